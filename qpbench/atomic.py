@@ -1,0 +1,58 @@
+"""Writing outputs so that a killed run never leaves a truncated file that looks complete.
+
+Every report, problem set and manifest is written to a temporary name in the
+same folder and renamed into place (:func:`os.replace` is atomic on POSIX).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+from .exceptions import OutputExistsError
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path):
+    """Yield a temporary path beside ``path``; rename it to ``path`` on success.
+
+    On an exception the temporary file is removed and ``path`` is untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+
+
+def check_output(path: str | Path, force: bool = False, resume: bool = False) -> None:
+    """Refuse to overwrite an existing output unless ``force`` or ``resume``.
+
+    Raises:
+        OutputExistsError: ``path`` exists and neither flag was given.
+    """
+    path = Path(path)
+    if path.exists() and not (force or resume):
+        raise OutputExistsError(f"{path}: exists; pass --force to overwrite or --resume to continue")

@@ -1,0 +1,140 @@
+"""The backend interface: one small class per solver route.
+
+A backend turns a :class:`qpsolvers.Problem` into a :class:`BackendSolution`
+(a :class:`qpsolvers.Solution` with a few extras). Duals follow qpsolvers'
+sign convention::
+
+    P x + q + A^T y + G^T z + z_box = 0,   z >= 0,
+    z_box < 0 where the lower bound is active, > 0 where the upper bound is.
+
+A backend may keep state between calls (a controller solves a sequence of
+problems, tick after tick): :meth:`Backend.solve` may update a persistent
+solver object and warm-start from the previous answer; :meth:`Backend.reset`
+forgets all of that.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import qpsolvers
+
+from ..profiles import Profile, get_profile
+
+#: Statuses a backend reports. The harness adds ``invalid`` (non-finite answer)
+#: and ``crashed`` (the worker process died) on top of these.
+STATUSES = (
+    "optimal",
+    "primal_infeasible",
+    "dual_infeasible",
+    "max_iter",
+    "time_limit",
+    "error",
+    "not_solved",
+)
+
+
+@dataclass
+class BackendSolution(qpsolvers.Solution):
+    """A :class:`qpsolvers.Solution` plus what a benchmark needs to know.
+
+    Attributes:
+        status: One of :data:`STATUSES`.
+        iterations: Iterations (or integration steps) the solver reports, if any.
+        solver_time_s: Solve time the solver itself reports, in [s], if any.
+        wall_time_s: Wall time of the whole :meth:`Backend.solve` call in [s].
+        backend: Name of the backend that produced it.
+        error: Exception type and message when ``status == "error"``.
+    """
+
+    status: str = "not_solved"
+    iterations: int | None = None
+    solver_time_s: float | None = None
+    wall_time_s: float | None = None
+    backend: str = ""
+    error: str | None = None
+
+
+class Backend:
+    """Base class of every backend.
+
+    Subclasses set the class attributes and implement :meth:`_solve`.
+
+    Attributes:
+        name: Registry key, e.g. ``"osqp"`` or ``"qpsolvers:daqp"``.
+        family: Algorithm family, e.g. ``"ADMM"``, ``"interior point"``.
+        package: Python distribution whose version is reported (or ``None``).
+        profile: The settings profile in force.
+        settings: Extra solver settings given by the user (override the profile).
+    """
+
+    name: ClassVar[str] = ""
+    family: ClassVar[str] = ""
+    package: ClassVar[str | None] = None
+
+    def __init__(self, profile: str | Profile = "default", **settings):
+        self.profile = get_profile(profile)
+        self.settings = dict(settings)
+
+    # -- availability -----------------------------------------------------
+    @classmethod
+    def unavailable_reason(cls) -> str | None:
+        """``None`` when the backend can run here, else why it cannot."""
+        return None
+
+    @classmethod
+    def version(cls) -> str | None:
+        """Version of the package behind the backend, if known."""
+        if cls.package is None:
+            return None
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            return version(cls.package)
+        except PackageNotFoundError:
+            return None
+
+    # -- solving ----------------------------------------------------------
+    def solve(
+        self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None
+    ) -> BackendSolution:
+        """Solve ``problem``; fill x, y, z, z_box, found, obj, status and times.
+
+        Args:
+            problem: The QP in qpsolvers form.
+            warm_start: Optional primal initial guess of shape (n,).
+
+        Returns:
+            The solution. ``found`` is True only for status ``optimal``.
+            Solver failures are statuses, not exceptions; an exception
+            escaping here is a bug (the harness records it as ``error``).
+        """
+        start = time.perf_counter_ns()
+        sol = self._solve(problem, warm_start)
+        sol.wall_time_s = (time.perf_counter_ns() - start) * 1e-9
+        sol.backend = self.name
+        sol.found = sol.status == "optimal"
+        if sol.x is not None and sol.obj is None:
+            sol.obj = objective(problem, sol.x)
+        return sol
+
+    def _solve(
+        self, problem: qpsolvers.Problem, warm_start: np.ndarray | None
+    ) -> BackendSolution:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Forget every state kept between calls (persistent solver, warm start)."""
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r} profile={self.profile.name}>"
+
+
+def objective(problem: qpsolvers.Problem, x: np.ndarray) -> float:
+    """Primal objective ``1/2 x^T P x + q^T x`` (plus no constant)."""
+    P = problem.P
+    Px = P @ x
+    return float(0.5 * x @ Px + problem.q @ x)

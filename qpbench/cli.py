@@ -1,0 +1,99 @@
+"""The ``qpbench`` command line: argument parsing and logging set-up only.
+
+Each sub-command lives in :mod:`qpbench.commands` as a module with
+``HELP`` (one line), ``EXAMPLE`` (shown under ``--help``),
+``add_arguments(parser)`` and ``run(args) -> int``.
+
+Exit codes: 0 success; 1 the run completed but some solves failed;
+2 usage or input error (one line on stderr naming the file, key or value);
+130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from .exceptions import QpbenchError
+
+#: Sub-command name -> module under qpbench.commands.
+COMMANDS = {
+    "run": "run",
+    "bench": "bench",
+    "closed-loop": "closed_loop",
+    "simulate": "simulate",
+    "report": "report",
+    "backends": "backends",
+    "inspect": "inspect_",
+}
+
+log = logging.getLogger("qpbench")
+
+
+def _available_commands():
+    for name, module in COMMANDS.items():
+        try:
+            yield name, importlib.import_module(f"qpbench.commands.{module}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"qpbench.commands.{module}":
+                raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser (used by :func:`main` and by the tests)."""
+    common = argparse.ArgumentParser(add_help=False)
+    verbosity = common.add_mutually_exclusive_group()
+    verbosity.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    verbosity.add_argument("-v", "--verbose", action="store_true", help="debug output")
+    parser = argparse.ArgumentParser(
+        prog="qpbench",
+        description="Benchmark QP solvers on the per-tick QPs of a compliant redundant manipulator.",
+        parents=[common],
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, module in _available_commands():
+        p = sub.add_parser(
+            name,
+            help=module.HELP,
+            description=module.HELP,
+            epilog=f"example:\n  {module.EXAMPLE}",
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+            parents=[common],
+        )
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def _configure_logging(args: argparse.Namespace) -> None:
+    level = logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+    root = logging.getLogger("qpbench")
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    root.propagate = False
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``qpbench`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    _configure_logging(args)
+    try:
+        return int(args._run(args) or 0)
+    except QpbenchError as exc:
+        print(f"qpbench {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"qpbench {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

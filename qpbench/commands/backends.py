@@ -1,0 +1,27 @@
+"""``qpbench backends``: list every registered backend and whether it can run here."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "list solver backends: name, available, version, algorithm family, reason if unavailable"
+EXAMPLE = "qpbench backends"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--available", action="store_true", help="list only the backends that can run here"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..backends import backend_info
+
+    infos = [i for i in backend_info() if i.available or not args.available]
+    rows = [("name", "available", "version", "family", "reason")]
+    for i in infos:
+        rows.append((i.name, "yes" if i.available else "no", i.version or "-", i.family, i.reason or ""))
+    widths = [max(len(r[c]) for r in rows) for c in range(4)]
+    for r in rows:
+        print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + ("  " + r[4] if r[4] else ""))
+    return 0

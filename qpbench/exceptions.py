@@ -1,0 +1,68 @@
+"""Exceptions of qpbench.
+
+One base, :class:`QpbenchError`, and a few precise subclasses. Each carries the
+offending file, key or value so the CLI can print one clear line and exit 2
+(input errors) or 1 (a run that completed with failures).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class QpbenchError(Exception):
+    """Base class of every error qpbench raises on purpose."""
+
+    #: Exit code the CLI uses for this error.
+    exit_code: int = 2
+
+
+class InputError(QpbenchError):
+    """Bad user input: a file, key or value that cannot be used.
+
+    Args:
+        message: What is wrong, in one line.
+        path: The offending file or folder, if any.
+        key: The offending key, column or option, if any.
+    """
+
+    def __init__(self, message: str, path: str | Path | None = None, key: str | None = None):
+        self.path = None if path is None else Path(path)
+        self.key = key
+        self.message = message
+        super().__init__(message)
+
+    def __str__(self) -> str:
+        where = []
+        if self.path is not None:
+            where.append(str(self.path))
+        if self.key is not None:
+            where.append(f"key '{self.key}'")
+        prefix = ": ".join(where)
+        return f"{prefix}: {self.message}" if prefix else self.message
+
+
+class ProblemFormatError(InputError):
+    """A problem file or problem set is unreadable, corrupt or inconsistent."""
+
+
+class ScenarioError(InputError):
+    """A scenario file has a missing, unknown or impossible key."""
+
+
+class ParamError(InputError):
+    """A backend, profile or command parameter has a value that is not allowed."""
+
+
+class BackendNotFound(QpbenchError):
+    """No backend is registered under the requested name, or it is unavailable."""
+
+
+class BackendError(QpbenchError):
+    """A backend failed in a way that is not a solver status (a bug or a crash)."""
+
+    exit_code = 1
+
+
+class OutputExistsError(QpbenchError):
+    """An output exists and neither ``--force`` nor ``--resume`` was given."""
