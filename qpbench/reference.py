@@ -1,0 +1,355 @@
+"""High-accuracy reference solutions, cross-checked, cached per problem set.
+
+How a reference is computed (:func:`reference_solution`):
+
+1. Clarabel (interior point) through :func:`qpsolvers.solve_problem` with
+   ``tol_gap_abs = tol_gap_rel = tol_feas = 1e-10``, ``tol_ktratio = 1e-8``,
+   ``tol_infeas_abs = tol_infeas_rel = 1e-10``, ``max_iter = 500``. Its status is
+   read from ``Solution.extras["status"]`` (Clarabel's ``SolverStatus``):
+   ``Solved`` -> ``optimal``; ``PrimalInfeasible`` / ``AlmostPrimalInfeasible`` ->
+   ``primal_infeasible``; ``DualInfeasible`` / ``AlmostDualInfeasible`` ->
+   ``dual_infeasible`` (unbounded objective); ``AlmostSolved`` -> ``optimal`` when
+   qpsolvers' residuals and duality gap are all below 1e-7, anything else ->
+   ``unknown``. A problem without any constraint is solved directly:
+   ``P x = -q`` by least squares, ``optimal`` when the residual is below
+   1e-9 max(1, |q|), else ``dual_infeasible``.
+2. Cross-check with PIQP (a second, independent interior-point code with
+   infeasibility detection) through qpsolvers at ``eps_abs = 1e-10``,
+   ``eps_rel = 0`` and the duality-gap check on. The two agree when both give
+   the same status and, when optimal, objectives within
+   ``1e-7 max(1, |f*|)``. The result records ``agree`` and the second solver's
+   status and objective. When Clarabel ends ``unknown`` but PIQP solves, PIQP's
+   solution is the reference (``solver = "piqp"``). When both are optimal but
+   disagree, the one with the smaller worst KKT residual is kept.
+
+The objective is ``1/2 x'Px + q'x + offset`` (:func:`qpbench.metrics.objective`).
+
+Cache (:func:`reference_solutions`): one Parquet file beside the set,
+``<folder>/reference-<sha[:16]>.parquet`` (or ``<file stem>.reference-<sha[:16]>.parquet``
+beside a single file), keyed by the set's SHA-256 (the manifest hash of a
+problem-set folder; for a folder of ``.npz`` / ``.mat`` files or a bare Parquet
+file, a SHA-256 of the files' names and bytes: :func:`qpbench.formats.content_sha256`).
+The full hash and :data:`REFERENCE_VERSION` are stored in the file's metadata and
+checked on read, so a changed set, a changed method or a corrupt cache is
+recomputed. A set built in memory, or one in a read-only folder (no write
+permission, or no write bit at all, as for shared data folders), is not cached.
+Writes are atomic; stale ``reference-*.parquet`` files in a problem-set folder are
+removed.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import qpsolvers
+
+from .atomic import write_bytes
+from .formats import ProblemRecord, ProblemSet, content_sha256, dense_problem
+from .metrics import objective
+
+log = logging.getLogger(__name__)
+
+#: Bumped when the way references are computed changes (invalidates caches).
+REFERENCE_VERSION = "1"
+#: Statuses a reference can have.
+REFERENCE_STATUSES = ("optimal", "primal_infeasible", "dual_infeasible", "unknown")
+
+CLARABEL_SETTINGS = dict(
+    tol_gap_abs=1e-10,
+    tol_gap_rel=1e-10,
+    tol_feas=1e-10,
+    tol_ktratio=1e-8,
+    tol_infeas_abs=1e-10,
+    tol_infeas_rel=1e-10,
+    max_iter=500,
+)
+PIQP_SETTINGS = dict(
+    eps_abs=1e-10,
+    eps_rel=0.0,
+    check_duality_gap=True,
+    eps_duality_gap_abs=1e-10,
+    eps_duality_gap_rel=0.0,
+    max_iter=500,
+)
+#: Relative objective agreement required between the two solvers.
+AGREE_RTOL = 1e-7
+#: Residual bound accepting Clarabel's ``AlmostSolved``.
+ALMOST_TOL = 1e-7
+
+
+@dataclass
+class ReferenceSolution:
+    """High-accuracy solution of one problem.
+
+    Attributes:
+        status: ``optimal``, ``primal_infeasible``, ``dual_infeasible`` or ``unknown``.
+        x, y, z, z_box: Primal and dual solution (qpsolvers' sign convention);
+            ``None`` unless optimal.
+        objective: ``1/2 x'Px + q'x + offset`` (NaN unless optimal).
+        solver: Solver whose solution is kept (``clarabel``, ``piqp``, ``lstsq``).
+        check_solver: Second solver used for the cross-check.
+        check_status: Its status.
+        check_objective: Its objective (NaN unless optimal).
+        agree: Whether the two solvers agree (see the module docstring).
+        name: Problem name.
+    """
+
+    status: str
+    x: np.ndarray | None = None
+    y: np.ndarray | None = None
+    z: np.ndarray | None = None
+    z_box: np.ndarray | None = None
+    objective: float = math.nan
+    solver: str = "clarabel"
+    check_solver: str | None = None
+    check_status: str | None = None
+    check_objective: float = math.nan
+    agree: bool | None = None
+    name: str | None = None
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def is_optimal(self) -> bool:
+        return self.status == "optimal"
+
+
+def _clarabel_status(solution) -> str:
+    import clarabel
+
+    status = solution.extras.get("status")
+    S = clarabel.SolverStatus
+    if status == S.Solved:
+        return "optimal"
+    if status in (S.PrimalInfeasible, S.AlmostPrimalInfeasible):
+        return "primal_infeasible"
+    if status in (S.DualInfeasible, S.AlmostDualInfeasible):
+        return "dual_infeasible"
+    if status == S.AlmostSolved and _worst_residual(solution) <= ALMOST_TOL:
+        return "optimal"
+    return "unknown"
+
+
+def _piqp_status(solution) -> str:
+    import piqp
+
+    info = solution.extras.get("info")
+    status = getattr(info, "status", None)
+    if status == piqp.PIQP_SOLVED:
+        return "optimal"
+    if status == piqp.PIQP_PRIMAL_INFEASIBLE:
+        return "primal_infeasible"
+    if status == piqp.PIQP_DUAL_INFEASIBLE:
+        return "dual_infeasible"
+    return "unknown"
+
+
+def _worst_residual(solution) -> float:
+    s = solution
+    if s.x is None or not np.all(np.isfinite(s.x)):
+        return math.inf
+    if not s.found:
+        import dataclasses
+
+        s = dataclasses.replace(s, found=True)
+    return max(s.primal_residual(), s.dual_residual(), s.duality_gap())
+
+
+def _solve(problem, solver: str, settings: dict):
+    """(solution or None, status) of one qpsolvers solve; never raises for solver trouble."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
+    except Exception as exc:  # a solver crash is an "unknown" reference, not a traceback
+        log.debug("reference: %s failed: %s", solver, exc)
+        return None, "unknown"
+    status = _clarabel_status(sol) if solver == "clarabel" else _piqp_status(sol)
+    return sol, status
+
+
+def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
+    P, q = record.problem.P, record.problem.q
+    x, *_ = np.linalg.lstsq(P, -q, rcond=None)
+    res = float(np.max(np.abs(P @ x + q)))
+    if res > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
+        return ReferenceSolution("dual_infeasible", solver="lstsq", name=record.name)
+    n = q.shape[0]
+    return ReferenceSolution(
+        "optimal",
+        x=x,
+        y=np.empty(0),
+        z=np.empty(0),
+        z_box=np.empty(0) if record.problem.lb is None and record.problem.ub is None else np.zeros(n),
+        objective=objective(record, x),
+        solver="lstsq",
+        name=record.name,
+    )
+
+
+def _is_unconstrained(p) -> bool:
+    no_bounds = all(
+        v is None or np.all(np.isinf(v)) for v in (p.lb, p.ub)
+    )
+    return p.G is None and p.A is None and no_bounds
+
+
+def reference_solution(record: ProblemRecord) -> ReferenceSolution:
+    """High-accuracy reference of one problem (see the module docstring)."""
+    problem = dense_problem(record.problem, name=record.name)
+    if _is_unconstrained(problem):
+        return _unconstrained(ProblemRecord(problem, record.name, offset=record.offset))
+    sol1, st1 = _solve(problem, "clarabel", CLARABEL_SETTINGS)
+    sol2, st2 = _solve(problem, "piqp", PIQP_SETTINGS)
+    obj1 = objective(record, sol1.x) if st1 == "optimal" else math.nan
+    obj2 = objective(record, sol2.x) if st2 == "optimal" else math.nan
+    agree = st1 == st2 and (
+        st1 != "optimal" or abs(obj1 - obj2) <= AGREE_RTOL * max(1.0, abs(obj1))
+    )
+    keep, status, solver, obj = sol1, st1, "clarabel", obj1
+    check_solver, check_status, check_obj = "piqp", st2, obj2
+    if st1 == "unknown" and st2 == "optimal":
+        keep, status, solver, obj = sol2, st2, "piqp", obj2
+        check_solver, check_status, check_obj = "clarabel", st1, obj1
+    elif st1 == st2 == "optimal" and not agree and _worst_residual(sol2) < _worst_residual(sol1):
+        keep, status, solver, obj = sol2, st2, "piqp", obj2
+        check_solver, check_status, check_obj = "clarabel", st1, obj1
+    if not agree:
+        log.warning(
+            "reference of '%s': %s says %s (f = %.10g), %s says %s (f = %.10g); keeping %s",
+            record.name, "clarabel", st1, obj1, "piqp", st2, obj2, solver,
+        )
+    ref = ReferenceSolution(
+        status=status,
+        objective=obj,
+        solver=solver,
+        check_solver=check_solver,
+        check_status=check_status,
+        check_objective=check_obj,
+        agree=agree,
+        name=record.name,
+    )
+    if status == "optimal":
+        ref.x = np.asarray(keep.x, dtype=np.float64)
+        ref.y = None if keep.y is None else np.asarray(keep.y, dtype=np.float64)
+        ref.z = None if keep.z is None else np.asarray(keep.z, dtype=np.float64)
+        ref.z_box = None if keep.z_box is None else np.asarray(keep.z_box, dtype=np.float64)
+    return ref
+
+
+# ---------------------------------------------------------------- cache
+
+
+def cache_path(problem_set: ProblemSet) -> Path | None:
+    """Where the references of ``problem_set`` are cached (``None``: not cached)."""
+    sha = content_sha256(problem_set)
+    if sha is None or problem_set.path is None:
+        return None
+    path = Path(problem_set.path)
+    if path.is_dir():
+        return path / f"reference-{sha[:16]}.parquet"
+    return path.parent / f"{path.stem}.reference-{sha[:16]}.parquet"
+
+
+_VEC_KEYS = ("x", "y", "z", "z_box")
+
+
+def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
+    import pyarrow as pa
+
+    from .formats import _list_column, table_to_bytes
+
+    cols = {
+        "name": pa.array([r.name for r in refs], type=pa.string()),
+        "status": pa.array([r.status for r in refs], type=pa.string()),
+        **{k: _list_column([getattr(r, k) for r in refs]) for k in _VEC_KEYS},
+        "objective": pa.array([r.objective for r in refs], type=pa.float64()),
+        "solver": pa.array([r.solver for r in refs], type=pa.string()),
+        "check_solver": pa.array([r.check_solver for r in refs], type=pa.string()),
+        "check_status": pa.array([r.check_status for r in refs], type=pa.string()),
+        "check_objective": pa.array([r.check_objective for r in refs], type=pa.float64()),
+        "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
+    }
+    table = pa.table(cols).replace_schema_metadata(
+        {"qpbench_set_sha256": sha, "qpbench_reference_version": REFERENCE_VERSION}
+    )
+    return table_to_bytes(table)
+
+
+def _read_cache(path: Path, sha: str, names: list[str]) -> list[ReferenceSolution] | None:
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+        meta = table.schema.metadata or {}
+        if meta.get(b"qpbench_set_sha256", b"").decode() != sha:
+            return None
+        if meta.get(b"qpbench_reference_version", b"").decode() != REFERENCE_VERSION:
+            return None
+        rows = table.to_pylist()
+    except Exception as exc:  # corrupt cache: recompute
+        log.warning("%s: unreadable reference cache, recomputing (%s)", path, exc)
+        return None
+    if [r["name"] for r in rows] != names:
+        return None
+    out = []
+    for r in rows:
+        vec = {k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS}
+        out.append(
+            ReferenceSolution(
+                status=r["status"],
+                objective=math.nan if r["objective"] is None else r["objective"],
+                solver=r["solver"],
+                check_solver=r["check_solver"],
+                check_status=r["check_status"],
+                check_objective=math.nan if r["check_objective"] is None else r["check_objective"],
+                agree=r["agree"],
+                name=r["name"],
+                **vec,
+            )
+        )
+    return out
+
+
+def _writable(folder: Path) -> bool:
+    """Whether to write into ``folder``: it must be writable and not marked read-only
+    (no write bit at all; this holds even for root, who may write anywhere)."""
+    try:
+        return os.access(folder, os.W_OK) and bool(folder.stat().st_mode & 0o222)
+    except OSError:
+        return False
+
+
+def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None) -> list[ReferenceSolution]:
+    """References of every problem of a set, in order, read from or written to the cache.
+
+    Args:
+        problem_set: The set (from :func:`qpbench.formats.load_problems`).
+        cache: Use the cache beside the set.
+        progress: Optional callable wrapping an iterable (e.g. ``tqdm.tqdm``).
+    """
+    path = cache_path(problem_set) if cache else None
+    sha = content_sha256(problem_set)
+    names = [r.name for r in problem_set.records]
+    if path is not None and path.exists():
+        cached = _read_cache(path, sha, names)
+        if cached is not None:
+            return cached
+    records = problem_set.records if progress is None else progress(problem_set.records)
+    refs = [reference_solution(r) for r in records]
+    if path is not None and _writable(path.parent):
+        try:
+            write_bytes(path, _to_bytes(refs, sha))
+        except OSError as exc:
+            log.debug("%s: reference cache not written (%s)", path, exc)
+            return refs
+        if problem_set.kind == "set" and Path(problem_set.path).is_dir():
+            for stale in Path(problem_set.path).glob("reference-*.parquet"):
+                if stale != path:
+                    stale.unlink(missing_ok=True)
+    return refs

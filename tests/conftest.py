@@ -1,0 +1,75 @@
+"""Shared fixtures: random problems, the Maros-Meszaros subset."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import qpsolvers
+
+from qpbench.formats import ProblemRecord
+
+#: Where the Maros-Meszaros subset is looked for (first existing folder wins).
+_MM_CANDIDATES = [
+    Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros",
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "maros_meszaros",
+]
+MAROS_MESZAROS_DIR = next((p for p in _MM_CANDIDATES if p.is_dir()), _MM_CANDIDATES[0])
+
+
+def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) -> qpsolvers.Problem:
+    """A random strictly convex QP (dense float64) with the requested parts.
+
+    ``n_ineq = None`` / ``n_eq = None`` leave out ``G, h`` / ``A, b``; ``bounds``
+    adds ``lb`` and/or ``ub`` (with some infinite entries).
+    """
+    M = rng.standard_normal((n, n))
+    P = M @ M.T + 0.1 * np.eye(n)
+    q = rng.standard_normal(n)
+    G = h = A = b = lo = up = None
+    if n_ineq is not None:
+        G = rng.standard_normal((n_ineq, n))
+        h = rng.random(n_ineq) + 0.1
+    if n_eq is not None:
+        A = rng.standard_normal((n_eq, n))
+        b = 0.1 * rng.standard_normal(n_eq)
+    if bounds and lb:
+        lo = -1.0 - rng.random(n)
+        lo[0] = -np.inf
+    if bounds and ub:
+        up = 1.0 + rng.random(n)
+        up[-1] = np.inf
+    return qpsolvers.Problem(P, q, G, h, A, b, lo, up)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20190101)
+
+
+@pytest.fixture
+def make_record(rng):
+    """Factory: ``make_record(name, **random_problem kwargs)`` -> ProblemRecord with metadata."""
+
+    def make(name="p", scenario="wall", tick=0, t=0.0, formulation="paper", offset=0.0, **kw):
+        return ProblemRecord(random_problem(rng, **kw), name, scenario, tick, t, formulation, offset)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def mm_dir():
+    if not MAROS_MESZAROS_DIR.is_dir():
+        pytest.skip(f"Maros-Meszaros subset not found at {MAROS_MESZAROS_DIR}")
+    return MAROS_MESZAROS_DIR
+
+
+@pytest.fixture
+def random_qp(rng):
+    """Factory: ``random_qp(**random_problem kwargs)`` -> random strictly convex ``qpsolvers.Problem``."""
+
+    def make(**kw):
+        return random_problem(rng, **kw)
+
+    return make

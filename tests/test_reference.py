@@ -1,0 +1,200 @@
+"""Reference solutions: published optima, infeasibility classification, cache."""
+
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pytest
+import qpsolvers
+import scipy.io
+
+import qpbench.reference as reference_module
+from qpbench.formats import ProblemRecord, load_maros_meszaros, load_problems, read_problem_set, write_problem_set
+from qpbench.reference import cache_path, reference_solution, reference_solutions
+
+# Optimal objective values from the Maros-Meszaros table (Maros & Meszaros 1999), where
+# the value is a known exact number (fractions such as HS35 = 1/9, HS52 = 1859/349,
+# HS53 = 176/43, HS76 = -103/22) or given to 8 significant digits.
+EXACT = {
+    "HS21": -99.96,
+    "HS35": 1.0 / 9.0,
+    "HS35MOD": 0.25,
+    "HS51": 0.0,
+    "HS52": 1859.0 / 349.0,
+    "HS53": 176.0 / 43.0,
+    "HS76": -103.0 / 22.0,
+    "QPTEST": 4.371875,
+    "TAME": 0.0,
+    "ZECEVIC2": -4.125,
+}
+PUBLISHED_8_DIGITS = {
+    "HS118": 6.6482045e2,
+    "QAFIRO": -1.5907818,
+    "GENHS28": 9.2717369e-1,
+    "LOTSCHD": 2.3984159e3,
+}
+
+
+@pytest.fixture(scope="module")
+def mm_refs(mm_dir):
+    ps = load_problems(mm_dir)
+    return ps, reference_solutions(ps, cache=False)
+
+
+def test_maros_meszaros_published_optima(mm_refs):
+    ps, refs = mm_refs
+    got = {r.name: ref for r, ref in zip(ps, refs)}
+    assert set(EXACT) | set(PUBLISHED_8_DIGITS) == set(got)
+    for name, f in EXACT.items():
+        assert got[name].status == "optimal" and got[name].agree, name
+        assert abs(got[name].objective - f) <= 1e-8 * max(1.0, abs(f)), (name, got[name].objective, f)
+    for name, f in PUBLISHED_8_DIGITS.items():
+        assert got[name].status == "optimal" and got[name].agree, name
+        assert abs(got[name].objective - f) <= 1e-7 * abs(f), (name, got[name].objective, f)
+
+
+def test_maros_meszaros_reference_satisfies_original_form(mm_refs):
+    """The reference x of the converted problem is feasible and optimal-valued in the
+    original ``l <= A x <= u`` form, read straight from the .mat file."""
+    ps, refs = mm_refs
+    for rec, ref in zip(ps, refs):
+        raw = scipy.io.loadmat(str(ps.path / f"{rec.name}.mat"))
+        A = raw["A"].toarray()
+        lo, up = raw["l"].ravel().astype(float), raw["u"].ravel().astype(float)
+        Ax = A @ ref.x
+        scale = 1e-7 * (1.0 + np.abs(Ax))
+        assert np.all(Ax >= np.where(lo <= -1e20, -np.inf, lo) - scale), rec.name
+        assert np.all(Ax <= np.where(up >= 1e20, np.inf, up) + scale), rec.name
+        P = raw["P"].toarray()
+        f = 0.5 * ref.x @ P @ ref.x + raw["q"].ravel() @ ref.x + float(raw["r"].item())
+        assert f == pytest.approx(ref.objective, rel=1e-12, abs=1e-12)
+        # second solver agrees on the objective
+        assert abs(ref.check_objective - ref.objective) <= 1e-7 * max(1.0, abs(ref.objective))
+
+
+def _infeasible_problems():
+    eye = np.eye(2)
+    return {
+        "ineq": qpsolvers.Problem(eye, np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([-1.0, -1.0])),
+        "eq": qpsolvers.Problem(np.eye(3), np.zeros(3), A=np.array([[1.0, 1, 1], [1, 1, 1]]), b=np.array([1.0, 2.0])),
+        "bounds+eq": qpsolvers.Problem(eye, np.zeros(2), A=np.array([[1.0, 1.0]]), b=np.array([5.0]),
+                                       lb=-np.ones(2), ub=np.ones(2)),
+    }
+
+
+def _unbounded_problems():
+    return {
+        # f = -x2 with x2 >= 0 only: decreases without bound along x2
+        "ineq": qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([0.0, -1.0]), np.array([[0.0, -1.0]]), np.array([0.0])),
+        # x1 + x2 = 1, f = (x1 - x2)... linear along the line
+        "eq": qpsolvers.Problem(np.zeros((2, 2)), np.array([1.0, -1.0]), A=np.array([[1.0, 1.0]]), b=np.array([1.0])),
+        "unconstrained": qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([0.0, -1.0])),
+    }
+
+
+@pytest.mark.parametrize("case", list(_infeasible_problems()))
+def test_primal_infeasible_is_classified(case):
+    ref = reference_solution(ProblemRecord(_infeasible_problems()[case], case))
+    assert ref.status == "primal_infeasible" and ref.x is None and math.isnan(ref.objective)
+
+
+@pytest.mark.parametrize("case", list(_unbounded_problems()))
+def test_unbounded_is_classified_dual_infeasible(case):
+    ref = reference_solution(ProblemRecord(_unbounded_problems()[case], case))
+    assert ref.status == "dual_infeasible" and ref.x is None
+
+
+def test_unconstrained_optimal_and_known_kkt(random_qp):
+    p = random_qp(n_ineq=None, n_eq=None, bounds=False)
+    ref = reference_solution(ProblemRecord(p, "u", offset=2.0))
+    x = np.linalg.solve(p.P, -p.q)
+    assert ref.status == "optimal" and np.allclose(ref.x, x, atol=1e-10)
+    assert ref.objective == pytest.approx(0.5 * x @ p.P @ x + p.q @ x + 2.0, rel=1e-12)
+    # a constrained problem: qpsolvers' residuals of the reference are tiny
+    p = random_qp(n=6, n_ineq=5, n_eq=2)
+    ref = reference_solution(ProblemRecord(p, "c"))
+    sol = qpsolvers.Solution(p, found=True, x=ref.x, y=ref.y, z=ref.z, z_box=ref.z_box)
+    assert ref.agree and max(sol.primal_residual(), sol.dual_residual(), sol.duality_gap()) < 1e-8
+
+
+def test_cache_beside_set_and_recomputed_on_change(make_record, tmp_path, monkeypatch):
+    folder = tmp_path / "set"
+    recs = [make_record(f"p{i}", tick=i) for i in range(3)]
+    write_problem_set(folder, recs, {"name": "t"})
+    ps = read_problem_set(folder)
+    refs = reference_solutions(ps)
+    path = cache_path(ps)
+    assert path == folder / f"reference-{ps.sha256[:16]}.parquet" and path.exists()
+    # second call reads the cache (the solver is not called) and gives the same numbers
+    def boom(record):
+        raise AssertionError("recomputed although cached")
+
+    monkeypatch.setattr(reference_module, "reference_solution", boom)
+    again = reference_solutions(read_problem_set(folder))
+    for a, b in zip(refs, again):
+        assert a.status == b.status and a.objective == b.objective and a.x.tobytes() == b.x.tobytes()
+        assert a.z_box.tobytes() == b.z_box.tobytes()
+    monkeypatch.undo()
+    # a changed set gets a new cache; the stale one is removed
+    write_problem_set(folder, recs[:2], {"name": "t"})
+    ps2 = read_problem_set(folder)
+    refs2 = reference_solutions(ps2)
+    assert len(refs2) == 2 and cache_path(ps2).exists() and not path.exists()
+    # a corrupt cache is recomputed, not trusted
+    cache_path(ps2).write_bytes(b"garbage")
+    refs3 = reference_solutions(ps2)
+    assert [r.objective for r in refs3] == [r.objective for r in refs2]
+
+
+def test_cache_of_file_folder_and_read_only(mm_dir, tmp_path, make_record):
+    from qpbench.formats import save_npz
+
+    for i in range(2):
+        save_npz(make_record(f"n{i}"), tmp_path / "npz" / f"n{i}.npz")
+    ps = load_problems(tmp_path / "npz")
+    reference_solutions(ps)
+    assert len(list((tmp_path / "npz").glob("reference-*.parquet"))) == 1
+    save_npz(make_record("n2"), tmp_path / "npz" / "n2.npz")  # content changes -> new key
+    ps = load_problems(tmp_path / "npz")
+    assert cache_path(ps) not in list((tmp_path / "npz").glob("reference-*.parquet"))
+    assert len(reference_solutions(ps)) == 3
+    # a single .mat copied to a writable place is cached beside it
+    shutil.copy(mm_dir / "HS21.mat", tmp_path / "HS21.mat")
+    one = load_problems(tmp_path / "HS21.mat")
+    assert reference_solutions(one)[0].objective == pytest.approx(-99.96, rel=1e-9)
+    assert cache_path(one).parent == tmp_path and cache_path(one).exists()
+
+
+def test_unwritable_folder_is_not_cached(mm_dir, tmp_path, monkeypatch):
+    shutil.copy(mm_dir / "HS35.mat", tmp_path / "HS35.mat")
+
+    def refuse(path, data):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(reference_module, "write_bytes", refuse)
+    ps = load_problems(tmp_path)
+    refs = reference_solutions(ps)
+    assert refs[0].objective == pytest.approx(1 / 9, rel=1e-8)
+    assert not list(tmp_path.glob("reference-*"))
+
+
+def test_read_only_folder_is_not_cached(mm_dir, tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    shutil.copy(mm_dir / "HS35.mat", ro / "HS35.mat")
+    ro.chmod(0o555)
+    try:
+        refs = reference_solutions(load_problems(ro))
+        assert refs[0].objective == pytest.approx(1 / 9, rel=1e-8)
+        assert not list(ro.glob("reference-*")) and not list(ro.glob(".*"))
+    finally:
+        ro.chmod(0o755)
+
+
+def test_reference_of_loaded_record_matches_direct(mm_dir):
+    rec = load_maros_meszaros(mm_dir / "HS118.mat")
+    ref = reference_solution(rec)
+    assert ref.solver in ("clarabel", "piqp") and ref.check_solver in ("clarabel", "piqp")
+    assert ref.check_status == "optimal"
