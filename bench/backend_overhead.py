@@ -1,0 +1,379 @@
+"""Overhead of qpbench's backends against the solvers' own APIs and qpsolvers.solve_problem.
+
+For each backend, the median wall time of one solve over a few hundred small
+dense QPs shaped like the robot's control ticks (n = 4, 2 equalities, 7-14
+inequalities, bounds), measured three ways in this process:
+
+- ``ours``: ``Backend.solve`` of qpbench;
+- ``direct``: the solver's own Python API called directly with the same
+  settings: a persistent, updated object for ``osqp``, ``proxqp``,
+  ``clarabel`` (as ours); a fresh call of the solver's own function for
+  ``qpsolvers:<name>`` where that is simple (daqp, quadprog, piqp, osqp,
+  clarabel, proxqp), else ``qpsolvers.solve_problem`` (highs, scs); the same
+  parametrised cvxpy model for ``cvxpy``; ``numpy.linalg.lstsq`` for ``pinv``;
+- ``qpsolvers``: ``qpsolvers.solve_problem`` with the backend's solver and settings.
+
+Problems: consecutive ticks of the ``wall`` scenario (an obstacle row active)
+when :mod:`qpbench.sim` can produce them, else :func:`qpbench.known.robot_like_problem`.
+Each method runs over the whole sequence ``--repeat`` times (fresh state each
+pass, passes interleaved between methods); the median is over all calls.
+
+Usage::
+
+    python bench/backend_overhead.py [--count 400] [--repeat 3] [--source sim|known]
+        [--profile default] [--backends osqp,proxqp,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import warnings
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as spa
+
+from qpbench.backends import backend_names, get_backend
+from qpbench.backends.qpsolvers_ import native_settings
+from qpbench.known import robot_like_problem
+
+
+# ----------------------------------------------------------------- problems
+
+
+def sim_problems(count: int, start_tick: int = 1500) -> list[qpsolvers.Problem]:
+    """``count`` consecutive QPs of the wall scenario from ``start_tick`` (1 ms ticks)."""
+    from qpbench.sim.loop import simulate
+
+    duration = (start_tick + count + 1) * 1e-3
+    result = simulate("wall", "qpsolvers:daqp", formulation="paper", duration=duration, every=1)
+    records = result.records[start_tick : start_tick + count]
+    return [r.problem for r in records]
+
+
+def known_problems(count: int) -> list[qpsolvers.Problem]:
+    rng = np.random.default_rng(0)
+    return [robot_like_problem(rng)[0] for _ in range(count)]
+
+
+# ----------------------------------------------------------------- direct APIs
+
+
+def _parts(p):
+    """Dense ``P, q, G, h, A, b, lb, ub`` with empty arrays for absent blocks."""
+    n = p.q.shape[0]
+    G = np.zeros((0, n)) if p.G is None else np.asarray(p.G, float)
+    h = np.zeros(0) if p.h is None else np.asarray(p.h, float)
+    A = np.zeros((0, n)) if p.A is None else np.asarray(p.A, float)
+    b = np.zeros(0) if p.b is None else np.asarray(p.b, float)
+    lb = np.full(n, -np.inf) if p.lb is None else np.asarray(p.lb, float)
+    ub = np.full(n, np.inf) if p.ub is None else np.asarray(p.ub, float)
+    return np.asarray(p.P, float), np.asarray(p.q, float), G, h, A, b, lb, ub
+
+
+def _triu_index(n):
+    rows = np.concatenate([np.arange(j + 1) for j in range(n)])
+    cols = np.concatenate([np.full(j + 1, j) for j in range(n)])
+    indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))])
+    return rows, cols, indptr
+
+
+class DirectOsqp:
+    """osqp.OSQP set up once, then update(q, l, u, Px, Ax); C = [G; A; I] with a full dense pattern."""
+
+    def __init__(self, settings, persistent=True):
+        self.settings, self.persistent = {**settings, "verbose": False}, persistent
+        self.solver = None
+
+    def __call__(self, p):
+        import osqp
+
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n = q.shape[0]
+        C = np.vstack([G, A, np.eye(n)])
+        l = np.concatenate([np.full(G.shape[0], -np.inf), b, lb])
+        u = np.concatenate([h, b, ub])
+        if self.solver is None or not self.persistent:
+            rows, cols, indptr = _triu_index(n)
+            self.idx = (rows, cols)
+            Pc = spa.csc_matrix((P[rows, cols], rows, indptr), shape=(n, n))
+            k = C.shape[0]
+            Cc = spa.csc_matrix((C.T.ravel(), np.tile(np.arange(k), n), np.arange(0, k * n + 1, k)), shape=(k, n))
+            self.solver = osqp.OSQP()
+            self.solver.setup(Pc, q, Cc, l, u, **self.settings)
+        else:
+            self.solver.update(q=q, l=l, u=u, Px=P[self.idx], Ax=C.T.ravel())
+        res = self.solver.solve(raise_error=False)
+        return res.x
+
+
+class DirectClarabel:
+    """clarabel.DefaultSolver built once, then update(P, q, A, b); C = [A; G; I; -I], full dense pattern."""
+
+    def __init__(self, settings_fn, persistent=True):
+        self.settings_fn, self.persistent = settings_fn, persistent
+        self.solver = None
+
+    def __call__(self, p):
+        import clarabel
+
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n = q.shape[0]
+        I = np.eye(n)
+        C = np.vstack([A, G, I, -I])
+        d = np.concatenate([b, h, ub, -lb])
+        if self.solver is None or not self.persistent:
+            rows, cols, indptr = _triu_index(n)
+            self.idx = (rows, cols)
+            Pc = spa.csc_matrix((P[rows, cols], rows, indptr), shape=(n, n))
+            k = C.shape[0]
+            Cc = spa.csc_matrix((C.T.ravel(), np.tile(np.arange(k), n), np.arange(0, k * n + 1, k)), shape=(k, n))
+            cones = [clarabel.ZeroConeT(A.shape[0]), clarabel.NonnegativeConeT(k - A.shape[0])]
+            self.solver = clarabel.DefaultSolver(Pc, q, Cc, d, cones, self.settings_fn())
+        else:
+            self.solver.update(P=P[self.idx], q=q, A=C.T.ravel(), b=d)
+        return self.solver.solve().x
+
+
+class DirectProxqp:
+    """proxsuite.proxqp.dense.QP init-ed once, then update + solve (warm start with previous result)."""
+
+    def __init__(self, apply_settings):
+        self.apply_settings = apply_settings
+        self.qp = None
+
+    def __call__(self, p):
+        import proxsuite
+
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        l = np.full(G.shape[0], -np.inf)
+        if self.qp is None:
+            self.qp = proxsuite.proxqp.dense.QP(q.shape[0], A.shape[0], G.shape[0], box_constraints=True)
+            self.apply_settings(self.qp)
+            self.qp.init(P, q, A, b, G, l, h, lb, ub)
+        else:
+            self.qp.update(P, q, A, b, G, l, h, lb, ub)
+        self.qp.solve()
+        return self.qp.results.x
+
+
+def direct_daqp(settings):
+    import daqp
+
+    def solve(p):
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n, m, meq = q.shape[0], G.shape[0], A.shape[0]
+        Atot = np.vstack([G, A])
+        bupper = np.concatenate([ub, h, b])
+        blower = np.concatenate([lb, np.full(m, -1e30), b])
+        sense = np.zeros(n + m + meq, dtype=np.intc)
+        sense[n + m :] = 5
+        x, fval, exitflag, info = daqp.solve(P, q, Atot, bupper, blower, sense, **settings)
+        return x
+
+    return solve
+
+
+def direct_quadprog(settings):
+    import quadprog
+
+    def solve(p):
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n = q.shape[0]
+        I = np.eye(n)
+        C = np.vstack([A, -G, I, -I])
+        rhs = np.concatenate([b, -h, lb, -ub])
+        return quadprog.solve_qp(P, -q, C.T, rhs, A.shape[0])[0]
+
+    return solve
+
+
+def direct_piqp(settings):
+    import piqp
+
+    def solve(p):
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        solver = piqp.DenseSolver()
+        for key, value in settings.items():
+            setattr(solver.settings, key, value)
+        solver.setup(P, q, A, b, G, None, h, lb, ub)
+        solver.solve()
+        return solver.result.x
+
+    return solve
+
+
+def direct_proxqp_function(settings):
+    import proxsuite
+
+    def solve(p):
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n = q.shape[0]
+        C = np.vstack([G, np.eye(n)])
+        l = np.concatenate([np.full(G.shape[0], -np.inf), lb])
+        u = np.concatenate([h, ub])
+        return proxsuite.proxqp.dense.solve(P, q, A, b, C, l, u, verbose=False, **settings).x
+
+    return solve
+
+
+def via_qpsolvers(solver, settings):
+    def solve(p):
+        return qpsolvers.solve_problem(p, solver=solver, **settings).x
+
+    return solve
+
+
+def direct_for(name: str, profile: str):
+    """(description, callable factory) of the direct API of backend ``name``."""
+    backend = get_backend(name, profile)
+    if name == "osqp":
+        return "osqp.OSQP update", lambda: DirectOsqp(backend._settings())
+    if name == "clarabel":
+        import clarabel
+
+        return "clarabel.DefaultSolver update", lambda: DirectClarabel(lambda: backend._settings(clarabel))
+    if name == "proxqp":
+        import proxsuite
+
+        return "proxqp.dense.QP update", lambda: DirectProxqp(lambda qp: backend._apply_settings(qp, proxsuite.proxqp))
+    if name == "pinv":
+        return "numpy lstsq", lambda: (lambda p: np.linalg.lstsq(p.A, p.b, rcond=None)[0])
+    if name == "cvxpy":
+        import cvxpy as cp
+
+        from qpbench.backends.cvxpy_ import _Model
+
+        solver, options = backend._solver_options(cp)
+
+        def factory():
+            models = {}
+
+            def solve(p):
+                P, q, G, h, A, b, lb, ub = _parts(p)
+                key = (q.shape[0], A.shape[0], G.shape[0])
+                if key not in models:
+                    models[key] = _Model(cp, q.shape[0], A.shape[0], np.ones(G.shape[0], bool),
+                                         np.arange(q.shape[0]), np.arange(q.shape[0]))
+                model = models[key]
+                model.set_values(p, P, lb, ub)
+                model.problem.solve(solver=solver, warm_start=True, **options)
+                return model.x.value
+
+            return solve
+
+        return f"cvxpy Problem.solve ({solver})", factory
+    if name.startswith("qpsolvers:"):
+        solver = name.split(":", 1)[1]
+        settings = backend._options()
+        table = {
+            "daqp": ("daqp.solve", direct_daqp),
+            "quadprog": ("quadprog.solve_qp", direct_quadprog),
+            "piqp": ("piqp.DenseSolver (fresh)", direct_piqp),
+            "osqp": ("osqp.OSQP (fresh)", lambda s: DirectOsqp(s, persistent=False)),
+            "proxqp": ("proxqp.dense.solve", direct_proxqp_function),
+        }
+        if solver == "clarabel":
+            import clarabel
+
+            return "clarabel.DefaultSolver (fresh)", lambda: DirectClarabel(
+                lambda: _clarabel_settings(clarabel, settings), persistent=False
+            )
+        if solver in table:
+            desc, make = table[solver]
+            return desc, lambda: make(settings)
+        return "qpsolvers.solve_problem", lambda: via_qpsolvers(solver, settings)
+    return None, None
+
+
+def _clarabel_settings(clarabel, options):
+    s = clarabel.DefaultSettings()
+    s.verbose = False
+    for key, value in options.items():
+        setattr(s, key, value)
+    return s
+
+
+def qpsolvers_for(name: str, profile: str):
+    """qpsolvers.solve_problem with the backend's solver and settings, or None."""
+    solver = {"osqp": "osqp", "proxqp": "proxqp", "clarabel": "clarabel"}.get(name)
+    if name.startswith("qpsolvers:"):
+        solver = name.split(":", 1)[1]
+    if solver is None or solver not in qpsolvers.available_solvers:
+        return None
+    generic = get_backend(name, profile).profile
+    settings = native_settings(solver, generic.eps_abs, generic.eps_rel, generic.max_iter, generic.time_limit)
+    return lambda: via_qpsolvers(solver, settings)
+
+
+# ----------------------------------------------------------------- timing
+
+
+def time_pass(solve, problems) -> list[float]:
+    times = []
+    for p in problems:
+        start = time.perf_counter_ns()
+        solve(p)
+        times.append((time.perf_counter_ns() - start) * 1e-3)
+    return times
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--count", type=int, default=400, help="number of QPs (default 400)")
+    parser.add_argument("--repeat", type=int, default=3, help="passes per method (default 3)")
+    parser.add_argument("--source", choices=("sim", "known"), default="sim")
+    parser.add_argument("--profile", default="default")
+    parser.add_argument("--backends", default=None, help="comma-separated backend names (default: all but rnn*)")
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore")
+
+    source = args.source
+    if source == "sim":
+        try:
+            problems = sim_problems(args.count)
+        except Exception as exc:  # the simulator is optional here
+            print(f"# qpbench.sim unavailable ({type(exc).__name__}: {exc}); using known.robot_like_problem")
+            source, problems = "known", known_problems(args.count)
+    else:
+        problems = known_problems(args.count)
+    sizes = sorted({(p.q.shape[0], 0 if p.A is None else p.A.shape[0], 0 if p.G is None else p.G.shape[0]) for p in problems})
+    print(f"# {len(problems)} QPs from {source}; (n, meq, m) in {sizes}; profile {args.profile}; "
+          f"{args.repeat} passes; median wall time per solve in microseconds")
+
+    names = args.backends.split(",") if args.backends else [
+        n for n in backend_names() if not n.startswith("rnn")
+    ]
+    header = f"| {'backend':<20} | {'ours':>9} | {'direct':>9} | {'ours/direct':>11} | {'qpsolvers':>9} | {'ours/qpsolvers':>14} | direct API"
+    print(header)
+    print("|" + "|".join("-" * (len(c) + 0) for c in header.split("|")[1:]))
+    for name in names:
+        desc, direct_factory = direct_for(name, args.profile)
+        qps_factory = qpsolvers_for(name, args.profile)
+        methods = {"ours": lambda: get_backend(name, args.profile).solve, "direct": direct_factory, "qpsolvers": qps_factory}
+        times: dict[str, list[float]] = {k: [] for k, f in methods.items() if f is not None}
+        for _ in range(args.repeat):
+            for key in times:
+                solve = methods[key]()
+                solve(problems[0])  # first call: imports, compilation, set-up of the first shape
+                times[key] += time_pass(solve, problems)
+        med = {k: statistics.median(v) for k, v in times.items()}
+        ours = med["ours"]
+        direct = med.get("direct")
+        qps = med.get("qpsolvers")
+
+        def fmt(v):
+            return f"{v:9.1f}" if v is not None else f"{'-':>9}"
+
+        r1 = f"{ours / direct:11.2f}" if direct else f"{'-':>11}"
+        r2 = f"{ours / qps:14.2f}" if qps else f"{'-':>14}"
+        print(f"| {name:<20} | {fmt(ours)} | {fmt(direct)} | {r1} | {fmt(qps)} | {r2} | {desc or '-'}")
+        sys.stdout.flush()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

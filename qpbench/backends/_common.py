@@ -1,0 +1,83 @@
+"""Small helpers shared by the backend modules (no solver imports here).
+
+- :func:`generic_settings` merges a profile with the user's settings;
+- :func:`dense_bounds` turns optional ``lb``/``ub`` into full vectors;
+- :func:`as_dense`, :func:`all_dense` handle dense/sparse input cheaply;
+- :func:`dense_upper_layout` gives the CSC structure of a dense cost matrix's
+  upper triangle with *every* entry stored.
+
+Dense blocks are stored with their full (dense) pattern by the sparse solvers'
+backends: the robot's QPs are tiny and some Jacobian entries are
+structurally zero in some ticks only, so a pattern taken from the non-zeros
+would change from tick to tick and force a rebuild of the solver.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as spa
+
+#: Setting names every backend understands; the profile provides their values.
+GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
+
+
+def generic_settings(backend) -> tuple[dict, dict]:
+    """Split a backend's settings into generic values and native solver options.
+
+    Returns:
+        ``(generic, native)``: ``generic`` holds :data:`GENERIC_KEYS` from the
+        profile overridden by the user's settings of the same name; ``native``
+        holds the other user settings, passed to the solver verbatim (they
+        override what the backend derives from ``generic``).
+    """
+    profile = backend.profile
+    generic = {
+        "eps_abs": profile.eps_abs,
+        "eps_rel": profile.eps_rel,
+        "max_iter": profile.max_iter,
+        "time_limit": profile.time_limit,
+    }
+    native = {}
+    for key, value in backend.settings.items():
+        if key in generic:
+            generic[key] = value
+        else:
+            native[key] = value
+    return generic, native
+
+
+def dense_bounds(problem, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(lb, ub)`` as full float vectors, or ``(None, None)`` when the problem has no box."""
+    lb, ub = problem.lb, problem.ub
+    if lb is None and ub is None:
+        return None, None
+    lb = np.full(n, -np.inf) if lb is None else np.asarray(lb, dtype=float)
+    ub = np.full(n, np.inf) if ub is None else np.asarray(ub, dtype=float)
+    return lb, ub
+
+
+def as_dense(M) -> np.ndarray:
+    """A dense float array of a dense or scipy.sparse matrix."""
+    if type(M) is np.ndarray and M.dtype == np.float64:
+        return M
+    if spa.issparse(M):
+        return M.toarray()
+    return np.asarray(M, dtype=float)
+
+
+def all_dense(*matrices) -> bool:
+    """True when every given matrix is a numpy array or None (fast path of the backends)."""
+    return all(M is None or type(M) is np.ndarray for M in matrices)
+
+
+def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
+    """Index arrays of the CSC upper triangle of a dense ``n x n`` matrix, every entry stored.
+
+    Returns:
+        ``((rows, cols), indices, indptr)``: ``P[rows, cols]`` is the CSC data
+        vector (column-major order), ``indices``/``indptr`` its structure.
+    """
+    rows = np.concatenate([np.arange(j + 1) for j in range(n)]).astype(np.int64) if n else np.zeros(0, np.int64)
+    cols = np.concatenate([np.full(j + 1, j) for j in range(n)]).astype(np.int64) if n else np.zeros(0, np.int64)
+    indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
+    return (rows, cols), rows, indptr

@@ -1,0 +1,327 @@
+"""Backend ``clarabel``: Clarabel (interior point) through its own Python API, with a persistent solver.
+
+Formulation. Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K``.
+The qpsolvers problem is stacked as::
+
+    C = [A; G; I; -I],   d = [b; h; ub; -lb],   K = {0}^meq x R+^(rest)
+
+Rows whose bound is infinite (``h``, ``lb`` or ``ub`` entries of +-inf) are
+left out, so Clarabel never sees an infinite right-hand side; which rows are
+kept is part of the problem's pattern. Clarabel's multiplier ``w`` satisfies
+``P x + q + C' w = 0`` with ``w >= 0`` on the cone rows, so ``y = w_A``,
+``z = w_G`` (zero on the rows left out) and ``z_box = w_ub - w_lb``, which is
+qpsolvers' convention (negative where a lower bound is active).
+
+Persistence. A ``clarabel.DefaultSolver`` is built once and then updated
+in place (``DefaultSolver.update(P=..., q=..., A=..., b=...)`` with the
+new non-zero values) while the problem keeps its shape and sparsity pattern.
+Updates need ``presolve_enable=False`` and ``input_sparse_dropzeros=False``
+(both set here) and are used only when ``is_data_update_allowed()``. Dense
+blocks are stored with every entry, zeros included (the robot's Jacobian has
+entries that are zero in some ticks only), the ``+-I`` blocks with their
+diagonal; sparse inputs keep their own pattern. Clarabel is an interior-point
+method and starts each solve from its own initial point: ``warm_start`` is
+ignored, the saving is the skipped set-up (equilibration structure, symbolic
+factorisation). :meth:`ClarabelBackend.reset` drops the solver.
+
+Settings. ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``,
+``max_iter``, ``time_limit`` [s] from the profile, ``verbose`` off; other
+settings are set on ``DefaultSettings`` verbatim.
+
+Statuses. ``Solved`` -> optimal, ``PrimalInfeasible`` / ``DualInfeasible``
+(Clarabel's certificates) -> primal_infeasible / dual_infeasible,
+``MaxIterations`` -> max_iter, ``MaxTime`` -> time_limit, ``NumericalError``
+-> error; the ``Almost...`` statuses, ``InsufficientProgress`` and the rest
+-> not_solved (raw status in ``extras["raw_status"]``). ``ValueError``,
+``TypeError`` and Rust panics raised by Clarabel become status ``error``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as spa
+
+from . import register
+from ._common import all_dense, dense_bounds, dense_upper_layout, generic_settings
+from .base import Backend, BackendSolution
+
+
+class ConeLayout:
+    """CSC layout of ``P`` (upper) and ``C = [A; G_kept; I_kept; -I_kept]`` of one problem."""
+
+    def __init__(self, problem):
+        P, G, A = problem.P, problem.G, problem.A
+        self.n = n = problem.q.shape[0]
+        self.meq = 0 if A is None else A.shape[0]
+        self.m_all = 0 if G is None else G.shape[0]
+        lb, ub = dense_bounds(problem, n)
+        self.with_box = lb is not None
+        self.g_keep = np.isfinite(problem.h) if G is not None else np.zeros(0, bool)
+        self.ub_keep = np.isfinite(ub) if self.with_box else np.zeros(n, bool)
+        self.lb_keep = np.isfinite(lb) if self.with_box else np.zeros(n, bool)
+        self.m = int(self.g_keep.sum())
+        self.n_ub = int(self.ub_keep.sum())
+        self.n_lb = int(self.lb_keep.sum())
+        self.rows = self.meq + self.m + self.n_ub + self.n_lb
+        self.dense = all_dense(P, G, A)
+        masks = (np.concatenate([self.g_keep, self.ub_keep, self.lb_keep]).tobytes(),)
+        self.all_kept = bool(self.g_keep.all() and self.ub_keep.all() and self.lb_keep.all())
+        self._g_idx = np.flatnonzero(self.g_keep)
+        self._ub_idx = np.flatnonzero(self.ub_keep)
+        self._lb_idx = np.flatnonzero(self.lb_keep)
+        if self.dense:
+            self._P_idx, self.P_indices, self.P_indptr = dense_upper_layout(n)
+            k = self.meq + self.m
+            # Column j: the k dense rows, then its +I row (if kept), then its -I row (if kept).
+            ub_row = np.full(n, -1, np.int64)
+            ub_row[self.ub_keep] = k + np.arange(self.n_ub)
+            lb_row = np.full(n, -1, np.int64)
+            lb_row[self.lb_keep] = k + self.n_ub + np.arange(self.n_lb)
+            col_rows = np.hstack([np.tile(np.arange(k), (n, 1)), ub_row[:, None], lb_row[:, None]])
+            self._C_mask = (col_rows >= 0).ravel()
+            self.C_indices = col_rows.ravel()[self._C_mask]
+            counts = (col_rows >= 0).sum(axis=1)
+            self.C_indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+            self.key = ("dense", n, self.meq, self.m_all, self.with_box) + masks
+        else:
+            Pc, Cc = self._sparse(problem)
+            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
+            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
+            self.key = (
+                "sparse", n, self.meq, self.m_all, self.with_box, *masks,
+                Pc.indptr.tobytes(), Pc.indices.tobytes(), Cc.indptr.tobytes(), Cc.indices.tobytes(),
+            )
+
+    def _sparse(self, problem):
+        n = self.n
+        P = spa.triu(spa.csc_matrix(problem.P, dtype=float), format="csc")
+        blocks = []
+        if problem.A is not None:
+            blocks.append(spa.csc_matrix(problem.A, dtype=float))
+        if problem.G is not None:
+            blocks.append(spa.csc_matrix(problem.G, dtype=float)[np.flatnonzero(self.g_keep)])
+        eye = spa.identity(n, format="csr")
+        if self.n_ub:
+            blocks.append(eye[np.flatnonzero(self.ub_keep)])
+        if self.n_lb:
+            blocks.append(-eye[np.flatnonzero(self.lb_keep)])
+        C = spa.vstack(blocks, format="csc") if blocks else spa.csc_matrix((0, n))
+        P.sort_indices()
+        C.sort_indices()
+        return P, C
+
+    def data(self, problem):
+        """``(P_data, C_data)`` in this layout's order."""
+        if self.dense and self.all_kept:
+            n, meq, k = self.n, self.meq, self.meq + self.m
+            P_data = problem.P[self._P_idx]
+            D = np.empty((k + 2, n))
+            if meq:
+                D[:meq] = problem.A
+            if k > meq:
+                D[meq:k] = problem.G
+            D[k] = 1.0
+            D[k + 1] = -1.0
+            return P_data, D.T.ravel()
+        if self.dense:
+            n = self.n
+            P_data = np.asarray(problem.P, dtype=float)[self._P_idx]
+            parts = []
+            if problem.A is not None:
+                parts.append(np.asarray(problem.A, dtype=float))
+            if problem.G is not None:
+                parts.append(np.asarray(problem.G, dtype=float)[self.g_keep])
+            parts.append(np.ones((1, n)))
+            parts.append(-np.ones((1, n)))
+            C_data = np.vstack(parts).T.ravel()[self._C_mask]
+            return P_data, C_data
+        P, C = self._sparse(problem)
+        return P.data, C.data
+
+    def matrices(self, problem):
+        P_data, C_data = self.data(problem)
+        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
+        C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, self.n))
+        return P, C
+
+    def rhs(self, problem) -> np.ndarray:
+        if self.all_kept and self.with_box:
+            lb, ub = dense_bounds(problem, self.n)
+            parts = [v for v in (problem.b, problem.h) if v is not None]
+            return np.concatenate(parts + [ub, -lb])
+        parts = []
+        if problem.A is not None:
+            parts.append(np.asarray(problem.b, dtype=float))
+        if problem.G is not None:
+            parts.append(np.asarray(problem.h, dtype=float)[self.g_keep])
+        if self.with_box:
+            lb, ub = dense_bounds(problem, self.n)
+            parts.append(ub[self.ub_keep])
+            parts.append(-lb[self.lb_keep])
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def cones(self, clarabel) -> list:
+        cones = []
+        if self.meq:
+            cones.append(clarabel.ZeroConeT(self.meq))
+        if self.rows - self.meq:
+            cones.append(clarabel.NonnegativeConeT(self.rows - self.meq))
+        return cones
+
+    def split_duals(self, w: np.ndarray):
+        """``(y, z, z_box)`` of Clarabel's multiplier ``w``."""
+        meq, m, n = self.meq, self.m, self.n
+        y = w[:meq]
+        if self.all_kept:
+            z = w[meq : meq + m]
+            if not self.with_box:
+                return y, z, np.zeros(0)
+            return y, z, w[meq + m : meq + m + n] - w[meq + m + n :]
+        z = np.zeros(self.m_all)
+        z[self._g_idx] = w[meq : meq + m]
+        if not self.with_box:
+            return y, z, np.zeros(0)
+        z_box = np.zeros(n)
+        z_box[self._ub_idx] += w[meq + m : meq + m + self.n_ub]
+        z_box[self._lb_idx] -= w[meq + m + self.n_ub :]
+        return y, z, z_box
+
+
+_STATUSES = {
+    "Solved": "optimal",
+    "PrimalInfeasible": "primal_infeasible",
+    "DualInfeasible": "dual_infeasible",
+    "MaxIterations": "max_iter",
+    "MaxTime": "time_limit",
+    "NumericalError": "error",
+}
+_NAMES: dict = {}
+
+
+def _status_name(status) -> str:
+    """Name of a ``clarabel.SolverStatus`` (cached: its ``str`` is slow)."""
+    try:
+        return _NAMES[status]
+    except KeyError:
+        name = _NAMES[status] = str(status).split(".")[-1]
+        return name
+    except TypeError:  # unhashable
+        return str(status).split(".")[-1]
+
+
+def quick_key(problem) -> tuple | None:
+    """The :attr:`ConeLayout.key` of an all-dense problem without building the layout (else None)."""
+    P, G, A = problem.P, problem.G, problem.A
+    if not all_dense(P, G, A):
+        return None
+    n = problem.q.shape[0]
+    lb, ub = problem.lb, problem.ub
+    with_box = lb is not None or ub is not None
+    parts = [np.empty(0) if G is None else problem.h]
+    if with_box:
+        parts.append(np.full(n, np.inf) if ub is None else ub)
+        parts.append(np.full(n, -np.inf) if lb is None else lb)
+    else:
+        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
+    finite = np.isfinite(np.concatenate(parts))
+    return ("dense", n, 0 if A is None else A.shape[0], 0 if G is None else G.shape[0], with_box, finite.tobytes())
+
+
+def _is_clarabel_error(exc: BaseException) -> bool:
+    """Errors Clarabel raises on bad data (pyo3 panics derive from BaseException)."""
+    return isinstance(exc, (ValueError, TypeError)) or type(exc).__name__ == "PanicException"
+
+
+@register
+class ClarabelBackend(Backend):
+    """Clarabel with a persistent ``DefaultSolver``, updated in place when the pattern holds."""
+
+    name = "clarabel"
+    family = "interior point"
+    package = "clarabel"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self._solver = None
+        self._layout: ConeLayout | None = None
+
+    @classmethod
+    def unavailable_reason(cls):
+        try:
+            import clarabel  # noqa: F401
+        except ImportError as exc:
+            return f"cannot import clarabel ({exc})"
+        return None
+
+    def reset(self) -> None:
+        self._solver = None
+        self._layout = None
+
+    def _settings(self, clarabel):
+        generic, native = generic_settings(self)
+        s = clarabel.DefaultSettings()
+        s.verbose = False
+        s.tol_feas = float(generic["eps_abs"])
+        s.tol_gap_abs = float(generic["eps_abs"])
+        s.tol_gap_rel = float(generic["eps_rel"])
+        s.max_iter = int(min(generic["max_iter"], 2**32 - 1))
+        s.time_limit = float(generic["time_limit"])
+        s.presolve_enable = False
+        s.input_sparse_dropzeros = False
+        for key, value in native.items():
+            setattr(s, key, value)
+        return s
+
+    def _solve(self, problem, warm_start):
+        import clarabel
+
+        sol = BackendSolution(problem)
+        try:
+            layout = self._layout
+            same = False
+            if self._solver is not None and layout is not None:
+                key = quick_key(problem) if layout.dense else None
+                if key is None:
+                    key = ConeLayout(problem).key
+                same = key == layout.key
+            if same:
+                P_data, C_data = layout.data(problem)
+                self._solver.update(P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem))
+            else:
+                self._solver = None
+                layout = ConeLayout(problem)
+                P, C = layout.matrices(problem)
+                solver = clarabel.DefaultSolver(
+                    P, np.asarray(problem.q, dtype=float), C, layout.rhs(problem),
+                    layout.cones(clarabel), self._settings(clarabel),
+                )
+                if solver.is_data_update_allowed():
+                    self._solver, self._layout = solver, layout
+                else:
+                    self._layout = None
+            res = (self._solver or solver).solve()
+        except BaseException as exc:
+            if not _is_clarabel_error(exc):
+                raise
+            self.reset()
+            sol.status = "error"
+            sol.error = f"{type(exc).__name__}: {exc}"
+            return sol
+
+        name = _status_name(res.status)
+        status = _STATUSES.get(name, "not_solved")
+        sol.status = status
+        sol.extras = {"raw_status": name}
+        if status == "error":
+            sol.error = f"Clarabel: {name}"
+        sol.iterations = int(res.iterations)
+        sol.solver_time_s = float(res.solve_time)
+        if status in ("primal_infeasible", "dual_infeasible"):
+            return sol
+        x = np.array(res.x)
+        if x.size == layout.n and np.isfinite(x).all():
+            sol.x = x
+            sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.z))
+        if status == "optimal":
+            sol.obj = float(res.obj_val)
+        return sol

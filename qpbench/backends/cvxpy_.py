@@ -1,0 +1,221 @@
+"""Backend ``cvxpy``: the modelling-layer route, a parametrised cvxpy model re-solved with new values.
+
+Model (built once per shape, then only parameter values change)::
+
+    minimize    1/2 ||L' x||^2 + q' x          P = L L'
+    subject to  A x == b,  G_f x <= h_f,  x[i_l] >= lb_f,  x[i_u] <= ub_f
+
+with ``cp.Parameter`` for ``L, q, A, b, G_f, h_f, lb_f, ub_f``. ``quad_form(x, P)``
+with a parameter ``P`` is not DPP, so the cost is written with a factor
+``L``: the Cholesky factor of ``P`` when ``P`` is positive definite, else
+``V diag(sqrt(max(lambda, 0)))`` from ``P``'s eigendecomposition (exact for a
+positive semidefinite ``P``, no regularisation). Rows of ``G x <= h`` and
+bounds with an infinite right-hand side are left out of the model (which ones
+is part of the cache key, with the shapes). The DPP compilation happens at
+the first solve of each shape; later solves only map the new parameter
+values to the solver's data, which is the overhead this backend shows.
+
+Solver. cvxpy's default QP solver, OSQP (cvxpy 1.9 picks OSQP for a QP when
+it is installed; Clarabel otherwise). The solver is passed explicitly so that
+the profile's tolerances can be given in its own names: for OSQP
+``eps_abs, eps_rel, max_iter, time_limit`` and ``polish=True`` when
+``eps_abs <= 1e-7``; for Clarabel ``tol_feas, tol_gap_abs, tol_gap_rel,
+max_iter, time_limit``. cvxpy's ``warm_start=True`` reuses the previous
+solution; an explicit ``warm_start`` sets ``x.value`` first. Other settings
+are passed to ``Problem.solve`` verbatim. The solver's iteration count and
+solve time come from ``problem.solver_stats``.
+
+Duals. cvxpy's dual of ``A x == b`` already has qpsolvers' sign; the duals
+of ``G x <= h`` are ``z`` (zero on rows left out); ``z_box = nu - mu`` from
+the duals ``mu >= 0`` of ``x >= lb`` and ``nu >= 0`` of ``x <= ub``.
+
+Statuses. ``optimal`` -> optimal, ``infeasible`` -> primal_infeasible,
+``unbounded`` -> dual_infeasible, ``user_limit`` -> max_iter, the
+``..._inaccurate`` statuses -> not_solved, except that an inaccurate answer
+after ``max_iter`` iterations is max_iter (raw status in
+``extras["raw_status"]``). ``cvxpy.error.SolverError`` (the solver failed)
+becomes status ``error``.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from . import register
+from ._common import as_dense, dense_bounds, generic_settings
+from .base import Backend, BackendSolution
+
+
+def cost_factor(P: np.ndarray) -> np.ndarray:
+    """``L`` with ``L L' = P`` for a symmetric positive semidefinite ``P``."""
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(0.5 * (P + P.T))
+        return V * np.sqrt(np.maximum(w, 0.0))
+
+
+class _Model:
+    """The parametrised cvxpy problem of one shape."""
+
+    def __init__(self, cp, n: int, meq: int, g_keep: np.ndarray, lb_idx: np.ndarray, ub_idx: np.ndarray):
+        self.x = x = cp.Variable(n)
+        self.L = cp.Parameter((n, n))
+        self.q = cp.Parameter(n)
+        self.g_keep, self.lb_idx, self.ub_idx = g_keep, lb_idx, ub_idx
+        self.m_all = g_keep.shape[0]
+        constraints = []
+        self.eq = self.ineq = self.lower = self.upper = None
+        if meq:
+            self.A = cp.Parameter((meq, n))
+            self.b = cp.Parameter(meq)
+            self.eq = self.A @ x == self.b
+            constraints.append(self.eq)
+        m = int(g_keep.sum())
+        if m:
+            self.G = cp.Parameter((m, n))
+            self.h = cp.Parameter(m)
+            self.ineq = self.G @ x <= self.h
+            constraints.append(self.ineq)
+        if lb_idx.size:
+            self.lb = cp.Parameter(lb_idx.size)
+            self.lower = x[lb_idx] >= self.lb
+            constraints.append(self.lower)
+        if ub_idx.size:
+            self.ub = cp.Parameter(ub_idx.size)
+            self.upper = x[ub_idx] <= self.ub
+            constraints.append(self.upper)
+        objective = cp.Minimize(0.5 * cp.sum_squares(self.L.T @ x) + self.q @ x)
+        self.problem = cp.Problem(objective, constraints)
+
+    def set_values(self, problem, P: np.ndarray, lb, ub) -> None:
+        self.L.value = cost_factor(P)
+        self.q.value = np.asarray(problem.q, dtype=float)
+        if self.eq is not None:
+            self.A.value = as_dense(problem.A)
+            self.b.value = np.asarray(problem.b, dtype=float)
+        if self.ineq is not None:
+            self.G.value = as_dense(problem.G)[self.g_keep]
+            self.h.value = np.asarray(problem.h, dtype=float)[self.g_keep]
+        if self.lower is not None:
+            self.lb.value = lb[self.lb_idx]
+        if self.upper is not None:
+            self.ub.value = ub[self.ub_idx]
+
+    def duals(self, n: int, with_box: bool):
+        def value(c):
+            return np.zeros(0) if c is None or c.dual_value is None else np.atleast_1d(np.asarray(c.dual_value, float))
+
+        y = value(self.eq) if self.eq is not None else np.zeros(0)
+        z = np.zeros(self.m_all)
+        if self.ineq is not None:
+            z[self.g_keep] = value(self.ineq)
+        z_box = np.zeros(n if with_box else 0)
+        if self.lower is not None:
+            z_box[self.lb_idx] -= value(self.lower)
+        if self.upper is not None:
+            z_box[self.ub_idx] += value(self.upper)
+        return y, z, z_box
+
+
+@register
+class CvxpyBackend(Backend):
+    """A cached, parametrised cvxpy model per problem shape, on cvxpy's default QP solver."""
+
+    name = "cvxpy"
+    family = "modelling layer (OSQP: ADMM)"
+    package = "cvxpy"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self._models: dict[tuple, _Model] = {}
+        self._options: tuple[str, dict] | None = None
+
+    @classmethod
+    def unavailable_reason(cls):
+        try:
+            import cvxpy  # noqa: F401
+        except ImportError as exc:
+            return f"cannot import cvxpy ({exc})"
+        return None
+
+    def reset(self) -> None:
+        self._models = {}
+
+    def _solver_options(self, cp) -> tuple[str, dict]:
+        generic, native = generic_settings(self)
+        installed = cp.installed_solvers()
+        if "OSQP" in installed:
+            solver = "OSQP"
+            options = {
+                "eps_abs": generic["eps_abs"],
+                "eps_rel": generic["eps_rel"],
+                "max_iter": int(generic["max_iter"]),
+                "time_limit": float(generic["time_limit"]),
+                "polish": generic["eps_abs"] <= 1e-7,
+            }
+        else:
+            solver = "CLARABEL"
+            options = {
+                "tol_feas": generic["eps_abs"],
+                "tol_gap_abs": generic["eps_abs"],
+                "tol_gap_rel": generic["eps_rel"],
+                "max_iter": int(generic["max_iter"]),
+                "time_limit": float(generic["time_limit"]),
+            }
+        options.update(native)
+        return solver, options
+
+    def _solve(self, problem, warm_start):
+        import cvxpy as cp
+
+        sol = BackendSolution(problem)
+        q = np.asarray(problem.q)
+        n = q.shape[0]
+        P = as_dense(problem.P)
+        meq = 0 if problem.A is None else problem.A.shape[0]
+        g_keep = np.isfinite(problem.h) if problem.G is not None else np.zeros(0, bool)
+        lb, ub = dense_bounds(problem, n)
+        with_box = lb is not None
+        lb_idx = np.flatnonzero(np.isfinite(lb)) if with_box else np.zeros(0, np.int64)
+        ub_idx = np.flatnonzero(np.isfinite(ub)) if with_box else np.zeros(0, np.int64)
+        key = (n, meq, g_keep.tobytes(), lb_idx.tobytes(), ub_idx.tobytes())
+        model = self._models.get(key)
+        if model is None:
+            model = self._models[key] = _Model(cp, n, meq, g_keep, lb_idx, ub_idx)
+        model.set_values(problem, P, lb, ub)
+        if warm_start is not None:
+            model.x.value = np.asarray(warm_start, dtype=float)
+        if self._options is None:  # cp.installed_solvers() takes milliseconds
+            self._options = self._solver_options(cp)
+        solver, options = self._options
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "Solution may be inaccurate": the status says it
+                model.problem.solve(solver=solver, warm_start=True, verbose=False, **options)
+        except cp.error.SolverError as exc:
+            sol.status = "error"
+            sol.error = f"SolverError: {exc}"
+            return sol
+        raw = model.problem.status
+        status = {
+            cp.OPTIMAL: "optimal",
+            cp.INFEASIBLE: "primal_infeasible",
+            cp.UNBOUNDED: "dual_infeasible",
+            cp.USER_LIMIT: "max_iter",
+        }.get(raw, "not_solved")
+        stats = model.problem.solver_stats
+        if status == "not_solved" and stats.num_iters is not None and stats.num_iters >= options.get("max_iter", np.inf):
+            status = "max_iter"  # cvxpy reports OSQP's iteration limit as "optimal_inaccurate"
+        sol.status = status
+        sol.extras = {"raw_status": raw, "solver": stats.solver_name}
+        sol.iterations = None if stats.num_iters is None else int(stats.num_iters)
+        sol.solver_time_s = stats.solve_time
+        if status in ("primal_infeasible", "dual_infeasible"):
+            return sol
+        if model.x.value is not None and np.all(np.isfinite(model.x.value)):
+            sol.x = np.array(model.x.value, dtype=float)
+            sol.y, sol.z, sol.z_box = model.duals(n, with_box)
+        return sol

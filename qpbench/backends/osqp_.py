@@ -1,0 +1,271 @@
+"""Backend ``osqp``: OSQP (ADMM) through its own Python API, with a persistent solver.
+
+Formulation. OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u``. The
+qpsolvers problem is stacked as::
+
+    C = [G; A; I],   l = [-inf; b; lb],   u = [h; b; ub]
+
+(the identity rows only when the problem has bounds). OSQP's multiplier ``w``
+of ``C x`` satisfies ``P x + q + C' w = 0``, positive at an active upper side
+and negative at an active lower side, which is qpsolvers' convention
+already: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
+
+Persistence. A solver object is set up once and then updated
+(``OSQP.update(q, l, u, Px, Ax)``) while the problem keeps the same shape and
+sparsity pattern; OSQP then warm-starts from its previous iterate (its
+``warm_starting`` setting, on by default), or from ``warm_start`` when given.
+Dense blocks are stored with every entry (zeros included), so a Jacobian
+entry that is zero in one tick does not change the pattern; the identity
+block holds its diagonal only; sparse inputs keep their own pattern. Any
+other change of shape or pattern (or of settings) rebuilds the solver.
+:meth:`OsqpBackend.reset` drops it.
+
+Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, ``time_limit`` from the
+profile; ``polishing=True`` when ``eps_abs <= 1e-7`` (the ``high_accuracy``
+profile): ADMM alone seldom reaches a 1e-9 residual, the polishing step
+(a solve of the KKT system of the guessed active set) does. ``verbose`` is
+off. Other settings are passed to ``OSQP.setup`` verbatim.
+
+Statuses. ``solved`` -> optimal, ``primal infeasible`` / ``dual infeasible``
+(OSQP's certificates) -> primal_infeasible / dual_infeasible,
+``maximum iterations reached`` -> max_iter, ``run time limit reached`` ->
+time_limit, ``problem non convex`` -> error; the ``... inaccurate`` variants
+and ``unsolved`` -> not_solved (raw status in ``extras["raw_status"]``).
+``OSQPException`` and ``ValueError`` from OSQP become status ``error``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as spa
+
+from . import register
+from ._common import all_dense, dense_bounds, dense_upper_layout, generic_settings
+from .base import Backend, BackendSolution
+
+
+class StackedLayout:
+    """CSC layout of ``P`` (upper triangle) and ``C = [G; A; I]`` of one problem shape.
+
+    For dense blocks the data vectors are gathered with precomputed indices,
+    so an update costs two fancy-indexing operations.
+    """
+
+    def __init__(self, problem, with_box: bool, upper_P: bool = True):
+        P, G, A = problem.P, problem.G, problem.A
+        self.n = n = problem.q.shape[0]
+        self.m = 0 if G is None else G.shape[0]
+        self.meq = 0 if A is None else A.shape[0]
+        self.with_box = with_box
+        self.upper_P = upper_P
+        self.dense = all_dense(P, G, A)
+        if self.dense:
+            if upper_P:
+                (rows, cols), _, indptr = dense_upper_layout(n)
+            else:
+                rows = np.tile(np.arange(n), n).astype(np.int64)
+                cols = np.repeat(np.arange(n), n).astype(np.int64)
+                indptr = np.arange(0, n * n + 1, n, dtype=np.int64)
+            self._P_idx = (rows, cols)
+            self.P_indices, self.P_indptr = rows, indptr
+            k = self.m + self.meq
+            per_col = k + (1 if with_box else 0)
+            col_rows = np.arange(k, dtype=np.int64)
+            if with_box:
+                self.C_indices = np.concatenate([np.append(col_rows, k + j) for j in range(n)]).astype(np.int64)
+            else:
+                self.C_indices = np.tile(col_rows, n)
+            self.C_indptr = np.arange(0, per_col * n + 1, per_col, dtype=np.int64)
+            self.key = ("dense", n, self.m, self.meq, with_box, upper_P)
+        else:
+            Pc, Cc = self._sparse(problem)
+            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
+            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
+            self.key = (
+                "sparse", n, self.m, self.meq, with_box, upper_P,
+                Pc.indptr.tobytes(), Pc.indices.tobytes(), Cc.indptr.tobytes(), Cc.indices.tobytes(),
+            )
+
+    @property
+    def C_rows(self) -> int:
+        return self.m + self.meq + (self.n if self.with_box else 0)
+
+    def _sparse(self, problem):
+        n = self.n
+        P = spa.csc_matrix(problem.P, dtype=float)
+        if self.upper_P:
+            P = spa.triu(P, format="csc")
+        blocks = [spa.csc_matrix(M, dtype=float) for M in (problem.G, problem.A) if M is not None]
+        if self.with_box:
+            blocks.append(spa.identity(n, format="csc"))
+        C = spa.vstack(blocks, format="csc") if blocks else spa.csc_matrix((0, n))
+        P.sort_indices()
+        C.sort_indices()
+        return P, C
+
+    def data(self, problem) -> tuple[np.ndarray, np.ndarray]:
+        """``(P_data, C_data)`` in this layout's order."""
+        if self.dense:
+            m, k = self.m, self.m + self.meq
+            P_data = problem.P[self._P_idx]
+            D = np.empty((k + (1 if self.with_box else 0), self.n))
+            if m:
+                D[:m] = problem.G
+            if k > m:
+                D[m:k] = problem.A
+            if self.with_box:
+                D[k] = 1.0
+            return P_data, D.T.ravel()
+        P, C = self._sparse(problem)
+        return P.data, C.data
+
+    def matrices(self, problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
+        """``(P, C)`` as CSC matrices with this layout's pattern."""
+        P_data, C_data = self.data(problem)
+        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
+        C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.C_rows, self.n))
+        return P, C
+
+    def vectors(self, problem) -> tuple[np.ndarray, np.ndarray]:
+        """``(l, u)`` of the stacked rows ``[G; A; I]``."""
+        parts_l, parts_u = [], []
+        if problem.G is not None:
+            parts_l.append(np.full(self.m, -np.inf))
+            parts_u.append(np.asarray(problem.h, dtype=float))
+        if problem.A is not None:
+            b = np.asarray(problem.b, dtype=float)
+            parts_l.append(b)
+            parts_u.append(b)
+        if self.with_box:
+            lb, ub = dense_bounds(problem, self.n)
+            parts_l.append(lb)
+            parts_u.append(ub)
+        if not parts_l:
+            return np.zeros(0), np.zeros(0)
+        return np.concatenate(parts_l), np.concatenate(parts_u)
+
+    def split_duals(self, w: np.ndarray):
+        """``(y, z, z_box)`` of the stacked multiplier ``w`` (views into ``w``)."""
+        m, meq = self.m, self.meq
+        z_box = w[m + meq :] if self.with_box else np.zeros(0)
+        return w[m : m + meq], w[:m], z_box
+
+
+_STATUS_MAP: dict = {}
+
+
+def _status_map(osqp) -> dict:
+    """OSQP ``status_val`` (int) -> our status, built once."""
+    if not _STATUS_MAP:
+        S = osqp.SolverStatus
+        _STATUS_MAP.update({
+            int(S.OSQP_SOLVED): "optimal",
+            int(S.OSQP_PRIMAL_INFEASIBLE): "primal_infeasible",
+            int(S.OSQP_DUAL_INFEASIBLE): "dual_infeasible",
+            int(S.OSQP_MAX_ITER_REACHED): "max_iter",
+            int(S.OSQP_TIME_LIMIT_REACHED): "time_limit",
+            int(S.OSQP_NON_CVX): "error",
+        })
+    return _STATUS_MAP
+
+
+def _has_box(problem) -> bool:
+    return problem.lb is not None or problem.ub is not None
+
+
+@register
+class OsqpBackend(Backend):
+    """OSQP through ``osqp.OSQP`` with a persistent, updated solver object."""
+
+    name = "osqp"
+    family = "ADMM"
+    package = "osqp"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self._solver = None
+        self._layout: StackedLayout | None = None
+
+    @classmethod
+    def unavailable_reason(cls):
+        try:
+            import osqp  # noqa: F401
+        except ImportError as exc:
+            return f"cannot import osqp ({exc})"
+        return None
+
+    def reset(self) -> None:
+        self._solver = None
+        self._layout = None
+
+    def _settings(self) -> dict:
+        generic, native = generic_settings(self)
+        settings = {
+            "eps_abs": generic["eps_abs"],
+            "eps_rel": generic["eps_rel"],
+            "max_iter": int(generic["max_iter"]),
+            "time_limit": float(generic["time_limit"]),
+            "verbose": False,
+        }
+        if generic["eps_abs"] <= 1e-7:
+            settings["polishing"] = True
+        settings.update(native)
+        return settings
+
+    def _solve(self, problem, warm_start):
+        import osqp
+
+        sol = BackendSolution(problem)
+        with_box = _has_box(problem)
+        layout = self._layout
+        reuse = False
+        if self._solver is not None and layout is not None and layout.with_box == with_box:
+            if layout.dense:
+                reuse = all_dense(problem.P, problem.G, problem.A) and (
+                    layout.n == problem.q.shape[0]
+                    and layout.m == (0 if problem.G is None else problem.G.shape[0])
+                    and layout.meq == (0 if problem.A is None else problem.A.shape[0])
+                )
+            else:
+                reuse = StackedLayout(problem, with_box).key == layout.key
+        try:
+            if reuse:
+                P_data, C_data = layout.data(problem)
+                l, u = layout.vectors(problem)
+                self._solver.update(q=problem.q, l=l, u=u, Px=P_data, Ax=C_data)
+            else:
+                self._solver = None
+                layout = StackedLayout(problem, with_box)
+                P, C = layout.matrices(problem)
+                l, u = layout.vectors(problem)
+                solver = osqp.OSQP()
+                solver.setup(P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings())
+                self._solver, self._layout = solver, layout
+            if warm_start is not None:
+                self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
+            res = self._solver.solve(raise_error=False)
+        except (osqp.OSQPException, ValueError) as exc:
+            self.reset()
+            sol.status = "error"
+            sol.error = f"{type(exc).__name__}: {exc}"
+            return sol
+
+        info = res.info
+        status = _status_map(osqp).get(int(info.status_val), "not_solved")
+        sol.status = status
+        sol.extras = {"raw_status": info.status, "info": info}
+        if status == "error":
+            sol.error = f"OSQP: {info.status}"
+        sol.iterations = int(info.iter)
+        sol.solver_time_s = float(info.run_time)
+        if status in ("primal_infeasible", "dual_infeasible"):
+            sol.extras["prim_inf_cert"] = np.array(res.prim_inf_cert)
+            sol.extras["dual_inf_cert"] = np.array(res.dual_inf_cert)
+            return sol
+        x = np.array(res.x)
+        if np.isfinite(x).all():
+            sol.x = x
+            sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.y))
+        if status == "optimal":
+            sol.obj = float(info.obj_val)
+        return sol

@@ -1,0 +1,67 @@
+"""Backend ``pinv``: the paper's comparison baseline, Jacobian Moore-Penrose inverse (JMPI).
+
+The JMPI controller of the paper's section 4 computes the joint velocity
+``v = J^+ b0`` and ignores obstacles and joint limits. As a QP "solver":
+
+- with equalities ``A x = b``: ``x = A^+ b`` (from a thin SVD of ``A``, the
+  minimum-norm solution, which is the QP's minimiser when ``P = I, q = 0`` as
+  in the paper's eq. 11); ``P``, ``q``, ``G``, ``h``, ``lb``, ``ub`` are ignored;
+- without equalities: the unconstrained minimiser ``x = -P^+ q`` (least
+  squares of ``P x = -q``), ignoring ``G``, ``h``, ``lb``, ``ub``.
+
+Status is ``optimal`` whenever an ``x`` was produced: the method has no notion
+of failure; the metrics show its constraint violation and optimality gap.
+
+Duals: ``y = -(A')^+ (P x + q)``, the least-squares solution of the
+stationarity condition ``A' y = -(P x + q)`` (same SVD), and ``z``, ``z_box``
+are zero vectors (the method treats every inequality and bound as
+inactive), so the dual residual reported for it is exactly the stationarity
+error of that claim.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import register
+from ._common import as_dense
+from .base import Backend, BackendSolution
+
+
+@register
+class PinvBackend(Backend):
+    """JMPI: ``x = A^+ b`` (or ``-P^+ q`` without equalities); constraints ignored."""
+
+    name = "pinv"
+    family = "pseudo-inverse (JMPI, ignores inequalities and bounds)"
+    package = "numpy"
+
+    def _solve(self, problem, warm_start):
+        sol = BackendSolution(problem)
+        P = as_dense(problem.P)
+        q = np.asarray(problem.q, dtype=float)
+        n = q.shape[0]
+        try:
+            if problem.A is not None and problem.A.shape[0] > 0:
+                # One thin SVD A = U S V' gives both pseudo-inverse solutions:
+                # x = V S^+ U' b and y = -U S^+ V' (P x + q).
+                A = as_dense(problem.A)
+                U, s, Vt = np.linalg.svd(A, full_matrices=False)
+                keep = s > max(A.shape) * np.finfo(float).eps * (s[0] if s.size else 0.0)
+                s_inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+                x = Vt.T @ (s_inv * (U.T @ np.asarray(problem.b, dtype=float)))
+                y = -U @ (s_inv * (Vt @ (P @ x + q)))
+            else:
+                x = np.linalg.lstsq(P, -q, rcond=None)[0]
+                y = np.zeros(0)
+        except np.linalg.LinAlgError as exc:
+            sol.status = "error"
+            sol.error = f"LinAlgError: {exc}"
+            return sol
+        sol.x = x
+        sol.y = y
+        sol.z = np.zeros(0 if problem.G is None else problem.G.shape[0])
+        sol.z_box = np.zeros(n) if (problem.lb is not None or problem.ub is not None) else np.zeros(0)
+        sol.status = "optimal"
+        sol.iterations = 0
+        return sol
