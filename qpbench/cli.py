@@ -43,10 +43,16 @@ def _available_commands():
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser (used by :func:`main` and by the tests)."""
+    # The flags are accepted before and after the sub-command; SUPPRESS keeps the
+    # sub-parser from resetting a value given before it (``qpbench -q simulate``).
     common = argparse.ArgumentParser(add_help=False)
     verbosity = common.add_mutually_exclusive_group()
-    verbosity.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
-    verbosity.add_argument("-v", "--verbose", action="store_true", help="debug output")
+    verbosity.add_argument(
+        "-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="only warnings and errors"
+    )
+    verbosity.add_argument(
+        "-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="debug output"
+    )
     parser = argparse.ArgumentParser(
         prog="qpbench",
         description="Benchmark QP solvers on the per-tick QPs of a compliant redundant manipulator.",
@@ -81,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``qpbench`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.quiet = getattr(args, "quiet", False)
+    args.verbose = getattr(args, "verbose", False)
     if args.command is None:
         parser.print_help()
         return 2

@@ -1,0 +1,410 @@
+"""The controller: build one control tick's QP (paper eq. 11) as a :class:`qpsolvers.Problem`.
+
+Two formulations of the same tick, both with ``n`` variables ``v`` (joint
+velocities in [rad/s]):
+
+``paper`` (hard task, eq. 11)::
+
+    minimize 1/2 v^T v   s.t.  J v = b0,  G v <= h,  lb <= v <= ub
+
+``soft`` (task as a weighted cost; feasible whenever the robot is within its
+limits and static obstacles are at least ``d_safe`` away)::
+
+    minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
+
+``G`` holds one row per (key point, obstacle point) pair, ordered key point by
+key point (A1 against every obstacle point, then A2, ...), every pair kept so
+the row count is fixed for a scenario and a solver can keep a persistent
+object. ``P`` is a dense ndarray; no obstacle means ``G = h = None``.
+
+The per-tick build runs one compiled numba kernel (kinematics, impedance
+reference, bounds, obstacle rows; compiled on first call and cached on disk)
+writing into freshly allocated arrays, so a returned problem is never changed
+by a later build. :meth:`Controller.build_reference` assembles the same
+problem from the numpy terms of :mod:`qpbench.control.terms`; the tests
+check the two agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import qpsolvers
+
+from ..exceptions import ParamError
+from ..robot.environment import PRIMITIVE_WIDTH, Obstacle
+from ..robot.kinematics import KeyPoints, PlanarArm
+from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
+
+__all__ = ["FORMULATIONS", "Controller", "TickQP", "build_problem"]
+
+#: Formulations a controller builds.
+FORMULATIONS = ("paper", "soft")
+
+# Layout of the kernel's parameter vector.
+_T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = range(16)
+_NPAR = 16
+
+_kernel = None
+_Problem = qpsolvers.Problem
+_new_problem = object.__new__
+
+
+def _get_kernel():
+    """The compiled build kernel (numba imported and compiled on first use only)."""
+    global _kernel
+    if _kernel is None:
+        import numba
+
+        _kernel = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
+    return _kernel
+
+
+def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist):  # pragma: no cover - compiled
+    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick (see the module docstring)."""
+    n = theta.shape[0]
+    px = np.empty(n + 1)
+    py = np.empty(n + 1)
+    cs = np.empty(n)
+    sn = np.empty(n)
+    px[0] = 0.0
+    py[0] = 0.0
+    phi = 0.0
+    for i in range(n):
+        phi += theta[i]
+        cs[i] = np.cos(phi)
+        sn[i] = np.sin(phi)
+        px[i + 1] = px[i] + lengths[i] * cs[i]
+        py[i + 1] = py[i] + lengths[i] * sn[i]
+    ex = px[n]
+    ey = py[n]
+    ee[0] = ex
+    ee[1] = ey
+    for k in range(n):
+        J[0, k] = -(ey - py[k])
+        J[1, k] = ex - px[k]
+    # impedance reference, eq. 4
+    kd = par[_KD]
+    kpkd = par[_KP] / kd
+    fkd = par[_FD] / kd
+    b[0] = par[_VDX] - kpkd * (ex - par[_XDX]) + fkd * par[_NX]
+    b[1] = par[_VDY] - kpkd * (ey - par[_XDY]) + fkd * par[_NY]
+    # escape-velocity bounds, eq. 11c
+    alpha = par[_ALPHA]
+    for k in range(n):
+        lo = alpha * (lim[0, k] - theta[k])
+        vmin = lim[2, k]
+        lb[k] = lo if lo > vmin else vmin
+        up = alpha * (lim[1, k] - theta[k])
+        vmax = lim[3, k]
+        ub[k] = up if up < vmax else vmax
+    # objective
+    if par[_SOFT] != 0.0:
+        rho = par[_RHO]
+        for r in range(n):
+            for c in range(n):
+                P[r, c] = rho * (J[0, r] * J[0, c] + J[1, r] * J[1, c])
+            P[r, r] += 1.0
+            q[r] = -rho * (J[0, r] * b[0] + J[1, r] * b[1])
+    else:
+        for r in range(n):
+            for c in range(n):
+                P[r, c] = 0.0
+            P[r, r] = 1.0
+            q[r] = 0.0
+    # obstacle rows, eqs. 8-10 with the velocity-damper signs
+    nb = prims.shape[0]
+    t = par[_T]
+    kgain = par[_K]
+    dsafe = par[_DSAFE]
+    radius = par[_RADIUS]
+    for i in range(kp_link.shape[0]):
+        L = kp_link[i]
+        f = kp_frac[i] * lengths[L]
+        ax = px[L] + f * cs[L]
+        ay = py[L] + f * sn[L]
+        for j in range(nb):
+            kind = int(prims[j, 0])
+            vx = prims[j, 6]
+            vy = prims[j, 7]
+            bx = prims[j, 1] + vx * t
+            by = prims[j, 2] + vy * t
+            if kind == 0:  # line, signed distance, u = normal
+                ux = prims[j, 3]
+                uy = prims[j, 4]
+                d = (ax - bx) * ux + (ay - by) * uy
+            else:
+                if kind == 1:  # segment
+                    abx = prims[j, 3] - prims[j, 1]
+                    aby = prims[j, 4] - prims[j, 2]
+                    s = ((ax - bx) * abx + (ay - by) * aby) / (abx * abx + aby * aby)
+                    if s < 0.0:
+                        s = 0.0
+                    elif s > 1.0:
+                        s = 1.0
+                    bx += s * abx
+                    by += s * aby
+                dx = ax - bx
+                dy = ay - by
+                d = np.sqrt(dx * dx + dy * dy)
+                if d > 0.0:
+                    ux = dx / d
+                    uy = dy / d
+                else:
+                    ux = 0.0
+                    uy = 0.0
+                if kind == 2:  # disk
+                    d -= prims[j, 5]
+            d -= radius
+            r = i * nb + j
+            for k in range(n):
+                if k <= L:
+                    G[r, k] = -(ux * (py[k] - ay) + uy * (ax - px[k]))
+                else:
+                    G[r, k] = 0.0
+            h[r] = kgain * (d - dsafe) - (ux * vx + uy * vy)
+            dist[r] = d
+
+
+@dataclass
+class TickQP:
+    """One tick's QP and the robot quantities it was built from.
+
+    Attributes:
+        problem: The QP.
+        formulation: ``paper`` or ``soft``.
+        J: End-effector Jacobian (2, n) in [m/rad].
+        b0: Impedance reference (eq. 4) in [m/s].
+        ee: End-effector position in [m].
+        distances: Distance of each key point to each obstacle point (a, m) in [m].
+        x_d: Desired position in [m]; ``xdot_d`` desired velocity in [m/s].
+    """
+
+    problem: qpsolvers.Problem
+    formulation: str
+    J: np.ndarray
+    b0: np.ndarray
+    ee: np.ndarray
+    distances: np.ndarray
+    x_d: np.ndarray
+    xdot_d: np.ndarray
+
+
+class Controller:
+    """Builds the per-tick QP of the paper's collision-free compliance controller.
+
+    Args:
+        arm: The robot.
+        key_points: Points of the robot kept away from obstacles.
+        task: The impedance task (path, pressing direction, desired force).
+        limits: Joint-angle and joint-velocity limits and the escape gain.
+        obstacles: The obstacles.
+        k: Obstacle damper gain in [1/s].
+        d_safe: Safety distance in [m].
+        rho: Task weight of the ``soft`` formulation [s^2/m^2 relative to ``|v|^2``].
+        kp, kd: The controller's interaction coefficients ``Kp`` [N/m], ``Kd`` [N s/m]
+            (overridden per call by an adaptive estimate).
+    """
+
+    def __init__(
+        self,
+        arm: PlanarArm,
+        key_points: KeyPoints,
+        task: ImpedanceTask,
+        limits: EscapeVelocityLimits,
+        obstacles: list[Obstacle],
+        k: float,
+        d_safe: float,
+        rho: float,
+        kp: float,
+        kd: float,
+    ):
+        self.arm = arm
+        self.key_points = key_points
+        self.task = task
+        self.limits = limits
+        self.obstacles = list(obstacles)
+        self.avoidance = [ObstacleAvoidance(o, k, d_safe) for o in self.obstacles]
+        self.k = float(k)
+        self.d_safe = float(d_safe)
+        self.rho = float(rho)
+        self.kp = float(kp)
+        self.kd = float(kd)
+        self.n = arm.n
+        #: Obstacle points per obstacle, and the total per key point.
+        self.points_per_obstacle = [o.n_points for o in self.obstacles]
+        self.n_obstacle_points = int(sum(self.points_per_obstacle))
+        #: Inequality rows per tick (fixed).
+        self.n_rows = len(key_points) * self.n_obstacle_points
+        self._compiled = all(o.KERNEL_KIND is not None for o in self.obstacles)
+        if self.obstacles:
+            self._prims = np.ascontiguousarray(np.vstack([o.primitives() for o in self.obstacles]), dtype=float)
+        else:
+            self._prims = np.zeros((0, PRIMITIVE_WIDTH))
+        self._lengths = np.ascontiguousarray(arm.lengths, dtype=float)
+        self._kp_link = np.ascontiguousarray(key_points.links, dtype=np.int64)
+        self._kp_frac = np.ascontiguousarray(key_points.fracs, dtype=float)
+        self._lim = np.ascontiguousarray(
+            np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max]), dtype=float
+        )
+        self._par = np.zeros(_NPAR)
+        self._par[_NX], self._par[_NY] = task.normal
+        self._par[_FD] = task.desired_force
+        self._par[_K] = self.k
+        self._par[_DSAFE] = self.d_safe
+        self._par[_ALPHA] = limits.alpha
+        self._par[_RHO] = self.rho
+        self._par[_RADIUS] = key_points.radius
+        self._path = task.path
+
+    # -- fast path -------------------------------------------------------------
+    def build_arrays(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, soft: bool = False):
+        """The tick's arrays ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd)``, freshly allocated.
+
+        ``xd`` is ``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)``; ``dist`` is flat
+        (a * m,), key point major. This is the loop's hot path: ``theta`` must
+        be a contiguous float64 array (:meth:`build` converts; it wraps the
+        result into a :class:`TickQP`).
+        """
+        if not self._compiled:
+            return self._arrays_from_terms(theta, t, kp, kd, soft)
+        n = self.n
+        nr = self.n_rows
+        xd = self._path(t)
+        par = self._par
+        par[0] = t
+        par[1], par[2], par[3], par[4] = xd
+        par[8] = self.kp if kp is None else kp
+        par[9] = self.kd if kd is None else kd
+        par[14] = 1.0 if soft else 0.0
+        empty = np.empty
+        P = empty((n, n))
+        q = empty(n)
+        G = empty((nr, n))
+        h = empty(nr)
+        J = empty((2, n))
+        b = empty(2)
+        lb = empty(n)
+        ub = empty(n)
+        ee = empty(2)
+        dist = empty(nr)
+        (_kernel or _get_kernel())(
+            theta,
+            self._lengths, self._kp_link, self._kp_frac, self._prims, self._lim, par,
+            P, q, G, h, J, b, lb, ub, ee, dist,
+        )
+        return P, q, G, h, J, b, lb, ub, ee, dist, xd
+
+    def make_problem(self, arrays, soft: bool) -> qpsolvers.Problem:
+        """A :class:`qpsolvers.Problem` from :meth:`build_arrays`' output.
+
+        The arrays already have the types and shapes :class:`qpsolvers.Problem`
+        checks for (dense float64 matrices, 1-D vectors), so its fields are set
+        directly: the constructor's checks cost more than the kernel that fills
+        them. The tests check the result equals the constructor's.
+        """
+        P, q, G, h, J, b, lb, ub = arrays[:8]
+        if self.n_rows == 0:
+            G = h = None
+        if soft:
+            J = b = None
+        problem = _new_problem(_Problem)
+        problem.P = P
+        problem.q = q
+        problem.G = G
+        problem.h = h
+        problem.A = J
+        problem.b = b
+        problem.lb = lb
+        problem.ub = ub
+        return problem
+
+    def build(self, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
+        """Build the tick's QP at joint angles ``theta`` [rad] and time ``t`` [s].
+
+        Args:
+            theta: Joint angles in [rad], shape (n,).
+            t: Time in [s] (sets ``x_d(t)`` and moving obstacles' positions).
+            kp, kd: Interaction coefficients (default: the controller's).
+            formulation: ``paper`` or ``soft``.
+        """
+        soft = _check_formulation(formulation)
+        theta = np.ascontiguousarray(theta, dtype=np.float64)
+        if theta.shape != (self.n,):
+            raise ParamError(f"theta must have shape ({self.n},), got {theta.shape}", key="theta")
+        arrays = self.build_arrays(theta, float(t), kp, kd, soft)
+        return self._tick(arrays, soft, formulation)
+
+    def _tick(self, arrays, soft, formulation) -> TickQP:
+        problem = self.make_problem(arrays, soft)
+        xd = arrays[10]
+        return TickQP(
+            problem=problem,
+            formulation=formulation,
+            J=arrays[4],
+            b0=arrays[5],
+            ee=arrays[8],
+            distances=arrays[9].reshape(len(self.key_points), self.n_obstacle_points),
+            x_d=np.array(xd[:2]),
+            xdot_d=np.array(xd[2:]),
+        )
+
+    # -- numpy reference path ---------------------------------------------------
+    def _arrays_from_terms(self, theta, t, kp, kd, soft):
+        theta = np.asarray(theta, dtype=float)
+        kp = self.kp if kp is None else kp
+        kd = self.kd if kd is None else kd
+        n = self.n
+        ee_arr, J = self.arm.points_jacobians(theta, [n - 1], [1.0])
+        ee, J = ee_arr[0], J[0]
+        xd = self._path(t)
+        b0 = self.task.impedance_reference(ee, t, kp, kd)
+        lb, ub = self.limits.escape_velocity_bounds(theta)
+        if soft:
+            P, q = self.task.cost(J, b0, self.rho)
+        else:
+            P, q = np.eye(n), np.zeros(n)
+        a = len(self.key_points)
+        key_xy, key_J = self.arm.points_jacobians(theta, self.key_points.links, self.key_points.fracs)
+        Gs, hs, ds = [], [], []
+        for term in self.avoidance:
+            G, h, dist = term.rows(key_xy, key_J, t, self.key_points.radius)
+            m = dist.shape[1]
+            Gs.append(G.reshape(a, m, n))
+            hs.append(h.reshape(a, m))
+            ds.append(dist)
+        if Gs:
+            G = np.concatenate(Gs, axis=1).reshape(a * self.n_obstacle_points, n)
+            h = np.concatenate(hs, axis=1).reshape(-1)
+            dist = np.concatenate(ds, axis=1).reshape(-1)
+        else:
+            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
+        return P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd
+
+    def build_reference(self, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
+        """Same as :meth:`build`, assembled from the numpy terms (slower; for checks)."""
+        soft = _check_formulation(formulation)
+        arrays = self._arrays_from_terms(theta, t, kp, kd, soft)
+        return self._tick(arrays, soft, formulation)
+
+    def obstacle_columns(self) -> list[tuple[str, str, slice]]:
+        """``(key point name, obstacle name, slice of obstacle points)`` for each log column."""
+        cols = []
+        for name in self.key_points.names:
+            start = 0
+            for o in self.obstacles:
+                cols.append((name, o.name, slice(start, start + o.n_points)))
+                start += o.n_points
+        return cols
+
+
+def _check_formulation(formulation: str) -> bool:
+    if formulation not in FORMULATIONS:
+        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
+    return formulation == "soft"
+
+
+def build_problem(controller: Controller, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> qpsolvers.Problem:
+    """The tick's :class:`qpsolvers.Problem` at joint angles ``theta`` [rad], time ``t`` [s] (paper eq. 11)."""
+    return controller.build(theta, t, kp, kd, formulation).problem

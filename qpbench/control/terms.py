@@ -1,0 +1,180 @@
+"""The pieces of the controller's QP (paper eq. 11), one small class each.
+
+- :class:`CosinePath`, :class:`PolylinePath`: the desired path ``x_d(t)``.
+- :class:`ImpedanceTask`: the impedance reference ``b0`` (eq. 4) and the task
+  rows ``J v = b0`` (eq. 11b) or, in the soft formulation, the cost
+  ``rho/2 |J v - b0|^2``.
+- :class:`EscapeVelocityLimits`: joint-angle and joint-velocity limits as
+  bounds on ``v`` (eq. 11c).
+- :class:`ObstacleAvoidance`: one velocity-damper row per (key point,
+  obstacle point) pair (eqs. 8-10, signs fixed as in the project's notes).
+
+These are the readable numpy reference; :class:`qpbench.control.controller.Controller`
+assembles the same rows in one compiled kernel on its fast path.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..exceptions import InputError
+from ..robot.environment import Obstacle
+
+__all__ = ["CosinePath", "EscapeVelocityLimits", "ImpedanceTask", "ObstacleAvoidance", "PolylinePath"]
+
+
+class CosinePath:
+    """``x_d(t) = centre + amplitude * cos(omega t + phase)`` per axis, in [m] (paper sections 4.2-4.5).
+
+    Args:
+        centre: [m], shape (2,).
+        amplitude: [m], shape (2,).
+        omega: [rad/s], shape (2,).
+        phase: [rad], shape (2,).
+    """
+
+    def __init__(self, centre, amplitude, omega, phase=(0.0, 0.0)):
+        self.centre = np.asarray(centre, dtype=float)
+        self.amplitude = np.asarray(amplitude, dtype=float)
+        self.omega = np.asarray(omega, dtype=float)
+        self.phase = np.asarray(phase, dtype=float)
+        self._c = tuple(float(v) for v in (*self.centre, *self.amplitude, *self.omega, *self.phase))
+
+    def __call__(self, t: float) -> tuple[float, float, float, float]:
+        """``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)`` at time t [s], in [m] and [m/s]."""
+        cx, cy, ax, ay, wx, wy, px, py = self._c
+        sx, sy = wx * t + px, wy * t + py
+        return (cx + ax * math.cos(sx), cy + ay * math.cos(sy), -ax * wx * math.sin(sx), -ay * wy * math.sin(sy))
+
+
+class PolylinePath:
+    """A piecewise-linear ``x_d(t)`` through ``points`` at ``times``; it holds the last point after the end.
+
+    Args:
+        times: Increasing times in [s], shape (m,), m >= 2.
+        points: [m], shape (m, 2).
+    """
+
+    def __init__(self, times, points):
+        self.times = np.asarray(times, dtype=float)
+        self.points = np.asarray(points, dtype=float)
+        if self.times.ndim != 1 or self.times.size < 2 or np.any(np.diff(self.times) <= 0):
+            raise InputError("polyline times must be >= 2 strictly increasing values [s]", key="path.times")
+        if self.points.shape != (self.times.size, 2):
+            raise InputError(f"polyline points must be {self.times.size} [x, y] pairs", key="path.points")
+
+    def __call__(self, t: float) -> tuple[float, float, float, float]:
+        times, pts = self.times, self.points
+        if t <= times[0]:
+            return float(pts[0, 0]), float(pts[0, 1]), 0.0, 0.0
+        if t >= times[-1]:
+            return float(pts[-1, 0]), float(pts[-1, 1]), 0.0, 0.0
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        s = (t - times[i]) / (times[i + 1] - times[i])
+        d = (pts[i + 1] - pts[i]) / (times[i + 1] - times[i])
+        x = pts[i] + s * (pts[i + 1] - pts[i])
+        return float(x[0]), float(x[1]), float(d[0]), float(d[1])
+
+
+class ImpedanceTask:
+    """Position-force task as a task-space velocity reference (paper eqs. 3, 4, 11b).
+
+    ``b0 = xdot_d - Kd^-1 Kp (x - x_d) + Kd^-1 Fd n``: at rest in contact the end
+    effector sits ``Fd/Kp`` past ``x_d`` along ``n`` and the environment's spring
+    returns ``Fd`` when the estimate ``Kp`` is right.
+
+    Args:
+        path: The desired path, ``path(t) -> (x_d, xdot_d)`` components.
+        normal: Unit direction in which the robot presses.
+        desired_force: ``Fd`` in [N].
+    """
+
+    def __init__(self, path, normal, desired_force: float):
+        self.path = path
+        self.normal = np.asarray(normal, dtype=float)
+        self.desired_force = float(desired_force)
+
+    def impedance_reference(self, x, t: float, kp: float, kd: float) -> np.ndarray:
+        """``b0`` (eq. 4) in [m/s] for end-effector position ``x`` [m] at time ``t`` [s]."""
+        xdx, xdy, vdx, vdy = self.path(t)
+        x_d = np.array([xdx, xdy])
+        xdot_d = np.array([vdx, vdy])
+        return xdot_d - (kp / kd) * (np.asarray(x) - x_d) + (self.desired_force / kd) * self.normal
+
+    @staticmethod
+    def rows(J: np.ndarray, b0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Equality rows ``A = J``, ``b = b0`` of the ``paper`` formulation (eq. 11b)."""
+        return J.copy(), b0.copy()
+
+    @staticmethod
+    def cost(J: np.ndarray, b0: np.ndarray, rho: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(P, q)`` of ``1/2 v^T v + rho/2 |J v - b0|^2`` (``soft`` formulation): ``I + rho J^T J``, ``-rho J^T b0``."""
+        n = J.shape[1]
+        return np.eye(n) + rho * J.T @ J, -rho * J.T @ b0
+
+
+class EscapeVelocityLimits:
+    """Joint limits as velocity bounds (paper eq. 11c, escape-velocity form)::
+
+        lb = max(alpha (theta_min - theta), v_min),   ub = min(v_max, alpha (theta_max - theta))
+
+    With the plant ``theta += dt v`` and ``alpha dt < 1`` the angle never leaves
+    ``[theta_min, theta_max]`` once inside.
+
+    Args:
+        theta_min, theta_max: Joint-angle limits in [rad], shape (n,).
+        v_min, v_max: Joint-velocity limits in [rad/s], shape (n,).
+        alpha: Escape gain in [1/s].
+    """
+
+    def __init__(self, theta_min, theta_max, v_min, v_max, alpha: float):
+        self.theta_min = np.asarray(theta_min, dtype=float)
+        self.theta_max = np.asarray(theta_max, dtype=float)
+        self.v_min = np.asarray(v_min, dtype=float)
+        self.v_max = np.asarray(v_max, dtype=float)
+        self.alpha = float(alpha)
+
+    def escape_velocity_bounds(self, theta) -> tuple[np.ndarray, np.ndarray]:
+        """``(lb, ub)`` in [rad/s] at joint angles ``theta`` [rad]."""
+        theta = np.asarray(theta, dtype=float)
+        lb = np.maximum(self.alpha * (self.theta_min - theta), self.v_min)
+        ub = np.minimum(self.v_max, self.alpha * (self.theta_max - theta))
+        return lb, ub
+
+
+class ObstacleAvoidance:
+    """Velocity-damper rows keeping key points ``d_safe`` away from one obstacle (eqs. 8-10).
+
+    For key point ``A_i`` and obstacle point ``B_j`` with ``u = (A_i - B_j)/|A_i - B_j|``::
+
+        d/dt dist = u . (J_Ai v - Bdot_j) >= -k (dist - d_safe)
+        =>  G row = -u^T J_Ai,   h = k (dist - d_safe) - u . Bdot_j
+
+    One row per pair, all pairs kept (fixed row count), rows ordered by key
+    point, then obstacle point.
+
+    Args:
+        obstacle: The obstacle.
+        k: Damper gain in [1/s] (> 0).
+        d_safe: Safety distance in [m].
+    """
+
+    def __init__(self, obstacle: Obstacle, k: float, d_safe: float):
+        self.obstacle = obstacle
+        self.k = float(k)
+        self.d_safe = float(d_safe)
+
+    def rows(self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0):
+        """``(G, h, dist)`` for key points ``key_xy`` (a, 2) with Jacobians ``key_J`` (a, 2, n).
+
+        Returns:
+            G (a*m, n), h (a*m,), dist (a, m) in [m] (link radius subtracted).
+        """
+        _, dist, u = self.obstacle.closest(key_xy, t)
+        dist = dist - radius
+        a, m = dist.shape
+        G = -np.einsum("amk,akn->amn", u, key_J).reshape(a * m, -1)
+        h = (self.k * (dist - self.d_safe) - u @ self.obstacle.velocity).reshape(a * m)
+        return G, h, dist

@@ -1,0 +1,147 @@
+"""Planar serial chain: forward kinematics, Jacobians and key points (paper sections 2.1, 2.2).
+
+A chain of ``n >= 2`` revolute joints about z. ``theta[k]`` is the relative
+angle of joint k in [rad]; the absolute angle of link i is
+``phi[i] = sum(theta[:i+1])``. Joint positions (eq. 1)::
+
+    p[0] = 0,   p[i+1] = p[i] + l[i] [cos phi[i], sin phi[i]]
+
+The end effector is ``p[n]``. A point ``x`` rigidly attached to link i has the
+Jacobian (eq. 2, 7b) whose column k <= i is ``z x (x - p[k]) = [-(x - p[k])_y,
+(x - p[k])_x]`` and whose columns k > i are zero.
+
+A point on a link is named by ``(link, frac)``: ``x = p[link] + frac * l[link]
+[cos phi, sin phi]``; ``frac = 1`` is the next joint, ``frac = 0.5`` the link's
+midpoint.
+
+The functions here are vectorised numpy (no loop over joints). The
+controller's compiled per-tick build (:mod:`qpbench.control.controller`)
+repeats the same maths inside one numba kernel; the tests check both against
+finite differences and against each other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exceptions import InputError
+
+__all__ = ["KeyPoints", "PlanarArm", "default_key_points"]
+
+
+class PlanarArm:
+    """A planar serial chain of revolute joints.
+
+    Args:
+        lengths: Link lengths in [m], shape (n,), n >= 2, every length > 0.
+
+    Raises:
+        InputError: fewer than two links, or a length that is not positive.
+    """
+
+    def __init__(self, lengths):
+        lengths = np.asarray(lengths, dtype=float)
+        if lengths.ndim != 1 or lengths.size < 2:
+            raise InputError(f"a planar arm needs at least 2 link lengths, got {lengths.tolist()}", key="link_lengths")
+        if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
+            raise InputError(f"link lengths must be finite and > 0 [m], got {lengths.tolist()}", key="link_lengths")
+        self.lengths = lengths
+        self.n = lengths.size
+
+    # -- positions -----------------------------------------------------------
+    def absolute_angles(self, theta) -> np.ndarray:
+        """``phi[i] = sum(theta[:i+1])`` in [rad], shape (n,)."""
+        return np.cumsum(np.asarray(theta, dtype=float))
+
+    def joint_positions(self, theta) -> np.ndarray:
+        """Positions of the base, the joints and the end effector in [m], shape (n+1, 2)."""
+        phi = self.absolute_angles(theta)
+        seg = self.lengths[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        p = np.zeros((self.n + 1, 2))
+        np.cumsum(seg, axis=0, out=p[1:])
+        return p
+
+    def end_effector(self, theta) -> np.ndarray:
+        """End-effector position ``x = f(theta)`` (eq. 1) in [m], shape (2,)."""
+        return self.joint_positions(theta)[-1]
+
+    def points(self, theta, links, fracs) -> np.ndarray:
+        """Positions of points ``(links[j], fracs[j])`` in [m], shape (a, 2)."""
+        links = np.asarray(links, dtype=int)
+        fracs = np.asarray(fracs, dtype=float)
+        phi = self.absolute_angles(theta)
+        p = self.joint_positions(theta)
+        d = np.stack([np.cos(phi[links]), np.sin(phi[links])], axis=1)
+        return p[links] + (fracs * self.lengths[links])[:, None] * d
+
+    # -- Jacobians -----------------------------------------------------------
+    def points_jacobians(self, theta, links, fracs) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (a, 2) in [m] and Jacobians (a, 2, n) in [m/rad] of points on links (eq. 7b)."""
+        links = np.asarray(links, dtype=int)
+        x = self.points(theta, links, fracs)
+        p = self.joint_positions(theta)[:-1]  # joint k's position, (n, 2)
+        rel = x[:, None, :] - p[None, :, :]  # (a, n, 2)
+        mask = (np.arange(self.n)[None, :] <= links[:, None]).astype(float)  # (a, n)
+        J = np.empty((x.shape[0], 2, self.n))
+        J[:, 0, :] = -rel[:, :, 1] * mask
+        J[:, 1, :] = rel[:, :, 0] * mask
+        return x, J
+
+    def jacobian(self, theta) -> np.ndarray:
+        """End-effector Jacobian ``J = dx/dtheta`` (eq. 2) in [m/rad], shape (2, n)."""
+        _, J = self.points_jacobians(theta, [self.n - 1], [1.0])
+        return J[0]
+
+
+@dataclass(frozen=True)
+class KeyPoints:
+    """Points of the robot kept away from obstacles (paper section 2.2, 4.1).
+
+    Attributes:
+        links: Link index of each key point, shape (a,).
+        fracs: Position along its link, 0 = the link's inner joint, 1 = its outer joint.
+        names: ``A1..Aa`` in the paper's order.
+        radius: Link radius in [m]; distances to obstacles are measured from
+            the link's surface (``|A - B| - radius``).
+    """
+
+    links: np.ndarray
+    fracs: np.ndarray
+    names: tuple[str, ...]
+    radius: float = 0.0
+
+    def __len__(self) -> int:
+        return int(self.links.size)
+
+
+def default_key_points(n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0) -> KeyPoints:
+    """Key points of an n-link chain: evenly spaced points on each link and the joints J2..Jn.
+
+    With ``points_per_link = 1`` and joints included this is the paper's set
+    for n = 4: A1, A3, A5, A7 at the link midpoints, A2, A4, A6 at J2, J3, J4.
+    The end effector is not a key point: it must be free to touch the contact
+    surface. Order: link by link, the link's points from the inner joint
+    outwards, then the link's outer joint (not after the last link).
+
+    Args:
+        n: Number of links.
+        points_per_link: Points on each link at fractions ``j / (m + 1)``, j = 1..m.
+        include_joints: Add the joints J2..Jn.
+        radius: Link radius in [m].
+    """
+    if points_per_link < 0:
+        raise InputError(f"points_per_link must be >= 0, got {points_per_link}", key="points_per_link")
+    links, fracs = [], []
+    for i in range(n):
+        for j in range(1, points_per_link + 1):
+            links.append(i)
+            fracs.append(j / (points_per_link + 1))
+        if include_joints and i < n - 1:
+            links.append(i)
+            fracs.append(1.0)
+    if not links:
+        raise InputError("no key points: points_per_link = 0 and include_joints = false", key="key_points")
+    names = tuple(f"A{i + 1}" for i in range(len(links)))
+    return KeyPoints(np.array(links, dtype=np.int64), np.array(fracs, dtype=float), names, float(radius))

@@ -1,0 +1,1 @@
+"""Scenarios (TOML files) and the closed-loop simulation of the controller with any backend."""

@@ -1,0 +1,515 @@
+"""Closed-loop simulation: the controller's QP solved every tick by a backend, a kinematic plant.
+
+One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
+
+1. sense: end-effector position ``x_k`` (forward kinematics), velocity
+   ``xdot_k = (x_k - x_{k-1}) / dt`` (0 at k = 0), contact force ``F_k`` of the
+   environment's spring-damper (with the scenario's sensor noise);
+2. build the tick's QP (eq. 11, the chosen formulation) with the current
+   ``Kp_hat, Kd_hat``;
+3. solve it with the backend (warm-started from the previous command). If the
+   backend returns no solution (infeasible, failure, time limit), solve the
+   ``soft`` formulation of the same tick with the same backend (fallback); if
+   that fails too, command zero velocity. An *online* backend (class attribute
+   ``online = True``, the RNN) is its own controller: its ``x`` is applied
+   whatever its status, with no fallback;
+4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
+5. plant: ``theta_{k+1} = theta_k + dt v_k``.
+
+The per-tick log is written into preallocated arrays (no pandas in the loop)
+and turned into a :class:`pandas.DataFrame` at the end, one row per tick:
+
+=================== ===========================================================
+t                   time [s]
+theta_i, v_i        joint angles [rad] and commanded velocities [rad/s]
+ee_x, ee_y          end-effector position [m]
+xd_x, xd_y          desired position x_d(t) [m]
+tracking_error      tangential error t . (x - x_d) [m], t the surface tangent
+force               measured contact force [N]; force_error = force - Fd [N]
+d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
+                    point cloud's points; link radius subtracted)
+d_min               smallest of those [m]
+v_sq                ``|v|^2`` [rad^2/s^2]
+task_residual       ``|J v - b0|`` [m/s]
+status              the backend's status on the tick's QP
+fallback            the soft fallback's answer was applied
+zero_velocity       zero velocity was commanded (fallback failed too)
+solve_time_s        wall time of the tick's solve call(s) [s]
+y_0, y_1            equality duals of the applied solution (paper formulation)
+z_max               largest inequality (obstacle row) dual
+kp_hat, kd_hat      interaction coefficients the tick's QP used
+=================== ===========================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..backends import STATUSES, Backend, get_backend
+from ..exceptions import ParamError
+from ..control.controller import FORMULATIONS, Controller
+from .scenario import Scenario, load_scenario
+
+__all__ = ["SimResult", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize"]
+
+log = logging.getLogger(__name__)
+
+#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks
+#: (solvers meet bounds to their own accuracy, about 1e-9 here).
+VIOLATION_TOL = 1e-6
+
+#: Time from which tracking and force errors are judged [s] (paper: transient about 1 s).
+SETTLE_TIME = 2.0
+
+#: A key point within this of ``d_safe`` [m] counts as touching its obstacle row (summary intervals).
+ACTIVE_MARGIN = 1e-4
+
+#: At most this many intervals per list in a summary.
+MAX_INTERVALS = 20
+
+_STATUS_CODES = {s: i for i, s in enumerate(STATUSES)}
+
+
+@dataclass
+class SimResult:
+    """What :func:`simulate` returns.
+
+    Attributes:
+        log: One row per tick (columns in the module docstring).
+        summary: Figures of the whole run (see :func:`summarize`).
+        records: The dumped ticks' QPs (:class:`qpbench.formats.ProblemRecord`),
+            when ``dump`` or ``every`` was given.
+    """
+
+    log: pd.DataFrame
+    summary: dict
+    records: list = field(default_factory=list)
+
+
+def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default") -> Backend:
+    """A backend instance for ``scenario``: by name, or the given instance checked.
+
+    The ``rnn`` backends get the scenario's ``[rnn]`` settings; the online
+    ``rnn`` also the control period ``dt``. An instance with a ``dt`` of its own
+    must match the loop's ``dt``.
+    """
+    if isinstance(backend, str):
+        settings = {}
+        if backend.startswith("rnn"):
+            settings.update(scenario.rnn)
+            if backend == "rnn":
+                settings.setdefault("dt", dt)
+        return get_backend(backend, profile=profile, **settings)
+    if not isinstance(backend, Backend):
+        raise ParamError(f"expected a backend name or instance, got {type(backend).__name__}", key="backend")
+    own_dt = getattr(backend, "dt", None)
+    if own_dt is not None and abs(float(own_dt) - dt) > 1e-15:
+        raise ParamError(f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt")
+    return backend
+
+
+_post_kernel = None
+
+
+def _get_post_kernel():
+    global _post_kernel
+    if _post_kernel is None:
+        import numba
+
+        _post_kernel = numba.njit(cache=True, nogil=True)(_post_py)
+    return _post_kernel
+
+
+def _post_py(theta, v, ee, ee_prev, J, b0, dist, col_start, col_end, xd, tangent, surf, row, idx, dt, first, y, z, t, fallback, zero, kp, kd, solve_time):  # pragma: no cover - compiled
+    """Sense and log one tick, then advance the plant ``theta += dt v``.
+
+    Writes the robot columns of ``row``; ``surf`` is ``[nx, ny, n . point,
+    stiffness, damping, Fd]`` of the contact surface (the law of
+    :meth:`ContactSurface.force` without noise). Returns the noise-free force
+    [N]; leaves the end-effector velocity in ``ee_prev`` [m/s] in
+    ``ee_prev[2:4]`` and the position in ``ee_prev[0:2]``.
+    """
+    n = theta.shape[0]
+    c_theta = idx[0]
+    c_v = idx[1]
+    c_ee = idx[2]
+    c_d = idx[3]
+    c_force = idx[4]
+    row[0] = t
+    row[idx[5]] = fallback
+    row[idx[6]] = zero
+    row[idx[7]] = solve_time
+    if y.shape[0] == 2:
+        row[idx[8]] = y[0]
+        row[idx[8] + 1] = y[1]
+    if z.shape[0] > 0:
+        zmax = z[0]
+        for i in range(1, z.shape[0]):
+            if z[i] > zmax:
+                zmax = z[i]
+        row[idx[9]] = zmax
+    row[idx[10]] = kp
+    row[idx[11]] = kd
+    # sense: velocity by finite difference, spring-damper force
+    if first:
+        xd0 = 0.0
+        xd1 = 0.0
+    else:
+        xd0 = (ee[0] - ee_prev[0]) / dt
+        xd1 = (ee[1] - ee_prev[1]) / dt
+    ee_prev[0] = ee[0]
+    ee_prev[1] = ee[1]
+    ee_prev[2] = xd0
+    ee_prev[3] = xd1
+    nx = surf[0]
+    ny = surf[1]
+    delta = nx * ee[0] + ny * ee[1] - surf[2]
+    force = 0.0
+    if delta > 0.0:
+        force = surf[3] * delta + surf[4] * (nx * xd0 + ny * xd1)
+        if force < 0.0:
+            force = 0.0
+    row[c_force] = force
+    row[c_force + 1] = force - surf[5]
+    vsq = 0.0
+    for i in range(n):
+        row[c_theta + i] = theta[i]
+        row[c_v + i] = v[i]
+        vsq += v[i] * v[i]
+        theta[i] += dt * v[i]
+    row[c_ee] = ee[0]
+    row[c_ee + 1] = ee[1]
+    row[c_ee + 2] = xd[0]
+    row[c_ee + 3] = xd[1]
+    row[c_ee + 4] = tangent[0] * (ee[0] - xd[0]) + tangent[1] * (ee[1] - xd[1])
+    r0 = b0[0]
+    r1 = b0[1]
+    for k in range(n):
+        r0 -= J[0, k] * v[k]
+        r1 -= J[1, k] * v[k]
+    ncol = col_start.shape[0]
+    dmin = np.inf
+    for c in range(ncol):
+        m = np.inf
+        for j in range(col_start[c], col_end[c]):
+            if dist[j] < m:
+                m = dist[j]
+        row[c_d + c] = m
+        if m < dmin:
+            dmin = m
+    row[c_d + ncol] = dmin if ncol > 0 else np.nan
+    row[c_d + ncol + 1] = vsq
+    row[c_d + ncol + 2] = math.sqrt(r0 * r0 + r1 * r1)
+    return force
+
+
+def _columns(controller: Controller) -> tuple[list[str], dict[str, int]]:
+    n = controller.n
+    cols = ["t"] + [f"theta_{i}" for i in range(n)] + [f"v_{i}" for i in range(n)]
+    cols += ["ee_x", "ee_y", "xd_x", "xd_y", "tracking_error", "force", "force_error"]
+    cols += [f"d_{a}_{o}" for a, o, _ in controller.obstacle_columns()]
+    cols += ["d_min", "v_sq", "task_residual", "fallback", "zero_velocity", "solve_time_s", "y_0", "y_1", "z_max", "kp_hat", "kd_hat"]
+    return cols, {c: i for i, c in enumerate(cols)}
+
+
+def simulate(
+    scenario: Scenario | str | Path,
+    backend: str | Backend,
+    formulation: str = "paper",
+    duration: float | None = None,
+    dt: float | None = None,
+    every: int | None = None,
+    dump: str | Path | None = None,
+    progress: bool = False,
+    profile: str = "default",
+) -> SimResult:
+    """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
+
+    Args:
+        scenario: A :class:`Scenario`, a shipped scenario's name or a file path.
+        backend: A backend name (``"qpsolvers:daqp"``, ``"clarabel"``, ``"rnn"``) or instance.
+        formulation: ``paper`` (hard task, eq. 11) or ``soft``.
+        duration: Simulated time in [s] (default: the scenario's).
+        dt: Control period in [s] (default: the scenario's).
+        every: Keep every K-th tick's QP as a record (default 1 when dumping).
+        dump: Folder to write the kept QPs to as a problem set
+            (:func:`qpbench.formats.write_problem_set`).
+        progress: Show a tqdm progress bar.
+        profile: Settings profile of a backend given by name.
+
+    Returns:
+        The per-tick log, the summary and the kept records.
+    """
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    if formulation not in FORMULATIONS:
+        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
+    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
+        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    if dt is not None or duration is not None:
+        scenario = scenario.with_overrides(dt=dt, duration=duration)
+    dt = scenario.dt
+    duration = scenario.duration
+    ticks = int(round(duration / dt))
+    keep_every = every if every is not None else (1 if dump is not None else None)
+
+    be = resolve_backend(backend, scenario, dt, profile)
+    online = bool(getattr(be, "online", False))
+    be.reset()
+
+    ctrl = scenario.make_controller()
+    surface = scenario.make_surface()
+    adaptive = scenario.make_adaptive()
+    n = ctrl.n
+    soft_primary = formulation == "soft"
+    normal = ctrl.task.normal
+    tangent = np.array([-normal[1], normal[0]])
+    fd = ctrl.task.desired_force
+
+    cols, ci = _columns(ctrl)
+    data = np.full((ticks, len(cols)), np.nan)
+    status_codes = np.zeros(ticks, dtype=np.int8)
+    obstacle_cols = ctrl.obstacle_columns()
+    n_pts = ctrl.n_obstacle_points
+    n_obs = max(len(ctrl.obstacles), 1)
+    # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
+    col_start = np.array([(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)], dtype=np.int64)
+    col_end = np.array([(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)], dtype=np.int64)
+    c_theta, c_v, c_ee, c_d = ci["theta_0"], ci["v_0"], ci["ee_x"], ci["d_min"] - len(obstacle_cols)
+    c_force, c_ferr, c_fb, c_zero, c_time = ci["force"], ci["force_error"], ci["fallback"], ci["zero_velocity"], ci["solve_time_s"]
+    c_y0, c_zmax, c_kp, c_kd = ci["y_0"], ci["z_max"], ci["kp_hat"], ci["kd_hat"]
+
+    theta = scenario.theta0.astype(float)
+    v = np.zeros(n)
+    zeros = np.zeros(n)
+    kp, kd = ctrl.kp, ctrl.kd
+    records = []
+    post = _get_post_kernel()
+    build = ctrl.build_arrays
+    make_problem = ctrl.make_problem
+    solve = be.solve
+    perf = time.perf_counter
+    isfinite = math.isfinite
+    idx = np.array([c_theta, c_v, c_ee, c_d, c_force, c_fb, c_zero, c_time, c_y0, c_zmax, c_kp, c_kd], dtype=np.int64)
+    none = np.zeros(0)
+    surf = np.array([normal[0], normal[1], float(normal @ surface.point), surface.stiffness, surface.damping, fd])
+    noisy = surface.noise_std > 0.0
+    sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
+
+    # compile (or load from the numba cache) before the clock starts
+    warm = build(theta, 0.0, kp, kd, soft_primary)
+    post(theta.copy(), zeros, warm[8], sensed.copy(), warm[4], warm[5], warm[9], col_start, col_end, warm[10], tangent, surf, np.zeros(len(cols)), idx, dt, True, none, none, 0.0, False, False, kp, kd, 0.0)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=ticks, unit="tick", desc=f"{scenario.name} {be.name}", mininterval=0.5)
+    n_fallback = n_zero = 0
+    start = perf()
+    for k in range(ticks):
+        t = k * dt
+        arrays = build(theta, t, kp, kd, soft_primary)
+        problem = make_problem(arrays, soft_primary)
+        if keep_every is not None and k % keep_every == 0:
+            records.append((k, t, problem))
+        t0 = perf()
+        sol = solve(problem, warm_start=v)
+        status_codes[k] = _STATUS_CODES.get(sol.status, 5)
+        x = sol.x
+        applied = sol
+        fallback = zero = False
+        if online:
+            zero = x is None or not isfinite(x @ x)
+        elif not sol.found or x is None or not isfinite(x @ x):
+            if not soft_primary:
+                soft_problem = make_problem(build(theta, t, kp, kd, True), True)
+                applied = solve(soft_problem, warm_start=v)
+                x = applied.x
+                if applied.found and x is not None and isfinite(x @ x):
+                    fallback = True
+                else:
+                    zero = True
+            else:
+                zero = True
+        solve_time = perf() - t0
+        y = z = none
+        if zero:
+            v = zeros.copy()
+            n_zero += 1
+        else:
+            v = x if x.dtype == np.float64 else np.asarray(x, dtype=float)
+            if fallback:
+                n_fallback += 1
+            elif applied.y is not None:
+                y = applied.y
+            if applied.z is not None:
+                z = applied.z
+        xd = arrays[10]
+        force = post(
+            theta, v, arrays[8], sensed, arrays[4], arrays[5], arrays[9], col_start, col_end, xd, tangent, surf,
+            data[k], idx, dt, k == 0, y, z, t, fallback, zero, kp, kd, solve_time,
+        )
+        if noisy:
+            force += surface.noise()
+            row[c_force] = force
+            row[c_ferr] = force - fd
+        if adaptive is not None:
+            kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
+        if bar is not None and (k + 1) % 500 == 0:
+            bar.update(500)
+    wall = perf() - start
+    if bar is not None:
+        bar.update(ticks - bar.n)
+        bar.close()
+
+    frame = pd.DataFrame(data, columns=cols)
+    frame["fallback"] = frame["fallback"].astype(bool)
+    frame["zero_velocity"] = frame["zero_velocity"].astype(bool)
+    frame.insert(cols.index("fallback"), "status", pd.Categorical.from_codes(status_codes, categories=list(STATUSES)))
+    summary = summarize(frame, scenario, ctrl, be.name, formulation, wall)
+    recs = []
+    if keep_every is not None:
+        from ..formats import ProblemRecord
+
+        recs = [
+            ProblemRecord(problem=p, name=f"{scenario.name}_{formulation}_{k:06d}", scenario=scenario.name, tick=k, t=t, formulation=formulation)
+            for k, t, p in records
+        ]
+    if dump is not None:
+        write_dump(dump, recs, scenario, be.name, formulation, keep_every, duration, dt)
+    return SimResult(frame, summary, recs)
+
+
+def write_dump(folder, records, scenario: Scenario, backend_name: str, formulation: str, every, duration, dt) -> Path:
+    """Write the kept ticks' QPs as a problem set; the manifest holds the scenario file's full text."""
+    from ..formats import write_problem_set
+
+    generator = {
+        "name": "qpbench simulate",
+        "scenario": scenario.name,
+        "backend": backend_name,
+        "formulation": formulation,
+        "every": every,
+        "duration": duration,
+        "dt": dt,
+    }
+    extra = {
+        "scenario_file": scenario.path.name if scenario.path is not None else None,
+        "scenario_toml": scenario.source,
+        "ticks_per_record": every,
+    }
+    return write_problem_set(folder, records, generator=generator, extra=extra)
+
+
+def _none(x):
+    x = float(x)
+    return None if not math.isfinite(x) else x
+
+
+def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
+    """Runs of consecutive True ticks as ``[first t, last t]`` pairs [s]."""
+    if not mask.any():
+        return []
+    idx = np.flatnonzero(mask)
+    breaks = np.flatnonzero(np.diff(idx) > 1)
+    starts = np.r_[idx[0], idx[breaks + 1]]
+    ends = np.r_[idx[breaks], idx[-1]]
+    return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
+
+
+def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, backend: str, formulation: str, wall_time_s: float) -> dict:
+    """Figures of a run (JSON-able; ``None`` where a figure does not exist).
+
+    ``infeasible_ticks`` counts the ticks whose QP (in the run's formulation)
+    the backend did not solve to ``optimal`` (for a QP solver: infeasible,
+    failed or out of time; for the online RNN: not converged within the tick),
+    ``status_counts`` breaks them down, ``infeasible_intervals`` gives their
+    runs as ``[first t, last t]``. ``fallback_ticks`` applied the soft
+    formulation's answer, ``zero_velocity_ticks`` commanded zero. Errors
+    "after 2 s" use the ticks with ``t >= 2`` s; limit violations count ticks
+    with an angle or a commanded speed beyond its limit by more than
+    :data:`VIOLATION_TOL`; ``obstacle_active_intervals`` lists, per (key point,
+    obstacle), when it was within :data:`ACTIVE_MARGIN` of ``d_safe``.
+    """
+    t = frame["t"].to_numpy()
+    dt = scenario.dt
+    ticks = len(frame)
+    infeasible = (frame["status"] != "optimal").to_numpy()
+    after = t >= SETTLE_TIME - 1e-12
+    n = controller.n
+    theta = frame[[f"theta_{i}" for i in range(n)]].to_numpy()
+    v = frame[[f"v_{i}" for i in range(n)]].to_numpy()
+    lim = controller.limits
+    tol = VIOLATION_TOL
+    angle_viol = ((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1)
+    speed_viol = ((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1)
+
+    def rms(x):
+        return _none(np.sqrt(np.mean(np.square(x)))) if x.size else None
+
+    def amax(x):
+        return _none(np.max(np.abs(x))) if x.size else None
+
+    te = frame["tracking_error"].to_numpy()
+    fe = frame["force_error"].to_numpy()
+    out = {
+        "scenario": scenario.name,
+        "backend": backend,
+        "formulation": formulation,
+        "dt": dt,
+        "duration": scenario.duration,
+        "ticks": ticks,
+        "infeasible_ticks": int(infeasible.sum()),
+        "fallback_ticks": int(frame["fallback"].sum()),
+        "zero_velocity_ticks": int(frame["zero_velocity"].sum()),
+        "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
+        "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
+        "infeasible_intervals": _intervals(infeasible, t, dt),
+        "status_counts": {str(k): int(v) for k, v in frame["status"].value_counts().items() if v},
+        "tracking_rms_after_2s": rms(te[after]),
+        "tracking_max_after_2s": amax(te[after]),
+        "force_error_rms_after_2s": rms(fe[after]),
+        "force_error_max_after_2s": amax(fe[after]),
+        "force_final": _none(frame["force"].iloc[-1]) if ticks else None,
+        "min_obstacle_distance": None,
+        "min_obstacle_distance_key_point": None,
+        "min_obstacle_distance_obstacle": None,
+        "min_obstacle_distance_t": None,
+        "d_safe": controller.d_safe,
+        "joint_limit_violations": int(angle_viol.sum()),
+        "joint_velocity_limit_violations": int(speed_viol.sum()),
+        "max_abs_theta": _none(np.max(np.abs(theta))) if ticks else None,
+        "max_abs_v": _none(np.max(np.abs(v))) if ticks else None,
+        "v_sq_max": _none(frame["v_sq"].max()),
+        "task_residual_max_after_2s": amax(frame["task_residual"].to_numpy()[after]),
+        "kp_hat_final": _none(frame["kp_hat"].iloc[-1]) if ticks else None,
+        "kd_hat_final": _none(frame["kd_hat"].iloc[-1]) if ticks else None,
+        "solve_time_median_s": _none(frame["solve_time_s"].median()),
+        "solve_time_p99_s": _none(frame["solve_time_s"].quantile(0.99)),
+        "solve_time_max_s": _none(frame["solve_time_s"].max()),
+        "wall_time_s": float(wall_time_s),
+        "real_time_factor": _none(scenario.duration / wall_time_s) if wall_time_s > 0 else None,
+    }
+    dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
+    if dcols:
+        D = frame[[f"d_{a}_{o}" for a, o in dcols]].to_numpy()
+        flat = int(np.argmin(D))
+        k, c = divmod(flat, D.shape[1])
+        out["min_obstacle_distance"] = _none(D[k, c])
+        out["min_obstacle_distance_key_point"] = dcols[c][0]
+        out["min_obstacle_distance_obstacle"] = dcols[c][1]
+        out["min_obstacle_distance_t"] = _none(t[k])
+        # when each (key point, obstacle) pair is at its safety distance (row about active)
+        near = D <= controller.d_safe + ACTIVE_MARGIN
+        out["obstacle_active_intervals"] = {
+            f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS] for c, (a, o) in enumerate(dcols) if near[:, c].any()
+        }
+    return out
