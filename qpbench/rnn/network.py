@@ -1,0 +1,743 @@
+"""The projection network of the paper's eq. 15 for any QP in qpsolvers form.
+
+For the QP ``min 1/2 v^T P v + q^T v  s.t.  A v = b, G v <= h, lb <= v <= ub``
+the network's state is ``(v, l1, l2)`` and its gain ``eps`` [s] (eq. 15a-c,
+with the objective's gradient ``P v + q`` where the paper prints a garbled
+``thetadot / ||thetadot||^2``)::
+
+    eps vdot  = -v + P_Omega(v - (P v + q - A^T l1 + G^T l2))      (15a)
+    eps l1dot = b - A v                                              (15b)
+    eps l2dot = -l2 + max(l2 + G v - h, 0)                           (15c)
+
+``P_Omega`` clips to ``[lb, ub]`` (infinite where a bound is absent). At an
+equilibrium the qpsolvers duals are ``y = -l1``, ``z = l2`` and
+``z_box = -(P v + q + A^T y + G^T z)``.
+
+Integration. Writing ``r = h / eps`` for a step of ``h`` seconds, explicit
+Euler is ``xi <- xi + r * f(xi)``. Away from the kinks of the projections
+the network is linear with matrix ``M = [[P, -C^T], [C, 0]]``,
+``C = [A; -G]`` (rows of active inequalities), whose eigenvalues ``lam``
+satisfy ``Re lam = u^H P u`` for a unit eigenvector ``(u, w)``. Euler is
+stable when ``|1 - r lam| < 1`` for all of them, which holds when::
+
+    r < min(lambda_min(P) / sigma_max(C)^2,  2 / lambda_max(P))
+
+(complex eigenvalues have ``|u|^2 = 1/2`` and ``|lam| <= sigma_max(C)``;
+real ones ``lam <= lambda_max(P)``). For the paper's ``P = I`` this is the
+note's ``r sigma_max^2 < 1``. Taking every row of ``A`` and ``G`` in ``C``
+bounds every active set (a subset of rows has a smaller ``sigma_max``); the
+box is handled by the projection and adds decoupled modes with eigenvalue 1.
+``sigma_max(C)^2`` is bounded from above without an eigen-decomposition by
+``tr(B^(2^k))^(1/2^k)`` with ``B = A^T A + G^T G`` (``k = 5`` squarings of
+an ``n x n`` matrix; at most ``rank(B)^(1/32)`` above the true value).
+
+The ``semi-implicit`` method updates ``v`` first and feeds the new ``v`` to the
+dual updates (symplectic Euler). For ``P = p I`` each singular value ``sigma``
+of ``C`` gives the 2x2 step matrix ``[[1 - r p, r sigma], [-r sigma (1 - r p),
+1 - r^2 sigma^2]]``, stable (Jury) when ``r p < 2`` and
+``r < 4 / (p + sqrt(p^2 + 4 sigma^2))`` -- about ``2 / sigma`` instead of
+Euler's ``1 / sigma^2``. For a ``P`` that is not a multiple of the identity the
+semi-implicit method uses Euler's bound.
+
+Two integrators compute the same thing: a numba-compiled loop (compiled on
+first call, cached on disk) and a pure-numpy path (used when numba is absent
+or not wanted). They agree to rounding (1e-12 and below).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as spa
+
+from ..exceptions import ParamError, ProblemFormatError
+
+#: Integration methods.
+METHODS = ("euler", "semi-implicit")
+
+#: Squarings in the trace-power bound of ``sigma_max(C)^2``.
+_SQUARINGS = 5
+
+#: Layout of the parameter block ``prm`` the kernels read (inputs) and fill (outputs).
+PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
+PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
+PRM_SIZE = 16
+
+#: Kernel return codes besides a step count.
+NO_STABLE_STEP = -1
+SHAPE_MISMATCH = -2
+
+
+# ---------------------------------------------------------------------------
+# Problem and state
+# ---------------------------------------------------------------------------
+@dataclass
+class DenseQP:
+    """A QP as dense float64 arrays, absent parts replaced by neutral ones.
+
+    Attributes:
+        P: Cost matrix, shape (n, n).
+        q: Cost vector, shape (n,).
+        A, b: Equalities ``A v = b``, shapes (me, n), (me,); me may be 0.
+        G, h: Inequalities ``G v <= h``, shapes (mi, n), (mi,); mi may be 0.
+        lb, ub: Box, shape (n,), ``-inf`` / ``+inf`` where absent.
+        has_box: Whether the problem had ``lb`` or ``ub``.
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    has_box: bool
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(n, me, mi)``: variables, equalities, inequalities."""
+        return self.q.shape[0], self.b.shape[0], self.h.shape[0]
+
+
+_EMPTY_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def _cached(key: tuple, make) -> np.ndarray:
+    arr = _EMPTY_CACHE.get(key)
+    if arr is None:
+        arr = make()
+        arr.flags.writeable = False
+        _EMPTY_CACHE[key] = arr
+    return arr
+
+
+def _f64(a, name: str, ndim: int) -> np.ndarray:
+    if spa.issparse(a):
+        a = a.toarray()
+    if type(a) is not np.ndarray or a.dtype != np.float64 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.ndim != ndim:
+        if ndim == 2 and a.ndim == 1:
+            a = a.reshape(1, -1)
+        elif ndim == 1 and a.ndim == 2 and 1 in a.shape:
+            a = a.ravel()
+        else:
+            raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
+    return a
+
+
+def dense_qp(problem) -> DenseQP:
+    """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`.
+
+    Raises:
+        ProblemFormatError: inconsistent shapes (names the matrix).
+    """
+    P = _f64(problem.P, "P", 2)
+    q = _f64(problem.q, "q", 1)
+    n = q.shape[0]
+    if P.shape != (n, n):
+        raise ProblemFormatError(f"P has shape {P.shape}, expected ({n}, {n})", key="P")
+    if problem.A is None:
+        A = _cached(("A", n), lambda: np.zeros((0, n)))
+        b = _cached(("v", 0), lambda: np.zeros(0))
+    else:
+        A = _f64(problem.A, "A", 2)
+        b = _f64(problem.b, "b", 1)
+        if A.shape[1] != n or b.shape[0] != A.shape[0]:
+            raise ProblemFormatError(f"A {A.shape} and b {b.shape} do not fit n = {n}", key="A")
+    if problem.G is None:
+        G = _cached(("A", n), lambda: np.zeros((0, n)))
+        h = _cached(("v", 0), lambda: np.zeros(0))
+    else:
+        G = _f64(problem.G, "G", 2)
+        h = _f64(problem.h, "h", 1)
+        if G.shape[1] != n or h.shape[0] != G.shape[0]:
+            raise ProblemFormatError(f"G {G.shape} and h {h.shape} do not fit n = {n}", key="G")
+    has_box = problem.lb is not None or problem.ub is not None
+    if problem.lb is None:
+        lb = _cached(("lb", n), lambda: np.full(n, -np.inf))
+    else:
+        lb = _f64(problem.lb, "lb", 1)
+    if problem.ub is None:
+        ub = _cached(("ub", n), lambda: np.full(n, np.inf))
+    else:
+        ub = _f64(problem.ub, "ub", 1)
+    if lb.shape[0] != n or ub.shape[0] != n:
+        raise ProblemFormatError(f"lb {lb.shape} / ub {ub.shape} do not fit n = {n}", key="lb")
+    return DenseQP(P, q, A, b, G, h, lb, ub, has_box)
+
+
+class NetworkState:
+    """State of the network, stored as one vector ``xi = [v; l1; l2]``.
+
+    Attributes:
+        xi: The whole state, shape (n + me + mi,).
+        v: Output (the joint-velocity command in the paper), shape (n,), [rad/s]
+            (a view of ``xi``).
+        l1: Equality dual state, shape (me,) (qpsolvers ``y = -l1``).
+        l2: Inequality dual state, shape (mi,), >= 0 (qpsolvers ``z = l2``).
+    """
+
+    __slots__ = ("xi", "n", "me", "mi")
+
+    def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
+        if xi.shape != (n + me + mi,):
+            raise ParamError(f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state")
+        self.xi = xi
+        self.n, self.me, self.mi = n, me, mi
+
+    @classmethod
+    def cold(cls, n: int, me: int, mi: int, v0: np.ndarray | None = None) -> NetworkState:
+        """All-zero state (``v = v0`` if given)."""
+        xi = np.zeros(n + me + mi)
+        if v0 is not None:
+            xi[:n] = np.asarray(v0, dtype=np.float64).reshape(n)
+        return cls(xi, n, me, mi)
+
+    def resized(self, n: int, me: int, mi: int) -> NetworkState:
+        """A state for a problem of shape ``(n, me, mi)``: parts whose size
+        changed restart at zero (all of it when ``n`` changes)."""
+        if n != self.n:
+            return NetworkState.cold(n, me, mi)
+        new = NetworkState.cold(n, me, mi, self.v)
+        if me == self.me:
+            new.l1[:] = self.l1
+        if mi == self.mi:
+            new.l2[:] = self.l2
+        return new
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.xi[: self.n]
+
+    @v.setter
+    def v(self, value) -> None:
+        self.xi[: self.n] = value
+
+    @property
+    def l1(self) -> np.ndarray:
+        return self.xi[self.n : self.n + self.me]
+
+    @property
+    def l2(self) -> np.ndarray:
+        return self.xi[self.n + self.me :]
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.n, self.me, self.mi
+
+    def copy(self) -> NetworkState:
+        return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
+
+    def __repr__(self) -> str:
+        return f"NetworkState(v={self.v!r}, l1={self.l1!r}, l2={self.l2!r})"
+
+
+@dataclass
+class IntegrationResult:
+    """What one call of :func:`integrate` did.
+
+    Attributes:
+        steps: Integration steps taken, or :data:`NO_STABLE_STEP` when ``P``
+            is not positive definite and no step size is proven stable.
+        primal_residual: ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``
+            at the final state (inf-norm).
+        dual_residual: ``|v - P_Omega(v - g)|_inf`` with
+            ``g = P v + q - A^T l1 + G^T l2``: qpsolvers' dual residual with the
+            ``z_box`` of :func:`duals`.
+        complementarity: ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero iff
+            ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``).
+        objective: ``1/2 v^T P v + q^T v`` at the final state.
+        ratio: ``r = h / eps`` of one step.
+        ratio_max: Stability bound on ``r`` (module docstring); a ``ratio``
+            above it may diverge.
+        sigma2_bound: Upper bound on ``sigma_max([A; G])^2`` used.
+    """
+
+    steps: int
+    primal_residual: float
+    dual_residual: float
+    complementarity: float
+    objective: float
+    ratio: float
+    ratio_max: float
+    sigma2_bound: float
+
+
+# ---------------------------------------------------------------------------
+# Step bound
+# ---------------------------------------------------------------------------
+def p_eigen_range(P: np.ndarray) -> tuple[float, float]:
+    """``(lambda_min, lambda_max)`` of the symmetric part of ``P``."""
+    if P.shape[0] == 0:
+        return 1.0, 1.0
+    w = np.linalg.eigvalsh(0.5 * (P + P.T))
+    return float(w[0]), float(w[-1])
+
+
+def _ratio_max(pmin, pmax, sig2, semi):
+    """Largest stable ``r = h/eps`` (see the module docstring); 0 if none."""
+    if pmin <= 0.0:
+        return 0.0
+    if semi and pmin == pmax:
+        return min(2.0 / pmax, 4.0 / (pmax + math.sqrt(pmax * pmax + 4.0 * sig2)))
+    bound = 2.0 / pmax
+    if sig2 > 0.0:
+        bound = min(bound, pmin / sig2)
+    return bound
+
+
+def _sigma2_bound_numpy(A: np.ndarray, G: np.ndarray) -> float:
+    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``."""
+    B = A.T @ A + G.T @ G
+    t = float(np.trace(B))
+    if not t > 0.0:
+        return 0.0
+    logc = math.log(t)
+    B = B / t
+    for _ in range(_SQUARINGS):
+        B = B @ B
+        t = float(np.trace(B))
+        if not t > 0.0:
+            return 0.0
+        logc = 2.0 * logc + math.log(t)
+        B = B / t
+    return math.exp(logc / 2.0**_SQUARINGS)
+
+
+def stable_ratio(qp: DenseQP, method: str = "euler") -> float:
+    """Largest stable ``r = h / eps`` of one integration step for ``qp``.
+
+    Uses the eigenvalues of ``P`` and the trace-power bound of
+    ``sigma_max([A; G])^2`` (module docstring). Returns 0 when ``P`` is not
+    positive definite (no step size is proven stable then).
+    """
+    pmin, pmax = p_eigen_range(qp.P)
+    return _ratio_max(pmin, pmax, _sigma2_bound_numpy(qp.A, qp.G), method == "semi-implicit")
+
+
+def make_params(
+    *,
+    p_range: tuple[float, float],
+    method: str = "euler",
+    r_total: float = 0.0,
+    substeps: int = 0,
+    safety: float = 0.9,
+    max_steps: int = 100_000,
+    tol: float = -1.0,
+    l1_clip: float | None = None,
+) -> np.ndarray:
+    """The parameter block ``prm`` of the kernels (see :func:`integrate`)."""
+    if method not in METHODS:
+        raise ParamError(f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method")
+    prm = np.zeros(PRM_SIZE)
+    prm[PMIN], prm[PMAX] = p_range
+    prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
+    prm[R_TOTAL] = r_total
+    prm[SUBSTEPS] = substeps
+    prm[SAFETY] = safety
+    prm[MAX_STEPS] = max_steps
+    prm[TOL] = tol
+    prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
+    return prm
+
+
+# ---------------------------------------------------------------------------
+# numpy integrator
+# ---------------------------------------------------------------------------
+def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
+    """Same contract as the compiled kernel (see :func:`kernel`)."""
+    n, me, mi = q.shape[0], b.shape[0], h.shape[0]
+    if (
+        P.shape != (n, n) or A.shape != (me, n) or G.shape != (mi, n) or lb.shape != (n,)
+        or ub.shape != (n,) or xi.shape != (n + me + mi,)
+        or sol.shape[0] not in (0, 2 * n + me + mi, 3 * n + 2 * (me + mi))
+    ):
+        return SHAPE_MISMATCH
+    v, l1, l2 = xi[:n], xi[n : n + me], xi[n + me :]
+    semi = prm[SEMI] != 0.0
+    r_total, substeps, l1_clip = prm[R_TOTAL], int(prm[SUBSTEPS]), prm[L1_CLIP]
+    forced = r_total > 0.0 and substeps > 0
+    if forced:
+        rmax = sig2 = np.nan
+    else:
+        sig2 = _sigma2_bound_numpy(A, G)
+        rmax = _ratio_max(prm[PMIN], prm[PMAX], sig2, semi)
+    prm[RATIO_MAX] = rmax
+    prm[SIG2] = sig2
+    if not forced and rmax <= 0.0:
+        prm[RATIO] = 0.0
+        return NO_STABLE_STEP
+    if r_total > 0.0:
+        nsteps = substeps if substeps > 0 else max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+        r = r_total / nsteps
+        check = False
+    else:
+        r = prm[SAFETY] * rmax
+        nsteps = int(prm[MAX_STEPS])
+        check = prm[TOL] >= 0.0
+    tol = prm[TOL]
+    prm[RATIO] = r
+    Av = A @ v
+    Gv = G @ v
+    steps = 0
+    while True:
+        g = P @ v + q - A.T @ l1 + G.T @ l2
+        if check or steps == nsteps:
+            # np.max propagates NaN (a diverged state must not look converged)
+            pr = np.max(np.concatenate([np.abs(Av - b), Gv - h, lb - v, v - ub, v * 0.0]))
+            du = np.max(np.abs(v - np.minimum(np.maximum(v - g, lb), ub)), initial=0.0)
+            if np.isnan(g).any():
+                du = np.nan
+            co = np.max(np.abs(l2 - np.maximum(l2 + Gv - h, 0.0)), initial=0.0)
+            if steps == nsteps or (pr <= tol and du <= tol and co <= tol):
+                break
+        w = np.minimum(np.maximum(v - g, lb), ub)
+        v += r * (w - v)
+        if semi:
+            Av = A @ v
+            Gv = G @ v
+        l1 += r * (b - Av)
+        if l1_clip < np.inf:
+            np.minimum(np.maximum(l1, -l1_clip, out=l1), l1_clip, out=l1)
+        l2 += r * (np.maximum(l2 + Gv - h, 0.0) - l2)
+        if not semi:
+            Av = A @ v
+            Gv = G @ v
+        steps += 1
+    prm[PRIMAL] = pr
+    prm[DUAL] = du
+    prm[COMPL] = co
+    prm[OBJ] = 0.5 * float(v @ (P @ v)) + float(q @ v)
+    if sol.shape[0]:
+        w = v - g
+        if sol.shape[0] > 2 * n + me + mi:
+            base = 2 * n + me + mi
+            sol[base : base + n] = g
+            sol[base + n : base + n + me] = Av
+            sol[base + n + me :] = Gv
+        sol[:n] = v
+        sol[n : n + me] = -l1
+        sol[n + me : n + me + mi] = l2
+        sol[n + me + mi : 2 * n + me + mi] = w - np.minimum(np.maximum(w, lb), ub)
+    return steps
+
+
+# ---------------------------------------------------------------------------
+# numba integrator (same algorithm, explicit loops; compiled on first call)
+# ---------------------------------------------------------------------------
+def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
+    n = A.shape[1]
+    B = np.zeros((n, n))
+    for k in range(A.shape[0]):
+        for i in range(n):
+            for j in range(n):
+                B[i, j] += A[k, i] * A[k, j]
+    for k in range(G.shape[0]):
+        for i in range(n):
+            for j in range(n):
+                B[i, j] += G[k, i] * G[k, j]
+    t = 0.0
+    for i in range(n):
+        t += B[i, i]
+    if not t > 0.0:
+        return 0.0
+    logc = math.log(t)
+    for i in range(n):
+        for j in range(n):
+            B[i, j] /= t
+    C = np.empty((n, n))
+    for _ in range(_SQUARINGS):
+        for i in range(n):
+            for j in range(n):
+                s = 0.0
+                for k in range(n):
+                    s += B[i, k] * B[k, j]
+                C[i, j] = s
+        t = 0.0
+        for i in range(n):
+            t += C[i, i]
+        if not t > 0.0:
+            return 0.0
+        logc = 2.0 * logc + math.log(t)
+        for i in range(n):
+            for j in range(n):
+                B[i, j] = C[i, j] / t
+    return math.exp(logc / 2.0**_SQUARINGS)
+
+
+def _matvec_off(M, xi, off, y):  # pragma: no cover - runs compiled
+    """``y = M @ xi[off : off + M.shape[1]]``."""
+    for i in range(M.shape[0]):
+        s = 0.0
+        for j in range(M.shape[1]):
+            s += M[i, j] * xi[off + j]
+        y[i] = s
+
+
+def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
+    n = q.shape[0]
+    me = b.shape[0]
+    mi = h.shape[0]
+    if (
+        P.shape[0] != n or P.shape[1] != n or A.shape[0] != me or A.shape[1] != n
+        or G.shape[0] != mi or G.shape[1] != n or lb.shape[0] != n or ub.shape[0] != n
+        or xi.shape[0] != n + me + mi
+        or (sol.shape[0] != 0 and sol.shape[0] != 2 * n + me + mi and sol.shape[0] != 3 * n + 2 * (me + mi))
+    ):
+        return SHAPE_MISMATCH
+    o1 = n
+    o2 = n + me
+    semi = prm[SEMI] != 0.0
+    r_total = prm[R_TOTAL]
+    substeps = int(prm[SUBSTEPS])
+    l1_clip = prm[L1_CLIP]
+    tol = prm[TOL]
+    forced = r_total > 0.0 and substeps > 0
+    if forced:
+        # The bound only informs; skip it (the caller may ask stable_ratio()).
+        rmax = np.nan
+        sig2 = np.nan
+    else:
+        sig2 = _sigma2_bound_jit(A, G)
+        rmax = _ratio_max_jit(prm[PMIN], prm[PMAX], sig2, semi)
+    prm[RATIO_MAX] = rmax
+    prm[SIG2] = sig2
+    if not forced and rmax <= 0.0:
+        prm[RATIO] = 0.0
+        return NO_STABLE_STEP
+    if r_total > 0.0:
+        if substeps > 0:
+            nsteps = substeps
+        else:
+            nsteps = max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+        r = r_total / nsteps
+        check = False
+    else:
+        r = prm[SAFETY] * rmax
+        nsteps = int(prm[MAX_STEPS])
+        check = tol >= 0.0
+    prm[RATIO] = r
+    if sol.shape[0] >= 3 * n + 2 * (me + mi):
+        # scratch space after the outputs (saves three allocations)
+        base = 2 * n + me + mi
+        g = sol[base : base + n]
+        Av = sol[base + n : base + n + me]
+        Gv = sol[base + n + me : base + n + me + mi]
+    else:
+        Av = np.empty(me)
+        Gv = np.empty(mi)
+        g = np.empty(n)
+    _matvec_jit(A, xi, 0, Av)
+    _matvec_jit(G, xi, 0, Gv)
+    pr = 0.0
+    du = 0.0
+    co = 0.0
+    steps = 0
+    while True:
+        # g = P v + q - A^T l1 + G^T l2
+        for j in range(n):
+            s = 0.0
+            for k in range(n):
+                s += P[j, k] * xi[k]
+            g[j] = s + q[j]
+        for j in range(n):
+            s = 0.0
+            for i in range(me):
+                s += A[i, j] * xi[o1 + i]
+            g[j] -= s
+        for j in range(n):
+            s = 0.0
+            for i in range(mi):
+                s += G[i, j] * xi[o2 + i]
+            g[j] += s
+        if check or steps == nsteps:
+            # maxima that propagate NaN (a diverged state must not look converged)
+            pr = 0.0
+            for i in range(me):
+                e = abs(Av[i] - b[i])
+                if e > pr or e != e:
+                    pr = e
+            for i in range(mi):
+                e = Gv[i] - h[i]
+                if e > pr or e != e:
+                    pr = e
+            for j in range(n):
+                e = max(lb[j] - xi[j], xi[j] - ub[j])
+                if e > pr or xi[j] != xi[j]:
+                    pr = e if xi[j] == xi[j] else xi[j]
+            du = 0.0
+            for j in range(n):
+                e = abs(xi[j] - min(max(xi[j] - g[j], lb[j]), ub[j]))
+                if e > du or g[j] != g[j] or xi[j] != xi[j]:
+                    du = e if (g[j] == g[j] and xi[j] == xi[j]) else np.nan
+            co = 0.0
+            for i in range(mi):
+                e = abs(xi[o2 + i] - max(xi[o2 + i] + Gv[i] - h[i], 0.0))
+                if e > co or xi[o2 + i] != xi[o2 + i] or Gv[i] != Gv[i]:
+                    co = e if (xi[o2 + i] == xi[o2 + i] and Gv[i] == Gv[i]) else np.nan
+            if steps == nsteps or (pr <= tol and du <= tol and co <= tol):
+                break
+        for j in range(n):
+            w = min(max(xi[j] - g[j], lb[j]), ub[j])
+            xi[j] += r * (w - xi[j])
+        if semi:
+            _matvec_jit(A, xi, 0, Av)
+            _matvec_jit(G, xi, 0, Gv)
+        for i in range(me):
+            xi[o1 + i] += r * (b[i] - Av[i])
+            if l1_clip < np.inf:
+                xi[o1 + i] = min(max(xi[o1 + i], -l1_clip), l1_clip)
+        for i in range(mi):
+            xi[o2 + i] += r * (max(xi[o2 + i] + Gv[i] - h[i], 0.0) - xi[o2 + i])
+        if not semi:
+            _matvec_jit(A, xi, 0, Av)
+            _matvec_jit(G, xi, 0, Gv)
+        steps += 1
+    prm[PRIMAL] = pr
+    prm[DUAL] = du
+    prm[COMPL] = co
+    obj = 0.0
+    for j in range(n):
+        s = 0.0
+        for k in range(n):
+            s += P[j, k] * xi[k]
+        obj += xi[j] * (0.5 * s + q[j])
+    prm[OBJ] = obj
+    if sol.shape[0] != 0:
+        for j in range(n):
+            sol[j] = xi[j]
+            w = xi[j] - g[j]
+            sol[n + me + mi + j] = w - min(max(w, lb[j]), ub[j])
+        for i in range(me):
+            sol[n + i] = -xi[o1 + i]
+        for i in range(mi):
+            sol[n + me + i] = xi[o2 + i]
+    return steps
+
+
+# Names the compiled kernel calls; bound to jitted functions by :func:`kernel`.
+_sigma2_bound_jit = _sigma2_bound_loops
+_ratio_max_jit = _ratio_max
+_matvec_jit = _matvec_off
+_COMPILED = None
+
+
+def numba_available() -> bool:
+    """Whether numba can be imported here."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def kernel(use_numba: bool = True):
+    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
+
+    ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the
+    inputs ``PMIN .. L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``
+    (index constants of this module); ``sol`` (length ``2n + me + mi``, or 0
+    to skip) receives ``[x; y; z; z_box]`` as :func:`duals` defines them.
+    Returns the step count, :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`.
+    The numba version is compiled on the first call of this function's result
+    (and cached on disk); the numpy version computes the same numbers.
+    """
+    if not use_numba:
+        return _integrate_numpy
+    global _COMPILED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit
+    if _COMPILED is None:
+        import numba
+
+        jit = numba.njit(cache=True)
+        _sigma2_bound_jit = jit(_sigma2_bound_loops)
+        _ratio_max_jit = jit(_ratio_max)
+        _matvec_jit = jit(_matvec_off)
+        _COMPILED = jit(_integrate_loops)
+    return _COMPILED
+
+
+# ---------------------------------------------------------------------------
+# Public entry points
+# ---------------------------------------------------------------------------
+def integrate(
+    qp: DenseQP,
+    state: NetworkState,
+    *,
+    r_total: float = 0.0,
+    substeps: int = 0,
+    safety: float = 0.9,
+    max_steps: int = 100_000,
+    tol: float = -1.0,
+    l1_clip: float | None = None,
+    method: str = "euler",
+    use_numba: bool = True,
+    p_range: tuple[float, float] | None = None,
+) -> IntegrationResult:
+    """Integrate the network on ``qp`` from ``state`` (updated in place).
+
+    Two modes:
+
+    - fixed duration (``r_total = duration / eps > 0``): ``substeps`` equal
+      steps, or, when ``substeps == 0``, the fewest steps with
+      ``r <= safety * ratio_max``;
+    - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
+      until primal residual, dual residual and complementarity are all
+      ``<= tol``, or ``max_steps`` steps.
+
+    Args:
+        qp: The problem (:func:`dense_qp`).
+        state: Network state, updated in place; its shape must match ``qp``.
+        r_total: Duration of the integration over ``eps`` (dimensionless).
+        substeps: Forced number of steps of a fixed-duration integration.
+        safety: Fraction of the stability bound used for the step, in (0, 1].
+        max_steps: Step budget of a convergence run.
+        tol: Residual tolerance of a convergence run (negative: never stop early).
+        l1_clip: Clip ``l1`` to ``[-l1_clip, l1_clip]`` after each step
+            (anti-windup); ``None`` for no clip.
+        method: ``"euler"`` or ``"semi-implicit"``.
+        use_numba: Use the compiled loop (else the numpy path).
+        p_range: ``(lambda_min, lambda_max)`` of ``P`` if known.
+
+    Returns:
+        An :class:`IntegrationResult` (``steps == NO_STABLE_STEP`` when ``P``
+        is not positive definite and no step count was forced).
+    """
+    if state.shape != qp.shape:
+        raise ParamError(f"state shape {state.shape} does not match problem {qp.shape}", key="state")
+    prm = make_params(
+        p_range=p_range if p_range is not None else p_eigen_range(qp.P), method=method,
+        r_total=r_total, substeps=substeps, safety=safety, max_steps=max_steps, tol=tol,
+        l1_clip=l1_clip,
+    )
+    steps = kernel(use_numba)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL)
+    if steps == SHAPE_MISMATCH:  # pragma: no cover - dense_qp checked the shapes
+        raise ProblemFormatError("inconsistent problem shapes", key="P")
+    return IntegrationResult(
+        int(steps), float(prm[PRIMAL]), float(prm[DUAL]), float(prm[COMPL]), float(prm[OBJ]),
+        float(prm[RATIO]), float(prm[RATIO_MAX]), float(prm[SIG2]),
+    )
+
+
+_NO_SOL = np.zeros(0)
+
+
+def duals(qp: DenseQP, state: NetworkState):
+    """qpsolvers duals ``(y, z, z_box)`` of a network state.
+
+    ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with
+    ``w = v - (P v + q + A^T y + G^T z)``: the part of ``w`` the projection
+    cuts off. At an equilibrium (``v = P_Omega(w)``) this is the note's
+    ``z_box = -(P v + q + A^T y + G^T z)``; away from it ``z_box`` keeps the
+    signs qpsolvers requires (< 0 only at a lower bound, > 0 only at an upper
+    one) and qpsolvers' dual residual equals ``|v - P_Omega(w)|_inf``.
+    Absent parts give ``None``.
+    """
+    n, me, mi = qp.shape
+    v, l1, l2 = state.v, state.l1, state.l2
+    w = v - (qp.P @ v + qp.q - qp.A.T @ l1 + qp.G.T @ l2)
+    z_box = w - np.minimum(np.maximum(w, qp.lb), qp.ub)
+    return (-l1 if me else None), (l2.copy() if mi else None), (z_box if qp.has_box else None)

@@ -1,0 +1,344 @@
+"""The projection network (paper eq. 15) and its backends ``rnn`` and ``rnn-converged``."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import qpsolvers
+
+from qpbench.backends import get_backend
+from qpbench.backends.rnn import WORKING_SETTINGS
+from qpbench.exceptions import ParamError, ProblemFormatError
+from qpbench.known import random_kkt_problem, robot_like_problem
+from qpbench.rnn import network as nw
+
+pytestmark = pytest.mark.filterwarnings("ignore::qpsolvers.warnings.SparseConversionWarning")
+
+
+def reference(problem: qpsolvers.Problem) -> qpsolvers.Solution:
+    """DAQP's answer (an active-set solver: exact to rounding on these sizes)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = qpsolvers.solve_problem(problem, solver="daqp")
+    assert sol.found
+    return sol
+
+
+def robot_ticks(scenario: str, duration: float, every: int, backend="qpsolvers:daqp", **overrides):
+    """QPs of a closed-loop run (kept every ``every`` ticks) and the run itself."""
+    from qpbench.sim.loop import simulate
+    from qpbench.sim.scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    if overrides:
+        sc = replace(sc, rnn=dict(overrides))
+    return simulate(sc, backend, duration=duration, every=every)
+
+
+# ---------------------------------------------------------------------------
+# network: step bound, integrators
+# ---------------------------------------------------------------------------
+def test_sigma_bound_is_an_upper_bound_and_tight(rng):
+    for _ in range(20):
+        m, n = rng.integers(1, 12), rng.integers(1, 8)
+        C = rng.standard_normal((m, n)) * rng.uniform(0.01, 10)
+        k = int(rng.integers(0, m + 1))
+        true = np.linalg.eigvalsh(C.T @ C)[-1]
+        bound = nw._sigma2_bound_numpy(C[:k], C[k:])
+        rank = np.linalg.matrix_rank(C)
+        assert true * (1 - 1e-12) <= bound <= true * rank ** (1 / 32) * (1 + 1e-12)
+    assert nw._sigma2_bound_numpy(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
+
+
+@pytest.mark.parametrize("method", nw.METHODS)
+def test_step_bound_separates_stable_from_unstable(rng, method):
+    """Equality-only QP with P = I: the computed bound on r = h/eps is the edge of stability."""
+    n = 4
+    A = rng.standard_normal((2, n))
+    problem = qpsolvers.Problem(np.eye(n), rng.standard_normal(n), A=A, b=rng.standard_normal(2))
+    qp = nw.dense_qp(problem)
+    sig2 = np.linalg.eigvalsh(A.T @ A)[-1]
+    exact = 1 / sig2 if method == "euler" else 4 / (1 + np.sqrt(1 + 4 * sig2))
+    r_max = nw.stable_ratio(qp, method)
+    assert exact / 2 ** (1 / 32) <= r_max <= exact * (1 + 1e-12)
+    for factor, stable in ((0.95, True), (1.05, False)):
+        state = nw.NetworkState.cold(n, 2, 0)
+        steps = 4000
+        res = nw.integrate(qp, state, r_total=factor * exact * steps, substeps=steps, method=method)
+        assert (res.primal_residual < 1e-6) == stable, (factor, res)
+
+
+def test_semi_implicit_takes_fewer_steps_on_robot_shaped_problems(rng):
+    steps = {}
+    for method in nw.METHODS:
+        local = np.random.default_rng(7)
+        total = 0
+        for _ in range(10):
+            problem, *_ = robot_like_problem(local)
+            problem.P = np.eye(4)  # the paper's cost
+            problem.q = np.zeros(4)
+            be = get_backend("rnn-converged", method=method)
+            sol = be.solve(problem)
+            assert sol.found
+            total += sol.iterations
+        steps[method] = total
+    assert steps["semi-implicit"] < steps["euler"]
+
+
+def test_p_not_positive_definite_is_an_error_status():
+    problem = qpsolvers.Problem(np.diag([1.0, 0.0]), np.ones(2), lb=-np.ones(2), ub=np.ones(2))
+    sol = get_backend("rnn-converged").solve(problem)
+    assert sol.status == "error" and not sol.found and "positive definite" in sol.error
+
+
+# ---------------------------------------------------------------------------
+# rnn-converged against references
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", range(6))
+def test_converged_matches_known_solutions(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 9))
+    n_eq = int(rng.integers(0, 3))
+    n_ineq = int(rng.integers(0, 6))
+    n_active = int(rng.integers(0, min(n_ineq, n - n_eq) + 1))
+    problem, x, y, z, z_box = random_kkt_problem(rng, n, n_eq, n_ineq, n_active, with_bounds=seed % 3 != 0, cond=10.0)
+    be = get_backend("rnn-converged")
+    sol = be.solve(problem)
+    assert sol.found and sol.status == "optimal"
+    assert sol.primal_residual() <= 1e-6
+    assert sol.dual_residual() <= 1e-6
+    assert np.abs(sol.x - x).max() <= 1e-5
+    if n_eq:
+        assert np.abs(sol.y - y).max() <= 1e-4
+    if n_ineq:
+        assert np.abs(sol.z - z).max() <= 1e-4 and (sol.z >= 0).all()
+    if seed % 3 != 0:
+        assert np.abs(sol.z_box - z_box).max() <= 1e-4
+        # at the solution the projection's z_box is the stationarity one (note section 6)
+        P, q, G, h, A, b, lb, ub = problem.unpack()
+        stat = -(P @ sol.x + q + (A.T @ sol.y if n_eq else 0) + (G.T @ sol.z if n_ineq else 0))
+        assert np.abs(sol.z_box - stat).max() <= 1e-6
+    assert sol.iterations == be.last.steps > 0
+
+
+@pytest.mark.parametrize(
+    "parts",
+    [dict(n_ineq=None, n_eq=None), dict(n_eq=None), dict(n_ineq=None), dict(bounds=False), dict(lb=False), dict(ub=False), {}],
+)
+def test_converged_with_absent_parts(random_qp, parts):
+    problem = random_qp(n=5, **parts)
+    ref = reference(problem)
+    sol = get_backend("rnn-converged").solve(problem)
+    assert sol.found
+    assert sol.primal_residual() <= 1e-6 and sol.dual_residual() <= 1e-6
+    assert np.abs(sol.x - ref.x).max() <= 1e-5
+    assert (sol.y is None) == (problem.A is None)
+    assert (sol.z is None) == (problem.G is None)
+    assert (sol.z_box is None) == (problem.lb is None and problem.ub is None)
+
+
+def test_converged_on_robot_ticks_warm_from_previous_tick():
+    """Every feasible tick of 2 s of the wall scenario (every 10th), warm-started tick to tick."""
+    run = robot_ticks("wall", 2.0, every=10)
+    be = get_backend("rnn-converged")
+    checked = active = 0
+    for rec in run.records:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ref = qpsolvers.solve_problem(rec.problem, solver="daqp")
+        if not ref.found:  # the infeasible start of the paper formulation (note section 5)
+            continue
+        sol = be.solve(rec.problem)
+        assert sol.found, (rec.name, be.last)
+        assert sol.primal_residual() <= 1e-6 and sol.dual_residual() <= 1e-6
+        assert np.abs(sol.x - ref.x).max() <= 1e-5, rec.name
+        checked += 1
+        active += bool(ref.z is not None and ref.z.max() > 1e-9)
+    assert checked >= 150 and active >= 10
+
+
+def test_converged_on_shipped_problem_sets():
+    from pathlib import Path
+
+    from qpbench.formats import read_problem_set
+
+    root = Path(__file__).resolve().parents[1] / "problems"
+    folders = sorted(p.parent for p in root.glob("*/problems.parquet") if p.parent.name != "maros_meszaros")
+    if not folders:
+        pytest.skip("no robot problem set under problems/")
+    for folder in folders:
+        pset = read_problem_set(folder)
+        be = get_backend("rnn-converged")
+        for rec in pset.records[:: max(1, len(pset.records) // 60)]:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ref = qpsolvers.solve_problem(rec.problem, solver="daqp")
+            if not ref.found:
+                continue
+            sol = be.solve(rec.problem)
+            assert sol.found and sol.primal_residual() <= 1e-6 and sol.dual_residual() <= 1e-6
+            assert np.abs(sol.x - ref.x).max() <= 1e-5, (folder.name, rec.name)
+
+
+def test_converged_step_budget_gives_max_iter():
+    # infeasible: x1 = 1 and x1 <= 0
+    problem = qpsolvers.Problem(np.eye(2), np.zeros(2), G=np.array([[1.0, 0.0]]), h=np.zeros(1),
+                                A=np.array([[1.0, 0.0]]), b=np.ones(1))
+    sol = get_backend("rnn-converged", max_iter=500).solve(problem)
+    assert sol.status == "max_iter" and not sol.found and sol.iterations == 500
+    assert sol.x is not None  # the state it reached, for inspection
+
+
+# ---------------------------------------------------------------------------
+# numba and numpy paths
+# ---------------------------------------------------------------------------
+def test_numba_and_numpy_agree_online_and_converged():
+    run = robot_ticks("narrow", 0.6, every=3)
+    problems = [r.problem for r in run.records]
+    rng = np.random.default_rng(3)
+    problems += [robot_like_problem(rng)[0] for _ in range(20)]
+    for name, settings in (("rnn", dict(eps=1e-3, l1_clip=10.0)), ("rnn", dict(substeps=3, method="semi-implicit")),
+                           ("rnn-converged", {})):
+        fast = get_backend(name, use_numba=True, **settings)
+        slow = get_backend(name, use_numba=False, **settings)
+        # the numpy path takes about 10 us a step: converge on a few ticks only
+        for problem in problems if name == "rnn" else problems[-25::3]:
+            a, b = fast.solve(problem), slow.solve(problem)
+            assert a.status == b.status
+            assert abs(a.iterations - b.iterations) <= (0 if name == "rnn" else 1)
+            if a.iterations == b.iterations:
+                # to 1e-12, relative to the size of the numbers (without the clip l1
+                # winds up to 1e5 and more in the infeasible start of narrow)
+                for u, w in ((a.x, b.x), (a.y, b.y), (a.z, b.z), (a.z_box, b.z_box)):
+                    assert np.abs(u - w).max() <= 1e-12 * max(1.0, np.abs(u).max())
+                assert abs(a.obj - b.obj) <= 1e-12 * max(1.0, abs(a.obj))
+            scale = max(1.0, np.abs(fast.state.xi).max())
+            np.testing.assert_allclose(fast.state.xi, slow.state.xi, rtol=0, atol=1e-10 * scale)
+            if a.iterations != b.iterations:  # resynchronise after a tie at the tolerance
+                slow.state = fast.state.copy()
+
+
+def test_kernel_outputs_match_duals_function(rng):
+    problem, *_ = robot_like_problem(rng)
+    qp = nw.dense_qp(problem)
+    state = nw.NetworkState.cold(*qp.shape)
+    nw.integrate(qp, state, r_total=3.0, substeps=20)
+    n, me, mi = qp.shape
+    for use in (True, False):
+        sol = np.empty(2 * n + me + mi)
+        prm = nw.make_params(p_range=nw.p_eigen_range(qp.P), r_total=1e-9, substeps=1)
+        st = state.copy()
+        nw.kernel(use)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, st.xi, prm, sol)
+        y, z, z_box = nw.duals(qp, st)
+        np.testing.assert_allclose(sol, np.concatenate([st.v, y, z, z_box]), rtol=0, atol=1e-14)
+
+
+# ---------------------------------------------------------------------------
+# rnn (online): state across calls, settings
+# ---------------------------------------------------------------------------
+def test_online_state_lives_across_calls_and_reset_clears_it(rng):
+    problem, *_ = robot_like_problem(rng)
+    one = get_backend("rnn", eps=1e-3, dt=2e-3, substeps=10)
+    two = get_backend("rnn", eps=1e-3, dt=1e-3, substeps=5)
+    a = one.solve(problem)
+    two.solve(problem)
+    b = two.solve(problem)
+    np.testing.assert_array_equal(a.x, b.x)  # two ticks of dt = one tick of 2 dt, same steps
+    assert two.online and not get_backend("rnn-converged").online
+    two.reset()
+    c = two.solve(problem)
+    d = get_backend("rnn", eps=1e-3, dt=1e-3, substeps=5).solve(problem)
+    np.testing.assert_array_equal(c.x, d.x)
+
+
+def test_online_auto_substeps_respect_the_bound(rng):
+    problem, *_ = robot_like_problem(rng)
+    be = get_backend("rnn", eps=1e-3, safety=0.5)
+    sol = be.solve(problem)
+    last = be.last
+    assert sol.iterations == int(np.ceil(1.0 / (0.5 * last.ratio_max)))
+    assert last.ratio <= 0.5 * last.ratio_max
+    assert sol.status in ("optimal", "max_iter") and sol.x.shape == (4,)
+
+
+def test_online_shape_change_keeps_what_still_fits(rng):
+    p1, *_ = robot_like_problem(rng, n_ineq=7)
+    p2, *_ = robot_like_problem(rng, n_ineq=9)
+    be = get_backend("rnn", eps=1e-3, substeps=5)
+    be.solve(p1)
+    v, l1 = be.state.v.copy(), be.state.l1.copy()
+    be.solve(p2)
+    ref = get_backend("rnn", eps=1e-3, substeps=5)
+    ref.state = nw.NetworkState.cold(4, 2, 9, v)
+    ref.state.l1[:] = l1
+    np.testing.assert_array_equal(be.state.xi, ref.solve(p2) and ref.state.xi)
+
+
+def test_settings_are_checked():
+    with pytest.raises(ParamError) as err:
+        get_backend("rnn", epsilon=0.1)
+    assert err.value.key == "epsilon"
+    for key, value in (("eps", 0.0), ("eps", -1), ("dt", float("nan")), ("substeps", 2.5), ("safety", 1.5),
+                       ("l1_clip", 0), ("method", "rk45"), ("use_numba", "yes"), ("max_iter", 0)):
+        with pytest.raises(ParamError) as err:
+            get_backend("rnn-converged", **{key: value})
+        assert err.value.key == key
+
+
+def test_bad_shapes_are_reported():
+    problem = qpsolvers.Problem(np.eye(3), np.zeros(3), G=np.ones((2, 3)), h=np.ones(3))
+    with pytest.raises(ProblemFormatError) as err:
+        get_backend("rnn").solve(problem)
+    assert err.value.key == "G"
+
+
+def test_sparse_input_gives_the_dense_answer(random_qp):
+    import scipy.sparse as spa
+
+    problem = random_qp(n=5)
+    sparse = qpsolvers.Problem(spa.csc_matrix(problem.P), problem.q, spa.csc_matrix(problem.G), problem.h,
+                               spa.csc_matrix(problem.A), problem.b, problem.lb, problem.ub)
+    a = get_backend("rnn-converged").solve(problem)
+    b = get_backend("rnn-converged").solve(sparse)
+    assert a.iterations == b.iterations
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-12)
+
+
+# ---------------------------------------------------------------------------
+# closed loop
+# ---------------------------------------------------------------------------
+def test_replaying_the_dumped_ticks_reproduces_the_commands(tmp_path):
+    """simulate with rnn, dump every tick, replay through a fresh backend: same v, bit for bit."""
+    from qpbench.formats import read_problem_set
+    from qpbench.sim.loop import simulate
+    from qpbench.sim.scenario import load_scenario
+
+    sc = replace(load_scenario("wall"), rnn=dict(WORKING_SETTINGS))
+    run = simulate(sc, "rnn", duration=0.5, dump=tmp_path / "wall_rnn")
+    pset = read_problem_set(tmp_path / "wall_rnn")
+    assert len(pset) == len(run.log)
+    be = get_backend("rnn", dt=sc.dt, **sc.rnn)
+    v_log = run.log[[f"v_{i}" for i in range(4)]].to_numpy()
+    replayed = np.array([be.solve(rec.problem).x for rec in pset.records])
+    np.testing.assert_array_equal(replayed, v_log)
+
+
+@pytest.mark.parametrize("scenario", ["free", "wall"])
+def test_working_setting_meets_the_bars(scenario):
+    run = robot_ticks(scenario, 5.0, every=None, backend="rnn", **WORKING_SETTINGS)
+    s = run.summary
+    assert s["force_error_max_after_2s"] <= 0.5
+    assert s["tracking_max_after_2s"] <= 1e-3
+    if s["min_obstacle_distance"] is not None:
+        assert s["min_obstacle_distance"] >= s["d_safe"] - 5e-4
+    assert s["joint_limit_violations"] == 0 and s["fallback_ticks"] == 0
+
+
+def test_paper_setting_crosses_the_wall():
+    """eps = 0.02 (the paper's): the network lags the 10 ms impedance loop and a key point crosses the wall."""
+    s = robot_ticks("wall", 4.0, every=None, backend="rnn", eps=0.02).summary
+    assert s["min_obstacle_distance"] < 0.0
+    assert s["force_error_max_after_2s"] > 10.0
