@@ -138,6 +138,8 @@ class StackedLayout:
             parts_u.append(b)
         if self.with_box:
             lb, ub = dense_bounds(problem, self.n)
+            if lb is None:  # free rows of an unconstrained problem
+                lb, ub = np.full(self.n, -np.inf), np.full(self.n, np.inf)
             parts_l.append(lb)
             parts_u.append(ub)
         if not parts_l:
@@ -170,7 +172,16 @@ def _status_map(osqp) -> dict:
 
 
 def _has_box(problem) -> bool:
-    return problem.lb is not None or problem.ub is not None
+    """Stack box rows when there is a box, or when there is nothing else.
+
+    OSQP needs a constraint matrix with at least one row per column to lay out
+    its CSC pattern; an unconstrained problem gets free rows ``-inf <= x <= inf``.
+    """
+    if problem.lb is not None or problem.ub is not None:
+        return True
+    no_G = problem.G is None or problem.G.shape[0] == 0
+    no_A = problem.A is None or problem.A.shape[0] == 0
+    return no_G and no_A
 
 
 @register

@@ -89,6 +89,10 @@ class ProxqpBackend(Backend):
     name = "proxqp"
     family = "augmented Lagrangian"
     package = "proxsuite"
+    #: Solved in a worker process with a deadline under ``--isolate auto``:
+    #: ProxQP 0.8 was seen once to hang in native code (633 s) on a warm-started
+    #: robot tick, which an in-process time limit cannot interrupt.
+    risky = True
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)

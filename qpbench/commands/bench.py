@@ -1,0 +1,90 @@
+"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from ..profiles import PROFILES
+
+HELP = "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
+EXAMPLE = "qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3"
+
+log = logging.getLogger("qpbench")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "problems",
+        metavar="PROBLEMS",
+        help="problem-set folder, qpbenchmark .parquet, folder of .npz or .mat, or one .npz/.mat file",
+    )
+    parser.add_argument(
+        "--backends", required=True, help="comma-separated backend names, or 'all' (every available backend)"
+    )
+    parser.add_argument("--out", required=True, help="CSV file of results (rows appended as they are produced)")
+    parser.add_argument("--profile", default="default", choices=sorted(PROFILES), help="settings profile (default: default)")
+    parser.add_argument("--repeat", type=int, default=1, help="timed solves per problem; rows give min and median (default 1)")
+    parser.add_argument(
+        "--mode",
+        default="sequential",
+        choices=("sequential", "independent"),
+        help="sequential: tick order, state carried (default); independent: reset before each problem",
+    )
+    parser.add_argument("--time-limit", type=float, default=None, help="per-solve time limit in s (default: the profile's)")
+    parser.add_argument(
+        "--isolate",
+        default="auto",
+        choices=("auto", "always", "never"),
+        help="run solves in a worker process: auto = backends marked risky or seen to crash (default)",
+    )
+    parser.add_argument("--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend")
+    parser.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE_OR_FILE",
+        help="import a module (or .py file) that registers extra backends; repeatable (also QPBENCH_PLUGINS)",
+    )
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--force", action="store_true", help="delete an existing --out and start again")
+    group.add_argument("--resume", action="store_true", help="keep the rows of an existing --out and run the rest")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..atomic import check_output
+    from ..backends import backend_names
+    from ..exceptions import ParamError
+    from ..formats import load_problems
+    from ..harness.bench import BenchConfig, run_bench
+    from ..harness.plugins import load_plugins, plugin_specs
+
+    # Nothing is written before the input is known to be good.
+    check_output(args.out, force=args.force, resume=args.resume)
+    plugins = plugin_specs(args.plugin)
+    load_plugins(plugins)
+    if args.backends.strip() == "all":
+        backends = backend_names(available_only=True)
+    else:
+        backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+    if not backends:
+        raise ParamError("no backend given", key="backends")
+    config = BenchConfig(
+        backends=backends,
+        profile=args.profile,
+        repeat=args.repeat,
+        mode=args.mode,
+        time_limit=args.time_limit,
+        isolate=args.isolate,
+        warmup=not args.no_warmup,
+        plugins=plugins,
+    )
+    config.validate()
+    problem_set = load_problems(args.problems)
+    log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
+    progress = not args.quiet and sys.stderr.isatty()
+    summary = run_bench(problem_set, config, args.out, force=args.force, resume=args.resume, progress=progress)
+    if not args.quiet:
+        print(f"bench: {summary.line()}")
+    return summary.exit_code

@@ -1,0 +1,14 @@
+"""The benchmark harness: timed, guarded, resumable runs of backends over problem sets.
+
+- :mod:`.bench`: :func:`run_bench` (``qpbench bench``), sequences, rows;
+- :mod:`.timing`: the timed region and state restoration between repeats;
+- :mod:`.guard`: guarded in-process solves (exceptions, time limit, non-finite answers);
+- :mod:`.isolation`: solves in a worker process (hangs and crashes);
+- :mod:`.results`: CSV rows appended as produced, read back on resume;
+- :mod:`.plugins`: extra backend modules (``--plugin``, ``QPBENCH_PLUGINS``).
+"""
+
+from .bench import BenchConfig, BenchSummary, is_failure, run_bench, sequences
+from .results import COLUMNS, KEY_COLUMNS, read_results
+
+__all__ = ["COLUMNS", "KEY_COLUMNS", "BenchConfig", "BenchSummary", "is_failure", "read_results", "run_bench", "sequences"]

@@ -1,0 +1,498 @@
+"""The per-tick benchmark: every backend on every problem of a set, one row each.
+
+:func:`run_bench` walks the problems in sequence order, problem by problem,
+and solves each with every backend (a :class:`~qpbench.harness.guard.LocalRunner`
+in this process or an :class:`~qpbench.harness.isolation.IsolatedRunner` in a
+worker). The rows of a problem are appended to the CSV and ``fsync``-ed before
+the next problem starts.
+
+Sequences (``mode="sequential"``): problems of the same ``scenario`` form one
+sequence, in tick order (file order breaks ties); a problem without a scenario
+is a sequence of its own. Each backend's state is carried along a sequence
+(the way a controller calls its solver tick after tick) and reset between
+sequences. After a failure that leaves the state suspect (``error``,
+``time_limit``, ``invalid``, ``crashed``) the backend is reset and the next
+row says ``state_reset = True``. ``mode="independent"`` resets before every
+problem.
+
+Resuming (``resume=True``): rows already in the CSV are kept and their keys
+``(problem, backend, profile)`` skipped. In sequential mode a backend that
+still has problems left in a sequence is brought back to the state it had by
+replaying, untimed and unrecorded, the earlier problems of that sequence,
+following the recorded statuses (a recorded failure means "reset here", as the
+original run did). Deterministic backends then produce the same rows as an
+uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import statistics
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..exceptions import InputError, ParamError
+from ..profiles import Profile, get_profile
+from .guard import FAILURE_STATUSES, RESET_STATUSES, LocalRunner
+from .isolation import IsolatedRunner
+from .results import (
+    COLUMNS,
+    ExistingResults,
+    InflightMarker,
+    ResultsWriter,
+    read_results,
+    row_key,
+)
+
+log = logging.getLogger("qpbench.harness")
+
+MODES = ("sequential", "independent")
+ISOLATE = ("auto", "always", "never")
+
+
+@dataclass
+class BenchConfig:
+    """What to run.
+
+    Attributes:
+        backends: Backend names.
+        profile: Profile name or :class:`~qpbench.profiles.Profile`.
+        repeat: Timed solves per (problem, backend); the row has their min and median.
+        mode: ``sequential`` or ``independent``.
+        time_limit: Per-solve limit in [s]; ``None`` = the profile's.
+        isolate: ``auto`` (only backends marked ``risky`` or seen to crash in
+            this process), ``always`` or ``never``.
+        warmup: One discarded solve per backend before the first timed one.
+        plugins: Plugin modules (imported here and in workers).
+        settings: Extra solver settings passed to every backend.
+    """
+
+    backends: list[str]
+    profile: str | Profile = "default"
+    repeat: int = 1
+    mode: str = "sequential"
+    time_limit: float | None = None
+    isolate: str = "auto"
+    warmup: bool = True
+    plugins: list[str] = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+    def validate(self) -> None:
+        if self.mode not in MODES:
+            raise ParamError(f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode")
+        if self.isolate not in ISOLATE:
+            raise ParamError(f"unknown isolation '{self.isolate}' (choose from {', '.join(ISOLATE)})", key="isolate")
+        if int(self.repeat) < 1:
+            raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
+        if self.time_limit is not None and not (self.time_limit > 0 and math.isfinite(self.time_limit)):
+            raise ParamError(f"time limit must be a positive number of seconds, got {self.time_limit}", key="time-limit")
+        if not self.backends:
+            raise ParamError("no backend to run", key="backends")
+        if len(set(self.backends)) != len(self.backends):
+            raise ParamError(f"backend listed twice in {','.join(self.backends)}", key="backends")
+
+
+@dataclass
+class BenchSummary:
+    """What a bench run did (also the data of the closing summary line).
+
+    Attributes:
+        rows: Rows of this run's keys in the CSV (resumed and new).
+        new_rows: Rows written by this invocation.
+        failures: Rows counted as failed solves (see :func:`is_failure`).
+        statuses: Count of each status over ``rows``.
+        elapsed_s: Duration of this invocation in [s].
+        timed_s: Sum of the reported wall times (min over repeats) of the new rows in [s].
+        overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s``
+            (our timed region minus what the solver reports), NaN if no backend reports a time.
+        overhead_rows: Rows with both times.
+        isolated: Backends that ran in a worker process.
+    """
+
+    rows: int = 0
+    new_rows: int = 0
+    failures: int = 0
+    statuses: dict = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    timed_s: float = 0.0
+    overhead_median_s: float = math.nan
+    overhead_rows: int = 0
+    isolated: list = field(default_factory=list)
+
+    @property
+    def exit_code(self) -> int:
+        return 1 if self.failures else 0
+
+    def line(self) -> str:
+        statuses = ", ".join(f"{k} {v}" for k, v in sorted(self.statuses.items()))
+        text = (
+            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s, "
+            f"{self.failures} failed solves [{statuses}]; "
+            f"timed solves {self.timed_s:.3f} s"
+        )
+        if self.overhead_rows:
+            text += (
+                f"; harness overhead (wall - solver-reported time) median "
+                f"{self.overhead_median_s * 1e6:.1f} us over {self.overhead_rows} solves"
+            )
+        if self.isolated:
+            text += f"; isolated: {', '.join(self.isolated)}"
+        return text
+
+
+def is_failure(status: str, reference_status: str | None) -> bool:
+    """A failed solve: a harness failure status, or not ``optimal`` where the reference is."""
+    return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
+
+
+def sequences(records, mode: str) -> list[list[int]]:
+    """Indices of ``records`` grouped into sequences, each in tick order.
+
+    Sequential: one sequence per scenario (first-appearance order), sorted by
+    tick (stable); records without a scenario are one-problem sequences.
+    Independent: one sequence per record, in file order.
+    """
+    if mode == "independent":
+        return [[i] for i in range(len(records))]
+    groups: dict[object, list[int]] = {}
+    order: list[object] = []
+    for i, rec in enumerate(records):
+        key = ("scenario", rec.scenario) if rec.scenario is not None else ("single", i)
+        if key not in groups:
+            groups[key] = []
+            order.append(key)
+        groups[key].append(i)
+    out = []
+    for key in order:
+        idx = groups[key]
+        idx.sort(key=lambda i: (records[i].tick is None, records[i].tick if records[i].tick is not None else 0))
+        out.append(idx)
+    return out
+
+
+def _n_box(problem) -> int:
+    n = 0
+    if problem.lb is not None:
+        n += int(np.isfinite(np.asarray(problem.lb, dtype=float)).sum())
+    if problem.ub is not None:
+        n += int(np.isfinite(np.asarray(problem.ub, dtype=float)).sum())
+    return n
+
+
+def _float(value) -> float | None:
+    if value is None:
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+class _RowMaker:
+    """Builds a row from a record, a backend outcome and the record's reference."""
+
+    def __init__(self, problem_set, profile: Profile, mode: str, sha: str | None, versions: dict):
+        from ..formats import problem_sizes
+
+        self.problem_sizes = problem_sizes
+        self.profile = profile
+        self.mode = mode
+        self.sha = sha or ""
+        self.versions = versions
+
+    def __call__(self, record, backend: str, outcome, reference) -> dict:
+        from ..metrics import evaluate
+
+        sol = outcome.solution
+        status = outcome.status
+        if sol is not None:
+            sol.found = status == "optimal"
+            if status == "invalid":
+                sol = None
+        metrics = evaluate(record, sol, reference, self.profile.tolerance)
+        times = outcome.wall_times_s
+        n, m_eq, m_ineq = self.problem_sizes(record.problem)
+        error = outcome.error if status != "optimal" or outcome.error else None
+        return {
+            "problem": record.name,
+            "scenario": record.scenario,
+            "tick": record.tick,
+            "t": record.t,
+            "backend": backend,
+            "profile": self.profile.name,
+            "mode": self.mode,
+            "status": status,
+            "found": bool(metrics["found"]) and status == "optimal",
+            "success": bool(metrics["success"]) and status not in FAILURE_STATUSES,
+            "objective": metrics["objective"],
+            "reference_objective": metrics["reference_objective"],
+            "reference_status": metrics["reference_status"],
+            "optimality_gap": metrics["optimality_gap"],
+            "primal_residual": metrics["primal_residual"],
+            "dual_residual": metrics["dual_residual"],
+            "duality_gap": metrics["duality_gap"],
+            "wall_time_min_s": min(times) if times else None,
+            "wall_time_median_s": statistics.median(times) if times else None,
+            "solver_time_s": _float(getattr(sol, "solver_time_s", None)) if outcome.solution is not None else None,
+            "iterations": getattr(outcome.solution, "iterations", None) if outcome.solution is not None else None,
+            "error": error,
+            "state_reset": outcome.state_reset,
+            "isolated": outcome.isolated,
+            "repeat": len(times),
+            "n": n,
+            "m_eq": m_eq,
+            "m_ineq": m_ineq,
+            "n_box": _n_box(record.problem),
+            "problem_set_sha256": self.sha,
+            "backend_version": self.versions.get(backend),
+        }
+
+
+def _check_existing(existing: ExistingResults, path: Path, config_mode: str, sha: str | None) -> None:
+    for row in existing.rows:
+        if row["mode"] != config_mode:
+            raise InputError(
+                f"holds rows of mode '{row['mode']}', this run is '{config_mode}'; use --force to start again",
+                path=path,
+                key="mode",
+            )
+        if sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
+            raise InputError(
+                "holds rows of another problem set (SHA-256 differs); use --force to start again",
+                path=path,
+                key="problem_set_sha256",
+            )
+
+
+def run_bench(
+    problem_set,
+    config: BenchConfig,
+    out: str | Path,
+    *,
+    force: bool = False,
+    resume: bool = False,
+    references: list | None = None,
+    progress: bool = False,
+) -> BenchSummary:
+    """Benchmark ``config.backends`` on ``problem_set``; write rows to ``out`` (CSV).
+
+    Everything that can fail on user input (backend names, the existing
+    output, the problems' names) is checked before ``out`` is created or
+    changed.
+
+    Args:
+        problem_set: A :class:`~qpbench.formats.ProblemSet` (already loaded and validated).
+        config: What to run.
+        out: CSV path.
+        force: Delete an existing ``out`` and start again.
+        resume: Keep the rows of an existing ``out`` and run the missing keys only.
+        references: Reference solutions (one per record); computed (and cached) if ``None``.
+        progress: Show a progress bar on stderr.
+
+    Raises:
+        OutputExistsError: ``out`` exists and neither ``force`` nor ``resume``.
+        ParamError, BackendNotFound, InputError: bad configuration or a foreign ``out``.
+    """
+    from ..atomic import check_output
+    from ..backends import get_backend
+    from ..formats import content_sha256
+
+    started = time.perf_counter()
+    config.validate()
+    out = Path(out)
+    check_output(out, force=force, resume=resume)
+    profile = get_profile(config.profile)
+    time_limit = float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
+    run_profile = replace(profile, time_limit=time_limit)
+    sequential = config.mode == "sequential"
+    records = list(problem_set.records)
+    if not records:
+        raise InputError("problem set is empty", path=getattr(problem_set, "path", None))
+    names = [r.name for r in records]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise InputError(f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path)
+
+    # Backends: build the in-process ones now (a bad name fails before any write).
+    from ..backends import _registry
+
+    registry = _registry()
+    instances = {name: get_backend(name, run_profile, **config.settings) for name in config.backends}
+    versions = {name: type(b).version() for name, b in instances.items()}
+
+    # Existing output.
+    existing = ExistingResults([])
+    marker = InflightMarker(InflightMarker.for_output(out))
+    learned: list[str] = []
+    sha = content_sha256(problem_set)
+    resuming = resume and out.exists() and not force
+    if resuming:
+        existing = read_results(out, repair=False)
+        _check_existing(existing, out, config.mode, sha)
+        learned, inflight, crash = marker.read()
+        done_keys = {row_key(r) for r in existing.rows}
+        if inflight and crash and inflight not in done_keys and len(inflight) == 3:
+            suspect = inflight[1]
+            if suspect in instances and suspect not in learned:
+                learned.append(suspect)
+                log.warning(
+                    "the previous run died while %s was solving %s in this process (%s); %s",
+                    suspect,
+                    inflight[0],
+                    crash.splitlines()[0],
+                    "it runs in a worker process from now on"
+                    if config.isolate == "auto"
+                    else "use --isolate auto or always to isolate it",
+                )
+
+    if references is None:
+        from ..reference import reference_solutions
+
+        references = reference_solutions(problem_set)
+    if len(references) != len(records):
+        raise InputError(f"{len(references)} reference solutions for {len(records)} problems", path=problem_set.path)
+
+    # From here on, the output is created or changed.
+    if resuming:
+        existing = read_results(out, repair=True)
+    elif force and out.exists():
+        out.unlink()
+        if marker.path.exists():
+            marker.path.unlink()
+    done = existing.by_key()
+
+    def isolated(name: str) -> bool:
+        if config.isolate == "always":
+            return True
+        if config.isolate == "never":
+            return False
+        return bool(getattr(registry.get(name), "risky", False)) or name in learned
+
+    runners = {}
+    for name in config.backends:
+        if isolated(name):
+            runners[name] = IsolatedRunner(name, run_profile, config.settings, time_limit, sequential, config.plugins)
+        else:
+            runners[name] = LocalRunner(instances[name], time_limit, sequential)
+    summary = BenchSummary(isolated=[n for n in config.backends if runners[n].isolated])
+    make_row = _RowMaker(problem_set, run_profile, config.mode, sha, versions)
+    pname = run_profile.name
+    seqs = sequences(records, config.mode)
+
+    # Keys still to run, per backend and sequence (to know when replay is needed).
+    todo = {
+        name: [any((records[i].name, name, pname) not in done for i in seq) for seq in seqs] for name in config.backends
+    }
+    total_todo = sum(1 for r in records for b in config.backends if (r.name, b, pname) not in done)
+
+    writer = ResultsWriter(out, new=not (resuming and out.exists()))
+    marker.open(learned, catch_faults=any(not r.isolated for r in runners.values()))
+    bar = None
+    if progress and total_todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total_todo, unit="solve", desc="bench", leave=False)
+    overheads = []
+    try:
+        if config.warmup:
+            for name, runner in runners.items():
+                if any(todo[name]):
+                    marker.mark(("warmup", name, pname))
+                    runner.warmup(records[seqs[0][0]].problem)
+        for s, seq in enumerate(seqs):
+            active = [name for name in config.backends if todo[name][s]]
+            if not active:
+                continue
+            needs_reset = {name: False for name in active}
+            if sequential:
+                for name in active:
+                    runners[name].reset()
+            prev = None
+            for i in seq:
+                record = records[i]
+                batch = []
+                for name in active:
+                    key = (record.name, name, pname)
+                    runner = runners[name]
+                    if key in done:
+                        if sequential:  # replay to restore the state the original run had
+                            status = done[key]["status"]
+                            if status in RESET_STATUSES:
+                                needs_reset[name] = True
+                            else:
+                                if needs_reset[name]:
+                                    runner.reset()
+                                    needs_reset[name] = False
+                                marker.mark((f"replay {record.name}", name, pname))
+                                if runner.replay(record.problem) in RESET_STATUSES:
+                                    log.warning("%s: replay of %s failed; state reset", name, record.name)
+                                    needs_reset[name] = True
+                        continue
+                    marker.mark(key)
+                    outcome = runner.solve(
+                        record.problem,
+                        repeat=config.repeat,
+                        reset_before=needs_reset[name],
+                        prev_problem=prev,
+                    )
+                    needs_reset[name] = sequential and outcome.status in RESET_STATUSES
+                    if outcome.status == "time_limit" and not runner.isolated and config.isolate == "auto":
+                        # In this process a limit can only be enforced where Python code
+                        # runs: a backend that overran once goes to a worker process.
+                        log.warning(
+                            "%s overran its time limit on %s in this process; it runs in a worker process from now on",
+                            name,
+                            record.name,
+                        )
+                        runner.close()
+                        runners[name] = IsolatedRunner(
+                            name, run_profile, config.settings, time_limit, sequential, config.plugins
+                        )
+                        learned.append(name)
+                        marker.isolate = list(learned)
+                        summary.isolated.append(name)
+                        needs_reset[name] = sequential
+                    row = make_row(record, name, outcome, references[i])
+                    batch.append(row)
+                    if row["wall_time_min_s"] is not None:
+                        summary.timed_s += row["wall_time_min_s"]
+                        if row["solver_time_s"] is not None and math.isfinite(row["solver_time_s"]):
+                            overheads.append(row["wall_time_min_s"] - row["solver_time_s"])
+                writer.write_rows(batch)
+                for row in batch:
+                    done[row_key(row)] = row
+                summary.new_rows += len(batch)
+                if bar is not None and batch:
+                    bar.update(len(batch))
+                prev = record.problem if sequential else None
+        marker.remove()
+    finally:
+        writer.close()
+        marker.close()
+        if bar is not None:
+            bar.close()
+        for runner in runners.values():
+            runner.close()
+
+    wanted = {(r.name, b, pname) for r in records for b in config.backends}
+    for key, row in done.items():
+        if key not in wanted:
+            continue
+        summary.rows += 1
+        status = str(row["status"])
+        summary.statuses[status] = summary.statuses.get(status, 0) + 1
+        ref = row["reference_status"] or None
+        if is_failure(status, ref):
+            summary.failures += 1
+    if overheads:
+        summary.overhead_median_s = statistics.median(overheads)
+        summary.overhead_rows = len(overheads)
+    summary.elapsed_s = time.perf_counter() - started
+    return summary
+
+
+__all__ = ["COLUMNS", "BenchConfig", "BenchSummary", "is_failure", "run_bench", "sequences"]

@@ -1,0 +1,196 @@
+"""Guarded solves in this process.
+
+:class:`LocalRunner` wraps one backend instance and turns every way a solve
+can go wrong into a status, never an exception:
+
+- a Python exception escaping the backend -> ``error``, with
+  ``"Type: message"`` in :attr:`Outcome.error`;
+- a solve longer than the time limit -> ``time_limit``. In the main thread a
+  ``SIGALRM`` timer interrupts a solve that runs Python code past the limit
+  (it cannot interrupt native code; that needs a worker process, see
+  :mod:`qpbench.harness.isolation`); a solve that returns after the limit is
+  also ``time_limit``;
+- a non-finite ``x`` (or ``optimal`` without ``x``) -> ``invalid``.
+
+After ``error``, ``time_limit`` and ``invalid`` the backend is reset before
+its next solve: its state can no longer be trusted.
+
+The same class runs inside the worker process of an isolated backend, so the
+timed region is identical in both cases.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .timing import StateRestorer, timed_call
+
+#: Statuses after which a sequential run resets the backend (its state is lost or suspect).
+RESET_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
+#: Statuses that are a failure whatever the reference says.
+FAILURE_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
+
+
+class SolveTimeLimit(BaseException):
+    """Raised by the ``SIGALRM`` handler inside a solve that overran its limit.
+
+    A ``BaseException`` so that a backend's ``except Exception`` does not swallow it.
+    """
+
+
+def _on_alarm(signum, frame):
+    raise SolveTimeLimit()
+
+
+@dataclass
+class Outcome:
+    """What one guarded (possibly repeated) solve produced.
+
+    Attributes:
+        status: Backend status, or ``error``/``time_limit``/``invalid``/``crashed``.
+        solution: The solution of the last repeat (``None`` if there is none).
+        wall_times_s: Wall time of each timed repeat in [s].
+        error: ``"Type: message"`` or a description of the failure.
+        state_reset: The solve did not start from the state the previous
+            solve of the sequence left (a reset after a failure, a new worker).
+        isolated: The solve ran in a worker process.
+    """
+
+    status: str
+    solution: object | None = None
+    wall_times_s: list = field(default_factory=list)
+    error: str | None = None
+    state_reset: bool = False
+    isolated: bool = False
+
+
+def describe_exception(exc: BaseException) -> str:
+    """``"Type: message"`` on one line."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def classify(solution, wall_s: float, time_limit: float) -> tuple[str, str | None]:
+    """Status and error text of a solution the backend returned."""
+    status = getattr(solution, "status", None) or ("optimal" if getattr(solution, "found", False) else "not_solved")
+    x = getattr(solution, "x", None)
+    if x is not None:
+        x = np.asarray(x, dtype=float)
+        finite = np.isfinite(x)
+        if not finite.all():
+            return "invalid", f"non-finite x ({int((~finite).sum())} of {x.size} entries; backend status {status})"
+    elif status == "optimal":
+        return "invalid", "status optimal without a primal solution x"
+    if wall_s > time_limit:
+        return "time_limit", f"solve took {wall_s:.3g} s > time limit {time_limit:g} s (backend status {status})"
+    return status, getattr(solution, "error", None)
+
+
+class LocalRunner:
+    """Run one backend's solves in this process, guarded and timed.
+
+    Args:
+        backend: A backend instance (its profile carries the time limit).
+        time_limit: Per-solve limit in [s].
+        sequential: State carried between solves (else reset before each).
+        use_alarm: Interrupt Python-level overruns with ``SIGALRM`` (main thread only).
+    """
+
+    isolated = False
+
+    def __init__(self, backend, time_limit: float, sequential: bool, use_alarm: bool = True):
+        self.backend = backend
+        self.name = backend.name
+        self.time_limit = float(time_limit)
+        self.sequential = sequential
+        self.use_alarm = (
+            use_alarm and hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+        )
+        self.restorer = StateRestorer(sequential)
+        self._old_handler = None
+
+    # -- helpers -------------------------------------------------------------
+    def _guarded(self, problem, timed: bool = True) -> Outcome:
+        """One solve: an :class:`Outcome` with one wall time, never an exception."""
+        if self.use_alarm and self._old_handler is None:
+            self._old_handler = signal.signal(signal.SIGALRM, _on_alarm)  # restored by close()
+        start = time.perf_counter_ns()
+        try:
+            try:
+                if self.use_alarm:
+                    signal.setitimer(signal.ITIMER_REAL, self.time_limit)
+                solution, ns = timed_call(self.backend, problem)
+            finally:
+                if self.use_alarm:
+                    signal.setitimer(signal.ITIMER_REAL, 0)
+        except SolveTimeLimit:
+            wall = (time.perf_counter_ns() - start) * 1e-9
+            return Outcome(
+                "time_limit", None, [wall], f"interrupted after {wall:.3g} s (time limit {self.time_limit:g} s)"
+            )
+        except Exception as exc:  # noqa: BLE001 - turned into a status on purpose
+            return Outcome("error", None, [], describe_exception(exc))
+        wall = ns * 1e-9
+        status, error = classify(solution, wall, self.time_limit)
+        return Outcome(status, solution, [wall], error)
+
+    # -- interface shared with IsolatedRunner -----------------------------------
+    def reset(self) -> None:
+        """Forget the backend's state (a new sequence starts)."""
+        try:
+            self.backend.reset()
+        except Exception:  # noqa: BLE001 - a failing reset shows up at the next solve
+            pass
+
+    def warmup(self, problem) -> str:
+        """A discarded solve (imports, JIT compilation, allocations), then a reset."""
+        outcome = self._guarded(problem)
+        self.reset()
+        return outcome.status
+
+    def replay(self, problem) -> str:
+        """An untimed, unrecorded solve that only moves the state forward (resume)."""
+        return self._guarded(problem).status
+
+    def solve(self, problem, repeat: int = 1, reset_before: bool = False, prev_problem=None) -> Outcome:
+        """Solve ``problem`` ``repeat`` times from the same state; time each.
+
+        Args:
+            problem: The QP.
+            repeat: Number of timed solves (R >= 1).
+            reset_before: Reset the backend first (independent mode, or after a failure).
+            prev_problem: The previous problem of the sequence (for restoring by replay).
+        """
+        if reset_before or not self.sequential:
+            self.reset()
+        if repeat <= 1:
+            outcome = self._guarded(problem)
+        else:
+            times = []
+            self.restorer.snapshot(self.backend)
+            for r in range(repeat):
+                if r > 0:
+                    try:
+                        self.backend = self.restorer.restore(self.backend, prev_problem)
+                    except Exception as exc:  # noqa: BLE001
+                        outcome = Outcome("error", None, times, f"restoring state: {describe_exception(exc)}")
+                        break
+                outcome = self._guarded(problem)
+                times.extend(outcome.wall_times_s)
+                if outcome.status in RESET_STATUSES:
+                    break
+            outcome.wall_times_s = times
+        outcome.state_reset = bool(reset_before and self.sequential)
+        return outcome
+
+    def close(self) -> None:
+        """Restore the previous SIGALRM handler."""
+        if self._old_handler is not None:
+            if self._old_handler is not _on_alarm:  # another runner's: that one restores
+                signal.signal(signal.SIGALRM, self._old_handler)
+            self._old_handler = None

@@ -1,0 +1,232 @@
+"""Test-only backends: faults on purpose, and stateful backends whose answers reveal their state.
+
+Loaded by the harness tests with ``--plugin tests/faulty_backends.py`` (or
+``QPBENCH_PLUGINS``); never registered by qpbench itself.
+
+Faulty (names ``faulty:<kind>``):
+
+- ``raise``: raises ``RuntimeError("solver exploded")``;
+- ``sleep``: sleeps 60 s in Python (a ``SIGALRM`` time limit interrupts it);
+- ``hang``: blocks SIGALRM and sleeps 60 s, like a hang in native code that
+  nothing but killing the process stops (``risky``: isolated under ``auto``);
+- ``segfault``: ``os.kill(os.getpid(), SIGSEGV)`` (``risky``);
+- ``nan``: returns ``x`` full of NaN with status ``optimal``;
+- ``segfault-once``: segfaults on the problem named in ``QPBENCH_TEST_SEGV``
+  only, solves the others (not marked risky: the harness must learn it).
+
+Stateful (they solve the QP exactly with qpsolvers' ``clarabel`` and report
+their state in ``iterations``), names ``stateful:<kind>``:
+
+- ``count-state`` / ``count-copy``: ``iterations`` = solves since the last
+  reset, including this one; state restored by ``get_state``/``set_state``
+  or by ``copy.deepcopy`` respectively;
+- ``count-fail2``: ``count-copy`` that raises on tick 2 (``q[-1] == 2``);
+- ``last-native``: ``iterations`` = ``round(q[-1])`` of the previously solved
+  problem + 1 (0 after a reset); holds a lock, so it cannot be deep-copied
+  (restored by replaying the previous problem).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+import warnings
+
+import numpy as np
+import qpsolvers
+
+from qpbench.backends import Backend, BackendSolution, register
+
+
+def exact_solution(problem) -> BackendSolution:
+    """Solve ``problem`` with qpsolvers' clarabel; a :class:`BackendSolution`."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_feas=1e-10, tol_gap_rel=1e-10)
+    out = BackendSolution(problem=problem)
+    out.x, out.y, out.z, out.z_box = sol.x, sol.y, sol.z, sol.z_box
+    out.status = "optimal" if sol.found else "primal_infeasible"
+    return out
+
+
+class _Faulty(Backend):
+    family = "test fault"
+
+    def _solve(self, problem, warm_start):
+        raise NotImplementedError
+
+
+@register
+class RaiseBackend(_Faulty):
+    name = "faulty:raise"
+
+    def _solve(self, problem, warm_start):
+        raise RuntimeError("solver exploded\non two lines")
+
+
+@register
+class SleepBackend(_Faulty):
+    name = "faulty:sleep"
+
+    def _solve(self, problem, warm_start):
+        time.sleep(60.0)
+        return exact_solution(problem)
+
+
+@register
+class HangBackend(_Faulty):
+    name = "faulty:hang"
+    risky = True
+
+    def _solve(self, problem, warm_start):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
+        try:
+            time.sleep(60.0)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGALRM})
+        return exact_solution(problem)
+
+
+@register
+class SegfaultBackend(_Faulty):
+    name = "faulty:segfault"
+    risky = True
+
+    def _solve(self, problem, warm_start):
+        os.kill(os.getpid(), signal.SIGSEGV)
+        time.sleep(5.0)  # the signal is delivered before this returns
+        raise RuntimeError("still alive after SIGSEGV")
+
+
+@register
+class SegfaultOnceBackend(_Faulty):
+    name = "faulty:segfault-once"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self.names_seen = 0
+
+    def _solve(self, problem, warm_start):
+        self.names_seen += 1
+        target = os.environ.get("QPBENCH_TEST_SEGV")
+        if target is not None and abs(float(problem.q[-1]) - float(target)) < 1e-9:
+            os.kill(os.getpid(), signal.SIGSEGV)
+            time.sleep(5.0)
+        return exact_solution(problem)
+
+
+@register
+class NanBackend(_Faulty):
+    name = "faulty:nan"
+
+    def _solve(self, problem, warm_start):
+        out = BackendSolution(problem=problem)
+        out.x = np.full(problem.q.shape[0], np.nan)
+        out.status = "optimal"
+        return out
+
+
+class _Stateful(Backend):
+    family = "test state"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self.count = 0
+
+    def reset(self):
+        self.count = 0
+
+    def _solve(self, problem, warm_start):
+        self.count += 1
+        sol = exact_solution(problem)
+        sol.iterations = self.count
+        return sol
+
+
+@register
+class CountState(_Stateful):
+    name = "stateful:count-state"
+
+    def get_state(self):
+        return self.count
+
+    def set_state(self, state):
+        self.count = state
+
+
+@register
+class CountCopy(_Stateful):
+    name = "stateful:count-copy"
+
+
+@register
+class CountFail(_Stateful):
+    """``count-copy`` that raises on the problem whose ``q[-1]`` is 2 (tick 2)."""
+
+    name = "stateful:count-fail2"
+
+    def _solve(self, problem, warm_start):
+        if abs(float(problem.q[-1]) - 2.0) < 1e-12:
+            self.count += 100  # a failure leaves the state corrupt: the harness must reset it
+            raise ValueError("tick two")
+        return super()._solve(problem, warm_start)
+
+
+@register
+class LastNative(Backend):
+    name = "stateful:last-native"
+    family = "test state"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self._lock = threading.Lock()  # makes copy.deepcopy fail, like a native handle
+        self.last = None
+
+    def reset(self):
+        self.last = None
+
+    def _solve(self, problem, warm_start):
+        with self._lock:
+            sol = exact_solution(problem)
+            sol.iterations = 0 if self.last is None else self.last + 1
+            self.last = int(round(float(problem.q[-1])))
+            return sol
+
+
+# ---------------------------------------------------------------- problem sets for the harness tests
+
+
+def tick_records(n_ticks: int, scenario: str | None = "wall", seed: int = 7, n: int = 4, prefix: str | None = None):
+    """``n_ticks`` small strictly convex QPs with ``q[-1] = tick`` (the stateful backends read it).
+
+    Each has 3 inequality rows, 1 equality row and box bounds; ``x = 0``
+    satisfies ``G x <= h`` and the box, and the equality right-hand side is
+    small, so every problem is feasible.
+    """
+    from qpbench.formats import ProblemRecord
+
+    rng = np.random.default_rng(seed)
+    records = []
+    prefix = prefix if prefix is not None else (scenario or "p")
+    for k in range(n_ticks):
+        M = rng.standard_normal((n, n))
+        P = M @ M.T + 0.5 * np.eye(n)
+        q = rng.standard_normal(n)
+        q[-1] = float(k)
+        G = rng.standard_normal((3, n))
+        h = rng.random(3) + 0.5
+        A = rng.standard_normal((1, n))
+        b = 0.05 * rng.standard_normal(1)
+        lb, ub = -2.0 * np.ones(n), 2.0 * np.ones(n)
+        problem = qpsolvers.Problem(P, q, G, h, A, b, lb, ub)
+        records.append(ProblemRecord(problem, f"{prefix}/tick-{k:04d}", scenario, k, 0.001 * k, "paper"))
+    return records
+
+
+def write_tick_set(folder, n_ticks: int, **kw):
+    """Write :func:`tick_records` as a problem-set folder; return the folder."""
+    from qpbench.formats import write_problem_set
+
+    return write_problem_set(folder, tick_records(n_ticks, **kw), generator={"name": "tests.tick_records", "n_ticks": n_ticks})

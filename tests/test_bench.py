@@ -1,0 +1,262 @@
+"""``qpbench bench`` end to end: columns, references, success, state, resume, exit codes, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import faulty_backends as fb
+from qpbench.cli import main
+from qpbench.formats import write_problem_set
+from qpbench.harness import COLUMNS, sequences
+from qpbench.harness.results import TIMING_COLUMNS
+from qpbench.profiles import PROFILES
+
+PLUGIN = str(Path(fb.__file__).resolve())
+STATEFUL = "stateful:count-state,stateful:count-copy,stateful:last-native"
+
+
+def read(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def untimed(rows):
+    return sorted((tuple((k, v) for k, v in r.items() if k not in TIMING_COLUMNS) for r in rows))
+
+
+def bench(*args) -> int:
+    return main(["bench", *map(str, args), "--plugin", PLUGIN])
+
+
+@pytest.fixture(scope="module")
+def two_scenarios(tmp_path_factory):
+    """Set of 2 scenarios x 5 ticks, stored with the ticks of 'free' shuffled."""
+    wall = fb.tick_records(5, scenario="wall", seed=1)
+    free = fb.tick_records(5, scenario="free", seed=2)
+    order = [free[3], wall[0], free[0], wall[1], wall[2], free[4], free[1], wall[3], wall[4], free[2]]
+    return write_problem_set(tmp_path_factory.mktemp("sets") / "two", order, generator={"name": "test"})
+
+
+@pytest.fixture(scope="module")
+def mm_small(tmp_path_factory, mm_dir):
+    folder = tmp_path_factory.mktemp("mm")
+    for name in ["HS21", "HS35", "HS51", "HS118", "GENHS28"]:
+        shutil.copy(mm_dir / f"{name}.mat", folder)
+    return folder
+
+
+def test_maros_meszaros_rows_columns_references_and_success(mm_small, tmp_path, capsys):
+    out = tmp_path / "mm.csv"
+    code = bench(mm_small, "--backends", "clarabel,qpsolvers:daqp,faulty:nan", "--out", out, "--repeat", "2")
+    rows = read(out)
+    assert code == 1  # faulty:nan is invalid everywhere
+    assert list(rows[0].keys()) == list(COLUMNS)
+    assert len(rows) == 5 * 3
+    assert "harness overhead" in capsys.readouterr().out
+    tol = PROFILES["default"].tolerance
+    for r in rows:
+        assert r["reference_status"] == "optimal"
+        assert r["profile"] == "default" and r["mode"] == "sequential"
+        assert float(r["wall_time_min_s"]) <= float(r["wall_time_median_s"])
+        if r["backend"] == "faulty:nan":
+            assert r["status"] == "invalid" and r["success"] == "False" and r["found"] == "False"
+            assert r["repeat"] == "1"  # a failed solve is not repeated
+            continue
+        assert r["repeat"] == "2"
+        expected = (
+            r["found"] == "True"
+            and float(r["primal_residual"]) <= tol.primal
+            and float(r["dual_residual"]) <= tol.dual
+            and float(r["duality_gap"]) <= tol.gap
+            and float(r["optimality_gap"]) <= tol.gap
+        )
+        assert (r["success"] == "True") == expected
+    clarabel = {r["problem"]: r for r in rows if r["backend"] == "clarabel"}
+    assert all(r["success"] == "True" for r in clarabel.values())
+    # HS21 optimum is -99.96 (Maros & Meszaros); HS118 is 664.82045
+    assert float(clarabel["HS21"]["reference_objective"]) == pytest.approx(-99.96, rel=1e-6)
+    assert float(clarabel["HS118"]["objective"]) == pytest.approx(664.82045, rel=1e-6)
+    assert clarabel["HS118"]["n"] == "15" and int(clarabel["HS118"]["m_ineq"]) > 0
+
+
+def test_sequences_group_by_scenario_in_tick_order():
+    recs = [
+        fb.tick_records(1, scenario="b")[0],
+        *fb.tick_records(3, scenario="a"),
+        fb.tick_records(1, scenario=None, prefix="x")[0],
+    ]
+    recs[1], recs[3] = recs[3], recs[1]  # a's ticks stored 2, 1, 0
+    assert sequences(recs, "sequential") == [[0], [3, 2, 1], [4]]
+    assert sequences(recs, "independent") == [[0], [1], [2], [3], [4]]
+
+
+def test_sequential_mode_carries_state_per_scenario(two_scenarios, tmp_path):
+    out = tmp_path / "seq.csv"
+    assert bench(two_scenarios, "--backends", STATEFUL, "--out", out, "--repeat", "3") == 0
+    rows = read(out)
+    assert len(rows) == 30
+    for r in rows:
+        tick = int(r["tick"])
+        expected = tick if r["backend"] == "stateful:last-native" else tick + 1
+        assert int(r["iterations"]) == expected, r
+        assert r["state_reset"] == "False" and r["success"] == "True"
+    # rows come out per sequence, in tick order
+    wall = [int(r["tick"]) for r in rows if r["scenario"] == "wall" and r["backend"] == "stateful:count-copy"]
+    assert wall == [0, 1, 2, 3, 4]
+
+
+def test_independent_mode_resets_before_every_problem(two_scenarios, tmp_path):
+    out = tmp_path / "ind.csv"
+    assert bench(two_scenarios, "--backends", STATEFUL, "--out", out, "--mode", "independent") == 0
+    for r in read(out):
+        assert int(r["iterations"]) == (0 if r["backend"] == "stateful:last-native" else 1)
+        assert r["mode"] == "independent"
+
+
+def test_failure_resets_state_and_says_so(two_scenarios, tmp_path):
+    out = tmp_path / "fail.csv"
+    assert bench(two_scenarios, "--backends", "stateful:count-fail2", "--out", out) == 1
+    rows = {(r["scenario"], int(r["tick"])): r for r in read(out)}
+    for scenario in ("wall", "free"):
+        assert [rows[(scenario, k)]["iterations"] for k in (0, 1, 3, 4)] == ["1", "2", "1", "2"]
+        assert rows[(scenario, 2)]["status"] == "error"
+        assert rows[(scenario, 2)]["error"] == "ValueError: tick two"
+        assert [rows[(scenario, k)]["state_reset"] for k in range(5)] == ["False", "False", "False", "True", "False"]
+
+
+@pytest.mark.parametrize("keep", [0, 3, 7, 12, 25])
+def test_resume_after_interruption_gives_the_rows_of_an_uninterrupted_run(two_scenarios, tmp_path, keep):
+    backends = STATEFUL + ",stateful:count-fail2"
+    full = tmp_path / "full.csv"
+    assert bench(two_scenarios, "--backends", backends, "--out", full) == 1
+    lines = full.read_bytes().split(b"\n")
+    cut = tmp_path / "cut.csv"
+    # header + `keep` rows + half of the next line, as a kill -9 during a write leaves it
+    cut.write_bytes(b"\n".join(lines[: 1 + keep]) + b"\n" + lines[1 + keep][:17])
+    assert bench(two_scenarios, "--backends", backends, "--out", cut, "--resume") == 1
+    assert untimed(read(cut)) == untimed(read(full))
+    assert len(read(cut)) == 40
+
+
+def test_existing_output_is_refused_and_untouched(two_scenarios, tmp_path, capsys):
+    out = tmp_path / "exists.csv"
+    out.write_text("precious\n")
+    assert bench(two_scenarios, "--backends", "clarabel", "--out", out) == 2
+    assert "exists" in capsys.readouterr().err
+    assert out.read_text() == "precious\n"
+    assert bench(two_scenarios, "--backends", "clarabel", "--out", out, "--force") == 0
+    assert len(read(out)) == 10
+
+
+def test_resume_refuses_a_different_mode(two_scenarios, tmp_path, capsys):
+    out = tmp_path / "m.csv"
+    assert bench(two_scenarios, "--backends", "clarabel", "--out", out) == 0
+    before = out.read_bytes()
+    assert bench(two_scenarios, "--backends", "clarabel", "--out", out, "--resume", "--mode", "independent") == 2
+    assert "mode" in capsys.readouterr().err
+    assert out.read_bytes() == before
+
+
+def _corrupt_npz(folder):
+    folder.mkdir()
+    (folder / "a.npz").write_bytes(b"PK\x03\x04 truncated")
+
+
+def _save_arrays(folder, **changes):
+    """A qpsolvers-style .npz of a valid problem with some arrays replaced."""
+    folder.mkdir()
+    p = fb.tick_records(1)[0].problem
+    arrays = dict(P=p.P, q=p.q, G=p.G, h=p.h, A=p.A, b=p.b, lb=p.lb, ub=p.ub)
+    arrays.update(changes)
+    np.savez(folder / "a.npz", **arrays)
+
+
+def _nan_npz(folder):
+    _save_arrays(folder, q=np.array([np.nan, 0.0, 0.0, 1.0]))
+
+
+def _inf_npz(folder):
+    _save_arrays(folder, h=np.array([1.0, np.inf, 1.0]))
+
+
+def _hash_mismatch(folder):
+    write_problem_set(folder, fb.tick_records(2), generator={"name": "test"})
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["sha256"] = "0" * 64
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
+def _truncated_parquet(folder):
+    write_problem_set(folder, fb.tick_records(2), generator={"name": "test"})
+    data = (folder / "problems.parquet").read_bytes()
+    (folder / "problems.parquet").write_bytes(data[: len(data) // 2])
+
+
+def _wrong_shape_npz(folder):
+    _save_arrays(folder, q=np.ones(3))
+
+
+def _missing_column_parquet(folder):
+    import pyarrow.parquet as pq
+
+    folder.mkdir()
+    write_problem_set(folder / "set", fb.tick_records(2), generator={"name": "test"})
+    table = pq.read_table(folder / "set" / "problems.parquet").drop(["q"])
+    pq.write_table(table, folder / "bad.parquet")
+    shutil.rmtree(folder / "set")
+
+
+@pytest.mark.parametrize(
+    "make",
+    [_corrupt_npz, _nan_npz, _inf_npz, _hash_mismatch, _truncated_parquet, _wrong_shape_npz, _missing_column_parquet, None],
+)
+def test_bad_input_is_one_line_exit_2_and_no_output(tmp_path, capsys, make):
+    folder = tmp_path / "bad"
+    if make is not None:
+        make(folder)
+    if make is _missing_column_parquet:
+        folder = folder / "bad.parquet"
+    out = tmp_path / "out" / "r.csv"
+    assert bench(folder, "--backends", "clarabel", "--out", out) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("qpbench bench: error:") and "bad" in err
+    assert not out.exists() and not out.parent.exists()
+
+
+@pytest.mark.parametrize(
+    "args, key",
+    [
+        (["--backends", "nope"], "nope"),
+        (["--backends", "clarabel", "--repeat", "0"], "repeat"),
+        (["--backends", "clarabel", "--time-limit", "-1"], "time"),
+        (["--backends", "clarabel,clarabel"], "twice"),
+        (["--backends", "clarabel", "--plugin", "/no/such/plugin.py"], "plugin"),
+    ],
+)
+def test_bad_parameters_exit_2_without_output(two_scenarios, tmp_path, capsys, args, key):
+    out = tmp_path / "r.csv"
+    assert main(["bench", str(two_scenarios), "--out", str(out), *args]) == 2
+    assert key in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_all_means_every_available_backend(tmp_path):
+    import subprocess
+    import sys
+
+    folder = fb.write_tick_set(tmp_path / "set", 2)
+    out = tmp_path / "all.csv"
+    env = {k: v for k, v in __import__("os").environ.items() if k != "QPBENCH_PLUGINS"}
+    cmd = [sys.executable, "-m", "qpbench.cli"]
+    proc = subprocess.run(cmd + ["bench", str(folder), "--backends", "all", "--out", str(out)], capture_output=True, text=True, env=env)
+    assert proc.returncode in (0, 1), proc.stderr
+    listed = subprocess.run(cmd + ["backends", "--available"], capture_output=True, text=True, env=env).stdout
+    available = {line.split()[0] for line in listed.splitlines()[1:] if line.strip()}
+    rows = read(out)
+    assert {r["backend"] for r in rows} == available and len(rows) == 2 * len(available)

@@ -1,0 +1,205 @@
+"""Guarded solves: exceptions, time limits, non-finite answers, hangs and crashes in a worker.
+
+The fault-injection backends live in tests/faulty_backends.py (registered here
+only). The end-to-end run goes through the CLI in a subprocess, so that the
+worker processes also load them through ``QPBENCH_PLUGINS``.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import faulty_backends as fb
+from qpbench.backends import get_backend
+from qpbench.harness.guard import LocalRunner, classify
+from qpbench.harness.isolation import IsolatedRunner
+from qpbench.harness.results import TIMING_COLUMNS
+
+PLUGIN = str(Path(fb.__file__).resolve())
+QPBENCH = [sys.executable, "-m", "qpbench.cli"]
+
+
+@pytest.fixture(scope="module")
+def records():
+    return fb.tick_records(4)
+
+
+def local(name, time_limit=0.5, sequential=True):
+    return LocalRunner(get_backend(name), time_limit, sequential)
+
+
+def test_exception_becomes_error_with_type_and_message(records):
+    out = local("faulty:raise").solve(records[0].problem)
+    assert out.status == "error"
+    assert out.error == "RuntimeError: solver exploded on two lines"
+    assert out.solution is None and out.wall_times_s == []
+
+
+def test_python_overrun_is_interrupted_at_the_time_limit(records):
+    out = local("faulty:sleep", time_limit=0.3).solve(records[0].problem)
+    assert out.status == "time_limit"
+    assert 0.3 <= out.wall_times_s[0] < 30.0  # interrupted, not the 60 s sleep
+    assert "time limit 0.3" in out.error
+
+
+def test_nan_answer_is_invalid(records):
+    out = local("faulty:nan").solve(records[0].problem)
+    assert out.status == "invalid"
+    assert "non-finite x (4 of 4" in out.error
+
+
+def test_classify_rules():
+    sol = fb.exact_solution(fb.tick_records(1)[0].problem)
+    assert classify(sol, 0.01, 1.0) == ("optimal", None)
+    status, error = classify(sol, 2.0, 1.0)
+    assert status == "time_limit" and "backend status optimal" in error
+    sol.x = None
+    assert classify(sol, 0.01, 1.0)[0] == "invalid"
+    sol.status = "primal_infeasible"
+    assert classify(sol, 0.01, 1.0)[0] == "primal_infeasible"
+
+
+def test_reset_before_marks_state_reset_in_sequential_mode_only(records):
+    runner = local("stateful:count-state")
+    assert runner.solve(records[0].problem).solution.iterations == 1
+    assert runner.solve(records[1].problem).solution.iterations == 2
+    out = runner.solve(records[2].problem, reset_before=True)
+    assert out.state_reset and out.solution.iterations == 1
+    independent = local("stateful:count-state", sequential=False)
+    for rec in records:
+        out = independent.solve(rec.problem)
+        assert out.solution.iterations == 1 and not out.state_reset
+
+
+@pytest.mark.parametrize("name", ["stateful:count-state", "stateful:count-copy"])
+def test_repeats_start_from_the_same_state(records, name):
+    runner = local(name)
+    runner.solve(records[0].problem)
+    out = runner.solve(records[1].problem, repeat=4, prev_problem=records[0].problem)
+    assert len(out.wall_times_s) == 4
+    assert out.solution.iterations == 2  # each repeat restarted from state "1 solve done"
+    assert runner.solve(records[2].problem).solution.iterations == 3
+    expected = {"stateful:count-state": "state", "stateful:count-copy": "deepcopy"}[name]
+    assert runner.restorer.method == expected
+
+
+def test_repeats_restore_uncopyable_state_by_replay(records):
+    runner = local("stateful:last-native")
+    assert runner.solve(records[0].problem).solution.iterations == 0
+    out = runner.solve(records[1].problem, repeat=3, prev_problem=records[0].problem)
+    assert runner.restorer.method == "replay"
+    assert out.solution.iterations == 1 and len(out.wall_times_s) == 3
+    assert runner.solve(records[2].problem).solution.iterations == 2
+
+
+def test_worker_survives_segfault_and_restarts(records):
+    runner = IsolatedRunner("faulty:segfault", "default", {}, 1.0, True, [PLUGIN])
+    try:
+        out = runner.solve(records[0].problem)
+        assert out.status == "crashed" and "SIGSEGV" in out.error and out.isolated
+        out = runner.solve(records[1].problem, reset_before=True)
+        assert out.status == "crashed" and out.state_reset
+        assert runner.restarts == 2
+    finally:
+        runner.close()
+
+
+def test_worker_hang_is_killed_at_the_deadline_and_state_is_lost(records):
+    runner = IsolatedRunner("faulty:hang", "default", {}, 0.2, True, [PLUGIN])
+    try:
+        out = runner.solve(records[0].problem)
+        assert out.status == "time_limit" and "worker killed" in out.error
+        assert runner.restarts == 1
+    finally:
+        runner.close()
+
+
+def test_worker_times_inside_and_carries_state(records):
+    runner = IsolatedRunner("stateful:last-native", "default", {}, 5.0, True, [PLUGIN])
+    try:
+        outs = [runner.solve(r.problem) for r in records]
+        assert [o.solution.iterations for o in outs] == [0, 1, 2, 3]
+        assert all(o.status == "optimal" and o.isolated and len(o.wall_times_s) == 1 for o in outs)
+        assert outs[0].solution.problem is records[0].problem  # re-attached in the parent
+        np.testing.assert_allclose(outs[1].solution.x, fb.exact_solution(records[1].problem).x, atol=1e-9)
+    finally:
+        runner.close()
+
+
+def _read(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _strip_timing(row):
+    return {k: v for k, v in row.items() if k not in TIMING_COLUMNS}
+
+
+@pytest.fixture(scope="module")
+def tick_set(tmp_path_factory):
+    return fb.write_tick_set(tmp_path_factory.mktemp("set") / "wall", 4)
+
+
+def _bench(args, env_extra=None):
+    env = dict(os.environ, QPBENCH_PLUGINS=PLUGIN, **(env_extra or {}))
+    return subprocess.run(QPBENCH + ["bench", *args], capture_output=True, text=True, env=env, timeout=300)
+
+
+def test_fault_injection_run_completes_and_keeps_real_rows(tick_set, tmp_path):
+    faulty = ["faulty:raise", "faulty:sleep", "faulty:hang", "faulty:segfault", "faulty:nan"]
+    out = tmp_path / "faults.csv"
+    proc = _bench([str(tick_set), "--backends", ",".join(["clarabel", *faulty]), "--out", str(out), "--time-limit", "0.3"])
+    assert proc.returncode == 1, proc.stderr  # completed, some solves failed
+    assert "failed solves" in proc.stdout
+    rows = _read(out)
+    assert len(rows) == 4 * 6
+    status = {(r["problem"], r["backend"]): r["status"] for r in rows}
+    for problem in {r["problem"] for r in rows}:
+        assert status[(problem, "faulty:raise")] == "error"
+        assert status[(problem, "faulty:sleep")] == "time_limit"
+        assert status[(problem, "faulty:hang")] == "time_limit"
+        assert status[(problem, "faulty:segfault")] == "crashed"
+        assert status[(problem, "faulty:nan")] == "invalid"
+        assert status[(problem, "clarabel")] == "optimal"
+    by_backend = {b: [r for r in rows if r["backend"] == b] for b in ["faulty:raise", "faulty:segfault", "faulty:hang"]}
+    assert all(r["error"] == "RuntimeError: solver exploded on two lines" for r in by_backend["faulty:raise"])
+    assert all("SIGSEGV" in r["error"] and r["isolated"] == "True" for r in by_backend["faulty:segfault"])
+    # a Python-level overrun is interrupted in this process, then the backend moves to a worker
+    assert [r["isolated"] for r in rows if r["backend"] == "faulty:sleep"] == ["False", "True", "True", "True"]
+    assert "overran its time limit" in proc.stderr
+    # after the first failure of a sequence, each later solve starts from a reset state
+    assert [r["state_reset"] for r in by_backend["faulty:hang"]] == ["False", "True", "True", "True"]
+    # the real backend's rows equal those of a run of it alone
+    alone = tmp_path / "alone.csv"
+    proc = _bench([str(tick_set), "--backends", "clarabel", "--out", str(alone)])
+    assert proc.returncode == 0, proc.stderr
+    mine = [_strip_timing(r) for r in rows if r["backend"] == "clarabel"]
+    assert mine == [_strip_timing(r) for r in _read(alone)]
+    assert all(r["success"] == "True" for r in mine)
+
+
+def test_in_process_crash_is_learned_on_resume(tick_set, tmp_path):
+    out = tmp_path / "learn.csv"
+    args = [str(tick_set), "--backends", "clarabel,faulty:segfault-once", "--out", str(out), "--no-warmup"]
+    proc = _bench(args, {"QPBENCH_TEST_SEGV": "2"})
+    assert proc.returncode == -11  # the in-process segfault took the run down ...
+    rows = _read(out)
+    assert len(rows) == 4  # ... after the rows of ticks 0 and 1 were written
+    marker = out.with_name(f".{out.name}.inflight")
+    assert "Segmentation fault" in marker.read_text()
+    proc = _bench(args + ["--resume"], {"QPBENCH_TEST_SEGV": "2"})
+    assert proc.returncode == 1, proc.stderr
+    assert "runs in a worker process from now on" in proc.stderr
+    rows = _read(out)
+    assert len(rows) == 8 and len({(r["problem"], r["backend"]) for r in rows}) == 8
+    st = {(r["problem"], r["backend"]): (r["status"], r["isolated"]) for r in rows}
+    assert st[("wall/tick-0002", "faulty:segfault-once")] == ("crashed", "True")
+    assert st[("wall/tick-0003", "faulty:segfault-once")] == ("optimal", "True")
+    assert not marker.exists()
