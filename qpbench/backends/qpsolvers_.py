@@ -342,7 +342,11 @@ class QpsolversBackend(Backend):
             sol.error = error
             return sol
         sol.extras = result.extras
-        sol.x, sol.y, sol.z, sol.z_box = result.x, result.y, result.z, result.z_box
+        # Some qpsolvers wrappers (clarabel) hand duals back as Python lists.
+        sol.x, sol.y, sol.z, sol.z_box = (
+            None if v is None else np.asarray(v, dtype=float)
+            for v in (result.x, result.y, result.z, result.z_box)
+        )
         sol.obj = result.obj
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time

@@ -1,0 +1,27 @@
+"""``qpbench report``: report.md and PNG plots from bench and closed-loop CSVs."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+HELP = "write report.md and PNG plots from bench and closed-loop result CSVs (every number recomputed)"
+EXAMPLE = "qpbench report results/bench results/closed_loop.csv --out results --force"
+
+log = logging.getLogger("qpbench.report")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("results", nargs="+", metavar="RESULTS",
+                        help="bench or closed-loop CSV files, or folders searched for *.csv")
+    parser.add_argument("--out", required=True, metavar="DIR", help="folder of report.md and plots/")
+    parser.add_argument("--force", action="store_true", help="replace an existing report.md")
+    parser.add_argument("--no-plots", action="store_true", help="write report.md only")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..report import write_report
+
+    path = write_report(args.results, args.out, force=args.force, plots=not args.no_plots)
+    log.info("wrote %s", path)
+    return 0

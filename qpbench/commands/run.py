@@ -1,0 +1,284 @@
+"""``qpbench run``: the main job. Problem sets, bench, closed loop and report into results/.
+
+With no arguments, on a fresh clone:
+
+1. problem sets: ``problems/<scenario>/`` for the paper's four scenarios
+   (free, wall, adaptive, narrow), relative to the current folder; a missing
+   set is regenerated there by the simulator (every 10th tick of the
+   scenario's 20 s, ``paper`` formulation, solved with a QP backend);
+2. bench: every available backend on every problem of each set (2,000 per
+   scenario, every 10th tick; ``--bench-every K`` keeps every K-th for quick
+   runs), sequential mode, default profile, one CSV per scenario in
+   ``results/bench/``;
+3. closed loop: every shipped scenario with every available backend in the
+   loop, ``results/closed_loop.csv`` and ``results/logs/``. A backend whose
+   real-time factor on a 200-tick probe is below ``--min-rtf`` (default 1:
+   it cannot run the 1 kHz loop in real time on this machine) gets a
+   ``skipped`` row naming its measured factor instead of 20 s runs (at 3-30 ms
+   a tick, cvxpy or the converged RNN would take 1-10 minutes per scenario);
+   the bench still times it on every problem;
+4. report: ``results/report.md`` and ``results/plots/``.
+
+Where outputs go: ``--out`` (default ``./results``, relative to the current
+folder, also when qpbench is installed as a package). The run works in
+``OUT/.partial/`` and, once everything is done, replaces the previous run's
+outputs in ``OUT`` (``bench/``, ``logs/``, ``plots/``, ``closed_loop.csv``,
+``report.md``, ``run.json``), each by a rename: a run killed half-way leaves
+the previous results whole. Other files in ``OUT`` are never touched. The
+outputs are recognised as a previous run's by ``OUT/run.json``; if one of
+those names exists without it, it is someone else's file and needs
+``--force``. ``--resume`` continues an interrupted run from
+``OUT/.partial/``. So ``qpbench run`` twice simply refreshes ``results/``.
+
+Exit code: 0, or 1 when a solve failed in the bench or a closed-loop run raised.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import shutil
+import time
+from dataclasses import replace
+from pathlib import Path
+
+HELP = "the main job: make missing problem sets, bench every backend, closed loop every scenario, write results/ and report.md"
+EXAMPLE = "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall --backends qpsolvers:daqp,pinv --out /tmp/r)"
+
+log = logging.getLogger("qpbench.run")
+
+#: Outputs of a run inside ``--out`` (replaced as a whole at the end of a run).
+OUTPUTS = ("bench", "logs", "plots", "closed_loop.csv", "report.md", "run.json")
+#: Staging folder of a run in progress, inside ``--out``.
+STAGING = ".partial"
+#: Every k-th tick goes into a problem set.
+EVERY = 10
+#: The bench of ``run`` takes every k-th problem of each set (the 10-minute budget).
+BENCH_EVERY = 1
+#: Backends that may regenerate a missing problem set, first available wins.
+DUMP_BACKENDS = ("qpsolvers:daqp", "clarabel", "proxqp", "qpsolvers:quadprog", "osqp")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default="results", metavar="DIR",
+                        help="results folder (default: ./results)")
+    parser.add_argument("--problems", default="problems", metavar="DIR",
+                        help="folder of the problem sets <DIR>/<scenario>/ (default: ./problems; "
+                             "missing sets are regenerated there)")
+    parser.add_argument("--scenarios", default="all",
+                        help="comma-separated scenarios, or 'all' shipped ones (default: all; the bench "
+                             "uses the paper's four among them)")
+    parser.add_argument("--backends", default="all",
+                        help="comma-separated backends, or 'all' available ones (default: all)")
+    parser.add_argument("--duration", type=float, default=None, metavar="S",
+                        help="closed-loop time per run in [s] (default: the scenario's, 20 s); the bench "
+                             "then uses only the problems with t < S (quick runs)")
+    parser.add_argument("--bench-every", type=int, default=BENCH_EVERY, metavar="K",
+                        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: all 2,000 "
+                             "per set, every 10th tick; 4 cuts the bench time by 4 for quick runs)")
+    parser.add_argument("--min-rtf", type=float, default=1.0, metavar="R",
+                        help="closed loop only for backends whose real-time factor on a 200-tick probe "
+                             "is >= R (default 1: those that can run the 1 kHz loop in real time here; "
+                             "0 runs every backend); the others get a 'skipped' row saying why")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="closed-loop runs in parallel worker processes (default: 1)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--force", action="store_true",
+                       help="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
+                            "if no previous 'qpbench run' wrote them")
+    group.add_argument("--resume", action="store_true",
+                       help="continue an interrupted run from OUT/.partial/")
+
+
+def _check_out(out: Path, force: bool) -> None:
+    """Refuse to replace outputs that a previous ``qpbench run`` did not write.
+
+    ``run`` only ever replaces the names in :data:`OUTPUTS`; other files and
+    folders in ``out`` (e.g. ``results/simulate/``) are left alone. If one of
+    those names exists and ``out/run.json`` does not, it is someone else's
+    file and ``--force`` is needed.
+    """
+    from ..exceptions import OutputExistsError
+
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise OutputExistsError(f"{out}: exists and is not a folder")
+    if (out / "run.json").exists() or force:
+        return
+    clash = sorted(name for name in OUTPUTS if (out / name).exists())
+    if clash:
+        raise OutputExistsError(
+            f"{out}: holds {', '.join(clash)} not written by 'qpbench run' (no run.json); "
+            "pass --force to replace them"
+        )
+
+
+def _dump_backend(backends: list[str]) -> str:
+    from ..backends import backend_names
+    from ..exceptions import BackendNotFound
+
+    available = set(backend_names(available_only=True))
+    for name in DUMP_BACKENDS:
+        if name in available:
+            return name
+    raise BackendNotFound(f"no QP backend to generate problem sets with (tried {', '.join(DUMP_BACKENDS)})")
+
+
+def make_problem_set(scenario: str, folder: Path, backend: str) -> Path:
+    """Regenerate a scenario's problem set: every 10th tick of its full run, paper formulation."""
+    from ..sim.loop import simulate
+    from ..sim.scenario import load_scenario
+
+    log.info("problem set %s missing: simulating %s with %s to dump every %dth tick", folder, scenario,
+             backend, EVERY)
+    simulate(load_scenario(scenario), backend, formulation="paper", every=EVERY, dump=folder)
+    return folder
+
+
+def _bench_subset(problem_set, duration: float | None, every: int = 1):
+    """The problem set and its references: every ``every``-th problem, those with t < duration."""
+    from ..reference import reference_solutions
+
+    refs = reference_solutions(problem_set)
+    if duration is None and every == 1:
+        return problem_set, refs
+    keep = [
+        i for i, r in enumerate(problem_set.records)
+        if i % every == 0 and (duration is None or r.t is None or r.t < duration)
+    ]
+    if not keep:
+        keep = [0]
+    return replace(problem_set, records=[problem_set.records[i] for i in keep]), [refs[i] for i in keep]
+
+
+def _probe(backend: str, min_rtf: float, probe_scenario: str) -> str | None:
+    """Why ``backend`` is left out of the closed loop (``None``: it runs)."""
+    from ..harness.closed_loop import PROBE_TICKS, probe_real_time_factor
+
+    try:
+        rtf = probe_real_time_factor(backend, scenario=probe_scenario)
+    except Exception:  # noqa: BLE001 - the run itself will record the error
+        return None
+    if rtf >= min_rtf:
+        return None
+    return (f"real-time factor {rtf:.2g} < {min_rtf:g} on a {PROBE_TICKS}-tick probe of {probe_scenario}: "
+            f"it cannot run the 1 kHz loop in real time here (qpbench closed-loop --backends {backend} "
+            "simulates it in full)")
+
+
+def _promote(staging: Path, out: Path) -> None:
+    """Replace the previous run's outputs in ``out`` by the staged ones (one rename each)."""
+    for name in OUTPUTS:
+        src = staging / name
+        dst = out / name
+        if not src.exists():
+            continue
+        if src.is_dir():
+            old = out / f".old-{name}"
+            if old.exists():
+                shutil.rmtree(old)
+            if dst.exists():
+                os.replace(dst, old)
+            os.replace(src, dst)
+            if old.exists():
+                shutil.rmtree(old)
+        else:
+            os.replace(src, dst)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..atomic import write_text
+    from ..exceptions import ParamError
+    from ..formats import load_problems
+    from ..harness.bench import BenchConfig, run_bench
+    from ..harness.closed_loop import PAPER_SCENARIOS, resolve_backends, resolve_scenarios, run_closed_loop
+    from ..report import write_report
+
+    started = time.perf_counter()
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise ParamError(f"must be a positive number of seconds, got {args.duration}", key="--duration")
+    if args.bench_every < 1:
+        raise ParamError(f"must be an integer >= 1, got {args.bench_every}", key="--bench-every")
+    out = Path(args.out)
+    problems = Path(args.problems)
+    scenarios = resolve_scenarios(args.scenarios)
+    backends = resolve_backends(args.backends)
+    bench_scenarios = [s for s in scenarios if s in PAPER_SCENARIOS] or scenarios
+    _check_out(out, args.force)
+    staging = out / STAGING
+    if staging.exists() and not args.resume:
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True, exist_ok=True)
+
+    missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
+    total = len(missing) + len(bench_scenarios) + len(scenarios) * len(backends) + 1
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="step", desc="qpbench run", disable=True if args.quiet else None)
+    failures = 0
+    try:
+        for s in missing:
+            bar.set_description(f"problem set {s}")
+            make_problem_set(s, problems / s, _dump_backend(backends))
+            bar.update(1)
+        bench_dir = staging / "bench"
+        for s in bench_scenarios:
+            bar.set_description(f"bench {s}")
+            subset, refs = _bench_subset(load_problems(problems / s), args.duration, args.bench_every)
+            summary = run_bench(
+                subset,
+                BenchConfig(backends=list(backends), profile="default", mode="sequential"),
+                bench_dir / f"{s}.csv",
+                resume=args.resume,
+                force=not args.resume,
+                references=refs,
+            )
+            log.info("bench %s: %s", s, summary.line())
+            failures += summary.failures
+            bar.update(1)
+
+        def on_row(row):
+            bar.set_description(f"closed loop {row['scenario']}")
+            bar.update(1)
+
+        skip = {}
+        if args.min_rtf > 0:
+            for b in backends:
+                bar.set_description(f"probe {b}")
+                skip_reason = _probe(b, args.min_rtf, probe_scenario="wall" if "wall" in scenarios else scenarios[0])
+                if skip_reason:
+                    skip[b] = skip_reason
+                    log.info("closed loop: %s skipped: %s", b, skip_reason)
+        bar.set_description("closed loop")
+        outcome = run_closed_loop(scenarios, backends, staging, duration=args.duration,
+                                  formulation="paper", force=not args.resume, resume=args.resume,
+                                  jobs=args.jobs, on_row=on_row, skip=skip)
+        failures += outcome.errors
+        bar.set_description("report")
+        manifest = {
+            "command": "qpbench run",
+            "scenarios": scenarios,
+            "bench_scenarios": bench_scenarios,
+            "backends": backends,
+            "duration_s": args.duration,
+            "min_rtf": args.min_rtf,
+            "bench_every": args.bench_every,
+            "closed_loop_skipped": skip,
+            "problems": str(problems),
+            "wall_time_s": None,
+        }
+        write_report([bench_dir, staging / "closed_loop.csv"], staging, force=True)
+        bar.update(1)
+        manifest["wall_time_s"] = round(time.perf_counter() - started, 1)
+        write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
+        _promote(staging, out)
+    finally:
+        bar.close()
+    log.info("qpbench run: %s in %.0f s (%d failed solves or runs); report %s", out,
+             time.perf_counter() - started, failures, out / "report.md")
+    return 1 if failures else 0

@@ -1,0 +1,514 @@
+"""Closed-loop comparison: each scenario with each backend in the loop.
+
+For every (scenario, backend) pair :func:`qpbench.sim.loop.simulate` runs the
+scenario with that backend solving every tick's QP. Each run writes its
+per-tick log to ``OUT/logs/<scenario>__<backend>.parquet`` and one row to
+``OUT/closed_loop.csv`` (long format, one row per (scenario, backend)):
+
+==========================  =====================================================
+column                      meaning
+==========================  =====================================================
+scenario, backend           the pair
+formulation, duration_s     the QP formulation (``paper`` | ``soft``), simulated [s]
+status, error               ``ok``, ``error`` (and the exception's message) or
+                            ``skipped`` (and why: see :func:`probe_real_time_factor`)
+ticks                       control ticks simulated
+tracking_rms_after_2s       tangential tracking error RMS for t >= 2 s [m]
+tracking_max_after_2s       its maximum [m]
+force_error_rms_after_2s    contact-force error RMS for t >= 2 s [N]
+force_error_max_after_2s    its maximum [N]
+min_obstacle_distance       smallest key-point to obstacle distance [m]
+joint_limit_violations      ticks with a joint angle outside its limits
+infeasible_ticks            ticks whose QP the backend did not solve
+fallback_ticks              ticks that used the soft fallback
+v2_integral                 integral of ||v||^2 dt over the run [rad^2/s]
+solve_time_p50_s            median per-tick solve time [s]
+solve_time_p99_s            99th percentile [s] (a 1 kHz loop lives by its tail)
+solve_time_max_s            worst tick [s]
+real_time_factor            simulated time / wall time
+log_file                    the tick log, relative to the CSV's folder
+==========================  =====================================================
+
+followed by every other key of the simulator's summary. The table is
+rewritten atomically after each run (rows appear as they are produced); a
+run that raises becomes a row with status ``error`` and the others continue.
+``resume`` keeps the rows already done with the same formulation and
+duration (status ``ok``) and runs the rest (rows of pairs not asked for this
+time stay in the table); ``force`` starts again.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import shutil
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..atomic import atomic_path, check_output
+from ..exceptions import ParamError
+
+log = logging.getLogger("qpbench.harness")
+
+#: Name of the table inside ``--out``.
+CSV_NAME = "closed_loop.csv"
+#: Folder of the per-tick logs inside ``--out``.
+LOG_DIR = "logs"
+
+#: Scenarios of the paper (section 4), in its order.
+PAPER_SCENARIOS = ("free", "wall", "adaptive", "narrow")
+
+#: Leading columns of the closed-loop table, in order.
+COLUMNS = (
+    "scenario",
+    "backend",
+    "formulation",
+    "duration_s",
+    "status",
+    "error",
+    "ticks",
+    "tracking_rms_after_2s",
+    "tracking_max_after_2s",
+    "force_error_rms_after_2s",
+    "force_error_max_after_2s",
+    "min_obstacle_distance",
+    "joint_limit_violations",
+    "infeasible_ticks",
+    "fallback_ticks",
+    "v2_integral",
+    "solve_time_p50_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "real_time_factor",
+    "log_file",
+)
+
+#: Ticks of the discarded warm-up run before each timed run.
+WARMUP_TICKS = 3
+
+#: Transient excluded from the tracking and force statistics [s].
+TRANSIENT_S = 2.0
+
+# Candidate names of per-tick log columns (the first present wins).
+_T = ("t",)
+_SOLVE_TIME = ("solve_time_s", "solve_time", "qp_time_s")
+_V2 = ("v_sq", "v_norm2", "v2", "v_norm_sq", "norm_v2")
+_TRACK = ("tracking_error", "tangential_error", "tracking_error_m")
+_FORCE_ERR = ("force_error", "force_error_n")
+_MIN_DIST = ("d_min", "min_distance", "min_obstacle_distance", "distance_min")
+
+
+def find_column(log_df: pd.DataFrame, candidates: Iterable[str]) -> str | None:
+    """First of ``candidates`` that is a column of ``log_df`` (``None`` if none is)."""
+    for c in candidates:
+        if c in log_df.columns:
+            return c
+    return None
+
+
+def velocity_columns(log_df: pd.DataFrame) -> list[str]:
+    """Joint-velocity columns of a tick log (``v0, v1, ...`` or ``v_0, v_1, ...``), in order."""
+    cols = [c for c in log_df.columns if re.fullmatch(r"v_?\d+", str(c))]
+    return sorted(cols, key=lambda c: int(re.sub(r"\D", "", c)))
+
+
+def v_norm2(log_df: pd.DataFrame) -> np.ndarray | None:
+    """``||v||^2`` per tick [rad^2/s^2], from a logged column or the joint velocities."""
+    col = find_column(log_df, _V2)
+    if col is not None:
+        return log_df[col].to_numpy(dtype=float)
+    vcols = velocity_columns(log_df)
+    if vcols:
+        return np.sum(log_df[vcols].to_numpy(dtype=float) ** 2, axis=1)
+    if "v" in log_df.columns:
+        return np.array([float(np.dot(v, v)) for v in log_df["v"]])
+    return None
+
+
+def _time_step(t: np.ndarray, fallback: float | None) -> float:
+    if len(t) > 1:
+        return float(np.median(np.diff(t)))
+    return float(fallback) if fallback else math.nan
+
+
+def row_from_run(
+    scenario: str,
+    backend: str,
+    formulation: str,
+    duration: float | None,
+    log_df: pd.DataFrame,
+    summary: dict,
+    dt: float | None = None,
+) -> dict:
+    """The closed-loop table row of one run (see the module doc for the columns).
+
+    Summary keys of the simulator are taken as they are; what the table needs
+    and the summary lacks is computed from the tick log: ``v2_integral``
+    ``= sum_k ||v_k||^2 dt`` (rectangle rule, dt the control period [s]),
+    solve-time percentiles, and the after-transient statistics.
+    """
+    t = log_df[find_column(log_df, _T)].to_numpy(dtype=float) if "t" in log_df.columns else np.array([])
+    step = _time_step(t, dt or summary.get("dt"))
+    row: dict = {
+        "scenario": scenario,
+        "backend": backend,
+        "formulation": formulation,
+        "duration_s": float(duration) if duration is not None else float(
+            summary.get("duration", len(log_df) * step if len(t) else math.nan)),
+        "status": "ok",
+        "error": "",
+        "ticks": int(summary.get("ticks", len(log_df))),
+    }
+    after = t >= TRANSIENT_S - 1e-12 if len(t) else np.zeros(len(log_df), bool)
+
+    def _rms_max(cols, key_rms, key_max):
+        if key_rms in summary and key_max in summary:
+            return summary[key_rms], summary[key_max]
+        col = find_column(log_df, cols)
+        if col is None or not after.any():
+            return math.nan, math.nan
+        e = np.abs(log_df[col].to_numpy(dtype=float)[after])
+        return float(np.sqrt(np.mean(e**2))), float(e.max())
+
+    row["tracking_rms_after_2s"], row["tracking_max_after_2s"] = _rms_max(
+        _TRACK, "tracking_rms_after_2s", "tracking_max_after_2s"
+    )
+    row["force_error_rms_after_2s"], row["force_error_max_after_2s"] = _rms_max(
+        _FORCE_ERR, "force_error_rms_after_2s", "force_error_max_after_2s"
+    )
+    if "min_obstacle_distance" in summary:
+        row["min_obstacle_distance"] = summary["min_obstacle_distance"]
+    else:
+        col = find_column(log_df, _MIN_DIST)
+        row["min_obstacle_distance"] = float(np.nanmin(log_df[col])) if col else math.nan
+    for key in ("joint_limit_violations", "infeasible_ticks", "fallback_ticks"):
+        row[key] = summary.get(key, math.nan)
+    v2 = v_norm2(log_df)
+    row["v2_integral"] = float(np.sum(v2) * step) if v2 is not None and np.isfinite(step) else math.nan
+    col = find_column(log_df, _SOLVE_TIME)
+    if col is not None and len(log_df):
+        st = log_df[col].to_numpy(dtype=float)
+        st = st[np.isfinite(st)]
+    else:
+        st = np.array([])
+    row["solve_time_p50_s"] = float(np.percentile(st, 50)) if len(st) else math.nan
+    row["solve_time_p99_s"] = float(np.percentile(st, 99)) if len(st) else math.nan
+    row["solve_time_max_s"] = float(st.max()) if len(st) else math.nan
+    if "real_time_factor" in summary:
+        row["real_time_factor"] = summary["real_time_factor"]
+    else:
+        wall = summary.get("wall_time_s")
+        row["real_time_factor"] = (len(log_df) * step / wall) if wall else math.nan
+    row["log_file"] = ""
+    for key, value in summary.items():
+        if key not in row and key not in ("scenario", "backend"):
+            row[key] = _scalar(value)
+    return row
+
+
+def _scalar(value):
+    """A summary value as one CSV cell (lists and dicts as text)."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+def log_name(scenario: str, backend: str) -> str:
+    """File name of a run's tick log (``:`` and ``/`` of backend names made safe)."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "-", f"{scenario}__{backend}")
+    return f"{safe}.parquet"
+
+
+def scenario_names() -> list[str]:
+    """Every shipped scenario (the simulator's list when it exposes one)."""
+    try:
+        from ..sim import scenario as scenario_mod
+    except ImportError:  # pragma: no cover - simulator missing
+        return list(PAPER_SCENARIOS)
+    for attr in ("scenario_names", "list_scenarios", "available_scenarios"):
+        fn = getattr(scenario_mod, attr, None)
+        if callable(fn):
+            names = list(fn())
+            return [n for n in PAPER_SCENARIOS if n in names] + sorted(
+                n for n in names if n not in PAPER_SCENARIOS
+            )
+    return list(PAPER_SCENARIOS)
+
+
+def parse_list(value: str | list[str] | None, option: str) -> list[str]:
+    """Split a comma-separated option value (empty items dropped, order kept, no duplicates).
+
+    Raises:
+        ParamError: the list is empty.
+    """
+    if value is None:
+        return []
+    items = value if isinstance(value, list) else value.split(",")
+    out: list[str] = []
+    for item in items:
+        item = item.strip()
+        if item and item not in out:
+            out.append(item)
+    if not out:
+        raise ParamError("empty list", key=option)
+    return out
+
+
+def resolve_scenarios(value: str | list[str] | None) -> list[str]:
+    """``all`` (or nothing) -> every shipped scenario; else the names or paths given."""
+    names = parse_list(value or "all", "--scenarios")
+    if names == ["all"]:
+        return scenario_names()
+    return names
+
+
+def resolve_backends(value: str | list[str] | None) -> list[str]:
+    """``all`` (or nothing) -> every available backend; else the names, each checked.
+
+    Raises:
+        BackendNotFound: a name is not registered or not available here.
+    """
+    from ..backends import backend_names, get_backend
+
+    names = parse_list(value or "all", "--backends")
+    if names == ["all"]:
+        return list(backend_names(available_only=True))
+    for name in names:
+        get_backend(name)  # raises BackendNotFound with the reason
+    return names
+
+
+def simulate_one(scenario_name: str, backend: str, formulation: str, duration: float | None,
+                 log_path: Path | None) -> tuple[dict, pd.DataFrame]:
+    """Run one (scenario, backend) and return its table row and tick log.
+
+    The tick log is written atomically to ``log_path`` (Parquet) when given.
+    The backend is passed by name, so the ``rnn`` backends get the scenario's
+    ``[rnn]`` table (eps, sub-steps, clipping) and the loop's ``dt`` from
+    :func:`qpbench.sim.loop.resolve_backend`. Exceptions propagate (the
+    caller turns them into an error row).
+    """
+    from ..sim.loop import simulate
+    from ..sim.scenario import load_scenario
+
+    scenario = load_scenario(scenario_name)
+    # warm-up: a discarded run of a few ticks, so one-off costs (numba compilation or
+    # cache load, solver imports, first-call allocations) stay out of the timed run
+    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt)
+    start = time.perf_counter()
+    # by name: the simulator gives the rnn backends the scenario's [rnn] settings and dt
+    result = simulate(scenario, backend, formulation=formulation, duration=duration)
+    wall = time.perf_counter() - start
+    summary = dict(result.summary or {})
+    summary.setdefault("wall_time_s", wall)
+    log_df = result.log if isinstance(result.log, pd.DataFrame) else pd.DataFrame(result.log)
+    dt = getattr(scenario, "dt", None)
+    row = row_from_run(scenario_name, backend, formulation, duration, log_df, summary, dt=dt)
+    if log_path is not None:
+        with atomic_path(log_path) as tmp:
+            log_df.to_parquet(tmp, index=False)
+    return row, log_df
+
+
+def _run_job(args: tuple) -> dict:
+    """One guarded run (module level so a process pool can call it)."""
+    scenario, backend, formulation, duration, out = args
+    log_path = Path(out) / LOG_DIR / log_name(scenario, backend)
+    try:
+        row, _ = simulate_one(scenario, backend, formulation, duration, log_path)
+        row["log_file"] = f"{LOG_DIR}/{log_path.name}"
+    except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
+        log.warning("closed loop %s with %s failed: %s: %s", scenario, backend, type(exc).__name__, exc)
+        row = error_row(scenario, backend, formulation, duration, exc)
+    return row
+
+
+def skipped_row(scenario: str, backend: str, formulation: str, duration: float | None,
+                reason: str) -> dict:
+    """The row of a run that was not made (status ``skipped``, the reason in ``error``)."""
+    row = {c: math.nan for c in COLUMNS}
+    row.update(scenario=scenario, backend=backend, formulation=formulation,
+               duration_s=float(duration) if duration is not None else math.nan,
+               status="skipped", error=reason, log_file="")
+    return row
+
+
+#: Ticks of the probe that measures a backend's real-time factor.
+PROBE_TICKS = 200
+
+
+def probe_real_time_factor(backend: str, scenario: str = "wall", ticks: int = PROBE_TICKS,
+                           formulation: str = "paper") -> float:
+    """Real-time factor (simulated time / wall time) of ``backend`` on the first ``ticks`` of a scenario.
+
+    After a discarded warm-up of a few ticks. The first ticks of the paper's
+    scenarios include the infeasible start (a soft fallback solve on top of
+    the failed one), so the probe errs on the slow side.
+    """
+    from ..sim.loop import simulate
+    from ..sim.scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    simulate(sc, backend, formulation=formulation, duration=WARMUP_TICKS * sc.dt)
+    start = time.perf_counter()
+    result = simulate(sc, backend, formulation=formulation, duration=ticks * sc.dt)
+    wall = time.perf_counter() - start
+    rtf = (result.summary or {}).get("real_time_factor")
+    return float(rtf) if rtf else ticks * sc.dt / wall
+
+
+def error_row(scenario: str, backend: str, formulation: str, duration: float | None,
+              exc: BaseException) -> dict:
+    """The row of a run that raised: status ``error`` and the message, in one line."""
+    row = {c: math.nan for c in COLUMNS}
+    message = " ".join(f"{type(exc).__name__}: {exc}".split())
+    row.update(scenario=scenario, backend=backend, formulation=formulation,
+               duration_s=float(duration) if duration is not None else math.nan,
+               status="error", error=message, log_file="")
+    return row
+
+
+@dataclass
+class ClosedLoopOutcome:
+    """What :func:`run_closed_loop` did: the full table, the runs that raised
+    (``errors``), the runs made now (``ran``) and those kept or skipped."""
+
+    table: pd.DataFrame
+    csv_path: Path
+    errors: int
+    ran: int
+    skipped: int
+
+
+def _same_run(row: dict, formulation: str, duration: float | None) -> bool:
+    if str(row.get("status")) != "ok" or str(row.get("formulation")) != formulation:
+        return False
+    d = row.get("duration_s")
+    if duration is None:
+        return True
+    try:
+        return math.isclose(float(d), float(duration), rel_tol=1e-9, abs_tol=1e-12)
+    except (TypeError, ValueError):
+        return False
+
+
+def write_table(rows: list[dict], path: Path) -> pd.DataFrame:
+    """Write the closed-loop table atomically (leading :data:`COLUMNS`, then the rest sorted)."""
+    df = pd.DataFrame(rows)
+    extra = sorted(c for c in df.columns if c not in COLUMNS)
+    for c in COLUMNS:
+        if c not in df.columns:
+            df[c] = math.nan
+    df = df[list(COLUMNS) + extra]
+    with atomic_path(path) as tmp:
+        df.to_csv(tmp, index=False)
+    return df
+
+
+def run_closed_loop(
+    scenarios: list[str],
+    backends: list[str],
+    out: str | Path,
+    *,
+    duration: float | None = None,
+    formulation: str = "paper",
+    force: bool = False,
+    resume: bool = False,
+    jobs: int = 1,
+    on_row: Callable[[dict], None] | None = None,
+    skip: dict[str, str] | None = None,
+) -> ClosedLoopOutcome:
+    """Run every (scenario, backend) pair in the loop and tabulate them into ``out``.
+
+    Args:
+        scenarios: Scenario names or TOML paths.
+        backends: Backend names.
+        out: Output folder (``closed_loop.csv`` and ``logs/``).
+        duration: Simulated time per run [s]; ``None`` keeps each scenario's ``T``.
+        formulation: ``paper`` (hard task, eq. 11) or ``soft``.
+        force: Replace an existing table and its logs.
+        resume: Keep the rows already done (same formulation and duration).
+        jobs: Runs in parallel (worker processes); 1 runs them in this process.
+        on_row: Called with each new row as soon as it is written.
+        skip: Backend -> reason: those backends get a ``skipped`` row per scenario
+            instead of a run.
+
+    Raises:
+        OutputExistsError: the table exists and neither ``force`` nor ``resume``.
+        ParamError: a bad formulation, duration or job count.
+    """
+    if formulation not in ("paper", "soft"):
+        raise ParamError(f"unknown formulation '{formulation}' (choose paper or soft)", key="--formulation")
+    if duration is not None and not (duration > 0 and math.isfinite(duration)):
+        raise ParamError(f"duration must be a positive number of seconds, got {duration}", key="--duration")
+    if jobs < 1:
+        raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
+    out = Path(out)
+    csv_path = out / CSV_NAME
+    check_output(csv_path, force=force, resume=resume)
+    done: dict[tuple[str, str], dict] = {}
+    previous_rows: list[dict] = []
+    if csv_path.exists() and resume and not force:
+        previous = pd.read_csv(csv_path, keep_default_na=True)
+        for rec in previous.to_dict("records"):
+            rec = {k: ("" if k in ("error", "log_file") and isinstance(v, float) and math.isnan(v) else v)
+                   for k, v in rec.items()}
+            previous_rows.append(rec)
+            if _same_run(rec, formulation, duration):
+                done[(str(rec["scenario"]), str(rec["backend"]))] = rec
+    elif force:
+        if csv_path.exists():
+            csv_path.unlink()
+        if (out / LOG_DIR).exists():
+            shutil.rmtree(out / LOG_DIR)
+    (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+
+    order = [(s, b) for s in scenarios for b in backends]
+    # rows of other pairs in a resumed table are kept, after this run's
+    others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
+    rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
+    skip = skip or {}
+    for key in order:
+        if key not in rows and key[1] in skip:
+            rows[key] = skipped_row(key[0], key[1], formulation, duration, skip[key[1]])
+    todo = [k for k in order if k not in rows]
+
+    def _table_rows():
+        return [rows[k] for k in order if k in rows] + others
+
+    def _emit(key, row):
+        rows[key] = row
+        write_table(_table_rows(), csv_path)
+        if on_row is not None:
+            on_row(row)
+
+    jobs_args = [(s, b, formulation, duration, str(out)) for s, b in todo]
+    if jobs == 1 or len(todo) <= 1:
+        for key, args in zip(todo, jobs_args):
+            _emit(key, _run_job(args))
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+            futures = {pool.submit(_run_job, args): key for key, args in zip(todo, jobs_args)}
+            for fut in as_completed(futures):
+                key = futures[fut]
+                try:
+                    row = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a worker died
+                    row = error_row(key[0], key[1], formulation, duration, exc)
+                _emit(key, row)
+    write_table(_table_rows(), csv_path)
+    table = pd.read_csv(csv_path)
+    errors = int((table["status"] == "error").sum()) if len(table) else 0
+    return ClosedLoopOutcome(table, csv_path, errors, len(todo), len(order) - len(todo))

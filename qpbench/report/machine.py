@@ -1,0 +1,72 @@
+"""The machine a report was produced on: CPU, cores, OS, Python and package versions.
+
+Read at report time (nothing is probed at import). The CPU name comes from
+``/proc/cpuinfo`` when it exists, else from :mod:`platform`.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+from importlib import metadata
+from pathlib import Path
+
+#: Distributions whose versions every report lists (missing ones print "-").
+PACKAGES = (
+    "qpbench",
+    "numpy",
+    "scipy",
+    "pandas",
+    "numba",
+    "qpsolvers",
+    "qpbenchmark",
+    "osqp",
+    "proxsuite",
+    "clarabel",
+    "cvxpy",
+    "daqp",
+    "quadprog",
+    "piqp",
+    "matplotlib",
+)
+
+
+def cpu_name() -> str:
+    """Model name of the CPU (``/proc/cpuinfo``'s ``model name``), or the platform's guess."""
+    cpuinfo = Path("/proc/cpuinfo")
+    try:
+        for line in cpuinfo.read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (the affinity mask where the OS has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def machine_info() -> dict[str, str]:
+    """CPU, core counts, OS and Python of the current machine, as display strings."""
+    return {
+        "CPU": cpu_name(),
+        "Cores (usable / logical)": f"{usable_cores()} / {os.cpu_count()}",
+        "OS": platform.platform(),
+        "Python": f"{platform.python_implementation()} {platform.python_version()}",
+    }
+
+
+def package_versions(names: tuple[str, ...] = PACKAGES) -> dict[str, str]:
+    """Installed version of each distribution in ``names`` ("-" when absent)."""
+    versions = {}
+    for name in names:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "-"
+    return versions

@@ -1,0 +1,298 @@
+"""``report.md``: every number recomputed from the result CSVs it is given.
+
+Layout (each table is preceded by a one-line caption ending in ``:``, so two
+reports diff cleanly and a reader, or a test, can find a table by its
+heading and caption):
+
+- header: date, result files (kind, rows, SHA-256), machine, package versions;
+- per tick (bench CSVs), per (profile, mode): success rate and shifted
+  geometric means as ratios to the best and as absolute values, the
+  Dolan-More performance profile of runtime, then per-scenario tables and
+  plots of time and optimality gap against t;
+- closed loop (closed-loop CSVs), per scenario: tracking, force, obstacle
+  distance, limit violations, infeasible and fallback ticks, ``int ||v||^2 dt``,
+  solve-time tail and real-time factor, and the paper's figures per backend.
+
+Display units: times in [us], distances and tracking errors in [mm], forces in
+[N]; every other number as in the CSV. Floats print with 4 significant digits.
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..profiles import PROFILES
+from . import tables
+from .machine import machine_info, package_versions
+
+#: Significant digits of every float in the report.
+DIGITS = 4
+
+
+def fmt(value) -> str:
+    """One table cell: ``-`` for missing, ``inf``, integers as is, floats to 4 significant digits."""
+    if value is None:
+        return "-"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if math.isnan(v):
+            return "-"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        if v == int(v) and abs(v) < 1e6:
+            return str(int(v))
+        return f"{v:.{DIGITS}g}"
+    text = str(value)
+    return text.replace("|", "\\|").replace("\n", " ") if text else "-"
+
+
+def md_table(header: list[str], rows: list[list]) -> str:
+    """A Markdown table (first column left-aligned, the others right-aligned)."""
+    cells = [[fmt(c) for c in r] for r in rows]
+    head = "| " + " | ".join(header) + " |"
+    align = "|:" + "-" * max(3, len(header[0])) + "|" + "|".join(
+        "-" * max(3, len(h)) + ":" for h in header[1:]
+    ) + "|"
+    body = ["| " + " | ".join(r) + " |" for r in cells]
+    return "\n".join([head, align, *body]) + "\n"
+
+
+def slug(text: str) -> str:
+    """File-name-safe form of a label."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
+
+
+_US = 1e6  # s -> us
+_MM = 1e3  # m -> mm
+
+
+def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
+    out = ["## Per-tick benchmark\n"]
+    bench = results.bench
+    out.append(
+        f"{bench['problem'].nunique()} problems, {bench['backend'].nunique()} backends, "
+        f"{len(bench)} rows. A solve is a *success* when the backend found a solution whose "
+        "primal residual, dual residual, duality gap and optimality gap (against the "
+        "reference solution) are within the profile's tolerances. Shifted geometric means "
+        f"(shm) use qpbenchmark's shift sh = {tables.SHIFT:g} for every metric; a solve "
+        "without a solution counts as the profile's time limit (runtime) or its tolerance "
+        "(residuals, gaps), and residuals and gaps are floored at their tolerance, as in "
+        "qpbenchmark; a backend that reports the infeasibility the reference found (the "
+        "paper formulation's first ticks) answered right and its runtime counts as measured. Runtime is the harness's median wall time of the backend call. With "
+        "sh = 10 s the runtime shm of microsecond solves is close to their arithmetic mean "
+        "and a single failure dominates it: read it with the success rate and the per-scenario "
+        "percentiles. *runtime (feasible)* is the same mean over the problems whose reference "
+        "solution is optimal only: on the paper formulation's infeasible ticks the right answer "
+        "is \"infeasible\", and a backend that cannot say so (qpsolvers' interface reports "
+        "not_solved) is charged the time limit for it in the plain column.\n"
+    )
+    for label, tol, rows in tables.bench_groups(bench):
+        out.append(f"### Profile {label}\n")
+        out.append(
+            f"Tolerances: primal {tol.primal:g}, dual {tol.dual:g}, gap {tol.gap:g}, "
+            f"time limit {tol.runtime:g} s.\n"
+        )
+        summary = tables.backend_summary(rows, tol)
+        out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
+        out.append(
+            md_table(
+                ["backend", "problems", "success (%)", "runtime", "runtime (feasible)",
+                 "primal residual", "dual residual", "duality gap", "optimality gap"],
+                [
+                    [b, int(r["problems"]), r["success_rate"], r["runtime_ratio"],
+                     r["runtime_feasible_ratio"], r["primal_residual_ratio"],
+                     r["dual_residual_ratio"], r["duality_gap_ratio"], r["optimality_gap_ratio"]]
+                    for b, r in summary.iterrows()
+                ],
+            )
+        )
+        out.append("Shifted geometric means, absolute values:\n")
+        out.append(
+            md_table(
+                ["backend", "runtime (us)", "runtime feasible (us)", "primal residual",
+                 "dual residual", "duality gap", "optimality gap", "harness overhead p50 (us)"],
+                [
+                    [b, r["runtime"] * _US, r["runtime_feasible"] * _US, r["primal_residual"],
+                     r["dual_residual"],
+                     r["duality_gap"], r["optimality_gap"], r["overhead_median_s"] * _US]
+                    for b, r in summary.iterrows()
+                ],
+            )
+        )
+        key = f"perf_profile_{slug(label)}"
+        if key in plot_files:
+            out.append(
+                "Dolan-More performance profile of runtime (fraction of problems a backend "
+                "solves successfully within tau times the best backend's time):\n"
+            )
+            out.append(f"![performance profile, {label}]({plot_files[key]})\n")
+        for scenario, table in tables.scenario_summary(rows, tol).items():
+            out.append(f"#### Scenario {scenario} ({label})\n")
+            out.append("Per backend, runtime over every problem of the scenario:\n")
+            out.append(
+                md_table(
+                    ["backend", "problems", "success (%)", "runtime shm ratio",
+                     "runtime p50 (us)", "runtime p99 (us)", "runtime max (us)",
+                     "max optimality gap"],
+                    [
+                        [b, int(r["problems"]), r["success_rate"], r["runtime_ratio"],
+                         r["runtime_p50_s"] * _US, r["runtime_p99_s"] * _US,
+                         r["runtime_max_s"] * _US, r["optimality_gap_max"]]
+                        for b, r in table.iterrows()
+                    ],
+                )
+            )
+            key = f"per_tick_{slug(label)}_{slug(scenario)}"
+            if key in plot_files:
+                out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
+    return out
+
+
+#: Closed-loop table: (header, column, scale to display units).
+CLOSED_LOOP_TABLE = (
+    ("status", "status", None),
+    ("tracking RMS (mm)", "tracking_rms_after_2s", _MM),
+    ("tracking max (mm)", "tracking_max_after_2s", _MM),
+    ("force err RMS (N)", "force_error_rms_after_2s", 1.0),
+    ("force err max (N)", "force_error_max_after_2s", 1.0),
+    ("min obstacle dist (mm)", "min_obstacle_distance", _MM),
+    ("joint-limit violations", "joint_limit_violations", 1.0),
+    ("infeasible ticks", "infeasible_ticks", 1.0),
+    ("fallback ticks", "fallback_ticks", 1.0),
+    ("int v^2 dt", "v2_integral", 1.0),
+    ("solve p50 (us)", "solve_time_p50_s", _US),
+    ("solve p99 (us)", "solve_time_p99_s", _US),
+    ("solve max (us)", "solve_time_max_s", _US),
+    ("real-time factor", "real_time_factor", 1.0),
+)
+
+
+def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
+    value = row.get(column)
+    if scale is None:
+        return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return v * scale
+
+
+def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
+    df = results.closed_loop
+    out = ["## Closed loop\n"]
+    out.append(
+        "Each scenario with each backend solving every tick's QP in the loop. Tracking and "
+        f"force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
+        "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
+        "factor is simulated time over wall time.\n"
+    )
+    for (scenario, formulation), g in df.groupby(
+        [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
+    ):
+        duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
+        out.append(f"### Scenario {scenario} ({formulation})\n")
+        out.append(f"Closed-loop metrics per backend ({fmt(duration)} s simulated):\n")
+        out.append(
+            md_table(
+                ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
+                [[str(r["backend"])] + [_closed_loop_cell(r, c, s) for _, c, s in CLOSED_LOOP_TABLE]
+                 for _, r in g.iterrows()],
+            )
+        )
+        errors = g[g["status"] != "ok"]
+        for _, r in errors.iterrows():
+            out.append(f"- {r['backend']}: {fmt(r.get('error'))}\n")
+        key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
+        if key in plot_files:
+            out.append(f"![closed loop, {scenario}]({plot_files[key]})\n")
+        key = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
+        if key in plot_files:
+            out.append(f"![joint velocities, {scenario}]({plot_files[key]})\n")
+        key = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
+        if key in plot_files:
+            out.append(f"![key-point distances, {scenario}]({plot_files[key]})\n")
+    return out
+
+
+def render(results: tables.Results, plot_files: dict[str, str] | None = None,
+           date: str | None = None) -> str:
+    """The text of ``report.md``.
+
+    Args:
+        results: The rows read by :func:`qpbench.report.tables.read_results`.
+        plot_files: Plot key -> path relative to the report (keys as made by
+            :mod:`qpbench.report.plots`); missing keys are simply not shown.
+        date: Date line (default: now, UTC).
+    """
+    plot_files = plot_files or {}
+    date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = ["# qpbench report\n"]
+    lines.append(
+        "Per-tick QPs of the compliant redundant manipulator of Zhou, Xu & Li (2019), "
+        "benchmarked per tick and in the closed loop. Every number below is recomputed "
+        "from the result files listed here.\n"
+    )
+    lines.append(f"Date: {date}\n")
+    lines.append("Result files:\n")
+    lines.append(
+        md_table(
+            ["file", "kind", "rows", "sha256"],
+            [[f.path.name, f.kind, f.rows, f.sha256[:16]] for f in results.files],
+        )
+    )
+    lines.append("## Machine\n")
+    lines.append("Machine the report was written on:\n")
+    lines.append(md_table(["property", "value"], [[k, v] for k, v in machine_info().items()]))
+    lines.append("Package versions:\n")
+    lines.append(md_table(["package", "version"], [[k, v] for k, v in package_versions().items()]))
+    if not results.bench.empty:
+        lines.extend(_bench_section(results, plot_files))
+        profiles_used = sorted(set(results.bench["profile"].astype(str)))
+        lines.append("## Profiles\n")
+        lines.append("Settings asked of every backend and success tolerances:\n")
+        lines.append(
+            md_table(
+                ["profile", "eps_abs", "eps_rel", "max_iter", "time limit (s)", "primal tol",
+                 "dual tol", "gap tol"],
+                [[p.name, p.eps_abs, p.eps_rel, p.max_iter, p.time_limit, p.tolerance.primal,
+                  p.tolerance.dual, p.tolerance.gap]
+                 for n, p in PROFILES.items() if n in profiles_used],
+            )
+        )
+    if not results.closed_loop.empty:
+        lines.extend(_closed_loop_section(results, plot_files))
+    return "\n".join(lines)
+
+
+def write_report(paths: list[str | Path], out: str | Path, *, force: bool = False,
+                 plots: bool = True) -> Path:
+    """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
+
+    Raises:
+        InputError: a path is missing or not a result CSV.
+        OutputExistsError: ``out/report.md`` exists and ``force`` is false.
+    """
+    from ..atomic import check_output, write_text
+
+    out = Path(out)
+    report_path = out / "report.md"
+    check_output(report_path, force=force)
+    results = tables.read_results(paths)
+    plot_files: dict[str, str] = {}
+    if plots:
+        from .plots import write_plots
+
+        plot_files = write_plots(results, out / "plots", relative_to=out)
+    write_text(report_path, render(results, plot_files))
+    return report_path

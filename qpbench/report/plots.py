@@ -1,0 +1,273 @@
+"""PNG figures of a report (matplotlib, Agg backend, imported inside the functions).
+
+Keys of the returned mapping (used by :mod:`qpbench.report.markdown`):
+
+- ``perf_profile_<group>``: Dolan-More performance profile of runtime;
+- ``per_tick_<group>_<scenario>``: solve time and optimality gap against t;
+- ``closed_loop_<scenario>_<formulation>``: the paper's figures per backend:
+  tracking error, contact force, ``||v||^2`` (against the ``pinv`` baseline),
+  smallest key-point distance, the equality duals ``||y||`` and the largest
+  obstacle dual where logged;
+- ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one panel per backend;
+- ``closed_loop_d_<scenario>_<formulation>``: every key point's distance to every
+  obstacle, one panel per backend.
+
+For the network the duals are its state: ``y = -l1`` and ``z = l2`` at
+equilibrium, so the ``||y||`` and largest-obstacle-dual panels show its
+``||l1||`` and ``max l2``.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..atomic import atomic_path
+from ..harness.closed_loop import find_column, v_norm2, velocity_columns
+from . import tables
+from .markdown import slug
+
+log = logging.getLogger("qpbench.report")
+
+# Candidate per-tick log columns (first present wins).
+_TRACK = ("tracking_error", "tangential_error", "tracking_error_m")
+_FORCE = ("force", "contact_force", "force_n", "f")
+_MIN_DIST = ("d_min", "min_distance", "min_obstacle_distance", "distance_min")
+_L1 = ("l1_norm", "rnn_l1_norm", "norm_l1")
+_L2 = ("l2_norm", "rnn_l2_norm", "z_max", "l2_max")
+_BASELINE = "pinv"
+
+
+def _y_norm(df: pd.DataFrame) -> np.ndarray | None:
+    """``||y||`` of the equality duals (the network's ``||l1||``: ``y = -l1`` at equilibrium)."""
+    got = _norm_series(df, _L1, "l1_")
+    if got is not None:
+        return got
+    cols = [c for c in df.columns if re.fullmatch(r"y_\d+", str(c))]
+    if cols:
+        return np.linalg.norm(df[cols].to_numpy(float), axis=1)
+    return None
+
+
+def _keypoint_columns(df: pd.DataFrame) -> list[str]:
+    """Per key point and obstacle distance columns ``d_<A>_<obstacle>`` of a tick log."""
+    return [c for c in df.columns if str(c).startswith("d_") and c != "d_min"]
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _colours(ax, n: int) -> None:
+    """Distinct colours for up to 20 lines (matplotlib's default cycle has 10)."""
+    if n > 10:
+        plt = _pyplot()
+        ax.set_prop_cycle(color=plt.cm.tab20.colors)
+
+
+def _save(fig, path: Path) -> None:
+    plt = _pyplot()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None:
+    """Dolan-More profile ``rho_s(tau)`` of runtime for each backend (log-scale tau)."""
+    plt = _pyplot()
+    taus, profiles = tables.performance_profile(rows)
+    fig, ax = plt.subplots(figsize=(6.5, 4.0))
+    _colours(ax, len(profiles))
+    for backend, rho in profiles.items():
+        ax.step(taus, rho, where="post", label=backend)
+    ax.set_xscale("log")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("tau (runtime / best runtime)")
+    ax.set_ylabel("fraction of problems solved")
+    ax.set_title(f"Performance profile of runtime ({label})")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    _save(fig, path)
+
+
+def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
+    """Solve time [us] and |optimality gap| against t [s], one line per backend."""
+    if "t" not in rows.columns:
+        return False
+    df = rows.copy()
+    df["t"] = pd.to_numeric(df["t"], errors="coerce")
+    df = df[np.isfinite(df["t"])]
+    if df.empty:
+        return False
+    plt = _pyplot()
+    fig, (ax_t, ax_g) = plt.subplots(2, 1, figsize=(7.5, 5.5), sharex=True)
+    _colours(ax_t, df["backend"].nunique())
+    _colours(ax_g, df["backend"].nunique())
+    for backend, g in df.sort_values("t").groupby("backend", sort=True):
+        t = g["t"].to_numpy(float)
+        ax_t.plot(t, pd.to_numeric(g["wall_time_median_s"], errors="coerce") * 1e6, lw=0.8, label=backend)
+        gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
+        gap = np.where(g["found"].to_numpy(bool), gap, np.nan)
+        ax_g.plot(t, np.maximum(gap, 1e-16), lw=0.8, label=backend)
+    ax_t.set_yscale("log")
+    ax_t.set_ylabel("solve time (us)")
+    ax_t.set_title(title)
+    ax_g.set_yscale("log")
+    ax_g.set_ylabel("|optimality gap|")
+    ax_g.set_xlabel("t (s)")
+    for ax in (ax_t, ax_g):
+        ax.grid(True, which="both", alpha=0.3)
+    ax_t.legend(fontsize=7, ncol=2)
+    _save(fig, path)
+    return True
+
+
+def _read_log(path) -> pd.DataFrame | None:
+    if not isinstance(path, str) or not path or not Path(path).exists():
+        return None
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - a damaged log only loses its curve
+        log.warning("%s: cannot read tick log (%s)", path, exc)
+        return None
+
+
+def _norm_series(df: pd.DataFrame, names: tuple[str, ...], prefix: str) -> np.ndarray | None:
+    col = find_column(df, names)
+    if col is not None:
+        return df[col].to_numpy(float)
+    cols = [c for c in df.columns if str(c).startswith(prefix) and str(c)[len(prefix):].isdigit()]
+    if cols:
+        return np.linalg.norm(df[cols].to_numpy(float), axis=1)
+    if prefix.rstrip("_") in df.columns:
+        return np.array([float(np.linalg.norm(np.atleast_1d(x))) for x in df[prefix.rstrip("_")]])
+    return None
+
+
+def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path: Path,
+                      path_v: Path) -> tuple[bool, bool]:
+    """The paper's figures for one scenario, every backend overlaid (see module doc)."""
+    logs = {}
+    for _, r in runs.iterrows():
+        df = _read_log(r.get("log_path"))
+        if df is not None and "t" in df.columns and len(df):
+            logs[str(r["backend"])] = df
+    if not logs:
+        return False, False
+    plt = _pyplot()
+    panels = []
+    if any(find_column(d, _TRACK) for d in logs.values()):
+        panels.append(("tracking error (mm)", lambda d: _col(d, _TRACK, 1e3), "linear"))
+    if any(find_column(d, _FORCE) for d in logs.values()):
+        panels.append(("contact force (N)", lambda d: _col(d, _FORCE, 1.0), "linear"))
+    panels.append(("||v||^2 (rad^2/s^2)", v_norm2, "log"))
+    if any(find_column(d, _MIN_DIST) for d in logs.values()):
+        panels.append(("min key-point distance (mm)", lambda d: _col(d, _MIN_DIST, 1e3), "linear"))
+    if any(_y_norm(d) is not None and np.isfinite(_y_norm(d)).any() for d in logs.values()):
+        panels.append(("||y|| equality duals\n(rnn: ||l1||)", _y_norm, "linear"))
+    if any(_norm_series(d, _L2, "l2_") is not None for d in logs.values()):
+        panels.append(("max obstacle dual\n(rnn: max l2)", lambda d: _norm_series(d, _L2, "l2_"), "linear"))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7.5, 2.1 * len(panels) + 0.6), sharex=True)
+    axes = np.atleast_1d(axes)
+    for ax, (ylabel, getter, scale) in zip(axes, panels):
+        _colours(ax, len(logs))
+        for backend, d in logs.items():
+            y = getter(d)
+            if y is None:
+                continue
+            style = dict(lw=1.6, ls="--", color="black") if backend == _BASELINE else dict(lw=0.9)
+            ax.plot(d["t"].to_numpy(float), y, label=backend, **style)
+        if scale == "log":
+            ax.set_yscale("symlog", linthresh=1e-3)
+        ax.set_ylabel(ylabel, fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[0].set_title(f"Closed loop, {scenario} ({formulation})")
+    axes[0].legend(fontsize=7, ncol=3)
+    axes[-1].set_xlabel("t (s)")
+    _save(fig, path)
+
+    done_v = _per_backend_figure(logs, velocity_columns, "v (rad/s)", 1.0,
+                                 f"Joint velocities, {scenario} ({formulation})", path_v)
+    return True, done_v
+
+
+def _per_backend_figure(logs: dict, columns, ylabel: str, scale: float, title: str, path: Path) -> bool:
+    """One panel per backend, one line per column that ``columns(log)`` names."""
+    with_cols = {b: d for b, d in logs.items() if columns(d)}
+    if not with_cols:
+        return False
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(with_cols), 1, figsize=(7.5, 1.8 * len(with_cols) + 0.6), sharex=True,
+                             squeeze=False)
+    for ax, (backend, d) in zip(axes[:, 0], with_cols.items()):
+        for c in columns(d):
+            ax.plot(d["t"].to_numpy(float), d[c].to_numpy(float) * scale, lw=0.8, label=c)
+        ax.set_ylabel(f"{backend}\n{ylabel}", fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].set_title(title)
+    axes[0, 0].legend(fontsize=6, ncol=4)
+    axes[-1, 0].set_xlabel("t (s)")
+    _save(fig, path)
+    return True
+
+
+def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Path) -> bool:
+    """Distance of every key point to every obstacle [mm], one panel per backend."""
+    logs = {}
+    for _, r in runs.iterrows():
+        df = _read_log(r.get("log_path"))
+        if df is not None and "t" in df.columns and len(df):
+            logs[str(r["backend"])] = df
+    return _per_backend_figure(logs, _keypoint_columns, "distance (mm)", 1e3,
+                               f"Key-point distances, {scenario} ({formulation})", path)
+
+
+def _col(df: pd.DataFrame, names: tuple[str, ...], scale: float):
+    col = find_column(df, names)
+    return None if col is None else df[col].to_numpy(float) * scale
+
+
+def write_plots(results: tables.Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
+    """Write every figure of a report into ``folder``; return key -> path relative to ``relative_to``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    files: dict[str, str] = {}
+
+    def _rel(p: Path) -> str:
+        return Path(p).resolve().relative_to(Path(relative_to).resolve()).as_posix()
+
+    for label, _tol, rows in tables.bench_groups(results.bench):
+        key = f"perf_profile_{slug(label)}"
+        performance_profile_plot(rows, label, folder / f"{key}.png")
+        files[key] = _rel(folder / f"{key}.png")
+        if "scenario" in rows.columns:
+            for scenario, g in rows.groupby(rows["scenario"].map(tables.scenario_key), sort=True):
+                key = f"per_tick_{slug(label)}_{slug(scenario)}"
+                if per_tick_plot(g, f"{scenario} ({label})", folder / f"{key}.png"):
+                    files[key] = _rel(folder / f"{key}.png")
+    df = results.closed_loop
+    if not df.empty:
+        for (scenario, formulation), g in df.groupby(
+            [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
+        ):
+            key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
+            key_v = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
+            done, done_v = closed_loop_plots(g, scenario, formulation, folder / f"{key}.png",
+                                             folder / f"{key_v}.png")
+            if done:
+                files[key] = _rel(folder / f"{key}.png")
+            if done_v:
+                files[key_v] = _rel(folder / f"{key_v}.png")
+            key_d = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
+            if done and keypoint_plot(g, scenario, formulation, folder / f"{key_d}.png"):
+                files[key_d] = _rel(folder / f"{key_d}.png")
+    return files

@@ -1,0 +1,372 @@
+"""Reading result CSVs and the statistics a report shows.
+
+Two kinds of CSV are recognised by their columns:
+
+- **bench** (``qpbench bench``): one row per (problem, backend, profile, mode);
+- **closed-loop** (``qpbench closed-loop``): one row per (scenario, backend),
+  with a ``log_file`` column naming the per-tick log beside it.
+
+Aggregates follow qpbenchmark (``qpbenchmark/report.py``, ``results.py``):
+
+- success rate: percentage of rows whose ``success`` is true (found, and
+  residuals and gaps within the profile's tolerance, see :mod:`qpbench.metrics`);
+- shifted geometric mean (:func:`qpbenchmark.shgeom.shgeom`) with qpbenchmark's
+  shift ``sh = 10`` for every metric. A row whose solution was not found counts
+  with the *not-found value*: the profile's time limit for runtime, the
+  profile's tolerance for residuals and gaps. One departure, because our sets
+  hold infeasible problems (qpbenchmark's do not): a backend that reports the
+  infeasibility the reference found has answered right, and its runtime
+  counts as measured. Residuals and gaps are floored at
+  their tolerance, so over-accuracy is neither rewarded nor penalised. A value
+  that is missing (NaN: e.g. no reference objective) counts as not found; an
+  infinite residual (a backend that returns no duals) stays infinite.
+- ratios to the best: each backend's mean divided by the smallest mean.
+
+Runtime is ``wall_time_median_s`` (the harness's timing of the backend call,
+in [s]). With ``sh = 10`` s and runtimes of microseconds the shifted geometric
+mean is practically the arithmetic mean, dominated by failures (each counted
+as the full time limit): read it with the success rate, and the medians and
+tails of the per-scenario tables.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..exceptions import InputError
+from ..profiles import Tolerance, get_profile
+
+#: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
+SHIFT = 10.0
+
+#: Columns that make a CSV a bench result.
+BENCH_COLUMNS = (
+    "problem",
+    "backend",
+    "profile",
+    "found",
+    "success",
+    "wall_time_median_s",
+    "primal_residual",
+    "dual_residual",
+    "duality_gap",
+    "optimality_gap",
+)
+
+#: Columns that make a CSV a closed-loop result.
+CLOSED_LOOP_COLUMNS = ("scenario", "backend", "status", "log_file")
+
+#: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?)
+SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
+    "runtime": ("wall_time_median_s", "runtime", False),
+    "primal_residual": ("primal_residual", "primal", True),
+    "dual_residual": ("dual_residual", "dual", True),
+    "duality_gap": ("duality_gap", "gap", True),
+    "optimality_gap": ("optimality_gap", "gap", True),
+}
+
+
+@dataclass
+class ResultFile:
+    """One CSV given to the report."""
+
+    path: Path
+    kind: str  # "bench" | "closed-loop"
+    sha256: str
+    rows: int
+
+
+@dataclass
+class Results:
+    """All rows of the CSVs given to the report, by kind."""
+
+    bench: pd.DataFrame
+    closed_loop: pd.DataFrame
+    files: list[ResultFile] = field(default_factory=list)
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
+    if series.dtype == bool:
+        return series
+    # an empty cell (a row whose solve crashed) counts as false
+    mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False,
+               "nan": False, "": False, "none": False}
+    text = series.astype(str).str.strip().str.lower()
+    bad = ~text.isin(list(mapping))
+    if bad.any():
+        raise InputError(
+            f"non-boolean value {series[bad].iloc[0]!r} in row {int(np.flatnonzero(bad)[0]) + 2}",
+            path=path,
+            key=key,
+        )
+    return text.map(mapping).astype(bool)
+
+
+def expand_paths(paths: list[str | Path]) -> list[Path]:
+    """CSV files named directly, and every ``*.csv`` in a named folder (sorted).
+
+    Raises:
+        InputError: a path does not exist, or a folder holds no CSV.
+    """
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*.csv") if not q.name.startswith("."))
+            if not found:
+                raise InputError("folder holds no result CSV", path=p)
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise InputError("no such file or folder", path=p)
+    return out
+
+
+def read_results(paths: list[str | Path]) -> Results:
+    """Read bench and closed-loop CSVs (folders are searched for ``*.csv``).
+
+    Closed-loop rows get ``log_path``: their ``log_file`` resolved against the
+    CSV's folder (or ``None`` when the run left no log).
+
+    Raises:
+        InputError: unreadable CSV, or one that is neither kind (naming the file).
+    """
+    bench, loops, files = [], [], []
+    for path in expand_paths(paths):
+        try:
+            df = pd.read_csv(path)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise InputError(f"not a readable CSV ({exc})", path=path) from None
+        cols = set(df.columns)
+        if set(BENCH_COLUMNS) <= cols:
+            df["found"] = _as_bool(df["found"], path, "found")
+            df["success"] = _as_bool(df["success"], path, "success")
+            df["source"] = str(path)
+            bench.append(df)
+            kind = "bench"
+        elif set(CLOSED_LOOP_COLUMNS) <= cols:
+            df["log_path"] = [
+                str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
+            ]
+            df["source"] = str(path)
+            loops.append(df)
+            kind = "closed-loop"
+        else:
+            missing = sorted(set(BENCH_COLUMNS) - cols)
+            raise InputError(
+                "neither a bench CSV (missing columns "
+                + ", ".join(missing)
+                + ") nor a closed-loop CSV (needs scenario, backend, status, log_file)",
+                path=path,
+            )
+        files.append(ResultFile(path, kind, _sha256(path), len(df)))
+    return Results(
+        bench=pd.concat(bench, ignore_index=True) if bench else pd.DataFrame(),
+        closed_loop=pd.concat(loops, ignore_index=True) if loops else pd.DataFrame(),
+        files=files,
+    )
+
+
+def profile_tolerance(profile: str, path: str | None = None) -> Tolerance:
+    """The success thresholds of a profile named in a CSV's ``profile`` column."""
+    try:
+        return get_profile(str(profile)).tolerance
+    except InputError as exc:
+        raise InputError(exc.message, path=path, key="profile") from None
+
+
+def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.ndarray:
+    """The values entering the shifted geometric mean of ``metric`` (see module doc)."""
+    column, tol_attr, floored = SHGEOM_METRICS[metric]
+    not_found = float(getattr(tolerance, tol_attr))
+    values = pd.to_numeric(df[column], errors="coerce").to_numpy(dtype=float)
+    if metric != "runtime":
+        values = np.abs(values)
+    answered = df["found"].to_numpy(dtype=bool)
+    if metric == "runtime":
+        answered = answered | correct_infeasibility(df)
+    values = np.where(answered & ~np.isnan(values), values, not_found)
+    if floored:
+        values = np.maximum(values, not_found)
+    return values
+
+
+#: Reference statuses of problems whose right answer is "no solution".
+INFEASIBLE_STATUSES = ("primal_infeasible", "dual_infeasible")
+
+
+def correct_infeasibility(df: pd.DataFrame) -> np.ndarray:
+    """Rows where the backend reported the infeasibility the reference found (a right answer)."""
+    if "status" not in df.columns or "reference_status" not in df.columns:
+        return np.zeros(len(df), dtype=bool)
+    status = df["status"].astype(str).to_numpy()
+    ref = df["reference_status"].astype(str).to_numpy()
+    return (status == ref) & np.isin(ref, INFEASIBLE_STATUSES)
+
+
+def shgeom_of(values: np.ndarray) -> float:
+    """qpbenchmark's shifted geometric mean with ``sh = SHIFT`` (inf if any value is)."""
+    from qpbenchmark.shgeom import shgeom
+
+    if len(values) == 0:
+        return math.nan
+    if np.isinf(values).any():
+        return math.inf
+    return float(shgeom(np.asarray(values, dtype=float), SHIFT))
+
+
+def group_label(profile: str, mode: str | None) -> str:
+    """Heading of a (profile, mode) group, e.g. ``default, sequential``."""
+    return f"{profile}, {mode}" if mode else str(profile)
+
+
+def bench_groups(bench: pd.DataFrame):
+    """Yield ``(label, tolerance, rows)`` per (profile, mode) of the bench rows."""
+    if bench.empty:
+        return
+    keys = ["profile", "mode"] if "mode" in bench.columns else ["profile"]
+    df = bench.copy()
+    if "mode" in df.columns:
+        df["mode"] = df["mode"].fillna("")
+    for key, rows in df.groupby(keys, sort=True):
+        key = key if isinstance(key, tuple) else (key,)
+        profile = key[0]
+        mode = key[1] if len(key) > 1 else None
+        tolerance = profile_tolerance(profile, rows["source"].iloc[0])
+        yield group_label(profile, mode), tolerance, rows
+
+
+def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
+    """Per backend: success rate [%] and shifted geometric mean of each metric.
+
+    Columns: ``problems``, ``success_rate`` (%), ``found_rate`` (%), and for each
+    metric of :data:`SHGEOM_METRICS` the absolute mean (``<metric>``, runtime in
+    [s]) and the ratio to the best backend (``<metric>_ratio``); plus
+    ``overhead_median_s``: median of wall time minus solver-reported time, the
+    harness's own overhead (NaN when no backend reports a time), and
+    ``runtime_feasible`` (+ ``_ratio``): the runtime mean over the problems whose
+    reference is optimal only, so that ticks where the right answer is
+    "infeasible" (the paper formulation's start) do not decide the ranking.
+    """
+    out = {}
+    for backend, g in rows.groupby("backend", sort=True):
+        rec = {
+            "problems": len(g),
+            "success_rate": 100.0 * g["success"].astype(float).mean(),
+            "found_rate": 100.0 * g["found"].astype(float).mean(),
+        }
+        for metric in SHGEOM_METRICS:
+            rec[metric] = shgeom_of(metric_values(g, metric, tolerance))
+        if "reference_status" in g.columns:
+            feasible = g[g["reference_status"].astype(str) == "optimal"]
+            rec["runtime_feasible"] = shgeom_of(metric_values(feasible, "runtime", tolerance))
+        else:
+            rec["runtime_feasible"] = math.nan
+        if "solver_time_s" in g.columns:
+            diff = pd.to_numeric(g["wall_time_median_s"], errors="coerce") - pd.to_numeric(
+                g["solver_time_s"], errors="coerce"
+            )
+            diff = diff[np.isfinite(diff)]
+            rec["overhead_median_s"] = float(diff.median()) if len(diff) else math.nan
+        else:
+            rec["overhead_median_s"] = math.nan
+        out[backend] = rec
+    df = pd.DataFrame.from_dict(out, orient="index")
+    for metric in (*SHGEOM_METRICS, "runtime_feasible"):
+        best = df[metric].replace([np.inf], np.nan).min()
+        df[f"{metric}_ratio"] = df[metric] / best if best and best > 0 else math.nan
+    return df
+
+
+def scenario_key(value) -> str:
+    """Scenario label of a bench row (``-`` when the problem has no scenario)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
+        return "-"
+    return str(value)
+
+
+def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.DataFrame]:
+    """Per scenario, per backend: problems, success [%], runtime statistics.
+
+    Columns: ``problems``, ``success_rate`` (%), ``runtime_ratio`` (shifted
+    geometric mean of runtime over the best backend of that scenario),
+    ``runtime_p50_s``, ``runtime_p99_s``, ``runtime_max_s`` (over every row,
+    found or not: the time a controller waits), ``optimality_gap_max``
+    (largest absolute gap among found solutions, NaN when none has one).
+    """
+    df = rows.copy()
+    df["_scenario"] = (
+        [scenario_key(v) for v in df["scenario"]] if "scenario" in df.columns else "-"
+    )
+    tables = {}
+    for scenario, g in df.groupby("_scenario", sort=True):
+        rec = {}
+        for backend, b in g.groupby("backend", sort=True):
+            t = pd.to_numeric(b["wall_time_median_s"], errors="coerce").to_numpy(dtype=float)
+            t = t[np.isfinite(t)]
+            gap = np.abs(pd.to_numeric(b["optimality_gap"], errors="coerce").to_numpy(dtype=float))
+            gap = gap[b["found"].to_numpy(dtype=bool) & np.isfinite(gap)]
+            rec[backend] = {
+                "problems": len(b),
+                "success_rate": 100.0 * b["success"].astype(float).mean(),
+                "runtime_shgeom": shgeom_of(metric_values(b, "runtime", tolerance)),
+                "runtime_p50_s": float(np.percentile(t, 50)) if len(t) else math.nan,
+                "runtime_p99_s": float(np.percentile(t, 99)) if len(t) else math.nan,
+                "runtime_max_s": float(t.max()) if len(t) else math.nan,
+                "optimality_gap_max": float(gap.max()) if len(gap) else math.nan,
+            }
+        table = pd.DataFrame.from_dict(rec, orient="index")
+        best = table["runtime_shgeom"].replace([np.inf], np.nan).min()
+        table["runtime_ratio"] = table["runtime_shgeom"] / best if best and best > 0 else math.nan
+        tables[scenario] = table
+    return tables
+
+
+def performance_profile(
+    rows: pd.DataFrame, taus: np.ndarray | None = None
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Dolan-More performance profile of runtime.
+
+    For problem p and backend s, ``r[p, s] = t[p, s] / min_s t[p, s]`` over the
+    successful solves (a failure has ``r = inf``); the profile of s is
+    ``rho_s(tau) = |{p : r[p, s] <= tau}| / |P|``.
+
+    Returns:
+        ``(taus, {backend: rho(taus)})``.
+    """
+    rows = rows.assign(
+        _key=rows["problem"].astype(str)
+        + "\x00"
+        + (rows["scenario"].map(scenario_key) if "scenario" in rows.columns else "")
+    )
+    t = rows.pivot_table(index="_key", columns="backend", values="wall_time_median_s", aggfunc="first")
+    ok = rows.pivot_table(index="_key", columns="backend", values="success", aggfunc="first")
+    ok = ok.reindex_like(t).fillna(False).astype(bool)
+    times = t.to_numpy(dtype=float)
+    times = np.where(ok.to_numpy() & np.isfinite(times), times, np.inf)
+    best = times.min(axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratios = np.where(np.isfinite(best), times / best, np.inf)
+    if taus is None:
+        finite = ratios[np.isfinite(ratios)]
+        top = max(2.0, float(finite.max()) * 1.05) if finite.size else 2.0
+        taus = np.logspace(0, np.log10(top), 200)
+    profiles = {
+        str(b): (ratios[:, j][None, :] <= taus[:, None]).mean(axis=1)
+        for j, b in enumerate(t.columns)
+    }
+    return taus, profiles

@@ -1,0 +1,164 @@
+"""End-to-end tests of the command line: bench -> report, closed-loop -> report, run.
+
+Every sub-command's ``--help`` carries an example; exit codes follow the
+convention (0 ok, 1 some solves or runs failed, 2 usage or input error).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from qpbench.cli import COMMANDS, build_parser, main
+from qpbench.profiles import get_profile
+
+from test_report import assert_close, parse_tables, qpbenchmark_ratios
+
+MAROS = Path("/work/shared/data/maros_meszaros")
+BACKENDS = "qpsolvers:daqp,osqp,pinv"
+
+
+def _commands():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    return sorted(sub.choices)
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_help_has_an_example(command, capsys):
+    if command not in _commands():
+        pytest.skip(f"qpbench {command} is not installed here")
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "example" in text.lower()
+    assert f"qpbench {command}" in text
+
+
+def test_no_command_is_a_usage_error(capsys):
+    assert main([]) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["nosuchcommand"])
+    assert exc.value.code == 2
+
+
+@pytest.fixture(scope="module")
+def bench_and_report(tmp_path_factory):
+    """A few dozen ticks of wall dumped by the simulator and the Maros-Meszaros subset, benched and reported."""
+    from qpbench.sim.loop import simulate
+
+    root = tmp_path_factory.mktemp("e2e")
+    simulate("wall", "qpsolvers:daqp", duration=0.4, every=10, dump=root / "wall")
+    codes = [
+        main(["-q", "bench", str(root / "wall"), "--backends", BACKENDS, "--out", str(root / "wall.csv")]),
+        main(["-q", "bench", str(MAROS), "--backends", BACKENDS, "--out", str(root / "mm.csv")]),
+    ]
+    rep = main(["-q", "report", str(root / "wall.csv"), str(root / "mm.csv"), "--out", str(root / "rep")])
+    return root, codes, rep
+
+
+def test_bench_then_report_numbers_match_the_csvs(bench_and_report):
+    root, codes, rep = bench_and_report
+    assert rep == 0
+    assert all(c in (0, 1) for c in codes)
+    bench = pd.concat([pd.read_csv(root / "wall.csv"), pd.read_csv(root / "mm.csv")], ignore_index=True)
+    assert len(bench) == (40 + len(list(MAROS.glob("*.mat")))) * 3
+    # the paper formulation is infeasible at the start of wall: the reference says so
+    wall = bench[bench["scenario"] == "wall"]
+    assert (wall.loc[wall["t"] < 0.1, "reference_status"] == "primal_infeasible").all()
+    assert (wall.loc[wall["t"] > 0.2, "reference_status"] == "optimal").all()
+    md = (root / "rep" / "report.md").read_text()
+    tol = get_profile("default").tolerance
+    tabs = parse_tables(md)
+    ratios = next(t for t in tabs if t["caption"].startswith("Success rate and shifted"))
+    shown = {r[0]: r for r in ratios["rows"]}
+    assert set(shown) == set(BACKENDS.split(","))
+    for name, col, nf, floor in (
+        ("runtime", "wall_time_median_s", tol.runtime, None),
+        ("primal residual", "primal_residual", tol.primal, tol.primal),
+        ("duality gap", "duality_gap", tol.gap, tol.gap),
+    ):
+        j = ratios["header"].index(name)
+        expected = qpbenchmark_ratios(bench, col, nf, floor)
+        for b, r in shown.items():
+            assert_close(r[j], expected[b], f"{name} of {b}")
+    for b, r in shown.items():
+        rows = bench[bench["backend"] == b]
+        assert int(r[1]) == len(rows)
+        assert_close(r[2], 100 * rows["success"].mean(), f"success of {b}")
+    scen = {t["headings"][4]: t for t in tabs if t["headings"].get(4, "").startswith("Scenario")}
+    assert set(scen) == {"Scenario wall (default, sequential)", "Scenario - (default, sequential)"}
+    for r in scen["Scenario wall (default, sequential)"]["rows"]:
+        t = wall.loc[wall["backend"] == r[0], "wall_time_median_s"].to_numpy(float)
+        assert_close(r[4], np.percentile(t, 50) * 1e6, "p50")
+        assert_close(r[6], t.max() * 1e6, "max")
+    assert (root / "rep" / "plots" / "perf_profile_default_sequential.png").exists()
+    assert (root / "rep" / "plots" / "per_tick_default_sequential_wall.png").exists()
+
+
+def test_closed_loop_then_report(tmp_path):
+    out = tmp_path / "cl"
+    code = main(["-q", "closed-loop", "--scenarios", "wall,narrow", "--backends", "qpsolvers:daqp,pinv",
+                 "--duration", "0.5", "--out", str(out)])
+    assert code == 0
+    table = pd.read_csv(out / "closed_loop.csv")
+    assert len(table) == 4 and (table["status"] == "ok").all()
+    assert main(["-q", "report", str(out / "closed_loop.csv"), "--out", str(out)]) == 0
+    md = (out / "report.md").read_text()
+    tabs = [t for t in parse_tables(md) if (t["caption"] or "").startswith("Closed-loop metrics")]
+    assert [t["headings"][3] for t in tabs] == ["Scenario wall (paper)", "Scenario narrow (paper)"]
+    for t in tabs:
+        scenario = t["headings"][3].split()[1]
+        for r in t["rows"]:
+            row = table[(table["scenario"] == scenario) & (table["backend"] == r[0])].iloc[0]
+            head = t["header"]
+            assert_close(r[head.index("min obstacle dist (mm)")], row["min_obstacle_distance"] * 1e3, "dist")
+            assert_close(r[head.index("solve p99 (us)")], row["solve_time_p99_s"] * 1e6, "p99")
+            assert_close(r[head.index("int v^2 dt")], row["v2_integral"], "v2")
+            assert int(r[head.index("infeasible ticks")]) == row["infeasible_ticks"]
+    for png in re.findall(r"\]\((plots/[^)]+\.png)\)", md):
+        assert (out / png).exists()
+    assert (out / "plots" / "closed_loop_wall_paper.png").exists()
+
+
+def test_run_end_to_end(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    args = ["-q", "run", "--duration", "0.3", "--scenarios", "wall", "--backends", "qpsolvers:daqp,pinv",
+            "--out", "tmp"]
+    assert main(args) == 0
+    out = tmp_path / "tmp"
+    assert (tmp_path / "problems" / "wall" / "problems.parquet").exists()  # regenerated: none shipped here
+    assert len(pd.read_parquet(tmp_path / "problems" / "wall" / "problems.parquet")) == 2000
+    bench = pd.read_csv(out / "bench" / "wall.csv")
+    assert set(bench["backend"]) == {"qpsolvers:daqp", "pinv"}
+    assert (bench["t"] < 0.3).all() and len(bench) > 0
+    loop = pd.read_csv(out / "closed_loop.csv")
+    assert sorted(loop["backend"]) == ["pinv", "qpsolvers:daqp"] and (loop["duration_s"] == 0.3).all()
+    md = (out / "report.md").read_text()
+    assert "## Per-tick benchmark" in md and "## Closed loop" in md
+    manifest = json.loads((out / "run.json").read_text())
+    assert manifest["backends"] == ["qpsolvers:daqp", "pinv"]
+    assert not (out / ".partial").exists()
+    # a second run replaces the previous run's outputs (run.json marks the folder as ours)
+    first = (out / "closed_loop.csv").stat().st_mtime_ns
+    assert main(args) == 0
+    assert (out / "closed_loop.csv").stat().st_mtime_ns != first
+    # --resume of a finished run starts from an empty staging folder and completes too
+    assert main([*args, "--resume"]) == 0
+    # other files in the folder are left alone; a report.md that no run wrote is not replaced
+    other = tmp_path / "other"
+    (other / "simulate").mkdir(parents=True)
+    (other / "simulate" / "notes.txt").write_text("mine")
+    (other / "report.md").write_text("hand-written")
+    assert main([*args[:-1], "other"]) == 2
+    assert (other / "report.md").read_text() == "hand-written"
+    assert main([*args[:-1], "other", "--force"]) == 0
+    assert (other / "simulate" / "notes.txt").read_text() == "mine"
+    assert "## Closed loop" in (other / "report.md").read_text()
+    assert main(["-q", "run", "--duration", "-1", "--out", "x"]) == 2

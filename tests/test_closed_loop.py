@@ -1,0 +1,162 @@
+"""Tests of qpbench.harness.closed_loop and ``qpbench closed-loop``.
+
+Real simulator runs, shortened to 0.5 s: the table's figures are checked
+against the per-tick logs they came from.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from qpbench.cli import main
+from qpbench.exceptions import OutputExistsError, ParamError
+from qpbench.harness import closed_loop as cl
+
+SCENARIOS = ["wall", "narrow"]
+BACKENDS = ["qpsolvers:daqp", "pinv"]
+
+
+@pytest.fixture(scope="module")
+def table_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cl")
+    outcome = cl.run_closed_loop(SCENARIOS, BACKENDS, out, duration=0.5)
+    return out, outcome
+
+
+def test_table_has_one_row_per_pair(table_dir):
+    out, outcome = table_dir
+    table = pd.read_csv(out / cl.CSV_NAME)
+    assert list(table.columns[: len(cl.COLUMNS)]) == list(cl.COLUMNS)
+    assert [(r.scenario, r.backend) for r in table.itertuples()] == [
+        (s, b) for s in SCENARIOS for b in BACKENDS
+    ]
+    assert (table["status"] == "ok").all(), table["error"].tolist()
+    assert outcome.errors == 0 and outcome.ran == 4 and outcome.skipped == 0
+    # simulator summary keys come along
+    for key in ("zero_velocity_ticks", "first_infeasible_t", "kp_hat_final", "joint_velocity_limit_violations"):
+        assert key in table.columns
+    assert (table["duration_s"] == 0.5).all()
+    assert (table["ticks"] == 500).all()
+
+
+def test_figures_equal_the_tick_logs(table_dir):
+    out, _ = table_dir
+    table = pd.read_csv(out / cl.CSV_NAME)
+    for r in table.itertuples():
+        log = pd.read_parquet(out / r.log_file)
+        assert len(log) == r.ticks
+        dt = float(np.median(np.diff(log["t"])))
+        assert dt == pytest.approx(0.001)
+        v = log[[c for c in log.columns if c.startswith("v_") and c[2:].isdigit()]].to_numpy()
+        assert r.v2_integral == pytest.approx(np.sum(v**2) * dt, rel=1e-9)
+        st = log["solve_time_s"].to_numpy()
+        assert r.solve_time_p50_s == pytest.approx(np.percentile(st, 50))
+        assert r.solve_time_p99_s == pytest.approx(np.percentile(st, 99))
+        assert r.solve_time_max_s == pytest.approx(st.max())
+        assert r.min_obstacle_distance == pytest.approx(log["d_min"].min())
+        assert r.infeasible_ticks == int((log["status"] != "optimal").sum())
+        assert r.fallback_ticks == int(log["fallback"].sum())
+        assert r.real_time_factor > 0
+    pinv = table[table["backend"] == "pinv"]
+    assert (pinv["infeasible_ticks"] == 0).all()  # the pseudo-inverse always answers
+    daqp = table[(table["backend"] == "qpsolvers:daqp") & (table["scenario"] == "wall")].iloc[0]
+    # the paper formulation is infeasible at the start and the soft fallback takes over
+    assert daqp["infeasible_ticks"] > 0 and daqp["fallback_ticks"] == daqp["infeasible_ticks"]
+    # with the QP the key points keep d_safe (1e-4 m slack), the pseudo-inverse ignores obstacles
+    assert daqp["min_obstacle_distance"] >= 0.01 - 1e-4
+
+
+def test_row_from_run_computes_what_the_summary_lacks():
+    t = np.arange(3000) * 0.001
+    log = pd.DataFrame({
+        "t": t, "v_0": np.ones_like(t), "v_1": 2 * np.ones_like(t),
+        "tracking_error": np.where(t >= 2, 3e-3, 1.0), "force_error": np.where(t >= 2, -0.5, 9.0),
+        "d_min": 0.5 - t / 10, "solve_time_s": np.linspace(1e-5, 2e-5, len(t)),
+    })
+    row = cl.row_from_run("s", "b", "paper", None, log, {"wall_time_s": 1.5, "extra": [1, 2]}, dt=0.001)
+    assert row["tracking_rms_after_2s"] == pytest.approx(3e-3)
+    assert row["tracking_max_after_2s"] == pytest.approx(3e-3)
+    assert row["force_error_rms_after_2s"] == pytest.approx(0.5)
+    assert row["force_error_max_after_2s"] == pytest.approx(0.5)
+    assert row["min_obstacle_distance"] == pytest.approx(0.5 - 2.999 / 10)
+    assert row["v2_integral"] == pytest.approx(5.0 * 3.0)  # |v|^2 = 5 for 3 s
+    assert row["real_time_factor"] == pytest.approx(3.0 / 1.5)
+    assert row["duration_s"] == pytest.approx(3.0)
+    assert row["extra"] == "[1, 2]"
+    assert math.isnan(row["infeasible_ticks"])
+
+
+def test_failing_run_becomes_an_error_row(tmp_path):
+    bad = tmp_path / "typo.toml"
+    bad.write_text("[scenario]\nname = 'typo'\n")
+    outcome = cl.run_closed_loop(["wall", str(bad)], ["pinv"], tmp_path / "o", duration=0.05)
+    table = outcome.table
+    assert list(table["status"]) == ["ok", "error"]
+    assert "ScenarioError" in table["error"].iloc[1] and "typo.toml" in table["error"].iloc[1]
+    assert outcome.errors == 1
+
+
+def test_resume_force_and_refusal(tmp_path):
+    out = tmp_path / "o"
+    first = cl.run_closed_loop(["wall"], ["pinv", "qpsolvers:daqp"], out, duration=0.05)
+    assert first.ran == 2
+    with pytest.raises(OutputExistsError):
+        cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05)
+    before = pd.read_csv(out / cl.CSV_NAME)
+    again = cl.run_closed_loop(["wall", "free"], ["pinv", "qpsolvers:daqp"], out, duration=0.05, resume=True)
+    assert again.ran == 2 and again.skipped == 2  # only the new scenario runs
+    kept = again.table[again.table["scenario"] == "wall"].reset_index(drop=True)
+    pd.testing.assert_series_equal(kept["solve_time_p50_s"], before["solve_time_p50_s"])
+    # another duration is another run: resume does not keep it
+    longer = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.08, resume=True)
+    assert longer.ran == 1
+    # the pairs not asked for this time stay in the table
+    assert sorted(zip(longer.table["scenario"], longer.table["backend"])) == sorted(
+        (s, b) for s in ("wall", "free") for b in ("pinv", "qpsolvers:daqp"))
+    assert longer.table.iloc[0]["duration_s"] == 0.08
+    forced = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05, force=True)
+    assert forced.ran == 1 and len(forced.table) == 1
+    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == ["wall__pinv.parquet"]
+
+
+def test_skipped_backends_get_a_row(tmp_path):
+    outcome = cl.run_closed_loop(["wall"], ["pinv", "cvxpy"], tmp_path, duration=0.05,
+                                 skip={"cvxpy": "too slow here"})
+    table = outcome.table
+    assert list(table["status"]) == ["ok", "skipped"]
+    assert table["error"].iloc[1] == "too slow here"
+    assert outcome.errors == 0 and outcome.ran == 1
+
+
+def test_probe_measures_a_real_time_factor():
+    rtf = cl.probe_real_time_factor("pinv", ticks=50)
+    assert 0 < rtf < math.inf
+
+
+def test_bad_parameters(tmp_path):
+    with pytest.raises(ParamError):
+        cl.run_closed_loop(["wall"], ["pinv"], tmp_path, formulation="hard")
+    with pytest.raises(ParamError):
+        cl.run_closed_loop(["wall"], ["pinv"], tmp_path, duration=-1.0)
+    with pytest.raises(ParamError):
+        cl.parse_list(",,", "--backends")
+    assert cl.resolve_scenarios("all")[:4] == list(cl.PAPER_SCENARIOS)
+
+
+def test_cli_exit_codes(tmp_path, capsys):
+    out = tmp_path / "cli"
+    args = ["closed-loop", "--scenarios", "wall", "--backends", "pinv", "--duration", "0.05", "--out", str(out)]
+    assert main(["-q", *args]) == 0
+    assert main(["-q", *args]) == 2  # exists, no --force / --resume
+    assert "--force" in capsys.readouterr().err
+    assert main(["-q", *args, "--resume"]) == 0
+    assert main(["-q", *args, "--force", "--scenarios", f"wall,{tmp_path / 'missing.toml'}"]) == 1
+    assert main(["-q", "closed-loop", "--backends", "nosuch", "--out", str(tmp_path / "x")]) == 2
+    assert "nosuch" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["closed-loop", "--out", str(out), "--force", "--resume"])
+    assert exc.value.code == 2

@@ -1,0 +1,343 @@
+"""Tests of qpbench.report: report.md's numbers against independent recomputations.
+
+The bench rows here are synthetic (random times, residuals, failures, missing
+duals) so every branch of qpbenchmark's rules is exercised; the reference for
+the ratios is qpbenchmark's own ``Results.get_shgeom_for_metric_and_settings``.
+End-to-end runs on real problem sets are in tests/test_cli.py.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from qpbench.cli import main
+from qpbench.profiles import get_profile
+from qpbench.report import tables
+
+BACKENDS = ("alpha", "beta", "gamma")
+SCENARIOS = ("wall", "narrow", None)  # None: a Maros-Meszaros-like problem without scenario
+
+
+# ----------------------------------------------------------------- helpers
+
+
+def parse_tables(md: str) -> list[dict]:
+    """Every Markdown table with its headings (h2..h5) and the caption line above it."""
+    out = []
+    headings: dict[int, str] = {}
+    lines = md.splitlines()
+    i = 0
+    caption = None
+    while i < len(lines):
+        line = lines[i]
+        m = re.match(r"^(#{1,6}) (.*)$", line)
+        if m:
+            level = len(m.group(1))
+            headings = {k: v for k, v in headings.items() if k < level}
+            headings[level] = m.group(2).strip()
+            caption = None
+        elif line.startswith("|") and i + 1 < len(lines) and re.match(r"^\|[:\-| ]+\|$", lines[i + 1]):
+            header = [c.strip() for c in line.strip("|").split("|")]
+            rows = []
+            i += 2
+            while i < len(lines) and lines[i].startswith("|"):
+                rows.append([c.strip() for c in lines[i].strip("|").split("|")])
+                i += 1
+            out.append({"headings": dict(headings), "caption": caption, "header": header, "rows": rows})
+            continue
+        elif line.strip():
+            caption = line.strip()
+        i += 1
+    return out
+
+
+def cell_value(text: str) -> float:
+    if text == "-":
+        return math.nan
+    return float(text)
+
+
+def assert_close(shown: str, expected: float, what: str) -> None:
+    value = cell_value(shown)
+    if expected is None or (isinstance(expected, float) and math.isnan(expected)):
+        assert math.isnan(value), f"{what}: shown {shown}, expected missing"
+    elif math.isinf(expected):
+        assert math.isinf(value), f"{what}: shown {shown}, expected inf"
+    else:
+        # 4 significant digits in the report
+        assert value == pytest.approx(expected, rel=6e-4, abs=1e-300), f"{what}: shown {shown}, expected {expected}"
+
+
+def synthetic_bench(rng: np.random.Generator, n_ticks: int = 30) -> pd.DataFrame:
+    rows = []
+    tol = get_profile("default").tolerance
+    for scenario in SCENARIOS:
+        for k in range(n_ticks if scenario else 6):
+            name = f"{scenario}-{k:04d}" if scenario else f"MM{k}"
+            for j, backend in enumerate(BACKENDS):
+                found = bool(rng.random() > 0.12 * j)
+                infeasible = scenario is not None and k < 3
+                says_infeasible = infeasible and j == 1  # beta detects it
+                found = found and not says_infeasible
+                primal = float(10 ** rng.uniform(-12, -4)) if found else math.nan
+                dual = float(10 ** rng.uniform(-12, -4)) if found else math.nan
+                if backend == "gamma" and scenario == "narrow" and found:
+                    dual = math.inf  # a backend without duals
+                gap = float(10 ** rng.uniform(-12, -4)) if found else math.nan
+                opt_gap = float(rng.choice([-1, 1]) * 10 ** rng.uniform(-11, -3)) if found else math.nan
+                success = found and primal < tol.primal and dual < tol.dual and gap < tol.gap
+                wall = float(10 ** rng.uniform(-5.5, -3.5) * (1 + j))
+                rows.append(
+                    dict(
+                        problem=name, scenario=scenario, tick=k * 10 if scenario else None,
+                        t=k * 0.01 if scenario else None, backend=backend, profile="default",
+                        mode="sequential",
+                        status="optimal" if found else "primal_infeasible" if says_infeasible else "max_iter",
+                        found=found,
+                        success=success, objective=1.0, reference_objective=1.0,
+                        reference_status="primal_infeasible" if infeasible else "optimal",
+                        optimality_gap=opt_gap, primal_residual=primal,
+                        dual_residual=dual, duality_gap=gap, wall_time_min_s=wall * 0.9,
+                        wall_time_median_s=wall, solver_time_s=wall * 0.8 if j != 2 else None,
+                        iterations=10, error="",
+                    )
+                )
+    return pd.DataFrame(rows)
+
+
+def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
+    (folder / "logs").mkdir(parents=True)
+    rows = []
+    t = np.arange(0, 3.0, 0.001)
+    for scenario in ("wall", "narrow"):
+        for backend in ("qpsolvers:daqp", "pinv", "rnn"):
+            log_name = f"logs/{scenario}__{backend.replace(':', '-')}.parquet"
+            df = pd.DataFrame({
+                "t": t,
+                "tracking_error": 1e-3 * np.exp(-t) * rng.standard_normal(len(t)),
+                "force": 20 + np.exp(-t),
+                "v0": np.sin(t), "v1": np.cos(t), "v2": 0.1 * t, "v3": -0.1 * t,
+                "min_distance": 0.01 + 0.1 * np.exp(-t),
+                "solve_time_s": 10 ** rng.uniform(-5, -4, len(t)),
+            })
+            df.to_parquet(folder / log_name)
+            rows.append(dict(
+                scenario=scenario, backend=backend, formulation="paper", duration_s=3.0, status="ok",
+                error="", ticks=len(t), tracking_rms_after_2s=rng.uniform(1e-8, 1e-6),
+                tracking_max_after_2s=rng.uniform(1e-6, 1e-5), force_error_rms_after_2s=rng.uniform(0, 1e-3),
+                force_error_max_after_2s=rng.uniform(1e-3, 1e-2), min_obstacle_distance=rng.uniform(0.0099, 0.0101),
+                joint_limit_violations=0, infeasible_ticks=int(rng.integers(0, 200)),
+                fallback_ticks=int(rng.integers(0, 200)), v2_integral=rng.uniform(0.5, 2),
+                solve_time_p50_s=rng.uniform(1e-5, 2e-5), solve_time_p99_s=rng.uniform(3e-5, 1e-4),
+                solve_time_max_s=rng.uniform(1e-4, 1e-3), real_time_factor=rng.uniform(5, 80),
+                log_file=log_name, kp_hat_final=5000.0,
+            ))
+    rows.append(dict(scenario="wall", backend="broken", formulation="paper", duration_s=3.0, status="error",
+                     error="RuntimeError: boom | bad", log_file=""))
+    path = folder / "closed_loop.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    return path
+
+
+def qpbenchmark_ratios(df: pd.DataFrame, metric_column: str, not_found: float, floor) -> dict:
+    """Ratios to the best by qpbenchmark's own code (Results bypassing its TestSet)."""
+    from qpbenchmark.results import Results
+
+    res = Results.__new__(Results)
+    qdf = pd.DataFrame({
+        "solver": df["backend"].to_numpy(),
+        "settings": df["profile"].to_numpy(),
+        # qpbenchmark's "found"; for runtime a right infeasibility report also counts as answered
+        "found": df["found"].to_numpy(bool) | (
+            (metric_column == "wall_time_median_s")
+            & (df["status"] == df["reference_status"]).to_numpy()
+            & (df["reference_status"] == "primal_infeasible").to_numpy()),
+        "metric": np.abs(pd.to_numeric(df[metric_column]).to_numpy(float)),
+    })
+    res.df = qdf
+    return res.get_shgeom_for_metric_and_settings("metric", "default", shift=10.0,
+                                                  not_found_value=not_found, floor=floor)
+
+
+@pytest.fixture(scope="module")
+def report_dir(tmp_path_factory):
+    rng = np.random.default_rng(7)
+    folder = tmp_path_factory.mktemp("rep")
+    bench = synthetic_bench(rng)
+    bench.to_csv(folder / "bench.csv", index=False)
+    cl = synthetic_closed_loop(folder / "cl", rng)
+    out = folder / "out"
+    code = main(["report", str(folder / "bench.csv"), str(cl), "--out", str(out)])
+    assert code == 0
+    return folder, out, bench, pd.read_csv(cl)
+
+
+# ----------------------------------------------------------------- tests
+
+
+def test_report_writes_markdown_and_plots(report_dir):
+    _, out, _, _ = report_dir
+    md = (out / "report.md").read_text()
+    assert "# qpbench report" in md
+    for png in re.findall(r"\]\((plots/[^)]+\.png)\)", md):
+        assert (out / png).exists() and (out / png).stat().st_size > 1000, png
+    assert (out / "plots" / "perf_profile_default_sequential.png").exists()
+    assert (out / "plots" / "closed_loop_wall_paper.png").exists()
+    assert (out / "plots" / "per_tick_default_sequential_wall.png").exists()
+    # the error row's message is shown, with its pipe escaped
+    assert "RuntimeError: boom \\| bad" in md
+
+
+def test_ratio_table_equals_qpbenchmark(report_dir):
+    _, out, bench, _ = report_dir
+    md = (out / "report.md").read_text()
+    tol = get_profile("default").tolerance
+    table = next(t for t in parse_tables(md) if t["caption"].startswith("Success rate and shifted"))
+    assert table["header"][:3] == ["backend", "problems", "success (%)"]
+    shown = {r[0]: r for r in table["rows"]}
+    assert set(shown) == set(BACKENDS)
+    columns = {
+        "runtime": ("wall_time_median_s", tol.runtime, None),
+        "primal residual": ("primal_residual", tol.primal, tol.primal),
+        "dual residual": ("dual_residual", tol.dual, tol.dual),
+        "duality gap": ("duality_gap", tol.gap, tol.gap),
+        "optimality gap": ("optimality_gap", tol.gap, tol.gap),
+    }
+    for name, (col, not_found, floor) in columns.items():
+        expected = qpbenchmark_ratios(bench, col, not_found, floor)
+        j = table["header"].index(name)
+        for b in BACKENDS:
+            if name == "dual residual" and b == "gamma":
+                assert shown[b][j] == "inf", "an infinite residual must not look finite"
+            assert_close(shown[b][j], expected[b], f"{name} ratio of {b}")
+    feasible = bench[bench["reference_status"] == "optimal"]
+    assert len(feasible) < len(bench)
+    expected = qpbenchmark_ratios(feasible, "wall_time_median_s", tol.runtime, None)
+    j = table["header"].index("runtime (feasible)")
+    for b in BACKENDS:
+        assert_close(shown[b][j], expected[b], f"feasible runtime ratio of {b}")
+    for b in BACKENDS:
+        rows = bench[bench["backend"] == b]
+        assert int(shown[b][1]) == len(rows)
+        assert_close(shown[b][2], 100.0 * rows["success"].mean(), f"success of {b}")
+
+
+def test_absolute_table_recomputed(report_dir):
+    from qpbenchmark.shgeom import shgeom
+
+    _, out, bench, _ = report_dir
+    md = (out / "report.md").read_text()
+    tol = get_profile("default").tolerance
+    table = next(t for t in parse_tables(md) if t["caption"].startswith("Shifted geometric means, absolute"))
+    shown = {r[0]: r for r in table["rows"]}
+    for b in BACKENDS:
+        rows = bench[bench["backend"] == b]
+        found = rows["found"].to_numpy(bool)
+        right = ((rows["status"] == "primal_infeasible") & (rows["reference_status"] == "primal_infeasible")).to_numpy()
+        if b == "beta":
+            assert right.any()  # the case is exercised
+        t = np.where(found | right, rows["wall_time_median_s"], tol.runtime)
+        assert_close(shown[b][1], shgeom(t, 10.0) * 1e6, f"runtime of {b}")
+        ok = (rows["reference_status"] == "optimal").to_numpy()
+        assert_close(shown[b][2], shgeom(t[ok], 10.0) * 1e6, f"feasible runtime of {b}")
+        p = np.maximum(np.where(found, rows["primal_residual"], tol.primal), tol.primal)
+        assert_close(shown[b][3], shgeom(p, 10.0), f"primal of {b}")
+        g = np.maximum(np.where(found, np.abs(rows["optimality_gap"]), tol.gap), tol.gap)
+        assert_close(shown[b][6], shgeom(g, 10.0), f"optimality gap of {b}")
+        overhead = (rows["wall_time_median_s"] - rows["solver_time_s"]).dropna()
+        assert_close(shown[b][7], overhead.median() * 1e6 if len(overhead) else math.nan, f"overhead of {b}")
+
+
+def test_scenario_tables_recomputed(report_dir):
+    _, out, bench, _ = report_dir
+    md = (out / "report.md").read_text()
+    found_tables = {t["headings"].get(4): t for t in parse_tables(md) if t["headings"].get(4, "").startswith("Scenario")}
+    assert set(found_tables) == {f"Scenario {s} (default, sequential)" for s in ("wall", "narrow", "-")}
+    for scenario in SCENARIOS:
+        label = scenario or "-"
+        table = found_tables[f"Scenario {label} (default, sequential)"]
+        shown = {r[0]: r for r in table["rows"]}
+        sel = bench["scenario"].isna() if scenario is None else bench["scenario"] == scenario
+        for b in BACKENDS:
+            rows = bench[sel & (bench["backend"] == b)]
+            t = rows["wall_time_median_s"].to_numpy(float)
+            assert int(shown[b][1]) == len(rows)
+            assert_close(shown[b][2], 100 * rows["success"].mean(), "success")
+            assert_close(shown[b][4], np.percentile(t, 50) * 1e6, "p50")
+            assert_close(shown[b][5], np.percentile(t, 99) * 1e6, "p99")
+            assert_close(shown[b][6], t.max() * 1e6, "max")
+            gaps = np.abs(rows.loc[rows["found"], "optimality_gap"].dropna())
+            assert_close(shown[b][7], gaps.max() if len(gaps) else math.nan, "gap max")
+
+
+def test_closed_loop_tables_equal_csv(report_dir):
+    from qpbench.report.markdown import CLOSED_LOOP_TABLE
+
+    _, out, _, cl = report_dir
+    md = (out / "report.md").read_text()
+    tabs = [t for t in parse_tables(md) if t["caption"] and t["caption"].startswith("Closed-loop metrics")]
+    assert len(tabs) == 2
+    for t in tabs:
+        scenario = re.match(r"Scenario (\S+) ", t["headings"][3]).group(1)
+        for r in t["rows"]:
+            csv_row = cl[(cl["scenario"] == scenario) & (cl["backend"] == r[0])].iloc[0]
+            for (head, column, scale), shown in zip(CLOSED_LOOP_TABLE, r[1:]):
+                assert head in t["header"]
+                if scale is None:
+                    assert shown == str(csv_row[column])
+                else:
+                    assert_close(shown, float(csv_row[column]) * scale, f"{scenario}/{r[0]}/{column}")
+
+
+def test_report_refuses_overwrite_and_bad_input(report_dir, tmp_path, capsys):
+    folder, out, _, _ = report_dir
+    assert main(["report", str(folder / "bench.csv"), "--out", str(out)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["report", str(folder / "bench.csv"), "--out", str(tmp_path), "--no-plots"]) == 0
+    assert main(["report", str(folder / "bench.csv"), "--out", str(tmp_path), "--force", "--no-plots"]) == 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("a,b\n1,2\n")
+    assert main(["report", str(bad), "--out", str(tmp_path / "x")]) == 2
+    assert "bad.csv" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x" / "report.md").exists()
+
+
+def test_performance_profile_known_values():
+    # problem p1: a 1 us, b 2 us; p2: a 4 us, b 2 us; p3: a fails, b 1 us
+    rows = pd.DataFrame({
+        "problem": ["p1", "p1", "p2", "p2", "p3", "p3"],
+        "backend": ["a", "b"] * 3,
+        "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6, 5e-6, 1e-6],
+        "success": [True, True, True, True, False, True],
+    })
+    taus, prof = tables.performance_profile(rows, taus=np.array([1.0, 1.99, 2.0, 10.0]))
+    np.testing.assert_allclose(prof["a"], [1 / 3, 1 / 3, 2 / 3, 2 / 3])
+    np.testing.assert_allclose(prof["b"], [2 / 3, 2 / 3, 1.0, 1.0])
+
+
+def test_same_problem_name_in_two_scenarios_kept_apart():
+    rows = pd.DataFrame({
+        "problem": ["p", "p", "p", "p"], "scenario": ["s1", "s1", "s2", "s2"],
+        "backend": ["a", "b", "a", "b"],
+        "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6], "success": [True] * 4,
+    })
+    _, prof = tables.performance_profile(rows, taus=np.array([1.0]))
+    np.testing.assert_allclose(prof["a"], [0.5])
+    np.testing.assert_allclose(prof["b"], [0.5])
+
+
+def test_import_has_no_side_effects():
+    code = ("import sys, logging, qpbench.report, qpbench.report.plots, qpbench.harness.closed_loop; "
+            "assert 'matplotlib.pyplot' not in sys.modules; "
+            "assert not logging.getLogger('qpbench').handlers; print('ok')")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
