@@ -25,7 +25,7 @@ MM_FOLDER = Path("/work/shared/data/maros_meszaros")
 
 #: Backends that classify a primal-infeasible / unbounded QP from a certificate.
 CERTIFYING = {
-    "osqp", "proxqp", "clarabel", "cvxpy",
+    "osqp", "proxqp", "clarabel", "cvxpy", "daqp",
     "qpsolvers:clarabel", "qpsolvers:osqp", "qpsolvers:piqp", "qpsolvers:proxqp", "qpsolvers:scs",
 }
 #: Why the other QP backends cannot tell.
@@ -191,7 +191,7 @@ def test_infinite_bounds_and_rows():
     ub[inactive_b[1]] = np.inf
     h[inactive_g] = np.inf
     problem = qpsolvers.Problem(problem.P, problem.q, problem.G, h, problem.A, problem.b, lb, ub)
-    for name in ("osqp", "proxqp", "clarabel", "cvxpy", "qpsolvers:daqp"):
+    for name in ("osqp", "proxqp", "clarabel", "cvxpy", "daqp", "qpsolvers:daqp"):
         if name in backend_names():
             _check_solution(get_backend(name, "high_accuracy").solve(problem), x, y, z, z_box, gap=False)
 
@@ -267,7 +267,7 @@ def test_infeasible_and_unbounded(name):
 # ----------------------------------------------------------------- settings and errors
 
 
-@pytest.mark.parametrize("name", ["osqp", "proxqp", "clarabel", "qpsolvers:osqp", "qpsolvers:piqp", "cvxpy"])
+@pytest.mark.parametrize("name", ["osqp", "proxqp", "clarabel", "daqp", "qpsolvers:osqp", "qpsolvers:piqp", "cvxpy"])
 def test_max_iter_setting_overrides_profile(name):
     if name not in backend_names():
         pytest.skip(f"{name} unavailable")
@@ -389,7 +389,7 @@ def robot_ticks():
     return problems, [reference.solve(p) for p in problems]
 
 
-@pytest.mark.parametrize("name", _param([i for i in QP_INFOS if i.name in ("osqp", "proxqp", "clarabel", "cvxpy")]))
+@pytest.mark.parametrize("name", _param([i for i in QP_INFOS if i.name in ("osqp", "proxqp", "clarabel", "cvxpy", "daqp")]))
 def test_persistent_on_robot_ticks(name, robot_ticks):
     """Tick after tick, updated and warm-started: same statuses and solutions as a cold reference."""
     problems, refs = robot_ticks

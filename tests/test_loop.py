@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 
@@ -141,8 +142,76 @@ def test_zero_velocity_when_the_fallback_fails_too():
 def test_online_backend_is_applied_without_fallback():
     res = simulate("free", _Online(), duration=0.05)
     s = res.summary
-    assert s["fallback_ticks"] == 0 and s["zero_velocity_ticks"] == 0 and s["infeasible_ticks"] == 50
+    assert s["fallback_ticks"] == 0 and s["zero_velocity_ticks"] == 0
+    # not optimal on every tick, but never declared infeasible
+    assert s["non_optimal_ticks"] == 50 and s["infeasible_ticks"] == 0
+    assert s["first_infeasible_t"] is None and s["last_infeasible_t"] is None and s["infeasible_intervals"] == []
     assert np.allclose(res.log["v_0"], 0.5)
+
+
+class _Scripted(Backend):
+    """Solves with a real QP backend, but reports ``script[k]`` on the k-th paper-formulation call.
+
+    ``script`` maps a call index to ``(status, x)``: ``x`` is ``"keep"`` (the
+    real answer), ``None`` or ``"nan"``.
+    """
+
+    name = "test-scripted"
+
+    def __init__(self, script):
+        super().__init__()
+        from qpbench.backends import get_backend
+
+        self.inner = get_backend(qp_backend())
+        self.script = script
+        self.calls = 0
+
+    def _solve(self, problem, warm_start):
+        sol = self.inner.solve(problem, warm_start)
+        if problem.A is not None:  # paper formulation (the soft one has no equality)
+            k = self.calls
+            self.calls += 1
+            if k in self.script:
+                status, x = self.script[k]
+                sol.status = status
+                sol.x = None if x is None else np.full(problem.q.size, np.nan) if x == "nan" else sol.x
+        return sol
+
+
+def test_summary_counts_declared_infeasible_ticks_only():
+    """infeasible_ticks: ticks declared infeasible (or not_solved); other failures are non-optimal only."""
+    script = {
+        300: ("primal_infeasible", None),
+        301: ("primal_infeasible", None),
+        305: ("not_solved", None),
+        310: ("max_iter", None),  # a budget, not infeasibility
+        320: ("optimal", "nan"),  # a non-finite answer is no answer
+        330: ("error", None),
+    }
+    res = simulate("wall", _Scripted(script), duration=0.35)
+    s, log = res.summary, res.log
+    # the paper QP's own infeasible start, as the real backend reports it, then the scripted ticks
+    start = int((log["t"] < 0.2).sum() - (log.loc[log["t"] < 0.2, "status"] == "optimal").sum())
+    assert start > 50 and log["status"].iloc[:start].isin(["primal_infeasible", "not_solved"]).all()
+    assert s["infeasible_ticks"] == start + 3
+    assert s["non_optimal_ticks"] == start + 5  # tick 320 says optimal (its answer is not finite)
+    assert s["fallback_ticks"] == start + 6 and s["zero_velocity_ticks"] == 0
+    assert s["first_infeasible_t"] == 0.0 and s["last_infeasible_t"] == pytest.approx(0.305)
+    assert s["infeasible_intervals"][-2:] == [[0.3, 0.301], [0.305, 0.305]]
+    assert s["status_counts"]["max_iter"] == 1 and s["status_counts"]["error"] == 1
+    assert bool(log["fallback"].iloc[320]) and np.isfinite(log[[f"v_{i}" for i in range(4)]].to_numpy()).all()
+    assert log["status"].iloc[320] == "optimal"
+
+
+def test_rnn_online_ticks_are_non_optimal_not_infeasible():
+    from qpbench.backends.rnn import WORKING_SETTINGS
+
+    sc = load_scenario("wall")
+    res = simulate(dataclasses.replace(sc, rnn=dict(WORKING_SETTINGS)), "rnn", duration=0.2)
+    s = res.summary
+    assert s["infeasible_ticks"] == 0 and s["first_infeasible_t"] is None
+    assert s["fallback_ticks"] == 0 and s["zero_velocity_ticks"] == 0
+    assert s["non_optimal_ticks"] == s["status_counts"].get("max_iter", 0) > 150
 
 
 def test_backend_dt_must_match():
@@ -231,3 +300,94 @@ def test_qpbenchmark_runs_a_dumped_set_unchanged(tmp_path):
     feasible = res.log["status"].iloc[::10].to_numpy() == "optimal"
     names = [r.name for r in res.records]
     assert df.loc[names, "found"].to_numpy().tolist() == feasible.tolist()
+
+
+# ----------------------------------------------------------------- scenario values set over the file's
+
+
+def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
+    from qpbench.cli import main
+    from qpbench.commands.simulate import parse_overrides
+    from qpbench.formats import read_problem_set
+
+    items = ["rnn.eps=0.001", "rnn.substeps=5", "rnn.l1_clip=10.0", "controller.k=20", "obstacles[0].velocity=[0.0, 0.01]"]
+    overrides = parse_overrides(items)
+    assert overrides == {"rnn.eps": 0.001, "rnn.substeps": 5, "rnn.l1_clip": 10.0, "controller.k": 20,
+                         "obstacles[0].velocity": [0.0, 0.01]}
+    plain = load_scenario("wall")
+    sc = load_scenario("wall", overrides=overrides)
+    assert sc.rnn == {"eps": 0.001, "substeps": 5, "l1_clip": 10.0}
+    assert sc.data["controller"]["k"] == 20.0 and isinstance(sc.data["controller"]["k"], float)
+    np.testing.assert_array_equal(sc.data["obstacles"][0]["velocity"], [0.0, 0.01])
+    assert sc.overrides == overrides and plain.overrides == {} and sc.source == plain.source
+    # everything not overridden is the file's
+    for table in ("robot", "contact", "path", "simulation"):
+        for key, value in plain.data[table].items():
+            np.testing.assert_array_equal(sc.data[table][key], value)
+    # the CLI runs exactly that scenario, and says so in the summary and the dump's manifest
+    args = ["simulate", "--scenario", "wall", "--backend", "rnn", "--duration", "0.1",
+            "--summary", str(tmp_path / "s.json"), "--log", str(tmp_path / "log.csv"), "--dump", str(tmp_path / "set")]
+    for item in items:
+        args += ["--set", item]
+    assert main(args) == 0
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["scenario_overrides"] == overrides
+    manifest = read_problem_set(tmp_path / "set").manifest
+    assert manifest["extra"]["scenario_overrides"] == overrides
+    import pandas as pd
+
+    logged = pd.read_csv(tmp_path / "log.csv")[[f"v_{i}" for i in range(4)]].to_numpy()
+    direct = simulate(sc, "rnn", duration=0.1).log[[f"v_{i}" for i in range(4)]].to_numpy()
+    np.testing.assert_allclose(logged, direct, rtol=1e-9, atol=0)  # the CSV keeps 10 digits
+    assert not np.allclose(direct, simulate("wall", "rnn", duration=0.1).log[[f"v_{i}" for i in range(4)]].to_numpy())
+    assert simulate("wall", "rnn", duration=0.01).summary["scenario_overrides"] == {}
+
+
+@pytest.mark.parametrize(
+    "overrides, key",
+    [
+        ({"rnn.epz": 0.001}, "rnn.epz"),
+        ({"controller.kk": 3.0}, "controller.kk"),
+        ({"controller.k": "abc"}, "controller.k"),
+        ({"controller.k": -1.0}, "controller.k"),
+        ({"k": 3.0}, "k"),
+        ({"nosuch.k": 3.0}, "nosuch.k"),
+        ({"obstacles[3].velocity": [0.0, 0.0]}, "obstacles[3]"),
+        ({"obstacles[0].speed": [0.0, 0.0]}, "obstacles[0].speed"),
+        ({"robot[0].theta0": 1.0}, "robot[0].theta0"),
+        ({"rnn.eps": 0.0}, "rnn.eps"),
+    ],
+)
+def test_bad_overrides_are_errors_naming_the_key(overrides, key):
+    from qpbench.exceptions import ScenarioError
+
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("wall", overrides=overrides)
+    assert err.value.key == key
+    assert key in str(err.value) and "wall.toml" in str(err.value)
+
+
+def test_set_option_errors(capsys):
+    from qpbench.cli import main
+    from qpbench.commands.simulate import parse_overrides
+
+    assert parse_overrides(["rnn.method=euler", "a.b = [1, 2]", "x.y=true", "s.t=\"q=1\"", "x.y=false"]) == {
+        "rnn.method": "euler", "a.b": [1, 2], "x.y": False, "s.t": "q=1"}
+    with pytest.raises(ParamError) as err:
+        parse_overrides(["controller.k"])
+    assert err.value.key == "--set"
+    assert main(["simulate", "--scenario", "wall", "--backend", "daqp", "--set", "controller.kk=3"]) == 2
+    assert "controller.kk" in capsys.readouterr().err
+
+
+def test_force_sensor_noise_is_logged():
+    """With force_noise_std > 0 the logged force is the law plus the scenario's seeded noise."""
+    sc = load_scenario("wall", overrides={"contact.force_noise_std": 0.5, "contact.noise_seed": 3})
+    log = simulate(sc, qp_backend(), duration=0.3).log
+    quiet, noisy = load_scenario("wall").make_surface(), sc.make_surface()  # law without noise; the noise alone
+    ee = log[["ee_x", "ee_y"]].to_numpy()
+    law = np.array([quiet.force(ee[k], (ee[k] - ee[k - 1]) / sc.dt if k else np.zeros(2)) for k in range(len(log))])
+    noise = np.array([noisy.noise() for _ in range(len(log))])
+    assert np.abs(noise).max() > 0.5
+    np.testing.assert_allclose(log["force"].to_numpy(), law + noise, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(log["force_error"].to_numpy(), law + noise - 20.0, rtol=0, atol=1e-9)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from dataclasses import replace
+from dataclasses import astuple, replace
 
 import numpy as np
 import pytest
@@ -275,6 +275,35 @@ def test_online_shape_change_keeps_what_still_fits(rng):
     ref.state = nw.NetworkState.cold(4, 2, 9, v)
     ref.state.l1[:] = l1
     np.testing.assert_array_equal(be.state.xi, ref.solve(p2) and ref.state.xi)
+
+
+@pytest.mark.parametrize("settings", [WORKING_SETTINGS, {"eps": 0.02}], ids=["fixed-substeps", "auto-substeps"])
+def test_online_short_path_equals_general_path(settings):
+    """rnn's per-tick short path gives the general path's numbers bit for bit, across odd inputs too."""
+    import scipy.sparse as spa
+
+    from qpbench.backends.base import Backend
+
+    problems = [r.problem for r in robot_ticks("wall", 0.15, every=1, backend="rnn", **WORKING_SETTINGS).records]
+    p = problems[60]
+    # odd inputs mid-sequence: sparse matrices, a soft-formulation tick (no equality), 1-D A of one row
+    problems[70] = qpsolvers.Problem(spa.csc_matrix(p.P), p.q, spa.csc_matrix(p.G), p.h, p.A, p.b, p.lb, p.ub)
+    problems[80] = qpsolvers.Problem(p.P, p.q, p.G, p.h, None, None, p.lb, p.ub)
+    problems[90] = qpsolvers.Problem(p.P, p.q, p.G, p.h, p.A[0], p.b[:1], p.lb, p.ub)
+    fast = get_backend("rnn", dt=1e-3, **settings)
+    general = get_backend("rnn", dt=1e-3, **settings)
+    for k, problem in enumerate(problems):
+        a = fast.solve(problem)
+        b = Backend.solve(general, problem)  # the base class's solve: the general path
+        for f in ("x", "y", "z", "z_box"):
+            va, vb = getattr(a, f), getattr(b, f)
+            assert (va is None) == (vb is None), (k, f)
+            if va is not None:
+                np.testing.assert_array_equal(va, vb, err_msg=f"tick {k}, {f}")
+        assert (a.obj, a.status, a.iterations, a.found, a.backend) == (b.obj, b.status, b.iterations, b.found, b.backend)
+        assert a.wall_time_s > 0
+        np.testing.assert_array_equal(fast.state.xi, general.state.xi)
+    np.testing.assert_array_equal(np.array(astuple(fast.last)), np.array(astuple(general.last)))  # NaN == NaN here
 
 
 def test_settings_are_checked():

@@ -10,8 +10,9 @@ from pathlib import Path
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
-    "qpbench simulate --scenario wall --backend qpsolvers:daqp --summary results/simulate/wall.json "
-    "--log wall.parquet --dump problems/wall --every 10 --plot wall.png"
+    "qpbench simulate --scenario wall --backend daqp --summary results/simulate/wall.json "
+    "--log wall.parquet --dump problems/wall --every 10 --plot wall.png; "
+    "qpbench simulate --scenario wall --backend rnn --set rnn.eps=0.001 --set rnn.substeps=5"
 )
 
 log = logging.getLogger("qpbench")
@@ -23,6 +24,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--formulation", default="paper", choices=("paper", "soft"), help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)")
     parser.add_argument("--duration", type=float, default=None, metavar="S", help="simulated time in s (default: the scenario's)")
     parser.add_argument("--dt", type=float, default=None, metavar="S", help="control period in s (default: the scenario's)")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides",
+        help="set a scenario value over the file's (repeatable): TABLE.KEY=VALUE or obstacles[i].KEY=VALUE, "
+        "VALUE in TOML syntax (a bare word is a string), e.g. --set rnn.eps=0.001 --set rnn.substeps=5",
+    )
     parser.add_argument("--profile", default="default", help="backend settings profile (default: default)")
     parser.add_argument("--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet")
     parser.add_argument("--summary", default=None, metavar="FILE", help="summary as JSON")
@@ -51,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         for name in ("problems.parquet", "manifest.json"):
             check_output(Path(args.dump) / name, force=args.force)
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
     result = simulate(
         scenario, args.backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
@@ -89,6 +95,36 @@ def run(args: argparse.Namespace) -> int:
     )
     log.info("wall time %.3f s, real-time factor %s", s["wall_time_s"], fmt(s["real_time_factor"]))
     return 1 if s["zero_velocity_ticks"] else 0
+
+
+def parse_overrides(items: list[str]) -> dict:
+    """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``.
+
+    A value is read as a TOML value (``0.001``, ``5``, ``true``, ``[0.0, 0.1]``,
+    ``"text"``); one that is not valid TOML is taken as a string (``euler``).
+    A later setting of the same key wins. Keys are checked by the scenario
+    loader (:func:`qpbench.sim.scenario.apply_overrides`).
+
+    Raises:
+        ParamError: an item without ``=`` or with an empty key.
+    """
+    import tomllib
+
+    from ..exceptions import ParamError
+
+    out = {}
+    for item in items or ():
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ParamError(f"expected KEY=VALUE, got {item!r}", key="--set")
+        text = text.strip()
+        try:
+            value = tomllib.loads(f"value = {text}")["value"]
+        except tomllib.TOMLDecodeError:
+            value = text
+        out[key] = value
+    return out
 
 
 def plot_run(frame, summary: dict, path) -> None:

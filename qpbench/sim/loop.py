@@ -12,12 +12,21 @@ One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
    ``soft`` formulation of the same tick with the same backend (fallback); if
    that fails too, command zero velocity. An *online* backend (class attribute
    ``online = True``, the RNN) is its own controller: its ``x`` is applied
-   whatever its status, with no fallback;
+   whatever its status, with no fallback. A non-finite ``x`` counts as no
+   solution. (A backend that cannot classify infeasibility and stops on a
+   budget, like ``rnn-converged``, spends that budget on every infeasible
+   tick of the ``paper`` formulation; on the scenarios' infeasible start its
+   soft fallback fails too and the arm stops: see results/rnn/README.md);
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
 5. plant: ``theta_{k+1} = theta_k + dt v_k``.
 
-The per-tick log is written into preallocated arrays (no pandas in the loop)
-and turned into a :class:`pandas.DataFrame` at the end, one row per tick:
+Per tick the Python side does the least it can: one call of the controller's
+compiled build kernel (which also returns the end-effector position, the
+key-point distances and ``x_d``: nothing is recomputed), the backend's
+``solve``, and one call of a compiled kernel that senses, writes the tick's
+log row into a preallocated array (by index; no dict, no pandas) and
+advances the plant. Statuses are collected as strings and coded once at the
+end, when the log becomes a :class:`pandas.DataFrame`, one row per tick:
 
 =================== ===========================================================
 t                   time [s]
@@ -57,7 +66,7 @@ from ..exceptions import ParamError
 from ..control.controller import FORMULATIONS, Controller
 from .scenario import Scenario, load_scenario
 
-__all__ = ["SimResult", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize"]
+__all__ = ["INFEASIBLE_STATUSES", "SimResult", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize"]
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +83,9 @@ ACTIVE_MARGIN = 1e-4
 #: At most this many intervals per list in a summary.
 MAX_INTERVALS = 20
 
-_STATUS_CODES = {s: i for i, s in enumerate(STATUSES)}
+#: Statuses counted as ``infeasible_ticks`` in a summary (see :func:`summarize`).
+INFEASIBLE_STATUSES = ("primal_infeasible", "dual_infeasible", "not_solved")
+
 
 
 @dataclass
@@ -127,57 +138,74 @@ def _get_post_kernel():
     return _post_kernel
 
 
-def _post_py(theta, v, ee, ee_prev, J, b0, dist, col_start, col_end, xd, tangent, surf, row, idx, dt, first, y, z, t, fallback, zero, kp, kd, solve_time):  # pragma: no cover - compiled
-    """Sense and log one tick, then advance the plant ``theta += dt v``.
+#: ``mode`` argument of the post kernel: the tick's own answer applied, the
+#: soft fallback's, or zero velocity.
+_APPLIED, _FALLBACK, _ZERO = 0, 1, 2
 
-    Writes the robot columns of ``row``; ``surf`` is ``[nx, ny, n . point,
-    stiffness, damping, Fd]`` of the contact surface (the law of
-    :meth:`ContactSurface.force` without noise). Returns the noise-free force
-    [N]; leaves the end-effector velocity in ``ee_prev`` [m/s] in
-    ``ee_prev[2:4]`` and the position in ``ee_prev[0:2]``.
+# Layout of the kernel's constant float block ``cf``: tangent (2), surface (6), dt.
+_CF_TANGENT, _CF_SURF, _CF_DT = 0, 2, 8
+# Layout of the kernel's constant int block ``ci``: 12 column indices, then the
+# obstacle columns' [start, end) ranges in the flat distance array.
+_CI_COLS = 12
+
+
+def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mode, kp, kd, solve_time):  # pragma: no cover - compiled
+    """Log tick ``k`` into ``data[k]`` and advance the plant ``theta += dt v``.
+
+    Returns the noise-free contact force [N] (the law of
+    :meth:`ContactSurface.force`, ``surf = [nx, ny, n . point, stiffness,
+    damping, Fd]`` in ``cf``), and leaves the sensed end-effector position
+    [m] in ``sensed[0:2]`` and its finite-difference velocity [m/s] in
+    ``sensed[2:4]``. When ``v`` holds a NaN or an infinity nothing is written
+    or advanced and -1.0 is returned (the caller falls back).
     """
     n = theta.shape[0]
-    c_theta = idx[0]
-    c_v = idx[1]
-    c_ee = idx[2]
-    c_d = idx[3]
-    c_force = idx[4]
+    for i in range(n):
+        if not math.isfinite(v[i]):
+            return -1.0
+    row = data[k]
+    dt = cf[_CF_DT]
+    c_theta = ci[0]
+    c_v = ci[1]
+    c_ee = ci[2]
+    c_d = ci[3]
+    c_force = ci[4]
     row[0] = t
-    row[idx[5]] = fallback
-    row[idx[6]] = zero
-    row[idx[7]] = solve_time
+    row[ci[5]] = 1.0 if mode == _FALLBACK else 0.0
+    row[ci[6]] = 1.0 if mode == _ZERO else 0.0
+    row[ci[7]] = solve_time
     if y.shape[0] == 2:
-        row[idx[8]] = y[0]
-        row[idx[8] + 1] = y[1]
+        row[ci[8]] = y[0]
+        row[ci[8] + 1] = y[1]
     if z.shape[0] > 0:
         zmax = z[0]
         for i in range(1, z.shape[0]):
             if z[i] > zmax:
                 zmax = z[i]
-        row[idx[9]] = zmax
-    row[idx[10]] = kp
-    row[idx[11]] = kd
+        row[ci[9]] = zmax
+    row[ci[10]] = kp
+    row[ci[11]] = kd
     # sense: velocity by finite difference, spring-damper force
-    if first:
+    if k == 0:
         xd0 = 0.0
         xd1 = 0.0
     else:
-        xd0 = (ee[0] - ee_prev[0]) / dt
-        xd1 = (ee[1] - ee_prev[1]) / dt
-    ee_prev[0] = ee[0]
-    ee_prev[1] = ee[1]
-    ee_prev[2] = xd0
-    ee_prev[3] = xd1
-    nx = surf[0]
-    ny = surf[1]
-    delta = nx * ee[0] + ny * ee[1] - surf[2]
+        xd0 = (ee[0] - sensed[0]) / dt
+        xd1 = (ee[1] - sensed[1]) / dt
+    sensed[0] = ee[0]
+    sensed[1] = ee[1]
+    sensed[2] = xd0
+    sensed[3] = xd1
+    nx = cf[_CF_SURF]
+    ny = cf[_CF_SURF + 1]
+    delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
     force = 0.0
     if delta > 0.0:
-        force = surf[3] * delta + surf[4] * (nx * xd0 + ny * xd1)
+        force = cf[_CF_SURF + 3] * delta + cf[_CF_SURF + 4] * (nx * xd0 + ny * xd1)
         if force < 0.0:
             force = 0.0
     row[c_force] = force
-    row[c_force + 1] = force - surf[5]
+    row[c_force + 1] = force - cf[_CF_SURF + 5]
     vsq = 0.0
     for i in range(n):
         row[c_theta + i] = theta[i]
@@ -188,17 +216,17 @@ def _post_py(theta, v, ee, ee_prev, J, b0, dist, col_start, col_end, xd, tangent
     row[c_ee + 1] = ee[1]
     row[c_ee + 2] = xd[0]
     row[c_ee + 3] = xd[1]
-    row[c_ee + 4] = tangent[0] * (ee[0] - xd[0]) + tangent[1] * (ee[1] - xd[1])
+    row[c_ee + 4] = cf[_CF_TANGENT] * (ee[0] - xd[0]) + cf[_CF_TANGENT + 1] * (ee[1] - xd[1])
     r0 = b0[0]
     r1 = b0[1]
-    for k in range(n):
-        r0 -= J[0, k] * v[k]
-        r1 -= J[1, k] * v[k]
-    ncol = col_start.shape[0]
+    for j in range(n):
+        r0 -= J[0, j] * v[j]
+        r1 -= J[1, j] * v[j]
+    ncol = (ci.shape[0] - _CI_COLS) // 2
     dmin = np.inf
     for c in range(ncol):
         m = np.inf
-        for j in range(col_start[c], col_end[c]):
+        for j in range(ci[_CI_COLS + c], ci[_CI_COLS + ncol + c]):
             if dist[j] < m:
                 m = dist[j]
         row[c_d + c] = m
@@ -273,39 +301,42 @@ def simulate(
     tangent = np.array([-normal[1], normal[0]])
     fd = ctrl.task.desired_force
 
-    cols, ci = _columns(ctrl)
+    cols, cidx = _columns(ctrl)
     data = np.full((ticks, len(cols)), np.nan)
-    status_codes = np.zeros(ticks, dtype=np.int8)
     obstacle_cols = ctrl.obstacle_columns()
     n_pts = ctrl.n_obstacle_points
     n_obs = max(len(ctrl.obstacles), 1)
     # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
-    col_start = np.array([(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)], dtype=np.int64)
-    col_end = np.array([(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)], dtype=np.int64)
-    c_theta, c_v, c_ee, c_d = ci["theta_0"], ci["v_0"], ci["ee_x"], ci["d_min"] - len(obstacle_cols)
-    c_force, c_ferr, c_fb, c_zero, c_time = ci["force"], ci["force_error"], ci["fallback"], ci["zero_velocity"], ci["solve_time_s"]
-    c_y0, c_zmax, c_kp, c_kd = ci["y_0"], ci["z_max"], ci["kp_hat"], ci["kd_hat"]
+    col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
+    col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
+    c_force, c_ferr = cidx["force"], cidx["force_error"]
+    names = ("theta_0", "v_0", "ee_x", None, "force", "fallback", "zero_velocity", "solve_time_s", "y_0", "z_max", "kp_hat", "kd_hat")
+    ci = np.array(
+        [cidx["d_min"] - len(obstacle_cols) if c is None else cidx[c] for c in names] + col_start + col_end, dtype=np.int64
+    )
+    cf = np.array([tangent[0], tangent[1], normal[0], normal[1], float(normal @ surface.point), surface.stiffness,
+                   surface.damping, fd, dt])
 
     theta = scenario.theta0.astype(float)
     v = np.zeros(n)
-    zeros = np.zeros(n)
+    zeros = np.zeros(n)  # zero velocity (never written; writable so numba sees one array type)
     kp, kd = ctrl.kp, ctrl.kd
     records = []
+    statuses = []
     post = _get_post_kernel()
     build = ctrl.build_arrays
     make_problem = ctrl.make_problem
     solve = be.solve
     perf = time.perf_counter
-    isfinite = math.isfinite
-    idx = np.array([c_theta, c_v, c_ee, c_d, c_force, c_fb, c_zero, c_time, c_y0, c_zmax, c_kp, c_kd], dtype=np.int64)
     none = np.zeros(0)
-    surf = np.array([normal[0], normal[1], float(normal @ surface.point), surface.stiffness, surface.damping, fd])
     noisy = surface.noise_std > 0.0
     sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
+    f64 = np.dtype(np.float64)
 
     # compile (or load from the numba cache) before the clock starts
     warm = build(theta, 0.0, kp, kd, soft_primary)
-    post(theta.copy(), zeros, warm[8], sensed.copy(), warm[4], warm[5], warm[9], col_start, col_end, warm[10], tangent, surf, np.zeros(len(cols)), idx, dt, True, none, none, 0.0, False, False, kp, kd, 0.0)
+    post(theta.copy(), zeros, warm[8], sensed.copy(), warm[4], warm[5], warm[9], warm[10], none, none,
+         np.zeros((1, len(cols))), 0, ci, cf, 0.0, _APPLIED, kp, kd, 0.0)
 
     bar = None
     if progress:
@@ -321,47 +352,47 @@ def simulate(
         if keep_every is not None and k % keep_every == 0:
             records.append((k, t, problem))
         t0 = perf()
-        sol = solve(problem, warm_start=v)
-        status_codes[k] = _STATUS_CODES.get(sol.status, 5)
+        sol = solve(problem, v)
+        status = sol.status
+        statuses.append(status)
         x = sol.x
-        applied = sol
-        fallback = zero = False
-        if online:
-            zero = x is None or not isfinite(x @ x)
-        elif not sol.found or x is None or not isfinite(x @ x):
-            if not soft_primary:
-                soft_problem = make_problem(build(theta, t, kp, kd, True), True)
-                applied = solve(soft_problem, warm_start=v)
-                x = applied.x
-                if applied.found and x is not None and isfinite(x @ x):
-                    fallback = True
-                else:
-                    zero = True
-            else:
-                zero = True
-        solve_time = perf() - t0
-        y = z = none
-        if zero:
-            v = zeros.copy()
-            n_zero += 1
-        else:
-            v = x if x.dtype == np.float64 else np.asarray(x, dtype=float)
-            if fallback:
+        force = -1.0
+        if x is not None and (online or status == "optimal"):
+            if type(x) is not np.ndarray or x.dtype != f64:
+                x = np.asarray(x, dtype=np.float64)
+            y = sol.y
+            z = sol.z
+            # -1.0 when x is not finite: nothing logged, the plant not moved
+            force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10],
+                         none if y is None else y, none if z is None else z,
+                         data, k, ci, cf, t, _APPLIED, kp, kd, perf() - t0)
+            if force >= 0.0:
+                v = x
+        if force < 0.0:
+            # no usable answer: the soft formulation's (same backend), else zero velocity
+            mode, x, z = _ZERO, zeros, none
+            if not online and not soft_primary:
+                fb = solve(make_problem(build(theta, t, kp, kd, True), True), v)
+                if fb.status == "optimal" and fb.x is not None:
+                    mode, x = _FALLBACK, np.asarray(fb.x, dtype=np.float64)
+                    z = none if fb.z is None else fb.z
+            force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10], none, z,
+                         data, k, ci, cf, t, mode, kp, kd, perf() - t0)
+            if force < 0.0:  # the fallback's answer was not finite either
+                mode, x = _ZERO, zeros
+                force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10], none, none,
+                             data, k, ci, cf, t, mode, kp, kd, perf() - t0)
+            if mode == _FALLBACK:
                 n_fallback += 1
-            elif applied.y is not None:
-                y = applied.y
-            if applied.z is not None:
-                z = applied.z
-        xd = arrays[10]
-        force = post(
-            theta, v, arrays[8], sensed, arrays[4], arrays[5], arrays[9], col_start, col_end, xd, tangent, surf,
-            data[k], idx, dt, k == 0, y, z, t, fallback, zero, kp, kd, solve_time,
-        )
+            else:
+                n_zero += 1
+            v = x if mode == _FALLBACK else zeros.copy()
         if noisy:
             force += surface.noise()
-            row[c_force] = force
-            row[c_ferr] = force - fd
+            data[k, c_force] = force
+            data[k, c_ferr] = force - fd
         if adaptive is not None:
+            xd = arrays[10]
             kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
         if bar is not None and (k + 1) % 500 == 0:
             bar.update(500)
@@ -370,6 +401,8 @@ def simulate(
         bar.update(ticks - bar.n)
         bar.close()
 
+    codes = {s: i for i, s in enumerate(STATUSES)}
+    status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=ticks)
     frame = pd.DataFrame(data, columns=cols)
     frame["fallback"] = frame["fallback"].astype(bool)
     frame["zero_velocity"] = frame["zero_velocity"].astype(bool)
@@ -406,7 +439,13 @@ def write_dump(folder, records, scenario: Scenario, backend_name: str, formulati
         "scenario_toml": scenario.source,
         "ticks_per_record": every,
     }
+    if scenario.overrides:  # values set over the file's (the TOML above is the file as it is)
+        extra["scenario_overrides"] = _jsonable(scenario.overrides)
     return write_problem_set(folder, records, generator=generator, extra=extra)
+
+
+def _jsonable(overrides: dict) -> dict:
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in overrides.items()}
 
 
 def _none(x):
@@ -428,21 +467,38 @@ def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
 def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, backend: str, formulation: str, wall_time_s: float) -> dict:
     """Figures of a run (JSON-able; ``None`` where a figure does not exist).
 
-    ``infeasible_ticks`` counts the ticks whose QP (in the run's formulation)
-    the backend did not solve to ``optimal`` (for a QP solver: infeasible,
-    failed or out of time; for the online RNN: not converged within the tick),
-    ``status_counts`` breaks them down, ``infeasible_intervals`` gives their
-    runs as ``[first t, last t]``. ``fallback_ticks`` applied the soft
-    formulation's answer, ``zero_velocity_ticks`` commanded zero. Errors
-    "after 2 s" use the ticks with ``t >= 2`` s; limit violations count ticks
-    with an angle or a commanded speed beyond its limit by more than
-    :data:`VIOLATION_TOL`; ``obstacle_active_intervals`` lists, per (key point,
-    obstacle), when it was within :data:`ACTIVE_MARGIN` of ``d_safe``.
+    Statuses are those of the QP of the run's formulation at each tick:
+
+    - ``infeasible_ticks``: ticks the backend declared infeasible (status
+      ``primal_infeasible`` or ``dual_infeasible``), plus ticks with status
+      ``not_solved``: a backend that cannot classify a failure (qpsolvers'
+      route to DAQP, quadprog or HiGHS keeps only ``found=False``) reports
+      that, and on the controller's QPs such a failure is the infeasible
+      start. ``first_infeasible_t``, ``last_infeasible_t`` and
+      ``infeasible_intervals`` (runs as ``[first t, last t]``) are of these
+      ticks. A backend that stops on a budget (``max_iter``, ``time_limit``)
+      or fails (``error``) is not counted here.
+    - ``non_optimal_ticks``: ticks whose QP was not solved to ``optimal``,
+      whatever the reason (a superset of the above; for the online ``rnn``
+      nearly every tick, since its state is applied after one tick of
+      integration, not at convergence).
+    - ``status_counts``: the breakdown by status.
+
+    ``scenario_overrides`` holds the values set over the scenario file's
+    (``qpbench simulate --set``), empty when none. ``fallback_ticks``
+    applied the soft formulation's answer,
+    ``zero_velocity_ticks`` commanded zero. Errors "after 2 s" use the ticks
+    with ``t >= 2`` s; limit violations count ticks with an angle or a
+    commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
+    ``obstacle_active_intervals`` lists, per (key point, obstacle), when it
+    was within :data:`ACTIVE_MARGIN` of ``d_safe``.
     """
     t = frame["t"].to_numpy()
     dt = scenario.dt
     ticks = len(frame)
-    infeasible = (frame["status"] != "optimal").to_numpy()
+    status = frame["status"]
+    infeasible = status.isin(INFEASIBLE_STATUSES).to_numpy()
+    non_optimal = (status != "optimal").to_numpy()
     after = t >= SETTLE_TIME - 1e-12
     n = controller.n
     theta = frame[[f"theta_{i}" for i in range(n)]].to_numpy()
@@ -462,12 +518,14 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
     fe = frame["force_error"].to_numpy()
     out = {
         "scenario": scenario.name,
+        "scenario_overrides": _jsonable(scenario.overrides),
         "backend": backend,
         "formulation": formulation,
         "dt": dt,
         "duration": scenario.duration,
         "ticks": ticks,
         "infeasible_ticks": int(infeasible.sum()),
+        "non_optimal_ticks": int(non_optimal.sum()),
         "fallback_ticks": int(frame["fallback"].sum()),
         "zero_velocity_ticks": int(frame["zero_velocity"].sum()),
         "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,

@@ -26,6 +26,10 @@ raises :class:`~qpbench.exceptions.ScenarioError` naming the file and the key)::
     [rnn]         eps [s] and any further settings of the ``rnn`` backend
                   (passed through: ``get_backend("rnn", **scenario.rnn)``)
 
+Values can be set over a file's without copying it (``load_scenario(name,
+overrides={"rnn.eps": 1e-3})``, ``qpbench simulate --set rnn.eps=0.001``):
+see :func:`apply_overrides`; the validation is the same.
+
 Obstacles (``[[obstacles]]``, each with ``kind``, ``name`` and ``velocity``
 [m/s]): ``line`` (point, normal to the free side), ``segment`` (a, b),
 ``disk`` (center, radius), ``points`` (points).
@@ -35,6 +39,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -46,7 +51,7 @@ from ..exceptions import InputError, ScenarioError
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
 
-__all__ = ["Scenario", "load_scenario", "parse_scenario", "scenario_names", "scenario_path"]
+__all__ = ["Scenario", "apply_overrides", "load_scenario", "parse_scenario", "scenario_names", "scenario_path"]
 
 # -- schema -----------------------------------------------------------------------
 _NUM = "number"
@@ -158,6 +163,8 @@ class Scenario:
         source: The file's full text (stored in dumped problem sets' manifests).
         data: The parsed, validated tables (numbers as floats, vectors as arrays).
         rnn: Settings of the ``rnn`` backend (``eps`` and more), as a plain dict.
+        overrides: Values set over the file's (:func:`apply_overrides`), by
+            dotted key; empty when the file is used as it is.
         dt: Control period in [s].
         duration: Simulated time in [s].
     """
@@ -167,6 +174,7 @@ class Scenario:
     source: str
     data: dict
     rnn: dict = field(default_factory=dict)
+    overrides: dict = field(default_factory=dict)
 
     # -- convenience views -------------------------------------------------------
     @property
@@ -269,13 +277,20 @@ def _check_simulation(data: dict, file) -> None:
         )
 
 
-def parse_scenario(text: str, path: str | Path | None = None) -> Scenario:
-    """Parse and validate a scenario from TOML text (``path`` only names it in errors)."""
+def parse_scenario(text: str, path: str | Path | None = None, overrides: dict | None = None) -> Scenario:
+    """Parse and validate a scenario from TOML text (``path`` only names it in errors).
+
+    ``overrides`` (dotted key -> value, see :func:`apply_overrides`) replace
+    the file's values before the validation, which then names the key of a
+    wrong one exactly as for a wrong value in the file.
+    """
     file = path if path is not None else "<scenario>"
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"not valid TOML: {exc}", path=file) from None
+    if overrides:
+        raw = apply_overrides(raw, overrides, file)
     for key in raw:
         if key not in _TOP:
             raise ScenarioError(f"unknown table (expected one of: {', '.join(sorted(_TOP))})", path=file, key=key)
@@ -324,7 +339,10 @@ def parse_scenario(text: str, path: str | Path | None = None) -> Scenario:
 
     _check_values(data, file)
     _check_simulation(data, file)
-    scenario = Scenario(name=data["scenario"]["name"], path=None if path is None else Path(path), source=text, data=data, rnn=dict(rnn))
+    scenario = Scenario(
+        name=data["scenario"]["name"], path=None if path is None else Path(path), source=text, data=data,
+        rnn=dict(rnn), overrides=dict(overrides or {}),
+    )
     # build every object once so constructor checks surface here, naming the file
     try:
         scenario.make_controller()
@@ -334,6 +352,51 @@ def parse_scenario(text: str, path: str | Path | None = None) -> Scenario:
     except InputError as exc:
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
     return scenario
+
+
+_OVERRIDE_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
+
+
+def apply_overrides(raw: dict, overrides: dict, file="<scenario>") -> dict:
+    """A copy of the parsed TOML tables ``raw`` with ``overrides`` set over them.
+
+    Keys are dotted: ``table.key`` (``rnn.eps``, ``controller.k``,
+    ``simulation.duration``) or ``obstacles[i].key`` (``obstacles[0].velocity``).
+    A key must name a table the file has and, in ``[rnn]``, a setting of the
+    ``rnn`` backends (an ``[rnn]`` key may be new: the file need not list
+    every setting); anything else is checked by the usual validation of
+    :func:`parse_scenario` (an unknown key of another table is reported
+    there). Errors name the file and the key.
+    """
+    raw = copy.deepcopy(raw)
+    for key, value in overrides.items():
+        match = _OVERRIDE_KEY.fullmatch(str(key))
+        if match is None:
+            raise ScenarioError("expected TABLE.KEY or obstacles[i].KEY", path=file, key=key)
+        table, index, name = match.groups()
+        if index is not None:
+            if table != "obstacles":
+                raise ScenarioError("only obstacles take an index (obstacles[i].KEY)", path=file, key=key)
+            obstacles = raw.get("obstacles")
+            count = len(obstacles) if isinstance(obstacles, list) else 0
+            if int(index) >= count:
+                raise ScenarioError(f"no such obstacle (the file has {count})", path=file, key=f"obstacles[{index}]")
+            target = obstacles[int(index)]
+        else:
+            target = raw.get(table)
+            if table == "obstacles" or not isinstance(target, dict):
+                tables = ", ".join(sorted(t for t in raw if isinstance(raw[t], dict)))
+                raise ScenarioError(f"no such table in the file (tables: {tables})", path=file, key=key)
+            if table == "rnn" and name not in target:
+                from ..backends.rnn import SETTING_NAMES
+
+                if name not in SETTING_NAMES:
+                    raise ScenarioError(
+                        f"unknown setting of the rnn backends (expected one of: {', '.join(SETTING_NAMES)})",
+                        path=file, key=key,
+                    )
+        target[name] = value
+    return raw
 
 
 def _check_values(data: dict, file) -> None:
@@ -426,8 +489,11 @@ def scenario_path(name_or_path: str | Path) -> Path:
     return path
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
+def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Scenario:
     """Load a scenario by shipped name (``wall``) or by path (``my/scene.toml``).
+
+    ``overrides`` (dotted key -> value) replace values of the file
+    (:func:`apply_overrides`); they are validated like the file's own.
 
     Raises:
         ScenarioError: unknown name, unreadable file, or a missing, unknown or
@@ -438,4 +504,4 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"cannot read: {exc}", path=path) from None
-    return parse_scenario(text, path)
+    return parse_scenario(text, path, overrides)
