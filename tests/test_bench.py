@@ -260,3 +260,24 @@ def test_all_means_every_available_backend(tmp_path):
     available = {line.split()[0] for line in listed.splitlines()[1:] if line.strip()}
     rows = read(out)
     assert {r["backend"] for r in rows} == available and len(rows) == 2 * len(available)
+
+
+def test_online_backend_integrates_the_time_between_records(tmp_path):
+    """A set keeping every 10th tick of a 1 ms loop: the network integrates 10 ms per record."""
+    from qpbench.backends import _registry
+    from qpbench.formats import read_problem_set
+    from qpbench.harness import BenchConfig
+    from qpbench.harness.bench import backend_settings
+
+    folder = write_problem_set(
+        tmp_path / "s", fb.tick_records(3), generator={"name": "qpbench simulate", "dt": 0.001, "every": 10}
+    )
+    pset = read_problem_set(folder)
+    config = BenchConfig(backends=["rnn", "rnn-tuned", "clarabel"], settings={})
+    got = {name: backend_settings(name, config, pset, _registry()) for name in config.backends}
+    assert got == {"rnn": {"dt": pytest.approx(0.01)}, "rnn-tuned": {"dt": pytest.approx(0.01)}, "clarabel": {}}
+    # an explicit dt wins; a set without a generator period leaves the default
+    explicit = BenchConfig(backends=["rnn"], settings={"dt": 0.002})
+    assert backend_settings("rnn", explicit, pset, _registry()) == {"dt": 0.002}
+    bare = read_problem_set(write_problem_set(tmp_path / "b", fb.tick_records(3), generator={"name": "t"}))
+    assert backend_settings("rnn", config, bare, _registry()) == {}

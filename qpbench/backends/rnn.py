@@ -409,3 +409,20 @@ class RNNConverged(_NetworkBackend):
         if warm_start is not None and self.state is not None and self.state.n == np.size(warm_start):
             self.state.v = np.asarray(warm_start, dtype=np.float64).reshape(-1)
         return self._run(problem, warm_start)
+
+
+@register
+class RNNTuned(RNNOnline):
+    """The online network with :data:`WORKING_SETTINGS`, not the paper's ``eps``.
+
+    ``eps = 1e-3`` s, 5 Euler sub-steps per tick and ``l1`` clipped to +-10
+    (anti-windup during the infeasible start): the setting with which the
+    network holds the paper's bars in closed loop (results/rnn/README.md).
+    It ignores a scenario's ``[rnn]`` table, which carries the paper's values;
+    settings given explicitly still override.
+    """
+
+    name = "rnn-tuned"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **{**WORKING_SETTINGS, **settings})

@@ -144,6 +144,34 @@ class BenchSummary:
         return text
 
 
+def record_period(problem_set) -> float | None:
+    """Time in [s] between two consecutive records of a dumped sequence, if known.
+
+    A set dumped by ``qpbench simulate --dump`` records its control period
+    ``dt`` and the stride ``every`` in its manifest's ``generator``.
+    """
+    generator = (getattr(problem_set, "manifest", None) or {}).get("generator") or {}
+    try:
+        return float(generator["dt"]) * int(generator.get("every", 1))
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def backend_settings(name: str, config: BenchConfig, problem_set, registry) -> dict:
+    """Settings for backend ``name``: the run's, plus ``dt`` for an online backend.
+
+    An online backend (the ``rnn`` network) integrates for ``dt`` per call:
+    replaying a set that keeps every K-th tick, that is K control periods, the
+    time the controller's state evolves between two records.
+    """
+    settings = dict(config.settings)
+    if getattr(registry.get(name), "online", False) and "dt" not in settings:
+        period = record_period(problem_set)
+        if period is not None:
+            settings["dt"] = period
+    return settings
+
+
 def is_failure(status: str, reference_status: str | None) -> bool:
     """A failed solve: a harness failure status, or not ``optimal`` where the reference is."""
     return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
@@ -321,7 +349,8 @@ def run_bench(
     from ..backends import _registry
 
     registry = _registry()
-    instances = {name: get_backend(name, run_profile, **config.settings) for name in config.backends}
+    settings = {name: backend_settings(name, config, problem_set, registry) for name in config.backends}
+    instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
     versions = {name: type(b).version() for name, b in instances.items()}
 
     # Existing output.
@@ -375,7 +404,7 @@ def run_bench(
     runners = {}
     for name in config.backends:
         if isolated(name):
-            runners[name] = IsolatedRunner(name, run_profile, config.settings, time_limit, sequential, config.plugins)
+            runners[name] = IsolatedRunner(name, run_profile, settings[name], time_limit, sequential, config.plugins)
         else:
             runners[name] = LocalRunner(instances[name], time_limit, sequential)
     summary = BenchSummary(isolated=[n for n in config.backends if runners[n].isolated])
@@ -450,7 +479,7 @@ def run_bench(
                         )
                         runner.close()
                         runners[name] = IsolatedRunner(
-                            name, run_profile, config.settings, time_limit, sequential, config.plugins
+                            name, run_profile, settings[name], time_limit, sequential, config.plugins
                         )
                         learned.append(name)
                         marker.isolate = list(learned)

@@ -104,19 +104,25 @@ class SimResult:
     records: list = field(default_factory=list)
 
 
+#: Backends built with the scenario's ``[rnn]`` table (``rnn-tuned`` keeps its own).
+SCENARIO_RNN_BACKENDS = ("rnn", "rnn-converged")
+
+
 def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default") -> Backend:
     """A backend instance for ``scenario``: by name, or the given instance checked.
 
-    The ``rnn`` backends get the scenario's ``[rnn]`` settings; the online
-    ``rnn`` also the control period ``dt``. An instance with a ``dt`` of its own
+    ``rnn`` and ``rnn-converged`` get the scenario's ``[rnn]`` settings; an
+    online backend (``rnn``, ``rnn-tuned``) also the control period ``dt``. An instance with a ``dt`` of its own
     must match the loop's ``dt``.
     """
     if isinstance(backend, str):
+        from ..backends import _registry
+
         settings = {}
-        if backend.startswith("rnn"):
+        if backend in SCENARIO_RNN_BACKENDS:
             settings.update(scenario.rnn)
-            if backend == "rnn":
-                settings.setdefault("dt", dt)
+        if getattr(_registry().get(backend), "online", False):
+            settings.setdefault("dt", dt)
         return get_backend(backend, profile=profile, **settings)
     if not isinstance(backend, Backend):
         raise ParamError(f"expected a backend name or instance, got {type(backend).__name__}", key="backend")
