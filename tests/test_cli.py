@@ -135,7 +135,7 @@ def test_run_end_to_end(tmp_path, monkeypatch):
     out = tmp_path / "tmp"
     assert (tmp_path / "problems" / "wall" / "problems.parquet").exists()  # regenerated: none shipped here
     assert len(pd.read_parquet(tmp_path / "problems" / "wall" / "problems.parquet")) == 2000
-    bench = pd.read_csv(out / "bench" / "wall.csv")
+    bench = pd.read_csv(out / "bench" / "wall.csv.gz")
     assert set(bench["backend"]) == {"qpsolvers:daqp", "pinv"}
     assert (bench["t"] < 0.3).all() and len(bench) > 0
     loop = pd.read_csv(out / "closed_loop.csv")

@@ -91,11 +91,23 @@ class Backend:
         package: Python distribution whose version is reported (or ``None``).
         profile: The settings profile in force.
         settings: Extra solver settings given by the user (override the profile).
+        online: True for a backend that is its own controller state (the
+            ``rnn`` network): a closed loop applies its ``x`` whatever the
+            status, with no fallback, and the harness gives it the time between
+            records as ``dt``.
+        risky: True for a backend the harness runs in a worker process with a
+            deadline under ``--isolate auto`` (it was seen to hang in native code).
+
+    Optional hooks the harness uses when present: ``get_state()`` and
+    ``set_state(state)`` restore a backend exactly between timed repeats
+    (otherwise it is deep-copied, or reset and re-warmed; see README).
     """
 
     name: ClassVar[str] = ""
     family: ClassVar[str] = ""
     package: ClassVar[str | None] = None
+    online: ClassVar[bool] = False
+    risky: ClassVar[bool] = False
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

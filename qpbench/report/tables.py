@@ -117,7 +117,7 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
 
 
 def expand_paths(paths: list[str | Path]) -> list[Path]:
-    """CSV files named directly, and every ``*.csv`` in a named folder (sorted).
+    """CSV files named directly, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
 
     Raises:
         InputError: a path does not exist, or a folder holds no CSV.
@@ -125,7 +125,9 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
-            found = sorted(q for q in p.rglob("*.csv") if not q.name.startswith("."))
+            found = sorted(
+                q for pattern in ("*.csv", "*.csv.gz") for q in p.rglob(pattern) if not q.name.startswith(".")
+            )
             if not found:
                 raise InputError("folder holds no result CSV", path=p)
             out.extend(found)
@@ -149,7 +151,7 @@ def read_results(paths: list[str | Path]) -> Results:
     for path in expand_paths(paths):
         try:
             df = pd.read_csv(path)
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError, EOFError) as exc:
             raise InputError(f"not a readable CSV ({exc})", path=path) from None
         cols = set(df.columns)
         if set(BENCH_COLUMNS) <= cols:
