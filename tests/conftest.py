@@ -10,12 +10,8 @@ import qpsolvers
 
 from qpbench.formats import ProblemRecord
 
-#: Where the Maros-Meszaros subset is looked for (first existing folder wins).
-_MM_CANDIDATES = [
-    Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros",
-    Path(__file__).resolve().parents[2] / "shared" / "data" / "maros_meszaros",
-]
-MAROS_MESZAROS_DIR = next((p for p in _MM_CANDIDATES if p.is_dir()), _MM_CANDIDATES[0])
+#: The Maros-Meszaros subset the repository ships.
+MAROS_MESZAROS_DIR = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 
 
 def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) -> qpsolvers.Problem:
@@ -60,8 +56,7 @@ def make_record(rng):
 
 @pytest.fixture(scope="session")
 def mm_dir():
-    if not MAROS_MESZAROS_DIR.is_dir():
-        pytest.skip(f"Maros-Meszaros subset not found at {MAROS_MESZAROS_DIR}")
+    assert MAROS_MESZAROS_DIR.is_dir(), f"the shipped Maros-Meszaros subset is missing: {MAROS_MESZAROS_DIR}"
     return MAROS_MESZAROS_DIR
 
 

@@ -18,10 +18,10 @@ from qpbench.backends import BackendSolution, backend_info, backend_names, get_b
 from qpbench.exceptions import BackendNotFound
 from qpbench.known import random_kkt_problem, robot_like_problem
 
-EXCLUDED = {"rnn", "rnn-converged"}
+EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged"}  # tested in test_rnn.py
 INFOS = [info for info in backend_info() if info.name not in EXCLUDED]
 QP_INFOS = [info for info in INFOS if info.name != "pinv"]
-MM_FOLDER = Path("/work/shared/data/maros_meszaros")
+MM_FOLDER = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 
 #: Backends that classify a primal-infeasible / unbounded QP from a certificate.
 CERTIFYING = {

@@ -19,7 +19,7 @@ from qpbench.profiles import get_profile
 
 from test_report import assert_close, parse_tables, qpbenchmark_ratios
 
-MAROS = Path("/work/shared/data/maros_meszaros")
+MAROS = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 BACKENDS = "qpsolvers:daqp,osqp,pinv"
 
 

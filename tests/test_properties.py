@@ -56,7 +56,7 @@ MUST_SUCCEED = {
 #: Approximate by design: ``pinv`` ignores inequalities and bounds; ``rnn`` takes
 #: one integration step per call (online). Their success is not expected but,
 #: when claimed, must be right.
-APPROXIMATE = {"pinv", "rnn", "rnn-converged", "qpsolvers:highs", "qpsolvers:scs"}
+APPROXIMATE = {"pinv", "rnn", "rnn-tuned", "rnn-converged", "qpsolvers:highs", "qpsolvers:scs"}
 
 
 @st.composite
