@@ -89,6 +89,8 @@ class Backend:
         name: Registry key, e.g. ``"osqp"`` or ``"qpsolvers:daqp"``.
         family: Algorithm family, e.g. ``"ADMM"``, ``"interior point"``.
         package: Python distribution whose version is reported (or ``None``).
+        module: Python module the backend needs; it is unavailable when that
+            module does not import (or ``None``: always available).
         profile: The settings profile in force.
         settings: Extra solver settings given by the user (override the profile).
         online: True for a backend that is its own controller state (the
@@ -106,6 +108,7 @@ class Backend:
     name: ClassVar[str] = ""
     family: ClassVar[str] = ""
     package: ClassVar[str | None] = None
+    module: ClassVar[str | None] = None
     online: ClassVar[bool] = False
     risky: ClassVar[bool] = False
 
@@ -116,7 +119,17 @@ class Backend:
     # -- availability -----------------------------------------------------
     @classmethod
     def unavailable_reason(cls) -> str | None:
-        """``None`` when the backend can run here, else why it cannot."""
+        """``None`` when the backend can run here, else why it cannot.
+
+        By default: whether :attr:`module` (the solver's Python module, if the
+        backend names one) imports. Imported here, never at module import.
+        """
+        if cls.module is None:
+            return None
+        try:
+            __import__(cls.module)  # like an import statement (honours import hooks)
+        except ImportError as exc:
+            return f"cannot import {cls.module} ({exc})"
         return None
 
     @classmethod

@@ -189,7 +189,8 @@ class ConeLayout:
         return y, z, z_box
 
 
-_STATUSES = {
+#: Clarabel status name -> our status (also used by ``qpsolvers:clarabel``).
+CLARABEL_STATUSES = {
     "Solved": "optimal",
     "PrimalInfeasible": "primal_infeasible",
     "DualInfeasible": "dual_infeasible",
@@ -241,19 +242,13 @@ class ClarabelBackend(Backend):
     name = "clarabel"
     family = "interior point"
     package = "clarabel"
+    module = "clarabel"
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._solver = None
         self._layout: ConeLayout | None = None
 
-    @classmethod
-    def unavailable_reason(cls):
-        try:
-            import clarabel  # noqa: F401
-        except ImportError as exc:
-            return f"cannot import clarabel ({exc})"
-        return None
 
     def reset(self) -> None:
         self._solver = None
@@ -311,7 +306,7 @@ class ClarabelBackend(Backend):
             return sol
 
         name = _status_name(res.status)
-        status = _STATUSES.get(name, "not_solved")
+        status = CLARABEL_STATUSES.get(name, "not_solved")
         sol.status = status
         sol.extras = {"raw_status": name}
         if status == "error":

@@ -127,19 +127,13 @@ class CvxpyBackend(Backend):
     name = "cvxpy"
     family = "modelling layer (OSQP: ADMM)"
     package = "cvxpy"
+    module = "cvxpy"
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._models: dict[tuple, _Model] = {}
         self._options: tuple[str, dict] | None = None
 
-    @classmethod
-    def unavailable_reason(cls):
-        try:
-            import cvxpy  # noqa: F401
-        except ImportError as exc:
-            return f"cannot import cvxpy ({exc})"
-        return None
 
     def reset(self) -> None:
         self._models = {}

@@ -134,6 +134,7 @@ class DaqpBackend(Backend):
     name = "daqp"
     family = "active set (dual)"
     package = "daqp"
+    module = "daqp"
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
@@ -141,13 +142,6 @@ class DaqpBackend(Backend):
         self._options: dict | None = None
         self.options()  # checks the settings now (ParamError naming an unknown one)
 
-    @classmethod
-    def unavailable_reason(cls) -> str | None:
-        try:
-            import daqp  # noqa: F401
-        except ImportError as exc:
-            return f"cannot import daqp ({exc})"
-        return None
 
     def options(self) -> dict:
         """Keyword settings passed to ``daqp.solve`` (profile first, then the user's)."""

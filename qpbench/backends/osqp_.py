@@ -191,19 +191,13 @@ class OsqpBackend(Backend):
     name = "osqp"
     family = "ADMM"
     package = "osqp"
+    module = "osqp"
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._solver = None
         self._layout: StackedLayout | None = None
 
-    @classmethod
-    def unavailable_reason(cls):
-        try:
-            import osqp  # noqa: F401
-        except ImportError as exc:
-            return f"cannot import osqp ({exc})"
-        return None
 
     def reset(self) -> None:
         self._solver = None

@@ -169,17 +169,11 @@ def native_settings(solver: str, eps_abs: float, eps_rel: float, max_iter: int, 
 # -- statuses ------------------------------------------------------------------
 
 def _status_clarabel(extras) -> tuple[str, str | None]:
+    from .clarabel_ import CLARABEL_STATUSES
+
     raw = extras.get("status")
     name = str(raw).split(".")[-1] if raw is not None else None
-    mapping = {
-        "Solved": "optimal",
-        "PrimalInfeasible": "primal_infeasible",
-        "DualInfeasible": "dual_infeasible",
-        "MaxIterations": "max_iter",
-        "MaxTime": "time_limit",
-        "NumericalError": "error",
-    }
-    return mapping.get(name, "not_solved"), name
+    return CLARABEL_STATUSES.get(name, "not_solved"), name
 
 
 _ENUM_MAPS: dict[str, dict] = {}
