@@ -6,12 +6,21 @@ inequalities, bounds), measured three ways in this process:
 
 - ``ours``: ``Backend.solve`` of qpbench;
 - ``direct``: the solver's own Python API called directly with the same
-  settings: a persistent, updated object for ``osqp``, ``proxqp``,
-  ``clarabel`` (as ours); a fresh call of the solver's own function for
+  settings, doing what a controller needs (set the data, solve, read ``x``):
+  a persistent, updated object for ``osqp``, ``proxqp``,
+  ``clarabel`` (as ours); ``daqp.solve`` with the stacked arrays of the
+  ``daqp`` backend for ``daqp``; a fresh call of the solver's own function for
   ``qpsolvers:<name>`` where that is simple (daqp, quadprog, piqp, osqp,
   clarabel, proxqp), else ``qpsolvers.solve_problem`` (highs, scs); the same
   parametrised cvxpy model for ``cvxpy``; ``numpy.linalg.lstsq`` for ``pinv``;
 - ``qpsolvers``: ``qpsolvers.solve_problem`` with the backend's solver and settings.
+
+``ours`` does more than ``direct``: it also returns ``y``, ``z``, ``z_box``
+(copies, in qpsolvers' convention), the status, iterations and the solver's
+time in a ``BackendSolution``. For ``proxqp`` the direct call reads
+``qp.results.x`` as a view (no copy, no ``y``/``z``) and passes the nine
+arrays positionally; ours passes ``update_preconditioner`` as a keyword,
+which nanobind dispatches about 0.6 us faster (a direct user could do the same).
 
 Problems: consecutive ticks of the ``wall`` scenario (an obstacle row active)
 when :mod:`qpbench.sim` can produce them, else :func:`qpbench.known.robot_like_problem`.
@@ -177,6 +186,27 @@ def direct_daqp(settings):
     return solve
 
 
+def direct_daqp_native(options):
+    """``daqp.solve`` with the arrays the ``daqp`` backend builds: simple bounds native,
+    ``A = [A_eq; G]``, ``bupper = [ub; b; h]``, ``blower = [lb; b; -inf]``,
+    ``sense = [0 (n); 5 (me); 0 (mi)]``, and the backend's keyword settings.
+    Stacked here with ``np.vstack``/``np.concatenate`` per call, as a user would."""
+    import daqp
+
+    def solve(p):
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n, me, mi = q.shape[0], A.shape[0], G.shape[0]
+        Atot = np.vstack([A, G])
+        bupper = np.concatenate([ub, b, h])
+        blower = np.concatenate([lb, b, np.full(mi, -np.inf)])
+        sense = np.zeros(n + me + mi, dtype=np.intc)
+        sense[n : n + me] = 5
+        x, fval, exitflag, info = daqp.solve(P, q, Atot, bupper, blower, sense, **options)
+        return x
+
+    return solve
+
+
 def direct_quadprog(settings):
     import quadprog
 
@@ -240,6 +270,8 @@ def direct_for(name: str, profile: str):
         import proxsuite
 
         return "proxqp.dense.QP update", lambda: DirectProxqp(lambda qp: backend._apply_settings(qp, proxsuite.proxqp))
+    if name == "daqp":
+        return "daqp.solve", lambda: direct_daqp_native(backend.options())
     if name == "pinv":
         return "numpy lstsq", lambda: (lambda p: np.linalg.lstsq(p.A, p.b, rcond=None)[0])
     if name == "cvxpy":

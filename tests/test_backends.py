@@ -166,6 +166,34 @@ def test_persistent_backends_keep_their_object():
         assert _persistent_object(backend) is not None, name
 
 
+def test_proxqp_cached_result_views_follow_warm_starts():
+    """proxqp reads x, y, z through cached views of ``qp.results``: they must stay
+    those of the live object across updates, explicit warm starts (which make
+    ProxQP reallocate ``results.x``) and rebuilds, and the returned arrays are copies."""
+    if "proxqp" not in backend_names():
+        pytest.skip("proxsuite unavailable")
+    backend = get_backend("proxqp", "high_accuracy")
+    rng = np.random.default_rng(11)
+    kept = []
+    previous = None
+    for i in range(12):
+        problem, x, y, z, z_box = robot_like_problem(rng)
+        warm = previous if i % 3 == 1 else None
+        sol = backend.solve(problem, warm)
+        _check_solution(sol, x, y, z, z_box)
+        res = backend._qp.results
+        n_in = problem.G.shape[0]
+        assert np.array_equal(sol.x, res.x) and np.array_equal(sol.y, res.y)
+        assert np.array_equal(np.concatenate([sol.z, sol.z_box]), res.z[: n_in + problem.q.shape[0]])
+        assert not np.shares_memory(sol.x, res.x) and not np.shares_memory(sol.z, res.z)
+        kept.append((sol, sol.x.copy(), sol.z_box.copy()))
+        previous = sol.x
+        if i == 7:
+            backend.reset()
+    for sol, x, z_box in kept:  # later solves did not write into earlier solutions
+        assert np.array_equal(sol.x, x) and np.array_equal(sol.z_box, z_box)
+
+
 def test_cvxpy_model_cached_per_shape():
     if "cvxpy" not in backend_names():
         pytest.skip("cvxpy unavailable")
