@@ -230,3 +230,79 @@ def write_tick_set(folder, n_ticks: int, **kw):
     from qpbench.formats import write_problem_set
 
     return write_problem_set(folder, tick_records(n_ticks, **kw), generator={"name": "tests.tick_records", "n_ticks": n_ticks})
+
+
+# ---------------------------------------------------------------- closed-loop faults on some ticks only
+#
+# For the closed loop's per-tick guards (tests/test_loop.py): these solve with
+# ``daqp`` but misbehave on the paper formulation's call k (the tick k: one
+# such call per tick; the soft fallback, which has no equality, is never
+# touched) when ``k % FAULT_EVERY == FAULT_PHASE``. Names ``faulty-ticks:<kind>``:
+#
+# - ``raise``: raises ``RuntimeError("tick fault k")``;
+# - ``nan``: returns ``x`` full of NaN with status ``optimal``;
+# - ``slow``: sleeps ``SLOW_S`` before answering (past a small per-tick limit).
+
+#: Every FAULT_EVERY-th paper-formulation call, from call FAULT_PHASE, misbehaves.
+FAULT_EVERY = 10
+FAULT_PHASE = 7
+#: Sleep of ``faulty-ticks:slow`` on its faulty ticks [s].
+SLOW_S = 0.06
+
+
+def fault_ticks(n_ticks: int) -> list[int]:
+    """The ticks on which a ``faulty-ticks:*`` backend misbehaves in a run of ``n_ticks``."""
+    return [k for k in range(n_ticks) if k % FAULT_EVERY == FAULT_PHASE]
+
+
+class _SomeTicks(Backend):
+    family = "test fault"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        from qpbench.backends import get_backend
+
+        self.inner = get_backend("daqp", profile)
+        self.calls = 0  # paper-formulation calls; not reset (the loop resets after a fault)
+
+    def reset(self):
+        self.inner.reset()
+
+    def _fault(self, problem, warm_start):
+        raise NotImplementedError
+
+    def _solve(self, problem, warm_start):
+        if problem.A is not None:  # the paper formulation
+            k = self.calls
+            self.calls += 1
+            if k % FAULT_EVERY == FAULT_PHASE:
+                return self._fault(problem, warm_start)
+        return self.inner.solve(problem, warm_start)
+
+
+@register
+class RaiseSomeTicks(_SomeTicks):
+    name = "faulty-ticks:raise"
+
+    def _fault(self, problem, warm_start):
+        raise RuntimeError(f"tick fault {self.calls - 1}")
+
+
+@register
+class NanSomeTicks(_SomeTicks):
+    name = "faulty-ticks:nan"
+
+    def _fault(self, problem, warm_start):
+        out = BackendSolution(problem=problem)
+        out.x = np.full(problem.q.shape[0], np.nan)
+        out.status = "optimal"
+        return out
+
+
+@register
+class SlowSomeTicks(_SomeTicks):
+    name = "faulty-ticks:slow"
+
+    def _fault(self, problem, warm_start):
+        time.sleep(SLOW_S)
+        return self.inner.solve(problem, warm_start)

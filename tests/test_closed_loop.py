@@ -160,3 +160,84 @@ def test_cli_exit_codes(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["closed-loop", "--out", str(out), "--force", "--resume"])
     assert exc.value.code == 2
+
+
+# ---------------------------------------------------------------- guards: crash, hang, per-tick faults
+
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parent))
+import faulty_backends as fb  # noqa: E402
+
+PLUGIN = str(Path(fb.__file__).resolve())
+#: Columns that hold timings (differ between two runs of the same thing).
+TIMED = ("solve_time_p50_s", "solve_time_p99_s", "solve_time_max_s", "real_time_factor", "solve_time_median_s",
+         "wall_time_s")
+
+
+def _untimed(row: pd.Series) -> pd.Series:
+    return row.drop([c for c in TIMED if c in row.index])
+
+
+def _same_daqp_run(out_a, row_a, out_b, row_b):
+    pd.testing.assert_series_equal(_untimed(row_a).sort_index(), _untimed(row_b).sort_index(), check_names=False)
+    log_a = pd.read_parquet(out_a / row_a["log_file"]).drop(columns="solve_time_s")
+    log_b = pd.read_parquet(out_b / row_b["log_file"]).drop(columns="solve_time_s")
+    pd.testing.assert_frame_equal(log_a, log_b)
+
+
+@pytest.fixture(scope="module")
+def daqp_alone(tmp_path_factory):
+    out = tmp_path_factory.mktemp("alone")
+    assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.1",
+                 "--out", str(out)]) == 0
+    return out, pd.read_csv(out / cl.CSV_NAME).iloc[0]
+
+
+def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alone):
+    out = tmp_path / "o"
+    args = ["-q", "closed-loop", "--scenarios", "wall", "--backends", "faulty:segfault,faulty:hang,daqp",
+            "--duration", "0.1", "--out", str(out), "--run-time-limit", "4", "--plugin", PLUGIN]
+    assert main(args) == 1  # failed runs
+    table = pd.read_csv(out / cl.CSV_NAME)
+    assert list(table["backend"]) == ["faulty:segfault", "faulty:hang", "daqp"]
+    crashed, hung, daqp = (table.iloc[i] for i in range(3))
+    assert crashed["status"] == "crashed" and "SIGSEGV" in crashed["error"]
+    assert hung["status"] == "time_limit" and "killed" in hung["error"]
+    assert bool(crashed["isolated"]) and bool(hung["isolated"]) and not bool(daqp["isolated"])  # auto: risky ones
+    assert daqp["status"] == "ok"
+    _same_daqp_run(out, daqp, *daqp_alone)
+    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == ["wall__daqp.parquet"]  # no partial logs
+    # resume keeps the ok row and retries only the failed ones
+    seen = []
+    outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp"], out, duration=0.1, resume=True,
+                                 plugins=[PLUGIN], on_row=seen.append)
+    assert [r["backend"] for r in seen] == ["faulty:segfault"] and outcome.errors == 2
+
+
+def test_parallel_runs_survive_a_crash(tmp_path, daqp_alone):
+    out = tmp_path / "p"
+    outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp", "faulty-ticks:raise"], out, duration=0.1,
+                                 jobs=2, isolate="always", plugins=[PLUGIN])
+    table = outcome.table.set_index("backend")
+    assert table.loc["faulty:segfault", "status"] == "crashed"
+    assert table.loc["daqp", "status"] == "ok" and table.loc["faulty-ticks:raise", "status"] == "ok"
+    assert table["isolated"].all() and outcome.errors == 1
+    alone_out, alone_row = daqp_alone
+    _same_daqp_run(out, outcome.table.iloc[1].drop("isolated"), alone_out, alone_row.drop("isolated"))
+    # the per-tick guards' counts reach the table (the test plugin loaded in the worker)
+    raised = table.loc["faulty-ticks:raise"]
+    assert raised["error_ticks"] == len(fb.fault_ticks(100)) and raised["first_error"].startswith("RuntimeError")
+    assert raised["fallback_ticks"] >= raised["error_ticks"]
+
+
+def test_guard_parameters(tmp_path):
+    with pytest.raises(ParamError):
+        cl.run_closed_loop(["wall"], ["pinv"], tmp_path, isolate="sometimes")
+    with pytest.raises(ParamError):
+        cl.run_closed_loop(["wall"], ["pinv"], tmp_path, run_time_limit=0.0)
+    assert cl.run_deadline("wall", 0.1) == cl.RUN_TIME_LIMIT_MIN_S
+    assert cl.run_deadline("wall", 100.0) == 100.0 * cl.RUN_TIME_LIMIT_PER_SIM_S
+    assert cl.run_deadline("wall", None, 7.0) == 7.0
+    assert cl.is_risky("faulty:hang") and not cl.is_risky("daqp") and not cl.is_risky("nosuch")

@@ -194,13 +194,14 @@ def test_summary_counts_declared_infeasible_ticks_only():
     start = int((log["t"] < 0.2).sum() - (log.loc[log["t"] < 0.2, "status"] == "optimal").sum())
     assert start > 50 and log["status"].iloc[:start].isin(["primal_infeasible", "not_solved"]).all()
     assert s["infeasible_ticks"] == start + 3
-    assert s["non_optimal_ticks"] == start + 5  # tick 320 says optimal (its answer is not finite)
+    assert s["non_optimal_ticks"] == start + 6  # tick 320 says optimal but its answer is not finite: invalid
     assert s["fallback_ticks"] == start + 6 and s["zero_velocity_ticks"] == 0
     assert s["first_infeasible_t"] == 0.0 and s["last_infeasible_t"] == pytest.approx(0.305)
     assert s["infeasible_intervals"][-2:] == [[0.3, 0.301], [0.305, 0.305]]
     assert s["status_counts"]["max_iter"] == 1 and s["status_counts"]["error"] == 1
+    assert s["invalid_ticks"] == 1 and s["error_ticks"] == 1 and s["raised_ticks"] == 0
     assert bool(log["fallback"].iloc[320]) and np.isfinite(log[[f"v_{i}" for i in range(4)]].to_numpy()).all()
-    assert log["status"].iloc[320] == "optimal"
+    assert log["status"].iloc[320] == "invalid"
 
 
 def test_rnn_online_ticks_are_non_optimal_not_infeasible():
@@ -391,3 +392,73 @@ def test_force_sensor_noise_is_logged():
     assert np.abs(noise).max() > 0.5
     np.testing.assert_allclose(log["force"].to_numpy(), law + noise, rtol=0, atol=1e-9)
     np.testing.assert_allclose(log["force_error"].to_numpy(), law + noise - 20.0, rtol=0, atol=1e-9)
+
+
+# ---------------------------------------------------------------- per-tick guards (test-only faulty backends)
+
+
+def _fault_run(kind, **kw):
+    import faulty_backends as fb
+
+    res = simulate("wall", f"faulty-ticks:{kind}", duration=0.1, **kw)
+    return res, fb.fault_ticks(100)
+
+
+def _check_fault_ticks(res, ticks, status):
+    s, log = res.summary, res.log
+    assert s["ticks"] == len(log) == 100
+    assert "invalid" in log["status"].cat.categories
+    assert list(np.flatnonzero((log["status"] == status).to_numpy())) == ticks
+    # the soft fallback covered every faulty tick; the arm never stopped
+    assert log["fallback"].iloc[ticks].all() and s["zero_velocity_ticks"] == 0
+    assert np.isfinite(log[[f"v_{i}" for i in range(4)]].to_numpy()).all()
+    assert s["status_counts"][status] == len(ticks)
+    json.dumps(s, allow_nan=False)
+
+
+def test_exception_on_a_tick_is_an_error_tick_covered_by_the_fallback():
+    res, ticks = _fault_run("raise")
+    s = res.summary
+    _check_fault_ticks(res, ticks, "error")
+    assert s["error_ticks"] == s["raised_ticks"] == len(ticks) == 10
+    assert s["first_error"] == f"RuntimeError: tick fault {ticks[0]}"
+    assert s["first_error_t"] == pytest.approx(ticks[0] * 0.001)
+    assert s["fallback_errors"] == 0 and s["invalid_ticks"] == s["time_limit_ticks"] == 0
+    assert np.isfinite(res.log["tracking_error"]).all()  # every tick logged
+
+
+def test_non_finite_answer_is_an_invalid_tick():
+    res, ticks = _fault_run("nan")
+    s = res.summary
+    _check_fault_ticks(res, ticks, "invalid")
+    assert s["invalid_ticks"] == len(ticks) and s["error_ticks"] == 0 and s["first_error"] is None
+
+
+def test_late_answer_is_a_time_limit_tick():
+    res, ticks = _fault_run("slow", time_limit=0.03)
+    s = res.summary
+    _check_fault_ticks(res, ticks, "time_limit")
+    assert s["time_limit_ticks"] == len(ticks) and s["time_limit_s"] == 0.03
+    assert (res.log["solve_time_s"].iloc[ticks] > 0.03).all()
+    # the default limit is the profile's (10 s): the same answers are on time
+    quick = simulate("wall", qp_backend(), duration=0.01)
+    assert quick.summary["time_limit_s"] == 10.0 and quick.summary["time_limit_ticks"] == 0
+
+
+def test_fallback_exception_means_zero_velocity():
+    class _AlwaysRaises(Backend):
+        name = "test-raises"
+
+        def _solve(self, problem, warm_start):
+            raise ValueError("boom")
+
+    res = simulate("wall", _AlwaysRaises(), duration=0.02)
+    s = res.summary
+    assert s["error_ticks"] == s["raised_ticks"] == s["zero_velocity_ticks"] == s["fallback_errors"] == 20
+    assert s["first_error"] == "ValueError: boom"
+    assert (res.log["status"] == "error").all()
+
+
+def test_bad_time_limit():
+    with pytest.raises(ParamError, match="positive"):
+        simulate("wall", "pinv", duration=0.01, time_limit=0.0)

@@ -1,4 +1,14 @@
-"""``qpbench closed-loop``: every scenario with every backend in the loop, tabulated."""
+"""``qpbench closed-loop``: every scenario with every backend in the loop, tabulated.
+
+Guarded (see :mod:`qpbench.harness.closed_loop`): per tick, an exception, a
+late answer (``--time-limit``) or a non-finite answer of the backend is a tick
+without a solution (statuses ``error``, ``time_limit``, ``invalid`` in the
+tick log, counts in the row); per run, ``--isolate`` runs a backend in a worker
+process with a deadline (``--run-time-limit``), so a hang or a crash in native
+code becomes a ``time_limit`` or ``crashed`` row and the other runs go on.
+``--plugin`` (or ``QPBENCH_PLUGINS``) loads modules that register extra
+backends, here and in the workers.
+"""
 
 from __future__ import annotations
 
@@ -23,7 +33,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--formulation", choices=("paper", "soft"), default="paper",
                         help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
-                        help="runs in parallel worker processes (default: 1; timing is cleanest with 1)")
+                        help="runs in parallel, each in a worker process of its own (default: 1; timing is "
+                             "cleanest with 1)")
+    parser.add_argument("--time-limit", type=float, default=None, metavar="S",
+                        help="per-tick time limit in [s]: a later answer is status time_limit and not applied "
+                             "(default: the profile's, 10 s)")
+    parser.add_argument("--isolate", default="auto", choices=("auto", "always", "never"),
+                        help="run a backend's runs in a worker process with a deadline, so a hang or crash is a "
+                             "row: auto = backends marked risky (default)")
+    parser.add_argument("--run-time-limit", type=float, default=None, metavar="S",
+                        help="deadline of an isolated run in [s], worker start and warm-up included (default: "
+                             "max(600, 50 x simulated seconds))")
+    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE_OR_FILE",
+                        help="import a module (or .py file) that registers extra backends; repeatable "
+                             "(also QPBENCH_PLUGINS)")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help="replace an existing table and its logs")
     group.add_argument("--resume", action="store_true",
@@ -32,7 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..harness.closed_loop import resolve_backends, resolve_scenarios, run_closed_loop
+    from ..harness.plugins import load_plugins, plugin_specs
 
+    plugins = plugin_specs(args.plugin)
+    load_plugins(plugins)
     scenarios = resolve_scenarios(args.scenarios)
     backends = resolve_backends(args.backends)
     bar = None
@@ -51,7 +77,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         outcome = run_closed_loop(scenarios, backends, args.out, duration=args.duration,
                                   formulation=args.formulation, force=args.force,
-                                  resume=args.resume, jobs=args.jobs, on_row=on_row)
+                                  resume=args.resume, jobs=args.jobs, on_row=on_row,
+                                  isolate=args.isolate, run_time_limit=args.run_time_limit,
+                                  time_limit=args.time_limit, plugins=plugins)
     finally:
         if bar is not None:
             bar.close()

@@ -10,7 +10,9 @@ column                      meaning
 ==========================  =====================================================
 scenario, backend           the pair
 formulation, duration_s     the QP formulation (``paper`` | ``soft``), simulated [s]
-status, error               ``ok``, ``error`` (and the exception's message) or
+status, error               ``ok``; ``error`` (and the exception's message),
+                            ``crashed`` (the worker died; the signal),
+                            ``time_limit`` (the run overran its deadline) or
                             ``skipped`` (and why: see :func:`probe_real_time_factor`)
 ticks                       control ticks simulated
 tracking_rms_after_2s       tangential tracking error RMS for t >= 2 s [m]
@@ -29,9 +31,31 @@ real_time_factor            simulated time / wall time
 log_file                    the tick log, relative to the CSV's folder
 ==========================  =====================================================
 
-followed by every other key of the simulator's summary. The table is
-rewritten atomically after each run (rows appear as they are produced); a
-run that raises becomes a row with status ``error`` and the others continue.
+followed by ``isolated`` (the run was made in a worker process with a
+deadline) and every other key of the simulator's summary, among them the
+per-tick guards' counts ``error_ticks``, ``time_limit_ticks``,
+``invalid_ticks`` and ``first_error`` (see :func:`qpbench.sim.loop.simulate`:
+an exception, a late answer or a non-finite answer of the backend is a
+tick without a solution, not the end of the run). The table is rewritten
+atomically after each run (rows appear as they are produced); a run that
+raises becomes a row with status ``error`` and the others continue.
+
+Guards against a hang in native code and a process death (segfault, abort):
+``isolate`` (``--isolate``) ``auto`` (the default: backends whose class has
+``risky = True``, e.g. ``proxqp``), ``always`` or ``never``. An isolated run
+is made in a worker process of its own (``multiprocessing``, ``forkserver``
+context with qpbench preloaded, else ``spawn``) with a deadline
+(``run_time_limit``, ``--run-time-limit``; default
+``max(600 s, 50 s per simulated second)``, see :func:`run_deadline`). A
+worker that dies gives a row with status ``crashed`` and the signal (``worker
+process killed by SIGSEGV``), one that overruns the deadline is killed
+(SIGKILL) and gives a row with status ``time_limit``; the other runs go on.
+With ``jobs > 1`` every run is made in a worker process of its own (the
+deadline only for isolated ones), so one crash loses no other run's row.
+Isolation costs no timing accuracy: the worker times the run itself exactly
+as this process would (warm-up run first); its start (a fork of the
+forkserver, importing the backend, loading the compiled kernels: about a
+second) adds only to the total duration.
 ``resume`` keeps the rows already done with the same formulation and
 duration (status ``ok``) and runs the rest (rows of pairs not asked for this
 time stay in the table); ``force`` starts again.
@@ -287,14 +311,15 @@ def resolve_backends(value: str | list[str] | None) -> list[str]:
 
 
 def simulate_one(scenario_name: str, backend: str, formulation: str, duration: float | None,
-                 log_path: Path | None) -> tuple[dict, pd.DataFrame]:
+                 log_path: Path | None, time_limit: float | None = None) -> tuple[dict, pd.DataFrame]:
     """Run one (scenario, backend) and return its table row and tick log.
 
     The tick log is written atomically to ``log_path`` (Parquet) when given.
     The backend is passed by name, so the ``rnn`` backends get the scenario's
     ``[rnn]`` table (eps, sub-steps, clipping) and the loop's ``dt`` from
-    :func:`qpbench.sim.loop.resolve_backend`. Exceptions propagate (the
-    caller turns them into an error row).
+    :func:`qpbench.sim.loop.resolve_backend`. ``time_limit`` is the per-tick
+    limit [s] (default: the backend profile's; see :func:`qpbench.sim.loop.simulate`).
+    Exceptions propagate (the caller turns them into an error row).
     """
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
@@ -302,10 +327,10 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
     scenario = load_scenario(scenario_name)
     # warm-up: a discarded run of a few ticks, so one-off costs (numba compilation or
     # cache load, solver imports, first-call allocations) stay out of the timed run
-    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt)
+    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt, time_limit=time_limit)
     start = time.perf_counter()
     # by name: the simulator gives the rnn backends the scenario's [rnn] settings and dt
-    result = simulate(scenario, backend, formulation=formulation, duration=duration)
+    result = simulate(scenario, backend, formulation=formulation, duration=duration, time_limit=time_limit)
     wall = time.perf_counter() - start
     summary = dict(result.summary or {})
     summary.setdefault("wall_time_s", wall)
@@ -320,10 +345,10 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
 
 def _run_job(args: tuple) -> dict:
     """One guarded run (module level so a process pool can call it)."""
-    scenario, backend, formulation, duration, out = args
+    scenario, backend, formulation, duration, out, time_limit = args
     log_path = Path(out) / LOG_DIR / log_name(scenario, backend)
     try:
-        row, _ = simulate_one(scenario, backend, formulation, duration, log_path)
+        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, time_limit)
         row["log_file"] = f"{LOG_DIR}/{log_path.name}"
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
         log.warning("closed loop %s with %s failed: %s: %s", scenario, backend, type(exc).__name__, exc)
@@ -368,18 +393,180 @@ def probe_real_time_factor(backend: str, scenario: str = "wall", ticks: int = PR
 def error_row(scenario: str, backend: str, formulation: str, duration: float | None,
               exc: BaseException) -> dict:
     """The row of a run that raised: status ``error`` and the message, in one line."""
+    return failure_row(scenario, backend, formulation, duration, "error",
+                       " ".join(f"{type(exc).__name__}: {exc}".split()))
+
+
+def failure_row(scenario: str, backend: str, formulation: str, duration: float | None,
+                status: str, message: str) -> dict:
+    """The row of a run that produced no result: ``status`` (``error``, ``crashed``,
+    ``time_limit``) and why in ``error``."""
     row = {c: math.nan for c in COLUMNS}
-    message = " ".join(f"{type(exc).__name__}: {exc}".split())
     row.update(scenario=scenario, backend=backend, formulation=formulation,
                duration_s=float(duration) if duration is not None else math.nan,
-               status="error", error=message, log_file="")
+               status=status, error=message, log_file="")
     return row
+
+
+#: Choices of ``isolate``: ``auto`` isolates backends whose class says ``risky = True``.
+ISOLATE = ("auto", "always", "never")
+#: Least deadline of an isolated run [s] (see :func:`run_deadline`).
+RUN_TIME_LIMIT_MIN_S = 600.0
+#: Deadline of an isolated run per simulated second [s] (a real-time factor of 1/50).
+RUN_TIME_LIMIT_PER_SIM_S = 50.0
+#: Statuses of a run that produced no result (counted in :attr:`ClosedLoopOutcome.errors`).
+FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
+
+
+def run_deadline(scenario: str, duration: float | None, run_time_limit: float | None = None) -> float:
+    """Deadline [s] of one isolated run: ``run_time_limit`` when given, else
+    ``max(RUN_TIME_LIMIT_MIN_S, RUN_TIME_LIMIT_PER_SIM_S * simulated seconds)``
+    (600 s up to 12 s of simulated time). It covers the worker's start, the
+    warm-up, the run and the writing of its tick log."""
+    if run_time_limit is not None:
+        return float(run_time_limit)
+    if duration is None:
+        try:
+            from ..sim.scenario import load_scenario
+
+            duration = load_scenario(scenario).duration
+        except Exception:  # noqa: BLE001 - the run itself reports a bad scenario
+            duration = 0.0
+    return max(RUN_TIME_LIMIT_MIN_S, RUN_TIME_LIMIT_PER_SIM_S * float(duration))
+
+
+def is_risky(backend: str) -> bool:
+    """The backend's class says ``risky = True`` (``False`` for an unknown name)."""
+    from ..backends import _registry
+
+    return bool(getattr(_registry().get(backend), "risky", False))
+
+
+def _worker_main(conn, args: tuple, plugins: list[str]) -> None:
+    """Body of a run's worker process: load the plugins, make the run, send its row."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    try:
+        from .plugins import load_plugins
+
+        load_plugins(plugins)
+        row = _run_job(args)
+    except BaseException as exc:  # noqa: BLE001 - a plugin that fails to load
+        row = error_row(args[0], args[1], args[2], args[3], exc)
+    conn.send(row)
+    conn.close()
+
+
+def _exit_text(exitcode: int | None) -> str:
+    import signal
+
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"worker process killed by {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"worker process killed by signal {-exitcode}"
+    return f"worker process exited with code {exitcode} without a result"
+
+
+class _RunWorker:
+    """One (scenario, backend) run in its own worker process, with an optional deadline."""
+
+    def __init__(self, key: tuple[str, str], args: tuple, plugins: list[str], deadline_s: float | None):
+        from .isolation import _context
+
+        ctx = _context()  # forkserver (qpbench preloaded) where there is one, else spawn
+        self.key, self.args = key, args
+        self.conn, child = ctx.Pipe(duplex=False)
+        self.proc = ctx.Process(target=_worker_main, args=(child, args, plugins), daemon=True,
+                                name=f"qpbench-closed-loop-{key[0]}-{key[1]}")
+        self.started = time.monotonic()
+        self.deadline_s = deadline_s
+        self.deadline = math.inf if deadline_s is None else self.started + deadline_s
+        self.proc.start()
+        child.close()
+
+    def result(self, now: float) -> dict | None:
+        """The run's row once it is over (finished, died or past its deadline), else ``None``."""
+        scenario, backend, formulation, duration = self.args[:4]
+        try:
+            if self.conn.poll():
+                row = self.conn.recv()
+                self.proc.join(5)
+                self._close()
+                return row
+        except (EOFError, OSError):
+            pass
+        if not self.proc.is_alive():
+            self.proc.join()
+            message = f"{_exit_text(self.proc.exitcode)} during the closed-loop run"
+            log.warning("closed loop %s with %s: %s", scenario, backend, message)
+            self._close()
+            self._drop_partial_log()
+            return failure_row(scenario, backend, formulation, duration, "crashed", message)
+        if now >= self.deadline:
+            self.kill()
+            self._drop_partial_log()
+            message = f"no result after {self.deadline_s:.3g} s (run time limit); worker killed"
+            log.warning("closed loop %s with %s: %s", scenario, backend, message)
+            return failure_row(scenario, backend, formulation, duration, "time_limit", message)
+        return None
+
+    def kill(self) -> None:
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.proc.join(5)
+        self._close()
+
+    def _drop_partial_log(self) -> None:
+        """Remove the temporary tick log a dead worker may have left (never a complete one)."""
+        scenario, backend, out = self.args[0], self.args[1], self.args[4]
+        for tmp in (Path(out) / LOG_DIR).glob(f".{log_name(scenario, backend)}.*.tmp"):
+            tmp.unlink(missing_ok=True)
+
+    def _close(self) -> None:
+        try:
+            self.conn.close()
+        except OSError:  # pragma: no cover
+            pass
+
+
+def _run_in_workers(items: list[tuple], jobs: int, plugins: list[str], emit: Callable) -> None:
+    """Run ``items`` (key, args, deadline or None) in worker processes, ``jobs`` at a time.
+
+    Each run has a process of its own: a run that dies or overruns its
+    deadline becomes a ``crashed`` or ``time_limit`` row and takes no other
+    run's row with it. ``emit(key, row)`` is called as each run ends.
+    """
+    from multiprocessing.connection import wait
+
+    pending = list(items)
+    active: list[_RunWorker] = []
+    try:
+        while pending or active:
+            while pending and len(active) < jobs:
+                key, args, deadline_s = pending.pop(0)
+                active.append(_RunWorker(key, args, plugins, deadline_s))
+            now = time.monotonic()
+            timeout = min(w.deadline for w in active) - now
+            wait([w.conn for w in active] + [w.proc.sentinel for w in active],
+                 timeout=None if timeout == math.inf else max(timeout, 0.0))
+            now = time.monotonic()
+            for w in list(active):
+                row = w.result(now)
+                if row is not None:
+                    active.remove(w)
+                    emit(w.key, row)
+    finally:
+        for w in active:  # interrupted: no orphan workers
+            w.kill()
 
 
 @dataclass
 class ClosedLoopOutcome:
-    """What :func:`run_closed_loop` did: the full table, the runs that raised
-    (``errors``), the runs made now (``ran``) and those kept or skipped."""
+    """What :func:`run_closed_loop` did: the full table, the runs that failed
+    (``errors``: status ``error``, ``crashed`` or ``time_limit``), the runs made
+    now (``ran``) and those kept or skipped."""
 
     table: pd.DataFrame
     csv_path: Path
@@ -425,6 +612,10 @@ def run_closed_loop(
     jobs: int = 1,
     on_row: Callable[[dict], None] | None = None,
     skip: dict[str, str] | None = None,
+    isolate: str = "auto",
+    run_time_limit: float | None = None,
+    time_limit: float | None = None,
+    plugins: list[str] | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``.
 
@@ -436,10 +627,21 @@ def run_closed_loop(
         formulation: ``paper`` (hard task, eq. 11) or ``soft``.
         force: Replace an existing table and its logs.
         resume: Keep the rows already done (same formulation and duration).
-        jobs: Runs in parallel (worker processes); 1 runs them in this process.
+        jobs: Runs in parallel, each in a worker process of its own; with 1 the
+            runs that are not isolated run in this process.
         on_row: Called with each new row as soon as it is written.
         skip: Backend -> reason: those backends get a ``skipped`` row per scenario
             instead of a run.
+        isolate: ``auto`` (backends whose class has ``risky = True``),
+            ``always`` or ``never``: an isolated run is made in a worker process
+            with a deadline; its death is a ``crashed`` row (with the signal),
+            its overrun a ``time_limit`` row (the worker killed).
+        run_time_limit: Deadline of an isolated run [s] (default: see
+            :func:`run_deadline`).
+        time_limit: Per-tick time limit [s] (default: the backend profile's;
+            see :func:`qpbench.sim.loop.simulate`).
+        plugins: Plugin modules or ``.py`` files that register extra backends
+            (with those of ``QPBENCH_PLUGINS``); imported here and in the workers.
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -451,6 +653,15 @@ def run_closed_loop(
         raise ParamError(f"duration must be a positive number of seconds, got {duration}", key="--duration")
     if jobs < 1:
         raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
+    if isolate not in ISOLATE:
+        raise ParamError(f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate")
+    for value, key in ((run_time_limit, "--run-time-limit"), (time_limit, "--time-limit")):
+        if value is not None and not (value > 0 and not math.isnan(value)):
+            raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
+    from .plugins import load_plugins, plugin_specs
+
+    plugins = [str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_specs(plugins)]
+    load_plugins(plugins)
     out = Path(out)
     csv_path = out / CSV_NAME
     check_output(csv_path, force=force, resume=resume)
@@ -490,25 +701,27 @@ def run_closed_loop(
         if on_row is not None:
             on_row(row)
 
-    jobs_args = [(s, b, formulation, duration, str(out)) for s, b in todo]
-    if jobs == 1 or len(todo) <= 1:
-        for key, args in zip(todo, jobs_args):
-            _emit(key, _run_job(args))
-    else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+    def _isolated(backend: str) -> bool:
+        return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            futures = {pool.submit(_run_job, args): key for key, args in zip(todo, jobs_args)}
-            for fut in as_completed(futures):
-                key = futures[fut]
-                try:
-                    row = fut.result()
-                except Exception as exc:  # noqa: BLE001 - a worker died
-                    row = error_row(key[0], key[1], formulation, duration, exc)
-                _emit(key, row)
+    # (key, args, deadline of an isolated run or None)
+    items = [((s, b), (s, b, formulation, duration, str(out), time_limit),
+              run_deadline(s, duration, run_time_limit) if _isolated(b) else None) for s, b in todo]
+
+    def _emit_run(key, row):
+        row["isolated"] = _isolated(key[1])
+        _emit(key, row)
+
+    if jobs == 1:
+        for key, args, deadline_s in items:
+            if deadline_s is None:
+                _emit_run(key, _run_job(args))
+            else:
+                _run_in_workers([(key, args, deadline_s)], 1, plugins, _emit_run)
+    else:
+        # every run in a worker of its own: a crash is that run's row, not the pool's end
+        _run_in_workers(items, jobs, plugins, _emit_run)
     write_table(_table_rows(), csv_path)
     table = pd.read_csv(csv_path)
-    errors = int((table["status"] == "error").sum()) if len(table) else 0
+    errors = int(table["status"].isin(FAILED_RUN_STATUSES).sum()) if len(table) else 0
     return ClosedLoopOutcome(table, csv_path, errors, len(todo), len(order) - len(todo))

@@ -16,7 +16,22 @@ One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
    solution. (A backend that cannot classify infeasibility and stops on a
    budget, like ``rnn-converged``, spends that budget on every infeasible
    tick of the ``paper`` formulation; on the scenarios' infeasible start its
-   soft fallback fails too and the arm stops: see results/rnn/README.md);
+   soft fallback fails too and the arm stops: see results/rnn/README.md).
+   Every solve is guarded, so a faulty backend cannot stop the loop: a
+   Python exception escaping the backend makes the tick's status ``error``
+   (the backend is reset, the first exception's ``"Type: message"`` is kept
+   in the summary as ``first_error``); an answer that arrives after the
+   per-tick time limit (``time_limit``, default the backend profile's) is
+   ``time_limit``; an ``x`` holding a NaN or an infinity is ``invalid``
+   (the backend is reset). Each of these is a tick without a solution:
+   soft fallback, else zero velocity (an online backend: zero velocity).
+   The time limit is checked when the answer arrives: a solve is never
+   interrupted, so a backend that hangs (in native code) hangs the loop;
+   ``qpbench closed-loop`` guards against that (and against a crash of the
+   process) by running such a backend's simulation in a worker process with
+   a deadline (:mod:`qpbench.harness.closed_loop`). An exception or a late
+   answer of the fallback's own solve counts as a failed fallback (zero
+   velocity; ``fallback_errors`` in the summary);
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
 5. plant: ``theta_{k+1} = theta_k + dt v_k``.
 
@@ -40,7 +55,10 @@ d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
 d_min               smallest of those [m]
 v_sq                ``|v|^2`` [rad^2/s^2]
 task_residual       ``|J v - b0|`` [m/s]
-status              the backend's status on the tick's QP
+status              the backend's status on the tick's QP, one of
+                    :data:`TICK_STATUSES` (the backends' statuses, plus
+                    ``invalid``: a non-finite answer; ``error`` is also an
+                    exception, ``time_limit`` also a late answer)
 fallback            the soft fallback's answer was applied
 zero_velocity       zero velocity was commanded (fallback failed too)
 solve_time_s        wall time of the tick's solve call(s) [s]
@@ -66,7 +84,9 @@ from ..exceptions import ParamError
 from ..control.controller import FORMULATIONS, Controller
 from .scenario import Scenario, load_scenario
 
-__all__ = ["INFEASIBLE_STATUSES", "SimResult", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize"]
+__all__ = [
+    "INFEASIBLE_STATUSES", "SimResult", "TICK_STATUSES", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize",
+]
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +105,36 @@ MAX_INTERVALS = 20
 
 #: Statuses counted as ``infeasible_ticks`` in a summary (see :func:`summarize`).
 INFEASIBLE_STATUSES = ("primal_infeasible", "dual_infeasible", "not_solved")
+
+#: Categories of the tick log's ``status`` column: the backends' statuses plus
+#: ``invalid`` (the answer held a NaN or an infinity).
+TICK_STATUSES = tuple(STATUSES) + ("invalid",)
+
+
+class _Raised:
+    """Stands for the solution of a solve that raised (status ``error``, no answer)."""
+
+    __slots__ = ("status", "x", "y", "z", "error")
+
+    def __init__(self, error: str):
+        self.status = "error"
+        self.x = self.y = self.z = None
+        self.error = error
+
+
+def _describe(exc: BaseException) -> str:
+    """``"Type: message"`` on one line (the harness's wording)."""
+    from ..harness.guard import describe_exception
+
+    return describe_exception(exc)
+
+
+def _reset(backend: Backend) -> None:
+    """Reset a backend after a failed tick; a reset that raises shows up at the next solve."""
+    try:
+        backend.reset()
+    except Exception:  # noqa: BLE001
+        log.debug("reset of %s raised", backend.name, exc_info=True)
 
 
 
@@ -263,6 +313,7 @@ def simulate(
     dump: str | Path | None = None,
     progress: bool = False,
     profile: str = "default",
+    time_limit: float | None = None,
 ) -> SimResult:
     """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
 
@@ -277,6 +328,11 @@ def simulate(
             (:func:`qpbench.formats.write_problem_set`).
         progress: Show a tqdm progress bar.
         profile: Settings profile of a backend given by name.
+        time_limit: Per-tick time limit in [s] (default: the backend's
+            profile's ``time_limit``, 10 s for ``default``). An answer that
+            arrives later is status ``time_limit`` and is not applied (the
+            tick goes on as a tick without a solution); the solve is not
+            interrupted (see the module docstring).
 
     Returns:
         The per-tick log, the summary and the kept records.
@@ -295,6 +351,11 @@ def simulate(
     keep_every = every if every is not None else (1 if dump is not None else None)
 
     be = resolve_backend(backend, scenario, dt, profile)
+    if time_limit is None:
+        time_limit = float(be.profile.time_limit)
+    elif not (isinstance(time_limit, (int, float, np.floating)) and time_limit > 0):
+        raise ParamError(f"must be a positive number of seconds, got {time_limit!r}", key="time_limit")
+    time_limit = float(time_limit)
     online = bool(getattr(be, "online", False))
     be.reset()
 
@@ -350,6 +411,8 @@ def simulate(
 
         bar = tqdm(total=ticks, unit="tick", desc=f"{scenario.name} {be.name}", mininterval=0.5)
     n_fallback = n_zero = 0
+    n_raised = n_fallback_errors = 0
+    first_error = first_error_t = None
     start = perf()
     for k in range(ticks):
         t = k * dt
@@ -358,12 +421,15 @@ def simulate(
         if keep_every is not None and k % keep_every == 0:
             records.append((k, t, problem))
         t0 = perf()
-        sol = solve(problem, v)
+        try:
+            sol = solve(problem, v)
+        except Exception as exc:  # noqa: BLE001 - a backend's exception is the tick's status
+            sol = _Raised(_describe(exc))
+        solve_s = perf() - t0
         status = sol.status
-        statuses.append(status)
         x = sol.x
         force = -1.0
-        if x is not None and (online or status == "optimal"):
+        if x is not None and (online or status == "optimal") and solve_s <= time_limit:
             if type(x) is not np.ndarray or x.dtype != f64:
                 x = np.asarray(x, dtype=np.float64)
             y = sol.y
@@ -371,15 +437,37 @@ def simulate(
             # -1.0 when x is not finite: nothing logged, the plant not moved
             force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10],
                          none if y is None else y, none if z is None else z,
-                         data, k, ci, cf, t, _APPLIED, kp, kd, perf() - t0)
+                         data, k, ci, cf, t, _APPLIED, kp, kd, solve_s)
             if force >= 0.0:
                 v = x
+            else:
+                status = "invalid"
         if force < 0.0:
+            # the tick's own answer is not applied: say why
+            if type(sol) is _Raised:
+                n_raised += 1
+                if first_error is None:
+                    first_error, first_error_t = sol.error, t
+                _reset(be)  # its state can no longer be trusted
+            elif status == "invalid":
+                _reset(be)
+            elif solve_s > time_limit:
+                status = "time_limit"
+            elif status == "error" and first_error is None and getattr(sol, "error", None):
+                first_error, first_error_t = str(sol.error), t  # reported by the backend, not raised
             # no usable answer: the soft formulation's (same backend), else zero velocity
             mode, x, z = _ZERO, zeros, none
             if not online and not soft_primary:
-                fb = solve(make_problem(build(theta, t, kp, kd, True), True), v)
-                if fb.status == "optimal" and fb.x is not None:
+                t1 = perf()
+                try:
+                    fb = solve(make_problem(build(theta, t, kp, kd, True), True), v)
+                except Exception as exc:  # noqa: BLE001 - a failed fallback: zero velocity
+                    fb = _Raised(_describe(exc))
+                    n_fallback_errors += 1
+                    if first_error is None:
+                        first_error, first_error_t = f"fallback: {fb.error}", t
+                    _reset(be)
+                if fb.status == "optimal" and fb.x is not None and perf() - t1 <= time_limit:
                     mode, x = _FALLBACK, np.asarray(fb.x, dtype=np.float64)
                     z = none if fb.z is None else fb.z
             force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10], none, z,
@@ -393,6 +481,7 @@ def simulate(
             else:
                 n_zero += 1
             v = x if mode == _FALLBACK else zeros.copy()
+        statuses.append(status)
         if noisy:
             force += surface.noise()
             data[k, c_force] = force
@@ -407,13 +496,15 @@ def simulate(
         bar.update(ticks - bar.n)
         bar.close()
 
-    codes = {s: i for i, s in enumerate(STATUSES)}
+    codes = {s: i for i, s in enumerate(TICK_STATUSES)}
     status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=ticks)
     frame = pd.DataFrame(data, columns=cols)
     frame["fallback"] = frame["fallback"].astype(bool)
     frame["zero_velocity"] = frame["zero_velocity"].astype(bool)
-    frame.insert(cols.index("fallback"), "status", pd.Categorical.from_codes(status_codes, categories=list(STATUSES)))
+    frame.insert(cols.index("fallback"), "status", pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)))
     summary = summarize(frame, scenario, ctrl, be.name, formulation, wall)
+    summary.update(time_limit_s=time_limit, raised_ticks=n_raised, fallback_errors=n_fallback_errors,
+                   first_error=first_error, first_error_t=first_error_t)
     recs = []
     if keep_every is not None:
         from ..formats import ProblemRecord
@@ -488,7 +579,14 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
       whatever the reason (a superset of the above; for the online ``rnn``
       nearly every tick, since its state is applied after one tick of
       integration, not at convergence).
-    - ``status_counts``: the breakdown by status.
+    - ``status_counts``: the breakdown by status; ``error_ticks``,
+      ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
+      (an exception or an ``error`` status, a late answer or a budget, a
+      non-finite answer). :func:`simulate` adds ``time_limit_s`` (the
+      per-tick limit), ``raised_ticks`` (ticks whose solve raised),
+      ``fallback_errors`` (fallback solves that raised), ``first_error``
+      (``"Type: message"`` of the first exception, else the first error a
+      backend reported; ``None`` when none) and ``first_error_t`` [s].
 
     ``scenario_overrides`` holds the values set over the scenario file's
     (``qpbench simulate --set``), empty when none. ``fallback_ticks``
@@ -538,6 +636,9 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
         "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
         "infeasible_intervals": _intervals(infeasible, t, dt),
         "status_counts": {str(k): int(v) for k, v in frame["status"].value_counts().items() if v},
+        "error_ticks": int((status == "error").sum()),
+        "time_limit_ticks": int((status == "time_limit").sum()),
+        "invalid_ticks": int((status == "invalid").sum()),
         "tracking_rms_after_2s": rms(te[after]),
         "tracking_max_after_2s": amax(te[after]),
         "force_error_rms_after_2s": rms(fe[after]),
