@@ -51,12 +51,19 @@ def write_bytes(path: str | Path, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def check_output(path: str | Path, force: bool = False, resume: bool = False) -> None:
+def check_output(path: str | Path, force: bool = False, resume: bool | None = None) -> None:
     """Refuse to overwrite an existing output unless ``force`` or ``resume``.
+
+    Args:
+        path: The output file or folder.
+        force: ``--force`` was given.
+        resume: ``--resume`` was given; ``None`` when the command has no
+            ``--resume`` (the message then does not offer it).
 
     Raises:
         OutputExistsError: ``path`` exists and neither flag was given.
     """
     path = Path(path)
     if path.exists() and not (force or resume):
-        raise OutputExistsError(f"{path}: exists; pass --force to overwrite or --resume to continue")
+        hint = "pass --force to overwrite" + (" or --resume to continue" if resume is not None else "")
+        raise OutputExistsError(f"{path}: exists; {hint}")

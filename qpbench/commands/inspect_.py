@@ -7,7 +7,7 @@ import sys
 from collections import Counter
 
 HELP = "show what a problem set, .parquet, .npz, .mat or folder holds (count, sizes, formulation, hash)"
-EXAMPLE = "qpbench inspect problems/wall-paper"
+EXAMPLE = "qpbench inspect problems/wall"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -10,8 +10,8 @@ from pathlib import Path
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
-    "qpbench simulate --scenario wall --backend daqp --summary results/simulate/wall.json "
-    "--log wall.parquet --dump problems/wall --every 10 --plot wall.png; "
+    "qpbench simulate --scenario wall --backend daqp --summary wall.json "
+    "--log wall.parquet --dump wall-set --every 10 --plot wall.png; "
     "qpbench simulate --scenario wall --backend rnn --set rnn.eps=0.001 --set rnn.substeps=5"
 )
 
