@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 import qpsolvers
+from hypothesis import settings
 
 from qpbench.formats import ProblemRecord
+
+# CI draws the same hypothesis examples every run, so a red CI is reproducible;
+# locally each run explores new ones.
+settings.register_profile("ci", derandomize=True, database=None)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 #: The Maros-Meszaros subset the repository ships.
 MAROS_MESZAROS_DIR = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
