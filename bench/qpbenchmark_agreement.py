@@ -52,6 +52,7 @@ import pandas as pd
 import qpsolvers
 
 from qpbench.backends import backend_names, get_backend
+from qpbench.backends.qpsolvers_ import solver_default_limits
 from qpbench.formats import load_problems
 from qpbench.harness.bench import BenchConfig, run_bench
 from qpbench.profiles import get_profile
@@ -72,40 +73,6 @@ def import_qpbenchmark():
     root.handlers[:] = handlers
     root.setLevel(level)
     return qpbenchmark
-
-
-def solver_default_limits(solver: str) -> dict | None:
-    """The solver's own defaults of the options qpbench adds beyond qpbenchmark's (native names)."""
-    if solver == "clarabel":
-        import clarabel
-
-        s = clarabel.DefaultSettings()
-        return {"max_iter": s.max_iter, "time_limit": s.time_limit}
-    if solver == "daqp":
-        import daqp
-
-        return {"iter_limit": daqp.Model().settings["iter_limit"]}
-    if solver == "osqp":
-        import osqp
-        import scipy.sparse as spa
-
-        one = spa.csc_matrix(np.eye(1))
-        o = osqp.OSQP()
-        o.setup(one, np.zeros(1), one, -np.ones(1), np.ones(1), verbose=False)
-        return {"max_iter": int(o.settings.max_iter), "polishing": bool(o.settings.polishing)}
-    if solver == "piqp":
-        import piqp
-
-        return {"max_iter": piqp.DenseSolver().settings.max_iter}
-    if solver == "proxqp":
-        import proxsuite
-
-        return {"max_iter": proxsuite.proxqp.dense.QP(1, 0, 0).settings.max_iter}
-    if solver == "scs":
-        return {"max_iters": 100_000}  # SCS 3's documented default (not exposed by its binding)
-    if solver in ("highs", "quadprog"):
-        return {}
-    return None
 
 
 def run_qpbenchmark(qpb, test_set, solver: str, settings: str, csv_path: Path) -> pd.DataFrame:
