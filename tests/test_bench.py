@@ -281,3 +281,25 @@ def test_online_backend_integrates_the_time_between_records(tmp_path):
     assert backend_settings("rnn", explicit, pset, _registry()) == {"dt": 0.002}
     bare = read_problem_set(write_problem_set(tmp_path / "b", fb.tick_records(3), generator={"name": "t"}))
     assert backend_settings("rnn", config, bare, _registry()) == {}
+
+
+def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys, monkeypatch):
+    """--set rnn.eps=0.001 reaches the rnn backend only; a --set naming no backend of the run is exit 2."""
+    from qpbench.backends import get_backend as real_get_backend
+
+    seen = {}
+
+    def spy(name, profile="default", **settings):
+        seen[name] = settings
+        return real_get_backend(name, profile, **settings)
+
+    monkeypatch.setattr("qpbench.backends.get_backend", spy)
+    out = tmp_path / "s.csv"
+    assert bench(two_scenarios, "--backends", "rnn,clarabel", "--out", out, "--set", "rnn.eps=0.001",
+                 "--set", "rnn.substeps=5") in (0, 1)
+    assert seen["rnn"]["eps"] == 0.001 and seen["rnn"]["substeps"] == 5
+    assert "eps" not in seen["clarabel"]
+    capsys.readouterr()
+    bad = tmp_path / "bad.csv"
+    assert bench(two_scenarios, "--backends", "clarabel", "--out", bad, "--set", "osqp.rho=0.1") == 2
+    assert "osqp.rho" in capsys.readouterr().err and not bad.exists()

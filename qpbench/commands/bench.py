@@ -41,6 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend")
     parser.add_argument(
+        "--set",
+        dest="sets",
+        action="append",
+        default=[],
+        metavar="BACKEND.KEY=VALUE",
+        help="a solver setting for one backend, over the profile's, e.g. osqp.rho=0.1 or rnn.eps=0.001; repeatable",
+    )
+    parser.add_argument(
         "--plugin",
         action="append",
         default=[],
@@ -59,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..harness.plugins import load_plugins, plugin_specs
+    from .simulate import parse_overrides
 
     # Nothing is written before the input is known to be good.
     check_output(args.out, force=args.force, resume=args.resume)
@@ -70,7 +79,17 @@ def run(args: argparse.Namespace) -> int:
         backends = [b.strip() for b in args.backends.split(",") if b.strip()]
     if not backends:
         raise ParamError("no backend given", key="backends")
+    per_backend: dict[str, dict] = {}
+    for key, value in parse_overrides(args.sets).items():
+        backend, _, setting = key.rpartition(".")
+        if backend not in backends or not setting:
+            raise ParamError(
+                f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in --backends)",
+                key="--set",
+            )
+        per_backend.setdefault(backend, {})[setting] = value
     config = BenchConfig(
+        backend_settings=per_backend,
         backends=backends,
         profile=args.profile,
         repeat=args.repeat,

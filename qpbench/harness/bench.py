@@ -69,6 +69,7 @@ class BenchConfig:
         warmup: One discarded solve per backend before the first timed one.
         plugins: Plugin modules (imported here and in workers).
         settings: Extra solver settings passed to every backend.
+        backend_settings: Extra settings per backend name (over ``settings``).
     """
 
     backends: list[str]
@@ -80,6 +81,7 @@ class BenchConfig:
     warmup: bool = True
     plugins: list[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
+    backend_settings: dict = field(default_factory=dict)
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -158,13 +160,13 @@ def record_period(problem_set) -> float | None:
 
 
 def backend_settings(name: str, config: BenchConfig, problem_set, registry) -> dict:
-    """Settings for backend ``name``: the run's, plus ``dt`` for an online backend.
+    """Settings for backend ``name``: the run's, its own, plus ``dt`` for an online backend.
 
     An online backend (the ``rnn`` network) integrates for ``dt`` per call:
     replaying a set that keeps every K-th tick, that is K control periods, the
     time the controller's state evolves between two records.
     """
-    settings = dict(config.settings)
+    settings = {**config.settings, **config.backend_settings.get(name, {})}
     if getattr(registry.get(name), "online", False) and "dt" not in settings:
         period = record_period(problem_set)
         if period is not None:
