@@ -1,16 +1,18 @@
 """Speed of the projection network (backends ``rnn`` and ``rnn-converged``) on the robot's QPs.
 
-    python bench/rnn_speed.py [--scenario wall] [--duration 4] [--passes 3]
+    python bench/rnn_speed.py [--scenario wall] [--duration 4] [--passes 5] [--online-only]
 
 Ticks: the consecutive per-tick QPs of a closed-loop run (every tick kept).
 
 1. ``rnn`` online (the working setting: eps = 1e-3, 5 Euler sub-steps, l1 clip 10),
-   replaying the run of the network itself: median time per tick of
-   ``Backend.solve`` (its short per-tick path), of the general path, of the
-   compiled kernel call alone, and of the sub-steps alone (the kernel's cost
-   per Euler step measured on a long integration); then the pieces of Python
-   work the generic interface needs around the kernel, each timed alone,
-   and their sum with the kernel: the floor of a ``Backend.solve`` call.
+   replaying the run of the network itself, median and p90 time per tick of
+   ``Backend.solve``: on the controller's problems (``PackedProblem``: the
+   per-tick path hands the kernel one buffer), the same plus reading the
+   duals ``y, z, z_box`` (views made on first read), on the same QPs as plain
+   ``qpsolvers.Problem`` objects (eight arrays), and through the general
+   (converting) path; then the compiled kernel call alone, one Euler step,
+   the closed loop's own per-tick solve time (``simulate``'s log), and the
+   pieces of Python work around the kernel, each timed alone.
 2. ``rnn-converged`` to 1e-6 from the previous tick's state, on the ticks of a
    DAQP run (the QP's trajectory) that DAQP finds feasible: median and p90
    steps and microseconds, overall and on ticks with an active obstacle row;
@@ -43,8 +45,11 @@ def ticks(scenario: str, duration: float, backend: str, rnn: dict | None = None)
     return sc, simulate(sc, backend, duration=duration, every=1).records
 
 
-def replay(make, problems, passes: int) -> tuple[np.ndarray, list]:
-    """Per-tick minimum of ``solve`` wall time [s] over ``passes`` fresh replays."""
+def replay(make, problems, passes: int, read_duals: bool = False) -> tuple[np.ndarray, list]:
+    """Per-tick minimum of ``solve`` wall time [s] over ``passes`` fresh replays.
+
+    With ``read_duals`` the time includes reading ``y``, ``z`` and ``z_box``.
+    """
     best = np.full(len(problems), np.inf)
     sols = []
     perf = time.perf_counter_ns
@@ -52,12 +57,29 @@ def replay(make, problems, passes: int) -> tuple[np.ndarray, list]:
         be = make()
         sols = []
         for k, p in enumerate(problems):
-            t0 = perf()
-            s = be.solve(p)
-            dt = perf() - t0
+            if read_duals:
+                t0 = perf()
+                s = be.solve(p)
+                s.y, s.z, s.z_box  # noqa: B018 - the read is what is timed
+                dt = perf() - t0
+            else:
+                t0 = perf()
+                s = be.solve(p)
+                dt = perf() - t0
             best[k] = min(best[k], dt * 1e-9)
             sols.append(s)
     return best, sols
+
+
+def in_loop(scenario: str, duration: float, passes: int) -> np.ndarray:
+    """Per-tick minimum over ``passes`` closed-loop runs of ``rnn-tuned`` of the loop's own solve time [s]."""
+    from qpbench.sim.loop import simulate
+
+    best = None
+    for _ in range(passes):
+        t = simulate(scenario, "rnn-tuned", duration=duration).log["solve_time_s"].to_numpy()
+        best = t if best is None else np.minimum(best, t)
+    return best
 
 
 class _General:
@@ -80,40 +102,47 @@ def _load() -> str:
 
 
 def _interface_pieces(problem, passes: int, count: int = 100_000) -> list[tuple[str, float]]:
-    """Seconds per call of the unavoidable Python work around the kernel."""
-    from qpbench.backends.base import BackendSolution
+    """Seconds per call of the Python work of the per-tick path around the kernel, each piece alone."""
+    from qpbench.backends.rnn import TickSolution
 
     perf = time.perf_counter_ns
+    new = object.__new__
     out = np.empty(30)
-    x = out[:4]
+    sx, slices = slice(0, 4), (slice(0, 4), slice(4, 6), slice(6, 13), slice(13, 17))
 
     def make_solution():
-        sol = BackendSolution(problem)
-        sol.status, sol.x, sol.y, sol.z, sol.z_box, sol.obj, sol.iterations = "max_iter", x, x, x, x, 0.0, 5
+        sol = new(TickSolution)
+        sol.problem = problem
+        sol.x = out
+        sol._out = out
+        sol._slices = slices
+        sol.iterations = 5
+        sol.status = "max_iter"
+        sol.found = False
+        sol.backend = "rnn"
+        sol.wall_time_s = 1e-6
 
-    s1, s2, s3, s4 = slice(0, 4), slice(4, 6), slice(6, 13), slice(13, 17)
+    def x_view():
+        return out[sx]
 
-    def views():
-        return out[s1], out[s2], out[s3], out[s4]
+    def dual_views():
+        return out[slices[1]], out[slices[2]], out[slices[3]]
+
+    clock = time.perf_counter
 
     def timing():
-        start = perf()
-        return (perf() - start) * 1e-9
-
-    def read_problem():
-        P, q, A, G, lb, ub = problem.P, problem.q, problem.A, problem.G, problem.lb, problem.ub
-        return (type(P) is np.ndarray and type(q) is np.ndarray and type(A) is np.ndarray and type(G) is np.ndarray
-                and type(lb) is np.ndarray and type(ub) is np.ndarray, problem.b.shape[0], problem.h.shape[0])
+        start = clock()
+        return clock() - start
 
     def output_array():
         return np.empty(30)
 
     pieces = [
-        ("BackendSolution(problem) + its 7 fields", make_solution),
-        ("4 output views x, y, z, z_box", views),
-        ("timing (2 perf_counter_ns)", timing),
-        ("read the problem's fields, check types, shape key", read_problem),
+        ("TickSolution + its 9 fields", make_solution),
+        ("the view x", x_view),
         ("the output array", output_array),
+        ("timing (2 perf_counter)", timing),
+        ("3 views y, z, z_box (made on first read)", dual_views),
     ]
     result = []
     for name, fn in pieces:
@@ -131,7 +160,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="wall")
     parser.add_argument("--duration", type=float, default=4.0, help="simulated seconds of ticks")
-    parser.add_argument("--passes", type=int, default=3)
+    parser.add_argument("--passes", type=int, default=5)
+    parser.add_argument("--online-only", action="store_true", help="part 1 only (rnn online)")
     args = parser.parse_args()
 
     from qpbench.backends import backend_names, get_backend
@@ -142,31 +172,39 @@ def main() -> None:
     us = 1e6
 
     # -- 1. online ---------------------------------------------------------
+    import qpsolvers
+
     sc, recs = ticks(args.scenario, args.duration, "rnn", WORKING_SETTINGS)
-    problems = [r.problem for r in recs]
+    problems = [r.problem for r in recs]  # the controller's PackedProblem objects
+    plain = [qpsolvers.Problem(p.P.copy(), p.q.copy(), p.G.copy(), p.h.copy(), p.A.copy(), p.b.copy(),
+                               p.lb.copy(), p.ub.copy()) for p in problems]
     settings = dict(WORKING_SETTINGS, dt=sc.dt)
-    t_solve, _ = replay(lambda: get_backend("rnn", **settings), problems, args.passes)
+    make = lambda: get_backend("rnn", **settings)  # noqa: E731
+    t_solve, sols = replay(make, problems, args.passes)
+    t_duals, _ = replay(make, problems, args.passes, read_duals=True)
+    t_plain, sols_plain = replay(make, plain, args.passes)
     # the general path (Backend.solve of the base class: convert, check, then the same kernel)
-    t_general, _ = replay(lambda: _General(get_backend("rnn", **settings)), problems, args.passes)
-    # kernel call alone, same sequence
-    be = get_backend("rnn", **settings)
-    be.solve(problems[0])
-    kern = be._kernel
+    t_general, _ = replay(lambda: _General(make()), problems, args.passes)
+    for a, b in zip(sols, sols_plain):  # one network, whichever path: same numbers
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.z, b.z)
+    # the packed kernel's call alone, same sequence
+    kern = nw.packed_kernel()
     t_kernel = np.full(len(problems), np.inf)
     perf = time.perf_counter_ns
     for _ in range(args.passes):
-        be.reset()
+        be = make()
         be.solve(problems[0])
-        prm = be._prm
+        xi, prm = be.state.xi, be._prm
+        n, me, mi = be.state.shape
+        size = 3 * n + 2 * (me + mi)
         for k, p in enumerate(problems[1:], 1):
-            st = be.state
-            n, me, mi = st.shape
-            sol = np.empty(3 * n + 2 * (me + mi))
+            out = np.empty(size)
+            buf = p.buffer
             t0 = perf()
-            kern(p.P, p.q, p.A, p.b, p.G, p.h, p.lb, p.ub, st.xi, prm, sol)
+            kern(buf, xi, prm, out)
             t_kernel[k] = min(t_kernel[k], (perf() - t0) * 1e-9)
     t_kernel = t_kernel[1:]
-    # what the generic interface costs around the kernel, piece by piece
+    t_loop = in_loop(args.scenario, args.duration, args.passes)
     pieces = _interface_pieces(problems[len(problems) // 2], args.passes)
     # cost of one Euler step: a long fixed integration of one tick's QP
     p = problems[len(problems) // 2]
@@ -179,22 +217,27 @@ def main() -> None:
         nw.integrate(qp, st, r_total=0.2 * steps, substeps=steps, p_range=(1.0, 1.0))
         per_step = min(per_step, (perf() - t0) * 1e-9 / steps)
     n, me, mi = qp.shape
+
+    def fig(t):
+        return f"median {np.median(t) * us:.2f} us, p90 {np.percentile(t, 90) * us:.2f} us"
+
     print(f"# rnn online, {args.scenario}, {len(problems)} consecutive ticks, settings {settings}; {_load()}")
     print(f"  QP size n={n}, equalities {me}, inequalities {mi}")
-    print(f"  Backend.solve per tick: median {np.median(t_solve) * us:.2f} us, p90 {np.percentile(t_solve, 90) * us:.2f} us"
-          f" (target <= 2 us)")
-    print(f"  general path (convert + check + kernel) per tick: median {np.median(t_general) * us:.2f} us")
-    print(f"  kernel call per tick (numba dispatch + {WORKING_SETTINGS['substeps']} steps + duals): "
-          f"median {np.median(t_kernel) * us:.2f} us")
+    print(f"  Backend.solve per tick, the controller's problems: {fig(t_solve)} (target <= 2 us)")
+    print(f"  ... and reading y, z, z_box too:                   {fig(t_duals)}")
+    print(f"  Backend.solve, same QPs as plain qpsolvers.Problem: {fig(t_plain)}")
+    print(f"  general path (convert + check + kernel):           {fig(t_general)}")
+    print(f"  closed loop's own solve time per tick (rnn-tuned): {fig(t_loop)}")
+    print(f"  kernel call (dispatch + {WORKING_SETTINGS['substeps']} steps + residuals + duals): {fig(t_kernel)}")
     print(f"  one Euler step (numba): {per_step * 1e9:.0f} ns; {WORKING_SETTINGS['substeps']} steps = "
           f"{WORKING_SETTINGS['substeps'] * per_step * us:.2f} us")
-    print(f"  overhead outside the kernel (Backend.solve - kernel): {(np.median(t_solve) - np.median(t_kernel)) * us:.2f} us")
-    print("  pieces of that overhead (each timed alone in a tight loop, best of passes):")
+    print(f"  outside the kernel (Backend.solve - kernel): {(np.median(t_solve) - np.median(t_kernel)) * us:.2f} us")
+    print("  pieces of the Python work (each timed alone in a tight loop, best of passes):")
     for name, t in pieces:
         print(f"    {name:<58} {t * 1e9:6.0f} ns")
-    floor = np.median(t_kernel) + sum(t for _, t in pieces)
-    print(f"  floor through the generic interface (kernel + the pieces above): about {floor * us:.2f} us")
 
+    if args.online_only:
+        return
     # -- 2. converged ------------------------------------------------------
     sc, recs = ticks(args.scenario, args.duration, "qpsolvers:daqp")
     problems, active = [], []

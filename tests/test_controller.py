@@ -12,6 +12,7 @@ from qpbench.control.adaptive import AdaptiveImpedance
 from qpbench.control.controller import Controller, build_problem
 from qpbench.control.terms import CosinePath, EscapeVelocityLimits, ImpedanceTask, PolylinePath
 from qpbench.exceptions import ParamError
+from qpbench.packed import PackedProblem
 from qpbench.robot.environment import DiskObstacle, LineObstacle, PointCloudObstacle, SegmentObstacle
 from qpbench.robot.kinematics import PlanarArm, default_key_points
 from qpbench.sim.scenario import load_scenario
@@ -202,13 +203,16 @@ def test_fast_problem_equals_qpsolvers_constructor(formulation, obstacles):
     ctrl = make_controller(obstacles)
     p = ctrl.build(np.array([1.0, -0.5, 0.3, -0.2]), 0.4, formulation=formulation).problem
     ref = qpsolvers.Problem(p.P, p.q, p.G, p.h, p.A, p.b, p.lb, p.ub)
-    assert set(vars(p)) == set(vars(ref))
+    assert isinstance(p, PackedProblem) and set(vars(p)) - {"buffer"} == set(vars(ref))
+    # the header the kernel wrote describes the same problem (checked constructor)
+    unpacked = PackedProblem(p.buffer)
     for key, value in vars(ref).items():
-        mine = getattr(p, key)
-        assert (mine is None) == (value is None), key
-        if value is not None:
-            assert type(mine) is type(value) and mine.dtype == value.dtype and mine.shape == value.shape, key
-            np.testing.assert_array_equal(mine, value)
+        for mine in (getattr(p, key), getattr(unpacked, key)):
+            assert (mine is None) == (value is None), key
+            if value is not None:
+                assert type(mine) is type(value) and mine.dtype == value.dtype and mine.shape == value.shape, key
+                assert mine.flags.c_contiguous and np.shares_memory(mine, p.buffer), key
+                np.testing.assert_array_equal(mine, value)
     p.check_constraints()
     assert p.has_sparse is False
 

@@ -61,6 +61,17 @@ class BackendSolution(qpsolvers.Solution):
     backend: str = ""
     error: str | None = None
 
+    def __getattr__(self, name: str):
+        # Only for attributes not set: an instance made without __init__ (a
+        # backend's per-tick path sets just the fields it has) gets the
+        # defaults here. Fields with a plain default are class attributes.
+        if name == "extras":
+            extras = self.extras = {}
+            return extras
+        if name == "_obj":
+            return None
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
 
 def _get_obj(self) -> float | None:
     obj = self._obj

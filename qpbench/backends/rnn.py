@@ -50,6 +50,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..exceptions import ParamError, ProblemFormatError
+from ..packed import PackedProblem
 from ..rnn import network as nw
 from . import register
 from .base import Backend, BackendSolution
@@ -99,6 +100,8 @@ class _NetworkBackend(Backend):
     online: ClassVar[bool] = False
     #: Integration method unless the ``method`` setting says otherwise.
     default_method: ClassVar[str] = "euler"
+    #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).
+    _kernel_obj: ClassVar[bool] = True
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
@@ -134,7 +137,6 @@ class _NetworkBackend(Backend):
             "max_iter", self.profile.max_iter if s["max_iter"] is None else s["max_iter"], integer=True
         )
         self.tol = _positive("tol", self.profile.eps_abs if s["tol"] is None else s["tol"])
-        self.state: nw.NetworkState | None = None
         self._p_key: bytes | None = None
         self._prm = nw.make_params(
             p_range=(1.0, 1.0), method=self.method, r_total=self._r_total(),
@@ -142,11 +144,27 @@ class _NetworkBackend(Backend):
             tol=self._stop_tol(), l1_clip=self.l1_clip,
         )
         self._kernel = None
-        self._calls = 0
         # A call is "optimal" when its residuals meet the profile's success
         # thresholds (and the stop tolerance, when it is tighter).
         self._ok_primal = max(self.tol, self.profile.tolerance.primal)
         self._ok_dual = max(self.tol, self.profile.tolerance.dual)
+        self._prm[nw.OK_PRIMAL] = self._ok_primal
+        self._prm[nw.OK_DUAL] = self._ok_dual
+        self.state = None
+
+    @property
+    def state(self) -> nw.NetworkState | None:
+        """The network's state ``(v, l1, l2)``, or ``None`` (the next call starts cold)."""
+        return self._state
+
+    @state.setter
+    def state(self, st: nw.NetworkState | None) -> None:
+        self._state = st
+        self._prm[nw.STATE_ME] = -1.0 if st is None else st.me
+        self._state_changed()
+
+    def _state_changed(self) -> None:
+        """Hook: the state object was replaced (or dropped)."""
 
     def _r_total(self) -> float:
         """``duration / eps`` of one call; 0 to integrate to convergence."""
@@ -159,17 +177,27 @@ class _NetworkBackend(Backend):
     def reset(self) -> None:
         """Forget the network state (the next call starts cold)."""
         self.state = None
-        self._calls = 0
+        self._prm[nw.STEPS] = np.nan
 
     @property
     def last(self) -> nw.IntegrationResult | None:
-        """What the last call's integration did (``None`` before any call)."""
-        if not self._calls:
-            return None
+        """What the last call's integration did (``None`` before any call or after :meth:`reset`)."""
         p = self._prm
+        if math.isnan(p[nw.STEPS]):
+            return None
         return nw.IntegrationResult(
-            self._last_steps, float(p[nw.PRIMAL]), float(p[nw.DUAL]), float(p[nw.COMPL]),
+            int(p[nw.STEPS]), float(p[nw.PRIMAL]), float(p[nw.DUAL]), float(p[nw.COMPL]),
             float(p[nw.OBJ]), float(p[nw.RATIO]), float(p[nw.RATIO_MAX]), float(p[nw.SIG2]),
+        )
+
+    def _diverged(self, problem, steps: int) -> BackendSolution:
+        """The answer of a call whose state is no longer finite (the state is dropped)."""
+        self.state = None
+        prm = self._prm
+        return BackendSolution(
+            problem=problem, status="error", iterations=steps,
+            error=f"FloatingPointError: network state diverged (r = {prm[nw.RATIO]:.3g}, "
+            f"stable below {prm[nw.RATIO_MAX]:.3g})",
         )
 
     # -- the call ---------------------------------------------------------
@@ -213,8 +241,6 @@ class _NetworkBackend(Backend):
         if steps == nw.SHAPE_MISMATCH:
             nw.dense_qp(problem)  # raises ProblemFormatError naming the matrix
             raise ProblemFormatError("inconsistent problem shapes", key="P")  # pragma: no cover
-        self._last_steps = steps
-        self._calls += 1
         if steps == nw.NO_STABLE_STEP:
             return BackendSolution(
                 problem=problem, status="error", iterations=0,
@@ -223,12 +249,7 @@ class _NetworkBackend(Backend):
             )
         obj = prm.item(nw.OBJ)
         if not math.isfinite(obj) or not math.isfinite(prm.item(nw.PRIMAL)):
-            self.state = None
-            return BackendSolution(
-                problem=problem, status="error", iterations=steps,
-                error=f"FloatingPointError: network state diverged (r = {prm[nw.RATIO]:.3g}, "
-                f"stable below {prm[nw.RATIO_MAX]:.3g})",
-            )
+            return self._diverged(problem, steps)
         ok = (
             prm.item(nw.PRIMAL) <= self._ok_primal
             and prm.item(nw.DUAL) <= self._ok_dual
@@ -238,7 +259,7 @@ class _NetworkBackend(Backend):
             problem=problem, x=sol[:n], y=sol[n : n + me] if me else None,
             z=sol[n + me : n + me + mi] if mi else None,
             z_box=sol[n + me + mi : 2 * n + me + mi] if (problem.lb is not None or problem.ub is not None) else None,
-            obj=obj, status="optimal" if ok else "max_iter",
+            obj=obj if self._kernel_obj else None, status="optimal" if ok else "max_iter",
             iterations=steps,
         )
 
@@ -267,41 +288,75 @@ def _infinite(n: int, value: float) -> np.ndarray:
     return arr
 
 
+class _Duals:
+    """``y``, ``z`` and ``z_box`` of a :class:`TickSolution`, made on the first read of any.
+
+    A non-data descriptor: the first read puts views of the tick's output
+    array for all three into the instance (those not set already), and
+    later reads find them there without calling this.
+    """
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __get__(self, sol, owner=None):
+        if sol is None:
+            return self
+        d = sol.__dict__
+        out = d["_out"]
+        _, sy, sz, sb = d["_slices"]
+        if "y" not in d:
+            d["y"] = None if sy is None else out[sy]
+        if "z" not in d:
+            d["z"] = None if sz is None else out[sz]
+        if "z_box" not in d:
+            d["z_box"] = out[sb]
+        return d[self.name]
+
+
+class TickSolution(BackendSolution):
+    """The online network's answer to one tick (a :class:`BackendSolution`).
+
+    The kernel writes ``[x; y; z; z_box]`` into one fresh array. ``x`` is a
+    view of it made at once; ``y``, ``z`` and ``z_box`` are views made on the
+    first read of any of them (three views cost about as much as the
+    network's five sub-steps; a controller applying ``x`` does not need
+    them). The values are fixed when :meth:`RNNOnline.solve` returns: the
+    array is never written again.
+    """
+
+    y = _Duals("y")
+    z = _Duals("z")
+    z_box = _Duals("z_box")
+
+
 @register
 class RNNOnline(_NetworkBackend):
     """The network integrated for one tick of ``dt`` per call (the paper's use).
 
-    Per-call path. A control loop calls this once per tick with problems of
-    one shape made of dense arrays (what the controller builds), so
-    :meth:`solve` takes a short path for exactly that and hands anything else
-    (absent parts, sparse matrices, a shape or type the compiled kernel
-    rejects) to the general one, which converts, checks and raises. The
-    short path keeps per shape the output size and the slices of
-    ``x, y, z, z_box``, reads ``P``'s eigenvalues only when the kernel picks
-    the sub-steps itself (``substeps`` unset) and ``P`` changed, reads the
-    kernel's outputs in one ``tolist()``, and inlines :meth:`Backend.solve`'s
-    timing and status (same fields, same meaning). It computes the same
-    numbers as the general path, bit for bit (tested).
-
-    Cost (``bench/rnn_speed.py``, robot ticks, n = 4, 2 equalities, 7
-    inequalities, 5 sub-steps, a shared machine): ``solve`` about 4.2 us
-    median per tick (the general path 5.4 us); the kernel call alone about
-    1.65 us (numba's dispatch of 11 array arguments is about 0.6 us of it).
-    What any ``Backend.solve`` must add around the kernel, each piece timed
-    alone: a ``BackendSolution`` with its fields 0.5 us, the four output
-    views 0.35 us, reading and checking the problem's fields 0.4 us, the
-    output array 0.2 us, the timing 0.17 us: a floor of about 3.3 us, so the
-    2 us a tick asked of the online network is out of reach through this
-    interface (the kernel alone meets it).
+    Per-tick path. A control loop calls this once per tick with problems of
+    one shape made of dense float64 arrays (what the controller builds). Once
+    a first call has set up the state, :meth:`solve` hands the problem's
+    arrays straight to a kernel compiled for exactly that argument type
+    (:func:`qpbench.rnn.network.online_kernel`): numba's dispatcher is the
+    type check, the kernel checks the shapes against the state's and returns
+    the step count and the status in one integer. Anything else (absent
+    parts, sparse matrices, another dtype or layout, a shape change) goes to
+    the general path, which converts, checks, re-shapes the state and raises
+    what is wrong. Both paths give the same numbers bit for bit (tested);
+    ``obj`` is computed from ``x`` on first read (a controller does not read
+    it). ``bench/rnn_speed.py`` measures the cost of a tick and its parts.
     """
 
     name = "rnn"
     online = True
+    _kernel_obj = False
 
     def __init__(self, profile="default", **settings):
+        self._fast = None
         super().__init__(profile, **settings)
-        self._shape_key = None
-        self._shape = None
         # P's eigenvalues are read by the kernel only when it picks the sub-steps itself
         self._needs_p = self.substeps is None
 
@@ -311,73 +366,73 @@ class RNNOnline(_NetworkBackend):
     def _stop_tol(self) -> float:
         return -1.0
 
-    def reset(self) -> None:
-        super().reset()
-        self._shape_key = None
+    def _state_changed(self) -> None:
+        """Arm the per-tick path for the state's shape (disarm without a state)."""
+        st = self._state
+        if st is None or not self.use_numba:
+            self._fast = None
+            return
+        n, me, mi = st.n, st.me, st.mi
+        slices = (
+            slice(0, n), slice(n, n + me) if me else None, slice(n + me, n + me + mi) if mi else None,
+            slice(n + me + mi, 2 * n + me + mi),
+        )
+        # the strict kernel takes arrays only: absent parts (None) go to the general path
+        strict = nw.online_kernel(strict=True) if me and mi else None
+        self._fast = (
+            self._needs_p, nw.packed_kernel(), st.xi, self._prm, 3 * n + 2 * (me + mi), slices[0], slices,
+            self.name, strict,
+        )
 
     def solve(self, problem, warm_start=None) -> BackendSolution:
         """One tick of integration; see :meth:`Backend.solve` (same fields)."""
-        start = _perf_ns()
-        P, q, A, G, lb, ub = problem.P, problem.q, problem.A, problem.G, problem.lb, problem.ub
-        st = self.state
-        if (
-            st is None or not self.use_numba or self._kernel is None
-            or type(P) is not _ndarray or type(q) is not _ndarray
-            or type(A) is not _ndarray or type(G) is not _ndarray
-            or type(lb) is not _ndarray or type(ub) is not _ndarray
-        ):
-            sol = self._run(problem, warm_start)
-            sol.wall_time_s = (_perf_ns() - start) * 1e-9
-            sol.backend = self.name
-            sol.found = sol.status == "optimal"
-            return sol
-        b, h = problem.b, problem.h
-        key = (q.shape[0], b.shape[0], h.shape[0])
-        if key != self._shape_key:
-            if key != (st.n, st.me, st.mi):
-                self.state = st = st.resized(*key)
-            n, me, mi = key
-            self._shape = (
-                3 * n + 2 * (me + mi), slice(0, n), slice(n, n + me), slice(n + me, n + me + mi),
-                slice(n + me + mi, 2 * n + me + mi), me, mi,
-            )
-            self._shape_key = key
-        size, sx, sy, sz, sb, me, mi = self._shape
-        prm = self._prm
-        if self._needs_p:
-            p_key = P.tobytes()
-            if p_key != self._p_key:
-                prm[nw.PMIN], prm[nw.PMAX] = nw.p_eigen_range(P)
-                self._p_key = p_key
-        out = _empty_like(size)
-        try:
-            steps = self._kernel(P, q, A, b, G, h, lb, ub, st.xi, prm, out)
-        except Exception:  # noqa: BLE001 - numba rejects the argument types (e.g. a 1-D A) before running
-            steps = -1  # the general path converts and checks, and raises what is wrong
-        if steps < 0:
-            sol = self._run(problem, warm_start)  # the general path reports it (shape error, no stable step)
-        else:
-            self._last_steps = steps
-            self._calls += 1
-            values = prm.tolist()
-            pr, du, co, obj = values[nw.PRIMAL], values[nw.DUAL], values[nw.COMPL], values[nw.OBJ]
-            if not (_isfinite(obj) and _isfinite(pr)):
-                self.state = None
-                sol = BackendSolution(
-                    problem=problem, status="error", iterations=steps,
-                    error=f"FloatingPointError: network state diverged (r = {values[nw.RATIO]:.3g}, "
-                    f"stable below {values[nw.RATIO_MAX]:.3g})",
-                )
+        start = _perf()
+        fast = self._fast
+        if fast is not None:
+            needs_p, packed, xi, prm, size, sx, slices, name, strict = fast
+            if needs_p:
+                P = problem.P
+                if type(P) is not _ndarray or P.dtype != _f64:
+                    packed = strict = None
+                else:
+                    p_key = P.tobytes()
+                    if p_key != self._p_key:
+                        prm[nw.PMIN], prm[nw.PMAX] = nw.p_eigen_range(P)
+                        self._p_key = p_key
+            out = _alloc(size)
+            if type(problem) is _Packed and packed is not None:
+                code = packed(problem.buffer, xi, prm, out)
+            elif strict is None:
+                code = nw.SHAPE_MISMATCH
             else:
-                sol = BackendSolution(problem)
-                sol.status = "optimal" if pr <= self._ok_primal and du <= self._ok_dual and co <= self._ok_primal else "max_iter"
+                try:
+                    code = strict(problem.P, problem.q, problem.A, problem.b, problem.G, problem.h,
+                                  problem.lb, problem.ub, xi, prm, out)
+                except TypeError:  # numba's dispatcher: not the one argument type compiled
+                    code = nw.SHAPE_MISMATCH
+            if code >= 0:
+                sol = _new(TickSolution)
+                sol.problem = problem
                 sol.x = out[sx]
-                sol.y = out[sy] if me else None
-                sol.z = out[sz] if mi else None
-                sol.z_box = out[sb]
-                sol.obj = obj
-                sol.iterations = steps
-        sol.wall_time_s = (_perf_ns() - start) * 1e-9
+                sol._out = out
+                sol._slices = slices
+                sol.iterations = code >> 1
+                if code & 1:
+                    sol.status = "optimal"
+                    sol.found = True
+                else:
+                    sol.status = "max_iter"
+                    sol.found = False
+                sol.backend = name
+                sol.wall_time_s = _perf() - start
+                return sol
+            if code == nw.DIVERGED:
+                sol = self._diverged(problem, int(prm[nw.STEPS]))
+            else:  # refused before touching the state: the general path says why or copes
+                sol = self._run(problem, warm_start)
+        else:  # first call, odd input: the general path converts, checks, sets up the state
+            sol = self._run(problem, warm_start)
+        sol.wall_time_s = _perf() - start
         sol.backend = self.name
         sol.found = sol.status == "optimal"
         return sol
@@ -386,10 +441,12 @@ class RNNOnline(_NetworkBackend):
         return self._run(problem, warm_start)
 
 
-_perf_ns = time.perf_counter_ns
+_perf = time.perf_counter
 _ndarray = np.ndarray
-_empty_like = np.empty
-_isfinite = math.isfinite
+_f64 = np.dtype(np.float64)
+_alloc = np.empty
+_new = object.__new__
+_Packed = PackedProblem
 
 
 @register

@@ -19,8 +19,10 @@ object. ``P`` is a dense ndarray; no obstacle means ``G = h = None``.
 
 The per-tick build runs one compiled numba kernel (kinematics, impedance
 reference, bounds, obstacle rows; compiled on first call and cached on disk)
-writing into freshly allocated arrays, so a returned problem is never changed
-by a later build. :meth:`Controller.build_reference` assembles the same
+writing into one freshly allocated buffer, so a returned problem is never
+changed by a later build. The problem is a :class:`qpbench.packed.PackedProblem`:
+its arrays are views of that buffer, and a backend that knows the layout (the
+online network) hands the kernel one array instead of eight. :meth:`Controller.build_reference` assembles the same
 problem from the numpy terms of :mod:`qpbench.control.terms`; the tests
 check the two agree.
 """
@@ -33,6 +35,8 @@ import numpy as np
 import qpsolvers
 
 from ..exceptions import ParamError
+from ..packed import HEADER as PACKED_HEADER
+from ..packed import PackedProblem
 from ..robot.environment import PRIMITIVE_WIDTH, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
@@ -47,18 +51,80 @@ _T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _
 _NPAR = 16
 
 _kernel = None
+_build_kernel_jit = None
 _Problem = qpsolvers.Problem
 _new_problem = object.__new__
+_trusted = PackedProblem._trusted
+_empty = np.empty
 
 
 def _get_kernel():
-    """The compiled build kernel (numba imported and compiled on first use only)."""
-    global _kernel
+    """The compiled packed build kernel (numba imported and compiled on first use only)."""
+    global _kernel, _build_kernel_jit
     if _kernel is None:
         import numba
 
-        _kernel = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
+        _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
+        _kernel = numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
     return _kernel
+
+
+def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[int, ...]]]]:
+    """Size of a tick's buffer and ``{name: (offset, shape)}`` of its arrays.
+
+    Order after the :mod:`qpbench.packed` header: ``P, q, G, h, J, b, lb, ub,
+    ee, dist`` (the kernel :func:`_build_packed_py` computes the same).
+    """
+    shapes = {"P": (n, n), "q": (n,), "G": (n_rows, n), "h": (n_rows,), "J": (2, n), "b": (2,),
+              "lb": (n,), "ub": (n,), "ee": (2,), "dist": (n_rows,)}
+    layout, off = {}, PACKED_HEADER
+    for name, shape in shapes.items():
+        layout[name] = (off, shape)
+        off += int(np.prod(shape))
+    return off, layout
+
+
+def _build_packed_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  # pragma: no cover - compiled
+    """Write the tick into ``buf`` (layout of :func:`packed_layout`) and its header."""
+    n = theta.shape[0]
+    nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
+    o = PACKED_HEADER
+    oP = o
+    o += n * n
+    oq = o
+    o += n
+    oG = o
+    o += nr * n
+    oh = o
+    o += nr
+    oJ = o
+    o += 2 * n
+    ob = o
+    o += 2
+    olb = o
+    o += n
+    oub = o
+    o += n
+    oee = o
+    o += 2
+    od = o
+    soft = par[_SOFT] != 0.0
+    buf[0] = n
+    buf[1] = 0 if soft else 2
+    buf[2] = nr
+    buf[3] = oP
+    buf[4] = oq
+    buf[5] = -1 if soft else oJ
+    buf[6] = -1 if soft else ob
+    buf[7] = oG if nr > 0 else -1
+    buf[8] = oh if nr > 0 else -1
+    buf[9] = olb
+    buf[10] = oub
+    _build_kernel_jit(
+        theta, lengths, kp_link, kp_frac, prims, lim, par,
+        buf[oP:oq].reshape((n, n)), buf[oq:oG], buf[oG:oh].reshape((nr, n)), buf[oh:oJ],
+        buf[oJ:ob].reshape((2, n)), buf[ob:olb], buf[olb:oub], buf[oub:oee], buf[oee:od], buf[od:od + nr],
+    )
 
 
 def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist):  # pragma: no cover - compiled
@@ -257,10 +323,17 @@ class Controller:
         self._par[_RHO] = self.rho
         self._par[_RADIUS] = key_points.radius
         self._path = task.path
+        self._packed_size, layout = packed_layout(self.n, self.n_rows)
+        self._packed_slices = tuple(slice(off, off + int(np.prod(shape))) for off, shape in layout.values())
 
     # -- fast path -------------------------------------------------------------
     def build_arrays(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, soft: bool = False):
-        """The tick's arrays ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd)``, freshly allocated.
+        """The tick's arrays ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd, buffer)``, freshly allocated.
+
+        All but ``xd`` are views of ``buffer``, the tick's
+        :class:`qpbench.packed.PackedProblem` buffer (layout of :func:`packed_layout`).
+        The numpy reference path (obstacles without a kernel) returns the
+        first eleven only.
 
         ``xd`` is ``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)``; ``dist`` is flat
         (a * m,), key point major. This is the loop's hot path: ``theta`` must
@@ -278,26 +351,19 @@ class Controller:
         par[8] = self.kp if kp is None else kp
         par[9] = self.kd if kd is None else kd
         par[14] = 1.0 if soft else 0.0
-        empty = np.empty
-        P = empty((n, n))
-        q = empty(n)
-        G = empty((nr, n))
-        h = empty(nr)
-        J = empty((2, n))
-        b = empty(2)
-        lb = empty(n)
-        ub = empty(n)
-        ee = empty(2)
-        dist = empty(nr)
+        buf = _empty(self._packed_size)
         (_kernel or _get_kernel())(
-            theta,
-            self._lengths, self._kp_link, self._kp_frac, self._prims, self._lim, par,
-            P, q, G, h, J, b, lb, ub, ee, dist,
+            theta, self._lengths, self._kp_link, self._kp_frac, self._prims, self._lim, par, buf,
         )
-        return P, q, G, h, J, b, lb, ub, ee, dist, xd
+        sP, sq, sG, sh, sJ, sb, slb, sub, see, sd = self._packed_slices
+        return (
+            buf[sP].reshape(n, n), buf[sq], buf[sG].reshape(nr, n), buf[sh], buf[sJ].reshape(2, n), buf[sb],
+            buf[slb], buf[sub], buf[see], buf[sd], xd, buf,
+        )
 
     def make_problem(self, arrays, soft: bool) -> qpsolvers.Problem:
-        """A :class:`qpsolvers.Problem` from :meth:`build_arrays`' output.
+        """A :class:`qpsolvers.Problem` from :meth:`build_arrays`' output
+        (a :class:`~qpbench.packed.PackedProblem` when it came with its buffer).
 
         The arrays already have the types and shapes :class:`qpsolvers.Problem`
         checks for (dense float64 matrices, 1-D vectors), so its fields are set
@@ -309,6 +375,8 @@ class Controller:
             G = h = None
         if soft:
             J = b = None
+        if len(arrays) > 11:  # one buffer (build_arrays): its header says the same
+            return _trusted(arrays[11], P, q, G, h, J, b, lb, ub)
         problem = _new_problem(_Problem)
         problem.P = P
         problem.q = q

@@ -63,11 +63,17 @@ _SQUARINGS = 5
 #: Layout of the parameter block ``prm`` the kernels read (inputs) and fill (outputs).
 PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
 PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
-PRM_SIZE = 16
+#: Inputs of the per-tick kernel (:func:`online_kernel`): the residual bounds of
+#: status ``optimal`` and the equality count of the state's split (-1: not checked);
+#: and one more output of every kernel: the last call's step count or code (NaN: none yet).
+OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
+PRM_SIZE = 20
 
 #: Kernel return codes besides a step count.
 NO_STABLE_STEP = -1
 SHAPE_MISMATCH = -2
+#: Per-tick kernel only: the state is no longer finite.
+DIVERGED = -3
 
 
 # ---------------------------------------------------------------------------
@@ -342,6 +348,9 @@ def make_params(
     prm[MAX_STEPS] = max_steps
     prm[TOL] = tol
     prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
+    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
+    prm[STATE_ME] = -1.0
+    prm[STEPS] = np.nan
     return prm
 
 
@@ -370,6 +379,7 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     prm[SIG2] = sig2
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
+        prm[STEPS] = NO_STABLE_STEP
         return NO_STABLE_STEP
     if r_total > 0.0:
         nsteps = substeps if substeps > 0 else max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
@@ -412,6 +422,7 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     prm[DUAL] = du
     prm[COMPL] = co
     prm[OBJ] = 0.5 * float(v @ (P @ v)) + float(q @ v)
+    prm[STEPS] = steps
     if sol.shape[0]:
         w = v - g
         if sol.shape[0] > 2 * n + me + mi:
@@ -478,6 +489,98 @@ def _matvec_off(M, xi, off, y):  # pragma: no cover - runs compiled
         y[i] = s
 
 
+def _grad_products(P, q, A, G, xi, g, Av, Gv, products):  # pragma: no cover - runs compiled
+    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``.
+
+    Row by row: each row of ``A`` and ``G`` is read once for both its
+    product with ``v`` and its share of ``g`` (the rows are contiguous).
+    """
+    n = P.shape[0]
+    me = A.shape[0]
+    mi = G.shape[0]
+    for j in range(n):
+        s = q[j]
+        for k in range(n):
+            s += P[j, k] * xi[k]
+        g[j] = s
+    for i in range(me):
+        c = xi[n + i]
+        s = 0.0
+        for j in range(n):
+            a = A[i, j]
+            s += a * xi[j]
+            g[j] -= a * c
+        if products:
+            Av[i] = s
+    for i in range(mi):
+        c = xi[n + me + i]
+        s = 0.0
+        for j in range(n):
+            a = G[i, j]
+            s += a * xi[j]
+            g[j] += a * c
+        if products:
+            Gv[i] = s
+
+
+def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):  # pragma: no cover - runs compiled
+    """One step of ratio ``r`` from the state ``xi`` whose ``g`` (and ``Av``, ``Gv``) are given; refreshes them."""
+    n = q.shape[0]
+    me = b.shape[0]
+    mi = h.shape[0]
+    o1 = n
+    o2 = n + me
+    for j in range(n):
+        w = min(max(xi[j] - g[j], lb[j]), ub[j])
+        xi[j] += r * (w - xi[j])
+    if semi:
+        _matvec_jit(A, xi, 0, Av)
+        _matvec_jit(G, xi, 0, Gv)
+    for i in range(me):
+        xi[o1 + i] += r * (b[i] - Av[i])
+        if l1_clip < np.inf:
+            xi[o1 + i] = min(max(xi[o1 + i], -l1_clip), l1_clip)
+    for i in range(mi):
+        xi[o2 + i] += r * (max(xi[o2 + i] + Gv[i] - h[i], 0.0) - xi[o2 + i])
+    # the next step's g (and, for Euler, Av and Gv): one pass over each row
+    _grad_products_jit(P, q, A, G, xi, g, Av, Gv, not semi)
+
+
+def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
+    """``(primal, dual, complementarity)`` residuals of the state (see :class:`IntegrationResult`).
+
+    Maxima that propagate NaN: a diverged state must not look converged.
+    """
+    n = lb.shape[0]
+    me = b.shape[0]
+    mi = h.shape[0]
+    o2 = n + me
+    pr = 0.0
+    for i in range(me):
+        e = abs(Av[i] - b[i])
+        if e > pr or e != e:
+            pr = e
+    for i in range(mi):
+        e = Gv[i] - h[i]
+        if e > pr or e != e:
+            pr = e
+    for j in range(n):
+        e = max(lb[j] - xi[j], xi[j] - ub[j])
+        if e > pr or xi[j] != xi[j]:
+            pr = e if xi[j] == xi[j] else xi[j]
+    du = 0.0
+    for j in range(n):
+        e = abs(xi[j] - min(max(xi[j] - g[j], lb[j]), ub[j]))
+        if e > du or g[j] != g[j] or xi[j] != xi[j]:
+            du = e if (g[j] == g[j] and xi[j] == xi[j]) else np.nan
+    co = 0.0
+    for i in range(mi):
+        e = abs(xi[o2 + i] - max(xi[o2 + i] + Gv[i] - h[i], 0.0))
+        if e > co or xi[o2 + i] != xi[o2 + i] or Gv[i] != Gv[i]:
+            co = e if (xi[o2 + i] == xi[o2 + i] and Gv[i] == Gv[i]) else np.nan
+    return pr, du, co
+
+
 def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
     n = q.shape[0]
     me = b.shape[0]
@@ -508,6 +611,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     prm[SIG2] = sig2
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
+        prm[STEPS] = NO_STABLE_STEP
         return NO_STABLE_STEP
     if r_total > 0.0:
         if substeps > 0:
@@ -531,72 +635,22 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
         Av = np.empty(me)
         Gv = np.empty(mi)
         g = np.empty(n)
-    _matvec_jit(A, xi, 0, Av)
-    _matvec_jit(G, xi, 0, Gv)
-    pr = 0.0
-    du = 0.0
-    co = 0.0
-    steps = 0
-    while True:
-        # g = P v + q - A^T l1 + G^T l2
-        for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += P[j, k] * xi[k]
-            g[j] = s + q[j]
-        for j in range(n):
-            s = 0.0
-            for i in range(me):
-                s += A[i, j] * xi[o1 + i]
-            g[j] -= s
-        for j in range(n):
-            s = 0.0
-            for i in range(mi):
-                s += G[i, j] * xi[o2 + i]
-            g[j] += s
-        if check or steps == nsteps:
-            # maxima that propagate NaN (a diverged state must not look converged)
-            pr = 0.0
-            for i in range(me):
-                e = abs(Av[i] - b[i])
-                if e > pr or e != e:
-                    pr = e
-            for i in range(mi):
-                e = Gv[i] - h[i]
-                if e > pr or e != e:
-                    pr = e
-            for j in range(n):
-                e = max(lb[j] - xi[j], xi[j] - ub[j])
-                if e > pr or xi[j] != xi[j]:
-                    pr = e if xi[j] == xi[j] else xi[j]
-            du = 0.0
-            for j in range(n):
-                e = abs(xi[j] - min(max(xi[j] - g[j], lb[j]), ub[j]))
-                if e > du or g[j] != g[j] or xi[j] != xi[j]:
-                    du = e if (g[j] == g[j] and xi[j] == xi[j]) else np.nan
-            co = 0.0
-            for i in range(mi):
-                e = abs(xi[o2 + i] - max(xi[o2 + i] + Gv[i] - h[i], 0.0))
-                if e > co or xi[o2 + i] != xi[o2 + i] or Gv[i] != Gv[i]:
-                    co = e if (xi[o2 + i] == xi[o2 + i] and Gv[i] == Gv[i]) else np.nan
+    # g = P v + q - A^T l1 + G^T l2, Av = A v, Gv = G v at the current state
+    _grad_products_jit(P, q, A, G, xi, g, Av, Gv, True)
+    if check:
+        steps = 0
+        while True:
+            pr, du, co = _residuals_jit(b, h, lb, ub, xi, g, Av, Gv)
             if steps == nsteps or (pr <= tol and du <= tol and co <= tol):
                 break
-        for j in range(n):
-            w = min(max(xi[j] - g[j], lb[j]), ub[j])
-            xi[j] += r * (w - xi[j])
-        if semi:
-            _matvec_jit(A, xi, 0, Av)
-            _matvec_jit(G, xi, 0, Gv)
-        for i in range(me):
-            xi[o1 + i] += r * (b[i] - Av[i])
-            if l1_clip < np.inf:
-                xi[o1 + i] = min(max(xi[o1 + i], -l1_clip), l1_clip)
-        for i in range(mi):
-            xi[o2 + i] += r * (max(xi[o2 + i] + Gv[i] - h[i], 0.0) - xi[o2 + i])
-        if not semi:
-            _matvec_jit(A, xi, 0, Av)
-            _matvec_jit(G, xi, 0, Gv)
-        steps += 1
+            _step_jit(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip)
+            steps += 1
+    else:
+        # a fixed duration: a plain loop (the residuals once, at the end)
+        for _ in range(nsteps):
+            _step_jit(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip)
+        steps = nsteps
+        pr, du, co = _residuals_jit(b, h, lb, ub, xi, g, Av, Gv)
     prm[PRIMAL] = pr
     prm[DUAL] = du
     prm[COMPL] = co
@@ -607,6 +661,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
             s += P[j, k] * xi[k]
         obj += xi[j] * (0.5 * s + q[j])
     prm[OBJ] = obj
+    prm[STEPS] = steps
     if sol.shape[0] != 0:
         for j in range(n):
             sol[j] = xi[j]
@@ -619,11 +674,88 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     return steps
 
 
-# Names the compiled kernel calls; bound to jitted functions by :func:`kernel`.
+def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
+    """One call of the online network: :func:`_integrate_loops` plus its verdict.
+
+    Returns ``2 * steps + ok`` (``ok``: primal residual and complementarity
+    within ``prm[OK_PRIMAL]``, dual residual within ``prm[OK_DUAL]``), or
+    :data:`SHAPE_MISMATCH` (also when the equality count is not the state's
+    ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`.
+    """
+    if prm[STATE_ME] >= 0.0 and b.shape[0] != prm[STATE_ME]:
+        return SHAPE_MISMATCH
+    steps = _integrate_jit(P, q, A, b, G, h, lb, ub, xi, prm, sol)
+    if steps < 0:
+        return steps
+    obj = prm[OBJ]
+    pr = prm[PRIMAL]
+    if not (math.isfinite(obj) and math.isfinite(pr)):
+        return DIVERGED
+    ok = pr <= prm[OK_PRIMAL] and prm[DUAL] <= prm[OK_DUAL] and prm[COMPL] <= prm[OK_PRIMAL]
+    return 2 * steps + (1 if ok else 0)
+
+
+def _part_fits(off, size, length):  # pragma: no cover - runs compiled
+    return off >= _HEADER and size >= 0 and off + size <= length
+
+
+def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs compiled
+    """:func:`_online_tick_loops` on a :class:`qpbench.packed.PackedProblem`'s buffer.
+
+    Reads the header, checks that every part lies inside the buffer and that
+    the sizes are the state's, and integrates on views of the buffer. A
+    problem without ``lb`` or ``ub`` gives :data:`SHAPE_MISMATCH` (the general
+    path handles it).
+    """
+    length = buf.shape[0]
+    if length < _HEADER:
+        return SHAPE_MISMATCH
+    n = int(buf[0])
+    me = int(buf[1])
+    mi = int(buf[2])
+    if n < 1 or me < 0 or mi < 0 or n + me + mi != xi.shape[0]:
+        return SHAPE_MISMATCH
+    oP = int(buf[3])
+    oq = int(buf[4])
+    oA = int(buf[5])
+    ob = int(buf[6])
+    oG = int(buf[7])
+    oh = int(buf[8])
+    olb = int(buf[9])
+    oub = int(buf[10])
+    if not (
+        _part_fits_jit(oP, n * n, length) and _part_fits_jit(oq, n, length)
+        and _part_fits_jit(olb, n, length) and _part_fits_jit(oub, n, length)
+        and (me == 0 or (_part_fits_jit(oA, me * n, length) and _part_fits_jit(ob, me, length)))
+        and (mi == 0 or (_part_fits_jit(oG, mi * n, length) and _part_fits_jit(oh, mi, length)))
+    ):
+        return SHAPE_MISMATCH
+    if me == 0:
+        oA = ob = _HEADER
+    if mi == 0:
+        oG = oh = _HEADER
+    return _online_tick_jit(
+        buf[oP : oP + n * n].reshape((n, n)), buf[oq : oq + n],
+        buf[oA : oA + me * n].reshape((me, n)), buf[ob : ob + me],
+        buf[oG : oG + mi * n].reshape((mi, n)), buf[oh : oh + mi],
+        buf[olb : olb + n], buf[oub : oub + n], xi, prm, sol,
+    )
+
+
+# Names the compiled kernels call; bound to jitted functions by :func:`kernel`.
 _sigma2_bound_jit = _sigma2_bound_loops
 _ratio_max_jit = _ratio_max
 _matvec_jit = _matvec_off
+_grad_products_jit = _grad_products
+_step_jit = _step
+_residuals_jit = _residuals
+_integrate_jit = _integrate_loops
+_online_tick_jit = _online_tick_loops
+_part_fits_jit = _part_fits
 _COMPILED = None
+_ONLINE = {}
+_PACKED = None
+_HEADER = 11  # qpbench.packed.HEADER (a test keeps them equal)
 
 
 def numba_available() -> bool:
@@ -648,16 +780,79 @@ def kernel(use_numba: bool = True):
     """
     if not use_numba:
         return _integrate_numpy
-    global _COMPILED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit
+    global _COMPILED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit, _grad_products_jit, _integrate_jit
+    global _step_jit, _residuals_jit
     if _COMPILED is None:
         import numba
 
         jit = numba.njit(cache=True)
+        inline = numba.njit(cache=True, inline="always")
         _sigma2_bound_jit = jit(_sigma2_bound_loops)
         _ratio_max_jit = jit(_ratio_max)
-        _matvec_jit = jit(_matvec_off)
-        _COMPILED = jit(_integrate_loops)
+        # inlined into their callers (numba IR): a call costs more than these small products
+        _matvec_jit = inline(_matvec_off)
+        _grad_products_jit = inline(_grad_products)
+        _step_jit = inline(_step)
+        _residuals_jit = inline(_residuals)
+        _COMPILED = _integrate_jit = inline(_integrate_loops)
     return _COMPILED
+
+
+def online_kernel(strict: bool = True, inline: bool = False):
+    """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``.
+
+    Same arguments as :func:`kernel`'s result, ``sol`` of length
+    ``3 n + 2 (me + mi)``; returns :func:`_online_tick_loops`'s code. With
+    ``strict`` it is compiled for exactly one argument type (C-contiguous,
+    writable float64 arrays; ``P``, ``A``, ``G`` 2-D) and compiles nothing
+    else: any other argument (``None``, a sparse matrix, a list, another
+    dtype or layout) raises ``TypeError`` in numba's dispatcher, which is the
+    whole type check of the online backend's per-tick path. Without
+    ``strict`` it compiles for what it is given (the general path); with
+    ``inline`` too, numba inlines it into a compiled caller
+    (:func:`packed_kernel`). All compile the same code and give the same
+    numbers.
+    """
+    fn = _ONLINE.get((strict, inline))
+    if fn is None:
+        import numba
+
+        kernel(True)  # binds the integrator the tick calls
+        if strict:
+            a1 = numba.types.Array(numba.float64, 1, "C")
+            a2 = numba.types.Array(numba.float64, 2, "C")
+            sig = numba.int64(a2, a1, a2, a1, a2, a1, a1, a1, a1, a1, a1)
+            fn = numba.njit(sig, cache=True)(_online_tick_loops)
+        else:
+            fn = numba.njit(cache=True, inline="always" if inline else "never")(_online_tick_loops)
+        _ONLINE[(strict, inline)] = fn
+    return fn
+
+
+def packed_kernel():
+    """The per-tick kernel on a packed buffer: ``f(buffer, xi, prm, sol) -> code``.
+
+    Compiled for 1-D C-contiguous float64 arrays only. Returned is the
+    compiled function's own entry point when numba exposes it: it skips the
+    dispatcher's type matching (a quarter of a call's cost here), so every
+    argument must be of that type. :class:`qpbench.packed.PackedProblem`
+    guarantees it for its buffer (made by its checked constructor or by the
+    controller, and never reassigned); the kernel checks the header against
+    the buffer's length and the state before reading.
+    """
+    global _PACKED, _online_tick_jit, _part_fits_jit
+    if _PACKED is None:
+        import numba
+
+        _online_tick_jit = online_kernel(strict=False, inline=True)
+        _part_fits_jit = numba.njit(cache=True, inline="always")(_part_fits)
+        a1 = numba.types.Array(numba.float64, 1, "C")
+        disp = numba.njit(numba.int64(a1, a1, a1, a1), cache=True)(_online_tick_packed_loops)
+        try:
+            _PACKED = disp.overloads[disp.signatures[0]].entry_point
+        except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
+            _PACKED = disp
+    return _PACKED
 
 
 # ---------------------------------------------------------------------------

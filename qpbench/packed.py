@@ -1,0 +1,160 @@
+"""A :class:`qpsolvers.Problem` whose arrays are views of one float64 buffer.
+
+A control loop builds one small QP per tick. Handing its eight arrays to a
+compiled kernel costs more than the kernel's arithmetic (numba unboxes every
+array argument; see ``bench/rnn_speed.py``), so the controller writes the
+whole tick into one buffer and a backend that knows the layout passes that
+one array. Every other consumer sees an ordinary :class:`qpsolvers.Problem`:
+``P, q, G, h, A, b, lb, ub`` are ndarrays (views of the buffer) or ``None``.
+
+Layout of :attr:`PackedProblem.buffer` (1-D, C-contiguous float64)::
+
+    [0 : HEADER]   n, me, mi, then the offsets of P, q, A, b, G, h, lb, ub
+                   (-1 where the part is absent)
+    at the offsets the arrays, row-major; anything else may follow (the
+    controller keeps the end-effector position and distances there)
+
+The fields cannot be reassigned (the buffer would no longer describe the
+problem): to change a problem, make a :class:`qpsolvers.Problem`. Writing into
+the arrays writes into the buffer, so the two stay one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import qpsolvers
+
+from .exceptions import ProblemFormatError
+
+__all__ = ["HEADER", "PackedProblem", "pack"]
+
+#: Length of the header, and the index of each entry in it.
+HEADER = 11
+N, ME, MI, OFF_P, OFF_Q, OFF_A, OFF_B, OFF_G, OFF_H, OFF_LB, OFF_UB = range(HEADER)
+
+#: Problem fields in header order (after n, me, mi), with their shapes.
+_FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
+
+
+def _shapes(n: int, me: int, mi: int) -> dict[str, tuple[int, ...]]:
+    return {"P": (n, n), "q": (n,), "A": (me, n), "b": (me,), "G": (mi, n), "h": (mi,), "lb": (n,), "ub": (n,)}
+
+
+class PackedProblem(qpsolvers.Problem):
+    """A QP in qpsolvers form stored in one buffer (module docstring).
+
+    Args:
+        buffer: The packed problem, 1-D float64 (copied only if it is not
+            C-contiguous float64 already).
+
+    Raises:
+        ProblemFormatError: the header does not describe arrays inside the
+            buffer, or a required part (``P``, ``q``) is absent.
+    """
+
+    def __init__(self, buffer):
+        buf = np.ascontiguousarray(buffer, dtype=np.float64)
+        if buf.ndim != 1 or buf.shape[0] < HEADER:
+            raise ProblemFormatError(f"buffer of shape {buf.shape} has no header of {HEADER} values", key="buffer")
+        head = buf[:HEADER]
+        if not np.all(np.isfinite(head)) or np.any(head != np.round(head)):
+            raise ProblemFormatError("header values must be whole numbers", key="buffer")
+        n, me, mi = (int(v) for v in head[:3])
+        if n < 1 or me < 0 or mi < 0:
+            raise ProblemFormatError(f"header sizes n={n}, me={me}, mi={mi} are not valid", key="buffer")
+        fields = {}
+        for k, (name, shape) in enumerate(_shapes(n, me, mi).items()):
+            off = int(head[OFF_P + k])
+            if off == -1:
+                if name in ("P", "q") or (name in ("A", "b") and me) or (name in ("G", "h") and mi):
+                    raise ProblemFormatError(f"'{name}' is absent but the header sizes need it", key=name)
+                fields[name] = None
+                continue
+            size = int(np.prod(shape))
+            if off < HEADER or off + size > buf.shape[0]:
+                raise ProblemFormatError(f"'{name}' at offset {off} does not fit a buffer of {buf.shape[0]}", key=name)
+            fields[name] = buf[off : off + size].reshape(shape)
+        if (fields["A"] is None) != (fields["b"] is None) or (fields["G"] is None) != (fields["h"] is None):
+            raise ProblemFormatError("A and b (G and h) must be present together", key="buffer")
+        _init(self, buf, fields)
+
+    @classmethod
+    def _trusted(cls, buf, P, q, G, h, A, b, lb, ub) -> PackedProblem:
+        """A problem from views the caller made of ``buf`` after writing its header (no checks)."""
+        self = _new(cls)
+        d = self.__dict__
+        d["buffer"] = buf
+        d["P"] = P
+        d["q"] = q
+        d["G"] = G
+        d["h"] = h
+        d["A"] = A
+        d["b"] = b
+        d["lb"] = lb
+        d["ub"] = ub
+        return self
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(n, me, mi)``: variables, equalities, inequalities."""
+        head = self.buffer
+        return int(head[N]), int(head[ME]), int(head[MI])
+
+    def __setattr__(self, name, value):
+        raise AttributeError(
+            f"PackedProblem.{name} cannot be set: its arrays are views of one buffer; "
+            "build a qpsolvers.Problem to change a problem"
+        )
+
+    def __reduce__(self):
+        return (PackedProblem, (self.buffer,))
+
+    def __repr__(self) -> str:
+        n, me, mi = self.shape
+        return f"PackedProblem(n={n}, me={me}, mi={mi})"
+
+
+_new = object.__new__
+
+
+def _init(self, buf, fields) -> None:
+    d = self.__dict__
+    d["buffer"] = buf
+    d.update(fields)
+
+
+def pack(problem: qpsolvers.Problem) -> PackedProblem:
+    """The :class:`PackedProblem` of any problem in qpsolvers form (dense copies).
+
+    Raises:
+        ProblemFormatError: inconsistent shapes (names the field).
+    """
+    import scipy.sparse as spa
+
+    arrays = {}
+    for name in _FIELDS:
+        value = getattr(problem, name)
+        if value is not None:
+            value = value.toarray() if spa.issparse(value) else value
+            value = np.asarray(value, dtype=np.float64)
+        arrays[name] = value
+    if arrays["P"] is None or arrays["q"] is None:
+        raise ProblemFormatError("a problem needs P and q", key="P" if arrays["P"] is None else "q")
+    n = arrays["q"].size
+    for mat, vec in (("A", "b"), ("G", "h")):
+        if arrays[mat] is not None and arrays[mat].ndim == 1:
+            arrays[mat] = arrays[mat].reshape(1, -1)
+    me = 0 if arrays["b"] is None else arrays["b"].size
+    mi = 0 if arrays["h"] is None else arrays["h"].size
+    parts, head, off = [], [n, me, mi], HEADER
+    for name, shape in _shapes(n, me, mi).items():
+        value = arrays[name]
+        if value is None:
+            head.append(-1)
+            continue
+        if value.size != int(np.prod(shape)) or (value.ndim == 2 and value.shape != shape):
+            raise ProblemFormatError(f"'{name}' has shape {value.shape}, expected {shape}", key=name)
+        head.append(off)
+        parts.append(value.reshape(-1))
+        off += value.size
+    return PackedProblem(np.concatenate([np.array(head, dtype=np.float64), *parts]))
