@@ -42,6 +42,12 @@ semi-implicit method uses Euler's bound.
 Two integrators compute the same thing: a numba-compiled loop (compiled on
 first call, cached on disk) and a pure-numpy path (used when numba is absent
 or not wanted). They agree to rounding (1e-12 and below).
+
+The online backend calls the compiled loop through two thin per-tick
+kernels that also return the tick's verdict: :func:`online_kernel` (the
+problem's eight arrays, compiled for exactly one argument type) and
+:func:`packed_kernel` (a :class:`qpbench.packed.PackedProblem`'s one buffer).
+Both run the same compiled loop and give the same numbers bit for bit.
 """
 
 from __future__ import annotations

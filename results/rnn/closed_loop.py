@@ -2,6 +2,7 @@
 
     python results/rnn/closed_loop.py run      # summaries/<scenario>_<setting>.json, one run at a time
     python results/rnn/closed_loop.py table    # summaries/*.json -> closed_loop.md
+    python results/rnn/closed_loop.py sweep    # eps / l1 clip on wall, 8 s: the table in README.md
 
 ``run`` runs ``qpbench simulate`` for each shipped scenario twice: as the
 file says (its ``[rnn]`` table carries the paper's ``eps = 0.02``: setting
@@ -111,7 +112,32 @@ def write_table() -> None:
     print(text)
 
 
+#: ``(eps [s], l1 clip or None)`` of the sweep on wall (auto sub-steps, Euler).
+SWEEP = ((0.02, None), (0.02, 10.0), (0.01, None), (0.005, None), (0.005, 10.0), (0.001, None),
+         (0.001, 10.0), (0.0001, 10.0))
+
+
+def sweep(duration: float = 8.0) -> None:
+    """Print the eps / l1-clip table of README.md: ``wall`` for ``duration`` s, auto sub-steps."""
+    from dataclasses import replace
+
+    from qpbench.sim.loop import simulate
+    from qpbench.sim.scenario import load_scenario
+
+    base = load_scenario("wall")
+    print(f"wall, {duration:g} s, backend rnn, Euler, auto sub-steps")
+    print("| eps [s] | l1 clip | tracking max after 2 s [m] | force error max [N] | min distance [m] |")
+    print("|---|---|---|---|---|")
+    for eps, clip in SWEEP:
+        rnn = {"eps": eps} if clip is None else {"eps": eps, "l1_clip": clip}
+        s = simulate(replace(base, rnn=rnn), "rnn", duration=duration).summary
+        t = s["min_obstacle_distance_t"]
+        at = f" (t = {t:.2f} s)" if s["min_obstacle_distance"] < s["d_safe"] - 5e-4 and t < 2.0 else ""
+        print(f"| {eps:g} | {'-' if clip is None else f'{clip:g}'} | {s['tracking_max_after_2s']:.2g} "
+              f"| {s['force_error_max_after_2s']:.3g} | {s['min_obstacle_distance']:.2g}{at} |", flush=True)
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 2 or sys.argv[1] not in ("run", "table"):
+    if len(sys.argv) != 2 or sys.argv[1] not in ("run", "table", "sweep"):
         raise SystemExit(__doc__)
-    run_all() if sys.argv[1] == "run" else write_table()
+    {"run": run_all, "table": write_table, "sweep": sweep}[sys.argv[1]]()
