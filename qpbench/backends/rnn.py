@@ -337,15 +337,21 @@ class RNNOnline(_NetworkBackend):
     """The network integrated for one tick of ``dt`` per call (the paper's use).
 
     Per-tick path. A control loop calls this once per tick with problems of
-    one shape made of dense float64 arrays (what the controller builds). Once
-    a first call has set up the state, :meth:`solve` hands the problem's
-    arrays straight to a kernel compiled for exactly that argument type
-    (:func:`qpbench.rnn.network.online_kernel`): numba's dispatcher is the
-    type check, the kernel checks the shapes against the state's and returns
-    the step count and the status in one integer. Anything else (absent
+    one shape (what the controller builds). Once a first call has set up the
+    state, :meth:`solve` hands the kernel
+
+    - a :class:`~qpbench.packed.PackedProblem` (the controller's): its one
+      buffer, to :func:`qpbench.rnn.network.packed_kernel`, which reads the
+      header and checks it against the buffer and the state;
+    - any other problem: its eight arrays, to a kernel compiled for exactly
+      C-contiguous float64 arrays (:func:`qpbench.rnn.network.online_kernel`),
+      numba's dispatcher being the type check.
+
+    The kernel returns the step count and the status in one integer; the
+    answer is a :class:`TickSolution`. Anything the kernel refuses (absent
     parts, sparse matrices, another dtype or layout, a shape change) goes to
     the general path, which converts, checks, re-shapes the state and raises
-    what is wrong. Both paths give the same numbers bit for bit (tested);
+    what is wrong. All paths give the same numbers bit for bit (tested);
     ``obj`` is computed from ``x`` on first read (a controller does not read
     it). ``bench/rnn_speed.py`` measures the cost of a tick and its parts.
     """
