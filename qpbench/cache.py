@@ -1,0 +1,76 @@
+"""Where qpbench keeps what it compiles: numba's kernels and native shims.
+
+One rule for every compiled artefact, so that a worker process, a second run
+and a test all find what the first compile left:
+
+1. ``$NUMBA_CACHE_DIR`` when it is set (numba's own variable, honoured as is);
+2. else the package folder, when it can be written (numba's default: a
+   ``__pycache__`` beside each source file; shims go to ``qpbench/__cache__``);
+3. else the user cache folder, ``$XDG_CACHE_HOME/qpbench`` (default
+   ``~/.cache/qpbench``).
+
+Nothing here runs at import; call :func:`configure_numba_cache` before numba
+compiles anything (the CLI does, first thing).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+#: The installed package's folder.
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+def _writable(folder: Path) -> bool:
+    """``folder`` exists (or can be made) and a file can be created in it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".write-probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+        return True
+    except OSError:
+        return False
+
+
+def user_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/qpbench``, default ``~/.cache/qpbench``."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "qpbench"
+
+
+def cache_root() -> Path:
+    """The folder compiled artefacts of qpbench go to (rule in the module docstring)."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        return Path(env)
+    local = PACKAGE_DIR / "__cache__"
+    if _writable(local):
+        return local
+    return user_cache_dir()
+
+
+def shim_dir(name: str) -> Path:
+    """Folder for a compiled native shim ``name`` (e.g. ``"qpoases"``), created if missing."""
+    folder = cache_root() / name
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def configure_numba_cache() -> str | None:
+    """Point numba's cache at a writable folder when the package folder is not writable.
+
+    Sets ``NUMBA_CACHE_DIR`` (inherited by worker processes) only when it is
+    unset and the package folder cannot be written; returns the folder numba
+    caches to, or ``None`` for numba's default (beside the sources).
+    Call it before numba is imported.
+    """
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return os.environ["NUMBA_CACHE_DIR"]
+    if _writable(PACKAGE_DIR / "__pycache__"):
+        return None
+    folder = user_cache_dir() / "numba"
+    folder.mkdir(parents=True, exist_ok=True)
+    os.environ["NUMBA_CACHE_DIR"] = str(folder)
+    return str(folder)
