@@ -16,6 +16,7 @@ import importlib
 import logging
 import sys
 
+from . import __version__
 from .exceptions import QpbenchError
 
 #: Sub-command name -> module under qpbench.commands.
@@ -27,7 +28,17 @@ COMMANDS = {
     "report": "report",
     "backends": "backends",
     "inspect": "inspect_",
+    "list": "list_",
+    "export": "export",
 }
+
+#: Shown at the end of ``qpbench --help``.
+EXAMPLES = """examples:
+  qpbench run                                    the main job: every backend, per tick and in the loop, into results/
+  qpbench bench problems/wall --backends daqp,osqp,rnn --out wall.csv
+  qpbench simulate --scenario narrow --backend daqp --summary narrow.json --snapshot narrow.png
+
+every command has --help with an example; exit codes: 0 ok, 1 some solves or runs failed, 2 bad input"""
 
 log = logging.getLogger("qpbench")
 
@@ -56,8 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="qpbench",
         description="Benchmark QP solvers on the per-tick QPs of a compliant redundant manipulator.",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         parents=[common],
     )
+    parser.add_argument("--version", action="version", version=f"qpbench {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in _available_commands():
         p = sub.add_parser(

@@ -1,0 +1,117 @@
+"""The snippets of problems/README.md run as written, and the commands that list and export problems."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import qpsolvers
+
+from qpbench.cli import main
+from qpbench.formats import load_problems, read_problem_set
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+def snippets(markdown: Path, language: str) -> list[str]:
+    text = markdown.read_text()
+    return re.findall(rf"```{language}\n(.*?)```", text, flags=re.S)
+
+
+@pytest.fixture
+def workdir(tmp_path):
+    """A folder holding a copy-free view of the repository's problems/ (as in a clone)."""
+    (tmp_path / "problems").symlink_to(ROOT / "problems")
+    return tmp_path
+
+
+def test_problems_readme_python_snippets_run(workdir):
+    blocks = snippets(ROOT / "problems" / "README.md", "python")
+    assert blocks, "problems/README.md has no python snippet"
+    for code in blocks:
+        proc = subprocess.run([sys.executable, "-c", code], cwd=workdir, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+
+
+def test_problems_readme_shell_snippets_run(workdir):
+    blocks = [b for b in snippets(ROOT / "problems" / "README.md", "bash") if "qpbench list" in b]
+    assert blocks
+    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
+    for block in blocks:
+        proc = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=workdir, env=env,
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+    assert (workdir / "wall.csv").exists()
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert re.fullmatch(r"qpbench \d+\.\d+\.\d+\n", capsys.readouterr().out)
+
+
+def test_top_level_help_has_examples(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert out.count("\n  qpbench ") >= 3
+
+
+def test_list_selects_and_prints_json(capsys):
+    assert main(["list", str(ROOT / "problems" / "wall"), "--every", "100", "--limit", "3", "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["tick"] for r in rows] == [0, 1000, 2000]
+    assert rows[0] == {"name": "wall_paper_000000", "n": 4, "m_eq": 2, "m_ineq": 7, "n_box": 8,
+                       "scenario": "wall", "tick": 0, "t": 0.0, "formulation": "paper"}
+
+
+def test_list_pattern_that_matches_nothing(capsys):
+    assert main(["list", str(ROOT / "problems" / "maros_meszaros"), "--problems", "HS9*"]) == 2
+    assert "HS9*" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fmt", ["npz", "parquet"])
+def test_export_round_trip(tmp_path, fmt):
+    src = read_problem_set(ROOT / "problems" / "narrow")
+    out = tmp_path / "out"
+    assert main(["export", str(ROOT / "problems" / "narrow"), "--format", fmt, "--problems", "narrow_paper_0001*",
+                 "--out", str(out)]) == 0
+    back = load_problems(out)
+    expected = [r for r in src.records if r.name.startswith("narrow_paper_0001")]
+    assert [r.name for r in back.records] == [r.name for r in expected]
+    for a, b in zip(back.records, expected):
+        for key in ("P", "q", "G", "h", "A", "b", "lb", "ub"):
+            np.testing.assert_array_equal(getattr(a.problem, key), getattr(b.problem, key))
+        assert (a.scenario, a.tick, a.t) == (b.scenario, b.tick, b.t)
+    if fmt == "npz":  # qpsolvers reads them itself, and the arrays are writable (DAQP needs that)
+        first = sorted(out.glob("*.npz"))[0]
+        problem = qpsolvers.Problem.load(str(first))
+        assert problem.A.flags.writeable
+        assert qpsolvers.solve_problem(problem, "daqp").found in (True, False)
+
+
+def test_export_refuses_existing_and_missing_parent(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    src = str(ROOT / "problems" / "maros_meszaros")
+    assert main(["export", src, "--format", "npz", "--out", str(out)]) == 2
+    assert (out / "keep.txt").read_text() == "mine"
+    assert main(["export", src, "--format", "npz", "--out", str(tmp_path / "no" / "such")]) == 2
+    assert not (tmp_path / "no").exists()
+    assert "no such folder" in capsys.readouterr().err
+
+
+def test_export_failure_leaves_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    assert main(["export", str(bad), "--format", "parquet", "--out", str(tmp_path / "out")]) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.npz"]
