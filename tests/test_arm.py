@@ -56,3 +56,25 @@ def test_animation_refuses_other_formats(wall_run, tmp_path, name):
     with pytest.raises(ParamError, match="gif"):
         animate(scenario, run.log, tmp_path / name)
     assert not (tmp_path / name).exists()
+
+
+def test_simulate_writes_snapshot_and_animation(tmp_path):
+    from qpbench.cli import main
+
+    png, gif = tmp_path / "n.png", tmp_path / "n.gif"
+    code = main(["-q", "simulate", "--scenario", "narrow", "--backend", "qpsolvers:daqp", "--duration", "0.2",
+                 "--snapshot", str(png), "--animate", str(gif), "--fps", "10", "--speed", "0.5"])
+    assert code == 0
+    with Image.open(png) as img:
+        assert img.format == "PNG"
+    with Image.open(gif) as img:
+        assert img.n_frames == 4  # 0.2 s at 0.5 simulated s per second and 10 fps
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["n.gif", "n.png"]
+
+
+def test_simulate_refuses_a_snapshot_format_before_running(tmp_path, capsys):
+    from qpbench.cli import main
+
+    assert main(["simulate", "--scenario", "wall", "--backend", "qpsolvers:daqp", "--snapshot", str(tmp_path / "a.jpg")]) == 2
+    assert "--snapshot" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

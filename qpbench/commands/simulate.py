@@ -12,7 +12,8 @@ HELP = "simulate a scenario in closed loop with one backend solving every tick's
 EXAMPLE = (
     "qpbench simulate --scenario wall --backend daqp --summary wall.json "
     "--log wall.parquet --dump wall-set --every 10 --plot wall.png; "
-    "qpbench simulate --scenario wall --backend rnn --set rnn.eps=0.001 --set rnn.substeps=5"
+    "qpbench simulate --scenario wall --backend rnn --set rnn.eps=0.001 --set rnn.substeps=5; "
+    "qpbench simulate --scenario narrow --backend daqp --snapshot narrow.png --animate narrow.gif"
 )
 
 log = logging.getLogger("qpbench")
@@ -35,6 +36,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dump", default=None, metavar="DIR", help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)")
     parser.add_argument("--every", type=int, default=None, metavar="K", help="dump every K-th tick (default 1)")
     parser.add_argument("--plot", default=None, metavar="FILE", help="figure of the run (.png)")
+    parser.add_argument("--snapshot", default=None, metavar="FILE",
+                        help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)")
+    parser.add_argument("--animate", default=None, metavar="FILE",
+                        help="animation of the run (.gif; .mp4 when ffmpeg is installed)")
+    parser.add_argument("--speed", type=float, default=2.0, metavar="X",
+                        help="simulated seconds per second of animation (default 2)")
+    parser.add_argument("--fps", type=int, default=15, help="frames per second of the animation (default 15)")
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
 
@@ -50,7 +58,18 @@ def run(args: argparse.Namespace) -> int:
         raise ParamError(f"--every must be >= 1, got {args.every}", key="--every")
     if args.every is not None and args.dump is None:
         raise ParamError("--every needs --dump", key="--every")
-    for out in (args.log, args.summary, args.plot):
+    if args.snapshot is not None and Path(args.snapshot).suffix.lower() not in (".png", ".svg", ".pdf"):
+        raise ParamError(f"--snapshot must end in .png, .svg or .pdf, got {args.snapshot}", key="--snapshot")
+    if args.animate is not None and Path(args.animate).suffix.lower() not in (".gif", ".mp4"):
+        raise ParamError(f"--animate must end in .gif or .mp4, got {args.animate}", key="--animate")
+    if args.animate is not None and Path(args.animate).suffix.lower() == ".mp4":
+        import shutil
+
+        if shutil.which("ffmpeg") is None:
+            raise ParamError("--animate .mp4 needs ffmpeg on the PATH; use a .gif", key="--animate")
+    if not (args.speed > 0 and args.fps > 0):
+        raise ParamError(f"--speed and --fps must be positive, got {args.speed} and {args.fps}", key="--speed")
+    for out in (args.log, args.summary, args.plot, args.snapshot, args.animate):
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
@@ -74,6 +93,14 @@ def run(args: argparse.Namespace) -> int:
         write_text(args.summary, json.dumps(s, indent=2) + "\n")
     if args.plot is not None:
         plot_run(result.log, s, args.plot)
+    if args.snapshot is not None or args.animate is not None:
+        from ..report.arm import animate, draw_snapshot
+
+        title = f"{scenario.name} / {s['backend']}"
+        if args.snapshot is not None:
+            draw_snapshot(scenario, result.log, args.snapshot, title=title)
+        if args.animate is not None:
+            animate(scenario, result.log, args.animate, fps=args.fps, speed=args.speed, progress=progress, title=title)
 
     def fmt(x, spec=".3g"):
         return "-" if x is None else format(x, spec)

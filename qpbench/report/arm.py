@@ -185,9 +185,13 @@ def draw_snapshot(scenario, log, path: str | Path, *, instants: int = 8, title: 
     ax.set_title(title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
+    from ..atomic import atomic_path
+
+    try:
+        with atomic_path(path) as tmp:  # never a half-written picture under the final name
+            fig.savefig(tmp, format=path.suffix.lstrip(".").lower() or "png", bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path
 
 
