@@ -107,8 +107,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _configure_logging(args)
+    from .native_output import silence_native_stdout
+
     try:
-        return int(args._run(args) or 0)
+        with silence_native_stdout(enabled=not args.verbose):
+            return int(args._run(args) or 0)
     except QpbenchError as exc:
         print(f"qpbench {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
