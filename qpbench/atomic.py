@@ -51,7 +51,7 @@ def write_bytes(path: str | Path, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def check_output(path: str | Path, force: bool = False, resume: bool | None = None) -> None:
+def check_output(path: str | Path, force: bool = False, resume: bool | None = None, kind: str = "file") -> None:
     """Refuse to overwrite an existing output unless ``force`` or ``resume``.
 
     Args:
@@ -59,11 +59,23 @@ def check_output(path: str | Path, force: bool = False, resume: bool | None = No
         force: ``--force`` was given.
         resume: ``--resume`` was given; ``None`` when the command has no
             ``--resume`` (the message then does not offer it).
+        kind: ``"file"`` or ``"dir"``: what ``path`` must be if it exists.
 
     Raises:
         OutputExistsError: ``path`` exists and neither flag was given.
+        ParamError: ``path`` is a folder where a file is expected (``kind="file"``)
+            or a file where a folder is (the output or its parent).
     """
+    from .exceptions import ParamError
+
     path = Path(path)
+    if kind == "file" and path.is_dir():
+        raise ParamError(f"{path}: is a folder; expected a file name", key="out")
+    if kind == "dir" and path.exists() and not path.is_dir():
+        raise ParamError(f"{path}: is a file; expected a folder", key="out")
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise ParamError(f"{parent}: is a file; expected a folder", key="out")
     if path.exists() and not (force or resume):
         hint = "pass --force to overwrite" + (" or --resume to continue" if resume is not None else "")
         raise OutputExistsError(f"{path}: exists; {hint}")
