@@ -115,6 +115,13 @@ def main(argv: list[str] | None = None) -> int:
     except QpbenchError as exc:
         print(f"qpbench {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except BrokenPipeError:
+        # stdout's reader closed early (``qpbench list ... | head``): stop quietly, as Unix tools do
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except KeyboardInterrupt:
         print(f"qpbench {args.command}: interrupted", file=sys.stderr)
         return 130

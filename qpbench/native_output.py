@@ -55,10 +55,16 @@ def silence_native_stdout(enabled: bool = True):
         sys.stdout = private
         yield
     finally:
-        private.flush()
+        try:
+            private.flush()
+        except BrokenPipeError:  # the reader went away (``| head``): nothing more to say
+            pass
         _flush_c_stdio()
         os.dup2(saved, 1)
         sys.stdout = old_stdout
-        private.close()
+        try:
+            private.close()
+        except BrokenPipeError:
+            pass
         os.close(saved)
         os.close(devnull)

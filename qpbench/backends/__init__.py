@@ -28,11 +28,13 @@ __all__ = [
     "Backend",
     "BackendInfo",
     "BackendSolution",
+    "backend_class",
     "backend_info",
     "backend_names",
     "get_backend",
     "objective",
     "register",
+    "resolve_name",
 ]
 
 _REGISTRY: dict[str, type[Backend]] = {}
@@ -101,19 +103,42 @@ def backend_names(available_only: bool = True) -> list[str]:
     ]
 
 
+def resolve_name(name: str) -> str:
+    """The registered spelling of backend ``name``, matched without regard to case.
+
+    Raises:
+        BackendNotFound: no backend of that name; the message offers the
+            closest names ("did you mean ...") and lists the available ones.
+    """
+    registry = _registry()
+    if name in registry:
+        return name
+    folded = {key.casefold(): key for key in registry}
+    key = folded.get(str(name).strip().casefold())
+    if key is not None:
+        return key
+    import difflib
+
+    close = difflib.get_close_matches(str(name).casefold(), list(folded), n=3, cutoff=0.6)
+    hint = f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""
+    raise BackendNotFound(f"unknown backend '{name}'; {hint}available: {', '.join(backend_names())}")
+
+
+def backend_class(name: str) -> type[Backend]:
+    """The registered class of backend ``name`` (case-insensitive; see :func:`resolve_name`)."""
+    return _registry()[resolve_name(name)]
+
+
 def get_backend(name: str, profile: str | Profile = "default", **settings) -> Backend:
-    """A fresh backend instance called ``name``.
+    """A fresh backend instance called ``name`` (matched without regard to case).
 
     Raises:
         BackendNotFound: no such backend, or it is unavailable here; the
-            message lists the available names.
+            message offers close names and lists the available ones.
     """
     registry = _registry()
-    cls = registry.get(name)
-    if cls is None:
-        raise BackendNotFound(
-            f"unknown backend '{name}'; available: {', '.join(backend_names())}"
-        )
+    name = resolve_name(name)
+    cls = registry[name]
     reason = cls.unavailable_reason()
     if reason is not None:
         raise BackendNotFound(

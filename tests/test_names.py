@@ -1,0 +1,43 @@
+"""Backend names: matched without regard to case, with a suggestion for a typo; listed as JSON."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from qpbench.backends import backend_class, backend_names, get_backend, resolve_name
+from qpbench.cli import main
+from qpbench.exceptions import BackendNotFound
+
+
+def test_case_insensitive():
+    assert resolve_name("DAQP") == "daqp"
+    assert resolve_name("QPSolvers:Clarabel") == "qpsolvers:clarabel"
+    assert get_backend("Pinv").name == "pinv"
+    assert backend_class("RNN-Tuned").name == "rnn-tuned"
+
+
+def test_typo_gets_a_suggestion():
+    with pytest.raises(BackendNotFound, match=r"did you mean 'osqp'"):
+        resolve_name("osqq")
+    with pytest.raises(BackendNotFound) as exc:
+        resolve_name("zzzzzz")
+    assert "did you mean" not in str(exc.value)
+    assert "available: " in str(exc.value)
+
+
+def test_backends_json(capsys):
+    assert main(["backends", "--available", "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["name"] for r in rows] == backend_names()
+    assert all(r["available"] and r["reason"] is None for r in rows)
+
+
+def test_closed_pipe_is_quiet():
+    proc = subprocess.run(f"{sys.executable} -m qpbench.cli backends | head -1", shell=True,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.stdout.startswith("name")
+    assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr
