@@ -41,3 +41,21 @@ def test_closed_pipe_is_quiet():
                           capture_output=True, text=True, timeout=120)
     assert proc.stdout.startswith("name")
     assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr
+
+
+def test_inspect_json(capsys):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    assert main(["inspect", str(root / "problems" / "narrow"), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["problems"] == 2000 and info["n"] == [4, 4] and info["m_ineq"] == [14, 14]
+    assert info["hash_ok"] is True and info["scenario"] == {"narrow": 2000}
+
+
+def test_simulate_summary_to_stdout(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["-q", "simulate", "--scenario", "wall", "--backend", "pinv", "--duration", "0.02", "--summary", "-"]) in (0, 1)
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["ticks"] == 20 and summary["backend"] == "pinv"
+    assert not (tmp_path / "-").exists()

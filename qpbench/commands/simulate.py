@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--profile", default="default", help="backend settings profile (default: default)")
     parser.add_argument("--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet")
-    parser.add_argument("--summary", default=None, metavar="FILE", help="summary as JSON")
+    parser.add_argument("--summary", default=None, metavar="FILE", help="summary as JSON ('-': to stdout)")
     parser.add_argument("--dump", default=None, metavar="DIR", help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)")
     parser.add_argument("--every", type=int, default=None, metavar="K", help="dump every K-th tick (default 1)")
     parser.add_argument("--plot", default=None, metavar="FILE", help="figure of the run (.png)")
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
             raise ParamError("--animate .mp4 needs ffmpeg on the PATH; use a .gif", key="--animate")
     if not (args.speed > 0 and args.fps > 0):
         raise ParamError(f"--speed and --fps must be positive, got {args.speed} and {args.fps}", key="--speed")
-    for out in (args.log, args.summary, args.plot, args.snapshot, args.animate):
+    for out in (args.log, None if args.summary == "-" else args.summary, args.plot, args.snapshot, args.animate):
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
@@ -89,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
                 result.log.to_csv(tmp, index=False, float_format="%.10g")
             else:
                 result.log.to_parquet(tmp, index=False)
-    if args.summary is not None:
+    if args.summary == "-":
+        print(json.dumps(s, indent=2))
+    elif args.summary is not None:
         write_text(args.summary, json.dumps(s, indent=2) + "\n")
     if args.plot is not None:
         plot_run(result.log, s, args.plot)
