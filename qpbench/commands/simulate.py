@@ -157,45 +157,11 @@ def parse_overrides(items: list[str]) -> dict:
 
 
 def plot_run(frame, summary: dict, path) -> None:
-    """Six panels: tangential error, force, key-point distances, ``|v|^2``, joint angles, ``Kp_hat``."""
-    import matplotlib
+    """The closed-loop figure of one run (:func:`qpbench.report.loop_figure.closed_loop_figure`)."""
+    from ..report.loop_figure import closed_loop_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..atomic import atomic_path
-
-    t = frame["t"].to_numpy()
-    fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
-    ax = axes[0, 0]
-    ax.plot(t, frame["tracking_error"])
-    ax.set_ylabel("tangential error [m]")
-    ax = axes[0, 1]
-    ax.plot(t, frame["force"])
-    ax.set_ylabel("contact force [N]")
-    ax = axes[1, 0]
-    dcols = [c for c in frame.columns if c.startswith("d_") and c != "d_min"]
-    for c in dcols:
-        ax.plot(t, frame[c], lw=0.8, label=c[2:])
-    if dcols:
-        ax.axhline(summary["d_safe"], color="k", ls="--", lw=0.8)
-        ax.legend(fontsize=6, ncol=2)
-    ax.set_ylabel("key point distance [m]")
-    ax = axes[1, 1]
-    ax.plot(t, frame["v_sq"])
-    ax.set_ylabel("|v|^2 [rad^2/s^2]")
-    ax = axes[2, 0]
-    for c in [c for c in frame.columns if c.startswith("theta_")]:
-        ax.plot(t, frame[c], label=c)
-    ax.legend(fontsize=7)
-    ax.set_ylabel("joint angle [rad]")
-    ax.set_xlabel("t [s]")
-    ax = axes[2, 1]
-    ax.plot(t, frame["kp_hat"], label="Kp_hat")
-    ax.set_ylabel("Kp_hat [N/m]")
-    ax.set_xlabel("t [s]")
-    fig.suptitle(f"{summary['scenario']} / {summary['backend']} / {summary['formulation']}")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    closed_loop_figure(
+        {summary["backend"]: frame}, path,
+        title=f"{summary['scenario']} / {summary['backend']} / {summary['formulation']}",
+        d_safe=summary.get("d_safe"),
+    )
