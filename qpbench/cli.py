@@ -107,10 +107,13 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _configure_logging(args)
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
     from .native_output import silence_native_stdout
 
     try:
-        with silence_native_stdout(enabled=not args.verbose):
+        # log lines go through tqdm.write: a progress bar is redrawn below them, never mixed into one line
+        with silence_native_stdout(enabled=not args.verbose), logging_redirect_tqdm(loggers=[log]):
             return int(args._run(args) or 0)
     except QpbenchError as exc:
         print(f"qpbench {args.command}: error: {exc}", file=sys.stderr)
