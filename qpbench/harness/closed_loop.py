@@ -571,7 +571,8 @@ class ClosedLoopOutcome:
     """What :func:`run_closed_loop` did: the full table, the runs that failed
     (``errors``: status ``error``, ``crashed`` or ``time_limit``), the runs made
     now (``ran``), those kept or skipped, and the rows of the table whose
-    verdict is not ``ok`` (``not_ok``: failed, unsafe, limits or diverged)."""
+    verdict is not ``ok`` (``not_ok``: failed, unsafe, limits or diverged;
+    the failed runs among them)."""
 
     table: pd.DataFrame
     csv_path: Path
@@ -750,5 +751,5 @@ def run_closed_loop(
     write_table(_table_rows(), csv_path)
     table = pd.read_csv(csv_path)
     errors = int(table["status"].isin(FAILED_RUN_STATUSES).sum()) if len(table) else 0
-    not_ok = int(table["verdict"].isin(BAD_VERDICTS).sum()) if len(table) else 0
+    not_ok = int((table["verdict"].isin(BAD_VERDICTS) | table["status"].isin(FAILED_RUN_STATUSES)).sum()) if len(table) else 0
     return ClosedLoopOutcome(table, csv_path, errors, len(todo), len(order) - len(todo), not_ok)

@@ -606,7 +606,7 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
     - ``verdict`` (``ok``, ``diverged``, ``limits``, ``unsafe``, ``failed``)
       and ``verdict_reasons`` (plain text, ``"; "`` between reasons): see
       :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
-      thresholds; they are the last two keys.
+      thresholds.
 
     ``scenario_overrides`` holds the values set over the scenario file's
     (``qpbench simulate --set``), empty when none. ``fallback_ticks``
