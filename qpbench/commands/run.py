@@ -69,9 +69,10 @@ BENCH_EVERY = 1
 #: 3 minutes and the 55 runs of the backends that keep up with the loop about
 #: 1.5 (20 s each at real-time factors of 10-100); the 30 runs of the 6 slow
 #: backends then take at most 30 x 5 s = 2.5 minutes, which keeps the whole
-#: job near 7.5 minutes, inside 10 minutes on 2 cores. 5 s take a backend with
-#: a real-time factor of 0.3-0.8 (cvxpy, qpsolvers' osqp) through the
-#: infeasible start (0.13 s) and the transient (1.5-4 s simulated).
+#: job near 7.5 minutes, inside 10 minutes on 2 cores. In 5 s qpsolvers'
+#: clarabel, highs, osqp and scs (real-time factors 0.4-0.8 on an idle
+#: machine) get through the infeasible start (0.13 s) and the transient to
+#: 2-4 s, cvxpy (0.3) to about 1.5 s, the converged RNN (0.02-0.06) to 0.1-0.3 s.
 RUN_BUDGET_S = 5.0
 #: Backends that may regenerate a missing problem set, first available wins.
 DUMP_BACKENDS = ("qpsolvers:daqp", "clarabel", "proxqp", "qpsolvers:quadprog", "osqp")

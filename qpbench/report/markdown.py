@@ -233,7 +233,7 @@ def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) ->
     ):
         duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
         out.append(f"### Scenario {scenario} ({formulation})\n")
-        out.append(f"Closed-loop metrics per backend ({fmt(duration)} s simulated):\n")
+        out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
         out.append(
             md_table(
                 ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
