@@ -187,8 +187,10 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv")
     assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(
         (s, b) for s in ("wall", "free") for b in ("daqp", slow))
-    assert (loop["status"] == "ok").all() and (loop["verdict"] == "ok").all()
-    assert (loop["ticks"] == 300).all() and (loop["simulated_s"] == 0.3).all()
+    assert (loop["verdict"] == "ok").all() and loop["status"].isin(("ok", "budget")).all()
+    assert (loop["ticks"] > 0).all()
+    fast = loop[loop["backend"] == "daqp"]
+    assert (fast["status"] == "ok").all() and (fast["ticks"] == 300).all() and (fast["simulated_s"] == 0.3).all()
     assert (loop.loc[loop["backend"] == slow, "real_time_factor"] < 1).all()  # slower than real time, still in
     manifest = json.loads((tmp_path / "r" / "run.json").read_text())
     assert "closed_loop_skipped" not in manifest and "min_rtf" not in manifest

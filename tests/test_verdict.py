@@ -222,7 +222,7 @@ def test_budget_stops_between_ticks_with_the_uncut_prefix():
     assert 0 < s["ticks"] == len(cut.log) < 500
     assert s["simulated_s"] == pytest.approx(s["ticks"] * 0.001) and s["duration"] == 0.5
     assert s["real_time_factor"] == pytest.approx(s["simulated_s"] / s["wall_time_s"])
-    assert s["wall_time_s"] < 0.25 + 0.1  # stops within a tick or two of the budget
+    assert s["wall_time_s"] >= 0.25  # it stopped because the budget was spent
     assert s["verdict"] == "ok" and s["verdict_reasons"].startswith(f"stopped at {s['simulated_s']:.3g} s of 0.5 s")
     whole = simulate("wall", SlowExact(), duration=0.5)
     assert not whole.summary["stopped_early"] and whole.summary["ticks"] == 500
