@@ -106,11 +106,18 @@ def test_closed_loop_then_report(tmp_path):
     out = tmp_path / "cl"
     code = main(["-q", "closed-loop", "--scenarios", "wall,narrow", "--backends", "qpsolvers:daqp,pinv",
                  "--duration", "0.5", "--out", str(out)])
-    assert code == 0
+    assert code == 1  # pinv breaks the speed limits (and goes through narrow's lower line)
     table = pd.read_csv(out / "closed_loop.csv")
     assert len(table) == 4 and (table["status"] == "ok").all()
+    assert list(table["verdict"]) == ["ok", "limits", "ok", "unsafe"]
     assert main(["-q", "report", str(out / "closed_loop.csv"), "--out", str(out)]) == 0
     md = (out / "report.md").read_text()
+    failed = [t for t in parse_tables(md) if t["headings"].get(3) == "Runs that failed their verdict"]
+    assert len(failed) == 1 and failed[0]["header"] == ["scenario", "backend", "formulation", "verdict", "reasons"]
+    bad = table[table["verdict"] != "ok"]
+    assert [r[:4] for r in failed[0]["rows"]] == [[s, b, "paper", v] for s, b, v in
+                                                  zip(bad["scenario"], bad["backend"], bad["verdict"])]
+    assert [r[4] for r in failed[0]["rows"]] == list(bad["verdict_reasons"])
     tabs = [t for t in parse_tables(md) if (t["caption"] or "").startswith("Closed-loop metrics")]
     assert [t["headings"][3] for t in tabs] == ["Scenario wall (paper)", "Scenario narrow (paper)"]
     for t in tabs:
@@ -131,7 +138,7 @@ def test_run_end_to_end(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     args = ["-q", "run", "--duration", "0.3", "--scenarios", "wall", "--backends", "qpsolvers:daqp,pinv",
             "--out", "tmp"]
-    assert main(args) == 0
+    assert main(args) == 1  # pinv breaks the joint speed limits: its closed-loop verdict is "limits"
     out = tmp_path / "tmp"
     assert (tmp_path / "problems" / "wall" / "problems.parquet").exists()  # regenerated: none shipped here
     assert len(pd.read_parquet(tmp_path / "problems" / "wall" / "problems.parquet")) == 2000
@@ -144,13 +151,14 @@ def test_run_end_to_end(tmp_path, monkeypatch):
     assert "## Per-tick benchmark" in md and "## Closed loop" in md
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["backends"] == ["qpsolvers:daqp", "pinv"]
+    assert manifest["closed_loop_not_ok"] == {"wall/pinv": "limits"} and manifest["run_budget_s"] == 5.0
     assert not (out / ".partial").exists()
     # a second run replaces the previous run's outputs (run.json marks the folder as ours)
     first = (out / "closed_loop.csv").stat().st_mtime_ns
-    assert main(args) == 0
+    assert main(args) == 1
     assert (out / "closed_loop.csv").stat().st_mtime_ns != first
     # --resume of a finished run starts from an empty staging folder and completes too
-    assert main([*args, "--resume"]) == 0
+    assert main([*args, "--resume"]) == 1
     # other files in the folder are left alone; a report.md that no run wrote is not replaced
     other = tmp_path / "other"
     (other / "simulate").mkdir(parents=True)
@@ -158,7 +166,42 @@ def test_run_end_to_end(tmp_path, monkeypatch):
     (other / "report.md").write_text("hand-written")
     assert main([*args[:-1], "other"]) == 2
     assert (other / "report.md").read_text() == "hand-written"
-    assert main([*args[:-1], "other", "--force"]) == 0
+    assert main([*args[:-1], "other", "--force"]) == 1
     assert (other / "simulate" / "notes.txt").read_text() == "mine"
     assert "## Closed loop" in (other / "report.md").read_text()
     assert main(["-q", "run", "--duration", "-1", "--out", "x"]) == 2
+    assert main(["-q", "run", "--run-budget", "-1", "--out", "x"]) == 2
+
+
+def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch):
+    """A backend slower than the 1 kHz loop (real-time factor about 0.3) runs every scenario, under the budget."""
+    from slow_backends import registered
+
+    slow = registered(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    # a small problem set (30 ticks of wall) so the bench is quick
+    assert main(["-q", "simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.3",
+                 "--dump", "problems/wall", "--every", "10"]) == 0
+    args = ["-q", "run", "--duration", "0.3", "--scenarios", "wall,free", "--backends", f"daqp,{slow}", "--out", "r"]
+    assert main(args) == 0
+    loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv")
+    assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(
+        (s, b) for s in ("wall", "free") for b in ("daqp", slow))
+    assert (loop["verdict"] == "ok").all() and loop["status"].isin(("ok", "budget")).all()
+    assert (loop["ticks"] > 0).all()
+    fast = loop[loop["backend"] == "daqp"]
+    assert (fast["status"] == "ok").all() and (fast["ticks"] == 300).all() and (fast["simulated_s"] == 0.3).all()
+    assert (loop.loc[loop["backend"] == slow, "real_time_factor"] < 1).all()  # slower than real time, still in
+    manifest = json.loads((tmp_path / "r" / "run.json").read_text())
+    assert "closed_loop_skipped" not in manifest and "min_rtf" not in manifest
+    # a budget that runs out: the run stops and says how far it got, it is not left out
+    assert main([*args, "--run-budget", "0.2"]) == 0
+    loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv").set_index(["scenario", "backend"])
+    cut = loop.loc[("wall", slow)]
+    assert cut["status"] == "budget" and 0 < cut["simulated_s"] < 0.3 and cut["verdict"] == "ok"
+    assert cut["verdict_reasons"].startswith(f"stopped at {cut['simulated_s']:.3g} s of 0.3 s (wall-time budget 0.2 s)")
+    assert json.loads((tmp_path / "r" / "run.json").read_text())["closed_loop_stopped_by_budget"][f"wall/{slow}"] == \
+        pytest.approx(cut["simulated_s"])
+    with pytest.raises(SystemExit) as exc:  # no probe, no admission threshold
+        main(["run", "--min-rtf", "1"])
+    assert exc.value.code == 2

@@ -132,11 +132,6 @@ def test_skipped_backends_get_a_row(tmp_path):
     assert outcome.errors == 0 and outcome.ran == 1
 
 
-def test_probe_measures_a_real_time_factor():
-    rtf = cl.probe_real_time_factor("pinv", ticks=50)
-    assert 0 < rtf < math.inf
-
-
 def test_bad_parameters(tmp_path):
     with pytest.raises(ParamError):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, formulation="hard")
@@ -149,7 +144,7 @@ def test_bad_parameters(tmp_path):
 
 def test_cli_exit_codes(tmp_path, capsys):
     out = tmp_path / "cli"
-    args = ["closed-loop", "--scenarios", "wall", "--backends", "pinv", "--duration", "0.05", "--out", str(out)]
+    args = ["closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.05", "--out", str(out)]
     assert main(["-q", *args]) == 0
     assert main(["-q", *args]) == 2  # exists, no --force / --resume
     assert "--force" in capsys.readouterr().err
@@ -205,6 +200,9 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     crashed, hung, daqp = (table.iloc[i] for i in range(3))
     assert crashed["status"] == "crashed" and "SIGSEGV" in crashed["error"]
     assert hung["status"] == "time_limit" and "killed" in hung["error"]
+    assert crashed["verdict"] == hung["verdict"] == "failed" and daqp["verdict"] == "ok"
+    assert crashed["verdict_reasons"].startswith("run crashed: worker process killed by SIGSEGV")
+    assert hung["verdict_reasons"].startswith("run overran its deadline: no result after 4 s")
     assert bool(crashed["isolated"]) and bool(hung["isolated"]) and not bool(daqp["isolated"])  # auto: risky ones
     assert daqp["status"] == "ok"
     _same_daqp_run(out, daqp, *daqp_alone)
@@ -230,6 +228,9 @@ def test_parallel_runs_survive_a_crash(tmp_path, daqp_alone):
     raised = table.loc["faulty-ticks:raise"]
     assert raised["error_ticks"] == len(fb.fault_ticks(100)) and raised["first_error"].startswith("RuntimeError")
     assert raised["fallback_ticks"] >= raised["error_ticks"]
+    # the verdict is the simulator's, copied: a backend that raises on ticks fails it
+    assert raised["verdict"] == "failed" and raised["verdict_reasons"].startswith("10 ticks with an error (first at ")
+    assert outcome.not_ok == 2  # the crashed run and the raising backend
 
 
 def test_guard_parameters(tmp_path):
@@ -241,3 +242,73 @@ def test_guard_parameters(tmp_path):
     assert cl.run_deadline("wall", 100.0) == 100.0 * cl.RUN_TIME_LIMIT_PER_SIM_S
     assert cl.run_deadline("wall", None, 7.0) == 7.0
     assert cl.is_risky("faulty:hang") and not cl.is_risky("daqp") and not cl.is_risky("nosuch")
+
+
+# ---------------------------------------------------------------- verdicts and the wall-time budget
+
+from slow_backends import registered  # noqa: E402
+
+
+def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
+    """pinv ignores obstacles: its A2 dips below d_safe - 0.5 mm at 1.48 s of wall; daqp keeps d_safe."""
+    out = tmp_path / "o"
+    code = main(["closed-loop", "--scenarios", "wall", "--backends", "daqp,pinv", "--duration", "1.6",
+                 "--out", str(out)])
+    assert code == 1
+    table = pd.read_csv(out / cl.CSV_NAME).set_index("backend")
+    pinv, daqp = table.loc["pinv"], table.loc["daqp"]
+    assert daqp["verdict"] == "ok" and math.isnan(daqp["verdict_reasons"])  # empty in the CSV
+    assert pinv["status"] == "ok" and pinv["verdict"] == "unsafe"
+    assert pinv["verdict_reasons"].startswith(f"d_min {pinv['min_obstacle_distance'] * 1e3:.1f} mm < d_safe - 0.5 mm = 9.5 mm")
+    assert pinv["min_obstacle_distance"] < 0.0095
+    # the verdict is the simulator's, never recomputed: the tick log gives the same one
+    from qpbench.sim.loop import simulate
+
+    again = simulate("wall", "pinv", duration=1.6).summary
+    assert (again["verdict"], again["verdict_reasons"]) == (pinv["verdict"], pinv["verdict_reasons"])
+    err = capsys.readouterr().err
+    assert f"WARNING: wall / pinv: unsafe ({pinv['verdict_reasons']})" in err
+    assert "INFO: wall / daqp: ok" in err
+
+
+def test_exact_backend_short_run_is_ok_and_exits_0(tmp_path):
+    out = tmp_path / "o"
+    assert main(["-q", "closed-loop", "--scenarios", "wall,narrow", "--backends", "qpsolvers:daqp", "--duration", "0.3",
+                 "--out", str(out)]) == 0
+    table = pd.read_csv(out / cl.CSV_NAME)
+    assert (table["verdict"] == "ok").all() and (table["simulated_s"] == 0.3).all()
+
+
+def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
+    slow = registered(monkeypatch)  # about 4 ms per tick: 1 s of simulated time takes about 4 s
+    out = tmp_path / "cut"
+    args = ["closed-loop", "--scenarios", "wall", "--backends", slow, "--duration", "1.0", "--isolate", "never"]
+    assert main([*args, "--out", str(out), "--run-budget", "0.4"]) == 0  # stopped early is not a failure
+    row = pd.read_csv(out / cl.CSV_NAME).iloc[0]
+    assert row["status"] == "budget" and row["verdict"] == "ok" and row["run_budget_s"] == 0.4
+    assert 0 < row["simulated_s"] < row["duration_s"] == 1.0
+    assert row["ticks"] == round(row["simulated_s"] / 0.001)
+    assert row["verdict_reasons"].startswith(f"stopped at {row['simulated_s']:.3g} s of 1 s (wall-time budget 0.4 s)")
+    assert row["real_time_factor"] == pytest.approx(row["simulated_s"] / row["wall_time_s"])
+    assert "INFO: wall / test-slow-exact: ok (budget; stopped at" in capsys.readouterr().err
+    cut_log = pd.read_parquet(out / row["log_file"])
+    assert len(cut_log) == row["ticks"]
+    # the uncut run: its first ticks are the budgeted run's log
+    whole_out = tmp_path / "whole"
+    assert main([*args, "--out", str(whole_out)]) == 0
+    whole = pd.read_csv(whole_out / cl.CSV_NAME).iloc[0]
+    assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
+    whole_log = pd.read_parquet(whole_out / whole["log_file"])
+    pd.testing.assert_frame_equal(cut_log.drop(columns="solve_time_s"),
+                                  whole_log.drop(columns="solve_time_s").iloc[: len(cut_log)])
+    # resume keeps a budget row made under the same budget, and reruns it under another
+    seen = []
+    cl.run_closed_loop(["wall"], [slow], out, duration=1.0, resume=True, run_budget=0.4, on_row=seen.append)
+    assert seen == []
+    cl.run_closed_loop(["wall"], [slow], out, duration=1.0, resume=True, run_budget=0.3, on_row=seen.append)
+    assert len(seen) == 1 and seen[0]["status"] == "budget"
+
+
+def test_bad_budget(tmp_path):
+    with pytest.raises(ParamError, match="run-budget"):
+        cl.run_closed_loop(["wall"], ["daqp"], tmp_path, run_budget=-1.0)

@@ -138,10 +138,13 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
                 fallback_ticks=int(rng.integers(0, 200)), v2_integral=rng.uniform(0.5, 2),
                 solve_time_p50_s=rng.uniform(1e-5, 2e-5), solve_time_p99_s=rng.uniform(3e-5, 1e-4),
                 solve_time_max_s=rng.uniform(1e-4, 1e-3), real_time_factor=rng.uniform(5, 80),
-                log_file=log_name, kp_hat_final=5000.0,
+                log_file=log_name, kp_hat_final=5000.0, simulated_s=3.0,
+                verdict="unsafe" if backend == "rnn" else "ok",
+                verdict_reasons=f"d_min 3.5 mm < d_safe - 0.5 mm = 9.5 mm (A2/{scenario} at 2.510 s)" if backend == "rnn" else "",
             ))
     rows.append(dict(scenario="wall", backend="broken", formulation="paper", duration_s=3.0, status="error",
-                     error="RuntimeError: boom | bad", log_file=""))
+                     error="RuntimeError: boom | bad", log_file="", verdict="failed",
+                     verdict_reasons="run raised: RuntimeError: boom | bad"))
     path = folder / "closed_loop.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     return path
@@ -295,6 +298,23 @@ def test_closed_loop_tables_equal_csv(report_dir):
                     assert shown == str(csv_row[column])
                 else:
                     assert_close(shown, float(csv_row[column]) * scale, f"{scenario}/{r[0]}/{column}")
+
+
+def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
+    _, out, _, cl = report_dir
+    md = (out / "report.md").read_text()
+    tabs = [t for t in parse_tables(md) if t["headings"].get(3) == "Runs that failed their verdict"]
+    assert len(tabs) == 1
+    bad = cl[cl["verdict"] != "ok"]
+    assert [r[:4] for r in tabs[0]["rows"]] == [[s, b, "paper", v] for s, b, v in
+                                                zip(bad["scenario"], bad["backend"], bad["verdict"])]
+    assert [r[4] for r in tabs[0]["rows"][:-1]] == list(bad["verdict_reasons"])[:-1]
+    assert "| failed | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
+    # a table of runs that are all ok says so, and an older table without verdicts has no such list
+    from qpbench.report.markdown import _failed_verdicts
+
+    assert _failed_verdicts(cl[cl["verdict"] == "ok"]) == ["Every run's verdict is ok.\n"]
+    assert _failed_verdicts(cl.drop(columns=["verdict", "verdict_reasons"])) == []
 
 
 def test_report_refuses_overwrite_and_bad_input(report_dir, tmp_path, capsys):

@@ -7,7 +7,14 @@ tick log, counts in the row); per run, ``--isolate`` runs a backend in a worker
 process with a deadline (``--run-time-limit``), so a hang or a crash in native
 code becomes a ``time_limit`` or ``crashed`` row and the other runs go on.
 ``--plugin`` (or ``QPBENCH_PLUGINS``) loads modules that register extra
-backends, here and in the workers.
+backends, here and in the workers. ``--run-budget`` gives each run a wall-time
+budget: a run that spends it stops between ticks (status ``budget``, the row
+says how far it got).
+
+Every run gets a verdict (:mod:`qpbench.sim.verdict`): ``ok``, or ``failed``,
+``unsafe``, ``limits``, ``diverged`` with the reasons; a run that is not ``ok``
+is printed as a WARNING. Exit code: 0 when every run in the table is ``ok``,
+1 when one is not (or failed to run), 2 on bad input.
 """
 
 from __future__ import annotations
@@ -44,6 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--run-time-limit", type=float, default=None, metavar="S",
                         help="deadline of an isolated run in [s], worker start and warm-up included (default: "
                              "max(600, 50 x simulated seconds))")
+    parser.add_argument("--run-budget", type=float, default=None, metavar="S",
+                        help="wall-time budget of each run in [s]: a run that spends it stops between ticks "
+                             "(status budget; simulated_s says how far it got, the verdict is of what was "
+                             "simulated) (default: none, every run simulates its full duration)")
     parser.add_argument("--plugin", action="append", default=[], metavar="MODULE_OR_FILE",
                         help="import a module (or .py file) that registers extra backends; repeatable "
                              "(also QPBENCH_PLUGINS)")
@@ -71,18 +82,33 @@ def run(args: argparse.Namespace) -> int:
     def on_row(row):
         if bar is not None:
             bar.update(1)
-        log.info("%s / %s: %s%s", row["scenario"], row["backend"], row["status"],
-                 f" ({row['error']})" if row["status"] != "ok" else "")
+        log_row(log, row)
 
     try:
         outcome = run_closed_loop(scenarios, backends, args.out, duration=args.duration,
                                   formulation=args.formulation, force=args.force,
                                   resume=args.resume, jobs=args.jobs, on_row=on_row,
                                   isolate=args.isolate, run_time_limit=args.run_time_limit,
-                                  time_limit=args.time_limit, plugins=plugins)
+                                  time_limit=args.time_limit, plugins=plugins, run_budget=args.run_budget)
     finally:
         if bar is not None:
             bar.close()
-    log.info("%d runs (%d new, %d kept), %d failed; table in %s", len(outcome.table), outcome.ran,
-             outcome.skipped, outcome.errors, outcome.csv_path)
-    return 1 if outcome.errors else 0
+    log.info("%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",
+             len(outcome.table), outcome.ran, outcome.skipped, outcome.errors, outcome.not_ok, outcome.csv_path)
+    return 1 if outcome.errors or outcome.not_ok else 0
+
+
+def log_row(logger: logging.Logger, row: dict) -> None:
+    """One line per run: INFO when its verdict is ``ok`` (or it was skipped), else WARNING with the reasons."""
+    verdict = row.get("verdict")
+    verdict = verdict if isinstance(verdict, str) else ""
+    reasons = row.get("verdict_reasons")
+    reasons = reasons if isinstance(reasons, str) else ""
+    where = f"{row['scenario']} / {row['backend']}"
+    if verdict and verdict != "ok":
+        logger.warning("%s: %s (%s)", where, verdict, reasons or row.get("status"))
+        return
+    status = str(row.get("status"))
+    error = row.get("error") if isinstance(row.get("error"), str) else ""
+    detail = "; ".join(x for x in (status if status != "ok" and verdict else "", error, reasons) if x)
+    logger.info("%s: %s%s", where, verdict or status, f" ({detail})" if detail else "")

@@ -1,4 +1,11 @@
-"""``qpbench simulate``: run a scenario in closed loop with one backend; log, summary, dump, plot."""
+"""``qpbench simulate``: run a scenario in closed loop with one backend; log, summary, dump, plot.
+
+The run's verdict (:mod:`qpbench.sim.verdict`, thresholds from the scenario's
+``[verdict]`` table) ends the output: an INFO line when it is ``ok``, else a
+WARNING with the reasons (the smallest obstacle distance among them when the
+run is unsafe). Exit code: 0 when the verdict is ``ok``, 1 when it is not,
+2 on bad input.
+"""
 
 from __future__ import annotations
 
@@ -118,12 +125,30 @@ def run(args: argparse.Namespace) -> int:
         fmt(s["force_error_rms_after_2s"]), fmt(s["force_error_max_after_2s"]),
     )
     log.info(
-        "min obstacle distance %s m (%s, t = %s s); limit violations: angle %d, speed %d; Kp_hat %s, Kd_hat %s",
-        fmt(s["min_obstacle_distance"], ".6f"), s["min_obstacle_distance_key_point"] or "-", fmt(s["min_obstacle_distance_t"]),
+        "limit violations: angle %d, speed %d; Kp_hat %s, Kd_hat %s",
         s["joint_limit_violations"], s["joint_velocity_limit_violations"], fmt(s["kp_hat_final"], ".6g"), fmt(s["kd_hat_final"], ".6g"),
     )
     log.info("wall time %.3f s, real-time factor %s", s["wall_time_s"], fmt(s["real_time_factor"]))
-    return 1 if s["zero_velocity_ticks"] else 0
+    return log_verdict(s)
+
+
+def log_verdict(s: dict) -> int:
+    """Log the verdict line and return the exit code: 0 ok, 1 not.
+
+    The smallest obstacle distance is on the line: in the reasons when the
+    run is unsafe, else appended as a figure.
+    """
+    distance = ""
+    if s.get("min_obstacle_distance") is not None and s["verdict"] != "unsafe":
+        distance = (f"; min obstacle distance {s['min_obstacle_distance'] * 1e3:.3f} mm "
+                    f"({s.get('min_obstacle_distance_key_point') or '-'}/{s.get('min_obstacle_distance_obstacle') or '-'} "
+                    f"at t = {s['min_obstacle_distance_t']:.3f} s, d_safe {s['d_safe'] * 1e3:g} mm)")
+    reasons = f": {s['verdict_reasons']}" if s.get("verdict_reasons") else ""
+    if s["verdict"] == "ok":
+        log.info("verdict ok%s%s", reasons, distance)
+        return 0
+    log.warning("verdict %s%s%s", s["verdict"], reasons, distance)
+    return 1
 
 
 def parse_overrides(items: list[str]) -> dict:

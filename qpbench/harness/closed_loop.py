@@ -9,11 +9,21 @@ per-tick log to ``OUT/logs/<scenario>__<backend>.parquet`` and one row to
 column                      meaning
 ==========================  =====================================================
 scenario, backend           the pair
-formulation, duration_s     the QP formulation (``paper`` | ``soft``), simulated [s]
-status, error               ``ok``; ``error`` (and the exception's message),
+formulation, duration_s     the QP formulation (``paper`` | ``soft``), asked duration [s]
+simulated_s                 simulated time reached [s] (less than ``duration_s``
+                            when the run's wall-time budget ran out)
+status, error               ``ok``; ``budget`` (stopped early by the run's
+                            wall-time budget, ``run_budget``; the rest as ``ok``),
+                            ``error`` (and the exception's message),
                             ``crashed`` (the worker died; the signal),
                             ``time_limit`` (the run overran its deadline) or
-                            ``skipped`` (and why: see :func:`probe_real_time_factor`)
+                            ``skipped`` (and why)
+verdict                     ``ok``, ``diverged``, ``limits``, ``unsafe`` or
+                            ``failed`` (:mod:`qpbench.sim.verdict`: from the
+                            simulator's summary as it is; ``failed`` for a run
+                            without a result; empty for a skipped one)
+verdict_reasons             why, plain text, ``"; "`` between reasons (a
+                            budget-stopped run also says where it stopped)
 ticks                       control ticks simulated
 tracking_rms_after_2s       tangential tracking error RMS for t >= 2 s [m]
 tracking_max_after_2s       its maximum [m]
@@ -27,12 +37,14 @@ v2_integral                 integral of ||v||^2 dt over the run [rad^2/s]
 solve_time_p50_s            median per-tick solve time [s]
 solve_time_p99_s            99th percentile [s] (a 1 kHz loop lives by its tail)
 solve_time_max_s            worst tick [s]
-real_time_factor            simulated time / wall time
+real_time_factor            simulated time / wall time, over what was simulated
 log_file                    the tick log, relative to the CSV's folder
 ==========================  =====================================================
 
 followed by ``isolated`` (the run was made in a worker process with a
-deadline) and every other key of the simulator's summary, among them the
+deadline), ``run_budget_s`` (the run's wall-time budget [s], empty when
+none) and every other key of the simulator's summary, among them
+``deadline_misses`` when the simulator counts them, the
 per-tick guards' counts ``error_ticks``, ``time_limit_ticks``,
 ``invalid_ticks`` and ``first_error`` (see :func:`qpbench.sim.loop.simulate`:
 an exception, a late answer or a non-finite answer of the backend is a
@@ -94,8 +106,11 @@ COLUMNS = (
     "backend",
     "formulation",
     "duration_s",
+    "simulated_s",
     "status",
     "error",
+    "verdict",
+    "verdict_reasons",
     "ticks",
     "tracking_rms_after_2s",
     "tracking_max_after_2s",
@@ -172,8 +187,10 @@ def row_from_run(
 ) -> dict:
     """The closed-loop table row of one run (see the module doc for the columns).
 
-    Summary keys of the simulator are taken as they are; what the table needs
-    and the summary lacks is computed from the tick log: ``v2_integral``
+    Summary keys of the simulator are taken as they are (``verdict`` and
+    ``verdict_reasons`` too: the verdict is the simulator's, never redone
+    here; status ``budget`` when the summary says ``stopped_early``); what
+    the table needs and the summary lacks is computed from the tick log: ``v2_integral``
     ``= sum_k ||v_k||^2 dt`` (rectangle rule, dt the control period [s]),
     solve-time percentiles, and the after-transient statistics.
     """
@@ -185,8 +202,11 @@ def row_from_run(
         "formulation": formulation,
         "duration_s": float(duration) if duration is not None else float(
             summary.get("duration", len(log_df) * step if len(t) else math.nan)),
-        "status": "ok",
+        "simulated_s": float(summary.get("simulated_s", len(log_df) * step)),
+        "status": "budget" if summary.get("stopped_early") else "ok",
         "error": "",
+        "verdict": summary.get("verdict", ""),
+        "verdict_reasons": summary.get("verdict_reasons", ""),
         "ticks": int(summary.get("ticks", len(log_df))),
     }
     after = t >= TRANSIENT_S - 1e-12 if len(t) else np.zeros(len(log_df), bool)
@@ -311,7 +331,8 @@ def resolve_backends(value: str | list[str] | None) -> list[str]:
 
 
 def simulate_one(scenario_name: str, backend: str, formulation: str, duration: float | None,
-                 log_path: Path | None, time_limit: float | None = None) -> tuple[dict, pd.DataFrame]:
+                 log_path: Path | None, time_limit: float | None = None,
+                 run_budget: float | None = None) -> tuple[dict, pd.DataFrame]:
     """Run one (scenario, backend) and return its table row and tick log.
 
     The tick log is written atomically to ``log_path`` (Parquet) when given.
@@ -319,6 +340,9 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
     ``[rnn]`` table (eps, sub-steps, clipping) and the loop's ``dt`` from
     :func:`qpbench.sim.loop.resolve_backend`. ``time_limit`` is the per-tick
     limit [s] (default: the backend profile's; see :func:`qpbench.sim.loop.simulate`).
+    ``run_budget`` is the wall-time budget of the timed run [s] (``wall_budget_s``
+    of :func:`qpbench.sim.loop.simulate`; the warm-up is outside it): the run
+    stops between ticks once it is spent and the row says how far it got.
     Exceptions propagate (the caller turns them into an error row).
     """
     from ..sim.loop import simulate
@@ -330,7 +354,8 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
     simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt, time_limit=time_limit)
     start = time.perf_counter()
     # by name: the simulator gives the rnn backends the scenario's [rnn] settings and dt
-    result = simulate(scenario, backend, formulation=formulation, duration=duration, time_limit=time_limit)
+    result = simulate(scenario, backend, formulation=formulation, duration=duration, time_limit=time_limit,
+                      wall_budget_s=run_budget)
     wall = time.perf_counter() - start
     summary = dict(result.summary or {})
     summary.setdefault("wall_time_s", wall)
@@ -345,10 +370,10 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
 
 def _run_job(args: tuple) -> dict:
     """One guarded run (module level so a process pool can call it)."""
-    scenario, backend, formulation, duration, out, time_limit = args
+    scenario, backend, formulation, duration, out, time_limit, run_budget = args
     log_path = Path(out) / LOG_DIR / log_name(scenario, backend)
     try:
-        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, time_limit)
+        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, time_limit, run_budget)
         row["log_file"] = f"{LOG_DIR}/{log_path.name}"
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
         log.warning("closed loop %s with %s failed: %s: %s", scenario, backend, type(exc).__name__, exc)
@@ -358,36 +383,12 @@ def _run_job(args: tuple) -> dict:
 
 def skipped_row(scenario: str, backend: str, formulation: str, duration: float | None,
                 reason: str) -> dict:
-    """The row of a run that was not made (status ``skipped``, the reason in ``error``)."""
+    """The row of a run that was not made (status ``skipped``, the reason in ``error``, no verdict)."""
     row = {c: math.nan for c in COLUMNS}
     row.update(scenario=scenario, backend=backend, formulation=formulation,
                duration_s=float(duration) if duration is not None else math.nan,
-               status="skipped", error=reason, log_file="")
+               status="skipped", error=reason, verdict="", verdict_reasons="", log_file="")
     return row
-
-
-#: Ticks of the probe that measures a backend's real-time factor.
-PROBE_TICKS = 200
-
-
-def probe_real_time_factor(backend: str, scenario: str = "wall", ticks: int = PROBE_TICKS,
-                           formulation: str = "paper") -> float:
-    """Real-time factor (simulated time / wall time) of ``backend`` on the first ``ticks`` of a scenario.
-
-    After a discarded warm-up of a few ticks. The first ticks of the paper's
-    scenarios include the infeasible start (a soft fallback solve on top of
-    the failed one), so the probe errs on the slow side.
-    """
-    from ..sim.loop import simulate
-    from ..sim.scenario import load_scenario
-
-    sc = load_scenario(scenario)
-    simulate(sc, backend, formulation=formulation, duration=WARMUP_TICKS * sc.dt)
-    start = time.perf_counter()
-    result = simulate(sc, backend, formulation=formulation, duration=ticks * sc.dt)
-    wall = time.perf_counter() - start
-    rtf = (result.summary or {}).get("real_time_factor")
-    return float(rtf) if rtf else ticks * sc.dt / wall
 
 
 def error_row(scenario: str, backend: str, formulation: str, duration: float | None,
@@ -400,11 +401,14 @@ def error_row(scenario: str, backend: str, formulation: str, duration: float | N
 def failure_row(scenario: str, backend: str, formulation: str, duration: float | None,
                 status: str, message: str) -> dict:
     """The row of a run that produced no result: ``status`` (``error``, ``crashed``,
-    ``time_limit``) and why in ``error``."""
+    ``time_limit``) and why in ``error``; verdict ``failed``."""
+    from ..sim.verdict import failed_run
+
+    verdict = failed_run(status, message)
     row = {c: math.nan for c in COLUMNS}
     row.update(scenario=scenario, backend=backend, formulation=formulation,
                duration_s=float(duration) if duration is not None else math.nan,
-               status=status, error=message, log_file="")
+               status=status, error=message, verdict=verdict.verdict, verdict_reasons=verdict.text, log_file="")
     return row
 
 
@@ -566,17 +570,33 @@ def _run_in_workers(items: list[tuple], jobs: int, plugins: list[str], emit: Cal
 class ClosedLoopOutcome:
     """What :func:`run_closed_loop` did: the full table, the runs that failed
     (``errors``: status ``error``, ``crashed`` or ``time_limit``), the runs made
-    now (``ran``) and those kept or skipped."""
+    now (``ran``), those kept or skipped, and the rows of the table whose
+    verdict is not ``ok`` (``not_ok``: failed, unsafe, limits or diverged;
+    the failed runs among them)."""
 
     table: pd.DataFrame
     csv_path: Path
     errors: int
     ran: int
     skipped: int
+    not_ok: int = 0
 
 
-def _same_run(row: dict, formulation: str, duration: float | None) -> bool:
-    if str(row.get("status")) != "ok" or str(row.get("formulation")) != formulation:
+#: Verdicts that fail a run (every verdict but ``ok``).
+BAD_VERDICTS = ("failed", "unsafe", "limits", "diverged")
+
+
+def _same_run(row: dict, formulation: str, duration: float | None, run_budget: float | None = None) -> bool:
+    status = str(row.get("status"))
+    if str(row.get("formulation")) != formulation:
+        return False
+    if status == "budget":  # a budget-stopped run is the same run only under the same budget
+        try:
+            if run_budget is None or not math.isclose(float(row.get("run_budget_s")), float(run_budget)):
+                return False
+        except (TypeError, ValueError):
+            return False
+    elif status != "ok":
         return False
     d = row.get("duration_s")
     if duration is None:
@@ -616,6 +636,7 @@ def run_closed_loop(
     run_time_limit: float | None = None,
     time_limit: float | None = None,
     plugins: list[str] | None = None,
+    run_budget: float | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``.
 
@@ -642,6 +663,10 @@ def run_closed_loop(
             see :func:`qpbench.sim.loop.simulate`).
         plugins: Plugin modules or ``.py`` files that register extra backends
             (with those of ``QPBENCH_PLUGINS``); imported here and in the workers.
+        run_budget: Wall-time budget of each run [s] (default: none): a run
+            stops between ticks once it is spent (status ``budget``,
+            ``simulated_s`` how far it got; its log is the uncut run's first
+            ticks), the verdict judged on what was simulated.
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -655,7 +680,8 @@ def run_closed_loop(
         raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
     if isolate not in ISOLATE:
         raise ParamError(f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate")
-    for value, key in ((run_time_limit, "--run-time-limit"), (time_limit, "--time-limit")):
+    for value, key in ((run_time_limit, "--run-time-limit"), (time_limit, "--time-limit"),
+                       (run_budget, "--run-budget")):
         if value is not None and not (value > 0 and not math.isnan(value)):
             raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
     from .plugins import load_plugins, plugin_specs
@@ -670,10 +696,10 @@ def run_closed_loop(
     if csv_path.exists() and resume and not force:
         previous = pd.read_csv(csv_path, keep_default_na=True)
         for rec in previous.to_dict("records"):
-            rec = {k: ("" if k in ("error", "log_file") and isinstance(v, float) and math.isnan(v) else v)
+            rec = {k: ("" if k in ("error", "log_file", "verdict", "verdict_reasons") and isinstance(v, float) and math.isnan(v) else v)
                    for k, v in rec.items()}
             previous_rows.append(rec)
-            if _same_run(rec, formulation, duration):
+            if _same_run(rec, formulation, duration, run_budget):
                 done[(str(rec["scenario"]), str(rec["backend"]))] = rec
     elif force:
         if csv_path.exists():
@@ -705,11 +731,12 @@ def run_closed_loop(
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
     # (key, args, deadline of an isolated run or None)
-    items = [((s, b), (s, b, formulation, duration, str(out), time_limit),
+    items = [((s, b), (s, b, formulation, duration, str(out), time_limit, run_budget),
               run_deadline(s, duration, run_time_limit) if _isolated(b) else None) for s, b in todo]
 
     def _emit_run(key, row):
         row["isolated"] = _isolated(key[1])
+        row["run_budget_s"] = run_budget
         _emit(key, row)
 
     if jobs == 1:
@@ -724,4 +751,5 @@ def run_closed_loop(
     write_table(_table_rows(), csv_path)
     table = pd.read_csv(csv_path)
     errors = int(table["status"].isin(FAILED_RUN_STATUSES).sum()) if len(table) else 0
-    return ClosedLoopOutcome(table, csv_path, errors, len(todo), len(order) - len(todo))
+    not_ok = int((table["verdict"].isin(BAD_VERDICTS) | table["status"].isin(FAILED_RUN_STATUSES)).sum()) if len(table) else 0
+    return ClosedLoopOutcome(table, csv_path, errors, len(todo), len(order) - len(todo), not_ok)

@@ -9,9 +9,11 @@ heading and caption):
   geometric means as ratios to the best and as absolute values, the
   Dolan-More performance profile of runtime, then per-scenario tables and
   plots of time and optimality gap against t;
-- closed loop (closed-loop CSVs), per scenario: tracking, force, obstacle
-  distance, limit violations, infeasible and fallback ticks, ``int ||v||^2 dt``,
-  solve-time tail and real-time factor, and the paper's figures per backend.
+- closed loop (closed-loop CSVs): the runs that failed their verdict (with
+  the reasons), then per scenario: verdict, simulated time, tracking, force,
+  obstacle distance, limit violations, infeasible and fallback ticks,
+  ``int ||v||^2 dt``, solve-time tail and real-time factor, and the paper's
+  figures per backend.
 
 Display units: times in [us], distances and tracking errors in [mm], forces in
 [N]; every other number as in the CSV. Floats print with 4 significant digits.
@@ -161,6 +163,8 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
 #: Closed-loop table: (header, column, scale to display units).
 CLOSED_LOOP_TABLE = (
     ("status", "status", None),
+    ("verdict", "verdict", None),
+    ("simulated (s)", "simulated_s", 1.0),
     ("tracking RMS (mm)", "tracking_rms_after_2s", _MM),
     ("tracking max (mm)", "tracking_max_after_2s", _MM),
     ("force err RMS (N)", "force_error_rms_after_2s", 1.0),
@@ -188,6 +192,25 @@ def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
     return v * scale
 
 
+def _failed_verdicts(df: pd.DataFrame) -> list[str]:
+    """The "Runs that failed their verdict" table (nothing when every run is ``ok``)."""
+    if "verdict" not in df.columns:
+        return []
+    bad = df[df["verdict"].astype(str).isin(("failed", "unsafe", "limits", "diverged"))]
+    if bad.empty:
+        return ["Every run's verdict is ok.\n"]
+    out = ["### Runs that failed their verdict\n"]
+    out.append("Runs whose verdict is not ok, and why:\n")
+    out.append(
+        md_table(
+            ["scenario", "backend", "formulation", "verdict", "reasons"],
+            [[str(r["scenario"]), str(r["backend"]), r.get("formulation"), str(r["verdict"]),
+              r.get("verdict_reasons")] for _, r in bad.iterrows()],
+        )
+    )
+    return out
+
+
 def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
     df = results.closed_loop
     out = ["## Closed loop\n"]
@@ -195,14 +218,22 @@ def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) ->
         "Each scenario with each backend solving every tick's QP in the loop. Tracking and "
         f"force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
         "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
-        "factor is simulated time over wall time.\n"
+        "factor is simulated time over wall time. Each run's *verdict* (thresholds in the "
+        "scenario file's `[verdict]` table) is `failed` (the backend raised, answered with "
+        "NaN, too late or not at all, or the run crashed), `unsafe` (a key point closer to "
+        "an obstacle than d_safe minus the safety margin), `limits` (a joint angle or speed "
+        "beyond its limit), `diverged` (tracking or force error beyond its threshold after "
+        "the settle time), else `ok`; the first that holds, every reason listed. Status "
+        "`budget`: the run stopped when its wall-time budget was spent, after `simulated (s)`; "
+        "its figures are of what it simulated.\n"
     )
+    out.extend(_failed_verdicts(df))
     for (scenario, formulation), g in df.groupby(
         [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
     ):
         duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
         out.append(f"### Scenario {scenario} ({formulation})\n")
-        out.append(f"Closed-loop metrics per backend ({fmt(duration)} s simulated):\n")
+        out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
         out.append(
             md_table(
                 ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
@@ -210,7 +241,7 @@ def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) ->
                  for _, r in g.iterrows()],
             )
         )
-        errors = g[g["status"] != "ok"]
+        errors = g[~g["status"].isin(("ok", "budget"))]
         for _, r in errors.iterrows():
             out.append(f"- {r['backend']}: {fmt(r.get('error'))}\n")
         key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"

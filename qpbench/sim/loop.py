@@ -83,16 +83,13 @@ from ..backends import STATUSES, Backend, get_backend
 from ..exceptions import ParamError
 from ..control.controller import FORMULATIONS, Controller
 from .scenario import Scenario, load_scenario
+from .verdict import VIOLATION_TOL, judge
 
 __all__ = [
     "INFEASIBLE_STATUSES", "SimResult", "TICK_STATUSES", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize",
 ]
 
 log = logging.getLogger(__name__)
-
-#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks
-#: (solvers meet bounds to their own accuracy, about 1e-9 here).
-VIOLATION_TOL = 1e-6
 
 #: Time from which tracking and force errors are judged [s] (paper: transient about 1 s).
 SETTLE_TIME = 2.0
@@ -314,6 +311,7 @@ def simulate(
     progress: bool = False,
     profile: str = "default",
     time_limit: float | None = None,
+    wall_budget_s: float | None = None,
 ) -> SimResult:
     """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
 
@@ -333,6 +331,11 @@ def simulate(
             arrives later is status ``time_limit`` and is not applied (the
             tick goes on as a tick without a solution); the solve is not
             interrupted (see the module docstring).
+        wall_budget_s: Wall-time budget of the loop in [s] (default: none).
+            Checked between ticks: once spent, the run stops and the log
+            holds the ticks simulated so far, the same rows an uncut run
+            has (nothing simulated depends on how long a solve took, only
+            how far the run gets); the summary says ``stopped_early``.
 
     Returns:
         The per-tick log, the summary and the kept records.
@@ -356,6 +359,8 @@ def simulate(
     elif not (isinstance(time_limit, (int, float, np.floating)) and time_limit > 0):
         raise ParamError(f"must be a positive number of seconds, got {time_limit!r}", key="time_limit")
     time_limit = float(time_limit)
+    if wall_budget_s is not None and not (isinstance(wall_budget_s, (int, float, np.floating)) and wall_budget_s > 0):
+        raise ParamError(f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s")
     online = bool(getattr(be, "online", False))
     be.reset()
 
@@ -414,7 +419,10 @@ def simulate(
     n_raised = n_fallback_errors = 0
     first_error = first_error_t = None
     start = perf()
+    stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
     for k in range(ticks):
+        if stop_at is not None and k and perf() >= stop_at:
+            break  # budget spent: the log keeps the ticks done
         t = k * dt
         arrays = build(theta, t, kp, kd, soft_primary)
         problem = make_problem(arrays, soft_primary)
@@ -496,15 +504,17 @@ def simulate(
         bar.update(ticks - bar.n)
         bar.close()
 
+    done = len(statuses)
     codes = {s: i for i, s in enumerate(TICK_STATUSES)}
-    status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=ticks)
-    frame = pd.DataFrame(data, columns=cols)
+    status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done)
+    frame = pd.DataFrame(data[:done], columns=cols)
     frame["fallback"] = frame["fallback"].astype(bool)
     frame["zero_velocity"] = frame["zero_velocity"].astype(bool)
     frame.insert(cols.index("fallback"), "status", pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)))
-    summary = summarize(frame, scenario, ctrl, be.name, formulation, wall)
-    summary.update(time_limit_s=time_limit, raised_ticks=n_raised, fallback_errors=n_fallback_errors,
-                   first_error=first_error, first_error_t=first_error_t)
+    summary = summarize(frame, scenario, ctrl, be.name, formulation, wall, run_info=dict(
+        time_limit_s=time_limit, raised_ticks=n_raised, fallback_errors=n_fallback_errors,
+        first_error=first_error, first_error_t=first_error_t, wall_budget_s=wall_budget_s,
+        stopped_early=done < ticks))
     recs = []
     if keep_every is not None:
         from ..formats import ProblemRecord
@@ -561,8 +571,9 @@ def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
     return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
 
 
-def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, backend: str, formulation: str, wall_time_s: float) -> dict:
-    """Figures of a run (JSON-able; ``None`` where a figure does not exist).
+def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, backend: str, formulation: str,
+              wall_time_s: float, run_info: dict | None = None) -> dict:
+    """Figures of a run (JSON-able; ``None`` where a figure does not exist) and its verdict.
 
     Statuses are those of the QP of the run's formulation at each tick:
 
@@ -582,11 +593,20 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
     - ``status_counts``: the breakdown by status; ``error_ticks``,
       ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
       (an exception or an ``error`` status, a late answer or a budget, a
-      non-finite answer). :func:`simulate` adds ``time_limit_s`` (the
-      per-tick limit), ``raised_ticks`` (ticks whose solve raised),
-      ``fallback_errors`` (fallback solves that raised), ``first_error``
-      (``"Type: message"`` of the first exception, else the first error a
-      backend reported; ``None`` when none) and ``first_error_t`` [s].
+      non-finite answer). :func:`simulate` adds, in ``run_info``,
+      ``time_limit_s`` (the per-tick limit), ``raised_ticks`` (ticks whose
+      solve raised), ``fallback_errors`` (fallback solves that raised),
+      ``first_error`` (``"Type: message"`` of the first exception, else the
+      first error a backend reported; ``None`` when none), ``first_error_t``
+      [s], ``wall_budget_s`` (the loop's wall-time budget [s], ``None`` when
+      none) and ``stopped_early`` (the budget ran out before ``duration``).
+    - ``duration`` is the simulated time asked for [s], ``simulated_s`` the
+      time simulated (``ticks * dt``, less than ``duration`` when stopped
+      early); ``real_time_factor`` is ``simulated_s / wall_time_s``.
+    - ``verdict`` (``ok``, ``diverged``, ``limits``, ``unsafe``, ``failed``)
+      and ``verdict_reasons`` (plain text, ``"; "`` between reasons): see
+      :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
+      thresholds.
 
     ``scenario_overrides`` holds the values set over the scenario file's
     (``qpbench simulate --set``), empty when none. ``fallback_ticks``
@@ -628,6 +648,7 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
         "dt": dt,
         "duration": scenario.duration,
         "ticks": ticks,
+        "simulated_s": ticks * dt,
         "infeasible_ticks": int(infeasible.sum()),
         "non_optimal_ticks": int(non_optimal.sum()),
         "fallback_ticks": int(frame["fallback"].sum()),
@@ -661,7 +682,9 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
         "solve_time_p99_s": _none(frame["solve_time_s"].quantile(0.99)),
         "solve_time_max_s": _none(frame["solve_time_s"].max()),
         "wall_time_s": float(wall_time_s),
-        "real_time_factor": _none(scenario.duration / wall_time_s) if wall_time_s > 0 else None,
+        "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
+        "wall_budget_s": None,
+        "stopped_early": False,
     }
     dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
     if dcols:
@@ -677,4 +700,8 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
         out["obstacle_active_intervals"] = {
             f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS] for c, (a, o) in enumerate(dcols) if near[:, c].any()
         }
+    out.update(run_info or {})
+    verdict = judge(frame, scenario.verdict, d_safe=controller.d_safe, limits=lim, obstacle_columns=dcols, summary=out)
+    out["verdict"] = verdict.verdict
+    out["verdict_reasons"] = verdict.text
     return out

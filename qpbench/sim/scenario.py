@@ -25,6 +25,9 @@ raises :class:`~qpbench.exceptions.ScenarioError` naming the file and the key)::
     [simulation]  dt [s], duration [s]
     [rnn]         eps [s] and any further settings of the ``rnn`` backend
                   (passed through: ``get_backend("rnn", **scenario.rnn)``)
+    [verdict]     settle_time [s], max_tracking_error [m], max_force_error [N],
+                  safety_margin [m] (optional, default 0.0005): the thresholds
+                  of a run's verdict (:mod:`qpbench.sim.verdict`)
 
 Values can be set over a file's without copying it (``load_scenario(name,
 overrides={"rnn.eps": 1e-3})``, ``qpbench simulate --set rnn.eps=0.001``):
@@ -50,6 +53,7 @@ import numpy as np
 from ..exceptions import InputError, ScenarioError
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
+from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 __all__ = ["Scenario", "apply_overrides", "load_scenario", "parse_scenario", "scenario_names", "scenario_path"]
 
@@ -95,7 +99,10 @@ _OBSTACLE_SCHEMA = {
     "disk": {"kind": _STR, "name": _STR, "center": _VEC2, "radius": _NUM, "velocity": _VEC2},
     "points": {"kind": _STR, "name": _STR, "points": _PTS, "velocity": _VEC2},
 }
-_TOP = set(_SCHEMA) | {"path", "obstacles", "rnn"}
+_TOP = set(_SCHEMA) | {"path", "obstacles", "rnn", "verdict"}
+#: ``[verdict]`` keys: required ones, then the optional ``safety_margin`` (see :mod:`qpbench.sim.verdict`).
+_VERDICT_SCHEMA = {"settle_time": _NUM, "max_tracking_error": _NUM, "max_force_error": _NUM, "safety_margin": _NUM}
+_VERDICT_OPTIONAL = {"safety_margin": DEFAULT_SAFETY_MARGIN}
 
 
 def _typed(value, kind: str, file, key: str):
@@ -188,6 +195,11 @@ class Scenario:
     @property
     def theta0(self) -> np.ndarray:
         return self.data["robot"]["theta0"].copy()
+
+    @property
+    def verdict(self) -> VerdictSettings:
+        """Thresholds of a run's verdict (``[verdict]``; :mod:`qpbench.sim.verdict`)."""
+        return VerdictSettings(**self.data["verdict"])
 
     @property
     def adaptive_enabled(self) -> bool:
@@ -337,6 +349,8 @@ def parse_scenario(text: str, path: str | Path | None = None, overrides: dict | 
     if not eps > 0:
         raise ScenarioError(f"must be > 0 [s], got {eps}", path=file, key="rnn.eps")
 
+    data["verdict"] = _verdict_table(raw["verdict"], file)
+
     _check_values(data, file)
     _check_simulation(data, file)
     scenario = Scenario(
@@ -397,6 +411,23 @@ def apply_overrides(raw: dict, overrides: dict, file="<scenario>") -> dict:
                     )
         target[name] = value
     return raw
+
+
+def _verdict_table(raw, file) -> dict:
+    """The ``[verdict]`` table, validated (``safety_margin`` defaults to 0.0005 m)."""
+    raw = dict(raw) if isinstance(raw, dict) else raw
+    if isinstance(raw, dict):
+        for key, value in _VERDICT_OPTIONAL.items():
+            raw.setdefault(key, value)
+    out = _table(raw, _VERDICT_SCHEMA, file, "verdict")
+    if not out["settle_time"] >= 0:
+        raise ScenarioError(f"must be >= 0 [s], got {out['settle_time']}", path=file, key="verdict.settle_time")
+    for key, unit in (("max_tracking_error", "m"), ("max_force_error", "N")):
+        if not out[key] > 0:
+            raise ScenarioError(f"must be > 0 [{unit}], got {out[key]}", path=file, key=f"verdict.{key}")
+    if not out["safety_margin"] >= 0:
+        raise ScenarioError(f"must be >= 0 [m], got {out['safety_margin']}", path=file, key="verdict.safety_margin")
+    return out
 
 
 def _check_values(data: dict, file) -> None:

@@ -1,0 +1,244 @@
+"""Verdict of a closed-loop run: ``ok``, ``diverged``, ``limits``, ``unsafe`` or ``failed``.
+
+One function, :func:`judge`, decides; :func:`qpbench.sim.loop.summarize` calls
+it and puts ``verdict`` and ``verdict_reasons`` into the summary, which the
+closed-loop table (:mod:`qpbench.harness.closed_loop`) copies as they are.
+:func:`failed_run` gives the verdict of a run that produced no result at all
+(a crash, an overrun deadline, an exception outside the ticks).
+
+Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettings`):
+
+- ``failed``: the backend did not answer usably: a tick whose solve raised or
+  reported ``error``, a non-finite answer (``invalid``), an answer later than
+  the per-tick time limit (``time_limit``), a fallback solve that raised, or a
+  tick left without any command (zero velocity: no answer and no soft
+  fallback); or the run itself crashed, overran its deadline or raised;
+- ``unsafe``: a key point came closer to an obstacle than
+  ``d_safe - safety_margin`` [m];
+- ``limits``: a joint angle or a commanded joint speed went beyond its limit
+  by more than :data:`VIOLATION_TOL`;
+- ``diverged``: for ``t >= settle_time`` [s], ``|tracking_error|`` exceeded
+  ``max_tracking_error`` [m] or ``|force_error|`` exceeded ``max_force_error``
+  [N] (or either was not finite).
+
+When several hold, the verdict is the first of failed > unsafe > limits >
+diverged and ``verdict_reasons`` lists every one, in that order, ``"; "``
+between them. A run stopped early by a wall-time budget is judged on the
+ticks it simulated (a simulated trajectory does not depend on how long its
+solves took, only how far it got does); a reason says where it stopped, and
+that tracking and force were not judged when it stopped before
+``settle_time``. Such a note does not change the verdict.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "DEFAULT_SAFETY_MARGIN", "VERDICTS", "VIOLATION_TOL", "Verdict", "VerdictSettings", "failed_run", "judge",
+]
+
+#: Verdicts, from the worst: the verdict of a run is the first whose rule holds.
+VERDICTS = ("failed", "unsafe", "limits", "diverged", "ok")
+
+#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks
+#: (solvers meet bounds to their own accuracy, about 1e-9 here).
+VIOLATION_TOL = 1e-6
+
+#: Default of ``[verdict] safety_margin`` [m]: how far below ``d_safe`` a key
+#: point may come before the run is unsafe (the QP backends keep ``d_safe`` to
+#: about 1e-4 m of slack at a tick: the velocity damper acts one tick late).
+DEFAULT_SAFETY_MARGIN = 5e-4
+
+
+@dataclass(frozen=True)
+class VerdictSettings:
+    """Thresholds of the verdict (the scenario's ``[verdict]`` table).
+
+    Attributes:
+        settle_time: Start of the judged span of tracking and force errors [s].
+        max_tracking_error: Largest ``|tangential tracking error|`` after it [m].
+        max_force_error: Largest ``|contact force - Fd|`` after it [N].
+        safety_margin: A key point closer than ``d_safe - safety_margin`` to
+            an obstacle is unsafe [m].
+    """
+
+    settle_time: float
+    max_tracking_error: float
+    max_force_error: float
+    safety_margin: float = DEFAULT_SAFETY_MARGIN
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A verdict and why (``reasons`` empty for a clean ``ok``)."""
+
+    verdict: str
+    reasons: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.verdict == "ok"
+
+    @property
+    def text(self) -> str:
+        """The reasons as one line, ``"; "`` between them."""
+        return "; ".join(self.reasons)
+
+
+def _verdict(found: dict[str, list[str]], notes: list[str]) -> Verdict:
+    reasons = [r for v in VERDICTS[:-1] for r in found.get(v, [])]
+    worst = next((v for v in VERDICTS[:-1] if found.get(v)), "ok")
+    return Verdict(worst, tuple(reasons + notes))
+
+
+def _g(x: float) -> str:
+    return f"{x:.3g}"
+
+
+def _failed_reasons(summary: dict) -> list[str]:
+    out = []
+    n = int(summary.get("error_ticks") or 0)
+    if n:
+        first = summary.get("first_error")
+        t = summary.get("first_error_t")
+        where = f" (first at {t:.3f} s: {first})" if first and t is not None else ""
+        out.append(f"{n} tick{'s' if n > 1 else ''} with an error{where}")
+    n = int(summary.get("invalid_ticks") or 0)
+    if n:
+        out.append(f"{n} non-finite answer{'s' if n > 1 else ''}")
+    n = int(summary.get("time_limit_ticks") or 0)
+    if n:
+        limit = summary.get("time_limit_s")
+        what = f" ({_g(limit)} s)" if limit is not None else ""
+        out.append(f"{n} tick{'s' if n > 1 else ''} over the per-tick time limit{what}")
+    n = int(summary.get("fallback_errors") or 0)
+    if n:
+        out.append(f"{n} fallback solve{'s' if n > 1 else ''} raised")
+    n = int(summary.get("zero_velocity_ticks") or 0)
+    if n:
+        out.append(f"{n} tick{'s' if n > 1 else ''} without a command (no answer, no soft fallback: zero velocity)")
+    return out
+
+
+def _unsafe_reasons(frame, d_safe: float, margin: float, columns: list[tuple[str, str]]) -> list[str]:
+    if not columns or not len(frame):
+        return []
+    D = frame[[f"d_{a}_{o}" for a, o in columns]].to_numpy(dtype=float)
+    t = frame["t"].to_numpy(dtype=float)
+    limit = d_safe - margin
+    below = ~(D >= limit)  # a NaN distance counts as below
+    if not below.any():
+        return []
+    rows = np.flatnonzero(below.any(axis=1))
+    filled = np.where(np.isnan(D), -np.inf, D)
+    k, c = divmod(int(np.argmin(filled)), D.shape[1])
+    a, o = columns[c]
+    value = D[k, c]
+    shown = f"{value * 1e3:.1f} mm" if math.isfinite(value) else "not finite"
+    first = f", below from {t[rows[0]]:.3f} s" if rows[0] != k else ""
+    return [
+        f"d_min {shown} < d_safe - {margin * 1e3:g} mm = {limit * 1e3:.1f} mm "
+        f"({a}/{o} at {t[k]:.3f} s{first}; {rows.size} ticks)"
+    ]
+
+
+def _limit_reasons(frame, limits, n: int) -> list[str]:
+    if not len(frame):
+        return []
+    t = frame["t"].to_numpy(dtype=float)
+    out = []
+    for sym, prefix, lo, hi, unit, what in (
+        ("theta", "theta", limits.theta_min, limits.theta_max, "rad", "angle"),
+        ("v", "v", limits.v_min, limits.v_max, "rad/s", "speed"),
+    ):
+        X = frame[[f"{prefix}_{i}" for i in range(n)]].to_numpy(dtype=float)
+        excess = np.maximum(lo - X, X - hi)  # > 0 beyond a limit
+        excess = np.where(np.isnan(X), np.inf, excess)
+        bad = (excess > VIOLATION_TOL).any(axis=1)
+        if not bad.any():
+            continue
+        k, i = divmod(int(np.argmax(excess)), n)
+        x = X[k, i]
+        bound = f"< {_g(lo[i])}" if x < lo[i] else f"> {_g(hi[i])}"
+        ticks = int(bad.sum())
+        out.append(
+            f"joint {what} limit broken on {ticks} tick{'s' if ticks > 1 else ''} "
+            f"(worst {sym}_{i} = {_g(x)} {unit} {bound} {unit} at {t[k]:.3f} s)"
+        )
+    return out
+
+
+def _diverged_reasons(frame, settings: VerdictSettings) -> list[str]:
+    t = frame["t"].to_numpy(dtype=float)
+    after = t >= settings.settle_time - 1e-12
+    if not after.any():
+        return []
+    out = []
+    for column, limit, unit, scale, what in (
+        ("tracking_error", settings.max_tracking_error, "mm", 1e3, "tracking error"),
+        ("force_error", settings.max_force_error, "N", 1.0, "force error"),
+    ):
+        e = np.abs(frame[column].to_numpy(dtype=float)[after])
+        e = np.where(np.isnan(e), np.inf, e)
+        if not (e > limit).any():
+            continue
+        k = int(np.argmax(e))
+        shown = f"{e[k] * scale:.3g} {unit}" if math.isfinite(e[k]) else "not finite"
+        out.append(
+            f"{what} {shown} > {limit * scale:g} {unit} after {settings.settle_time:g} s "
+            f"(at {t[after][k]:.3f} s)"
+        )
+    return out
+
+
+def judge(frame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_columns: list[tuple[str, str]],
+          summary: dict) -> Verdict:
+    """The verdict of one simulated run (rules in the module docstring).
+
+    Args:
+        frame: The run's tick log (:func:`qpbench.sim.loop.simulate`; columns
+            ``t``, ``theta_i``, ``v_i``, ``tracking_error`` [m],
+            ``force_error`` [N], ``d_<key point>_<obstacle>`` [m]).
+        settings: The scenario's thresholds.
+        d_safe: The controller's safety distance [m].
+        limits: The controller's joint limits (``theta_min``, ``theta_max``
+            [rad], ``v_min``, ``v_max`` [rad/s]).
+        obstacle_columns: ``(key point, obstacle)`` of each distance column.
+        summary: The run's counts: ``error_ticks``, ``invalid_ticks``,
+            ``time_limit_ticks``, ``zero_velocity_ticks``, ``fallback_errors``,
+            ``first_error``, ``first_error_t`` [s], ``time_limit_s`` [s];
+            ``stopped_early``, ``simulated_s``, ``duration`` [s] and
+            ``wall_budget_s`` [s] for a run cut by a wall-time budget. Missing
+            counts are 0.
+    """
+    n = len(limits.theta_min)
+    found = {
+        "failed": _failed_reasons(summary),
+        "unsafe": _unsafe_reasons(frame, d_safe, settings.safety_margin, obstacle_columns),
+        "limits": _limit_reasons(frame, limits, n),
+        "diverged": _diverged_reasons(frame, settings) if len(frame) else [],
+    }
+    notes = []
+    if summary.get("stopped_early"):
+        simulated = float(summary.get("simulated_s") or 0.0)
+        note = (f"stopped at {simulated:.3g} s of {_g(float(summary.get('duration') or math.nan))} s "
+                f"(wall-time budget {_g(float(summary.get('wall_budget_s') or math.nan))} s)")
+        if simulated <= settings.settle_time:
+            note += f": tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
+        else:
+            note += ": judged on what was simulated"
+        notes.append(note)
+    return _verdict(found, notes)
+
+
+def failed_run(status: str, message: str) -> Verdict:
+    """The verdict of a run that produced no result: ``status`` (``error``,
+    ``crashed``, ``time_limit``) and the harness's message."""
+    what = {"crashed": "run crashed", "time_limit": "run overran its deadline", "error": "run raised"}.get(
+        status, f"run {status}")
+    message = " ".join(str(message).split())
+    return Verdict("failed", (f"{what}: {message}" if message else what,))
