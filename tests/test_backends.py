@@ -25,7 +25,7 @@ MM_FOLDER = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 
 #: Backends that classify a primal-infeasible / unbounded QP from a certificate.
 CERTIFYING = {
-    "osqp", "proxqp", "clarabel", "cvxpy", "daqp",
+    "osqp", "proxqp", "clarabel", "cvxpy", "daqp", "daqp-stateless", "qpoases", "piqp",
     "qpsolvers:clarabel", "qpsolvers:osqp", "qpsolvers:piqp", "qpsolvers:proxqp", "qpsolvers:scs",
 }
 #: Why the other QP backends cannot tell.
@@ -149,16 +149,16 @@ def test_sequence_then_new_shape_then_reset(name):
 
 def _persistent_object(backend):
     """The persistent solver object of the backends that keep one (else None)."""
-    for attr in ("_solver", "_qp"):
+    for attr in ("_solver", "_qp", "_model", "_ws"):
         if hasattr(backend, attr):
             return getattr(backend, attr)
     return None
 
 
 def test_persistent_backends_keep_their_object():
-    """osqp, proxqp and clarabel do keep a solver object (so the identity checks above bite)."""
+    """The persistent backends do keep a solver object (so the identity checks above bite)."""
     problem = robot_like_problem(np.random.default_rng(0))[0]
-    for name in ("osqp", "proxqp", "clarabel"):
+    for name in ("osqp", "proxqp", "clarabel", "daqp", "qpoases", "piqp"):
         if name not in backend_names():
             continue
         backend = get_backend(name)
@@ -219,7 +219,7 @@ def test_infinite_bounds_and_rows():
     ub[inactive_b[1]] = np.inf
     h[inactive_g] = np.inf
     problem = qpsolvers.Problem(problem.P, problem.q, problem.G, h, problem.A, problem.b, lb, ub)
-    for name in ("osqp", "proxqp", "clarabel", "cvxpy", "daqp", "qpsolvers:daqp"):
+    for name in ("osqp", "proxqp", "clarabel", "cvxpy", "daqp", "daqp-stateless", "qpoases", "piqp", "qpsolvers:daqp"):
         if name in backend_names():
             _check_solution(get_backend(name, "high_accuracy").solve(problem), x, y, z, z_box, gap=False)
 
@@ -295,7 +295,10 @@ def test_infeasible_and_unbounded(name):
 # ----------------------------------------------------------------- settings and errors
 
 
-@pytest.mark.parametrize("name", ["osqp", "proxqp", "clarabel", "daqp", "qpsolvers:osqp", "qpsolvers:piqp", "cvxpy"])
+@pytest.mark.parametrize(
+    "name",
+    ["osqp", "proxqp", "clarabel", "daqp", "daqp-stateless", "qpoases", "piqp", "qpsolvers:osqp", "qpsolvers:piqp", "cvxpy"],
+)
 def test_max_iter_setting_overrides_profile(name):
     if name not in backend_names():
         pytest.skip(f"{name} unavailable")
@@ -417,7 +420,11 @@ def robot_ticks():
     return problems, [reference.solve(p) for p in problems]
 
 
-@pytest.mark.parametrize("name", _param([i for i in QP_INFOS if i.name in ("osqp", "proxqp", "clarabel", "cvxpy", "daqp")]))
+#: Backends that keep a solver object or working set from tick to tick.
+PERSISTENT = ("osqp", "proxqp", "clarabel", "cvxpy", "daqp", "qpoases", "piqp")
+
+
+@pytest.mark.parametrize("name", _param([i for i in QP_INFOS if i.name in PERSISTENT]))
 def test_persistent_on_robot_ticks(name, robot_ticks):
     """Tick after tick, updated and warm-started: same statuses and solutions as a cold reference."""
     problems, refs = robot_ticks
