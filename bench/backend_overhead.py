@@ -8,8 +8,12 @@ inequalities, bounds), measured three ways in this process:
 - ``direct``: the solver's own Python API called directly with the same
   settings, doing what a controller needs (set the data, solve, read ``x``):
   a persistent, updated object for ``osqp``, ``proxqp``,
-  ``clarabel`` (as ours); ``daqp.solve`` with the stacked arrays of the
-  ``daqp`` backend for ``daqp``; a fresh call of the solver's own function for
+  ``clarabel``, ``piqp`` (as ours); ``daqp.Model.update`` + ``solve`` with
+  arrays stacked per call for ``daqp``; ``daqp.solve`` with the stacked
+  arrays of the backend for ``daqp-stateless``; for ``qpoases``, the compiled
+  shim called through ctypes on buffers filled per call (qpOASES has no
+  Python API of its own here: this is the thinnest Python route to its
+  ``hotstart``); a fresh call of the solver's own function for
   ``qpsolvers:<name>`` where that is simple (daqp, quadprog, piqp, osqp,
   clarabel, proxqp), else ``qpsolvers.solve_problem`` (highs, scs); the same
   parametrised cvxpy model for ``cvxpy``; ``numpy.linalg.lstsq`` for ``pinv``;
@@ -207,6 +211,80 @@ def direct_daqp_native(options):
     return solve
 
 
+class DirectDaqpModel:
+    """``daqp.Model``: setup once, then ``update(None, None, A, bupper, blower)`` + ``solve`` (P, q constant
+    on the robot's ticks), arrays stacked per call as a user would."""
+
+    def __init__(self, options):
+        self.options, self.model = options, None
+
+    def __call__(self, p):
+        import daqp
+
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n, me, mi = q.shape[0], A.shape[0], G.shape[0]
+        Atot = np.vstack([A, G])
+        bupper = np.concatenate([ub, b, h])
+        blower = np.concatenate([lb, b, np.full(mi, -np.inf)])
+        if self.model is None:
+            sense = np.zeros(n + me + mi, dtype=np.intc)
+            sense[n : n + me] = 5
+            self.model = daqp.Model()
+            self.model.settings = dict(self.model.settings, **self.options)
+            self.model.setup(P, q, Atot, bupper, blower, sense)
+        else:
+            self.model.update(None, None, Atot, bupper, blower)
+        return self.model.solve()[0]
+
+
+class DirectPiqp:
+    """``piqp.DenseSolver`` set up once, then ``update`` + ``solve``; reads ``result.x``."""
+
+    def __init__(self, settings):
+        self.settings, self.solver = settings, None
+
+    def __call__(self, p):
+        import piqp
+
+        if self.solver is None:
+            self.solver = piqp.DenseSolver()
+            for key, value in self.settings.items():
+                setattr(self.solver.settings, key, value)
+            self.solver.setup(p.P, p.q, p.A, p.b, p.G, None, p.h, p.lb, p.ub)
+        else:
+            self.solver.update(p.P, p.q, p.A, p.b, p.G, None, p.h, p.lb, p.ub)
+        self.solver.solve()
+        return self.solver.result.x
+
+
+class DirectQpoases:
+    """The qpOASES shim through ctypes: ``H, g, A = [A_eq; G], lb, ub, lbA, ubA`` written into its buffer,
+    ``init`` on the first call and ``hotstart`` after; reads ``x``."""
+
+    def __init__(self, backend):
+        self.backend, self.lib, self.ws = backend, backend.prepare(), None
+
+    def __call__(self, p):
+        from qpbench.backends.qpoases_ import _Workspace
+
+        ws = self.ws
+        if ws is None:
+            b = self.backend
+            key = (p.q.shape[0], p.A.shape[0], p.G.shape[0], True)
+            ws = self.ws = _Workspace(key, self.lib, b._preset, b._native, b._nwsr, b._time_limit)
+        ws.H[:] = p.P
+        ws.g[:] = p.q
+        ws.A_eq[:] = p.A
+        ws.A_in[:] = p.G
+        ws.lbA_eq[:] = p.b
+        ws.ubA_eq[:] = p.b
+        ws.ubA_in[:] = p.h
+        ws.lb[:] = p.lb
+        ws.ub[:] = p.ub
+        self.lib.qpb_solve(ws.handle)
+        return ws.x.copy()
+
+
 def direct_quadprog(settings):
     import quadprog
 
@@ -271,7 +349,13 @@ def direct_for(name: str, profile: str):
 
         return "proxqp.dense.QP update", lambda: DirectProxqp(lambda qp: backend._apply_settings(qp, proxsuite.proxqp))
     if name == "daqp":
+        return "daqp.Model update", lambda: DirectDaqpModel(backend.options())
+    if name == "daqp-stateless":
         return "daqp.solve", lambda: direct_daqp_native(backend.options())
+    if name == "piqp":
+        return "piqp.DenseSolver update", lambda: DirectPiqp(backend._settings_dict)
+    if name == "qpoases":
+        return "qpOASES shim hotstart (ctypes)", lambda: DirectQpoases(backend)
     if name == "pinv":
         return "numpy lstsq", lambda: (lambda p: np.linalg.lstsq(p.A, p.b, rcond=None)[0])
     if name == "cvxpy":
@@ -331,7 +415,8 @@ def _clarabel_settings(clarabel, options):
 
 def qpsolvers_for(name: str, profile: str):
     """qpsolvers.solve_problem with the backend's solver and settings, or None."""
-    solver = {"osqp": "osqp", "proxqp": "proxqp", "clarabel": "clarabel"}.get(name)
+    solver = {"osqp": "osqp", "proxqp": "proxqp", "clarabel": "clarabel", "piqp": "piqp", "daqp": "daqp",
+              "daqp-stateless": "daqp", "qpoases": "qpoases"}.get(name)
     if name.startswith("qpsolvers:"):
         solver = name.split(":", 1)[1]
     if solver is None or solver not in qpsolvers.available_solvers:

@@ -24,7 +24,12 @@ Formulation. ``SQProblem(n, me + mi)`` solves
 ``INFTY = 1e20``). qpOASES' multipliers ``y`` (``n`` for the bounds, then one
 per row of ``A``) satisfy ``H x + g = y_box + A' y_rows``: positive at an
 active *lower* bound. qpsolvers' convention is the opposite sign, so
-``z_box = -y[:n]``, ``y = -y[n:n+me]``, ``z = -y[n+me:]``.
+``z_box = -y[:n]``, ``y = -y[n:n+me]``, ``z = -y[n+me:]`` (negated in the shim).
+
+Per-call cost. The tick's arrays are copied into one buffer the shim reads
+(no stacking, no allocation), the shim is one ctypes call with one
+argument, the shapes are checked in full only when they differ from the
+previous tick's, and ``x`` and the multipliers come out of one copy.
 
 Persistence. The first tick of a shape ``(n, me, mi, with box)`` calls
 ``init()``; the next ones call ``hotstart()`` with the whole new data (H, g,
@@ -115,7 +120,8 @@ def _option_setters() -> str:
 
 #: The shim's C++ source. Data layout of the buffer ``d`` (float64), all
 #: row-major: ``H (n*n), g (n), A (m*n), lb (n), ub (n), lbA (m), ubA (m),
-#: x (n), y (n+m), obj, time limit [s], solve time [s], qpOASES cputime [s]``;
+#: x (n), -y (n+m: qpOASES' multipliers with qpsolvers' sign), obj,
+#: time limit [s], solve time [s], qpOASES cputime [s]``;
 #: of ``iv`` (int): ``nWSR limit, -, nWSR done, return value, status``.
 SHIM_SOURCE = r"""
 #include <qpOASES.hpp>
@@ -217,6 +223,7 @@ int qpb_solve(void* p) {
     if (st == 0) {
         h->qp.getPrimalSolution(x);
         h->qp.getDualSolution(y);
+        for (int j = 0; j < n + m; ++j) y[j] = -y[j];  /* qpsolvers' sign */
         s[0] = h->qp.getObjVal();
         h->initialised = true;
     } else {
@@ -316,7 +323,7 @@ class _Workspace:
     """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object)."""
 
     __slots__ = ("key", "d", "iv", "handle", "H", "g", "A_eq", "A_in", "lb", "ub", "lbA_eq", "ubA_eq", "ubA_in",
-                 "x", "y", "s", "n", "me", "mi", "_free")
+                 "x", "y", "xy", "s", "n", "me", "mi", "shapes", "_free")
 
     def __init__(self, key, lib, preset, options, nwsr, time_limit, clone_of=None):
         n, me, mi, box = key
@@ -338,8 +345,10 @@ class _Workspace:
         if not box:
             self.lb[:] = -np.inf
             self.ub[:] = np.inf
+        self.xy = d[o : o + 2 * n + m]
         self.x = d[o : o + n]; o += n
         self.y = d[o : o + n + m]; o += n + m
+        self.shapes = None  # shapes of the arrays last written (checked then)
         self.s = d[o:]
         self.s[1] = time_limit
         self.iv[0] = nwsr
@@ -458,14 +467,19 @@ class QpoasesBackend(Backend):
             and (lb is None or type(lb) is _ndarray) and (ub is None or type(ub) is _ndarray)
         ):
             P, q, A, b, G, h, lb, ub = _dense(problem)
-        n = q.shape[0]
-        me, mi = check_shapes(self.name, n, P, A, b, G, h, lb, ub)
-        box = lb is not None or ub is not None
+        shapes = (P.shape, q.shape, None if A is None else A.shape, None if b is None else b.shape,
+                  None if G is None else G.shape, None if h is None else h.shape,
+                  None if lb is None else lb.shape, None if ub is None else ub.shape)
         ws = self._ws
-        if ws is None or ws.key != (n, me, mi, box):
-            ws = self._ws = None
-            ws = self._ws = _Workspace((n, me, mi, box), self._lib, self._preset, self._native, self._nwsr,
-                                       self._time_limit)
+        if ws is None or shapes != ws.shapes:
+            n = q.shape[0]
+            me, mi = check_shapes(self.name, n, P, A, b, G, h, lb, ub)
+            key = (n, me, mi, lb is not None or ub is not None)
+            if ws is None or ws.key != key:
+                ws = self._ws = None
+                ws = self._ws = _Workspace(key, self._lib, self._preset, self._native, self._nwsr, self._time_limit)
+            ws.shapes = shapes
+        n, me, mi, box = ws.key
         ws.H[:] = P
         ws.g[:] = q
         if me:
@@ -479,23 +493,21 @@ class QpoasesBackend(Backend):
             ws.lb[:] = -_INF if lb is None else lb
             ws.ub[:] = _INF if ub is None else ub
         st = self._lib.qpb_solve(ws.handle)
-        status = _STATUSES[st]
-        sol = BackendSolution(problem, status=status)
-        iv, s = ws.iv, ws.s
-        sol.iterations = int(iv[2])
-        sol.solver_time_s = float(s[2])
-        sol.extras["raw_status"] = int(iv[3])
-        sol.extras["qpoases_cputime_s"] = float(s[3])
+        obj, _, solve_time, cputime = ws.s.tolist()
+        _, _, iterations, raw = ws.iv.tolist()[:4]
+        sol = BackendSolution(problem, status=_STATUSES[st], extras={"raw_status": raw, "qpoases_cputime_s": cputime})
+        sol.iterations = iterations
+        sol.solver_time_s = solve_time
         if st == 0:
-            sol.x = ws.x.copy()
-            y = -ws.y  # one copy, qpsolvers' sign
-            sol.z_box = y[:n] if box else _EMPTY
-            sol.y = y[n : n + me]
-            sol.z = y[n + me :]
-            sol.obj = float(s[0])
-        elif status == "error":
-            message = self._lib.qpb_message(int(iv[3]))
-            sol.error = f"qpOASES return value {int(iv[3])}: {message.decode(errors='replace') if message else ''}"
+            xy = ws.xy.copy()  # x, then the multipliers (already with qpsolvers' sign): one copy, then views
+            sol.x = xy[:n]
+            sol.z_box = xy[n : n + n] if box else _EMPTY
+            sol.y = xy[n + n : n + n + me]
+            sol.z = xy[n + n + me :]
+            sol.obj = obj
+        elif st == -1:
+            message = self._lib.qpb_message(raw)
+            sol.error = f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
         return sol
 
 
