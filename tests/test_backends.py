@@ -503,3 +503,13 @@ def test_qpsolvers_status_readers_of_the_added_solvers():
     assert qs._status_gurobi({"status": 4}) == ("not_solved", "4")
     assert qs._status_gurobi({"status": 9})[0] == "time_limit"
     assert qs.native_settings("gurobi", 1e-10, 0.0, 100, 1.0)["FeasibilityTol"] == 1e-9  # Gurobi's minimum
+
+
+def test_all_solvers_extra_is_listed_when_missing(monkeypatch):
+    """qpalm, ecos, cvxopt and gurobi are listed by `qpbench backends` even when not installed, saying how."""
+    monkeypatch.setattr(qpsolvers, "available_solvers", [s for s in qpsolvers.available_solvers
+                                                         if s not in ("qpalm", "ecos", "cvxopt", "gurobi")])
+    infos = {i.name: i for i in backend_info()}
+    for solver in ("qpalm", "ecos", "cvxopt", "gurobi"):
+        info = infos[f"qpsolvers:{solver}"]
+        assert not info.available and "qpbench[all-solvers]" in info.reason

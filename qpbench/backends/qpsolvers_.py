@@ -3,9 +3,12 @@
 One class per solver, generated in a loop at import of this module and
 registered as ``qpsolvers:<name>``. Classes exist for every solver in
 :data:`qpsolvers.available_solvers` plus the solvers qpbench depends on
-(:data:`EXPECTED_SOLVERS`, so that a missing one shows as unavailable); a
-class is available exactly when qpsolvers lists its solver as available
-(importing qpsolvers is all this module does at import).
+(:data:`EXPECTED_SOLVERS`, so that a missing one shows as unavailable) and
+those of the ``all-solvers`` extra (:data:`OPTIONAL_SOLVERS`: qpalm, ecos,
+cvxopt, gurobi with gurobipy's size-limited licence, which prints a
+"Restricted license" line at its first model); a class is available exactly
+when qpsolvers lists its solver as available (importing qpsolvers is all this
+module does at import).
 
 Each call is stateless: qpsolvers builds the solver's problem anew (that is the
 route this backend measures). ``warm_start`` is passed as ``initvals``.
@@ -411,10 +414,11 @@ class QpsolversBackend(Backend):
     def unavailable_reason(cls) -> str | None:
         if cls.solver in qpsolvers.available_solvers:
             return None
-        return (
-            f"qpsolvers does not find solver '{cls.solver}' "
-            f"(pip install qpsolvers[{cls.solver}] or the solver's package)"
+        how = (
+            "pip install 'qpbench[all-solvers]'" if cls.solver in OPTIONAL_SOLVERS
+            else f"pip install qpsolvers[{cls.solver}] or the solver's package"
         )
+        return f"qpsolvers does not find solver '{cls.solver}' ({how})"
 
     def _options(self) -> dict:
         """Solver options (computed once per instance; do not modify the dict)."""
@@ -499,10 +503,13 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
 #: Solvers qpbench installs with itself (listed even when qpsolvers does not find them).
 EXPECTED_SOLVERS = ("clarabel", "daqp", "highs", "osqp", "piqp", "proxqp", "quadprog", "scs")
 
+#: Solvers of the ``all-solvers`` extra (listed even when not installed, with how to install them).
+OPTIONAL_SOLVERS = ("cvxopt", "ecos", "gurobi", "qpalm")
+
 #: The generated classes, by qpsolvers' solver name.
 BACKENDS: dict[str, type[QpsolversBackend]] = {
     solver: _make_class(solver)
-    for solver in sorted(set(EXPECTED_SOLVERS) | set(qpsolvers.available_solvers))
+    for solver in sorted(set(EXPECTED_SOLVERS) | set(OPTIONAL_SOLVERS) | set(qpsolvers.available_solvers))
 }
 
 
