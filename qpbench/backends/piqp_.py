@@ -158,13 +158,17 @@ class PiqpBackend(Backend):
         info = self._info
         raw_status = info.status
         if raw_status == _SOLVED[0]:
-            sol = BackendSolution(problem, status="optimal", extras={"raw_status": "PIQP_SOLVED"})
+            # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
+            sol = _new(BackendSolution)
+            sol.problem = problem
+            sol.status = "optimal"
+            sol.extras = {"raw_status": "PIQP_SOLVED"}
             x, y, z_l, z_u, z_bl, z_bu = self._views
             sol.x = x.copy()
             sol.y = y.copy() if A is not None else _EMPTY
             sol.z = z_u - z_l if G is not None else _EMPTY
             sol.z_box = z_bu - z_bl if (lb is not None or ub is not None) else _EMPTY
-            sol.obj = info.primal_obj
+            sol._obj = info.primal_obj
         else:
             status, raw = _STATUS_MAP.get(raw_status, ("not_solved", str(raw_status)))
             sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
@@ -177,6 +181,7 @@ class PiqpBackend(Backend):
 
 
 _ndarray = np.ndarray
+_new = object.__new__
 _f64 = np.dtype(np.float64)
 _EMPTY = np.zeros(0)
 _EMPTY.flags.writeable = False
