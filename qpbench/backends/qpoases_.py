@@ -12,8 +12,9 @@ timed or time-limited call; ``qpbench backends`` shows the backend as
 unavailable, with the reason, when neither the wheel nor (without a compiled
 shim) a compiler is there. The other route that installs from PyPI, casadi's
 ``conic('qpoases')``, is not offered: on the robot's n = 4 ticks its hotstart
-costs 150-295 us per Python call against about 6 us here (qpOASES' own
-hotstart takes 3-5 us of that), and it prints a banner.
+costs 150-295 us per Python call against about 9 us per call of this
+backend (qpOASES' own hotstart: 3 us median on the ``wall`` ticks), and it
+prints a banner.
 
 Formulation. ``SQProblem(n, me + mi)`` solves
 ``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with::

@@ -171,13 +171,13 @@ def native_settings(solver: str, eps_abs: float, eps_rel: float, max_iter: int, 
         # would stop cvxopt far from a 1e-9 answer.
         return {"feastol": eps_abs, "abstol": eps_abs, "reltol": max(eps_rel, eps_abs), "maxiters": max_iter}
     if solver == "ecos":
-        return {"feastol": eps_abs, "abstol": eps_abs, "reltol": max(eps_rel, eps_abs), "max_iters": max_iter}
+        # qpbenchmark's (feastol only): tighter gap tolerances make ECOS's dual residual worse, not better.
+        return {"feastol": eps_abs}
     if solver == "qpalm":
         return {"eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter, "time_limit": time_limit}
     if solver == "gurobi":
-        # Gurobi refuses tolerances below 1e-9.
-        tol = max(eps_abs, 1e-9)
-        return {"FeasibilityTol": tol, "OptimalityTol": tol, "BarConvTol": tol, "TimeLimit": time_limit}
+        # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error at high_accuracy).
+        return {"FeasibilityTol": eps_abs, "OptimalityTol": eps_abs, "TimeLimit": time_limit}
     if solver == "hpipm":
         return {"tol_dual_gap": eps_abs, "tol_eq": eps_abs, "tol_ineq": eps_abs, "tol_stat": eps_abs}
     if solver == "qpswift":
@@ -373,6 +373,9 @@ _SOLVER_WARNINGS = {
 }
 
 
+#: Exception classes of solver packages (by name) that are solver failures, not bugs.
+_SOLVER_ERRORS = frozenset({"GurobiError"})
+
 _ndarray = np.ndarray
 _new = object.__new__
 _solve_problem = qpsolvers.solve_problem
@@ -441,6 +444,10 @@ class QpsolversBackend(Backend):
         try:
             result = _solve_problem(solved, solver, warm_start, **options)
         except (_QPError, ValueError) as exc:
+            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        except Exception as exc:
+            if type(exc).__name__ not in _SOLVER_ERRORS:
+                raise
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
         # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
         sol = _new(BackendSolution)
