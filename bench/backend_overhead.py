@@ -8,8 +8,12 @@ inequalities, bounds), measured three ways in this process:
 - ``direct``: the solver's own Python API called directly with the same
   settings, doing what a controller needs (set the data, solve, read ``x``):
   a persistent, updated object for ``osqp``, ``proxqp``,
-  ``clarabel`` (as ours); ``daqp.solve`` with the stacked arrays of the
-  ``daqp`` backend for ``daqp``; a fresh call of the solver's own function for
+  ``clarabel``, ``piqp`` (as ours); ``daqp.Model.update`` + ``solve`` with
+  arrays stacked per call for ``daqp``; ``daqp.solve`` with the stacked
+  arrays of the backend for ``daqp-stateless``; for ``qpoases``, the compiled
+  shim called through ctypes on buffers filled per call (qpOASES has no
+  Python API of its own here: this is the thinnest Python route to its
+  ``hotstart``); a fresh call of the solver's own function for
   ``qpsolvers:<name>`` where that is simple (daqp, quadprog, piqp, osqp,
   clarabel, proxqp), else ``qpsolvers.solve_problem`` (highs, scs); the same
   parametrised cvxpy model for ``cvxpy``; ``numpy.linalg.lstsq`` for ``pinv``;
@@ -25,12 +29,15 @@ which nanobind dispatches about 0.6 us faster (a direct user could do the same).
 Problems: consecutive ticks of the ``wall`` scenario (an obstacle row active)
 when :mod:`qpbench.sim` can produce them, else :func:`qpbench.known.robot_like_problem`.
 Each method runs over the whole sequence ``--repeat`` times (fresh state each
-pass, passes interleaved between methods); the median is over all calls.
+pass, passes interleaved between methods); the median is over all calls, or
+with ``--stat min`` the median over problems of each problem's fastest pass
+(robust when other processes share the cores: a call slowed by them is
+dropped unless every pass of it was).
 
 Usage::
 
     python bench/backend_overhead.py [--count 400] [--repeat 3] [--source sim|known]
-        [--profile default] [--backends osqp,proxqp,...]
+        [--profile default] [--backends osqp,proxqp,...] [--stat median|min]
 """
 
 from __future__ import annotations
@@ -207,6 +214,80 @@ def direct_daqp_native(options):
     return solve
 
 
+class DirectDaqpModel:
+    """``daqp.Model``: setup once, then ``update(None, None, A, bupper, blower)`` + ``solve`` (P, q constant
+    on the robot's ticks), arrays stacked per call as a user would."""
+
+    def __init__(self, options):
+        self.options, self.model = options, None
+
+    def __call__(self, p):
+        import daqp
+
+        P, q, G, h, A, b, lb, ub = _parts(p)
+        n, me, mi = q.shape[0], A.shape[0], G.shape[0]
+        Atot = np.vstack([A, G])
+        bupper = np.concatenate([ub, b, h])
+        blower = np.concatenate([lb, b, np.full(mi, -np.inf)])
+        if self.model is None:
+            sense = np.zeros(n + me + mi, dtype=np.intc)
+            sense[n : n + me] = 5
+            self.model = daqp.Model()
+            self.model.settings = dict(self.model.settings, **self.options)
+            self.model.setup(P, q, Atot, bupper, blower, sense)
+        else:
+            self.model.update(None, None, Atot, bupper, blower)
+        return self.model.solve()[0]
+
+
+class DirectPiqp:
+    """``piqp.DenseSolver`` set up once, then ``update`` + ``solve``; reads ``result.x``."""
+
+    def __init__(self, settings):
+        self.settings, self.solver = settings, None
+
+    def __call__(self, p):
+        import piqp
+
+        if self.solver is None:
+            self.solver = piqp.DenseSolver()
+            for key, value in self.settings.items():
+                setattr(self.solver.settings, key, value)
+            self.solver.setup(p.P, p.q, p.A, p.b, p.G, None, p.h, p.lb, p.ub)
+        else:
+            self.solver.update(p.P, p.q, p.A, p.b, p.G, None, p.h, p.lb, p.ub)
+        self.solver.solve()
+        return self.solver.result.x
+
+
+class DirectQpoases:
+    """The qpOASES shim through ctypes: ``H, g, A = [A_eq; G], lb, ub, lbA, ubA`` written into its buffer,
+    ``init`` on the first call and ``hotstart`` after; reads ``x``."""
+
+    def __init__(self, backend):
+        self.backend, self.lib, self.ws = backend, backend.prepare(), None
+
+    def __call__(self, p):
+        from qpbench.backends.qpoases_ import _Workspace
+
+        ws = self.ws
+        if ws is None:
+            b = self.backend
+            key = (p.q.shape[0], p.A.shape[0], p.G.shape[0], True)
+            ws = self.ws = _Workspace(key, self.lib, b._preset, b._native, b._nwsr, b._time_limit)
+        ws.H[:] = p.P
+        ws.g[:] = p.q
+        ws.A_eq[:] = p.A
+        ws.A_in[:] = p.G
+        ws.lbA_eq[:] = p.b
+        ws.ubA_eq[:] = p.b
+        ws.ubA_in[:] = p.h
+        ws.lb[:] = p.lb
+        ws.ub[:] = p.ub
+        self.lib.qpb_solve(ws.handle)
+        return ws.x.copy()
+
+
 def direct_quadprog(settings):
     import quadprog
 
@@ -271,7 +352,13 @@ def direct_for(name: str, profile: str):
 
         return "proxqp.dense.QP update", lambda: DirectProxqp(lambda qp: backend._apply_settings(qp, proxsuite.proxqp))
     if name == "daqp":
+        return "daqp.Model update", lambda: DirectDaqpModel(backend.options())
+    if name == "daqp-stateless":
         return "daqp.solve", lambda: direct_daqp_native(backend.options())
+    if name == "piqp":
+        return "piqp.DenseSolver update", lambda: DirectPiqp(backend._settings_dict)
+    if name == "qpoases":
+        return "qpOASES shim hotstart (ctypes)", lambda: DirectQpoases(backend)
     if name == "pinv":
         return "numpy lstsq", lambda: (lambda p: np.linalg.lstsq(p.A, p.b, rcond=None)[0])
     if name == "cvxpy":
@@ -331,7 +418,8 @@ def _clarabel_settings(clarabel, options):
 
 def qpsolvers_for(name: str, profile: str):
     """qpsolvers.solve_problem with the backend's solver and settings, or None."""
-    solver = {"osqp": "osqp", "proxqp": "proxqp", "clarabel": "clarabel"}.get(name)
+    solver = {"osqp": "osqp", "proxqp": "proxqp", "clarabel": "clarabel", "piqp": "piqp", "daqp": "daqp",
+              "daqp-stateless": "daqp", "qpoases": "qpoases"}.get(name)
     if name.startswith("qpsolvers:"):
         solver = name.split(":", 1)[1]
     if solver is None or solver not in qpsolvers.available_solvers:
@@ -360,6 +448,8 @@ def main(argv=None) -> int:
     parser.add_argument("--source", choices=("sim", "known"), default="sim")
     parser.add_argument("--profile", default="default")
     parser.add_argument("--backends", default=None, help="comma-separated backend names (default: all but rnn*)")
+    parser.add_argument("--stat", choices=("median", "min"), default="median",
+                        help="median of all calls, or median over problems of each one's fastest pass")
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")
 
@@ -373,8 +463,9 @@ def main(argv=None) -> int:
     else:
         problems = known_problems(args.count)
     sizes = sorted({(p.q.shape[0], 0 if p.A is None else p.A.shape[0], 0 if p.G is None else p.G.shape[0]) for p in problems})
+    stat = "median wall time per solve" if args.stat == "median" else "median over QPs of the fastest pass"
     print(f"# {len(problems)} QPs from {source}; (n, meq, m) in {sizes}; profile {args.profile}; "
-          f"{args.repeat} passes; median wall time per solve in microseconds")
+          f"{args.repeat} passes; {stat} in microseconds")
 
     names = args.backends.split(",") if args.backends else [
         n for n in backend_names() if not n.startswith("rnn")
@@ -386,13 +477,16 @@ def main(argv=None) -> int:
         desc, direct_factory = direct_for(name, args.profile)
         qps_factory = qpsolvers_for(name, args.profile)
         methods = {"ours": lambda: get_backend(name, args.profile).solve, "direct": direct_factory, "qpsolvers": qps_factory}
-        times: dict[str, list[float]] = {k: [] for k, f in methods.items() if f is not None}
+        times: dict[str, list[list[float]]] = {k: [] for k, f in methods.items() if f is not None}
         for _ in range(args.repeat):
             for key in times:
                 solve = methods[key]()
                 solve(problems[0])  # first call: imports, compilation, set-up of the first shape
-                times[key] += time_pass(solve, problems)
-        med = {k: statistics.median(v) for k, v in times.items()}
+                times[key].append(time_pass(solve, problems))
+        if args.stat == "min":
+            med = {k: statistics.median(map(min, zip(*v))) for k, v in times.items()}
+        else:
+            med = {k: statistics.median([t for p in v for t in p]) for k, v in times.items()}
         ours = med["ours"]
         direct = med.get("direct")
         qps = med.get("qpsolvers")

@@ -14,13 +14,13 @@ pytestmark = pytest.mark.skipif("daqp" not in backend_names(), reason="daqp unav
 
 
 def test_settings_come_from_the_profile_and_unknown_ones_are_refused():
-    assert get_backend("daqp", "high_accuracy").options() == {
+    assert get_backend("daqp-stateless", "high_accuracy").options() == {
         "primal_tol": 1e-10, "dual_tol": 1e-10, "iter_limit": 1_000_000, "time_limit": 10.0,
     }
-    options = get_backend("daqp", "low_accuracy", max_iter=7, eps_prox=0.0).options()
+    options = get_backend("daqp-stateless", "low_accuracy", max_iter=7, eps_prox=0.0).options()
     assert options["iter_limit"] == 7 and options["primal_tol"] == 1e-4 and options["eps_prox"] == 0.0
     with pytest.raises(ParamError) as err:
-        get_backend("daqp", primal_tolerance=1e-3)
+        get_backend("daqp-stateless", primal_tolerance=1e-3)
     assert err.value.key == "primal_tolerance" and "primal_tol" in str(err.value)
 
 
@@ -28,11 +28,11 @@ def test_singular_p_needs_daqps_proximal_iterations():
     """P = diag(1, 0): solved with DAQP's default automatic regularisation; eps_prox = 0 refuses it."""
     problem = qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([1.0, 1.0]), None, None, None, None,
                                 -np.ones(2), np.ones(2))
-    sol = get_backend("daqp", "high_accuracy").solve(problem)
+    sol = get_backend("daqp-stateless", "high_accuracy").solve(problem)
     assert sol.status == "optimal"
     np.testing.assert_allclose(sol.x, [-1.0, -1.0], atol=1e-9)
     np.testing.assert_allclose(sol.z_box, [0.0, -1.0], atol=1e-9)  # only the lower bound of x2 is active
-    refused = get_backend("daqp", eps_prox=0.0).solve(problem)
+    refused = get_backend("daqp-stateless", eps_prox=0.0).solve(problem)
     assert refused.status == "error" and "NONCONVEX" in refused.error and refused.x is None and not refused.found
 
 
@@ -59,7 +59,7 @@ def test_exit_flags_become_statuses(monkeypatch, flag, status):
             return xx, fval, flag, info
 
     monkeypatch.setattr(daqp_, "_DAQP", [Fake])
-    sol = get_backend("daqp", "high_accuracy").solve(problem)
+    sol = get_backend("daqp-stateless", "high_accuracy").solve(problem)
     assert sol.status == status and sol.found == (status == "optimal")
     assert calls[0]["iter_limit"] == 1_000_000
     if status == "optimal":
@@ -77,8 +77,8 @@ def test_same_answer_as_qpsolvers_route_on_robot_ticks():
     qpsolvers' route's answers, and names the infeasible ticks that qpsolvers' route cannot."""
     from qpbench.sim.loop import simulate
 
-    records = simulate("wall", "daqp", duration=0.2, every=1).records[100:200]
-    ours, theirs = get_backend("daqp"), get_backend("qpsolvers:daqp")
+    records = simulate("wall", "daqp-stateless", duration=0.2, every=1).records[100:200]
+    ours, theirs = get_backend("daqp-stateless"), get_backend("qpsolvers:daqp")
     statuses = set()
     for rec in records:
         a, b = ours.solve(rec.problem), theirs.solve(rec.problem)
@@ -101,7 +101,7 @@ def test_buffers_are_per_shape_and_do_not_leak_between_calls():
              random_kkt_problem(rng, 6, 2, 5, 3)]
     p, x, y, z, z_box = random_kkt_problem(rng, 4, 1, 3, 1, False)  # no box
     cases.append((p, x, y, z, z_box))
-    backend = get_backend("daqp", "high_accuracy")
+    backend = get_backend("daqp-stateless", "high_accuracy")
     for _ in range(2):
         for problem, x, y, z, z_box in cases:
             sol = backend.solve(problem)

@@ -40,7 +40,9 @@ __all__ = [
 _REGISTRY: dict[str, type[Backend]] = {}
 
 #: Modules of this package that hold built-in backends (imported on first use).
-_BUILTIN_MODULES = ("osqp_", "proxqp_", "clarabel_", "daqp_", "pinv", "cvxpy_", "rnn", "qpsolvers_")
+_BUILTIN_MODULES = (
+    "osqp_", "proxqp_", "clarabel_", "daqp_", "daqp_model", "piqp_", "qpoases_", "pinv", "cvxpy_", "rnn", "qpsolvers_",
+)
 _loaded = False
 
 

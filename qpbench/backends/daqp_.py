@@ -131,7 +131,7 @@ class _Buffers:
 class DaqpBackend(Backend):
     """DAQP through ``daqp.solve`` with simple bounds native and equalities by sense flags."""
 
-    name = "daqp"
+    name = "daqp-stateless"
     family = "active set (dual)"
     package = "daqp"
     module = "daqp"

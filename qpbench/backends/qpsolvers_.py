@@ -3,9 +3,12 @@
 One class per solver, generated in a loop at import of this module and
 registered as ``qpsolvers:<name>``. Classes exist for every solver in
 :data:`qpsolvers.available_solvers` plus the solvers qpbench depends on
-(:data:`EXPECTED_SOLVERS`, so that a missing one shows as unavailable); a
-class is available exactly when qpsolvers lists its solver as available
-(importing qpsolvers is all this module does at import).
+(:data:`EXPECTED_SOLVERS`, so that a missing one shows as unavailable) and
+those of the ``all-solvers`` extra (:data:`OPTIONAL_SOLVERS`: qpalm, ecos,
+cvxopt, gurobi with gurobipy's size-limited licence, which prints a
+"Restricted license" line at its first model); a class is available exactly
+when qpsolvers lists its solver as available (importing qpsolvers is all this
+module does at import).
 
 Each call is stateless: qpsolvers builds the solver's problem anew (that is the
 route this backend measures). ``warm_start`` is passed as ``initvals``.
@@ -22,10 +25,20 @@ names are passed to the solver verbatim.
 
 Matrices. Solvers that qpsolvers lists as sparse-only get CSC matrices from
 us (qpsolvers would convert them too, with a warning); dense-only solvers
-get dense ones (quadprog refuses sparse input). qpsolvers' warnings (non-optimal exit, ignored warm
-start) are silenced: the status says it (except for daqp, whose wrapper
-never warns: a ``catch_warnings`` block would cost a third of a DAQP solve
-on the robot's QPs).
+get dense ones (quadprog refuses sparse input).
+
+Warnings. qpsolvers' wrappers warn on a failed solve and on an ignored warm
+start; the status says it. Constructing a ``qpsolvers:<name>`` backend adds
+a filter that ignores the warnings of qpsolvers' wrapper module for that
+solver (``qpsolvers.solvers.<name>_``) in this process
+(:func:`silence_wrapper_warnings`): free per call, where a
+``warnings.catch_warnings`` block around every call cost 1.5-3 us.
+
+Per-call cost. The options are computed once per instance, the dense/sparse
+test is a type check, duals already float64 arrays are not converted, and a
+solver's status table is read only when qpsolvers says ``found=False``: the
+backend costs what :func:`qpsolvers.solve_problem` costs plus building the
+:class:`BackendSolution` (``bench/backend_overhead.py``).
 
 Statuses. qpsolvers reports ``found`` only; when ``found`` is True the status
 is ``optimal``. When it is False, the status is read from the solver's own
@@ -37,6 +50,10 @@ osqp      ``extras["info"].status_val``
 proxqp    ``extras["info"].status`` (``QPSolverOutput``)
 piqp      ``extras["info"].status``
 scs       ``extras["status_val"]``
+ecos      ``extras["exitFlag"]``
+cvxopt    ``extras["status"]`` (``qp()`` says ``optimal`` or ``unknown``)
+qpalm     ``extras["info"].status``
+gurobi    ``extras["status"]`` (model status code)
 ========= ==========================================================
 
 Other solvers (daqp, quadprog, highs, ...) keep no status there, so
@@ -149,11 +166,17 @@ def native_settings(solver: str, eps_abs: float, eps_rel: float, max_iter: int, 
         return settings
     if solver == "scs":
         return {"eps_abs": eps_abs, "eps_rel": eps_rel, "max_iters": max_iter, "time_limit_secs": time_limit}
-    if solver in ("cvxopt", "kvxopt", "ecos"):
+    if solver in ("cvxopt", "kvxopt"):
+        # qpbenchmark sets feastol only; the gap tolerances (defaults 1e-7 absolute, 1e-6 relative)
+        # would stop cvxopt far from a 1e-9 answer.
+        return {"feastol": eps_abs, "abstol": eps_abs, "reltol": max(eps_rel, eps_abs), "maxiters": max_iter}
+    if solver == "ecos":
+        # qpbenchmark's (feastol only): tighter gap tolerances make ECOS's dual residual worse, not better.
         return {"feastol": eps_abs}
     if solver == "qpalm":
         return {"eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter, "time_limit": time_limit}
     if solver == "gurobi":
+        # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error at high_accuracy).
         return {"FeasibilityTol": eps_abs, "OptimalityTol": eps_abs, "TimeLimit": time_limit}
     if solver == "hpipm":
         return {"tol_dual_gap": eps_abs, "tol_eq": eps_abs, "tol_ineq": eps_abs, "tol_stat": eps_abs}
@@ -236,13 +259,59 @@ def _status_scs(extras) -> tuple[str, str | None]:
     return mapping.get(val, "not_solved"), f"{val} ({extras.get('status', '')})"
 
 
+def _status_ecos(extras) -> tuple[str, str | None]:
+    flag = extras.get("exitFlag")
+    if flag is None:
+        return "not_solved", None
+    # ECOS: 0 optimal, 1 primal infeasible, 2 dual infeasible, -1 max iterations; others inaccurate/failed.
+    mapping = {0: "optimal", 1: "primal_infeasible", 2: "dual_infeasible", -1: "max_iter"}
+    return mapping.get(flag, "not_solved"), f"{flag} ({extras.get('infostring', '')})"
+
+
+def _status_cvxopt(extras) -> tuple[str, str | None]:
+    raw = extras.get("status")
+    if raw is None:
+        return "not_solved", None
+    # cvxopt's qp() says "optimal" or "unknown" (it certifies infeasibility for LPs/cone programs only).
+    mapping = {"optimal": "optimal", "primal infeasible": "primal_infeasible", "dual infeasible": "dual_infeasible"}
+    return mapping.get(raw, "not_solved"), str(raw)
+
+
+def _status_qpalm(extras) -> tuple[str, str | None]:
+    info = extras.get("info")
+    if info is None:
+        return "not_solved", None
+    raw = str(info.status)
+    mapping = {"solved": "optimal", "primal infeasible": "primal_infeasible", "dual infeasible": "dual_infeasible",
+               "maximum iterations reached": "max_iter", "time limit exceeded": "time_limit"}
+    return mapping.get(raw, "not_solved"), raw
+
+
+def _status_gurobi(extras) -> tuple[str, str | None]:
+    code = extras.get("status")
+    if code is None:
+        return "not_solved", None
+    # Gurobi's model status codes: 2 OPTIMAL, 3 INFEASIBLE, 5 UNBOUNDED, 7 ITERATION_LIMIT, 9 TIME_LIMIT;
+    # 4 INF_OR_UNBD says neither for sure.
+    mapping = {2: "optimal", 3: "primal_infeasible", 5: "dual_infeasible", 7: "max_iter", 9: "time_limit"}
+    return mapping.get(code, "not_solved"), str(code)
+
+
 _STATUS_READERS = {
     "clarabel": _status_clarabel,
     "osqp": _status_osqp,
     "proxqp": _status_proxqp,
     "piqp": _status_piqp,
     "scs": _status_scs,
+    "ecos": _status_ecos,
+    "cvxopt": _status_cvxopt,
+    "qpalm": _status_qpalm,
+    "gurobi": _status_gurobi,
 }
+
+
+#: Solvers whose iteration count qpsolvers keeps in ``extras``.
+_ITERATION_SOLVERS = frozenset({"osqp", "proxqp", "piqp", "scs", "quadprog", "ecos", "cvxopt", "qpalm"})
 
 
 def _iterations(solver: str, extras: dict) -> int | None:
@@ -253,7 +322,14 @@ def _iterations(solver: str, extras: dict) -> int | None:
         if solver == "scs":
             return int(extras["iter"])
         if solver == "quadprog":
-            return int(np.ravel(extras["iterations"])[0])
+            it = extras["iterations"]  # quadprog's (iterations, active-set changes)
+            return int(it[0]) if type(it) is _ndarray and it.ndim == 1 else int(np.ravel(it)[0])
+        if solver == "ecos":
+            return int(extras["iter"])
+        if solver == "cvxopt":
+            return int(extras["iterations"])
+        if solver == "qpalm":
+            return int(extras["info"].iter)
     except (KeyError, AttributeError, TypeError, IndexError):
         return None
     return None
@@ -274,9 +350,50 @@ def _sparse_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     )
 
 
-#: Solvers whose qpsolvers wrapper does not warn on a normal solve (no
-#: ``warnings.catch_warnings`` around them: it costs microseconds).
-_SILENT_SOLVERS = frozenset({"daqp"})
+def silence_wrapper_warnings(solver: str) -> None:
+    """Ignore the warnings of qpsolvers' wrapper module of ``solver`` from now on, in this process.
+
+    qpsolvers' wrappers warn on a failed solve and on an ignored ``initvals``;
+    the backend reports both as its status. A filter on the wrapper's module
+    (``qpsolvers.solvers.<solver>_``) costs nothing per call, where a
+    ``warnings.catch_warnings`` block around each call costs 1.5-3 us (a
+    tenth of a DAQP solve through qpsolvers). Adding it again moves it to the
+    front of the filter list (idempotent). Warnings a solver's own package
+    raises on qpsolvers' normal calls (:data:`_SOLVER_WARNINGS`) are ignored too.
+    """
+    warnings.filterwarnings("ignore", module=rf"qpsolvers\.solvers\.{solver}_\Z")
+    for message, category in _SOLVER_WARNINGS.get(solver, ()):
+        warnings.filterwarnings("ignore", message=message, category=category)
+
+
+#: Warnings of a solver's own package on every call qpsolvers makes (message regex, category).
+_SOLVER_WARNINGS = {
+    # osqp 1.x: qpsolvers calls solve() without raise_error.
+    "osqp": (("The default value of raise_error will change", PendingDeprecationWarning),),
+}
+
+
+#: Exception classes of solver packages (by name) that are solver failures, not bugs.
+_SOLVER_ERRORS = frozenset({"GurobiError"})
+
+_ndarray = np.ndarray
+_new = object.__new__
+_solve_problem = qpsolvers.solve_problem
+_QPError = qpsolvers.QPError
+
+
+def _all_dense(problem) -> bool:
+    P, G, A = problem.P, problem.G, problem.A
+    return type(P) is _ndarray and (G is None or type(G) is _ndarray) and (A is None or type(A) is _ndarray)
+
+
+def _float_array(v):
+    if v is None or (type(v) is _ndarray and v.dtype == _F64):
+        return v
+    return np.asarray(v, dtype=float)
+
+
+_F64 = np.dtype(np.float64)
 
 
 class QpsolversBackend(Backend):
@@ -290,77 +407,86 @@ class QpsolversBackend(Backend):
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._cached_options: dict | None = None
+        solver = self.solver
+        self._sparse_only = solver in qpsolvers.sparse_solvers and solver not in qpsolvers.dense_solvers
+        self._dense_only = solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers
+        self._reader = _STATUS_READERS.get(solver)
+        silence_wrapper_warnings(solver)
 
     @classmethod
     def unavailable_reason(cls) -> str | None:
         if cls.solver in qpsolvers.available_solvers:
             return None
-        return (
-            f"qpsolvers does not find solver '{cls.solver}' "
-            f"(pip install qpsolvers[{cls.solver}] or the solver's package)"
+        how = (
+            "pip install 'qpbench[all-solvers]'" if cls.solver in OPTIONAL_SOLVERS
+            else f"pip install qpsolvers[{cls.solver}] or the solver's package"
         )
+        return f"qpsolvers does not find solver '{cls.solver}' ({how})"
 
     def _options(self) -> dict:
-        """Solver options (computed once per instance)."""
+        """Solver options (computed once per instance; do not modify the dict)."""
         if self._cached_options is None:
             generic, native = generic_settings(self)
             options = native_settings(self.solver, **generic)
             options.update(native)
             self._cached_options = options
-        return dict(self._cached_options)
-
-    def _call(self, problem, warm_start, options):
-        try:
-            return qpsolvers.solve_problem(problem, solver=self.solver, initvals=warm_start, **options), None
-        except (qpsolvers.QPError, ValueError) as exc:
-            return None, f"{type(exc).__name__}: {exc}"
+        return self._cached_options
 
     def _solve(self, problem, warm_start):
-        options = self._options()
-        sparse_only = self.solver in qpsolvers.sparse_solvers and self.solver not in qpsolvers.dense_solvers
-        dense_only = self.solver in qpsolvers.dense_solvers and self.solver not in qpsolvers.sparse_solvers
-        solved_problem = problem
-        if sparse_only and not problem.has_sparse:
-            solved_problem = _sparse_problem(problem)
-        elif dense_only and problem.has_sparse:
-            solved_problem = qpsolvers.Problem(*problem.unpack_as_dense())
-        if self.solver in _SILENT_SOLVERS:
-            result, error = self._call(solved_problem, warm_start, options)
-        else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                result, error = self._call(solved_problem, warm_start, options)
-        sol = BackendSolution(problem)
-        if result is None:
-            sol.status = "error"
-            sol.error = error
-            return sol
-        sol.extras = result.extras
+        options = self._cached_options if self._cached_options is not None else self._options()
+        solver = self.solver
+        solved = problem
+        if self._sparse_only:
+            if not problem.has_sparse:
+                solved = _sparse_problem(problem)
+        elif self._dense_only and not _all_dense(problem) and problem.has_sparse:
+            solved = qpsolvers.Problem(*problem.unpack_as_dense())
+        try:
+            result = _solve_problem(solved, solver, warm_start, **options)
+        except (_QPError, ValueError) as exc:
+            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        except Exception as exc:
+            if type(exc).__name__ not in _SOLVER_ERRORS:
+                raise
+            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
+        sol = _new(BackendSolution)
+        sol.problem = problem
+        extras = result.extras
+        if extras is None:
+            extras = {}
+        sol.extras = extras
         # Some qpsolvers wrappers (clarabel) hand duals back as Python lists.
-        sol.x, sol.y, sol.z, sol.z_box = (
-            None if v is None else np.asarray(v, dtype=float)
-            for v in (result.x, result.y, result.z, result.z_box)
-        )
-        sol.obj = result.obj
+        x, y, z, z_box = result.x, result.y, result.z, result.z_box
+        if not (
+            (x is None or (type(x) is _ndarray and x.dtype == _F64))
+            and (y is None or (type(y) is _ndarray and y.dtype == _F64))
+            and (z is None or (type(z) is _ndarray and z.dtype == _F64))
+            and (z_box is None or (type(z_box) is _ndarray and z_box.dtype == _F64))
+        ):
+            x, y, z, z_box = map(_float_array, (x, y, z, z_box))
+        sol.x, sol.y, sol.z, sol.z_box = x, y, z, z_box
+        sol._obj = result.obj
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time
-        sol.iterations = _iterations(self.solver, result.extras or {})
-        reader = _STATUS_READERS.get(self.solver)
+        sol.iterations = _iterations(solver, extras) if solver in _ITERATION_SOLVERS else None
+        if result.found:
+            sol.status = "optimal"
+            return sol
+        reader = self._reader
         raw = None
         if reader is not None:
-            status, raw = reader(result.extras or {})
+            status, raw = reader(extras)
+            if status == "optimal":
+                status = "not_solved"  # the solver says solved but qpsolvers does not agree
+            if raw is None and "info" in extras:
+                raw = str(getattr(extras["info"], "status", None))
         else:
-            status = "optimal" if result.found else "not_solved"
-        if result.found:
-            status = "optimal"
-        elif status == "optimal":
-            status = "not_solved"  # the solver says solved but qpsolvers does not agree
-        if raw is None and status != "optimal" and reader is not None and "info" in (result.extras or {}):
-            raw = str(getattr(result.extras["info"], "status", None))
+            status = "not_solved"
         if raw is not None:
-            sol.extras = dict(sol.extras or {}, raw_status=raw)
+            sol.extras = dict(extras, raw_status=raw)
         sol.status = status
-        if status != "optimal" and sol.x is not None and not np.all(np.isfinite(sol.x)):
+        if sol.x is not None and not np.all(np.isfinite(sol.x)):
             sol.x = None
         return sol
 
@@ -384,10 +510,13 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
 #: Solvers qpbench installs with itself (listed even when qpsolvers does not find them).
 EXPECTED_SOLVERS = ("clarabel", "daqp", "highs", "osqp", "piqp", "proxqp", "quadprog", "scs")
 
+#: Solvers of the ``all-solvers`` extra (listed even when not installed, with how to install them).
+OPTIONAL_SOLVERS = ("cvxopt", "ecos", "gurobi", "qpalm")
+
 #: The generated classes, by qpsolvers' solver name.
 BACKENDS: dict[str, type[QpsolversBackend]] = {
     solver: _make_class(solver)
-    for solver in sorted(set(EXPECTED_SOLVERS) | set(qpsolvers.available_solvers))
+    for solver in sorted(set(EXPECTED_SOLVERS) | set(OPTIONAL_SOLVERS) | set(qpsolvers.available_solvers))
 }
 
 

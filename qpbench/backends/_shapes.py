@@ -1,0 +1,55 @@
+"""Shape checks of a dense problem before it is written into a solver's workspace.
+
+Solvers that keep a workspace of one shape (DAQP's ``Model``, qpOASES'
+``SQProblem``, PIQP's ``DenseSolver``) must not be handed arrays of another
+shape: DAQP ignores such an update without a word, numpy would broadcast a
+1-row ``b`` into two slots. :func:`check_shapes` refuses them with one line
+naming the backend, the array and both shapes.
+"""
+
+from __future__ import annotations
+
+from ..exceptions import ProblemFormatError
+
+
+def _refuse(backend: str, key: str, shape, expected) -> None:
+    raise ProblemFormatError(
+        f"backend '{backend}': {key} has shape {tuple(shape)}, expected {tuple(expected)} "
+        "(from q and the rows of A and G)",
+        key=key,
+    )
+
+
+def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]:
+    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
+
+    Args:
+        backend: Backend name (for the message).
+        n: Number of variables (length of ``q``).
+        P, A, b, G, h, lb, ub: Dense arrays (``None`` for an absent part).
+
+    Raises:
+        ProblemFormatError: an array whose shape does not fit ``n`` and the
+            row counts of ``A`` and ``G``.
+    """
+    if P.shape != (n, n):
+        _refuse(backend, "P", P.shape, (n, n))
+    me = 0
+    if A is not None:
+        if A.ndim != 2 or A.shape[1] != n:
+            _refuse(backend, "A", A.shape, ("me", n))
+        me = A.shape[0]
+        if b is None or b.shape != (me,):
+            _refuse(backend, "b", () if b is None else b.shape, (me,))
+    mi = 0
+    if G is not None:
+        if G.ndim != 2 or G.shape[1] != n:
+            _refuse(backend, "G", G.shape, ("mi", n))
+        mi = G.shape[0]
+        if h is None or h.shape != (mi,):
+            _refuse(backend, "h", () if h is None else h.shape, (mi,))
+    if lb is not None and lb.shape != (n,):
+        _refuse(backend, "lb", lb.shape, (n,))
+    if ub is not None and ub.shape != (n,):
+        _refuse(backend, "ub", ub.shape, (n,))
+    return me, mi

@@ -1,0 +1,205 @@
+"""Backend ``piqp``: PIQP (proximal interior point) through its own dense API, with a persistent solver.
+
+Formulation. ``piqp.DenseSolver`` solves
+``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,  x_l <= x <= x_u``
+with ``c = q``, ``h_l = -inf`` (left out), ``h_u = h``, ``x_l = lb``,
+``x_u = ub`` (bounds native, no stacking; infinite entries are PIQP's
+business, it leaves them out). PIQP's multipliers are non-negative per side
+(``z_l, z_u`` of the rows of ``G``, ``z_bl, z_bu`` of the bounds) and ``y`` has
+qpsolvers' sign, so ``y = y``, ``z = z_u - z_l``, ``z_box = z_bu - z_bl``.
+
+Persistence. The solver is ``setup`` once per shape ``(n, me, mi, with box)``
+and then ``update``-d with the tick's ``P, c, A, b, G, h_u, x_l, x_u`` (the
+dense solver has no pattern to keep). PIQP is an interior-point method and
+starts every solve from its own initial point (it has no warm start):
+``warm_start`` is ignored and the saving is the skipped set-up (allocation,
+preconditioner, which ``update`` reuses: PIQP's
+``preconditioner_reuse_on_update`` default). A status other than optimal
+drops the solver, so the next tick sets up afresh. :meth:`PiqpBackend.reset`
+drops it too. Every array is checked against the shape before it is handed to
+PIQP (:func:`~qpbench.backends._shapes.check_shapes`).
+
+Settings. As ``qpsolvers:piqp`` (:func:`qpbench.backends.qpsolvers_.native_settings`):
+``eps_abs``, ``eps_rel``, ``eps_duality_gap_abs/rel``, ``max_iter``, and
+``check_duality_gap=True`` at ``eps_abs <= 1e-7``; PIQP has no time limit.
+``compute_timings`` is on, ``verbose`` off. Other settings are set on
+``DenseSolver.settings`` verbatim; an unknown name is a
+:class:`~qpbench.exceptions.ParamError`.
+
+Time. ``solver_time_s`` is PIQP's ``info.run_time``: set-up plus solve on the
+first tick of a shape, update plus solve after.
+
+Statuses. ``PIQP_SOLVED`` -> optimal, ``PIQP_PRIMAL_INFEASIBLE`` /
+``PIQP_DUAL_INFEASIBLE`` -> primal_infeasible / dual_infeasible,
+``PIQP_MAX_ITER_REACHED`` -> max_iter, ``PIQP_NUMERICS`` and
+``PIQP_INVALID_SETTINGS`` -> error, ``PIQP_UNSOLVED`` -> not_solved
+(raw name in ``extras["raw_status"]``). ``ValueError``/``TypeError``/
+``RuntimeError`` raised by the binding become status ``error``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..exceptions import ParamError
+from . import register
+from ._common import as_dense, generic_settings
+from ._shapes import check_shapes
+from .base import Backend, BackendSolution
+
+_STATUS_MAP: dict = {}
+_MODULE: list = []
+_SOLVED: list = []  # piqp.PIQP_SOLVED (compared with ==: hashing the enum costs 1 us)
+
+
+def _piqp():
+    if not _MODULE:
+        import piqp
+
+        _MODULE.append(piqp)
+        _SOLVED.append(piqp.PIQP_SOLVED)
+        S = piqp
+        ours = {
+            S.PIQP_SOLVED: "optimal",
+            S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+            S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
+            S.PIQP_MAX_ITER_REACHED: "max_iter",
+            S.PIQP_NUMERICS: "error",
+            S.PIQP_INVALID_SETTINGS: "error",
+            S.PIQP_UNSOLVED: "not_solved",
+        }
+        for value, status in ours.items():
+            _STATUS_MAP[value] = (status, str(value).split(".")[-1])
+    return _MODULE[0]
+
+
+@register
+class PiqpBackend(Backend):
+    """PIQP dense with a persistent ``DenseSolver``, updated per tick."""
+
+    name = "piqp"
+    family = "proximal interior point"
+    package = "piqp"
+    module = "piqp"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self._solver = None
+        self._shapes = None
+        self._result = None
+        self._info = None
+        self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
+        self._settings_dict = self._make_settings()
+
+    def _make_settings(self) -> dict:
+        from .qpsolvers_ import native_settings
+
+        generic, native = generic_settings(self)
+        settings = native_settings("piqp", **generic)
+        settings.update(verbose=False, compute_timings=True)
+        allowed = {a for a in dir(_piqp().DenseSolver().settings) if not a.startswith("_")}
+        for key in native:
+            if key not in allowed:
+                raise ParamError(
+                    f"unknown setting '{key}' for backend 'piqp' (PIQP's own: {', '.join(sorted(allowed))}; "
+                    "generic: eps_abs, eps_rel, max_iter, time_limit)",
+                    key=key,
+                )
+        settings.update(native)
+        return settings
+
+    def reset(self) -> None:
+        self._solver = None
+        self._shapes = None
+        self._result = None
+        self._info = None
+        self._views = None
+
+    def _solve(self, problem, warm_start):
+        P, q, A, b, G, h, lb, ub = (
+            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+        )
+        if not (
+            type(P) is _ndarray and type(q) is _ndarray and P.dtype == _f64 and q.dtype == _f64 and q.ndim == 1
+            and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
+            and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
+            and (lb is None or (type(lb) is _ndarray and lb.dtype == _f64))
+            and (ub is None or (type(ub) is _ndarray and ub.dtype == _f64))
+        ):
+            P, q, A, b, G, h, lb, ub = _dense(problem)
+        shapes = (P.shape, q.shape, None if A is None else A.shape, None if b is None else b.shape,
+                  None if G is None else G.shape, None if h is None else h.shape,
+                  None if lb is None else lb.shape, None if ub is None else ub.shape)
+        solver = self._solver
+        try:
+            if solver is not None and shapes == self._shapes:
+                # PIQP prints "... has wrong dimensions" and keeps its old data on a wrong
+                # shape: the shapes are those the solver was set up with (checked then).
+                solver.update(P, q, A, b, G, None, h, lb, ub)
+            else:
+                n = q.shape[0]
+                check_shapes(self.name, n, P, A, b, G, h, lb, ub)
+                self.reset()
+                solver = (_MODULE[0] if _MODULE else _piqp()).DenseSolver()
+                s = solver.settings
+                for name, value in self._settings_dict.items():
+                    setattr(s, name, value)
+                solver.setup(P, q, A, b, G, None, h, lb, ub)
+                self._solver, self._shapes = solver, shapes
+                res = self._result = solver.result
+                self._info = res.info
+                # Each attribute read of the result builds a new view (0.9 us); these views follow
+                # the live vectors, which update() and solve() overwrite in place (same shape).
+                self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
+            solver.solve()
+        except (ValueError, TypeError, RuntimeError) as exc:
+            self.reset()
+            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        info = self._info
+        raw_status = info.status
+        if raw_status == _SOLVED[0]:
+            # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
+            sol = _new(BackendSolution)
+            sol.problem = problem
+            sol.status = "optimal"
+            sol.extras = {"raw_status": "PIQP_SOLVED"}
+            x, y, z_l, z_u, z_bl, z_bu = self._views
+            sol.x = x.copy()
+            sol.y = y.copy() if A is not None else _EMPTY
+            sol.z = z_u - z_l if G is not None else _EMPTY
+            sol.z_box = z_bu - z_bl if (lb is not None or ub is not None) else _EMPTY
+            sol._obj = info.primal_obj
+        else:
+            status, raw = _STATUS_MAP.get(raw_status, ("not_solved", str(raw_status)))
+            sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
+            self.reset()
+            if status == "error":
+                sol.error = f"PIQP: {raw}"
+        sol.iterations = info.iter
+        sol.solver_time_s = info.run_time
+        return sol
+
+
+_ndarray = np.ndarray
+_new = object.__new__
+_f64 = np.dtype(np.float64)
+_EMPTY = np.zeros(0)
+_EMPTY.flags.writeable = False
+
+
+def _dense(problem):
+    """The problem's parts as dense float64 arrays (``None`` kept), rows 2-D."""
+    P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
+    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+
+    def rows(M, v):
+        if M is None:
+            return None, None
+        M = as_dense(M)
+        return (M[None, :] if M.ndim == 1 else M), np.asarray(v, dtype=np.float64).reshape(-1)
+
+    A, b = rows(problem.A, problem.b)
+    G, h = rows(problem.G, problem.h)
+    lb = None if problem.lb is None else np.asarray(problem.lb, dtype=np.float64).reshape(-1)
+    ub = None if problem.ub is None else np.asarray(problem.ub, dtype=np.float64).reshape(-1)
+    return P, q, A, b, G, h, lb, ub
