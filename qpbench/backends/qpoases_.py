@@ -1,7 +1,7 @@
 """Backend ``qpoases``: qpOASES (online active set) with hotstart, through a small compiled shim.
 
 Route. qpOASES' C++ library and headers come from the ``cmeel-qpoases`` wheel
-(LGPL, ``pip install 'qpbench[qpoases]'``). A C shim of about 100 lines
+(LGPL, a dependency of qpbench). A C shim of about 100 lines
 (``extern "C"`` around ``qpOASES::SQProblem``, source in :data:`SHIM_SOURCE`)
 is compiled by the system's C++ compiler (``$CXX``, else ``g++``, else
 ``c++``) on first use, once per machine and version, into
@@ -303,7 +303,7 @@ def _load() -> ctypes.CDLL:
         return _LIB[0]
     prefix = _qpoases_prefix()
     if prefix is None:
-        raise BackendError("qpoases: cmeel-qpoases is not installed (pip install 'qpbench[qpoases]')")
+        raise BackendError("qpoases: cmeel-qpoases is not installed (pip install cmeel-qpoases)")
     path = _shim_path(prefix)
     if not path.is_file():
         _compile(prefix, path)
@@ -415,7 +415,7 @@ class QpoasesBackend(Backend):
     def unavailable_reason(cls) -> str | None:
         prefix = _qpoases_prefix()
         if prefix is None:
-            return "cmeel-qpoases is not installed (pip install 'qpbench[qpoases]')"
+            return "cmeel-qpoases is not installed (pip install cmeel-qpoases)"
         if _LIB or _shim_path(prefix).is_file():
             return None
         if _compiler() is None:
