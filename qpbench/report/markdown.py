@@ -116,10 +116,11 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
         "(residuals, gaps), and residuals and gaps are floored at their tolerance, as in "
         "qpbenchmark; a backend that reports the infeasibility the reference found (the "
         "paper formulation's first ticks) answered right and its runtime counts as measured. Runtime is the harness's wall time of the "
-        "backend call and the reading of its whole answer (x, duals, objective). With "
+        "backend call and the reading of its whole answer (x, duals, objective), the minimum over "
+        "the row's timed repeats (`repeat` column). With "
         "sh = 10 s the runtime shm of microsecond solves is close to their arithmetic mean "
         "and a single failure dominates it: read it with the success rate and the per-scenario "
-        "percentiles. Runtime is the minimum over a row's timed repeats (`repeat` column). Each problem is "
+        "percentiles. Each problem is "
         "solved by the backends in an order drawn for it from a recorded seed (`position`, `order_seed` "
         "columns), so the cold caches the harness leaves between problems do not fall on one backend. "
         "*runtime (feasible)* is the same mean over the problems whose reference "
@@ -154,7 +155,7 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
         never_note = []
         if never:
             never_note.append(
-                f"- in a residual or gap column: {', '.join(never)} never found a solution (0 rows with "
+                f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows with "
                 "status optimal), so there is no residual or gap to average; counted with the "
                 "not-found value, floored at the tolerance, they would score as the best.\n"
             )
