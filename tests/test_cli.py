@@ -138,6 +138,8 @@ def test_run_end_to_end(tmp_path, monkeypatch):
     bench = pd.read_csv(out / "bench" / "wall.csv.gz")
     assert set(bench["backend"]) == {"qpsolvers:daqp", "pinv"}
     assert (bench["t"] < 0.3).all() and len(bench) > 0
+    assert (bench["repeat"] == 3).all()  # run times every problem 3 times; the report uses the minimum
+    assert set(bench["position"]) == {0, 1} and (bench["order_seed"] == 0).all()
     loop = pd.read_csv(out / "closed_loop.csv")
     assert sorted(loop["backend"]) == ["pinv", "qpsolvers:daqp"] and (loop["duration_s"] == 0.3).all()
     md = (out / "report.md").read_text()
