@@ -326,8 +326,8 @@ class TickSolution(BackendSolution):
     them). The values are fixed when :meth:`RNNOnline.solve` returns: the
     array is never written again. The bench's timed region reads every field
     of the answer (:func:`qpbench.harness.timing.timed_call`), so there the
-    views and ``obj`` are paid for inside the timing, as other backends pay
-    for the duals they build.
+    three views are paid for inside the timing, as other backends pay for
+    the duals they build.
     """
 
     y = _Duals("y")

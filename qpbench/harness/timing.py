@@ -1,18 +1,22 @@
 """How a solve is timed, and how a backend's state is restored between repeats.
 
-The timed region is the backend call and the reading of its whole answer::
+The timed region is the backend call and the reading of its answer::
 
     gc.disable(); t0 = perf_counter_ns()
-    sol = backend.solve(problem); sol.x; sol.y; sol.z; sol.z_box; sol.obj
+    sol = backend.solve(problem); sol.x; sol.y; sol.z; sol.z_box
     t1 = perf_counter_ns(); gc.enable()
 
-Reading ``y``, ``z``, ``z_box`` and ``obj`` inside the region makes every
-backend pay for its full answer: most build it inside ``solve``, while a
-backend may defer parts until first read (the online network's
-:class:`~qpbench.backends.rnn.TickSolution` makes its duals on first read,
-:class:`~qpbench.backends.base.BackendSolution` computes ``obj`` from ``x``
-on first read when the solver gave none). For a backend that built
-everything already the reads are attribute look-ups (tens of ns).
+Reading ``y``, ``z`` and ``z_box`` inside the region makes every backend pay
+for its full answer: most build it inside ``solve``, while a backend may
+defer the duals until first read (the online network's
+:class:`~qpbench.backends.rnn.TickSolution`: about 1 us a tick on
+``problems/wall``). The objective is not read: a solver that reports one
+computed it inside its call; a backend without one (``pinv``, ``rnn``) gets
+it computed from ``x`` on first read by
+:class:`~qpbench.backends.base.BackendSolution`, a Python computation the
+harness does for every backend anyway (:func:`qpbench.metrics.objective`),
+which would charge those backends microseconds the others do not pay. For a
+backend that built everything already the reads are attribute look-ups.
 
 Loading, reference solutions, metrics, CSV writing and inter-process
 communication are all outside it. With ``--repeat R`` the same problem is
@@ -49,7 +53,7 @@ log = logging.getLogger("qpbench.harness")
 
 
 #: Fields of a solution read inside the timed region (see the module docstring).
-ANSWER_FIELDS = ("x", "y", "z", "z_box", "obj")
+ANSWER_FIELDS = ("x", "y", "z", "z_box")
 
 
 def read_answer(solution) -> None:

@@ -116,7 +116,7 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
         "(residuals, gaps), and residuals and gaps are floored at their tolerance, as in "
         "qpbenchmark; a backend that reports the infeasibility the reference found (the "
         "paper formulation's first ticks) answered right and its runtime counts as measured. Runtime is the harness's wall time of the "
-        "backend call and the reading of its whole answer (x, duals, objective), the minimum over "
+        "backend call and the reading of its answer (x and duals), the minimum over "
         "the row's timed repeats (`repeat` column). With "
         "sh = 10 s the runtime shm of microsecond solves is close to their arithmetic mean "
         "and a single failure dominates it: read it with the success rate and the per-scenario "
