@@ -310,12 +310,21 @@ def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys,
 ORDER = ["order:a", "order:b", "order:c"]
 
 
+def _calls() -> list:
+    """The call log of the ``order:*`` backends registered now (a ``--plugin`` run loads its own copy)."""
+    import sys
+
+    from qpbench.backends import _registry
+
+    return sys.modules[_registry()["order:a"].__module__].CALLS
+
+
 def _order_run(pset, out, **kw):
     from qpbench.harness.bench import BenchConfig, run_bench
     from qpbench.reference import reference_solutions
 
     refs = reference_solutions(pset)
-    fb.CALLS.clear()
+    _calls().clear()
     config = BenchConfig(backends=list(ORDER), isolate="never", warmup=False, **kw)
     return run_bench(pset, config, out, references=refs), refs
 
@@ -346,7 +355,7 @@ def test_backend_order_is_drawn_per_problem_recorded_and_followed(two_scenarios,
         for i in seq:
             rec = pset.records[i]
             expected += [(b, float(rec.tick)) for b in backend_order(rec.name, ORDER, 0)]
-    assert fb.CALLS == expected
+    assert _calls() == expected
     # another seed, another order; the order does not depend on how the list is given
     assert backend_order("wall/tick-0001", ORDER, 0) == backend_order("wall/tick-0001", ORDER[::-1], 0)
     assert any(backend_order(p, ORDER, 1) != backend_order(p, ORDER, 0) for p in by_problem)

@@ -438,3 +438,12 @@ def test_report_refuses_mixed_repeat_counts_unless_told(tmp_path, capsys):
     assert main(["report", *files, "--out", str(tmp_path / "o"), "--no-plots", "--prefer", "last"]) == 0
     md = (tmp_path / "o" / "report.md").read_text()
     assert "Note: alpha (default, sequential) mixes rows timed with different --repeat" in md
+
+
+def test_backends_with_different_repeat_counts_in_one_table_are_noted(tmp_path):
+    bench = _honest_bench(np.random.default_rng(4))
+    bench.loc[bench["backend"] == "alpha", "repeat"] = 3
+    bench.to_csv(tmp_path / "b.csv", index=False)
+    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    md = (tmp_path / "o" / "report.md").read_text()
+    assert "different --repeat counts in the tables of default, sequential (alpha 3, iso 1, net 1)" in md

@@ -214,7 +214,7 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
         files.append(ResultFile(path, kind, _sha256(path), len(df)))
     notes: list[str] = []
     bench_df = pd.concat(bench, ignore_index=True) if bench else pd.DataFrame()
-    if len(bench) > 1:
+    if bench:
         bench_df = drop_duplicates(bench_df, prefer)
     if not bench_df.empty:
         notes.extend(check_repeats(bench_df, prefer))
@@ -277,6 +277,14 @@ def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
         _repeat=pd.to_numeric(bench["repeat"], errors="coerce"),
         _mode=bench["mode"].fillna("") if "mode" in bench.columns else "",
     )
+    for (profile, mode), table in df.groupby(["profile", "_mode"], sort=True):
+        per_backend = table.groupby("backend", sort=True)["_repeat"].max().dropna()
+        if per_backend.nunique() > 1:
+            counts = ", ".join(f"{b} {int(r)}" for b, r in per_backend.items())
+            notes.append(
+                f"backends timed with different --repeat counts in the tables of {group_label(profile, mode or None)} "
+                f"({counts}): a single-shot time includes cold caches that a minimum over repeats does not"
+            )
     for (profile, mode, backend), g in df.groupby(["profile", "_mode", "backend"], sort=True):
         per_file = g.groupby("source", sort=False)["_repeat"].max().dropna()
         if per_file.nunique() <= 1:
