@@ -197,7 +197,7 @@ class LastNative(Backend):
 
 # ---------------------------------------------------------------- order, violation, lazy answers
 
-#: ``(backend name, q[-1] of the problem)`` of every solve of the ``order:*`` backends, in call order.
+#: ``(backend name, q[-1] of the problem)`` of every solve of the ``faulty:order-*`` backends, in call order.
 CALLS: list = []
 
 
@@ -220,24 +220,24 @@ class _Recorder(Backend):
 
 @register
 class OrderA(_Recorder):
-    name = "order:a"
+    name = "faulty:order-a"
 
 
 @register
 class OrderB(_Recorder):
-    name = "order:b"
+    name = "faulty:order-b"
 
 
 @register
 class OrderC(_Recorder):
-    name = "order:c"
+    name = "faulty:order-c"
 
 
 @register
 class OutsideBox(Backend):
     """Answers ``x = 3`` everywhere (status ``optimal``): outside the box ``[-2, 2]`` of :func:`tick_records`."""
 
-    name = "order:outside"
+    name = "faulty:outside-box"
     family = "test violation"
 
     def _solve(self, problem, warm_start):
@@ -271,7 +271,7 @@ LAZY_SECONDS = 0.05
 class LazyDuals(Backend):
     """Returns at once a :class:`LazySolution` whose duals cost :data:`LAZY_SECONDS` on first read."""
 
-    name = "order:lazy"
+    name = "faulty:lazy-duals"
     family = "test timing"
 
     def _solve(self, problem, warm_start):

@@ -307,16 +307,16 @@ def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys,
 
 # ------------------------------------------------------------ backend order, violation, summary, timing
 
-ORDER = ["order:a", "order:b", "order:c"]
+ORDER = ["faulty:order-a", "faulty:order-b", "faulty:order-c"]
 
 
 def _calls() -> list:
-    """The call log of the ``order:*`` backends registered now (a ``--plugin`` run loads its own copy)."""
+    """The call log of the ``faulty:order-*`` backends registered now (a ``--plugin`` run loads its own copy)."""
     import sys
 
     from qpbench.backends import _registry
 
-    return sys.modules[_registry()["order:a"].__module__].CALLS
+    return sys.modules[_registry()["faulty:order-a"].__module__].CALLS
 
 
 def _order_run(pset, out, **kw):
@@ -379,11 +379,11 @@ def test_violation_columns_for_answers_found_or_not(two_scenarios, tmp_path):
     from qpbench.formats import load_problems
 
     out = tmp_path / "v.csv"
-    assert bench(two_scenarios, "--backends", "order:a,order:outside", "--out", out) == 1
+    assert bench(two_scenarios, "--backends", "faulty:order-a,faulty:outside-box", "--out", out) == 1
     problems = {r.name: r.problem for r in load_problems(two_scenarios).records}
     for r in read(out):
         p = problems[r["problem"]]
-        if r["backend"] == "order:a":  # x = 0, not found: only the equality is violated, by |b|
+        if r["backend"] == "faulty:order-a":  # x = 0, not found: only the equality is violated, by |b|
             assert r["found"] == "False" and r["primal_residual"] == "inf"
             assert float(r["violation_eq"]) == pytest.approx(float(np.max(np.abs(p.b))), rel=1e-15)
             assert float(r["violation_ineq"]) == 0.0 and float(r["violation_box"]) == 0.0
@@ -426,11 +426,11 @@ def test_deferred_parts_of_the_answer_are_inside_the_timed_region(two_scenarios,
     from qpbench.harness.timing import timed_call
 
     problem = load_problems(two_scenarios).records[0].problem
-    sol, ns = timed_call(get_backend_instance("order:lazy"), problem)
+    sol, ns = timed_call(get_backend_instance("faulty:lazy-duals"), problem)
     assert "_y" in sol.__dict__  # built by the timed call
     assert ns >= fb.LAZY_SECONDS * 1e9
     out = tmp_path / "lazy.csv"
-    assert bench(two_scenarios, "--backends", "order:lazy", "--out", out, "--mode", "independent") == 1
+    assert bench(two_scenarios, "--backends", "faulty:lazy-duals", "--out", out, "--mode", "independent") == 1
     assert all(float(r["wall_time_min_s"]) >= fb.LAZY_SECONDS for r in read(out))
 
 
