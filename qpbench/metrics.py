@@ -12,10 +12,18 @@ For a record with problem ``(P, q, G, h, A, b, lb, ub)`` and constant ``r``
   :meth:`~qpsolvers.Solution.primal_residual`, ``dual_residual`` and
   ``duality_gap`` on the solution as given (``inf`` when ``found`` is false or
   the duals are missing, as qpsolvers defines them).
-- ``constraint_violation``: qpsolvers' primal residual of ``x`` even when the
-  backend did not report ``found`` (so a baseline that ignores constraints, or a
-  solver stopped at its iteration limit, shows how far off it is); ``inf``
-  without ``x``.
+- constraint violation of ``x``, whether the backend reported ``found`` or
+  not (so a baseline that ignores constraints, a solver stopped at its
+  iteration limit or the online network, whose answers are not ``found``, shows
+  how far off it is); absolute, in the problem's units, NaN without ``x``
+  (:func:`constraint_violation`):
+
+  - ``violation_ineq``: ``max_i max(0, (G x - h)_i)``;
+  - ``violation_eq``: ``max_i |(A x - b)_i|``;
+  - ``violation_box``: ``max_i max(0, lb_i - x_i, x_i - ub_i)``;
+  - ``constraint_violation``: the largest of the three (0 for a problem
+    without constraints). It equals qpsolvers' primal residual of a found
+    solution.
 - ``status``, ``found``: as reported by the backend (``status`` of a
   :class:`~qpbench.backends.base.BackendSolution`, or ``extras["status"]`` when
   it is one of :data:`STATUSES`; for a plain ``qpsolvers.Solution``,
@@ -36,7 +44,6 @@ Success rule (qpbenchmark's, plus the reference):
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -70,19 +77,60 @@ def solution_status(solution) -> str | None:
     return "optimal" if solution.found else "not_solved"
 
 
-def _qpsolvers_metrics(solution) -> tuple[float, float, float, float]:
+#: Keys of :func:`constraint_violation`'s answer (also bench CSV columns).
+VIOLATION_KEYS = ("violation_ineq", "violation_eq", "violation_box", "constraint_violation")
+
+
+def _dense(M) -> np.ndarray:
+    return M.toarray() if hasattr(M, "toarray") else np.asarray(M, dtype=np.float64)
+
+
+def constraint_violation(problem, x: np.ndarray | None) -> dict:
+    """How far ``x`` is from satisfying ``problem``'s constraints (absolute, problem units).
+
+    Args:
+        problem: ``qpsolvers.Problem`` with ``G, h, A, b, lb, ub`` (any may be ``None``).
+        x: Primal point of shape (n,), or ``None``.
+
+    Returns:
+        ``{"violation_ineq": max(0, max(G x - h)), "violation_eq": max|A x - b|,
+        "violation_box": max(0, max(lb - x), max(x - ub)), "constraint_violation":
+        the largest of the three}``; a part the problem lacks is 0; all NaN
+        when ``x`` is ``None``. A non-finite ``x`` gives ``inf`` or NaN as
+        arithmetic does.
+    """
+    if x is None:
+        return dict.fromkeys(VIOLATION_KEYS, math.nan)
+    x = np.asarray(x, dtype=np.float64).reshape(-1)
+    ineq = eq = box = 0.0
+    if problem.G is not None and problem.h is not None and np.size(problem.h):
+        ineq = max(0.0, float(np.max(_dense(problem.G) @ x - np.asarray(problem.h, dtype=np.float64))))
+    if problem.A is not None and problem.b is not None and np.size(problem.b):
+        eq = float(np.max(np.abs(_dense(problem.A) @ x - np.asarray(problem.b, dtype=np.float64))))
+    with np.errstate(invalid="ignore"):  # inf - inf of an infinite bound at an infinite x
+        if problem.lb is not None and np.size(problem.lb):
+            low = np.asarray(problem.lb, dtype=np.float64) - x
+            low = low[~np.isnan(low)]
+            box = max(box, float(np.max(low, initial=0.0)))
+        if problem.ub is not None and np.size(problem.ub):
+            high = x - np.asarray(problem.ub, dtype=np.float64)
+            high = high[~np.isnan(high)]
+            box = max(box, float(np.max(high, initial=0.0)))
+    return {
+        "violation_ineq": ineq,
+        "violation_eq": eq,
+        "violation_box": box,
+        "constraint_violation": max(ineq, eq, box),
+    }
+
+
+def _qpsolvers_metrics(solution) -> tuple[float, float, float]:
     if solution is None:
-        return math.inf, math.inf, math.inf, math.inf
+        return math.inf, math.inf, math.inf
     primal = float(solution.primal_residual())
     dual = float(solution.dual_residual())
     gap = float(solution.duality_gap())
-    if solution.x is None:
-        violation = math.inf
-    elif solution.found:
-        violation = primal
-    else:
-        violation = float(dataclasses.replace(solution, found=True).primal_residual())
-    return primal, dual, gap, violation
+    return primal, dual, gap
 
 
 def evaluate(record, solution, reference, tolerance) -> dict:
@@ -98,8 +146,9 @@ def evaluate(record, solution, reference, tolerance) -> dict:
     Returns:
         A dict with the keys listed in the module docstring.
     """
-    primal, dual, gap, violation = _qpsolvers_metrics(solution)
+    primal, dual, gap = _qpsolvers_metrics(solution)
     x = None if solution is None else solution.x
+    violation = constraint_violation(record.problem, x)
     obj = objective(record, x)
     found = bool(solution is not None and solution.found)
     status = solution_status(solution)
@@ -131,6 +180,6 @@ def evaluate(record, solution, reference, tolerance) -> dict:
         "primal_residual": primal,
         "dual_residual": dual,
         "duality_gap": gap,
-        "constraint_violation": violation,
+        **violation,
         "success": bool(success),
     }

@@ -15,12 +15,27 @@ How a reference is computed (:func:`reference_solution`):
    1e-9 max(1, |q|), else ``dual_infeasible``.
 2. Cross-check with PIQP (a second, independent interior-point code with
    infeasibility detection) through qpsolvers at ``eps_abs = 1e-10``,
-   ``eps_rel = 0`` and the duality-gap check on. The two agree when both give
-   the same status and, when optimal, objectives within
-   ``1e-7 max(1, |f*|)``. The result records ``agree`` and the second solver's
-   status and objective. When Clarabel ends ``unknown`` but PIQP solves, PIQP's
-   solution is the reference (``solver = "piqp"``). When both are optimal but
-   disagree, the one with the smaller worst KKT residual is kept.
+   ``eps_rel = 0`` and the duality-gap check on. ``agreement`` is the two
+   solvers' relative objective difference ``|f1 - f2| / max(1, |f1|, |f2|)``
+   (NaN unless both are optimal); they agree when both give the same status
+   and, when optimal, ``agreement <= 1e-7``.
+
+Which answer is kept is decided by the evidence, never by the solver's name
+(:func:`settle`). Each solver's worst KKT residual ``kkt`` is
+``max(primal residual, dual residual, duality gap)`` of qpsolvers at its
+answer (``inf`` without one):
+
+- both optimal: the one with the smaller ``kkt`` (agreeing or not);
+- one optimal: it is kept if the other has no verdict (``unknown``) or if
+  its ``kkt <= 1e-7`` (a point that satisfies the optimality conditions
+  refutes the other's infeasibility claim); otherwise the other's
+  infeasibility is kept;
+- neither optimal: the common status; one ``unknown`` and one infeasibility
+  verdict: the verdict; two different verdicts: ``unknown``.
+
+The result records both objectives and residuals (``objective``/``kkt`` of the
+kept answer, ``check_objective``/``check_kkt`` of the other), which solver was
+kept (``solver``), ``agreement`` and ``agree``; a disagreement is logged.
 
 The objective is ``1/2 x'Px + q'x + offset`` (:func:`qpbench.metrics.objective`).
 
@@ -56,7 +71,7 @@ from .metrics import objective
 log = logging.getLogger(__name__)
 
 #: Bumped when the way references are computed changes (invalidates caches).
-REFERENCE_VERSION = "1"
+REFERENCE_VERSION = "2"
 #: Statuses a reference can have.
 REFERENCE_STATUSES = ("optimal", "primal_infeasible", "dual_infeasible", "unknown")
 
@@ -97,6 +112,10 @@ class ReferenceSolution:
         check_status: Its status.
         check_objective: Its objective (NaN unless optimal).
         agree: Whether the two solvers agree (see the module docstring).
+        agreement: Relative objective difference of the two solvers (NaN
+            unless both are optimal; dimensionless).
+        kkt: Worst KKT residual of the kept answer (``inf`` without one).
+        check_kkt: Worst KKT residual of the other solver's answer.
         name: Problem name.
     """
 
@@ -111,6 +130,9 @@ class ReferenceSolution:
     check_status: str | None = None
     check_objective: float = math.nan
     agree: bool | None = None
+    agreement: float = math.nan
+    kkt: float = math.nan
+    check_kkt: float = math.nan
     name: str | None = None
     extras: dict = field(default_factory=dict)
 
@@ -199,46 +221,93 @@ def _is_unconstrained(p) -> bool:
     return p.G is None and p.A is None and no_bounds
 
 
+def relative_difference(f1: float, f2: float) -> float:
+    """``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN when either is NaN)."""
+    if math.isnan(f1) or math.isnan(f2):
+        return math.nan
+    return abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
+
+
+@dataclass
+class Candidate:
+    """One reference solver's answer: its name, status, solution (or ``None``) and objective."""
+
+    solver: str
+    status: str
+    solution: object | None
+    objective: float = math.nan
+
+    @property
+    def kkt(self) -> float:
+        """Worst of qpsolvers' primal residual, dual residual and duality gap (``inf`` without x)."""
+        if self.solution is None:
+            return math.inf
+        return float(_worst_residual(self.solution))
+
+
+def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str]:
+    """``(kept, other, status)`` by the rules of the module docstring (names play no part)."""
+    k1, k2 = first.kkt, second.kkt
+    s1, s2 = first.status, second.status
+    if s1 == s2 == "optimal":
+        return (first, second, s1) if k1 <= k2 else (second, first, s2)
+    if "optimal" in (s1, s2):
+        opt, other = (first, second) if s1 == "optimal" else (second, first)
+        if other.status == "unknown" or opt.kkt <= ALMOST_TOL:
+            return opt, other, "optimal"
+        return other, opt, other.status
+    if s1 == s2:
+        return first, second, s1
+    if "unknown" in (s1, s2):
+        verdict, other = (first, second) if s2 == "unknown" else (second, first)
+        return verdict, other, verdict.status
+    return first, second, "unknown"
+
+
 def reference_solution(record: ProblemRecord) -> ReferenceSolution:
     """High-accuracy reference of one problem (see the module docstring)."""
     problem = dense_problem(record.problem, name=record.name)
     if _is_unconstrained(problem):
         return _unconstrained(ProblemRecord(problem, record.name, offset=record.offset))
-    sol1, st1 = _solve(problem, "clarabel", CLARABEL_SETTINGS)
-    sol2, st2 = _solve(problem, "piqp", PIQP_SETTINGS)
-    obj1 = objective(record, sol1.x) if st1 == "optimal" else math.nan
-    obj2 = objective(record, sol2.x) if st2 == "optimal" else math.nan
-    agree = st1 == st2 and (
-        st1 != "optimal" or abs(obj1 - obj2) <= AGREE_RTOL * max(1.0, abs(obj1))
-    )
-    keep, status, solver, obj = sol1, st1, "clarabel", obj1
-    check_solver, check_status, check_obj = "piqp", st2, obj2
-    if st1 == "unknown" and st2 == "optimal":
-        keep, status, solver, obj = sol2, st2, "piqp", obj2
-        check_solver, check_status, check_obj = "clarabel", st1, obj1
-    elif st1 == st2 == "optimal" and not agree and _worst_residual(sol2) < _worst_residual(sol1):
-        keep, status, solver, obj = sol2, st2, "piqp", obj2
-        check_solver, check_status, check_obj = "clarabel", st1, obj1
+    candidates = []
+    for solver, settings in (("clarabel", CLARABEL_SETTINGS), ("piqp", PIQP_SETTINGS)):
+        sol, status = _solve(problem, solver, settings)
+        obj = objective(record, sol.x) if status == "optimal" else math.nan
+        candidates.append(Candidate(solver, status, sol if status == "optimal" else None, obj))
+    return combine(record.name, *candidates)
+
+
+def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
+    """The reference made of two solvers' answers (see :func:`settle`)."""
+    agreement = relative_difference(first.objective, second.objective)
+    agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
+    keep, other, status = settle(first, second)
     if not agree:
         log.warning(
-            "reference of '%s': %s says %s (f = %.10g), %s says %s (f = %.10g); keeping %s",
-            record.name, "clarabel", st1, obj1, "piqp", st2, obj2, solver,
+            "reference of '%s': %s says %s (f = %.10g, KKT %.3g), %s says %s (f = %.10g, KKT %.3g); "
+            "keeping %s's answer (%s)",
+            name, first.solver, first.status, first.objective, first.kkt,
+            second.solver, second.status, second.objective, second.kkt, keep.solver, status,
         )
     ref = ReferenceSolution(
         status=status,
-        objective=obj,
-        solver=solver,
-        check_solver=check_solver,
-        check_status=check_status,
-        check_objective=check_obj,
+        objective=keep.objective if status == "optimal" else math.nan,
+        solver=keep.solver,
+        check_solver=other.solver,
+        check_status=other.status,
+        check_objective=other.objective,
         agree=agree,
-        name=record.name,
+        agreement=agreement,
+        kkt=keep.kkt,
+        check_kkt=other.kkt,
+        name=name,
     )
     if status == "optimal":
-        ref.x = np.asarray(keep.x, dtype=np.float64)
-        ref.y = None if keep.y is None else np.asarray(keep.y, dtype=np.float64)
-        ref.z = None if keep.z is None else np.asarray(keep.z, dtype=np.float64)
-        ref.z_box = None if keep.z_box is None else np.asarray(keep.z_box, dtype=np.float64)
+        sol = keep.solution
+        ref.x = np.asarray(sol.x, dtype=np.float64)
+        ref.y = None if sol.y is None else np.asarray(sol.y, dtype=np.float64)
+        ref.z = None if sol.z is None else np.asarray(sol.z, dtype=np.float64)
+        ref.z_box = None if sol.z_box is None else np.asarray(sol.z_box, dtype=np.float64)
     return ref
 
 
@@ -257,6 +326,7 @@ def cache_path(problem_set: ProblemSet) -> Path | None:
 
 
 _VEC_KEYS = ("x", "y", "z", "z_box")
+_FLOAT_KEYS = ("agreement", "kkt", "check_kkt")
 
 
 def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
@@ -274,6 +344,7 @@ def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
         "check_status": pa.array([r.check_status for r in refs], type=pa.string()),
         "check_objective": pa.array([r.check_objective for r in refs], type=pa.float64()),
         "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
+        **{k: pa.array([getattr(r, k) for r in refs], type=pa.float64()) for k in _FLOAT_KEYS},
     }
     table = pa.table(cols).replace_schema_metadata(
         {"qpbench_set_sha256": sha, "qpbench_reference_version": REFERENCE_VERSION}
@@ -310,6 +381,7 @@ def _read_cache(path: Path, sha: str, names: list[str]) -> list[ReferenceSolutio
                 check_objective=math.nan if r["check_objective"] is None else r["check_objective"],
                 agree=r["agree"],
                 name=r["name"],
+                **{k: math.nan if r[k] is None else r[k] for k in _FLOAT_KEYS},
                 **vec,
             )
         )

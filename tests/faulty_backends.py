@@ -195,6 +195,92 @@ class LastNative(Backend):
             return sol
 
 
+# ---------------------------------------------------------------- order, violation, lazy answers
+
+#: ``(backend name, q[-1] of the problem)`` of every solve of the ``faulty:order-*`` backends, in call order.
+CALLS: list = []
+
+
+class _Recorder(Backend):
+    """Records its solves in :data:`CALLS`; answers ``x = 0`` with status ``max_iter`` (not found).
+
+    On :func:`tick_records` problems ``x = 0`` satisfies ``G x <= h`` and the
+    box, and violates ``A x = b`` by exactly ``|b|``.
+    """
+
+    family = "test order"
+
+    def _solve(self, problem, warm_start):
+        CALLS.append((self.name, float(problem.q[-1])))
+        sol = BackendSolution(problem=problem)
+        sol.x = np.zeros(problem.q.shape[0])
+        sol.status = "max_iter"
+        return sol
+
+
+@register
+class OrderA(_Recorder):
+    name = "faulty:order-a"
+
+
+@register
+class OrderB(_Recorder):
+    name = "faulty:order-b"
+
+
+@register
+class OrderC(_Recorder):
+    name = "faulty:order-c"
+
+
+@register
+class OutsideBox(Backend):
+    """Answers ``x = 3`` everywhere (status ``optimal``): outside the box ``[-2, 2]`` of :func:`tick_records`."""
+
+    name = "faulty:outside-box"
+    family = "test violation"
+
+    def _solve(self, problem, warm_start):
+        sol = exact_solution(problem)
+        sol.x = 3.0 * np.ones(problem.q.shape[0])
+        return sol
+
+
+class LazySolution(BackendSolution):
+    """A solution whose ``y`` is built on first read, slowly (``LAZY_SECONDS``)."""
+
+    @property
+    def y(self):
+        d = self.__dict__
+        if "_y" not in d:
+            time.sleep(LAZY_SECONDS)
+            d["_y"] = np.zeros(0)
+        return d["_y"]
+
+    @y.setter
+    def y(self, value):
+        if value is not None:
+            self.__dict__["_y"] = value
+
+
+#: How long building :class:`LazySolution`'s ``y`` takes, in [s].
+LAZY_SECONDS = 0.05
+
+
+@register
+class LazyDuals(Backend):
+    """Returns at once a :class:`LazySolution` whose duals cost :data:`LAZY_SECONDS` on first read."""
+
+    name = "faulty:lazy-duals"
+    family = "test timing"
+
+    def _solve(self, problem, warm_start):
+        sol = LazySolution(problem=problem)
+        sol.x = np.zeros(problem.q.shape[0])
+        sol.status = "max_iter"
+        return sol
+
+
 # ---------------------------------------------------------------- problem sets for the harness tests
 
 

@@ -303,3 +303,138 @@ def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys,
     bad = tmp_path / "bad.csv"
     assert bench(two_scenarios, "--backends", "clarabel", "--out", bad, "--set", "osqp.rho=0.1") == 2
     assert "osqp.rho" in capsys.readouterr().err and not bad.exists()
+
+
+# ------------------------------------------------------------ backend order, violation, summary, timing
+
+ORDER = ["faulty:order-a", "faulty:order-b", "faulty:order-c"]
+
+
+def _calls() -> list:
+    """The call log of the ``faulty:order-*`` backends registered now (a ``--plugin`` run loads its own copy)."""
+    import sys
+
+    from qpbench.backends import _registry
+
+    return sys.modules[_registry()["faulty:order-a"].__module__].CALLS
+
+
+def _order_run(pset, out, **kw):
+    from qpbench.harness.bench import BenchConfig, run_bench
+    from qpbench.reference import reference_solutions
+
+    refs = reference_solutions(pset)
+    _calls().clear()
+    config = BenchConfig(backends=list(ORDER), isolate="never", warmup=False, **kw)
+    return run_bench(pset, config, out, references=refs), refs
+
+
+def test_backend_order_is_drawn_per_problem_recorded_and_followed(two_scenarios, tmp_path):
+    from qpbench.formats import load_problems
+    from qpbench.harness.bench import backend_order
+
+    pset = load_problems(two_scenarios)
+    _order_run(pset, tmp_path / "o.csv")
+    rows = read(tmp_path / "o.csv")
+    by_problem = {}
+    for r in rows:
+        by_problem.setdefault(r["problem"], {})[r["backend"]] = int(r["position"])
+        assert r["order_seed"] == "0"
+    orders = set()
+    for problem, positions in by_problem.items():
+        assert sorted(positions.values()) == [0, 1, 2]
+        order = sorted(positions, key=positions.get)
+        assert order == backend_order(problem, ORDER, 0)
+        orders.add(tuple(order))
+    # the first place moves between backends across problems
+    assert len({o[0] for o in orders}) > 1
+    # the solves happened in the recorded order: sequences in tick order, each problem's backends in a row
+    seqs = sequences(pset.records, "sequential")
+    expected = []
+    for seq in seqs:
+        for i in seq:
+            rec = pset.records[i]
+            expected += [(b, float(rec.tick)) for b in backend_order(rec.name, ORDER, 0)]
+    assert _calls() == expected
+    # another seed, another order; the order does not depend on how the list is given
+    assert backend_order("wall/tick-0001", ORDER, 0) == backend_order("wall/tick-0001", ORDER[::-1], 0)
+    assert any(backend_order(p, ORDER, 1) != backend_order(p, ORDER, 0) for p in by_problem)
+
+
+def test_resume_reproduces_the_order_and_refuses_another_seed(two_scenarios, tmp_path, capsys):
+    full, cut = tmp_path / "full.csv", tmp_path / "cut.csv"
+    # x = 0 is not optimal where the reference is: failed solves, exit 1
+    assert bench(two_scenarios, "--backends", ",".join(ORDER), "--out", full, "--seed", "5") == 1
+    lines = full.read_bytes().split(b"\n")
+    cut.write_bytes(b"\n".join(lines[:12]) + b"\n" + lines[12][:9])
+    assert bench(two_scenarios, "--backends", ",".join(ORDER), "--out", cut, "--resume") == 2
+    assert "seed 5" in capsys.readouterr().err
+    assert bench(two_scenarios, "--backends", ",".join(ORDER), "--out", cut, "--resume", "--seed", "5") == 1
+    pos = lambda rows: sorted((r["problem"], r["backend"], r["position"], r["order_seed"]) for r in rows)  # noqa: E731
+    assert pos(read(cut)) == pos(read(full))
+    assert {r["order_seed"] for r in read(cut)} == {"5"}
+
+
+def test_violation_columns_for_answers_found_or_not(two_scenarios, tmp_path):
+    from qpbench.formats import load_problems
+
+    out = tmp_path / "v.csv"
+    assert bench(two_scenarios, "--backends", "faulty:order-a,faulty:outside-box", "--out", out) == 1
+    problems = {r.name: r.problem for r in load_problems(two_scenarios).records}
+    for r in read(out):
+        p = problems[r["problem"]]
+        if r["backend"] == "faulty:order-a":  # x = 0, not found: only the equality is violated, by |b|
+            assert r["found"] == "False" and r["primal_residual"] == "inf"
+            assert float(r["violation_eq"]) == pytest.approx(float(np.max(np.abs(p.b))), rel=1e-15)
+            assert float(r["violation_ineq"]) == 0.0 and float(r["violation_box"]) == 0.0
+            assert float(r["constraint_violation"]) == float(r["violation_eq"])
+        else:  # x = 3, "optimal": 1 outside the box [-2, 2]
+            x = 3.0 * np.ones(p.q.shape[0])
+            assert float(r["violation_box"]) == pytest.approx(1.0, rel=1e-15)
+            assert float(r["violation_ineq"]) == pytest.approx(max(0.0, float(np.max(p.G @ x - p.h))), rel=1e-12)
+            assert float(r["violation_eq"]) == pytest.approx(float(np.max(np.abs(p.A @ x - p.b))), rel=1e-12)
+            assert float(r["constraint_violation"]) == pytest.approx(float(r["primal_residual"]), rel=1e-12)
+        assert float(r["reference_agreement"]) <= 1e-7
+
+
+def test_closing_summary_counts_failures_and_unsuccessful_solves_by_backend(two_scenarios, tmp_path, capsys):
+    out = tmp_path / "s.csv"
+    code = bench(two_scenarios, "--backends", "clarabel,pinv,stateful:count-fail2", "--out", out)
+    assert code == 1
+    text = capsys.readouterr().out
+    rows = read(out)
+    pinv_bad = sum(1 for r in rows if r["backend"] == "pinv" and r["success"] == "False")
+    assert pinv_bad > 0  # pinv ignores the objective: its answers are off the optimum
+    assert "2 failed solves (stateful:count-fail2 2)" in text
+    assert f"pinv {pinv_bad}" in text.splitlines()[0]
+    table = {line.split()[0]: line for line in text.splitlines()[1:] if line.strip()}
+    assert table["backend"].split()[:3] == ["backend", "rows", "success"]
+    assert table["stateful:count-fail2"].rstrip().endswith("2 (error 2)")
+    pinv = table["pinv"].split()
+    assert float(pinv[2]) == pytest.approx(100.0 * (10 - pinv_bad) / 10, abs=0.05)
+    viol = max(float(r["constraint_violation"]) for r in rows if r["backend"] == "pinv")
+    assert pinv[5] == f"{viol:.3g}"
+    clarabel = table["clarabel"].split()
+    assert clarabel[1] == "10" and clarabel[2] == "100.0" and clarabel[-1] == "0"
+    # -q hides both
+    assert bench(two_scenarios, "--backends", "clarabel", "--out", tmp_path / "q.csv", "-q") == 0
+    assert capsys.readouterr().out == ""
+
+
+def test_deferred_parts_of_the_answer_are_inside_the_timed_region(two_scenarios, tmp_path):
+    from qpbench.formats import load_problems
+    from qpbench.harness.timing import timed_call
+
+    problem = load_problems(two_scenarios).records[0].problem
+    sol, ns = timed_call(get_backend_instance("faulty:lazy-duals"), problem)
+    assert "_y" in sol.__dict__  # built by the timed call
+    assert ns >= fb.LAZY_SECONDS * 1e9
+    out = tmp_path / "lazy.csv"
+    assert bench(two_scenarios, "--backends", "faulty:lazy-duals", "--out", out, "--mode", "independent") == 1
+    assert all(float(r["wall_time_min_s"]) >= fb.LAZY_SECONDS for r in read(out))
+
+
+def get_backend_instance(name):
+    from qpbench.backends import get_backend
+
+    return get_backend(name)

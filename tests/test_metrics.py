@@ -113,3 +113,40 @@ def test_success_rule_with_infeasible_reference(random_qp, ref_status):
     sol = _solve(p)
     wrong = BackendSolution(p, found=True, status="optimal", x=sol.x, y=sol.y, z=sol.z, z_box=sol.z_box)
     assert evaluate(rec, wrong, ref, TOL)["success"] is False
+
+
+def test_constraint_violation_of_a_deliberately_infeasible_point():
+    from qpbench.metrics import constraint_violation
+
+    # x = (3, -2) on: x0 <= 1, x1 <= 1 (G x <= h); x0 + x1 = 0 (A x = b); -1 <= x <= (2, 0.5)
+    p = qpsolvers.Problem(
+        np.eye(2), np.zeros(2), G=np.eye(2), h=np.ones(2), A=np.array([[1.0, 1.0]]), b=np.array([0.0]),
+        lb=np.array([-1.0, -1.0]), ub=np.array([2.0, 0.5]),
+    )
+    x = np.array([3.0, -2.0])
+    v = constraint_violation(p, x)
+    # G x - h = (2, -3); A x - b = 1; lb - x = (-4, 1), x - ub = (1, -2.5)
+    assert v == {"violation_ineq": 2.0, "violation_eq": 1.0, "violation_box": 1.0, "constraint_violation": 2.0}
+    # in evaluate, whether found or not; equal to qpsolvers' primal residual of a found solution
+    for found in (False, True):
+        m = evaluate(ProblemRecord(p, "bad"), qpsolvers.Solution(p, found=found, x=x), None, TOL)
+        assert m["constraint_violation"] == 2.0 and m["violation_eq"] == 1.0
+    assert qpsolvers.Solution(p, found=True, x=x).primal_residual() == 2.0
+    # a feasible point violates nothing; no x: NaN; a problem without constraints: 0
+    assert constraint_violation(p, np.array([0.5, -0.5]))["constraint_violation"] == 0.0
+    assert all(math.isnan(val) for val in constraint_violation(p, None).values())
+    assert constraint_violation(qpsolvers.Problem(np.eye(2), np.zeros(2)), x)["constraint_violation"] == 0.0
+    # infinite bounds are no constraint
+    p_inf = qpsolvers.Problem(np.eye(2), np.zeros(2), lb=np.array([-np.inf, 0.0]), ub=np.array([np.inf, np.inf]))
+    assert constraint_violation(p_inf, x)["violation_box"] == 2.0
+
+
+def test_constraint_violation_equals_qpsolvers_primal_residual(random_qp):
+    from qpbench.metrics import constraint_violation
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        p = random_qp()
+        x = 3 * rng.standard_normal(p.q.shape[0])
+        expected = qpsolvers.Solution(p, found=True, x=x).primal_residual()
+        assert constraint_violation(p, x)["constraint_violation"] == pytest.approx(expected, rel=1e-14, abs=1e-15)

@@ -198,3 +198,59 @@ def test_reference_of_loaded_record_matches_direct(mm_dir):
     ref = reference_solution(rec)
     assert ref.solver in ("clarabel", "piqp") and ref.check_solver in ("clarabel", "piqp")
     assert ref.check_status == "optimal"
+
+
+def _candidates(problem, record):
+    from qpbench.metrics import objective
+    from qpbench.reference import Candidate
+
+    good = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_feas=1e-10, tol_gap_rel=1e-10)
+    bad = qpsolvers.Solution(problem, found=True, x=good.x + 1e-3, y=good.y, z=good.z, z_box=good.z_box)
+    return (
+        lambda name: Candidate(name, "optimal", good, objective(record, good.x)),
+        lambda name: Candidate(name, "optimal", bad, objective(record, bad.x)),
+    )
+
+
+def test_disagreeing_references_are_settled_by_kkt_residuals_not_by_name(make_record):
+    from qpbench.reference import Candidate, combine
+
+    record = make_record("r")
+    good, bad = _candidates(record.problem, record)
+    for first, second in (("clarabel", "piqp"), ("piqp", "clarabel")):
+        # the worse answer comes first, under either name
+        ref = combine("r", bad(first), good(second))
+        assert ref.solver == second and ref.check_solver == first
+        assert ref.objective == good(second).objective and ref.check_objective == bad(first).objective
+        assert ref.agree is False and ref.kkt < ref.check_kkt
+        expected = abs(good(second).objective - bad(first).objective) / max(
+            1.0, abs(good(second).objective), abs(bad(first).objective))
+        assert ref.agreement == pytest.approx(expected, rel=1e-12) and ref.agreement > 1e-7
+        np.testing.assert_array_equal(ref.x, good(second).solution.x)
+    # agreeing answers: agreement tiny, still the smaller residuals kept
+    ref = combine("r", good("clarabel"), good("piqp"))
+    assert ref.agree is True and ref.agreement == 0.0
+    # an optimal answer that satisfies the KKT conditions refutes an infeasibility claim ...
+    ref = combine("r", Candidate("clarabel", "primal_infeasible", None), good("piqp"))
+    assert ref.status == "optimal" and ref.solver == "piqp" and ref.agree is False
+    assert math.isnan(ref.agreement)
+    # ... one that does not, does not
+    ref = combine("r", bad("clarabel"), Candidate("piqp", "primal_infeasible", None))
+    assert ref.status == "primal_infeasible" and ref.solver == "piqp" and ref.x is None
+    # no verdict vs a verdict: the verdict; two different verdicts: unknown
+    ref = combine("r", Candidate("clarabel", "unknown", None), Candidate("piqp", "dual_infeasible", None))
+    assert ref.status == "dual_infeasible" and ref.solver == "piqp"
+    ref = combine("r", Candidate("clarabel", "primal_infeasible", None), Candidate("piqp", "dual_infeasible", None))
+    assert ref.status == "unknown"
+
+
+def test_cache_keeps_agreement_and_both_residuals(make_record, tmp_path):
+    records = [make_record(f"p{i}", tick=i) for i in range(3)]
+    folder = write_problem_set(tmp_path / "set", records, generator={"name": "test"})
+    pset = load_problems(folder)
+    refs = reference_solutions(pset)
+    assert cache_path(pset).exists()
+    again = reference_solutions(load_problems(folder))
+    for a, b in zip(refs, again):
+        assert a.agreement == b.agreement and a.kkt == b.kkt and a.check_kkt == b.check_kkt
+        assert a.agreement <= 1e-7 and a.kkt <= a.check_kkt

@@ -160,7 +160,7 @@ def qpbenchmark_ratios(df: pd.DataFrame, metric_column: str, not_found: float, f
         "settings": df["profile"].to_numpy(),
         # qpbenchmark's "found"; for runtime a right infeasibility report also counts as answered
         "found": df["found"].to_numpy(bool) | (
-            (metric_column == "wall_time_median_s")
+            (metric_column == "wall_time_min_s")
             & (df["status"] == df["reference_status"]).to_numpy()
             & (df["reference_status"] == "primal_infeasible").to_numpy()),
         "metric": np.abs(pd.to_numeric(df[metric_column]).to_numpy(float)),
@@ -208,7 +208,7 @@ def test_ratio_table_equals_qpbenchmark(report_dir):
     shown = {r[0]: r for r in table["rows"]}
     assert set(shown) == set(BACKENDS)
     columns = {
-        "runtime": ("wall_time_median_s", tol.runtime, None),
+        "runtime": ("wall_time_min_s", tol.runtime, None),
         "primal residual": ("primal_residual", tol.primal, tol.primal),
         "dual residual": ("dual_residual", tol.dual, tol.dual),
         "duality gap": ("duality_gap", tol.gap, tol.gap),
@@ -223,7 +223,7 @@ def test_ratio_table_equals_qpbenchmark(report_dir):
             assert_close(shown[b][j], expected[b], f"{name} ratio of {b}")
     feasible = bench[bench["reference_status"] == "optimal"]
     assert len(feasible) < len(bench)
-    expected = qpbenchmark_ratios(feasible, "wall_time_median_s", tol.runtime, None)
+    expected = qpbenchmark_ratios(feasible, "wall_time_min_s", tol.runtime, None)
     j = table["header"].index("runtime (feasible)")
     for b in BACKENDS:
         assert_close(shown[b][j], expected[b], f"feasible runtime ratio of {b}")
@@ -247,7 +247,7 @@ def test_absolute_table_recomputed(report_dir):
         right = ((rows["status"] == "primal_infeasible") & (rows["reference_status"] == "primal_infeasible")).to_numpy()
         if b == "beta":
             assert right.any()  # the case is exercised
-        t = np.where(found | right, rows["wall_time_median_s"], tol.runtime)
+        t = np.where(found | right, rows["wall_time_min_s"], tol.runtime)
         assert_close(shown[b][1], shgeom(t, 10.0) * 1e6, f"runtime of {b}")
         ok = (rows["reference_status"] == "optimal").to_numpy()
         assert_close(shown[b][2], shgeom(t[ok], 10.0) * 1e6, f"feasible runtime of {b}")
@@ -255,7 +255,7 @@ def test_absolute_table_recomputed(report_dir):
         assert_close(shown[b][3], shgeom(p, 10.0), f"primal of {b}")
         g = np.maximum(np.where(found, np.abs(rows["optimality_gap"]), tol.gap), tol.gap)
         assert_close(shown[b][6], shgeom(g, 10.0), f"optimality gap of {b}")
-        overhead = (rows["wall_time_median_s"] - rows["solver_time_s"]).dropna()
+        overhead = (rows["wall_time_min_s"] - rows["solver_time_s"]).dropna()
         assert_close(shown[b][7], overhead.median() * 1e6 if len(overhead) else math.nan, f"overhead of {b}")
 
 
@@ -271,7 +271,7 @@ def test_scenario_tables_recomputed(report_dir):
         sel = bench["scenario"].isna() if scenario is None else bench["scenario"] == scenario
         for b in BACKENDS:
             rows = bench[sel & (bench["backend"] == b)]
-            t = rows["wall_time_median_s"].to_numpy(float)
+            t = rows["wall_time_min_s"].to_numpy(float)
             assert int(shown[b][1]) == len(rows)
             assert_close(shown[b][2], 100 * rows["success"].mean(), "success")
             assert_close(shown[b][4], np.percentile(t, 50) * 1e6, "p50")
@@ -361,3 +361,109 @@ def test_import_has_no_side_effects():
             "assert not logging.getLogger('qpbench').handlers; print('ok')")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
+
+
+# ----------------------------------------------------------------- honest tables, duplicates
+
+
+def _honest_bench(rng: np.random.Generator) -> pd.DataFrame:
+    """``alpha`` finds everything in process; ``net`` never finds (the network); ``iso`` runs in a worker."""
+    rows = []
+    for k in range(20):
+        for backend in ("alpha", "net", "iso"):
+            found = backend != "net"
+            rows.append(dict(
+                problem=f"wall-{k:04d}", scenario="wall", tick=k, t=k * 0.01, backend=backend,
+                profile="default", mode="sequential", status="optimal" if found else "max_iter", found=found,
+                success=found, objective=1.0, reference_objective=1.0, reference_status="optimal",
+                reference_agreement=1e-12, optimality_gap=1e-9 if found else 0.3,
+                primal_residual=1e-9 if found else math.inf, dual_residual=1e-9 if found else math.inf,
+                duality_gap=1e-9 if found else math.inf,
+                constraint_violation=1e-9 if found else 0.01 * (k + 1),
+                wall_time_min_s=1e-5 * (1 + rng.random()), wall_time_median_s=2e-5, solver_time_s=None,
+                iterations=1, error="", isolated=backend == "iso", position=k % 3, order_seed=0, repeat=1,
+            ))
+    return pd.DataFrame(rows)
+
+
+def test_never_found_backend_is_not_the_best_and_isolated_rows_are_marked(tmp_path):
+    bench = _honest_bench(np.random.default_rng(1))
+    bench.to_csv(tmp_path / "b.csv", index=False)
+    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    md = (tmp_path / "out" / "report.md").read_text()
+    tabs = parse_tables(md)
+    ratios = next(t for t in tabs if t["caption"].startswith("Success rate and shifted"))
+    shown = {r[0]: r for r in ratios["rows"]}
+    assert set(shown) == {"alpha", "net", "iso \u2020"}  # the worker's rows are marked
+    for col in ("primal residual", "dual residual", "duality gap", "optimality gap"):
+        j = ratios["header"].index(col)
+        assert shown["net"][j] == "-", col  # not "1": it never found a solution
+        assert shown["alpha"][j] == "1" and shown["iso \u2020"][j] == "1"
+    assert shown["net"][ratios["header"].index("runtime")] != "-"  # its time is a time
+    absolute = next(t for t in tabs if t["caption"].startswith("Shifted geometric means, absolute"))
+    net = next(r for r in absolute["rows"] if r[0] == "net")
+    assert net[3:7] == ["-", "-", "-", "-"]
+    assert "A `-` in a residual or gap column: net never found a solution (0 rows with status optimal)" in md
+    assert "\u2020 solved in a worker process (iso 20 of 20 rows)" in md
+    scenario = next(t for t in tabs if t["headings"].get(4, "").startswith("Scenario wall"))
+    assert "iso \u2020" in {r[0] for r in scenario["rows"]}
+    # violation: per backend max and p99, and the sentence for the backend without a found solution
+    viol = next(t for t in tabs if t["caption"].startswith("Constraint violation"))
+    row = next(r for r in viol["rows"] if r[0] == "net")
+    v = 0.01 * np.arange(1, 21)
+    assert_close(row[viol["header"].index("max")], v.max(), "max violation")
+    assert_close(row[viol["header"].index("p99")], np.percentile(v, 99), "p99 violation")
+    assert re.search(r"net never found a solution \(0 of 20 rows\): its constraint violation is the only "
+                     r"accuracy figure it has: max 0\.2, p99 0\.1981", md)
+
+
+def test_report_refuses_duplicate_rows_unless_told_which_to_keep(tmp_path, capsys):
+    bench = _honest_bench(np.random.default_rng(2))
+    first, last = bench.copy(), bench[bench["problem"] < "wall-0010"].copy()
+    last["success"] = False  # tells the two files' rows apart
+    first.to_csv(tmp_path / "first.csv", index=False)
+    last.to_csv(tmp_path / "last.csv", index=False)
+    files = [str(tmp_path / "first.csv"), str(tmp_path / "last.csv")]
+    out = tmp_path / "out"
+    assert main(["report", *files, "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "first.csv" in err and "last.csv" in err and "problem=wall-0000" in err and "backend=alpha" in err
+    assert not (out / "report.md").exists()
+
+    def success(prefer):
+        target = tmp_path / prefer
+        assert main(["report", *files, "--out", str(target), "--no-plots", "--prefer", prefer]) == 0
+        table = next(t for t in parse_tables((target / "report.md").read_text())
+                     if t["caption"].startswith("Success rate and shifted"))
+        row = next(r for r in table["rows"] if r[0] == "alpha")
+        return int(row[1]), float(row[2])
+
+    assert success("first") == (20, 100.0)
+    assert success("last") == (20, 50.0)  # 10 rows of last.csv (success false) over 10 of first.csv
+
+
+def test_report_refuses_mixed_repeat_counts_unless_told(tmp_path, capsys):
+    bench = _honest_bench(np.random.default_rng(3))
+    one, three = bench[bench["tick"] < 10].copy(), bench[bench["tick"] >= 10].copy()
+    three["repeat"] = 3
+    three.loc[three["backend"] == "net", "repeat"] = 1  # a failed solve is not repeated: not a mix
+    one.loc[one["backend"] == "net", "repeat"] = 1
+    one.to_csv(tmp_path / "one.csv", index=False)
+    three.to_csv(tmp_path / "three.csv", index=False)
+    files = [str(tmp_path / "one.csv"), str(tmp_path / "three.csv")]
+    assert main(["report", *files, "--out", str(tmp_path / "o"), "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert "alpha" in err and "one.csv: 1" in err and "three.csv: 3" in err and "net" not in err
+    assert main(["report", *files, "--out", str(tmp_path / "o"), "--no-plots", "--prefer", "last"]) == 0
+    md = (tmp_path / "o" / "report.md").read_text()
+    assert "Note: alpha (default, sequential) mixes rows timed with different --repeat" in md
+
+
+def test_backends_with_different_repeat_counts_in_one_table_are_noted(tmp_path):
+    bench = _honest_bench(np.random.default_rng(4))
+    bench.loc[bench["backend"] == "alpha", "repeat"] = 3
+    bench.to_csv(tmp_path / "b.csv", index=False)
+    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    md = (tmp_path / "o" / "report.md").read_text()
+    assert "different --repeat counts in the tables of default, sequential (alpha 3, iso 1, net 1)" in md

@@ -6,6 +6,7 @@ import argparse
 import logging
 import sys
 
+from ..harness.bench import DEFAULT_SEED
 from ..profiles import PROFILES
 
 HELP = "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -26,6 +27,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="CSV file of results (rows appended as they are produced)")
     parser.add_argument("--profile", default="default", choices=sorted(PROFILES), help="settings profile (default: default)")
     parser.add_argument("--repeat", type=int, default=1, help="timed solves per problem; rows give min and median (default 1)")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=DEFAULT_SEED,
+        help=f"seed of the per-problem backend order, recorded in each row (default {DEFAULT_SEED}); "
+        "--resume needs the seed of the rows it continues",
+    )
     parser.add_argument(
         "--mode",
         default="sequential",
@@ -98,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         isolate=args.isolate,
         warmup=not args.no_warmup,
         plugins=plugins,
+        seed=args.seed,
     )
     config.validate()
     problem_set = load_problems(args.problems)
@@ -106,4 +115,5 @@ def run(args: argparse.Namespace) -> int:
     summary = run_bench(problem_set, config, args.out, force=args.force, resume=args.resume, progress=progress)
     if not args.quiet:
         print(f"bench: {summary.line()}")
+        print(summary.table())
     return summary.exit_code

@@ -17,11 +17,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="folder of report.md and plots/")
     parser.add_argument("--force", action="store_true", help="replace an existing report.md")
     parser.add_argument("--no-plots", action="store_true", help="write report.md only")
+    parser.add_argument(
+        "--prefer",
+        choices=("first", "last"),
+        default=None,
+        help="a (problem, scenario, backend, profile, mode) row in several bench CSVs is an error, and so "
+        "is a backend timed with different --repeat counts in one table; first/last: keep the row of the "
+        "first/last file given, and report mixed repeat counts with a note",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from ..report import write_report
 
-    path = write_report(args.results, args.out, force=args.force, plots=not args.no_plots)
+    path = write_report(args.results, args.out, force=args.force, plots=not args.no_plots, prefer=args.prefer)
     log.info("wrote %s", path)
     return 0

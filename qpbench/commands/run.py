@@ -8,7 +8,8 @@ With no arguments, on a fresh clone:
    scenario's 20 s, ``paper`` formulation, solved with a QP backend);
 2. bench: every available backend on every problem of each set (2,000 per
    scenario, every 10th tick; ``--bench-every K`` keeps every K-th for quick
-   runs), sequential mode, default profile, one CSV per scenario in
+   runs), sequential mode, default profile, each problem timed 3 times
+   (``--repeat``; the report shows the minimum), one CSV per scenario in
    ``results/bench/``;
 3. closed loop: every shipped scenario with every available backend in the
    loop, ``results/closed_loop.csv`` and ``results/logs/``. No backend is
@@ -74,6 +75,8 @@ BENCH_EVERY = 1
 #: machine) get through the infeasible start (0.13 s) and the transient to
 #: 2-4 s, cvxpy (0.3) to about 1.5 s, the converged RNN (0.02-0.06) to 0.1-0.3 s.
 RUN_BUDGET_S = 5.0
+#: Timed solves per bench problem (the report shows the minimum: warm caches).
+REPEAT = 3
 #: Backends that may regenerate a missing problem set, first available wins.
 DUMP_BACKENDS = ("qpsolvers:daqp", "clarabel", "proxqp", "qpsolvers:quadprog", "osqp")
 
@@ -100,6 +103,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "that spends it stops between ticks; its row says how far it got (simulated_s) and "
                              "its verdict is of what it simulated. 0: no budget, every run simulates its full "
                              "duration (slow backends then take minutes per scenario)")
+    parser.add_argument("--repeat", type=int, default=REPEAT, metavar="R",
+                        help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="closed-loop runs in parallel worker processes (default: 1)")
     group = parser.add_mutually_exclusive_group()
@@ -225,6 +230,8 @@ def run(args: argparse.Namespace) -> int:
     if not (args.run_budget >= 0 and math.isfinite(args.run_budget)):
         raise ParamError(f"must be a number of seconds >= 0 (0: no budget), got {args.run_budget}", key="--run-budget")
     run_budget = args.run_budget or None
+    if args.repeat < 1:
+        raise ParamError(f"must be an integer >= 1, got {args.repeat}", key="--repeat")
     out = Path(args.out)
     problems = Path(args.problems)
     scenarios = resolve_scenarios(args.scenarios)
@@ -253,13 +260,15 @@ def run(args: argparse.Namespace) -> int:
             subset, refs = _bench_subset(load_problems(problems / s), args.duration, args.bench_every)
             summary = run_bench(
                 subset,
-                BenchConfig(backends=list(backends), profile="default", mode="sequential"),
+                BenchConfig(backends=list(backends), profile="default", mode="sequential", repeat=args.repeat),
                 bench_dir / f"{s}.csv",
                 resume=args.resume,
                 force=not args.resume,
                 references=refs,
             )
             log.info("bench %s: %s", s, summary.line())
+            for line in summary.table().splitlines():
+                log.info("bench %s: %s", s, line)
             failures += summary.failures
             bar.update(1)
 
@@ -292,6 +301,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{r.scenario}/{r.backend}": str(r.verdict) for r in table.itertuples()
                 if str(r.verdict) not in ("ok", "nan", "")
             },
+            "bench_repeat": args.repeat,
             "problems": str(problems),
             "wall_time_s": None,
         }

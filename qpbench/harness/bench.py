@@ -15,6 +15,18 @@ sequences. After a failure that leaves the state suspect (``error``,
 row says ``state_reset = True``. ``mode="independent"`` resets before every
 problem.
 
+Order of the backends: each problem is solved by every backend in an order
+drawn for that problem (:func:`backend_order`: a permutation of the sorted
+backend names from a generator seeded with ``(seed, SHA-256 of the problem
+name)``). A backend that ran first on one problem runs later on another, so
+the cold caches the harness leaves between two problems (metrics, CSV write,
+``fsync``) do not always fall on the same backend. The rows record the
+``position`` (0 = first) and the ``order_seed``; the order depends only on the
+seed, the problem's name and the set of backends, so a resumed run solves in
+the order the interrupted one did. All backends of a problem are solved before
+any of its rows is made (metrics and references are outside the sequence of
+solves).
+
 Resuming (``resume=True``): rows already in the CSV are kept and their keys
 ``(problem, backend, profile)`` skipped. In sequential mode a backend that
 still has problems left in a sequence is brought back to the state it had by
@@ -51,6 +63,8 @@ from .results import (
 log = logging.getLogger("qpbench.harness")
 
 MODES = ("sequential", "independent")
+#: Seed of the per-problem backend order unless ``--seed`` says otherwise.
+DEFAULT_SEED = 0
 ISOLATE = ("auto", "always", "never")
 
 
@@ -70,6 +84,7 @@ class BenchConfig:
         plugins: Plugin modules (imported here and in workers).
         settings: Extra solver settings passed to every backend.
         backend_settings: Extra settings per backend name (over ``settings``).
+        seed: Seed of the per-problem backend order (:func:`backend_order`).
     """
 
     backends: list[str]
@@ -82,6 +97,7 @@ class BenchConfig:
     plugins: list[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
     backend_settings: dict = field(default_factory=dict)
+    seed: int = DEFAULT_SEED
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -92,6 +108,8 @@ class BenchConfig:
             raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
         if self.time_limit is not None and not (self.time_limit > 0 and math.isfinite(self.time_limit)):
             raise ParamError(f"time limit must be a positive number of seconds, got {self.time_limit}", key="time-limit")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ParamError(f"seed must be an integer >= 0, got {self.seed!r}", key="seed")
         if not self.backends:
             raise ParamError("no backend to run", key="backends")
         if len(set(self.backends)) != len(self.backends):
@@ -99,42 +117,108 @@ class BenchConfig:
 
 
 @dataclass
+class BackendStats:
+    """One backend's rows in a bench run (a line of the closing table).
+
+    Attributes:
+        rows: Rows of the backend.
+        successes: Rows with ``success`` true.
+        times_s: ``wall_time_min_s`` of the rows that have one, in [s].
+        violations: ``constraint_violation`` of the rows that have one (an ``x``).
+        failures: Failed solves (:func:`is_failure`) by status.
+        isolated: Rows solved in a worker process.
+    """
+
+    rows: int = 0
+    successes: int = 0
+    times_s: list = field(default_factory=list)
+    violations: list = field(default_factory=list)
+    failures: dict = field(default_factory=dict)
+    isolated: int = 0
+
+    @property
+    def n_failures(self) -> int:
+        return sum(self.failures.values())
+
+    @property
+    def unsuccessful(self) -> int:
+        return self.rows - self.successes
+
+    def add(self, row: dict) -> None:
+        """Count one row (a new row's values or a resumed row's strings)."""
+        self.rows += 1
+        if _truth(row.get("success")):
+            self.successes += 1
+        if _truth(row.get("isolated")):
+            self.isolated += 1
+        t = _float(row.get("wall_time_min_s"))
+        if t is not None and math.isfinite(t):
+            self.times_s.append(t)
+        v = _float(row.get("constraint_violation"))
+        if v is not None and not math.isnan(v):
+            self.violations.append(v)
+        status = str(row.get("status"))
+        if is_failure(status, row.get("reference_status") or None):
+            self.failures[status] = self.failures.get(status, 0) + 1
+
+
+@dataclass
 class BenchSummary:
-    """What a bench run did (also the data of the closing summary line).
+    """What a bench run did (the data of the closing line and table).
 
     Attributes:
         rows: Rows of this run's keys in the CSV (resumed and new).
         new_rows: Rows written by this invocation.
         failures: Rows counted as failed solves (see :func:`is_failure`).
         statuses: Count of each status over ``rows``.
+        backends: Per backend (in the run's order), its :class:`BackendStats`.
         elapsed_s: Duration of this invocation in [s].
         timed_s: Sum of the reported wall times (min over repeats) of the new rows in [s].
         overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s``
             (our timed region minus what the solver reports), NaN if no backend reports a time.
         overhead_rows: Rows with both times.
         isolated: Backends that ran in a worker process.
+        seed: Seed of the backend order.
     """
 
     rows: int = 0
     new_rows: int = 0
     failures: int = 0
     statuses: dict = field(default_factory=dict)
+    backends: dict = field(default_factory=dict)
     elapsed_s: float = 0.0
     timed_s: float = 0.0
     overhead_median_s: float = math.nan
     overhead_rows: int = 0
     isolated: list = field(default_factory=list)
+    seed: int = DEFAULT_SEED
 
     @property
     def exit_code(self) -> int:
         return 1 if self.failures else 0
 
+    @property
+    def failures_by_backend(self) -> dict:
+        """Failed solves per backend (only backends with some)."""
+        return {b: s.n_failures for b, s in self.backends.items() if s.n_failures}
+
+    @property
+    def unsuccessful_by_backend(self) -> dict:
+        """Rows without ``success`` per backend (only backends with some)."""
+        return {b: s.unsuccessful for b, s in self.backends.items() if s.unsuccessful}
+
     def line(self) -> str:
-        statuses = ", ".join(f"{k} {v}" for k, v in sorted(self.statuses.items()))
+        """The closing line: rows, failed and unsuccessful solves by backend, times."""
+
+        def by_backend(counts: dict) -> str:
+            return " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
+
+        unsuccessful = self.unsuccessful_by_backend
         text = (
-            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s, "
-            f"{self.failures} failed solves [{statuses}]; "
-            f"timed solves {self.timed_s:.3f} s"
+            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; "
+            f"{self.failures} failed solves{by_backend(self.failures_by_backend)}; "
+            f"{sum(unsuccessful.values())} without success{by_backend(unsuccessful)}; "
+            f"timed solves {self.timed_s:.3f} s; backend order seed {self.seed}"
         )
         if self.overhead_rows:
             text += (
@@ -144,6 +228,62 @@ class BenchSummary:
         if self.isolated:
             text += f"; isolated: {', '.join(self.isolated)}"
         return text
+
+    def table(self) -> str:
+        """Per backend: rows, success %, time p50/p99, max constraint violation, failures by status.
+
+        Plain text with aligned columns; times in [us] (``wall_time_min_s``),
+        violation in the problem's units over the rows with an ``x``; a
+        backend solved in a worker process (some rows) is marked ``*``.
+        """
+        header = ["backend", "rows", "success %", "time p50 (us)", "time p99 (us)", "max violation", "failures"]
+        lines = [header]
+        for name, st in self.backends.items():
+            times = np.asarray(st.times_s, dtype=float)
+            viol = np.asarray(st.violations, dtype=float)
+            fails = ", ".join(f"{k} {v}" for k, v in sorted(st.failures.items())) or "0"
+            lines.append([
+                name + (" *" if st.isolated else ""),
+                str(st.rows),
+                f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
+                f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
+                f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
+                f"{viol.max():.3g}" if viol.size else "-",
+                fails if not st.n_failures else f"{st.n_failures} ({fails})",
+            ])
+        widths = [max(len(r[j]) for r in lines) for j in range(len(header))]
+        out = []
+        for r in lines:
+            cells = [r[0].ljust(widths[0])] + [c.rjust(w) for c, w in zip(r[1:-1], widths[1:-1])] + [r[-1]]
+            out.append("  ".join(cells).rstrip())
+        if any(st.isolated for st in self.backends.values()):
+            out.append("* some or all rows solved in a worker process (times taken inside it)")
+        return "\n".join(out)
+
+
+def _truth(value) -> bool:
+    """A boolean cell: ``True`` / ``"True"`` (a resumed row) is true."""
+    if isinstance(value, str):
+        return value.strip().lower() in ("true", "1")
+    return bool(value)
+
+
+def backend_order(problem: str, backends, seed: int = DEFAULT_SEED) -> list[str]:
+    """The order in which ``backends`` solve ``problem``: a seeded permutation.
+
+    The permutation of the sorted names is drawn by
+    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``:
+    it depends on the seed, the problem's name and the set of backends only
+    (not on the order given, nor on what ran before), so a resumed run
+    repeats it.
+    """
+    import hashlib
+
+    digest = hashlib.sha256(str(problem).encode("utf-8")).digest()
+    words = [int.from_bytes(digest[i : i + 8], "little") for i in range(0, 32, 8)]
+    names = sorted(backends)
+    perm = np.random.default_rng([int(seed), *words]).permutation(len(names))
+    return [names[i] for i in perm]
 
 
 def record_period(problem_set) -> float | None:
@@ -234,8 +374,9 @@ class _RowMaker:
         self.sha = sha or ""
         self.versions = versions
 
-    def __call__(self, record, backend: str, outcome, reference) -> dict:
-        from ..metrics import evaluate
+    def __call__(self, record, backend: str, outcome, reference, position: int | None = None,
+                 seed: int | None = None) -> dict:
+        from ..metrics import VIOLATION_KEYS, evaluate
 
         sol = outcome.solution
         status = outcome.status
@@ -261,10 +402,12 @@ class _RowMaker:
             "objective": metrics["objective"],
             "reference_objective": metrics["reference_objective"],
             "reference_status": metrics["reference_status"],
+            "reference_agreement": _float(getattr(reference, "agreement", None)),
             "optimality_gap": metrics["optimality_gap"],
             "primal_residual": metrics["primal_residual"],
             "dual_residual": metrics["dual_residual"],
             "duality_gap": metrics["duality_gap"],
+            **{k: metrics[k] for k in VIOLATION_KEYS},
             "wall_time_min_s": min(times) if times else None,
             "wall_time_median_s": statistics.median(times) if times else None,
             "solver_time_s": _float(getattr(sol, "solver_time_s", None)) if outcome.solution is not None else None,
@@ -272,6 +415,8 @@ class _RowMaker:
             "error": error,
             "state_reset": outcome.state_reset,
             "isolated": outcome.isolated,
+            "position": position,
+            "order_seed": seed,
             "repeat": len(times),
             "n": n,
             "m_eq": m_eq,
@@ -282,13 +427,21 @@ class _RowMaker:
         }
 
 
-def _check_existing(existing: ExistingResults, path: Path, config_mode: str, sha: str | None) -> None:
+def _check_existing(existing: ExistingResults, path: Path, config_mode: str, sha: str | None,
+                    seed: int = DEFAULT_SEED) -> None:
     for row in existing.rows:
         if row["mode"] != config_mode:
             raise InputError(
                 f"holds rows of mode '{row['mode']}', this run is '{config_mode}'; use --force to start again",
                 path=path,
                 key="mode",
+            )
+        if row["order_seed"] != str(seed):
+            raise InputError(
+                f"holds rows ordered with seed {row['order_seed'] or 'none'}, this run's is {seed}; "
+                f"resume with --seed {row['order_seed']} or use --force to start again",
+                path=path,
+                key="order_seed",
             )
         if sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
             raise InputError(
@@ -363,7 +516,7 @@ def run_bench(
     resuming = resume and out.exists() and not force
     if resuming:
         existing = read_results(out, repair=False)
-        _check_existing(existing, out, config.mode, sha)
+        _check_existing(existing, out, config.mode, sha, int(config.seed))
         learned, inflight, crash = marker.read()
         done_keys = {row_key(r) for r in existing.rows}
         if inflight and crash and inflight not in done_keys and len(inflight) == 3:
@@ -409,7 +562,7 @@ def run_bench(
             runners[name] = IsolatedRunner(name, run_profile, settings[name], time_limit, sequential, config.plugins)
         else:
             runners[name] = LocalRunner(instances[name], time_limit, sequential)
-    summary = BenchSummary(isolated=[n for n in config.backends if runners[n].isolated])
+    summary = BenchSummary(isolated=[n for n in config.backends if runners[n].isolated], seed=int(config.seed))
     make_row = _RowMaker(problem_set, run_profile, config.mode, sha, versions)
     pname = run_profile.name
     seqs = sequences(records, config.mode)
@@ -445,8 +598,11 @@ def run_bench(
             prev = None
             for i in seq:
                 record = records[i]
-                batch = []
-                for name in active:
+                order = backend_order(record.name, config.backends, config.seed)
+                solved = []
+                for position, name in enumerate(order):
+                    if not todo[name][s]:
+                        continue
                     key = (record.name, name, pname)
                     runner = runners[name]
                     if key in done:
@@ -487,7 +643,11 @@ def run_bench(
                         marker.isolate = list(learned)
                         summary.isolated.append(name)
                         needs_reset[name] = sequential
-                    row = make_row(record, name, outcome, references[i])
+                    solved.append((position, name, outcome))
+                # rows (metrics against the reference) once every backend has solved the problem
+                batch = []
+                for position, name, outcome in sorted(solved, key=lambda item: config.backends.index(item[1])):
+                    row = make_row(record, name, outcome, references[i], position, int(config.seed))
                     batch.append(row)
                     if row["wall_time_min_s"] is not None:
                         summary.timed_s += row["wall_time_min_s"]
@@ -510,12 +670,14 @@ def run_bench(
             runner.close()
 
     wanted = {(r.name, b, pname) for r in records for b in config.backends}
+    summary.backends = {name: BackendStats() for name in config.backends}
     for key, row in done.items():
         if key not in wanted:
             continue
         summary.rows += 1
         status = str(row["status"])
         summary.statuses[status] = summary.statuses.get(status, 0) + 1
+        summary.backends[key[1]].add(row)
         ref = row["reference_status"] or None
         if is_failure(status, ref):
             summary.failures += 1
@@ -526,4 +688,6 @@ def run_bench(
     return summary
 
 
-__all__ = ["COLUMNS", "BenchConfig", "BenchSummary", "is_failure", "run_bench", "sequences"]
+__all__ = [
+    "COLUMNS", "BackendStats", "BenchConfig", "BenchSummary", "backend_order", "is_failure", "run_bench", "sequences",
+]

@@ -6,9 +6,13 @@ heading and caption):
 
 - header: date, result files (kind, rows, SHA-256), machine, package versions;
 - per tick (bench CSVs), per (profile, mode): success rate and shifted
-  geometric means as ratios to the best and as absolute values, the
-  Dolan-More performance profile of runtime, then per-scenario tables and
-  plots of time and optimality gap against t;
+  geometric means as ratios to the best and as absolute values, constraint
+  violation per backend (with a sentence for each backend that never found a
+  solution), the Dolan-More performance profile of runtime, then
+  per-scenario tables and plots of time and optimality gap against t. A
+  backend with rows solved in a worker process is marked with a dagger in
+  every table showing its times, with a footnote; a residual or gap column
+  of a backend without a found solution shows ``-``, with a footnote;
 - closed loop (closed-loop CSVs): the runs that failed their verdict (with
   the reasons), then per scenario: verdict, simulated time, tracking, force,
   obstacle distance, limit violations, infeasible and fallback ticks,
@@ -77,6 +81,29 @@ def slug(text: str) -> str:
 _US = 1e6  # s -> us
 _MM = 1e3  # m -> mm
 
+#: Mark of a backend with rows solved in a worker process.
+ISOLATED_MARK = "\u2020"
+
+
+def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
+    """Backend -> name shown in tables showing times, and the footnote lines for isolated rows."""
+    isolated = tables.isolated_rows(rows)
+    totals = rows.groupby("backend", sort=True).size()
+    labels = {str(b): f"{b} {ISOLATED_MARK}" if str(b) in isolated else str(b) for b in totals.index}
+    notes = []
+    if isolated:
+        parts = ", ".join(f"{b} {n} of {int(totals[b])} rows" for b, n in isolated.items())
+        notes.append(
+            f"{ISOLATED_MARK} solved in a worker process ({parts}): the time is taken inside the worker "
+            "around the same call, but a worker's caches are not the main process's, so its single-shot "
+            "times are not directly comparable with in-process ones.\n"
+        )
+    return labels, notes
+
+
+def _never_found(summary: pd.DataFrame) -> list[str]:
+    return [str(b) for b, r in summary.iterrows() if int(r["found"]) == 0]
+
 
 def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
     out = ["## Per-tick benchmark\n"]
@@ -90,14 +117,34 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
         "without a solution counts as the profile's time limit (runtime) or its tolerance "
         "(residuals, gaps), and residuals and gaps are floored at their tolerance, as in "
         "qpbenchmark; a backend that reports the infeasibility the reference found (the "
-        "paper formulation's first ticks) answered right and its runtime counts as measured. Runtime is the harness's median wall time of the backend call. With "
+        "paper formulation's first ticks) answered right and its runtime counts as measured. Runtime is the harness's wall time of the "
+        "backend call and the reading of its answer (x and duals), the minimum over "
+        "the row's timed repeats (`repeat` column). With "
         "sh = 10 s the runtime shm of microsecond solves is close to their arithmetic mean "
         "and a single failure dominates it: read it with the success rate and the per-scenario "
-        "percentiles. *runtime (feasible)* is the same mean over the problems whose reference "
+        "percentiles. Each problem is "
+        "solved by the backends in an order drawn for it from a recorded seed (`position`, `order_seed` "
+        "columns), so the cold caches the harness leaves between problems do not fall on one backend. "
+        "*runtime (feasible)* is the same mean over the problems whose reference "
         "solution is optimal only: on the paper formulation's infeasible ticks the right answer "
         "is \"infeasible\", and a backend that cannot say so (qpsolvers' interface reports "
         "not_solved) is charged the time limit for it in the plain column.\n"
     )
+    for note in results.notes:
+        out.append(f"Note: {note}.\n")
+    if "reference_agreement" in bench.columns:
+        per_problem = (
+            bench.assign(_a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
+                         _s=[tables.scenario_key(v) for v in bench.get("scenario", pd.Series("-", index=bench.index))])
+            .groupby(["_s", "problem"], sort=False)["_a"].max().dropna()
+        )
+        if len(per_problem):
+            out.append(
+                f"Reference solutions: Clarabel and PIQP both optimal on {len(per_problem)} problems, relative "
+                f"objective difference max {fmt(per_problem.max())}, "
+                f"{int((per_problem > 1e-7).sum())} above 1e-7 (the kept answer is the one with the smaller "
+                "KKT residuals; `reference_agreement` column).\n"
+            )
     for label, tol, rows in tables.bench_groups(bench):
         out.append(f"### Profile {label}\n")
         out.append(
@@ -105,32 +152,44 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
             f"time limit {tol.runtime:g} s.\n"
         )
         summary = tables.backend_summary(rows, tol)
+        names, isolated_notes = _labels(rows)
+        never = _never_found(summary)
+        never_note = []
+        if never:
+            never_note.append(
+                f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows with "
+                "status optimal), so there is no residual or gap to average; counted with the "
+                "not-found value, floored at the tolerance, they would score as the best.\n"
+            )
         out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
         out.append(
             md_table(
                 ["backend", "problems", "success (%)", "runtime", "runtime (feasible)",
                  "primal residual", "dual residual", "duality gap", "optimality gap"],
                 [
-                    [b, int(r["problems"]), r["success_rate"], r["runtime_ratio"],
+                    [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
                      r["runtime_feasible_ratio"], r["primal_residual_ratio"],
                      r["dual_residual_ratio"], r["duality_gap_ratio"], r["optimality_gap_ratio"]]
                     for b, r in summary.iterrows()
                 ],
             )
         )
+        out.extend(isolated_notes + never_note)
         out.append("Shifted geometric means, absolute values:\n")
         out.append(
             md_table(
                 ["backend", "runtime (us)", "runtime feasible (us)", "primal residual",
                  "dual residual", "duality gap", "optimality gap", "harness overhead p50 (us)"],
                 [
-                    [b, r["runtime"] * _US, r["runtime_feasible"] * _US, r["primal_residual"],
+                    [names[b], r["runtime"] * _US, r["runtime_feasible"] * _US, r["primal_residual"],
                      r["dual_residual"],
                      r["duality_gap"], r["optimality_gap"], r["overhead_median_s"] * _US]
                     for b, r in summary.iterrows()
                 ],
             )
         )
+        out.extend(isolated_notes + never_note)
+        out.extend(_violation_part(rows, never))
         key = f"perf_profile_{slug(label)}"
         if key in plot_files:
             out.append(
@@ -147,16 +206,51 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
                      "runtime p50 (us)", "runtime p99 (us)", "runtime max (us)",
                      "max optimality gap"],
                     [
-                        [b, int(r["problems"]), r["success_rate"], r["runtime_ratio"],
+                        [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
                          r["runtime_p50_s"] * _US, r["runtime_p99_s"] * _US,
                          r["runtime_max_s"] * _US, r["optimality_gap_max"]]
                         for b, r in table.iterrows()
                     ],
                 )
             )
+            if any(names[b] != b for b in table.index):
+                out.extend(isolated_notes)
             key = f"per_tick_{slug(label)}_{slug(scenario)}"
             if key in plot_files:
                 out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
+    return out
+
+
+def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
+    """Constraint violation per backend, and a sentence for each backend that never found a solution."""
+    table = tables.violation_summary(rows)
+    if table.empty:
+        return []
+    out = [
+        "Constraint violation of the answers, max(0, Gx - h), |Ax - b| and bound violation, the "
+        "largest of the three per row (absolute, in the problem's units), over the rows with an x "
+        "(found or not), and over those whose reference is optimal:\n"
+    ]
+    out.append(
+        md_table(
+            ["backend", "problems", "found", "rows with x", "max", "p99", "max (feasible)", "p99 (feasible)"],
+            [[b, int(r["problems"]), int(r["found"]), int(r["with_x"]), r["max"], r["p99"],
+              r["feasible_max"], r["feasible_p99"]] for b, r in table.iterrows()],
+        )
+    )
+    for b in never:
+        if b not in table.index:
+            continue
+        r = table.loc[b]
+        if int(r["with_x"]) == 0:
+            out.append(f"{b} never found a solution and returned no x: it has no accuracy figure.\n")
+            continue
+        out.append(
+            f"{b} never found a solution (0 of {int(r['problems'])} rows): its constraint violation is the "
+            f"only accuracy figure it has: max {fmt(r['max'])}, p99 {fmt(r['p99'])} over its "
+            f"{int(r['with_x'])} answers; max {fmt(r['feasible_max'])}, p99 {fmt(r['feasible_p99'])} on "
+            "the problems whose reference is optimal.\n"
+        )
     return out
 
 
@@ -307,11 +401,17 @@ def render(results: tables.Results, plot_files: dict[str, str] | None = None,
 
 
 def write_report(paths: list[str | Path], out: str | Path, *, force: bool = False,
-                 plots: bool = True) -> Path:
+                 plots: bool = True, prefer: str | None = None) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 
+    Args:
+        prefer: Which file's row to keep for a key present in several bench
+            CSVs (``first``/``last``; ``None``: refuse), see
+            :func:`qpbench.report.tables.read_results`.
+
     Raises:
-        InputError: a path is missing or not a result CSV.
+        InputError: a path is missing or not a result CSV, a duplicate key or
+            mixed repeat counts without ``prefer``.
         OutputExistsError: ``out/report.md`` exists and ``force`` is false.
     """
     from ..atomic import check_output, write_text
@@ -319,7 +419,7 @@ def write_report(paths: list[str | Path], out: str | Path, *, force: bool = Fals
     out = Path(out)
     report_path = out / "report.md"
     check_output(report_path, force=force)
-    results = tables.read_results(paths)
+    results = tables.read_results(paths, prefer=prefer)
     plot_files: dict[str, str] = {}
     if plots:
         from .plots import write_plots

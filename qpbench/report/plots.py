@@ -114,7 +114,7 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     _colours(ax_g, df["backend"].nunique())
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
         t = g["t"].to_numpy(float)
-        ax_t.plot(t, pd.to_numeric(g["wall_time_median_s"], errors="coerce") * 1e6, lw=0.8, label=backend)
+        ax_t.plot(t, pd.to_numeric(g[tables.runtime_column(g)], errors="coerce") * 1e6, lw=0.8, label=backend)
         gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
         gap = np.where(g["found"].to_numpy(bool), gap, np.nan)
         ax_g.plot(t, np.maximum(gap, 1e-16), lw=0.8, label=backend)

@@ -22,8 +22,24 @@ Aggregates follow qpbenchmark (``qpbenchmark/report.py``, ``results.py``):
   infinite residual (a backend that returns no duals) stays infinite.
 - ratios to the best: each backend's mean divided by the smallest mean.
 
-Runtime is ``wall_time_median_s`` (the harness's timing of the backend call,
-in [s]). With ``sh = 10`` s and runtimes of microseconds the shifted geometric
+Rows from several CSVs (:func:`read_results`): a result key
+``(problem, scenario, backend, profile, mode)`` present in two files is an
+error unless ``prefer`` (``first`` or ``last`` file in the order given) says
+which to keep; so is a backend whose rows in one ``(profile, mode)`` come from
+files timed with different ``repeat`` counts (the minimum of 3 solves is not
+comparable to a single shot), unless ``prefer`` is given, in which case the
+rows are kept and :attr:`Results.notes` says so.
+
+Honest ratios: a residual or gap mean over a backend that never found a
+solution would be the not-found value floored at the tolerance, the smallest
+value possible, and its ratio 1 ("best"); such a backend gets NaN (``-`` in the
+report) for every residual and gap mean and ratio, and the best is taken over
+the backends that found something.
+
+Runtime is ``wall_time_min_s`` (the harness's timing of the backend call and
+the reading of its answer, the minimum over the ``repeat`` timed solves, in
+[s]; ``wall_time_median_s`` for a CSV without it). With ``sh = 10`` s and
+runtimes of microseconds the shifted geometric
 mean is practically the arithmetic mean, dominated by failures (each counted
 as the full time limit): read it with the success rate, and the medians and
 tails of the per-scenario tables.
@@ -45,6 +61,13 @@ from ..profiles import Tolerance, get_profile
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
 SHIFT = 10.0
 
+#: Metrics whose mean means nothing without a found solution (NaN for a backend with none).
+FOUND_ONLY_METRICS = ("primal_residual", "dual_residual", "duality_gap", "optimality_gap")
+#: Columns that identify a bench result across CSVs.
+DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
+#: Values of ``prefer``.
+PREFER = ("first", "last")
+
 #: Columns that make a CSV a bench result.
 BENCH_COLUMNS = (
     "problem",
@@ -64,7 +87,7 @@ CLOSED_LOOP_COLUMNS = ("scenario", "backend", "status", "log_file")
 
 #: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?)
 SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
-    "runtime": ("wall_time_median_s", "runtime", False),
+    "runtime": ("wall_time_min_s", "runtime", False),
     "primal_residual": ("primal_residual", "primal", True),
     "dual_residual": ("dual_residual", "dual", True),
     "duality_gap": ("duality_gap", "gap", True),
@@ -89,6 +112,7 @@ class Results:
     bench: pd.DataFrame
     closed_loop: pd.DataFrame
     files: list[ResultFile] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
 def _sha256(path: Path) -> str:
@@ -138,15 +162,25 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
     return out
 
 
-def read_results(paths: list[str | Path]) -> Results:
+def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     """Read bench and closed-loop CSVs (folders are searched for ``*.csv``).
 
     Closed-loop rows get ``log_path``: their ``log_file`` resolved against the
-    CSV's folder (or ``None`` when the run left no log).
+    CSV's folder (or ``None`` when the run left no log). Bench rows get
+    ``source`` (their file).
+
+    Args:
+        paths: Files or folders.
+        prefer: ``None`` (duplicates across files and mixed ``repeat`` counts
+            are errors), ``"first"`` or ``"last"`` (keep the row of the first
+            or last file holding a key; mixed repeats are noted).
 
     Raises:
-        InputError: unreadable CSV, or one that is neither kind (naming the file).
+        InputError: unreadable CSV, one that is neither kind (naming the file),
+            a duplicate key or mixed repeat counts without ``prefer``.
     """
+    if prefer is not None and prefer not in PREFER:
+        raise InputError(f"unknown value '{prefer}' (choose from {', '.join(PREFER)})", key="--prefer")
     bench, loops, files = [], [], []
     for path in expand_paths(paths):
         try:
@@ -157,6 +191,8 @@ def read_results(paths: list[str | Path]) -> Results:
         if set(BENCH_COLUMNS) <= cols:
             df["found"] = _as_bool(df["found"], path, "found")
             df["success"] = _as_bool(df["success"], path, "success")
+            if "isolated" in cols:
+                df["isolated"] = _as_bool(df["isolated"], path, "isolated")
             df["source"] = str(path)
             bench.append(df)
             kind = "bench"
@@ -176,11 +212,89 @@ def read_results(paths: list[str | Path]) -> Results:
                 path=path,
             )
         files.append(ResultFile(path, kind, _sha256(path), len(df)))
+    notes: list[str] = []
+    bench_df = pd.concat(bench, ignore_index=True) if bench else pd.DataFrame()
+    if bench:
+        bench_df = drop_duplicates(bench_df, prefer)
+    if not bench_df.empty:
+        notes.extend(check_repeats(bench_df, prefer))
     return Results(
-        bench=pd.concat(bench, ignore_index=True) if bench else pd.DataFrame(),
+        bench=bench_df,
         closed_loop=pd.concat(loops, ignore_index=True) if loops else pd.DataFrame(),
         files=files,
+        notes=notes,
     )
+
+
+def _key_frame(df: pd.DataFrame) -> pd.DataFrame:
+    """The :data:`DUPLICATE_KEY` columns as text (missing columns and empty cells: ``-``)."""
+    out = {}
+    for c in DUPLICATE_KEY:
+        out[c] = df[c].map(scenario_key) if c in df.columns else pd.Series("-", index=df.index)
+    return pd.DataFrame(out, index=df.index)
+
+
+def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
+    """Bench rows with each result key once (see the module docstring).
+
+    Raises:
+        InputError: a key in two files and ``prefer`` is ``None`` (naming both files and the key).
+    """
+    keys = _key_frame(bench)
+    dup = keys.duplicated(keep=False)
+    if not dup.any():
+        return bench
+    if prefer is None:
+        first = int(np.flatnonzero(dup.to_numpy())[0])
+        key = keys.iloc[first]
+        same = (keys == key).all(axis=1).to_numpy()
+        sources = list(dict.fromkeys(bench.loc[same, "source"]))
+        text = ", ".join(f"{c}={key[c]}" for c in DUPLICATE_KEY)
+        if len(sources) == 1:
+            sources = sources * 2
+        raise InputError(
+            f"{sources[0]} and {sources[1]} both hold the row ({text}); "
+            "pass --prefer first or --prefer last to keep one file's rows",
+            key="--prefer",
+        )
+    keep = ~keys.duplicated(keep="first" if prefer == "first" else "last")
+    return bench[keep.to_numpy()].reset_index(drop=True)
+
+
+def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
+    """Notes on backends timed with different ``repeat`` counts in one table.
+
+    A file's repeat count for a backend is the largest ``repeat`` of its rows
+    (failed solves are not repeated). Without ``prefer`` a mix is an error.
+
+    Raises:
+        InputError: a mix and ``prefer`` is ``None``.
+    """
+    if "repeat" not in bench.columns:
+        return []
+    notes = []
+    df = bench.assign(
+        _repeat=pd.to_numeric(bench["repeat"], errors="coerce"),
+        _mode=bench["mode"].fillna("") if "mode" in bench.columns else "",
+    )
+    for (profile, mode), table in df.groupby(["profile", "_mode"], sort=True):
+        per_backend = table.groupby("backend", sort=True)["_repeat"].max().dropna()
+        if per_backend.nunique() > 1:
+            counts = ", ".join(f"{b} {int(r)}" for b, r in per_backend.items())
+            notes.append(
+                f"backends timed with different --repeat counts in the tables of {group_label(profile, mode or None)} "
+                f"({counts}): a single-shot time includes cold caches that a minimum over repeats does not"
+            )
+    for (profile, mode, backend), g in df.groupby(["profile", "_mode", "backend"], sort=True):
+        per_file = g.groupby("source", sort=False)["_repeat"].max().dropna()
+        if per_file.nunique() <= 1:
+            continue
+        counts = ", ".join(f"{Path(f).name}: {int(r)}" for f, r in per_file.items())
+        text = f"{backend} ({group_label(profile, mode or None)}) mixes rows timed with different --repeat ({counts})"
+        if prefer is None:
+            raise InputError(f"{text}; pass --prefer first|last to report them together anyway", key="repeat")
+        notes.append(text + ": single-shot and repeated times are in one table")
+    return notes
 
 
 def profile_tolerance(profile: str, path: str | None = None) -> Tolerance:
@@ -194,6 +308,8 @@ def profile_tolerance(profile: str, path: str | None = None) -> Tolerance:
 def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.ndarray:
     """The values entering the shifted geometric mean of ``metric`` (see module doc)."""
     column, tol_attr, floored = SHGEOM_METRICS[metric]
+    if column not in df.columns and metric == "runtime":
+        column = "wall_time_median_s"
     not_found = float(getattr(tolerance, tol_attr))
     values = pd.to_numeric(df[column], errors="coerce").to_numpy(dtype=float)
     if metric != "runtime":
@@ -252,12 +368,28 @@ def bench_groups(bench: pd.DataFrame):
         yield group_label(profile, mode), tolerance, rows
 
 
+def runtime_column(df: pd.DataFrame) -> str:
+    """The runtime column of bench rows: ``wall_time_min_s`` (``wall_time_median_s`` without it)."""
+    return "wall_time_min_s" if "wall_time_min_s" in df.columns else "wall_time_median_s"
+
+
+def isolated_rows(rows: pd.DataFrame) -> dict[str, int]:
+    """Per backend, rows solved in a worker process (only backends with some)."""
+    if "isolated" not in rows.columns:
+        return {}
+    counts = rows.groupby("backend", sort=True)["isolated"].sum()
+    return {str(b): int(n) for b, n in counts.items() if n}
+
+
 def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
     """Per backend: success rate [%] and shifted geometric mean of each metric.
 
-    Columns: ``problems``, ``success_rate`` (%), ``found_rate`` (%), and for each
-    metric of :data:`SHGEOM_METRICS` the absolute mean (``<metric>``, runtime in
-    [s]) and the ratio to the best backend (``<metric>_ratio``); plus
+    Columns: ``problems``, ``success_rate`` (%), ``found_rate`` (%),
+    ``found`` (rows), ``isolated`` (rows solved in a worker process), and for
+    each metric of :data:`SHGEOM_METRICS` the absolute mean (``<metric>``,
+    runtime in [s]) and the ratio to the best backend (``<metric>_ratio``);
+    the metrics of :data:`FOUND_ONLY_METRICS` are NaN for a backend that never
+    found a solution, and the best is taken over the others; plus
     ``overhead_median_s``: median of wall time minus solver-reported time, the
     harness's own overhead (NaN when fewer than half of the rows report a
     solver time), and
@@ -266,21 +398,28 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
     "infeasible" (the paper formulation's start) do not decide the ranking.
     """
     out = {}
+    tcol = runtime_column(rows)
     for backend, g in rows.groupby("backend", sort=True):
+        found = int(g["found"].astype(bool).sum())
         rec = {
             "problems": len(g),
             "success_rate": 100.0 * g["success"].astype(float).mean(),
             "found_rate": 100.0 * g["found"].astype(float).mean(),
+            "found": found,
+            "isolated": int(g["isolated"].sum()) if "isolated" in g.columns else 0,
         }
         for metric in SHGEOM_METRICS:
-            rec[metric] = shgeom_of(metric_values(g, metric, tolerance))
+            if metric in FOUND_ONLY_METRICS and not found:
+                rec[metric] = math.nan
+            else:
+                rec[metric] = shgeom_of(metric_values(g, metric, tolerance))
         if "reference_status" in g.columns:
             feasible = g[g["reference_status"].astype(str) == "optimal"]
             rec["runtime_feasible"] = shgeom_of(metric_values(feasible, "runtime", tolerance))
         else:
             rec["runtime_feasible"] = math.nan
         if "solver_time_s" in g.columns:
-            diff = pd.to_numeric(g["wall_time_median_s"], errors="coerce") - pd.to_numeric(
+            diff = pd.to_numeric(g[tcol], errors="coerce") - pd.to_numeric(
                 g["solver_time_s"], errors="coerce"
             )
             diff = diff[np.isfinite(diff)]
@@ -296,6 +435,38 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
         best = df[metric].replace([np.inf], np.nan).min()
         df[f"{metric}_ratio"] = df[metric] / best if best and best > 0 else math.nan
     return df
+
+
+def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per backend: constraint violation of its answers (absolute, problem units).
+
+    Columns: ``problems``, ``found`` (rows), ``with_x`` (rows with a
+    violation, i.e. with an ``x``), ``max``, ``p99`` over those rows, and
+    ``feasible_max``, ``feasible_p99`` over the rows whose reference is
+    optimal (on an infeasible problem every answer violates something).
+    Empty when the rows have no ``constraint_violation`` column.
+    """
+    if "constraint_violation" not in rows.columns:
+        return pd.DataFrame()
+    out = {}
+    for backend, g in rows.groupby("backend", sort=True):
+        v = pd.to_numeric(g["constraint_violation"], errors="coerce").to_numpy(dtype=float)
+        ok = ~np.isnan(v)
+        feasible = (
+            (g["reference_status"].astype(str) == "optimal").to_numpy()
+            if "reference_status" in g.columns else np.zeros(len(g), dtype=bool)
+        )
+        vf = v[ok & feasible]
+        out[backend] = {
+            "problems": len(g),
+            "found": int(g["found"].astype(bool).sum()),
+            "with_x": int(ok.sum()),
+            "max": float(v[ok].max()) if ok.any() else math.nan,
+            "p99": float(np.percentile(v[ok], 99)) if ok.any() else math.nan,
+            "feasible_max": float(vf.max()) if vf.size else math.nan,
+            "feasible_p99": float(np.percentile(vf, 99)) if vf.size else math.nan,
+        }
+    return pd.DataFrame.from_dict(out, orient="index")
 
 
 def scenario_key(value) -> str:
@@ -319,10 +490,11 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
         [scenario_key(v) for v in df["scenario"]] if "scenario" in df.columns else "-"
     )
     tables = {}
+    tcol = runtime_column(df)
     for scenario, g in df.groupby("_scenario", sort=True):
         rec = {}
         for backend, b in g.groupby("backend", sort=True):
-            t = pd.to_numeric(b["wall_time_median_s"], errors="coerce").to_numpy(dtype=float)
+            t = pd.to_numeric(b[tcol], errors="coerce").to_numpy(dtype=float)
             t = t[np.isfinite(t)]
             gap = np.abs(pd.to_numeric(b["optimality_gap"], errors="coerce").to_numpy(dtype=float))
             gap = gap[b["found"].to_numpy(dtype=bool) & np.isfinite(gap)]
@@ -359,7 +531,7 @@ def performance_profile(
         + "\x00"
         + (rows["scenario"].map(scenario_key) if "scenario" in rows.columns else "")
     )
-    t = rows.pivot_table(index="_key", columns="backend", values="wall_time_median_s", aggfunc="first")
+    t = rows.pivot_table(index="_key", columns="backend", values=runtime_column(rows), aggfunc="first")
     ok = rows.pivot_table(index="_key", columns="backend", values="success", aggfunc="first")
     ok = ok.reindex_like(t).fillna(False).astype(bool)
     times = t.to_numpy(dtype=float)
