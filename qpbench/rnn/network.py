@@ -78,7 +78,15 @@ OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
 #: whether to clamp a forced step to the stability bound (1) or not (0);
 #: output: the step count the setting asked for (0 when the bound chose it).
 R_STEP, CLAMP, NOMINAL = range(20, 23)
-PRM_SIZE = 23
+#: Output: what a fixed-duration call did against its setting (:data:`NOTES`).
+NOTE = 23
+PRM_SIZE = 24
+
+#: ``prm[NOTE]`` values: nothing to say; the step was clamped to the bound (more
+#: steps); no step is proven stable (``P`` not positive definite: the steps ran
+#: as set); the steps the bound needs exceed ``MAX_STEPS`` (capped there: the
+#: step stays above the bound).
+NOTE_NONE, NOTE_CLAMPED, NOTE_UNPROVEN, NOTE_CAPPED = 0, 1, 2, 3
 
 #: Kernel return codes besides a step count.
 NO_STABLE_STEP = -1
@@ -371,6 +379,14 @@ def _nominal_steps(r_total, r_step, substeps):
     return substeps
 
 
+def _clamped_steps(r_total, r_max, at_least, max_steps):
+    """The fewest steps (at least ``at_least``) of ratio ``<= r_max`` over ``r_total``, at most ``max_steps``."""
+    need = r_total / r_max
+    if not need < max_steps:  # also a tiny or zero bound (need inf or NaN)
+        return int(max(at_least, max_steps))
+    return max(at_least, int(math.ceil(need)))
+
+
 def _sigma2_bound_numpy(A: np.ndarray, G: np.ndarray) -> float:
     """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``."""
     B = A.T @ A + G.T @ G
@@ -430,6 +446,7 @@ def make_params(
     prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
     prm[STATE_ME] = -1.0
     prm[STEPS] = np.nan
+    prm[NOTE] = NOTE_NONE
     return prm
 
 
@@ -451,6 +468,7 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     nominal = _nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
     forced = nominal > 0
     prm[NOMINAL] = nominal
+    note = NOTE_NONE
     if forced:
         rmax = sig2 = np.nan
         nsteps = nominal
@@ -469,8 +487,11 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
                 pmin, pmax = (glo, ghi) if exact else p_eigen_range(P)
                 sig2 = _sigma2_bound_numpy(A, G)
                 rmax = _ratio_max(pmin, pmax, sig2, semi)
-                if rmax > 0.0 and r_total / nominal > prm[SAFETY] * rmax:
-                    nsteps = max(nominal, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+                if rmax <= 0.0:
+                    note = NOTE_UNPROVEN
+                elif r_total / nominal > prm[SAFETY] * rmax:
+                    nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                    note = NOTE_CLAMPED
     else:
         sig2 = _sigma2_bound_numpy(A, G)
         rmax = _ratio_max(prm[PMIN], prm[PMAX], sig2, semi)
@@ -482,13 +503,16 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         return NO_STABLE_STEP
     if r_total > 0.0:
         if not forced:
-            nsteps = max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+            nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
+        if nsteps >= prm[MAX_STEPS] and r_total / nsteps > prm[SAFETY] * rmax:
+            note = NOTE_CAPPED
         r = r_total / nsteps
         check = False
     else:
         r = prm[SAFETY] * rmax
         nsteps = int(prm[MAX_STEPS])
         check = prm[TOL] >= 0.0
+    prm[NOTE] = note
     tol = prm[TOL]
     prm[RATIO] = r
     Av = A @ v
@@ -702,6 +726,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     forced = nominal > 0
     prm[NOMINAL] = nominal
     nsteps = nominal
+    note = NOTE_NONE
     if forced:
         rmax = np.nan
         sig2 = np.nan
@@ -719,8 +744,11 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
                     pmax = w[n - 1]
                 sig2 = _sigma2_bound_jit(A, G)
                 rmax = _ratio_max_jit(pmin, pmax, sig2, semi)
-                if rmax > 0.0 and r_total / nominal > prm[SAFETY] * rmax:
-                    nsteps = max(nominal, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+                if rmax <= 0.0:
+                    note = NOTE_UNPROVEN
+                elif r_total / nominal > prm[SAFETY] * rmax:
+                    nsteps = _clamped_steps_jit(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                    note = NOTE_CLAMPED
     else:
         sig2 = _sigma2_bound_jit(A, G)
         rmax = _ratio_max_jit(prm[PMIN], prm[PMAX], sig2, semi)
@@ -732,13 +760,16 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
         return NO_STABLE_STEP
     if r_total > 0.0:
         if not forced:
-            nsteps = max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+            nsteps = _clamped_steps_jit(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
+        if nsteps >= prm[MAX_STEPS] and r_total / nsteps > prm[SAFETY] * rmax:
+            note = NOTE_CAPPED
         r = r_total / nsteps
         check = False
     else:
         r = prm[SAFETY] * rmax
         nsteps = int(prm[MAX_STEPS])
         check = tol >= 0.0
+    prm[NOTE] = note
     prm[RATIO] = r
     if sol.shape[0] >= 3 * n + 2 * (me + mi):
         # scratch space after the outputs (saves three allocations)
@@ -809,8 +840,7 @@ def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no co
     if not (math.isfinite(obj) and math.isfinite(pr)):
         return DIVERGED
     ok = pr <= prm[OK_PRIMAL] and prm[DUAL] <= prm[OK_DUAL] and prm[COMPL] <= prm[OK_PRIMAL]
-    note = prm[NOMINAL] > 0.0 and (steps > prm[NOMINAL] or prm[RATIO_MAX] == 0.0)
-    return 4 * steps + (2 if note else 0) + (1 if ok else 0)
+    return 4 * steps + (2 if prm[NOTE] != NOTE_NONE else 0) + (1 if ok else 0)
 
 
 def _part_fits(off, size, length):  # pragma: no cover - runs compiled
@@ -866,6 +896,7 @@ _ratio_max_jit = _ratio_max
 _gershgorin_jit = _gershgorin
 _frobenius2_jit = _frobenius2
 _nominal_steps_jit = _nominal_steps
+_clamped_steps_jit = _clamped_steps
 _matvec_jit = _matvec_off
 _grad_products_jit = _grad_products
 _step_jit = _step
@@ -902,7 +933,7 @@ def kernel(use_numba: bool = True):
     if not use_numba:
         return _integrate_numpy
     global _COMPILED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit, _grad_products_jit, _integrate_jit
-    global _step_jit, _residuals_jit, _gershgorin_jit, _frobenius2_jit, _nominal_steps_jit
+    global _step_jit, _residuals_jit, _gershgorin_jit, _frobenius2_jit, _nominal_steps_jit, _clamped_steps_jit
     if _COMPILED is None:
         import numba
 
@@ -913,6 +944,7 @@ def kernel(use_numba: bool = True):
         _gershgorin_jit = inline(_gershgorin)
         _frobenius2_jit = inline(_frobenius2)
         _nominal_steps_jit = inline(_nominal_steps)
+        _clamped_steps_jit = inline(_clamped_steps)
         # inlined into their callers (numba IR): a call costs more than these small products
         _matvec_jit = inline(_matvec_off)
         _grad_products_jit = inline(_grad_products)
@@ -1064,18 +1096,21 @@ def step_note(prm: np.ndarray) -> str | None:
     or no step size is proven stable (``P`` not positive definite) and the
     setting's steps ran as given.
     """
-    nominal = prm[NOMINAL]
-    if not nominal > 0:
-        return None
-    steps = prm[STEPS]
-    if steps > nominal:
+    note = prm[NOTE]
+    nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
+    if note == NOTE_CLAMPED:
         r_set = prm[R_TOTAL] / nominal
         return (
             f"step clamped to the stability bound: r = h/eps = {r_set:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g}; "
-            f"{int(steps)} steps instead of {int(nominal)}"
+            f"{steps} steps instead of {nominal}"
         )
-    if prm[RATIO_MAX] == 0.0:
-        return f"no step size is proven stable (P not positive definite); {int(steps)} steps as set"
+    if note == NOTE_UNPROVEN:
+        return f"no step size is proven stable (P not positive definite); {steps} steps as set"
+    if note == NOTE_CAPPED:
+        return (
+            f"step above the stability bound: r = h/eps = {prm[RATIO]:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g} "
+            f"even at the step budget ({steps} steps, max_iter)"
+        )
     return None
 
 
