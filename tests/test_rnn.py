@@ -263,15 +263,18 @@ def test_online_state_lives_across_calls_and_reset_clears_it(rng):
     np.testing.assert_array_equal(c.x, d.x)
 
 
-@pytest.mark.parametrize("dt, steps", [(1e-3, 5), (1e-2, 50), (3e-3, 15), (2.5e-4, 2), (1.1e-3, 6)])
-def test_online_step_is_fixed_and_its_count_follows_the_integrated_time(dt, steps):
-    """rnn-tuned (5 sub-steps per 1 ms): a step of 0.2 ms whatever the time integrated per call."""
+@pytest.mark.parametrize("dt, steps, tuned", [(1e-3, 5, 20), (1e-2, 50, 200), (3e-3, 15, 60), (2.5e-4, 2, 5),
+                                              (1.1e-3, 6, 22)])
+def test_online_step_is_fixed_and_its_count_follows_the_integrated_time(dt, steps, tuned):
+    """5 sub-steps per 1 ms (eps 1 ms): a step of 0.2 ms whatever the time integrated per call."""
     problem = qpsolvers.Problem(np.eye(2), np.array([1.0, -1.0]), A=np.array([[1.0, 1.0]]), b=np.array([0.5]),
                                 lb=-np.ones(2), ub=np.ones(2))
-    be = get_backend("rnn-tuned", dt=dt)
+    be = get_backend("rnn", eps=1e-3, substeps=5, dt=dt)
     sol = be.solve(problem)
     assert sol.iterations == steps and sol.error is None
     assert be.last.ratio == pytest.approx(dt / 1e-3 / steps) and be.last.ratio <= 0.2 * (1 + 1e-12)
+    # rnn-tuned: 20 steps per 1 ms (50 us each)
+    assert get_backend("rnn-tuned", dt=dt).solve(problem).iterations == tuned
 
 
 def test_online_step_above_the_bound_is_clamped_and_said(rng):
@@ -402,7 +405,7 @@ def test_replaying_the_dumped_ticks_reproduces_the_commands(tmp_path):
     np.testing.assert_array_equal(replayed, v_log)
 
 
-@pytest.mark.parametrize("scenario", ["free", "wall"])
+@pytest.mark.parametrize("scenario", ["free", "wall", "narrow"])
 def test_working_setting_meets_the_bars(scenario):
     run = robot_ticks(scenario, 5.0, every=None, backend="rnn", **WORKING_SETTINGS)
     s = run.summary
@@ -411,6 +414,14 @@ def test_working_setting_meets_the_bars(scenario):
     if s["min_obstacle_distance"] is not None:
         assert s["min_obstacle_distance"] >= s["d_safe"] - 5e-4
     assert s["joint_limit_violations"] == 0 and s["fallback_ticks"] == 0
+
+
+@pytest.mark.parametrize("scenario", ["adaptive", "adaptive_fast"])
+def test_working_setting_keeps_the_safety_distance(scenario):
+    """The adaptive scenarios' force error is the slow adaptive law's (not the network's): d_min only."""
+    s = robot_ticks(scenario, 4.0, every=None, backend="rnn", **WORKING_SETTINGS).summary
+    assert s["min_obstacle_distance"] >= s["d_safe"] - 5e-4
+    assert s["tracking_max_after_2s"] <= 1e-3
 
 
 def test_paper_setting_crosses_the_wall():
@@ -428,7 +439,7 @@ def test_rnn_tuned_is_the_network_with_the_working_setting_in_the_loop():
     sc = load_scenario("wall")
     assert sc.rnn["eps"] == 0.02  # the shipped scenario carries the paper's value
     tuned = resolve_backend("rnn-tuned", sc, dt=sc.dt)
-    assert (tuned.eps, tuned.substeps, tuned.l1_clip, tuned.dt) == (1e-3, 5, 10.0, sc.dt)
+    assert (tuned.eps, tuned.substeps, tuned.method, tuned.l1_clip, tuned.dt) == (1e-4, 20, "semi-implicit", 10.0, sc.dt)
     assert resolve_backend("rnn", sc, dt=sc.dt).eps == 0.02
     a = simulate(sc, "rnn-tuned", duration=0.3).log
     b = simulate(replace(sc, rnn=dict(WORKING_SETTINGS)), "rnn", duration=0.3).log
@@ -447,7 +458,7 @@ def _gap(record, x, ref) -> float:
 
 @pytest.mark.parametrize("scenario", ["free", "wall", "adaptive", "narrow"])
 def test_rnn_tuned_replays_the_shipped_sets_stably(scenario, tmp_path):
-    """rnn-tuned on every 10th tick (10 ms per call, 50 steps of 0.2 ms): inside the box, and as
+    """rnn-tuned on every 10th tick (10 ms per call, 200 steps of 50 us): inside the box, and as
     close to optimal as the network is in its own closed loop.
 
     The closed loop's gap is that of the commands the loop applied (every 10th
