@@ -22,7 +22,9 @@ Duals. DAQP's multipliers ``lam`` (one per entry of ``bupper``) satisfy
 bound and ``< 0`` at an active lower bound: qpsolvers' convention, so
 ``z_box = lam[:n]``, ``y = lam[n:n+me]``, ``z = lam[n+me:]`` as they are.
 
-Persistence. None: ``daqp.solve`` builds its workspace per call. DAQP also
+Persistence. None: ``daqp.solve`` builds its workspace per call (so
+``get_state``/``set_state``, the harness's restore between timed repeats,
+have nothing to do; a deep copy of the backend rebuilds the buffers' views). DAQP also
 offers ``daqp.Model`` (workspace kept, ``update`` + ``solve``, active set of
 the previous solve reused). On one tick of the ``wall`` scenario, timed in a
 tight loop: ``daqp.solve`` 3.6 us (3.8-4.0 us with the four settings as
@@ -126,6 +128,17 @@ class _Buffers:
         self.bl_box = self.bl[:nb]
         self.bl_eq = self.bl[nb : nb + me]
 
+    def __deepcopy__(self, memo):
+        # A plain deep copy would copy each view on its own: the copy's views
+        # would no longer write into the copy's A, bu, bl (the arrays
+        # ``daqp.solve`` reads), and it would solve a stale problem.
+        new = _Buffers(self.n, self.me, self.mi, self.nb > 0)
+        new.A[:] = self.A
+        new.bu[:] = self.bu
+        new.bl[:] = self.bl
+        memo[id(self)] = new
+        return new
+
 
 @register
 class DaqpBackend(Backend):
@@ -168,6 +181,16 @@ class DaqpBackend(Backend):
 
     def reset(self) -> None:
         self._buffers.clear()
+
+    # DAQP keeps nothing from one call to the next (the buffers are scratch
+    # space, filled completely before every solve): a timed repeat needs no
+    # restoring, and these hooks tell the harness so (no deep copy per repeat).
+    def get_state(self) -> None:
+        """The state carried between calls: none."""
+        return None
+
+    def set_state(self, state) -> None:
+        """Nothing to restore (see :meth:`get_state`)."""
 
     def _solve(self, problem, warm_start):
         daqp = _DAQP[0] if _DAQP else _daqp()

@@ -20,9 +20,15 @@ Settings (keyword arguments of :func:`qpbench.backends.get_backend`):
 ================ ========================================================
 eps              gain of eq. 15 in [s] (default 0.02, the paper's); only
                  ``rnn`` depends on it (it sets ``r = dt / eps`` per tick)
-dt               duration of one tick in [s] (default 1e-3); ``rnn`` only
-substeps         steps per tick (``rnn``); default: the fewest with
-                 ``h / eps <= safety * bound`` (:mod:`qpbench.rnn.network`)
+dt               time integrated per call in [s] (default 1e-3, one control
+                 tick; a per-tick benchmark of a set that keeps every K-th
+                 tick passes K ticks); ``rnn`` only
+substeps         steps per ``tick`` of integrated time (``rnn``): a fixed
+                 step ``h = tick / substeps``, so a call of ``dt`` takes
+                 ``dt / h`` steps (rounded up); default: the fewest steps
+                 with ``h / eps <= safety * bound`` (:mod:`qpbench.rnn.network`)
+tick             the duration in [s] ``substeps`` divides (default 1e-3, the
+                 control period of every shipped scenario)
 safety           fraction of the stability bound per step, in (0, 1]
                  (default 0.9; on the robot's QPs the steps to converge fall
                  as r grows up to the bound: 0.5 takes 1.8x the steps of 0.9)
@@ -35,6 +41,13 @@ use_numba        compiled loop (default when numba is installed) or numpy
 max_iter         step budget of ``rnn-converged`` (default: profile's)
 tol              residual tolerance (default: profile's ``eps_abs``)
 ================ ========================================================
+
+No setting exceeds the stability bound silently: a step ``h = tick /
+substeps`` with ``h / eps`` above ``safety`` times the bound of the call's
+QP is shortened to it (more steps), and the solution says so in ``error``
+(``step clamped to the stability bound: ...``; a bench row carries it in its
+``error`` column; ``last.clamped``). The bound is computed only when the
+step is above a cheap lower estimate of it (module :mod:`qpbench.rnn.network`).
 
 When the problem's shape changes between calls the state is re-initialised
 part by part: ``v`` (and everything) when ``n`` changes, ``l1`` when the
@@ -55,14 +68,21 @@ from ..rnn import network as nw
 from . import register
 from .base import Backend, BackendSolution
 
-#: A setting that works in the closed loop of the paper's scenarios (the
-#: paper's ``eps = 0.02`` does not; see results/rnn/README.md).
-WORKING_SETTINGS = {"eps": 1e-3, "substeps": 5, "l1_clip": 10.0}
+#: A setting that works in the closed loop of every shipped scenario (the
+#: paper's ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps
+#: per 1 ms (a step of 50 us, r = 0.5) and ``l1`` clipped to +-10. It keeps
+#: every key point at least 9.8 mm from the obstacles (d_safe 10 mm, bar
+#: 9.5 mm) in free, wall, adaptive, narrow and adaptive_fast, at a few
+#: microseconds per tick (the frontier in results/rnn/README.md;
+#: ``python bench/rnn_frontier.py``). The earlier setting, eps = 1 ms with 5
+#: Euler steps, reaches 6.4 mm in narrow.
+WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 _DEFAULTS = {
     "eps": 0.02,
     "dt": 1e-3,
     "substeps": None,
+    "tick": 1e-3,
     "safety": 0.9,
     "l1_clip": None,
     "method": None,
@@ -116,6 +136,7 @@ class _NetworkBackend(Backend):
         self.eps = _positive("eps", s["eps"])
         self.dt = _positive("dt", s["dt"])
         self.substeps = _positive("substeps", s["substeps"], integer=True, allow_none=True)
+        self.tick = _positive("tick", s["tick"])
         self.safety = _positive("safety", s["safety"], upper=1.0)
         self.l1_clip = _positive("l1_clip", s["l1_clip"], allow_none=True)
         if s["method"] is None:
@@ -140,8 +161,8 @@ class _NetworkBackend(Backend):
         self._p_key: bytes | None = None
         self._prm = nw.make_params(
             p_range=(1.0, 1.0), method=self.method, r_total=self._r_total(),
-            substeps=self.substeps or 0, safety=self.safety, max_steps=self.max_iter,
-            tol=self._stop_tol(), l1_clip=self.l1_clip,
+            safety=self.safety, max_steps=self.max_iter, tol=self._stop_tol(), l1_clip=self.l1_clip,
+            step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0, clamp=True,
         )
         self._kernel = None
         # A call is "optimal" when its residuals meet the profile's success
@@ -185,10 +206,7 @@ class _NetworkBackend(Backend):
         p = self._prm
         if math.isnan(p[nw.STEPS]):
             return None
-        return nw.IntegrationResult(
-            int(p[nw.STEPS]), float(p[nw.PRIMAL]), float(p[nw.DUAL]), float(p[nw.COMPL]),
-            float(p[nw.OBJ]), float(p[nw.RATIO]), float(p[nw.RATIO_MAX]), float(p[nw.SIG2]),
-        )
+        return nw.result(p)
 
     def _diverged(self, problem, steps: int) -> BackendSolution:
         """The answer of a call whose state is no longer finite (the state is dropped)."""
@@ -197,7 +215,8 @@ class _NetworkBackend(Backend):
         return BackendSolution(
             problem=problem, status="error", iterations=steps,
             error=f"FloatingPointError: network state diverged (r = {prm[nw.RATIO]:.3g}, "
-            f"stable below {prm[nw.RATIO_MAX]:.3g})",
+            + (f"stable below {prm[nw.RATIO_MAX]:.3g})" if math.isfinite(prm[nw.RATIO_MAX])
+               else "below a lower estimate of the stability bound)"),
         )
 
     # -- the call ---------------------------------------------------------
@@ -260,7 +279,7 @@ class _NetworkBackend(Backend):
             z=sol[n + me : n + me + mi] if mi else None,
             z_box=sol[n + me + mi : 2 * n + me + mi] if (problem.lb is not None or problem.ub is not None) else None,
             obj=obj if self._kernel_obj else None, status="optimal" if ok else "max_iter",
-            iterations=steps,
+            iterations=steps, error=nw.step_note(prm),
         )
 
 
@@ -350,7 +369,8 @@ class RNNOnline(_NetworkBackend):
       C-contiguous float64 arrays (:func:`qpbench.rnn.network.online_kernel`),
       numba's dispatcher being the type check.
 
-    The kernel returns the step count and the status in one integer; the
+    The kernel returns the step count, the status and whether the step was
+    clamped to the stability bound in one integer; the
     answer is a :class:`TickSolution`. Anything the kernel refuses (absent
     parts, sparse matrices, another dtype or layout, a shape change) goes to
     the general path, which converts, checks, re-shapes the state and raises
@@ -425,7 +445,9 @@ class RNNOnline(_NetworkBackend):
                 sol.x = out[sx]
                 sol._out = out
                 sol._slices = slices
-                sol.iterations = code >> 1
+                sol.iterations = code >> 2
+                if code & 2:  # the step was clamped to the bound (or none is proven stable)
+                    sol.error = nw.step_note(prm)
                 if code & 1:
                     sol.status = "optimal"
                     sol.found = True
@@ -481,9 +503,10 @@ class RNNConverged(_NetworkBackend):
 class RNNTuned(RNNOnline):
     """The online network with :data:`WORKING_SETTINGS`, not the paper's ``eps``.
 
-    ``eps = 1e-3`` s, 5 Euler sub-steps per tick and ``l1`` clipped to +-10
-    (anti-windup during the infeasible start): the setting with which the
-    network holds the paper's bars in closed loop (results/rnn/README.md).
+    ``eps = 1e-4`` s, 20 semi-implicit sub-steps per 1 ms of integrated time
+    (a step of 50 us whatever ``dt``) and ``l1`` clipped to +-10 (anti-windup
+    during the infeasible start): the setting with which the network keeps
+    ``d_safe - 0.5 mm`` in every shipped scenario (results/rnn/README.md).
     It ignores a scenario's ``[rnn]`` table, which carries the paper's values;
     settings given explicitly still override.
     """

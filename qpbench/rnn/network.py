@@ -73,7 +73,20 @@ PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
 #: status ``optimal`` and the equality count of the state's split (-1: not checked);
 #: and one more output of every kernel: the last call's step count or code (NaN: none yet).
 OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
-PRM_SIZE = 20
+#: Inputs of a fixed step: the ratio ``r = h / eps`` of one step the setting
+#: asks for (0: none; then ``SUBSTEPS`` or the bound decides the count) and
+#: whether to clamp a forced step to the stability bound (1) or not (0);
+#: output: the step count the setting asked for (0 when the bound chose it).
+R_STEP, CLAMP, NOMINAL = range(20, 23)
+#: Output: what a fixed-duration call did against its setting (:data:`NOTES`).
+NOTE = 23
+PRM_SIZE = 24
+
+#: ``prm[NOTE]`` values: nothing to say; the step was clamped to the bound (more
+#: steps); no step is proven stable (``P`` not positive definite: the steps ran
+#: as set); the steps the bound needs exceed ``MAX_STEPS`` (capped there: the
+#: step stays above the bound).
+NOTE_NONE, NOTE_CLAMPED, NOTE_UNPROVEN, NOTE_CAPPED = 0, 1, 2, 3
 
 #: Kernel return codes besides a step count.
 NO_STABLE_STEP = -1
@@ -267,6 +280,13 @@ class IntegrationResult:
         ratio_max: Stability bound on ``r`` (module docstring); a ``ratio``
             above it may diverge.
         sigma2_bound: Upper bound on ``sigma_max([A; G])^2`` used.
+        nominal_steps: Steps the setting asked for (a forced count, or the
+            duration over a fixed step); 0 when the bound chose the count.
+            ``steps > nominal_steps > 0``: the step was clamped to the bound.
+
+    ``ratio_max`` and ``sigma2_bound`` are NaN when a forced step was not
+    checked against the bound, or was below a cheap lower estimate of it
+    (then it is within the bound: see :func:`integrate`).
     """
 
     steps: int
@@ -277,6 +297,12 @@ class IntegrationResult:
     ratio: float
     ratio_max: float
     sigma2_bound: float
+    nominal_steps: int = 0
+
+    @property
+    def clamped(self) -> bool:
+        """The step of the setting exceeded the stability bound and was shortened."""
+        return self.steps > self.nominal_steps > 0
 
 
 # ---------------------------------------------------------------------------
@@ -300,6 +326,65 @@ def _ratio_max(pmin, pmax, sig2, semi):
     if sig2 > 0.0:
         bound = min(bound, pmin / sig2)
     return bound
+
+
+def _gershgorin(P):
+    """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``.
+
+    ``exact`` when the symmetric part is diagonal (the bounds are then its
+    smallest and largest diagonal entries, the eigenvalues themselves).
+    """
+    n = P.shape[0]
+    lo = np.inf
+    hi = -np.inf
+    exact = True
+    for i in range(n):
+        radius = 0.0
+        for j in range(n):
+            if j != i:
+                radius += abs(0.5 * (P[i, j] + P[j, i]))
+        if radius != 0.0:
+            exact = False
+        lo = min(lo, P[i, i] - radius)
+        hi = max(hi, P[i, i] + radius)
+    if n == 0:
+        return 1.0, 1.0, True
+    return lo, hi, exact
+
+
+def _frobenius2(A, G):
+    """``|A|_F^2 + |G|_F^2 = tr(A^T A + G^T G)``: an upper bound on ``sigma_max([A; G])^2``."""
+    t = 0.0
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            t += A[i, j] * A[i, j]
+    for i in range(G.shape[0]):
+        for j in range(G.shape[1]):
+            t += G[i, j] * G[i, j]
+    return t
+
+
+def _nominal_steps(r_total, r_step, substeps):
+    """Steps a fixed-duration call takes before any clamp (0: the bound decides).
+
+    ``r_step > 0``: the fewest steps of ratio at most ``r_step`` over
+    ``r_total`` (a step of fixed length, whatever the duration; a duration a
+    hair above a multiple of the step, from rounding, does not add a step);
+    else ``substeps`` (0 for none).
+    """
+    if r_total <= 0.0:
+        return 0
+    if r_step > 0.0:
+        return max(1, int(math.ceil(r_total / r_step - 1e-9)))
+    return substeps
+
+
+def _clamped_steps(r_total, r_max, at_least, max_steps):
+    """The fewest steps (at least ``at_least``) of ratio ``<= r_max`` over ``r_total``, at most ``max_steps``."""
+    need = r_total / r_max
+    if not need < max_steps:  # also a tiny or zero bound (need inf or NaN)
+        return int(max(at_least, max_steps))
+    return max(at_least, int(math.ceil(need)))
 
 
 def _sigma2_bound_numpy(A: np.ndarray, G: np.ndarray) -> float:
@@ -341,6 +426,8 @@ def make_params(
     max_steps: int = 100_000,
     tol: float = -1.0,
     l1_clip: float | None = None,
+    step_ratio: float = 0.0,
+    clamp: bool = False,
 ) -> np.ndarray:
     """The parameter block ``prm`` of the kernels (see :func:`integrate`)."""
     if method not in METHODS:
@@ -354,9 +441,12 @@ def make_params(
     prm[MAX_STEPS] = max_steps
     prm[TOL] = tol
     prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
+    prm[R_STEP] = step_ratio
+    prm[CLAMP] = 1.0 if clamp else 0.0
     prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
     prm[STATE_ME] = -1.0
     prm[STEPS] = np.nan
+    prm[NOTE] = NOTE_NONE
     return prm
 
 
@@ -374,10 +464,34 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         return SHAPE_MISMATCH
     v, l1, l2 = xi[:n], xi[n : n + me], xi[n + me :]
     semi = prm[SEMI] != 0.0
-    r_total, substeps, l1_clip = prm[R_TOTAL], int(prm[SUBSTEPS]), prm[L1_CLIP]
-    forced = r_total > 0.0 and substeps > 0
+    r_total, l1_clip = prm[R_TOTAL], prm[L1_CLIP]
+    nominal = _nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
+    forced = nominal > 0
+    prm[NOMINAL] = nominal
+    note = NOTE_NONE
     if forced:
         rmax = sig2 = np.nan
+        nsteps = nominal
+        if prm[CLAMP] != 0.0:
+            # the bound only when the step may exceed it: below a cheap lower
+            # estimate of it (Gershgorin for P, Frobenius for sigma_max^2) it cannot
+            if n:
+                S = 0.5 * (P + P.T)
+                radius = np.abs(S).sum(axis=1) - np.abs(np.diag(S))
+                glo, ghi = float((np.diag(S) - radius).min()), float((np.diag(S) + radius).max())
+                exact = not radius.any()
+            else:
+                glo, ghi, exact = 1.0, 1.0, True
+            low = _ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
+            if not r_total / nominal <= prm[SAFETY] * low:
+                pmin, pmax = (glo, ghi) if exact else p_eigen_range(P)
+                sig2 = _sigma2_bound_numpy(A, G)
+                rmax = _ratio_max(pmin, pmax, sig2, semi)
+                if rmax <= 0.0:
+                    note = NOTE_UNPROVEN
+                elif r_total / nominal > prm[SAFETY] * rmax:
+                    nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                    note = NOTE_CLAMPED
     else:
         sig2 = _sigma2_bound_numpy(A, G)
         rmax = _ratio_max(prm[PMIN], prm[PMAX], sig2, semi)
@@ -388,13 +502,17 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         prm[STEPS] = NO_STABLE_STEP
         return NO_STABLE_STEP
     if r_total > 0.0:
-        nsteps = substeps if substeps > 0 else max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+        if not forced:
+            nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
+        if nsteps >= prm[MAX_STEPS] and r_total / nsteps > prm[SAFETY] * rmax:
+            note = NOTE_CAPPED
         r = r_total / nsteps
         check = False
     else:
         r = prm[SAFETY] * rmax
         nsteps = int(prm[MAX_STEPS])
         check = prm[TOL] >= 0.0
+    prm[NOTE] = note
     tol = prm[TOL]
     prm[RATIO] = r
     Av = A @ v
@@ -602,14 +720,35 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     o2 = n + me
     semi = prm[SEMI] != 0.0
     r_total = prm[R_TOTAL]
-    substeps = int(prm[SUBSTEPS])
     l1_clip = prm[L1_CLIP]
     tol = prm[TOL]
-    forced = r_total > 0.0 and substeps > 0
+    nominal = _nominal_steps_jit(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
+    forced = nominal > 0
+    prm[NOMINAL] = nominal
+    nsteps = nominal
+    note = NOTE_NONE
     if forced:
-        # The bound only informs; skip it (the caller may ask stable_ratio()).
         rmax = np.nan
         sig2 = np.nan
+        if prm[CLAMP] != 0.0:
+            # the bound only when the step may exceed it: below a cheap lower
+            # estimate of it (Gershgorin for P, Frobenius for sigma_max^2) it cannot
+            glo, ghi, exact = _gershgorin_jit(P)
+            low = _ratio_max_jit(glo, ghi, _frobenius2_jit(A, G), semi)
+            if not r_total / nominal <= prm[SAFETY] * low:
+                pmin = glo
+                pmax = ghi
+                if not exact:
+                    w = np.linalg.eigvalsh(0.5 * (P + P.T))
+                    pmin = w[0]
+                    pmax = w[n - 1]
+                sig2 = _sigma2_bound_jit(A, G)
+                rmax = _ratio_max_jit(pmin, pmax, sig2, semi)
+                if rmax <= 0.0:
+                    note = NOTE_UNPROVEN
+                elif r_total / nominal > prm[SAFETY] * rmax:
+                    nsteps = _clamped_steps_jit(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                    note = NOTE_CLAMPED
     else:
         sig2 = _sigma2_bound_jit(A, G)
         rmax = _ratio_max_jit(prm[PMIN], prm[PMAX], sig2, semi)
@@ -620,16 +759,17 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
         prm[STEPS] = NO_STABLE_STEP
         return NO_STABLE_STEP
     if r_total > 0.0:
-        if substeps > 0:
-            nsteps = substeps
-        else:
-            nsteps = max(1, int(math.ceil(r_total / (prm[SAFETY] * rmax))))
+        if not forced:
+            nsteps = _clamped_steps_jit(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
+        if nsteps >= prm[MAX_STEPS] and r_total / nsteps > prm[SAFETY] * rmax:
+            note = NOTE_CAPPED
         r = r_total / nsteps
         check = False
     else:
         r = prm[SAFETY] * rmax
         nsteps = int(prm[MAX_STEPS])
         check = tol >= 0.0
+    prm[NOTE] = note
     prm[RATIO] = r
     if sol.shape[0] >= 3 * n + 2 * (me + mi):
         # scratch space after the outputs (saves three allocations)
@@ -683,8 +823,10 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
 def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
     """One call of the online network: :func:`_integrate_loops` plus its verdict.
 
-    Returns ``2 * steps + ok`` (``ok``: primal residual and complementarity
-    within ``prm[OK_PRIMAL]``, dual residual within ``prm[OK_DUAL]``), or
+    Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and
+    complementarity within ``prm[OK_PRIMAL]``, dual residual within
+    ``prm[OK_DUAL]``; ``note``: the setting's step was clamped to the
+    stability bound, or no step is proven stable, see :func:`step_note`), or
     :data:`SHAPE_MISMATCH` (also when the equality count is not the state's
     ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`.
     """
@@ -698,7 +840,7 @@ def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no co
     if not (math.isfinite(obj) and math.isfinite(pr)):
         return DIVERGED
     ok = pr <= prm[OK_PRIMAL] and prm[DUAL] <= prm[OK_DUAL] and prm[COMPL] <= prm[OK_PRIMAL]
-    return 2 * steps + (1 if ok else 0)
+    return 4 * steps + (2 if prm[NOTE] != NOTE_NONE else 0) + (1 if ok else 0)
 
 
 def _part_fits(off, size, length):  # pragma: no cover - runs compiled
@@ -751,6 +893,10 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
 # Names the compiled kernels call; bound to jitted functions by :func:`kernel`.
 _sigma2_bound_jit = _sigma2_bound_loops
 _ratio_max_jit = _ratio_max
+_gershgorin_jit = _gershgorin
+_frobenius2_jit = _frobenius2
+_nominal_steps_jit = _nominal_steps
+_clamped_steps_jit = _clamped_steps
 _matvec_jit = _matvec_off
 _grad_products_jit = _grad_products
 _step_jit = _step
@@ -787,7 +933,7 @@ def kernel(use_numba: bool = True):
     if not use_numba:
         return _integrate_numpy
     global _COMPILED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit, _grad_products_jit, _integrate_jit
-    global _step_jit, _residuals_jit
+    global _step_jit, _residuals_jit, _gershgorin_jit, _frobenius2_jit, _nominal_steps_jit, _clamped_steps_jit
     if _COMPILED is None:
         import numba
 
@@ -795,6 +941,10 @@ def kernel(use_numba: bool = True):
         inline = numba.njit(cache=True, inline="always")
         _sigma2_bound_jit = jit(_sigma2_bound_loops)
         _ratio_max_jit = jit(_ratio_max)
+        _gershgorin_jit = inline(_gershgorin)
+        _frobenius2_jit = inline(_frobenius2)
+        _nominal_steps_jit = inline(_nominal_steps)
+        _clamped_steps_jit = inline(_clamped_steps)
         # inlined into their callers (numba IR): a call costs more than these small products
         _matvec_jit = inline(_matvec_off)
         _grad_products_jit = inline(_grad_products)
@@ -877,14 +1027,21 @@ def integrate(
     method: str = "euler",
     use_numba: bool = True,
     p_range: tuple[float, float] | None = None,
+    step_ratio: float = 0.0,
+    clamp: bool = True,
 ) -> IntegrationResult:
     """Integrate the network on ``qp`` from ``state`` (updated in place).
 
     Two modes:
 
-    - fixed duration (``r_total = duration / eps > 0``): ``substeps`` equal
-      steps, or, when ``substeps == 0``, the fewest steps with
-      ``r <= safety * ratio_max``;
+    - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
+      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``: their count
+      follows the duration), else ``substeps`` equal steps, else (both 0)
+      the fewest steps with ``r <= safety * ratio_max``. With ``clamp``, a
+      forced step above ``safety * ratio_max`` is shortened to it (more
+      steps; :attr:`IntegrationResult.clamped`); the bound is computed only
+      when the step is above a cheap lower estimate of it (Gershgorin bounds
+      of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
     - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
       until primal residual, dual residual and complementarity are all
       ``<= tol``, or ``max_steps`` steps.
@@ -894,6 +1051,8 @@ def integrate(
         state: Network state, updated in place; its shape must match ``qp``.
         r_total: Duration of the integration over ``eps`` (dimensionless).
         substeps: Forced number of steps of a fixed-duration integration.
+        step_ratio: Ratio ``h / eps`` of one step of a fixed-duration
+            integration (over ``substeps`` when both are given).
         safety: Fraction of the stability bound used for the step, in (0, 1].
         max_steps: Step budget of a convergence run.
         tol: Residual tolerance of a convergence run (negative: never stop early).
@@ -902,6 +1061,8 @@ def integrate(
         method: ``"euler"`` or ``"semi-implicit"``.
         use_numba: Use the compiled loop (else the numpy path).
         p_range: ``(lambda_min, lambda_max)`` of ``P`` if known.
+        clamp: Shorten a forced step above ``safety * ratio_max`` (more
+            steps); ``False`` runs it as given (to study instability).
 
     Returns:
         An :class:`IntegrationResult` (``steps == NO_STABLE_STEP`` when ``P``
@@ -912,15 +1073,45 @@ def integrate(
     prm = make_params(
         p_range=p_range if p_range is not None else p_eigen_range(qp.P), method=method,
         r_total=r_total, substeps=substeps, safety=safety, max_steps=max_steps, tol=tol,
-        l1_clip=l1_clip,
+        l1_clip=l1_clip, step_ratio=step_ratio, clamp=clamp,
     )
     steps = kernel(use_numba)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL)
     if steps == SHAPE_MISMATCH:  # pragma: no cover - dense_qp checked the shapes
         raise ProblemFormatError("inconsistent problem shapes", key="P")
+    return result(prm)
+
+
+def result(prm: np.ndarray) -> IntegrationResult:
+    """The :class:`IntegrationResult` of the last kernel call on ``prm``."""
     return IntegrationResult(
-        int(steps), float(prm[PRIMAL]), float(prm[DUAL]), float(prm[COMPL]), float(prm[OBJ]),
-        float(prm[RATIO]), float(prm[RATIO_MAX]), float(prm[SIG2]),
+        int(prm[STEPS]), float(prm[PRIMAL]), float(prm[DUAL]), float(prm[COMPL]), float(prm[OBJ]),
+        float(prm[RATIO]), float(prm[RATIO_MAX]), float(prm[SIG2]), int(prm[NOMINAL]),
     )
+
+
+def step_note(prm: np.ndarray) -> str | None:
+    """What the last fixed-step call did against the setting, if anything (else ``None``).
+
+    A forced step above ``safety * ratio_max`` was shortened (more steps),
+    or no step size is proven stable (``P`` not positive definite) and the
+    setting's steps ran as given.
+    """
+    note = prm[NOTE]
+    nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
+    if note == NOTE_CLAMPED:
+        r_set = prm[R_TOTAL] / nominal
+        return (
+            f"step clamped to the stability bound: r = h/eps = {r_set:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g}; "
+            f"{steps} steps instead of {nominal}"
+        )
+    if note == NOTE_UNPROVEN:
+        return f"no step size is proven stable (P not positive definite); {steps} steps as set"
+    if note == NOTE_CAPPED:
+        return (
+            f"step above the stability bound: r = h/eps = {prm[RATIO]:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g} "
+            f"even at the step budget ({steps} steps, max_iter)"
+        )
+    return None
 
 
 _NO_SOL = np.zeros(0)
