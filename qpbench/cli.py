@@ -27,6 +27,7 @@ COMMANDS = {
     "report": "report",
     "backends": "backends",
     "inspect": "inspect_",
+    "warmup": "warmup",
 }
 
 log = logging.getLogger("qpbench")
@@ -85,6 +86,9 @@ def _configure_logging(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``qpbench`` console script; returns the exit code."""
+    from .cache import configure_numba_cache
+
+    configure_numba_cache()  # before numba is imported: workers inherit the variable it may set
     parser = build_parser()
     args = parser.parse_args(argv)
     args.quiet = getattr(args, "quiet", False)

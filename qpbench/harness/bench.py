@@ -472,8 +472,9 @@ def run_bench(
                     )
                     needs_reset[name] = sequential and outcome.status in RESET_STATUSES
                     if outcome.status == "time_limit" and not runner.isolated and config.isolate == "auto":
-                        # In this process a limit can only be enforced where Python code
-                        # runs: a backend that overran once goes to a worker process.
+                        # In this process a solve is never interrupted (an exception raised
+                        # into foreign code can break it): a backend that overran once goes
+                        # to a worker process, which is killed at its deadline.
                         log.warning(
                             "%s overran its time limit on %s in this process; it runs in a worker process from now on",
                             name,

@@ -35,8 +35,11 @@ followed by ``isolated`` (the run was made in a worker process with a
 deadline) and every other key of the simulator's summary, among them the
 per-tick guards' counts ``error_ticks``, ``time_limit_ticks``,
 ``invalid_ticks`` and ``first_error`` (see :func:`qpbench.sim.loop.simulate`:
-an exception, a late answer or a non-finite answer of the backend is a
-tick without a solution, not the end of the run). The table is rewritten
+an exception or a non-finite answer of the backend is a tick without a
+solution, not the end of the run), ``deadline_misses`` (ticks whose solve
+took longer than dt; the answer was applied all the same) and, with a
+per-tick ``deadline`` (``--deadline``), ``deadline_dropped`` (answers
+dropped for arriving later). The table is rewritten
 atomically after each run (rows appear as they are produced); a run that
 raises becomes a row with status ``error`` and the others continue.
 
@@ -311,26 +314,26 @@ def resolve_backends(value: str | list[str] | None) -> list[str]:
 
 
 def simulate_one(scenario_name: str, backend: str, formulation: str, duration: float | None,
-                 log_path: Path | None, time_limit: float | None = None) -> tuple[dict, pd.DataFrame]:
+                 log_path: Path | None, deadline: float | None = None) -> tuple[dict, pd.DataFrame]:
     """Run one (scenario, backend) and return its table row and tick log.
 
     The tick log is written atomically to ``log_path`` (Parquet) when given.
     The backend is passed by name, so the ``rnn`` backends get the scenario's
     ``[rnn]`` table (eps, sub-steps, clipping) and the loop's ``dt`` from
-    :func:`qpbench.sim.loop.resolve_backend`. ``time_limit`` is the per-tick
-    limit [s] (default: the backend profile's; see :func:`qpbench.sim.loop.simulate`).
+    :func:`qpbench.sim.loop.resolve_backend`. ``deadline`` is the per-tick
+    deadline [s] (default none: every answer is applied; see :func:`qpbench.sim.loop.simulate`).
     Exceptions propagate (the caller turns them into an error row).
     """
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
     scenario = load_scenario(scenario_name)
-    # warm-up: a discarded run of a few ticks, so one-off costs (numba compilation or
-    # cache load, solver imports, first-call allocations) stay out of the timed run
-    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt, time_limit=time_limit)
+    # warm-up: a discarded run of a few ticks, so one-off costs (solver imports, first-call
+    # allocations; the numba kernels are ready before, see qpbench.jit) stay out of the timed run
+    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt, deadline=deadline)
     start = time.perf_counter()
     # by name: the simulator gives the rnn backends the scenario's [rnn] settings and dt
-    result = simulate(scenario, backend, formulation=formulation, duration=duration, time_limit=time_limit)
+    result = simulate(scenario, backend, formulation=formulation, duration=duration, deadline=deadline)
     wall = time.perf_counter() - start
     summary = dict(result.summary or {})
     summary.setdefault("wall_time_s", wall)
@@ -345,10 +348,10 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
 
 def _run_job(args: tuple) -> dict:
     """One guarded run (module level so a process pool can call it)."""
-    scenario, backend, formulation, duration, out, time_limit = args
+    scenario, backend, formulation, duration, out, deadline = args
     log_path = Path(out) / LOG_DIR / log_name(scenario, backend)
     try:
-        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, time_limit)
+        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, deadline)
         row["log_file"] = f"{LOG_DIR}/{log_path.name}"
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
         log.warning("closed loop %s with %s failed: %s: %s", scenario, backend, type(exc).__name__, exc)
@@ -614,7 +617,7 @@ def run_closed_loop(
     skip: dict[str, str] | None = None,
     isolate: str = "auto",
     run_time_limit: float | None = None,
-    time_limit: float | None = None,
+    deadline: float | None = None,
     plugins: list[str] | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``.
@@ -638,8 +641,8 @@ def run_closed_loop(
             its overrun a ``time_limit`` row (the worker killed).
         run_time_limit: Deadline of an isolated run [s] (default: see
             :func:`run_deadline`).
-        time_limit: Per-tick time limit [s] (default: the backend profile's;
-            see :func:`qpbench.sim.loop.simulate`).
+        deadline: Per-tick deadline [s]: a later answer is dropped (default
+            none: every answer is applied; see :func:`qpbench.sim.loop.simulate`).
         plugins: Plugin modules or ``.py`` files that register extra backends
             (with those of ``QPBENCH_PLUGINS``); imported here and in the workers.
 
@@ -655,8 +658,8 @@ def run_closed_loop(
         raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
     if isolate not in ISOLATE:
         raise ParamError(f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate")
-    for value, key in ((run_time_limit, "--run-time-limit"), (time_limit, "--time-limit")):
-        if value is not None and not (value > 0 and not math.isnan(value)):
+    for value, key in ((run_time_limit, "--run-time-limit"), (deadline, "--deadline")):
+        if value is not None and not (value > 0 and math.isfinite(value)):
             raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
     from .plugins import load_plugins, plugin_specs
 
@@ -705,7 +708,7 @@ def run_closed_loop(
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
     # (key, args, deadline of an isolated run or None)
-    items = [((s, b), (s, b, formulation, duration, str(out), time_limit),
+    items = [((s, b), (s, b, formulation, duration, str(out), deadline),
               run_deadline(s, duration, run_time_limit) if _isolated(b) else None) for s, b in todo]
 
     def _emit_run(key, row):
