@@ -22,9 +22,12 @@ says ``state_reset = True``.
 
 No compile in a worker: the parent prepares every numba kernel before it
 starts one (:func:`qpbench.jit.warmup`, which leaves them in the on-disk
-cache), the forkserver preloads numba and qpbench's kernel modules, and each
-worker loads the kernels from the cache when it starts, before it reports
-ready (within :data:`START_TIMEOUT_S`, outside any solve's deadline). The
+cache); the forkserver, started and preloaded before the first worker's
+clock, imports qpbench and loads the kernels from the cache once
+(:mod:`qpbench.harness.preload`), so each worker is forked with them in
+memory. A worker started otherwise (``spawn``) loads them when it starts,
+before it reports ready (within :data:`START_TIMEOUT_S`, outside any solve's
+deadline). The
 discarded warm-up solve has an allowance of its own (:data:`WARMUP_TIMEOUT_S`):
 a slow one is not a reason to kill the worker.
 
@@ -71,13 +74,22 @@ def _context():
     warmup()  # at once after the first call
     if _CTX is None:
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        _CTX = multiprocessing.get_context(method)
+        ctx = multiprocessing.get_context(method)
         if method == "forkserver":
-            _CTX.set_forkserver_preload([
-                "qpbench.harness.isolation", "qpbench.backends", "numpy", "scipy.sparse", "numba",
-                "qpbench.jit", "qpbench.rnn.network", "qpbench.control.controller", "qpbench.sim.loop",
+            ctx.set_forkserver_preload([
+                "qpbench.harness.isolation", "qpbench.backends", "numpy", "scipy.sparse", "qpbench.harness.preload",
             ])
+            # start the server now and wait for its preload (a no-op child), so that no
+            # worker's deadline ever covers it
+            proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
+            proc.start()
+            proc.join(START_TIMEOUT_S)
+        _CTX = ctx
     return _CTX
+
+
+def _noop() -> None:
+    """A child that does nothing: its start waits for the forkserver's preload."""
 
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
