@@ -303,3 +303,19 @@ def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys,
     bad = tmp_path / "bad.csv"
     assert bench(two_scenarios, "--backends", "clarabel", "--out", bad, "--set", "osqp.rho=0.1") == 2
     assert "osqp.rho" in capsys.readouterr().err and not bad.exists()
+
+
+def test_warmup_solves_cover_every_problem_structure():
+    """The discarded warm-up solves reach each structure of the set (a kernel specialises on
+    which parts are present), so no timed solve pays a first-structure cost."""
+    from qpbench.harness.bench import _structure, _warmup_problems
+
+    records = fb.tick_records(6)
+    records[3].problem.A = records[3].problem.b = None
+    records[4].problem.A = records[4].problem.b = None
+    records[5].problem.lb = records[5].problem.ub = None
+    seqs = sequences(records, "sequential")
+    firsts = _warmup_problems(records, seqs)
+    assert firsts == [records[0].problem, records[3].problem, records[5].problem]
+    assert len({_structure(p) for p in firsts}) == 3
+    assert _warmup_problems(records[:3], sequences(records[:3], "sequential")) == [records[0].problem]
