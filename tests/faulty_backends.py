@@ -222,6 +222,22 @@ class LastNative(Backend):
             return sol
 
 
+
+@register
+class KernelProbe(Backend):
+    """Solves exactly; ``iterations`` = specialisations of the network's general integrator
+    this process holds in memory (a worker forked with the kernels loaded has them all)."""
+
+    name = "probe:kernels"
+    family = "test state"
+
+    def _solve(self, problem, warm_start):
+        from qpbench.rnn import network as nw
+
+        sol = exact_solution(problem)
+        sol.iterations = len(nw.kernel(True).overloads)
+        return sol
+
 # ---------------------------------------------------------------- problem sets for the harness tests
 
 

@@ -139,6 +139,19 @@ def test_worker_times_inside_and_carries_state(records):
         runner.close()
 
 
+
+def test_worker_starts_with_the_kernels_in_memory(records):
+    """Workers are forked from a server that loaded every kernel: none compiles or loads one in a solve."""
+    from qpbench import jit
+
+    runner = IsolatedRunner("probe:kernels", "default", {}, 5.0, True, [PLUGIN])
+    try:
+        out = runner.solve(records[0].problem)
+        assert out.status == "optimal"
+        assert out.solution.iterations >= len(jit._SCENARIOS) * 2  # each QP shape warmed: in memory at once
+    finally:
+        runner.close()
+
 def _read(path):
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))

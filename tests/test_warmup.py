@@ -76,7 +76,7 @@ def test_warmup_command_loads_what_the_cache_holds(fresh):
     assert _qpbench(["-q", "warmup"], cache, work).stdout == ""
 
 
-def test_warmup_on_a_cache_it_fills(tmp_path):
+def test_warmup_twice_in_one_process_does_nothing_more():
     """In process: a warmed process has every kernel; a second call does nothing."""
     from qpbench import jit
 

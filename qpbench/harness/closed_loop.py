@@ -57,8 +57,10 @@ With ``jobs > 1`` every run is made in a worker process of its own (the
 deadline only for isolated ones), so one crash loses no other run's row.
 Isolation costs no timing accuracy: the worker times the run itself exactly
 as this process would (warm-up run first); its start (a fork of the
-forkserver, importing the backend, loading the compiled kernels: about a
-second) adds only to the total duration.
+forkserver, which already holds qpbench and the compiled kernels, then
+importing the backend: well under a second) adds only to the total duration.
+No worker compiles: the kernels are compiled (or loaded) in this process
+before the first worker starts (:mod:`qpbench.jit`).
 ``resume`` keeps the rows already done with the same formulation and
 duration (status ``ok``) and runs the rest (rows of pairs not asked for this
 time stay in the table); ``force`` starts again.
