@@ -28,6 +28,8 @@ their state in ``iterations``), names ``stateful:<kind>``:
 - ``last-native``: ``iterations`` = ``round(q[-1])`` of the previously solved
   problem + 1 (0 after a reset); holds a lock, so it cannot be deep-copied
   (restored by replaying the previous problem).
+- ``kernels``: ``iterations`` = specialisations of the network's general
+  integrator the solving process holds in memory (a worker's inheritance).
 """
 
 from __future__ import annotations
@@ -228,7 +230,7 @@ class KernelProbe(Backend):
     """Solves exactly; ``iterations`` = specialisations of the network's general integrator
     this process holds in memory (a worker forked with the kernels loaded has them all)."""
 
-    name = "probe:kernels"
+    name = "stateful:kernels"
     family = "test state"
 
     def _solve(self, problem, warm_start):

@@ -144,7 +144,7 @@ def test_worker_starts_with_the_kernels_in_memory(records):
     """Workers are forked from a server that loaded every kernel: none compiles or loads one in a solve."""
     from qpbench import jit
 
-    runner = IsolatedRunner("probe:kernels", "default", {}, 5.0, True, [PLUGIN])
+    runner = IsolatedRunner("stateful:kernels", "default", {}, 5.0, True, [PLUGIN])
     try:
         out = runner.solve(records[0].problem)
         assert out.status == "optimal"
