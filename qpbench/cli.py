@@ -30,6 +30,7 @@ COMMANDS = {
     "inspect": "inspect_",
     "list": "list_",
     "export": "export",
+    "warmup": "warmup",
 }
 
 #: Shown at the end of ``qpbench --help``.
@@ -99,6 +100,9 @@ def _configure_logging(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``qpbench`` console script; returns the exit code."""
+    from .cache import configure_numba_cache
+
+    configure_numba_cache()  # before numba is imported: workers inherit the variable it may set
     parser = build_parser()
     args = parser.parse_args(argv)
     args.quiet = getattr(args, "quiet", False)

@@ -6,9 +6,13 @@ Loaded by the harness tests with ``--plugin tests/faulty_backends.py`` (or
 Faulty (names ``faulty:<kind>``):
 
 - ``raise``: raises ``RuntimeError("solver exploded")``;
-- ``sleep``: sleeps 60 s in Python (a ``SIGALRM`` time limit interrupts it);
-- ``hang``: blocks SIGALRM and sleeps 60 s, like a hang in native code that
-  nothing but killing the process stops (``risky``: isolated under ``auto``);
+- ``sleep``: sleeps :data:`SLEEP_S` in Python, then answers (past a short
+  time limit: ``time_limit`` by its wall time; the solve is not interrupted);
+- ``busy``: a Python loop of :data:`BUSY_S`, then answers; counts the solves
+  that ran to their last line (``completed``) and its ``finally`` blocks
+  (``cleanups``): a guard that raised into it would leave ``completed`` behind;
+- ``hang``: sleeps 60 s, like a hang in native code that nothing but
+  killing the process stops (``risky``: isolated under ``auto``);
 - ``segfault``: ``os.kill(os.getpid(), SIGSEGV)`` (``risky``);
 - ``nan``: returns ``x`` full of NaN with status ``optimal``;
 - ``segfault-once``: segfaults on the problem named in ``QPBENCH_TEST_SEGV``
@@ -24,6 +28,8 @@ their state in ``iterations``), names ``stateful:<kind>``:
 - ``last-native``: ``iterations`` = ``round(q[-1])`` of the previously solved
   problem + 1 (0 after a reset); holds a lock, so it cannot be deep-copied
   (restored by replaying the previous problem).
+- ``kernels``: ``iterations`` = specialisations of the network's general
+  integrator the solving process holds in memory (a worker's inheritance).
 """
 
 from __future__ import annotations
@@ -66,13 +72,40 @@ class RaiseBackend(_Faulty):
         raise RuntimeError("solver exploded\non two lines")
 
 
+#: Sleep of ``faulty:sleep`` [s].
+SLEEP_S = 1.0
+#: Length of ``faulty:busy``'s Python loop [s].
+BUSY_S = 0.5
+
+
 @register
 class SleepBackend(_Faulty):
     name = "faulty:sleep"
 
     def _solve(self, problem, warm_start):
-        time.sleep(60.0)
+        time.sleep(SLEEP_S)
         return exact_solution(problem)
+
+
+@register
+class BusyBackend(_Faulty):
+    name = "faulty:busy"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self.completed = self.cleanups = 0
+
+    def _solve(self, problem, warm_start):
+        try:
+            end = time.perf_counter() + BUSY_S
+            spins = 0
+            while time.perf_counter() < end:
+                spins += 1
+            sol = exact_solution(problem)
+            self.completed += 1  # the solve's last line
+            return sol
+        finally:
+            self.cleanups += 1
 
 
 @register
@@ -81,11 +114,7 @@ class HangBackend(_Faulty):
     risky = True
 
     def _solve(self, problem, warm_start):
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGALRM})
-        try:
-            time.sleep(60.0)
-        finally:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGALRM})
+        time.sleep(60.0)
         return exact_solution(problem)
 
 
@@ -281,6 +310,23 @@ class LazyDuals(Backend):
         return sol
 
 
+
+
+@register
+class KernelProbe(Backend):
+    """Solves exactly; ``iterations`` = specialisations of the network's general integrator
+    this process holds in memory (a worker forked with the kernels loaded has them all)."""
+
+    name = "stateful:kernels"
+    family = "test state"
+
+    def _solve(self, problem, warm_start):
+        from qpbench.rnn import network as nw
+
+        sol = exact_solution(problem)
+        sol.iterations = len(nw.kernel(True).overloads)
+        return sol
+
 # ---------------------------------------------------------------- problem sets for the harness tests
 
 
@@ -327,7 +373,9 @@ def write_tick_set(folder, n_ticks: int, **kw):
 #
 # - ``raise``: raises ``RuntimeError("tick fault k")``;
 # - ``nan``: returns ``x`` full of NaN with status ``optimal``;
-# - ``slow``: sleeps ``SLOW_S`` before answering (past a small per-tick limit).
+# - ``slow``: sleeps ``SLOW_S`` before answering (past a small per-tick deadline);
+# - ``slow-first``: sleeps ``SLOW_S`` on the first paper call only (tick 0), like
+#   a compile on a fresh machine, then answers.
 
 #: Every FAULT_EVERY-th paper-formulation call, from call FAULT_PHASE, misbehaves.
 FAULT_EVERY = 10
@@ -391,4 +439,16 @@ class SlowSomeTicks(_SomeTicks):
 
     def _fault(self, problem, warm_start):
         time.sleep(SLOW_S)
+        return self.inner.solve(problem, warm_start)
+
+
+@register
+class SlowFirstTick(_SomeTicks):
+    name = "faulty-ticks:slow-first"
+
+    def _solve(self, problem, warm_start):
+        if problem.A is not None:
+            self.calls += 1
+            if self.calls == 1:
+                time.sleep(SLOW_S)
         return self.inner.solve(problem, warm_start)

@@ -438,3 +438,18 @@ def get_backend_instance(name):
     from qpbench.backends import get_backend
 
     return get_backend(name)
+
+def test_warmup_solves_cover_every_problem_structure():
+    """The discarded warm-up solves reach each structure of the set (a kernel specialises on
+    which parts are present), so no timed solve pays a first-structure cost."""
+    from qpbench.harness.bench import _structure, _warmup_problems
+
+    records = fb.tick_records(6)
+    records[3].problem.A = records[3].problem.b = None
+    records[4].problem.A = records[4].problem.b = None
+    records[5].problem.lb = records[5].problem.ub = None
+    seqs = sequences(records, "sequential")
+    firsts = _warmup_problems(records, seqs)
+    assert firsts == [records[0].problem, records[3].problem, records[5].problem]
+    assert len({_structure(p) for p in firsts}) == 3
+    assert _warmup_problems(records[:3], sequences(records[:3], "sequential")) == [records[0].problem]

@@ -168,7 +168,7 @@ import faulty_backends as fb  # noqa: E402
 PLUGIN = str(Path(fb.__file__).resolve())
 #: Columns that hold timings (differ between two runs of the same thing).
 TIMED = ("solve_time_p50_s", "solve_time_p99_s", "solve_time_max_s", "real_time_factor", "solve_time_median_s",
-         "wall_time_s")
+         "wall_time_s", "deadline_misses")
 
 
 def _untimed(row: pd.Series) -> pd.Series:

@@ -42,11 +42,17 @@ def test_exception_becomes_error_with_type_and_message(records):
     assert out.solution is None and out.wall_times_s == []
 
 
-def test_python_overrun_is_interrupted_at_the_time_limit(records):
-    out = local("faulty:sleep", time_limit=0.3).solve(records[0].problem)
-    assert out.status == "time_limit"
-    assert 0.3 <= out.wall_times_s[0] < 30.0  # interrupted, not the 60 s sleep
-    assert "time limit 0.3" in out.error
+def test_python_overrun_runs_to_its_end_and_is_time_limit(records):
+    """The guard never raises inside a backend: a Python loop past the limit ends
+    by itself (its last line and its ``finally`` run), then the row is ``time_limit``."""
+    runner = local("faulty:busy", time_limit=0.05)
+    out = runner.solve(records[0].problem)
+    assert out.status == "time_limit" and "time limit 0.05" in out.error
+    assert out.wall_times_s[0] >= fb.BUSY_S
+    assert runner.backend.completed == runner.backend.cleanups == 1
+    # the answer it returned is kept (right, only late)
+    np.testing.assert_allclose(out.solution.x, fb.exact_solution(records[0].problem).x, atol=1e-9)
+    assert runner.solve(records[1].problem).status == "time_limit" and runner.backend.completed == 2
 
 
 def test_nan_answer_is_invalid(records):
@@ -133,6 +139,19 @@ def test_worker_times_inside_and_carries_state(records):
         runner.close()
 
 
+
+def test_worker_starts_with_the_kernels_in_memory(records):
+    """Workers are forked from a server that loaded every kernel: none compiles or loads one in a solve."""
+    from qpbench import jit
+
+    runner = IsolatedRunner("stateful:kernels", "default", {}, 5.0, True, [PLUGIN])
+    try:
+        out = runner.solve(records[0].problem)
+        assert out.status == "optimal"
+        assert out.solution.iterations >= len(jit._SCENARIOS) * 2  # each QP shape warmed: in memory at once
+    finally:
+        runner.close()
+
 def _read(path):
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))
@@ -156,7 +175,8 @@ def _bench(args, env_extra=None):
 def test_fault_injection_run_completes_and_keeps_real_rows(tick_set, tmp_path):
     faulty = ["faulty:raise", "faulty:sleep", "faulty:hang", "faulty:segfault", "faulty:nan"]
     out = tmp_path / "faults.csv"
-    proc = _bench([str(tick_set), "--backends", ",".join(["clarabel", *faulty]), "--out", str(out), "--time-limit", "0.3"])
+    proc = _bench([str(tick_set), "--backends", ",".join(["clarabel", *faulty]), "--out", str(out), "--time-limit", "0.3",
+                   "--no-warmup"])
     assert proc.returncode == 1, proc.stderr  # completed, some solves failed
     assert "failed solves" in proc.stdout
     rows = _read(out)
@@ -172,7 +192,8 @@ def test_fault_injection_run_completes_and_keeps_real_rows(tick_set, tmp_path):
     by_backend = {b: [r for r in rows if r["backend"] == b] for b in ["faulty:raise", "faulty:segfault", "faulty:hang"]}
     assert all(r["error"] == "RuntimeError: solver exploded on two lines" for r in by_backend["faulty:raise"])
     assert all("SIGSEGV" in r["error"] and r["isolated"] == "True" for r in by_backend["faulty:segfault"])
-    # a Python-level overrun is interrupted in this process, then the backend moves to a worker
+    # a Python-level overrun runs to its end in this process (never interrupted: time_limit by its
+    # wall time), then the backend moves to a worker, whose deadline can stop it
     assert [r["isolated"] for r in rows if r["backend"] == "faulty:sleep"] == ["False", "True", "True", "True"]
     assert "overran its time limit" in proc.stderr
     # after the first failure of a sequence, each later solve starts from a reset state

@@ -7,6 +7,7 @@ import hashlib
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 import qpsolvers
 
@@ -434,15 +435,40 @@ def test_non_finite_answer_is_an_invalid_tick():
     assert s["invalid_ticks"] == len(ticks) and s["error_ticks"] == 0 and s["first_error"] is None
 
 
-def test_late_answer_is_a_time_limit_tick():
-    res, ticks = _fault_run("slow", time_limit=0.03)
+#: Columns and summary keys that measure time (all others must not depend on it).
+TIME_COLUMNS = ["solve_time_s"]
+TIME_KEYS = {"wall_time_s", "real_time_factor", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s",
+             "deadline_misses"}
+
+
+def test_late_answer_past_a_deadline_is_dropped_and_counted():
+    res, ticks = _fault_run("slow", deadline=0.03)
     s = res.summary
     _check_fault_ticks(res, ticks, "time_limit")
-    assert s["time_limit_ticks"] == len(ticks) and s["time_limit_s"] == 0.03
+    assert s["time_limit_ticks"] == s["deadline_dropped"] == len(ticks) and s["deadline_s"] == 0.03
     assert (res.log["solve_time_s"].iloc[ticks] > 0.03).all()
-    # the default limit is the profile's (10 s): the same answers are on time
-    quick = simulate("wall", qp_backend(), duration=0.01)
-    assert quick.summary["time_limit_s"] == 10.0 and quick.summary["time_limit_ticks"] == 0
+    assert s["deadline_misses"] >= len(ticks)  # each of them took longer than dt = 1 ms
+
+
+def test_late_first_answer_is_applied_without_a_deadline():
+    """A solve that sleeps past any sensible limit on tick 0 (a compile on a fresh machine):
+    its answer is applied, the run is the one without the sleep, and the tick is a deadline miss."""
+    import faulty_backends as fb
+
+    slow = simulate("wall", "faulty-ticks:slow-first", duration=0.05)
+    fast = simulate("wall", "daqp", duration=0.05)
+    s = slow.summary
+    assert slow.log["solve_time_s"].iloc[0] >= fb.SLOW_S
+    assert s["deadline_misses"] >= 1 and s["deadline_s"] is None and s["deadline_dropped"] is None
+    assert s["time_limit_ticks"] == 0 and slow.log["status"].iloc[0] == fast.log["status"].iloc[0]
+    pd.testing.assert_frame_equal(slow.log.drop(columns=TIME_COLUMNS), fast.log.drop(columns=TIME_COLUMNS))
+    skip = TIME_KEYS | {"backend"}
+    assert {k: v for k, v in s.items() if k not in skip} == {k: v for k, v in fast.summary.items() if k not in skip}
+    # with a deadline the late first answer is dropped: the soft fallback covers tick 0
+    dropped = simulate("wall", "faulty-ticks:slow-first", duration=0.05, deadline=fb.SLOW_S / 2)
+    d = dropped.summary
+    assert d["deadline_dropped"] == d["time_limit_ticks"] == 1 and d["deadline_s"] == fb.SLOW_S / 2
+    assert dropped.log["status"].iloc[0] == "time_limit" and dropped.log["fallback"].iloc[0]
 
 
 def test_fallback_exception_means_zero_velocity():
@@ -459,6 +485,15 @@ def test_fallback_exception_means_zero_velocity():
     assert (res.log["status"] == "error").all()
 
 
-def test_bad_time_limit():
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "1"])
+def test_bad_deadline(bad):
     with pytest.raises(ParamError, match="positive"):
-        simulate("wall", "pinv", duration=0.01, time_limit=0.0)
+        simulate("wall", "pinv", duration=0.01, deadline=bad)
+
+
+def test_bad_deadline_on_the_command_line(tmp_path, capsys):
+    from qpbench.cli import main
+
+    out = tmp_path / "s.json"
+    assert main(["simulate", "--scenario", "wall", "--backend", "pinv", "--deadline", "0", "--summary", str(out)]) == 2
+    assert "--deadline" in capsys.readouterr().err and not out.exists()

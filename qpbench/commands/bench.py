@@ -75,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..harness.plugins import load_plugins, plugin_specs
+    from ..jit import warmup_logged
     from .simulate import parse_overrides
 
     # Nothing is written before the input is known to be good.
@@ -111,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
     config.validate()
     problem_set = load_problems(args.problems)
     log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
+    warmup_logged(log)  # no compile inside a timed solve, here or in a worker
     progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(problem_set, config, args.out, force=args.force, resume=args.resume, progress=progress)
     if not args.quiet:

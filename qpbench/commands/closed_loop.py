@@ -1,9 +1,10 @@
 """``qpbench closed-loop``: every scenario with every backend in the loop, tabulated.
 
-Guarded (see :mod:`qpbench.harness.closed_loop`): per tick, an exception, a
-late answer (``--time-limit``) or a non-finite answer of the backend is a tick
-without a solution (statuses ``error``, ``time_limit``, ``invalid`` in the
-tick log, counts in the row); per run, ``--isolate`` runs a backend in a worker
+Guarded (see :mod:`qpbench.harness.closed_loop`): per tick, an exception or
+a non-finite answer of the backend is a tick without a solution (statuses
+``error``, ``invalid`` in the tick log, counts in the row); a late answer is
+applied like any other (``deadline_misses`` counts ticks slower than dt)
+unless ``--deadline`` drops it (status ``time_limit``, ``deadline_dropped``); per run, ``--isolate`` runs a backend in a worker
 process with a deadline (``--run-time-limit``), so a hang or a crash in native
 code becomes a ``time_limit`` or ``crashed`` row and the other runs go on.
 ``--plugin`` (or ``QPBENCH_PLUGINS``) loads modules that register extra
@@ -42,9 +43,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="runs in parallel, each in a worker process of its own (default: 1; timing is "
                              "cleanest with 1)")
-    parser.add_argument("--time-limit", type=float, default=None, metavar="S",
-                        help="per-tick time limit in [s]: a later answer is status time_limit and not applied "
-                             "(default: the profile's, 10 s)")
+    parser.add_argument("--deadline", type=float, default=None, metavar="SECONDS",
+                        help="per-tick deadline in [s]: a later answer is dropped (status time_limit; soft "
+                             "fallback, else zero velocity) and the runs depend on the machine's speed "
+                             "(default: none, every answer is applied; deadline_misses counts ticks slower "
+                             "than dt)")
     parser.add_argument("--isolate", default="auto", choices=("auto", "always", "never"),
                         help="run a backend's runs in a worker process with a deadline, so a hang or crash is a "
                              "row: auto = backends marked risky (default)")
@@ -67,11 +70,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..harness.closed_loop import resolve_backends, resolve_scenarios, run_closed_loop
     from ..harness.plugins import load_plugins, plugin_specs
+    from ..jit import warmup_logged
 
     plugins = plugin_specs(args.plugin)
     load_plugins(plugins)
     scenarios = resolve_scenarios(args.scenarios)
     backends = resolve_backends(args.backends)
+    warmup_logged(log)  # compiled here once: the worker processes load them
     bar = None
     total = len(scenarios) * len(backends)
     if not args.quiet:
@@ -89,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
                                   formulation=args.formulation, force=args.force,
                                   resume=args.resume, jobs=args.jobs, on_row=on_row,
                                   isolate=args.isolate, run_time_limit=args.run_time_limit,
-                                  time_limit=args.time_limit, plugins=plugins, run_budget=args.run_budget)
+                                  deadline=args.deadline, plugins=plugins, run_budget=args.run_budget)
     finally:
         if bar is not None:
             bar.close()

@@ -220,6 +220,7 @@ def run(args: argparse.Namespace) -> int:
     from ..harness.bench import BenchConfig, run_bench
     from ..harness.closed_loop import PAPER_SCENARIOS, resolve_backends, resolve_scenarios, run_closed_loop
     from .closed_loop import log_row
+    from ..jit import warmup_logged
     from ..report import write_report
 
     started = time.perf_counter()
@@ -243,6 +244,7 @@ def run(args: argparse.Namespace) -> int:
         shutil.rmtree(staging)
     staging.mkdir(parents=True, exist_ok=True)
 
+    warmup_logged(log)  # before anything is timed; the worker processes load them from the cache
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
     total = len(missing) + len(bench_scenarios) + len(scenarios) * len(backends) + 1
     from tqdm import tqdm

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -38,6 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "VALUE in TOML syntax (a bare word is a string), e.g. --set rnn.eps=0.001 --set rnn.substeps=5",
     )
     parser.add_argument("--profile", default="default", help="backend settings profile (default: default)")
+    parser.add_argument(
+        "--deadline", type=float, default=None, metavar="SECONDS",
+        help="drop an answer that arrives later than this (status time_limit; soft fallback, else zero velocity), "
+        "as a real-time controller would; the run then depends on the machine's speed. Default: none, every "
+        "answer is applied and the summary's deadline_misses counts ticks slower than dt",
+    )
     parser.add_argument("--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet")
     parser.add_argument("--summary", default=None, metavar="FILE", help="summary as JSON ('-': to stdout)")
     parser.add_argument("--dump", default=None, metavar="DIR", help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)")
@@ -56,6 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..atomic import atomic_path, check_output, write_text
     from ..exceptions import ParamError
+    from ..jit import warmup_logged
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
@@ -83,11 +91,14 @@ def run(args: argparse.Namespace) -> int:
         for name in ("problems.parquet", "manifest.json"):
             check_output(Path(args.dump) / name, force=args.force)
 
+    if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
+        raise ParamError(f"--deadline must be a positive number of seconds, got {args.deadline}", key="--deadline")
     scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
+    warmup_logged(log)
     result = simulate(
         scenario, args.backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
-        every=args.every, dump=args.dump, progress=progress, profile=args.profile,
+        every=args.every, dump=args.dump, progress=progress, profile=args.profile, deadline=args.deadline,
     )
     s = result.summary
     if args.log is not None:
@@ -128,7 +139,9 @@ def run(args: argparse.Namespace) -> int:
         "limit violations: angle %d, speed %d; Kp_hat %s, Kd_hat %s",
         s["joint_limit_violations"], s["joint_velocity_limit_violations"], fmt(s["kp_hat_final"], ".6g"), fmt(s["kd_hat_final"], ".6g"),
     )
-    log.info("wall time %.3f s, real-time factor %s", s["wall_time_s"], fmt(s["real_time_factor"]))
+    log.info("wall time %.3f s, real-time factor %s; %d ticks slower than dt = %g s%s", s["wall_time_s"],
+             fmt(s["real_time_factor"]), s["deadline_misses"], s["dt"],
+             "" if s["deadline_dropped"] is None else f", {s['deadline_dropped']} dropped past the deadline")
     return log_verdict(s)
 
 

@@ -80,7 +80,8 @@ class BenchConfig:
         time_limit: Per-solve limit in [s]; ``None`` = the profile's.
         isolate: ``auto`` (only backends marked ``risky`` or seen to crash in
             this process), ``always`` or ``never``.
-        warmup: One discarded solve per backend before the first timed one.
+        warmup: Discarded solves per backend before the first timed one: the
+            first problem, and the first of each other structure (parts present).
         plugins: Plugin modules (imported here and in workers).
         settings: Extra solver settings passed to every backend.
         backend_settings: Extra settings per backend name (over ``settings``).
@@ -344,6 +345,30 @@ def sequences(records, mode: str) -> list[list[int]]:
     return out
 
 
+def _structure(problem) -> tuple[bool, ...]:
+    """Which parts a problem has (equalities, inequalities, bounds) and whether ``P`` is sparse."""
+    import scipy.sparse as spa
+
+    return (problem.A is not None, problem.G is not None, problem.lb is not None or problem.ub is not None,
+            spa.issparse(problem.P))
+
+
+def _warmup_problems(records, seqs) -> list:
+    """The first problem of the run, then the first of each other structure (:func:`_structure`).
+
+    A backend's first solve of a structure may pay one-off costs (a compiled
+    kernel specialises on which parts are present): the discarded warm-up
+    solves pay them, not a timed one.
+    """
+    out, seen = [], set()
+    for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
+        key = _structure(records[i].problem)
+        if key not in seen:
+            seen.add(key)
+            out.append(records[i].problem)
+    return out
+
+
 def _n_box(problem) -> int:
     n = 0
     if problem.lb is not None:
@@ -583,10 +608,12 @@ def run_bench(
     overheads = []
     try:
         if config.warmup:
+            firsts = _warmup_problems(records, seqs)
             for name, runner in runners.items():
                 if any(todo[name]):
                     marker.mark(("warmup", name, pname))
-                    runner.warmup(records[seqs[0][0]].problem)
+                    for problem in firsts:
+                        runner.warmup(problem)
         for s, seq in enumerate(seqs):
             active = [name for name in config.backends if todo[name][s]]
             if not active:
@@ -628,8 +655,9 @@ def run_bench(
                     )
                     needs_reset[name] = sequential and outcome.status in RESET_STATUSES
                     if outcome.status == "time_limit" and not runner.isolated and config.isolate == "auto":
-                        # In this process a limit can only be enforced where Python code
-                        # runs: a backend that overran once goes to a worker process.
+                        # In this process a solve is never interrupted (an exception raised
+                        # into foreign code can break it): a backend that overran once goes
+                        # to a worker process, which is killed at its deadline.
                         log.warning(
                             "%s overran its time limit on %s in this process; it runs in a worker process from now on",
                             name,

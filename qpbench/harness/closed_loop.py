@@ -47,8 +47,11 @@ none) and every other key of the simulator's summary, among them
 ``deadline_misses`` when the simulator counts them, the
 per-tick guards' counts ``error_ticks``, ``time_limit_ticks``,
 ``invalid_ticks`` and ``first_error`` (see :func:`qpbench.sim.loop.simulate`:
-an exception, a late answer or a non-finite answer of the backend is a
-tick without a solution, not the end of the run). The table is rewritten
+an exception or a non-finite answer of the backend is a tick without a
+solution, not the end of the run), ``deadline_misses`` (ticks whose solve
+took longer than dt; the answer was applied all the same) and, with a
+per-tick ``deadline`` (``--deadline``), ``deadline_dropped`` (answers
+dropped for arriving later). The table is rewritten
 atomically after each run (rows appear as they are produced); a run that
 raises becomes a row with status ``error`` and the others continue.
 
@@ -66,8 +69,10 @@ With ``jobs > 1`` every run is made in a worker process of its own (the
 deadline only for isolated ones), so one crash loses no other run's row.
 Isolation costs no timing accuracy: the worker times the run itself exactly
 as this process would (warm-up run first); its start (a fork of the
-forkserver, importing the backend, loading the compiled kernels: about a
-second) adds only to the total duration.
+forkserver, which already holds qpbench and the compiled kernels, then
+importing the backend: well under a second) adds only to the total duration.
+No worker compiles: the kernels are compiled (or loaded) in this process
+before the first worker starts (:mod:`qpbench.jit`).
 ``resume`` keeps the rows already done with the same formulation and
 duration (status ``ok``) and runs the rest (rows of pairs not asked for this
 time stay in the table); ``force`` starts again.
@@ -331,15 +336,15 @@ def resolve_backends(value: str | list[str] | None) -> list[str]:
 
 
 def simulate_one(scenario_name: str, backend: str, formulation: str, duration: float | None,
-                 log_path: Path | None, time_limit: float | None = None,
+                 log_path: Path | None, deadline: float | None = None,
                  run_budget: float | None = None) -> tuple[dict, pd.DataFrame]:
     """Run one (scenario, backend) and return its table row and tick log.
 
     The tick log is written atomically to ``log_path`` (Parquet) when given.
     The backend is passed by name, so the ``rnn`` backends get the scenario's
     ``[rnn]`` table (eps, sub-steps, clipping) and the loop's ``dt`` from
-    :func:`qpbench.sim.loop.resolve_backend`. ``time_limit`` is the per-tick
-    limit [s] (default: the backend profile's; see :func:`qpbench.sim.loop.simulate`).
+    :func:`qpbench.sim.loop.resolve_backend`. ``deadline`` is the per-tick
+    deadline [s] (default none: every answer is applied; see :func:`qpbench.sim.loop.simulate`).
     ``run_budget`` is the wall-time budget of the timed run [s] (``wall_budget_s``
     of :func:`qpbench.sim.loop.simulate`; the warm-up is outside it): the run
     stops between ticks once it is spent and the row says how far it got.
@@ -349,12 +354,12 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
     from ..sim.scenario import load_scenario
 
     scenario = load_scenario(scenario_name)
-    # warm-up: a discarded run of a few ticks, so one-off costs (numba compilation or
-    # cache load, solver imports, first-call allocations) stay out of the timed run
-    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt, time_limit=time_limit)
+    # warm-up: a discarded run of a few ticks, so one-off costs (solver imports, first-call
+    # allocations; the numba kernels are ready before, see qpbench.jit) stay out of the timed run
+    simulate(scenario, backend, formulation=formulation, duration=WARMUP_TICKS * scenario.dt, deadline=deadline)
     start = time.perf_counter()
     # by name: the simulator gives the rnn backends the scenario's [rnn] settings and dt
-    result = simulate(scenario, backend, formulation=formulation, duration=duration, time_limit=time_limit,
+    result = simulate(scenario, backend, formulation=formulation, duration=duration, deadline=deadline,
                       wall_budget_s=run_budget)
     wall = time.perf_counter() - start
     summary = dict(result.summary or {})
@@ -370,10 +375,10 @@ def simulate_one(scenario_name: str, backend: str, formulation: str, duration: f
 
 def _run_job(args: tuple) -> dict:
     """One guarded run (module level so a process pool can call it)."""
-    scenario, backend, formulation, duration, out, time_limit, run_budget = args
+    scenario, backend, formulation, duration, out, deadline, run_budget = args
     log_path = Path(out) / LOG_DIR / log_name(scenario, backend)
     try:
-        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, time_limit, run_budget)
+        row, _ = simulate_one(scenario, backend, formulation, duration, log_path, deadline, run_budget)
         row["log_file"] = f"{LOG_DIR}/{log_path.name}"
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
         log.warning("closed loop %s with %s failed: %s: %s", scenario, backend, type(exc).__name__, exc)
@@ -634,7 +639,7 @@ def run_closed_loop(
     skip: dict[str, str] | None = None,
     isolate: str = "auto",
     run_time_limit: float | None = None,
-    time_limit: float | None = None,
+    deadline: float | None = None,
     plugins: list[str] | None = None,
     run_budget: float | None = None,
 ) -> ClosedLoopOutcome:
@@ -659,8 +664,8 @@ def run_closed_loop(
             its overrun a ``time_limit`` row (the worker killed).
         run_time_limit: Deadline of an isolated run [s] (default: see
             :func:`run_deadline`).
-        time_limit: Per-tick time limit [s] (default: the backend profile's;
-            see :func:`qpbench.sim.loop.simulate`).
+        deadline: Per-tick deadline [s]: a later answer is dropped (default
+            none: every answer is applied; see :func:`qpbench.sim.loop.simulate`).
         plugins: Plugin modules or ``.py`` files that register extra backends
             (with those of ``QPBENCH_PLUGINS``); imported here and in the workers.
         run_budget: Wall-time budget of each run [s] (default: none): a run
@@ -680,9 +685,9 @@ def run_closed_loop(
         raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
     if isolate not in ISOLATE:
         raise ParamError(f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate")
-    for value, key in ((run_time_limit, "--run-time-limit"), (time_limit, "--time-limit"),
+    for value, key in ((run_time_limit, "--run-time-limit"), (deadline, "--deadline"),
                        (run_budget, "--run-budget")):
-        if value is not None and not (value > 0 and not math.isnan(value)):
+        if value is not None and not (value > 0 and math.isfinite(value)):
             raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
     from .plugins import load_plugins, plugin_specs
 
@@ -731,7 +736,7 @@ def run_closed_loop(
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
     # (key, args, deadline of an isolated run or None)
-    items = [((s, b), (s, b, formulation, duration, str(out), time_limit, run_budget),
+    items = [((s, b), (s, b, formulation, duration, str(out), deadline, run_budget),
               run_deadline(s, duration, run_time_limit) if _isolated(b) else None) for s, b in todo]
 
     def _emit_run(key, row):

@@ -5,11 +5,15 @@ can go wrong into a status, never an exception:
 
 - a Python exception escaping the backend -> ``error``, with
   ``"Type: message"`` in :attr:`Outcome.error`;
-- a solve longer than the time limit -> ``time_limit``. In the main thread a
-  ``SIGALRM`` timer interrupts a solve that runs Python code past the limit
-  (it cannot interrupt native code; that needs a worker process, see
-  :mod:`qpbench.harness.isolation`); a solve that returns after the limit is
-  also ``time_limit``;
+- a solve longer than the time limit -> ``time_limit``. The solve is never
+  interrupted: its wall time is compared with the limit when it returns.
+  Raising an exception asynchronously inside a backend (a signal handler, as
+  ``SIGALRM`` would) can land in foreign code (a solver's Python wrapper,
+  numba's compiler, a C extension's callback) and leave it broken, so this
+  process does not; a solve that must be stopped (a hang in native or Python
+  code) needs a worker process, which is killed at its deadline (see
+  :mod:`qpbench.harness.isolation`; the bench moves a backend that overran
+  its limit in this process to one, under ``--isolate auto``);
 - a non-finite ``x`` (or ``optimal`` without ``x``) -> ``invalid``.
 
 After ``error``, ``time_limit`` and ``invalid`` the backend is reset before
@@ -21,9 +25,6 @@ timed region is identical in both cases.
 
 from __future__ import annotations
 
-import signal
-import threading
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,17 +35,6 @@ from .timing import StateRestorer, timed_call
 RESET_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
 #: Statuses that are a failure whatever the reference says.
 FAILURE_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
-
-
-class SolveTimeLimit(BaseException):
-    """Raised by the ``SIGALRM`` handler inside a solve that overran its limit.
-
-    A ``BaseException`` so that a backend's ``except Exception`` does not swallow it.
-    """
-
-
-def _on_alarm(signum, frame):
-    raise SolveTimeLimit()
 
 
 @dataclass
@@ -96,43 +86,27 @@ class LocalRunner:
 
     Args:
         backend: A backend instance (its profile carries the time limit).
-        time_limit: Per-solve limit in [s].
+        time_limit: Per-solve limit in [s], checked when the solve returns.
         sequential: State carried between solves (else reset before each).
-        use_alarm: Interrupt Python-level overruns with ``SIGALRM`` (main thread only).
     """
 
     isolated = False
 
-    def __init__(self, backend, time_limit: float, sequential: bool, use_alarm: bool = True):
+    def __init__(self, backend, time_limit: float, sequential: bool):
         self.backend = backend
         self.name = backend.name
         self.time_limit = float(time_limit)
         self.sequential = sequential
-        self.use_alarm = (
-            use_alarm and hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
-        )
         self.restorer = StateRestorer(sequential)
-        self._old_handler = None
 
     # -- helpers -------------------------------------------------------------
-    def _guarded(self, problem, timed: bool = True) -> Outcome:
-        """One solve: an :class:`Outcome` with one wall time, never an exception."""
-        if self.use_alarm and self._old_handler is None:
-            self._old_handler = signal.signal(signal.SIGALRM, _on_alarm)  # restored by close()
-        start = time.perf_counter_ns()
+    def _guarded(self, problem) -> Outcome:
+        """One solve: an :class:`Outcome` with one wall time, never an exception.
+
+        The solve runs to its end; a late one is ``time_limit`` by its wall time.
+        """
         try:
-            try:
-                if self.use_alarm:
-                    signal.setitimer(signal.ITIMER_REAL, self.time_limit)
-                solution, ns = timed_call(self.backend, problem)
-            finally:
-                if self.use_alarm:
-                    signal.setitimer(signal.ITIMER_REAL, 0)
-        except SolveTimeLimit:
-            wall = (time.perf_counter_ns() - start) * 1e-9
-            return Outcome(
-                "time_limit", None, [wall], f"interrupted after {wall:.3g} s (time limit {self.time_limit:g} s)"
-            )
+            solution, ns = timed_call(self.backend, problem)
         except Exception as exc:  # noqa: BLE001 - turned into a status on purpose
             return Outcome("error", None, [], describe_exception(exc))
         wall = ns * 1e-9
@@ -148,7 +122,8 @@ class LocalRunner:
             pass
 
     def warmup(self, problem) -> str:
-        """A discarded solve (imports, JIT compilation, allocations), then a reset."""
+        """A discarded solve (imports, first-call allocations, a compile for an unusual
+        problem shape), then a reset. Its status and time have no consequence."""
         outcome = self._guarded(problem)
         self.reset()
         return outcome.status
@@ -189,8 +164,4 @@ class LocalRunner:
         return outcome
 
     def close(self) -> None:
-        """Restore the previous SIGALRM handler."""
-        if self._old_handler is not None:
-            if self._old_handler is not _on_alarm:  # another runner's: that one restores
-                signal.signal(signal.SIGALRM, self._old_handler)
-            self._old_handler = None
+        """Nothing to release in this process (the interface of :class:`IsolatedRunner`)."""

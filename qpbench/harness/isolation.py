@@ -10,12 +10,26 @@ every request has a deadline::
     deadline = time_limit * (solves in the request) + max(1 s, time_limit / 2)
 
 - no answer by the deadline -> the worker is killed (SIGKILL), the solve is
-  ``time_limit``, a new worker starts at the next request;
+  ``time_limit``, a new worker starts at the next request. This is the only
+  place a solve is stopped: inside the worker, as in the parent, a solve is
+  never interrupted (see :mod:`qpbench.harness.guard`); one that returns
+  late but before the deadline is ``time_limit`` by its wall time;
 - the worker dies (segfault, abort, ``os._exit``) -> the solve is
   ``crashed`` with the signal or exit code in ``error``, a new worker starts.
 
 A new worker has lost the backend's state: in sequential mode the next row
 says ``state_reset = True``.
+
+No compile in a worker: the parent prepares every numba kernel before it
+starts one (:func:`qpbench.jit.warmup`, which leaves them in the on-disk
+cache); the forkserver, started and preloaded before the first worker's
+clock, imports qpbench and loads the kernels from the cache once
+(:mod:`qpbench.harness.preload`), so each worker is forked with them in
+memory. A worker started otherwise (``spawn``) loads them when it starts,
+before it reports ready (within :data:`START_TIMEOUT_S`, outside any solve's
+deadline). The
+discarded warm-up solve has an allowance of its own (:data:`WARMUP_TIMEOUT_S`):
+a slow one is not a reason to kill the worker.
 
 The timing is taken inside the worker by the same
 :class:`~qpbench.harness.guard.LocalRunner` code that runs in-process, around
@@ -39,20 +53,43 @@ log = logging.getLogger("qpbench.harness")
 #: Least slack added to every deadline in [s] (pipe, pickling, scheduling on a loaded
 #: machine); the slack is ``max(DEADLINE_MARGIN_S, time_limit / 2)``.
 DEADLINE_MARGIN_S = 1.0
-#: Time allowed for a worker to start and build its backend in [s].
+#: Time allowed for a worker to start (load the kernels) and build its backend in [s].
 START_TIMEOUT_S = 120.0
+#: Time allowed for the discarded warm-up solve in [s] (at least twice the time limit):
+#: first-call costs (imports, a solver's set-up) are no reason to kill the worker.
+WARMUP_TIMEOUT_S = 30.0
 
 _CTX = None
 
 
 def _context():
+    """The start method's context, every numba kernel compiled in this process first.
+
+    Called before each worker starts: the warm-up compiles what the on-disk
+    cache lacks here, once, so that no worker ever compiles (it only loads).
+    """
     global _CTX
+    from ..jit import warmup
+
+    warmup()  # at once after the first call
     if _CTX is None:
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        _CTX = multiprocessing.get_context(method)
+        ctx = multiprocessing.get_context(method)
         if method == "forkserver":
-            _CTX.set_forkserver_preload(["qpbench.harness.isolation", "qpbench.backends", "numpy", "scipy.sparse"])
+            ctx.set_forkserver_preload([
+                "qpbench.harness.isolation", "qpbench.backends", "numpy", "scipy.sparse", "qpbench.harness.preload",
+            ])
+            # start the server now and wait for its preload (a no-op child), so that no
+            # worker's deadline ever covers it
+            proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
+            proc.start()
+            proc.join(START_TIMEOUT_S)
+        _CTX = ctx
     return _CTX
+
+
+def _noop() -> None:
+    """A child that does nothing: its start waits for the forkserver's preload."""
 
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
@@ -83,9 +120,12 @@ def _worker_main(conn, spec: dict) -> None:
         from ..backends import get_backend
         from .plugins import load_plugins
 
+        from ..jit import warmup
+
+        warmup()  # loads the kernels the parent compiled; nothing is timed yet
         load_plugins(spec["plugins"])
         backend = get_backend(spec["backend"], spec["profile"], **spec["settings"])
-        runner = LocalRunner(backend, spec["time_limit"], spec["sequential"], use_alarm=True)
+        runner = LocalRunner(backend, spec["time_limit"], spec["sequential"])
     except BaseException as exc:  # noqa: BLE001
         conn.send(("exc", describe_exception(exc)))
         return
@@ -210,11 +250,13 @@ class IsolatedRunner:
                 self.restarts += 1
                 raise WorkerDied("time_limit", f"no answer after {timeout:.3g} s during {what}; worker killed")
 
-    def _call(self, request: tuple, n_solves: int, what: str):
+    def _call(self, request: tuple, n_solves: int, what: str, timeout: float | None = None):
         if self._proc is None:
             self._start()
         self._conn.send(request)
-        kind, payload = self._receive(self.time_limit * n_solves + max(DEADLINE_MARGIN_S, self.time_limit / 2), what)
+        if timeout is None:
+            timeout = self.time_limit * n_solves + max(DEADLINE_MARGIN_S, self.time_limit / 2)
+        kind, payload = self._receive(timeout, what)
         if kind == "exc":
             raise WorkerDied("error", payload)
         return payload
@@ -229,8 +271,9 @@ class IsolatedRunner:
             pass
 
     def warmup(self, problem) -> str:
+        """The discarded warm-up solve, allowed :data:`WARMUP_TIMEOUT_S` (its slowness has no consequence)."""
         try:
-            return self._call(("warmup", problem), 1, "warm-up")
+            return self._call(("warmup", problem), 1, "warm-up", timeout=max(WARMUP_TIMEOUT_S, 2 * self.time_limit))
         except WorkerDied as died:
             return died.status
 

@@ -8,7 +8,7 @@ One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
 2. build the tick's QP (eq. 11, the chosen formulation) with the current
    ``Kp_hat, Kd_hat``;
 3. solve it with the backend (warm-started from the previous command). If the
-   backend returns no solution (infeasible, failure, time limit), solve the
+   backend returns no solution (infeasible, failure), solve the
    ``soft`` formulation of the same tick with the same backend (fallback); if
    that fails too, command zero velocity. An *online* backend (class attribute
    ``online = True``, the RNN) is its own controller: its ``x`` is applied
@@ -20,18 +20,23 @@ One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
    Every solve is guarded, so a faulty backend cannot stop the loop: a
    Python exception escaping the backend makes the tick's status ``error``
    (the backend is reset, the first exception's ``"Type: message"`` is kept
-   in the summary as ``first_error``); an answer that arrives after the
-   per-tick time limit (``time_limit``, default the backend profile's) is
-   ``time_limit``; an ``x`` holding a NaN or an infinity is ``invalid``
-   (the backend is reset). Each of these is a tick without a solution:
-   soft fallback, else zero velocity (an online backend: zero velocity).
-   The time limit is checked when the answer arrives: a solve is never
-   interrupted, so a backend that hangs (in native code) hangs the loop;
-   ``qpbench closed-loop`` guards against that (and against a crash of the
-   process) by running such a backend's simulation in a worker process with
-   a deadline (:mod:`qpbench.harness.closed_loop`). An exception or a late
-   answer of the fallback's own solve counts as a failed fallback (zero
-   velocity; ``fallback_errors`` in the summary);
+   in the summary as ``first_error``); an ``x`` holding a NaN or an infinity
+   is ``invalid`` (the backend is reset). Each of these is a tick without a
+   solution: soft fallback, else zero velocity (an online backend: zero
+   velocity). An exception of the fallback's own solve counts as a failed
+   fallback (zero velocity; ``fallback_errors`` in the summary).
+   Time never changes the trajectory unless asked to: an answer is applied
+   however long it took (its time is in ``solve_time_s`` and the summary's
+   ``deadline_misses`` counts the ticks slower than ``dt``), so a run is the
+   same on a fresh machine (kernels compiled first, before the clock:
+   :func:`qpbench.jit.warmup`) and on the next. With a ``deadline``
+   (``--deadline``) an answer, or a fallback's, that arrives later is
+   dropped (status ``time_limit``, counted in ``deadline_dropped``), as a
+   real-time controller would. A solve is never interrupted, so a backend
+   that hangs (in native code) hangs the loop; ``qpbench closed-loop``
+   guards against that (and against a crash of the process) by running such
+   a backend's simulation in a worker process with a deadline for the whole
+   run (:mod:`qpbench.harness.closed_loop`);
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
 5. plant: ``theta_{k+1} = theta_k + dt v_k``.
 
@@ -58,7 +63,8 @@ task_residual       ``|J v - b0|`` [m/s]
 status              the backend's status on the tick's QP, one of
                     :data:`TICK_STATUSES` (the backends' statuses, plus
                     ``invalid``: a non-finite answer; ``error`` is also an
-                    exception, ``time_limit`` also a late answer)
+                    exception, ``time_limit`` also an answer dropped past
+                    the ``deadline``)
 fallback            the soft fallback's answer was applied
 zero_velocity       zero velocity was commanded (fallback failed too)
 solve_time_s        wall time of the tick's solve call(s) [s]
@@ -300,6 +306,42 @@ def _columns(controller: Controller) -> tuple[list[str], dict[str, int]]:
     return cols, {c: i for i, c in enumerate(cols)}
 
 
+def _post_constants(controller: Controller, surface, dt: float):
+    """The tick log's columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
+    cols, cidx = _columns(controller)
+    normal = controller.task.normal
+    tangent = np.array([-normal[1], normal[0]])
+    obstacle_cols = controller.obstacle_columns()
+    n_pts = controller.n_obstacle_points
+    n_obs = max(len(controller.obstacles), 1)
+    # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
+    col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
+    col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
+    names = ("theta_0", "v_0", "ee_x", None, "force", "fallback", "zero_velocity", "solve_time_s", "y_0", "z_max", "kp_hat", "kd_hat")
+    ci = np.array(
+        [cidx["d_min"] - len(obstacle_cols) if c is None else cidx[c] for c in names] + col_start + col_end, dtype=np.int64
+    )
+    cf = np.array([tangent[0], tangent[1], normal[0], normal[1], float(normal @ surface.point), surface.stiffness,
+                   surface.damping, controller.task.desired_force, dt])
+    return cols, cidx, ci, cf
+
+
+def warm_post_kernel(controller: Controller, surface, dt: float, theta: np.ndarray, arrays) -> None:
+    """Compile (or load) the post kernel for the argument types :func:`simulate` passes.
+
+    ``arrays`` is a :meth:`Controller.build_arrays` result; ``theta`` is not changed.
+    """
+    cols, _, ci, cf = _post_constants(controller, surface, dt)
+    post = _get_post_kernel()
+    none = np.zeros(0)
+    row = np.zeros((1, len(cols)))
+    kp, kd = controller.kp, controller.kd
+    # an applied answer with duals, and a fallback/zero-velocity tick without
+    for y, z, mode in ((np.zeros(2), np.zeros(max(controller.n_rows, 1)), _APPLIED), (none, none, _ZERO)):
+        post(theta.copy(), np.zeros(controller.n), arrays[8], np.zeros(4), arrays[4], arrays[5], arrays[9], arrays[10],
+             y, z, row, 0, ci, cf, 0.0, mode, kp, kd, 0.0)
+
+
 def simulate(
     scenario: Scenario | str | Path,
     backend: str | Backend,
@@ -310,7 +352,7 @@ def simulate(
     dump: str | Path | None = None,
     progress: bool = False,
     profile: str = "default",
-    time_limit: float | None = None,
+    deadline: float | None = None,
     wall_budget_s: float | None = None,
 ) -> SimResult:
     """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
@@ -326,11 +368,13 @@ def simulate(
             (:func:`qpbench.formats.write_problem_set`).
         progress: Show a tqdm progress bar.
         profile: Settings profile of a backend given by name.
-        time_limit: Per-tick time limit in [s] (default: the backend's
-            profile's ``time_limit``, 10 s for ``default``). An answer that
-            arrives later is status ``time_limit`` and is not applied (the
-            tick goes on as a tick without a solution); the solve is not
-            interrupted (see the module docstring).
+        deadline: Per-tick deadline in [s], ``None`` (the default) for none.
+            Without one, every answer is applied whenever it arrives: the
+            trajectory does not depend on how long a solve took (a compile, a
+            loaded machine). With one, an answer that arrives later is
+            dropped: status ``time_limit``, and the tick goes on as a tick
+            without a solution (soft fallback, else zero velocity); the run then
+            depends on the machine's speed. A solve is never interrupted.
         wall_budget_s: Wall-time budget of the loop in [s] (default: none).
             Checked between ticks: once spent, the run stops and the log
             holds the ticks simulated so far, the same rows an uncut run
@@ -338,7 +382,14 @@ def simulate(
             how far the run gets); the summary says ``stopped_early``.
 
     Returns:
-        The per-tick log, the summary and the kept records.
+        The per-tick log, the summary and the kept records. Besides
+        :func:`summarize`'s figures the summary holds ``deadline_s`` (the
+        deadline or ``None``), ``deadline_misses`` (ticks whose solve calls
+        took longer than the control period ``dt``: the ticks a 1/dt loop
+        would not have kept up with; a time figure, like ``solve_time_*``),
+        ``deadline_dropped`` (ticks whose answer was dropped for arriving
+        after the deadline; ``None`` without a deadline), ``raised_ticks``,
+        ``fallback_errors``, ``first_error`` and ``first_error_t``.
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
@@ -346,19 +397,21 @@ def simulate(
         raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
     if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
         raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    if deadline is not None and not (
+        isinstance(deadline, (int, float, np.floating)) and not isinstance(deadline, bool)
+        and math.isfinite(deadline) and deadline > 0
+    ):
+        raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     dt = scenario.dt
     duration = scenario.duration
     ticks = int(round(duration / dt))
     keep_every = every if every is not None else (1 if dump is not None else None)
+    # a late answer is dropped only past a deadline
+    limit = math.inf if deadline is None else float(deadline)
 
     be = resolve_backend(backend, scenario, dt, profile)
-    if time_limit is None:
-        time_limit = float(be.profile.time_limit)
-    elif not (isinstance(time_limit, (int, float, np.floating)) and time_limit > 0):
-        raise ParamError(f"must be a positive number of seconds, got {time_limit!r}", key="time_limit")
-    time_limit = float(time_limit)
     if wall_budget_s is not None and not (isinstance(wall_budget_s, (int, float, np.floating)) and wall_budget_s > 0):
         raise ParamError(f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s")
     online = bool(getattr(be, "online", False))
@@ -369,25 +422,11 @@ def simulate(
     adaptive = scenario.make_adaptive()
     n = ctrl.n
     soft_primary = formulation == "soft"
-    normal = ctrl.task.normal
-    tangent = np.array([-normal[1], normal[0]])
     fd = ctrl.task.desired_force
 
-    cols, cidx = _columns(ctrl)
+    cols, cidx, ci, cf = _post_constants(ctrl, surface, dt)
     data = np.full((ticks, len(cols)), np.nan)
-    obstacle_cols = ctrl.obstacle_columns()
-    n_pts = ctrl.n_obstacle_points
-    n_obs = max(len(ctrl.obstacles), 1)
-    # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
-    col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
-    col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
     c_force, c_ferr = cidx["force"], cidx["force_error"]
-    names = ("theta_0", "v_0", "ee_x", None, "force", "fallback", "zero_velocity", "solve_time_s", "y_0", "z_max", "kp_hat", "kd_hat")
-    ci = np.array(
-        [cidx["d_min"] - len(obstacle_cols) if c is None else cidx[c] for c in names] + col_start + col_end, dtype=np.int64
-    )
-    cf = np.array([tangent[0], tangent[1], normal[0], normal[1], float(normal @ surface.point), surface.stiffness,
-                   surface.damping, fd, dt])
 
     theta = scenario.theta0.astype(float)
     v = np.zeros(n)
@@ -405,17 +444,18 @@ def simulate(
     sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
     f64 = np.dtype(np.float64)
 
-    # compile (or load from the numba cache) before the clock starts
-    warm = build(theta, 0.0, kp, kd, soft_primary)
-    post(theta.copy(), zeros, warm[8], sensed.copy(), warm[4], warm[5], warm[9], warm[10], none, none,
-         np.zeros((1, len(cols))), 0, ci, cf, 0.0, _APPLIED, kp, kd, 0.0)
+    # compile (or load from the numba cache) every kernel before the clock starts
+    from ..jit import warmup
+
+    warmup()
+    warm_post_kernel(ctrl, surface, dt, theta, build(theta, 0.0, kp, kd, soft_primary))
 
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=ticks, unit="tick", desc=f"{scenario.name} {be.name}", mininterval=0.5)
-    n_fallback = n_zero = 0
+    n_fallback = n_zero = n_dropped = 0
     n_raised = n_fallback_errors = 0
     first_error = first_error_t = None
     start = perf()
@@ -437,7 +477,7 @@ def simulate(
         status = sol.status
         x = sol.x
         force = -1.0
-        if x is not None and (online or status == "optimal") and solve_s <= time_limit:
+        if x is not None and (online or status == "optimal") and solve_s <= limit:
             if type(x) is not np.ndarray or x.dtype != f64:
                 x = np.asarray(x, dtype=np.float64)
             y = sol.y
@@ -459,8 +499,9 @@ def simulate(
                 _reset(be)  # its state can no longer be trusted
             elif status == "invalid":
                 _reset(be)
-            elif solve_s > time_limit:
-                status = "time_limit"
+            elif solve_s > limit:
+                status = "time_limit"  # arrived after the deadline: dropped
+                n_dropped += 1
             elif status == "error" and first_error is None and getattr(sol, "error", None):
                 first_error, first_error_t = str(sol.error), t  # reported by the backend, not raised
             # no usable answer: the soft formulation's (same backend), else zero velocity
@@ -475,7 +516,7 @@ def simulate(
                     if first_error is None:
                         first_error, first_error_t = f"fallback: {fb.error}", t
                     _reset(be)
-                if fb.status == "optimal" and fb.x is not None and perf() - t1 <= time_limit:
+                if fb.status == "optimal" and fb.x is not None and perf() - t1 <= limit:
                     mode, x = _FALLBACK, np.asarray(fb.x, dtype=np.float64)
                     z = none if fb.z is None else fb.z
             force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10], none, z,
@@ -507,12 +548,15 @@ def simulate(
     done = len(statuses)
     codes = {s: i for i, s in enumerate(TICK_STATUSES)}
     status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done)
+    misses = int(np.count_nonzero(data[:done, cidx["solve_time_s"]] > dt))
     frame = pd.DataFrame(data[:done], columns=cols)
     frame["fallback"] = frame["fallback"].astype(bool)
     frame["zero_velocity"] = frame["zero_velocity"].astype(bool)
     frame.insert(cols.index("fallback"), "status", pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)))
     summary = summarize(frame, scenario, ctrl, be.name, formulation, wall, run_info=dict(
-        time_limit_s=time_limit, raised_ticks=n_raised, fallback_errors=n_fallback_errors,
+        deadline_s=deadline if deadline is None else float(deadline), deadline_misses=misses,
+        deadline_dropped=None if deadline is None else n_dropped,
+        raised_ticks=n_raised, fallback_errors=n_fallback_errors,
         first_error=first_error, first_error_t=first_error_t, wall_budget_s=wall_budget_s,
         stopped_early=done < ticks))
     recs = []
@@ -592,9 +636,13 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
       integration, not at convergence).
     - ``status_counts``: the breakdown by status; ``error_ticks``,
       ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
-      (an exception or an ``error`` status, a late answer or a budget, a
-      non-finite answer). :func:`simulate` adds, in ``run_info``,
-      ``time_limit_s`` (the per-tick limit), ``raised_ticks`` (ticks whose
+      (an exception or an ``error`` status, an answer dropped past the
+      deadline or a budget, a non-finite answer). :func:`simulate` adds, in
+      ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
+      none, every answer applied), ``deadline_misses`` (ticks whose solve
+      calls took longer than ``dt``: the loop did not keep up with its rate
+      there), ``deadline_dropped`` (answers dropped past the deadline;
+      ``None`` without one), ``raised_ticks`` (ticks whose
       solve raised), ``fallback_errors`` (fallback solves that raised),
       ``first_error`` (``"Type: message"`` of the first exception, else the
       first error a backend reported; ``None`` when none), ``first_error_t``

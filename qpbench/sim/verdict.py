@@ -10,7 +10,7 @@ Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettin
 
 - ``failed``: the backend did not answer usably: a tick whose solve raised or
   reported ``error``, a non-finite answer (``invalid``), an answer later than
-  the per-tick time limit (``time_limit``), a fallback solve that raised, or a
+  the per-tick deadline (``time_limit``, with ``--deadline``), a fallback solve that raised, or a
   tick left without any command (zero velocity: no answer and no soft
   fallback); or the run itself crashed, overran its deadline or raised;
 - ``unsafe``: a key point came closer to an obstacle than
@@ -112,9 +112,9 @@ def _failed_reasons(summary: dict) -> list[str]:
         out.append(f"{n} non-finite answer{'s' if n > 1 else ''}")
     n = int(summary.get("time_limit_ticks") or 0)
     if n:
-        limit = summary.get("time_limit_s")
+        limit = summary.get("deadline_s")
         what = f" ({_g(limit)} s)" if limit is not None else ""
-        out.append(f"{n} tick{'s' if n > 1 else ''} over the per-tick time limit{what}")
+        out.append(f"{n} answer{'s' if n > 1 else ''} dropped past the per-tick deadline{what}")
     n = int(summary.get("fallback_errors") or 0)
     if n:
         out.append(f"{n} fallback solve{'s' if n > 1 else ''} raised")
@@ -210,7 +210,7 @@ def judge(frame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_c
         obstacle_columns: ``(key point, obstacle)`` of each distance column.
         summary: The run's counts: ``error_ticks``, ``invalid_ticks``,
             ``time_limit_ticks``, ``zero_velocity_ticks``, ``fallback_errors``,
-            ``first_error``, ``first_error_t`` [s], ``time_limit_s`` [s];
+            ``first_error``, ``first_error_t`` [s], ``deadline_s`` [s];
             ``stopped_early``, ``simulated_s``, ``duration`` [s] and
             ``wall_budget_s`` [s] for a run cut by a wall-time budget. Missing
             counts are 0.

@@ -1,0 +1,21 @@
+"""Imported by the worker processes' forkserver only: the kernels loaded once, for every fork.
+
+:func:`qpbench.harness.isolation._context` names this module in the
+forkserver's preload list, after the parent has compiled every numba kernel
+into the on-disk cache (:func:`qpbench.jit.warmup`). Importing it loads them
+into the forkserver, so each worker forked from it starts with them in
+memory (its own :func:`~qpbench.jit.warmup` returns at once) instead of
+loading them again. This is the one qpbench module that does work when
+imported, and nothing but the forkserver imports it. A failure here only
+costs speed (a worker then loads the kernels itself), so it is swallowed:
+an exception would stop the forkserver.
+"""
+
+from __future__ import annotations
+
+try:
+    from ..jit import warmup
+
+    warmup()
+except Exception:  # noqa: BLE001 - see the module docstring
+    pass

@@ -1,0 +1,86 @@
+"""Kernels compiled before the clock, once: a fresh machine's first run is the same run as the next.
+
+The module's runs share one empty numba cache folder (``NUMBA_CACHE_DIR``), so
+the first ``qpbench`` call compiles every kernel (about a minute) and the
+later ones must only load them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+QPBENCH = [sys.executable, "-m", "qpbench.cli"]
+#: Summary keys that measure time; every other one must be the same on every run.
+TIME_KEYS = {"wall_time_s", "real_time_factor", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s",
+             "deadline_misses"}
+
+
+def _cache_files(folder: Path) -> dict[str, tuple[int, int]]:
+    """numba's index and data files under ``folder``: name -> (size, mtime in ns)."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+            for p in folder.rglob("*") if p.suffix in (".nbi", ".nbc")}
+
+
+def _qpbench(args, cache: Path, cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    proc = subprocess.run(QPBENCH + args, capture_output=True, text=True, env=env, cwd=cwd, timeout=1200)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+@pytest.fixture(scope="module")
+def fresh(tmp_path_factory):
+    """Two identical simulations, the first in an empty kernel cache; the cache after each."""
+    cache = tmp_path_factory.mktemp("numba-cache")
+    work = tmp_path_factory.mktemp("runs")
+    args = ["simulate", "--scenario", "wall", "--backend", "rnn-tuned", "--set", "simulation.duration=0.1"]
+    runs, files = [], []
+    for name in ("first.json", "second.json"):
+        proc = _qpbench(args + ["--summary", name], cache, work)
+        runs.append((proc, json.loads((work / name).read_text())))
+        files.append(_cache_files(cache))
+    return cache, work, runs, files
+
+
+@pytest.mark.slow
+def test_first_run_on_a_fresh_cache_equals_the_next(fresh):
+    _, _, runs, files = fresh
+    (first, a), (second, b) = runs
+    # the first run compiled before its clock started, the second only loaded
+    assert "kernels: compiled" in first.stderr
+    assert "kernels: loaded from the cache" in second.stderr and "(0 compiled)" in second.stderr
+    assert files[0] and files[1] == files[0]  # nothing compiled or rewritten by the second run
+    # the same trajectory: every figure but the time ones
+    assert {k: v for k, v in a.items() if k not in TIME_KEYS} == {k: v for k, v in b.items() if k not in TIME_KEYS}
+    assert a["zero_velocity_ticks"] == 0 and a["time_limit_ticks"] == 0 and a["deadline_dropped"] is None
+    assert a["solve_time_max_s"] < 5.0  # no compile inside the loop (a compile takes tens of seconds)
+
+
+@pytest.mark.slow
+def test_warmup_command_loads_what_the_cache_holds(fresh):
+    cache, work, _, files = fresh
+    for _ in range(2):
+        proc = _qpbench(["warmup", "--json"], cache, work)
+        report = json.loads(proc.stdout)
+        assert report["compiled"] == 0 and report["cache"] == str(cache)
+        assert report["kernels"] == ["controller", "post", "network"]
+    assert _cache_files(cache) == files[0]
+    proc = _qpbench(["warmup"], cache, work)
+    assert proc.stdout.startswith("kernels: loaded from the cache") and "(0 compiled)" in proc.stdout
+    assert _qpbench(["-q", "warmup"], cache, work).stdout == ""
+
+
+def test_warmup_twice_in_one_process_does_nothing_more():
+    """In process: a warmed process has every kernel; a second call does nothing."""
+    from qpbench import jit
+
+    first = jit.warmup()
+    again = jit.warmup()
+    assert again.in_memory and again.compiled == 0 and again.kernels == first.kernels
+    assert "already loaded" in again.line()
