@@ -82,7 +82,7 @@ def test_repeat_three_equals_repeat_one(name, wall_ticks):
     problems = wall_ticks[:120]  # across the infeasible start
 
     def run(repeat):
-        runner = LocalRunner(get_backend(name), time_limit=10.0, sequential=True, use_alarm=False)
+        runner = LocalRunner(get_backend(name), time_limit=10.0, sequential=True)
         out, prev = [], None
         for problem in problems:
             outcome = runner.solve(problem, repeat=repeat, prev_problem=prev)

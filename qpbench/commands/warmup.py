@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     report = warmup()
     if args.json:
         print(json.dumps({"compiled": report.compiled, "seconds": round(report.seconds, 3), "cache": report.cache,
-                          "kernels": list(report.kernels)}))
+                          "kernels": list(report.kernels), "shims_compiled": report.shims_compiled}))
     elif not args.quiet:
         print(report.line())
     return 0
