@@ -207,3 +207,18 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     with pytest.raises(SystemExit) as exc:  # no probe, no admission threshold
         main(["run", "--min-rtf", "1"])
     assert exc.value.code == 2
+
+
+def test_run_bench_subset_keeps_the_time_between_records():
+    """`run --bench-every K` keeps every K-th record: an online backend then integrates K record periods per call."""
+    from qpbench.commands.run import _bench_subset
+    from qpbench.formats import read_problem_set
+    from qpbench.harness.bench import record_period
+
+    full = read_problem_set(Path(__file__).resolve().parents[1] / "problems" / "wall")
+    subset, refs = _bench_subset(full, None, 5)
+    assert len(subset) == len(refs) == 400
+    assert [r.tick for r in subset.records[:3]] == [0, 50, 100]
+    assert record_period(full) == pytest.approx(0.01)
+    assert record_period(subset) == pytest.approx(0.05)
+    assert full.manifest["generator"]["every"] == 10  # the set itself is untouched
