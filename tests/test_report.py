@@ -262,7 +262,8 @@ def test_absolute_table_recomputed(report_dir):
 def test_scenario_tables_recomputed(report_dir):
     _, out, bench, _ = report_dir
     md = (out / "report.md").read_text()
-    found_tables = {t["headings"].get(4): t for t in parse_tables(md) if t["headings"].get(4, "").startswith("Scenario")}
+    found_tables = {t["headings"].get(4): t for t in parse_tables(md)
+                    if t["headings"].get(4, "").startswith("Scenario") and t["caption"].startswith("Per backend, runtime")}
     assert set(found_tables) == {f"Scenario {s} (default, sequential)" for s in ("wall", "narrow", "-")}
     for scenario in SCENARIOS:
         label = scenario or "-"
@@ -467,3 +468,23 @@ def test_backends_with_different_repeat_counts_in_one_table_are_noted(tmp_path):
     assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "o"), "--no-plots"]) == 0
     md = (tmp_path / "o" / "report.md").read_text()
     assert "different --repeat counts in the tables of default, sequential (alpha 3, iso 1, net 1)" in md
+
+
+def test_solver_time_against_call_time_per_scenario(tmp_path):
+    """The table of what the solver reports for itself against the call equals the rows' percentiles."""
+    rng = np.random.default_rng(3)
+    bench = _honest_bench(rng)
+    solver = np.where(bench["backend"] == "alpha", 4e-6 * (1 + rng.random(len(bench))), np.nan)
+    bench["solver_time_s"] = solver
+    bench.to_csv(tmp_path / "b.csv", index=False)
+    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    tabs = parse_tables((tmp_path / "out" / "report.md").read_text())
+    t = next(t for t in tabs if t["caption"].startswith("What the solver reports for its own work"))
+    assert [r[0] for r in t["rows"]] == ["alpha"]  # the others report no time of their own
+    alpha = bench[bench["backend"] == "alpha"]
+    call = alpha["wall_time_min_s"].to_numpy()
+    own = alpha["solver_time_s"].to_numpy()
+    row = t["rows"][0]
+    for header, values, q in (("call p50 (us)", call, 50), ("solver p99 (us)", own, 99),
+                              ("call - solver p50 (us)", call - own, 50), ("call - solver p99 (us)", call - own, 99)):
+        assert_close(row[t["header"].index(header)], np.percentile(values, q) * 1e6, header)

@@ -215,9 +215,33 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
             )
             if any(names[b] != b for b in table.index):
                 out.extend(isolated_notes)
+            out.extend(_solver_time_part(rows, scenario, names))
             key = f"per_tick_{slug(label)}_{slug(scenario)}"
             if key in plot_files:
                 out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
+    return out
+
+
+def _solver_time_part(rows: pd.DataFrame, scenario: str, names: dict[str, str]) -> list[str]:
+    """Per backend of one scenario: the solver's own time against the whole call."""
+    if "scenario" in rows.columns:
+        rows = rows[[tables.scenario_key(v) == scenario for v in rows["scenario"]]]
+    table = tables.solver_time_summary(rows)
+    if table.empty:
+        return []
+    out = [
+        "What the solver reports for its own work (`solver_time_s`: what a controller calling its "
+        "C or C++ library pays) against the timed call, and their difference per tick (what the "
+        "Python layers add); backends that report no time of their own are not listed:\n"
+    ]
+    out.append(
+        md_table(
+            ["backend", "rows", "call p50 (us)", "call p99 (us)", "solver p50 (us)", "solver p99 (us)",
+             "call - solver p50 (us)", "call - solver p99 (us)"],
+            [[names.get(b, b), int(r["rows"]), r["call_p50"] * _US, r["call_p99"] * _US, r["solver_p50"] * _US,
+              r["solver_p99"] * _US, r["around_p50"] * _US, r["around_p99"] * _US] for b, r in table.iterrows()],
+        )
+    )
     return out
 
 

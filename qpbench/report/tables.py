@@ -469,6 +469,38 @@ def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame.from_dict(out, orient="index")
 
 
+def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per backend: the call's wall time against the time the solver reports for itself [s].
+
+    Over the rows where both are known: ``rows`` (count), ``call_p50``,
+    ``call_p99`` (the harness's timed call, minimum over repeats),
+    ``solver_p50``, ``solver_p99`` (``solver_time_s``: what a controller
+    calling the solver's C or C++ library would pay) and ``around_p50``,
+    ``around_p99`` (per row, call minus solver: what the Python layers add).
+    Backends that report no time of their own (pinv, the network, Clarabel
+    after an ``update()``, whose figure is not the solve's) have no row.
+    """
+    if "solver_time_s" not in rows.columns:
+        return pd.DataFrame()
+    tcol = runtime_column(rows)
+    out = {}
+    for backend, g in rows.groupby("backend", sort=True):
+        call = pd.to_numeric(g[tcol], errors="coerce").to_numpy(dtype=float)
+        solver = pd.to_numeric(g["solver_time_s"], errors="coerce").to_numpy(dtype=float)
+        ok = np.isfinite(call) & np.isfinite(solver)
+        if not ok.any():
+            continue
+        call, solver = call[ok], solver[ok]
+        around = call - solver
+        out[backend] = {
+            "rows": int(ok.sum()),
+            "call_p50": float(np.percentile(call, 50)), "call_p99": float(np.percentile(call, 99)),
+            "solver_p50": float(np.percentile(solver, 50)), "solver_p99": float(np.percentile(solver, 99)),
+            "around_p50": float(np.percentile(around, 50)), "around_p99": float(np.percentile(around, 99)),
+        }
+    return pd.DataFrame.from_dict(out, orient="index")
+
+
 def scenario_key(value) -> str:
     """Scenario label of a bench row (``-`` when the problem has no scenario)."""
     if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
