@@ -352,7 +352,7 @@ def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
     return table_to_bytes(table)
 
 
-def _read_cache(path: Path, sha: str, names: list[str]) -> list[ReferenceSolution] | None:
+def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
     import pyarrow.parquet as pq
 
     try:
@@ -365,8 +365,6 @@ def _read_cache(path: Path, sha: str, names: list[str]) -> list[ReferenceSolutio
         rows = table.to_pylist()
     except Exception as exc:  # corrupt cache: recompute
         log.warning("%s: unreadable reference cache, recomputing (%s)", path, exc)
-        return None
-    if [r["name"] for r in rows] != names:
         return None
     out = []
     for r in rows:
@@ -408,15 +406,21 @@ def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=No
     path = cache_path(problem_set) if cache else None
     sha = content_sha256(problem_set)
     names = [r.name for r in problem_set.records]
+    known: dict[str, ReferenceSolution] = {}
     if path is not None and path.exists():
-        cached = _read_cache(path, sha, names)
-        if cached is not None:
-            return cached
-    records = problem_set.records if progress is None else progress(problem_set.records)
-    refs = [reference_solution(r) for r in records]
+        # a subset of a set (``--problems``, ``--every``, ``--limit``) reads the set's cache and
+        # adds what it lacks; it never replaces the cache with fewer problems
+        known = {ref.name: ref for ref in (_read_cache(path, sha) or [])}
+        if all(n in known for n in names):
+            return [known[n] for n in names]
+    todo = [r for r in problem_set.records if r.name not in known]
+    records = todo if progress is None else progress(todo)
+    for r in records:
+        known[r.name] = reference_solution(r)
+    refs = [known[n] for n in names]
     if path is not None and _writable(path.parent):
         try:
-            write_bytes(path, _to_bytes(refs, sha))
+            write_bytes(path, _to_bytes(list(known.values()), sha))
         except OSError as exc:
             log.debug("%s: reference cache not written (%s)", path, exc)
             return refs

@@ -13,7 +13,7 @@ import fnmatch
 
 from .exceptions import ParamError
 
-__all__ = ["select_records"]
+__all__ = ["select_records", "select_set"]
 
 
 def select_records(records: list, pattern: str | None = None, every: int | None = None, limit: int | None = None) -> list:
@@ -45,3 +45,23 @@ def select_records(records: list, pattern: str | None = None, every: int | None 
     if limit is not None:
         kept = kept[:limit]
     return kept
+
+
+def select_set(problem_set, pattern: str | None = None, every: int | None = None, limit: int | None = None):
+    """A copy of ``problem_set`` holding the records :func:`select_records` keeps.
+
+    With ``every`` > 1 the manifest's generator stride (``every``, ticks per
+    record of a dumped sequence) is multiplied by it, so that an online backend
+    integrates the real time between two kept records. The set's SHA-256 (of
+    its file) is kept: rows stay tied to the file they came from.
+    """
+    from dataclasses import replace
+
+    if pattern is None and every is None and limit is None:
+        return problem_set
+    records = select_records(problem_set.records, pattern, every, limit)
+    manifest = problem_set.manifest
+    if every is not None and every > 1 and manifest and (manifest.get("generator") or {}).get("every") is not None:
+        generator = dict(manifest["generator"], every=int(manifest["generator"]["every"]) * every)
+        manifest = dict(manifest, generator=generator)
+    return replace(problem_set, records=records, manifest=manifest)

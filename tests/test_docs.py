@@ -115,3 +115,18 @@ def test_export_failure_leaves_nothing(tmp_path, capsys):
     bad.write_bytes(b"not a zip")
     assert main(["export", str(bad), "--format", "parquet", "--out", str(tmp_path / "out")]) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.npz"]
+
+
+def test_bench_on_a_selection(tmp_path, capsys):
+    """`bench --problems PATTERN --limit N`: only those problems, backend names in any case."""
+    import csv
+
+    out = tmp_path / "hs.csv"
+    cache = sorted((ROOT / "problems" / "maros_meszaros").glob("reference-*.parquet"))
+    before = [p.read_bytes() for p in cache]
+    assert main(["-q", "bench", str(ROOT / "problems" / "maros_meszaros"), "--problems", "HS*", "--limit", "3",
+                 "--backends", "DAQP,Clarabel", "--out", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert sorted({r["problem"] for r in rows}) == ["HS118", "HS21", "HS35"]
+    assert {r["backend"] for r in rows} == {"daqp", "clarabel"}
+    assert [p.read_bytes() for p in cache] == before  # the set's reference cache is read, not shrunk

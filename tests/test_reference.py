@@ -254,3 +254,30 @@ def test_cache_keeps_agreement_and_both_residuals(make_record, tmp_path):
     for a, b in zip(refs, again):
         assert a.agreement == b.agreement and a.kkt == b.kkt and a.check_kkt == b.check_kkt
         assert a.agreement <= 1e-7 and a.kkt <= a.check_kkt
+
+
+def test_a_subset_reads_the_sets_cache_and_never_shrinks_it(tmp_path):
+    """`bench --limit` on a set: the references come from the set's cache, which keeps every problem."""
+    from dataclasses import replace as dc_replace
+    from pathlib import Path
+
+    from qpbench.formats import load_problems
+    from qpbench.reference import cache_path, reference_solutions
+
+    src = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
+    folder = tmp_path / "mm"
+    folder.mkdir()
+    for f in sorted(src.glob("*.mat"))[:4]:
+        shutil.copy(f, folder / f.name)
+    full = load_problems(folder)
+    sub = dc_replace(full, records=full.records[1:3])
+    first = reference_solutions(sub)  # computes two, caches two
+    assert [r.name for r in first] == [r.name for r in sub.records]
+    refs = reference_solutions(full)  # computes the other two, keeps all four
+    assert [r.name for r in refs] == [r.name for r in full.records]
+    again = reference_solutions(sub)
+    assert [(r.name, r.objective) for r in again] == [(r.name, r.objective) for r in refs[1:3]]
+    path = cache_path(full)
+    stamp = path.stat().st_mtime_ns
+    assert [r.name for r in reference_solutions(full)] == [r.name for r in full.records]
+    assert path.stat().st_mtime_ns == stamp  # read, not rewritten

@@ -10,7 +10,8 @@ from ..harness.bench import DEFAULT_SEED
 from ..profiles import PROFILES
 
 HELP = "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
-EXAMPLE = "qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3"
+EXAMPLE = ("qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3; "
+           "qpbench bench problems/maros_meszaros --problems 'HS*' --limit 5 --backends daqp,clarabel --out hs.csv")
 
 log = logging.getLogger("qpbench")
 
@@ -63,6 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="MODULE_OR_FILE",
         help="import a module (or .py file) that registers extra backends; repeatable (also QPBENCH_PLUGINS)",
     )
+    from .list_ import add_selection_arguments
+
+    add_selection_arguments(parser)
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help="delete an existing --out and start again")
     group.add_argument("--resume", action="store_true", help="keep the rows of an existing --out and run the rest")
@@ -70,7 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output
-    from ..backends import backend_names
+    from ..backends import backend_names, resolve_name
     from ..exceptions import ParamError
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
@@ -85,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if args.backends.strip() == "all":
         backends = backend_names(available_only=True)
     else:
-        backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+        backends = [resolve_name(b.strip()) for b in args.backends.split(",") if b.strip()]
     if not backends:
         raise ParamError("no backend given", key="backends")
     per_backend: dict[str, dict] = {}
@@ -110,7 +114,9 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
     )
     config.validate()
-    problem_set = load_problems(args.problems)
+    from ..selection import select_set
+
+    problem_set = select_set(load_problems(args.problems), args.pattern, args.every, args.limit)
     log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
     warmup_logged(log)  # no compile inside a timed solve, here or in a worker
     progress = not args.quiet and sys.stderr.isatty()

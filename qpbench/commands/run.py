@@ -168,6 +168,7 @@ def make_problem_set(scenario: str, folder: Path, backend: str) -> Path:
 def _bench_subset(problem_set, duration: float | None, every: int = 1):
     """The problem set and its references: every ``every``-th problem, those with t < duration."""
     from ..reference import reference_solutions
+    from ..selection import select_set
 
     refs = reference_solutions(problem_set)
     if duration is None and every == 1:
@@ -178,13 +179,9 @@ def _bench_subset(problem_set, duration: float | None, every: int = 1):
     ]
     if not keep:
         keep = [0]
-    manifest = problem_set.manifest
-    if every > 1 and manifest and (manifest.get("generator") or {}).get("every") is not None:
-        # the time between two kept records grows by ``every``: an online backend integrates that much per call
-        generator = dict(manifest["generator"], every=int(manifest["generator"]["every"]) * every)
-        manifest = dict(manifest, generator=generator)
-    return (replace(problem_set, records=[problem_set.records[i] for i in keep], manifest=manifest),
-            [refs[i] for i in keep])
+    # the time between two kept records grows by ``every``: an online backend integrates that much per call
+    stretched = select_set(problem_set, every=every) if every > 1 else problem_set
+    return (replace(stretched, records=[problem_set.records[i] for i in keep]), [refs[i] for i in keep])
 
 
 def _compress_bench(bench_dir: Path) -> None:
