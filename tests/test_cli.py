@@ -92,7 +92,8 @@ def test_bench_then_report_numbers_match_the_csvs(bench_and_report):
         rows = bench[bench["backend"] == b]
         assert int(r[1]) == len(rows)
         assert_close(r[2], 100 * rows["success"].mean(), f"success of {b}")
-    scen = {t["headings"][4]: t for t in tabs if t["headings"].get(4, "").startswith("Scenario")}
+    scen = {t["headings"][4]: t for t in tabs
+            if t["headings"].get(4, "").startswith("Scenario") and t["caption"].startswith("Per backend, runtime")}
     assert set(scen) == {"Scenario wall (default, sequential)", "Scenario - (default, sequential)"}
     for r in scen["Scenario wall (default, sequential)"]["rows"]:
         t = wall.loc[wall["backend"] == r[0], "wall_time_min_s"].to_numpy(float)

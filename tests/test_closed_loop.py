@@ -149,7 +149,11 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert main(["-q", *args]) == 2  # exists, no --force / --resume
     assert "--force" in capsys.readouterr().err
     assert main(["-q", *args, "--resume"]) == 0
-    assert main(["-q", *args, "--force", "--scenarios", f"wall,{tmp_path / 'missing.toml'}"]) == 1
+    before = (out / "closed_loop.csv").read_bytes()
+    # a scenario that does not exist is refused before any run (and before --force deletes anything)
+    assert main(["-q", *args, "--force", "--scenarios", f"wall,{tmp_path / 'missing.toml'}"]) == 2
+    assert "missing.toml" in capsys.readouterr().err
+    assert (out / "closed_loop.csv").read_bytes() == before
     assert main(["-q", "closed-loop", "--backends", "nosuch", "--out", str(tmp_path / "x")]) == 2
     assert "nosuch" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:

@@ -59,3 +59,23 @@ def test_simulate_summary_to_stdout(tmp_path, monkeypatch, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["ticks"] == 20 and summary["backend"] == "pinv"
     assert not (tmp_path / "-").exists()
+
+
+def test_closed_loop_checks_scenarios_before_running(tmp_path, capsys):
+    out = tmp_path / "loop"
+    assert main(["closed-loop", "--scenarios", "wal", "--backends", "daqp", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "wal" in err and "shipped: " in err
+    assert not out.exists()
+
+
+def test_closed_loop_prints_a_table_of_its_runs(tmp_path, capsys):
+    out = tmp_path / "loop"
+    code = main(["closed-loop", "--scenarios", "wall", "--backends", "DAQP,pinv", "--duration", "2",
+                 "--out", str(out)])
+    assert code == 1  # pinv goes through the wall
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:3] == ["scenario", "backend", "verdict"]
+    by_backend = {line.split()[1]: line.split() for line in lines[1:]}
+    assert by_backend["daqp"][2] == "ok" and by_backend["pinv"][2] == "unsafe"
+    assert float(by_backend["pinv"][6]) < 9.5  # d_min in mm

@@ -100,7 +100,34 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
     log.info("%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",
              len(outcome.table), outcome.ran, outcome.skipped, outcome.errors, outcome.not_ok, outcome.csv_path)
+    if not args.quiet and len(outcome.table):
+        print(summary_table(outcome.table))
     return 1 if outcome.errors or outcome.not_ok else 0
+
+
+def summary_table(table) -> str:
+    """One line per run: verdict, how far it got, tracking and force error after the transient,
+    closest key point, p99 solve time and ticks over the 1 ms budget (plain text, aligned)."""
+    import math
+
+    def num(value, scale=1.0, spec=".3g"):
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            return "-"
+        return "-" if math.isnan(value) else format(value * scale, spec)
+
+    header = ("scenario", "backend", "verdict", "simulated s", "tracking max mm", "force err max N",
+              "d_min mm", "solve p99 us", "ticks > dt")
+    rows = [header]
+    for r in table.to_dict("records"):
+        rows.append((str(r.get("scenario")), str(r.get("backend")), str(r.get("verdict") or r.get("status")),
+                     num(r.get("simulated_s"), spec=".4g"), num(r.get("tracking_max_after_2s"), 1e3),
+                     num(r.get("force_error_max_after_2s")), num(r.get("min_obstacle_distance"), 1e3, ".4g"),
+                     num(r.get("solve_time_p99_s"), 1e6, ".4g"), num(r.get("deadline_misses"), spec=".0f")))
+    widths = [max(len(row[c]) for row in rows) for c in range(len(header))]
+    return "\n".join("  ".join(cell.ljust(w) if c < 3 else cell.rjust(w) for c, (cell, w) in enumerate(zip(row, widths)))
+                     for row in rows)
 
 
 def log_row(logger: logging.Logger, row: dict) -> None:

@@ -316,6 +316,10 @@ def resolve_scenarios(value: str | list[str] | None) -> list[str]:
     names = parse_list(value or "all", "--scenarios")
     if names == ["all"]:
         return scenario_names()
+    from ..sim.scenario import load_scenario
+
+    for name in names:
+        load_scenario(name)  # a typo or a broken file: one line naming it, before any run starts
     return names
 
 
@@ -330,6 +334,9 @@ def resolve_backends(value: str | list[str] | None) -> list[str]:
     names = parse_list(value or "all", "--backends")
     if names == ["all"]:
         return list(backend_names(available_only=True))
+    from ..backends import resolve_name
+
+    names = [resolve_name(name) for name in names]  # canonical spelling; a typo gets a suggestion
     for name in names:
         get_backend(name)  # raises BackendNotFound with the reason
     return names
