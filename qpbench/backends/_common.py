@@ -81,3 +81,25 @@ def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarra
     cols = np.concatenate([np.full(j + 1, j) for j in range(n)]).astype(np.int64) if n else np.zeros(0, np.int64)
     indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
     return (rows, cols), rows, indptr
+
+
+def dense_parts(problem):
+    """The problem's ``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept).
+
+    ``A`` and ``G`` are 2-D (a single row given as a vector becomes one row); the vectors
+    are 1-D. The dense-API backends (daqp, qpoases, piqp) read a problem through this.
+    """
+    P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
+    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+    n = q.shape[0]
+
+    def rows(M, v):
+        if M is None:
+            return None, None
+        return as_dense(M).reshape(-1, n), np.asarray(v, dtype=np.float64).reshape(-1)
+
+    A, b = rows(problem.A, problem.b)
+    G, h = rows(problem.G, problem.h)
+    lb = None if problem.lb is None else np.asarray(problem.lb, dtype=np.float64).reshape(-1)
+    ub = None if problem.ub is None else np.asarray(problem.ub, dtype=np.float64).reshape(-1)
+    return P, q, A, b, G, h, lb, ub

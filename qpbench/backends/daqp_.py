@@ -76,7 +76,7 @@ import numpy as np
 
 from ..exceptions import ParamError
 from . import register
-from ._common import as_dense, generic_settings
+from ._common import dense_parts, generic_settings
 from .base import Backend, BackendSolution
 
 #: DAQP exit flag -> (status, DAQP's name).
@@ -228,22 +228,28 @@ class DaqpBackend(Backend):
             x, fval, flag, info = daqp.solve(P, q, buf.A, buf.bu, buf.bl, buf.sense, **options)
         except (ValueError, TypeError) as exc:
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
-        status, raw = EXITFLAGS.get(flag, _UNKNOWN)
-        sol = BackendSolution(problem, status=status)
-        sol.iterations = info["iterations"]
-        sol.solver_time_s = info["setup_time"] + info["solve_time"]
-        sol.extras["raw_status"] = raw
-        if status == "optimal":
-            lam = info["lam"]
-            nb = buf.nb
-            sol.x = x
-            sol.obj = fval
-            sol.z_box = lam[:nb] if box else _EMPTY
-            sol.y = lam[nb : nb + me]
-            sol.z = lam[nb + me :]
-        elif status == "error":
-            sol.error = f"DAQP exit flag {flag} ({raw})"
-        return sol
+        return read_result(problem, x, fval, flag, info, buf.nb, box, me)
+
+
+def read_result(problem, x, fval, flag: int, info: dict, nb: int, box: bool, me: int) -> BackendSolution:
+    """A solution from what DAQP returned: status from the exit flag, its own time, and on
+    success ``x``, the objective and the duals, split from DAQP's one multiplier vector
+    (bounds first, then equalities, then inequalities; DAQP's signs are qpsolvers')."""
+    status, raw = EXITFLAGS.get(flag, _UNKNOWN)
+    sol = BackendSolution(problem, status=status)
+    sol.iterations = info["iterations"]
+    sol.solver_time_s = info["setup_time"] + info["solve_time"]
+    sol.extras["raw_status"] = raw
+    if status == "optimal":
+        lam = info["lam"]
+        sol.x = x
+        sol.obj = fval
+        sol.z_box = lam[:nb] if box else _EMPTY
+        sol.y = lam[nb : nb + me]
+        sol.z = lam[nb + me :]
+    elif status == "error":
+        sol.error = f"DAQP exit flag {flag} ({raw})"
+    return sol
 
 
 _ndarray = np.ndarray
@@ -254,19 +260,4 @@ _EMPTY = np.zeros(0)
 _EMPTY.flags.writeable = False
 
 
-def _dense(problem):
-    """The problem's parts as dense float64 arrays (``None`` kept), rows 2-D."""
-    P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
-    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
-    n = q.shape[0]
-
-    def rows(M, v):
-        if M is None:
-            return None, None
-        return as_dense(M).reshape(-1, n), np.asarray(v, dtype=np.float64).reshape(-1)
-
-    A, b = rows(problem.A, problem.b)
-    G, h = rows(problem.G, problem.h)
-    lb = None if problem.lb is None else np.asarray(problem.lb, dtype=np.float64).reshape(-1)
-    ub = None if problem.ub is None else np.asarray(problem.ub, dtype=np.float64).reshape(-1)
-    return P, q, A, b, G, h, lb, ub
+_dense = dense_parts

@@ -49,7 +49,7 @@ import numpy as np
 from . import register
 from ._shapes import check_shapes
 from .base import BackendSolution
-from .daqp_ import _UNKNOWN, EXITFLAGS, DaqpBackend, _Buffers, _daqp, _dense
+from .daqp_ import _UNKNOWN, EXITFLAGS, DaqpBackend, _Buffers, _daqp, _dense, read_result
 
 
 @register
@@ -132,23 +132,9 @@ class DaqpModelBackend(DaqpBackend):
         except (ValueError, TypeError) as exc:
             self._model = None
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
-        status, raw = EXITFLAGS.get(flag, _UNKNOWN)
-        sol = BackendSolution(problem, status=status)
-        sol.iterations = info["iterations"]
-        sol.solver_time_s = info["setup_time"] + info["solve_time"]
-        sol.extras["raw_status"] = raw
-        if status == "optimal":
-            lam = info["lam"]
-            nb = buf.nb
-            sol.x = x
-            sol.obj = fval
-            sol.z_box = lam[:nb] if box else _EMPTY
-            sol.y = lam[nb : nb + me]
-            sol.z = lam[nb + me :]
-        else:
+        sol = read_result(problem, x, fval, flag, info, buf.nb, box, me)
+        if sol.status != "optimal":
             self._model = None  # set up afresh on the next tick
-            if status == "error":
-                sol.error = f"DAQP exit flag {flag} ({raw})"
         return sol
 
     def _failed(self, problem, flag):

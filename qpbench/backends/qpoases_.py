@@ -83,7 +83,7 @@ import numpy as np
 
 from ..exceptions import BackendError, ParamError
 from . import register
-from ._common import as_dense, generic_settings
+from ._common import dense_parts, generic_settings
 from ._shapes import check_shapes
 from .base import Backend, BackendSolution
 
@@ -537,20 +537,4 @@ _EMPTY = np.zeros(0)
 _EMPTY.flags.writeable = False
 
 
-def _dense(problem):
-    """The problem's parts as dense float64 arrays (``None`` kept), rows 2-D."""
-    P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
-    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
-    n = q.shape[0]
-
-    def rows(M, v):
-        if M is None:
-            return None, None
-        M = as_dense(M)
-        return (M[None, :] if M.ndim == 1 else M), np.asarray(v, dtype=np.float64).reshape(-1)
-
-    A, b = rows(problem.A, problem.b)
-    G, h = rows(problem.G, problem.h)
-    lb = None if problem.lb is None else np.asarray(problem.lb, dtype=np.float64).reshape(-1)
-    ub = None if problem.ub is None else np.asarray(problem.ub, dtype=np.float64).reshape(-1)
-    return P, q, A, b, G, h, lb, ub
+_dense = dense_parts
