@@ -120,13 +120,15 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
     for scenario in ("wall", "narrow"):
         for backend in ("qpsolvers:daqp", "pinv", "rnn"):
             log_name = f"logs/{scenario}__{backend.replace(':', '-')}.parquet"
+            # the tick log's own columns (qpbench.sim.loop)
             df = pd.DataFrame({
                 "t": t,
                 "tracking_error": 1e-3 * np.exp(-t) * rng.standard_normal(len(t)),
-                "force": 20 + np.exp(-t),
-                "v0": np.sin(t), "v1": np.cos(t), "v2": 0.1 * t, "v3": -0.1 * t,
-                "min_distance": 0.01 + 0.1 * np.exp(-t),
-                "solve_time_s": 10 ** rng.uniform(-5, -4, len(t)),
+                "force": 20 + np.exp(-t), "force_error": np.exp(-t),
+                "v_0": np.sin(t), "v_1": np.cos(t), "v_2": 0.1 * t, "v_3": -0.1 * t,
+                "d_A2_wall": 0.01 + 0.1 * np.exp(-t), "d_min": 0.01 + 0.1 * np.exp(-t),
+                "v_sq": np.sin(t) ** 2 + np.cos(t) ** 2, "fallback": t < 0.1, "zero_velocity": False,
+                "solve_time_s": 10 ** rng.uniform(-5, -4, len(t)), "kp_hat": 5000.0,
             })
             df.to_parquet(folder / log_name)
             rows.append(dict(

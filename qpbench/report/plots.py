@@ -4,53 +4,29 @@ Keys of the returned mapping (used by :mod:`qpbench.report.markdown`):
 
 - ``perf_profile_<group>``: Dolan-More performance profile of runtime;
 - ``per_tick_<group>_<scenario>``: solve time and optimality gap against t;
-- ``closed_loop_<scenario>_<formulation>``: the paper's figures per backend:
-  tracking error, contact force, ``||v||^2`` (against the ``pinv`` baseline),
-  smallest key-point distance, the equality duals ``||y||`` and the largest
-  obstacle dual where logged;
+- ``closed_loop_<scenario>_<formulation>``: every backend's run overlaid
+  (:func:`qpbench.report.loop_figure.closed_loop_figure`): tracking and force
+  error on log scales, the closest key point against ``d_safe``, solve time
+  per tick against the 1 ms budget, ``|v|^2``, ``Kp_hat`` when adapting;
 - ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one panel per backend;
 - ``closed_loop_d_<scenario>_<formulation>``: every key point's distance to every
   obstacle, one panel per backend.
-
-For the network the duals are its state: ``y = -l1`` and ``z = l2`` at
-equilibrium, so the ``||y||`` and largest-obstacle-dual panels show its
-``||l1||`` and ``max l2``.
 """
 
 from __future__ import annotations
 
 import logging
-import re
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path
-from ..harness.closed_loop import find_column, v_norm2, velocity_columns
+from ..harness.closed_loop import velocity_columns
 from . import tables
 from .markdown import slug
 
 log = logging.getLogger("qpbench.report")
-
-# Candidate per-tick log columns (first present wins).
-_TRACK = ("tracking_error", "tangential_error", "tracking_error_m")
-_FORCE = ("force", "contact_force", "force_n", "f")
-_MIN_DIST = ("d_min", "min_distance", "min_obstacle_distance", "distance_min")
-_L1 = ("l1_norm", "rnn_l1_norm", "norm_l1")
-_L2 = ("l2_norm", "rnn_l2_norm", "z_max", "l2_max")
-_BASELINE = "pinv"
-
-
-def _y_norm(df: pd.DataFrame) -> np.ndarray | None:
-    """``||y||`` of the equality duals (the network's ``||l1||``: ``y = -l1`` at equilibrium)."""
-    got = _norm_series(df, _L1, "l1_")
-    if got is not None:
-        return got
-    cols = [c for c in df.columns if re.fullmatch(r"y_\d+", str(c))]
-    if cols:
-        return np.linalg.norm(df[cols].to_numpy(float), axis=1)
-    return None
 
 
 def _keypoint_columns(df: pd.DataFrame) -> list[str]:
@@ -141,60 +117,24 @@ def _read_log(path) -> pd.DataFrame | None:
         return None
 
 
-def _norm_series(df: pd.DataFrame, names: tuple[str, ...], prefix: str) -> np.ndarray | None:
-    col = find_column(df, names)
-    if col is not None:
-        return df[col].to_numpy(float)
-    cols = [c for c in df.columns if str(c).startswith(prefix) and str(c)[len(prefix):].isdigit()]
-    if cols:
-        return np.linalg.norm(df[cols].to_numpy(float), axis=1)
-    if prefix.rstrip("_") in df.columns:
-        return np.array([float(np.linalg.norm(np.atleast_1d(x))) for x in df[prefix.rstrip("_")]])
-    return None
-
-
 def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path: Path,
                       path_v: Path) -> tuple[bool, bool]:
-    """The paper's figures for one scenario, every backend overlaid (see module doc)."""
+    """The closed-loop figure of one scenario, every backend overlaid
+    (:func:`qpbench.report.loop_figure.closed_loop_figure`), and the joint velocities per backend."""
+    from .loop_figure import closed_loop_figure
+
     logs = {}
+    d_safe = None
     for _, r in runs.iterrows():
         df = _read_log(r.get("log_path"))
         if df is not None and "t" in df.columns and len(df):
             logs[str(r["backend"])] = df
+            value = r.get("d_safe")
+            if value is not None and np.isfinite(float(value)):
+                d_safe = float(value)
     if not logs:
         return False, False
-    plt = _pyplot()
-    panels = []
-    if any(find_column(d, _TRACK) for d in logs.values()):
-        panels.append(("tracking error (mm)", lambda d: _col(d, _TRACK, 1e3), "linear"))
-    if any(find_column(d, _FORCE) for d in logs.values()):
-        panels.append(("contact force (N)", lambda d: _col(d, _FORCE, 1.0), "linear"))
-    panels.append(("||v||^2 (rad^2/s^2)", v_norm2, "log"))
-    if any(find_column(d, _MIN_DIST) for d in logs.values()):
-        panels.append(("min key-point distance (mm)", lambda d: _col(d, _MIN_DIST, 1e3), "linear"))
-    if any(_y_norm(d) is not None and np.isfinite(_y_norm(d)).any() for d in logs.values()):
-        panels.append(("||y|| equality duals\n(rnn: ||l1||)", _y_norm, "linear"))
-    if any(_norm_series(d, _L2, "l2_") is not None for d in logs.values()):
-        panels.append(("max obstacle dual\n(rnn: max l2)", lambda d: _norm_series(d, _L2, "l2_"), "linear"))
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7.5, 2.1 * len(panels) + 0.6), sharex=True)
-    axes = np.atleast_1d(axes)
-    for ax, (ylabel, getter, scale) in zip(axes, panels):
-        _colours(ax, len(logs))
-        for backend, d in logs.items():
-            y = getter(d)
-            if y is None:
-                continue
-            style = dict(lw=1.6, ls="--", color="black") if backend == _BASELINE else dict(lw=0.9)
-            ax.plot(d["t"].to_numpy(float), y, label=backend, **style)
-        if scale == "log":
-            ax.set_yscale("symlog", linthresh=1e-3)
-        ax.set_ylabel(ylabel, fontsize=8)
-        ax.grid(True, alpha=0.3)
-    axes[0].set_title(f"Closed loop, {scenario} ({formulation})")
-    axes[0].legend(fontsize=7, ncol=3)
-    axes[-1].set_xlabel("t (s)")
-    _save(fig, path)
-
+    closed_loop_figure(logs, path, title=f"Closed loop, {scenario} ({formulation})", d_safe=d_safe)
     done_v = _per_backend_figure(logs, velocity_columns, "v (rad/s)", 1.0,
                                  f"Joint velocities, {scenario} ({formulation})", path_v)
     return True, done_v
@@ -229,11 +169,6 @@ def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Pat
             logs[str(r["backend"])] = df
     return _per_backend_figure(logs, _keypoint_columns, "distance (mm)", 1e3,
                                f"Key-point distances, {scenario} ({formulation})", path)
-
-
-def _col(df: pd.DataFrame, names: tuple[str, ...], scale: float):
-    col = find_column(df, names)
-    return None if col is None else df[col].to_numpy(float) * scale
 
 
 def write_plots(results: tables.Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
