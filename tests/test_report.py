@@ -490,3 +490,13 @@ def test_solver_time_against_call_time_per_scenario(tmp_path):
     for header, values, q in (("call p50 (us)", call, 50), ("solver p99 (us)", own, 99),
                               ("call - solver p50 (us)", call - own, 50), ("call - solver p99 (us)", call - own, 99)):
         assert_close(row[t["header"].index(header)], np.percentile(values, q) * 1e6, header)
+
+
+def test_per_tick_plot_of_a_scenario_without_any_solution(tmp_path):
+    """A short run whose ticks are all infeasible (narrow's start) has no gap to draw: no crash."""
+    from qpbench.report.plots import per_tick_plot
+
+    rows = _honest_bench(np.random.default_rng(0))
+    rows = rows[rows["backend"] == "net"]  # never found
+    assert per_tick_plot(rows, "narrow", tmp_path / "p.png")
+    assert (tmp_path / "p.png").stat().st_size > 0

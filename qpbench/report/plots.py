@@ -88,16 +88,23 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     fig, (ax_t, ax_g) = plt.subplots(2, 1, figsize=(7.5, 5.5), sharex=True)
     _colours(ax_t, df["backend"].nunique())
     _colours(ax_g, df["backend"].nunique())
+    drawn = {ax_t: False, ax_g: False}
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
         t = g["t"].to_numpy(float)
-        ax_t.plot(t, pd.to_numeric(g[tables.runtime_column(g)], errors="coerce") * 1e6, lw=0.8, label=backend)
+        times = pd.to_numeric(g[tables.runtime_column(g)], errors="coerce").to_numpy(float) * 1e6
+        ax_t.plot(t, times, lw=0.8, label=backend)
         gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
-        gap = np.where(g["found"].to_numpy(bool), gap, np.nan)
-        ax_g.plot(t, np.maximum(gap, 1e-16), lw=0.8, label=backend)
-    ax_t.set_yscale("log")
+        gap = np.maximum(np.where(g["found"].to_numpy(bool), gap, np.nan), 1e-16)
+        ax_g.plot(t, gap, lw=0.8, label=backend)
+        drawn[ax_t] |= bool(np.any(np.isfinite(times) & (times > 0)))
+        drawn[ax_g] |= bool(np.any(np.isfinite(gap)))
+    for ax, shown in drawn.items():
+        if shown:  # a log axis needs one positive value (no solution found: nothing to draw)
+            ax.set_yscale("log")
+        else:
+            ax.text(0.5, 0.5, "no solution found", transform=ax.transAxes, ha="center", va="center")
     ax_t.set_ylabel("solve time (us)")
     ax_t.set_title(title)
-    ax_g.set_yscale("log")
     ax_g.set_ylabel("|optimality gap|")
     ax_g.set_xlabel("t (s)")
     for ax in (ax_t, ax_g):
