@@ -128,6 +128,19 @@ class _Buffers:
         self.bl_box = self.bl[:nb]
         self.bl_eq = self.bl[nb : nb + me]
 
+    def fill(self, A, b, G, h, lb, ub) -> None:
+        """Write a problem's rows and bounds into the stacked arrays (equalities as ``bl = bu``)."""
+        if self.me:
+            self.A_eq[:] = A
+            self.bu_eq[:] = b
+            self.bl_eq[:] = b
+        if self.mi:
+            self.A_in[:] = G
+            self.bu_in[:] = h
+        if self.nb:
+            self.bu_box[:] = _INF if ub is None else ub
+            self.bl_box[:] = -_INF if lb is None else lb
+
     def __deepcopy__(self, memo):
         # A plain deep copy would copy each view on its own: the copy's views
         # would no longer write into the copy's A, bu, bl (the arrays
@@ -215,16 +228,7 @@ class DaqpBackend(Backend):
         if buf is None:
             buf = self._buffers[key] = _Buffers(n, me, mi, box)
         try:
-            if me:
-                buf.A_eq[:] = A
-                buf.bu_eq[:] = b
-                buf.bl_eq[:] = b
-            if mi:
-                buf.A_in[:] = G
-                buf.bu_in[:] = h
-            if box:
-                buf.bu_box[:] = _INF if ub is None else ub
-                buf.bl_box[:] = -_INF if lb is None else lb
+            buf.fill(A, b, G, h, lb, ub)
             x, fval, flag, info = daqp.solve(P, q, buf.A, buf.bu, buf.bl, buf.sense, **options)
         except (ValueError, TypeError) as exc:
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")

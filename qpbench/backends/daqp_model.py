@@ -98,16 +98,7 @@ class DaqpModelBackend(DaqpBackend):
             self.reset()
             buf = self._buf = _Buffers(n, me, mi, box)
             self._key = key
-        if me:
-            buf.A_eq[:] = A
-            buf.bu_eq[:] = b
-            buf.bl_eq[:] = b
-        if mi:
-            buf.A_in[:] = G
-            buf.bu_in[:] = h
-        if box:
-            buf.bu_box[:] = _INF if ub is None else ub
-            buf.bl_box[:] = -_INF if lb is None else lb
+        buf.fill(A, b, G, h, lb, ub)
         model = self._model
         try:
             if model is None:

@@ -104,6 +104,16 @@ def _draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) ->
             ax.scatter(pts[:, 0], pts[:, 1], s=6, color=OBSTACLE, alpha=alpha, label=label)
 
 
+def _workspace_axes(ax, xlim, ylim) -> None:
+    """Equal-aspect axes in metres over the view, with a light grid."""
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(alpha=0.25)
+
+
 def _frame_parts(scenario):
     arm = scenario.make_arm()
     keys = scenario.make_key_points()
@@ -176,12 +186,7 @@ def draw_snapshot(scenario, log, path: str | Path, *, instants: int = 8, title: 
                 q, textcoords="offset points", xytext=(10, -28), fontsize=8, color="red" if bad else "black",
             )
 
-    ax.set_xlim(*xlim)
-    ax.set_ylim(*ylim)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.grid(alpha=0.25)
+    _workspace_axes(ax, xlim, ylim)
     ax.set_title(title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
@@ -243,12 +248,7 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
     dcols = [c for c in log.columns if c.startswith("d_") and c != "d_min"]
 
     fig, ax = plt.subplots(figsize=(6, 5), dpi=dpi)
-    ax.set_xlim(*xlim)
-    ax.set_ylim(*ylim)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.grid(alpha=0.25)
+    _workspace_axes(ax, xlim, ylim)
     _draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=SURFACE, lw=2.5)
     ax.plot(log["xd_x"], log["xd_y"], "--", color="0.6", lw=1.0)
     static = not any(np.any(ob.velocity) for ob in obstacles)
@@ -281,14 +281,11 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
 
     anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
     bar = None
-    callback = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(frames), unit="frame", desc=f"animate {path.name}", leave=False)
-
-        def callback(i, n):  # noqa: ARG001 - matplotlib's signature
-            bar.update(1)
+    callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
 
     writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
     path.parent.mkdir(parents=True, exist_ok=True)
