@@ -34,22 +34,23 @@ def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]
     """
     if P.shape != (n, n):
         _refuse(backend, "P", P.shape, (n, n))
-    me = 0
-    if A is not None:
-        if A.ndim != 2 or A.shape[1] != n:
-            _refuse(backend, "A", A.shape, ("me", n))
-        me = A.shape[0]
-        if b is None or b.shape != (me,):
-            _refuse(backend, "b", () if b is None else b.shape, (me,))
-    mi = 0
-    if G is not None:
-        if G.ndim != 2 or G.shape[1] != n:
-            _refuse(backend, "G", G.shape, ("mi", n))
-        mi = G.shape[0]
-        if h is None or h.shape != (mi,):
-            _refuse(backend, "h", () if h is None else h.shape, (mi,))
+    me = _rows(backend, A, b, n, ("A", "b", "me"))
+    mi = _rows(backend, G, h, n, ("G", "h", "mi"))
     if lb is not None and lb.shape != (n,):
         _refuse(backend, "lb", lb.shape, (n,))
     if ub is not None and ub.shape != (n,):
         _refuse(backend, "ub", ub.shape, (n,))
     return me, mi
+
+
+def _rows(backend: str, M, v, n: int, names: tuple[str, str, str]) -> int:
+    """Rows of a constraint block ``M x (=|<=) v`` after checking ``M`` is (m, n) and ``v`` is (m,); 0 if absent."""
+    if M is None:
+        return 0
+    matrix, vector, count = names
+    if M.ndim != 2 or M.shape[1] != n:
+        _refuse(backend, matrix, M.shape, (count, n))
+    m = M.shape[0]
+    if v is None or v.shape != (m,):
+        _refuse(backend, vector, () if v is None else v.shape, (m,))
+    return m

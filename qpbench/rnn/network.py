@@ -742,6 +742,8 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
                     w = np.linalg.eigvalsh(0.5 * (P + P.T))
                     pmin = w[0]
                     pmax = w[n - 1]
+                # same logic as _integrate_numpy's (the numpy twin, kept apart on purpose: numba
+                # compiles this one; tests/test_rnn.py checks both give the same steps and notes)
                 sig2 = _sigma2_bound_jit(A, G)
                 rmax = _ratio_max_jit(pmin, pmax, sig2, semi)
                 if rmax <= 0.0:
