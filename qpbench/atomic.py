@@ -51,7 +51,31 @@ def write_bytes(path: str | Path, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def check_output(path: str | Path, force: bool = False, resume: bool | None = None, kind: str = "file") -> None:
+def check_folder(path: str | Path, key: str = "out") -> None:
+    """Check an output folder before anything is written into it.
+
+    The folder may exist (the caller decides what may be replaced inside it)
+    or not (it is created later), but its parent must exist: qpbench creates an
+    output folder, never the folders above it.
+
+    Raises:
+        ParamError: ``path`` is a file, or its parent is missing or a file.
+    """
+    from .exceptions import ParamError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ParamError(f"{path}: is a file; expected a folder", key=key)
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise ParamError(f"{parent}: is a file; expected a folder", key=key)
+    if not path.exists() and not parent.exists():
+        raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key=key)
+
+
+def check_output(
+    path: str | Path, force: bool = False, resume: bool | None = None, kind: str = "file", make_parent: bool = False
+) -> None:
     """Refuse to overwrite an existing output unless ``force`` or ``resume``.
 
     Args:
@@ -60,11 +84,15 @@ def check_output(path: str | Path, force: bool = False, resume: bool | None = No
         resume: ``--resume`` was given; ``None`` when the command has no
             ``--resume`` (the message then does not offer it).
         kind: ``"file"`` or ``"dir"``: what ``path`` must be if it exists.
+        make_parent: The caller creates the parent folder itself (an internal
+            staging folder); otherwise a missing parent is an error.
 
     Raises:
         OutputExistsError: ``path`` exists and neither flag was given.
-        ParamError: ``path`` is a folder where a file is expected (``kind="file"``)
-            or a file where a folder is (the output or its parent).
+        ParamError: ``path`` is a folder where a file is expected (``kind="file"``),
+            a file where a folder is (the output or its parent), or its parent
+            folder does not exist (qpbench creates an output file or folder,
+            never the folders above it).
     """
     from .exceptions import ParamError
 
@@ -76,6 +104,9 @@ def check_output(path: str | Path, force: bool = False, resume: bool | None = No
     parent = path.parent
     if parent.exists() and not parent.is_dir():
         raise ParamError(f"{parent}: is a file; expected a folder", key="out")
+    if not parent.exists() and not make_parent:
+        # Outputs are created, their parents never: a typo in a path must not grow a tree of folders.
+        raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key="out")
     if path.exists() and not (force or resume):
         hint = "pass --force to overwrite" + (" or --resume to continue" if resume is not None else "")
         raise OutputExistsError(f"{path}: exists; {hint}")

@@ -60,10 +60,12 @@ def build_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     verbosity = common.add_mutually_exclusive_group()
     verbosity.add_argument(
-        "-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="only warnings and errors"
+        "-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="only errors"
     )
     verbosity.add_argument(
-        "-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="debug output"
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS,
+        help="-v: the run's settings, each backend's version and settings, and the solvers' own output; "
+        "-vv: also one line per solve",
     )
     parser = argparse.ArgumentParser(
         prog="qpbench",
@@ -88,14 +90,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Logger of the one-line-per-solve messages; shown from ``-vv`` on.
+SOLVE_LOGGER = "qpbench.solves"
+
+
 def _configure_logging(args: argparse.Namespace) -> None:
-    level = logging.WARNING if args.quiet else logging.DEBUG if args.verbose else logging.INFO
+    """``-q``: errors only; default: progress and results; ``-v``: settings and
+    per-backend details (DEBUG); ``-vv``: also every solve (:data:`SOLVE_LOGGER`)."""
+    level = logging.ERROR if args.quiet else logging.DEBUG if args.verbose else logging.INFO
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
     root = logging.getLogger("qpbench")
     root.handlers[:] = [handler]
     root.setLevel(level)
     root.propagate = False
+    logging.getLogger(SOLVE_LOGGER).setLevel(logging.DEBUG if args.verbose >= 2 else max(level, logging.INFO))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -106,11 +115,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.quiet = getattr(args, "quiet", False)
-    args.verbose = getattr(args, "verbose", False)
+    args.verbose = getattr(args, "verbose", 0) or 0
     if args.command is None:
         parser.print_help()
         return 2
     _configure_logging(args)
+    log.debug(
+        "qpbench %s %s: %s", __version__, args.command,
+        ", ".join(f"{k}={v!r}" for k, v in sorted(vars(args).items()) if not k.startswith("_") and k != "command"),
+    )
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     from .native_output import silence_native_stdout

@@ -183,6 +183,7 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     slow = registered(monkeypatch)
     monkeypatch.chdir(tmp_path)
     # a small problem set (30 ticks of wall) so the bench is quick
+    (tmp_path / "problems").mkdir()
     assert main(["-q", "simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.3",
                  "--dump", "problems/wall", "--every", "10"]) == 0
     args = ["-q", "run", "--duration", "0.3", "--scenarios", "wall,free", "--backends", f"daqp,{slow}", "--out", "r"]

@@ -107,7 +107,7 @@ def test_export_refuses_existing_and_missing_parent(tmp_path, capsys):
     assert (out / "keep.txt").read_text() == "mine"
     assert main(["export", src, "--format", "npz", "--out", str(tmp_path / "no" / "such")]) == 2
     assert not (tmp_path / "no").exists()
-    assert "no such folder" in capsys.readouterr().err
+    assert "parent folder" in capsys.readouterr().err
 
 
 def test_export_failure_leaves_nothing(tmp_path, capsys):

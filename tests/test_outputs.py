@@ -39,3 +39,29 @@ def test_existing_output_needs_force(tmp_path):
     with pytest.raises(OutputExistsError):
         check_output(f)
     check_output(f, force=True)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bench", "problems/wall", "--backends", "daqp", "--limit", "2", "--out", "{tmp}/no/such/x.csv"],
+        ["simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.01", "--summary", "{tmp}/no/such/s.json"],
+        ["simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.01", "--dump", "{tmp}/no/such"],
+        ["closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.01", "--out", "{tmp}/no/such"],
+        ["report", "results/closed_loop.csv", "--out", "{tmp}/no/such"],
+        ["export", "problems/wall", "--format", "npz", "--limit", "1", "--out", "{tmp}/no/such"],
+    ],
+    ids=["bench", "simulate-summary", "simulate-dump", "closed-loop", "report", "export"],
+)
+def test_a_missing_parent_folder_is_refused_and_nothing_is_created(argv, tmp_path, capsys):
+    """qpbench creates an output file or folder, never the folders above it: a typo
+    in a path is one line and exit 2, not a new tree of folders."""
+    from qpbench.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    argv = [a.replace("{tmp}", str(tmp_path)) if "{tmp}" in a else str(root / a) if a.startswith(("problems/", "results/")) else a
+            for a in argv]
+    assert main(["-q", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"parent folder {tmp_path}/no" in err[0] and "does not exist" in err[0], err
+    assert not (tmp_path / "no").exists()

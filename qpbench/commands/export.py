@@ -77,17 +77,15 @@ def raise_dup(name: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..exceptions import OutputExistsError, ParamError
+    from ..atomic import check_folder
+    from ..exceptions import OutputExistsError
     from ..formats import load_problems
     from ..selection import select_records
 
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ParamError(f"{out}: exists and is not a folder", key="out")
+    check_folder(out)
     if out.exists() and not args.force:
         raise OutputExistsError(f"{out}: exists; pass --force to overwrite")
-    if not out.parent.is_dir():
-        raise ParamError(f"{out.parent}: no such folder (create it first)", key="out")
     ps = load_problems(args.path)
     records = select_records(ps.records, args.pattern, args.every, args.limit)
     export(records, args.format, out, str(args.path))

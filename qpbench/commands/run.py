@@ -127,12 +127,12 @@ def _check_out(out: Path, force: bool) -> None:
     those names exists and ``out/run.json`` does not, it is someone else's
     file and ``--force`` is needed.
     """
+    from ..atomic import check_folder
     from ..exceptions import OutputExistsError
 
+    check_folder(out)
     if not out.exists():
         return
-    if not out.is_dir():
-        raise OutputExistsError(f"{out}: exists and is not a folder")
     if (out / "run.json").exists() or force:
         return
     clash = sorted(name for name in OUTPUTS if (out / name).exists())

@@ -61,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import atomic_path, check_output, write_text
+    from ..atomic import atomic_path, check_folder, check_output, write_text
     from ..exceptions import ParamError
     from ..jit import warmup_logged
     from ..sim.loop import simulate
@@ -88,8 +88,10 @@ def run(args: argparse.Namespace) -> int:
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
+        check_folder(args.dump, key="--dump")
         for name in ("problems.parquet", "manifest.json"):
-            check_output(Path(args.dump) / name, force=args.force)
+            if Path(args.dump).exists():
+                check_output(Path(args.dump) / name, force=args.force)
 
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise ParamError(f"--deadline must be a positive number of seconds, got {args.deadline}", key="--deadline")

@@ -512,7 +512,7 @@ def run_bench(
     started = time.perf_counter()
     config.validate()
     out = Path(out)
-    check_output(out, force=force, resume=resume)
+    check_output(out, force=force, resume=resume, make_parent=True)  # the command checked the user's path
     profile = get_profile(config.profile)
     time_limit = float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
     run_profile = replace(profile, time_limit=time_limit)

@@ -92,7 +92,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_path, check_output
+from ..atomic import atomic_path, check_folder, check_output
 from ..exceptions import ParamError
 
 log = logging.getLogger("qpbench.harness")
@@ -702,7 +702,9 @@ def run_closed_loop(
     load_plugins(plugins)
     out = Path(out)
     csv_path = out / CSV_NAME
-    check_output(csv_path, force=force, resume=resume)
+    check_folder(out)
+    if out.exists():
+        check_output(csv_path, force=force, resume=resume)
     done: dict[tuple[str, str], dict] = {}
     previous_rows: list[dict] = []
     if csv_path.exists() and resume and not force:

@@ -438,11 +438,13 @@ def write_report(paths: list[str | Path], out: str | Path, *, force: bool = Fals
             mixed repeat counts without ``prefer``.
         OutputExistsError: ``out/report.md`` exists and ``force`` is false.
     """
-    from ..atomic import check_output, write_text
+    from ..atomic import check_folder, check_output, write_text
 
     out = Path(out)
     report_path = out / "report.md"
-    check_output(report_path, force=force)
+    check_folder(out)
+    if out.exists():
+        check_output(report_path, force=force)
     results = tables.read_results(paths, prefer=prefer)
     plot_files: dict[str, str] = {}
     if plots:
