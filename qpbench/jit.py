@@ -122,7 +122,7 @@ def _problems():
 
 
 def _warm_post(problems) -> None:
-    from .sim.loop import warm_post_kernel
+    from .sim.tick_kernel import warm_post_kernel
 
     for sc, ctrl, theta, arrays, _ in problems[::2]:  # one per scenario (the formulation does not change types)
         warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)

@@ -48,11 +48,7 @@ import math
 
 import numpy as np
 
-INFEASIBLE_STATUSES = ("primal_infeasible", "dual_infeasible")
-#: Statuses a backend reports (same list as :data:`qpbench.backends.base.STATUSES`).
-STATUSES = (
-    "optimal", "primal_infeasible", "dual_infeasible", "max_iter", "time_limit", "error", "not_solved",
-)
+from .statuses import CERTIFIED_INFEASIBLE, STATUSES
 
 
 def objective(record, x: np.ndarray | None) -> float:
@@ -158,7 +154,7 @@ def evaluate(record, solution, reference, tolerance) -> dict:
         signed = math.nan
     else:
         signed = (obj - ref_obj) / max(1.0, abs(ref_obj))
-    if ref_status in INFEASIBLE_STATUSES:
+    if ref_status in CERTIFIED_INFEASIBLE:
         success = status == ref_status
     else:
         success = (

@@ -23,18 +23,7 @@ import numpy as np
 import qpsolvers
 
 from ..profiles import Profile, get_profile
-
-#: Statuses a backend reports. The harness adds ``invalid`` (non-finite answer)
-#: and ``crashed`` (the worker process died) on top of these.
-STATUSES = (
-    "optimal",
-    "primal_infeasible",
-    "dual_infeasible",
-    "max_iter",
-    "time_limit",
-    "error",
-    "not_solved",
-)
+from ..statuses import STATUSES  # the vocabulary lives in qpbench.statuses; re-exported for backends
 
 
 @dataclass
@@ -110,6 +99,10 @@ class Backend:
             records as ``dt``.
         risky: True for a backend the harness runs in a worker process with a
             deadline under ``--isolate auto`` (it was seen to hang in native code).
+        scenario_table: Name of the scenario table whose values a closed loop
+            passes as settings when it builds the backend by name (``"rnn"``
+            for the network backends: the scenario's ``[rnn]`` table), or
+            ``None``.
 
     Optional hooks the harness uses when present: ``get_state()`` and
     ``set_state(state)`` restore a backend exactly between timed repeats
@@ -122,6 +115,7 @@ class Backend:
     module: ClassVar[str | None] = None
     online: ClassVar[bool] = False
     risky: ClassVar[bool] = False
+    scenario_table: ClassVar[str | None] = None
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

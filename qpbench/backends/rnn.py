@@ -118,6 +118,8 @@ class _NetworkBackend(Backend):
     package: ClassVar[str | None] = "qpbench"
     #: A closed loop applies ``x`` of an online backend whatever its status.
     online: ClassVar[bool] = False
+    #: A closed loop builds the network with the scenario's ``[rnn]`` table.
+    scenario_table: ClassVar[str | None] = "rnn"
     #: Integration method unless the ``method`` setting says otherwise.
     default_method: ClassVar[str] = "euler"
     #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).
@@ -512,6 +514,7 @@ class RNNTuned(RNNOnline):
     """
 
     name = "rnn-tuned"
+    scenario_table = None  # its own settings, not the scenario's (the paper's values)
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **{**WORKING_SETTINGS, **settings})

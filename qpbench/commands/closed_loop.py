@@ -23,6 +23,8 @@ from __future__ import annotations
 import argparse
 import logging
 
+from ..statuses import FORMULATIONS
+
 HELP = "run scenarios in closed loop with each backend solving every tick; one table row per (scenario, backend)"
 EXAMPLE = "qpbench closed-loop --scenarios wall,narrow --backends qpsolvers:daqp,rnn,pinv --out results/closed-loop"
 
@@ -38,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="output folder: closed_loop.csv and logs/<scenario>__<backend>.parquet")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="simulated time per run in [s] (default: each scenario's T)")
-    parser.add_argument("--formulation", choices=("paper", "soft"), default="paper",
+    parser.add_argument("--formulation", choices=FORMULATIONS, default="paper",
                         help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="runs in parallel, each in a worker process of its own (default: 1; timing is "

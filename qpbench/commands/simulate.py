@@ -16,6 +16,8 @@ import math
 import sys
 from pathlib import Path
 
+from ..statuses import FORMULATIONS
+
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
     "qpbench simulate --scenario wall --backend daqp --summary wall.json "
@@ -30,7 +32,7 @@ log = logging.getLogger("qpbench")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", required=True, metavar="NAME|PATH", help="shipped scenario name (free, wall, adaptive, adaptive_fast, narrow) or a .toml file")
     parser.add_argument("--backend", required=True, metavar="NAME", help="backend name (see `qpbench backends`), e.g. qpsolvers:daqp, clarabel, rnn")
-    parser.add_argument("--formulation", default="paper", choices=("paper", "soft"), help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)")
+    parser.add_argument("--formulation", default="paper", choices=FORMULATIONS, help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)")
     parser.add_argument("--duration", type=float, default=None, metavar="S", help="simulated time in s (default: the scenario's)")
     parser.add_argument("--dt", type=float, default=None, metavar="S", help="control period in s (default: the scenario's)")
     parser.add_argument(

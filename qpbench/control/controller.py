@@ -30,6 +30,7 @@ check the two agree.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import qpsolvers
@@ -39,12 +40,30 @@ from ..packed import HEADER as PACKED_HEADER
 from ..packed import PackedProblem
 from ..robot.environment import PRIMITIVE_WIDTH, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm
+from ..statuses import FORMULATIONS
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
-__all__ = ["FORMULATIONS", "Controller", "TickQP", "build_problem"]
+__all__ = ["FORMULATIONS", "Controller", "TickArrays", "TickQP", "build_problem"]
 
-#: Formulations a controller builds.
-FORMULATIONS = ("paper", "soft")
+
+class TickArrays(NamedTuple):
+    """One tick's arrays (:meth:`Controller.build_arrays`): cost and obstacle rows ``P, q, G, h``,
+    task row ``J v = b0`` (eq. 11), escape-velocity bounds ``lb, ub`` [rad/s], end effector ``ee``
+    [m], key-point distances ``dist`` [m] (flat, key point major), ``xd = (x_d, xdot_d)`` [m, m/s],
+    the packed ``buffer`` the others view (``None`` on the numpy reference path)."""
+
+    P: np.ndarray
+    q: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    J: np.ndarray
+    b0: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    ee: np.ndarray
+    dist: np.ndarray
+    xd: np.ndarray
+    buffer: np.ndarray | None = None
 
 # Layout of the kernel's parameter vector.
 _T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = range(16)
@@ -327,13 +346,12 @@ class Controller:
         self._packed_slices = tuple(slice(off, off + int(np.prod(shape))) for off, shape in layout.values())
 
     # -- fast path -------------------------------------------------------------
-    def build_arrays(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, soft: bool = False):
-        """The tick's arrays ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd, buffer)``, freshly allocated.
+    def build_arrays(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, soft: bool = False) -> TickArrays:
+        """The tick's :class:`TickArrays` ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd, buffer)``, freshly allocated.
 
         All but ``xd`` are views of ``buffer``, the tick's
         :class:`qpbench.packed.PackedProblem` buffer (layout of :func:`packed_layout`).
-        The numpy reference path (obstacles without a kernel) returns the
-        first eleven only.
+        On the numpy reference path (obstacles without a kernel) ``buffer`` is ``None``.
 
         ``xd`` is ``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)``; ``dist`` is flat
         (a * m,), key point major. This is the loop's hot path: ``theta`` must
@@ -356,12 +374,12 @@ class Controller:
             theta, self._lengths, self._kp_link, self._kp_frac, self._prims, self._lim, par, buf,
         )
         sP, sq, sG, sh, sJ, sb, slb, sub, see, sd = self._packed_slices
-        return (
+        return TickArrays(
             buf[sP].reshape(n, n), buf[sq], buf[sG].reshape(nr, n), buf[sh], buf[sJ].reshape(2, n), buf[sb],
             buf[slb], buf[sub], buf[see], buf[sd], xd, buf,
         )
 
-    def make_problem(self, arrays, soft: bool) -> qpsolvers.Problem:
+    def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
         """A :class:`qpsolvers.Problem` from :meth:`build_arrays`' output
         (a :class:`~qpbench.packed.PackedProblem` when it came with its buffer).
 
@@ -375,8 +393,8 @@ class Controller:
             G = h = None
         if soft:
             J = b = None
-        if len(arrays) > 11:  # one buffer (build_arrays): its header says the same
-            return _trusted(arrays[11], P, q, G, h, J, b, lb, ub)
+        if arrays.buffer is not None:  # one buffer (the kernel's): its header says the same
+            return _trusted(arrays.buffer, P, q, G, h, J, b, lb, ub)
         problem = _new_problem(_Problem)
         problem.P = P
         problem.q = q
@@ -406,14 +424,14 @@ class Controller:
 
     def _tick(self, arrays, soft, formulation) -> TickQP:
         problem = self.make_problem(arrays, soft)
-        xd = arrays[10]
+        xd = arrays.xd
         return TickQP(
             problem=problem,
             formulation=formulation,
-            J=arrays[4],
-            b0=arrays[5],
-            ee=arrays[8],
-            distances=arrays[9].reshape(len(self.key_points), self.n_obstacle_points),
+            J=arrays.J,
+            b0=arrays.b0,
+            ee=arrays.ee,
+            distances=arrays.dist.reshape(len(self.key_points), self.n_obstacle_points),
             x_d=np.array(xd[:2]),
             xdot_d=np.array(xd[2:]),
         )
@@ -448,7 +466,7 @@ class Controller:
             dist = np.concatenate(ds, axis=1).reshape(-1)
         else:
             G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
-        return P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd
+        return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
     def build_reference(self, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
         """Same as :meth:`build`, assembled from the numpy terms (slower; for checks)."""

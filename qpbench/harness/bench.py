@@ -49,7 +49,8 @@ import numpy as np
 
 from ..exceptions import InputError, ParamError
 from ..profiles import Profile, get_profile
-from .guard import FAILURE_STATUSES, RESET_STATUSES, LocalRunner
+from ..statuses import FAILURE_STATUSES
+from .guard import LocalRunner
 from .isolation import IsolatedRunner
 from .results import (
     COLUMNS,
@@ -635,14 +636,14 @@ def run_bench(
                     if key in done:
                         if sequential:  # replay to restore the state the original run had
                             status = done[key]["status"]
-                            if status in RESET_STATUSES:
+                            if status in FAILURE_STATUSES:
                                 needs_reset[name] = True
                             else:
                                 if needs_reset[name]:
                                     runner.reset()
                                     needs_reset[name] = False
                                 marker.mark((f"replay {record.name}", name, pname))
-                                if runner.replay(record.problem) in RESET_STATUSES:
+                                if runner.replay(record.problem) in FAILURE_STATUSES:
                                     log.warning("%s: replay of %s failed; state reset", name, record.name)
                                     needs_reset[name] = True
                         continue
@@ -653,7 +654,7 @@ def run_bench(
                         reset_before=needs_reset[name],
                         prev_problem=prev,
                     )
-                    needs_reset[name] = sequential and outcome.status in RESET_STATUSES
+                    needs_reset[name] = sequential and outcome.status in FAILURE_STATUSES
                     if outcome.status == "time_limit" and not runner.isolated and config.isolate == "auto":
                         # In this process a solve is never interrupted (an exception raised
                         # into foreign code can break it): a backend that overran once goes

@@ -16,8 +16,9 @@ can go wrong into a status, never an exception:
   its limit in this process to one, under ``--isolate auto``);
 - a non-finite ``x`` (or ``optimal`` without ``x``) -> ``invalid``.
 
-After ``error``, ``time_limit`` and ``invalid`` the backend is reset before
-its next solve: its state can no longer be trusted.
+After ``error``, ``time_limit`` and ``invalid`` (:data:`qpbench.statuses.FAILURE_STATUSES`) the
+backend is reset before its next solve: its state can no longer be trusted. The
+classification itself (:func:`qpbench.statuses.classify`) is shared with the closed loop.
 
 The same class runs inside the worker process of an isolated backend, so the
 timed region is identical in both cases.
@@ -27,14 +28,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from .timing import StateRestorer, timed_call
-
-#: Statuses after which a sequential run resets the backend (its state is lost or suspect).
-RESET_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
-#: Statuses that are a failure whatever the reference says.
-FAILURE_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
 
 
 @dataclass
@@ -57,28 +52,6 @@ class Outcome:
     error: str | None = None
     state_reset: bool = False
     isolated: bool = False
-
-
-def describe_exception(exc: BaseException) -> str:
-    """``"Type: message"`` on one line."""
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-def classify(solution, wall_s: float, time_limit: float) -> tuple[str, str | None]:
-    """Status and error text of a solution the backend returned."""
-    status = getattr(solution, "status", None) or ("optimal" if getattr(solution, "found", False) else "not_solved")
-    x = getattr(solution, "x", None)
-    if x is not None:
-        x = np.asarray(x, dtype=float)
-        finite = np.isfinite(x)
-        if not finite.all():
-            return "invalid", f"non-finite x ({int((~finite).sum())} of {x.size} entries; backend status {status})"
-    elif status == "optimal":
-        return "invalid", "status optimal without a primal solution x"
-    if wall_s > time_limit:
-        return "time_limit", f"solve took {wall_s:.3g} s > time limit {time_limit:g} s (backend status {status})"
-    return status, getattr(solution, "error", None)
 
 
 class LocalRunner:
@@ -157,7 +130,7 @@ class LocalRunner:
                         break
                 outcome = self._guarded(problem)
                 times.extend(outcome.wall_times_s)
-                if outcome.status in RESET_STATUSES:
+                if outcome.status in FAILURE_STATUSES:
                     break
             outcome.wall_times_s = times
         outcome.state_reset = bool(reset_before and self.sequential)

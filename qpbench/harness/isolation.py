@@ -46,7 +46,8 @@ import time
 
 import numpy as np
 
-from .guard import LocalRunner, Outcome, describe_exception
+from ..statuses import describe_exception
+from .guard import LocalRunner, Outcome
 
 log = logging.getLogger("qpbench.harness")
 

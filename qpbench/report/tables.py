@@ -57,6 +57,7 @@ import pandas as pd
 
 from ..exceptions import InputError
 from ..profiles import Tolerance, get_profile
+from ..statuses import CERTIFIED_INFEASIBLE
 
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
 SHIFT = 10.0
@@ -323,17 +324,13 @@ def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.nda
     return values
 
 
-#: Reference statuses of problems whose right answer is "no solution".
-INFEASIBLE_STATUSES = ("primal_infeasible", "dual_infeasible")
-
-
 def correct_infeasibility(df: pd.DataFrame) -> np.ndarray:
     """Rows where the backend reported the infeasibility the reference found (a right answer)."""
     if "status" not in df.columns or "reference_status" not in df.columns:
         return np.zeros(len(df), dtype=bool)
     status = df["status"].astype(str).to_numpy()
     ref = df["reference_status"].astype(str).to_numpy()
-    return (status == ref) & np.isin(ref, INFEASIBLE_STATUSES)
+    return (status == ref) & np.isin(ref, CERTIFIED_INFEASIBLE)
 
 
 def shgeom_of(values: np.ndarray) -> float:

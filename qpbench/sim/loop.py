@@ -17,11 +17,14 @@ One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
    budget, like ``rnn-converged``, spends that budget on every infeasible
    tick of the ``paper`` formulation; on the scenarios' infeasible start its
    soft fallback fails too and the arm stops: see results/rnn/README.md).
-   Every solve is guarded, so a faulty backend cannot stop the loop: a
-   Python exception escaping the backend makes the tick's status ``error``
-   (the backend is reset, the first exception's ``"Type: message"`` is kept
-   in the summary as ``first_error``); an ``x`` holding a NaN or an infinity
-   is ``invalid`` (the backend is reset). Each of these is a tick without a
+   Every solve is guarded, so a faulty backend cannot stop the loop, and
+   classified as the per-tick bench's guard does (:mod:`qpbench.statuses`):
+   a Python exception escaping the backend makes the tick's status ``error``
+   (the first exception's ``"Type: message"`` is kept in the summary as
+   ``first_error``); an ``x`` holding a NaN or an infinity (or ``optimal``
+   without an ``x``) is ``invalid``. After either, or an ``error`` the
+   backend reported, the backend is reset (a late answer is dropped, not
+   distrusted: its solver state is the tick's, so it is not reset). Each of these is a tick without a
    solution: soft fallback, else zero velocity (an online backend: zero
    velocity). An exception of the fallback's own solve counts as a failed
    fallback (zero velocity; ``fallback_errors`` in the summary).
@@ -43,35 +46,12 @@ One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
 Per tick the Python side does the least it can: one call of the controller's
 compiled build kernel (which also returns the end-effector position, the
 key-point distances and ``x_d``: nothing is recomputed), the backend's
-``solve``, and one call of a compiled kernel that senses, writes the tick's
-log row into a preallocated array (by index; no dict, no pandas) and
-advances the plant. Statuses are collected as strings and coded once at the
-end, when the log becomes a :class:`pandas.DataFrame`, one row per tick:
-
-=================== ===========================================================
-t                   time [s]
-theta_i, v_i        joint angles [rad] and commanded velocities [rad/s]
-ee_x, ee_y          end-effector position [m]
-xd_x, xd_y          desired position x_d(t) [m]
-tracking_error      tangential error t . (x - x_d) [m], t the surface tangent
-force               measured contact force [N]; force_error = force - Fd [N]
-d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
-                    point cloud's points; link radius subtracted)
-d_min               smallest of those [m]
-v_sq                ``|v|^2`` [rad^2/s^2]
-task_residual       ``|J v - b0|`` [m/s]
-status              the backend's status on the tick's QP, one of
-                    :data:`TICK_STATUSES` (the backends' statuses, plus
-                    ``invalid``: a non-finite answer; ``error`` is also an
-                    exception, ``time_limit`` also an answer dropped past
-                    the ``deadline``)
-fallback            the soft fallback's answer was applied
-zero_velocity       zero velocity was commanded (fallback failed too)
-solve_time_s        wall time of the tick's solve call(s) [s]
-y_0, y_1            equality duals of the applied solution (paper formulation)
-z_max               largest inequality (obstacle row) dual
-kp_hat, kd_hat      interaction coefficients the tick's QP used
-=================== ===========================================================
+``solve``, and one call of the compiled tick kernel
+(:mod:`qpbench.sim.tick_kernel`) that senses, writes the tick's log row into
+a preallocated array and advances the plant. Statuses are collected as
+strings and coded once at the end, when the log becomes a
+:class:`pandas.DataFrame`, one row per tick (columns: :mod:`qpbench.sim.log`).
+The run's figures and verdict: :mod:`qpbench.sim.summary`.
 """
 
 from __future__ import annotations
@@ -85,33 +65,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..backends import STATUSES, Backend, get_backend
+from ..backends import Backend, backend_class, get_backend
 from ..exceptions import ParamError
-from ..control.controller import FORMULATIONS, Controller
+from ..statuses import FAILURE_STATUSES, FORMULATIONS, classify, describe_exception
+from . import log as tick_log
 from .scenario import Scenario, load_scenario
-from .verdict import VIOLATION_TOL, judge
+from .summary import jsonable, summarize
+from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
 
-__all__ = [
-    "INFEASIBLE_STATUSES", "SimResult", "TICK_STATUSES", "VIOLATION_TOL", "resolve_backend", "simulate", "summarize",
-]
+__all__ = ["SimResult", "resolve_backend", "simulate", "write_dump"]
 
 log = logging.getLogger(__name__)
-
-#: Time from which tracking and force errors are judged [s] (paper: transient about 1 s).
-SETTLE_TIME = 2.0
-
-#: A key point within this of ``d_safe`` [m] counts as touching its obstacle row (summary intervals).
-ACTIVE_MARGIN = 1e-4
-
-#: At most this many intervals per list in a summary.
-MAX_INTERVALS = 20
-
-#: Statuses counted as ``infeasible_ticks`` in a summary (see :func:`summarize`).
-INFEASIBLE_STATUSES = ("primal_infeasible", "dual_infeasible", "not_solved")
-
-#: Categories of the tick log's ``status`` column: the backends' statuses plus
-#: ``invalid`` (the answer held a NaN or an infinity).
-TICK_STATUSES = tuple(STATUSES) + ("invalid",)
 
 
 class _Raised:
@@ -125,13 +89,6 @@ class _Raised:
         self.error = error
 
 
-def _describe(exc: BaseException) -> str:
-    """``"Type: message"`` on one line (the harness's wording)."""
-    from ..harness.guard import describe_exception
-
-    return describe_exception(exc)
-
-
 def _reset(backend: Backend) -> None:
     """Reset a backend after a failed tick; a reset that raises shows up at the next solve."""
     try:
@@ -140,14 +97,13 @@ def _reset(backend: Backend) -> None:
         log.debug("reset of %s raised", backend.name, exc_info=True)
 
 
-
 @dataclass
 class SimResult:
     """What :func:`simulate` returns.
 
     Attributes:
-        log: One row per tick (columns in the module docstring).
-        summary: Figures of the whole run (see :func:`summarize`).
+        log: One row per tick (columns: :mod:`qpbench.sim.log`).
+        summary: Figures of the whole run (:func:`qpbench.sim.summary.summarize`).
         records: The dumped ticks' QPs (:class:`qpbench.formats.ProblemRecord`),
             when ``dump`` or ``every`` was given.
     """
@@ -157,24 +113,20 @@ class SimResult:
     records: list = field(default_factory=list)
 
 
-#: Backends built with the scenario's ``[rnn]`` table (``rnn-tuned`` keeps its own).
-SCENARIO_RNN_BACKENDS = ("rnn", "rnn-converged")
-
-
 def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default") -> Backend:
     """A backend instance for ``scenario``: by name, or the given instance checked.
 
-    ``rnn`` and ``rnn-converged`` get the scenario's ``[rnn]`` settings; an
-    online backend (``rnn``, ``rnn-tuned``) also the control period ``dt``. An instance with a ``dt`` of its own
-    must match the loop's ``dt``.
+    A backend class whose ``scenario_table`` names a table of the scenario
+    (the ``rnn`` backends: ``"rnn"``) gets that table's settings; an online
+    backend (``online = True``) also the control period ``dt``. An instance
+    with a ``dt`` of its own must match the loop's ``dt``.
     """
     if isinstance(backend, str):
-        from ..backends import _registry
-
+        cls = backend_class(backend)
         settings = {}
-        if backend in SCENARIO_RNN_BACKENDS:
-            settings.update(scenario.rnn)
-        if getattr(_registry().get(backend), "online", False):
+        if cls.scenario_table:
+            settings.update(getattr(scenario, cls.scenario_table))
+        if cls.online:
             settings.setdefault("dt", dt)
         return get_backend(backend, profile=profile, **settings)
     if not isinstance(backend, Backend):
@@ -185,161 +137,20 @@ def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profi
     return backend
 
 
-_post_kernel = None
+def _positive_seconds(value) -> bool:
+    return (isinstance(value, (int, float, np.floating)) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0)
 
 
-def _get_post_kernel():
-    global _post_kernel
-    if _post_kernel is None:
-        import numba
-
-        _post_kernel = numba.njit(cache=True, nogil=True)(_post_py)
-    return _post_kernel
-
-
-#: ``mode`` argument of the post kernel: the tick's own answer applied, the
-#: soft fallback's, or zero velocity.
-_APPLIED, _FALLBACK, _ZERO = 0, 1, 2
-
-# Layout of the kernel's constant float block ``cf``: tangent (2), surface (6), dt.
-_CF_TANGENT, _CF_SURF, _CF_DT = 0, 2, 8
-# Layout of the kernel's constant int block ``ci``: 12 column indices, then the
-# obstacle columns' [start, end) ranges in the flat distance array.
-_CI_COLS = 12
-
-
-def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mode, kp, kd, solve_time):  # pragma: no cover - compiled
-    """Log tick ``k`` into ``data[k]`` and advance the plant ``theta += dt v``.
-
-    Returns the noise-free contact force [N] (the law of
-    :meth:`ContactSurface.force`, ``surf = [nx, ny, n . point, stiffness,
-    damping, Fd]`` in ``cf``), and leaves the sensed end-effector position
-    [m] in ``sensed[0:2]`` and its finite-difference velocity [m/s] in
-    ``sensed[2:4]``. When ``v`` holds a NaN or an infinity nothing is written
-    or advanced and -1.0 is returned (the caller falls back).
-    """
-    n = theta.shape[0]
-    for i in range(n):
-        if not math.isfinite(v[i]):
-            return -1.0
-    row = data[k]
-    dt = cf[_CF_DT]
-    c_theta = ci[0]
-    c_v = ci[1]
-    c_ee = ci[2]
-    c_d = ci[3]
-    c_force = ci[4]
-    row[0] = t
-    row[ci[5]] = 1.0 if mode == _FALLBACK else 0.0
-    row[ci[6]] = 1.0 if mode == _ZERO else 0.0
-    row[ci[7]] = solve_time
-    if y.shape[0] == 2:
-        row[ci[8]] = y[0]
-        row[ci[8] + 1] = y[1]
-    if z.shape[0] > 0:
-        zmax = z[0]
-        for i in range(1, z.shape[0]):
-            if z[i] > zmax:
-                zmax = z[i]
-        row[ci[9]] = zmax
-    row[ci[10]] = kp
-    row[ci[11]] = kd
-    # sense: velocity by finite difference, spring-damper force
-    if k == 0:
-        xd0 = 0.0
-        xd1 = 0.0
-    else:
-        xd0 = (ee[0] - sensed[0]) / dt
-        xd1 = (ee[1] - sensed[1]) / dt
-    sensed[0] = ee[0]
-    sensed[1] = ee[1]
-    sensed[2] = xd0
-    sensed[3] = xd1
-    nx = cf[_CF_SURF]
-    ny = cf[_CF_SURF + 1]
-    delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
-    force = 0.0
-    if delta > 0.0:
-        force = cf[_CF_SURF + 3] * delta + cf[_CF_SURF + 4] * (nx * xd0 + ny * xd1)
-        if force < 0.0:
-            force = 0.0
-    row[c_force] = force
-    row[c_force + 1] = force - cf[_CF_SURF + 5]
-    vsq = 0.0
-    for i in range(n):
-        row[c_theta + i] = theta[i]
-        row[c_v + i] = v[i]
-        vsq += v[i] * v[i]
-        theta[i] += dt * v[i]
-    row[c_ee] = ee[0]
-    row[c_ee + 1] = ee[1]
-    row[c_ee + 2] = xd[0]
-    row[c_ee + 3] = xd[1]
-    row[c_ee + 4] = cf[_CF_TANGENT] * (ee[0] - xd[0]) + cf[_CF_TANGENT + 1] * (ee[1] - xd[1])
-    r0 = b0[0]
-    r1 = b0[1]
-    for j in range(n):
-        r0 -= J[0, j] * v[j]
-        r1 -= J[1, j] * v[j]
-    ncol = (ci.shape[0] - _CI_COLS) // 2
-    dmin = np.inf
-    for c in range(ncol):
-        m = np.inf
-        for j in range(ci[_CI_COLS + c], ci[_CI_COLS + ncol + c]):
-            if dist[j] < m:
-                m = dist[j]
-        row[c_d + c] = m
-        if m < dmin:
-            dmin = m
-    row[c_d + ncol] = dmin if ncol > 0 else np.nan
-    row[c_d + ncol + 1] = vsq
-    row[c_d + ncol + 2] = math.sqrt(r0 * r0 + r1 * r1)
-    return force
-
-
-def _columns(controller: Controller) -> tuple[list[str], dict[str, int]]:
-    n = controller.n
-    cols = ["t"] + [f"theta_{i}" for i in range(n)] + [f"v_{i}" for i in range(n)]
-    cols += ["ee_x", "ee_y", "xd_x", "xd_y", "tracking_error", "force", "force_error"]
-    cols += [f"d_{a}_{o}" for a, o, _ in controller.obstacle_columns()]
-    cols += ["d_min", "v_sq", "task_residual", "fallback", "zero_velocity", "solve_time_s", "y_0", "y_1", "z_max", "kp_hat", "kd_hat"]
-    return cols, {c: i for i, c in enumerate(cols)}
-
-
-def _post_constants(controller: Controller, surface, dt: float):
-    """The tick log's columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
-    cols, cidx = _columns(controller)
-    normal = controller.task.normal
-    tangent = np.array([-normal[1], normal[0]])
-    obstacle_cols = controller.obstacle_columns()
-    n_pts = controller.n_obstacle_points
-    n_obs = max(len(controller.obstacles), 1)
-    # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
-    col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
-    col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
-    names = ("theta_0", "v_0", "ee_x", None, "force", "fallback", "zero_velocity", "solve_time_s", "y_0", "z_max", "kp_hat", "kd_hat")
-    ci = np.array(
-        [cidx["d_min"] - len(obstacle_cols) if c is None else cidx[c] for c in names] + col_start + col_end, dtype=np.int64
-    )
-    cf = np.array([tangent[0], tangent[1], normal[0], normal[1], float(normal @ surface.point), surface.stiffness,
-                   surface.damping, controller.task.desired_force, dt])
-    return cols, cidx, ci, cf
-
-
-def warm_post_kernel(controller: Controller, surface, dt: float, theta: np.ndarray, arrays) -> None:
-    """Compile (or load) the post kernel for the argument types :func:`simulate` passes.
-
-    ``arrays`` is a :meth:`Controller.build_arrays` result; ``theta`` is not changed.
-    """
-    cols, _, ci, cf = _post_constants(controller, surface, dt)
-    post = _get_post_kernel()
-    none = np.zeros(0)
-    row = np.zeros((1, len(cols)))
-    kp, kd = controller.kp, controller.kd
-    # an applied answer with duals, and a fallback/zero-velocity tick without
-    for y, z, mode in ((np.zeros(2), np.zeros(max(controller.n_rows, 1)), _APPLIED), (none, none, _ZERO)):
-        post(theta.copy(), np.zeros(controller.n), arrays[8], np.zeros(4), arrays[4], arrays[5], arrays[9], arrays[10],
-             y, z, row, 0, ci, cf, 0.0, mode, kp, kd, 0.0)
+def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
+    if formulation not in FORMULATIONS:
+        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
+    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
+        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    if deadline is not None and not _positive_seconds(deadline):
+        raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
+    if wall_budget_s is not None and not _positive_seconds(wall_budget_s):
+        raise ParamError(f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s")
 
 
 def simulate(
@@ -383,7 +194,7 @@ def simulate(
 
     Returns:
         The per-tick log, the summary and the kept records. Besides
-        :func:`summarize`'s figures the summary holds ``deadline_s`` (the
+        :func:`qpbench.sim.summary.summarize`'s figures the summary holds ``deadline_s`` (the
         deadline or ``None``), ``deadline_misses`` (ticks whose solve calls
         took longer than the control period ``dt``: the ticks a 1/dt loop
         would not have kept up with; a time figure, like ``solve_time_*``),
@@ -393,183 +204,199 @@ def simulate(
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    if formulation not in FORMULATIONS:
-        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
-    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
-        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
-    if deadline is not None and not (
-        isinstance(deadline, (int, float, np.floating)) and not isinstance(deadline, bool)
-        and math.isfinite(deadline) and deadline > 0
-    ):
-        raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
+    _check_arguments(formulation, every, deadline, wall_budget_s)
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
-    dt = scenario.dt
-    duration = scenario.duration
-    ticks = int(round(duration / dt))
     keep_every = every if every is not None else (1 if dump is not None else None)
-    # a late answer is dropped only past a deadline
-    limit = math.inf if deadline is None else float(deadline)
-
-    be = resolve_backend(backend, scenario, dt, profile)
-    if wall_budget_s is not None and not (isinstance(wall_budget_s, (int, float, np.floating)) and wall_budget_s > 0):
-        raise ParamError(f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s")
-    online = bool(getattr(be, "online", False))
-    be.reset()
-
-    ctrl = scenario.make_controller()
-    surface = scenario.make_surface()
-    adaptive = scenario.make_adaptive()
-    n = ctrl.n
-    soft_primary = formulation == "soft"
-    fd = ctrl.task.desired_force
-
-    cols, cidx, ci, cf = _post_constants(ctrl, surface, dt)
-    data = np.full((ticks, len(cols)), np.nan)
-    c_force, c_ferr = cidx["force"], cidx["force_error"]
-
-    theta = scenario.theta0.astype(float)
-    v = np.zeros(n)
-    zeros = np.zeros(n)  # zero velocity (never written; writable so numba sees one array type)
-    kp, kd = ctrl.kp, ctrl.kd
-    records = []
-    statuses = []
-    post = _get_post_kernel()
-    build = ctrl.build_arrays
-    make_problem = ctrl.make_problem
-    solve = be.solve
-    perf = time.perf_counter
-    none = np.zeros(0)
-    noisy = surface.noise_std > 0.0
-    sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
-    f64 = np.dtype(np.float64)
-
-    # compile (or load from the numba cache) every kernel before the clock starts
-    from ..jit import warmup
-
-    warmup()
-    warm_post_kernel(ctrl, surface, dt, theta, build(theta, 0.0, kp, kd, soft_primary))
-
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=ticks, unit="tick", desc=f"{scenario.name} {be.name}", mininterval=0.5)
-    n_fallback = n_zero = n_dropped = 0
-    n_raised = n_fallback_errors = 0
-    first_error = first_error_t = None
-    start = perf()
-    stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
-    for k in range(ticks):
-        if stop_at is not None and k and perf() >= stop_at:
-            break  # budget spent: the log keeps the ticks done
-        t = k * dt
-        arrays = build(theta, t, kp, kd, soft_primary)
-        problem = make_problem(arrays, soft_primary)
-        if keep_every is not None and k % keep_every == 0:
-            records.append((k, t, problem))
-        t0 = perf()
-        try:
-            sol = solve(problem, v)
-        except Exception as exc:  # noqa: BLE001 - a backend's exception is the tick's status
-            sol = _Raised(_describe(exc))
-        solve_s = perf() - t0
-        status = sol.status
-        x = sol.x
-        force = -1.0
-        if x is not None and (online or status == "optimal") and solve_s <= limit:
-            if type(x) is not np.ndarray or x.dtype != f64:
-                x = np.asarray(x, dtype=np.float64)
-            y = sol.y
-            z = sol.z
-            # -1.0 when x is not finite: nothing logged, the plant not moved
-            force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10],
-                         none if y is None else y, none if z is None else z,
-                         data, k, ci, cf, t, _APPLIED, kp, kd, solve_s)
-            if force >= 0.0:
-                v = x
-            else:
-                status = "invalid"
-        if force < 0.0:
-            # the tick's own answer is not applied: say why
-            if type(sol) is _Raised:
-                n_raised += 1
-                if first_error is None:
-                    first_error, first_error_t = sol.error, t
-                _reset(be)  # its state can no longer be trusted
-            elif status == "invalid":
-                _reset(be)
-            elif solve_s > limit:
-                status = "time_limit"  # arrived after the deadline: dropped
-                n_dropped += 1
-            elif status == "error" and first_error is None and getattr(sol, "error", None):
-                first_error, first_error_t = str(sol.error), t  # reported by the backend, not raised
-            # no usable answer: the soft formulation's (same backend), else zero velocity
-            mode, x, z = _ZERO, zeros, none
-            if not online and not soft_primary:
-                t1 = perf()
-                try:
-                    fb = solve(make_problem(build(theta, t, kp, kd, True), True), v)
-                except Exception as exc:  # noqa: BLE001 - a failed fallback: zero velocity
-                    fb = _Raised(_describe(exc))
-                    n_fallback_errors += 1
-                    if first_error is None:
-                        first_error, first_error_t = f"fallback: {fb.error}", t
-                    _reset(be)
-                if fb.status == "optimal" and fb.x is not None and perf() - t1 <= limit:
-                    mode, x = _FALLBACK, np.asarray(fb.x, dtype=np.float64)
-                    z = none if fb.z is None else fb.z
-            force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10], none, z,
-                         data, k, ci, cf, t, mode, kp, kd, perf() - t0)
-            if force < 0.0:  # the fallback's answer was not finite either
-                mode, x = _ZERO, zeros
-                force = post(theta, x, arrays[8], sensed, arrays[4], arrays[5], arrays[9], arrays[10], none, none,
-                             data, k, ci, cf, t, mode, kp, kd, perf() - t0)
-            if mode == _FALLBACK:
-                n_fallback += 1
-            else:
-                n_zero += 1
-            v = x if mode == _FALLBACK else zeros.copy()
-        statuses.append(status)
-        if noisy:
-            force += surface.noise()
-            data[k, c_force] = force
-            data[k, c_ferr] = force - fd
-        if adaptive is not None:
-            xd = arrays[10]
-            kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
-        if bar is not None and (k + 1) % 500 == 0:
-            bar.update(500)
-    wall = perf() - start
-    if bar is not None:
-        bar.update(ticks - bar.n)
-        bar.close()
-
-    done = len(statuses)
-    codes = {s: i for i, s in enumerate(TICK_STATUSES)}
-    status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done)
-    misses = int(np.count_nonzero(data[:done, cidx["solve_time_s"]] > dt))
-    frame = pd.DataFrame(data[:done], columns=cols)
-    frame["fallback"] = frame["fallback"].astype(bool)
-    frame["zero_velocity"] = frame["zero_velocity"].astype(bool)
-    frame.insert(cols.index("fallback"), "status", pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)))
-    summary = summarize(frame, scenario, ctrl, be.name, formulation, wall, run_info=dict(
-        deadline_s=deadline if deadline is None else float(deadline), deadline_misses=misses,
-        deadline_dropped=None if deadline is None else n_dropped,
-        raised_ticks=n_raised, fallback_errors=n_fallback_errors,
-        first_error=first_error, first_error_t=first_error_t, wall_budget_s=wall_budget_s,
-        stopped_early=done < ticks))
-    recs = []
-    if keep_every is not None:
-        from ..formats import ProblemRecord
-
-        recs = [
-            ProblemRecord(problem=p, name=f"{scenario.name}_{formulation}_{k:06d}", scenario=scenario.name, tick=k, t=t, formulation=formulation)
-            for k, t, p in records
-        ]
+    be = resolve_backend(backend, scenario, scenario.dt, profile)
+    run = _Run(scenario, be, formulation, keep_every, deadline)
+    run.warm()
+    run.loop(progress, wall_budget_s)
+    result = run.result(wall_budget_s)
     if dump is not None:
-        write_dump(dump, recs, scenario, be.name, formulation, keep_every, duration, dt)
-    return SimResult(frame, summary, recs)
+        write_dump(dump, result.records, scenario, be.name, formulation, keep_every, scenario.duration, scenario.dt)
+    return result
+
+
+class _Run:
+    """One closed-loop run, in named steps: set up, warm the kernels, loop over the ticks, tabulate.
+
+    The per-tick state lives in local variables of :meth:`loop` (the hot path);
+    a tick whose own answer is not applied goes through :meth:`_without_answer`.
+    """
+
+    def __init__(self, scenario: Scenario, backend: Backend, formulation: str, keep_every: int | None,
+                 deadline: float | None):
+        self.scenario, self.be, self.formulation, self.keep_every = scenario, backend, formulation, keep_every
+        self.deadline = deadline
+        # a late answer is dropped only past a deadline
+        self.limit = math.inf if deadline is None else float(deadline)
+        self.dt = dt = scenario.dt
+        self.ticks = int(round(scenario.duration / dt))
+        self.online = bool(getattr(backend, "online", False))
+        backend.reset()
+        self.ctrl = ctrl = scenario.make_controller()
+        self.surface = scenario.make_surface()
+        self.adaptive = scenario.make_adaptive()
+        self.soft_primary = formulation == "soft"
+        self.cols, self.cidx, self.ci, self.cf = post_constants(ctrl, self.surface, dt)
+        self.data = np.full((self.ticks, len(self.cols)), np.nan)
+        self.theta = scenario.theta0.astype(float)
+        self.sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
+        # zero velocity (never written; writable so numba sees one array type)
+        self.zeros = np.zeros(ctrl.n)
+        self.none = np.zeros(0)
+        self.records: list = []
+        self.statuses: list[str] = []
+        self.n_fallback = self.n_zero = self.n_dropped = self.n_raised = self.n_fallback_errors = 0
+        self.first_error = self.first_error_t = None
+        self.wall = 0.0
+
+    def warm(self) -> None:
+        """Compile (or load from the numba cache) every kernel before the clock starts."""
+        from ..jit import warmup
+
+        warmup()
+        ctrl = self.ctrl
+        arrays = ctrl.build_arrays(self.theta, 0.0, ctrl.kp, ctrl.kd, self.soft_primary)
+        warm_post_kernel(ctrl, self.surface, self.dt, self.theta, arrays)
+
+    def loop(self, progress: bool, wall_budget_s: float | None) -> None:
+        """The ticks (module docstring, steps 1-5), until ``duration`` or the wall-time budget."""
+        ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
+        data, ci, cf, sensed, theta, none = self.data, self.ci, self.cf, self.sensed, self.theta, self.none
+        c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
+        online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
+        records, statuses, adaptive, surface = self.records, self.statuses, self.adaptive, self.surface
+        post, build, make_problem, solve, perf = (get_post_kernel(), ctrl.build_arrays, ctrl.make_problem,
+                                                  be.solve, time.perf_counter)
+        noisy = surface.noise_std > 0.0
+        fd = ctrl.task.desired_force
+        f64 = np.dtype(np.float64)
+        kp, kd = ctrl.kp, ctrl.kd
+        v = np.zeros(ctrl.n)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=ticks, unit="tick", desc=f"{self.scenario.name} {be.name}", mininterval=0.5)
+        start = perf()
+        stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
+        for k in range(ticks):
+            if stop_at is not None and k and perf() >= stop_at:
+                break  # budget spent: the log keeps the ticks done
+            t = k * dt
+            arrays = build(theta, t, kp, kd, soft_primary)
+            problem = make_problem(arrays, soft_primary)
+            if keep_every is not None and k % keep_every == 0:
+                records.append((k, t, problem))
+            t0 = perf()
+            try:
+                sol = solve(problem, v)
+            except Exception as exc:  # noqa: BLE001 - a backend's exception is the tick's status
+                sol = _Raised(describe_exception(exc))
+            solve_s = perf() - t0
+            status = sol.status
+            x = sol.x
+            force = -1.0
+            # the fast path: an answer classify() would call optimal (finite x, in time), or an online one
+            if x is not None and (online or status == "optimal") and solve_s <= limit:
+                if type(x) is not np.ndarray or x.dtype != f64:
+                    x = np.asarray(x, dtype=np.float64)
+                y, z = sol.y, sol.z
+                # -1.0 when x is not finite: nothing logged, the plant not moved
+                force = post(theta, x, arrays.ee, sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd,
+                             none if y is None else y, none if z is None else z,
+                             data, k, ci, cf, t, APPLIED, kp, kd, solve_s)
+                if force >= 0.0:
+                    v = x
+            if force < 0.0:
+                status, v, force = self._without_answer(k, t, sol, solve_s, t0, arrays, kp, kd, v)
+            statuses.append(status)
+            if noisy:
+                force += surface.noise()
+                data[k, c_force] = force
+                data[k, c_ferr] = force - fd
+            if adaptive is not None:
+                xd = arrays.xd
+                kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
+            if bar is not None and (k + 1) % 500 == 0:
+                bar.update(500)
+        self.wall = perf() - start
+        if bar is not None:
+            bar.update(ticks - bar.n)
+            bar.close()
+
+    def _without_answer(self, k: int, t: float, sol, solve_s: float, t0: float, arrays, kp: float, kd: float,
+                        v: np.ndarray) -> tuple[str, np.ndarray, float]:
+        """A tick whose own answer is not applied: say why (:func:`~qpbench.statuses.classify`),
+        then apply the soft formulation's answer (same backend), else zero velocity.
+
+        Returns the tick's status, the velocity applied [rad/s] and the noise-free force [N].
+        """
+        be, limit, none, zeros = self.be, self.limit, self.none, self.zeros
+        if type(sol) is _Raised:
+            status, error = "error", sol.error
+            self.n_raised += 1
+        else:
+            status, error = classify(sol, solve_s, limit)
+            if status == "time_limit" and solve_s > limit:
+                self.n_dropped += 1  # arrived after the deadline: dropped
+        if status == "error" and error and self.first_error is None:
+            self.first_error, self.first_error_t = str(error), t
+        if status in FAILURE_STATUSES and status != "time_limit":
+            _reset(be)  # its state can no longer be trusted
+        mode, x, z = ZERO, zeros, none
+        if not self.online and not self.soft_primary:
+            ctrl = self.ctrl
+            t1 = time.perf_counter()
+            try:
+                fb = be.solve(ctrl.make_problem(ctrl.build_arrays(self.theta, t, kp, kd, True), True), v)
+                fb_status = classify(fb, time.perf_counter() - t1, limit)[0]
+            except Exception as exc:  # noqa: BLE001 - a failed fallback: zero velocity
+                fb, fb_status = _Raised(describe_exception(exc)), "error"
+                self.n_fallback_errors += 1
+                if self.first_error is None:
+                    self.first_error, self.first_error_t = f"fallback: {fb.error}", t
+                _reset(be)
+            if fb_status == "optimal":
+                mode, x = FALLBACK, np.asarray(fb.x, dtype=np.float64)
+                z = none if fb.z is None else fb.z
+        force = self._post(k, t, arrays, x, z, mode, kp, kd, t0)
+        if force < 0.0:  # the fallback's answer was not finite either
+            mode, x = ZERO, zeros
+            force = self._post(k, t, arrays, x, none, mode, kp, kd, t0)
+        if mode == FALLBACK:
+            self.n_fallback += 1
+            return status, x, force
+        self.n_zero += 1
+        return status, zeros.copy(), force
+
+    def _post(self, k, t, arrays, x, z, mode, kp, kd, t0) -> float:
+        return get_post_kernel()(self.theta, x, arrays.ee, self.sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd,
+                                 self.none, z, self.data, k, self.ci, self.cf, t, mode, kp, kd,
+                                 time.perf_counter() - t0)
+
+    def result(self, wall_budget_s: float | None) -> SimResult:
+        """The tick log, the summary and the kept records of the ticks simulated."""
+        scenario, dt, deadline = self.scenario, self.dt, self.deadline
+        done = len(self.statuses)
+        misses = int(np.count_nonzero(self.data[:done, self.cidx[tick_log.SOLVE_TIME]] > dt))
+        frame = tick_log.to_frame(self.data, self.cols, self.statuses)
+        summary = summarize(frame, scenario, self.ctrl, self.be.name, self.formulation, self.wall, run_info=dict(
+            deadline_s=deadline if deadline is None else float(deadline), deadline_misses=misses,
+            deadline_dropped=None if deadline is None else self.n_dropped,
+            raised_ticks=self.n_raised, fallback_errors=self.n_fallback_errors,
+            first_error=self.first_error, first_error_t=self.first_error_t, wall_budget_s=wall_budget_s,
+            stopped_early=done < self.ticks))
+        recs = []
+        if self.keep_every is not None:
+            from ..formats import ProblemRecord
+
+            name = f"{scenario.name}_{self.formulation}"
+            recs = [ProblemRecord(problem=p, name=f"{name}_{k:06d}", scenario=scenario.name, tick=k, t=t,
+                                  formulation=self.formulation) for k, t, p in self.records]
+        return SimResult(frame, summary, recs)
 
 
 def write_dump(folder, records, scenario: Scenario, backend_name: str, formulation: str, every, duration, dt) -> Path:
@@ -591,165 +418,5 @@ def write_dump(folder, records, scenario: Scenario, backend_name: str, formulati
         "ticks_per_record": every,
     }
     if scenario.overrides:  # values set over the file's (the TOML above is the file as it is)
-        extra["scenario_overrides"] = _jsonable(scenario.overrides)
+        extra["scenario_overrides"] = jsonable(scenario.overrides)
     return write_problem_set(folder, records, generator=generator, extra=extra)
-
-
-def _jsonable(overrides: dict) -> dict:
-    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in overrides.items()}
-
-
-def _none(x):
-    x = float(x)
-    return None if not math.isfinite(x) else x
-
-
-def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
-    """Runs of consecutive True ticks as ``[first t, last t]`` pairs [s]."""
-    if not mask.any():
-        return []
-    idx = np.flatnonzero(mask)
-    breaks = np.flatnonzero(np.diff(idx) > 1)
-    starts = np.r_[idx[0], idx[breaks + 1]]
-    ends = np.r_[idx[breaks], idx[-1]]
-    return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
-
-
-def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, backend: str, formulation: str,
-              wall_time_s: float, run_info: dict | None = None) -> dict:
-    """Figures of a run (JSON-able; ``None`` where a figure does not exist) and its verdict.
-
-    Statuses are those of the QP of the run's formulation at each tick:
-
-    - ``infeasible_ticks``: ticks the backend declared infeasible (status
-      ``primal_infeasible`` or ``dual_infeasible``), plus ticks with status
-      ``not_solved``: a backend that cannot classify a failure (qpsolvers'
-      route to DAQP, quadprog or HiGHS keeps only ``found=False``) reports
-      that, and on the controller's QPs such a failure is the infeasible
-      start. ``first_infeasible_t``, ``last_infeasible_t`` and
-      ``infeasible_intervals`` (runs as ``[first t, last t]``) are of these
-      ticks. A backend that stops on a budget (``max_iter``, ``time_limit``)
-      or fails (``error``) is not counted here.
-    - ``non_optimal_ticks``: ticks whose QP was not solved to ``optimal``,
-      whatever the reason (a superset of the above; for the online ``rnn``
-      nearly every tick, since its state is applied after one tick of
-      integration, not at convergence).
-    - ``status_counts``: the breakdown by status; ``error_ticks``,
-      ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
-      (an exception or an ``error`` status, an answer dropped past the
-      deadline or a budget, a non-finite answer). :func:`simulate` adds, in
-      ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
-      none, every answer applied), ``deadline_misses`` (ticks whose solve
-      calls took longer than ``dt``: the loop did not keep up with its rate
-      there), ``deadline_dropped`` (answers dropped past the deadline;
-      ``None`` without one), ``raised_ticks`` (ticks whose
-      solve raised), ``fallback_errors`` (fallback solves that raised),
-      ``first_error`` (``"Type: message"`` of the first exception, else the
-      first error a backend reported; ``None`` when none), ``first_error_t``
-      [s], ``wall_budget_s`` (the loop's wall-time budget [s], ``None`` when
-      none) and ``stopped_early`` (the budget ran out before ``duration``).
-    - ``duration`` is the simulated time asked for [s], ``simulated_s`` the
-      time simulated (``ticks * dt``, less than ``duration`` when stopped
-      early); ``real_time_factor`` is ``simulated_s / wall_time_s``.
-    - ``verdict`` (``ok``, ``diverged``, ``limits``, ``unsafe``, ``failed``)
-      and ``verdict_reasons`` (plain text, ``"; "`` between reasons): see
-      :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
-      thresholds.
-
-    ``scenario_overrides`` holds the values set over the scenario file's
-    (``qpbench simulate --set``), empty when none. ``fallback_ticks``
-    applied the soft formulation's answer,
-    ``zero_velocity_ticks`` commanded zero. Errors "after 2 s" use the ticks
-    with ``t >= 2`` s; limit violations count ticks with an angle or a
-    commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
-    ``obstacle_active_intervals`` lists, per (key point, obstacle), when it
-    was within :data:`ACTIVE_MARGIN` of ``d_safe``.
-    """
-    t = frame["t"].to_numpy()
-    dt = scenario.dt
-    ticks = len(frame)
-    status = frame["status"]
-    infeasible = status.isin(INFEASIBLE_STATUSES).to_numpy()
-    non_optimal = (status != "optimal").to_numpy()
-    after = t >= SETTLE_TIME - 1e-12
-    n = controller.n
-    theta = frame[[f"theta_{i}" for i in range(n)]].to_numpy()
-    v = frame[[f"v_{i}" for i in range(n)]].to_numpy()
-    lim = controller.limits
-    tol = VIOLATION_TOL
-    angle_viol = ((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1)
-    speed_viol = ((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1)
-
-    def rms(x):
-        return _none(np.sqrt(np.mean(np.square(x)))) if x.size else None
-
-    def amax(x):
-        return _none(np.max(np.abs(x))) if x.size else None
-
-    te = frame["tracking_error"].to_numpy()
-    fe = frame["force_error"].to_numpy()
-    out = {
-        "scenario": scenario.name,
-        "scenario_overrides": _jsonable(scenario.overrides),
-        "backend": backend,
-        "formulation": formulation,
-        "dt": dt,
-        "duration": scenario.duration,
-        "ticks": ticks,
-        "simulated_s": ticks * dt,
-        "infeasible_ticks": int(infeasible.sum()),
-        "non_optimal_ticks": int(non_optimal.sum()),
-        "fallback_ticks": int(frame["fallback"].sum()),
-        "zero_velocity_ticks": int(frame["zero_velocity"].sum()),
-        "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
-        "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
-        "infeasible_intervals": _intervals(infeasible, t, dt),
-        "status_counts": {str(k): int(v) for k, v in frame["status"].value_counts().items() if v},
-        "error_ticks": int((status == "error").sum()),
-        "time_limit_ticks": int((status == "time_limit").sum()),
-        "invalid_ticks": int((status == "invalid").sum()),
-        "tracking_rms_after_2s": rms(te[after]),
-        "tracking_max_after_2s": amax(te[after]),
-        "force_error_rms_after_2s": rms(fe[after]),
-        "force_error_max_after_2s": amax(fe[after]),
-        "force_final": _none(frame["force"].iloc[-1]) if ticks else None,
-        "min_obstacle_distance": None,
-        "min_obstacle_distance_key_point": None,
-        "min_obstacle_distance_obstacle": None,
-        "min_obstacle_distance_t": None,
-        "d_safe": controller.d_safe,
-        "joint_limit_violations": int(angle_viol.sum()),
-        "joint_velocity_limit_violations": int(speed_viol.sum()),
-        "max_abs_theta": _none(np.max(np.abs(theta))) if ticks else None,
-        "max_abs_v": _none(np.max(np.abs(v))) if ticks else None,
-        "v_sq_max": _none(frame["v_sq"].max()),
-        "task_residual_max_after_2s": amax(frame["task_residual"].to_numpy()[after]),
-        "kp_hat_final": _none(frame["kp_hat"].iloc[-1]) if ticks else None,
-        "kd_hat_final": _none(frame["kd_hat"].iloc[-1]) if ticks else None,
-        "solve_time_median_s": _none(frame["solve_time_s"].median()),
-        "solve_time_p99_s": _none(frame["solve_time_s"].quantile(0.99)),
-        "solve_time_max_s": _none(frame["solve_time_s"].max()),
-        "wall_time_s": float(wall_time_s),
-        "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
-        "wall_budget_s": None,
-        "stopped_early": False,
-    }
-    dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
-    if dcols:
-        D = frame[[f"d_{a}_{o}" for a, o in dcols]].to_numpy()
-        flat = int(np.argmin(D))
-        k, c = divmod(flat, D.shape[1])
-        out["min_obstacle_distance"] = _none(D[k, c])
-        out["min_obstacle_distance_key_point"] = dcols[c][0]
-        out["min_obstacle_distance_obstacle"] = dcols[c][1]
-        out["min_obstacle_distance_t"] = _none(t[k])
-        # when each (key point, obstacle) pair is at its safety distance (row about active)
-        near = D <= controller.d_safe + ACTIVE_MARGIN
-        out["obstacle_active_intervals"] = {
-            f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS] for c, (a, o) in enumerate(dcols) if near[:, c].any()
-        }
-    out.update(run_info or {})
-    verdict = judge(frame, scenario.verdict, d_safe=controller.d_safe, limits=lim, obstacle_columns=dcols, summary=out)
-    out["verdict"] = verdict.verdict
-    out["verdict_reasons"] = verdict.text
-    return out

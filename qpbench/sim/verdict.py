@@ -1,8 +1,8 @@
 """Verdict of a closed-loop run: ``ok``, ``diverged``, ``limits``, ``unsafe`` or ``failed``.
 
-One function, :func:`judge`, decides; :func:`qpbench.sim.loop.summarize` calls
+One function, :func:`judge`, decides; :func:`qpbench.sim.summary.summarize` calls
 it and puts ``verdict`` and ``verdict_reasons`` into the summary, which the
-closed-loop table (:mod:`qpbench.harness.closed_loop`) copies as they are.
+closed-loop table (:mod:`qpbench.harness.loop_rows`) copies as they are.
 :func:`failed_run` gives the verdict of a run that produced no result at all
 (a crash, an overrun deadline, an exception outside the ticks).
 
@@ -36,6 +36,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from . import log
 
 __all__ = [
     "DEFAULT_SAFETY_MARGIN", "VERDICTS", "VIOLATION_TOL", "Verdict", "VerdictSettings", "failed_run", "judge",
@@ -127,8 +129,8 @@ def _failed_reasons(summary: dict) -> list[str]:
 def _unsafe_reasons(frame, d_safe: float, margin: float, columns: list[tuple[str, str]]) -> list[str]:
     if not columns or not len(frame):
         return []
-    D = frame[[f"d_{a}_{o}" for a, o in columns]].to_numpy(dtype=float)
-    t = frame["t"].to_numpy(dtype=float)
+    D = frame[[log.distance_column(a, o) for a, o in columns]].to_numpy(dtype=float)
+    t = frame[log.T].to_numpy(dtype=float)
     limit = d_safe - margin
     below = ~(D >= limit)  # a NaN distance counts as below
     if not below.any():
@@ -149,13 +151,13 @@ def _unsafe_reasons(frame, d_safe: float, margin: float, columns: list[tuple[str
 def _limit_reasons(frame, limits, n: int) -> list[str]:
     if not len(frame):
         return []
-    t = frame["t"].to_numpy(dtype=float)
+    t = frame[log.T].to_numpy(dtype=float)
     out = []
-    for sym, prefix, lo, hi, unit, what in (
-        ("theta", "theta", limits.theta_min, limits.theta_max, "rad", "angle"),
-        ("v", "v", limits.v_min, limits.v_max, "rad/s", "speed"),
+    for sym, columns, lo, hi, unit, what in (
+        ("theta", log.theta_columns(n), limits.theta_min, limits.theta_max, "rad", "angle"),
+        ("v", log.velocity_columns(n), limits.v_min, limits.v_max, "rad/s", "speed"),
     ):
-        X = frame[[f"{prefix}_{i}" for i in range(n)]].to_numpy(dtype=float)
+        X = frame[columns].to_numpy(dtype=float)
         excess = np.maximum(lo - X, X - hi)  # > 0 beyond a limit
         excess = np.where(np.isnan(X), np.inf, excess)
         bad = (excess > VIOLATION_TOL).any(axis=1)
@@ -173,14 +175,14 @@ def _limit_reasons(frame, limits, n: int) -> list[str]:
 
 
 def _diverged_reasons(frame, settings: VerdictSettings) -> list[str]:
-    t = frame["t"].to_numpy(dtype=float)
+    t = frame[log.T].to_numpy(dtype=float)
     after = t >= settings.settle_time - 1e-12
     if not after.any():
         return []
     out = []
     for column, limit, unit, scale, what in (
-        ("tracking_error", settings.max_tracking_error, "mm", 1e3, "tracking error"),
-        ("force_error", settings.max_force_error, "N", 1.0, "force error"),
+        (log.TRACKING_ERROR, settings.max_tracking_error, "mm", 1e3, "tracking error"),
+        (log.FORCE_ERROR, settings.max_force_error, "N", 1.0, "force error"),
     ):
         e = np.abs(frame[column].to_numpy(dtype=float)[after])
         e = np.where(np.isnan(e), np.inf, e)

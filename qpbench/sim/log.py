@@ -1,0 +1,119 @@
+"""The closed loop's tick log: its columns, by name, in one place.
+
+:func:`qpbench.sim.loop.simulate` writes one row per tick; the summary
+(:mod:`qpbench.sim.summary`), the verdict (:mod:`qpbench.sim.verdict`), the
+figures (:mod:`qpbench.report.loop_figure`, :mod:`qpbench.report.plots`) and
+the arm's pictures read them through the names below, never by guessing.
+
+=================== ===========================================================
+t                   time [s]
+theta_i, v_i        joint angles [rad] and commanded velocities [rad/s]
+ee_x, ee_y          end-effector position [m]
+xd_x, xd_y          desired position x_d(t) [m]
+tracking_error      tangential error t . (x - x_d) [m], t the surface tangent
+force               measured contact force [N]; force_error = force - Fd [N]
+d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
+                    point cloud's points; link radius subtracted)
+d_min               smallest of those [m]
+v_sq                ``|v|^2`` [rad^2/s^2]
+task_residual       ``|J v - b0|`` [m/s]
+status              the backend's status on the tick's QP, one of
+                    :data:`qpbench.statuses.TICK_STATUSES` (the backends'
+                    statuses, plus ``invalid``: a non-finite answer; ``error``
+                    is also an exception, ``time_limit`` also an answer
+                    dropped past the ``deadline``)
+fallback            the soft fallback's answer was applied
+zero_velocity       zero velocity was commanded (fallback failed too)
+solve_time_s        wall time of the tick's solve call(s) [s]
+y_0, y_1            equality duals of the applied solution (paper formulation)
+z_max               largest inequality (obstacle row) dual
+kp_hat, kd_hat      interaction coefficients the tick's QP used
+=================== ===========================================================
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+
+from ..statuses import TICK_STATUSES
+
+T = "t"
+EE_X, EE_Y = "ee_x", "ee_y"
+XD_X, XD_Y = "xd_x", "xd_y"
+TRACKING_ERROR = "tracking_error"
+FORCE = "force"
+FORCE_ERROR = "force_error"
+D_MIN = "d_min"
+V_SQ = "v_sq"
+TASK_RESIDUAL = "task_residual"
+STATUS = "status"
+FALLBACK = "fallback"
+ZERO_VELOCITY = "zero_velocity"
+SOLVE_TIME = "solve_time_s"
+Y_0, Y_1 = "y_0", "y_1"
+Z_MAX = "z_max"
+KP_HAT, KD_HAT = "kp_hat", "kd_hat"
+
+#: Prefixes of the per-joint columns ``theta_i`` [rad] and ``v_i`` [rad/s].
+THETA_PREFIX, V_PREFIX = "theta", "v"
+#: Prefix of the per (key point, obstacle) distance columns ``d_<A>_<obstacle>`` [m].
+DISTANCE_PREFIX = "d"
+
+#: Columns after the distances, in the order the tick kernel writes them
+#: (``status`` is inserted before ``fallback`` when the log becomes a frame).
+_TAIL = (D_MIN, V_SQ, TASK_RESIDUAL, FALLBACK, ZERO_VELOCITY, SOLVE_TIME, Y_0, Y_1, Z_MAX, KP_HAT, KD_HAT)
+_MIDDLE = (EE_X, EE_Y, XD_X, XD_Y, TRACKING_ERROR, FORCE, FORCE_ERROR)
+
+
+def theta_columns(n: int) -> list[str]:
+    """``theta_0 .. theta_{n-1}``: joint angles [rad]."""
+    return [f"{THETA_PREFIX}_{i}" for i in range(n)]
+
+
+def velocity_columns(n: int) -> list[str]:
+    """``v_0 .. v_{n-1}``: commanded joint velocities [rad/s]."""
+    return [f"{V_PREFIX}_{i}" for i in range(n)]
+
+
+def distance_column(key_point: str, obstacle: str) -> str:
+    """``d_<key point>_<obstacle>``: the key point's distance to the obstacle [m]."""
+    return f"{DISTANCE_PREFIX}_{key_point}_{obstacle}"
+
+
+def joint_count(frame: pd.DataFrame) -> int:
+    """Joints of the arm a tick log is of (its ``v_i`` columns)."""
+    return sum(1 for c in frame.columns if re.fullmatch(rf"{V_PREFIX}_\d+", str(c)))
+
+
+def distance_columns(frame: pd.DataFrame) -> list[str]:
+    """The ``d_<A>_<obstacle>`` columns of a tick log, in its order (``d_min`` excluded)."""
+    return [c for c in frame.columns if str(c).startswith(f"{DISTANCE_PREFIX}_") and c != D_MIN]
+
+
+def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
+    """The float block the tick kernel fills, in order (every column but ``status``).
+
+    Args:
+        n: Joints.
+        obstacle_columns: ``(key point, obstacle)`` of each distance column.
+    """
+    return ([T] + theta_columns(n) + velocity_columns(n) + list(_MIDDLE)
+            + [distance_column(a, o) for a, o in obstacle_columns] + list(_TAIL))
+
+
+def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.DataFrame:
+    """The tick log as a frame: the first ``len(statuses)`` rows of ``data``, flags as
+    booleans, ``status`` a categorical of :data:`~qpbench.statuses.TICK_STATUSES`
+    (a status outside them counts as ``error``)."""
+    done = len(statuses)
+    codes = {s: i for i, s in enumerate(TICK_STATUSES)}
+    status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done)
+    frame = pd.DataFrame(data[:done], columns=columns)
+    frame[FALLBACK] = frame[FALLBACK].astype(bool)
+    frame[ZERO_VELOCITY] = frame[ZERO_VELOCITY].astype(bool)
+    frame.insert(columns.index(FALLBACK), STATUS,
+                 pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)))
+    return frame

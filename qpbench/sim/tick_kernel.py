@@ -1,0 +1,172 @@
+"""The closed loop's per-tick compiled step: log the tick, sense, advance the plant.
+
+One call of :func:`_post_py` (compiled by numba) per tick writes the tick's row
+of the log (:mod:`qpbench.sim.log`) into a preallocated array by index (no
+dict, no pandas), senses the end effector's velocity and the contact force,
+and integrates ``theta += dt v``. Its float and int constant blocks are made
+once per run by :func:`post_constants`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..control.controller import Controller, TickArrays
+from . import log
+
+__all__ = ["APPLIED", "FALLBACK", "ZERO", "get_post_kernel", "post_constants", "warm_post_kernel"]
+
+_post_kernel = None
+
+
+def get_post_kernel():
+    """The compiled :func:`_post_py` (compiled, or loaded from numba's cache, on first call)."""
+    global _post_kernel
+    if _post_kernel is None:
+        import numba
+
+        _post_kernel = numba.njit(cache=True, nogil=True)(_post_py)
+    return _post_kernel
+
+
+#: ``mode`` argument of the post kernel: the tick's own answer applied, the
+#: soft fallback's, or zero velocity.
+APPLIED, FALLBACK, ZERO = 0, 1, 2
+
+# Layout of the kernel's constant float block ``cf``: tangent (2), surface (6), dt.
+_CF_TANGENT, _CF_SURF, _CF_DT = 0, 2, 8
+# Layout of the kernel's constant int block ``ci``: 12 column indices, then the
+# obstacle columns' [start, end) ranges in the flat distance array.
+_CI_COLS = 12
+
+
+def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mode, kp, kd, solve_time):  # pragma: no cover - compiled
+    """Log tick ``k`` into ``data[k]`` and advance the plant ``theta += dt v``.
+
+    Returns the noise-free contact force [N], and leaves the sensed end-effector position
+    [m] in ``sensed[0:2]`` and its finite-difference velocity [m/s] in
+    ``sensed[2:4]``. When ``v`` holds a NaN or an infinity nothing is written
+    or advanced and -1.0 is returned (the caller falls back).
+    """
+    n = theta.shape[0]
+    for i in range(n):
+        if not math.isfinite(v[i]):
+            return -1.0
+    row = data[k]
+    dt = cf[_CF_DT]
+    c_theta = ci[0]
+    c_v = ci[1]
+    c_ee = ci[2]
+    c_d = ci[3]
+    c_force = ci[4]
+    row[0] = t
+    row[ci[5]] = 1.0 if mode == FALLBACK else 0.0
+    row[ci[6]] = 1.0 if mode == ZERO else 0.0
+    row[ci[7]] = solve_time
+    if y.shape[0] == 2:
+        row[ci[8]] = y[0]
+        row[ci[8] + 1] = y[1]
+    if z.shape[0] > 0:
+        zmax = z[0]
+        for i in range(1, z.shape[0]):
+            if z[i] > zmax:
+                zmax = z[i]
+        row[ci[9]] = zmax
+    row[ci[10]] = kp
+    row[ci[11]] = kd
+    # sense: velocity by finite difference, spring-damper force
+    if k == 0:
+        xd0 = 0.0
+        xd1 = 0.0
+    else:
+        xd0 = (ee[0] - sensed[0]) / dt
+        xd1 = (ee[1] - sensed[1]) / dt
+    sensed[0] = ee[0]
+    sensed[1] = ee[1]
+    sensed[2] = xd0
+    sensed[3] = xd1
+    # Compiled twin of ContactSurface.force (noise-free; surf = [nx, ny, n . point, stiffness,
+    # damping, Fd] in cf): kept inline so the kernel stays one call per tick with no Python object
+    # inside; tests/test_loop.py::test_post_kernel_force_matches_contact_surface checks they agree.
+    nx = cf[_CF_SURF]
+    ny = cf[_CF_SURF + 1]
+    delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
+    force = 0.0
+    if delta > 0.0:
+        force = cf[_CF_SURF + 3] * delta + cf[_CF_SURF + 4] * (nx * xd0 + ny * xd1)
+        if force < 0.0:
+            force = 0.0
+    row[c_force] = force
+    row[c_force + 1] = force - cf[_CF_SURF + 5]
+    vsq = 0.0
+    for i in range(n):
+        row[c_theta + i] = theta[i]
+        row[c_v + i] = v[i]
+        vsq += v[i] * v[i]
+        theta[i] += dt * v[i]
+    row[c_ee] = ee[0]
+    row[c_ee + 1] = ee[1]
+    row[c_ee + 2] = xd[0]
+    row[c_ee + 3] = xd[1]
+    row[c_ee + 4] = cf[_CF_TANGENT] * (ee[0] - xd[0]) + cf[_CF_TANGENT + 1] * (ee[1] - xd[1])
+    r0 = b0[0]
+    r1 = b0[1]
+    for j in range(n):
+        r0 -= J[0, j] * v[j]
+        r1 -= J[1, j] * v[j]
+    ncol = (ci.shape[0] - _CI_COLS) // 2
+    dmin = np.inf
+    for c in range(ncol):
+        m = np.inf
+        for j in range(ci[_CI_COLS + c], ci[_CI_COLS + ncol + c]):
+            if dist[j] < m:
+                m = dist[j]
+        row[c_d + c] = m
+        if m < dmin:
+            dmin = m
+    row[c_d + ncol] = dmin if ncol > 0 else np.nan
+    row[c_d + ncol + 1] = vsq
+    row[c_d + ncol + 2] = math.sqrt(r0 * r0 + r1 * r1)
+    return force
+
+
+def post_constants(controller: Controller, surface, dt: float):
+    """The tick log's float columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
+    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in controller.obstacle_columns()])
+    cidx = {c: i for i, c in enumerate(cols)}
+    normal = controller.task.normal
+    tangent = np.array([-normal[1], normal[0]])
+    obstacle_cols = controller.obstacle_columns()
+    n_pts = controller.n_obstacle_points
+    n_obs = max(len(controller.obstacles), 1)
+    # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
+    col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
+    col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
+    first_theta, first_v = log.theta_columns(1)[0], log.velocity_columns(1)[0]
+    names = (first_theta, first_v, log.EE_X, None, log.FORCE, log.FALLBACK, log.ZERO_VELOCITY, log.SOLVE_TIME,
+             log.Y_0, log.Z_MAX, log.KP_HAT, log.KD_HAT)
+    ci = np.array(
+        [cidx[log.D_MIN] - len(obstacle_cols) if c is None else cidx[c] for c in names] + col_start + col_end,
+        dtype=np.int64,
+    )
+    cf = np.array([tangent[0], tangent[1], normal[0], normal[1], float(normal @ surface.point), surface.stiffness,
+                   surface.damping, controller.task.desired_force, dt])
+    return cols, cidx, ci, cf
+
+
+def warm_post_kernel(controller: Controller, surface, dt: float, theta: np.ndarray, arrays: TickArrays) -> None:
+    """Compile (or load) the post kernel for the argument types :func:`simulate` passes.
+
+    ``arrays`` is a :meth:`Controller.build_arrays` result; ``theta`` is not changed.
+    """
+    cols, _, ci, cf = post_constants(controller, surface, dt)
+    post = get_post_kernel()
+    none = np.zeros(0)
+    row = np.zeros((1, len(cols)))
+    kp, kd = controller.kp, controller.kd
+    # an applied answer with duals, and a fallback/zero-velocity tick without
+    for y, z, mode in ((np.zeros(2), np.zeros(max(controller.n_rows, 1)), APPLIED), (none, none, ZERO)):
+        post(theta.copy(), np.zeros(controller.n), arrays.ee, np.zeros(4), arrays.J, arrays.b0, arrays.dist, arrays.xd,
+             y, z, row, 0, ci, cf, 0.0, mode, kp, kd, 0.0)

@@ -1,0 +1,91 @@
+"""The one vocabulary of solve outcomes, and how a returned answer is classified.
+
+A backend reports one of :data:`STATUSES`; the harness adds :data:`GUARD_STATUSES`
+when a solve went wrong in a way the backend did not (or could not) say. The
+per-tick guard (:mod:`qpbench.harness.guard`) and the closed loop
+(:mod:`qpbench.sim.loop`) both turn an exception into text with
+:func:`describe_exception` and an answer into a status with :func:`classify`,
+so the same answer gets the same status in a bench row and in a tick log.
+
+Sets, named by what they mean:
+
+- :data:`CERTIFIED_INFEASIBLE`: the backend proved there is no solution
+  (a bench row against an infeasible reference is right with one of these);
+- :data:`INFEASIBLE_OR_UNCLASSIFIED`: those, plus ``not_solved``, the status
+  of a backend that cannot classify a failure (qpsolvers' route to DAQP,
+  quadprog or HiGHS keeps only ``found=False``); on the controller's QPs
+  such a failure is the infeasible start, so the closed loop counts these
+  ticks as ``infeasible_ticks``;
+- :data:`FAILURE_STATUSES`: a failure whatever the reference says; the
+  backend's state is suspect after one and it is reset before its next solve
+  (the closed loop keeps one exception, see :mod:`qpbench.sim.loop`).
+
+:data:`FORMULATIONS` names the controller's two QP formulations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "CERTIFIED_INFEASIBLE", "FAILURE_STATUSES", "FORMULATIONS", "GUARD_STATUSES", "INFEASIBLE_OR_UNCLASSIFIED",
+    "STATUSES", "TICK_STATUSES", "classify", "describe_exception",
+]
+
+#: Statuses a backend reports.
+STATUSES = (
+    "optimal",
+    "primal_infeasible",
+    "dual_infeasible",
+    "max_iter",
+    "time_limit",
+    "error",
+    "not_solved",
+)
+
+#: Statuses only the harness gives: ``invalid`` (a non-finite answer, or ``optimal``
+#: without one) and ``crashed`` (the worker process holding the backend died).
+GUARD_STATUSES = ("invalid", "crashed")
+
+#: Categories of a closed-loop tick log's ``status`` column (no worker process there).
+TICK_STATUSES = STATUSES + ("invalid",)
+
+#: The backend proved the QP has no solution.
+CERTIFIED_INFEASIBLE = ("primal_infeasible", "dual_infeasible")
+
+#: A certificate of infeasibility, or a failure the backend cannot classify.
+INFEASIBLE_OR_UNCLASSIFIED = CERTIFIED_INFEASIBLE + ("not_solved",)
+
+#: A failure whatever the reference says; the backend is reset after one.
+FAILURE_STATUSES = frozenset({"error", "time_limit", "invalid", "crashed"})
+
+#: The controller's QP formulations: ``paper`` (hard task equality, eq. 11) and ``soft``.
+FORMULATIONS = ("paper", "soft")
+
+
+def describe_exception(exc: BaseException) -> str:
+    """``"Type: message"`` on one line (``"Type"`` when the message is empty)."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def classify(solution, wall_s: float, time_limit: float) -> tuple[str, str | None]:
+    """Status and error text of an answer a backend returned in ``wall_s`` [s].
+
+    - a non-finite ``x`` -> ``invalid``; ``optimal`` without ``x`` -> ``invalid``;
+    - else an answer later than ``time_limit`` [s] -> ``time_limit``;
+    - else the backend's status (``optimal``/``not_solved`` from ``found`` for
+      a plain :class:`qpsolvers.Solution`) and its ``error`` text, if any.
+    """
+    status = getattr(solution, "status", None) or ("optimal" if getattr(solution, "found", False) else "not_solved")
+    x = getattr(solution, "x", None)
+    if x is not None:
+        x = np.asarray(x, dtype=float)
+        finite = np.isfinite(x)
+        if not finite.all():
+            return "invalid", f"non-finite x ({int((~finite).sum())} of {x.size} entries; backend status {status})"
+    elif status == "optimal":
+        return "invalid", "status optimal without a primal solution x"
+    if wall_s > time_limit:
+        return "time_limit", f"solve took {wall_s:.3g} s > time limit {time_limit:g} s (backend status {status})"
+    return status, getattr(solution, "error", None)
