@@ -401,12 +401,13 @@ def table_to_bytes(table) -> bytes:
     return sink.getvalue().to_pybytes()
 
 
-def package_versions() -> dict[str, str]:
-    """Versions of the packages that shape the files and the numbers."""
+def package_versions(names: tuple[str, ...] = ("qpbench", "numpy", "scipy", "qpsolvers", "pyarrow")) -> dict[str, str | None]:
+    """Installed version of each distribution in ``names`` (``None`` when absent); by default
+    the packages that shape the files and the numbers."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = {}
-    for pkg in ("qpbench", "numpy", "scipy", "qpsolvers", "pyarrow"):
+    for pkg in names:
         try:
             out[pkg] = version(pkg)
         except PackageNotFoundError:

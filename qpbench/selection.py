@@ -1,10 +1,18 @@
-"""Choosing a subset of a problem set: by name pattern, stride and count.
+"""What a command works on, parsed and checked before any work starts.
 
-The same three options on every command that reads a problem set
-(``qpbench list``, ``qpbench export``): ``--problems PATTERN`` keeps the
-records whose name matches a shell-style pattern (``wall_paper_0001*``;
-several patterns separated by commas), ``--every K`` keeps every K-th of
-those, ``--limit N`` the first N of what is left. Order is the file's.
+Problem subsets: the same three options on every command that reads a
+problem set (``qpbench list``, ``qpbench export``, ``qpbench bench``):
+``--problems PATTERN`` keeps the records whose name matches a shell-style
+pattern (``wall_paper_0001*``; several patterns separated by commas),
+``--every K`` keeps every K-th of those, ``--limit N`` the first N of what
+is left. Order is the file's.
+
+Backend lists, scenario lists and ``--set`` overrides, for ``bench``,
+``simulate``, ``closed-loop`` and ``run`` alike (:func:`select_backends`,
+:func:`select_scenarios`, :func:`parse_overrides`, :func:`backend_settings`):
+``all`` or comma-separated names; a name given twice is refused with one line
+naming it; a backend setting is checked against the backend's own list where
+the backend can tell.
 """
 
 from __future__ import annotations
@@ -13,7 +21,10 @@ import fnmatch
 
 from .exceptions import ParamError
 
-__all__ = ["select_records", "select_set"]
+__all__ = [
+    "PAPER_SCENARIOS", "backend_settings", "parse_list", "parse_overrides", "select_backend", "select_backends", "select_records",
+    "select_scenarios", "select_set",
+]
 
 
 def select_records(records: list, pattern: str | None = None, every: int | None = None, limit: int | None = None) -> list:
@@ -65,3 +76,139 @@ def select_set(problem_set, pattern: str | None = None, every: int | None = None
         generator = dict(manifest["generator"], every=int(manifest["generator"]["every"]) * every)
         manifest = dict(manifest, generator=generator)
     return replace(problem_set, records=records, manifest=manifest)
+
+
+# -- backends, scenarios and --set overrides: parsed and checked before any work starts ----------
+
+#: Scenarios of the paper (section 4), in its order: ``all`` lists them first.
+PAPER_SCENARIOS = ("free", "wall", "adaptive", "narrow")
+
+
+def parse_list(value: str | list[str] | None, option: str) -> list[str]:
+    """Split a comma-separated option value (empty items dropped, order kept).
+
+    Raises:
+        ParamError: the list is empty, or an item is given twice.
+    """
+    if value is None:
+        return []
+    items = value if isinstance(value, list) else value.split(",")
+    out: list[str] = []
+    for item in items:
+        item = item.strip()
+        if not item:
+            continue
+        if item in out:
+            raise ParamError(f"'{item}' listed twice in {','.join(i.strip() for i in items)}", key=option)
+        out.append(item)
+    if not out:
+        raise ParamError("empty list", key=option)
+    return out
+
+
+def select_scenarios(value: str | list[str] | None, option: str = "--scenarios") -> list[str]:
+    """``all`` (or nothing) -> every shipped scenario (the paper's four first); else the names
+    or paths given, each loaded once here so that a typo or a broken file is one line naming it.
+
+    Raises:
+        ParamError: an empty list or a name given twice. ScenarioError: a scenario that does not load.
+    """
+    from .sim.scenario import load_scenario, scenario_names
+
+    names = parse_list(value or "all", option)
+    if names == ["all"]:
+        shipped = scenario_names()
+        return [n for n in PAPER_SCENARIOS if n in shipped] + [n for n in shipped if n not in PAPER_SCENARIOS]
+    for name in names:
+        load_scenario(name)
+    return names
+
+
+def select_backends(value: str | list[str] | None, option: str = "--backends") -> list[str]:
+    """``all`` (or nothing) -> every available backend; else the names given, in their
+    registered spelling, each available here.
+
+    Raises:
+        ParamError: an empty list, or a backend given twice (also under two spellings).
+        BackendNotFound: a name is not registered or not available here (with close names).
+    """
+    from .backends import backend_names, get_backend, resolve_name
+
+    names = parse_list(value or "all", option)
+    if names == ["all"]:
+        return list(backend_names(available_only=True))
+    resolved = parse_list([resolve_name(name) for name in names], option)  # a typo gets a suggestion
+    for name in resolved:
+        get_backend(name)  # raises BackendNotFound with the reason
+    return resolved
+
+
+def select_backend(name: str, option: str = "--backend") -> str:
+    """One backend name (not a list, not ``all``), in its registered spelling, available here.
+
+    Raises:
+        ParamError: a list or ``all``. BackendNotFound: see :func:`select_backends`.
+    """
+    names = parse_list(name, option)
+    if len(names) != 1 or names == ["all"]:
+        raise ParamError(f"expected one backend name, got '{name}'", key=option)
+    return select_backends(names, option)[0]
+
+
+def parse_overrides(items: list[str] | None, option: str = "--set") -> dict:
+    """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``.
+
+    A value is read as a TOML value (``0.001``, ``5``, ``true``, ``[0.0, 0.1]``,
+    ``"text"``); one that is not valid TOML is taken as a string (``euler``).
+    A later setting of the same key wins. Scenario keys are checked by the
+    scenario loader (:func:`qpbench.sim.scenario.apply_overrides`), backend
+    keys by :func:`backend_settings`.
+
+    Raises:
+        ParamError: an item without ``=`` or with an empty key.
+    """
+    import tomllib
+
+    out = {}
+    for item in items or ():
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ParamError(f"expected KEY=VALUE, got {item!r}", key=option)
+        text = text.strip()
+        try:
+            value = tomllib.loads(f"value = {text}")["value"]
+        except tomllib.TOMLDecodeError:
+            value = text
+        out[key] = value
+    return out
+
+
+def backend_settings(items: list[str] | None, backends: list[str], option: str = "--set") -> dict[str, dict]:
+    """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked.
+
+    A key is checked against the settings the backend says it accepts
+    (:meth:`qpbench.backends.base.Backend.setting_names`) where it can tell:
+    ``osqp.rhoo`` is refused with "did you mean 'rho'".
+
+    Raises:
+        ParamError: ``BACKEND`` is not one of ``backends``, or ``KEY`` is not a setting of it.
+    """
+    import difflib
+
+    from .backends import backend_class
+
+    out: dict[str, dict] = {}
+    for key, value in parse_overrides(items, option).items():
+        backend, _, setting = key.rpartition(".")
+        if backend not in backends or not setting:
+            raise ParamError(f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in "
+                             "--backends)", key=option)
+        allowed = backend_class(backend).setting_names()
+        if allowed is not None and setting not in allowed:
+            close = difflib.get_close_matches(setting, sorted(allowed), n=3, cutoff=0.6)
+            hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+            raise ParamError(f"'{setting}' is not a setting of backend '{backend}'; {hint}"
+                             f"its settings: {', '.join(sorted(allowed))}", key=f"{option} {key}")
+        out.setdefault(backend, {})[setting] = value
+    return out

@@ -213,7 +213,7 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
 
 def test_run_bench_subset_keeps_the_time_between_records():
     """`run --bench-every K` keeps every K-th record: an online backend then integrates K record periods per call."""
-    from qpbench.commands.run import _bench_subset
+    from qpbench.harness.pipeline import bench_subset as _bench_subset
     from qpbench.formats import read_problem_set
     from qpbench.harness.bench import record_period
 

@@ -1,4 +1,4 @@
-"""Tests of qpbench.harness.closed_loop and ``qpbench closed-loop``.
+"""Tests of qpbench.harness.closed_loop (and its loop_rows, loop_run, loop_workers) and ``qpbench closed-loop``.
 
 Real simulator runs, shortened to 0.5 s: the table's figures are checked
 against the per-tick logs they came from.
@@ -6,6 +6,7 @@ against the per-tick logs they came from.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -14,7 +15,10 @@ import pytest
 
 from qpbench.cli import main
 from qpbench.exceptions import OutputExistsError, ParamError
+from qpbench import selection
 from qpbench.harness import closed_loop as cl
+from qpbench.harness import loop_rows as rows
+from qpbench.harness import loop_workers as workers
 
 SCENARIOS = ["wall", "narrow"]
 BACKENDS = ["qpsolvers:daqp", "pinv"]
@@ -29,8 +33,8 @@ def table_dir(tmp_path_factory):
 
 def test_table_has_one_row_per_pair(table_dir):
     out, outcome = table_dir
-    table = pd.read_csv(out / cl.CSV_NAME)
-    assert list(table.columns[: len(cl.COLUMNS)]) == list(cl.COLUMNS)
+    table = pd.read_csv(out / rows.CSV_NAME)
+    assert list(table.columns[: len(rows.COLUMNS)]) == list(rows.COLUMNS)
     assert [(r.scenario, r.backend) for r in table.itertuples()] == [
         (s, b) for s in SCENARIOS for b in BACKENDS
     ]
@@ -45,7 +49,7 @@ def test_table_has_one_row_per_pair(table_dir):
 
 def test_figures_equal_the_tick_logs(table_dir):
     out, _ = table_dir
-    table = pd.read_csv(out / cl.CSV_NAME)
+    table = pd.read_csv(out / rows.CSV_NAME)
     for r in table.itertuples():
         log = pd.read_parquet(out / r.log_file)
         assert len(log) == r.ticks
@@ -70,24 +74,74 @@ def test_figures_equal_the_tick_logs(table_dir):
     assert daqp["min_obstacle_distance"] >= 0.01 - 1e-4
 
 
-def test_row_from_run_computes_what_the_summary_lacks():
-    t = np.arange(3000) * 0.001
-    log = pd.DataFrame({
-        "t": t, "v_0": np.ones_like(t), "v_1": 2 * np.ones_like(t),
-        "tracking_error": np.where(t >= 2, 3e-3, 1.0), "force_error": np.where(t >= 2, -0.5, 9.0),
-        "d_min": 0.5 - t / 10, "solve_time_s": np.linspace(1e-5, 2e-5, len(t)),
-    })
-    row = cl.row_from_run("s", "b", "paper", None, log, {"wall_time_s": 1.5, "extra": [1, 2]}, dt=0.001)
-    assert row["tracking_rms_after_2s"] == pytest.approx(3e-3)
-    assert row["tracking_max_after_2s"] == pytest.approx(3e-3)
-    assert row["force_error_rms_after_2s"] == pytest.approx(0.5)
-    assert row["force_error_max_after_2s"] == pytest.approx(0.5)
-    assert row["min_obstacle_distance"] == pytest.approx(0.5 - 2.999 / 10)
-    assert row["v2_integral"] == pytest.approx(5.0 * 3.0)  # |v|^2 = 5 for 3 s
-    assert row["real_time_factor"] == pytest.approx(3.0 / 1.5)
-    assert row["duration_s"] == pytest.approx(3.0)
-    assert row["extra"] == "[1, 2]"
-    assert math.isnan(row["infeasible_ticks"])
+def test_a_row_is_the_summary_under_the_table_names(table_dir):
+    """The figures are computed once (sim.summary): a row of closed_loop.csv is the run's summary."""
+    from qpbench.sim.loop import simulate
+
+    out, _ = table_dir
+    table = pd.read_csv(out / rows.CSV_NAME)
+    row = table[(table["scenario"] == "wall") & (table["backend"] == "pinv")].iloc[0]
+    summary = simulate("wall", "pinv", duration=0.5).summary
+    timed = {"wall_time_s", "real_time_factor", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s",
+             "deadline_misses"}
+    for key, value in summary.items():
+        if key in timed or key in ("scenario", "backend"):
+            continue
+        column = rows.TABLE_NAMES.get(key, key)
+        cell = row[column]
+        if value is None or value == "":
+            assert pd.isna(cell), key  # an empty cell
+        elif isinstance(value, (list, dict)):
+            assert json.loads(cell) == value, key  # JSON text, read back as it was
+        elif isinstance(value, float):
+            assert cell == pytest.approx(value, rel=1e-12, abs=1e-15), key
+        else:
+            assert cell == value or str(cell) == str(value), key
+    # one column per figure: the summary's two older names appear only under the table's
+    assert "duration" not in table.columns and "solve_time_median_s" not in table.columns
+    assert len(set(table.columns)) == len(table.columns)
+    assert summary["v2_integral"] == pytest.approx(row["v2_integral"], rel=1e-12)
+
+
+def test_structured_cells_are_json_and_the_report_reads_them_back(table_dir):
+    from qpbench.report.tables import read_results
+
+    out, _ = table_dir
+    text = (out / rows.CSV_NAME).read_text()
+    assert "{'" not in text  # no Python repr
+    table = pd.read_csv(out / rows.CSV_NAME)
+    narrow = table[(table["scenario"] == "narrow") & (table["backend"] == "qpsolvers:daqp")].iloc[0]
+    counts = json.loads(narrow["status_counts"])
+    assert sum(counts.values()) == narrow["ticks"]
+    loops = read_results([out / rows.CSV_NAME]).closed_loop
+    read_back = loops[(loops["scenario"] == "narrow") & (loops["backend"] == "qpsolvers:daqp")].iloc[0]
+    assert read_back["status_counts"] == counts
+    assert read_back["infeasible_intervals"] == json.loads(narrow["infeasible_intervals"])
+    assert all(isinstance(v, list) for v in read_back["obstacle_active_intervals"].values())
+
+
+def test_cell_writes_json():
+    value = {"A2/wall": [[1.613, 6.467], [7.0, 7.5]]}
+    assert json.loads(rows.cell(value)) == value
+    assert rows.cell(np.float64(0.5)) == 0.5 and rows.cell(None) is None and rows.cell("x") == "x"
+
+
+def test_duplicate_backends_are_refused_like_in_bench(tmp_path, capsys):
+    with pytest.raises(ParamError, match="twice"):
+        cl.run_closed_loop(["wall"], ["pinv", "pinv"], tmp_path / "o", duration=0.05)
+    out = tmp_path / "cli"
+    assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "pinv,daqp,pinv",
+                 "--duration", "0.05", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'pinv' listed twice" in err
+    assert not out.exists()
+    # two spellings of one backend are one backend
+    assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "pinv,PINV",
+                 "--duration", "0.05", "--out", str(out)]) == 2
+    assert "twice" in capsys.readouterr().err
+    assert main(["-q", "closed-loop", "--scenarios", "wall,wall", "--backends", "pinv",
+                 "--duration", "0.05", "--out", str(out)]) == 2
+    assert "'wall' listed twice" in capsys.readouterr().err
 
 
 def test_failing_run_becomes_an_error_row(tmp_path):
@@ -106,7 +160,7 @@ def test_resume_force_and_refusal(tmp_path):
     assert first.ran == 2
     with pytest.raises(OutputExistsError):
         cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05)
-    before = pd.read_csv(out / cl.CSV_NAME)
+    before = pd.read_csv(out / rows.CSV_NAME)
     again = cl.run_closed_loop(["wall", "free"], ["pinv", "qpsolvers:daqp"], out, duration=0.05, resume=True)
     assert again.ran == 2 and again.skipped == 2  # only the new scenario runs
     kept = again.table[again.table["scenario"] == "wall"].reset_index(drop=True)
@@ -120,7 +174,7 @@ def test_resume_force_and_refusal(tmp_path):
     assert longer.table.iloc[0]["duration_s"] == 0.08
     forced = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05, force=True)
     assert forced.ran == 1 and len(forced.table) == 1
-    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == ["wall__pinv.parquet"]
+    assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == ["wall__pinv.parquet"]
 
 
 def test_skipped_backends_get_a_row(tmp_path):
@@ -138,8 +192,8 @@ def test_bad_parameters(tmp_path):
     with pytest.raises(ParamError):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, duration=-1.0)
     with pytest.raises(ParamError):
-        cl.parse_list(",,", "--backends")
-    assert cl.resolve_scenarios("all")[:4] == list(cl.PAPER_SCENARIOS)
+        selection.parse_list(",,", "--backends")
+    assert selection.select_scenarios("all")[:4] == list(selection.PAPER_SCENARIOS)
 
 
 def test_cli_exit_codes(tmp_path, capsys):
@@ -191,7 +245,7 @@ def daqp_alone(tmp_path_factory):
     out = tmp_path_factory.mktemp("alone")
     assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.1",
                  "--out", str(out)]) == 0
-    return out, pd.read_csv(out / cl.CSV_NAME).iloc[0]
+    return out, pd.read_csv(out / rows.CSV_NAME).iloc[0]
 
 
 def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alone):
@@ -199,7 +253,7 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     args = ["-q", "closed-loop", "--scenarios", "wall", "--backends", "faulty:segfault,faulty:hang,daqp",
             "--duration", "0.1", "--out", str(out), "--run-time-limit", "4", "--plugin", PLUGIN]
     assert main(args) == 1  # failed runs
-    table = pd.read_csv(out / cl.CSV_NAME)
+    table = pd.read_csv(out / rows.CSV_NAME)
     assert list(table["backend"]) == ["faulty:segfault", "faulty:hang", "daqp"]
     crashed, hung, daqp = (table.iloc[i] for i in range(3))
     assert crashed["status"] == "crashed" and "SIGSEGV" in crashed["error"]
@@ -210,7 +264,7 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     assert bool(crashed["isolated"]) and bool(hung["isolated"]) and not bool(daqp["isolated"])  # auto: risky ones
     assert daqp["status"] == "ok"
     _same_daqp_run(out, daqp, *daqp_alone)
-    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == ["wall__daqp.parquet"]  # no partial logs
+    assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == ["wall__daqp.parquet"]  # no partial logs
     # resume keeps the ok row and retries only the failed ones
     seen = []
     outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp"], out, duration=0.1, resume=True,
@@ -242,9 +296,9 @@ def test_guard_parameters(tmp_path):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, isolate="sometimes")
     with pytest.raises(ParamError):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, run_time_limit=0.0)
-    assert cl.run_deadline("wall", 0.1) == cl.RUN_TIME_LIMIT_MIN_S
-    assert cl.run_deadline("wall", 100.0) == 100.0 * cl.RUN_TIME_LIMIT_PER_SIM_S
-    assert cl.run_deadline("wall", None, 7.0) == 7.0
+    assert workers.run_deadline("wall", 0.1) == workers.RUN_TIME_LIMIT_MIN_S
+    assert workers.run_deadline("wall", 100.0) == 100.0 * workers.RUN_TIME_LIMIT_PER_SIM_S
+    assert workers.run_deadline("wall", None, 7.0) == 7.0
     assert cl.is_risky("faulty:hang") and not cl.is_risky("daqp") and not cl.is_risky("nosuch")
 
 
@@ -259,7 +313,7 @@ def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
     code = main(["closed-loop", "--scenarios", "wall", "--backends", "daqp,pinv", "--duration", "1.6",
                  "--out", str(out)])
     assert code == 1
-    table = pd.read_csv(out / cl.CSV_NAME).set_index("backend")
+    table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]
     assert daqp["verdict"] == "ok" and math.isnan(daqp["verdict_reasons"])  # empty in the CSV
     assert pinv["status"] == "ok" and pinv["verdict"] == "unsafe"
@@ -279,7 +333,7 @@ def test_exact_backend_short_run_is_ok_and_exits_0(tmp_path):
     out = tmp_path / "o"
     assert main(["-q", "closed-loop", "--scenarios", "wall,narrow", "--backends", "qpsolvers:daqp", "--duration", "0.3",
                  "--out", str(out)]) == 0
-    table = pd.read_csv(out / cl.CSV_NAME)
+    table = pd.read_csv(out / rows.CSV_NAME)
     assert (table["verdict"] == "ok").all() and (table["simulated_s"] == 0.3).all()
 
 
@@ -288,7 +342,7 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     out = tmp_path / "cut"
     args = ["closed-loop", "--scenarios", "wall", "--backends", slow, "--duration", "1.0", "--isolate", "never"]
     assert main([*args, "--out", str(out), "--run-budget", "0.4"]) == 0  # stopped early is not a failure
-    row = pd.read_csv(out / cl.CSV_NAME).iloc[0]
+    row = pd.read_csv(out / rows.CSV_NAME).iloc[0]
     assert row["status"] == "budget" and row["verdict"] == "ok" and row["run_budget_s"] == 0.4
     assert 0 < row["simulated_s"] < row["duration_s"] == 1.0
     assert row["ticks"] == round(row["simulated_s"] / 0.001)
@@ -300,7 +354,7 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     # the uncut run: its first ticks are the budgeted run's log
     whole_out = tmp_path / "whole"
     assert main([*args, "--out", str(whole_out)]) == 0
-    whole = pd.read_csv(whole_out / cl.CSV_NAME).iloc[0]
+    whole = pd.read_csv(whole_out / rows.CSV_NAME).iloc[0]
     assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
     whole_log = pd.read_parquet(whole_out / whole["log_file"])
     pd.testing.assert_frame_equal(cut_log.drop(columns="solve_time_s"),

@@ -309,7 +309,7 @@ def test_qpbenchmark_runs_a_dumped_set_unchanged(tmp_path):
 
 def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
     from qpbench.cli import main
-    from qpbench.commands.simulate import parse_overrides
+    from qpbench.selection import parse_overrides
     from qpbench.formats import read_problem_set
 
     items = ["rnn.eps=0.001", "rnn.substeps=5", "rnn.l1_clip=10.0", "controller.k=20", "obstacles[0].velocity=[0.0, 0.01]"]
@@ -371,7 +371,7 @@ def test_bad_overrides_are_errors_naming_the_key(overrides, key):
 
 def test_set_option_errors(capsys):
     from qpbench.cli import main
-    from qpbench.commands.simulate import parse_overrides
+    from qpbench.selection import parse_overrides
 
     assert parse_overrides(["rnn.method=euler", "a.b = [1, 2]", "x.y=true", "s.t=\"q=1\"", "x.y=false"]) == {
         "rnn.method": "euler", "a.b": [1, 2], "x.y": False, "s.t": "q=1"}

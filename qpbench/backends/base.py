@@ -23,7 +23,7 @@ import numpy as np
 import qpsolvers
 
 from ..profiles import Profile, get_profile
-from ..statuses import STATUSES  # the vocabulary lives in qpbench.statuses; re-exported for backends
+from ..statuses import STATUSES  # noqa: F401 - the vocabulary lives in qpbench.statuses; re-exported for backends
 
 
 @dataclass
@@ -120,6 +120,12 @@ class Backend:
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)
         self.settings = dict(settings)
+
+    @classmethod
+    def setting_names(cls) -> frozenset[str] | None:
+        """Names of the settings the backend accepts (``--set BACKEND.KEY=VALUE`` is checked
+        against them before any solve), or ``None`` when it cannot tell (every key is passed on)."""
+        return None
 
     # -- availability -----------------------------------------------------
     @classmethod

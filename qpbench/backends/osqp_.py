@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
-from ._common import all_dense, dense_bounds, dense_upper_layout, generic_settings
+from ._common import GENERIC_KEYS, all_dense, dense_bounds, dense_upper_layout, generic_settings
 from .base import Backend, BackendSolution
 
 
@@ -202,6 +202,16 @@ class OsqpBackend(Backend):
     def reset(self) -> None:
         self._solver = None
         self._layout = None
+
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """The generic settings, OSQP's own (its ``OSQPSettings`` fields) and the names its
+        ``update_settings`` translates (``polish``, ``warm_start``, ``solver_type``, ``cg_preconditioner``)."""
+        import osqp
+
+        solver = osqp.OSQP()
+        own = {k for k in type(solver.ext.OSQPSettings()).__dict__ if not k.startswith("_")}
+        return frozenset(own | {"polish", "warm_start", "solver_type", "cg_preconditioner"} | set(GENERIC_KEYS))
 
     def _settings(self) -> dict:
         generic, native = generic_settings(self)

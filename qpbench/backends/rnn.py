@@ -125,6 +125,10 @@ class _NetworkBackend(Backend):
     #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).
     _kernel_obj: ClassVar[bool] = True
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        return frozenset(_DEFAULTS)
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         unknown = sorted(set(settings) - set(_DEFAULTS))

@@ -74,33 +74,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output
-    from ..backends import backend_names, resolve_name
-    from ..exceptions import ParamError
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..harness.plugins import load_plugins, plugin_specs
     from ..jit import warmup_logged
-    from .simulate import parse_overrides
+    from ..selection import backend_settings, select_backends
 
     # Nothing is written before the input is known to be good.
     check_output(args.out, force=args.force, resume=args.resume)
     plugins = plugin_specs(args.plugin)
     load_plugins(plugins)
-    if args.backends.strip() == "all":
-        backends = backend_names(available_only=True)
-    else:
-        backends = [resolve_name(b.strip()) for b in args.backends.split(",") if b.strip()]
-    if not backends:
-        raise ParamError("no backend given", key="backends")
-    per_backend: dict[str, dict] = {}
-    for key, value in parse_overrides(args.sets).items():
-        backend, _, setting = key.rpartition(".")
-        if backend not in backends or not setting:
-            raise ParamError(
-                f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in --backends)",
-                key="--set",
-            )
-        per_backend.setdefault(backend, {})[setting] = value
+    backends = select_backends(args.backends)
+    per_backend = backend_settings(args.sets, backends)
     config = BenchConfig(
         backend_settings=per_backend,
         backends=backends,

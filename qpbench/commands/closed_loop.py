@@ -70,14 +70,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..harness.closed_loop import resolve_backends, resolve_scenarios, run_closed_loop
+    from ..harness.closed_loop import log_row, run_closed_loop
     from ..harness.plugins import load_plugins, plugin_specs
     from ..jit import warmup_logged
+    from ..selection import select_backends, select_scenarios
 
     plugins = plugin_specs(args.plugin)
     load_plugins(plugins)
-    scenarios = resolve_scenarios(args.scenarios)
-    backends = resolve_backends(args.backends)
+    scenarios = select_scenarios(args.scenarios)
+    backends = select_backends(args.backends)
     warmup_logged(log)  # compiled here once: the worker processes load them
     bar = None
     total = len(scenarios) * len(backends)
@@ -130,19 +131,3 @@ def summary_table(table) -> str:
     widths = [max(len(row[c]) for row in rows) for c in range(len(header))]
     return "\n".join("  ".join(cell.ljust(w) if c < 3 else cell.rjust(w) for c, (cell, w) in enumerate(zip(row, widths)))
                      for row in rows)
-
-
-def log_row(logger: logging.Logger, row: dict) -> None:
-    """One line per run: INFO when its verdict is ``ok`` (or it was skipped), else WARNING with the reasons."""
-    verdict = row.get("verdict")
-    verdict = verdict if isinstance(verdict, str) else ""
-    reasons = row.get("verdict_reasons")
-    reasons = reasons if isinstance(reasons, str) else ""
-    where = f"{row['scenario']} / {row['backend']}"
-    if verdict and verdict != "ok":
-        logger.warning("%s: %s (%s)", where, verdict, reasons or row.get("status"))
-        return
-    status = str(row.get("status"))
-    error = row.get("error") if isinstance(row.get("error"), str) else ""
-    detail = "; ".join(x for x in (status if status != "ok" and verdict else "", error, reasons) if x)
-    logger.info("%s: %s%s", where, verdict or status, f" ({detail})" if detail else "")

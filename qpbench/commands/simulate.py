@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from ..atomic import atomic_path, check_folder, check_output, write_text
     from ..exceptions import ParamError
     from ..jit import warmup_logged
+    from ..selection import parse_overrides, select_backend
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
@@ -97,11 +98,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise ParamError(f"--deadline must be a positive number of seconds, got {args.deadline}", key="--deadline")
+    backend = select_backend(args.backend)
     scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log)
     result = simulate(
-        scenario, args.backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
+        scenario, backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
         every=args.every, dump=args.dump, progress=progress, profile=args.profile, deadline=args.deadline,
     )
     s = result.summary
@@ -116,7 +118,9 @@ def run(args: argparse.Namespace) -> int:
     elif args.summary is not None:
         write_text(args.summary, json.dumps(s, indent=2) + "\n")
     if args.plot is not None:
-        plot_run(result.log, s, args.plot)
+        from ..report.loop_figure import run_figure
+
+        run_figure(result.log, s, args.plot)
     if args.snapshot is not None or args.animate is not None:
         from ..report.arm import animate, draw_snapshot
 
@@ -166,44 +170,3 @@ def log_verdict(s: dict) -> int:
         return 0
     log.warning("verdict %s%s%s", s["verdict"], reasons, distance)
     return 1
-
-
-def parse_overrides(items: list[str]) -> dict:
-    """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``.
-
-    A value is read as a TOML value (``0.001``, ``5``, ``true``, ``[0.0, 0.1]``,
-    ``"text"``); one that is not valid TOML is taken as a string (``euler``).
-    A later setting of the same key wins. Keys are checked by the scenario
-    loader (:func:`qpbench.sim.scenario.apply_overrides`).
-
-    Raises:
-        ParamError: an item without ``=`` or with an empty key.
-    """
-    import tomllib
-
-    from ..exceptions import ParamError
-
-    out = {}
-    for item in items or ():
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ParamError(f"expected KEY=VALUE, got {item!r}", key="--set")
-        text = text.strip()
-        try:
-            value = tomllib.loads(f"value = {text}")["value"]
-        except tomllib.TOMLDecodeError:
-            value = text
-        out[key] = value
-    return out
-
-
-def plot_run(frame, summary: dict, path) -> None:
-    """The closed-loop figure of one run (:func:`qpbench.report.loop_figure.closed_loop_figure`)."""
-    from ..report.loop_figure import closed_loop_figure
-
-    closed_loop_figure(
-        {summary["backend"]: frame}, path,
-        title=f"{summary['scenario']} / {summary['backend']} / {summary['formulation']}",
-        d_safe=summary.get("d_safe"),
-    )

@@ -26,7 +26,7 @@ cache); the forkserver, started and preloaded before the first worker's
 clock, imports qpbench and loads the kernels from the cache once
 (:mod:`qpbench.harness.preload`), so each worker is forked with them in
 memory. A worker started otherwise (``spawn``) loads them when it starts,
-before it reports ready (within :data:`START_TIMEOUT_S`, outside any solve's
+before it reports ready (within :data:`~qpbench.harness.workers.START_TIMEOUT_S`, outside any solve's
 deadline). The
 discarded warm-up solve has an allowance of its own (:data:`WARMUP_TIMEOUT_S`):
 a slow one is not a reason to kill the worker.
@@ -40,58 +40,22 @@ times; they only add to the run's total duration.
 from __future__ import annotations
 
 import logging
-import multiprocessing
-import signal
 import time
 
 import numpy as np
 
 from ..statuses import describe_exception
 from .guard import LocalRunner, Outcome
+from .workers import START_TIMEOUT_S, death_message, ignore_interrupts, start_worker, stop_worker
 
 log = logging.getLogger("qpbench.harness")
 
 #: Least slack added to every deadline in [s] (pipe, pickling, scheduling on a loaded
 #: machine); the slack is ``max(DEADLINE_MARGIN_S, time_limit / 2)``.
 DEADLINE_MARGIN_S = 1.0
-#: Time allowed for a worker to start (load the kernels) and build its backend in [s].
-START_TIMEOUT_S = 120.0
 #: Time allowed for the discarded warm-up solve in [s] (at least twice the time limit):
 #: first-call costs (imports, a solver's set-up) are no reason to kill the worker.
 WARMUP_TIMEOUT_S = 30.0
-
-_CTX = None
-
-
-def _context():
-    """The start method's context, every numba kernel compiled in this process first.
-
-    Called before each worker starts: the warm-up compiles what the on-disk
-    cache lacks here, once, so that no worker ever compiles (it only loads).
-    """
-    global _CTX
-    from ..jit import warmup
-
-    warmup()  # at once after the first call
-    if _CTX is None:
-        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        ctx = multiprocessing.get_context(method)
-        if method == "forkserver":
-            ctx.set_forkserver_preload([
-                "qpbench.harness.isolation", "qpbench.backends", "numpy", "scipy.sparse", "qpbench.harness.preload",
-            ])
-            # start the server now and wait for its preload (a no-op child), so that no
-            # worker's deadline ever covers it
-            proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
-            proc.start()
-            proc.join(START_TIMEOUT_S)
-        _CTX = ctx
-    return _CTX
-
-
-def _noop() -> None:
-    """A child that does nothing: its start waits for the forkserver's preload."""
-
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
 _FIELDS = ("x", "y", "z", "z_box", "found", "obj", "status", "iterations", "solver_time_s", "wall_time_s", "backend", "error")
@@ -116,7 +80,7 @@ def _strip(outcome: Outcome) -> Outcome:
 
 def _worker_main(conn, spec: dict) -> None:
     """Body of the worker process: build the backend, answer requests until ``stop``."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    ignore_interrupts()
     try:
         from ..backends import get_backend
         from .plugins import load_plugins
@@ -195,11 +159,7 @@ class IsolatedRunner:
 
     # -- process management --------------------------------------------------------
     def _start(self) -> None:
-        ctx = _context()
-        parent, child = ctx.Pipe()
-        proc = ctx.Process(target=_worker_main, args=(child, self.spec), daemon=True, name=f"qpbench-{self.name}")
-        proc.start()
-        child.close()
+        proc, parent = start_worker(_worker_main, (self.spec,), name=f"qpbench-{self.name}")
         self._proc, self._conn = proc, parent
         try:
             kind, payload = self._receive(START_TIMEOUT_S, what="start")
@@ -212,23 +172,12 @@ class IsolatedRunner:
         log.debug("worker for %s started (pid %s)", self.name, proc.pid)
 
     def _kill(self) -> None:
-        if self._proc is not None:
-            if self._proc.is_alive():
-                self._proc.kill()
-            self._proc.join(5)
-        if self._conn is not None:
-            self._conn.close()
+        stop_worker(self._proc, self._conn)
         self._proc = self._conn = None
 
     def _death_message(self) -> str:
         self._proc.join(2)
-        code = self._proc.exitcode
-        if code is not None and code < 0:
-            try:
-                return f"worker process killed by {signal.Signals(-code).name}"
-            except ValueError:
-                return f"worker process killed by signal {-code}"
-        return f"worker process exited with code {code}"
+        return death_message(self._proc.exitcode)
 
     def _receive(self, timeout: float, what: str):
         deadline = time.monotonic() + timeout

@@ -1,6 +1,6 @@
 """Imported by the worker processes' forkserver only: the kernels loaded once, for every fork.
 
-:func:`qpbench.harness.isolation._context` names this module in the
+:func:`qpbench.harness.workers.context` names this module in the
 forkserver's preload list, after the parent has compiled every numba kernel
 into the on-disk cache (:func:`qpbench.jit.warmup`). Importing it loads them
 into the forkserver, so each worker forked from it starts with them in

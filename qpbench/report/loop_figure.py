@@ -15,9 +15,11 @@ Panels, top to bottom (each backend one colour, the legend outside the axes):
 Ticks where a backend's own answer was not applied (the soft fallback's or
 zero velocity was) are shaded in its colour along the top of the first panel.
 
-Columns read are the tick log's (:mod:`qpbench.sim.loop`): ``t``,
-``tracking_error``, ``force_error``, ``d_min``, ``solve_time_s``, ``v_sq``,
-``kp_hat``, ``fallback``, ``zero_velocity``.
+Columns read are the tick log's, by the names :mod:`qpbench.sim.log` gives
+them (``t``, ``tracking_error``, ``force_error``, ``d_min``, ``solve_time_s``,
+``v_sq``, ``kp_hat``, ``fallback``, ``zero_velocity``). One run's figure
+(``qpbench simulate --plot``) and a scenario's runs overlaid (the report) are
+both drawn by :func:`closed_loop_figure`.
 """
 
 from __future__ import annotations
@@ -26,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["closed_loop_figure"]
+from ..sim import log as tick_log
+
+__all__ = ["closed_loop_figure", "run_figure"]
 
 #: Margin below ``d_safe`` at which a run counts as unsafe [m] (drawn as a line).
 UNSAFE_MARGIN = 5e-4
@@ -78,30 +82,30 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
     logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
-    has_d = any("d_min" in d.columns and np.isfinite(d["d_min"].to_numpy(float)).any() for d in logs.values())
+    has_d = any(tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any() for d in logs.values())
     if adaptive is None:
-        adaptive = any("kp_hat" in d.columns and np.nanstd(d["kp_hat"].to_numpy(float)) > 0 for d in logs.values())
+        adaptive = any(tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0 for d in logs.values())
     panels = ["tracking", "force"] + (["distance"] if has_d else []) + ["time", "speed"] + (["kp"] if adaptive else [])
     colours = dict(zip(logs, _palette(len(logs))))
 
     fig, axes = plt.subplots(len(panels), 1, figsize=(9.5, 1.9 * len(panels) + 0.8), sharex=True, squeeze=False)
     axes = {name: ax for name, ax in zip(panels, axes[:, 0])}
     for backend, d in logs.items():
-        t = d["t"].to_numpy(float)
+        t = d[tick_log.T].to_numpy(float)
         c = colours[backend]
         style = dict(color=c, lw=0.9, label=backend)
-        axes["tracking"].plot(t, _floor(np.abs(d["tracking_error"].to_numpy(float)) * 1e3, 1e-7), **style)
-        axes["force"].plot(t, _floor(np.abs(d["force_error"].to_numpy(float)), 1e-7), **style)
-        if has_d and "d_min" in d.columns:
-            axes["distance"].plot(t, d["d_min"].to_numpy(float) * 1e3, **style)
-        axes["time"].plot(t, d["solve_time_s"].to_numpy(float) * 1e6, color=c, lw=0.0, marker=".", ms=1.2,
+        axes["tracking"].plot(t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style)
+        axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style)
+        if has_d and tick_log.D_MIN in d.columns:
+            axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style)
+        axes["time"].plot(t, d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6, color=c, lw=0.0, marker=".", ms=1.2,
                           alpha=0.6, rasterized=True)
-        axes["speed"].plot(t, _floor(d["v_sq"].to_numpy(float), 1e-9), **style)
-        if adaptive and "kp_hat" in d.columns:
-            axes["kp"].plot(t, d["kp_hat"].to_numpy(float), **style)
+        axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style)
+        if adaptive and tick_log.KP_HAT in d.columns:
+            axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style)
         # ticks without the backend's own answer: a band along the top of the first panel
         not_own = np.zeros(len(d), dtype=bool)
-        for col in ("fallback", "zero_velocity"):
+        for col in (tick_log.FALLBACK, tick_log.ZERO_VELOCITY):
             if col in d.columns:
                 not_own |= d[col].to_numpy(bool)
         for a, b in _intervals(not_own):
@@ -119,7 +123,7 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
         if d_safe is not None:
             ax.axhline(d_safe * 1e3, color="black", ls="--", lw=0.8, label="d_safe")
             ax.axhline((d_safe - UNSAFE_MARGIN) * 1e3, color="red", ls=":", lw=0.9, label="d_safe - 0.5 mm")
-            lo = min(float(np.nanmin(d["d_min"].to_numpy(float))) for d in logs.values() if "d_min" in d.columns)
+            lo = min(float(np.nanmin(d[tick_log.D_MIN].to_numpy(float))) for d in logs.values() if tick_log.D_MIN in d.columns)
             ax.set_ylim(bottom=min(lo * 1e3 - 1.0, d_safe * 1e3 - 2.0))
         ax.set_ylabel("closest key point\nto an obstacle [mm]")
     ax = axes["time"]
@@ -152,3 +156,12 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
     finally:
         plt.close(fig)
     return path
+
+
+def run_figure(frame, summary: dict, path: str | Path) -> Path:
+    """The figure of one run (``qpbench simulate --plot``): its tick log and its summary's names."""
+    return closed_loop_figure(
+        {summary["backend"]: frame}, path,
+        title=f"{summary['scenario']} / {summary['backend']} / {summary['formulation']}",
+        d_safe=summary.get("d_safe"),
+    )

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import platform
-from importlib import metadata
 from pathlib import Path
 
 #: Distributions whose versions every report lists (missing ones print "-").
@@ -63,10 +62,6 @@ def machine_info() -> dict[str, str]:
 
 def package_versions(names: tuple[str, ...] = PACKAGES) -> dict[str, str]:
     """Installed version of each distribution in ``names`` ("-" when absent)."""
-    versions = {}
-    for name in names:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "-"
-    return versions
+    from ..formats import package_versions as installed
+
+    return {name: version or "-" for name, version in installed(names).items()}

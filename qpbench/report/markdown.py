@@ -27,14 +27,13 @@ from __future__ import annotations
 
 import datetime
 import math
-import re
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from ..profiles import PROFILES
 from . import tables
+from .tables import slug
 from .machine import machine_info, package_versions
 
 #: Significant digits of every float in the report.
@@ -71,11 +70,6 @@ def md_table(header: list[str], rows: list[list]) -> str:
     ) + "|"
     body = ["| " + " | ".join(r) + " |" for r in cells]
     return "\n".join([head, align, *body]) + "\n"
-
-
-def slug(text: str) -> str:
-    """File-name-safe form of a label."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
 
 
 _US = 1e6  # s -> us
@@ -422,34 +416,3 @@ def render(results: tables.Results, plot_files: dict[str, str] | None = None,
     if not results.closed_loop.empty:
         lines.extend(_closed_loop_section(results, plot_files))
     return "\n".join(lines)
-
-
-def write_report(paths: list[str | Path], out: str | Path, *, force: bool = False,
-                 plots: bool = True, prefer: str | None = None) -> Path:
-    """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
-
-    Args:
-        prefer: Which file's row to keep for a key present in several bench
-            CSVs (``first``/``last``; ``None``: refuse), see
-            :func:`qpbench.report.tables.read_results`.
-
-    Raises:
-        InputError: a path is missing or not a result CSV, a duplicate key or
-            mixed repeat counts without ``prefer``.
-        OutputExistsError: ``out/report.md`` exists and ``force`` is false.
-    """
-    from ..atomic import check_folder, check_output, write_text
-
-    out = Path(out)
-    report_path = out / "report.md"
-    check_folder(out)
-    if out.exists():
-        check_output(report_path, force=force)
-    results = tables.read_results(paths, prefer=prefer)
-    plot_files: dict[str, str] = {}
-    if plots:
-        from .plots import write_plots
-
-        plot_files = write_plots(results, out / "plots", relative_to=out)
-    write_text(report_path, render(results, plot_files))
-    return report_path

@@ -22,16 +22,16 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path
-from ..harness.closed_loop import velocity_columns
+from ..sim import log as tick_log
 from . import tables
-from .markdown import slug
+from .tables import slug
 
 log = logging.getLogger("qpbench.report")
 
 
-def _keypoint_columns(df: pd.DataFrame) -> list[str]:
-    """Per key point and obstacle distance columns ``d_<A>_<obstacle>`` of a tick log."""
-    return [c for c in df.columns if str(c).startswith("d_") and c != "d_min"]
+def _velocity_columns(df: pd.DataFrame) -> list[str]:
+    """Joint-velocity columns ``v_i`` of a tick log, in joint order."""
+    return tick_log.velocity_columns(tick_log.joint_count(df))
 
 
 def _pyplot():
@@ -134,7 +134,7 @@ def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path:
     d_safe = None
     for _, r in runs.iterrows():
         df = _read_log(r.get("log_path"))
-        if df is not None and "t" in df.columns and len(df):
+        if df is not None and tick_log.T in df.columns and len(df):
             logs[str(r["backend"])] = df
             value = r.get("d_safe")
             if value is not None and np.isfinite(float(value)):
@@ -142,7 +142,7 @@ def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path:
     if not logs:
         return False, False
     closed_loop_figure(logs, path, title=f"Closed loop, {scenario} ({formulation})", d_safe=d_safe)
-    done_v = _per_backend_figure(logs, velocity_columns, "v (rad/s)", 1.0,
+    done_v = _per_backend_figure(logs, _velocity_columns, "v (rad/s)", 1.0,
                                  f"Joint velocities, {scenario} ({formulation})", path_v)
     return True, done_v
 
@@ -157,7 +157,7 @@ def _per_backend_figure(logs: dict, columns, ylabel: str, scale: float, title: s
                              squeeze=False)
     for ax, (backend, d) in zip(axes[:, 0], with_cols.items()):
         for c in columns(d):
-            ax.plot(d["t"].to_numpy(float), d[c].to_numpy(float) * scale, lw=0.8, label=c)
+            ax.plot(d[tick_log.T].to_numpy(float), d[c].to_numpy(float) * scale, lw=0.8, label=c)
         ax.set_ylabel(f"{backend}\n{ylabel}", fontsize=8)
         ax.grid(True, alpha=0.3)
     axes[0, 0].set_title(title)
@@ -172,9 +172,9 @@ def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Pat
     logs = {}
     for _, r in runs.iterrows():
         df = _read_log(r.get("log_path"))
-        if df is not None and "t" in df.columns and len(df):
+        if df is not None and tick_log.T in df.columns and len(df):
             logs[str(r["backend"])] = df
-    return _per_backend_figure(logs, _keypoint_columns, "distance (mm)", 1e3,
+    return _per_backend_figure(logs, tick_log.distance_columns, "distance (mm)", 1e3,
                                f"Key-point distances, {scenario} ({formulation})", path)
 
 

@@ -47,8 +47,9 @@ tails of the per-scenario tables.
 
 from __future__ import annotations
 
-import hashlib
+import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,7 +57,9 @@ import numpy as np
 import pandas as pd
 
 from ..exceptions import InputError
+from ..formats import sha256_file
 from ..profiles import Tolerance, get_profile
+from ..sim.summary import STRUCTURED_FIGURES
 from ..statuses import CERTIFIED_INFEASIBLE
 
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
@@ -116,12 +119,19 @@ class Results:
     notes: list[str] = field(default_factory=list)
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
+def slug(text: str) -> str:
+    """File-name-safe form of a label (plot keys and file names of a report)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
+
+
+def _from_json(text):
+    """A list- or dict-valued cell of a closed-loop CSV (JSON text) as its value; empty stays NaN."""
+    if not isinstance(text, str):
+        return text
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text  # not JSON (a table written by hand): kept as text
 
 
 def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
@@ -198,6 +208,9 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
             bench.append(df)
             kind = "bench"
         elif set(CLOSED_LOOP_COLUMNS) <= cols:
+            for column in STRUCTURED_FIGURES:
+                if column in cols:
+                    df[column] = df[column].map(_from_json)
             df["log_path"] = [
                 str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
             ]
@@ -212,7 +225,7 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
                 + ") nor a closed-loop CSV (needs scenario, backend, status, log_file)",
                 path=path,
             )
-        files.append(ResultFile(path, kind, _sha256(path), len(df)))
+        files.append(ResultFile(path, kind, sha256_file(path), len(df)))
     notes: list[str] = []
     bench_df = pd.concat(bench, ignore_index=True) if bench else pd.DataFrame()
     if bench:

@@ -19,7 +19,7 @@ from . import log
 from .scenario import Scenario
 from .verdict import VIOLATION_TOL, judge
 
-__all__ = ["ACTIVE_MARGIN", "MAX_INTERVALS", "SETTLE_TIME", "summarize"]
+__all__ = ["ACTIVE_MARGIN", "MAX_INTERVALS", "SETTLE_TIME", "STRUCTURED_FIGURES", "jsonable", "summarize"]
 
 #: Time from which tracking and force errors are judged [s] (paper: transient about 1 s);
 #: the ``*_after_2s`` figures.
@@ -30,6 +30,9 @@ ACTIVE_MARGIN = 1e-4
 
 #: At most this many intervals per list in a summary.
 MAX_INTERVALS = 20
+
+#: Figures of a summary that are lists or dicts (JSON text in a CSV cell).
+STRUCTURED_FIGURES = ("infeasible_intervals", "obstacle_active_intervals", "scenario_overrides", "status_counts")
 
 
 def jsonable(overrides: dict) -> dict:

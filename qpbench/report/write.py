@@ -1,0 +1,46 @@
+"""``report.md`` and its figures from result CSVs: the one entry point of a report.
+
+:mod:`.tables` reads the CSVs, :mod:`.plots` draws the figures, :mod:`.markdown`
+renders the text; this module calls them in that order (neither of the last
+two imports the other).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import tables
+from .markdown import render
+
+__all__ = ["write_report"]
+
+
+def write_report(paths: list[str | Path], out: str | Path, *, force: bool = False,
+                 plots: bool = True, prefer: str | None = None) -> Path:
+    """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
+
+    Args:
+        prefer: Which file's row to keep for a key present in several bench
+            CSVs (``first``/``last``; ``None``: refuse), see
+            :func:`qpbench.report.tables.read_results`.
+
+    Raises:
+        InputError: a path is missing or not a result CSV, a duplicate key or
+            mixed repeat counts without ``prefer``.
+        OutputExistsError: ``out/report.md`` exists and ``force`` is false.
+    """
+    from ..atomic import check_folder, check_output, write_text
+
+    out = Path(out)
+    report_path = out / "report.md"
+    check_folder(out)
+    if out.exists():
+        check_output(report_path, force=force)
+    results = tables.read_results(paths, prefer=prefer)
+    plot_files: dict[str, str] = {}
+    if plots:
+        from .plots import write_plots
+
+        plot_files = write_plots(results, out / "plots", relative_to=out)
+    write_text(report_path, render(results, plot_files))
+    return report_path
