@@ -21,7 +21,7 @@ kernel          argument types warmed
 controller      the controller's packed tick build
                 (:mod:`qpbench.control.controller`; one type)
 post            the closed loop's sense, log and plant step
-                (:func:`qpbench.sim.loop.warm_post_kernel`; one type)
+                (:func:`qpbench.sim.tick_kernel.warm_post_kernel`; one type)
 network         the network's integrator (:func:`qpbench.rnn.network.kernel`)
                 for the controller's four QP shapes: with and without the
                 task's equality rows (``paper``, ``soft``), with and without

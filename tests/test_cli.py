@@ -213,12 +213,12 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
 
 def test_run_bench_subset_keeps_the_time_between_records():
     """`run --bench-every K` keeps every K-th record: an online backend then integrates K record periods per call."""
-    from qpbench.harness.pipeline import bench_subset as _bench_subset
+    from qpbench.harness.pipeline import bench_subset
     from qpbench.formats import read_problem_set
     from qpbench.harness.bench import record_period
 
     full = read_problem_set(Path(__file__).resolve().parents[1] / "problems" / "wall")
-    subset, refs = _bench_subset(full, None, 5)
+    subset, refs = bench_subset(full, None, 5)
     assert len(subset) == len(refs) == 400
     assert [r.tick for r in subset.records[:3]] == [0, 50, 100]
     assert record_period(full) == pytest.approx(0.01)

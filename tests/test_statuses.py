@@ -11,7 +11,6 @@ from __future__ import annotations
 import signal
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 
@@ -77,31 +76,6 @@ def test_a_dead_worker_is_worded_the_same_per_tick_and_in_the_loop(tmp_path):
     assert per_tick.status == "crashed" and per_tick.error == f"{words} during solve"
     assert row["status"] == "crashed" and row["error"] == f"{words} during the closed-loop run"
     assert death_message(3) == "worker process exited with code 3"
-
-
-def test_post_kernel_force_matches_contact_surface():
-    """The tick kernel's inline force law is the compiled twin of ContactSurface.force."""
-    from qpbench.sim.scenario import load_scenario
-    from qpbench.sim.tick_kernel import APPLIED, get_post_kernel, post_constants
-
-    scenario = load_scenario("wall")
-    ctrl, surface = scenario.make_controller(), scenario.make_surface()
-    assert surface.noise_std == 0.0
-    cols, cidx, ci, cf = post_constants(ctrl, surface, scenario.dt)
-    rng = np.random.default_rng(3)
-    post = get_post_kernel()
-    theta = scenario.theta0.astype(float)
-    for _ in range(50):
-        arrays = ctrl.build_arrays(theta.copy(), 0.0, ctrl.kp, ctrl.kd, False)
-        ee = arrays.ee + rng.normal(0.0, 0.02, 2)
-        previous = ee - rng.normal(0.0, 2e-4, 2)
-        sensed = np.array([previous[0], previous[1], 0.0, 0.0])
-        data = np.zeros((2, len(cols)))
-        force = post(theta.copy(), np.zeros(ctrl.n), ee, sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd,
-                     np.zeros(0), np.zeros(0), data, 1, ci, cf, 0.0, APPLIED, ctrl.kp, ctrl.kd, 0.0)
-        expected = surface.force(ee, (ee - previous) / scenario.dt)
-        assert force == pytest.approx(expected, rel=1e-12, abs=1e-12)
-        assert data[1, cidx["force"]] == force
 
 
 def test_set_with_a_typo_exits_2_before_any_solve(tmp_path, capsys, monkeypatch):

@@ -63,12 +63,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import atomic_path, check_folder, check_output, write_text
-    from ..exceptions import ParamError
     from ..jit import warmup_logged
     from ..selection import parse_overrides, select_backend
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
+
+    _check_arguments(args)
+    backend = select_backend(args.backend)
+    scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
+    progress = sys.stderr.isatty() and not args.quiet
+    warmup_logged(log)
+    result = simulate(
+        scenario, backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
+        every=args.every, dump=args.dump, progress=progress, profile=args.profile, deadline=args.deadline,
+    )
+    _write_outputs(args, scenario, result, progress)
+    _log_summary(result.summary)
+    return log_verdict(result.summary)
+
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """Every option checked, and no output in the way, before anything runs."""
+    from ..atomic import check_folder, check_output
+    from ..exceptions import ParamError
 
     if args.log is not None and Path(args.log).suffix not in (".csv", ".parquet"):
         raise ParamError(f"--log must end in .csv or .parquet, got {args.log}", key="--log")
@@ -98,14 +115,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise ParamError(f"--deadline must be a positive number of seconds, got {args.deadline}", key="--deadline")
-    backend = select_backend(args.backend)
-    scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
-    progress = sys.stderr.isatty() and not args.quiet
-    warmup_logged(log)
-    result = simulate(
-        scenario, backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
-        every=args.every, dump=args.dump, progress=progress, profile=args.profile, deadline=args.deadline,
-    )
+
+
+def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:
+    """The tick log, the summary, the figure, the snapshot and the animation asked for."""
+    from ..atomic import atomic_path, write_text
+
     s = result.summary
     if args.log is not None:
         with atomic_path(args.log) as tmp:
@@ -130,6 +145,10 @@ def run(args: argparse.Namespace) -> int:
         if args.animate is not None:
             animate(scenario, result.log, args.animate, fps=args.fps, speed=args.speed, progress=progress, title=title)
 
+
+def _log_summary(s: dict) -> None:
+    """Four INFO lines: ticks and fallbacks, errors after 2 s, limits and Kp_hat, time."""
+
     def fmt(x, spec=".3g"):
         return "-" if x is None else format(x, spec)
 
@@ -150,7 +169,6 @@ def run(args: argparse.Namespace) -> int:
     log.info("wall time %.3f s, real-time factor %s; %d ticks slower than dt = %g s%s", s["wall_time_s"],
              fmt(s["real_time_factor"]), s["deadline_misses"], s["dt"],
              "" if s["deadline_dropped"] is None else f", {s['deadline_dropped']} dropped past the deadline")
-    return log_verdict(s)
 
 
 def log_verdict(s: dict) -> int:

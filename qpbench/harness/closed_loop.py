@@ -95,35 +95,25 @@ def run_closed_loop(
     plugins: list[str] | None = None,
     run_budget: float | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop and tabulate them into ``out``.
+    """Run every (scenario, backend) pair in the loop and tabulate them into ``out``
+    (the module docstring says how; the table: :mod:`qpbench.harness.loop_rows`).
 
     Args:
-        scenarios: Scenario names or TOML paths.
-        backends: Backend names.
+        scenarios, backends: Scenario names or TOML paths; backend names (each once).
         out: Output folder (``closed_loop.csv`` and ``logs/``).
         duration: Simulated time per run [s]; ``None`` keeps each scenario's ``T``.
         formulation: ``paper`` (hard task, eq. 11) or ``soft``.
-        force: Replace an existing table and its logs.
-        resume: Keep the rows already done (same formulation and duration).
-        jobs: Runs in parallel, each in a worker process of its own; with 1 the
-            runs that are not isolated run in this process.
+        force, resume: Replace an existing table and its logs; keep its rows done under the same terms.
+        jobs: Runs in parallel, each in a worker process of its own (with 1, only isolated ones).
         on_row: Called with each new row as soon as it is written.
-        skip: Backend -> reason: those backends get a ``skipped`` row per scenario
-            instead of a run.
-        isolate: ``auto`` (backends whose class has ``risky = True``),
-            ``always`` or ``never``: an isolated run is made in a worker process
-            with a deadline; its death is a ``crashed`` row (with the signal),
-            its overrun a ``time_limit`` row (the worker killed).
-        run_time_limit: Deadline of an isolated run [s] (default: see
-            :func:`run_deadline`).
-        deadline: Per-tick deadline [s]: a later answer is dropped (default
-            none: every answer is applied; see :func:`qpbench.sim.loop.simulate`).
-        plugins: Plugin modules or ``.py`` files that register extra backends
-            (with those of ``QPBENCH_PLUGINS``); imported here and in the workers.
-        run_budget: Wall-time budget of each run [s] (default: none): a run
-            stops between ticks once it is spent (status ``budget``,
-            ``simulated_s`` how far it got; its log is the uncut run's first
-            ticks), the verdict judged on what was simulated.
+        skip: Backend -> reason: a ``skipped`` row per scenario instead of a run.
+        isolate: ``auto`` (backends whose class has ``risky = True``), ``always``
+            or ``never``: an isolated run is made in a worker process with a
+            deadline (``run_time_limit`` [s], default :func:`~qpbench.harness.loop_workers.run_deadline`).
+        deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
+        plugins: Plugin modules or ``.py`` files (with ``QPBENCH_PLUGINS``), imported here and in workers.
+        run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
+            it is spent (status ``budget``), the verdict judged on what was simulated.
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -144,23 +134,14 @@ def run_closed_loop(
     (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
 
     order = [(s, b) for s in scenarios for b in backends]
-    done = {(str(r["scenario"]), str(r["backend"])): r for r in previous_rows
-            if same_run(r, formulation, duration, run_budget)}
-    # rows of other pairs in a resumed table are kept, after this run's
-    others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
-    rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
-    skip = skip or {}
-    for key in order:
-        if key not in rows and key[1] in skip:
-            rows[key] = skipped_row(key[0], key[1], formulation, duration, skip[key[1]])
+    rows, others = _kept_rows(order, previous_rows, formulation, duration, run_budget, skip or {})
     todo = [k for k in order if k not in rows]
 
     def _table_rows():
         return [rows[k] for k in order if k in rows] + others
 
-    def _isolated(backend: str) -> bool:
+    def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
-
     def _emit(key, row):
         row["isolated"] = _isolated(key[1])
         row["run_budget_s"] = run_budget
@@ -172,20 +153,40 @@ def run_closed_loop(
     # (key, what to run, deadline of an isolated run or None)
     items = [((s, b), RunSpec(s, b, formulation, duration, str(out), deadline, run_budget),
               run_deadline(s, duration, run_time_limit) if _isolated(b) else None) for s, b in todo]
-    if jobs == 1:
-        for key, spec, deadline_s in items:
-            if deadline_s is None:
-                _emit(key, run_guarded(spec))
-            else:
-                run_in_workers([(key, spec, deadline_s)], 1, plugins, _emit)
-    else:
-        # every run in a worker of its own: a crash is that run's row, not the pool's end
-        run_in_workers(items, jobs, plugins, _emit)
+    _run_items(items, jobs, plugins, _emit)
     write_table(_table_rows(), csv_path)
     table = pd.read_csv(csv_path)
-    errors = int(table["status"].isin(FAILED_RUN_STATUSES).sum()) if len(table) else 0
-    not_ok = int((table["verdict"].isin(BAD_VERDICTS) | table["status"].isin(FAILED_RUN_STATUSES)).sum()) if len(table) else 0
-    return ClosedLoopOutcome(table, csv_path, errors, len(todo), len(order) - len(todo), not_ok)
+    failed = table["status"].isin(FAILED_RUN_STATUSES)
+    not_ok = int((table["verdict"].isin(BAD_VERDICTS) | failed).sum()) if len(table) else 0
+    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), len(todo), len(order) - len(todo), not_ok)
+
+
+def _run_items(items: list[tuple], jobs: int, plugins: list[str], emit: Callable) -> None:
+    """Make the runs: with one job, those not isolated in this process and the isolated ones
+    each in a worker; with more, every run in a worker of its own (a crash is that run's row,
+    not the pool's end)."""
+    if jobs > 1:
+        run_in_workers(items, jobs, plugins, emit)
+        return
+    for key, spec, deadline_s in items:
+        if deadline_s is None:
+            emit(key, run_guarded(spec))
+        else:
+            run_in_workers([(key, spec, deadline_s)], 1, plugins, emit)
+
+
+def _kept_rows(order: list[tuple[str, str]], previous_rows: list[dict], formulation: str, duration: float | None,
+               run_budget: float | None, skip: dict[str, str]) -> tuple[dict, list[dict]]:
+    """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
+    and the resumed table's rows of other pairs (kept, after this run's)."""
+    done = {(str(r["scenario"]), str(r["backend"])): r for r in previous_rows
+            if same_run(r, formulation, duration, run_budget)}
+    others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
+    rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
+    for key in order:
+        if key not in rows and key[1] in skip:
+            rows[key] = skipped_row(key[0], key[1], formulation, duration, skip[key[1]])
+    return rows, others
 
 
 def _check_arguments(scenarios, backends, duration, formulation, jobs, isolate, run_time_limit, deadline,

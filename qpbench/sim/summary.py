@@ -4,6 +4,55 @@
 dict; ``qpbench simulate --summary`` writes it, and each row of
 ``closed_loop.csv`` is that dict under the table's column names
 (:mod:`qpbench.harness.loop_rows`), nothing recomputed.
+
+Figures (statuses are those of the QP of the run's formulation at each tick; the
+status sets are :mod:`qpbench.statuses`'):
+
+- ``infeasible_ticks``: ticks the backend declared infeasible (status
+  ``primal_infeasible`` or ``dual_infeasible``), plus ticks with status
+  ``not_solved``: a backend that cannot classify a failure (qpsolvers'
+  route to DAQP, quadprog or HiGHS keeps only ``found=False``) reports
+  that, and on the controller's QPs such a failure is the infeasible
+  start. ``first_infeasible_t``, ``last_infeasible_t`` and
+  ``infeasible_intervals`` (runs as ``[first t, last t]``) are of these
+  ticks. A backend that stops on a budget (``max_iter``, ``time_limit``)
+  or fails (``error``) is not counted here.
+- ``non_optimal_ticks``: ticks whose QP was not solved to ``optimal``,
+  whatever the reason (a superset of the above; for the online ``rnn``
+  nearly every tick, since its state is applied after one tick of
+  integration, not at convergence).
+- ``status_counts``: the breakdown by status; ``error_ticks``,
+  ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
+  (an exception or an ``error`` status, an answer dropped past the
+  deadline or a budget, a non-finite answer). :func:`qpbench.sim.loop.simulate` adds, in
+  ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
+  none, every answer applied), ``deadline_misses`` (ticks whose solve
+  calls took longer than ``dt``: the loop did not keep up with its rate
+  there), ``deadline_dropped`` (answers dropped past the deadline;
+  ``None`` without one), ``raised_ticks`` (ticks whose
+  solve raised), ``fallback_errors`` (fallback solves that raised),
+  ``first_error`` (``"Type: message"`` of the first exception, else the
+  first error a backend reported; ``None`` when none), ``first_error_t``
+  [s], ``wall_budget_s`` (the loop's wall-time budget [s], ``None`` when
+  none) and ``stopped_early`` (the budget ran out before ``duration``).
+- ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s] (rectangle rule), the
+  joint-speed effort of the run.
+- ``duration`` is the simulated time asked for [s], ``simulated_s`` the
+  time simulated (``ticks * dt``, less than ``duration`` when stopped
+  early); ``real_time_factor`` is ``simulated_s / wall_time_s``.
+- ``verdict`` (``ok``, ``diverged``, ``limits``, ``unsafe``, ``failed``)
+  and ``verdict_reasons`` (plain text, ``"; "`` between reasons): see
+  :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
+  thresholds.
+
+``scenario_overrides`` holds the values set over the scenario file's
+(``qpbench simulate --set``), empty when none. ``fallback_ticks``
+applied the soft formulation's answer,
+``zero_velocity_ticks`` commanded zero. Errors "after 2 s" use the ticks
+with ``t >=`` :data:`SETTLE_TIME`; limit violations count ticks with an angle or a
+commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
+``obstacle_active_intervals`` lists, per (key point, obstacle), when it
+was within :data:`ACTIVE_MARGIN` of ``d_safe``.
 """
 
 from __future__ import annotations
@@ -60,79 +109,12 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
               wall_time_s: float, run_info: dict | None = None) -> dict:
     """Figures of a run (JSON-able; ``None`` where a figure does not exist) and its verdict.
 
-    Statuses are those of the QP of the run's formulation at each tick:
-
-    - ``infeasible_ticks``: ticks the backend declared infeasible (status
-      ``primal_infeasible`` or ``dual_infeasible``), plus ticks with status
-      ``not_solved``: a backend that cannot classify a failure (qpsolvers'
-      route to DAQP, quadprog or HiGHS keeps only ``found=False``) reports
-      that, and on the controller's QPs such a failure is the infeasible
-      start. ``first_infeasible_t``, ``last_infeasible_t`` and
-      ``infeasible_intervals`` (runs as ``[first t, last t]``) are of these
-      ticks. A backend that stops on a budget (``max_iter``, ``time_limit``)
-      or fails (``error``) is not counted here.
-    - ``non_optimal_ticks``: ticks whose QP was not solved to ``optimal``,
-      whatever the reason (a superset of the above; for the online ``rnn``
-      nearly every tick, since its state is applied after one tick of
-      integration, not at convergence).
-    - ``status_counts``: the breakdown by status; ``error_ticks``,
-      ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
-      (an exception or an ``error`` status, an answer dropped past the
-      deadline or a budget, a non-finite answer). :func:`qpbench.sim.loop.simulate` adds, in
-      ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
-      none, every answer applied), ``deadline_misses`` (ticks whose solve
-      calls took longer than ``dt``: the loop did not keep up with its rate
-      there), ``deadline_dropped`` (answers dropped past the deadline;
-      ``None`` without one), ``raised_ticks`` (ticks whose
-      solve raised), ``fallback_errors`` (fallback solves that raised),
-      ``first_error`` (``"Type: message"`` of the first exception, else the
-      first error a backend reported; ``None`` when none), ``first_error_t``
-      [s], ``wall_budget_s`` (the loop's wall-time budget [s], ``None`` when
-      none) and ``stopped_early`` (the budget ran out before ``duration``).
-    - ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s] (rectangle rule), the
-      joint-speed effort of the run.
-    - ``duration`` is the simulated time asked for [s], ``simulated_s`` the
-      time simulated (``ticks * dt``, less than ``duration`` when stopped
-      early); ``real_time_factor`` is ``simulated_s / wall_time_s``.
-    - ``verdict`` (``ok``, ``diverged``, ``limits``, ``unsafe``, ``failed``)
-      and ``verdict_reasons`` (plain text, ``"; "`` between reasons): see
-      :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
-      thresholds.
-
-    ``scenario_overrides`` holds the values set over the scenario file's
-    (``qpbench simulate --set``), empty when none. ``fallback_ticks``
-    applied the soft formulation's answer,
-    ``zero_velocity_ticks`` commanded zero. Errors "after 2 s" use the ticks
-    with ``t >=`` :data:`SETTLE_TIME`; limit violations count ticks with an angle or a
-    commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
-    ``obstacle_active_intervals`` lists, per (key point, obstacle), when it
-    was within :data:`ACTIVE_MARGIN` of ``d_safe``.
+    The figures are listed in the module docstring. ``run_info`` (from
+    :func:`qpbench.sim.loop.simulate`) adds the run's own counts and settings.
     """
     t = frame[log.T].to_numpy()
     dt = scenario.dt
     ticks = len(frame)
-    status = frame[log.STATUS]
-    infeasible = status.isin(INFEASIBLE_OR_UNCLASSIFIED).to_numpy()
-    non_optimal = (status != "optimal").to_numpy()
-    after = t >= SETTLE_TIME - 1e-12
-    n = controller.n
-    theta = frame[log.theta_columns(n)].to_numpy()
-    v = frame[log.velocity_columns(n)].to_numpy()
-    lim = controller.limits
-    tol = VIOLATION_TOL
-    angle_viol = ((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1)
-    speed_viol = ((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1)
-
-    def rms(x):
-        return _none(np.sqrt(np.mean(np.square(x)))) if x.size else None
-
-    def amax(x):
-        return _none(np.max(np.abs(x))) if x.size else None
-
-    te = frame[log.TRACKING_ERROR].to_numpy()
-    fe = frame[log.FORCE_ERROR].to_numpy()
-    v_sq = frame[log.V_SQ].to_numpy()
-    solve_time = frame[log.SOLVE_TIME]
     out = {
         "scenario": scenario.name,
         "scenario_overrides": jsonable(scenario.overrides),
@@ -142,8 +124,43 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
         "duration": scenario.duration,
         "ticks": ticks,
         "simulated_s": ticks * dt,
+    }
+    out.update(_status_figures(frame, t, dt))
+    out.update(_error_figures(frame, t))
+    dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
+    closest, active = _obstacle_figures(frame, t, dt, dcols, controller.d_safe)
+    out.update(closest)
+    out.update(_effort_figures(frame, controller, dt, t >= SETTLE_TIME - 1e-12))
+    out.update({
+        "wall_time_s": float(wall_time_s),
+        "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
+        "wall_budget_s": None,
+        "stopped_early": False,
+    })
+    out.update(active)
+    out.update(run_info or {})
+    verdict = judge(frame, scenario.verdict, d_safe=controller.d_safe, limits=controller.limits,
+                    obstacle_columns=dcols, summary=out)
+    out["verdict"] = verdict.verdict
+    out["verdict_reasons"] = verdict.text
+    return out
+
+
+def _rms(x: np.ndarray) -> float | None:
+    return _none(np.sqrt(np.mean(np.square(x)))) if x.size else None
+
+
+def _amax(x: np.ndarray) -> float | None:
+    return _none(np.max(np.abs(x))) if x.size else None
+
+
+def _status_figures(frame: pd.DataFrame, t: np.ndarray, dt: float) -> dict:
+    """Counts by tick status (:mod:`qpbench.statuses`), fallbacks, and when the QP was infeasible."""
+    status = frame[log.STATUS]
+    infeasible = status.isin(INFEASIBLE_OR_UNCLASSIFIED).to_numpy()
+    return {
         "infeasible_ticks": int(infeasible.sum()),
-        "non_optimal_ticks": int(non_optimal.sum()),
+        "non_optimal_ticks": int((status != "optimal").to_numpy().sum()),
         "fallback_ticks": int(frame[log.FALLBACK].sum()),
         "zero_velocity_ticks": int(frame[log.ZERO_VELOCITY].sum()),
         "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
@@ -153,49 +170,61 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
         "error_ticks": int((status == "error").sum()),
         "time_limit_ticks": int((status == "time_limit").sum()),
         "invalid_ticks": int((status == "invalid").sum()),
-        "tracking_rms_after_2s": rms(te[after]),
-        "tracking_max_after_2s": amax(te[after]),
-        "force_error_rms_after_2s": rms(fe[after]),
-        "force_error_max_after_2s": amax(fe[after]),
-        "force_final": _none(frame[log.FORCE].iloc[-1]) if ticks else None,
-        "min_obstacle_distance": None,
-        "min_obstacle_distance_key_point": None,
-        "min_obstacle_distance_obstacle": None,
-        "min_obstacle_distance_t": None,
-        "d_safe": controller.d_safe,
-        "joint_limit_violations": int(angle_viol.sum()),
-        "joint_velocity_limit_violations": int(speed_viol.sum()),
+    }
+
+
+def _error_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
+    """Tracking [m] and force [N] errors after :data:`SETTLE_TIME`, the last force [N]."""
+    after = t >= SETTLE_TIME - 1e-12
+    te = frame[log.TRACKING_ERROR].to_numpy()[after]
+    fe = frame[log.FORCE_ERROR].to_numpy()[after]
+    return {
+        "tracking_rms_after_2s": _rms(te),
+        "tracking_max_after_2s": _amax(te),
+        "force_error_rms_after_2s": _rms(fe),
+        "force_error_max_after_2s": _amax(fe),
+        "force_final": _none(frame[log.FORCE].iloc[-1]) if len(frame) else None,
+    }
+
+
+def _obstacle_figures(frame: pd.DataFrame, t: np.ndarray, dt: float, dcols: list[tuple[str, str]],
+                      d_safe: float) -> tuple[dict, dict]:
+    """The closest approach of a key point to an obstacle [m], and when each pair's row was
+    about active (within :data:`ACTIVE_MARGIN` of ``d_safe``; ``{}`` without obstacles)."""
+    closest = {"min_obstacle_distance": None, "min_obstacle_distance_key_point": None,
+               "min_obstacle_distance_obstacle": None, "min_obstacle_distance_t": None, "d_safe": d_safe}
+    if not dcols:
+        return closest, {}
+    D = frame[[log.distance_column(a, o) for a, o in dcols]].to_numpy()
+    k, c = divmod(int(np.argmin(D)), D.shape[1])
+    closest.update(min_obstacle_distance=_none(D[k, c]), min_obstacle_distance_key_point=dcols[c][0],
+                   min_obstacle_distance_obstacle=dcols[c][1], min_obstacle_distance_t=_none(t[k]))
+    near = D <= d_safe + ACTIVE_MARGIN
+    active = {f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS]
+              for c, (a, o) in enumerate(dcols) if near[:, c].any()}
+    return closest, {"obstacle_active_intervals": active}
+
+
+def _effort_figures(frame: pd.DataFrame, controller: Controller, dt: float, after: np.ndarray) -> dict:
+    """Joint-limit violations, joint motion and effort, the task residual, ``Kp_hat, Kd_hat``
+    and the solve times [s] of a run."""
+    n, lim, tol = controller.n, controller.limits, VIOLATION_TOL
+    ticks = len(frame)
+    theta = frame[log.theta_columns(n)].to_numpy()
+    v = frame[log.velocity_columns(n)].to_numpy()
+    v_sq = frame[log.V_SQ].to_numpy()
+    solve_time = frame[log.SOLVE_TIME]
+    return {
+        "joint_limit_violations": int(((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1).sum()),
+        "joint_velocity_limit_violations": int(((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1).sum()),
         "max_abs_theta": _none(np.max(np.abs(theta))) if ticks else None,
         "max_abs_v": _none(np.max(np.abs(v))) if ticks else None,
         "v_sq_max": _none(v_sq.max()) if ticks else None,
         "v2_integral": float(np.sum(v_sq) * dt),
-        "task_residual_max_after_2s": amax(frame[log.TASK_RESIDUAL].to_numpy()[after]),
+        "task_residual_max_after_2s": _amax(frame[log.TASK_RESIDUAL].to_numpy()[after]),
         "kp_hat_final": _none(frame[log.KP_HAT].iloc[-1]) if ticks else None,
         "kd_hat_final": _none(frame[log.KD_HAT].iloc[-1]) if ticks else None,
         "solve_time_median_s": _none(solve_time.median()),
         "solve_time_p99_s": _none(solve_time.quantile(0.99)),
         "solve_time_max_s": _none(solve_time.max()),
-        "wall_time_s": float(wall_time_s),
-        "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
-        "wall_budget_s": None,
-        "stopped_early": False,
     }
-    dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
-    if dcols:
-        D = frame[[log.distance_column(a, o) for a, o in dcols]].to_numpy()
-        flat = int(np.argmin(D))
-        k, c = divmod(flat, D.shape[1])
-        out["min_obstacle_distance"] = _none(D[k, c])
-        out["min_obstacle_distance_key_point"] = dcols[c][0]
-        out["min_obstacle_distance_obstacle"] = dcols[c][1]
-        out["min_obstacle_distance_t"] = _none(t[k])
-        # when each (key point, obstacle) pair is at its safety distance (row about active)
-        near = D <= controller.d_safe + ACTIVE_MARGIN
-        out["obstacle_active_intervals"] = {
-            f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS] for c, (a, o) in enumerate(dcols) if near[:, c].any()
-        }
-    out.update(run_info or {})
-    verdict = judge(frame, scenario.verdict, d_safe=controller.d_safe, limits=lim, obstacle_columns=dcols, summary=out)
-    out["verdict"] = verdict.verdict
-    out["verdict_reasons"] = verdict.text
-    return out

@@ -56,11 +56,7 @@ def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mo
             return -1.0
     row = data[k]
     dt = cf[_CF_DT]
-    c_theta = ci[0]
-    c_v = ci[1]
-    c_ee = ci[2]
-    c_d = ci[3]
-    c_force = ci[4]
+    c_theta, c_v, c_ee, c_d, c_force = ci[0], ci[1], ci[2], ci[3], ci[4]
     row[0] = t
     row[ci[5]] = 1.0 if mode == FALLBACK else 0.0
     row[ci[6]] = 1.0 if mode == ZERO else 0.0
@@ -77,21 +73,15 @@ def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mo
     row[ci[10]] = kp
     row[ci[11]] = kd
     # sense: velocity by finite difference, spring-damper force
-    if k == 0:
-        xd0 = 0.0
-        xd1 = 0.0
-    else:
+    xd0 = xd1 = 0.0
+    if k > 0:
         xd0 = (ee[0] - sensed[0]) / dt
         xd1 = (ee[1] - sensed[1]) / dt
-    sensed[0] = ee[0]
-    sensed[1] = ee[1]
-    sensed[2] = xd0
-    sensed[3] = xd1
+    sensed[0], sensed[1], sensed[2], sensed[3] = ee[0], ee[1], xd0, xd1
     # Compiled twin of ContactSurface.force (noise-free; surf = [nx, ny, n . point, stiffness,
     # damping, Fd] in cf): kept inline so the kernel stays one call per tick with no Python object
-    # inside; tests/test_loop.py::test_post_kernel_force_matches_contact_surface checks they agree.
-    nx = cf[_CF_SURF]
-    ny = cf[_CF_SURF + 1]
+    # inside; tests/test_tick_kernel.py::test_post_kernel_force_matches_contact_surface checks they agree.
+    nx, ny = cf[_CF_SURF], cf[_CF_SURF + 1]
     delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
     force = 0.0
     if delta > 0.0:
@@ -111,8 +101,7 @@ def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mo
     row[c_ee + 2] = xd[0]
     row[c_ee + 3] = xd[1]
     row[c_ee + 4] = cf[_CF_TANGENT] * (ee[0] - xd[0]) + cf[_CF_TANGENT + 1] * (ee[1] - xd[1])
-    r0 = b0[0]
-    r1 = b0[1]
+    r0, r1 = b0[0], b0[1]
     for j in range(n):
         r0 -= J[0, j] * v[j]
         r1 -= J[1, j] * v[j]
