@@ -4,8 +4,15 @@
 - :mod:`.timing`: the timed region and state restoration between repeats;
 - :mod:`.guard`: guarded in-process solves (exceptions, time limit, non-finite answers);
 - :mod:`.isolation`: solves in a worker process (hangs and crashes);
+- :mod:`.workers`: starting, stopping and wording the death of a worker process
+  (per-tick isolation and isolated closed-loop runs alike);
 - :mod:`.results`: CSV rows appended as produced, read back on resume;
-- :mod:`.plugins`: extra backend modules (``--plugin``, ``QPBENCH_PLUGINS``).
+- :mod:`.plugins`: extra backend modules (``--plugin``, ``QPBENCH_PLUGINS``);
+- :mod:`.closed_loop`: :func:`run_closed_loop` (``qpbench closed-loop``), with
+  :mod:`.loop_run` (one run), :mod:`.loop_workers` (isolated runs) and
+  :mod:`.loop_rows` (``closed_loop.csv``);
+- :mod:`.pipeline`: :func:`run_all` (``qpbench run``): problem sets, bench,
+  closed loop, report.
 """
 
 from .bench import BenchConfig, BenchSummary, is_failure, run_bench, sequences
