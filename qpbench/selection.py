@@ -137,7 +137,10 @@ def select_backends(value: str | list[str] | None, option: str = "--backends") -
     names = parse_list(value or "all", option)
     if names == ["all"]:
         return list(backend_names(available_only=True))
-    resolved = parse_list([resolve_name(name) for name in names], option)  # a typo gets a suggestion
+    resolved = [resolve_name(name) for name in names]  # the registered spelling; a typo gets a suggestion
+    for i, name in enumerate(resolved):
+        if name in resolved[:i]:
+            raise ParamError(f"'{names[i]}' listed twice in {','.join(names)} (both are '{name}')", key=option)
     for name in resolved:
         get_backend(name)  # raises BackendNotFound with the reason
     return resolved
