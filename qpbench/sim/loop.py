@@ -76,6 +76,8 @@ from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constant
 __all__ = ["SimResult", "resolve_backend", "simulate", "write_dump"]
 
 log = logging.getLogger(__name__)
+#: One line per solve, shown by ``qpbench -vv`` (the CLI sets its level).
+solve_log = logging.getLogger("qpbench.solves")
 
 
 class _Raised:
@@ -276,6 +278,7 @@ class _Run:
         kp, kd = ctrl.kp, ctrl.kd
         v = np.zeros(ctrl.n)
         bar = None
+        verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
         if progress:
             from tqdm import tqdm
 
@@ -313,6 +316,9 @@ class _Run:
             if force < 0.0:
                 status, v, force = self._without_answer(k, t, sol, solve_s, t0, arrays, kp, kd, v)
             statuses.append(status)
+            if verbose:
+                solve_log.debug("%s %s tick %d (t = %.3f s): %s in %.1f µs", self.scenario.name, be.name, k, t,
+                                status, solve_s * 1e6)
             if noisy:
                 force += surface.noise()
                 data[k, c_force] = force
