@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
-    check_output(out, kind="dir")
+    check_output(out, force=True, kind="dir")  # a folder (or nothing); its scaling.csv is checked below
     if (out / SUMMARY_NAME).exists() and not (args.force or args.resume):
         from ..exceptions import OutputExistsError
 
