@@ -123,6 +123,7 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
 
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     m = frame[frame["status"] == "measured"]
     backends = sorted(m["backend"].unique())
@@ -144,6 +145,10 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
         ax.axhline(TICK_S * 1e6, color="k", lw=0.8, ls=":")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ticks = sorted(a[xcol].unique())
+        if ticks:  # the measured sizes as plain numbers
+            ax.set_xticks(ticks, [f"{int(v):,}" for v in ticks])
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel(label)
         ax.set_ylabel("median solve time per tick [us]")
         ax.set_title(f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)", fontsize=9)

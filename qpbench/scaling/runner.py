@@ -72,9 +72,13 @@ _MATRIX_FORMATS = {
 
 def matrix_format(name: str) -> str:
     """``dense``, ``sparse`` or ``unknown`` (a plugin's backend that does not say)."""
-    from ..backends import _registry
+    from ..backends import backend_class
+    from ..exceptions import QpbenchError
 
-    declared = getattr(_registry().get(name), "matrix_format", None)
+    try:
+        declared = getattr(backend_class(name), "matrix_format", None)
+    except QpbenchError:
+        declared = None
     return declared or _MATRIX_FORMATS.get(name, "unknown")
 
 
