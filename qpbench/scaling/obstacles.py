@@ -77,25 +77,30 @@ def _outer_normal(gen: GeneratedArm, i: int) -> np.ndarray:
     return normal if normal @ side >= 0 else -normal
 
 
+def _clear_offset(xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.ndarray, want: float) -> float:
+    """Smallest offset along ``u`` (1 mm steps from the one that puts the cloud's point nearest
+    the arm ``want`` away from ``anchor``) at which the arm clears the cloud by ``want``."""
+    offset = want + float(np.max(-(pts @ u)))
+    for _ in range(2000):
+        if min_key_point_distance(xy, anchor + offset * u + pts) >= want:
+            return offset
+        offset += 0.001
+    raise RuntimeError("no clear place for the cloud")  # pragma: no cover - 2 m of steps clear a 1 m arm
+
+
 def place_cloud(gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud") -> PointCloudObstacle:
     """The cloud beside ``gen`` at ``theta0``: every key point at least ``d_safe + clearance`` [m] from every point.
 
-    The disk starts at the middle key point's outer normal and steps outwards
-    until the whole arm clears it by ``d_safe + clearance`` (a strongly bent
-    arm may curl towards it); it moves back towards the arm at ``spec.speed``.
+    The disk starts on the middle key point's outer normal (then, if nearer,
+    its inner one) and steps outwards by 1 mm until the whole arm clears it by
+    ``d_safe + clearance`` (a bent arm may curl towards it); the side that
+    needs the smaller step wins. It moves back towards the arm at ``spec.speed``.
     """
     xy = gen.key_point_positions()
     i = len(gen.key_points) // 2
     u = _outer_normal(gen, i)
     pts = cloud_points(spec.points, spec.seed)
-    reach = float(np.max(np.hypot(pts[:, 0], pts[:, 1]))) if spec.points > 1 else 0.0
     want = d_safe + spec.clearance
-    offset = reach + want
-    for _ in range(1000):
-        placed = xy[i] + offset * u + pts
-        if min_key_point_distance(xy, placed) >= want:
-            break
-        offset += 0.002
-    else:  # pragma: no cover - the arm is bounded, 2 m of steps always clear it
-        raise RuntimeError("no clear place for the cloud")
-    return PointCloudObstacle(name, placed, velocity=-spec.speed * u)
+    offset, side = min((_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0)))
+    u = u if side == 0 else -u
+    return PointCloudObstacle(name, xy[i] + offset * u + pts, velocity=-spec.speed * u)
