@@ -110,7 +110,7 @@ class ScalingConfig:
     seed: int = 0
     profile: str = "default"
     dense_limit: int = 1_000_000
-    slow_limit: float = 0.05
+    slow_limit: float = 0.02
 
 
 def _cell(value) -> str:
