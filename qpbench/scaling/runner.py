@@ -104,7 +104,7 @@ class ScalingConfig:
     sizes: list[Size]
     driver: str = "daqp"
     duration: float = 0.3
-    every: int = 10
+    every: int = 5
     repeat: int = 3
     build_repeat: int = 20
     seed: int = 0
