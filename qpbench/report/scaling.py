@@ -238,7 +238,9 @@ def write_scaling_report(folder, out, force: bool = False, plots: bool = True, q
         raise InputError("no rows", path=Path(folder) / "scaling.csv")
     out = Path(out)
     md = out / "scaling.md"
-    check_output(md, force=force)
+    check_output(out, force=True, kind="dir")  # a folder or nothing yet
+    if md.exists():
+        check_output(md, force=force)
     out.mkdir(parents=True, exist_ok=True)
     fitted = fits(frame)
     image = None

@@ -233,6 +233,7 @@ def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
     text = scenario_toml(size, gen, cloud, config.duration)
     write_text(path, text)
     scenario = parse_scenario(text, path)
+    (out / "sets").mkdir(exist_ok=True)
     result = simulate(scenario, config.driver, every=config.every, dump=out / "sets" / size.name)
     frame = result.log
     thetas = frame[[f"theta_{i}" for i in range(size.links)]].to_numpy()
