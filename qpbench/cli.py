@@ -31,6 +31,7 @@ COMMANDS = {
     "list": "list_",
     "export": "export",
     "warmup": "warmup",
+    "scaling": "scaling",
 }
 
 #: Shown at the end of ``qpbench --help``.

@@ -29,7 +29,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..report import write_report
+    from ..report.scaling import is_scaling_dir, write_scaling_report
 
-    path = write_report(args.results, args.out, force=args.force, plots=not args.no_plots, prefer=args.prefer)
-    log.info("wrote %s", path)
+    scaling = [r for r in args.results if is_scaling_dir(r)]  # folders written by ``qpbench scaling``
+    for folder in scaling:
+        log.info("wrote %s", write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots))
+    rest = [r for r in args.results if r not in scaling]
+    if rest:
+        path = write_report(rest, args.out, force=args.force, plots=not args.no_plots, prefer=args.prefer)
+        log.info("wrote %s", path)
     return 0

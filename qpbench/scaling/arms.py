@@ -1,0 +1,141 @@
+"""Generated planar arms for the scaling study: n links, key points, a start in contact.
+
+An arm of ``n`` links has link lengths summing to :data:`REACH` (the paper
+arm's ``0.3 + 0.4 + 0.15 + 0.15 = 1.0`` m), drawn from a seed: ``l_i = REACH
+w_i / sum(w)`` with ``w_i`` uniform in [0.5, 1.5], so no link is more than
+three times another. Its key points are the paper's rule generalised
+(:func:`qpbench.robot.kinematics.default_key_points`): ``p`` evenly spaced
+points on every link and the joints J2..Jn, ``a = n p + (n - 1)`` key points
+(``p = 1``, ``n = 4``: the paper's A1..A7).
+
+The start ``theta0`` puts the end effector where the impedance task wants it
+at rest in contact (paper eq. 4): ``x_d(0) + (Fd / Kp) n``, the desired point
+pushed ``Fd/Kp`` along the pressing direction, so that ``b0 = xdot_d`` and the
+first ticks' QPs are feasible. The arm is a bent arc: every relative angle
+but the first is the same ``c``, found by bisection so that the distance from
+the base to the end effector is ``|x*|``; the first joint then turns the whole
+chain onto ``x*`` (exact, no iterative inverse kinematics). ``|c| <= 2 pi / n``
+keeps every joint inside the limits ``+-3`` rad for ``n >= 4``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exceptions import ParamError
+from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
+
+__all__ = ["REACH", "ArmSpec", "GeneratedArm", "generate_arm", "link_lengths", "bent_arm_angles"]
+
+#: Sum of the link lengths of every generated arm in [m] (the paper arm's reach).
+REACH = 1.0
+#: Joint-angle limits in [rad] (the paper's, for every joint).
+THETA_LIMIT = 3.0
+#: Joint-velocity limits in [rad/s] (the paper's, for every joint).
+VELOCITY_LIMIT = 1.0
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """What to generate.
+
+    Attributes:
+        links: Number of links ``n`` (>= 2).
+        points_per_link: Key points ``p`` per link (>= 1), besides the joints.
+        seed: Seed of the link lengths.
+    """
+
+    links: int
+    points_per_link: int
+    seed: int = 0
+
+    def __post_init__(self):
+        if int(self.links) < 2:
+            raise ParamError(f"an arm needs at least 2 links, got {self.links}", key="links")
+        if int(self.points_per_link) < 1:
+            raise ParamError(f"points_per_link must be >= 1, got {self.points_per_link}", key="points_per_link")
+
+    @property
+    def key_point_count(self) -> int:
+        """``a = n p + (n - 1)``: p points per link and the joints J2..Jn."""
+        return self.links * self.points_per_link + self.links - 1
+
+
+@dataclass
+class GeneratedArm:
+    """An arm, its key points and a start in contact.
+
+    Attributes:
+        spec: What was asked for.
+        arm: The chain (link lengths in [m]).
+        key_points: Its key points.
+        theta0: Start joint angles in [rad], shape (n,).
+        target: End-effector position at ``theta0`` in [m].
+    """
+
+    spec: ArmSpec
+    arm: PlanarArm
+    key_points: KeyPoints
+    theta0: np.ndarray
+    target: np.ndarray
+
+    def key_point_positions(self, theta=None) -> np.ndarray:
+        """Key-point positions in [m], shape (a, 2), at ``theta`` (default ``theta0``)."""
+        theta = self.theta0 if theta is None else theta
+        return self.arm.points(theta, self.key_points.links, self.key_points.fracs)
+
+
+def link_lengths(n: int, seed: int = 0, reach: float = REACH) -> np.ndarray:
+    """Link lengths in [m] summing to ``reach``, ``l_i`` proportional to uniform [0.5, 1.5] draws."""
+    rng = np.random.default_rng([int(seed), int(n), 7919])
+    w = rng.uniform(0.5, 1.5, size=int(n))
+    return reach * w / w.sum()
+
+
+def _reach_at(lengths: np.ndarray, c: float) -> float:
+    arm = PlanarArm(lengths)
+    theta = np.full(lengths.size, c)
+    theta[0] = 0.0
+    return float(np.hypot(*arm.end_effector(theta)))
+
+
+def bent_arm_angles(lengths, target) -> np.ndarray:
+    """Joint angles [rad] of the bent arc reaching ``target`` [m] exactly (module docstring).
+
+    Raises:
+        ParamError: ``target`` is out of reach (farther than the arm's length
+            or nearer than the tightest arc with ``|c| <= 2 pi / n``).
+    """
+    lengths = np.asarray(lengths, dtype=float)
+    n = lengths.size
+    target = np.asarray(target, dtype=float)
+    dist = float(np.hypot(*target))
+    lo, hi = 0.0, 2.0 * math.pi / n * 0.95
+    if not _reach_at(lengths, hi) < dist < _reach_at(lengths, lo):
+        raise ParamError(f"target {target.tolist()} m is out of reach of a bent {n}-link arm", key="target")
+    for _ in range(100):  # the reach falls monotonically as the arc bends on [0, 2 pi / n)
+        mid = 0.5 * (lo + hi)
+        if _reach_at(lengths, mid) > dist:
+            lo = mid
+        else:
+            hi = mid
+    theta = np.full(n, 0.5 * (lo + hi))
+    theta[0] = 0.0
+    ee = PlanarArm(lengths).end_effector(theta)
+    theta[0] = math.atan2(target[1], target[0]) - math.atan2(ee[1], ee[0])
+    theta[0] = math.remainder(theta[0], 2.0 * math.pi)
+    return theta
+
+
+def generate_arm(spec: ArmSpec, target) -> GeneratedArm:
+    """The arm of ``spec`` with its end effector at ``target`` [m] (module docstring)."""
+    lengths = link_lengths(spec.links, spec.seed)
+    arm = PlanarArm(lengths)
+    theta0 = bent_arm_angles(lengths, target)
+    if np.any(np.abs(theta0) > THETA_LIMIT):
+        raise ParamError(f"start angles {theta0.tolist()} leave the joint limits +-{THETA_LIMIT} rad", key="theta0")
+    key_points = default_key_points(spec.links, spec.points_per_link, include_joints=True)
+    return GeneratedArm(spec, arm, key_points, theta0, arm.end_effector(theta0))

@@ -1,0 +1,98 @@
+"""Power laws fitted to solve times, and where the curves cross (scaling study).
+
+A backend's median solve time ``T`` against a size ``s`` (variables or rows)
+is fitted as ``T = C s^k``: ordinary least squares of ``log10 T`` on
+``log10 s`` over the sizes of one grid axis. The slope ``k`` comes with its
+standard error ``se = sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (N sizes;
+undefined, NaN, for N = 2, where the line goes through both points).
+
+``k = 1``: time doubles when the size doubles; ``k = 2``: quadruples. A
+slope near 0 says the size does not matter there (fixed costs dominate: the
+Python call, the set-up).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["PowerFit", "crossing", "fit_power_law", "first_above"]
+
+
+@dataclass(frozen=True)
+class PowerFit:
+    """``T = 10**intercept * s**slope``, from ``points`` sizes; ``slope_se`` its standard error."""
+
+    slope: float
+    slope_se: float
+    intercept: float
+    points: int
+
+    def predict(self, s) -> np.ndarray:
+        """Fitted time at size(s) ``s`` (same units as the data)."""
+        return 10.0 ** (self.intercept + self.slope * np.log10(np.asarray(s, dtype=float)))
+
+    def text(self) -> str:
+        """``1.23 +- 0.05`` (``+- n/a`` with two points)."""
+        if math.isnan(self.slope):
+            return "-"
+        se = "n/a" if math.isnan(self.slope_se) else f"{self.slope_se:.2f}"
+        return f"{self.slope:.2f} +- {se}"
+
+
+def fit_power_law(sizes, times) -> PowerFit:
+    """Least squares of ``log10 times`` on ``log10 sizes`` (module docstring).
+
+    Non-positive or non-finite pairs are left out; fewer than two distinct
+    sizes give a NaN fit.
+    """
+    s = np.asarray(sizes, dtype=float)
+    t = np.asarray(times, dtype=float)
+    keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
+    x, y = np.log10(s[keep]), np.log10(t[keep])
+    if x.size < 2 or np.ptp(x) == 0:
+        return PowerFit(math.nan, math.nan, math.nan, int(x.size))
+    xm = x.mean()
+    sxx = float(((x - xm) ** 2).sum())
+    slope = float(((x - xm) * (y - y.mean())).sum() / sxx)
+    intercept = float(y.mean() - slope * xm)
+    if x.size > 2:
+        rss = float(((y - intercept - slope * x) ** 2).sum())
+        se = math.sqrt(rss / (x.size - 2) / sxx)
+    else:
+        se = math.nan
+    return PowerFit(slope, se, intercept, int(x.size))
+
+
+def first_above(sizes, values, limit: float):
+    """The first size (in increasing order) from which every value exceeds ``limit``, else None."""
+    order = np.argsort(np.asarray(sizes, dtype=float), kind="stable")
+    s = np.asarray(sizes)[order]
+    v = np.asarray(values, dtype=float)[order]
+    for i in range(s.size):
+        if np.all(v[i:] > limit):
+            return s[i].item()
+    return None
+
+
+def crossing(sizes, slower, faster):
+    """The first size from which ``faster`` stays strictly below ``slower``, else None.
+
+    ``slower`` and ``faster`` are times per size (NaN where not measured;
+    such sizes are left out).
+    """
+    s = np.asarray(sizes, dtype=float)
+    a = np.asarray(slower, dtype=float)
+    b = np.asarray(faster, dtype=float)
+    keep = np.isfinite(a) & np.isfinite(b)
+    return first_above(s[keep], (a - b)[keep], 0.0)
+
+
+def extrapolated_crossing(fit_a: PowerFit, fit_b: PowerFit) -> float | None:
+    """Size where two fitted lines meet (``None`` when parallel or not fitted)."""
+    if any(math.isnan(v) for v in (fit_a.slope, fit_b.slope)) or fit_a.slope == fit_b.slope:
+        return None
+    x = (fit_b.intercept - fit_a.intercept) / (fit_a.slope - fit_b.slope)
+    return float(10.0 ** x)

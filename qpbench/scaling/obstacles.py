@@ -1,0 +1,106 @@
+"""Point-cloud obstacles beside a generated arm, approaching it (scaling study).
+
+How a cloud gives rows: the paper keeps every (key point, obstacle point)
+pair (section 2.2, obstacles as key points ``B_j``), one velocity-damper row
+each (eqs. 8-10), and so does the controller for a ``points`` obstacle
+(:class:`qpbench.robot.environment.PointCloudObstacle`): a cloud of ``m``
+points facing ``a`` key points gives ``a m`` rows, every tick, whether near or
+far (a fixed row count, as a solver with a persistent object needs). That
+per-point rule is what makes thousands of rows: 7 key points and 1,000 points
+are 7,000 rows of 4 variables. (The alternative, one row per key point and
+cloud through the cloud's nearest point, gives ``a`` rows per cloud whatever
+its size: it would measure the distance query, not the solver.)
+
+The cloud: ``m`` points spread uniformly over a disk of radius
+:data:`CLOUD_RADIUS`, drawn from a seed (one point: the disk's centre). The
+disk is put on the outer side of the arm at its middle key point (the side
+away from the chord base -> end effector), its nearest point ``d_safe +
+clearance`` from the nearest key point, and moves towards the arm at
+``speed`` [m/s]: its damper rows start inactive and become active within the
+first tenths of a second (``h = k (dist - d_safe) - u . Bdot`` reaches 0 at
+``dist - d_safe = speed / k``), so the dumped ticks hold both.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..robot.environment import PointCloudObstacle
+from .arms import GeneratedArm
+
+__all__ = ["CLOUD_RADIUS", "CloudSpec", "cloud_points", "min_key_point_distance", "place_cloud"]
+
+#: Radius of the disk the cloud's points fill, in [m].
+CLOUD_RADIUS = 0.03
+
+
+@dataclass(frozen=True)
+class CloudSpec:
+    """A cloud of ``points`` points, ``clearance`` [m] beyond ``d_safe``, moving at ``speed`` [m/s]."""
+
+    points: int
+    clearance: float = 0.015
+    speed: float = 0.1
+    seed: int = 0
+
+
+def cloud_points(m: int, seed: int = 0, radius: float = CLOUD_RADIUS) -> np.ndarray:
+    """``m`` points uniform over a disk of ``radius`` [m] centred at 0, shape (m, 2); one point: the centre."""
+    if m == 1:
+        return np.zeros((1, 2))
+    rng = np.random.default_rng([int(seed), int(m), 104729])
+    r = radius * np.sqrt(rng.uniform(0.0, 1.0, m))
+    a = rng.uniform(0.0, 2.0 * math.pi, m)
+    return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+def min_key_point_distance(key_xy: np.ndarray, points: np.ndarray) -> float:
+    """Smallest distance in [m] between key points (a, 2) and cloud points (m, 2)."""
+    best = math.inf
+    for chunk in np.array_split(points, max(1, points.shape[0] // 256)):
+        d = np.sqrt(((key_xy[:, None, :] - chunk[None, :, :]) ** 2).sum(axis=2))
+        best = min(best, float(d.min()))
+    return best
+
+
+def _outer_normal(gen: GeneratedArm, i: int) -> np.ndarray:
+    """Unit normal at key point ``i`` pointing away from the chord base -> end effector."""
+    xy = gen.key_point_positions()
+    link = int(gen.key_points.links[i])
+    phi = float(np.cumsum(gen.theta0)[link])
+    normal = np.array([-math.sin(phi), math.cos(phi)])
+    chord = gen.target / np.linalg.norm(gen.target)
+    side = xy[i] - (xy[i] @ chord) * chord  # the key point's offset from the chord
+    return normal if normal @ side >= 0 else -normal
+
+
+def _clear_offset(xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.ndarray, want: float) -> float:
+    """Smallest offset along ``u`` (1 mm steps from the one that puts the cloud's point nearest
+    the arm ``want`` away from ``anchor``) at which the arm clears the cloud by ``want``."""
+    offset = want + float(np.max(-(pts @ u)))
+    for _ in range(2000):
+        if min_key_point_distance(xy, anchor + offset * u + pts) >= want:
+            return offset
+        offset += 0.001
+    raise RuntimeError("no clear place for the cloud")  # pragma: no cover - 2 m of steps clear a 1 m arm
+
+
+def place_cloud(gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud") -> PointCloudObstacle:
+    """The cloud beside ``gen`` at ``theta0``: every key point at least ``d_safe + clearance`` [m] from every point.
+
+    The disk starts on the middle key point's outer normal (then, if nearer,
+    its inner one) and steps outwards by 1 mm until the whole arm clears it by
+    ``d_safe + clearance`` (a bent arm may curl towards it); the side that
+    needs the smaller step wins. It moves back towards the arm at ``spec.speed``.
+    """
+    xy = gen.key_point_positions()
+    i = len(gen.key_points) // 2
+    u = _outer_normal(gen, i)
+    pts = cloud_points(spec.points, spec.seed)
+    want = d_safe + spec.clearance
+    offset, side = min((_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0)))
+    u = u if side == 0 else -u
+    return PointCloudObstacle(name, xy[i] + offset * u + pts, velocity=-spec.speed * u)

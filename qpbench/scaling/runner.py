@@ -1,0 +1,306 @@
+"""The scaling study: per size, dump ticks of the closed loop, bench them, summarise.
+
+For each size (:mod:`qpbench.scaling.sizes`), in the output folder ``DIR``:
+
+1. ``scenarios/<size>.toml``: the size as a scenario file;
+2. ``sets/<size>/``: the closed loop run for ``duration`` seconds with the
+   ``driver`` backend (an exact QP solver), every ``every``-th tick's QP kept
+   as a problem set (:func:`qpbench.sim.loop.simulate` with ``dump``). The
+   closed loop, not a scripted trajectory: the QPs are the ones the
+   controller meets (the arm in contact, its key points pushed by the
+   approaching cloud, obstacle rows becoming active), and nothing in them
+   depends on timing;
+3. the time to build one tick's QP (``Controller.build`` at each kept tick's
+   state; the minimum of ``build_repeat`` calls per tick, as a solve's
+   ``wall_time_min_s``);
+4. ``bench/<size>.csv``: :func:`qpbench.harness.bench.run_bench` on the set,
+   every backend that is not skipped: the same timed region, warm-up, state
+   carried tick to tick, references (Clarabel and PIQP at 1e-10, cached beside
+   the set) and metrics as ``qpbench bench``, rows appended and ``fsync``-ed,
+   resumable;
+5. ``scaling.csv``: one row per (size, backend), appended once the size is
+   done (:data:`COLUMNS`). A resumed run skips the sizes it holds and resumes
+   the bench CSV of an interrupted one.
+
+Skips (a ``skipped`` row with the reason, never a run of minutes): a
+dense-only backend (:func:`matrix_format`) on a size whose inequality matrix
+has more than ``dense_limit`` entries (``n x rows``); any backend whose median
+solve on a smaller size of the same axis took longer than ``slow_limit``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .sizes import Size, generate, qp_shape, scenario_toml
+
+log = logging.getLogger("qpbench.scaling")
+
+__all__ = ["COLUMNS", "ScalingConfig", "matrix_format", "read_summary", "run_scaling"]
+
+#: Columns of ``scaling.csv``, in order.
+COLUMNS = (
+    "size", "axis", "links", "points_per_link", "key_points", "cloud_points", "n", "m_eq", "m_ineq", "rows",
+    "backend", "matrix_format", "status", "skip_reason", "problems", "success_rate", "failures",
+    "time_median_s", "time_p99_s", "gap_median", "gap_max", "violation_max",
+    "build_median_s", "build_p99_s", "reference_optimal", "driver", "repeat", "seed",
+)
+SUMMARY_NAME = "scaling.csv"
+
+#: How each built-in route takes its matrices: ``dense`` (a dense factorisation or
+#: dense active set: cost grows with n x rows whatever the zeros) or ``sparse``.
+#: A backend class may say so itself with a ``matrix_format`` attribute.
+_MATRIX_FORMATS = {
+    "daqp": "dense", "daqp-stateless": "dense", "qpoases": "dense", "piqp": "dense", "proxqp": "dense",
+    "pinv": "dense", "rnn": "dense", "rnn-tuned": "dense", "rnn-converged": "dense",
+    "qpsolvers:daqp": "dense", "qpsolvers:quadprog": "dense", "qpsolvers:proxqp": "dense",
+    "qpsolvers:piqp": "dense", "qpsolvers:cvxopt": "dense", "qpsolvers:qpalm": "sparse",
+    "osqp": "sparse", "clarabel": "sparse", "cvxpy": "sparse", "qpsolvers:osqp": "sparse",
+    "qpsolvers:clarabel": "sparse", "qpsolvers:scs": "sparse", "qpsolvers:highs": "sparse",
+    "qpsolvers:ecos": "sparse", "qpsolvers:gurobi": "sparse",
+}
+
+
+def matrix_format(name: str) -> str:
+    """``dense``, ``sparse`` or ``unknown`` (a plugin's backend that does not say)."""
+    from ..backends import backend_class
+    from ..exceptions import QpbenchError
+
+    try:
+        declared = getattr(backend_class(name), "matrix_format", None)
+    except QpbenchError:
+        declared = None
+    return declared or _MATRIX_FORMATS.get(name, "unknown")
+
+
+@dataclass
+class ScalingConfig:
+    """What to run.
+
+    Attributes:
+        backends: Backend names to measure.
+        sizes: The sizes, in the order to run (smallest first within an axis).
+        driver: Backend solving the closed loop whose ticks are dumped.
+        duration: Simulated time per size in [s].
+        every: Keep every K-th tick.
+        repeat: Timed solves per (tick, backend); the row keeps the minimum.
+        build_repeat: Timed builds per tick.
+        seed: Seed of the arms, clouds and the bench's backend order.
+        profile: Settings profile.
+        dense_limit: Largest ``n x rows`` a dense-only backend is run on.
+        slow_limit: Median solve time [s] past which a backend skips the larger sizes of an axis.
+    """
+
+    backends: list[str]
+    sizes: list[Size]
+    driver: str = "daqp"
+    duration: float = 0.3
+    every: int = 5
+    repeat: int = 3
+    build_repeat: int = 20
+    seed: int = 0
+    profile: str = "default"
+    dense_limit: int = 1_000_000
+    slow_limit: float = 0.02
+
+
+def _cell(value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def append_rows(path: Path, rows: list[dict]) -> None:
+    """Append ``rows`` to ``scaling.csv`` (header first if new) in one ``write``, then ``fsync``."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    new = not path.exists() or path.stat().st_size == 0
+    if new:
+        writer.writerow(COLUMNS)
+    for row in rows:
+        writer.writerow([_cell(row.get(c)) for c in COLUMNS])
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, buf.getvalue().encode("utf-8"))
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
+    """Rows of a ``scaling.csv`` (strings); a half-written last line is dropped (and cut with ``repair``).
+
+    Raises:
+        InputError: not a scaling CSV (its header differs).
+    """
+    from ..exceptions import InputError
+
+    path = Path(path)
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        cut = data.rfind(b"\n") + 1
+        log.warning("%s: dropping a half-written last line left by an interrupted run", path)
+        data = data[:cut]
+        if repair:
+            os.truncate(path, cut)
+    lines = data.decode("utf-8").splitlines()
+    if not lines:
+        return []
+    header = next(csv.reader([lines[0]]))
+    if tuple(header) != COLUMNS:
+        raise InputError("not a scaling CSV of this version (columns differ); use --force to start again", path=path)
+    return [dict(zip(COLUMNS, fields)) for fields in csv.reader(lines[1:]) if len(fields) == len(COLUMNS)]
+
+
+def build_times(controller, states, repeat: int) -> np.ndarray:
+    """Per state ``(theta, t)``: the minimum over ``repeat`` calls of ``controller.build`` in [s]."""
+    controller.build(*states[0])
+    out = np.empty(len(states))
+    for i, (theta, t) in enumerate(states):
+        best = math.inf
+        for _ in range(repeat):
+            t0 = time.perf_counter_ns()
+            controller.build(theta, t)
+            best = min(best, time.perf_counter_ns() - t0)
+        out[i] = best * 1e-9
+    return out
+
+
+def _size_columns(size: Size, config: ScalingConfig) -> dict:
+    shape = qp_shape(size)
+    return {
+        "size": size.name, "axis": size.axis, "links": size.links, "points_per_link": size.points_per_link,
+        "key_points": size.key_points, "cloud_points": size.cloud_points, **shape,
+        "rows": shape["m_eq"] + shape["m_ineq"], "driver": config.driver, "repeat": config.repeat,
+        "seed": config.seed,
+    }
+
+
+def _backend_row(base: dict, name: str, rows: list[dict]) -> dict:
+    """Summary of one backend's bench rows on one size."""
+    from ..harness.bench import is_failure
+
+    def col(key):
+        return np.array([float(r[key]) if r[key] not in ("", None) else math.nan for r in rows])
+
+    times, gaps, viol = col("wall_time_min_s"), col("optimality_gap"), col("constraint_violation")
+    times = times[np.isfinite(times)]
+    gaps = gaps[np.isfinite(gaps)]
+    viol = viol[np.isfinite(viol)]
+    success = [str(r["success"]) == "True" for r in rows]
+    failures = sum(1 for r in rows if is_failure(r["status"], r["reference_status"] or None))
+    return {
+        **base, "backend": name, "matrix_format": matrix_format(name), "status": "measured", "problems": len(rows),
+        "success_rate": float(np.mean(success)) if rows else math.nan, "failures": failures,
+        "time_median_s": float(np.median(times)) if times.size else math.nan,
+        "time_p99_s": float(np.percentile(times, 99)) if times.size else math.nan,
+        "gap_median": float(np.median(gaps)) if gaps.size else math.nan,
+        "gap_max": float(gaps.max()) if gaps.size else math.nan,
+        "violation_max": float(viol.max()) if viol.size else math.nan,
+        "reference_optimal": sum(1 for r in rows if r["reference_status"] == "optimal"),
+    }
+
+
+def _skip_reason(name: str, size: Size, slow: dict, config: ScalingConfig) -> str | None:
+    shape = qp_shape(size)
+    entries = shape["n"] * shape["m_ineq"]
+    if matrix_format(name) == "dense" and entries > config.dense_limit:
+        return f"dense-only; n x rows = {entries:,} > --dense-limit {config.dense_limit:,}"
+    if (size.axis, name) in slow:
+        smaller, median = slow[(size.axis, name)]
+        return f"median solve {median * 1e3:.1f} ms on {smaller} > --slow-limit {config.slow_limit * 1e3:g} ms"
+    return None
+
+
+def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
+    """Write the size's scenario and problem set; return ``(scenario, states of the kept ticks)``."""
+    from ..atomic import write_text
+    from ..sim.loop import simulate
+    from ..sim.scenario import parse_scenario
+
+    gen, cloud = generate(size, config.seed)
+    path = out / "scenarios" / f"{size.name}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = scenario_toml(size, gen, cloud, config.duration)
+    write_text(path, text)
+    scenario = parse_scenario(text, path)
+    (out / "sets").mkdir(exist_ok=True)
+    result = simulate(scenario, config.driver, every=config.every, dump=out / "sets" / size.name)
+    frame = result.log
+    thetas = frame[[f"theta_{i}" for i in range(size.links)]].to_numpy()
+    ticks = [r.tick for r in result.records]
+    states = [(np.ascontiguousarray(thetas[k]), float(frame["t"].iloc[k])) for k in ticks]
+    return scenario, states
+
+
+def run_size(size: Size, config: ScalingConfig, out: Path, slow: dict, progress: bool = False) -> tuple[list[dict], int]:
+    """Everything for one size (module docstring); returns its summary rows and the bench exit code."""
+    from ..formats import load_problems
+    from ..harness.bench import BenchConfig, run_bench
+
+    scenario, states = _dump_ticks(size, config, out)
+    built = build_times(scenario.make_controller(), states, config.build_repeat)
+    base = _size_columns(size, config)
+    base.update(build_median_s=float(np.median(built)), build_p99_s=float(np.percentile(built, 99)))
+    skipped = {name: _skip_reason(name, size, slow, config) for name in config.backends}
+    run = [name for name in config.backends if skipped[name] is None]
+    rows, code = [], 0
+    if run:
+        problem_set = load_problems(out / "sets" / size.name)
+        csv_path = out / "bench" / f"{size.name}.csv"
+        csv_path.parent.mkdir(parents=True, exist_ok=True)
+        bench = BenchConfig(backends=run, profile=config.profile, repeat=config.repeat, seed=config.seed)
+        summary = run_bench(problem_set, bench, csv_path, resume=csv_path.exists(), progress=progress)
+        code = summary.exit_code
+        from ..harness.results import read_results
+
+        by_backend: dict[str, list[dict]] = {}
+        for r in read_results(csv_path).rows:
+            by_backend.setdefault(r["backend"], []).append(r)
+        for name in run:
+            row = _backend_row(base, name, by_backend.get(name, []))
+            rows.append(row)
+            if row["time_median_s"] > config.slow_limit:
+                slow[(size.axis, name)] = (size.name, row["time_median_s"])
+    for name in config.backends:
+        if skipped[name] is not None:
+            rows.append({**base, "backend": name, "matrix_format": matrix_format(name), "status": "skipped",
+                         "skip_reason": skipped[name]})
+    return rows, code
+
+
+def run_scaling(config: ScalingConfig, out: str | Path, resume: bool = False, progress: bool = False) -> int:
+    """Run every size of ``config`` into folder ``out``; return 1 if some solve failed, else 0."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary_path = out / SUMMARY_NAME
+    done: dict[str, list[dict]] = {}
+    slow: dict = {}
+    if resume and summary_path.exists():
+        for r in read_summary(summary_path, repair=True):
+            done.setdefault(r["size"], []).append(r)
+            if r["status"] == "measured" and r["time_median_s"] and float(r["time_median_s"]) > config.slow_limit:
+                slow[(r["axis"], r["backend"])] = (r["size"], float(r["time_median_s"]))
+    code = 0
+    for size in config.sizes:
+        if size.name in done:
+            log.info("%s: done in %s, skipped", size.name, summary_path)
+            continue
+        started = time.perf_counter()
+        shape = qp_shape(size)
+        log.info("%s: %d variables, %d rows (%d key points x %d cloud points + 2)", size.name, shape["n"],
+                 shape["m_eq"] + shape["m_ineq"], size.key_points, size.cloud_points)
+        rows, size_code = run_size(size, config, out, slow, progress)
+        append_rows(summary_path, rows)
+        code = max(code, size_code)
+        log.info("%s: done in %.1f s", size.name, time.perf_counter() - started)
+    return code
