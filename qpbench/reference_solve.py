@@ -1,6 +1,7 @@
-"""High-accuracy reference solutions, cross-checked, cached per problem set.
+"""High-accuracy reference solution of one problem: two solvers, settled by their KKT residuals.
 
-How a reference is computed (:func:`reference_solution`):
+How a reference is computed (:func:`reference_solution`, ``method = "auto"``;
+``"clarabel"`` or ``"piqp"`` use that solver alone, without a cross-check):
 
 1. Clarabel (interior point) through :func:`qpsolvers.solve_problem` with
    ``tol_gap_abs = tol_gap_rel = tol_feas = 1e-10``, ``tol_ktratio = 1e-8``,
@@ -39,39 +40,37 @@ kept (``solver``), ``agreement`` and ``agree``; a disagreement is logged.
 
 The objective is ``1/2 x'Px + q'x + offset`` (:func:`qpbench.metrics.objective`).
 
-Cache (:func:`reference_solutions`): one Parquet file beside the set,
-``<folder>/reference-<sha[:16]>.parquet`` (or ``<file stem>.reference-<sha[:16]>.parquet``
-beside a single file), keyed by the set's SHA-256 (the manifest hash of a
-problem-set folder; for a folder of ``.npz`` / ``.mat`` files or a bare Parquet
-file, a SHA-256 of the files' names and bytes: :func:`qpbench.formats.content_sha256`).
-The full hash and :data:`REFERENCE_VERSION` are stored in the file's metadata and
-checked on read, so a changed set, a changed method or a corrupt cache is
-recomputed. A set built in memory, or one in a read-only folder (no write
-permission, or no write bit at all, as for shared data folders), is not cached.
-Writes are atomic; stale ``reference-*.parquet`` files in a problem-set folder are
-removed.
+Time limit (:func:`solve_candidate`): Clarabel gets ``time_limit``; PIQP has
+none, so a limit that must hold whatever the solver does needs a worker
+process (:mod:`qpbench.reference_pool`). An answer that arrives after the
+limit is discarded: that solver's status is ``unknown`` with the reason
+(``timed_out``), and :func:`settle` treats it as no verdict.
+
+Every :class:`ReferenceSolution` carries a ``note``: each solver's status,
+objective and KKT residual, and which answer was kept and why (or why there
+is none). The cache, the orchestration over a set and the other sources of
+references (``none``, a file of optimal objectives) are in :mod:`qpbench.reference`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import os
+import time
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import qpsolvers
 
-from .atomic import write_bytes
-from .formats import ProblemRecord, ProblemSet, content_sha256, dense_problem
+from .formats import ProblemRecord, dense_problem
 from .metrics import objective
 
 log = logging.getLogger(__name__)
 
 #: Bumped when the way references are computed changes (invalidates caches).
-REFERENCE_VERSION = "2"
+REFERENCE_VERSION = "3"
 #: Statuses a reference can have.
 REFERENCE_STATUSES = ("optimal", "primal_infeasible", "dual_infeasible", "unknown")
 
@@ -92,6 +91,10 @@ PIQP_SETTINGS = dict(
     eps_duality_gap_rel=0.0,
     max_iter=500,
 )
+#: Settings of each reference solver, by name.
+SOLVER_SETTINGS = {"clarabel": CLARABEL_SETTINGS, "piqp": PIQP_SETTINGS}
+#: Ways of computing a reference: both solvers settled by residuals, or one of them alone.
+METHODS = ("auto", "clarabel", "piqp")
 #: Relative objective agreement required between the two solvers.
 AGREE_RTOL = 1e-7
 #: Residual bound accepting Clarabel's ``AlmostSolved``.
@@ -117,6 +120,10 @@ class ReferenceSolution:
         kkt: Worst KKT residual of the kept answer (``inf`` without one).
         check_kkt: Worst KKT residual of the other solver's answer.
         name: Problem name.
+        note: Each solver's status, objective and KKT residual and which answer
+            was kept and why; or why there is no reference.
+        time_limit_s: Limit each solve had in [s] (``inf``: none).
+        timed_out: A solver gave no answer within the limit.
     """
 
     status: str
@@ -134,6 +141,9 @@ class ReferenceSolution:
     kkt: float = math.nan
     check_kkt: float = math.nan
     name: str | None = None
+    note: str = ""
+    time_limit_s: float = math.inf
+    timed_out: bool = False
     extras: dict = field(default_factory=dict)
 
     @property
@@ -183,16 +193,16 @@ def _worst_residual(solution) -> float:
 
 
 def _solve(problem, solver: str, settings: dict):
-    """(solution or None, status) of one qpsolvers solve; never raises for solver trouble."""
+    """``(solution or None, status, error text)`` of one qpsolvers solve; never raises for solver trouble."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
     except Exception as exc:  # a solver crash is an "unknown" reference, not a traceback
         log.debug("reference: %s failed: %s", solver, exc)
-        return None, "unknown"
+        return None, "unknown", f"{type(exc).__name__}: {' '.join(str(exc).split())}"
     status = _clarabel_status(sol) if solver == "clarabel" else _piqp_status(sol)
-    return sol, status
+    return sol, status, ""
 
 
 def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
@@ -200,7 +210,8 @@ def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
     x, *_ = np.linalg.lstsq(P, -q, rcond=None)
     res = float(np.max(np.abs(P @ x + q)))
     if res > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
-        return ReferenceSolution("dual_infeasible", solver="lstsq", name=record.name)
+        return ReferenceSolution("dual_infeasible", solver="lstsq", name=record.name,
+                                 note="no constraints and P x = -q has no solution: unbounded")
     n = q.shape[0]
     return ReferenceSolution(
         "optimal",
@@ -211,6 +222,7 @@ def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
         objective=objective(record, x),
         solver="lstsq",
         name=record.name,
+        note="no constraints: P x = -q solved by least squares",
     )
 
 
@@ -230,19 +242,93 @@ def relative_difference(f1: float, f2: float) -> float:
 
 @dataclass
 class Candidate:
-    """One reference solver's answer: its name, status, solution (or ``None``) and objective."""
+    """One reference solver's answer.
+
+    Attributes:
+        solver: ``clarabel`` or ``piqp``.
+        status: One of :data:`REFERENCE_STATUSES`.
+        solution: Its solution (``x, y, z, z_box``) when optimal, else ``None``.
+        objective: ``1/2 x'Px + q'x + offset`` (NaN unless optimal).
+        reason: Why there is no verdict (time limit, error), else empty.
+        timed_out: No answer within the time limit.
+        wall_s: Duration of the solve in [s].
+        known_kkt: The KKT residual when already computed (a worker's answer).
+    """
 
     solver: str
     status: str
     solution: object | None
     objective: float = math.nan
+    reason: str = ""
+    timed_out: bool = False
+    wall_s: float = math.nan
+    known_kkt: float | None = None
 
     @property
     def kkt(self) -> float:
         """Worst of qpsolvers' primal residual, dual residual and duality gap (``inf`` without x)."""
+        if self.known_kkt is not None:
+            return self.known_kkt
         if self.solution is None:
             return math.inf
         return float(_worst_residual(self.solution))
+
+    def plain(self) -> Candidate:
+        """The same answer without the solver's objects (picklable: a worker sends it back)."""
+        sol = self.solution
+        plain = None if sol is None else SimpleNamespace(**{k: getattr(sol, k, None) for k in _VEC_KEYS})
+        return Candidate(self.solver, self.status, plain, self.objective, self.reason, self.timed_out,
+                         self.wall_s, self.kkt)
+
+    def describe(self) -> str:
+        """``solver status`` with its objective and KKT residual, or the reason for no verdict."""
+        text = f"{self.solver} {self.status}"
+        if self.status == "optimal":
+            text += f" f = {self.objective:.10g} (KKT {self.kkt:.2g})"
+        if self.reason:
+            text += f" ({self.reason})"
+        return text
+
+
+_VEC_KEYS = ("x", "y", "z", "z_box")
+
+
+def _problem_for_reference(record: ProblemRecord):
+    """The problem as the reference solvers get it (dense float64 arrays)."""
+    return dense_problem(record.problem, name=record.name)
+
+
+def solve_candidate(record: ProblemRecord, solver: str, time_limit: float | None = None) -> Candidate:
+    """One reference solver's answer for ``record``; never raises for solver trouble.
+
+    Args:
+        record: The problem.
+        solver: ``clarabel`` or ``piqp``.
+        time_limit: Limit in [s] (``None``: none). Clarabel is given it; an answer of
+            either that arrives later is discarded (status ``unknown``, ``timed_out``).
+    """
+    settings = dict(SOLVER_SETTINGS[solver])
+    limited = time_limit is not None and math.isfinite(time_limit)
+    if limited and solver == "clarabel":
+        settings["time_limit"] = float(time_limit)
+    problem = _problem_for_reference(record)
+    started = time.perf_counter()
+    sol, status, error = _solve(problem, solver, settings)
+    wall = time.perf_counter() - started
+    if limited and (wall > time_limit or _clarabel_timed_out(solver, sol)):
+        return Candidate(solver, "unknown", None, reason=f"no answer within the time limit of {time_limit:g} s",
+                         timed_out=True, wall_s=wall)
+    if status != "optimal":
+        return Candidate(solver, status, None, reason=error, wall_s=wall)
+    return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
+
+
+def _clarabel_timed_out(solver: str, sol) -> bool:
+    if solver != "clarabel" or sol is None:
+        return False
+    import clarabel
+
+    return (sol.extras or {}).get("status") == clarabel.SolverStatus.MaxTime
 
 
 def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str]:
@@ -264,17 +350,57 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
     return first, second, "unknown"
 
 
-def reference_solution(record: ProblemRecord) -> ReferenceSolution:
-    """High-accuracy reference of one problem (see the module docstring)."""
-    problem = dense_problem(record.problem, name=record.name)
-    if _is_unconstrained(problem):
-        return _unconstrained(ProblemRecord(problem, record.name, offset=record.offset))
-    candidates = []
-    for solver, settings in (("clarabel", CLARABEL_SETTINGS), ("piqp", PIQP_SETTINGS)):
-        sol, status = _solve(problem, solver, settings)
-        obj = objective(record, sol.x) if status == "optimal" else math.nan
-        candidates.append(Candidate(solver, status, sol if status == "optimal" else None, obj))
-    return combine(record.name, *candidates)
+def reference_solution(record: ProblemRecord, method: str = "auto", time_limit: float | None = None,
+                       ) -> ReferenceSolution:
+    """High-accuracy reference of one problem (see the module docstring), solved in this process.
+
+    Args:
+        record: The problem.
+        method: ``auto`` (both solvers, settled by residuals), ``clarabel`` or ``piqp`` alone.
+        time_limit: Limit of each solve in [s] (``None``: none; see :func:`solve_candidate`).
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown reference method '{method}'")
+    if _is_unconstrained(_problem_for_reference(record)):
+        return _unconstrained(ProblemRecord(_problem_for_reference(record), record.name, offset=record.offset))
+    solvers = ("clarabel", "piqp") if method == "auto" else (method,)
+    return assemble(record.name, [solve_candidate(record, s, time_limit) for s in solvers], time_limit)
+
+
+def assemble(name: str | None, candidates: list[Candidate], time_limit: float | None = None) -> ReferenceSolution:
+    """The reference made of one or two solvers' answers (:func:`combine` for two)."""
+    if len(candidates) == 2:
+        ref = combine(name, *candidates)
+    else:
+        (only,) = candidates
+        ref = _from_candidate(name, only, only.status)
+        ref.note = f"{only.describe()}; {only.solver} alone (no cross-check)"
+    ref.time_limit_s = math.inf if time_limit is None else float(time_limit)
+    ref.timed_out = any(c.timed_out for c in candidates)
+    return ref
+
+
+def _from_candidate(name, keep: Candidate, status: str) -> ReferenceSolution:
+    ref = ReferenceSolution(status=status, solver=keep.solver, kkt=keep.kkt, name=name,
+                            objective=keep.objective if status == "optimal" else math.nan)
+    if status == "optimal":
+        sol = keep.solution
+        ref.x = np.asarray(sol.x, dtype=np.float64)
+        for k in ("y", "z", "z_box"):
+            v = getattr(sol, k, None)
+            setattr(ref, k, None if v is None else np.asarray(v, dtype=np.float64))
+    return ref
+
+
+def _why(keep: Candidate, other: Candidate, status: str) -> str:
+    if status == "optimal" and other.status == "optimal":
+        return f"kept {keep.solver}: smaller KKT residuals"
+    if status == "optimal":
+        return f"kept {keep.solver}: the only optimal answer"
+    if status == "unknown":
+        return "no reference: " + ("no verdict from either solver" if keep.status == other.status
+                                   else "the solvers' verdicts contradict each other")
+    return f"kept {keep.solver}'s verdict {status}"
 
 
 def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
@@ -282,150 +408,18 @@ def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceS
     agreement = relative_difference(first.objective, second.objective)
     agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
     keep, other, status = settle(first, second)
+    verdict = "agree" if agree else "disagree"
+    if first.status == second.status == "optimal":
+        verdict += f" (objectives differ by {agreement:.2g} relative)"
+    note = f"{first.describe()}; {second.describe()}; {verdict}; {_why(keep, other, status)}"
     if not agree:
-        log.warning(
-            "reference of '%s': %s says %s (f = %.10g, KKT %.3g), %s says %s (f = %.10g, KKT %.3g); "
-            "keeping %s's answer (%s)",
-            name, first.solver, first.status, first.objective, first.kkt,
-            second.solver, second.status, second.objective, second.kkt, keep.solver, status,
-        )
-    ref = ReferenceSolution(
-        status=status,
-        objective=keep.objective if status == "optimal" else math.nan,
-        solver=keep.solver,
-        check_solver=other.solver,
-        check_status=other.status,
-        check_objective=other.objective,
-        agree=agree,
-        agreement=agreement,
-        kkt=keep.kkt,
-        check_kkt=other.kkt,
-        name=name,
-    )
-    if status == "optimal":
-        sol = keep.solution
-        ref.x = np.asarray(sol.x, dtype=np.float64)
-        ref.y = None if sol.y is None else np.asarray(sol.y, dtype=np.float64)
-        ref.z = None if sol.z is None else np.asarray(sol.z, dtype=np.float64)
-        ref.z_box = None if sol.z_box is None else np.asarray(sol.z_box, dtype=np.float64)
+        log.warning("reference of '%s': %s", name, note)
+    ref = _from_candidate(name, keep, status)
+    ref.check_solver = other.solver
+    ref.check_status = other.status
+    ref.check_objective = other.objective
+    ref.agree = agree
+    ref.agreement = agreement
+    ref.check_kkt = other.kkt
+    ref.note = note
     return ref
-
-
-# ---------------------------------------------------------------- cache
-
-
-def cache_path(problem_set: ProblemSet) -> Path | None:
-    """Where the references of ``problem_set`` are cached (``None``: not cached)."""
-    sha = content_sha256(problem_set)
-    if sha is None or problem_set.path is None:
-        return None
-    path = Path(problem_set.path)
-    if path.is_dir():
-        return path / f"reference-{sha[:16]}.parquet"
-    return path.parent / f"{path.stem}.reference-{sha[:16]}.parquet"
-
-
-_VEC_KEYS = ("x", "y", "z", "z_box")
-_FLOAT_KEYS = ("agreement", "kkt", "check_kkt")
-
-
-def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
-    import pyarrow as pa
-
-    from .formats import _list_column, table_to_bytes
-
-    cols = {
-        "name": pa.array([r.name for r in refs], type=pa.string()),
-        "status": pa.array([r.status for r in refs], type=pa.string()),
-        **{k: _list_column([getattr(r, k) for r in refs]) for k in _VEC_KEYS},
-        "objective": pa.array([r.objective for r in refs], type=pa.float64()),
-        "solver": pa.array([r.solver for r in refs], type=pa.string()),
-        "check_solver": pa.array([r.check_solver for r in refs], type=pa.string()),
-        "check_status": pa.array([r.check_status for r in refs], type=pa.string()),
-        "check_objective": pa.array([r.check_objective for r in refs], type=pa.float64()),
-        "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
-        **{k: pa.array([getattr(r, k) for r in refs], type=pa.float64()) for k in _FLOAT_KEYS},
-    }
-    table = pa.table(cols).replace_schema_metadata(
-        {"qpbench_set_sha256": sha, "qpbench_reference_version": REFERENCE_VERSION}
-    )
-    return table_to_bytes(table)
-
-
-def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
-    import pyarrow.parquet as pq
-
-    try:
-        table = pq.read_table(path)
-        meta = table.schema.metadata or {}
-        if meta.get(b"qpbench_set_sha256", b"").decode() != sha:
-            return None
-        if meta.get(b"qpbench_reference_version", b"").decode() != REFERENCE_VERSION:
-            return None
-        rows = table.to_pylist()
-    except Exception as exc:  # corrupt cache: recompute
-        log.warning("%s: unreadable reference cache, recomputing (%s)", path, exc)
-        return None
-    out = []
-    for r in rows:
-        vec = {k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS}
-        out.append(
-            ReferenceSolution(
-                status=r["status"],
-                objective=math.nan if r["objective"] is None else r["objective"],
-                solver=r["solver"],
-                check_solver=r["check_solver"],
-                check_status=r["check_status"],
-                check_objective=math.nan if r["check_objective"] is None else r["check_objective"],
-                agree=r["agree"],
-                name=r["name"],
-                **{k: math.nan if r[k] is None else r[k] for k in _FLOAT_KEYS},
-                **vec,
-            )
-        )
-    return out
-
-
-def _writable(folder: Path) -> bool:
-    """Whether to write into ``folder``: it must be writable and not marked read-only
-    (no write bit at all; this holds even for root, who may write anywhere)."""
-    try:
-        return os.access(folder, os.W_OK) and bool(folder.stat().st_mode & 0o222)
-    except OSError:
-        return False
-
-
-def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None) -> list[ReferenceSolution]:
-    """References of every problem of a set, in order, read from or written to the cache.
-
-    Args:
-        problem_set: The set (from :func:`qpbench.formats.load_problems`).
-        cache: Use the cache beside the set.
-        progress: Optional callable wrapping an iterable (e.g. ``tqdm.tqdm``).
-    """
-    path = cache_path(problem_set) if cache else None
-    sha = content_sha256(problem_set)
-    names = [r.name for r in problem_set.records]
-    known: dict[str, ReferenceSolution] = {}
-    if path is not None and path.exists():
-        # a subset of a set (``--problems``, ``--every``, ``--limit``) reads the set's cache and
-        # adds what it lacks; it never replaces the cache with fewer problems
-        known = {ref.name: ref for ref in (_read_cache(path, sha) or [])}
-        if all(n in known for n in names):
-            return [known[n] for n in names]
-    todo = [r for r in problem_set.records if r.name not in known]
-    records = todo if progress is None else progress(todo)
-    for r in records:
-        known[r.name] = reference_solution(r)
-    refs = [known[n] for n in names]
-    if path is not None and _writable(path.parent):
-        try:
-            write_bytes(path, _to_bytes(list(known.values()), sha))
-        except OSError as exc:
-            log.debug("%s: reference cache not written (%s)", path, exc)
-            return refs
-        if problem_set.kind == "set" and Path(problem_set.path).is_dir():
-            for stale in Path(problem_set.path).glob("reference-*.parquet"):
-                if stale != path:
-                    stale.unlink(missing_ok=True)
-    return refs

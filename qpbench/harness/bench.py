@@ -42,7 +42,7 @@ import logging
 import math
 import statistics
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -428,6 +428,7 @@ class _RowMaker:
             "reference_objective": metrics["reference_objective"],
             "reference_status": metrics["reference_status"],
             "reference_agreement": _float(getattr(reference, "agreement", None)),
+            "reference_note": getattr(reference, "note", None),
             "optimality_gap": metrics["optimality_gap"],
             "primal_residual": metrics["primal_residual"],
             "dual_residual": metrics["dual_residual"],
@@ -515,7 +516,7 @@ def run_bench(
     check_output(out, force=force, resume=resume)
     profile = get_profile(config.profile)
     time_limit = float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
-    run_profile = replace(profile, time_limit=time_limit)
+    run_profile = profile.with_time_limit(time_limit)
     sequential = config.mode == "sequential"
     records = list(problem_set.records)
     if not records:
