@@ -499,7 +499,8 @@ def run_bench(
         out: CSV path.
         force: Delete an existing ``out`` and start again.
         resume: Keep the rows of an existing ``out`` and run the missing keys only.
-        references: Reference solutions (one per record); computed (and cached) if ``None``.
+        references: Reference solutions (one per record, ``None`` entries for none), or a function
+            of the problem set that returns them; computed (and cached) if ``None``.
         progress: Show a progress bar on stderr.
 
     Raises:
@@ -563,6 +564,8 @@ def run_bench(
         from ..reference import reference_solutions
 
         references = reference_solutions(problem_set)
+    elif callable(references):  # computed now that the input is known to be good
+        references = references(problem_set)
     if len(references) != len(records):
         raise InputError(f"{len(references)} reference solutions for {len(records)} problems", path=problem_set.path)
 
