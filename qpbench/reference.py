@@ -82,7 +82,7 @@ SOURCES = METHODS + ("none",)
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limit: float | None = None,
-                     jobs: int = 1, progress=None, cache: bool = True) -> list:
+                     jobs: int = 1, progress=None, cache: bool = True, context=None) -> list:
     """One reference per record of ``problem_set`` from ``source`` (see the module docstring).
 
     Returns:
@@ -95,7 +95,7 @@ def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limi
         return [None] * len(problem_set.records)
     if source in METHODS:
         return reference_solutions(problem_set, cache=cache, progress=progress, method=source,
-                                   time_limit=time_limit, jobs=jobs)
+                                   time_limit=time_limit, jobs=jobs, context=context)
     from .published import read_objectives
 
     return from_objectives(problem_set, read_objectives(source), source)
@@ -118,7 +118,7 @@ def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Pat
 # ---------------------------------------------------------------- computing
 
 
-def _compute(records: list, method: str, time_limit: float | None, jobs: int, on_done) -> dict:
+def _compute(records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None) -> dict:
     """``{name: ReferenceSolution}`` of ``records``, in this process or in workers."""
     solvers = ("clarabel", "piqp") if method == "auto" else (method,)
     limited = time_limit is not None and math.isfinite(time_limit)
@@ -150,7 +150,7 @@ def _compute(records: list, method: str, time_limit: float | None, jobs: int, on
             out[name] = assemble(name, [got[s] for s in solvers], time_limit)
             on_done(out[name], sum(c.wall_s for c in got.values() if math.isfinite(c.wall_s)))
 
-    solve_in_workers(tasks, time_limit if limited else None, jobs, done)
+    solve_in_workers(tasks, time_limit if limited else None, jobs, done, context)
     return out
 
 
@@ -171,7 +171,7 @@ class LogProgress:
 
 
 def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None, *, method: str = "auto",
-                        time_limit: float | None = None, jobs: int = 1) -> list[ReferenceSolution]:
+                        time_limit: float | None = None, jobs: int = 1, context=None) -> list[ReferenceSolution]:
     """References of every problem of a set, in order, read from or written to the cache.
 
     Args:
@@ -182,6 +182,8 @@ def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=No
         method: ``auto``, ``clarabel`` or ``piqp``.
         time_limit: Limit of each reference solve in [s] (``None``: none).
         jobs: Worker processes solving at once.
+        context: ``multiprocessing`` context of the workers (default ``spawn``;
+            :mod:`qpbench.reference_pool`).
     """
     if method not in METHODS:
         raise ValueError(f"unknown reference method '{method}'")
@@ -197,7 +199,7 @@ def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=No
     todo = [r for r in problem_set.records if r.name not in known or _stale(known[r.name], limit)]
     on_done, close = _progress(progress, len(todo))
     try:
-        known.update(_compute(todo, method, time_limit, jobs, on_done))
+        known.update(_compute(todo, method, time_limit, jobs, on_done, context))
     finally:
         close()
     refs = [known[n] for n in names]

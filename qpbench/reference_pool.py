@@ -12,9 +12,12 @@ to ``jobs`` worker processes, each solving one task at a time:
 - a worker that dies (segfault, abort) makes its task ``unknown`` with the
   exit code as the reason; a new worker takes the next task.
 
-Workers are started with ``spawn`` (a fresh interpreter that imports
-:mod:`qpbench.reference_solve` and says it is ready before any deadline
-runs), never forked from a process that may hold threads and locks. Each
+Workers come from the ``multiprocessing`` context given (``qpbench bench``
+gives the harness's forkserver, :func:`qpbench.harness.isolation.worker_context`:
+a fork of a server that has imported the solvers, ready in milliseconds), by
+default ``spawn`` (a fresh interpreter); never a fork of this process, which
+may hold threads and locks. A worker says it is ready (it has imported
+:mod:`qpbench.reference_solve`) before any deadline runs. Each
 answer depends on its task only, so the answers are the same whatever
 ``jobs`` is and in whatever order the tasks finish.
 """
@@ -98,7 +101,7 @@ class _Worker:
         self.kill()
 
 
-def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=None) -> dict:
+def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=None, context=None) -> dict:
     """Solve every task on up to ``jobs`` workers.
 
     Args:
@@ -106,13 +109,14 @@ def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=N
         time_limit: Limit of each solve in [s] (``None``: none, no deadline).
         jobs: Worker processes (at least 1).
         on_done: Optional ``on_done(key, candidate)`` called as each answer arrives.
+        context: ``multiprocessing`` context of the workers (default ``spawn``).
 
     Returns:
         ``{key: Candidate}`` (plain candidates, see :meth:`Candidate.plain`).
     """
     from .reference_solve import Candidate
 
-    ctx = multiprocessing.get_context("spawn")
+    ctx = context if context is not None else multiprocessing.get_context("spawn")
     pending = deque(tasks)
     solver_of = {key: solver for key, _, solver in tasks}
     answers: dict = {}

@@ -199,5 +199,10 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         from tqdm import tqdm
 
         progress = tqdm if sys.stderr.isatty() else "log"
-    return lambda problem_set: bench_references(problem_set, source, time_limit=limit, jobs=args.jobs,
-                                                progress=progress)
+    def compute(problem_set):
+        from ..harness.isolation import worker_context
+
+        return bench_references(problem_set, source, time_limit=limit, jobs=args.jobs, progress=progress,
+                                context=worker_context())
+
+    return compute

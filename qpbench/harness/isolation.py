@@ -88,6 +88,11 @@ def _context():
     return _CTX
 
 
+def worker_context():
+    """The context worker processes start from (the forkserver, kernels loaded): reference solves use it too."""
+    return _context()
+
+
 def _noop() -> None:
     """A child that does nothing: its start waits for the forkserver's preload."""
 
