@@ -12,7 +12,7 @@ succeed under one and not the other, and the median and total solve time.
 Usage::
 
     python bench/accuracy_margin.py [--sets problems/free,problems/wall,...] [--every 10]
-        [--backends clarabel,osqp,...] [--profiles default,high_accuracy] [--out-dir DIR]
+        [--backends clarabel,osqp,...] [--profiles default,high_accuracy] [--out-dir DIR] [--reference none]
 """
 
 from __future__ import annotations
@@ -76,6 +76,8 @@ def main(argv=None) -> int:
     parser.add_argument("--backends", default=DEFAULT_BACKENDS)
     parser.add_argument("--profiles", default="default,high_accuracy")
     parser.add_argument("--out-dir", default=None, help="keep the CSVs here (default: a temporary folder)")
+    parser.add_argument("--reference", choices=("auto", "none"), default="auto",
+                        help="none: no reference solutions (success from the residuals alone)")
     args = parser.parse_args(argv)
     backends = args.backends.split(",")
     started = time.perf_counter()
@@ -89,7 +91,8 @@ def main(argv=None) -> int:
             for set_path in args.sets.split(","):
                 full = load_problems(set_path)
                 problem_set = select_set(full, None, args.every, None)
-                references = reference_solutions(problem_set)
+                references = (reference_solutions(problem_set) if args.reference == "auto"
+                              else [None] * len(problem_set.records))
                 stem = Path(set_path).name
                 t = run(problem_set, references, backends, shipped, out_dir / f"{stem}-{name}-10x.csv")
                 lo = run(problem_set, references, backends, loose, out_dir / f"{stem}-{name}-1x.csv")

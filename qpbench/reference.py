@@ -213,6 +213,7 @@ def _progress(progress, total: int):
     if progress is None or total == 0:
         return (lambda ref, wall: None), (lambda: None)
     if progress == "log":
+        log.info("references: %d problems to solve", total)
         return LogProgress(total), (lambda: None)
     bar = progress(None, total=total, unit="problem", desc="references")
     return (lambda ref, wall: bar.update(1)), bar.close

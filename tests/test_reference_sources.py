@@ -181,3 +181,13 @@ def test_single_solver_references_are_cached_apart(mm_dir, tmp_path):
                for r in only)
     assert [r.objective for r in only] == pytest.approx([r.objective for r in auto], rel=1e-8)
     assert bench_references(ps, "none") == [None, None]
+
+
+@pytest.mark.parametrize("option, value, key", [("--jobs", "0", "jobs"), ("--reference-time-limit", "-1", "reference-time-limit"),
+                                                ("--reference-time-limit", "inf", "reference-time-limit")])
+def test_bad_reference_options_are_input_errors(mm_dir, tmp_path, capsys, option, value, key):
+    out = tmp_path / "out.csv"
+    assert main(["bench", str(mm_dir / "HS21.mat"), "--backends", "qpsolvers:clarabel", "--out", str(out),
+                 option, value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"key '{key}'" in err[0] and not out.exists()
