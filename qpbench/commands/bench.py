@@ -35,30 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="settings profile (default: default); qpbenchmark:<settings> applies qpbenchmark's solver arguments, "
         "time limit and success rule verbatim",
     )
-    parser.add_argument(
-        "--reference",
-        default="auto",
-        metavar="auto|clarabel|piqp|none|FILE",
-        help="reference solutions: auto = Clarabel and PIQP, the one with smaller KKT residuals kept (default); "
-        "clarabel or piqp alone; none = no reference (qpbenchmark's success rule, empty optimality gap); "
-        "FILE = CSV with columns problem,objective of known optimal objectives",
-    )
-    parser.add_argument(
-        "--reference-time-limit",
-        type=float,
-        default=None,
-        metavar="S",
-        help="time limit of each reference solve in s (default: the profile's, 60 s); a reference that times out "
-        "leaves its problem's rows with an empty optimality gap and the reason",
-    )
-    parser.add_argument(
-        "--jobs",
-        type=int,
-        default=1,
-        metavar="N",
-        help="worker processes computing reference solutions at once (default 1); the benchmark's timed solves "
-        "stay one at a time",
-    )
+    add_reference_arguments(parser)
     parser.add_argument("--repeat", type=int, default=1, help="timed solves per problem; rows give min and median (default 1)")
     parser.add_argument(
         "--seed",
@@ -102,6 +79,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help="delete an existing --out and start again")
     group.add_argument("--resume", action="store_true", help="keep the rows of an existing --out and run the rest")
+
+
+def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--reference``, ``--reference-time-limit``, ``--jobs``: where the references come from."""
+    parser.add_argument(
+        "--reference",
+        default="auto",
+        metavar="auto|clarabel|piqp|none|FILE",
+        help="reference solutions: auto = Clarabel and PIQP, the one with smaller KKT residuals kept (default); "
+        "clarabel or piqp alone; none = no reference (qpbenchmark's success rule, empty optimality gap); "
+        "FILE = CSV with columns problem,objective of known optimal objectives",
+    )
+    parser.add_argument(
+        "--reference-time-limit",
+        type=float,
+        default=None,
+        metavar="S",
+        help="time limit of each reference solve in s (default: the profile's, 60 s); a reference that times out "
+        "leaves its problem's rows with an empty optimality gap and the reason",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="worker processes computing reference solutions at once (default 1); the benchmark's timed solves "
+        "stay one at a time",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
