@@ -77,7 +77,9 @@ class _Worker:
         if not self.conn.poll(START_TIMEOUT_S):
             self.kill()
             raise RuntimeError(f"a reference worker did not start within {START_TIMEOUT_S:g} s")
-        assert self.conn.recv() == "ready"
+        if self.conn.recv() != "ready":
+            self.kill()
+            raise RuntimeError("a reference worker started badly")
         self.ready = True
 
     def send(self, key, task, time_limit: float | None) -> None:
@@ -116,6 +118,8 @@ def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=N
     """
     from .reference_solve import Candidate
 
+    if not tasks:
+        return {}
     ctx = context if context is not None else multiprocessing.get_context("spawn")
     pending = deque(tasks)
     solver_of = {key: solver for key, _, solver in tasks}
