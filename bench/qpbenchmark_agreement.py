@@ -9,10 +9,11 @@ one run per (settings, solver) on each side.
 Two comparisons:
 
 - ``named`` (always): qpbenchmark's ``low_accuracy``, ``mid_accuracy`` and
-  ``high_accuracy`` settings; our backend gets qpbenchmark's keyword arguments
-  plus the solver's own defaults for the options qpbench adds (iteration
-  limits, Clarabel's time limit, OSQP's polishing), so both sides make the same
-  ``qpsolvers.solve_problem`` call (checked: the options are compared key by key);
+  ``high_accuracy`` settings against qpbench's profiles ``qpbenchmark:<settings>``,
+  which pass qpbenchmark's keyword arguments verbatim, so both sides make the
+  same ``qpsolvers.solve_problem`` call (checked: the options are compared key
+  by key), and judge success by its rule (``success differs (our column)``:
+  our ``success`` column against qpbenchmark's rule on its own rows);
 - ``profile`` (``--profiles``): our profile's own options (what ``qpbench bench
   --profile P`` runs) against qpbenchmark with settings built by its API from
   P's numbers. Solvers marked ``other run`` get options from us beyond limits
@@ -44,7 +45,6 @@ import sys
 import tempfile
 import time
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +52,6 @@ import pandas as pd
 import qpsolvers
 
 from qpbench.backends import backend_names, get_backend
-from qpbench.backends.qpsolvers_ import solver_default_limits
 from qpbench.formats import load_problems
 from qpbench.harness.bench import BenchConfig, run_bench
 from qpbench.profiles import get_profile
@@ -140,6 +139,12 @@ def compare(theirs: pd.DataFrame, ours: pd.DataFrame, tol, scales: dict) -> dict
     return row
 
 
+def _their_success(m: pd.DataFrame, tol) -> pd.Series:
+    """qpbenchmark's success rule on its own rows of a merged frame (suffix ``_x``)."""
+    return (m["found_x"].astype(bool) & (m["primal_residual_x"] < tol.primal) & (m["dual_residual_x"] < tol.dual)
+            & (m["duality_gap_x"] < tol.gap))
+
+
 def print_table(title: str, rows: list[dict]) -> None:
     print(f"\n{title}\n")
     cols = list(rows[0])
@@ -189,21 +194,21 @@ def main(argv=None) -> int:
 
         test_set = Slice(path)
         rows = []
-        for settings_name, profile_name in NAMED_SETTINGS.items():
+        for settings_name in NAMED_SETTINGS:
             tol = test_set.tolerances[settings_name]
-            profile = replace(get_profile(profile_name), time_limit=tol.runtime)
+            # qpbench's profile qpbenchmark:<settings>: its arguments verbatim, its time limit, its success rule
+            profile = get_profile(f"qpbenchmark:{settings_name}").with_time_limit(tol.runtime)
             for solver in solvers:
-                limits = solver_default_limits(solver)
-                if limits is None:
-                    print(f"skip {solver}: defaults of the options qpbench adds are unknown", file=sys.stderr)
-                    continue
                 kwargs = dict(test_set.solver_settings[settings_name][solver])
-                settings = {**limits, **kwargs}
-                options = get_backend(f"qpsolvers:{solver}", profile, **settings)._options()
-                same_call = options == settings
+                options = get_backend(f"qpsolvers:{solver}", profile)._options()
+                same_call = options == kwargs
                 theirs = run_qpbenchmark(qpb, test_set, solver, settings_name, tmp / f"qpb-{settings_name}-{solver}.csv")
-                ours = run_ours(problem_set, references, solver, profile, settings, tmp / f"ours-{settings_name}-{solver}.csv")
-                rows.append({"settings": settings_name, "solver": solver, "same call": same_call, **compare(theirs, ours, tol, scales)})
+                ours = run_ours(problem_set, references, solver, profile, {}, tmp / f"ours-{settings_name}-{solver}.csv")
+                rows.append({"settings": settings_name, "solver": solver, "same call": same_call,
+                             "success differs (our column)": int((theirs.merge(ours, on=["problem", "solver"])
+                                                                  .pipe(lambda m: _their_success(m, tol)
+                                                                        != m["success"].astype(bool))).sum()),
+                             **compare(theirs, ours, tol, scales)})
         print_table("qpbenchmark's named settings, identical solver calls on both sides", rows)
 
         for profile_name in [p for p in args.profiles.split(",") if p]:

@@ -40,6 +40,11 @@ Success rule (qpbenchmark's, plus the reference):
   ``|f(x) - f*| <= tol.gap * max(1, |f*|)``: absolute for objectives below 1
   in magnitude, relative above. A reference with status ``unknown`` (or no
   reference) adds no condition.
+
+Under ``tolerance.rule == "qpbenchmark"`` (qpbenchmark's profiles, and
+``bench --reference none``) success is qpbenchmark's rule exactly: ``found``
+and each of the three residuals strictly below its threshold; the reference
+plays no part (:func:`qpbench.published.qpbenchmark_success`).
 """
 
 from __future__ import annotations
@@ -154,7 +159,9 @@ def evaluate(record, solution, reference, tolerance) -> dict:
         signed = math.nan
     else:
         signed = (obj - ref_obj) / max(1.0, abs(ref_obj))
-    if ref_status in CERTIFIED_INFEASIBLE:
+    if getattr(tolerance, "rule", "qpbench") == "qpbenchmark":
+        success = found and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
+    elif ref_status in CERTIFIED_INFEASIBLE:
         success = status == ref_status
     else:
         success = (

@@ -18,14 +18,48 @@ stopping test (scaled, relative, or on a different residual) does not match
 qpsolvers' unscaled residuals exactly, and a solver that honours its own
 tolerance should not fail ours by a hair. Relative tolerances are zero so that
 every backend stops on the same absolute criterion. The success thresholds are
-qpbenchmark's for ``low_accuracy``, ``mid_accuracy`` and ``high_accuracy``.
+qpbenchmark's for ``low_accuracy``, ``mid_accuracy`` and ``high_accuracy``; a
+solve succeeds when each residual is at most its threshold and, against an
+optimal reference, so is the optimality gap (:mod:`qpbench.metrics`).
+
+``reference_time_limit`` [s] bounds each reference solve (:mod:`qpbench.reference`):
+60 s in every profile.
+
+qpbenchmark's own settings: ``qpbenchmark:low_accuracy``, ``qpbenchmark:mid_accuracy``,
+``qpbenchmark:high_accuracy`` and ``qpbenchmark:default`` (:func:`qpbenchmark_profile`)
+apply what qpbenchmark's runner does, read from its installed modules
+(:func:`qpbench.published.qpbenchmark_settings`), not copied here:
+
+- a ``qpsolvers:<name>`` backend passes qpbenchmark's keyword arguments for
+  ``<name>`` to ``qpsolvers.solve_problem`` verbatim (no iteration limit, no
+  polishing, nothing of ours added; ``--set`` still adds or overrides);
+- the time limit is its ``Tolerance.runtime`` (10 s, the default of its
+  ``TestSet.define_tolerances``; ``--time-limit`` replaces it in the solvers'
+  arguments too, as qpbenchmark's ``set_time_limit`` does: 1000 s reproduces
+  its Maros-Meszaros runs);
+- success is its rule (``rule = "qpbenchmark"``): ``found`` and the primal
+  residual, dual residual and duality gap each strictly below its tolerance
+  (1, 1e-3, 1e-6, 1e-9); the reference plays no part (its optimality gap is
+  still reported).
+
+The other backends are not qpbenchmark routes: they get the generic numbers
+``eps_abs`` (the tolerance qpbenchmark asks its solvers for; under
+``qpbenchmark:default``, which asks for nothing, qpbench's ``default`` 1e-7),
+``eps_rel = 0``, ``max_iter`` 1e6 and the time limit.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field, replace
 
 from .exceptions import ParamError
+
+#: Prefix of the profiles that apply qpbenchmark's own settings.
+QPBENCHMARK_PREFIX = "qpbenchmark:"
+#: Success rules: ``qpbench`` (thresholds included, optimality gap and infeasibility
+#: verdicts of the reference) and ``qpbenchmark`` (its rule, strict, no reference).
+RULES = ("qpbench", "qpbenchmark")
 
 
 @dataclass(frozen=True)
@@ -37,12 +71,14 @@ class Tolerance:
         dual: Max dual residual (inf-norm of stationarity error).
         gap: Max absolute duality gap.
         runtime: Time limit in [s] (same meaning as qpbenchmark's ``Tolerance.runtime``).
+        rule: ``qpbench`` or ``qpbenchmark`` (:data:`RULES`; :func:`qpbench.metrics.evaluate`).
     """
 
     primal: float
     dual: float
     gap: float
     runtime: float
+    rule: str = "qpbench"
 
 
 @dataclass(frozen=True)
@@ -56,6 +92,9 @@ class Profile:
         max_iter: Iteration limit requested from solvers.
         time_limit: Per-solve time limit in [s].
         tolerance: Thresholds of a successful solve.
+        reference_time_limit: Limit of each reference solve in [s].
+        solver_options: For qpbenchmark's profiles, the keyword arguments its runner
+            passes per qpsolvers solver name (``None`` for qpbench's own profiles).
     """
 
     name: str
@@ -64,6 +103,25 @@ class Profile:
     max_iter: int
     time_limit: float
     tolerance: Tolerance
+    reference_time_limit: float = 60.0
+    solver_options: dict | None = field(default=None, hash=False)
+
+    @property
+    def is_qpbenchmark(self) -> bool:
+        """Whether this profile applies qpbenchmark's own settings."""
+        return self.name.startswith(QPBENCHMARK_PREFIX)
+
+    def with_time_limit(self, time_limit: float) -> Profile:
+        """The same profile with another per-solve time limit in [s].
+
+        For a qpbenchmark profile the solvers' arguments change with it, as
+        qpbenchmark's ``set_time_limit`` makes them.
+        """
+        if self.is_qpbenchmark:
+            rebuilt = qpbenchmark_profile(self.name[len(QPBENCHMARK_PREFIX):], time_limit)
+            return replace(rebuilt, reference_time_limit=self.reference_time_limit)
+        return replace(self, time_limit=float(time_limit),
+                       tolerance=replace(self.tolerance, runtime=float(time_limit)))
 
 
 PROFILES: dict[str, Profile] = {
@@ -79,6 +137,44 @@ PROFILES: dict[str, Profile] = {
 }
 
 
+def profile_names() -> tuple[str, ...]:
+    """Every profile name ``--profile`` accepts: qpbench's, then qpbenchmark's."""
+    from .published import SETTINGS_NAMES
+
+    return tuple(PROFILES) + tuple(QPBENCHMARK_PREFIX + s for s in SETTINGS_NAMES)
+
+
+@functools.lru_cache(maxsize=None)
+def qpbenchmark_profile(settings: str, time_limit: float | None = None) -> Profile:
+    """The profile ``qpbenchmark:<settings>`` (see the module docstring).
+
+    Args:
+        settings: ``low_accuracy``, ``mid_accuracy``, ``high_accuracy`` or ``default``.
+        time_limit: Per-solve limit in [s]; ``None``: qpbenchmark's default runtime.
+    """
+    from .published import SETTINGS_NAMES, qpbenchmark_settings
+
+    if settings not in SETTINGS_NAMES:
+        raise ParamError(f"unknown qpbenchmark settings '{settings}' (choose from {', '.join(SETTINGS_NAMES)})",
+                         key="profile")
+    kwargs, tolerances = qpbenchmark_settings(time_limit)
+    tol = tolerances[settings]
+    options = kwargs[settings]
+    # the tolerance qpbenchmark asks of its solvers (its set_eps_abs / set_eps_rel), read from OSQP's arguments
+    eps_abs = float(options["osqp"].get("eps_abs", PROFILES["default"].eps_abs))
+    eps_rel = float(options["osqp"].get("eps_rel", 0.0))
+    runtime = float(tol.runtime)
+    return Profile(
+        QPBENCHMARK_PREFIX + settings,
+        eps_abs,
+        eps_rel,
+        PROFILES["high_accuracy"].max_iter,
+        runtime,
+        Tolerance(float(tol.primal), float(tol.dual), float(tol.gap), runtime, rule="qpbenchmark"),
+        solver_options={solver: dict(kw) for solver, kw in options.items()},
+    )
+
+
 def get_profile(name: str | Profile) -> Profile:
     """Return the profile called ``name`` (a :class:`Profile` passes through).
 
@@ -87,9 +183,11 @@ def get_profile(name: str | Profile) -> Profile:
     """
     if isinstance(name, Profile):
         return name
+    if isinstance(name, str) and name.startswith(QPBENCHMARK_PREFIX):
+        return qpbenchmark_profile(name[len(QPBENCHMARK_PREFIX):])
     try:
         return PROFILES[name]
     except KeyError:
         raise ParamError(
-            f"unknown profile '{name}' (choose from {', '.join(PROFILES)})", key="profile"
+            f"unknown profile '{name}' (choose from {', '.join(profile_names())})", key="profile"
         ) from None

@@ -1,55 +1,46 @@
-"""High-accuracy reference solutions, cross-checked, cached per problem set.
+"""References of a problem set: computed (time-limited, in parallel), cached, or given.
 
-How a reference is computed (:func:`reference_solution`):
+Where the reference of each problem comes from (:func:`bench_references`,
+``qpbench bench --reference``):
 
-1. Clarabel (interior point) through :func:`qpsolvers.solve_problem` with
-   ``tol_gap_abs = tol_gap_rel = tol_feas = 1e-10``, ``tol_ktratio = 1e-8``,
-   ``tol_infeas_abs = tol_infeas_rel = 1e-10``, ``max_iter = 500``. Its status is
-   read from ``Solution.extras["status"]`` (Clarabel's ``SolverStatus``):
-   ``Solved`` -> ``optimal``; ``PrimalInfeasible`` / ``AlmostPrimalInfeasible`` ->
-   ``primal_infeasible``; ``DualInfeasible`` / ``AlmostDualInfeasible`` ->
-   ``dual_infeasible`` (unbounded objective); ``AlmostSolved`` -> ``optimal`` when
-   qpsolvers' residuals and duality gap are all below 1e-7, anything else ->
-   ``unknown``. A problem without any constraint is solved directly:
-   ``P x = -q`` by least squares, ``optimal`` when the residual is below
-   1e-9 max(1, |q|), else ``dual_infeasible``.
-2. Cross-check with PIQP (a second, independent interior-point code with
-   infeasibility detection) through qpsolvers at ``eps_abs = 1e-10``,
-   ``eps_rel = 0`` and the duality-gap check on. ``agreement`` is the two
-   solvers' relative objective difference ``|f1 - f2| / max(1, |f1|, |f2|)``
-   (NaN unless both are optimal); they agree when both give the same status
-   and, when optimal, ``agreement <= 1e-7``.
+- ``auto`` (default): Clarabel and PIQP at 1e-10, the answer with the smaller
+  KKT residuals kept (:mod:`qpbench.reference_solve`); ``clarabel`` or
+  ``piqp``: that solver alone;
+- ``none``: no reference. Rows have an empty reference and optimality gap, and
+  success is qpbenchmark's rule (found and residuals strictly below the
+  tolerances; :mod:`qpbench.metrics`);
+- a file (``FILE``): known optimal objectives, a CSV with a header and
+  columns ``problem,objective`` (:func:`qpbench.published.read_objectives`).
+  Each listed problem's reference is ``optimal`` with that objective (no
+  ``x``: the optimality gap is computed, residuals are the solution's own); a
+  problem the file does not list has reference status ``unknown``, an empty
+  gap and a note saying so.
 
-Which answer is kept is decided by the evidence, never by the solver's name
-(:func:`settle`). Each solver's worst KKT residual ``kkt`` is
-``max(primal residual, dual residual, duality gap)`` of qpsolvers at its
-answer (``inf`` without one):
+Computing (:func:`reference_solutions`): each reference solve has a time
+limit (the profile's ``reference_time_limit``; ``None`` here means none).
+With a limit, or with ``jobs > 1``, the solves run in worker processes
+(:mod:`qpbench.reference_pool`), each task one solver on one problem, up to
+``jobs`` at once; otherwise in this process. Both give the same answers. A
+solve that times out or fails is an ``unknown`` answer with its reason; a
+problem left without a reference has status ``unknown`` and its rows an
+empty optimality gap, with the reason in the ``reference_note`` column. The
+run goes on. ``progress`` is called once per finished problem.
 
-- both optimal: the one with the smaller ``kkt`` (agreeing or not);
-- one optimal: it is kept if the other has no verdict (``unknown``) or if
-  its ``kkt <= 1e-7`` (a point that satisfies the optimality conditions
-  refutes the other's infeasibility claim); otherwise the other's
-  infeasibility is kept;
-- neither optimal: the common status; one ``unknown`` and one infeasibility
-  verdict: the verdict; two different verdicts: ``unknown``.
-
-The result records both objectives and residuals (``objective``/``kkt`` of the
-kept answer, ``check_objective``/``check_kkt`` of the other), which solver was
-kept (``solver``), ``agreement`` and ``agree``; a disagreement is logged.
-
-The objective is ``1/2 x'Px + q'x + offset`` (:func:`qpbench.metrics.objective`).
-
-Cache (:func:`reference_solutions`): one Parquet file beside the set,
-``<folder>/reference-<sha[:16]>.parquet`` (or ``<file stem>.reference-<sha[:16]>.parquet``
-beside a single file), keyed by the set's SHA-256 (the manifest hash of a
-problem-set folder; for a folder of ``.npz`` / ``.mat`` files or a bare Parquet
-file, a SHA-256 of the files' names and bytes: :func:`qpbench.formats.content_sha256`).
-The full hash and :data:`REFERENCE_VERSION` are stored in the file's metadata and
-checked on read, so a changed set, a changed method or a corrupt cache is
-recomputed. A set built in memory, or one in a read-only folder (no write
-permission, or no write bit at all, as for shared data folders), is not cached.
-Writes are atomic; stale ``reference-*.parquet`` files in a problem-set folder are
-removed.
+Cache: one Parquet file beside the set, ``<folder>/reference-<sha[:16]>.parquet``
+(``reference-<method>-<sha[:16]>.parquet`` for ``clarabel`` / ``piqp``; beside a
+single file ``<file stem>.reference-...``), keyed by the set's SHA-256 (the
+manifest hash of a problem-set folder; for a folder of ``.npz`` / ``.mat`` files
+or a bare Parquet file, a SHA-256 of the files' names and bytes:
+:func:`qpbench.formats.content_sha256`). It holds each problem's status,
+solution, both solvers' objectives and KKT residuals, which was kept, the note
+and the time limit. The full hash and :data:`REFERENCE_VERSION` are checked on
+read, so a changed set, a changed method or a corrupt cache is recomputed; an
+entry that timed out is recomputed when the limit is now larger. A set built
+in memory, or one in a read-only folder (no write permission, or no write bit
+at all, as for shared data folders), is not cached. Writes are atomic; stale
+caches of the same method in a problem-set folder are removed. A subset of a
+set (``--problems``, ``--every``, ``--limit``) reads the set's cache and adds
+what it lacks; it never replaces the cache with fewer problems.
 """
 
 from __future__ import annotations
@@ -57,276 +48,200 @@ from __future__ import annotations
 import logging
 import math
 import os
-import warnings
-from dataclasses import dataclass, field
+import re
+import time
 from pathlib import Path
 
 import numpy as np
-import qpsolvers
 
 from .atomic import write_bytes
-from .formats import ProblemRecord, ProblemSet, content_sha256, dense_problem
-from .metrics import objective
-
-log = logging.getLogger(__name__)
-
-#: Bumped when the way references are computed changes (invalidates caches).
-REFERENCE_VERSION = "2"
-#: Statuses a reference can have.
-REFERENCE_STATUSES = ("optimal", "primal_infeasible", "dual_infeasible", "unknown")
-
-CLARABEL_SETTINGS = dict(
-    tol_gap_abs=1e-10,
-    tol_gap_rel=1e-10,
-    tol_feas=1e-10,
-    tol_ktratio=1e-8,
-    tol_infeas_abs=1e-10,
-    tol_infeas_rel=1e-10,
-    max_iter=500,
+from .formats import ProblemSet, content_sha256
+from .reference_solve import (  # noqa: F401 - the public names of references live here too
+    AGREE_RTOL,
+    ALMOST_TOL,
+    METHODS,
+    REFERENCE_STATUSES,
+    REFERENCE_VERSION,
+    Candidate,
+    ReferenceSolution,
+    assemble,
+    combine,
+    reference_solution,
+    relative_difference,
+    settle,
+    solve_candidate,
 )
-PIQP_SETTINGS = dict(
-    eps_abs=1e-10,
-    eps_rel=0.0,
-    check_duality_gap=True,
-    eps_duality_gap_abs=1e-10,
-    eps_duality_gap_rel=0.0,
-    max_iter=500,
-)
-#: Relative objective agreement required between the two solvers.
-AGREE_RTOL = 1e-7
-#: Residual bound accepting Clarabel's ``AlmostSolved``.
-ALMOST_TOL = 1e-7
+
+log = logging.getLogger("qpbench.reference")
+
+#: What ``--reference`` accepts besides a file.
+SOURCES = METHODS + ("none",)
 
 
-@dataclass
-class ReferenceSolution:
-    """High-accuracy solution of one problem.
+# ---------------------------------------------------------------- sources
 
-    Attributes:
-        status: ``optimal``, ``primal_infeasible``, ``dual_infeasible`` or ``unknown``.
-        x, y, z, z_box: Primal and dual solution (qpsolvers' sign convention);
-            ``None`` unless optimal.
-        objective: ``1/2 x'Px + q'x + offset`` (NaN unless optimal).
-        solver: Solver whose solution is kept (``clarabel``, ``piqp``, ``lstsq``).
-        check_solver: Second solver used for the cross-check.
-        check_status: Its status.
-        check_objective: Its objective (NaN unless optimal).
-        agree: Whether the two solvers agree (see the module docstring).
-        agreement: Relative objective difference of the two solvers (NaN
-            unless both are optimal; dimensionless).
-        kkt: Worst KKT residual of the kept answer (``inf`` without one).
-        check_kkt: Worst KKT residual of the other solver's answer.
-        name: Problem name.
+
+def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limit: float | None = None,
+                     jobs: int = 1, progress=None, cache: bool = True, context=None) -> list:
+    """One reference per record of ``problem_set`` from ``source`` (see the module docstring).
+
+    Returns:
+        A list of :class:`ReferenceSolution` (``None`` entries for ``none``).
+
+    Raises:
+        InputError: ``source`` is neither a method, ``none``, nor a readable objectives file.
     """
+    if source == "none":
+        return [None] * len(problem_set.records)
+    if source in METHODS:
+        return reference_solutions(problem_set, cache=cache, progress=progress, method=source,
+                                   time_limit=time_limit, jobs=jobs, context=context)
+    from .published import read_objectives
 
-    status: str
-    x: np.ndarray | None = None
-    y: np.ndarray | None = None
-    z: np.ndarray | None = None
-    z_box: np.ndarray | None = None
-    objective: float = math.nan
-    solver: str = "clarabel"
-    check_solver: str | None = None
-    check_status: str | None = None
-    check_objective: float = math.nan
-    agree: bool | None = None
-    agreement: float = math.nan
-    kkt: float = math.nan
-    check_kkt: float = math.nan
-    name: str | None = None
-    extras: dict = field(default_factory=dict)
-
-    @property
-    def is_optimal(self) -> bool:
-        return self.status == "optimal"
+    return from_objectives(problem_set, read_objectives(source), source)
 
 
-def _clarabel_status(solution) -> str:
-    import clarabel
-
-    status = solution.extras.get("status")
-    S = clarabel.SolverStatus
-    if status == S.Solved:
-        return "optimal"
-    if status in (S.PrimalInfeasible, S.AlmostPrimalInfeasible):
-        return "primal_infeasible"
-    if status in (S.DualInfeasible, S.AlmostDualInfeasible):
-        return "dual_infeasible"
-    if status == S.AlmostSolved and _worst_residual(solution) <= ALMOST_TOL:
-        return "optimal"
-    return "unknown"
+def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Path = "file") -> list:
+    """References from known optimal objectives (``{problem name: objective}``)."""
+    refs = []
+    for record in problem_set.records:
+        f = objectives.get(record.name)
+        if f is None:
+            refs.append(ReferenceSolution("unknown", solver="file", name=record.name,
+                                          note=f"no reference: '{record.name}' is not in {source}"))
+        else:
+            refs.append(ReferenceSolution("optimal", objective=float(f), solver="file", name=record.name,
+                                          note=f"optimal objective {float(f):.10g} from {source}"))
+    return refs
 
 
-def _piqp_status(solution) -> str:
-    import piqp
-
-    info = solution.extras.get("info")
-    status = getattr(info, "status", None)
-    if status == piqp.PIQP_SOLVED:
-        return "optimal"
-    if status == piqp.PIQP_PRIMAL_INFEASIBLE:
-        return "primal_infeasible"
-    if status == piqp.PIQP_DUAL_INFEASIBLE:
-        return "dual_infeasible"
-    return "unknown"
+# ---------------------------------------------------------------- computing
 
 
-def _worst_residual(solution) -> float:
-    s = solution
-    if s.x is None or not np.all(np.isfinite(s.x)):
-        return math.inf
-    if not s.found:
-        import dataclasses
+def _compute(records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None) -> dict:
+    """``{name: ReferenceSolution}`` of ``records``, in this process or in workers."""
+    solvers = ("clarabel", "piqp") if method == "auto" else (method,)
+    limited = time_limit is not None and math.isfinite(time_limit)
+    out = {}
+    if not limited and jobs <= 1:
+        for record in records:
+            started = time.perf_counter()
+            ref = reference_solution(record, method, None)
+            out[record.name] = ref
+            on_done(ref, time.perf_counter() - started)
+        return out
+    from .reference_pool import solve_in_workers
+    from .reference_solve import _is_unconstrained, _problem_for_reference
 
-        s = dataclasses.replace(s, found=True)
-    return max(s.primal_residual(), s.dual_residual(), s.duality_gap())
+    tasks, waiting = [], {}
+    for record in records:
+        if _is_unconstrained(_problem_for_reference(record)):  # no solver involved
+            out[record.name] = reference_solution(record, method, time_limit)
+            on_done(out[record.name], 0.0)
+            continue
+        waiting[record.name] = {}
+        tasks.extend(((record.name, s), record, s) for s in solvers)
+
+    def done(key, candidate) -> None:
+        name, solver = key
+        got = waiting[name]
+        got[solver] = candidate
+        if len(got) == len(solvers):
+            out[name] = assemble(name, [got[s] for s in solvers], time_limit)
+            on_done(out[name], sum(c.wall_s for c in got.values() if math.isfinite(c.wall_s)))
+
+    solve_in_workers(tasks, time_limit if limited else None, jobs, done, context)
+    return out
 
 
-def _solve(problem, solver: str, settings: dict):
-    """(solution or None, status) of one qpsolvers solve; never raises for solver trouble."""
+class LogProgress:
+    """Progress of reference solves as log lines on stderr (at most one per ``every_s`` seconds, and the last)."""
+
+    def __init__(self, total: int, every_s: float = 5.0):
+        self.total, self.every_s, self.done = total, every_s, 0
+        self.last = time.monotonic()
+
+    def __call__(self, ref, wall_s: float) -> None:
+        self.done += 1
+        now = time.monotonic()
+        if now - self.last >= self.every_s or self.done == self.total or ref.status != "optimal":
+            self.last = now
+            log.info("references: %d/%d; %s: %s in %.1f s%s", self.done, self.total, ref.name, ref.status, wall_s,
+                     "" if ref.status == "optimal" else f" ({ref.note})")
+
+
+def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None, *, method: str = "auto",
+                        time_limit: float | None = None, jobs: int = 1, context=None) -> list[ReferenceSolution]:
+    """References of every problem of a set, in order, read from or written to the cache.
+
+    Args:
+        problem_set: The set (from :func:`qpbench.formats.load_problems`).
+        cache: Use the cache beside the set.
+        progress: ``None``, a callable wrapping an iterable (e.g. ``tqdm.tqdm``; called
+            with ``total=``), or ``"log"`` (:class:`LogProgress`).
+        method: ``auto``, ``clarabel`` or ``piqp``.
+        time_limit: Limit of each reference solve in [s] (``None``: none).
+        jobs: Worker processes solving at once.
+        context: ``multiprocessing`` context of the workers (default ``spawn``;
+            :mod:`qpbench.reference_pool`).
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown reference method '{method}'")
+    path = cache_path(problem_set, method) if cache else None
+    sha = content_sha256(problem_set)
+    names = [r.name for r in problem_set.records]
+    limit = math.inf if time_limit is None else float(time_limit)
+    known: dict[str, ReferenceSolution] = {}
+    if path is not None and path.exists():
+        known = {ref.name: ref for ref in (_read_cache(path, sha) or [])}
+        if all(n in known and not _stale(known[n], limit) for n in names):
+            return [known[n] for n in names]
+    todo = [r for r in problem_set.records if r.name not in known or _stale(known[r.name], limit)]
+    on_done, close = _progress(progress, len(todo))
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
-    except Exception as exc:  # a solver crash is an "unknown" reference, not a traceback
-        log.debug("reference: %s failed: %s", solver, exc)
-        return None, "unknown"
-    status = _clarabel_status(sol) if solver == "clarabel" else _piqp_status(sol)
-    return sol, status
+        known.update(_compute(todo, method, time_limit, jobs, on_done, context))
+    finally:
+        close()
+    refs = [known[n] for n in names]
+    if path is not None and _writable(path.parent):
+        _write_cache(path, problem_set, list(known.values()), sha, method)
+    return refs
 
 
-def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
-    P, q = record.problem.P, record.problem.q
-    x, *_ = np.linalg.lstsq(P, -q, rcond=None)
-    res = float(np.max(np.abs(P @ x + q)))
-    if res > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
-        return ReferenceSolution("dual_infeasible", solver="lstsq", name=record.name)
-    n = q.shape[0]
-    return ReferenceSolution(
-        "optimal",
-        x=x,
-        y=np.empty(0),
-        z=np.empty(0),
-        z_box=np.empty(0) if record.problem.lb is None and record.problem.ub is None else np.zeros(n),
-        objective=objective(record, x),
-        solver="lstsq",
-        name=record.name,
-    )
+def _progress(progress, total: int):
+    """``(on_done(ref, wall_s), close())`` for the ``progress`` argument of :func:`reference_solutions`."""
+    if progress is None or total == 0:
+        return (lambda ref, wall: None), (lambda: None)
+    if progress == "log":
+        log.info("references: %d problems to solve", total)
+        return LogProgress(total), (lambda: None)
+    bar = progress(None, total=total, unit="problem", desc="references")
+    return (lambda ref, wall: bar.update(1)), bar.close
 
 
-def _is_unconstrained(p) -> bool:
-    no_bounds = all(
-        v is None or np.all(np.isinf(v)) for v in (p.lb, p.ub)
-    )
-    return p.G is None and p.A is None and no_bounds
-
-
-def relative_difference(f1: float, f2: float) -> float:
-    """``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN when either is NaN)."""
-    if math.isnan(f1) or math.isnan(f2):
-        return math.nan
-    return abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
-
-
-@dataclass
-class Candidate:
-    """One reference solver's answer: its name, status, solution (or ``None``) and objective."""
-
-    solver: str
-    status: str
-    solution: object | None
-    objective: float = math.nan
-
-    @property
-    def kkt(self) -> float:
-        """Worst of qpsolvers' primal residual, dual residual and duality gap (``inf`` without x)."""
-        if self.solution is None:
-            return math.inf
-        return float(_worst_residual(self.solution))
-
-
-def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str]:
-    """``(kept, other, status)`` by the rules of the module docstring (names play no part)."""
-    k1, k2 = first.kkt, second.kkt
-    s1, s2 = first.status, second.status
-    if s1 == s2 == "optimal":
-        return (first, second, s1) if k1 <= k2 else (second, first, s2)
-    if "optimal" in (s1, s2):
-        opt, other = (first, second) if s1 == "optimal" else (second, first)
-        if other.status == "unknown" or opt.kkt <= ALMOST_TOL:
-            return opt, other, "optimal"
-        return other, opt, other.status
-    if s1 == s2:
-        return first, second, s1
-    if "unknown" in (s1, s2):
-        verdict, other = (first, second) if s2 == "unknown" else (second, first)
-        return verdict, other, verdict.status
-    return first, second, "unknown"
-
-
-def reference_solution(record: ProblemRecord) -> ReferenceSolution:
-    """High-accuracy reference of one problem (see the module docstring)."""
-    problem = dense_problem(record.problem, name=record.name)
-    if _is_unconstrained(problem):
-        return _unconstrained(ProblemRecord(problem, record.name, offset=record.offset))
-    candidates = []
-    for solver, settings in (("clarabel", CLARABEL_SETTINGS), ("piqp", PIQP_SETTINGS)):
-        sol, status = _solve(problem, solver, settings)
-        obj = objective(record, sol.x) if status == "optimal" else math.nan
-        candidates.append(Candidate(solver, status, sol if status == "optimal" else None, obj))
-    return combine(record.name, *candidates)
-
-
-def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
-    """The reference made of two solvers' answers (see :func:`settle`)."""
-    agreement = relative_difference(first.objective, second.objective)
-    agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
-    keep, other, status = settle(first, second)
-    if not agree:
-        log.warning(
-            "reference of '%s': %s says %s (f = %.10g, KKT %.3g), %s says %s (f = %.10g, KKT %.3g); "
-            "keeping %s's answer (%s)",
-            name, first.solver, first.status, first.objective, first.kkt,
-            second.solver, second.status, second.objective, second.kkt, keep.solver, status,
-        )
-    ref = ReferenceSolution(
-        status=status,
-        objective=keep.objective if status == "optimal" else math.nan,
-        solver=keep.solver,
-        check_solver=other.solver,
-        check_status=other.status,
-        check_objective=other.objective,
-        agree=agree,
-        agreement=agreement,
-        kkt=keep.kkt,
-        check_kkt=other.kkt,
-        name=name,
-    )
-    if status == "optimal":
-        sol = keep.solution
-        ref.x = np.asarray(sol.x, dtype=np.float64)
-        ref.y = None if sol.y is None else np.asarray(sol.y, dtype=np.float64)
-        ref.z = None if sol.z is None else np.asarray(sol.z, dtype=np.float64)
-        ref.z_box = None if sol.z_box is None else np.asarray(sol.z_box, dtype=np.float64)
-    return ref
+def _stale(ref: ReferenceSolution, limit: float) -> bool:
+    """A cached reference that timed out under a smaller limit than ``limit`` is recomputed."""
+    return bool(ref.timed_out) and ref.time_limit_s < limit
 
 
 # ---------------------------------------------------------------- cache
 
 
-def cache_path(problem_set: ProblemSet) -> Path | None:
-    """Where the references of ``problem_set`` are cached (``None``: not cached)."""
+def cache_path(problem_set: ProblemSet, method: str = "auto") -> Path | None:
+    """Where the references of ``problem_set`` computed by ``method`` are cached (``None``: not cached)."""
     sha = content_sha256(problem_set)
     if sha is None or problem_set.path is None:
         return None
+    tag = "" if method == "auto" else f"{method}-"
     path = Path(problem_set.path)
     if path.is_dir():
-        return path / f"reference-{sha[:16]}.parquet"
-    return path.parent / f"{path.stem}.reference-{sha[:16]}.parquet"
+        return path / f"reference-{tag}{sha[:16]}.parquet"
+    return path.parent / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
 
 
 _VEC_KEYS = ("x", "y", "z", "z_box")
-_FLOAT_KEYS = ("agreement", "kkt", "check_kkt")
+_FLOAT_KEYS = ("objective", "check_objective", "agreement", "kkt", "check_kkt", "time_limit_s")
+_TEXT_KEYS = ("name", "status", "solver", "check_solver", "check_status", "note")
 
 
 def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
@@ -335,16 +250,11 @@ def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
     from .formats import _list_column, table_to_bytes
 
     cols = {
-        "name": pa.array([r.name for r in refs], type=pa.string()),
-        "status": pa.array([r.status for r in refs], type=pa.string()),
+        **{k: pa.array([getattr(r, k) for r in refs], type=pa.string()) for k in _TEXT_KEYS},
         **{k: _list_column([getattr(r, k) for r in refs]) for k in _VEC_KEYS},
-        "objective": pa.array([r.objective for r in refs], type=pa.float64()),
-        "solver": pa.array([r.solver for r in refs], type=pa.string()),
-        "check_solver": pa.array([r.check_solver for r in refs], type=pa.string()),
-        "check_status": pa.array([r.check_status for r in refs], type=pa.string()),
-        "check_objective": pa.array([r.check_objective for r in refs], type=pa.float64()),
-        "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
         **{k: pa.array([getattr(r, k) for r in refs], type=pa.float64()) for k in _FLOAT_KEYS},
+        "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
+        "timed_out": pa.array([bool(r.timed_out) for r in refs], type=pa.bool_()),
     }
     table = pa.table(cols).replace_schema_metadata(
         {"qpbench_set_sha256": sha, "qpbench_reference_version": REFERENCE_VERSION}
@@ -363,27 +273,34 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
         if meta.get(b"qpbench_reference_version", b"").decode() != REFERENCE_VERSION:
             return None
         rows = table.to_pylist()
+        return [
+            ReferenceSolution(
+                **{k: r[k] for k in _TEXT_KEYS if k != "note"},
+                note=r["note"] or "",
+                **{k: math.nan if r[k] is None else float(r[k]) for k in _FLOAT_KEYS},
+                **{k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS},
+                agree=r["agree"],
+                timed_out=bool(r["timed_out"]),
+            )
+            for r in rows
+        ]
     except Exception as exc:  # corrupt cache: recompute
         log.warning("%s: unreadable reference cache, recomputing (%s)", path, exc)
         return None
-    out = []
-    for r in rows:
-        vec = {k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS}
-        out.append(
-            ReferenceSolution(
-                status=r["status"],
-                objective=math.nan if r["objective"] is None else r["objective"],
-                solver=r["solver"],
-                check_solver=r["check_solver"],
-                check_status=r["check_status"],
-                check_objective=math.nan if r["check_objective"] is None else r["check_objective"],
-                agree=r["agree"],
-                name=r["name"],
-                **{k: math.nan if r[k] is None else r[k] for k in _FLOAT_KEYS},
-                **vec,
-            )
-        )
-    return out
+
+
+def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str, method: str) -> None:
+    try:
+        write_bytes(path, _to_bytes(refs, sha))
+    except OSError as exc:
+        log.debug("%s: reference cache not written (%s)", path, exc)
+        return
+    if problem_set.kind == "set" and Path(problem_set.path).is_dir():
+        tag = "" if method == "auto" else f"{method}-"
+        same_method = re.compile(rf"reference-{re.escape(tag)}[0-9a-f]{{16}}\.parquet")
+        for stale in Path(problem_set.path).glob("reference-*.parquet"):
+            if stale != path and same_method.fullmatch(stale.name):
+                stale.unlink(missing_ok=True)
 
 
 def _writable(folder: Path) -> bool:
@@ -393,39 +310,3 @@ def _writable(folder: Path) -> bool:
         return os.access(folder, os.W_OK) and bool(folder.stat().st_mode & 0o222)
     except OSError:
         return False
-
-
-def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None) -> list[ReferenceSolution]:
-    """References of every problem of a set, in order, read from or written to the cache.
-
-    Args:
-        problem_set: The set (from :func:`qpbench.formats.load_problems`).
-        cache: Use the cache beside the set.
-        progress: Optional callable wrapping an iterable (e.g. ``tqdm.tqdm``).
-    """
-    path = cache_path(problem_set) if cache else None
-    sha = content_sha256(problem_set)
-    names = [r.name for r in problem_set.records]
-    known: dict[str, ReferenceSolution] = {}
-    if path is not None and path.exists():
-        # a subset of a set (``--problems``, ``--every``, ``--limit``) reads the set's cache and
-        # adds what it lacks; it never replaces the cache with fewer problems
-        known = {ref.name: ref for ref in (_read_cache(path, sha) or [])}
-        if all(n in known for n in names):
-            return [known[n] for n in names]
-    todo = [r for r in problem_set.records if r.name not in known]
-    records = todo if progress is None else progress(todo)
-    for r in records:
-        known[r.name] = reference_solution(r)
-    refs = [known[n] for n in names]
-    if path is not None and _writable(path.parent):
-        try:
-            write_bytes(path, _to_bytes(list(known.values()), sha))
-        except OSError as exc:
-            log.debug("%s: reference cache not written (%s)", path, exc)
-            return refs
-        if problem_set.kind == "set" and Path(problem_set.path).is_dir():
-            for stale in Path(problem_set.path).glob("reference-*.parquet"):
-                if stale != path:
-                    stale.unlink(missing_ok=True)
-    return refs

@@ -4,12 +4,12 @@ Every ``import`` statement of the package counts, at module level or inside
 a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
-    exceptions statuses profiles atomic cache packed known native_output
-    robot rnn backends metrics formats reference
+    exceptions statuses profiles published atomic cache packed known native_output
+    robot rnn backends metrics formats reference reference_solve reference_pool
     control
     sim
     selection report
-    harness
+    harness scaling
     commands cli
 
 ``jit`` warms every compiled kernel (the backends', the network's, the
@@ -27,12 +27,13 @@ import qpbench
 ROOT = Path(qpbench.__file__).resolve().parent
 
 LAYERS = [
-    {"exceptions", "statuses", "profiles", "atomic", "cache", "packed", "known", "native_output", "qpbench"},
-    {"robot", "rnn", "backends", "metrics", "formats", "reference"},
+    {"exceptions", "statuses", "profiles", "published", "atomic", "cache", "packed", "known", "native_output",
+     "qpbench"},
+    {"robot", "rnn", "backends", "metrics", "formats", "reference", "reference_solve", "reference_pool"},
     {"control"},
     {"sim"},
     {"selection", "report"},
-    {"harness"},
+    {"harness", "scaling"},
     {"commands", "cli"},
 ]
 #: Allowed across layers in both directions (see the module docstring).

@@ -13,7 +13,10 @@ module does at import).
 Each call is stateless: qpsolvers builds the solver's problem anew (that is the
 route this backend measures). ``warm_start`` is passed as ``initvals``.
 
-Settings. The profile's ``eps_abs``, ``eps_rel``, ``max_iter`` and
+Settings. Under a qpbenchmark profile (``qpbenchmark:<settings>``) the
+options are the keyword arguments qpbenchmark's runner passes for the solver,
+verbatim, plus the backend's own settings (``--set``). Otherwise the profile's
+``eps_abs``, ``eps_rel``, ``max_iter`` and
 ``time_limit`` are translated to each solver's own option names by
 :func:`native_settings`, following qpbenchmark's ``SolverSettings``
 (``set_eps_abs``, ``set_eps_rel``, ``set_time_limit``; for ``high_accuracy``
@@ -427,8 +430,13 @@ class QpsolversBackend(Backend):
         """Solver options (computed once per instance; do not modify the dict)."""
         if self._cached_options is None:
             generic, native = generic_settings(self)
-            options = native_settings(self.solver, **generic)
-            options.update(native)
+            given = self.profile.solver_options
+            if given is not None:  # qpbenchmark's arguments, verbatim (qpbench.profiles)
+                options = dict(given.get(self.solver, {}))
+                options.update({k: v for k, v in self.settings.items()})
+            else:
+                options = native_settings(self.solver, **generic)
+                options.update(native)
             self._cached_options = options
         return self._cached_options
 

@@ -7,11 +7,13 @@ import logging
 import sys
 
 from ..harness.bench import DEFAULT_SEED
-from ..profiles import PROFILES
+from ..profiles import profile_names
 
 HELP = "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
 EXAMPLE = ("qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3; "
-           "qpbench bench problems/maros_meszaros --problems 'HS*' --limit 5 --backends daqp,clarabel --out hs.csv")
+           "qpbench bench problems/maros_meszaros --problems 'HS*' --limit 5 --backends daqp,clarabel --out hs.csv; "
+           "qpbench bench problems/maros_meszaros --backends qpsolvers:osqp --profile qpbenchmark:high_accuracy "
+           "--reference none --out mm.csv")
 
 log = logging.getLogger("qpbench")
 
@@ -26,7 +28,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--backends", required=True, help="comma-separated backend names, or 'all' (every available backend)"
     )
     parser.add_argument("--out", required=True, help="CSV file of results (rows appended as they are produced)")
-    parser.add_argument("--profile", default="default", choices=sorted(PROFILES), help="settings profile (default: default)")
+    parser.add_argument(
+        "--profile",
+        default="default",
+        choices=profile_names(),
+        help="settings profile (default: default); qpbenchmark:<settings> applies qpbenchmark's solver arguments, "
+        "time limit and success rule verbatim",
+    )
+    add_reference_arguments(parser)
     parser.add_argument("--repeat", type=int, default=1, help="timed solves per problem; rows give min and median (default 1)")
     parser.add_argument(
         "--seed",
@@ -72,6 +81,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--resume", action="store_true", help="keep the rows of an existing --out and run the rest")
 
 
+def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--reference``, ``--reference-time-limit``, ``--jobs``: where the references come from."""
+    parser.add_argument(
+        "--reference",
+        default="auto",
+        metavar="auto|clarabel|piqp|none|FILE",
+        help="reference solutions: auto = Clarabel and PIQP, the one with smaller KKT residuals kept (default); "
+        "clarabel or piqp alone; none = no reference (qpbenchmark's success rule, empty optimality gap); "
+        "FILE = CSV with columns problem,objective of known optimal objectives",
+    )
+    parser.add_argument(
+        "--reference-time-limit",
+        type=float,
+        default=None,
+        metavar="S",
+        help="time limit of each reference solve in s (default: the profile's, 60 s); a reference that times out "
+        "leaves its problem's rows with an empty optimality gap and the reason",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="worker processes computing reference solutions at once (default 1); the benchmark's timed solves "
+        "stay one at a time",
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output
     from ..formats import load_problems
@@ -101,12 +138,61 @@ def run(args: argparse.Namespace) -> int:
     config.validate()
     from ..selection import select_set
 
+    references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.problems), args.pattern, args.every, args.limit)
     log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
     warmup_logged(log)  # no compile inside a timed solve, here or in a worker
     progress = not args.quiet and sys.stderr.isatty()
-    summary = run_bench(problem_set, config, args.out, force=args.force, resume=args.resume, progress=progress)
+    summary = run_bench(problem_set, config, args.out, force=args.force, resume=args.resume, progress=progress,
+                        references=references)
     if not args.quiet:
         print(f"bench: {summary.line()}")
         print(summary.table())
     return summary.exit_code
+
+
+def _reference_source(args: argparse.Namespace, config) -> object:
+    """What ``run_bench`` gets as ``references``: a function of the set, called once the run's input is checked.
+
+    ``--reference none`` also makes the success rule qpbenchmark's (there is no
+    reference to judge against); the profile keeps its name.
+    """
+    import math
+    from dataclasses import replace
+    from pathlib import Path
+
+    from ..exceptions import ParamError
+    from ..profiles import get_profile
+    from ..published import read_objectives
+    from ..reference import SOURCES, bench_references, from_objectives
+
+    source = args.reference
+    if args.jobs < 1:
+        raise ParamError(f"--jobs must be >= 1, got {args.jobs}", key="jobs")
+    limit = args.reference_time_limit
+    if limit is not None and not (limit > 0 and math.isfinite(limit)):
+        raise ParamError(f"reference time limit must be a positive number of seconds, got {limit}",
+                         key="reference-time-limit")
+    profile = get_profile(config.profile)
+    if limit is None:
+        limit = profile.reference_time_limit
+    if source == "none":
+        config.profile = replace(profile, tolerance=replace(profile.tolerance, rule="qpbenchmark"))
+        return lambda problem_set: [None] * len(problem_set.records)
+    if source not in SOURCES:
+        if not Path(source).is_file():
+            raise ParamError(f"'{source}' is neither {', '.join(SOURCES)} nor a file", key="reference")
+        objectives = read_objectives(source)  # a bad file fails here, before anything is written
+        return lambda problem_set: from_objectives(problem_set, objectives, source)
+    progress = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        progress = tqdm if sys.stderr.isatty() else "log"
+    def compute(problem_set):
+        from ..harness.workers import context as worker_context
+
+        return bench_references(problem_set, source, time_limit=limit, jobs=args.jobs, progress=progress,
+                                context=worker_context())
+
+    return compute

@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..report import write_report
-    from ..report.scaling import is_scaling_dir, write_scaling_report
+    from ..scaling.report import is_scaling_dir, write_scaling_report
 
     scaling = [r for r in args.results if is_scaling_dir(r)]  # folders written by ``qpbench scaling``
     for folder in scaling:

@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     progress = not args.quiet and sys.stderr.isatty()
     code = run_scaling(config, out, resume=args.resume, progress=progress)
     if not args.no_report:
-        from ..report.scaling import write_scaling_report
+        from ..scaling.report import write_scaling_report
 
         path = write_scaling_report(out, out, force=True, quiet=args.quiet)
         log.info("wrote %s", path)

@@ -42,7 +42,7 @@ import logging
 import math
 import statistics
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -429,6 +429,7 @@ class _RowMaker:
             "reference_objective": metrics["reference_objective"],
             "reference_status": metrics["reference_status"],
             "reference_agreement": _float(getattr(reference, "agreement", None)),
+            "reference_note": getattr(reference, "note", None),
             "optimality_gap": metrics["optimality_gap"],
             "primal_residual": metrics["primal_residual"],
             "dual_residual": metrics["dual_residual"],
@@ -499,7 +500,8 @@ def run_bench(
         out: CSV path.
         force: Delete an existing ``out`` and start again.
         resume: Keep the rows of an existing ``out`` and run the missing keys only.
-        references: Reference solutions (one per record); computed (and cached) if ``None``.
+        references: Reference solutions (one per record, ``None`` entries for none), or a function
+            of the problem set that returns them; computed (and cached) if ``None``.
         progress: Show a progress bar on stderr.
 
     Raises:
@@ -516,7 +518,7 @@ def run_bench(
     check_output(out, force=force, resume=resume, make_parent=True)  # the command checked the user's path
     profile = get_profile(config.profile)
     time_limit = float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
-    run_profile = replace(profile, time_limit=time_limit)
+    run_profile = profile.with_time_limit(time_limit)
     sequential = config.mode == "sequential"
     records = list(problem_set.records)
     if not records:
@@ -563,6 +565,8 @@ def run_bench(
         from ..reference import reference_solutions
 
         references = reference_solutions(problem_set)
+    elif callable(references):  # computed now that the input is known to be good
+        references = references(problem_set)
     if len(references) != len(records):
         raise InputError(f"{len(references)} reference solutions for {len(records)} problems", path=problem_set.path)
 

@@ -43,6 +43,7 @@ COLUMNS = (
     "reference_objective",
     "reference_status",
     "reference_agreement",
+    "reference_note",
     "optimality_gap",
     "primal_residual",
     "dual_residual",

@@ -8,5 +8,5 @@
 - :mod:`.runner`: dump the closed loop's ticks, bench them, summarise (``scaling.csv``);
 - :mod:`.fit`: power laws on log-log axes with standard errors, crossings.
 
-The command is ``qpbench scaling``; the report is :mod:`qpbench.report.scaling`.
+The command is ``qpbench scaling``; the report is :mod:`qpbench.scaling.report`.
 """

@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path, write_text
-from ..scaling.fit import crossing, extrapolated_crossing, first_above, fit_power_law
+from .fit import crossing, extrapolated_crossing, first_above, fit_power_law
 
 __all__ = ["TICK_S", "is_scaling_dir", "write_scaling_report"]
 
@@ -38,14 +38,14 @@ AXES = {"arm": ("n", "variables n (arm axis: 4-64 links, 16 cloud points)"),
 
 def is_scaling_dir(path) -> bool:
     """Whether ``path`` is a folder written by ``qpbench scaling`` (it holds ``scaling.csv``)."""
-    from ..scaling.runner import SUMMARY_NAME
+    from .runner import SUMMARY_NAME
 
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
 
 
 def load(folder) -> pd.DataFrame:
     """``scaling.csv`` of ``folder`` as a frame (numbers typed)."""
-    from ..scaling.runner import SUMMARY_NAME, read_summary
+    from .runner import SUMMARY_NAME, read_summary
 
     rows = read_summary(Path(folder) / SUMMARY_NAME)
     frame = pd.DataFrame(rows)

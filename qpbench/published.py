@@ -1,0 +1,164 @@
+"""qpbenchmark's own rules and published numbers, read from its installed modules and files.
+
+- :func:`qpbenchmark_settings`: the keyword arguments qpbenchmark's runner
+  passes to ``qpsolvers.solve_problem`` per settings name and solver, and its
+  ``Tolerance`` per settings name, taken from a ``qpbenchmark.TestSet`` built
+  here (``define_tolerances`` and ``define_solver_settings`` run as they do for
+  any of its test sets; ``runtime`` is the time limit of its
+  ``define_tolerances``: 10 s by default, 1000 s in its Maros-Meszaros test set).
+- :func:`qpbenchmark_success`: its success rule, as its
+  ``Results.build_success_rate_df`` computes it: ``found`` and each of the
+  primal residual, dual residual and duality gap strictly below the tolerance.
+- :func:`read_published_results`: a results file of qpbenchmark (columns
+  ``problem, solver, settings, runtime, found, primal_residual, dual_residual,
+  duality_gap``, as its ``Results`` writes them).
+- :func:`read_objectives`: a file of known optimal objectives (``--reference FILE``).
+
+Importing qpbenchmark configures the root logger (``qpbenchmark.spdlog``);
+:func:`import_qpbenchmark` undoes that, so nothing here changes logging.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+from pathlib import Path
+
+from .exceptions import InputError
+
+#: qpbenchmark's settings names, in the order of increasing accuracy asked ("default": the solvers' own).
+SETTINGS_NAMES = ("default", "low_accuracy", "mid_accuracy", "high_accuracy")
+#: Columns of a qpbenchmark results file.
+RESULTS_COLUMNS = ("problem", "solver", "settings", "runtime", "found", "primal_residual", "dual_residual",
+                   "duality_gap")
+
+
+def import_qpbenchmark():
+    """Import qpbenchmark, leaving the root logger as it was (it adds a handler at import)."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    import qpbenchmark
+
+    root.handlers[:] = handlers
+    root.setLevel(level)
+    return qpbenchmark
+
+
+@functools.lru_cache(maxsize=None)
+def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
+    """``(kwargs, tolerances)`` of qpbenchmark's test sets.
+
+    Args:
+        runtime: Time limit in [s] given to its ``define_tolerances`` (``None``: its default).
+
+    Returns:
+        ``kwargs[settings][solver]``: the keyword arguments its runner passes to
+        ``qpsolvers.solve_problem`` (a fresh dict per call of this function's
+        caller is not made: do not modify); ``tolerances[settings]``: its
+        ``Tolerance`` (``primal``, ``dual``, ``gap``, ``runtime``).
+    """
+    qpb = import_qpbenchmark()
+
+    class _Settings(qpb.TestSet):
+        description = "qpbenchmark's settings, read by qpbench"
+        title = "qpbench"
+        sparse_only = False
+
+        def __iter__(self):
+            return iter(())
+
+        def define_tolerances(self) -> None:
+            if runtime is None:
+                super().define_tolerances()
+            else:
+                super().define_tolerances(runtime=float(runtime))
+
+    previous = logging.root.manager.disable
+    logging.disable(logging.WARNING)  # "solver X is available but skipped as its settings are unknown"
+    try:
+        test_set = _Settings()
+    finally:
+        logging.disable(previous)
+    solvers = sorted(qpb.solver_settings.SolverSettings.IMPLEMENTED_SOLVERS)
+    kwargs = {
+        name: {solver: dict(settings[solver]) for solver in solvers}
+        for name, settings in test_set.solver_settings.items()
+    }
+    return kwargs, dict(test_set.tolerances)
+
+
+def qpbenchmark_success(found: bool, primal: float, dual: float, gap: float, tolerance) -> bool:
+    """qpbenchmark's success rule: ``found`` and each residual strictly below ``tolerance``'s."""
+    return bool(found) and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
+
+
+def read_published_results(path: str | Path):
+    """A qpbenchmark results file (CSV or Parquet) as a DataFrame with :data:`RESULTS_COLUMNS`.
+
+    Raises:
+        InputError: unreadable file or missing columns.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    try:
+        df = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
+    except FileNotFoundError:
+        raise InputError("no such file", path=path) from None
+    except Exception as exc:  # pandas raises many types for a bad file
+        raise InputError(f"unreadable results file ({type(exc).__name__}: {exc})", path=path) from None
+    missing = [c for c in RESULTS_COLUMNS if c not in df.columns]
+    if missing:
+        raise InputError(f"not a qpbenchmark results file (missing columns: {', '.join(missing)})", path=path,
+                         key=missing[0])
+    df = df.copy()
+    df["found"] = df["found"].map(lambda v: str(v).strip().lower() in ("true", "1"))
+    return df
+
+
+def read_objectives(path: str | Path) -> dict[str, float]:
+    """Known optimal objectives from a CSV file with a header and columns ``problem,objective``.
+
+    The objective is ``1/2 x'Px + q'x + r`` with the problem's constant ``r``
+    (as Maros and Meszaros publish them); other columns are ignored, blank
+    lines skipped. A problem of the set that the file does not list gets no
+    reference.
+
+    Raises:
+        InputError: unreadable file, missing column, a value that is not a
+            finite number, or a problem listed twice (naming the line).
+    """
+    import csv
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("no such reference file", path=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"unreadable reference file ({exc})", path=path) from None
+    rows = list(csv.reader(text.splitlines()))
+    header = [c.strip() for c in rows[0]] if rows else []
+    for key in ("problem", "objective"):
+        if key not in header:
+            raise InputError("reference file needs a header with columns problem,objective", path=path, key=key)
+    ip, io = header.index("problem"), header.index("objective")
+    out: dict[str, float] = {}
+    for line, row in enumerate(rows[1:], start=2):
+        if not any(c.strip() for c in row):
+            continue
+        if len(row) <= max(ip, io):
+            raise InputError(f"line {line}: {len(row)} fields, expected {len(header)}", path=path, key="objective")
+        name, value = row[ip].strip(), row[io].strip()
+        try:
+            f = float(value)
+        except ValueError:
+            f = math.nan
+        if not math.isfinite(f):
+            raise InputError(f"line {line}: objective of '{name}' is not a finite number: '{value}'", path=path,
+                             key="objective")
+        if name in out:
+            raise InputError(f"line {line}: problem '{name}' listed twice", path=path, key="problem")
+        out[name] = f
+    return out
