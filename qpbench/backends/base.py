@@ -110,6 +110,11 @@ class Backend:
             records as ``dt``.
         risky: True for a backend the harness runs in a worker process with a
             deadline under ``--isolate auto`` (it was seen to hang in native code).
+        certifies_infeasibility: True when the backend tells a primal-infeasible
+            QP (status ``primal_infeasible``) and an unbounded one
+            (``dual_infeasible``) apart from a certificate; False when it cannot
+            (then :attr:`infeasibility_note` says why); ``None``: not declared.
+        infeasibility_note: Why the backend cannot certify infeasibility.
 
     Optional hooks the harness uses when present: ``get_state()`` and
     ``set_state(state)`` restore a backend exactly between timed repeats
@@ -122,6 +127,8 @@ class Backend:
     module: ClassVar[str | None] = None
     online: ClassVar[bool] = False
     risky: ClassVar[bool] = False
+    certifies_infeasibility: ClassVar[bool | None] = None
+    infeasibility_note: ClassVar[str] = ""
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

@@ -158,6 +158,7 @@ class DaqpBackend(Backend):
     """DAQP through ``daqp.solve`` with simple bounds native and equalities by sense flags."""
 
     name = "daqp-stateless"
+    certifies_infeasibility = True
     family = "active set (dual)"
     package = "daqp"
     module = "daqp"

@@ -78,6 +78,7 @@ class PiqpBackend(Backend):
     """PIQP dense with a persistent ``DenseSolver``, updated per tick."""
 
     name = "piqp"
+    certifies_infeasibility = True
     family = "proximal interior point"
     package = "piqp"
     module = "piqp"

@@ -97,6 +97,7 @@ class ProxqpBackend(Backend):
     """ProxQP dense with a persistent ``QP`` object, updated per problem."""
 
     name = "proxqp"
+    certifies_infeasibility = True
     family = "augmented Lagrangian"
     package = "proxsuite"
     module = "proxsuite"

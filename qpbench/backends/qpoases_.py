@@ -378,6 +378,7 @@ class QpoasesBackend(Backend):
     """qpOASES ``SQProblem``: ``init()`` on the first tick of a shape, ``hotstart()`` on the next ones."""
 
     name = "qpoases"
+    certifies_infeasibility = True
     family = "active set (online, parametric)"
     package = "cmeel-qpoases"
     module = None

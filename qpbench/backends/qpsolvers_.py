@@ -491,6 +491,23 @@ class QpsolversBackend(Backend):
         return sol
 
 
+#: Solvers whose status, as qpsolvers hands it back, tells primal from dual infeasibility.
+CERTIFYING_SOLVERS = ("clarabel", "osqp", "piqp", "proxqp", "qpalm", "scs")
+
+#: Why the other solvers cannot tell, through qpsolvers.
+NO_CERTIFICATE = {
+    "daqp": "qpsolvers drops DAQP's exit flag: found=False only",
+    "highs": "qpsolvers keeps no HiGHS model status: found=False only; on the unbounded "
+    "problem HiGHS 1.16 even reports kOptimal with x2 = 1e7 and a dual residual of 1",
+    "quadprog": "quadprog raises 'no solution' without saying why (and needs P > 0)",
+    "cvxopt": "cvxopt's qp() certifies nothing: 'domain error' on the infeasible problem, "
+    "'Rank(A) < p or Rank([P; A; G]) < n' on the unbounded one",
+    "ecos": "ECOS finds the infeasible problem (exit flag 1) but qpsolvers' ECOS route needs P > 0 "
+    "(Cholesky of P): the unbounded problem is an error",
+    "gurobi": "Gurobi's presolve says INF_OR_UNBD (status 4) on both (DualReductions=0 would tell)",
+}
+
+
 def _make_class(solver: str) -> type[QpsolversBackend]:
     cls = type(
         f"Qpsolvers_{solver}",
@@ -500,6 +517,10 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
             "family": SOLVER_FAMILIES.get(solver, "unknown"),
             "package": SOLVER_PACKAGES.get(solver),
             "solver": solver,
+            "certifies_infeasibility": True if solver in CERTIFYING_SOLVERS else (
+                False if solver in NO_CERTIFICATE else None
+            ),
+            "infeasibility_note": NO_CERTIFICATE.get(solver, ""),
             "__module__": __name__,
             "__doc__": f"``{solver}`` through qpsolvers.solve_problem (see :mod:`{__name__}`).",
         },

@@ -118,6 +118,8 @@ class _NetworkBackend(Backend):
     package: ClassVar[str | None] = "qpbench"
     #: A closed loop applies ``x`` of an online backend whatever its status.
     online: ClassVar[bool] = False
+    certifies_infeasibility = False
+    infeasibility_note = "the network's state moves towards the projection; no certificate, only no convergence"
     #: Integration method unless the ``method`` setting says otherwise.
     default_method: ClassVar[str] = "euler"
     #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).

@@ -57,13 +57,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="BACKEND.KEY=VALUE",
         help="a solver setting for one backend, over the profile's, e.g. osqp.rho=0.1 or rnn.eps=0.001; repeatable",
     )
-    parser.add_argument(
-        "--plugin",
-        action="append",
-        default=[],
-        metavar="MODULE_OR_FILE",
-        help="import a module (or .py file) that registers extra backends; repeatable (also QPBENCH_PLUGINS)",
-    )
     from .list_ import add_selection_arguments
 
     add_selection_arguments(parser)
@@ -78,14 +71,11 @@ def run(args: argparse.Namespace) -> int:
     from ..exceptions import ParamError
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
-    from ..harness.plugins import load_plugins, plugin_specs
     from ..jit import warmup_logged
     from .simulate import parse_overrides
 
     # Nothing is written before the input is known to be good.
     check_output(args.out, force=args.force, resume=args.resume)
-    plugins = plugin_specs(args.plugin)
-    load_plugins(plugins)
     if args.backends.strip() == "all":
         backends = backend_names(available_only=True)
     else:
@@ -110,7 +100,6 @@ def run(args: argparse.Namespace) -> int:
         time_limit=args.time_limit,
         isolate=args.isolate,
         warmup=not args.no_warmup,
-        plugins=plugins,
         seed=args.seed,
     )
     config.validate()

@@ -4,8 +4,7 @@
 - :mod:`.timing`: the timed region and state restoration between repeats;
 - :mod:`.guard`: guarded in-process solves (exceptions, time limit, non-finite answers);
 - :mod:`.isolation`: solves in a worker process (hangs and crashes);
-- :mod:`.results`: CSV rows appended as produced, read back on resume;
-- :mod:`.plugins`: extra backend modules (``--plugin``, ``QPBENCH_PLUGINS``).
+- :mod:`.results`: CSV rows appended as produced, read back on resume.
 """
 
 from .bench import BenchConfig, BenchSummary, is_failure, run_bench, sequences

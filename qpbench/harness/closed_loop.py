@@ -453,18 +453,22 @@ def run_deadline(scenario: str, duration: float | None, run_time_limit: float | 
 
 def is_risky(backend: str) -> bool:
     """The backend's class says ``risky = True`` (``False`` for an unknown name)."""
-    from ..backends import _registry
+    from ..backends import backend_class
+    from ..exceptions import BackendNotFound
 
-    return bool(getattr(_registry().get(backend), "risky", False))
+    try:
+        return backend_class(backend).risky
+    except BackendNotFound:
+        return False
 
 
 def _worker_main(conn, args: tuple, plugins: list[str]) -> None:
-    """Body of a run's worker process: load the plugins, make the run, send its row."""
+    """Body of a run's worker process: load the parent's plugin files, make the run, send its row."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
     try:
-        from .plugins import load_plugins
+        from ..backends import load_plugins
 
         load_plugins(plugins)
         row = _run_job(args)
@@ -647,7 +651,6 @@ def run_closed_loop(
     isolate: str = "auto",
     run_time_limit: float | None = None,
     deadline: float | None = None,
-    plugins: list[str] | None = None,
     run_budget: float | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``.
@@ -673,8 +676,6 @@ def run_closed_loop(
             :func:`run_deadline`).
         deadline: Per-tick deadline [s]: a later answer is dropped (default
             none: every answer is applied; see :func:`qpbench.sim.loop.simulate`).
-        plugins: Plugin modules or ``.py`` files that register extra backends
-            (with those of ``QPBENCH_PLUGINS``); imported here and in the workers.
         run_budget: Wall-time budget of each run [s] (default: none): a run
             stops between ticks once it is spent (status ``budget``,
             ``simulated_s`` how far it got; its log is the uncut run's first
@@ -696,10 +697,9 @@ def run_closed_loop(
                        (run_budget, "--run-budget")):
         if value is not None and not (value > 0 and math.isfinite(value)):
             raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
-    from .plugins import load_plugins, plugin_specs
+    from ..backends import plugin_files
 
-    plugins = [str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_specs(plugins)]
-    load_plugins(plugins)
+    plugins = plugin_files()  # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
     out = Path(out)
     csv_path = out / CSV_NAME
     check_output(csv_path, force=force, resume=resume)

@@ -169,12 +169,12 @@ def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profi
     must match the loop's ``dt``.
     """
     if isinstance(backend, str):
-        from ..backends import _registry
+        from ..backends import backend_class
 
         settings = {}
         if backend in SCENARIO_RNN_BACKENDS:
             settings.update(scenario.rnn)
-        if getattr(_registry().get(backend), "online", False):
+        if backend_class(backend).online:
             settings.setdefault("dt", dt)
         return get_backend(backend, profile=profile, **settings)
     if not isinstance(backend, Backend):
