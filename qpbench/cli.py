@@ -32,6 +32,7 @@ COMMANDS = {
     "simulate": "simulate",
     "report": "report",
     "backends": "backends",
+    "scenarios": "scenarios",
     "inspect": "inspect_",
     "list": "list_",
     "export": "export",

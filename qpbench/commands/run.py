@@ -225,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
     from ..exceptions import ParamError
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
-    from ..harness.closed_loop import PAPER_SCENARIOS, resolve_backends, resolve_scenarios, run_closed_loop
+    from ..harness.closed_loop import resolve_backends, resolve_scenarios, run_closed_loop
     from .closed_loop import log_row
     from ..jit import warmup_logged
     from ..report import write_report
@@ -244,7 +244,9 @@ def run(args: argparse.Namespace) -> int:
     problems = Path(args.problems)
     scenarios = resolve_scenarios(args.scenarios)
     backends = resolve_backends(args.backends)
-    bench_scenarios = [s for s in scenarios if s in PAPER_SCENARIOS] or scenarios
+    from ..sim.scenario import paper_scenarios
+
+    bench_scenarios = [s for s in scenarios if s in paper_scenarios()] or scenarios
     _check_out(out, args.force)
     staging = out / STAGING
     if staging.exists() and not args.resume:

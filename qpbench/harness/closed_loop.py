@@ -102,9 +102,6 @@ CSV_NAME = "closed_loop.csv"
 #: Folder of the per-tick logs inside ``--out``.
 LOG_DIR = "logs"
 
-#: Scenarios of the paper (section 4), in its order.
-PAPER_SCENARIOS = ("free", "wall", "adaptive", "narrow")
-
 #: Leading columns of the closed-loop table, in order.
 COLUMNS = (
     "scenario",
@@ -276,22 +273,6 @@ def log_name(scenario: str, backend: str) -> str:
     return f"{safe}.parquet"
 
 
-def scenario_names() -> list[str]:
-    """Every shipped scenario (the simulator's list when it exposes one)."""
-    try:
-        from ..sim import scenario as scenario_mod
-    except ImportError:  # pragma: no cover - simulator missing
-        return list(PAPER_SCENARIOS)
-    for attr in ("scenario_names", "list_scenarios", "available_scenarios"):
-        fn = getattr(scenario_mod, attr, None)
-        if callable(fn):
-            names = list(fn())
-            return [n for n in PAPER_SCENARIOS if n in names] + sorted(
-                n for n in names if n not in PAPER_SCENARIOS
-            )
-    return list(PAPER_SCENARIOS)
-
-
 def parse_list(value: str | list[str] | None, option: str) -> list[str]:
     """Split a comma-separated option value (empty items dropped, order kept, no duplicates).
 
@@ -314,9 +295,10 @@ def parse_list(value: str | list[str] | None, option: str) -> list[str]:
 def resolve_scenarios(value: str | list[str] | None) -> list[str]:
     """``all`` (or nothing) -> every shipped scenario; else the names or paths given."""
     names = parse_list(value or "all", "--scenarios")
+    from ..sim.scenario import load_scenario, scenario_names
+
     if names == ["all"]:
         return scenario_names()
-    from ..sim.scenario import load_scenario
 
     for name in names:
         load_scenario(name)  # a typo or a broken file: one line naming it, before any run starts
