@@ -13,7 +13,7 @@ import pytest
 import faulty_backends as fb
 from qpbench.cli import main
 from qpbench.formats import write_problem_set
-from qpbench.harness import COLUMNS, sequences
+from qpbench.harness import columns, sequences
 from qpbench.harness.results import TIMING_COLUMNS
 from qpbench.profiles import PROFILES
 
@@ -56,7 +56,7 @@ def test_maros_meszaros_rows_columns_references_and_success(mm_small, tmp_path, 
     code = bench(mm_small, "--backends", "clarabel,qpsolvers:daqp,faulty:nan", "--out", out, "--repeat", "2")
     rows = read(out)
     assert code == 1  # faulty:nan is invalid everywhere
-    assert list(rows[0].keys()) == list(COLUMNS)
+    assert list(rows[0].keys()) == list(columns())
     assert len(rows) == 5 * 3
     assert "harness overhead" in capsys.readouterr().out
     tol = PROFILES["default"].tolerance

@@ -53,7 +53,6 @@ from ..profiles import Profile, get_profile
 from .guard import FAILURE_STATUSES, RESET_STATUSES, LocalRunner
 from .isolation import IsolatedRunner
 from .results import (
-    COLUMNS,
     ExistingResults,
     InflightMarker,
     ResultsWriter,
@@ -400,7 +399,7 @@ class _RowMaker:
 
     def __call__(self, record, backend: str, outcome, reference, position: int | None = None,
                  seed: int | None = None) -> dict:
-        from ..metrics import VIOLATION_KEYS, evaluate
+        from ..metrics import evaluate, metric_columns
 
         sol = outcome.solution
         status = outcome.status
@@ -423,15 +422,7 @@ class _RowMaker:
             "status": status,
             "found": bool(metrics["found"]) and status == "optimal",
             "success": bool(metrics["success"]) and status not in FAILURE_STATUSES,
-            "objective": metrics["objective"],
-            "reference_objective": metrics["reference_objective"],
-            "reference_status": metrics["reference_status"],
-            "reference_agreement": _float(getattr(reference, "agreement", None)),
-            "optimality_gap": metrics["optimality_gap"],
-            "primal_residual": metrics["primal_residual"],
-            "dual_residual": metrics["dual_residual"],
-            "duality_gap": metrics["duality_gap"],
-            **{k: metrics[k] for k in VIOLATION_KEYS},
+            **{c: metrics[c] for c in metric_columns()},
             "wall_time_min_s": min(times) if times else None,
             "wall_time_median_s": statistics.median(times) if times else None,
             "solver_time_s": _float(getattr(sol, "solver_time_s", None)) if outcome.solution is not None else None,
@@ -711,5 +702,5 @@ def run_bench(
 
 
 __all__ = [
-    "COLUMNS", "BackendStats", "BenchConfig", "BenchSummary", "backend_order", "is_failure", "run_bench", "sequences",
+    "BackendStats", "BenchConfig", "BenchSummary", "backend_order", "is_failure", "run_bench", "sequences",
 ]
