@@ -32,7 +32,8 @@ start; the status says it. Constructing a ``qpsolvers:<name>`` backend adds
 a filter that ignores the warnings of qpsolvers' wrapper module for that
 solver (``qpsolvers.solvers.<name>_``) in this process
 (:func:`silence_wrapper_warnings`): free per call, where a
-``warnings.catch_warnings`` block around every call cost 1.5-3 us.
+``warnings.catch_warnings`` block around every call costs a noticeable
+fraction of a fast solve.
 
 Per-call cost. The options are computed once per instance, the dense/sparse
 test is a type check, duals already float64 arrays are not converted, and a
@@ -356,8 +357,8 @@ def silence_wrapper_warnings(solver: str) -> None:
     qpsolvers' wrappers warn on a failed solve and on an ignored ``initvals``;
     the backend reports both as its status. A filter on the wrapper's module
     (``qpsolvers.solvers.<solver>_``) costs nothing per call, where a
-    ``warnings.catch_warnings`` block around each call costs 1.5-3 us (a
-    tenth of a DAQP solve through qpsolvers). Adding it again moves it to the
+    ``warnings.catch_warnings`` block around each call costs a noticeable
+    fraction of a DAQP solve through qpsolvers. Adding it again moves it to the
     front of the filter list (idempotent). Warnings a solver's own package
     raises on qpsolvers' normal calls (:data:`_SOLVER_WARNINGS`) are ignored too.
     """

@@ -20,10 +20,9 @@ With no arguments, on a fresh clone:
    (``simulated_s``), its real-time factor over that time, and a verdict of
    what it simulated (the trajectory up to the stop is the uncut run's: a
    simulated trajectory does not depend on how long a solve took). Backends
-   that keep up with the loop finish their 20 s well within the budget (at
-   a real-time factor of 10-100, 0.2-2 s); those that do not (cvxpy,
-   qpsolvers' clarabel, highs, osqp, scs, the converged RNN: 0.02-0.8) get
-   as far as the budget allows;
+   that keep up with the loop finish their 20 s well within the budget;
+   those that do not (a real-time factor below 1) get as far as the budget
+   allows;
 4. report: ``results/report.md`` and ``results/plots/``.
 
 Where outputs go: ``--out`` (default ``./results``, relative to the current
