@@ -56,33 +56,7 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     nominal = _nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
     forced = nominal > 0
     prm[NOMINAL] = nominal
-    note = NOTE_NONE
-    if forced:
-        rmax = sig2 = np.nan
-        nsteps = nominal
-        if prm[CLAMP] != 0.0:
-            # the bound only when the step may exceed it: below a cheap lower
-            # estimate of it (Gershgorin for P, Frobenius for sigma_max^2) it cannot
-            if n:
-                S = 0.5 * (P + P.T)
-                radius = np.abs(S).sum(axis=1) - np.abs(np.diag(S))
-                glo, ghi = float((np.diag(S) - radius).min()), float((np.diag(S) + radius).max())
-                exact = not radius.any()
-            else:
-                glo, ghi, exact = 1.0, 1.0, True
-            low = _ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
-            if not r_total / nominal <= prm[SAFETY] * low:
-                pmin, pmax = (glo, ghi) if exact else p_eigen_range(P)
-                sig2 = _sigma2_bound_numpy(A, G)
-                rmax = _ratio_max(pmin, pmax, sig2, semi)
-                if rmax <= 0.0:
-                    note = NOTE_UNPROVEN
-                elif r_total / nominal > prm[SAFETY] * rmax:
-                    nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
-                    note = NOTE_CLAMPED
-    else:
-        sig2 = _sigma2_bound_numpy(A, G)
-        rmax = _ratio_max(prm[PMIN], prm[PMAX], sig2, semi)
+    nsteps, rmax, sig2, note = _step_bound(P, A, G, prm, nominal, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
     if not forced and rmax <= 0.0:
@@ -136,14 +110,56 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     prm[OBJ] = 0.5 * float(v @ (P @ v)) + float(q @ v)
     prm[STEPS] = steps
     if sol.shape[0]:
-        w = v - g
-        if sol.shape[0] > 2 * n + me + mi:
-            base = 2 * n + me + mi
-            sol[base : base + n] = g
-            sol[base + n : base + n + me] = Av
-            sol[base + n + me :] = Gv
-        sol[:n] = v
-        sol[n : n + me] = -l1
-        sol[n + me : n + me + mi] = l2
-        sol[n + me + mi : 2 * n + me + mi] = w - np.minimum(np.maximum(w, lb), ub)
+        _fill_solution(sol, v, l1, l2, g, Av, Gv, lb, ub)
     return steps
+
+
+def _step_bound(P, A, G, prm, nominal, semi):
+    """``(steps, ratio_max, sigma_max^2 bound, note)`` before the steps: the bound where it is needed.
+
+    A forced step count (``nominal > 0``) needs the bound only when its step
+    may exceed it: below a cheap lower estimate of it (Gershgorin for ``P``,
+    Frobenius for ``sigma_max^2``) it cannot, and ``ratio_max`` stays NaN.
+    """
+    n = P.shape[0]
+    r_total = prm[R_TOTAL]
+    note = NOTE_NONE
+    if nominal <= 0:
+        sig2 = _sigma2_bound_numpy(A, G)
+        return 0, _ratio_max(prm[PMIN], prm[PMAX], sig2, semi), sig2, note
+    rmax = sig2 = np.nan
+    nsteps = nominal
+    if prm[CLAMP] != 0.0:
+        if n:
+            S = 0.5 * (P + P.T)
+            radius = np.abs(S).sum(axis=1) - np.abs(np.diag(S))
+            glo, ghi = float((np.diag(S) - radius).min()), float((np.diag(S) + radius).max())
+            exact = not radius.any()
+        else:
+            glo, ghi, exact = 1.0, 1.0, True
+        low = _ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
+        if not r_total / nominal <= prm[SAFETY] * low:
+            pmin, pmax = (glo, ghi) if exact else p_eigen_range(P)
+            sig2 = _sigma2_bound_numpy(A, G)
+            rmax = _ratio_max(pmin, pmax, sig2, semi)
+            if rmax <= 0.0:
+                note = NOTE_UNPROVEN
+            elif r_total / nominal > prm[SAFETY] * rmax:
+                nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                note = NOTE_CLAMPED
+    return nsteps, rmax, sig2, note
+
+
+def _fill_solution(sol, v, l1, l2, g, Av, Gv, lb, ub):
+    """``sol = [x; y; z; z_box]`` (and ``[g; Av; Gv]`` after it when long enough): see :func:`duals`."""
+    n, me, mi = v.shape[0], l1.shape[0], l2.shape[0]
+    w = v - g
+    if sol.shape[0] > 2 * n + me + mi:
+        base = 2 * n + me + mi
+        sol[base : base + n] = g
+        sol[base + n : base + n + me] = Av
+        sol[base + n + me :] = Gv
+    sol[:n] = v
+    sol[n : n + me] = -l1
+    sol[n + me : n + me + mi] = l2
+    sol[n + me + mi : 2 * n + me + mi] = w - np.minimum(np.maximum(w, lb), ub)
