@@ -477,7 +477,7 @@ def test_qpsolvers_status_readers_of_the_added_solvers():
     """The status tables of ecos, cvxopt, qpalm and gurobi (read only when qpsolvers says found=False)."""
     from types import SimpleNamespace
 
-    from qpbench.backends import qpsolvers_ as qs
+    from qpbench.backends import _qpsolvers_status as qs
 
     assert qs._status_ecos({"exitFlag": 1})[0] == "primal_infeasible"
     assert qs._status_ecos({"exitFlag": 2})[0] == "dual_infeasible"
