@@ -4,6 +4,10 @@ Each sub-command lives in :mod:`qpbench.commands` as a module with
 ``HELP`` (one line), ``EXAMPLE`` (shown under ``--help``),
 ``add_arguments(parser)`` and ``run(args) -> int``.
 
+Plugin backends (:func:`qpbench.backends.load_plugins`: ``--plugin FILE``,
+before or after the sub-command, ``QPBENCH_PLUGINS``, entry points of group
+``qpbench.backends``) are loaded here, once, before any command runs.
+
 Exit codes: 0 success; 1 the run completed but some solves failed;
 2 usage or input error (one line on stderr naming the file, key or value);
 130 interrupted.
@@ -14,6 +18,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 from . import __version__
@@ -27,6 +32,7 @@ COMMANDS = {
     "simulate": "simulate",
     "report": "report",
     "backends": "backends",
+    "scenarios": "scenarios",
     "inspect": "inspect_",
     "list": "list_",
     "export": "export",
@@ -76,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common],
     )
     parser.add_argument("--version", action="version", version=f"qpbench {__version__}")
+    _add_plugin_option(parser, "plugins_before")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in _available_commands():
         p = sub.add_parser(
@@ -87,12 +94,21 @@ def build_parser() -> argparse.ArgumentParser:
             parents=[common],
         )
         module.add_arguments(p)
+        _add_plugin_option(p, "plugins_after")
         p.set_defaults(_run=module.run)
     return parser
 
 
 #: Logger of the one-line-per-solve messages; shown from ``-vv`` on.
 SOLVE_LOGGER = "qpbench.solves"
+def _add_plugin_option(parser: argparse.ArgumentParser, dest: str) -> None:
+    # Two destinations: a sub-command's parser starts from a namespace of its own and would
+    # replace a list given before the sub-command (``qpbench --plugin a.py bench --plugin b.py``).
+    parser.add_argument(
+        "--plugin", dest=dest, action="append", default=[], metavar="FILE",
+        help=f"a Python file that registers extra backends; repeatable (also QPBENCH_PLUGINS, "
+        f"files separated by '{os.pathsep}', and entry points of group qpbench.backends)",
+    )
 
 
 def _configure_logging(args: argparse.Namespace) -> None:
@@ -127,9 +143,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     from tqdm.contrib.logging import logging_redirect_tqdm
 
+    from .backends import load_plugins
     from .native_output import silence_native_stdout
 
     try:
+        load_plugins([*args.plugins_before, *getattr(args, "plugins_after", [])])
         # log lines go through tqdm.write: a progress bar is redrawn below them, never mixed into one line
         with silence_native_stdout(enabled=not args.verbose), logging_redirect_tqdm(loggers=[log]):
             return int(args._run(args) or 0)
@@ -138,8 +156,6 @@ def main(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except BrokenPipeError:
         # stdout's reader closed early (``qpbench list ... | head``): stop quietly, as Unix tools do
-        import os
-
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141

@@ -1,11 +1,22 @@
 """Metrics of a solution against its problem and its reference solution.
 
+The per-tick metrics are a declared list (:data:`PER_TICK_METRICS`), each a
+function of one :class:`Tick` registered with :func:`per_tick_metric`; their
+names are the metric columns of a bench CSV, in that order
+(:func:`metric_columns`; :mod:`qpbench.harness.results` puts them between the
+outcome and the timings). A new per-tick metric is one such function here;
+a report table shows it only if one is written for it.
+
 For a record with problem ``(P, q, G, h, A, b, lb, ub)`` and constant ``r``
-(:attr:`~qpbench.formats.ProblemRecord.offset`), :func:`evaluate` returns:
+(:attr:`~qpbench.formats.ProblemRecord.offset`), :func:`evaluate` returns
+every registered metric and ``status``, ``found``, ``success`` and
+``optimality_gap_signed``:
 
 - ``objective``: ``f(x) = 1/2 x'Px + q'x + r`` computed here (``Solution.obj``
   is ``None`` for some solvers and never includes ``r``); NaN without ``x``.
-- ``reference_objective``: ``f*`` of an optimal reference, else NaN.
+- ``reference_objective``: ``f*`` of an optimal reference, else NaN;
+  ``reference_status``: the reference's status; ``reference_agreement``: the
+  relative objective difference of the two reference solvers.
 - ``optimality_gap_signed``: ``(f(x) - f*) / max(1, |f*|)`` (dimensionless);
   ``optimality_gap``: its absolute value. NaN when either side is missing.
 - ``primal_residual``, ``dual_residual``, ``duality_gap``: qpsolvers'
@@ -50,6 +61,8 @@ plays no part (:func:`qpbench.published.qpbenchmark_success`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -125,13 +138,125 @@ def constraint_violation(problem, x: np.ndarray | None) -> dict:
     }
 
 
-def _qpsolvers_metrics(solution) -> tuple[float, float, float]:
-    if solution is None:
-        return math.inf, math.inf, math.inf
-    primal = float(solution.primal_residual())
-    dual = float(solution.dual_residual())
-    gap = float(solution.duality_gap())
-    return primal, dual, gap
+@dataclass
+class Tick:
+    """What a per-tick metric reads.
+
+    Attributes:
+        record: The :class:`~qpbench.formats.ProblemRecord` that was solved.
+        solution: The backend's ``qpsolvers.Solution`` (``None`` without one).
+        reference: The record's :class:`~qpbench.reference.ReferenceSolution`, or ``None``.
+        values: The metrics computed before this one, by column (a metric may
+            read an earlier one instead of computing it again).
+    """
+
+    record: object
+    solution: object
+    reference: object
+    values: dict = field(default_factory=dict)
+
+    @property
+    def x(self) -> np.ndarray | None:
+        return None if self.solution is None else self.solution.x
+
+    @property
+    def reference_status(self) -> str | None:
+        return None if self.reference is None else self.reference.status
+
+
+#: The per-tick metrics in column order: ``(columns, function)``; a function of
+#: one column returns its value, one of several a dict of them.
+PER_TICK_METRICS: list[tuple[tuple[str, ...], Callable[[Tick], object]]] = []
+
+
+def per_tick_metric(fn: Callable | None = None, *, columns: tuple[str, ...] | None = None):
+    """Register ``fn(tick) -> value`` as a per-tick metric; its name is the column.
+
+    ``columns=("a", "b")``: the function returns ``{"a": ..., "b": ...}``.
+    Usable bare (``@per_tick_metric``) or with ``columns``. A name already
+    registered is replaced in place (its column keeps its position).
+    """
+
+    def add(f: Callable) -> Callable:
+        cols = tuple(columns) if columns else (f.__name__,)
+        for i, (old, _) in enumerate(PER_TICK_METRICS):
+            if old == cols:
+                PER_TICK_METRICS[i] = (cols, f)
+                return f
+        taken = set(metric_columns()) & set(cols)
+        if taken:
+            raise ValueError(f"metric column(s) {', '.join(sorted(taken))} already registered")
+        PER_TICK_METRICS.append((cols, f))
+        return f
+
+    return add(fn) if fn is not None else add
+
+
+def metric_columns() -> tuple[str, ...]:
+    """The bench CSV's metric columns, in order."""
+    return tuple(c for cols, _ in PER_TICK_METRICS for c in cols)
+
+
+@per_tick_metric(columns=("objective",))
+def _objective(tick: Tick) -> float:
+    return objective(tick.record, tick.x)
+
+
+@per_tick_metric
+def reference_objective(tick: Tick) -> float:
+    ref = tick.reference
+    value = ref.objective if tick.reference_status == "optimal" else None
+    return math.nan if value is None else float(value)
+
+
+@per_tick_metric
+def reference_status(tick: Tick) -> str | None:
+    return tick.reference_status
+
+
+@per_tick_metric
+def reference_agreement(tick: Tick) -> float | None:
+    value = getattr(tick.reference, "agreement", None)
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+@per_tick_metric
+def reference_note(tick: Tick) -> str | None:
+    """Each reference solver's answer and which one was kept and why, or why there is no reference."""
+    return getattr(tick.reference, "note", None)
+
+
+def _signed_gap(values: dict) -> float:
+    obj, ref = values["objective"], values["reference_objective"]
+    if math.isnan(obj) or math.isnan(ref):
+        return math.nan
+    return (obj - ref) / max(1.0, abs(ref))
+
+
+@per_tick_metric
+def optimality_gap(tick: Tick) -> float:
+    return abs(_signed_gap(tick.values))
+
+
+@per_tick_metric(columns=("primal_residual", "dual_residual", "duality_gap"))
+def residuals(tick: Tick) -> dict:
+    """qpsolvers' residuals and duality gap (``inf`` without a solution)."""
+    sol = tick.solution
+    if sol is None:
+        return dict.fromkeys(("primal_residual", "dual_residual", "duality_gap"), math.inf)
+    return {
+        "primal_residual": float(sol.primal_residual()),
+        "dual_residual": float(sol.dual_residual()),
+        "duality_gap": float(sol.duality_gap()),
+    }
+
+
+@per_tick_metric(columns=("constraint_violation", "violation_ineq", "violation_eq", "violation_box"))
+def _violation(tick: Tick) -> dict:
+    return constraint_violation(tick.record.problem, tick.x)
 
 
 def evaluate(record, solution, reference, tolerance) -> dict:
@@ -145,44 +270,30 @@ def evaluate(record, solution, reference, tolerance) -> dict:
         tolerance: :class:`~qpbench.profiles.Tolerance` (``primal``, ``dual``, ``gap``).
 
     Returns:
-        A dict with the keys listed in the module docstring.
+        ``status``, ``found``, every metric of :data:`PER_TICK_METRICS` (by
+        column, in order), ``optimality_gap_signed`` and ``success`` (see the
+        module docstring).
     """
-    primal, dual, gap = _qpsolvers_metrics(solution)
-    x = None if solution is None else solution.x
-    violation = constraint_violation(record.problem, x)
-    obj = objective(record, x)
+    tick = Tick(record, solution, reference)
+    for columns, fn in PER_TICK_METRICS:
+        value = fn(tick)
+        tick.values.update({c: value[c] for c in columns} if len(columns) > 1 else {columns[0]: value})
+    m = tick.values
     found = bool(solution is not None and solution.found)
     status = solution_status(solution)
-    ref_status = None if reference is None else reference.status
-    ref_obj = reference.objective if ref_status == "optimal" else math.nan
-    if math.isnan(obj) or ref_obj is None or math.isnan(ref_obj):
-        signed = math.nan
-    else:
-        signed = (obj - ref_obj) / max(1.0, abs(ref_obj))
+    signed = _signed_gap(m)
     if getattr(tolerance, "rule", "qpbench") == "qpbenchmark":
-        success = found and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
-    elif ref_status in CERTIFIED_INFEASIBLE:
-        success = status == ref_status
+        success = (found and m["primal_residual"] < tolerance.primal and m["dual_residual"] < tolerance.dual
+                   and m["duality_gap"] < tolerance.gap)
+    elif tick.reference_status in CERTIFIED_INFEASIBLE:
+        success = status == tick.reference_status
     else:
         success = (
             found
-            and primal <= tolerance.primal
-            and dual <= tolerance.dual
-            and gap <= tolerance.gap
+            and m["primal_residual"] <= tolerance.primal
+            and m["dual_residual"] <= tolerance.dual
+            and m["duality_gap"] <= tolerance.gap
         )
-        if success and ref_status == "optimal":
+        if success and tick.reference_status == "optimal":
             success = abs(signed) <= tolerance.gap
-    return {
-        "status": status,
-        "found": found,
-        "objective": obj,
-        "reference_objective": float(ref_obj) if ref_obj is not None else math.nan,
-        "reference_status": ref_status,
-        "optimality_gap": abs(signed),
-        "optimality_gap_signed": signed,
-        "primal_residual": primal,
-        "dual_residual": dual,
-        "duality_gap": gap,
-        **violation,
-        "success": bool(success),
-    }
+    return {"status": status, "found": found, **m, "optimality_gap_signed": signed, "success": bool(success)}

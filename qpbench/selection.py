@@ -22,7 +22,7 @@ import fnmatch
 from .exceptions import ParamError
 
 __all__ = [
-    "PAPER_SCENARIOS", "backend_settings", "parse_list", "parse_overrides", "select_backend", "select_backends", "select_records",
+    "backend_settings", "parse_list", "parse_overrides", "select_backend", "select_backends", "select_records",
     "select_scenarios", "select_set",
 ]
 
@@ -80,10 +80,6 @@ def select_set(problem_set, pattern: str | None = None, every: int | None = None
 
 # -- backends, scenarios and --set overrides: parsed and checked before any work starts ----------
 
-#: Scenarios of the paper (section 4), in its order: ``all`` lists them first.
-PAPER_SCENARIOS = ("free", "wall", "adaptive", "narrow")
-
-
 def parse_list(value: str | list[str] | None, option: str) -> list[str]:
     """Split a comma-separated option value (empty items dropped, order kept).
 
@@ -117,8 +113,7 @@ def select_scenarios(value: str | list[str] | None, option: str = "--scenarios")
 
     names = parse_list(value or "all", option)
     if names == ["all"]:
-        shipped = scenario_names()
-        return [n for n in PAPER_SCENARIOS if n in shipped] + [n for n in shipped if n not in PAPER_SCENARIOS]
+        return scenario_names()  # the paper's (``in_paper = true``) first, in its order
     for name in names:
         load_scenario(name)
     return names

@@ -14,33 +14,16 @@ import pytest
 import qpsolvers
 
 from qpbench import backends
-from qpbench.backends import BackendSolution, backend_info, backend_names, get_backend, objective
+from qpbench.backends import BackendSolution, backend_class, backend_info, backend_names, get_backend, objective
 from qpbench.exceptions import BackendNotFound
 from qpbench.known import random_kkt_problem, robot_like_problem
 
 EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged"}  # tested in test_rnn.py
-INFOS = [info for info in backend_info() if info.name not in EXCLUDED]
+#: The package's backends (not those other tests register to inject faults).
+INFOS = [info for info in backend_info()
+         if info.name not in EXCLUDED and backend_class(info.name).__module__.startswith("qpbench.backends.")]
 QP_INFOS = [info for info in INFOS if info.name != "pinv"]
 MM_FOLDER = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
-
-#: Backends that classify a primal-infeasible / unbounded QP from a certificate.
-CERTIFYING = {
-    "osqp", "proxqp", "clarabel", "cvxpy", "daqp", "daqp-stateless", "qpoases", "piqp",
-    "qpsolvers:clarabel", "qpsolvers:osqp", "qpsolvers:piqp", "qpsolvers:proxqp", "qpsolvers:scs",
-    "qpsolvers:qpalm",
-}
-#: Why the other QP backends cannot tell.
-CANNOT_TELL = {
-    "qpsolvers:daqp": "qpsolvers drops DAQP's exit flag: found=False only",
-    "qpsolvers:highs": "qpsolvers keeps no HiGHS model status: found=False only; on the unbounded "
-    "problem HiGHS 1.16 even reports kOptimal with x2 = 1e7 and a dual residual of 1",
-    "qpsolvers:quadprog": "quadprog raises 'no solution' without saying why (and needs P > 0)",
-    "qpsolvers:cvxopt": "cvxopt's qp() certifies nothing: 'domain error' on the infeasible problem, "
-    "'Rank(A) < p or Rank([P; A; G]) < n' on the unbounded one",
-    "qpsolvers:ecos": "ECOS finds the infeasible problem (exit flag 1) but qpsolvers' ECOS route needs P > 0 "
-    "(Cholesky of P): the unbounded problem is an error",
-    "qpsolvers:gurobi": "Gurobi's presolve says INF_OR_UNBD (status 4) on both (DualReductions=0 would tell)",
-}
 
 #: QP backends that cannot reach the high_accuracy profile, and why (the high-accuracy tests skip them).
 LOW_ACCURACY = {
@@ -295,16 +278,18 @@ def test_infeasible_and_unbounded(name):
     infeasible = backend.solve(_infeasible_problem())
     backend.reset()
     unbounded = backend.solve(_unbounded_problem())
-    if name in CERTIFYING:
+    cls = type(backend)
+    assert cls.certifies_infeasibility is not None, f"{name}: say whether it can classify infeasibility"
+    if cls.certifies_infeasibility:
         assert infeasible.status == "primal_infeasible", (infeasible.status, infeasible.error)
         assert unbounded.status == "dual_infeasible", (unbounded.status, unbounded.error)
     else:
-        assert name in CANNOT_TELL, f"{name}: say whether it can classify infeasibility"
+        assert cls.infeasibility_note, f"{name}: say why it cannot classify infeasibility"
         # It cannot tell both; it never says the wrong one, and what it returns must not pass as a solution.
         assert infeasible.status != "dual_infeasible" and unbounded.status != "primal_infeasible"
         assert not (infeasible.status == "primal_infeasible" and unbounded.status == "dual_infeasible"), name
         for sol in (infeasible, unbounded):
-            if sol.status == "optimal":  # HiGHS on the unbounded problem, see CANNOT_TELL
+            if sol.status == "optimal":  # HiGHS on the unbounded problem, see its infeasibility_note
                 assert max(sol.primal_residual(), sol.dual_residual()) > 0.5
     for sol in (infeasible, unbounded):
         if sol.status == "error":
@@ -492,7 +477,7 @@ def test_qpsolvers_status_readers_of_the_added_solvers():
     """The status tables of ecos, cvxopt, qpalm and gurobi (read only when qpsolvers says found=False)."""
     from types import SimpleNamespace
 
-    from qpbench.backends import qpsolvers_ as qs
+    from qpbench.backends import _qpsolvers_status as qs
 
     assert qs._status_ecos({"exitFlag": 1})[0] == "primal_infeasible"
     assert qs._status_ecos({"exitFlag": 2})[0] == "dual_infeasible"

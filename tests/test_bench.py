@@ -13,7 +13,7 @@ import pytest
 import faulty_backends as fb
 from qpbench.cli import main
 from qpbench.formats import write_problem_set
-from qpbench.harness import COLUMNS, sequences
+from qpbench.harness import columns, sequences
 from qpbench.harness.results import TIMING_COLUMNS
 from qpbench.profiles import PROFILES
 
@@ -56,7 +56,7 @@ def test_maros_meszaros_rows_columns_references_and_success(mm_small, tmp_path, 
     code = bench(mm_small, "--backends", "clarabel,qpsolvers:daqp,faulty:nan", "--out", out, "--repeat", "2")
     rows = read(out)
     assert code == 1  # faulty:nan is invalid everywhere
-    assert list(rows[0].keys()) == list(COLUMNS)
+    assert list(rows[0].keys()) == list(columns())
     assert len(rows) == 5 * 3
     assert "harness overhead" in capsys.readouterr().out
     tol = PROFILES["default"].tolerance
@@ -264,7 +264,6 @@ def test_all_means_every_available_backend(tmp_path):
 
 def test_online_backend_integrates_the_time_between_records(tmp_path):
     """A set keeping every 10th tick of a 1 ms loop: the network integrates 10 ms per record."""
-    from qpbench.backends import _registry
     from qpbench.formats import read_problem_set
     from qpbench.harness import BenchConfig
     from qpbench.harness.bench import backend_settings
@@ -274,13 +273,13 @@ def test_online_backend_integrates_the_time_between_records(tmp_path):
     )
     pset = read_problem_set(folder)
     config = BenchConfig(backends=["rnn", "rnn-tuned", "clarabel"], settings={})
-    got = {name: backend_settings(name, config, pset, _registry()) for name in config.backends}
+    got = {name: backend_settings(name, config, pset) for name in config.backends}
     assert got == {"rnn": {"dt": pytest.approx(0.01)}, "rnn-tuned": {"dt": pytest.approx(0.01)}, "clarabel": {}}
     # an explicit dt wins; a set without a generator period leaves the default
     explicit = BenchConfig(backends=["rnn"], settings={"dt": 0.002})
-    assert backend_settings("rnn", explicit, pset, _registry()) == {"dt": 0.002}
+    assert backend_settings("rnn", explicit, pset) == {"dt": 0.002}
     bare = read_problem_set(write_problem_set(tmp_path / "b", fb.tick_records(3), generator={"name": "t"}))
-    assert backend_settings("rnn", config, bare, _registry()) == {}
+    assert backend_settings("rnn", config, bare) == {}
 
 
 def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys, monkeypatch):
@@ -314,9 +313,9 @@ def _calls() -> list:
     """The call log of the ``faulty:order-*`` backends registered now (a ``--plugin`` run loads its own copy)."""
     import sys
 
-    from qpbench.backends import _registry
+    from qpbench.backends import backend_class
 
-    return sys.modules[_registry()["faulty:order-a"].__module__].CALLS
+    return sys.modules[backend_class("faulty:order-a").__module__].CALLS
 
 
 def _order_run(pset, out, **kw):

@@ -193,7 +193,7 @@ def test_bad_parameters(tmp_path):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, duration=-1.0)
     with pytest.raises(ParamError):
         selection.parse_list(",,", "--backends")
-    assert selection.select_scenarios("all")[:4] == list(selection.PAPER_SCENARIOS)
+    assert selection.select_scenarios("all")[:4] == ["free", "wall", "adaptive", "narrow"]
 
 
 def test_cli_exit_codes(tmp_path, capsys):
@@ -222,8 +222,10 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import faulty_backends as fb  # noqa: E402
+from qpbench.backends import load_plugins  # noqa: E402
 
 PLUGIN = str(Path(fb.__file__).resolve())
+
 #: Columns that hold timings (differ between two runs of the same thing).
 TIMED = ("solve_time_p50_s", "solve_time_p99_s", "solve_time_max_s", "real_time_factor", "solve_time_median_s",
          "wall_time_s", "deadline_misses")
@@ -267,15 +269,17 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == ["wall__daqp.parquet"]  # no partial logs
     # resume keeps the ok row and retries only the failed ones
     seen = []
+    load_plugins([PLUGIN])  # what the CLI's --plugin did: the workers load it too
     outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp"], out, duration=0.1, resume=True,
-                                 plugins=[PLUGIN], on_row=seen.append)
+                                 on_row=seen.append)
     assert [r["backend"] for r in seen] == ["faulty:segfault"] and outcome.errors == 2
 
 
 def test_parallel_runs_survive_a_crash(tmp_path, daqp_alone):
     out = tmp_path / "p"
+    load_plugins([PLUGIN])
     outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp", "faulty-ticks:raise"], out, duration=0.1,
-                                 jobs=2, isolate="always", plugins=[PLUGIN])
+                                 jobs=2, isolate="always")
     table = outcome.table.set_index("backend")
     assert table.loc["faulty:segfault", "status"] == "crashed"
     assert table.loc["daqp", "status"] == "ok" and table.loc["faulty-ticks:raise", "status"] == "ok"

@@ -87,10 +87,9 @@ def slices():
 
 def _shipped_backends() -> list[str]:
     """Registered, available backends of the package (not those the other tests register to inject faults)."""
-    from qpbench.backends import _registry
+    from qpbench.backends import backend_class
 
-    registry = _registry()
-    return [name for name in backend_names() if registry[name].__module__.startswith("qpbench.")]
+    return [name for name in backend_names() if backend_class(name).__module__.startswith("qpbench.")]
 
 
 @pytest.mark.parametrize("backend", _shipped_backends())

@@ -51,6 +51,18 @@ def test_problems_readme_shell_snippets_run(workdir):
     assert (workdir / "wall.csv").exists()
 
 
+def test_problems_readme_own_scenario_snippet_runs(workdir):
+    """Start from a shipped scenario file and simulate it, as problems/README.md says."""
+    blocks = [b for b in snippets(ROOT / "problems" / "README.md", "bash") if "qpbench scenarios show" in b]
+    assert blocks
+    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
+    for block in blocks:
+        proc = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=workdir, env=env,
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+    assert (workdir / "my.toml").read_text().startswith("# Paper section 4.3")
+
+
 def test_version(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--version"])

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import faulty_backends as fb
-from qpbench.backends import get_backend
+from qpbench.backends import get_backend, load_plugins, plugin_files
 from qpbench.harness.guard import LocalRunner, classify
 from qpbench.harness.isolation import IsolatedRunner
 from qpbench.harness.results import TIMING_COLUMNS
@@ -29,6 +29,13 @@ QPBENCH = [sys.executable, "-m", "qpbench.cli"]
 @pytest.fixture(scope="module")
 def records():
     return fb.tick_records(4)
+
+
+@pytest.fixture
+def plugin_loaded():
+    """The test plugin loaded as a plugin file: worker processes load it too."""
+    load_plugins([PLUGIN])
+    assert PLUGIN in plugin_files()
 
 
 def local(name, time_limit=0.5, sequential=True):
@@ -105,8 +112,8 @@ def test_repeats_restore_uncopyable_state_by_replay(records):
     assert runner.solve(records[2].problem).solution.iterations == 2
 
 
-def test_worker_survives_segfault_and_restarts(records):
-    runner = IsolatedRunner("faulty:segfault", "default", {}, 1.0, True, [PLUGIN])
+def test_worker_survives_segfault_and_restarts(records, plugin_loaded):
+    runner = IsolatedRunner("faulty:segfault", "default", {}, 1.0, True)
     try:
         out = runner.solve(records[0].problem)
         assert out.status == "crashed" and "SIGSEGV" in out.error and out.isolated
@@ -117,8 +124,8 @@ def test_worker_survives_segfault_and_restarts(records):
         runner.close()
 
 
-def test_worker_hang_is_killed_at_the_deadline_and_state_is_lost(records):
-    runner = IsolatedRunner("faulty:hang", "default", {}, 0.2, True, [PLUGIN])
+def test_worker_hang_is_killed_at_the_deadline_and_state_is_lost(records, plugin_loaded):
+    runner = IsolatedRunner("faulty:hang", "default", {}, 0.2, True)
     try:
         out = runner.solve(records[0].problem)
         assert out.status == "time_limit" and "worker killed" in out.error
@@ -127,8 +134,8 @@ def test_worker_hang_is_killed_at_the_deadline_and_state_is_lost(records):
         runner.close()
 
 
-def test_worker_times_inside_and_carries_state(records):
-    runner = IsolatedRunner("stateful:last-native", "default", {}, 5.0, True, [PLUGIN])
+def test_worker_times_inside_and_carries_state(records, plugin_loaded):
+    runner = IsolatedRunner("stateful:last-native", "default", {}, 5.0, True)
     try:
         outs = [runner.solve(r.problem) for r in records]
         assert [o.solution.iterations for o in outs] == [0, 1, 2, 3]
@@ -140,11 +147,11 @@ def test_worker_times_inside_and_carries_state(records):
 
 
 
-def test_worker_starts_with_the_kernels_in_memory(records):
+def test_worker_starts_with_the_kernels_in_memory(records, plugin_loaded):
     """Workers are forked from a server that loaded every kernel: none compiles or loads one in a solve."""
     from qpbench import jit
 
-    runner = IsolatedRunner("stateful:kernels", "default", {}, 5.0, True, [PLUGIN])
+    runner = IsolatedRunner("stateful:kernels", "default", {}, 5.0, True)
     try:
         out = runner.solve(records[0].problem)
         assert out.status == "optimal"

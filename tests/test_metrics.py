@@ -150,3 +150,48 @@ def test_constraint_violation_equals_qpsolvers_primal_residual(random_qp):
         x = 3 * rng.standard_normal(p.q.shape[0])
         expected = qpsolvers.Solution(p, found=True, x=x).primal_residual()
         assert constraint_violation(p, x)["constraint_violation"] == pytest.approx(expected, rel=1e-14, abs=1e-15)
+
+
+# ------------------------------------------------------------ per-tick metrics are the CSV's columns
+
+
+def test_evaluate_returns_every_metric_column_in_order(random_qp):
+    from qpbench.metrics import metric_columns
+
+    problem = random_qp()
+    record = ProblemRecord(problem, "p")
+    m = evaluate(record, _solve(problem), None, TOL)
+    assert list(m) == ["status", "found", *metric_columns(), "optimality_gap_signed", "success"]
+
+
+def test_a_metric_added_here_is_a_column_of_qpbench_bench(tmp_path, monkeypatch):
+    """One function registered in metrics: bench writes it as a column, after the other metrics."""
+    import faulty_backends as fb
+    import pandas as pd
+
+    from qpbench import metrics
+    from qpbench.cli import main
+    from qpbench.harness.results import columns
+
+    monkeypatch.setattr(metrics, "PER_TICK_METRICS", list(metrics.PER_TICK_METRICS))
+
+    @metrics.per_tick_metric
+    def kkt_residual(tick):
+        """The largest of the residuals and the duality gap, read from the metrics before it."""
+        v = tick.values
+        return max(v["primal_residual"], v["dual_residual"], abs(v["duality_gap"]))
+
+    assert columns()[columns().index("violation_box") + 1] == "kkt_residual"
+    folder = fb.write_tick_set(tmp_path / "set", 3)
+    out = tmp_path / "rows.csv"
+    assert main(["-q", "bench", str(folder), "--backends", "daqp,pinv", "--out", str(out)]) in (0, 1)
+    rows = pd.read_csv(out)
+    assert list(rows.columns) == list(columns())
+    expected = rows[["primal_residual", "dual_residual", "duality_gap"]].abs().max(axis=1)
+    np.testing.assert_allclose(rows["kkt_residual"], expected)
+    assert (rows["backend"] == "pinv").any() and np.isfinite(rows["kkt_residual"]).any()
+    # a metric of an existing name is refused, a re-registered one keeps its place
+    with pytest.raises(ValueError, match="dual_residual"):
+        metrics.per_tick_metric(lambda tick: 0.0, columns=("dual_residual", "x"))
+    metrics.per_tick_metric(kkt_residual)
+    assert metrics.metric_columns().count("kkt_residual") == 1

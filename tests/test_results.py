@@ -9,9 +9,9 @@ import pytest
 
 from qpbench.exceptions import InputError
 from qpbench.harness.results import (
-    COLUMNS,
     InflightMarker,
     ResultsWriter,
+    columns,
     format_rows,
     read_results,
     row_key,
@@ -19,7 +19,7 @@ from qpbench.harness.results import (
 
 
 def make_row(i: int, **kw) -> dict:
-    row = {c: None for c in COLUMNS}
+    row = {c: None for c in columns()}
     row.update(
         problem=f"wall/tick-{i:04d}",
         scenario="wall",
@@ -59,7 +59,7 @@ def test_rows_round_trip_exactly(tmp_path):
     import pandas
 
     df = pandas.read_csv(path)
-    assert list(df.columns) == list(COLUMNS)
+    assert list(df.columns) == list(columns())
     assert df["found"].dtype == bool and df["tick"].tolist() == [0, 1, 2, 3]
 
 
@@ -96,7 +96,7 @@ def test_truncated_header_starts_again(tmp_path):
     path.write_bytes(b"problem,scen")
     res = read_results(path, repair=True)
     assert res.rows == [] and res.dropped == 1
-    assert path.read_text().splitlines() == [",".join(COLUMNS)]
+    assert path.read_text().splitlines() == [",".join(columns())]
 
 
 def test_complete_line_with_wrong_field_count_at_the_end_is_dropped(tmp_path):

@@ -491,7 +491,6 @@ def test_rnn_tuned_replays_the_shipped_sets_stably(scenario, tmp_path):
     from qpbench.harness.bench import BenchConfig, backend_settings, run_bench
     from qpbench.harness.results import read_results
     from qpbench.reference import reference_solution, reference_solutions
-    from qpbench.backends import _registry
 
     folder = Path(__file__).resolve().parents[1] / "problems" / scenario
     if not folder.exists():
@@ -500,9 +499,9 @@ def test_rnn_tuned_replays_the_shipped_sets_stably(scenario, tmp_path):
     refs = reference_solutions(full)[100:400]
     pset = replace(full, records=full.records[100:400], path=None, sha256=None, files=[])
     config = BenchConfig(backends=["rnn-tuned"], warmup=True)
-    assert backend_settings("rnn-tuned", config, full, _registry())["dt"] == pytest.approx(0.01)
+    assert backend_settings("rnn-tuned", config, full)["dt"] == pytest.approx(0.01)
     # outputs inside the box, through the backend the bench builds
-    be = get_backend("rnn-tuned", **backend_settings("rnn-tuned", config, full, _registry()))
+    be = get_backend("rnn-tuned", **backend_settings("rnn-tuned", config, full))
     for rec in pset.records:
         x = be.solve(rec.problem).x
         assert (x >= rec.problem.lb - 1e-9).all() and (x <= rec.problem.ub + 1e-9).all(), rec.name

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -9,21 +10,41 @@ import numpy as np
 import pytest
 
 from qpbench.exceptions import ScenarioError
-from qpbench.sim.scenario import load_scenario, parse_scenario, scenario_names, scenario_path
+from qpbench.sim.scenario import load_scenario, paper_scenarios, parse_scenario, scenario_names, scenario_path
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCUMENTED = ROOT / "problems" / "scenarios"
-PACKAGED = ROOT / "qpbench" / "data" / "scenarios"
+SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
 PAPER = ("free", "wall", "adaptive", "narrow")
 
 
-def test_shipped_copies_are_identical():
-    """problems/scenarios/ (documented place) and the package's copy must not drift apart."""
-    doc = sorted(p.name for p in DOCUMENTED.glob("*.toml"))
-    pkg = sorted(p.name for p in PACKAGED.glob("*.toml"))
-    assert doc == pkg
-    for name in doc:
-        assert (DOCUMENTED / name).read_bytes() == (PACKAGED / name).read_bytes(), name
+def test_the_paper_scenarios_come_from_the_files_in_section_order(tmp_path, monkeypatch):
+    assert paper_scenarios() == list(PAPER)
+    assert scenario_names() == [*PAPER, "adaptive_fast"]
+    assert [load_scenario(n).in_paper for n in scenario_names()] == [True] * 4 + [False]
+    # a new file is a new scenario: in_paper and its section decide where it goes
+    for f in SHIPPED.glob("*.toml"):
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    text = (SHIPPED / "wall.toml").read_text()
+    (tmp_path / "corner.toml").write_text(text.replace('name = "wall"', 'name = "corner"')
+                                          .replace('paper_section = "4.3"', 'paper_section = "4.10"'))
+    (tmp_path / "aside.toml").write_text(text.replace('name = "wall"', 'name = "aside"')
+                                         .replace("in_paper = true", "in_paper = false"))
+    import qpbench.sim.scenario_files as files
+
+    monkeypatch.setattr(files, "shipped_dir", lambda: tmp_path)
+    assert paper_scenarios() == [*PAPER, "corner"]
+    assert scenario_names() == [*PAPER, "corner", "adaptive_fast", "aside"]
+    assert load_scenario("corner").name == "corner"
+
+
+def test_in_paper_is_optional_and_typed(tmp_path):
+    text = (SHIPPED / "wall.toml").read_text()
+    f = tmp_path / "mine.toml"
+    f.write_text(re.sub(r"^in_paper = .*$", "", text, flags=re.M))
+    assert load_scenario(f).in_paper is False
+    f.write_text(text.replace("in_paper = true", 'in_paper = "yes"'))
+    with pytest.raises(ScenarioError, match="scenario.in_paper"):
+        load_scenario(f)
 
 
 def test_shipped_scenarios_load_with_the_paper_values():
@@ -48,14 +69,14 @@ def test_shipped_scenarios_load_with_the_paper_values():
 
 def test_a_path_works_too(tmp_path):
     f = tmp_path / "mine.toml"
-    f.write_text((DOCUMENTED / "wall.toml").read_text().replace('name = "wall"\ndescription', 'name = "mine"\ndescription'))
+    f.write_text((SHIPPED / "wall.toml").read_text().replace('name = "wall"\ndescription', 'name = "mine"\ndescription'))
     assert load_scenario(f).name == "mine"
     assert load_scenario(str(f)).path == f
-    assert scenario_path("wall").read_bytes() == (DOCUMENTED / "wall.toml").read_bytes()
+    assert scenario_path("wall").read_bytes() == (SHIPPED / "wall.toml").read_bytes()
 
 
 def edited(tmp_path, old, new, name="wall"):
-    text = (DOCUMENTED / f"{name}.toml").read_text()
+    text = (SHIPPED / f"{name}.toml").read_text()
     assert re.search(old, text, flags=re.M), old
     f = tmp_path / "edited.toml"
     f.write_text(re.sub(old, new, text, count=1, flags=re.M))
@@ -113,10 +134,57 @@ def test_overrides_are_validated():
 
 
 def test_polyline_path_and_other_obstacles(tmp_path):
-    text = (DOCUMENTED / "free.toml").read_text()
+    text = (SHIPPED / "free.toml").read_text()
     text = re.sub(r"\[path\].*?(?=\n\[contact\])", '[path]\nkind = "polyline"\ntimes = [0.0, 10.0]\npoints = [[0.4, 0.5], [0.5, 0.6]]\n', text, flags=re.S)
     text = text.replace("obstacles = []", 'obstacles = [{kind = "disk", name = "ball", center = [0.9, 0.9], radius = 0.05, velocity = [0.0, 0.0]}, {kind = "points", name = "cloud", points = [[1.0, 1.0], [1.1, 1.0]], velocity = [0.0, 0.0]}, {kind = "segment", name = "bar", a = [-1.0, -1.0], b = [-0.9, -1.0], velocity = [0.0, 0.01]}]')
     sc = parse_scenario(text, tmp_path / "x.toml")
     ctrl = sc.make_controller()
     assert ctrl.n_rows == 7 * 4
     assert sc.make_path()(5.0) == pytest.approx((0.45, 0.55, 0.01, 0.01))
+
+
+# ------------------------------------------------------------------ qpbench scenarios
+
+
+def test_scenarios_lists_every_shipped_file(capsys):
+    from qpbench.cli import main
+
+    assert main(["scenarios"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:4] == ["name", "paper", "duration", "obstacles"]
+    assert [line.split()[0] for line in lines[1:]] == scenario_names()
+    narrow = next(line for line in lines if line.startswith("narrow "))
+    assert "upper, lower" in narrow and "20 s" in narrow and load_scenario("narrow").description in narrow
+    assert main(["scenarios", "--json"]) == 0
+    items = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [i["name"] for i in items] == scenario_names()
+    assert items[0] == {"name": "free", "paper_section": "4.2", "in_paper": True, "duration_s": 20.0,
+                        "obstacles": [], "description": load_scenario("free").description}
+
+
+def test_scenarios_show_prints_a_file_to_start_from(tmp_path, capsys):
+    from qpbench.cli import main
+
+    assert main(["scenarios", "show", "wall"]) == 0
+    text = capsys.readouterr().out
+    assert text == (SHIPPED / "wall.toml").read_text()
+    mine = tmp_path / "mine.toml"
+    mine.write_text(text.replace('name = "wall"', 'name = "mine"').replace("d_safe = 0.01 ", "d_safe = 0.02 "))
+    assert load_scenario(mine).data["controller"]["d_safe"] == 0.02
+    assert main(["scenarios", "show", "narrow", "--json"]) == 0
+    tables = json.loads(capsys.readouterr().out)
+    assert tables["scenario"]["name"] == "narrow" and [o["name"] for o in tables["obstacles"]] == ["upper", "lower"]
+
+
+@pytest.mark.parametrize("args, what", [
+    (["show"], "which scenario"),
+    (["show", "nope"], "no shipped scenario"),
+    (["wall"], "show wall"),
+    (["list", "wall"], "show wall"),
+])
+def test_scenarios_bad_input_is_one_line_and_exit_2(capsys, args, what):
+    from qpbench.cli import main
+
+    assert main(["scenarios", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and what in err

@@ -61,15 +61,17 @@ def test_late_answer_is_time_limit_in_both():
 
 
 def test_a_dead_worker_is_worded_the_same_per_tick_and_in_the_loop(tmp_path):
+    from qpbench.backends import load_plugins
     from qpbench.harness import closed_loop
 
-    runner = IsolatedRunner("faulty:segfault", "default", {}, 1.0, True, [PLUGIN])
+    load_plugins([PLUGIN])  # what the CLI's --plugin does: the workers load it too
+    runner = IsolatedRunner("faulty:segfault", "default", {}, 1.0, True)
     try:
         per_tick = runner.solve(fb.tick_records(1)[0].problem)
     finally:
         runner.close()
     outcome = closed_loop.run_closed_loop(["wall"], ["faulty:segfault"], tmp_path, duration=0.01,
-                                          plugins=[PLUGIN], run_time_limit=60.0)
+                                          run_time_limit=60.0)
     row = outcome.table.iloc[0]
     words = death_message(-signal.SIGSEGV)
     assert words == "worker process killed by SIGSEGV"

@@ -20,7 +20,7 @@ from qpbench.sim.verdict import VerdictSettings, failed_run, judge
 from slow_backends import SlowExact
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCUMENTED = ROOT / "problems" / "scenarios"
+SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
 
 
 # ---------------------------------------------------------------- thresholds in the scenario files
@@ -35,7 +35,7 @@ def test_every_shipped_scenario_has_thresholds():
 
 
 def _edited(tmp_path, old, new):
-    text = (DOCUMENTED / "wall.toml").read_text()
+    text = (SHIPPED / "wall.toml").read_text()
     assert re.search(old, text, flags=re.M), old
     f = tmp_path / "edited.toml"
     f.write_text(re.sub(old, new, text, count=1, flags=re.M))
@@ -77,7 +77,7 @@ def test_bad_thresholds_are_refused_naming_file_and_key(tmp_path, capsys, old, n
 
 
 def test_a_file_without_the_verdict_table_is_refused(tmp_path):
-    text = (DOCUMENTED / "wall.toml").read_text()
+    text = (SHIPPED / "wall.toml").read_text()
     head, rest = text.split("[verdict]\n")
     f = tmp_path / "old.toml"
     f.write_text(head + rest[rest.index("[rnn]"):])

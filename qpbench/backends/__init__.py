@@ -7,20 +7,32 @@ Registering a backend is one decorator::
         name = "mine"
         ...
 
-Built-in backends live one module each in this package and import their
+Built-in backends live one module each in this package, found by listing
+the package (:func:`pkgutil.iter_modules`; modules whose name starts with
+``_`` are helpers, not backends): a new backend is one file. Each imports its
 solver lazily, so a missing optional package makes the backend
 "unavailable (reason)" rather than an import error. Every solver that
 :data:`qpsolvers.available_solvers` lists is also exposed as
 ``qpsolvers:<name>``.
+
+Backends from outside the package (:mod:`._plugins`): the entry points of
+group ``qpbench.backends`` of installed distributions, and plugin files named
+by ``qpbench --plugin FILE`` or ``QPBENCH_PLUGINS``; :func:`load_plugins`
+loads them once per process, after the built-in backends. Worker processes
+load :func:`plugin_files` of their parent.
 """
 
 from __future__ import annotations
 
 import importlib
+import pkgutil
+from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 from ..exceptions import BackendNotFound
 from ..profiles import Profile
+from . import _plugins
 from .base import STATUSES, Backend, BackendSolution, objective
 
 __all__ = [
@@ -32,18 +44,16 @@ __all__ = [
     "backend_info",
     "backend_names",
     "get_backend",
+    "load_plugins",
     "objective",
+    "plugin_files",
     "register",
     "resolve_name",
 ]
 
 _REGISTRY: dict[str, type[Backend]] = {}
-
-#: Modules of this package that hold built-in backends (imported on first use).
-_BUILTIN_MODULES = (
-    "osqp_", "proxqp_", "clarabel_", "daqp_", "daqp_model", "piqp_", "qpoases_", "pinv", "cvxpy_", "rnn", "qpsolvers_",
-)
-_loaded = False
+_builtins_loaded = False
+_plugins_checked = False
 
 
 def register(cls: type[Backend]) -> type[Backend]:
@@ -54,23 +64,51 @@ def register(cls: type[Backend]) -> type[Backend]:
     return cls
 
 
+def builtin_modules() -> list[str]:
+    """Names of this package's backend modules (every module not starting with ``_``), sorted."""
+    return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
+
+
 def _load_builtins() -> None:
-    global _loaded
-    if _loaded:
-        return
-    _loaded = True
-    for module in _BUILTIN_MODULES:
-        try:
+    global _builtins_loaded
+    if not _builtins_loaded:
+        _builtins_loaded = True
+        for module in builtin_modules():
             importlib.import_module(f"{__name__}.{module}")
-        except ModuleNotFoundError as exc:
-            # A built-in module not written yet (or removed) is simply absent;
-            # a missing *solver* package is handled inside each module.
-            if exc.name != f"{__name__}.{module}":
-                raise
+
+
+def load_plugins(files: Iterable[str | Path] = ()) -> None:
+    """Load the plugins: entry points, ``QPBENCH_PLUGINS`` files, then ``files``.
+
+    Each is loaded once per process, after the built-in backends (a plugin's
+    backend may replace a built-in of the same name). Nothing is imported
+    when there is no plugin at all.
+
+    Raises:
+        ParamError: a plugin file or entry point cannot be loaded (naming it).
+    """
+    global _plugins_checked
+    files = list(files)
+    if not _plugins_checked:
+        _plugins_checked = True
+        found, env = _plugins.group_entry_points(), _plugins.env_files()
+        if found or env:
+            _load_builtins()
+            _plugins.load_entry_points(found, register, Backend)
+            _plugins.load_files(env)
+    if files:
+        _load_builtins()
+        _plugins.load_files(files)
+
+
+def plugin_files() -> list[str]:
+    """The plugin files loaded in this process (absolute paths): what a worker process loads."""
+    return _plugins.loaded_files()
 
 
 def _registry() -> dict[str, type[Backend]]:
     _load_builtins()
+    load_plugins()
     return _REGISTRY
 
 
@@ -127,7 +165,11 @@ def resolve_name(name: str) -> str:
 
 
 def backend_class(name: str) -> type[Backend]:
-    """The registered class of backend ``name`` (case-insensitive; see :func:`resolve_name`)."""
+    """The registered class of backend ``name`` (case-insensitive; see :func:`resolve_name`).
+
+    Raises:
+        BackendNotFound: no backend of that name.
+    """
     return _registry()[resolve_name(name)]
 
 

@@ -103,6 +103,11 @@ class Backend:
             passes as settings when it builds the backend by name (``"rnn"``
             for the network backends: the scenario's ``[rnn]`` table), or
             ``None``.
+        certifies_infeasibility: True when the backend tells a primal-infeasible
+            QP (status ``primal_infeasible``) and an unbounded one
+            (``dual_infeasible``) apart from a certificate; False when it cannot
+            (then :attr:`infeasibility_note` says why); ``None``: not declared.
+        infeasibility_note: Why the backend cannot certify infeasibility.
 
     Optional hooks the harness uses when present: ``get_state()`` and
     ``set_state(state)`` restore a backend exactly between timed repeats
@@ -116,6 +121,8 @@ class Backend:
     online: ClassVar[bool] = False
     risky: ClassVar[bool] = False
     scenario_table: ClassVar[str | None] = None
+    certifies_infeasibility: ClassVar[bool | None] = None
+    infeasibility_note: ClassVar[str] = ""
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

@@ -125,6 +125,7 @@ class CvxpyBackend(Backend):
     """A cached, parametrised cvxpy model per problem shape, on cvxpy's default QP solver."""
 
     name = "cvxpy"
+    certifies_infeasibility = True
     family = "modelling layer (OSQP: ADMM)"
     package = "cvxpy"
     module = "cvxpy"

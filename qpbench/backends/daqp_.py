@@ -26,20 +26,12 @@ Persistence. None: ``daqp.solve`` builds its workspace per call (so
 ``get_state``/``set_state``, the harness's restore between timed repeats,
 have nothing to do; a deep copy of the backend rebuilds the buffers' views). DAQP also
 offers ``daqp.Model`` (workspace kept, ``update`` + ``solve``, active set of
-the previous solve reused). On one tick of the ``wall`` scenario, timed in a
-tight loop: ``daqp.solve`` 3.6 us (3.8-4.0 us with the four settings as
-keywords), ``Model.update`` of H, f, A and the bounds 2.4 us plus
-``Model.solve`` 1.8 us (4.2 us); 3.2 us when H and f are left out of the
-update, which would need a comparison of H and f with the previous tick's on
-every call. Over 3000 consecutive ticks the medians were within 0.5 us of
-each other either way, so the stateless call is used. ``warm_start`` is
-ignored: passed as DAQP's ``primal_start`` (the previous tick's ``x``) it
-saves one iteration (median 1 instead of 2) but costs about 1 us more per
-call (5.4 against 4.4 us median over 3000 ticks).
-
-The whole call, input stacking and ``BackendSolution`` included, is about
-8.5 us median per robot tick (``bench/rnn_speed.py``, ``bench/closed_loop_speed.py``),
-against about 20 us for DAQP through ``qpsolvers.solve_problem``.
+the previous solve reused): that route is the backend ``daqp``
+(:mod:`.daqp_model`); for n = 4 its ``update`` + ``solve`` costs about what
+a fresh ``daqp.solve`` does. ``warm_start`` is ignored: passed as DAQP's
+``primal_start`` (the previous tick's ``x``) it saves an iteration but costs
+more per call than it saves. What the whole call costs per robot tick:
+``bench/backend_overhead.py``, ``bench/closed_loop_speed.py``.
 
 Settings. From the profile: ``primal_tol = eps_abs``, ``dual_tol = eps_abs``,
 ``iter_limit = max_iter`` and ``time_limit`` [s]. Other settings are DAQP's
@@ -158,6 +150,7 @@ class DaqpBackend(Backend):
     """DAQP through ``daqp.solve`` with simple bounds native and equalities by sense flags."""
 
     name = "daqp-stateless"
+    certifies_infeasibility = True
     family = "active set (dual)"
     package = "daqp"
     module = "daqp"

@@ -189,6 +189,7 @@ class OsqpBackend(Backend):
     """OSQP through ``osqp.OSQP`` with a persistent, updated solver object."""
 
     name = "osqp"
+    certifies_infeasibility = True
     family = "ADMM"
     package = "osqp"
     module = "osqp"

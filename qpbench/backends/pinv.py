@@ -33,6 +33,8 @@ class PinvBackend(Backend):
     """JMPI: ``x = A^+ b`` (or ``-P^+ q`` without equalities); constraints ignored."""
 
     name = "pinv"
+    certifies_infeasibility = False
+    infeasibility_note = "x = A^+ b solves the equalities in the least-squares sense and ignores the rest"
     family = "pseudo-inverse (JMPI, ignores inequalities and bounds)"
     package = "numpy"
 

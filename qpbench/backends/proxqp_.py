@@ -34,9 +34,8 @@ Per-call cost. Dense float64 inputs are passed as they are (other inputs
 are converted), ``l = -inf`` is cached, and ``qp.results.info`` and numpy
 views of ``results.x, y, z`` are kept per ``QP`` object (re-read after a
 solve with an explicit guess), each copied once into the solution (``z`` and
-``z_box`` are slices of one copy of ProxQP's ``z``). On the robot's ticks
-this puts the backend within about 1 us of ``update`` + ``solve`` + reading
-``x`` (``bench/backend_overhead.py``).
+``z_box`` are slices of one copy of ProxQP's ``z``). What is left against
+``update`` + ``solve`` + reading ``x``: ``bench/backend_overhead.py``.
 
 Settings. ``eps_abs``, ``eps_rel``, ``max_iter`` from the profile, and at
 ``eps_abs <= 1e-7`` also ``check_duality_gap=True`` with
@@ -97,6 +96,7 @@ class ProxqpBackend(Backend):
     """ProxQP dense with a persistent ``QP`` object, updated per problem."""
 
     name = "proxqp"
+    certifies_infeasibility = True
     family = "augmented Lagrangian"
     package = "proxsuite"
     module = "proxsuite"
@@ -197,7 +197,7 @@ class ProxqpBackend(Backend):
             if warm:
                 qp = self._qp
                 # ``update_preconditioner`` as a keyword: nanobind dispatches
-                # this about 0.6 us faster than the same call all positional.
+                # this faster than the same call all positional.
                 if with_box:
                     qp.update(H, q, A, b, C, l, u, lb, ub, update_preconditioner=self._update_preconditioner)
                 else:
@@ -245,7 +245,7 @@ class ProxqpBackend(Backend):
         views = self._views
         if views is None:
             # Views of ``qp.results.x, y, z`` (each attribute access builds a
-            # new one, about 0.35 us), kept per ``QP`` object: ``update`` and
+            # new one), kept per ``QP`` object: ``update`` and
             # ``solve`` write into the same buffers (same dimensions).
             res = qp.results
             views = self._views = (res.x, res.y, res.z)

@@ -12,9 +12,7 @@ timed or time-limited call; ``qpbench backends`` shows the backend as
 unavailable, with the reason, when neither the wheel nor (without a compiled
 shim) a compiler is there. The other route that installs from PyPI, casadi's
 ``conic('qpoases')``, is not offered: on the robot's n = 4 ticks its hotstart
-costs 150-295 us per Python call against about 9 us per call of this
-backend (qpOASES' own hotstart: 3 us median on the ``wall`` ticks), and it
-prints a banner.
+costs over ten times a call of this backend, and it prints a banner.
 
 Formulation. ``SQProblem(n, me + mi)`` solves
 ``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with::
@@ -57,7 +55,7 @@ is a :class:`~qpbench.exceptions.ParamError`. Output is off (``PL_NONE``).
 Time. ``solver_time_s`` is the time of the ``init()``/``hotstart()`` call
 measured in the shim with ``clock_gettime(CLOCK_MONOTONIC)``: qpOASES' own
 CPU-time output (in ``extras["qpoases_cputime_s"]``) comes from
-``gettimeofday`` and is too coarse for a 3 us hotstart.
+``gettimeofday`` and is too coarse for a hotstart of microseconds.
 
 Statuses. ``SUCCESSFUL_RETURN`` -> optimal; ``isInfeasible()`` or
 ``RET_*_INFEASIBILITY`` -> primal_infeasible; ``isUnbounded()`` or
@@ -378,6 +376,7 @@ class QpoasesBackend(Backend):
     """qpOASES ``SQProblem``: ``init()`` on the first tick of a shape, ``hotstart()`` on the next ones."""
 
     name = "qpoases"
+    certifies_infeasibility = True
     family = "active set (online, parametric)"
     package = "cmeel-qpoases"
     module = None

@@ -35,7 +35,8 @@ start; the status says it. Constructing a ``qpsolvers:<name>`` backend adds
 a filter that ignores the warnings of qpsolvers' wrapper module for that
 solver (``qpsolvers.solvers.<name>_``) in this process
 (:func:`silence_wrapper_warnings`): free per call, where a
-``warnings.catch_warnings`` block around every call cost 1.5-3 us.
+``warnings.catch_warnings`` block around every call costs a noticeable
+fraction of a fast solve.
 
 Per-call cost. The options are computed once per instance, the dense/sparse
 test is a type check, duals already float64 arrays are not converted, and a
@@ -79,6 +80,7 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings
+from ._qpsolvers_status import CERTIFYING_SOLVERS, ITERATION_SOLVERS, NO_CERTIFICATE, STATUS_READERS, iterations
 from .base import Backend, BackendSolution
 
 #: Algorithm family of each solver qpsolvers can drive.
@@ -192,152 +194,6 @@ def native_settings(solver: str, eps_abs: float, eps_rel: float, max_iter: int, 
     return {}
 
 
-# -- statuses ------------------------------------------------------------------
-
-def _status_clarabel(extras) -> tuple[str, str | None]:
-    from .clarabel_ import CLARABEL_STATUSES
-
-    raw = extras.get("status")
-    name = str(raw).split(".")[-1] if raw is not None else None
-    return CLARABEL_STATUSES.get(name, "not_solved"), name
-
-
-_ENUM_MAPS: dict[str, dict] = {}
-
-
-def _enum_map(solver: str) -> dict:
-    """Solver status value -> our status, built once per solver (hashing their enums is slow)."""
-    if solver not in _ENUM_MAPS:
-        if solver == "osqp":
-            import osqp
-
-            S = osqp.SolverStatus
-            pairs = [(S.OSQP_SOLVED, "optimal"), (S.OSQP_PRIMAL_INFEASIBLE, "primal_infeasible"),
-                     (S.OSQP_DUAL_INFEASIBLE, "dual_infeasible"), (S.OSQP_MAX_ITER_REACHED, "max_iter"),
-                     (S.OSQP_TIME_LIMIT_REACHED, "time_limit")]
-            _ENUM_MAPS[solver] = {int(k): v for k, v in pairs}
-        elif solver == "proxqp":
-            import proxsuite
-
-            O = proxsuite.proxqp.QPSolverOutput
-            _ENUM_MAPS[solver] = {O.PROXQP_SOLVED: "optimal", O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                                  O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
-                                  O.PROXQP_MAX_ITER_REACHED: "max_iter"}
-        elif solver == "piqp":
-            import piqp
-
-            _ENUM_MAPS[solver] = {piqp.PIQP_SOLVED: "optimal", piqp.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                                  piqp.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
-                                  piqp.PIQP_MAX_ITER_REACHED: "max_iter", piqp.PIQP_NUMERICS: "error"}
-    return _ENUM_MAPS[solver]
-
-
-def _status_osqp(extras) -> tuple[str, str | None]:
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return _enum_map("osqp").get(int(info.status_val), "not_solved"), str(info.status)
-
-
-def _status_proxqp(extras) -> tuple[str, str | None]:
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return _enum_map("proxqp").get(info.status, "not_solved"), None
-
-
-def _status_piqp(extras) -> tuple[str, str | None]:
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return _enum_map("piqp").get(info.status, "not_solved"), None
-
-
-def _status_scs(extras) -> tuple[str, str | None]:
-    val = extras.get("status_val")
-    if val is None:
-        return "not_solved", None
-    # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
-    mapping = {1: "optimal", -1: "dual_infeasible", -2: "primal_infeasible"}
-    return mapping.get(val, "not_solved"), f"{val} ({extras.get('status', '')})"
-
-
-def _status_ecos(extras) -> tuple[str, str | None]:
-    flag = extras.get("exitFlag")
-    if flag is None:
-        return "not_solved", None
-    # ECOS: 0 optimal, 1 primal infeasible, 2 dual infeasible, -1 max iterations; others inaccurate/failed.
-    mapping = {0: "optimal", 1: "primal_infeasible", 2: "dual_infeasible", -1: "max_iter"}
-    return mapping.get(flag, "not_solved"), f"{flag} ({extras.get('infostring', '')})"
-
-
-def _status_cvxopt(extras) -> tuple[str, str | None]:
-    raw = extras.get("status")
-    if raw is None:
-        return "not_solved", None
-    # cvxopt's qp() says "optimal" or "unknown" (it certifies infeasibility for LPs/cone programs only).
-    mapping = {"optimal": "optimal", "primal infeasible": "primal_infeasible", "dual infeasible": "dual_infeasible"}
-    return mapping.get(raw, "not_solved"), str(raw)
-
-
-def _status_qpalm(extras) -> tuple[str, str | None]:
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    raw = str(info.status)
-    mapping = {"solved": "optimal", "primal infeasible": "primal_infeasible", "dual infeasible": "dual_infeasible",
-               "maximum iterations reached": "max_iter", "time limit exceeded": "time_limit"}
-    return mapping.get(raw, "not_solved"), raw
-
-
-def _status_gurobi(extras) -> tuple[str, str | None]:
-    code = extras.get("status")
-    if code is None:
-        return "not_solved", None
-    # Gurobi's model status codes: 2 OPTIMAL, 3 INFEASIBLE, 5 UNBOUNDED, 7 ITERATION_LIMIT, 9 TIME_LIMIT;
-    # 4 INF_OR_UNBD says neither for sure.
-    mapping = {2: "optimal", 3: "primal_infeasible", 5: "dual_infeasible", 7: "max_iter", 9: "time_limit"}
-    return mapping.get(code, "not_solved"), str(code)
-
-
-_STATUS_READERS = {
-    "clarabel": _status_clarabel,
-    "osqp": _status_osqp,
-    "proxqp": _status_proxqp,
-    "piqp": _status_piqp,
-    "scs": _status_scs,
-    "ecos": _status_ecos,
-    "cvxopt": _status_cvxopt,
-    "qpalm": _status_qpalm,
-    "gurobi": _status_gurobi,
-}
-
-
-#: Solvers whose iteration count qpsolvers keeps in ``extras``.
-_ITERATION_SOLVERS = frozenset({"osqp", "proxqp", "piqp", "scs", "quadprog", "ecos", "cvxopt", "qpalm"})
-
-
-def _iterations(solver: str, extras: dict) -> int | None:
-    """Iteration count where qpsolvers keeps it."""
-    try:
-        if solver in ("osqp", "proxqp", "piqp"):
-            return int(extras["info"].iter)
-        if solver == "scs":
-            return int(extras["iter"])
-        if solver == "quadprog":
-            it = extras["iterations"]  # quadprog's (iterations, active-set changes)
-            return int(it[0]) if type(it) is _ndarray and it.ndim == 1 else int(np.ravel(it)[0])
-        if solver == "ecos":
-            return int(extras["iter"])
-        if solver == "cvxopt":
-            return int(extras["iterations"])
-        if solver == "qpalm":
-            return int(extras["info"].iter)
-    except (KeyError, AttributeError, TypeError, IndexError):
-        return None
-    return None
-
-
 def _sparse_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     """Same problem with CSC matrices (for solvers that only take sparse input)."""
     P, q, G, h, A, b, lb, ub = problem.unpack()
@@ -359,8 +215,8 @@ def silence_wrapper_warnings(solver: str) -> None:
     qpsolvers' wrappers warn on a failed solve and on an ignored ``initvals``;
     the backend reports both as its status. A filter on the wrapper's module
     (``qpsolvers.solvers.<solver>_``) costs nothing per call, where a
-    ``warnings.catch_warnings`` block around each call costs 1.5-3 us (a
-    tenth of a DAQP solve through qpsolvers). Adding it again moves it to the
+    ``warnings.catch_warnings`` block around each call costs a noticeable
+    fraction of a DAQP solve through qpsolvers. Adding it again moves it to the
     front of the filter list (idempotent). Warnings a solver's own package
     raises on qpsolvers' normal calls (:data:`_SOLVER_WARNINGS`) are ignored too.
     """
@@ -413,7 +269,7 @@ class QpsolversBackend(Backend):
         solver = self.solver
         self._sparse_only = solver in qpsolvers.sparse_solvers and solver not in qpsolvers.dense_solvers
         self._dense_only = solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers
-        self._reader = _STATUS_READERS.get(solver)
+        self._reader = STATUS_READERS.get(solver)
         silence_wrapper_warnings(solver)
 
     @classmethod
@@ -477,7 +333,7 @@ class QpsolversBackend(Backend):
         sol._obj = result.obj
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time
-        sol.iterations = _iterations(solver, extras) if solver in _ITERATION_SOLVERS else None
+        sol.iterations = iterations(solver, extras) if solver in ITERATION_SOLVERS else None
         if result.found:
             sol.status = "optimal"
             return sol
@@ -508,6 +364,10 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
             "family": SOLVER_FAMILIES.get(solver, "unknown"),
             "package": SOLVER_PACKAGES.get(solver),
             "solver": solver,
+            "certifies_infeasibility": True if solver in CERTIFYING_SOLVERS else (
+                False if solver in NO_CERTIFICATE else None
+            ),
+            "infeasibility_note": NO_CERTIFICATE.get(solver, ""),
             "__module__": __name__,
             "__doc__": f"``{solver}`` through qpsolvers.solve_problem (see :mod:`{__name__}`).",
         },

@@ -120,6 +120,8 @@ class _NetworkBackend(Backend):
     online: ClassVar[bool] = False
     #: A closed loop builds the network with the scenario's ``[rnn]`` table.
     scenario_table: ClassVar[str | None] = "rnn"
+    certifies_infeasibility = False
+    infeasibility_note = "the network's state moves towards the projection; no certificate, only no convergence"
     #: Integration method unless the ``method`` setting says otherwise.
     default_method: ClassVar[str] = "euler"
     #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).

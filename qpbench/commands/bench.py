@@ -66,13 +66,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="BACKEND.KEY=VALUE",
         help="a solver setting for one backend, over the profile's, e.g. osqp.rho=0.1 or rnn.eps=0.001; repeatable",
     )
-    parser.add_argument(
-        "--plugin",
-        action="append",
-        default=[],
-        metavar="MODULE_OR_FILE",
-        help="import a module (or .py file) that registers extra backends; repeatable (also QPBENCH_PLUGINS)",
-    )
     from .list_ import add_selection_arguments
 
     add_selection_arguments(parser)
@@ -113,14 +106,11 @@ def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
-    from ..harness.plugins import load_plugins, plugin_specs
     from ..jit import warmup_logged
     from ..selection import backend_settings, select_backends
 
     # Nothing is written before the input is known to be good.
     check_output(args.out, force=args.force, resume=args.resume)
-    plugins = plugin_specs(args.plugin)
-    load_plugins(plugins)
     backends = select_backends(args.backends)
     per_backend = backend_settings(args.sets, backends)
     config = BenchConfig(
@@ -132,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
         time_limit=args.time_limit,
         isolate=args.isolate,
         warmup=not args.no_warmup,
-        plugins=plugins,
         seed=args.seed,
     )
     config.validate()

@@ -7,8 +7,8 @@ applied like any other (``deadline_misses`` counts ticks slower than dt)
 unless ``--deadline`` drops it (status ``time_limit``, ``deadline_dropped``); per run, ``--isolate`` runs a backend in a worker
 process with a deadline (``--run-time-limit``), so a hang or a crash in native
 code becomes a ``time_limit`` or ``crashed`` row and the other runs go on.
-``--plugin`` (or ``QPBENCH_PLUGINS``) loads modules that register extra
-backends, here and in the workers. ``--run-budget`` gives each run a wall-time
+Plugin backends (``qpbench --plugin FILE``, ``QPBENCH_PLUGINS``, entry
+points) run here and in the workers. ``--run-budget`` gives each run a wall-time
 budget: a run that spends it stops between ticks (status ``budget``, the row
 says how far it got).
 
@@ -60,9 +60,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="wall-time budget of each run in [s]: a run that spends it stops between ticks "
                              "(status budget; simulated_s says how far it got, the verdict is of what was "
                              "simulated) (default: none, every run simulates its full duration)")
-    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE_OR_FILE",
-                        help="import a module (or .py file) that registers extra backends; repeatable "
-                             "(also QPBENCH_PLUGINS)")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help="replace an existing table and its logs")
     group.add_argument("--resume", action="store_true",
@@ -71,12 +68,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..harness.closed_loop import log_row, run_closed_loop
-    from ..harness.plugins import load_plugins, plugin_specs
     from ..jit import warmup_logged
     from ..selection import select_backends, select_scenarios
 
-    plugins = plugin_specs(args.plugin)
-    load_plugins(plugins)
     scenarios = select_scenarios(args.scenarios)
     backends = select_backends(args.backends)
     warmup_logged(log)  # compiled here once: the worker processes load them
@@ -97,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
                                   formulation=args.formulation, force=args.force,
                                   resume=args.resume, jobs=args.jobs, on_row=on_row,
                                   isolate=args.isolate, run_time_limit=args.run_time_limit,
-                                  deadline=args.deadline, plugins=plugins, run_budget=args.run_budget)
+                                  deadline=args.deadline, run_budget=args.run_budget)
     finally:
         if bar is not None:
             bar.close()

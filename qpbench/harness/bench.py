@@ -47,13 +47,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..backends import backend_class
 from ..exceptions import InputError, ParamError
 from ..profiles import Profile, get_profile
 from ..statuses import FAILURE_STATUSES
 from .guard import LocalRunner
 from .isolation import IsolatedRunner
 from .results import (
-    COLUMNS,
     ExistingResults,
     InflightMarker,
     ResultsWriter,
@@ -83,7 +83,6 @@ class BenchConfig:
             this process), ``always`` or ``never``.
         warmup: Discarded solves per backend before the first timed one: the
             first problem, and the first of each other structure (parts present).
-        plugins: Plugin modules (imported here and in workers).
         settings: Extra solver settings passed to every backend.
         backend_settings: Extra settings per backend name (over ``settings``).
         seed: Seed of the per-problem backend order (:func:`backend_order`).
@@ -96,7 +95,6 @@ class BenchConfig:
     time_limit: float | None = None
     isolate: str = "auto"
     warmup: bool = True
-    plugins: list[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
     backend_settings: dict = field(default_factory=dict)
     seed: int = DEFAULT_SEED
@@ -301,7 +299,7 @@ def record_period(problem_set) -> float | None:
         return None
 
 
-def backend_settings(name: str, config: BenchConfig, problem_set, registry) -> dict:
+def backend_settings(name: str, config: BenchConfig, problem_set) -> dict:
     """Settings for backend ``name``: the run's, its own, plus ``dt`` for an online backend.
 
     An online backend (the ``rnn`` network) integrates for ``dt`` per call:
@@ -309,7 +307,7 @@ def backend_settings(name: str, config: BenchConfig, problem_set, registry) -> d
     time the controller's state evolves between two records.
     """
     settings = {**config.settings, **config.backend_settings.get(name, {})}
-    if getattr(registry.get(name), "online", False) and "dt" not in settings:
+    if backend_class(name).online and "dt" not in settings:
         period = record_period(problem_set)
         if period is not None:
             settings["dt"] = period
@@ -402,7 +400,7 @@ class _RowMaker:
 
     def __call__(self, record, backend: str, outcome, reference, position: int | None = None,
                  seed: int | None = None) -> dict:
-        from ..metrics import VIOLATION_KEYS, evaluate
+        from ..metrics import evaluate, metric_columns
 
         sol = outcome.solution
         status = outcome.status
@@ -425,16 +423,7 @@ class _RowMaker:
             "status": status,
             "found": bool(metrics["found"]) and status == "optimal",
             "success": bool(metrics["success"]) and status not in FAILURE_STATUSES,
-            "objective": metrics["objective"],
-            "reference_objective": metrics["reference_objective"],
-            "reference_status": metrics["reference_status"],
-            "reference_agreement": _float(getattr(reference, "agreement", None)),
-            "reference_note": getattr(reference, "note", None),
-            "optimality_gap": metrics["optimality_gap"],
-            "primal_residual": metrics["primal_residual"],
-            "dual_residual": metrics["dual_residual"],
-            "duality_gap": metrics["duality_gap"],
-            **{k: metrics[k] for k in VIOLATION_KEYS},
+            **{c: metrics[c] for c in metric_columns()},
             "wall_time_min_s": min(times) if times else None,
             "wall_time_median_s": statistics.median(times) if times else None,
             "solver_time_s": _float(getattr(sol, "solver_time_s", None)) if outcome.solution is not None else None,
@@ -529,10 +518,7 @@ def run_bench(
         raise InputError(f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path)
 
     # Backends: build the in-process ones now (a bad name fails before any write).
-    from ..backends import _registry
-
-    registry = _registry()
-    settings = {name: backend_settings(name, config, problem_set, registry) for name in config.backends}
+    settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
     instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
     versions = {name: type(b).version() for name, b in instances.items()}
 
@@ -584,12 +570,12 @@ def run_bench(
             return True
         if config.isolate == "never":
             return False
-        return bool(getattr(registry.get(name), "risky", False)) or name in learned
+        return backend_class(name).risky or name in learned
 
     runners = {}
     for name in config.backends:
         if isolated(name):
-            runners[name] = IsolatedRunner(name, run_profile, settings[name], time_limit, sequential, config.plugins)
+            runners[name] = IsolatedRunner(name, run_profile, settings[name], time_limit, sequential)
         else:
             runners[name] = LocalRunner(instances[name], time_limit, sequential)
     summary = BenchSummary(isolated=[n for n in config.backends if runners[n].isolated], seed=int(config.seed))
@@ -669,9 +655,7 @@ def run_bench(
                             record.name,
                         )
                         runner.close()
-                        runners[name] = IsolatedRunner(
-                            name, run_profile, settings[name], time_limit, sequential, config.plugins
-                        )
+                        runners[name] = IsolatedRunner(name, run_profile, settings[name], time_limit, sequential)
                         learned.append(name)
                         marker.isolate = list(learned)
                         summary.isolated.append(name)
@@ -722,5 +706,5 @@ def run_bench(
 
 
 __all__ = [
-    "COLUMNS", "BackendStats", "BenchConfig", "BenchSummary", "backend_order", "is_failure", "run_bench", "sequences",
+    "BackendStats", "BenchConfig", "BenchSummary", "backend_order", "is_failure", "run_bench", "sequences",
 ]

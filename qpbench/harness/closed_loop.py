@@ -92,7 +92,6 @@ def run_closed_loop(
     isolate: str = "auto",
     run_time_limit: float | None = None,
     deadline: float | None = None,
-    plugins: list[str] | None = None,
     run_budget: float | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``
@@ -111,7 +110,6 @@ def run_closed_loop(
             or ``never``: an isolated run is made in a worker process with a
             deadline (``run_time_limit`` [s], default :func:`~qpbench.harness.loop_workers.run_deadline`).
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
-        plugins: Plugin modules or ``.py`` files (with ``QPBENCH_PLUGINS``), imported here and in workers.
         run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
             it is spent (status ``budget``), the verdict judged on what was simulated.
 
@@ -121,10 +119,9 @@ def run_closed_loop(
             scenario listed twice.
     """
     _check_arguments(scenarios, backends, duration, formulation, jobs, isolate, run_time_limit, deadline, run_budget)
-    from .plugins import load_plugins, plugin_specs
+    from ..backends import plugin_files
 
-    plugins = [str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_specs(plugins)]
-    load_plugins(plugins)
+    plugins = plugin_files()  # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
     out = Path(out)
     csv_path = out / CSV_NAME
     check_folder(out)

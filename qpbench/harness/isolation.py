@@ -82,9 +82,7 @@ def _worker_main(conn, spec: dict) -> None:
     """Body of the worker process: build the backend, answer requests until ``stop``."""
     ignore_interrupts()
     try:
-        from ..backends import get_backend
-        from .plugins import load_plugins
-
+        from ..backends import get_backend, load_plugins
         from ..jit import warmup
 
         warmup()  # loads the kernels the parent compiled; nothing is timed yet
@@ -136,12 +134,16 @@ class IsolatedRunner:
         name: Backend name; profile, settings: as for :func:`qpbench.backends.get_backend`.
         time_limit: Per-solve limit in [s].
         sequential: State carried between solves.
-        plugins: Plugin modules the worker imports before building the backend.
+
+    The worker loads this process's plugin files
+    (:func:`qpbench.backends.plugin_files`) before building the backend.
     """
 
     isolated = True
 
-    def __init__(self, name: str, profile, settings: dict, time_limit: float, sequential: bool, plugins: list[str]):
+    def __init__(self, name: str, profile, settings: dict, time_limit: float, sequential: bool):
+        from ..backends import plugin_files
+
         self.name = name
         self.time_limit = float(time_limit)
         self.sequential = sequential
@@ -149,7 +151,7 @@ class IsolatedRunner:
             "backend": name,
             "profile": profile,
             "settings": dict(settings),
-            "plugins": list(plugins),
+            "plugins": plugin_files(),
             "time_limit": float(time_limit),
             "sequential": sequential,
         }

@@ -52,10 +52,10 @@ def run_deadline(scenario: str, duration: float | None, run_time_limit: float | 
 
 
 def _worker_main(conn, spec: RunSpec, plugins: list[str]) -> None:
-    """Body of a run's worker process: load the plugins, make the run, send its row."""
+    """Body of a run's worker process: load the parent's plugin files, make the run, send its row."""
     ignore_interrupts()
     try:
-        from .plugins import load_plugins
+        from ..backends import load_plugins
 
         load_plugins(plugins)
         row = run_guarded(spec)

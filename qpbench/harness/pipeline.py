@@ -270,9 +270,10 @@ def run_all(config: RunConfig) -> RunOutcome:
 
 def _bench_scenarios(scenarios: list[str]) -> list[str]:
     """The scenarios the bench uses: the paper's four among those asked, else all asked."""
-    from ..selection import PAPER_SCENARIOS
+    from ..sim.scenario import paper_scenarios
 
-    return [s for s in scenarios if s in PAPER_SCENARIOS] or list(scenarios)
+    paper = paper_scenarios()
+    return [s for s in scenarios if s in paper] or list(scenarios)
 
 
 def _bench(config: RunConfig, scenarios: list[str], bench_dir: Path, bar) -> int:

@@ -24,34 +24,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..exceptions import InputError
+from ..metrics import metric_columns
 
 log = logging.getLogger("qpbench.harness")
 
-#: Columns of a bench CSV, in order.
-COLUMNS = (
-    "problem",
-    "scenario",
-    "tick",
-    "t",
-    "backend",
-    "profile",
-    "mode",
-    "status",
-    "found",
-    "success",
-    "objective",
-    "reference_objective",
-    "reference_status",
-    "reference_agreement",
-    "reference_note",
-    "optimality_gap",
-    "primal_residual",
-    "dual_residual",
-    "duality_gap",
-    "constraint_violation",
-    "violation_ineq",
-    "violation_eq",
-    "violation_box",
+#: Columns before the metrics: the record, what ran, and its outcome.
+LEAD_COLUMNS = ("problem", "scenario", "tick", "t", "backend", "profile", "mode", "status", "found", "success")
+
+#: Columns after the metrics: timings, the harness's own record, sizes and provenance.
+TAIL_COLUMNS = (
     "wall_time_min_s",
     "wall_time_median_s",
     "solver_time_s",
@@ -69,6 +50,12 @@ COLUMNS = (
     "problem_set_sha256",
     "backend_version",
 )
+
+
+def columns() -> tuple[str, ...]:
+    """Columns of a bench CSV, in order: lead, every per-tick metric (:func:`qpbench.metrics.metric_columns`), tail."""
+    return LEAD_COLUMNS + metric_columns() + TAIL_COLUMNS
+
 
 #: Columns that identify a result: a resumed run skips rows with a known key.
 KEY_COLUMNS = ("problem", "backend", "profile")
@@ -101,17 +88,18 @@ def _cell(value) -> str:
 
 
 def format_rows(rows: list[dict]) -> bytes:
-    """CSV bytes of ``rows`` (no header), one line each, in :data:`COLUMNS` order."""
+    """CSV bytes of ``rows`` (no header), one line each, in :func:`columns` order."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
+    names = columns()
     for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in COLUMNS])
+        writer.writerow([_cell(row.get(c)) for c in names])
     return buf.getvalue().encode("utf-8")
 
 
 def header_bytes() -> bytes:
     """The header line of a bench CSV."""
-    return (",".join(COLUMNS) + "\n").encode("utf-8")
+    return (",".join(columns()) + "\n").encode("utf-8")
 
 
 @dataclass
@@ -164,8 +152,9 @@ def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
     text = data.decode("utf-8", errors="replace")
     lines = text.split("\n")[:-1]
     header = next(csv.reader([lines[0]]))
-    if tuple(header) != COLUMNS:
-        missing = [c for c in COLUMNS if c not in header]
+    names = columns()
+    if tuple(header) != names:
+        missing = [c for c in names if c not in header]
         raise InputError(
             f"not a bench CSV of this version (missing columns: {', '.join(missing) or 'none'}; "
             "columns differ); use --force to start again",
@@ -177,14 +166,14 @@ def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
     bad_tail = False
     for line in lines[1:]:
         fields = next(csv.reader([line])) if line else []
-        if len(fields) != len(COLUMNS):
-            log.warning("%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(COLUMNS))
+        if len(fields) != len(names):
+            log.warning("%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(names))
             dropped += 1
             bad_tail = True
         else:
             if bad_tail:
                 raise InputError("malformed line in the middle of the file; use --force to start again", path=path)
-            rows.append(dict(zip(COLUMNS, fields)))
+            rows.append(dict(zip(names, fields)))
             good_end = offset + len(line.encode("utf-8")) + 1
         offset += len(line.encode("utf-8")) + 1
     if repair and bad_tail:

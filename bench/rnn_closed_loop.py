@@ -1,28 +1,34 @@
 """Closed-loop results of the ``rnn`` backend: the runs and the summary table.
 
-    python results/rnn/closed_loop.py run      # summaries/<scenario>_<setting>.json, one run at a time
-    python results/rnn/closed_loop.py table    # summaries/*.json -> closed_loop.md
-    python results/rnn/closed_loop.py sweep    # eps / l1 clip on wall, 8 s: the table in README.md
+    python bench/rnn_closed_loop.py run      # results/rnn/summaries/<scenario>_<setting>.json, one run at a time
+    python bench/rnn_closed_loop.py table    # results/rnn/summaries/*.json -> results/rnn/closed_loop.md
+    python bench/rnn_closed_loop.py sweep    # eps / l1 clip on wall, 8 s: the table in results/rnn/README.md
 
 ``run`` runs ``qpbench simulate`` for each shipped scenario twice: as the
 file says (its ``[rnn]`` table carries the paper's ``eps = 0.02``: setting
 "paper") and with the working setting set over the file's
 (:data:`qpbench.backends.rnn.WORKING_SETTINGS`, as ``--set rnn.KEY=VALUE``:
-setting "working"). The commands it runs are printed; README.md beside this
-file lists them.
+setting "working"). The commands it runs are printed; results/rnn/README.md
+lists them.
 """
 
 from __future__ import annotations
 
 import json
 import sys
-import tomllib
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[1]
-SCENARIOS = ("free", "wall", "adaptive", "narrow", "adaptive_fast")
+ROOT = Path(__file__).resolve().parents[1]
+#: Where the summaries and the table go.
+OUT = ROOT / "results" / "rnn"
 SETTINGS = ("paper", "working")
+
+
+def scenarios() -> list[str]:
+    """Every shipped scenario (the paper's first, in its order)."""
+    from qpbench.sim.scenario import scenario_names
+
+    return scenario_names()
 
 
 def working_overrides() -> list[str]:
@@ -35,10 +41,10 @@ def working_overrides() -> list[str]:
 def commands() -> list[list[str]]:
     """The ``qpbench`` argument lists of every run."""
     out = []
-    for name in SCENARIOS:
+    for name in scenarios():
         for setting in SETTINGS:
             args = ["simulate", "--scenario", name, "--backend", "rnn",
-                    "--summary", str((HERE / "summaries" / f"{name}_{setting}.json").relative_to(ROOT)), "--force"]
+                    "--summary", str((OUT / "summaries" / f"{name}_{setting}.json").relative_to(ROOT)), "--force"]
             if setting == "working":
                 for item in working_overrides():
                     args += ["--set", item]
@@ -65,6 +71,7 @@ def _fmt(x, spec):
 
 def write_table() -> None:
     from qpbench.atomic import write_text
+    from qpbench.sim.scenario import load_scenario
 
     rows = [
         "| scenario | setting | eps [s] | sub-steps | l1 clip | tracking rms / max after 2 s [m] "
@@ -72,13 +79,13 @@ def write_table() -> None:
         "| joint angle / speed limit violations [ticks] | max abs v [rad/s] | non-optimal ticks | infeasible ticks |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name in SCENARIOS:
+    for name in scenarios():
         for setting in SETTINGS:
-            path = HERE / "summaries" / f"{name}_{setting}.json"
+            path = OUT / "summaries" / f"{name}_{setting}.json"
             if not path.exists():
                 continue
             s = json.loads(path.read_text())
-            rnn = tomllib.loads((ROOT / "problems" / "scenarios" / f"{name}.toml").read_text())["rnn"]
+            rnn = dict(load_scenario(name).rnn)
             for key, value in s.get("scenario_overrides", {}).items():
                 if key.startswith("rnn."):
                     rnn[key[4:]] = value
@@ -99,7 +106,7 @@ def write_table() -> None:
             )
     text = (
         "# rnn in closed loop, 20 s per scenario\n\n"
-        "Produced by `python results/rnn/closed_loop.py run` (the `qpbench simulate` commands in README.md);\n"
+        "Produced by `python bench/rnn_closed_loop.py run` (the `qpbench simulate` commands in README.md beside it);\n"
         "numbers from `summaries/<scenario>_<setting>.json` (the summary `qpbench simulate --summary` writes).\n"
         "Bars of the robot issue: force error within 0.5 N and tracking within 1 mm after 2 s; no key point\n"
         "closer than d_safe - 5e-4 m = 0.0095 m. \"non-optimal ticks\": the network's state at the end of the\n"
@@ -108,7 +115,7 @@ def write_table() -> None:
         "declared infeasible; the network never does.\n\n"
         + "\n".join(rows) + "\n"
     )
-    write_text(HERE / "closed_loop.md", text)
+    write_text(OUT / "closed_loop.md", text)
     print(text)
 
 
@@ -118,7 +125,7 @@ SWEEP = ((0.02, None), (0.02, 10.0), (0.01, None), (0.005, None), (0.005, 10.0),
 
 
 def sweep(duration: float = 8.0) -> None:
-    """Print the eps / l1-clip table of README.md: ``wall`` for ``duration`` s, auto sub-steps."""
+    """Print the eps / l1-clip table of results/rnn/README.md: ``wall`` for ``duration`` s, auto sub-steps."""
     from dataclasses import replace
 
     from qpbench.sim.loop import simulate

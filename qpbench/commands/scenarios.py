@@ -1,0 +1,77 @@
+"""``qpbench scenarios``: the shipped scenario files; ``show NAME`` prints one to start your own from.
+
+``qpbench scenarios`` lists every shipped scenario (name, the paper's section,
+duration, obstacles, description); ``qpbench scenarios show NAME`` prints
+the file itself, every parameter with its unit in a comment: copy it, change
+it, and pass its path (``qpbench simulate --scenario my.toml``).
+``--json``: one object per scenario (list), or the file's tables (show).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+HELP = "list the shipped scenarios; 'show NAME' prints one's TOML file to start your own from"
+EXAMPLE = "qpbench scenarios    (qpbench scenarios show wall > my.toml; qpbench scenarios --json)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("action", nargs="?", default="list", metavar="list|show", help="list (default) or show one")
+    parser.add_argument("name", nargs="?", metavar="NAME", help="the scenario to show (a shipped name or a .toml path)")
+    parser.add_argument("--json", action="store_true", help="JSON: one object per scenario, or the file's tables")
+
+
+def _listing(name: str) -> dict:
+    from ..sim.scenario import load_scenario
+
+    sc = load_scenario(name)
+    return {
+        "name": sc.name,
+        "paper_section": sc.data["scenario"]["paper_section"],
+        "in_paper": sc.in_paper,
+        "duration_s": sc.duration,
+        "obstacles": [o["name"] for o in sc.data["obstacles"]],
+        "description": sc.description,
+    }
+
+
+def _show(name: str, as_json: bool) -> None:
+    import tomllib
+
+    from ..sim.scenario import load_scenario
+
+    sc = load_scenario(name)  # checked: what is printed is a file that loads
+    if as_json:
+        print(json.dumps(tomllib.loads(sc.source), indent=2))
+    else:
+        print(sc.source, end="" if sc.source.endswith("\n") else "\n")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..exceptions import ParamError
+    from ..sim.scenario import scenario_names
+
+    if args.action not in ("list", "show"):
+        raise ParamError(f"unknown action '{args.action}' (list or show; did you mean: qpbench scenarios show "
+                         f"{args.action}?)", key="action")
+    if args.action == "show":
+        if not args.name:
+            raise ParamError("which scenario? (qpbench scenarios show NAME)", key="NAME")
+        _show(args.name, args.json)
+        return 0
+    if args.name:
+        raise ParamError(f"unexpected '{args.name}' (did you mean: qpbench scenarios show {args.name}?)", key="NAME")
+    listing = [_listing(name) for name in scenario_names()]
+    if args.json:
+        for item in listing:
+            print(json.dumps(item))
+        return 0
+    rows = [("name", "paper", "duration", "obstacles", "description")]
+    for item in listing:
+        obstacles = ", ".join(item["obstacles"]) or "none"
+        rows.append((item["name"], item["paper_section"], f"{item['duration_s']:g} s", obstacles, item["description"]))
+    widths = [max(len(r[c]) for r in rows) for c in range(4)]
+    for r in rows:
+        print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4])
+    return 0

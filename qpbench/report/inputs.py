@@ -1,0 +1,284 @@
+"""Reading result CSVs for a report: which kind each is, duplicates, repeat counts.
+
+Two kinds of CSV are recognised by their columns:
+
+- **bench** (``qpbench bench``): one row per (problem, backend, profile, mode);
+- **closed-loop** (``qpbench closed-loop``): one row per (scenario, backend),
+  with a ``log_file`` column naming the per-tick log beside it.
+
+Rows from several CSVs (:func:`read_results`): a result key
+``(problem, scenario, backend, profile, mode)`` present in two files is an
+error unless ``prefer`` (``first`` or ``last`` file in the order given) says
+which to keep; so is a backend whose rows in one ``(profile, mode)`` come from
+files timed with different ``repeat`` counts (the minimum of 3 solves is not
+comparable to a single shot), unless ``prefer`` is given, in which case the
+rows are kept and :attr:`Results.notes` says so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..exceptions import InputError
+from ..formats import sha256_file
+from ..sim.summary import STRUCTURED_FIGURES
+
+__all__ = ["ResultFile", "Results", "expand_paths", "group_label", "read_results", "scenario_key"]
+
+
+#: Columns that identify a bench result across CSVs.
+DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
+
+
+#: Values of ``prefer``.
+PREFER = ("first", "last")
+
+
+#: Columns that make a CSV a bench result.
+BENCH_COLUMNS = (
+    "problem",
+    "backend",
+    "profile",
+    "found",
+    "success",
+    "wall_time_median_s",
+    "primal_residual",
+    "dual_residual",
+    "duality_gap",
+    "optimality_gap",
+)
+
+
+#: Columns that make a CSV a closed-loop result.
+CLOSED_LOOP_COLUMNS = ("scenario", "backend", "status", "log_file")
+
+
+@dataclass
+class ResultFile:
+    """One CSV given to the report."""
+
+    path: Path
+    kind: str  # "bench" | "closed-loop"
+    sha256: str
+    rows: int
+
+
+@dataclass
+class Results:
+    """All rows of the CSVs given to the report, by kind."""
+
+    bench: pd.DataFrame
+    closed_loop: pd.DataFrame
+    files: list[ResultFile] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def slug(text: str) -> str:
+    """File-name-safe form of a label (plot keys and file names of a report)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
+
+
+def _from_json(text):
+    """A list- or dict-valued cell of a closed-loop CSV (JSON text) as its value; empty stays NaN."""
+    if not isinstance(text, str):
+        return text
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text  # not JSON (a table written by hand): kept as text
+
+
+def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
+    if series.dtype == bool:
+        return series
+    # an empty cell (a row whose solve crashed) counts as false
+    mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False,
+               "nan": False, "": False, "none": False}
+    text = series.astype(str).str.strip().str.lower()
+    bad = ~text.isin(list(mapping))
+    if bad.any():
+        raise InputError(
+            f"non-boolean value {series[bad].iloc[0]!r} in row {int(np.flatnonzero(bad)[0]) + 2}",
+            path=path,
+            key=key,
+        )
+    return text.map(mapping).astype(bool)
+
+
+def expand_paths(paths: list[str | Path]) -> list[Path]:
+    """CSV files named directly, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
+
+    Raises:
+        InputError: a path does not exist, or a folder holds no CSV.
+    """
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(
+                q for pattern in ("*.csv", "*.csv.gz") for q in p.rglob(pattern) if not q.name.startswith(".")
+            )
+            if not found:
+                raise InputError("folder holds no result CSV", path=p)
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise InputError("no such file or folder", path=p)
+    return out
+
+
+def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
+    """Read bench and closed-loop CSVs (folders are searched for ``*.csv``).
+
+    Closed-loop rows get ``log_path``: their ``log_file`` resolved against the
+    CSV's folder (or ``None`` when the run left no log). Bench rows get
+    ``source`` (their file).
+
+    Args:
+        paths: Files or folders.
+        prefer: ``None`` (duplicates across files and mixed ``repeat`` counts
+            are errors), ``"first"`` or ``"last"`` (keep the row of the first
+            or last file holding a key; mixed repeats are noted).
+
+    Raises:
+        InputError: unreadable CSV, one that is neither kind (naming the file),
+            a duplicate key or mixed repeat counts without ``prefer``.
+    """
+    if prefer is not None and prefer not in PREFER:
+        raise InputError(f"unknown value '{prefer}' (choose from {', '.join(PREFER)})", key="--prefer")
+    bench, loops, files = [], [], []
+    for path in expand_paths(paths):
+        try:
+            df = pd.read_csv(path)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError, EOFError) as exc:
+            raise InputError(f"not a readable CSV ({exc})", path=path) from None
+        cols = set(df.columns)
+        if set(BENCH_COLUMNS) <= cols:
+            df["found"] = _as_bool(df["found"], path, "found")
+            df["success"] = _as_bool(df["success"], path, "success")
+            if "isolated" in cols:
+                df["isolated"] = _as_bool(df["isolated"], path, "isolated")
+            df["source"] = str(path)
+            bench.append(df)
+            kind = "bench"
+        elif set(CLOSED_LOOP_COLUMNS) <= cols:
+            for column in STRUCTURED_FIGURES:
+                if column in cols:
+                    df[column] = df[column].map(_from_json)
+            df["log_path"] = [
+                str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
+            ]
+            df["source"] = str(path)
+            loops.append(df)
+            kind = "closed-loop"
+        else:
+            missing = sorted(set(BENCH_COLUMNS) - cols)
+            raise InputError(
+                "neither a bench CSV (missing columns "
+                + ", ".join(missing)
+                + ") nor a closed-loop CSV (needs scenario, backend, status, log_file)",
+                path=path,
+            )
+        files.append(ResultFile(path, kind, sha256_file(path), len(df)))
+    notes: list[str] = []
+    bench_df = pd.concat(bench, ignore_index=True) if bench else pd.DataFrame()
+    if bench:
+        bench_df = drop_duplicates(bench_df, prefer)
+    if not bench_df.empty:
+        notes.extend(check_repeats(bench_df, prefer))
+    return Results(
+        bench=bench_df,
+        closed_loop=pd.concat(loops, ignore_index=True) if loops else pd.DataFrame(),
+        files=files,
+        notes=notes,
+    )
+
+
+def _key_frame(df: pd.DataFrame) -> pd.DataFrame:
+    """The :data:`DUPLICATE_KEY` columns as text (missing columns and empty cells: ``-``)."""
+    out = {}
+    for c in DUPLICATE_KEY:
+        out[c] = df[c].map(scenario_key) if c in df.columns else pd.Series("-", index=df.index)
+    return pd.DataFrame(out, index=df.index)
+
+
+def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
+    """Bench rows with each result key once (see the module docstring).
+
+    Raises:
+        InputError: a key in two files and ``prefer`` is ``None`` (naming both files and the key).
+    """
+    keys = _key_frame(bench)
+    dup = keys.duplicated(keep=False)
+    if not dup.any():
+        return bench
+    if prefer is None:
+        first = int(np.flatnonzero(dup.to_numpy())[0])
+        key = keys.iloc[first]
+        same = (keys == key).all(axis=1).to_numpy()
+        sources = list(dict.fromkeys(bench.loc[same, "source"]))
+        text = ", ".join(f"{c}={key[c]}" for c in DUPLICATE_KEY)
+        if len(sources) == 1:
+            sources = sources * 2
+        raise InputError(
+            f"{sources[0]} and {sources[1]} both hold the row ({text}); "
+            "pass --prefer first or --prefer last to keep one file's rows",
+            key="--prefer",
+        )
+    keep = ~keys.duplicated(keep="first" if prefer == "first" else "last")
+    return bench[keep.to_numpy()].reset_index(drop=True)
+
+
+def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
+    """Notes on backends timed with different ``repeat`` counts in one table.
+
+    A file's repeat count for a backend is the largest ``repeat`` of its rows
+    (failed solves are not repeated). Without ``prefer`` a mix is an error.
+
+    Raises:
+        InputError: a mix and ``prefer`` is ``None``.
+    """
+    if "repeat" not in bench.columns:
+        return []
+    notes = []
+    df = bench.assign(
+        _repeat=pd.to_numeric(bench["repeat"], errors="coerce"),
+        _mode=bench["mode"].fillna("") if "mode" in bench.columns else "",
+    )
+    for (profile, mode), table in df.groupby(["profile", "_mode"], sort=True):
+        per_backend = table.groupby("backend", sort=True)["_repeat"].max().dropna()
+        if per_backend.nunique() > 1:
+            counts = ", ".join(f"{b} {int(r)}" for b, r in per_backend.items())
+            notes.append(
+                f"backends timed with different --repeat counts in the tables of {group_label(profile, mode or None)} "
+                f"({counts}): a single-shot time includes cold caches that a minimum over repeats does not"
+            )
+    for (profile, mode, backend), g in df.groupby(["profile", "_mode", "backend"], sort=True):
+        per_file = g.groupby("source", sort=False)["_repeat"].max().dropna()
+        if per_file.nunique() <= 1:
+            continue
+        counts = ", ".join(f"{Path(f).name}: {int(r)}" for f, r in per_file.items())
+        text = f"{backend} ({group_label(profile, mode or None)}) mixes rows timed with different --repeat ({counts})"
+        if prefer is None:
+            raise InputError(f"{text}; pass --prefer first|last to report them together anyway", key="repeat")
+        notes.append(text + ": single-shot and repeated times are in one table")
+    return notes
+
+
+def group_label(profile: str, mode: str | None) -> str:
+    """Heading of a (profile, mode) group, e.g. ``default, sequential``."""
+    return f"{profile}, {mode}" if mode else str(profile)
+
+
+def scenario_key(value) -> str:
+    """Scenario label of a bench row (``-`` when the problem has no scenario)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
+        return "-"
+    return str(value)

@@ -1,0 +1,220 @@
+"""The network's problem and state: a QP as dense C-contiguous arrays, the state ``(v, l1, l2)``.
+
+See :mod:`qpbench.rnn.network` for the network (eq. 15) itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as spa
+
+from ..exceptions import ParamError, ProblemFormatError
+
+
+@dataclass
+class DenseQP:
+    """A QP as dense float64 arrays, absent parts replaced by neutral ones.
+
+    Attributes:
+        P: Cost matrix, shape (n, n).
+        q: Cost vector, shape (n,).
+        A, b: Equalities ``A v = b``, shapes (me, n), (me,); me may be 0.
+        G, h: Inequalities ``G v <= h``, shapes (mi, n), (mi,); mi may be 0.
+        lb, ub: Box, shape (n,), ``-inf`` / ``+inf`` where absent.
+        has_box: Whether the problem had ``lb`` or ``ub``.
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    has_box: bool
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(n, me, mi)``: variables, equalities, inequalities."""
+        return self.q.shape[0], self.b.shape[0], self.h.shape[0]
+
+
+_EMPTY_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def _cached(key: tuple, make) -> np.ndarray:
+    arr = _EMPTY_CACHE.get(key)
+    if arr is None:
+        arr = make()
+        arr.flags.writeable = False
+        _EMPTY_CACHE[key] = arr
+    return arr
+
+
+def _f64(a, name: str, ndim: int) -> np.ndarray:
+    if spa.issparse(a):
+        a = a.toarray()
+    if type(a) is not np.ndarray or a.dtype != np.float64 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.ndim != ndim:
+        if ndim == 2 and a.ndim == 1:
+            a = a.reshape(1, -1)
+        elif ndim == 1 and a.ndim == 2 and 1 in a.shape:
+            a = a.ravel()
+        else:
+            raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
+    return a
+
+
+def dense_qp(problem) -> DenseQP:
+    """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`.
+
+    Raises:
+        ProblemFormatError: inconsistent shapes (names the matrix).
+    """
+    P = _f64(problem.P, "P", 2)
+    q = _f64(problem.q, "q", 1)
+    n = q.shape[0]
+    if P.shape != (n, n):
+        raise ProblemFormatError(f"P has shape {P.shape}, expected ({n}, {n})", key="P")
+    if problem.A is None:
+        A = _cached(("A", n), lambda: np.zeros((0, n)))
+        b = _cached(("v", 0), lambda: np.zeros(0))
+    else:
+        A = _f64(problem.A, "A", 2)
+        b = _f64(problem.b, "b", 1)
+        if A.shape[1] != n or b.shape[0] != A.shape[0]:
+            raise ProblemFormatError(f"A {A.shape} and b {b.shape} do not fit n = {n}", key="A")
+    if problem.G is None:
+        G = _cached(("A", n), lambda: np.zeros((0, n)))
+        h = _cached(("v", 0), lambda: np.zeros(0))
+    else:
+        G = _f64(problem.G, "G", 2)
+        h = _f64(problem.h, "h", 1)
+        if G.shape[1] != n or h.shape[0] != G.shape[0]:
+            raise ProblemFormatError(f"G {G.shape} and h {h.shape} do not fit n = {n}", key="G")
+    has_box = problem.lb is not None or problem.ub is not None
+    if problem.lb is None:
+        lb = _cached(("lb", n), lambda: np.full(n, -np.inf))
+    else:
+        lb = _f64(problem.lb, "lb", 1)
+    if problem.ub is None:
+        ub = _cached(("ub", n), lambda: np.full(n, np.inf))
+    else:
+        ub = _f64(problem.ub, "ub", 1)
+    if lb.shape[0] != n or ub.shape[0] != n:
+        raise ProblemFormatError(f"lb {lb.shape} / ub {ub.shape} do not fit n = {n}", key="lb")
+    return DenseQP(P, q, A, b, G, h, lb, ub, has_box)
+
+
+class NetworkState:
+    """State of the network, stored as one vector ``xi = [v; l1; l2]``.
+
+    Attributes:
+        xi: The whole state, shape (n + me + mi,).
+        v: Output (the joint-velocity command in the paper), shape (n,), [rad/s]
+            (a view of ``xi``).
+        l1: Equality dual state, shape (me,) (qpsolvers ``y = -l1``).
+        l2: Inequality dual state, shape (mi,), >= 0 (qpsolvers ``z = l2``).
+    """
+
+    __slots__ = ("xi", "n", "me", "mi")
+
+    def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
+        if xi.shape != (n + me + mi,):
+            raise ParamError(f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state")
+        self.xi = xi
+        self.n, self.me, self.mi = n, me, mi
+
+    @classmethod
+    def cold(cls, n: int, me: int, mi: int, v0: np.ndarray | None = None) -> NetworkState:
+        """All-zero state (``v = v0`` if given)."""
+        xi = np.zeros(n + me + mi)
+        if v0 is not None:
+            xi[:n] = np.asarray(v0, dtype=np.float64).reshape(n)
+        return cls(xi, n, me, mi)
+
+    def resized(self, n: int, me: int, mi: int) -> NetworkState:
+        """A state for a problem of shape ``(n, me, mi)``: parts whose size
+        changed restart at zero (all of it when ``n`` changes)."""
+        if n != self.n:
+            return NetworkState.cold(n, me, mi)
+        new = NetworkState.cold(n, me, mi, self.v)
+        if me == self.me:
+            new.l1[:] = self.l1
+        if mi == self.mi:
+            new.l2[:] = self.l2
+        return new
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.xi[: self.n]
+
+    @v.setter
+    def v(self, value) -> None:
+        self.xi[: self.n] = value
+
+    @property
+    def l1(self) -> np.ndarray:
+        return self.xi[self.n : self.n + self.me]
+
+    @property
+    def l2(self) -> np.ndarray:
+        return self.xi[self.n + self.me :]
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.n, self.me, self.mi
+
+    def copy(self) -> NetworkState:
+        return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
+
+    def __repr__(self) -> str:
+        return f"NetworkState(v={self.v!r}, l1={self.l1!r}, l2={self.l2!r})"
+
+
+@dataclass
+class IntegrationResult:
+    """What one call of :func:`integrate` did.
+
+    Attributes:
+        steps: Integration steps taken, or :data:`NO_STABLE_STEP` when ``P``
+            is not positive definite and no step size is proven stable.
+        primal_residual: ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``
+            at the final state (inf-norm).
+        dual_residual: ``|v - P_Omega(v - g)|_inf`` with
+            ``g = P v + q - A^T l1 + G^T l2``: qpsolvers' dual residual with the
+            ``z_box`` of :func:`duals`.
+        complementarity: ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero iff
+            ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``).
+        objective: ``1/2 v^T P v + q^T v`` at the final state.
+        ratio: ``r = h / eps`` of one step.
+        ratio_max: Stability bound on ``r`` (module docstring); a ``ratio``
+            above it may diverge.
+        sigma2_bound: Upper bound on ``sigma_max([A; G])^2`` used.
+        nominal_steps: Steps the setting asked for (a forced count, or the
+            duration over a fixed step); 0 when the bound chose the count.
+            ``steps > nominal_steps > 0``: the step was clamped to the bound.
+
+    ``ratio_max`` and ``sigma2_bound`` are NaN when a forced step was not
+    checked against the bound, or was below a cheap lower estimate of it
+    (then it is within the bound: see :func:`integrate`).
+    """
+
+    steps: int
+    primal_residual: float
+    dual_residual: float
+    complementarity: float
+    objective: float
+    ratio: float
+    ratio_max: float
+    sigma2_bound: float
+    nominal_steps: int = 0
+
+    @property
+    def clamped(self) -> bool:
+        """The step of the setting exceeded the stability bound and was shortened."""
+        return self.steps > self.nominal_steps > 0
