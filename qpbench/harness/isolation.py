@@ -118,9 +118,8 @@ def _worker_main(conn, spec: dict) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
     try:
         from ..backends import get_backend
-        from .plugins import load_plugins
-
         from ..jit import warmup
+        from .plugins import load_plugins
 
         warmup()  # loads the kernels the parent compiled; nothing is timed yet
         load_plugins(spec["plugins"])
