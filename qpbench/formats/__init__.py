@@ -13,9 +13,11 @@ through three formats:
   :meth:`qpsolvers.Problem.save` and read by :meth:`qpsolvers.Problem.load`,
   so qpsolvers and qpbenchmark read our files as they read the MPC test set.
   The metadata goes in one extra member ``qpbench_record`` (a 0-d unicode array
-  holding JSON) that ``Problem.load`` ignores. Sparse matrices are stored dense
-  (``Problem.save`` turns a sparse ``G`` or ``A`` into an object array that
-  ``Problem.load`` silently reads back as ``None``).
+  holding JSON) that ``Problem.load`` ignores. A scipy.sparse matrix ``M`` is
+  also stored as CSC (members ``M_csc_data, M_csc_indices, M_csc_indptr,
+  M_csc_shape``), which :func:`load_npz` prefers (read back bit for bit); the
+  dense copy for ``Problem.load`` is written only for problems whose ``P, G, A``
+  hold at most ``DENSE_COPY_MAX`` (10^6) entries made dense.
 - **A problem set <-> a folder** (:func:`write_problem_set`,
   :func:`read_problem_set`) holding ``problems.parquet`` and ``manifest.json``.
   The Parquet file has qpbenchmark's ``ProblemList`` columns
@@ -23,7 +25,14 @@ through three formats:
   ``rows = size / n``; null for an absent part) and the metadata columns
   ``scenario`` (string), ``tick`` (int64), ``t`` (double, [s]),
   ``formulation`` (string) and ``offset`` (double). ``qpbenchmark.ParquetTestSet``
-  runs it as a test set. The writer options are pinned (zstd, no dictionary, no
+  runs it as a test set. A set holding scipy.sparse matrices has, per such
+  matrix ``M``, three more columns ``M_csc_data`` (list<double>),
+  ``M_csc_indices`` (list<int32>) and ``M_csc_indptr`` (list<int64>): the
+  reader prefers them (bit for bit the same CSC matrix); qpbenchmark's
+  column holds the dense copy while the problem has at most ``DENSE_COPY_MAX``
+  entries made dense, else null (such a row is read by qpbench only). A set
+  without sparse matrices (the robot's) has no such column and the bytes of
+  before. The writer options are pinned (zstd, no dictionary, no
   statistics, one row group, format 2.6) and nothing time-dependent is stored,
   so the same records give the same bytes with the same package versions.
   ``manifest.json`` records the generator and its parameters, the package
@@ -35,19 +44,23 @@ through three formats:
   row per finite side (upper sides first, then lower sides as ``-C x <= -l``).
   The last ``n`` rows give ``lb, ub``. ``|value| >= 1e20`` means infinite.
   ``P`` is read as a symmetric full matrix (a triangular ``P`` is mirrored);
-  all matrices are stored dense (the problems of interest are small), and
-  ``r`` is kept as :attr:`ProblemRecord.offset`, so that
+  ``P``, ``G`` and ``A`` stay scipy.sparse CSC (indices sorted) from the file
+  to the solvers, never made dense here, and ``r`` is kept as :attr:`ProblemRecord.offset`, so that
   ``1/2 x'Px + q'x + r`` equals the published optimal values.
 
-Data rules (checked by every reader; :func:`check_problem`):
-``P`` is ``n x n``, symmetric (to 1e-9 relative) and not clearly indefinite
-(smallest eigenvalue >= -1e-8 max(1, |P|)); ``q`` has ``n`` entries; ``G, h`` and
+Data rules (checked by every reader; :func:`check_problem`, through the stored
+values of a sparse matrix, never a dense copy): ``P`` is ``n x n`` and symmetric
+(``max |P - P'| <= 1e-9 max |P|``); ``q`` has ``n`` entries; ``G, h`` and
 ``A, b`` come in pairs with matching rows; ``P q G h A b`` are finite (a row
 without a limit is dropped rather than stored with ``h = +inf``, because several
 solvers reject infinite ``h``); ``lb`` may hold ``-inf`` and ``ub`` may hold
 ``+inf`` (no bound), never NaN, ``lb = +inf`` or ``ub = -inf``. A violation raises
 :class:`~qpbench.exceptions.ProblemFormatError` naming the file, the problem and
-the field.
+the field. Convexity is not a format rule: every reader records what
+:func:`~qpbench.formats.convexity.assess_convexity` finds in
+:attr:`ProblemRecord.convexity` (sparse methods, a tolerance for rounding), and
+the bench solves a slightly indefinite problem with a warning and skips a
+clearly nonconvex one with the reason.
 """
 
 from __future__ import annotations
@@ -56,6 +69,7 @@ import hashlib
 from pathlib import Path
 
 from ..exceptions import ProblemFormatError
+from .convexity import Convexity, assess_convexity
 from .maros_meszaros import load_maros_meszaros
 from .npz import load_npz, save_npz
 from .parquet import (
@@ -72,6 +86,7 @@ from .parquet import (
 )
 from .records import (
     ARRAY_KEYS,
+    DENSE_COPY_MAX,
     FORMAT_VERSION,
     MANIFEST_NAME,
     META_KEYS,
@@ -83,8 +98,10 @@ from .records import (
     ProblemSet,
     check_problem,
     check_record,
+    dense_entries,
     dense_problem,
     problem_sizes,
+    solver_problem,
 )
 
 
@@ -161,6 +178,7 @@ def content_sha256(problem_set: ProblemSet) -> str | None:
 
 
 __all__ = [
+    "DENSE_COPY_MAX", "Convexity", "assess_convexity", "dense_entries", "solver_problem",
     "ARRAY_KEYS", "FORMAT_VERSION", "MANIFEST_NAME", "META_KEYS", "MM_INFINITY", "NPZ_META_KEY", "PARQUET_NAME",
     "PROBLEM_KEYS", "ProblemRecord", "ProblemSet", "check_problem", "check_record", "content_sha256",
     "dense_problem", "load_maros_meszaros", "load_npz", "load_problems", "package_versions", "problem_sizes",

@@ -8,12 +8,14 @@ from pathlib import Path
 
 import numpy as np
 import qpsolvers
+import scipy.sparse as spa
 
 from ..atomic import write_bytes, write_text
 from ..exceptions import ProblemFormatError
 from .records import (
     _MATRIX_KEYS,
     ARRAY_KEYS,
+    DENSE_COPY_MAX,
     FORMAT_VERSION,
     MANIFEST_NAME,
     META_KEYS,
@@ -22,14 +24,19 @@ from .records import (
     ProblemRecord,
     ProblemSet,
     check_record,
-    dense_problem,
+    dense_entries,
 )
 
+#: Per sparse matrix ``M`` of a set (only when some record has one): CSC columns
+#: ``M_csc_data`` (list<double>), ``M_csc_indices`` (list<int32>), ``M_csc_indptr`` (list<int64>).
+CSC_COLUMNS = (("data", "float64"), ("indices", "int32"), ("indptr", "int64"))
 
-def _schema():
+
+def _schema(sparse_keys=()):
     import pyarrow as pa
 
     lst = pa.list_(pa.float64())
+    csc = [(f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())) for k in sparse_keys for part, kind in CSC_COLUMNS]
     return pa.schema(
         [(k, lst) for k in ARRAY_KEYS]
         + [
@@ -40,34 +47,58 @@ def _schema():
             ("formulation", pa.string()),
             ("offset", pa.float64()),
         ]
+        + csc
     )
 
 
-def _list_column(values: list[np.ndarray | None]):
+def _list_column(values: list[np.ndarray | None], kind: str = "float64"):
     import pyarrow as pa
 
     lengths = [0 if v is None else v.size for v in values]
     offsets = np.zeros(len(values) + 1, dtype=np.int32)
     np.cumsum(lengths, out=offsets[1:])
     flat = [v.ravel(order="C") for v in values if v is not None]
-    data = np.concatenate(flat) if flat else np.zeros(0)
+    data = np.concatenate(flat).astype(kind, copy=False) if flat else np.zeros(0, dtype=kind)
     mask = pa.array([v is None for v in values], type=pa.bool_())
-    return pa.ListArray.from_arrays(pa.array(offsets, type=pa.int32()), pa.array(data, type=pa.float64()), mask=mask)
+    return pa.ListArray.from_arrays(
+        pa.array(offsets, type=pa.int32()), pa.array(data, type=getattr(pa, kind)()), mask=mask
+    )
+
+
+def _stored(problem, key: str):
+    """What the qpbenchmark column of ``key`` holds: the dense array, or ``None`` for a
+    sparse matrix of a problem too large to be written dense too (``DENSE_COPY_MAX``)."""
+    M = getattr(problem, key)
+    if M is None or not spa.issparse(M):
+        return None if M is None else np.asarray(M, dtype=np.float64)
+    return M.toarray() if dense_entries(problem) <= DENSE_COPY_MAX else None
+
+
+def _csc_parts(M) -> tuple | None:
+    if not spa.issparse(M):
+        return None
+    M = spa.csc_matrix(M, dtype=np.float64)
+    M.sort_indices()
+    return M.data, M.indices, M.indptr
 
 
 def records_to_table(records: list[ProblemRecord], path=None):
-    """The records as a ``pyarrow.Table`` in the problem-set schema."""
+    """The records as a ``pyarrow.Table`` in the problem-set schema.
+
+    A scipy.sparse matrix is stored in its CSC columns (read back bit for bit as
+    the same sparse matrix) and, while the problem is small enough
+    (:data:`~qpbench.formats.records.DENSE_COPY_MAX`), dense in qpbenchmark's
+    column too; a set without sparse matrices has no CSC columns at all.
+    """
     import pyarrow as pa
 
-    problems = []
     for r in records:
         check_record(r, path=path)
-        problems.append(dense_problem(r.problem, path=path, name=r.name))
     names = [r.name for r in records]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
-    cols = [_list_column([getattr(p, k) for p in problems]) for k in ARRAY_KEYS]
+    cols = [_list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
     cols += [
         pa.array(names, type=pa.string()),
         pa.array([r.scenario for r in records], type=pa.string()),
@@ -76,7 +107,12 @@ def records_to_table(records: list[ProblemRecord], path=None):
         pa.array([r.formulation for r in records], type=pa.string()),
         pa.array([float(r.offset) for r in records], type=pa.float64()),
     ]
-    return pa.Table.from_arrays(cols, schema=_schema())
+    sparse_keys = [k for k in _MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)]
+    for k in sparse_keys:
+        parts = [_csc_parts(getattr(r.problem, k)) for r in records]
+        for j, (_, kind) in enumerate(CSC_COLUMNS):
+            cols.append(_list_column([None if p is None else p[j] for p in parts], kind))
+    return pa.Table.from_arrays(cols, schema=_schema(sparse_keys))
 
 
 def table_to_bytes(table) -> bytes:
@@ -158,7 +194,7 @@ def write_problem_set(
         "generator": generator,
         "extra": extra or {},
         "versions": package_versions(),
-        "columns": list(PROBLEM_KEYS) + list(META_KEYS),
+        "columns": list(table.column_names),
     }
     try:
         text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
@@ -169,7 +205,26 @@ def write_problem_set(
     return folder
 
 
-def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
+def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
+    """Per row, the values of a list column as a numpy array (``None`` for a null)."""
+    import pyarrow as pa
+
+    col = table.column(key)
+    rows = table.num_rows
+    if pa.types.is_null(col.type):
+        return [None] * rows
+    if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)):
+        raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
+    chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+    if not (pa.types.is_floating(chunk.type.value_type) or pa.types.is_integer(chunk.type.value_type)):
+        raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
+    offsets = chunk.offsets.to_numpy()
+    values = chunk.values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
+    nulls = chunk.is_null().to_numpy(zero_copy_only=False)
+    return [None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype) for i in range(rows)]
+
+
+def _read_table(path: Path, require_meta: bool):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -183,25 +238,40 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
     for k in required:
         if k not in table.column_names:
             raise ProblemFormatError("missing column", path=path, key=k)
+    return table
+
+
+def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
+    """Matrix ``k`` of row ``i``: from its CSC columns when they hold it, else the dense column."""
+    parts = csc.get(k)
+    if parts is not None and parts[0][i] is not None:
+        data, indices, indptr = (p[i] for p in parts)
+        vector = None if k == "P" else arrays["h" if k == "G" else "b"][i]
+        rows = n if k == "P" else (0 if vector is None else vector.size)
+        if len(indptr) != n + 1 or len(indices) != len(data):
+            fail(k, f"CSC columns hold {len(indptr) - 1} columns and {len(indices)} indices for "
+                 f"{len(data)} values, expected n = {n} columns")
+        try:
+            return spa.csc_matrix((data, indices.astype(np.int32), indptr), shape=(rows, n))
+        except ValueError as exc:
+            fail(k, f"CSC columns are inconsistent ({exc})")
+    v = arrays[k][i]
+    if v is not None:
+        if v.size % n:
+            fail(k, f"{v.size} values is not a multiple of n = {n}")
+        v = v.reshape((v.size // n, n))
+    return v
+
+
+def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
+    table = _read_table(path, require_meta)
     rows = table.num_rows
-    arrays: dict[str, list] = {}
-    for k in ARRAY_KEYS:
-        col = table.column(k)
-        if pa.types.is_null(col.type):
-            arrays[k] = [None] * rows
-            continue
-        if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)):
-            raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=k)
-        chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-        if not (pa.types.is_floating(chunk.type.value_type) or pa.types.is_integer(chunk.type.value_type)):
-            raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=k)
-        offsets = chunk.offsets.to_numpy()
-        values = chunk.values.cast(pa.float64()).to_numpy(zero_copy_only=False)
-        nulls = chunk.is_null().to_numpy(zero_copy_only=False)
-        arrays[k] = [
-            None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=np.float64)
-            for i in range(rows)
-        ]
+    arrays = {k: _list_values(table, k, path) for k in ARRAY_KEYS}
+    csc = {
+        k: [_list_values(table, f"{k}_csc_{part}", path, kind) for part, kind in CSC_COLUMNS]
+        for k in _MATRIX_KEYS
+        if f"{k}_csc_data" in table.column_names
+    }
     names = table.column("name").to_pylist()
 
     def meta(key):
@@ -211,24 +281,19 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
     records = []
     for i in range(rows):
         name = names[i] if names[i] is not None else f"{path.stem}-{i}"
+
+        def fail(key, msg, name=name, i=i):
+            raise ProblemFormatError(f"problem '{name}' (row {i}): {msg}", path=path, key=key)
+
         q = arrays["q"][i]
         if q is None:
-            raise ProblemFormatError(f"problem '{name}' (row {i}): missing", path=path, key="q")
+            fail("q", "missing")
         n = q.size
         if n == 0:
-            raise ProblemFormatError(f"problem '{name}' (row {i}): no variables", path=path, key="q")
-        data = {}
-        for k in ARRAY_KEYS:
-            v = arrays[k][i]
-            if v is not None and k in _MATRIX_KEYS:
-                if v.size % n:
-                    raise ProblemFormatError(
-                        f"problem '{name}' (row {i}): {v.size} values is not a multiple of n = {n}", path=path, key=k
-                    )
-                v = v.reshape((v.size // n, n))
-            data[k] = v
+            fail("q", "no variables")
+        data = {k: _matrix(arrays, csc, k, i, n, fail) if k in _MATRIX_KEYS else arrays[k][i] for k in ARRAY_KEYS}
         if data["P"] is None:
-            raise ProblemFormatError(f"problem '{name}' (row {i}): missing", path=path, key="P")
+            fail("P", "missing")
         offset = off[i]
         rec = ProblemRecord(
             problem=qpsolvers.Problem(**data),

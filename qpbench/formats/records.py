@@ -30,6 +30,11 @@ NPZ_META_KEY = "qpbench_record"
 FORMAT_VERSION = 1
 #: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
 MM_INFINITY = 1e20
+#: A sparse problem whose matrices hold more entries than this (P, G and A made dense;
+#: 8 MB of float64) is not also written dense for qpsolvers / qpbenchmark readers.
+DENSE_COPY_MAX = 1_000_000
+#: ``P`` is symmetric when ``max |P - P'| <= SYMMETRY_RTOL max |P|``.
+SYMMETRY_RTOL = 1e-9
 
 _MATRIX_KEYS = ("P", "G", "A")
 
@@ -47,6 +52,8 @@ class ProblemRecord:
         formulation: ``"paper"`` (hard task equality, paper eq. 11), ``"soft"``
             (task as a weighted cost) or ``None``.
         offset: Constant term of the objective (Maros-Meszaros ``r``).
+        convexity: What :func:`~qpbench.formats.convexity.assess_convexity` found
+            (set by :func:`check_record`, which every reader calls).
     """
 
     problem: qpsolvers.Problem
@@ -56,6 +63,7 @@ class ProblemRecord:
     t: float | None = None
     formulation: str | None = None
     offset: float = 0.0
+    convexity: object = field(default=None, compare=False, repr=False)
 
     @property
     def sizes(self) -> tuple[int, int, int]:
@@ -134,8 +142,54 @@ def dense_problem(problem: qpsolvers.Problem, path=None, name=None) -> qpsolvers
     return qpsolvers.Problem(*arrays)
 
 
+def dense_entries(problem: qpsolvers.Problem) -> int:
+    """Entries of ``P``, ``G`` and ``A`` made dense: ``n (n + m_ineq + m_eq)``."""
+    n, m_eq, m_ineq = problem_sizes(problem)
+    return n * (n + m_eq + m_ineq)
+
+
+def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
+    """``problem`` with float64 arrays, its sparse matrices kept sparse (CSC): what a
+    solver with a sparse API is given. A dense problem of float64 arrays passes through."""
+    parts = []
+    for k in ARRAY_KEYS:
+        v = getattr(problem, k)
+        if v is not None:
+            v = spa.csc_matrix(v, dtype=np.float64) if spa.issparse(v) else np.asarray(v, dtype=np.float64)
+        parts.append(v)
+    return qpsolvers.Problem(*parts)
+
+
+def _numeric(v, key: str, fail):
+    """``v`` as float64 (CSC for a sparse matrix), or a failure naming ``key``."""
+    if spa.issparse(v):
+        if v.dtype.kind not in "fiub":
+            fail(key, f"dtype {v.dtype} is not numeric")
+        return spa.csc_matrix(v, dtype=np.float64) if v.format != "csc" or v.dtype != np.float64 else v
+    v = np.asarray(v)
+    if v.dtype.kind not in "fiub":
+        fail(key, f"dtype {v.dtype} is not numeric")
+    return v.astype(np.float64, copy=False)
+
+
+def _values(M) -> np.ndarray:
+    """The stored values of a dense or sparse array (never a dense copy of a sparse one)."""
+    return M.data if spa.issparse(M) else M
+
+
+def _asymmetry(P) -> float:
+    """``max |P - P'|`` without a dense copy of a sparse ``P``."""
+    D = P - P.T
+    if spa.issparse(D):
+        return float(abs(D).max()) if D.nnz else 0.0
+    return float(np.max(np.abs(D), initial=0.0))
+
+
 def check_problem(problem: qpsolvers.Problem, path=None, name: str | None = None) -> None:
-    """Check shapes and values of a problem (see the module docstring for the rules).
+    """Check shapes and values of a problem (see :mod:`qpbench.formats` for the rules).
+
+    Sparse matrices are checked through their stored values: nothing is made dense.
+    Convexity is not a format rule (:func:`~qpbench.formats.convexity.assess_convexity`).
 
     Raises:
         ProblemFormatError: naming ``path``, the problem ``name`` and the field.
@@ -144,17 +198,7 @@ def check_problem(problem: qpsolvers.Problem, path=None, name: str | None = None
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
 
-    arr = {k: getattr(problem, k) for k in ARRAY_KEYS}
-    for k in ARRAY_KEYS:
-        v = arr[k]
-        if v is None:
-            continue
-        if spa.issparse(v):
-            v = v.toarray()
-        v = np.asarray(v)
-        if v.dtype.kind not in "fiub":
-            fail(k, f"dtype {v.dtype} is not numeric")
-        arr[k] = v.astype(np.float64, copy=False)
+    arr = {k: None if getattr(problem, k) is None else _numeric(getattr(problem, k), k, fail) for k in ARRAY_KEYS}
     P, q = arr["P"], arr["q"]
     if P is None:
         fail("P", "missing")
@@ -180,27 +224,28 @@ def check_problem(problem: qpsolvers.Problem, path=None, name: str | None = None
         if arr[k] is not None and arr[k].shape != (n,):
             fail(k, f"shape {arr[k].shape} does not match n = {n}")
     for k in ("P", "q", "G", "h", "A", "b"):
-        if arr[k] is not None and not np.all(np.isfinite(arr[k])):
-            bad = "NaN" if np.any(np.isnan(arr[k])) else "Inf"
+        if arr[k] is not None and not np.all(np.isfinite(_values(arr[k]))):
+            bad = "NaN" if np.any(np.isnan(_values(arr[k]))) else "Inf"
             fail(k, f"holds {bad} (only lb/ub may be infinite)")
     if arr["lb"] is not None and (np.any(np.isnan(arr["lb"])) or np.any(arr["lb"] == np.inf)):
         fail("lb", "holds NaN or +inf")
     if arr["ub"] is not None and (np.any(np.isnan(arr["ub"])) or np.any(arr["ub"] == -np.inf)):
         fail("ub", "holds NaN or -inf")
-    scale = max(1.0, float(np.max(np.abs(P))) if P.size else 1.0)
-    if np.max(np.abs(P - P.T), initial=0.0) > 1e-9 * scale:
-        fail("P", "is not symmetric")
-    if n <= 2000:
-        lam_min = float(np.linalg.eigvalsh(P)[0])
-        if lam_min < -1e-8 * scale:
-            fail("P", f"is indefinite (smallest eigenvalue {lam_min:.3g})")
+    values = _values(P)
+    scale = float(np.max(np.abs(values))) if values.size else 0.0
+    if _asymmetry(P) > SYMMETRY_RTOL * scale:
+        fail("P", f"is not symmetric (max |P - P'| = {_asymmetry(P):.3g} > {SYMMETRY_RTOL:g} max |P|)")
 
 
 def check_record(record: ProblemRecord, path=None) -> None:
-    """:func:`check_problem` plus the metadata types."""
+    """:func:`check_problem` plus the metadata types; sets :attr:`ProblemRecord.convexity`."""
+    from .convexity import assess_convexity
+
     check_problem(record.problem, path=path, name=record.name)
     if not isinstance(record.name, str) or not record.name:
         raise ProblemFormatError(f"problem name {record.name!r} is not a non-empty string", path=path, key="name")
     if not np.isfinite(record.offset):
         raise ProblemFormatError(f"problem '{record.name}': offset {record.offset} is not finite", path=path, key="offset")
+    if record.convexity is None:
+        record.convexity = assess_convexity(record.problem.P)
 
