@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 from . import __version__
@@ -103,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     from .cache import configure_numba_cache
 
     configure_numba_cache()  # before numba is imported: workers inherit the variable it may set
+    # pyarrow's default allocator reserves about 1 GB of address space on first use; the system
+    # allocator does not, so an address-space limit (ulimit -v) counts memory used, not reserved
+    os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
     parser = build_parser()
     args = parser.parse_args(argv)
     args.quiet = getattr(args, "quiet", False)
@@ -124,8 +128,6 @@ def main(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except BrokenPipeError:
         # stdout's reader closed early (``qpbench list ... | head``): stop quietly, as Unix tools do
-        import os
-
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141

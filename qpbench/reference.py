@@ -65,7 +65,7 @@ import numpy as np
 import qpsolvers
 
 from .atomic import write_bytes
-from .formats import ProblemRecord, ProblemSet, content_sha256, dense_problem
+from .formats import ProblemRecord, ProblemSet, content_sha256, solver_problem
 from .metrics import objective
 
 log = logging.getLogger(__name__)
@@ -197,6 +197,7 @@ def _solve(problem, solver: str, settings: dict):
 
 def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
     P, q = record.problem.P, record.problem.q
+    P = P.toarray() if hasattr(P, "toarray") else P  # no constraint at all: small problems in practice
     x, *_ = np.linalg.lstsq(P, -q, rcond=None)
     res = float(np.max(np.abs(P @ x + q)))
     if res > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
@@ -266,7 +267,7 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
 
 def reference_solution(record: ProblemRecord) -> ReferenceSolution:
     """High-accuracy reference of one problem (see the module docstring)."""
-    problem = dense_problem(record.problem, name=record.name)
+    problem = solver_problem(record.problem)  # sparse matrices stay sparse
     if _is_unconstrained(problem):
         return _unconstrained(ProblemRecord(problem, record.name, offset=record.offset))
     candidates = []

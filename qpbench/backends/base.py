@@ -110,6 +110,10 @@ class Backend:
             records as ``dt``.
         risky: True for a backend the harness runs in a worker process with a
             deadline under ``--isolate auto`` (it was seen to hang in native code).
+        sparse: True for a backend that hands scipy.sparse matrices to its solver as
+            they are; the others make them dense, so the bench gives them problems
+            up to :data:`qpbench.memory.DENSE_MAX_ENTRIES` only (a larger one is a
+            ``skipped`` row).
 
     Optional hooks the harness uses when present: ``get_state()`` and
     ``set_state(state)`` restore a backend exactly between timed repeats
@@ -122,6 +126,7 @@ class Backend:
     module: ClassVar[str | None] = None
     online: ClassVar[bool] = False
     risky: ClassVar[bool] = False
+    sparse: ClassVar[bool] = False
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

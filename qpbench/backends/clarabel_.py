@@ -240,6 +240,7 @@ class ClarabelBackend(Backend):
     """Clarabel with a persistent ``DefaultSolver``, updated in place when the pattern holds."""
 
     name = "clarabel"
+    sparse = True
     family = "interior point"
     package = "clarabel"
     module = "clarabel"

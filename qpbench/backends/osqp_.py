@@ -189,6 +189,7 @@ class OsqpBackend(Backend):
     """OSQP through ``osqp.OSQP`` with a persistent, updated solver object."""
 
     name = "osqp"
+    sparse = True
     family = "ADMM"
     package = "osqp"
     module = "osqp"

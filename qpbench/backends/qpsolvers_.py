@@ -500,6 +500,8 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
             "family": SOLVER_FAMILIES.get(solver, "unknown"),
             "package": SOLVER_PACKAGES.get(solver),
             "solver": solver,
+            # qpsolvers hands sparse matrices to a solver with a sparse API as they are
+            "sparse": solver in qpsolvers.sparse_solvers,
             "__module__": __name__,
             "__doc__": f"``{solver}`` through qpsolvers.solve_problem (see :mod:`{__name__}`).",
         },

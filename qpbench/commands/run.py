@@ -111,6 +111,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="closed-loop runs in parallel worker processes (default: 1)")
+    from .inspect_ import add_memory_argument
+
+    add_memory_argument(parser)
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true",
                        help="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
@@ -225,6 +228,7 @@ def run(args: argparse.Namespace) -> int:
     from ..exceptions import ParamError
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
+    from ..memory import resolve_budget
     from ..harness.closed_loop import PAPER_SCENARIOS, resolve_backends, resolve_scenarios, run_closed_loop
     from .closed_loop import log_row
     from ..jit import warmup_logged
@@ -269,7 +273,8 @@ def run(args: argparse.Namespace) -> int:
             subset, refs = _bench_subset(load_problems(problems / s), args.duration, args.bench_every)
             summary = run_bench(
                 subset,
-                BenchConfig(backends=list(backends), profile="default", mode="sequential", repeat=args.repeat),
+                BenchConfig(backends=list(backends), profile="default", mode="sequential", repeat=args.repeat,
+                            memory_budget=resolve_budget(args.memory_budget)),
                 bench_dir / f"{s}.csv",
                 resume=args.resume,
                 force=not args.resume,

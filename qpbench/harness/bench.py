@@ -59,7 +59,7 @@ from .bench_plan import (
     sequences,
 )
 from .bench_summary import DEFAULT_SEED, BackendStats, BenchSummary, is_failure
-from .guard import RESET_STATUSES, LocalRunner
+from .guard import RESET_STATUSES, LocalRunner, Outcome
 from .isolation import IsolatedRunner
 from .results import (
     COLUMNS,
@@ -96,7 +96,7 @@ def _structure(problem) -> tuple[bool, ...]:
             spa.issparse(problem.P))
 
 
-def _warmup_problems(records, seqs) -> list:
+def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
     """The first problem of the run, then the first of each other structure (:func:`_structure`).
 
     A backend's first solve of a structure may pay one-off costs (a compiled
@@ -105,6 +105,8 @@ def _warmup_problems(records, seqs) -> list:
     """
     out, seen = [], set()
     for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
+        if i in skipped:  # a problem the backend does not solve is no warm-up either
+            continue
         key = _structure(records[i].problem)
         if key not in seen:
             seen.add(key)
@@ -179,11 +181,11 @@ class _BenchRun:
                 runner.close()
 
     def _warmup(self) -> None:
-        firsts = _warmup_problems(self.plan.records, self.plan.seqs)
         for name, runner in self.runners.items():
             if any(self.todo[name]):
+                skipped = {i for i, b in self.plan.skips if b == name}
                 self.plan.marker.mark(("warmup", name, self.pname))
-                for problem in firsts:
+                for problem in _warmup_problems(self.plan.records, self.plan.seqs, skipped):
                     runner.warmup(problem)
 
     def _sequence(self, s: int, seq: list[int]) -> None:
@@ -205,8 +207,11 @@ class _BenchRun:
                     continue
                 key = (record.name, name, self.pname)
                 if key in self.done:
-                    if self.sequential:
+                    if self.sequential and (i, name) not in self.plan.skips:
                         self._replay(name, record, self.done[key]["status"], needs_reset)
+                    continue
+                if (i, name) in self.plan.skips:  # never handed to the backend; its state is untouched
+                    solved.append((position, name, Outcome("skipped", error=self.plan.skips[(i, name)])))
                     continue
                 solved.append((position, name, self._solve(name, record, prev, needs_reset)))
             self._write_rows(i, solved)
@@ -256,6 +261,8 @@ class _BenchRun:
         batch = []
         for position, name, outcome in sorted(solved, key=lambda item: backends.index(item[1])):
             row = self.make_row(record, name, outcome, self.references[i], position, int(self.config.seed))
+            if i in self.plan.notes and outcome.status != "skipped":
+                row["error"] = "; ".join(filter(None, [self.plan.notes[i], row["error"]]))
             batch.append(row)
             if row["wall_time_min_s"] is not None:
                 self.summary.timed_s += row["wall_time_min_s"]

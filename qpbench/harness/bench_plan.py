@@ -44,6 +44,7 @@ class BenchConfig:
         settings: Extra solver settings passed to every backend.
         backend_settings: Extra settings per backend name (over ``settings``).
         seed: Seed of the per-problem backend order (:func:`backend_order`).
+        memory_budget: Bytes a solve may need (:mod:`qpbench.memory`; ``None``: the default).
     """
 
     backends: list[str]
@@ -57,6 +58,7 @@ class BenchConfig:
     settings: dict = field(default_factory=dict)
     backend_settings: dict = field(default_factory=dict)
     seed: int = DEFAULT_SEED
+    memory_budget: int | None = None
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -170,6 +172,9 @@ class Plan:
         existing: Its rows (empty when not resuming).
         learned: Backends known to crash in this process (from the in-flight marker).
         marker: The in-flight marker of ``out``.
+        skips: ``(record index, backend) -> reason`` of the solves not made
+            (:func:`skipped_solves`).
+        notes: ``record index -> warning`` written in its rows' ``error`` column.
     """
 
     records: list
@@ -184,6 +189,9 @@ class Plan:
     existing: ExistingResults
     learned: list
     marker: InflightMarker
+    skips: dict = field(default_factory=dict)
+    notes: dict = field(default_factory=dict)
+    budget: int | None = None
 
 
 def _check_records(problem_set) -> list:
@@ -248,6 +256,8 @@ def make_plan(problem_set, config: BenchConfig, out: Path, force: bool, resume: 
         learned=[],
         marker=InflightMarker(InflightMarker.for_output(out)),
     )
+    plan.skips, plan.notes = skipped_solves(records, config, registry)
+    plan.budget = config.memory_budget
     if plan.resuming:
         plan.existing = read_results(out, repair=False)
         _check_existing(plan.existing, out, config.mode, plan.sha, int(config.seed))
@@ -255,11 +265,54 @@ def make_plan(problem_set, config: BenchConfig, out: Path, force: bool, resume: 
     return plan
 
 
+def skipped_solves(records, config: BenchConfig, registry) -> tuple[dict, dict]:
+    """``(skips, notes)``: which solves are not made and why, and the warnings of the rest.
+
+    A clearly nonconvex problem is skipped by every backend; a slightly indefinite one is
+    solved with a warning (:mod:`qpbench.formats.convexity`); a problem too large for a
+    dense-only backend or for the memory budget is skipped by that backend
+    (:func:`qpbench.memory.skip_reason`).
+    """
+    from ..formats.convexity import assess_convexity
+    from ..memory import resolve_budget, skip_reason
+
+    budget = config.memory_budget if config.memory_budget is not None else resolve_budget(None)
+    skips, notes = {}, {}
+    for i, record in enumerate(records):
+        if record.convexity is None:
+            record.convexity = assess_convexity(record.problem.P)
+        reason = record.convexity.skip_reason
+        if record.convexity.warning:
+            notes[i] = f"warning: {record.convexity.warning}"
+            log.warning("%s: %s", record.name, record.convexity.warning)
+        for name in config.backends:
+            sparse = bool(getattr(registry.get(name), "sparse", False))
+            why = reason or skip_reason(record.problem, sparse, budget)
+            if why:
+                skips[(i, name)] = why
+    return skips, notes
+
+
 def references_for(problem_set, plan: Plan, references: list | None) -> list:
+    """One reference per record; none is computed for a record no backend solves, or one
+    beyond the memory budget (its reference status is then ``unknown``)."""
+    from dataclasses import replace as copy_with
+
+    from ..memory import resolve_budget, sparse_solver_bytes
+    from ..reference import ReferenceSolution
+
     if references is None:
         from ..reference import reference_solutions
 
-        references = reference_solutions(problem_set)
+        budget = resolve_budget(None) if plan.budget is None else plan.budget
+        backends = {name for _, name in plan.skips} | set(plan.settings)
+        wanted = [
+            i for i, r in enumerate(plan.records)
+            if any((i, name) not in plan.skips for name in backends) and sparse_solver_bytes(r.problem) <= budget
+        ]
+        subset = copy_with(problem_set, records=[plan.records[i] for i in wanted])
+        computed = dict(zip(wanted, reference_solutions(subset))) if wanted else {}
+        references = [computed.get(i) or ReferenceSolution("unknown", name=r.name) for i, r in enumerate(plan.records)]
     if len(references) != len(plan.records):
         raise InputError(
             f"{len(references)} reference solutions for {len(plan.records)} problems", path=problem_set.path

@@ -166,7 +166,13 @@ def _truth(value) -> bool:
 
 
 def is_failure(status: str, reference_status: str | None) -> bool:
-    """A failed solve: a harness failure status, or not ``optimal`` where the reference is."""
+    """A failed solve: a harness failure status, or not ``optimal`` where the reference is.
+
+    A ``skipped`` row (a solve not made: nonconvex, beyond a dense-only backend's size or
+    the memory budget; the reason in ``error``) is not a failure.
+    """
+    if status == "skipped":
+        return False
     return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
 
 
