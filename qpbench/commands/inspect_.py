@@ -20,7 +20,7 @@ def add_memory_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="SIZE",
         help="bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
-        f"{DEFAULT_FRACTION:.0%} of the machine's memory, within ulimit -v); a problem that needs more is "
+        f"{DEFAULT_FRACTION * 100:.0f}%% of the machine's memory, within ulimit -v); a problem that needs more is "
         "a 'skipped' row saying so",
     )
 
