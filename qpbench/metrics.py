@@ -95,8 +95,9 @@ def solution_status(solution) -> str | None:
 VIOLATION_KEYS = ("violation_ineq", "violation_eq", "violation_box", "constraint_violation")
 
 
-def _dense(M) -> np.ndarray:
-    return M.toarray() if hasattr(M, "toarray") else np.asarray(M, dtype=np.float64)
+def _dense(M):
+    """``M`` as it is when scipy.sparse (``M @ x`` is sparse-times-vector), else a float array."""
+    return M if hasattr(M, "toarray") else np.asarray(M, dtype=np.float64)
 
 
 def constraint_violation(problem, x: np.ndarray | None) -> dict:

@@ -50,14 +50,40 @@ def _records(random_qp):
 
 
 def assert_bit_exact(r1: ProblemRecord, r2: ProblemRecord):
+    """Same arrays bit for bit; a sparse matrix comes back sparse (CSC, same pattern and values)."""
     for k in ARRAY_KEYS:
         a, b = getattr(r1.problem, k), getattr(r2.problem, k)
         assert (a is None) == (b is None), k
-        if a is not None:
-            a = np.asarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
+        if a is None:
+            continue
+        assert spa.issparse(a) == spa.issparse(b), k
+        if spa.issparse(a):
+            a = spa.csc_matrix(a)
+            a.sort_indices()
+            assert b.format == "csc" and b.dtype == np.float64 and a.shape == b.shape, k
+            assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices), k
+            assert a.data.astype(np.float64).tobytes() == b.data.tobytes(), k
+        else:
+            a = np.asarray(a, dtype=np.float64)
             assert b.dtype == np.float64 and a.shape == b.shape, k
             assert a.tobytes() == b.tobytes(), k
     assert r1.meta() == r2.meta()
+
+
+def _sparse_record(n: int, name: str, seed: int = 0) -> ProblemRecord:
+    """A banded sparse QP (CSC P, G, A; some explicit zeros kept, signed zero in q)."""
+    rng = np.random.default_rng(seed)
+    e = np.ones(n)
+    P = spa.diags([-e[:-1], 2.5 * e, -e[:-1]], [-1, 0, 1], format="csc")
+    G = spa.random(max(1, n // 3), n, density=min(1.0, 4 / n), random_state=seed, format="csc")
+    A = spa.csc_matrix(spa.eye(2, n))
+    A.data[0] = 0.0  # an explicit zero is part of the pattern and survives
+    q = rng.standard_normal(n)
+    q[0] = -0.0
+    lb = np.full(n, -1.0)
+    lb[1] = -np.inf
+    problem = qpsolvers.Problem(P, q, G, np.ones(G.shape[0]), A, np.zeros(2), lb, None)
+    return ProblemRecord(problem, name, offset=0.25)
 
 
 # ---------------------------------------------------------------- npz
@@ -77,13 +103,19 @@ def test_npz_round_trip_bit_exact(random_qp, tmp_path):
                 assert np.array_equal(a, b)
 
 
-def test_npz_sparse_input_is_stored_dense(random_qp, tmp_path):
+def test_npz_sparse_round_trip_bit_exact(random_qp, tmp_path):
     p = random_qp(n=5)
     sparse = qpsolvers.Problem(spa.csc_matrix(p.P), p.q, spa.csc_matrix(p.G), p.h, spa.csr_matrix(p.A), p.b, p.lb, p.ub)
     back = load_npz(save_npz(ProblemRecord(sparse, "s"), tmp_path / "s.npz"))
-    assert_bit_exact(ProblemRecord(p, "s"), back)
-    # Problem.save alone loses a sparse G (object array read back as None): ours does not
-    assert qpsolvers.Problem.load(str(tmp_path / "s.npz")).G is not None
+    assert_bit_exact(ProblemRecord(sparse, "s"), back)
+    # a small problem is also written dense: qpsolvers reads it (Problem.save alone loses a sparse G)
+    plain = qpsolvers.Problem.load(str(tmp_path / "s.npz"))
+    assert np.array_equal(plain.G, p.G) and np.array_equal(plain.A, p.A)
+    # a large one stays compact on disk (no dense copy) and comes back the same
+    big = _sparse_record(3000, "big")
+    path = save_npz(big, tmp_path / "big.npz")
+    assert path.stat().st_size < 1_000_000  # dense P alone would be 72 MB
+    assert_bit_exact(big, load_npz(path))
 
 
 def test_npz_written_by_qpsolvers_is_read(random_qp, tmp_path):
@@ -282,7 +314,6 @@ def test_write_rejects_bad_records(random_qp, tmp_path):
         ("q", qpsolvers.Problem(p.P, p.q + np.inf, p.G, p.h)),  # Inf
         ("h", qpsolvers.Problem(p.P, p.q, p.G, p.h + np.inf)),  # infinite h is not allowed
         ("P", qpsolvers.Problem(p.P + np.triu(np.ones_like(p.P), 1), p.q)),  # not symmetric
-        ("P", qpsolvers.Problem(-np.eye(4), p.q)),  # indefinite
         ("lb", qpsolvers.Problem(p.P, p.q, lb=np.full(4, np.inf))),
         ("G", qpsolvers.Problem(p.P, p.q, p.G, None)),  # G without h
     ]
@@ -295,6 +326,50 @@ def test_write_rejects_bad_records(random_qp, tmp_path):
         write_problem_set(tmp_path / "set", [good, good], {"name": "t"})
     _one_line(e, "'name'", "same")
     assert not (tmp_path / "set" / "problems.parquet").exists()
+
+
+def test_nonconvex_is_recorded_not_refused(random_qp, tmp_path):
+    """Convexity is not a format rule: a nonconvex P is written and read with its verdict."""
+    p = random_qp()
+    write_problem_set(tmp_path / "s", [ProblemRecord(qpsolvers.Problem(-np.eye(4), p.q), "neg")], {"name": "t"})
+    back = read_problem_set(tmp_path / "s")[0]
+    assert back.convexity.verdict == "nonconvex" and back.convexity.ratio == -1.0
+
+
+def test_sparse_problem_set_round_trip_bit_exact(random_qp, tmp_path):
+    """Sparse and dense records in one set: CSC columns for the sparse ones, read back bit for bit;
+    a set without sparse matrices has no CSC column (the robot's sets keep their bytes)."""
+    records = [_sparse_record(6, "small"), _sparse_record(2000, "large", seed=1), ProblemRecord(random_qp(), "dense")]
+    write_problem_set(tmp_path / "s", records, {"name": "t"})
+    back = read_problem_set(tmp_path / "s")
+    for a, b in zip(records, back):
+        assert_bit_exact(a, b)
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(tmp_path / "s" / "problems.parquet")
+    assert {"P_csc_data", "G_csc_indices", "A_csc_indptr"} <= set(table.column_names)
+    dense_P = table.column("P").to_pylist()
+    assert dense_P[0] is not None and dense_P[1] is None  # large: compact only
+    assert (tmp_path / "s" / "problems.parquet").stat().st_size < 1_000_000
+    write_problem_set(tmp_path / "d", [ProblemRecord(random_qp(), "dense")], {"name": "t"})
+    assert not any(c.endswith("_csc_data") for c in pq.read_table(tmp_path / "d" / "problems.parquet").column_names)
+
+
+def test_maros_meszaros_read_is_sparse_and_exact(mm_dir, tmp_path):
+    """.mat -> CSC kept as the file holds it (no dense copy), through npz and Parquet bit for bit."""
+    ps = load_problems(mm_dir)
+    write_problem_set(tmp_path / "set", ps.records, {"name": "t"})
+    for a, b in zip(ps, read_problem_set(tmp_path / "set")):
+        assert_bit_exact(a, b)
+        assert_bit_exact(a, load_npz(save_npz(a, tmp_path / f"{a.name}.npz")))
+    for rec in ps:
+        raw = scipy.io.loadmat(str(mm_dir / f"{rec.name}.mat"))
+        P = rec.problem.P
+        assert spa.isspmatrix_csc(P) and P.has_sorted_indices
+        full = raw["P"].toarray()
+        if not np.array_equal(full, full.T):
+            full = full + full.T - np.diag(np.diag(full))
+        assert np.array_equal(P.toarray(), full)
 
 
 def test_infinite_bounds_are_allowed(random_qp, tmp_path):
@@ -317,8 +392,8 @@ def test_maros_meszaros_subset_loads(mm_dir):
         n, m = int(raw["n"].item()), int(raw["m"].item())
         n_, m_eq, m_ineq = rec.sizes
         assert n_ == n
-        P = rec.problem.P
-        assert isinstance(P, np.ndarray) and np.array_equal(P, P.T)
+        P = rec.problem.P.toarray()
+        assert spa.issparse(rec.problem.P) and np.array_equal(P, P.T)
         assert np.array_equal(P, raw["P"].toarray())  # stored full and symmetric
         assert rec.offset == float(raw["r"].item())
         lo, up = raw["l"].ravel()[: m - n], raw["u"].ravel()[: m - n]
@@ -333,9 +408,9 @@ def test_maros_meszaros_hs21_by_hand(mm_dir):
     # HS21: min 0.01 x1^2 + x2^2 - 100, 10 x1 - x2 >= 10, 2 <= x1 <= 50, -50 <= x2 <= 50
     rec = load_maros_meszaros(mm_dir / "HS21.mat")
     p = rec.problem
-    assert np.allclose(p.P, np.diag([0.02, 2.0])) and np.array_equal(p.q, [0.0, 0.0])
+    assert np.allclose(p.P.toarray(), np.diag([0.02, 2.0])) and np.array_equal(p.q, [0.0, 0.0])
     assert rec.offset == -100.0 and p.A is None
-    assert np.allclose(p.G, [[-10.0, 1.0]]) and np.allclose(p.h, [-10.0])
+    assert np.allclose(p.G.toarray(), [[-10.0, 1.0]]) and np.allclose(p.h, [-10.0])
     assert np.array_equal(p.lb, [2.0, -50.0]) and np.array_equal(p.ub, [50.0, 50.0])
 
 

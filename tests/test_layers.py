@@ -4,7 +4,7 @@ Every ``import`` statement of the package counts, at module level or inside
 a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
-    exceptions statuses profiles published atomic cache packed known native_output
+    exceptions statuses profiles published memory atomic cache packed known native_output
     robot rnn backends metrics formats reference reference_solve reference_pool
     control
     sim
@@ -27,7 +27,7 @@ import qpbench
 ROOT = Path(qpbench.__file__).resolve().parent
 
 LAYERS = [
-    {"exceptions", "statuses", "profiles", "published", "atomic", "cache", "packed", "known", "native_output",
+    {"exceptions", "statuses", "profiles", "published", "memory", "atomic", "cache", "packed", "known", "native_output",
      "qpbench"},
     {"robot", "rnn", "backends", "metrics", "formats", "reference", "reference_solve", "reference_pool"},
     {"control"},

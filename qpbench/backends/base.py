@@ -108,6 +108,10 @@ class Backend:
             (``dual_infeasible``) apart from a certificate; False when it cannot
             (then :attr:`infeasibility_note` says why); ``None``: not declared.
         infeasibility_note: Why the backend cannot certify infeasibility.
+        sparse: True for a backend that hands scipy.sparse matrices to its solver as
+            they are; the others make them dense, so the bench gives them problems
+            up to :data:`qpbench.memory.DENSE_MAX_ENTRIES` only (a larger one is a
+            ``skipped`` row).
 
     Optional hooks the harness uses when present: ``get_state()`` and
     ``set_state(state)`` restore a backend exactly between timed repeats
@@ -123,6 +127,7 @@ class Backend:
     scenario_table: ClassVar[str | None] = None
     certifies_infeasibility: ClassVar[bool | None] = None
     infeasibility_note: ClassVar[str] = ""
+    sparse: ClassVar[bool] = False
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

@@ -241,6 +241,7 @@ class ClarabelBackend(Backend):
 
     name = "clarabel"
     certifies_infeasibility = True
+    sparse = True
     family = "interior point"
     package = "clarabel"
     module = "clarabel"

@@ -190,6 +190,7 @@ class OsqpBackend(Backend):
 
     name = "osqp"
     certifies_infeasibility = True
+    sparse = True
     family = "ADMM"
     package = "osqp"
     module = "osqp"

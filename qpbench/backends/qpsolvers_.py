@@ -368,6 +368,8 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
                 False if solver in NO_CERTIFICATE else None
             ),
             "infeasibility_note": NO_CERTIFICATE.get(solver, ""),
+            # qpsolvers hands sparse matrices to a solver with a sparse API as they are
+            "sparse": solver in qpsolvers.sparse_solvers,
             "__module__": __name__,
             "__doc__": f"``{solver}`` through qpsolvers.solve_problem (see :mod:`{__name__}`).",
         },

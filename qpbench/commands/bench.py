@@ -8,6 +8,7 @@ import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
+from .inspect_ import add_memory_argument
 
 HELP = "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
 EXAMPLE = ("qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3; "
@@ -58,6 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="run solves in a worker process: auto = backends marked risky or seen to crash (default)",
     )
     parser.add_argument("--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend")
+    add_memory_argument(parser)
     parser.add_argument(
         "--set",
         dest="sets",
@@ -107,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..jit import warmup_logged
+    from ..memory import resolve_budget
     from ..selection import backend_settings, select_backends
 
     # Nothing is written before the input is known to be good.
@@ -123,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
         isolate=args.isolate,
         warmup=not args.no_warmup,
         seed=args.seed,
+        memory_budget=resolve_budget(args.memory_budget),
     )
     config.validate()
     from ..selection import select_set

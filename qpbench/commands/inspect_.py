@@ -11,9 +11,24 @@ HELP = "show what a problem set, .parquet, .npz, .mat or folder holds (count, si
 EXAMPLE = "qpbench inspect problems/wall    (qpbench inspect problems/wall --json)"
 
 
+def add_memory_argument(parser: argparse.ArgumentParser) -> None:
+    """``--memory-budget`` (bench, inspect, run)."""
+    from ..memory import DEFAULT_FRACTION
+
+    parser.add_argument(
+        "--memory-budget",
+        default=None,
+        metavar="SIZE",
+        help="bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
+        f"{DEFAULT_FRACTION * 100:.0f}%% of the machine's memory, within ulimit -v); a problem that needs more is "
+        "a 'skipped' row saying so",
+    )
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("path", help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    add_memory_argument(parser)
 
 
 def _range(values: list[int]) -> str:
@@ -26,8 +41,37 @@ def _counts(values) -> str:
     return ", ".join(f"{k} ({n})" for k, n in sorted(c.items()))
 
 
-def describe(ps, sizes) -> dict:
+def _nnz(problem) -> int:
+    """Stored entries of ``P``, ``G`` and ``A`` (non-zeros of a dense one)."""
+    import numpy as np
+
+    return sum(
+        0 if M is None else int(M.nnz) if hasattr(M, "nnz") else int(np.count_nonzero(M))
+        for M in (problem.P, problem.G, problem.A)
+    )
+
+
+def _notes(ps, budget: int) -> list[str]:
+    """One line per problem a bench would warn about or skip for every backend."""
+    from ..memory import format_size, sparse_solver_bytes
+
+    out = []
+    for r in ps.records:
+        conv = r.convexity
+        if conv is not None and conv.skip_reason:
+            out.append(f"{r.name}: skipped: {conv.skip_reason}")
+        elif conv is not None and conv.warning:
+            out.append(f"{r.name}: warning: {conv.warning}")
+        need = sparse_solver_bytes(r.problem)
+        if need > budget:
+            out.append(f"{r.name}: skipped: memory: a sparse solver needs about {format_size(need)} "
+                       f"> budget {format_size(budget)}")
+    return out
+
+
+def describe(ps, sizes, budget: int | None = None) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
+    from ..memory import resolve_budget
 
     def span(values):
         return [min(values), max(values)] if values else None
@@ -40,6 +84,10 @@ def describe(ps, sizes) -> dict:
         "n": span([s[0] for s in sizes]),
         "m_eq": span([s[1] for s in sizes]),
         "m_ineq": span([s[2] for s in sizes]),
+        "nnz": span([_nnz(r.problem) for r in ps.records]),
+        "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
+        "convexity": dict(Counter("-" if r.convexity is None else r.convexity.verdict for r in ps.records)),
+        "notes": _notes(ps, resolve_budget(None) if budget is None else budget),
         "with_bounds": sum(r.problem.lb is not None or r.problem.ub is not None for r in ps.records),
         "formulation": dict(Counter("-" if r.formulation is None else r.formulation for r in ps.records)),
         "scenario": dict(Counter("-" if r.scenario is None else r.scenario for r in ps.records)),
@@ -51,29 +99,23 @@ def describe(ps, sizes) -> dict:
     }
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..formats import load_problems
-
-    # The hash is checked and reported, not enforced, so a changed set can be inspected.
-    ps = load_problems(args.path, verify_hash=False)
-    sizes = [r.sizes for r in ps.records]
-    if args.json:
-        print(json.dumps(describe(ps, sizes), indent=2))
-        return 2 if ps.hash_ok is False else 0
+def _print_table(ps, info: dict) -> None:
     print(f"path         {ps.path}")
     print(f"kind         {ps.kind}")
     print(f"problems     {len(ps)}")
-    if sizes:
-        print(f"n            {_range([s[0] for s in sizes])}")
-        print(f"m_eq         {_range([s[1] for s in sizes])}")
-        print(f"m_ineq       {_range([s[2] for s in sizes])}")
-        bounds = sum(r.problem.lb is not None or r.problem.ub is not None for r in ps.records)
-        print(f"with bounds  {bounds}")
+    if len(ps):
+        for key in ("n", "m_eq", "m_ineq", "nnz"):
+            lo, hi = info[key]
+            print(f"{key:<12} {lo}" + ("" if lo == hi else f"-{hi}"))
+        print(f"sparse P     {info['sparse']}")
+        print(f"convexity    {', '.join(f'{k} ({v})' for k, v in sorted(info['convexity'].items()))}")
+        print(f"with bounds  {info['with_bounds']}")
         print(f"formulation  {_counts(r.formulation for r in ps.records)}")
         print(f"scenario     {_counts(r.scenario for r in ps.records)}")
-        ts = [r.t for r in ps.records if r.t is not None]
-        if ts:
-            print(f"t [s]        {min(ts):g}-{max(ts):g}")
+        if info["t"]:
+            print(f"t [s]        {info['t'][0]:g}-{info['t'][1]:g}")
+        for line in info["notes"]:
+            print(f"note         {line}")
     if ps.manifest is not None:
         gen = ps.manifest.get("generator") or {}
         print(f"generator    {', '.join(f'{k}={v}' for k, v in gen.items()) or '-'}")
@@ -83,6 +125,20 @@ def run(args: argparse.Namespace) -> int:
             print(f"count        manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
     else:
         print("manifest     none (hash not checked)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..formats import load_problems
+    from ..memory import resolve_budget
+
+    budget = resolve_budget(args.memory_budget)
+    # The hash is checked and reported, not enforced, so a changed set can be inspected.
+    ps = load_problems(args.path, verify_hash=False)
+    info = describe(ps, [r.sizes for r in ps.records], budget)
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 2 if ps.hash_ok is False else 0
+    _print_table(ps, info)
     if ps.hash_ok is False:
         print(
             f"qpbench inspect: error: {ps.files[0]}: key 'sha256': does not match manifest.json",

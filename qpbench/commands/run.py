@@ -54,6 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="closed-loop runs in parallel worker processes (default: 1)")
+    from .inspect_ import add_memory_argument
+
+    add_memory_argument(parser)
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true",
                        help="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
@@ -68,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from ..exceptions import ParamError
     from ..harness.closed_loop import log_row
     from ..harness.pipeline import RunConfig, run_all
+    from ..memory import resolve_budget
     from ..selection import select_backends, select_scenarios
 
     if not (args.run_budget >= 0 and math.isfinite(args.run_budget)):
@@ -76,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
         out=Path(args.out), problems=Path(args.problems), duration=args.duration, bench_every=args.bench_every,
         run_budget=args.run_budget or None, repeat=args.repeat, jobs=args.jobs, force=args.force,
         resume=args.resume, progress=not args.quiet, scenarios=[], backends=[],
+        memory_budget=resolve_budget(args.memory_budget),
         on_row=lambda row: log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None,
     )
     config.validate()  # the numbers first, as before any scenario is loaded

@@ -80,7 +80,8 @@ class RunConfig:
             bench then uses only the problems with ``t < duration``.
         bench_every: Bench every K-th problem. run_budget: Wall-time budget of
             each closed-loop run [s] (``None``: none). repeat: Timed solves per
-            bench problem. jobs: Closed-loop runs in parallel.
+            bench problem. jobs: Closed-loop runs in parallel. memory_budget: Bytes
+            a bench solve may need (:mod:`qpbench.memory`; ``None``: the default).
         force, resume: See the module docstring. progress: Show a progress bar.
         on_row: Called with each closed-loop row as it is written.
     """
@@ -94,6 +95,7 @@ class RunConfig:
     run_budget: float | None = RUN_BUDGET_S
     repeat: int = REPEAT
     jobs: int = 1
+    memory_budget: int | None = None
     force: bool = False
     resume: bool = False
     progress: bool = True
@@ -287,7 +289,8 @@ def _bench(config: RunConfig, scenarios: list[str], bench_dir: Path, bar) -> int
         subset, refs = bench_subset(load_problems(Path(config.problems) / s), config.duration, config.bench_every)
         summary = run_bench(
             subset,
-            BenchConfig(backends=list(config.backends), profile="default", mode="sequential", repeat=config.repeat),
+            BenchConfig(backends=list(config.backends), profile="default", mode="sequential", repeat=config.repeat,
+                        memory_budget=config.memory_budget),
             bench_dir / f"{s}.csv", resume=config.resume, force=not config.resume, references=refs,
         )
         log.info("bench %s: %s", s, summary.line())

@@ -1,0 +1,133 @@
+"""Maros-Meszaros ``.mat`` files (keys ``P q r A l u n m``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as spa
+
+from ..exceptions import ProblemFormatError
+from .records import MM_INFINITY, ProblemRecord, check_record
+
+
+def load_maros_meszaros(path: str | Path) -> ProblemRecord:
+    """Read one Maros-Meszaros problem (``.mat`` with keys ``P q r A l u n m``).
+
+    See the module docstring for the conversion. The record's ``offset`` is ``r``
+    and its name is the file stem.
+
+    Raises:
+        ProblemFormatError: unreadable file, missing key, inconsistent sizes.
+    """
+    import scipy.io
+
+    path = Path(path)
+    name = path.stem
+    try:
+        data = scipy.io.loadmat(str(path))
+    except FileNotFoundError:
+        raise ProblemFormatError("no such file", path=path) from None
+    except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError...
+        raise ProblemFormatError(f"unreadable .mat ({type(exc).__name__}: {exc})", path=path) from None
+    for k in ("P", "q", "r", "A", "l", "u", "n", "m"):
+        if k not in data:
+            raise ProblemFormatError(f"problem '{name}': missing key", path=path, key=k)
+
+    def fail(key, msg):
+        raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
+
+    try:
+        n = int(np.asarray(data["n"]).item())
+        m = int(np.asarray(data["m"]).item())
+        r = float(np.asarray(data["r"], dtype=np.float64).item())
+    except (ValueError, TypeError) as exc:
+        fail("n", f"n, m and r must be scalars ({exc})")
+    P = _csc(data["P"], "P", fail)
+    A = _csc(data["A"], "A", fail)
+    q, lo, up = (_vector(data[k], k, fail) for k in ("q", "l", "u"))
+    if P.shape != (n, n):
+        fail("P", f"shape {P.shape} does not match n = {n}")
+    if q.shape != (n,):
+        fail("q", f"shape {q.shape} does not match n = {n}")
+    if A.shape != (m, n):
+        fail("A", f"shape {A.shape} does not match (m, n) = {(m, n)}")
+    if lo.shape != (m,) or up.shape != (m,):
+        fail("l", f"l, u shapes {lo.shape}, {up.shape} do not match m = {m}")
+    if np.any(np.isnan(lo)) or np.any(np.isnan(up)):
+        fail("l", "l or u holds NaN")
+    P = _symmetric(P)
+    lo = np.where(lo <= -MM_INFINITY, -np.inf, lo)
+    up = np.where(up >= MM_INFINITY, np.inf, up)
+    problem = qpsolvers.Problem(P, q, *_constraints(A, lo, up, m, n))
+    problem.lb, problem.ub = _box(problem.lb), _box(problem.ub)
+    record = ProblemRecord(problem=problem, name=name, offset=r)
+    check_record(record, path=path)
+    return record
+
+
+
+def _csc(M, key: str, fail) -> spa.csc_matrix:
+    """A matrix of the file as CSC float64 (sparse in the file or not), indices sorted."""
+    try:
+        M = spa.csc_matrix(M, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        fail(key, f"not a numeric matrix ({exc})")
+    M.sum_duplicates()
+    M.sort_indices()
+    return M
+
+
+def _vector(v, key: str, fail) -> np.ndarray:
+    try:
+        v = v.toarray() if spa.issparse(v) else v
+        return np.asarray(v, dtype=np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        fail(key, f"not numeric ({exc})")
+
+
+def _symmetric(P: spa.csc_matrix) -> spa.csc_matrix:
+    """``P`` mirrored when the file holds one triangle (a non-symmetric full ``P`` is left
+    to :func:`~qpbench.formats.records.check_problem`, which reports it)."""
+    if (P != P.T).nnz == 0:
+        return P
+    upper, lower = spa.triu(P, format="csc"), spa.tril(P, format="csc")
+    if (P != upper).nnz == 0 or (P != lower).nnz == 0:
+        P = (P + P.T - spa.diags(P.diagonal())).tocsc()
+        P.sort_indices()
+    return P
+
+
+def _rows(M: spa.csr_matrix, mask: np.ndarray) -> spa.csc_matrix:
+    out = M[np.flatnonzero(mask)].tocsc()
+    out.sort_indices()
+    return out
+
+
+def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: int) -> tuple:
+    """``(G, h, A_eq, b, lb, ub)`` of ``lo <= A x <= up`` (see the package docstring)."""
+    rows = A.tocsr()
+    identity = m >= n and (rows[m - n :] != spa.identity(n, format="csr")).nnz == 0
+    if identity:
+        C, lc, uc = rows[: m - n], lo[: m - n], up[: m - n]
+        lb, ub = lo[m - n :].copy(), up[m - n :].copy()
+    else:  # no identity block: every row is a general constraint
+        C, lc, uc = rows, lo, up
+        lb = ub = None
+    eq = (lc == uc) & np.isfinite(lc)
+    upper = ~eq & np.isfinite(uc)
+    lower = ~eq & np.isfinite(lc)
+    Aeq, beq = (_rows(C, eq), uc[eq]) if np.any(eq) else (None, None)
+    if np.any(upper) or np.any(lower):
+        G = spa.vstack([_rows(C, upper), -_rows(C, lower)], format="csc")
+        G.sort_indices()
+        h = np.concatenate([uc[upper], -lc[lower]])
+    else:
+        G = h = None
+    return G, h, Aeq, beq, lb, ub
+
+
+def _box(v):
+    """``None`` for a bound vector without any finite entry."""
+    return None if v is None or np.all(np.isinf(v)) else v

@@ -1,0 +1,140 @@
+"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save` / ``load``)."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as spa
+
+from ..atomic import atomic_path
+from ..exceptions import ProblemFormatError
+from .records import (
+    _MATRIX_KEYS,
+    ARRAY_KEYS,
+    DENSE_COPY_MAX,
+    NPZ_META_KEY,
+    ProblemRecord,
+    check_record,
+    dense_entries,
+    dense_problem,
+    solver_problem,
+)
+
+#: Stored arrays of a sparse matrix ``M``: ``M_csc_data``, ``M_csc_indices``, ``M_csc_indptr``,
+#: ``M_csc_shape`` (scipy's CSC, indices sorted).
+CSC_PARTS = ("data", "indices", "indptr", "shape")
+
+
+def _csc_members(key: str, M) -> dict[str, np.ndarray]:
+    M = spa.csc_matrix(M, dtype=np.float64)
+    M.sort_indices()
+    return {
+        f"{key}_csc_data": M.data,
+        f"{key}_csc_indices": M.indices,
+        f"{key}_csc_indptr": M.indptr,
+        f"{key}_csc_shape": np.asarray(M.shape, dtype=np.int64),
+    }
+
+
+def _append(path: Path, members: dict[str, np.ndarray]) -> None:
+    with zipfile.ZipFile(path, mode="a", compression=zipfile.ZIP_STORED) as zf:
+        for key, value in members.items():
+            with zf.open(f"{key}.npy", "w") as member:
+                np.lib.format.write_array(member, value, allow_pickle=False)
+
+
+def save_npz(record: ProblemRecord, path: str | Path) -> Path:
+    """Write one record to ``path`` (``.npz``) through :meth:`qpsolvers.Problem.save`.
+
+    The metadata is one extra member, ``qpbench_record`` (JSON in a 0-d unicode
+    array). A scipy.sparse matrix ``M`` is also written as CSC (members
+    ``M_csc_data, M_csc_indices, M_csc_indptr, M_csc_shape``), which this reader
+    prefers, so it reads back bit for bit as the same sparse matrix; its dense
+    copy for :meth:`qpsolvers.Problem.load` is written only while the problem's
+    matrices hold at most :data:`~qpbench.formats.records.DENSE_COPY_MAX` entries
+    (a larger file is read by qpbench only). The write is atomic.
+
+    Returns:
+        The path written.
+    """
+    path = Path(path)
+    check_record(record, path=path)
+    sparse = {k: getattr(record.problem, k) for k in _MATRIX_KEYS if spa.issparse(getattr(record.problem, k))}
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            if dense_entries(record.problem) <= DENSE_COPY_MAX:
+                dense_problem(record.problem, path=path, name=record.name).save(fh)
+            else:
+                np.savez(fh, **{k: np.asarray(getattr(record.problem, k), dtype=np.float64)
+                                for k in ARRAY_KEYS if k not in sparse and getattr(record.problem, k) is not None})
+        members = {NPZ_META_KEY: np.array(json.dumps(record.meta(), sort_keys=True))}
+        for key, M in sparse.items():
+            members.update(_csc_members(key, M))
+        _append(tmp, members)
+    return path
+
+
+def _read_members(data, path: Path) -> qpsolvers.Problem:
+    """The problem of a file with CSC members (dense members for the other parts)."""
+    parts = []
+    for k in ARRAY_KEYS:
+        if f"{k}_csc_data" in data.files:
+            d, i, p, shape = (data[f"{k}_csc_{part}"] for part in CSC_PARTS)
+            parts.append(spa.csc_matrix((d, i, p), shape=tuple(int(v) for v in shape)))
+        elif k in data.files:
+            try:
+                v = data[k]
+            except ValueError:  # qpsolvers writes an absent part as a pickled None
+                v = None
+            parts.append(None if v is None or v.dtype == object else v)
+        else:
+            parts.append(None)
+    return qpsolvers.Problem(*parts)
+
+
+def load_npz(path: str | Path) -> ProblemRecord:
+    """Read one record from a ``.npz`` written by :func:`save_npz` or by
+    :meth:`qpsolvers.Problem.save` (then the name is the file stem).
+
+    Raises:
+        ProblemFormatError: unreadable, truncated or inconsistent file.
+    """
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [k for k in ("P", "q") if k not in data.files and f"{k}_csc_data" not in data.files]
+            if missing:
+                raise ProblemFormatError("missing array", path=path, key=missing[0])
+            meta = json.loads(str(data[NPZ_META_KEY])) if NPZ_META_KEY in data.files else {}
+            compact = any(f.endswith("_csc_data") for f in data.files)
+            problem = _read_members(data, path) if compact else None
+        if problem is None:
+            problem = qpsolvers.Problem.load(str(path))
+    except FileNotFoundError:
+        raise ProblemFormatError("no such file", path=path) from None
+    except ProblemFormatError:
+        raise
+    except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, ValueError, qpsolvers errors
+        raise ProblemFormatError(f"unreadable .npz ({type(exc).__name__}: {exc})", path=path) from None
+    name = meta.get("name") or path.stem
+    if problem.P is None or problem.q is None:
+        raise ProblemFormatError(f"problem '{name}': P or q is not a numeric array", path=path, key="P")
+    try:
+        problem = solver_problem(problem)
+    except (TypeError, ValueError) as exc:
+        raise ProblemFormatError(f"problem '{name}': not numeric ({exc})", path=path) from None
+    record = ProblemRecord(
+        problem=problem,
+        name=name,
+        scenario=meta.get("scenario"),
+        tick=meta.get("tick"),
+        t=meta.get("t"),
+        formulation=meta.get("formulation"),
+        offset=float(meta.get("offset", 0.0)),
+    )
+    check_record(record, path=path)
+    return record

@@ -1,0 +1,382 @@
+"""A problem set <-> a folder holding ``problems.parquet`` and ``manifest.json``."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as spa
+
+from ..atomic import write_bytes, write_text
+from ..exceptions import ProblemFormatError
+from .records import (
+    _MATRIX_KEYS,
+    ARRAY_KEYS,
+    DENSE_COPY_MAX,
+    FORMAT_VERSION,
+    MANIFEST_NAME,
+    META_KEYS,
+    PARQUET_NAME,
+    PROBLEM_KEYS,
+    ProblemRecord,
+    ProblemSet,
+    check_record,
+    dense_entries,
+)
+
+#: Per sparse matrix ``M`` of a set (only when some record has one): CSC columns
+#: ``M_csc_data`` (list<double>), ``M_csc_indices`` (list<int32>), ``M_csc_indptr`` (list<int64>).
+CSC_COLUMNS = (("data", "float64"), ("indices", "int32"), ("indptr", "int64"))
+
+
+def _schema(sparse_keys=()):
+    import pyarrow as pa
+
+    lst = pa.list_(pa.float64())
+    csc = [(f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())) for k in sparse_keys for part, kind in CSC_COLUMNS]
+    return pa.schema(
+        [(k, lst) for k in ARRAY_KEYS]
+        + [
+            ("name", pa.string()),
+            ("scenario", pa.string()),
+            ("tick", pa.int64()),
+            ("t", pa.float64()),
+            ("formulation", pa.string()),
+            ("offset", pa.float64()),
+        ]
+        + csc
+    )
+
+
+def _list_column(values: list[np.ndarray | None], kind: str = "float64"):
+    import pyarrow as pa
+
+    lengths = [0 if v is None else v.size for v in values]
+    offsets = np.zeros(len(values) + 1, dtype=np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    flat = [v.ravel(order="C") for v in values if v is not None]
+    data = np.concatenate(flat).astype(kind, copy=False) if flat else np.zeros(0, dtype=kind)
+    mask = pa.array([v is None for v in values], type=pa.bool_())
+    return pa.ListArray.from_arrays(
+        pa.array(offsets, type=pa.int32()), pa.array(data, type=getattr(pa, kind)()), mask=mask
+    )
+
+
+def _stored(problem, key: str):
+    """What the qpbenchmark column of ``key`` holds: the dense array, or ``None`` for a
+    sparse matrix of a problem too large to be written dense too (``DENSE_COPY_MAX``)."""
+    M = getattr(problem, key)
+    if M is None or not spa.issparse(M):
+        return None if M is None else np.asarray(M, dtype=np.float64)
+    return M.toarray() if dense_entries(problem) <= DENSE_COPY_MAX else None
+
+
+def _csc_parts(M) -> tuple | None:
+    if not spa.issparse(M):
+        return None
+    M = spa.csc_matrix(M, dtype=np.float64)
+    M.sort_indices()
+    return M.data, M.indices, M.indptr
+
+
+def records_to_table(records: list[ProblemRecord], path=None):
+    """The records as a ``pyarrow.Table`` in the problem-set schema.
+
+    A scipy.sparse matrix is stored in its CSC columns (read back bit for bit as
+    the same sparse matrix) and, while the problem is small enough
+    (:data:`~qpbench.formats.records.DENSE_COPY_MAX`), dense in qpbenchmark's
+    column too; a set without sparse matrices has no CSC columns at all.
+    """
+    import pyarrow as pa
+
+    for r in records:
+        check_record(r, path=path)
+    names = [r.name for r in records]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
+    cols = [_list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
+    cols += [
+        pa.array(names, type=pa.string()),
+        pa.array([r.scenario for r in records], type=pa.string()),
+        pa.array([None if r.tick is None else int(r.tick) for r in records], type=pa.int64()),
+        pa.array([None if r.t is None else float(r.t) for r in records], type=pa.float64()),
+        pa.array([r.formulation for r in records], type=pa.string()),
+        pa.array([float(r.offset) for r in records], type=pa.float64()),
+    ]
+    sparse_keys = [k for k in _MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)]
+    for k in sparse_keys:
+        parts = [_csc_parts(getattr(r.problem, k)) for r in records]
+        for j, (_, kind) in enumerate(CSC_COLUMNS):
+            cols.append(_list_column([None if p is None else p[j] for p in parts], kind))
+    return pa.Table.from_arrays(cols, schema=_schema(sparse_keys))
+
+
+def table_to_bytes(table) -> bytes:
+    """Serialise a table to Parquet with pinned writer options (deterministic bytes)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(
+        table,
+        sink,
+        row_group_size=max(1, table.num_rows),
+        version="2.6",
+        data_page_version="1.0",
+        compression="zstd",
+        compression_level=3,
+        use_dictionary=False,
+        write_statistics=False,
+        write_page_index=False,
+        write_page_checksum=False,
+        store_schema=True,
+    )
+    return sink.getvalue().to_pybytes()
+
+
+def package_versions(
+    names: tuple[str, ...] = ("qpbench", "numpy", "scipy", "qpsolvers", "pyarrow"),
+) -> dict[str, str | None]:
+    """Installed version of each distribution in ``names`` (``None`` when absent); by default
+    the packages that shape the files and the numbers."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in names:
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def sha256_file(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def write_problem_set(
+    folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
+) -> Path:
+    """Write ``records`` to ``folder/problems.parquet`` and ``folder/manifest.json``.
+
+    Args:
+        folder: Output folder (created if needed; existing files are replaced).
+        records: The problems, in order; names must be unique.
+        generator: What produced the set, e.g. ``{"name": "simulate", "scenario":
+            "wall", "backend": "clarabel", "duration": 2.0}`` (JSON-able).
+        extra: More JSON-able information for the manifest.
+
+    Returns:
+        The folder.
+
+    Both files are written atomically, Parquet first, so a manifest never
+    describes a Parquet file that is not complete.
+    """
+    folder = Path(folder)
+    table = records_to_table(records, path=folder / PARQUET_NAME)
+    data = table_to_bytes(table)
+    digest = sha256_bytes(data)
+    manifest = {
+        "format": "qpbench-problem-set",
+        "format_version": FORMAT_VERSION,
+        "file": PARQUET_NAME,
+        "count": len(records),
+        "sha256": digest,
+        "generator": generator,
+        "extra": extra or {},
+        "versions": package_versions(),
+        "columns": list(table.column_names),
+    }
+    try:
+        text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    except (TypeError, ValueError) as exc:
+        raise ProblemFormatError(f"generator/extra is not JSON-able ({exc})", path=folder / MANIFEST_NAME, key="generator") from None
+    write_bytes(folder / PARQUET_NAME, data)
+    write_text(folder / MANIFEST_NAME, text)
+    return folder
+
+
+def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
+    """Per row, the values of a list column as a numpy array (``None`` for a null)."""
+    import pyarrow as pa
+
+    col = table.column(key)
+    rows = table.num_rows
+    if pa.types.is_null(col.type):
+        return [None] * rows
+    if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)):
+        raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
+    chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+    if not (pa.types.is_floating(chunk.type.value_type) or pa.types.is_integer(chunk.type.value_type)):
+        raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
+    offsets = chunk.offsets.to_numpy()
+    values = chunk.values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
+    nulls = chunk.is_null().to_numpy(zero_copy_only=False)
+    return [None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype) for i in range(rows)]
+
+
+def _read_table(path: Path, require_meta: bool):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except FileNotFoundError:
+        raise ProblemFormatError("no such file", path=path) from None
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise ProblemFormatError(f"unreadable Parquet file ({type(exc).__name__}: {exc})", path=path) from None
+    required = list(PROBLEM_KEYS) + (list(META_KEYS) if require_meta else [])
+    for k in required:
+        if k not in table.column_names:
+            raise ProblemFormatError("missing column", path=path, key=k)
+    return table
+
+
+def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
+    """Matrix ``k`` of row ``i``: from its CSC columns when they hold it, else the dense column."""
+    parts = csc.get(k)
+    if parts is not None and parts[0][i] is not None:
+        data, indices, indptr = (p[i] for p in parts)
+        vector = None if k == "P" else arrays["h" if k == "G" else "b"][i]
+        rows = n if k == "P" else (0 if vector is None else vector.size)
+        if len(indptr) != n + 1 or len(indices) != len(data):
+            fail(k, f"CSC columns hold {len(indptr) - 1} columns and {len(indices)} indices for "
+                 f"{len(data)} values, expected n = {n} columns")
+        try:
+            return spa.csc_matrix((data, indices.astype(np.int32), indptr), shape=(rows, n))
+        except ValueError as exc:
+            fail(k, f"CSC columns are inconsistent ({exc})")
+    v = arrays[k][i]
+    if v is not None:
+        if v.size % n:
+            fail(k, f"{v.size} values is not a multiple of n = {n}")
+        v = v.reshape((v.size // n, n))
+    return v
+
+
+def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
+    table = _read_table(path, require_meta)
+    rows = table.num_rows
+    arrays = {k: _list_values(table, k, path) for k in ARRAY_KEYS}
+    csc = {
+        k: [_list_values(table, f"{k}_csc_{part}", path, kind) for part, kind in CSC_COLUMNS]
+        for k in _MATRIX_KEYS
+        if f"{k}_csc_data" in table.column_names
+    }
+    names = table.column("name").to_pylist()
+
+    def meta(key):
+        return table.column(key).to_pylist() if key in table.column_names else [None] * rows
+
+    scen, tick, t, form, off = (meta(k) for k in META_KEYS)
+    records = []
+    for i in range(rows):
+        name = names[i] if names[i] is not None else f"{path.stem}-{i}"
+
+        def fail(key, msg, name=name, i=i):
+            raise ProblemFormatError(f"problem '{name}' (row {i}): {msg}", path=path, key=key)
+
+        q = arrays["q"][i]
+        if q is None:
+            fail("q", "missing")
+        n = q.size
+        if n == 0:
+            fail("q", "no variables")
+        data = {k: _matrix(arrays, csc, k, i, n, fail) if k in _MATRIX_KEYS else arrays[k][i] for k in ARRAY_KEYS}
+        if data["P"] is None:
+            fail("P", "missing")
+        offset = off[i]
+        rec = ProblemRecord(
+            problem=qpsolvers.Problem(**data),
+            name=name,
+            scenario=scen[i],
+            tick=None if tick[i] is None else int(tick[i]),
+            t=t[i],
+            formulation=form[i],
+            offset=0.0 if offset is None else float(offset),
+        )
+        check_record(rec, path=path)
+        records.append(rec)
+    return records
+
+
+def read_manifest(folder: str | Path) -> dict:
+    """Read and check ``folder/manifest.json``."""
+    mpath = Path(folder) / MANIFEST_NAME
+    try:
+        manifest = json.loads(mpath.read_text())
+    except FileNotFoundError:
+        raise ProblemFormatError("no such file", path=mpath) from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ProblemFormatError(f"unreadable manifest ({exc})", path=mpath) from None
+    if not isinstance(manifest, dict):
+        raise ProblemFormatError("manifest is not a JSON object", path=mpath)
+    for k in ("sha256", "count"):
+        if k not in manifest:
+            raise ProblemFormatError("missing key", path=mpath, key=k)
+    return manifest
+
+
+def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
+    """Read a problem-set folder written by :func:`write_problem_set`.
+
+    Args:
+        folder: The folder (or its ``problems.parquet``).
+        verify_hash: Check the SHA-256 and row count against the manifest.
+
+    Raises:
+        ProblemFormatError: missing file, hash or count mismatch, corrupt
+            Parquet, missing column, bad shapes or values.
+    """
+    folder = Path(folder)
+    if folder.name == PARQUET_NAME:
+        folder = folder.parent
+    ppath = folder / PARQUET_NAME
+    if not ppath.is_file():
+        raise ProblemFormatError("no such file", path=ppath)
+    manifest = read_manifest(folder)
+    digest = sha256_file(ppath)
+    hash_ok = digest == manifest["sha256"]
+    if verify_hash and not hash_ok:
+        raise ProblemFormatError(
+            f"SHA-256 {digest[:16]}... does not match manifest's {str(manifest['sha256'])[:16]}... "
+            "(file changed or truncated after it was written)",
+            path=ppath,
+            key="sha256",
+        )
+    records = _read_parquet_records(ppath, require_meta=True)
+    if verify_hash and len(records) != manifest["count"]:
+        raise ProblemFormatError(
+            f"{len(records)} rows but manifest says {manifest['count']}", path=ppath, key="count"
+        )
+    return ProblemSet(
+        name=folder.resolve().name,
+        path=folder,
+        records=records,
+        manifest=manifest,
+        sha256=digest,
+        kind="set",
+        files=[ppath],
+        hash_ok=hash_ok,
+    )
+
+
+def read_parquet(path: str | Path) -> ProblemSet:
+    """Read a bare qpbenchmark Parquet file (``ProblemList.to_parquet``); the
+    metadata columns are read when present."""
+    path = Path(path)
+    records = _read_parquet_records(path, require_meta=False)
+    return ProblemSet(name=path.stem, path=path, records=records, kind="parquet", files=[path])
+

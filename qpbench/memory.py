@@ -1,0 +1,143 @@
+"""A memory budget: what a step may allocate, and estimates of what a solve needs.
+
+The budget (``--memory-budget`` of ``bench``, ``inspect`` and ``run``; bytes,
+e.g. ``2GB``, ``512MB``, ``1.5GiB``) defaults to :data:`DEFAULT_FRACTION` of the
+machine's physical memory, and never more than what an address-space limit
+(``ulimit -v``, ``RLIMIT_AS``) leaves above what the process maps already.
+A solve whose estimate (:func:`solve_bytes`) exceeds it is a ``skipped`` row
+saying so, never an out-of-memory kill.
+
+Estimates (bytes; float64 values, 4-byte indices):
+
+- a dense copy of a problem: ``8 n (n + m_eq + m_ineq)``, plus vectors;
+- a sparse solver (OSQP, Clarabel, qpsolvers' sparse routes): its KKT matrix
+  holds ``nnz(P) + nnz(A) + nnz(G) + n + m`` entries; its factor is counted as
+  :data:`FILL` times that, at 12 bytes an entry, plus 50 vectors of ``n + m``.
+  Fill-in depends on the ordering and the structure: the estimate is the order
+  of magnitude a budget needs, not a prediction.
+
+A dense-only backend (``sparse = False``: daqp, quadprog, pinv, the network,
+ProxQP and PIQP dense, qpOASES, cvxpy) is given problems up to
+:data:`DENSE_MAX_ENTRIES` entries made dense (``n (n + m)``, 200 MB of float64;
+e.g. n = 5,000 with no rows): above it the row says ``skipped`` with the sizes.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+import scipy.sparse as spa
+
+from .exceptions import ParamError
+
+#: Default budget: this fraction of the machine's physical memory.
+DEFAULT_FRACTION = 0.5
+#: Largest ``n (n + m_eq + m_ineq)`` given to a dense-only backend.
+DENSE_MAX_ENTRIES = 25_000_000
+#: Factor fill-in assumed by :func:`solve_bytes` for a sparse solver.
+FILL = 10
+
+_UNITS = {"": 1, "b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "tb": 1e12,
+          "kib": 2**10, "mib": 2**20, "gib": 2**30, "tib": 2**40, "k": 1e3, "m": 1e6, "g": 1e9}
+
+
+def parse_size(text: str) -> int:
+    """Bytes of ``"2GB"`` (10^9), ``"1.5GiB"`` (2^30), ``"512MB"``, ``"100000"``.
+
+    Raises:
+        ParamError: not a positive size.
+    """
+    match = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
+    unit = match.group(2).lower() if match else None
+    if not match or unit not in _UNITS or float(match.group(1)) <= 0:
+        raise ParamError(f"memory budget '{text}' is not a size like 2GB, 512MB or 1.5GiB", key="memory-budget")
+    return int(float(match.group(1)) * _UNITS[unit])
+
+
+def format_size(n: float) -> str:
+    """``1.2 GB`` (powers of 1000)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{int(n)} B"
+
+
+def machine_memory() -> int:
+    """Physical memory of the machine in bytes."""
+    return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def _mapped_bytes() -> int:
+    """Virtual memory this process maps now (``VmSize``), 0 if unknown."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmSize:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def default_budget() -> int:
+    """:data:`DEFAULT_FRACTION` of physical memory, within what ``RLIMIT_AS`` leaves."""
+    budget = int(DEFAULT_FRACTION * machine_memory())
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (ImportError, OSError, ValueError):
+        return budget
+    if soft != resource.RLIM_INFINITY:
+        budget = min(budget, max(0, int(0.8 * (soft - _mapped_bytes()))))
+    return budget
+
+
+def resolve_budget(text: str | None) -> int:
+    """The budget in bytes of a ``--memory-budget`` value (``None``: :func:`default_budget`)."""
+    return default_budget() if text is None else parse_size(text)
+
+
+def _nnz(M) -> int:
+    if M is None:
+        return 0
+    return int(M.nnz) if spa.issparse(M) else int(np.count_nonzero(M))
+
+
+def dense_bytes(problem) -> int:
+    """A dense copy of ``problem``'s matrices and vectors, in bytes."""
+    n = int(np.asarray(problem.q).shape[0])
+    m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    return 8 * (n * (n + m) + 4 * (n + m))
+
+
+def sparse_solver_bytes(problem) -> int:
+    """What a sparse solver needs for ``problem`` (KKT matrix, its factor, vectors), in bytes."""
+    n = int(np.asarray(problem.q).shape[0])
+    m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    kkt = _nnz(problem.P) + _nnz(problem.A) + _nnz(problem.G) + n + m
+    return 12 * kkt * (1 + FILL) + 8 * 50 * (n + m)
+
+
+def dense_entries(problem) -> int:
+    """``n (n + m_eq + m_ineq)``: entries of the problem's matrices made dense."""
+    n = int(np.asarray(problem.q).shape[0])
+    m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    return n * (n + m)
+
+
+def skip_reason(problem, sparse_backend: bool, budget: int) -> str | None:
+    """Why a backend cannot be given ``problem`` within ``budget`` bytes, or ``None``."""
+    if not sparse_backend:
+        entries = dense_entries(problem)
+        if entries > DENSE_MAX_ENTRIES:
+            return (f"dense-only backend: n (n + m) = {entries:.3g} entries > {DENSE_MAX_ENTRIES:.3g} "
+                    f"({format_size(8 * entries)} dense)")
+        need = dense_bytes(problem) * 3  # the problem's dense copy, the solver's, its workspace
+    else:
+        need = sparse_solver_bytes(problem)
+    if need > budget:
+        return f"memory: needs about {format_size(need)} > budget {format_size(budget)}"
+    return None
