@@ -25,6 +25,7 @@ COMMANDS = {
     "bench": "bench",
     "closed-loop": "closed_loop",
     "simulate": "simulate",
+    "sweep": "sweep",
     "report": "report",
     "backends": "backends",
     "inspect": "inspect_",

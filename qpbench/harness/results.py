@@ -99,18 +99,18 @@ def _cell(value) -> str:
     return text
 
 
-def format_rows(rows: list[dict]) -> bytes:
-    """CSV bytes of ``rows`` (no header), one line each, in :data:`COLUMNS` order."""
+def format_rows(rows: list[dict], columns: tuple[str, ...] = COLUMNS) -> bytes:
+    """CSV bytes of ``rows`` (no header), one line each, in ``columns`` order (default :data:`COLUMNS`)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in COLUMNS])
+        writer.writerow([_cell(row.get(c)) for c in columns])
     return buf.getvalue().encode("utf-8")
 
 
-def header_bytes() -> bytes:
-    """The header line of a bench CSV."""
-    return (",".join(COLUMNS) + "\n").encode("utf-8")
+def header_bytes(columns: tuple[str, ...] = COLUMNS) -> bytes:
+    """The header line of a bench CSV (or of another table of ``columns``)."""
+    return (",".join(columns) + "\n").encode("utf-8")
 
 
 @dataclass
@@ -129,8 +129,9 @@ class ExistingResults:
         return {row_key(r): r for r in self.rows}
 
 
-def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
-    """Read a bench CSV written by :class:`ResultsWriter`.
+def read_results(path: str | Path, repair: bool = False, columns: tuple[str, ...] = COLUMNS,
+                 kind: str = "bench") -> ExistingResults:
+    """Read a bench CSV written by :class:`ResultsWriter` (or a ``kind`` table of ``columns``).
 
     A last line without its newline (the run was killed while writing it) or
     a line with the wrong number of fields is dropped with a warning; with
@@ -156,17 +157,17 @@ def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
         if repair:
             # killed before the header was complete: start the file again
             with open(path, "wb") as fh:
-                fh.write(header_bytes())
+                fh.write(header_bytes(columns))
                 fh.flush()
                 os.fsync(fh.fileno())
         return ExistingResults([], dropped)
     text = data.decode("utf-8", errors="replace")
     lines = text.split("\n")[:-1]
     header = next(csv.reader([lines[0]]))
-    if tuple(header) != COLUMNS:
-        missing = [c for c in COLUMNS if c not in header]
+    if tuple(header) != columns:
+        missing = [c for c in columns if c not in header]
         raise InputError(
-            f"not a bench CSV of this version (missing columns: {', '.join(missing) or 'none'}; "
+            f"not a {kind} CSV of this version (missing columns: {', '.join(missing) or 'none'}; "
             "columns differ); use --force to start again",
             path=path,
         )
@@ -176,14 +177,14 @@ def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
     bad_tail = False
     for line in lines[1:]:
         fields = next(csv.reader([line])) if line else []
-        if len(fields) != len(COLUMNS):
-            log.warning("%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(COLUMNS))
+        if len(fields) != len(columns):
+            log.warning("%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(columns))
             dropped += 1
             bad_tail = True
         else:
             if bad_tail:
                 raise InputError("malformed line in the middle of the file; use --force to start again", path=path)
-            rows.append(dict(zip(COLUMNS, fields)))
+            rows.append(dict(zip(columns, fields)))
             good_end = offset + len(line.encode("utf-8")) + 1
         offset += len(line.encode("utf-8")) + 1
     if repair and bad_tail:
@@ -198,18 +199,20 @@ class ResultsWriter:
         path: The CSV file.
         new: Create (truncate) the file and write the header; else append.
         fsync: Call ``os.fsync`` after each batch (off only in tests of speed).
+        columns: The table's columns (default: the bench's :data:`COLUMNS`).
     """
 
-    def __init__(self, path: str | Path, new: bool, fsync: bool = True):
+    def __init__(self, path: str | Path, new: bool, fsync: bool = True, columns: tuple[str, ...] = COLUMNS):
         self.path = Path(path)
         self.fsync = fsync
+        self.columns = tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT
         if new:
             flags |= os.O_TRUNC
         self._fd = os.open(self.path, flags, 0o644)
         if new:
-            self._write(header_bytes())
+            self._write(header_bytes(self.columns))
         self.count = 0
 
     def _write(self, data: bytes) -> None:
@@ -223,7 +226,7 @@ class ResultsWriter:
     def write_rows(self, rows: list[dict]) -> None:
         """Append ``rows`` and make them durable before returning."""
         if rows:
-            self._write(format_rows(rows))
+            self._write(format_rows(rows, self.columns))
             self.count += len(rows)
 
     def close(self) -> None:
