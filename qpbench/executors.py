@@ -119,11 +119,17 @@ def _exit_text(exitcode: int | None) -> str:
     return f"worker process exited with code {exitcode}"
 
 
-def _worker_loop(conn) -> None:
-    """Body of a worker process: run ``(id, fn, arg)`` requests until ``None``."""
+def _worker_loop(conn, environ: dict) -> None:
+    """Body of a worker process: run ``(id, fn, arg)`` requests until ``None``.
+
+    The worker takes the environment of the process that started it
+    (``environ``), not the one the forkserver was started with.
+    """
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    os.environ.clear()
+    os.environ.update(environ)
     while True:
         try:
             msg = conn.recv()
@@ -138,7 +144,7 @@ def _worker_loop(conn) -> None:
 class _Worker:
     def __init__(self, ctx, index: int):
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_loop, args=(child,), daemon=True, name=f"qpbench-worker-{index}")
+        self.proc = ctx.Process(target=_worker_loop, args=(child, dict(os.environ)), daemon=True, name=f"qpbench-worker-{index}")
         self.proc.start()
         child.close()
         self.task = None  # (tid, key, arg, attempts)

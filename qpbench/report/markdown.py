@@ -440,14 +440,21 @@ def write_report(paths: list[str | Path], out: str | Path, *, force: bool = Fals
     """
     from ..atomic import check_output, write_text
 
+    from .sweep import split_sweep_paths, sweep_section
+
     out = Path(out)
     report_path = out / "report.md"
     check_output(report_path, force=force)
-    results = tables.read_results(paths, prefer=prefer)
+    paths, sweeps = split_sweep_paths(paths)
+    results = tables.read_results(paths, prefer=prefer) if paths or not sweeps else tables.Results(
+        pd.DataFrame(), pd.DataFrame())
     plot_files: dict[str, str] = {}
     if plots:
         from .plots import write_plots
 
         plot_files = write_plots(results, out / "plots", relative_to=out)
-    write_text(report_path, render(results, plot_files))
+    text = render(results, plot_files)
+    if sweeps:
+        text += "\n" + "\n".join(sweep_section(sweeps, out, plots))
+    write_text(report_path, text)
     return report_path
