@@ -57,7 +57,7 @@ def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
     from .. import __version__
 
     return {
-        "sweep": spec.name, "sweep_file": str(spec.path), "sweep_sha256": spec.sha256, "sweep_text": spec.text,
+        "sweep": spec.name, "sweep_file": str(spec.path),  # samples, backends: of every run into the folder "sweep_sha256": spec.sha256, "sweep_text": spec.text,
         "seed": spec.seed, "samples": spec.samples, "duration": spec.duration, "base": spec.base,
         "base_file": str(spec.base_path), "backends": backends, "qpbench_version": __version__,
         "force_band_n": spec.force_band, "tracking_band_m": spec.tracking_band,
@@ -104,7 +104,12 @@ def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resum
         path = out / INSTANCE_DIR / f"{inst.name}.toml"
         if not path.exists() or path.read_text(encoding="utf-8") != inst.text:
             write_text(path, inst.text)
-    write_text(out / MANIFEST_NAME, json.dumps(_manifest(spec, backends), indent=2) + "\n")
+    manifest = _manifest(spec, backends)
+    if resume and (out / MANIFEST_NAME).exists():  # the table holds the earlier runs' rows too
+        old = json.loads((out / MANIFEST_NAME).read_text())
+        manifest["backends"] = list(dict.fromkeys(old.get("backends", []) + backends))
+        manifest["samples"] = max(int(old.get("samples", 0)), spec.samples)
+    write_text(out / MANIFEST_NAME, json.dumps(manifest, indent=2) + "\n")
     kept = {}
     if csv_path.exists():
         kept = {tuple(r[c] for c in KEY_COLUMNS): r for r in read_sweep_rows(csv_path, repair=True)

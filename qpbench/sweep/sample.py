@@ -7,7 +7,10 @@ saved as ``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario
 DIR/instances/<name>.toml --backend B`` re-runs that one instance alone. An
 instance the scenario loader refuses (a theta0 drawn outside the joint
 limits, ``alpha * dt >= 1``, ...) keeps the loader's one-line reason in
-:attr:`Instance.invalid`: the sweep records it and goes on.
+:attr:`Instance.invalid`: the sweep records it and goes on. So does one
+whose start puts a key point inside ``d_safe`` of an obstacle (unless
+``[sweep] safe_start = false``): every backend would be ``unsafe`` at
+``t = 0``, which says nothing about the backends.
 """
 
 from __future__ import annotations
@@ -75,19 +78,48 @@ def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
     return dumps(raw, header="\n".join(header))
 
 
-def sample_instances(spec: SweepSpec) -> list[Instance]:
-    """Every instance of ``spec`` (deterministic in ``spec.seed``), each checked by the scenario loader."""
+def start_clearance(scenario) -> tuple[float, str, str]:
+    """Smallest distance [m] of a key point to an obstacle at t = 0, and which key point and obstacle.
+
+    ``(inf, "", "")`` without obstacles. Distances from the link's surface
+    (the key points' ``link_radius`` subtracted), as the controller measures them.
+    """
+    import numpy as np
+
+    arm, kp = scenario.make_arm(), scenario.make_key_points()
+    points = arm.points(scenario.theta0, kp.links, kp.fracs)
+    best = (np.inf, "", "")
+    for obstacle in scenario.make_obstacles():
+        dist = obstacle.closest(points, 0.0)[1].min(axis=1) - kp.radius
+        i = int(np.argmin(dist))
+        if dist[i] < best[0]:
+            best = (float(dist[i]), kp.names[i], obstacle.name)
+    return best
+
+
+def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
     from ..sim.scenario import parse_scenario
 
+    try:
+        scenario = parse_scenario(text, path=f"{name}.toml")
+    except ScenarioError as exc:
+        return str(exc)
+    if safe_start:
+        d, point, obstacle = start_clearance(scenario)
+        d_safe = scenario.data["controller"]["d_safe"]
+        if d < d_safe:
+            return (f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
+                    f"inside d_safe = {d_safe * 1e3:g} mm (every backend would be unsafe at t = 0)")
+    return None
+
+
+def sample_instances(spec: SweepSpec) -> list[Instance]:
+    """Every instance of ``spec`` (deterministic in ``spec.seed``), each checked by the scenario loader
+    and, with ``[sweep] safe_start`` (default), for a start outside ``d_safe`` of every obstacle."""
     out = []
     for index in range(spec.samples):
         name = instance_name(index, spec.samples)
         values = {d.key: d.draw(spec.rng(index, d.key)) for d in spec.parameters}
         text = instance_text(spec, name, index, values)
-        invalid = None
-        try:
-            parse_scenario(text, path=f"{name}.toml")
-        except ScenarioError as exc:
-            invalid = str(exc)
-        out.append(Instance(index, name, values, text, invalid))
+        out.append(Instance(index, name, values, text, _why_invalid(text, name, spec.safe_start)))
     return out

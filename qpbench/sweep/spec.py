@@ -9,6 +9,7 @@ distribution to draw that key's value from for every instance::
     seed = 1                      # every draw follows from it
     samples = 500                 # instances
     duration = 6.0                # s, optional: simulated time of every instance (default: the base's)
+    safe_start = true             # optional (default true): an instance starting inside d_safe is invalid
 
     [convergence]                 # optional: bands of the time-to-converge figures
     force_band = 0.5              # N   (default: a tenth of the base's [verdict] max_force_error)
@@ -59,6 +60,12 @@ key draws each component independently):
 - ``choice``: ``values`` (each a whole value of the key), optional ``weights``;
 - ``integers``: ``low``, ``high`` (inclusive), for integer keys.
 
+``same = true`` (uniform, normal, loguniform; numbers only) draws once for
+every component of a vector key: with ``spread`` (or a normal around the
+base) the same offset is added to each component, e.g. ``path.centre``
+moved along (1, 1), which is wall's surface tangent; else every component
+gets the value drawn, e.g. ``path.amplitude = [a, a]``.
+
 Instance ``i`` draws key ``k`` from its own stream
 ``numpy.random.default_rng([seed, i, crc32(k)])``: the same instance has the
 same values whatever the sample count and whatever other keys are swept.
@@ -84,9 +91,9 @@ __all__ = ["DISTRIBUTIONS", "Distribution", "SweepSpec", "load_sweep", "parse_sw
 
 #: Distribution kinds and their allowed fields (``dist`` aside).
 DISTRIBUTIONS = {
-    "uniform": ("low", "high", "spread"),
-    "normal": ("mean", "std", "low", "high"),
-    "loguniform": ("low", "high"),
+    "uniform": ("low", "high", "spread", "same"),
+    "normal": ("mean", "std", "low", "high", "same"),
+    "loguniform": ("low", "high", "same"),
     "choice": ("values", "weights"),
     "integers": ("low", "high"),
 }
@@ -100,7 +107,7 @@ ALIASES = {
     "omega": "path.omega", "duration": "[sweep] duration",
 }
 
-_SWEEP_KEYS = {"name": str, "base": str, "seed": int, "samples": int, "duration": float}
+_SWEEP_KEYS = {"name": str, "base": str, "seed": int, "samples": int, "duration": float, "safe_start": bool}
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
 _KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
 #: Draws of a truncated normal tried before giving up on a component.
@@ -136,6 +143,12 @@ class Distribution:
             return copy.deepcopy(p["values"][i])
         if self.kind == "integers":
             return int(rng.integers(p["low"], p["high"], endpoint=True))
+        if p.get("same"):  # one draw for every component: an offset from the base value, or the value itself
+            relative = "spread" in p or (self.kind == "normal" and "mean" not in p)
+            first = float(np.ravel(base)[0])
+            one = Distribution(self.key, self.kind, {k: v for k, v in p.items() if k != "same"}, first).draw(rng)
+            value = base + (one - first) if relative else np.full(shape, one)
+            return value.tolist() if shape else float(value)
         if self.kind == "uniform":
             low, high = (base - p["spread"], base + p["spread"]) if "spread" in p else (p["low"], p["high"])
             value = rng.uniform(low, high, size=shape)
@@ -176,6 +189,7 @@ class SweepSpec:
         parameters: The distributions, in file order.
         force_band: Band of the force's time to converge [N].
         tracking_band: Band of the tracking error's time to converge [m].
+        safe_start: An instance whose start has a key point inside ``d_safe`` is invalid.
     """
 
     path: Path
@@ -190,6 +204,7 @@ class SweepSpec:
     parameters: list[Distribution] = field(default_factory=list)
     force_band: float = 0.2
     tracking_band: float = 1e-4
+    safe_start: bool = True
 
     @property
     def sha256(self) -> str:
@@ -247,7 +262,8 @@ def parse_sweep(text: str, path: str | Path, samples: int | None = None, duratio
     force_band, tracking_band = _bands(raw.get("convergence", {}), scenario.verdict, path)
     return SweepSpec(path=path, text=text, name=head["name"], seed=head["seed"], samples=head["samples"],
                      duration=head.get("duration"), base=head["base"], base_path=base_path, base_raw=base_raw,
-                     parameters=distributions, force_band=force_band, tracking_band=tracking_band)
+                     parameters=distributions, force_band=force_band, tracking_band=tracking_band,
+                     safe_start=head.get("safe_start", True))
 
 
 def _positive_int(value, path, key) -> int:
@@ -273,6 +289,8 @@ def _sweep_table(head, path) -> dict:
     if not isinstance(head["seed"], int) or isinstance(head["seed"], bool) or head["seed"] < 0:
         raise InputError(f"expected an integer >= 0, got {head['seed']!r}", path=path, key="sweep.seed")
     _positive_int(head["samples"], path, "sweep.samples")
+    if not isinstance(head.get("safe_start", True), bool):
+        raise InputError("expected true or false", path=path, key="sweep.safe_start")
     return dict(head)
 
 
@@ -362,7 +380,16 @@ def _distribution(key: str, spec: dict, base_raw: dict, path) -> Distribution:
             raise InputError(f"need integers low <= high, got {lo!r}, {hi!r}", path=path, key=where)
         return Distribution(key, kind, {"low": lo, "high": hi}, base)
     base_arr = _numeric(base, None, path, where, "the base value")
-    params = {f: _numeric(v, np.shape(base_arr), path, f"{where}.{f}", f) for f, v in spec.items() if f != "dist"}
+    same = spec.get("same", False)
+    if not isinstance(same, bool):
+        raise InputError(f"expected true or false, got {same!r}", path=path, key=f"{where}.same")
+    shape = () if same else np.shape(base_arr)
+    params = {f: _numeric(v, shape, path, f"{where}.{f}", f) for f, v in spec.items() if f not in ("dist", "same")}
+    if same and any(np.ndim(v) for v in params.values()):
+        raise InputError("same = true takes numbers, not lists (one draw for every component)", path=path,
+                         key=f"{where}.same")
+    if same:
+        params["same"] = True
     _check_bounds(kind, params, path, where)
     return Distribution(key, kind, params, base_arr if np.ndim(base_arr) else float(base_arr))
 
@@ -376,8 +403,8 @@ def _numeric(value, shape, path, where, what):
     if arr is None or arr.dtype == object or not np.all(np.isfinite(arr)) or isinstance(value, bool):
         raise InputError(f"{what}: expected finite numbers, got {value!r}", path=path, key=where)
     if shape is not None and arr.ndim and arr.shape != tuple(shape):
-        raise InputError(f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
-                         path=path, key=where)
+        raise InputError(f"expected a number or {list(shape) or 'a number'} numbers (the base value's shape), "
+                         f"got {value!r}", path=path, key=where)
     return arr
 
 
