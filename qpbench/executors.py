@@ -5,13 +5,15 @@ can import it by name) and ``arg`` plain picklable data; its value comes back
 as a :class:`Done`, in the order the tasks finish. Every executor gives the
 same values for the same tasks: only where and when they ran differs.
 
-- :class:`SerialExecutor`: in this process, one task after the other (the
-  only setting in which solve times are not disturbed by other runs).
+- :class:`SerialExecutor`: in this process, one task after the other (for
+  the Python API; a crash in a solver ends the process).
 - :class:`ProcessExecutor`: ``jobs`` long-lived worker processes, forked from
   the forkserver that holds qpbench and its compiled kernels
   (:func:`qpbench.harness.isolation._context`). A worker that dies (a
   segfault in a solver, SIGKILL from the out-of-memory killer) loses only its
-  task: it is retried once on a fresh worker, then reported lost.
+  task: it is retried once on a fresh worker, then reported lost. With one
+  job the tasks run one after the other, the only setting in which solve
+  times are not disturbed by other runs.
 - :class:`DaskExecutor`: an existing ``distributed`` cluster (``scheduler``
   address, ``tls://`` with a :func:`load_security` file) or an in-process
   ``LocalCluster`` bound to 127.0.0.1. Tasks are submitted at once and
@@ -357,8 +359,10 @@ class DaskExecutor:
 def make_executor(name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None):
     """The executor of ``--executor NAME --jobs N [--scheduler ADDRESS --security FILE]``.
 
-    ``local`` with one job is :class:`SerialExecutor`, with more
-    :class:`ProcessExecutor`; ``dask`` is :class:`DaskExecutor`.
+    ``local`` is :class:`ProcessExecutor`: with one job the runs are made
+    one after the other, as serially as in this process (the worker times
+    them itself) but a crash in a solver loses only the run it hit;
+    ``dask`` is :class:`DaskExecutor`.
 
     Raises:
         ParamError: an unknown executor, a scheduler or security file without
@@ -371,7 +375,7 @@ def make_executor(name: str, jobs: int, scheduler: str | None = None, security_f
     if name == "local":
         if scheduler is not None or security_file is not None:
             raise ParamError("--scheduler and --security need --executor dask", key="--scheduler")
-        return SerialExecutor() if jobs == 1 else ProcessExecutor(jobs)
+        return ProcessExecutor(jobs)
     if scheduler is not None and scheduler.startswith("tls://") and security_file is None:
         raise ParamError("a tls:// scheduler needs --security FILE (CA, certificate, key)", key="--security")
     if security_file is not None and scheduler is not None and not scheduler.startswith("tls://"):

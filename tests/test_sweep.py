@@ -151,7 +151,8 @@ def serial(tmp_path_factory):
 def test_serial_rows(serial):
     rows = rows_of(serial)
     assert len(rows) == 16 and all(r["status"] == "ok" for r in rows)
-    assert {r["executor"] for r in rows} == {"serial"} and {r["concurrent_solves"] for r in rows} == {"1"}
+    assert {r["executor"] for r in rows} == {"processes"} and {r["concurrent_solves"] for r in rows} == {"1"}
+    assert len({r["worker"] for r in rows}) == 1  # one worker, one run after the other
     assert len(list((serial / "instances").glob("*.toml"))) == 8
     manifest = json.loads((serial / "sweep.json").read_text())
     assert manifest["samples"] == 8 and manifest["backends"] == ["daqp", "osqp"]
@@ -270,3 +271,33 @@ def test_report_has_the_sweep_section(serial, tmp_path):
 
 def test_columns_are_unique():
     assert len(set(COLUMNS)) == len(COLUMNS) and set(TIMING_COLUMNS) <= set(COLUMNS)
+
+
+def test_same_draws_one_value_for_every_component(tmp_path):
+    head = SWEEP.split("[parameters]")[0]
+    text = head + """[parameters]
+"path.centre" = { dist = "uniform", spread = 0.03, same = true }
+"path.amplitude" = { dist = "uniform", low = 0.05, high = 0.12, same = true }
+"""
+    for inst in sample_instances(load_sweep(write_sweep(tmp_path, text))):
+        cx, cy = inst.values["path.centre"]
+        assert cx - 0.4 == pytest.approx(cy - 0.5) and abs(cx - 0.4) <= 0.03  # along wall's surface tangent
+        ax, ay = inst.values["path.amplitude"]
+        assert ax == ay and 0.05 <= ax <= 0.12
+    with pytest.raises(InputError, match="same = true takes numbers"):
+        parse_sweep(head + '[parameters]\n"path.centre" = { dist = "uniform", low = [0.3, 0.4], high = [0.5, 0.6], '
+                    'same = true }\n', tmp_path / "s.toml")
+
+
+def test_a_start_inside_d_safe_is_invalid_unless_allowed(tmp_path):
+    from qpbench.sim.scenario import load_scenario
+    from qpbench.sweep.sample import start_clearance
+
+    assert start_clearance(load_scenario("wall"))[1:] == ("A1", "wall")
+    assert start_clearance(load_scenario("wall"))[0] == pytest.approx(0.05, abs=1e-3)  # A1, A2 at x = 0
+    head = SWEEP.split("[parameters]")[0].replace("samples = 8", "samples = 2")
+    line = '[parameters]\n"obstacles[0].point" = { dist = "uniform", low = [-0.005, 0.0], high = [-0.001, 0.0] }\n'
+    inst = sample_instances(load_sweep(write_sweep(tmp_path, head + line)))
+    assert all("inside d_safe" in i.invalid and "from obstacle wall" in i.invalid for i in inst)
+    allowed = head.replace("duration = 0.25", "duration = 0.25\nsafe_start = false")
+    assert all(i.invalid is None for i in sample_instances(load_sweep(write_sweep(tmp_path, allowed + line))))

@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = ("qpbench sweep problems/sweeps/wall.toml --backends daqp,osqp,qpoases --out sweeps/wall --jobs 2; "
            "qpbench sweep problems/sweeps/narrow.toml --backends daqp --out n --executor dask "
-           "--scheduler tls://10.0.0.5:8786 --security dask-tls.toml")
+           "--scheduler tls://scheduler.example.org:8786 --security dask-tls.toml")
 
 log = logging.getLogger("qpbench.sweep")
 
@@ -44,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"runs at once: local worker processes, or the local Dask cluster's workers "
                              f"(default: this machine's cores, {default_jobs()}). Timings are clean only with 1")
     parser.add_argument("--executor", choices=EXECUTORS, default="local",
-                        help="local (this process with --jobs 1, else worker processes) or dask (default: local)")
+                        help="local (worker processes on this machine) or dask (default: local)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="address of a running Dask scheduler (tls://HOST:8786 with --security); without it "
                              "--executor dask starts a local cluster on 127.0.0.1")
@@ -77,8 +78,10 @@ def _backends(value: str) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..atomic import check_output
     from ..exceptions import ParamError
     from ..executors import make_executor
+    from ..sweep.rows import CSV_NAME
     from ..harness.plugins import load_plugins, plugin_specs
     from ..jit import warmup_logged
     from ..sweep.spec import load_sweep
@@ -89,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     load_plugins(plugins)
     spec = load_sweep(args.sweep, samples=args.samples, duration=args.duration)
     backends = _backends(args.backends)
+    check_output(Path(args.out) / CSV_NAME, force=args.force, resume=args.resume)  # before any worker starts
     warmup_logged(log)
     executor = make_executor(args.executor, args.jobs, args.scheduler, args.security)
     try:

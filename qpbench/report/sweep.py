@@ -180,13 +180,14 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         for backend, g in ok.groupby("backend", sort=True):
             v = np.sort(pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale)
             if len(v):
-                ax.step(v, np.arange(1, len(v) + 1) / len(v), where="post", label=backend)
+                ax.step(np.r_[v[0], v], np.r_[0.0, np.arange(1, len(v) + 1) / len(v)], where="post", label=backend)
         if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
             ax.set_xscale("log")
         if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
             ax.axvline(float(ok["d_safe"].dropna().iloc[0]) * 1e3, color="k", lw=0.8, ls="--", label="d_safe")
         ax.set_xlabel(label)
         ax.set_ylabel("fraction of runs")
+        ax.set_ylim(0.0, 1.02)
         ax.grid(alpha=0.3)
     for ax in axes.flat:
         if ax.get_legend_handles_labels()[0]:

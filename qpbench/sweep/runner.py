@@ -57,7 +57,8 @@ def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
     from .. import __version__
 
     return {
-        "sweep": spec.name, "sweep_file": str(spec.path),  # samples, backends: of every run into the folder "sweep_sha256": spec.sha256, "sweep_text": spec.text,
+        # samples, backends: of every run into the folder (a resumed run merges them)
+        "sweep": spec.name, "sweep_file": str(spec.path), "sweep_sha256": spec.sha256, "sweep_text": spec.text,
         "seed": spec.seed, "samples": spec.samples, "duration": spec.duration, "base": spec.base,
         "base_file": str(spec.base_path), "backends": backends, "qpbench_version": __version__,
         "force_band_n": spec.force_band, "tracking_band_m": spec.tracking_band,

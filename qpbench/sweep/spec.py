@@ -383,7 +383,7 @@ def _distribution(key: str, spec: dict, base_raw: dict, path) -> Distribution:
     same = spec.get("same", False)
     if not isinstance(same, bool):
         raise InputError(f"expected true or false, got {same!r}", path=path, key=f"{where}.same")
-    shape = () if same else np.shape(base_arr)
+    shape = None if same else np.shape(base_arr)  # same: numbers only, checked below
     params = {f: _numeric(v, shape, path, f"{where}.{f}", f) for f, v in spec.items() if f not in ("dist", "same")}
     if same and any(np.ndim(v) for v in params.values()):
         raise InputError("same = true takes numbers, not lists (one draw for every component)", path=path,
@@ -403,8 +403,8 @@ def _numeric(value, shape, path, where, what):
     if arr is None or arr.dtype == object or not np.all(np.isfinite(arr)) or isinstance(value, bool):
         raise InputError(f"{what}: expected finite numbers, got {value!r}", path=path, key=where)
     if shape is not None and arr.ndim and arr.shape != tuple(shape):
-        raise InputError(f"expected a number or {list(shape) or 'a number'} numbers (the base value's shape), "
-                         f"got {value!r}", path=path, key=where)
+        raise InputError(f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
+                         path=path, key=where)
     return arr
 
 
