@@ -34,6 +34,7 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import sys
 import tomllib
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -86,12 +87,11 @@ class Done:
 def _call(fn: Callable, arg) -> tuple:
     """``fn(arg)`` with the host and worker that ran it."""
     worker = f"pid{os.getpid()}"
-    try:
-        from distributed import get_worker
-
-        worker = get_worker().address
-    except (ImportError, ValueError):
-        pass
+    if "distributed" in sys.modules:  # on a Dask worker: its address
+        try:
+            worker = sys.modules["distributed"].get_worker().address
+        except ValueError:
+            pass
     return fn(arg), socket.gethostname(), worker
 
 
