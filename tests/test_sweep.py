@@ -301,3 +301,13 @@ def test_a_start_inside_d_safe_is_invalid_unless_allowed(tmp_path):
     assert all("inside d_safe" in i.invalid and "from obstacle wall" in i.invalid for i in inst)
     allowed = head.replace("duration = 0.25", "duration = 0.25\nsafe_start = false")
     assert all(i.invalid is None for i in sample_instances(load_sweep(write_sweep(tmp_path, allowed + line))))
+
+
+@pytest.mark.parametrize("name", ["wall", "narrow"])
+def test_shipped_sweeps_hold_500_instances_with_a_safe_start(name):
+    path = Path(__file__).resolve().parents[1] / "problems" / "sweeps" / f"{name}.toml"
+    spec = load_sweep(path)
+    instances = sample_instances(spec)
+    assert spec.base == name and spec.duration is not None and spec.duration < 20.0
+    assert sum(i.invalid is None for i in instances) >= 500
+    assert all("inside d_safe" in i.invalid for i in instances if i.invalid)
