@@ -30,6 +30,7 @@ COMMANDS = {
     "bench": "bench",
     "closed-loop": "closed_loop",
     "simulate": "simulate",
+    "sweep": "sweep",
     "report": "report",
     "backends": "backends",
     "scenarios": "scenarios",

@@ -9,7 +9,7 @@ layer or below):
     control
     sim
     selection report
-    harness scaling
+    harness scaling sweep executors
     commands cli
 
 ``jit`` warms every compiled kernel (the backends', the network's, the
@@ -33,7 +33,7 @@ LAYERS = [
     {"control"},
     {"sim"},
     {"selection", "report"},
-    {"harness", "scaling"},
+    {"harness", "scaling", "sweep", "executors"},
     {"commands", "cli"},
 ]
 #: Allowed across layers in both directions (see the module docstring).

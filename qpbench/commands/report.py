@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-HELP = "write report.md and PNG plots from bench and closed-loop result CSVs (every number recomputed)"
+HELP = "write report.md and PNG plots from bench, closed-loop and sweep result CSVs (every number recomputed)"
 EXAMPLE = "qpbench report results/bench results/closed_loop.csv --out results --force"
 
 log = logging.getLogger("qpbench.report")
@@ -13,7 +13,8 @@ log = logging.getLogger("qpbench.report")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("results", nargs="+", metavar="RESULTS",
-                        help="bench or closed-loop CSV files, or folders searched for *.csv")
+                        help="bench, closed-loop or sweep CSV files, or folders searched for *.csv (a sweep's "
+                             "sweep.csv adds the sweep section)")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder of report.md and plots/")
     parser.add_argument("--force", action="store_true", help="replace an existing report.md")
     parser.add_argument("--no-plots", action="store_true", help="write report.md only")
@@ -36,6 +37,11 @@ def run(args: argparse.Namespace) -> int:
         log.info("wrote %s", write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots))
     rest = [r for r in args.results if r not in scaling]
     if rest:
-        path = write_report(rest, args.out, force=args.force, plots=not args.no_plots, prefer=args.prefer)
+        from ..sweep.report import split_sweep_paths, sweep_section
+
+        rest, sweeps = split_sweep_paths(rest)  # tables written by ``qpbench sweep``: their own section
+        sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
+        path = write_report(rest, args.out, force=args.force, plots=not args.no_plots, prefer=args.prefer,
+                            sections=sections)
         log.info("wrote %s", path)
     return 0

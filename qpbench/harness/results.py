@@ -57,6 +57,10 @@ def columns() -> tuple[str, ...]:
     return LEAD_COLUMNS + metric_columns() + TAIL_COLUMNS
 
 
+#: :func:`columns` under a name that a ``columns`` parameter does not hide.
+bench_columns = columns
+
+
 #: Columns that identify a result: a resumed run skips rows with a known key.
 KEY_COLUMNS = ("problem", "backend", "profile")
 
@@ -87,19 +91,20 @@ def _cell(value) -> str:
     return text
 
 
-def format_rows(rows: list[dict]) -> bytes:
-    """CSV bytes of ``rows`` (no header), one line each, in :func:`columns` order."""
+def format_rows(rows: list[dict], columns: tuple[str, ...] | None = None) -> bytes:
+    """CSV bytes of ``rows`` (no header), one line each, in ``columns`` order (default: the bench's,
+    :func:`bench_columns`)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    names = columns()
+    names = bench_columns() if columns is None else columns
     for row in rows:
         writer.writerow([_cell(row.get(c)) for c in names])
     return buf.getvalue().encode("utf-8")
 
 
-def header_bytes() -> bytes:
-    """The header line of a bench CSV."""
-    return (",".join(columns()) + "\n").encode("utf-8")
+def header_bytes(columns: tuple[str, ...] | None = None) -> bytes:
+    """The header line of a bench CSV (or of another table of ``columns``)."""
+    return (",".join(bench_columns() if columns is None else columns) + "\n").encode("utf-8")
 
 
 @dataclass
@@ -118,8 +123,9 @@ class ExistingResults:
         return {row_key(r): r for r in self.rows}
 
 
-def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
-    """Read a bench CSV written by :class:`ResultsWriter`.
+def read_results(path: str | Path, repair: bool = False, columns: tuple[str, ...] | None = None,
+                 kind: str = "bench") -> ExistingResults:
+    """Read a bench CSV written by :class:`ResultsWriter` (or a ``kind`` table of ``columns``).
 
     A last line without its newline (the run was killed while writing it) or
     a line with the wrong number of fields is dropped with a warning; with
@@ -130,6 +136,7 @@ def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
         InputError: the file is not a bench CSV (missing or different header).
     """
     path = Path(path)
+    names = bench_columns() if columns is None else tuple(columns)
     data = path.read_bytes()
     dropped = 0
     if data and not data.endswith(b"\n"):
@@ -145,18 +152,17 @@ def read_results(path: str | Path, repair: bool = False) -> ExistingResults:
         if repair:
             # killed before the header was complete: start the file again
             with open(path, "wb") as fh:
-                fh.write(header_bytes())
+                fh.write(header_bytes(names))
                 fh.flush()
                 os.fsync(fh.fileno())
         return ExistingResults([], dropped)
     text = data.decode("utf-8", errors="replace")
     lines = text.split("\n")[:-1]
     header = next(csv.reader([lines[0]]))
-    names = columns()
     if tuple(header) != names:
         missing = [c for c in names if c not in header]
         raise InputError(
-            f"not a bench CSV of this version (missing columns: {', '.join(missing) or 'none'}; "
+            f"not a {kind} CSV of this version (missing columns: {', '.join(missing) or 'none'}; "
             "columns differ); use --force to start again",
             path=path,
         )
@@ -188,18 +194,20 @@ class ResultsWriter:
         path: The CSV file.
         new: Create (truncate) the file and write the header; else append.
         fsync: Call ``os.fsync`` after each batch (off only in tests of speed).
+        columns: The table's columns (default: the bench's, :func:`bench_columns`).
     """
 
-    def __init__(self, path: str | Path, new: bool, fsync: bool = True):
+    def __init__(self, path: str | Path, new: bool, fsync: bool = True, columns: tuple[str, ...] | None = None):
         self.path = Path(path)
         self.fsync = fsync
+        self.columns = bench_columns() if columns is None else tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT
         if new:
             flags |= os.O_TRUNC
         self._fd = os.open(self.path, flags, 0o644)
         if new:
-            self._write(header_bytes())
+            self._write(header_bytes(self.columns))
         self.count = 0
 
     def _write(self, data: bytes) -> None:
@@ -213,7 +221,7 @@ class ResultsWriter:
     def write_rows(self, rows: list[dict]) -> None:
         """Append ``rows`` and make them durable before returning."""
         if rows:
-            self._write(format_rows(rows))
+            self._write(format_rows(rows, self.columns))
             self.count += len(rows)
 
     def close(self) -> None:

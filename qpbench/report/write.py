@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
+
 from . import tables
 from .markdown import render
 
@@ -16,10 +18,13 @@ __all__ = ["write_report"]
 
 
 def write_report(paths: list[str | Path], out: str | Path, *, force: bool = False,
-                 plots: bool = True, prefer: str | None = None) -> Path:
+                 plots: bool = True, prefer: str | None = None, sections=None) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 
     Args:
+        sections: ``sections(out, plots) -> list of markdown lines`` appended after the
+            tables, called once the output is checked (the sweep section of
+            :mod:`qpbench.sweep.report`); with it, ``paths`` may be empty.
         prefer: Which file's row to keep for a key present in several bench
             CSVs (``first``/``last``; ``None``: refuse), see
             :func:`qpbench.report.tables.read_results`.
@@ -36,11 +41,15 @@ def write_report(paths: list[str | Path], out: str | Path, *, force: bool = Fals
     check_folder(out)
     if out.exists():
         check_output(report_path, force=force)
-    results = tables.read_results(paths, prefer=prefer)
+    results = tables.read_results(paths, prefer=prefer) if paths or sections is None else tables.Results(
+        pd.DataFrame(), pd.DataFrame())
     plot_files: dict[str, str] = {}
     if plots:
         from .plots import write_plots
 
         plot_files = write_plots(results, out / "plots", relative_to=out)
-    write_text(report_path, render(results, plot_files))
+    text = render(results, plot_files)
+    if sections is not None:
+        text += "\n" + "\n".join(sections(out, plots))
+    write_text(report_path, text)
     return report_path

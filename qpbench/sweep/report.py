@@ -1,0 +1,252 @@
+"""The report's sweep section: failure rates with confidence intervals, paired comparisons, ECDFs, worst instances.
+
+Every number is recomputed from ``sweep.csv`` (:mod:`qpbench.sweep.rows`).
+
+- **Rates**: per backend, the share of runs whose verdict is ``unsafe``,
+  ``diverged``, ``limits`` and ``failed`` (a run that raised or whose worker
+  was lost counts as failed) among the runs of valid instances, with 95 %
+  Wilson score intervals (:func:`wilson`): unlike the normal approximation
+  they stay inside [0, 1] and are honest at 0 of n.
+- **Paired comparisons**: two backends on the same instances. Of the
+  instances both ran, how many are ``ok`` with A and not with B, and the
+  reverse; McNemar's exact test (a two-sided binomial test of the discordant
+  pairs, :func:`mcnemar_exact`) says whether the difference could be chance.
+- **Distributions**: ECDFs of tracking error, force error (max after 2 s),
+  closest approach d_min and p99 solve time, one line per backend.
+- **Worst instances**: per backend, the runs with the worst verdicts and the
+  smallest margin to ``d_safe``, each with the command that re-runs it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..exceptions import InputError
+
+__all__ = ["is_sweep_csv", "mcnemar_exact", "split_sweep_paths", "sweep_section", "wilson"]
+
+#: z of a two-sided 95 % interval.
+Z95 = 1.959963984540054
+#: Verdict severity, worst first (an ``error``/``crashed`` row's verdict is ``failed``).
+SEVERITY = ("failed", "unsafe", "limits", "diverged", "ok")
+#: Runs listed per backend among the worst.
+WORST = 5
+#: ECDF panels: column, label, scale.
+ECDF_PANELS = (
+    ("tracking_max_after_2s", "max |tracking error| after 2 s [mm]", 1e3),
+    ("force_error_max_after_2s", "max |force error| after 2 s [N]", 1.0),
+    ("min_obstacle_distance", "d_min [mm]", 1e3),
+    ("solve_time_p99_s", "p99 solve time [us]", 1e6),
+)
+
+
+def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of a proportion ``k / n`` (``(nan, nan)`` when ``n = 0``)."""
+    if n == 0:
+        return math.nan, math.nan
+    p = k / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def mcnemar_exact(b: int, c: int) -> float:
+    """Two-sided exact McNemar p-value of ``b`` and ``c`` discordant pairs (1 when there are none)."""
+    if b + c == 0:
+        return 1.0
+    from scipy.stats import binomtest
+
+    return float(binomtest(b, b + c, 0.5).pvalue)
+
+
+def is_sweep_csv(path: Path) -> bool:
+    """``path`` starts with the sweep table's header."""
+    from .rows import COLUMNS
+
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            return fh.readline().rstrip("\n") == ",".join(COLUMNS)
+    except OSError:
+        return False
+
+
+def split_sweep_paths(paths) -> tuple[list[Path], list[Path]]:
+    """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
+    from ..report.inputs import expand_paths
+
+    files = expand_paths(paths)
+    sweeps = [p for p in files if p.suffix == ".csv" and is_sweep_csv(p)]
+    return [p for p in files if p not in sweeps], sweeps
+
+
+def _read(path: Path) -> pd.DataFrame:
+    try:
+        df = pd.read_csv(path, keep_default_na=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
+        raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
+    df = df.drop_duplicates(["instance", "backend"], keep="last")
+    df["verdict"] = df["verdict"].fillna("").astype(str)
+    df["folder"] = str(path.parent)
+    return df
+
+
+def rate_rows(df: pd.DataFrame) -> list[list]:
+    """Per backend: runs, invalid instances, ok, and each bad verdict's rate with its 95 % interval."""
+    out = []
+    for backend, g in df.groupby("backend", sort=True):
+        valid = g[g["status"] != "invalid_scenario"]
+        n = len(valid)
+        row = [backend, n, int((g["status"] == "invalid_scenario").sum()), int((valid["verdict"] == "ok").sum())]
+        for verdict in ("unsafe", "diverged", "limits", "failed"):
+            k = int((valid["verdict"] == verdict).sum())
+            lo, hi = wilson(k, n)
+            row.append(f"{k} ({100 * k / n:.1f} %, {100 * lo:.1f}-{100 * hi:.1f})" if n else "-")
+        row.append(int(valid["status"].isin(["error", "crashed"]).sum()))
+        out.append(row)
+    return out
+
+
+def paired_rows(df: pd.DataFrame) -> list[list]:
+    """Every pair of backends on the instances both ran: counts and McNemar's exact p-value."""
+    valid = df[df["status"] != "invalid_scenario"]
+    ok = valid.pivot_table(index="instance", columns="backend", values="verdict",
+                           aggfunc=lambda v: v.iloc[-1] == "ok")
+    backends = sorted(ok.columns)
+    out = []
+    for i, a in enumerate(backends):
+        for b in backends[i + 1:]:
+            both = ok[[a, b]].dropna()
+            if both.empty:
+                continue
+            xa, xb = both[a].astype(bool).to_numpy(), both[b].astype(bool).to_numpy()
+            n10, n01 = int((xa & ~xb).sum()), int((~xa & xb).sum())
+            out.append([a, b, len(both), int((xa & xb).sum()), n10, n01, int((~xa & ~xb).sum()),
+                        mcnemar_exact(n10, n01)])
+    return out
+
+
+def _quantile_rows(df: pd.DataFrame) -> list[list]:
+    out = []
+    for backend, g in df[df["status"] == "ok"].groupby("backend", sort=True):
+        row = [backend]
+        for col, _, scale in ECDF_PANELS:
+            v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale
+            row += [np.median(v), np.quantile(v, 0.9), np.max(v)] if len(v) else [None] * 3
+        for col in ("t_converge_force_s", "t_converge_tracking_s"):
+            v = pd.to_numeric(g[col], errors="coerce")
+            row += [v.median() if v.notna().any() else None, int(v.isna().sum())]
+        row += [int((pd.to_numeric(g["ticks_over_1ms"], errors="coerce") > 0).sum())]
+        out.append(row)
+    return out
+
+
+def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
+    """Per backend the ``k`` worst runs: worst verdict first, then the smallest margin to ``d_safe``."""
+    valid = df[df["status"] != "invalid_scenario"].copy()
+    valid["severity"] = valid["verdict"].map({v: i for i, v in enumerate(SEVERITY)}).fillna(0)
+    margin = pd.to_numeric(valid["min_obstacle_distance"], errors="coerce") - pd.to_numeric(valid["d_safe"],
+                                                                                           errors="coerce")
+    valid["margin"] = margin.fillna(np.inf)
+    valid["tracking"] = -pd.to_numeric(valid["tracking_max_after_2s"], errors="coerce").fillna(0)
+    out = []
+    for backend, g in valid.groupby("backend", sort=True):
+        for r in g.sort_values(["severity", "margin", "tracking"]).head(k).to_dict("records"):
+            if r["verdict"] == "ok":
+                continue
+            path = Path(r["folder"]) / str(r["instance_file"])
+            reasons = r["verdict_reasons"] if isinstance(r["verdict_reasons"], str) else r.get("error", "")
+            out.append([backend, r["instance"], r["verdict"], r["min_obstacle_distance"] * 1e3
+                        if pd.notna(r["min_obstacle_distance"]) else None, str(reasons)[:160],
+                        f"`qpbench simulate --scenario {path} --backend {backend}`"])
+    return out
+
+
+def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
+    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend, runs with a result only."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+    ok = df[df["status"] == "ok"]
+    for ax, (col, label, scale) in zip(axes.flat, ECDF_PANELS):
+        for backend, g in ok.groupby("backend", sort=True):
+            v = np.sort(pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale)
+            if len(v):
+                ax.step(np.r_[v[0], v], np.r_[0.0, np.arange(1, len(v) + 1) / len(v)], where="post", label=backend)
+        if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
+            ax.set_xscale("log")
+        if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
+            ax.axvline(float(ok["d_safe"].dropna().iloc[0]) * 1e3, color="k", lw=0.8, ls="--", label="d_safe")
+        ax.set_xlabel(label)
+        ax.set_ylabel("fraction of runs")
+        ax.set_ylim(0.0, 1.02)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+            break
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _manifest_lines(folder: Path) -> list[str]:
+    try:
+        m = json.loads((folder / "sweep.json").read_text())
+    except (OSError, ValueError):
+        return []
+    duration = f"{m['duration']} s (the sweep's)" if m.get("duration") else "the base scenario's"
+    return [f"Sweep file `{m.get('sweep_file')}` (sha256 {str(m.get('sweep_sha256'))[:16]}), base scenario "
+            f"`{m.get('base')}`, seed {m.get('seed')}, {m.get('samples')} instances, duration {duration}; "
+            f"time to converge: within {m.get('force_band_n')} N and {m.get('tracking_band_m')} m to the end.\n"]
+
+
+def sweep_section(paths: list[Path], out: Path, plots: bool = True) -> list[str]:
+    """Markdown lines of the sweep section for the sweep tables ``paths`` (plots into ``out/plots``)."""
+    from ..report.markdown import md_table, slug
+
+    lines = ["## Sweeps\n", "Randomised instances of a scenario, each in closed loop with each backend "
+             "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n"]
+    for path in paths:
+        df = _read(path)
+        name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
+        lines.append(f"### Sweep {name}\n")
+        lines += _manifest_lines(path.parent)
+        lines.append(md_table(["backend", "runs", "invalid instances", "ok", "unsafe", "diverged", "limits", "failed",
+                               "of which error/crashed"], rate_rows(df)))
+        pairs = paired_rows(df)
+        if pairs:
+            lines.append("Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
+                         "pairs):\n")
+            lines.append(md_table(["A", "B", "instances", "both ok", "A ok, B not", "B ok, A not", "neither",
+                                   "p (McNemar)"], pairs))
+        lines.append("Distributions over the runs with a result (median, p90, max; time to converge: median, "
+                     "runs not converged at the end):\n")
+        lines.append(md_table(
+            ["backend", "track p50 mm", "p90", "max", "force err p50 N", "p90", "max", "d_min p50 mm", "p90", "max",
+             "p99 solve p50 us", "p90", "max", "t conv. force s", "not conv.", "t conv. track s", "not conv.",
+             "runs with ticks > 1 ms"], _quantile_rows(df)))
+        concurrent = pd.to_numeric(df["concurrent_solves"], errors="coerce").max()
+        if pd.notna(concurrent) and concurrent > 1:
+            lines.append(f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
+                         "host: they are disturbed; take timings with `--jobs 1`.\n")
+        if plots:
+            key = f"sweep_ecdf_{slug(path.parent.name)}_{slug(name)}"
+            ecdf_plot(df, out / "plots" / f"{key}.png", f"sweep {name}")
+            lines.append(f"![ECDFs, sweep {name}](plots/{key}.png)\n")
+        worst = worst_rows(df)
+        if worst:
+            lines.append("Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
+                         "command:\n")
+            lines.append(md_table(["backend", "instance", "verdict", "d_min mm", "why", "re-run"], worst))
+    return lines

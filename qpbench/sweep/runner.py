@@ -1,0 +1,173 @@
+"""A sweep's run: sample the instances, save them, run every (instance, backend), append the rows.
+
+``DIR`` (``--out``) holds:
+
+- ``sweep.json``: the manifest (the sweep file's text and SHA-256, seed,
+  sample count, duration, base scenario, backends, qpbench's version);
+- ``instances/<name>.toml``: every instance's full scenario file;
+- ``sweep.csv``: one row per (instance, backend) (:mod:`qpbench.sweep.rows`).
+
+Resuming (``resume=True``) keeps every row whose run gave a result (status
+``ok``) or whose instance is invalid, and runs the rest again: the missing
+keys (a killed sweep) and the ``error`` and ``crashed`` rows. It refuses a
+folder made from another sweep file or with another duration; the sample
+count and the backends may differ (instance ``i`` is the same whatever the
+count).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..atomic import atomic_path, check_folder, check_output, write_text
+from ..exceptions import InputError
+from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
+from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row
+from .sample import Instance, sample_instances
+from .spec import SweepSpec
+from .task import SweepTask, run_task
+
+log = logging.getLogger("qpbench.sweep")
+
+__all__ = ["MANIFEST_NAME", "INSTANCE_DIR", "SweepOutcome", "run_sweep", "read_sweep_rows"]
+
+MANIFEST_NAME = "sweep.json"
+INSTANCE_DIR = "instances"
+#: Statuses a resumed sweep keeps.
+KEPT_STATUSES = ("ok", "invalid_scenario")
+
+
+@dataclass
+class SweepOutcome:
+    """What :func:`run_sweep` did: the table's rows (one per key), how many ran now, how many failed to run."""
+
+    rows: list[dict]
+    csv_path: Path
+    ran: int
+    kept: int
+    failed: int
+
+
+def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
+    from .. import __version__
+
+    return {
+        # samples, backends: of every run into the folder (a resumed run merges them)
+        "sweep": spec.name, "sweep_file": str(spec.path), "sweep_sha256": spec.sha256, "sweep_text": spec.text,
+        "seed": spec.seed, "samples": spec.samples, "duration": spec.duration, "base": spec.base,
+        "base_file": str(spec.base_path), "backends": backends, "qpbench_version": __version__,
+        "force_band_n": spec.force_band, "tracking_band_m": spec.tracking_band,
+    }
+
+
+def _check_resumable(out: Path, spec: SweepSpec) -> None:
+    path = out / MANIFEST_NAME
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path) from None
+    if old.get("sweep_sha256") != spec.sha256:
+        raise InputError(f"cannot resume: made from another sweep file ({old.get('sweep_file')}); use --force",
+                         path=path, key="sweep_sha256")
+    if old.get("duration") != spec.duration:
+        raise InputError(f"cannot resume: made with duration {old.get('duration')}, not {spec.duration}; use --force",
+                         path=path, key="duration")
+
+
+def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
+    """The rows of ``sweep.csv`` as strings, the last row of each key kept (a half-written line dropped)."""
+    rows = read_results(csv_path, repair=repair, columns=COLUMNS, kind="sweep").rows
+    last = {tuple(r[c] for c in KEY_COLUMNS): r for r in rows}
+    return list(last.values())
+
+
+def _meta(spec: SweepSpec, inst: Instance, backend: str) -> dict:
+    return {"instance": inst.name, "backend": backend, "instance_file": f"{INSTANCE_DIR}/{inst.name}.toml",
+            "sample": inst.index, "sweep": spec.name, "base_scenario": spec.base, "parameters": inst.values,
+            "duration": spec.duration, "force_band": spec.force_band, "tracking_band": spec.tracking_band}
+
+
+def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
+    csv_path = out / CSV_NAME
+    check_folder(out)
+    check_output(out / CSV_NAME, force=force, resume=resume, make_parent=True)  # out is created below
+    if resume and csv_path.exists() and not force:
+        _check_resumable(out, spec)
+    elif force:
+        csv_path.unlink(missing_ok=True)
+        shutil.rmtree(out / INSTANCE_DIR, ignore_errors=True)
+    instances = sample_instances(spec)
+    for inst in instances:
+        path = out / INSTANCE_DIR / f"{inst.name}.toml"
+        if not path.exists() or path.read_text(encoding="utf-8") != inst.text:
+            write_text(path, inst.text)
+    manifest = _manifest(spec, backends)
+    if resume and (out / MANIFEST_NAME).exists():  # the table holds the earlier runs' rows too
+        old = json.loads((out / MANIFEST_NAME).read_text())
+        manifest["backends"] = list(dict.fromkeys(old.get("backends", []) + backends))
+        manifest["samples"] = max(int(old.get("samples", 0)), spec.samples)
+    write_text(out / MANIFEST_NAME, json.dumps(manifest, indent=2) + "\n")
+    kept = {}
+    if csv_path.exists():
+        kept = {tuple(r[c] for c in KEY_COLUMNS): r for r in read_sweep_rows(csv_path, repair=True)
+                if r["status"] in KEPT_STATUSES}
+    return instances, kept
+
+
+def run_sweep(spec: SweepSpec, backends: list[str], out: str | Path, executor, *, force: bool = False,
+              resume: bool = False, plugins: list[str] | None = None,
+              on_row: Callable[[dict], None] | None = None) -> SweepOutcome:
+    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.executors`) into ``out``.
+
+    Rows are appended to ``out/sweep.csv`` as runs end (``on_row`` is called
+    with each); an instance the scenario loader refuses gets an
+    ``invalid_scenario`` row per backend, a run that raises an ``error`` row, a
+    run whose worker was lost twice a ``crashed`` row. At the end the table is
+    rewritten atomically in instance and backend order, one row per key.
+
+    Raises:
+        OutputExistsError: ``out/sweep.csv`` exists without ``force`` or ``resume``.
+        InputError: resuming a folder of another sweep file or duration.
+    """
+    out = Path(out)
+    instances, kept = _prepare(out, spec, backends, force, resume)
+    csv_path = out / CSV_NAME
+    rows = dict(kept)
+    new = not csv_path.exists() or csv_path.stat().st_size == 0
+    ran = failed = 0
+    items = []
+    with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
+
+        def emit(row):
+            rows[(row["instance"], row["backend"])] = row
+            writer.write_rows([row])
+            if on_row is not None:
+                on_row(row)
+
+        for inst in instances:
+            for backend in backends:
+                if (inst.name, backend) in kept:
+                    continue
+                meta = _meta(spec, inst, backend)
+                if inst.invalid is not None:
+                    emit(failed_row(meta, "invalid_scenario", inst.invalid))
+                    continue
+                items.append(((inst.name, backend), SweepTask(meta, inst.text, tuple(plugins or ()))))
+        metas = {key: task.meta for key, task in items}
+        for done in executor.run(run_task, items):
+            row = done.value if done.lost is None else failed_row(metas[done.key], "crashed", done.lost)
+            row.update(executor=executor.name, host=done.host, worker=done.worker,
+                       concurrent_solves=done.concurrent, attempts=done.attempts)
+            ran += 1
+            failed += row["status"] in ("error", "crashed")
+            emit(row)
+    order = [(inst.name, b) for inst in instances for b in backends]
+    final = [rows[k] for k in order if k in rows] + [r for k, r in rows.items() if k not in set(order)]
+    with atomic_path(csv_path) as tmp:
+        tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
+    return SweepOutcome(final, csv_path, ran, len(kept), failed)

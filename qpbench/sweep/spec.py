@@ -1,0 +1,469 @@
+"""Sweep files: a base scenario and distributions over its parameters.
+
+A sweep file (TOML) names a base scenario and, per scenario key, a
+distribution to draw that key's value from for every instance::
+
+    [sweep]
+    name = "wall"                 # names the instances (wall-i00003)
+    base = "wall"                 # shipped scenario name, or a path (relative to this file)
+    seed = 1                      # every draw follows from it
+    samples = 500                 # instances
+    duration = 6.0                # s, optional: simulated time of every instance (default: the base's)
+    safe_start = true             # optional (default true): an instance starting inside d_safe is invalid
+
+    [convergence]                 # optional: bands of the time-to-converge figures
+    force_band = 0.5              # N   (default: a tenth of the base's [verdict] max_force_error)
+    tracking_band = 1e-4          # m   (default: a tenth of its max_tracking_error)
+
+    [[obstacles]]                 # optional: obstacles added to the base's (scenario schema)
+    kind = "disk"
+    name = "post"
+    center = [0.1, 0.3]
+    radius = 0.03
+    velocity = [0.0, 0.0]
+
+    [parameters]                  # scenario key = distribution
+    "robot.theta0" = { dist = "normal", std = 0.05 }
+    "controller.desired_force" = { dist = "uniform", low = 10.0, high = 30.0 }
+    "obstacles[1].radius" = { dist = "loguniform", low = 0.01, high = 0.05 }
+    "simulation.dt" = { dist = "choice", values = [0.001, 0.0005] }
+
+Keys are the scenario's own dotted keys (those of ``qpbench simulate
+--set``), quoted, or nested tables (``[parameters.controller]``
+``desired_force = {...}``). What the sweeps of paper-like situations vary:
+
+=============================  ===========================================
+quantity                       scenario key
+=============================  ===========================================
+start configuration theta0     ``robot.theta0`` [rad]
+link lengths                   ``robot.link_lengths`` [m]
+obstacle position              ``obstacles[i].point`` (line), ``.center``
+                               (disk), ``.a``/``.b`` (segment) [m]
+obstacle size                  ``obstacles[i].radius`` (disk) [m]
+obstacle velocity              ``obstacles[i].velocity`` [m/s]
+desired force Fd               ``controller.desired_force`` [N]
+path centre, amplitude, speed  ``path.centre``, ``path.amplitude`` [m],
+                               ``path.omega`` [rad/s]
+force-sensor noise             ``contact.force_noise_std`` [N]
+                               (``contact.noise_seed`` with ``integers``)
+contact stiffness              ``contact.stiffness`` [N/m]
+control period dt              ``simulation.dt`` [s]
+=============================  ===========================================
+
+Distributions (every bound a number, or a list of the key's shape; a vector
+key draws each component independently):
+
+- ``uniform``: ``low``, ``high``; or ``spread``: the base value +- spread;
+- ``normal``: ``std``, ``mean`` (default: the base value), optional ``low``,
+  ``high`` (truncated: draws outside are drawn again);
+- ``loguniform``: ``low``, ``high`` (> 0): uniform in ``log``;
+- ``choice``: ``values`` (each a whole value of the key), optional ``weights``;
+- ``integers``: ``low``, ``high`` (inclusive), for integer keys.
+
+``same = true`` (uniform, normal, loguniform; numbers only) draws once for
+every component of a vector key: with ``spread`` (or a normal around the
+base) the same offset is added to each component, e.g. ``path.centre``
+moved along (1, 1), which is wall's surface tangent; else every component
+gets the value drawn, e.g. ``path.amplitude = [a, a]``.
+
+Instance ``i`` draws key ``k`` from its own stream
+``numpy.random.default_rng([seed, i, crc32(k)])``: the same instance has the
+same values whatever the sample count and whatever other keys are swept.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import hashlib
+import math
+import re
+import tomllib
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..exceptions import InputError, ScenarioError
+
+__all__ = ["DISTRIBUTIONS", "Distribution", "SweepSpec", "load_sweep", "parse_sweep"]
+
+#: Distribution kinds and their allowed fields (``dist`` aside).
+DISTRIBUTIONS = {
+    "uniform": ("low", "high", "spread", "same"),
+    "normal": ("mean", "std", "low", "high", "same"),
+    "loguniform": ("low", "high", "same"),
+    "choice": ("values", "weights"),
+    "integers": ("low", "high"),
+}
+
+#: Names a reader may try for a key, and the scenario key meant.
+ALIASES = {
+    "theta0": "robot.theta0", "fd": "controller.desired_force", "desired_force": "controller.desired_force",
+    "dt": "simulation.dt", "stiffness": "contact.stiffness", "noise": "contact.force_noise_std",
+    "force_noise_std": "contact.force_noise_std", "link_lengths": "robot.link_lengths",
+    "centre": "path.centre", "center": "path.centre", "amplitude": "path.amplitude", "speed": "path.omega",
+    "omega": "path.omega", "duration": "[sweep] duration",
+}
+
+_SWEEP_KEYS = {"name": str, "base": str, "seed": int, "samples": int, "duration": float, "safe_start": bool}
+_TOP = ("sweep", "parameters", "convergence", "obstacles")
+_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
+#: Draws of a truncated normal tried before giving up on a component.
+_MAX_REDRAWS = 1000
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """One key's distribution, checked against the base value's shape.
+
+    Attributes:
+        key: The scenario key (``controller.desired_force``).
+        kind: One of :data:`DISTRIBUTIONS`.
+        params: Its fields as given (numbers as arrays of the key's shape).
+        base: The base scenario's value (a float, an int or an array).
+    """
+
+    key: str
+    kind: str
+    params: dict
+    base: object
+
+    def draw(self, rng: np.random.Generator):
+        """One value of the key (a float, an int, or a list of the base's shape)."""
+        p, base = self.params, self.base
+        shape = np.shape(base)
+        if self.kind == "choice":
+            i = int(rng.choice(len(p["values"]), p=p.get("weights")))
+            return copy.deepcopy(p["values"][i])
+        if self.kind == "integers":
+            return int(rng.integers(p["low"], p["high"], endpoint=True))
+        if p.get("same"):  # one draw for every component: an offset from the base value, or the value itself
+            relative = "spread" in p or (self.kind == "normal" and "mean" not in p)
+            first = float(np.ravel(base)[0])
+            one = Distribution(self.key, self.kind, {k: v for k, v in p.items() if k != "same"}, first).draw(rng)
+            value = base + (one - first) if relative else np.full(shape, one)
+            return value.tolist() if shape else float(value)
+        if self.kind == "uniform":
+            low, high = (base - p["spread"], base + p["spread"]) if "spread" in p else (p["low"], p["high"])
+            value = rng.uniform(low, high, size=shape)
+        elif self.kind == "loguniform":
+            value = np.exp(rng.uniform(np.log(p["low"]), np.log(p["high"]), size=shape))
+        else:
+            value = self._truncated_normal(rng, shape)
+        return value.tolist() if shape else float(value)
+
+    def _truncated_normal(self, rng, shape):
+        p = self.params
+        mean = p.get("mean", np.asarray(self.base, dtype=float))
+        mean, std = np.broadcast_to(mean, shape), np.broadcast_to(p["std"], shape)
+        low = np.broadcast_to(p.get("low", -np.inf), shape)
+        high = np.broadcast_to(p.get("high", np.inf), shape)
+        value = np.asarray(rng.normal(mean, std), dtype=float)
+        for _ in range(_MAX_REDRAWS):
+            bad = (value < low) | (value > high)
+            if not bad.any():
+                return value
+            value = np.where(bad, rng.normal(mean, std), value)
+        raise InputError(f"a truncated normal draw stayed outside [low, high] {_MAX_REDRAWS} times", key=self.key)
+
+
+@dataclass
+class SweepSpec:
+    """A parsed sweep file.
+
+    Attributes:
+        path: The sweep file.
+        text: Its text (kept in the output's manifest).
+        name, seed, samples: ``[sweep]`` values (``samples`` after any override).
+        duration: Simulated time of every instance [s], ``None``: the base's.
+        base: The base scenario's name or path as written.
+        base_path: The base scenario's file.
+        base_raw: The base scenario's tables (as ``tomllib`` reads them), with the
+            sweep's ``[[obstacles]]`` appended and ``duration`` set.
+        parameters: The distributions, in file order.
+        force_band: Band of the force's time to converge [N].
+        tracking_band: Band of the tracking error's time to converge [m].
+        safe_start: An instance whose start has a key point inside ``d_safe`` is invalid.
+    """
+
+    path: Path
+    text: str
+    name: str
+    seed: int
+    samples: int
+    duration: float | None
+    base: str
+    base_path: Path
+    base_raw: dict
+    parameters: list[Distribution] = field(default_factory=list)
+    force_band: float = 0.2
+    tracking_band: float = 1e-4
+    safe_start: bool = True
+
+    @property
+    def sha256(self) -> str:
+        return hashlib.sha256(self.text.encode("utf-8")).hexdigest()
+
+    def rng(self, index: int, key: str) -> np.random.Generator:
+        """The random stream of instance ``index``'s draw of ``key``."""
+        return np.random.default_rng([self.seed, index, zlib.crc32(key.encode("utf-8"))])
+
+
+def load_sweep(path: str | Path, samples: int | None = None, duration: float | None = None) -> SweepSpec:
+    """Read and check a sweep file (``samples``, ``duration`` override the file's).
+
+    Raises:
+        InputError: unreadable file, unknown or missing key, impossible
+            distribution, unknown base scenario (one line naming the file and key).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the sweep file: {exc}", path=path) from None
+    return parse_sweep(text, path, samples=samples, duration=duration)
+
+
+def parse_sweep(text: str, path: str | Path, samples: int | None = None, duration: float | None = None) -> SweepSpec:
+    """Parse sweep-file ``text`` (``path`` names it in errors and anchors a relative ``base``)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", path=path) from None
+    for key in raw:
+        if key not in _TOP:
+            raise InputError(f"unknown table (expected: {', '.join(_TOP)})", path=path, key=key)
+    head = _sweep_table(raw.get("sweep"), path)
+    if samples is not None:
+        head["samples"] = _positive_int(samples, path, "--samples")
+    if duration is not None:
+        head["duration"] = duration
+    if head.get("duration") is not None and not (_number(head["duration"]) and head["duration"] > 0):
+        raise InputError(f"must be a positive number of seconds, got {head['duration']!r}", path=path, key="sweep.duration")
+    base_path, base_raw = _base(head["base"], path)
+    extra = raw.get("obstacles", [])
+    if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
+        raise InputError("expected [[obstacles]] tables", path=path, key="obstacles")
+    base_raw["obstacles"] = list(base_raw.get("obstacles", [])) + copy.deepcopy(extra)
+    if head.get("duration") is not None:
+        base_raw.setdefault("simulation", {})["duration"] = float(head["duration"])
+    scenario = _check_base(base_raw, path)
+    params = raw.get("parameters", {})
+    if not isinstance(params, dict) or not params:
+        raise InputError("expected a [parameters] table with at least one key", path=path, key="parameters")
+    distributions = [_distribution(key, spec, base_raw, path) for key, spec in _flatten(params, path)]
+    force_band, tracking_band = _bands(raw.get("convergence", {}), scenario.verdict, path)
+    return SweepSpec(path=path, text=text, name=head["name"], seed=head["seed"], samples=head["samples"],
+                     duration=head.get("duration"), base=head["base"], base_path=base_path, base_raw=base_raw,
+                     parameters=distributions, force_band=force_band, tracking_band=tracking_band,
+                     safe_start=head.get("safe_start", True))
+
+
+def _positive_int(value, path, key) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        raise InputError(f"must be an integer >= 1, got {value!r}", path=path, key=key)
+    return value
+
+
+def _sweep_table(head, path) -> dict:
+    if not isinstance(head, dict):
+        raise InputError("missing table", path=path, key="sweep")
+    for key in head:
+        if key not in _SWEEP_KEYS:
+            raise InputError(f"unknown key (expected one of: {', '.join(_SWEEP_KEYS)})", path=path, key=f"sweep.{key}")
+    for key in ("name", "base", "seed", "samples"):
+        if key not in head:
+            raise InputError("missing key", path=path, key=f"sweep.{key}")
+    for key in ("name", "base"):
+        if not isinstance(head[key], str) or not head[key]:
+            raise InputError("expected a non-empty string", path=path, key=f"sweep.{key}")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", head["name"]):
+        raise InputError("letters, digits, '_', '.' and '-' only (it names files)", path=path, key="sweep.name")
+    if not isinstance(head["seed"], int) or isinstance(head["seed"], bool) or head["seed"] < 0:
+        raise InputError(f"expected an integer >= 0, got {head['seed']!r}", path=path, key="sweep.seed")
+    _positive_int(head["samples"], path, "sweep.samples")
+    if not isinstance(head.get("safe_start", True), bool):
+        raise InputError("expected true or false", path=path, key="sweep.safe_start")
+    return dict(head)
+
+
+def _base(name: str, path: Path) -> tuple[Path, dict]:
+    from ..sim.scenario import scenario_path
+
+    candidate = (path.parent / name) if ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute() else name
+    try:
+        base_path = scenario_path(candidate)
+        raw = tomllib.loads(base_path.read_text(encoding="utf-8"))
+    except ScenarioError as exc:
+        raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise InputError(f"base scenario {name!r} unreadable: {exc}", path=path, key="sweep.base") from None
+    return base_path, raw
+
+
+def _check_base(base_raw: dict, path: Path):
+    """The base scenario with the sweep's obstacles and duration, validated."""
+    from ..sim.scenario import parse_scenario
+    from .toml_text import dumps
+
+    try:
+        return parse_scenario(dumps(base_raw), path=path)
+    except ScenarioError as exc:
+        raise InputError(f"base scenario with this sweep's obstacles and duration: {exc.message}", path=path,
+                         key=exc.key) from None
+
+
+def _flatten(params: dict, path, prefix: str = ""):
+    for key, value in params.items():
+        full = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict) and "dist" not in value:
+            yield from _flatten(value, path, full)
+        elif isinstance(value, dict):
+            yield full, value
+        else:
+            raise InputError("expected a distribution table, e.g. { dist = \"uniform\", low = 0.0, high = 1.0 }",
+                             path=path, key=f"parameters.{full}")
+
+
+def _base_value(key: str, base_raw: dict, path):
+    where = f"parameters.{key}"
+    match = _KEY.fullmatch(key)
+    if match is None:
+        hint = ALIASES.get(key.casefold())
+        raise InputError("unknown parameter key" + (f"; the key is {hint}" if hint else
+                         " (expected a scenario key TABLE.KEY or obstacles[i].KEY, e.g. controller.desired_force)"),
+                         path=path, key=where)
+    table, index, name = match.groups()
+    if index is not None:
+        obstacles = base_raw.get("obstacles", []) if table == "obstacles" else []
+        if table != "obstacles" or int(index) >= len(obstacles):
+            raise InputError(f"no such obstacle (base and sweep have {len(obstacles)})", path=path, key=where)
+        target = obstacles[int(index)]
+    else:
+        target = base_raw.get(table)
+        if table == "obstacles" or not isinstance(target, dict):
+            raise InputError(f"unknown parameter key: the base scenario has no table [{table}]", path=path, key=where)
+    if name not in target:
+        close = difflib.get_close_matches(name, list(target), n=1)
+        hint = f"; did you mean {table}{'' if index is None else f'[{index}]'}.{close[0]}?" if close else ""
+        raise InputError(f"unknown parameter key: [{table}] has no key {name!r}{hint}", path=path, key=where)
+    return target[name]
+
+
+def _distribution(key: str, spec: dict, base_raw: dict, path) -> Distribution:
+    where = f"parameters.{key}"
+    base = _base_value(key, base_raw, path)
+    kind = spec.get("dist")
+    if kind not in DISTRIBUTIONS:
+        raise InputError(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", path=path,
+                         key=f"{where}.dist")
+    for f in spec:
+        if f != "dist" and f not in DISTRIBUTIONS[kind]:
+            raise InputError(f"unknown field of a {kind} distribution (expected: {', '.join(DISTRIBUTIONS[kind])})",
+                             path=path, key=f"{where}.{f}")
+    if kind == "choice":
+        return Distribution(key, kind, _choice(spec, base, path, where), base)
+    is_int = isinstance(base, int) and not isinstance(base, bool)
+    if kind == "integers" or is_int:
+        if not (kind == "integers" and is_int):
+            raise InputError(f"{'an integer key takes integers or choice' if is_int else 'integers is for integer keys'}",
+                             path=path, key=f"{where}.dist")
+        lo, hi = spec.get("low"), spec.get("high")
+        if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
+            raise InputError(f"need integers low <= high, got {lo!r}, {hi!r}", path=path, key=where)
+        return Distribution(key, kind, {"low": lo, "high": hi}, base)
+    base_arr = _numeric(base, None, path, where, "the base value")
+    same = spec.get("same", False)
+    if not isinstance(same, bool):
+        raise InputError(f"expected true or false, got {same!r}", path=path, key=f"{where}.same")
+    shape = None if same else np.shape(base_arr)  # same: numbers only, checked below
+    params = {f: _numeric(v, shape, path, f"{where}.{f}", f) for f, v in spec.items() if f not in ("dist", "same")}
+    if same and any(np.ndim(v) for v in params.values()):
+        raise InputError("same = true takes numbers, not lists (one draw for every component)", path=path,
+                         key=f"{where}.same")
+    if same:
+        params["same"] = True
+    _check_bounds(kind, params, path, where)
+    return Distribution(key, kind, params, base_arr if np.ndim(base_arr) else float(base_arr))
+
+
+def _numeric(value, shape, path, where, what):
+    """``value`` as a float array broadcastable to ``shape`` (or any numeric shape when ``shape`` is None)."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.dtype == object or not np.all(np.isfinite(arr)) or isinstance(value, bool):
+        raise InputError(f"{what}: expected finite numbers, got {value!r}", path=path, key=where)
+    if shape is not None and arr.ndim and arr.shape != tuple(shape):
+        raise InputError(f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
+                         path=path, key=where)
+    return arr
+
+
+def _check_bounds(kind: str, p: dict, path, where) -> None:
+    def need(*names):
+        for n in names:
+            if n not in p:
+                raise InputError(f"a {kind} distribution needs {' and '.join(names)}", path=path, key=f"{where}.{n}")
+
+    if kind == "uniform":
+        if "spread" in p:
+            if "low" in p or "high" in p:
+                raise InputError("give either spread or low and high", path=path, key=f"{where}.spread")
+            if np.any(p["spread"] < 0):
+                raise InputError("spread must be >= 0", path=path, key=f"{where}.spread")
+            return
+        need("low", "high")
+    elif kind == "loguniform":
+        need("low", "high")
+        if np.any(p["low"] <= 0):
+            raise InputError("loguniform needs low > 0", path=path, key=f"{where}.low")
+    elif kind == "normal":
+        need("std")
+        if np.any(p["std"] < 0):
+            raise InputError("std must be >= 0", path=path, key=f"{where}.std")
+    if "low" in p and "high" in p and np.any(p["low"] > p["high"]):
+        raise InputError("low must be <= high", path=path, key=f"{where}.low")
+
+
+def _choice(spec: dict, base, path, where) -> dict:
+    values = spec.get("values")
+    if not isinstance(values, list) or not values:
+        raise InputError("a choice needs a non-empty list of values", path=path, key=f"{where}.values")
+    for v in values:
+        if type(v) is not type(base) and not (_number(v) and _number(base)):
+            raise InputError(f"each value must be like the base value {base!r}, got {v!r}", path=path,
+                             key=f"{where}.values")
+        if isinstance(base, list) and np.shape(v) != np.shape(base):
+            raise InputError(f"each value must have the base value's shape {list(np.shape(base))}, got {v!r}",
+                             path=path, key=f"{where}.values")
+    out = {"values": values}
+    if "weights" in spec:
+        w = spec["weights"]
+        if not (isinstance(w, list) and len(w) == len(values) and all(_number(x) and x >= 0 for x in w) and sum(w) > 0):
+            raise InputError("weights: one number >= 0 per value, not all zero", path=path, key=f"{where}.weights")
+        out["weights"] = [x / sum(w) for x in w]
+    return out
+
+
+def _bands(conv, verdict, path) -> tuple[float, float]:
+    if not isinstance(conv, dict):
+        raise InputError("expected a table", path=path, key="convergence")
+    for key in conv:
+        if key not in ("force_band", "tracking_band"):
+            raise InputError("unknown key (expected force_band, tracking_band)", path=path, key=f"convergence.{key}")
+    out = []
+    for key, default in (("force_band", verdict.max_force_error / 10), ("tracking_band", verdict.max_tracking_error / 10)):
+        value = conv.get(key, default)
+        if not (_number(value) and value > 0):
+            raise InputError(f"must be a positive number, got {value!r}", path=path, key=f"convergence.{key}")
+        out.append(float(value))
+    return out[0], out[1]
