@@ -226,16 +226,8 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
     import matplotlib.pyplot as plt
     from matplotlib import animation
 
-    from ..exceptions import ParamError
-
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".gif", ".mp4"):
-        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate")
-    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
-        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
-    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
-        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate")
+    _check_animation(path, fps, speed)
 
     arm, keys, surface, obstacles = _frame_parts(scenario)
     theta = _thetas(log, arm.n)
@@ -280,11 +272,34 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
         return [link_line, keys_plot, trace, label, *moving_artists]
 
     anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    _save_animation(anim, fig, path, fps, len(frames), progress)
+    return path
+
+
+def _check_animation(path: Path, fps: float, speed: float) -> None:
+    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
+    from ..exceptions import ParamError
+
+    suffix = path.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate")
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
+    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
+        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate")
+
+
+def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
+    """Write ``anim`` to ``path`` atomically (temporary file, then rename) and close ``fig``."""
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+
+    suffix = path.suffix.lower()
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(frames), unit="frame", desc=f"animate {path.name}", leave=False)
+        bar = tqdm(total=n_frames, unit="frame", desc=f"animate {path.name}", leave=False)
     callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
 
     writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
@@ -299,4 +314,3 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
         plt.close(fig)
         if tmp.exists():
             tmp.unlink()
-    return path

@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+# Each slot name imported on its own (the list repeats the other rnn modules'): the kernels read
+# them as plain module globals, which numba freezes as constants at compile time.
 from .layout import (
     CLAMP,
     COMPL,
@@ -194,6 +196,11 @@ def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
     return pr, du, co
 
 
+# Over 80 lines, kept whole on purpose: the integrator's main loop is one compiled loop (the
+# per-step functions it calls are already separate kernels, inlined by numba); moving its
+# set-up or its stopping tests out would add calls inside the loop or another compiled
+# function to rebind before the first compile, and the bit-identical tests against the
+# numpy twin (qpbench/rnn/integrate_numpy.py) pin its numbers.
 def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
     n = q.shape[0]
     me = b.shape[0]
@@ -245,6 +252,8 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
         rmax = _ratio_max_jit(prm[PMIN], prm[PMAX], sig2, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
+    # From here on the same lines as the numpy twin (qpbench/rnn/integrate_numpy.py), kept twice
+    # on purpose: the twin is this loop's reference in the tests and runs without numba.
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
         prm[STEPS] = NO_STABLE_STEP

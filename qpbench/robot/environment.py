@@ -188,6 +188,9 @@ class LineObstacle(Obstacle):
         return np.array([[self.KERNEL_KIND, *self.point, *self.normal, 0.0, *self.velocity]])
 
 
+# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest, primitives) on
+# purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
+# touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 

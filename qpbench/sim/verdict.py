@@ -103,6 +103,8 @@ def _g(x: float) -> str:
 
 def _failed_reasons(summary: dict) -> list[str]:
     out = []
+    # One branch per kind of tick that did not go as planned, each with its own sentence and
+    # details (first error, deadline): alike in shape, kept apart so each reads as its sentence.
     n = int(summary.get("error_ticks") or 0)
     if n:
         first = summary.get("first_error")
