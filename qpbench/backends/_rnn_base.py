@@ -36,7 +36,7 @@ _DEFAULTS = {
 SETTING_NAMES = tuple(_DEFAULTS)
 
 
-def positive(key: str, value, integer: bool = False, allow_none: bool = False, upper=None):
+def positive(key: str, value: object, integer: bool = False, allow_none: bool = False, upper: float | None = None) -> float | int | None:
     if value is None and allow_none:
         return None
     try:
@@ -234,7 +234,7 @@ class NetworkBackend(Backend):
 _EMPTIES: dict = {}
 
 
-def empty_rows(n: int):
+def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Cached read-only ``(zeros((0, n)), zeros(0))``."""
     pair = _EMPTIES.get(n)
     if pair is None:

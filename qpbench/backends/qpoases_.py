@@ -140,14 +140,14 @@ class QpoasesBackend(Backend):
     def reset(self) -> None:
         self._ws = None
 
-    def get_state(self):
+    def get_state(self) -> Workspace | None:
         """A deep copy of the ``SQProblem`` (working set, factorisations), or None before the first tick."""
         ws = self._ws
         if ws is None:
             return None
         return Workspace(ws.key, self._lib, self._preset, {}, self._nwsr, self._time_limit, clone_of=ws.handle)
 
-    def set_state(self, state) -> None:
+    def set_state(self, state: Workspace | None) -> None:
         if state is None:
             self._ws = None
         elif self._ws is not None and self._ws.key == state.key:

@@ -57,6 +57,7 @@ number of equalities changes, ``l2`` when the number of inequalities does.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -65,6 +66,9 @@ from ..rnn import network as nw
 from . import register
 from ._rnn_base import SETTING_NAMES, NetworkBackend
 from .base import BackendSolution
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 __all__ = ["SETTING_NAMES", "WORKING_SETTINGS", "RNNConverged", "RNNOnline", "RNNTuned", "TickSolution"]
 
@@ -184,7 +188,7 @@ class RNNOnline(NetworkBackend):
             self.name, strict,
         )
 
-    def solve(self, problem, warm_start=None) -> BackendSolution:
+    def solve(self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None) -> BackendSolution:
         """One tick of integration; see :meth:`Backend.solve` (same fields)."""
         start = _perf()
         fast = self._fast

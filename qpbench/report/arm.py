@@ -20,8 +20,14 @@ from __future__ import annotations
 import math
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..sim.scenario import Scenario
 
 __all__ = ["animate", "closest_approach", "draw_snapshot"]
 
@@ -33,7 +39,7 @@ def _thetas(log, n: int) -> np.ndarray:
     return log[[f"theta_{i}" for i in range(n)]].to_numpy(dtype=float)
 
 
-def closest_approach(log, scenario) -> dict | None:
+def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
     """Where and when a key point came closest to an obstacle.
 
     Returns ``{"t", "k", "key_point", "obstacle", "distance"}`` (distance in
@@ -122,7 +128,7 @@ def _frame_parts(scenario):
     return arm, keys, surface, obstacles
 
 
-def draw_snapshot(scenario, log, path: str | Path, *, instants: int = 8, title: str | None = None) -> Path:
+def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, instants: int = 8, title: str | None = None) -> Path:
     """Draw the run ``log`` of ``scenario`` as stick figures at ``instants`` times; save to ``path`` (PNG, SVG, PDF).
 
     Args:
@@ -200,7 +206,7 @@ def draw_snapshot(scenario, log, path: str | Path, *, instants: int = 8, title: 
     return path
 
 
-def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.0, progress: bool = False,
+def animate(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, fps: int = 20, speed: float = 1.0, progress: bool = False,
             title: str | None = None, dpi: int = 70) -> Path:
     """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
 

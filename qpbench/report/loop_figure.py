@@ -25,10 +25,14 @@ both drawn by :func:`closed_loop_figure`.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..sim import log as tick_log
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["closed_loop_figure", "run_figure"]
 
@@ -171,7 +175,7 @@ def _legend(fig, axes: dict, logs: dict) -> None:
                title="band on top: fallback\nor zero velocity", title_fontsize=7)
 
 
-def run_figure(frame, summary: dict, path: str | Path) -> Path:
+def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:
     """The figure of one run (``qpbench simulate --plot``): its tick log and its summary's names."""
     return closed_loop_figure(
         {summary["backend"]: frame}, path,

@@ -40,7 +40,7 @@ from .machine import machine_info, package_versions
 DIGITS = 4
 
 
-def fmt(value) -> str:
+def fmt(value: object) -> str:
     """One table cell: ``-`` for missing, ``inf``, integers as is, floats to 4 significant digits."""
     if value is None:
         return "-"

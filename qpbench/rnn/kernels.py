@@ -12,6 +12,7 @@ loop is :mod:`qpbench.rnn.integrate_numpy` (same algorithm, tested equal).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -53,6 +54,9 @@ from .layout import (
 )
 from .step_bound import _clamped_steps, _frobenius2, _gershgorin, _nominal_steps, _ratio_max
 from .integrate_numpy import _integrate_numpy
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
@@ -419,7 +423,7 @@ def numba_available() -> bool:
     return True
 
 
-def kernel(use_numba: bool = True):
+def kernel(use_numba: bool = True) -> Callable:
     """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
 
     ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the
@@ -454,7 +458,7 @@ def kernel(use_numba: bool = True):
     return _COMPILED
 
 
-def online_kernel(strict: bool = True, inline: bool = False):
+def online_kernel(strict: bool = True, inline: bool = False) -> Callable:
     """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``.
 
     Same arguments as :func:`kernel`'s result, ``sol`` of length
@@ -485,7 +489,7 @@ def online_kernel(strict: bool = True, inline: bool = False):
     return fn
 
 
-def packed_kernel():
+def packed_kernel() -> Callable:
     """The per-tick kernel on a packed buffer: ``f(buffer, xi, prm, sol) -> code``.
 
     Compiled for 1-D C-contiguous float64 arrays only. Returned is the

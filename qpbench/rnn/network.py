@@ -226,7 +226,7 @@ def step_note(prm: np.ndarray) -> str | None:
 _NO_SOL = np.zeros(0)
 
 
-def duals(qp: DenseQP, state: NetworkState):
+def duals(qp: DenseQP, state: NetworkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """qpsolvers duals ``(y, z, z_box)`` of a network state.
 
     ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with

@@ -6,11 +6,15 @@ See :mod:`qpbench.rnn.network` for the network (eq. 15) itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 
 @dataclass
@@ -80,7 +84,7 @@ def _f64(a, name: str, ndim: int) -> np.ndarray:
     return a
 
 
-def dense_qp(problem) -> DenseQP:
+def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
     """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`.
 
     Raises:
@@ -151,7 +155,7 @@ class NetworkState:
         return self.xi[: self.n]
 
     @v.setter
-    def v(self, value) -> None:
+    def v(self, value: np.ndarray) -> None:
         self.xi[: self.n] = value
 
     @property

@@ -92,11 +92,11 @@ class ContactSurface:
         """Restart the noise sequence from the seed."""
         self._rng = np.random.default_rng(self.seed)
 
-    def penetration(self, x) -> float:
+    def penetration(self, x: np.ndarray) -> float:
         """``delta = n . (x - point)`` in [m] (positive inside the surface)."""
         return float(self.normal[0] * x[0] + self.normal[1] * x[1] - self._offset)
 
-    def force(self, x, xdot) -> float:
+    def force(self, x: np.ndarray, xdot: np.ndarray) -> float:
         """Contact force magnitude along the normal in [N], as a sensor reads it (noise included).
 
         Args:

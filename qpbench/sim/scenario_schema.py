@@ -33,11 +33,15 @@ Obstacles (``[[obstacles]]``, each with ``kind``, ``name`` and ``velocity``
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..exceptions import ScenarioError
 from .verdict import DEFAULT_SAFETY_MARGIN
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 __all__ = ["check_simulation", "validate"]
 
@@ -144,7 +148,7 @@ def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
     return out
 
 
-def validate(raw: dict, file) -> tuple[dict, dict]:
+def validate(raw: dict, file: str | Path) -> tuple[dict, dict]:
     """The parsed TOML tables ``raw`` checked against the schema.
 
     Returns:
@@ -277,7 +281,7 @@ def _check_signs(table: dict, name: str, file, positive: tuple = (), non_negativ
             raise ScenarioError(f"must be >= 0, got {table[key]}", path=file, key=f"{name}.{key}")
 
 
-def check_simulation(data: dict, file) -> None:
+def check_simulation(data: dict, file: str | Path) -> None:
     s = data["simulation"]
     if not s["dt"] > 0:
         raise ScenarioError(f"must be > 0 [s], got {s['dt']}", path=file, key="simulation.dt")

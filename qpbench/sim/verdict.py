@@ -34,10 +34,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import log
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "DEFAULT_SAFETY_MARGIN", "VERDICTS", "VIOLATION_TOL", "Verdict", "VerdictSettings", "failed_run", "judge",
@@ -199,7 +203,7 @@ def _diverged_reasons(frame, settings: VerdictSettings) -> list[str]:
     return out
 
 
-def judge(frame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_columns: list[tuple[str, str]],
+def judge(frame: pd.DataFrame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_columns: list[tuple[str, str]],
           summary: dict) -> Verdict:
     """The verdict of one simulated run (rules in the module docstring).
 
