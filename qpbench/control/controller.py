@@ -146,11 +146,9 @@ def _build_packed_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
     )
 
 
-# Over 80 lines, kept whole on purpose: it is compiled by numba as one function (``njit`` of
-# this function alone, in ``_build_kernel_jit``); split into helpers, each helper would have
-# to be compiled too and rebound in this module's globals before the first compile, and the
-# tick's arrays would be rebuilt by several calls where one loop fills them. One compiled
-# function is what tests/test_controller.py compares against the numpy terms.
+# Over 80 lines, kept whole on purpose: numba compiles it as one function (``_build_kernel_jit``);
+# split, each helper would have to be compiled too and rebound in this module's globals before
+# the first compile. tests/test_controller.py compares this one function with the numpy terms.
 def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist):  # pragma: no cover - compiled
     """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick (see the module docstring)."""
     n = theta.shape[0]

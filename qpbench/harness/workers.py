@@ -36,7 +36,7 @@ PRELOAD = (
 _CTX = None
 
 
-def context():
+def context() -> multiprocessing.context.BaseContext:
     """The start method's context, every numba kernel compiled in this process first.
 
     Called before each worker starts: the warm-up compiles what the on-disk

@@ -30,6 +30,7 @@ from .verdict import VerdictSettings
 if TYPE_CHECKING:
     from ..control.adaptive import AdaptiveImpedance
     from ..control.controller import Controller
+    from ..control.terms import CosinePath, PolylinePath
 
 __all__ = [
     "Scenario", "apply_overrides", "load_scenario", "paper_scenarios", "parse_scenario", "scenario_names",
@@ -111,7 +112,7 @@ class Scenario:
             len(self.data["robot"]["link_lengths"]), kp["points_per_link"], kp["include_joints"], kp["link_radius"]
         )
 
-    def make_path(self):
+    def make_path(self) -> CosinePath | PolylinePath:
         from ..control.terms import CosinePath, PolylinePath
 
         p = self.data["path"]
