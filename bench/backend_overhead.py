@@ -268,13 +268,13 @@ class DirectQpoases:
         self.backend, self.lib, self.ws = backend, backend.prepare(), None
 
     def __call__(self, p):
-        from qpbench.backends.qpoases_ import _Workspace
+        from qpbench.backends._qpoases_shim import Workspace
 
         ws = self.ws
         if ws is None:
             b = self.backend
             key = (p.q.shape[0], p.A.shape[0], p.G.shape[0], True)
-            ws = self.ws = _Workspace(key, self.lib, b._preset, b._native, b._nwsr, b._time_limit)
+            ws = self.ws = Workspace(key, self.lib, b._preset, b._native, b._nwsr, b._time_limit)
         ws.H[:] = p.P
         ws.g[:] = p.q
         ws.A_eq[:] = p.A

@@ -158,10 +158,10 @@ def _warm_shims() -> int:
     except Exception:  # noqa: BLE001 - a backend that is not registered has nothing to prepare
         return 0
     if qpoases.unavailable_reason() is None:
-        from .backends import qpoases_
+        from .backends import _qpoases_shim as shim
 
-        before = qpoases_._LIB[:] if hasattr(qpoases_, "_LIB") else []
-        existed = qpoases_._shim_path(qpoases_._qpoases_prefix()).is_file()
+        before = shim.LOADED[:]
+        existed = shim.shim_path(shim.qpoases_prefix()).is_file()
         qpoases.prepare()
         compiled += int(not existed and not before)
     return compiled

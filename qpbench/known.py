@@ -24,6 +24,45 @@ import qpsolvers
 from .exceptions import ParamError
 
 
+def _check_kkt_counts(
+    n: int, n_eq: int, n_ineq: int, n_active: int, n_active_bounds: int, with_bounds: bool
+) -> None:
+    """Reject counts :func:`random_kkt_problem` cannot build (a :class:`ParamError` naming the count)."""
+    if min(n, n_eq, n_ineq, n_active, n_active_bounds) < 0 or n < 1:
+        raise ParamError(f"counts must be non-negative and n >= 1 (n={n})", key="n")
+    if n_active > n_ineq:
+        raise ParamError(f"n_active={n_active} > n_ineq={n_ineq}", key="n_active")
+    if n_eq + n_active + n_active_bounds > n:
+        raise ParamError(
+            f"n_eq + n_active + n_active_bounds = {n_eq + n_active + n_active_bounds} > n = {n}",
+            key="n_active",
+        )
+    if n_active_bounds and not with_bounds:
+        raise ParamError("n_active_bounds > 0 needs with_bounds=True", key="n_active_bounds")
+
+
+def _bounds_around(
+    rng: np.random.Generator, x: np.ndarray, n_active_bounds: int, z_box: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds ``lb < x < ub`` with ``n_active_bounds`` of them active at ``x`` (lower, upper, ...).
+
+    Writes the active bounds' multipliers into ``z_box`` (negative at a lower
+    bound, qpsolvers' sign).
+    """
+    n = x.shape[0]
+    lb = x - rng.uniform(0.1, 1.0, n)
+    ub = x + rng.uniform(0.1, 1.0, n)
+    active = rng.choice(n, size=n_active_bounds, replace=False)
+    for k, i in enumerate(active):
+        if k % 2 == 0:
+            lb[i] = x[i]
+            z_box[i] = -rng.uniform(0.1, 1.0)
+        else:
+            ub[i] = x[i]
+            z_box[i] = rng.uniform(0.1, 1.0)
+    return lb, ub
+
+
 def random_kkt_problem(
     rng: np.random.Generator,
     n: int,
@@ -57,17 +96,7 @@ def random_kkt_problem(
     """
     if n_active_bounds is None:
         n_active_bounds = min(2, max(0, n - n_eq - n_active)) if with_bounds else 0
-    if min(n, n_eq, n_ineq, n_active, n_active_bounds) < 0 or n < 1:
-        raise ParamError(f"counts must be non-negative and n >= 1 (n={n})", key="n")
-    if n_active > n_ineq:
-        raise ParamError(f"n_active={n_active} > n_ineq={n_ineq}", key="n_active")
-    if n_eq + n_active + n_active_bounds > n:
-        raise ParamError(
-            f"n_eq + n_active + n_active_bounds = {n_eq + n_active + n_active_bounds} > n = {n}",
-            key="n_active",
-        )
-    if n_active_bounds and not with_bounds:
-        raise ParamError("n_active_bounds > 0 needs with_bounds=True", key="n_active_bounds")
+    _check_kkt_counts(n, n_eq, n_ineq, n_active, n_active_bounds, with_bounds)
 
     # Cost: P = Q diag(eigs) Q' with eigenvalues log-spaced in [1, cond].
     Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
@@ -94,16 +123,7 @@ def random_kkt_problem(
     z_box = np.zeros(n)
     lb = ub = None
     if with_bounds:
-        lb = x - rng.uniform(0.1, 1.0, n)
-        ub = x + rng.uniform(0.1, 1.0, n)
-        active = rng.choice(n, size=n_active_bounds, replace=False)
-        for k, i in enumerate(active):
-            if k % 2 == 0:
-                lb[i] = x[i]
-                z_box[i] = -rng.uniform(0.1, 1.0)
-            else:
-                ub[i] = x[i]
-                z_box[i] = rng.uniform(0.1, 1.0)
+        lb, ub = _bounds_around(rng, x, n_active_bounds, z_box)
 
     q = -(P @ x + A.T @ y + G.T @ z + z_box)
     problem = qpsolvers.Problem(

@@ -26,11 +26,15 @@ from __future__ import annotations
 
 import os
 import re
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as spa
 
 from .exceptions import ParamError
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 #: Default budget: this fraction of the machine's physical memory.
 DEFAULT_FRACTION = 0.5
@@ -106,14 +110,14 @@ def _nnz(M) -> int:
     return int(M.nnz) if spa.issparse(M) else int(np.count_nonzero(M))
 
 
-def dense_bytes(problem) -> int:
+def dense_bytes(problem: qpsolvers.Problem) -> int:
     """A dense copy of ``problem``'s matrices and vectors, in bytes."""
     n = int(np.asarray(problem.q).shape[0])
     m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
     return 8 * (n * (n + m) + 4 * (n + m))
 
 
-def sparse_solver_bytes(problem) -> int:
+def sparse_solver_bytes(problem: qpsolvers.Problem) -> int:
     """What a sparse solver needs for ``problem`` (KKT matrix, its factor, vectors), in bytes."""
     n = int(np.asarray(problem.q).shape[0])
     m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
@@ -121,14 +125,14 @@ def sparse_solver_bytes(problem) -> int:
     return 12 * kkt * (1 + FILL) + 8 * 50 * (n + m)
 
 
-def dense_entries(problem) -> int:
+def dense_entries(problem: qpsolvers.Problem) -> int:
     """``n (n + m_eq + m_ineq)``: entries of the problem's matrices made dense."""
     n = int(np.asarray(problem.q).shape[0])
     m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
     return n * (n + m)
 
 
-def skip_reason(problem, sparse_backend: bool, budget: int) -> str | None:
+def skip_reason(problem: qpsolvers.Problem, sparse_backend: bool, budget: int) -> str | None:
     """Why a backend cannot be given ``problem`` within ``budget`` bytes, or ``None``."""
     if not sparse_backend:
         entries = dense_entries(problem)

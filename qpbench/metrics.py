@@ -63,10 +63,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .statuses import CERTIFIED_INFEASIBLE, STATUSES
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 
 def objective(record, x: np.ndarray | None) -> float:
@@ -78,7 +82,7 @@ def objective(record, x: np.ndarray | None) -> float:
     return float(0.5 * x @ (P @ x) + q @ x + record.offset)
 
 
-def solution_status(solution) -> str | None:
+def solution_status(solution: qpsolvers.Solution) -> str | None:
     """The backend's status string, if it reported one."""
     if solution is None:
         return None
@@ -100,7 +104,7 @@ def _dense(M):
     return M if hasattr(M, "toarray") else np.asarray(M, dtype=np.float64)
 
 
-def constraint_violation(problem, x: np.ndarray | None) -> dict:
+def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> dict:
     """How far ``x`` is from satisfying ``problem``'s constraints (absolute, problem units).
 
     Args:
@@ -170,7 +174,7 @@ class Tick:
 PER_TICK_METRICS: list[tuple[tuple[str, ...], Callable[[Tick], object]]] = []
 
 
-def per_tick_metric(fn: Callable | None = None, *, columns: tuple[str, ...] | None = None):
+def per_tick_metric(fn: Callable | None = None, *, columns: tuple[str, ...] | None = None) -> Callable:
     """Register ``fn(tick) -> value`` as a per-tick metric; its name is the column.
 
     ``columns=("a", "b")``: the function returns ``{"a": ..., "b": ...}``.

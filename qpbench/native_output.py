@@ -17,6 +17,10 @@ import ctypes
 import io
 import os
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
 
 __all__ = ["silence_native_stdout"]
 
@@ -30,7 +34,7 @@ def _flush_c_stdio() -> None:
 
 
 @contextlib.contextmanager
-def silence_native_stdout(enabled: bool = True):
+def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
     """Send native writes to descriptor 1 to ``/dev/null``; Python's ``sys.stdout`` keeps the real output.
 
     Does nothing when ``enabled`` is false, or when ``sys.stdout`` is not the

@@ -24,8 +24,14 @@ import functools
 import logging
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .exceptions import InputError
+
+if TYPE_CHECKING:
+    from types import ModuleType
+
+    import pandas as pd
 
 #: qpbenchmark's settings names, in the order of increasing accuracy asked ("default": the solvers' own).
 SETTINGS_NAMES = ("default", "low_accuracy", "mid_accuracy", "high_accuracy")
@@ -34,7 +40,7 @@ RESULTS_COLUMNS = ("problem", "solver", "settings", "runtime", "found", "primal_
                    "duality_gap")
 
 
-def import_qpbenchmark():
+def import_qpbenchmark() -> ModuleType:
     """Import qpbenchmark, leaving the root logger as it was (it adds a handler at import)."""
     root = logging.getLogger()
     handlers, level = list(root.handlers), root.level
@@ -93,7 +99,7 @@ def qpbenchmark_success(found: bool, primal: float, dual: float, gap: float, tol
     return bool(found) and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
 
 
-def read_published_results(path: str | Path):
+def read_published_results(path: str | Path) -> pd.DataFrame:
     """A qpbenchmark results file (CSV or Parquet) as a DataFrame with :data:`RESULTS_COLUMNS`.
 
     Raises:

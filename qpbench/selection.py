@@ -18,8 +18,12 @@ the backend can tell.
 from __future__ import annotations
 
 import fnmatch
+from typing import TYPE_CHECKING
 
 from .exceptions import ParamError
+
+if TYPE_CHECKING:
+    from .formats import ProblemSet
 
 __all__ = [
     "backend_settings", "parse_list", "parse_overrides", "select_backend", "select_backends", "select_records",
@@ -58,7 +62,7 @@ def select_records(records: list, pattern: str | None = None, every: int | None 
     return kept
 
 
-def select_set(problem_set, pattern: str | None = None, every: int | None = None, limit: int | None = None):
+def select_set(problem_set: ProblemSet, pattern: str | None = None, every: int | None = None, limit: int | None = None) -> ProblemSet:
     """A copy of ``problem_set`` holding the records :func:`select_records` keeps.
 
     With ``every`` > 1 the manifest's generator stride (``every``, ticks per

@@ -69,7 +69,7 @@ def describe_exception(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def classify(solution, wall_s: float, time_limit: float) -> tuple[str, str | None]:
+def classify(solution: object, wall_s: float, time_limit: float) -> tuple[str, str | None]:
     """Status and error text of an answer a backend returned in ``wall_s`` [s].
 
     - a non-finite ``x`` -> ``invalid``; ``optimal`` without ``x`` -> ``invalid``;

@@ -227,14 +227,14 @@ def test_qpoases_state_copy_is_independent(wall_ticks):
 
 @pytest_qpoases
 def test_qpoases_unavailable_reasons(monkeypatch, tmp_path):
-    from qpbench.backends import qpoases_
+    from qpbench.backends import _qpoases_shim as shim
 
     cls = type(get_backend("qpoases"))
-    monkeypatch.setattr(qpoases_, "_qpoases_prefix", lambda: None)
+    monkeypatch.setattr(shim, "qpoases_prefix", lambda: None)
     assert "cmeel-qpoases" in cls.unavailable_reason()
     monkeypatch.undo()
-    monkeypatch.setattr(qpoases_, "_LIB", [])
-    monkeypatch.setattr(qpoases_, "_compiler", lambda: None)
+    monkeypatch.setattr(shim, "LOADED", [])
+    monkeypatch.setattr(shim, "compiler", lambda: None)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))  # no shim compiled there
     assert "compiler" in cls.unavailable_reason()
     names = {i.name: i for i in backend_info()}
@@ -246,17 +246,17 @@ def test_qpoases_shim_compiles_atomically(monkeypatch, tmp_path):
     """Two builds of the shim at once: both succeed, the library loads, no temporary file is left."""
     import ctypes
 
-    from qpbench.backends import qpoases_
+    from qpbench.backends import _qpoases_shim as shim
 
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
-    prefix = qpoases_._qpoases_prefix()
-    target = qpoases_._shim_path(prefix)
+    prefix = shim.qpoases_prefix()
+    target = shim.shim_path(prefix)
     assert str(target).startswith(str(tmp_path)) and not target.exists()
     errors = []
 
     def build():
         try:
-            qpoases_._compile(prefix, target)
+            shim.compile_shim(prefix, target)
         except Exception as exc:  # noqa: BLE001
             errors.append(exc)
 

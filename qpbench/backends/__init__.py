@@ -173,7 +173,7 @@ def backend_class(name: str) -> type[Backend]:
     return _registry()[resolve_name(name)]
 
 
-def get_backend(name: str, profile: str | Profile = "default", **settings) -> Backend:
+def get_backend(name: str, profile: str | Profile = "default", **settings: object) -> Backend:
     """A fresh backend instance called ``name`` (matched without regard to case).
 
     Raises:

@@ -14,14 +14,21 @@ would change from tick to tick and force a rebuild of the solver.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as spa
+
+if TYPE_CHECKING:
+    import qpsolvers
+
+    from .base import Backend
 
 #: Setting names every backend understands; the profile provides their values.
 GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 
 
-def generic_settings(backend) -> tuple[dict, dict]:
+def generic_settings(backend: Backend) -> tuple[dict, dict]:
     """Split a backend's settings into generic values and native solver options.
 
     Returns:
@@ -46,7 +53,7 @@ def generic_settings(backend) -> tuple[dict, dict]:
     return generic, native
 
 
-def dense_bounds(problem, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+def dense_bounds(problem: qpsolvers.Problem, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
     """``(lb, ub)`` as full float vectors, or ``(None, None)`` when the problem has no box."""
     lb, ub = problem.lb, problem.ub
     if lb is None and ub is None:
@@ -56,7 +63,7 @@ def dense_bounds(problem, n: int) -> tuple[np.ndarray | None, np.ndarray | None]
     return lb, ub
 
 
-def as_dense(M) -> np.ndarray:
+def as_dense(M: np.ndarray | spa.spmatrix | spa.sparray) -> np.ndarray:
     """A dense float array of a dense or scipy.sparse matrix."""
     if type(M) is np.ndarray and M.dtype == np.float64:
         return M
@@ -65,7 +72,7 @@ def as_dense(M) -> np.ndarray:
     return np.asarray(M, dtype=float)
 
 
-def all_dense(*matrices) -> bool:
+def all_dense(*matrices: object) -> bool:
     """True when every given matrix is a numpy array or None (fast path of the backends)."""
     return all(M is None or type(M) is np.ndarray for M in matrices)
 
@@ -83,7 +90,7 @@ def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarra
     return (rows, cols), rows, indptr
 
 
-def dense_parts(problem):
+def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
     """The problem's ``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept).
 
     ``A`` and ``G`` are 2-D (a single row given as a vector becomes one row); the vectors

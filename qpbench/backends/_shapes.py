@@ -9,7 +9,12 @@ naming the backend, the array and both shapes.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ..exceptions import ProblemFormatError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def _refuse(backend: str, key: str, shape, expected) -> None:
@@ -20,7 +25,7 @@ def _refuse(backend: str, key: str, shape, expected) -> None:
     )
 
 
-def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]:
+def check_shapes(backend: str, n: int, P: np.ndarray | None, A: np.ndarray | None, b: np.ndarray | None, G: np.ndarray | None, h: np.ndarray | None, lb: np.ndarray | None, ub: np.ndarray | None) -> tuple[int, int]:
     """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
 
     Args:

@@ -40,12 +40,19 @@ Statuses. ``Solved`` -> optimal, ``PrimalInfeasible`` / ``DualInfeasible``
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as spa
 
 from . import register
 from ._common import all_dense, dense_bounds, dense_upper_layout, generic_settings
 from .base import Backend, BackendSolution
+
+if TYPE_CHECKING:
+    from types import ModuleType
+
+    import qpsolvers
 
 
 class ConeLayout:
@@ -112,7 +119,7 @@ class ConeLayout:
         C.sort_indices()
         return P, C
 
-    def data(self, problem):
+    def data(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
         """``(P_data, C_data)`` in this layout's order."""
         if self.dense and self.all_kept:
             n, meq, k = self.n, self.meq, self.meq + self.m
@@ -140,13 +147,13 @@ class ConeLayout:
         P, C = self._sparse(problem)
         return P.data, C.data
 
-    def matrices(self, problem):
+    def matrices(self, problem: qpsolvers.Problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
         P_data, C_data = self.data(problem)
         P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
         C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, self.n))
         return P, C
 
-    def rhs(self, problem) -> np.ndarray:
+    def rhs(self, problem: qpsolvers.Problem) -> np.ndarray:
         if self.all_kept and self.with_box:
             lb, ub = dense_bounds(problem, self.n)
             parts = [v for v in (problem.b, problem.h) if v is not None]
@@ -162,7 +169,7 @@ class ConeLayout:
             parts.append(-lb[self.lb_keep])
         return np.concatenate(parts) if parts else np.zeros(0)
 
-    def cones(self, clarabel) -> list:
+    def cones(self, clarabel: ModuleType) -> list:
         cones = []
         if self.meq:
             cones.append(clarabel.ZeroConeT(self.meq))
@@ -170,7 +177,7 @@ class ConeLayout:
             cones.append(clarabel.NonnegativeConeT(self.rows - self.meq))
         return cones
 
-    def split_duals(self, w: np.ndarray):
+    def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of Clarabel's multiplier ``w``."""
         meq, m, n = self.meq, self.m, self.n
         y = w[:meq]
@@ -212,7 +219,7 @@ def _status_name(status) -> str:
         return str(status).split(".")[-1]
 
 
-def quick_key(problem) -> tuple | None:
+def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     """The :attr:`ConeLayout.key` of an all-dense problem without building the layout (else None)."""
     P, G, A = problem.P, problem.G, problem.A
     if not all_dense(P, G, A):

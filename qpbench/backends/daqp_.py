@@ -64,12 +64,17 @@ solution has no ``x`` (DAQP's iterate and ``lam`` are not meaningful then).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..exceptions import ParamError
 from . import register
 from ._common import dense_parts, generic_settings
 from .base import Backend, BackendSolution
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 #: DAQP exit flag -> (status, DAQP's name).
 EXITFLAGS = {
@@ -195,7 +200,7 @@ class DaqpBackend(Backend):
         """The state carried between calls: none."""
         return None
 
-    def set_state(self, state) -> None:
+    def set_state(self, state: None) -> None:
         """Nothing to restore (see :meth:`get_state`)."""
 
     def _solve(self, problem, warm_start):
@@ -228,7 +233,7 @@ class DaqpBackend(Backend):
         return read_result(problem, x, fval, flag, info, buf.nb, box, me)
 
 
-def read_result(problem, x, fval, flag: int, info: dict, nb: int, box: bool, me: int) -> BackendSolution:
+def read_result(problem: qpsolvers.Problem, x: np.ndarray, fval: float, flag: int, info: dict, nb: int, box: bool, me: int) -> BackendSolution:
     """A solution from what DAQP returned: status from the exit flag, its own time, and on
     success ``x``, the objective and the duals, split from DAQP's one multiplier vector
     (bounds first, then equalities, then inequalities; DAQP's signs are qpsolvers')."""

@@ -44,12 +44,10 @@ in it; the wall time is).
 
 from __future__ import annotations
 
-import numpy as np
-
 from . import register
 from ._shapes import check_shapes
 from .base import BackendSolution
-from .daqp_ import _UNKNOWN, EXITFLAGS, DaqpBackend, _Buffers, _daqp, _dense, read_result
+from .daqp_ import _UNKNOWN, EXITFLAGS, DaqpBackend, _Buffers, _daqp, _dense, _f64, _ndarray, read_result
 
 
 @register
@@ -137,10 +135,3 @@ class DaqpModelBackend(DaqpBackend):
         if status == "error":
             sol.error = f"DAQP setup/update exit flag {flag} ({raw})"
         return sol
-
-
-_ndarray = np.ndarray
-_f64 = np.dtype(np.float64)
-_INF = np.inf
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False

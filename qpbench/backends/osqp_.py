@@ -36,12 +36,17 @@ and ``unsolved`` -> not_solved (raw status in ``extras["raw_status"]``).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as spa
 
 from . import register
 from ._common import GENERIC_KEYS, all_dense, dense_bounds, dense_upper_layout, generic_settings
 from .base import Backend, BackendSolution
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 
 class StackedLayout:
@@ -103,7 +108,7 @@ class StackedLayout:
         C.sort_indices()
         return P, C
 
-    def data(self, problem) -> tuple[np.ndarray, np.ndarray]:
+    def data(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
         """``(P_data, C_data)`` in this layout's order."""
         if self.dense:
             m, k = self.m, self.m + self.meq
@@ -119,14 +124,14 @@ class StackedLayout:
         P, C = self._sparse(problem)
         return P.data, C.data
 
-    def matrices(self, problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
+    def matrices(self, problem: qpsolvers.Problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
         """``(P, C)`` as CSC matrices with this layout's pattern."""
         P_data, C_data = self.data(problem)
         P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
         C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.C_rows, self.n))
         return P, C
 
-    def vectors(self, problem) -> tuple[np.ndarray, np.ndarray]:
+    def vectors(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
         """``(l, u)`` of the stacked rows ``[G; A; I]``."""
         parts_l, parts_u = [], []
         if problem.G is not None:
@@ -146,7 +151,7 @@ class StackedLayout:
             return np.zeros(0), np.zeros(0)
         return np.concatenate(parts_l), np.concatenate(parts_u)
 
-    def split_duals(self, w: np.ndarray):
+    def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of the stacked multiplier ``w`` (views into ``w``)."""
         m, meq = self.m, self.meq
         z_box = w[m + meq :] if self.with_box else np.zeros(0)

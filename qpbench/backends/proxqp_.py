@@ -162,31 +162,8 @@ class ProxqpBackend(Backend):
         return l
 
     def _solve(self, problem, warm_start):
-        P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
-        )
-        # Fast path: dense float64 arrays (what the conversions below return
-        # unchanged); anything else is converted as before.
-        if (
-            type(P) is _ndarray and P.dtype == _f64 and type(q) is _ndarray and q.dtype == _f64
-            and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
-            and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
-            and (
-                (lb is None and ub is None)
-                or (type(lb) is _ndarray and lb.dtype == _f64 and type(ub) is _ndarray and ub.dtype == _f64)
-            )
-        ):
-            H, C, u = P, G, h
-            n = q.shape[0]
-        else:
-            q = np.asarray(q, dtype=float)
-            n = q.shape[0]
-            H = as_dense(P)
-            A = None if A is None else as_dense(A)
-            b = None if b is None else np.asarray(b, dtype=float)
-            C = None if G is None else as_dense(G)
-            u = None if h is None else np.asarray(h, dtype=float)
-            lb, ub = dense_bounds(problem, n)
+        H, q, A, b, C, u, lb, ub = _tick_arrays(problem)
+        n = q.shape[0]
         n_eq = 0 if A is None else A.shape[0]
         n_in = 0 if C is None else C.shape[0]
         l = None if C is None else self._lower(n_in)
@@ -194,25 +171,7 @@ class ProxqpBackend(Backend):
         key = (n, n_eq, n_in, with_box)
         try:
             warm = self._qp is not None and key == self._key
-            if warm:
-                qp = self._qp
-                # ``update_preconditioner`` as a keyword: nanobind dispatches
-                # this faster than the same call all positional.
-                if with_box:
-                    qp.update(H, q, A, b, C, l, u, lb, ub, update_preconditioner=self._update_preconditioner)
-                else:
-                    qp.update(H, q, A, b, C, l, u, update_preconditioner=self._update_preconditioner)
-            else:
-                qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, H, q, A, b, C, l, u, lb, ub)
-            if warm_start is not None:
-                # Passing x makes ProxQP start from it (y, z from zero) for this call.
-                qp.solve(np.asarray(warm_start, dtype=float), None, None)
-                # ProxQP assigns ``results.x`` from an evaluated copy of the
-                # guess (``results.x = x_wm.value().eval()``): 0.8.0 keeps the
-                # buffer, but the cached views are re-read rather than rely on it.
-                self._views = None
-            else:
-                qp.solve()
+            qp = self._update_and_solve(warm, key, H, q, A, b, C, l, u, lb, ub, warm_start)
             info = self._info
             status, raw = (_STATUS_MAP or _status_map(_proxqp()))[info.status]
             retried = False
@@ -242,6 +201,36 @@ class ProxqpBackend(Backend):
             sol.solver_time_s += float(first_time) * 1e-6
         if status == "primal_infeasible" or status == "dual_infeasible":
             return sol
+        self._read_solution(sol, qp, n, n_eq, n_in, with_box)
+        if status == "optimal":
+            sol.obj = float(info.objValue)
+        return sol
+
+    def _update_and_solve(self, warm, key, H, q, A, b, C, l, u, lb, ub, warm_start):
+        """Update the kept ``QP`` (``warm``) or build one, then solve it; returns the ``QP``."""
+        if warm:
+            qp = self._qp
+            # ``update_preconditioner`` as a keyword: nanobind dispatches
+            # this faster than the same call all positional.
+            if lb is not None:
+                qp.update(H, q, A, b, C, l, u, lb, ub, update_preconditioner=self._update_preconditioner)
+            else:
+                qp.update(H, q, A, b, C, l, u, update_preconditioner=self._update_preconditioner)
+        else:
+            qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, H, q, A, b, C, l, u, lb, ub)
+        if warm_start is not None:
+            # Passing x makes ProxQP start from it (y, z from zero) for this call.
+            qp.solve(np.asarray(warm_start, dtype=float), None, None)
+            # ProxQP assigns ``results.x`` from an evaluated copy of the
+            # guess (``results.x = x_wm.value().eval()``): 0.8.0 keeps the
+            # buffer, but the cached views are re-read rather than rely on it.
+            self._views = None
+        else:
+            qp.solve()
+        return qp
+
+    def _read_solution(self, sol, qp, n, n_eq, n_in, with_box) -> None:
+        """Copy ``x``, ``y``, ``z``, ``z_box`` out of ProxQP's results into ``sol`` (none if ``x`` is not finite)."""
         views = self._views
         if views is None:
             # Views of ``qp.results.x, y, z`` (each attribute access builds a
@@ -265,9 +254,35 @@ class ProxqpBackend(Backend):
             else:
                 sol.z = z
                 sol.z_box = np.zeros(0)
-        if status == "optimal":
-            sol.obj = float(info.objValue)
-        return sol
+
+
+def _tick_arrays(problem):
+    """``H, q, A, b, C, u, lb, ub`` of ``problem`` as dense float64 arrays (or None).
+
+    Fast path: dense float64 arrays (what the conversions return unchanged)
+    pass as they are; anything else is converted.
+    """
+    P, q, A, b, G, h, lb, ub = (
+        problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+    )
+    if (
+        type(P) is _ndarray and P.dtype == _f64 and type(q) is _ndarray and q.dtype == _f64
+        and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
+        and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
+        and (
+            (lb is None and ub is None)
+            or (type(lb) is _ndarray and lb.dtype == _f64 and type(ub) is _ndarray and ub.dtype == _f64)
+        )
+    ):
+        return P, q, A, b, G, h, lb, ub
+    q = np.asarray(q, dtype=float)
+    n = q.shape[0]
+    A = None if A is None else as_dense(A)
+    b = None if b is None else np.asarray(b, dtype=float)
+    C = None if G is None else as_dense(G)
+    u = None if h is None else np.asarray(h, dtype=float)
+    lb, ub = dense_bounds(problem, n)
+    return as_dense(P), q, A, b, C, u, lb, ub
 
 
 _ndarray = np.ndarray

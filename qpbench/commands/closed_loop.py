@@ -25,6 +25,8 @@ import logging
 
 from ..statuses import FORMULATIONS
 
+# The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
+# command module: cli.py reads these names; the repetition is that interface, not shared logic.
 HELP = "run scenarios in closed loop with each backend solving every tick; one table row per (scenario, backend)"
 EXAMPLE = "qpbench closed-loop --scenarios wall,narrow --backends qpsolvers:daqp,rnn,pinv --out results/closed-loop"
 

@@ -22,6 +22,8 @@ from pathlib import Path
 
 from .list_ import add_selection_arguments
 
+# The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
+# command module: cli.py reads these names; the repetition is that interface, not shared logic.
 HELP = "write problems as qpsolvers .npz files or a Parquet problem set (subset with --problems/--every/--limit)"
 EXAMPLE = "qpbench export problems/wall --format npz --limit 10 --out wall-npz"
 

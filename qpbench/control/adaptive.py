@@ -17,6 +17,11 @@ The estimates are kept at or above ``kp_min``, ``kd_min`` (``b0`` divides by
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+
 __all__ = ["AdaptiveImpedance"]
 
 
@@ -49,7 +54,7 @@ class AdaptiveImpedance:
         self.kp = self.kp0
         self.kd = self.kd0
 
-    def update(self, dt: float, x, x_d, xdot, xdot_d, force: float) -> tuple[float, float]:
+    def update(self, dt: float, x: np.ndarray, x_d: np.ndarray, xdot: np.ndarray, xdot_d: np.ndarray, force: float) -> tuple[float, float]:
         """One Euler step of ``Wdot = -K_in eta (Fd - F)`` over ``dt`` [s]; returns the new ``(Kp_hat, Kd_hat)``.
 
         Args:

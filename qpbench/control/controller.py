@@ -146,6 +146,9 @@ def _build_packed_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
     )
 
 
+# Over 80 lines, kept whole on purpose: numba compiles it as one function (``_build_kernel_jit``);
+# split, each helper would have to be compiled too and rebound in this module's globals before
+# the first compile. tests/test_controller.py compares this one function with the numpy terms.
 def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist):  # pragma: no cover - compiled
     """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick (see the module docstring)."""
     n = theta.shape[0]
@@ -406,7 +409,7 @@ class Controller:
         problem.ub = ub
         return problem
 
-    def build(self, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
+    def build(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
         """Build the tick's QP at joint angles ``theta`` [rad] and time ``t`` [s].
 
         Args:
@@ -468,7 +471,7 @@ class Controller:
             G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
         return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
-    def build_reference(self, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
+    def build_reference(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
         """Same as :meth:`build`, assembled from the numpy terms (slower; for checks)."""
         soft = _check_formulation(formulation)
         arrays = self._arrays_from_terms(theta, t, kp, kd, soft)
@@ -491,6 +494,6 @@ def _check_formulation(formulation: str) -> bool:
     return formulation == "soft"
 
 
-def build_problem(controller: Controller, theta, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> qpsolvers.Problem:
+def build_problem(controller: Controller, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> qpsolvers.Problem:
     """The tick's :class:`qpsolvers.Problem` at joint angles ``theta`` [rad], time ``t`` [s] (paper eq. 11)."""
     return controller.build(theta, t, kp, kd, formulation).problem

@@ -96,7 +96,7 @@ class ImpedanceTask:
         self.normal = np.asarray(normal, dtype=float)
         self.desired_force = float(desired_force)
 
-    def impedance_reference(self, x, t: float, kp: float, kd: float) -> np.ndarray:
+    def impedance_reference(self, x: np.ndarray, t: float, kp: float, kd: float) -> np.ndarray:
         """``b0`` (eq. 4) in [m/s] for end-effector position ``x`` [m] at time ``t`` [s]."""
         xdx, xdy, vdx, vdy = self.path(t)
         x_d = np.array([xdx, xdy])
@@ -136,7 +136,7 @@ class EscapeVelocityLimits:
         self.v_max = np.asarray(v_max, dtype=float)
         self.alpha = float(alpha)
 
-    def escape_velocity_bounds(self, theta) -> tuple[np.ndarray, np.ndarray]:
+    def escape_velocity_bounds(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(lb, ub)`` in [rad/s] at joint angles ``theta`` [rad]."""
         theta = np.asarray(theta, dtype=float)
         lb = np.maximum(self.alpha * (self.theta_min - theta), self.v_min)
@@ -166,7 +166,7 @@ class ObstacleAvoidance:
         self.k = float(k)
         self.d_safe = float(d_safe)
 
-    def rows(self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0):
+    def rows(self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(G, h, dist)`` for key points ``key_xy`` (a, 2) with Jacobians ``key_J`` (a, 2, n).
 
         Returns:

@@ -89,7 +89,7 @@ def _verdict(ratio: float) -> str:
     return "rounding" if ratio >= -NONCONVEX_RATIO else "nonconvex"
 
 
-def assess_convexity(P) -> Convexity:
+def assess_convexity(P: np.ndarray | spa.spmatrix | spa.sparray) -> Convexity:
     """The convexity of ``x'Px`` for a symmetric ``P`` (dense or scipy.sparse)."""
     n = P.shape[0]
     if spa.issparse(P):
@@ -144,7 +144,7 @@ def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
     return max(float(d.max()), float(v @ (P @ v)))
 
 
-def negative_eigenvalues(P, shift: float) -> int | None:
+def negative_eigenvalues(P: spa.spmatrix | spa.sparray, shift: float) -> int | None:
     """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift``
     (inertia of ``P + shift I`` from a diagonal-pivot sparse LU); ``None`` if the
     factorization pivoted off the diagonal (then Sylvester's law does not apply)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import qpsolvers
@@ -26,6 +27,9 @@ from .records import (
     check_record,
     dense_entries,
 )
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 #: Per sparse matrix ``M`` of a set (only when some record has one): CSC columns
 #: ``M_csc_data`` (list<double>), ``M_csc_indices`` (list<int32>), ``M_csc_indptr`` (list<int64>).
@@ -82,7 +86,7 @@ def _csc_parts(M) -> tuple | None:
     return M.data, M.indices, M.indptr
 
 
-def records_to_table(records: list[ProblemRecord], path=None):
+def records_to_table(records: list[ProblemRecord], path: str | Path | None = None) -> pa.Table:
     """The records as a ``pyarrow.Table`` in the problem-set schema.
 
     A scipy.sparse matrix is stored in its CSC columns (read back bit for bit as
@@ -115,7 +119,7 @@ def records_to_table(records: list[ProblemRecord], path=None):
     return pa.Table.from_arrays(cols, schema=_schema(sparse_keys))
 
 
-def table_to_bytes(table) -> bytes:
+def table_to_bytes(table: pa.Table) -> bytes:
     """Serialise a table to Parquet with pinned writer options (deterministic bytes)."""
     import pyarrow as pa
     import pyarrow.parquet as pq

@@ -135,7 +135,7 @@ def _dense(M, key: str, path, name) -> np.ndarray | None:
         raise ProblemFormatError(f"problem '{name}': not numeric ({exc})", path=path, key=key) from None
 
 
-def dense_problem(problem: qpsolvers.Problem, path=None, name=None) -> qpsolvers.Problem:
+def dense_problem(problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None) -> qpsolvers.Problem:
     """A copy of ``problem`` with dense float64 arrays (a dense problem's arrays pass through
     unchanged when they already are float64)."""
     arrays = [_dense(getattr(problem, k), k, path, name) for k in ARRAY_KEYS]
@@ -185,7 +185,7 @@ def _asymmetry(P) -> float:
     return float(np.max(np.abs(D), initial=0.0))
 
 
-def check_problem(problem: qpsolvers.Problem, path=None, name: str | None = None) -> None:
+def check_problem(problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None) -> None:
     """Check shapes and values of a problem (see :mod:`qpbench.formats` for the rules).
 
     Sparse matrices are checked through their stored values: nothing is made dense.
@@ -237,7 +237,7 @@ def check_problem(problem: qpsolvers.Problem, path=None, name: str | None = None
         fail("P", f"is not symmetric (max |P - P'| = {_asymmetry(P):.3g} > {SYMMETRY_RTOL:g} max |P|)")
 
 
-def check_record(record: ProblemRecord, path=None) -> None:
+def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     """:func:`check_problem` plus the metadata types; sets :attr:`ProblemRecord.convexity`."""
     from .convexity import assess_convexity
 

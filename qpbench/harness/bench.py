@@ -43,6 +43,7 @@ import math
 import statistics
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -69,9 +70,12 @@ from .results import (
 )
 from .rows import _RowMaker
 
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
 log = logging.getLogger("qpbench.harness")
 
-def backend_order(problem: str, backends, seed: int = DEFAULT_SEED) -> list[str]:
+def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
     """The order in which ``backends`` solve ``problem``: a seeded permutation.
 
     The permutation of the sorted names is drawn by

@@ -12,6 +12,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from ..exceptions import InputError, ParamError
 from ..profiles import Profile, get_profile
 from .bench_summary import DEFAULT_SEED
 from .results import ExistingResults, InflightMarker, read_results, row_key
+
+if TYPE_CHECKING:
+    from ..formats import ProblemRecord, ProblemSet
 
 log = logging.getLogger("qpbench.harness")
 
@@ -77,7 +81,7 @@ class BenchConfig:
 
 
 
-def record_period(problem_set) -> float | None:
+def record_period(problem_set: ProblemSet) -> float | None:
     """Time in [s] between two consecutive records of a dumped sequence, if known.
 
     A set dumped by ``qpbench simulate --dump`` records its control period
@@ -90,7 +94,7 @@ def record_period(problem_set) -> float | None:
         return None
 
 
-def backend_settings(name: str, config: BenchConfig, problem_set) -> dict:
+def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) -> dict:
     """Settings for backend ``name``: the run's, its own, plus ``dt`` for an online backend.
 
     An online backend (the ``rnn`` network) integrates for ``dt`` per call:
@@ -105,7 +109,7 @@ def backend_settings(name: str, config: BenchConfig, problem_set) -> dict:
     return settings
 
 
-def sequences(records, mode: str) -> list[list[int]]:
+def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
     """Indices of ``records`` grouped into sequences, each in tick order.
 
     Sequential: one sequence per scenario (first-appearance order), sorted by
@@ -224,7 +228,7 @@ def _learn_from_crash(plan: Plan, config: BenchConfig) -> None:
         )
 
 
-def make_plan(problem_set, config: BenchConfig, out: Path, force: bool, resume: bool) -> Plan:
+def make_plan(problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool) -> Plan:
     """Every check that can fail on user input, before ``out`` is created or changed."""
     from ..atomic import check_output
     from ..backends import get_backend
@@ -260,7 +264,7 @@ def make_plan(problem_set, config: BenchConfig, out: Path, force: bool, resume: 
     return plan
 
 
-def skipped_solves(records, config: BenchConfig) -> tuple[dict, dict]:
+def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[dict, dict]:
     """``(skips, notes)``: which solves are not made and why, and the warnings of the rest.
 
     A clearly nonconvex problem is skipped by every backend; a slightly indefinite one is

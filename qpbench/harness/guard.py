@@ -27,9 +27,13 @@ timed region is identical in both cases.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from .timing import StateRestorer, timed_call
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 
 @dataclass
@@ -94,18 +98,18 @@ class LocalRunner:
         except Exception:  # noqa: BLE001 - a failing reset shows up at the next solve
             pass
 
-    def warmup(self, problem) -> str:
+    def warmup(self, problem: qpsolvers.Problem) -> str:
         """A discarded solve (imports, first-call allocations, a compile for an unusual
         problem shape), then a reset. Its status and time have no consequence."""
         outcome = self._guarded(problem)
         self.reset()
         return outcome.status
 
-    def replay(self, problem) -> str:
+    def replay(self, problem: qpsolvers.Problem) -> str:
         """An untimed, unrecorded solve that only moves the state forward (resume)."""
         return self._guarded(problem).status
 
-    def solve(self, problem, repeat: int = 1, reset_before: bool = False, prev_problem=None) -> Outcome:
+    def solve(self, problem: qpsolvers.Problem, repeat: int = 1, reset_before: bool = False, prev_problem: qpsolvers.Problem | None = None) -> Outcome:
         """Solve ``problem`` ``repeat`` times from the same state; time each.
 
         Args:

@@ -41,12 +41,16 @@ from __future__ import annotations
 
 import logging
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..statuses import describe_exception
 from .guard import LocalRunner, Outcome
 from .workers import START_TIMEOUT_S, death_message, ignore_interrupts, start_worker, stop_worker
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 log = logging.getLogger("qpbench.harness")
 
@@ -222,20 +226,20 @@ class IsolatedRunner:
         except WorkerDied:
             pass
 
-    def warmup(self, problem) -> str:
+    def warmup(self, problem: qpsolvers.Problem) -> str:
         """The discarded warm-up solve, allowed :data:`WARMUP_TIMEOUT_S` (its slowness has no consequence)."""
         try:
             return self._call(("warmup", problem), 1, "warm-up", timeout=max(WARMUP_TIMEOUT_S, 2 * self.time_limit))
         except WorkerDied as died:
             return died.status
 
-    def replay(self, problem) -> str:
+    def replay(self, problem: qpsolvers.Problem) -> str:
         try:
             return self._call(("replay", problem), 1, "replay")
         except WorkerDied as died:
             return died.status
 
-    def solve(self, problem, repeat: int = 1, reset_before: bool = False, prev_problem=None) -> Outcome:
+    def solve(self, problem: qpsolvers.Problem, repeat: int = 1, reset_before: bool = False, prev_problem: qpsolvers.Problem | None = None) -> Outcome:
         n = max(1, repeat) * (2 if prev_problem is not None else 1)
         try:
             outcome = self._call(("solve", problem, repeat, reset_before, prev_problem), n, "solve")

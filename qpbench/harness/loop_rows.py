@@ -93,7 +93,7 @@ FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
 BAD_VERDICTS = ("failed", "unsafe", "limits", "diverged")
 
 
-def cell(value):
+def cell(value: object) -> object:
     """A summary value as one CSV cell: scalars as they are, lists and dicts as JSON text."""
     if value is None or isinstance(value, (bool, int, float, str)):
         return value

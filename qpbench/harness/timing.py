@@ -48,6 +48,12 @@ import copy
 import gc
 import logging
 import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import qpsolvers
+
+    from ..backends.base import Backend, BackendSolution
 
 log = logging.getLogger("qpbench.harness")
 
@@ -56,13 +62,13 @@ log = logging.getLogger("qpbench.harness")
 ANSWER_FIELDS = ("x", "y", "z", "z_box")
 
 
-def read_answer(solution) -> None:
+def read_answer(solution: BackendSolution) -> None:
     """Read every field of :data:`ANSWER_FIELDS` (materialises fields a backend defers)."""
     for name in ANSWER_FIELDS:
         getattr(solution, name, None)
 
 
-def timed_call(backend, problem):
+def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSolution, int]:
     """``(solution, wall time in [ns])`` of ``backend.solve(problem)`` and the reading of
     its answer (:func:`read_answer`), gc off."""
     enabled = gc.isenabled()
@@ -96,7 +102,7 @@ class StateRestorer:
         self._snap = None
         self._no_deepcopy: set[str] = set()
 
-    def snapshot(self, backend) -> None:
+    def snapshot(self, backend: Backend) -> None:
         """Remember ``backend``'s current state."""
         if not self.sequential:
             return
@@ -115,7 +121,7 @@ class StateRestorer:
         self.method = "replay"
         self._snap = None
 
-    def restore(self, backend, prev_problem):
+    def restore(self, backend: Backend, prev_problem: qpsolvers.Problem | None) -> Backend:
         """Return a backend in the snapshot state (``backend`` itself or a copy)."""
         if self.method == "reset":
             backend.reset()

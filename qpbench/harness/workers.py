@@ -15,6 +15,12 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from multiprocessing.connection import Connection
+    from multiprocessing.process import BaseProcess
 
 __all__ = ["START_TIMEOUT_S", "context", "death_message", "ignore_interrupts", "start_worker", "stop_worker"]
 
@@ -30,7 +36,7 @@ PRELOAD = (
 _CTX = None
 
 
-def context():
+def context() -> multiprocessing.context.BaseContext:
     """The start method's context, every numba kernel compiled in this process first.
 
     Called before each worker starts: the warm-up compiles what the on-disk
@@ -58,7 +64,7 @@ def _noop() -> None:
     """A child that does nothing: its start waits for the forkserver's preload."""
 
 
-def start_worker(target, args: tuple, name: str, duplex: bool = True):
+def start_worker(target: Callable[..., None], args: tuple, name: str, duplex: bool = True) -> tuple[BaseProcess, Connection]:
     """Start ``target(conn, *args)`` in a worker process; return ``(process, conn)``.
 
     ``conn`` is this side of the pipe (the worker gets the other end as its
@@ -72,7 +78,7 @@ def start_worker(target, args: tuple, name: str, duplex: bool = True):
     return proc, parent
 
 
-def stop_worker(proc, conn) -> None:
+def stop_worker(proc: BaseProcess | None, conn: Connection | None) -> None:
     """Kill the worker if it is alive (SIGKILL), reap it and close the pipe."""
     if proc is not None:
         if proc.is_alive():

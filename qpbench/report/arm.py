@@ -20,8 +20,14 @@ from __future__ import annotations
 import math
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..sim.scenario import Scenario
 
 __all__ = ["animate", "closest_approach", "draw_snapshot"]
 
@@ -33,7 +39,7 @@ def _thetas(log, n: int) -> np.ndarray:
     return log[[f"theta_{i}" for i in range(n)]].to_numpy(dtype=float)
 
 
-def closest_approach(log, scenario) -> dict | None:
+def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
     """Where and when a key point came closest to an obstacle.
 
     Returns ``{"t", "k", "key_point", "obstacle", "distance"}`` (distance in
@@ -122,7 +128,7 @@ def _frame_parts(scenario):
     return arm, keys, surface, obstacles
 
 
-def draw_snapshot(scenario, log, path: str | Path, *, instants: int = 8, title: str | None = None) -> Path:
+def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, instants: int = 8, title: str | None = None) -> Path:
     """Draw the run ``log`` of ``scenario`` as stick figures at ``instants`` times; save to ``path`` (PNG, SVG, PDF).
 
     Args:
@@ -200,7 +206,7 @@ def draw_snapshot(scenario, log, path: str | Path, *, instants: int = 8, title: 
     return path
 
 
-def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.0, progress: bool = False,
+def animate(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, fps: int = 20, speed: float = 1.0, progress: bool = False,
             title: str | None = None, dpi: int = 70) -> Path:
     """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
 
@@ -226,16 +232,8 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
     import matplotlib.pyplot as plt
     from matplotlib import animation
 
-    from ..exceptions import ParamError
-
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".gif", ".mp4"):
-        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate")
-    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
-        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
-    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
-        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate")
+    _check_animation(path, fps, speed)
 
     arm, keys, surface, obstacles = _frame_parts(scenario)
     theta = _thetas(log, arm.n)
@@ -280,11 +278,34 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
         return [link_line, keys_plot, trace, label, *moving_artists]
 
     anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    _save_animation(anim, fig, path, fps, len(frames), progress)
+    return path
+
+
+def _check_animation(path: Path, fps: float, speed: float) -> None:
+    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
+    from ..exceptions import ParamError
+
+    suffix = path.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate")
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
+    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
+        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate")
+
+
+def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
+    """Write ``anim`` to ``path`` atomically (temporary file, then rename) and close ``fig``."""
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+
+    suffix = path.suffix.lower()
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(frames), unit="frame", desc=f"animate {path.name}", leave=False)
+        bar = tqdm(total=n_frames, unit="frame", desc=f"animate {path.name}", leave=False)
     callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
 
     writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
@@ -299,4 +320,3 @@ def animate(scenario, log, path: str | Path, *, fps: int = 20, speed: float = 1.
         plt.close(fig)
         if tmp.exists():
             tmp.unlink()
-    return path

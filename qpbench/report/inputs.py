@@ -277,7 +277,7 @@ def group_label(profile: str, mode: str | None) -> str:
     return f"{profile}, {mode}" if mode else str(profile)
 
 
-def scenario_key(value) -> str:
+def scenario_key(value: object) -> str:
     """Scenario label of a bench row (``-`` when the problem has no scenario)."""
     if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
         return "-"

@@ -25,10 +25,14 @@ both drawn by :func:`closed_loop_figure`.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..sim import log as tick_log
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["closed_loop_figure", "run_figure"]
 
@@ -91,27 +95,46 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
     fig, axes = plt.subplots(len(panels), 1, figsize=(9.5, 1.9 * len(panels) + 0.8), sharex=True, squeeze=False)
     axes = {name: ax for name, ax in zip(panels, axes[:, 0])}
     for backend, d in logs.items():
-        t = d[tick_log.T].to_numpy(float)
-        c = colours[backend]
-        style = dict(color=c, lw=0.9, label=backend)
-        axes["tracking"].plot(t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style)
-        axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style)
-        if has_d and tick_log.D_MIN in d.columns:
-            axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style)
-        axes["time"].plot(t, d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6, color=c, lw=0.0, marker=".", ms=1.2,
-                          alpha=0.6, rasterized=True)
-        axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style)
-        if adaptive and tick_log.KP_HAT in d.columns:
-            axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style)
-        # ticks without the backend's own answer: a band along the top of the first panel
-        not_own = np.zeros(len(d), dtype=bool)
-        for col in (tick_log.FALLBACK, tick_log.ZERO_VELOCITY):
-            if col in d.columns:
-                not_own |= d[col].to_numpy(bool)
-        for a, b in _intervals(not_own):
-            axes["tracking"].axvspan(t[a], t[b] + (t[1] - t[0] if len(t) > 1 else 0.0), ymin=0.94, ymax=1.0,
-                                     color=c, alpha=0.5, lw=0)
+        _plot_log(axes, d, backend, colours[backend], has_d, adaptive)
+    _label_axes(axes, logs, has_d, adaptive, d_safe, budget_s)
+    axes[panels[-1]].set_xlabel("t [s]")
+    _legend(fig, axes, logs)
+    fig.suptitle(title)
+    fig.tight_layout()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    return path
 
+
+def _plot_log(axes: dict, d, backend: str, c, has_d: bool, adaptive: bool) -> None:
+    """One backend's tick log on every panel, and a band on top of the first where it did not answer."""
+    t = d[tick_log.T].to_numpy(float)
+    style = dict(color=c, lw=0.9, label=backend)
+    axes["tracking"].plot(t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style)
+    axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style)
+    if has_d and tick_log.D_MIN in d.columns:
+        axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style)
+    axes["time"].plot(t, d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6, color=c, lw=0.0, marker=".", ms=1.2,
+                      alpha=0.6, rasterized=True)
+    axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style)
+    if adaptive and tick_log.KP_HAT in d.columns:
+        axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style)
+    # ticks without the backend's own answer: a band along the top of the first panel
+    not_own = np.zeros(len(d), dtype=bool)
+    for col in (tick_log.FALLBACK, tick_log.ZERO_VELOCITY):
+        if col in d.columns:
+            not_own |= d[col].to_numpy(bool)
+    for a, b in _intervals(not_own):
+        axes["tracking"].axvspan(t[a], t[b] + (t[1] - t[0] if len(t) > 1 else 0.0), ymin=0.94, ymax=1.0,
+                                 color=c, alpha=0.5, lw=0)
+
+
+def _label_axes(axes: dict, logs: dict, has_d: bool, adaptive: bool, d_safe: float | None,
+                budget_s: float) -> None:
+    """Scales, labels, the safety lines and the time budget of the panels."""
     ax = axes["tracking"]
     ax.set_yscale("log")
     ax.set_ylabel("|tracking error|\n[mm]")
@@ -137,8 +160,10 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
         axes["kp"].set_ylabel("estimated\nKp_hat [N/m]")
     for ax in axes.values():
         ax.grid(True, alpha=0.3, which="major")
-    last = axes[panels[-1]]
-    last.set_xlabel("t [s]")
+
+
+def _legend(fig, axes: dict, logs: dict) -> None:
+    """One legend for the figure: the backends, then the reference lines (d_safe, budget)."""
     handles, labels = axes["tracking"].get_legend_handles_labels()
     extra = []
     for name in ("distance", "time"):
@@ -148,17 +173,9 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
     fig.legend(handles + [h for h, _ in extra], labels + [lab for _, lab in extra], loc="upper left",
                bbox_to_anchor=(1.0, 0.97), fontsize=8, frameon=False,
                title="band on top: fallback\nor zero velocity", title_fontsize=7)
-    fig.suptitle(title)
-    fig.tight_layout()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
-    finally:
-        plt.close(fig)
-    return path
 
 
-def run_figure(frame, summary: dict, path: str | Path) -> Path:
+def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:
     """The figure of one run (``qpbench simulate --plot``): its tick log and its summary's names."""
     return closed_loop_figure(
         {summary["backend"]: frame}, path,

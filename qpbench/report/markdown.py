@@ -40,7 +40,7 @@ from .machine import machine_info, package_versions
 DIGITS = 4
 
 
-def fmt(value) -> str:
+def fmt(value: object) -> str:
     """One table cell: ``-`` for missing, ``inf``, integers as is, floats to 4 significant digits."""
     if value is None:
         return "-"
@@ -100,6 +100,7 @@ def _never_found(summary: pd.DataFrame) -> list[str]:
 
 
 def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
+    """The per-tick benchmark's section: what a success and the means are, then one part per profile."""
     out = ["## Per-tick benchmark\n"]
     bench = results.bench
     out.append(
@@ -126,6 +127,15 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
     )
     for note in results.notes:
         out.append(f"Note: {note}.\n")
+    out.extend(_reference_agreement_part(bench))
+    for label, tol, rows in tables.bench_groups(bench):
+        out.extend(_profile_part(label, tol, rows, plot_files))
+    return out
+
+
+def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
+    """How far the two reference solvers' objectives are apart, per problem (when the column is there)."""
+    out: list[str] = []
     if "reference_agreement" in bench.columns:
         per_problem = (
             bench.assign(_a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
@@ -139,79 +149,92 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
                 f"{int((per_problem > 1e-7).sum())} above 1e-7 (the kept answer is the one with the smaller "
                 "KKT residuals; `reference_agreement` column).\n"
             )
-    for label, tol, rows in tables.bench_groups(bench):
-        out.append(f"### Profile {label}\n")
-        out.append(
-            f"Tolerances: primal {tol.primal:g}, dual {tol.dual:g}, gap {tol.gap:g}, "
-            f"time limit {tol.runtime:g} s.\n"
+    return out
+
+
+def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str]) -> list[str]:
+    """One profile's tables: success and shifted geometric means, violations, then per scenario."""
+    out: list[str] = []
+    out.append(f"### Profile {label}\n")
+    out.append(
+        f"Tolerances: primal {tol.primal:g}, dual {tol.dual:g}, gap {tol.gap:g}, "
+        f"time limit {tol.runtime:g} s.\n"
+    )
+    summary = tables.backend_summary(rows, tol)
+    names, isolated_notes = _labels(rows)
+    never = _never_found(summary)
+    never_note = []
+    if never:
+        never_note.append(
+            f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows with "
+            "status optimal), so there is no residual or gap to average; counted with the "
+            "not-found value, floored at the tolerance, they would score as the best.\n"
         )
-        summary = tables.backend_summary(rows, tol)
-        names, isolated_notes = _labels(rows)
-        never = _never_found(summary)
-        never_note = []
-        if never:
-            never_note.append(
-                f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows with "
-                "status optimal), so there is no residual or gap to average; counted with the "
-                "not-found value, floored at the tolerance, they would score as the best.\n"
-            )
-        accuracy = [m for m in tables.SHGEOM_METRICS if m != "runtime"]  # residuals and gaps, in order
-        out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
-        out.append(
-            md_table(
-                ["backend", "problems", "success (%)", "runtime", "runtime (feasible)",
-                 *(m.replace("_", " ") for m in accuracy)],
-                [
-                    [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
-                     r["runtime_feasible_ratio"], *(r[f"{m}_ratio"] for m in accuracy)]
-                    for b, r in summary.iterrows()
-                ],
-            )
+    accuracy = [m for m in tables.SHGEOM_METRICS if m != "runtime"]  # residuals and gaps, in order
+    out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
+    out.append(
+        md_table(
+            ["backend", "problems", "success (%)", "runtime", "runtime (feasible)",
+             *(m.replace("_", " ") for m in accuracy)],
+            [
+                [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
+                 r["runtime_feasible_ratio"], *(r[f"{m}_ratio"] for m in accuracy)]
+                for b, r in summary.iterrows()
+            ],
         )
-        out.extend(isolated_notes + never_note)
-        out.append("Shifted geometric means, absolute values:\n")
-        out.append(
-            md_table(
-                ["backend", "runtime (us)", "runtime feasible (us)", *(m.replace("_", " ") for m in accuracy),
-                 "harness overhead p50 (us)"],
-                [
-                    [names[b], r["runtime"] * _US, r["runtime_feasible"] * _US, *(r[m] for m in accuracy),
-                     r["overhead_median_s"] * _US]
-                    for b, r in summary.iterrows()
-                ],
-            )
+    )
+    out.extend(isolated_notes + never_note)
+    out.append("Shifted geometric means, absolute values:\n")
+    out.append(
+        md_table(
+            ["backend", "runtime (us)", "runtime feasible (us)", *(m.replace("_", " ") for m in accuracy),
+             "harness overhead p50 (us)"],
+            [
+                [names[b], r["runtime"] * _US, r["runtime_feasible"] * _US, *(r[m] for m in accuracy),
+                 r["overhead_median_s"] * _US]
+                for b, r in summary.iterrows()
+            ],
         )
-        out.extend(isolated_notes + never_note)
-        out.extend(_violation_part(rows, never))
-        key = f"perf_profile_{slug(label)}"
-        if key in plot_files:
-            out.append(
-                "Dolan-More performance profile of runtime (fraction of problems a backend "
-                "solves successfully within tau times the best backend's time):\n"
-            )
-            out.append(f"![performance profile, {label}]({plot_files[key]})\n")
-        for scenario, table in tables.scenario_summary(rows, tol).items():
-            out.append(f"#### Scenario {scenario} ({label})\n")
-            out.append("Per backend, runtime over every problem of the scenario:\n")
-            out.append(
-                md_table(
-                    ["backend", "problems", "success (%)", "runtime shm ratio",
-                     "runtime p50 (us)", "runtime p99 (us)", "runtime max (us)",
-                     "max optimality gap"],
-                    [
-                        [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
-                         r["runtime_p50_s"] * _US, r["runtime_p99_s"] * _US,
-                         r["runtime_max_s"] * _US, r["optimality_gap_max"]]
-                        for b, r in table.iterrows()
-                    ],
-                )
-            )
-            if any(names[b] != b for b in table.index):
-                out.extend(isolated_notes)
-            out.extend(_solver_time_part(rows, scenario, names))
-            key = f"per_tick_{slug(label)}_{slug(scenario)}"
-            if key in plot_files:
-                out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
+    )
+    out.extend(isolated_notes + never_note)
+    out.extend(_violation_part(rows, never))
+    key = f"perf_profile_{slug(label)}"
+    if key in plot_files:
+        out.append(
+            "Dolan-More performance profile of runtime (fraction of problems a backend "
+            "solves successfully within tau times the best backend's time):\n"
+        )
+        out.append(f"![performance profile, {label}]({plot_files[key]})\n")
+    for scenario, table in tables.scenario_summary(rows, tol).items():
+        out.extend(_scenario_part(scenario, table, label, rows, names, isolated_notes, plot_files))
+    return out
+
+
+def _scenario_part(scenario: str, table: pd.DataFrame, label: str, rows: pd.DataFrame,
+                   names: dict[str, str], isolated_notes: list[str], plot_files: dict[str, str]) -> list[str]:
+    """One scenario's runtime table of one profile, its solver-time part and its per-tick figure."""
+    out: list[str] = []
+    out.append(f"#### Scenario {scenario} ({label})\n")
+    out.append("Per backend, runtime over every problem of the scenario:\n")
+    out.append(
+        md_table(
+            ["backend", "problems", "success (%)", "runtime shm ratio",
+             "runtime p50 (us)", "runtime p99 (us)", "runtime max (us)",
+             "max optimality gap"],
+            [
+                [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
+                 r["runtime_p50_s"] * _US, r["runtime_p99_s"] * _US,
+                 r["runtime_max_s"] * _US, r["optimality_gap_max"]]
+                for b, r in table.iterrows()
+            ],
+        )
+    )
+    if any(names[b] != b for b in table.index):
+        out.extend(isolated_notes)
+    out.extend(_solver_time_part(rows, scenario, names))
+    key = f"per_tick_{slug(label)}_{slug(scenario)}"
+    if key in plot_files:
+        out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
     return out
 
 

@@ -34,6 +34,7 @@ tails of the per-scenario tables.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -45,6 +46,9 @@ from ..statuses import CERTIFIED_INFEASIBLE
 # Reading the CSVs lives in .inputs; Results and read_results stay reachable from here,
 # where the report's modules look for their rows.
 from .inputs import Results, group_label, read_results, scenario_key, slug  # noqa: F401
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
 
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
 SHIFT = 10.0
@@ -110,7 +114,7 @@ def shgeom_of(values: np.ndarray) -> float:
     return float(shgeom(np.asarray(values, dtype=float), SHIFT))
 
 
-def bench_groups(bench: pd.DataFrame):
+def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataFrame]]:
     """Yield ``(label, tolerance, rows)`` per (profile, mode) of the bench rows."""
     if bench.empty:
         return

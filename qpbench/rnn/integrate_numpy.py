@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+# The layout's names one by one, as in kernels.py (the twin reads the same slots by the same names).
 from .layout import (
     CLAMP,
     COMPL,
@@ -56,6 +57,9 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     nominal = _nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
     forced = nominal > 0
     prm[NOMINAL] = nominal
+    # From here on the same lines as the compiled loop (qpbench/rnn/kernels.py:_integrate_loops),
+    # kept twice on purpose: this is its numpy twin, the reference the tests compare it with, and
+    # numba compiles only its own module's functions (see that module's docstring).
     nsteps, rmax, sig2, note = _step_bound(P, A, G, prm, nominal, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2

@@ -12,9 +12,12 @@ loop is :mod:`qpbench.rnn.integrate_numpy` (same algorithm, tested equal).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+# Each slot name imported on its own (the list repeats the other rnn modules'): the kernels read
+# them as plain module globals, which numba freezes as constants at compile time.
 from .layout import (
     CLAMP,
     COMPL,
@@ -51,6 +54,9 @@ from .layout import (
 )
 from .step_bound import _clamped_steps, _frobenius2, _gershgorin, _nominal_steps, _ratio_max
 from .integrate_numpy import _integrate_numpy
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
@@ -194,6 +200,11 @@ def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
     return pr, du, co
 
 
+# Over 80 lines, kept whole on purpose: the integrator's main loop is one compiled loop (the
+# per-step functions it calls are already separate kernels, inlined by numba); moving its
+# set-up or its stopping tests out would add calls inside the loop or another compiled
+# function to rebind before the first compile, and the bit-identical tests against the
+# numpy twin (qpbench/rnn/integrate_numpy.py) pin its numbers.
 def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
     n = q.shape[0]
     me = b.shape[0]
@@ -245,6 +256,8 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
         rmax = _ratio_max_jit(prm[PMIN], prm[PMAX], sig2, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
+    # From here on the same lines as the numpy twin (qpbench/rnn/integrate_numpy.py), kept twice
+    # on purpose: the twin is this loop's reference in the tests and runs without numba.
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
         prm[STEPS] = NO_STABLE_STEP
@@ -410,7 +423,7 @@ def numba_available() -> bool:
     return True
 
 
-def kernel(use_numba: bool = True):
+def kernel(use_numba: bool = True) -> Callable:
     """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
 
     ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the
@@ -445,7 +458,7 @@ def kernel(use_numba: bool = True):
     return _COMPILED
 
 
-def online_kernel(strict: bool = True, inline: bool = False):
+def online_kernel(strict: bool = True, inline: bool = False) -> Callable:
     """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``.
 
     Same arguments as :func:`kernel`'s result, ``sol`` of length
@@ -476,7 +489,7 @@ def online_kernel(strict: bool = True, inline: bool = False):
     return fn
 
 
-def packed_kernel():
+def packed_kernel() -> Callable:
     """The per-tick kernel on a packed buffer: ``f(buffer, xi, prm, sol) -> code``.
 
     Compiled for 1-D C-contiguous float64 arrays only. Returned is the

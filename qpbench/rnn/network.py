@@ -62,6 +62,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..exceptions import ParamError, ProblemFormatError
+# The layout's names re-exported one by one (the list repeats kernels.py's): callers read the
+# network's slots as ``network.NAME``, and this list says which names that covers.
 from .layout import (  # noqa: F401 - the network's names, read through this module
     CLAMP,
     COMPL,
@@ -119,6 +121,8 @@ from .kernels import (  # noqa: F401 - the network's names, read through this mo
 )
 
 
+# The keywords repeat step_bound.make_params' on purpose: this is the public entry, whose signature
+# documents each setting with its default; it passes them on to make_params unchanged.
 def integrate(
     qp: DenseQP,
     state: NetworkState,
@@ -222,7 +226,7 @@ def step_note(prm: np.ndarray) -> str | None:
 _NO_SOL = np.zeros(0)
 
 
-def duals(qp: DenseQP, state: NetworkState):
+def duals(qp: DenseQP, state: NetworkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """qpsolvers duals ``(y, z, z_box)`` of a network state.
 
     ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with

@@ -6,11 +6,15 @@ See :mod:`qpbench.rnn.network` for the network (eq. 15) itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 
 @dataclass
@@ -54,6 +58,17 @@ def _cached(key: tuple, make) -> np.ndarray:
     return arr
 
 
+def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Constraint rows ``M x (=|<=) v`` as float64 arrays; no rows (cached empties) when ``M`` is None."""
+    if M is None:
+        return _cached(("A", n), lambda: np.zeros((0, n))), _cached(("v", 0), lambda: np.zeros(0))
+    M = _f64(M, m_name, 2)
+    v = _f64(v, v_name, 1)
+    if M.shape[1] != n or v.shape[0] != M.shape[0]:
+        raise ProblemFormatError(f"{m_name} {M.shape} and {v_name} {v.shape} do not fit n = {n}", key=m_name)
+    return M, v
+
+
 def _f64(a, name: str, ndim: int) -> np.ndarray:
     if spa.issparse(a):
         a = a.toarray()
@@ -69,7 +84,7 @@ def _f64(a, name: str, ndim: int) -> np.ndarray:
     return a
 
 
-def dense_qp(problem) -> DenseQP:
+def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
     """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`.
 
     Raises:
@@ -80,22 +95,8 @@ def dense_qp(problem) -> DenseQP:
     n = q.shape[0]
     if P.shape != (n, n):
         raise ProblemFormatError(f"P has shape {P.shape}, expected ({n}, {n})", key="P")
-    if problem.A is None:
-        A = _cached(("A", n), lambda: np.zeros((0, n)))
-        b = _cached(("v", 0), lambda: np.zeros(0))
-    else:
-        A = _f64(problem.A, "A", 2)
-        b = _f64(problem.b, "b", 1)
-        if A.shape[1] != n or b.shape[0] != A.shape[0]:
-            raise ProblemFormatError(f"A {A.shape} and b {b.shape} do not fit n = {n}", key="A")
-    if problem.G is None:
-        G = _cached(("A", n), lambda: np.zeros((0, n)))
-        h = _cached(("v", 0), lambda: np.zeros(0))
-    else:
-        G = _f64(problem.G, "G", 2)
-        h = _f64(problem.h, "h", 1)
-        if G.shape[1] != n or h.shape[0] != G.shape[0]:
-            raise ProblemFormatError(f"G {G.shape} and h {h.shape} do not fit n = {n}", key="G")
+    A, b = _rows(problem.A, problem.b, "A", "b", n)
+    G, h = _rows(problem.G, problem.h, "G", "h", n)
     has_box = problem.lb is not None or problem.ub is not None
     if problem.lb is None:
         lb = _cached(("lb", n), lambda: np.full(n, -np.inf))
@@ -154,7 +155,7 @@ class NetworkState:
         return self.xi[: self.n]
 
     @v.setter
-    def v(self, value) -> None:
+    def v(self, value: np.ndarray) -> None:
         self.xi[: self.n] = value
 
     @property

@@ -147,6 +147,8 @@ def stable_ratio(qp: DenseQP, method: str = "euler") -> float:
     return _ratio_max(pmin, pmax, _sigma2_bound_numpy(qp.A, qp.G), method == "semi-implicit")
 
 
+# Keywords as in network.integrate (the public entry that passes them on); listed again here so
+# the packed parameter vector can be built without going through a network state.
 def make_params(
     *,
     p_range: tuple[float, float],

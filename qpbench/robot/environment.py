@@ -92,11 +92,11 @@ class ContactSurface:
         """Restart the noise sequence from the seed."""
         self._rng = np.random.default_rng(self.seed)
 
-    def penetration(self, x) -> float:
+    def penetration(self, x: np.ndarray) -> float:
         """``delta = n . (x - point)`` in [m] (positive inside the surface)."""
         return float(self.normal[0] * x[0] + self.normal[1] * x[1] - self._offset)
 
-    def force(self, x, xdot) -> float:
+    def force(self, x: np.ndarray, xdot: np.ndarray) -> float:
         """Contact force magnitude along the normal in [N], as a sensor reads it (noise included).
 
         Args:
@@ -176,7 +176,7 @@ class LineObstacle(Obstacle):
         self.point = _vec2(point, f"obstacles.{name}.point")
         self.normal = _unit(normal, f"obstacles.{name}.normal")
 
-    def closest(self, A, t):
+    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         A = np.asarray(A, dtype=float)
         p = self.point + self.velocity * t
         dist = (A - p) @ self.normal  # signed
@@ -184,10 +184,13 @@ class LineObstacle(Obstacle):
         u = np.broadcast_to(self.normal, A.shape).copy()
         return B[:, None, :], dist[:, None], u[:, None, :]
 
-    def primitives(self):
+    def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.point, *self.normal, 0.0, *self.velocity]])
 
 
+# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest, primitives) on
+# purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
+# touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 
@@ -201,7 +204,7 @@ class SegmentObstacle(Obstacle):
         if np.allclose(self.a, self.b):
             raise InputError("segment end points must differ", key=f"obstacles.{name}.b")
 
-    def closest(self, A, t):
+    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         A = np.asarray(A, dtype=float)
         a = self.a + self.velocity * t
         ab = self.b - self.a
@@ -210,7 +213,7 @@ class SegmentObstacle(Obstacle):
         dist, u = self._from_diff(A - B)
         return B[:, None, :], dist[:, None], u[:, None, :]
 
-    def primitives(self):
+    def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.a, *self.b, 0.0, *self.velocity]])
 
 
@@ -227,14 +230,14 @@ class DiskObstacle(Obstacle):
             raise InputError(f"radius must be > 0 [m], got {radius}", key=f"obstacles.{name}.radius")
         self.radius = float(radius)
 
-    def closest(self, A, t):
+    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         A = np.asarray(A, dtype=float)
         c = self.center + self.velocity * t
         dist, u = self._from_diff(A - c, self.radius)
         B = c + self.radius * u
         return B[:, None, :], dist[:, None], u[:, None, :]
 
-    def primitives(self):
+    def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.center, 0.0, 0.0, self.radius, *self.velocity]])
 
 
@@ -252,13 +255,13 @@ class PointCloudObstacle(Obstacle):
         self.points = pts
         self.n_points = pts.shape[0]
 
-    def closest(self, A, t):
+    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         A = np.asarray(A, dtype=float)
         B = np.broadcast_to(self.points + self.velocity * t, (A.shape[0], self.n_points, 2)).copy()
         dist, u = self._from_diff(A[:, None, :] - B)
         return B, dist, u
 
-    def primitives(self):
+    def primitives(self) -> np.ndarray:
         m = self.n_points
         rows = np.zeros((m, PRIMITIVE_WIDTH))
         rows[:, 0] = self.KERNEL_KIND

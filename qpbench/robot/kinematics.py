@@ -51,11 +51,11 @@ class PlanarArm:
         self.n = lengths.size
 
     # -- positions -----------------------------------------------------------
-    def absolute_angles(self, theta) -> np.ndarray:
+    def absolute_angles(self, theta: np.ndarray) -> np.ndarray:
         """``phi[i] = sum(theta[:i+1])`` in [rad], shape (n,)."""
         return np.cumsum(np.asarray(theta, dtype=float))
 
-    def joint_positions(self, theta) -> np.ndarray:
+    def joint_positions(self, theta: np.ndarray) -> np.ndarray:
         """Positions of the base, the joints and the end effector in [m], shape (n+1, 2)."""
         phi = self.absolute_angles(theta)
         seg = self.lengths[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
@@ -63,11 +63,11 @@ class PlanarArm:
         np.cumsum(seg, axis=0, out=p[1:])
         return p
 
-    def end_effector(self, theta) -> np.ndarray:
+    def end_effector(self, theta: np.ndarray) -> np.ndarray:
         """End-effector position ``x = f(theta)`` (eq. 1) in [m], shape (2,)."""
         return self.joint_positions(theta)[-1]
 
-    def points(self, theta, links, fracs) -> np.ndarray:
+    def points(self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray) -> np.ndarray:
         """Positions of points ``(links[j], fracs[j])`` in [m], shape (a, 2)."""
         links = np.asarray(links, dtype=int)
         fracs = np.asarray(fracs, dtype=float)
@@ -77,7 +77,7 @@ class PlanarArm:
         return p[links] + (fracs * self.lengths[links])[:, None] * d
 
     # -- Jacobians -----------------------------------------------------------
-    def points_jacobians(self, theta, links, fracs) -> tuple[np.ndarray, np.ndarray]:
+    def points_jacobians(self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Positions (a, 2) in [m] and Jacobians (a, 2, n) in [m/rad] of points on links (eq. 7b)."""
         links = np.asarray(links, dtype=int)
         x = self.points(theta, links, fracs)
@@ -89,7 +89,7 @@ class PlanarArm:
         J[:, 1, :] = rel[:, :, 0] * mask
         return x, J
 
-    def jacobian(self, theta) -> np.ndarray:
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
         """End-effector Jacobian ``J = dx/dtheta`` (eq. 2) in [m/rad], shape (2, n)."""
         _, J = self.points_jacobians(theta, [self.n - 1], [1.0])
         return J[0]

@@ -82,7 +82,7 @@ class GeneratedArm:
     theta0: np.ndarray
     target: np.ndarray
 
-    def key_point_positions(self, theta=None) -> np.ndarray:
+    def key_point_positions(self, theta: np.ndarray | None = None) -> np.ndarray:
         """Key-point positions in [m], shape (a, 2), at ``theta`` (default ``theta0``)."""
         theta = self.theta0 if theta is None else theta
         return self.arm.points(theta, self.key_points.links, self.key_points.fracs)
@@ -102,7 +102,7 @@ def _reach_at(lengths: np.ndarray, c: float) -> float:
     return float(np.hypot(*arm.end_effector(theta)))
 
 
-def bent_arm_angles(lengths, target) -> np.ndarray:
+def bent_arm_angles(lengths: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Joint angles [rad] of the bent arc reaching ``target`` [m] exactly (module docstring).
 
     Raises:
@@ -130,7 +130,7 @@ def bent_arm_angles(lengths, target) -> np.ndarray:
     return theta
 
 
-def generate_arm(spec: ArmSpec, target) -> GeneratedArm:
+def generate_arm(spec: ArmSpec, target: np.ndarray) -> GeneratedArm:
     """The arm of ``spec`` with its end effector at ``target`` [m] (module docstring)."""
     lengths = link_lengths(spec.links, spec.seed)
     arm = PlanarArm(lengths)

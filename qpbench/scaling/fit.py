@@ -30,7 +30,7 @@ class PowerFit:
     intercept: float
     points: int
 
-    def predict(self, s) -> np.ndarray:
+    def predict(self, s: float | np.ndarray) -> np.ndarray:
         """Fitted time at size(s) ``s`` (same units as the data)."""
         return 10.0 ** (self.intercept + self.slope * np.log10(np.asarray(s, dtype=float)))
 
@@ -42,7 +42,7 @@ class PowerFit:
         return f"{self.slope:.2f} +- {se}"
 
 
-def fit_power_law(sizes, times) -> PowerFit:
+def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
     """Least squares of ``log10 times`` on ``log10 sizes`` (module docstring).
 
     Non-positive or non-finite pairs are left out; fewer than two distinct
@@ -66,7 +66,7 @@ def fit_power_law(sizes, times) -> PowerFit:
     return PowerFit(slope, se, intercept, int(x.size))
 
 
-def first_above(sizes, values, limit: float):
+def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | None:
     """The first size (in increasing order) from which every value exceeds ``limit``, else None."""
     order = np.argsort(np.asarray(sizes, dtype=float), kind="stable")
     s = np.asarray(sizes)[order]
@@ -77,7 +77,7 @@ def first_above(sizes, values, limit: float):
     return None
 
 
-def crossing(sizes, slower, faster):
+def crossing(sizes: np.ndarray, slower: np.ndarray, faster: np.ndarray) -> float | None:
     """The first size from which ``faster`` stays strictly below ``slower``, else None.
 
     ``slower`` and ``faster`` are times per size (NaN where not measured;

@@ -36,14 +36,14 @@ AXES = {"arm": ("n", "variables n (arm axis: 4-64 links, 16 cloud points)"),
         "cloud": ("rows", "constraint rows (cloud axis: 4 links, 1-1,000 cloud points)")}
 
 
-def is_scaling_dir(path) -> bool:
+def is_scaling_dir(path: str | Path) -> bool:
     """Whether ``path`` is a folder written by ``qpbench scaling`` (it holds ``scaling.csv``)."""
     from .runner import SUMMARY_NAME
 
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
 
 
-def load(folder) -> pd.DataFrame:
+def load(folder: str | Path) -> pd.DataFrame:
     """``scaling.csv`` of ``folder`` as a frame (numbers typed)."""
     from .runner import SUMMARY_NAME, read_summary
 
@@ -221,7 +221,7 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_scaling_report(folder, out, force: bool = False, plots: bool = True, quiet: bool = False) -> Path:
+def write_scaling_report(folder: str | Path, out: str | Path, force: bool = False, plots: bool = True, quiet: bool = False) -> Path:
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``; return the .md path.
 
     Raises:

@@ -25,12 +25,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..exceptions import ParamError
 from .arms import THETA_LIMIT, VELOCITY_LIMIT, ArmSpec, GeneratedArm, generate_arm
 from .obstacles import CloudSpec, place_cloud
+
+if TYPE_CHECKING:
+    from ..robot.environment import PointCloudObstacle
 
 __all__ = ["DEFAULT_SIZES", "Size", "parse_sizes", "qp_shape", "scenario_toml", "TASK"]
 
@@ -117,7 +121,7 @@ def start_target() -> np.ndarray:
     return c + a * np.cos(ph) + TASK["desired_force"] / TASK["kp"] * normal
 
 
-def generate(size: Size, seed: int = 0, cloud: CloudSpec | None = None):
+def generate(size: Size, seed: int = 0, cloud: CloudSpec | None = None) -> tuple[GeneratedArm, PointCloudObstacle]:
     """``(GeneratedArm, PointCloudObstacle)`` of a size, deterministic in ``seed``."""
     gen = generate_arm(ArmSpec(size.links, size.points_per_link, seed), start_target())
     spec = cloud or CloudSpec(size.cloud_points, seed=seed)
@@ -128,7 +132,7 @@ def _vec(values) -> str:
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
 
-def scenario_toml(size: Size, gen: GeneratedArm, cloud, duration: float) -> str:
+def scenario_toml(size: Size, gen: GeneratedArm, cloud: PointCloudObstacle, duration: float) -> str:
     """The size as a scenario file's text (:mod:`qpbench.sim.scenario` layout)."""
     n = size.links
     t = TASK

@@ -16,6 +16,7 @@ import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,11 @@ from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
 from .scenario_files import paper_scenarios, scenario_names, scenario_path
 from .scenario_schema import check_simulation, validate
 from .verdict import VerdictSettings
+
+if TYPE_CHECKING:
+    from ..control.adaptive import AdaptiveImpedance
+    from ..control.controller import Controller
+    from ..control.terms import CosinePath, PolylinePath
 
 __all__ = [
     "Scenario", "apply_overrides", "load_scenario", "paper_scenarios", "parse_scenario", "scenario_names",
@@ -106,7 +112,7 @@ class Scenario:
             len(self.data["robot"]["link_lengths"]), kp["points_per_link"], kp["include_joints"], kp["link_radius"]
         )
 
-    def make_path(self):
+    def make_path(self) -> CosinePath | PolylinePath:
         from ..control.terms import CosinePath, PolylinePath
 
         p = self.data["path"]
@@ -126,7 +132,7 @@ class Scenario:
             out.append(OBSTACLE_KINDS[kind](**args))
         return out
 
-    def make_controller(self):
+    def make_controller(self) -> Controller:
         """The scenario's :class:`~qpbench.control.controller.Controller`."""
         from ..control.controller import Controller
         from ..control.terms import EscapeVelocityLimits, ImpedanceTask
@@ -141,7 +147,7 @@ class Scenario:
             k=c["k"], d_safe=c["d_safe"], rho=c["rho"], kp=c["kp"], kd=c["kd"],
         )
 
-    def make_adaptive(self):
+    def make_adaptive(self) -> AdaptiveImpedance | None:
         """The adaptive estimator (section 4.4), or None when ``[adaptive] enabled = false``."""
         from ..control.adaptive import AdaptiveImpedance
 
@@ -187,7 +193,7 @@ def parse_scenario(text: str, path: str | Path | None = None, overrides: dict | 
 _OVERRIDE_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
 
 
-def apply_overrides(raw: dict, overrides: dict, file="<scenario>") -> dict:
+def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>") -> dict:
     """A copy of the parsed TOML tables ``raw`` with ``overrides`` set over them.
 
     Keys are dotted: ``table.key`` (``rnn.eps``, ``controller.k``,

@@ -15,13 +15,17 @@ import re
 import tomllib
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..exceptions import ScenarioError
+
+if TYPE_CHECKING:
+    from importlib.resources.abc import Traversable
 
 __all__ = ["paper_scenarios", "scenario_names", "scenario_path", "shipped_dir"]
 
 
-def shipped_dir():
+def shipped_dir() -> Traversable:
     """The package folder of the shipped scenario files (a :mod:`importlib.resources` traversable)."""
     return resources.files("qpbench") / "data" / "scenarios"
 

@@ -33,11 +33,15 @@ Obstacles (``[[obstacles]]``, each with ``kind``, ``name`` and ``velocity``
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..exceptions import ScenarioError
 from .verdict import DEFAULT_SAFETY_MARGIN
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 __all__ = ["check_simulation", "validate"]
 
@@ -144,7 +148,7 @@ def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
     return out
 
 
-def validate(raw: dict, file) -> tuple[dict, dict]:
+def validate(raw: dict, file: str | Path) -> tuple[dict, dict]:
     """The parsed TOML tables ``raw`` checked against the schema.
 
     Returns:
@@ -255,31 +259,29 @@ def _check_values(data: dict, file) -> None:
     c = data["contact"]
     if np.hypot(*c["normal"]) < 1e-12:
         raise ScenarioError("must not be zero", path=file, key="contact.normal")
-    for key in ("stiffness",):
-        if not c[key] > 0:
-            raise ScenarioError(f"must be > 0, got {c[key]}", path=file, key=f"contact.{key}")
-    for key in ("damping", "force_noise_std"):
-        if not c[key] >= 0:
-            raise ScenarioError(f"must be >= 0, got {c[key]}", path=file, key=f"contact.{key}")
-    ctl = data["controller"]
-    for key in ("kp", "kd", "alpha", "k", "rho"):
-        if not ctl[key] > 0:
-            raise ScenarioError(f"must be > 0, got {ctl[key]}", path=file, key=f"controller.{key}")
-    for key in ("d_safe", "desired_force"):
-        if not ctl[key] >= 0:
-            raise ScenarioError(f"must be >= 0, got {ctl[key]}", path=file, key=f"controller.{key}")
+    _check_signs(c, "contact", file, positive=("stiffness",), non_negative=("damping", "force_noise_std"))
+    _check_signs(data["controller"], "controller", file, positive=("kp", "kd", "alpha", "k", "rho"),
+                 non_negative=("d_safe", "desired_force"))
     a = data["adaptive"]
     if np.any(a["gain"] < 0):
         raise ScenarioError("gains must be >= 0", path=file, key="adaptive.gain")
-    for key in ("kp_min", "kd_min"):
-        if not a[key] > 0:
-            raise ScenarioError(f"must be > 0, got {a[key]}", path=file, key=f"adaptive.{key}")
+    _check_signs(a, "adaptive", file, positive=("kp_min", "kd_min"))
     for i, o in enumerate(data["obstacles"]):
         if o["kind"] == "disk" and not o["radius"] > 0:
             raise ScenarioError(f"must be > 0 [m], got {o['radius']}", path=file, key=f"obstacles[{i}].radius")
 
 
-def check_simulation(data: dict, file) -> None:
+def _check_signs(table: dict, name: str, file, positive: tuple = (), non_negative: tuple = ()) -> None:
+    """Reject a value of ``table`` (the TOML table ``name``) that is not > 0 / not >= 0 (NaN included)."""
+    for key in positive:
+        if not table[key] > 0:
+            raise ScenarioError(f"must be > 0, got {table[key]}", path=file, key=f"{name}.{key}")
+    for key in non_negative:
+        if not table[key] >= 0:
+            raise ScenarioError(f"must be >= 0, got {table[key]}", path=file, key=f"{name}.{key}")
+
+
+def check_simulation(data: dict, file: str | Path) -> None:
     s = data["simulation"]
     if not s["dt"] > 0:
         raise ScenarioError(f"must be > 0 [s], got {s['dt']}", path=file, key="simulation.dt")

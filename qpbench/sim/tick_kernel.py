@@ -10,18 +10,24 @@ once per run by :func:`post_constants`.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..control.controller import Controller, TickArrays
 from . import log
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from ..robot.environment import ContactSurface
+
 __all__ = ["APPLIED", "FALLBACK", "ZERO", "get_post_kernel", "post_constants", "warm_post_kernel"]
 
 _post_kernel = None
 
 
-def get_post_kernel():
+def get_post_kernel() -> Callable:
     """The compiled :func:`_post_py` (compiled, or loaded from numba's cache, on first call)."""
     global _post_kernel
     if _post_kernel is None:
@@ -121,7 +127,7 @@ def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mo
     return force
 
 
-def post_constants(controller: Controller, surface, dt: float):
+def post_constants(controller: Controller, surface: ContactSurface, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The tick log's float columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
     cols = log.float_columns(controller.n, [(a, o) for a, o, _ in controller.obstacle_columns()])
     cidx = {c: i for i, c in enumerate(cols)}
@@ -145,7 +151,7 @@ def post_constants(controller: Controller, surface, dt: float):
     return cols, cidx, ci, cf
 
 
-def warm_post_kernel(controller: Controller, surface, dt: float, theta: np.ndarray, arrays: TickArrays) -> None:
+def warm_post_kernel(controller: Controller, surface: ContactSurface, dt: float, theta: np.ndarray, arrays: TickArrays) -> None:
     """Compile (or load) the post kernel for the argument types :func:`simulate` passes.
 
     ``arrays`` is a :meth:`Controller.build_arrays` result; ``theta`` is not changed.

@@ -34,10 +34,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import log
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "DEFAULT_SAFETY_MARGIN", "VERDICTS", "VIOLATION_TOL", "Verdict", "VerdictSettings", "failed_run", "judge",
@@ -103,6 +107,8 @@ def _g(x: float) -> str:
 
 def _failed_reasons(summary: dict) -> list[str]:
     out = []
+    # One branch per kind of tick that did not go as planned, each with its own sentence and
+    # details (first error, deadline): alike in shape, kept apart so each reads as its sentence.
     n = int(summary.get("error_ticks") or 0)
     if n:
         first = summary.get("first_error")
@@ -197,7 +203,7 @@ def _diverged_reasons(frame, settings: VerdictSettings) -> list[str]:
     return out
 
 
-def judge(frame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_columns: list[tuple[str, str]],
+def judge(frame: pd.DataFrame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_columns: list[tuple[str, str]],
           summary: dict) -> Verdict:
     """The verdict of one simulated run (rules in the module docstring).
 
