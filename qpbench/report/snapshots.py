@@ -54,17 +54,21 @@ def _is_exact(backend: str) -> bool:
 
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     """Of one scenario's runs (one formulation), the row of each role that has one (see the module docstring)."""
-    runs = runs[[log_file(p) is not None for p in runs.get("log_path", pd.Series(index=runs.index))]]
+    if "log_path" not in runs.columns:
+        return {}
+    runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
     whole = pd.to_numeric(runs["simulated_s"], errors="coerce") >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
-    exact = runs[runs["backend"].astype(str).map(_is_exact) & runs["verdict"].eq("ok") & whole]
+    backends = [str(b) for b in runs["backend"]]
+    is_exact = np.array([_is_exact(b) for b in backends], dtype=bool)
+    exact = runs[is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)]
     if not exact.empty:
         p50 = pd.to_numeric(exact["solve_time_p50_s"], errors="coerce").fillna(np.inf)
-        chosen["exact"] = exact.loc[p50.idxmin()]
-    networks = runs[runs["backend"].astype(str).map(_is_network)]
+        chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
+    networks = runs[np.array([_is_network(b) for b in backends], dtype=bool)]
     if not networks.empty:
-        rank = networks["backend"].map(lambda b: NETWORKS.index(b) if b in NETWORKS else len(NETWORKS))
-        chosen["network"] = networks.loc[rank.idxmin()]
+        rank = [NETWORKS.index(b) if b in NETWORKS else len(NETWORKS) for b in networks["backend"].astype(str)]
+        chosen["network"] = networks.iloc[int(np.argmin(rank))]
     return chosen
 
 
