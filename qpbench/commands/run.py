@@ -23,7 +23,7 @@ from pathlib import Path
 from ..harness.pipeline import BENCH_EVERY, REPEAT, RUN_BUDGET_S
 
 HELP = "the main job: make missing problem sets, bench every backend, closed loop every scenario, write results/ and report.md"
-EXAMPLE = "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall --backends qpsolvers:daqp,pinv --out /tmp/r)"
+EXAMPLE = "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall --backends qpsolvers:daqp,pinv --out quick)"
 
 log = logging.getLogger("qpbench.run")
 
