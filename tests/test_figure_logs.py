@@ -79,7 +79,7 @@ def _image_links(report_md: str) -> list[str]:
 def loop_dir(tmp_path_factory):
     """A closed-loop run of the wall scenario by an exact backend and the network, its logs kept."""
     out = tmp_path_factory.mktemp("loop") / "cl"
-    code = main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "daqp,rnn-tuned,pinv", "--duration", "1.5",
+    code = main(["closed-loop", "--scenarios", "wall", "--backends", "daqp,rnn-tuned,pinv", "--duration", "1.5",
                  "--out", str(out)])
     verdicts = pd.read_csv(out / "closed_loop.csv").set_index("backend")["verdict"]
     assert verdicts["daqp"] == verdicts["rnn-tuned"] == "ok"
@@ -89,12 +89,12 @@ def loop_dir(tmp_path_factory):
 
 def test_report_from_the_csv_and_figure_logs_links_the_same_figures(loop_dir, tmp_path):
     assert sorted(p.name for p in (loop_dir / "figure_logs").iterdir()) == sorted(p.name for p in (loop_dir / "logs").iterdir())
-    assert main(["-q", "report", str(loop_dir / "closed_loop.csv"), "--out", str(tmp_path / "full")]) == 0
+    assert main(["report", str(loop_dir / "closed_loop.csv"), "--out", str(tmp_path / "full")]) == 0
     bare = tmp_path / "bare"  # as a fresh clone has it: the CSV and figure_logs/, no logs/
     bare.mkdir()
     shutil.copy(loop_dir / "closed_loop.csv", bare)
     shutil.copytree(loop_dir / "figure_logs", bare / "figure_logs")
-    assert main(["-q", "report", str(bare / "closed_loop.csv"), "--out", str(tmp_path / "bare_out")]) == 0
+    assert main(["report", str(bare / "closed_loop.csv"), "--out", str(tmp_path / "bare_out")]) == 0
     full = _image_links((tmp_path / "full" / "report.md").read_text())
     compact = _image_links((tmp_path / "bare_out" / "report.md").read_text())
     assert full == compact
@@ -102,7 +102,7 @@ def test_report_from_the_csv_and_figure_logs_links_the_same_figures(loop_dir, tm
             "plots/closed_loop_d_wall_paper.png"} <= set(compact)
     # without either log, the closed-loop figures are gone: the figure logs are what drew them
     shutil.rmtree(bare / "figure_logs")
-    assert main(["-q", "report", str(bare / "closed_loop.csv"), "--out", str(tmp_path / "none")]) == 0
+    assert main(["report", str(bare / "closed_loop.csv"), "--out", str(tmp_path / "none")]) == 0
     assert not [p for p in _image_links((tmp_path / "none" / "report.md").read_text()) if "wall" in p]
 
 
@@ -111,7 +111,7 @@ def test_report_shows_the_arm_for_the_fastest_exact_backend_and_the_network_side
     bare.mkdir()
     shutil.copy(loop_dir / "closed_loop.csv", bare)
     shutil.copytree(loop_dir / "figure_logs", bare / "figure_logs")
-    assert main(["-q", "report", str(bare / "closed_loop.csv"), "--out", str(tmp_path / "out")]) == 0
+    assert main(["report", str(bare / "closed_loop.csv"), "--out", str(tmp_path / "out")]) == 0
     md = (tmp_path / "out" / "report.md").read_text()
     row = ("| ![fastest exact backend, wall](plots/snapshot_exact_wall_paper.png) "
            "| ![network, wall](plots/snapshot_network_wall_paper.png) |")
@@ -136,7 +136,7 @@ def test_snapshot_roles(loop_dir):
 
 def test_report_removes_only_its_own_figures_it_no_longer_links(loop_dir, tmp_path):
     out = tmp_path / "out"
-    assert main(["-q", "report", str(loop_dir / "closed_loop.csv"), "--out", str(out)]) == 0
+    assert main(["report", str(loop_dir / "closed_loop.csv"), "--out", str(out)]) == 0
     plots = out / "plots"
     stale = [plots / "closed_loop_narrow_paper.png", plots / "snapshot_exact_old_paper.png",
              plots / "perf_profile_gone.png", plots / "per_tick_gone_wall.png"]
@@ -144,7 +144,7 @@ def test_report_removes_only_its_own_figures_it_no_longer_links(loop_dir, tmp_pa
     for path in stale + mine:
         path.write_bytes(b"x")
     linked = _image_links((out / "report.md").read_text())
-    assert main(["-q", "report", str(loop_dir / "closed_loop.csv"), "--out", str(out), "--force"]) == 0
+    assert main(["report", str(loop_dir / "closed_loop.csv"), "--out", str(out), "--force"]) == 0
     assert not [p for p in stale if p.exists()]
     assert all(p.exists() for p in mine)
     assert _image_links((out / "report.md").read_text()) == linked

@@ -88,8 +88,8 @@ def write_snapshots(runs: pd.DataFrame, scenario: str, formulation: str, folder:
         return files
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
-        if frame is None:
-            continue
+        if frame is None or not {f"theta_{i}" for i in range(scene.make_arm().n)} <= set(frame.columns):
+            continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         path = folder / f"{key}.png"
         draw_snapshot(scene, frame, path, title=f"{scenario}: {row['backend']} ({ROLES[role]})")
