@@ -26,7 +26,7 @@ problem left without a reference has status ``unknown`` and its rows an
 empty optimality gap, with the reason in the ``reference_note`` column. The
 run goes on. ``progress`` is called once per finished problem.
 
-Cache: one Parquet file beside the set, ``<folder>/reference-<sha[:16]>.parquet``
+Cache: one Parquet file, ``reference-<sha[:16]>.parquet``
 (``reference-<method>-<sha[:16]>.parquet`` for ``clarabel`` / ``piqp``; beside a
 single file ``<file stem>.reference-...``), keyed by the set's SHA-256 (the
 manifest hash of a problem-set folder; for a folder of ``.npz`` / ``.mat`` files
@@ -36,9 +36,14 @@ solution, both solvers' objectives and KKT residuals, which was kept, the note
 and the time limit. The full hash and :data:`REFERENCE_VERSION` are checked on
 read, so a changed set, a changed method or a corrupt cache is recomputed; an
 entry that timed out is recomputed when the limit is now larger. A set built
-in memory, or one in a read-only folder (no write permission, or no write bit
-at all, as for shared data folders), is not cached. Writes are atomic; stale
-caches of the same method in a problem-set folder are removed. A subset of a
+in memory is not cached; a folder counts as read-only without write
+permission or with no write bit at all (as for shared data folders). Writes are atomic; stale
+caches of the same method in a problem-set folder are removed. Where
+(:func:`cache_folder`): a folder given by the caller (``bench --cache-dir``);
+else beside the set when that folder is writable and the set is ours (its
+``manifest.json``, or a reference cache of ours, is there); else the user cache folder,
+``$XDG_CACHE_HOME/qpbench/references`` (default ``~/.cache/qpbench/references``).
+A subset of a
 set (``--problems``, ``--every``, ``--limit``) reads the set's cache and adds
 what it lacks; it never replaces the cache with fewer problems.
 """
@@ -82,7 +87,8 @@ SOURCES = METHODS + ("none",)
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limit: float | None = None,
-                     jobs: int = 1, progress=None, cache: bool = True, context=None) -> list:
+                     jobs: int = 1, progress=None, cache: bool = True, context=None,
+                     cache_dir: str | Path | None = None) -> list:
     """One reference per record of ``problem_set`` from ``source`` (see the module docstring).
 
     Returns:
@@ -95,7 +101,7 @@ def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limi
         return [None] * len(problem_set.records)
     if source in METHODS:
         return reference_solutions(problem_set, cache=cache, progress=progress, method=source,
-                                   time_limit=time_limit, jobs=jobs, context=context)
+                                   time_limit=time_limit, jobs=jobs, context=context, cache_dir=cache_dir)
     from .published import read_objectives
 
     return from_objectives(problem_set, read_objectives(source), source)
@@ -171,12 +177,13 @@ class LogProgress:
 
 
 def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None, *, method: str = "auto",
-                        time_limit: float | None = None, jobs: int = 1, context=None) -> list[ReferenceSolution]:
+                        time_limit: float | None = None, jobs: int = 1, context=None,
+                        cache_dir: str | Path | None = None) -> list[ReferenceSolution]:
     """References of every problem of a set, in order, read from or written to the cache.
 
     Args:
         problem_set: The set (from :func:`qpbench.formats.load_problems`).
-        cache: Use the cache beside the set.
+        cache: Use the cache (in :func:`cache_folder`).
         progress: ``None``, a callable wrapping an iterable (e.g. ``tqdm.tqdm``; called
             with ``total=``), or ``"log"`` (:class:`LogProgress`).
         method: ``auto``, ``clarabel`` or ``piqp``.
@@ -184,10 +191,11 @@ def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=No
         jobs: Worker processes solving at once.
         context: ``multiprocessing`` context of the workers (default ``spawn``;
             :mod:`qpbench.reference_pool`).
+        cache_dir: Folder of the cache (default: :func:`cache_folder`'s rule).
     """
     if method not in METHODS:
         raise ValueError(f"unknown reference method '{method}'")
-    path = cache_path(problem_set, method) if cache else None
+    path = cache_path(problem_set, method, cache_dir) if cache else None
     sha = content_sha256(problem_set)
     names = [r.name for r in problem_set.records]
     limit = math.inf if time_limit is None else float(time_limit)
@@ -203,7 +211,7 @@ def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=No
     finally:
         close()
     refs = [known[n] for n in names]
-    if path is not None and _writable(path.parent):
+    if path is not None and _make(path.parent):
         _write_cache(path, problem_set, list(known.values()), sha, method)
     return refs
 
@@ -227,16 +235,39 @@ def _stale(ref: ReferenceSolution, limit: float) -> bool:
 # ---------------------------------------------------------------- cache
 
 
-def cache_path(problem_set: ProblemSet, method: str = "auto") -> Path | None:
+def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -> Path | None:
+    """The folder the references of ``problem_set`` are cached in (``None``: not cached).
+
+    ``cache_dir`` when given; else the set's folder (the folder of a single
+    file) when it is writable and the set is ours (``manifest.json`` or a
+    ``reference-*.parquet`` of ours there);
+    else the user cache folder (:func:`qpbench.cache.user_cache_dir` / ``references``).
+    """
+    if problem_set.path is None:
+        return None
+    if cache_dir is not None:
+        return Path(cache_dir)
+    path = Path(problem_set.path)
+    folder = path if path.is_dir() else path.parent
+    ours = (folder / "manifest.json").is_file() or any(folder.glob("*reference-*.parquet"))
+    if ours and _writable(folder):
+        return folder
+    from .cache import user_cache_dir
+
+    return user_cache_dir() / "references"
+
+
+def cache_path(problem_set: ProblemSet, method: str = "auto", cache_dir: str | Path | None = None) -> Path | None:
     """Where the references of ``problem_set`` computed by ``method`` are cached (``None``: not cached)."""
     sha = content_sha256(problem_set)
-    if sha is None or problem_set.path is None:
+    folder = cache_folder(problem_set, cache_dir)
+    if sha is None or folder is None:
         return None
     tag = "" if method == "auto" else f"{method}-"
     path = Path(problem_set.path)
     if path.is_dir():
-        return path / f"reference-{tag}{sha[:16]}.parquet"
-    return path.parent / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
+        return folder / f"reference-{tag}{sha[:16]}.parquet"
+    return folder / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
 
 
 _VEC_KEYS = ("x", "y", "z", "z_box")
@@ -295,12 +326,21 @@ def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str, meth
     except OSError as exc:
         log.debug("%s: reference cache not written (%s)", path, exc)
         return
-    if problem_set.kind == "set" and Path(problem_set.path).is_dir():
+    if problem_set.kind == "set" and path.parent == Path(problem_set.path):
         tag = "" if method == "auto" else f"{method}-"
         same_method = re.compile(rf"reference-{re.escape(tag)}[0-9a-f]{{16}}\.parquet")
         for stale in Path(problem_set.path).glob("reference-*.parquet"):
             if stale != path and same_method.fullmatch(stale.name):
                 stale.unlink(missing_ok=True)
+
+
+def _make(folder: Path) -> bool:
+    """Create ``folder`` (and parents); whether it is then writable."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return _writable(folder)
 
 
 def _writable(folder: Path) -> bool:

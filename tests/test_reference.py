@@ -148,26 +148,45 @@ def test_cache_beside_set_and_recomputed_on_change(make_record, tmp_path, monkey
     assert [r.objective for r in refs3] == [r.objective for r in refs2]
 
 
-def test_cache_of_file_folder_and_read_only(mm_dir, tmp_path, make_record):
+@pytest.fixture
+def user_cache(tmp_path, monkeypatch):
+    """A throw-away user cache folder (``$XDG_CACHE_HOME``); returns where references go in it."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    return tmp_path / "xdg" / "qpbench" / "references"
+
+
+def test_cache_of_file_folder_goes_to_the_user_cache(mm_dir, tmp_path, make_record, user_cache):
     from qpbench.formats import save_npz
 
     for i in range(2):
         save_npz(make_record(f"n{i}"), tmp_path / "npz" / f"n{i}.npz")
     ps = load_problems(tmp_path / "npz")
     reference_solutions(ps)
-    assert len(list((tmp_path / "npz").glob("reference-*.parquet"))) == 1
+    # a folder of .npz files is not ours (no manifest.json): nothing is written into it
+    assert not list((tmp_path / "npz").glob("reference-*")) and cache_path(ps).parent == user_cache
+    assert len(list(user_cache.glob("reference-*.parquet"))) == 1
     save_npz(make_record("n2"), tmp_path / "npz" / "n2.npz")  # content changes -> new key
     ps = load_problems(tmp_path / "npz")
-    assert cache_path(ps) not in list((tmp_path / "npz").glob("reference-*.parquet"))
+    assert cache_path(ps) not in list(user_cache.glob("reference-*.parquet"))
     assert len(reference_solutions(ps)) == 3
-    # a single .mat copied to a writable place is cached beside it
+    # a single .mat: cached in the user cache folder under its stem
     shutil.copy(mm_dir / "HS21.mat", tmp_path / "HS21.mat")
     one = load_problems(tmp_path / "HS21.mat")
     assert reference_solutions(one)[0].objective == pytest.approx(-99.96, rel=1e-9)
-    assert cache_path(one).parent == tmp_path and cache_path(one).exists()
+    assert cache_path(one).parent == user_cache and cache_path(one).name.startswith("HS21.reference-")
+    assert cache_path(one).exists() and not list(tmp_path.glob("*reference-*"))
 
 
-def test_unwritable_folder_is_not_cached(mm_dir, tmp_path, monkeypatch):
+def test_cache_dir_is_honoured(make_record, tmp_path, user_cache):
+    folder = tmp_path / "set"
+    write_problem_set(folder, [make_record(f"p{i}", tick=i) for i in range(2)], {"name": "t"})
+    ps = read_problem_set(folder)
+    reference_solutions(ps, cache_dir=tmp_path / "elsewhere" / "refs")  # created when missing
+    assert cache_path(ps, cache_dir=tmp_path / "elsewhere" / "refs").exists()
+    assert not list(folder.glob("reference-*")) and not user_cache.exists()
+
+
+def test_unwritable_folder_is_not_cached(mm_dir, tmp_path, monkeypatch, user_cache):
     shutil.copy(mm_dir / "HS35.mat", tmp_path / "HS35.mat")
 
     def refuse(path, data):
@@ -177,18 +196,19 @@ def test_unwritable_folder_is_not_cached(mm_dir, tmp_path, monkeypatch):
     ps = load_problems(tmp_path)
     refs = reference_solutions(ps)
     assert refs[0].objective == pytest.approx(1 / 9, rel=1e-8)
-    assert not list(tmp_path.glob("reference-*"))
+    assert not list(tmp_path.glob("reference-*")) and not list(user_cache.glob("*"))
 
 
-def test_read_only_folder_is_not_cached(mm_dir, tmp_path):
+def test_read_only_set_is_cached_in_the_user_cache(make_record, tmp_path, user_cache):
     ro = tmp_path / "ro"
-    ro.mkdir()
-    shutil.copy(mm_dir / "HS35.mat", ro / "HS35.mat")
+    write_problem_set(ro, [make_record(f"p{i}", tick=i) for i in range(2)], {"name": "t"})
     ro.chmod(0o555)
     try:
-        refs = reference_solutions(load_problems(ro))
-        assert refs[0].objective == pytest.approx(1 / 9, rel=1e-8)
+        ps = read_problem_set(ro)
+        refs = reference_solutions(ps)
+        assert all(r.status == "optimal" for r in refs)
         assert not list(ro.glob("reference-*")) and not list(ro.glob(".*"))
+        assert cache_path(ps).parent == user_cache and cache_path(ps).exists()
     finally:
         ro.chmod(0o755)
 

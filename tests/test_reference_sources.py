@@ -191,3 +191,42 @@ def test_bad_reference_options_are_input_errors(mm_dir, tmp_path, capsys, option
                  option, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"key '{key}'" in err[0] and not out.exists()
+
+
+def _our_set(folder: Path, make_record) -> Path:
+    from qpbench.formats import write_problem_set
+
+    write_problem_set(folder, [make_record(f"p{i}", tick=i) for i in range(2)], {"name": "t"})
+    return folder
+
+
+def test_bench_says_first_where_a_read_only_set_caches(tmp_path, make_record, monkeypatch, capsys):
+    """``bench`` on our set in a read-only folder: the cache goes to the user cache folder, said first."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    folder = _our_set(tmp_path / "ro", make_record)
+    folder.chmod(0o555)
+    try:
+        code = main(["bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(tmp_path / "o.csv"),
+                     "--no-warmup"])
+        assert code == 0
+        users = tmp_path / "xdg" / "qpbench" / "references"
+        first = capsys.readouterr().err.splitlines()[0]
+        assert first == f"INFO: reference cache: {users}"
+        assert len(list(users.glob("reference-*.parquet"))) == 1 and not list(folder.glob("reference-*"))
+    finally:
+        folder.chmod(0o755)
+
+
+def test_bench_cache_dir_is_honoured(tmp_path, make_record, monkeypatch, capsys):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    folder = _our_set(tmp_path / "set", make_record)
+    cache = tmp_path / "cache"
+    argv = ["bench", str(folder), "--backends", "qpsolvers:clarabel", "--no-warmup", "--cache-dir", str(cache)]
+    assert main(argv + ["--out", str(tmp_path / "a.csv")]) == 0
+    assert capsys.readouterr().err.splitlines()[0] == f"INFO: reference cache: {cache}"
+    assert len(list(cache.glob("reference-*.parquet"))) == 1
+    assert not list(folder.glob("reference-*")) and not (tmp_path / "xdg").exists()
+    # without --cache-dir, our writable set keeps its cache beside it
+    assert main(argv[:-2] + ["--out", str(tmp_path / "b.csv")]) == 0
+    assert capsys.readouterr().err.splitlines()[0] == f"INFO: reference cache: {folder}"
+    assert len(list(folder.glob("reference-*.parquet"))) == 1

@@ -95,6 +95,13 @@ def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
         "leaves its problem's rows with an empty optimality gap and the reason",
     )
     parser.add_argument(
+        "--cache-dir",
+        default=None,
+        metavar="DIR",
+        help="folder of the reference cache (default: beside the set when that folder is writable and holds "
+        "qpbench's manifest.json, else the user cache folder, ~/.cache/qpbench/references)",
+    )
+    parser.add_argument(
         "--jobs",
         type=int,
         default=1,
@@ -133,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
 
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.problems), args.pattern, args.every, args.limit)
+    log.info("%s", _cache_line(args, problem_set))
     log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
     warmup_logged(log)  # no compile inside a timed solve, here or in a worker
     progress = not args.quiet and sys.stderr.isatty()
@@ -186,6 +194,16 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         from ..harness.workers import context as worker_context
 
         return bench_references(problem_set, source, time_limit=limit, jobs=args.jobs, progress=progress,
-                                context=worker_context())
+                                context=worker_context(), cache_dir=args.cache_dir)
 
     return compute
+
+
+def _cache_line(args: argparse.Namespace, problem_set) -> str:
+    """The first line of a run: where the references of ``problem_set`` are cached."""
+    from ..reference import SOURCES, cache_folder
+
+    if args.reference not in SOURCES:
+        return f"references: {args.reference} (not cached)"
+    folder = cache_folder(problem_set, args.cache_dir)
+    return "references: not cached (set built in memory)" if folder is None else f"reference cache: {folder}"

@@ -25,7 +25,7 @@ from ..harness.pipeline import BENCH_EVERY, REPEAT, RUN_BUDGET_S
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
 HELP = "the main job: make missing problem sets, bench every backend, closed loop every scenario, write results/ and report.md"
-EXAMPLE = "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall --backends qpsolvers:daqp,pinv --out /tmp/r)"
+EXAMPLE = "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall --backends qpsolvers:daqp,pinv --out quick)"
 
 log = logging.getLogger("qpbench.run")
 

@@ -208,14 +208,17 @@ def _check_arguments(scenarios, backends, duration, formulation, jobs, isolate, 
 
 def _previous_rows(out: Path, force: bool, resume: bool) -> list[dict]:
     """The rows of the table to resume (none without ``resume``); ``force`` removes table and logs."""
+    from ..sim.figure_log import FIGURE_LOG_DIR
+
     csv_path = out / CSV_NAME
     if csv_path.exists() and resume and not force:
         return read_rows(csv_path)
     if force:
         if csv_path.exists():
             csv_path.unlink()
-        if (out / LOG_DIR).exists():
-            shutil.rmtree(out / LOG_DIR)
+        for folder in (LOG_DIR, FIGURE_LOG_DIR):
+            if (out / folder).exists():
+                shutil.rmtree(out / folder)
     return []
 
 

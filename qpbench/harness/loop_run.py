@@ -30,7 +30,7 @@ class RunSpec:
     Attributes:
         scenario: Scenario name or TOML path. backend: Backend name.
         formulation: ``paper`` or ``soft``. duration: Simulated time [s] (``None``: the scenario's).
-        out: Output folder (the tick log goes to ``out/logs/``).
+        out: Output folder (the tick log goes to ``out/logs/``, its figure log to ``out/figure_logs/``).
         deadline: Per-tick deadline [s] or ``None``. run_budget: Wall-time budget [s] or ``None``.
     """
 
@@ -50,7 +50,9 @@ class RunSpec:
 def simulate_one(spec: RunSpec, log_path: Path | None) -> tuple[dict, pd.DataFrame]:
     """Run one (scenario, backend) and return its table row and tick log.
 
-    The tick log is written atomically to ``log_path`` (Parquet) when given.
+    The tick log is written atomically to ``log_path`` (Parquet) when given, and
+    its figure log (:mod:`qpbench.sim.figure_log`: what the report's figures
+    draw, small enough to keep with the results) to ``<out>/figure_logs/``.
     The backend is passed by name, so a backend that reads a scenario table
     (the ``rnn`` backends: ``[rnn]``) gets it, and an online one the loop's
     ``dt`` (:func:`qpbench.sim.loop.resolve_backend`). ``run_budget`` is the
@@ -58,6 +60,7 @@ def simulate_one(spec: RunSpec, log_path: Path | None) -> tuple[dict, pd.DataFra
     :func:`qpbench.sim.loop.simulate`; the warm-up is outside it).
     Exceptions propagate (the caller turns them into an error row).
     """
+    from ..sim.figure_log import figure_log_path, write_figure_log
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
@@ -72,6 +75,7 @@ def simulate_one(spec: RunSpec, log_path: Path | None) -> tuple[dict, pd.DataFra
     if log_path is not None:
         with atomic_path(log_path) as tmp:
             result.log.to_parquet(tmp, index=False)
+        write_figure_log(result.log, figure_log_path(log_path))
     return row, result.log
 
 

@@ -104,9 +104,13 @@ class _RunWorker:
         stop_worker(self.proc, self.conn)
 
     def _drop_partial_log(self) -> None:
-        """Remove the temporary tick log a dead worker may have left (never a complete one)."""
-        for tmp in (Path(self.spec.out) / LOG_DIR).glob(f".{log_name(self.spec.scenario, self.spec.backend)}.*.tmp"):
-            tmp.unlink(missing_ok=True)
+        """Remove the temporary tick or figure log a dead worker may have left (never a complete one)."""
+        from ..sim.figure_log import FIGURE_LOG_DIR
+
+        name = log_name(self.spec.scenario, self.spec.backend)
+        for folder in (LOG_DIR, FIGURE_LOG_DIR):
+            for tmp in (Path(self.spec.out) / folder).glob(f".{name}.*.tmp"):
+                tmp.unlink(missing_ok=True)
 
 
 def run_in_workers(items: list[tuple], jobs: int, plugins: list[str], emit: Callable) -> None:

@@ -48,7 +48,7 @@ __all__ = ["BENCH_EVERY", "OUTPUTS", "REPEAT", "RUN_BUDGET_S", "RunConfig", "Run
 log = logging.getLogger("qpbench.run")
 
 #: Outputs of a run inside ``--out`` (replaced as a whole at the end of a run).
-OUTPUTS = ("bench", "logs", "plots", "closed_loop.csv", "report.md", "run.json")
+OUTPUTS = ("bench", "logs", "figure_logs", "plots", "closed_loop.csv", "report.md", "run.json")
 #: Staging folder of a run in progress, inside ``--out``.
 STAGING = ".partial"
 #: Every k-th tick goes into a problem set.

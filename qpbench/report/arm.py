@@ -58,9 +58,15 @@ def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
     return {"t": float(log["t"].iloc[k]), "k": int(k), "key_point": key, "obstacle": obstacle, "distance": float(D[k, c])}
 
 
-def _instants(ticks: int, count: int) -> np.ndarray:
-    count = max(2, min(int(count), ticks))
-    return np.unique(np.linspace(0, ticks - 1, count).round().astype(int))
+def _instants(t: np.ndarray, count: int) -> np.ndarray:
+    """Ticks nearest to ``count`` times evenly spaced over ``t`` (a decimated log's ticks are not evenly spaced)."""
+    if len(t) < 2:
+        return np.zeros(len(t), dtype=int)
+    count = max(2, min(int(count), len(t)))
+    wanted = np.linspace(t[0], t[-1], count)
+    k = np.clip(np.searchsorted(t, wanted), 1, len(t) - 1)
+    k -= (wanted - t[k - 1]) < (t[k] - wanted)
+    return np.unique(k)
 
 
 def _view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -160,7 +166,7 @@ def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, in
         _draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
     _draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
-    idx = _instants(ticks, instants)
+    idx = _instants(t, instants)
     for j, k in enumerate(idx):
         shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
         p = arm.joint_positions(theta[k])

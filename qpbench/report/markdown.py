@@ -387,7 +387,20 @@ def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) ->
         key = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
         if key in plot_files:
             out.append(f"![key-point distances, {scenario}]({plot_files[key]})\n")
+        out.extend(_snapshot_row(scenario, formulation, plot_files))
     return out
+
+
+def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -> list[str]:
+    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.snapshots`), when drawn."""
+    from .snapshots import ROLES
+
+    keys = {role: f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}" for role in ROLES}
+    shown = [role for role, key in keys.items() if key in plot_files]
+    if not shown:
+        return []
+    return [f"The arm, {scenario}:\n",
+            md_table([ROLES[r] for r in shown], [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]])]
 
 
 def render(results: tables.Results, plot_files: dict[str, str] | None = None,

@@ -10,12 +10,19 @@ Keys of the returned mapping (used by :mod:`qpbench.report.markdown`):
   per tick against the 1 ms budget, ``|v|^2``, ``Kp_hat`` when adapting;
 - ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one panel per backend;
 - ``closed_loop_d_<scenario>_<formulation>``: every key point's distance to every
-  obstacle, one panel per backend.
+  obstacle, one panel per backend;
+- ``snapshot_<role>_<scenario>_<formulation>``: the arm, for the fastest exact
+  backend and the network (:mod:`qpbench.report.snapshots`).
+
+Closed-loop figures read each run's tick log, or its figure log when the tick
+log is absent (:func:`qpbench.report.logs.read_log`). Figures of a previous report in the folder
+that this one no longer links are removed (:func:`remove_unlinked`).
 """
 
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +31,8 @@ import pandas as pd
 from ..atomic import atomic_path
 from ..sim import log as tick_log
 from . import tables
+from .logs import read_log as _read_log
+from .snapshots import write_snapshots
 from .tables import slug
 
 log = logging.getLogger("qpbench.report")
@@ -114,16 +123,6 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     return True
 
 
-def _read_log(path) -> pd.DataFrame | None:
-    if not isinstance(path, str) or not path or not Path(path).exists():
-        return None
-    try:
-        return pd.read_parquet(path)
-    except Exception as exc:  # noqa: BLE001 - a damaged log only loses its curve
-        log.warning("%s: cannot read tick log (%s)", path, exc)
-        return None
-
-
 def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path: Path,
                       path_v: Path) -> tuple[bool, bool]:
     """The closed-loop figure of one scenario, every backend overlaid
@@ -212,4 +211,27 @@ def write_plots(results: tables.Results, folder: str | Path, relative_to: str | 
             key_d = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
             if done and keypoint_plot(g, scenario, formulation, folder / f"{key_d}.png"):
                 files[key_d] = _rel(folder / f"{key_d}.png")
+            files.update({k: _rel(p) for k, p in write_snapshots(g, scenario, formulation, folder).items()})
+    remove_unlinked(folder, files.values(), relative_to)
     return files
+
+
+#: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).
+FIGURE_PATTERN = re.compile(r"(perf_profile|per_tick|closed_loop|snapshot)_[A-Za-z0-9_.+-]*\.png")
+
+
+def remove_unlinked(folder: str | Path, linked, relative_to: str | Path) -> list[Path]:
+    """Remove the figures of a previous report in ``folder`` that the new one does not link.
+
+    Only files named as :func:`write_plots` names its figures
+    (:data:`FIGURE_PATTERN`) are removed; any other file stays. Returns them.
+    """
+    keep = {(Path(relative_to) / p).resolve() for p in linked}
+    removed = []
+    for path in sorted(Path(folder).iterdir()):
+        if path.is_file() and FIGURE_PATTERN.fullmatch(path.name) and path.resolve() not in keep:
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    if removed:
+        log.info("%s: removed %d figures no longer in the report", folder, len(removed))
+    return removed

@@ -1,0 +1,97 @@
+"""The report's pictures of the arm: one snapshot per scenario for two backends, side by side.
+
+Of each scenario's closed-loop runs (one formulation at a time) the report
+draws (:func:`qpbench.report.arm.draw_snapshot`):
+
+- the *fastest exact backend*: a QP solver (not the network, not the
+  pseudo-inverse, which ignores the inequalities), whose run ended ``ok``
+  and lasted its whole duration, with the smallest median solve time;
+- the *network*: ``rnn-tuned``, else ``rnn``, else any other network backend.
+
+Each from its run's tick log, or its figure log (:mod:`qpbench.sim.figure_log`)
+when the tick log is absent. Keys of the returned mapping:
+``snapshot_<role>_<scenario>_<formulation>``, ``role`` ``exact`` or ``network``.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .logs import log_file, read_log
+from .tables import slug
+
+__all__ = ["ROLES", "snapshot_runs", "write_snapshots"]
+
+log = logging.getLogger("qpbench.report")
+
+#: The two pictures of a scenario, left to right: role -> column header in the report.
+ROLES = {"exact": "fastest exact backend", "network": "network"}
+#: Network backends in order of preference.
+NETWORKS = ("rnn-tuned", "rnn")
+
+
+def _family(backend: str) -> str:
+    from ..backends import backend_class
+
+    try:
+        return str(backend_class(backend).family)
+    except Exception:  # noqa: BLE001 - an unknown (plugin) backend: judged by its name
+        return "recurrent neural network" if backend.startswith("rnn") else ""
+
+
+def _is_network(backend: str) -> bool:
+    return "neural network" in _family(backend)
+
+
+def _is_exact(backend: str) -> bool:
+    family = _family(backend)
+    return not ("neural network" in family or family.startswith("pseudo-inverse"))
+
+
+def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
+    """Of one scenario's runs (one formulation), the row of each role that has one (see the module docstring)."""
+    if "log_path" not in runs.columns:
+        return {}
+    runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
+    chosen: dict[str, pd.Series] = {}
+    whole = pd.to_numeric(runs["simulated_s"], errors="coerce") >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
+    backends = [str(b) for b in runs["backend"]]
+    is_exact = np.array([_is_exact(b) for b in backends], dtype=bool)
+    exact = runs[is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)]
+    if not exact.empty:
+        p50 = pd.to_numeric(exact["solve_time_p50_s"], errors="coerce").fillna(np.inf)
+        chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
+    networks = runs[np.array([_is_network(b) for b in backends], dtype=bool)]
+    if not networks.empty:
+        rank = [NETWORKS.index(b) if b in NETWORKS else len(NETWORKS) for b in networks["backend"].astype(str)]
+        chosen["network"] = networks.iloc[int(np.argmin(rank))]
+    return chosen
+
+
+def write_snapshots(runs: pd.DataFrame, scenario: str, formulation: str, folder: Path) -> dict[str, Path]:
+    """Draw the snapshots of one scenario's runs into ``folder``; return key -> file."""
+    from ..sim.scenario import load_scenario
+    from .arm import draw_snapshot
+
+    files: dict[str, Path] = {}
+    chosen = snapshot_runs(runs)
+    if not chosen:
+        return files
+    try:
+        scene = load_scenario(scenario)
+    except Exception as exc:  # noqa: BLE001 - a scenario not found here only loses its pictures
+        log.warning("%s: no arm snapshot (%s)", scenario, exc)
+        return files
+    for role, row in chosen.items():
+        frame = read_log(row["log_path"])
+        if frame is None or not {f"theta_{i}" for i in range(scene.make_arm().n)} <= set(frame.columns):
+            continue  # no log, or one without the joint angles: no picture of the arm
+        key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
+        path = folder / f"{key}.png"
+        draw_snapshot(scene, frame, path, title=f"{scenario}: {row['backend']} ({ROLES[role]})")
+        files[key] = path
+    return files

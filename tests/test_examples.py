@@ -1,0 +1,136 @@
+"""Every ``--help`` example of every command and every snippet of the READMEs runs as written.
+
+Each runs with bash in a temporary folder holding copies of the repository's
+``problems/`` and ``results/`` (so nothing in the checkout is written), with
+the installed ``qpbench`` first on the PATH. Long commands run on a slice, by
+one rule: the options of :data:`SLICE` for their subcommand are appended to the
+command, each only when the command does not give it already. Two lines of the
+README's install block are not run as such: the one that creates ``.venv`` and
+installs the package is this environment (``.venv`` is linked to it and the
+rest of the line runs), and the one that runs this test suite is this run.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from qpbench.cli import _available_commands as command_modules
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+#: Options appended to a command of each subcommand (when it lacks them): documented options
+#: that cut the work to a slice (a few problems, a short run, one scenario, one small size).
+SLICE = {
+    "bench": ["--limit", "5"],
+    "simulate": ["--duration", "0.05"],
+    "closed-loop": ["--duration", "0.05"],
+    "run": ["--duration", "0.05", "--bench-every", "400", "--repeat", "1", "--scenarios", "wall",
+            "--backends", "qpsolvers:daqp,pinv"],
+    "scaling": ["--sizes", "n4-p1-m1", "--duration", "0.05", "--repeat", "1"],
+}
+#: Command lines that are not run (see the module docstring).
+SKIP = re.compile(r"-m pytest")
+INSTALL = re.compile(r"^python3 -m venv \.venv && \.venv/bin/pip install \S+ && ")
+
+
+def sliced(command: str) -> str:
+    """``command`` with the :data:`SLICE` options of its subcommand appended (a shell redirection stays last)."""
+    words = shlex.split(command.split(">")[0])
+    names = [w for w in words if not w.startswith("-") and "=" not in w]
+    sub = next((names[i + 1] for i, w in enumerate(names[:-1]) if w.endswith("qpbench")), None)
+    extra = []
+    options = SLICE.get(sub, [])
+    for i, word in enumerate(options):
+        if word.startswith("--") and word not in words:
+            extra += [word] + ([options[i + 1]] if i + 1 < len(options) and not options[i + 1].startswith("--") else [])
+    if not extra:
+        return command
+    head, sep, tail = command.partition(" >")
+    return f"{head} {shlex.join(extra)}{sep}{tail}"
+
+
+def help_examples() -> list[tuple[str, str]]:
+    """``(command name, command line)`` of every command's ``EXAMPLE``: split at ``;``, parentheses and ``quick:``."""
+    out = []
+    for name, module in command_modules():
+        text = re.sub(r"[()]|\bquick:", ";", module.EXAMPLE)
+        out += [(name, c.strip()) for c in text.split(";") if c.strip()]
+    return out
+
+
+def readme_snippets(path: Path, languages=("bash", "sh", "shell", "python")) -> list[tuple[str, str]]:
+    """``(language, code)`` of the fenced blocks of ``path`` in ``languages`` (untagged blocks show output)."""
+    return [(lang, code) for lang, code in re.findall(r"```(\w*)\n(.*?)```", path.read_text(), flags=re.S)
+            if lang in languages]
+
+
+@pytest.fixture
+def workdir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("examples")
+    shutil.copytree(ROOT / "problems", folder / "problems")
+    shutil.copytree(ROOT / "results", folder / "results")
+    (folder / ".venv").symlink_to(Path(sys.prefix))
+    return folder
+
+
+def _run(command: str, cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
+    return subprocess.run(["bash", "-euo", "pipefail", "-c", command], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=900)
+
+
+def _bash_lines(code: str) -> list[str]:
+    return [line for line in code.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+
+
+EXAMPLES = help_examples()
+COMMAND_NAMES = sorted({n for n, _ in EXAMPLES})
+
+
+@pytest.mark.parametrize("name", COMMAND_NAMES)
+def test_help_examples_run(name, workdir):
+    """A command's examples run in order in one folder (a later one may read what an earlier one wrote)."""
+    for command in [c for n, c in EXAMPLES if n == name]:
+        assert command.split()[0].startswith(("qpbench", "NUMBA_CACHE_DIR=")), command
+        proc = _run(sliced(command), workdir)
+        # exit 1 is a run that ran and found failures (a backend's verdict); 2 and more are errors
+        assert proc.returncode in (0, 1), f"{sliced(command)}\n{proc.stderr[-3000:]}"
+
+
+def test_every_command_has_an_example():
+    assert {n for n, _ in EXAMPLES} == {n for n, _ in command_modules()}
+
+
+@pytest.mark.parametrize("readme", ["README.md", "problems/README.md"])
+def test_readme_snippets_run(readme, workdir):
+    snippets = readme_snippets(ROOT / readme)
+    assert snippets
+    for lang, code in snippets:
+        if lang == "python":
+            proc = subprocess.run([sys.executable, "-c", code], cwd=workdir, capture_output=True, text=True,
+                                  timeout=600)
+            assert proc.returncode == 0, f"{code}\n{proc.stderr[-3000:]}"
+            continue
+        for line in _bash_lines(code):
+            if SKIP.search(line):
+                continue
+            command = sliced(INSTALL.sub("", line))
+            proc = _run(command, workdir)
+            assert proc.returncode in (0, 1), f"{command}\n{proc.stderr[-3000:]}"
+
+
+def test_slice_rule():
+    assert sliced("qpbench bench problems/wall --backends daqp --out x.csv") == (
+        "qpbench bench problems/wall --backends daqp --out x.csv --limit 5")
+    assert sliced("qpbench bench p --limit 3 --backends daqp --out x.csv").endswith("--out x.csv")
+    assert sliced("qpbench scenarios show wall > my.toml") == "qpbench scenarios show wall > my.toml"
+    assert sliced(".venv/bin/qpbench run").startswith(".venv/bin/qpbench run --duration 0.05 --bench-every 400")
