@@ -36,6 +36,7 @@ SLICE = {
     "run": ["--duration", "0.05", "--bench-every", "400", "--repeat", "1", "--scenarios", "wall",
             "--backends", "qpsolvers:daqp,pinv"],
     "scaling": ["--sizes", "n4-p1-m1", "--duration", "0.05", "--repeat", "1"],
+    "sweep": ["--samples", "2", "--duration", "0.05"],
 }
 #: Command lines that are not run (see the module docstring).
 SKIP = re.compile(r"-m pytest")

@@ -20,9 +20,9 @@ import logging
 from pathlib import Path
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
-EXAMPLE = ("qpbench sweep problems/sweeps/wall.toml --backends daqp,osqp,qpoases --out sweeps/wall --jobs 2; "
-           "qpbench sweep problems/sweeps/narrow.toml --backends daqp --out n --executor dask "
-           "--scheduler tls://scheduler.example.org:8786 --security dask-tls.toml")
+EXAMPLE = ("qpbench sweep problems/sweeps/wall.toml --backends daqp,osqp,qpoases --out wall-sweep --jobs 2; "
+           "qpbench sweep problems/sweeps/narrow.toml --backends daqp --samples 20 --out narrow-sweep "
+           "--executor dask --jobs 2")
 
 log = logging.getLogger("qpbench.sweep")
 
