@@ -1,4 +1,4 @@
-"""Backend ``piqp``: PIQP (proximal interior point) through its own dense API, with a persistent solver.
+"""Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs, with a persistent solver.
 
 Formulation. ``piqp.DenseSolver`` solves
 ``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,  x_l <= x <= x_u``
@@ -7,6 +7,14 @@ with ``c = q``, ``h_l = -inf`` (left out), ``h_u = h``, ``x_l = lb``,
 business, it leaves them out). PIQP's multipliers are non-negative per side
 (``z_l, z_u`` of the rows of ``G``, ``z_bl, z_bu`` of the bounds) and ``y`` has
 qpsolvers' sign, so ``y = y``, ``z = z_u - z_l``, ``z_box = z_bu - z_bl``.
+
+Sparse route. A problem with a scipy.sparse matrix, or one that made dense
+would exceed :data:`qpbench.memory.DENSE_MAX_ENTRIES` entries
+(:func:`~qpbench.backends._sparse.wants_sparse`), goes to ``piqp.SparseSolver``
+with the same formulation, ``P`` as its upper triangle and ``A``, ``G`` as
+CSC; the dense arrays of the robot's ticks keep ``DenseSolver``. The sparse
+solver is kept per structure (shapes and sparsity patterns) and ``update``-d
+like the dense one; same settings, statuses and multipliers.
 
 Persistence. The solver is ``setup`` once per shape ``(n, me, mi, with box)``
 and then ``update``-d with the tick's ``P, c, A, b, G, h_u, x_l, x_u`` (the
@@ -45,6 +53,7 @@ from ..exceptions import ParamError
 from . import register
 from ._common import dense_parts, generic_settings
 from ._shapes import check_shapes
+from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
 
 _STATUS_MAP: dict = {}
@@ -82,6 +91,8 @@ class PiqpBackend(Backend):
     family = "proximal interior point"
     package = "piqp"
     module = "piqp"
+    #: scipy.sparse input (or a problem too large made dense) goes to ``piqp.SparseSolver``.
+    sparse = True
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
@@ -116,17 +127,36 @@ class PiqpBackend(Backend):
         self._info = None
         self._views = None
 
+    def _setup(self, cls, shapes, data):
+        """A new ``cls`` solver (``DenseSolver`` or ``SparseSolver``) set up with ``data``; kept."""
+        self.reset()
+        solver = cls()
+        s = solver.settings
+        for name, value in self._settings_dict.items():
+            setattr(s, name, value)
+        solver.setup(*data)
+        self._solver, self._shapes = solver, shapes
+        res = self._result = solver.result
+        self._info = res.info
+        # Each attribute read of the result builds a new view; these views follow
+        # the live vectors, which update() and solve() overwrite in place (same shape).
+        self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
+        return solver
+
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = (
             problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
         )
         if not (
             type(P) is _ndarray and type(q) is _ndarray and P.dtype == _f64 and q.dtype == _f64 and q.ndim == 1
+            and q.shape[0] <= _SMALL_N
             and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
             and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
             and (lb is None or (type(lb) is _ndarray and lb.dtype == _f64))
             and (ub is None or (type(ub) is _ndarray and ub.dtype == _f64))
         ):
+            if wants_sparse(problem):
+                return self._solve_sparse(problem)
             P, q, A, b, G, h, lb, ub = _dense(problem)
         shapes = (P.shape, q.shape, None if A is None else A.shape, None if b is None else b.shape,
                   None if G is None else G.shape, None if h is None else h.shape,
@@ -138,24 +168,35 @@ class PiqpBackend(Backend):
                 # shape: the shapes are those the solver was set up with (checked then).
                 solver.update(P, q, A, b, G, None, h, lb, ub)
             else:
-                n = q.shape[0]
-                check_shapes(self.name, n, P, A, b, G, h, lb, ub)
-                self.reset()
-                solver = (_MODULE[0] if _MODULE else _piqp()).DenseSolver()
-                s = solver.settings
-                for name, value in self._settings_dict.items():
-                    setattr(s, name, value)
-                solver.setup(P, q, A, b, G, None, h, lb, ub)
-                self._solver, self._shapes = solver, shapes
-                res = self._result = solver.result
-                self._info = res.info
-                # Each attribute read of the result builds a new view; these views follow
-                # the live vectors, which update() and solve() overwrite in place (same shape).
-                self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
+                check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+                solver = self._setup((_MODULE[0] if _MODULE else _piqp()).DenseSolver, shapes,
+                                     (P, q, A, b, G, None, h, lb, ub))
             solver.solve()
         except (ValueError, TypeError, RuntimeError) as exc:
             self.reset()
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        return self._read(problem, A is not None, G is not None, lb is not None or ub is not None)
+
+    def _solve_sparse(self, problem):
+        """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
+        P, q, A, b, G, h, lb, ub = sparse_parts(problem, upper=True)
+        check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+        shapes = ("sparse", q.shape, None if b is None else b.shape, None if h is None else h.shape,
+                  lb is None, ub is None, structure_key(P, A, G))
+        try:
+            if self._solver is not None and shapes == self._shapes:
+                solver = self._solver
+                solver.update(P, q, A, b, G, None, h, lb, ub)
+            else:
+                solver = self._setup(_piqp().SparseSolver, shapes, (P, q, A, b, G, None, h, lb, ub))
+            solver.solve()
+        except (ValueError, TypeError, RuntimeError) as exc:
+            self.reset()
+            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        return self._read(problem, A is not None, G is not None, lb is not None or ub is not None)
+
+    def _read(self, problem, has_eq: bool, has_ineq: bool, has_box: bool) -> BackendSolution:
+        """The solution of the kept solver's last solve, in qpsolvers' convention."""
         info = self._info
         raw_status = info.status
         if raw_status == _SOLVED[0]:
@@ -166,9 +207,9 @@ class PiqpBackend(Backend):
             sol.extras = {"raw_status": "PIQP_SOLVED"}
             x, y, z_l, z_u, z_bl, z_bu = self._views
             sol.x = x.copy()
-            sol.y = y.copy() if A is not None else _EMPTY
-            sol.z = z_u - z_l if G is not None else _EMPTY
-            sol.z_box = z_bu - z_bl if (lb is not None or ub is not None) else _EMPTY
+            sol.y = y.copy() if has_eq else _EMPTY
+            sol.z = z_u - z_l if has_ineq else _EMPTY
+            sol.z_box = z_bu - z_bl if has_box else _EMPTY
             sol._obj = info.primal_obj
         else:
             status, raw = _STATUS_MAP.get(raw_status, ("not_solved", str(raw_status)))
@@ -189,3 +230,5 @@ _EMPTY.flags.writeable = False
 
 
 _dense = dense_parts
+#: Above this many variables the fast path asks :func:`wants_sparse` (exact: ``n (n + m)`` entries).
+_SMALL_N = 2_000

@@ -1,12 +1,22 @@
-"""Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's own dense API.
+"""Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's own dense and sparse APIs.
 
 Formulation. ``proxsuite.proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)``
 solves ``min 1/2 x'Hx + g'x  s.t.  A x = b,  l <= C x <= u,  l_box <= x <= u_box``
 with ``H = P, g = q, C = G, l = -inf, u = h`` and the bounds as ProxQP's own box
 (no stacking). ProxQP's multipliers satisfy ``H x + g + A'y + C'z + z_box = 0``
 with the same signs as qpsolvers, so ``y``, ``z`` and the last ``n`` entries of
-ProxQP's ``z`` (``z_box``) are used as they are. Sparse inputs are densified
-(the dense backend is the one made for small problems like the robot's).
+ProxQP's ``z`` (``z_box``) are used as they are.
+
+Sparse route. A problem with a scipy.sparse matrix, or one that made dense
+would exceed :data:`qpbench.memory.DENSE_MAX_ENTRIES` entries
+(:func:`~qpbench.backends._sparse.wants_sparse`), goes to
+``proxsuite.proxqp.sparse.QP(n, n_eq, n_in)``, which has no box of its own:
+the bounds are stacked under ``G`` as qpsolvers does (``C = [G; I]``,
+``l = [-inf; lb]``, ``u = [h; ub]``), and ProxQP's ``z`` is again
+``[z; z_box]``. The object is kept per structure (shapes and sparsity patterns
+of ``H``, ``A``, ``C``) and ``update``-d as the dense one, with the same
+warm start, cold retry, settings and statuses. The dense arrays of the robot's
+ticks keep ``proxqp.dense.QP``.
 
 Persistence. The ``QP`` object is built and ``init``-ed once per shape
 ``(n, n_eq, n_in, with bounds)`` and then ``update``-d with the new data
@@ -27,7 +37,13 @@ fires on the dual iterates' jump). On consecutive robot ticks it does not
 iteration). So an infeasibility report from a warm-started solve is
 checked by one cold re-solve (a fresh ``QP`` object) and its status
 is kept; iterations and solve time add up, and ``extras["cold_retry"]`` says
-it happened. ``retry_cold=False`` in the settings turns this off.
+it happened. On the sparse route (bounds stacked as rows) ProxQP 0.8's
+default ``eps_primal_inf = 1e-4`` also fires on cold solves of feasible
+problems (HS118 of Maros-Meszaros, which the dense box API solves): there an
+infeasibility verdict is checked by one fresh solve with ``eps_primal_inf`` and
+``eps_dual_inf`` at the profile's ``eps_abs``, whose status is kept (a truly
+infeasible problem stays infeasible). ``retry_cold=False`` in the settings
+turns both checks off.
 :meth:`ProxqpBackend.reset` drops the object.
 
 Per-call cost. Dense float64 inputs are passed as they are (other inputs
@@ -56,9 +72,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.sparse as spa
 
 from . import register
 from ._common import as_dense, dense_bounds, generic_settings
+from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
 
 
@@ -100,6 +118,8 @@ class ProxqpBackend(Backend):
     family = "augmented Lagrangian"
     package = "proxsuite"
     module = "proxsuite"
+    #: scipy.sparse input (or a problem too large made dense) goes to ``proxqp.sparse.QP``.
+    sparse = True
     #: Solved in a worker process with a deadline under ``--isolate auto``:
     #: ProxQP 0.8 was seen once to hang in native code (633 s) on a warm-started
     #: robot tick, which an in-process time limit cannot interrupt.
@@ -139,16 +159,20 @@ class ProxqpBackend(Backend):
             setattr(s, key, value)
         return update_preconditioner
 
-    def _build(self, proxqp, key, H, q, A, b, C, l, u, lb, ub):
-        """A new ``QP`` object, initialised with the data; it becomes the persistent one."""
+    def _build(self, proxqp, key, data):
+        """A new ``QP`` object, initialised with ``data``; it becomes the persistent one.
+
+        ``key`` is ``(n, n_eq, n_in, with_box)`` for ``proxqp.dense.QP`` and
+        ``(n, n_eq, n_in, False, structure)`` for ``proxqp.sparse.QP`` (bounds stacked in ``C``).
+        """
         self._qp = self._info = self._views = None
-        n, n_eq, n_in, with_box = key
-        qp = proxqp.dense.QP(n, n_eq, n_in, box_constraints=with_box)
-        self._update_preconditioner = self._apply_settings(qp, proxqp)
-        if with_box:
-            qp.init(H, q, A, b, C, l, u, lb, ub)
+        n, n_eq, n_in, with_box = key[:4]
+        if len(key) > 4:
+            qp = proxqp.sparse.QP(n, n_eq, n_in)
         else:
-            qp.init(H, q, A, b, C, l, u)
+            qp = proxqp.dense.QP(n, n_eq, n_in, box_constraints=with_box)
+        self._update_preconditioner = self._apply_settings(qp, proxqp)
+        qp.init(*data)
         self._qp, self._key = qp, key
         # ``qp.results.info`` is a member of the object: its wrapper stays valid.
         self._info = qp.results.info
@@ -162,29 +186,104 @@ class ProxqpBackend(Backend):
         return l
 
     def _solve(self, problem, warm_start):
-        H, q, A, b, C, u, lb, ub = _tick_arrays(problem)
-        n = q.shape[0]
+        P, q, A, b, G, h, lb, ub = (
+            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+        )
+        # Fast path: dense float64 arrays (what the conversions below return
+        # unchanged); anything else is converted as before.
+        if (
+            type(P) is _ndarray and P.dtype == _f64 and type(q) is _ndarray and q.dtype == _f64
+            and q.shape[0] <= _SMALL_N
+            and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
+            and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
+            and (
+                (lb is None and ub is None)
+                or (type(lb) is _ndarray and lb.dtype == _f64 and type(ub) is _ndarray and ub.dtype == _f64)
+            )
+        ):
+            H, C, u = P, G, h
+            n = q.shape[0]
+        else:
+            if wants_sparse(problem):
+                return self._solve_sparse(problem, warm_start)
+            q = np.asarray(q, dtype=float)
+            n = q.shape[0]
+            H = as_dense(P)
+            A = None if A is None else as_dense(A)
+            b = None if b is None else np.asarray(b, dtype=float)
+            C = None if G is None else as_dense(G)
+            u = None if h is None else np.asarray(h, dtype=float)
+            lb, ub = dense_bounds(problem, n)
         n_eq = 0 if A is None else A.shape[0]
         n_in = 0 if C is None else C.shape[0]
         l = None if C is None else self._lower(n_in)
         with_box = lb is not None
         key = (n, n_eq, n_in, with_box)
+        data = (H, q, A, b, C, l, u, lb, ub) if with_box else (H, q, A, b, C, l, u)
+        return self._run(problem, key, data, n, n_in, with_box, warm_start)
+
+    def _solve_sparse(self, problem, warm_start):
+        """The sparse route: ``proxqp.sparse.QP``, bounds stacked under ``G`` as qpsolvers does."""
+        H, q, A, b, G, h, lb, ub = sparse_parts(problem)
+        n = q.shape[0]
+        n_g = 0 if G is None else G.shape[0]
+        C, u = G, h
+        l = None if G is None else self._lower(n_g)
+        with_box = lb is not None or ub is not None
+        if with_box:
+            lb = np.full(n, -np.inf) if lb is None else lb
+            ub = np.full(n, np.inf) if ub is None else ub
+            eye = spa.identity(n, format="csc")
+            C = eye if G is None else spa.vstack([G, eye], format="csc")
+            l = lb if G is None else np.concatenate([l, lb])
+            u = ub if G is None else np.concatenate([h, ub])
+        n_eq = 0 if A is None else A.shape[0]
+        n_in = 0 if C is None else C.shape[0]
+        key = (n, n_eq, n_in, False, structure_key(H, A, C))
+        return self._run(problem, key, (H, q, A, b, C, l, u), n, n_g, with_box, warm_start)
+
+    def _run(self, problem, key, data, n, n_in, with_box, warm_start):
+        """Update (same ``key``) or build the ``QP`` object with ``data``, solve, read the result.
+
+        ``n_in`` rows of ``G`` lead ProxQP's ``z``; with ``with_box`` the next ``n`` are ``z_box``.
+        """
+        n_eq = key[1]
         try:
             warm = self._qp is not None and key == self._key
-            qp = self._update_and_solve(warm, key, H, q, A, b, C, l, u, lb, ub, warm_start)
+            if warm:
+                qp = self._qp
+                # ``update_preconditioner`` as a keyword: nanobind dispatches
+                # this faster than the same call all positional.
+                qp.update(*data, update_preconditioner=self._update_preconditioner)
+            else:
+                qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
+            if warm_start is not None:
+                # Passing x makes ProxQP start from it (y, z from zero) for this call.
+                qp.solve(np.asarray(warm_start, dtype=float), None, None)
+                # ProxQP assigns ``results.x`` from an evaluated copy of the
+                # guess (``results.x = x_wm.value().eval()``): 0.8.0 keeps the
+                # buffer, but the cached views are re-read rather than rely on it.
+                self._views = None
+            else:
+                qp.solve()
             info = self._info
             status, raw = (_STATUS_MAP or _status_map(_proxqp()))[info.status]
             retried = False
+            sparse = len(key) > 4
             if (
                 self._retry_cold
-                and (warm or warm_start is not None)
+                and (warm or warm_start is not None or sparse)
                 and status in ("primal_infeasible", "dual_infeasible")
             ):
                 first_time = info.solve_time
                 first_iter = info.iter
                 # A fresh object: changing ``initial_guess`` after ``init`` makes
                 # ProxQP 0.8 loop forever in ``solve``.
-                qp = self._build(_proxqp(), key, H, q, A, b, C, l, u, lb, ub)
+                qp = self._build(_proxqp(), key, data)
+                if sparse:  # bounds as rows: the verdict is checked at the profile's tolerance
+                    eps = qp.settings.eps_abs
+                    qp.settings.eps_primal_inf = min(qp.settings.eps_primal_inf, eps)
+                    qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
                 qp.solve()
                 info = self._info
                 status, raw = _STATUS_MAP[info.status]
@@ -201,36 +300,11 @@ class ProxqpBackend(Backend):
             sol.solver_time_s += float(first_time) * 1e-6
         if status == "primal_infeasible" or status == "dual_infeasible":
             return sol
-        self._read_solution(sol, qp, n, n_eq, n_in, with_box)
-        if status == "optimal":
-            sol.obj = float(info.objValue)
-        return sol
+        return self._read_solution(qp, sol, info, n, n_eq, n_in, with_box)
 
-    def _update_and_solve(self, warm, key, H, q, A, b, C, l, u, lb, ub, warm_start):
-        """Update the kept ``QP`` (``warm``) or build one, then solve it; returns the ``QP``."""
-        if warm:
-            qp = self._qp
-            # ``update_preconditioner`` as a keyword: nanobind dispatches
-            # this faster than the same call all positional.
-            if lb is not None:
-                qp.update(H, q, A, b, C, l, u, lb, ub, update_preconditioner=self._update_preconditioner)
-            else:
-                qp.update(H, q, A, b, C, l, u, update_preconditioner=self._update_preconditioner)
-        else:
-            qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, H, q, A, b, C, l, u, lb, ub)
-        if warm_start is not None:
-            # Passing x makes ProxQP start from it (y, z from zero) for this call.
-            qp.solve(np.asarray(warm_start, dtype=float), None, None)
-            # ProxQP assigns ``results.x`` from an evaluated copy of the
-            # guess (``results.x = x_wm.value().eval()``): 0.8.0 keeps the
-            # buffer, but the cached views are re-read rather than rely on it.
-            self._views = None
-        else:
-            qp.solve()
-        return qp
-
-    def _read_solution(self, sol, qp, n, n_eq, n_in, with_box) -> None:
-        """Copy ``x``, ``y``, ``z``, ``z_box`` out of ProxQP's results into ``sol`` (none if ``x`` is not finite)."""
+    def _read_solution(self, qp, sol, info, n: int, n_eq: int, n_in: int, with_box: bool):
+        """Copy x, y, z (and z_box: the ``n`` rows after ``n_in``) out of ProxQP's results into ``sol``."""
+        status = sol.status
         views = self._views
         if views is None:
             # Views of ``qp.results.x, y, z`` (each attribute access builds a
@@ -254,37 +328,13 @@ class ProxqpBackend(Backend):
             else:
                 sol.z = z
                 sol.z_box = np.zeros(0)
-
-
-def _tick_arrays(problem):
-    """``H, q, A, b, C, u, lb, ub`` of ``problem`` as dense float64 arrays (or None).
-
-    Fast path: dense float64 arrays (what the conversions return unchanged)
-    pass as they are; anything else is converted.
-    """
-    P, q, A, b, G, h, lb, ub = (
-        problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
-    )
-    if (
-        type(P) is _ndarray and P.dtype == _f64 and type(q) is _ndarray and q.dtype == _f64
-        and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
-        and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
-        and (
-            (lb is None and ub is None)
-            or (type(lb) is _ndarray and lb.dtype == _f64 and type(ub) is _ndarray and ub.dtype == _f64)
-        )
-    ):
-        return P, q, A, b, G, h, lb, ub
-    q = np.asarray(q, dtype=float)
-    n = q.shape[0]
-    A = None if A is None else as_dense(A)
-    b = None if b is None else np.asarray(b, dtype=float)
-    C = None if G is None else as_dense(G)
-    u = None if h is None else np.asarray(h, dtype=float)
-    lb, ub = dense_bounds(problem, n)
-    return as_dense(P), q, A, b, C, u, lb, ub
+        if status == "optimal":
+            sol.obj = float(info.objValue)
+        return sol
 
 
 _ndarray = np.ndarray
 _f64 = np.dtype(np.float64)
 _isfinite = math.isfinite
+#: Above this many variables the fast path asks :func:`wants_sparse` (exact: ``n (n + m)`` entries).
+_SMALL_N = 2_000
