@@ -35,8 +35,10 @@ from qpbench.selection import select_set
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SETS = ",".join(str(ROOT / "problems" / s) for s in ("free", "wall", "adaptive", "narrow"))
-DEFAULT_BACKENDS = ("clarabel,osqp,proxqp,piqp,daqp,qpsolvers:osqp,qpsolvers:proxqp,qpsolvers:scs,"
-                    "qpsolvers:clarabel,qpsolvers:piqp")
+DEFAULT_BACKENDS = (
+    "clarabel,osqp,proxqp,piqp,daqp,qpsolvers:osqp,qpsolvers:proxqp,qpsolvers:scs,"
+    "qpsolvers:clarabel,qpsolvers:piqp"
+)
 
 
 def run(problem_set, references, backends, profile, out: Path) -> pd.DataFrame:
@@ -52,32 +54,46 @@ def compare(tight: pd.DataFrame, loose: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for backend, g in m.groupby("backend", sort=True):
         s10, s1 = g["success_10x"].astype(bool), g["success_1x"].astype(bool)
-        rows.append({
-            "backend": backend,
-            "rows": len(g),
-            "success 10x %": 100.0 * s10.mean(),
-            "success 1x %": 100.0 * s1.mean(),
-            "only 10x": int((s10 & ~s1).sum()),
-            "only 1x": int((s1 & ~s10).sum()),
-            "time_limit 10x": int((g["status_10x"] == "time_limit").sum()),
-            "time_limit 1x": int((g["status_1x"] == "time_limit").sum()),
-            "median us 10x": 1e6 * g["wall_time_min_s_10x"].median(),
-            "median us 1x": 1e6 * g["wall_time_min_s_1x"].median(),
-            "total s 10x": g["wall_time_min_s_10x"].sum(),
-            "total s 1x": g["wall_time_min_s_1x"].sum(),
-        })
+        rows.append(
+            {
+                "backend": backend,
+                "rows": len(g),
+                "success 10x %": 100.0 * s10.mean(),
+                "success 1x %": 100.0 * s1.mean(),
+                "only 10x": int((s10 & ~s1).sum()),
+                "only 1x": int((s1 & ~s10).sum()),
+                "time_limit 10x": int((g["status_10x"] == "time_limit").sum()),
+                "time_limit 1x": int((g["status_1x"] == "time_limit").sum()),
+                "median us 10x": 1e6 * g["wall_time_min_s_10x"].median(),
+                "median us 1x": 1e6 * g["wall_time_min_s_1x"].median(),
+                "total s 10x": g["wall_time_min_s_10x"].sum(),
+                "total s 1x": g["wall_time_min_s_1x"].sum(),
+            }
+        )
     return pd.DataFrame(rows)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sets", default=DEFAULT_SETS, help="comma-separated problem sets (default: the 4 robot sets)")
-    parser.add_argument("--every", type=int, default=10, help="every K-th problem of each set (default 10)")
+    parser.add_argument(
+        "--sets",
+        default=DEFAULT_SETS,
+        help="comma-separated problem sets (default: the 4 robot sets)",
+    )
+    parser.add_argument(
+        "--every", type=int, default=10, help="every K-th problem of each set (default 10)"
+    )
     parser.add_argument("--backends", default=DEFAULT_BACKENDS)
     parser.add_argument("--profiles", default="default,high_accuracy")
-    parser.add_argument("--out-dir", default=None, help="keep the CSVs here (default: a temporary folder)")
-    parser.add_argument("--reference", choices=("auto", "none"), default="auto",
-                        help="none: no reference solutions (success from the residuals alone)")
+    parser.add_argument(
+        "--out-dir", default=None, help="keep the CSVs here (default: a temporary folder)"
+    )
+    parser.add_argument(
+        "--reference",
+        choices=("auto", "none"),
+        default="auto",
+        help="none: no reference solutions (success from the residuals alone)",
+    )
     args = parser.parse_args(argv)
     backends = args.backends.split(",")
     started = time.perf_counter()
@@ -91,17 +107,26 @@ def main(argv=None) -> int:
             for set_path in args.sets.split(","):
                 full = load_problems(set_path)
                 problem_set = select_set(full, None, args.every, None)
-                references = (reference_solutions(problem_set) if args.reference == "auto"
-                              else [None] * len(problem_set.records))
+                references = (
+                    reference_solutions(problem_set)
+                    if args.reference == "auto"
+                    else [None] * len(problem_set.records)
+                )
                 stem = Path(set_path).name
-                t = run(problem_set, references, backends, shipped, out_dir / f"{stem}-{name}-10x.csv")
-                lo = run(problem_set, references, backends, loose, out_dir / f"{stem}-{name}-1x.csv")
+                t = run(
+                    problem_set, references, backends, shipped, out_dir / f"{stem}-{name}-10x.csv"
+                )
+                lo = run(
+                    problem_set, references, backends, loose, out_dir / f"{stem}-{name}-1x.csv"
+                )
                 frames.append((t, lo))
             tight = pd.concat([f[0] for f in frames], ignore_index=True)
             loo = pd.concat([f[1] for f in frames], ignore_index=True)
             table = compare(tight, loo)
-            print(f"\nprofile {name}: asked eps_abs {shipped.eps_abs:g} (10x) vs {loose.eps_abs:g} (1x), "
-                  f"judged at {shipped.tolerance.primal:g}; sets {args.sets} every {args.every}\n")
+            print(
+                f"\nprofile {name}: asked eps_abs {shipped.eps_abs:g} (10x) vs {loose.eps_abs:g} (1x), "
+                f"judged at {shipped.tolerance.primal:g}; sets {args.sets} every {args.every}\n"
+            )
             print(table.to_markdown(index=False, floatfmt=".4g"))
             sys.stdout.flush()
     print(f"\n{time.perf_counter() - started:.0f} s")

@@ -56,7 +56,6 @@ from qpbench.backends import backend_names, get_backend
 from qpbench.backends.qpsolvers_ import native_settings
 from qpbench.known import robot_like_problem
 
-
 # ----------------------------------------------------------------- problems
 
 
@@ -117,7 +116,9 @@ class DirectOsqp:
             self.idx = (rows, cols)
             Pc = spa.csc_matrix((P[rows, cols], rows, indptr), shape=(n, n))
             k = C.shape[0]
-            Cc = spa.csc_matrix((C.T.ravel(), np.tile(np.arange(k), n), np.arange(0, k * n + 1, k)), shape=(k, n))
+            Cc = spa.csc_matrix(
+                (C.T.ravel(), np.tile(np.arange(k), n), np.arange(0, k * n + 1, k)), shape=(k, n)
+            )
             self.solver = osqp.OSQP()
             self.solver.setup(Pc, q, Cc, l, u, **self.settings)
         else:
@@ -146,7 +147,9 @@ class DirectClarabel:
             self.idx = (rows, cols)
             Pc = spa.csc_matrix((P[rows, cols], rows, indptr), shape=(n, n))
             k = C.shape[0]
-            Cc = spa.csc_matrix((C.T.ravel(), np.tile(np.arange(k), n), np.arange(0, k * n + 1, k)), shape=(k, n))
+            Cc = spa.csc_matrix(
+                (C.T.ravel(), np.tile(np.arange(k), n), np.arange(0, k * n + 1, k)), shape=(k, n)
+            )
             cones = [clarabel.ZeroConeT(A.shape[0]), clarabel.NonnegativeConeT(k - A.shape[0])]
             self.solver = clarabel.DefaultSolver(Pc, q, Cc, d, cones, self.settings_fn())
         else:
@@ -167,7 +170,9 @@ class DirectProxqp:
         P, q, G, h, A, b, lb, ub = _parts(p)
         l = np.full(G.shape[0], -np.inf)
         if self.qp is None:
-            self.qp = proxsuite.proxqp.dense.QP(q.shape[0], A.shape[0], G.shape[0], box_constraints=True)
+            self.qp = proxsuite.proxqp.dense.QP(
+                q.shape[0], A.shape[0], G.shape[0], box_constraints=True
+            )
             self.apply_settings(self.qp)
             self.qp.init(P, q, A, b, G, l, h, lb, ub)
         else:
@@ -346,11 +351,15 @@ def direct_for(name: str, profile: str):
     if name == "clarabel":
         import clarabel
 
-        return "clarabel.DefaultSolver update", lambda: DirectClarabel(lambda: backend._settings(clarabel))
+        return "clarabel.DefaultSolver update", lambda: DirectClarabel(
+            lambda: backend._settings(clarabel)
+        )
     if name == "proxqp":
         import proxsuite
 
-        return "proxqp.dense.QP update", lambda: DirectProxqp(lambda qp: backend._apply_settings(qp, proxsuite.proxqp))
+        return "proxqp.dense.QP update", lambda: DirectProxqp(
+            lambda qp: backend._apply_settings(qp, proxsuite.proxqp)
+        )
     if name == "daqp":
         return "daqp.Model update", lambda: DirectDaqpModel(backend.options())
     if name == "daqp-stateless":
@@ -360,7 +369,7 @@ def direct_for(name: str, profile: str):
     if name == "qpoases":
         return "qpOASES shim hotstart (ctypes)", lambda: DirectQpoases(backend)
     if name == "pinv":
-        return "numpy lstsq", lambda: (lambda p: np.linalg.lstsq(p.A, p.b, rcond=None)[0])
+        return "numpy lstsq", lambda: lambda p: np.linalg.lstsq(p.A, p.b, rcond=None)[0]
     if name == "cvxpy":
         import cvxpy as cp
 
@@ -375,8 +384,14 @@ def direct_for(name: str, profile: str):
                 P, q, G, h, A, b, lb, ub = _parts(p)
                 key = (q.shape[0], A.shape[0], G.shape[0])
                 if key not in models:
-                    models[key] = _Model(cp, q.shape[0], A.shape[0], np.ones(G.shape[0], bool),
-                                         np.arange(q.shape[0]), np.arange(q.shape[0]))
+                    models[key] = _Model(
+                        cp,
+                        q.shape[0],
+                        A.shape[0],
+                        np.ones(G.shape[0], bool),
+                        np.arange(q.shape[0]),
+                        np.arange(q.shape[0]),
+                    )
                 model = models[key]
                 model.set_values(p, P, lb, ub)
                 model.problem.solve(solver=solver, warm_start=True, **options)
@@ -418,14 +433,23 @@ def _clarabel_settings(clarabel, options):
 
 def qpsolvers_for(name: str, profile: str):
     """qpsolvers.solve_problem with the backend's solver and settings, or None."""
-    solver = {"osqp": "osqp", "proxqp": "proxqp", "clarabel": "clarabel", "piqp": "piqp", "daqp": "daqp",
-              "daqp-stateless": "daqp", "qpoases": "qpoases"}.get(name)
+    solver = {
+        "osqp": "osqp",
+        "proxqp": "proxqp",
+        "clarabel": "clarabel",
+        "piqp": "piqp",
+        "daqp": "daqp",
+        "daqp-stateless": "daqp",
+        "qpoases": "qpoases",
+    }.get(name)
     if name.startswith("qpsolvers:"):
         solver = name.split(":", 1)[1]
     if solver is None or solver not in qpsolvers.available_solvers:
         return None
     generic = get_backend(name, profile).profile
-    settings = native_settings(solver, generic.eps_abs, generic.eps_rel, generic.max_iter, generic.time_limit)
+    settings = native_settings(
+        solver, generic.eps_abs, generic.eps_rel, generic.max_iter, generic.time_limit
+    )
     return lambda: via_qpsolvers(solver, settings)
 
 
@@ -447,9 +471,15 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=3, help="passes per method (default 3)")
     parser.add_argument("--source", choices=("sim", "known"), default="sim")
     parser.add_argument("--profile", default="default")
-    parser.add_argument("--backends", default=None, help="comma-separated backend names (default: all but rnn*)")
-    parser.add_argument("--stat", choices=("median", "min"), default="median",
-                        help="median of all calls, or median over problems of each one's fastest pass")
+    parser.add_argument(
+        "--backends", default=None, help="comma-separated backend names (default: all but rnn*)"
+    )
+    parser.add_argument(
+        "--stat",
+        choices=("median", "min"),
+        default="median",
+        help="median of all calls, or median over problems of each one's fastest pass",
+    )
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")
 
@@ -458,25 +488,47 @@ def main(argv=None) -> int:
         try:
             problems = sim_problems(args.count)
         except Exception as exc:  # the simulator is optional here
-            print(f"# qpbench.sim unavailable ({type(exc).__name__}: {exc}); using known.robot_like_problem")
+            print(
+                f"# qpbench.sim unavailable ({type(exc).__name__}: {exc}); using known.robot_like_problem"
+            )
             source, problems = "known", known_problems(args.count)
     else:
         problems = known_problems(args.count)
-    sizes = sorted({(p.q.shape[0], 0 if p.A is None else p.A.shape[0], 0 if p.G is None else p.G.shape[0]) for p in problems})
-    stat = "median wall time per solve" if args.stat == "median" else "median over QPs of the fastest pass"
-    print(f"# {len(problems)} QPs from {source}; (n, meq, m) in {sizes}; profile {args.profile}; "
-          f"{args.repeat} passes; {stat} in microseconds")
+    sizes = sorted(
+        {
+            (p.q.shape[0], 0 if p.A is None else p.A.shape[0], 0 if p.G is None else p.G.shape[0])
+            for p in problems
+        }
+    )
+    stat = (
+        "median wall time per solve"
+        if args.stat == "median"
+        else "median over QPs of the fastest pass"
+    )
+    print(
+        f"# {len(problems)} QPs from {source}; (n, meq, m) in {sizes}; profile {args.profile}; "
+        f"{args.repeat} passes; {stat} in microseconds"
+    )
 
-    names = args.backends.split(",") if args.backends else [
-        n for n in backend_names() if not n.startswith("rnn")
-    ]
-    header = f"| {'backend':<20} | {'ours':>9} | {'direct':>9} | {'ours/direct':>11} | {'qpsolvers':>9} | {'ours/qpsolvers':>14} | direct API"
+    names = (
+        args.backends.split(",")
+        if args.backends
+        else [n for n in backend_names() if not n.startswith("rnn")]
+    )
+    header = (
+        f"| {'backend':<20} | {'ours':>9} | {'direct':>9} | {'ours/direct':>11} | {'qpsolvers':>9} "
+        f"| {'ours/qpsolvers':>14} | direct API"
+    )
     print(header)
     print("|" + "|".join("-" * (len(c) + 0) for c in header.split("|")[1:]))
     for name in names:
         desc, direct_factory = direct_for(name, args.profile)
         qps_factory = qpsolvers_for(name, args.profile)
-        methods = {"ours": lambda: get_backend(name, args.profile).solve, "direct": direct_factory, "qpsolvers": qps_factory}
+        methods = {
+            "ours": lambda: get_backend(name, args.profile).solve,
+            "direct": direct_factory,
+            "qpsolvers": qps_factory,
+        }
         times: dict[str, list[list[float]]] = {k: [] for k, f in methods.items() if f is not None}
         for _ in range(args.repeat):
             for key in times:
@@ -496,7 +548,9 @@ def main(argv=None) -> int:
 
         r1 = f"{ours / direct:11.2f}" if direct else f"{'-':>11}"
         r2 = f"{ours / qps:14.2f}" if qps else f"{'-':>14}"
-        print(f"| {name:<20} | {fmt(ours)} | {fmt(direct)} | {r1} | {fmt(qps)} | {r2} | {desc or '-'}")
+        print(
+            f"| {name:<20} | {fmt(ours)} | {fmt(direct)} | {r1} | {fmt(qps)} | {r2} | {desc or '-'}"
+        )
         sys.stdout.flush()
     return 0
 

@@ -33,24 +33,39 @@ def median_us(fn, states, repeat):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--ticks", type=int, default=2000, help="states sampled from a closed-loop run")
+    parser.add_argument(
+        "--ticks", type=int, default=2000, help="states sampled from a closed-loop run"
+    )
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--backend", default="qpsolvers:daqp", help="backend of the run that provides the states")
+    parser.add_argument(
+        "--backend", default="qpsolvers:daqp", help="backend of the run that provides the states"
+    )
     args = parser.parse_args()
-    print(f"{'scenario':<14} {'rows':>4} {'build [us]':>10} {'arrays only [us]':>16} {'numpy terms [us]':>16}")
+    print(
+        f"{'scenario':<14} {'rows':>4} {'build [us]':>10} {'arrays only [us]':>16} {'numpy terms [us]':>16}"
+    )
     for name in ("free", "wall", "adaptive", "narrow"):
         sc = load_scenario(name)
         res = simulate(sc, args.backend, duration=args.ticks * sc.dt)
         n = sc.make_arm().n
         log = res.log
         states = [
-            (np.ascontiguousarray(row[[f"theta_{i}" for i in range(n)]].to_numpy(float)), float(row["t"]), float(row["kp_hat"]), float(row["kd_hat"]))
+            (
+                np.ascontiguousarray(row[[f"theta_{i}" for i in range(n)]].to_numpy(float)),
+                float(row["t"]),
+                float(row["kp_hat"]),
+                float(row["kd_hat"]),
+            )
             for _, row in log.iterrows()
         ]
         ctrl = sc.make_controller()
         ctrl.build(*states[0])
         build = median_us(lambda th, t, kp, kd: ctrl.build(th, t, kp, kd), states, args.repeat)
-        arrays = median_us(lambda th, t, kp, kd: ctrl.make_problem(ctrl.build_arrays(th, t, kp, kd), False), states, args.repeat)
+        arrays = median_us(
+            lambda th, t, kp, kd: ctrl.make_problem(ctrl.build_arrays(th, t, kp, kd), False),
+            states,
+            args.repeat,
+        )
         ref = median_us(lambda th, t, kp, kd: ctrl.build_reference(th, t, kp, kd), states[:500], 1)
         print(f"{name:<14} {ctrl.n_rows:>4} {build:>10.2f} {arrays:>16.2f} {ref:>16.2f}")
     print("target: build <= 15 us median per tick")

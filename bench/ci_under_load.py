@@ -58,7 +58,9 @@ def ci_run(clone: Path, cache: Path, log: Path) -> tuple[int, float, str]:
     env.pop("VIRTUAL_ENV", None)
     start = time.perf_counter()
     with open(log, "wb") as fh:
-        proc = subprocess.run(["bash", ".ci/run"], cwd=clone, env=env, stdout=fh, stderr=subprocess.STDOUT)
+        proc = subprocess.run(
+            ["bash", ".ci/run"], cwd=clone, env=env, stdout=fh, stderr=subprocess.STDOUT
+        )
     elapsed = time.perf_counter() - start
     return proc.returncode, elapsed, last_line(log.read_text(errors="replace"))
 
@@ -76,7 +78,9 @@ def stop_burners(procs: list[subprocess.Popen]) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--burners", type=int, default=2, help="CPU-bound processes beside the loaded run")
+    parser.add_argument(
+        "--burners", type=int, default=2, help="CPU-bound processes beside the loaded run"
+    )
     parser.add_argument("--only", choices=("idle", "load"), help="run only one of the two")
     parser.add_argument("--keep", action="store_true", help="keep the temporary clones and logs")
     args = parser.parse_args(argv)
@@ -97,7 +101,9 @@ def main(argv: list[str] | None = None) -> int:
             finally:
                 stop_burners(procs)
             failures += status != 0
-            print(f"{name:>4} ({burners} busy processes beside it): exit {status} in {elapsed:.0f} s; {tail}")
+            print(
+                f"{name:>4} ({burners} busy processes beside it): exit {status} in {elapsed:.0f} s; {tail}"
+            )
             if status != 0:
                 print(f"     log: {workdir / f'{name}.log'}")
     finally:

@@ -64,7 +64,10 @@ class NullBackend(Backend):
 
 def _load() -> str:
     try:
-        return "load average %.2f %.2f %.2f (1/5/15 min) on %d cores" % (*os.getloadavg(), os.cpu_count() or 0)
+        return "load average %.2f %.2f %.2f (1/5/15 min) on %d cores" % (
+            *os.getloadavg(),
+            os.cpu_count() or 0,
+        )
     except OSError:  # pragma: no cover - not on every platform
         return "load average unknown"
 
@@ -89,34 +92,59 @@ def _line(label, summaries, duration):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="wall")
-    parser.add_argument("--duration", type=float, default=20.0, help="simulated seconds of the timed runs")
-    parser.add_argument("--rank-duration", type=float, default=2.0, help="simulated seconds per backend when ranking")
-    parser.add_argument("--repeat", type=int, default=3, help="timed runs per backend (median reported)")
-    parser.add_argument("--top", type=int, default=3, help="how many of the fastest backends get the timed runs")
-    parser.add_argument("--backends", default=None, help="comma-separated candidates (default: a built-in list)")
-    parser.add_argument("--rnn", action="store_true", help="also time the online rnn backend (working setting)")
+    parser.add_argument(
+        "--duration", type=float, default=20.0, help="simulated seconds of the timed runs"
+    )
+    parser.add_argument(
+        "--rank-duration",
+        type=float,
+        default=2.0,
+        help="simulated seconds per backend when ranking",
+    )
+    parser.add_argument(
+        "--repeat", type=int, default=3, help="timed runs per backend (median reported)"
+    )
+    parser.add_argument(
+        "--top", type=int, default=3, help="how many of the fastest backends get the timed runs"
+    )
+    parser.add_argument(
+        "--backends", default=None, help="comma-separated candidates (default: a built-in list)"
+    )
+    parser.add_argument(
+        "--rnn", action="store_true", help="also time the online rnn backend (working setting)"
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     available = set(backend_names())
-    cands = [b for b in (args.backends.split(",") if args.backends else CANDIDATES) if b in available]
+    cands = [
+        b for b in (args.backends.split(",") if args.backends else CANDIDATES) if b in available
+    ]
     print(f"# {args.scenario}, dt from the scenario; {_load()}")
 
     print(f"\nranking on {args.rank_duration:g} s of {args.scenario} (one run each):")
-    print(f"{'backend':<22} {'wall [s]':>9} {'us/tick':>8} {'median solve [us]':>18} {'infeasible':>10}")
+    print(
+        f"{'backend':<22} {'wall [s]':>9} {'us/tick':>8} {'median solve [us]':>18} {'infeasible':>10}"
+    )
     ranked = []
     for b in cands:
         s = simulate(args.scenario, b, duration=args.rank_duration).summary
         ranked.append((s["wall_time_s"], b))
-        print(f"{b:<22} {s['wall_time_s']:>9.3f} {s['wall_time_s'] / s['ticks'] * 1e6:>8.1f} "
-              f"{s['solve_time_median_s'] * 1e6:>18.1f} {s['infeasible_ticks']:>10}")
+        print(
+            f"{b:<22} {s['wall_time_s']:>9.3f} {s['wall_time_s'] / s['ticks'] * 1e6:>8.1f} "
+            f"{s['solve_time_median_s'] * 1e6:>18.1f} {s['infeasible_ticks']:>10}"
+        )
     if not ranked:
         print("no QP backend available")
         return
     best = [b for _, b in sorted(ranked)[: args.top]]
 
-    print(f"\n{args.scenario}, {args.duration:g} s, {args.repeat} runs each; wall time median [min, max]:")
-    header = (f"{'backend':<26} {'wall [s]':>7} {'[min, max]':<14} {'RTF':>7} {'us/tick':>8} {'solve [us]':>11} "
-              f"{'infeasible':>10} {'fallback':>8}")
+    print(
+        f"\n{args.scenario}, {args.duration:g} s, {args.repeat} runs each; wall time median [min, max]:"
+    )
+    header = (
+        f"{'backend':<26} {'wall [s]':>7} {'[min, max]':<14} {'RTF':>7} {'us/tick':>8} {'solve [us]':>11} "
+        f"{'infeasible':>10} {'fallback':>8}"
+    )
     print(header)
     results = {}
     for b in best:
@@ -138,8 +166,10 @@ def main() -> None:
     fastest = min(results, key=results.get)
     med = results[fastest]
     verdict = "met" if args.duration / med >= TARGET_RTF else "NOT met"
-    print(f"\nfastest: {fastest}, {med:.3f} s for {args.duration:g} s, real-time factor {args.duration / med:.1f} "
-          f"(target: 20 s in <= 0.6 s, factor >= {TARGET_RTF:.1f}: {verdict}); {_load()}")
+    print(
+        f"\nfastest: {fastest}, {med:.3f} s for {args.duration:g} s, real-time factor {args.duration / med:.1f} "
+        f"(target: 20 s in <= 0.6 s, factor >= {TARGET_RTF:.1f}: {verdict}); {_load()}"
+    )
 
 
 if __name__ == "__main__":

@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -31,8 +30,12 @@ def inspect_one(path: Path) -> tuple[float, float, dict | None, str]:
     """``(wall s, peak RSS GB, inspect's JSON or None, stderr)`` of ``qpbench inspect path --json``."""
     code = "import sys; from qpbench.cli import main; sys.exit(main(sys.argv[1:]))"
     start = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", code, "inspect", str(path), "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, "inspect", str(path), "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - start
     out, err = proc.stdout.read(), proc.stderr.read()
@@ -50,8 +53,10 @@ def main() -> int:
     if not files:
         print(f"no .mat file in {args.folder}", file=sys.stderr)
         return 2
-    print(f"{'problem':<10} {'n':>7} {'m_eq':>6} {'m_ineq':>7} {'nnz':>8} {'convexity':<10} "
-          f"{'wall [s]':>8} {'peak RSS [GB]':>13}")
+    print(
+        f"{'problem':<10} {'n':>7} {'m_eq':>6} {'m_ineq':>7} {'nnz':>8} {'convexity':<10} "
+        f"{'wall [s]':>8} {'peak RSS [GB]':>13}"
+    )
     worst_s = worst_gb = 0.0
     bad = []
     for f in files:
@@ -59,16 +64,23 @@ def main() -> int:
         worst_s, worst_gb = max(worst_s, wall), max(worst_gb, rss)
         if info is None:
             bad.append(f"{f.name}: {err.splitlines()[-1] if err else 'failed'}")
-            print(f"{f.stem:<10} {'-':>7} {'-':>6} {'-':>7} {'-':>8} {'FAILED':<10} {wall:8.2f} {rss:13.3f}")
+            print(
+                f"{f.stem:<10} {'-':>7} {'-':>6} {'-':>7} {'-':>8} {'FAILED':<10} {wall:8.2f} {rss:13.3f}"
+            )
             continue
         verdict = ",".join(info["convexity"])
-        print(f"{f.stem:<10} {info['n'][0]:>7} {info['m_eq'][0]:>6} {info['m_ineq'][0]:>7} {info['nnz'][0]:>8} "
-              f"{verdict:<10} {wall:8.2f} {rss:13.3f}", flush=True)
+        print(
+            f"{f.stem:<10} {info['n'][0]:>7} {info['m_eq'][0]:>6} {info['m_ineq'][0]:>7} {info['nnz'][0]:>8} "
+            f"{verdict:<10} {wall:8.2f} {rss:13.3f}",
+            flush=True,
+        )
         if wall > args.limit_s or rss > args.limit_gb:
             bad.append(f"{f.name}: {wall:.2f} s, {rss:.3f} GB")
-    print(f"{len(files)} files; slowest {worst_s:.2f} s (target {args.limit_s:g} s), "
-          f"largest peak RSS {worst_gb:.3f} GB (target {args.limit_gb:g} GB); "
-          f"load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"{len(files)} files; slowest {worst_s:.2f} s (target {args.limit_s:g} s), "
+        f"largest peak RSS {worst_gb:.3f} GB (target {args.limit_gb:g} GB); "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
     for line in bad:
         print(f"MISSED: {line}")
     return 1 if bad else 0

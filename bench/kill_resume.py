@@ -41,7 +41,9 @@ def pick_problems(arg: str | None, limit: int, workdir: Path) -> Path:
 
     With ``limit`` > 0, the first ``limit`` records are copied into a new set in ``workdir``.
     """
-    candidates = [Path(arg)] if arg else [ROOT / "problems" / "wall", ROOT / "problems" / "maros_meszaros"]
+    candidates = (
+        [Path(arg)] if arg else [ROOT / "problems" / "wall", ROOT / "problems" / "maros_meszaros"]
+    )
     path = next((p for p in candidates if p.exists()), None)
     if path is None:
         sys.exit(f"no problem set found among {', '.join(map(str, candidates))}")
@@ -53,12 +55,27 @@ def pick_problems(arg: str | None, limit: int, workdir: Path) -> Path:
     if len(pset) <= limit:
         return path
     out = workdir / f"{path.name}-first{limit}"
-    write_problem_set(out, pset.records[:limit], generator={"name": "kill_resume", "source": str(path), "limit": limit})
+    write_problem_set(
+        out,
+        pset.records[:limit],
+        generator={"name": "kill_resume", "source": str(path), "limit": limit},
+    )
     return out
 
 
 def command(problems: Path, backends: str, out: Path, resume: bool) -> list[str]:
-    cmd = [sys.executable, "-m", "qpbench.cli", "-q", "bench", str(problems), "--backends", backends, "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "qpbench.cli",
+        "-q",
+        "bench",
+        str(problems),
+        "--backends",
+        backends,
+        "--out",
+        str(out),
+    ]
     return cmd + (["--resume"] if resume else [])
 
 
@@ -87,10 +104,14 @@ def differing(rows_a: list[dict], rows_b: list[dict]) -> list[tuple[tuple, dict]
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--problems", help="problem set (default: problems/wall, else problems/maros_meszaros)")
+    parser.add_argument(
+        "--problems", help="problem set (default: problems/wall, else problems/maros_meszaros)"
+    )
     parser.add_argument("--backends", default=DEFAULT_BACKENDS)
     parser.add_argument("--kills", type=int, default=8, help="number of SIGKILLs (default 8)")
-    parser.add_argument("--limit", type=int, default=0, help="use the first N problems (default 0: all)")
+    parser.add_argument(
+        "--limit", type=int, default=0, help="use the first N problems (default 0: all)"
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     rng = random.Random(args.seed)
@@ -102,15 +123,21 @@ def main() -> int:
 
         # Two uninterrupted runs: the first also fills the reference cache, the second
         # gives the duration and, compared with the first, the run-to-run noise.
-        first = subprocess.run(command(problems, args.backends, again, False), capture_output=True, text=True)
+        first = subprocess.run(
+            command(problems, args.backends, again, False), capture_output=True, text=True
+        )
         if first.returncode not in (0, 1):
             print(first.stderr, file=sys.stderr)
             return 2
         start = time.perf_counter()
-        done = subprocess.run(command(problems, args.backends, full, False), capture_output=True, text=True)
+        done = subprocess.run(
+            command(problems, args.backends, full, False), capture_output=True, text=True
+        )
         duration = time.perf_counter() - start
         print(f"problems: {problems} ; backends: {args.backends}")
-        print(f"uninterrupted run: {len(read_rows(full))} rows in {duration:.1f} s (exit {done.returncode})")
+        print(
+            f"uninterrupted run: {len(read_rows(full))} rows in {duration:.1f} s (exit {done.returncode})"
+        )
         noise = differing(read_rows(full), read_rows(again))
         print(f"rows differing outside timing columns between two uninterrupted runs: {len(noise)}")
 
@@ -144,15 +171,27 @@ def main() -> int:
             proc.wait()
             rows = len(read_rows(cut)) if cut.exists() else 0
             size = cut.stat().st_size if cut.exists() else 0
-            tail = "" if not size else ("ends mid-line" if not cut.read_bytes().endswith(b"\n") else "ends on a newline")
+            tail = (
+                ""
+                if not size
+                else (
+                    "ends mid-line" if not cut.read_bytes().endswith(b"\n") else "ends on a newline"
+                )
+            )
             kills.append(f"{how}: {rows} complete rows on disk, {tail}".rstrip(", "))
-        final = subprocess.run(command(problems, args.backends, cut, resume=cut.exists()), capture_output=True, text=True)
+        final = subprocess.run(
+            command(problems, args.backends, cut, resume=cut.exists()),
+            capture_output=True,
+            text=True,
+        )
         for line in kills:
             print(f"  SIGKILL after {line}")
         if final.returncode not in (0, 1):
             print(final.stderr, file=sys.stderr)
             return 2
-        warnings = [ln for ln in final.stderr.splitlines() if "half-written" in ln or "malformed" in ln]
+        warnings = [
+            ln for ln in final.stderr.splitlines() if "half-written" in ln or "malformed" in ln
+        ]
         for ln in warnings:
             print(f"  last resume: {ln}")
 
@@ -167,7 +206,9 @@ def main() -> int:
         print(f"rows lost: {lost}")
         print(f"rows duplicated: {duplicated}")
         print(f"rows not in the uninterrupted run: {extra}")
-        print(f"rows differing outside timing columns: {len(differ)} (between two uninterrupted runs: {len(noise)})")
+        print(
+            f"rows differing outside timing columns: {len(differ)} (between two uninterrupted runs: {len(noise)})"
+        )
         by_backend = collections.Counter(k[1] for k, _ in differ)
         for backend, count in sorted(by_backend.items()):
             columns = sorted({c for k, d in differ if k[1] == backend for c in d})

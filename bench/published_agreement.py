@@ -55,7 +55,11 @@ from qpbench.published import import_qpbenchmark, read_published_results
 
 DEFAULT_BACKENDS = "clarabel,osqp,proxqp,qpsolvers:osqp"
 #: qpbenchmark's settings judged at the thresholds of each of qpbench's own profiles.
-SETTINGS_OF_PROFILE = {"low_accuracy": "low_accuracy", "default": "mid_accuracy", "high_accuracy": "high_accuracy"}
+SETTINGS_OF_PROFILE = {
+    "low_accuracy": "low_accuracy",
+    "default": "mid_accuracy",
+    "high_accuracy": "high_accuracy",
+}
 #: Target agreement of the found flags, in percent.
 TARGET = 90.0
 
@@ -69,13 +73,29 @@ def settings_of(profile: str) -> str:
 def run_bench_cli(args, out: Path) -> tuple[int, float, float]:
     """``(exit code, wall time [s], peak RSS [MiB])`` of ``qpbench bench`` in a child process."""
     exe = Path(sys.executable).with_name("qpbench")
-    cli = ["bench", str(args.folder), "--backends", args.backends, "--profile", args.profile,
-           "--out", str(out), "--force", "--reference", args.reference, "--jobs", str(args.jobs)]
+    cli = [
+        "bench",
+        str(args.folder),
+        "--backends",
+        args.backends,
+        "--profile",
+        args.profile,
+        "--out",
+        str(out),
+        "--force",
+        "--reference",
+        args.reference,
+        "--jobs",
+        str(args.jobs),
+    ]
     if args.time_limit is not None:
         cli += ["--time-limit", str(args.time_limit)]
     print("$ qpbench " + " ".join(cli), flush=True)
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-c", "import sys; from qpbench.cli import main; "
-                                                               "sys.exit(main())"]
+    cmd = (
+        [str(exe)]
+        if exe.exists()
+        else [sys.executable, "-c", "import sys; from qpbench.cli import main; sys.exit(main())"]
+    )
     cmd += cli
     started = time.perf_counter()
     code = subprocess.call(cmd)
@@ -84,8 +104,9 @@ def run_bench_cli(args, out: Path) -> tuple[int, float, float]:
     return code, wall, peak_mib
 
 
-def run_qpbenchmark_here(folder: Path, solvers: list[str], settings: str, time_limit: float | None,
-                         problems: list[str]) -> pd.DataFrame:
+def run_qpbenchmark_here(
+    folder: Path, solvers: list[str], settings: str, time_limit: float | None, problems: list[str]
+) -> pd.DataFrame:
     """qpbenchmark's runner on the problems of ``folder`` as qpbench reads them (CSC matrices)."""
     import scipy.sparse as spa
 
@@ -105,8 +126,10 @@ def run_qpbenchmark_here(folder: Path, solvers: list[str], settings: str, time_l
         def __iter__(self):
             for r in records:
                 p = r.problem
-                csc = (lambda M: None if M is None else spa.csc_matrix(M))
-                yield qpb.Problem(csc(p.P), p.q, csc(p.G), p.h, csc(p.A), p.b, p.lb, p.ub, name=r.name)
+                csc = lambda M: None if M is None else spa.csc_matrix(M)
+                yield qpb.Problem(
+                    csc(p.P), p.q, csc(p.G), p.h, csc(p.A), p.b, p.lb, p.ub, name=r.name
+                )
 
     test_set = Published()
     test_set.solvers = set(solvers) & set(test_set.solvers)
@@ -120,32 +143,45 @@ def run_qpbenchmark_here(folder: Path, solvers: list[str], settings: str, time_l
     return df
 
 
-def agreement(ours: pd.DataFrame, theirs: pd.DataFrame, settings: str, time_limit: float) -> pd.DataFrame:
+def agreement(
+    ours: pd.DataFrame, theirs: pd.DataFrame, settings: str, time_limit: float
+) -> pd.DataFrame:
     """Per ``qpsolvers:`` backend: rows compared, found flags equal, and the rows that differ."""
     routes = ours[ours["backend"].str.startswith("qpsolvers:")].copy()
     routes["solver"] = routes["backend"].str.split(":", n=1).str[1]
     routes["found"] = routes["found"].astype(str).str.lower() == "true"
     theirs = theirs[theirs["settings"] == settings]
-    m = routes.merge(theirs[["problem", "solver", "found", "runtime"]], on=["problem", "solver"],
-                     suffixes=("", "_qpb"), how="left", validate="1:1")
+    m = routes.merge(
+        theirs[["problem", "solver", "found", "runtime"]],
+        on=["problem", "solver"],
+        suffixes=("", "_qpb"),
+        how="left",
+        validate="1:1",
+    )
     rows, differ = [], []
     for solver, g in m.groupby("solver", sort=True):
         known = g[g["found_qpb"].notna()]
         same = known["found"] == known["found_qpb"].astype(bool)
-        rows.append({
-            "solver": f"qpsolvers:{solver}",
-            "rows": len(g),
-            "published": len(known),
-            "found (ours)": int(known["found"].sum()),
-            "found (qpbenchmark)": int(known["found_qpb"].astype(bool).sum()),
-            "agree": int(same.sum()),
-            "agreement %": 100.0 * same.mean() if len(known) else float("nan"),
-            "differ, qpbenchmark over our time limit": int((~same & (known["runtime"] > time_limit)).sum()),
-        })
+        rows.append(
+            {
+                "solver": f"qpsolvers:{solver}",
+                "rows": len(g),
+                "published": len(known),
+                "found (ours)": int(known["found"].sum()),
+                "found (qpbenchmark)": int(known["found_qpb"].astype(bool).sum()),
+                "agree": int(same.sum()),
+                "agreement %": 100.0 * same.mean() if len(known) else float("nan"),
+                "differ, qpbenchmark over our time limit": int(
+                    (~same & (known["runtime"] > time_limit)).sum()
+                ),
+            }
+        )
         for _, r in known[~same].iterrows():
-            differ.append(f"  {r['backend']} {r['problem']}: ours {r['status']} (found {r['found']}, "
-                          f"{r['wall_time_min_s'] if pd.notna(r['wall_time_min_s']) else float('nan'):.3g} s), "
-                          f"qpbenchmark found {bool(r['found_qpb'])} in {r['runtime']:.3g} s")
+            differ.append(
+                f"  {r['backend']} {r['problem']}: ours {r['status']} (found {r['found']}, "
+                f"{r['wall_time_min_s'] if pd.notna(r['wall_time_min_s']) else float('nan'):.3g} s), "
+                f"qpbenchmark found {bool(r['found_qpb'])} in {r['runtime']:.3g} s"
+            )
     table = pd.DataFrame(rows)
     table.attrs["differ"] = differ
     return table
@@ -156,10 +192,17 @@ def main(argv=None) -> int:
     parser.add_argument("folder", type=Path, help="folder of published problems (.mat)")
     parser.add_argument("--backends", default=DEFAULT_BACKENDS)
     parser.add_argument("--profile", default="qpbenchmark:default")
-    parser.add_argument("--settings", default=None, help="qpbenchmark settings to compare with (default: see above)")
+    parser.add_argument(
+        "--settings", default=None, help="qpbenchmark settings to compare with (default: see above)"
+    )
     parser.add_argument("--published", type=Path, default=None, help="qpbenchmark results file")
     parser.add_argument("--reference", default="auto")
-    parser.add_argument("--time-limit", type=float, default=None, help="per-solve limit in s (default: the profile's)")
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        help="per-solve limit in s (default: the profile's)",
+    )
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--out", type=Path, default=None, help="keep the bench CSV here")
     args = parser.parse_args(argv)
@@ -176,9 +219,11 @@ def main(argv=None) -> int:
             print(f"qpbench bench exited {code}", file=sys.stderr)
             return code
         ours = pd.read_csv(out)
-    print(f"\nrun: {wall:.1f} s wall, peak memory {peak:.0f} MiB (largest process), exit {code}, "
-          f"{len(ours)} rows, {ours['problem'].nunique()} problems, profile {args.profile}, time limit "
-          f"{time_limit:g} s")
+    print(
+        f"\nrun: {wall:.1f} s wall, peak memory {peak:.0f} MiB (largest process), exit {code}, "
+        f"{len(ours)} rows, {ours['problem'].nunique()} problems, profile {args.profile}, time limit "
+        f"{time_limit:g} s"
+    )
     print(ours.groupby(["backend", "status"]).size().unstack(fill_value=0).to_markdown())
     print()
     print(ours.groupby("backend")[["found", "success"]].mean().mul(100).round(1).to_markdown())
@@ -187,17 +232,30 @@ def main(argv=None) -> int:
     if published.exists():
         theirs, source = read_published_results(published), f"published ({published})"
     else:
-        solvers = sorted({b.split(":", 1)[1] for b in args.backends.split(",") if b.startswith("qpsolvers:")})
-        theirs = run_qpbenchmark_here(args.folder, solvers, settings, args.time_limit, list(ours["problem"].unique()))
+        solvers = sorted(
+            {b.split(":", 1)[1] for b in args.backends.split(",") if b.startswith("qpsolvers:")}
+        )
+        theirs = run_qpbenchmark_here(
+            args.folder, solvers, settings, args.time_limit, list(ours["problem"].unique())
+        )
         source = "qpbenchmark run here (no published results in the folder)"
     table = agreement(ours, theirs, settings, time_limit)
-    print(f"\nfound flags of the qpsolvers: routes vs qpbenchmark's, settings {settings}; {source}; "
-          f"target >= {TARGET:g} %\n")
-    print(table.to_markdown(index=False, floatfmt=".1f") if len(table) else "(no qpsolvers: backend in the run)")
+    print(
+        f"\nfound flags of the qpsolvers: routes vs qpbenchmark's, settings {settings}; {source}; "
+        f"target >= {TARGET:g} %\n"
+    )
+    print(
+        table.to_markdown(index=False, floatfmt=".1f")
+        if len(table)
+        else "(no qpsolvers: backend in the run)"
+    )
     for line in table.attrs.get("differ", []):
         print(line)
     below = [r["solver"] for _, r in table.iterrows() if not r["agreement %"] >= TARGET]
-    print(f"\nagreement >= {TARGET:g} %: " + ("yes" if len(table) and not below else f"no ({', '.join(below)})"))
+    print(
+        f"\nagreement >= {TARGET:g} %: "
+        + ("yes" if len(table) and not below else f"no ({', '.join(below)})")
+    )
     return 0
 
 

@@ -59,8 +59,14 @@ from qpbench.reference import reference_solutions
 
 METRICS = ("primal_residual", "dual_residual", "duality_gap")
 EPS = float(np.finfo(float).eps)
-NAMED_SETTINGS = {"low_accuracy": "low_accuracy", "mid_accuracy": "default", "high_accuracy": "high_accuracy"}
-LIMIT_KEYS = frozenset({"max_iter", "iter_limit", "max_iters", "time_limit", "time_limit_secs", "TimeLimit"})
+NAMED_SETTINGS = {
+    "low_accuracy": "low_accuracy",
+    "mid_accuracy": "default",
+    "high_accuracy": "high_accuracy",
+}
+LIMIT_KEYS = frozenset(
+    {"max_iter", "iter_limit", "max_iters", "time_limit", "time_limit_secs", "TimeLimit"}
+)
 
 
 def import_qpbenchmark():
@@ -83,9 +89,15 @@ def run_qpbenchmark(qpb, test_set, solver: str, settings: str, csv_path: Path) -
     return results.df.reset_index(drop=True)
 
 
-def run_ours(problem_set, references, solver: str, profile, settings: dict, out: Path) -> pd.DataFrame:
+def run_ours(
+    problem_set, references, solver: str, profile, settings: dict, out: Path
+) -> pd.DataFrame:
     config = BenchConfig(
-        backends=[f"qpsolvers:{solver}"], profile=profile, mode="independent", isolate="never", settings=settings
+        backends=[f"qpsolvers:{solver}"],
+        profile=profile,
+        mode="independent",
+        isolate="never",
+        settings=settings,
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -98,7 +110,16 @@ def run_ours(problem_set, references, solver: str, profile, settings: dict, out:
 def data_scale(problem) -> float:
     """Largest finite magnitude in the problem's data (at least 1)."""
     scale = 1.0
-    for M in (problem.P, problem.q, problem.G, problem.h, problem.A, problem.b, problem.lb, problem.ub):
+    for M in (
+        problem.P,
+        problem.q,
+        problem.G,
+        problem.h,
+        problem.A,
+        problem.b,
+        problem.lb,
+        problem.ub,
+    ):
         if M is not None:
             v = np.abs(np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float))
             v = v[np.isfinite(v)]
@@ -141,8 +162,12 @@ def compare(theirs: pd.DataFrame, ours: pd.DataFrame, tol, scales: dict) -> dict
 
 def _their_success(m: pd.DataFrame, tol) -> pd.Series:
     """qpbenchmark's success rule on its own rows of a merged frame (suffix ``_x``)."""
-    return (m["found_x"].astype(bool) & (m["primal_residual_x"] < tol.primal) & (m["dual_residual_x"] < tol.dual)
-            & (m["duality_gap_x"] < tol.gap))
+    return (
+        m["found_x"].astype(bool)
+        & (m["primal_residual_x"] < tol.primal)
+        & (m["dual_residual_x"] < tol.dual)
+        & (m["duality_gap_x"] < tol.gap)
+    )
 
 
 def print_table(title: str, rows: list[dict]) -> None:
@@ -160,16 +185,32 @@ def print_table(title: str, rows: list[dict]) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--set", default="problems/wall", help="problem-set folder (default problems/wall)")
-    parser.add_argument("--count", type=int, default=None, help="first N problems only (default: all)")
-    parser.add_argument("--solvers", default=None, help="comma-separated qpsolvers names (default: all common)")
-    parser.add_argument("--profiles", default="", help="also compare these qpbench profiles (e.g. default,high_accuracy)")
+    parser.add_argument(
+        "--set", default="problems/wall", help="problem-set folder (default problems/wall)"
+    )
+    parser.add_argument(
+        "--count", type=int, default=None, help="first N problems only (default: all)"
+    )
+    parser.add_argument(
+        "--solvers", default=None, help="comma-separated qpsolvers names (default: all common)"
+    )
+    parser.add_argument(
+        "--profiles",
+        default="",
+        help="also compare these qpbench profiles (e.g. default,high_accuracy)",
+    )
     args = parser.parse_args(argv)
 
     qpb = import_qpbenchmark()
     SolverSettings = qpb.solver_settings.SolverSettings
-    ours_available = {n.split(":", 1)[1] for n in backend_names(available_only=True) if n.startswith("qpsolvers:")}
-    solvers = sorted(s for s in qpsolvers.available_solvers if SolverSettings.is_implemented(s) and s in ours_available)
+    ours_available = {
+        n.split(":", 1)[1] for n in backend_names(available_only=True) if n.startswith("qpsolvers:")
+    }
+    solvers = sorted(
+        s
+        for s in qpsolvers.available_solvers
+        if SolverSettings.is_implemented(s) and s in ours_available
+    )
     if args.solvers:
         solvers = [s for s in args.solvers.split(",") if s in solvers]
 
@@ -185,7 +226,9 @@ def main(argv=None) -> int:
         references = reference_solutions(problem_set, cache=False)
         scales = {r.name: data_scale(r.problem) for r in problem_set.records}
         statuses = pd.Series([r.status for r in references]).value_counts().to_dict()
-        print(f"{args.set}: {len(problem_set)} problems (reference statuses {statuses}); solvers {', '.join(solvers)}")
+        print(
+            f"{args.set}: {len(problem_set)} problems (reference statuses {statuses}); solvers {', '.join(solvers)}"
+        )
 
         class Slice(qpb.ParquetTestSet):
             title = "qpbench problem set"
@@ -202,13 +245,32 @@ def main(argv=None) -> int:
                 kwargs = dict(test_set.solver_settings[settings_name][solver])
                 options = get_backend(f"qpsolvers:{solver}", profile)._options()
                 same_call = options == kwargs
-                theirs = run_qpbenchmark(qpb, test_set, solver, settings_name, tmp / f"qpb-{settings_name}-{solver}.csv")
-                ours = run_ours(problem_set, references, solver, profile, {}, tmp / f"ours-{settings_name}-{solver}.csv")
-                rows.append({"settings": settings_name, "solver": solver, "same call": same_call,
-                             "success differs (our column)": int((theirs.merge(ours, on=["problem", "solver"])
-                                                                  .pipe(lambda m: _their_success(m, tol)
-                                                                        != m["success"].astype(bool))).sum()),
-                             **compare(theirs, ours, tol, scales)})
+                theirs = run_qpbenchmark(
+                    qpb, test_set, solver, settings_name, tmp / f"qpb-{settings_name}-{solver}.csv"
+                )
+                ours = run_ours(
+                    problem_set,
+                    references,
+                    solver,
+                    profile,
+                    {},
+                    tmp / f"ours-{settings_name}-{solver}.csv",
+                )
+                rows.append(
+                    {
+                        "settings": settings_name,
+                        "solver": solver,
+                        "same call": same_call,
+                        "success differs (our column)": int(
+                            (
+                                theirs.merge(ours, on=["problem", "solver"]).pipe(
+                                    lambda m: _their_success(m, tol) != m["success"].astype(bool)
+                                )
+                            ).sum()
+                        ),
+                        **compare(theirs, ours, tol, scales),
+                    }
+                )
         print_table("qpbenchmark's named settings, identical solver calls on both sides", rows)
 
         for profile_name in [p for p in args.profiles.split(",") if p]:
@@ -221,18 +283,45 @@ def main(argv=None) -> int:
             s.set_time_limit(profile.time_limit)
             t = profile.tolerance
             test_set.solver_settings = {profile.name: s}
-            test_set.tolerances = {profile.name: qpb.Tolerance(t.primal, t.dual, t.gap, profile.time_limit)}
+            test_set.tolerances = {
+                profile.name: qpb.Tolerance(t.primal, t.dual, t.gap, profile.time_limit)
+            }
             rows = []
             for solver in solvers:
                 options = get_backend(f"qpsolvers:{solver}", profile)._options()
                 extra = sorted(set(options) - set(s[solver]))
                 differs = sorted(k for k, v in s[solver].items() if options.get(k) != v)
                 run = "same" if set(extra) <= LIMIT_KEYS and not differs else "other"
-                theirs = run_qpbenchmark(qpb, test_set, solver, profile.name, tmp / f"qpb-profile-{profile.name}-{solver}.csv")
-                ours = run_ours(problem_set, references, solver, profile, {}, tmp / f"ours-profile-{profile.name}-{solver}.csv")
-                note = ",".join(k for k in extra if k not in LIMIT_KEYS) + (f" differs:{differs}" if differs else "")
-                rows.append({"solver": solver, "run": run, "our extra options": note or "-", **compare(theirs, ours, t, scales)})
-            print_table(f"qpbench profile {profile.name} (CLI options) vs qpbenchmark settings from its numbers", rows)
+                theirs = run_qpbenchmark(
+                    qpb,
+                    test_set,
+                    solver,
+                    profile.name,
+                    tmp / f"qpb-profile-{profile.name}-{solver}.csv",
+                )
+                ours = run_ours(
+                    problem_set,
+                    references,
+                    solver,
+                    profile,
+                    {},
+                    tmp / f"ours-profile-{profile.name}-{solver}.csv",
+                )
+                note = ",".join(k for k in extra if k not in LIMIT_KEYS) + (
+                    f" differs:{differs}" if differs else ""
+                )
+                rows.append(
+                    {
+                        "solver": solver,
+                        "run": run,
+                        "our extra options": note or "-",
+                        **compare(theirs, ours, t, scales),
+                    }
+                )
+            print_table(
+                f"qpbench profile {profile.name} (CLI options) vs qpbenchmark settings from its numbers",
+                rows,
+            )
     print(f"\n{time.perf_counter() - started:.0f} s")
     return 0
 

@@ -43,8 +43,16 @@ def commands() -> list[list[str]]:
     out = []
     for name in scenarios():
         for setting in SETTINGS:
-            args = ["simulate", "--scenario", name, "--backend", "rnn",
-                    "--summary", str((OUT / "summaries" / f"{name}_{setting}.json").relative_to(ROOT)), "--force"]
+            args = [
+                "simulate",
+                "--scenario",
+                name,
+                "--backend",
+                "rnn",
+                "--summary",
+                str((OUT / "summaries" / f"{name}_{setting}.json").relative_to(ROOT)),
+                "--force",
+            ]
             if setting == "working":
                 for item in working_overrides():
                     args += ["--set", item]
@@ -94,10 +102,13 @@ def write_table() -> None:
                 non_opt = sum(v for k, v in s.get("status_counts", {}).items() if k != "optimal")
             dmin = "-"
             if s["min_obstacle_distance"] is not None:
-                dmin = (f"{s['min_obstacle_distance']:.4f} ({s['min_obstacle_distance_key_point']}, "
-                        f"{s['min_obstacle_distance_t']:.3f})")
+                dmin = (
+                    f"{s['min_obstacle_distance']:.4f} ({s['min_obstacle_distance_key_point']}, "
+                    f"{s['min_obstacle_distance_t']:.3f})"
+                )
             rows.append(
-                f"| {name} | {setting} | {rnn.get('eps', '-')} | {rnn.get('substeps', 'auto')} | {rnn.get('l1_clip', '-')} "
+                f"| {name} | {setting} | {rnn.get('eps', '-')} | {rnn.get('substeps', 'auto')} "
+                f"| {rnn.get('l1_clip', '-')} "
                 f"| {_fmt(s['tracking_rms_after_2s'], '.2e')} / {_fmt(s['tracking_max_after_2s'], '.2e')} "
                 f"| {_fmt(s['force_error_rms_after_2s'], '.3g')} / {_fmt(s['force_error_max_after_2s'], '.3g')} "
                 f"| {_fmt(s['force_final'], '.4g')} | {dmin} "
@@ -109,19 +120,26 @@ def write_table() -> None:
         "Produced by `python bench/rnn_closed_loop.py run` (the `qpbench simulate` commands in README.md beside it);\n"
         "numbers from `summaries/<scenario>_<setting>.json` (the summary `qpbench simulate --summary` writes).\n"
         "Bars of the robot issue: force error within 0.5 N and tracking within 1 mm after 2 s; no key point\n"
-        "closer than d_safe - 5e-4 m = 0.0095 m. \"non-optimal ticks\": the network's state at the end of the\n"
+        'closer than d_safe - 5e-4 m = 0.0095 m. "non-optimal ticks": the network\'s state at the end of the\n'
         "tick was not within the default profile's tolerance (1e-6) of the tick's KKT conditions (status\n"
-        "max_iter); the loop applies it anyway, as the paper does. \"infeasible ticks\": ticks the backend\n"
-        "declared infeasible; the network never does.\n\n"
-        + "\n".join(rows) + "\n"
+        'max_iter); the loop applies it anyway, as the paper does. "infeasible ticks": ticks the backend\n'
+        "declared infeasible; the network never does.\n\n" + "\n".join(rows) + "\n"
     )
     write_text(OUT / "closed_loop.md", text)
     print(text)
 
 
 #: ``(eps [s], l1 clip or None)`` of the sweep on wall (auto sub-steps, Euler).
-SWEEP = ((0.02, None), (0.02, 10.0), (0.01, None), (0.005, None), (0.005, 10.0), (0.001, None),
-         (0.001, 10.0), (0.0001, 10.0))
+SWEEP = (
+    (0.02, None),
+    (0.02, 10.0),
+    (0.01, None),
+    (0.005, None),
+    (0.005, 10.0),
+    (0.001, None),
+    (0.001, 10.0),
+    (0.0001, 10.0),
+)
 
 
 def sweep(duration: float = 8.0) -> None:
@@ -133,15 +151,24 @@ def sweep(duration: float = 8.0) -> None:
 
     base = load_scenario("wall")
     print(f"wall, {duration:g} s, backend rnn, Euler, auto sub-steps")
-    print("| eps [s] | l1 clip | tracking max after 2 s [m] | force error max [N] | min distance [m] |")
+    print(
+        "| eps [s] | l1 clip | tracking max after 2 s [m] | force error max [N] | min distance [m] |"
+    )
     print("|---|---|---|---|---|")
     for eps, clip in SWEEP:
         rnn = {"eps": eps} if clip is None else {"eps": eps, "l1_clip": clip}
         s = simulate(replace(base, rnn=rnn), "rnn", duration=duration).summary
         t = s["min_obstacle_distance_t"]
-        at = f" (t = {t:.2f} s)" if s["min_obstacle_distance"] < s["d_safe"] - 5e-4 and t < 2.0 else ""
-        print(f"| {eps:g} | {'-' if clip is None else f'{clip:g}'} | {s['tracking_max_after_2s']:.2g} "
-              f"| {s['force_error_max_after_2s']:.3g} | {s['min_obstacle_distance']:.2g}{at} |", flush=True)
+        at = (
+            f" (t = {t:.2f} s)"
+            if s["min_obstacle_distance"] < s["d_safe"] - 5e-4 and t < 2.0
+            else ""
+        )
+        print(
+            f"| {eps:g} | {'-' if clip is None else f'{clip:g}'} | {s['tracking_max_after_2s']:.2g} "
+            f"| {s['force_error_max_after_2s']:.3g} | {s['min_obstacle_distance']:.2g}{at} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

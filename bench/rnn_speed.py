@@ -176,8 +176,19 @@ def main() -> None:
 
     sc, recs = ticks(args.scenario, args.duration, "rnn", WORKING_SETTINGS)
     problems = [r.problem for r in recs]  # the controller's PackedProblem objects
-    plain = [qpsolvers.Problem(p.P.copy(), p.q.copy(), p.G.copy(), p.h.copy(), p.A.copy(), p.b.copy(),
-                               p.lb.copy(), p.ub.copy()) for p in problems]
+    plain = [
+        qpsolvers.Problem(
+            p.P.copy(),
+            p.q.copy(),
+            p.G.copy(),
+            p.h.copy(),
+            p.A.copy(),
+            p.b.copy(),
+            p.lb.copy(),
+            p.ub.copy(),
+        )
+        for p in problems
+    ]
     settings = dict(WORKING_SETTINGS, dt=sc.dt)
     make = lambda: get_backend("rnn", **settings)  # noqa: E731
     t_solve, sols = replay(make, problems, args.passes)
@@ -221,17 +232,25 @@ def main() -> None:
     def fig(t):
         return f"median {np.median(t) * us:.2f} us, p90 {np.percentile(t, 90) * us:.2f} us"
 
-    print(f"# rnn online, {args.scenario}, {len(problems)} consecutive ticks, settings {settings}; {_load()}")
+    print(
+        f"# rnn online, {args.scenario}, {len(problems)} consecutive ticks, settings {settings}; {_load()}"
+    )
     print(f"  QP size n={n}, equalities {me}, inequalities {mi}")
     print(f"  Backend.solve per tick, the controller's problems: {fig(t_solve)} (target <= 2 us)")
     print(f"  ... and reading y, z, z_box too:                   {fig(t_duals)}")
     print(f"  Backend.solve, same QPs as plain qpsolvers.Problem: {fig(t_plain)}")
     print(f"  general path (convert + check + kernel):           {fig(t_general)}")
     print(f"  closed loop's own solve time per tick (rnn-tuned): {fig(t_loop)}")
-    print(f"  kernel call (dispatch + {WORKING_SETTINGS['substeps']} steps + residuals + duals): {fig(t_kernel)}")
-    print(f"  one Euler step (numba): {per_step * 1e9:.0f} ns; {WORKING_SETTINGS['substeps']} steps = "
-          f"{WORKING_SETTINGS['substeps'] * per_step * us:.2f} us")
-    print(f"  outside the kernel (Backend.solve - kernel): {(np.median(t_solve) - np.median(t_kernel)) * us:.2f} us")
+    print(
+        f"  kernel call (dispatch + {WORKING_SETTINGS['substeps']} steps + residuals + duals): {fig(t_kernel)}"
+    )
+    print(
+        f"  one Euler step (numba): {per_step * 1e9:.0f} ns; {WORKING_SETTINGS['substeps']} steps = "
+        f"{WORKING_SETTINGS['substeps'] * per_step * us:.2f} us"
+    )
+    print(
+        f"  outside the kernel (Backend.solve - kernel): {(np.median(t_solve) - np.median(t_kernel)) * us:.2f} us"
+    )
     print("  pieces of the Python work (each timed alone in a tight loop, best of passes):")
     for name, t in pieces:
         print(f"    {name:<58} {t * 1e9:6.0f} ns")
@@ -252,36 +271,58 @@ def main() -> None:
     t_conv, sols = replay(conv, problems, args.passes)
     steps = np.array([s.iterations for s in sols])
     found = np.array([s.found for s in sols])
-    conv_semi = lambda: get_backend("rnn-converged", tol=1e-6, max_iter=1_000_000, method="semi-implicit")  # noqa: E731
+    conv_semi = lambda: get_backend(
+        "rnn-converged", tol=1e-6, max_iter=1_000_000, method="semi-implicit"
+    )  # noqa: E731
     t_semi, sols_semi = replay(conv_semi, problems, args.passes)
     steps_semi = np.array([s.iterations for s in sols_semi])
-    print(f"\n# rnn-converged to 1e-6 from the previous tick's state, {args.scenario}, "
-          f"{len(problems)} feasible consecutive ticks ({active.sum()} with an active obstacle row)")
+    print(
+        f"\n# rnn-converged to 1e-6 from the previous tick's state, {args.scenario}, "
+        f"{len(problems)} feasible consecutive ticks ({active.sum()} with an active obstacle row)"
+    )
     print(f"  converged on {found.sum()} of {len(found)}")
     for label, st_, tt in (("euler", steps, t_conv), ("semi-implicit", steps_semi, t_semi)):
-        for name, mask in (("all", np.ones_like(active)), ("obstacle active", active), ("no active row", ~active)):
+        for name, mask in (
+            ("all", np.ones_like(active)),
+            ("obstacle active", active),
+            ("no active row", ~active),
+        ):
             if mask.any():
-                print(f"  {label:13s} {name:16s} steps median {np.median(st_[mask]):.0f}, p90 {np.percentile(st_[mask], 90):.0f}; "
-                      f"time median {np.median(tt[mask]) * us:.2f} us, p90 {np.percentile(tt[mask], 90) * us:.2f} us")
+                print(
+                    f"  {label:13s} {name:16s} steps median {np.median(st_[mask]):.0f}, "
+                    f"p90 {np.percentile(st_[mask], 90):.0f}; "
+                    f"time median {np.median(tt[mask]) * us:.2f} us, p90 {np.percentile(tt[mask], 90) * us:.2f} us"
+                )
 
     results = {}
     for name in backend_names():
-        if not (name.startswith("qpsolvers:") or name == "daqp") or name in ("qpsolvers:scs", "qpsolvers:highs"):
+        if not (name.startswith("qpsolvers:") or name == "daqp") or name in (
+            "qpsolvers:scs",
+            "qpsolvers:highs",
+        ):
             continue
         t_ref, s_ref = replay(lambda: get_backend(name), problems, args.passes)
         if all(s.found for s in s_ref):
             results[name] = t_ref
-    print("\n# QP backends on the same ticks: qpsolvers:* and daqp (Backend.solve, per-tick min over passes)")
+    print(
+        "\n# QP backends on the same ticks: qpsolvers:* and daqp (Backend.solve, per-tick min over passes)"
+    )
     for name, tt in sorted(results.items(), key=lambda kv: np.median(kv[1])):
-        print(f"  {name:20s} median {np.median(tt) * us:8.2f} us, p90 {np.percentile(tt, 90) * us:8.2f} us")
+        print(
+            f"  {name:20s} median {np.median(tt) * us:8.2f} us, p90 {np.percentile(tt, 90) * us:8.2f} us"
+        )
     via_qpsolvers = {k: v for k, v in results.items() if k.startswith("qpsolvers:")}
     fastest = min(via_qpsolvers, key=lambda k: np.median(via_qpsolvers[k]))
     for label, tt in (("euler", t_conv), ("semi-implicit", t_semi)):
-        print(f"  rnn-converged ({label}) / {fastest}: median ratio {np.median(tt) / np.median(results[fastest]):.2f}"
-              f" (goal <= 2)")
+        print(
+            f"  rnn-converged ({label}) / {fastest}: median ratio {np.median(tt) / np.median(results[fastest]):.2f}"
+            f" (goal <= 2)"
+        )
         if "daqp" in results:
-            print(f"  rnn-converged ({label}) / daqp (own API): median ratio "
-                  f"{np.median(tt) / np.median(results['daqp']):.2f}")
+            print(
+                f"  rnn-converged ({label}) / daqp (own API): median ratio "
+                f"{np.median(tt) / np.median(results['daqp']):.2f}"
+            )
 
 
 if __name__ == "__main__":

@@ -55,17 +55,24 @@ def speedup(args) -> None:
     backends = args.backends.split(",")
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for label, make in (("in this process", SerialExecutor), ("1 worker (--jobs 1)", lambda: ProcessExecutor(1)),
-                            ("2 workers (--jobs 2)", lambda: ProcessExecutor(2)),
-                            ("Dask LocalCluster, 2 workers", lambda: DaskExecutor(jobs=2))):
+        for label, make in (
+            ("in this process", SerialExecutor),
+            ("1 worker (--jobs 1)", lambda: ProcessExecutor(1)),
+            ("2 workers (--jobs 2)", lambda: ProcessExecutor(2)),
+            ("Dask LocalCluster, 2 workers", lambda: DaskExecutor(jobs=2)),
+        ):
             runs[label] = timed_sweep(spec, backends, make(), Path(tmp) / str(len(runs)))
     serial_s, serial_rows = runs["1 worker (--jobs 1)"]
-    print(f"sweep {spec.name}: {spec.samples} instances x {len(backends)} backends ({args.backends}), "
-          f"{spec.duration} s each")
+    print(
+        f"sweep {spec.name}: {spec.samples} instances x {len(backends)} backends ({args.backends}), "
+        f"{spec.duration} s each"
+    )
     for label, (wall, rows) in runs.items():
         differ = sum(bool(same_outside_timing(a, b)) for a, b in zip(serial_rows, rows))
-        print(f"  {label:30s} {wall:8.2f} s   speed-up over --jobs 1 {serial_s / wall:5.2f}   rows differing "
-              f"outside timing: {differ} of {len(rows)}")
+        print(
+            f"  {label:30s} {wall:8.2f} s   speed-up over --jobs 1 {serial_s / wall:5.2f}   rows differing "
+            f"outside timing: {differ} of {len(rows)}"
+        )
 
 
 def _wall_task(duration: float):
@@ -74,8 +81,18 @@ def _wall_task(duration: float):
     from qpbench.sweep.task import SweepTask
 
     text = scenario_path("wall").read_text().replace("duration = 20.0", f"duration = {duration!r}")
-    meta = {"instance": "wall", "backend": "daqp", "instance_file": "wall.toml", "sample": 0, "sweep": "bench",
-            "base_scenario": "wall", "parameters": {}, "duration": duration, "force_band": 0.2, "tracking_band": 1e-4}
+    meta = {
+        "instance": "wall",
+        "backend": "daqp",
+        "instance_file": "wall.toml",
+        "sample": 0,
+        "sweep": "bench",
+        "base_scenario": "wall",
+        "parameters": {},
+        "duration": duration,
+        "force_band": 0.2,
+        "tracking_band": 1e-4,
+    }
     return SweepTask(meta, text)
 
 
@@ -107,14 +124,20 @@ def dask_overhead(args) -> None:
     finally:
         ex.close()
     inst, dask_inst = statistics.median(local), statistics.median(remote)
-    print(f"Dask LocalCluster (1 worker), {args.tasks} empty tasks: {per_task * 1e3:.2f} ms per task "
-          f"({100 * per_task / inst:.2f} % of a 20 s wall instance with daqp, {inst:.3f} s in this process)")
-    print(f"one 20 s wall instance with daqp (the sweep's task), median of {args.repeat}: {inst:.3f} s in this "
-          f"process, {dask_inst:.3f} s through Dask: overhead {1e3 * (dask_inst - inst):.1f} ms "
-          f"({100 * (dask_inst - inst) / inst:.1f} %; target < 5 %)")
+    print(
+        f"Dask LocalCluster (1 worker), {args.tasks} empty tasks: {per_task * 1e3:.2f} ms per task "
+        f"({100 * per_task / inst:.2f} % of a 20 s wall instance with daqp, {inst:.3f} s in this process)"
+    )
+    print(
+        f"one 20 s wall instance with daqp (the sweep's task), median of {args.repeat}: {inst:.3f} s in this "
+        f"process, {dask_inst:.3f} s through Dask: overhead {1e3 * (dask_inst - inst):.1f} ms "
+        f"({100 * (dask_inst - inst) / inst:.1f} %; target < 5 %)"
+    )
     lo, lr = statistics.median(loop_local), statistics.median(loop_remote)
-    print(f"  of which the closed loop itself (its wall_time_s): {lo:.3f} s here, {lr:.3f} s on the worker "
-          f"({1e3 * (lr - lo):+.1f} ms: the worker runs tasks in a thread beside its own event loop)")
+    print(
+        f"  of which the closed loop itself (its wall_time_s): {lo:.3f} s here, {lr:.3f} s on the worker "
+        f"({1e3 * (lr - lo):+.1f} ms: the worker runs tasks in a thread beside its own event loop)"
+    )
 
 
 def main() -> None:

@@ -78,7 +78,11 @@ def check_folder(path: str | Path, key: str = "out") -> None:
 
 
 def check_output(
-    path: str | Path, force: bool = False, resume: bool | None = None, kind: str = "file", make_parent: bool = False
+    path: str | Path,
+    force: bool = False,
+    resume: bool | None = None,
+    kind: str = "file",
+    make_parent: bool = False,
 ) -> None:
     """Refuse to overwrite an existing output unless ``force`` or ``resume``.
 
@@ -110,7 +114,11 @@ def check_output(
         raise ParamError(f"{parent}: is a file; expected a folder", key="out")
     if not parent.exists() and not make_parent:
         # Outputs are created, their parents never: a typo in a path must not grow a tree of folders.
-        raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key="out")
+        raise ParamError(
+            f"{path}: parent folder {parent} does not exist; create it first", key="out"
+        )
     if path.exists() and not (force or resume):
-        hint = "pass --force to overwrite" + (" or --resume to continue" if resume is not None else "")
+        hint = "pass --force to overwrite" + (
+            " or --resume to continue" if resume is not None else ""
+        )
         raise OutputExistsError(f"{path}: exists; {hint}")

@@ -71,7 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
         "-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="only errors"
     )
     verbosity.add_argument(
-        "-v", "--verbose", action="count", default=argparse.SUPPRESS,
+        "-v",
+        "--verbose",
+        action="count",
+        default=argparse.SUPPRESS,
         help="-v: the run's settings, each backend's version and settings, and the solvers' own output; "
         "-vv: also one line per solve",
     )
@@ -102,11 +105,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Logger of the one-line-per-solve messages; shown from ``-vv`` on.
 SOLVE_LOGGER = "qpbench.solves"
+
+
 def _add_plugin_option(parser: argparse.ArgumentParser, dest: str) -> None:
     # Two destinations: a sub-command's parser starts from a namespace of its own and would
     # replace a list given before the sub-command (``qpbench --plugin a.py bench --plugin b.py``).
     parser.add_argument(
-        "--plugin", dest=dest, action="append", default=[], metavar="FILE",
+        "--plugin",
+        dest=dest,
+        action="append",
+        default=[],
+        metavar="FILE",
         help=f"a Python file that registers extra backends; repeatable (also QPBENCH_PLUGINS, "
         f"files separated by '{os.pathsep}', and entry points of group qpbench.backends)",
     )
@@ -122,7 +131,9 @@ def _configure_logging(args: argparse.Namespace) -> None:
     root.handlers[:] = [handler]
     root.setLevel(level)
     root.propagate = False
-    logging.getLogger(SOLVE_LOGGER).setLevel(logging.DEBUG if args.verbose >= 2 else max(level, logging.INFO))
+    logging.getLogger(SOLVE_LOGGER).setLevel(
+        logging.DEBUG if args.verbose >= 2 else max(level, logging.INFO)
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -142,8 +153,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     _configure_logging(args)
     log.debug(
-        "qpbench %s %s: %s", __version__, args.command,
-        ", ".join(f"{k}={v!r}" for k, v in sorted(vars(args).items()) if not k.startswith("_") and k != "command"),
+        "qpbench %s %s: %s",
+        __version__,
+        args.command,
+        ", ".join(
+            f"{k}={v!r}"
+            for k, v in sorted(vars(args).items())
+            if not k.startswith("_") and k != "command"
+        ),
     )
     from tqdm.contrib.logging import logging_redirect_tqdm
 

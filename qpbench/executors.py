@@ -45,8 +45,16 @@ from .exceptions import InputError, ParamError
 
 log = logging.getLogger("qpbench.executors")
 
-__all__ = ["EXECUTORS", "DaskExecutor", "Done", "ProcessExecutor", "SerialExecutor", "default_jobs",
-           "load_security", "make_executor"]
+__all__ = [
+    "EXECUTORS",
+    "DaskExecutor",
+    "Done",
+    "ProcessExecutor",
+    "SerialExecutor",
+    "default_jobs",
+    "load_security",
+    "make_executor",
+]
 
 #: Names of ``--executor``.
 EXECUTORS = ("local", "dask")
@@ -146,7 +154,12 @@ def _worker_loop(conn, environ: dict) -> None:
 class _Worker:
     def __init__(self, ctx, index: int):
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_loop, args=(child, dict(os.environ)), daemon=True, name=f"qpbench-worker-{index}")
+        self.proc = ctx.Process(
+            target=_worker_loop,
+            args=(child, dict(os.environ)),
+            daemon=True,
+            name=f"qpbench-worker-{index}",
+        )
         self.proc.start()
         child.close()
         self.task = None  # (tid, key, arg, attempts)
@@ -232,8 +245,15 @@ class ProcessExecutor:
             log.warning("%s: %s; running it again", key, why)
             queue.appendleft((tid, key, arg, attempts))
             return None
-        return Done(key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, host,
-                    f"pid{w.proc.pid}", self.concurrency)
+        return Done(
+            key,
+            None,
+            f"{why} (attempt {attempts} of {MAX_ATTEMPTS})",
+            attempts,
+            host,
+            f"pid{w.proc.pid}",
+            self.concurrency,
+        )
 
     def close(self) -> None:
         for w in self._workers:
@@ -266,12 +286,16 @@ def load_security(path: str | Path):
         else:
             raw = tomllib.loads(text)
     except Exception as exc:  # noqa: BLE001 - unreadable, bad TOML or YAML: one line
-        raise InputError(f"cannot read the security file: {type(exc).__name__}: {exc}", path=path) from None
+        raise InputError(
+            f"cannot read the security file: {type(exc).__name__}: {exc}", path=path
+        ) from None
     if not isinstance(raw, dict):
         raise InputError("expected keys ca_file, cert_file, key_file", path=path)
     for key in raw:
         if key not in ("ca_file", "cert_file", "key_file"):
-            raise InputError("unknown key (expected ca_file, cert_file, key_file)", path=path, key=key)
+            raise InputError(
+                "unknown key (expected ca_file, cert_file, key_file)", path=path, key=key
+            )
     files = {}
     for key in ("ca_file", "cert_file", "key_file"):
         if not isinstance(raw.get(key), str):
@@ -283,8 +307,16 @@ def load_security(path: str | Path):
     from distributed.security import Security
 
     ca, cert, key = files["ca_file"], files["cert_file"], files["key_file"]
-    return Security(tls_ca_file=ca, tls_client_cert=cert, tls_client_key=key, tls_scheduler_cert=cert,
-                    tls_scheduler_key=key, tls_worker_cert=cert, tls_worker_key=key, require_encryption=True)
+    return Security(
+        tls_ca_file=ca,
+        tls_client_cert=cert,
+        tls_client_key=key,
+        tls_scheduler_cert=cert,
+        tls_scheduler_key=key,
+        tls_worker_cert=cert,
+        tls_worker_key=key,
+        require_encryption=True,
+    )
 
 
 class DaskExecutor:
@@ -297,26 +329,38 @@ class DaskExecutor:
             import dask
             from distributed import Client, LocalCluster
         except ImportError:
-            raise ParamError("--executor dask needs dask and distributed: pip install 'qpbench[dask]'",
-                             key="--executor") from None
+            raise ParamError(
+                "--executor dask needs dask and distributed: pip install 'qpbench[dask]'",
+                key="--executor",
+            ) from None
         self.cluster = None
         if scheduler is None:
             with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-                self.cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                            dashboard_address=None, security=security,
-                                            protocol="tls://" if security is not None else None)
+                self.cluster = LocalCluster(
+                    n_workers=jobs,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address=None,
+                    security=security,
+                    protocol="tls://" if security is not None else None,
+                )
             self.client = Client(self.cluster, security=security)
         else:
             try:
                 self.client = Client(scheduler, security=security, timeout="30s")
             except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                raise InputError(f"cannot reach the Dask scheduler: {type(exc).__name__}: {exc}",
-                                 key="--scheduler") from None
+                raise InputError(
+                    f"cannot reach the Dask scheduler: {type(exc).__name__}: {exc}",
+                    key="--scheduler",
+                ) from None
         self.address = self.client.scheduler.address
 
     @property
     def concurrency(self) -> int:
-        return sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()) or 1
+        return (
+            sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()) or 1
+        )
 
     def _per_host(self) -> tuple[dict, dict]:
         workers = self.client.scheduler_info()["workers"]
@@ -331,7 +375,12 @@ class DaskExecutor:
         hosts, threads = self._per_host()
         pending = {}
         for i, (key, arg) in enumerate(items):
-            pending[self.client.submit(_call, fn, arg, pure=False, key=f"qpbench-task-{i}-1")] = (i, key, arg, 1)
+            pending[self.client.submit(_call, fn, arg, pure=False, key=f"qpbench-task-{i}-1")] = (
+                i,
+                key,
+                arg,
+                1,
+            )
         queue = as_completed(list(pending))
         for fut in queue:
             i, key, arg, attempts = pending.pop(fut)
@@ -339,16 +388,22 @@ class DaskExecutor:
                 value, host, worker = fut.result()
                 if worker not in hosts:
                     hosts, threads = self._per_host()
-                yield Done(key, value, None, attempts, host, worker, threads.get(hosts.get(worker), 1))
+                yield Done(
+                    key, value, None, attempts, host, worker, threads.get(hosts.get(worker), 1)
+                )
                 continue
             why = f"{type(fut.exception()).__name__}: {fut.exception()}"
             if attempts < MAX_ATTEMPTS:
                 log.warning("%s: %s; running it again", key, why)
-                new = self.client.submit(_call, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempts + 1}")
+                new = self.client.submit(
+                    _call, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempts + 1}"
+                )
                 pending[new] = (i, key, arg, attempts + 1)
                 queue.add(new)
                 continue
-            yield Done(key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0)
+            yield Done(
+                key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0
+            )
 
     def close(self) -> None:
         self.client.close()
@@ -356,7 +411,9 @@ class DaskExecutor:
             self.cluster.close()
 
 
-def make_executor(name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None):
+def make_executor(
+    name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None
+):
     """The executor of ``--executor NAME --jobs N [--scheduler ADDRESS --security FILE]``.
 
     ``local`` is :class:`ProcessExecutor`: with one job the runs are made
@@ -369,7 +426,9 @@ def make_executor(name: str, jobs: int, scheduler: str | None = None, security_f
             ``dask``, a ``tls://`` address without a security file.
     """
     if name not in EXECUTORS:
-        raise ParamError(f"unknown executor '{name}' (choose from {', '.join(EXECUTORS)})", key="--executor")
+        raise ParamError(
+            f"unknown executor '{name}' (choose from {', '.join(EXECUTORS)})", key="--executor"
+        )
     if jobs < 1:
         raise ParamError(f"must be >= 1, got {jobs}", key="--jobs")
     if name == "local":
@@ -377,11 +436,16 @@ def make_executor(name: str, jobs: int, scheduler: str | None = None, security_f
             raise ParamError("--scheduler and --security need --executor dask", key="--scheduler")
         return ProcessExecutor(jobs)
     if scheduler is not None and scheduler.startswith("tls://") and security_file is None:
-        raise ParamError("a tls:// scheduler needs --security FILE (CA, certificate, key)", key="--security")
+        raise ParamError(
+            "a tls:// scheduler needs --security FILE (CA, certificate, key)", key="--security"
+        )
     if security_file is not None and scheduler is not None and not scheduler.startswith("tls://"):
         raise ParamError("--security needs a tls:// scheduler address", key="--scheduler")
     if scheduler is not None and not scheduler.startswith("tls://"):
-        log.warning("Dask scheduler %s without TLS: whoever can reach it can run code on every worker "
-                    "(use tls:// and --security)", scheduler)
+        log.warning(
+            "Dask scheduler %s without TLS: whoever can reach it can run code on every worker "
+            "(use tls:// and --security)",
+            scheduler,
+        )
     security = load_security(security_file) if security_file is not None else None
     return DaskExecutor(scheduler, security, jobs)

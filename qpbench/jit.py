@@ -88,9 +88,13 @@ class WarmupReport:
             return "kernels already loaded in this process"
         shims = f" and {self.shims_compiled} native shim" if self.shims_compiled else ""
         if self.compiled or self.shims_compiled:
-            return (f"kernels: compiled {self.compiled}{shims} (first run with this cache) and cached in "
-                    f"{self.cache} in {self.seconds:.1f} s; later runs load them")
-        return f"kernels: loaded from the cache in {self.cache} in {self.seconds:.2f} s (0 compiled)"
+            return (
+                f"kernels: compiled {self.compiled}{shims} (first run with this cache) and cached in "
+                f"{self.cache} in {self.seconds:.1f} s; later runs load them"
+            )
+        return (
+            f"kernels: loaded from the cache in {self.cache} in {self.seconds:.2f} s (0 compiled)"
+        )
 
 
 _READY: WarmupReport | None = None
@@ -124,7 +128,9 @@ def _problems():
 def _warm_post(problems) -> None:
     from .sim.tick_kernel import warm_post_kernel
 
-    for sc, ctrl, theta, arrays, _ in problems[::2]:  # one per scenario (the formulation does not change types)
+    for sc, ctrl, theta, arrays, _ in problems[
+        ::2
+    ]:  # one per scenario (the formulation does not change types)
         warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
 
 
@@ -143,8 +149,21 @@ def _warm_network(problems) -> None:
     online = get_backend("rnn", dt=sc.dt)
     online.solve(problem)
     online.solve(problem)
-    plain = qpsolvers.Problem(*(None if a is None else a.copy() for a in (
-        problem.P, problem.q, problem.G, problem.h, problem.A, problem.b, problem.lb, problem.ub)))
+    plain = qpsolvers.Problem(
+        *(
+            None if a is None else a.copy()
+            for a in (
+                problem.P,
+                problem.q,
+                problem.G,
+                problem.h,
+                problem.A,
+                problem.b,
+                problem.lb,
+                problem.ub,
+            )
+        )
+    )
     online.solve(plain)
 
 
@@ -193,7 +212,9 @@ def warmup() -> WarmupReport:
         _warm_network(problems)
     compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)
     shims = _warm_shims()
-    _READY = WarmupReport(compiled, time.perf_counter() - start, cache_location(), KERNELS, shims_compiled=shims)
+    _READY = WarmupReport(
+        compiled, time.perf_counter() - start, cache_location(), KERNELS, shims_compiled=shims
+    )
     return _READY
 
 

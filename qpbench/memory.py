@@ -43,8 +43,21 @@ DENSE_MAX_ENTRIES = 25_000_000
 #: Factor fill-in assumed by :func:`solve_bytes` for a sparse solver.
 FILL = 10
 
-_UNITS = {"": 1, "b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "tb": 1e12,
-          "kib": 2**10, "mib": 2**20, "gib": 2**30, "tib": 2**40, "k": 1e3, "m": 1e6, "g": 1e9}
+_UNITS = {
+    "": 1,
+    "b": 1,
+    "kb": 1e3,
+    "mb": 1e6,
+    "gb": 1e9,
+    "tb": 1e12,
+    "kib": 2**10,
+    "mib": 2**20,
+    "gib": 2**30,
+    "tib": 2**40,
+    "k": 1e3,
+    "m": 1e6,
+    "g": 1e9,
+}
 
 
 def parse_size(text: str) -> int:
@@ -56,7 +69,9 @@ def parse_size(text: str) -> int:
     match = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
     unit = match.group(2).lower() if match else None
     if not match or unit not in _UNITS or float(match.group(1)) <= 0:
-        raise ParamError(f"memory budget '{text}' is not a size like 2GB, 512MB or 1.5GiB", key="memory-budget")
+        raise ParamError(
+            f"memory budget '{text}' is not a size like 2GB, 512MB or 1.5GiB", key="memory-budget"
+        )
     return int(float(match.group(1)) * _UNITS[unit])
 
 
@@ -137,8 +152,10 @@ def skip_reason(problem: qpsolvers.Problem, sparse_backend: bool, budget: int) -
     if not sparse_backend:
         entries = dense_entries(problem)
         if entries > DENSE_MAX_ENTRIES:
-            return (f"dense-only backend: n (n + m) = {entries:.3g} entries > {DENSE_MAX_ENTRIES:.3g} "
-                    f"({format_size(8 * entries)} dense)")
+            return (
+                f"dense-only backend: n (n + m) = {entries:.3g} entries > {DENSE_MAX_ENTRIES:.3g} "
+                f"({format_size(8 * entries)} dense)"
+            )
         need = dense_bytes(problem) * 3  # the problem's dense copy, the solver's, its workspace
     else:
         need = sparse_solver_bytes(problem)

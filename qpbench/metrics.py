@@ -123,7 +123,9 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
     x = np.asarray(x, dtype=np.float64).reshape(-1)
     ineq = eq = box = 0.0
     if problem.G is not None and problem.h is not None and np.size(problem.h):
-        ineq = max(0.0, float(np.max(_dense(problem.G) @ x - np.asarray(problem.h, dtype=np.float64))))
+        ineq = max(
+            0.0, float(np.max(_dense(problem.G) @ x - np.asarray(problem.h, dtype=np.float64)))
+        )
     if problem.A is not None and problem.b is not None and np.size(problem.b):
         eq = float(np.max(np.abs(_dense(problem.A) @ x - np.asarray(problem.b, dtype=np.float64))))
     with np.errstate(invalid="ignore"):  # inf - inf of an infinite bound at an infinite x
@@ -174,7 +176,9 @@ class Tick:
 PER_TICK_METRICS: list[tuple[tuple[str, ...], Callable[[Tick], object]]] = []
 
 
-def per_tick_metric(fn: Callable | None = None, *, columns: tuple[str, ...] | None = None) -> Callable:
+def per_tick_metric(
+    fn: Callable | None = None, *, columns: tuple[str, ...] | None = None
+) -> Callable:
     """Register ``fn(tick) -> value`` as a per-tick metric; its name is the column.
 
     ``columns=("a", "b")``: the function returns ``{"a": ..., "b": ...}``.
@@ -259,7 +263,9 @@ def residuals(tick: Tick) -> dict:
     }
 
 
-@per_tick_metric(columns=("constraint_violation", "violation_ineq", "violation_eq", "violation_box"))
+@per_tick_metric(
+    columns=("constraint_violation", "violation_ineq", "violation_eq", "violation_box")
+)
 def _violation(tick: Tick) -> dict:
     return constraint_violation(tick.record.problem, tick.x)
 
@@ -282,14 +288,20 @@ def evaluate(record, solution, reference, tolerance) -> dict:
     tick = Tick(record, solution, reference)
     for columns, fn in PER_TICK_METRICS:
         value = fn(tick)
-        tick.values.update({c: value[c] for c in columns} if len(columns) > 1 else {columns[0]: value})
+        tick.values.update(
+            {c: value[c] for c in columns} if len(columns) > 1 else {columns[0]: value}
+        )
     m = tick.values
     found = bool(solution is not None and solution.found)
     status = solution_status(solution)
     signed = _signed_gap(m)
     if getattr(tolerance, "rule", "qpbench") == "qpbenchmark":
-        success = (found and m["primal_residual"] < tolerance.primal and m["dual_residual"] < tolerance.dual
-                   and m["duality_gap"] < tolerance.gap)
+        success = (
+            found
+            and m["primal_residual"] < tolerance.primal
+            and m["dual_residual"] < tolerance.dual
+            and m["duality_gap"] < tolerance.gap
+        )
     elif tick.reference_status in CERTIFIED_INFEASIBLE:
         success = status == tick.reference_status
     else:
@@ -301,4 +313,10 @@ def evaluate(record, solution, reference, tolerance) -> dict:
         )
         if success and tick.reference_status == "optimal":
             success = abs(signed) <= tolerance.gap
-    return {"status": status, "found": found, **m, "optimality_gap_signed": signed, "success": bool(success)}
+    return {
+        "status": status,
+        "found": found,
+        **m,
+        "optimality_gap_signed": signed,
+        "success": bool(success),
+    }

@@ -53,7 +53,9 @@ def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
     saved = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     old_stdout = sys.stdout
-    private = os.fdopen(os.dup(saved), "w", buffering=1, encoding=old_stdout.encoding, errors=old_stdout.errors)
+    private = os.fdopen(
+        os.dup(saved), "w", buffering=1, encoding=old_stdout.encoding, errors=old_stdout.errors
+    )
     try:
         os.dup2(devnull, 1)
         sys.stdout = private

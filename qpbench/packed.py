@@ -37,7 +37,16 @@ _FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
 
 
 def _shapes(n: int, me: int, mi: int) -> dict[str, tuple[int, ...]]:
-    return {"P": (n, n), "q": (n,), "A": (me, n), "b": (me,), "G": (mi, n), "h": (mi,), "lb": (n,), "ub": (n,)}
+    return {
+        "P": (n, n),
+        "q": (n,),
+        "A": (me, n),
+        "b": (me,),
+        "G": (mi, n),
+        "h": (mi,),
+        "lb": (n,),
+        "ub": (n,),
+    }
 
 
 class PackedProblem(qpsolvers.Problem):
@@ -55,26 +64,36 @@ class PackedProblem(qpsolvers.Problem):
     def __init__(self, buffer):
         buf = np.ascontiguousarray(buffer, dtype=np.float64)
         if buf.ndim != 1 or buf.shape[0] < HEADER:
-            raise ProblemFormatError(f"buffer of shape {buf.shape} has no header of {HEADER} values", key="buffer")
+            raise ProblemFormatError(
+                f"buffer of shape {buf.shape} has no header of {HEADER} values", key="buffer"
+            )
         head = buf[:HEADER]
         if not np.all(np.isfinite(head)) or np.any(head != np.round(head)):
             raise ProblemFormatError("header values must be whole numbers", key="buffer")
         n, me, mi = (int(v) for v in head[:3])
         if n < 1 or me < 0 or mi < 0:
-            raise ProblemFormatError(f"header sizes n={n}, me={me}, mi={mi} are not valid", key="buffer")
+            raise ProblemFormatError(
+                f"header sizes n={n}, me={me}, mi={mi} are not valid", key="buffer"
+            )
         fields = {}
         for k, (name, shape) in enumerate(_shapes(n, me, mi).items()):
             off = int(head[OFF_P + k])
             if off == -1:
                 if name in ("P", "q") or (name in ("A", "b") and me) or (name in ("G", "h") and mi):
-                    raise ProblemFormatError(f"'{name}' is absent but the header sizes need it", key=name)
+                    raise ProblemFormatError(
+                        f"'{name}' is absent but the header sizes need it", key=name
+                    )
                 fields[name] = None
                 continue
             size = int(np.prod(shape))
             if off < HEADER or off + size > buf.shape[0]:
-                raise ProblemFormatError(f"'{name}' at offset {off} does not fit a buffer of {buf.shape[0]}", key=name)
+                raise ProblemFormatError(
+                    f"'{name}' at offset {off} does not fit a buffer of {buf.shape[0]}", key=name
+                )
             fields[name] = buf[off : off + size].reshape(shape)
-        if (fields["A"] is None) != (fields["b"] is None) or (fields["G"] is None) != (fields["h"] is None):
+        if (fields["A"] is None) != (fields["b"] is None) or (fields["G"] is None) != (
+            fields["h"] is None
+        ):
             raise ProblemFormatError("A and b (G and h) must be present together", key="buffer")
         _init(self, buf, fields)
 
@@ -153,7 +172,9 @@ def pack(problem: qpsolvers.Problem) -> PackedProblem:
             head.append(-1)
             continue
         if value.size != int(np.prod(shape)) or (value.ndim == 2 and value.shape != shape):
-            raise ProblemFormatError(f"'{name}' has shape {value.shape}, expected {shape}", key=name)
+            raise ProblemFormatError(
+                f"'{name}' has shape {value.shape}, expected {shape}", key=name
+            )
         head.append(off)
         parts.append(value.reshape(-1))
         off += value.size

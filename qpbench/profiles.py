@@ -118,19 +118,20 @@ class Profile:
         qpbenchmark's ``set_time_limit`` makes them.
         """
         if self.is_qpbenchmark:
-            rebuilt = qpbenchmark_profile(self.name[len(QPBENCHMARK_PREFIX):], time_limit)
+            rebuilt = qpbenchmark_profile(self.name[len(QPBENCHMARK_PREFIX) :], time_limit)
             return replace(rebuilt, reference_time_limit=self.reference_time_limit)
-        return replace(self, time_limit=float(time_limit),
-                       tolerance=replace(self.tolerance, runtime=float(time_limit)))
+        return replace(
+            self,
+            time_limit=float(time_limit),
+            tolerance=replace(self.tolerance, runtime=float(time_limit)),
+        )
 
 
 PROFILES: dict[str, Profile] = {
     "low_accuracy": Profile(
         "low_accuracy", 1e-4, 0.0, 10_000, 1.0, Tolerance(1e-3, 1e-3, 1e-3, 1.0)
     ),
-    "default": Profile(
-        "default", 1e-7, 0.0, 100_000, 10.0, Tolerance(1e-6, 1e-6, 1e-6, 10.0)
-    ),
+    "default": Profile("default", 1e-7, 0.0, 100_000, 10.0, Tolerance(1e-6, 1e-6, 1e-6, 10.0)),
     "high_accuracy": Profile(
         "high_accuracy", 1e-10, 0.0, 1_000_000, 10.0, Tolerance(1e-9, 1e-9, 1e-9, 10.0)
     ),
@@ -155,8 +156,10 @@ def qpbenchmark_profile(settings: str, time_limit: float | None = None) -> Profi
     from .published import SETTINGS_NAMES, qpbenchmark_settings
 
     if settings not in SETTINGS_NAMES:
-        raise ParamError(f"unknown qpbenchmark settings '{settings}' (choose from {', '.join(SETTINGS_NAMES)})",
-                         key="profile")
+        raise ParamError(
+            f"unknown qpbenchmark settings '{settings}' (choose from {', '.join(SETTINGS_NAMES)})",
+            key="profile",
+        )
     kwargs, tolerances = qpbenchmark_settings(time_limit)
     tol = tolerances[settings]
     options = kwargs[settings]
@@ -184,7 +187,7 @@ def get_profile(name: str | Profile) -> Profile:
     if isinstance(name, Profile):
         return name
     if isinstance(name, str) and name.startswith(QPBENCHMARK_PREFIX):
-        return qpbenchmark_profile(name[len(QPBENCHMARK_PREFIX):])
+        return qpbenchmark_profile(name[len(QPBENCHMARK_PREFIX) :])
     try:
         return PROFILES[name]
     except KeyError:

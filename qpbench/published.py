@@ -36,8 +36,16 @@ if TYPE_CHECKING:
 #: qpbenchmark's settings names, in the order of increasing accuracy asked ("default": the solvers' own).
 SETTINGS_NAMES = ("default", "low_accuracy", "mid_accuracy", "high_accuracy")
 #: Columns of a qpbenchmark results file.
-RESULTS_COLUMNS = ("problem", "solver", "settings", "runtime", "found", "primal_residual", "dual_residual",
-                   "duality_gap")
+RESULTS_COLUMNS = (
+    "problem",
+    "solver",
+    "settings",
+    "runtime",
+    "found",
+    "primal_residual",
+    "dual_residual",
+    "duality_gap",
+)
 
 
 def import_qpbenchmark() -> ModuleType:
@@ -81,7 +89,9 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
                 super().define_tolerances(runtime=float(runtime))
 
     previous = logging.root.manager.disable
-    logging.disable(logging.WARNING)  # "solver X is available but skipped as its settings are unknown"
+    logging.disable(
+        logging.WARNING
+    )  # "solver X is available but skipped as its settings are unknown"
     try:
         test_set = _Settings()
     finally:
@@ -96,7 +106,9 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
 
 def qpbenchmark_success(found: bool, primal: float, dual: float, gap: float, tolerance) -> bool:
     """qpbenchmark's success rule: ``found`` and each residual strictly below ``tolerance``'s."""
-    return bool(found) and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
+    return (
+        bool(found) and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
+    )
 
 
 def read_published_results(path: str | Path) -> pd.DataFrame:
@@ -113,11 +125,16 @@ def read_published_results(path: str | Path) -> pd.DataFrame:
     except FileNotFoundError:
         raise InputError("no such file", path=path) from None
     except Exception as exc:  # pandas raises many types for a bad file
-        raise InputError(f"unreadable results file ({type(exc).__name__}: {exc})", path=path) from None
+        raise InputError(
+            f"unreadable results file ({type(exc).__name__}: {exc})", path=path
+        ) from None
     missing = [c for c in RESULTS_COLUMNS if c not in df.columns]
     if missing:
-        raise InputError(f"not a qpbenchmark results file (missing columns: {', '.join(missing)})", path=path,
-                         key=missing[0])
+        raise InputError(
+            f"not a qpbenchmark results file (missing columns: {', '.join(missing)})",
+            path=path,
+            key=missing[0],
+        )
     df = df.copy()
     df["found"] = df["found"].map(lambda v: str(v).strip().lower() in ("true", "1"))
     return df
@@ -148,23 +165,34 @@ def read_objectives(path: str | Path) -> dict[str, float]:
     header = [c.strip() for c in rows[0]] if rows else []
     for key in ("problem", "objective"):
         if key not in header:
-            raise InputError("reference file needs a header with columns problem,objective", path=path, key=key)
+            raise InputError(
+                "reference file needs a header with columns problem,objective", path=path, key=key
+            )
     ip, io = header.index("problem"), header.index("objective")
     out: dict[str, float] = {}
     for line, row in enumerate(rows[1:], start=2):
         if not any(c.strip() for c in row):
             continue
         if len(row) <= max(ip, io):
-            raise InputError(f"line {line}: {len(row)} fields, expected {len(header)}", path=path, key="objective")
+            raise InputError(
+                f"line {line}: {len(row)} fields, expected {len(header)}",
+                path=path,
+                key="objective",
+            )
         name, value = row[ip].strip(), row[io].strip()
         try:
             f = float(value)
         except ValueError:
             f = math.nan
         if not math.isfinite(f):
-            raise InputError(f"line {line}: objective of '{name}' is not a finite number: '{value}'", path=path,
-                             key="objective")
+            raise InputError(
+                f"line {line}: objective of '{name}' is not a finite number: '{value}'",
+                path=path,
+                key="objective",
+            )
         if name in out:
-            raise InputError(f"line {line}: problem '{name}' listed twice", path=path, key="problem")
+            raise InputError(
+                f"line {line}: problem '{name}' listed twice", path=path, key="problem"
+            )
         out[name] = f
     return out

@@ -86,9 +86,17 @@ SOURCES = METHODS + ("none",)
 # ---------------------------------------------------------------- sources
 
 
-def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limit: float | None = None,
-                     jobs: int = 1, progress=None, cache: bool = True, context=None,
-                     cache_dir: str | Path | None = None) -> list:
+def bench_references(
+    problem_set: ProblemSet,
+    source: str = "auto",
+    *,
+    time_limit: float | None = None,
+    jobs: int = 1,
+    progress=None,
+    cache: bool = True,
+    context=None,
+    cache_dir: str | Path | None = None,
+) -> list:
     """One reference per record of ``problem_set`` from ``source`` (see the module docstring).
 
     Returns:
@@ -100,8 +108,16 @@ def bench_references(problem_set: ProblemSet, source: str = "auto", *, time_limi
     if source == "none":
         return [None] * len(problem_set.records)
     if source in METHODS:
-        return reference_solutions(problem_set, cache=cache, progress=progress, method=source,
-                                   time_limit=time_limit, jobs=jobs, context=context, cache_dir=cache_dir)
+        return reference_solutions(
+            problem_set,
+            cache=cache,
+            progress=progress,
+            method=source,
+            time_limit=time_limit,
+            jobs=jobs,
+            context=context,
+            cache_dir=cache_dir,
+        )
     from .published import read_objectives
 
     return from_objectives(problem_set, read_objectives(source), source)
@@ -113,18 +129,33 @@ def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Pat
     for record in problem_set.records:
         f = objectives.get(record.name)
         if f is None:
-            refs.append(ReferenceSolution("unknown", solver="file", name=record.name,
-                                          note=f"no reference: '{record.name}' is not in {source}"))
+            refs.append(
+                ReferenceSolution(
+                    "unknown",
+                    solver="file",
+                    name=record.name,
+                    note=f"no reference: '{record.name}' is not in {source}",
+                )
+            )
         else:
-            refs.append(ReferenceSolution("optimal", objective=float(f), solver="file", name=record.name,
-                                          note=f"optimal objective {float(f):.10g} from {source}"))
+            refs.append(
+                ReferenceSolution(
+                    "optimal",
+                    objective=float(f),
+                    solver="file",
+                    name=record.name,
+                    note=f"optimal objective {float(f):.10g} from {source}",
+                )
+            )
     return refs
 
 
 # ---------------------------------------------------------------- computing
 
 
-def _compute(records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None) -> dict:
+def _compute(
+    records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None
+) -> dict:
     """``{name: ReferenceSolution}`` of ``records``, in this process or in workers."""
     solvers = ("clarabel", "piqp") if method == "auto" else (method,)
     limited = time_limit is not None and math.isfinite(time_limit)
@@ -172,13 +203,28 @@ class LogProgress:
         now = time.monotonic()
         if now - self.last >= self.every_s or self.done == self.total or ref.status != "optimal":
             self.last = now
-            log.info("references: %d/%d; %s: %s in %.1f s%s", self.done, self.total, ref.name, ref.status, wall_s,
-                     "" if ref.status == "optimal" else f" ({ref.note})")
+            log.info(
+                "references: %d/%d; %s: %s in %.1f s%s",
+                self.done,
+                self.total,
+                ref.name,
+                ref.status,
+                wall_s,
+                "" if ref.status == "optimal" else f" ({ref.note})",
+            )
 
 
-def reference_solutions(problem_set: ProblemSet, cache: bool = True, progress=None, *, method: str = "auto",
-                        time_limit: float | None = None, jobs: int = 1, context=None,
-                        cache_dir: str | Path | None = None) -> list[ReferenceSolution]:
+def reference_solutions(
+    problem_set: ProblemSet,
+    cache: bool = True,
+    progress=None,
+    *,
+    method: str = "auto",
+    time_limit: float | None = None,
+    jobs: int = 1,
+    context=None,
+    cache_dir: str | Path | None = None,
+) -> list[ReferenceSolution]:
     """References of every problem of a set, in order, read from or written to the cache.
 
     Args:
@@ -257,7 +303,9 @@ def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -
     return user_cache_dir() / "references"
 
 
-def cache_path(problem_set: ProblemSet, method: str = "auto", cache_dir: str | Path | None = None) -> Path | None:
+def cache_path(
+    problem_set: ProblemSet, method: str = "auto", cache_dir: str | Path | None = None
+) -> Path | None:
     """Where the references of ``problem_set`` computed by ``method`` are cached (``None``: not cached)."""
     sha = content_sha256(problem_set)
     folder = cache_folder(problem_set, cache_dir)
@@ -309,7 +357,9 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
                 **{k: r[k] for k in _TEXT_KEYS if k != "note"},
                 note=r["note"] or "",
                 **{k: math.nan if r[k] is None else float(r[k]) for k in _FLOAT_KEYS},
-                **{k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS},
+                **{
+                    k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS
+                },
                 agree=r["agree"],
                 timed_out=bool(r["timed_out"]),
             )

@@ -66,7 +66,9 @@ class _Worker:
 
     def __init__(self, ctx):
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_main, args=(child,), name="qpbench-reference", daemon=True)
+        self.proc = ctx.Process(
+            target=_worker_main, args=(child,), name="qpbench-reference", daemon=True
+        )
         self.proc.start()
         child.close()
         self.task = None
@@ -103,7 +105,9 @@ class _Worker:
         self.kill()
 
 
-def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=None, context=None) -> dict:
+def solve_in_workers(
+    tasks: list, time_limit: float | None, jobs: int, on_done=None, context=None
+) -> dict:
     """Solve every task on up to ``jobs`` workers.
 
     Args:
@@ -152,8 +156,12 @@ def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=N
                         answer = w.conn.recv()
                     except (EOFError, OSError):
                         w.proc.join(5.0)
-                        answer = Candidate(solver_of[w.task], "unknown", None,
-                                           reason=f"reference worker died (exit code {w.proc.exitcode})")
+                        answer = Candidate(
+                            solver_of[w.task],
+                            "unknown",
+                            None,
+                            reason=f"reference worker died (exit code {w.proc.exitcode})",
+                        )
                         w.kill()
                         w.ready = False
                     finish(w.task, answer)
@@ -161,9 +169,17 @@ def solve_in_workers(tasks: list, time_limit: float | None, jobs: int, on_done=N
                 elif time.monotonic() > w.deadline:
                     w.kill()
                     w.ready = False
-                    finish(w.task, Candidate(solver_of[w.task], "unknown", None, timed_out=True,
-                                             reason=f"no answer within the time limit of {time_limit:g} s; "
-                                             "worker stopped"))
+                    finish(
+                        w.task,
+                        Candidate(
+                            solver_of[w.task],
+                            "unknown",
+                            None,
+                            timed_out=True,
+                            reason=f"no answer within the time limit of {time_limit:g} s; "
+                            "worker stopped",
+                        ),
+                    )
                     w.task = None
     finally:
         for w in workers:

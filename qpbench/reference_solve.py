@@ -207,19 +207,27 @@ def _solve(problem, solver: str, settings: dict):
 
 def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
     P, q = record.problem.P, record.problem.q
-    P = P.toarray() if hasattr(P, "toarray") else P  # no constraint at all: small problems in practice
+    P = (
+        P.toarray() if hasattr(P, "toarray") else P
+    )  # no constraint at all: small problems in practice
     x, *_ = np.linalg.lstsq(P, -q, rcond=None)
     res = float(np.max(np.abs(P @ x + q)))
     if res > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
-        return ReferenceSolution("dual_infeasible", solver="lstsq", name=record.name,
-                                 note="no constraints and P x = -q has no solution: unbounded")
+        return ReferenceSolution(
+            "dual_infeasible",
+            solver="lstsq",
+            name=record.name,
+            note="no constraints and P x = -q has no solution: unbounded",
+        )
     n = q.shape[0]
     return ReferenceSolution(
         "optimal",
         x=x,
         y=np.empty(0),
         z=np.empty(0),
-        z_box=np.empty(0) if record.problem.lb is None and record.problem.ub is None else np.zeros(n),
+        z_box=np.empty(0)
+        if record.problem.lb is None and record.problem.ub is None
+        else np.zeros(n),
         objective=objective(record, x),
         solver="lstsq",
         name=record.name,
@@ -228,9 +236,7 @@ def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
 
 
 def _is_unconstrained(p) -> bool:
-    no_bounds = all(
-        v is None or np.all(np.isinf(v)) for v in (p.lb, p.ub)
-    )
+    no_bounds = all(v is None or np.all(np.isinf(v)) for v in (p.lb, p.ub))
     return p.G is None and p.A is None and no_bounds
 
 
@@ -277,9 +283,21 @@ class Candidate:
     def plain(self) -> Candidate:
         """The same answer without the solver's objects (picklable: a worker sends it back)."""
         sol = self.solution
-        plain = None if sol is None else SimpleNamespace(**{k: getattr(sol, k, None) for k in _VEC_KEYS})
-        return Candidate(self.solver, self.status, plain, self.objective, self.reason, self.timed_out,
-                         self.wall_s, self.kkt)
+        plain = (
+            None
+            if sol is None
+            else SimpleNamespace(**{k: getattr(sol, k, None) for k in _VEC_KEYS})
+        )
+        return Candidate(
+            self.solver,
+            self.status,
+            plain,
+            self.objective,
+            self.reason,
+            self.timed_out,
+            self.wall_s,
+            self.kkt,
+        )
 
     def describe(self) -> str:
         """``solver status`` with its objective and KKT residual, or the reason for no verdict."""
@@ -299,7 +317,9 @@ def _problem_for_reference(record: ProblemRecord):
     return solver_problem(record.problem)
 
 
-def solve_candidate(record: ProblemRecord, solver: str, time_limit: float | None = None) -> Candidate:
+def solve_candidate(
+    record: ProblemRecord, solver: str, time_limit: float | None = None
+) -> Candidate:
     """One reference solver's answer for ``record``; never raises for solver trouble.
 
     Args:
@@ -317,8 +337,14 @@ def solve_candidate(record: ProblemRecord, solver: str, time_limit: float | None
     sol, status, error = _solve(problem, solver, settings)
     wall = time.perf_counter() - started
     if limited and (wall > time_limit or _clarabel_timed_out(solver, sol)):
-        return Candidate(solver, "unknown", None, reason=f"no answer within the time limit of {time_limit:g} s",
-                         timed_out=True, wall_s=wall)
+        return Candidate(
+            solver,
+            "unknown",
+            None,
+            reason=f"no answer within the time limit of {time_limit:g} s",
+            timed_out=True,
+            wall_s=wall,
+        )
     if status != "optimal":
         return Candidate(solver, status, None, reason=error, wall_s=wall)
     return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
@@ -351,8 +377,11 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
     return first, second, "unknown"
 
 
-def reference_solution(record: ProblemRecord, method: str = "auto", time_limit: float | None = None,
-                       ) -> ReferenceSolution:
+def reference_solution(
+    record: ProblemRecord,
+    method: str = "auto",
+    time_limit: float | None = None,
+) -> ReferenceSolution:
     """High-accuracy reference of one problem (see the module docstring), solved in this process.
 
     Args:
@@ -363,12 +392,18 @@ def reference_solution(record: ProblemRecord, method: str = "auto", time_limit: 
     if method not in METHODS:
         raise ValueError(f"unknown reference method '{method}'")
     if _is_unconstrained(_problem_for_reference(record)):
-        return _unconstrained(ProblemRecord(_problem_for_reference(record), record.name, offset=record.offset))
+        return _unconstrained(
+            ProblemRecord(_problem_for_reference(record), record.name, offset=record.offset)
+        )
     solvers = ("clarabel", "piqp") if method == "auto" else (method,)
-    return assemble(record.name, [solve_candidate(record, s, time_limit) for s in solvers], time_limit)
+    return assemble(
+        record.name, [solve_candidate(record, s, time_limit) for s in solvers], time_limit
+    )
 
 
-def assemble(name: str | None, candidates: list[Candidate], time_limit: float | None = None) -> ReferenceSolution:
+def assemble(
+    name: str | None, candidates: list[Candidate], time_limit: float | None = None
+) -> ReferenceSolution:
     """The reference made of one or two solvers' answers (:func:`combine` for two)."""
     if len(candidates) == 2:
         ref = combine(name, *candidates)
@@ -382,8 +417,13 @@ def assemble(name: str | None, candidates: list[Candidate], time_limit: float | 
 
 
 def _from_candidate(name, keep: Candidate, status: str) -> ReferenceSolution:
-    ref = ReferenceSolution(status=status, solver=keep.solver, kkt=keep.kkt, name=name,
-                            objective=keep.objective if status == "optimal" else math.nan)
+    ref = ReferenceSolution(
+        status=status,
+        solver=keep.solver,
+        kkt=keep.kkt,
+        name=name,
+        objective=keep.objective if status == "optimal" else math.nan,
+    )
     if status == "optimal":
         sol = keep.solution
         ref.x = np.asarray(sol.x, dtype=np.float64)
@@ -399,8 +439,11 @@ def _why(keep: Candidate, other: Candidate, status: str) -> str:
     if status == "optimal":
         return f"kept {keep.solver}: the only optimal answer"
     if status == "unknown":
-        return "no reference: " + ("no verdict from either solver" if keep.status == other.status
-                                   else "the solvers' verdicts contradict each other")
+        return "no reference: " + (
+            "no verdict from either solver"
+            if keep.status == other.status
+            else "the solvers' verdicts contradict each other"
+        )
     return f"kept {keep.solver}'s verdict {status}"
 
 

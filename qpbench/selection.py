@@ -26,12 +26,20 @@ if TYPE_CHECKING:
     from .formats import ProblemSet
 
 __all__ = [
-    "backend_settings", "parse_list", "parse_overrides", "select_backend", "select_backends", "select_records",
-    "select_scenarios", "select_set",
+    "backend_settings",
+    "parse_list",
+    "parse_overrides",
+    "select_backend",
+    "select_backends",
+    "select_records",
+    "select_scenarios",
+    "select_set",
 ]
 
 
-def select_records(records: list, pattern: str | None = None, every: int | None = None, limit: int | None = None) -> list:
+def select_records(
+    records: list, pattern: str | None = None, every: int | None = None, limit: int | None = None
+) -> list:
     """The records kept by ``pattern``, then ``every``, then ``limit`` (file order).
 
     Args:
@@ -54,7 +62,9 @@ def select_records(records: list, pattern: str | None = None, every: int | None 
         kept = [r for r in kept if any(fnmatch.fnmatchcase(r.name, p) for p in pats)]
         if not kept:
             sample = ", ".join(r.name for r in list(records)[:3])
-            raise ParamError(f"'{pattern}' matches no problem (names look like: {sample})", key="problems")
+            raise ParamError(
+                f"'{pattern}' matches no problem (names look like: {sample})", key="problems"
+            )
     if every is not None:
         kept = kept[::every]
     if limit is not None:
@@ -62,7 +72,12 @@ def select_records(records: list, pattern: str | None = None, every: int | None 
     return kept
 
 
-def select_set(problem_set: ProblemSet, pattern: str | None = None, every: int | None = None, limit: int | None = None) -> ProblemSet:
+def select_set(
+    problem_set: ProblemSet,
+    pattern: str | None = None,
+    every: int | None = None,
+    limit: int | None = None,
+) -> ProblemSet:
     """A copy of ``problem_set`` holding the records :func:`select_records` keeps.
 
     With ``every`` > 1 the manifest's generator stride (``every``, ticks per
@@ -76,13 +91,19 @@ def select_set(problem_set: ProblemSet, pattern: str | None = None, every: int |
         return problem_set
     records = select_records(problem_set.records, pattern, every, limit)
     manifest = problem_set.manifest
-    if every is not None and every > 1 and manifest and (manifest.get("generator") or {}).get("every") is not None:
+    if (
+        every is not None
+        and every > 1
+        and manifest
+        and (manifest.get("generator") or {}).get("every") is not None
+    ):
         generator = dict(manifest["generator"], every=int(manifest["generator"]["every"]) * every)
         manifest = dict(manifest, generator=generator)
     return replace(problem_set, records=records, manifest=manifest)
 
 
 # -- backends, scenarios and --set overrides: parsed and checked before any work starts ----------
+
 
 def parse_list(value: str | list[str] | None, option: str) -> list[str]:
     """Split a comma-separated option value (empty items dropped, order kept).
@@ -99,7 +120,9 @@ def parse_list(value: str | list[str] | None, option: str) -> list[str]:
         if not item:
             continue
         if item in out:
-            raise ParamError(f"'{item}' listed twice in {','.join(i.strip() for i in items)}", key=option)
+            raise ParamError(
+                f"'{item}' listed twice in {','.join(i.strip() for i in items)}", key=option
+            )
         out.append(item)
     if not out:
         raise ParamError("empty list", key=option)
@@ -136,10 +159,14 @@ def select_backends(value: str | list[str] | None, option: str = "--backends") -
     names = parse_list(value or "all", option)
     if names == ["all"]:
         return list(backend_names(available_only=True))
-    resolved = [resolve_name(name) for name in names]  # the registered spelling; a typo gets a suggestion
+    resolved = [
+        resolve_name(name) for name in names
+    ]  # the registered spelling; a typo gets a suggestion
     for i, name in enumerate(resolved):
         if name in resolved[:i]:
-            raise ParamError(f"'{names[i]}' listed twice in {','.join(names)} (both are '{name}')", key=option)
+            raise ParamError(
+                f"'{names[i]}' listed twice in {','.join(names)} (both are '{name}')", key=option
+            )
     for name in resolved:
         get_backend(name)  # raises BackendNotFound with the reason
     return resolved
@@ -186,7 +213,9 @@ def parse_overrides(items: list[str] | None, option: str = "--set") -> dict:
     return out
 
 
-def backend_settings(items: list[str] | None, backends: list[str], option: str = "--set") -> dict[str, dict]:
+def backend_settings(
+    items: list[str] | None, backends: list[str], option: str = "--set"
+) -> dict[str, dict]:
     """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked.
 
     A key is checked against the settings the backend says it accepts
@@ -204,13 +233,19 @@ def backend_settings(items: list[str] | None, backends: list[str], option: str =
     for key, value in parse_overrides(items, option).items():
         backend, _, setting = key.rpartition(".")
         if backend not in backends or not setting:
-            raise ParamError(f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in "
-                             "--backends)", key=option)
+            raise ParamError(
+                f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in "
+                "--backends)",
+                key=option,
+            )
         allowed = backend_class(backend).setting_names()
         if allowed is not None and setting not in allowed:
             close = difflib.get_close_matches(setting, sorted(allowed), n=3, cutoff=0.6)
             hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
-            raise ParamError(f"'{setting}' is not a setting of backend '{backend}'; {hint}"
-                             f"its settings: {', '.join(sorted(allowed))}", key=f"{option} {key}")
+            raise ParamError(
+                f"'{setting}' is not a setting of backend '{backend}'; {hint}"
+                f"its settings: {', '.join(sorted(allowed))}",
+                key=f"{option} {key}",
+            )
         out.setdefault(backend, {})[setting] = value
     return out

@@ -28,8 +28,15 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "CERTIFIED_INFEASIBLE", "FAILURE_STATUSES", "FORMULATIONS", "GUARD_STATUSES", "INFEASIBLE_OR_UNCLASSIFIED",
-    "STATUSES", "TICK_STATUSES", "classify", "describe_exception",
+    "CERTIFIED_INFEASIBLE",
+    "FAILURE_STATUSES",
+    "FORMULATIONS",
+    "GUARD_STATUSES",
+    "INFEASIBLE_OR_UNCLASSIFIED",
+    "STATUSES",
+    "TICK_STATUSES",
+    "classify",
+    "describe_exception",
 ]
 
 #: Statuses a backend reports.
@@ -77,15 +84,23 @@ def classify(solution: object, wall_s: float, time_limit: float) -> tuple[str, s
     - else the backend's status (``optimal``/``not_solved`` from ``found`` for
       a plain :class:`qpsolvers.Solution`) and its ``error`` text, if any.
     """
-    status = getattr(solution, "status", None) or ("optimal" if getattr(solution, "found", False) else "not_solved")
+    status = getattr(solution, "status", None) or (
+        "optimal" if getattr(solution, "found", False) else "not_solved"
+    )
     x = getattr(solution, "x", None)
     if x is not None:
         x = np.asarray(x, dtype=float)
         finite = np.isfinite(x)
         if not finite.all():
-            return "invalid", f"non-finite x ({int((~finite).sum())} of {x.size} entries; backend status {status})"
+            return (
+                "invalid",
+                f"non-finite x ({int((~finite).sum())} of {x.size} entries; backend status {status})",
+            )
     elif status == "optimal":
         return "invalid", "status optimal without a primal solution x"
     if wall_s > time_limit:
-        return "time_limit", f"solve took {wall_s:.3g} s > time limit {time_limit:g} s (backend status {status})"
+        return (
+            "time_limit",
+            f"solve took {wall_s:.3g} s > time limit {time_limit:g} s (backend status {status})",
+        )
     return status, getattr(solution, "error", None)

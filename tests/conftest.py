@@ -18,6 +18,20 @@ settings.register_profile("ci", derandomize=True, database=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
+
+@pytest.fixture(autouse=True, scope="session")
+def _own_user_cache(tmp_path_factory):
+    """The user cache folder (reference caches of sets that are not ours) is the session's own:
+    a test never reads what an earlier run left there, and the runs leave nothing behind."""
+    previous = os.environ.get("XDG_CACHE_HOME")
+    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("user-cache"))
+    yield
+    if previous is None:
+        os.environ.pop("XDG_CACHE_HOME", None)
+    else:
+        os.environ["XDG_CACHE_HOME"] = previous
+
+
 #: The Maros-Meszaros subset the repository ships.
 MAROS_MESZAROS_DIR = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 
@@ -57,14 +71,18 @@ def make_record(rng):
     """Factory: ``make_record(name, **random_problem kwargs)`` -> ProblemRecord with metadata."""
 
     def make(name="p", scenario="wall", tick=0, t=0.0, formulation="paper", offset=0.0, **kw):
-        return ProblemRecord(random_problem(rng, **kw), name, scenario, tick, t, formulation, offset)
+        return ProblemRecord(
+            random_problem(rng, **kw), name, scenario, tick, t, formulation, offset
+        )
 
     return make
 
 
 @pytest.fixture(scope="session")
 def mm_dir():
-    assert MAROS_MESZAROS_DIR.is_dir(), f"the shipped Maros-Meszaros subset is missing: {MAROS_MESZAROS_DIR}"
+    assert MAROS_MESZAROS_DIR.is_dir(), (
+        f"the shipped Maros-Meszaros subset is missing: {MAROS_MESZAROS_DIR}"
+    )
     return MAROS_MESZAROS_DIR
 
 

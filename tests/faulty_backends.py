@@ -50,7 +50,9 @@ def exact_solution(problem) -> BackendSolution:
     """Solve ``problem`` with qpsolvers' clarabel; a :class:`BackendSolution`."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_feas=1e-10, tol_gap_rel=1e-10)
+        sol = qpsolvers.solve_problem(
+            problem, solver="clarabel", tol_gap_abs=1e-10, tol_feas=1e-10, tol_gap_rel=1e-10
+        )
     out = BackendSolution(problem=problem)
     out.x, out.y, out.z, out.z_box = sol.x, sol.y, sol.z, sol.z_box
     out.status = "optimal" if sol.found else "primal_infeasible"
@@ -310,8 +312,6 @@ class LazyDuals(Backend):
         return sol
 
 
-
-
 @register
 class KernelProbe(Backend):
     """Solves exactly; ``iterations`` = specialisations of the network's general integrator
@@ -327,10 +327,17 @@ class KernelProbe(Backend):
         sol.iterations = len(nw.kernel(True).overloads)
         return sol
 
+
 # ---------------------------------------------------------------- problem sets for the harness tests
 
 
-def tick_records(n_ticks: int, scenario: str | None = "wall", seed: int = 7, n: int = 4, prefix: str | None = None):
+def tick_records(
+    n_ticks: int,
+    scenario: str | None = "wall",
+    seed: int = 7,
+    n: int = 4,
+    prefix: str | None = None,
+):
     """``n_ticks`` small strictly convex QPs with ``q[-1] = tick`` (the stateful backends read it).
 
     Each has 3 inequality rows, 1 equality row and box bounds; ``x = 0``
@@ -353,7 +360,9 @@ def tick_records(n_ticks: int, scenario: str | None = "wall", seed: int = 7, n: 
         b = 0.05 * rng.standard_normal(1)
         lb, ub = -2.0 * np.ones(n), 2.0 * np.ones(n)
         problem = qpsolvers.Problem(P, q, G, h, A, b, lb, ub)
-        records.append(ProblemRecord(problem, f"{prefix}/tick-{k:04d}", scenario, k, 0.001 * k, "paper"))
+        records.append(
+            ProblemRecord(problem, f"{prefix}/tick-{k:04d}", scenario, k, 0.001 * k, "paper")
+        )
     return records
 
 
@@ -361,7 +370,11 @@ def write_tick_set(folder, n_ticks: int, **kw):
     """Write :func:`tick_records` as a problem-set folder; return the folder."""
     from qpbench.formats import write_problem_set
 
-    return write_problem_set(folder, tick_records(n_ticks, **kw), generator={"name": "tests.tick_records", "n_ticks": n_ticks})
+    return write_problem_set(
+        folder,
+        tick_records(n_ticks, **kw),
+        generator={"name": "tests.tick_records", "n_ticks": n_ticks},
+    )
 
 
 # ---------------------------------------------------------------- closed-loop faults on some ticks only

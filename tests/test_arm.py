@@ -62,8 +62,26 @@ def test_simulate_writes_snapshot_and_animation(tmp_path):
     from qpbench.cli import main
 
     png, gif = tmp_path / "n.png", tmp_path / "n.gif"
-    code = main(["-q", "simulate", "--scenario", "narrow", "--backend", "qpsolvers:daqp", "--duration", "0.2",
-                 "--snapshot", str(png), "--animate", str(gif), "--fps", "10", "--speed", "0.5"])
+    code = main(
+        [
+            "-q",
+            "simulate",
+            "--scenario",
+            "narrow",
+            "--backend",
+            "qpsolvers:daqp",
+            "--duration",
+            "0.2",
+            "--snapshot",
+            str(png),
+            "--animate",
+            str(gif),
+            "--fps",
+            "10",
+            "--speed",
+            "0.5",
+        ]
+    )
     assert code == 0
     with Image.open(png) as img:
         assert img.format == "PNG"
@@ -75,6 +93,19 @@ def test_simulate_writes_snapshot_and_animation(tmp_path):
 def test_simulate_refuses_a_snapshot_format_before_running(tmp_path, capsys):
     from qpbench.cli import main
 
-    assert main(["simulate", "--scenario", "wall", "--backend", "qpsolvers:daqp", "--snapshot", str(tmp_path / "a.jpg")]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "wall",
+                "--backend",
+                "qpsolvers:daqp",
+                "--snapshot",
+                str(tmp_path / "a.jpg"),
+            ]
+        )
+        == 2
+    )
     assert "--snapshot" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())

@@ -20,7 +20,12 @@ def documented_command(scenario: str) -> str:
     text = " ".join(ROOT.joinpath("README.md").read_text().split())
     match = re.search(r"Made with `(qpbench simulate --scenario S [^`]*)`", text)
     assert match, "README no longer documents how results/arm/ is made"
-    return match.group(1).replace("results/arm/", "").replace(" S ", f" {scenario} ").replace("S.", f"{scenario}.")
+    return (
+        match.group(1)
+        .replace("results/arm/", "")
+        .replace(" S ", f" {scenario} ")
+        .replace("S.", f"{scenario}.")
+    )
 
 
 def _frames(path: Path) -> int:
@@ -36,9 +41,17 @@ def test_committed_gifs_are_small(gif):
 
 def test_documented_command_regenerates_the_free_pictures(tmp_path):
     command = documented_command("free")
-    assert command == "qpbench simulate --scenario free --backend daqp --snapshot free.png --animate free.gif --speed 4 --fps 12"
-    proc = subprocess.run([str(BIN / "qpbench"), *command.split()[1:]], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=900)
+    assert (
+        command
+        == "qpbench simulate --scenario free --backend daqp --snapshot free.png --animate free.gif --speed 4 --fps 12"
+    )
+    proc = subprocess.run(
+        [str(BIN / "qpbench"), *command.split()[1:]],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert proc.returncode == 0, proc.stderr
     for name in ("free.png", "free.gif"):
         made, committed = tmp_path / name, ARM / name

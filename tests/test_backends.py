@@ -14,14 +14,25 @@ import pytest
 import qpsolvers
 
 from qpbench import backends
-from qpbench.backends import BackendSolution, backend_class, backend_info, backend_names, get_backend, objective
+from qpbench.backends import (
+    BackendSolution,
+    backend_class,
+    backend_info,
+    backend_names,
+    get_backend,
+    objective,
+)
 from qpbench.exceptions import BackendNotFound
 from qpbench.known import random_kkt_problem, robot_like_problem
 
 EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged"}  # tested in test_rnn.py
 #: The package's backends (not those other tests register to inject faults).
-INFOS = [info for info in backend_info()
-         if info.name not in EXCLUDED and backend_class(info.name).__module__.startswith("qpbench.backends.")]
+INFOS = [
+    info
+    for info in backend_info()
+    if info.name not in EXCLUDED
+    and backend_class(info.name).__module__.startswith("qpbench.backends.")
+]
 QP_INFOS = [info for info in INFOS if info.name != "pinv"]
 MM_FOLDER = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 
@@ -36,18 +47,45 @@ LOW_ACCURACY = {
 #: (backend, Maros-Meszaros problem) pairs that cannot match the reference, and why.
 MM_SKIP = {
     ("qpsolvers:quadprog", "LOTSCHD"): "quadprog needs a positive definite P (LOTSCHD is an LP)",
-    ("qpsolvers:quadprog", "QAFIRO"): "quadprog needs a positive definite P (QAFIRO's P is singular)",
-    ("qpsolvers:quadprog", "ZECEVIC2"): "quadprog needs a positive definite P (ZECEVIC2's P is singular)",
-    ("qpsolvers:quadprog", "HS52"): "quadprog factorises a singular P (eigenvalue 2e-16): objective off by 2e-8 rel.",
-    ("qpsolvers:quadprog", "HS53"): "quadprog factorises a singular P (eigenvalue 8e-17): objective off by 2e-8 rel.",
-    ("proxqp", "HS118"): "ProxQP 0.8 reports PRIMAL_INFEASIBLE after 14 iterations with its default "
+    (
+        "qpsolvers:quadprog",
+        "QAFIRO",
+    ): "quadprog needs a positive definite P (QAFIRO's P is singular)",
+    (
+        "qpsolvers:quadprog",
+        "ZECEVIC2",
+    ): "quadprog needs a positive definite P (ZECEVIC2's P is singular)",
+    (
+        "qpsolvers:quadprog",
+        "HS52",
+    ): "quadprog factorises a singular P (eigenvalue 2e-16): objective off by 2e-8 rel.",
+    (
+        "qpsolvers:quadprog",
+        "HS53",
+    ): "quadprog factorises a singular P (eigenvalue 8e-17): objective off by 2e-8 rel.",
+    (
+        "proxqp",
+        "HS118",
+    ): "ProxQP 0.8 reports PRIMAL_INFEASIBLE after 14 iterations with its default "
     "eps_primal_inf=1e-4 (optimal with eps_primal_inf=1e-12)",
-    ("qpsolvers:proxqp", "HS118"): "ProxQP 0.8 reports PRIMAL_INFEASIBLE after 14 iterations with its default "
+    (
+        "qpsolvers:proxqp",
+        "HS118",
+    ): "ProxQP 0.8 reports PRIMAL_INFEASIBLE after 14 iterations with its default "
     "eps_primal_inf=1e-4 (optimal with eps_primal_inf=1e-12)",
-    ("cvxpy", "HS52"): "OSQP under cvxpy (singular P written as ||L'x||^2) reaches max_iter=1e6 at eps 1e-9",
-    ("qpsolvers:cvxopt", "GENHS28"): "qpsolvers 4.13's cvxopt route drops A x = b when there is no inequality "
+    (
+        "cvxpy",
+        "HS52",
+    ): "OSQP under cvxpy (singular P written as ||L'x||^2) reaches max_iter=1e6 at eps 1e-9",
+    (
+        "qpsolvers:cvxopt",
+        "GENHS28",
+    ): "qpsolvers 4.13's cvxopt route drops A x = b when there is no inequality "
     "and no bound: 'optimal' with a primal residual of 2.7",
-    ("qpsolvers:cvxopt", "HS52"): "qpsolvers 4.13's cvxopt route drops A x = b when there is no inequality "
+    (
+        "qpsolvers:cvxopt",
+        "HS52",
+    ): "qpsolvers 4.13's cvxopt route drops A x = b when there is no inequality "
     "and no bound: 'optimal' with a primal residual of 0.71",
     ("qpsolvers:cvxopt", "QAFIRO"): "cvxopt's qp() stops with status 'unknown' on this LP at 1e-10",
 }
@@ -56,7 +94,9 @@ MM_SKIP = {
 def _param(infos, high_accuracy=False):
     params = []
     for info in infos:
-        marks = [pytest.mark.skipif(not info.available, reason=f"{info.name} unavailable: {info.reason}")]
+        marks = [
+            pytest.mark.skipif(not info.available, reason=f"{info.name} unavailable: {info.reason}")
+        ]
         if high_accuracy and info.name in LOW_ACCURACY:
             marks.append(pytest.mark.skip(reason=f"{info.name}: {LOW_ACCURACY[info.name]}"))
         params.append(pytest.param(info.name, id=info.name, marks=marks))
@@ -126,7 +166,9 @@ def test_sequence_then_new_shape_then_reset(name):
             A = problem.A.copy()
             A[0, 1] = 0.0
             q = -(problem.P @ x + A.T @ y + problem.G.T @ z + z_box)
-            problem = qpsolvers.Problem(problem.P, q, problem.G, problem.h, A, A @ x, problem.lb, problem.ub)
+            problem = qpsolvers.Problem(
+                problem.P, q, problem.G, problem.h, A, A @ x, problem.lb, problem.ub
+            )
         sequence.append((problem, x, y, z, z_box))
     other = random_kkt_problem(rng, 7, 1, 5, 2)
     persistent = None
@@ -134,10 +176,14 @@ def test_sequence_then_new_shape_then_reset(name):
         sol = backend.solve(problem)
         _check_solution(sol, *known)
         state = _persistent_object(backend)
-        if i == 0 or sol.extras.get("cold_retry"):  # proxqp re-solves a warm "infeasible" on a new object
+        if i == 0 or sol.extras.get(
+            "cold_retry"
+        ):  # proxqp re-solves a warm "infeasible" on a new object
             persistent = state
         elif persistent is not None:
-            assert state is persistent, "the solver object was rebuilt for a problem of the same pattern"
+            assert state is persistent, (
+                "the solver object was rebuilt for a problem of the same pattern"
+            )
     _check_solution(backend.solve(other[0]), *other[1:])
     if persistent is not None:
         assert _persistent_object(backend) is not persistent
@@ -185,7 +231,9 @@ def test_proxqp_cached_result_views_follow_warm_starts():
         res = backend._qp.results
         n_in = problem.G.shape[0]
         assert np.array_equal(sol.x, res.x) and np.array_equal(sol.y, res.y)
-        assert np.array_equal(np.concatenate([sol.z, sol.z_box]), res.z[: n_in + problem.q.shape[0]])
+        assert np.array_equal(
+            np.concatenate([sol.z, sol.z_box]), res.z[: n_in + problem.q.shape[0]]
+        )
         assert not np.shares_memory(sol.x, res.x) and not np.shares_memory(sol.z, res.z)
         kept.append((sol, sol.x.copy(), sol.z_box.copy()))
         previous = sol.x
@@ -220,9 +268,21 @@ def test_infinite_bounds_and_rows():
     ub[inactive_b[1]] = np.inf
     h[inactive_g] = np.inf
     problem = qpsolvers.Problem(problem.P, problem.q, problem.G, h, problem.A, problem.b, lb, ub)
-    for name in ("osqp", "proxqp", "clarabel", "cvxpy", "daqp", "daqp-stateless", "qpoases", "piqp", "qpsolvers:daqp"):
+    for name in (
+        "osqp",
+        "proxqp",
+        "clarabel",
+        "cvxpy",
+        "daqp",
+        "daqp-stateless",
+        "qpoases",
+        "piqp",
+        "qpsolvers:daqp",
+    ):
         if name in backend_names():
-            _check_solution(get_backend(name, "high_accuracy").solve(problem), x, y, z, z_box, gap=False)
+            _check_solution(
+                get_backend(name, "high_accuracy").solve(problem), x, y, z, z_box, gap=False
+            )
 
 
 # ----------------------------------------------------------------- pinv
@@ -239,8 +299,16 @@ def test_pinv_is_jmpi():
     # The paper's QP (P = I, q = 0) with no active inequality: pinv is its exact solution.
     A = rng.standard_normal((2, 4))
     b = rng.standard_normal(2)
-    paper = qpsolvers.Problem(np.eye(4), np.zeros(4), np.ones((1, 4)), np.array([100.0]), A, b,
-                              -100 * np.ones(4), 100 * np.ones(4))
+    paper = qpsolvers.Problem(
+        np.eye(4),
+        np.zeros(4),
+        np.ones((1, 4)),
+        np.array([100.0]),
+        A,
+        b,
+        -100 * np.ones(4),
+        100 * np.ones(4),
+    )
     sol = get_backend("pinv").solve(paper)
     assert sol.primal_residual() < 1e-12 and sol.dual_residual() < 1e-12
     # Without equalities: -P^-1 q, bounds ignored (the metrics show the violation).
@@ -256,19 +324,26 @@ def test_pinv_is_jmpi():
 def _infeasible_problem():
     """x0 + x1 = 3 with 0 <= x <= 1: primal infeasible."""
     return qpsolvers.Problem(
-        np.eye(3), np.array([1.0, -1.0, 0.5]),
-        np.array([[1.0, 0.0, 1.0]]), np.array([1.0]),
-        np.array([[1.0, 1.0, 0.0]]), np.array([3.0]),
-        np.zeros(3), np.ones(3),
+        np.eye(3),
+        np.array([1.0, -1.0, 0.5]),
+        np.array([[1.0, 0.0, 1.0]]),
+        np.array([1.0]),
+        np.array([[1.0, 1.0, 0.0]]),
+        np.array([3.0]),
+        np.zeros(3),
+        np.ones(3),
     )
 
 
 def _unbounded_problem():
     """P = diag(1, 1, 0), q = -e2, and no row limits x2: dual infeasible (unbounded below)."""
     return qpsolvers.Problem(
-        np.diag([1.0, 1.0, 0.0]), np.array([0.3, -0.2, -1.0]),
-        np.array([[1.0, 1.0, 0.0]]), np.array([1.0]),
-        np.array([[1.0, -1.0, 0.0]]), np.array([0.1]),
+        np.diag([1.0, 1.0, 0.0]),
+        np.array([0.3, -0.2, -1.0]),
+        np.array([[1.0, 1.0, 0.0]]),
+        np.array([1.0]),
+        np.array([[1.0, -1.0, 0.0]]),
+        np.array([0.1]),
     )
 
 
@@ -279,7 +354,9 @@ def test_infeasible_and_unbounded(name):
     backend.reset()
     unbounded = backend.solve(_unbounded_problem())
     cls = type(backend)
-    assert cls.certifies_infeasibility is not None, f"{name}: say whether it can classify infeasibility"
+    assert cls.certifies_infeasibility is not None, (
+        f"{name}: say whether it can classify infeasibility"
+    )
     if cls.certifies_infeasibility:
         assert infeasible.status == "primal_infeasible", (infeasible.status, infeasible.error)
         assert unbounded.status == "dual_infeasible", (unbounded.status, unbounded.error)
@@ -287,9 +364,13 @@ def test_infeasible_and_unbounded(name):
         assert cls.infeasibility_note, f"{name}: say why it cannot classify infeasibility"
         # It cannot tell both; it never says the wrong one, and what it returns must not pass as a solution.
         assert infeasible.status != "dual_infeasible" and unbounded.status != "primal_infeasible"
-        assert not (infeasible.status == "primal_infeasible" and unbounded.status == "dual_infeasible"), name
+        assert not (
+            infeasible.status == "primal_infeasible" and unbounded.status == "dual_infeasible"
+        ), name
         for sol in (infeasible, unbounded):
-            if sol.status == "optimal":  # HiGHS on the unbounded problem, see its infeasibility_note
+            if (
+                sol.status == "optimal"
+            ):  # HiGHS on the unbounded problem, see its infeasibility_note
                 assert max(sol.primal_residual(), sol.dual_residual()) > 0.5
     for sol in (infeasible, unbounded):
         if sol.status == "error":
@@ -301,7 +382,18 @@ def test_infeasible_and_unbounded(name):
 
 @pytest.mark.parametrize(
     "name",
-    ["osqp", "proxqp", "clarabel", "daqp", "daqp-stateless", "qpoases", "piqp", "qpsolvers:osqp", "qpsolvers:piqp", "cvxpy"],
+    [
+        "osqp",
+        "proxqp",
+        "clarabel",
+        "daqp",
+        "daqp-stateless",
+        "qpoases",
+        "piqp",
+        "qpsolvers:osqp",
+        "qpsolvers:piqp",
+        "cvxpy",
+    ],
 )
 def test_max_iter_setting_overrides_profile(name):
     if name not in backend_names():
@@ -316,8 +408,9 @@ def test_solver_error_becomes_status():
     """quadprog refuses a singular P: status error with the message, no exception."""
     if "qpsolvers:quadprog" not in backend_names():
         pytest.skip("quadprog unavailable")
-    problem = qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([1.0, 1.0]), None, None, None, None,
-                                -np.ones(2), np.ones(2))
+    problem = qpsolvers.Problem(
+        np.diag([1.0, 0.0]), np.array([1.0, 1.0]), None, None, None, None, -np.ones(2), np.ones(2)
+    )
     sol = get_backend("qpsolvers:quadprog").solve(problem)
     assert sol.status == "error" and "positive definite" in sol.error
     assert not sol.found
@@ -354,7 +447,9 @@ def test_missing_package_is_unavailable(monkeypatch):
 
 
 def test_qpsolvers_availability_follows_qpsolvers(monkeypatch):
-    monkeypatch.setattr(qpsolvers, "available_solvers", [s for s in qpsolvers.available_solvers if s != "daqp"])
+    monkeypatch.setattr(
+        qpsolvers, "available_solvers", [s for s in qpsolvers.available_solvers if s != "daqp"]
+    )
     info = {i.name: i for i in backend_info()}["qpsolvers:daqp"]
     assert not info.available and "daqp" in info.reason
     with pytest.raises(BackendNotFound):
@@ -391,9 +486,18 @@ def test_maros_meszaros_objective(name, maros_meszaros):
             continue
         backend.reset()
         sol = backend.solve(record.problem)
-        assert sol.status == "optimal", (record.name, sol.status, sol.error, sol.extras.get("raw_status"))
+        assert sol.status == "optimal", (
+            record.name,
+            sol.status,
+            sol.error,
+            sol.extras.get("raw_status"),
+        )
         f = objective(record.problem, sol.x) + record.offset
-        assert abs(f - ref.objective) <= 1e-8 * max(1.0, abs(ref.objective)), (record.name, f, ref.objective)
+        assert abs(f - ref.objective) <= 1e-8 * max(1.0, abs(ref.objective)), (
+            record.name,
+            f,
+            ref.objective,
+        )
         checked += 1
     assert checked >= len(maros_meszaros) - 5
 
@@ -408,8 +512,14 @@ def test_sparse_input(name):
     for _ in range(2):
         problem, x, y, z, z_box = random_kkt_problem(rng, 8, 2, 6, 2)
         sparse = qpsolvers.Problem(
-            spa.csc_matrix(problem.P), problem.q, spa.csc_matrix(problem.G), problem.h,
-            spa.csc_matrix(problem.A), problem.b, problem.lb, problem.ub,
+            spa.csc_matrix(problem.P),
+            problem.q,
+            spa.csc_matrix(problem.G),
+            problem.h,
+            spa.csc_matrix(problem.A),
+            problem.b,
+            problem.lb,
+            problem.ub,
         )
         _check_solution(backend.solve(sparse), x, y, z, z_box)
 
@@ -484,20 +594,31 @@ def test_qpsolvers_status_readers_of_the_added_solvers():
     assert qs._status_ecos({"exitFlag": -1})[0] == "max_iter"
     assert qs._status_ecos({"exitFlag": 10})[0] == "not_solved"
     assert qs._status_cvxopt({"status": "unknown"}) == ("not_solved", "unknown")
-    assert qs._status_qpalm({"info": SimpleNamespace(status="primal infeasible")})[0] == "primal_infeasible"
-    assert qs._status_qpalm({"info": SimpleNamespace(status="maximum iterations reached")})[0] == "max_iter"
+    assert (
+        qs._status_qpalm({"info": SimpleNamespace(status="primal infeasible")})[0]
+        == "primal_infeasible"
+    )
+    assert (
+        qs._status_qpalm({"info": SimpleNamespace(status="maximum iterations reached")})[0]
+        == "max_iter"
+    )
     assert qs._status_gurobi({"status": 3})[0] == "primal_infeasible"
     assert qs._status_gurobi({"status": 4}) == ("not_solved", "4")
     assert qs._status_gurobi({"status": 9})[0] == "time_limit"
     if "qpsolvers:gurobi" in backend_names():  # Gurobi refuses 1e-10: a status, not an exception
-        sol = get_backend("qpsolvers:gurobi", "high_accuracy").solve(robot_like_problem(np.random.default_rng(1))[0])
+        sol = get_backend("qpsolvers:gurobi", "high_accuracy").solve(
+            robot_like_problem(np.random.default_rng(1))[0]
+        )
         assert sol.status == "error" and "FeasibilityTol" in sol.error
 
 
 def test_all_solvers_extra_is_listed_when_missing(monkeypatch):
     """qpalm, ecos, cvxopt and gurobi are listed by `qpbench backends` even when not installed, saying how."""
-    monkeypatch.setattr(qpsolvers, "available_solvers", [s for s in qpsolvers.available_solvers
-                                                         if s not in ("qpalm", "ecos", "cvxopt", "gurobi")])
+    monkeypatch.setattr(
+        qpsolvers,
+        "available_solvers",
+        [s for s in qpsolvers.available_solvers if s not in ("qpalm", "ecos", "cvxopt", "gurobi")],
+    )
     infos = {i.name: i for i in backend_info()}
     for solver in ("qpalm", "ecos", "cvxopt", "gurobi"):
         info = infos[f"qpsolvers:{solver}"]

@@ -7,10 +7,10 @@ import json
 import shutil
 from pathlib import Path
 
+import faulty_backends as fb
 import numpy as np
 import pytest
 
-import faulty_backends as fb
 from qpbench.cli import main
 from qpbench.formats import write_problem_set
 from qpbench.harness import columns, sequences
@@ -39,8 +39,21 @@ def two_scenarios(tmp_path_factory):
     """Set of 2 scenarios x 5 ticks, stored with the ticks of 'free' shuffled."""
     wall = fb.tick_records(5, scenario="wall", seed=1)
     free = fb.tick_records(5, scenario="free", seed=2)
-    order = [free[3], wall[0], free[0], wall[1], wall[2], free[4], free[1], wall[3], wall[4], free[2]]
-    return write_problem_set(tmp_path_factory.mktemp("sets") / "two", order, generator={"name": "test"})
+    order = [
+        free[3],
+        wall[0],
+        free[0],
+        wall[1],
+        wall[2],
+        free[4],
+        free[1],
+        wall[3],
+        wall[4],
+        free[2],
+    ]
+    return write_problem_set(
+        tmp_path_factory.mktemp("sets") / "two", order, generator={"name": "test"}
+    )
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +66,9 @@ def mm_small(tmp_path_factory, mm_dir):
 
 def test_maros_meszaros_rows_columns_references_and_success(mm_small, tmp_path, capsys):
     out = tmp_path / "mm.csv"
-    code = bench(mm_small, "--backends", "clarabel,qpsolvers:daqp,faulty:nan", "--out", out, "--repeat", "2")
+    code = bench(
+        mm_small, "--backends", "clarabel,qpsolvers:daqp,faulty:nan", "--out", out, "--repeat", "2"
+    )
     rows = read(out)
     assert code == 1  # faulty:nan is invalid everywhere
     assert list(rows[0].keys()) == list(columns())
@@ -107,7 +122,11 @@ def test_sequential_mode_carries_state_per_scenario(two_scenarios, tmp_path):
         assert int(r["iterations"]) == expected, r
         assert r["state_reset"] == "False" and r["success"] == "True"
     # rows come out per sequence, in tick order
-    wall = [int(r["tick"]) for r in rows if r["scenario"] == "wall" and r["backend"] == "stateful:count-copy"]
+    wall = [
+        int(r["tick"])
+        for r in rows
+        if r["scenario"] == "wall" and r["backend"] == "stateful:count-copy"
+    ]
     assert wall == [0, 1, 2, 3, 4]
 
 
@@ -127,11 +146,19 @@ def test_failure_resets_state_and_says_so(two_scenarios, tmp_path):
         assert [rows[(scenario, k)]["iterations"] for k in (0, 1, 3, 4)] == ["1", "2", "1", "2"]
         assert rows[(scenario, 2)]["status"] == "error"
         assert rows[(scenario, 2)]["error"] == "ValueError: tick two"
-        assert [rows[(scenario, k)]["state_reset"] for k in range(5)] == ["False", "False", "False", "True", "False"]
+        assert [rows[(scenario, k)]["state_reset"] for k in range(5)] == [
+            "False",
+            "False",
+            "False",
+            "True",
+            "False",
+        ]
 
 
 @pytest.mark.parametrize("keep", [0, 3, 7, 12, 25])
-def test_resume_after_interruption_gives_the_rows_of_an_uninterrupted_run(two_scenarios, tmp_path, keep):
+def test_resume_after_interruption_gives_the_rows_of_an_uninterrupted_run(
+    two_scenarios, tmp_path, keep
+):
     backends = STATEFUL + ",stateful:count-fail2"
     full = tmp_path / "full.csv"
     assert bench(two_scenarios, "--backends", backends, "--out", full) == 1
@@ -158,7 +185,19 @@ def test_resume_refuses_a_different_mode(two_scenarios, tmp_path, capsys):
     out = tmp_path / "m.csv"
     assert bench(two_scenarios, "--backends", "clarabel", "--out", out) == 0
     before = out.read_bytes()
-    assert bench(two_scenarios, "--backends", "clarabel", "--out", out, "--resume", "--mode", "independent") == 2
+    assert (
+        bench(
+            two_scenarios,
+            "--backends",
+            "clarabel",
+            "--out",
+            out,
+            "--resume",
+            "--mode",
+            "independent",
+        )
+        == 2
+    )
     assert "mode" in capsys.readouterr().err
     assert out.read_bytes() == before
 
@@ -214,7 +253,16 @@ def _missing_column_parquet(folder):
 
 @pytest.mark.parametrize(
     "make",
-    [_corrupt_npz, _nan_npz, _inf_npz, _hash_mismatch, _truncated_parquet, _wrong_shape_npz, _missing_column_parquet, None],
+    [
+        _corrupt_npz,
+        _nan_npz,
+        _inf_npz,
+        _hash_mismatch,
+        _truncated_parquet,
+        _wrong_shape_npz,
+        _missing_column_parquet,
+        None,
+    ],
 )
 def test_bad_input_is_one_line_exit_2_and_no_output(tmp_path, capsys, make):
     folder = tmp_path / "bad"
@@ -254,9 +302,16 @@ def test_all_means_every_available_backend(tmp_path):
     out = tmp_path / "all.csv"
     env = {k: v for k, v in __import__("os").environ.items() if k != "QPBENCH_PLUGINS"}
     cmd = [sys.executable, "-m", "qpbench.cli"]
-    proc = subprocess.run(cmd + ["bench", str(folder), "--backends", "all", "--out", str(out)], capture_output=True, text=True, env=env)
+    proc = subprocess.run(
+        cmd + ["bench", str(folder), "--backends", "all", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     assert proc.returncode in (0, 1), proc.stderr
-    listed = subprocess.run(cmd + ["backends", "--available"], capture_output=True, text=True, env=env).stdout
+    listed = subprocess.run(
+        cmd + ["backends", "--available"], capture_output=True, text=True, env=env
+    ).stdout
     available = {line.split()[0] for line in listed.splitlines()[1:] if line.strip()}
     rows = read(out)
     assert {r["backend"] for r in rows} == available and len(rows) == 2 * len(available)
@@ -269,16 +324,24 @@ def test_online_backend_integrates_the_time_between_records(tmp_path):
     from qpbench.harness.bench import backend_settings
 
     folder = write_problem_set(
-        tmp_path / "s", fb.tick_records(3), generator={"name": "qpbench simulate", "dt": 0.001, "every": 10}
+        tmp_path / "s",
+        fb.tick_records(3),
+        generator={"name": "qpbench simulate", "dt": 0.001, "every": 10},
     )
     pset = read_problem_set(folder)
     config = BenchConfig(backends=["rnn", "rnn-tuned", "clarabel"], settings={})
     got = {name: backend_settings(name, config, pset) for name in config.backends}
-    assert got == {"rnn": {"dt": pytest.approx(0.01)}, "rnn-tuned": {"dt": pytest.approx(0.01)}, "clarabel": {}}
+    assert got == {
+        "rnn": {"dt": pytest.approx(0.01)},
+        "rnn-tuned": {"dt": pytest.approx(0.01)},
+        "clarabel": {},
+    }
     # an explicit dt wins; a set without a generator period leaves the default
     explicit = BenchConfig(backends=["rnn"], settings={"dt": 0.002})
     assert backend_settings("rnn", explicit, pset) == {"dt": 0.002}
-    bare = read_problem_set(write_problem_set(tmp_path / "b", fb.tick_records(3), generator={"name": "t"}))
+    bare = read_problem_set(
+        write_problem_set(tmp_path / "b", fb.tick_records(3), generator={"name": "t"})
+    )
     assert backend_settings("rnn", config, bare) == {}
 
 
@@ -294,13 +357,24 @@ def test_set_gives_one_backend_its_own_settings(two_scenarios, tmp_path, capsys,
 
     monkeypatch.setattr("qpbench.backends.get_backend", spy)
     out = tmp_path / "s.csv"
-    assert bench(two_scenarios, "--backends", "rnn,clarabel", "--out", out, "--set", "rnn.eps=0.001",
-                 "--set", "rnn.substeps=5") in (0, 1)
+    assert bench(
+        two_scenarios,
+        "--backends",
+        "rnn,clarabel",
+        "--out",
+        out,
+        "--set",
+        "rnn.eps=0.001",
+        "--set",
+        "rnn.substeps=5",
+    ) in (0, 1)
     assert seen["rnn"]["eps"] == 0.001 and seen["rnn"]["substeps"] == 5
     assert "eps" not in seen["clarabel"]
     capsys.readouterr()
     bad = tmp_path / "bad.csv"
-    assert bench(two_scenarios, "--backends", "clarabel", "--out", bad, "--set", "osqp.rho=0.1") == 2
+    assert (
+        bench(two_scenarios, "--backends", "clarabel", "--out", bad, "--set", "osqp.rho=0.1") == 2
+    )
     assert "osqp.rho" in capsys.readouterr().err and not bad.exists()
 
 
@@ -356,7 +430,9 @@ def test_backend_order_is_drawn_per_problem_recorded_and_followed(two_scenarios,
             expected += [(b, float(rec.tick)) for b in backend_order(rec.name, ORDER, 0)]
     assert _calls() == expected
     # another seed, another order; the order does not depend on how the list is given
-    assert backend_order("wall/tick-0001", ORDER, 0) == backend_order("wall/tick-0001", ORDER[::-1], 0)
+    assert backend_order("wall/tick-0001", ORDER, 0) == backend_order(
+        "wall/tick-0001", ORDER[::-1], 0
+    )
     assert any(backend_order(p, ORDER, 1) != backend_order(p, ORDER, 0) for p in by_problem)
 
 
@@ -368,8 +444,13 @@ def test_resume_reproduces_the_order_and_refuses_another_seed(two_scenarios, tmp
     cut.write_bytes(b"\n".join(lines[:12]) + b"\n" + lines[12][:9])
     assert bench(two_scenarios, "--backends", ",".join(ORDER), "--out", cut, "--resume") == 2
     assert "seed 5" in capsys.readouterr().err
-    assert bench(two_scenarios, "--backends", ",".join(ORDER), "--out", cut, "--resume", "--seed", "5") == 1
-    pos = lambda rows: sorted((r["problem"], r["backend"], r["position"], r["order_seed"]) for r in rows)  # noqa: E731
+    assert (
+        bench(two_scenarios, "--backends", ",".join(ORDER), "--out", cut, "--resume", "--seed", "5")
+        == 1
+    )
+    pos = lambda rows: sorted(
+        (r["problem"], r["backend"], r["position"], r["order_seed"]) for r in rows
+    )  # noqa: E731
     assert pos(read(cut)) == pos(read(full))
     assert {r["order_seed"] for r in read(cut)} == {"5"}
 
@@ -378,11 +459,15 @@ def test_violation_columns_for_answers_found_or_not(two_scenarios, tmp_path):
     from qpbench.formats import load_problems
 
     out = tmp_path / "v.csv"
-    assert bench(two_scenarios, "--backends", "faulty:order-a,faulty:outside-box", "--out", out) == 1
+    assert (
+        bench(two_scenarios, "--backends", "faulty:order-a,faulty:outside-box", "--out", out) == 1
+    )
     problems = {r.name: r.problem for r in load_problems(two_scenarios).records}
     for r in read(out):
         p = problems[r["problem"]]
-        if r["backend"] == "faulty:order-a":  # x = 0, not found: only the equality is violated, by |b|
+        if (
+            r["backend"] == "faulty:order-a"
+        ):  # x = 0, not found: only the equality is violated, by |b|
             assert r["found"] == "False" and r["primal_residual"] == "inf"
             assert float(r["violation_eq"]) == pytest.approx(float(np.max(np.abs(p.b))), rel=1e-15)
             assert float(r["violation_ineq"]) == 0.0 and float(r["violation_box"]) == 0.0
@@ -390,13 +475,21 @@ def test_violation_columns_for_answers_found_or_not(two_scenarios, tmp_path):
         else:  # x = 3, "optimal": 1 outside the box [-2, 2]
             x = 3.0 * np.ones(p.q.shape[0])
             assert float(r["violation_box"]) == pytest.approx(1.0, rel=1e-15)
-            assert float(r["violation_ineq"]) == pytest.approx(max(0.0, float(np.max(p.G @ x - p.h))), rel=1e-12)
-            assert float(r["violation_eq"]) == pytest.approx(float(np.max(np.abs(p.A @ x - p.b))), rel=1e-12)
-            assert float(r["constraint_violation"]) == pytest.approx(float(r["primal_residual"]), rel=1e-12)
+            assert float(r["violation_ineq"]) == pytest.approx(
+                max(0.0, float(np.max(p.G @ x - p.h))), rel=1e-12
+            )
+            assert float(r["violation_eq"]) == pytest.approx(
+                float(np.max(np.abs(p.A @ x - p.b))), rel=1e-12
+            )
+            assert float(r["constraint_violation"]) == pytest.approx(
+                float(r["primal_residual"]), rel=1e-12
+            )
         assert float(r["reference_agreement"]) <= 1e-7
 
 
-def test_closing_summary_counts_failures_and_unsuccessful_solves_by_backend(two_scenarios, tmp_path, capsys):
+def test_closing_summary_counts_failures_and_unsuccessful_solves_by_backend(
+    two_scenarios, tmp_path, capsys
+):
     out = tmp_path / "s.csv"
     code = bench(two_scenarios, "--backends", "clarabel,pinv,stateful:count-fail2", "--out", out)
     assert code == 1
@@ -429,7 +522,12 @@ def test_deferred_parts_of_the_answer_are_inside_the_timed_region(two_scenarios,
     assert "_y" in sol.__dict__  # built by the timed call
     assert ns >= fb.LAZY_SECONDS * 1e9
     out = tmp_path / "lazy.csv"
-    assert bench(two_scenarios, "--backends", "faulty:lazy-duals", "--out", out, "--mode", "independent") == 1
+    assert (
+        bench(
+            two_scenarios, "--backends", "faulty:lazy-duals", "--out", out, "--mode", "independent"
+        )
+        == 1
+    )
     assert all(float(r["wall_time_min_s"]) >= fb.LAZY_SECONDS for r in read(out))
 
 
@@ -437,6 +535,7 @@ def get_backend_instance(name):
     from qpbench.backends import get_backend
 
     return get_backend(name)
+
 
 def test_warmup_solves_cover_every_problem_structure():
     """The discarded warm-up solves reach each structure of the set (a kernel specialises on
@@ -451,4 +550,6 @@ def test_warmup_solves_cover_every_problem_structure():
     firsts = _warmup_problems(records, seqs)
     assert firsts == [records[0].problem, records[3].problem, records[5].problem]
     assert len({_structure(p) for p in firsts}) == 3
-    assert _warmup_problems(records[:3], sequences(records[:3], "sequential")) == [records[0].problem]
+    assert _warmup_problems(records[:3], sequences(records[:3], "sequential")) == [
+        records[0].problem
+    ]

@@ -13,11 +13,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from test_report import assert_close, parse_tables, qpbenchmark_ratios
 
 from qpbench.cli import COMMANDS, build_parser, main
 from qpbench.profiles import get_profile
-
-from test_report import assert_close, parse_tables, qpbenchmark_ratios
 
 MAROS = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 BACKENDS = "qpsolvers:daqp,osqp,pinv"
@@ -56,10 +55,22 @@ def bench_and_report(tmp_path_factory):
     root = tmp_path_factory.mktemp("e2e")
     simulate("wall", "qpsolvers:daqp", duration=0.4, every=10, dump=root / "wall")
     codes = [
-        main(["-q", "bench", str(root / "wall"), "--backends", BACKENDS, "--out", str(root / "wall.csv")]),
+        main(
+            [
+                "-q",
+                "bench",
+                str(root / "wall"),
+                "--backends",
+                BACKENDS,
+                "--out",
+                str(root / "wall.csv"),
+            ]
+        ),
         main(["-q", "bench", str(MAROS), "--backends", BACKENDS, "--out", str(root / "mm.csv")]),
     ]
-    rep = main(["-q", "report", str(root / "wall.csv"), str(root / "mm.csv"), "--out", str(root / "rep")])
+    rep = main(
+        ["-q", "report", str(root / "wall.csv"), str(root / "mm.csv"), "--out", str(root / "rep")]
+    )
     return root, codes, rep
 
 
@@ -67,7 +78,9 @@ def test_bench_then_report_numbers_match_the_csvs(bench_and_report):
     root, codes, rep = bench_and_report
     assert rep == 0
     assert all(c in (0, 1) for c in codes)
-    bench = pd.concat([pd.read_csv(root / "wall.csv"), pd.read_csv(root / "mm.csv")], ignore_index=True)
+    bench = pd.concat(
+        [pd.read_csv(root / "wall.csv"), pd.read_csv(root / "mm.csv")], ignore_index=True
+    )
     assert len(bench) == (40 + len(list(MAROS.glob("*.mat")))) * 3
     # the paper formulation is infeasible at the start of wall: the reference says so
     wall = bench[bench["scenario"] == "wall"]
@@ -92,8 +105,12 @@ def test_bench_then_report_numbers_match_the_csvs(bench_and_report):
         rows = bench[bench["backend"] == b]
         assert int(r[1]) == len(rows)
         assert_close(r[2], 100 * rows["success"].mean(), f"success of {b}")
-    scen = {t["headings"][4]: t for t in tabs
-            if t["headings"].get(4, "").startswith("Scenario") and t["caption"].startswith("Per backend, runtime")}
+    scen = {
+        t["headings"][4]: t
+        for t in tabs
+        if t["headings"].get(4, "").startswith("Scenario")
+        and t["caption"].startswith("Per backend, runtime")
+    }
     assert set(scen) == {"Scenario wall (default, sequential)", "Scenario - (default, sequential)"}
     for r in scen["Scenario wall (default, sequential)"]["rows"]:
         t = wall.loc[wall["backend"] == r[0], "wall_time_min_s"].to_numpy(float)
@@ -105,19 +122,40 @@ def test_bench_then_report_numbers_match_the_csvs(bench_and_report):
 
 def test_closed_loop_then_report(tmp_path):
     out = tmp_path / "cl"
-    code = main(["-q", "closed-loop", "--scenarios", "wall,narrow", "--backends", "qpsolvers:daqp,pinv",
-                 "--duration", "0.5", "--out", str(out)])
+    code = main(
+        [
+            "-q",
+            "closed-loop",
+            "--scenarios",
+            "wall,narrow",
+            "--backends",
+            "qpsolvers:daqp,pinv",
+            "--duration",
+            "0.5",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 1  # pinv breaks the speed limits (and goes through narrow's lower line)
     table = pd.read_csv(out / "closed_loop.csv")
     assert len(table) == 4 and (table["status"] == "ok").all()
     assert list(table["verdict"]) == ["ok", "limits", "ok", "unsafe"]
     assert main(["-q", "report", str(out / "closed_loop.csv"), "--out", str(out)]) == 0
     md = (out / "report.md").read_text()
-    failed = [t for t in parse_tables(md) if t["headings"].get(3) == "Runs that failed their verdict"]
-    assert len(failed) == 1 and failed[0]["header"] == ["scenario", "backend", "formulation", "verdict", "reasons"]
+    failed = [
+        t for t in parse_tables(md) if t["headings"].get(3) == "Runs that failed their verdict"
+    ]
+    assert len(failed) == 1 and failed[0]["header"] == [
+        "scenario",
+        "backend",
+        "formulation",
+        "verdict",
+        "reasons",
+    ]
     bad = table[table["verdict"] != "ok"]
-    assert [r[:4] for r in failed[0]["rows"]] == [[s, b, "paper", v] for s, b, v in
-                                                  zip(bad["scenario"], bad["backend"], bad["verdict"])]
+    assert [r[:4] for r in failed[0]["rows"]] == [
+        [s, b, "paper", v] for s, b, v in zip(bad["scenario"], bad["backend"], bad["verdict"])
+    ]
     assert [r[4] for r in failed[0]["rows"]] == list(bad["verdict_reasons"])
     tabs = [t for t in parse_tables(md) if (t["caption"] or "").startswith("Closed-loop metrics")]
     assert [t["headings"][3] for t in tabs] == ["Scenario wall (paper)", "Scenario narrow (paper)"]
@@ -126,7 +164,9 @@ def test_closed_loop_then_report(tmp_path):
         for r in t["rows"]:
             row = table[(table["scenario"] == scenario) & (table["backend"] == r[0])].iloc[0]
             head = t["header"]
-            assert_close(r[head.index("min obstacle dist (mm)")], row["min_obstacle_distance"] * 1e3, "dist")
+            assert_close(
+                r[head.index("min obstacle dist (mm)")], row["min_obstacle_distance"] * 1e3, "dist"
+            )
             assert_close(r[head.index("solve p99 (us)")], row["solve_time_p99_s"] * 1e6, "p99")
             assert_close(r[head.index("int v^2 dt")], row["v2_integral"], "v2")
             assert int(r[head.index("infeasible ticks")]) == row["infeasible_ticks"]
@@ -137,24 +177,45 @@ def test_closed_loop_then_report(tmp_path):
 
 def test_run_end_to_end(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    args = ["-q", "run", "--duration", "0.3", "--scenarios", "wall", "--backends", "qpsolvers:daqp,pinv",
-            "--out", "tmp"]
-    assert main(args) == 1  # pinv breaks the joint speed limits: its closed-loop verdict is "limits"
+    args = [
+        "-q",
+        "run",
+        "--duration",
+        "0.3",
+        "--scenarios",
+        "wall",
+        "--backends",
+        "qpsolvers:daqp,pinv",
+        "--out",
+        "tmp",
+    ]
+    assert (
+        main(args) == 1
+    )  # pinv breaks the joint speed limits: its closed-loop verdict is "limits"
     out = tmp_path / "tmp"
-    assert (tmp_path / "problems" / "wall" / "problems.parquet").exists()  # regenerated: none shipped here
+    assert (
+        tmp_path / "problems" / "wall" / "problems.parquet"
+    ).exists()  # regenerated: none shipped here
     assert len(pd.read_parquet(tmp_path / "problems" / "wall" / "problems.parquet")) == 2000
     bench = pd.read_csv(out / "bench" / "wall.csv.gz")
     assert set(bench["backend"]) == {"qpsolvers:daqp", "pinv"}
     assert (bench["t"] < 0.3).all() and len(bench) > 0
-    assert (bench["repeat"] == 3).all()  # run times every problem 3 times; the report uses the minimum
+    assert (
+        bench["repeat"] == 3
+    ).all()  # run times every problem 3 times; the report uses the minimum
     assert set(bench["position"]) == {0, 1} and (bench["order_seed"] == 0).all()
     loop = pd.read_csv(out / "closed_loop.csv")
-    assert sorted(loop["backend"]) == ["pinv", "qpsolvers:daqp"] and (loop["duration_s"] == 0.3).all()
+    assert (
+        sorted(loop["backend"]) == ["pinv", "qpsolvers:daqp"] and (loop["duration_s"] == 0.3).all()
+    )
     md = (out / "report.md").read_text()
     assert "## Per-tick benchmark" in md and "## Closed loop" in md
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["backends"] == ["qpsolvers:daqp", "pinv"]
-    assert manifest["closed_loop_not_ok"] == {"wall/pinv": "limits"} and manifest["run_budget_s"] == 5.0
+    assert (
+        manifest["closed_loop_not_ok"] == {"wall/pinv": "limits"}
+        and manifest["run_budget_s"] == 5.0
+    )
     assert not (out / ".partial").exists()
     # a second run replaces the previous run's outputs (run.json marks the folder as ours)
     first = (out / "closed_loop.csv").stat().st_mtime_ns
@@ -184,18 +245,53 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     monkeypatch.chdir(tmp_path)
     # a small problem set (30 ticks of wall) so the bench is quick
     (tmp_path / "problems").mkdir()
-    assert main(["-q", "simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.3",
-                 "--dump", "problems/wall", "--every", "10"]) == 0
-    args = ["-q", "run", "--duration", "0.3", "--scenarios", "wall,free", "--backends", f"daqp,{slow}", "--out", "r"]
+    assert (
+        main(
+            [
+                "-q",
+                "simulate",
+                "--scenario",
+                "wall",
+                "--backend",
+                "daqp",
+                "--duration",
+                "0.3",
+                "--dump",
+                "problems/wall",
+                "--every",
+                "10",
+            ]
+        )
+        == 0
+    )
+    args = [
+        "-q",
+        "run",
+        "--duration",
+        "0.3",
+        "--scenarios",
+        "wall,free",
+        "--backends",
+        f"daqp,{slow}",
+        "--out",
+        "r",
+    ]
     assert main(args) == 0
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv")
     assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(
-        (s, b) for s in ("wall", "free") for b in ("daqp", slow))
+        (s, b) for s in ("wall", "free") for b in ("daqp", slow)
+    )
     assert (loop["verdict"] == "ok").all() and loop["status"].isin(("ok", "budget")).all()
     assert (loop["ticks"] > 0).all()
     fast = loop[loop["backend"] == "daqp"]
-    assert (fast["status"] == "ok").all() and (fast["ticks"] == 300).all() and (fast["simulated_s"] == 0.3).all()
-    assert (loop.loc[loop["backend"] == slow, "real_time_factor"] < 1).all()  # slower than real time, still in
+    assert (
+        (fast["status"] == "ok").all()
+        and (fast["ticks"] == 300).all()
+        and (fast["simulated_s"] == 0.3).all()
+    )
+    assert (
+        loop.loc[loop["backend"] == slow, "real_time_factor"] < 1
+    ).all()  # slower than real time, still in
     manifest = json.loads((tmp_path / "r" / "run.json").read_text())
     assert "closed_loop_skipped" not in manifest and "min_rtf" not in manifest
     # a budget that runs out: the run stops and says how far it got, it is not left out
@@ -203,9 +299,12 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv").set_index(["scenario", "backend"])
     cut = loop.loc[("wall", slow)]
     assert cut["status"] == "budget" and 0 < cut["simulated_s"] < 0.3 and cut["verdict"] == "ok"
-    assert cut["verdict_reasons"].startswith(f"stopped at {cut['simulated_s']:.3g} s of 0.3 s (wall-time budget 0.2 s)")
-    assert json.loads((tmp_path / "r" / "run.json").read_text())["closed_loop_stopped_by_budget"][f"wall/{slow}"] == \
-        pytest.approx(cut["simulated_s"])
+    assert cut["verdict_reasons"].startswith(
+        f"stopped at {cut['simulated_s']:.3g} s of 0.3 s (wall-time budget 0.2 s)"
+    )
+    assert json.loads((tmp_path / "r" / "run.json").read_text())["closed_loop_stopped_by_budget"][
+        f"wall/{slow}"
+    ] == pytest.approx(cut["simulated_s"])
     with pytest.raises(SystemExit) as exc:  # no probe, no admission threshold
         main(["run", "--min-rtf", "1"])
     assert exc.value.code == 2
@@ -213,9 +312,9 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
 
 def test_run_bench_subset_keeps_the_time_between_records():
     """`run --bench-every K` keeps every K-th record: an online backend then integrates K record periods per call."""
-    from qpbench.harness.pipeline import bench_subset
     from qpbench.formats import read_problem_set
     from qpbench.harness.bench import record_period
+    from qpbench.harness.pipeline import bench_subset
 
     full = read_problem_set(Path(__file__).resolve().parents[1] / "problems" / "wall")
     subset, refs = bench_subset(full, None, 5)

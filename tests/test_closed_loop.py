@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from qpbench import selection
 from qpbench.cli import main
 from qpbench.exceptions import OutputExistsError, ParamError
-from qpbench import selection
 from qpbench.harness import closed_loop as cl
 from qpbench.harness import loop_rows as rows
 from qpbench.harness import loop_workers as workers
@@ -41,7 +41,12 @@ def test_table_has_one_row_per_pair(table_dir):
     assert (table["status"] == "ok").all(), table["error"].tolist()
     assert outcome.errors == 0 and outcome.ran == 4 and outcome.skipped == 0
     # simulator summary keys come along
-    for key in ("zero_velocity_ticks", "first_infeasible_t", "kp_hat_final", "joint_velocity_limit_violations"):
+    for key in (
+        "zero_velocity_ticks",
+        "first_infeasible_t",
+        "kp_hat_final",
+        "joint_velocity_limit_violations",
+    ):
         assert key in table.columns
     assert (table["duration_s"] == 0.5).all()
     assert (table["ticks"] == 500).all()
@@ -82,8 +87,14 @@ def test_a_row_is_the_summary_under_the_table_names(table_dir):
     table = pd.read_csv(out / rows.CSV_NAME)
     row = table[(table["scenario"] == "wall") & (table["backend"] == "pinv")].iloc[0]
     summary = simulate("wall", "pinv", duration=0.5).summary
-    timed = {"wall_time_s", "real_time_factor", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s",
-             "deadline_misses"}
+    timed = {
+        "wall_time_s",
+        "real_time_factor",
+        "solve_time_median_s",
+        "solve_time_p99_s",
+        "solve_time_max_s",
+        "deadline_misses",
+    }
     for key, value in summary.items():
         if key in timed or key in ("scenario", "backend"):
             continue
@@ -114,7 +125,9 @@ def test_structured_cells_are_json_and_the_report_reads_them_back(table_dir):
     counts = json.loads(narrow["status_counts"])
     assert sum(counts.values()) == narrow["ticks"]
     loops = read_results([out / rows.CSV_NAME]).closed_loop
-    read_back = loops[(loops["scenario"] == "narrow") & (loops["backend"] == "qpsolvers:daqp")].iloc[0]
+    read_back = loops[
+        (loops["scenario"] == "narrow") & (loops["backend"] == "qpsolvers:daqp")
+    ].iloc[0]
     assert read_back["status_counts"] == counts
     assert read_back["infeasible_intervals"] == json.loads(narrow["infeasible_intervals"])
     assert all(isinstance(v, list) for v in read_back["obstacle_active_intervals"].values())
@@ -130,17 +143,62 @@ def test_duplicate_backends_are_refused_like_in_bench(tmp_path, capsys):
     with pytest.raises(ParamError, match="twice"):
         cl.run_closed_loop(["wall"], ["pinv", "pinv"], tmp_path / "o", duration=0.05)
     out = tmp_path / "cli"
-    assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "pinv,daqp,pinv",
-                 "--duration", "0.05", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "-q",
+                "closed-loop",
+                "--scenarios",
+                "wall",
+                "--backends",
+                "pinv,daqp,pinv",
+                "--duration",
+                "0.05",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "'pinv' listed twice" in err
     assert not out.exists()
     # two spellings of one backend are one backend
-    assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "pinv,PINV",
-                 "--duration", "0.05", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "-q",
+                "closed-loop",
+                "--scenarios",
+                "wall",
+                "--backends",
+                "pinv,PINV",
+                "--duration",
+                "0.05",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "twice" in capsys.readouterr().err
-    assert main(["-q", "closed-loop", "--scenarios", "wall,wall", "--backends", "pinv",
-                 "--duration", "0.05", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "-q",
+                "closed-loop",
+                "--scenarios",
+                "wall,wall",
+                "--backends",
+                "pinv",
+                "--duration",
+                "0.05",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "'wall' listed twice" in capsys.readouterr().err
 
 
@@ -161,7 +219,9 @@ def test_resume_force_and_refusal(tmp_path):
     with pytest.raises(OutputExistsError):
         cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05)
     before = pd.read_csv(out / rows.CSV_NAME)
-    again = cl.run_closed_loop(["wall", "free"], ["pinv", "qpsolvers:daqp"], out, duration=0.05, resume=True)
+    again = cl.run_closed_loop(
+        ["wall", "free"], ["pinv", "qpsolvers:daqp"], out, duration=0.05, resume=True
+    )
     assert again.ran == 2 and again.skipped == 2  # only the new scenario runs
     kept = again.table[again.table["scenario"] == "wall"].reset_index(drop=True)
     pd.testing.assert_series_equal(kept["solve_time_p50_s"], before["solve_time_p50_s"])
@@ -170,7 +230,8 @@ def test_resume_force_and_refusal(tmp_path):
     assert longer.ran == 1
     # the pairs not asked for this time stay in the table
     assert sorted(zip(longer.table["scenario"], longer.table["backend"])) == sorted(
-        (s, b) for s in ("wall", "free") for b in ("pinv", "qpsolvers:daqp"))
+        (s, b) for s in ("wall", "free") for b in ("pinv", "qpsolvers:daqp")
+    )
     assert longer.table.iloc[0]["duration_s"] == 0.08
     forced = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05, force=True)
     assert forced.ran == 1 and len(forced.table) == 1
@@ -178,8 +239,9 @@ def test_resume_force_and_refusal(tmp_path):
 
 
 def test_skipped_backends_get_a_row(tmp_path):
-    outcome = cl.run_closed_loop(["wall"], ["pinv", "cvxpy"], tmp_path, duration=0.05,
-                                 skip={"cvxpy": "too slow here"})
+    outcome = cl.run_closed_loop(
+        ["wall"], ["pinv", "cvxpy"], tmp_path, duration=0.05, skip={"cvxpy": "too slow here"}
+    )
     table = outcome.table
     assert list(table["status"]) == ["ok", "skipped"]
     assert table["error"].iloc[1] == "too slow here"
@@ -198,7 +260,17 @@ def test_bad_parameters(tmp_path):
 
 def test_cli_exit_codes(tmp_path, capsys):
     out = tmp_path / "cli"
-    args = ["closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.05", "--out", str(out)]
+    args = [
+        "closed-loop",
+        "--scenarios",
+        "wall",
+        "--backends",
+        "daqp",
+        "--duration",
+        "0.05",
+        "--out",
+        str(out),
+    ]
     assert main(["-q", *args]) == 0
     assert main(["-q", *args]) == 2  # exists, no --force / --resume
     assert "--force" in capsys.readouterr().err
@@ -222,13 +294,21 @@ from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import faulty_backends as fb  # noqa: E402
+
 from qpbench.backends import load_plugins  # noqa: E402
 
 PLUGIN = str(Path(fb.__file__).resolve())
 
 #: Columns that hold timings (differ between two runs of the same thing).
-TIMED = ("solve_time_p50_s", "solve_time_p99_s", "solve_time_max_s", "real_time_factor", "solve_time_median_s",
-         "wall_time_s", "deadline_misses")
+TIMED = (
+    "solve_time_p50_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "real_time_factor",
+    "solve_time_median_s",
+    "wall_time_s",
+    "deadline_misses",
+)
 
 
 def _untimed(row: pd.Series) -> pd.Series:
@@ -236,7 +316,9 @@ def _untimed(row: pd.Series) -> pd.Series:
 
 
 def _same_daqp_run(out_a, row_a, out_b, row_b):
-    pd.testing.assert_series_equal(_untimed(row_a).sort_index(), _untimed(row_b).sort_index(), check_names=False)
+    pd.testing.assert_series_equal(
+        _untimed(row_a).sort_index(), _untimed(row_b).sort_index(), check_names=False
+    )
     log_a = pd.read_parquet(out_a / row_a["log_file"]).drop(columns="solve_time_s")
     log_b = pd.read_parquet(out_b / row_b["log_file"]).drop(columns="solve_time_s")
     pd.testing.assert_frame_equal(log_a, log_b)
@@ -245,15 +327,44 @@ def _same_daqp_run(out_a, row_a, out_b, row_b):
 @pytest.fixture(scope="module")
 def daqp_alone(tmp_path_factory):
     out = tmp_path_factory.mktemp("alone")
-    assert main(["-q", "closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.1",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "-q",
+                "closed-loop",
+                "--scenarios",
+                "wall",
+                "--backends",
+                "daqp",
+                "--duration",
+                "0.1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out, pd.read_csv(out / rows.CSV_NAME).iloc[0]
 
 
 def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alone):
     out = tmp_path / "o"
-    args = ["-q", "closed-loop", "--scenarios", "wall", "--backends", "faulty:segfault,faulty:hang,daqp",
-            "--duration", "0.1", "--out", str(out), "--run-time-limit", "4", "--plugin", PLUGIN]
+    args = [
+        "-q",
+        "closed-loop",
+        "--scenarios",
+        "wall",
+        "--backends",
+        "faulty:segfault,faulty:hang,daqp",
+        "--duration",
+        "0.1",
+        "--out",
+        str(out),
+        "--run-time-limit",
+        "4",
+        "--plugin",
+        PLUGIN,
+    ]
     assert main(args) == 1  # failed runs
     table = pd.read_csv(out / rows.CSV_NAME)
     assert list(table["backend"]) == ["faulty:segfault", "faulty:hang", "daqp"]
@@ -263,35 +374,52 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     assert crashed["verdict"] == hung["verdict"] == "failed" and daqp["verdict"] == "ok"
     assert crashed["verdict_reasons"].startswith("run crashed: worker process killed by SIGSEGV")
     assert hung["verdict_reasons"].startswith("run overran its deadline: no result after 4 s")
-    assert bool(crashed["isolated"]) and bool(hung["isolated"]) and not bool(daqp["isolated"])  # auto: risky ones
+    assert (
+        bool(crashed["isolated"]) and bool(hung["isolated"]) and not bool(daqp["isolated"])
+    )  # auto: risky ones
     assert daqp["status"] == "ok"
     _same_daqp_run(out, daqp, *daqp_alone)
-    assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == ["wall__daqp.parquet"]  # no partial logs
+    assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == [
+        "wall__daqp.parquet"
+    ]  # no partial logs
     # resume keeps the ok row and retries only the failed ones
     seen = []
     load_plugins([PLUGIN])  # what the CLI's --plugin did: the workers load it too
-    outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp"], out, duration=0.1, resume=True,
-                                 on_row=seen.append)
+    outcome = cl.run_closed_loop(
+        ["wall"], ["faulty:segfault", "daqp"], out, duration=0.1, resume=True, on_row=seen.append
+    )
     assert [r["backend"] for r in seen] == ["faulty:segfault"] and outcome.errors == 2
 
 
 def test_parallel_runs_survive_a_crash(tmp_path, daqp_alone):
     out = tmp_path / "p"
     load_plugins([PLUGIN])
-    outcome = cl.run_closed_loop(["wall"], ["faulty:segfault", "daqp", "faulty-ticks:raise"], out, duration=0.1,
-                                 jobs=2, isolate="always")
+    outcome = cl.run_closed_loop(
+        ["wall"],
+        ["faulty:segfault", "daqp", "faulty-ticks:raise"],
+        out,
+        duration=0.1,
+        jobs=2,
+        isolate="always",
+    )
     table = outcome.table.set_index("backend")
     assert table.loc["faulty:segfault", "status"] == "crashed"
     assert table.loc["daqp", "status"] == "ok" and table.loc["faulty-ticks:raise", "status"] == "ok"
     assert table["isolated"].all() and outcome.errors == 1
     alone_out, alone_row = daqp_alone
-    _same_daqp_run(out, outcome.table.iloc[1].drop("isolated"), alone_out, alone_row.drop("isolated"))
+    _same_daqp_run(
+        out, outcome.table.iloc[1].drop("isolated"), alone_out, alone_row.drop("isolated")
+    )
     # the per-tick guards' counts reach the table (the test plugin loaded in the worker)
     raised = table.loc["faulty-ticks:raise"]
-    assert raised["error_ticks"] == len(fb.fault_ticks(100)) and raised["first_error"].startswith("RuntimeError")
+    assert raised["error_ticks"] == len(fb.fault_ticks(100)) and raised["first_error"].startswith(
+        "RuntimeError"
+    )
     assert raised["fallback_ticks"] >= raised["error_ticks"]
     # the verdict is the simulator's, copied: a backend that raises on ticks fails it
-    assert raised["verdict"] == "failed" and raised["verdict_reasons"].startswith("10 ticks with an error (first at ")
+    assert raised["verdict"] == "failed" and raised["verdict_reasons"].startswith(
+        "10 ticks with an error (first at "
+    )
     assert outcome.not_ok == 2  # the crashed run and the raising backend
 
 
@@ -314,20 +442,36 @@ from slow_backends import registered  # noqa: E402
 def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
     """pinv ignores obstacles: its A2 dips below d_safe - 0.5 mm at 1.48 s of wall; daqp keeps d_safe."""
     out = tmp_path / "o"
-    code = main(["closed-loop", "--scenarios", "wall", "--backends", "daqp,pinv", "--duration", "1.6",
-                 "--out", str(out)])
+    code = main(
+        [
+            "closed-loop",
+            "--scenarios",
+            "wall",
+            "--backends",
+            "daqp,pinv",
+            "--duration",
+            "1.6",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 1
     table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]
     assert daqp["verdict"] == "ok" and math.isnan(daqp["verdict_reasons"])  # empty in the CSV
     assert pinv["status"] == "ok" and pinv["verdict"] == "unsafe"
-    assert pinv["verdict_reasons"].startswith(f"d_min {pinv['min_obstacle_distance'] * 1e3:.1f} mm < d_safe - 0.5 mm = 9.5 mm")
+    assert pinv["verdict_reasons"].startswith(
+        f"d_min {pinv['min_obstacle_distance'] * 1e3:.1f} mm < d_safe - 0.5 mm = 9.5 mm"
+    )
     assert pinv["min_obstacle_distance"] < 0.0095
     # the verdict is the simulator's, never recomputed: the tick log gives the same one
     from qpbench.sim.loop import simulate
 
     again = simulate("wall", "pinv", duration=1.6).summary
-    assert (again["verdict"], again["verdict_reasons"]) == (pinv["verdict"], pinv["verdict_reasons"])
+    assert (again["verdict"], again["verdict_reasons"]) == (
+        pinv["verdict"],
+        pinv["verdict_reasons"],
+    )
     err = capsys.readouterr().err
     assert f"WARNING: wall / pinv: unsafe ({pinv['verdict_reasons']})" in err
     assert "INFO: wall / daqp: ok" in err
@@ -335,8 +479,23 @@ def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
 
 def test_exact_backend_short_run_is_ok_and_exits_0(tmp_path):
     out = tmp_path / "o"
-    assert main(["-q", "closed-loop", "--scenarios", "wall,narrow", "--backends", "qpsolvers:daqp", "--duration", "0.3",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "-q",
+                "closed-loop",
+                "--scenarios",
+                "wall,narrow",
+                "--backends",
+                "qpsolvers:daqp",
+                "--duration",
+                "0.3",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     table = pd.read_csv(out / rows.CSV_NAME)
     assert (table["verdict"] == "ok").all() and (table["simulated_s"] == 0.3).all()
 
@@ -344,13 +503,27 @@ def test_exact_backend_short_run_is_ok_and_exits_0(tmp_path):
 def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     slow = registered(monkeypatch)  # about 4 ms per tick: 1 s of simulated time takes about 4 s
     out = tmp_path / "cut"
-    args = ["closed-loop", "--scenarios", "wall", "--backends", slow, "--duration", "1.0", "--isolate", "never"]
-    assert main([*args, "--out", str(out), "--run-budget", "0.4"]) == 0  # stopped early is not a failure
+    args = [
+        "closed-loop",
+        "--scenarios",
+        "wall",
+        "--backends",
+        slow,
+        "--duration",
+        "1.0",
+        "--isolate",
+        "never",
+    ]
+    assert (
+        main([*args, "--out", str(out), "--run-budget", "0.4"]) == 0
+    )  # stopped early is not a failure
     row = pd.read_csv(out / rows.CSV_NAME).iloc[0]
     assert row["status"] == "budget" and row["verdict"] == "ok" and row["run_budget_s"] == 0.4
     assert 0 < row["simulated_s"] < row["duration_s"] == 1.0
     assert row["ticks"] == round(row["simulated_s"] / 0.001)
-    assert row["verdict_reasons"].startswith(f"stopped at {row['simulated_s']:.3g} s of 1 s (wall-time budget 0.4 s)")
+    assert row["verdict_reasons"].startswith(
+        f"stopped at {row['simulated_s']:.3g} s of 1 s (wall-time budget 0.4 s)"
+    )
     assert row["real_time_factor"] == pytest.approx(row["simulated_s"] / row["wall_time_s"])
     assert "INFO: wall / test-slow-exact: ok (budget; stopped at" in capsys.readouterr().err
     cut_log = pd.read_parquet(out / row["log_file"])
@@ -361,13 +534,19 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     whole = pd.read_csv(whole_out / rows.CSV_NAME).iloc[0]
     assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
     whole_log = pd.read_parquet(whole_out / whole["log_file"])
-    pd.testing.assert_frame_equal(cut_log.drop(columns="solve_time_s"),
-                                  whole_log.drop(columns="solve_time_s").iloc[: len(cut_log)])
+    pd.testing.assert_frame_equal(
+        cut_log.drop(columns="solve_time_s"),
+        whole_log.drop(columns="solve_time_s").iloc[: len(cut_log)],
+    )
     # resume keeps a budget row made under the same budget, and reruns it under another
     seen = []
-    cl.run_closed_loop(["wall"], [slow], out, duration=1.0, resume=True, run_budget=0.4, on_row=seen.append)
+    cl.run_closed_loop(
+        ["wall"], [slow], out, duration=1.0, resume=True, run_budget=0.4, on_row=seen.append
+    )
     assert seen == []
-    cl.run_closed_loop(["wall"], [slow], out, duration=1.0, resume=True, run_budget=0.3, on_row=seen.append)
+    cl.run_closed_loop(
+        ["wall"], [slow], out, duration=1.0, resume=True, run_budget=0.3, on_row=seen.append
+    )
     assert len(seen) == 1 and seen[0]["status"] == "budget"
 
 

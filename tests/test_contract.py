@@ -49,7 +49,9 @@ TOLERANCE = {"proxqp": 1e-5, "qpsolvers:proxqp": 1e-5}
 def _slice(name: str, count: int):
     pset = load_problems(ROOT / name)
     start = SETS[name]
-    return replace(pset, records=pset.records[start : start + count], path=None, sha256=None, files=[])
+    return replace(
+        pset, records=pset.records[start : start + count], path=None, sha256=None, files=[]
+    )
 
 
 def _run(monkeypatch, tmp_path, pset, backend: str, repeat: int, mode: str, refs):
@@ -58,13 +60,17 @@ def _run(monkeypatch, tmp_path, pset, backend: str, repeat: int, mode: str, refs
 
     class Recording(LocalRunner):
         def solve(self, problem, repeat=1, reset_before=False, prev_problem=None):
-            out = super().solve(problem, repeat=repeat, reset_before=reset_before, prev_problem=prev_problem)
+            out = super().solve(
+                problem, repeat=repeat, reset_before=reset_before, prev_problem=prev_problem
+            )
             x = None if out.solution is None or out.solution.x is None else np.array(out.solution.x)
             seen.append((out.status, x, out.error))
             return out
 
     monkeypatch.setattr(hb, "LocalRunner", Recording)
-    config = hb.BenchConfig(backends=[backend], repeat=repeat, mode=mode, isolate="never", time_limit=60.0)
+    config = hb.BenchConfig(
+        backends=[backend], repeat=repeat, mode=mode, isolate="never", time_limit=60.0
+    )
     hb.run_bench(pset, config, tmp_path / f"{mode}-{repeat}.csv", force=True, references=refs)
     return seen
 
@@ -89,7 +95,9 @@ def _shipped_backends() -> list[str]:
     """Registered, available backends of the package (not those the other tests register to inject faults)."""
     from qpbench.backends import backend_class
 
-    return [name for name in backend_names() if backend_class(name).__module__.startswith("qpbench.")]
+    return [
+        name for name in backend_names() if backend_class(name).__module__.startswith("qpbench.")
+    ]
 
 
 @pytest.mark.parametrize("backend", _shipped_backends())
@@ -127,4 +135,6 @@ def test_daqp_deep_copy_solves_the_new_problem():
     backend.solve(records[0].problem)
     twin = copy.deepcopy(backend)
     for rec in records[1:]:
-        np.testing.assert_array_equal(twin.solve(rec.problem).x, get_backend("daqp-stateless").solve(rec.problem).x)
+        np.testing.assert_array_equal(
+            twin.solve(rec.problem).x, get_backend("daqp-stateless").solve(rec.problem).x
+        )

@@ -13,7 +13,12 @@ from qpbench.control.controller import Controller, build_problem
 from qpbench.control.terms import CosinePath, EscapeVelocityLimits, ImpedanceTask, PolylinePath
 from qpbench.exceptions import ParamError
 from qpbench.packed import PackedProblem
-from qpbench.robot.environment import DiskObstacle, LineObstacle, PointCloudObstacle, SegmentObstacle
+from qpbench.robot.environment import (
+    DiskObstacle,
+    LineObstacle,
+    PointCloudObstacle,
+    SegmentObstacle,
+)
 from qpbench.robot.kinematics import PlanarArm, default_key_points
 from qpbench.sim.scenario import load_scenario
 
@@ -38,7 +43,9 @@ def fd_jac(lengths, theta, link, frac, h=1e-7):
     for k in range(len(theta)):
         e = np.zeros(len(theta))
         e[k] = h
-        cols.append((fk(lengths, theta + e, link, frac) - fk(lengths, theta - e, link, frac)) / (2 * h))
+        cols.append(
+            (fk(lengths, theta + e, link, frac) - fk(lengths, theta - e, link, frac)) / (2 * h)
+        )
     return np.array(cols).T
 
 
@@ -91,7 +98,9 @@ def runs():
     from qpbench.sim.loop import simulate
 
     names = backend_names()
-    backend = next((b for b in ("qpsolvers:daqp", "qpsolvers:clarabel", "clarabel") if b in names), None)
+    backend = next(
+        (b for b in ("qpsolvers:daqp", "qpsolvers:clarabel", "clarabel") if b in names), None
+    )
     if backend is None:
         pytest.skip("no QP backend available")
     return {s: simulate(s, backend, duration=3.0).log for s in SCENARIOS}
@@ -115,7 +124,9 @@ def test_independent_cvxpy_model_has_the_same_optimum(runs, name, formulation):
         problem = build_problem(ctrl, theta, t, kp, kd, formulation)
         ref, const = independent_qp(sc.data, theta, t, kp, kd, formulation)
         ref.solve(solver=cp.CLARABEL)
-        sol = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10)
+        sol = qpsolvers.solve_problem(
+            problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10
+        )
         if ref.status in ("infeasible", "infeasible_inaccurate"):
             assert formulation == "paper"
             assert not sol.found, f"{name} tick {k}: cvxpy infeasible, exported problem solved"
@@ -125,11 +136,15 @@ def test_independent_cvxpy_model_has_the_same_optimum(runs, name, formulation):
         assert sol.found, f"{name} tick {k}: exported problem not solved, cvxpy optimal"
         obj = 0.5 * sol.x @ problem.P @ sol.x + problem.q @ sol.x
         assert obj + const == pytest.approx(ref.value, rel=1e-5, abs=1e-7), (name, k)
-        np.testing.assert_allclose(sol.x, ref.variables()[0].value, atol=2e-5, err_msg=f"{name} tick {k}")
+        np.testing.assert_allclose(
+            sol.x, ref.variables()[0].value, atol=2e-5, err_msg=f"{name} tick {k}"
+        )
         if problem.G is not None and np.any(problem.G @ sol.x > problem.h - 1e-7):
             n_active += 1
     if formulation == "paper":
-        assert n_infeasible >= 1  # the paper formulation is infeasible at the start of every scenario
+        assert (
+            n_infeasible >= 1
+        )  # the paper formulation is infeasible at the start of every scenario
     if name in ("wall", "narrow"):
         assert n_active >= 1  # some sampled tick has an active obstacle row
 
@@ -141,7 +156,9 @@ def make_controller(obstacles, n=4, radius=0.0, path=None):
     path = path or CosinePath([0.4, 0.5], [0.1, 0.1], [0.5, 0.5], [0.1, -0.2])
     task = ImpedanceTask(path, np.array([1.0, -1.0]) / np.sqrt(2), 20.0)
     lim = EscapeVelocityLimits(-3 * np.ones(n), 3 * np.ones(n), -np.ones(n), np.ones(n), 8.0)
-    return Controller(arm, kps, task, lim, obstacles, k=10.0, d_safe=0.01, rho=1e4, kp=5000.0, kd=50.0)
+    return Controller(
+        arm, kps, task, lim, obstacles, k=10.0, d_safe=0.01, rho=1e4, kp=5000.0, kd=50.0
+    )
 
 
 ALL_KINDS = [
@@ -210,7 +227,11 @@ def test_fast_problem_equals_qpsolvers_constructor(formulation, obstacles):
         for mine in (getattr(p, key), getattr(unpacked, key)):
             assert (mine is None) == (value is None), key
             if value is not None:
-                assert type(mine) is type(value) and mine.dtype == value.dtype and mine.shape == value.shape, key
+                assert (
+                    type(mine) is type(value)
+                    and mine.dtype == value.dtype
+                    and mine.shape == value.shape
+                ), key
                 assert mine.flags.c_contiguous and np.shares_memory(mine, p.buffer), key
                 np.testing.assert_array_equal(mine, value)
     p.check_constraints()
@@ -223,7 +244,9 @@ def test_impedance_reference_equilibrium():
     task = ctrl.task
     xdx, xdy, vdx, vdy = task.path(1.3)
     x = np.array([xdx, xdy]) + 20.0 / 5000.0 * task.normal
-    np.testing.assert_allclose(task.impedance_reference(x, 1.3, 5000.0, 50.0), [vdx, vdy], atol=1e-14)
+    np.testing.assert_allclose(
+        task.impedance_reference(x, 1.3, 5000.0, 50.0), [vdx, vdy], atol=1e-14
+    )
 
 
 # -- obstacle rows against finite differences of the distance --------------------------
@@ -246,7 +269,9 @@ def test_obstacle_rows_are_distance_derivatives(obstacle):
         dtm = ctrl.build(theta, t - h).distances.reshape(-1)
         ok = d > 1e-3  # away from the kink of |A - B| at 0
         np.testing.assert_allclose((-tick.problem.G @ v)[ok], ((dp - dm) / (2 * h))[ok], atol=1e-6)
-        np.testing.assert_allclose(tick.problem.h[ok], (10.0 * (d - 0.01) + (dtp - dtm) / (2 * h))[ok], atol=1e-6)
+        np.testing.assert_allclose(
+            tick.problem.h[ok], (10.0 * (d - 0.01) + (dtp - dtm) / (2 * h))[ok], atol=1e-6
+        )
         checked += ok.sum()
     assert checked > 50
 

@@ -15,10 +15,15 @@ pytestmark = pytest.mark.skipif("daqp" not in backend_names(), reason="daqp unav
 
 def test_settings_come_from_the_profile_and_unknown_ones_are_refused():
     assert get_backend("daqp-stateless", "high_accuracy").options() == {
-        "primal_tol": 1e-10, "dual_tol": 1e-10, "iter_limit": 1_000_000, "time_limit": 10.0,
+        "primal_tol": 1e-10,
+        "dual_tol": 1e-10,
+        "iter_limit": 1_000_000,
+        "time_limit": 10.0,
     }
     options = get_backend("daqp-stateless", "low_accuracy", max_iter=7, eps_prox=0.0).options()
-    assert options["iter_limit"] == 7 and options["primal_tol"] == 1e-4 and options["eps_prox"] == 0.0
+    assert (
+        options["iter_limit"] == 7 and options["primal_tol"] == 1e-4 and options["eps_prox"] == 0.0
+    )
     with pytest.raises(ParamError) as err:
         get_backend("daqp-stateless", primal_tolerance=1e-3)
     assert err.value.key == "primal_tolerance" and "primal_tol" in str(err.value)
@@ -26,20 +31,38 @@ def test_settings_come_from_the_profile_and_unknown_ones_are_refused():
 
 def test_singular_p_needs_daqps_proximal_iterations():
     """P = diag(1, 0): solved with DAQP's default automatic regularisation; eps_prox = 0 refuses it."""
-    problem = qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([1.0, 1.0]), None, None, None, None,
-                                -np.ones(2), np.ones(2))
+    problem = qpsolvers.Problem(
+        np.diag([1.0, 0.0]), np.array([1.0, 1.0]), None, None, None, None, -np.ones(2), np.ones(2)
+    )
     sol = get_backend("daqp-stateless", "high_accuracy").solve(problem)
     assert sol.status == "optimal"
     np.testing.assert_allclose(sol.x, [-1.0, -1.0], atol=1e-9)
-    np.testing.assert_allclose(sol.z_box, [0.0, -1.0], atol=1e-9)  # only the lower bound of x2 is active
+    np.testing.assert_allclose(
+        sol.z_box, [0.0, -1.0], atol=1e-9
+    )  # only the lower bound of x2 is active
     refused = get_backend("daqp-stateless", eps_prox=0.0).solve(problem)
-    assert refused.status == "error" and "NONCONVEX" in refused.error and refused.x is None and not refused.found
+    assert (
+        refused.status == "error"
+        and "NONCONVEX" in refused.error
+        and refused.x is None
+        and not refused.found
+    )
 
 
 @pytest.mark.parametrize(
     "flag, status",
-    [(1, "optimal"), (2, "optimal"), (-1, "primal_infeasible"), (-2, "max_iter"), (-3, "dual_infeasible"),
-     (-4, "max_iter"), (-5, "error"), (-6, "error"), (-7, "time_limit"), (-99, "error")],
+    [
+        (1, "optimal"),
+        (2, "optimal"),
+        (-1, "primal_infeasible"),
+        (-2, "max_iter"),
+        (-3, "dual_infeasible"),
+        (-4, "max_iter"),
+        (-5, "error"),
+        (-6, "error"),
+        (-7, "time_limit"),
+        (-99, "error"),
+    ],
 )
 def test_exit_flags_become_statuses(monkeypatch, flag, status):
     """Each DAQP exit flag maps to one status; only an optimal one carries x, duals and objective."""
@@ -97,8 +120,11 @@ def test_same_answer_as_qpsolvers_route_on_robot_ticks():
 def test_buffers_are_per_shape_and_do_not_leak_between_calls():
     """Alternating shapes (two problems share one) and one without box: each answer is the known one."""
     rng = np.random.default_rng(11)
-    cases = [random_kkt_problem(rng, 6, 2, 5, 2), random_kkt_problem(rng, 5, 0, 4, 1),
-             random_kkt_problem(rng, 6, 2, 5, 3)]
+    cases = [
+        random_kkt_problem(rng, 6, 2, 5, 2),
+        random_kkt_problem(rng, 5, 0, 4, 1),
+        random_kkt_problem(rng, 6, 2, 5, 3),
+    ]
     p, x, y, z, z_box = random_kkt_problem(rng, 4, 1, 3, 1, False)  # no box
     cases.append((p, x, y, z, z_box))
     backend = get_backend("daqp-stateless", "high_accuracy")

@@ -36,7 +36,9 @@ def test_problems_readme_python_snippets_run(workdir):
     blocks = snippets(ROOT / "problems" / "README.md", "python")
     assert blocks, "problems/README.md has no python snippet"
     for code in blocks:
-        proc = subprocess.run([sys.executable, "-c", code], cwd=workdir, capture_output=True, text=True, timeout=300)
+        proc = subprocess.run(
+            [sys.executable, "-c", code], cwd=workdir, capture_output=True, text=True, timeout=300
+        )
         assert proc.returncode == 0, proc.stderr
 
 
@@ -45,20 +47,36 @@ def test_problems_readme_shell_snippets_run(workdir):
     assert blocks
     env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
     for block in blocks:
-        proc = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=workdir, env=env,
-                              capture_output=True, text=True, timeout=600)
+        proc = subprocess.run(
+            ["bash", "-euo", "pipefail", "-c", block],
+            cwd=workdir,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert proc.returncode == 0, proc.stderr
     assert (workdir / "wall.csv").exists()
 
 
 def test_problems_readme_own_scenario_snippet_runs(workdir):
     """Start from a shipped scenario file and simulate it, as problems/README.md says."""
-    blocks = [b for b in snippets(ROOT / "problems" / "README.md", "bash") if "qpbench scenarios show" in b]
+    blocks = [
+        b
+        for b in snippets(ROOT / "problems" / "README.md", "bash")
+        if "qpbench scenarios show" in b
+    ]
     assert blocks
     env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
     for block in blocks:
-        proc = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=workdir, env=env,
-                              capture_output=True, text=True, timeout=600)
+        proc = subprocess.run(
+            ["bash", "-euo", "pipefail", "-c", block],
+            cwd=workdir,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert proc.returncode == 0, proc.stderr
     assert (workdir / "my.toml").read_text().startswith("# Paper section 4.3")
 
@@ -78,11 +96,23 @@ def test_top_level_help_has_examples(capsys):
 
 
 def test_list_selects_and_prints_json(capsys):
-    assert main(["list", str(ROOT / "problems" / "wall"), "--every", "100", "--limit", "3", "--json"]) == 0
+    assert (
+        main(["list", str(ROOT / "problems" / "wall"), "--every", "100", "--limit", "3", "--json"])
+        == 0
+    )
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [r["tick"] for r in rows] == [0, 1000, 2000]
-    assert rows[0] == {"name": "wall_paper_000000", "n": 4, "m_eq": 2, "m_ineq": 7, "n_box": 8,
-                       "scenario": "wall", "tick": 0, "t": 0.0, "formulation": "paper"}
+    assert rows[0] == {
+        "name": "wall_paper_000000",
+        "n": 4,
+        "m_eq": 2,
+        "m_ineq": 7,
+        "n_box": 8,
+        "scenario": "wall",
+        "tick": 0,
+        "t": 0.0,
+        "formulation": "paper",
+    }
 
 
 def test_list_pattern_that_matches_nothing(capsys):
@@ -94,8 +124,21 @@ def test_list_pattern_that_matches_nothing(capsys):
 def test_export_round_trip(tmp_path, fmt):
     src = read_problem_set(ROOT / "problems" / "narrow")
     out = tmp_path / "out"
-    assert main(["export", str(ROOT / "problems" / "narrow"), "--format", fmt, "--problems", "narrow_paper_0001*",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(ROOT / "problems" / "narrow"),
+                "--format",
+                fmt,
+                "--problems",
+                "narrow_paper_0001*",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     back = load_problems(out)
     expected = [r for r in src.records if r.name.startswith("narrow_paper_0001")]
     assert [r.name for r in back.records] == [r.name for r in expected]
@@ -136,9 +179,27 @@ def test_bench_on_a_selection(tmp_path, capsys):
     out = tmp_path / "hs.csv"
     cache = sorted((ROOT / "problems" / "maros_meszaros").glob("reference-*.parquet"))
     before = [p.read_bytes() for p in cache]
-    assert main(["-q", "bench", str(ROOT / "problems" / "maros_meszaros"), "--problems", "HS*", "--limit", "3",
-                 "--backends", "DAQP,Clarabel", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "-q",
+                "bench",
+                str(ROOT / "problems" / "maros_meszaros"),
+                "--problems",
+                "HS*",
+                "--limit",
+                "3",
+                "--backends",
+                "DAQP,Clarabel",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     rows = list(csv.DictReader(out.open()))
     assert sorted({r["problem"] for r in rows}) == ["HS118", "HS21", "HS35"]
     assert {r["backend"] for r in rows} == {"daqp", "clarabel"}
-    assert [p.read_bytes() for p in cache] == before  # the set's reference cache is read, not shrunk
+    assert [
+        p.read_bytes() for p in cache
+    ] == before  # the set's reference cache is read, not shrunk

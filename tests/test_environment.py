@@ -47,11 +47,18 @@ def brute_force_distance(sample_points, A):
 
 
 OBSTACLES = [
-    (SegmentObstacle("seg", [0.1, 0.2], [0.4, -0.1], velocity=[0.05, -0.02]),
-     lambda t: np.linspace([0.1, 0.2], [0.4, -0.1], 20001) + np.array([0.05, -0.02]) * t),
-    (DiskObstacle("disk", [0.3, 0.1], 0.07, velocity=[-0.1, 0.0]),
-     lambda t: np.array([0.3, 0.1]) + np.array([-0.1, 0.0]) * t
-     + 0.07 * np.stack([np.cos(a := np.linspace(0, 2 * np.pi, 40001)), np.sin(a)], axis=1)),
+    (
+        SegmentObstacle("seg", [0.1, 0.2], [0.4, -0.1], velocity=[0.05, -0.02]),
+        lambda t: np.linspace([0.1, 0.2], [0.4, -0.1], 20001) + np.array([0.05, -0.02]) * t,
+    ),
+    (
+        DiskObstacle("disk", [0.3, 0.1], 0.07, velocity=[-0.1, 0.0]),
+        lambda t: (
+            np.array([0.3, 0.1])
+            + np.array([-0.1, 0.0]) * t
+            + 0.07 * np.stack([np.cos(a := np.linspace(0, 2 * np.pi, 40001)), np.sin(a)], axis=1)
+        ),
+    ),
 ]
 
 
@@ -64,7 +71,10 @@ def test_closest_point_matches_brute_force(obstacle, samples):
         S = samples(t)
         for i in range(len(A)):
             d_ref = brute_force_distance(S, A[i])
-            if isinstance(obstacle, DiskObstacle) and np.linalg.norm(A[i] - obstacle.center - obstacle.velocity * t) < obstacle.radius:
+            if (
+                isinstance(obstacle, DiskObstacle)
+                and np.linalg.norm(A[i] - obstacle.center - obstacle.velocity * t) < obstacle.radius
+            ):
                 continue  # inside the disk: distance is negative by design
             assert dist[i, 0] == pytest.approx(d_ref, abs=2e-5)
             # B is the closest point: on the shape, |A - B| = dist

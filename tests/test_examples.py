@@ -33,8 +33,18 @@ SLICE = {
     "bench": ["--limit", "5"],
     "simulate": ["--duration", "0.05"],
     "closed-loop": ["--duration", "0.05"],
-    "run": ["--duration", "0.05", "--bench-every", "400", "--repeat", "1", "--scenarios", "wall",
-            "--backends", "qpsolvers:daqp,pinv"],
+    "run": [
+        "--duration",
+        "0.05",
+        "--bench-every",
+        "400",
+        "--repeat",
+        "1",
+        "--scenarios",
+        "wall",
+        "--backends",
+        "qpsolvers:daqp,pinv",
+    ],
     "scaling": ["--sizes", "n4-p1-m1", "--duration", "0.05", "--repeat", "1"],
     "sweep": ["--samples", "2", "--duration", "0.05"],
 }
@@ -52,7 +62,11 @@ def sliced(command: str) -> str:
     options = SLICE.get(sub, [])
     for i, word in enumerate(options):
         if word.startswith("--") and word not in words:
-            extra += [word] + ([options[i + 1]] if i + 1 < len(options) and not options[i + 1].startswith("--") else [])
+            extra += [word] + (
+                [options[i + 1]]
+                if i + 1 < len(options) and not options[i + 1].startswith("--")
+                else []
+            )
     if not extra:
         return command
     head, sep, tail = command.partition(" >")
@@ -68,10 +82,15 @@ def help_examples() -> list[tuple[str, str]]:
     return out
 
 
-def readme_snippets(path: Path, languages=("bash", "sh", "shell", "python")) -> list[tuple[str, str]]:
+def readme_snippets(
+    path: Path, languages=("bash", "sh", "shell", "python")
+) -> list[tuple[str, str]]:
     """``(language, code)`` of the fenced blocks of ``path`` in ``languages`` (untagged blocks show output)."""
-    return [(lang, code) for lang, code in re.findall(r"```(\w*)\n(.*?)```", path.read_text(), flags=re.S)
-            if lang in languages]
+    return [
+        (lang, code)
+        for lang, code in re.findall(r"```(\w*)\n(.*?)```", path.read_text(), flags=re.S)
+        if lang in languages
+    ]
 
 
 @pytest.fixture
@@ -85,12 +104,20 @@ def workdir(tmp_path_factory):
 
 def _run(command: str, cwd: Path) -> subprocess.CompletedProcess:
     env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
-    return subprocess.run(["bash", "-euo", "pipefail", "-c", command], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=900)
+    return subprocess.run(
+        ["bash", "-euo", "pipefail", "-c", command],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
 
 
 def _bash_lines(code: str) -> list[str]:
-    return [line for line in code.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    return [
+        line for line in code.splitlines() if line.strip() and not line.lstrip().startswith("#")
+    ]
 
 
 EXAMPLES = help_examples()
@@ -117,8 +144,13 @@ def test_readme_snippets_run(readme, workdir):
     assert snippets
     for lang, code in snippets:
         if lang == "python":
-            proc = subprocess.run([sys.executable, "-c", code], cwd=workdir, capture_output=True, text=True,
-                                  timeout=600)
+            proc = subprocess.run(
+                [sys.executable, "-c", code],
+                cwd=workdir,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
             assert proc.returncode == 0, f"{code}\n{proc.stderr[-3000:]}"
             continue
         for line in _bash_lines(code):
@@ -131,7 +163,12 @@ def test_readme_snippets_run(readme, workdir):
 
 def test_slice_rule():
     assert sliced("qpbench bench problems/wall --backends daqp --out x.csv") == (
-        "qpbench bench problems/wall --backends daqp --out x.csv --limit 5")
+        "qpbench bench problems/wall --backends daqp --out x.csv --limit 5"
+    )
     assert sliced("qpbench bench p --limit 3 --backends daqp --out x.csv").endswith("--out x.csv")
-    assert sliced("qpbench scenarios show wall > my.toml") == "qpbench scenarios show wall > my.toml"
-    assert sliced(".venv/bin/qpbench run").startswith(".venv/bin/qpbench run --duration 0.05 --bench-every 400")
+    assert (
+        sliced("qpbench scenarios show wall > my.toml") == "qpbench scenarios show wall > my.toml"
+    )
+    assert sliced(".venv/bin/qpbench run").startswith(
+        ".venv/bin/qpbench run --duration 0.05 --bench-every 400"
+    )

@@ -36,11 +36,24 @@ def _records(random_qp):
     out = []
     for i, (g, a, lo, up) in enumerate(PARTS):
         p = random_qp(
-            n=3 + i % 4, n_ineq=2 + i % 3 if g else None, n_eq=1 + i % 2 if a else None,
-            bounds=lo or up, lb=lo, ub=up,
+            n=3 + i % 4,
+            n_ineq=2 + i % 3 if g else None,
+            n_eq=1 + i % 2 if a else None,
+            bounds=lo or up,
+            lb=lo,
+            ub=up,
         )
-        out.append(ProblemRecord(p, f"p{i:02d}", "wall" if i % 2 else None, i if i % 3 else None,
-                                 0.001 * i if i % 5 else None, ["paper", "soft", None][i % 3], -0.5 * i))
+        out.append(
+            ProblemRecord(
+                p,
+                f"p{i:02d}",
+                "wall" if i % 2 else None,
+                i if i % 3 else None,
+                0.001 * i if i % 5 else None,
+                ["paper", "soft", None][i % 3],
+                -0.5 * i,
+            )
+        )
     # an empty inequality block (0 rows) and a signed zero survive too
     p = random_qp(n=2, n_ineq=None, n_eq=None, bounds=False)
     p.G, p.h = np.zeros((0, 2)), np.zeros(0)
@@ -105,7 +118,9 @@ def test_npz_round_trip_bit_exact(random_qp, tmp_path):
 
 def test_npz_sparse_round_trip_bit_exact(random_qp, tmp_path):
     p = random_qp(n=5)
-    sparse = qpsolvers.Problem(spa.csc_matrix(p.P), p.q, spa.csc_matrix(p.G), p.h, spa.csr_matrix(p.A), p.b, p.lb, p.ub)
+    sparse = qpsolvers.Problem(
+        spa.csc_matrix(p.P), p.q, spa.csc_matrix(p.G), p.h, spa.csr_matrix(p.A), p.b, p.lb, p.ub
+    )
     back = load_npz(save_npz(ProblemRecord(sparse, "s"), tmp_path / "s.npz"))
     assert_bit_exact(ProblemRecord(sparse, "s"), back)
     # a small problem is also written dense: qpsolvers reads it (Problem.save alone loses a sparse G)
@@ -173,7 +188,9 @@ def test_problem_set_round_trip_bit_exact(random_qp, tmp_path):
     for a, b in zip(recs, ps):
         assert_bit_exact(a, b)
     m = ps.manifest
-    assert m["count"] == len(recs) and m["sha256"] == sha256_file(tmp_path / "set" / "problems.parquet")
+    assert m["count"] == len(recs) and m["sha256"] == sha256_file(
+        tmp_path / "set" / "problems.parquet"
+    )
     assert m["generator"] == {"name": "test", "seed": 1}
     assert {"qpbench", "numpy", "qpsolvers", "pyarrow"} <= set(m["versions"])
     # load_problems on the folder and on the parquet file inside it
@@ -189,7 +206,9 @@ def test_problem_set_deterministic_bytes(random_qp, tmp_path):
     for f in ("problems.parquet", "manifest.json"):
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
     write_problem_set(tmp_path / "c", recs[::-1], {"name": "test"})
-    assert (tmp_path / "c" / "problems.parquet").read_bytes() != (tmp_path / "a" / "problems.parquet").read_bytes()
+    assert (tmp_path / "c" / "problems.parquet").read_bytes() != (
+        tmp_path / "a" / "problems.parquet"
+    ).read_bytes()
     assert not list(tmp_path.glob("*/.*.tmp"))  # atomic writes leave no temporary file
 
 
@@ -211,7 +230,7 @@ def test_qpbenchmark_parquet_test_set_reads_our_file(random_qp, tmp_path):
 
 
 def test_bare_qpbenchmark_parquet_is_read(random_qp, tmp_path):
-    qpbenchmark = pytest.importorskip("qpbenchmark")
+    pytest.importorskip("qpbenchmark")
     from qpbenchmark.problem import Problem as BenchProblem
     from qpbenchmark.problem_list import ProblemList
 
@@ -331,7 +350,9 @@ def test_write_rejects_bad_records(random_qp, tmp_path):
 def test_nonconvex_is_recorded_not_refused(random_qp, tmp_path):
     """Convexity is not a format rule: a nonconvex P is written and read with its verdict."""
     p = random_qp()
-    write_problem_set(tmp_path / "s", [ProblemRecord(qpsolvers.Problem(-np.eye(4), p.q), "neg")], {"name": "t"})
+    write_problem_set(
+        tmp_path / "s", [ProblemRecord(qpsolvers.Problem(-np.eye(4), p.q), "neg")], {"name": "t"}
+    )
     back = read_problem_set(tmp_path / "s")[0]
     assert back.convexity.verdict == "nonconvex" and back.convexity.ratio == -1.0
 
@@ -339,7 +360,11 @@ def test_nonconvex_is_recorded_not_refused(random_qp, tmp_path):
 def test_sparse_problem_set_round_trip_bit_exact(random_qp, tmp_path):
     """Sparse and dense records in one set: CSC columns for the sparse ones, read back bit for bit;
     a set without sparse matrices has no CSC column (the robot's sets keep their bytes)."""
-    records = [_sparse_record(6, "small"), _sparse_record(2000, "large", seed=1), ProblemRecord(random_qp(), "dense")]
+    records = [
+        _sparse_record(6, "small"),
+        _sparse_record(2000, "large", seed=1),
+        ProblemRecord(random_qp(), "dense"),
+    ]
     write_problem_set(tmp_path / "s", records, {"name": "t"})
     back = read_problem_set(tmp_path / "s")
     for a, b in zip(records, back):
@@ -352,7 +377,10 @@ def test_sparse_problem_set_round_trip_bit_exact(random_qp, tmp_path):
     assert dense_P[0] is not None and dense_P[1] is None  # large: compact only
     assert (tmp_path / "s" / "problems.parquet").stat().st_size < 1_000_000
     write_problem_set(tmp_path / "d", [ProblemRecord(random_qp(), "dense")], {"name": "t"})
-    assert not any(c.endswith("_csc_data") for c in pq.read_table(tmp_path / "d" / "problems.parquet").column_names)
+    assert not any(
+        c.endswith("_csc_data")
+        for c in pq.read_table(tmp_path / "d" / "problems.parquet").column_names
+    )
 
 
 def test_maros_meszaros_read_is_sparse_and_exact(mm_dir, tmp_path):
@@ -398,7 +426,9 @@ def test_maros_meszaros_subset_loads(mm_dir):
         assert rec.offset == float(raw["r"].item())
         lo, up = raw["l"].ravel()[: m - n], raw["u"].ravel()[: m - n]
         n_eq = int(np.sum(lo == up))
-        n_ineq = int(np.sum((lo != up) & (np.abs(up) < 1e20)) + np.sum((lo != up) & (np.abs(lo) < 1e20)))
+        n_ineq = int(
+            np.sum((lo != up) & (np.abs(up) < 1e20)) + np.sum((lo != up) & (np.abs(lo) < 1e20))
+        )
         assert (m_eq, m_ineq) == (n_eq, n_ineq), rec.name
         for v in (rec.problem.lb, rec.problem.ub):
             assert v is None or not np.any(np.abs(v[np.isfinite(v)]) >= 1e20)
@@ -416,7 +446,9 @@ def test_maros_meszaros_hs21_by_hand(mm_dir):
 
 def test_maros_meszaros_bad_files(mm_dir, tmp_path):
     raw = scipy.io.loadmat(str(mm_dir / "HS21.mat"))
-    scipy.io.savemat(str(tmp_path / "NOR.mat"), {k: v for k, v in raw.items() if k in "P q A l u n m".split()})
+    scipy.io.savemat(
+        str(tmp_path / "NOR.mat"), {k: v for k, v in raw.items() if k in "P q A l u n m".split()}
+    )
     with pytest.raises(ProblemFormatError) as e:
         load_maros_meszaros(tmp_path / "NOR.mat")
     _one_line(e, "NOR.mat", "'r'")

@@ -13,10 +13,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import faulty_backends as fb
 import numpy as np
 import pytest
 
-import faulty_backends as fb
 from qpbench.backends import get_backend, load_plugins, plugin_files
 from qpbench.harness.guard import LocalRunner, classify
 from qpbench.harness.isolation import IsolatedRunner
@@ -141,10 +141,11 @@ def test_worker_times_inside_and_carries_state(records, plugin_loaded):
         assert [o.solution.iterations for o in outs] == [0, 1, 2, 3]
         assert all(o.status == "optimal" and o.isolated and len(o.wall_times_s) == 1 for o in outs)
         assert outs[0].solution.problem is records[0].problem  # re-attached in the parent
-        np.testing.assert_allclose(outs[1].solution.x, fb.exact_solution(records[1].problem).x, atol=1e-9)
+        np.testing.assert_allclose(
+            outs[1].solution.x, fb.exact_solution(records[1].problem).x, atol=1e-9
+        )
     finally:
         runner.close()
-
 
 
 def test_worker_starts_with_the_kernels_in_memory(records, plugin_loaded):
@@ -155,9 +156,12 @@ def test_worker_starts_with_the_kernels_in_memory(records, plugin_loaded):
     try:
         out = runner.solve(records[0].problem)
         assert out.status == "optimal"
-        assert out.solution.iterations >= len(jit._SCENARIOS) * 2  # each QP shape warmed: in memory at once
+        assert (
+            out.solution.iterations >= len(jit._SCENARIOS) * 2
+        )  # each QP shape warmed: in memory at once
     finally:
         runner.close()
+
 
 def _read(path):
     with open(path, newline="") as fh:
@@ -176,14 +180,26 @@ def tick_set(tmp_path_factory):
 
 def _bench(args, env_extra=None):
     env = dict(os.environ, QPBENCH_PLUGINS=PLUGIN, **(env_extra or {}))
-    return subprocess.run(QPBENCH + ["bench", *args], capture_output=True, text=True, env=env, timeout=300)
+    return subprocess.run(
+        QPBENCH + ["bench", *args], capture_output=True, text=True, env=env, timeout=300
+    )
 
 
 def test_fault_injection_run_completes_and_keeps_real_rows(tick_set, tmp_path):
     faulty = ["faulty:raise", "faulty:sleep", "faulty:hang", "faulty:segfault", "faulty:nan"]
     out = tmp_path / "faults.csv"
-    proc = _bench([str(tick_set), "--backends", ",".join(["clarabel", *faulty]), "--out", str(out), "--time-limit", "0.3",
-                   "--no-warmup"])
+    proc = _bench(
+        [
+            str(tick_set),
+            "--backends",
+            ",".join(["clarabel", *faulty]),
+            "--out",
+            str(out),
+            "--time-limit",
+            "0.3",
+            "--no-warmup",
+        ]
+    )
     assert proc.returncode == 1, proc.stderr  # completed, some solves failed
     assert "failed solves" in proc.stdout
     rows = _read(out)
@@ -196,15 +212,33 @@ def test_fault_injection_run_completes_and_keeps_real_rows(tick_set, tmp_path):
         assert status[(problem, "faulty:segfault")] == "crashed"
         assert status[(problem, "faulty:nan")] == "invalid"
         assert status[(problem, "clarabel")] == "optimal"
-    by_backend = {b: [r for r in rows if r["backend"] == b] for b in ["faulty:raise", "faulty:segfault", "faulty:hang"]}
-    assert all(r["error"] == "RuntimeError: solver exploded on two lines" for r in by_backend["faulty:raise"])
-    assert all("SIGSEGV" in r["error"] and r["isolated"] == "True" for r in by_backend["faulty:segfault"])
+    by_backend = {
+        b: [r for r in rows if r["backend"] == b]
+        for b in ["faulty:raise", "faulty:segfault", "faulty:hang"]
+    }
+    assert all(
+        r["error"] == "RuntimeError: solver exploded on two lines"
+        for r in by_backend["faulty:raise"]
+    )
+    assert all(
+        "SIGSEGV" in r["error"] and r["isolated"] == "True" for r in by_backend["faulty:segfault"]
+    )
     # a Python-level overrun runs to its end in this process (never interrupted: time_limit by its
     # wall time), then the backend moves to a worker, whose deadline can stop it
-    assert [r["isolated"] for r in rows if r["backend"] == "faulty:sleep"] == ["False", "True", "True", "True"]
+    assert [r["isolated"] for r in rows if r["backend"] == "faulty:sleep"] == [
+        "False",
+        "True",
+        "True",
+        "True",
+    ]
     assert "overran its time limit" in proc.stderr
     # after the first failure of a sequence, each later solve starts from a reset state
-    assert [r["state_reset"] for r in by_backend["faulty:hang"]] == ["False", "True", "True", "True"]
+    assert [r["state_reset"] for r in by_backend["faulty:hang"]] == [
+        "False",
+        "True",
+        "True",
+        "True",
+    ]
     # the real backend's rows equal those of a run of it alone
     alone = tmp_path / "alone.csv"
     proc = _bench([str(tick_set), "--backends", "clarabel", "--out", str(alone)])
@@ -216,7 +250,14 @@ def test_fault_injection_run_completes_and_keeps_real_rows(tick_set, tmp_path):
 
 def test_in_process_crash_is_learned_on_resume(tick_set, tmp_path):
     out = tmp_path / "learn.csv"
-    args = [str(tick_set), "--backends", "clarabel,faulty:segfault-once", "--out", str(out), "--no-warmup"]
+    args = [
+        str(tick_set),
+        "--backends",
+        "clarabel,faulty:segfault-once",
+        "--out",
+        str(out),
+        "--no-warmup",
+    ]
     proc = _bench(args, {"QPBENCH_TEST_SEGV": "2"})
     assert proc.returncode == -11  # the in-process segfault took the run down ...
     rows = _read(out)

@@ -25,7 +25,9 @@ def fd_jacobian(lengths, theta, link, frac, h=1e-6):
     for k in range(len(theta)):
         e = np.zeros(len(theta))
         e[k] = h
-        J[:, k] = (fk_complex(lengths, theta + e, link, frac) - fk_complex(lengths, theta - e, link, frac)) / (2 * h)
+        J[:, k] = (
+            fk_complex(lengths, theta + e, link, frac) - fk_complex(lengths, theta - e, link, frac)
+        ) / (2 * h)
     return J
 
 
@@ -40,12 +42,20 @@ def test_jacobians_match_finite_differences(n):
         fracs = rng.uniform(0, 1, 6)
         x, J = arm.points_jacobians(theta, links, fracs)
         for j in range(6):
-            np.testing.assert_allclose(x[j], fk_complex(lengths, theta, links[j], fracs[j]), atol=1e-12)
-            np.testing.assert_allclose(J[j], fd_jacobian(lengths, theta, links[j], fracs[j]), atol=1e-8)
+            np.testing.assert_allclose(
+                x[j], fk_complex(lengths, theta, links[j], fracs[j]), atol=1e-12
+            )
+            np.testing.assert_allclose(
+                J[j], fd_jacobian(lengths, theta, links[j], fracs[j]), atol=1e-8
+            )
             # columns beyond the point's link are exactly zero
-            assert np.all(J[j][:, links[j] + 1:] == 0.0)
-        np.testing.assert_allclose(arm.jacobian(theta), fd_jacobian(lengths, theta, n - 1, 1.0), atol=1e-8)
-        np.testing.assert_allclose(arm.end_effector(theta), fk_complex(lengths, theta, n - 1, 1.0), atol=1e-12)
+            assert np.all(J[j][:, links[j] + 1 :] == 0.0)
+        np.testing.assert_allclose(
+            arm.jacobian(theta), fd_jacobian(lengths, theta, n - 1, 1.0), atol=1e-8
+        )
+        np.testing.assert_allclose(
+            arm.end_effector(theta), fk_complex(lengths, theta, n - 1, 1.0), atol=1e-12
+        )
 
 
 def test_joint_positions_geometry():

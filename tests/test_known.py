@@ -25,7 +25,9 @@ def _cases():
 
 @pytest.mark.parametrize("seed,n,n_eq,n_ineq,n_active", _cases())
 def test_kkt_point_satisfies_kkt_conditions(seed, n, n_eq, n_ineq, n_active):
-    problem, x, y, z, z_box = random_kkt_problem(np.random.default_rng(seed), n, n_eq, n_ineq, n_active)
+    problem, x, y, z, z_box = random_kkt_problem(
+        np.random.default_rng(seed), n, n_eq, n_ineq, n_active
+    )
     sol = qpsolvers.Solution(problem)
     sol.x, sol.y, sol.z, sol.z_box, sol.found = x, y, z, z_box, True
     assert sol.primal_residual() < 1e-12
@@ -78,7 +80,9 @@ def test_deterministic_for_a_seed():
 
 
 def test_without_bounds_and_without_rows():
-    problem, x, y, z, z_box = random_kkt_problem(np.random.default_rng(1), 5, 0, 0, 0, with_bounds=False)
+    problem, x, y, z, z_box = random_kkt_problem(
+        np.random.default_rng(1), 5, 0, 0, 0, with_bounds=False
+    )
     assert problem.G is None and problem.A is None and problem.lb is None and problem.ub is None
     np.testing.assert_allclose(np.linalg.solve(problem.P, -problem.q), x, atol=1e-12)
     assert y.shape == (0,) and z.shape == (0,) and np.all(z_box == 0)

@@ -27,9 +27,29 @@ import qpbench
 ROOT = Path(qpbench.__file__).resolve().parent
 
 LAYERS = [
-    {"exceptions", "statuses", "profiles", "published", "memory", "atomic", "cache", "packed", "known", "native_output",
-     "qpbench"},
-    {"robot", "rnn", "backends", "metrics", "formats", "reference", "reference_solve", "reference_pool"},
+    {
+        "exceptions",
+        "statuses",
+        "profiles",
+        "published",
+        "memory",
+        "atomic",
+        "cache",
+        "packed",
+        "known",
+        "native_output",
+        "qpbench",
+    },
+    {
+        "robot",
+        "rnn",
+        "backends",
+        "metrics",
+        "formats",
+        "reference",
+        "reference_solve",
+        "reference_pool",
+    },
     {"control"},
     {"sim"},
     {"selection", "report"},
@@ -62,7 +82,10 @@ def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
                 module = ".".join(base + ([node.module] if node.module else []))
             else:
                 module = node.module or ""
-            targets = [f"{module}.{a.name}" if f"{module}.{a.name}" in modules else module for a in node.names]
+            targets = [
+                f"{module}.{a.name}" if f"{module}.{a.name}" in modules else module
+                for a in node.names
+            ]
         for target in targets:
             while target and target not in modules:
                 target = target.rpartition(".")[0]
@@ -112,7 +135,7 @@ def test_no_import_cycle():
         state[node] = 1
         for dep in graph[node]:
             if state.get(dep) == 1:
-                cycles.append(path[path.index(dep):] + [dep])
+                cycles.append(path[path.index(dep) :] + [dep])
             elif dep not in state:
                 visit(dep, path + [dep])
         state[node] = 2

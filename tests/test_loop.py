@@ -29,7 +29,10 @@ def qp_backend() -> str:
 @pytest.fixture(scope="module")
 def short_runs():
     backend = qp_backend()
-    return {name: simulate(name, backend, duration=3.5) for name in ("free", "wall", "adaptive", "adaptive_fast", "narrow")}
+    return {
+        name: simulate(name, backend, duration=3.5)
+        for name in ("free", "wall", "adaptive", "adaptive_fast", "narrow")
+    }
 
 
 @pytest.mark.parametrize("name", ["free", "wall", "adaptive", "narrow"])
@@ -92,11 +95,27 @@ def test_adaptive_fast_converges(short_runs):
 
 def test_summary_keys(short_runs):
     keys = {
-        "scenario", "backend", "formulation", "ticks", "infeasible_ticks", "fallback_ticks",
-        "zero_velocity_ticks", "first_infeasible_t", "last_infeasible_t", "tracking_rms_after_2s",
-        "tracking_max_after_2s", "force_error_rms_after_2s", "force_error_max_after_2s",
-        "min_obstacle_distance", "min_obstacle_distance_key_point", "joint_limit_violations",
-        "joint_velocity_limit_violations", "kp_hat_final", "kd_hat_final", "wall_time_s", "real_time_factor",
+        "scenario",
+        "backend",
+        "formulation",
+        "ticks",
+        "infeasible_ticks",
+        "fallback_ticks",
+        "zero_velocity_ticks",
+        "first_infeasible_t",
+        "last_infeasible_t",
+        "tracking_rms_after_2s",
+        "tracking_max_after_2s",
+        "force_error_rms_after_2s",
+        "force_error_max_after_2s",
+        "min_obstacle_distance",
+        "min_obstacle_distance_key_point",
+        "joint_limit_violations",
+        "joint_velocity_limit_violations",
+        "kp_hat_final",
+        "kd_hat_final",
+        "wall_time_s",
+        "real_time_factor",
     }
     s = short_runs["wall"].summary
     assert keys <= set(s)
@@ -146,7 +165,11 @@ def test_online_backend_is_applied_without_fallback():
     assert s["fallback_ticks"] == 0 and s["zero_velocity_ticks"] == 0
     # not optimal on every tick, but never declared infeasible
     assert s["non_optimal_ticks"] == 50 and s["infeasible_ticks"] == 0
-    assert s["first_infeasible_t"] is None and s["last_infeasible_t"] is None and s["infeasible_intervals"] == []
+    assert (
+        s["first_infeasible_t"] is None
+        and s["last_infeasible_t"] is None
+        and s["infeasible_intervals"] == []
+    )
     assert np.allclose(res.log["v_0"], 0.5)
 
 
@@ -175,7 +198,9 @@ class _Scripted(Backend):
             if k in self.script:
                 status, x = self.script[k]
                 sol.status = status
-                sol.x = None if x is None else np.full(problem.q.size, np.nan) if x == "nan" else sol.x
+                sol.x = (
+                    None if x is None else np.full(problem.q.size, np.nan) if x == "nan" else sol.x
+                )
         return sol
 
 
@@ -195,13 +220,18 @@ def test_summary_counts_declared_infeasible_ticks_only():
     start = int((log["t"] < 0.2).sum() - (log.loc[log["t"] < 0.2, "status"] == "optimal").sum())
     assert start > 50 and log["status"].iloc[:start].isin(["primal_infeasible", "not_solved"]).all()
     assert s["infeasible_ticks"] == start + 3
-    assert s["non_optimal_ticks"] == start + 6  # tick 320 says optimal but its answer is not finite: invalid
+    assert (
+        s["non_optimal_ticks"] == start + 6
+    )  # tick 320 says optimal but its answer is not finite: invalid
     assert s["fallback_ticks"] == start + 6 and s["zero_velocity_ticks"] == 0
     assert s["first_infeasible_t"] == 0.0 and s["last_infeasible_t"] == pytest.approx(0.305)
     assert s["infeasible_intervals"][-2:] == [[0.3, 0.301], [0.305, 0.305]]
     assert s["status_counts"]["max_iter"] == 1 and s["status_counts"]["error"] == 1
     assert s["invalid_ticks"] == 1 and s["error_ticks"] == 1 and s["raised_ticks"] == 0
-    assert bool(log["fallback"].iloc[320]) and np.isfinite(log[[f"v_{i}" for i in range(4)]].to_numpy()).all()
+    assert (
+        bool(log["fallback"].iloc[320])
+        and np.isfinite(log[[f"v_{i}" for i in range(4)]].to_numpy()).all()
+    )
     assert log["status"].iloc[320] == "invalid"
 
 
@@ -231,8 +261,12 @@ def test_dump_round_trip_and_determinism(tmp_path):
     a = simulate("wall", backend, duration=0.3, every=10, dump=tmp_path / "a")
     simulate("wall", backend, duration=0.3, every=10, dump=tmp_path / "b")
     pa, pb = (tmp_path / d / "problems.parquet" for d in "ab")
-    assert hashlib.sha256(pa.read_bytes()).hexdigest() == hashlib.sha256(pb.read_bytes()).hexdigest()
-    assert (tmp_path / "a" / "manifest.json").read_bytes() == (tmp_path / "b" / "manifest.json").read_bytes()
+    assert (
+        hashlib.sha256(pa.read_bytes()).hexdigest() == hashlib.sha256(pb.read_bytes()).hexdigest()
+    )
+    assert (tmp_path / "a" / "manifest.json").read_bytes() == (
+        tmp_path / "b" / "manifest.json"
+    ).read_bytes()
     ps = read_problem_set(tmp_path / "a")
     assert len(ps) == len(a.records) == 30
     manifest = ps.manifest
@@ -249,7 +283,9 @@ def test_dump_round_trip_and_determinism(tmp_path):
     np.testing.assert_array_equal(back.G, rec.problem.G)
     assert load_npz(tmp_path / "tick.npz").tick == rec.tick
     # the dumped tick is the one the loop solved: re-solving it gives the logged command
-    sol = qpsolvers.solve_problem(back, solver="daqp" if "daqp" in qpsolvers.available_solvers else "clarabel")
+    sol = qpsolvers.solve_problem(
+        back, solver="daqp" if "daqp" in qpsolvers.available_solvers else "clarabel"
+    )
     if sol.found:
         logged = a.log.iloc[rec.tick][[f"v_{i}" for i in range(4)]].to_numpy(float)
         np.testing.assert_allclose(sol.x, logged, atol=1e-6)
@@ -258,13 +294,31 @@ def test_dump_round_trip_and_determinism(tmp_path):
 def test_cli(tmp_path, capsys):
     from qpbench.cli import main
 
-    args = ["simulate", "--scenario", "wall", "--backend", qp_backend(), "--duration", "0.2",
-            "--summary", str(tmp_path / "s.json"), "--log", str(tmp_path / "log.csv"),
-            "--dump", str(tmp_path / "set"), "--every", "5", "--plot", str(tmp_path / "p.png")]
+    args = [
+        "simulate",
+        "--scenario",
+        "wall",
+        "--backend",
+        qp_backend(),
+        "--duration",
+        "0.2",
+        "--summary",
+        str(tmp_path / "s.json"),
+        "--log",
+        str(tmp_path / "log.csv"),
+        "--dump",
+        str(tmp_path / "set"),
+        "--every",
+        "5",
+        "--plot",
+        str(tmp_path / "p.png"),
+    ]
     assert main(args) == 0
     s = json.loads((tmp_path / "s.json").read_text())
     assert s["ticks"] == 200 and s["scenario"] == "wall"
-    assert (tmp_path / "set" / "manifest.json").is_file() and (tmp_path / "p.png").stat().st_size > 1000
+    assert (tmp_path / "set" / "manifest.json").is_file() and (
+        tmp_path / "p.png"
+    ).stat().st_size > 1000
     import pandas as pd
 
     assert len(pd.read_csv(tmp_path / "log.csv")) == 200
@@ -309,13 +363,24 @@ def test_qpbenchmark_runs_a_dumped_set_unchanged(tmp_path):
 
 def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
     from qpbench.cli import main
-    from qpbench.selection import parse_overrides
     from qpbench.formats import read_problem_set
+    from qpbench.selection import parse_overrides
 
-    items = ["rnn.eps=0.001", "rnn.substeps=5", "rnn.l1_clip=10.0", "controller.k=20", "obstacles[0].velocity=[0.0, 0.01]"]
+    items = [
+        "rnn.eps=0.001",
+        "rnn.substeps=5",
+        "rnn.l1_clip=10.0",
+        "controller.k=20",
+        "obstacles[0].velocity=[0.0, 0.01]",
+    ]
     overrides = parse_overrides(items)
-    assert overrides == {"rnn.eps": 0.001, "rnn.substeps": 5, "rnn.l1_clip": 10.0, "controller.k": 20,
-                         "obstacles[0].velocity": [0.0, 0.01]}
+    assert overrides == {
+        "rnn.eps": 0.001,
+        "rnn.substeps": 5,
+        "rnn.l1_clip": 10.0,
+        "controller.k": 20,
+        "obstacles[0].velocity": [0.0, 0.01],
+    }
     plain = load_scenario("wall")
     sc = load_scenario("wall", overrides=overrides)
     assert sc.rnn == {"eps": 0.001, "substeps": 5, "l1_clip": 10.0}
@@ -327,8 +392,21 @@ def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
         for key, value in plain.data[table].items():
             np.testing.assert_array_equal(sc.data[table][key], value)
     # the CLI runs exactly that scenario, and says so in the summary and the dump's manifest
-    args = ["simulate", "--scenario", "wall", "--backend", "rnn", "--duration", "0.1",
-            "--summary", str(tmp_path / "s.json"), "--log", str(tmp_path / "log.csv"), "--dump", str(tmp_path / "set")]
+    args = [
+        "simulate",
+        "--scenario",
+        "wall",
+        "--backend",
+        "rnn",
+        "--duration",
+        "0.1",
+        "--summary",
+        str(tmp_path / "s.json"),
+        "--log",
+        str(tmp_path / "log.csv"),
+        "--dump",
+        str(tmp_path / "set"),
+    ]
     for item in items:
         args += ["--set", item]
     assert main(args) == 0
@@ -341,7 +419,9 @@ def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
     logged = pd.read_csv(tmp_path / "log.csv")[[f"v_{i}" for i in range(4)]].to_numpy()
     direct = simulate(sc, "rnn", duration=0.1).log[[f"v_{i}" for i in range(4)]].to_numpy()
     np.testing.assert_allclose(logged, direct, rtol=1e-9, atol=0)  # the CSV keeps 10 digits
-    assert not np.allclose(direct, simulate("wall", "rnn", duration=0.1).log[[f"v_{i}" for i in range(4)]].to_numpy())
+    assert not np.allclose(
+        direct, simulate("wall", "rnn", duration=0.1).log[[f"v_{i}" for i in range(4)]].to_numpy()
+    )
     assert simulate("wall", "rnn", duration=0.01).summary["scenario_overrides"] == {}
 
 
@@ -373,12 +453,16 @@ def test_set_option_errors(capsys):
     from qpbench.cli import main
     from qpbench.selection import parse_overrides
 
-    assert parse_overrides(["rnn.method=euler", "a.b = [1, 2]", "x.y=true", "s.t=\"q=1\"", "x.y=false"]) == {
-        "rnn.method": "euler", "a.b": [1, 2], "x.y": False, "s.t": "q=1"}
+    assert parse_overrides(
+        ["rnn.method=euler", "a.b = [1, 2]", "x.y=true", 's.t="q=1"', "x.y=false"]
+    ) == {"rnn.method": "euler", "a.b": [1, 2], "x.y": False, "s.t": "q=1"}
     with pytest.raises(ParamError) as err:
         parse_overrides(["controller.k"])
     assert err.value.key == "--set"
-    assert main(["simulate", "--scenario", "wall", "--backend", "daqp", "--set", "controller.kk=3"]) == 2
+    assert (
+        main(["simulate", "--scenario", "wall", "--backend", "daqp", "--set", "controller.kk=3"])
+        == 2
+    )
     assert "controller.kk" in capsys.readouterr().err
 
 
@@ -386,9 +470,17 @@ def test_force_sensor_noise_is_logged():
     """With force_noise_std > 0 the logged force is the law plus the scenario's seeded noise."""
     sc = load_scenario("wall", overrides={"contact.force_noise_std": 0.5, "contact.noise_seed": 3})
     log = simulate(sc, qp_backend(), duration=0.3).log
-    quiet, noisy = load_scenario("wall").make_surface(), sc.make_surface()  # law without noise; the noise alone
+    quiet, noisy = (
+        load_scenario("wall").make_surface(),
+        sc.make_surface(),
+    )  # law without noise; the noise alone
     ee = log[["ee_x", "ee_y"]].to_numpy()
-    law = np.array([quiet.force(ee[k], (ee[k] - ee[k - 1]) / sc.dt if k else np.zeros(2)) for k in range(len(log))])
+    law = np.array(
+        [
+            quiet.force(ee[k], (ee[k] - ee[k - 1]) / sc.dt if k else np.zeros(2))
+            for k in range(len(log))
+        ]
+    )
     noise = np.array([noisy.noise() for _ in range(len(log))])
     assert np.abs(noise).max() > 0.5
     np.testing.assert_allclose(log["force"].to_numpy(), law + noise, rtol=0, atol=1e-9)
@@ -437,8 +529,14 @@ def test_non_finite_answer_is_an_invalid_tick():
 
 #: Columns and summary keys that measure time (all others must not depend on it).
 TIME_COLUMNS = ["solve_time_s"]
-TIME_KEYS = {"wall_time_s", "real_time_factor", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s",
-             "deadline_misses"}
+TIME_KEYS = {
+    "wall_time_s",
+    "real_time_factor",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "deadline_misses",
+}
 
 
 def test_late_answer_past_a_deadline_is_dropped_and_counted():
@@ -461,9 +559,13 @@ def test_late_first_answer_is_applied_without_a_deadline():
     assert slow.log["solve_time_s"].iloc[0] >= fb.SLOW_S
     assert s["deadline_misses"] >= 1 and s["deadline_s"] is None and s["deadline_dropped"] is None
     assert s["time_limit_ticks"] == 0 and slow.log["status"].iloc[0] == fast.log["status"].iloc[0]
-    pd.testing.assert_frame_equal(slow.log.drop(columns=TIME_COLUMNS), fast.log.drop(columns=TIME_COLUMNS))
+    pd.testing.assert_frame_equal(
+        slow.log.drop(columns=TIME_COLUMNS), fast.log.drop(columns=TIME_COLUMNS)
+    )
     skip = TIME_KEYS | {"backend"}
-    assert {k: v for k, v in s.items() if k not in skip} == {k: v for k, v in fast.summary.items() if k not in skip}
+    assert {k: v for k, v in s.items() if k not in skip} == {
+        k: v for k, v in fast.summary.items() if k not in skip
+    }
     # with a deadline the late first answer is dropped: the soft fallback covers tick 0
     dropped = simulate("wall", "faulty-ticks:slow-first", duration=0.05, deadline=fb.SLOW_S / 2)
     d = dropped.summary
@@ -480,7 +582,13 @@ def test_fallback_exception_means_zero_velocity():
 
     res = simulate("wall", _AlwaysRaises(), duration=0.02)
     s = res.summary
-    assert s["error_ticks"] == s["raised_ticks"] == s["zero_velocity_ticks"] == s["fallback_errors"] == 20
+    assert (
+        s["error_ticks"]
+        == s["raised_ticks"]
+        == s["zero_velocity_ticks"]
+        == s["fallback_errors"]
+        == 20
+    )
     assert s["first_error"] == "ValueError: boom"
     assert (res.log["status"] == "error").all()
 
@@ -495,5 +603,20 @@ def test_bad_deadline_on_the_command_line(tmp_path, capsys):
     from qpbench.cli import main
 
     out = tmp_path / "s.json"
-    assert main(["simulate", "--scenario", "wall", "--backend", "pinv", "--deadline", "0", "--summary", str(out)]) == 2
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "wall",
+                "--backend",
+                "pinv",
+                "--deadline",
+                "0",
+                "--summary",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "--deadline" in capsys.readouterr().err and not out.exists()

@@ -51,14 +51,18 @@ def test_panels_and_scales(wall_logs, tmp_path, monkeypatch):
 def test_adaptive_panel_only_when_adapting(tmp_path, monkeypatch):
     sc = load_scenario("adaptive_fast").with_overrides(duration=0.2)
     seen = panels_drawn(monkeypatch)
-    loop_figure.closed_loop_figure({"daqp": simulate(sc, "qpsolvers:daqp").log}, tmp_path / "a.png", title="a")
+    loop_figure.closed_loop_figure(
+        {"daqp": simulate(sc, "qpsolvers:daqp").log}, tmp_path / "a.png", title="a"
+    )
     assert any("Kp_hat" in label for label in seen["labels"])
 
 
 def test_free_has_no_distance_panel(tmp_path, monkeypatch):
     sc = load_scenario("free").with_overrides(duration=0.05)
     seen = panels_drawn(monkeypatch)
-    loop_figure.closed_loop_figure({"pinv": simulate(sc, "pinv").log}, tmp_path / "f.png", title="f", d_safe=0.01)
+    loop_figure.closed_loop_figure(
+        {"pinv": simulate(sc, "pinv").log}, tmp_path / "f.png", title="f", d_safe=0.01
+    )
     assert not any("closest key point" in label for label in seen["labels"])
 
 

@@ -68,7 +68,9 @@ def test_constraint_violation_of_unfound_solution(random_qp):
     sol = qpsolvers.Solution(p, found=False, x=x)
     m = evaluate(ProblemRecord(p, "pinv-like"), sol, None, TOL)
     assert m["primal_residual"] == math.inf  # qpsolvers: not found -> inf
-    assert m["constraint_violation"] == pytest.approx(max(0.0, float(np.max(p.G @ x - p.h))), rel=1e-12)
+    assert m["constraint_violation"] == pytest.approx(
+        max(0.0, float(np.max(p.G @ x - p.h))), rel=1e-12
+    )
     assert m["status"] == "not_solved" and m["success"] is False
 
 
@@ -83,7 +85,9 @@ def test_success_rule_with_optimal_reference(random_qp):
     # same residuals, but a reference 1e-3 lower: relative gap 1e-3/max(1,|f*|) fails the 1e-5 tolerance
     shifted = ReferenceSolution("optimal", objective=f - 1e-3 * max(1.0, abs(f)))
     m = evaluate(rec, sol, shifted, TOL)
-    assert m["optimality_gap_signed"] == pytest.approx(1e-3 * max(1.0, abs(f)) / max(1.0, abs(f - 1e-3 * max(1.0, abs(f)))))
+    assert m["optimality_gap_signed"] == pytest.approx(
+        1e-3 * max(1.0, abs(f)) / max(1.0, abs(f - 1e-3 * max(1.0, abs(f))))
+    )
     assert m["optimality_gap_signed"] > 0 and m["success"] is False
     # an unknown reference adds no condition
     assert evaluate(rec, sol, ReferenceSolution("unknown"), TOL)["success"] is True
@@ -108,10 +112,14 @@ def test_success_rule_with_infeasible_reference(random_qp, ref_status):
     right = BackendSolution(p, found=False, status=ref_status)
     assert evaluate(rec, right, ref, TOL)["success"] is True
     other = "dual_infeasible" if ref_status == "primal_infeasible" else "primal_infeasible"
-    assert evaluate(rec, BackendSolution(p, found=False, status=other), ref, TOL)["success"] is False
+    assert (
+        evaluate(rec, BackendSolution(p, found=False, status=other), ref, TOL)["success"] is False
+    )
     # a "solution" to an infeasible problem is a failure, however small its residuals look
     sol = _solve(p)
-    wrong = BackendSolution(p, found=True, status="optimal", x=sol.x, y=sol.y, z=sol.z, z_box=sol.z_box)
+    wrong = BackendSolution(
+        p, found=True, status="optimal", x=sol.x, y=sol.y, z=sol.z, z_box=sol.z_box
+    )
     assert evaluate(rec, wrong, ref, TOL)["success"] is False
 
 
@@ -120,13 +128,24 @@ def test_constraint_violation_of_a_deliberately_infeasible_point():
 
     # x = (3, -2) on: x0 <= 1, x1 <= 1 (G x <= h); x0 + x1 = 0 (A x = b); -1 <= x <= (2, 0.5)
     p = qpsolvers.Problem(
-        np.eye(2), np.zeros(2), G=np.eye(2), h=np.ones(2), A=np.array([[1.0, 1.0]]), b=np.array([0.0]),
-        lb=np.array([-1.0, -1.0]), ub=np.array([2.0, 0.5]),
+        np.eye(2),
+        np.zeros(2),
+        G=np.eye(2),
+        h=np.ones(2),
+        A=np.array([[1.0, 1.0]]),
+        b=np.array([0.0]),
+        lb=np.array([-1.0, -1.0]),
+        ub=np.array([2.0, 0.5]),
     )
     x = np.array([3.0, -2.0])
     v = constraint_violation(p, x)
     # G x - h = (2, -3); A x - b = 1; lb - x = (-4, 1), x - ub = (1, -2.5)
-    assert v == {"violation_ineq": 2.0, "violation_eq": 1.0, "violation_box": 1.0, "constraint_violation": 2.0}
+    assert v == {
+        "violation_ineq": 2.0,
+        "violation_eq": 1.0,
+        "violation_box": 1.0,
+        "constraint_violation": 2.0,
+    }
     # in evaluate, whether found or not; equal to qpsolvers' primal residual of a found solution
     for found in (False, True):
         m = evaluate(ProblemRecord(p, "bad"), qpsolvers.Solution(p, found=found, x=x), None, TOL)
@@ -135,9 +154,14 @@ def test_constraint_violation_of_a_deliberately_infeasible_point():
     # a feasible point violates nothing; no x: NaN; a problem without constraints: 0
     assert constraint_violation(p, np.array([0.5, -0.5]))["constraint_violation"] == 0.0
     assert all(math.isnan(val) for val in constraint_violation(p, None).values())
-    assert constraint_violation(qpsolvers.Problem(np.eye(2), np.zeros(2)), x)["constraint_violation"] == 0.0
+    assert (
+        constraint_violation(qpsolvers.Problem(np.eye(2), np.zeros(2)), x)["constraint_violation"]
+        == 0.0
+    )
     # infinite bounds are no constraint
-    p_inf = qpsolvers.Problem(np.eye(2), np.zeros(2), lb=np.array([-np.inf, 0.0]), ub=np.array([np.inf, np.inf]))
+    p_inf = qpsolvers.Problem(
+        np.eye(2), np.zeros(2), lb=np.array([-np.inf, 0.0]), ub=np.array([np.inf, np.inf])
+    )
     assert constraint_violation(p_inf, x)["violation_box"] == 2.0
 
 
@@ -149,7 +173,9 @@ def test_constraint_violation_equals_qpsolvers_primal_residual(random_qp):
         p = random_qp()
         x = 3 * rng.standard_normal(p.q.shape[0])
         expected = qpsolvers.Solution(p, found=True, x=x).primal_residual()
-        assert constraint_violation(p, x)["constraint_violation"] == pytest.approx(expected, rel=1e-14, abs=1e-15)
+        assert constraint_violation(p, x)["constraint_violation"] == pytest.approx(
+            expected, rel=1e-14, abs=1e-15
+        )
 
 
 # ------------------------------------------------------------ per-tick metrics are the CSV's columns
@@ -184,7 +210,10 @@ def test_a_metric_added_here_is_a_column_of_qpbench_bench(tmp_path, monkeypatch)
     assert columns()[columns().index("violation_box") + 1] == "kkt_residual"
     folder = fb.write_tick_set(tmp_path / "set", 3)
     out = tmp_path / "rows.csv"
-    assert main(["-q", "bench", str(folder), "--backends", "daqp,pinv", "--out", str(out)]) in (0, 1)
+    assert main(["-q", "bench", str(folder), "--backends", "daqp,pinv", "--out", str(out)]) in (
+        0,
+        1,
+    )
     rows = pd.read_csv(out)
     assert list(rows.columns) == list(columns())
     expected = rows[["primal_residual", "dual_residual", "duality_gap"]].abs().max(axis=1)

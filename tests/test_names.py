@@ -37,8 +37,13 @@ def test_backends_json(capsys):
 
 
 def test_closed_pipe_is_quiet():
-    proc = subprocess.run(f"{sys.executable} -m qpbench.cli backends | head -1", shell=True,
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        f"{sys.executable} -m qpbench.cli backends | head -1",
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.stdout.startswith("name")
     assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr
 
@@ -55,7 +60,20 @@ def test_inspect_json(capsys):
 
 def test_simulate_summary_to_stdout(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    assert main(["-q", "simulate", "--scenario", "wall", "--backend", "pinv", "--duration", "0.02", "--summary", "-"]) in (0, 1)
+    assert main(
+        [
+            "-q",
+            "simulate",
+            "--scenario",
+            "wall",
+            "--backend",
+            "pinv",
+            "--duration",
+            "0.02",
+            "--summary",
+            "-",
+        ]
+    ) in (0, 1)
     summary = json.loads(capsys.readouterr().out)
     assert summary["ticks"] == 20 and summary["backend"] == "pinv"
     assert not (tmp_path / "-").exists()
@@ -71,8 +89,19 @@ def test_closed_loop_checks_scenarios_before_running(tmp_path, capsys):
 
 def test_closed_loop_prints_a_table_of_its_runs(tmp_path, capsys):
     out = tmp_path / "loop"
-    code = main(["closed-loop", "--scenarios", "wall", "--backends", "DAQP,pinv", "--duration", "2",
-                 "--out", str(out)])
+    code = main(
+        [
+            "closed-loop",
+            "--scenarios",
+            "wall",
+            "--backends",
+            "DAQP,pinv",
+            "--duration",
+            "2",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 1  # pinv goes through the wall
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split()[:3] == ["scenario", "backend", "verdict"]

@@ -16,9 +16,19 @@ def bench(tmp_path, *flags):
     pytest.importorskip("highspy")
     out = tmp_path / "x.csv"
     proc = subprocess.run(
-        [*QPBENCH, *flags, "bench", str(ROOT / "problems" / "maros_meszaros"),
-         "--backends", "qpsolvers:highs", "--out", str(out)],
-        capture_output=True, text=True, timeout=600,
+        [
+            *QPBENCH,
+            *flags,
+            "bench",
+            str(ROOT / "problems" / "maros_meszaros"),
+            "--backends",
+            "qpsolvers:highs",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode in (0, 1), proc.stderr
     return proc.stdout
@@ -35,8 +45,12 @@ def test_verbose_lets_native_output_through(tmp_path):
 
 
 def test_python_output_still_reaches_stdout(tmp_path):
-    proc = subprocess.run([*QPBENCH, "list", str(ROOT / "problems" / "wall"), "--limit", "2"],
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [*QPBENCH, "list", str(ROOT / "problems" / "wall"), "--limit", "2"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0
     assert proc.stdout.splitlines()[1].startswith("wall_paper_000000")
 

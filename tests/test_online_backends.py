@@ -28,7 +28,12 @@ ONLINE = ("qpoases", "daqp", "piqp")
 def _online(names=ONLINE):
     infos = {i.name: i for i in backend_info()}
     return [
-        pytest.param(n, marks=pytest.mark.skipif(not infos[n].available, reason=f"{n} unavailable: {infos[n].reason}"))
+        pytest.param(
+            n,
+            marks=pytest.mark.skipif(
+                not infos[n].available, reason=f"{n} unavailable: {infos[n].reason}"
+            ),
+        )
         for n in names
     ]
 
@@ -60,7 +65,10 @@ def test_wall_sequence_equals_independent_solves(name, wall_ticks):
             iters_fresh.append(b.iterations)
     assert statuses == {"primal_infeasible", "optimal"}
     if name in ("qpoases", "daqp"):  # active-set methods start from the previous working set
-        assert np.mean(iters_carried) < np.mean(iters_fresh), (np.mean(iters_carried), np.mean(iters_fresh))
+        assert np.mean(iters_carried) < np.mean(iters_fresh), (
+            np.mean(iters_carried),
+            np.mean(iters_fresh),
+        )
 
 
 @pytest.mark.parametrize("name", _online())
@@ -72,7 +80,9 @@ def test_duals_follow_qpsolvers_convention_on_robot_ticks(name, wall_ticks):
         ref = qpsolvers.solve_problem(problem, solver="daqp")
         assert ours.status == "optimal" and ref.found
         for field in ("y", "z", "z_box"):
-            np.testing.assert_allclose(getattr(ours, field), getattr(ref, field), atol=1e-6, err_msg=field)
+            np.testing.assert_allclose(
+                getattr(ours, field), getattr(ref, field), atol=1e-6, err_msg=field
+            )
         assert ours.dual_residual() < 1e-8
 
 
@@ -140,7 +150,9 @@ def test_daqp_model_updates_only_what_changed(monkeypatch, wall_ticks):
             self.inner = real.Model()
             calls.append(("new",))
 
-        settings = property(lambda s: s.inner.settings, lambda s, v: setattr(s.inner, "settings", v))
+        settings = property(
+            lambda s: s.inner.settings, lambda s, v: setattr(s.inner, "settings", v)
+        )
 
         def setup(self, *args):
             return self.inner.setup(*args)
@@ -190,7 +202,11 @@ def test_qpoases_settings():
     with pytest.raises(ParamError):
         get_backend("qpoases", preset="turbo")
     problem, x, *_ = random_kkt_problem(np.random.default_rng(6), 8, 2, 6, 3)
-    for settings in ({"preset": "mpc"}, {"preset": "reliable"}, {"terminationTolerance": 1e-12, "enableEqualities": 1}):
+    for settings in (
+        {"preset": "mpc"},
+        {"preset": "reliable"},
+        {"terminationTolerance": 1e-12, "enableEqualities": 1},
+    ):
         sol = get_backend("qpoases", **settings).solve(problem)
         np.testing.assert_allclose(sol.x, x, atol=1e-7)
 

@@ -17,7 +17,17 @@ def test_folder_where_a_file_is_expected_even_with_force(tmp_path, capsys):
     out = tmp_path / "somedir"
     out.mkdir()
     (out / "mine.txt").write_text("keep")
-    code = main(["bench", str(ROOT / "problems" / "maros_meszaros"), "--backends", "pinv", "--out", str(out), "--force"])
+    code = main(
+        [
+            "bench",
+            str(ROOT / "problems" / "maros_meszaros"),
+            "--backends",
+            "pinv",
+            "--out",
+            str(out),
+            "--force",
+        ]
+    )
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is a folder" in err[0] and str(out) in err[0]
@@ -44,10 +54,49 @@ def test_existing_output_needs_force(tmp_path):
 @pytest.mark.parametrize(
     "argv",
     [
-        ["bench", "problems/wall", "--backends", "daqp", "--limit", "2", "--out", "{tmp}/no/such/x.csv"],
-        ["simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.01", "--summary", "{tmp}/no/such/s.json"],
-        ["simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.01", "--dump", "{tmp}/no/such"],
-        ["closed-loop", "--scenarios", "wall", "--backends", "daqp", "--duration", "0.01", "--out", "{tmp}/no/such"],
+        [
+            "bench",
+            "problems/wall",
+            "--backends",
+            "daqp",
+            "--limit",
+            "2",
+            "--out",
+            "{tmp}/no/such/x.csv",
+        ],
+        [
+            "simulate",
+            "--scenario",
+            "wall",
+            "--backend",
+            "daqp",
+            "--duration",
+            "0.01",
+            "--summary",
+            "{tmp}/no/such/s.json",
+        ],
+        [
+            "simulate",
+            "--scenario",
+            "wall",
+            "--backend",
+            "daqp",
+            "--duration",
+            "0.01",
+            "--dump",
+            "{tmp}/no/such",
+        ],
+        [
+            "closed-loop",
+            "--scenarios",
+            "wall",
+            "--backends",
+            "daqp",
+            "--duration",
+            "0.01",
+            "--out",
+            "{tmp}/no/such",
+        ],
         ["report", "results/closed_loop.csv", "--out", "{tmp}/no/such"],
         ["export", "problems/wall", "--format", "npz", "--limit", "1", "--out", "{tmp}/no/such"],
     ],
@@ -59,9 +108,17 @@ def test_a_missing_parent_folder_is_refused_and_nothing_is_created(argv, tmp_pat
     from qpbench.cli import main
 
     root = Path(__file__).resolve().parents[1]
-    argv = [a.replace("{tmp}", str(tmp_path)) if "{tmp}" in a else str(root / a) if a.startswith(("problems/", "results/")) else a
-            for a in argv]
+    argv = [
+        a.replace("{tmp}", str(tmp_path))
+        if "{tmp}" in a
+        else str(root / a)
+        if a.startswith(("problems/", "results/"))
+        else a
+        for a in argv
+    ]
     assert main(["-q", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"parent folder {tmp_path}/no" in err[0] and "does not exist" in err[0], err
+    assert (
+        len(err) == 1 and f"parent folder {tmp_path}/no" in err[0] and "does not exist" in err[0]
+    ), err
     assert not (tmp_path / "no").exists()

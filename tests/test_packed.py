@@ -44,8 +44,13 @@ def test_pack_round_trip_and_same_solution(robot_qp):
             mine, ref = getattr(packed, f), getattr(p, f)
             assert (mine is None) == (ref is None), (label, f)
             if ref is not None:
-                np.testing.assert_array_equal(mine, np.atleast_2d(ref) if f == "A" else ref, err_msg=f"{label} {f}")
-                assert mine.dtype == np.float64 and np.shares_memory(mine, packed.buffer), (label, f)
+                np.testing.assert_array_equal(
+                    mine, np.atleast_2d(ref) if f == "A" else ref, err_msg=f"{label} {f}"
+                )
+                assert mine.dtype == np.float64 and np.shares_memory(mine, packed.buffer), (
+                    label,
+                    f,
+                )
         packed.check_constraints()
         a = qpsolvers.solve_problem(p, solver="daqp")
         b = qpsolvers.solve_problem(packed, solver="daqp")
@@ -101,14 +106,24 @@ def sequence(rng, count=40, n_ineq=7):
     return problems
 
 
-@pytest.mark.parametrize("settings", [WORKING_SETTINGS, {"eps": 0.02}], ids=["fixed-substeps", "auto-substeps"])
+@pytest.mark.parametrize(
+    "settings", [WORKING_SETTINGS, {"eps": 0.02}], ids=["fixed-substeps", "auto-substeps"]
+)
 def test_packed_path_equals_plain_and_general_paths(rng, settings):
     """The same ticks as PackedProblem, as plain Problem and through the general path: same numbers, bit for bit."""
     problems = sequence(rng)
     # odd ticks mid-sequence: another equality/inequality split of the same total, absent parts
     p = problems[20]
-    problems[20] = qpsolvers.Problem(p.P, p.q, np.vstack([p.G[:6]]), p.h[:6], np.vstack([p.A, p.G[6]]),
-                                     np.append(p.b, p.h[6]), p.lb, p.ub)
+    problems[20] = qpsolvers.Problem(
+        p.P,
+        p.q,
+        np.vstack([p.G[:6]]),
+        p.h[:6],
+        np.vstack([p.A, p.G[6]]),
+        np.append(p.b, p.h[6]),
+        p.lb,
+        p.ub,
+    )
     problems[30] = qpsolvers.Problem(p.P, p.q, p.G, p.h, None, None, p.lb, p.ub)
     problems[31] = qpsolvers.Problem(p.P, p.q, p.G, p.h, p.A, p.b, None, None)
     runs = {}
@@ -129,7 +144,12 @@ def test_packed_path_equals_plain_and_general_paths(rng, settings):
                 assert (va is None) == (vb is None), (label, k, f)
                 if va is not None:
                     np.testing.assert_array_equal(va, vb, err_msg=f"{label} tick {k} {f}")
-            assert (a.status, a.iterations, a.found, a.backend) == (b.status, b.iterations, b.found, b.backend), (label, k)
+            assert (a.status, a.iterations, a.found, a.backend) == (
+                b.status,
+                b.iterations,
+                b.found,
+                b.backend,
+            ), (label, k)
             assert a.obj == pytest.approx(b.obj, rel=1e-12, abs=1e-15)
 
 
@@ -164,6 +184,8 @@ def test_tick_solution_duals_are_fixed_views_and_survive_copies(rng):
         np.testing.assert_array_equal(getattr(back, f), getattr(sol, f))
     other = dataclasses.replace(sol, status="max_iter")
     np.testing.assert_array_equal(other.z, sol.z)
-    assert sol.extras == {} and sol.obj == pytest.approx(0.5 * sol.x @ problems[1].P @ sol.x + problems[1].q @ sol.x)
+    assert sol.extras == {} and sol.obj == pytest.approx(
+        0.5 * sol.x @ problems[1].P @ sol.x + problems[1].q @ sol.x
+    )
     # residuals through qpsolvers agree with the network's own verdict
     assert sol.primal_residual() >= 0.0 and sol.dual_residual() >= 0.0

@@ -22,13 +22,13 @@ from __future__ import annotations
 import math
 import warnings
 
+import faulty_backends as fb
 import numpy as np
 import pytest
 import qpsolvers
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-import faulty_backends as fb
 from qpbench.backends import backend_names
 from qpbench.formats import ProblemRecord, ProblemSet
 from qpbench.harness import BenchConfig, read_results, run_bench
@@ -38,7 +38,9 @@ from qpbench.profiles import PROFILES
 from qpbench.reference import reference_solution
 
 TOL = PROFILES["default"].tolerance
-FAST = settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+FAST = settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 
 #: Backends that must solve every strongly convex, well-conditioned random QP
 #: to the default profile's tolerances (exact methods, tight settings).
@@ -89,7 +91,9 @@ def test_every_backend_success_agrees_with_the_reference(case, tmp_path_factory)
     ref = reference_solution(record)
     assert ref.status == "optimal"
     np.testing.assert_allclose(ref.x, x_star, atol=1e-6)  # the reference is right
-    names = [n for n in backend_names() if not n.startswith(("faulty:", "stateful:"))]  # built-ins only
+    names = [
+        n for n in backend_names() if not n.startswith(("faulty:", "stateful:"))
+    ]  # built-ins only
     out = tmp_path_factory.mktemp("prop") / "r.csv"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -102,11 +106,7 @@ def test_every_backend_success_agrees_with_the_reference(case, tmp_path_factory)
     rows = {r["backend"]: r for r in read_results(out).rows}
     assert set(rows) == set(names) and summary.rows == len(names)
     for name, row in rows.items():
-        if (
-            name in QPSOLVERS_LSQR_ROUTE
-            and problem.is_unconstrained
-            and row["status"] == "error"
-        ):
+        if name in QPSOLVERS_LSQR_ROUTE and problem.is_unconstrained and row["status"] == "error":
             # qpsolvers hands an unconstrained QP of these solvers to SciPy's LSQR
             # at its default tolerance and then rejects the answer when
             # |P x + q| > 1e-8: a qpsolvers finding, pinned here by its message.
@@ -153,7 +153,16 @@ def test_metrics_under_row_permutation_and_positive_row_scaling(case, seed):
 
     # Row permutation of (G, h), duals permuted alike: every metric is invariant.
     perm = rng.permutation(m)
-    pp = qpsolvers.Problem(problem.P, problem.q, problem.G[perm], problem.h[perm], problem.A, problem.b, problem.lb, problem.ub)
+    pp = qpsolvers.Problem(
+        problem.P,
+        problem.q,
+        problem.G[perm],
+        problem.h[perm],
+        problem.A,
+        problem.b,
+        problem.lb,
+        problem.ub,
+    )
     ps = _perturbed_solution(pp, ref, np.random.default_rng(0), scale=0.0)
     ps.x, ps.z = sol.x, sol.z[perm]
     permuted = _metrics(pp, ps, ref)
@@ -162,7 +171,16 @@ def test_metrics_under_row_permutation_and_positive_row_scaling(case, seed):
 
     # Positive row scaling: z_i -> z_i / s_i keeps G'z, h_i z_i, the feasible set and x*.
     s = np.exp(rng.uniform(-3.0, 3.0, m))
-    sp = qpsolvers.Problem(problem.P, problem.q, s[:, None] * problem.G, s * problem.h, problem.A, problem.b, problem.lb, problem.ub)
+    sp = qpsolvers.Problem(
+        problem.P,
+        problem.q,
+        s[:, None] * problem.G,
+        s * problem.h,
+        problem.A,
+        problem.b,
+        problem.lb,
+        problem.ub,
+    )
     ss = _perturbed_solution(sp, ref, np.random.default_rng(0), scale=0.0)
     ss.x, ss.z = sol.x, sol.z / s
     scaled = _metrics(sp, ss, ref)
@@ -247,10 +265,16 @@ def test_any_row_round_trips_through_the_csv(values, tmp_path_factory):
         elif isinstance(value, int):
             assert int(text) == value
         else:
-            assert text == " ".join(value.split()) if ("\n" in value or "\r" in value) else text == value
+            assert (
+                text == " ".join(value.split())
+                if ("\n" in value or "\r" in value)
+                else text == value
+            )
 
 
-@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(data=st.data())
 def test_resume_from_any_cut_point_matches_a_full_run(data, tmp_path_factory):
     from qpbench.harness.results import TIMING_COLUMNS
@@ -260,7 +284,8 @@ def test_resume_from_any_cut_point_matches_a_full_run(data, tmp_path_factory):
     pset = ProblemSet("s", None, records)
     refs = [reference_solution(r) for r in records]
     config = BenchConfig(
-        backends=["stateful:count-copy", "stateful:last-native", "stateful:count-fail2"], isolate="never"
+        backends=["stateful:count-copy", "stateful:last-native", "stateful:count-fail2"],
+        isolate="never",
     )
     full = folder / "full.csv"
     run_bench(pset, config, full, references=refs)

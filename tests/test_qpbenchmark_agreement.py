@@ -77,9 +77,15 @@ SHIPPED_SET = Path(__file__).resolve().parents[1] / "problems" / "wall" / "probl
 COUNT = 60
 METRICS = ("primal_residual", "dual_residual", "duality_gap")
 #: qpbenchmark's named settings and the qpbench profile judged at the same tolerances.
-NAMED_SETTINGS = {"low_accuracy": "low_accuracy", "mid_accuracy": "default", "high_accuracy": "high_accuracy"}
+NAMED_SETTINGS = {
+    "low_accuracy": "low_accuracy",
+    "mid_accuracy": "default",
+    "high_accuracy": "high_accuracy",
+}
 #: Native option names that only limit a run (a solve that converges before them is unchanged).
-LIMIT_KEYS = frozenset({"max_iter", "iter_limit", "max_iters", "time_limit", "time_limit_secs", "TimeLimit"})
+LIMIT_KEYS = frozenset(
+    {"max_iter", "iter_limit", "max_iters", "time_limit", "time_limit_secs", "TimeLimit"}
+)
 #: Relative agreement of residuals evaluated on the same solution.
 RTOL_SAME = 1e-12
 EPS = float(np.finfo(float).eps)
@@ -100,9 +106,15 @@ def _import_qpbenchmark():
 
 def common_solvers(qpb) -> list[str]:
     """Solvers qpsolvers finds, qpbenchmark has settings for and qpbench can drive."""
-    ours = {name.split(":", 1)[1] for name in backend_names(available_only=True) if name.startswith("qpsolvers:")}
+    ours = {
+        name.split(":", 1)[1]
+        for name in backend_names(available_only=True)
+        if name.startswith("qpsolvers:")
+    }
     return sorted(
-        s for s in qpsolvers.available_solvers if qpb.solver_settings.SolverSettings.is_implemented(s) and s in ours
+        s
+        for s in qpsolvers.available_solvers
+        if qpb.solver_settings.SolverSettings.is_implemented(s) and s in ours
     )
 
 
@@ -126,7 +138,9 @@ def run_qpbenchmark(qpb, test_set, solvers, csv_path) -> pd.DataFrame:
 
 
 def read_ours(path) -> pd.DataFrame:
-    df = pd.read_csv(path)  # repr-exact floats in the CSV; a parser off by 1 ulp is far inside the allowance
+    df = pd.read_csv(
+        path
+    )  # repr-exact floats in the CSV; a parser off by 1 ulp is far inside the allowance
     df["solver"] = df["backend"].str.split(":", n=1).str[1]
     return df
 
@@ -134,7 +148,16 @@ def read_ours(path) -> pd.DataFrame:
 def data_scale(problem) -> float:
     """Largest finite magnitude in the problem's data (at least 1)."""
     scale = 1.0
-    for M in (problem.P, problem.q, problem.G, problem.h, problem.A, problem.b, problem.lb, problem.ub):
+    for M in (
+        problem.P,
+        problem.q,
+        problem.G,
+        problem.h,
+        problem.A,
+        problem.b,
+        problem.lb,
+        problem.ub,
+    ):
         if M is None:
             continue
         v = np.abs(np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float))
@@ -154,9 +177,9 @@ def metric_differences(merged: pd.DataFrame) -> pd.DataFrame:
         with np.errstate(invalid="ignore"):
             d = np.where(both_inf, 0.0, np.abs(a - b))
         out[f"{k}_diff"] = d
-        out[f"{k}_allow"] = RTOL_SAME * np.where(both_inf, 0.0, np.maximum(np.abs(a), np.abs(b))) + 16 * EPS * merged[
-            "scale"
-        ].to_numpy(float)
+        out[f"{k}_allow"] = RTOL_SAME * np.where(
+            both_inf, 0.0, np.maximum(np.abs(a), np.abs(b))
+        ) + 16 * EPS * merged["scale"].to_numpy(float)
     return pd.DataFrame(out, index=merged.index)
 
 
@@ -228,7 +251,9 @@ def test_slice_is_read_alike(qpb, wall_slice, problem_set):
                 np.testing.assert_array_equal(a, b, err_msg=f"{p.name} {k}")
 
 
-def test_same_solver_calls_same_metrics(qpb, tmp_path, wall_slice, problem_set, references, scales, solvers):
+def test_same_solver_calls_same_metrics(
+    qpb, tmp_path, wall_slice, problem_set, references, scales, solvers
+):
     """qpbenchmark's named settings on both sides: same calls, metrics equal to rounding."""
     test_set = _test_set_class(qpb)(wall_slice)
     test_set.solver_settings = {k: test_set.solver_settings[k] for k in NAMED_SETTINGS}
@@ -266,12 +291,16 @@ def test_same_solver_calls_same_metrics(qpb, tmp_path, wall_slice, problem_set, 
             frames.append(ours)
     ours = pd.concat(frames, ignore_index=True)
 
-    merged = theirs.merge(ours, on=["problem", "solver", "settings"], suffixes=("_qpb", "_ours"), validate="1:1")
+    merged = theirs.merge(
+        ours, on=["problem", "solver", "settings"], suffixes=("_qpb", "_ours"), validate="1:1"
+    )
     assert len(merged) == len(theirs) == len(ours)
     merged["scale"] = merged["problem"].map(scales)
 
     mismatch = merged[merged["found_qpb"].astype(bool) != merged["found_ours"].astype(bool)]
-    assert mismatch.empty, mismatch[["problem", "solver", "settings", "found_qpb", "found_ours", "status"]]
+    assert mismatch.empty, mismatch[
+        ["problem", "solver", "settings", "found_qpb", "found_ours", "status"]
+    ]
     # Infeasible ticks: nobody "finds" a solution; optimal ones: at least one solver does.
     infeasible = {r.name for r in references if r.status == "primal_infeasible"}
     assert infeasible, "the slice should hold the infeasible ticks at the start of the wall set"
@@ -281,7 +310,9 @@ def test_same_solver_calls_same_metrics(qpb, tmp_path, wall_slice, problem_set, 
     diffs = metric_differences(merged)
     for k in METRICS:
         bad = diffs[f"{k}_diff"] > diffs[f"{k}_allow"]
-        assert not bad.any(), merged.loc[bad, ["problem", "solver", "settings", f"{k}_qpb", f"{k}_ours"]]
+        assert not bad.any(), merged.loc[
+            bad, ["problem", "solver", "settings", f"{k}_qpb", f"{k}_ours"]
+        ]
         # not found <=> inf on both sides
         found = merged["found_qpb"].astype(bool)
         assert np.isinf(merged.loc[~found, f"{k}_ours"]).all()
@@ -296,27 +327,39 @@ def test_same_solver_calls_same_metrics(qpb, tmp_path, wall_slice, problem_set, 
         assert (a == b).all(), rows.loc[a != b, ["problem", "solver"]]
     tols = test_set.tolerances
     rate_theirs = results.build_success_rate_df(
-        {k: t.primal for k, t in tols.items()}, {k: t.dual for k, t in tols.items()}, {k: t.gap for k, t in tols.items()}
+        {k: t.primal for k, t in tols.items()},
+        {k: t.dual for k, t in tols.items()},
+        {k: t.gap for k, t in tols.items()},
     )
-    ours_as_qpb = ours.astype({"found": bool})[["problem", "solver", "settings", "found", *METRICS]].copy()
+    ours_as_qpb = ours.astype({"found": bool})[
+        ["problem", "solver", "settings", "found", *METRICS]
+    ].copy()
     ours_results = qpb.Results(None, test_set)
     ours_results.df = ours_as_qpb
     rate_ours = ours_results.build_success_rate_df(
-        {k: t.primal for k, t in tols.items()}, {k: t.dual for k, t in tols.items()}, {k: t.gap for k, t in tols.items()}
+        {k: t.primal for k, t in tols.items()},
+        {k: t.dual for k, t in tols.items()},
+        {k: t.gap for k, t in tols.items()},
     )
     pd.testing.assert_frame_equal(rate_theirs.sort_index(), rate_ours.sort_index())
 
     # Our success adds conditions: on problems with an optimal reference it implies qpbenchmark's.
     for settings_name in NAMED_SETTINGS:
         tol = test_set.tolerances[settings_name]
-        rows = merged[(merged["settings"] == settings_name) & (merged["reference_status"] == "optimal")]
+        rows = merged[
+            (merged["settings"] == settings_name) & (merged["reference_status"] == "optimal")
+        ]
         theirs_ok = qpbenchmark_success(rows.rename(columns=lambda c: c.removesuffix("_qpb")), tol)
         ours_ok = rows["success"].astype(bool)
-        assert not (ours_ok & ~theirs_ok).any(), rows.loc[ours_ok & ~theirs_ok, ["problem", "solver"]]
+        assert not (ours_ok & ~theirs_ok).any(), rows.loc[
+            ours_ok & ~theirs_ok, ["problem", "solver"]
+        ]
 
 
 @pytest.mark.parametrize("profile_name", ["default", "high_accuracy"])
-def test_cli_profile_against_qpbenchmark_settings(qpb, tmp_path, wall_slice, scales, solvers, profile_name):
+def test_cli_profile_against_qpbenchmark_settings(
+    qpb, tmp_path, wall_slice, scales, solvers, profile_name
+):
     """``qpbench bench --profile P`` against qpbenchmark with settings built by its API from P."""
     profile = get_profile(profile_name)
     SolverSettings = qpb.solver_settings.SolverSettings
@@ -365,13 +408,17 @@ def test_cli_profile_against_qpbenchmark_settings(qpb, tmp_path, wall_slice, sca
     )
     assert code in (0, 1)
     ours = read_ours(out).rename(columns={"profile": "settings"})
-    merged = theirs.merge(ours, on=["problem", "solver", "settings"], suffixes=("_qpb", "_ours"), validate="1:1")
+    merged = theirs.merge(
+        ours, on=["problem", "solver", "settings"], suffixes=("_qpb", "_ours"), validate="1:1"
+    )
     assert len(merged) == len(theirs) == COUNT * len(solvers)
     merged["scale"] = merged["problem"].map(scales)
     diffs = metric_differences(merged)
 
     same = merged["solver"].isin(same_run)
-    assert (merged.loc[same, "found_qpb"].astype(bool) == merged.loc[same, "found_ours"].astype(bool)).all()
+    assert (
+        merged.loc[same, "found_qpb"].astype(bool) == merged.loc[same, "found_ours"].astype(bool)
+    ).all()
     tol = profile.tolerance
     for k, level in zip(METRICS, (tol.primal, tol.dual, tol.gap)):
         bad = same & (diffs[f"{k}_diff"] > diffs[f"{k}_allow"])

@@ -53,19 +53,27 @@ def _test_set(qpb, runtime=None):
 
 
 def _routes():
-    return sorted(n.split(":", 1)[1] for n in backend_names(available_only=True) if n.startswith("qpsolvers:"))
+    return sorted(
+        n.split(":", 1)[1] for n in backend_names(available_only=True) if n.startswith("qpsolvers:")
+    )
 
 
 @pytest.mark.parametrize("runtime", [None, 1000.0])
 def test_profiles_pass_qpbenchmarks_arguments_verbatim(qpb, runtime):
     test_set = _test_set(qpb, runtime)
     implemented = qpb.solver_settings.SolverSettings.is_implemented
-    assert set(test_set.solver_settings) == {n.split(":", 1)[1] for n in profile_names() if n.startswith("qpbenchmark:")}
+    assert set(test_set.solver_settings) == {
+        n.split(":", 1)[1] for n in profile_names() if n.startswith("qpbenchmark:")
+    }
     for settings, tol in test_set.tolerances.items():
         profile = get_profile(f"qpbenchmark:{settings}")
         if runtime is not None:
             profile = profile.with_time_limit(runtime)
-        assert (profile.tolerance.primal, profile.tolerance.dual, profile.tolerance.gap) == (tol.primal, tol.dual, tol.gap)
+        assert (profile.tolerance.primal, profile.tolerance.dual, profile.tolerance.gap) == (
+            tol.primal,
+            tol.dual,
+            tol.gap,
+        )
         assert profile.time_limit == tol.runtime and profile.tolerance.rule == "qpbenchmark"
         for solver in _routes():
             if not implemented(solver):
@@ -87,39 +95,69 @@ def test_the_solver_is_called_with_those_arguments(qpb, mm_dir, tmp_path, monkey
 
     monkeypatch.setattr(route, "_solve_problem", spy)
     ps = load_problems(mm_dir / "HS21.mat")
-    config = BenchConfig(backends=["qpsolvers:osqp", "qpsolvers:clarabel"], profile="qpbenchmark:high_accuracy",
-                         isolate="never", warmup=False)
+    config = BenchConfig(
+        backends=["qpsolvers:osqp", "qpsolvers:clarabel"],
+        profile="qpbenchmark:high_accuracy",
+        isolate="never",
+        warmup=False,
+    )
     run_bench(ps, config, tmp_path / "out.csv", references=[None])
     expected = _test_set(qpb).solver_settings["high_accuracy"]
-    assert sorted(calls, key=lambda c: c[0]) == [("clarabel", expected["clarabel"]), ("osqp", expected["osqp"])]
+    assert sorted(calls, key=lambda c: c[0]) == [
+        ("clarabel", expected["clarabel"]),
+        ("osqp", expected["osqp"]),
+    ]
 
 
 def _qpbenchmark_success(qpb, rows: pd.DataFrame, tol) -> pd.Series:
     """qpbenchmark's own success flags of our rows: one 'solver' per row, rates of 0 or 100."""
     results = qpb.Results.__new__(qpb.Results)
-    results.df = pd.DataFrame({
-        "problem": rows["problem"],
-        "solver": rows["backend"] + "|" + rows["problem"],
-        "settings": "s",
-        "runtime": rows["wall_time_min_s"],
-        "found": rows["found"].astype(bool),
-        "primal_residual": rows["primal_residual"].astype(float),
-        "dual_residual": rows["dual_residual"].astype(float),
-        "duality_gap": rows["duality_gap"].astype(float),
-    })
+    results.df = pd.DataFrame(
+        {
+            "problem": rows["problem"],
+            "solver": rows["backend"] + "|" + rows["problem"],
+            "settings": "s",
+            "runtime": rows["wall_time_min_s"],
+            "found": rows["found"].astype(bool),
+            "primal_residual": rows["primal_residual"].astype(float),
+            "dual_residual": rows["dual_residual"].astype(float),
+            "duality_gap": rows["duality_gap"].astype(float),
+        }
+    )
     rates = results.build_success_rate_df({"s": tol.primal}, {"s": tol.dual}, {"s": tol.gap})["s"]
     return (rows["backend"] + "|" + rows["problem"]).map(rates) == 100.0
 
 
-@pytest.mark.parametrize("profile", ["high_accuracy", "qpbenchmark:high_accuracy", "qpbenchmark:mid_accuracy"])
-def test_reference_none_and_qpbenchmark_profiles_succeed_by_qpbenchmarks_rule(qpb, mm_dir, tmp_path, profile):
+@pytest.mark.parametrize(
+    "profile", ["high_accuracy", "qpbenchmark:high_accuracy", "qpbenchmark:mid_accuracy"]
+)
+def test_reference_none_and_qpbenchmark_profiles_succeed_by_qpbenchmarks_rule(
+    qpb, mm_dir, tmp_path, profile
+):
     folder = tmp_path / "mm"
     shutil.copytree(mm_dir, folder, ignore=shutil.ignore_patterns("reference-*"))
     out = tmp_path / "out.csv"
-    backends = ",".join(b for b in ("qpsolvers:osqp", "qpsolvers:scs", "qpsolvers:proxqp", "osqp", "clarabel")
-                        if b.split(":")[-1] in qpsolvers.available_solvers)
-    code = main(["-q", "bench", str(folder), "--backends", backends, "--profile", profile,
-                 "--reference", "none", "--out", str(out), "--no-warmup"])
+    backends = ",".join(
+        b
+        for b in ("qpsolvers:osqp", "qpsolvers:scs", "qpsolvers:proxqp", "osqp", "clarabel")
+        if b.split(":")[-1] in qpsolvers.available_solvers
+    )
+    code = main(
+        [
+            "-q",
+            "bench",
+            str(folder),
+            "--backends",
+            backends,
+            "--profile",
+            profile,
+            "--reference",
+            "none",
+            "--out",
+            str(out),
+            "--no-warmup",
+        ]
+    )
     assert code in (0, 1)
     rows = pd.read_csv(out)
     assert rows["reference_status"].isna().all() and rows["optimality_gap"].isna().all()
@@ -138,19 +176,27 @@ def test_qpbenchmark_rule_is_strict_where_qpbenchs_is_not():
     from qpbench.metrics import evaluate
 
     problem = qpsolvers.Problem(np.eye(1), np.zeros(1), A=np.ones((1, 1)), b=np.ones(1))
-    sol = qpsolvers.Solution(problem, found=True, x=np.array([1.0 - 1e-6]), y=np.array([-(1.0 - 1e-6)]))
+    sol = qpsolvers.Solution(
+        problem, found=True, x=np.array([1.0 - 1e-6]), y=np.array([-(1.0 - 1e-6)])
+    )
     record = ProblemRecord(problem, "p")
     tol = get_profile("default").tolerance
     primal = sol.primal_residual()
     at = type(tol)(primal, 1.0, 1.0, 10.0)
     assert evaluate(record, sol, None, at)["success"]
-    assert not evaluate(record, sol, None, type(tol)(primal, 1.0, 1.0, 10.0, rule="qpbenchmark"))["success"]
+    assert not evaluate(record, sol, None, type(tol)(primal, 1.0, 1.0, 10.0, rule="qpbenchmark"))[
+        "success"
+    ]
 
 
 def test_time_limit_replaces_qpbenchmarks_in_the_solver_arguments(qpb):
     profile = get_profile("qpbenchmark:low_accuracy").with_time_limit(3.0)
     assert profile.time_limit == 3.0 and profile.tolerance.runtime == 3.0
     assert profile.solver_options == {
-        s: dict(v) for s, v in ((s, _test_set(qpb, 3.0).solver_settings["low_accuracy"][s])
-                                for s in qpb.solver_settings.SolverSettings.IMPLEMENTED_SOLVERS)}
+        s: dict(v)
+        for s, v in (
+            (s, _test_set(qpb, 3.0).solver_settings["low_accuracy"][s])
+            for s in qpb.solver_settings.SolverSettings.IMPLEMENTED_SOLVERS
+        )
+    }
     assert np.isfinite(profile.reference_time_limit)

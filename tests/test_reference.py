@@ -11,7 +11,13 @@ import qpsolvers
 import scipy.io
 
 import qpbench.reference as reference_module
-from qpbench.formats import ProblemRecord, load_maros_meszaros, load_problems, read_problem_set, write_problem_set
+from qpbench.formats import (
+    ProblemRecord,
+    load_maros_meszaros,
+    load_problems,
+    read_problem_set,
+    write_problem_set,
+)
 from qpbench.reference import cache_path, reference_solution, reference_solutions
 
 # Optimal objective values from the Maros-Meszaros table (Maros & Meszaros 1999), where
@@ -49,7 +55,11 @@ def test_maros_meszaros_published_optima(mm_refs):
     assert set(EXACT) | set(PUBLISHED_8_DIGITS) == set(got)
     for name, f in EXACT.items():
         assert got[name].status == "optimal" and got[name].agree, name
-        assert abs(got[name].objective - f) <= 1e-8 * max(1.0, abs(f)), (name, got[name].objective, f)
+        assert abs(got[name].objective - f) <= 1e-8 * max(1.0, abs(f)), (
+            name,
+            got[name].objective,
+            f,
+        )
     for name, f in PUBLISHED_8_DIGITS.items():
         assert got[name].status == "optimal" and got[name].agree, name
         assert abs(got[name].objective - f) <= 1e-7 * abs(f), (name, got[name].objective, f)
@@ -77,19 +87,33 @@ def test_maros_meszaros_reference_satisfies_original_form(mm_refs):
 def _infeasible_problems():
     eye = np.eye(2)
     return {
-        "ineq": qpsolvers.Problem(eye, np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([-1.0, -1.0])),
-        "eq": qpsolvers.Problem(np.eye(3), np.zeros(3), A=np.array([[1.0, 1, 1], [1, 1, 1]]), b=np.array([1.0, 2.0])),
-        "bounds+eq": qpsolvers.Problem(eye, np.zeros(2), A=np.array([[1.0, 1.0]]), b=np.array([5.0]),
-                                       lb=-np.ones(2), ub=np.ones(2)),
+        "ineq": qpsolvers.Problem(
+            eye, np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([-1.0, -1.0])
+        ),
+        "eq": qpsolvers.Problem(
+            np.eye(3), np.zeros(3), A=np.array([[1.0, 1, 1], [1, 1, 1]]), b=np.array([1.0, 2.0])
+        ),
+        "bounds+eq": qpsolvers.Problem(
+            eye,
+            np.zeros(2),
+            A=np.array([[1.0, 1.0]]),
+            b=np.array([5.0]),
+            lb=-np.ones(2),
+            ub=np.ones(2),
+        ),
     }
 
 
 def _unbounded_problems():
     return {
         # f = -x2 with x2 >= 0 only: decreases without bound along x2
-        "ineq": qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([0.0, -1.0]), np.array([[0.0, -1.0]]), np.array([0.0])),
+        "ineq": qpsolvers.Problem(
+            np.diag([1.0, 0.0]), np.array([0.0, -1.0]), np.array([[0.0, -1.0]]), np.array([0.0])
+        ),
         # x1 + x2 = 1, f = (x1 - x2)... linear along the line
-        "eq": qpsolvers.Problem(np.zeros((2, 2)), np.array([1.0, -1.0]), A=np.array([[1.0, 1.0]]), b=np.array([1.0])),
+        "eq": qpsolvers.Problem(
+            np.zeros((2, 2)), np.array([1.0, -1.0]), A=np.array([[1.0, 1.0]]), b=np.array([1.0])
+        ),
         "unconstrained": qpsolvers.Problem(np.diag([1.0, 0.0]), np.array([0.0, -1.0])),
     }
 
@@ -127,6 +151,7 @@ def test_cache_beside_set_and_recomputed_on_change(make_record, tmp_path, monkey
     refs = reference_solutions(ps)
     path = cache_path(ps)
     assert path == folder / f"reference-{ps.sha256[:16]}.parquet" and path.exists()
+
     # second call reads the cache (the solver is not called) and gives the same numbers
     def boom(record):
         raise AssertionError("recomputed although cached")
@@ -134,7 +159,9 @@ def test_cache_beside_set_and_recomputed_on_change(make_record, tmp_path, monkey
     monkeypatch.setattr(reference_module, "reference_solution", boom)
     again = reference_solutions(read_problem_set(folder))
     for a, b in zip(refs, again):
-        assert a.status == b.status and a.objective == b.objective and a.x.tobytes() == b.x.tobytes()
+        assert (
+            a.status == b.status and a.objective == b.objective and a.x.tobytes() == b.x.tobytes()
+        )
         assert a.z_box.tobytes() == b.z_box.tobytes()
     monkeypatch.undo()
     # a changed set gets a new cache; the stale one is removed
@@ -173,7 +200,9 @@ def test_cache_of_file_folder_goes_to_the_user_cache(mm_dir, tmp_path, make_reco
     shutil.copy(mm_dir / "HS21.mat", tmp_path / "HS21.mat")
     one = load_problems(tmp_path / "HS21.mat")
     assert reference_solutions(one)[0].objective == pytest.approx(-99.96, rel=1e-9)
-    assert cache_path(one).parent == user_cache and cache_path(one).name.startswith("HS21.reference-")
+    assert cache_path(one).parent == user_cache and cache_path(one).name.startswith(
+        "HS21.reference-"
+    )
     assert cache_path(one).exists() and not list(tmp_path.glob("*reference-*"))
 
 
@@ -224,8 +253,12 @@ def _candidates(problem, record):
     from qpbench.metrics import objective
     from qpbench.reference import Candidate
 
-    good = qpsolvers.solve_problem(problem, solver="clarabel", tol_gap_abs=1e-10, tol_feas=1e-10, tol_gap_rel=1e-10)
-    bad = qpsolvers.Solution(problem, found=True, x=good.x + 1e-3, y=good.y, z=good.z, z_box=good.z_box)
+    good = qpsolvers.solve_problem(
+        problem, solver="clarabel", tol_gap_abs=1e-10, tol_feas=1e-10, tol_gap_rel=1e-10
+    )
+    bad = qpsolvers.Solution(
+        problem, found=True, x=good.x + 1e-3, y=good.y, z=good.z, z_box=good.z_box
+    )
     return (
         lambda name: Candidate(name, "optimal", good, objective(record, good.x)),
         lambda name: Candidate(name, "optimal", bad, objective(record, bad.x)),
@@ -241,10 +274,13 @@ def test_disagreeing_references_are_settled_by_kkt_residuals_not_by_name(make_re
         # the worse answer comes first, under either name
         ref = combine("r", bad(first), good(second))
         assert ref.solver == second and ref.check_solver == first
-        assert ref.objective == good(second).objective and ref.check_objective == bad(first).objective
+        assert (
+            ref.objective == good(second).objective and ref.check_objective == bad(first).objective
+        )
         assert ref.agree is False and ref.kkt < ref.check_kkt
         expected = abs(good(second).objective - bad(first).objective) / max(
-            1.0, abs(good(second).objective), abs(bad(first).objective))
+            1.0, abs(good(second).objective), abs(bad(first).objective)
+        )
         assert ref.agreement == pytest.approx(expected, rel=1e-12) and ref.agreement > 1e-7
         np.testing.assert_array_equal(ref.x, good(second).solution.x)
     # agreeing answers: agreement tiny, still the smaller residuals kept
@@ -258,9 +294,15 @@ def test_disagreeing_references_are_settled_by_kkt_residuals_not_by_name(make_re
     ref = combine("r", bad("clarabel"), Candidate("piqp", "primal_infeasible", None))
     assert ref.status == "primal_infeasible" and ref.solver == "piqp" and ref.x is None
     # no verdict vs a verdict: the verdict; two different verdicts: unknown
-    ref = combine("r", Candidate("clarabel", "unknown", None), Candidate("piqp", "dual_infeasible", None))
+    ref = combine(
+        "r", Candidate("clarabel", "unknown", None), Candidate("piqp", "dual_infeasible", None)
+    )
     assert ref.status == "dual_infeasible" and ref.solver == "piqp"
-    ref = combine("r", Candidate("clarabel", "primal_infeasible", None), Candidate("piqp", "dual_infeasible", None))
+    ref = combine(
+        "r",
+        Candidate("clarabel", "primal_infeasible", None),
+        Candidate("piqp", "dual_infeasible", None),
+    )
     assert ref.status == "unknown"
 
 

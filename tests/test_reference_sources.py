@@ -12,13 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 import qpsolvers
+from conftest import random_problem
 
 import qpbench.reference_solve as reference_solve
 from qpbench.cli import main
 from qpbench.formats import ProblemRecord, ProblemSet, load_problems
 from qpbench.reference import bench_references, cache_path, reference_solutions
-
-from conftest import random_problem
 
 
 def _record(seed=3, name="r"):
@@ -29,7 +28,9 @@ def _record(seed=3, name="r"):
 def test_a_less_accurate_solver_loses_whatever_its_name(monkeypatch, loose):
     """One solver stopped at 1e-3: its answer is off by about 1e-4 and the other one's is kept."""
     settings = {
-        "clarabel": dict(reference_solve.CLARABEL_SETTINGS, tol_feas=1e-3, tol_gap_abs=1e-3, tol_gap_rel=1e-3),
+        "clarabel": dict(
+            reference_solve.CLARABEL_SETTINGS, tol_feas=1e-3, tol_gap_abs=1e-3, tol_gap_rel=1e-3
+        ),
         "piqp": dict(reference_solve.PIQP_SETTINGS, eps_abs=1e-3, eps_duality_gap_abs=1e-3),
     }
     record = _record()
@@ -47,7 +48,9 @@ def test_a_less_accurate_solver_loses_whatever_its_name(monkeypatch, loose):
     assert ref.note.endswith(f"kept {accurate}: smaller KKT residuals")
     # the kept answer satisfies the KKT conditions as qpsolvers measures them
     sol = qpsolvers.Solution(record.problem, found=True, x=ref.x, y=ref.y, z=ref.z, z_box=ref.z_box)
-    assert max(sol.primal_residual(), sol.dual_residual(), sol.duality_gap()) == pytest.approx(ref.kkt)
+    assert max(sol.primal_residual(), sol.dual_residual(), sol.duality_gap()) == pytest.approx(
+        ref.kkt
+    )
 
 
 def _mm_copy(mm_dir, tmp_path, names):
@@ -61,8 +64,12 @@ def _mm_copy(mm_dir, tmp_path, names):
 def test_parallel_references_equal_serial(mm_dir, tmp_path):
     """--jobs 2 (worker processes) gives the same references, bit for bit, as one worker and as this process."""
     ps = load_problems(mm_dir)
-    infeasible = ProblemRecord(qpsolvers.Problem(np.eye(2), np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.0]]),
-                                                 np.array([-1.0, -1.0])), "infeasible")
+    infeasible = ProblemRecord(
+        qpsolvers.Problem(
+            np.eye(2), np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([-1.0, -1.0])
+        ),
+        "infeasible",
+    )
     ps = replace(ps, records=ps.records + [infeasible], path=None, files=[])
     here = reference_solutions(ps, cache=False)
     one = reference_solutions(ps, cache=False, jobs=1, time_limit=120.0)
@@ -111,8 +118,20 @@ def test_a_reference_that_times_out_is_recorded_and_the_others_go_on(tmp_path):
 def test_bench_rows_of_a_timed_out_reference_have_an_empty_gap_and_the_reason(mm_dir, tmp_path):
     folder = _mm_copy(mm_dir, tmp_path, ["HS21", "HS35", "QAFIRO"])
     out = tmp_path / "out.csv"
-    code = main(["-q", "bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(out),
-                 "--reference-time-limit", "1e-9", "--no-warmup"])
+    code = main(
+        [
+            "-q",
+            "bench",
+            str(folder),
+            "--backends",
+            "qpsolvers:clarabel",
+            "--out",
+            str(out),
+            "--reference-time-limit",
+            "1e-9",
+            "--no-warmup",
+        ]
+    )
     assert code == 0
     df = pd.read_csv(out)
     assert len(df) == 3 and df["reference_status"].eq("unknown").all()
@@ -129,45 +148,113 @@ def test_reference_file_gives_published_objectives(mm_dir, tmp_path):
     folder = _mm_copy(mm_dir, tmp_path, ["HS21", "HS35", "HS76"])
     objectives = tmp_path / "optima.csv"
     # HS21 and HS76 as published; HS35's deliberately wrong; extra column ignored; HS35MOD not in the set
-    objectives.write_text("problem,objective,source\nHS21,-99.96,MM\nHS76,-4.681818181818182,MM\n"
-                          "HS35,1.0,wrong\nHS35MOD,0.25,MM\n")
+    objectives.write_text(
+        "problem,objective,source\nHS21,-99.96,MM\nHS76,-4.681818181818182,MM\n"
+        "HS35,1.0,wrong\nHS35MOD,0.25,MM\n"
+    )
     out = tmp_path / "out.csv"
-    assert main(["-q", "bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(out),
-                 "--reference", str(objectives), "--no-warmup"]) in (0, 1)
+    assert main(
+        [
+            "-q",
+            "bench",
+            str(folder),
+            "--backends",
+            "qpsolvers:clarabel",
+            "--out",
+            str(out),
+            "--reference",
+            str(objectives),
+            "--no-warmup",
+        ]
+    ) in (0, 1)
     df = pd.read_csv(out).set_index("problem")
-    assert df.loc["HS21", "reference_objective"] == -99.96 and df.loc["HS21", "optimality_gap"] < 1e-8
+    assert (
+        df.loc["HS21", "reference_objective"] == -99.96 and df.loc["HS21", "optimality_gap"] < 1e-8
+    )
     assert df.loc["HS21", "success"] and df.loc["HS76", "success"]
     # the wrong objective is believed: clarabel's 1/9 is off by (1 - 1/9) / 1
-    assert df.loc["HS35", "optimality_gap"] == pytest.approx(1 - 1 / 9, rel=1e-8) and not df.loc["HS35", "success"]
+    assert (
+        df.loc["HS35", "optimality_gap"] == pytest.approx(1 - 1 / 9, rel=1e-8)
+        and not df.loc["HS35", "success"]
+    )
     assert "from " + str(objectives) in df.loc["HS21", "reference_note"]
     assert not list(folder.glob("reference-*"))  # nothing computed, nothing cached
     # a problem the file does not list: no reference, an empty gap and why
     objectives.write_text("problem,objective\nHS21,-99.96\n")
-    assert main(["-q", "bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(out), "--force",
-                 "--reference", str(objectives), "--no-warmup"]) == 0
+    assert (
+        main(
+            [
+                "-q",
+                "bench",
+                str(folder),
+                "--backends",
+                "qpsolvers:clarabel",
+                "--out",
+                str(out),
+                "--force",
+                "--reference",
+                str(objectives),
+                "--no-warmup",
+            ]
+        )
+        == 0
+    )
     df = pd.read_csv(out).set_index("problem")
-    assert df.loc["HS35", "reference_status"] == "unknown" and math.isnan(df.loc["HS35", "optimality_gap"])
+    assert df.loc["HS35", "reference_status"] == "unknown" and math.isnan(
+        df.loc["HS35", "optimality_gap"]
+    )
     assert "'HS35' is not in" in df.loc["HS35", "reference_note"]
 
 
-@pytest.mark.parametrize("text, key", [
-    ("name,objective\nHS21,1\n", "problem"),
-    ("problem,objective\nHS21,abc\n", "objective"),
-    ("problem,objective\nHS21,1\nHS21,2\n", "problem"),
-    ("problem,objective\nHS21,nan\n", "objective"),
-])
-def test_a_bad_reference_file_is_an_input_error_and_nothing_is_written(mm_dir, tmp_path, capsys, text, key):
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("name,objective\nHS21,1\n", "problem"),
+        ("problem,objective\nHS21,abc\n", "objective"),
+        ("problem,objective\nHS21,1\nHS21,2\n", "problem"),
+        ("problem,objective\nHS21,nan\n", "objective"),
+    ],
+)
+def test_a_bad_reference_file_is_an_input_error_and_nothing_is_written(
+    mm_dir, tmp_path, capsys, text, key
+):
     folder = _mm_copy(mm_dir, tmp_path, ["HS21"])
     objectives = tmp_path / "optima.csv"
     objectives.write_text(text)
     out = tmp_path / "out.csv"
-    assert main(["bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(out),
-                 "--reference", str(objectives)]) == 2
+    assert (
+        main(
+            [
+                "bench",
+                str(folder),
+                "--backends",
+                "qpsolvers:clarabel",
+                "--out",
+                str(out),
+                "--reference",
+                str(objectives),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(objectives) in err[0] and f"key '{key}'" in err[0]
     assert not out.exists()
-    assert main(["bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(out),
-                 "--reference", str(tmp_path / "missing.csv")]) == 2
+    assert (
+        main(
+            [
+                "bench",
+                str(folder),
+                "--backends",
+                "qpsolvers:clarabel",
+                "--out",
+                str(out),
+                "--reference",
+                str(tmp_path / "missing.csv"),
+            ]
+        )
+        == 2
+    )
     assert "neither auto, clarabel, piqp, none nor a file" in capsys.readouterr().err
 
 
@@ -176,19 +263,46 @@ def test_single_solver_references_are_cached_apart(mm_dir, tmp_path):
     ps = load_problems(folder)
     auto = bench_references(ps, "auto")
     only = bench_references(ps, "piqp")
-    assert cache_path(ps).exists() and cache_path(ps, "piqp").exists() and cache_path(ps) != cache_path(ps, "piqp")
-    assert all(r.solver == "piqp" and r.check_solver is None and r.note.endswith("piqp alone (no cross-check)")
-               for r in only)
+    assert (
+        cache_path(ps).exists()
+        and cache_path(ps, "piqp").exists()
+        and cache_path(ps) != cache_path(ps, "piqp")
+    )
+    assert all(
+        r.solver == "piqp"
+        and r.check_solver is None
+        and r.note.endswith("piqp alone (no cross-check)")
+        for r in only
+    )
     assert [r.objective for r in only] == pytest.approx([r.objective for r in auto], rel=1e-8)
     assert bench_references(ps, "none") == [None, None]
 
 
-@pytest.mark.parametrize("option, value, key", [("--jobs", "0", "jobs"), ("--reference-time-limit", "-1", "reference-time-limit"),
-                                                ("--reference-time-limit", "inf", "reference-time-limit")])
+@pytest.mark.parametrize(
+    "option, value, key",
+    [
+        ("--jobs", "0", "jobs"),
+        ("--reference-time-limit", "-1", "reference-time-limit"),
+        ("--reference-time-limit", "inf", "reference-time-limit"),
+    ],
+)
 def test_bad_reference_options_are_input_errors(mm_dir, tmp_path, capsys, option, value, key):
     out = tmp_path / "out.csv"
-    assert main(["bench", str(mm_dir / "HS21.mat"), "--backends", "qpsolvers:clarabel", "--out", str(out),
-                 option, value]) == 2
+    assert (
+        main(
+            [
+                "bench",
+                str(mm_dir / "HS21.mat"),
+                "--backends",
+                "qpsolvers:clarabel",
+                "--out",
+                str(out),
+                option,
+                value,
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"key '{key}'" in err[0] and not out.exists()
 
@@ -206,13 +320,24 @@ def test_bench_says_first_where_a_read_only_set_caches(tmp_path, make_record, mo
     folder = _our_set(tmp_path / "ro", make_record)
     folder.chmod(0o555)
     try:
-        code = main(["bench", str(folder), "--backends", "qpsolvers:clarabel", "--out", str(tmp_path / "o.csv"),
-                     "--no-warmup"])
+        code = main(
+            [
+                "bench",
+                str(folder),
+                "--backends",
+                "qpsolvers:clarabel",
+                "--out",
+                str(tmp_path / "o.csv"),
+                "--no-warmup",
+            ]
+        )
         assert code == 0
         users = tmp_path / "xdg" / "qpbench" / "references"
         first = capsys.readouterr().err.splitlines()[0]
         assert first == f"INFO: reference cache: {users}"
-        assert len(list(users.glob("reference-*.parquet"))) == 1 and not list(folder.glob("reference-*"))
+        assert len(list(users.glob("reference-*.parquet"))) == 1 and not list(
+            folder.glob("reference-*")
+        )
     finally:
         folder.chmod(0o755)
 
@@ -221,7 +346,15 @@ def test_bench_cache_dir_is_honoured(tmp_path, make_record, monkeypatch, capsys)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     folder = _our_set(tmp_path / "set", make_record)
     cache = tmp_path / "cache"
-    argv = ["bench", str(folder), "--backends", "qpsolvers:clarabel", "--no-warmup", "--cache-dir", str(cache)]
+    argv = [
+        "bench",
+        str(folder),
+        "--backends",
+        "qpsolvers:clarabel",
+        "--no-warmup",
+        "--cache-dir",
+        str(cache),
+    ]
     assert main(argv + ["--out", str(tmp_path / "a.csv")]) == 0
     assert capsys.readouterr().err.splitlines()[0] == f"INFO: reference cache: {cache}"
     assert len(list(cache.glob("reference-*.parquet"))) == 1

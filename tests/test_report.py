@@ -44,14 +44,20 @@ def parse_tables(md: str) -> list[dict]:
             headings = {k: v for k, v in headings.items() if k < level}
             headings[level] = m.group(2).strip()
             caption = None
-        elif line.startswith("|") and i + 1 < len(lines) and re.match(r"^\|[:\-| ]+\|$", lines[i + 1]):
+        elif (
+            line.startswith("|")
+            and i + 1 < len(lines)
+            and re.match(r"^\|[:\-| ]+\|$", lines[i + 1])
+        ):
             header = [c.strip() for c in line.strip("|").split("|")]
             rows = []
             i += 2
             while i < len(lines) and lines[i].startswith("|"):
                 rows.append([c.strip() for c in lines[i].strip("|").split("|")])
                 i += 1
-            out.append({"headings": dict(headings), "caption": caption, "header": header, "rows": rows})
+            out.append(
+                {"headings": dict(headings), "caption": caption, "header": header, "rows": rows}
+            )
             continue
         elif line.strip():
             caption = line.strip()
@@ -73,7 +79,9 @@ def assert_close(shown: str, expected: float, what: str) -> None:
         assert math.isinf(value), f"{what}: shown {shown}, expected inf"
     else:
         # 4 significant digits in the report
-        assert value == pytest.approx(expected, rel=6e-4, abs=1e-300), f"{what}: shown {shown}, expected {expected}"
+        assert value == pytest.approx(expected, rel=6e-4, abs=1e-300), (
+            f"{what}: shown {shown}, expected {expected}"
+        )
 
 
 def synthetic_bench(rng: np.random.Generator, n_ticks: int = 30) -> pd.DataFrame:
@@ -92,22 +100,39 @@ def synthetic_bench(rng: np.random.Generator, n_ticks: int = 30) -> pd.DataFrame
                 if backend == "gamma" and scenario == "narrow" and found:
                     dual = math.inf  # a backend without duals
                 gap = float(10 ** rng.uniform(-12, -4)) if found else math.nan
-                opt_gap = float(rng.choice([-1, 1]) * 10 ** rng.uniform(-11, -3)) if found else math.nan
+                opt_gap = (
+                    float(rng.choice([-1, 1]) * 10 ** rng.uniform(-11, -3)) if found else math.nan
+                )
                 success = found and primal < tol.primal and dual < tol.dual and gap < tol.gap
                 wall = float(10 ** rng.uniform(-5.5, -3.5) * (1 + j))
                 rows.append(
                     dict(
-                        problem=name, scenario=scenario, tick=k * 10 if scenario else None,
-                        t=k * 0.01 if scenario else None, backend=backend, profile="default",
+                        problem=name,
+                        scenario=scenario,
+                        tick=k * 10 if scenario else None,
+                        t=k * 0.01 if scenario else None,
+                        backend=backend,
+                        profile="default",
                         mode="sequential",
-                        status="optimal" if found else "primal_infeasible" if says_infeasible else "max_iter",
+                        status="optimal"
+                        if found
+                        else "primal_infeasible"
+                        if says_infeasible
+                        else "max_iter",
                         found=found,
-                        success=success, objective=1.0, reference_objective=1.0,
+                        success=success,
+                        objective=1.0,
+                        reference_objective=1.0,
                         reference_status="primal_infeasible" if infeasible else "optimal",
-                        optimality_gap=opt_gap, primal_residual=primal,
-                        dual_residual=dual, duality_gap=gap, wall_time_min_s=wall * 0.9,
-                        wall_time_median_s=wall, solver_time_s=wall * 0.8 if j != 2 else None,
-                        iterations=10, error="",
+                        optimality_gap=opt_gap,
+                        primal_residual=primal,
+                        dual_residual=dual,
+                        duality_gap=gap,
+                        wall_time_min_s=wall * 0.9,
+                        wall_time_median_s=wall,
+                        solver_time_s=wall * 0.8 if j != 2 else None,
+                        iterations=10,
+                        error="",
                     )
                 )
     return pd.DataFrame(rows)
@@ -121,32 +146,70 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
         for backend in ("qpsolvers:daqp", "pinv", "rnn"):
             log_name = f"logs/{scenario}__{backend.replace(':', '-')}.parquet"
             # the tick log's own columns (qpbench.sim.loop)
-            df = pd.DataFrame({
-                "t": t,
-                "tracking_error": 1e-3 * np.exp(-t) * rng.standard_normal(len(t)),
-                "force": 20 + np.exp(-t), "force_error": np.exp(-t),
-                "v_0": np.sin(t), "v_1": np.cos(t), "v_2": 0.1 * t, "v_3": -0.1 * t,
-                "d_A2_wall": 0.01 + 0.1 * np.exp(-t), "d_min": 0.01 + 0.1 * np.exp(-t),
-                "v_sq": np.sin(t) ** 2 + np.cos(t) ** 2, "fallback": t < 0.1, "zero_velocity": False,
-                "solve_time_s": 10 ** rng.uniform(-5, -4, len(t)), "kp_hat": 5000.0,
-            })
+            df = pd.DataFrame(
+                {
+                    "t": t,
+                    "tracking_error": 1e-3 * np.exp(-t) * rng.standard_normal(len(t)),
+                    "force": 20 + np.exp(-t),
+                    "force_error": np.exp(-t),
+                    "v_0": np.sin(t),
+                    "v_1": np.cos(t),
+                    "v_2": 0.1 * t,
+                    "v_3": -0.1 * t,
+                    "d_A2_wall": 0.01 + 0.1 * np.exp(-t),
+                    "d_min": 0.01 + 0.1 * np.exp(-t),
+                    "v_sq": np.sin(t) ** 2 + np.cos(t) ** 2,
+                    "fallback": t < 0.1,
+                    "zero_velocity": False,
+                    "solve_time_s": 10 ** rng.uniform(-5, -4, len(t)),
+                    "kp_hat": 5000.0,
+                }
+            )
             df.to_parquet(folder / log_name)
-            rows.append(dict(
-                scenario=scenario, backend=backend, formulation="paper", duration_s=3.0, status="ok",
-                error="", ticks=len(t), tracking_rms_after_2s=rng.uniform(1e-8, 1e-6),
-                tracking_max_after_2s=rng.uniform(1e-6, 1e-5), force_error_rms_after_2s=rng.uniform(0, 1e-3),
-                force_error_max_after_2s=rng.uniform(1e-3, 1e-2), min_obstacle_distance=rng.uniform(0.0099, 0.0101),
-                joint_limit_violations=0, infeasible_ticks=int(rng.integers(0, 200)),
-                fallback_ticks=int(rng.integers(0, 200)), v2_integral=rng.uniform(0.5, 2),
-                solve_time_p50_s=rng.uniform(1e-5, 2e-5), solve_time_p99_s=rng.uniform(3e-5, 1e-4),
-                solve_time_max_s=rng.uniform(1e-4, 1e-3), real_time_factor=rng.uniform(5, 80),
-                log_file=log_name, kp_hat_final=5000.0, simulated_s=3.0,
-                verdict="unsafe" if backend == "rnn" else "ok",
-                verdict_reasons=f"d_min 3.5 mm < d_safe - 0.5 mm = 9.5 mm (A2/{scenario} at 2.510 s)" if backend == "rnn" else "",
-            ))
-    rows.append(dict(scenario="wall", backend="broken", formulation="paper", duration_s=3.0, status="error",
-                     error="RuntimeError: boom | bad", log_file="", verdict="failed",
-                     verdict_reasons="run raised: RuntimeError: boom | bad"))
+            rows.append(
+                dict(
+                    scenario=scenario,
+                    backend=backend,
+                    formulation="paper",
+                    duration_s=3.0,
+                    status="ok",
+                    error="",
+                    ticks=len(t),
+                    tracking_rms_after_2s=rng.uniform(1e-8, 1e-6),
+                    tracking_max_after_2s=rng.uniform(1e-6, 1e-5),
+                    force_error_rms_after_2s=rng.uniform(0, 1e-3),
+                    force_error_max_after_2s=rng.uniform(1e-3, 1e-2),
+                    min_obstacle_distance=rng.uniform(0.0099, 0.0101),
+                    joint_limit_violations=0,
+                    infeasible_ticks=int(rng.integers(0, 200)),
+                    fallback_ticks=int(rng.integers(0, 200)),
+                    v2_integral=rng.uniform(0.5, 2),
+                    solve_time_p50_s=rng.uniform(1e-5, 2e-5),
+                    solve_time_p99_s=rng.uniform(3e-5, 1e-4),
+                    solve_time_max_s=rng.uniform(1e-4, 1e-3),
+                    real_time_factor=rng.uniform(5, 80),
+                    log_file=log_name,
+                    kp_hat_final=5000.0,
+                    simulated_s=3.0,
+                    verdict="unsafe" if backend == "rnn" else "ok",
+                    verdict_reasons=f"d_min 3.5 mm < d_safe - 0.5 mm = 9.5 mm (A2/{scenario} at 2.510 s)"
+                    if backend == "rnn"
+                    else "",
+                )
+            )
+    rows.append(
+        dict(
+            scenario="wall",
+            backend="broken",
+            formulation="paper",
+            duration_s=3.0,
+            status="error",
+            error="RuntimeError: boom | bad",
+            log_file="",
+            verdict="failed",
+            verdict_reasons="run raised: RuntimeError: boom | bad",
+        )
+    )
     path = folder / "closed_loop.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
     return path
@@ -157,19 +220,24 @@ def qpbenchmark_ratios(df: pd.DataFrame, metric_column: str, not_found: float, f
     from qpbenchmark.results import Results
 
     res = Results.__new__(Results)
-    qdf = pd.DataFrame({
-        "solver": df["backend"].to_numpy(),
-        "settings": df["profile"].to_numpy(),
-        # qpbenchmark's "found"; for runtime a right infeasibility report also counts as answered
-        "found": df["found"].to_numpy(bool) | (
-            (metric_column == "wall_time_min_s")
-            & (df["status"] == df["reference_status"]).to_numpy()
-            & (df["reference_status"] == "primal_infeasible").to_numpy()),
-        "metric": np.abs(pd.to_numeric(df[metric_column]).to_numpy(float)),
-    })
+    qdf = pd.DataFrame(
+        {
+            "solver": df["backend"].to_numpy(),
+            "settings": df["profile"].to_numpy(),
+            # qpbenchmark's "found"; for runtime a right infeasibility report also counts as answered
+            "found": df["found"].to_numpy(bool)
+            | (
+                (metric_column == "wall_time_min_s")
+                & (df["status"] == df["reference_status"]).to_numpy()
+                & (df["reference_status"] == "primal_infeasible").to_numpy()
+            ),
+            "metric": np.abs(pd.to_numeric(df[metric_column]).to_numpy(float)),
+        }
+    )
     res.df = qdf
-    return res.get_shgeom_for_metric_and_settings("metric", "default", shift=10.0,
-                                                  not_found_value=not_found, floor=floor)
+    return res.get_shgeom_for_metric_and_settings(
+        "metric", "default", shift=10.0, not_found_value=not_found, floor=floor
+    )
 
 
 @pytest.fixture(scope="module")
@@ -241,12 +309,17 @@ def test_absolute_table_recomputed(report_dir):
     _, out, bench, _ = report_dir
     md = (out / "report.md").read_text()
     tol = get_profile("default").tolerance
-    table = next(t for t in parse_tables(md) if t["caption"].startswith("Shifted geometric means, absolute"))
+    table = next(
+        t for t in parse_tables(md) if t["caption"].startswith("Shifted geometric means, absolute")
+    )
     shown = {r[0]: r for r in table["rows"]}
     for b in BACKENDS:
         rows = bench[bench["backend"] == b]
         found = rows["found"].to_numpy(bool)
-        right = ((rows["status"] == "primal_infeasible") & (rows["reference_status"] == "primal_infeasible")).to_numpy()
+        right = (
+            (rows["status"] == "primal_infeasible")
+            & (rows["reference_status"] == "primal_infeasible")
+        ).to_numpy()
         if b == "beta":
             assert right.any()  # the case is exercised
         t = np.where(found | right, rows["wall_time_min_s"], tol.runtime)
@@ -258,15 +331,23 @@ def test_absolute_table_recomputed(report_dir):
         g = np.maximum(np.where(found, np.abs(rows["optimality_gap"]), tol.gap), tol.gap)
         assert_close(shown[b][6], shgeom(g, 10.0), f"optimality gap of {b}")
         overhead = (rows["wall_time_min_s"] - rows["solver_time_s"]).dropna()
-        assert_close(shown[b][7], overhead.median() * 1e6 if len(overhead) else math.nan, f"overhead of {b}")
+        assert_close(
+            shown[b][7], overhead.median() * 1e6 if len(overhead) else math.nan, f"overhead of {b}"
+        )
 
 
 def test_scenario_tables_recomputed(report_dir):
     _, out, bench, _ = report_dir
     md = (out / "report.md").read_text()
-    found_tables = {t["headings"].get(4): t for t in parse_tables(md)
-                    if t["headings"].get(4, "").startswith("Scenario") and t["caption"].startswith("Per backend, runtime")}
-    assert set(found_tables) == {f"Scenario {s} (default, sequential)" for s in ("wall", "narrow", "-")}
+    found_tables = {
+        t["headings"].get(4): t
+        for t in parse_tables(md)
+        if t["headings"].get(4, "").startswith("Scenario")
+        and t["caption"].startswith("Per backend, runtime")
+    }
+    assert set(found_tables) == {
+        f"Scenario {s} (default, sequential)" for s in ("wall", "narrow", "-")
+    }
     for scenario in SCENARIOS:
         label = scenario or "-"
         table = found_tables[f"Scenario {label} (default, sequential)"]
@@ -289,7 +370,11 @@ def test_closed_loop_tables_equal_csv(report_dir):
 
     _, out, _, cl = report_dir
     md = (out / "report.md").read_text()
-    tabs = [t for t in parse_tables(md) if t["caption"] and t["caption"].startswith("Closed-loop metrics")]
+    tabs = [
+        t
+        for t in parse_tables(md)
+        if t["caption"] and t["caption"].startswith("Closed-loop metrics")
+    ]
     assert len(tabs) == 2
     for t in tabs:
         scenario = re.match(r"Scenario (\S+) ", t["headings"][3]).group(1)
@@ -300,7 +385,9 @@ def test_closed_loop_tables_equal_csv(report_dir):
                 if scale is None:
                     assert shown == str(csv_row[column])
                 else:
-                    assert_close(shown, float(csv_row[column]) * scale, f"{scenario}/{r[0]}/{column}")
+                    assert_close(
+                        shown, float(csv_row[column]) * scale, f"{scenario}/{r[0]}/{column}"
+                    )
 
 
 def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
@@ -309,8 +396,9 @@ def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
     tabs = [t for t in parse_tables(md) if t["headings"].get(3) == "Runs that failed their verdict"]
     assert len(tabs) == 1
     bad = cl[cl["verdict"] != "ok"]
-    assert [r[:4] for r in tabs[0]["rows"]] == [[s, b, "paper", v] for s, b, v in
-                                                zip(bad["scenario"], bad["backend"], bad["verdict"])]
+    assert [r[:4] for r in tabs[0]["rows"]] == [
+        [s, b, "paper", v] for s, b, v in zip(bad["scenario"], bad["backend"], bad["verdict"])
+    ]
     assert [r[4] for r in tabs[0]["rows"][:-1]] == list(bad["verdict_reasons"])[:-1]
     assert "| failed | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
     # a table of runs that are all ok says so, and an older table without verdicts has no such list
@@ -325,7 +413,10 @@ def test_report_refuses_overwrite_and_bad_input(report_dir, tmp_path, capsys):
     assert main(["report", str(folder / "bench.csv"), "--out", str(out)]) == 2
     assert "exists" in capsys.readouterr().err
     assert main(["report", str(folder / "bench.csv"), "--out", str(tmp_path), "--no-plots"]) == 0
-    assert main(["report", str(folder / "bench.csv"), "--out", str(tmp_path), "--force", "--no-plots"]) == 0
+    assert (
+        main(["report", str(folder / "bench.csv"), "--out", str(tmp_path), "--force", "--no-plots"])
+        == 0
+    )
     bad = tmp_path / "bad.csv"
     bad.write_text("a,b\n1,2\n")
     assert main(["report", str(bad), "--out", str(tmp_path / "x")]) == 2
@@ -336,32 +427,40 @@ def test_report_refuses_overwrite_and_bad_input(report_dir, tmp_path, capsys):
 
 def test_performance_profile_known_values():
     # problem p1: a 1 us, b 2 us; p2: a 4 us, b 2 us; p3: a fails, b 1 us
-    rows = pd.DataFrame({
-        "problem": ["p1", "p1", "p2", "p2", "p3", "p3"],
-        "backend": ["a", "b"] * 3,
-        "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6, 5e-6, 1e-6],
-        "success": [True, True, True, True, False, True],
-    })
+    rows = pd.DataFrame(
+        {
+            "problem": ["p1", "p1", "p2", "p2", "p3", "p3"],
+            "backend": ["a", "b"] * 3,
+            "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6, 5e-6, 1e-6],
+            "success": [True, True, True, True, False, True],
+        }
+    )
     taus, prof = tables.performance_profile(rows, taus=np.array([1.0, 1.99, 2.0, 10.0]))
     np.testing.assert_allclose(prof["a"], [1 / 3, 1 / 3, 2 / 3, 2 / 3])
     np.testing.assert_allclose(prof["b"], [2 / 3, 2 / 3, 1.0, 1.0])
 
 
 def test_same_problem_name_in_two_scenarios_kept_apart():
-    rows = pd.DataFrame({
-        "problem": ["p", "p", "p", "p"], "scenario": ["s1", "s1", "s2", "s2"],
-        "backend": ["a", "b", "a", "b"],
-        "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6], "success": [True] * 4,
-    })
+    rows = pd.DataFrame(
+        {
+            "problem": ["p", "p", "p", "p"],
+            "scenario": ["s1", "s1", "s2", "s2"],
+            "backend": ["a", "b", "a", "b"],
+            "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6],
+            "success": [True] * 4,
+        }
+    )
     _, prof = tables.performance_profile(rows, taus=np.array([1.0]))
     np.testing.assert_allclose(prof["a"], [0.5])
     np.testing.assert_allclose(prof["b"], [0.5])
 
 
 def test_import_has_no_side_effects():
-    code = ("import sys, logging, qpbench.report, qpbench.report.plots, qpbench.harness.closed_loop; "
-            "assert 'matplotlib.pyplot' not in sys.modules; "
-            "assert not logging.getLogger('qpbench').handlers; print('ok')")
+    code = (
+        "import sys, logging, qpbench.report, qpbench.report.plots, qpbench.harness.closed_loop; "
+        "assert 'matplotlib.pyplot' not in sys.modules; "
+        "assert not logging.getLogger('qpbench').handlers; print('ok')"
+    )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
 
@@ -375,24 +474,47 @@ def _honest_bench(rng: np.random.Generator) -> pd.DataFrame:
     for k in range(20):
         for backend in ("alpha", "net", "iso"):
             found = backend != "net"
-            rows.append(dict(
-                problem=f"wall-{k:04d}", scenario="wall", tick=k, t=k * 0.01, backend=backend,
-                profile="default", mode="sequential", status="optimal" if found else "max_iter", found=found,
-                success=found, objective=1.0, reference_objective=1.0, reference_status="optimal",
-                reference_agreement=1e-12, optimality_gap=1e-9 if found else 0.3,
-                primal_residual=1e-9 if found else math.inf, dual_residual=1e-9 if found else math.inf,
-                duality_gap=1e-9 if found else math.inf,
-                constraint_violation=1e-9 if found else 0.01 * (k + 1),
-                wall_time_min_s=1e-5 * (1 + rng.random()), wall_time_median_s=2e-5, solver_time_s=None,
-                iterations=1, error="", isolated=backend == "iso", position=k % 3, order_seed=0, repeat=1,
-            ))
+            rows.append(
+                dict(
+                    problem=f"wall-{k:04d}",
+                    scenario="wall",
+                    tick=k,
+                    t=k * 0.01,
+                    backend=backend,
+                    profile="default",
+                    mode="sequential",
+                    status="optimal" if found else "max_iter",
+                    found=found,
+                    success=found,
+                    objective=1.0,
+                    reference_objective=1.0,
+                    reference_status="optimal",
+                    reference_agreement=1e-12,
+                    optimality_gap=1e-9 if found else 0.3,
+                    primal_residual=1e-9 if found else math.inf,
+                    dual_residual=1e-9 if found else math.inf,
+                    duality_gap=1e-9 if found else math.inf,
+                    constraint_violation=1e-9 if found else 0.01 * (k + 1),
+                    wall_time_min_s=1e-5 * (1 + rng.random()),
+                    wall_time_median_s=2e-5,
+                    solver_time_s=None,
+                    iterations=1,
+                    error="",
+                    isolated=backend == "iso",
+                    position=k % 3,
+                    order_seed=0,
+                    repeat=1,
+                )
+            )
     return pd.DataFrame(rows)
 
 
 def test_never_found_backend_is_not_the_best_and_isolated_rows_are_marked(tmp_path):
     bench = _honest_bench(np.random.default_rng(1))
     bench.to_csv(tmp_path / "b.csv", index=False)
-    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    assert (
+        main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    )
     md = (tmp_path / "out" / "report.md").read_text()
     tabs = parse_tables(md)
     ratios = next(t for t in tabs if t["caption"].startswith("Success rate and shifted"))
@@ -406,7 +528,10 @@ def test_never_found_backend_is_not_the_best_and_isolated_rows_are_marked(tmp_pa
     absolute = next(t for t in tabs if t["caption"].startswith("Shifted geometric means, absolute"))
     net = next(r for r in absolute["rows"] if r[0] == "net")
     assert net[3:7] == ["-", "-", "-", "-"]
-    assert "A `-` in a residual or gap column: net never found a solution (0 rows with status optimal)" in md
+    assert (
+        "A `-` in a residual or gap column: net never found a solution (0 rows with status optimal)"
+        in md
+    )
     assert "\u2020 solved in a worker process (iso 20 of 20 rows)" in md
     scenario = next(t for t in tabs if t["headings"].get(4, "").startswith("Scenario wall"))
     assert "iso \u2020" in {r[0] for r in scenario["rows"]}
@@ -416,8 +541,11 @@ def test_never_found_backend_is_not_the_best_and_isolated_rows_are_marked(tmp_pa
     v = 0.01 * np.arange(1, 21)
     assert_close(row[viol["header"].index("max")], v.max(), "max violation")
     assert_close(row[viol["header"].index("p99")], np.percentile(v, 99), "p99 violation")
-    assert re.search(r"net never found a solution \(0 of 20 rows\): its constraint violation is the only "
-                     r"accuracy figure it has: max 0\.2, p99 0\.1981", md)
+    assert re.search(
+        r"net never found a solution \(0 of 20 rows\): its constraint violation is the only "
+        r"accuracy figure it has: max 0\.2, p99 0\.1981",
+        md,
+    )
 
 
 def test_report_refuses_duplicate_rows_unless_told_which_to_keep(tmp_path, capsys):
@@ -431,14 +559,22 @@ def test_report_refuses_duplicate_rows_unless_told_which_to_keep(tmp_path, capsy
     assert main(["report", *files, "--out", str(out), "--no-plots"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
-    assert "first.csv" in err and "last.csv" in err and "problem=wall-0000" in err and "backend=alpha" in err
+    assert (
+        "first.csv" in err
+        and "last.csv" in err
+        and "problem=wall-0000" in err
+        and "backend=alpha" in err
+    )
     assert not (out / "report.md").exists()
 
     def success(prefer):
         target = tmp_path / prefer
         assert main(["report", *files, "--out", str(target), "--no-plots", "--prefer", prefer]) == 0
-        table = next(t for t in parse_tables((target / "report.md").read_text())
-                     if t["caption"].startswith("Success rate and shifted"))
+        table = next(
+            t
+            for t in parse_tables((target / "report.md").read_text())
+            if t["caption"].startswith("Success rate and shifted")
+        )
         row = next(r for r in table["rows"] if r[0] == "alpha")
         return int(row[1]), float(row[2])
 
@@ -458,7 +594,10 @@ def test_report_refuses_mixed_repeat_counts_unless_told(tmp_path, capsys):
     assert main(["report", *files, "--out", str(tmp_path / "o"), "--no-plots"]) == 2
     err = capsys.readouterr().err
     assert "alpha" in err and "one.csv: 1" in err and "three.csv: 3" in err and "net" not in err
-    assert main(["report", *files, "--out", str(tmp_path / "o"), "--no-plots", "--prefer", "last"]) == 0
+    assert (
+        main(["report", *files, "--out", str(tmp_path / "o"), "--no-plots", "--prefer", "last"])
+        == 0
+    )
     md = (tmp_path / "o" / "report.md").read_text()
     assert "Note: alpha (default, sequential) mixes rows timed with different --repeat" in md
 
@@ -467,9 +606,14 @@ def test_backends_with_different_repeat_counts_in_one_table_are_noted(tmp_path):
     bench = _honest_bench(np.random.default_rng(4))
     bench.loc[bench["backend"] == "alpha", "repeat"] = 3
     bench.to_csv(tmp_path / "b.csv", index=False)
-    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    assert (
+        main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    )
     md = (tmp_path / "o" / "report.md").read_text()
-    assert "different --repeat counts in the tables of default, sequential (alpha 3, iso 1, net 1)" in md
+    assert (
+        "different --repeat counts in the tables of default, sequential (alpha 3, iso 1, net 1)"
+        in md
+    )
 
 
 def test_solver_time_against_call_time_per_scenario(tmp_path):
@@ -479,7 +623,9 @@ def test_solver_time_against_call_time_per_scenario(tmp_path):
     solver = np.where(bench["backend"] == "alpha", 4e-6 * (1 + rng.random(len(bench))), np.nan)
     bench["solver_time_s"] = solver
     bench.to_csv(tmp_path / "b.csv", index=False)
-    assert main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    assert (
+        main(["report", str(tmp_path / "b.csv"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    )
     tabs = parse_tables((tmp_path / "out" / "report.md").read_text())
     t = next(t for t in tabs if t["caption"].startswith("What the solver reports for its own work"))
     assert [r[0] for r in t["rows"]] == ["alpha"]  # the others report no time of their own
@@ -487,8 +633,12 @@ def test_solver_time_against_call_time_per_scenario(tmp_path):
     call = alpha["wall_time_min_s"].to_numpy()
     own = alpha["solver_time_s"].to_numpy()
     row = t["rows"][0]
-    for header, values, q in (("call p50 (us)", call, 50), ("solver p99 (us)", own, 99),
-                              ("call - solver p50 (us)", call - own, 50), ("call - solver p99 (us)", call - own, 99)):
+    for header, values, q in (
+        ("call p50 (us)", call, 50),
+        ("solver p99 (us)", own, 99),
+        ("call - solver p50 (us)", call - own, 50),
+        ("call - solver p99 (us)", call - own, 99),
+    ):
         assert_close(row[t["header"].index(header)], np.percentile(values, q) * 1e6, header)
 
 

@@ -44,7 +44,9 @@ def make_row(i: int, **kw) -> dict:
 
 def test_rows_round_trip_exactly(tmp_path):
     path = tmp_path / "r.csv"
-    rows = [make_row(i) for i in range(3)] + [make_row(3, status="error", error='ValueError: bad "x",\nline two')]
+    rows = [make_row(i) for i in range(3)] + [
+        make_row(3, status="error", error='ValueError: bad "x",\nline two')
+    ]
     with ResultsWriter(path, new=True) as writer:
         writer.write_rows(rows[:2])
         writer.write_rows(rows[2:])

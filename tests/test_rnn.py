@@ -67,7 +67,9 @@ def test_step_bound_separates_stable_from_unstable(rng, method):
     for factor, stable in ((0.95, True), (1.05, False)):
         state = nw.NetworkState.cold(n, 2, 0)
         steps = 4000
-        res = nw.integrate(qp, state, r_total=factor * exact * steps, substeps=steps, method=method, clamp=False)
+        res = nw.integrate(
+            qp, state, r_total=factor * exact * steps, substeps=steps, method=method, clamp=False
+        )
         assert (res.primal_residual < 1e-6) == stable, (factor, res)
         # clamped (the default), both steps, above safety (0.9) x bound, are shortened to it and converge
         state = nw.NetworkState.cold(n, 2, 0)
@@ -109,7 +111,9 @@ def test_converged_matches_known_solutions(seed):
     n_eq = int(rng.integers(0, 3))
     n_ineq = int(rng.integers(0, 6))
     n_active = int(rng.integers(0, min(n_ineq, n - n_eq) + 1))
-    problem, x, y, z, z_box = random_kkt_problem(rng, n, n_eq, n_ineq, n_active, with_bounds=seed % 3 != 0, cond=10.0)
+    problem, x, y, z, z_box = random_kkt_problem(
+        rng, n, n_eq, n_ineq, n_active, with_bounds=seed % 3 != 0, cond=10.0
+    )
     be = get_backend("rnn-converged")
     sol = be.solve(problem)
     assert sol.found and sol.status == "optimal"
@@ -131,7 +135,15 @@ def test_converged_matches_known_solutions(seed):
 
 @pytest.mark.parametrize(
     "parts",
-    [dict(n_ineq=None, n_eq=None), dict(n_eq=None), dict(n_ineq=None), dict(bounds=False), dict(lb=False), dict(ub=False), {}],
+    [
+        dict(n_ineq=None, n_eq=None),
+        dict(n_eq=None),
+        dict(n_ineq=None),
+        dict(bounds=False),
+        dict(lb=False),
+        dict(ub=False),
+        {},
+    ],
 )
 def test_converged_with_absent_parts(random_qp, parts):
     problem = random_qp(n=5, **parts)
@@ -171,7 +183,9 @@ def test_converged_on_shipped_problem_sets():
     from qpbench.formats import read_problem_set
 
     root = Path(__file__).resolve().parents[1] / "problems"
-    folders = sorted(p.parent for p in root.glob("*/problems.parquet") if p.parent.name != "maros_meszaros")
+    folders = sorted(
+        p.parent for p in root.glob("*/problems.parquet") if p.parent.name != "maros_meszaros"
+    )
     if not folders:
         pytest.skip("no robot problem set under problems/")
     for folder in folders:
@@ -190,8 +204,14 @@ def test_converged_on_shipped_problem_sets():
 
 def test_converged_step_budget_gives_max_iter():
     # infeasible: x1 = 1 and x1 <= 0
-    problem = qpsolvers.Problem(np.eye(2), np.zeros(2), G=np.array([[1.0, 0.0]]), h=np.zeros(1),
-                                A=np.array([[1.0, 0.0]]), b=np.ones(1))
+    problem = qpsolvers.Problem(
+        np.eye(2),
+        np.zeros(2),
+        G=np.array([[1.0, 0.0]]),
+        h=np.zeros(1),
+        A=np.array([[1.0, 0.0]]),
+        b=np.ones(1),
+    )
     sol = get_backend("rnn-converged", max_iter=500).solve(problem)
     assert sol.status == "max_iter" and not sol.found and sol.iterations == 500
     assert sol.x is not None  # the state it reached, for inspection
@@ -207,8 +227,12 @@ def test_numba_and_numpy_agree_online_and_converged():
     problems += [robot_like_problem(rng)[0] for _ in range(20)]
     # the third setting exceeds the bound on every tick of narrow and on the random
     # problems (P not diagonal: the kernels compute its eigenvalues): both clamp alike
-    for name, settings in (("rnn", dict(eps=1e-3, l1_clip=10.0)), ("rnn", dict(substeps=3, method="semi-implicit")),
-                           ("rnn", dict(WORKING_SETTINGS, dt=1e-2)), ("rnn-converged", {})):
+    for name, settings in (
+        ("rnn", dict(eps=1e-3, l1_clip=10.0)),
+        ("rnn", dict(substeps=3, method="semi-implicit")),
+        ("rnn", dict(WORKING_SETTINGS, dt=1e-2)),
+        ("rnn-converged", {}),
+    ):
         fast = get_backend(name, use_numba=True, **settings)
         slow = get_backend(name, use_numba=False, **settings)
         # the numpy path takes about 10 us a step: converge on a few ticks only
@@ -263,12 +287,20 @@ def test_online_state_lives_across_calls_and_reset_clears_it(rng):
     np.testing.assert_array_equal(c.x, d.x)
 
 
-@pytest.mark.parametrize("dt, steps, tuned", [(1e-3, 5, 20), (1e-2, 50, 200), (3e-3, 15, 60), (2.5e-4, 2, 5),
-                                              (1.1e-3, 6, 22)])
+@pytest.mark.parametrize(
+    "dt, steps, tuned",
+    [(1e-3, 5, 20), (1e-2, 50, 200), (3e-3, 15, 60), (2.5e-4, 2, 5), (1.1e-3, 6, 22)],
+)
 def test_online_step_is_fixed_and_its_count_follows_the_integrated_time(dt, steps, tuned):
     """5 sub-steps per 1 ms (eps 1 ms): a step of 0.2 ms whatever the time integrated per call."""
-    problem = qpsolvers.Problem(np.eye(2), np.array([1.0, -1.0]), A=np.array([[1.0, 1.0]]), b=np.array([0.5]),
-                                lb=-np.ones(2), ub=np.ones(2))
+    problem = qpsolvers.Problem(
+        np.eye(2),
+        np.array([1.0, -1.0]),
+        A=np.array([[1.0, 1.0]]),
+        b=np.array([0.5]),
+        lb=-np.ones(2),
+        ub=np.ones(2),
+    )
     be = get_backend("rnn", eps=1e-3, substeps=5, dt=dt)
     sol = be.solve(problem)
     assert sol.iterations == steps and sol.error is None
@@ -288,7 +320,10 @@ def test_online_step_above_the_bound_is_clamped_and_said(rng):
     assert last.ratio_max == pytest.approx(bound, rel=1e-12)
     assert sol.iterations == last.steps == int(np.ceil(1.0 / (0.9 * bound)))
     assert last.ratio <= 0.9 * bound
-    assert "clamped to the stability bound" in sol.error and f"{sol.iterations} steps instead of 2" in sol.error
+    assert (
+        "clamped to the stability bound" in sol.error
+        and f"{sol.iterations} steps instead of 2" in sol.error
+    )
     assert np.isfinite(sol.x).all() and sol.status in ("optimal", "max_iter")
     # the per-tick path (state armed) says the same on the next tick
     again = be.solve(problem)
@@ -327,17 +362,24 @@ def test_online_shape_change_keeps_what_still_fits(rng):
     np.testing.assert_array_equal(be.state.xi, ref.solve(p2) and ref.state.xi)
 
 
-@pytest.mark.parametrize("settings", [WORKING_SETTINGS, {"eps": 0.02}], ids=["fixed-substeps", "auto-substeps"])
+@pytest.mark.parametrize(
+    "settings", [WORKING_SETTINGS, {"eps": 0.02}], ids=["fixed-substeps", "auto-substeps"]
+)
 def test_online_short_path_equals_general_path(settings):
     """rnn's per-tick short path gives the general path's numbers bit for bit, across odd inputs too."""
     import scipy.sparse as spa
 
     from qpbench.backends.base import Backend
 
-    problems = [r.problem for r in robot_ticks("wall", 0.15, every=1, backend="rnn", **WORKING_SETTINGS).records]
+    problems = [
+        r.problem
+        for r in robot_ticks("wall", 0.15, every=1, backend="rnn", **WORKING_SETTINGS).records
+    ]
     p = problems[60]
     # odd inputs mid-sequence: sparse matrices, a soft-formulation tick (no equality), 1-D A of one row
-    problems[70] = qpsolvers.Problem(spa.csc_matrix(p.P), p.q, spa.csc_matrix(p.G), p.h, p.A, p.b, p.lb, p.ub)
+    problems[70] = qpsolvers.Problem(
+        spa.csc_matrix(p.P), p.q, spa.csc_matrix(p.G), p.h, p.A, p.b, p.lb, p.ub
+    )
     problems[80] = qpsolvers.Problem(p.P, p.q, p.G, p.h, None, None, p.lb, p.ub)
     problems[90] = qpsolvers.Problem(p.P, p.q, p.G, p.h, p.A[0], p.b[:1], p.lb, p.ub)
     fast = get_backend("rnn", dt=1e-3, **settings)
@@ -350,18 +392,35 @@ def test_online_short_path_equals_general_path(settings):
             assert (va is None) == (vb is None), (k, f)
             if va is not None:
                 np.testing.assert_array_equal(va, vb, err_msg=f"tick {k}, {f}")
-        assert (a.obj, a.status, a.iterations, a.found, a.backend) == (b.obj, b.status, b.iterations, b.found, b.backend)
+        assert (a.obj, a.status, a.iterations, a.found, a.backend) == (
+            b.obj,
+            b.status,
+            b.iterations,
+            b.found,
+            b.backend,
+        )
         assert a.wall_time_s > 0
         np.testing.assert_array_equal(fast.state.xi, general.state.xi)
-    np.testing.assert_array_equal(np.array(astuple(fast.last)), np.array(astuple(general.last)))  # NaN == NaN here
+    np.testing.assert_array_equal(
+        np.array(astuple(fast.last)), np.array(astuple(general.last))
+    )  # NaN == NaN here
 
 
 def test_settings_are_checked():
     with pytest.raises(ParamError) as err:
         get_backend("rnn", epsilon=0.1)
     assert err.value.key == "epsilon"
-    for key, value in (("eps", 0.0), ("eps", -1), ("dt", float("nan")), ("substeps", 2.5), ("safety", 1.5),
-                       ("l1_clip", 0), ("method", "rk45"), ("use_numba", "yes"), ("max_iter", 0)):
+    for key, value in (
+        ("eps", 0.0),
+        ("eps", -1),
+        ("dt", float("nan")),
+        ("substeps", 2.5),
+        ("safety", 1.5),
+        ("l1_clip", 0),
+        ("method", "rk45"),
+        ("use_numba", "yes"),
+        ("max_iter", 0),
+    ):
         with pytest.raises(ParamError) as err:
             get_backend("rnn-converged", **{key: value})
         assert err.value.key == key
@@ -378,8 +437,16 @@ def test_sparse_input_gives_the_dense_answer(random_qp):
     import scipy.sparse as spa
 
     problem = random_qp(n=5)
-    sparse = qpsolvers.Problem(spa.csc_matrix(problem.P), problem.q, spa.csc_matrix(problem.G), problem.h,
-                               spa.csc_matrix(problem.A), problem.b, problem.lb, problem.ub)
+    sparse = qpsolvers.Problem(
+        spa.csc_matrix(problem.P),
+        problem.q,
+        spa.csc_matrix(problem.G),
+        problem.h,
+        spa.csc_matrix(problem.A),
+        problem.b,
+        problem.lb,
+        problem.ub,
+    )
     a = get_backend("rnn-converged").solve(problem)
     b = get_backend("rnn-converged").solve(sparse)
     assert a.iterations == b.iterations
@@ -439,7 +506,13 @@ def test_rnn_tuned_is_the_network_with_the_working_setting_in_the_loop():
     sc = load_scenario("wall")
     assert sc.rnn["eps"] == 0.02  # the shipped scenario carries the paper's value
     tuned = resolve_backend("rnn-tuned", sc, dt=sc.dt)
-    assert (tuned.eps, tuned.substeps, tuned.method, tuned.l1_clip, tuned.dt) == (1e-4, 20, "semi-implicit", 10.0, sc.dt)
+    assert (tuned.eps, tuned.substeps, tuned.method, tuned.l1_clip, tuned.dt) == (
+        1e-4,
+        20,
+        "semi-implicit",
+        10.0,
+        sc.dt,
+    )
     assert resolve_backend("rnn", sc, dt=sc.dt).eps == 0.02
     a = simulate(sc, "rnn-tuned", duration=0.3).log
     b = simulate(replace(sc, rnn=dict(WORKING_SETTINGS)), "rnn", duration=0.3).log

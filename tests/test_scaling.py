@@ -14,7 +14,16 @@ from qpbench.scaling.arms import REACH, THETA_LIMIT, ArmSpec, generate_arm
 from qpbench.scaling.fit import crossing, extrapolated_crossing, first_above, fit_power_law
 from qpbench.scaling.obstacles import min_key_point_distance
 from qpbench.scaling.runner import COLUMNS, read_summary
-from qpbench.scaling.sizes import DEFAULT_SIZES, TASK, Size, generate, parse_sizes, qp_shape, scenario_toml, start_target
+from qpbench.scaling.sizes import (
+    DEFAULT_SIZES,
+    TASK,
+    Size,
+    generate,
+    parse_sizes,
+    qp_shape,
+    scenario_toml,
+    start_target,
+)
 from qpbench.sim.scenario import parse_scenario
 
 LINKS = (4, 8, 16, 32, 64)
@@ -26,7 +35,9 @@ def _fd_jacobian(arm: PlanarArm, theta, links, fracs, h=1e-6) -> np.ndarray:
     for k in range(arm.n):
         e = np.zeros(arm.n)
         e[k] = h
-        J[:, :, k] = (arm.points(theta + e, links, fracs) - arm.points(theta - e, links, fracs)) / (2 * h)
+        J[:, :, k] = (arm.points(theta + e, links, fracs) - arm.points(theta - e, links, fracs)) / (
+            2 * h
+        )
     return J
 
 
@@ -82,7 +93,11 @@ def test_tick_qp_shapes_follow_the_formula_and_v0_is_feasible(size):
     shape = qp_shape(size)
     assert problem.P.shape == (shape["n"], shape["n"])
     assert problem.A.shape == (shape["m_eq"], shape["n"])
-    assert problem.G.shape == (shape["m_ineq"], shape["n"]) == (size.key_points * size.cloud_points, size.links)
+    assert (
+        problem.G.shape
+        == (shape["m_ineq"], shape["n"])
+        == (size.key_points * size.cloud_points, size.links)
+    )
     assert problem.lb.shape == problem.ub.shape == (size.links,)
     # v = 0 satisfies every obstacle row and bound at the start; the task asks for the path's speed only
     assert np.all(problem.h > 0)
@@ -148,13 +163,28 @@ def _rows(path):
 
 def test_command_end_to_end_on_the_two_smallest_sizes(tmp_path, capsys):
     out = tmp_path / "scaling"
-    args = ["scaling", "--backends", "daqp,clarabel", "--sizes", "n4-p1-m1,n4-p1-m10", "--out", str(out),
-            "--duration", "0.05", "--every", "10", "--repeat", "1", "-q"]
+    args = [
+        "scaling",
+        "--backends",
+        "daqp,clarabel",
+        "--sizes",
+        "n4-p1-m1,n4-p1-m10",
+        "--out",
+        str(out),
+        "--duration",
+        "0.05",
+        "--every",
+        "10",
+        "--repeat",
+        "1",
+        "-q",
+    ]
     assert main(args) == 0
     rows = _rows(out / "scaling.csv")
     assert tuple(rows[0]) == COLUMNS
     assert {(r["size"], r["backend"]) for r in rows} == {
-        (s, b) for s in ("n4-p1-m1", "n4-p1-m10") for b in ("daqp", "clarabel")}
+        (s, b) for s in ("n4-p1-m1", "n4-p1-m10") for b in ("daqp", "clarabel")
+    }
     for r in rows:
         assert r["status"] == "measured" and r["problems"] == "5"
         assert float(r["success_rate"]) == 1.0
@@ -189,16 +219,43 @@ def test_command_end_to_end_on_the_two_smallest_sizes(tmp_path, capsys):
 
 def test_dense_backends_skip_above_the_limit_with_a_reason(tmp_path):
     out = tmp_path / "s"
-    assert main(["scaling", "--backends", "daqp,clarabel", "--sizes", "n4-p1-m1", "--out", str(out),
-                 "--duration", "0.02", "--every", "10", "--repeat", "1", "--dense-limit", "10", "-q"]) == 0
+    assert (
+        main(
+            [
+                "scaling",
+                "--backends",
+                "daqp,clarabel",
+                "--sizes",
+                "n4-p1-m1",
+                "--out",
+                str(out),
+                "--duration",
+                "0.02",
+                "--every",
+                "10",
+                "--repeat",
+                "1",
+                "--dense-limit",
+                "10",
+                "-q",
+            ]
+        )
+        == 0
+    )
     rows = {r["backend"]: r for r in _rows(out / "scaling.csv")}
     assert rows["daqp"]["status"] == "skipped" and "dense-only" in rows["daqp"]["skip_reason"]
     assert rows["clarabel"]["status"] == "measured"
     assert "skipped: dense-only" in (out / "scaling.md").read_text()
 
 
-@pytest.mark.parametrize("extra, key", [(["--sizes", "n1-p1-m1"], "--sizes"), (["--every", "0"], "--every"),
-                                        (["--backends", "osqq"], "osqq")])
+@pytest.mark.parametrize(
+    "extra, key",
+    [
+        (["--sizes", "n1-p1-m1"], "--sizes"),
+        (["--every", "0"], "--every"),
+        (["--backends", "osqq"], "osqq"),
+    ],
+)
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, extra, key):
     out = tmp_path / "s"
     argv = ["scaling", "--backends", "daqp", "--out", str(out), *extra]

@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from qpbench.exceptions import ScenarioError
-from qpbench.sim.scenario import load_scenario, paper_scenarios, parse_scenario, scenario_names, scenario_path
+from qpbench.sim.scenario import (
+    load_scenario,
+    paper_scenarios,
+    parse_scenario,
+    scenario_names,
+    scenario_path,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
@@ -25,10 +31,16 @@ def test_the_paper_scenarios_come_from_the_files_in_section_order(tmp_path, monk
     for f in SHIPPED.glob("*.toml"):
         (tmp_path / f.name).write_bytes(f.read_bytes())
     text = (SHIPPED / "wall.toml").read_text()
-    (tmp_path / "corner.toml").write_text(text.replace('name = "wall"', 'name = "corner"')
-                                          .replace('paper_section = "4.3"', 'paper_section = "4.10"'))
-    (tmp_path / "aside.toml").write_text(text.replace('name = "wall"', 'name = "aside"')
-                                         .replace("in_paper = true", "in_paper = false"))
+    (tmp_path / "corner.toml").write_text(
+        text.replace('name = "wall"', 'name = "corner"').replace(
+            'paper_section = "4.3"', 'paper_section = "4.10"'
+        )
+    )
+    (tmp_path / "aside.toml").write_text(
+        text.replace('name = "wall"', 'name = "aside"').replace(
+            "in_paper = true", "in_paper = false"
+        )
+    )
     import qpbench.sim.scenario_files as files
 
     monkeypatch.setattr(files, "shipped_dir", lambda: tmp_path)
@@ -69,7 +81,11 @@ def test_shipped_scenarios_load_with_the_paper_values():
 
 def test_a_path_works_too(tmp_path):
     f = tmp_path / "mine.toml"
-    f.write_text((SHIPPED / "wall.toml").read_text().replace('name = "wall"\ndescription', 'name = "mine"\ndescription'))
+    f.write_text(
+        (SHIPPED / "wall.toml")
+        .read_text()
+        .replace('name = "wall"\ndescription', 'name = "mine"\ndescription')
+    )
     assert load_scenario(f).name == "mine"
     assert load_scenario(str(f)).path == f
     assert scenario_path("wall").read_bytes() == (SHIPPED / "wall.toml").read_bytes()
@@ -86,7 +102,11 @@ def edited(tmp_path, old, new, name="wall"):
 @pytest.mark.parametrize(
     "old,new,key",
     [
-        (r"^d_safe = ", "d_sefe = ", "controller.d_sefe"),  # typo: unknown key (reported before the missing one)
+        (
+            r"^d_safe = ",
+            "d_sefe = ",
+            "controller.d_sefe",
+        ),  # typo: unknown key (reported before the missing one)
         (r"^k = 10.0 .*$", "", "controller.k"),  # missing key
         (r"^alpha = 8.0", 'alpha = "eight"', "controller.alpha"),  # wrong type
         (r"^dt = 0.001", "dt = -0.001", "simulation.dt"),
@@ -135,8 +155,18 @@ def test_overrides_are_validated():
 
 def test_polyline_path_and_other_obstacles(tmp_path):
     text = (SHIPPED / "free.toml").read_text()
-    text = re.sub(r"\[path\].*?(?=\n\[contact\])", '[path]\nkind = "polyline"\ntimes = [0.0, 10.0]\npoints = [[0.4, 0.5], [0.5, 0.6]]\n', text, flags=re.S)
-    text = text.replace("obstacles = []", 'obstacles = [{kind = "disk", name = "ball", center = [0.9, 0.9], radius = 0.05, velocity = [0.0, 0.0]}, {kind = "points", name = "cloud", points = [[1.0, 1.0], [1.1, 1.0]], velocity = [0.0, 0.0]}, {kind = "segment", name = "bar", a = [-1.0, -1.0], b = [-0.9, -1.0], velocity = [0.0, 0.01]}]')
+    text = re.sub(
+        r"\[path\].*?(?=\n\[contact\])",
+        '[path]\nkind = "polyline"\ntimes = [0.0, 10.0]\npoints = [[0.4, 0.5], [0.5, 0.6]]\n',
+        text,
+        flags=re.S,
+    )
+    text = text.replace(
+        "obstacles = []",
+        'obstacles = [{kind = "disk", name = "ball", center = [0.9, 0.9], radius = 0.05, velocity = [0.0, 0.0]}, '
+        '{kind = "points", name = "cloud", points = [[1.0, 1.0], [1.1, 1.0]], velocity = [0.0, 0.0]}, '
+        '{kind = "segment", name = "bar", a = [-1.0, -1.0], b = [-0.9, -1.0], velocity = [0.0, 0.01]}]',
+    )
     sc = parse_scenario(text, tmp_path / "x.toml")
     ctrl = sc.make_controller()
     assert ctrl.n_rows == 7 * 4
@@ -154,12 +184,22 @@ def test_scenarios_lists_every_shipped_file(capsys):
     assert lines[0].split()[:4] == ["name", "paper", "duration", "obstacles"]
     assert [line.split()[0] for line in lines[1:]] == scenario_names()
     narrow = next(line for line in lines if line.startswith("narrow "))
-    assert "upper, lower" in narrow and "20 s" in narrow and load_scenario("narrow").description in narrow
+    assert (
+        "upper, lower" in narrow
+        and "20 s" in narrow
+        and load_scenario("narrow").description in narrow
+    )
     assert main(["scenarios", "--json"]) == 0
     items = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [i["name"] for i in items] == scenario_names()
-    assert items[0] == {"name": "free", "paper_section": "4.2", "in_paper": True, "duration_s": 20.0,
-                        "obstacles": [], "description": load_scenario("free").description}
+    assert items[0] == {
+        "name": "free",
+        "paper_section": "4.2",
+        "in_paper": True,
+        "duration_s": 20.0,
+        "obstacles": [],
+        "description": load_scenario("free").description,
+    }
 
 
 def test_scenarios_show_prints_a_file_to_start_from(tmp_path, capsys):
@@ -169,19 +209,27 @@ def test_scenarios_show_prints_a_file_to_start_from(tmp_path, capsys):
     text = capsys.readouterr().out
     assert text == (SHIPPED / "wall.toml").read_text()
     mine = tmp_path / "mine.toml"
-    mine.write_text(text.replace('name = "wall"', 'name = "mine"').replace("d_safe = 0.01 ", "d_safe = 0.02 "))
+    mine.write_text(
+        text.replace('name = "wall"', 'name = "mine"').replace("d_safe = 0.01 ", "d_safe = 0.02 ")
+    )
     assert load_scenario(mine).data["controller"]["d_safe"] == 0.02
     assert main(["scenarios", "show", "narrow", "--json"]) == 0
     tables = json.loads(capsys.readouterr().out)
-    assert tables["scenario"]["name"] == "narrow" and [o["name"] for o in tables["obstacles"]] == ["upper", "lower"]
+    assert tables["scenario"]["name"] == "narrow" and [o["name"] for o in tables["obstacles"]] == [
+        "upper",
+        "lower",
+    ]
 
 
-@pytest.mark.parametrize("args, what", [
-    (["show"], "which scenario"),
-    (["show", "nope"], "no shipped scenario"),
-    (["wall"], "show wall"),
-    (["list", "wall"], "show wall"),
-])
+@pytest.mark.parametrize(
+    "args, what",
+    [
+        (["show"], "which scenario"),
+        (["show", "nope"], "no shipped scenario"),
+        (["wall"], "show wall"),
+        (["list", "wall"], "show wall"),
+    ],
+)
 def test_scenarios_bad_input_is_one_line_and_exit_2(capsys, args, what):
     from qpbench.cli import main
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import qpsolvers
 import scipy.sparse as spa
-
 from conftest import MAROS_MESZAROS_DIR, random_problem
+
 from qpbench.backends import backend_class, get_backend
 from qpbench.backends._sparse import wants_sparse
 from qpbench.formats import load_problems
@@ -27,8 +27,16 @@ def _sparse_copy(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     def csc(M):
         return None if M is None else spa.csc_matrix(M)
 
-    return qpsolvers.Problem(csc(problem.P), problem.q, csc(problem.G), problem.h, csc(problem.A), problem.b,
-                             problem.lb, problem.ub)
+    return qpsolvers.Problem(
+        csc(problem.P),
+        problem.q,
+        csc(problem.G),
+        problem.h,
+        csc(problem.A),
+        problem.b,
+        problem.lb,
+        problem.ub,
+    )
 
 
 def _sparse_solver_kind(backend) -> str:
@@ -86,14 +94,18 @@ def test_sparse_update_keeps_solver_per_structure(name):
     base = _sparse_copy(random_problem(rng, n=8, n_ineq=5, n_eq=2))
     first = backend.solve(base)
     kept = backend._qp if name == "proxqp" else backend._solver
-    moved = qpsolvers.Problem(base.P, base.q + 0.5, base.G, base.h, base.A, base.b, base.lb, base.ub)
+    moved = qpsolvers.Problem(
+        base.P, base.q + 0.5, base.G, base.h, base.A, base.b, base.lb, base.ub
+    )
     second = backend.solve(moved)
     assert (backend._qp if name == "proxqp" else backend._solver) is kept
     fresh = get_backend(name, "high_accuracy").solve(moved)
     assert first.status == second.status == fresh.status == "optimal"
     np.testing.assert_allclose(second.x, fresh.x, atol=1e-6)
     other = spa.csc_matrix(np.diag(np.linspace(1, 2, 8)))  # another sparsity pattern of P
-    backend.solve(qpsolvers.Problem(other, base.q, base.G, base.h, base.A, base.b, base.lb, base.ub))
+    backend.solve(
+        qpsolvers.Problem(other, base.q, base.G, base.h, base.A, base.b, base.lb, base.ub)
+    )
     assert (backend._qp if name == "proxqp" else backend._solver) is not kept
 
 
@@ -117,8 +129,14 @@ def test_sparse_infeasible_stays_infeasible(name):
     n = 4
     # x_0 >= 1 and x_0 <= -1 (rows of G), bounds on every variable
     G = spa.csc_matrix(np.vstack([-np.eye(n)[0], np.eye(n)[0]]))
-    problem = qpsolvers.Problem(spa.identity(n, format="csc"), np.ones(n), G, np.array([-1.0, -1.0]),
-                                lb=-5 * np.ones(n), ub=5 * np.ones(n))
+    problem = qpsolvers.Problem(
+        spa.identity(n, format="csc"),
+        np.ones(n),
+        G,
+        np.array([-1.0, -1.0]),
+        lb=-5 * np.ones(n),
+        ub=5 * np.ones(n),
+    )
     assert get_backend(name).solve(problem).status == "primal_infeasible"
 
 
@@ -146,22 +164,54 @@ def test_100k_banded_through_sparse_routes_under_2gb(tmp_path):
     e = np.ones(n)
     L = spa.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="csc")
     P = ((L @ L) + 0.016 * spa.identity(n)).tocsc()
-    problem = qpsolvers.Problem(P, np.sin(np.arange(n)), None, None, spa.csc_matrix(np.ones((1, n))), np.ones(1),
-                                -np.ones(n), np.ones(n))
+    problem = qpsolvers.Problem(
+        P,
+        np.sin(np.arange(n)),
+        None,
+        None,
+        spa.csc_matrix(np.ones((1, n))),
+        np.ones(1),
+        -np.ones(n),
+        np.ones(n),
+    )
     (tmp_path / "set").mkdir()
     save_npz(ProblemRecord(problem, "band100k"), tmp_path / "set" / "band100k.npz")
     out = tmp_path / "rows.csv"
-    backends = ",".join(b for b in ("clarabel",) + ROUTES if not backend_class(b).unavailable_reason())
-    bench = subprocess.run([sys.executable, "-c", _LIMITED.format(limit=2 * 1024**3), "bench", str(tmp_path / "set"),
-                            "--backends", backends, "--out", str(out), "--memory-budget", "1GB"],
-                           capture_output=True, text=True, timeout=900)
-    assert bench.returncode in (0, 1), bench.stderr  # 1: a row did not succeed (ProxQP's time limit)
+    backends = ",".join(
+        b for b in ("clarabel",) + ROUTES if not backend_class(b).unavailable_reason()
+    )
+    bench = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            _LIMITED.format(limit=2 * 1024**3),
+            "bench",
+            str(tmp_path / "set"),
+            "--backends",
+            backends,
+            "--out",
+            str(out),
+            "--memory-budget",
+            "1GB",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert bench.returncode in (0, 1), (
+        bench.stderr
+    )  # 1: a row did not succeed (ProxQP's time limit)
     with open(out, newline="") as fh:
         rows = {r["backend"]: r for r in csv.DictReader(fh)}
     assert set(rows) == set(backends.split(","))
     if rows.get("proxqp", {}).get("status") == "time_limit":
         del rows["proxqp"]
     for name, row in rows.items():
-        assert row["status"] == "optimal" and row["success"] == "True", (name, row["status"], row["error"])
+        assert row["status"] == "optimal" and row["success"] == "True", (
+            name,
+            row["status"],
+            row["error"],
+        )
         assert abs(float(row["objective"]) - float(rows["clarabel"]["objective"])) <= 1e-5 * (
-            1 + abs(float(rows["clarabel"]["objective"])))
+            1 + abs(float(rows["clarabel"]["objective"]))
+        )

@@ -11,10 +11,10 @@ from __future__ import annotations
 import signal
 from pathlib import Path
 
+import faulty_backends as fb
 import pandas as pd
 import pytest
 
-import faulty_backends as fb
 from qpbench import metrics, statuses
 from qpbench.backends import STATUSES, get_backend
 from qpbench.cli import main
@@ -28,7 +28,11 @@ PLUGIN = str(Path(fb.__file__).resolve())
 
 def test_one_vocabulary():
     assert STATUSES is statuses.STATUSES and metrics.STATUSES is statuses.STATUSES
-    assert set(statuses.CERTIFIED_INFEASIBLE) < set(statuses.INFEASIBLE_OR_UNCLASSIFIED) <= set(statuses.STATUSES)
+    assert (
+        set(statuses.CERTIFIED_INFEASIBLE)
+        < set(statuses.INFEASIBLE_OR_UNCLASSIFIED)
+        <= set(statuses.STATUSES)
+    )
     assert set(statuses.FAILURE_STATUSES) <= set(statuses.STATUSES) | set(statuses.GUARD_STATUSES)
     assert statuses.TICK_STATUSES == statuses.STATUSES + ("invalid",)
 
@@ -47,7 +51,11 @@ def test_guard_and_loop_classify_the_same_answer_the_same_way(name, status):
     assert set(result.log["status"].astype(str)) == {status}
     assert result.summary[f"{status}_ticks"] == 3
     if status == "error":  # the same words for the same exception
-        assert result.summary["first_error"] == outcome.error == "RuntimeError: solver exploded on two lines"
+        assert (
+            result.summary["first_error"]
+            == outcome.error
+            == "RuntimeError: solver exploded on two lines"
+        )
     # a tick without an answer: the soft fallback fails too (same backend), zero velocity
     assert result.log["zero_velocity"].all()
 
@@ -57,7 +65,9 @@ def test_late_answer_is_time_limit_in_both():
     solution = fb.exact_solution(problem)
     assert statuses.classify(solution, 2.0, 1.0)[0] == "time_limit"
     assert statuses.classify(solution, 0.5, 1.0) == ("optimal", None)
-    assert LocalRunner(get_backend("faulty:sleep"), 0.01, True).solve(problem).status == "time_limit"
+    assert (
+        LocalRunner(get_backend("faulty:sleep"), 0.01, True).solve(problem).status == "time_limit"
+    )
 
 
 def test_a_dead_worker_is_worded_the_same_per_tick_and_in_the_loop(tmp_path):
@@ -70,8 +80,9 @@ def test_a_dead_worker_is_worded_the_same_per_tick_and_in_the_loop(tmp_path):
         per_tick = runner.solve(fb.tick_records(1)[0].problem)
     finally:
         runner.close()
-    outcome = closed_loop.run_closed_loop(["wall"], ["faulty:segfault"], tmp_path, duration=0.01,
-                                          run_time_limit=60.0)
+    outcome = closed_loop.run_closed_loop(
+        ["wall"], ["faulty:segfault"], tmp_path, duration=0.01, run_time_limit=60.0
+    )
     row = outcome.table.iloc[0]
     words = death_message(-signal.SIGSEGV)
     assert words == "worker process killed by SIGSEGV"
@@ -90,11 +101,37 @@ def test_set_with_a_typo_exits_2_before_any_solve(tmp_path, capsys, monkeypatch)
     from qpbench.backends import osqp_
 
     monkeypatch.setattr(osqp_.OsqpBackend, "solve", no_solve)
-    assert main(["bench", str(folder), "--backends", "osqp", "--set", "osqp.rhoo=0.1", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "bench",
+                str(folder),
+                "--backends",
+                "osqp",
+                "--set",
+                "osqp.rhoo=0.1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "did you mean 'rho'" in err and "osqp.rhoo" in err
     assert not out.exists()
     # a real setting passes the check (and reaches the solver)
     monkeypatch.undo()
-    assert main(["-q", "bench", str(folder), "--backends", "osqp", "--set", "osqp.rho=0.1", "--out", str(out)]) in (0, 1)
+    assert main(
+        [
+            "-q",
+            "bench",
+            str(folder),
+            "--backends",
+            "osqp",
+            "--set",
+            "osqp.rho=0.1",
+            "--out",
+            str(out),
+        ]
+    ) in (0, 1)
     assert len(pd.read_csv(out)) == 2

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import tomllib
 from pathlib import Path
 
@@ -69,7 +68,9 @@ def test_sampling_is_deterministic_and_per_instance(tmp_path):
     a, b = sample_instances(spec), sample_instances(spec)
     assert [i.text for i in a] == [i.text for i in b]
     more = sample_instances(load_sweep(write_sweep(tmp_path), samples=12))
-    assert [i.text for i in more[:8]] == [i.text for i in a]  # instance i does not depend on the count
+    assert [i.text for i in more[:8]] == [
+        i.text for i in a
+    ]  # instance i does not depend on the count
     assert len({i.text for i in a}) == 8
     for inst in a:
         v = inst.values
@@ -91,39 +92,78 @@ def test_distributions_have_their_moments(tmp_path):
     theta = np.array([dist["robot.theta0"].draw(spec.rng(i, "robot.theta0")) for i in range(400)])
     assert np.allclose(theta.mean(axis=0), [1.57, -0.628, -0.524, -0.524], atol=0.01)
     assert np.allclose(theta.std(axis=0), 0.03, rtol=0.15)
-    k = np.array([dist["contact.stiffness"].draw(spec.rng(i, "contact.stiffness")) for i in range(400)])
+    k = np.array(
+        [dist["contact.stiffness"].draw(spec.rng(i, "contact.stiffness")) for i in range(400)]
+    )
     assert abs(np.mean(np.log(k)) - np.log(np.sqrt(2000.0 * 20000.0))) < 0.15  # uniform in log
 
 
-@pytest.mark.parametrize(("line", "key", "words"), [
-    ('"controller.desire_force" = { dist = "uniform", low = 1.0, high = 2.0 }', "parameters.controller.desire_force",
-     "did you mean controller.desired_force"),
-    ('Fd = { dist = "uniform", low = 1.0, high = 2.0 }', "parameters.Fd", "controller.desired_force"),
-    ('"robot.theta0" = { dist = "gauss", std = 0.1 }', "parameters.robot.theta0.dist", "unknown distribution"),
-    ('"robot.theta0" = { dist = "uniform", low = [0.0, 0.0], high = 1.0 }', "parameters.robot.theta0.low", "shape"),
-    ('"contact.stiffness" = { dist = "loguniform", low = 0.0, high = 2.0 }', "parameters.contact.stiffness.low",
-     "low > 0"),
-    ('"obstacles[3].point" = { dist = "uniform", low = 0.0, high = 1.0 }', "parameters.obstacles[3].point",
-     "no such obstacle"),
-    ('"contact.noise_seed" = { dist = "uniform", low = 0.0, high = 9.0 }', "parameters.contact.noise_seed.dist",
-     "integer"),
-    ('"simulation.dt" = { dist = "choice", values = [] }', "parameters.simulation.dt.values", "non-empty"),
-])
+@pytest.mark.parametrize(
+    ("line", "key", "words"),
+    [
+        (
+            '"controller.desire_force" = { dist = "uniform", low = 1.0, high = 2.0 }',
+            "parameters.controller.desire_force",
+            "did you mean controller.desired_force",
+        ),
+        (
+            'Fd = { dist = "uniform", low = 1.0, high = 2.0 }',
+            "parameters.Fd",
+            "controller.desired_force",
+        ),
+        (
+            '"robot.theta0" = { dist = "gauss", std = 0.1 }',
+            "parameters.robot.theta0.dist",
+            "unknown distribution",
+        ),
+        (
+            '"robot.theta0" = { dist = "uniform", low = [0.0, 0.0], high = 1.0 }',
+            "parameters.robot.theta0.low",
+            "shape",
+        ),
+        (
+            '"contact.stiffness" = { dist = "loguniform", low = 0.0, high = 2.0 }',
+            "parameters.contact.stiffness.low",
+            "low > 0",
+        ),
+        (
+            '"obstacles[3].point" = { dist = "uniform", low = 0.0, high = 1.0 }',
+            "parameters.obstacles[3].point",
+            "no such obstacle",
+        ),
+        (
+            '"contact.noise_seed" = { dist = "uniform", low = 0.0, high = 9.0 }',
+            "parameters.contact.noise_seed.dist",
+            "integer",
+        ),
+        (
+            '"simulation.dt" = { dist = "choice", values = [] }',
+            "parameters.simulation.dt.values",
+            "non-empty",
+        ),
+    ],
+)
 def test_bad_sweep_file_is_one_line_naming_file_and_key(tmp_path, capsys, line, key, words):
     head = SWEEP.split("[parameters]")[0]
     path = write_sweep(tmp_path, head + "[parameters]\n" + line + "\n")
-    code = main(["sweep", str(path), "--backends", "daqp", "--out", str(tmp_path / "out"), "--jobs", "1"])
+    code = main(
+        ["sweep", str(path), "--backends", "daqp", "--out", str(tmp_path / "out"), "--jobs", "1"]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
-    assert len(err) == 1 and str(path) in err[0] and f"key '{key}'" in err[0] and words in err[0], err
+    assert len(err) == 1 and str(path) in err[0] and f"key '{key}'" in err[0] and words in err[0], (
+        err
+    )
     assert not (tmp_path / "out").exists()
 
 
 def test_bad_head_keys(tmp_path):
-    for text, key in ((SWEEP.replace("seed = 7", "sed = 7"), "sweep.sed"),
-                      (SWEEP.replace('base = "wall"', 'base = "walll"'), "sweep.base"),
-                      (SWEEP + "\n[extra]\nx = 1\n", "extra"),
-                      (SWEEP.replace("duration = 0.25", "duration = -1.0"), "sweep.duration")):
+    for text, key in (
+        (SWEEP.replace("seed = 7", "sed = 7"), "sweep.sed"),
+        (SWEEP.replace('base = "wall"', 'base = "walll"'), "sweep.base"),
+        (SWEEP + "\n[extra]\nx = 1\n", "extra"),
+        (SWEEP.replace("duration = 0.25", "duration = -1.0"), "sweep.duration"),
+    ):
         with pytest.raises(InputError) as err:
             parse_sweep(text, tmp_path / "s.toml")
         assert err.value.key == key
@@ -143,7 +183,18 @@ def serial(tmp_path_factory):
     """The tiny sweep run serially with daqp and osqp (the reference rows)."""
     tmp = tmp_path_factory.mktemp("serial")
     out = tmp / "out"
-    code = main(["sweep", str(write_sweep(tmp)), "--backends", "daqp,osqp", "--out", str(out), "--jobs", "1"])
+    code = main(
+        [
+            "sweep",
+            str(write_sweep(tmp)),
+            "--backends",
+            "daqp,osqp",
+            "--out",
+            str(out),
+            "--jobs",
+            "1",
+        ]
+    )
     assert code == 0
     return out
 
@@ -151,7 +202,9 @@ def serial(tmp_path_factory):
 def test_serial_rows(serial):
     rows = rows_of(serial)
     assert len(rows) == 16 and all(r["status"] == "ok" for r in rows)
-    assert {r["executor"] for r in rows} == {"processes"} and {r["concurrent_solves"] for r in rows} == {"1"}
+    assert {r["executor"] for r in rows} == {"processes"} and {
+        r["concurrent_solves"] for r in rows
+    } == {"1"}
     assert len({r["worker"] for r in rows}) == 1  # one worker, one run after the other
     assert len(list((serial / "instances").glob("*.toml"))) == 8
     manifest = json.loads((serial / "sweep.json").read_text())
@@ -164,10 +217,26 @@ def test_serial_rows(serial):
 
 def test_two_jobs_give_the_serial_rows(serial, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["sweep", str(write_sweep(tmp_path)), "--backends", "daqp,osqp", "--out", str(out), "--jobs", "2"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(write_sweep(tmp_path)),
+                "--backends",
+                "daqp,osqp",
+                "--out",
+                str(out),
+                "--jobs",
+                "2",
+            ]
+        )
+        == 0
+    )
     rows = rows_of(out)
     assert_same_rows(rows_of(serial), rows)
-    assert {r["executor"] for r in rows} == {"processes"} and {r["concurrent_solves"] for r in rows} == {"2"}
+    assert {r["executor"] for r in rows} == {"processes"} and {
+        r["concurrent_solves"] for r in rows
+    } == {"2"}
     assert len({r["worker"] for r in rows}) == 2
     assert "Take timings with --jobs 1" in capsys.readouterr().err
 
@@ -175,8 +244,23 @@ def test_two_jobs_give_the_serial_rows(serial, tmp_path, capsys):
 def test_local_dask_cluster_gives_the_serial_rows(serial, tmp_path):
     pytest.importorskip("distributed")
     out = tmp_path / "out"
-    assert main(["sweep", str(write_sweep(tmp_path)), "--backends", "daqp,osqp", "--out", str(out), "--jobs", "2",
-                 "--executor", "dask"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(write_sweep(tmp_path)),
+                "--backends",
+                "daqp,osqp",
+                "--out",
+                str(out),
+                "--jobs",
+                "2",
+                "--executor",
+                "dask",
+            ]
+        )
+        == 0
+    )
     rows = rows_of(out)
     assert_same_rows(rows_of(serial), rows)
     assert all(r["executor"] == "dask" and r["worker"].startswith("tcp://127.0.0.1:") for r in rows)
@@ -187,17 +271,31 @@ def test_simulate_reruns_a_saved_instance(serial, tmp_path):
 
     row = next(r for r in rows_of(serial) if r["instance"] == "i00003" and r["backend"] == "daqp")
     summary, log = tmp_path / "s.json", tmp_path / "log.parquet"
-    code = main(["simulate", "--scenario", str(serial / row["instance_file"]), "--backend", "daqp",
-                 "--summary", str(summary), "--log", str(log)])
+    code = main(
+        [
+            "simulate",
+            "--scenario",
+            str(serial / row["instance_file"]),
+            "--backend",
+            "daqp",
+            "--summary",
+            str(summary),
+            "--log",
+            str(log),
+        ]
+    )
     assert code == 0
     s = json.loads(summary.read_text())
     again = {"duration_s" if k == "duration" else k: s.get(k) for k in SUMMARY_COLUMNS}
     again.update(verdict=s["verdict"], verdict_reasons=s["verdict_reasons"])
     frame = pd.read_parquet(log)
     t = frame["t"].to_numpy()
-    again["t_converge_force_s"] = time_to_converge(t, frame["force_error"].to_numpy(), float(row["force_band_n"]))
-    again["t_converge_tracking_s"] = time_to_converge(t, frame["tracking_error"].to_numpy(),
-                                                      float(row["tracking_band_m"]))
+    again["t_converge_force_s"] = time_to_converge(
+        t, frame["force_error"].to_numpy(), float(row["force_band_n"])
+    )
+    again["t_converge_tracking_s"] = time_to_converge(
+        t, frame["tracking_error"].to_numpy(), float(row["tracking_band_m"])
+    )
     compared = [c for c in again if c not in TIMING_COLUMNS]
     assert len(compared) >= 25
     assert same_outside_timing({c: row[c] for c in compared}, again) == []
@@ -208,14 +306,29 @@ def test_lost_worker_loses_only_its_run_and_resume_fills_it(serial, tmp_path, mo
     flag.touch()
     monkeypatch.setenv("QPBENCH_TEST_DIE", str(flag))
     path, out = write_sweep(tmp_path), tmp_path / "out"
-    args = ["sweep", str(path), "--backends", "daqp,sweep:die-on-flag", "--out", str(out), "--jobs", "2",
-            "--plugin", PLUGIN]
+    args = [
+        "sweep",
+        str(path),
+        "--backends",
+        "daqp,sweep:die-on-flag",
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+        "--plugin",
+        PLUGIN,
+    ]
     assert main(args) == 1
     rows = rows_of(out)
     dead = [r for r in rows if r["backend"] == "sweep:die-on-flag"]
     assert len(rows) == 16 and len(dead) == 8
-    assert all(r["status"] == "crashed" and r["attempts"] == "2" and r["verdict"] == "failed" and "SIGKILL" in r["error"]
-               for r in dead)
+    assert all(
+        r["status"] == "crashed"
+        and r["attempts"] == "2"
+        and r["verdict"] == "failed"
+        and "SIGKILL" in r["error"]
+        for r in dead
+    )
     daqp = [r for r in rows if r["backend"] == "daqp"]
     assert_same_rows([r for r in rows_of(serial) if r["backend"] == "daqp"], daqp)
     flag.unlink()
@@ -224,7 +337,10 @@ def test_lost_worker_loses_only_its_run_and_resume_fills_it(serial, tmp_path, mo
     assert len(rows) == 16 and all(r["status"] == "ok" for r in rows)
     again = [r for r in rows if r["backend"] == "sweep:die-on-flag"]
     for a, b in zip(again, daqp):  # the same DAQP solves: the same trajectories
-        assert a["min_obstacle_distance"] == b["min_obstacle_distance"] and a["verdict"] == b["verdict"]
+        assert (
+            a["min_obstacle_distance"] == b["min_obstacle_distance"]
+            and a["verdict"] == b["verdict"]
+        )
 
 
 def test_killed_sweep_resumes_to_the_same_rows(serial, tmp_path):
@@ -235,7 +351,9 @@ def test_killed_sweep_resumes_to_the_same_rows(serial, tmp_path):
     assert main(args) == 0
     data = (out / "sweep.csv").read_bytes()
     lines = data.split(b"\n")
-    (out / "sweep.csv").write_bytes(b"\n".join(lines[:10]) + b"\n" + lines[10][:40])  # 9 rows and a half
+    (out / "sweep.csv").write_bytes(
+        b"\n".join(lines[:10]) + b"\n" + lines[10][:40]
+    )  # 9 rows and a half
     assert main(args) == 2  # exists: neither --force nor --resume
     assert main(args + ["--resume"]) == 0
     assert_same_rows(rows_of(serial), rows_of(out))
@@ -253,7 +371,10 @@ def test_resume_refuses_another_sweep_file(serial, tmp_path, capsys):
 
 def test_invalid_instance_is_a_row(tmp_path):
     head = SWEEP.split("[parameters]")[0].replace("samples = 8", "samples = 3")
-    path = write_sweep(tmp_path, head + '[parameters]\n"robot.theta0" = { dist = "uniform", low = 3.1, high = 3.2 }\n')
+    path = write_sweep(
+        tmp_path,
+        head + '[parameters]\n"robot.theta0" = { dist = "uniform", low = 3.1, high = 3.2 }\n',
+    )
     out = tmp_path / "out"
     assert main(["sweep", str(path), "--backends", "daqp", "--out", str(out), "--jobs", "1"]) == 0
     rows = rows_of(out)
@@ -275,18 +396,27 @@ def test_columns_are_unique():
 
 def test_same_draws_one_value_for_every_component(tmp_path):
     head = SWEEP.split("[parameters]")[0]
-    text = head + """[parameters]
+    text = (
+        head
+        + """[parameters]
 "path.centre" = { dist = "uniform", spread = 0.03, same = true }
 "path.amplitude" = { dist = "uniform", low = 0.05, high = 0.12, same = true }
 """
+    )
     for inst in sample_instances(load_sweep(write_sweep(tmp_path, text))):
         cx, cy = inst.values["path.centre"]
-        assert cx - 0.4 == pytest.approx(cy - 0.5) and abs(cx - 0.4) <= 0.03  # along wall's surface tangent
+        assert (
+            cx - 0.4 == pytest.approx(cy - 0.5) and abs(cx - 0.4) <= 0.03
+        )  # along wall's surface tangent
         ax, ay = inst.values["path.amplitude"]
         assert ax == ay and 0.05 <= ax <= 0.12
     with pytest.raises(InputError, match="same = true takes numbers"):
-        parse_sweep(head + '[parameters]\n"path.centre" = { dist = "uniform", low = [0.3, 0.4], high = [0.5, 0.6], '
-                    'same = true }\n', tmp_path / "s.toml")
+        parse_sweep(
+            head
+            + '[parameters]\n"path.centre" = { dist = "uniform", low = [0.3, 0.4], high = [0.5, 0.6], '
+            "same = true }\n",
+            tmp_path / "s.toml",
+        )
 
 
 def test_a_start_inside_d_safe_is_invalid_unless_allowed(tmp_path):
@@ -294,13 +424,18 @@ def test_a_start_inside_d_safe_is_invalid_unless_allowed(tmp_path):
     from qpbench.sweep.sample import start_clearance
 
     assert start_clearance(load_scenario("wall"))[1:] == ("A1", "wall")
-    assert start_clearance(load_scenario("wall"))[0] == pytest.approx(0.05, abs=1e-3)  # A1, A2 at x = 0
+    assert start_clearance(load_scenario("wall"))[0] == pytest.approx(
+        0.05, abs=1e-3
+    )  # A1, A2 at x = 0
     head = SWEEP.split("[parameters]")[0].replace("samples = 8", "samples = 2")
     line = '[parameters]\n"obstacles[0].point" = { dist = "uniform", low = [-0.005, 0.0], high = [-0.001, 0.0] }\n'
     inst = sample_instances(load_sweep(write_sweep(tmp_path, head + line)))
     assert all("inside d_safe" in i.invalid and "from obstacle wall" in i.invalid for i in inst)
     allowed = head.replace("duration = 0.25", "duration = 0.25\nsafe_start = false")
-    assert all(i.invalid is None for i in sample_instances(load_sweep(write_sweep(tmp_path, allowed + line))))
+    assert all(
+        i.invalid is None
+        for i in sample_instances(load_sweep(write_sweep(tmp_path, allowed + line)))
+    )
 
 
 @pytest.mark.parametrize("name", ["wall", "narrow"])

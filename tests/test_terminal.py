@@ -36,9 +36,22 @@ def test_log_lines_start_on_their_own_line():
 
 def _simulate_stderr(*flags: str) -> list[str]:
     proc = subprocess.run(
-        [sys.executable, "-m", "qpbench.cli", *flags, "simulate", "--scenario", "wall", "--backend", "daqp",
-         "--duration", "0.005"],
-        capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "qpbench.cli",
+            *flags,
+            "simulate",
+            "--scenario",
+            "wall",
+            "--backend",
+            "daqp",
+            "--duration",
+            "0.005",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stderr
     return proc.stderr.splitlines()
@@ -51,7 +64,15 @@ def test_verbosity_levels():
     assert any("verdict ok" in line for line in default)
     assert not any(line.startswith("DEBUG") for line in default)
     settings = [line for line in v if line.startswith("DEBUG: qpbench ") and "simulate:" in line]
-    assert len(settings) == 1 and "backend='daqp'" in settings[0] and "duration=0.005" in settings[0]
+    assert (
+        len(settings) == 1 and "backend='daqp'" in settings[0] and "duration=0.005" in settings[0]
+    )
     per_solve = [line for line in vv if line.startswith("DEBUG: wall daqp tick ")]
-    assert [line.split(" tick ")[1].split(" ")[0] for line in per_solve] == ["0", "1", "2", "3", "4"]
+    assert [line.split(" tick ")[1].split(" ")[0] for line in per_solve] == [
+        "0",
+        "1",
+        "2",
+        "3",
+        "4",
+    ]
     assert not any(" tick " in line and line.startswith("DEBUG: wall daqp") for line in v)

@@ -24,8 +24,27 @@ def test_post_kernel_force_matches_contact_surface():
         previous = ee - rng.normal(0.0, 2e-4, 2)
         sensed = np.array([previous[0], previous[1], 0.0, 0.0])
         data = np.zeros((2, len(cols)))
-        force = post(theta.copy(), np.zeros(ctrl.n), ee, sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd,
-                     np.zeros(0), np.zeros(0), data, 1, ci, cf, 0.0, APPLIED, ctrl.kp, ctrl.kd, 0.0)
+        force = post(
+            theta.copy(),
+            np.zeros(ctrl.n),
+            ee,
+            sensed,
+            arrays.J,
+            arrays.b0,
+            arrays.dist,
+            arrays.xd,
+            np.zeros(0),
+            np.zeros(0),
+            data,
+            1,
+            ci,
+            cf,
+            0.0,
+            APPLIED,
+            ctrl.kp,
+            ctrl.kd,
+            0.0,
+        )
         expected = surface.force(ee, (ee - previous) / scenario.dt)
         assert force == pytest.approx(expected, rel=1e-12, abs=1e-12)
         assert data[1, cidx["force"]] == force

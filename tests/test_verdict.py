@@ -11,13 +11,13 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+from slow_backends import SlowExact
 
 from qpbench.cli import main
 from qpbench.exceptions import ParamError, ScenarioError
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario, scenario_names
 from qpbench.sim.verdict import VerdictSettings, failed_run, judge
-from slow_backends import SlowExact
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
@@ -44,11 +44,16 @@ def _edited(tmp_path, old, new):
 
 def test_safety_margin_defaults_to_half_a_millimetre(tmp_path):
     f = _edited(tmp_path, r"^safety_margin = .*$", "")
-    assert "safety_margin" not in f.read_text().split("[verdict]")[1].split("[rnn]")[0].split("#")[0]
+    assert (
+        "safety_margin" not in f.read_text().split("[verdict]")[1].split("[rnn]")[0].split("#")[0]
+    )
     assert load_scenario(f).verdict.safety_margin == 0.0005
     f = _edited(tmp_path, r"^safety_margin = .*$", "safety_margin = 0.002")
     assert load_scenario(f).verdict.safety_margin == 0.002
-    assert load_scenario("wall", overrides={"verdict.max_force_error": 3.5}).verdict.max_force_error == 3.5
+    assert (
+        load_scenario("wall", overrides={"verdict.max_force_error": 3.5}).verdict.max_force_error
+        == 3.5
+    )
 
 
 @pytest.mark.parametrize(
@@ -80,7 +85,7 @@ def test_a_file_without_the_verdict_table_is_refused(tmp_path):
     text = (SHIPPED / "wall.toml").read_text()
     head, rest = text.split("[verdict]\n")
     f = tmp_path / "old.toml"
-    f.write_text(head + rest[rest.index("[rnn]"):])
+    f.write_text(head + rest[rest.index("[rnn]") :])
     with pytest.raises(ScenarioError, match="missing table") as err:
         load_scenario(f)
     assert err.value.key == "verdict"
@@ -88,76 +93,138 @@ def test_a_file_without_the_verdict_table_is_refused(tmp_path):
 
 # ---------------------------------------------------------------- the rules, on logs made by hand
 
-LIMITS = SimpleNamespace(theta_min=np.full(2, -1.0), theta_max=np.full(2, 1.0),
-                         v_min=np.full(2, -0.5), v_max=np.full(2, 0.5))
-SETTINGS = VerdictSettings(settle_time=1.0, max_tracking_error=1e-3, max_force_error=2.0, safety_margin=5e-4)
+LIMITS = SimpleNamespace(
+    theta_min=np.full(2, -1.0),
+    theta_max=np.full(2, 1.0),
+    v_min=np.full(2, -0.5),
+    v_max=np.full(2, 0.5),
+)
+SETTINGS = VerdictSettings(
+    settle_time=1.0, max_tracking_error=1e-3, max_force_error=2.0, safety_margin=5e-4
+)
 
 
 def _log(n=3000, dt=1e-3, **over):
     t = np.arange(n) * dt
-    cols = {"t": t, "theta_0": np.zeros(n), "theta_1": np.zeros(n), "v_0": np.zeros(n), "v_1": np.zeros(n),
-            "tracking_error": np.zeros(n), "force_error": np.zeros(n), "d_A1_wall": np.full(n, 0.02)}
+    cols = {
+        "t": t,
+        "theta_0": np.zeros(n),
+        "theta_1": np.zeros(n),
+        "v_0": np.zeros(n),
+        "v_1": np.zeros(n),
+        "tracking_error": np.zeros(n),
+        "force_error": np.zeros(n),
+        "d_A1_wall": np.full(n, 0.02),
+    }
     for k, f in over.items():
         cols[k] = f(t)
     return pd.DataFrame(cols)
 
 
 def _judge(frame, **summary):
-    return judge(frame, SETTINGS, d_safe=0.01, limits=LIMITS, obstacle_columns=[("A1", "wall")], summary=summary)
+    return judge(
+        frame,
+        SETTINGS,
+        d_safe=0.01,
+        limits=LIMITS,
+        obstacle_columns=[("A1", "wall")],
+        summary=summary,
+    )
 
 
 def test_clean_run_is_ok():
-    v = _judge(_log(tracking_error=lambda t: np.where(t < 1.0, 0.5, 9e-4), force_error=lambda t: np.where(t < 1.0, 50.0, -1.9),
-                    d_A1_wall=lambda t: np.full_like(t, 0.0096)))
-    assert v.verdict == "ok" and v.reasons == () and v.ok  # big errors inside the transient are not judged
+    v = _judge(
+        _log(
+            tracking_error=lambda t: np.where(t < 1.0, 0.5, 9e-4),
+            force_error=lambda t: np.where(t < 1.0, 50.0, -1.9),
+            d_A1_wall=lambda t: np.full_like(t, 0.0096),
+        )
+    )
+    assert (
+        v.verdict == "ok" and v.reasons == () and v.ok
+    )  # big errors inside the transient are not judged
 
 
 def test_each_rule_and_its_reason():
     unsafe = _judge(_log(d_A1_wall=lambda t: np.where((t >= 1.5) & (t < 1.6), 0.0064, 0.02)))
     assert unsafe.verdict == "unsafe"
     assert unsafe.text == "d_min 6.4 mm < d_safe - 0.5 mm = 9.5 mm (A1/wall at 1.500 s; 100 ticks)"
-    limits = _judge(_log(v_1=lambda t: np.where(t == 0.25, -0.7, 0.0), theta_0=lambda t: np.where(t > 2.5, 1.0 + 2e-6, 0.0)))
+    limits = _judge(
+        _log(
+            v_1=lambda t: np.where(t == 0.25, -0.7, 0.0),
+            theta_0=lambda t: np.where(t > 2.5, 1.0 + 2e-6, 0.0),
+        )
+    )
     assert limits.verdict == "limits"
-    assert limits.reasons[0].startswith("joint angle limit broken on 499 ticks (worst theta_0 = 1 rad > 1 rad at 2.501 s")
-    assert limits.reasons[1] == "joint speed limit broken on 1 tick (worst v_1 = -0.7 rad/s < -0.5 rad/s at 0.250 s)"
+    assert limits.reasons[0].startswith(
+        "joint angle limit broken on 499 ticks (worst theta_0 = 1 rad > 1 rad at 2.501 s"
+    )
+    assert (
+        limits.reasons[1]
+        == "joint speed limit broken on 1 tick (worst v_1 = -0.7 rad/s < -0.5 rad/s at 0.250 s)"
+    )
     # within VIOLATION_TOL of a limit is no violation
     assert _judge(_log(v_0=lambda t: np.full_like(t, 0.5 + 5e-7))).verdict == "ok"
     diverged = _judge(_log(force_error=lambda t: np.where(t > 2.0, 2.5, 0.0)))
-    assert diverged.verdict == "diverged" and diverged.text == "force error 2.5 N > 2 N after 1 s (at 2.001 s)"
+    assert (
+        diverged.verdict == "diverged"
+        and diverged.text == "force error 2.5 N > 2 N after 1 s (at 2.001 s)"
+    )
     nan = _judge(_log(tracking_error=lambda t: np.where(t > 2.0, np.nan, 0.0)))
     assert nan.verdict == "diverged" and nan.text.startswith("tracking error not finite > 1 mm")
     failed = _judge(_log(), error_ticks=3, first_error="RuntimeError: boom", first_error_t=0.005)
-    assert failed.verdict == "failed" and failed.text == "3 ticks with an error (first at 0.005 s: RuntimeError: boom)"
+    assert (
+        failed.verdict == "failed"
+        and failed.text == "3 ticks with an error (first at 0.005 s: RuntimeError: boom)"
+    )
     for key in ("invalid_ticks", "time_limit_ticks", "zero_velocity_ticks", "fallback_errors"):
         assert _judge(_log(), **{key: 1}).verdict == "failed", key
 
 
 def test_precedence_failed_unsafe_limits_diverged_with_every_reason():
-    frame = _log(d_A1_wall=lambda t: np.full_like(t, -0.09), v_0=lambda t: np.full_like(t, 2.0),
-                 tracking_error=lambda t: np.full_like(t, 0.3))
+    frame = _log(
+        d_A1_wall=lambda t: np.full_like(t, -0.09),
+        v_0=lambda t: np.full_like(t, 2.0),
+        tracking_error=lambda t: np.full_like(t, 0.3),
+    )
     v = _judge(frame)
     assert v.verdict == "unsafe"
     assert [r.split()[0] for r in v.reasons] == ["d_min", "joint", "tracking"]
     assert "d_min -90.0 mm" in v.reasons[0]
     v = _judge(frame, invalid_ticks=2)
     assert v.verdict == "failed" and len(v.reasons) == 4 and v.reasons[0] == "2 non-finite answers"
-    assert _judge(_log(v_0=lambda t: np.full_like(t, 2.0), tracking_error=lambda t: np.full_like(t, 0.3))).verdict == "limits"
+    assert (
+        _judge(
+            _log(v_0=lambda t: np.full_like(t, 2.0), tracking_error=lambda t: np.full_like(t, 0.3))
+        ).verdict
+        == "limits"
+    )
 
 
 def test_a_run_stopped_early_is_judged_on_what_it_simulated():
     short = _log(n=800)  # 0.8 s: before the settle time
     v = _judge(short, stopped_early=True, simulated_s=0.8, duration=20.0, wall_budget_s=5.0)
     assert v.verdict == "ok"
-    assert v.text == ("stopped at 0.8 s of 20 s (wall-time budget 5 s): tracking and force not judged "
-                      "(settle time 1 s not reached)")
-    v = _judge(_log(d_A1_wall=lambda t: np.full_like(t, 0.001)), stopped_early=True, simulated_s=3.0, duration=20.0,
-               wall_budget_s=5.0)
+    assert v.text == (
+        "stopped at 0.8 s of 20 s (wall-time budget 5 s): tracking and force not judged "
+        "(settle time 1 s not reached)"
+    )
+    v = _judge(
+        _log(d_A1_wall=lambda t: np.full_like(t, 0.001)),
+        stopped_early=True,
+        simulated_s=3.0,
+        duration=20.0,
+        wall_budget_s=5.0,
+    )
     assert v.verdict == "unsafe" and v.reasons[-1].endswith("judged on what was simulated")
 
 
 def test_failed_run_verdict():
     v = failed_run("crashed", "worker process killed by SIGSEGV\n during the run")
-    assert v.verdict == "failed" and v.text == "run crashed: worker process killed by SIGSEGV during the run"
+    assert (
+        v.verdict == "failed"
+        and v.text == "run crashed: worker process killed by SIGSEGV during the run"
+    )
 
 
 # ---------------------------------------------------------------- real runs
@@ -178,11 +245,26 @@ def test_exact_qp_passes_and_paper_rnn_fails_every_shipped_scenario(scenario):
 def test_simulate_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
     """pinv ignores the obstacle: A2 is 9.5 mm from the wall by 1.5 s (and it breaks the speed limit at t = 0)."""
     out = tmp_path / "s.json"
-    code = main(["simulate", "--scenario", "wall", "--backend", "pinv", "--duration", "1.6", "--summary", str(out)])
+    code = main(
+        [
+            "simulate",
+            "--scenario",
+            "wall",
+            "--backend",
+            "pinv",
+            "--duration",
+            "1.6",
+            "--summary",
+            str(out),
+        ]
+    )
     assert code == 1
     s = json.loads(out.read_text())
     assert s["verdict"] == "unsafe"
-    assert s["verdict_reasons"].startswith("d_min ") and "< d_safe - 0.5 mm = 9.5 mm (A2/wall at " in s["verdict_reasons"]
+    assert (
+        s["verdict_reasons"].startswith("d_min ")
+        and "< d_safe - 0.5 mm = 9.5 mm (A2/wall at " in s["verdict_reasons"]
+    )
     assert "joint speed limit broken" in s["verdict_reasons"]
     assert s["min_obstacle_distance"] < 0.0095
     err = capsys.readouterr().err.splitlines()
@@ -195,7 +277,22 @@ def test_simulate_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
 
 def test_simulate_exact_backend_is_ok_and_exits_0(tmp_path, capsys):
     out = tmp_path / "s.json"
-    assert main(["simulate", "--scenario", "wall", "--backend", "daqp", "--duration", "0.3", "--summary", str(out)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                "wall",
+                "--backend",
+                "daqp",
+                "--duration",
+                "0.3",
+                "--summary",
+                str(out),
+            ]
+        )
+        == 0
+    )
     s = json.loads(out.read_text())
     assert (s["verdict"], s["verdict_reasons"]) == ("ok", "")
     err = capsys.readouterr().err.splitlines()
@@ -208,12 +305,16 @@ def test_faulty_backend_fails_its_verdict():
 
     s = simulate("wall", "faulty-ticks:raise", duration=0.1).summary
     assert s["verdict"] == "failed"
-    assert s["verdict_reasons"].startswith("10 ticks with an error (first at ") and "RuntimeError: tick fault" in s["verdict_reasons"]
+    assert (
+        s["verdict_reasons"].startswith("10 ticks with an error (first at ")
+        and "RuntimeError: tick fault" in s["verdict_reasons"]
+    )
     s = simulate("wall", "faulty-ticks:nan", duration=0.1).summary
     assert s["verdict"] == "failed" and s["verdict_reasons"] == "10 non-finite answers"
 
 
 # ---------------------------------------------------------------- the wall-time budget
+
 
 def test_budget_stops_between_ticks_with_the_uncut_prefix():
     cut = simulate("wall", SlowExact(), duration=0.5, wall_budget_s=0.25)
@@ -223,12 +324,15 @@ def test_budget_stops_between_ticks_with_the_uncut_prefix():
     assert s["simulated_s"] == pytest.approx(s["ticks"] * 0.001) and s["duration"] == 0.5
     assert s["real_time_factor"] == pytest.approx(s["simulated_s"] / s["wall_time_s"])
     assert s["wall_time_s"] >= 0.25  # it stopped because the budget was spent
-    assert s["verdict"] == "ok" and s["verdict_reasons"].startswith(f"stopped at {s['simulated_s']:.3g} s of 0.5 s")
+    assert s["verdict"] == "ok" and s["verdict_reasons"].startswith(
+        f"stopped at {s['simulated_s']:.3g} s of 0.5 s"
+    )
     whole = simulate("wall", SlowExact(), duration=0.5)
     assert not whole.summary["stopped_early"] and whole.summary["ticks"] == 500
     n = s["ticks"]
-    pd.testing.assert_frame_equal(cut.log.drop(columns="solve_time_s"),
-                                  whole.log.drop(columns="solve_time_s").iloc[:n])
+    pd.testing.assert_frame_equal(
+        cut.log.drop(columns="solve_time_s"), whole.log.drop(columns="solve_time_s").iloc[:n]
+    )
     json.dumps(s, allow_nan=False)
 
 

@@ -17,19 +17,30 @@ import pytest
 
 QPBENCH = [sys.executable, "-m", "qpbench.cli"]
 #: Summary keys that measure time; every other one must be the same on every run.
-TIME_KEYS = {"wall_time_s", "real_time_factor", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s",
-             "deadline_misses"}
+TIME_KEYS = {
+    "wall_time_s",
+    "real_time_factor",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "deadline_misses",
+}
 
 
 def _cache_files(folder: Path) -> dict[str, tuple[int, int]]:
     """numba's index and data files under ``folder``: name -> (size, mtime in ns)."""
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
-            for p in folder.rglob("*") if p.suffix in (".nbi", ".nbc")}
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in folder.rglob("*")
+        if p.suffix in (".nbi", ".nbc")
+    }
 
 
 def _qpbench(args, cache: Path, cwd: Path) -> subprocess.CompletedProcess:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-    proc = subprocess.run(QPBENCH + args, capture_output=True, text=True, env=env, cwd=cwd, timeout=1200)
+    proc = subprocess.run(
+        QPBENCH + args, capture_output=True, text=True, env=env, cwd=cwd, timeout=1200
+    )
     assert proc.returncode == 0, proc.stderr
     return proc
 
@@ -39,7 +50,15 @@ def fresh(tmp_path_factory):
     """Two identical simulations, the first in an empty kernel cache; the cache after each."""
     cache = tmp_path_factory.mktemp("numba-cache")
     work = tmp_path_factory.mktemp("runs")
-    args = ["simulate", "--scenario", "wall", "--backend", "rnn-tuned", "--set", "simulation.duration=0.1"]
+    args = [
+        "simulate",
+        "--scenario",
+        "wall",
+        "--backend",
+        "rnn-tuned",
+        "--set",
+        "simulation.duration=0.1",
+    ]
     runs, files = [], []
     for name in ("first.json", "second.json"):
         proc = _qpbench(args + ["--summary", name], cache, work)
@@ -57,9 +76,17 @@ def test_first_run_on_a_fresh_cache_equals_the_next(fresh):
     assert "kernels: loaded from the cache" in second.stderr and "(0 compiled)" in second.stderr
     assert files[0] and files[1] == files[0]  # nothing compiled or rewritten by the second run
     # the same trajectory: every figure but the time ones
-    assert {k: v for k, v in a.items() if k not in TIME_KEYS} == {k: v for k, v in b.items() if k not in TIME_KEYS}
-    assert a["zero_velocity_ticks"] == 0 and a["time_limit_ticks"] == 0 and a["deadline_dropped"] is None
-    assert a["solve_time_max_s"] < 5.0  # no compile inside the loop (a compile takes tens of seconds)
+    assert {k: v for k, v in a.items() if k not in TIME_KEYS} == {
+        k: v for k, v in b.items() if k not in TIME_KEYS
+    }
+    assert (
+        a["zero_velocity_ticks"] == 0
+        and a["time_limit_ticks"] == 0
+        and a["deadline_dropped"] is None
+    )
+    assert (
+        a["solve_time_max_s"] < 5.0
+    )  # no compile inside the loop (a compile takes tens of seconds)
 
 
 @pytest.mark.slow
@@ -72,7 +99,9 @@ def test_warmup_command_loads_what_the_cache_holds(fresh):
         assert report["kernels"] == ["controller", "post", "network"]
     assert _cache_files(cache) == files[0]
     proc = _qpbench(["warmup"], cache, work)
-    assert proc.stdout.startswith("kernels: loaded from the cache") and "(0 compiled)" in proc.stdout
+    assert (
+        proc.stdout.startswith("kernels: loaded from the cache") and "(0 compiled)" in proc.stdout
+    )
     assert _qpbench(["-q", "warmup"], cache, work).stdout == ""
 
 

@@ -129,7 +129,9 @@ def backend_info() -> list[BackendInfo]:
     for name, cls in sorted(_registry().items()):
         reason = cls.unavailable_reason()
         infos.append(
-            BackendInfo(name, reason is None, cls.version() if reason is None else None, cls.family, reason)
+            BackendInfo(
+                name, reason is None, cls.version() if reason is None else None, cls.family, reason
+            )
         )
     return infos
 
@@ -161,7 +163,9 @@ def resolve_name(name: str) -> str:
 
     close = difflib.get_close_matches(str(name).casefold(), list(folded), n=3, cutoff=0.6)
     hint = f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""
-    raise BackendNotFound(f"unknown backend '{name}'; {hint}available: {', '.join(backend_names())}")
+    raise BackendNotFound(
+        f"unknown backend '{name}'; {hint}available: {', '.join(backend_names())}"
+    )
 
 
 def backend_class(name: str) -> type[Backend]:

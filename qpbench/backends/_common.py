@@ -84,8 +84,16 @@ def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarra
         ``((rows, cols), indices, indptr)``: ``P[rows, cols]`` is the CSC data
         vector (column-major order), ``indices``/``indptr`` its structure.
     """
-    rows = np.concatenate([np.arange(j + 1) for j in range(n)]).astype(np.int64) if n else np.zeros(0, np.int64)
-    cols = np.concatenate([np.full(j + 1, j) for j in range(n)]).astype(np.int64) if n else np.zeros(0, np.int64)
+    rows = (
+        np.concatenate([np.arange(j + 1) for j in range(n)]).astype(np.int64)
+        if n
+        else np.zeros(0, np.int64)
+    )
+    cols = (
+        np.concatenate([np.full(j + 1, j) for j in range(n)]).astype(np.int64)
+        if n
+        else np.zeros(0, np.int64)
+    )
     indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
     return (rows, cols), rows, indptr
 

@@ -75,7 +75,8 @@ def load_entry_points(found: Iterable[EntryPoint], register: Callable, backend_t
         except Exception as exc:  # noqa: BLE001 - any import failure is a bad plugin
             dist = getattr(getattr(ep, "dist", None), "name", None) or "an installed distribution"
             raise ParamError(
-                f"cannot load the entry point '{key}' of {dist}: {_one_line(exc)}", key=ENTRY_POINT_GROUP
+                f"cannot load the entry point '{key}' of {dist}: {_one_line(exc)}",
+                key=ENTRY_POINT_GROUP,
             ) from None
         if isinstance(obj, type) and issubclass(obj, backend_type):
             register(obj)
@@ -107,7 +108,8 @@ def load_files(files: Iterable[str | Path]) -> None:
         if path.suffix != ".py":
             raise ParamError(
                 f"a plugin is a .py file (an installed package declares an entry point in group "
-                f"'{ENTRY_POINT_GROUP}' instead)", path=path,
+                f"'{ENTRY_POINT_GROUP}' instead)",
+                path=path,
             )
         name = _module_name(path)
         module_spec = importlib.util.spec_from_file_location(name, path)

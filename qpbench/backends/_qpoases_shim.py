@@ -26,19 +26,55 @@ from ..exceptions import BackendError
 #: qpOASES option names the ``qpoases`` backend accepts as settings (set as numbers;
 #: the ``enable...`` flags take 0/1).
 OPTION_NAMES = (
-    "enableRamping", "enableFarBounds", "enableFlippingBounds", "enableRegularisation",
-    "enableFullLITests", "enableNZCTests", "enableDriftCorrection", "enableCholeskyRefactorisation",
-    "enableEqualities", "terminationTolerance", "boundTolerance", "boundRelaxation", "epsNum", "epsDen",
-    "maxPrimalJump", "maxDualJump", "initialRamping", "finalRamping", "initialFarBounds", "growFarBounds",
-    "epsFlipping", "numRegularisationSteps", "epsRegularisation", "numRefinementSteps", "epsIterRef",
-    "epsLITests", "epsNZCTests", "rcondSMin", "enableInertiaCorrection",
+    "enableRamping",
+    "enableFarBounds",
+    "enableFlippingBounds",
+    "enableRegularisation",
+    "enableFullLITests",
+    "enableNZCTests",
+    "enableDriftCorrection",
+    "enableCholeskyRefactorisation",
+    "enableEqualities",
+    "terminationTolerance",
+    "boundTolerance",
+    "boundRelaxation",
+    "epsNum",
+    "epsDen",
+    "maxPrimalJump",
+    "maxDualJump",
+    "initialRamping",
+    "finalRamping",
+    "initialFarBounds",
+    "growFarBounds",
+    "epsFlipping",
+    "numRegularisationSteps",
+    "epsRegularisation",
+    "numRefinementSteps",
+    "epsIterRef",
+    "epsLITests",
+    "epsNZCTests",
+    "rcondSMin",
+    "enableInertiaCorrection",
 )
 _BOOL_OPTIONS = frozenset(
-    {"enableRamping", "enableFarBounds", "enableFlippingBounds", "enableRegularisation", "enableFullLITests",
-     "enableNZCTests", "enableEqualities", "enableInertiaCorrection"}
+    {
+        "enableRamping",
+        "enableFarBounds",
+        "enableFlippingBounds",
+        "enableRegularisation",
+        "enableFullLITests",
+        "enableNZCTests",
+        "enableEqualities",
+        "enableInertiaCorrection",
+    }
 )
 _INT_OPTIONS = frozenset(
-    {"enableDriftCorrection", "enableCholeskyRefactorisation", "numRegularisationSteps", "numRefinementSteps"}
+    {
+        "enableDriftCorrection",
+        "enableCholeskyRefactorisation",
+        "numRegularisationSteps",
+        "numRefinementSteps",
+    }
 )
 PRESETS = {"default": 0, "mpc": 1, "reliable": 2, "fast": 3}
 
@@ -77,8 +113,10 @@ struct Handle {
     double* d;
     int* iv;
     bool initialised;
-    Handle(int nV_, int nC_, double* d_, int* iv_) : qp(nV_, nC_), nV(nV_), nC(nC_), d(d_), iv(iv_), initialised(false) {}
-    Handle(const Handle& o, double* d_, int* iv_) : qp(o.qp), options(o.options), nV(o.nV), nC(o.nC), d(d_), iv(iv_), initialised(o.initialised) {}
+    Handle(int nV_, int nC_, double* d_, int* iv_)
+        : qp(nV_, nC_), nV(nV_), nC(nC_), d(d_), iv(iv_), initialised(false) {}
+    Handle(const Handle& o, double* d_, int* iv_)
+        : qp(o.qp), options(o.options), nV(o.nV), nC(o.nC), d(d_), iv(iv_), initialised(o.initialised) {}
 };
 inline double now() { timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
 int set_option(Options& o, const char* name, double v) {
@@ -153,8 +191,10 @@ int qpb_solve(void* p) {
     iv[3] = (int) rv;
     int st;
     if (rv == SUCCESSFUL_RETURN) st = 0;
-    else if (h->qp.isInfeasible() || rv == RET_INIT_FAILED_INFEASIBILITY || rv == RET_HOTSTART_STOPPED_INFEASIBILITY) st = -2;
-    else if (h->qp.isUnbounded() || rv == RET_INIT_FAILED_UNBOUNDEDNESS || rv == RET_HOTSTART_STOPPED_UNBOUNDEDNESS) st = -3;
+    else if (h->qp.isInfeasible() || rv == RET_INIT_FAILED_INFEASIBILITY
+             || rv == RET_HOTSTART_STOPPED_INFEASIBILITY) st = -2;
+    else if (h->qp.isUnbounded() || rv == RET_INIT_FAILED_UNBOUNDEDNESS
+             || rv == RET_HOTSTART_STOPPED_UNBOUNDEDNESS) st = -3;
     else if (rv == RET_MAX_NWSR_REACHED) st = (nWSR < iv[0]) ? 2 : 1;
     else st = -1;
     iv[4] = st;
@@ -209,7 +249,9 @@ def compile_shim(prefix: Path, target: Path) -> None:
 
     cxx = compiler()
     if cxx is None:
-        raise BackendError("qpoases: no C++ compiler (set $CXX or install g++) to build the qpOASES shim")
+        raise BackendError(
+            "qpoases: no C++ compiler (set $CXX or install g++) to build the qpOASES shim"
+        )
     folder = shim_dir("qpoases")
     include, lib = prefix / "include", prefix / "lib"
     fd, tmp_so = tempfile.mkstemp(suffix=".so.tmp", dir=folder)
@@ -218,11 +260,25 @@ def compile_shim(prefix: Path, target: Path) -> None:
     try:
         with os.fdopen(fd, "w") as handle:
             handle.write(SHIM_SOURCE)
-        cmd = [cxx, "-O2", "-shared", "-fPIC", "-std=c++11", src, f"-I{include}", f"-L{lib}",
-               "-lqpOASES", f"-Wl,-rpath,{lib}", "-o", tmp_so]
+        cmd = [
+            cxx,
+            "-O2",
+            "-shared",
+            "-fPIC",
+            "-std=c++11",
+            src,
+            f"-I{include}",
+            f"-L{lib}",
+            "-lqpOASES",
+            f"-Wl,-rpath,{lib}",
+            "-o",
+            tmp_so,
+        ]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
-            raise BackendError(f"qpoases: compiling the qpOASES shim failed: {' '.join(cmd)}\n{done.stderr[-2000:]}")
+            raise BackendError(
+                f"qpoases: compiling the qpOASES shim failed: {' '.join(cmd)}\n{done.stderr[-2000:]}"
+            )
         os.replace(tmp_so, target)
     finally:
         for path in (src, tmp_so):
@@ -243,7 +299,10 @@ def load() -> ctypes.CDLL:
     lib = ctypes.CDLL(str(path))
     vp, ip = ctypes.c_void_p, ctypes.c_int
     lib.qpb_new.argtypes, lib.qpb_new.restype = [ip, ip, vp, vp, ip], vp
-    lib.qpb_set_option.argtypes, lib.qpb_set_option.restype = [vp, ctypes.c_char_p, ctypes.c_double], ip
+    lib.qpb_set_option.argtypes, lib.qpb_set_option.restype = (
+        [vp, ctypes.c_char_p, ctypes.c_double],
+        ip,
+    )
     lib.qpb_known_option.argtypes, lib.qpb_known_option.restype = [ctypes.c_char_p], ip
     lib.qpb_free.argtypes, lib.qpb_free.restype = [vp], None
     lib.qpb_clone.argtypes, lib.qpb_clone.restype = [vp, vp, vp], vp
@@ -257,8 +316,30 @@ def load() -> ctypes.CDLL:
 class Workspace:
     """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object)."""
 
-    __slots__ = ("key", "d", "iv", "handle", "H", "g", "A_eq", "A_in", "lb", "ub", "lbA_eq", "ubA_eq", "ubA_in",
-                 "x", "y", "xy", "s", "n", "me", "mi", "sizes", "_free")
+    __slots__ = (
+        "key",
+        "d",
+        "iv",
+        "handle",
+        "H",
+        "g",
+        "A_eq",
+        "A_in",
+        "lb",
+        "ub",
+        "lbA_eq",
+        "ubA_eq",
+        "ubA_in",
+        "x",
+        "y",
+        "xy",
+        "s",
+        "n",
+        "me",
+        "mi",
+        "sizes",
+        "_free",
+    )
 
     def __init__(
         self,
@@ -276,22 +357,31 @@ class Workspace:
         d = self.d = np.zeros(n * n + n + m * n + 2 * n + 2 * m + n + n + m + 4)
         self.iv = np.zeros(5, dtype=np.intc)
         o = 0
-        self.H = d[o : o + n * n].reshape(n, n); o += n * n
-        self.g = d[o : o + n]; o += n
-        A = d[o : o + m * n].reshape(m, n); o += m * n
+        self.H = d[o : o + n * n].reshape(n, n)
+        o += n * n
+        self.g = d[o : o + n]
+        o += n
+        A = d[o : o + m * n].reshape(m, n)
+        o += m * n
         self.A_eq, self.A_in = A[:me], A[me:]
-        self.lb = d[o : o + n]; o += n
-        self.ub = d[o : o + n]; o += n
-        lbA = d[o : o + m]; o += m
-        ubA = d[o : o + m]; o += m
+        self.lb = d[o : o + n]
+        o += n
+        self.ub = d[o : o + n]
+        o += n
+        lbA = d[o : o + m]
+        o += m
+        ubA = d[o : o + m]
+        o += m
         self.lbA_eq, self.ubA_eq, self.ubA_in = lbA[:me], ubA[:me], ubA[me:]
         lbA[me:] = -np.inf
         if not box:
             self.lb[:] = -np.inf
             self.ub[:] = np.inf
         self.xy = d[o : o + 2 * n + m]
-        self.x = d[o : o + n]; o += n
-        self.y = d[o : o + n + m]; o += n + m
+        self.x = d[o : o + n]
+        o += n
+        self.y = d[o : o + n + m]
+        o += n + m
         self.sizes = None  # sizes of the arrays last written (their shapes checked then)
         self.s = d[o:]
         self.s[1] = time_limit

@@ -33,23 +33,34 @@ def _enum_map(solver: str) -> dict:
             import osqp
 
             S = osqp.SolverStatus
-            pairs = [(S.OSQP_SOLVED, "optimal"), (S.OSQP_PRIMAL_INFEASIBLE, "primal_infeasible"),
-                     (S.OSQP_DUAL_INFEASIBLE, "dual_infeasible"), (S.OSQP_MAX_ITER_REACHED, "max_iter"),
-                     (S.OSQP_TIME_LIMIT_REACHED, "time_limit")]
+            pairs = [
+                (S.OSQP_SOLVED, "optimal"),
+                (S.OSQP_PRIMAL_INFEASIBLE, "primal_infeasible"),
+                (S.OSQP_DUAL_INFEASIBLE, "dual_infeasible"),
+                (S.OSQP_MAX_ITER_REACHED, "max_iter"),
+                (S.OSQP_TIME_LIMIT_REACHED, "time_limit"),
+            ]
             _ENUM_MAPS[solver] = {int(k): v for k, v in pairs}
         elif solver == "proxqp":
             import proxsuite
 
             O = proxsuite.proxqp.QPSolverOutput
-            _ENUM_MAPS[solver] = {O.PROXQP_SOLVED: "optimal", O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                                  O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
-                                  O.PROXQP_MAX_ITER_REACHED: "max_iter"}
+            _ENUM_MAPS[solver] = {
+                O.PROXQP_SOLVED: "optimal",
+                O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+                O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
+                O.PROXQP_MAX_ITER_REACHED: "max_iter",
+            }
         elif solver == "piqp":
             import piqp
 
-            _ENUM_MAPS[solver] = {piqp.PIQP_SOLVED: "optimal", piqp.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                                  piqp.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
-                                  piqp.PIQP_MAX_ITER_REACHED: "max_iter", piqp.PIQP_NUMERICS: "error"}
+            _ENUM_MAPS[solver] = {
+                piqp.PIQP_SOLVED: "optimal",
+                piqp.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+                piqp.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
+                piqp.PIQP_MAX_ITER_REACHED: "max_iter",
+                piqp.PIQP_NUMERICS: "error",
+            }
     return _ENUM_MAPS[solver]
 
 
@@ -97,7 +108,11 @@ def _status_cvxopt(extras) -> tuple[str, str | None]:
     if raw is None:
         return "not_solved", None
     # cvxopt's qp() says "optimal" or "unknown" (it certifies infeasibility for LPs/cone programs only).
-    mapping = {"optimal": "optimal", "primal infeasible": "primal_infeasible", "dual infeasible": "dual_infeasible"}
+    mapping = {
+        "optimal": "optimal",
+        "primal infeasible": "primal_infeasible",
+        "dual infeasible": "dual_infeasible",
+    }
     return mapping.get(raw, "not_solved"), str(raw)
 
 
@@ -106,8 +121,13 @@ def _status_qpalm(extras) -> tuple[str, str | None]:
     if info is None:
         return "not_solved", None
     raw = str(info.status)
-    mapping = {"solved": "optimal", "primal infeasible": "primal_infeasible", "dual infeasible": "dual_infeasible",
-               "maximum iterations reached": "max_iter", "time limit exceeded": "time_limit"}
+    mapping = {
+        "solved": "optimal",
+        "primal infeasible": "primal_infeasible",
+        "dual infeasible": "dual_infeasible",
+        "maximum iterations reached": "max_iter",
+        "time limit exceeded": "time_limit",
+    }
     return mapping.get(raw, "not_solved"), raw
 
 
@@ -117,7 +137,13 @@ def _status_gurobi(extras) -> tuple[str, str | None]:
         return "not_solved", None
     # Gurobi's model status codes: 2 OPTIMAL, 3 INFEASIBLE, 5 UNBOUNDED, 7 ITERATION_LIMIT, 9 TIME_LIMIT;
     # 4 INF_OR_UNBD says neither for sure.
-    mapping = {2: "optimal", 3: "primal_infeasible", 5: "dual_infeasible", 7: "max_iter", 9: "time_limit"}
+    mapping = {
+        2: "optimal",
+        3: "primal_infeasible",
+        5: "dual_infeasible",
+        7: "max_iter",
+        9: "time_limit",
+    }
     return mapping.get(code, "not_solved"), str(code)
 
 
@@ -136,7 +162,9 @@ STATUS_READERS = {
 
 
 #: Solvers whose iteration count qpsolvers keeps in ``extras``.
-ITERATION_SOLVERS = frozenset({"osqp", "proxqp", "piqp", "scs", "quadprog", "ecos", "cvxopt", "qpalm"})
+ITERATION_SOLVERS = frozenset(
+    {"osqp", "proxqp", "piqp", "scs", "quadprog", "ecos", "cvxopt", "qpalm"}
+)
 
 
 def iterations(solver: str, extras: dict) -> int | None:

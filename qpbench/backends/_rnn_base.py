@@ -36,7 +36,13 @@ _DEFAULTS = {
 SETTING_NAMES = tuple(_DEFAULTS)
 
 
-def positive(key: str, value: object, integer: bool = False, allow_none: bool = False, upper: float | None = None) -> float | int | None:
+def positive(
+    key: str,
+    value: object,
+    integer: bool = False,
+    allow_none: bool = False,
+    upper: float | None = None,
+) -> float | int | None:
     if value is None and allow_none:
         return None
     try:
@@ -61,7 +67,9 @@ class NetworkBackend(Backend):
     #: A closed loop builds the network with the scenario's ``[rnn]`` table.
     scenario_table: ClassVar[str | None] = "rnn"
     certifies_infeasibility = False
-    infeasibility_note = "the network's state moves towards the projection; no certificate, only no convergence"
+    infeasibility_note = (
+        "the network's state moves towards the projection; no certificate, only no convergence"
+    )
     #: Integration method unless the ``method`` setting says otherwise.
     default_method: ClassVar[str] = "euler"
     #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).
@@ -91,7 +99,8 @@ class NetworkBackend(Backend):
             s["method"] = self.default_method
         if s["method"] not in nw.METHODS:
             raise ParamError(
-                f"unknown method {s['method']!r} (choose from {', '.join(nw.METHODS)})", key="method"
+                f"unknown method {s['method']!r} (choose from {', '.join(nw.METHODS)})",
+                key="method",
             )
         self.method = s["method"]
         if s["use_numba"] is None:
@@ -103,14 +112,22 @@ class NetworkBackend(Backend):
         else:
             raise ParamError(f"{s['use_numba']!r} is not true or false", key="use_numba")
         self.max_iter = positive(
-            "max_iter", self.profile.max_iter if s["max_iter"] is None else s["max_iter"], integer=True
+            "max_iter",
+            self.profile.max_iter if s["max_iter"] is None else s["max_iter"],
+            integer=True,
         )
         self.tol = positive("tol", self.profile.eps_abs if s["tol"] is None else s["tol"])
         self._p_key: bytes | None = None
         self._prm = nw.make_params(
-            p_range=(1.0, 1.0), method=self.method, r_total=self._r_total(),
-            safety=self.safety, max_steps=self.max_iter, tol=self._stop_tol(), l1_clip=self.l1_clip,
-            step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0, clamp=True,
+            p_range=(1.0, 1.0),
+            method=self.method,
+            r_total=self._r_total(),
+            safety=self.safety,
+            max_steps=self.max_iter,
+            tol=self._stop_tol(),
+            l1_clip=self.l1_clip,
+            step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0,
+            clamp=True,
         )
         self._kernel = None
         # A call is "optimal" when its residuals meet the profile's success
@@ -161,10 +178,15 @@ class NetworkBackend(Backend):
         self.state = None
         prm = self._prm
         return BackendSolution(
-            problem=problem, status="error", iterations=steps,
+            problem=problem,
+            status="error",
+            iterations=steps,
             error=f"FloatingPointError: network state diverged (r = {prm[nw.RATIO]:.3g}, "
-            + (f"stable below {prm[nw.RATIO_MAX]:.3g})" if math.isfinite(prm[nw.RATIO_MAX])
-               else "below a lower estimate of the stability bound)"),
+            + (
+                f"stable below {prm[nw.RATIO_MAX]:.3g})"
+                if math.isfinite(prm[nw.RATIO_MAX])
+                else "below a lower estimate of the stability bound)"
+            ),
         )
 
     # -- the call ---------------------------------------------------------
@@ -172,7 +194,14 @@ class NetworkBackend(Backend):
         if self._kernel is None:
             self._kernel = nw.kernel(self.use_numba)
         P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+            problem.P,
+            problem.q,
+            problem.A,
+            problem.b,
+            problem.G,
+            problem.h,
+            problem.lb,
+            problem.ub,
         )
         if (
             not self.use_numba
@@ -210,7 +239,9 @@ class NetworkBackend(Backend):
             raise ProblemFormatError("inconsistent problem shapes", key="P")  # pragma: no cover
         if steps == nw.NO_STABLE_STEP:
             return BackendSolution(
-                problem=problem, status="error", iterations=0,
+                problem=problem,
+                status="error",
+                iterations=0,
                 error=f"ParamError: P is not positive definite (lambda_min {prm[nw.PMIN]:.3g}); "
                 "no step size of the network is proven stable",
             )
@@ -223,11 +254,17 @@ class NetworkBackend(Backend):
             and prm.item(nw.COMPL) <= self._ok_primal
         )
         return BackendSolution(
-            problem=problem, x=sol[:n], y=sol[n : n + me] if me else None,
+            problem=problem,
+            x=sol[:n],
+            y=sol[n : n + me] if me else None,
             z=sol[n + me : n + me + mi] if mi else None,
-            z_box=sol[n + me + mi : 2 * n + me + mi] if (problem.lb is not None or problem.ub is not None) else None,
-            obj=obj if self._kernel_obj else None, status="optimal" if ok else "max_iter",
-            iterations=steps, error=nw.step_note(prm),
+            z_box=sol[n + me + mi : 2 * n + me + mi]
+            if (problem.lb is not None or problem.ub is not None)
+            else None,
+            obj=obj if self._kernel_obj else None,
+            status="optimal" if ok else "max_iter",
+            iterations=steps,
+            error=nw.step_note(prm),
         )
 
 

@@ -25,7 +25,17 @@ def _refuse(backend: str, key: str, shape, expected) -> None:
     )
 
 
-def check_shapes(backend: str, n: int, P: np.ndarray | None, A: np.ndarray | None, b: np.ndarray | None, G: np.ndarray | None, h: np.ndarray | None, lb: np.ndarray | None, ub: np.ndarray | None) -> tuple[int, int]:
+def check_shapes(
+    backend: str,
+    n: int,
+    P: np.ndarray | None,
+    A: np.ndarray | None,
+    b: np.ndarray | None,
+    G: np.ndarray | None,
+    h: np.ndarray | None,
+    lb: np.ndarray | None,
+    ub: np.ndarray | None,
+) -> tuple[int, int]:
     """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
 
     Args:

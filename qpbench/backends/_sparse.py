@@ -26,7 +26,9 @@ def wants_sparse(problem) -> bool:
     if spa.issparse(P) or spa.issparse(A) or spa.issparse(G):
         return True
     n = np.shape(problem.q)[0]
-    m = (0 if A is None else np.atleast_2d(A).shape[0]) + (0 if G is None else np.atleast_2d(G).shape[0])
+    m = (0 if A is None else np.atleast_2d(A).shape[0]) + (
+        0 if G is None else np.atleast_2d(G).shape[0]
+    )
     return n * (n + m) > DENSE_MAX_ENTRIES
 
 
@@ -60,7 +62,16 @@ def sparse_parts(problem, upper: bool = False):
         P = spa.triu(P, format="csc")
         P.sort_indices()
     A, G = _csc(problem.A, n), _csc(problem.G, n)
-    return P, q, A, _vector(problem.b), G, _vector(problem.h), _vector(problem.lb), _vector(problem.ub)
+    return (
+        P,
+        q,
+        A,
+        _vector(problem.b),
+        G,
+        _vector(problem.h),
+        _vector(problem.lb),
+        _vector(problem.ub),
+    )
 
 
 def structure_key(*matrices) -> tuple:

@@ -76,7 +76,9 @@ def _set_obj(self, value) -> None:
 # The dataclass __init__ assigns ``self.obj = obj``, which the property stores
 # as ``_obj`` (a plain attribute: no ``__dict__`` access on the hot path).
 BackendSolution.obj = property(
-    _get_obj, _set_obj, doc="Primal objective at ``x`` (computed on first read when the solver gave none)."
+    _get_obj,
+    _set_obj,
+    doc="Primal objective at ``x`` (computed on first read when the solver gave none).",
 )
 
 

@@ -97,8 +97,16 @@ class ConeLayout:
             self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
             self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
             self.key = (
-                "sparse", n, self.meq, self.m_all, self.with_box, *masks,
-                Pc.indptr.tobytes(), Pc.indices.tobytes(), Cc.indptr.tobytes(), Cc.indices.tobytes(),
+                "sparse",
+                n,
+                self.meq,
+                self.m_all,
+                self.with_box,
+                *masks,
+                Pc.indptr.tobytes(),
+                Pc.indices.tobytes(),
+                Cc.indptr.tobytes(),
+                Cc.indices.tobytes(),
             )
 
     def _sparse(self, problem):
@@ -234,7 +242,14 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     else:
         parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
     finite = np.isfinite(np.concatenate(parts))
-    return ("dense", n, 0 if A is None else A.shape[0], 0 if G is None else G.shape[0], with_box, finite.tobytes())
+    return (
+        "dense",
+        n,
+        0 if A is None else A.shape[0],
+        0 if G is None else G.shape[0],
+        with_box,
+        finite.tobytes(),
+    )
 
 
 def _is_clarabel_error(exc: BaseException) -> bool:
@@ -257,7 +272,6 @@ class ClarabelBackend(Backend):
         super().__init__(profile, **settings)
         self._solver = None
         self._layout: ConeLayout | None = None
-
 
     def reset(self) -> None:
         self._solver = None
@@ -292,14 +306,20 @@ class ClarabelBackend(Backend):
                 same = key == layout.key
             if same:
                 P_data, C_data = layout.data(problem)
-                self._solver.update(P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem))
+                self._solver.update(
+                    P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem)
+                )
             else:
                 self._solver = None
                 layout = ConeLayout(problem)
                 P, C = layout.matrices(problem)
                 solver = clarabel.DefaultSolver(
-                    P, np.asarray(problem.q, dtype=float), C, layout.rhs(problem),
-                    layout.cones(clarabel), self._settings(clarabel),
+                    P,
+                    np.asarray(problem.q, dtype=float),
+                    C,
+                    layout.rhs(problem),
+                    layout.cones(clarabel),
+                    self._settings(clarabel),
                 )
                 if solver.is_data_update_allowed():
                     self._solver, self._layout = solver, layout

@@ -60,7 +60,9 @@ def cost_factor(P: np.ndarray) -> np.ndarray:
 class _Model:
     """The parametrised cvxpy problem of one shape."""
 
-    def __init__(self, cp, n: int, meq: int, g_keep: np.ndarray, lb_idx: np.ndarray, ub_idx: np.ndarray):
+    def __init__(
+        self, cp, n: int, meq: int, g_keep: np.ndarray, lb_idx: np.ndarray, ub_idx: np.ndarray
+    ):
         self.x = x = cp.Variable(n)
         self.L = cp.Parameter((n, n))
         self.q = cp.Parameter(n)
@@ -106,7 +108,11 @@ class _Model:
 
     def duals(self, n: int, with_box: bool):
         def value(c):
-            return np.zeros(0) if c is None or c.dual_value is None else np.atleast_1d(np.asarray(c.dual_value, float))
+            return (
+                np.zeros(0)
+                if c is None or c.dual_value is None
+                else np.atleast_1d(np.asarray(c.dual_value, float))
+            )
 
         y = value(self.eq) if self.eq is not None else np.zeros(0)
         z = np.zeros(self.m_all)
@@ -134,7 +140,6 @@ class CvxpyBackend(Backend):
         super().__init__(profile, **settings)
         self._models: dict[tuple, _Model] = {}
         self._options: tuple[str, dict] | None = None
-
 
     def reset(self) -> None:
         self._models = {}
@@ -202,7 +207,11 @@ class CvxpyBackend(Backend):
             cp.USER_LIMIT: "max_iter",
         }.get(raw, "not_solved")
         stats = model.problem.solver_stats
-        if status == "not_solved" and stats.num_iters is not None and stats.num_iters >= options.get("max_iter", np.inf):
+        if (
+            status == "not_solved"
+            and stats.num_iters is not None
+            and stats.num_iters >= options.get("max_iter", np.inf)
+        ):
             status = "max_iter"  # cvxpy reports OSQP's iteration limit as "optimal_inaccurate"
         sol.status = status
         sol.extras = {"raw_status": raw, "solver": stats.solver_name}

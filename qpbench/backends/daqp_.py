@@ -106,7 +106,23 @@ def _daqp():
 class _Buffers:
     """Stacked ``A``, ``bupper``, ``blower``, ``sense`` of one shape, and views to fill them."""
 
-    __slots__ = ("A", "bu", "bl", "sense", "A_eq", "A_in", "bu_box", "bu_eq", "bu_in", "bl_box", "bl_eq", "n", "me", "mi", "nb")
+    __slots__ = (
+        "A",
+        "bu",
+        "bl",
+        "sense",
+        "A_eq",
+        "A_in",
+        "bu_box",
+        "bu_eq",
+        "bu_in",
+        "bl_box",
+        "bl_eq",
+        "n",
+        "me",
+        "mi",
+        "nb",
+    )
 
     def __init__(self, n: int, me: int, mi: int, box: bool):
         nb = n if box else 0
@@ -166,7 +182,6 @@ class DaqpBackend(Backend):
         self._options: dict | None = None
         self.options()  # checks the settings now (ParamError naming an unknown one)
 
-
     def options(self) -> dict:
         """Keyword settings passed to ``daqp.solve`` (profile first, then the user's)."""
         if self._options is None:
@@ -207,12 +222,22 @@ class DaqpBackend(Backend):
         daqp = _DAQP[0] if _DAQP else _daqp()
         options = self._options if self._options is not None else self.options()
         P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+            problem.P,
+            problem.q,
+            problem.A,
+            problem.b,
+            problem.G,
+            problem.h,
+            problem.lb,
+            problem.ub,
         )
         # Fast path: the dense float64 arrays a controller builds; anything else
         # (sparse, lists, 1-D single rows, other dtypes) is converted first.
         if not (
-            type(P) is _ndarray and type(q) is _ndarray and P.dtype == _f64 and q.dtype == _f64
+            type(P) is _ndarray
+            and type(q) is _ndarray
+            and P.dtype == _f64
+            and q.dtype == _f64
             and (A is None or (type(A) is _ndarray and A.ndim == 2))
             and (G is None or (type(G) is _ndarray and G.ndim == 2))
         ):
@@ -233,7 +258,16 @@ class DaqpBackend(Backend):
         return read_result(problem, x, fval, flag, info, buf.nb, box, me)
 
 
-def read_result(problem: qpsolvers.Problem, x: np.ndarray, fval: float, flag: int, info: dict, nb: int, box: bool, me: int) -> BackendSolution:
+def read_result(
+    problem: qpsolvers.Problem,
+    x: np.ndarray,
+    fval: float,
+    flag: int,
+    info: dict,
+    nb: int,
+    box: bool,
+    me: int,
+) -> BackendSolution:
     """A solution from what DAQP returned: status from the exit flag, its own time, and on
     success ``x``, the objective and the duals, split from DAQP's one multiplier vector
     (bounds first, then equalities, then inequalities; DAQP's signs are qpsolvers')."""

@@ -47,7 +47,17 @@ from __future__ import annotations
 from . import register
 from ._shapes import check_shapes
 from .base import BackendSolution
-from .daqp_ import _UNKNOWN, EXITFLAGS, DaqpBackend, _Buffers, _daqp, _dense, _f64, _ndarray, read_result
+from .daqp_ import (
+    _UNKNOWN,
+    EXITFLAGS,
+    DaqpBackend,
+    _Buffers,
+    _daqp,
+    _dense,
+    _f64,
+    _ndarray,
+    read_result,
+)
 
 
 @register
@@ -78,13 +88,25 @@ class DaqpModelBackend(DaqpBackend):
 
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+            problem.P,
+            problem.q,
+            problem.A,
+            problem.b,
+            problem.G,
+            problem.h,
+            problem.lb,
+            problem.ub,
         )
         if not (
-            type(P) is _ndarray and type(q) is _ndarray and P.dtype == _f64 and q.dtype == _f64 and q.ndim == 1
+            type(P) is _ndarray
+            and type(q) is _ndarray
+            and P.dtype == _f64
+            and q.dtype == _f64
+            and q.ndim == 1
             and (A is None or (type(A) is _ndarray and type(b) is _ndarray))
             and (G is None or (type(G) is _ndarray and type(h) is _ndarray))
-            and (lb is None or type(lb) is _ndarray) and (ub is None or type(ub) is _ndarray)
+            and (lb is None or type(lb) is _ndarray)
+            and (ub is None or type(ub) is _ndarray)
         ):
             P, q, A, b, G, h, lb, ub = _dense(problem)
         n = q.shape[0]

@@ -77,7 +77,9 @@ class StackedLayout:
             per_col = k + (1 if with_box else 0)
             col_rows = np.arange(k, dtype=np.int64)
             if with_box:
-                self.C_indices = np.concatenate([np.append(col_rows, k + j) for j in range(n)]).astype(np.int64)
+                self.C_indices = np.concatenate(
+                    [np.append(col_rows, k + j) for j in range(n)]
+                ).astype(np.int64)
             else:
                 self.C_indices = np.tile(col_rows, n)
             self.C_indptr = np.arange(0, per_col * n + 1, per_col, dtype=np.int64)
@@ -87,8 +89,16 @@ class StackedLayout:
             self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
             self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
             self.key = (
-                "sparse", n, self.m, self.meq, with_box, upper_P,
-                Pc.indptr.tobytes(), Pc.indices.tobytes(), Cc.indptr.tobytes(), Cc.indices.tobytes(),
+                "sparse",
+                n,
+                self.m,
+                self.meq,
+                with_box,
+                upper_P,
+                Pc.indptr.tobytes(),
+                Pc.indices.tobytes(),
+                Cc.indptr.tobytes(),
+                Cc.indices.tobytes(),
             )
 
     @property
@@ -165,14 +175,16 @@ def _status_map(osqp) -> dict:
     """OSQP ``status_val`` (int) -> our status, built once."""
     if not _STATUS_MAP:
         S = osqp.SolverStatus
-        _STATUS_MAP.update({
-            int(S.OSQP_SOLVED): "optimal",
-            int(S.OSQP_PRIMAL_INFEASIBLE): "primal_infeasible",
-            int(S.OSQP_DUAL_INFEASIBLE): "dual_infeasible",
-            int(S.OSQP_MAX_ITER_REACHED): "max_iter",
-            int(S.OSQP_TIME_LIMIT_REACHED): "time_limit",
-            int(S.OSQP_NON_CVX): "error",
-        })
+        _STATUS_MAP.update(
+            {
+                int(S.OSQP_SOLVED): "optimal",
+                int(S.OSQP_PRIMAL_INFEASIBLE): "primal_infeasible",
+                int(S.OSQP_DUAL_INFEASIBLE): "dual_infeasible",
+                int(S.OSQP_MAX_ITER_REACHED): "max_iter",
+                int(S.OSQP_TIME_LIMIT_REACHED): "time_limit",
+                int(S.OSQP_NON_CVX): "error",
+            }
+        )
     return _STATUS_MAP
 
 
@@ -205,7 +217,6 @@ class OsqpBackend(Backend):
         self._solver = None
         self._layout: StackedLayout | None = None
 
-
     def reset(self) -> None:
         self._solver = None
         self._layout = None
@@ -218,7 +229,9 @@ class OsqpBackend(Backend):
 
         solver = osqp.OSQP()
         own = {k for k in type(solver.ext.OSQPSettings()).__dict__ if not k.startswith("_")}
-        return frozenset(own | {"polish", "warm_start", "solver_type", "cg_preconditioner"} | set(GENERIC_KEYS))
+        return frozenset(
+            own | {"polish", "warm_start", "solver_type", "cg_preconditioner"} | set(GENERIC_KEYS)
+        )
 
     def _settings(self) -> dict:
         generic, native = generic_settings(self)
@@ -261,7 +274,9 @@ class OsqpBackend(Backend):
                 P, C = layout.matrices(problem)
                 l, u = layout.vectors(problem)
                 solver = osqp.OSQP()
-                solver.setup(P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings())
+                solver.setup(
+                    P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings()
+                )
                 self._solver, self._layout = solver, layout
             if warm_start is not None:
                 self._solver.warm_start(x=np.asarray(warm_start, dtype=float))

@@ -34,7 +34,9 @@ class PinvBackend(Backend):
 
     name = "pinv"
     certifies_infeasibility = False
-    infeasibility_note = "x = A^+ b solves the equalities in the least-squares sense and ignores the rest"
+    infeasibility_note = (
+        "x = A^+ b solves the equalities in the least-squares sense and ignores the rest"
+    )
     family = "pseudo-inverse (JMPI, ignores inequalities and bounds)"
     package = "numpy"
 
@@ -63,7 +65,9 @@ class PinvBackend(Backend):
         sol.x = x
         sol.y = y
         sol.z = np.zeros(0 if problem.G is None else problem.G.shape[0])
-        sol.z_box = np.zeros(n) if (problem.lb is not None or problem.ub is not None) else np.zeros(0)
+        sol.z_box = (
+            np.zeros(n) if (problem.lb is not None or problem.ub is not None) else np.zeros(0)
+        )
         sol.status = "optimal"
         sol.iterations = 0
         return sol

@@ -145,22 +145,56 @@ class PiqpBackend(Backend):
 
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+            problem.P,
+            problem.q,
+            problem.A,
+            problem.b,
+            problem.G,
+            problem.h,
+            problem.lb,
+            problem.ub,
         )
         if not (
-            type(P) is _ndarray and type(q) is _ndarray and P.dtype == _f64 and q.dtype == _f64 and q.ndim == 1
+            type(P) is _ndarray
+            and type(q) is _ndarray
+            and P.dtype == _f64
+            and q.dtype == _f64
+            and q.ndim == 1
             and q.shape[0] <= _SMALL_N
-            and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
-            and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
+            and (
+                A is None
+                or (
+                    type(A) is _ndarray
+                    and A.dtype == _f64
+                    and type(b) is _ndarray
+                    and b.dtype == _f64
+                )
+            )
+            and (
+                G is None
+                or (
+                    type(G) is _ndarray
+                    and G.dtype == _f64
+                    and type(h) is _ndarray
+                    and h.dtype == _f64
+                )
+            )
             and (lb is None or (type(lb) is _ndarray and lb.dtype == _f64))
             and (ub is None or (type(ub) is _ndarray and ub.dtype == _f64))
         ):
             if wants_sparse(problem):
                 return self._solve_sparse(problem)
             P, q, A, b, G, h, lb, ub = _dense(problem)
-        shapes = (P.shape, q.shape, None if A is None else A.shape, None if b is None else b.shape,
-                  None if G is None else G.shape, None if h is None else h.shape,
-                  None if lb is None else lb.shape, None if ub is None else ub.shape)
+        shapes = (
+            P.shape,
+            q.shape,
+            None if A is None else A.shape,
+            None if b is None else b.shape,
+            None if G is None else G.shape,
+            None if h is None else h.shape,
+            None if lb is None else lb.shape,
+            None if ub is None else ub.shape,
+        )
         solver = self._solver
         try:
             if solver is not None and shapes == self._shapes:
@@ -169,8 +203,11 @@ class PiqpBackend(Backend):
                 solver.update(P, q, A, b, G, None, h, lb, ub)
             else:
                 check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-                solver = self._setup((_MODULE[0] if _MODULE else _piqp()).DenseSolver, shapes,
-                                     (P, q, A, b, G, None, h, lb, ub))
+                solver = self._setup(
+                    (_MODULE[0] if _MODULE else _piqp()).DenseSolver,
+                    shapes,
+                    (P, q, A, b, G, None, h, lb, ub),
+                )
             solver.solve()
         except (ValueError, TypeError, RuntimeError) as exc:
             self.reset()
@@ -181,8 +218,15 @@ class PiqpBackend(Backend):
         """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
         P, q, A, b, G, h, lb, ub = sparse_parts(problem, upper=True)
         check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-        shapes = ("sparse", q.shape, None if b is None else b.shape, None if h is None else h.shape,
-                  lb is None, ub is None, structure_key(P, A, G))
+        shapes = (
+            "sparse",
+            q.shape,
+            None if b is None else b.shape,
+            None if h is None else h.shape,
+            lb is None,
+            ub is None,
+            structure_key(P, A, G),
+        )
         try:
             if self._solver is not None and shapes == self._shapes:
                 solver = self._solver

@@ -79,7 +79,6 @@ from ._common import as_dense, dense_bounds, generic_settings
 from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
 
-
 _STATUS_MAP: dict = {}
 _MODULE: list = []
 
@@ -91,7 +90,6 @@ def _proxqp():
 
         _MODULE.append(proxsuite.proxqp)
     return _MODULE[0]
-
 
 
 def _status_map(proxqp) -> dict:
@@ -132,7 +130,6 @@ class ProxqpBackend(Backend):
         self._info = None  # ``qp.results.info`` of ``_qp``
         self._views = None  # ``(results.x, results.y, results.z)`` of ``_qp`` (numpy views)
         self._l = None  # cached ``l = -inf``
-
 
     def reset(self) -> None:
         self._qp = None
@@ -187,18 +184,49 @@ class ProxqpBackend(Backend):
 
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+            problem.P,
+            problem.q,
+            problem.A,
+            problem.b,
+            problem.G,
+            problem.h,
+            problem.lb,
+            problem.ub,
         )
         # Fast path: dense float64 arrays (what the conversions below return
         # unchanged); anything else is converted as before.
         if (
-            type(P) is _ndarray and P.dtype == _f64 and type(q) is _ndarray and q.dtype == _f64
+            type(P) is _ndarray
+            and P.dtype == _f64
+            and type(q) is _ndarray
+            and q.dtype == _f64
             and q.shape[0] <= _SMALL_N
-            and (A is None or (type(A) is _ndarray and A.dtype == _f64 and type(b) is _ndarray and b.dtype == _f64))
-            and (G is None or (type(G) is _ndarray and G.dtype == _f64 and type(h) is _ndarray and h.dtype == _f64))
+            and (
+                A is None
+                or (
+                    type(A) is _ndarray
+                    and A.dtype == _f64
+                    and type(b) is _ndarray
+                    and b.dtype == _f64
+                )
+            )
+            and (
+                G is None
+                or (
+                    type(G) is _ndarray
+                    and G.dtype == _f64
+                    and type(h) is _ndarray
+                    and h.dtype == _f64
+                )
+            )
             and (
                 (lb is None and ub is None)
-                or (type(lb) is _ndarray and lb.dtype == _f64 and type(ub) is _ndarray and ub.dtype == _f64)
+                or (
+                    type(lb) is _ndarray
+                    and lb.dtype == _f64
+                    and type(ub) is _ndarray
+                    and ub.dtype == _f64
+                )
             )
         ):
             H, C, u = P, G, h
@@ -292,7 +320,9 @@ class ProxqpBackend(Backend):
             self.reset()
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
 
-        sol = BackendSolution(problem, status=status, extras={"raw_status": raw, "cold_retry": retried})
+        sol = BackendSolution(
+            problem, status=status, extras={"raw_status": raw, "cold_retry": retried}
+        )
         sol.iterations = int(info.iter)
         sol.solver_time_s = float(info.solve_time) * 1e-6  # ProxQP reports [us]
         if retried:

@@ -84,7 +84,15 @@ from .base import Backend, BackendSolution
 __all__ = ["OPTION_NAMES", "PRESETS", "QpoasesBackend"]
 
 #: Shim status -> our status.
-_STATUSES = {0: "optimal", 1: "max_iter", 2: "time_limit", -2: "primal_infeasible", -3: "dual_infeasible", -1: "error"}
+_STATUSES = {
+    0: "optimal",
+    1: "max_iter",
+    2: "time_limit",
+    -2: "primal_infeasible",
+    -3: "dual_infeasible",
+    -1: "error",
+}
+
 
 @register
 class QpoasesBackend(Backend):
@@ -103,7 +111,8 @@ class QpoasesBackend(Backend):
         preset = native.pop("preset", "default")
         if preset not in PRESETS:
             raise ParamError(
-                f"unknown preset '{preset}' for backend 'qpoases' (one of: {', '.join(PRESETS)})", key="preset"
+                f"unknown preset '{preset}' for backend 'qpoases' (one of: {', '.join(PRESETS)})",
+                key="preset",
             )
         self._preset = PRESETS[preset]
         for key in native:
@@ -145,7 +154,9 @@ class QpoasesBackend(Backend):
         ws = self._ws
         if ws is None:
             return None
-        return Workspace(ws.key, self._lib, self._preset, {}, self._nwsr, self._time_limit, clone_of=ws.handle)
+        return Workspace(
+            ws.key, self._lib, self._preset, {}, self._nwsr, self._time_limit, clone_of=ws.handle
+        )
 
     def set_state(self, state: Workspace | None) -> None:
         if state is None:
@@ -153,8 +164,15 @@ class QpoasesBackend(Backend):
         elif self._ws is not None and self._ws.key == state.key:
             self._lib.qpb_assign(self._ws.handle, state.handle)
         else:
-            self._ws = Workspace(state.key, self._lib, self._preset, {}, self._nwsr, self._time_limit,
-                                  clone_of=state.handle)
+            self._ws = Workspace(
+                state.key,
+                self._lib,
+                self._preset,
+                {},
+                self._nwsr,
+                self._time_limit,
+                clone_of=state.handle,
+            )
 
     def __deepcopy__(self, memo):
         other = type(self)(self.profile, **self.settings)
@@ -174,20 +192,37 @@ class QpoasesBackend(Backend):
     # -- solving --------------------------------------------------------------
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = (
-            problem.P, problem.q, problem.A, problem.b, problem.G, problem.h, problem.lb, problem.ub
+            problem.P,
+            problem.q,
+            problem.A,
+            problem.b,
+            problem.G,
+            problem.h,
+            problem.lb,
+            problem.ub,
         )
         if not (
-            type(P) is _ndarray and type(q) is _ndarray and q.ndim == 1
+            type(P) is _ndarray
+            and type(q) is _ndarray
+            and q.ndim == 1
             and (A is None or (type(A) is _ndarray and type(b) is _ndarray))
             and (G is None or (type(G) is _ndarray and type(h) is _ndarray))
-            and (lb is None or type(lb) is _ndarray) and (ub is None or type(ub) is _ndarray)
+            and (lb is None or type(lb) is _ndarray)
+            and (ub is None or type(ub) is _ndarray)
         ):
             P, q, A, b, G, h, lb, ub = _dense(problem)
         # The sizes decide: a copy into a buffer of another shape raises, and one of the same size
         # cannot broadcast; check_shapes names the array when the sizes changed or a copy raised.
-        sizes = (P.size, q.size, None if A is None else A.size, None if b is None else b.size,
-                 None if G is None else G.size, None if h is None else h.size,
-                 None if lb is None else lb.size, None if ub is None else ub.size)
+        sizes = (
+            P.size,
+            q.size,
+            None if A is None else A.size,
+            None if b is None else b.size,
+            None if G is None else G.size,
+            None if h is None else h.size,
+            None if lb is None else lb.size,
+            None if ub is None else ub.size,
+        )
         ws = self._ws
         if ws is None or sizes != ws.sizes:
             ws = self._workspace(P, q, A, b, G, h, lb, ub)
@@ -221,7 +256,9 @@ class QpoasesBackend(Backend):
         sol.iterations = iterations
         sol.solver_time_s = solve_time
         if st == 0:
-            xy = ws.xy.copy()  # x, then the multipliers (already with qpsolvers' sign): one copy, then views
+            xy = (
+                ws.xy.copy()
+            )  # x, then the multipliers (already with qpsolvers' sign): one copy, then views
             sol.x = xy[:n]
             sol.z_box = xy[n : n + n] if box else _EMPTY
             sol.y = xy[n + n : n + n + me]
@@ -229,7 +266,9 @@ class QpoasesBackend(Backend):
             sol._obj = obj
         elif st == -1:
             message = self._lib.qpb_message(raw)
-            sol.error = f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
+            sol.error = (
+                f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
+            )
         return sol
 
     def _workspace(self, P, q, A, b, G, h, lb, ub) -> Workspace:
@@ -240,7 +279,9 @@ class QpoasesBackend(Backend):
         ws = self._ws
         if ws is None or ws.key != key:
             self._ws = None
-            ws = self._ws = Workspace(key, self._lib, self._preset, self._native, self._nwsr, self._time_limit)
+            ws = self._ws = Workspace(
+                key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
+            )
         return ws
 
 

@@ -80,7 +80,13 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings
-from ._qpsolvers_status import CERTIFYING_SOLVERS, ITERATION_SOLVERS, NO_CERTIFICATE, STATUS_READERS, iterations
+from ._qpsolvers_status import (
+    CERTIFYING_SOLVERS,
+    ITERATION_SOLVERS,
+    NO_CERTIFICATE,
+    STATUS_READERS,
+    iterations,
+)
 from .base import Backend, BackendSolution
 
 #: Algorithm family of each solver qpsolvers can drive.
@@ -139,7 +145,9 @@ SOLVER_PACKAGES: dict[str, str] = {
 }
 
 
-def native_settings(solver: str, eps_abs: float, eps_rel: float, max_iter: int, time_limit: float) -> dict:
+def native_settings(
+    solver: str, eps_abs: float, eps_rel: float, max_iter: int, time_limit: float
+) -> dict:
     """Solver options (qpsolvers keyword arguments) for the generic settings.
 
     Args:
@@ -151,40 +159,78 @@ def native_settings(solver: str, eps_abs: float, eps_rel: float, max_iter: int, 
     """
     max_iter = int(max_iter)
     if solver == "clarabel":
-        return {"tol_feas": eps_abs, "tol_gap_abs": eps_abs, "tol_gap_rel": eps_rel,
-                "max_iter": min(max_iter, 2**32 - 1), "time_limit": time_limit}
+        return {
+            "tol_feas": eps_abs,
+            "tol_gap_abs": eps_abs,
+            "tol_gap_rel": eps_rel,
+            "max_iter": min(max_iter, 2**32 - 1),
+            "time_limit": time_limit,
+        }
     if solver == "daqp":
         return {"primal_tol": eps_abs, "dual_tol": eps_abs, "iter_limit": max_iter}
     if solver == "highs":
-        return {"primal_feasibility_tolerance": eps_abs, "dual_feasibility_tolerance": eps_abs,
-                "time_limit": time_limit}
+        return {
+            "primal_feasibility_tolerance": eps_abs,
+            "dual_feasibility_tolerance": eps_abs,
+            "time_limit": time_limit,
+        }
     if solver == "osqp":
-        settings = {"eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter, "time_limit": time_limit}
+        settings = {
+            "eps_abs": eps_abs,
+            "eps_rel": eps_rel,
+            "max_iter": max_iter,
+            "time_limit": time_limit,
+        }
         if eps_abs <= 1e-7:
             settings["polishing"] = True
         return settings
     if solver in ("piqp", "proxqp"):
-        settings = {"eps_abs": eps_abs, "eps_rel": eps_rel, "eps_duality_gap_abs": eps_abs,
-                    "eps_duality_gap_rel": eps_rel, "max_iter": max_iter}
+        settings = {
+            "eps_abs": eps_abs,
+            "eps_rel": eps_rel,
+            "eps_duality_gap_abs": eps_abs,
+            "eps_duality_gap_rel": eps_rel,
+            "max_iter": max_iter,
+        }
         if eps_abs <= 1e-7:
             settings["check_duality_gap"] = True
         return settings
     if solver == "scs":
-        return {"eps_abs": eps_abs, "eps_rel": eps_rel, "max_iters": max_iter, "time_limit_secs": time_limit}
+        return {
+            "eps_abs": eps_abs,
+            "eps_rel": eps_rel,
+            "max_iters": max_iter,
+            "time_limit_secs": time_limit,
+        }
     if solver in ("cvxopt", "kvxopt"):
         # qpbenchmark sets feastol only; the gap tolerances (defaults 1e-7 absolute, 1e-6 relative)
         # would stop cvxopt far from a 1e-9 answer.
-        return {"feastol": eps_abs, "abstol": eps_abs, "reltol": max(eps_rel, eps_abs), "maxiters": max_iter}
+        return {
+            "feastol": eps_abs,
+            "abstol": eps_abs,
+            "reltol": max(eps_rel, eps_abs),
+            "maxiters": max_iter,
+        }
     if solver == "ecos":
         # qpbenchmark's (feastol only): tighter gap tolerances make ECOS's dual residual worse, not better.
         return {"feastol": eps_abs}
     if solver == "qpalm":
-        return {"eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter, "time_limit": time_limit}
+        return {
+            "eps_abs": eps_abs,
+            "eps_rel": eps_rel,
+            "max_iter": max_iter,
+            "time_limit": time_limit,
+        }
     if solver == "gurobi":
         # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error at high_accuracy).
         return {"FeasibilityTol": eps_abs, "OptimalityTol": eps_abs, "TimeLimit": time_limit}
     if solver == "hpipm":
-        return {"tol_dual_gap": eps_abs, "tol_eq": eps_abs, "tol_ineq": eps_abs, "tol_stat": eps_abs}
+        return {
+            "tol_dual_gap": eps_abs,
+            "tol_eq": eps_abs,
+            "tol_ineq": eps_abs,
+            "tol_stat": eps_abs,
+        }
     if solver == "qpswift":
         return {"RELTOL": eps_abs * np.sqrt(3.0)}
     if solver == "qpoases":
@@ -243,7 +289,11 @@ _QPError = qpsolvers.QPError
 
 def _all_dense(problem) -> bool:
     P, G, A = problem.P, problem.G, problem.A
-    return type(P) is _ndarray and (G is None or type(G) is _ndarray) and (A is None or type(A) is _ndarray)
+    return (
+        type(P) is _ndarray
+        and (G is None or type(G) is _ndarray)
+        and (A is None or type(A) is _ndarray)
+    )
 
 
 def _float_array(v):
@@ -267,8 +317,12 @@ class QpsolversBackend(Backend):
         super().__init__(profile, **settings)
         self._cached_options: dict | None = None
         solver = self.solver
-        self._sparse_only = solver in qpsolvers.sparse_solvers and solver not in qpsolvers.dense_solvers
-        self._dense_only = solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers
+        self._sparse_only = (
+            solver in qpsolvers.sparse_solvers and solver not in qpsolvers.dense_solvers
+        )
+        self._dense_only = (
+            solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers
+        )
         self._reader = STATUS_READERS.get(solver)
         silence_wrapper_warnings(solver)
 
@@ -277,7 +331,8 @@ class QpsolversBackend(Backend):
         if cls.solver in qpsolvers.available_solvers:
             return None
         how = (
-            "pip install 'qpbench[all-solvers]'" if cls.solver in OPTIONAL_SOLVERS
+            "pip install 'qpbench[all-solvers]'"
+            if cls.solver in OPTIONAL_SOLVERS
             else f"pip install qpsolvers[{cls.solver}] or the solver's package"
         )
         return f"qpsolvers does not find solver '{cls.solver}' ({how})"
@@ -364,9 +419,9 @@ def _make_class(solver: str) -> type[QpsolversBackend]:
             "family": SOLVER_FAMILIES.get(solver, "unknown"),
             "package": SOLVER_PACKAGES.get(solver),
             "solver": solver,
-            "certifies_infeasibility": True if solver in CERTIFYING_SOLVERS else (
-                False if solver in NO_CERTIFICATE else None
-            ),
+            "certifies_infeasibility": True
+            if solver in CERTIFYING_SOLVERS
+            else (False if solver in NO_CERTIFICATE else None),
             "infeasibility_note": NO_CERTIFICATE.get(solver, ""),
             # qpsolvers hands sparse matrices to a solver with a sparse API as they are
             "sparse": solver in qpsolvers.sparse_solvers,
@@ -386,7 +441,9 @@ OPTIONAL_SOLVERS = ("cvxopt", "ecos", "gurobi", "qpalm")
 #: The generated classes, by qpsolvers' solver name.
 BACKENDS: dict[str, type[QpsolversBackend]] = {
     solver: _make_class(solver)
-    for solver in sorted(set(EXPECTED_SOLVERS) | set(OPTIONAL_SOLVERS) | set(qpsolvers.available_solvers))
+    for solver in sorted(
+        set(EXPECTED_SOLVERS) | set(OPTIONAL_SOLVERS) | set(qpsolvers.available_solvers)
+    )
 }
 
 

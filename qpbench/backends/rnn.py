@@ -70,7 +70,14 @@ from .base import BackendSolution
 if TYPE_CHECKING:
     import qpsolvers
 
-__all__ = ["SETTING_NAMES", "WORKING_SETTINGS", "RNNConverged", "RNNOnline", "RNNTuned", "TickSolution"]
+__all__ = [
+    "SETTING_NAMES",
+    "WORKING_SETTINGS",
+    "RNNConverged",
+    "RNNOnline",
+    "RNNTuned",
+    "TickSolution",
+]
 
 #: A setting that works in the closed loop of every shipped scenario (the
 #: paper's ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps
@@ -81,6 +88,7 @@ __all__ = ["SETTING_NAMES", "WORKING_SETTINGS", "RNNConverged", "RNNOnline", "RN
 #: ``python bench/rnn_frontier.py``). The earlier setting, eps = 1 ms with 5
 #: Euler steps, reaches 6.4 mm in narrow.
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
+
 
 class _Duals:
     """``y``, ``z`` and ``z_box`` of a :class:`TickSolution`, made on the first read of any.
@@ -178,17 +186,28 @@ class RNNOnline(NetworkBackend):
             return
         n, me, mi = st.n, st.me, st.mi
         slices = (
-            slice(0, n), slice(n, n + me) if me else None, slice(n + me, n + me + mi) if mi else None,
+            slice(0, n),
+            slice(n, n + me) if me else None,
+            slice(n + me, n + me + mi) if mi else None,
             slice(n + me + mi, 2 * n + me + mi),
         )
         # the strict kernel takes arrays only: absent parts (None) go to the general path
         strict = nw.online_kernel(strict=True) if me and mi else None
         self._fast = (
-            self._needs_p, nw.packed_kernel(), st.xi, self._prm, 3 * n + 2 * (me + mi), slices[0], slices,
-            self.name, strict,
+            self._needs_p,
+            nw.packed_kernel(),
+            st.xi,
+            self._prm,
+            3 * n + 2 * (me + mi),
+            slices[0],
+            slices,
+            self.name,
+            strict,
         )
 
-    def solve(self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None) -> BackendSolution:
+    def solve(
+        self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None
+    ) -> BackendSolution:
         """One tick of integration; see :meth:`Backend.solve` (same fields)."""
         start = _perf()
         fast = self._fast
@@ -210,8 +229,19 @@ class RNNOnline(NetworkBackend):
                 code = nw.SHAPE_MISMATCH
             else:
                 try:
-                    code = strict(problem.P, problem.q, problem.A, problem.b, problem.G, problem.h,
-                                  problem.lb, problem.ub, xi, prm, out)
+                    code = strict(
+                        problem.P,
+                        problem.q,
+                        problem.A,
+                        problem.b,
+                        problem.G,
+                        problem.h,
+                        problem.lb,
+                        problem.ub,
+                        xi,
+                        prm,
+                        out,
+                    )
                 except TypeError:  # numba's dispatcher: not the one argument type compiled
                     code = nw.SHAPE_MISMATCH
             if code >= 0:
@@ -269,7 +299,11 @@ class RNNConverged(NetworkBackend):
         return self.tol
 
     def _solve(self, problem, warm_start):
-        if warm_start is not None and self.state is not None and self.state.n == np.size(warm_start):
+        if (
+            warm_start is not None
+            and self.state is not None
+            and self.state.n == np.size(warm_start)
+        ):
             self.state.v = np.asarray(warm_start, dtype=np.float64).reshape(-1)
         return self._run(problem, warm_start)
 

@@ -12,7 +12,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--available", action="store_true", help="list only the backends that can run here"
     )
-    parser.add_argument("--json", action="store_true", help="one JSON object per backend, one per line")
+    parser.add_argument(
+        "--json", action="store_true", help="one JSON object per backend, one per line"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,7 +30,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     rows = [("name", "available", "version", "family", "reason")]
     for i in infos:
-        rows.append((i.name, "yes" if i.available else "no", i.version or "-", i.family, i.reason or ""))
+        rows.append(
+            (i.name, "yes" if i.available else "no", i.version or "-", i.family, i.reason or "")
+        )
     widths = [max(len(r[c]) for r in rows) for c in range(4)]
     for r in rows:
         print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + ("  " + r[4] if r[4] else ""))

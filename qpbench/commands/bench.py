@@ -10,11 +10,15 @@ from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
 from .inspect_ import add_memory_argument
 
-HELP = "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
-EXAMPLE = ("qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3; "
-           "qpbench bench problems/maros_meszaros --problems 'HS*' --limit 5 --backends daqp,clarabel --out hs.csv; "
-           "qpbench bench problems/maros_meszaros --backends qpsolvers:osqp --profile qpbenchmark:high_accuracy "
-           "--reference none --out mm.csv")
+HELP = (
+    "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
+)
+EXAMPLE = (
+    "qpbench bench problems/wall --backends osqp,proxqp,rnn --out results/bench-wall.csv --repeat 3; "
+    "qpbench bench problems/maros_meszaros --problems 'HS*' --limit 5 --backends daqp,clarabel --out hs.csv; "
+    "qpbench bench problems/maros_meszaros --backends qpsolvers:osqp --profile qpbenchmark:high_accuracy "
+    "--reference none --out mm.csv"
+)
 
 log = logging.getLogger("qpbench")
 
@@ -26,9 +30,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="problem-set folder, qpbenchmark .parquet, folder of .npz or .mat, or one .npz/.mat file",
     )
     parser.add_argument(
-        "--backends", required=True, help="comma-separated backend names, or 'all' (every available backend)"
+        "--backends",
+        required=True,
+        help="comma-separated backend names, or 'all' (every available backend)",
     )
-    parser.add_argument("--out", required=True, help="CSV file of results (rows appended as they are produced)")
+    parser.add_argument(
+        "--out", required=True, help="CSV file of results (rows appended as they are produced)"
+    )
     parser.add_argument(
         "--profile",
         default="default",
@@ -37,7 +45,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "time limit and success rule verbatim",
     )
     add_reference_arguments(parser)
-    parser.add_argument("--repeat", type=int, default=1, help="timed solves per problem; rows give min and median (default 1)")
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="timed solves per problem; rows give min and median (default 1)",
+    )
     parser.add_argument(
         "--seed",
         type=int,
@@ -51,14 +64,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("sequential", "independent"),
         help="sequential: tick order, state carried (default); independent: reset before each problem",
     )
-    parser.add_argument("--time-limit", type=float, default=None, help="per-solve time limit in s (default: the profile's)")
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        help="per-solve time limit in s (default: the profile's)",
+    )
     parser.add_argument(
         "--isolate",
         default="auto",
         choices=("auto", "always", "never"),
         help="run solves in a worker process: auto = backends marked risky or seen to crash (default)",
     )
-    parser.add_argument("--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend")
+    parser.add_argument(
+        "--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend"
+    )
     add_memory_argument(parser)
     parser.add_argument(
         "--set",
@@ -72,8 +92,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     add_selection_arguments(parser)
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--force", action="store_true", help="delete an existing --out and start again")
-    group.add_argument("--resume", action="store_true", help="keep the rows of an existing --out and run the rest")
+    group.add_argument(
+        "--force", action="store_true", help="delete an existing --out and start again"
+    )
+    group.add_argument(
+        "--resume", action="store_true", help="keep the rows of an existing --out and run the rest"
+    )
 
 
 def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
@@ -144,8 +168,15 @@ def run(args: argparse.Namespace) -> int:
     log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
     warmup_logged(log)  # no compile inside a timed solve, here or in a worker
     progress = not args.quiet and sys.stderr.isatty()
-    summary = run_bench(problem_set, config, args.out, force=args.force, resume=args.resume, progress=progress,
-                        references=references)
+    summary = run_bench(
+        problem_set,
+        config,
+        args.out,
+        force=args.force,
+        resume=args.resume,
+        progress=progress,
+        references=references,
+    )
     if not args.quiet:
         print(f"bench: {summary.line()}")
         print(summary.table())
@@ -172,8 +203,10 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         raise ParamError(f"--jobs must be >= 1, got {args.jobs}", key="jobs")
     limit = args.reference_time_limit
     if limit is not None and not (limit > 0 and math.isfinite(limit)):
-        raise ParamError(f"reference time limit must be a positive number of seconds, got {limit}",
-                         key="reference-time-limit")
+        raise ParamError(
+            f"reference time limit must be a positive number of seconds, got {limit}",
+            key="reference-time-limit",
+        )
     profile = get_profile(config.profile)
     if limit is None:
         limit = profile.reference_time_limit
@@ -182,7 +215,9 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         return lambda problem_set: [None] * len(problem_set.records)
     if source not in SOURCES:
         if not Path(source).is_file():
-            raise ParamError(f"'{source}' is neither {', '.join(SOURCES)} nor a file", key="reference")
+            raise ParamError(
+                f"'{source}' is neither {', '.join(SOURCES)} nor a file", key="reference"
+            )
         objectives = read_objectives(source)  # a bad file fails here, before anything is written
         return lambda problem_set: from_objectives(problem_set, objectives, source)
     progress = None
@@ -190,11 +225,19 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         from tqdm import tqdm
 
         progress = tqdm if sys.stderr.isatty() else "log"
+
     def compute(problem_set):
         from ..harness.workers import context as worker_context
 
-        return bench_references(problem_set, source, time_limit=limit, jobs=args.jobs, progress=progress,
-                                context=worker_context(), cache_dir=args.cache_dir)
+        return bench_references(
+            problem_set,
+            source,
+            time_limit=limit,
+            jobs=args.jobs,
+            progress=progress,
+            context=worker_context(),
+            cache_dir=args.cache_dir,
+        )
 
     return compute
 
@@ -206,4 +249,8 @@ def _cache_line(args: argparse.Namespace, problem_set) -> str:
     if args.reference not in SOURCES:
         return f"references: {args.reference} (not cached)"
     folder = cache_folder(problem_set, args.cache_dir)
-    return "references: not cached (set built in memory)" if folder is None else f"reference cache: {folder}"
+    return (
+        "references: not cached (set built in memory)"
+        if folder is None
+        else f"reference cache: {folder}"
+    )

@@ -4,7 +4,8 @@ Guarded (see :mod:`qpbench.harness.closed_loop`): per tick, an exception or
 a non-finite answer of the backend is a tick without a solution (statuses
 ``error``, ``invalid`` in the tick log, counts in the row); a late answer is
 applied like any other (``deadline_misses`` counts ticks slower than dt)
-unless ``--deadline`` drops it (status ``time_limit``, ``deadline_dropped``); per run, ``--isolate`` runs a backend in a worker
+unless ``--deadline`` drops it (status ``time_limit``, ``deadline_dropped``); per run,
+``--isolate`` runs a backend in a worker
 process with a deadline (``--run-time-limit``), so a hang or a crash in native
 code becomes a ``time_limit`` or ``crashed`` row and the other runs go on.
 Plugin backends (``qpbench --plugin FILE``, ``QPBENCH_PLUGINS``, entry
@@ -34,38 +35,86 @@ log = logging.getLogger("qpbench.closed_loop")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenarios", default="all",
-                        help="comma-separated scenario names or TOML paths, or 'all' (default: all)")
-    parser.add_argument("--backends", default="all",
-                        help="comma-separated backend names, or 'all' available ones (default: all)")
-    parser.add_argument("--out", required=True, metavar="DIR",
-                        help="output folder: closed_loop.csv and logs/<scenario>__<backend>.parquet")
-    parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="simulated time per run in [s] (default: each scenario's T)")
-    parser.add_argument("--formulation", choices=FORMULATIONS, default="paper",
-                        help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)")
-    parser.add_argument("--jobs", type=int, default=1, metavar="N",
-                        help="runs in parallel, each in a worker process of its own (default: 1; timing is "
-                             "cleanest with 1)")
-    parser.add_argument("--deadline", type=float, default=None, metavar="SECONDS",
-                        help="per-tick deadline in [s]: a later answer is dropped (status time_limit; soft "
-                             "fallback, else zero velocity) and the runs depend on the machine's speed "
-                             "(default: none, every answer is applied; deadline_misses counts ticks slower "
-                             "than dt)")
-    parser.add_argument("--isolate", default="auto", choices=("auto", "always", "never"),
-                        help="run a backend's runs in a worker process with a deadline, so a hang or crash is a "
-                             "row: auto = backends marked risky (default)")
-    parser.add_argument("--run-time-limit", type=float, default=None, metavar="S",
-                        help="deadline of an isolated run in [s], worker start and warm-up included (default: "
-                             "max(600, 50 x simulated seconds))")
-    parser.add_argument("--run-budget", type=float, default=None, metavar="S",
-                        help="wall-time budget of each run in [s]: a run that spends it stops between ticks "
-                             "(status budget; simulated_s says how far it got, the verdict is of what was "
-                             "simulated) (default: none, every run simulates its full duration)")
+    parser.add_argument(
+        "--scenarios",
+        default="all",
+        help="comma-separated scenario names or TOML paths, or 'all' (default: all)",
+    )
+    parser.add_argument(
+        "--backends",
+        default="all",
+        help="comma-separated backend names, or 'all' available ones (default: all)",
+    )
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output folder: closed_loop.csv and logs/<scenario>__<backend>.parquet",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated time per run in [s] (default: each scenario's T)",
+    )
+    parser.add_argument(
+        "--formulation",
+        choices=FORMULATIONS,
+        default="paper",
+        help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="runs in parallel, each in a worker process of its own (default: 1; timing is "
+        "cleanest with 1)",
+    )
+    parser.add_argument(
+        "--deadline",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="per-tick deadline in [s]: a later answer is dropped (status time_limit; soft "
+        "fallback, else zero velocity) and the runs depend on the machine's speed "
+        "(default: none, every answer is applied; deadline_misses counts ticks slower "
+        "than dt)",
+    )
+    parser.add_argument(
+        "--isolate",
+        default="auto",
+        choices=("auto", "always", "never"),
+        help="run a backend's runs in a worker process with a deadline, so a hang or crash is a "
+        "row: auto = backends marked risky (default)",
+    )
+    parser.add_argument(
+        "--run-time-limit",
+        type=float,
+        default=None,
+        metavar="S",
+        help="deadline of an isolated run in [s], worker start and warm-up included (default: "
+        "max(600, 50 x simulated seconds))",
+    )
+    parser.add_argument(
+        "--run-budget",
+        type=float,
+        default=None,
+        metavar="S",
+        help="wall-time budget of each run in [s]: a run that spends it stops between ticks "
+        "(status budget; simulated_s says how far it got, the verdict is of what was "
+        "simulated) (default: none, every run simulates its full duration)",
+    )
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--force", action="store_true", help="replace an existing table and its logs")
-    group.add_argument("--resume", action="store_true",
-                       help="keep the rows already done (same formulation and duration) and run the rest")
+    group.add_argument(
+        "--force", action="store_true", help="replace an existing table and its logs"
+    )
+    group.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the rows already done (same formulation and duration) and run the rest",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -89,16 +138,33 @@ def run(args: argparse.Namespace) -> int:
         log_row(log, row)
 
     try:
-        outcome = run_closed_loop(scenarios, backends, args.out, duration=args.duration,
-                                  formulation=args.formulation, force=args.force,
-                                  resume=args.resume, jobs=args.jobs, on_row=on_row,
-                                  isolate=args.isolate, run_time_limit=args.run_time_limit,
-                                  deadline=args.deadline, run_budget=args.run_budget)
+        outcome = run_closed_loop(
+            scenarios,
+            backends,
+            args.out,
+            duration=args.duration,
+            formulation=args.formulation,
+            force=args.force,
+            resume=args.resume,
+            jobs=args.jobs,
+            on_row=on_row,
+            isolate=args.isolate,
+            run_time_limit=args.run_time_limit,
+            deadline=args.deadline,
+            run_budget=args.run_budget,
+        )
     finally:
         if bar is not None:
             bar.close()
-    log.info("%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",
-             len(outcome.table), outcome.ran, outcome.skipped, outcome.errors, outcome.not_ok, outcome.csv_path)
+    log.info(
+        "%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",
+        len(outcome.table),
+        outcome.ran,
+        outcome.skipped,
+        outcome.errors,
+        outcome.not_ok,
+        outcome.csv_path,
+    )
     if not args.quiet and len(outcome.table):
         print(summary_table(outcome.table))
     return 1 if outcome.errors or outcome.not_ok else 0
@@ -116,14 +182,37 @@ def summary_table(table) -> str:
             return "-"
         return "-" if math.isnan(value) else format(value * scale, spec)
 
-    header = ("scenario", "backend", "verdict", "simulated s", "tracking max mm", "force err max N",
-              "d_min mm", "solve p99 us", "ticks > dt")
+    header = (
+        "scenario",
+        "backend",
+        "verdict",
+        "simulated s",
+        "tracking max mm",
+        "force err max N",
+        "d_min mm",
+        "solve p99 us",
+        "ticks > dt",
+    )
     rows = [header]
     for r in table.to_dict("records"):
-        rows.append((str(r.get("scenario")), str(r.get("backend")), str(r.get("verdict") or r.get("status")),
-                     num(r.get("simulated_s"), spec=".4g"), num(r.get("tracking_max_after_2s"), 1e3),
-                     num(r.get("force_error_max_after_2s")), num(r.get("min_obstacle_distance"), 1e3, ".4g"),
-                     num(r.get("solve_time_p99_s"), 1e6, ".4g"), num(r.get("deadline_misses"), spec=".0f")))
+        rows.append(
+            (
+                str(r.get("scenario")),
+                str(r.get("backend")),
+                str(r.get("verdict") or r.get("status")),
+                num(r.get("simulated_s"), spec=".4g"),
+                num(r.get("tracking_max_after_2s"), 1e3),
+                num(r.get("force_error_max_after_2s")),
+                num(r.get("min_obstacle_distance"), 1e3, ".4g"),
+                num(r.get("solve_time_p99_s"), 1e6, ".4g"),
+                num(r.get("deadline_misses"), spec=".0f"),
+            )
+        )
     widths = [max(len(row[c]) for row in rows) for c in range(len(header))]
-    return "\n".join("  ".join(cell.ljust(w) if c < 3 else cell.rjust(w) for c, (cell, w) in enumerate(zip(row, widths)))
-                     for row in rows)
+    return "\n".join(
+        "  ".join(
+            cell.ljust(w) if c < 3 else cell.rjust(w)
+            for c, (cell, w) in enumerate(zip(row, widths))
+        )
+        for row in rows
+    )

@@ -31,10 +31,15 @@ log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("path", metavar="PROBLEMS",
-                        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat")
+    parser.add_argument(
+        "path",
+        metavar="PROBLEMS",
+        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat",
+    )
     parser.add_argument("--format", required=True, choices=("npz", "parquet"), help="output format")
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder (must not exist unless --force)")
+    parser.add_argument(
+        "--out", required=True, metavar="DIR", help="output folder (must not exist unless --force)"
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing output folder")
     add_selection_arguments(parser)
 
@@ -58,7 +63,9 @@ def export(records, fmt: str, out: Path, source: str) -> Path:
                 seen.add(stem)
                 save_npz(rec, staging / f"{stem}.npz")
         else:
-            write_problem_set(staging, records, generator={"name": "qpbench export", "source": source})
+            write_problem_set(
+                staging, records, generator={"name": "qpbench export", "source": source}
+            )
         if out.exists():
             old = out.with_name(f".{out.name}.old")
             out.rename(old)

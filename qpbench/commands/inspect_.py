@@ -26,8 +26,12 @@ def add_memory_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("path", help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    parser.add_argument(
+        "path", help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat"
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object instead of the table"
+    )
     add_memory_argument(parser)
 
 
@@ -64,8 +68,10 @@ def _notes(ps, budget: int) -> list[str]:
             out.append(f"{r.name}: warning: {conv.warning}")
         need = sparse_solver_bytes(r.problem)
         if need > budget:
-            out.append(f"{r.name}: skipped: memory: a sparse solver needs about {format_size(need)} "
-                       f"> budget {format_size(budget)}")
+            out.append(
+                f"{r.name}: skipped: memory: a sparse solver needs about {format_size(need)} "
+                f"> budget {format_size(budget)}"
+            )
     return out
 
 
@@ -86,10 +92,16 @@ def describe(ps, sizes, budget: int | None = None) -> dict:
         "m_ineq": span([s[2] for s in sizes]),
         "nnz": span([_nnz(r.problem) for r in ps.records]),
         "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
-        "convexity": dict(Counter("-" if r.convexity is None else r.convexity.verdict for r in ps.records)),
+        "convexity": dict(
+            Counter("-" if r.convexity is None else r.convexity.verdict for r in ps.records)
+        ),
         "notes": _notes(ps, resolve_budget(None) if budget is None else budget),
-        "with_bounds": sum(r.problem.lb is not None or r.problem.ub is not None for r in ps.records),
-        "formulation": dict(Counter("-" if r.formulation is None else r.formulation for r in ps.records)),
+        "with_bounds": sum(
+            r.problem.lb is not None or r.problem.ub is not None for r in ps.records
+        ),
+        "formulation": dict(
+            Counter("-" if r.formulation is None else r.formulation for r in ps.records)
+        ),
         "scenario": dict(Counter("-" if r.scenario is None else r.scenario for r in ps.records)),
         "t": span(ts),
         "generator": (ps.manifest or {}).get("generator"),
@@ -108,7 +120,9 @@ def _print_table(ps, info: dict) -> None:
             lo, hi = info[key]
             print(f"{key:<12} {lo}" + ("" if lo == hi else f"-{hi}"))
         print(f"sparse P     {info['sparse']}")
-        print(f"convexity    {', '.join(f'{k} ({v})' for k, v in sorted(info['convexity'].items()))}")
+        print(
+            f"convexity    {', '.join(f'{k} ({v})' for k, v in sorted(info['convexity'].items()))}"
+        )
         print(f"with bounds  {info['with_bounds']}")
         print(f"formulation  {_counts(r.formulation for r in ps.records)}")
         print(f"scenario     {_counts(r.scenario for r in ps.records)}")

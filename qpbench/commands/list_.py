@@ -5,23 +5,39 @@ from __future__ import annotations
 import argparse
 import json
 
-HELP = "list the problems of a set: name, n, equality and inequality rows, bounds, scenario, tick, t"
+HELP = (
+    "list the problems of a set: name, n, equality and inequality rows, bounds, scenario, tick, t"
+)
 EXAMPLE = "qpbench list problems/wall --limit 5      (qpbench list problems/maros_meszaros --json)"
 
 
 def add_selection_arguments(parser: argparse.ArgumentParser) -> None:
     """``--problems``, ``--every``, ``--limit`` (see :mod:`qpbench.selection`)."""
-    parser.add_argument("--problems", dest="pattern", default=None, metavar="PATTERN",
-                        help="keep problems whose name matches a shell-style pattern (comma-separated patterns)")
-    parser.add_argument("--every", type=int, default=None, metavar="K", help="keep every K-th problem")
-    parser.add_argument("--limit", type=int, default=None, metavar="N", help="keep the first N problems")
+    parser.add_argument(
+        "--problems",
+        dest="pattern",
+        default=None,
+        metavar="PATTERN",
+        help="keep problems whose name matches a shell-style pattern (comma-separated patterns)",
+    )
+    parser.add_argument(
+        "--every", type=int, default=None, metavar="K", help="keep every K-th problem"
+    )
+    parser.add_argument(
+        "--limit", type=int, default=None, metavar="N", help="keep the first N problems"
+    )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("path", metavar="PROBLEMS",
-                        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat")
+    parser.add_argument(
+        "path",
+        metavar="PROBLEMS",
+        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat",
+    )
     add_selection_arguments(parser)
-    parser.add_argument("--json", action="store_true", help="one JSON object per problem, one per line")
+    parser.add_argument(
+        "--json", action="store_true", help="one JSON object per problem, one per line"
+    )
 
 
 def rows(records) -> list[dict]:
@@ -30,8 +46,19 @@ def rows(records) -> list[dict]:
         n, m_eq, m_ineq = r.sizes
         p = r.problem
         n_box = sum(int((x is not None) and (abs(x) < float("inf")).sum()) for x in (p.lb, p.ub))
-        out.append({"name": r.name, "n": n, "m_eq": m_eq, "m_ineq": m_ineq, "n_box": n_box,
-                    "scenario": r.scenario, "tick": r.tick, "t": r.t, "formulation": r.formulation})
+        out.append(
+            {
+                "name": r.name,
+                "n": n,
+                "m_eq": m_eq,
+                "m_ineq": m_ineq,
+                "n_box": n_box,
+                "scenario": r.scenario,
+                "tick": r.tick,
+                "t": r.t,
+                "formulation": r.formulation,
+            }
+        )
     return out
 
 
@@ -46,10 +73,14 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(row))
         return 0
     width = max([len("name")] + [len(r["name"]) for r in table])
-    print(f"{'name':<{width}}  {'n':>6} {'m_eq':>6} {'m_ineq':>6} {'bounds':>6}  scenario  {'tick':>6} {'t [s]':>8}")
+    print(
+        f"{'name':<{width}}  {'n':>6} {'m_eq':>6} {'m_ineq':>6} {'bounds':>6}  scenario  {'tick':>6} {'t [s]':>8}"
+    )
     for r in table:
         t = "" if r["t"] is None else f"{r['t']:.3f}"
         tick = "" if r["tick"] is None else str(r["tick"])
-        print(f"{r['name']:<{width}}  {r['n']:>6} {r['m_eq']:>6} {r['m_ineq']:>6} {r['n_box']:>6}  "
-              f"{r['scenario'] or '-':<8}  {tick:>6} {t:>8}")
+        print(
+            f"{r['name']:<{width}}  {r['n']:>6} {r['m_eq']:>6} {r['m_ineq']:>6} {r['n_box']:>6}  "
+            f"{r['scenario'] or '-':<8}  {tick:>6} {t:>8}"
+        )
     return 0

@@ -12,10 +12,16 @@ log = logging.getLogger("qpbench.report")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("results", nargs="+", metavar="RESULTS",
-                        help="bench, closed-loop or sweep CSV files, or folders searched for *.csv (a sweep's "
-                             "sweep.csv adds the sweep section)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="folder of report.md and plots/")
+    parser.add_argument(
+        "results",
+        nargs="+",
+        metavar="RESULTS",
+        help="bench, closed-loop or sweep CSV files, or folders searched for *.csv (a sweep's "
+        "sweep.csv adds the sweep section)",
+    )
+    parser.add_argument(
+        "--out", required=True, metavar="DIR", help="folder of report.md and plots/"
+    )
     parser.add_argument("--force", action="store_true", help="replace an existing report.md")
     parser.add_argument("--no-plots", action="store_true", help="write report.md only")
     parser.add_argument(
@@ -32,16 +38,29 @@ def run(args: argparse.Namespace) -> int:
     from ..report import write_report
     from ..scaling.report import is_scaling_dir, write_scaling_report
 
-    scaling = [r for r in args.results if is_scaling_dir(r)]  # folders written by ``qpbench scaling``
+    scaling = [
+        r for r in args.results if is_scaling_dir(r)
+    ]  # folders written by ``qpbench scaling``
     for folder in scaling:
-        log.info("wrote %s", write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots))
+        log.info(
+            "wrote %s",
+            write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots),
+        )
     rest = [r for r in args.results if r not in scaling]
     if rest:
         from ..sweep.report import split_sweep_paths, sweep_section
 
-        rest, sweeps = split_sweep_paths(rest)  # tables written by ``qpbench sweep``: their own section
+        rest, sweeps = split_sweep_paths(
+            rest
+        )  # tables written by ``qpbench sweep``: their own section
         sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
-        path = write_report(rest, args.out, force=args.force, plots=not args.no_plots, prefer=args.prefer,
-                            sections=sections)
+        path = write_report(
+            rest,
+            args.out,
+            force=args.force,
+            plots=not args.no_plots,
+            prefer=args.prefer,
+            sections=sections,
+        )
         log.info("wrote %s", path)
     return 0

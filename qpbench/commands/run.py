@@ -24,47 +24,93 @@ from ..harness.pipeline import BENCH_EVERY, REPEAT, RUN_BUDGET_S
 
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
-HELP = "the main job: make missing problem sets, bench every backend, closed loop every scenario, write results/ and report.md"
-EXAMPLE = "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall --backends qpsolvers:daqp,pinv --out quick)"
+HELP = (
+    "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
+    "write results/ and report.md"
+)
+EXAMPLE = (
+    "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall "
+    "--backends qpsolvers:daqp,pinv --out quick)"
+)
 
 log = logging.getLogger("qpbench.run")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default="results", metavar="DIR",
-                        help="results folder (default: ./results)")
-    parser.add_argument("--problems", default="problems", metavar="DIR",
-                        help="folder of the problem sets <DIR>/<scenario>/ (default: ./problems; "
-                             "missing sets are regenerated there)")
-    parser.add_argument("--scenarios", default="all",
-                        help="comma-separated scenarios, or 'all' shipped ones (default: all; the bench "
-                             "uses the paper's four among them)")
-    parser.add_argument("--backends", default="all",
-                        help="comma-separated backends, or 'all' available ones (default: all)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="closed-loop time per run in [s] (default: the scenario's, 20 s); the bench "
-                             "then uses only the problems with t < S (quick runs)")
-    parser.add_argument("--bench-every", type=int, default=BENCH_EVERY, metavar="K",
-                        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 400 of each set's "
-                             "2,000, every 50th control tick; 1: all of them, about 4x longer)")
-    parser.add_argument("--run-budget", type=float, default=RUN_BUDGET_S, metavar="S",
-                        help=f"wall-time budget of each closed-loop run in [s] (default: {RUN_BUDGET_S:g}): a run "
-                             "that spends it stops between ticks; its row says how far it got (simulated_s) and "
-                             "its verdict is of what it simulated. 0: no budget, every run simulates its full "
-                             "duration (slow backends then take minutes per scenario)")
-    parser.add_argument("--repeat", type=int, default=REPEAT, metavar="R",
-                        help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})")
-    parser.add_argument("--jobs", type=int, default=1, metavar="N",
-                        help="closed-loop runs in parallel worker processes (default: 1)")
+    parser.add_argument(
+        "--out", default="results", metavar="DIR", help="results folder (default: ./results)"
+    )
+    parser.add_argument(
+        "--problems",
+        default="problems",
+        metavar="DIR",
+        help="folder of the problem sets <DIR>/<scenario>/ (default: ./problems; "
+        "missing sets are regenerated there)",
+    )
+    parser.add_argument(
+        "--scenarios",
+        default="all",
+        help="comma-separated scenarios, or 'all' shipped ones (default: all; the bench "
+        "uses the paper's four among them)",
+    )
+    parser.add_argument(
+        "--backends",
+        default="all",
+        help="comma-separated backends, or 'all' available ones (default: all)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="closed-loop time per run in [s] (default: the scenario's, 20 s); the bench "
+        "then uses only the problems with t < S (quick runs)",
+    )
+    parser.add_argument(
+        "--bench-every",
+        type=int,
+        default=BENCH_EVERY,
+        metavar="K",
+        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 400 of each set's "
+        "2,000, every 50th control tick; 1: all of them, about 4x longer)",
+    )
+    parser.add_argument(
+        "--run-budget",
+        type=float,
+        default=RUN_BUDGET_S,
+        metavar="S",
+        help=f"wall-time budget of each closed-loop run in [s] (default: {RUN_BUDGET_S:g}): a run "
+        "that spends it stops between ticks; its row says how far it got (simulated_s) and "
+        "its verdict is of what it simulated. 0: no budget, every run simulates its full "
+        "duration (slow backends then take minutes per scenario)",
+    )
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=REPEAT,
+        metavar="R",
+        help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="closed-loop runs in parallel worker processes (default: 1)",
+    )
     from .inspect_ import add_memory_argument
 
     add_memory_argument(parser)
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--force", action="store_true",
-                       help="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
-                            "if no previous 'qpbench run' wrote them")
-    group.add_argument("--resume", action="store_true",
-                       help="continue an interrupted run from OUT/.partial/")
+    group.add_argument(
+        "--force",
+        action="store_true",
+        help="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
+        "if no previous 'qpbench run' wrote them",
+    )
+    group.add_argument(
+        "--resume", action="store_true", help="continue an interrupted run from OUT/.partial/"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,18 +123,37 @@ def run(args: argparse.Namespace) -> int:
     from ..selection import select_backends, select_scenarios
 
     if not (args.run_budget >= 0 and math.isfinite(args.run_budget)):
-        raise ParamError(f"must be a number of seconds >= 0 (0: no budget), got {args.run_budget}", key="--run-budget")
+        raise ParamError(
+            f"must be a number of seconds >= 0 (0: no budget), got {args.run_budget}",
+            key="--run-budget",
+        )
     config = RunConfig(
-        out=Path(args.out), problems=Path(args.problems), duration=args.duration, bench_every=args.bench_every,
-        run_budget=args.run_budget or None, repeat=args.repeat, jobs=args.jobs, force=args.force,
-        resume=args.resume, progress=not args.quiet, scenarios=[], backends=[],
+        out=Path(args.out),
+        problems=Path(args.problems),
+        duration=args.duration,
+        bench_every=args.bench_every,
+        run_budget=args.run_budget or None,
+        repeat=args.repeat,
+        jobs=args.jobs,
+        force=args.force,
+        resume=args.resume,
+        progress=not args.quiet,
+        scenarios=[],
+        backends=[],
         memory_budget=resolve_budget(args.memory_budget),
-        on_row=lambda row: log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None,
+        on_row=lambda row: (
+            log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None
+        ),
     )
     config.validate()  # the numbers first, as before any scenario is loaded
     config.scenarios = select_scenarios(args.scenarios)
     config.backends = select_backends(args.backends)
     outcome = run_all(config)
-    log.info("qpbench run: %s in %.0f s (%d failed solves, failed runs or runs that failed their verdict); report %s",
-             args.out, outcome.wall_time_s, outcome.failures, outcome.report)
+    log.info(
+        "qpbench run: %s in %.0f s (%d failed solves, failed runs or runs that failed their verdict); report %s",
+        args.out,
+        outcome.wall_time_s,
+        outcome.failures,
+        outcome.report,
+    )
     return 1 if outcome.failures else 0

@@ -9,7 +9,10 @@ import sys
 from pathlib import Path
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
-EXAMPLE = "qpbench scaling --backends daqp,qpoases,piqp,osqp,clarabel --out scaling/ ; qpbench report scaling/ --out scaling-report/"
+EXAMPLE = (
+    "qpbench scaling --backends daqp,qpoases,piqp,osqp,clarabel --out scaling/ ; "
+    "qpbench report scaling/ --out scaling-report/"
+)
 
 log = logging.getLogger("qpbench")
 
@@ -21,26 +24,80 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..scaling.runner import ScalingConfig
 
     d = ScalingConfig(backends=[], sizes=[])
-    parser.add_argument("--backends", required=True, help="comma-separated backend names, or 'all' (every available backend)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="folder of scaling.csv, bench/, sets/, scenarios/ and the report")
-    parser.add_argument("--sizes", default="default", metavar="LIST",
-                        help="'default' (9 sizes: n4-p1-m1,m10,m100,m1000 and n4..n64-p2-m16) or comma-separated "
-                        "nN-pP-mM names: N links, P key points per link, a cloud of M points")
-    parser.add_argument("--driver", default=d.driver, help=f"backend solving the closed loop whose ticks are dumped (default {d.driver})")
-    parser.add_argument("--duration", type=float, default=d.duration, help=f"simulated seconds per size (default {d.duration})")
-    parser.add_argument("--every", type=int, default=d.every, help=f"keep every K-th tick (default {d.every})")
-    parser.add_argument("--repeat", type=int, default=d.repeat, help=f"timed solves per tick, minimum kept (default {d.repeat})")
-    parser.add_argument("--seed", type=int, default=d.seed, help=f"seed of the arms, clouds and backend order (default {d.seed})")
-    parser.add_argument("--profile", default=d.profile, help=f"settings profile (default {d.profile})")
-    parser.add_argument("--dense-limit", type=int, default=d.dense_limit, metavar="ENTRIES",
-                        help=f"skip dense-only backends when n x rows exceeds this (default {d.dense_limit:,})")
-    parser.add_argument("--slow-limit", type=float, default=d.slow_limit, metavar="S",
-                        help=f"skip a backend on the larger sizes of an axis once its median solve exceeds S seconds "
-                        f"(default {d.slow_limit})")
-    parser.add_argument("--no-report", action="store_true", help="do not write scaling.md and scaling.png")
+    parser.add_argument(
+        "--backends",
+        required=True,
+        help="comma-separated backend names, or 'all' (every available backend)",
+    )
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="folder of scaling.csv, bench/, sets/, scenarios/ and the report",
+    )
+    parser.add_argument(
+        "--sizes",
+        default="default",
+        metavar="LIST",
+        help="'default' (9 sizes: n4-p1-m1,m10,m100,m1000 and n4..n64-p2-m16) or comma-separated "
+        "nN-pP-mM names: N links, P key points per link, a cloud of M points",
+    )
+    parser.add_argument(
+        "--driver",
+        default=d.driver,
+        help=f"backend solving the closed loop whose ticks are dumped (default {d.driver})",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=d.duration,
+        help=f"simulated seconds per size (default {d.duration})",
+    )
+    parser.add_argument(
+        "--every", type=int, default=d.every, help=f"keep every K-th tick (default {d.every})"
+    )
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=d.repeat,
+        help=f"timed solves per tick, minimum kept (default {d.repeat})",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=d.seed,
+        help=f"seed of the arms, clouds and backend order (default {d.seed})",
+    )
+    parser.add_argument(
+        "--profile", default=d.profile, help=f"settings profile (default {d.profile})"
+    )
+    parser.add_argument(
+        "--dense-limit",
+        type=int,
+        default=d.dense_limit,
+        metavar="ENTRIES",
+        help=f"skip dense-only backends when n x rows exceeds this (default {d.dense_limit:,})",
+    )
+    parser.add_argument(
+        "--slow-limit",
+        type=float,
+        default=d.slow_limit,
+        metavar="S",
+        help=f"skip a backend on the larger sizes of an axis once its median solve exceeds S seconds "
+        f"(default {d.slow_limit})",
+    )
+    parser.add_argument(
+        "--no-report", action="store_true", help="do not write scaling.md and scaling.png"
+    )
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--force", action="store_true", help="delete this command's outputs in --out and start again")
-    group.add_argument("--resume", action="store_true", help="keep the sizes done in --out and run the rest")
+    group.add_argument(
+        "--force",
+        action="store_true",
+        help="delete this command's outputs in --out and start again",
+    )
+    group.add_argument(
+        "--resume", action="store_true", help="keep the sizes done in --out and run the rest"
+    )
 
 
 def _config(args):
@@ -59,17 +116,30 @@ def _config(args):
     if len(set(backends)) != len(backends):
         raise ParamError(f"a backend is listed twice in '{args.backends}'", key="--backends")
     get_profile(args.profile)
-    for key, value, ok in (("--duration", args.duration, args.duration > 0), ("--every", args.every, args.every >= 1),
-                           ("--repeat", args.repeat, args.repeat >= 1), ("--seed", args.seed, args.seed >= 0),
-                           ("--dense-limit", args.dense_limit, args.dense_limit >= 1),
-                           ("--slow-limit", args.slow_limit, args.slow_limit > 0)):
+    for key, value, ok in (
+        ("--duration", args.duration, args.duration > 0),
+        ("--every", args.every, args.every >= 1),
+        ("--repeat", args.repeat, args.repeat >= 1),
+        ("--seed", args.seed, args.seed >= 0),
+        ("--dense-limit", args.dense_limit, args.dense_limit >= 1),
+        ("--slow-limit", args.slow_limit, args.slow_limit > 0),
+    ):
         if not ok:
             raise ParamError(f"out of range: {value}", key=key)
     if args.duration / 0.001 < args.every:
-        raise ParamError(f"{args.duration} s at 1 kHz keeps no tick with --every {args.every}", key="--every")
+        raise ParamError(
+            f"{args.duration} s at 1 kHz keeps no tick with --every {args.every}", key="--every"
+        )
     return ScalingConfig(
-        backends=backends, sizes=parse_sizes(args.sizes), driver=resolve_name(args.driver), duration=args.duration,
-        every=args.every, repeat=args.repeat, seed=args.seed, profile=args.profile, dense_limit=args.dense_limit,
+        backends=backends,
+        sizes=parse_sizes(args.sizes),
+        driver=resolve_name(args.driver),
+        duration=args.duration,
+        every=args.every,
+        repeat=args.repeat,
+        seed=args.seed,
+        profile=args.profile,
+        dense_limit=args.dense_limit,
         slow_limit=args.slow_limit,
     )
 
@@ -81,11 +151,15 @@ def run(args: argparse.Namespace) -> int:
 
     config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
-    check_output(out, force=True, kind="dir")  # a folder (or nothing); its scaling.csv is checked below
+    check_output(
+        out, force=True, kind="dir"
+    )  # a folder (or nothing); its scaling.csv is checked below
     if (out / SUMMARY_NAME).exists() and not (args.force or args.resume):
         from ..exceptions import OutputExistsError
 
-        raise OutputExistsError(f"{out / SUMMARY_NAME}: exists; pass --force to overwrite or --resume to continue")
+        raise OutputExistsError(
+            f"{out / SUMMARY_NAME}: exists; pass --force to overwrite or --resume to continue"
+        )
     if args.force:
         for name in OWNED:
             target = out / name

@@ -17,9 +17,18 @@ EXAMPLE = "qpbench scenarios    (qpbench scenarios show wall > my.toml; qpbench 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("action", nargs="?", default="list", metavar="list|show", help="list (default) or show one")
-    parser.add_argument("name", nargs="?", metavar="NAME", help="the scenario to show (a shipped name or a .toml path)")
-    parser.add_argument("--json", action="store_true", help="JSON: one object per scenario, or the file's tables")
+    parser.add_argument(
+        "action", nargs="?", default="list", metavar="list|show", help="list (default) or show one"
+    )
+    parser.add_argument(
+        "name",
+        nargs="?",
+        metavar="NAME",
+        help="the scenario to show (a shipped name or a .toml path)",
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="JSON: one object per scenario, or the file's tables"
+    )
 
 
 def _listing(name: str) -> dict:
@@ -53,15 +62,21 @@ def run(args: argparse.Namespace) -> int:
     from ..sim.scenario import scenario_names
 
     if args.action not in ("list", "show"):
-        raise ParamError(f"unknown action '{args.action}' (list or show; did you mean: qpbench scenarios show "
-                         f"{args.action}?)", key="action")
+        raise ParamError(
+            f"unknown action '{args.action}' (list or show; did you mean: qpbench scenarios show "
+            f"{args.action}?)",
+            key="action",
+        )
     if args.action == "show":
         if not args.name:
             raise ParamError("which scenario? (qpbench scenarios show NAME)", key="NAME")
         _show(args.name, args.json)
         return 0
     if args.name:
-        raise ParamError(f"unexpected '{args.name}' (did you mean: qpbench scenarios show {args.name}?)", key="NAME")
+        raise ParamError(
+            f"unexpected '{args.name}' (did you mean: qpbench scenarios show {args.name}?)",
+            key="NAME",
+        )
     listing = [_listing(name) for name in scenario_names()]
     if args.json:
         for item in listing:
@@ -70,7 +85,15 @@ def run(args: argparse.Namespace) -> int:
     rows = [("name", "paper", "duration", "obstacles", "description")]
     for item in listing:
         obstacles = ", ".join(item["obstacles"]) or "none"
-        rows.append((item["name"], item["paper_section"], f"{item['duration_s']:g} s", obstacles, item["description"]))
+        rows.append(
+            (
+                item["name"],
+                item["paper_section"],
+                f"{item['duration_s']:g} s",
+                obstacles,
+                item["description"],
+            )
+        )
     widths = [max(len(r[c]) for r in rows) for c in range(4)]
     for r in rows:
         print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4])

@@ -30,35 +30,97 @@ log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", required=True, metavar="NAME|PATH", help="shipped scenario name (free, wall, adaptive, adaptive_fast, narrow) or a .toml file")
-    parser.add_argument("--backend", required=True, metavar="NAME", help="backend name (see `qpbench backends`), e.g. qpsolvers:daqp, clarabel, rnn")
-    parser.add_argument("--formulation", default="paper", choices=FORMULATIONS, help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S", help="simulated time in s (default: the scenario's)")
-    parser.add_argument("--dt", type=float, default=None, metavar="S", help="control period in s (default: the scenario's)")
     parser.add_argument(
-        "--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides",
+        "--scenario",
+        required=True,
+        metavar="NAME|PATH",
+        help="shipped scenario name (free, wall, adaptive, adaptive_fast, narrow) or a .toml file",
+    )
+    parser.add_argument(
+        "--backend",
+        required=True,
+        metavar="NAME",
+        help="backend name (see `qpbench backends`), e.g. qpsolvers:daqp, clarabel, rnn",
+    )
+    parser.add_argument(
+        "--formulation",
+        default="paper",
+        choices=FORMULATIONS,
+        help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated time in s (default: the scenario's)",
+    )
+    parser.add_argument(
+        "--dt",
+        type=float,
+        default=None,
+        metavar="S",
+        help="control period in s (default: the scenario's)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="overrides",
         help="set a scenario value over the file's (repeatable): TABLE.KEY=VALUE or obstacles[i].KEY=VALUE, "
         "VALUE in TOML syntax (a bare word is a string), e.g. --set rnn.eps=0.001 --set rnn.substeps=5",
     )
-    parser.add_argument("--profile", default="default", help="backend settings profile (default: default)")
     parser.add_argument(
-        "--deadline", type=float, default=None, metavar="SECONDS",
+        "--profile", default="default", help="backend settings profile (default: default)"
+    )
+    parser.add_argument(
+        "--deadline",
+        type=float,
+        default=None,
+        metavar="SECONDS",
         help="drop an answer that arrives later than this (status time_limit; soft fallback, else zero velocity), "
         "as a real-time controller would; the run then depends on the machine's speed. Default: none, every "
         "answer is applied and the summary's deadline_misses counts ticks slower than dt",
     )
-    parser.add_argument("--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet")
-    parser.add_argument("--summary", default=None, metavar="FILE", help="summary as JSON ('-': to stdout)")
-    parser.add_argument("--dump", default=None, metavar="DIR", help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)")
-    parser.add_argument("--every", type=int, default=None, metavar="K", help="dump every K-th tick (default 1)")
+    parser.add_argument(
+        "--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet"
+    )
+    parser.add_argument(
+        "--summary", default=None, metavar="FILE", help="summary as JSON ('-': to stdout)"
+    )
+    parser.add_argument(
+        "--dump",
+        default=None,
+        metavar="DIR",
+        help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)",
+    )
+    parser.add_argument(
+        "--every", type=int, default=None, metavar="K", help="dump every K-th tick (default 1)"
+    )
     parser.add_argument("--plot", default=None, metavar="FILE", help="figure of the run (.png)")
-    parser.add_argument("--snapshot", default=None, metavar="FILE",
-                        help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)")
-    parser.add_argument("--animate", default=None, metavar="FILE",
-                        help="animation of the run (.gif; .mp4 when ffmpeg is installed)")
-    parser.add_argument("--speed", type=float, default=2.0, metavar="X",
-                        help="simulated seconds per second of animation (default 2)")
-    parser.add_argument("--fps", type=int, default=15, help="frames per second of the animation (default 15)")
+    parser.add_argument(
+        "--snapshot",
+        default=None,
+        metavar="FILE",
+        help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)",
+    )
+    parser.add_argument(
+        "--animate",
+        default=None,
+        metavar="FILE",
+        help="animation of the run (.gif; .mp4 when ffmpeg is installed)",
+    )
+    parser.add_argument(
+        "--speed",
+        type=float,
+        default=2.0,
+        metavar="X",
+        help="simulated seconds per second of animation (default 2)",
+    )
+    parser.add_argument(
+        "--fps", type=int, default=15, help="frames per second of the animation (default 15)"
+    )
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
 
 
@@ -74,8 +136,16 @@ def run(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log)
     result = simulate(
-        scenario, backend, formulation=args.formulation, duration=args.duration, dt=args.dt,
-        every=args.every, dump=args.dump, progress=progress, profile=args.profile, deadline=args.deadline,
+        scenario,
+        backend,
+        formulation=args.formulation,
+        duration=args.duration,
+        dt=args.dt,
+        every=args.every,
+        dump=args.dump,
+        progress=progress,
+        profile=args.profile,
+        deadline=args.deadline,
     )
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)
@@ -93,8 +163,14 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise ParamError(f"--every must be >= 1, got {args.every}", key="--every")
     if args.every is not None and args.dump is None:
         raise ParamError("--every needs --dump", key="--every")
-    if args.snapshot is not None and Path(args.snapshot).suffix.lower() not in (".png", ".svg", ".pdf"):
-        raise ParamError(f"--snapshot must end in .png, .svg or .pdf, got {args.snapshot}", key="--snapshot")
+    if args.snapshot is not None and Path(args.snapshot).suffix.lower() not in (
+        ".png",
+        ".svg",
+        ".pdf",
+    ):
+        raise ParamError(
+            f"--snapshot must end in .png, .svg or .pdf, got {args.snapshot}", key="--snapshot"
+        )
     if args.animate is not None and Path(args.animate).suffix.lower() not in (".gif", ".mp4"):
         raise ParamError(f"--animate must end in .gif or .mp4, got {args.animate}", key="--animate")
     if args.animate is not None and Path(args.animate).suffix.lower() == ".mp4":
@@ -103,8 +179,16 @@ def _check_arguments(args: argparse.Namespace) -> None:
         if shutil.which("ffmpeg") is None:
             raise ParamError("--animate .mp4 needs ffmpeg on the PATH; use a .gif", key="--animate")
     if not (args.speed > 0 and args.fps > 0):
-        raise ParamError(f"--speed and --fps must be positive, got {args.speed} and {args.fps}", key="--speed")
-    for out in (args.log, None if args.summary == "-" else args.summary, args.plot, args.snapshot, args.animate):
+        raise ParamError(
+            f"--speed and --fps must be positive, got {args.speed} and {args.fps}", key="--speed"
+        )
+    for out in (
+        args.log,
+        None if args.summary == "-" else args.summary,
+        args.plot,
+        args.snapshot,
+        args.animate,
+    ):
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
@@ -114,7 +198,10 @@ def _check_arguments(args: argparse.Namespace) -> None:
                 check_output(Path(args.dump) / name, force=args.force)
 
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
-        raise ParamError(f"--deadline must be a positive number of seconds, got {args.deadline}", key="--deadline")
+        raise ParamError(
+            f"--deadline must be a positive number of seconds, got {args.deadline}",
+            key="--deadline",
+        )
 
 
 def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:
@@ -143,7 +230,15 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
         if args.snapshot is not None:
             draw_snapshot(scenario, result.log, args.snapshot, title=title)
         if args.animate is not None:
-            animate(scenario, result.log, args.animate, fps=args.fps, speed=args.speed, progress=progress, title=title)
+            animate(
+                scenario,
+                result.log,
+                args.animate,
+                fps=args.fps,
+                speed=args.speed,
+                progress=progress,
+                title=title,
+            )
 
 
 def _log_summary(s: dict) -> None:
@@ -154,21 +249,40 @@ def _log_summary(s: dict) -> None:
 
     log.info(
         "%s / %s / %s: %d ticks, %d infeasible (%s..%s s), %d fallback, %d zero-velocity",
-        s["scenario"], s["backend"], s["formulation"], s["ticks"], s["infeasible_ticks"],
-        fmt(s["first_infeasible_t"]), fmt(s["last_infeasible_t"]), s["fallback_ticks"], s["zero_velocity_ticks"],
+        s["scenario"],
+        s["backend"],
+        s["formulation"],
+        s["ticks"],
+        s["infeasible_ticks"],
+        fmt(s["first_infeasible_t"]),
+        fmt(s["last_infeasible_t"]),
+        s["fallback_ticks"],
+        s["zero_velocity_ticks"],
     )
     log.info(
         "after 2 s: tracking rms %s m, max %s m; force error rms %s N, max %s N",
-        fmt(s["tracking_rms_after_2s"]), fmt(s["tracking_max_after_2s"]),
-        fmt(s["force_error_rms_after_2s"]), fmt(s["force_error_max_after_2s"]),
+        fmt(s["tracking_rms_after_2s"]),
+        fmt(s["tracking_max_after_2s"]),
+        fmt(s["force_error_rms_after_2s"]),
+        fmt(s["force_error_max_after_2s"]),
     )
     log.info(
         "limit violations: angle %d, speed %d; Kp_hat %s, Kd_hat %s",
-        s["joint_limit_violations"], s["joint_velocity_limit_violations"], fmt(s["kp_hat_final"], ".6g"), fmt(s["kd_hat_final"], ".6g"),
+        s["joint_limit_violations"],
+        s["joint_velocity_limit_violations"],
+        fmt(s["kp_hat_final"], ".6g"),
+        fmt(s["kd_hat_final"], ".6g"),
     )
-    log.info("wall time %.3f s, real-time factor %s; %d ticks slower than dt = %g s%s", s["wall_time_s"],
-             fmt(s["real_time_factor"]), s["deadline_misses"], s["dt"],
-             "" if s["deadline_dropped"] is None else f", {s['deadline_dropped']} dropped past the deadline")
+    log.info(
+        "wall time %.3f s, real-time factor %s; %d ticks slower than dt = %g s%s",
+        s["wall_time_s"],
+        fmt(s["real_time_factor"]),
+        s["deadline_misses"],
+        s["dt"],
+        ""
+        if s["deadline_dropped"] is None
+        else f", {s['deadline_dropped']} dropped past the deadline",
+    )
 
 
 def log_verdict(s: dict) -> int:
@@ -179,9 +293,11 @@ def log_verdict(s: dict) -> int:
     """
     distance = ""
     if s.get("min_obstacle_distance") is not None and s["verdict"] != "unsafe":
-        distance = (f"; min obstacle distance {s['min_obstacle_distance'] * 1e3:.3f} mm "
-                    f"({s.get('min_obstacle_distance_key_point') or '-'}/{s.get('min_obstacle_distance_obstacle') or '-'} "
-                    f"at t = {s['min_obstacle_distance_t']:.3f} s, d_safe {s['d_safe'] * 1e3:g} mm)")
+        distance = (
+            f"; min obstacle distance {s['min_obstacle_distance'] * 1e3:.3f} mm "
+            f"({s.get('min_obstacle_distance_key_point') or '-'}/{s.get('min_obstacle_distance_obstacle') or '-'} "
+            f"at t = {s['min_obstacle_distance_t']:.3f} s, d_safe {s['d_safe'] * 1e3:g} mm)"
+        )
     reasons = f": {s['verdict_reasons']}" if s.get("verdict_reasons") else ""
     if s["verdict"] == "ok":
         log.info("verdict ok%s%s", reasons, distance)

@@ -20,9 +20,11 @@ import logging
 from pathlib import Path
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
-EXAMPLE = ("qpbench sweep problems/sweeps/wall.toml --backends daqp,osqp,qpoases --out wall-sweep --jobs 2; "
-           "qpbench sweep problems/sweeps/narrow.toml --backends daqp --samples 20 --out narrow-sweep "
-           "--executor dask --jobs 2")
+EXAMPLE = (
+    "qpbench sweep problems/sweeps/wall.toml --backends daqp,osqp,qpoases --out wall-sweep --jobs 2; "
+    "qpbench sweep problems/sweeps/narrow.toml --backends daqp --samples 20 --out narrow-sweep "
+    "--executor dask --jobs 2"
+)
 
 log = logging.getLogger("qpbench.sweep")
 
@@ -33,28 +35,67 @@ TIMED = "solve_time_*, deadline_misses, ticks_over_1ms, real_time_factor"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..executors import EXECUTORS, default_jobs
 
-    parser.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: base scenario, distributions, seed, samples")
-    parser.add_argument("--backends", required=True, help="comma-separated backend names, or 'all' available ones")
-    parser.add_argument("--out", required=True, metavar="DIR",
-                        help="folder: sweep.csv, sweep.json and instances/<name>.toml (each re-runs alone with "
-                             "qpbench simulate --scenario)")
-    parser.add_argument("--samples", type=int, default=None, metavar="N", help="instances (default: the file's)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S",
-                        help="simulated time of every instance in [s] (default: the file's, else the base's)")
-    parser.add_argument("--jobs", type=int, default=default_jobs(), metavar="N",
-                        help=f"runs at once: local worker processes, or the local Dask cluster's workers "
-                             f"(default: this machine's cores, {default_jobs()}). Timings are clean only with 1")
-    parser.add_argument("--executor", choices=EXECUTORS, default="local",
-                        help="local (worker processes on this machine) or dask (default: local)")
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                        help="address of a running Dask scheduler (tls://HOST:8786 with --security); without it "
-                             "--executor dask starts a local cluster on 127.0.0.1")
-    parser.add_argument("--security", default=None, metavar="FILE",
-                        help="TOML or YAML naming ca_file, cert_file, key_file (PEM) for a tls:// scheduler")
+    parser.add_argument(
+        "sweep",
+        metavar="SWEEP.toml",
+        help="sweep file: base scenario, distributions, seed, samples",
+    )
+    parser.add_argument(
+        "--backends", required=True, help="comma-separated backend names, or 'all' available ones"
+    )
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="folder: sweep.csv, sweep.json and instances/<name>.toml (each re-runs alone with "
+        "qpbench simulate --scenario)",
+    )
+    parser.add_argument(
+        "--samples", type=int, default=None, metavar="N", help="instances (default: the file's)"
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated time of every instance in [s] (default: the file's, else the base's)",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=default_jobs(),
+        metavar="N",
+        help=f"runs at once: local worker processes, or the local Dask cluster's workers "
+        f"(default: this machine's cores, {default_jobs()}). Timings are clean only with 1",
+    )
+    parser.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        default="local",
+        help="local (worker processes on this machine) or dask (default: local)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="address of a running Dask scheduler (tls://HOST:8786 with --security); without it "
+        "--executor dask starts a local cluster on 127.0.0.1",
+    )
+    parser.add_argument(
+        "--security",
+        default=None,
+        metavar="FILE",
+        help="TOML or YAML naming ca_file, cert_file, key_file (PEM) for a tls:// scheduler",
+    )
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--force", action="store_true", help="start again: replace the table and the instances")
-    group.add_argument("--resume", action="store_true",
-                       help="keep the rows with a result and run the rest (missing, error, crashed)")
+    group.add_argument(
+        "--force", action="store_true", help="start again: replace the table and the instances"
+    )
+    group.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the rows with a result and run the rest (missing, error, crashed)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.samples is not None and args.samples < 1:
         raise ParamError(f"must be >= 1, got {args.samples}", key="--samples")
-    plugins = plugin_files()  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker loads them too
+    plugins = (
+        plugin_files()
+    )  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker loads them too
     spec = load_sweep(args.sweep, samples=args.samples, duration=args.duration)
     backends = select_backends(args.backends)
     check_folder(args.out)  # before any worker starts
@@ -79,16 +122,27 @@ def run(args: argparse.Namespace) -> int:
     executor = make_executor(args.executor, args.jobs, args.scheduler, args.security)
     try:
         if executor.concurrency > 1:
-            log.warning("%d closed loops solve at once (%s executor): the timing columns (%s) are disturbed by "
-                        "each other (shared caches, memory bandwidth, clock); each row records host, worker and "
-                        "concurrent_solves. Take timings with --jobs 1", executor.concurrency, executor.name, TIMED)
+            log.warning(
+                "%d closed loops solve at once (%s executor): the timing columns (%s) are disturbed by "
+                "each other (shared caches, memory bandwidth, clock); each row records host, worker and "
+                "concurrent_solves. Take timings with --jobs 1",
+                executor.concurrency,
+                executor.name,
+                TIMED,
+            )
         outcome = _run(args, spec, backends, executor, plugins)
     finally:
         executor.close()
     if not args.quiet:
         print(summary_table(outcome.rows, backends))
-    log.info("%d rows (%d run now, %d kept), %d failed to run; table in %s", len(outcome.rows), outcome.ran,
-             outcome.kept, outcome.failed, outcome.csv_path)
+    log.info(
+        "%d rows (%d run now, %d kept), %d failed to run; table in %s",
+        len(outcome.rows),
+        outcome.ran,
+        outcome.kept,
+        outcome.failed,
+        outcome.csv_path,
+    )
     return 1 if outcome.failed else 0
 
 
@@ -98,17 +152,32 @@ def _run(args, spec, backends, executor, plugins):
     from ..sweep.runner import run_sweep
 
     total = spec.samples * len(backends)
-    bar = tqdm(total=total, unit="run", desc=f"sweep {spec.name}", disable=None if not args.quiet else True,
-               mininterval=0.5)
+    bar = tqdm(
+        total=total,
+        unit="run",
+        desc=f"sweep {spec.name}",
+        disable=None if not args.quiet else True,
+        mininterval=0.5,
+    )
 
     def on_row(row):
         bar.update(1)
         if row["status"] in ("error", "crashed"):
-            log.warning("%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"])
+            log.warning(
+                "%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"]
+            )
 
     try:
-        outcome = run_sweep(spec, backends, args.out, executor, force=args.force, resume=args.resume,
-                            plugins=plugins, on_row=on_row)
+        outcome = run_sweep(
+            spec,
+            backends,
+            args.out,
+            executor,
+            force=args.force,
+            resume=args.resume,
+            plugins=plugins,
+            on_row=on_row,
+        )
     finally:
         bar.close()
     return outcome
@@ -123,9 +192,18 @@ def summary_table(rows: list[dict], backends: list[str]) -> str:
     for b in backends + sorted({r["backend"] for r in rows} - set(backends)):
         mine = [r for r in rows if r["backend"] == b]
         counts = [sum(r["verdict"] == v and r["status"] == "ok" for r in mine) for v in VERDICTS]
-        lines.append([b, str(len(mine))] + [str(c) for c in counts]
-                     + [str(sum(r["status"] in ("error", "crashed") for r in mine)),
-                        str(sum(r["status"] == "invalid_scenario" for r in mine))])
+        lines.append(
+            [b, str(len(mine))]
+            + [str(c) for c in counts]
+            + [
+                str(sum(r["status"] in ("error", "crashed") for r in mine)),
+                str(sum(r["status"] == "invalid_scenario" for r in mine)),
+            ]
+        )
     widths = [max(len(line[i]) for line in lines) for i in range(len(header))]
-    return "\n".join("  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths)))
-                     for line in lines)
+    return "\n".join(
+        "  ".join(
+            c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))
+        )
+        for line in lines
+    )

@@ -15,8 +15,11 @@ EXAMPLE = "qpbench warmup    (NUMBA_CACHE_DIR=/tmp/kernels qpbench warmup --json
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", action="store_true",
-                        help="print {compiled, seconds, cache, kernels} as JSON on stdout")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print {compiled, seconds, cache, kernels} as JSON on stdout",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -24,8 +27,17 @@ def run(args: argparse.Namespace) -> int:
 
     report = warmup()
     if args.json:
-        print(json.dumps({"compiled": report.compiled, "seconds": round(report.seconds, 3), "cache": report.cache,
-                          "kernels": list(report.kernels), "shims_compiled": report.shims_compiled}))
+        print(
+            json.dumps(
+                {
+                    "compiled": report.compiled,
+                    "seconds": round(report.seconds, 3),
+                    "cache": report.cache,
+                    "kernels": list(report.kernels),
+                    "shims_compiled": report.shims_compiled,
+                }
+            )
+        )
     elif not args.quiet:
         print(report.line())
     return 0

@@ -37,7 +37,16 @@ class AdaptiveImpedance:
         kp_min, kd_min: Lower clamps of the estimates.
     """
 
-    def __init__(self, kp0: float, kd0: float, gain, normal, desired_force: float, kp_min: float, kd_min: float):
+    def __init__(
+        self,
+        kp0: float,
+        kd0: float,
+        gain,
+        normal,
+        desired_force: float,
+        kp_min: float,
+        kd_min: float,
+    ):
         self.kp0 = float(kp0)
         self.kd0 = float(kd0)
         self.gain_kp = float(gain[0])
@@ -54,7 +63,15 @@ class AdaptiveImpedance:
         self.kp = self.kp0
         self.kd = self.kd0
 
-    def update(self, dt: float, x: np.ndarray, x_d: np.ndarray, xdot: np.ndarray, xdot_d: np.ndarray, force: float) -> tuple[float, float]:
+    def update(
+        self,
+        dt: float,
+        x: np.ndarray,
+        x_d: np.ndarray,
+        xdot: np.ndarray,
+        xdot_d: np.ndarray,
+        force: float,
+    ) -> tuple[float, float]:
         """One Euler step of ``Wdot = -K_in eta (Fd - F)`` over ``dt`` [s]; returns the new ``(Kp_hat, Kd_hat)``.
 
         Args:

@@ -65,8 +65,11 @@ class TickArrays(NamedTuple):
     xd: np.ndarray
     buffer: np.ndarray | None = None
 
+
 # Layout of the kernel's parameter vector.
-_T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = range(16)
+_T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = (
+    range(16)
+)
 _NPAR = 16
 
 _kernel = None
@@ -94,8 +97,18 @@ def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[
     Order after the :mod:`qpbench.packed` header: ``P, q, G, h, J, b, lb, ub,
     ee, dist`` (the kernel :func:`_build_packed_py` computes the same).
     """
-    shapes = {"P": (n, n), "q": (n,), "G": (n_rows, n), "h": (n_rows,), "J": (2, n), "b": (2,),
-              "lb": (n,), "ub": (n,), "ee": (2,), "dist": (n_rows,)}
+    shapes = {
+        "P": (n, n),
+        "q": (n,),
+        "G": (n_rows, n),
+        "h": (n_rows,),
+        "J": (2, n),
+        "b": (2,),
+        "lb": (n,),
+        "ub": (n,),
+        "ee": (2,),
+        "dist": (n_rows,),
+    }
     layout, off = {}, PACKED_HEADER
     for name, shape in shapes.items():
         layout[name] = (off, shape)
@@ -103,7 +116,9 @@ def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[
     return off, layout
 
 
-def _build_packed_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  # pragma: no cover - compiled
+def _build_packed_py(
+    theta, lengths, kp_link, kp_frac, prims, lim, par, buf
+):  # pragma: no cover - compiled
     """Write the tick into ``buf`` (layout of :func:`packed_layout`) and its header."""
     n = theta.shape[0]
     nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
@@ -140,16 +155,32 @@ def _build_packed_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
     buf[9] = olb
     buf[10] = oub
     _build_kernel_jit(
-        theta, lengths, kp_link, kp_frac, prims, lim, par,
-        buf[oP:oq].reshape((n, n)), buf[oq:oG], buf[oG:oh].reshape((nr, n)), buf[oh:oJ],
-        buf[oJ:ob].reshape((2, n)), buf[ob:olb], buf[olb:oub], buf[oub:oee], buf[oee:od], buf[od:od + nr],
+        theta,
+        lengths,
+        kp_link,
+        kp_frac,
+        prims,
+        lim,
+        par,
+        buf[oP:oq].reshape((n, n)),
+        buf[oq:oG],
+        buf[oG:oh].reshape((nr, n)),
+        buf[oh:oJ],
+        buf[oJ:ob].reshape((2, n)),
+        buf[ob:olb],
+        buf[olb:oub],
+        buf[oub:oee],
+        buf[oee:od],
+        buf[od : od + nr],
     )
 
 
 # Over 80 lines, kept whole on purpose: numba compiles it as one function (``_build_kernel_jit``);
 # split, each helper would have to be compiled too and rebound in this module's globals before
 # the first compile. tests/test_controller.py compares this one function with the numpy terms.
-def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist):  # pragma: no cover - compiled
+def _build_kernel_py(
+    theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist
+):  # pragma: no cover - compiled
     """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick (see the module docstring)."""
     n = theta.shape[0]
     px = np.empty(n + 1)
@@ -327,7 +358,9 @@ class Controller:
         self.n_rows = len(key_points) * self.n_obstacle_points
         self._compiled = all(o.KERNEL_KIND is not None for o in self.obstacles)
         if self.obstacles:
-            self._prims = np.ascontiguousarray(np.vstack([o.primitives() for o in self.obstacles]), dtype=float)
+            self._prims = np.ascontiguousarray(
+                np.vstack([o.primitives() for o in self.obstacles]), dtype=float
+            )
         else:
             self._prims = np.zeros((0, PRIMITIVE_WIDTH))
         self._lengths = np.ascontiguousarray(arm.lengths, dtype=float)
@@ -346,10 +379,19 @@ class Controller:
         self._par[_RADIUS] = key_points.radius
         self._path = task.path
         self._packed_size, layout = packed_layout(self.n, self.n_rows)
-        self._packed_slices = tuple(slice(off, off + int(np.prod(shape))) for off, shape in layout.values())
+        self._packed_slices = tuple(
+            slice(off, off + int(np.prod(shape))) for off, shape in layout.values()
+        )
 
     # -- fast path -------------------------------------------------------------
-    def build_arrays(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, soft: bool = False) -> TickArrays:
+    def build_arrays(
+        self,
+        theta: np.ndarray,
+        t: float,
+        kp: float | None = None,
+        kd: float | None = None,
+        soft: bool = False,
+    ) -> TickArrays:
         """The tick's :class:`TickArrays` ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd, buffer)``, freshly allocated.
 
         All but ``xd`` are views of ``buffer``, the tick's
@@ -374,12 +416,29 @@ class Controller:
         par[14] = 1.0 if soft else 0.0
         buf = _empty(self._packed_size)
         (_kernel or _get_kernel())(
-            theta, self._lengths, self._kp_link, self._kp_frac, self._prims, self._lim, par, buf,
+            theta,
+            self._lengths,
+            self._kp_link,
+            self._kp_frac,
+            self._prims,
+            self._lim,
+            par,
+            buf,
         )
         sP, sq, sG, sh, sJ, sb, slb, sub, see, sd = self._packed_slices
         return TickArrays(
-            buf[sP].reshape(n, n), buf[sq], buf[sG].reshape(nr, n), buf[sh], buf[sJ].reshape(2, n), buf[sb],
-            buf[slb], buf[sub], buf[see], buf[sd], xd, buf,
+            buf[sP].reshape(n, n),
+            buf[sq],
+            buf[sG].reshape(nr, n),
+            buf[sh],
+            buf[sJ].reshape(2, n),
+            buf[sb],
+            buf[slb],
+            buf[sub],
+            buf[see],
+            buf[sd],
+            xd,
+            buf,
         )
 
     def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
@@ -409,7 +468,14 @@ class Controller:
         problem.ub = ub
         return problem
 
-    def build(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
+    def build(
+        self,
+        theta: np.ndarray,
+        t: float,
+        kp: float | None = None,
+        kd: float | None = None,
+        formulation: str = "paper",
+    ) -> TickQP:
         """Build the tick's QP at joint angles ``theta`` [rad] and time ``t`` [s].
 
         Args:
@@ -455,7 +521,9 @@ class Controller:
         else:
             P, q = np.eye(n), np.zeros(n)
         a = len(self.key_points)
-        key_xy, key_J = self.arm.points_jacobians(theta, self.key_points.links, self.key_points.fracs)
+        key_xy, key_J = self.arm.points_jacobians(
+            theta, self.key_points.links, self.key_points.fracs
+        )
         Gs, hs, ds = [], [], []
         for term in self.avoidance:
             G, h, dist = term.rows(key_xy, key_J, t, self.key_points.radius)
@@ -471,7 +539,14 @@ class Controller:
             G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
         return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
-    def build_reference(self, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> TickQP:
+    def build_reference(
+        self,
+        theta: np.ndarray,
+        t: float,
+        kp: float | None = None,
+        kd: float | None = None,
+        formulation: str = "paper",
+    ) -> TickQP:
         """Same as :meth:`build`, assembled from the numpy terms (slower; for checks)."""
         soft = _check_formulation(formulation)
         arrays = self._arrays_from_terms(theta, t, kp, kd, soft)
@@ -490,10 +565,20 @@ class Controller:
 
 def _check_formulation(formulation: str) -> bool:
     if formulation not in FORMULATIONS:
-        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
+        raise ParamError(
+            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
+            key="formulation",
+        )
     return formulation == "soft"
 
 
-def build_problem(controller: Controller, theta: np.ndarray, t: float, kp: float | None = None, kd: float | None = None, formulation: str = "paper") -> qpsolvers.Problem:
+def build_problem(
+    controller: Controller,
+    theta: np.ndarray,
+    t: float,
+    kp: float | None = None,
+    kd: float | None = None,
+    formulation: str = "paper",
+) -> qpsolvers.Problem:
     """The tick's :class:`qpsolvers.Problem` at joint angles ``theta`` [rad], time ``t`` [s] (paper eq. 11)."""
     return controller.build(theta, t, kp, kd, formulation).problem

@@ -22,7 +22,13 @@ import numpy as np
 from ..exceptions import InputError
 from ..robot.environment import Obstacle
 
-__all__ = ["CosinePath", "EscapeVelocityLimits", "ImpedanceTask", "ObstacleAvoidance", "PolylinePath"]
+__all__ = [
+    "CosinePath",
+    "EscapeVelocityLimits",
+    "ImpedanceTask",
+    "ObstacleAvoidance",
+    "PolylinePath",
+]
 
 
 class CosinePath:
@@ -46,7 +52,12 @@ class CosinePath:
         """``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)`` at time t [s], in [m] and [m/s]."""
         cx, cy, ax, ay, wx, wy, px, py = self._c
         sx, sy = wx * t + px, wy * t + py
-        return (cx + ax * math.cos(sx), cy + ay * math.cos(sy), -ax * wx * math.sin(sx), -ay * wy * math.sin(sy))
+        return (
+            cx + ax * math.cos(sx),
+            cy + ay * math.cos(sy),
+            -ax * wx * math.sin(sx),
+            -ay * wy * math.sin(sy),
+        )
 
 
 class PolylinePath:
@@ -61,9 +72,13 @@ class PolylinePath:
         self.times = np.asarray(times, dtype=float)
         self.points = np.asarray(points, dtype=float)
         if self.times.ndim != 1 or self.times.size < 2 or np.any(np.diff(self.times) <= 0):
-            raise InputError("polyline times must be >= 2 strictly increasing values [s]", key="path.times")
+            raise InputError(
+                "polyline times must be >= 2 strictly increasing values [s]", key="path.times"
+            )
         if self.points.shape != (self.times.size, 2):
-            raise InputError(f"polyline points must be {self.times.size} [x, y] pairs", key="path.points")
+            raise InputError(
+                f"polyline points must be {self.times.size} [x, y] pairs", key="path.points"
+            )
 
     def __call__(self, t: float) -> tuple[float, float, float, float]:
         times, pts = self.times, self.points
@@ -110,7 +125,8 @@ class ImpedanceTask:
 
     @staticmethod
     def cost(J: np.ndarray, b0: np.ndarray, rho: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(P, q)`` of ``1/2 v^T v + rho/2 |J v - b0|^2`` (``soft`` formulation): ``I + rho J^T J``, ``-rho J^T b0``."""
+        """``(P, q)`` of ``1/2 v^T v + rho/2 |J v - b0|^2`` (``soft`` formulation):
+        ``I + rho J^T J``, ``-rho J^T b0``."""
         n = J.shape[1]
         return np.eye(n) + rho * J.T @ J, -rho * J.T @ b0
 
@@ -166,7 +182,9 @@ class ObstacleAvoidance:
         self.k = float(k)
         self.d_safe = float(d_safe)
 
-    def rows(self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def rows(
+        self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(G, h, dist)`` for key points ``key_xy`` (a, 2) with Jacobians ``key_J`` (a, 2, n).
 
         Returns:

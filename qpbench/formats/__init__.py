@@ -108,7 +108,11 @@ from .records import (
 def _npz_folder(folder: Path) -> ProblemSet:
     files = sorted(folder.glob("*.npz"))
     return ProblemSet(
-        name=folder.resolve().name, path=folder, records=[load_npz(f) for f in files], kind="npz", files=files
+        name=folder.resolve().name,
+        path=folder,
+        records=[load_npz(f) for f in files],
+        kind="npz",
+        files=files,
     )
 
 
@@ -142,9 +146,7 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
             return _npz_folder(path)
         if any(path.glob("*.mat")):
             return _mat_folder(path)
-        raise ProblemFormatError(
-            f"folder holds no {PARQUET_NAME}, .npz or .mat files", path=path
-        )
+        raise ProblemFormatError(f"folder holds no {PARQUET_NAME}, .npz or .mat files", path=path)
     if not path.exists():
         raise ProblemFormatError("no such file or folder", path=path)
     suffix = path.suffix.lower()
@@ -153,7 +155,9 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
             return read_problem_set(path.parent, verify_hash=verify_hash)
         return read_parquet(path)
     if suffix == ".npz":
-        return ProblemSet(name=path.stem, path=path, records=[load_npz(path)], kind="npz", files=[path])
+        return ProblemSet(
+            name=path.stem, path=path, records=[load_npz(path)], kind="npz", files=[path]
+        )
     if suffix == ".mat":
         return ProblemSet(
             name=path.stem, path=path, records=[load_maros_meszaros(path)], kind="mat", files=[path]
@@ -178,10 +182,37 @@ def content_sha256(problem_set: ProblemSet) -> str | None:
 
 
 __all__ = [
-    "DENSE_COPY_MAX", "Convexity", "assess_convexity", "dense_entries", "solver_problem",
-    "ARRAY_KEYS", "FORMAT_VERSION", "MANIFEST_NAME", "META_KEYS", "MM_INFINITY", "NPZ_META_KEY", "PARQUET_NAME",
-    "PROBLEM_KEYS", "ProblemRecord", "ProblemSet", "check_problem", "check_record", "content_sha256",
-    "dense_problem", "load_maros_meszaros", "load_npz", "load_problems", "package_versions", "problem_sizes",
-    "read_manifest", "read_parquet", "read_problem_set", "records_to_table", "save_npz", "sha256_bytes",
-    "sha256_file", "table_to_bytes", "write_problem_set",
+    "DENSE_COPY_MAX",
+    "Convexity",
+    "assess_convexity",
+    "dense_entries",
+    "solver_problem",
+    "ARRAY_KEYS",
+    "FORMAT_VERSION",
+    "MANIFEST_NAME",
+    "META_KEYS",
+    "MM_INFINITY",
+    "NPZ_META_KEY",
+    "PARQUET_NAME",
+    "PROBLEM_KEYS",
+    "ProblemRecord",
+    "ProblemSet",
+    "check_problem",
+    "check_record",
+    "content_sha256",
+    "dense_problem",
+    "load_maros_meszaros",
+    "load_npz",
+    "load_problems",
+    "package_versions",
+    "problem_sizes",
+    "read_manifest",
+    "read_parquet",
+    "read_problem_set",
+    "records_to_table",
+    "save_npz",
+    "sha256_bytes",
+    "sha256_file",
+    "table_to_bytes",
+    "write_problem_set",
 ]

@@ -16,7 +16,8 @@ How (:func:`assess_convexity`), never a dense copy of a large matrix:
 1. ``n <= DENSE_EIG_MAX_N`` (1,000): ``numpy.linalg.eigvalsh`` (exact).
 2. Gershgorin discs: every ``P_ii >= sum_j |P_ij|`` (diagonal, diagonally
    dominant: most large published problems) proves ``P >= 0`` in ``O(nnz)``.
-3. A scale ``lambda_max`` (:func:`_top_eigenvalue`: 30 power iterations), then the inertia of ``P + delta I`` for ``delta = NONCONVEX_RATIO lambda_max``
+3. A scale ``lambda_max`` (:func:`_top_eigenvalue`: 30 power iterations), then the
+   inertia of ``P + delta I`` for ``delta = NONCONVEX_RATIO lambda_max``
    and ``delta = ROUNDING_RATIO lambda_max``: a sparse LU with diagonal pivots
    in symmetric mode (SuperLU) is an ``L D L'`` factorization, and by
    Sylvester's law the number of negative pivots is the number of
@@ -152,8 +153,9 @@ def negative_eigenvalues(P: spa.spmatrix | spa.sparray, shift: float) -> int | N
 
     M = (P + shift * spa.identity(P.shape[0], format="csc")).tocsc()
     try:
-        lu = splu(M, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                  options={"SymmetricMode": True})
+        lu = splu(
+            M, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+        )
     except RuntimeError:  # exactly singular: an eigenvalue at -shift, so none below is not proven
         return None
     if not np.array_equal(lu.perm_r, lu.perm_c):
@@ -170,11 +172,16 @@ def _sparse(P: spa.csc_matrix) -> Convexity:
     if hi <= 0:
         return Convexity("nonconvex", -1.0, method="gershgorin")
     floor = max(1.0, -float((d - off).min()) / hi) * 1.01  # lambda_min >= -floor hi (Gershgorin)
-    for low, high, verdict in ((NONCONVEX_RATIO, floor, "nonconvex"), (ROUNDING_RATIO, NONCONVEX_RATIO, "rounding")):
+    for low, high, verdict in (
+        (NONCONVEX_RATIO, floor, "nonconvex"),
+        (ROUNDING_RATIO, NONCONVEX_RATIO, "rounding"),
+    ):
         count = negative_eigenvalues(P, low * hi)
         if count is None:
             return Convexity("rounding", method="undecided")
         if count:
             ratio = _bisect_ratio(P, hi, low, high)
-            return Convexity(verdict, math.nan if ratio is None else ratio, bound=-low, method="inertia")
+            return Convexity(
+                verdict, math.nan if ratio is None else ratio, bound=-low, method="inertia"
+            )
     return Convexity("convex", math.nan, bound=-ROUNDING_RATIO, method="inertia")

@@ -30,7 +30,9 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
     except FileNotFoundError:
         raise ProblemFormatError("no such file", path=path) from None
     except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError...
-        raise ProblemFormatError(f"unreadable .mat ({type(exc).__name__}: {exc})", path=path) from None
+        raise ProblemFormatError(
+            f"unreadable .mat ({type(exc).__name__}: {exc})", path=path
+        ) from None
     for k in ("P", "q", "r", "A", "l", "u", "n", "m"):
         if k not in data:
             raise ProblemFormatError(f"problem '{name}': missing key", path=path, key=k)
@@ -65,7 +67,6 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
     record = ProblemRecord(problem=problem, name=name, offset=r)
     check_record(record, path=path)
     return record
-
 
 
 def _csc(M, key: str, fail) -> spa.csc_matrix:

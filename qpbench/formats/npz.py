@@ -63,14 +63,24 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     """
     path = Path(path)
     check_record(record, path=path)
-    sparse = {k: getattr(record.problem, k) for k in _MATRIX_KEYS if spa.issparse(getattr(record.problem, k))}
+    sparse = {
+        k: getattr(record.problem, k)
+        for k in _MATRIX_KEYS
+        if spa.issparse(getattr(record.problem, k))
+    }
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             if dense_entries(record.problem) <= DENSE_COPY_MAX:
                 dense_problem(record.problem, path=path, name=record.name).save(fh)
             else:
-                np.savez(fh, **{k: np.asarray(getattr(record.problem, k), dtype=np.float64)
-                                for k in ARRAY_KEYS if k not in sparse and getattr(record.problem, k) is not None})
+                np.savez(
+                    fh,
+                    **{
+                        k: np.asarray(getattr(record.problem, k), dtype=np.float64)
+                        for k in ARRAY_KEYS
+                        if k not in sparse and getattr(record.problem, k) is not None
+                    },
+                )
         members = {NPZ_META_KEY: np.array(json.dumps(record.meta(), sort_keys=True))}
         for key, M in sparse.items():
             members.update(_csc_members(key, M))
@@ -106,7 +116,9 @@ def load_npz(path: str | Path) -> ProblemRecord:
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in ("P", "q") if k not in data.files and f"{k}_csc_data" not in data.files]
+            missing = [
+                k for k in ("P", "q") if k not in data.files and f"{k}_csc_data" not in data.files
+            ]
             if missing:
                 raise ProblemFormatError("missing array", path=path, key=missing[0])
             meta = json.loads(str(data[NPZ_META_KEY])) if NPZ_META_KEY in data.files else {}
@@ -119,10 +131,14 @@ def load_npz(path: str | Path) -> ProblemRecord:
     except ProblemFormatError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, ValueError, qpsolvers errors
-        raise ProblemFormatError(f"unreadable .npz ({type(exc).__name__}: {exc})", path=path) from None
+        raise ProblemFormatError(
+            f"unreadable .npz ({type(exc).__name__}: {exc})", path=path
+        ) from None
     name = meta.get("name") or path.stem
     if problem.P is None or problem.q is None:
-        raise ProblemFormatError(f"problem '{name}': P or q is not a numeric array", path=path, key="P")
+        raise ProblemFormatError(
+            f"problem '{name}': P or q is not a numeric array", path=path, key="P"
+        )
     try:
         problem = solver_problem(problem)
     except (TypeError, ValueError) as exc:

@@ -40,7 +40,11 @@ def _schema(sparse_keys=()):
     import pyarrow as pa
 
     lst = pa.list_(pa.float64())
-    csc = [(f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())) for k in sparse_keys for part, kind in CSC_COLUMNS]
+    csc = [
+        (f"{k}_csc_{part}", pa.list_(getattr(pa, kind)()))
+        for k in sparse_keys
+        for part, kind in CSC_COLUMNS
+    ]
     return pa.schema(
         [(k, lst) for k in ARRAY_KEYS]
         + [
@@ -111,7 +115,9 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
         pa.array([r.formulation for r in records], type=pa.string()),
         pa.array([float(r.offset) for r in records], type=pa.float64()),
     ]
-    sparse_keys = [k for k in _MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)]
+    sparse_keys = [
+        k for k in _MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)
+    ]
     for k in sparse_keys:
         parts = [_csc_parts(getattr(r.problem, k)) for r in records]
         for j, (_, kind) in enumerate(CSC_COLUMNS):
@@ -206,7 +212,11 @@ def write_problem_set(
     try:
         text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
     except (TypeError, ValueError) as exc:
-        raise ProblemFormatError(f"generator/extra is not JSON-able ({exc})", path=folder / MANIFEST_NAME, key="generator") from None
+        raise ProblemFormatError(
+            f"generator/extra is not JSON-able ({exc})",
+            path=folder / MANIFEST_NAME,
+            key="generator",
+        ) from None
     write_bytes(folder / PARQUET_NAME, data)
     write_text(folder / MANIFEST_NAME, text)
     return folder
@@ -223,12 +233,17 @@ def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
     if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)):
         raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
     chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-    if not (pa.types.is_floating(chunk.type.value_type) or pa.types.is_integer(chunk.type.value_type)):
+    if not (
+        pa.types.is_floating(chunk.type.value_type) or pa.types.is_integer(chunk.type.value_type)
+    ):
         raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
     offsets = chunk.offsets.to_numpy()
     values = chunk.values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
     nulls = chunk.is_null().to_numpy(zero_copy_only=False)
-    return [None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype) for i in range(rows)]
+    return [
+        None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype)
+        for i in range(rows)
+    ]
 
 
 def _read_table(path: Path, require_meta: bool):
@@ -240,7 +255,9 @@ def _read_table(path: Path, require_meta: bool):
     except FileNotFoundError:
         raise ProblemFormatError("no such file", path=path) from None
     except (pa.ArrowException, OSError, ValueError) as exc:
-        raise ProblemFormatError(f"unreadable Parquet file ({type(exc).__name__}: {exc})", path=path) from None
+        raise ProblemFormatError(
+            f"unreadable Parquet file ({type(exc).__name__}: {exc})", path=path
+        ) from None
     required = list(PROBLEM_KEYS) + (list(META_KEYS) if require_meta else [])
     for k in required:
         if k not in table.column_names:
@@ -256,8 +273,11 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
         vector = None if k == "P" else arrays["h" if k == "G" else "b"][i]
         rows = n if k == "P" else (0 if vector is None else vector.size)
         if len(indptr) != n + 1 or len(indices) != len(data):
-            fail(k, f"CSC columns hold {len(indptr) - 1} columns and {len(indices)} indices for "
-                 f"{len(data)} values, expected n = {n} columns")
+            fail(
+                k,
+                f"CSC columns hold {len(indptr) - 1} columns and {len(indices)} indices for "
+                f"{len(data)} values, expected n = {n} columns",
+            )
         try:
             return spa.csc_matrix((data, indices.astype(np.int32), indptr), shape=(rows, n))
         except ValueError as exc:
@@ -298,7 +318,10 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
         n = q.size
         if n == 0:
             fail("q", "no variables")
-        data = {k: _matrix(arrays, csc, k, i, n, fail) if k in _MATRIX_KEYS else arrays[k][i] for k in ARRAY_KEYS}
+        data = {
+            k: _matrix(arrays, csc, k, i, n, fail) if k in _MATRIX_KEYS else arrays[k][i]
+            for k in ARRAY_KEYS
+        }
         if data["P"] is None:
             fail("P", "missing")
         offset = off[i]
@@ -383,4 +406,3 @@ def read_parquet(path: str | Path) -> ProblemSet:
     path = Path(path)
     records = _read_parquet_records(path, require_meta=False)
     return ProblemSet(name=path.stem, path=path, records=records, kind="parquet", files=[path])
-

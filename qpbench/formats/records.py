@@ -132,10 +132,14 @@ def _dense(M, key: str, path, name) -> np.ndarray | None:
     try:
         return np.asarray(M, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ProblemFormatError(f"problem '{name}': not numeric ({exc})", path=path, key=key) from None
+        raise ProblemFormatError(
+            f"problem '{name}': not numeric ({exc})", path=path, key=key
+        ) from None
 
 
-def dense_problem(problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None) -> qpsolvers.Problem:
+def dense_problem(
+    problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
+) -> qpsolvers.Problem:
     """A copy of ``problem`` with dense float64 arrays (a dense problem's arrays pass through
     unchanged when they already are float64)."""
     arrays = [_dense(getattr(problem, k), k, path, name) for k in ARRAY_KEYS]
@@ -155,7 +159,11 @@ def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     for k in ARRAY_KEYS:
         v = getattr(problem, k)
         if v is not None:
-            v = spa.csc_matrix(v, dtype=np.float64) if spa.issparse(v) else np.asarray(v, dtype=np.float64)
+            v = (
+                spa.csc_matrix(v, dtype=np.float64)
+                if spa.issparse(v)
+                else np.asarray(v, dtype=np.float64)
+            )
         parts.append(v)
     return qpsolvers.Problem(*parts)
 
@@ -165,7 +173,9 @@ def _numeric(v, key: str, fail):
     if spa.issparse(v):
         if v.dtype.kind not in "fiub":
             fail(key, f"dtype {v.dtype} is not numeric")
-        return spa.csc_matrix(v, dtype=np.float64) if v.format != "csc" or v.dtype != np.float64 else v
+        return (
+            spa.csc_matrix(v, dtype=np.float64) if v.format != "csc" or v.dtype != np.float64 else v
+        )
     v = np.asarray(v)
     if v.dtype.kind not in "fiub":
         fail(key, f"dtype {v.dtype} is not numeric")
@@ -185,7 +195,9 @@ def _asymmetry(P) -> float:
     return float(np.max(np.abs(D), initial=0.0))
 
 
-def check_problem(problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None) -> None:
+def check_problem(
+    problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
+) -> None:
     """Check shapes and values of a problem (see :mod:`qpbench.formats` for the rules).
 
     Sparse matrices are checked through their stored values: nothing is made dense.
@@ -198,7 +210,10 @@ def check_problem(problem: qpsolvers.Problem, path: str | Path | None = None, na
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
 
-    arr = {k: None if getattr(problem, k) is None else _numeric(getattr(problem, k), k, fail) for k in ARRAY_KEYS}
+    arr = {
+        k: None if getattr(problem, k) is None else _numeric(getattr(problem, k), k, fail)
+        for k in ARRAY_KEYS
+    }
     P, q = arr["P"], arr["q"]
     if P is None:
         fail("P", "missing")
@@ -213,7 +228,9 @@ def check_problem(problem: qpsolvers.Problem, path: str | Path | None = None, na
         fail("P", f"shape {P.shape} does not match n = {n} (expected {(n, n)})")
     for M, v in (("G", "h"), ("A", "b")):
         if (arr[M] is None) != (arr[v] is None):
-            fail(M if arr[M] is None else v, f"'{M}' and '{v}' must both be given or both be absent")
+            fail(
+                M if arr[M] is None else v, f"'{M}' and '{v}' must both be given or both be absent"
+            )
         if arr[M] is None:
             continue
         if arr[M].ndim != 2 or arr[M].shape[1] != n:
@@ -234,7 +251,10 @@ def check_problem(problem: qpsolvers.Problem, path: str | Path | None = None, na
     values = _values(P)
     scale = float(np.max(np.abs(values))) if values.size else 0.0
     if _asymmetry(P) > SYMMETRY_RTOL * scale:
-        fail("P", f"is not symmetric (max |P - P'| = {_asymmetry(P):.3g} > {SYMMETRY_RTOL:g} max |P|)")
+        fail(
+            "P",
+            f"is not symmetric (max |P - P'| = {_asymmetry(P):.3g} > {SYMMETRY_RTOL:g} max |P|)",
+        )
 
 
 def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
@@ -243,9 +263,14 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
 
     check_problem(record.problem, path=path, name=record.name)
     if not isinstance(record.name, str) or not record.name:
-        raise ProblemFormatError(f"problem name {record.name!r} is not a non-empty string", path=path, key="name")
+        raise ProblemFormatError(
+            f"problem name {record.name!r} is not a non-empty string", path=path, key="name"
+        )
     if not np.isfinite(record.offset):
-        raise ProblemFormatError(f"problem '{record.name}': offset {record.offset} is not finite", path=path, key="offset")
+        raise ProblemFormatError(
+            f"problem '{record.name}': offset {record.offset} is not finite",
+            path=path,
+            key="offset",
+        )
     if record.convexity is None:
         record.convexity = assess_convexity(record.problem.P)
-

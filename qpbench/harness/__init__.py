@@ -18,4 +18,13 @@
 from .bench import BenchConfig, BenchSummary, is_failure, run_bench, sequences
 from .results import KEY_COLUMNS, columns, read_results
 
-__all__ = ["KEY_COLUMNS", "columns", "BenchConfig", "BenchSummary", "is_failure", "read_results", "run_bench", "sequences"]
+__all__ = [
+    "KEY_COLUMNS",
+    "columns",
+    "BenchConfig",
+    "BenchSummary",
+    "is_failure",
+    "read_results",
+    "run_bench",
+    "sequences",
+]

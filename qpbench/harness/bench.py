@@ -47,6 +47,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..backends import backend_class
+from ..statuses import FAILURE_STATUSES
 from .bench_plan import (
     ISOLATE,
     MODES,
@@ -60,8 +62,6 @@ from .bench_plan import (
     sequences,
 )
 from .bench_summary import DEFAULT_SEED, BackendStats, BenchSummary, is_failure
-from ..backends import backend_class
-from ..statuses import FAILURE_STATUSES
 from .guard import LocalRunner, Outcome
 from .isolation import IsolatedRunner
 from .results import (
@@ -74,6 +74,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable
 
 log = logging.getLogger("qpbench.harness")
+
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
     """The order in which ``backends`` solve ``problem``: a seeded permutation.
@@ -97,8 +98,12 @@ def _structure(problem) -> tuple[bool, ...]:
     """Which parts a problem has (equalities, inequalities, bounds) and whether ``P`` is sparse."""
     import scipy.sparse as spa
 
-    return (problem.A is not None, problem.G is not None, problem.lb is not None or problem.ub is not None,
-            spa.issparse(problem.P))
+    return (
+        problem.A is not None,
+        problem.G is not None,
+        problem.lb is not None or problem.ub is not None,
+        spa.issparse(problem.P),
+    )
 
 
 def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
@@ -136,7 +141,10 @@ class _BenchRun:
         self.make_row = _RowMaker(None, plan.profile, config.mode, plan.sha, plan.versions)
         # Keys still to run, per backend and sequence (to know when replay is needed).
         self.todo = {
-            name: [any((plan.records[i].name, name, self.pname) not in done for i in seq) for seq in plan.seqs]
+            name: [
+                any((plan.records[i].name, name, self.pname) not in done for i in seq)
+                for seq in plan.seqs
+            ]
             for name in config.backends
         }
         self.total_todo = sum(
@@ -155,7 +163,9 @@ class _BenchRun:
 
     def _worker(self, name: str) -> IsolatedRunner:
         plan = self.plan
-        return IsolatedRunner(name, plan.profile, plan.settings[name], plan.profile.time_limit, self.sequential)
+        return IsolatedRunner(
+            name, plan.profile, plan.settings[name], plan.profile.time_limit, self.sequential
+        )
 
     def _runner(self, name: str):
         if self._isolated(name):
@@ -164,7 +174,9 @@ class _BenchRun:
 
     def run(self, progress: bool) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
-        self.plan.marker.open(self.plan.learned, catch_faults=any(not r.isolated for r in self.runners.values()))
+        self.plan.marker.open(
+            self.plan.learned, catch_faults=any(not r.isolated for r in self.runners.values())
+        )
         if progress and self.total_todo:
             from tqdm import tqdm
 
@@ -213,8 +225,13 @@ class _BenchRun:
                     if self.sequential and (i, name) not in self.plan.skips:
                         self._replay(name, record, self.done[key]["status"], needs_reset)
                     continue
-                if (i, name) in self.plan.skips:  # never handed to the backend; its state is untouched
-                    solved.append((position, name, Outcome("skipped", error=self.plan.skips[(i, name)])))
+                if (
+                    i,
+                    name,
+                ) in self.plan.skips:  # never handed to the backend; its state is untouched
+                    solved.append(
+                        (position, name, Outcome("skipped", error=self.plan.skips[(i, name)]))
+                    )
                     continue
                 solved.append((position, name, self._solve(name, record, prev, needs_reset)))
             self._write_rows(i, solved)
@@ -238,10 +255,17 @@ class _BenchRun:
         """One timed (repeated) solve; a backend that overran in this process moves to a worker."""
         self.plan.marker.mark((record.name, name, self.pname))
         outcome = self.runners[name].solve(
-            record.problem, repeat=self.config.repeat, reset_before=needs_reset[name], prev_problem=prev
+            record.problem,
+            repeat=self.config.repeat,
+            reset_before=needs_reset[name],
+            prev_problem=prev,
         )
         needs_reset[name] = self.sequential and outcome.status in FAILURE_STATUSES
-        if outcome.status == "time_limit" and not self.runners[name].isolated and self.config.isolate == "auto":
+        if (
+            outcome.status == "time_limit"
+            and not self.runners[name].isolated
+            and self.config.isolate == "auto"
+        ):
             # In this process a solve is never interrupted (an exception raised
             # into foreign code can break it): a backend that overran once goes
             # to a worker process, which is killed at its deadline.
@@ -263,7 +287,9 @@ class _BenchRun:
         record, backends = self.plan.records[i], self.config.backends
         batch = []
         for position, name, outcome in sorted(solved, key=lambda item: backends.index(item[1])):
-            row = self.make_row(record, name, outcome, self.references[i], position, int(self.config.seed))
+            row = self.make_row(
+                record, name, outcome, self.references[i], position, int(self.config.seed)
+            )
             if i in self.plan.notes and outcome.status != "skipped":
                 row["error"] = "; ".join(filter(None, [self.plan.notes[i], row["error"]]))
             batch.append(row)
@@ -340,6 +366,16 @@ def run_bench(
 
 
 __all__ = [
-    "DEFAULT_SEED", "ISOLATE", "MODES", "BackendStats", "BenchConfig", "BenchSummary", "backend_order",
-    "backend_settings", "is_failure", "record_period", "run_bench", "sequences",
+    "DEFAULT_SEED",
+    "ISOLATE",
+    "MODES",
+    "BackendStats",
+    "BenchConfig",
+    "BenchSummary",
+    "backend_order",
+    "backend_settings",
+    "is_failure",
+    "record_period",
+    "run_bench",
+    "sequences",
 ]

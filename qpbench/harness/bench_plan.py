@@ -65,20 +65,33 @@ class BenchConfig:
 
     def validate(self) -> None:
         if self.mode not in MODES:
-            raise ParamError(f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode")
+            raise ParamError(
+                f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode"
+            )
         if self.isolate not in ISOLATE:
-            raise ParamError(f"unknown isolation '{self.isolate}' (choose from {', '.join(ISOLATE)})", key="isolate")
+            raise ParamError(
+                f"unknown isolation '{self.isolate}' (choose from {', '.join(ISOLATE)})",
+                key="isolate",
+            )
         if int(self.repeat) < 1:
             raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
-        if self.time_limit is not None and not (self.time_limit > 0 and math.isfinite(self.time_limit)):
-            raise ParamError(f"time limit must be a positive number of seconds, got {self.time_limit}", key="time-limit")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+        if self.time_limit is not None and not (
+            self.time_limit > 0 and math.isfinite(self.time_limit)
+        ):
+            raise ParamError(
+                f"time limit must be a positive number of seconds, got {self.time_limit}",
+                key="time-limit",
+            )
+        if (
+            isinstance(self.seed, bool)
+            or not isinstance(self.seed, (int, np.integer))
+            or self.seed < 0
+        ):
             raise ParamError(f"seed must be an integer >= 0, got {self.seed!r}", key="seed")
         if not self.backends:
             raise ParamError("no backend to run", key="backends")
         if len(set(self.backends)) != len(self.backends):
             raise ParamError(f"backend listed twice in {','.join(self.backends)}", key="backends")
-
 
 
 def record_period(problem_set: ProblemSet) -> float | None:
@@ -129,13 +142,23 @@ def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
     out = []
     for key in order:
         idx = groups[key]
-        idx.sort(key=lambda i: (records[i].tick is None, records[i].tick if records[i].tick is not None else 0))
+        idx.sort(
+            key=lambda i: (
+                records[i].tick is None,
+                records[i].tick if records[i].tick is not None else 0,
+            )
+        )
         out.append(idx)
     return out
 
 
-def _check_existing(existing: ExistingResults, path: Path, config_mode: str, sha: str | None,
-                    seed: int = DEFAULT_SEED) -> None:
+def _check_existing(
+    existing: ExistingResults,
+    path: Path,
+    config_mode: str,
+    sha: str | None,
+    seed: int = DEFAULT_SEED,
+) -> None:
     for row in existing.rows:
         if row["mode"] != config_mode:
             raise InputError(
@@ -202,7 +225,9 @@ def _check_records(problem_set) -> list:
     names = [r.name for r in records]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
-        raise InputError(f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path)
+        raise InputError(
+            f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path
+        )
     return records
 
 
@@ -228,16 +253,22 @@ def _learn_from_crash(plan: Plan, config: BenchConfig) -> None:
         )
 
 
-def make_plan(problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool) -> Plan:
+def make_plan(
+    problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
+) -> Plan:
     """Every check that can fail on user input, before ``out`` is created or changed."""
     from ..atomic import check_output
     from ..backends import get_backend
     from ..formats import content_sha256
 
     config.validate()
-    check_output(out, force=force, resume=resume, make_parent=True)  # the command checked the user's path
+    check_output(
+        out, force=force, resume=resume, make_parent=True
+    )  # the command checked the user's path
     profile = get_profile(config.profile)
-    time_limit = float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
+    time_limit = (
+        float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
+    )
     run_profile = profile.with_time_limit(time_limit)
     records = _check_records(problem_set)
     settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
@@ -294,7 +325,8 @@ def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[d
 
 def references_for(problem_set, plan: Plan, references) -> list:
     """One reference per record (``references``: the list, a function of a problem set
-    that computes it, or ``None`` for :func:`qpbench.reference.reference_solutions`); none is computed for a record no backend solves, or one
+    that computes it, or ``None`` for :func:`qpbench.reference.reference_solutions`); none is
+    computed for a record no backend solves, or one
     beyond the memory budget (its reference status is then ``unknown``)."""
     from dataclasses import replace as copy_with
 
@@ -308,16 +340,21 @@ def references_for(problem_set, plan: Plan, references) -> list:
         budget = resolve_budget(None) if plan.budget is None else plan.budget
         backends = {name for _, name in plan.skips} | set(plan.settings)
         wanted = [
-            i for i, r in enumerate(plan.records)
-            if any((i, name) not in plan.skips for name in backends) and sparse_solver_bytes(r.problem) <= budget
+            i
+            for i, r in enumerate(plan.records)
+            if any((i, name) not in plan.skips for name in backends)
+            and sparse_solver_bytes(r.problem) <= budget
         ]
         subset = copy_with(problem_set, records=[plan.records[i] for i in wanted])
         computed = dict(zip(wanted, compute(subset))) if wanted else {}
-        references = [computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
-                      for i, r in enumerate(plan.records)]
+        references = [
+            computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
+            for i, r in enumerate(plan.records)
+        ]
     if len(references) != len(plan.records):
         raise InputError(
-            f"{len(references)} reference solutions for {len(plan.records)} problems", path=problem_set.path
+            f"{len(references)} reference solutions for {len(plan.records)} problems",
+            path=problem_set.path,
         )
     return references
 

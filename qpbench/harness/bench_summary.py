@@ -133,25 +133,39 @@ class BenchSummary:
         violation in the problem's units over the rows with an ``x``; a
         backend solved in a worker process (some rows) is marked ``*``.
         """
-        header = ["backend", "rows", "success %", "time p50 (us)", "time p99 (us)", "max violation", "failures"]
+        header = [
+            "backend",
+            "rows",
+            "success %",
+            "time p50 (us)",
+            "time p99 (us)",
+            "max violation",
+            "failures",
+        ]
         lines = [header]
         for name, st in self.backends.items():
             times = np.asarray(st.times_s, dtype=float)
             viol = np.asarray(st.violations, dtype=float)
             fails = ", ".join(f"{k} {v}" for k, v in sorted(st.failures.items())) or "0"
-            lines.append([
-                name + (" *" if st.isolated else ""),
-                str(st.rows),
-                f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
-                f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
-                f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
-                f"{viol.max():.3g}" if viol.size else "-",
-                fails if not st.n_failures else f"{st.n_failures} ({fails})",
-            ])
+            lines.append(
+                [
+                    name + (" *" if st.isolated else ""),
+                    str(st.rows),
+                    f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
+                    f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
+                    f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
+                    f"{viol.max():.3g}" if viol.size else "-",
+                    fails if not st.n_failures else f"{st.n_failures} ({fails})",
+                ]
+            )
         widths = [max(len(r[j]) for r in lines) for j in range(len(header))]
         out = []
         for r in lines:
-            cells = [r[0].ljust(widths[0])] + [c.rjust(w) for c, w in zip(r[1:-1], widths[1:-1])] + [r[-1]]
+            cells = (
+                [r[0].ljust(widths[0])]
+                + [c.rjust(w) for c, w in zip(r[1:-1], widths[1:-1])]
+                + [r[-1]]
+            )
             out.append("  ".join(cells).rstrip())
         if any(st.isolated for st in self.backends.values()):
             out.append("* some or all rows solved in a worker process (times taken inside it)")

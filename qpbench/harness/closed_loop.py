@@ -39,7 +39,14 @@ from ..exceptions import ParamError
 from ..selection import parse_list
 from ..statuses import FORMULATIONS
 from .loop_rows import (
-    BAD_VERDICTS, CSV_NAME, FAILED_RUN_STATUSES, LOG_DIR, read_rows, same_run, skipped_row, write_table,
+    BAD_VERDICTS,
+    CSV_NAME,
+    FAILED_RUN_STATUSES,
+    LOG_DIR,
+    read_rows,
+    same_run,
+    skipped_row,
+    write_table,
 )
 from .loop_run import RunSpec, run_guarded
 from .loop_workers import run_deadline, run_in_workers
@@ -118,10 +125,22 @@ def run_closed_loop(
         ParamError: a bad formulation, duration or job count, or a backend or
             scenario listed twice.
     """
-    _check_arguments(scenarios, backends, duration, formulation, jobs, isolate, run_time_limit, deadline, run_budget)
+    _check_arguments(
+        scenarios,
+        backends,
+        duration,
+        formulation,
+        jobs,
+        isolate,
+        run_time_limit,
+        deadline,
+        run_budget,
+    )
     from ..backends import plugin_files
 
-    plugins = plugin_files()  # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
+    plugins = (
+        plugin_files()
+    )  # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
     out = Path(out)
     csv_path = out / CSV_NAME
     check_folder(out)
@@ -139,6 +158,7 @@ def run_closed_loop(
 
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
+
     def _emit(key, row):
         row["isolated"] = _isolated(key[1])
         row["run_budget_s"] = run_budget
@@ -148,14 +168,22 @@ def run_closed_loop(
             on_row(row)
 
     # (key, what to run, deadline of an isolated run or None)
-    items = [((s, b), RunSpec(s, b, formulation, duration, str(out), deadline, run_budget),
-              run_deadline(s, duration, run_time_limit) if _isolated(b) else None) for s, b in todo]
+    items = [
+        (
+            (s, b),
+            RunSpec(s, b, formulation, duration, str(out), deadline, run_budget),
+            run_deadline(s, duration, run_time_limit) if _isolated(b) else None,
+        )
+        for s, b in todo
+    ]
     _run_items(items, jobs, plugins, _emit)
     write_table(_table_rows(), csv_path)
     table = pd.read_csv(csv_path)
     failed = table["status"].isin(FAILED_RUN_STATUSES)
     not_ok = int((table["verdict"].isin(BAD_VERDICTS) | failed).sum()) if len(table) else 0
-    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), len(todo), len(order) - len(todo), not_ok)
+    return ClosedLoopOutcome(
+        table, csv_path, int(failed.sum()), len(todo), len(order) - len(todo), not_ok
+    )
 
 
 def _run_items(items: list[tuple], jobs: int, plugins: list[str], emit: Callable) -> None:
@@ -172,12 +200,21 @@ def _run_items(items: list[tuple], jobs: int, plugins: list[str], emit: Callable
             run_in_workers([(key, spec, deadline_s)], 1, plugins, emit)
 
 
-def _kept_rows(order: list[tuple[str, str]], previous_rows: list[dict], formulation: str, duration: float | None,
-               run_budget: float | None, skip: dict[str, str]) -> tuple[dict, list[dict]]:
+def _kept_rows(
+    order: list[tuple[str, str]],
+    previous_rows: list[dict],
+    formulation: str,
+    duration: float | None,
+    run_budget: float | None,
+    skip: dict[str, str],
+) -> tuple[dict, list[dict]]:
     """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
     and the resumed table's rows of other pairs (kept, after this run's)."""
-    done = {(str(r["scenario"]), str(r["backend"])): r for r in previous_rows
-            if same_run(r, formulation, duration, run_budget)}
+    done = {
+        (str(r["scenario"]), str(r["backend"])): r
+        for r in previous_rows
+        if same_run(r, formulation, duration, run_budget)
+    }
     others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
     rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
     for key in order:
@@ -186,22 +223,32 @@ def _kept_rows(order: list[tuple[str, str]], previous_rows: list[dict], formulat
     return rows, others
 
 
-def _check_arguments(scenarios, backends, duration, formulation, jobs, isolate, run_time_limit, deadline,
-                     run_budget) -> None:
+def _check_arguments(
+    scenarios, backends, duration, formulation, jobs, isolate, run_time_limit, deadline, run_budget
+) -> None:
     """Every argument checked before anything is written or run (one-line errors naming the option)."""
     if formulation not in FORMULATIONS:
-        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
-                         key="--formulation")
+        raise ParamError(
+            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
+            key="--formulation",
+        )
     parse_list(list(scenarios), "--scenarios")  # a name given twice is refused, as everywhere
     parse_list(list(backends), "--backends")
     if duration is not None and not (duration > 0 and math.isfinite(duration)):
-        raise ParamError(f"duration must be a positive number of seconds, got {duration}", key="--duration")
+        raise ParamError(
+            f"duration must be a positive number of seconds, got {duration}", key="--duration"
+        )
     if jobs < 1:
         raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
     if isolate not in ISOLATE:
-        raise ParamError(f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate")
-    for value, key in ((run_time_limit, "--run-time-limit"), (deadline, "--deadline"),
-                       (run_budget, "--run-budget")):
+        raise ParamError(
+            f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate"
+        )
+    for value, key in (
+        (run_time_limit, "--run-time-limit"),
+        (deadline, "--deadline"),
+        (run_budget, "--run-budget"),
+    ):
         if value is not None and not (value > 0 and math.isfinite(value)):
             raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
 
@@ -234,5 +281,7 @@ def log_row(logger: logging.Logger, row: dict) -> None:
         return
     status = str(row.get("status"))
     error = row.get("error") if isinstance(row.get("error"), str) else ""
-    detail = "; ".join(x for x in (status if status != "ok" and verdict else "", error, reasons) if x)
+    detail = "; ".join(
+        x for x in (status if status != "ok" and verdict else "", error, reasons) if x
+    )
     logger.info("%s: %s%s", where, verdict or status, f" ({detail})" if detail else "")

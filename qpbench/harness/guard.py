@@ -109,7 +109,13 @@ class LocalRunner:
         """An untimed, unrecorded solve that only moves the state forward (resume)."""
         return self._guarded(problem).status
 
-    def solve(self, problem: qpsolvers.Problem, repeat: int = 1, reset_before: bool = False, prev_problem: qpsolvers.Problem | None = None) -> Outcome:
+    def solve(
+        self,
+        problem: qpsolvers.Problem,
+        repeat: int = 1,
+        reset_before: bool = False,
+        prev_problem: qpsolvers.Problem | None = None,
+    ) -> Outcome:
         """Solve ``problem`` ``repeat`` times from the same state; time each.
 
         Args:
@@ -130,7 +136,9 @@ class LocalRunner:
                     try:
                         self.backend = self.restorer.restore(self.backend, prev_problem)
                     except Exception as exc:  # noqa: BLE001
-                        outcome = Outcome("error", None, times, f"restoring state: {describe_exception(exc)}")
+                        outcome = Outcome(
+                            "error", None, times, f"restoring state: {describe_exception(exc)}"
+                        )
                         break
                 outcome = self._guarded(problem)
                 times.extend(outcome.wall_times_s)

@@ -62,7 +62,20 @@ DEADLINE_MARGIN_S = 1.0
 WARMUP_TIMEOUT_S = 30.0
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
-_FIELDS = ("x", "y", "z", "z_box", "found", "obj", "status", "iterations", "solver_time_s", "wall_time_s", "backend", "error")
+_FIELDS = (
+    "x",
+    "y",
+    "z",
+    "z_box",
+    "found",
+    "obj",
+    "status",
+    "iterations",
+    "solver_time_s",
+    "wall_time_s",
+    "backend",
+    "error",
+)
 _PLAIN = (int, float, str, bool, type(None), np.ndarray, np.generic)
 
 
@@ -204,7 +217,9 @@ class IsolatedRunner:
             if left <= 0:
                 self._kill()
                 self.restarts += 1
-                raise WorkerDied("time_limit", f"no answer after {timeout:.3g} s during {what}; worker killed")
+                raise WorkerDied(
+                    "time_limit", f"no answer after {timeout:.3g} s during {what}; worker killed"
+                )
 
     def _call(self, request: tuple, n_solves: int, what: str, timeout: float | None = None):
         if self._proc is None:
@@ -229,7 +244,12 @@ class IsolatedRunner:
     def warmup(self, problem: qpsolvers.Problem) -> str:
         """The discarded warm-up solve, allowed :data:`WARMUP_TIMEOUT_S` (its slowness has no consequence)."""
         try:
-            return self._call(("warmup", problem), 1, "warm-up", timeout=max(WARMUP_TIMEOUT_S, 2 * self.time_limit))
+            return self._call(
+                ("warmup", problem),
+                1,
+                "warm-up",
+                timeout=max(WARMUP_TIMEOUT_S, 2 * self.time_limit),
+            )
         except WorkerDied as died:
             return died.status
 
@@ -239,7 +259,13 @@ class IsolatedRunner:
         except WorkerDied as died:
             return died.status
 
-    def solve(self, problem: qpsolvers.Problem, repeat: int = 1, reset_before: bool = False, prev_problem: qpsolvers.Problem | None = None) -> Outcome:
+    def solve(
+        self,
+        problem: qpsolvers.Problem,
+        repeat: int = 1,
+        reset_before: bool = False,
+        prev_problem: qpsolvers.Problem | None = None,
+    ) -> Outcome:
         n = max(1, repeat) * (2 if prev_problem is not None else 1)
         try:
             outcome = self._call(("solve", problem, repeat, reset_before, prev_problem), n, "solve")
@@ -265,4 +291,3 @@ class IsolatedRunner:
             self._kill()
         except Exception:  # noqa: BLE001
             pass
-

@@ -66,8 +66,20 @@ from ..atomic import atomic_path
 from ..statuses import describe_exception
 
 __all__ = [
-    "BAD_VERDICTS", "COLUMNS", "CSV_NAME", "FAILED_RUN_STATUSES", "LOG_DIR", "TABLE_NAMES", "cell", "error_row",
-    "failure_row", "log_name", "row_from_summary", "same_run", "skipped_row", "write_table",
+    "BAD_VERDICTS",
+    "COLUMNS",
+    "CSV_NAME",
+    "FAILED_RUN_STATUSES",
+    "LOG_DIR",
+    "TABLE_NAMES",
+    "cell",
+    "error_row",
+    "failure_row",
+    "log_name",
+    "row_from_summary",
+    "same_run",
+    "skipped_row",
+    "write_table",
 ]
 
 #: Name of the table inside the output folder.
@@ -77,11 +89,30 @@ LOG_DIR = "logs"
 
 #: Leading columns of the closed-loop table, in order.
 COLUMNS = (
-    "scenario", "backend", "formulation", "duration_s", "simulated_s", "status", "error", "verdict",
-    "verdict_reasons", "ticks", "tracking_rms_after_2s", "tracking_max_after_2s", "force_error_rms_after_2s",
-    "force_error_max_after_2s", "min_obstacle_distance", "joint_limit_violations", "infeasible_ticks",
-    "fallback_ticks", "v2_integral", "solve_time_p50_s", "solve_time_p99_s", "solve_time_max_s",
-    "real_time_factor", "log_file",
+    "scenario",
+    "backend",
+    "formulation",
+    "duration_s",
+    "simulated_s",
+    "status",
+    "error",
+    "verdict",
+    "verdict_reasons",
+    "ticks",
+    "tracking_rms_after_2s",
+    "tracking_max_after_2s",
+    "force_error_rms_after_2s",
+    "force_error_max_after_2s",
+    "min_obstacle_distance",
+    "joint_limit_violations",
+    "infeasible_ticks",
+    "fallback_ticks",
+    "v2_integral",
+    "solve_time_p50_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "real_time_factor",
+    "log_file",
 )
 
 #: The table's names of two summary figures (the table's names are older than the summary's).
@@ -109,8 +140,13 @@ def row_from_summary(scenario: str, backend: str, summary: dict) -> dict:
     be a file path); the status is ``budget`` when the summary says
     ``stopped_early``, else ``ok``. ``log_file`` is filled in by the caller.
     """
-    row = {"scenario": scenario, "backend": backend, "status": "budget" if summary.get("stopped_early") else "ok",
-           "error": "", "log_file": ""}
+    row = {
+        "scenario": scenario,
+        "backend": backend,
+        "status": "budget" if summary.get("stopped_early") else "ok",
+        "error": "",
+        "log_file": "",
+    }
     for key, value in summary.items():
         if key not in ("scenario", "backend"):
             row[TABLE_NAMES.get(key, key)] = cell(value)
@@ -123,42 +159,67 @@ def log_name(scenario: str, backend: str) -> str:
     return f"{safe}.parquet"
 
 
-def skipped_row(scenario: str, backend: str, formulation: str, duration: float | None, reason: str) -> dict:
+def skipped_row(
+    scenario: str, backend: str, formulation: str, duration: float | None, reason: str
+) -> dict:
     """The row of a run that was not made (status ``skipped``, the reason in ``error``, no verdict)."""
     row = {c: math.nan for c in COLUMNS}
-    row.update(scenario=scenario, backend=backend, formulation=formulation,
-               duration_s=float(duration) if duration is not None else math.nan,
-               status="skipped", error=reason, verdict="", verdict_reasons="", log_file="")
+    row.update(
+        scenario=scenario,
+        backend=backend,
+        formulation=formulation,
+        duration_s=float(duration) if duration is not None else math.nan,
+        status="skipped",
+        error=reason,
+        verdict="",
+        verdict_reasons="",
+        log_file="",
+    )
     return row
 
 
-def error_row(scenario: str, backend: str, formulation: str, duration: float | None, exc: BaseException) -> dict:
+def error_row(
+    scenario: str, backend: str, formulation: str, duration: float | None, exc: BaseException
+) -> dict:
     """The row of a run that raised: status ``error`` and ``"Type: message"``, in one line."""
     return failure_row(scenario, backend, formulation, duration, "error", describe_exception(exc))
 
 
-def failure_row(scenario: str, backend: str, formulation: str, duration: float | None, status: str,
-                message: str) -> dict:
+def failure_row(
+    scenario: str, backend: str, formulation: str, duration: float | None, status: str, message: str
+) -> dict:
     """The row of a run that produced no result: ``status`` (``error``, ``crashed``,
     ``time_limit``) and why in ``error``; verdict ``failed``."""
     from ..sim.verdict import failed_run
 
     verdict = failed_run(status, message)
     row = {c: math.nan for c in COLUMNS}
-    row.update(scenario=scenario, backend=backend, formulation=formulation,
-               duration_s=float(duration) if duration is not None else math.nan,
-               status=status, error=message, verdict=verdict.verdict, verdict_reasons=verdict.text, log_file="")
+    row.update(
+        scenario=scenario,
+        backend=backend,
+        formulation=formulation,
+        duration_s=float(duration) if duration is not None else math.nan,
+        status=status,
+        error=message,
+        verdict=verdict.verdict,
+        verdict_reasons=verdict.text,
+        log_file="",
+    )
     return row
 
 
-def same_run(row: dict, formulation: str, duration: float | None, run_budget: float | None = None) -> bool:
+def same_run(
+    row: dict, formulation: str, duration: float | None, run_budget: float | None = None
+) -> bool:
     """``row`` (read back from the table) is a finished run of this formulation, duration and budget."""
     status = str(row.get("status"))
     if str(row.get("formulation")) != formulation:
         return False
     if status == "budget":  # a budget-stopped run is the same run only under the same budget
         try:
-            if run_budget is None or not math.isclose(float(row.get("run_budget_s")), float(run_budget)):
+            if run_budget is None or not math.isclose(
+                float(row.get("run_budget_s")), float(run_budget)
+            ):
                 return False
         except (TypeError, ValueError):
             return False
@@ -167,7 +228,9 @@ def same_run(row: dict, formulation: str, duration: float | None, run_budget: fl
     if duration is None:
         return True
     try:
-        return math.isclose(float(row.get("duration_s")), float(duration), rel_tol=1e-9, abs_tol=1e-12)
+        return math.isclose(
+            float(row.get("duration_s")), float(duration), rel_tol=1e-9, abs_tol=1e-12
+        )
     except (TypeError, ValueError):
         return False
 
@@ -189,6 +252,16 @@ def read_rows(path: Path) -> list[dict]:
     """The rows of an existing table, text cells that were empty as ``""`` (for resuming)."""
     rows = []
     for rec in pd.read_csv(path, keep_default_na=True).to_dict("records"):
-        rows.append({k: ("" if k in ("error", "log_file", "verdict", "verdict_reasons") and isinstance(v, float)
-                         and math.isnan(v) else v) for k, v in rec.items()})
+        rows.append(
+            {
+                k: (
+                    ""
+                    if k in ("error", "log_file", "verdict", "verdict_reasons")
+                    and isinstance(v, float)
+                    and math.isnan(v)
+                    else v
+                )
+                for k, v in rec.items()
+            }
+        )
     return rows

@@ -67,10 +67,21 @@ def simulate_one(spec: RunSpec, log_path: Path | None) -> tuple[dict, pd.DataFra
     scenario = load_scenario(spec.scenario)
     # warm-up: a discarded run of a few ticks, so one-off costs (solver imports, first-call
     # allocations; the numba kernels are ready before, see qpbench.jit) stay out of the timed run
-    simulate(scenario, spec.backend, formulation=spec.formulation, duration=WARMUP_TICKS * scenario.dt,
-             deadline=spec.deadline)
-    result = simulate(scenario, spec.backend, formulation=spec.formulation, duration=spec.duration,
-                      deadline=spec.deadline, wall_budget_s=spec.run_budget)
+    simulate(
+        scenario,
+        spec.backend,
+        formulation=spec.formulation,
+        duration=WARMUP_TICKS * scenario.dt,
+        deadline=spec.deadline,
+    )
+    result = simulate(
+        scenario,
+        spec.backend,
+        formulation=spec.formulation,
+        duration=spec.duration,
+        deadline=spec.deadline,
+        wall_budget_s=spec.run_budget,
+    )
     row = row_from_summary(spec.scenario, spec.backend, result.summary)
     if log_path is not None:
         with atomic_path(log_path) as tmp:
@@ -86,6 +97,12 @@ def run_guarded(spec: RunSpec) -> dict:
         row, _ = simulate_one(spec, log_path)
         row["log_file"] = f"{LOG_DIR}/{log_path.name}"
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
-        log.warning("closed loop %s with %s failed: %s: %s", spec.scenario, spec.backend, type(exc).__name__, exc)
+        log.warning(
+            "closed loop %s with %s failed: %s: %s",
+            spec.scenario,
+            spec.backend,
+            type(exc).__name__,
+            exc,
+        )
         row = error_row(spec.scenario, spec.backend, spec.formulation, spec.duration, exc)
     return row

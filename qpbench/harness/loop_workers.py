@@ -34,7 +34,9 @@ RUN_TIME_LIMIT_MIN_S = 600.0
 RUN_TIME_LIMIT_PER_SIM_S = 50.0
 
 
-def run_deadline(scenario: str, duration: float | None, run_time_limit: float | None = None) -> float:
+def run_deadline(
+    scenario: str, duration: float | None, run_time_limit: float | None = None
+) -> float:
     """Deadline [s] of one isolated run: ``run_time_limit`` when given, else
     ``max(RUN_TIME_LIMIT_MIN_S, RUN_TIME_LIMIT_PER_SIM_S * simulated seconds)``
     (600 s up to 12 s of simulated time). It covers the worker's start, the
@@ -68,10 +70,16 @@ def _worker_main(conn, spec: RunSpec, plugins: list[str]) -> None:
 class _RunWorker:
     """One run in its own worker process, with an optional deadline."""
 
-    def __init__(self, key: tuple[str, str], spec: RunSpec, plugins: list[str], deadline_s: float | None):
+    def __init__(
+        self, key: tuple[str, str], spec: RunSpec, plugins: list[str], deadline_s: float | None
+    ):
         self.key, self.spec = key, spec
-        self.proc, self.conn = start_worker(_worker_main, (spec, plugins), duplex=False,
-                                            name=f"qpbench-closed-loop-{key[0]}-{key[1]}")
+        self.proc, self.conn = start_worker(
+            _worker_main,
+            (spec, plugins),
+            duplex=False,
+            name=f"qpbench-closed-loop-{key[0]}-{key[1]}",
+        )
         self.deadline_s = deadline_s
         self.deadline = math.inf if deadline_s is None else time.monotonic() + deadline_s
 
@@ -98,7 +106,9 @@ class _RunWorker:
         self.kill()
         self._drop_partial_log()
         log.warning("closed loop %s with %s: %s", spec.scenario, spec.backend, message)
-        return failure_row(spec.scenario, spec.backend, spec.formulation, spec.duration, status, message)
+        return failure_row(
+            spec.scenario, spec.backend, spec.formulation, spec.duration, status, message
+        )
 
     def kill(self) -> None:
         stop_worker(self.proc, self.conn)
@@ -131,8 +141,10 @@ def run_in_workers(items: list[tuple], jobs: int, plugins: list[str], emit: Call
                 active.append(_RunWorker(key, spec, plugins, deadline_s))
             now = time.monotonic()
             timeout = min(w.deadline for w in active) - now
-            wait([w.conn for w in active] + [w.proc.sentinel for w in active],
-                 timeout=None if timeout == math.inf else max(timeout, 0.0))
+            wait(
+                [w.conn for w in active] + [w.proc.sentinel for w in active],
+                timeout=None if timeout == math.inf else max(timeout, 0.0),
+            )
             now = time.monotonic()
             for w in list(active):
                 row = w.result(now)

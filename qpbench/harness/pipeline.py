@@ -68,7 +68,6 @@ REPEAT = 3
 DUMP_BACKENDS = ("qpsolvers:daqp", "clarabel", "proxqp", "qpsolvers:quadprog", "osqp")
 
 
-
 @dataclass
 class RunConfig:
     """What ``qpbench run`` does (see the module docstring).
@@ -104,12 +103,20 @@ class RunConfig:
     def validate(self) -> None:
         """Every value checked before anything is written (one-line errors naming the option)."""
         if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
-            raise ParamError(f"must be a positive number of seconds, got {self.duration}", key="--duration")
+            raise ParamError(
+                f"must be a positive number of seconds, got {self.duration}", key="--duration"
+            )
         if self.bench_every < 1:
-            raise ParamError(f"must be an integer >= 1, got {self.bench_every}", key="--bench-every")
-        if self.run_budget is not None and not (self.run_budget > 0 and math.isfinite(self.run_budget)):
-            raise ParamError(f"must be a number of seconds >= 0 (0: no budget), got {self.run_budget}",
-                             key="--run-budget")
+            raise ParamError(
+                f"must be an integer >= 1, got {self.bench_every}", key="--bench-every"
+            )
+        if self.run_budget is not None and not (
+            self.run_budget > 0 and math.isfinite(self.run_budget)
+        ):
+            raise ParamError(
+                f"must be a number of seconds >= 0 (0: no budget), got {self.run_budget}",
+                key="--run-budget",
+            )
         if self.repeat < 1:
             raise ParamError(f"must be an integer >= 1, got {self.repeat}", key="--repeat")
 
@@ -155,7 +162,9 @@ def _dump_backend(backends: list[str]) -> str:
     for name in DUMP_BACKENDS:
         if name in available:
             return name
-    raise BackendNotFound(f"no QP backend to generate problem sets with (tried {', '.join(DUMP_BACKENDS)})")
+    raise BackendNotFound(
+        f"no QP backend to generate problem sets with (tried {', '.join(DUMP_BACKENDS)})"
+    )
 
 
 def make_problem_set(scenario: str, folder: Path, backend: str) -> Path:
@@ -163,8 +172,13 @@ def make_problem_set(scenario: str, folder: Path, backend: str) -> Path:
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
-    log.info("problem set %s missing: simulating %s with %s to dump every %dth tick", folder, scenario,
-             backend, EVERY)
+    log.info(
+        "problem set %s missing: simulating %s with %s to dump every %dth tick",
+        folder,
+        scenario,
+        backend,
+        EVERY,
+    )
     simulate(load_scenario(scenario), backend, formulation="paper", every=EVERY, dump=folder)
     return folder
 
@@ -178,14 +192,18 @@ def bench_subset(problem_set, duration: float | None, every: int = 1):
     if duration is None and every == 1:
         return problem_set, refs
     keep = [
-        i for i, r in enumerate(problem_set.records)
+        i
+        for i, r in enumerate(problem_set.records)
         if i % every == 0 and (duration is None or r.t is None or r.t < duration)
     ]
     if not keep:
         keep = [0]
     # the time between two kept records grows by ``every``: an online backend integrates that much per call
     stretched = select_set(problem_set, every=every) if every > 1 else problem_set
-    return (replace(stretched, records=[problem_set.records[i] for i in keep]), [refs[i] for i in keep])
+    return (
+        replace(stretched, records=[problem_set.records[i] for i in keep]),
+        [refs[i] for i in keep],
+    )
 
 
 def _compress_bench(bench_dir: Path) -> None:
@@ -243,7 +261,9 @@ def run_all(config: RunConfig) -> RunOutcome:
     total = len(missing) + len(bench_scenarios) + len(config.scenarios) * len(config.backends) + 1
     from tqdm import tqdm
 
-    bar = tqdm(total=total, unit="step", desc="qpbench run", disable=None if config.progress else True)
+    bar = tqdm(
+        total=total, unit="step", desc="qpbench run", disable=None if config.progress else True
+    )
     try:
         for s in missing:
             bar.set_description(f"problem set {s}")
@@ -286,12 +306,22 @@ def _bench(config: RunConfig, scenarios: list[str], bench_dir: Path, bar) -> int
     failures = 0
     for s in scenarios:
         bar.set_description(f"bench {s}")
-        subset, refs = bench_subset(load_problems(Path(config.problems) / s), config.duration, config.bench_every)
+        subset, refs = bench_subset(
+            load_problems(Path(config.problems) / s), config.duration, config.bench_every
+        )
         summary = run_bench(
             subset,
-            BenchConfig(backends=list(config.backends), profile="default", mode="sequential", repeat=config.repeat,
-                        memory_budget=config.memory_budget),
-            bench_dir / f"{s}.csv", resume=config.resume, force=not config.resume, references=refs,
+            BenchConfig(
+                backends=list(config.backends),
+                profile="default",
+                mode="sequential",
+                repeat=config.repeat,
+                memory_budget=config.memory_budget,
+            ),
+            bench_dir / f"{s}.csv",
+            resume=config.resume,
+            force=not config.resume,
+            references=refs,
         )
         log.info("bench %s: %s", s, summary.line())
         for line in summary.table().splitlines():
@@ -311,9 +341,18 @@ def _closed_loop(config: RunConfig, staging: Path, bar):
         if config.on_row is not None:
             config.on_row(row)
 
-    outcome = run_closed_loop(config.scenarios, config.backends, staging, duration=config.duration,
-                              formulation="paper", force=not config.resume, resume=config.resume,
-                              jobs=config.jobs, on_row=on_row, run_budget=config.run_budget)
+    outcome = run_closed_loop(
+        config.scenarios,
+        config.backends,
+        staging,
+        duration=config.duration,
+        formulation="paper",
+        force=not config.resume,
+        resume=config.resume,
+        jobs=config.jobs,
+        on_row=on_row,
+        run_budget=config.run_budget,
+    )
     return outcome.table, outcome.not_ok
 
 
@@ -329,10 +368,12 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table) -> dict:
         "run_budget_s": config.run_budget,
         "bench_every": config.bench_every,
         "closed_loop_stopped_by_budget": {
-            f"{r.scenario}/{r.backend}": round(float(r.simulated_s), 3) for r in stopped.itertuples()
+            f"{r.scenario}/{r.backend}": round(float(r.simulated_s), 3)
+            for r in stopped.itertuples()
         },
         "closed_loop_not_ok": {
-            f"{r.scenario}/{r.backend}": str(r.verdict) for r in table.itertuples()
+            f"{r.scenario}/{r.backend}": str(r.verdict)
+            for r in table.itertuples()
             if str(r.verdict) not in ("ok", "nan", "")
         },
         "bench_repeat": config.repeat,

@@ -29,7 +29,18 @@ from ..metrics import metric_columns
 log = logging.getLogger("qpbench.harness")
 
 #: Columns before the metrics: the record, what ran, and its outcome.
-LEAD_COLUMNS = ("problem", "scenario", "tick", "t", "backend", "profile", "mode", "status", "found", "success")
+LEAD_COLUMNS = (
+    "problem",
+    "scenario",
+    "tick",
+    "t",
+    "backend",
+    "profile",
+    "mode",
+    "status",
+    "found",
+    "success",
+)
 
 #: Columns after the metrics: timings, the harness's own record, sizes and provenance.
 TAIL_COLUMNS = (
@@ -123,8 +134,12 @@ class ExistingResults:
         return {row_key(r): r for r in self.rows}
 
 
-def read_results(path: str | Path, repair: bool = False, columns: tuple[str, ...] | None = None,
-                 kind: str = "bench") -> ExistingResults:
+def read_results(
+    path: str | Path,
+    repair: bool = False,
+    columns: tuple[str, ...] | None = None,
+    kind: str = "bench",
+) -> ExistingResults:
     """Read a bench CSV written by :class:`ResultsWriter` (or a ``kind`` table of ``columns``).
 
     A last line without its newline (the run was killed while writing it) or
@@ -142,7 +157,9 @@ def read_results(path: str | Path, repair: bool = False, columns: tuple[str, ...
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
         log.warning(
-            "%s: dropping a half-written last line (%d bytes) left by an interrupted run", path, len(data) - cut
+            "%s: dropping a half-written last line (%d bytes) left by an interrupted run",
+            path,
+            len(data) - cut,
         )
         data = data[:cut]
         dropped += 1
@@ -173,12 +190,20 @@ def read_results(path: str | Path, repair: bool = False, columns: tuple[str, ...
     for line in lines[1:]:
         fields = next(csv.reader([line])) if line else []
         if len(fields) != len(names):
-            log.warning("%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(names))
+            log.warning(
+                "%s: dropping a malformed line (%d fields, expected %d)",
+                path,
+                len(fields),
+                len(names),
+            )
             dropped += 1
             bad_tail = True
         else:
             if bad_tail:
-                raise InputError("malformed line in the middle of the file; use --force to start again", path=path)
+                raise InputError(
+                    "malformed line in the middle of the file; use --force to start again",
+                    path=path,
+                )
             rows.append(dict(zip(names, fields)))
             good_end = offset + len(line.encode("utf-8")) + 1
         offset += len(line.encode("utf-8")) + 1
@@ -197,7 +222,13 @@ class ResultsWriter:
         columns: The table's columns (default: the bench's, :func:`bench_columns`).
     """
 
-    def __init__(self, path: str | Path, new: bool, fsync: bool = True, columns: tuple[str, ...] | None = None):
+    def __init__(
+        self,
+        path: str | Path,
+        new: bool,
+        fsync: bool = True,
+        columns: tuple[str, ...] | None = None,
+    ):
         self.path = Path(path)
         self.fsync = fsync
         self.columns = bench_columns() if columns is None else tuple(columns)

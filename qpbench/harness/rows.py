@@ -7,8 +7,8 @@ import statistics
 import numpy as np
 
 from ..profiles import Profile
-from .bench_summary import _float
 from ..statuses import FAILURE_STATUSES
+from .bench_summary import _float
 
 
 def _n_box(problem) -> int:
@@ -32,8 +32,15 @@ class _RowMaker:
         self.sha = sha or ""
         self.versions = versions
 
-    def __call__(self, record, backend: str, outcome, reference, position: int | None = None,
-                 seed: int | None = None) -> dict:
+    def __call__(
+        self,
+        record,
+        backend: str,
+        outcome,
+        reference,
+        position: int | None = None,
+        seed: int | None = None,
+    ) -> dict:
         from ..metrics import evaluate, metric_columns
 
         sol = outcome.solution
@@ -60,8 +67,12 @@ class _RowMaker:
             **{c: metrics[c] for c in metric_columns()},
             "wall_time_min_s": min(times) if times else None,
             "wall_time_median_s": statistics.median(times) if times else None,
-            "solver_time_s": _float(getattr(sol, "solver_time_s", None)) if outcome.solution is not None else None,
-            "iterations": getattr(outcome.solution, "iterations", None) if outcome.solution is not None else None,
+            "solver_time_s": _float(getattr(sol, "solver_time_s", None))
+            if outcome.solution is not None
+            else None,
+            "iterations": getattr(outcome.solution, "iterations", None)
+            if outcome.solution is not None
+            else None,
             "error": error,
             "state_reset": outcome.state_reset,
             "isolated": outcome.isolated,

@@ -22,14 +22,25 @@ if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.process import BaseProcess
 
-__all__ = ["START_TIMEOUT_S", "context", "death_message", "ignore_interrupts", "start_worker", "stop_worker"]
+__all__ = [
+    "START_TIMEOUT_S",
+    "context",
+    "death_message",
+    "ignore_interrupts",
+    "start_worker",
+    "stop_worker",
+]
 
 #: Time allowed for the forkserver's preload and for a worker to start [s].
 START_TIMEOUT_S = 120.0
 
 #: Modules the forkserver imports once, for every worker forked from it.
 PRELOAD = (
-    "qpbench.harness.workers", "qpbench.harness.isolation", "qpbench.backends", "numpy", "scipy.sparse",
+    "qpbench.harness.workers",
+    "qpbench.harness.isolation",
+    "qpbench.backends",
+    "numpy",
+    "scipy.sparse",
     "qpbench.harness.preload",
 )
 
@@ -47,7 +58,9 @@ def context() -> multiprocessing.context.BaseContext:
 
     warmup()  # at once after the first call
     if _CTX is None:
-        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        method = (
+            "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        )
         ctx = multiprocessing.get_context(method)
         if method == "forkserver":
             ctx.set_forkserver_preload(list(PRELOAD))
@@ -64,7 +77,9 @@ def _noop() -> None:
     """A child that does nothing: its start waits for the forkserver's preload."""
 
 
-def start_worker(target: Callable[..., None], args: tuple, name: str, duplex: bool = True) -> tuple[BaseProcess, Connection]:
+def start_worker(
+    target: Callable[..., None], args: tuple, name: str, duplex: bool = True
+) -> tuple[BaseProcess, Connection]:
     """Start ``target(conn, *args)`` in a worker process; return ``(process, conn)``.
 
     ``conn`` is this side of the pipe (the worker gets the other end as its

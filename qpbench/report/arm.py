@@ -55,7 +55,13 @@ def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
     flat = int(np.nanargmin(D))
     k, c = divmod(flat, D.shape[1])
     _, key, obstacle = cols[c].split("_", 2)
-    return {"t": float(log["t"].iloc[k]), "k": int(k), "key_point": key, "obstacle": obstacle, "distance": float(D[k, c])}
+    return {
+        "t": float(log["t"].iloc[k]),
+        "k": int(k),
+        "key_point": key,
+        "obstacle": obstacle,
+        "distance": float(D[k, c]),
+    }
 
 
 def _instants(t: np.ndarray, count: int) -> np.ndarray:
@@ -104,13 +110,40 @@ def _draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) ->
         if kind == "LineObstacle":
             if faint and not np.any(ob.velocity):
                 continue
-            _draw_line(ax, ob.point + shift, ob.normal, xlim, ylim, color=OBSTACLE, lw=2, alpha=alpha, label=label)
+            _draw_line(
+                ax,
+                ob.point + shift,
+                ob.normal,
+                xlim,
+                ylim,
+                color=OBSTACLE,
+                lw=2,
+                alpha=alpha,
+                label=label,
+            )
         elif kind == "SegmentObstacle":
             a, b = ob.a + shift, ob.b + shift
-            ax.plot([a[0], b[0]], [a[1], b[1]], color=OBSTACLE, lw=3, alpha=alpha, solid_capstyle="round", label=label)
+            ax.plot(
+                [a[0], b[0]],
+                [a[1], b[1]],
+                color=OBSTACLE,
+                lw=3,
+                alpha=alpha,
+                solid_capstyle="round",
+                label=label,
+            )
         elif kind == "DiskObstacle":
             c = ob.center + shift
-            ax.add_patch(Circle(c, ob.radius, facecolor=OBSTACLE, edgecolor=OBSTACLE, alpha=0.35 * alpha, label=label))
+            ax.add_patch(
+                Circle(
+                    c,
+                    ob.radius,
+                    facecolor=OBSTACLE,
+                    edgecolor=OBSTACLE,
+                    alpha=0.35 * alpha,
+                    label=label,
+                )
+            )
         elif kind == "PointCloudObstacle":
             pts = ob.points + shift
             ax.scatter(pts[:, 0], pts[:, 1], s=6, color=OBSTACLE, alpha=alpha, label=label)
@@ -134,7 +167,14 @@ def _frame_parts(scenario):
     return arm, keys, surface, obstacles
 
 
-def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, instants: int = 8, title: str | None = None) -> Path:
+def draw_snapshot(
+    scenario: Scenario,
+    log: pd.DataFrame,
+    path: str | Path,
+    *,
+    instants: int = 8,
+    title: str | None = None,
+) -> Path:
     """Draw the run ``log`` of ``scenario`` as stick figures at ``instants`` times; save to ``path`` (PNG, SVG, PDF).
 
     Args:
@@ -160,7 +200,16 @@ def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, in
     xlim, ylim = _view(scenario, log, arm)
 
     fig, ax = plt.subplots(figsize=(7.5, 6.2), dpi=110)
-    _draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=SURFACE, lw=2.5, label="contact surface")
+    _draw_line(
+        ax,
+        surface.point,
+        -surface.normal,
+        xlim,
+        ylim,
+        color=SURFACE,
+        lw=2.5,
+        label="contact surface",
+    )
     moving = any(np.any(ob.velocity) for ob in obstacles)
     if moving:
         _draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
@@ -171,35 +220,84 @@ def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, in
         shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
         p = arm.joint_positions(theta[k])
         last = j == len(idx) - 1
-        ax.plot(p[:, 0], p[:, 1], "-o", color=ARM, alpha=shade, lw=2.6 if last else 1.6, ms=4 if last else 2.5,
-                label="arm (pale: earlier)" if last else None, zorder=3)
+        ax.plot(
+            p[:, 0],
+            p[:, 1],
+            "-o",
+            color=ARM,
+            alpha=shade,
+            lw=2.6 if last else 1.6,
+            ms=4 if last else 2.5,
+            label="arm (pale: earlier)" if last else None,
+            zorder=3,
+        )
         kp = arm.points(theta[k], keys.links, keys.fracs)
-        ax.scatter(kp[:, 0], kp[:, 1], s=16 if last else 8, color=KEY, alpha=shade, zorder=4,
-                   label="key points" if last else None)
+        ax.scatter(
+            kp[:, 0],
+            kp[:, 1],
+            s=16 if last else 8,
+            color=KEY,
+            alpha=shade,
+            zorder=4,
+            label="key points" if last else None,
+        )
         if last:
             for name, q in zip(keys.names, kp):
-                ax.annotate(name, q, textcoords="offset points", xytext=(4, 4), fontsize=7, color=KEY)
-    ax.plot(log["xd_x"], log["xd_y"], "--", color="0.45", lw=1.2, label="desired end-effector path", zorder=2)
-    ax.plot(log["ee_x"], log["ee_y"], "-", color="#e8590c", lw=1.0, alpha=0.9, label="actual end-effector path", zorder=2)
+                ax.annotate(
+                    name, q, textcoords="offset points", xytext=(4, 4), fontsize=7, color=KEY
+                )
+    ax.plot(
+        log["xd_x"],
+        log["xd_y"],
+        "--",
+        color="0.45",
+        lw=1.2,
+        label="desired end-effector path",
+        zorder=2,
+    )
+    ax.plot(
+        log["ee_x"],
+        log["ee_y"],
+        "-",
+        color="#e8590c",
+        lw=1.0,
+        alpha=0.9,
+        label="actual end-effector path",
+        zorder=2,
+    )
     ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
 
     close = closest_approach(log, scenario)
     if close is not None:
         a = list(keys.names).index(close["key_point"]) if close["key_point"] in keys.names else None
         if a is not None:
-            q = arm.points(theta[close["k"]], keys.links[a:a + 1], keys.fracs[a:a + 1])[0]
+            q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
             d_safe = scenario.data["controller"]["d_safe"]
             bad = close["distance"] < d_safe - 5e-4
-            ax.scatter([q[0]], [q[1]], s=140, facecolors="none", edgecolors="red" if bad else "black", lw=1.8, zorder=6,
-                       label="closest approach")
+            ax.scatter(
+                [q[0]],
+                [q[1]],
+                s=140,
+                facecolors="none",
+                edgecolors="red" if bad else "black",
+                lw=1.8,
+                zorder=6,
+                label="closest approach",
+            )
             ax.annotate(
                 f"{close['key_point']}: {close['distance'] * 1e3:.1f} mm from {close['obstacle']}\n"
                 f"at t = {close['t']:.2f} s (d_safe {d_safe * 1e3:.0f} mm)",
-                q, textcoords="offset points", xytext=(10, -28), fontsize=8, color="red" if bad else "black",
+                q,
+                textcoords="offset points",
+                xytext=(10, -28),
+                fontsize=8,
+                color="red" if bad else "black",
             )
 
     _workspace_axes(ax, xlim, ylim)
-    ax.set_title(title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s")
+    ax.set_title(
+        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s"
+    )
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
     from ..atomic import atomic_path
@@ -212,8 +310,17 @@ def draw_snapshot(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, in
     return path
 
 
-def animate(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, fps: int = 20, speed: float = 1.0, progress: bool = False,
-            title: str | None = None, dpi: int = 70) -> Path:
+def animate(
+    scenario: Scenario,
+    log: pd.DataFrame,
+    path: str | Path,
+    *,
+    fps: int = 20,
+    speed: float = 1.0,
+    progress: bool = False,
+    title: str | None = None,
+    dpi: int = 70,
+) -> Path:
     """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
 
     Args:
@@ -261,7 +368,9 @@ def animate(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, fps: int
     (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
     keys_plot = ax.scatter([], [], s=14, color=KEY, zorder=4)
     (trace,) = ax.plot([], [], "-", color="#e8590c", lw=1.0, zorder=2)
-    label = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8, family="monospace")
+    label = ax.text(
+        0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8, family="monospace"
+    )
     moving_artists: list = []
     head = title or scenario.name
 
@@ -279,7 +388,9 @@ def animate(scenario: Scenario, log: pd.DataFrame, path: str | Path, *, fps: int
         trace.set_data(log["ee_x"].to_numpy()[: k + 1], log["ee_y"].to_numpy()[: k + 1])
         dmin = np.nanmin(log[dcols].to_numpy()[k]) if dcols else float("nan")
         near = dcols and dmin < d_safe - 5e-4
-        label.set_text(f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else ""))
+        label.set_text(
+            f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else "")
+        )
         label.set_color("red" if near else "black")
         return [link_line, keys_plot, trace, label, *moving_artists]
 
@@ -294,11 +405,15 @@ def _check_animation(path: Path, fps: float, speed: float) -> None:
 
     suffix = path.suffix.lower()
     if suffix not in (".gif", ".mp4"):
-        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate")
+        raise ParamError(
+            f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate"
+        )
     if suffix == ".mp4" and shutil.which("ffmpeg") is None:
         raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
     if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
-        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate")
+        raise ParamError(
+            f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate"
+        )
 
 
 def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
@@ -314,7 +429,9 @@ def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: 
         bar = tqdm(total=n_frames, unit="frame", desc=f"animate {path.name}", leave=False)
     callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
 
-    writer = animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
+    writer = (
+        animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp{suffix}")
     try:

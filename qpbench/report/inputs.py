@@ -99,8 +99,17 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
     if series.dtype == bool:
         return series
     # an empty cell (a row whose solve crashed) counts as false
-    mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False,
-               "nan": False, "": False, "none": False}
+    mapping = {
+        "true": True,
+        "false": False,
+        "1": True,
+        "0": False,
+        "1.0": True,
+        "0.0": False,
+        "nan": False,
+        "": False,
+        "none": False,
+    }
     text = series.astype(str).str.strip().str.lower()
     bad = ~text.isin(list(mapping))
     if bad.any():
@@ -122,7 +131,10 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
     for p in map(Path, paths):
         if p.is_dir():
             found = sorted(
-                q for pattern in ("*.csv", "*.csv.gz") for q in p.rglob(pattern) if not q.name.startswith(".")
+                q
+                for pattern in ("*.csv", "*.csv.gz")
+                for q in p.rglob(pattern)
+                if not q.name.startswith(".")
             )
             if not found:
                 raise InputError("folder holds no result CSV", path=p)
@@ -152,12 +164,20 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
             a duplicate key or mixed repeat counts without ``prefer``.
     """
     if prefer is not None and prefer not in PREFER:
-        raise InputError(f"unknown value '{prefer}' (choose from {', '.join(PREFER)})", key="--prefer")
+        raise InputError(
+            f"unknown value '{prefer}' (choose from {', '.join(PREFER)})", key="--prefer"
+        )
     bench, loops, files = [], [], []
     for path in expand_paths(paths):
         try:
             df = pd.read_csv(path)
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError, EOFError) as exc:
+        except (
+            pd.errors.ParserError,
+            pd.errors.EmptyDataError,
+            UnicodeDecodeError,
+            OSError,
+            EOFError,
+        ) as exc:
             raise InputError(f"not a readable CSV ({exc})", path=path) from None
         cols = set(df.columns)
         if set(BENCH_COLUMNS) <= cols:
@@ -267,7 +287,9 @@ def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
         counts = ", ".join(f"{Path(f).name}: {int(r)}" for f, r in per_file.items())
         text = f"{backend} ({group_label(profile, mode or None)}) mixes rows timed with different --repeat ({counts})"
         if prefer is None:
-            raise InputError(f"{text}; pass --prefer first|last to report them together anyway", key="repeat")
+            raise InputError(
+                f"{text}; pass --prefer first|last to report them together anyway", key="repeat"
+            )
         notes.append(text + ": single-shot and repeated times are in one table")
     return notes
 

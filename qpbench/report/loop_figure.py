@@ -60,8 +60,15 @@ def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.r_[idx[0], idx[breaks + 1]], np.r_[idx[breaks], idx[-1]]))
 
 
-def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: float | None = None,
-                       adaptive: bool | None = None, budget_s: float = 1e-3) -> Path:
+def closed_loop_figure(
+    logs: dict,
+    path: str | Path,
+    *,
+    title: str,
+    d_safe: float | None = None,
+    adaptive: bool | None = None,
+    budget_s: float = 1e-3,
+) -> Path:
     """Draw the closed-loop figure of ``logs`` (backend name -> tick log) to ``path`` (PNG).
 
     Args:
@@ -86,13 +93,26 @@ def closed_loop_figure(logs: dict, path: str | Path, *, title: str, d_safe: floa
     logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
-    has_d = any(tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any() for d in logs.values())
+    has_d = any(
+        tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
+        for d in logs.values()
+    )
     if adaptive is None:
-        adaptive = any(tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0 for d in logs.values())
-    panels = ["tracking", "force"] + (["distance"] if has_d else []) + ["time", "speed"] + (["kp"] if adaptive else [])
+        adaptive = any(
+            tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
+            for d in logs.values()
+        )
+    panels = (
+        ["tracking", "force"]
+        + (["distance"] if has_d else [])
+        + ["time", "speed"]
+        + (["kp"] if adaptive else [])
+    )
     colours = dict(zip(logs, _palette(len(logs))))
 
-    fig, axes = plt.subplots(len(panels), 1, figsize=(9.5, 1.9 * len(panels) + 0.8), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(
+        len(panels), 1, figsize=(9.5, 1.9 * len(panels) + 0.8), sharex=True, squeeze=False
+    )
     axes = {name: ax for name, ax in zip(panels, axes[:, 0])}
     for backend, d in logs.items():
         _plot_log(axes, d, backend, colours[backend], has_d, adaptive)
@@ -113,12 +133,22 @@ def _plot_log(axes: dict, d, backend: str, c, has_d: bool, adaptive: bool) -> No
     """One backend's tick log on every panel, and a band on top of the first where it did not answer."""
     t = d[tick_log.T].to_numpy(float)
     style = dict(color=c, lw=0.9, label=backend)
-    axes["tracking"].plot(t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style)
+    axes["tracking"].plot(
+        t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style
+    )
     axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style)
     if has_d and tick_log.D_MIN in d.columns:
         axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style)
-    axes["time"].plot(t, d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6, color=c, lw=0.0, marker=".", ms=1.2,
-                      alpha=0.6, rasterized=True)
+    axes["time"].plot(
+        t,
+        d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6,
+        color=c,
+        lw=0.0,
+        marker=".",
+        ms=1.2,
+        alpha=0.6,
+        rasterized=True,
+    )
     axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style)
     if adaptive and tick_log.KP_HAT in d.columns:
         axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style)
@@ -128,12 +158,20 @@ def _plot_log(axes: dict, d, backend: str, c, has_d: bool, adaptive: bool) -> No
         if col in d.columns:
             not_own |= d[col].to_numpy(bool)
     for a, b in _intervals(not_own):
-        axes["tracking"].axvspan(t[a], t[b] + (t[1] - t[0] if len(t) > 1 else 0.0), ymin=0.94, ymax=1.0,
-                                 color=c, alpha=0.5, lw=0)
+        axes["tracking"].axvspan(
+            t[a],
+            t[b] + (t[1] - t[0] if len(t) > 1 else 0.0),
+            ymin=0.94,
+            ymax=1.0,
+            color=c,
+            alpha=0.5,
+            lw=0,
+        )
 
 
-def _label_axes(axes: dict, logs: dict, has_d: bool, adaptive: bool, d_safe: float | None,
-                budget_s: float) -> None:
+def _label_axes(
+    axes: dict, logs: dict, has_d: bool, adaptive: bool, d_safe: float | None, budget_s: float
+) -> None:
     """Scales, labels, the safety lines and the time budget of the panels."""
     ax = axes["tracking"]
     ax.set_yscale("log")
@@ -145,8 +183,14 @@ def _label_axes(axes: dict, logs: dict, has_d: bool, adaptive: bool, d_safe: flo
         ax = axes["distance"]
         if d_safe is not None:
             ax.axhline(d_safe * 1e3, color="black", ls="--", lw=0.8, label="d_safe")
-            ax.axhline((d_safe - UNSAFE_MARGIN) * 1e3, color="red", ls=":", lw=0.9, label="d_safe - 0.5 mm")
-            lo = min(float(np.nanmin(d[tick_log.D_MIN].to_numpy(float))) for d in logs.values() if tick_log.D_MIN in d.columns)
+            ax.axhline(
+                (d_safe - UNSAFE_MARGIN) * 1e3, color="red", ls=":", lw=0.9, label="d_safe - 0.5 mm"
+            )
+            lo = min(
+                float(np.nanmin(d[tick_log.D_MIN].to_numpy(float)))
+                for d in logs.values()
+                if tick_log.D_MIN in d.columns
+            )
             ax.set_ylim(bottom=min(lo * 1e3 - 1.0, d_safe * 1e3 - 2.0))
         ax.set_ylabel("closest key point\nto an obstacle [mm]")
     ax = axes["time"]
@@ -170,15 +214,23 @@ def _legend(fig, axes: dict, logs: dict) -> None:
         if name in axes:
             h, lab = axes[name].get_legend_handles_labels()
             extra += [(hh, ll) for hh, ll in zip(h, lab) if ll not in logs]
-    fig.legend(handles + [h for h, _ in extra], labels + [lab for _, lab in extra], loc="upper left",
-               bbox_to_anchor=(1.0, 0.97), fontsize=8, frameon=False,
-               title="band on top: fallback\nor zero velocity", title_fontsize=7)
+    fig.legend(
+        handles + [h for h, _ in extra],
+        labels + [lab for _, lab in extra],
+        loc="upper left",
+        bbox_to_anchor=(1.0, 0.97),
+        fontsize=8,
+        frameon=False,
+        title="band on top: fallback\nor zero velocity",
+        title_fontsize=7,
+    )
 
 
 def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:
     """The figure of one run (``qpbench simulate --plot``): its tick log and its summary's names."""
     return closed_loop_figure(
-        {summary["backend"]: frame}, path,
+        {summary["backend"]: frame},
+        path,
         title=f"{summary['scenario']} / {summary['backend']} / {summary['formulation']}",
         d_safe=summary.get("d_safe"),
     )

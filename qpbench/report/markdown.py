@@ -33,8 +33,8 @@ import pandas as pd
 
 from ..profiles import PROFILES
 from . import tables
-from .tables import slug
 from .machine import machine_info, package_versions
+from .tables import slug
 
 #: Significant digits of every float in the report.
 DIGITS = 4
@@ -65,9 +65,13 @@ def md_table(header: list[str], rows: list[list]) -> str:
     """A Markdown table (first column left-aligned, the others right-aligned)."""
     cells = [[fmt(c) for c in r] for r in rows]
     head = "| " + " | ".join(header) + " |"
-    align = "|:" + "-" * max(3, len(header[0])) + "|" + "|".join(
-        "-" * max(3, len(h)) + ":" for h in header[1:]
-    ) + "|"
+    align = (
+        "|:"
+        + "-" * max(3, len(header[0]))
+        + "|"
+        + "|".join("-" * max(3, len(h)) + ":" for h in header[1:])
+        + "|"
+    )
     body = ["| " + " | ".join(r) + " |" for r in cells]
     return "\n".join([head, align, *body]) + "\n"
 
@@ -83,7 +87,9 @@ def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
     """Backend -> name shown in tables showing times, and the footnote lines for isolated rows."""
     isolated = tables.isolated_rows(rows)
     totals = rows.groupby("backend", sort=True).size()
-    labels = {str(b): f"{b} {ISOLATED_MARK}" if str(b) in isolated else str(b) for b in totals.index}
+    labels = {
+        str(b): f"{b} {ISOLATED_MARK}" if str(b) in isolated else str(b) for b in totals.index
+    }
     notes = []
     if isolated:
         parts = ", ".join(f"{b} {n} of {int(totals[b])} rows" for b, n in isolated.items())
@@ -112,7 +118,8 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
         "without a solution counts as the profile's time limit (runtime) or its tolerance "
         "(residuals, gaps), and residuals and gaps are floored at their tolerance, as in "
         "qpbenchmark; a backend that reports the infeasibility the reference found (the "
-        "paper formulation's first ticks) answered right and its runtime counts as measured. Runtime is the harness's wall time of the "
+        "paper formulation's first ticks) answered right and its runtime counts as measured. "
+        "Runtime is the harness's wall time of the "
         "backend call and the reading of its answer (x and duals), the minimum over "
         "the row's timed repeats (`repeat` column). With "
         "sh = 10 s the runtime shm of microsecond solves is close to their arithmetic mean "
@@ -122,7 +129,7 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
         "columns), so the cold caches the harness leaves between problems do not fall on one backend. "
         "*runtime (feasible)* is the same mean over the problems whose reference "
         "solution is optimal only: on the paper formulation's infeasible ticks the right answer "
-        "is \"infeasible\", and a backend that cannot say so (qpsolvers' interface reports "
+        'is "infeasible", and a backend that cannot say so (qpsolvers\' interface reports '
         "not_solved) is charged the time limit for it in the plain column.\n"
     )
     for note in results.notes:
@@ -138,9 +145,16 @@ def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
     out: list[str] = []
     if "reference_agreement" in bench.columns:
         per_problem = (
-            bench.assign(_a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
-                         _s=[tables.scenario_key(v) for v in bench.get("scenario", pd.Series("-", index=bench.index))])
-            .groupby(["_s", "problem"], sort=False)["_a"].max().dropna()
+            bench.assign(
+                _a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
+                _s=[
+                    tables.scenario_key(v)
+                    for v in bench.get("scenario", pd.Series("-", index=bench.index))
+                ],
+            )
+            .groupby(["_s", "problem"], sort=False)["_a"]
+            .max()
+            .dropna()
         )
         if len(per_problem):
             out.append(
@@ -174,11 +188,23 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
     out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
     out.append(
         md_table(
-            ["backend", "problems", "success (%)", "runtime", "runtime (feasible)",
-             *(m.replace("_", " ") for m in accuracy)],
             [
-                [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
-                 r["runtime_feasible_ratio"], *(r[f"{m}_ratio"] for m in accuracy)]
+                "backend",
+                "problems",
+                "success (%)",
+                "runtime",
+                "runtime (feasible)",
+                *(m.replace("_", " ") for m in accuracy),
+            ],
+            [
+                [
+                    names[b],
+                    int(r["problems"]),
+                    r["success_rate"],
+                    r["runtime_ratio"],
+                    r["runtime_feasible_ratio"],
+                    *(r[f"{m}_ratio"] for m in accuracy),
+                ]
                 for b, r in summary.iterrows()
             ],
         )
@@ -187,11 +213,21 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
     out.append("Shifted geometric means, absolute values:\n")
     out.append(
         md_table(
-            ["backend", "runtime (us)", "runtime feasible (us)", *(m.replace("_", " ") for m in accuracy),
-             "harness overhead p50 (us)"],
             [
-                [names[b], r["runtime"] * _US, r["runtime_feasible"] * _US, *(r[m] for m in accuracy),
-                 r["overhead_median_s"] * _US]
+                "backend",
+                "runtime (us)",
+                "runtime feasible (us)",
+                *(m.replace("_", " ") for m in accuracy),
+                "harness overhead p50 (us)",
+            ],
+            [
+                [
+                    names[b],
+                    r["runtime"] * _US,
+                    r["runtime_feasible"] * _US,
+                    *(r[m] for m in accuracy),
+                    r["overhead_median_s"] * _US,
+                ]
                 for b, r in summary.iterrows()
             ],
         )
@@ -210,21 +246,42 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
     return out
 
 
-def _scenario_part(scenario: str, table: pd.DataFrame, label: str, rows: pd.DataFrame,
-                   names: dict[str, str], isolated_notes: list[str], plot_files: dict[str, str]) -> list[str]:
+def _scenario_part(
+    scenario: str,
+    table: pd.DataFrame,
+    label: str,
+    rows: pd.DataFrame,
+    names: dict[str, str],
+    isolated_notes: list[str],
+    plot_files: dict[str, str],
+) -> list[str]:
     """One scenario's runtime table of one profile, its solver-time part and its per-tick figure."""
     out: list[str] = []
     out.append(f"#### Scenario {scenario} ({label})\n")
     out.append("Per backend, runtime over every problem of the scenario:\n")
     out.append(
         md_table(
-            ["backend", "problems", "success (%)", "runtime shm ratio",
-             "runtime p50 (us)", "runtime p99 (us)", "runtime max (us)",
-             "max optimality gap"],
             [
-                [names[b], int(r["problems"]), r["success_rate"], r["runtime_ratio"],
-                 r["runtime_p50_s"] * _US, r["runtime_p99_s"] * _US,
-                 r["runtime_max_s"] * _US, r["optimality_gap_max"]]
+                "backend",
+                "problems",
+                "success (%)",
+                "runtime shm ratio",
+                "runtime p50 (us)",
+                "runtime p99 (us)",
+                "runtime max (us)",
+                "max optimality gap",
+            ],
+            [
+                [
+                    names[b],
+                    int(r["problems"]),
+                    r["success_rate"],
+                    r["runtime_ratio"],
+                    r["runtime_p50_s"] * _US,
+                    r["runtime_p99_s"] * _US,
+                    r["runtime_max_s"] * _US,
+                    r["optimality_gap_max"],
+                ]
                 for b, r in table.iterrows()
             ],
         )
@@ -252,10 +309,29 @@ def _solver_time_part(rows: pd.DataFrame, scenario: str, names: dict[str, str]) 
     ]
     out.append(
         md_table(
-            ["backend", "rows", "call p50 (us)", "call p99 (us)", "solver p50 (us)", "solver p99 (us)",
-             "call - solver p50 (us)", "call - solver p99 (us)"],
-            [[names.get(b, b), int(r["rows"]), r["call_p50"] * _US, r["call_p99"] * _US, r["solver_p50"] * _US,
-              r["solver_p99"] * _US, r["around_p50"] * _US, r["around_p99"] * _US] for b, r in table.iterrows()],
+            [
+                "backend",
+                "rows",
+                "call p50 (us)",
+                "call p99 (us)",
+                "solver p50 (us)",
+                "solver p99 (us)",
+                "call - solver p50 (us)",
+                "call - solver p99 (us)",
+            ],
+            [
+                [
+                    names.get(b, b),
+                    int(r["rows"]),
+                    r["call_p50"] * _US,
+                    r["call_p99"] * _US,
+                    r["solver_p50"] * _US,
+                    r["solver_p99"] * _US,
+                    r["around_p50"] * _US,
+                    r["around_p99"] * _US,
+                ]
+                for b, r in table.iterrows()
+            ],
         )
     )
     return out
@@ -273,9 +349,29 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     ]
     out.append(
         md_table(
-            ["backend", "problems", "found", "rows with x", "max", "p99", "max (feasible)", "p99 (feasible)"],
-            [[b, int(r["problems"]), int(r["found"]), int(r["with_x"]), r["max"], r["p99"],
-              r["feasible_max"], r["feasible_p99"]] for b, r in table.iterrows()],
+            [
+                "backend",
+                "problems",
+                "found",
+                "rows with x",
+                "max",
+                "p99",
+                "max (feasible)",
+                "p99 (feasible)",
+            ],
+            [
+                [
+                    b,
+                    int(r["problems"]),
+                    int(r["found"]),
+                    int(r["with_x"]),
+                    r["max"],
+                    r["p99"],
+                    r["feasible_max"],
+                    r["feasible_p99"],
+                ]
+                for b, r in table.iterrows()
+            ],
         )
     )
     for b in never:
@@ -283,7 +379,9 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
             continue
         r = table.loc[b]
         if int(r["with_x"]) == 0:
-            out.append(f"{b} never found a solution and returned no x: it has no accuracy figure.\n")
+            out.append(
+                f"{b} never found a solution and returned no x: it has no accuracy figure.\n"
+            )
             continue
         out.append(
             f"{b} never found a solution (0 of {int(r['problems'])} rows): its constraint violation is the "
@@ -318,7 +416,9 @@ CLOSED_LOOP_TABLE = (
 def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
     value = row.get(column)
     if scale is None:
-        return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
+        return (
+            "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
+        )
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -338,8 +438,16 @@ def _failed_verdicts(df: pd.DataFrame) -> list[str]:
     out.append(
         md_table(
             ["scenario", "backend", "formulation", "verdict", "reasons"],
-            [[str(r["scenario"]), str(r["backend"]), r.get("formulation"), str(r["verdict"]),
-              r.get("verdict_reasons")] for _, r in bad.iterrows()],
+            [
+                [
+                    str(r["scenario"]),
+                    str(r["backend"]),
+                    r.get("formulation"),
+                    str(r["verdict"]),
+                    r.get("verdict_reasons"),
+                ]
+                for _, r in bad.iterrows()
+            ],
         )
     )
     return out
@@ -350,7 +458,7 @@ def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) ->
     out = ["## Closed loop\n"]
     out.append(
         "Each scenario with each backend solving every tick's QP in the loop. Tracking and "
-        f"force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
+        "force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
         "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
         "factor is simulated time over wall time. Each run's *verdict* (thresholds in the "
         "scenario file's `[verdict]` table) is `failed` (the backend raised, answered with "
@@ -371,8 +479,11 @@ def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) ->
         out.append(
             md_table(
                 ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
-                [[str(r["backend"])] + [_closed_loop_cell(r, c, s) for _, c, s in CLOSED_LOOP_TABLE]
-                 for _, r in g.iterrows()],
+                [
+                    [str(r["backend"])]
+                    + [_closed_loop_cell(r, c, s) for _, c, s in CLOSED_LOOP_TABLE]
+                    for _, r in g.iterrows()
+                ],
             )
         )
         errors = g[~g["status"].isin(("ok", "budget"))]
@@ -399,12 +510,18 @@ def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -
     shown = [role for role, key in keys.items() if key in plot_files]
     if not shown:
         return []
-    return [f"The arm, {scenario}:\n",
-            md_table([ROLES[r] for r in shown], [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]])]
+    return [
+        f"The arm, {scenario}:\n",
+        md_table(
+            [ROLES[r] for r in shown],
+            [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]],
+        ),
+    ]
 
 
-def render(results: tables.Results, plot_files: dict[str, str] | None = None,
-           date: str | None = None) -> str:
+def render(
+    results: tables.Results, plot_files: dict[str, str] | None = None, date: str | None = None
+) -> str:
     """The text of ``report.md``.
 
     Args:
@@ -441,11 +558,30 @@ def render(results: tables.Results, plot_files: dict[str, str] | None = None,
         lines.append("Settings asked of every backend and success tolerances:\n")
         lines.append(
             md_table(
-                ["profile", "eps_abs", "eps_rel", "max_iter", "time limit (s)", "primal tol",
-                 "dual tol", "gap tol"],
-                [[p.name, p.eps_abs, p.eps_rel, p.max_iter, p.time_limit, p.tolerance.primal,
-                  p.tolerance.dual, p.tolerance.gap]
-                 for n, p in PROFILES.items() if n in profiles_used],
+                [
+                    "profile",
+                    "eps_abs",
+                    "eps_rel",
+                    "max_iter",
+                    "time limit (s)",
+                    "primal tol",
+                    "dual tol",
+                    "gap tol",
+                ],
+                [
+                    [
+                        p.name,
+                        p.eps_abs,
+                        p.eps_rel,
+                        p.max_iter,
+                        p.time_limit,
+                        p.tolerance.primal,
+                        p.tolerance.dual,
+                        p.tolerance.gap,
+                    ]
+                    for n, p in PROFILES.items()
+                    if n in profiles_used
+                ],
             )
         )
     if not results.closed_loop.empty:

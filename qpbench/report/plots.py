@@ -123,8 +123,9 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     return True
 
 
-def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path: Path,
-                      path_v: Path) -> tuple[bool, bool]:
+def closed_loop_plots(
+    runs: pd.DataFrame, scenario: str, formulation: str, path: Path, path_v: Path
+) -> tuple[bool, bool]:
     """The closed-loop figure of one scenario, every backend overlaid
     (:func:`qpbench.report.loop_figure.closed_loop_figure`), and the joint velocities per backend."""
     from .loop_figure import closed_loop_figure
@@ -141,19 +142,28 @@ def closed_loop_plots(runs: pd.DataFrame, scenario: str, formulation: str, path:
     if not logs:
         return False, False
     closed_loop_figure(logs, path, title=f"Closed loop, {scenario} ({formulation})", d_safe=d_safe)
-    done_v = _per_backend_figure(logs, _velocity_columns, "v (rad/s)", 1.0,
-                                 f"Joint velocities, {scenario} ({formulation})", path_v)
+    done_v = _per_backend_figure(
+        logs,
+        _velocity_columns,
+        "v (rad/s)",
+        1.0,
+        f"Joint velocities, {scenario} ({formulation})",
+        path_v,
+    )
     return True, done_v
 
 
-def _per_backend_figure(logs: dict, columns, ylabel: str, scale: float, title: str, path: Path) -> bool:
+def _per_backend_figure(
+    logs: dict, columns, ylabel: str, scale: float, title: str, path: Path
+) -> bool:
     """One panel per backend, one line per column that ``columns(log)`` names."""
     with_cols = {b: d for b, d in logs.items() if columns(d)}
     if not with_cols:
         return False
     plt = _pyplot()
-    fig, axes = plt.subplots(len(with_cols), 1, figsize=(7.5, 1.8 * len(with_cols) + 0.6), sharex=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        len(with_cols), 1, figsize=(7.5, 1.8 * len(with_cols) + 0.6), sharex=True, squeeze=False
+    )
     for ax, (backend, d) in zip(axes[:, 0], with_cols.items()):
         for c in columns(d):
             ax.plot(d[tick_log.T].to_numpy(float), d[c].to_numpy(float) * scale, lw=0.8, label=c)
@@ -173,11 +183,19 @@ def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Pat
         df = _read_log(r.get("log_path"))
         if df is not None and tick_log.T in df.columns and len(df):
             logs[str(r["backend"])] = df
-    return _per_backend_figure(logs, tick_log.distance_columns, "distance (mm)", 1e3,
-                               f"Key-point distances, {scenario} ({formulation})", path)
+    return _per_backend_figure(
+        logs,
+        tick_log.distance_columns,
+        "distance (mm)",
+        1e3,
+        f"Key-point distances, {scenario} ({formulation})",
+        path,
+    )
 
 
-def write_plots(results: tables.Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
+def write_plots(
+    results: tables.Results, folder: str | Path, relative_to: str | Path
+) -> dict[str, str]:
     """Write every figure of a report into ``folder``; return key -> path relative to ``relative_to``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -202,8 +220,9 @@ def write_plots(results: tables.Results, folder: str | Path, relative_to: str | 
         ):
             key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
             key_v = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
-            done, done_v = closed_loop_plots(g, scenario, formulation, folder / f"{key}.png",
-                                             folder / f"{key_v}.png")
+            done, done_v = closed_loop_plots(
+                g, scenario, formulation, folder / f"{key}.png", folder / f"{key_v}.png"
+            )
             if done:
                 files[key] = _rel(folder / f"{key}.png")
             if done_v:
@@ -211,7 +230,9 @@ def write_plots(results: tables.Results, folder: str | Path, relative_to: str | 
             key_d = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
             if done and keypoint_plot(g, scenario, formulation, folder / f"{key_d}.png"):
                 files[key_d] = _rel(folder / f"{key_d}.png")
-            files.update({k: _rel(p) for k, p in write_snapshots(g, scenario, formulation, folder).items()})
+            files.update(
+                {k: _rel(p) for k, p in write_snapshots(g, scenario, formulation, folder).items()}
+            )
     remove_unlinked(folder, files.values(), relative_to)
     return files
 

@@ -58,21 +58,31 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
         return {}
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
-    whole = pd.to_numeric(runs["simulated_s"], errors="coerce") >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
+    whole = (
+        pd.to_numeric(runs["simulated_s"], errors="coerce")
+        >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
+    )
     backends = [str(b) for b in runs["backend"]]
     is_exact = np.array([_is_exact(b) for b in backends], dtype=bool)
-    exact = runs[is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)]
+    exact = runs[
+        is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)
+    ]
     if not exact.empty:
         p50 = pd.to_numeric(exact["solve_time_p50_s"], errors="coerce").fillna(np.inf)
         chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
     networks = runs[np.array([_is_network(b) for b in backends], dtype=bool)]
     if not networks.empty:
-        rank = [NETWORKS.index(b) if b in NETWORKS else len(NETWORKS) for b in networks["backend"].astype(str)]
+        rank = [
+            NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)
+            for b in networks["backend"].astype(str)
+        ]
         chosen["network"] = networks.iloc[int(np.argmin(rank))]
     return chosen
 
 
-def write_snapshots(runs: pd.DataFrame, scenario: str, formulation: str, folder: Path) -> dict[str, Path]:
+def write_snapshots(
+    runs: pd.DataFrame, scenario: str, formulation: str, folder: Path
+) -> dict[str, Path]:
     """Draw the snapshots of one scenario's runs into ``folder``; return key -> file."""
     from ..sim.scenario import load_scenario
     from .arm import draw_snapshot
@@ -88,7 +98,9 @@ def write_snapshots(runs: pd.DataFrame, scenario: str, formulation: str, folder:
         return files
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
-        if frame is None or not {f"theta_{i}" for i in range(scene.make_arm().n)} <= set(frame.columns):
+        if frame is None or not {f"theta_{i}" for i in range(scene.make_arm().n)} <= set(
+            frame.columns
+        ):
             continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         path = folder / f"{key}.png"

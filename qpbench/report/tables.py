@@ -188,7 +188,9 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
             # Only when most solves report a time: a median over a few rows
             # (e.g. Clarabel, which reports its time only when freshly built,
             # set-up included) would not describe the backend.
-            rec["overhead_median_s"] = float(diff.median()) if len(diff) >= 0.5 * len(g) else math.nan
+            rec["overhead_median_s"] = (
+                float(diff.median()) if len(diff) >= 0.5 * len(g) else math.nan
+            )
         else:
             rec["overhead_median_s"] = math.nan
         out[backend] = rec
@@ -216,7 +218,8 @@ def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
         ok = ~np.isnan(v)
         feasible = (
             (g["reference_status"].astype(str) == "optimal").to_numpy()
-            if "reference_status" in g.columns else np.zeros(len(g), dtype=bool)
+            if "reference_status" in g.columns
+            else np.zeros(len(g), dtype=bool)
         )
         vf = v[ok & feasible]
         out[backend] = {
@@ -256,9 +259,12 @@ def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
         around = call - solver
         out[backend] = {
             "rows": int(ok.sum()),
-            "call_p50": float(np.percentile(call, 50)), "call_p99": float(np.percentile(call, 99)),
-            "solver_p50": float(np.percentile(solver, 50)), "solver_p99": float(np.percentile(solver, 99)),
-            "around_p50": float(np.percentile(around, 50)), "around_p99": float(np.percentile(around, 99)),
+            "call_p50": float(np.percentile(call, 50)),
+            "call_p99": float(np.percentile(call, 99)),
+            "solver_p50": float(np.percentile(solver, 50)),
+            "solver_p99": float(np.percentile(solver, 99)),
+            "around_p50": float(np.percentile(around, 50)),
+            "around_p99": float(np.percentile(around, 99)),
         }
     return pd.DataFrame.from_dict(out, orient="index")
 
@@ -273,9 +279,7 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
     (largest absolute gap among found solutions, NaN when none has one).
     """
     df = rows.copy()
-    df["_scenario"] = (
-        [scenario_key(v) for v in df["scenario"]] if "scenario" in df.columns else "-"
-    )
+    df["_scenario"] = [scenario_key(v) for v in df["scenario"]] if "scenario" in df.columns else "-"
     tables = {}
     tcol = runtime_column(df)
     for scenario, g in df.groupby("_scenario", sort=True):
@@ -318,7 +322,9 @@ def performance_profile(
         + "\x00"
         + (rows["scenario"].map(scenario_key) if "scenario" in rows.columns else "")
     )
-    t = rows.pivot_table(index="_key", columns="backend", values=runtime_column(rows), aggfunc="first")
+    t = rows.pivot_table(
+        index="_key", columns="backend", values=runtime_column(rows), aggfunc="first"
+    )
     ok = rows.pivot_table(index="_key", columns="backend", values="success", aggfunc="first")
     ok = ok.reindex_like(t).fillna(False).astype(bool)
     times = t.to_numpy(dtype=float)

@@ -17,8 +17,15 @@ from .markdown import render
 __all__ = ["write_report"]
 
 
-def write_report(paths: list[str | Path], out: str | Path, *, force: bool = False,
-                 plots: bool = True, prefer: str | None = None, sections=None) -> Path:
+def write_report(
+    paths: list[str | Path],
+    out: str | Path,
+    *,
+    force: bool = False,
+    plots: bool = True,
+    prefer: str | None = None,
+    sections=None,
+) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 
     Args:
@@ -41,8 +48,11 @@ def write_report(paths: list[str | Path], out: str | Path, *, force: bool = Fals
     check_folder(out)
     if out.exists():
         check_output(report_path, force=force)
-    results = tables.read_results(paths, prefer=prefer) if paths or sections is None else tables.Results(
-        pd.DataFrame(), pd.DataFrame())
+    results = (
+        tables.read_results(paths, prefer=prefer)
+        if paths or sections is None
+        else tables.Results(pd.DataFrame(), pd.DataFrame())
+    )
     plot_files: dict[str, str] = {}
     if plots:
         from .plots import write_plots

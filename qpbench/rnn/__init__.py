@@ -10,16 +10,16 @@ from __future__ import annotations
 
 from .network import (
     METHODS,
-    DenseQP,
-    IntegrationResult,
     NO_STABLE_STEP,
     SHAPE_MISMATCH,
+    DenseQP,
+    IntegrationResult,
     NetworkState,
     dense_qp,
     duals,
+    integrate,
     kernel,
     make_params,
-    integrate,
     numba_available,
     stable_ratio,
 )

@@ -16,21 +16,21 @@ from .layout import (
     DUAL,
     L1_CLIP,
     MAX_STEPS,
+    NO_STABLE_STEP,
     NOMINAL,
     NOTE,
     NOTE_CAPPED,
     NOTE_CLAMPED,
     NOTE_NONE,
     NOTE_UNPROVEN,
-    NO_STABLE_STEP,
     OBJ,
     PMAX,
     PMIN,
     PRIMAL,
-    RATIO,
-    RATIO_MAX,
     R_STEP,
     R_TOTAL,
+    RATIO,
+    RATIO_MAX,
     SAFETY,
     SEMI,
     SHAPE_MISMATCH,
@@ -39,15 +39,25 @@ from .layout import (
     SUBSTEPS,
     TOL,
 )
-from .step_bound import _clamped_steps, _nominal_steps, _ratio_max, _sigma2_bound_numpy, p_eigen_range
+from .step_bound import (
+    _clamped_steps,
+    _nominal_steps,
+    _ratio_max,
+    _sigma2_bound_numpy,
+    p_eigen_range,
+)
 
 
 def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     """Same contract as the compiled kernel (see :func:`kernel`)."""
     n, me, mi = q.shape[0], b.shape[0], h.shape[0]
     if (
-        P.shape != (n, n) or A.shape != (me, n) or G.shape != (mi, n) or lb.shape != (n,)
-        or ub.shape != (n,) or xi.shape != (n + me + mi,)
+        P.shape != (n, n)
+        or A.shape != (me, n)
+        or G.shape != (mi, n)
+        or lb.shape != (n,)
+        or ub.shape != (n,)
+        or xi.shape != (n + me + mi,)
         or sol.shape[0] not in (0, 2 * n + me + mi, 3 * n + 2 * (me + mi))
     ):
         return SHAPE_MISMATCH

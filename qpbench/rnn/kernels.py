@@ -16,32 +16,35 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .integrate_numpy import _integrate_numpy
+
 # Each slot name imported on its own (the list repeats the other rnn modules'): the kernels read
 # them as plain module globals, which numba freezes as constants at compile time.
 from .layout import (
+    _SQUARINGS,
     CLAMP,
     COMPL,
     DIVERGED,
     DUAL,
     L1_CLIP,
     MAX_STEPS,
+    NO_STABLE_STEP,
     NOMINAL,
     NOTE,
     NOTE_CAPPED,
     NOTE_CLAMPED,
     NOTE_NONE,
     NOTE_UNPROVEN,
-    NO_STABLE_STEP,
     OBJ,
     OK_DUAL,
     OK_PRIMAL,
     PMAX,
     PMIN,
     PRIMAL,
-    RATIO,
-    RATIO_MAX,
     R_STEP,
     R_TOTAL,
+    RATIO,
+    RATIO_MAX,
     SAFETY,
     SEMI,
     SHAPE_MISMATCH,
@@ -50,10 +53,8 @@ from .layout import (
     STEPS,
     SUBSTEPS,
     TOL,
-    _SQUARINGS,
 )
 from .step_bound import _clamped_steps, _frobenius2, _gershgorin, _nominal_steps, _ratio_max
-from .integrate_numpy import _integrate_numpy
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -142,7 +143,9 @@ def _grad_products(P, q, A, G, xi, g, Av, Gv, products):  # pragma: no cover - r
             Gv[i] = s
 
 
-def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):  # pragma: no cover - runs compiled
+def _step(
+    P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip
+):  # pragma: no cover - runs compiled
     """One step of ratio ``r`` from the state ``xi`` whose ``g`` (and ``Av``, ``Gv``) are given; refreshes them."""
     n = q.shape[0]
     me = b.shape[0]
@@ -210,10 +213,20 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     me = b.shape[0]
     mi = h.shape[0]
     if (
-        P.shape[0] != n or P.shape[1] != n or A.shape[0] != me or A.shape[1] != n
-        or G.shape[0] != mi or G.shape[1] != n or lb.shape[0] != n or ub.shape[0] != n
+        P.shape[0] != n
+        or P.shape[1] != n
+        or A.shape[0] != me
+        or A.shape[1] != n
+        or G.shape[0] != mi
+        or G.shape[1] != n
+        or lb.shape[0] != n
+        or ub.shape[0] != n
         or xi.shape[0] != n + me + mi
-        or (sol.shape[0] != 0 and sol.shape[0] != 2 * n + me + mi and sol.shape[0] != 3 * n + 2 * (me + mi))
+        or (
+            sol.shape[0] != 0
+            and sol.shape[0] != 2 * n + me + mi
+            and sol.shape[0] != 3 * n + 2 * (me + mi)
+        )
     ):
         return SHAPE_MISMATCH
     o1 = n
@@ -249,7 +262,9 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
                 if rmax <= 0.0:
                     note = NOTE_UNPROVEN
                 elif r_total / nominal > prm[SAFETY] * rmax:
-                    nsteps = _clamped_steps_jit(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                    nsteps = _clamped_steps_jit(
+                        r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS]
+                    )
                     note = NOTE_CLAMPED
     else:
         sig2 = _sigma2_bound_jit(A, G)
@@ -376,8 +391,10 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
     olb = int(buf[9])
     oub = int(buf[10])
     if not (
-        _part_fits_jit(oP, n * n, length) and _part_fits_jit(oq, n, length)
-        and _part_fits_jit(olb, n, length) and _part_fits_jit(oub, n, length)
+        _part_fits_jit(oP, n * n, length)
+        and _part_fits_jit(oq, n, length)
+        and _part_fits_jit(olb, n, length)
+        and _part_fits_jit(oub, n, length)
         and (me == 0 or (_part_fits_jit(oA, me * n, length) and _part_fits_jit(ob, me, length)))
         and (mi == 0 or (_part_fits_jit(oG, mi * n, length) and _part_fits_jit(oh, mi, length)))
     ):
@@ -387,10 +404,17 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
     if mi == 0:
         oG = oh = _HEADER
     return _online_tick_jit(
-        buf[oP : oP + n * n].reshape((n, n)), buf[oq : oq + n],
-        buf[oA : oA + me * n].reshape((me, n)), buf[ob : ob + me],
-        buf[oG : oG + mi * n].reshape((mi, n)), buf[oh : oh + mi],
-        buf[olb : olb + n], buf[oub : oub + n], xi, prm, sol,
+        buf[oP : oP + n * n].reshape((n, n)),
+        buf[oq : oq + n],
+        buf[oA : oA + me * n].reshape((me, n)),
+        buf[ob : ob + me],
+        buf[oG : oG + mi * n].reshape((mi, n)),
+        buf[oh : oh + mi],
+        buf[olb : olb + n],
+        buf[oub : oub + n],
+        xi,
+        prm,
+        sol,
     )
 
 
@@ -436,8 +460,20 @@ def kernel(use_numba: bool = True) -> Callable:
     """
     if not use_numba:
         return _integrate_numpy
-    global _COMPILED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit, _grad_products_jit, _integrate_jit
-    global _step_jit, _residuals_jit, _gershgorin_jit, _frobenius2_jit, _nominal_steps_jit, _clamped_steps_jit
+    global \
+        _COMPILED, \
+        _sigma2_bound_jit, \
+        _ratio_max_jit, \
+        _matvec_jit, \
+        _grad_products_jit, \
+        _integrate_jit
+    global \
+        _step_jit, \
+        _residuals_jit, \
+        _gershgorin_jit, \
+        _frobenius2_jit, \
+        _nominal_steps_jit, \
+        _clamped_steps_jit
     if _COMPILED is None:
         import numba
 

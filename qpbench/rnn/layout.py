@@ -6,7 +6,6 @@ builds it), shared by the numpy integrator and the compiled kernels.
 
 from __future__ import annotations
 
-
 #: Integration methods.
 METHODS = ("euler", "semi-implicit")
 

@@ -62,9 +62,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..exceptions import ParamError, ProblemFormatError
+from .kernels import (  # noqa: F401 - the network's names, read through this module
+    _HEADER,
+    kernel,
+    numba_available,
+    online_kernel,
+    packed_kernel,
+)
+
 # The layout's names re-exported one by one (the list repeats kernels.py's): callers read the
 # network's slots as ``network.NAME``, and this list says which names that covers.
 from .layout import (  # noqa: F401 - the network's names, read through this module
+    _SQUARINGS,
     CLAMP,
     COMPL,
     DIVERGED,
@@ -72,13 +81,13 @@ from .layout import (  # noqa: F401 - the network's names, read through this mod
     L1_CLIP,
     MAX_STEPS,
     METHODS,
+    NO_STABLE_STEP,
     NOMINAL,
     NOTE,
     NOTE_CAPPED,
     NOTE_CLAMPED,
     NOTE_NONE,
     NOTE_UNPROVEN,
-    NO_STABLE_STEP,
     OBJ,
     OK_DUAL,
     OK_PRIMAL,
@@ -86,10 +95,10 @@ from .layout import (  # noqa: F401 - the network's names, read through this mod
     PMIN,
     PRIMAL,
     PRM_SIZE,
-    RATIO,
-    RATIO_MAX,
     R_STEP,
     R_TOTAL,
+    RATIO,
+    RATIO_MAX,
     SAFETY,
     SEMI,
     SHAPE_MISMATCH,
@@ -98,7 +107,6 @@ from .layout import (  # noqa: F401 - the network's names, read through this mod
     STEPS,
     SUBSTEPS,
     TOL,
-    _SQUARINGS,
 )
 from .problem import (  # noqa: F401 - the network's names, read through this module
     DenseQP,
@@ -111,13 +119,6 @@ from .step_bound import (  # noqa: F401 - the network's names, read through this
     make_params,
     p_eigen_range,
     stable_ratio,
-)
-from .kernels import (  # noqa: F401 - the network's names, read through this module
-    _HEADER,
-    kernel,
-    numba_available,
-    online_kernel,
-    packed_kernel,
 )
 
 
@@ -178,13 +179,24 @@ def integrate(
         is not positive definite and no step count was forced).
     """
     if state.shape != qp.shape:
-        raise ParamError(f"state shape {state.shape} does not match problem {qp.shape}", key="state")
+        raise ParamError(
+            f"state shape {state.shape} does not match problem {qp.shape}", key="state"
+        )
     prm = make_params(
-        p_range=p_range if p_range is not None else p_eigen_range(qp.P), method=method,
-        r_total=r_total, substeps=substeps, safety=safety, max_steps=max_steps, tol=tol,
-        l1_clip=l1_clip, step_ratio=step_ratio, clamp=clamp,
+        p_range=p_range if p_range is not None else p_eigen_range(qp.P),
+        method=method,
+        r_total=r_total,
+        substeps=substeps,
+        safety=safety,
+        max_steps=max_steps,
+        tol=tol,
+        l1_clip=l1_clip,
+        step_ratio=step_ratio,
+        clamp=clamp,
     )
-    steps = kernel(use_numba)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL)
+    steps = kernel(use_numba)(
+        qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL
+    )
     if steps == SHAPE_MISMATCH:  # pragma: no cover - dense_qp checked the shapes
         raise ProblemFormatError("inconsistent problem shapes", key="P")
     return result(prm)
@@ -193,8 +205,15 @@ def integrate(
 def result(prm: np.ndarray) -> IntegrationResult:
     """The :class:`IntegrationResult` of the last kernel call on ``prm``."""
     return IntegrationResult(
-        int(prm[STEPS]), float(prm[PRIMAL]), float(prm[DUAL]), float(prm[COMPL]), float(prm[OBJ]),
-        float(prm[RATIO]), float(prm[RATIO_MAX]), float(prm[SIG2]), int(prm[NOMINAL]),
+        int(prm[STEPS]),
+        float(prm[PRIMAL]),
+        float(prm[DUAL]),
+        float(prm[COMPL]),
+        float(prm[OBJ]),
+        float(prm[RATIO]),
+        float(prm[RATIO_MAX]),
+        float(prm[SIG2]),
+        int(prm[NOMINAL]),
     )
 
 

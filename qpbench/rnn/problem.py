@@ -65,7 +65,9 @@ def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarra
     M = _f64(M, m_name, 2)
     v = _f64(v, v_name, 1)
     if M.shape[1] != n or v.shape[0] != M.shape[0]:
-        raise ProblemFormatError(f"{m_name} {M.shape} and {v_name} {v.shape} do not fit n = {n}", key=m_name)
+        raise ProblemFormatError(
+            f"{m_name} {M.shape} and {v_name} {v.shape} do not fit n = {n}", key=m_name
+        )
     return M, v
 
 
@@ -126,7 +128,9 @@ class NetworkState:
 
     def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
         if xi.shape != (n + me + mi,):
-            raise ParamError(f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state")
+            raise ParamError(
+                f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state"
+            )
         self.xi = xi
         self.n, self.me, self.mi = n, me, mi
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..exceptions import ParamError
 from .layout import (
+    _SQUARINGS,
     CLAMP,
     L1_CLIP,
     MAX_STEPS,
@@ -34,7 +35,6 @@ from .layout import (
     STEPS,
     SUBSTEPS,
     TOL,
-    _SQUARINGS,
 )
 from .problem import DenseQP
 
@@ -164,7 +164,9 @@ def make_params(
 ) -> np.ndarray:
     """The parameter block ``prm`` of the kernels (see :func:`integrate`)."""
     if method not in METHODS:
-        raise ParamError(f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method")
+        raise ParamError(
+            f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
+        )
     prm = np.zeros(PRM_SIZE)
     prm[PMIN], prm[PMAX] = p_range
     prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0

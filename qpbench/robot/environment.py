@@ -72,15 +72,27 @@ class ContactSurface:
         seed: Seed of the noise generator (same seed, same noise).
     """
 
-    def __init__(self, point, normal, stiffness: float, damping: float, noise_std: float = 0.0, seed: int | None = 0):
+    def __init__(
+        self,
+        point,
+        normal,
+        stiffness: float,
+        damping: float,
+        noise_std: float = 0.0,
+        seed: int | None = 0,
+    ):
         self.point = _vec2(point, "contact.point")
         self.normal = _unit(normal, "contact.normal")
         if not stiffness > 0:
-            raise InputError(f"stiffness must be > 0 [N/m], got {stiffness}", key="contact.stiffness")
+            raise InputError(
+                f"stiffness must be > 0 [N/m], got {stiffness}", key="contact.stiffness"
+            )
         if not damping >= 0:
             raise InputError(f"damping must be >= 0 [N s/m], got {damping}", key="contact.damping")
         if not noise_std >= 0:
-            raise InputError(f"noise_std must be >= 0 [N], got {noise_std}", key="contact.force_noise_std")
+            raise InputError(
+                f"noise_std must be >= 0 [N], got {noise_std}", key="contact.force_noise_std"
+            )
         self.stiffness = float(stiffness)
         self.damping = float(damping)
         self.noise_std = float(noise_std)
@@ -227,7 +239,9 @@ class DiskObstacle(Obstacle):
         super().__init__(name, velocity)
         self.center = _vec2(center, f"obstacles.{name}.center")
         if not radius > 0:
-            raise InputError(f"radius must be > 0 [m], got {radius}", key=f"obstacles.{name}.radius")
+            raise InputError(
+                f"radius must be > 0 [m], got {radius}", key=f"obstacles.{name}.radius"
+            )
         self.radius = float(radius)
 
     def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -251,7 +265,9 @@ class PointCloudObstacle(Obstacle):
         super().__init__(name, velocity)
         pts = np.asarray(points, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 1 or not np.all(np.isfinite(pts)):
-            raise InputError(f"expected a list of [x, y] points, got {points!r}", key=f"obstacles.{name}.points")
+            raise InputError(
+                f"expected a list of [x, y] points, got {points!r}", key=f"obstacles.{name}.points"
+            )
         self.points = pts
         self.n_points = pts.shape[0]
 

@@ -44,9 +44,15 @@ class PlanarArm:
     def __init__(self, lengths):
         lengths = np.asarray(lengths, dtype=float)
         if lengths.ndim != 1 or lengths.size < 2:
-            raise InputError(f"a planar arm needs at least 2 link lengths, got {lengths.tolist()}", key="link_lengths")
+            raise InputError(
+                f"a planar arm needs at least 2 link lengths, got {lengths.tolist()}",
+                key="link_lengths",
+            )
         if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
-            raise InputError(f"link lengths must be finite and > 0 [m], got {lengths.tolist()}", key="link_lengths")
+            raise InputError(
+                f"link lengths must be finite and > 0 [m], got {lengths.tolist()}",
+                key="link_lengths",
+            )
         self.lengths = lengths
         self.n = lengths.size
 
@@ -77,7 +83,9 @@ class PlanarArm:
         return p[links] + (fracs * self.lengths[links])[:, None] * d
 
     # -- Jacobians -----------------------------------------------------------
-    def points_jacobians(self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def points_jacobians(
+        self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Positions (a, 2) in [m] and Jacobians (a, 2, n) in [m/rad] of points on links (eq. 7b)."""
         links = np.asarray(links, dtype=int)
         x = self.points(theta, links, fracs)
@@ -116,7 +124,9 @@ class KeyPoints:
         return int(self.links.size)
 
 
-def default_key_points(n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0) -> KeyPoints:
+def default_key_points(
+    n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0
+) -> KeyPoints:
     """Key points of an n-link chain: evenly spaced points on each link and the joints J2..Jn.
 
     With ``points_per_link = 1`` and joints included this is the paper's set
@@ -132,7 +142,9 @@ def default_key_points(n: int, points_per_link: int = 1, include_joints: bool = 
         radius: Link radius in [m].
     """
     if points_per_link < 0:
-        raise InputError(f"points_per_link must be >= 0, got {points_per_link}", key="points_per_link")
+        raise InputError(
+            f"points_per_link must be >= 0, got {points_per_link}", key="points_per_link"
+        )
     links, fracs = [], []
     for i in range(n):
         for j in range(1, points_per_link + 1):
@@ -142,6 +154,10 @@ def default_key_points(n: int, points_per_link: int = 1, include_joints: bool = 
             links.append(i)
             fracs.append(1.0)
     if not links:
-        raise InputError("no key points: points_per_link = 0 and include_joints = false", key="key_points")
+        raise InputError(
+            "no key points: points_per_link = 0 and include_joints = false", key="key_points"
+        )
     names = tuple(f"A{i + 1}" for i in range(len(links)))
-    return KeyPoints(np.array(links, dtype=np.int64), np.array(fracs, dtype=float), names, float(radius))
+    return KeyPoints(
+        np.array(links, dtype=np.int64), np.array(fracs, dtype=float), names, float(radius)
+    )

@@ -56,7 +56,9 @@ class ArmSpec:
         if int(self.links) < 2:
             raise ParamError(f"an arm needs at least 2 links, got {self.links}", key="links")
         if int(self.points_per_link) < 1:
-            raise ParamError(f"points_per_link must be >= 1, got {self.points_per_link}", key="points_per_link")
+            raise ParamError(
+                f"points_per_link must be >= 1, got {self.points_per_link}", key="points_per_link"
+            )
 
     @property
     def key_point_count(self) -> int:
@@ -115,7 +117,9 @@ def bent_arm_angles(lengths: np.ndarray, target: np.ndarray) -> np.ndarray:
     dist = float(np.hypot(*target))
     lo, hi = 0.0, 2.0 * math.pi / n * 0.95
     if not _reach_at(lengths, hi) < dist < _reach_at(lengths, lo):
-        raise ParamError(f"target {target.tolist()} m is out of reach of a bent {n}-link arm", key="target")
+        raise ParamError(
+            f"target {target.tolist()} m is out of reach of a bent {n}-link arm", key="target"
+        )
     for _ in range(100):  # the reach falls monotonically as the arc bends on [0, 2 pi / n)
         mid = 0.5 * (lo + hi)
         if _reach_at(lengths, mid) > dist:
@@ -136,6 +140,9 @@ def generate_arm(spec: ArmSpec, target: np.ndarray) -> GeneratedArm:
     arm = PlanarArm(lengths)
     theta0 = bent_arm_angles(lengths, target)
     if np.any(np.abs(theta0) > THETA_LIMIT):
-        raise ParamError(f"start angles {theta0.tolist()} leave the joint limits +-{THETA_LIMIT} rad", key="theta0")
+        raise ParamError(
+            f"start angles {theta0.tolist()} leave the joint limits +-{THETA_LIMIT} rad",
+            key="theta0",
+        )
     key_points = default_key_points(spec.links, spec.points_per_link, include_joints=True)
     return GeneratedArm(spec, arm, key_points, theta0, arm.end_effector(theta0))

@@ -77,7 +77,9 @@ def _outer_normal(gen: GeneratedArm, i: int) -> np.ndarray:
     return normal if normal @ side >= 0 else -normal
 
 
-def _clear_offset(xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.ndarray, want: float) -> float:
+def _clear_offset(
+    xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.ndarray, want: float
+) -> float:
     """Smallest offset along ``u`` (1 mm steps from the one that puts the cloud's point nearest
     the arm ``want`` away from ``anchor``) at which the arm clears the cloud by ``want``."""
     offset = want + float(np.max(-(pts @ u)))
@@ -85,10 +87,14 @@ def _clear_offset(xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.nda
         if min_key_point_distance(xy, anchor + offset * u + pts) >= want:
             return offset
         offset += 0.001
-    raise RuntimeError("no clear place for the cloud")  # pragma: no cover - 2 m of steps clear a 1 m arm
+    raise RuntimeError(
+        "no clear place for the cloud"
+    )  # pragma: no cover - 2 m of steps clear a 1 m arm
 
 
-def place_cloud(gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud") -> PointCloudObstacle:
+def place_cloud(
+    gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud"
+) -> PointCloudObstacle:
     """The cloud beside ``gen`` at ``theta0``: every key point at least ``d_safe + clearance`` [m] from every point.
 
     The disk starts on the middle key point's outer normal (then, if nearer,
@@ -101,6 +107,8 @@ def place_cloud(gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "
     u = _outer_normal(gen, i)
     pts = cloud_points(spec.points, spec.seed)
     want = d_safe + spec.clearance
-    offset, side = min((_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0)))
+    offset, side = min(
+        (_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0))
+    )
     u = u if side == 0 else -u
     return PointCloudObstacle(name, xy[i] + offset * u + pts, velocity=-spec.speed * u)

@@ -32,8 +32,10 @@ __all__ = ["TICK_S", "is_scaling_dir", "write_scaling_report"]
 #: The control period a tick must fit in [s].
 TICK_S = 1e-3
 #: ``axis -> (column on x, label)`` of the two panels and fits.
-AXES = {"arm": ("n", "variables n (arm axis: 4-64 links, 16 cloud points)"),
-        "cloud": ("rows", "constraint rows (cloud axis: 4 links, 1-1,000 cloud points)")}
+AXES = {
+    "arm": ("n", "variables n (arm axis: 4-64 links, 16 cloud points)"),
+    "cloud": ("rows", "constraint rows (cloud axis: 4 links, 1-1,000 cloud points)"),
+}
 
 
 def is_scaling_dir(path: str | Path) -> bool:
@@ -49,9 +51,25 @@ def load(folder: str | Path) -> pd.DataFrame:
 
     rows = read_summary(Path(folder) / SUMMARY_NAME)
     frame = pd.DataFrame(rows)
-    for col in ("links", "n", "m_eq", "m_ineq", "rows", "key_points", "cloud_points", "problems", "failures",
-                "success_rate", "time_median_s", "time_p99_s", "gap_median", "gap_max", "violation_max",
-                "build_median_s", "build_p99_s"):
+    for col in (
+        "links",
+        "n",
+        "m_eq",
+        "m_ineq",
+        "rows",
+        "key_points",
+        "cloud_points",
+        "problems",
+        "failures",
+        "success_rate",
+        "time_median_s",
+        "time_p99_s",
+        "gap_median",
+        "gap_max",
+        "violation_max",
+        "build_median_s",
+        "build_p99_s",
+    ):
         if col in frame:
             frame[col] = pd.to_numeric(frame[col], errors="coerce")
     return frame
@@ -105,8 +123,10 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
             if meet is not None and meet > sizes.max():
                 text += f"; the fitted lines of {bd} and {bs} meet near {xcol} = {meet:,.0f} (extrapolated)"
             elif fd and fs:
-                text += (f" (fastest dense {bd}, slope {fd.text()}; fastest sparse {bs}, slope {fs.text()}: "
-                         "their fitted lines do not meet beyond the grid)")
+                text += (
+                    f" (fastest dense {bd}, slope {fd.text()}; fastest sparse {bs}, slope {fs.text()}: "
+                    "their fitted lines do not meet beyond the grid)"
+                )
         lines.append(text)
     return lines
 
@@ -120,7 +140,9 @@ def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
         g = g.sort_values(xcol)
         row = {"backend": backend, "axis": axis}
         for stat in ("p99", "median"):
-            tick = g[f"build_{'p99' if stat == 'p99' else 'median'}_s"].fillna(0) + g[f"time_{stat}_s"]
+            tick = (
+                g[f"build_{'p99' if stat == 'p99' else 'median'}_s"].fillna(0) + g[f"time_{stat}_s"]
+            )
             at = first_above(g[xcol].values, tick.values, TICK_S)
             row[stat] = _size_label(frame, None if at is None else g[g[xcol] == at]["size"].iloc[0])
             row[f"largest {stat}"] = tick.max()
@@ -162,7 +184,9 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
             ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel(label)
         ax.set_ylabel("median solve time per tick [us]")
-        ax.set_title(f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)", fontsize=9)
+        ax.set_title(
+            f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)", fontsize=9
+        )
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
         ax.grid(True, which="both", alpha=0.3)
@@ -181,47 +205,85 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
     """The text of ``scaling.md``."""
     m = frame[frame["status"] == "measured"]
     first = frame.iloc[0]
-    lines = ["# Scaling: solve time against QP size", "",
-             f"Closed loop solved by `{first['driver']}`, ticks dumped and solved by each backend "
-             f"(min of {first['repeat']} timed solves per tick, seed {first['seed']}); medians and p99 over each "
-             "size's ticks. Rows are constraint rows (2 task equalities + one row per key point and cloud point); "
-             "the 2n bounds are not counted.", ""]
+    lines = [
+        "# Scaling: solve time against QP size",
+        "",
+        f"Closed loop solved by `{first['driver']}`, ticks dumped and solved by each backend "
+        f"(min of {first['repeat']} timed solves per tick, seed {first['seed']}); medians and p99 over each "
+        "size's ticks. Rows are constraint rows (2 task equalities + one row per key point and cloud point); "
+        "the 2n bounds are not counted.",
+        "",
+    ]
     if image:
         lines += [f"![scaling]({image})", ""]
-    sizes = frame.drop_duplicates("size")[["size", "axis", "n", "key_points", "cloud_points", "rows",
-                                            "build_median_s", "build_p99_s"]]
-    lines += ["## Sizes", "", "| size | axis | variables | key points | cloud points | rows | build p50 [us] | build p99 [us] |",
-              "|:--|:--|--:|--:|--:|--:|--:|--:|"]
+    sizes = frame.drop_duplicates("size")[
+        ["size", "axis", "n", "key_points", "cloud_points", "rows", "build_median_s", "build_p99_s"]
+    ]
+    lines += [
+        "## Sizes",
+        "",
+        "| size | axis | variables | key points | cloud points | rows | build p50 [us] | build p99 [us] |",
+        "|:--|:--|--:|--:|--:|--:|--:|--:|",
+    ]
     for _, r in sizes.iterrows():
-        lines.append(f"| {r['size']} | {r['axis']} | {int(r['n'])} | {int(r['key_points'])} | {int(r['cloud_points'])} "
-                     f"| {int(r['rows']):,} | {_fmt_us(r['build_median_s'])} | {_fmt_us(r['build_p99_s'])} |")
-    lines += ["", "## Slopes", "", "Least squares of log10(median time) on log10(size) per axis; +- one standard error.",
-              "", "| backend | format | slope vs variables (arm axis) | slope vs rows (cloud axis) |", "|:--|:--|--:|--:|"]
+        lines.append(
+            f"| {r['size']} | {r['axis']} | {int(r['n'])} | {int(r['key_points'])} | {int(r['cloud_points'])} "
+            f"| {int(r['rows']):,} | {_fmt_us(r['build_median_s'])} | {_fmt_us(r['build_p99_s'])} |"
+        )
+    lines += [
+        "",
+        "## Slopes",
+        "",
+        "Least squares of log10(median time) on log10(size) per axis; +- one standard error.",
+        "",
+        "| backend | format | slope vs variables (arm axis) | slope vs rows (cloud axis) |",
+        "|:--|:--|--:|--:|",
+    ]
     for b in sorted(m["backend"].unique()):
         fmt = m[m["backend"] == b]["matrix_format"].iloc[0]
         cells = [fitted[(b, ax)].text() if (b, ax) in fitted else "-" for ax in AXES]
         lines.append(f"| {b} | {fmt} | {cells[0]} | {cells[1]} |")
     lines += ["", "## Sparse against dense", ""] + crossover_lines(frame, fitted)
-    lines += ["", "## The 1 ms tick", "",
-              "First size from which build + solve stays above 1 ms: p99 build + p99 solve (every tick must fit), "
-              "and median build + median solve (a typical tick fits); largest tick over the axis in brackets [us].", "",
-              "| backend | axis | p99 tick over 1 ms from | median tick over 1 ms from |", "|:--|:--|:--|:--|"]
+    lines += [
+        "",
+        "## The 1 ms tick",
+        "",
+        "First size from which build + solve stays above 1 ms: p99 build + p99 solve (every tick must fit), "
+        "and median build + median solve (a typical tick fits); largest tick over the axis in brackets [us].",
+        "",
+        "| backend | axis | p99 tick over 1 ms from | median tick over 1 ms from |",
+        "|:--|:--|:--|:--|",
+    ]
     for _, r in deadline_table(frame).iterrows():
-        lines.append(f"| {r['backend']} | {r['axis']} | {r['p99']} (largest {r['largest p99'] * 1e6:,.0f}) "
-                     f"| {r['median']} (largest {r['largest median'] * 1e6:,.0f}) |")
+        lines.append(
+            f"| {r['backend']} | {r['axis']} | {r['p99']} (largest {r['largest p99'] * 1e6:,.0f}) "
+            f"| {r['median']} (largest {r['largest median'] * 1e6:,.0f}) |"
+        )
     lines.append("")
-    lines += ["## Every size and backend", "", "| size | backend | median [us] | p99 [us] | success % | gap max | status |",
-              "|:--|:--|--:|--:|--:|--:|:--|"]
+    lines += [
+        "## Every size and backend",
+        "",
+        "| size | backend | median [us] | p99 [us] | success % | gap max | status |",
+        "|:--|:--|--:|--:|--:|--:|:--|",
+    ]
     for _, r in frame.iterrows():
         status = r["status"] if r["status"] == "measured" else f"skipped: {r['skip_reason']}"
         succ = "-" if not math.isfinite(r["success_rate"]) else f"{100 * r['success_rate']:.0f}"
         gap = "-" if not math.isfinite(r["gap_max"]) else f"{r['gap_max']:.1e}"
-        lines.append(f"| {r['size']} | {r['backend']} | {_fmt_us(r['time_median_s'])} | {_fmt_us(r['time_p99_s'])} "
-                     f"| {succ} | {gap} | {status} |")
+        lines.append(
+            f"| {r['size']} | {r['backend']} | {_fmt_us(r['time_median_s'])} | {_fmt_us(r['time_p99_s'])} "
+            f"| {succ} | {gap} | {status} |"
+        )
     return "\n".join(lines) + "\n"
 
 
-def write_scaling_report(folder: str | Path, out: str | Path, force: bool = False, plots: bool = True, quiet: bool = False) -> Path:
+def write_scaling_report(
+    folder: str | Path,
+    out: str | Path,
+    force: bool = False,
+    plots: bool = True,
+    quiet: bool = False,
+) -> Path:
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``; return the .md path.
 
     Raises:

@@ -49,10 +49,34 @@ __all__ = ["COLUMNS", "ScalingConfig", "matrix_format", "read_summary", "run_sca
 
 #: Columns of ``scaling.csv``, in order.
 COLUMNS = (
-    "size", "axis", "links", "points_per_link", "key_points", "cloud_points", "n", "m_eq", "m_ineq", "rows",
-    "backend", "matrix_format", "status", "skip_reason", "problems", "success_rate", "failures",
-    "time_median_s", "time_p99_s", "gap_median", "gap_max", "violation_max",
-    "build_median_s", "build_p99_s", "reference_optimal", "driver", "repeat", "seed",
+    "size",
+    "axis",
+    "links",
+    "points_per_link",
+    "key_points",
+    "cloud_points",
+    "n",
+    "m_eq",
+    "m_ineq",
+    "rows",
+    "backend",
+    "matrix_format",
+    "status",
+    "skip_reason",
+    "problems",
+    "success_rate",
+    "failures",
+    "time_median_s",
+    "time_p99_s",
+    "gap_median",
+    "gap_max",
+    "violation_max",
+    "build_median_s",
+    "build_p99_s",
+    "reference_optimal",
+    "driver",
+    "repeat",
+    "seed",
 )
 SUMMARY_NAME = "scaling.csv"
 
@@ -60,13 +84,30 @@ SUMMARY_NAME = "scaling.csv"
 #: dense active set: cost grows with n x rows whatever the zeros) or ``sparse``.
 #: A backend class may say so itself with a ``matrix_format`` attribute.
 _MATRIX_FORMATS = {
-    "daqp": "dense", "daqp-stateless": "dense", "qpoases": "dense", "piqp": "dense", "proxqp": "dense",
-    "pinv": "dense", "rnn": "dense", "rnn-tuned": "dense", "rnn-converged": "dense",
-    "qpsolvers:daqp": "dense", "qpsolvers:quadprog": "dense", "qpsolvers:proxqp": "dense",
-    "qpsolvers:piqp": "dense", "qpsolvers:cvxopt": "dense", "qpsolvers:qpalm": "sparse",
-    "osqp": "sparse", "clarabel": "sparse", "cvxpy": "sparse", "qpsolvers:osqp": "sparse",
-    "qpsolvers:clarabel": "sparse", "qpsolvers:scs": "sparse", "qpsolvers:highs": "sparse",
-    "qpsolvers:ecos": "sparse", "qpsolvers:gurobi": "sparse",
+    "daqp": "dense",
+    "daqp-stateless": "dense",
+    "qpoases": "dense",
+    "piqp": "dense",
+    "proxqp": "dense",
+    "pinv": "dense",
+    "rnn": "dense",
+    "rnn-tuned": "dense",
+    "rnn-converged": "dense",
+    "qpsolvers:daqp": "dense",
+    "qpsolvers:quadprog": "dense",
+    "qpsolvers:proxqp": "dense",
+    "qpsolvers:piqp": "dense",
+    "qpsolvers:cvxopt": "dense",
+    "qpsolvers:qpalm": "sparse",
+    "osqp": "sparse",
+    "clarabel": "sparse",
+    "cvxpy": "sparse",
+    "qpsolvers:osqp": "sparse",
+    "qpsolvers:clarabel": "sparse",
+    "qpsolvers:scs": "sparse",
+    "qpsolvers:highs": "sparse",
+    "qpsolvers:ecos": "sparse",
+    "qpsolvers:gurobi": "sparse",
 }
 
 
@@ -157,8 +198,15 @@ def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
         return []
     header = next(csv.reader([lines[0]]))
     if tuple(header) != COLUMNS:
-        raise InputError("not a scaling CSV of this version (columns differ); use --force to start again", path=path)
-    return [dict(zip(COLUMNS, fields)) for fields in csv.reader(lines[1:]) if len(fields) == len(COLUMNS)]
+        raise InputError(
+            "not a scaling CSV of this version (columns differ); use --force to start again",
+            path=path,
+        )
+    return [
+        dict(zip(COLUMNS, fields))
+        for fields in csv.reader(lines[1:])
+        if len(fields) == len(COLUMNS)
+    ]
 
 
 def build_times(controller, states, repeat: int) -> np.ndarray:
@@ -178,9 +226,16 @@ def build_times(controller, states, repeat: int) -> np.ndarray:
 def _size_columns(size: Size, config: ScalingConfig) -> dict:
     shape = qp_shape(size)
     return {
-        "size": size.name, "axis": size.axis, "links": size.links, "points_per_link": size.points_per_link,
-        "key_points": size.key_points, "cloud_points": size.cloud_points, **shape,
-        "rows": shape["m_eq"] + shape["m_ineq"], "driver": config.driver, "repeat": config.repeat,
+        "size": size.name,
+        "axis": size.axis,
+        "links": size.links,
+        "points_per_link": size.points_per_link,
+        "key_points": size.key_points,
+        "cloud_points": size.cloud_points,
+        **shape,
+        "rows": shape["m_eq"] + shape["m_ineq"],
+        "driver": config.driver,
+        "repeat": config.repeat,
         "seed": config.seed,
     }
 
@@ -199,8 +254,13 @@ def _backend_row(base: dict, name: str, rows: list[dict]) -> dict:
     success = [str(r["success"]) == "True" for r in rows]
     failures = sum(1 for r in rows if is_failure(r["status"], r["reference_status"] or None))
     return {
-        **base, "backend": name, "matrix_format": matrix_format(name), "status": "measured", "problems": len(rows),
-        "success_rate": float(np.mean(success)) if rows else math.nan, "failures": failures,
+        **base,
+        "backend": name,
+        "matrix_format": matrix_format(name),
+        "status": "measured",
+        "problems": len(rows),
+        "success_rate": float(np.mean(success)) if rows else math.nan,
+        "failures": failures,
         "time_median_s": float(np.median(times)) if times.size else math.nan,
         "time_p99_s": float(np.percentile(times, 99)) if times.size else math.nan,
         "gap_median": float(np.median(gaps)) if gaps.size else math.nan,
@@ -242,7 +302,9 @@ def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
     return scenario, states
 
 
-def run_size(size: Size, config: ScalingConfig, out: Path, slow: dict, progress: bool = False) -> tuple[list[dict], int]:
+def run_size(
+    size: Size, config: ScalingConfig, out: Path, slow: dict, progress: bool = False
+) -> tuple[list[dict], int]:
     """Everything for one size (module docstring); returns its summary rows and the bench exit code."""
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
@@ -258,8 +320,12 @@ def run_size(size: Size, config: ScalingConfig, out: Path, slow: dict, progress:
         problem_set = load_problems(out / "sets" / size.name)
         csv_path = out / "bench" / f"{size.name}.csv"
         csv_path.parent.mkdir(parents=True, exist_ok=True)
-        bench = BenchConfig(backends=run, profile=config.profile, repeat=config.repeat, seed=config.seed)
-        summary = run_bench(problem_set, bench, csv_path, resume=csv_path.exists(), progress=progress)
+        bench = BenchConfig(
+            backends=run, profile=config.profile, repeat=config.repeat, seed=config.seed
+        )
+        summary = run_bench(
+            problem_set, bench, csv_path, resume=csv_path.exists(), progress=progress
+        )
         code = summary.exit_code
         from ..harness.results import read_results
 
@@ -273,12 +339,21 @@ def run_size(size: Size, config: ScalingConfig, out: Path, slow: dict, progress:
                 slow[(size.axis, name)] = (size.name, row["time_median_s"])
     for name in config.backends:
         if skipped[name] is not None:
-            rows.append({**base, "backend": name, "matrix_format": matrix_format(name), "status": "skipped",
-                         "skip_reason": skipped[name]})
+            rows.append(
+                {
+                    **base,
+                    "backend": name,
+                    "matrix_format": matrix_format(name),
+                    "status": "skipped",
+                    "skip_reason": skipped[name],
+                }
+            )
     return rows, code
 
 
-def run_scaling(config: ScalingConfig, out: str | Path, resume: bool = False, progress: bool = False) -> int:
+def run_scaling(
+    config: ScalingConfig, out: str | Path, resume: bool = False, progress: bool = False
+) -> int:
     """Run every size of ``config`` into folder ``out``; return 1 if some solve failed, else 0."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -288,7 +363,11 @@ def run_scaling(config: ScalingConfig, out: str | Path, resume: bool = False, pr
     if resume and summary_path.exists():
         for r in read_summary(summary_path, repair=True):
             done.setdefault(r["size"], []).append(r)
-            if r["status"] == "measured" and r["time_median_s"] and float(r["time_median_s"]) > config.slow_limit:
+            if (
+                r["status"] == "measured"
+                and r["time_median_s"]
+                and float(r["time_median_s"]) > config.slow_limit
+            ):
                 slow[(r["axis"], r["backend"])] = (r["size"], float(r["time_median_s"]))
     code = 0
     for size in config.sizes:
@@ -297,8 +376,14 @@ def run_scaling(config: ScalingConfig, out: str | Path, resume: bool = False, pr
             continue
         started = time.perf_counter()
         shape = qp_shape(size)
-        log.info("%s: %d variables, %d rows (%d key points x %d cloud points + 2)", size.name, shape["n"],
-                 shape["m_eq"] + shape["m_ineq"], size.key_points, size.cloud_points)
+        log.info(
+            "%s: %d variables, %d rows (%d key points x %d cloud points + 2)",
+            size.name,
+            shape["n"],
+            shape["m_eq"] + shape["m_ineq"],
+            size.key_points,
+            size.cloud_points,
+        )
         rows, size_code = run_size(size, config, out, slow, progress)
         append_rows(summary_path, rows)
         code = max(code, size_code)

@@ -40,9 +40,21 @@ __all__ = ["DEFAULT_SIZES", "Size", "parse_sizes", "qp_shape", "scenario_toml", 
 
 #: The task every size shares (the ``wall`` scenario's, the path started mid-stroke so the arm moves at once).
 TASK = {
-    "centre": (0.4, 0.5), "amplitude": (0.1, 0.1), "omega": (0.5, 0.5), "phase": (-math.pi / 2, -math.pi / 2),
-    "normal": (1.0, -1.0), "stiffness": 5000.0, "damping": 50.0, "desired_force": 20.0, "kp": 5000.0, "kd": 50.0,
-    "alpha": 8.0, "k": 10.0, "d_safe": 0.01, "rho": 1.0e4, "dt": 0.001,
+    "centre": (0.4, 0.5),
+    "amplitude": (0.1, 0.1),
+    "omega": (0.5, 0.5),
+    "phase": (-math.pi / 2, -math.pi / 2),
+    "normal": (1.0, -1.0),
+    "stiffness": 5000.0,
+    "damping": 50.0,
+    "desired_force": 20.0,
+    "kp": 5000.0,
+    "kd": 50.0,
+    "alpha": 8.0,
+    "k": 10.0,
+    "d_safe": 0.01,
+    "rho": 1.0e4,
+    "dt": 0.001,
 }
 
 
@@ -70,12 +82,18 @@ class Size:
 
 def qp_shape(size: Size) -> dict:
     """``{"n", "m_eq", "m_ineq", "n_box"}`` of the size's tick QP (module docstring)."""
-    return {"n": size.links, "m_eq": 2, "m_ineq": size.key_points * size.cloud_points, "n_box": 2 * size.links}
+    return {
+        "n": size.links,
+        "m_eq": 2,
+        "m_ineq": size.key_points * size.cloud_points,
+        "n_box": 2 * size.links,
+    }
 
 
 #: The default grid (module docstring), smallest first.
 DEFAULT_SIZES = tuple(
-    [Size(4, 1, m, "cloud") for m in (1, 10, 100, 1000)] + [Size(n, 2, 16, "arm") for n in (4, 8, 16, 32, 64)]
+    [Size(4, 1, m, "cloud") for m in (1, 10, 100, 1000)]
+    + [Size(n, 2, 16, "arm") for n in (4, 8, 16, 32, 64)]
 )
 
 
@@ -103,9 +121,14 @@ def parse_sizes(text: str | None) -> list[Size]:
                 raise ValueError
             size = Size(int(n[1:]), int(p[1:]), int(m[1:]))
         except (ValueError, IndexError):
-            raise ParamError(f"'{part}' is not a size name nN-pP-mM (e.g. n16-p2-m16)", key="--sizes") from None
+            raise ParamError(
+                f"'{part}' is not a size name nN-pP-mM (e.g. n16-p2-m16)", key="--sizes"
+            ) from None
         if size.links < 2 or size.points_per_link < 1 or not 1 <= size.cloud_points <= 100000:
-            raise ParamError(f"'{part}': need N >= 2 links, P >= 1 points per link, 1 <= M <= 100000", key="--sizes")
+            raise ParamError(
+                f"'{part}': need N >= 2 links, P >= 1 points per link, 1 <= M <= 100000",
+                key="--sizes",
+            )
         out.append(size)
     if not out:
         raise ParamError("no size given", key="--sizes")
@@ -121,7 +144,9 @@ def start_target() -> np.ndarray:
     return c + a * np.cos(ph) + TASK["desired_force"] / TASK["kp"] * normal
 
 
-def generate(size: Size, seed: int = 0, cloud: CloudSpec | None = None) -> tuple[GeneratedArm, PointCloudObstacle]:
+def generate(
+    size: Size, seed: int = 0, cloud: CloudSpec | None = None
+) -> tuple[GeneratedArm, PointCloudObstacle]:
     """``(GeneratedArm, PointCloudObstacle)`` of a size, deterministic in ``seed``."""
     gen = generate_arm(ArmSpec(size.links, size.points_per_link, seed), start_target())
     spec = cloud or CloudSpec(size.cloud_points, seed=seed)
@@ -143,7 +168,8 @@ def scenario_toml(size: Size, gen: GeneratedArm, cloud: PointCloudObstacle, dura
 
 [scenario]
 name = "{size.name}"
-description = "Scaling study: {n} links, {size.key_points} key points, a cloud of {size.cloud_points} points ({size.key_points * size.cloud_points} obstacle rows)."
+description = "Scaling study: {n} links, {size.key_points} key points, \
+a cloud of {size.cloud_points} points ({size.key_points * size.cloud_points} obstacle rows)."
 paper_section = "scaling (beyond the paper)"
 
 [robot]

@@ -46,12 +46,30 @@ BUCKETS = 300
 MANTISSA_BITS = 12
 
 #: Columns kept besides the per-joint and per-distance ones.
-_KEPT = (tick_log.T, tick_log.EE_X, tick_log.EE_Y, tick_log.XD_X, tick_log.XD_Y, tick_log.TRACKING_ERROR,
-         tick_log.FORCE_ERROR, tick_log.D_MIN, tick_log.V_SQ, tick_log.SOLVE_TIME, tick_log.KP_HAT,
-         tick_log.STATUS, tick_log.FALLBACK, tick_log.ZERO_VELOCITY)
+_KEPT = (
+    tick_log.T,
+    tick_log.EE_X,
+    tick_log.EE_Y,
+    tick_log.XD_X,
+    tick_log.XD_Y,
+    tick_log.TRACKING_ERROR,
+    tick_log.FORCE_ERROR,
+    tick_log.D_MIN,
+    tick_log.V_SQ,
+    tick_log.SOLVE_TIME,
+    tick_log.KP_HAT,
+    tick_log.STATUS,
+    tick_log.FALLBACK,
+    tick_log.ZERO_VELOCITY,
+)
 #: Quantities whose smallest and largest value in each span are kept (absolute value for signed errors).
-_EXTREMES = ((tick_log.TRACKING_ERROR, True), (tick_log.FORCE_ERROR, True), (tick_log.D_MIN, False),
-             (tick_log.SOLVE_TIME, False), (tick_log.V_SQ, False))
+_EXTREMES = (
+    (tick_log.TRACKING_ERROR, True),
+    (tick_log.FORCE_ERROR, True),
+    (tick_log.D_MIN, False),
+    (tick_log.SOLVE_TIME, False),
+    (tick_log.V_SQ, False),
+)
 #: Statuses of a tick kept whatever its span.
 _NOT_SOLVED = frozenset(CERTIFIED_INFEASIBLE) | {"not_solved"} | FAILURE_STATUSES
 
@@ -90,8 +108,10 @@ def _extremes(frame: pd.DataFrame, buckets: int) -> np.ndarray:
         x = np.abs(x) if absolute else x
         lo = np.where(np.isfinite(x), x, np.inf)
         hi = np.where(np.isfinite(x), x, -np.inf)
-        keep += [s + np.array([np.argmin(lo[s:e]), np.argmax(hi[s:e])])
-                 for s, e in zip(starts, np.r_[starts[1:], n])]
+        keep += [
+            s + np.array([np.argmin(lo[s:e]), np.argmax(hi[s:e])])
+            for s, e in zip(starts, np.r_[starts[1:], n])
+        ]
     return np.unique(np.concatenate(keep))
 
 
@@ -135,8 +155,14 @@ def write_figure_log(frame: pd.DataFrame, path: str | Path, buckets: int = BUCKE
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     with atomic_path(path) as tmp:
         # byte-stream split puts the (mostly zero) low bytes of the floats together: half the size
-        pq.write_table(table, tmp, compression="zstd", compression_level=19, use_byte_stream_split=floats,
-                       use_dictionary=[tick_log.STATUS])
+        pq.write_table(
+            table,
+            tmp,
+            compression="zstd",
+            compression_level=19,
+            use_byte_stream_split=floats,
+            use_dictionary=[tick_log.STATUS],
+        )
     return path
 
 

@@ -64,7 +64,19 @@ DISTANCE_PREFIX = "d"
 
 #: Columns after the distances, in the order the tick kernel writes them
 #: (``status`` is inserted before ``fallback`` when the log becomes a frame).
-_TAIL = (D_MIN, V_SQ, TASK_RESIDUAL, FALLBACK, ZERO_VELOCITY, SOLVE_TIME, Y_0, Y_1, Z_MAX, KP_HAT, KD_HAT)
+_TAIL = (
+    D_MIN,
+    V_SQ,
+    TASK_RESIDUAL,
+    FALLBACK,
+    ZERO_VELOCITY,
+    SOLVE_TIME,
+    Y_0,
+    Y_1,
+    Z_MAX,
+    KP_HAT,
+    KD_HAT,
+)
 _MIDDLE = (EE_X, EE_Y, XD_X, XD_Y, TRACKING_ERROR, FORCE, FORCE_ERROR)
 
 
@@ -100,8 +112,14 @@ def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
         n: Joints.
         obstacle_columns: ``(key point, obstacle)`` of each distance column.
     """
-    return ([T] + theta_columns(n) + velocity_columns(n) + list(_MIDDLE)
-            + [distance_column(a, o) for a, o in obstacle_columns] + list(_TAIL))
+    return (
+        [T]
+        + theta_columns(n)
+        + velocity_columns(n)
+        + list(_MIDDLE)
+        + [distance_column(a, o) for a, o in obstacle_columns]
+        + list(_TAIL)
+    )
 
 
 def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.DataFrame:
@@ -110,10 +128,15 @@ def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.Da
     (a status outside them counts as ``error``)."""
     done = len(statuses)
     codes = {s: i for i, s in enumerate(TICK_STATUSES)}
-    status_codes = np.fromiter((codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done)
+    status_codes = np.fromiter(
+        (codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done
+    )
     frame = pd.DataFrame(data[:done], columns=columns)
     frame[FALLBACK] = frame[FALLBACK].astype(bool)
     frame[ZERO_VELOCITY] = frame[ZERO_VELOCITY].astype(bool)
-    frame.insert(columns.index(FALLBACK), STATUS,
-                 pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)))
+    frame.insert(
+        columns.index(FALLBACK),
+        STATUS,
+        pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)),
+    )
     return frame

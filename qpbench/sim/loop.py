@@ -115,7 +115,9 @@ class SimResult:
     records: list = field(default_factory=list)
 
 
-def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default") -> Backend:
+def resolve_backend(
+    backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default"
+) -> Backend:
     """A backend instance for ``scenario``: by name, or the given instance checked.
 
     A backend class whose ``scenario_table`` names a table of the scenario
@@ -132,27 +134,40 @@ def resolve_backend(backend: str | Backend, scenario: Scenario, dt: float, profi
             settings.setdefault("dt", dt)
         return get_backend(backend, profile=profile, **settings)
     if not isinstance(backend, Backend):
-        raise ParamError(f"expected a backend name or instance, got {type(backend).__name__}", key="backend")
+        raise ParamError(
+            f"expected a backend name or instance, got {type(backend).__name__}", key="backend"
+        )
     own_dt = getattr(backend, "dt", None)
     if own_dt is not None and abs(float(own_dt) - dt) > 1e-15:
-        raise ParamError(f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt")
+        raise ParamError(
+            f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt"
+        )
     return backend
 
 
 def _positive_seconds(value) -> bool:
-    return (isinstance(value, (int, float, np.floating)) and not isinstance(value, bool)
-            and math.isfinite(value) and value > 0)
+    return (
+        isinstance(value, (int, float, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value > 0
+    )
 
 
 def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
     if formulation not in FORMULATIONS:
-        raise ParamError(f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})", key="formulation")
+        raise ParamError(
+            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
+            key="formulation",
+        )
     if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
         raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
     if deadline is not None and not _positive_seconds(deadline):
         raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
     if wall_budget_s is not None and not _positive_seconds(wall_budget_s):
-        raise ParamError(f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s")
+        raise ParamError(
+            f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s"
+        )
 
 
 def simulate(
@@ -216,7 +231,16 @@ def simulate(
     run.loop(progress, wall_budget_s)
     result = run.result(wall_budget_s)
     if dump is not None:
-        write_dump(dump, result.records, scenario, be.name, formulation, keep_every, scenario.duration, scenario.dt)
+        write_dump(
+            dump,
+            result.records,
+            scenario,
+            be.name,
+            formulation,
+            keep_every,
+            scenario.duration,
+            scenario.dt,
+        )
     return result
 
 
@@ -227,9 +251,20 @@ class _Run:
     a tick whose own answer is not applied goes through :meth:`_without_answer`.
     """
 
-    def __init__(self, scenario: Scenario, backend: Backend, formulation: str, keep_every: int | None,
-                 deadline: float | None):
-        self.scenario, self.be, self.formulation, self.keep_every = scenario, backend, formulation, keep_every
+    def __init__(
+        self,
+        scenario: Scenario,
+        backend: Backend,
+        formulation: str,
+        keep_every: int | None,
+        deadline: float | None,
+    ):
+        self.scenario, self.be, self.formulation, self.keep_every = (
+            scenario,
+            backend,
+            formulation,
+            keep_every,
+        )
         self.deadline = deadline
         # a late answer is dropped only past a deadline
         self.limit = math.inf if deadline is None else float(deadline)
@@ -266,12 +301,29 @@ class _Run:
     def loop(self, progress: bool, wall_budget_s: float | None) -> None:
         """The ticks (module docstring, steps 1-5), until ``duration`` or the wall-time budget."""
         ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
-        data, ci, cf, sensed, theta, none = self.data, self.ci, self.cf, self.sensed, self.theta, self.none
+        data, ci, cf, sensed, theta, none = (
+            self.data,
+            self.ci,
+            self.cf,
+            self.sensed,
+            self.theta,
+            self.none,
+        )
         c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
-        records, statuses, adaptive, surface = self.records, self.statuses, self.adaptive, self.surface
-        post, build, make_problem, solve, perf = (get_post_kernel(), ctrl.build_arrays, ctrl.make_problem,
-                                                  be.solve, time.perf_counter)
+        records, statuses, adaptive, surface = (
+            self.records,
+            self.statuses,
+            self.adaptive,
+            self.surface,
+        )
+        post, build, make_problem, solve, perf = (
+            get_post_kernel(),
+            ctrl.build_arrays,
+            ctrl.make_problem,
+            be.solve,
+            time.perf_counter,
+        )
         noisy = surface.noise_std > 0.0
         fd = ctrl.task.desired_force
         f64 = np.dtype(np.float64)
@@ -282,7 +334,9 @@ class _Run:
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=ticks, unit="tick", desc=f"{self.scenario.name} {be.name}", mininterval=0.5)
+            bar = tqdm(
+                total=ticks, unit="tick", desc=f"{self.scenario.name} {be.name}", mininterval=0.5
+            )
         start = perf()
         stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
         for k in range(ticks):
@@ -308,17 +362,42 @@ class _Run:
                     x = np.asarray(x, dtype=np.float64)
                 y, z = sol.y, sol.z
                 # -1.0 when x is not finite: nothing logged, the plant not moved
-                force = post(theta, x, arrays.ee, sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd,
-                             none if y is None else y, none if z is None else z,
-                             data, k, ci, cf, t, APPLIED, kp, kd, solve_s)
+                force = post(
+                    theta,
+                    x,
+                    arrays.ee,
+                    sensed,
+                    arrays.J,
+                    arrays.b0,
+                    arrays.dist,
+                    arrays.xd,
+                    none if y is None else y,
+                    none if z is None else z,
+                    data,
+                    k,
+                    ci,
+                    cf,
+                    t,
+                    APPLIED,
+                    kp,
+                    kd,
+                    solve_s,
+                )
                 if force >= 0.0:
                     v = x
             if force < 0.0:
                 status, v, force = self._without_answer(k, t, sol, solve_s, t0, arrays, kp, kd, v)
             statuses.append(status)
             if verbose:
-                solve_log.debug("%s %s tick %d (t = %.3f s): %s in %.1f µs", self.scenario.name, be.name, k, t,
-                                status, solve_s * 1e6)
+                solve_log.debug(
+                    "%s %s tick %d (t = %.3f s): %s in %.1f µs",
+                    self.scenario.name,
+                    be.name,
+                    k,
+                    t,
+                    status,
+                    solve_s * 1e6,
+                )
             if noisy:
                 force += surface.noise()
                 data[k, c_force] = force
@@ -333,8 +412,18 @@ class _Run:
             bar.update(ticks - bar.n)
             bar.close()
 
-    def _without_answer(self, k: int, t: float, sol, solve_s: float, t0: float, arrays, kp: float, kd: float,
-                        v: np.ndarray) -> tuple[str, np.ndarray, float]:
+    def _without_answer(
+        self,
+        k: int,
+        t: float,
+        sol,
+        solve_s: float,
+        t0: float,
+        arrays,
+        kp: float,
+        kd: float,
+        v: np.ndarray,
+    ) -> tuple[str, np.ndarray, float]:
         """A tick whose own answer is not applied: say why (:func:`~qpbench.statuses.classify`),
         then apply the soft formulation's answer (same backend), else zero velocity.
 
@@ -357,7 +446,9 @@ class _Run:
             ctrl = self.ctrl
             t1 = time.perf_counter()
             try:
-                fb = be.solve(ctrl.make_problem(ctrl.build_arrays(self.theta, t, kp, kd, True), True), v)
+                fb = be.solve(
+                    ctrl.make_problem(ctrl.build_arrays(self.theta, t, kp, kd, True), True), v
+                )
                 fb_status = classify(fb, time.perf_counter() - t1, limit)[0]
             except Exception as exc:  # noqa: BLE001 - a failed fallback: zero velocity
                 fb, fb_status = _Raised(describe_exception(exc)), "error"
@@ -379,9 +470,27 @@ class _Run:
         return status, zeros.copy(), force
 
     def _post(self, k, t, arrays, x, z, mode, kp, kd, t0) -> float:
-        return get_post_kernel()(self.theta, x, arrays.ee, self.sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd,
-                                 self.none, z, self.data, k, self.ci, self.cf, t, mode, kp, kd,
-                                 time.perf_counter() - t0)
+        return get_post_kernel()(
+            self.theta,
+            x,
+            arrays.ee,
+            self.sensed,
+            arrays.J,
+            arrays.b0,
+            arrays.dist,
+            arrays.xd,
+            self.none,
+            z,
+            self.data,
+            k,
+            self.ci,
+            self.cf,
+            t,
+            mode,
+            kp,
+            kd,
+            time.perf_counter() - t0,
+        )
 
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated."""
@@ -389,23 +498,47 @@ class _Run:
         done = len(self.statuses)
         misses = int(np.count_nonzero(self.data[:done, self.cidx[tick_log.SOLVE_TIME]] > dt))
         frame = tick_log.to_frame(self.data, self.cols, self.statuses)
-        summary = summarize(frame, scenario, self.ctrl, self.be.name, self.formulation, self.wall, run_info=dict(
-            deadline_s=deadline if deadline is None else float(deadline), deadline_misses=misses,
-            deadline_dropped=None if deadline is None else self.n_dropped,
-            raised_ticks=self.n_raised, fallback_errors=self.n_fallback_errors,
-            first_error=self.first_error, first_error_t=self.first_error_t, wall_budget_s=wall_budget_s,
-            stopped_early=done < self.ticks))
+        summary = summarize(
+            frame,
+            scenario,
+            self.ctrl,
+            self.be.name,
+            self.formulation,
+            self.wall,
+            run_info=dict(
+                deadline_s=deadline if deadline is None else float(deadline),
+                deadline_misses=misses,
+                deadline_dropped=None if deadline is None else self.n_dropped,
+                raised_ticks=self.n_raised,
+                fallback_errors=self.n_fallback_errors,
+                first_error=self.first_error,
+                first_error_t=self.first_error_t,
+                wall_budget_s=wall_budget_s,
+                stopped_early=done < self.ticks,
+            ),
+        )
         recs = []
         if self.keep_every is not None:
             from ..formats import ProblemRecord
 
             name = f"{scenario.name}_{self.formulation}"
-            recs = [ProblemRecord(problem=p, name=f"{name}_{k:06d}", scenario=scenario.name, tick=k, t=t,
-                                  formulation=self.formulation) for k, t, p in self.records]
+            recs = [
+                ProblemRecord(
+                    problem=p,
+                    name=f"{name}_{k:06d}",
+                    scenario=scenario.name,
+                    tick=k,
+                    t=t,
+                    formulation=self.formulation,
+                )
+                for k, t, p in self.records
+            ]
         return SimResult(frame, summary, recs)
 
 
-def write_dump(folder, records, scenario: Scenario, backend_name: str, formulation: str, every, duration, dt) -> Path:
+def write_dump(
+    folder, records, scenario: Scenario, backend_name: str, formulation: str, every, duration, dt
+) -> Path:
     """Write the kept ticks' QPs as a problem set; the manifest holds the scenario file's full text."""
     from ..formats import write_problem_set
 

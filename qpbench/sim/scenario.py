@@ -33,7 +33,12 @@ if TYPE_CHECKING:
     from ..control.terms import CosinePath, PolylinePath
 
 __all__ = [
-    "Scenario", "apply_overrides", "load_scenario", "paper_scenarios", "parse_scenario", "scenario_names",
+    "Scenario",
+    "apply_overrides",
+    "load_scenario",
+    "paper_scenarios",
+    "parse_scenario",
+    "scenario_names",
     "scenario_path",
 ]
 
@@ -109,7 +114,10 @@ class Scenario:
     def make_key_points(self) -> KeyPoints:
         kp = self.data["key_points"]
         return default_key_points(
-            len(self.data["robot"]["link_lengths"]), kp["points_per_link"], kp["include_joints"], kp["link_radius"]
+            len(self.data["robot"]["link_lengths"]),
+            kp["points_per_link"],
+            kp["include_joints"],
+            kp["link_radius"],
         )
 
     def make_path(self) -> CosinePath | PolylinePath:
@@ -122,7 +130,14 @@ class Scenario:
 
     def make_surface(self) -> ContactSurface:
         c = self.data["contact"]
-        return ContactSurface(c["point"], c["normal"], c["stiffness"], c["damping"], c["force_noise_std"], c["noise_seed"])
+        return ContactSurface(
+            c["point"],
+            c["normal"],
+            c["stiffness"],
+            c["damping"],
+            c["force_noise_std"],
+            c["noise_seed"],
+        )
 
     def make_obstacles(self) -> list[Obstacle]:
         out = []
@@ -141,10 +156,20 @@ class Scenario:
         normal = self.data["contact"]["normal"]
         normal = normal / np.linalg.norm(normal)
         task = ImpedanceTask(self.make_path(), normal, c["desired_force"])
-        limits = EscapeVelocityLimits(r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"])
+        limits = EscapeVelocityLimits(
+            r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
+        )
         return Controller(
-            self.make_arm(), self.make_key_points(), task, limits, self.make_obstacles(),
-            k=c["k"], d_safe=c["d_safe"], rho=c["rho"], kp=c["kp"], kd=c["kd"],
+            self.make_arm(),
+            self.make_key_points(),
+            task,
+            limits,
+            self.make_obstacles(),
+            k=c["k"],
+            d_safe=c["d_safe"],
+            rho=c["rho"],
+            kp=c["kp"],
+            kd=c["kd"],
         )
 
     def make_adaptive(self) -> AdaptiveImpedance | None:
@@ -157,10 +182,14 @@ class Scenario:
         c = self.data["controller"]
         normal = self.data["contact"]["normal"]
         normal = normal / np.linalg.norm(normal)
-        return AdaptiveImpedance(c["kp"], c["kd"], a["gain"], normal, c["desired_force"], a["kp_min"], a["kd_min"])
+        return AdaptiveImpedance(
+            c["kp"], c["kd"], a["gain"], normal, c["desired_force"], a["kp_min"], a["kd_min"]
+        )
 
 
-def parse_scenario(text: str, path: str | Path | None = None, overrides: dict | None = None) -> Scenario:
+def parse_scenario(
+    text: str, path: str | Path | None = None, overrides: dict | None = None
+) -> Scenario:
     """Parse and validate a scenario from TOML text (``path`` only names it in errors).
 
     ``overrides`` (dotted key -> value, see :func:`apply_overrides`) replace
@@ -176,8 +205,12 @@ def parse_scenario(text: str, path: str | Path | None = None, overrides: dict | 
         raw = apply_overrides(raw, overrides, file)
     data, rnn = validate(raw, file)
     scenario = Scenario(
-        name=data["scenario"]["name"], path=None if path is None else Path(path), source=text, data=data,
-        rnn=rnn, overrides=dict(overrides or {}),
+        name=data["scenario"]["name"],
+        path=None if path is None else Path(path),
+        source=text,
+        data=data,
+        rnn=rnn,
+        overrides=dict(overrides or {}),
     )
     # build every object once so constructor checks surface here, naming the file
     try:
@@ -212,24 +245,31 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
         table, index, name = match.groups()
         if index is not None:
             if table != "obstacles":
-                raise ScenarioError("only obstacles take an index (obstacles[i].KEY)", path=file, key=key)
+                raise ScenarioError(
+                    "only obstacles take an index (obstacles[i].KEY)", path=file, key=key
+                )
             obstacles = raw.get("obstacles")
             count = len(obstacles) if isinstance(obstacles, list) else 0
             if int(index) >= count:
-                raise ScenarioError(f"no such obstacle (the file has {count})", path=file, key=f"obstacles[{index}]")
+                raise ScenarioError(
+                    f"no such obstacle (the file has {count})", path=file, key=f"obstacles[{index}]"
+                )
             target = obstacles[int(index)]
         else:
             target = raw.get(table)
             if table == "obstacles" or not isinstance(target, dict):
                 tables = ", ".join(sorted(t for t in raw if isinstance(raw[t], dict)))
-                raise ScenarioError(f"no such table in the file (tables: {tables})", path=file, key=key)
+                raise ScenarioError(
+                    f"no such table in the file (tables: {tables})", path=file, key=key
+                )
             if table == "rnn" and name not in target:
                 from ..backends.rnn import SETTING_NAMES
 
                 if name not in SETTING_NAMES:
                     raise ScenarioError(
                         f"unknown setting of the rnn backends (expected one of: {', '.join(SETTING_NAMES)})",
-                        path=file, key=key,
+                        path=file,
+                        key=key,
                     )
         target[name] = value
     return raw

@@ -46,7 +46,9 @@ def paper_scenarios() -> list[str]:
     """The shipped scenarios of the paper (``in_paper = true``), in the order of their sections."""
     tables = {name: _scenario_table(name) for name in _shipped_names()}
     paper = [name for name, t in tables.items() if t.get("in_paper") is True]
-    return sorted(paper, key=lambda name: (_section_key(tables[name].get("paper_section", "")), name))
+    return sorted(
+        paper, key=lambda name: (_section_key(tables[name].get("paper_section", "")), name)
+    )
 
 
 def _shipped_names() -> list[str]:

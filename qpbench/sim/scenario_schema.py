@@ -72,7 +72,15 @@ _SCHEMA: dict[str, dict[str, str]] = {
         "force_noise_std": _NUM,
         "noise_seed": _INT,
     },
-    "controller": {"desired_force": _NUM, "kp": _NUM, "kd": _NUM, "alpha": _NUM, "k": _NUM, "d_safe": _NUM, "rho": _NUM},
+    "controller": {
+        "desired_force": _NUM,
+        "kp": _NUM,
+        "kd": _NUM,
+        "alpha": _NUM,
+        "k": _NUM,
+        "d_safe": _NUM,
+        "rho": _NUM,
+    },
     "adaptive": {"enabled": _BOOL, "gain": _VEC2, "kp_min": _NUM, "kd_min": _NUM},
     "simulation": {"dt": _NUM, "duration": _NUM},
 }
@@ -88,7 +96,12 @@ _OBSTACLE_SCHEMA = {
 }
 _TOP = set(_SCHEMA) | {"path", "obstacles", "rnn", "verdict"}
 #: ``[verdict]`` keys: required ones, then the optional ``safety_margin`` (see :mod:`qpbench.sim.verdict`).
-_VERDICT_SCHEMA = {"settle_time": _NUM, "max_tracking_error": _NUM, "max_force_error": _NUM, "safety_margin": _NUM}
+_VERDICT_SCHEMA = {
+    "settle_time": _NUM,
+    "max_tracking_error": _NUM,
+    "max_force_error": _NUM,
+    "safety_margin": _NUM,
+}
 #: Optional keys and their defaults, per table.
 _OPTIONAL = {"scenario": {"in_paper": False}, "verdict": {"safety_margin": DEFAULT_SAFETY_MARGIN}}
 
@@ -126,7 +139,9 @@ def _typed(value, kind: str, file, key: str):
         if (
             not isinstance(value, list)
             or not value
-            or not all(isinstance(p, list) and len(p) == 2 and all(number(v) for v in p) for p in value)
+            or not all(
+                isinstance(p, list) and len(p) == 2 and all(number(v) for v in p) for p in value
+            )
         ):
             bad("a list of [x, y] pairs")
         return np.array(value, dtype=float)
@@ -139,7 +154,11 @@ def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
     raw = {**_OPTIONAL.get(prefix, {}), **raw}
     for key in raw:
         if key not in schema:
-            raise ScenarioError(f"unknown key (expected one of: {', '.join(schema)})", path=file, key=f"{prefix}.{key}")
+            raise ScenarioError(
+                f"unknown key (expected one of: {', '.join(schema)})",
+                path=file,
+                key=f"{prefix}.{key}",
+            )
     out = {}
     for key, kind in schema.items():
         if key not in raw:
@@ -160,7 +179,9 @@ def validate(raw: dict, file: str | Path) -> tuple[dict, dict]:
     """
     for key in raw:
         if key not in _TOP:
-            raise ScenarioError(f"unknown table (expected one of: {', '.join(sorted(_TOP))})", path=file, key=key)
+            raise ScenarioError(
+                f"unknown table (expected one of: {', '.join(sorted(_TOP))})", path=file, key=key
+            )
     for key in sorted(_TOP):
         if key not in raw:
             raise ScenarioError("missing table", path=file, key=key)
@@ -179,13 +200,19 @@ def _path_table(p, file) -> dict:
         raise ScenarioError("expected a table", path=file, key="path")
     kind = p.get("kind")
     if kind not in _PATH_SCHEMA:
-        raise ScenarioError(f"expected one of {', '.join(_PATH_SCHEMA)}, got {kind!r}", path=file, key="path.kind")
+        raise ScenarioError(
+            f"expected one of {', '.join(_PATH_SCHEMA)}, got {kind!r}", path=file, key="path.kind"
+        )
     return _table(p, _PATH_SCHEMA[kind], file, "path")
 
 
 def _obstacles(obstacles, file) -> list[dict]:
     if not isinstance(obstacles, list):
-        raise ScenarioError("expected a list of obstacle tables ([[obstacles]] or obstacles = [])", path=file, key="obstacles")
+        raise ScenarioError(
+            "expected a list of obstacle tables ([[obstacles]] or obstacles = [])",
+            path=file,
+            key="obstacles",
+        )
     out = []
     names = set()
     for i, o in enumerate(obstacles):
@@ -194,10 +221,18 @@ def _obstacles(obstacles, file) -> list[dict]:
             raise ScenarioError("expected a table", path=file, key=prefix)
         kind = o.get("kind")
         if kind not in _OBSTACLE_SCHEMA:
-            raise ScenarioError(f"expected one of {', '.join(_OBSTACLE_SCHEMA)}, got {kind!r}", path=file, key=f"{prefix}.kind")
+            raise ScenarioError(
+                f"expected one of {', '.join(_OBSTACLE_SCHEMA)}, got {kind!r}",
+                path=file,
+                key=f"{prefix}.kind",
+            )
         entry = _table(o, _OBSTACLE_SCHEMA[kind], file, prefix)
         if entry["name"] in names or not entry["name"]:
-            raise ScenarioError(f"obstacle names must be non-empty and unique, got {entry['name']!r}", path=file, key=f"{prefix}.name")
+            raise ScenarioError(
+                f"obstacle names must be non-empty and unique, got {entry['name']!r}",
+                path=file,
+                key=f"{prefix}.name",
+            )
         names.add(entry["name"])
         out.append(entry)
     return out
@@ -219,12 +254,18 @@ def _verdict_table(raw, file) -> dict:
     """The ``[verdict]`` table, validated (``safety_margin`` defaults to 0.0005 m)."""
     out = _table(raw, _VERDICT_SCHEMA, file, "verdict")
     if not out["settle_time"] >= 0:
-        raise ScenarioError(f"must be >= 0 [s], got {out['settle_time']}", path=file, key="verdict.settle_time")
+        raise ScenarioError(
+            f"must be >= 0 [s], got {out['settle_time']}", path=file, key="verdict.settle_time"
+        )
     for key, unit in (("max_tracking_error", "m"), ("max_force_error", "N")):
         if not out[key] > 0:
-            raise ScenarioError(f"must be > 0 [{unit}], got {out[key]}", path=file, key=f"verdict.{key}")
+            raise ScenarioError(
+                f"must be > 0 [{unit}], got {out[key]}", path=file, key=f"verdict.{key}"
+            )
     if not out["safety_margin"] >= 0:
-        raise ScenarioError(f"must be >= 0 [m], got {out['safety_margin']}", path=file, key="verdict.safety_margin")
+        raise ScenarioError(
+            f"must be >= 0 [m], got {out['safety_margin']}", path=file, key="verdict.safety_margin"
+        )
     return out
 
 
@@ -232,12 +273,22 @@ def _check_values(data: dict, file) -> None:
     r = data["robot"]
     n = r["link_lengths"].size
     if n < 2:
-        raise ScenarioError(f"a planar arm needs at least 2 links, got {n}", path=file, key="robot.link_lengths")
+        raise ScenarioError(
+            f"a planar arm needs at least 2 links, got {n}", path=file, key="robot.link_lengths"
+        )
     if np.any(r["link_lengths"] <= 0):
-        raise ScenarioError(f"every link length must be > 0 [m], got {r['link_lengths'].tolist()}", path=file, key="robot.link_lengths")
+        raise ScenarioError(
+            f"every link length must be > 0 [m], got {r['link_lengths'].tolist()}",
+            path=file,
+            key="robot.link_lengths",
+        )
     for key in ("theta0", "theta_min", "theta_max", "velocity_min", "velocity_max"):
         if r[key].size != n:
-            raise ScenarioError(f"expected {n} values (one per link), got {r[key].size}", path=file, key=f"robot.{key}")
+            raise ScenarioError(
+                f"expected {n} values (one per link), got {r[key].size}",
+                path=file,
+                key=f"robot.{key}",
+            )
     if np.any(r["theta_min"] >= r["theta_max"]):
         raise ScenarioError("every theta_min must be < theta_max", path=file, key="robot.theta_min")
     outside = np.flatnonzero((r["theta0"] < r["theta_min"]) | (r["theta0"] > r["theta_max"]))
@@ -245,33 +296,63 @@ def _check_values(data: dict, file) -> None:
         i = int(outside[0])
         raise ScenarioError(
             f"theta0[{i}] = {r['theta0'][i]} rad is outside [{r['theta_min'][i]}, {r['theta_max'][i]}]",
-            path=file, key="robot.theta0",
+            path=file,
+            key="robot.theta0",
         )
-    if np.any(r["velocity_min"] > 0) or np.any(r["velocity_max"] < 0) or np.any(r["velocity_min"] >= r["velocity_max"]):
-        raise ScenarioError("need velocity_min <= 0 <= velocity_max and velocity_min < velocity_max [rad/s]", path=file, key="robot.velocity_min")
+    if (
+        np.any(r["velocity_min"] > 0)
+        or np.any(r["velocity_max"] < 0)
+        or np.any(r["velocity_min"] >= r["velocity_max"])
+    ):
+        raise ScenarioError(
+            "need velocity_min <= 0 <= velocity_max and velocity_min < velocity_max [rad/s]",
+            path=file,
+            key="robot.velocity_min",
+        )
     kp = data["key_points"]
     if kp["points_per_link"] < 0:
-        raise ScenarioError(f"must be >= 0, got {kp['points_per_link']}", path=file, key="key_points.points_per_link")
+        raise ScenarioError(
+            f"must be >= 0, got {kp['points_per_link']}",
+            path=file,
+            key="key_points.points_per_link",
+        )
     if kp["points_per_link"] == 0 and not kp["include_joints"]:
-        raise ScenarioError("no key points (points_per_link = 0 and include_joints = false)", path=file, key="key_points.points_per_link")
+        raise ScenarioError(
+            "no key points (points_per_link = 0 and include_joints = false)",
+            path=file,
+            key="key_points.points_per_link",
+        )
     if kp["link_radius"] < 0:
-        raise ScenarioError(f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius")
+        raise ScenarioError(
+            f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius"
+        )
     c = data["contact"]
     if np.hypot(*c["normal"]) < 1e-12:
         raise ScenarioError("must not be zero", path=file, key="contact.normal")
-    _check_signs(c, "contact", file, positive=("stiffness",), non_negative=("damping", "force_noise_std"))
-    _check_signs(data["controller"], "controller", file, positive=("kp", "kd", "alpha", "k", "rho"),
-                 non_negative=("d_safe", "desired_force"))
+    _check_signs(
+        c, "contact", file, positive=("stiffness",), non_negative=("damping", "force_noise_std")
+    )
+    _check_signs(
+        data["controller"],
+        "controller",
+        file,
+        positive=("kp", "kd", "alpha", "k", "rho"),
+        non_negative=("d_safe", "desired_force"),
+    )
     a = data["adaptive"]
     if np.any(a["gain"] < 0):
         raise ScenarioError("gains must be >= 0", path=file, key="adaptive.gain")
     _check_signs(a, "adaptive", file, positive=("kp_min", "kd_min"))
     for i, o in enumerate(data["obstacles"]):
         if o["kind"] == "disk" and not o["radius"] > 0:
-            raise ScenarioError(f"must be > 0 [m], got {o['radius']}", path=file, key=f"obstacles[{i}].radius")
+            raise ScenarioError(
+                f"must be > 0 [m], got {o['radius']}", path=file, key=f"obstacles[{i}].radius"
+            )
 
 
-def _check_signs(table: dict, name: str, file, positive: tuple = (), non_negative: tuple = ()) -> None:
+def _check_signs(
+    table: dict, name: str, file, positive: tuple = (), non_negative: tuple = ()
+) -> None:
     """Reject a value of ``table`` (the TOML table ``name``) that is not > 0 / not >= 0 (NaN included)."""
     for key in positive:
         if not table[key] > 0:
@@ -286,12 +367,20 @@ def check_simulation(data: dict, file: str | Path) -> None:
     if not s["dt"] > 0:
         raise ScenarioError(f"must be > 0 [s], got {s['dt']}", path=file, key="simulation.dt")
     if not s["duration"] > 0:
-        raise ScenarioError(f"must be > 0 [s], got {s['duration']}", path=file, key="simulation.duration")
+        raise ScenarioError(
+            f"must be > 0 [s], got {s['duration']}", path=file, key="simulation.duration"
+        )
     if s["duration"] < s["dt"]:
-        raise ScenarioError(f"shorter than one control period dt = {s['dt']} s", path=file, key="simulation.duration")
+        raise ScenarioError(
+            f"shorter than one control period dt = {s['dt']} s",
+            path=file,
+            key="simulation.duration",
+        )
     alpha = data["controller"]["alpha"]
     if alpha * s["dt"] >= 1.0:
         raise ScenarioError(
-            f"alpha * dt = {alpha * s['dt']:g} must be < 1 for the escape-velocity bounds to keep the joints inside their limits",
-            path=file, key="controller.alpha",
+            f"alpha * dt = {alpha * s['dt']:g} must be < 1 for the escape-velocity bounds "
+            "to keep the joints inside their limits",
+            path=file,
+            key="controller.alpha",
         )

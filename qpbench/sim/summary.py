@@ -68,7 +68,14 @@ from . import log
 from .scenario import Scenario
 from .verdict import VIOLATION_TOL, judge
 
-__all__ = ["ACTIVE_MARGIN", "MAX_INTERVALS", "SETTLE_TIME", "STRUCTURED_FIGURES", "jsonable", "summarize"]
+__all__ = [
+    "ACTIVE_MARGIN",
+    "MAX_INTERVALS",
+    "SETTLE_TIME",
+    "STRUCTURED_FIGURES",
+    "jsonable",
+    "summarize",
+]
 
 #: Time from which tracking and force errors are judged [s] (paper: transient about 1 s);
 #: the ``*_after_2s`` figures.
@@ -81,7 +88,12 @@ ACTIVE_MARGIN = 1e-4
 MAX_INTERVALS = 20
 
 #: Figures of a summary that are lists or dicts (JSON text in a CSV cell).
-STRUCTURED_FIGURES = ("infeasible_intervals", "obstacle_active_intervals", "scenario_overrides", "status_counts")
+STRUCTURED_FIGURES = (
+    "infeasible_intervals",
+    "obstacle_active_intervals",
+    "scenario_overrides",
+    "status_counts",
+)
 
 
 def jsonable(overrides: dict) -> dict:
@@ -105,8 +117,15 @@ def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
     return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
 
 
-def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, backend: str, formulation: str,
-              wall_time_s: float, run_info: dict | None = None) -> dict:
+def summarize(
+    frame: pd.DataFrame,
+    scenario: Scenario,
+    controller: Controller,
+    backend: str,
+    formulation: str,
+    wall_time_s: float,
+    run_info: dict | None = None,
+) -> dict:
     """Figures of a run (JSON-able; ``None`` where a figure does not exist) and its verdict.
 
     The figures are listed in the module docstring. ``run_info`` (from
@@ -131,16 +150,24 @@ def summarize(frame: pd.DataFrame, scenario: Scenario, controller: Controller, b
     closest, active = _obstacle_figures(frame, t, dt, dcols, controller.d_safe)
     out.update(closest)
     out.update(_effort_figures(frame, controller, dt, t >= SETTLE_TIME - 1e-12))
-    out.update({
-        "wall_time_s": float(wall_time_s),
-        "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
-        "wall_budget_s": None,
-        "stopped_early": False,
-    })
+    out.update(
+        {
+            "wall_time_s": float(wall_time_s),
+            "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
+            "wall_budget_s": None,
+            "stopped_early": False,
+        }
+    )
     out.update(active)
     out.update(run_info or {})
-    verdict = judge(frame, scenario.verdict, d_safe=controller.d_safe, limits=controller.limits,
-                    obstacle_columns=dcols, summary=out)
+    verdict = judge(
+        frame,
+        scenario.verdict,
+        d_safe=controller.d_safe,
+        limits=controller.limits,
+        obstacle_columns=dcols,
+        summary=out,
+    )
     out["verdict"] = verdict.verdict
     out["verdict_reasons"] = verdict.text
     return out
@@ -187,25 +214,40 @@ def _error_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
     }
 
 
-def _obstacle_figures(frame: pd.DataFrame, t: np.ndarray, dt: float, dcols: list[tuple[str, str]],
-                      d_safe: float) -> tuple[dict, dict]:
+def _obstacle_figures(
+    frame: pd.DataFrame, t: np.ndarray, dt: float, dcols: list[tuple[str, str]], d_safe: float
+) -> tuple[dict, dict]:
     """The closest approach of a key point to an obstacle [m], and when each pair's row was
     about active (within :data:`ACTIVE_MARGIN` of ``d_safe``; ``{}`` without obstacles)."""
-    closest = {"min_obstacle_distance": None, "min_obstacle_distance_key_point": None,
-               "min_obstacle_distance_obstacle": None, "min_obstacle_distance_t": None, "d_safe": d_safe}
+    closest = {
+        "min_obstacle_distance": None,
+        "min_obstacle_distance_key_point": None,
+        "min_obstacle_distance_obstacle": None,
+        "min_obstacle_distance_t": None,
+        "d_safe": d_safe,
+    }
     if not dcols:
         return closest, {}
     D = frame[[log.distance_column(a, o) for a, o in dcols]].to_numpy()
     k, c = divmod(int(np.argmin(D)), D.shape[1])
-    closest.update(min_obstacle_distance=_none(D[k, c]), min_obstacle_distance_key_point=dcols[c][0],
-                   min_obstacle_distance_obstacle=dcols[c][1], min_obstacle_distance_t=_none(t[k]))
+    closest.update(
+        min_obstacle_distance=_none(D[k, c]),
+        min_obstacle_distance_key_point=dcols[c][0],
+        min_obstacle_distance_obstacle=dcols[c][1],
+        min_obstacle_distance_t=_none(t[k]),
+    )
     near = D <= d_safe + ACTIVE_MARGIN
-    active = {f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS]
-              for c, (a, o) in enumerate(dcols) if near[:, c].any()}
+    active = {
+        f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS]
+        for c, (a, o) in enumerate(dcols)
+        if near[:, c].any()
+    }
     return closest, {"obstacle_active_intervals": active}
 
 
-def _effort_figures(frame: pd.DataFrame, controller: Controller, dt: float, after: np.ndarray) -> dict:
+def _effort_figures(
+    frame: pd.DataFrame, controller: Controller, dt: float, after: np.ndarray
+) -> dict:
     """Joint-limit violations, joint motion and effort, the task residual, ``Kp_hat, Kd_hat``
     and the solve times [s] of a run."""
     n, lim, tol = controller.n, controller.limits, VIOLATION_TOL
@@ -215,8 +257,12 @@ def _effort_figures(frame: pd.DataFrame, controller: Controller, dt: float, afte
     v_sq = frame[log.V_SQ].to_numpy()
     solve_time = frame[log.SOLVE_TIME]
     return {
-        "joint_limit_violations": int(((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1).sum()),
-        "joint_velocity_limit_violations": int(((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1).sum()),
+        "joint_limit_violations": int(
+            ((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1).sum()
+        ),
+        "joint_velocity_limit_violations": int(
+            ((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1).sum()
+        ),
         "max_abs_theta": _none(np.max(np.abs(theta))) if ticks else None,
         "max_abs_v": _none(np.max(np.abs(v))) if ticks else None,
         "v_sq_max": _none(v_sq.max()) if ticks else None,

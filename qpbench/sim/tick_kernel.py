@@ -48,7 +48,9 @@ _CF_TANGENT, _CF_SURF, _CF_DT = 0, 2, 8
 _CI_COLS = 12
 
 
-def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mode, kp, kd, solve_time):  # pragma: no cover - compiled
+def _post_py(
+    theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mode, kp, kd, solve_time
+):  # pragma: no cover - compiled
     """Log tick ``k`` into ``data[k]`` and advance the plant ``theta += dt v``.
 
     Returns the noise-free contact force [N], and leaves the sensed end-effector position
@@ -127,7 +129,9 @@ def _post_py(theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, ci, cf, t, mo
     return force
 
 
-def post_constants(controller: Controller, surface: ContactSurface, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def post_constants(
+    controller: Controller, surface: ContactSurface, dt: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The tick log's float columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
     cols = log.float_columns(controller.n, [(a, o) for a, o, _ in controller.obstacle_columns()])
     cidx = {c: i for i, c in enumerate(cols)}
@@ -140,18 +144,49 @@ def post_constants(controller: Controller, surface: ContactSurface, dt: float) -
     col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
     col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
     first_theta, first_v = log.theta_columns(1)[0], log.velocity_columns(1)[0]
-    names = (first_theta, first_v, log.EE_X, None, log.FORCE, log.FALLBACK, log.ZERO_VELOCITY, log.SOLVE_TIME,
-             log.Y_0, log.Z_MAX, log.KP_HAT, log.KD_HAT)
+    names = (
+        first_theta,
+        first_v,
+        log.EE_X,
+        None,
+        log.FORCE,
+        log.FALLBACK,
+        log.ZERO_VELOCITY,
+        log.SOLVE_TIME,
+        log.Y_0,
+        log.Z_MAX,
+        log.KP_HAT,
+        log.KD_HAT,
+    )
     ci = np.array(
-        [cidx[log.D_MIN] - len(obstacle_cols) if c is None else cidx[c] for c in names] + col_start + col_end,
+        [cidx[log.D_MIN] - len(obstacle_cols) if c is None else cidx[c] for c in names]
+        + col_start
+        + col_end,
         dtype=np.int64,
     )
-    cf = np.array([tangent[0], tangent[1], normal[0], normal[1], float(normal @ surface.point), surface.stiffness,
-                   surface.damping, controller.task.desired_force, dt])
+    cf = np.array(
+        [
+            tangent[0],
+            tangent[1],
+            normal[0],
+            normal[1],
+            float(normal @ surface.point),
+            surface.stiffness,
+            surface.damping,
+            controller.task.desired_force,
+            dt,
+        ]
+    )
     return cols, cidx, ci, cf
 
 
-def warm_post_kernel(controller: Controller, surface: ContactSurface, dt: float, theta: np.ndarray, arrays: TickArrays) -> None:
+def warm_post_kernel(
+    controller: Controller,
+    surface: ContactSurface,
+    dt: float,
+    theta: np.ndarray,
+    arrays: TickArrays,
+) -> None:
     """Compile (or load) the post kernel for the argument types :func:`simulate` passes.
 
     ``arrays`` is a :meth:`Controller.build_arrays` result; ``theta`` is not changed.
@@ -162,6 +197,28 @@ def warm_post_kernel(controller: Controller, surface: ContactSurface, dt: float,
     row = np.zeros((1, len(cols)))
     kp, kd = controller.kp, controller.kd
     # an applied answer with duals, and a fallback/zero-velocity tick without
-    for y, z, mode in ((np.zeros(2), np.zeros(max(controller.n_rows, 1)), APPLIED), (none, none, ZERO)):
-        post(theta.copy(), np.zeros(controller.n), arrays.ee, np.zeros(4), arrays.J, arrays.b0, arrays.dist, arrays.xd,
-             y, z, row, 0, ci, cf, 0.0, mode, kp, kd, 0.0)
+    for y, z, mode in (
+        (np.zeros(2), np.zeros(max(controller.n_rows, 1)), APPLIED),
+        (none, none, ZERO),
+    ):
+        post(
+            theta.copy(),
+            np.zeros(controller.n),
+            arrays.ee,
+            np.zeros(4),
+            arrays.J,
+            arrays.b0,
+            arrays.dist,
+            arrays.xd,
+            y,
+            z,
+            row,
+            0,
+            ci,
+            cf,
+            0.0,
+            mode,
+            kp,
+            kd,
+            0.0,
+        )

@@ -44,7 +44,13 @@ if TYPE_CHECKING:
     import pandas as pd
 
 __all__ = [
-    "DEFAULT_SAFETY_MARGIN", "VERDICTS", "VIOLATION_TOL", "Verdict", "VerdictSettings", "failed_run", "judge",
+    "DEFAULT_SAFETY_MARGIN",
+    "VERDICTS",
+    "VIOLATION_TOL",
+    "Verdict",
+    "VerdictSettings",
+    "failed_run",
+    "judge",
 ]
 
 #: Verdicts, from the worst: the verdict of a run is the first whose rule holds.
@@ -128,11 +134,15 @@ def _failed_reasons(summary: dict) -> list[str]:
         out.append(f"{n} fallback solve{'s' if n > 1 else ''} raised")
     n = int(summary.get("zero_velocity_ticks") or 0)
     if n:
-        out.append(f"{n} tick{'s' if n > 1 else ''} without a command (no answer, no soft fallback: zero velocity)")
+        out.append(
+            f"{n} tick{'s' if n > 1 else ''} without a command (no answer, no soft fallback: zero velocity)"
+        )
     return out
 
 
-def _unsafe_reasons(frame, d_safe: float, margin: float, columns: list[tuple[str, str]]) -> list[str]:
+def _unsafe_reasons(
+    frame, d_safe: float, margin: float, columns: list[tuple[str, str]]
+) -> list[str]:
     if not columns or not len(frame):
         return []
     D = frame[[log.distance_column(a, o) for a, o in columns]].to_numpy(dtype=float)
@@ -203,8 +213,15 @@ def _diverged_reasons(frame, settings: VerdictSettings) -> list[str]:
     return out
 
 
-def judge(frame: pd.DataFrame, settings: VerdictSettings, *, d_safe: float, limits, obstacle_columns: list[tuple[str, str]],
-          summary: dict) -> Verdict:
+def judge(
+    frame: pd.DataFrame,
+    settings: VerdictSettings,
+    *,
+    d_safe: float,
+    limits,
+    obstacle_columns: list[tuple[str, str]],
+    summary: dict,
+) -> Verdict:
     """The verdict of one simulated run (rules in the module docstring).
 
     Args:
@@ -233,8 +250,10 @@ def judge(frame: pd.DataFrame, settings: VerdictSettings, *, d_safe: float, limi
     notes = []
     if summary.get("stopped_early"):
         simulated = float(summary.get("simulated_s") or 0.0)
-        note = (f"stopped at {simulated:.3g} s of {_g(float(summary.get('duration') or math.nan))} s "
-                f"(wall-time budget {_g(float(summary.get('wall_budget_s') or math.nan))} s)")
+        note = (
+            f"stopped at {simulated:.3g} s of {_g(float(summary.get('duration') or math.nan))} s "
+            f"(wall-time budget {_g(float(summary.get('wall_budget_s') or math.nan))} s)"
+        )
         if simulated <= settings.settle_time:
             note += f": tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
         else:
@@ -246,7 +265,10 @@ def judge(frame: pd.DataFrame, settings: VerdictSettings, *, d_safe: float, limi
 def failed_run(status: str, message: str) -> Verdict:
     """The verdict of a run that produced no result: ``status`` (``error``,
     ``crashed``, ``time_limit``) and the harness's message."""
-    what = {"crashed": "run crashed", "time_limit": "run overran its deadline", "error": "run raised"}.get(
-        status, f"run {status}")
+    what = {
+        "crashed": "run crashed",
+        "time_limit": "run overran its deadline",
+        "error": "run raised",
+    }.get(status, f"run {status}")
     message = " ".join(str(message).split())
     return Verdict("failed", (f"{what}: {message}" if message else what,))

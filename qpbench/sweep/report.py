@@ -102,7 +102,12 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
     for backend, g in df.groupby("backend", sort=True):
         valid = g[g["status"] != "invalid_scenario"]
         n = len(valid)
-        row = [backend, n, int((g["status"] == "invalid_scenario").sum()), int((valid["verdict"] == "ok").sum())]
+        row = [
+            backend,
+            n,
+            int((g["status"] == "invalid_scenario").sum()),
+            int((valid["verdict"] == "ok").sum()),
+        ]
         for verdict in ("unsafe", "diverged", "limits", "failed"):
             k = int((valid["verdict"] == verdict).sum())
             lo, hi = wilson(k, n)
@@ -115,19 +120,30 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
 def paired_rows(df: pd.DataFrame) -> list[list]:
     """Every pair of backends on the instances both ran: counts and McNemar's exact p-value."""
     valid = df[df["status"] != "invalid_scenario"]
-    ok = valid.pivot_table(index="instance", columns="backend", values="verdict",
-                           aggfunc=lambda v: v.iloc[-1] == "ok")
+    ok = valid.pivot_table(
+        index="instance", columns="backend", values="verdict", aggfunc=lambda v: v.iloc[-1] == "ok"
+    )
     backends = sorted(ok.columns)
     out = []
     for i, a in enumerate(backends):
-        for b in backends[i + 1:]:
+        for b in backends[i + 1 :]:
             both = ok[[a, b]].dropna()
             if both.empty:
                 continue
             xa, xb = both[a].astype(bool).to_numpy(), both[b].astype(bool).to_numpy()
             n10, n01 = int((xa & ~xb).sum()), int((~xa & xb).sum())
-            out.append([a, b, len(both), int((xa & xb).sum()), n10, n01, int((~xa & ~xb).sum()),
-                        mcnemar_exact(n10, n01)])
+            out.append(
+                [
+                    a,
+                    b,
+                    len(both),
+                    int((xa & xb).sum()),
+                    n10,
+                    n01,
+                    int((~xa & ~xb).sum()),
+                    mcnemar_exact(n10, n01),
+                ]
+            )
     return out
 
 
@@ -150,8 +166,9 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
     """Per backend the ``k`` worst runs: worst verdict first, then the smallest margin to ``d_safe``."""
     valid = df[df["status"] != "invalid_scenario"].copy()
     valid["severity"] = valid["verdict"].map({v: i for i, v in enumerate(SEVERITY)}).fillna(0)
-    margin = pd.to_numeric(valid["min_obstacle_distance"], errors="coerce") - pd.to_numeric(valid["d_safe"],
-                                                                                           errors="coerce")
+    margin = pd.to_numeric(valid["min_obstacle_distance"], errors="coerce") - pd.to_numeric(
+        valid["d_safe"], errors="coerce"
+    )
     valid["margin"] = margin.fillna(np.inf)
     valid["tracking"] = -pd.to_numeric(valid["tracking_max_after_2s"], errors="coerce").fillna(0)
     out = []
@@ -160,10 +177,23 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
             if r["verdict"] == "ok":
                 continue
             path = Path(r["folder"]) / str(r["instance_file"])
-            reasons = r["verdict_reasons"] if isinstance(r["verdict_reasons"], str) else r.get("error", "")
-            out.append([backend, r["instance"], r["verdict"], r["min_obstacle_distance"] * 1e3
-                        if pd.notna(r["min_obstacle_distance"]) else None, str(reasons)[:160],
-                        f"`qpbench simulate --scenario {path} --backend {backend}`"])
+            reasons = (
+                r["verdict_reasons"]
+                if isinstance(r["verdict_reasons"], str)
+                else r.get("error", "")
+            )
+            out.append(
+                [
+                    backend,
+                    r["instance"],
+                    r["verdict"],
+                    r["min_obstacle_distance"] * 1e3
+                    if pd.notna(r["min_obstacle_distance"])
+                    else None,
+                    str(reasons)[:160],
+                    f"`qpbench simulate --scenario {path} --backend {backend}`",
+                ]
+            )
     return out
 
 
@@ -180,11 +210,22 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         for backend, g in ok.groupby("backend", sort=True):
             v = np.sort(pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale)
             if len(v):
-                ax.step(np.r_[v[0], v], np.r_[0.0, np.arange(1, len(v) + 1) / len(v)], where="post", label=backend)
+                ax.step(
+                    np.r_[v[0], v],
+                    np.r_[0.0, np.arange(1, len(v) + 1) / len(v)],
+                    where="post",
+                    label=backend,
+                )
         if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
             ax.set_xscale("log")
         if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
-            ax.axvline(float(ok["d_safe"].dropna().iloc[0]) * 1e3, color="k", lw=0.8, ls="--", label="d_safe")
+            ax.axvline(
+                float(ok["d_safe"].dropna().iloc[0]) * 1e3,
+                color="k",
+                lw=0.8,
+                ls="--",
+                label="d_safe",
+            )
         ax.set_xlabel(label)
         ax.set_ylabel("fraction of runs")
         ax.set_ylim(0.0, 1.02)
@@ -206,47 +247,110 @@ def _manifest_lines(folder: Path) -> list[str]:
     except (OSError, ValueError):
         return []
     duration = f"{m['duration']} s (the sweep's)" if m.get("duration") else "the base scenario's"
-    return [f"Sweep file `{m.get('sweep_file')}` (sha256 {str(m.get('sweep_sha256'))[:16]}), base scenario "
-            f"`{m.get('base')}`, seed {m.get('seed')}, {m.get('samples')} instances, duration {duration}; "
-            f"time to converge: within {m.get('force_band_n')} N and {m.get('tracking_band_m')} m to the end.\n"]
+    return [
+        f"Sweep file `{m.get('sweep_file')}` (sha256 {str(m.get('sweep_sha256'))[:16]}), base scenario "
+        f"`{m.get('base')}`, seed {m.get('seed')}, {m.get('samples')} instances, duration {duration}; "
+        f"time to converge: within {m.get('force_band_n')} N and {m.get('tracking_band_m')} m to the end.\n"
+    ]
 
 
 def sweep_section(paths: list[Path], out: Path, plots: bool = True) -> list[str]:
     """Markdown lines of the sweep section for the sweep tables ``paths`` (plots into ``out/plots``)."""
     from ..report.markdown import md_table, slug
 
-    lines = ["## Sweeps\n", "Randomised instances of a scenario, each in closed loop with each backend "
-             "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n"]
+    lines = [
+        "## Sweeps\n",
+        "Randomised instances of a scenario, each in closed loop with each backend "
+        "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n",
+    ]
     for path in paths:
         df = _read(path)
         name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
         lines.append(f"### Sweep {name}\n")
         lines += _manifest_lines(path.parent)
-        lines.append(md_table(["backend", "runs", "invalid instances", "ok", "unsafe", "diverged", "limits", "failed",
-                               "of which error/crashed"], rate_rows(df)))
+        lines.append(
+            md_table(
+                [
+                    "backend",
+                    "runs",
+                    "invalid instances",
+                    "ok",
+                    "unsafe",
+                    "diverged",
+                    "limits",
+                    "failed",
+                    "of which error/crashed",
+                ],
+                rate_rows(df),
+            )
+        )
         pairs = paired_rows(df)
         if pairs:
-            lines.append("Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
-                         "pairs):\n")
-            lines.append(md_table(["A", "B", "instances", "both ok", "A ok, B not", "B ok, A not", "neither",
-                                   "p (McNemar)"], pairs))
-        lines.append("Distributions over the runs with a result (median, p90, max; time to converge: median, "
-                     "runs not converged at the end):\n")
-        lines.append(md_table(
-            ["backend", "track p50 mm", "p90", "max", "force err p50 N", "p90", "max", "d_min p50 mm", "p90", "max",
-             "p99 solve p50 us", "p90", "max", "t conv. force s", "not conv.", "t conv. track s", "not conv.",
-             "runs with ticks > 1 ms"], _quantile_rows(df)))
+            lines.append(
+                "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
+                "pairs):\n"
+            )
+            lines.append(
+                md_table(
+                    [
+                        "A",
+                        "B",
+                        "instances",
+                        "both ok",
+                        "A ok, B not",
+                        "B ok, A not",
+                        "neither",
+                        "p (McNemar)",
+                    ],
+                    pairs,
+                )
+            )
+        lines.append(
+            "Distributions over the runs with a result (median, p90, max; time to converge: median, "
+            "runs not converged at the end):\n"
+        )
+        lines.append(
+            md_table(
+                [
+                    "backend",
+                    "track p50 mm",
+                    "p90",
+                    "max",
+                    "force err p50 N",
+                    "p90",
+                    "max",
+                    "d_min p50 mm",
+                    "p90",
+                    "max",
+                    "p99 solve p50 us",
+                    "p90",
+                    "max",
+                    "t conv. force s",
+                    "not conv.",
+                    "t conv. track s",
+                    "not conv.",
+                    "runs with ticks > 1 ms",
+                ],
+                _quantile_rows(df),
+            )
+        )
         concurrent = pd.to_numeric(df["concurrent_solves"], errors="coerce").max()
         if pd.notna(concurrent) and concurrent > 1:
-            lines.append(f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
-                         "host: they are disturbed; take timings with `--jobs 1`.\n")
+            lines.append(
+                f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
+                "host: they are disturbed; take timings with `--jobs 1`.\n"
+            )
         if plots:
             key = f"sweep_ecdf_{slug(path.parent.name)}_{slug(name)}"
             ecdf_plot(df, out / "plots" / f"{key}.png", f"sweep {name}")
             lines.append(f"![ECDFs, sweep {name}](plots/{key}.png)\n")
         worst = worst_rows(df)
         if worst:
-            lines.append("Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
-                         "command:\n")
-            lines.append(md_table(["backend", "instance", "verdict", "d_min mm", "why", "re-run"], worst))
+            lines.append(
+                "Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
+                "command:\n"
+            )
+            lines.append(
+                md_table(["backend", "instance", "verdict", "d_min mm", "why", "re-run"], worst)
+            )
     return lines

@@ -47,8 +47,16 @@ import math
 
 import numpy as np
 
-__all__ = ["COLUMNS", "CSV_NAME", "KEY_COLUMNS", "STATUSES", "TIMING_COLUMNS", "failed_row", "result_row",
-           "time_to_converge"]
+__all__ = [
+    "COLUMNS",
+    "CSV_NAME",
+    "KEY_COLUMNS",
+    "STATUSES",
+    "TIMING_COLUMNS",
+    "failed_row",
+    "result_row",
+    "time_to_converge",
+]
 
 #: Name of the table inside the sweep's folder.
 CSV_NAME = "sweep.csv"
@@ -61,33 +69,105 @@ KEY_COLUMNS = ("instance", "backend")
 
 #: Figures copied from the closed loop's summary as they are.
 SUMMARY_COLUMNS = (
-    "duration", "simulated_s", "dt", "ticks",
-    "tracking_rms_after_2s", "tracking_max_after_2s", "force_error_rms_after_2s", "force_error_max_after_2s",
-    "min_obstacle_distance", "min_obstacle_distance_key_point", "min_obstacle_distance_obstacle",
-    "min_obstacle_distance_t", "d_safe", "joint_limit_violations", "joint_velocity_limit_violations", "max_abs_v",
-    "infeasible_ticks", "non_optimal_ticks", "fallback_ticks", "zero_velocity_ticks", "error_ticks", "invalid_ticks",
-    "first_error", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s", "deadline_misses",
-    "wall_time_s", "real_time_factor",
+    "duration",
+    "simulated_s",
+    "dt",
+    "ticks",
+    "tracking_rms_after_2s",
+    "tracking_max_after_2s",
+    "force_error_rms_after_2s",
+    "force_error_max_after_2s",
+    "min_obstacle_distance",
+    "min_obstacle_distance_key_point",
+    "min_obstacle_distance_obstacle",
+    "min_obstacle_distance_t",
+    "d_safe",
+    "joint_limit_violations",
+    "joint_velocity_limit_violations",
+    "max_abs_v",
+    "infeasible_ticks",
+    "non_optimal_ticks",
+    "fallback_ticks",
+    "zero_velocity_ticks",
+    "error_ticks",
+    "invalid_ticks",
+    "first_error",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "deadline_misses",
+    "wall_time_s",
+    "real_time_factor",
 )
 
 #: Columns of ``sweep.csv``, in order.
 COLUMNS = (
-    "instance", "backend", "instance_file", "sample", "sweep", "base_scenario", "parameters",
-    "status", "error", "attempts", "verdict", "verdict_reasons",
-    "duration_s", "simulated_s", "dt", "ticks",
-    "tracking_rms_after_2s", "tracking_max_after_2s", "force_error_rms_after_2s", "force_error_max_after_2s",
-    "t_converge_force_s", "t_converge_tracking_s", "force_band_n", "tracking_band_m",
-    "min_obstacle_distance", "min_obstacle_distance_key_point", "min_obstacle_distance_obstacle",
-    "min_obstacle_distance_t", "d_safe", "joint_limit_violations", "joint_velocity_limit_violations", "max_abs_v",
-    "infeasible_ticks", "non_optimal_ticks", "fallback_ticks", "zero_velocity_ticks", "error_ticks", "invalid_ticks",
-    "first_error", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s", "deadline_misses",
-    "ticks_over_1ms", "wall_time_s", "real_time_factor", "executor", "host", "worker", "concurrent_solves",
+    "instance",
+    "backend",
+    "instance_file",
+    "sample",
+    "sweep",
+    "base_scenario",
+    "parameters",
+    "status",
+    "error",
+    "attempts",
+    "verdict",
+    "verdict_reasons",
+    "duration_s",
+    "simulated_s",
+    "dt",
+    "ticks",
+    "tracking_rms_after_2s",
+    "tracking_max_after_2s",
+    "force_error_rms_after_2s",
+    "force_error_max_after_2s",
+    "t_converge_force_s",
+    "t_converge_tracking_s",
+    "force_band_n",
+    "tracking_band_m",
+    "min_obstacle_distance",
+    "min_obstacle_distance_key_point",
+    "min_obstacle_distance_obstacle",
+    "min_obstacle_distance_t",
+    "d_safe",
+    "joint_limit_violations",
+    "joint_velocity_limit_violations",
+    "max_abs_v",
+    "infeasible_ticks",
+    "non_optimal_ticks",
+    "fallback_ticks",
+    "zero_velocity_ticks",
+    "error_ticks",
+    "invalid_ticks",
+    "first_error",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "deadline_misses",
+    "ticks_over_1ms",
+    "wall_time_s",
+    "real_time_factor",
+    "executor",
+    "host",
+    "worker",
+    "concurrent_solves",
 )
 
 #: Columns that depend on timing or on where the run was made (ignored when comparing two sweeps).
 TIMING_COLUMNS = (
-    "attempts", "solve_time_median_s", "solve_time_p99_s", "solve_time_max_s", "deadline_misses",
-    "ticks_over_1ms", "wall_time_s", "real_time_factor", "executor", "host", "worker", "concurrent_solves",
+    "attempts",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "deadline_misses",
+    "ticks_over_1ms",
+    "wall_time_s",
+    "real_time_factor",
+    "executor",
+    "host",
+    "worker",
+    "concurrent_solves",
 )
 
 #: One tick's solve longer than this misses a 1 kHz loop's deadline [s].
@@ -132,10 +212,17 @@ def result_row(meta: dict, summary: dict, log) -> dict:
             value = value.item()
         row["duration_s" if key == "duration" else key] = value
     row["status"], row["error"] = "ok", ""
-    row["verdict"], row["verdict_reasons"] = summary.get("verdict"), summary.get("verdict_reasons", "")
+    row["verdict"], row["verdict_reasons"] = (
+        summary.get("verdict"),
+        summary.get("verdict_reasons", ""),
+    )
     t = log["t"].to_numpy(dtype=float)
-    row["t_converge_force_s"] = time_to_converge(t, log["force_error"].to_numpy(), meta["force_band"])
-    row["t_converge_tracking_s"] = time_to_converge(t, log["tracking_error"].to_numpy(), meta["tracking_band"])
+    row["t_converge_force_s"] = time_to_converge(
+        t, log["force_error"].to_numpy(), meta["force_band"]
+    )
+    row["t_converge_tracking_s"] = time_to_converge(
+        t, log["tracking_error"].to_numpy(), meta["tracking_band"]
+    )
     solve = log["solve_time_s"].to_numpy(dtype=float)
     row["ticks_over_1ms"] = int(np.count_nonzero(solve > KHZ_DEADLINE_S))
     return row
@@ -159,7 +246,11 @@ def same_outside_timing(a: dict, b: dict) -> list[str]:
     """Columns where rows ``a`` and ``b`` differ, timing columns aside (floats compared exactly, as text)."""
     from ..harness.results import _cell
 
-    return [c for c in COLUMNS if c not in TIMING_COLUMNS and _cell(_parse(a.get(c))) != _cell(_parse(b.get(c)))]
+    return [
+        c
+        for c in COLUMNS
+        if c not in TIMING_COLUMNS and _cell(_parse(a.get(c))) != _cell(_parse(b.get(c)))
+    ]
 
 
 def _parse(value):

@@ -58,10 +58,19 @@ def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
 
     return {
         # samples, backends: of every run into the folder (a resumed run merges them)
-        "sweep": spec.name, "sweep_file": str(spec.path), "sweep_sha256": spec.sha256, "sweep_text": spec.text,
-        "seed": spec.seed, "samples": spec.samples, "duration": spec.duration, "base": spec.base,
-        "base_file": str(spec.base_path), "backends": backends, "qpbench_version": __version__,
-        "force_band_n": spec.force_band, "tracking_band_m": spec.tracking_band,
+        "sweep": spec.name,
+        "sweep_file": str(spec.path),
+        "sweep_sha256": spec.sha256,
+        "sweep_text": spec.text,
+        "seed": spec.seed,
+        "samples": spec.samples,
+        "duration": spec.duration,
+        "base": spec.base,
+        "base_file": str(spec.base_path),
+        "backends": backends,
+        "qpbench_version": __version__,
+        "force_band_n": spec.force_band,
+        "tracking_band_m": spec.tracking_band,
     }
 
 
@@ -70,13 +79,21 @@ def _check_resumable(out: Path, spec: SweepSpec) -> None:
     try:
         old = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
-        raise InputError(f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path) from None
+        raise InputError(
+            f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path
+        ) from None
     if old.get("sweep_sha256") != spec.sha256:
-        raise InputError(f"cannot resume: made from another sweep file ({old.get('sweep_file')}); use --force",
-                         path=path, key="sweep_sha256")
+        raise InputError(
+            f"cannot resume: made from another sweep file ({old.get('sweep_file')}); use --force",
+            path=path,
+            key="sweep_sha256",
+        )
     if old.get("duration") != spec.duration:
-        raise InputError(f"cannot resume: made with duration {old.get('duration')}, not {spec.duration}; use --force",
-                         path=path, key="duration")
+        raise InputError(
+            f"cannot resume: made with duration {old.get('duration')}, not {spec.duration}; use --force",
+            path=path,
+            key="duration",
+        )
 
 
 def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
@@ -87,15 +104,26 @@ def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
 
 
 def _meta(spec: SweepSpec, inst: Instance, backend: str) -> dict:
-    return {"instance": inst.name, "backend": backend, "instance_file": f"{INSTANCE_DIR}/{inst.name}.toml",
-            "sample": inst.index, "sweep": spec.name, "base_scenario": spec.base, "parameters": inst.values,
-            "duration": spec.duration, "force_band": spec.force_band, "tracking_band": spec.tracking_band}
+    return {
+        "instance": inst.name,
+        "backend": backend,
+        "instance_file": f"{INSTANCE_DIR}/{inst.name}.toml",
+        "sample": inst.index,
+        "sweep": spec.name,
+        "base_scenario": spec.base,
+        "parameters": inst.values,
+        "duration": spec.duration,
+        "force_band": spec.force_band,
+        "tracking_band": spec.tracking_band,
+    }
 
 
 def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
     csv_path = out / CSV_NAME
     check_folder(out)
-    check_output(out / CSV_NAME, force=force, resume=resume, make_parent=True)  # out is created below
+    check_output(
+        out / CSV_NAME, force=force, resume=resume, make_parent=True
+    )  # out is created below
     if resume and csv_path.exists() and not force:
         _check_resumable(out, spec)
     elif force:
@@ -114,14 +142,25 @@ def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resum
     write_text(out / MANIFEST_NAME, json.dumps(manifest, indent=2) + "\n")
     kept = {}
     if csv_path.exists():
-        kept = {tuple(r[c] for c in KEY_COLUMNS): r for r in read_sweep_rows(csv_path, repair=True)
-                if r["status"] in KEPT_STATUSES}
+        kept = {
+            tuple(r[c] for c in KEY_COLUMNS): r
+            for r in read_sweep_rows(csv_path, repair=True)
+            if r["status"] in KEPT_STATUSES
+        }
     return instances, kept
 
 
-def run_sweep(spec: SweepSpec, backends: list[str], out: str | Path, executor, *, force: bool = False,
-              resume: bool = False, plugins: list[str] | None = None,
-              on_row: Callable[[dict], None] | None = None) -> SweepOutcome:
+def run_sweep(
+    spec: SweepSpec,
+    backends: list[str],
+    out: str | Path,
+    executor,
+    *,
+    force: bool = False,
+    resume: bool = False,
+    plugins: list[str] | None = None,
+    on_row: Callable[[dict], None] | None = None,
+) -> SweepOutcome:
     """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.executors`) into ``out``.
 
     Rows are appended to ``out/sweep.csv`` as runs end (``on_row`` is called
@@ -157,17 +196,30 @@ def run_sweep(spec: SweepSpec, backends: list[str], out: str | Path, executor, *
                 if inst.invalid is not None:
                     emit(failed_row(meta, "invalid_scenario", inst.invalid))
                     continue
-                items.append(((inst.name, backend), SweepTask(meta, inst.text, tuple(plugins or ()))))
+                items.append(
+                    ((inst.name, backend), SweepTask(meta, inst.text, tuple(plugins or ())))
+                )
         metas = {key: task.meta for key, task in items}
         for done in executor.run(run_task, items):
-            row = done.value if done.lost is None else failed_row(metas[done.key], "crashed", done.lost)
-            row.update(executor=executor.name, host=done.host, worker=done.worker,
-                       concurrent_solves=done.concurrent, attempts=done.attempts)
+            row = (
+                done.value
+                if done.lost is None
+                else failed_row(metas[done.key], "crashed", done.lost)
+            )
+            row.update(
+                executor=executor.name,
+                host=done.host,
+                worker=done.worker,
+                concurrent_solves=done.concurrent,
+                attempts=done.attempts,
+            )
             ran += 1
             failed += row["status"] in ("error", "crashed")
             emit(row)
     order = [(inst.name, b) for inst in instances for b in backends]
-    final = [rows[k] for k in order if k in rows] + [r for k, r in rows.items() if k not in set(order)]
+    final = [rows[k] for k in order if k in rows] + [
+        r for k, r in rows.items() if k not in set(order)
+    ]
     with atomic_path(csv_path) as tmp:
         tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
     return SweepOutcome(final, csv_path, ran, len(kept), failed)

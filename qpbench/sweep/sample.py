@@ -65,7 +65,9 @@ def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
     raw["scenario"] = dict(raw.get("scenario", {}))
     raw["scenario"]["name"] = f"{spec.name}-{name}"
     base_description = raw["scenario"].get("description", "")
-    raw["scenario"]["description"] = f"Instance {index} of sweep {spec.name!r}, around: {base_description}"
+    raw["scenario"]["description"] = (
+        f"Instance {index} of sweep {spec.name!r}, around: {base_description}"
+    )
     header = [
         f"Instance {name} (sample {index}) of sweep {spec.name!r} ({spec.path.name}, sha256 {spec.sha256[:16]}, "
         f"seed {spec.seed}).",
@@ -73,8 +75,12 @@ def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
     ]
     header += [f"  {key} = {value_text(value)}" for key, value in values.items()]
     if spec.duration is not None:
-        header.append(f"  simulation.duration = {value_text(float(spec.duration))} (the sweep's duration)")
-    header.append(f"Re-run alone: qpbench simulate --scenario {name}.toml --backend BACKEND (from its folder)")
+        header.append(
+            f"  simulation.duration = {value_text(float(spec.duration))} (the sweep's duration)"
+        )
+    header.append(
+        f"Re-run alone: qpbench simulate --scenario {name}.toml --backend BACKEND (from its folder)"
+    )
     return dumps(raw, header="\n".join(header))
 
 
@@ -108,8 +114,10 @@ def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
         d, point, obstacle = start_clearance(scenario)
         d_safe = scenario.data["controller"]["d_safe"]
         if d < d_safe:
-            return (f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
-                    f"inside d_safe = {d_safe * 1e3:g} mm (every backend would be unsafe at t = 0)")
+            return (
+                f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
+                f"inside d_safe = {d_safe * 1e3:g} mm (every backend would be unsafe at t = 0)"
+            )
     return None
 
 

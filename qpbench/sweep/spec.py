@@ -100,14 +100,30 @@ DISTRIBUTIONS = {
 
 #: Names a reader may try for a key, and the scenario key meant.
 ALIASES = {
-    "theta0": "robot.theta0", "fd": "controller.desired_force", "desired_force": "controller.desired_force",
-    "dt": "simulation.dt", "stiffness": "contact.stiffness", "noise": "contact.force_noise_std",
-    "force_noise_std": "contact.force_noise_std", "link_lengths": "robot.link_lengths",
-    "centre": "path.centre", "center": "path.centre", "amplitude": "path.amplitude", "speed": "path.omega",
-    "omega": "path.omega", "duration": "[sweep] duration",
+    "theta0": "robot.theta0",
+    "fd": "controller.desired_force",
+    "desired_force": "controller.desired_force",
+    "dt": "simulation.dt",
+    "stiffness": "contact.stiffness",
+    "noise": "contact.force_noise_std",
+    "force_noise_std": "contact.force_noise_std",
+    "link_lengths": "robot.link_lengths",
+    "centre": "path.centre",
+    "center": "path.centre",
+    "amplitude": "path.amplitude",
+    "speed": "path.omega",
+    "omega": "path.omega",
+    "duration": "[sweep] duration",
 }
 
-_SWEEP_KEYS = {"name": str, "base": str, "seed": int, "samples": int, "duration": float, "safe_start": bool}
+_SWEEP_KEYS = {
+    "name": str,
+    "base": str,
+    "seed": int,
+    "samples": int,
+    "duration": float,
+    "safe_start": bool,
+}
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
 _KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
 #: Draws of a truncated normal tried before giving up on a component.
@@ -143,14 +159,20 @@ class Distribution:
             return copy.deepcopy(p["values"][i])
         if self.kind == "integers":
             return int(rng.integers(p["low"], p["high"], endpoint=True))
-        if p.get("same"):  # one draw for every component: an offset from the base value, or the value itself
+        if p.get(
+            "same"
+        ):  # one draw for every component: an offset from the base value, or the value itself
             relative = "spread" in p or (self.kind == "normal" and "mean" not in p)
             first = float(np.ravel(base)[0])
-            one = Distribution(self.key, self.kind, {k: v for k, v in p.items() if k != "same"}, first).draw(rng)
+            one = Distribution(
+                self.key, self.kind, {k: v for k, v in p.items() if k != "same"}, first
+            ).draw(rng)
             value = base + (one - first) if relative else np.full(shape, one)
             return value.tolist() if shape else float(value)
         if self.kind == "uniform":
-            low, high = (base - p["spread"], base + p["spread"]) if "spread" in p else (p["low"], p["high"])
+            low, high = (
+                (base - p["spread"], base + p["spread"]) if "spread" in p else (p["low"], p["high"])
+            )
             value = rng.uniform(low, high, size=shape)
         elif self.kind == "loguniform":
             value = np.exp(rng.uniform(np.log(p["low"]), np.log(p["high"]), size=shape))
@@ -170,7 +192,9 @@ class Distribution:
             if not bad.any():
                 return value
             value = np.where(bad, rng.normal(mean, std), value)
-        raise InputError(f"a truncated normal draw stayed outside [low, high] {_MAX_REDRAWS} times", key=self.key)
+        raise InputError(
+            f"a truncated normal draw stayed outside [low, high] {_MAX_REDRAWS} times", key=self.key
+        )
 
 
 @dataclass
@@ -215,7 +239,9 @@ class SweepSpec:
         return np.random.default_rng([self.seed, index, zlib.crc32(key.encode("utf-8"))])
 
 
-def load_sweep(path: str | Path, samples: int | None = None, duration: float | None = None) -> SweepSpec:
+def load_sweep(
+    path: str | Path, samples: int | None = None, duration: float | None = None
+) -> SweepSpec:
     """Read and check a sweep file (``samples``, ``duration`` override the file's).
 
     Raises:
@@ -230,7 +256,9 @@ def load_sweep(path: str | Path, samples: int | None = None, duration: float | N
     return parse_sweep(text, path, samples=samples, duration=duration)
 
 
-def parse_sweep(text: str, path: str | Path, samples: int | None = None, duration: float | None = None) -> SweepSpec:
+def parse_sweep(
+    text: str, path: str | Path, samples: int | None = None, duration: float | None = None
+) -> SweepSpec:
     """Parse sweep-file ``text`` (``path`` names it in errors and anchors a relative ``base``)."""
     path = Path(path)
     try:
@@ -245,8 +273,14 @@ def parse_sweep(text: str, path: str | Path, samples: int | None = None, duratio
         head["samples"] = _positive_int(samples, path, "--samples")
     if duration is not None:
         head["duration"] = duration
-    if head.get("duration") is not None and not (_number(head["duration"]) and head["duration"] > 0):
-        raise InputError(f"must be a positive number of seconds, got {head['duration']!r}", path=path, key="sweep.duration")
+    if head.get("duration") is not None and not (
+        _number(head["duration"]) and head["duration"] > 0
+    ):
+        raise InputError(
+            f"must be a positive number of seconds, got {head['duration']!r}",
+            path=path,
+            key="sweep.duration",
+        )
     base_path, base_raw = _base(head["base"], path)
     extra = raw.get("obstacles", [])
     if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
@@ -257,13 +291,28 @@ def parse_sweep(text: str, path: str | Path, samples: int | None = None, duratio
     scenario = _check_base(base_raw, path)
     params = raw.get("parameters", {})
     if not isinstance(params, dict) or not params:
-        raise InputError("expected a [parameters] table with at least one key", path=path, key="parameters")
-    distributions = [_distribution(key, spec, base_raw, path) for key, spec in _flatten(params, path)]
+        raise InputError(
+            "expected a [parameters] table with at least one key", path=path, key="parameters"
+        )
+    distributions = [
+        _distribution(key, spec, base_raw, path) for key, spec in _flatten(params, path)
+    ]
     force_band, tracking_band = _bands(raw.get("convergence", {}), scenario.verdict, path)
-    return SweepSpec(path=path, text=text, name=head["name"], seed=head["seed"], samples=head["samples"],
-                     duration=head.get("duration"), base=head["base"], base_path=base_path, base_raw=base_raw,
-                     parameters=distributions, force_band=force_band, tracking_band=tracking_band,
-                     safe_start=head.get("safe_start", True))
+    return SweepSpec(
+        path=path,
+        text=text,
+        name=head["name"],
+        seed=head["seed"],
+        samples=head["samples"],
+        duration=head.get("duration"),
+        base=head["base"],
+        base_path=base_path,
+        base_raw=base_raw,
+        parameters=distributions,
+        force_band=force_band,
+        tracking_band=tracking_band,
+        safe_start=head.get("safe_start", True),
+    )
 
 
 def _positive_int(value, path, key) -> int:
@@ -277,7 +326,11 @@ def _sweep_table(head, path) -> dict:
         raise InputError("missing table", path=path, key="sweep")
     for key in head:
         if key not in _SWEEP_KEYS:
-            raise InputError(f"unknown key (expected one of: {', '.join(_SWEEP_KEYS)})", path=path, key=f"sweep.{key}")
+            raise InputError(
+                f"unknown key (expected one of: {', '.join(_SWEEP_KEYS)})",
+                path=path,
+                key=f"sweep.{key}",
+            )
     for key in ("name", "base", "seed", "samples"):
         if key not in head:
             raise InputError("missing key", path=path, key=f"sweep.{key}")
@@ -285,9 +338,13 @@ def _sweep_table(head, path) -> dict:
         if not isinstance(head[key], str) or not head[key]:
             raise InputError("expected a non-empty string", path=path, key=f"sweep.{key}")
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", head["name"]):
-        raise InputError("letters, digits, '_', '.' and '-' only (it names files)", path=path, key="sweep.name")
+        raise InputError(
+            "letters, digits, '_', '.' and '-' only (it names files)", path=path, key="sweep.name"
+        )
     if not isinstance(head["seed"], int) or isinstance(head["seed"], bool) or head["seed"] < 0:
-        raise InputError(f"expected an integer >= 0, got {head['seed']!r}", path=path, key="sweep.seed")
+        raise InputError(
+            f"expected an integer >= 0, got {head['seed']!r}", path=path, key="sweep.seed"
+        )
     _positive_int(head["samples"], path, "sweep.samples")
     if not isinstance(head.get("safe_start", True), bool):
         raise InputError("expected true or false", path=path, key="sweep.safe_start")
@@ -297,14 +354,20 @@ def _sweep_table(head, path) -> dict:
 def _base(name: str, path: Path) -> tuple[Path, dict]:
     from ..sim.scenario import scenario_path
 
-    candidate = (path.parent / name) if ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute() else name
+    candidate = (
+        (path.parent / name)
+        if ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
+        else name
+    )
     try:
         base_path = scenario_path(candidate)
         raw = tomllib.loads(base_path.read_text(encoding="utf-8"))
     except ScenarioError as exc:
         raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise InputError(f"base scenario {name!r} unreadable: {exc}", path=path, key="sweep.base") from None
+        raise InputError(
+            f"base scenario {name!r} unreadable: {exc}", path=path, key="sweep.base"
+        ) from None
     return base_path, raw
 
 
@@ -316,8 +379,11 @@ def _check_base(base_raw: dict, path: Path):
     try:
         return parse_scenario(dumps(base_raw), path=path)
     except ScenarioError as exc:
-        raise InputError(f"base scenario with this sweep's obstacles and duration: {exc.message}", path=path,
-                         key=exc.key) from None
+        raise InputError(
+            f"base scenario with this sweep's obstacles and duration: {exc.message}",
+            path=path,
+            key=exc.key,
+        ) from None
 
 
 def _flatten(params: dict, path, prefix: str = ""):
@@ -328,8 +394,11 @@ def _flatten(params: dict, path, prefix: str = ""):
         elif isinstance(value, dict):
             yield full, value
         else:
-            raise InputError("expected a distribution table, e.g. { dist = \"uniform\", low = 0.0, high = 1.0 }",
-                             path=path, key=f"parameters.{full}")
+            raise InputError(
+                'expected a distribution table, e.g. { dist = "uniform", low = 0.0, high = 1.0 }',
+                path=path,
+                key=f"parameters.{full}",
+            )
 
 
 def _base_value(key: str, base_raw: dict, path):
@@ -337,23 +406,42 @@ def _base_value(key: str, base_raw: dict, path):
     match = _KEY.fullmatch(key)
     if match is None:
         hint = ALIASES.get(key.casefold())
-        raise InputError("unknown parameter key" + (f"; the key is {hint}" if hint else
-                         " (expected a scenario key TABLE.KEY or obstacles[i].KEY, e.g. controller.desired_force)"),
-                         path=path, key=where)
+        raise InputError(
+            "unknown parameter key"
+            + (
+                f"; the key is {hint}"
+                if hint
+                else " (expected a scenario key TABLE.KEY or obstacles[i].KEY, e.g. controller.desired_force)"
+            ),
+            path=path,
+            key=where,
+        )
     table, index, name = match.groups()
     if index is not None:
         obstacles = base_raw.get("obstacles", []) if table == "obstacles" else []
         if table != "obstacles" or int(index) >= len(obstacles):
-            raise InputError(f"no such obstacle (base and sweep have {len(obstacles)})", path=path, key=where)
+            raise InputError(
+                f"no such obstacle (base and sweep have {len(obstacles)})", path=path, key=where
+            )
         target = obstacles[int(index)]
     else:
         target = base_raw.get(table)
         if table == "obstacles" or not isinstance(target, dict):
-            raise InputError(f"unknown parameter key: the base scenario has no table [{table}]", path=path, key=where)
+            raise InputError(
+                f"unknown parameter key: the base scenario has no table [{table}]",
+                path=path,
+                key=where,
+            )
     if name not in target:
         close = difflib.get_close_matches(name, list(target), n=1)
-        hint = f"; did you mean {table}{'' if index is None else f'[{index}]'}.{close[0]}?" if close else ""
-        raise InputError(f"unknown parameter key: [{table}] has no key {name!r}{hint}", path=path, key=where)
+        hint = (
+            f"; did you mean {table}{'' if index is None else f'[{index}]'}.{close[0]}?"
+            if close
+            else ""
+        )
+        raise InputError(
+            f"unknown parameter key: [{table}] has no key {name!r}{hint}", path=path, key=where
+        )
     return target[name]
 
 
@@ -362,19 +450,28 @@ def _distribution(key: str, spec: dict, base_raw: dict, path) -> Distribution:
     base = _base_value(key, base_raw, path)
     kind = spec.get("dist")
     if kind not in DISTRIBUTIONS:
-        raise InputError(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", path=path,
-                         key=f"{where}.dist")
+        raise InputError(
+            f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})",
+            path=path,
+            key=f"{where}.dist",
+        )
     for f in spec:
         if f != "dist" and f not in DISTRIBUTIONS[kind]:
-            raise InputError(f"unknown field of a {kind} distribution (expected: {', '.join(DISTRIBUTIONS[kind])})",
-                             path=path, key=f"{where}.{f}")
+            raise InputError(
+                f"unknown field of a {kind} distribution (expected: {', '.join(DISTRIBUTIONS[kind])})",
+                path=path,
+                key=f"{where}.{f}",
+            )
     if kind == "choice":
         return Distribution(key, kind, _choice(spec, base, path, where), base)
     is_int = isinstance(base, int) and not isinstance(base, bool)
     if kind == "integers" or is_int:
         if not (kind == "integers" and is_int):
-            raise InputError(f"{'an integer key takes integers or choice' if is_int else 'integers is for integer keys'}",
-                             path=path, key=f"{where}.dist")
+            raise InputError(
+                f"{'an integer key takes integers or choice' if is_int else 'integers is for integer keys'}",
+                path=path,
+                key=f"{where}.dist",
+            )
         lo, hi = spec.get("low"), spec.get("high")
         if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
             raise InputError(f"need integers low <= high, got {lo!r}, {hi!r}", path=path, key=where)
@@ -384,10 +481,17 @@ def _distribution(key: str, spec: dict, base_raw: dict, path) -> Distribution:
     if not isinstance(same, bool):
         raise InputError(f"expected true or false, got {same!r}", path=path, key=f"{where}.same")
     shape = None if same else np.shape(base_arr)  # same: numbers only, checked below
-    params = {f: _numeric(v, shape, path, f"{where}.{f}", f) for f, v in spec.items() if f not in ("dist", "same")}
+    params = {
+        f: _numeric(v, shape, path, f"{where}.{f}", f)
+        for f, v in spec.items()
+        if f not in ("dist", "same")
+    }
     if same and any(np.ndim(v) for v in params.values()):
-        raise InputError("same = true takes numbers, not lists (one draw for every component)", path=path,
-                         key=f"{where}.same")
+        raise InputError(
+            "same = true takes numbers, not lists (one draw for every component)",
+            path=path,
+            key=f"{where}.same",
+        )
     if same:
         params["same"] = True
     _check_bounds(kind, params, path, where)
@@ -400,11 +504,19 @@ def _numeric(value, shape, path, where, what):
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         arr = None
-    if arr is None or arr.dtype == object or not np.all(np.isfinite(arr)) or isinstance(value, bool):
+    if (
+        arr is None
+        or arr.dtype == object
+        or not np.all(np.isfinite(arr))
+        or isinstance(value, bool)
+    ):
         raise InputError(f"{what}: expected finite numbers, got {value!r}", path=path, key=where)
     if shape is not None and arr.ndim and arr.shape != tuple(shape):
-        raise InputError(f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
-                         path=path, key=where)
+        raise InputError(
+            f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
+            path=path,
+            key=where,
+        )
     return arr
 
 
@@ -412,12 +524,18 @@ def _check_bounds(kind: str, p: dict, path, where) -> None:
     def need(*names):
         for n in names:
             if n not in p:
-                raise InputError(f"a {kind} distribution needs {' and '.join(names)}", path=path, key=f"{where}.{n}")
+                raise InputError(
+                    f"a {kind} distribution needs {' and '.join(names)}",
+                    path=path,
+                    key=f"{where}.{n}",
+                )
 
     if kind == "uniform":
         if "spread" in p:
             if "low" in p or "high" in p:
-                raise InputError("give either spread or low and high", path=path, key=f"{where}.spread")
+                raise InputError(
+                    "give either spread or low and high", path=path, key=f"{where}.spread"
+                )
             if np.any(p["spread"] < 0):
                 raise InputError("spread must be >= 0", path=path, key=f"{where}.spread")
             return
@@ -437,19 +555,36 @@ def _check_bounds(kind: str, p: dict, path, where) -> None:
 def _choice(spec: dict, base, path, where) -> dict:
     values = spec.get("values")
     if not isinstance(values, list) or not values:
-        raise InputError("a choice needs a non-empty list of values", path=path, key=f"{where}.values")
+        raise InputError(
+            "a choice needs a non-empty list of values", path=path, key=f"{where}.values"
+        )
     for v in values:
         if type(v) is not type(base) and not (_number(v) and _number(base)):
-            raise InputError(f"each value must be like the base value {base!r}, got {v!r}", path=path,
-                             key=f"{where}.values")
+            raise InputError(
+                f"each value must be like the base value {base!r}, got {v!r}",
+                path=path,
+                key=f"{where}.values",
+            )
         if isinstance(base, list) and np.shape(v) != np.shape(base):
-            raise InputError(f"each value must have the base value's shape {list(np.shape(base))}, got {v!r}",
-                             path=path, key=f"{where}.values")
+            raise InputError(
+                f"each value must have the base value's shape {list(np.shape(base))}, got {v!r}",
+                path=path,
+                key=f"{where}.values",
+            )
     out = {"values": values}
     if "weights" in spec:
         w = spec["weights"]
-        if not (isinstance(w, list) and len(w) == len(values) and all(_number(x) and x >= 0 for x in w) and sum(w) > 0):
-            raise InputError("weights: one number >= 0 per value, not all zero", path=path, key=f"{where}.weights")
+        if not (
+            isinstance(w, list)
+            and len(w) == len(values)
+            and all(_number(x) and x >= 0 for x in w)
+            and sum(w) > 0
+        ):
+            raise InputError(
+                "weights: one number >= 0 per value, not all zero",
+                path=path,
+                key=f"{where}.weights",
+            )
         out["weights"] = [x / sum(w) for x in w]
     return out
 
@@ -459,11 +594,20 @@ def _bands(conv, verdict, path) -> tuple[float, float]:
         raise InputError("expected a table", path=path, key="convergence")
     for key in conv:
         if key not in ("force_band", "tracking_band"):
-            raise InputError("unknown key (expected force_band, tracking_band)", path=path, key=f"convergence.{key}")
+            raise InputError(
+                "unknown key (expected force_band, tracking_band)",
+                path=path,
+                key=f"convergence.{key}",
+            )
     out = []
-    for key, default in (("force_band", verdict.max_force_error / 10), ("tracking_band", verdict.max_tracking_error / 10)):
+    for key, default in (
+        ("force_band", verdict.max_force_error / 10),
+        ("tracking_band", verdict.max_tracking_error / 10),
+    ):
         value = conv.get(key, default)
         if not (_number(value) and value > 0):
-            raise InputError(f"must be a positive number, got {value!r}", path=path, key=f"convergence.{key}")
+            raise InputError(
+                f"must be a positive number, got {value!r}", path=path, key=f"convergence.{key}"
+            )
         out.append(float(value))
     return out[0], out[1]

@@ -64,9 +64,9 @@ def run_task(task: SweepTask) -> dict:
     An exception of the run becomes a row with status ``error``; only a
     lost process loses the row (the executor then says ``crashed``).
     """
-    from ..statuses import describe_exception
     from ..backends import load_plugins
     from ..sim.scenario import parse_scenario
+    from ..statuses import describe_exception
     from .rows import failed_row, result_row
 
     try:
@@ -75,5 +75,10 @@ def run_task(task: SweepTask) -> dict:
         summary, tick_log = closed_loop_run(scenario, task.meta["backend"])
         return result_row(task.meta, summary, tick_log)
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the sweep
-        log.warning("%s / %s failed: %s", task.meta["instance"], task.meta["backend"], describe_exception(exc))
+        log.warning(
+            "%s / %s failed: %s",
+            task.meta["instance"],
+            task.meta["backend"],
+            describe_exception(exc),
+        )
         return failed_row(task.meta, "error", describe_exception(exc))

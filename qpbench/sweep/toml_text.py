@@ -63,5 +63,7 @@ def dumps(raw: dict, header: str = "") -> str:
         lines += ["", f"[{_key(key)}]"] + [f"{_key(k)} = {value_text(v)}" for k, v in table.items()]
     for key, items in arrays:
         for table in items:
-            lines += ["", f"[[{_key(key)}]]"] + [f"{_key(k)} = {value_text(v)}" for k, v in table.items()]
+            lines += ["", f"[[{_key(key)}]]"] + [
+                f"{_key(k)} = {value_text(v)}" for k, v in table.items()
+            ]
     return "\n".join(lines).lstrip("\n") + "\n"
