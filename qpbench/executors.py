@@ -40,8 +40,12 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .exceptions import InputError, ParamError
+
+if TYPE_CHECKING:
+    from distributed.security import Security
 
 log = logging.getLogger("qpbench.executors")
 
@@ -261,7 +265,7 @@ class ProcessExecutor:
         self._workers = []
 
 
-def load_security(path: str | Path):
+def load_security(path: str | Path) -> Security:
     """A ``distributed.security.Security`` from a small TOML or YAML file.
 
     The file names PEM files (relative paths are read from the file's folder)::
@@ -413,7 +417,7 @@ class DaskExecutor:
 
 def make_executor(
     name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None
-):
+) -> SerialExecutor | ProcessExecutor | DaskExecutor:
     """The executor of ``--executor NAME --jobs N [--scheduler ADDRESS --security FILE]``.
 
     ``local`` is :class:`ProcessExecutor`: with one job the runs are made

@@ -72,8 +72,12 @@ from .statuses import CERTIFIED_INFEASIBLE, STATUSES
 if TYPE_CHECKING:
     import qpsolvers
 
+    from .formats import ProblemRecord
+    from .profiles import Tolerance
+    from .reference_solve import ReferenceSolution
 
-def objective(record, x: np.ndarray | None) -> float:
+
+def objective(record: ProblemRecord, x: np.ndarray | None) -> float:
     """``1/2 x'Px + q'x + offset`` of ``record`` at ``x`` (NaN when ``x`` is None)."""
     if x is None:
         return math.nan
@@ -270,7 +274,12 @@ def _violation(tick: Tick) -> dict:
     return constraint_violation(tick.record.problem, tick.x)
 
 
-def evaluate(record, solution, reference, tolerance) -> dict:
+def evaluate(
+    record: ProblemRecord,
+    solution: qpsolvers.Solution | None,
+    reference: ReferenceSolution | None,
+    tolerance: Tolerance,
+) -> dict:
     """Score ``solution`` of ``record`` against ``reference`` under ``tolerance``.
 
     Args:

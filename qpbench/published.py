@@ -33,6 +33,8 @@ if TYPE_CHECKING:
 
     import pandas as pd
 
+    from .profiles import Tolerance
+
 #: qpbenchmark's settings names, in the order of increasing accuracy asked ("default": the solvers' own).
 SETTINGS_NAMES = ("default", "low_accuracy", "mid_accuracy", "high_accuracy")
 #: Columns of a qpbenchmark results file.
@@ -104,7 +106,9 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
     return kwargs, dict(test_set.tolerances)
 
 
-def qpbenchmark_success(found: bool, primal: float, dual: float, gap: float, tolerance) -> bool:
+def qpbenchmark_success(
+    found: bool, primal: float, dual: float, gap: float, tolerance: Tolerance
+) -> bool:
     """qpbenchmark's success rule: ``found`` and each residual strictly below ``tolerance``'s."""
     return (
         bool(found) and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap

@@ -56,6 +56,7 @@ import os
 import re
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -77,6 +78,10 @@ from .reference_solve import (  # noqa: F401 - the public names of references li
     solve_candidate,
 )
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from multiprocessing.context import BaseContext
+
 log = logging.getLogger("qpbench.reference")
 
 #: What ``--reference`` accepts besides a file.
@@ -92,9 +97,9 @@ def bench_references(
     *,
     time_limit: float | None = None,
     jobs: int = 1,
-    progress=None,
+    progress: Callable | str | None = None,
     cache: bool = True,
-    context=None,
+    context: BaseContext | None = None,
     cache_dir: str | Path | None = None,
 ) -> list:
     """One reference per record of ``problem_set`` from ``source`` (see the module docstring).
@@ -217,12 +222,12 @@ class LogProgress:
 def reference_solutions(
     problem_set: ProblemSet,
     cache: bool = True,
-    progress=None,
+    progress: Callable | str | None = None,
     *,
     method: str = "auto",
     time_limit: float | None = None,
     jobs: int = 1,
-    context=None,
+    context: BaseContext | None = None,
     cache_dir: str | Path | None = None,
 ) -> list[ReferenceSolution]:
     """References of every problem of a set, in order, read from or written to the cache.

@@ -31,6 +31,11 @@ import signal
 import time
 from collections import deque
 from multiprocessing.connection import wait
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from multiprocessing.context import BaseContext
 
 log = logging.getLogger("qpbench.reference")
 
@@ -106,7 +111,11 @@ class _Worker:
 
 
 def solve_in_workers(
-    tasks: list, time_limit: float | None, jobs: int, on_done=None, context=None
+    tasks: list,
+    time_limit: float | None,
+    jobs: int,
+    on_done: Callable | None = None,
+    context: BaseContext | None = None,
 ) -> dict:
     """Solve every task on up to ``jobs`` workers.
 

@@ -14,13 +14,18 @@ set-up; comparing patterns costs ``O(nnz)``, small against a sparse solve.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as spa
 
 from ..memory import DENSE_MAX_ENTRIES
 
+if TYPE_CHECKING:
+    import qpsolvers
 
-def wants_sparse(problem) -> bool:
+
+def wants_sparse(problem: qpsolvers.Problem) -> bool:
     """True when the problem goes to a sparse API: a scipy.sparse matrix, or too large made dense."""
     P, A, G = problem.P, problem.A, problem.G
     if spa.issparse(P) or spa.issparse(A) or spa.issparse(G):
@@ -49,7 +54,7 @@ def _vector(v) -> np.ndarray | None:
     return None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
 
 
-def sparse_parts(problem, upper: bool = False):
+def sparse_parts(problem: qpsolvers.Problem, upper: bool = False) -> tuple:
     """``P, q, A, b, G, h, lb, ub`` with the matrices as CSC float64 (``None`` kept).
 
     Args:

@@ -23,8 +23,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+from typing import TYPE_CHECKING
 
 from ..statuses import FORMULATIONS
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
@@ -170,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     return 1 if outcome.errors or outcome.not_ok else 0
 
 
-def summary_table(table) -> str:
+def summary_table(table: pd.DataFrame) -> str:
     """One line per run: verdict, how far it got, tracking and force error after the transient,
     closest key point, p99 solve time and ticks over the 1 ms budget (plain text, aligned)."""
     import math

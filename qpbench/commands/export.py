@@ -19,8 +19,12 @@ import logging
 import shutil
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .list_ import add_selection_arguments
+
+if TYPE_CHECKING:
+    from ..formats import ProblemRecord
 
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
@@ -48,7 +52,7 @@ def _safe_name(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name)
 
 
-def export(records, fmt: str, out: Path, source: str) -> Path:
+def export(records: list[ProblemRecord], fmt: str, out: Path, source: str) -> Path:
     """Write ``records`` to ``out`` in ``fmt``; the folder appears complete or not at all."""
     from ..formats import save_npz, write_problem_set
 
@@ -79,7 +83,7 @@ def export(records, fmt: str, out: Path, source: str) -> Path:
     return out
 
 
-def raise_dup(name: str):
+def raise_dup(name: str) -> None:
     from ..exceptions import InputError
 
     raise InputError(f"two problems map to the same file name '{_safe_name(name)}.npz'", key=name)

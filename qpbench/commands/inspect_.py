@@ -6,6 +6,10 @@ import argparse
 import json
 import sys
 from collections import Counter
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..formats import ProblemSet
 
 HELP = "show what a problem set, .parquet, .npz, .mat or folder holds (count, sizes, formulation, hash)"
 EXAMPLE = "qpbench inspect problems/wall    (qpbench inspect problems/wall --json)"
@@ -75,7 +79,7 @@ def _notes(ps, budget: int) -> list[str]:
     return out
 
 
-def describe(ps, sizes, budget: int | None = None) -> dict:
+def describe(ps: ProblemSet, sizes: list[tuple[int, int, int]], budget: int | None = None) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
     from ..memory import resolve_budget
 

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..formats import ProblemRecord
 
 HELP = (
     "list the problems of a set: name, n, equality and inequality rows, bounds, scenario, tick, t"
@@ -40,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def rows(records) -> list[dict]:
+def rows(records: list[ProblemRecord]) -> list[dict]:
     out = []
     for r in records:
         n, m_eq, m_ineq = r.sizes

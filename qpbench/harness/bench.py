@@ -73,6 +73,8 @@ from .rows import _RowMaker
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
+    from ..formats import ProblemSet
+
 log = logging.getLogger("qpbench.harness")
 
 
@@ -326,7 +328,7 @@ class _BenchRun:
 
 
 def run_bench(
-    problem_set,
+    problem_set: ProblemSet,
     config: BenchConfig,
     out: str | Path,
     *,

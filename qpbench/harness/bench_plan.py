@@ -23,6 +23,8 @@ from .bench_summary import DEFAULT_SEED
 from .results import ExistingResults, InflightMarker, read_results, row_key
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ..formats import ProblemRecord, ProblemSet
 
 log = logging.getLogger("qpbench.harness")
@@ -323,7 +325,9 @@ def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[d
     return skips, notes
 
 
-def references_for(problem_set, plan: Plan, references) -> list:
+def references_for(
+    problem_set: ProblemSet, plan: Plan, references: list | Callable[[ProblemSet], list] | None
+) -> list:
     """One reference per record (``references``: the list, a function of a problem set
     that computes it, or ``None`` for :func:`qpbench.reference.reference_solutions`); none is
     computed for a record no backend solves, or one

@@ -40,8 +40,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..exceptions import ParamError
+
+if TYPE_CHECKING:
+    from ..formats import ProblemSet
 
 __all__ = ["BENCH_EVERY", "OUTPUTS", "REPEAT", "RUN_BUDGET_S", "RunConfig", "RunOutcome", "run_all"]
 
@@ -183,7 +187,9 @@ def make_problem_set(scenario: str, folder: Path, backend: str) -> Path:
     return folder
 
 
-def bench_subset(problem_set, duration: float | None, every: int = 1):
+def bench_subset(
+    problem_set: ProblemSet, duration: float | None, every: int = 1
+) -> tuple[ProblemSet, list]:
     """The problem set and its references: every ``every``-th problem, those with t < duration."""
     from ..reference import reference_solutions
     from ..selection import select_set

@@ -12,7 +12,7 @@ __all__ = ["log_file", "read_log"]
 log = logging.getLogger("qpbench.report")
 
 
-def log_file(path) -> str | None:
+def log_file(path: str | Path) -> str | None:
     """A run's tick log; its figure log (:mod:`qpbench.sim.figure_log`) when the full one is absent; else ``None``."""
     from ..sim.figure_log import figure_log_path
 
@@ -24,7 +24,7 @@ def log_file(path) -> str | None:
     return str(compact) if compact.exists() else None
 
 
-def read_log(path) -> pd.DataFrame | None:
+def read_log(path: str | Path) -> pd.DataFrame | None:
     path = log_file(path)
     if path is None:
         return None

@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -34,6 +35,9 @@ from . import tables
 from .logs import read_log as _read_log
 from .snapshots import write_snapshots
 from .tables import slug
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
 
 log = logging.getLogger("qpbench.report")
 
@@ -241,7 +245,9 @@ def write_plots(
 FIGURE_PATTERN = re.compile(r"(perf_profile|per_tick|closed_loop|snapshot)_[A-Za-z0-9_.+-]*\.png")
 
 
-def remove_unlinked(folder: str | Path, linked, relative_to: str | Path) -> list[Path]:
+def remove_unlinked(
+    folder: str | Path, linked: Iterable[str], relative_to: str | Path
+) -> list[Path]:
     """Remove the figures of a previous report in ``folder`` that the new one does not link.
 
     Only files named as :func:`write_plots` names its figures

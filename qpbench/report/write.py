@@ -8,11 +8,15 @@ two imports the other).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
 from . import tables
 from .markdown import render
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 __all__ = ["write_report"]
 
@@ -24,7 +28,7 @@ def write_report(
     force: bool = False,
     plots: bool = True,
     prefer: str | None = None,
-    sections=None,
+    sections: Callable[[Path, bool], list[str]] | None = None,
 ) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 

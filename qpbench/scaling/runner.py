@@ -38,10 +38,14 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .sizes import Size, generate, qp_shape, scenario_toml
+
+if TYPE_CHECKING:
+    from ..control.controller import Controller
 
 log = logging.getLogger("qpbench.scaling")
 
@@ -209,7 +213,9 @@ def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
     ]
 
 
-def build_times(controller, states, repeat: int) -> np.ndarray:
+def build_times(
+    controller: Controller, states: list[tuple[np.ndarray, float]], repeat: int
+) -> np.ndarray:
     """Per state ``(theta, t)``: the minimum over ``repeat`` calls of ``controller.build`` in [s]."""
     controller.build(*states[0])
     out = np.empty(len(states))

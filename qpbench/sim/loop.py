@@ -537,7 +537,14 @@ class _Run:
 
 
 def write_dump(
-    folder, records, scenario: Scenario, backend_name: str, formulation: str, every, duration, dt
+    folder: str | Path,
+    records: list,
+    scenario: Scenario,
+    backend_name: str,
+    formulation: str,
+    every: int | None,
+    duration: float | None,
+    dt: float | None,
 ) -> Path:
     """Write the kept ticks' QPs as a problem set; the manifest holds the scenario file's full text."""
     from ..formats import write_problem_set

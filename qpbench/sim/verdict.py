@@ -43,6 +43,8 @@ from . import log
 if TYPE_CHECKING:
     import pandas as pd
 
+    from ..control.terms import EscapeVelocityLimits
+
 __all__ = [
     "DEFAULT_SAFETY_MARGIN",
     "VERDICTS",
@@ -218,7 +220,7 @@ def judge(
     settings: VerdictSettings,
     *,
     d_safe: float,
-    limits,
+    limits: EscapeVelocityLimits,
     obstacle_columns: list[tuple[str, str]],
     summary: dict,
 ) -> Verdict:

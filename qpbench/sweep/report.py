@@ -76,7 +76,7 @@ def is_sweep_csv(path: Path) -> bool:
         return False
 
 
-def split_sweep_paths(paths) -> tuple[list[Path], list[Path]]:
+def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
     """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
     from ..report.inputs import expand_paths
 

@@ -44,8 +44,12 @@ from __future__ import annotations
 
 import json
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "COLUMNS",
@@ -199,7 +203,7 @@ def _head(meta: dict) -> dict:
     return row
 
 
-def result_row(meta: dict, summary: dict, log) -> dict:
+def result_row(meta: dict, summary: dict, log: pd.DataFrame) -> dict:
     """The row of a run that gave a result: the summary's figures plus those taken from the tick log.
 
     ``log`` is the run's tick log (columns ``t``, ``force_error``,

@@ -23,6 +23,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
@@ -31,6 +32,9 @@ from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row
 from .sample import Instance, sample_instances
 from .spec import SweepSpec
 from .task import SweepTask, run_task
+
+if TYPE_CHECKING:
+    from ..executors import DaskExecutor, ProcessExecutor, SerialExecutor
 
 log = logging.getLogger("qpbench.sweep")
 
@@ -154,7 +158,7 @@ def run_sweep(
     spec: SweepSpec,
     backends: list[str],
     out: str | Path,
-    executor,
+    executor: SerialExecutor | ProcessExecutor | DaskExecutor,
     *,
     force: bool = False,
     resume: bool = False,

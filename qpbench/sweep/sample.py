@@ -17,10 +17,14 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ..exceptions import ScenarioError
 from .spec import SweepSpec
 from .toml_text import dumps, value_text
+
+if TYPE_CHECKING:
+    from ..sim.scenario import Scenario
 
 __all__ = ["Instance", "instance_name", "sample_instances"]
 
@@ -84,7 +88,7 @@ def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
     return dumps(raw, header="\n".join(header))
 
 
-def start_clearance(scenario) -> tuple[float, str, str]:
+def start_clearance(scenario: Scenario) -> tuple[float, str, str]:
     """Smallest distance [m] of a key point to an obstacle at t = 0, and which key point and obstacle.
 
     ``(inf, "", "")`` without obstacles. Distances from the link's surface

@@ -150,7 +150,7 @@ class Distribution:
     params: dict
     base: object
 
-    def draw(self, rng: np.random.Generator):
+    def draw(self, rng: np.random.Generator) -> object:
         """One value of the key (a float, an int, or a list of the base's shape)."""
         p, base = self.params, self.base
         shape = np.shape(base)

@@ -12,6 +12,12 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..sim.scenario import Scenario
 
 log = logging.getLogger("qpbench.sweep")
 
@@ -42,7 +48,7 @@ class SweepTask:
         return self.meta["instance"], self.meta["backend"]
 
 
-def closed_loop_run(scenario, backend: str):
+def closed_loop_run(scenario: Scenario, backend: str) -> tuple[dict, pd.DataFrame]:
     """Run ``scenario`` (a :class:`~qpbench.sim.scenario.Scenario`) in closed loop with ``backend``.
 
     A discarded warm-up run of :data:`WARMUP_TICKS` ticks first, then the

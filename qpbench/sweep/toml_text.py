@@ -21,7 +21,7 @@ def _key(key: str) -> str:
     return key if _BARE.fullmatch(key) else json.dumps(key)
 
 
-def value_text(value) -> str:
+def value_text(value: object) -> str:
     """One TOML value."""
     if isinstance(value, bool):
         return "true" if value else "false"
