@@ -74,7 +74,6 @@ if TYPE_CHECKING:
 
     from .formats import ProblemRecord
     from .profiles import Tolerance
-    from .reference_solve import ReferenceSolution
 
 
 def objective(record: ProblemRecord, x: np.ndarray | None) -> float:
@@ -277,7 +276,7 @@ def _violation(tick: Tick) -> dict:
 def evaluate(
     record: ProblemRecord,
     solution: qpsolvers.Solution | None,
-    reference: ReferenceSolution | None,
+    reference: object | None,
     tolerance: Tolerance,
 ) -> dict:
     """Score ``solution`` of ``record`` against ``reference`` under ``tolerance``.

@@ -33,7 +33,6 @@ if TYPE_CHECKING:
 
     import pandas as pd
 
-    from .profiles import Tolerance
 
 #: qpbenchmark's settings names, in the order of increasing accuracy asked ("default": the solvers' own).
 SETTINGS_NAMES = ("default", "low_accuracy", "mid_accuracy", "high_accuracy")
@@ -107,7 +106,7 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
 
 
 def qpbenchmark_success(
-    found: bool, primal: float, dual: float, gap: float, tolerance: Tolerance
+    found: bool, primal: float, dual: float, gap: float, tolerance: object
 ) -> bool:
     """qpbenchmark's success rule: ``found`` and each residual strictly below ``tolerance``'s."""
     return (
