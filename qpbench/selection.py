@@ -242,9 +242,9 @@ def backend_settings(
         if allowed is not None and setting not in allowed:
             close = difflib.get_close_matches(setting, sorted(allowed), n=3, cutoff=0.6)
             hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+            listed = f"its settings: {', '.join(sorted(allowed))}" if allowed else "it has none"
             raise ParamError(
-                f"'{setting}' is not a setting of backend '{backend}'; {hint}"
-                f"its settings: {', '.join(sorted(allowed))}",
+                f"'{setting}' is not a setting of backend '{backend}'; {hint}{listed}",
                 key=f"{option} {key}",
             )
         out.setdefault(backend, {})[setting] = value

@@ -268,6 +268,18 @@ class ClarabelBackend(Backend):
     package = "clarabel"
     module = "clarabel"
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """The generic settings and Clarabel's own: the attributes of the installed package's
+        ``clarabel.DefaultSettings()``."""
+        import clarabel
+
+        from ._common import GENERIC_KEYS
+
+        s = clarabel.DefaultSettings()
+        own = {a for a in dir(s) if not a.startswith("_") and not callable(getattr(s, a))}
+        return frozenset(own | set(GENERIC_KEYS))
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._solver = None

@@ -136,6 +136,11 @@ class CvxpyBackend(Backend):
     package = "cvxpy"
     module = "cvxpy"
 
+    # ``setting_names()`` stays ``None`` (every ``--set`` key is passed on): ``Problem.solve``
+    # takes its own keywords, its solving chain takes more (``solver_path``, ``solver_verbose``,
+    # ``use_quad_obj``) and passes the rest to the solver it picked (OSQP or Clarabel, whichever
+    # is installed); cvxpy lists none of them, so no list can tell which keys it accepts.
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._models: dict[tuple, _Model] = {}

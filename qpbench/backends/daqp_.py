@@ -176,6 +176,14 @@ class DaqpBackend(Backend):
     package = "daqp"
     module = "daqp"
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """The generic settings and DAQP's own: the keys of the installed package's
+        ``daqp.Model().settings`` (the keyword settings ``daqp.solve`` takes)."""
+        from ._common import GENERIC_KEYS
+
+        return frozenset(_daqp().Model().settings) | frozenset(GENERIC_KEYS)
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._buffers: dict[tuple, _Buffers] = {}

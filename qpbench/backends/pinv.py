@@ -40,6 +40,11 @@ class PinvBackend(Backend):
     family = "pseudo-inverse (JMPI, ignores inequalities and bounds)"
     package = "numpy"
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """None: the pseudo-inverse has no tolerance, limit or option to set."""
+        return frozenset()
+
     def _solve(self, problem, warm_start):
         sol = BackendSolution(problem)
         P = as_dense(problem.P)

@@ -94,6 +94,22 @@ class PiqpBackend(Backend):
     #: scipy.sparse input (or a problem too large made dense) goes to ``piqp.SparseSolver``.
     sparse = True
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """The generic settings and PIQP's own: the attributes of the installed package's
+        ``DenseSolver().settings`` and ``SparseSolver().settings``."""
+        from ._common import GENERIC_KEYS
+
+        piqp = _piqp()
+        own = set()
+        for settings in (piqp.DenseSolver().settings, piqp.SparseSolver().settings):
+            own |= {
+                a
+                for a in dir(settings)
+                if not a.startswith("_") and not callable(getattr(settings, a))
+            }
+        return frozenset(own | set(GENERIC_KEYS))
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._solver = None

@@ -123,6 +123,19 @@ class ProxqpBackend(Backend):
     #: robot tick, which an in-process time limit cannot interrupt.
     risky = True
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """The generic settings, ``retry_cold`` and ProxQP's own: the attributes of the installed
+        package's ``proxqp.dense.QP(...).settings`` and ``proxqp.sparse.QP(...).settings``."""
+        from ._common import GENERIC_KEYS
+
+        proxqp = _proxqp()
+        own = set()
+        for qp in (proxqp.dense.QP(1, 0, 0), proxqp.sparse.QP(1, 0, 0)):
+            s = qp.settings
+            own |= {a for a in dir(s) if not a.startswith("_") and not callable(getattr(s, a))}
+        return frozenset(own | {"retry_cold"} | set(GENERIC_KEYS))
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._qp = None

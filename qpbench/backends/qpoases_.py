@@ -104,6 +104,14 @@ class QpoasesBackend(Backend):
     package = "cmeel-qpoases"
     module = None
 
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        """The generic settings, ``preset`` and the qpOASES options the shim sets by name
+        (:data:`OPTION_NAMES`, the ``Options`` fields its C++ source assigns)."""
+        from ._common import GENERIC_KEYS
+
+        return frozenset(OPTION_NAMES) | {"preset"} | frozenset(GENERIC_KEYS)
+
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._ws: Workspace | None = None

@@ -337,6 +337,13 @@ class QpsolversBackend(Backend):
         )
         return f"qpsolvers does not find solver '{cls.solver}' ({how})"
 
+    # ``setting_names()`` stays ``None`` (every ``--set`` key is passed on): qpsolvers hands its
+    # keywords to each solver in that solver's own way (OSQP's ``setup``, attributes of
+    # Clarabel's and PIQP's settings objects, the arguments of ``proxsuite.proxqp.dense.solve``,
+    # HiGHS' ``setOptionValue``, quadprog's ``solve_qp``), and its wrappers take some keywords
+    # themselves (``backend``, ``raise_error``, ``x``); qpsolvers lists neither, so no list of
+    # the solver's own settings tells which keys a ``qpsolvers:<name>`` route accepts.
+
     def _options(self) -> dict:
         """Solver options (computed once per instance; do not modify the dict)."""
         if self._cached_options is None:

@@ -266,8 +266,13 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
                 from ..backends.rnn import SETTING_NAMES
 
                 if name not in SETTING_NAMES:
+                    import difflib
+
+                    close = difflib.get_close_matches(name, SETTING_NAMES, n=3, cutoff=0.6)
+                    hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
                     raise ScenarioError(
-                        f"unknown setting of the rnn backends (expected one of: {', '.join(SETTING_NAMES)})",
+                        f"unknown setting of the rnn backends; {hint}"
+                        f"expected one of: {', '.join(SETTING_NAMES)}",
                         path=file,
                         key=key,
                     )
