@@ -232,6 +232,8 @@ def backend_settings(
     out: dict[str, dict] = {}
     for key, value in parse_overrides(items, option).items():
         backend, _, setting = key.rpartition(".")
+        folded = {b.casefold(): b for b in backends}  # backend names match without regard to case
+        backend = folded.get(backend.casefold(), backend)
         if backend not in backends or not setting:
             raise ParamError(
                 f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in "

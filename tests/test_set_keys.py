@@ -143,3 +143,10 @@ def test_every_listed_key_is_one_the_solver_takes(name, rng):
         sol = get_backend(name, **{key: value}).solve(problem)
         assert sol.status == "optimal", (key, value, sol.status, sol.error)
         np.testing.assert_allclose(sol.x, expected, atol=1e-4, err_msg=key)
+
+
+def test_the_backend_of_a_key_matches_without_regard_to_case():
+    from qpbench.selection import backend_settings, select_backends
+
+    backends = select_backends("DAQP")
+    assert backend_settings(["DAQP.iter_limit=5"], backends) == {"daqp": {"iter_limit": 5}}
