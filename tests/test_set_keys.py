@@ -40,6 +40,14 @@ TYPOS = [
     ),
     ("osqp", "osqp.rhoo=0.1", "'rho'", "osqp.rho=0.1"),
     ("rnn", "rnn.epz=0.01", "'eps'", "rnn.eps=0.01"),
+    # through qpsolvers, which would drop PIQP's unknown name silently
+    ("qpsolvers:piqp", "qpsolvers:piqp.eps_abz=1e-7", "'eps_abs'", "qpsolvers:piqp.backend=dense"),
+    (
+        "qpsolvers:clarabel",
+        "qpsolvers:clarabel.tol_fea=1e-7",
+        "'tol_feas'",
+        "qpsolvers:clarabel.tol_feas=1e-7",
+    ),
 ]
 
 

@@ -73,6 +73,7 @@ inside the solver call (what most solver bindings raise) become status
 from __future__ import annotations
 
 import warnings
+from typing import ClassVar
 
 import numpy as np
 import qpsolvers
@@ -337,12 +338,41 @@ class QpsolversBackend(Backend):
         )
         return f"qpsolvers does not find solver '{cls.solver}' ({how})"
 
-    # ``setting_names()`` stays ``None`` (every ``--set`` key is passed on): qpsolvers hands its
-    # keywords to each solver in that solver's own way (OSQP's ``setup``, attributes of
-    # Clarabel's and PIQP's settings objects, the arguments of ``proxsuite.proxqp.dense.solve``,
-    # HiGHS' ``setOptionValue``, quadprog's ``solve_qp``), and its wrappers take some keywords
-    # themselves (``backend``, ``raise_error``, ``x``); qpsolvers lists neither, so no list of
-    # the solver's own settings tells which keys a ``qpsolvers:<name>`` route accepts.
+    #: Solvers whose qpsolvers wrapper hands every keyword it does not take itself to the
+    #: solver's own settings, as the direct backend named here does: (that backend, keywords
+    #: the wrapper takes without listing them in its signature).
+    SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
+        "clarabel": ("clarabel", ()),  # setattr on DefaultSettings (an unknown name raises)
+        "daqp": ("daqp", ()),  # keywords of daqp.solve
+        "osqp": ("osqp", ("raise_error",)),  # OSQP.setup; raise_error goes to OSQP.solve
+        "piqp": ("piqp", ()),  # setattr on the settings (an unknown name is silently dropped)
+    }
+
+    @classmethod
+    def setting_names(cls) -> frozenset[str] | None:
+        """For the solvers of :data:`SAME_SETTINGS_AS`: the direct backend's names, plus the
+        keywords of qpsolvers' ``<solver>_solve_problem`` (``backend`` of piqp). For the other
+        solvers ``None`` (every key is passed on): qpsolvers hands them their keywords each
+        in its own way (the arguments of ``proxsuite.proxqp.dense.solve``, HiGHS'
+        ``setOptionValue``, quadprog's ``solve_qp``, ...), and no list of the solver's own
+        settings tells which keys the route accepts."""
+        import importlib
+        import inspect
+
+        from . import backend_class
+
+        same = cls.SAME_SETTINGS_AS.get(cls.solver)
+        if same is None:
+            return None
+        direct, extra = same
+        module = importlib.import_module(f"qpsolvers.solvers.{cls.solver}_")
+        wrapper = getattr(module, f"{cls.solver}_solve_problem")
+        named = {
+            name
+            for name, p in inspect.signature(wrapper).parameters.items()
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        } - {"problem", "initvals"}
+        return backend_class(direct).setting_names() | named | frozenset(extra)
 
     def _options(self) -> dict:
         """Solver options (computed once per instance; do not modify the dict)."""
