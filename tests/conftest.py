@@ -61,6 +61,17 @@ def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) ->
     return qpsolvers.Problem(P, q, G, h, A, b, lo, up)
 
 
+def sparse_copy(problem: qpsolvers.Problem) -> qpsolvers.Problem:
+    """The same QP with ``P``, ``G`` and ``A`` as ``scipy.sparse`` CSC matrices (``None`` kept)."""
+    import scipy.sparse as spa
+
+    def csc(M):
+        return None if M is None else spa.csc_matrix(M)
+
+    P, q, G, h, A, b, lb, ub = problem.unpack()
+    return qpsolvers.Problem(csc(P), q, csc(G), h, csc(A), b, lb, ub)
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20190101)
