@@ -61,6 +61,20 @@ def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) ->
     return qpsolvers.Problem(P, q, G, h, A, b, lo, up)
 
 
+def simulate_args(scenario: str, backend: str, duration: str, *options: str) -> list[str]:
+    """``simulate --scenario S --backend B --duration D OPTIONS...`` as argv."""
+    return [
+        "simulate",
+        "--scenario",
+        scenario,
+        "--backend",
+        backend,
+        "--duration",
+        duration,
+        *options,
+    ]
+
+
 def sparse_copy(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     """The same QP with ``P``, ``G`` and ``A`` as ``scipy.sparse`` CSC matrices (``None`` kept)."""
     import scipy.sparse as spa

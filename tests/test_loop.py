@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import qpsolvers
+from conftest import simulate_args
 
 from qpbench.backends import backend_names
 from qpbench.backends.base import Backend, BackendSolution
@@ -295,13 +296,7 @@ def test_cli(tmp_path, capsys):
     from qpbench.cli import main
 
     args = [
-        "simulate",
-        "--scenario",
-        "wall",
-        "--backend",
-        qp_backend(),
-        "--duration",
-        "0.2",
+        *simulate_args("wall", qp_backend(), "0.2"),
         "--summary",
         str(tmp_path / "s.json"),
         "--log",
@@ -393,13 +388,7 @@ def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
             np.testing.assert_array_equal(sc.data[table][key], value)
     # the CLI runs exactly that scenario, and says so in the summary and the dump's manifest
     args = [
-        "simulate",
-        "--scenario",
-        "wall",
-        "--backend",
-        "rnn",
-        "--duration",
-        "0.1",
+        *simulate_args("wall", "rnn", "0.1"),
         "--summary",
         str(tmp_path / "s.json"),
         "--log",
