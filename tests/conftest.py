@@ -61,6 +61,19 @@ def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) ->
     return qpsolvers.Problem(P, q, G, h, A, b, lo, up)
 
 
+#: Summary keys of a closed-loop run that measure time; every other one must not depend on it.
+SUMMARY_TIME_KEYS = frozenset(
+    {
+        "wall_time_s",
+        "real_time_factor",
+        "solve_time_median_s",
+        "solve_time_p99_s",
+        "solve_time_max_s",
+        "deadline_misses",
+    }
+)
+
+
 def simulate_args(scenario: str, backend: str, duration: str, *options: str) -> list[str]:
     """``simulate --scenario S --backend B --duration D OPTIONS...`` as argv."""
     return [
