@@ -61,6 +61,46 @@ def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) ->
     return qpsolvers.Problem(P, q, G, h, A, b, lo, up)
 
 
+#: ``python -c LIMITED_CLI.format(limit=BYTES) ARGS...``: the CLI with its address space capped.
+LIMITED_CLI = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, ({limit}, {limit}))
+from qpbench.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def band_matrix(n: int, shift: float = 0.0):
+    """``(L + shift 16 I)`` as CSC, ``L`` the square of the 1-D Laplacian (eigenvalues in [0, 16])."""
+    import scipy.sparse as spa
+
+    e = np.ones(n)
+    L = spa.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="csc")
+    return ((L @ L) + shift * 16 * spa.identity(n)).tocsc()
+
+
+def write_band_set(folder: Path, n: int = 100_000) -> Path:
+    """``folder/band100k.npz``: ``band_matrix(n, 1e-3)``, ``q = sin(i)``, one equality
+    ``sum x = 1`` and the box ``[-1, 1]`` (a dense ``P`` of 100,000 variables is 80 GB)."""
+    import scipy.sparse as spa
+
+    from qpbench.formats import save_npz
+
+    problem = qpsolvers.Problem(
+        band_matrix(n, 1e-3),
+        np.sin(np.arange(n)),
+        None,
+        None,
+        spa.csc_matrix(np.ones((1, n))),
+        np.ones(1),
+        -np.ones(n),
+        np.ones(n),
+    )
+    folder.mkdir()
+    save_npz(ProblemRecord(problem, "band100k"), folder / "band100k.npz")
+    return folder
+
+
 #: Summary keys of a closed-loop run that measure time; every other one must not depend on it.
 SUMMARY_TIME_KEYS = frozenset(
     {
