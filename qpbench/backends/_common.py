@@ -133,7 +133,8 @@ def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]
 
     Each dtype is tested by identity first (the float64 descriptor is a singleton except
     in unpickled arrays, which fall back to ``==``): this keeps the call as cheap as the
-    inline tests it replaces.
+    inline tests it replaces. The tests of ``A, b`` and ``G, h`` are written out twice on
+    purpose: a helper for one block would cost a call per block and tick.
     """
     P = problem.P
     q = problem.q
