@@ -172,3 +172,17 @@ def random_qp(rng):
         return random_problem(rng, **kw)
 
     return make
+
+
+@pytest.fixture(scope="module")
+def qpb():
+    """The qpbenchmark module (the test skipped without it), the root-logger set-up it does
+    at import undone."""
+    import logging
+
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    qpb = pytest.importorskip("qpbenchmark")
+    root.handlers[:] = handlers
+    root.setLevel(level)
+    return qpb

@@ -53,7 +53,6 @@ whose reference is optimal, our success implies qpbenchmark's.
 
 from __future__ import annotations
 
-import logging
 import math
 import warnings
 from dataclasses import replace
@@ -92,16 +91,6 @@ EPS = float(np.finfo(float).eps)
 
 
 # ---------------------------------------------------------------- helpers
-
-
-def _import_qpbenchmark():
-    """Import qpbenchmark, undoing the root-logger set-up it does at import."""
-    root = logging.getLogger()
-    handlers, level = list(root.handlers), root.level
-    qpb = pytest.importorskip("qpbenchmark")
-    root.handlers[:] = handlers
-    root.setLevel(level)
-    return qpb
 
 
 def common_solvers(qpb) -> list[str]:
@@ -185,11 +174,6 @@ def qpbenchmark_success(df: pd.DataFrame, tol) -> pd.Series:
 
 
 # ---------------------------------------------------------------- fixtures
-
-
-@pytest.fixture(scope="module")
-def qpb():
-    return _import_qpbenchmark()
 
 
 @pytest.fixture(scope="module")
