@@ -110,16 +110,7 @@ def run_ours(
 def data_scale(problem) -> float:
     """Largest finite magnitude in the problem's data (at least 1)."""
     scale = 1.0
-    for M in (
-        problem.P,
-        problem.q,
-        problem.G,
-        problem.h,
-        problem.A,
-        problem.b,
-        problem.lb,
-        problem.ub,
-    ):
+    for M in problem.unpack():
         if M is not None:
             v = np.abs(np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float))
             v = v[np.isfinite(v)]

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .exceptions import InputError, ParamError
+from .harness.workers import death_message, ignore_interrupts
 
 if TYPE_CHECKING:
     from distributed.security import Security
@@ -122,26 +123,13 @@ class SerialExecutor:
         pass
 
 
-def _exit_text(exitcode: int | None) -> str:
-    import signal
-
-    if exitcode is not None and exitcode < 0:
-        try:
-            return f"worker process killed by {signal.Signals(-exitcode).name}"
-        except ValueError:
-            return f"worker process killed by signal {-exitcode}"
-    return f"worker process exited with code {exitcode}"
-
-
 def _worker_loop(conn, environ: dict) -> None:
     """Body of a worker process: run ``(id, fn, arg)`` requests until ``None``.
 
     The worker takes the environment of the process that started it
     (``environ``), not the one the forkserver was started with.
     """
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    ignore_interrupts()
     os.environ.clear()
     os.environ.update(environ)
     while True:
@@ -241,7 +229,7 @@ class ProcessExecutor:
 
     def _lost(self, w: _Worker, queue: deque, host: str) -> Done | None:
         w.proc.join(5)
-        why = _exit_text(w.proc.exitcode)
+        why = death_message(w.proc.exitcode)
         tid, key, arg, attempts = w.task
         w.task = None
         w.conn.close()

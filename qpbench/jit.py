@@ -149,21 +149,7 @@ def _warm_network(problems) -> None:
     online = get_backend("rnn", dt=sc.dt)
     online.solve(problem)
     online.solve(problem)
-    plain = qpsolvers.Problem(
-        *(
-            None if a is None else a.copy()
-            for a in (
-                problem.P,
-                problem.q,
-                problem.G,
-                problem.h,
-                problem.A,
-                problem.b,
-                problem.lb,
-                problem.ub,
-            )
-        )
-    )
+    plain = qpsolvers.Problem(*(None if a is None else a.copy() for a in problem.unpack()))
     online.solve(plain)
 
 

@@ -61,6 +61,84 @@ def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) ->
     return qpsolvers.Problem(P, q, G, h, A, b, lo, up)
 
 
+#: ``python -c LIMITED_CLI.format(limit=BYTES) ARGS...``: the CLI with its address space capped.
+LIMITED_CLI = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, ({limit}, {limit}))
+from qpbench.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def band_matrix(n: int, shift: float = 0.0):
+    """``(L + shift 16 I)`` as CSC, ``L`` the square of the 1-D Laplacian (eigenvalues in [0, 16])."""
+    import scipy.sparse as spa
+
+    e = np.ones(n)
+    L = spa.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="csc")
+    return ((L @ L) + shift * 16 * spa.identity(n)).tocsc()
+
+
+def write_band_set(folder: Path, n: int = 100_000) -> Path:
+    """``folder/band100k.npz``: ``band_matrix(n, 1e-3)``, ``q = sin(i)``, one equality
+    ``sum x = 1`` and the box ``[-1, 1]`` (a dense ``P`` of 100,000 variables is 80 GB)."""
+    import scipy.sparse as spa
+
+    from qpbench.formats import save_npz
+
+    problem = qpsolvers.Problem(
+        band_matrix(n, 1e-3),
+        np.sin(np.arange(n)),
+        None,
+        None,
+        spa.csc_matrix(np.ones((1, n))),
+        np.ones(1),
+        -np.ones(n),
+        np.ones(n),
+    )
+    folder.mkdir()
+    save_npz(ProblemRecord(problem, "band100k"), folder / "band100k.npz")
+    return folder
+
+
+#: Summary keys of a closed-loop run that measure time; every other one must not depend on it.
+SUMMARY_TIME_KEYS = frozenset(
+    {
+        "wall_time_s",
+        "real_time_factor",
+        "solve_time_median_s",
+        "solve_time_p99_s",
+        "solve_time_max_s",
+        "deadline_misses",
+    }
+)
+
+
+def simulate_args(scenario: str, backend: str, duration: str, *options: str) -> list[str]:
+    """``simulate --scenario S --backend B --duration D OPTIONS...`` as argv."""
+    return [
+        "simulate",
+        "--scenario",
+        scenario,
+        "--backend",
+        backend,
+        "--duration",
+        duration,
+        *options,
+    ]
+
+
+def sparse_copy(problem: qpsolvers.Problem) -> qpsolvers.Problem:
+    """The same QP with ``P``, ``G`` and ``A`` as ``scipy.sparse`` CSC matrices (``None`` kept)."""
+    import scipy.sparse as spa
+
+    def csc(M):
+        return None if M is None else spa.csc_matrix(M)
+
+    P, q, G, h, A, b, lb, ub = problem.unpack()
+    return qpsolvers.Problem(csc(P), q, csc(G), h, csc(A), b, lb, ub)
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20190101)
@@ -94,3 +172,17 @@ def random_qp(rng):
         return random_problem(rng, **kw)
 
     return make
+
+
+@pytest.fixture(scope="module")
+def qpb():
+    """The qpbenchmark module (the test skipped without it), the root-logger set-up it does
+    at import undone."""
+    import logging
+
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    qpb = pytest.importorskip("qpbenchmark")
+    root.handlers[:] = handlers
+    root.setLevel(level)
+    return qpb

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from conftest import simulate_args
 from PIL import Image
 
 from qpbench.exceptions import ParamError
@@ -65,13 +66,7 @@ def test_simulate_writes_snapshot_and_animation(tmp_path):
     code = main(
         [
             "-q",
-            "simulate",
-            "--scenario",
-            "narrow",
-            "--backend",
-            "qpsolvers:daqp",
-            "--duration",
-            "0.2",
+            *simulate_args("narrow", "qpsolvers:daqp", "0.2"),
             "--snapshot",
             str(png),
             "--animate",

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import qpsolvers
+from conftest import sparse_copy
 
 from qpbench import backends
 from qpbench.backends import (
@@ -505,22 +506,11 @@ def test_maros_meszaros_objective(name, maros_meszaros):
 @pytest.mark.parametrize("name", _param(QP_INFOS, high_accuracy=True))
 def test_sparse_input(name):
     """CSC matrices give the same answer, and a sequence of them reuses the solver object."""
-    import scipy.sparse as spa
-
     backend = get_backend(name, "high_accuracy")
     rng = np.random.default_rng(23)
     for _ in range(2):
         problem, x, y, z, z_box = random_kkt_problem(rng, 8, 2, 6, 2)
-        sparse = qpsolvers.Problem(
-            spa.csc_matrix(problem.P),
-            problem.q,
-            spa.csc_matrix(problem.G),
-            problem.h,
-            spa.csc_matrix(problem.A),
-            problem.b,
-            problem.lb,
-            problem.ub,
-        )
+        sparse = sparse_copy(problem)
         _check_solution(backend.solve(sparse), x, y, z, z_box)
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import simulate_args
 from test_report import assert_close, parse_tables, qpbenchmark_ratios
 
 from qpbench.cli import COMMANDS, build_parser, main
@@ -249,13 +250,7 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
         main(
             [
                 "-q",
-                "simulate",
-                "--scenario",
-                "wall",
-                "--backend",
-                "daqp",
-                "--duration",
-                "0.3",
+                *simulate_args("wall", "daqp", "0.3"),
                 "--dump",
                 "problems/wall",
                 "--every",

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import SUMMARY_TIME_KEYS
 
 from qpbench import selection
 from qpbench.cli import main
@@ -22,6 +23,22 @@ from qpbench.harness import loop_workers as workers
 
 SCENARIOS = ["wall", "narrow"]
 BACKENDS = ["qpsolvers:daqp", "pinv"]
+
+
+def _cli_args(scenarios: str, backends: str, duration: str, out, *options: str) -> list[str]:
+    """``closed-loop --scenarios S --backends B --duration D --out OUT OPTIONS...`` as argv."""
+    return [
+        "closed-loop",
+        "--scenarios",
+        scenarios,
+        "--backends",
+        backends,
+        "--duration",
+        duration,
+        "--out",
+        str(out),
+        *options,
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -87,16 +104,8 @@ def test_a_row_is_the_summary_under_the_table_names(table_dir):
     table = pd.read_csv(out / rows.CSV_NAME)
     row = table[(table["scenario"] == "wall") & (table["backend"] == "pinv")].iloc[0]
     summary = simulate("wall", "pinv", duration=0.5).summary
-    timed = {
-        "wall_time_s",
-        "real_time_factor",
-        "solve_time_median_s",
-        "solve_time_p99_s",
-        "solve_time_max_s",
-        "deadline_misses",
-    }
     for key, value in summary.items():
-        if key in timed or key in ("scenario", "backend"):
+        if key in SUMMARY_TIME_KEYS or key in ("scenario", "backend"):
             continue
         column = rows.TABLE_NAMES.get(key, key)
         cell = row[column]
@@ -143,62 +152,14 @@ def test_duplicate_backends_are_refused_like_in_bench(tmp_path, capsys):
     with pytest.raises(ParamError, match="twice"):
         cl.run_closed_loop(["wall"], ["pinv", "pinv"], tmp_path / "o", duration=0.05)
     out = tmp_path / "cli"
-    assert (
-        main(
-            [
-                "-q",
-                "closed-loop",
-                "--scenarios",
-                "wall",
-                "--backends",
-                "pinv,daqp,pinv",
-                "--duration",
-                "0.05",
-                "--out",
-                str(out),
-            ]
-        )
-        == 2
-    )
+    assert main(["-q", *_cli_args("wall", "pinv,daqp,pinv", "0.05", out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "'pinv' listed twice" in err
     assert not out.exists()
     # two spellings of one backend are one backend
-    assert (
-        main(
-            [
-                "-q",
-                "closed-loop",
-                "--scenarios",
-                "wall",
-                "--backends",
-                "pinv,PINV",
-                "--duration",
-                "0.05",
-                "--out",
-                str(out),
-            ]
-        )
-        == 2
-    )
+    assert main(["-q", *_cli_args("wall", "pinv,PINV", "0.05", out)]) == 2
     assert "twice" in capsys.readouterr().err
-    assert (
-        main(
-            [
-                "-q",
-                "closed-loop",
-                "--scenarios",
-                "wall,wall",
-                "--backends",
-                "pinv",
-                "--duration",
-                "0.05",
-                "--out",
-                str(out),
-            ]
-        )
-        == 2
-    )
+    assert main(["-q", *_cli_args("wall,wall", "pinv", "0.05", out)]) == 2
     assert "'wall' listed twice" in capsys.readouterr().err
 
 
@@ -260,17 +221,7 @@ def test_bad_parameters(tmp_path):
 
 def test_cli_exit_codes(tmp_path, capsys):
     out = tmp_path / "cli"
-    args = [
-        "closed-loop",
-        "--scenarios",
-        "wall",
-        "--backends",
-        "daqp",
-        "--duration",
-        "0.05",
-        "--out",
-        str(out),
-    ]
+    args = _cli_args("wall", "daqp", "0.05", out)
     assert main(["-q", *args]) == 0
     assert main(["-q", *args]) == 2  # exists, no --force / --resume
     assert "--force" in capsys.readouterr().err
@@ -327,23 +278,7 @@ def _same_daqp_run(out_a, row_a, out_b, row_b):
 @pytest.fixture(scope="module")
 def daqp_alone(tmp_path_factory):
     out = tmp_path_factory.mktemp("alone")
-    assert (
-        main(
-            [
-                "-q",
-                "closed-loop",
-                "--scenarios",
-                "wall",
-                "--backends",
-                "daqp",
-                "--duration",
-                "0.1",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    assert main(["-q", *_cli_args("wall", "daqp", "0.1", out)]) == 0
     return out, pd.read_csv(out / rows.CSV_NAME).iloc[0]
 
 
@@ -351,19 +286,16 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     out = tmp_path / "o"
     args = [
         "-q",
-        "closed-loop",
-        "--scenarios",
-        "wall",
-        "--backends",
-        "faulty:segfault,faulty:hang,daqp",
-        "--duration",
-        "0.1",
-        "--out",
-        str(out),
-        "--run-time-limit",
-        "4",
-        "--plugin",
-        PLUGIN,
+        *_cli_args(
+            "wall",
+            "faulty:segfault,faulty:hang,daqp",
+            "0.1",
+            out,
+            "--run-time-limit",
+            "4",
+            "--plugin",
+            PLUGIN,
+        ),
     ]
     assert main(args) == 1  # failed runs
     table = pd.read_csv(out / rows.CSV_NAME)
@@ -442,19 +374,7 @@ from slow_backends import registered  # noqa: E402
 def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
     """pinv ignores obstacles: its A2 dips below d_safe - 0.5 mm at 1.48 s of wall; daqp keeps d_safe."""
     out = tmp_path / "o"
-    code = main(
-        [
-            "closed-loop",
-            "--scenarios",
-            "wall",
-            "--backends",
-            "daqp,pinv",
-            "--duration",
-            "1.6",
-            "--out",
-            str(out),
-        ]
-    )
+    code = main(_cli_args("wall", "daqp,pinv", "1.6", out))
     assert code == 1
     table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]
@@ -479,23 +399,7 @@ def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
 
 def test_exact_backend_short_run_is_ok_and_exits_0(tmp_path):
     out = tmp_path / "o"
-    assert (
-        main(
-            [
-                "-q",
-                "closed-loop",
-                "--scenarios",
-                "wall,narrow",
-                "--backends",
-                "qpsolvers:daqp",
-                "--duration",
-                "0.3",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    assert main(["-q", *_cli_args("wall,narrow", "qpsolvers:daqp", "0.3", out)]) == 0
     table = pd.read_csv(out / rows.CSV_NAME)
     assert (table["verdict"] == "ok").all() and (table["simulated_s"] == 0.3).all()
 

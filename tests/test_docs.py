@@ -42,8 +42,9 @@ def test_problems_readme_python_snippets_run(workdir):
         assert proc.returncode == 0, proc.stderr
 
 
-def test_problems_readme_shell_snippets_run(workdir):
-    blocks = [b for b in snippets(ROOT / "problems" / "README.md", "bash") if "qpbench list" in b]
+def _run_shell_snippets(workdir: Path, marker: str) -> None:
+    """Run each ``bash`` block of problems/README.md that contains ``marker``, in ``workdir``."""
+    blocks = [b for b in snippets(ROOT / "problems" / "README.md", "bash") if marker in b]
     assert blocks
     env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
     for block in blocks:
@@ -56,28 +57,16 @@ def test_problems_readme_shell_snippets_run(workdir):
             timeout=600,
         )
         assert proc.returncode == 0, proc.stderr
+
+
+def test_problems_readme_shell_snippets_run(workdir):
+    _run_shell_snippets(workdir, "qpbench list")
     assert (workdir / "wall.csv").exists()
 
 
 def test_problems_readme_own_scenario_snippet_runs(workdir):
     """Start from a shipped scenario file and simulate it, as problems/README.md says."""
-    blocks = [
-        b
-        for b in snippets(ROOT / "problems" / "README.md", "bash")
-        if "qpbench scenarios show" in b
-    ]
-    assert blocks
-    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
-    for block in blocks:
-        proc = subprocess.run(
-            ["bash", "-euo", "pipefail", "-c", block],
-            cwd=workdir,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert proc.returncode == 0, proc.stderr
+    _run_shell_snippets(workdir, "qpbench scenarios show")
     assert (workdir / "my.toml").read_text().startswith("# Paper section 4.3")
 
 

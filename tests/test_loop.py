@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import qpsolvers
+from conftest import SUMMARY_TIME_KEYS, simulate_args
 
 from qpbench.backends import backend_names
 from qpbench.backends.base import Backend, BackendSolution
@@ -295,13 +296,7 @@ def test_cli(tmp_path, capsys):
     from qpbench.cli import main
 
     args = [
-        "simulate",
-        "--scenario",
-        "wall",
-        "--backend",
-        qp_backend(),
-        "--duration",
-        "0.2",
+        *simulate_args("wall", qp_backend(), "0.2"),
         "--summary",
         str(tmp_path / "s.json"),
         "--log",
@@ -393,13 +388,7 @@ def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
             np.testing.assert_array_equal(sc.data[table][key], value)
     # the CLI runs exactly that scenario, and says so in the summary and the dump's manifest
     args = [
-        "simulate",
-        "--scenario",
-        "wall",
-        "--backend",
-        "rnn",
-        "--duration",
-        "0.1",
+        *simulate_args("wall", "rnn", "0.1"),
         "--summary",
         str(tmp_path / "s.json"),
         "--log",
@@ -527,16 +516,8 @@ def test_non_finite_answer_is_an_invalid_tick():
     assert s["invalid_ticks"] == len(ticks) and s["error_ticks"] == 0 and s["first_error"] is None
 
 
-#: Columns and summary keys that measure time (all others must not depend on it).
+#: Columns that measure time (all others must not depend on it).
 TIME_COLUMNS = ["solve_time_s"]
-TIME_KEYS = {
-    "wall_time_s",
-    "real_time_factor",
-    "solve_time_median_s",
-    "solve_time_p99_s",
-    "solve_time_max_s",
-    "deadline_misses",
-}
 
 
 def test_late_answer_past_a_deadline_is_dropped_and_counted():
@@ -562,7 +543,7 @@ def test_late_first_answer_is_applied_without_a_deadline():
     pd.testing.assert_frame_equal(
         slow.log.drop(columns=TIME_COLUMNS), fast.log.drop(columns=TIME_COLUMNS)
     )
-    skip = TIME_KEYS | {"backend"}
+    skip = SUMMARY_TIME_KEYS | {"backend"}
     assert {k: v for k, v in s.items() if k not in skip} == {
         k: v for k, v in fast.summary.items() if k not in skip
     }

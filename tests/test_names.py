@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pytest
+from conftest import simulate_args
 
 from qpbench.backends import backend_class, backend_names, get_backend, resolve_name
 from qpbench.cli import main
@@ -63,13 +64,7 @@ def test_simulate_summary_to_stdout(tmp_path, monkeypatch, capsys):
     assert main(
         [
             "-q",
-            "simulate",
-            "--scenario",
-            "wall",
-            "--backend",
-            "pinv",
-            "--duration",
-            "0.02",
+            *simulate_args("wall", "pinv", "0.02"),
             "--summary",
             "-",
         ]

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import simulate_args
 
 from qpbench.atomic import check_output
 from qpbench.cli import main
@@ -65,24 +66,12 @@ def test_existing_output_needs_force(tmp_path):
             "{tmp}/no/such/x.csv",
         ],
         [
-            "simulate",
-            "--scenario",
-            "wall",
-            "--backend",
-            "daqp",
-            "--duration",
-            "0.01",
+            *simulate_args("wall", "daqp", "0.01"),
             "--summary",
             "{tmp}/no/such/s.json",
         ],
         [
-            "simulate",
-            "--scenario",
-            "wall",
-            "--backend",
-            "daqp",
-            "--duration",
-            "0.01",
+            *simulate_args("wall", "daqp", "0.01"),
             "--dump",
             "{tmp}/no/such",
         ],

@@ -18,6 +18,7 @@ from pathlib import Path
 import faulty_backends as fb
 import pandas as pd
 import pytest
+from conftest import simulate_args
 
 import qpbench.backends
 from qpbench.backends import (
@@ -75,13 +76,7 @@ def _runs_everywhere(name: str, tmp_path: Path, env: dict | None = None) -> None
     sim = _run(
         [
             "-q",
-            "simulate",
-            "--scenario",
-            "wall",
-            "--backend",
-            name,
-            "--duration",
-            "0.2",
+            *simulate_args("wall", name, "0.2"),
             "--summary",
             str(summary),
         ],
@@ -198,13 +193,7 @@ def test_a_plugin_is_loaded_once_and_simulated(tmp_path):
                     "-q",
                     "--plugin",
                     str(plugin),
-                    "simulate",
-                    "--scenario",
-                    "free",
-                    "--backend",
-                    "test-plugin-once",
-                    "--duration",
-                    "0.05",
+                    *simulate_args("free", "test-plugin-once", "0.05"),
                     "--summary",
                     str(summary),
                     "--force",

@@ -53,7 +53,6 @@ whose reference is optimal, our success implies qpbenchmark's.
 
 from __future__ import annotations
 
-import logging
 import math
 import warnings
 from dataclasses import replace
@@ -92,16 +91,6 @@ EPS = float(np.finfo(float).eps)
 
 
 # ---------------------------------------------------------------- helpers
-
-
-def _import_qpbenchmark():
-    """Import qpbenchmark, undoing the root-logger set-up it does at import."""
-    root = logging.getLogger()
-    handlers, level = list(root.handlers), root.level
-    qpb = pytest.importorskip("qpbenchmark")
-    root.handlers[:] = handlers
-    root.setLevel(level)
-    return qpb
 
 
 def common_solvers(qpb) -> list[str]:
@@ -148,16 +137,7 @@ def read_ours(path) -> pd.DataFrame:
 def data_scale(problem) -> float:
     """Largest finite magnitude in the problem's data (at least 1)."""
     scale = 1.0
-    for M in (
-        problem.P,
-        problem.q,
-        problem.G,
-        problem.h,
-        problem.A,
-        problem.b,
-        problem.lb,
-        problem.ub,
-    ):
+    for M in problem.unpack():
         if M is None:
             continue
         v = np.abs(np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float))
@@ -194,11 +174,6 @@ def qpbenchmark_success(df: pd.DataFrame, tol) -> pd.Series:
 
 
 # ---------------------------------------------------------------- fixtures
-
-
-@pytest.fixture(scope="module")
-def qpb():
-    return _import_qpbenchmark()
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ test (as its test sets build them), and the expected success flags from its
 
 from __future__ import annotations
 
-import logging
 import shutil
 
 import numpy as np
@@ -21,16 +20,6 @@ from qpbench.cli import main
 from qpbench.formats import load_problems
 from qpbench.harness.bench import BenchConfig, run_bench
 from qpbench.profiles import get_profile, profile_names
-
-
-@pytest.fixture(scope="module")
-def qpb():
-    root = logging.getLogger()
-    handlers, level = list(root.handlers), root.level
-    qpb = pytest.importorskip("qpbenchmark")
-    root.handlers[:] = handlers
-    root.setLevel(level)
-    return qpb
 
 
 def _test_set(qpb, runtime=None):

@@ -53,6 +53,12 @@ def test_a_less_accurate_solver_loses_whatever_its_name(monkeypatch, loose):
     )
 
 
+def _bench(source: Path, out: Path, *options: str, quiet: bool = False) -> int:
+    """``qpbench [-q] bench SOURCE --backends qpsolvers:clarabel --out OUT OPTIONS...``: its exit code."""
+    argv = ["bench", str(source), "--backends", "qpsolvers:clarabel", "--out", str(out), *options]
+    return main(["-q", *argv] if quiet else argv)
+
+
 def _mm_copy(mm_dir, tmp_path, names):
     folder = tmp_path / "mm"
     folder.mkdir()
@@ -118,20 +124,7 @@ def test_a_reference_that_times_out_is_recorded_and_the_others_go_on(tmp_path):
 def test_bench_rows_of_a_timed_out_reference_have_an_empty_gap_and_the_reason(mm_dir, tmp_path):
     folder = _mm_copy(mm_dir, tmp_path, ["HS21", "HS35", "QAFIRO"])
     out = tmp_path / "out.csv"
-    code = main(
-        [
-            "-q",
-            "bench",
-            str(folder),
-            "--backends",
-            "qpsolvers:clarabel",
-            "--out",
-            str(out),
-            "--reference-time-limit",
-            "1e-9",
-            "--no-warmup",
-        ]
-    )
+    code = _bench(folder, out, "--reference-time-limit", "1e-9", "--no-warmup", quiet=True)
     assert code == 0
     df = pd.read_csv(out)
     assert len(df) == 3 and df["reference_status"].eq("unknown").all()
@@ -153,20 +146,7 @@ def test_reference_file_gives_published_objectives(mm_dir, tmp_path):
         "HS35,1.0,wrong\nHS35MOD,0.25,MM\n"
     )
     out = tmp_path / "out.csv"
-    assert main(
-        [
-            "-q",
-            "bench",
-            str(folder),
-            "--backends",
-            "qpsolvers:clarabel",
-            "--out",
-            str(out),
-            "--reference",
-            str(objectives),
-            "--no-warmup",
-        ]
-    ) in (0, 1)
+    assert _bench(folder, out, "--reference", str(objectives), "--no-warmup", quiet=True) in (0, 1)
     df = pd.read_csv(out).set_index("problem")
     assert (
         df.loc["HS21", "reference_objective"] == -99.96 and df.loc["HS21", "optimality_gap"] < 1e-8
@@ -182,21 +162,7 @@ def test_reference_file_gives_published_objectives(mm_dir, tmp_path):
     # a problem the file does not list: no reference, an empty gap and why
     objectives.write_text("problem,objective\nHS21,-99.96\n")
     assert (
-        main(
-            [
-                "-q",
-                "bench",
-                str(folder),
-                "--backends",
-                "qpsolvers:clarabel",
-                "--out",
-                str(out),
-                "--force",
-                "--reference",
-                str(objectives),
-                "--no-warmup",
-            ]
-        )
+        _bench(folder, out, "--force", "--reference", str(objectives), "--no-warmup", quiet=True)
         == 0
     )
     df = pd.read_csv(out).set_index("problem")
@@ -222,39 +188,11 @@ def test_a_bad_reference_file_is_an_input_error_and_nothing_is_written(
     objectives = tmp_path / "optima.csv"
     objectives.write_text(text)
     out = tmp_path / "out.csv"
-    assert (
-        main(
-            [
-                "bench",
-                str(folder),
-                "--backends",
-                "qpsolvers:clarabel",
-                "--out",
-                str(out),
-                "--reference",
-                str(objectives),
-            ]
-        )
-        == 2
-    )
+    assert _bench(folder, out, "--reference", str(objectives)) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(objectives) in err[0] and f"key '{key}'" in err[0]
     assert not out.exists()
-    assert (
-        main(
-            [
-                "bench",
-                str(folder),
-                "--backends",
-                "qpsolvers:clarabel",
-                "--out",
-                str(out),
-                "--reference",
-                str(tmp_path / "missing.csv"),
-            ]
-        )
-        == 2
-    )
+    assert _bench(folder, out, "--reference", str(tmp_path / "missing.csv")) == 2
     assert "neither auto, clarabel, piqp, none nor a file" in capsys.readouterr().err
 
 
@@ -288,21 +226,7 @@ def test_single_solver_references_are_cached_apart(mm_dir, tmp_path):
 )
 def test_bad_reference_options_are_input_errors(mm_dir, tmp_path, capsys, option, value, key):
     out = tmp_path / "out.csv"
-    assert (
-        main(
-            [
-                "bench",
-                str(mm_dir / "HS21.mat"),
-                "--backends",
-                "qpsolvers:clarabel",
-                "--out",
-                str(out),
-                option,
-                value,
-            ]
-        )
-        == 2
-    )
+    assert _bench(mm_dir / "HS21.mat", out, option, value) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"key '{key}'" in err[0] and not out.exists()
 
@@ -320,17 +244,7 @@ def test_bench_says_first_where_a_read_only_set_caches(tmp_path, make_record, mo
     folder = _our_set(tmp_path / "ro", make_record)
     folder.chmod(0o555)
     try:
-        code = main(
-            [
-                "bench",
-                str(folder),
-                "--backends",
-                "qpsolvers:clarabel",
-                "--out",
-                str(tmp_path / "o.csv"),
-                "--no-warmup",
-            ]
-        )
+        code = _bench(folder, tmp_path / "o.csv", "--no-warmup")
         assert code == 0
         users = tmp_path / "xdg" / "qpbench" / "references"
         first = capsys.readouterr().err.splitlines()[0]

@@ -8,6 +8,7 @@ from dataclasses import astuple, replace
 import numpy as np
 import pytest
 import qpsolvers
+from conftest import sparse_copy
 
 from qpbench.backends import get_backend
 from qpbench.backends.rnn import WORKING_SETTINGS
@@ -434,19 +435,8 @@ def test_bad_shapes_are_reported():
 
 
 def test_sparse_input_gives_the_dense_answer(random_qp):
-    import scipy.sparse as spa
-
     problem = random_qp(n=5)
-    sparse = qpsolvers.Problem(
-        spa.csc_matrix(problem.P),
-        problem.q,
-        spa.csc_matrix(problem.G),
-        problem.h,
-        spa.csc_matrix(problem.A),
-        problem.b,
-        problem.lb,
-        problem.ub,
-    )
+    sparse = sparse_copy(problem)
     a = get_backend("rnn-converged").solve(problem)
     b = get_backend("rnn-converged").solve(sparse)
     assert a.iterations == b.iterations

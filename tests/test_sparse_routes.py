@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import qpsolvers
 import scipy.sparse as spa
-from conftest import MAROS_MESZAROS_DIR, random_problem
+from conftest import LIMITED_CLI, MAROS_MESZAROS_DIR, random_problem, write_band_set
 
 from qpbench.backends import backend_class, get_backend
 from qpbench.backends._sparse import wants_sparse
@@ -140,14 +140,6 @@ def test_sparse_infeasible_stays_infeasible(name):
     assert get_backend(name).solve(problem).status == "primal_infeasible"
 
 
-_LIMITED = """
-import resource, sys
-resource.setrlimit(resource.RLIMIT_AS, ({limit}, {limit}))
-from qpbench.cli import main
-sys.exit(main(sys.argv[1:]))
-"""
-
-
 @pytest.mark.slow
 def test_100k_banded_through_sparse_routes_under_2gb(tmp_path):
     """A 100,000-variable banded QP (a dense P alone would be 80 GB) through ``bench`` with
@@ -158,24 +150,7 @@ def test_100k_banded_through_sparse_routes_under_2gb(tmp_path):
     import subprocess
     import sys
 
-    from qpbench.formats import ProblemRecord, save_npz
-
-    n = 100_000
-    e = np.ones(n)
-    L = spa.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="csc")
-    P = ((L @ L) + 0.016 * spa.identity(n)).tocsc()
-    problem = qpsolvers.Problem(
-        P,
-        np.sin(np.arange(n)),
-        None,
-        None,
-        spa.csc_matrix(np.ones((1, n))),
-        np.ones(1),
-        -np.ones(n),
-        np.ones(n),
-    )
-    (tmp_path / "set").mkdir()
-    save_npz(ProblemRecord(problem, "band100k"), tmp_path / "set" / "band100k.npz")
+    write_band_set(tmp_path / "set")
     out = tmp_path / "rows.csv"
     backends = ",".join(
         b for b in ("clarabel",) + ROUTES if not backend_class(b).unavailable_reason()
@@ -184,7 +159,7 @@ def test_100k_banded_through_sparse_routes_under_2gb(tmp_path):
         [
             sys.executable,
             "-c",
-            _LIMITED.format(limit=2 * 1024**3),
+            LIMITED_CLI.format(limit=2 * 1024**3),
             "bench",
             str(tmp_path / "set"),
             "--backends",

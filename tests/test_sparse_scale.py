@@ -12,17 +12,11 @@ import numpy as np
 import pytest
 import qpsolvers
 import scipy.sparse as spa
+from conftest import LIMITED_CLI, band_matrix, write_band_set
 
 from qpbench.cli import main
 from qpbench.formats import ProblemRecord, assess_convexity, load_problems, save_npz
 from qpbench.memory import parse_size, skip_reason
-
-
-def _band(n: int, shift: float = 0.0) -> spa.csc_matrix:
-    """``(L + shift 16 I)`` with ``L`` the square of the 1-D Laplacian (eigenvalues in [0, 16])."""
-    e = np.ones(n)
-    L = spa.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="csc")
-    return ((L @ L) + shift * 16 * spa.identity(n)).tocsc()
 
 
 def _rows(path) -> list[dict]:
@@ -43,10 +37,10 @@ def test_convexity_dense_and_sparse_paths():
     assert assess_convexity(np.diag([1.0, 0.0])).verdict == "convex"
     # sparse path (n > 1000, not diagonally dominant): inertia of P + delta I, ratio to 2 %
     n = 5000
-    assert assess_convexity(_band(n)).verdict == "convex"
-    c = assess_convexity(_band(n, -1.2e-6))
+    assert assess_convexity(band_matrix(n)).verdict == "convex"
+    c = assess_convexity(band_matrix(n, -1.2e-6))
     assert c.verdict == "rounding" and c.method == "inertia" and abs(c.ratio / -1.2e-6 - 1) < 0.05
-    c = assess_convexity(_band(n, -1e-3))
+    c = assess_convexity(band_matrix(n, -1e-3))
     assert c.verdict == "nonconvex" and abs(c.ratio / -1e-3 - 1) < 0.05
     # diagonal: Gershgorin decides without a factorization
     assert assess_convexity(spa.identity(200_000, format="csc")).method == "gershgorin"
@@ -63,7 +57,7 @@ def test_memory_sizes_and_dense_limit():
     with pytest.raises(ParamError, match="memory budget '2 parsecs'"):
         parse_size("2 parsecs")
     n = 100_000
-    big = qpsolvers.Problem(_band(n), np.zeros(n))
+    big = qpsolvers.Problem(band_matrix(n), np.zeros(n))
     assert skip_reason(big, sparse_backend=True, budget=2 * 10**9) is None
     assert skip_reason(big, sparse_backend=False, budget=2 * 10**9).startswith("dense-only backend")
     assert skip_reason(big, sparse_backend=True, budget=10**6).startswith("memory: needs about")
@@ -144,33 +138,12 @@ def test_memory_budget_skips_with_the_reason(tmp_path):
     assert all(r["error"].startswith(("memory: needs about", "nonconvex")) for r in rows)
 
 
-_LIMITED = """
-import resource, sys
-resource.setrlimit(resource.RLIMIT_AS, ({limit}, {limit}))
-from qpbench.cli import main
-sys.exit(main(sys.argv[1:]))
-"""
-
-
 @pytest.mark.slow
 def test_100k_variables_through_inspect_bench_report_under_2gb(tmp_path):
     """inspect, bench and report of a 100,000-variable banded QP with ``ulimit -v 2GB``:
     sparse all the way (a dense P alone would be 80 GB), dense-only backends skipped."""
-    n = 100_000
-    q = np.sin(np.arange(n))
-    problem = qpsolvers.Problem(
-        _band(n, 1e-3),
-        q,
-        None,
-        None,
-        spa.csc_matrix(np.ones((1, n))),
-        np.ones(1),
-        -np.ones(n),
-        np.ones(n),
-    )
-    (tmp_path / "set").mkdir()
-    save_npz(ProblemRecord(problem, "band100k"), tmp_path / "set" / "band100k.npz")
-    script = _LIMITED.format(limit=2 * 1024**3)
+    write_band_set(tmp_path / "set")
+    script = LIMITED_CLI.format(limit=2 * 1024**3)
     out = tmp_path / "rows.csv"
 
     def run(*args):

@@ -50,6 +50,13 @@ def rows_of(folder: Path) -> list[dict]:
     return read_sweep_rows(folder / "sweep.csv")
 
 
+def _tiny_sweep(folder: Path, out: Path, *options: str) -> int:
+    """``qpbench sweep`` of the tiny sweep (written into ``folder``) with daqp and osqp: its exit code."""
+    return main(
+        ["sweep", str(write_sweep(folder)), "--backends", "daqp,osqp", "--out", str(out), *options]
+    )
+
+
 def assert_same_rows(a: list[dict], b: list[dict]) -> None:
     assert [(r["instance"], r["backend"]) for r in a] == [(r["instance"], r["backend"]) for r in b]
     for x, y in zip(a, b):
@@ -183,18 +190,7 @@ def serial(tmp_path_factory):
     """The tiny sweep run serially with daqp and osqp (the reference rows)."""
     tmp = tmp_path_factory.mktemp("serial")
     out = tmp / "out"
-    code = main(
-        [
-            "sweep",
-            str(write_sweep(tmp)),
-            "--backends",
-            "daqp,osqp",
-            "--out",
-            str(out),
-            "--jobs",
-            "1",
-        ]
-    )
+    code = _tiny_sweep(tmp, out, "--jobs", "1")
     assert code == 0
     return out
 
@@ -217,21 +213,7 @@ def test_serial_rows(serial):
 
 def test_two_jobs_give_the_serial_rows(serial, tmp_path, capsys):
     out = tmp_path / "out"
-    assert (
-        main(
-            [
-                "sweep",
-                str(write_sweep(tmp_path)),
-                "--backends",
-                "daqp,osqp",
-                "--out",
-                str(out),
-                "--jobs",
-                "2",
-            ]
-        )
-        == 0
-    )
+    assert _tiny_sweep(tmp_path, out, "--jobs", "2") == 0
     rows = rows_of(out)
     assert_same_rows(rows_of(serial), rows)
     assert {r["executor"] for r in rows} == {"processes"} and {
@@ -244,23 +226,7 @@ def test_two_jobs_give_the_serial_rows(serial, tmp_path, capsys):
 def test_local_dask_cluster_gives_the_serial_rows(serial, tmp_path):
     pytest.importorskip("distributed")
     out = tmp_path / "out"
-    assert (
-        main(
-            [
-                "sweep",
-                str(write_sweep(tmp_path)),
-                "--backends",
-                "daqp,osqp",
-                "--out",
-                str(out),
-                "--jobs",
-                "2",
-                "--executor",
-                "dask",
-            ]
-        )
-        == 0
-    )
+    assert _tiny_sweep(tmp_path, out, "--jobs", "2", "--executor", "dask") == 0
     rows = rows_of(out)
     assert_same_rows(rows_of(serial), rows)
     assert all(r["executor"] == "dask" and r["worker"].startswith("tcp://127.0.0.1:") for r in rows)

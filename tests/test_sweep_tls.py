@@ -95,43 +95,27 @@ def test_sweep_on_a_tls_cluster(tmp_path):
         address = cluster.scheduler_address
         assert address.startswith("tls://127.0.0.1:")
         out = tmp_path / "out"
-        assert (
-            main(
+
+        def sweep_on(folder, scheduler: str, *options: str) -> int:
+            return main(
                 [
                     "sweep",
                     str(sweep),
                     "--backends",
                     "daqp",
                     "--out",
-                    str(out),
+                    str(folder),
                     "--executor",
                     "dask",
                     "--scheduler",
-                    address,
-                    "--security",
-                    str(security_file),
+                    scheduler,
+                    *options,
                 ]
             )
-            == 0
-        )
+
+        assert sweep_on(out, address, "--security", str(security_file)) == 0
         # no certificate, no service: a plain client is refused
-        assert (
-            main(
-                [
-                    "sweep",
-                    str(sweep),
-                    "--backends",
-                    "daqp",
-                    "--out",
-                    str(tmp_path / "x"),
-                    "--executor",
-                    "dask",
-                    "--scheduler",
-                    address.replace("tls://", "tcp://"),
-                ]
-            )
-            == 2
-        )
+        assert sweep_on(tmp_path / "x", address.replace("tls://", "tcp://")) == 2
     rows = rows_of(out)
     assert_same_rows(rows_of(serial), rows)
     assert all(r["executor"] == "dask" and r["worker"].startswith("tls://127.0.0.1:") for r in rows)

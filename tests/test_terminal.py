@@ -5,6 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+from conftest import simulate_args
+
 CODE = """
 import logging, sys
 from tqdm import tqdm
@@ -41,13 +43,7 @@ def _simulate_stderr(*flags: str) -> list[str]:
             "-m",
             "qpbench.cli",
             *flags,
-            "simulate",
-            "--scenario",
-            "wall",
-            "--backend",
-            "daqp",
-            "--duration",
-            "0.005",
+            *simulate_args("wall", "daqp", "0.005"),
         ],
         capture_output=True,
         text=True,

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import simulate_args
 from slow_backends import SlowExact
 
 from qpbench.cli import main
@@ -247,13 +248,7 @@ def test_simulate_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
     out = tmp_path / "s.json"
     code = main(
         [
-            "simulate",
-            "--scenario",
-            "wall",
-            "--backend",
-            "pinv",
-            "--duration",
-            "1.6",
+            *simulate_args("wall", "pinv", "1.6"),
             "--summary",
             str(out),
         ]
@@ -280,13 +275,7 @@ def test_simulate_exact_backend_is_ok_and_exits_0(tmp_path, capsys):
     assert (
         main(
             [
-                "simulate",
-                "--scenario",
-                "wall",
-                "--backend",
-                "daqp",
-                "--duration",
-                "0.3",
+                *simulate_args("wall", "daqp", "0.3"),
                 "--summary",
                 str(out),
             ]

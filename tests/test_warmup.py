@@ -14,17 +14,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import SUMMARY_TIME_KEYS
 
 QPBENCH = [sys.executable, "-m", "qpbench.cli"]
-#: Summary keys that measure time; every other one must be the same on every run.
-TIME_KEYS = {
-    "wall_time_s",
-    "real_time_factor",
-    "solve_time_median_s",
-    "solve_time_p99_s",
-    "solve_time_max_s",
-    "deadline_misses",
-}
 
 
 def _cache_files(folder: Path) -> dict[str, tuple[int, int]]:
@@ -76,8 +68,8 @@ def test_first_run_on_a_fresh_cache_equals_the_next(fresh):
     assert "kernels: loaded from the cache" in second.stderr and "(0 compiled)" in second.stderr
     assert files[0] and files[1] == files[0]  # nothing compiled or rewritten by the second run
     # the same trajectory: every figure but the time ones
-    assert {k: v for k, v in a.items() if k not in TIME_KEYS} == {
-        k: v for k, v in b.items() if k not in TIME_KEYS
+    assert {k: v for k, v in a.items() if k not in SUMMARY_TIME_KEYS} == {
+        k: v for k, v in b.items() if k not in SUMMARY_TIME_KEYS
     }
     assert (
         a["zero_velocity_ticks"] == 0

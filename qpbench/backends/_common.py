@@ -3,6 +3,8 @@
 - :func:`generic_settings` merges a profile with the user's settings;
 - :func:`dense_bounds` turns optional ``lb``/``ub`` into full vectors;
 - :func:`as_dense`, :func:`all_dense` handle dense/sparse input cheaply;
+- :func:`dense_f64_parts` is the dense backends' per-tick fast path, :func:`dense_parts`
+  the conversion of anything else;
 - :func:`dense_upper_layout` gives the CSC structure of a dense cost matrix's
   upper triangle with *every* entry stored.
 
@@ -118,3 +120,62 @@ def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
     lb = None if problem.lb is None else np.asarray(problem.lb, dtype=np.float64).reshape(-1)
     ub = None if problem.ub is None else np.asarray(problem.ub, dtype=np.float64).reshape(-1)
     return P, q, A, b, G, h, lb, ub
+
+
+def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
+    """The problem's ``P, q, A, b, G, h, lb, ub`` as they are, or ``None`` when one needs converting.
+
+    The per-tick fast path of the dense backends: the arrays a controller builds (numpy
+    arrays of float64, ``q`` 1-D, ``A`` and ``G`` 2-D, absent parts ``None``) are passed on
+    untouched; for anything else (sparse, lists, a single row as a vector, other dtypes)
+    this returns ``None`` and the backend converts, with :func:`dense_parts` or its own
+    route. Shapes are not compared here (see :mod:`._shapes`).
+
+    Each dtype is tested by identity first (the float64 descriptor is a singleton except
+    in unpickled arrays, which fall back to ``==``): this keeps the call as cheap as the
+    inline tests it replaces. The tests of ``A, b`` and ``G, h`` are written out twice on
+    purpose: a helper for one block would cost a call per block and tick.
+    """
+    P = problem.P
+    q = problem.q
+    A = problem.A
+    b = problem.b
+    G = problem.G
+    h = problem.h
+    lb = problem.lb
+    ub = problem.ub
+    if (
+        type(P) is _ndarray
+        and (P.dtype is _f64 or P.dtype == _f64)
+        and type(q) is _ndarray
+        and (q.dtype is _f64 or q.dtype == _f64)
+        and q.ndim == 1
+        and (
+            A is None
+            or (
+                type(A) is _ndarray
+                and (A.dtype is _f64 or A.dtype == _f64)
+                and A.ndim == 2
+                and type(b) is _ndarray
+                and (b.dtype is _f64 or b.dtype == _f64)
+            )
+        )
+        and (
+            G is None
+            or (
+                type(G) is _ndarray
+                and (G.dtype is _f64 or G.dtype == _f64)
+                and G.ndim == 2
+                and type(h) is _ndarray
+                and (h.dtype is _f64 or h.dtype == _f64)
+            )
+        )
+        and (lb is None or (type(lb) is _ndarray and (lb.dtype is _f64 or lb.dtype == _f64)))
+        and (ub is None or (type(ub) is _ndarray and (ub.dtype is _f64 or ub.dtype == _f64)))
+    ):
+        return P, q, A, b, G, h, lb, ub
+    return None
+
+
+_ndarray = np.ndarray
+_f64 = np.dtype(np.float64)

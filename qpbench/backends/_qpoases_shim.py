@@ -23,68 +23,50 @@ import numpy as np
 
 from ..exceptions import BackendError
 
-#: qpOASES option names the ``qpoases`` backend accepts as settings (set as numbers;
-#: the ``enable...`` flags take 0/1).
-OPTION_NAMES = (
-    "enableRamping",
-    "enableFarBounds",
-    "enableFlippingBounds",
-    "enableRegularisation",
-    "enableFullLITests",
-    "enableNZCTests",
-    "enableDriftCorrection",
-    "enableCholeskyRefactorisation",
-    "enableEqualities",
-    "terminationTolerance",
-    "boundTolerance",
-    "boundRelaxation",
-    "epsNum",
-    "epsDen",
-    "maxPrimalJump",
-    "maxDualJump",
-    "initialRamping",
-    "finalRamping",
-    "initialFarBounds",
-    "growFarBounds",
-    "epsFlipping",
-    "numRegularisationSteps",
-    "epsRegularisation",
-    "numRefinementSteps",
-    "epsIterRef",
-    "epsLITests",
-    "epsNZCTests",
-    "rcondSMin",
-    "enableInertiaCorrection",
-)
-_BOOL_OPTIONS = frozenset(
-    {
-        "enableRamping",
-        "enableFarBounds",
-        "enableFlippingBounds",
-        "enableRegularisation",
-        "enableFullLITests",
-        "enableNZCTests",
-        "enableEqualities",
-        "enableInertiaCorrection",
-    }
-)
-_INT_OPTIONS = frozenset(
-    {
-        "enableDriftCorrection",
-        "enableCholeskyRefactorisation",
-        "numRegularisationSteps",
-        "numRefinementSteps",
-    }
-)
+#: qpOASES options the ``qpoases`` backend accepts as settings (set as numbers), each with
+#: the C type the shim stores it as: ``bool`` (given as 0/1), ``int`` or ``real``.
+_OPTION_TYPES = {
+    "enableRamping": "bool",
+    "enableFarBounds": "bool",
+    "enableFlippingBounds": "bool",
+    "enableRegularisation": "bool",
+    "enableFullLITests": "bool",
+    "enableNZCTests": "bool",
+    "enableDriftCorrection": "int",
+    "enableCholeskyRefactorisation": "int",
+    "enableEqualities": "bool",
+    "terminationTolerance": "real",
+    "boundTolerance": "real",
+    "boundRelaxation": "real",
+    "epsNum": "real",
+    "epsDen": "real",
+    "maxPrimalJump": "real",
+    "maxDualJump": "real",
+    "initialRamping": "real",
+    "finalRamping": "real",
+    "initialFarBounds": "real",
+    "growFarBounds": "real",
+    "epsFlipping": "real",
+    "numRegularisationSteps": "int",
+    "epsRegularisation": "real",
+    "numRefinementSteps": "int",
+    "epsIterRef": "real",
+    "epsLITests": "real",
+    "epsNZCTests": "real",
+    "rcondSMin": "real",
+    "enableInertiaCorrection": "bool",
+}
+#: qpOASES option names the ``qpoases`` backend accepts as settings.
+OPTION_NAMES = tuple(_OPTION_TYPES)
 PRESETS = {"default": 0, "mpc": 1, "reliable": 2, "fast": 3}
 
 
 def _option_setters() -> str:
     lines = []
-    for name in OPTION_NAMES:
-        if name in _BOOL_OPTIONS:
+    for name, kind in _OPTION_TYPES.items():
+        if kind == "bool":
             value = "(v != 0.0 ? BT_TRUE : BT_FALSE)"
-        elif name in _INT_OPTIONS:
+        elif kind == "int":
             value = "(int_t) v"
         else:
             value = "(real_t) v"

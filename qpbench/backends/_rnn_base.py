@@ -193,16 +193,10 @@ class NetworkBackend(Backend):
     def _run(self, problem, warm_start) -> BackendSolution:
         if self._kernel is None:
             self._kernel = nw.kernel(self.use_numba)
-        P, q, A, b, G, h, lb, ub = (
-            problem.P,
-            problem.q,
-            problem.A,
-            problem.b,
-            problem.G,
-            problem.h,
-            problem.lb,
-            problem.ub,
-        )
+        P, q, A, b = problem.P, problem.q, problem.A, problem.b
+        G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
+        # Inline, not _common.dense_f64_parts: only the types that choose the route are
+        # tested here, and the tick pays no extra call.
         if (
             not self.use_numba
             or type(P) is not np.ndarray

@@ -51,7 +51,7 @@ import numpy as np
 
 from ..exceptions import ParamError
 from . import register
-from ._common import dense_parts, generic_settings
+from ._common import dense_f64_parts, dense_parts, generic_settings
 from ._shapes import check_shapes
 from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
@@ -160,47 +160,12 @@ class PiqpBackend(Backend):
         return solver
 
     def _solve(self, problem, warm_start):
-        P, q, A, b, G, h, lb, ub = (
-            problem.P,
-            problem.q,
-            problem.A,
-            problem.b,
-            problem.G,
-            problem.h,
-            problem.lb,
-            problem.ub,
-        )
-        if not (
-            type(P) is _ndarray
-            and type(q) is _ndarray
-            and P.dtype == _f64
-            and q.dtype == _f64
-            and q.ndim == 1
-            and q.shape[0] <= _SMALL_N
-            and (
-                A is None
-                or (
-                    type(A) is _ndarray
-                    and A.dtype == _f64
-                    and type(b) is _ndarray
-                    and b.dtype == _f64
-                )
-            )
-            and (
-                G is None
-                or (
-                    type(G) is _ndarray
-                    and G.dtype == _f64
-                    and type(h) is _ndarray
-                    and h.dtype == _f64
-                )
-            )
-            and (lb is None or (type(lb) is _ndarray and lb.dtype == _f64))
-            and (ub is None or (type(ub) is _ndarray and ub.dtype == _f64))
-        ):
+        parts = dense_f64_parts(problem)
+        if parts is None or parts[1].shape[0] > _SMALL_N:
             if wants_sparse(problem):
                 return self._solve_sparse(problem)
-            P, q, A, b, G, h, lb, ub = _dense(problem)
+            parts = _dense(problem)
+        P, q, A, b, G, h, lb, ub = parts
         shapes = (
             P.shape,
             q.shape,
@@ -282,9 +247,7 @@ class PiqpBackend(Backend):
         return sol
 
 
-_ndarray = np.ndarray
 _new = object.__new__
-_f64 = np.dtype(np.float64)
 _EMPTY = np.zeros(0)
 _EMPTY.flags.writeable = False
 

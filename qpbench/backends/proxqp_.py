@@ -70,14 +70,18 @@ Statuses. ``PROXQP_SOLVED`` -> optimal, ``PROXQP_PRIMAL_INFEASIBLE`` /
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as spa
 
 from . import register
-from ._common import as_dense, dense_bounds, generic_settings
+from ._common import as_dense, dense_bounds, dense_f64_parts, generic_settings
 from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -196,65 +200,17 @@ class ProxqpBackend(Backend):
         return l
 
     def _solve(self, problem, warm_start):
-        P, q, A, b, G, h, lb, ub = (
-            problem.P,
-            problem.q,
-            problem.A,
-            problem.b,
-            problem.G,
-            problem.h,
-            problem.lb,
-            problem.ub,
-        )
-        # Fast path: dense float64 arrays (what the conversions below return
-        # unchanged); anything else is converted as before.
+        parts = dense_f64_parts(problem)
         if (
-            type(P) is _ndarray
-            and P.dtype == _f64
-            and type(q) is _ndarray
-            and q.dtype == _f64
-            and q.shape[0] <= _SMALL_N
-            and (
-                A is None
-                or (
-                    type(A) is _ndarray
-                    and A.dtype == _f64
-                    and type(b) is _ndarray
-                    and b.dtype == _f64
-                )
-            )
-            and (
-                G is None
-                or (
-                    type(G) is _ndarray
-                    and G.dtype == _f64
-                    and type(h) is _ndarray
-                    and h.dtype == _f64
-                )
-            )
-            and (
-                (lb is None and ub is None)
-                or (
-                    type(lb) is _ndarray
-                    and lb.dtype == _f64
-                    and type(ub) is _ndarray
-                    and ub.dtype == _f64
-                )
-            )
+            parts is None
+            or parts[1].shape[0] > _SMALL_N
+            or (parts[6] is None) is not (parts[7] is None)  # one bound given: the other is filled
         ):
-            H, C, u = P, G, h
-            n = q.shape[0]
-        else:
             if wants_sparse(problem):
                 return self._solve_sparse(problem, warm_start)
-            q = np.asarray(q, dtype=float)
-            n = q.shape[0]
-            H = as_dense(P)
-            A = None if A is None else as_dense(A)
-            b = None if b is None else np.asarray(b, dtype=float)
-            C = None if G is None else as_dense(G)
-            u = None if h is None else np.asarray(h, dtype=float)
-            lb, ub = dense_bounds(problem, n)
+            parts = _converted(problem)
+        H, q, A, b, C, u, lb, ub = parts
+        n = q.shape[0]
         n_eq = 0 if A is None else A.shape[0]
         n_in = 0 if C is None else C.shape[0]
         l = None if C is None else self._lower(n_in)
@@ -376,8 +332,23 @@ class ProxqpBackend(Backend):
         return sol
 
 
-_ndarray = np.ndarray
-_f64 = np.dtype(np.float64)
+def _converted(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
+    """``P, q, A, b, G, h, lb, ub`` as float arrays, both bounds or neither (proxqp's dense API)."""
+    q = np.asarray(problem.q, dtype=float)
+    A, b, G, h = problem.A, problem.b, problem.G, problem.h
+    lb, ub = dense_bounds(problem, q.shape[0])
+    return (
+        as_dense(problem.P),
+        q,
+        None if A is None else as_dense(A),
+        None if b is None else np.asarray(b, dtype=float),
+        None if G is None else as_dense(G),
+        None if h is None else np.asarray(h, dtype=float),
+        lb,
+        ub,
+    )
+
+
 _isfinite = math.isfinite
 #: Above this many variables the fast path asks :func:`wants_sparse` (exact: ``n (n + m)`` entries).
 _SMALL_N = 2_000

@@ -105,24 +105,14 @@ from .records import (
 )
 
 
-def _npz_folder(folder: Path) -> ProblemSet:
-    files = sorted(folder.glob("*.npz"))
+def _folder(folder: Path, kind: str, load) -> ProblemSet:
+    """The ``*.<kind>`` files of ``folder``, sorted, each read by ``load``, as one set."""
+    files = sorted(folder.glob(f"*.{kind}"))
     return ProblemSet(
         name=folder.resolve().name,
         path=folder,
-        records=[load_npz(f) for f in files],
-        kind="npz",
-        files=files,
-    )
-
-
-def _mat_folder(folder: Path) -> ProblemSet:
-    files = sorted(folder.glob("*.mat"))
-    return ProblemSet(
-        name=folder.resolve().name,
-        path=folder,
-        records=[load_maros_meszaros(f) for f in files],
-        kind="mat",
+        records=[load(f) for f in files],
+        kind=kind,
         files=files,
     )
 
@@ -143,9 +133,9 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
         if (path / PARQUET_NAME).exists():
             return read_problem_set(path, verify_hash=verify_hash)
         if any(path.glob("*.npz")):
-            return _npz_folder(path)
+            return _folder(path, "npz", load_npz)
         if any(path.glob("*.mat")):
-            return _mat_folder(path)
+            return _folder(path, "mat", load_maros_meszaros)
         raise ProblemFormatError(f"folder holds no {PARQUET_NAME}, .npz or .mat files", path=path)
     if not path.exists():
         raise ProblemFormatError("no such file or folder", path=path)

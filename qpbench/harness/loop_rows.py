@@ -159,23 +159,36 @@ def log_name(scenario: str, backend: str) -> str:
     return f"{safe}.parquet"
 
 
-def skipped_row(
-    scenario: str, backend: str, formulation: str, duration: float | None, reason: str
+def _no_result_row(
+    scenario: str, backend: str, formulation: str, duration: float | None, **fields: str
 ) -> dict:
-    """The row of a run that was not made (status ``skipped``, the reason in ``error``, no verdict)."""
+    """A row of a run without a result: its key, the duration asked, ``fields``; no figures."""
     row = {c: math.nan for c in COLUMNS}
     row.update(
         scenario=scenario,
         backend=backend,
         formulation=formulation,
         duration_s=float(duration) if duration is not None else math.nan,
+        log_file="",
+        **fields,
+    )
+    return row
+
+
+def skipped_row(
+    scenario: str, backend: str, formulation: str, duration: float | None, reason: str
+) -> dict:
+    """The row of a run that was not made (status ``skipped``, the reason in ``error``, no verdict)."""
+    return _no_result_row(
+        scenario,
+        backend,
+        formulation,
+        duration,
         status="skipped",
         error=reason,
         verdict="",
         verdict_reasons="",
-        log_file="",
     )
-    return row
 
 
 def error_row(
@@ -193,19 +206,16 @@ def failure_row(
     from ..sim.verdict import failed_run
 
     verdict = failed_run(status, message)
-    row = {c: math.nan for c in COLUMNS}
-    row.update(
-        scenario=scenario,
-        backend=backend,
-        formulation=formulation,
-        duration_s=float(duration) if duration is not None else math.nan,
+    return _no_result_row(
+        scenario,
+        backend,
+        formulation,
+        duration,
         status=status,
         error=message,
         verdict=verdict.verdict,
         verdict_reasons=verdict.text,
-        log_file="",
     )
-    return row
 
 
 def same_run(

@@ -71,41 +71,8 @@ STATUSES = ("ok", "error", "crashed", "invalid_scenario")
 #: A row's key.
 KEY_COLUMNS = ("instance", "backend")
 
-#: Figures copied from the closed loop's summary as they are.
-SUMMARY_COLUMNS = (
-    "duration",
-    "simulated_s",
-    "dt",
-    "ticks",
-    "tracking_rms_after_2s",
-    "tracking_max_after_2s",
-    "force_error_rms_after_2s",
-    "force_error_max_after_2s",
-    "min_obstacle_distance",
-    "min_obstacle_distance_key_point",
-    "min_obstacle_distance_obstacle",
-    "min_obstacle_distance_t",
-    "d_safe",
-    "joint_limit_violations",
-    "joint_velocity_limit_violations",
-    "max_abs_v",
-    "infeasible_ticks",
-    "non_optimal_ticks",
-    "fallback_ticks",
-    "zero_velocity_ticks",
-    "error_ticks",
-    "invalid_ticks",
-    "first_error",
-    "solve_time_median_s",
-    "solve_time_p99_s",
-    "solve_time_max_s",
-    "deadline_misses",
-    "wall_time_s",
-    "real_time_factor",
-)
-
-#: Columns of ``sweep.csv``, in order.
-COLUMNS = (
+# Column groups, each name once; the tables below are made of them.
+_HEAD = (
     "instance",
     "backend",
     "instance_file",
@@ -118,7 +85,9 @@ COLUMNS = (
     "attempts",
     "verdict",
     "verdict_reasons",
-    "duration_s",
+)
+_RUN = (  # from the summary
+    "duration",
     "simulated_s",
     "dt",
     "ticks",
@@ -126,10 +95,9 @@ COLUMNS = (
     "tracking_max_after_2s",
     "force_error_rms_after_2s",
     "force_error_max_after_2s",
-    "t_converge_force_s",
-    "t_converge_tracking_s",
-    "force_band_n",
-    "tracking_band_m",
+)
+_CONVERGENCE = ("t_converge_force_s", "t_converge_tracking_s", "force_band_n", "tracking_band_m")
+_SAFETY = (  # from the summary
     "min_obstacle_distance",
     "min_obstacle_distance_key_point",
     "min_obstacle_distance_obstacle",
@@ -145,34 +113,36 @@ COLUMNS = (
     "error_ticks",
     "invalid_ticks",
     "first_error",
+)
+_SOLVE_TIMES = (  # from the summary
     "solve_time_median_s",
     "solve_time_p99_s",
     "solve_time_max_s",
     "deadline_misses",
-    "ticks_over_1ms",
-    "wall_time_s",
-    "real_time_factor",
-    "executor",
-    "host",
-    "worker",
-    "concurrent_solves",
+)
+_WALL = ("wall_time_s", "real_time_factor")  # from the summary
+_PLACE = ("executor", "host", "worker", "concurrent_solves")
+
+#: Summary keys whose column has another name.
+RENAMED = {"duration": "duration_s"}
+
+#: Figures copied from the closed loop's summary as they are (column: ``RENAMED`` or the key).
+SUMMARY_COLUMNS = _RUN + _SAFETY + _SOLVE_TIMES + _WALL
+
+#: Columns of ``sweep.csv``, in order.
+COLUMNS = (
+    _HEAD
+    + tuple(RENAMED.get(key, key) for key in _RUN)
+    + _CONVERGENCE
+    + _SAFETY
+    + _SOLVE_TIMES
+    + ("ticks_over_1ms",)
+    + _WALL
+    + _PLACE
 )
 
 #: Columns that depend on timing or on where the run was made (ignored when comparing two sweeps).
-TIMING_COLUMNS = (
-    "attempts",
-    "solve_time_median_s",
-    "solve_time_p99_s",
-    "solve_time_max_s",
-    "deadline_misses",
-    "ticks_over_1ms",
-    "wall_time_s",
-    "real_time_factor",
-    "executor",
-    "host",
-    "worker",
-    "concurrent_solves",
-)
+TIMING_COLUMNS = ("attempts",) + _SOLVE_TIMES + ("ticks_over_1ms",) + _WALL + _PLACE
 
 #: One tick's solve longer than this misses a 1 kHz loop's deadline [s].
 KHZ_DEADLINE_S = 1e-3
@@ -214,7 +184,7 @@ def result_row(meta: dict, summary: dict, log: pd.DataFrame) -> dict:
         value = summary.get(key)
         if isinstance(value, (np.generic,)):
             value = value.item()
-        row["duration_s" if key == "duration" else key] = value
+        row[RENAMED.get(key, key)] = value
     row["status"], row["error"] = "ok", ""
     row["verdict"], row["verdict_reasons"] = (
         summary.get("verdict"),
