@@ -3,14 +3,49 @@
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
-import numpy as np
-import pytest
-import qpsolvers
-from hypothesis import settings
+from qpbench.cache import PACKAGE_DIR  # imports nothing compiled: safe before the cache is set
 
-from qpbench.formats import ProblemRecord
+#: Test files run before every other one (see :func:`pytest_collection_modifyitems`).
+FIRST = ("test_warmup.py",)
+
+
+def _fresh_install() -> bool:
+    """No kernel of qpbench is compiled yet where numba keeps them by default (a fresh install)."""
+    return not os.environ.get("NUMBA_CACHE_DIR") and not any(PACKAGE_DIR.rglob("*.nbi"))
+
+
+# On a fresh install (CI's clean clone) the suite's kernels go to one empty folder of the
+# session, which tests/test_warmup.py fills first from an empty cache (the first-run check it
+# exists for) and every later test and subprocess loads: the kernels are compiled once per
+# session, not once for that check and again for the rest. Set before numba is imported (it
+# reads NUMBA_CACHE_DIR once). A checkout whose kernels are already compiled keeps its cache,
+# and test_warmup.py compiles into a folder of its own.
+SHARED_FRESH_CACHE = None
+if _fresh_install():
+    SHARED_FRESH_CACHE = tempfile.mkdtemp(prefix="qpbench-test-kernels-")
+    os.environ["NUMBA_CACHE_DIR"] = SHARED_FRESH_CACHE
+
+import numpy as np  # noqa: E402  (after NUMBA_CACHE_DIR is set)
+import pytest  # noqa: E402
+import qpsolvers  # noqa: E402
+from hypothesis import settings  # noqa: E402
+
+from qpbench.formats import ProblemRecord  # noqa: E402
+
+
+def pytest_collection_modifyitems(config, items):
+    """The files of :data:`FIRST` run first (their fresh-cache check must see an empty cache)."""
+    items.sort(key=lambda item: item.path.name not in FIRST)
+
+
+def pytest_unconfigure(config):
+    if SHARED_FRESH_CACHE is not None:
+        shutil.rmtree(SHARED_FRESH_CACHE, ignore_errors=True)
+
 
 # CI draws the same hypothesis examples every run, so a red CI is reproducible;
 # locally each run explores new ones.

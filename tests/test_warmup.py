@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import conftest
 import pytest
 from conftest import SUMMARY_TIME_KEYS
 
@@ -40,7 +41,13 @@ def _qpbench(args, cache: Path, cwd: Path) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def fresh(tmp_path_factory):
     """Two identical simulations, the first in an empty kernel cache; the cache after each."""
-    cache = tmp_path_factory.mktemp("numba-cache")
+    # the session's kernel folder when it is still empty (a fresh install, see conftest.py):
+    # what this compiles, the rest of the suite loads; else a folder of its own
+    shared = conftest.SHARED_FRESH_CACHE
+    if shared is not None and not any(Path(shared).iterdir()):
+        cache = Path(shared)
+    else:
+        cache = tmp_path_factory.mktemp("numba-cache")
     work = tmp_path_factory.mktemp("runs")
     args = [
         "simulate",
