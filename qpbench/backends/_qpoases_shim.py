@@ -380,7 +380,12 @@ class Workspace:
             self.ub[:] = np.inf
         self.xy = d[o : o + 2 * n + m]
         # Where x, z_box, y and z lie in a copy of ``xy``.
-        self.parts = (slice(0, n), slice(n, 2 * n), slice(2 * n, 2 * n + me), slice(2 * n + me, None))
+        self.parts = (
+            slice(0, n),
+            slice(n, 2 * n),
+            slice(2 * n, 2 * n + me),
+            slice(2 * n + me, None),
+        )
         self.x = d[o : o + n]
         o += n
         self.y = d[o : o + n + m]

@@ -308,7 +308,9 @@ class ProxqpBackend(Backend):
                 status, raw = (_STATUS_MAP or _status_map(_proxqp()))[raw_status]
             retried = False
             sparse = len(key) > 4
-            if sparse:  # the kept views' split of z depends on n_in, which the key does not pin here
+            if (
+                sparse
+            ):  # the kept views' split of z depends on n_in, which the key does not pin here
                 self._views = None
             if (
                 self._retry_cold
