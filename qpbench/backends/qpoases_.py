@@ -29,7 +29,8 @@ Per-call cost. The tick's arrays are copied into one buffer the shim reads
 (no stacking, no allocation), the shim is one ctypes call with one
 argument, the shapes are checked in full only when the sizes differ from the
 previous tick's (a copy into a buffer raises on another shape, so equal
-sizes are enough per tick), and ``x`` and the multipliers come out of one copy.
+sizes are enough per tick), and ``x`` and the multipliers come out of one copy,
+split into ``x``, ``z_box``, ``y``, ``z`` through slice objects the workspace keeps.
 
 Persistence. The first tick of a shape ``(n, me, mi, with box)`` calls
 ``init()``; the next ones call ``hotstart()`` with the whole new data (H, g,
