@@ -6,25 +6,32 @@ inequalities, bounds), measured three ways in this process:
 
 - ``ours``: ``Backend.solve`` of qpbench;
 - ``direct``: the solver's own Python API called directly with the same
-  settings, doing what a controller needs (set the data, solve, read ``x``):
-  a persistent, updated object for ``osqp``, ``proxqp``,
-  ``clarabel``, ``piqp`` (as ours); ``daqp.Model.update`` + ``solve`` with
-  arrays stacked per call for ``daqp``; ``daqp.solve`` with the stacked
-  arrays of the backend for ``daqp-stateless``; for ``qpoases``, the compiled
-  shim called through ctypes on buffers filled per call (qpOASES has no
-  Python API of its own here: this is the thinnest Python route to its
-  ``hotstart``); a fresh call of the solver's own function for
-  ``qpsolvers:<name>`` where that is simple (daqp, quadprog, piqp, osqp,
-  clarabel, proxqp), else ``qpsolvers.solve_problem`` (highs, scs); the same
-  parametrised cvxpy model for ``cvxpy``; ``numpy.linalg.lstsq`` for ``pinv``;
+  settings, doing the same work as the backend with nothing around it: set
+  the data, solve, and read what the backend must return, i.e. the status,
+  the solver's own time, ``x`` and one multiplier per constraint in the
+  solver's layout (copied where the API hands back views of buffers the next
+  solve overwrites, as the backend must; views and result handles kept across
+  calls where the API allows, the thinnest route): a persistent, updated
+  object for ``osqp``, ``proxqp``, ``clarabel``, ``piqp`` (as ours);
+  ``daqp.Model.update`` + ``solve`` with arrays stacked per call for
+  ``daqp``; ``daqp.solve`` with the stacked arrays of the backend for
+  ``daqp-stateless``; for ``qpoases``, the compiled shim called through
+  ctypes on buffers filled per call (qpOASES has no Python API of its own
+  here: this is the thinnest Python route to its ``hotstart``); a fresh call
+  of the solver's own function for ``qpsolvers:<name>`` where that is simple
+  (daqp, quadprog, piqp, osqp, clarabel, proxqp), else
+  ``qpsolvers.solve_problem`` (highs, scs); the same parametrised cvxpy model
+  for ``cvxpy``; ``numpy.linalg.lstsq`` for ``pinv``;
 - ``qpsolvers``: ``qpsolvers.solve_problem`` with the backend's solver and settings.
 
-``ours`` does more than ``direct``: it also returns ``y``, ``z``, ``z_box``
-(copies, in qpsolvers' convention), the status, iterations and the solver's
-time in a ``BackendSolution``. For ``proxqp`` the direct call reads
-``qp.results.x`` as a view (no copy, no ``y``/``z``) and passes the nine
-arrays positionally; ours passes ``update_preconditioner`` as a keyword,
-which nanobind dispatches about 0.6 us faster (a direct user could do the same).
+What ``ours`` does beyond ``direct`` is qpbench's own bookkeeping: the input
+checks, the split of the multipliers into ``y``, ``z``, ``z_box`` (views of
+one copy where the solver writes them in one vector), the status mapped to
+qpbench's vocabulary, iterations and the objective, the wall time, and the
+``BackendSolution`` that holds them. The targets: ``ours/direct`` within 1.1
+for every own-API backend, ``ours/qpsolvers`` within 1.05 for the
+``qpsolvers:<name>`` routes (whose reference is ``qpsolvers.solve_problem``:
+the route is meant to cost what qpsolvers costs).
 
 Problems: consecutive ticks of the ``wall`` scenario (an obstacle row active)
 when :mod:`qpbench.sim` can produce them, else :func:`qpbench.known.robot_like_problem`.
@@ -124,7 +131,9 @@ class DirectOsqp:
         else:
             self.solver.update(q=q, l=l, u=u, Px=P[self.idx], Ax=C.T.ravel())
         res = self.solver.solve(raise_error=False)
-        return res.x
+        info = res.info
+        # OSQP 1.x returns fresh arrays: x and y need no copy.
+        return info.status_val, res.x, res.y, info.run_time
 
 
 class DirectClarabel:
@@ -154,11 +163,14 @@ class DirectClarabel:
             self.solver = clarabel.DefaultSolver(Pc, q, Cc, d, cones, self.settings_fn())
         else:
             self.solver.update(P=P[self.idx], q=q, A=C.T.ravel(), b=d)
-        return self.solver.solve().x
+        res = self.solver.solve()
+        # Clarabel hands x and z back as lists: arrays, as the backend returns.
+        return res.status, np.array(res.x), np.array(res.z), res.solve_time
 
 
 class DirectProxqp:
-    """proxsuite.proxqp.dense.QP init-ed once, then update + solve (warm start with previous result)."""
+    """proxsuite.proxqp.dense.QP init-ed once, then update + solve (warm start with previous result);
+    reads the status, the solve time and copies of x, y, z (views and ``results.info`` kept)."""
 
     def __init__(self, apply_settings):
         self.apply_settings = apply_settings
@@ -173,12 +185,19 @@ class DirectProxqp:
             self.qp = proxsuite.proxqp.dense.QP(
                 q.shape[0], A.shape[0], G.shape[0], box_constraints=True
             )
-            self.apply_settings(self.qp)
+            self.update_preconditioner = self.apply_settings(self.qp)
             self.qp.init(P, q, A, b, G, l, h, lb, ub)
+            res = self.qp.results
+            self.info, self.views = res.info, (res.x, res.y, res.z)
         else:
-            self.qp.update(P, q, A, b, G, l, h, lb, ub)
+            # The keyword: nanobind dispatches it faster than the same call all positional.
+            self.qp.update(
+                P, q, A, b, G, l, h, lb, ub, update_preconditioner=self.update_preconditioner
+            )
         self.qp.solve()
-        return self.qp.results.x
+        info = self.info
+        x, y, z = self.views
+        return info.status, x.copy(), y.copy(), z.copy(), info.solve_time
 
 
 def direct_daqp(settings):
@@ -246,7 +265,9 @@ class DirectDaqpModel:
 
 
 class DirectPiqp:
-    """``piqp.DenseSolver`` set up once, then ``update`` + ``solve``; reads ``result.x``."""
+    """``piqp.DenseSolver`` set up once, then ``update`` + ``solve``; the status ``solve`` returns,
+    the run time, copies of ``x`` and ``y`` and one multiplier per constraint and bound
+    (``z_u - z_l``, ``z_bu - z_bl``), from views of ``result`` kept after set-up."""
 
     def __init__(self, settings):
         self.settings, self.solver = settings, None
@@ -259,15 +280,19 @@ class DirectPiqp:
             for key, value in self.settings.items():
                 setattr(self.solver.settings, key, value)
             self.solver.setup(p.P, p.q, p.A, p.b, p.G, None, p.h, p.lb, p.ub)
+            res = self.solver.result
+            self.info, self.views = res.info, (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
         else:
             self.solver.update(p.P, p.q, p.A, p.b, p.G, None, p.h, p.lb, p.ub)
-        self.solver.solve()
-        return self.solver.result.x
+        status = self.solver.solve()
+        x, y, z_l, z_u, z_bl, z_bu = self.views
+        return status, x.copy(), y.copy(), z_u - z_l, z_bu - z_bl, self.info.run_time
 
 
 class DirectQpoases:
     """The qpOASES shim through ctypes: ``H, g, A = [A_eq; G], lb, ub, lbA, ubA`` written into its buffer,
-    ``init`` on the first call and ``hotstart`` after; reads ``x``."""
+    ``init`` on the first call and ``hotstart`` after; the status it returns, the solve time and one
+    copy of ``x`` with the multipliers (the shim writes them one after the other)."""
 
     def __init__(self, backend):
         self.backend, self.lib, self.ws = backend, backend.prepare(), None
@@ -289,8 +314,8 @@ class DirectQpoases:
         ws.ubA_in[:] = p.h
         ws.lb[:] = p.lb
         ws.ub[:] = p.ub
-        self.lib.qpb_solve(ws.handle)
-        return ws.x.copy()
+        status = self.lib.qpb_solve(ws.handle)
+        return status, ws.xy.copy(), ws.s.item(2)
 
 
 def direct_quadprog(settings):

@@ -613,3 +613,34 @@ def test_all_solvers_extra_is_listed_when_missing(monkeypatch):
     for solver in ("qpalm", "ecos", "cvxopt", "gurobi"):
         info = infos[f"qpsolvers:{solver}"]
         assert not info.available and "qpbench[all-solvers]" in info.reason
+
+
+def test_qpsolvers_routes_report_the_iterations_qpsolvers_keeps():
+    """Each qpsolvers route with an iteration reader reports the count from its solver's extras
+    (a positive int), the others None; a missing or malformed entry is None, never an error."""
+    from types import SimpleNamespace
+
+    from qpbench.backends import _qpsolvers_status as qs
+
+    assert qs.iterations("quadprog", {"iterations": np.array([5, 1])}) == 5
+    assert qs.iterations("quadprog", {"iterations": np.array([[7, 0]])}) == 7
+    assert qs.iterations("osqp", {"info": SimpleNamespace(iter=12)}) == 12
+    assert qs.iterations("scs", {"iter": 40}) == 40
+    assert qs.iterations("cvxopt", {"iterations": 9}) == 9
+    assert qs.iterations("quadprog", {}) is None
+    assert qs.iterations("osqp", {"info": None}) is None
+    assert qs.iterations("daqp", {"iterations": 3}) is None  # qpsolvers keeps none for DAQP
+    problem = robot_like_problem(np.random.default_rng(3))[0]
+    for solver in ("quadprog", "osqp", "proxqp", "piqp", "daqp", "clarabel"):
+        name = f"qpsolvers:{solver}"
+        if name not in backend_names() or backend_class(name).unavailable_reason():
+            continue
+        sol = get_backend(name).solve(problem)
+        assert sol.status == "optimal", (name, sol.status)
+        if solver in qs.ITERATION_READERS:
+            assert type(sol.iterations) is int and sol.iterations > 0, (name, sol.iterations)
+        else:
+            assert sol.iterations is None, name
+        for field in ("x", "y", "z", "z_box"):  # float64 arrays, also from wrappers giving lists
+            value = getattr(sol, field)
+            assert type(value) is np.ndarray and value.dtype == np.float64, (name, field)

@@ -315,6 +315,7 @@ class Workspace:
         "x",
         "y",
         "xy",
+        "parts",
         "s",
         "n",
         "me",
@@ -360,6 +361,13 @@ class Workspace:
             self.lb[:] = -np.inf
             self.ub[:] = np.inf
         self.xy = d[o : o + 2 * n + m]
+        # Where x, z_box, y and z lie in a copy of ``xy``.
+        self.parts = (
+            slice(0, n),
+            slice(n, 2 * n),
+            slice(2 * n, 2 * n + me),
+            slice(2 * n + me, None),
+        )
         self.x = d[o : o + n]
         o += n
         self.y = d[o : o + n + m]

@@ -161,31 +161,51 @@ STATUS_READERS = {
 }
 
 
+def _iter_info(extras: dict) -> int:
+    return int(extras["info"].iter)
+
+
+def _iter_iter(extras: dict) -> int:
+    return int(extras["iter"])
+
+
+def _iter_quadprog(extras: dict) -> int:
+    it = extras["iterations"]  # quadprog's (iterations, active-set changes)
+    return int(it.item(0)) if type(it) is _ndarray and it.ndim == 1 else int(np.ravel(it)[0])
+
+
+def _iter_cvxopt(extras: dict) -> int:
+    return int(extras["iterations"])
+
+
+#: Solver -> ``reader(extras) -> iterations`` (raises KeyError, AttributeError, TypeError or
+#: IndexError when ``extras`` lacks it), for the solvers whose count qpsolvers keeps.
+ITERATION_READERS = {
+    "osqp": _iter_info,
+    "proxqp": _iter_info,
+    "piqp": _iter_info,
+    "scs": _iter_iter,
+    "quadprog": _iter_quadprog,
+    "ecos": _iter_iter,
+    "cvxopt": _iter_cvxopt,
+    "qpalm": _iter_info,
+}
+
 #: Solvers whose iteration count qpsolvers keeps in ``extras``.
-ITERATION_SOLVERS = frozenset(
-    {"osqp", "proxqp", "piqp", "scs", "quadprog", "ecos", "cvxopt", "qpalm"}
-)
+ITERATION_SOLVERS = frozenset(ITERATION_READERS)
+
+_ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
 
 def iterations(solver: str, extras: dict) -> int | None:
     """Iteration count where qpsolvers keeps it."""
-    try:
-        if solver in ("osqp", "proxqp", "piqp"):
-            return int(extras["info"].iter)
-        if solver == "scs":
-            return int(extras["iter"])
-        if solver == "quadprog":
-            it = extras["iterations"]  # quadprog's (iterations, active-set changes)
-            return int(it[0]) if type(it) is _ndarray and it.ndim == 1 else int(np.ravel(it)[0])
-        if solver == "ecos":
-            return int(extras["iter"])
-        if solver == "cvxopt":
-            return int(extras["iterations"])
-        if solver == "qpalm":
-            return int(extras["info"].iter)
-    except (KeyError, AttributeError, TypeError, IndexError):
+    reader = ITERATION_READERS.get(solver)
+    if reader is None:
         return None
-    return None
+    try:
+        return reader(extras)
+    except _ITERATION_ERRORS:
+        return None
 
 
 #: Solvers whose status, as qpsolvers hands it back, tells primal from dual infeasibility.

@@ -29,7 +29,8 @@ Per-call cost. The tick's arrays are copied into one buffer the shim reads
 (no stacking, no allocation), the shim is one ctypes call with one
 argument, the shapes are checked in full only when the sizes differ from the
 previous tick's (a copy into a buffer raises on another shape, so equal
-sizes are enough per tick), and ``x`` and the multipliers come out of one copy.
+sizes are enough per tick), and ``x`` and the multipliers come out of one copy,
+split into ``x``, ``z_box``, ``y``, ``z`` through slice objects the workspace keeps.
 
 Persistence. The first tick of a shape ``(n, me, mi, with box)`` calls
 ``init()``; the next ones call ``hotstart()`` with the whole new data (H, g,
@@ -249,7 +250,7 @@ class QpoasesBackend(Backend):
             raise
         st = self._lib.qpb_solve(ws.handle)
         obj, _, solve_time, cputime = ws.s.tolist()
-        _, _, iterations, raw = ws.iv.tolist()[:4]
+        _, _, iterations, raw, _ = ws.iv.tolist()
         # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
         sol = _new(BackendSolution)
         sol.problem = problem
@@ -258,13 +259,14 @@ class QpoasesBackend(Backend):
         sol.iterations = iterations
         sol.solver_time_s = solve_time
         if st == 0:
-            xy = (
-                ws.xy.copy()
-            )  # x, then the multipliers (already with qpsolvers' sign): one copy, then views
-            sol.x = xy[:n]
-            sol.z_box = xy[n : n + n] if box else _EMPTY
-            sol.y = xy[n + n : n + n + me]
-            sol.z = xy[n + n + me :]
+            # x, then the multipliers (already with qpsolvers' sign): one copy, then views of it
+            # through the workspace's slice objects (no slice built per call).
+            xy = ws.xy.copy()
+            part_x, part_box, part_y, part_z = ws.parts
+            sol.x = xy[part_x]
+            sol.z_box = xy[part_box] if box else _EMPTY
+            sol.y = xy[part_y]
+            sol.z = xy[part_z]
             sol._obj = obj
         elif st == -1:
             message = self._lib.qpb_message(raw)

@@ -83,10 +83,9 @@ from . import register
 from ._common import generic_settings
 from ._qpsolvers_status import (
     CERTIFYING_SOLVERS,
-    ITERATION_SOLVERS,
+    ITERATION_READERS,
     NO_CERTIFICATE,
     STATUS_READERS,
-    iterations,
 )
 from .base import Backend, BackendSolution
 
@@ -288,15 +287,6 @@ _solve_problem = qpsolvers.solve_problem
 _QPError = qpsolvers.QPError
 
 
-def _all_dense(problem) -> bool:
-    P, G, A = problem.P, problem.G, problem.A
-    return (
-        type(P) is _ndarray
-        and (G is None or type(G) is _ndarray)
-        and (A is None or type(A) is _ndarray)
-    )
-
-
 def _float_array(v):
     if v is None or (type(v) is _ndarray and v.dtype == _F64):
         return v
@@ -304,6 +294,7 @@ def _float_array(v):
 
 
 _F64 = np.dtype(np.float64)
+_ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
 
 class QpsolversBackend(Backend):
@@ -325,6 +316,7 @@ class QpsolversBackend(Backend):
             solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers
         )
         self._reader = STATUS_READERS.get(solver)
+        self._iterations = ITERATION_READERS.get(solver)
         silence_wrapper_warnings(solver)
 
     @classmethod
@@ -389,16 +381,26 @@ class QpsolversBackend(Backend):
         return self._cached_options
 
     def _solve(self, problem, warm_start):
-        options = self._cached_options if self._cached_options is not None else self._options()
-        solver = self.solver
+        options = self._cached_options
+        if options is None:
+            options = self._options()
         solved = problem
         if self._sparse_only:
             if not problem.has_sparse:
                 solved = _sparse_problem(problem)
-        elif self._dense_only and not _all_dense(problem) and problem.has_sparse:
-            solved = qpsolvers.Problem(*problem.unpack_as_dense())
+        elif self._dense_only:
+            P, G, A = problem.P, problem.G, problem.A
+            if (
+                not (
+                    type(P) is _ndarray
+                    and (G is None or type(G) is _ndarray)
+                    and (A is None or type(A) is _ndarray)
+                )
+                and problem.has_sparse
+            ):
+                solved = qpsolvers.Problem(*problem.unpack_as_dense())
         try:
-            result = _solve_problem(solved, solver, warm_start, **options)
+            result = _solve_problem(solved, self.solver, warm_start, **options)
         except (_QPError, ValueError) as exc:
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
         except Exception as exc:
@@ -412,20 +414,30 @@ class QpsolversBackend(Backend):
         if extras is None:
             extras = {}
         sol.extras = extras
-        # Some qpsolvers wrappers (clarabel) hand duals back as Python lists.
+        # Some qpsolvers wrappers (clarabel) hand duals back as Python lists. The float64
+        # descriptor of a fresh array is numpy's singleton: tested by identity, and anything
+        # else (lists, other dtypes, an equal descriptor that is another object) converted.
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
         if not (
-            (x is None or (type(x) is _ndarray and x.dtype == _F64))
-            and (y is None or (type(y) is _ndarray and y.dtype == _F64))
-            and (z is None or (type(z) is _ndarray and z.dtype == _F64))
-            and (z_box is None or (type(z_box) is _ndarray and z_box.dtype == _F64))
+            (x is None or (type(x) is _ndarray and x.dtype is _F64))
+            and (y is None or (type(y) is _ndarray and y.dtype is _F64))
+            and (z is None or (type(z) is _ndarray and z.dtype is _F64))
+            and (z_box is None or (type(z_box) is _ndarray and z_box.dtype is _F64))
         ):
             x, y, z, z_box = map(_float_array, (x, y, z, z_box))
-        sol.x, sol.y, sol.z, sol.z_box = x, y, z, z_box
+        sol.x = x
+        sol.y = y
+        sol.z = z
+        sol.z_box = z_box
         sol._obj = result.obj
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time
-        sol.iterations = iterations(solver, extras) if solver in ITERATION_SOLVERS else None
+        read_iterations = self._iterations
+        if read_iterations is not None:  # otherwise the class default, None
+            try:
+                sol.iterations = read_iterations(extras)
+            except _ITERATION_ERRORS:
+                pass
         if result.found:
             sol.status = "optimal"
             return sol
