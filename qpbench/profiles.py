@@ -42,7 +42,13 @@ apply what qpbenchmark's runner does, read from its installed modules
   (1, 1e-3, 1e-6, 1e-9); the reference plays no part (its optimality gap is
   still reported).
 
-The other backends are not qpbenchmark routes: they get the generic numbers
+The own-API backends of those solvers (``osqp``, ``clarabel``, ``proxqp``,
+``piqp``, ``daqp``) get the same arguments as their ``qpsolvers:`` route and
+nothing else (:func:`qpbench.backends._common.qpbenchmark_options`), so the two
+routes of one solver do the same work and differ only by the API (a cold solve
+of a Maros-Meszaros problem: same status, iterations and objective; under
+``qpbenchmark:default`` each solver's own tolerances, e.g. OSQP's 1e-3). Other
+backends (``cvxpy``, ``qpoases``, ``pinv``, the network) get the generic numbers
 ``eps_abs`` (the tolerance qpbenchmark asks its solvers for; under
 ``qpbenchmark:default``, which asks for nothing, qpbench's ``default`` 1e-7),
 ``eps_rel = 0``, ``max_iter`` 1e6 and the time limit.
