@@ -15,8 +15,8 @@ pytestmark = pytest.mark.skipif("daqp" not in backend_names(), reason="daqp unav
 
 def test_settings_come_from_the_profile_and_unknown_ones_are_refused():
     assert get_backend("daqp-stateless", "high_accuracy").options() == {
-        "primal_tol": 1e-10,
-        "dual_tol": 1e-10,
+        "primal_tol": 1e-9,
+        "dual_tol": 1e-9,
         "iter_limit": 1_000_000,
         "time_limit": 10.0,
     }

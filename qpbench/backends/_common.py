@@ -1,6 +1,8 @@
 """Small helpers shared by the backend modules (no solver imports here).
 
 - :func:`generic_settings` merges a profile with the user's settings;
+- :func:`qpbenchmark_options` gives an own-API backend qpbenchmark's arguments
+  for its solver under a ``qpbenchmark:<settings>`` profile;
 - :func:`dense_bounds` turns optional ``lb``/``ub`` into full vectors;
 - :func:`as_dense`, :func:`all_dense` handle dense/sparse input cheaply;
 - :func:`dense_f64_parts` is the dense backends' per-tick fast path, :func:`dense_parts`
@@ -22,6 +24,8 @@ import numpy as np
 import scipy.sparse as spa
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import qpsolvers
 
     from .base import Backend
@@ -53,6 +57,38 @@ def generic_settings(backend: Backend) -> tuple[dict, dict]:
         else:
             native[key] = value
     return generic, native
+
+
+def qpbenchmark_options(
+    backend: Backend, solver: str, translate: Callable[[dict], dict]
+) -> dict | None:
+    """The options an own-API backend gives ``solver`` under a qpbenchmark profile.
+
+    Under ``qpbenchmark:<settings>`` the ``qpsolvers:<solver>`` route passes
+    qpbenchmark's keyword arguments for the solver verbatim and nothing else
+    (:mod:`qpbench.backends.qpsolvers_`); the solver's own-API backend does the
+    same work from the same options: qpbenchmark's arguments (native names, as
+    qpsolvers hands them on), then the generic settings the user gave
+    (``--set osqp.eps_abs=...``, through ``translate``), then the user's native
+    ones. Nothing of qpbench's own profiles is added (no tighter tolerance,
+    iteration limit or polishing): under ``qpbenchmark:default`` the solver runs
+    with its own defaults and qpbenchmark's time limit where it sets one.
+
+    Args:
+        backend: The backend (its profile and settings).
+        solver: qpsolvers' name of the solver (the key of qpbenchmark's arguments).
+        translate: Maps a dict of some of :data:`GENERIC_KEYS` to the solver's option names.
+
+    Returns:
+        The options, or ``None`` under qpbench's own profiles.
+    """
+    given = backend.profile.solver_options
+    if given is None:
+        return None
+    options = dict(given.get(solver, {}))
+    options.update(translate({k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}))
+    options.update({k: v for k, v in backend.settings.items() if k not in GENERIC_KEYS})
+    return options
 
 
 def dense_bounds(problem: qpsolvers.Problem, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:

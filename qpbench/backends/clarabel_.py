@@ -3,11 +3,14 @@
 Formulation. Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K``.
 The qpsolvers problem is stacked as::
 
-    C = [A; G; I; -I],   d = [b; h; ub; -lb],   K = {0}^meq x R+^(rest)
+    C = [A; G; -I; I],   d = [b; h; -lb; ub],   K = {0}^meq x R+^(rest)
 
 Rows whose bound is infinite (``h``, ``lb`` or ``ub`` entries of +-inf) are
 left out, so Clarabel never sees an infinite right-hand side; which rows are
-kept is part of the problem's pattern. Clarabel's multiplier ``w`` satisfies
+kept is part of the problem's pattern. The rows are those the
+``qpsolvers:clarabel`` route builds (``-I`` before ``I``) after Clarabel's
+presolve has dropped the infinite ones, in the same order: a cold solve of a
+problem takes the same steps on both routes. Clarabel's multiplier ``w`` satisfies
 ``P x + q + C' w = 0`` with ``w >= 0`` on the cone rows, so ``y = w_A``,
 ``z = w_G`` (zero on the rows left out) and ``z_box = w_ub - w_lb``, which is
 qpsolvers' convention (negative where a lower bound is active).
@@ -28,7 +31,12 @@ own ``solve_time`` is reported only for a freshly built solver: after
 
 Settings. ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``,
 ``max_iter``, ``time_limit`` [s] from the profile, ``verbose`` off; other
-settings are set on ``DefaultSettings`` verbatim.
+settings are set on ``DefaultSettings`` verbatim. Under a
+``qpbenchmark:<settings>`` profile Clarabel gets what the ``qpsolvers:clarabel``
+route gets, qpbenchmark's arguments and nothing else
+(:func:`~qpbench.backends._common.qpbenchmark_options`; under
+``qpbenchmark:default`` Clarabel's own tolerances, iteration limit and no time
+limit), with the two settings persistence needs.
 
 Statuses. ``Solved`` -> optimal, ``PrimalInfeasible`` / ``DualInfeasible``
 (Clarabel's certificates) -> primal_infeasible / dual_infeasible,
@@ -46,7 +54,13 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
-from ._common import all_dense, dense_bounds, dense_upper_layout, generic_settings
+from ._common import (
+    all_dense,
+    dense_bounds,
+    dense_upper_layout,
+    generic_settings,
+    qpbenchmark_options,
+)
 from .base import Backend, BackendSolution
 
 if TYPE_CHECKING:
@@ -56,7 +70,7 @@ if TYPE_CHECKING:
 
 
 class ConeLayout:
-    """CSC layout of ``P`` (upper) and ``C = [A; G_kept; I_kept; -I_kept]`` of one problem."""
+    """CSC layout of ``P`` (upper) and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
 
     def __init__(self, problem):
         P, G, A = problem.P, problem.G, problem.A
@@ -71,9 +85,9 @@ class ConeLayout:
         self.m = int(self.g_keep.sum())
         self.n_ub = int(self.ub_keep.sum())
         self.n_lb = int(self.lb_keep.sum())
-        self.rows = self.meq + self.m + self.n_ub + self.n_lb
+        self.rows = self.meq + self.m + self.n_lb + self.n_ub
         self.dense = all_dense(P, G, A)
-        masks = (np.concatenate([self.g_keep, self.ub_keep, self.lb_keep]).tobytes(),)
+        masks = (np.concatenate([self.g_keep, self.lb_keep, self.ub_keep]).tobytes(),)
         self.all_kept = bool(self.g_keep.all() and self.ub_keep.all() and self.lb_keep.all())
         self._g_idx = np.flatnonzero(self.g_keep)
         self._ub_idx = np.flatnonzero(self.ub_keep)
@@ -81,12 +95,12 @@ class ConeLayout:
         if self.dense:
             self._P_idx, self.P_indices, self.P_indptr = dense_upper_layout(n)
             k = self.meq + self.m
-            # Column j: the k dense rows, then its +I row (if kept), then its -I row (if kept).
-            ub_row = np.full(n, -1, np.int64)
-            ub_row[self.ub_keep] = k + np.arange(self.n_ub)
+            # Column j: the k dense rows, then its -I row (if kept), then its +I row (if kept).
             lb_row = np.full(n, -1, np.int64)
-            lb_row[self.lb_keep] = k + self.n_ub + np.arange(self.n_lb)
-            col_rows = np.hstack([np.tile(np.arange(k), (n, 1)), ub_row[:, None], lb_row[:, None]])
+            lb_row[self.lb_keep] = k + np.arange(self.n_lb)
+            ub_row = np.full(n, -1, np.int64)
+            ub_row[self.ub_keep] = k + self.n_lb + np.arange(self.n_ub)
+            col_rows = np.hstack([np.tile(np.arange(k), (n, 1)), lb_row[:, None], ub_row[:, None]])
             self._C_mask = (col_rows >= 0).ravel()
             self.C_indices = col_rows.ravel()[self._C_mask]
             counts = (col_rows >= 0).sum(axis=1)
@@ -118,10 +132,10 @@ class ConeLayout:
         if problem.G is not None:
             blocks.append(spa.csc_matrix(problem.G, dtype=float)[np.flatnonzero(self.g_keep)])
         eye = spa.identity(n, format="csr")
-        if self.n_ub:
-            blocks.append(eye[np.flatnonzero(self.ub_keep)])
         if self.n_lb:
             blocks.append(-eye[np.flatnonzero(self.lb_keep)])
+        if self.n_ub:
+            blocks.append(eye[np.flatnonzero(self.ub_keep)])
         C = spa.vstack(blocks, format="csc") if blocks else spa.csc_matrix((0, n))
         P.sort_indices()
         C.sort_indices()
@@ -137,8 +151,8 @@ class ConeLayout:
                 D[:meq] = problem.A
             if k > meq:
                 D[meq:k] = problem.G
-            D[k] = 1.0
-            D[k + 1] = -1.0
+            D[k] = -1.0
+            D[k + 1] = 1.0
             return P_data, D.T.ravel()
         if self.dense:
             n = self.n
@@ -148,8 +162,8 @@ class ConeLayout:
                 parts.append(np.asarray(problem.A, dtype=float))
             if problem.G is not None:
                 parts.append(np.asarray(problem.G, dtype=float)[self.g_keep])
-            parts.append(np.ones((1, n)))
             parts.append(-np.ones((1, n)))
+            parts.append(np.ones((1, n)))
             C_data = np.vstack(parts).T.ravel()[self._C_mask]
             return P_data, C_data
         P, C = self._sparse(problem)
@@ -165,7 +179,7 @@ class ConeLayout:
         if self.all_kept and self.with_box:
             lb, ub = dense_bounds(problem, self.n)
             parts = [v for v in (problem.b, problem.h) if v is not None]
-            return np.concatenate(parts + [ub, -lb])
+            return np.concatenate(parts + [-lb, ub])
         parts = []
         if problem.A is not None:
             parts.append(np.asarray(problem.b, dtype=float))
@@ -173,8 +187,8 @@ class ConeLayout:
             parts.append(np.asarray(problem.h, dtype=float)[self.g_keep])
         if self.with_box:
             lb, ub = dense_bounds(problem, self.n)
-            parts.append(ub[self.ub_keep])
             parts.append(-lb[self.lb_keep])
+            parts.append(ub[self.ub_keep])
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def cones(self, clarabel: ModuleType) -> list:
@@ -193,14 +207,14 @@ class ConeLayout:
             z = w[meq : meq + m]
             if not self.with_box:
                 return y, z, np.zeros(0)
-            return y, z, w[meq + m : meq + m + n] - w[meq + m + n :]
+            return y, z, w[meq + m + n :] - w[meq + m : meq + m + n]
         z = np.zeros(self.m_all)
         z[self._g_idx] = w[meq : meq + m]
         if not self.with_box:
             return y, z, np.zeros(0)
         z_box = np.zeros(n)
-        z_box[self._ub_idx] += w[meq + m : meq + m + self.n_ub]
-        z_box[self._lb_idx] -= w[meq + m + self.n_ub :]
+        z_box[self._lb_idx] -= w[meq + m : meq + m + self.n_lb]
+        z_box[self._ub_idx] += w[meq + m + self.n_lb :]
         return y, z, z_box
 
 
@@ -237,8 +251,8 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     with_box = lb is not None or ub is not None
     parts = [np.empty(0) if G is None else problem.h]
     if with_box:
-        parts.append(np.full(n, np.inf) if ub is None else ub)
         parts.append(np.full(n, -np.inf) if lb is None else lb)
+        parts.append(np.full(n, np.inf) if ub is None else ub)
     else:
         parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
     finite = np.isfinite(np.concatenate(parts))
@@ -250,6 +264,20 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
         with_box,
         finite.tobytes(),
     )
+
+
+def _native_names(generic: dict) -> dict:
+    """Clarabel's settings for the generic ones given (any of ``eps_abs, eps_rel, max_iter, time_limit``)."""
+    out: dict = {}
+    if "eps_abs" in generic:
+        out["tol_feas"] = out["tol_gap_abs"] = float(generic["eps_abs"])
+    if "eps_rel" in generic:
+        out["tol_gap_rel"] = float(generic["eps_rel"])
+    if "max_iter" in generic:
+        out["max_iter"] = int(min(generic["max_iter"], 2**32 - 1))
+    if "time_limit" in generic:
+        out["time_limit"] = float(generic["time_limit"])
+    return out
 
 
 def _is_clarabel_error(exc: BaseException) -> bool:
@@ -290,17 +318,17 @@ class ClarabelBackend(Backend):
         self._layout = None
 
     def _settings(self, clarabel):
-        generic, native = generic_settings(self)
         s = clarabel.DefaultSettings()
         s.verbose = False
-        s.tol_feas = float(generic["eps_abs"])
-        s.tol_gap_abs = float(generic["eps_abs"])
-        s.tol_gap_rel = float(generic["eps_rel"])
-        s.max_iter = int(min(generic["max_iter"], 2**32 - 1))
-        s.time_limit = float(generic["time_limit"])
+        # what persistence needs; rows with an infinite bound are left out by ConeLayout,
+        # which is what Clarabel's presolve would do
         s.presolve_enable = False
         s.input_sparse_dropzeros = False
-        for key, value in native.items():
+        options = qpbenchmark_options(self, "clarabel", _native_names)
+        if options is None:
+            generic, native = generic_settings(self)
+            options = {**_native_names(generic), **native}
+        for key, value in options.items():
             setattr(s, key, value)
         return s
 

@@ -34,7 +34,10 @@ more per call than it saves. What the whole call costs per robot tick:
 ``bench/backend_overhead.py``, ``bench/closed_loop_speed.py``.
 
 Settings. From the profile: ``primal_tol = eps_abs``, ``dual_tol = eps_abs``,
-``iter_limit = max_iter`` and ``time_limit`` [s]. Other settings are DAQP's
+``iter_limit = max_iter`` and ``time_limit`` [s]; under a ``qpbenchmark:<settings>``
+profile, qpbenchmark's arguments for DAQP and nothing else, as the
+``qpsolvers:daqp`` route gets them
+(:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are DAQP's
 own (``eps_prox``, ``zero_tol``, ``pivot_tol``, ...; the names of
 ``daqp.Model().settings``), passed verbatim; an unknown name is a
 :class:`~qpbench.exceptions.ParamError`. DAQP's default ``eps_prox < 0``
@@ -70,7 +73,7 @@ import numpy as np
 
 from ..exceptions import ParamError
 from . import register
-from ._common import dense_parts, generic_settings
+from ._common import dense_parts, generic_settings, qpbenchmark_options
 from .base import Backend, BackendSolution
 
 if TYPE_CHECKING:
@@ -166,6 +169,19 @@ class _Buffers:
         return new
 
 
+def _native_names(generic: dict) -> dict:
+    """DAQP's settings for the generic ones given (any of ``eps_abs, eps_rel, max_iter, time_limit``)."""
+    out: dict = {}
+    if "eps_abs" in generic:
+        out["primal_tol"] = out["dual_tol"] = float(generic["eps_abs"])
+    if "max_iter" in generic:
+        out["iter_limit"] = int(min(generic["max_iter"], 2**31 - 1))
+    limit = generic.get("time_limit")
+    if limit is not None and np.isfinite(limit):
+        out["time_limit"] = float(limit)
+    return out
+
+
 @register
 class DaqpBackend(Backend):
     """DAQP through ``daqp.solve`` with simple bounds native and equalities by sense flags."""
@@ -202,15 +218,11 @@ class DaqpBackend(Backend):
                         "generic: eps_abs, eps_rel, max_iter, time_limit)",
                         key=key,
                     )
-            options = {
-                "primal_tol": float(generic["eps_abs"]),
-                "dual_tol": float(generic["eps_abs"]),
-                "iter_limit": int(min(generic["max_iter"], 2**31 - 1)),
-            }
-            if generic["time_limit"] is not None and np.isfinite(generic["time_limit"]):
-                options["time_limit"] = float(generic["time_limit"])
-            options.update(native)
-            self._options = options
+            given = qpbenchmark_options(self, "daqp", _native_names)
+            if given is not None:  # as the qpsolvers:daqp route under a qpbenchmark profile
+                self._options = given
+            else:
+                self._options = {**_native_names(generic), **native}
         return self._options
 
     def reset(self) -> None:

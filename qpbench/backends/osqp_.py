@@ -24,7 +24,13 @@ Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, ``time_limit`` from the
 profile; ``polishing=True`` when ``eps_abs <= 1e-7`` (the ``high_accuracy``
 profile): ADMM alone seldom reaches a 1e-9 residual, the polishing step
 (a solve of the KKT system of the guessed active set) does. ``verbose`` is
-off. Other settings are passed to ``OSQP.setup`` verbatim.
+off. Other settings are passed to ``OSQP.setup`` verbatim. Under a
+``qpbenchmark:<settings>`` profile OSQP gets what the ``qpsolvers:osqp`` route
+gets, qpbenchmark's arguments and nothing else
+(:func:`~qpbench.backends._common.qpbenchmark_options`): under
+``qpbenchmark:default`` OSQP's own tolerances (``eps_abs = eps_rel = 1e-3``),
+iteration limit and no polishing, so both routes stop at the same iterate
+(``tests/test_own_api_routes.py``).
 
 Statuses. ``solved`` -> optimal, ``primal infeasible`` / ``dual infeasible``
 (OSQP's certificates) -> primal_infeasible / dual_infeasible,
@@ -42,7 +48,14 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
-from ._common import GENERIC_KEYS, all_dense, dense_bounds, dense_upper_layout, generic_settings
+from ._common import (
+    GENERIC_KEYS,
+    all_dense,
+    dense_bounds,
+    dense_upper_layout,
+    generic_settings,
+    qpbenchmark_options,
+)
 from .base import Backend, BackendSolution
 
 if TYPE_CHECKING:
@@ -234,6 +247,9 @@ class OsqpBackend(Backend):
         )
 
     def _settings(self) -> dict:
+        given = qpbenchmark_options(self, "osqp", dict)  # the generic names are OSQP's own
+        if given is not None:
+            return {"verbose": False, **given}
         generic, native = generic_settings(self)
         settings = {
             "eps_abs": generic["eps_abs"],

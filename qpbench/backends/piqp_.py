@@ -30,6 +30,9 @@ PIQP (:func:`~qpbench.backends._shapes.check_shapes`).
 Settings. As ``qpsolvers:piqp`` (:func:`qpbench.backends.qpsolvers_.native_settings`):
 ``eps_abs``, ``eps_rel``, ``eps_duality_gap_abs/rel``, ``max_iter``, and
 ``check_duality_gap=True`` at ``eps_abs <= 1e-7``; PIQP has no time limit.
+Under a ``qpbenchmark:<settings>`` profile, qpbenchmark's arguments for PIQP
+and nothing else, as that route gets them
+(:func:`~qpbench.backends._common.qpbenchmark_options`).
 ``compute_timings`` is on, ``verbose`` off. Other settings are set on
 ``DenseSolver.settings`` verbatim; an unknown name is a
 :class:`~qpbench.exceptions.ParamError`.
@@ -51,7 +54,7 @@ import numpy as np
 
 from ..exceptions import ParamError
 from . import register
-from ._common import dense_f64_parts, dense_parts, generic_settings
+from ._common import dense_f64_parts, dense_parts, generic_settings, qpbenchmark_options
 from ._shapes import check_shapes
 from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
@@ -122,9 +125,15 @@ class PiqpBackend(Backend):
     def _make_settings(self) -> dict:
         from .qpsolvers_ import native_settings
 
-        generic, native = generic_settings(self)
-        settings = native_settings("piqp", **generic)
-        settings.update(verbose=False, compute_timings=True)
+        given = qpbenchmark_options(
+            self, "piqp", lambda g: {k: g[k] for k in g if k != "time_limit"}
+        )
+        if given is not None:  # as the qpsolvers:piqp route under a qpbenchmark profile
+            settings, native = {"verbose": False, "compute_timings": True}, given
+        else:
+            generic, native = generic_settings(self)
+            settings = native_settings("piqp", **generic)
+            settings.update(verbose=False, compute_timings=True)
         allowed = {a for a in dir(_piqp().DenseSolver().settings) if not a.startswith("_")}
         for key in native:
             if key not in allowed:

@@ -20,11 +20,16 @@ ticks keep ``proxqp.dense.QP``.
 
 Persistence. The ``QP`` object is built and ``init``-ed once per shape
 ``(n, n_eq, n_in, with bounds)`` and then ``update``-d with the new data
-(the dense backend has no sparsity pattern to keep). The initial guess is
-``WARM_START_WITH_PREVIOUS_RESULT``; an explicit ``warm_start`` is passed
-to ``QP.solve(x, None, None)``, which starts from that ``x`` for the call
-(``initial_guess`` itself is never changed after ``init``: ProxQP 0.8 then
-loops forever in ``solve``). The preconditioner is computed
+(the dense backend has no sparsity pattern to keep). A new object's first
+solve starts from ``EQUALITY_CONSTRAINED_INITIAL_GUESS``, as
+``proxqp.dense.solve`` / ``proxqp.sparse.solve`` do on the
+``qpsolvers:proxqp`` route (so a cold solve takes the same iterations on
+both routes); from then on the initial guess is
+``WARM_START_WITH_PREVIOUS_RESULT``, the one change made after ``init``
+(ProxQP 0.8 was seen to loop forever in ``solve`` after other changes of
+``initial_guess``, so a cold re-solve builds a new object). An explicit ``warm_start``
+is passed to ``QP.solve(x, None, None)``, which starts from that ``x`` for
+the call. The preconditioner is computed
 at ``init`` and kept at ``update`` (ProxQP's default; set
 ``update_preconditioner=True`` in the settings to recompute it).
 
@@ -59,7 +64,13 @@ and copies of ``x``, ``y``, ``z``: ``bench/backend_overhead.py``.
 Settings. ``eps_abs``, ``eps_rel``, ``max_iter`` from the profile, and at
 ``eps_abs <= 1e-7`` also ``check_duality_gap=True`` with
 ``eps_duality_gap_abs = eps_abs`` (as qpbenchmark does at high accuracy);
-ProxQP has no time limit. ``compute_timings`` is on so that the solver's own
+ProxQP has no time limit. Under a ``qpbenchmark:<settings>`` profile,
+qpbenchmark's arguments for ProxQP and nothing else, as the
+``qpsolvers:proxqp`` route gets them
+(:func:`~qpbench.backends._common.qpbenchmark_options`; under
+``qpbenchmark:default`` ProxQP's own ``eps_abs = 1e-5`` and iteration limit).
+The infeasibility checks above stay on (``retry_cold=False`` turns them off):
+where ProxQP's verdict is overturned the two routes differ by design. ``compute_timings`` is on so that the solver's own
 solve time is reported. Other settings are set on ``QP.settings`` verbatim
 (``update_preconditioner`` is passed to ``update``).
 
@@ -79,7 +90,13 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
-from ._common import as_dense, dense_bounds, dense_f64_parts, generic_settings
+from ._common import (
+    as_dense,
+    dense_bounds,
+    dense_f64_parts,
+    generic_settings,
+    qpbenchmark_options,
+)
 from ._sparse import sparse_parts, structure_key, wants_sparse
 from .base import Backend, BackendSolution
 
@@ -115,6 +132,11 @@ def _status_map(proxqp) -> dict:
         for value in O.__members__.values():
             _STATUS_MAP[value] = (ours.get(value, "not_solved"), str(value).split(".")[-1])
     return _STATUS_MAP
+
+
+def _native_names(generic: dict) -> dict:
+    """ProxQP's settings for the generic ones given (it has no time limit: that one is dropped)."""
+    return {k: v for k, v in generic.items() if k != "time_limit"}
 
 
 @register
@@ -161,18 +183,20 @@ class ProxqpBackend(Backend):
         self._views = None
 
     def _apply_settings(self, qp, proxqp) -> bool:
-        generic, native = generic_settings(self)
         s = qp.settings
-        s.eps_abs = float(generic["eps_abs"])
-        s.eps_rel = float(generic["eps_rel"])
-        s.max_iter = int(generic["max_iter"])
         s.verbose = False
         s.compute_timings = True
-        if generic["eps_abs"] <= 1e-7:
-            s.check_duality_gap = True
-            s.eps_duality_gap_abs = float(generic["eps_abs"])
-            s.eps_duality_gap_rel = float(generic["eps_rel"])
-        s.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+        s.initial_guess = proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+        native = qpbenchmark_options(self, "proxqp", _native_names)
+        if native is None:
+            generic, native = generic_settings(self)
+            s.eps_abs = float(generic["eps_abs"])
+            s.eps_rel = float(generic["eps_rel"])
+            s.max_iter = int(generic["max_iter"])
+            if generic["eps_abs"] <= 1e-7:
+                s.check_duality_gap = True
+                s.eps_duality_gap_abs = float(generic["eps_abs"])
+                s.eps_duality_gap_rel = float(generic["eps_rel"])
         update_preconditioner = bool(native.pop("update_preconditioner", False))
         self._retry_cold = bool(native.pop("retry_cold", True))
         for key, value in native.items():
@@ -299,6 +323,8 @@ class ProxqpBackend(Backend):
                 info = self._info
                 status, raw = _STATUS_MAP[info.status]
                 retried = True
+            if not warm or retried:  # built cold (equality-constrained guess); warm from now on
+                qp.settings.initial_guess = _proxqp().InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
         except (ValueError, RuntimeError) as exc:
             self.reset()
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
