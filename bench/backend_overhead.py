@@ -175,6 +175,7 @@ class DirectProxqp:
     def __init__(self, apply_settings):
         self.apply_settings = apply_settings
         self.qp = None
+        self.warm = False
 
     def __call__(self, p):
         import proxsuite
@@ -195,6 +196,11 @@ class DirectProxqp:
                 P, q, A, b, G, l, h, lb, ub, update_preconditioner=self.update_preconditioner
             )
         self.qp.solve()
+        if not self.warm:  # as the backend: built cold, warm-started from the next tick on
+            self.qp.settings.initial_guess = (
+                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            )
+            self.warm = True
         info = self.info
         x, y, z = self.views
         return info.status, x.copy(), y.copy(), z.copy(), info.solve_time
