@@ -366,7 +366,7 @@ def test_scenario_tables_recomputed(report_dir):
 
 
 def test_closed_loop_tables_equal_csv(report_dir):
-    from qpbench.report.markdown import CLOSED_LOOP_TABLE
+    from qpbench.report.markdown_closed_loop import CLOSED_LOOP_TABLE
 
     _, out, _, cl = report_dir
     md = (out / "report.md").read_text()
@@ -402,10 +402,10 @@ def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
     assert [r[4] for r in tabs[0]["rows"][:-1]] == list(bad["verdict_reasons"])[:-1]
     assert "| failed | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
     # a table of runs that are all ok says so, and an older table without verdicts has no such list
-    from qpbench.report.markdown import _failed_verdicts
+    from qpbench.report.markdown_closed_loop import failed_verdicts
 
-    assert _failed_verdicts(cl[cl["verdict"] == "ok"]) == ["Every run's verdict is ok.\n"]
-    assert _failed_verdicts(cl.drop(columns=["verdict", "verdict_reasons"])) == []
+    assert failed_verdicts(cl[cl["verdict"] == "ok"]) == ["Every run's verdict is ok.\n"]
+    assert failed_verdicts(cl.drop(columns=["verdict", "verdict_reasons"])) == []
 
 
 def test_report_refuses_overwrite_and_bad_input(report_dir, tmp_path, capsys):

@@ -13,8 +13,8 @@ heading and caption):
   backend with rows solved in a worker process is marked with a dagger in
   every table showing its times, with a footnote; a residual or gap column
   of a backend without a found solution shows ``-``, with a footnote;
-- closed loop (closed-loop CSVs): the runs that failed their verdict (with
-  the reasons), then per scenario: verdict, simulated time, tracking, force,
+- closed loop (closed-loop CSVs; :mod:`qpbench.report.markdown_closed_loop`):
+  the runs that failed their verdict (with the reasons), then per scenario: verdict, simulated time, tracking, force,
   obstacle distance, limit violations, infeasible and fallback ticks,
   ``int ||v||^2 dt``, solve-time tail and real-time factor, and the paper's
   figures per backend.
@@ -26,58 +26,15 @@ Display units: times in [us], distances and tracking errors in [mm], forces in
 from __future__ import annotations
 
 import datetime
-import math
 
-import numpy as np
 import pandas as pd
 
 from ..profiles import PROFILES
 from . import tables
 from .machine import machine_info, package_versions
+from .markdown_closed_loop import closed_loop_section
+from .markdown_table import US, fmt, md_table
 from .tables import slug
-
-#: Significant digits of every float in the report.
-DIGITS = 4
-
-
-def fmt(value: object) -> str:
-    """One table cell: ``-`` for missing, ``inf``, integers as is, floats to 4 significant digits."""
-    if value is None:
-        return "-"
-    if isinstance(value, (bool, np.bool_)):
-        return "yes" if value else "no"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        if math.isnan(v):
-            return "-"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        if v == int(v) and abs(v) < 1e6:
-            return str(int(v))
-        return f"{v:.{DIGITS}g}"
-    text = str(value)
-    return text.replace("|", "\\|").replace("\n", " ") if text else "-"
-
-
-def md_table(header: list[str], rows: list[list]) -> str:
-    """A Markdown table (first column left-aligned, the others right-aligned)."""
-    cells = [[fmt(c) for c in r] for r in rows]
-    head = "| " + " | ".join(header) + " |"
-    align = (
-        "|:"
-        + "-" * max(3, len(header[0]))
-        + "|"
-        + "|".join("-" * max(3, len(h)) + ":" for h in header[1:])
-        + "|"
-    )
-    body = ["| " + " | ".join(r) + " |" for r in cells]
-    return "\n".join([head, align, *body]) + "\n"
-
-
-_US = 1e6  # s -> us
-_MM = 1e3  # m -> mm
 
 #: Mark of a backend with rows solved in a worker process.
 ISOLATED_MARK = "\u2020"
@@ -223,10 +180,10 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
             [
                 [
                     names[b],
-                    r["runtime"] * _US,
-                    r["runtime_feasible"] * _US,
+                    r["runtime"] * US,
+                    r["runtime_feasible"] * US,
                     *(r[m] for m in accuracy),
-                    r["overhead_median_s"] * _US,
+                    r["overhead_median_s"] * US,
                 ]
                 for b, r in summary.iterrows()
             ],
@@ -277,9 +234,9 @@ def _scenario_part(
                     int(r["problems"]),
                     r["success_rate"],
                     r["runtime_ratio"],
-                    r["runtime_p50_s"] * _US,
-                    r["runtime_p99_s"] * _US,
-                    r["runtime_max_s"] * _US,
+                    r["runtime_p50_s"] * US,
+                    r["runtime_p99_s"] * US,
+                    r["runtime_max_s"] * US,
                     r["optimality_gap_max"],
                 ]
                 for b, r in table.iterrows()
@@ -323,12 +280,12 @@ def _solver_time_part(rows: pd.DataFrame, scenario: str, names: dict[str, str]) 
                 [
                     names.get(b, b),
                     int(r["rows"]),
-                    r["call_p50"] * _US,
-                    r["call_p99"] * _US,
-                    r["solver_p50"] * _US,
-                    r["solver_p99"] * _US,
-                    r["around_p50"] * _US,
-                    r["around_p99"] * _US,
+                    r["call_p50"] * US,
+                    r["call_p99"] * US,
+                    r["solver_p50"] * US,
+                    r["solver_p99"] * US,
+                    r["around_p50"] * US,
+                    r["around_p99"] * US,
                 ]
                 for b, r in table.iterrows()
             ],
@@ -390,133 +347,6 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
             "the problems whose reference is optimal.\n"
         )
     return out
-
-
-#: Closed-loop table: (header, column, scale to display units).
-CLOSED_LOOP_TABLE = (
-    ("status", "status", None),
-    ("verdict", "verdict", None),
-    ("simulated (s)", "simulated_s", 1.0),
-    ("tracking RMS (mm)", "tracking_rms_after_2s", _MM),
-    ("tracking max (mm)", "tracking_max_after_2s", _MM),
-    ("force err RMS (N)", "force_error_rms_after_2s", 1.0),
-    ("force err max (N)", "force_error_max_after_2s", 1.0),
-    ("min obstacle dist (mm)", "min_obstacle_distance", _MM),
-    ("joint-limit violations", "joint_limit_violations", 1.0),
-    ("infeasible ticks", "infeasible_ticks", 1.0),
-    ("fallback ticks", "fallback_ticks", 1.0),
-    ("int v^2 dt", "v2_integral", 1.0),
-    ("solve p50 (us)", "solve_time_p50_s", _US),
-    ("solve p99 (us)", "solve_time_p99_s", _US),
-    ("solve max (us)", "solve_time_max_s", _US),
-    ("real-time factor", "real_time_factor", 1.0),
-)
-
-
-def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
-    value = row.get(column)
-    if scale is None:
-        return (
-            "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
-        )
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return math.nan
-    return v * scale
-
-
-def _failed_verdicts(df: pd.DataFrame) -> list[str]:
-    """The "Runs that failed their verdict" table (nothing when every run is ``ok``)."""
-    if "verdict" not in df.columns:
-        return []
-    bad = df[df["verdict"].astype(str).isin(("failed", "unsafe", "limits", "diverged"))]
-    if bad.empty:
-        return ["Every run's verdict is ok.\n"]
-    out = ["### Runs that failed their verdict\n"]
-    out.append("Runs whose verdict is not ok, and why:\n")
-    out.append(
-        md_table(
-            ["scenario", "backend", "formulation", "verdict", "reasons"],
-            [
-                [
-                    str(r["scenario"]),
-                    str(r["backend"]),
-                    r.get("formulation"),
-                    str(r["verdict"]),
-                    r.get("verdict_reasons"),
-                ]
-                for _, r in bad.iterrows()
-            ],
-        )
-    )
-    return out
-
-
-def _closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
-    df = results.closed_loop
-    out = ["## Closed loop\n"]
-    out.append(
-        "Each scenario with each backend solving every tick's QP in the loop. Tracking and "
-        "force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
-        "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
-        "factor is simulated time over wall time. Each run's *verdict* (thresholds in the "
-        "scenario file's `[verdict]` table) is `failed` (the backend raised, answered with "
-        "NaN, too late or not at all, or the run crashed), `unsafe` (a key point closer to "
-        "an obstacle than d_safe minus the safety margin), `limits` (a joint angle or speed "
-        "beyond its limit), `diverged` (tracking or force error beyond its threshold after "
-        "the settle time), else `ok`; the first that holds, every reason listed. Status "
-        "`budget`: the run stopped when its wall-time budget was spent, after `simulated (s)`; "
-        "its figures are of what it simulated.\n"
-    )
-    out.extend(_failed_verdicts(df))
-    for (scenario, formulation), g in df.groupby(
-        [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
-    ):
-        duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
-        out.append(f"### Scenario {scenario} ({formulation})\n")
-        out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
-        out.append(
-            md_table(
-                ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
-                [
-                    [str(r["backend"])]
-                    + [_closed_loop_cell(r, c, s) for _, c, s in CLOSED_LOOP_TABLE]
-                    for _, r in g.iterrows()
-                ],
-            )
-        )
-        errors = g[~g["status"].isin(("ok", "budget"))]
-        for _, r in errors.iterrows():
-            out.append(f"- {r['backend']}: {fmt(r.get('error'))}\n")
-        key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
-        if key in plot_files:
-            out.append(f"![closed loop, {scenario}]({plot_files[key]})\n")
-        key = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
-        if key in plot_files:
-            out.append(f"![joint velocities, {scenario}]({plot_files[key]})\n")
-        key = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
-        if key in plot_files:
-            out.append(f"![key-point distances, {scenario}]({plot_files[key]})\n")
-        out.extend(_snapshot_row(scenario, formulation, plot_files))
-    return out
-
-
-def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -> list[str]:
-    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.snapshots`), when drawn."""
-    from .snapshots import ROLES
-
-    keys = {role: f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}" for role in ROLES}
-    shown = [role for role, key in keys.items() if key in plot_files]
-    if not shown:
-        return []
-    return [
-        f"The arm, {scenario}:\n",
-        md_table(
-            [ROLES[r] for r in shown],
-            [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]],
-        ),
-    ]
 
 
 def render(
@@ -585,5 +415,5 @@ def render(
             )
         )
     if not results.closed_loop.empty:
-        lines.extend(_closed_loop_section(results, plot_files))
+        lines.extend(closed_loop_section(results, plot_files))
     return "\n".join(lines)

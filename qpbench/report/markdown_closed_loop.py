@@ -1,0 +1,144 @@
+"""The closed-loop section of ``report.md`` (see :mod:`qpbench.report.markdown`).
+
+The runs that failed their verdict (with the reasons), then per scenario:
+verdict, simulated time, tracking, force, obstacle distance, limit
+violations, infeasible and fallback ticks, ``int ||v||^2 dt``, solve-time
+tail and real-time factor, and the paper's figures per backend.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from . import tables
+from .markdown_table import MM, US, fmt, md_table
+from .tables import slug
+
+#: Closed-loop table: (header, column, scale to display units).
+CLOSED_LOOP_TABLE = (
+    ("status", "status", None),
+    ("verdict", "verdict", None),
+    ("simulated (s)", "simulated_s", 1.0),
+    ("tracking RMS (mm)", "tracking_rms_after_2s", MM),
+    ("tracking max (mm)", "tracking_max_after_2s", MM),
+    ("force err RMS (N)", "force_error_rms_after_2s", 1.0),
+    ("force err max (N)", "force_error_max_after_2s", 1.0),
+    ("min obstacle dist (mm)", "min_obstacle_distance", MM),
+    ("joint-limit violations", "joint_limit_violations", 1.0),
+    ("infeasible ticks", "infeasible_ticks", 1.0),
+    ("fallback ticks", "fallback_ticks", 1.0),
+    ("int v^2 dt", "v2_integral", 1.0),
+    ("solve p50 (us)", "solve_time_p50_s", US),
+    ("solve p99 (us)", "solve_time_p99_s", US),
+    ("solve max (us)", "solve_time_max_s", US),
+    ("real-time factor", "real_time_factor", 1.0),
+)
+
+
+def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
+    value = row.get(column)
+    if scale is None:
+        return (
+            "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
+        )
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return math.nan
+    return v * scale
+
+
+def failed_verdicts(df: pd.DataFrame) -> list[str]:
+    """The "Runs that failed their verdict" table (nothing when every run is ``ok``)."""
+    if "verdict" not in df.columns:
+        return []
+    bad = df[df["verdict"].astype(str).isin(("failed", "unsafe", "limits", "diverged"))]
+    if bad.empty:
+        return ["Every run's verdict is ok.\n"]
+    out = ["### Runs that failed their verdict\n"]
+    out.append("Runs whose verdict is not ok, and why:\n")
+    out.append(
+        md_table(
+            ["scenario", "backend", "formulation", "verdict", "reasons"],
+            [
+                [
+                    str(r["scenario"]),
+                    str(r["backend"]),
+                    r.get("formulation"),
+                    str(r["verdict"]),
+                    r.get("verdict_reasons"),
+                ]
+                for _, r in bad.iterrows()
+            ],
+        )
+    )
+    return out
+
+
+def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
+    """The closed loop's section: the failed verdicts, then per scenario its table and figures."""
+    df = results.closed_loop
+    out = ["## Closed loop\n"]
+    out.append(
+        "Each scenario with each backend solving every tick's QP in the loop. Tracking and "
+        "force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
+        "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
+        "factor is simulated time over wall time. Each run's *verdict* (thresholds in the "
+        "scenario file's `[verdict]` table) is `failed` (the backend raised, answered with "
+        "NaN, too late or not at all, or the run crashed), `unsafe` (a key point closer to "
+        "an obstacle than d_safe minus the safety margin), `limits` (a joint angle or speed "
+        "beyond its limit), `diverged` (tracking or force error beyond its threshold after "
+        "the settle time), else `ok`; the first that holds, every reason listed. Status "
+        "`budget`: the run stopped when its wall-time budget was spent, after `simulated (s)`; "
+        "its figures are of what it simulated.\n"
+    )
+    out.extend(failed_verdicts(df))
+    for (scenario, formulation), g in df.groupby(
+        [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
+    ):
+        duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
+        out.append(f"### Scenario {scenario} ({formulation})\n")
+        out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
+        out.append(
+            md_table(
+                ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
+                [
+                    [str(r["backend"])]
+                    + [_closed_loop_cell(r, c, s) for _, c, s in CLOSED_LOOP_TABLE]
+                    for _, r in g.iterrows()
+                ],
+            )
+        )
+        errors = g[~g["status"].isin(("ok", "budget"))]
+        for _, r in errors.iterrows():
+            out.append(f"- {r['backend']}: {fmt(r.get('error'))}\n")
+        key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
+        if key in plot_files:
+            out.append(f"![closed loop, {scenario}]({plot_files[key]})\n")
+        key = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
+        if key in plot_files:
+            out.append(f"![joint velocities, {scenario}]({plot_files[key]})\n")
+        key = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
+        if key in plot_files:
+            out.append(f"![key-point distances, {scenario}]({plot_files[key]})\n")
+        out.extend(_snapshot_row(scenario, formulation, plot_files))
+    return out
+
+
+def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -> list[str]:
+    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.snapshots`), when drawn."""
+    from .snapshots import ROLES
+
+    keys = {role: f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}" for role in ROLES}
+    shown = [role for role, key in keys.items() if key in plot_files]
+    if not shown:
+        return []
+    return [
+        f"The arm, {scenario}:\n",
+        md_table(
+            [ROLES[r] for r in shown],
+            [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]],
+        ),
+    ]
