@@ -14,10 +14,10 @@ heading and caption):
   every table showing its times, with a footnote; a residual or gap column
   of a backend without a found solution shows ``-``, with a footnote;
 - closed loop (closed-loop CSVs; :mod:`qpbench.report.markdown_closed_loop`):
-  the runs that failed their verdict (with the reasons), then per scenario: verdict, simulated time, tracking, force,
-  obstacle distance, limit violations, infeasible and fallback ticks,
-  ``int ||v||^2 dt``, solve-time tail and real-time factor, and the paper's
-  figures per backend.
+  the runs that failed their verdict (with the reasons), then per scenario:
+  verdict, simulated time, tracking, force, obstacle distance, limit
+  violations, infeasible and fallback ticks, ``int ||v||^2 dt``, solve-time
+  tail and real-time factor, and the paper's figures per backend.
 
 Display units: times in [us], distances and tracking errors in [mm], forces in
 [N]; every other number as in the CSV. Floats print with 4 significant digits.
