@@ -38,7 +38,8 @@ EXAMPLE = "qpbench closed-loop --scenarios wall,narrow --backends qpsolvers:daqp
 log = logging.getLogger("qpbench.closed_loop")
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
+def _add_selection_arguments(parser: argparse.ArgumentParser) -> None:
+    """What to run: scenarios, backends, output folder, duration, formulation."""
     parser.add_argument(
         "--scenarios",
         default="all",
@@ -68,6 +69,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="paper",
         help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)",
     )
+
+
+def _add_execution_arguments(parser: argparse.ArgumentParser) -> None:
+    """How the runs are run: parallel jobs, per-tick deadline, isolation, limits."""
     parser.add_argument(
         "--jobs",
         type=int,
@@ -110,6 +115,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(status budget; simulated_s says how far it got, the verdict is of what was "
         "simulated) (default: none, every run simulates its full duration)",
     )
+
+
+def _add_existing_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """What to do with a table already in the output folder."""
     group = parser.add_mutually_exclusive_group()
     group.add_argument(
         "--force", action="store_true", help="replace an existing table and its logs"
@@ -119,6 +128,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="keep the rows already done (same formulation and duration) and run the rest",
     )
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_selection_arguments(parser)
+    _add_execution_arguments(parser)
+    _add_existing_output_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:

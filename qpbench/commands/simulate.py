@@ -29,7 +29,8 @@ EXAMPLE = (
 log = logging.getLogger("qpbench")
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
+def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """What to simulate: scenario, backend, formulation, times, overrides, profile, deadline."""
     parser.add_argument(
         "--scenario",
         required=True,
@@ -83,6 +84,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "as a real-time controller would; the run then depends on the machine's speed. Default: none, every "
         "answer is applied and the summary's deadline_misses counts ticks slower than dt",
     )
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """What to write: log, summary, dumped QPs, figure, snapshot, animation."""
     parser.add_argument(
         "--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet"
     )
@@ -122,6 +127,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fps", type=int, default=15, help="frames per second of the animation (default 15)"
     )
     parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_run_arguments(parser)
+    _add_output_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
