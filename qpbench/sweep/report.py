@@ -256,101 +256,134 @@ def _manifest_lines(folder: Path) -> list[str]:
 
 def sweep_section(paths: list[Path], out: Path, plots: bool = True) -> list[str]:
     """Markdown lines of the sweep section for the sweep tables ``paths`` (plots into ``out/plots``)."""
-    from ..report.markdown import md_table, slug
-
     lines = [
         "## Sweeps\n",
         "Randomised instances of a scenario, each in closed loop with each backend "
         "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n",
     ]
     for path in paths:
-        df = _read(path)
-        name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
-        lines.append(f"### Sweep {name}\n")
-        lines += _manifest_lines(path.parent)
+        lines += _one_sweep(path, out, plots)
+    return lines
+
+
+def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
+    """One sweep table's lines: rates, paired comparisons, distributions, ECDFs, worst runs."""
+    from ..report.markdown import md_table, slug
+
+    df = _read(path)
+    name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
+    lines = [f"### Sweep {name}\n"]
+    lines += _manifest_lines(path.parent)
+    lines.append(
+        md_table(
+            [
+                "backend",
+                "runs",
+                "invalid instances",
+                "ok",
+                "unsafe",
+                "diverged",
+                "limits",
+                "failed",
+                "of which error/crashed",
+            ],
+            rate_rows(df),
+        )
+    )
+    lines += _paired_lines(df)
+    lines += _distribution_lines(df)
+    concurrent = pd.to_numeric(df["concurrent_solves"], errors="coerce").max()
+    if pd.notna(concurrent) and concurrent > 1:
+        lines.append(
+            f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
+            "host: they are disturbed; take timings with `--jobs 1`.\n"
+        )
+    if plots:
+        key = f"sweep_ecdf_{slug(path.parent.name)}_{slug(name)}"
+        ecdf_plot(df, out / "plots" / f"{key}.png", f"sweep {name}")
+        lines.append(f"![ECDFs, sweep {name}](plots/{key}.png)\n")
+    lines += _worst_lines(df)
+    return lines
+
+
+def _paired_lines(df: pd.DataFrame) -> list[str]:
+    """The paired comparison of backends on the same instances (nothing for a single backend)."""
+    from ..report.markdown import md_table
+
+    lines = []
+    pairs = paired_rows(df)
+    if pairs:
+        lines.append(
+            "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
+            "pairs):\n"
+        )
         lines.append(
             md_table(
                 [
-                    "backend",
-                    "runs",
-                    "invalid instances",
-                    "ok",
-                    "unsafe",
-                    "diverged",
-                    "limits",
-                    "failed",
-                    "of which error/crashed",
+                    "A",
+                    "B",
+                    "instances",
+                    "both ok",
+                    "A ok, B not",
+                    "B ok, A not",
+                    "neither",
+                    "p (McNemar)",
                 ],
-                rate_rows(df),
+                pairs,
             )
         )
-        pairs = paired_rows(df)
-        if pairs:
-            lines.append(
-                "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
-                "pairs):\n"
-            )
-            lines.append(
-                md_table(
-                    [
-                        "A",
-                        "B",
-                        "instances",
-                        "both ok",
-                        "A ok, B not",
-                        "B ok, A not",
-                        "neither",
-                        "p (McNemar)",
-                    ],
-                    pairs,
-                )
-            )
+    return lines
+
+
+def _distribution_lines(df: pd.DataFrame) -> list[str]:
+    """The quantiles of each backend's per-run figures."""
+    from ..report.markdown import md_table
+
+    lines = []
+    lines.append(
+        "Distributions over the runs with a result (median, p90, max; time to converge: median, "
+        "runs not converged at the end):\n"
+    )
+    lines.append(
+        md_table(
+            [
+                "backend",
+                "track p50 mm",
+                "p90",
+                "max",
+                "force err p50 N",
+                "p90",
+                "max",
+                "d_min p50 mm",
+                "p90",
+                "max",
+                "p99 solve p50 us",
+                "p90",
+                "max",
+                "t conv. force s",
+                "not conv.",
+                "t conv. track s",
+                "not conv.",
+                "runs with ticks > 1 ms",
+            ],
+            _quantile_rows(df),
+        )
+    )
+    return lines
+
+
+def _worst_lines(df: pd.DataFrame) -> list[str]:
+    """The worst runs, each with the command re-running it alone."""
+    from ..report.markdown import md_table
+
+    lines = []
+    worst = worst_rows(df)
+    if worst:
         lines.append(
-            "Distributions over the runs with a result (median, p90, max; time to converge: median, "
-            "runs not converged at the end):\n"
+            "Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
+            "command:\n"
         )
         lines.append(
-            md_table(
-                [
-                    "backend",
-                    "track p50 mm",
-                    "p90",
-                    "max",
-                    "force err p50 N",
-                    "p90",
-                    "max",
-                    "d_min p50 mm",
-                    "p90",
-                    "max",
-                    "p99 solve p50 us",
-                    "p90",
-                    "max",
-                    "t conv. force s",
-                    "not conv.",
-                    "t conv. track s",
-                    "not conv.",
-                    "runs with ticks > 1 ms",
-                ],
-                _quantile_rows(df),
-            )
+            md_table(["backend", "instance", "verdict", "d_min mm", "why", "re-run"], worst)
         )
-        concurrent = pd.to_numeric(df["concurrent_solves"], errors="coerce").max()
-        if pd.notna(concurrent) and concurrent > 1:
-            lines.append(
-                f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
-                "host: they are disturbed; take timings with `--jobs 1`.\n"
-            )
-        if plots:
-            key = f"sweep_ecdf_{slug(path.parent.name)}_{slug(name)}"
-            ecdf_plot(df, out / "plots" / f"{key}.png", f"sweep {name}")
-            lines.append(f"![ECDFs, sweep {name}](plots/{key}.png)\n")
-        worst = worst_rows(df)
-        if worst:
-            lines.append(
-                "Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
-                "command:\n"
-            )
-            lines.append(
-                md_table(["backend", "instance", "verdict", "d_min mm", "why", "re-run"], worst)
-            )
     return lines
