@@ -167,6 +167,94 @@ def _frame_parts(scenario):
     return arm, keys, surface, obstacles
 
 
+def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
+    """The arm and its key points at ticks ``idx``, paler the earlier; the last pose's key points named."""
+    for j, k in enumerate(idx):
+        shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
+        p = arm.joint_positions(theta[k])
+        last = j == len(idx) - 1
+        ax.plot(
+            p[:, 0],
+            p[:, 1],
+            "-o",
+            color=ARM,
+            alpha=shade,
+            lw=2.6 if last else 1.6,
+            ms=4 if last else 2.5,
+            label="arm (pale: earlier)" if last else None,
+            zorder=3,
+        )
+        kp = arm.points(theta[k], keys.links, keys.fracs)
+        ax.scatter(
+            kp[:, 0],
+            kp[:, 1],
+            s=16 if last else 8,
+            color=KEY,
+            alpha=shade,
+            zorder=4,
+            label="key points" if last else None,
+        )
+        if last:
+            for name, q in zip(keys.names, kp):
+                ax.annotate(
+                    name, q, textcoords="offset points", xytext=(4, 4), fontsize=7, color=KEY
+                )
+
+
+def _draw_paths(ax, log: pd.DataFrame) -> None:
+    """The desired and actual end-effector paths [m], and the arm's base."""
+    ax.plot(
+        log["xd_x"],
+        log["xd_y"],
+        "--",
+        color="0.45",
+        lw=1.2,
+        label="desired end-effector path",
+        zorder=2,
+    )
+    ax.plot(
+        log["ee_x"],
+        log["ee_y"],
+        "-",
+        color="#e8590c",
+        lw=1.0,
+        alpha=0.9,
+        label="actual end-effector path",
+        zorder=2,
+    )
+    ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
+
+
+def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys, theta) -> None:
+    """Ring the key point at its closest approach to an obstacle, red when closer than d_safe."""
+    close = closest_approach(log, scenario)
+    if close is None or close["key_point"] not in keys.names:
+        return
+    a = list(keys.names).index(close["key_point"])
+    q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
+    d_safe = scenario.data["controller"]["d_safe"]
+    bad = close["distance"] < d_safe - 5e-4
+    ax.scatter(
+        [q[0]],
+        [q[1]],
+        s=140,
+        facecolors="none",
+        edgecolors="red" if bad else "black",
+        lw=1.8,
+        zorder=6,
+        label="closest approach",
+    )
+    ax.annotate(
+        f"{close['key_point']}: {close['distance'] * 1e3:.1f} mm from {close['obstacle']}\n"
+        f"at t = {close['t']:.2f} s (d_safe {d_safe * 1e3:.0f} mm)",
+        q,
+        textcoords="offset points",
+        xytext=(10, -28),
+        fontsize=8,
+        color="red" if bad else "black",
+    )
+
+
 def draw_snapshot(
     scenario: Scenario,
     log: pd.DataFrame,
@@ -215,84 +303,10 @@ def draw_snapshot(
         _draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
     _draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
-    idx = _instants(t, instants)
-    for j, k in enumerate(idx):
-        shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
-        p = arm.joint_positions(theta[k])
-        last = j == len(idx) - 1
-        ax.plot(
-            p[:, 0],
-            p[:, 1],
-            "-o",
-            color=ARM,
-            alpha=shade,
-            lw=2.6 if last else 1.6,
-            ms=4 if last else 2.5,
-            label="arm (pale: earlier)" if last else None,
-            zorder=3,
-        )
-        kp = arm.points(theta[k], keys.links, keys.fracs)
-        ax.scatter(
-            kp[:, 0],
-            kp[:, 1],
-            s=16 if last else 8,
-            color=KEY,
-            alpha=shade,
-            zorder=4,
-            label="key points" if last else None,
-        )
-        if last:
-            for name, q in zip(keys.names, kp):
-                ax.annotate(
-                    name, q, textcoords="offset points", xytext=(4, 4), fontsize=7, color=KEY
-                )
-    ax.plot(
-        log["xd_x"],
-        log["xd_y"],
-        "--",
-        color="0.45",
-        lw=1.2,
-        label="desired end-effector path",
-        zorder=2,
-    )
-    ax.plot(
-        log["ee_x"],
-        log["ee_y"],
-        "-",
-        color="#e8590c",
-        lw=1.0,
-        alpha=0.9,
-        label="actual end-effector path",
-        zorder=2,
-    )
-    ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
+    _draw_poses(ax, arm, keys, theta, _instants(t, instants))
+    _draw_paths(ax, log)
 
-    close = closest_approach(log, scenario)
-    if close is not None:
-        a = list(keys.names).index(close["key_point"]) if close["key_point"] in keys.names else None
-        if a is not None:
-            q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
-            d_safe = scenario.data["controller"]["d_safe"]
-            bad = close["distance"] < d_safe - 5e-4
-            ax.scatter(
-                [q[0]],
-                [q[1]],
-                s=140,
-                facecolors="none",
-                edgecolors="red" if bad else "black",
-                lw=1.8,
-                zorder=6,
-                label="closest approach",
-            )
-            ax.annotate(
-                f"{close['key_point']}: {close['distance'] * 1e3:.1f} mm from {close['obstacle']}\n"
-                f"at t = {close['t']:.2f} s (d_safe {d_safe * 1e3:.0f} mm)",
-                q,
-                textcoords="offset points",
-                xytext=(10, -28),
-                fontsize=8,
-                color="red" if bad else "black",
-            )
+    _mark_closest_approach(ax, log, scenario, arm, keys, theta)
 
     _workspace_axes(ax, xlim, ylim)
     ax.set_title(
@@ -308,6 +322,35 @@ def draw_snapshot(
     finally:
         plt.close(fig)
     return path
+
+
+def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
+    """Ticks shown as frames: every ``speed / (fps * dt)``-th, ``dt`` [s] from ``t`` when it can."""
+    dt = float(t[1] - t[0]) if len(t) > 1 else dt
+    step = max(1, int(round(speed / (fps * dt))))
+    return list(range(0, len(t), step))
+
+
+def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim) -> bool:
+    """Axes, surface, desired path and (if none moves) the obstacles; True when none moves."""
+    _workspace_axes(ax, xlim, ylim)
+    _draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=SURFACE, lw=2.5)
+    ax.plot(log["xd_x"], log["xd_y"], "--", color="0.6", lw=1.0)
+    static = not any(np.any(ob.velocity) for ob in obstacles)
+    if static:
+        _draw_obstacles(ax, obstacles, 0.0, xlim, ylim)
+    return static
+
+
+def _animation_artists(ax) -> tuple:
+    """The artists each frame updates: links, key points, end-effector trace, time label."""
+    (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
+    keys_plot = ax.scatter([], [], s=14, color=KEY, zorder=4)
+    (trace,) = ax.plot([], [], "-", color="#e8590c", lw=1.0, zorder=2)
+    label = ax.text(
+        0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8, family="monospace"
+    )
+    return link_line, keys_plot, trace, label
 
 
 def animate(
@@ -351,26 +394,14 @@ def animate(
     arm, keys, surface, obstacles = _frame_parts(scenario)
     theta = _thetas(log, arm.n)
     t = log["t"].to_numpy(float)
-    dt = float(t[1] - t[0]) if len(t) > 1 else scenario.dt
-    step = max(1, int(round(speed / (fps * dt))))
-    frames = list(range(0, len(log), step))
+    frames = _frame_ticks(t, scenario.dt, fps, speed)
     xlim, ylim = _view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
     dcols = [c for c in log.columns if c.startswith("d_") and c != "d_min"]
 
     fig, ax = plt.subplots(figsize=(6, 5), dpi=dpi)
-    _workspace_axes(ax, xlim, ylim)
-    _draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=SURFACE, lw=2.5)
-    ax.plot(log["xd_x"], log["xd_y"], "--", color="0.6", lw=1.0)
-    static = not any(np.any(ob.velocity) for ob in obstacles)
-    if static:
-        _draw_obstacles(ax, obstacles, 0.0, xlim, ylim)
-    (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
-    keys_plot = ax.scatter([], [], s=14, color=KEY, zorder=4)
-    (trace,) = ax.plot([], [], "-", color="#e8590c", lw=1.0, zorder=2)
-    label = ax.text(
-        0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8, family="monospace"
-    )
+    static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
+    link_line, keys_plot, trace, label = _animation_artists(ax)
     moving_artists: list = []
     head = title or scenario.name
 
