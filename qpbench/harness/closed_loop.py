@@ -84,6 +84,32 @@ class ClosedLoopOutcome:
     not_ok: int = 0
 
 
+@dataclass
+class _Table:
+    """The table as it grows: its rows in the order asked (``order``: (scenario, backend) keys),
+    then the rows kept from an earlier table for pairs not asked this time (``others``)."""
+
+    order: list[tuple[str, str]]
+    rows: dict[tuple[str, str], dict]
+    others: list[dict]
+    csv_path: Path
+    isolated: Callable[[str], bool]
+    run_budget: float | None
+    on_row: Callable[[dict], None] | None
+
+    def all_rows(self) -> list[dict]:
+        return [self.rows[k] for k in self.order if k in self.rows] + self.others
+
+    def emit(self, key: tuple[str, str], row: dict) -> None:
+        """Add a run's row and rewrite the table (atomically); tell ``on_row``."""
+        row["isolated"] = self.isolated(key[1])
+        row["run_budget_s"] = self.run_budget
+        self.rows[key] = row
+        write_table(self.all_rows(), self.csv_path)
+        if self.on_row is not None:
+            self.on_row(row)
+
+
 def run_closed_loop(
     scenarios: list[str],
     backends: list[str],
@@ -138,35 +164,19 @@ def run_closed_loop(
     )
     from ..backends import plugin_files
 
-    plugins = (
-        plugin_files()
-    )  # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
+    # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
+    plugins = plugin_files()
     out = Path(out)
-    csv_path = out / CSV_NAME
-    check_folder(out)
-    if out.exists():
-        check_output(csv_path, force=force, resume=resume)
-    previous_rows = _previous_rows(out, force, resume)
-    (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+    csv_path, previous_rows = _prepare_output(out, force, resume)
 
     order = [(s, b) for s in scenarios for b in backends]
     rows, others = _kept_rows(order, previous_rows, formulation, duration, run_budget, skip or {})
     todo = [k for k in order if k not in rows]
 
-    def _table_rows():
-        return [rows[k] for k in order if k in rows] + others
-
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
-    def _emit(key, row):
-        row["isolated"] = _isolated(key[1])
-        row["run_budget_s"] = run_budget
-        rows[key] = row
-        write_table(_table_rows(), csv_path)
-        if on_row is not None:
-            on_row(row)
-
+    table = _Table(order, rows, others, csv_path, _isolated, run_budget, on_row)
     # (key, what to run, deadline of an isolated run or None)
     items = [
         (
@@ -176,14 +186,28 @@ def run_closed_loop(
         )
         for s, b in todo
     ]
-    _run_items(items, jobs, plugins, _emit)
-    write_table(_table_rows(), csv_path)
+    _run_items(items, jobs, plugins, table.emit)
+    write_table(table.all_rows(), csv_path)
+    return _outcome(csv_path, len(todo), len(order) - len(todo))
+
+
+def _prepare_output(out: Path, force: bool, resume: bool) -> tuple[Path, list[dict]]:
+    """Check the output folder and its table (force, resume), read the rows to keep, make ``logs/``."""
+    csv_path = out / CSV_NAME
+    check_folder(out)
+    if out.exists():
+        check_output(csv_path, force=force, resume=resume)
+    previous_rows = _previous_rows(out, force, resume)
+    (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+    return csv_path, previous_rows
+
+
+def _outcome(csv_path: Path, ran: int, skipped: int) -> ClosedLoopOutcome:
+    """The outcome, counted from the table as written."""
     table = pd.read_csv(csv_path)
     failed = table["status"].isin(FAILED_RUN_STATUSES)
     not_ok = int((table["verdict"].isin(BAD_VERDICTS) | failed).sum()) if len(table) else 0
-    return ClosedLoopOutcome(
-        table, csv_path, int(failed.sum()), len(todo), len(order) - len(todo), not_ok
-    )
+    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, skipped, not_ok)
 
 
 def _run_items(items: list[tuple], jobs: int, plugins: list[str], emit: Callable) -> None:
