@@ -129,8 +129,6 @@ def solve_in_workers(
     Returns:
         ``{key: Candidate}`` (plain candidates, see :meth:`Candidate.plain`).
     """
-    from .reference_solve import Candidate
-
     if not tasks:
         return {}
     ctx = context if context is not None else multiprocessing.get_context("spawn")
@@ -160,35 +158,9 @@ def solve_in_workers(
             timeout = max(0.0, min(w.deadline for w in busy) - time.monotonic())
             ready = wait([w.conn for w in busy], None if math.isinf(timeout) else timeout)
             for w in busy:
-                if w.conn in ready:
-                    try:
-                        answer = w.conn.recv()
-                    except (EOFError, OSError):
-                        w.proc.join(5.0)
-                        answer = Candidate(
-                            solver_of[w.task],
-                            "unknown",
-                            None,
-                            reason=f"reference worker died (exit code {w.proc.exitcode})",
-                        )
-                        w.kill()
-                        w.ready = False
+                done, answer = _answer_of(w, ready, solver_of[w.task], time_limit)
+                if done:
                     finish(w.task, answer)
-                    w.task = None
-                elif time.monotonic() > w.deadline:
-                    w.kill()
-                    w.ready = False
-                    finish(
-                        w.task,
-                        Candidate(
-                            solver_of[w.task],
-                            "unknown",
-                            None,
-                            timed_out=True,
-                            reason=f"no answer within the time limit of {time_limit:g} s; "
-                            "worker stopped",
-                        ),
-                    )
                     w.task = None
     finally:
         for w in workers:
@@ -197,3 +169,41 @@ def solve_in_workers(
             else:
                 w.kill()
     return answers
+
+
+def _answer_of(
+    w: _Worker, ready: list, solver: str, time_limit: float | None
+) -> tuple[bool, object]:
+    """``(True, answer)`` once busy worker ``w`` is done with its task, else ``(False, None)``.
+
+    The answer is the worker's reply (``w.conn`` among the ``ready`` connections),
+    or an ``unknown`` candidate when the worker died or is past its deadline
+    (then the worker is killed and marked not ready).
+    """
+    from .reference_solve import Candidate
+
+    if w.conn in ready:
+        try:
+            return True, w.conn.recv()
+        except (EOFError, OSError):
+            w.proc.join(5.0)
+            answer = Candidate(
+                solver,
+                "unknown",
+                None,
+                reason=f"reference worker died (exit code {w.proc.exitcode})",
+            )
+            w.kill()
+            w.ready = False
+            return True, answer
+    if time.monotonic() > w.deadline:
+        w.kill()
+        w.ready = False
+        return True, Candidate(
+            solver,
+            "unknown",
+            None,
+            timed_out=True,
+            reason=f"no answer within the time limit of {time_limit:g} s; worker stopped",
+        )
+    return False, None
