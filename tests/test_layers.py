@@ -15,6 +15,10 @@ layer or below):
 ``jit`` warms every compiled kernel (the backends', the network's, the
 loop's) and so sits beside all of them: the loop calls it before its clock
 starts, it imports their modules, and no module cycle results (checked below).
+
+Sizes: no module of the package over :data:`MAX_MODULE_LINES` lines (``wc -l``)
+and no function over :data:`MAX_FUNCTION_LINES` lines (from ``def`` to its last
+line, docstring included), except the numba kernels of :data:`SIZE_EXCEPTIONS`.
 """
 
 from __future__ import annotations
@@ -150,3 +154,86 @@ def test_markdown_and_plots_do_not_import_each_other():
     graph = _graph()
     assert "qpbench.report.plots" not in graph["qpbench.report.markdown"]
     assert "qpbench.report.markdown" not in graph["qpbench.report.plots"]
+
+
+MAX_MODULE_LINES = 500
+MAX_FUNCTION_LINES = 80
+
+#: The only modules and functions allowed past the size limits: numba kernels kept whole by
+#: necessity (each has the reason in a comment beside it, too). Keys: a module's path from the
+#: repository root, or ``path:function`` (``path:Class.method`` for a method).
+SIZE_EXCEPTIONS = {
+    "qpbench/rnn/kernels.py": (
+        "the network's numba kernels: the names they call are module globals numba freezes at "
+        "compile time, so the kernels and their bindings stay in one module"
+    ),
+    "qpbench/rnn/kernels.py:_integrate_loops": (
+        "numba kernel: the integrator's main loop, one compiled loop pinned bit for bit by its "
+        "numpy twin"
+    ),
+    "qpbench/control/build_kernel.py:_build_kernel_py": (
+        "numba kernel: the controller's tick build, compiled as one function"
+    ),
+}
+
+
+def _sources() -> dict[str, str]:
+    return {
+        path.relative_to(ROOT.parent).as_posix(): path.read_text() for path in ROOT.rglob("*.py")
+    }
+
+
+def _function_lengths(source: str) -> dict[str, int]:
+    """``{qualified name: lines from def to the last line}`` of every function of a module."""
+    lengths = {}
+
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                name = prefix + child.name
+                lengths[name] = child.end_lineno - child.lineno + 1
+                visit(child, name + ".")
+            elif isinstance(child, ast.ClassDef):
+                visit(child, prefix + child.name + ".")
+            else:
+                visit(child, prefix)
+
+    visit(ast.parse(source), "")
+    return lengths
+
+
+def _too_long() -> tuple[dict[str, int], dict[str, int]]:
+    modules, functions = {}, {}
+    for path, source in _sources().items():
+        lines = source.count("\n")
+        if lines > MAX_MODULE_LINES:
+            modules[path] = lines
+        for name, length in _function_lengths(source).items():
+            if length > MAX_FUNCTION_LINES:
+                functions[f"{path}:{name}"] = length
+    return modules, functions
+
+
+def test_size_limits_measure_what_they_say():
+    source = (
+        'def f():\n    """Doc."""\n    return 1\n\n\nclass C:\n    def m(self):\n        pass\n'
+    )
+    assert _function_lengths(source) == {"f": 3, "C.m": 2}
+
+
+def test_no_module_over_500_lines():
+    modules, _ = _too_long()
+    over = {path: lines for path, lines in modules.items() if path not in SIZE_EXCEPTIONS}
+    assert over == {}, f"modules over {MAX_MODULE_LINES} lines: {over}"
+
+
+def test_no_function_over_80_lines():
+    _, functions = _too_long()
+    over = {name: lines for name, lines in functions.items() if name not in SIZE_EXCEPTIONS}
+    assert over == {}, f"functions over {MAX_FUNCTION_LINES} lines: {over}"
+
+
+def test_size_exceptions_are_still_needed():
+    modules, functions = _too_long()
+    stale = sorted(set(SIZE_EXCEPTIONS) - set(modules) - set(functions))
+    assert stale == [], f"within the limits now, drop from SIZE_EXCEPTIONS: {stale}"

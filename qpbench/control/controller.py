@@ -18,7 +18,8 @@ the row count is fixed for a scenario and a solver can keep a persistent
 object. ``P`` is a dense ndarray; no obstacle means ``G = h = None``.
 
 The per-tick build runs one compiled numba kernel (kinematics, impedance
-reference, bounds, obstacle rows; compiled on first call and cached on disk)
+reference, bounds, obstacle rows; :mod:`qpbench.control.build_kernel`, compiled
+on first call and cached on disk)
 writing into one freshly allocated buffer, so a returned problem is never
 changed by a later build. The problem is a :class:`qpbench.packed.PackedProblem`:
 its arrays are views of that buffer, and a backend that knows the layout (the
@@ -36,11 +37,11 @@ import numpy as np
 import qpsolvers
 
 from ..exceptions import ParamError
-from ..packed import HEADER as PACKED_HEADER
 from ..packed import PackedProblem
 from ..robot.environment import PRIMITIVE_WIDTH, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm
 from ..statuses import FORMULATIONS
+from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
 __all__ = ["FORMULATIONS", "Controller", "TickArrays", "TickQP", "build_problem"]
@@ -66,14 +67,7 @@ class TickArrays(NamedTuple):
     buffer: np.ndarray | None = None
 
 
-# Layout of the kernel's parameter vector.
-_T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = (
-    range(16)
-)
-_NPAR = 16
-
 _kernel = None
-_build_kernel_jit = None
 _Problem = qpsolvers.Problem
 _new_problem = object.__new__
 _trusted = PackedProblem._trusted
@@ -81,209 +75,12 @@ _empty = np.empty
 
 
 def _get_kernel():
-    """The compiled packed build kernel (numba imported and compiled on first use only)."""
-    global _kernel, _build_kernel_jit
+    """The compiled packed build kernel (:mod:`qpbench.control.build_kernel`), kept here so
+    the per-tick call reads a global of this module."""
+    global _kernel
     if _kernel is None:
-        import numba
-
-        _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
-        _kernel = numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
+        _kernel = compiled_build_kernel()
     return _kernel
-
-
-def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[int, ...]]]]:
-    """Size of a tick's buffer and ``{name: (offset, shape)}`` of its arrays.
-
-    Order after the :mod:`qpbench.packed` header: ``P, q, G, h, J, b, lb, ub,
-    ee, dist`` (the kernel :func:`_build_packed_py` computes the same).
-    """
-    shapes = {
-        "P": (n, n),
-        "q": (n,),
-        "G": (n_rows, n),
-        "h": (n_rows,),
-        "J": (2, n),
-        "b": (2,),
-        "lb": (n,),
-        "ub": (n,),
-        "ee": (2,),
-        "dist": (n_rows,),
-    }
-    layout, off = {}, PACKED_HEADER
-    for name, shape in shapes.items():
-        layout[name] = (off, shape)
-        off += int(np.prod(shape))
-    return off, layout
-
-
-def _build_packed_py(
-    theta, lengths, kp_link, kp_frac, prims, lim, par, buf
-):  # pragma: no cover - compiled
-    """Write the tick into ``buf`` (layout of :func:`packed_layout`) and its header."""
-    n = theta.shape[0]
-    nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
-    o = PACKED_HEADER
-    oP = o
-    o += n * n
-    oq = o
-    o += n
-    oG = o
-    o += nr * n
-    oh = o
-    o += nr
-    oJ = o
-    o += 2 * n
-    ob = o
-    o += 2
-    olb = o
-    o += n
-    oub = o
-    o += n
-    oee = o
-    o += 2
-    od = o
-    soft = par[_SOFT] != 0.0
-    buf[0] = n
-    buf[1] = 0 if soft else 2
-    buf[2] = nr
-    buf[3] = oP
-    buf[4] = oq
-    buf[5] = -1 if soft else oJ
-    buf[6] = -1 if soft else ob
-    buf[7] = oG if nr > 0 else -1
-    buf[8] = oh if nr > 0 else -1
-    buf[9] = olb
-    buf[10] = oub
-    _build_kernel_jit(
-        theta,
-        lengths,
-        kp_link,
-        kp_frac,
-        prims,
-        lim,
-        par,
-        buf[oP:oq].reshape((n, n)),
-        buf[oq:oG],
-        buf[oG:oh].reshape((nr, n)),
-        buf[oh:oJ],
-        buf[oJ:ob].reshape((2, n)),
-        buf[ob:olb],
-        buf[olb:oub],
-        buf[oub:oee],
-        buf[oee:od],
-        buf[od : od + nr],
-    )
-
-
-# Over 80 lines, kept whole on purpose: numba compiles it as one function (``_build_kernel_jit``);
-# split, each helper would have to be compiled too and rebound in this module's globals before
-# the first compile. tests/test_controller.py compares this one function with the numpy terms.
-def _build_kernel_py(
-    theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist
-):  # pragma: no cover - compiled
-    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick (see the module docstring)."""
-    n = theta.shape[0]
-    px = np.empty(n + 1)
-    py = np.empty(n + 1)
-    cs = np.empty(n)
-    sn = np.empty(n)
-    px[0] = 0.0
-    py[0] = 0.0
-    phi = 0.0
-    for i in range(n):
-        phi += theta[i]
-        cs[i] = np.cos(phi)
-        sn[i] = np.sin(phi)
-        px[i + 1] = px[i] + lengths[i] * cs[i]
-        py[i + 1] = py[i] + lengths[i] * sn[i]
-    ex = px[n]
-    ey = py[n]
-    ee[0] = ex
-    ee[1] = ey
-    for k in range(n):
-        J[0, k] = -(ey - py[k])
-        J[1, k] = ex - px[k]
-    # impedance reference, eq. 4
-    kd = par[_KD]
-    kpkd = par[_KP] / kd
-    fkd = par[_FD] / kd
-    b[0] = par[_VDX] - kpkd * (ex - par[_XDX]) + fkd * par[_NX]
-    b[1] = par[_VDY] - kpkd * (ey - par[_XDY]) + fkd * par[_NY]
-    # escape-velocity bounds, eq. 11c
-    alpha = par[_ALPHA]
-    for k in range(n):
-        lo = alpha * (lim[0, k] - theta[k])
-        vmin = lim[2, k]
-        lb[k] = lo if lo > vmin else vmin
-        up = alpha * (lim[1, k] - theta[k])
-        vmax = lim[3, k]
-        ub[k] = up if up < vmax else vmax
-    # objective
-    if par[_SOFT] != 0.0:
-        rho = par[_RHO]
-        for r in range(n):
-            for c in range(n):
-                P[r, c] = rho * (J[0, r] * J[0, c] + J[1, r] * J[1, c])
-            P[r, r] += 1.0
-            q[r] = -rho * (J[0, r] * b[0] + J[1, r] * b[1])
-    else:
-        for r in range(n):
-            for c in range(n):
-                P[r, c] = 0.0
-            P[r, r] = 1.0
-            q[r] = 0.0
-    # obstacle rows, eqs. 8-10 with the velocity-damper signs
-    nb = prims.shape[0]
-    t = par[_T]
-    kgain = par[_K]
-    dsafe = par[_DSAFE]
-    radius = par[_RADIUS]
-    for i in range(kp_link.shape[0]):
-        L = kp_link[i]
-        f = kp_frac[i] * lengths[L]
-        ax = px[L] + f * cs[L]
-        ay = py[L] + f * sn[L]
-        for j in range(nb):
-            kind = int(prims[j, 0])
-            vx = prims[j, 6]
-            vy = prims[j, 7]
-            bx = prims[j, 1] + vx * t
-            by = prims[j, 2] + vy * t
-            if kind == 0:  # line, signed distance, u = normal
-                ux = prims[j, 3]
-                uy = prims[j, 4]
-                d = (ax - bx) * ux + (ay - by) * uy
-            else:
-                if kind == 1:  # segment
-                    abx = prims[j, 3] - prims[j, 1]
-                    aby = prims[j, 4] - prims[j, 2]
-                    s = ((ax - bx) * abx + (ay - by) * aby) / (abx * abx + aby * aby)
-                    if s < 0.0:
-                        s = 0.0
-                    elif s > 1.0:
-                        s = 1.0
-                    bx += s * abx
-                    by += s * aby
-                dx = ax - bx
-                dy = ay - by
-                d = np.sqrt(dx * dx + dy * dy)
-                if d > 0.0:
-                    ux = dx / d
-                    uy = dy / d
-                else:
-                    ux = 0.0
-                    uy = 0.0
-                if kind == 2:  # disk
-                    d -= prims[j, 5]
-            d -= radius
-            r = i * nb + j
-            for k in range(n):
-                if k <= L:
-                    G[r, k] = -(ux * (py[k] - ay) + uy * (ax - px[k]))
-                else:
-                    G[r, k] = 0.0
-            h[r] = kgain * (d - dsafe) - (ux * vx + uy * vy)
-            dist[r] = d
 
 
 @dataclass
@@ -369,14 +166,15 @@ class Controller:
         self._lim = np.ascontiguousarray(
             np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max]), dtype=float
         )
-        self._par = np.zeros(_NPAR)
-        self._par[_NX], self._par[_NY] = task.normal
-        self._par[_FD] = task.desired_force
-        self._par[_K] = self.k
-        self._par[_DSAFE] = self.d_safe
-        self._par[_ALPHA] = limits.alpha
-        self._par[_RHO] = self.rho
-        self._par[_RADIUS] = key_points.radius
+        self._par = parameter_vector(
+            task.normal,
+            task.desired_force,
+            self.k,
+            self.d_safe,
+            limits.alpha,
+            self.rho,
+            key_points.radius,
+        )
         self._path = task.path
         self._packed_size, layout = packed_layout(self.n, self.n_rows)
         self._packed_slices = tuple(

@@ -65,12 +65,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..backends import Backend, backend_class, get_backend
-from ..exceptions import ParamError
-from ..statuses import FAILURE_STATUSES, FORMULATIONS, classify, describe_exception
+from ..backends import Backend
+from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
+from .arguments import check_arguments, resolve_backend
+from .dump import write_dump
 from .scenario import Scenario, load_scenario
-from .summary import jsonable, summarize
+from .summary import summarize
 from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
 
 __all__ = ["SimResult", "resolve_backend", "simulate", "write_dump"]
@@ -113,61 +114,6 @@ class SimResult:
     log: pd.DataFrame
     summary: dict
     records: list = field(default_factory=list)
-
-
-def resolve_backend(
-    backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default"
-) -> Backend:
-    """A backend instance for ``scenario``: by name, or the given instance checked.
-
-    A backend class whose ``scenario_table`` names a table of the scenario
-    (the ``rnn`` backends: ``"rnn"``) gets that table's settings; an online
-    backend (``online = True``) also the control period ``dt``. An instance
-    with a ``dt`` of its own must match the loop's ``dt``.
-    """
-    if isinstance(backend, str):
-        cls = backend_class(backend)
-        settings = {}
-        if cls.scenario_table:
-            settings.update(getattr(scenario, cls.scenario_table))
-        if cls.online:
-            settings.setdefault("dt", dt)
-        return get_backend(backend, profile=profile, **settings)
-    if not isinstance(backend, Backend):
-        raise ParamError(
-            f"expected a backend name or instance, got {type(backend).__name__}", key="backend"
-        )
-    own_dt = getattr(backend, "dt", None)
-    if own_dt is not None and abs(float(own_dt) - dt) > 1e-15:
-        raise ParamError(
-            f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt"
-        )
-    return backend
-
-
-def _positive_seconds(value) -> bool:
-    return (
-        isinstance(value, (int, float, np.floating))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and value > 0
-    )
-
-
-def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
-    if formulation not in FORMULATIONS:
-        raise ParamError(
-            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
-            key="formulation",
-        )
-    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
-        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
-    if deadline is not None and not _positive_seconds(deadline):
-        raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
-    if wall_budget_s is not None and not _positive_seconds(wall_budget_s):
-        raise ParamError(
-            f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s"
-        )
 
 
 def simulate(
@@ -221,7 +167,7 @@ def simulate(
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    _check_arguments(formulation, every, deadline, wall_budget_s)
+    check_arguments(formulation, every, deadline, wall_budget_s)
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     keep_every = every if every is not None else (1 if dump is not None else None)
@@ -301,42 +247,17 @@ class _Run:
     def loop(self, progress: bool, wall_budget_s: float | None) -> None:
         """The ticks (module docstring, steps 1-5), until ``duration`` or the wall-time budget."""
         ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
-        data, ci, cf, sensed, theta, none = (
-            self.data,
-            self.ci,
-            self.cf,
-            self.sensed,
-            self.theta,
-            self.none,
-        )
+        data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
+        theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
         c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
-        records, statuses, adaptive, surface = (
-            self.records,
-            self.statuses,
-            self.adaptive,
-            self.surface,
-        )
-        post, build, make_problem, solve, perf = (
-            get_post_kernel(),
-            ctrl.build_arrays,
-            ctrl.make_problem,
-            be.solve,
-            time.perf_counter,
-        )
-        noisy = surface.noise_std > 0.0
-        fd = ctrl.task.desired_force
-        f64 = np.dtype(np.float64)
-        kp, kd = ctrl.kp, ctrl.kd
-        v = np.zeros(ctrl.n)
-        bar = None
+        post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
+        solve, perf, surface = be.solve, time.perf_counter, self.surface
+        noisy, fd, f64 = surface.noise_std > 0.0, ctrl.task.desired_force, np.dtype(np.float64)
+        kp, kd, v = ctrl.kp, ctrl.kd, np.zeros(ctrl.n)
+        run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(
-                total=ticks, unit="tick", desc=f"{self.scenario.name} {be.name}", mininterval=0.5
-            )
+        bar = self._progress_bar(run_name) if progress else None
         start = perf()
         stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
         for k in range(ticks):
@@ -390,13 +311,7 @@ class _Run:
             statuses.append(status)
             if verbose:
                 solve_log.debug(
-                    "%s %s tick %d (t = %.3f s): %s in %.1f µs",
-                    self.scenario.name,
-                    be.name,
-                    k,
-                    t,
-                    status,
-                    solve_s * 1e6,
+                    "%s tick %d (t = %.3f s): %s in %.1f µs", run_name, k, t, status, solve_s * 1e6
                 )
             if noisy:
                 force += surface.noise()
@@ -408,9 +323,13 @@ class _Run:
             if bar is not None and (k + 1) % 500 == 0:
                 bar.update(500)
         self.wall = perf() - start
-        if bar is not None:
-            bar.update(ticks - bar.n)
-            bar.close()
+        _finish(bar)
+
+    def _progress_bar(self, run_name: str):
+        """A tqdm bar over the run's ticks (the loop updates it every 500 ticks)."""
+        from tqdm import tqdm
+
+        return tqdm(total=self.ticks, unit="tick", desc=run_name, mininterval=0.5)
 
     def _without_answer(
         self,
@@ -536,33 +455,8 @@ class _Run:
         return SimResult(frame, summary, recs)
 
 
-def write_dump(
-    folder: str | Path,
-    records: list,
-    scenario: Scenario,
-    backend_name: str,
-    formulation: str,
-    every: int | None,
-    duration: float | None,
-    dt: float | None,
-) -> Path:
-    """Write the kept ticks' QPs as a problem set; the manifest holds the scenario file's full text."""
-    from ..formats import write_problem_set
-
-    generator = {
-        "name": "qpbench simulate",
-        "scenario": scenario.name,
-        "backend": backend_name,
-        "formulation": formulation,
-        "every": every,
-        "duration": duration,
-        "dt": dt,
-    }
-    extra = {
-        "scenario_file": scenario.path.name if scenario.path is not None else None,
-        "scenario_toml": scenario.source,
-        "ticks_per_record": every,
-    }
-    if scenario.overrides:  # values set over the file's (the TOML above is the file as it is)
-        extra["scenario_overrides"] = jsonable(scenario.overrides)
-    return write_problem_set(folder, records, generator=generator, extra=extra)
+def _finish(bar) -> None:
+    """Bring a progress bar (or ``None``) to the ticks simulated and close it."""
+    if bar is not None:
+        bar.update(bar.total - bar.n)
+        bar.close()

@@ -1,0 +1,70 @@
+"""Checks of :func:`qpbench.sim.loop.simulate`'s arguments, and the backend instance for a scenario."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..backends import Backend, backend_class, get_backend
+from ..exceptions import ParamError
+from ..statuses import FORMULATIONS
+from .scenario import Scenario
+
+__all__ = ["check_arguments", "resolve_backend"]
+
+
+def resolve_backend(
+    backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default"
+) -> Backend:
+    """A backend instance for ``scenario``: by name, or the given instance checked.
+
+    A backend class whose ``scenario_table`` names a table of the scenario
+    (the ``rnn`` backends: ``"rnn"``) gets that table's settings; an online
+    backend (``online = True``) also the control period ``dt``. An instance
+    with a ``dt`` of its own must match the loop's ``dt``.
+    """
+    if isinstance(backend, str):
+        cls = backend_class(backend)
+        settings = {}
+        if cls.scenario_table:
+            settings.update(getattr(scenario, cls.scenario_table))
+        if cls.online:
+            settings.setdefault("dt", dt)
+        return get_backend(backend, profile=profile, **settings)
+    if not isinstance(backend, Backend):
+        raise ParamError(
+            f"expected a backend name or instance, got {type(backend).__name__}", key="backend"
+        )
+    own_dt = getattr(backend, "dt", None)
+    if own_dt is not None and abs(float(own_dt) - dt) > 1e-15:
+        raise ParamError(
+            f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt"
+        )
+    return backend
+
+
+def _positive_seconds(value) -> bool:
+    return (
+        isinstance(value, (int, float, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value > 0
+    )
+
+
+def check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
+    """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
+    if formulation not in FORMULATIONS:
+        raise ParamError(
+            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
+            key="formulation",
+        )
+    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
+        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    if deadline is not None and not _positive_seconds(deadline):
+        raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
+    if wall_budget_s is not None and not _positive_seconds(wall_budget_s):
+        raise ParamError(
+            f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s"
+        )
