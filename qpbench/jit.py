@@ -19,7 +19,7 @@ type qpbench passes it:
 kernel          argument types warmed
 ==============  ===============================================================
 controller      the controller's packed tick build
-                (:mod:`qpbench.control.controller`; one type)
+                (:mod:`qpbench.control.build_kernel`; one type)
 post            the closed loop's sense, log and plant step
                 (:func:`qpbench.sim.tick_kernel.warm_post_kernel`; one type)
 network         the network's integrator (:func:`qpbench.rnn.network.kernel`)
