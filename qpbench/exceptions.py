@@ -54,6 +54,19 @@ class ParamError(InputError):
     """A backend, profile or command parameter has a value that is not allowed."""
 
 
+def check_known_keys(
+    table: dict, known, path: str | Path | None, prefix: str, error: type[InputError] = InputError
+) -> None:
+    """Raise ``error`` naming ``prefix.KEY`` for the first key of ``table`` not in ``known``."""
+    for key in table:
+        if key not in known:
+            raise error(
+                f"unknown key (expected one of: {', '.join(known)})",
+                path=path,
+                key=f"{prefix}.{key}",
+            )
+
+
 class BackendNotFound(QpbenchError):
     """No backend is registered under the requested name, or it is unavailable."""
 

@@ -9,6 +9,7 @@ import sys
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
 from .inspect_ import add_memory_argument
+from .options import add_force_resume
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -91,12 +92,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from .list_ import add_selection_arguments
 
     add_selection_arguments(parser)
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--force", action="store_true", help="delete an existing --out and start again"
-    )
-    group.add_argument(
-        "--resume", action="store_true", help="keep the rows of an existing --out and run the rest"
+    add_force_resume(
+        parser,
+        force="delete an existing --out and start again",
+        resume="keep the rows of an existing --out and run the rest",
     )
 
 

@@ -26,6 +26,7 @@ import logging
 from typing import TYPE_CHECKING
 
 from ..statuses import FORMULATIONS
+from .options import add_force_resume
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -117,23 +118,14 @@ def _add_execution_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_existing_output_arguments(parser: argparse.ArgumentParser) -> None:
-    """What to do with a table already in the output folder."""
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--force", action="store_true", help="replace an existing table and its logs"
-    )
-    group.add_argument(
-        "--resume",
-        action="store_true",
-        help="keep the rows already done (same formulation and duration) and run the rest",
-    )
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     _add_selection_arguments(parser)
     _add_execution_arguments(parser)
-    _add_existing_output_arguments(parser)
+    add_force_resume(  # what to do with a table already in the output folder
+        parser,
+        force="replace an existing table and its logs",
+        resume="keep the rows already done (same formulation and duration) and run the rest",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,6 +21,7 @@ import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, REPEAT, RUN_BUDGET_S
+from .options import add_force_resume
 
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
@@ -101,15 +102,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from .inspect_ import add_memory_argument
 
     add_memory_argument(parser)
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--force",
-        action="store_true",
-        help="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
+    add_force_resume(
+        parser,
+        force="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
         "if no previous 'qpbench run' wrote them",
-    )
-    group.add_argument(
-        "--resume", action="store_true", help="continue an interrupted run from OUT/.partial/"
+        resume="continue an interrupted run from OUT/.partial/",
     )
 
 

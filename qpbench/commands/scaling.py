@@ -8,6 +8,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from .options import add_force_resume
+
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
     "qpbench scaling --backends daqp,qpoases,piqp,osqp,clarabel --out scaling/ ; "
@@ -42,61 +44,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="'default' (9 sizes: n4-p1-m1,m10,m100,m1000 and n4..n64-p2-m16) or comma-separated "
         "nN-pP-mM names: N links, P key points per link, a cloud of M points",
     )
-    parser.add_argument(
-        "--driver",
-        default=d.driver,
-        help=f"backend solving the closed loop whose ticks are dumped (default {d.driver})",
-    )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        default=d.duration,
-        help=f"simulated seconds per size (default {d.duration})",
-    )
-    parser.add_argument(
-        "--every", type=int, default=d.every, help=f"keep every K-th tick (default {d.every})"
-    )
-    parser.add_argument(
-        "--repeat",
-        type=int,
-        default=d.repeat,
-        help=f"timed solves per tick, minimum kept (default {d.repeat})",
-    )
-    parser.add_argument(
-        "--seed",
-        type=int,
-        default=d.seed,
-        help=f"seed of the arms, clouds and backend order (default {d.seed})",
-    )
-    parser.add_argument(
-        "--profile", default=d.profile, help=f"settings profile (default {d.profile})"
-    )
-    parser.add_argument(
+
+    def option(flag, text, spec="", **kw):
+        # the default is ScalingConfig's field of the same name, and the help text says it
+        value = getattr(d, flag[2:].replace("-", "_"))
+        parser.add_argument(flag, default=value, help=f"{text} (default {value:{spec}})", **kw)
+
+    option("--driver", "backend solving the closed loop whose ticks are dumped")
+    option("--duration", "simulated seconds per size", type=float)
+    option("--every", "keep every K-th tick", type=int)
+    option("--repeat", "timed solves per tick, minimum kept", type=int)
+    option("--seed", "seed of the arms, clouds and backend order", type=int)
+    option("--profile", "settings profile")
+    option(
         "--dense-limit",
+        "skip dense-only backends when n x rows exceeds this",
+        ",",
         type=int,
-        default=d.dense_limit,
         metavar="ENTRIES",
-        help=f"skip dense-only backends when n x rows exceeds this (default {d.dense_limit:,})",
     )
-    parser.add_argument(
+    option(
         "--slow-limit",
+        "skip a backend on the larger sizes of an axis once its median solve exceeds S seconds",
         type=float,
-        default=d.slow_limit,
         metavar="S",
-        help=f"skip a backend on the larger sizes of an axis once its median solve exceeds S seconds "
-        f"(default {d.slow_limit})",
     )
     parser.add_argument(
         "--no-report", action="store_true", help="do not write scaling.md and scaling.png"
     )
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--force",
-        action="store_true",
-        help="delete this command's outputs in --out and start again",
-    )
-    group.add_argument(
-        "--resume", action="store_true", help="keep the sizes done in --out and run the rest"
+    add_force_resume(
+        parser,
+        force="delete this command's outputs in --out and start again",
+        resume="keep the sizes done in --out and run the rest",
     )
 
 

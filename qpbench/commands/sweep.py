@@ -19,6 +19,8 @@ import argparse
 import logging
 from pathlib import Path
 
+from .options import add_force_resume
+
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
     "qpbench sweep problems/sweeps/wall.toml --backends daqp,osqp,qpoases --out wall-sweep --jobs 2; "
@@ -87,14 +89,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="TOML or YAML naming ca_file, cert_file, key_file (PEM) for a tls:// scheduler",
     )
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--force", action="store_true", help="start again: replace the table and the instances"
-    )
-    group.add_argument(
-        "--resume",
-        action="store_true",
-        help="keep the rows with a result and run the rest (missing, error, crashed)",
+    add_force_resume(
+        parser,
+        force="start again: replace the table and the instances",
+        resume="keep the rows with a result and run the rest (missing, error, crashed)",
     )
 
 

@@ -266,6 +266,9 @@ class Controller:
         problem.ub = ub
         return problem
 
+    # build, build_reference and build_problem take the same arguments on purpose: the reference
+    # path is called like the compiled one (tests/test_controller.py compares them tick by tick),
+    # and build_problem is build for callers that want only the qpsolvers Problem.
     def build(
         self,
         theta: np.ndarray,
@@ -337,6 +340,7 @@ class Controller:
             G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
         return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
+    # Same arguments as build (see there): its numpy reference, for checks.
     def build_reference(
         self,
         theta: np.ndarray,
@@ -370,6 +374,7 @@ def _check_formulation(formulation: str) -> bool:
     return formulation == "soft"
 
 
+# Same arguments as Controller.build (see there), which it calls.
 def build_problem(
     controller: Controller,
     theta: np.ndarray,

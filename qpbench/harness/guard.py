@@ -109,6 +109,8 @@ class LocalRunner:
         """An untimed, unrecorded solve that only moves the state forward (resume)."""
         return self._guarded(problem).status
 
+    # Same signature as IsolatedRunner.solve, on purpose: harness/bench.py calls either runner
+    # the same way (tests/test_guard.py drives both).
     def solve(
         self,
         problem: qpsolvers.Problem,

@@ -259,6 +259,8 @@ class IsolatedRunner:
         except WorkerDied as died:
             return died.status
 
+    # Same signature as LocalRunner.solve, on purpose: harness/bench.py calls either runner the
+    # same way, and the worker passes these arguments on to a LocalRunner.
     def solve(
         self,
         problem: qpsolvers.Problem,

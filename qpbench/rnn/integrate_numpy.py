@@ -68,8 +68,9 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     forced = nominal > 0
     prm[NOMINAL] = nominal
     # From here on the same lines as the compiled loop (qpbench/rnn/kernels.py:_integrate_loops),
-    # kept twice on purpose: this is its numpy twin, the reference the tests compare it with, and
-    # numba compiles only its own module's functions (see that module's docstring).
+    # kept twice on purpose: this is its numpy twin, the reference the tests compare it with
+    # (tests/test_rnn.py::test_numba_and_numpy_agree_online_and_converged), it runs without numba,
+    # and numba compiles only its own module's functions (see that module's docstring).
     nsteps, rmax, sig2, note = _step_bound(P, A, G, prm, nominal, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2

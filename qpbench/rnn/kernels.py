@@ -272,7 +272,8 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
     # From here on the same lines as the numpy twin (qpbench/rnn/integrate_numpy.py), kept twice
-    # on purpose: the twin is this loop's reference in the tests and runs without numba.
+    # on purpose: numba cannot call the twin's array code, the twin runs without numba, and it is
+    # this loop's reference (tests/test_rnn.py::test_numba_and_numpy_agree_online_and_converged).
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
         prm[STEPS] = NO_STABLE_STEP

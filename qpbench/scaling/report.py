@@ -47,30 +47,12 @@ def is_scaling_dir(path: str | Path) -> bool:
 
 def load(folder: str | Path) -> pd.DataFrame:
     """``scaling.csv`` of ``folder`` as a frame (numbers typed)."""
-    from .runner import SUMMARY_NAME, read_summary
+    from .runner import COLUMNS, SUMMARY_NAME, TEXT_COLUMNS, read_summary
 
     rows = read_summary(Path(folder) / SUMMARY_NAME)
     frame = pd.DataFrame(rows)
-    for col in (
-        "links",
-        "n",
-        "m_eq",
-        "m_ineq",
-        "rows",
-        "key_points",
-        "cloud_points",
-        "problems",
-        "failures",
-        "success_rate",
-        "time_median_s",
-        "time_p99_s",
-        "gap_median",
-        "gap_max",
-        "violation_max",
-        "build_median_s",
-        "build_p99_s",
-    ):
-        if col in frame:
+    for col in COLUMNS:
+        if col in frame and col not in TEXT_COLUMNS:
             frame[col] = pd.to_numeric(frame[col], errors="coerce")
     return frame
 

@@ -49,7 +49,14 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.scaling")
 
-__all__ = ["COLUMNS", "ScalingConfig", "matrix_format", "read_summary", "run_scaling"]
+__all__ = [
+    "COLUMNS",
+    "TEXT_COLUMNS",
+    "ScalingConfig",
+    "matrix_format",
+    "read_summary",
+    "run_scaling",
+]
 
 #: Columns of ``scaling.csv``, in order.
 COLUMNS = (
@@ -82,6 +89,8 @@ COLUMNS = (
     "repeat",
     "seed",
 )
+#: The columns of :data:`COLUMNS` that hold text; every other one holds a number.
+TEXT_COLUMNS = ("size", "axis", "backend", "matrix_format", "status", "skip_reason", "driver")
 SUMMARY_NAME = "scaling.csv"
 
 #: How each built-in route takes its matrices: ``dense`` (a dense factorisation or

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..exceptions import ScenarioError
+from ..exceptions import ScenarioError, check_known_keys
 from .verdict import DEFAULT_SAFETY_MARGIN
 
 if TYPE_CHECKING:
@@ -152,13 +152,7 @@ def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
     if not isinstance(raw, dict):
         raise ScenarioError("expected a table", path=file, key=prefix)
     raw = {**_OPTIONAL.get(prefix, {}), **raw}
-    for key in raw:
-        if key not in schema:
-            raise ScenarioError(
-                f"unknown key (expected one of: {', '.join(schema)})",
-                path=file,
-                key=f"{prefix}.{key}",
-            )
+    check_known_keys(raw, schema, file, prefix, ScenarioError)
     out = {}
     for key, kind in schema.items():
         if key not in raw:

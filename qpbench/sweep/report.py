@@ -306,33 +306,21 @@ def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
     return lines
 
 
-def _paired_lines(df: pd.DataFrame) -> list[str]:
-    """The paired comparison of backends on the same instances (nothing for a single backend)."""
+def _titled_table(title: str, header: list[str], rows: list) -> list[str]:
+    """``title`` and the table of ``rows`` under ``header``; nothing when there are no rows."""
     from ..report.markdown import md_table
 
-    lines = []
-    pairs = paired_rows(df)
-    if pairs:
-        lines.append(
-            "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
-            "pairs):\n"
-        )
-        lines.append(
-            md_table(
-                [
-                    "A",
-                    "B",
-                    "instances",
-                    "both ok",
-                    "A ok, B not",
-                    "B ok, A not",
-                    "neither",
-                    "p (McNemar)",
-                ],
-                pairs,
-            )
-        )
-    return lines
+    return [title, md_table(header, rows)] if rows else []
+
+
+def _paired_lines(df: pd.DataFrame) -> list[str]:
+    """The paired comparison of backends on the same instances (nothing for a single backend)."""
+    return _titled_table(
+        "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
+        "pairs):\n",
+        ["A", "B", "instances", "both ok", "A ok, B not", "B ok, A not", "neither", "p (McNemar)"],
+        paired_rows(df),
+    )
 
 
 def _distribution_lines(df: pd.DataFrame) -> list[str]:
@@ -374,16 +362,9 @@ def _distribution_lines(df: pd.DataFrame) -> list[str]:
 
 def _worst_lines(df: pd.DataFrame) -> list[str]:
     """The worst runs, each with the command re-running it alone."""
-    from ..report.markdown import md_table
-
-    lines = []
-    worst = worst_rows(df)
-    if worst:
-        lines.append(
-            "Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
-            "command:\n"
-        )
-        lines.append(
-            md_table(["backend", "instance", "verdict", "d_min mm", "why", "re-run"], worst)
-        )
-    return lines
+    return _titled_table(
+        "Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
+        "command:\n",
+        ["backend", "instance", "verdict", "d_min mm", "why", "re-run"],
+        worst_rows(df),
+    )

@@ -84,7 +84,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exceptions import InputError, ScenarioError
+from ..exceptions import InputError, ScenarioError, check_known_keys
 from .distributions import DISTRIBUTIONS, Distribution, checked_distribution, finite_number
 
 __all__ = ["DISTRIBUTIONS", "Distribution", "SweepSpec", "load_sweep", "parse_sweep"]
@@ -246,13 +246,7 @@ def _positive_int(value, path, key) -> int:
 def _sweep_table(head, path) -> dict:
     if not isinstance(head, dict):
         raise InputError("missing table", path=path, key="sweep")
-    for key in head:
-        if key not in _SWEEP_KEYS:
-            raise InputError(
-                f"unknown key (expected one of: {', '.join(_SWEEP_KEYS)})",
-                path=path,
-                key=f"sweep.{key}",
-            )
+    check_known_keys(head, _SWEEP_KEYS, path, "sweep")
     for key in ("name", "base", "seed", "samples"):
         if key not in head:
             raise InputError("missing key", path=path, key=f"sweep.{key}")
