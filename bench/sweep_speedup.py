@@ -26,6 +26,7 @@ import os
 import statistics
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from qpbench.executors import DaskExecutor, ProcessExecutor, SerialExecutor
@@ -96,47 +97,122 @@ def _wall_task(duration: float):
     return SweepTask(meta, text)
 
 
-def dask_overhead(args) -> None:
-    from distributed import as_completed
-
+def _on_worker(task):
+    """``run_task(task)`` and the wall-clock times [s since the epoch] at which it started and ended."""
     from qpbench.sweep.task import run_task
 
-    task, short = _wall_task(20.0), _wall_task(0.01)
-    run_task(short)
-    local, loop_local, loop_remote = [], [], []
-    for _ in range(args.repeat):
-        t0 = time.perf_counter()
-        loop_local.append(run_task(task)["wall_time_s"])
-        local.append(time.perf_counter() - t0)
-    ex = DaskExecutor(jobs=1)
+    start = time.time()
+    row = run_task(task)
+    return row, start, time.time()
+
+
+@contextmanager
+def _plain_cluster():
+    """A 1-worker ``LocalCluster`` with Dask's default settings, and a client of it."""
+    from distributed import Client, LocalCluster
+
+    with (
+        LocalCluster(
+            n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+@contextmanager
+def _executor(scheduler=None):
+    ex = DaskExecutor(scheduler, jobs=1)
     try:
-        client = ex.client
-        client.submit(run_task, short, pure=False).result()
-        t0 = time.perf_counter()
-        for _ in as_completed([client.submit(_nothing, i, pure=False) for i in range(args.tasks)]):
-            pass
-        per_task = (time.perf_counter() - t0) / args.tasks
-        remote = []
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
-            loop_remote.append(client.submit(run_task, task, pure=False).result()["wall_time_s"])
-            remote.append(time.perf_counter() - t0)
+        yield ex.client
     finally:
         ex.close()
-    inst, dask_inst = statistics.median(local), statistics.median(remote)
+
+
+@contextmanager
+def _plugged_cluster():
+    """Dask's defaults, reached as an existing cluster: the executor registers its worker plugin."""
+    with _plain_cluster() as plain, _executor(plain.scheduler.address) as client:
+        yield client
+
+
+#: The Dask set-ups compared: (label, context manager giving a client of a 1-worker cluster).
+SETUPS = (
+    ("Dask's defaults", _plain_cluster),
+    ("qpbench's LocalCluster", _executor),
+    ("defaults + QuietWorker plugin", _plugged_cluster),
+)
+
+
+def _timed_remote(client, task) -> tuple[float, float, float, float, float]:
+    """(total, submit to start, on the worker, end to result, closed loop) of one task, in [s]."""
+    t0 = time.time()
+    row, start, end = client.submit(_on_worker, task, pure=False).result()
+    t1 = time.time()
+    return t1 - t0, start - t0, end - start, t1 - end, row["wall_time_s"]
+
+
+def _timed_here(task) -> tuple[float, float, float, float, float]:
+    row, start, end = _on_worker(task)
+    return end - start, 0.0, end - start, 0.0, row["wall_time_s"]
+
+
+def _empty_tasks(client, n: int) -> float:
+    from distributed import as_completed
+
+    t0 = time.perf_counter()
+    for _ in as_completed([client.submit(_nothing, i, pure=False) for i in range(n)]):
+        pass
+    return (time.perf_counter() - t0) / n
+
+
+def dask_overhead(args) -> None:
+    import logging
+
+    logging.getLogger("qpbench.executors").setLevel(logging.ERROR)  # the plain tcp:// warning
+    task, short = _wall_task(20.0), _wall_task(0.01)
+    _on_worker(short)
+    runs = {"in this process": []} | {label: [] for label, _ in SETUPS}
+    first, per_task = {}, None
+    for _ in range(args.rounds):  # blocks in turn, so that a change of load hits every set-up
+        runs["in this process"] += [_timed_here(task) for _ in range(args.repeat)]
+        for label, setup in SETUPS:
+            with setup() as client:
+                client.submit(_on_worker, short, pure=False).result()
+                first.setdefault(label, _timed_remote(client, task)[0])
+                runs[label] += [_timed_remote(client, task) for _ in range(args.repeat)]
+                if per_task is None and label == "qpbench's LocalCluster":
+                    per_task = _empty_tasks(client, args.tasks)
+    med = {k: [statistics.median(r[i] for r in v) for i in range(5)] for k, v in runs.items()}
+    here = med["in this process"][0]
     print(
-        f"Dask LocalCluster (1 worker), {args.tasks} empty tasks: {per_task * 1e3:.2f} ms per task "
-        f"({100 * per_task / inst:.2f} % of a 20 s wall instance with daqp, {inst:.3f} s in this process)"
+        f"Dask's cost per task on a 1-worker LocalCluster: {per_task * 1e3:.2f} ms for an empty task "
+        f"({args.tasks} through as_completed, qpbench's cluster)"
     )
     print(
-        f"one 20 s wall instance with daqp (the sweep's task), median of {args.repeat}: {inst:.3f} s in this "
-        f"process, {dask_inst:.3f} s through Dask: overhead {1e3 * (dask_inst - inst):.1f} ms "
-        f"({100 * (dask_inst - inst) / inst:.1f} %; target < 5 %)"
+        f"one 20 s wall instance with daqp (the sweep's task), median of {args.rounds} x {args.repeat}, "
+        "in blocks taken in turn:"
     )
-    lo, lr = statistics.median(loop_local), statistics.median(loop_remote)
     print(
-        f"  of which the closed loop itself (its wall_time_s): {lo:.3f} s here, {lr:.3f} s on the worker "
-        f"({1e3 * (lr - lo):+.1f} ms: the worker runs tasks in a thread beside its own event loop)"
+        f"  {'':32s} {'total':>8s} {'overhead':>19s} {'on the worker':>13s} {'closed loop':>11s} "
+        f"{'submit->start':>13s} {'end->result':>11s} {'first run':>9s}"
+    )
+    for label, (total, before, run, after, loop) in med.items():
+        over = (
+            ""
+            if label == "in this process"
+            else f"{1e3 * (total - here):+7.1f} ms {100 * (total - here) / here:+6.1f} %"
+        )
+        tail = (
+            ""
+            if label == "in this process"
+            else f"{1e3 * before:10.1f} ms {1e3 * after:8.1f} ms {first[label]:7.3f} s"
+        )
+        print(f"  {label:32s} {total:6.3f} s {over:>19s} {run:11.3f} s {loop:9.3f} s {tail}")
+    print(
+        "  (overhead: total minus the total in this process, target < 5 %; on the worker: run_task's own "
+        "time there; closed loop: its wall_time_s; first run: the first 20 s instance on a fresh worker, "
+        "not counted)"
     )
 
 
@@ -147,11 +223,14 @@ def main() -> None:
     p.add_argument("--duration", type=float, default=6.0)
     p.add_argument("--backends", default="daqp,osqp,qpoases")
     p.add_argument("--tasks", type=int, default=200)
-    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--repeat", type=int, default=5, help="runs per set-up and round")
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--skip-speedup", action="store_true", help="only the cost of a Dask task")
     args = p.parse_args()
     warmup()
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    speedup(args)
+    if not args.skip_speedup:
+        speedup(args)
     dask_overhead(args)
     print(f"load average {os.getloadavg()[0]:.2f}")
 

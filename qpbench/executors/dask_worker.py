@@ -26,15 +26,17 @@ PLUGIN_NAME = "qpbench-quiet-worker"
 
 
 class QuietWorker(WorkerPlugin):
-    """Stop the worker's periodic callbacks ``stop``, slow ``slow`` down, while registered.
+    """Take the worker's periodic callbacks ``stop`` away, run ``slow`` less often, while registered.
 
     Args:
         stop: Names of the worker's periodic callbacks to stop (``Worker.periodic_callbacks``).
         slow: ``{name: period in [s]}`` of callbacks to run less often.
 
-    Callbacks the worker does not have (a worker started with the profiler
-    off has no ``profile``) are left alone; teardown restarts only what
-    setup stopped and restores the periods it changed.
+    A stopped callback leaves ``Worker.periodic_callbacks`` (so that a
+    worker that joins the cluster later, which sets its plugins up before it
+    starts its callbacks, does not start it) and comes back, running, at
+    teardown. Callbacks the worker does not have (a worker started with the
+    profiler off has no ``profile``) are left alone.
     """
 
     name = PLUGIN_NAME
@@ -42,17 +44,16 @@ class QuietWorker(WorkerPlugin):
     def __init__(self, stop: tuple[str, ...] = (), slow: dict[str, float] | None = None):
         self.stop = tuple(stop)
         self.slow = dict(slow or {})
-        self._stopped: list[str] = []
+        self._removed: dict = {}
         self._periods: dict[str, float] = {}
 
     def setup(self, worker) -> None:
         """Runs on the worker's event loop (the callbacks' own thread)."""
         callbacks = worker.periodic_callbacks
         for name in self.stop:
-            pc = callbacks.get(name)
-            if pc is not None and pc.is_running():
+            if name in callbacks:
+                self._removed[name] = pc = callbacks.pop(name)
                 pc.stop()
-                self._stopped.append(name)
         for name, period in self.slow.items():
             pc = callbacks.get(name)
             if pc is not None and pc.callback_time < period * 1e3:
@@ -60,14 +61,14 @@ class QuietWorker(WorkerPlugin):
                 _retime(pc, period * 1e3)
 
     def teardown(self, worker) -> None:
+        """Runs on the worker's event loop, also when the worker closes (which then stops every callback)."""
         callbacks = worker.periodic_callbacks
         for name, ms in self._periods.items():
             if name in callbacks:
                 _retime(callbacks[name], ms)
-        for name in self._stopped:
-            if name in callbacks and not callbacks[name].is_running():
-                callbacks[name].start()
-        self._stopped, self._periods = [], {}
+        for name, pc in self._removed.items():
+            callbacks.setdefault(name, pc).start()
+        self._removed, self._periods = {}, {}
 
 
 def _retime(pc, ms: float) -> None:
