@@ -97,13 +97,33 @@ def _wall_task(duration: float):
     return SweepTask(meta, text)
 
 
-def _on_worker(task):
-    """``run_task(task)`` and the wall-clock times [s since the epoch] at which it started and ended."""
+def _blocked() -> int:
+    """Times this thread has waited so far (voluntary context switches: for the GIL, on a busy
+    computation); 0 where Linux's ``/proc/thread-self`` is missing."""
+    try:
+        with open("/proc/thread-self/status") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("voluntary_ctxt"))
+    except OSError:
+        return 0
+
+
+def _on_worker(task) -> dict:
+    """``run_task(task)`` where it runs: wall-clock start and end [s since the epoch], CPU time of
+    this thread and of the whole process [s], the thread's waits, and the closed loop's own time."""
     from qpbench.sweep.task import run_task
 
+    waits, cpu, process = _blocked(), time.thread_time(), time.process_time()
     start = time.time()
     row = run_task(task)
-    return row, start, time.time()
+    end = time.time()
+    return {
+        "start": start,
+        "end": end,
+        "cpu": time.thread_time() - cpu,
+        "others": time.process_time() - process - (time.thread_time() - cpu),
+        "waits": _blocked() - waits,
+        "loop": row["wall_time_s"],
+    }
 
 
 @contextmanager
@@ -144,17 +164,28 @@ SETUPS = (
 )
 
 
-def _timed_remote(client, task) -> tuple[float, float, float, float, float]:
-    """(total, submit to start, on the worker, end to result, closed loop) of one task, in [s]."""
+#: What :func:`_timed` gives per run: total [s], submit to start [s], run_task on the worker [s],
+#: end to result [s], closed loop [s], CPU of the task's thread and of the others [s], waits.
+FIELDS = ("total", "before", "run", "after", "loop", "cpu", "others", "waits")
+
+
+def _timed(client, task) -> tuple:
+    """:data:`FIELDS` of one task: on the cluster of ``client``, or in this process (``None``)."""
     t0 = time.time()
-    row, start, end = client.submit(_on_worker, task, pure=False).result()
+    r = _on_worker(task) if client is None else client.submit(_on_worker, task, pure=False).result()
     t1 = time.time()
-    return t1 - t0, start - t0, end - start, t1 - end, row["wall_time_s"]
-
-
-def _timed_here(task) -> tuple[float, float, float, float, float]:
-    row, start, end = _on_worker(task)
-    return end - start, 0.0, end - start, 0.0, row["wall_time_s"]
+    if client is None:
+        t0, t1 = r["start"], r["end"]
+    return (
+        t1 - t0,
+        r["start"] - t0,
+        r["end"] - r["start"],
+        t1 - r["end"],
+        r["loop"],
+        r["cpu"],
+        r["others"],
+        r["waits"],
+    )
 
 
 def _empty_tasks(client, n: int) -> float:
@@ -175,16 +206,20 @@ def dask_overhead(args) -> None:
     runs = {"in this process": []} | {label: [] for label, _ in SETUPS}
     first, per_task = {}, None
     for _ in range(args.rounds):  # blocks in turn, so that a change of load hits every set-up
-        runs["in this process"] += [_timed_here(task) for _ in range(args.repeat)]
+        runs["in this process"] += [_timed(None, task) for _ in range(args.repeat)]
         for label, setup in SETUPS:
             with setup() as client:
                 client.submit(_on_worker, short, pure=False).result()
-                first.setdefault(label, _timed_remote(client, task)[0])
-                runs[label] += [_timed_remote(client, task) for _ in range(args.repeat)]
+                first.setdefault(label, _timed(client, task)[0])
+                runs[label] += [_timed(client, task) for _ in range(args.repeat)]
                 if per_task is None and label == "qpbench's LocalCluster":
                     per_task = _empty_tasks(client, args.tasks)
-    med = {k: [statistics.median(r[i] for r in v) for i in range(5)] for k, v in runs.items()}
-    here = med["in this process"][0]
+    _print_overhead(args, runs, first, per_task)
+
+
+def _print_overhead(args, runs: dict, first: dict, per_task: float) -> None:
+    med = {k: dict(zip(FIELDS, map(statistics.median, zip(*v)))) for k, v in runs.items()}
+    here = med["in this process"]["total"]
     print(
         f"Dask's cost per task on a 1-worker LocalCluster: {per_task * 1e3:.2f} ms for an empty task "
         f"({args.tasks} through as_completed, qpbench's cluster)"
@@ -194,25 +229,23 @@ def dask_overhead(args) -> None:
         "in blocks taken in turn:"
     )
     print(
-        f"  {'':32s} {'total':>8s} {'overhead':>19s} {'on the worker':>13s} {'closed loop':>11s} "
-        f"{'submit->start':>13s} {'end->result':>11s} {'first run':>9s}"
+        f"  {'':30s} {'total':>7s} {'overhead':>18s} {'run_task':>8s} {'loop':>7s} {'before':>7s} "
+        f"{'after':>7s} {'cpu':>7s} {'others':>7s} {'waits':>5s} {'1st run':>7s}"
     )
-    for label, (total, before, run, after, loop) in med.items():
-        over = (
-            ""
-            if label == "in this process"
-            else f"{1e3 * (total - here):+7.1f} ms {100 * (total - here) / here:+6.1f} %"
+    for label, m in med.items():
+        remote = label != "in this process"
+        over = f"{1e3 * (m['total'] - here):+7.1f} ms {100 * (m['total'] - here) / here:+6.1f} %"
+        print(
+            f"  {label:30s} {m['total']:5.3f} s {over if remote else '':>18s} {m['run']:6.3f} s "
+            f"{m['loop']:5.3f} s {1e3 * m['before']:4.1f} ms {1e3 * m['after']:4.1f} ms {m['cpu']:5.3f} s "
+            f"{1e3 * m['others']:4.0f} ms {m['waits']:5.0f} {first[label] if remote else here:5.3f} s"
         )
-        tail = (
-            ""
-            if label == "in this process"
-            else f"{1e3 * before:10.1f} ms {1e3 * after:8.1f} ms {first[label]:7.3f} s"
-        )
-        print(f"  {label:32s} {total:6.3f} s {over:>19s} {run:11.3f} s {loop:9.3f} s {tail}")
     print(
-        "  (overhead: total minus the total in this process, target < 5 %; on the worker: run_task's own "
-        "time there; closed loop: its wall_time_s; first run: the first 20 s instance on a fresh worker, "
-        "not counted)"
+        "  overhead: total minus the total in this process (target < 5 %); run_task: its time where it ran; "
+        "loop: the closed loop's wall_time_s;\n  before/after: submit to start, end to result; cpu: the task "
+        "thread's CPU time; others: CPU time of the process's other threads meanwhile (the worker's "
+        "event loop);\n  waits: the task thread's voluntary context switches (waits for the GIL); 1st run: the "
+        "first 20 s instance on a fresh worker (not counted)"
     )
 
 
