@@ -34,7 +34,8 @@ from multiprocessing.connection import wait
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Iterator
+    from multiprocessing.connection import Connection
     from multiprocessing.context import BaseContext
 
 log = logging.getLogger("qpbench.reference")
@@ -45,20 +46,29 @@ DEADLINE_MARGIN_S = 1.0
 START_TIMEOUT_S = 120.0
 
 
+def requests(conn: Connection) -> Iterator:
+    """Each request a worker process receives on ``conn``, until ``None`` or the other end closes.
+
+    The loop of every worker process that answers one request at a time
+    (here and :mod:`qpbench.executors.local`).
+    """
+    while True:
+        try:
+            request = conn.recv()
+        except EOFError:
+            return
+        if request is None:
+            return
+        yield request
+
+
 def _worker_main(conn) -> None:
     """Body of a worker: answer ``(record, solver, time_limit)`` requests until ``None``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
     from .reference_solve import Candidate, solve_candidate
 
     conn.send("ready")
-    while True:
-        try:
-            task = conn.recv()
-        except EOFError:
-            return
-        if task is None:
-            return
-        record, solver, time_limit = task
+    for record, solver, time_limit in requests(conn):
         try:
             answer = solve_candidate(record, solver, time_limit).plain()
         except Exception as exc:  # noqa: BLE001 - a bug in one task must not stop the others

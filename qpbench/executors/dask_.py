@@ -1,0 +1,234 @@
+"""Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1.
+
+:class:`DaskExecutor` reaches the cluster at a ``scheduler`` address
+(``tls://`` with a :func:`load_security` file) or starts an in-process
+``LocalCluster`` bound to 127.0.0.1. Tasks are submitted at once and
+collected with ``distributed.as_completed``; a task whose worker was lost
+(``KilledWorker``) is submitted once more, then reported lost. The local
+cluster's scheduler gives up on a task at its first lost worker
+(``allowed-failures = 0``) so that the retry is this module's; an external
+scheduler first applies its own ``distributed.scheduler.allowed-failures``.
+
+A task is a whole closed-loop run: pure computation in a thread beside the
+worker's event loop, which shares its GIL. The workers of the local cluster
+are started with :data:`WORKER_CONFIG`; on an existing cluster the client
+registers :class:`qpbench.executors.dask_worker.QuietWorker`, which does the
+same on every worker while the executor is open.
+"""
+
+from __future__ import annotations
+
+import logging
+import tomllib
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ..exceptions import InputError, ParamError
+from .local import MAX_ATTEMPTS, Done, run_located
+
+if TYPE_CHECKING:
+    from distributed.security import Security
+
+log = logging.getLogger("qpbench.executors")
+
+__all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
+
+#: Dask settings of the workers a sweep runs on. The statistical profiler samples the task's
+#: stack every 10 ms and the event loop checks its own health every 20 ms, both on the worker's
+#: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`). Measured on a
+#: 20 s wall instance with DAQP (``bench/sweep_speedup.py``): with Dask's defaults the worker's
+#: other threads took 37 ms of CPU time during the task's 0.47 s and the task's thread waited 34
+#: times; with these settings 7 ms and once (the memory monitor and heartbeats remain).
+WORKER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+}
+#: The plugin's equivalent of :data:`WORKER_CONFIG` on a running worker.
+QUIET_STOP = ("profile", "profile-cycle")
+QUIET_SLOW = {"tick": 1.0}
+
+
+def load_security(path: str | Path) -> Security:
+    """A ``distributed.security.Security`` from a small TOML or YAML file.
+
+    The file names PEM files (relative paths are read from the file's folder)::
+
+        ca_file = "ca.pem"       # the certificate authority that signed every certificate
+        cert_file = "node.pem"   # this machine's certificate
+        key_file = "node-key.pem"
+
+    The same certificate serves the client and, for the in-process local
+    cluster, its scheduler and workers. Encryption is required.
+
+    Raises:
+        InputError: unreadable file, unknown or missing key, missing PEM file.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+        if path.suffix.lower() in (".yaml", ".yml"):
+            import yaml
+
+            raw = yaml.safe_load(text)
+        else:
+            raw = tomllib.loads(text)
+    except Exception as exc:  # noqa: BLE001 - unreadable, bad TOML or YAML: one line
+        raise InputError(
+            f"cannot read the security file: {type(exc).__name__}: {exc}", path=path
+        ) from None
+    if not isinstance(raw, dict):
+        raise InputError("expected keys ca_file, cert_file, key_file", path=path)
+    for key in raw:
+        if key not in ("ca_file", "cert_file", "key_file"):
+            raise InputError(
+                "unknown key (expected ca_file, cert_file, key_file)", path=path, key=key
+            )
+    files = {}
+    for key in ("ca_file", "cert_file", "key_file"):
+        if not isinstance(raw.get(key), str):
+            raise InputError("missing key (the path of a PEM file)", path=path, key=key)
+        file = (path.parent / raw[key]).resolve()
+        if not file.is_file():
+            raise InputError(f"no such file: {file}", path=path, key=key)
+        files[key] = str(file)
+    from distributed.security import Security
+
+    ca, cert, key = files["ca_file"], files["cert_file"], files["key_file"]
+    return Security(
+        tls_ca_file=ca,
+        tls_client_cert=cert,
+        tls_client_key=key,
+        tls_scheduler_cert=cert,
+        tls_scheduler_key=key,
+        tls_worker_cert=cert,
+        tls_worker_key=key,
+        require_encryption=True,
+    )
+
+
+class DaskExecutor:
+    """Tasks on a Dask ``distributed`` cluster: the one at ``scheduler``, or a local one on 127.0.0.1.
+
+    Args:
+        scheduler: Address of an existing cluster's scheduler; ``None`` starts
+            a ``LocalCluster`` of ``jobs`` single-threaded worker processes with
+            :data:`WORKER_CONFIG`.
+        security: A ``distributed.security.Security`` (:func:`load_security`) for TLS.
+        jobs: Workers of the local cluster.
+
+    On an existing cluster the client registers
+    :class:`~qpbench.executors.dask_worker.QuietWorker` (the equivalent of
+    :data:`WORKER_CONFIG` on running workers, and on workers that join later)
+    and removes it at :meth:`close`, which restores the workers' settings.
+    """
+
+    name = "dask"
+
+    def __init__(self, scheduler: str | None = None, security=None, jobs: int = 1):
+        try:
+            import dask
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise ParamError(
+                "--executor dask needs dask and distributed: pip install 'qpbench[dask]'",
+                key="--executor",
+            ) from None
+        self.cluster = None
+        self._plugin = False
+        if scheduler is None:
+            with dask.config.set({**WORKER_CONFIG, "distributed.scheduler.allowed-failures": 0}):
+                self.cluster = LocalCluster(
+                    n_workers=jobs,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address=None,
+                    security=security,
+                    protocol="tls://" if security is not None else None,
+                )
+            self.client = Client(self.cluster, security=security)
+        else:
+            try:
+                self.client = Client(scheduler, security=security, timeout="30s")
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                raise InputError(
+                    f"cannot reach the Dask scheduler: {type(exc).__name__}: {exc}",
+                    key="--scheduler",
+                ) from None
+            self._quiet_workers()
+        self.address = self.client.scheduler.address
+
+    def _quiet_workers(self) -> None:
+        """Register :class:`~.dask_worker.QuietWorker` on the cluster's workers (until :meth:`close`)."""
+        from .dask_worker import PLUGIN_NAME, QuietWorker
+
+        try:
+            self.client.register_plugin(QuietWorker(QUIET_STOP, QUIET_SLOW), name=PLUGIN_NAME)
+            self._plugin = True
+        except Exception as exc:  # noqa: BLE001 - a cluster that refuses plugins still runs the tasks
+            log.warning(
+                "could not quiet the Dask workers' profiler (%s: %s): tasks run slower",
+                type(exc).__name__,
+                exc,
+            )
+
+    @property
+    def concurrency(self) -> int:
+        return (
+            sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()) or 1
+        )
+
+    def _per_host(self) -> tuple[dict, dict]:
+        workers = self.client.scheduler_info()["workers"]
+        threads: dict[str, int] = {}
+        for w in workers.values():
+            threads[w["host"]] = threads.get(w["host"], 0) + w.get("nthreads", 1)
+        return {a: w["host"] for a, w in workers.items()}, threads
+
+    def run(self, fn: Callable, items: list[tuple]) -> Iterator[Done]:
+        from distributed import as_completed
+
+        hosts, threads = self._per_host()
+        pending = {}
+        for i, (key, arg) in enumerate(items):
+            fut = self.client.submit(run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-1")
+            pending[fut] = (i, key, arg, 1)
+        queue = as_completed(list(pending))
+        for fut in queue:
+            i, key, arg, attempts = pending.pop(fut)
+            if fut.status == "finished":
+                value, host, worker = fut.result()
+                if worker not in hosts:
+                    hosts, threads = self._per_host()
+                yield Done(
+                    key, value, None, attempts, host, worker, threads.get(hosts.get(worker), 1)
+                )
+                continue
+            why = f"{type(fut.exception()).__name__}: {fut.exception()}"
+            if attempts < MAX_ATTEMPTS:
+                log.warning("%s: %s; running it again", key, why)
+                new = self.client.submit(
+                    run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempts + 1}"
+                )
+                pending[new] = (i, key, arg, attempts + 1)
+                queue.add(new)
+                continue
+            yield Done(
+                key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0
+            )
+
+    def close(self) -> None:
+        if self._plugin:
+            from .dask_worker import PLUGIN_NAME
+
+            try:
+                self.client.unregister_worker_plugin(PLUGIN_NAME)
+            except Exception as exc:  # noqa: BLE001 - closing goes on: the plugin stays registered
+                log.warning(
+                    "could not remove the Dask worker plugin: %s: %s", type(exc).__name__, exc
+                )
+            self._plugin = False
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()

@@ -1,0 +1,136 @@
+"""Executors: the Dask workers' settings (local cluster, worker plugin on an existing one), a lost
+Dask worker's run retried once then recorded as crashed, and the worker processes' request loop."""
+
+from __future__ import annotations
+
+import multiprocessing
+import threading
+
+import pytest
+from test_sweep import PLUGIN, rows_of, write_sweep
+
+from qpbench.cli import main
+from qpbench.reference_pool import requests
+
+pytest.importorskip("distributed")
+
+#: Two instances of the tiny sweep's base (short runs: each lost worker is restarted by its nanny).
+TWO = """
+[sweep]
+name = "two"
+base = "wall"
+seed = 3
+samples = 2
+duration = 0.1
+
+[parameters]
+"controller.desired_force" = { dist = "uniform", low = 10.0, high = 30.0 }
+"""
+
+
+def _settings(dask_worker) -> dict:
+    """``{callback: period in [ms]}`` of the worker's running periodic callbacks."""
+    return {
+        k: pc.callback_time for k, pc in dask_worker.periodic_callbacks.items() if pc.is_running()
+    }
+
+
+def _quiet(settings: dict) -> bool:
+    return (
+        "profile" not in settings and "profile-cycle" not in settings and settings["tick"] >= 1000
+    )
+
+
+def test_local_cluster_workers_start_quiet():
+    from qpbench.executors import DaskExecutor
+
+    ex = DaskExecutor(jobs=1)
+    try:
+        assert ex.address.startswith("tcp://127.0.0.1:")
+        (settings,) = ex.client.run(_settings).values()
+        assert _quiet(settings) and "memory_monitor" in settings and "heartbeat" in settings
+        done = sorted(ex.run(abs, [("a", -2), ("b", 3)]), key=lambda d: d.key)
+        assert [(d.key, d.value, d.lost, d.attempts) for d in done] == [
+            ("a", 2, None, 1),
+            ("b", 3, None, 1),
+        ]
+        assert all(d.worker.startswith("tcp://127.0.0.1:") and d.concurrent == 1 for d in done)
+    finally:
+        ex.close()
+
+
+def test_worker_plugin_quiets_an_existing_cluster_until_close():
+    from distributed import Client, LocalCluster
+
+    from qpbench.executors import DaskExecutor
+
+    with (
+        LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=False,
+            protocol="tcp://",
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster,
+        Client(cluster) as admin,
+    ):
+        (before,) = admin.run(_settings).values()
+        assert not _quiet(before)
+        ex = DaskExecutor(cluster.scheduler_address)
+        try:
+            cluster.scale(2)  # a worker that joins while the plugin is registered gets it too
+            admin.wait_for_workers(2)
+            during = admin.run(_settings)
+            assert len(during) == 2 and all(_quiet(s) for s in during.values())
+            assert sorted(d.value for d in ex.run(abs, [("a", -1), ("b", -4)])) == [1, 4]
+        finally:
+            ex.close()
+        after = admin.run(_settings)
+        assert len(after) == 2
+        assert all(
+            s["profile"] == before["profile"] and s["tick"] == before["tick"]
+            for s in after.values()
+        )
+
+
+def test_lost_dask_worker_is_retried_once_then_crashed_and_resume_fills_it(tmp_path, monkeypatch):
+    flag = tmp_path / "die"
+    flag.touch()
+    monkeypatch.setenv("QPBENCH_TEST_DIE", str(flag))  # read by the workers the cluster spawns
+    out = tmp_path / "out"
+    args = ["sweep", str(write_sweep(tmp_path, TWO, "two.toml")), "--out", str(out)]
+    args += ["--backends", "daqp,sweep:die-on-flag", "--plugin", PLUGIN]
+    args += ["--executor", "dask", "--jobs", "2"]
+    assert main(args) == 1
+    rows = rows_of(out)
+    dead = [r for r in rows if r["backend"] == "sweep:die-on-flag"]
+    assert len(rows) == 4 and len(dead) == 2
+    assert all(r["status"] == "crashed" and r["attempts"] == "2" for r in dead), dead
+    assert all("KilledWorker" in r["error"] and "attempt 2 of 2" in r["error"] for r in dead)
+    assert all(r["status"] == "ok" for r in rows if r["backend"] == "daqp")
+    flag.unlink()
+    assert main(args + ["--resume"]) == 0
+    rows = rows_of(out)
+    assert len(rows) == 4 and all(r["status"] == "ok" and r["executor"] == "dask" for r in rows)
+
+
+def _echo(conn) -> None:
+    for request in requests(conn):
+        conn.send(2 * request)
+
+
+@pytest.mark.parametrize("end", ["none", "close"])
+def test_requests_end_at_none_or_a_closed_pipe(end):
+    parent, child = multiprocessing.Pipe()
+    worker = threading.Thread(target=_echo, args=(child,), daemon=True)
+    worker.start()
+    for x in (1, "a", [3]):
+        parent.send(x)
+        assert parent.recv() == 2 * x
+    if end == "none":
+        parent.send(None)
+    else:
+        parent.close()
+    worker.join(10)
+    assert not worker.is_alive()
