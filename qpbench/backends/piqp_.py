@@ -175,6 +175,9 @@ class PiqpBackend(Backend):
                 return self._solve_sparse(problem)
             parts = _dense(problem)
         P, q, A, b, G, h, lb, ub = parts
+        # The shapes, not a helper's key: written out, they cost no call per tick. PIQP prints
+        # "... has wrong dimensions" and keeps its old data on a wrong shape, so an update
+        # needs the shapes the solver was set up with (checked then, in _run).
         shapes = (
             P.shape,
             q.shape,
@@ -185,26 +188,7 @@ class PiqpBackend(Backend):
             None if lb is None else lb.shape,
             None if ub is None else ub.shape,
         )
-        solver = self._solver
-        try:
-            if solver is not None and shapes == self._shapes:
-                # PIQP prints "... has wrong dimensions" and keeps its old data on a wrong
-                # shape: the shapes are those the solver was set up with (checked then).
-                solver.update(P, q, A, b, G, None, h, lb, ub)
-            else:
-                check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-                solver = self._setup(
-                    (_MODULE[0] if _MODULE else _piqp()).DenseSolver,
-                    shapes,
-                    (P, q, A, b, G, None, h, lb, ub),
-                )
-            raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
-        except (ValueError, TypeError, RuntimeError) as exc:
-            self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
-        return self._read(
-            problem, raw_status, A is not None, G is not None, lb is not None or ub is not None
-        )
+        return self._run(problem, None, shapes, P, q, A, b, G, h, lb, ub)
 
     def _solve_sparse(self, problem):
         """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
@@ -219,38 +203,39 @@ class PiqpBackend(Backend):
             ub is None,
             structure_key(P, A, G),
         )
+        return self._run(problem, _piqp().SparseSolver, shapes, P, q, A, b, G, h, lb, ub)
+
+    def _run(self, problem, cls, shapes, P, q, A, b, G, h, lb, ub) -> BackendSolution:
+        """Update the kept solver when it was set up for ``shapes``, else set up a new ``cls``
+        (``None``: ``DenseSolver``) after checking the shapes; solve; the solution in
+        qpsolvers' convention."""
+        solver = self._solver
         try:
-            if self._solver is not None and shapes == self._shapes:
-                solver = self._solver
+            if solver is not None and shapes == self._shapes:
                 solver.update(P, q, A, b, G, None, h, lb, ub)
             else:
-                solver = self._setup(_piqp().SparseSolver, shapes, (P, q, A, b, G, None, h, lb, ub))
+                check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+                solver = self._setup(
+                    cls or _piqp().DenseSolver, shapes, (P, q, A, b, G, None, h, lb, ub)
+                )
             raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
         except (ValueError, TypeError, RuntimeError) as exc:
             self.reset()
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
-        return self._read(
-            problem, raw_status, A is not None, G is not None, lb is not None or ub is not None
-        )
-
-    def _read(
-        self, problem, raw_status, has_eq: bool, has_ineq: bool, has_box: bool
-    ) -> BackendSolution:
-        """The solution of the kept solver's last solve (``raw_status``: what ``solve()``
-        returned), in qpsolvers' convention."""
         info = self._info
         if raw_status.value == _SOLVED[0]:
-            # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
+            # Without __init__ (BackendSolution's defaults are class attributes): a microsecond
+            # less per call. No objective read (a property read of the binding): it is
+            # computed from x if asked for.
             sol = _new(BackendSolution)
             sol.problem = problem
             sol.status = "optimal"
             sol.extras = {"raw_status": "PIQP_SOLVED"}
             x, y, z_l, z_u, z_bl, z_bu = self._views
             sol.x = x.copy()
-            sol.y = y.copy() if has_eq else _EMPTY
-            sol.z = z_u - z_l if has_ineq else _EMPTY
-            sol.z_box = z_bu - z_bl if has_box else _EMPTY
-            sol._obj = info.primal_obj
+            sol.y = _EMPTY if A is None else y.copy()
+            sol.z = _EMPTY if G is None else z_u - z_l
+            sol.z_box = _EMPTY if lb is None and ub is None else z_bu - z_bl
         else:
             status, raw = _STATUS_MAP.get(raw_status, ("not_solved", str(raw_status)))
             sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
