@@ -122,7 +122,7 @@ _NATIVE: dict[str, dict[str, object]] = {
         "max_iter": "max_iter",
         "time_limit": "time_limit",
     },
-    # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error at high_accuracy).
+    # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error; high_accuracy asks 1e-9).
     "gurobi": {"FeasibilityTol": "eps_abs", "OptimalityTol": "eps_abs", "TimeLimit": "time_limit"},
     "hpipm": {
         "tol_dual_gap": "eps_abs",
