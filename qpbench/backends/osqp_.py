@@ -48,6 +48,9 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
+
+# The same helpers as clarabel_ imports: both backends lay a dense problem out as CSC with
+# every entry stored, and take settings the same way; only the stacking differs.
 from ._common import (
     GENERIC_KEYS,
     all_dense,
