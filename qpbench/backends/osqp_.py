@@ -20,6 +20,13 @@ block holds its diagonal only; sparse inputs keep their own pattern. Any
 other change of shape or pattern (or of settings) rebuilds the solver.
 :meth:`OsqpBackend.reset` drops it.
 
+Per-call cost. A tick whose blocks are all there, dense and of the kept
+shape (the robot's) takes the short route: ``C``'s data and ``l`` are written
+into buffers the layout keeps (OSQP copies what ``update`` is given), ``P``'s
+upper triangle is one ``take`` of precomputed flat indices, and OSQP 1.x's
+``x`` and multiplier, fresh arrays on every solve, are handed back uncopied
+(``y``, ``z``, ``z_box`` as views of the multiplier).
+
 Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, ``time_limit`` from the
 profile; ``polishing=True`` when ``eps_abs <= 1e-7`` (the ``high_accuracy``
 profile): ADMM alone seldom reaches a 1e-9 residual, the polishing step

@@ -38,7 +38,9 @@ and nothing else, as that route gets them
 :class:`~qpbench.exceptions.ParamError`.
 
 Time. ``solver_time_s`` is PIQP's ``info.run_time``: set-up plus solve on the
-first tick of a shape, update plus solve after.
+first tick of a shape, update plus solve after. The objective is computed
+from ``x`` when it is read (:class:`~qpbench.backends.base.BackendSolution`),
+not read from ``info.primal_obj``: a property read of the binding per tick.
 
 Statuses. ``PIQP_SOLVED`` -> optimal, ``PIQP_PRIMAL_INFEASIBLE`` /
 ``PIQP_DUAL_INFEASIBLE`` -> primal_infeasible / dual_infeasible,
