@@ -273,14 +273,16 @@ class QpoasesBackend(Backend):
             sol.z = xy[part_z]
             sol._obj = obj
         elif st == -1:
-            message = self._lib.qpb_message(raw)
-            sol.error = (
-                f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
-            )
+            sol.error = self._message(raw)
         sol.found = status == "optimal"
         sol.backend = self.name
         sol.wall_time_s = (_perf_ns() - start) * 1e-9
         return sol
+
+    def _message(self, raw: int) -> str:
+        """The error text of qpOASES' return value ``raw``."""
+        message = self._lib.qpb_message(raw)
+        return f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
 
     def _workspace(self, P, q, A, b, G, h, lb, ub) -> Workspace:
         """The workspace of this problem's shape (checked here), the current one when the shape holds."""
