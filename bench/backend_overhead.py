@@ -496,7 +496,9 @@ def time_pass(solve, problems) -> list[float]:
     return times
 
 
-def main(argv=None) -> int:
+def parse_args(argv=None) -> argparse.Namespace:
+    # Options declared one by one as in the other bench scripts (bench/accuracy_margin.py has
+    # the same shape): each script's own options, no shared parser to factor out.
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=400, help="number of QPs (default 400)")
     parser.add_argument("--repeat", type=int, default=3, help="passes per method (default 3)")
@@ -511,20 +513,45 @@ def main(argv=None) -> int:
         default="median",
         help="median of all calls, or median over problems of each one's fastest pass",
     )
-    args = parser.parse_args(argv)
-    warnings.simplefilter("ignore")
+    return parser.parse_args(argv)
 
-    source = args.source
+
+def load_problems(source: str, count: int) -> tuple[str, list[qpsolvers.Problem]]:
+    """``(source used, problems)``: the wall scenario's ticks, or robot-like QPs."""
     if source == "sim":
         try:
-            problems = sim_problems(args.count)
+            return source, sim_problems(count)
         except Exception as exc:  # the simulator is optional here
             print(
                 f"# qpbench.sim unavailable ({type(exc).__name__}: {exc}); using known.robot_like_problem"
             )
-            source, problems = "known", known_problems(args.count)
-    else:
-        problems = known_problems(args.count)
+    return "known", known_problems(count)
+
+
+def measure(name: str, problems, profile: str, repeat: int, stat: str) -> tuple[dict, str | None]:
+    """Median time per call of ``ours``, ``direct`` and ``qpsolvers`` (those that exist) for
+    backend ``name``, passes interleaved between methods; and the direct API's description."""
+    desc, direct_factory = direct_for(name, profile)
+    methods = {
+        "ours": lambda: get_backend(name, profile).solve,
+        "direct": direct_factory,
+        "qpsolvers": qpsolvers_for(name, profile),
+    }
+    times: dict[str, list[list[float]]] = {k: [] for k, f in methods.items() if f is not None}
+    for _ in range(repeat):
+        for key in times:
+            solve = methods[key]()
+            solve(problems[0])  # first call: imports, compilation, set-up of the first shape
+            times[key].append(time_pass(solve, problems))
+    if stat == "min":
+        return {k: statistics.median(map(min, zip(*v))) for k, v in times.items()}, desc
+    return {k: statistics.median([t for p in v for t in p]) for k, v in times.items()}, desc
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    warnings.simplefilter("ignore")
+    source, problems = load_problems(args.source, args.count)
     sizes = sorted(
         {
             (p.q.shape[0], 0 if p.A is None else p.A.shape[0], 0 if p.G is None else p.G.shape[0])
@@ -540,7 +567,6 @@ def main(argv=None) -> int:
         f"# {len(problems)} QPs from {source}; (n, meq, m) in {sizes}; profile {args.profile}; "
         f"{args.repeat} passes; {stat} in microseconds"
     )
-
     names = (
         args.backends.split(",")
         if args.backends
@@ -552,31 +578,13 @@ def main(argv=None) -> int:
     )
     print(header)
     print("|" + "|".join("-" * (len(c) + 0) for c in header.split("|")[1:]))
+
+    def fmt(v):
+        return f"{v:9.1f}" if v is not None else f"{'-':>9}"
+
     for name in names:
-        desc, direct_factory = direct_for(name, args.profile)
-        qps_factory = qpsolvers_for(name, args.profile)
-        methods = {
-            "ours": lambda: get_backend(name, args.profile).solve,
-            "direct": direct_factory,
-            "qpsolvers": qps_factory,
-        }
-        times: dict[str, list[list[float]]] = {k: [] for k, f in methods.items() if f is not None}
-        for _ in range(args.repeat):
-            for key in times:
-                solve = methods[key]()
-                solve(problems[0])  # first call: imports, compilation, set-up of the first shape
-                times[key].append(time_pass(solve, problems))
-        if args.stat == "min":
-            med = {k: statistics.median(map(min, zip(*v))) for k, v in times.items()}
-        else:
-            med = {k: statistics.median([t for p in v for t in p]) for k, v in times.items()}
-        ours = med["ours"]
-        direct = med.get("direct")
-        qps = med.get("qpsolvers")
-
-        def fmt(v):
-            return f"{v:9.1f}" if v is not None else f"{'-':>9}"
-
+        med, desc = measure(name, problems, args.profile, args.repeat, args.stat)
+        ours, direct, qps = med["ours"], med.get("direct"), med.get("qpsolvers")
         r1 = f"{ours / direct:11.2f}" if direct else f"{'-':>11}"
         r2 = f"{ours / qps:14.2f}" if qps else f"{'-':>14}"
         print(

@@ -596,7 +596,7 @@ def test_qpsolvers_status_readers_of_the_added_solvers():
     assert qs._status_gurobi({"status": 4}) == ("not_solved", "4")
     assert qs._status_gurobi({"status": 9})[0] == "time_limit"
     if "qpsolvers:gurobi" in backend_names():  # Gurobi refuses 1e-10: a status, not an exception
-        sol = get_backend("qpsolvers:gurobi", "high_accuracy").solve(
+        sol = get_backend("qpsolvers:gurobi", "high_accuracy", eps_abs=1e-10).solve(
             robot_like_problem(np.random.default_rng(1))[0]
         )
         assert sol.status == "error" and "FeasibilityTol" in sol.error

@@ -186,6 +186,8 @@ def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]
         and type(q) is _ndarray
         and (q.dtype is _f64 or q.dtype == _f64)
         and q.ndim == 1
+        # The tests of (A, b) and (G, h) are the same, written out twice: a helper per block
+        # would cost a Python call per block and tick (see the docstring).
         and (
             A is None
             or (

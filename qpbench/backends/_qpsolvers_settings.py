@@ -69,131 +69,81 @@ SOLVER_PACKAGES: dict[str, str] = {
 }
 
 
-def _clarabel(eps_abs, eps_rel, max_iter, time_limit):
-    return {
-        "tol_feas": eps_abs,
-        "tol_gap_abs": eps_abs,
-        "tol_gap_rel": eps_rel,
-        "max_iter": min(max_iter, 2**32 - 1),
-        "time_limit": time_limit,
-    }
-
-
-def _daqp(eps_abs, eps_rel, max_iter, time_limit):
-    return {"primal_tol": eps_abs, "dual_tol": eps_abs, "iter_limit": max_iter}
-
-
-def _highs(eps_abs, eps_rel, max_iter, time_limit):
-    return {
-        "primal_feasibility_tolerance": eps_abs,
-        "dual_feasibility_tolerance": eps_abs,
-        "time_limit": time_limit,
-    }
-
-
-def _osqp(eps_abs, eps_rel, max_iter, time_limit):
-    settings = {
-        "eps_abs": eps_abs,
-        "eps_rel": eps_rel,
-        "max_iter": max_iter,
-        "time_limit": time_limit,
-    }
-    if eps_abs <= 1e-7:
-        settings["polishing"] = True
-    return settings
-
-
-def _piqp_proxqp(eps_abs, eps_rel, max_iter, time_limit):
-    settings = {
-        "eps_abs": eps_abs,
-        "eps_rel": eps_rel,
-        "eps_duality_gap_abs": eps_abs,
-        "eps_duality_gap_rel": eps_rel,
-        "max_iter": max_iter,
-    }
-    if eps_abs <= 1e-7:
-        settings["check_duality_gap"] = True
-    return settings
-
-
-def _scs(eps_abs, eps_rel, max_iter, time_limit):
-    return {
-        "eps_abs": eps_abs,
-        "eps_rel": eps_rel,
-        "max_iters": max_iter,
-        "time_limit_secs": time_limit,
-    }
-
-
-def _cvxopt(eps_abs, eps_rel, max_iter, time_limit):
+#: Each solver's option names for the generic settings, as qpbenchmark's ``SolverSettings``
+#: sets them plus iteration limits: native name -> the generic key whose value it takes, or a
+#: function of the generic values (``e``: eps_abs, ``r``: eps_rel, ``k``: max_iter, ``t``:
+#: time_limit) where the value is derived.
+_NATIVE: dict[str, dict[str, object]] = {
+    "clarabel": {
+        "tol_feas": "eps_abs",
+        "tol_gap_abs": "eps_abs",
+        "tol_gap_rel": "eps_rel",
+        "max_iter": lambda e, r, k, t: min(k, 2**32 - 1),  # Clarabel's u32
+        "time_limit": "time_limit",
+    },
+    "daqp": {"primal_tol": "eps_abs", "dual_tol": "eps_abs", "iter_limit": "max_iter"},
+    "highs": {
+        "primal_feasibility_tolerance": "eps_abs",
+        "dual_feasibility_tolerance": "eps_abs",
+        "time_limit": "time_limit",
+    },
+    "osqp": {
+        "eps_abs": "eps_abs",
+        "eps_rel": "eps_rel",
+        "max_iter": "max_iter",
+        "time_limit": "time_limit",
+    },
+    "piqp": {
+        "eps_abs": "eps_abs",
+        "eps_rel": "eps_rel",
+        "eps_duality_gap_abs": "eps_abs",
+        "eps_duality_gap_rel": "eps_rel",
+        "max_iter": "max_iter",
+    },
+    "scs": {
+        "eps_abs": "eps_abs",
+        "eps_rel": "eps_rel",
+        "max_iters": "max_iter",
+        "time_limit_secs": "time_limit",
+    },
     # qpbenchmark sets feastol only; the gap tolerances (defaults 1e-7 absolute, 1e-6 relative)
     # would stop cvxopt far from a 1e-9 answer.
-    return {
-        "feastol": eps_abs,
-        "abstol": eps_abs,
-        "reltol": max(eps_rel, eps_abs),
-        "maxiters": max_iter,
-    }
-
-
-def _ecos(eps_abs, eps_rel, max_iter, time_limit):
+    "cvxopt": {
+        "feastol": "eps_abs",
+        "abstol": "eps_abs",
+        "reltol": lambda e, r, k, t: max(r, e),
+        "maxiters": "max_iter",
+    },
     # qpbenchmark's (feastol only): tighter gap tolerances make ECOS's dual residual worse, not better.
-    return {"feastol": eps_abs}
+    "ecos": {"feastol": "eps_abs"},
+    "qpalm": {
+        "eps_abs": "eps_abs",
+        "eps_rel": "eps_rel",
+        "max_iter": "max_iter",
+        "time_limit": "time_limit",
+    },
+    # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error; high_accuracy asks 1e-9).
+    "gurobi": {"FeasibilityTol": "eps_abs", "OptimalityTol": "eps_abs", "TimeLimit": "time_limit"},
+    "hpipm": {
+        "tol_dual_gap": "eps_abs",
+        "tol_eq": "eps_abs",
+        "tol_ineq": "eps_abs",
+        "tol_stat": "eps_abs",
+    },
+    "qpswift": {"RELTOL": lambda e, r, k, t: e * np.sqrt(3.0)},
+    "qpoases": {"time_limit": "time_limit"},
+    "sip": {"eps_abs": "eps_abs", "eps_rel": "eps_rel", "time_limit": "time_limit"},
+}
+_NATIVE["proxqp"] = _NATIVE["piqp"]
+_NATIVE["kvxopt"] = _NATIVE["cvxopt"]
 
-
-def _qpalm(eps_abs, eps_rel, max_iter, time_limit):
-    return {
-        "eps_abs": eps_abs,
-        "eps_rel": eps_rel,
-        "max_iter": max_iter,
-        "time_limit": time_limit,
-    }
-
-
-def _gurobi(eps_abs, eps_rel, max_iter, time_limit):
-    # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error at high_accuracy).
-    return {"FeasibilityTol": eps_abs, "OptimalityTol": eps_abs, "TimeLimit": time_limit}
-
-
-def _hpipm(eps_abs, eps_rel, max_iter, time_limit):
-    return {
-        "tol_dual_gap": eps_abs,
-        "tol_eq": eps_abs,
-        "tol_ineq": eps_abs,
-        "tol_stat": eps_abs,
-    }
-
-
-def _qpswift(eps_abs, eps_rel, max_iter, time_limit):
-    return {"RELTOL": eps_abs * np.sqrt(3.0)}
-
-
-def _qpoases(eps_abs, eps_rel, max_iter, time_limit):
-    return {"time_limit": time_limit}
-
-
-def _sip(eps_abs, eps_rel, max_iter, time_limit):
-    return {"eps_abs": eps_abs, "eps_rel": eps_rel, "time_limit": time_limit}
-
-
-#: Each solver's translation of the generic settings to its own option names.
-_NATIVE = {
-    "clarabel": _clarabel,
-    "daqp": _daqp,
-    "highs": _highs,
-    "osqp": _osqp,
-    "piqp": _piqp_proxqp,
-    "proxqp": _piqp_proxqp,
-    "scs": _scs,
-    "cvxopt": _cvxopt,
-    "kvxopt": _cvxopt,
-    "ecos": _ecos,
-    "qpalm": _qpalm,
-    "gurobi": _gurobi,
-    "hpipm": _hpipm,
-    "qpswift": _qpswift,
-    "qpoases": _qpoases,
-    "sip": _sip,
+#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (ADMM
+#: alone seldom reaches a 1e-9 residual; the polishing step, a solve of the KKT system of the
+#: guessed active set, does), PIQP's and ProxQP's duality-gap test.
+_HIGH_ACCURACY = {
+    "osqp": {"polishing": True},
+    "piqp": {"check_duality_gap": True},
+    "proxqp": {"check_duality_gap": True},
 }
 
 
@@ -211,10 +161,22 @@ def native_settings(
         max_iter: Iteration limit.
         time_limit: Time limit in [s].
     """
-    translate = _NATIVE.get(solver)
-    if translate is None:
+    names = _NATIVE.get(solver)
+    if names is None:
         return {}
-    return translate(eps_abs, eps_rel, int(max_iter), time_limit)
+    generic = {
+        "eps_abs": eps_abs,
+        "eps_rel": eps_rel,
+        "max_iter": int(max_iter),
+        "time_limit": time_limit,
+    }
+    args = tuple(generic.values())
+    settings = {
+        name: generic[key] if type(key) is str else key(*args) for name, key in names.items()
+    }
+    if eps_abs <= 1e-7:
+        settings.update(_HIGH_ACCURACY.get(solver, {}))
+    return settings
 
 
 def solver_default_limits(solver: str) -> dict | None:

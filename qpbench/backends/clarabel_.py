@@ -54,6 +54,9 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
+
+# The same helpers as osqp_ imports (dense CSC layouts with every entry, settings); the
+# stacking into cones is this module's own.
 from ._common import (
     all_dense,
     dense_bounds,

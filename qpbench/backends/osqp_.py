@@ -20,6 +20,13 @@ block holds its diagonal only; sparse inputs keep their own pattern. Any
 other change of shape or pattern (or of settings) rebuilds the solver.
 :meth:`OsqpBackend.reset` drops it.
 
+Per-call cost. A tick whose blocks are all there, dense and of the kept
+shape (the robot's) takes the short route: ``C``'s data and ``l`` are written
+into buffers the layout keeps (OSQP copies what ``update`` is given), ``P``'s
+upper triangle is one ``take`` of precomputed flat indices, and OSQP 1.x's
+``x`` and multiplier, fresh arrays on every solve, are handed back uncopied
+(``y``, ``z``, ``z_box`` as views of the multiplier).
+
 Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, ``time_limit`` from the
 profile; ``polishing=True`` when ``eps_abs <= 1e-7`` (the ``high_accuracy``
 profile): ADMM alone seldom reaches a 1e-9 residual, the polishing step
@@ -48,6 +55,9 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
+
+# The same helpers as clarabel_ imports: both backends lay a dense problem out as CSC with
+# every entry stored, and take settings the same way; only the stacking differs.
 from ._common import (
     GENERIC_KEYS,
     all_dense,
@@ -76,6 +86,9 @@ class StackedLayout:
         self.meq = 0 if A is None else A.shape[0]
         self.with_box = with_box
         self.upper_P = upper_P
+        k = self.m + self.meq
+        #: Where ``y``, ``z`` and ``z_box`` lie in OSQP's multiplier of ``[G; A; I]``.
+        self.parts = (slice(self.m, k), slice(0, self.m), slice(k, None))
         self.dense = all_dense(P, G, A)
         if self.dense:
             if upper_P:
@@ -97,7 +110,9 @@ class StackedLayout:
                 self.C_indices = np.tile(col_rows, n)
             self.C_indptr = np.arange(0, per_col * n + 1, per_col, dtype=np.int64)
             self.key = ("dense", n, self.m, self.meq, with_box, upper_P)
+            self._tick_buffers(per_col)
         else:
+            self.tick_shapes = None
             Pc, Cc = self._sparse(problem)
             self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
             self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
@@ -113,6 +128,37 @@ class StackedLayout:
                 Cc.indptr.tobytes(),
                 Cc.indices.tobytes(),
             )
+
+    def _tick_buffers(self, per_col: int) -> None:
+        """What :meth:`tick_data` reuses: the shapes it takes, ``P``'s flat upper-triangle
+        indices, ``C'`` (n x per_col, C order: its ravel is ``C``'s CSC data, the box column
+        already 1) and ``l`` (its ``-inf`` rows of ``G`` already set)."""
+        n, m, k = self.n, self.m, self.m + self.meq
+        rows, cols = self._P_idx
+        self.P_flat = rows * n + cols
+        #: (P, G, A) shapes of a problem :meth:`tick_data` takes: every block there, box included.
+        self.tick_shapes = (
+            ((n, n), (m, n), (self.meq, n)) if m and k > m and self.with_box else None
+        )
+        self._CT = np.empty((n, per_col))
+        if self.with_box:
+            self._CT[:, k] = 1.0
+        self._l = np.empty(self.C_rows)
+        self._l[:m] = -np.inf
+
+    def tick_data(self, P, G, h, A, b, lb, ub) -> tuple[np.ndarray, ...]:
+        """``(l, u, Px, Ax)`` of ``OSQP.update`` for a dense tick of :attr:`tick_shapes`.
+
+        ``C``'s data and ``l`` are written into buffers kept here: OSQP copies what
+        ``update`` is given, and no caller keeps them.
+        """
+        m, k = self.m, self.m + self.meq
+        CT, l = self._CT, self._l
+        CT[:, :m] = G.T
+        CT[:, m:k] = A.T
+        l[m:k] = b
+        l[k:] = lb
+        return l, np.concatenate((h, b, ub)), P.take(self.P_flat), CT.ravel()
 
     @property
     def C_rows(self) -> int:
@@ -264,9 +310,67 @@ class OsqpBackend(Backend):
         return settings
 
     def _solve(self, problem, warm_start):
-        import osqp
+        osqp = _OSQP[0] if _OSQP else _import_osqp()
+        P, G, A, lb, ub = problem.P, problem.G, problem.A, problem.lb, problem.ub
+        layout = self._layout
+        try:
+            if (
+                layout is not None
+                and layout.tick_shapes is not None
+                and type(P) is _ndarray
+                and type(G) is _ndarray
+                and type(A) is _ndarray
+                and lb is not None
+                and ub is not None
+                and (P.shape, G.shape, A.shape) == layout.tick_shapes
+            ):
+                # A tick of the robot: every block dense and of the kept shape.
+                l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
+                self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
+            else:
+                layout = self._update_or_setup(osqp, problem)
+            if warm_start is not None:
+                self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
+            res = self._solver.solve(raise_error=False)
+        except (osqp.OSQPException, ValueError) as exc:
+            self.reset()
+            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        info = res.info
+        status_val = info.status_val
+        # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
+        sol = _new(BackendSolution)
+        sol.problem = problem
+        sol.extras = {"raw_status": info.status, "info": info}
+        sol.iterations = info.iter
+        sol.solver_time_s = info.run_time
+        if status_val == _SOLVED:
+            # OSQP 1.x hands back fresh arrays: x and w need no copy; y, z, z_box are views of w.
+            sol.status = "optimal"
+            sol.x = res.x
+            w = res.y
+            part_y, part_z, part_box = layout.parts
+            sol.y = w[part_y]
+            sol.z = w[part_z]
+            sol.z_box = w[part_box] if layout.with_box else _EMPTY
+            sol._obj = info.obj_val
+            return sol
+        status = _STATUS_MAP.get(status_val, "not_solved")
+        sol.status = status
+        if status == "error":
+            sol.error = f"OSQP: {info.status}"
+        if status in ("primal_infeasible", "dual_infeasible"):
+            sol.extras["prim_inf_cert"] = np.array(res.prim_inf_cert)
+            sol.extras["dual_inf_cert"] = np.array(res.dual_inf_cert)
+            return sol
+        x = res.x
+        if x is not None and np.isfinite(x).all():
+            sol.x = np.array(x)
+            sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.y))
+        return sol
 
-        sol = BackendSolution(problem)
+    def _update_or_setup(self, osqp, problem) -> StackedLayout:
+        """Update the kept solver with ``problem`` when its shape and pattern fit, else set
+        up a new one (the general route: sparse input, absent blocks, a new shape); the layout."""
         with_box = _has_box(problem)
         layout = self._layout
         reuse = False
@@ -279,46 +383,35 @@ class OsqpBackend(Backend):
                 )
             else:
                 reuse = StackedLayout(problem, with_box).key == layout.key
-        try:
-            if reuse:
-                P_data, C_data = layout.data(problem)
-                l, u = layout.vectors(problem)
-                self._solver.update(q=problem.q, l=l, u=u, Px=P_data, Ax=C_data)
-            else:
-                self._solver = None
-                layout = StackedLayout(problem, with_box)
-                P, C = layout.matrices(problem)
-                l, u = layout.vectors(problem)
-                solver = osqp.OSQP()
-                solver.setup(
-                    P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings()
-                )
-                self._solver, self._layout = solver, layout
-            if warm_start is not None:
-                self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
-            res = self._solver.solve(raise_error=False)
-        except (osqp.OSQPException, ValueError) as exc:
-            self.reset()
-            sol.status = "error"
-            sol.error = f"{type(exc).__name__}: {exc}"
-            return sol
+        if reuse:
+            P_data, C_data = layout.data(problem)
+            l, u = layout.vectors(problem)
+            self._solver.update(q=problem.q, l=l, u=u, Px=P_data, Ax=C_data)
+            return layout
+        self._solver = None
+        layout = StackedLayout(problem, with_box)
+        P, C = layout.matrices(problem)
+        l, u = layout.vectors(problem)
+        solver = osqp.OSQP()
+        solver.setup(P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings())
+        self._solver, self._layout = solver, layout
+        return layout
 
-        info = res.info
-        status = _status_map(osqp).get(int(info.status_val), "not_solved")
-        sol.status = status
-        sol.extras = {"raw_status": info.status, "info": info}
-        if status == "error":
-            sol.error = f"OSQP: {info.status}"
-        sol.iterations = int(info.iter)
-        sol.solver_time_s = float(info.run_time)
-        if status in ("primal_infeasible", "dual_infeasible"):
-            sol.extras["prim_inf_cert"] = np.array(res.prim_inf_cert)
-            sol.extras["dual_inf_cert"] = np.array(res.dual_inf_cert)
-            return sol
-        x = np.array(res.x)
-        if np.isfinite(x).all():
-            sol.x = x
-            sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.y))
-        if status == "optimal":
-            sol.obj = float(info.obj_val)
-        return sol
+
+_OSQP: list = []
+_SOLVED = None  # OSQP_SOLVED's status_val, read at the first import of osqp
+_ndarray = np.ndarray
+_new = object.__new__
+_EMPTY = np.zeros(0)
+_EMPTY.flags.writeable = False
+
+
+def _import_osqp():
+    """Import osqp once: the status table and :data:`_SOLVED`."""
+    global _SOLVED
+    import osqp
+
+    _status_map(osqp)
+    _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
+    _OSQP.append(osqp)
+    return osqp
