@@ -26,6 +26,13 @@ PACKAGES = (
     "daqp",
     "quadprog",
     "piqp",
+    "cmeel-qpoases",
+    "highspy",
+    "scs",
+    "qpalm",
+    "ecos",
+    "cvxopt",
+    "gurobipy",
     "matplotlib",
 )
 
