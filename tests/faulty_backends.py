@@ -402,18 +402,25 @@ def fault_ticks(n_ticks: int) -> list[int]:
     return [k for k in range(n_ticks) if k % FAULT_EVERY == FAULT_PHASE]
 
 
-class _SomeTicks(Backend):
-    family = "test fault"
+class DaqpInside(Backend):
+    """Not registered: a base whose solves go to ``daqp`` (``self.inner``) unless it says otherwise."""
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         from qpbench.backends import get_backend
 
         self.inner = get_backend("daqp", profile)
-        self.calls = 0  # paper-formulation calls; not reset (the loop resets after a fault)
 
     def reset(self):
         self.inner.reset()
+
+
+class _SomeTicks(DaqpInside):
+    family = "test fault"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self.calls = 0  # paper-formulation calls; not reset (the loop resets after a fault)
 
     def _fault(self, problem, warm_start):
         raise NotImplementedError

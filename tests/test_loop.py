@@ -292,17 +292,19 @@ def test_dump_round_trip_and_determinism(tmp_path):
         np.testing.assert_allclose(sol.x, logged, atol=1e-6)
 
 
+def _outputs(folder) -> list[str]:
+    """``--summary folder/s.json --log folder/log.csv --dump folder/set`` as argv."""
+    return [
+        f"--{k}={folder / name}"
+        for k, name in (("summary", "s.json"), ("log", "log.csv"), ("dump", "set"))
+    ]
+
+
 def test_cli(tmp_path, capsys):
     from qpbench.cli import main
 
     args = [
-        *simulate_args("wall", qp_backend(), "0.2"),
-        "--summary",
-        str(tmp_path / "s.json"),
-        "--log",
-        str(tmp_path / "log.csv"),
-        "--dump",
-        str(tmp_path / "set"),
+        *simulate_args("wall", qp_backend(), "0.2", *_outputs(tmp_path)),
         "--every",
         "5",
         "--plot",
@@ -388,13 +390,7 @@ def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
             np.testing.assert_array_equal(sc.data[table][key], value)
     # the CLI runs exactly that scenario, and says so in the summary and the dump's manifest
     args = [
-        *simulate_args("wall", "rnn", "0.1"),
-        "--summary",
-        str(tmp_path / "s.json"),
-        "--log",
-        str(tmp_path / "log.csv"),
-        "--dump",
-        str(tmp_path / "set"),
+        *simulate_args("wall", "rnn", "0.1", *_outputs(tmp_path)),
     ]
     for item in items:
         args += ["--set", item]
@@ -585,19 +581,7 @@ def test_bad_deadline_on_the_command_line(tmp_path, capsys):
 
     out = tmp_path / "s.json"
     assert (
-        main(
-            [
-                "simulate",
-                "--scenario",
-                "wall",
-                "--backend",
-                "pinv",
-                "--deadline",
-                "0",
-                "--summary",
-                str(out),
-            ]
-        )
+        main(["simulate", "--scenario=wall", "--backend=pinv", "--deadline=0", f"--summary={out}"])
         == 2
     )
     assert "--deadline" in capsys.readouterr().err and not out.exists()
