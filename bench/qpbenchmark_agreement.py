@@ -59,11 +59,13 @@ from qpbench.reference import reference_solutions
 
 METRICS = ("primal_residual", "dual_residual", "duality_gap")
 EPS = float(np.finfo(float).eps)
+#: qpbenchmark's named settings and the qpbench profile judged at the same tolerances.
 NAMED_SETTINGS = {
     "low_accuracy": "low_accuracy",
     "mid_accuracy": "default",
     "high_accuracy": "high_accuracy",
 }
+#: Native option names that only limit a run (a solve that converges before them is unchanged).
 LIMIT_KEYS = frozenset(
     {"max_iter", "iter_limit", "max_iters", "time_limit", "time_limit_secs", "TimeLimit"}
 )
@@ -107,6 +109,20 @@ def run_ours(
     return df
 
 
+def common_solvers(qpb) -> list[str]:
+    """Solvers qpsolvers finds, qpbenchmark has settings for and qpbench can drive."""
+    ours = {
+        name.split(":", 1)[1]
+        for name in backend_names(available_only=True)
+        if name.startswith("qpsolvers:")
+    }
+    return sorted(
+        s
+        for s in qpsolvers.available_solvers
+        if qpb.solver_settings.SolverSettings.is_implemented(s) and s in ours
+    )
+
+
 def data_scale(problem) -> float:
     """Largest finite magnitude in the problem's data (at least 1)."""
     scale = 1.0
@@ -118,24 +134,35 @@ def data_scale(problem) -> float:
     return scale
 
 
+def qpbenchmark_success(df: pd.DataFrame, tol) -> pd.Series:
+    """qpbenchmark's success rule (``Results.build_success_rate_df``) on rows of either side."""
+    return (
+        df["found"].astype(bool)
+        & (df["primal_residual"] < tol.primal)
+        & (df["dual_residual"] < tol.dual)
+        & (df["duality_gap"] < tol.gap)
+    )
+
+
+def side(merged: pd.DataFrame, suffix: str) -> pd.DataFrame:
+    """The columns of a merged frame that end in ``suffix``, without it (one side's rows)."""
+    return merged.rename(columns=lambda c: c.removesuffix(suffix))
+
+
 def compare(theirs: pd.DataFrame, ours: pd.DataFrame, tol, scales: dict) -> dict:
     m = theirs.merge(ours, on=["problem", "solver"], suffixes=("_qpb", "_ours"), validate="1:1")
     fq, fo = m["found_qpb"].astype(bool), m["found_ours"].astype(bool)
-
-    def success(side):
-        return (
-            m[f"found_{side}"].astype(bool)
-            & (m[f"primal_residual_{side}"] < tol.primal)
-            & (m[f"dual_residual_{side}"] < tol.dual)
-            & (m[f"duality_gap_{side}"] < tol.gap)
-        )
-
     row = {
         "rows": len(m),
         "found qpb": int(fq.sum()),
         "found ours": int(fo.sum()),
         "found differs": int((fq != fo).sum()),
-        "success differs": int((success("qpb") != success("ours")).sum()),
+        "success differs": int(
+            (
+                qpbenchmark_success(side(m, "_qpb"), tol)
+                != qpbenchmark_success(side(m, "_ours"), tol)
+            ).sum()
+        ),
     }
     both = fq & fo
     scale = m.loc[both, "problem"].map(scales).to_numpy(float)
@@ -149,16 +176,6 @@ def compare(theirs: pd.DataFrame, ours: pd.DataFrame, tol, scales: dict) -> dict
             ulps = max(ulps, float((d / (EPS * scale)).max()))
     row["max |d|/(eps s)"] = ulps
     return row
-
-
-def _their_success(m: pd.DataFrame, tol) -> pd.Series:
-    """qpbenchmark's success rule on its own rows of a merged frame (suffix ``_x``)."""
-    return (
-        m["found_x"].astype(bool)
-        & (m["primal_residual_x"] < tol.primal)
-        & (m["dual_residual_x"] < tol.dual)
-        & (m["duality_gap_x"] < tol.gap)
-    )
 
 
 def print_table(title: str, rows: list[dict]) -> None:
@@ -194,14 +211,7 @@ def main(argv=None) -> int:
 
     qpb = import_qpbenchmark()
     SolverSettings = qpb.solver_settings.SolverSettings
-    ours_available = {
-        n.split(":", 1)[1] for n in backend_names(available_only=True) if n.startswith("qpsolvers:")
-    }
-    solvers = sorted(
-        s
-        for s in qpsolvers.available_solvers
-        if SolverSettings.is_implemented(s) and s in ours_available
-    )
+    solvers = common_solvers(qpb)
     if args.solvers:
         solvers = [s for s in args.solvers.split(",") if s in solvers]
 
@@ -255,7 +265,10 @@ def main(argv=None) -> int:
                         "success differs (our column)": int(
                             (
                                 theirs.merge(ours, on=["problem", "solver"]).pipe(
-                                    lambda m: _their_success(m, tol) != m["success"].astype(bool)
+                                    lambda m: (
+                                        qpbenchmark_success(side(m, "_x"), tol)
+                                        != m["success"].astype(bool)
+                                    )
                                 )
                             ).sum()
                         ),

@@ -8,25 +8,19 @@ from __future__ import annotations
 
 import time
 
-from qpbench.backends import _registry, get_backend
-from qpbench.backends.base import Backend
+from faulty_backends import DaqpInside
+
+from qpbench.backends import _registry
 
 #: Sleep per solve [s]: with the solve itself a real-time factor of about 0.3 at 1 kHz.
 SLOW_S = 0.003
 
 
-class SlowExact(Backend):
+class SlowExact(DaqpInside):
     """``daqp`` with a sleep per solve: the same answers, a real-time factor below 1."""
 
     name = "test-slow-exact"
     family = "test"
-
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self.inner = get_backend("daqp", profile)
-
-    def reset(self):
-        self.inner.reset()
 
     def _solve(self, problem, warm_start):
         time.sleep(SLOW_S)

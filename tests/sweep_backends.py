@@ -17,6 +17,8 @@ from qpbench.backends import Backend, get_backend, register
 FLAG_ENV = "QPBENCH_TEST_DIE"
 
 
+# Written out rather than built on faulty_backends.DaqpInside: a plugin file is loaded by its
+# path in every worker, where tests/ is not importable.
 @register
 class DieOnFlag(Backend):
     name = "sweep:die-on-flag"

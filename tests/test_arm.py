@@ -88,19 +88,9 @@ def test_simulate_writes_snapshot_and_animation(tmp_path):
 def test_simulate_refuses_a_snapshot_format_before_running(tmp_path, capsys):
     from qpbench.cli import main
 
+    jpg = tmp_path / "a.jpg"
     assert (
-        main(
-            [
-                "simulate",
-                "--scenario",
-                "wall",
-                "--backend",
-                "qpsolvers:daqp",
-                "--snapshot",
-                str(tmp_path / "a.jpg"),
-            ]
-        )
-        == 2
+        main(["simulate", "--scenario=wall", "--backend=qpsolvers:daqp", f"--snapshot={jpg}"]) == 2
     )
     assert "--snapshot" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())

@@ -176,20 +176,15 @@ def test_closed_loop_then_report(tmp_path):
     assert (out / "plots" / "closed_loop_wall_paper.png").exists()
 
 
+def run_args(scenarios: str, backends: str, out: str) -> list[str]:
+    """``-q run`` of 0.3 simulated s per closed loop as argv; ``out`` is the last item."""
+    return ["-q", "run", "--duration", "0.3", f"--scenarios={scenarios}", f"--backends={backends}",
+            "--out", out]  # fmt: skip
+
+
 def test_run_end_to_end(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    args = [
-        "-q",
-        "run",
-        "--duration",
-        "0.3",
-        "--scenarios",
-        "wall",
-        "--backends",
-        "qpsolvers:daqp,pinv",
-        "--out",
-        "tmp",
-    ]
+    args = run_args("wall", "qpsolvers:daqp,pinv", "tmp")
     assert (
         main(args) == 1
     )  # pinv breaks the joint speed limits: its closed-loop verdict is "limits"
@@ -259,18 +254,7 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
         )
         == 0
     )
-    args = [
-        "-q",
-        "run",
-        "--duration",
-        "0.3",
-        "--scenarios",
-        "wall,free",
-        "--backends",
-        f"daqp,{slow}",
-        "--out",
-        "r",
-    ]
+    args = run_args("wall,free", f"daqp,{slow}", "r")
     assert main(args) == 0
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv")
     assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(

@@ -1,12 +1,11 @@
-"""The snippets of problems/README.md run as written, and the commands that list and export problems."""
+"""The commands that list, export and bench problems, and the top-level help and version.
+
+(The snippets of problems/README.md run in tests/test_examples.py, with every other README's.)"""
 
 from __future__ import annotations
 
 import json
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,57 +16,6 @@ from qpbench.cli import main
 from qpbench.formats import load_problems, read_problem_set
 
 ROOT = Path(__file__).resolve().parents[1]
-BIN = Path(sys.executable).parent
-
-
-def snippets(markdown: Path, language: str) -> list[str]:
-    text = markdown.read_text()
-    return re.findall(rf"```{language}\n(.*?)```", text, flags=re.S)
-
-
-@pytest.fixture
-def workdir(tmp_path):
-    """A folder holding a copy-free view of the repository's problems/ (as in a clone)."""
-    (tmp_path / "problems").symlink_to(ROOT / "problems")
-    return tmp_path
-
-
-def test_problems_readme_python_snippets_run(workdir):
-    blocks = snippets(ROOT / "problems" / "README.md", "python")
-    assert blocks, "problems/README.md has no python snippet"
-    for code in blocks:
-        proc = subprocess.run(
-            [sys.executable, "-c", code], cwd=workdir, capture_output=True, text=True, timeout=300
-        )
-        assert proc.returncode == 0, proc.stderr
-
-
-def _run_shell_snippets(workdir: Path, marker: str) -> None:
-    """Run each ``bash`` block of problems/README.md that contains ``marker``, in ``workdir``."""
-    blocks = [b for b in snippets(ROOT / "problems" / "README.md", "bash") if marker in b]
-    assert blocks
-    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
-    for block in blocks:
-        proc = subprocess.run(
-            ["bash", "-euo", "pipefail", "-c", block],
-            cwd=workdir,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert proc.returncode == 0, proc.stderr
-
-
-def test_problems_readme_shell_snippets_run(workdir):
-    _run_shell_snippets(workdir, "qpbench list")
-    assert (workdir / "wall.csv").exists()
-
-
-def test_problems_readme_own_scenario_snippet_runs(workdir):
-    """Start from a shipped scenario file and simulate it, as problems/README.md says."""
-    _run_shell_snippets(workdir, "qpbench scenarios show")
-    assert (workdir / "my.toml").read_text().startswith("# Paper section 4.3")
 
 
 def test_version(capsys):

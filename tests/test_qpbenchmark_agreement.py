@@ -54,6 +54,7 @@ whose reference is optimal, our success implies qpbenchmark's.
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -61,9 +62,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import qpsolvers
 
-from qpbench.backends import backend_names, get_backend
+from qpbench.backends import get_backend
 from qpbench.backends.qpsolvers_ import solver_default_limits
 from qpbench.cli import main
 from qpbench.formats import load_problems
@@ -71,40 +71,29 @@ from qpbench.harness.bench import BenchConfig, run_bench
 from qpbench.profiles import get_profile
 from qpbench.reference import reference_solutions
 
-SHIPPED_SET = Path(__file__).resolve().parents[1] / "problems" / "wall" / "problems.parquet"
+ROOT = Path(__file__).resolve().parents[1]
+# bench/qpbenchmark_agreement.py runs this comparison on whole sets: its constants, the solvers
+# both programs drive, the data scale and qpbenchmark's success rule are used here as they are there
+sys.path.insert(0, str(ROOT / "bench"))
+from qpbenchmark_agreement import (  # noqa: E402
+    EPS,
+    LIMIT_KEYS,
+    METRICS,
+    NAMED_SETTINGS,
+    common_solvers,
+    data_scale,
+    qpbenchmark_success,
+    side,
+)
+
+SHIPPED_SET = ROOT / "problems" / "wall" / "problems.parquet"
 #: Problems taken from the start of the shipped set.
 COUNT = 60
-METRICS = ("primal_residual", "dual_residual", "duality_gap")
-#: qpbenchmark's named settings and the qpbench profile judged at the same tolerances.
-NAMED_SETTINGS = {
-    "low_accuracy": "low_accuracy",
-    "mid_accuracy": "default",
-    "high_accuracy": "high_accuracy",
-}
-#: Native option names that only limit a run (a solve that converges before them is unchanged).
-LIMIT_KEYS = frozenset(
-    {"max_iter", "iter_limit", "max_iters", "time_limit", "time_limit_secs", "TimeLimit"}
-)
 #: Relative agreement of residuals evaluated on the same solution.
 RTOL_SAME = 1e-12
-EPS = float(np.finfo(float).eps)
 
 
 # ---------------------------------------------------------------- helpers
-
-
-def common_solvers(qpb) -> list[str]:
-    """Solvers qpsolvers finds, qpbenchmark has settings for and qpbench can drive."""
-    ours = {
-        name.split(":", 1)[1]
-        for name in backend_names(available_only=True)
-        if name.startswith("qpsolvers:")
-    }
-    return sorted(
-        s
-        for s in qpsolvers.available_solvers
-        if qpb.solver_settings.SolverSettings.is_implemented(s) and s in ours
-    )
 
 
 def _test_set_class(qpb):
@@ -134,19 +123,6 @@ def read_ours(path) -> pd.DataFrame:
     return df
 
 
-def data_scale(problem) -> float:
-    """Largest finite magnitude in the problem's data (at least 1)."""
-    scale = 1.0
-    for M in problem.unpack():
-        if M is None:
-            continue
-        v = np.abs(np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float))
-        v = v[np.isfinite(v)]
-        if v.size:
-            scale = max(scale, float(v.max()))
-    return scale
-
-
 def metric_differences(merged: pd.DataFrame) -> pd.DataFrame:
     """Per row and metric: ``|a - b|`` and the rounding allowance; inf on both sides counts as equal."""
     out = {}
@@ -161,16 +137,6 @@ def metric_differences(merged: pd.DataFrame) -> pd.DataFrame:
             both_inf, 0.0, np.maximum(np.abs(a), np.abs(b))
         ) + 16 * EPS * merged["scale"].to_numpy(float)
     return pd.DataFrame(out, index=merged.index)
-
-
-def qpbenchmark_success(df: pd.DataFrame, tol) -> pd.Series:
-    """qpbenchmark's success rule (``Results.build_success_rate_df``) on rows of either side."""
-    return (
-        df["found"].astype(bool)
-        & (df["primal_residual"] < tol.primal)
-        & (df["dual_residual"] < tol.dual)
-        & (df["duality_gap"] < tol.gap)
-    )
 
 
 # ---------------------------------------------------------------- fixtures
@@ -297,8 +263,8 @@ def test_same_solver_calls_same_metrics(
     for settings_name in NAMED_SETTINGS:
         tol = test_set.tolerances[settings_name]
         rows = merged[merged["settings"] == settings_name]
-        a = qpbenchmark_success(rows.rename(columns=lambda c: c.removesuffix("_qpb")), tol)
-        b = qpbenchmark_success(rows.rename(columns=lambda c: c.removesuffix("_ours")), tol)
+        a = qpbenchmark_success(side(rows, "_qpb"), tol)
+        b = qpbenchmark_success(side(rows, "_ours"), tol)
         assert (a == b).all(), rows.loc[a != b, ["problem", "solver"]]
     tols = test_set.tolerances
     rate_theirs = results.build_success_rate_df(
@@ -324,7 +290,7 @@ def test_same_solver_calls_same_metrics(
         rows = merged[
             (merged["settings"] == settings_name) & (merged["reference_status"] == "optimal")
         ]
-        theirs_ok = qpbenchmark_success(rows.rename(columns=lambda c: c.removesuffix("_qpb")), tol)
+        theirs_ok = qpbenchmark_success(side(rows, "_qpb"), tol)
         ours_ok = rows["success"].astype(bool)
         assert not (ours_ok & ~theirs_ok).any(), rows.loc[
             ours_ok & ~theirs_ok, ["problem", "solver"]

@@ -20,34 +20,20 @@ from qpbench.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: backend, a mistyped key, the suggestion it must get, a valid key for the same backend.
+#: backend, a mistyped ``KEY=VALUE`` of it, the name it must suggest, a valid ``KEY=VALUE``
+#: (each ``--set`` item is the backend's name, a dot, then the key).
 TYPOS = [
-    ("daqp", "daqp.iter_limt=5", "'iter_limit'", "daqp.iter_limit=50"),
-    (
-        "daqp-stateless",
-        "daqp-stateless.primal_tl=1e-8",
-        "'primal_tol'",
-        "daqp-stateless.eps_prox=0",
-    ),
-    ("piqp", "piqp.eps_abz=1e-7", "'eps_abs'", "piqp.eps_duality_gap_abs=1e-8"),
-    ("proxqp", "proxqp.eps_abss=1e-7", "'eps_abs'", "proxqp.eps_primal_inf=1e-5"),
-    ("clarabel", "clarabel.tol_fea=1e-7", "'tol_feas'", "clarabel.tol_feas=1e-7"),
-    (
-        "qpoases",
-        "qpoases.terminationTolerence=1e-10",
-        "'terminationTolerance'",
-        "qpoases.terminationTolerance=1e-10",
-    ),
-    ("osqp", "osqp.rhoo=0.1", "'rho'", "osqp.rho=0.1"),
-    ("rnn", "rnn.epz=0.01", "'eps'", "rnn.eps=0.01"),
+    ("daqp", "iter_limt=5", "iter_limit", "iter_limit=50"),
+    ("daqp-stateless", "primal_tl=1e-8", "primal_tol", "eps_prox=0"),
+    ("piqp", "eps_abz=1e-7", "eps_abs", "eps_duality_gap_abs=1e-8"),
+    ("proxqp", "eps_abss=1e-7", "eps_abs", "eps_primal_inf=1e-5"),
+    ("clarabel", "tol_fea=1e-7", "tol_feas", "tol_feas=1e-7"),
+    ("qpoases", "terminationTolerence=1e-10", "terminationTolerance", "terminationTolerance=1e-10"),
+    ("osqp", "rhoo=0.1", "rho", "rho=0.1"),
+    ("rnn", "epz=0.01", "eps", "eps=0.01"),
     # through qpsolvers, which would drop PIQP's unknown name silently
-    ("qpsolvers:piqp", "qpsolvers:piqp.eps_abz=1e-7", "'eps_abs'", "qpsolvers:piqp.backend=dense"),
-    (
-        "qpsolvers:clarabel",
-        "qpsolvers:clarabel.tol_fea=1e-7",
-        "'tol_feas'",
-        "qpsolvers:clarabel.tol_feas=1e-7",
-    ),
+    ("qpsolvers:piqp", "eps_abz=1e-7", "eps_abs", "backend=dense"),
+    ("qpsolvers:clarabel", "tol_fea=1e-7", "tol_feas", "tol_feas=1e-7"),
 ]
 
 
@@ -78,13 +64,15 @@ def test_a_mistyped_key_exits_2_before_any_work(
         raise AssertionError("a solve started")
 
     monkeypatch.setattr(backend_class(backend), "solve", no_solve)
-    command = f"bench problems/wall --backends {backend} --set {typo} --limit 2 --out x.csv"
+    command = (
+        f"bench problems/wall --backends {backend} --set {backend}.{typo} --limit 2 --out x.csv"
+    )
     assert main(command.split()) == 2
     err = capsys.readouterr().err.strip()
     key = typo.split("=")[0]
     assert len(err.splitlines()) == 1, err
-    assert f"--set {key}" in err and f"did you mean {suggestion}" in err
-    valid_key = valid.split("=")[0].split(".", 1)[1]
+    assert f"--set {backend}.{key}" in err and f"did you mean '{suggestion}'" in err
+    valid_key = valid.split("=")[0]
     assert "its settings: " in err and valid_key in err.split("its settings: ")[1].split(", ")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["problems"]  # no x.csv, nothing else
     assert _files(ROOT / "problems" / "wall") == before  # no reference cache beside the set
@@ -95,7 +83,7 @@ def test_a_valid_key_still_runs(backend, typo, suggestion, valid, tmp_path):
     _available(backend)
     folder = fb.write_tick_set(tmp_path / "set", 2)
     out = tmp_path / "x.csv"
-    command = ["-q", "bench", str(folder), "--backends", backend, "--set", valid]
+    command = ["-q", "bench", str(folder), "--backends", backend, "--set", f"{backend}.{valid}"]
     assert main(command + ["--out", str(out)]) in (0, 1)
     rows = pd.read_csv(out)
     assert len(rows) == 2 and "error" not in set(rows["status"]), rows[["status", "error"]]

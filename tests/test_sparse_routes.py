@@ -168,6 +168,8 @@ def test_100k_banded_through_sparse_routes_under_2gb(tmp_path):
             str(out),
             "--memory-budget",
             "1GB",
+            # no discarded warm-up solve: the same solve again (ProxQP's runs to its 10 s limit)
+            "--no-warmup",
         ],
         capture_output=True,
         text=True,

@@ -7,6 +7,8 @@ import sys
 
 from conftest import simulate_args
 
+from qpbench.cli import main
+
 CODE = """
 import logging, sys
 from tqdm import tqdm
@@ -36,26 +38,17 @@ def test_log_lines_start_on_their_own_line():
     assert all(line.startswith("INFO: wall / daqp: ok") for line in logged), shown
 
 
-def _simulate_stderr(*flags: str) -> list[str]:
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "qpbench.cli",
-            *flags,
-            *simulate_args("wall", "daqp", "0.005"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return proc.stderr.splitlines()
+def _simulate_stderr(capsys, *flags: str) -> list[str]:
+    """What ``qpbench FLAGS simulate ...`` writes on stderr (run in this process: the logging set-up
+    of each call is the command line's own, replacing the previous one)."""
+    capsys.readouterr()
+    assert main([*flags, *simulate_args("wall", "daqp", "0.005")]) == 0
+    return capsys.readouterr().err.splitlines()
 
 
-def test_verbosity_levels():
+def test_verbosity_levels(capsys):
     """-q: nothing but errors; default: the run's story; -v: also the settings; -vv: also one line per solve."""
-    quiet, default, v, vv = (_simulate_stderr(*f) for f in (["-q"], [], ["-v"], ["-vv"]))
+    quiet, default, v, vv = (_simulate_stderr(capsys, *f) for f in (["-q"], [], ["-v"], ["-vv"]))
     assert quiet == []
     assert any("verdict ok" in line for line in default)
     assert not any(line.startswith("DEBUG") for line in default)
