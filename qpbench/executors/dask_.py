@@ -37,9 +37,10 @@ __all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
 #: Dask settings of the workers a sweep runs on. The statistical profiler samples the task's
 #: stack every 10 ms and the event loop checks its own health every 20 ms, both on the worker's
 #: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`). Measured on a
-#: 20 s wall instance with DAQP (``bench/sweep_speedup.py``): with Dask's defaults the worker's
-#: other threads took 37 ms of CPU time during the task's 0.47 s and the task's thread waited 34
-#: times; with these settings 7 ms and once (the memory monitor and heartbeats remain).
+#: 20 s wall instance with DAQP (``bench/sweep_speedup.py``, idle machine): with Dask's defaults the
+#: worker's other threads took 19 ms of CPU time during the task's 0.41 s and the task's thread
+#: waited 129 times (+11.1 % wall); with these settings 4 ms and 39 waits (-2.8 %, within noise;
+#: the memory monitor and heartbeats remain).
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
