@@ -3,8 +3,9 @@
 qpbenchmark's published results for the large Maros-Meszaros problems were made with an
 older OSQP than the one qpbench installs; this script shows what the version alone
 changes, on exactly the matrices qpbench reads and stacked as ``qpsolvers``' OSQP route
-stacks them (``G``, then ``A``, then the bounds as an identity block), with OSQP's
-default settings and a time limit.
+stacks them (``G``, then ``A``, then the bounds as an identity block; written out here
+because qpsolvers 4.x's OSQP route does not drive OSQP 0.6), with OSQP's default settings
+and a time limit.
 
 Two steps, so that the second can run in a virtual environment of its own (numpy,
 scipy and the OSQP version under test, e.g. ``pip install 'osqp<0.7'``)::
