@@ -221,6 +221,36 @@ def test_qpoases_time_limit():
 
 
 @pytest_qpoases
+def test_qpoases_solution_fields_behave_like_plain_fields():
+    """The multipliers QpoasesSolution makes on first read: equal to qpsolvers' (a second
+    solver), read twice the same object, replaced by an assignment, kept by pickling and
+    dataclasses.replace; an empty z_box without bounds; None with no solution."""
+    import dataclasses
+    import pickle
+
+    problem, x, y, z, z_box = random_kkt_problem(np.random.default_rng(4), 6, 2, 5, 2)
+    sol = get_backend("qpoases").solve(problem)
+    ref = qpsolvers.solve_problem(problem, "daqp")
+    for field in ("x", "y", "z", "z_box"):
+        np.testing.assert_allclose(getattr(sol, field), getattr(ref, field), atol=1e-8)
+    assert sol.y is sol.y
+    assert qpsolvers.Solution.dual_residual(sol) < 1e-9
+    for copy in (pickle.loads(pickle.dumps(sol)), dataclasses.replace(sol)):
+        for field in ("x", "y", "z", "z_box"):
+            np.testing.assert_array_equal(getattr(copy, field), getattr(sol, field))
+    sol.z = np.zeros(5)
+    assert not sol.z.any()
+    P, q, G, h, A, b, _, _ = problem.unpack()
+    no_bounds = get_backend("qpoases").solve(qpsolvers.Problem(P, q, G, h, A, b))
+    assert no_bounds.z_box.shape == (0,) and no_bounds.z.shape == (5,)
+    failed = get_backend("qpoases", time_limit=1e-9).solve(
+        random_kkt_problem(np.random.default_rng(9), 40, 2, 60, 20)[0]
+    )
+    assert failed.status == "time_limit"
+    assert failed.x is None and failed.y is None and failed.z is None and failed.z_box is None
+
+
+@pytest_qpoases
 def test_qpoases_state_copy_is_independent(wall_ticks):
     """get_state copies the SQProblem: solving on after the snapshot does not change it."""
     backend = get_backend("qpoases")

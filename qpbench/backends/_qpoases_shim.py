@@ -364,7 +364,7 @@ class Workspace:
         # Where x, z_box, y and z lie in a copy of ``xy``.
         self.parts = (
             slice(0, n),
-            slice(n, 2 * n),
+            slice(n, 2 * n if box else n),  # no bounds: an empty z_box
             slice(2 * n, 2 * n + me),
             slice(2 * n + me, None),
         )
