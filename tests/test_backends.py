@@ -615,6 +615,88 @@ def test_all_solvers_extra_is_listed_when_missing(monkeypatch):
         assert not info.available and "qpbench[all-solvers]" in info.reason
 
 
+@pytest.mark.parametrize("solver", ["daqp", "ecos", "quadprog"])
+def test_dense_only_qpsolvers_routes_take_sparse_problems(solver):
+    """The dense-only routes take a sparse problem (densified for quadprog, whose qpsolvers
+    wrapper raises "problem has sparse matrices"): the same x as the dense problem."""
+    name = f"qpsolvers:{solver}"
+    if backend_class(name).unavailable_reason():
+        pytest.skip(backend_class(name).unavailable_reason())
+    problem, x, *_ = random_kkt_problem(np.random.default_rng(8), 6, 2, 5, 2)
+    backend = get_backend(name)
+    dense, sparse = backend.solve(problem), backend.solve(sparse_copy(problem))
+    assert dense.status == sparse.status == "optimal", (dense.error, sparse.error)
+    np.testing.assert_allclose(sparse.x, dense.x, atol=1e-12)
+    np.testing.assert_allclose(dense.x, x, atol=1e-6)
+
+
+def test_qpsolvers_routes_call_what_solve_problem_calls(monkeypatch):
+    """The routes call qpsolvers' function for the solver as solve_problem does: the same x and
+    duals as solve_problem with the same options, its constraint check (an incomplete
+    inequality is an error naming it), and solve_problem itself when no table is found."""
+    import qpbench.backends.qpsolvers_ as route
+
+    problem = robot_like_problem(np.random.default_rng(11))[0]
+    for solver in ("daqp", "quadprog", "osqp"):
+        backend = get_backend(f"qpsolvers:{solver}")
+        ours = backend.solve(problem)
+        ref = qpsolvers.solve_problem(problem, solver, **backend._options())
+        for field in ("x", "y", "z", "z_box"):
+            np.testing.assert_array_equal(getattr(ours, field), getattr(ref, field))
+    P, q, G, h, A, b, lb, ub = problem.unpack()
+    broken = qpsolvers.Problem(P, q, G, None, A, b, lb, ub)
+    sol = get_backend("qpsolvers:daqp").solve(broken)
+    assert sol.status == "error" and "incomplete inequality" in sol.error
+    assert route._wrapper("daqp") is qpsolvers.solve_problem.__globals__["solve_function"]["daqp"]
+
+    def solve_problem(*args, **kwargs):  # a function whose module has no dispatch table
+        return qpsolvers.solve_problem(*args, **kwargs)
+
+    monkeypatch.setattr(route, "_solve_problem", solve_problem)
+    fallback = route._wrapper("daqp")
+    assert fallback.__name__ == "through_solve_problem"
+    np.testing.assert_array_equal(fallback(problem).x, qpsolvers.solve_problem(problem, "daqp").x)
+
+
+def test_float64_wrappers_hand_back_float64_arrays():
+    """The qpsolvers routes take the results of FLOAT64_WRAPPERS' solvers as given: each of them
+    that is installed returns float64 arrays (or None) through qpsolvers.solve_problem itself,
+    with and without inequality rows and bounds, and on an infeasible problem; a solver
+    outside the set (clarabel's duals are lists) is why the set exists."""
+    import warnings
+
+    from qpbench.backends.qpsolvers_ import FLOAT64_WRAPPERS
+
+    full = robot_like_problem(np.random.default_rng(5))[0]
+    P, q, G, h, A, b, lb, ub = full.unpack()
+    problems = {
+        "robot tick": full,
+        "no inequalities": qpsolvers.Problem(P, q, None, None, A, b, lb, ub),
+        "no bounds": qpsolvers.Problem(P, q, G, h, A, b),
+        "infeasible": _infeasible_problem(),
+        "unbounded": _unbounded_problem(),
+    }
+    installed = sorted(FLOAT64_WRAPPERS & set(qpsolvers.available_solvers))
+    assert {"daqp", "quadprog", "osqp", "proxqp", "piqp"} <= set(installed)
+    for solver in installed:
+        for label, problem in problems.items():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    result = qpsolvers.solve_problem(problem, solver)
+                except (qpsolvers.QPError, ValueError):
+                    continue  # an error, not a result (quadprog on the infeasible problem)
+            for field in ("x", "y", "z", "z_box"):
+                value = getattr(result, field)
+                assert value is None or (type(value) is np.ndarray and value.dtype == np.float64), (
+                    solver,
+                    label,
+                    field,
+                    type(value),
+                )
+    assert "clarabel" not in FLOAT64_WRAPPERS
+
+
 def test_qpsolvers_routes_report_the_iterations_qpsolvers_keeps():
     """Each qpsolvers route with an iteration reader reports the count from its solver's extras
     (a positive int), the others None; a missing or malformed entry is None, never an error."""

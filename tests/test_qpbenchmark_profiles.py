@@ -72,17 +72,25 @@ def test_profiles_pass_qpbenchmarks_arguments_verbatim(qpb, runtime):
 
 
 def test_the_solver_is_called_with_those_arguments(qpb, mm_dir, tmp_path, monkeypatch):
-    """What qpsolvers.solve_problem receives in a bench run under qpbenchmark:high_accuracy."""
-    import qpbench.backends.qpsolvers_ as route
+    """What qpsolvers' function for each solver (the one qpsolvers.solve_problem dispatches to)
+    receives in a bench run under qpbenchmark:high_accuracy, beside initvals and verbose."""
+    import qpsolvers
 
+    table = qpsolvers.solve_problem.__globals__["solve_function"]
     calls = []
-    real = route._solve_problem
 
-    def spy(problem, solver, initvals, **kwargs):
-        calls.append((solver, kwargs))
-        return real(problem, solver, initvals, **kwargs)
+    def spy(solver):
+        real = table[solver]
 
-    monkeypatch.setattr(route, "_solve_problem", spy)
+        def call(problem, initvals=None, verbose=False, **kwargs):
+            assert verbose is False
+            calls.append((solver, kwargs))
+            return real(problem, initvals=initvals, verbose=verbose, **kwargs)
+
+        return call
+
+    for solver in ("osqp", "clarabel"):
+        monkeypatch.setitem(table, solver, spy(solver))
     ps = load_problems(mm_dir / "HS21.mat")
     config = BenchConfig(
         backends=["qpsolvers:osqp", "qpsolvers:clarabel"],

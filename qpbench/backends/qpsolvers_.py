@@ -11,7 +11,10 @@ when qpsolvers lists its solver as available (importing qpsolvers is all this
 module does at import).
 
 Each call is stateless: qpsolvers builds the solver's problem anew (that is the
-route this backend measures). ``warm_start`` is passed as ``initvals``.
+route this backend measures). ``warm_start`` is passed as ``initvals``. The
+call is what :func:`qpsolvers.solve_problem` does (``check_constraints``,
+then qpsolvers' function for the solver with the same keywords), minus its
+dispatch (:func:`_wrapper`).
 
 Settings. Under a qpbenchmark profile (``qpbenchmark:<settings>``) the
 options are the keyword arguments qpbenchmark's runner passes for the solver,
@@ -28,7 +31,7 @@ names are passed to the solver verbatim.
 
 Matrices. Solvers that qpsolvers lists as sparse-only get CSC matrices from
 us (qpsolvers would convert them too, with a warning); dense-only solvers
-get dense ones (quadprog refuses sparse input).
+get dense ones (quadprog's wrapper refuses sparse input).
 
 Warnings. qpsolvers' wrappers warn on a failed solve and on an ignored warm
 start; the status says it. Constructing a ``qpsolvers:<name>`` backend adds
@@ -38,8 +41,9 @@ solver (``qpsolvers.solvers.<name>_``) in this process
 ``warnings.catch_warnings`` block around every call costs a noticeable
 fraction of a fast solve.
 
-Per-call cost. The options are computed once per instance, the dense/sparse
-test is a type check, duals already float64 arrays are not converted, and a
+Per-call cost. The options are computed once per instance, the results of
+the solvers whose wrappers hand back float64 arrays (:data:`FLOAT64_WRAPPERS`)
+are taken as given (the others are checked and converted), and a
 solver's status table is read only when qpsolvers says ``found=False``: the
 backend costs what :func:`qpsolvers.solve_problem` costs plus building the
 :class:`BackendSolution` (``bench/backend_overhead.py``).
@@ -143,6 +147,23 @@ _solve_problem = qpsolvers.solve_problem
 _QPError = qpsolvers.QPError
 
 
+def _wrapper(solver: str):
+    """qpsolvers' function for ``solver``: the entry of the table :func:`qpsolvers.solve_problem`
+    dispatches through (read from its globals: the table's module moved between qpsolvers
+    4.4 and 4.13), called as ``solve_problem`` calls it. Without that table (another
+    qpsolvers), ``solve_problem`` itself. Calling it directly saves ``solve_problem``'s frame
+    and keyword repacking, 0.2-0.3 us of a 14 us DAQP call."""
+    table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
+    wrapper = table.get(solver) if isinstance(table, dict) else None
+    if wrapper is not None:
+        return wrapper
+
+    def through_solve_problem(problem, initvals=None, verbose=False, **kwargs):
+        return _solve_problem(problem, solver, initvals, verbose, **kwargs)
+
+    return through_solve_problem
+
+
 def _float_array(v):
     if v is None or (type(v) is _ndarray and v.dtype == _F64):
         return v
@@ -150,6 +171,27 @@ def _float_array(v):
 
 
 _F64 = np.dtype(np.float64)
+
+#: Solvers whose qpsolvers wrapper hands ``x``, ``y``, ``z`` and ``z_box`` back as float64
+#: arrays (or None): their results are taken as given, without the four type checks (0.2 us
+#: of a 14 us DAQP call). tests/test_backends.py checks it of every installed one through
+#: qpsolvers.solve_problem itself, so a qpsolvers release that changes a wrapper fails there;
+#: any other solver's results (clarabel's duals are lists) are checked and converted.
+FLOAT64_WRAPPERS = frozenset(
+    {
+        "cvxopt",
+        "daqp",
+        "ecos",
+        "gurobi",
+        "highs",
+        "osqp",
+        "piqp",
+        "proxqp",
+        "qpalm",
+        "quadprog",
+        "scs",
+    }
+)
 _ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
 
@@ -163,7 +205,6 @@ class QpsolversBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._cached_options: dict | None = None
         solver = self.solver
         self._sparse_only = (
             solver in qpsolvers.sparse_solvers and solver not in qpsolvers.dense_solvers
@@ -173,7 +214,12 @@ class QpsolversBackend(Backend):
         )
         self._reader = STATUS_READERS.get(solver)
         self._iterations = ITERATION_READERS.get(solver)
+        self._float64_wrapper = solver in FLOAT64_WRAPPERS
         silence_wrapper_warnings(solver)
+        self._solver_options = self._build_options()
+        # The keywords of every call: solve_problem passes verbose (default False) to the wrapper.
+        self._call_options = {"verbose": False, **self._solver_options}
+        self._wrapper = _wrapper(solver)
 
     @classmethod
     def unavailable_reason(cls) -> str | None:
@@ -223,26 +269,25 @@ class QpsolversBackend(Backend):
         return backend_class(direct).setting_names() | named | frozenset(extra)
 
     def _options(self) -> dict:
-        """Solver options (computed once per instance; do not modify the dict)."""
-        if self._cached_options is None:
-            generic, native = generic_settings(self)
-            given = self.profile.solver_options
-            if given is not None:  # qpbenchmark's arguments, verbatim (qpbench.profiles)
-                options = dict(given.get(self.solver, {}))
-                options.update({k: v for k, v in self.settings.items()})
-            else:
-                options = native_settings(self.solver, **generic)
-                options.update(native)
-            self._cached_options = options
-        return self._cached_options
+        """Solver options, as passed to :func:`qpsolvers.solve_problem` (computed at construction;
+        do not modify)."""
+        return self._solver_options
+
+    def _build_options(self) -> dict:
+        generic, native = generic_settings(self)
+        given = self.profile.solver_options
+        if given is not None:  # qpbenchmark's arguments, verbatim (qpbench.profiles)
+            options = dict(given.get(self.solver, {}))
+            options.update({k: v for k, v in self.settings.items()})
+        else:
+            options = native_settings(self.solver, **generic)
+            options.update(native)
+        return options
 
     def solve(self, problem, warm_start=None) -> BackendSolution:
         """One solve through qpsolvers; see :meth:`Backend.solve` (same fields). Timed here
         rather than around a ``_solve``: one Python call less per solve."""
         start = _perf_ns()
-        options = self._cached_options
-        if options is None:
-            options = self._options()
         solved = problem
         if self._sparse_only:
             if not problem.has_sparse:
@@ -259,7 +304,10 @@ class QpsolversBackend(Backend):
             ):
                 solved = qpsolvers.Problem(*problem.unpack_as_dense())
         try:
-            result = _solve_problem(solved, self.solver, warm_start, **options)
+            # What qpsolvers.solve_problem does, without its dispatch: the same check, then
+            # the same wrapper with the same keywords (verbose=False among them).
+            solved.check_constraints()
+            result = self._wrapper(solved, initvals=warm_start, **self._call_options)
         except (_QPError, ValueError) as exc:
             return self._finish(_error(problem, exc), start)
         except Exception as exc:
@@ -273,17 +321,18 @@ class QpsolversBackend(Backend):
         if extras is None:
             extras = {}
         sol.extras = extras
-        # Some qpsolvers wrappers (clarabel) hand duals back as Python lists. The float64
-        # descriptor of a fresh array is numpy's singleton: tested by identity, and anything
-        # else (lists, other dtypes, an equal descriptor that is another object) converted.
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
-        if not (
-            (x is None or (type(x) is _ndarray and x.dtype is _F64))
-            and (y is None or (type(y) is _ndarray and y.dtype is _F64))
-            and (z is None or (type(z) is _ndarray and z.dtype is _F64))
-            and (z_box is None or (type(z_box) is _ndarray and z_box.dtype is _F64))
-        ):
-            x, y, z, z_box = map(_float_array, (x, y, z, z_box))
+        if not self._float64_wrapper:
+            # Some qpsolvers wrappers (clarabel) hand duals back as Python lists. The float64
+            # descriptor of a fresh array is numpy's singleton: tested by identity, and anything
+            # else (lists, other dtypes, an equal descriptor that is another object) converted.
+            if not (
+                (x is None or (type(x) is _ndarray and x.dtype is _F64))
+                and (y is None or (type(y) is _ndarray and y.dtype is _F64))
+                and (z is None or (type(z) is _ndarray and z.dtype is _F64))
+                and (z_box is None or (type(z_box) is _ndarray and z_box.dtype is _F64))
+            ):
+                x, y, z, z_box = map(_float_array, (x, y, z, z_box))
         sol.x = x
         sol.y = y
         sol.z = z
