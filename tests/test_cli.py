@@ -302,3 +302,32 @@ def test_run_bench_subset_keeps_the_time_between_records():
     assert record_period(full) == pytest.approx(0.01)
     assert record_period(subset) == pytest.approx(0.05)
     assert full.manifest["generator"]["every"] == 10  # the set itself is untouched
+
+
+def test_run_bench_subset_solves_references_of_the_kept_records_only(tmp_path, monkeypatch):
+    """Without a reference cache, `run --bench-every K` solves the K-th records' references
+    only, and caches them in the set's cache for the next run."""
+    import shutil
+
+    import qpbench.reference as reference_module
+    from qpbench.formats import read_problem_set
+    from qpbench.harness.pipeline import bench_subset
+
+    folder = tmp_path / "wall"
+    folder.mkdir()
+    for name in ("manifest.json", "problems.parquet"):
+        shutil.copy(Path(__file__).resolve().parents[1] / "problems" / "wall" / name, folder)
+    solved = []
+    real = reference_module._compute
+
+    def spy(todo, *args, **kwargs):
+        solved.extend(r.name for r in todo)
+        return real(todo, *args, **kwargs)
+
+    monkeypatch.setattr(reference_module, "_compute", spy)
+    subset, refs = bench_subset(read_problem_set(folder), None, 200)
+    assert solved == [r.name for r in subset.records] == [r.name for r in refs]
+    assert len(solved) == 10
+    solved.clear()
+    assert bench_subset(read_problem_set(folder), None, 400)[1][1].name == refs[2].name
+    assert solved == []  # every 400th is among every 200th: read from the cache

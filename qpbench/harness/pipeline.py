@@ -194,9 +194,8 @@ def bench_subset(
     from ..reference import reference_solutions
     from ..selection import select_set
 
-    refs = reference_solutions(problem_set)
     if duration is None and every == 1:
-        return problem_set, refs
+        return problem_set, reference_solutions(problem_set)
     keep = [
         i
         for i, r in enumerate(problem_set.records)
@@ -204,11 +203,15 @@ def bench_subset(
     ]
     if not keep:
         keep = [0]
+    kept = [problem_set.records[i] for i in keep]
+    # Only the kept problems are solved for references: a set of some of the records shares
+    # the whole set's cache (keyed by the set's content), which gains them.
+    refs = reference_solutions(replace(problem_set, records=kept))
     # the time between two kept records grows by ``every``: an online backend integrates that much per call
     stretched = select_set(problem_set, every=every) if every > 1 else problem_set
     return (
-        replace(stretched, records=[problem_set.records[i] for i in keep]),
-        [refs[i] for i in keep],
+        replace(stretched, records=kept),
+        refs,
     )
 
 
