@@ -22,12 +22,16 @@ Stateful (they solve the QP exactly with qpsolvers' ``clarabel`` and report
 their state in ``iterations``), names ``stateful:<kind>``:
 
 - ``count-state`` / ``count-copy``: ``iterations`` = solves since the last
-  reset, including this one; state restored by ``get_state``/``set_state``
-  or by ``copy.deepcopy`` respectively;
+  reset, including this one (two names of one behaviour, kept for the tests
+  that name them);
 - ``count-fail2``: ``count-copy`` that raises on tick 2 (``q[-1] == 2``);
 - ``last-native``: ``iterations`` = ``round(q[-1])`` of the previously solved
-  problem + 1 (0 after a reset); holds a lock, so it cannot be deep-copied
-  (restored by replaying the previous problem).
+  problem + 1 (0 after a reset); holds a lock, like a native handle that
+  cannot be copied.
+- ``shared``: ``iterations`` = solves by any instance of the class since the
+  import (instances share their state: ``--repeat``'s replicas disagree);
+- ``single``: ``count-copy`` of which a second instance cannot be made
+  (:meth:`~qpbench.backends.base.Backend.fresh` raises).
 - ``kernels``: ``iterations`` = specialisations of the network's general
   integrator the solving process holds in memory (a worker's inheritance).
 """
@@ -180,12 +184,6 @@ class _Stateful(Backend):
 class CountState(_Stateful):
     name = "stateful:count-state"
 
-    def get_state(self):
-        return self.count
-
-    def set_state(self, state):
-        self.count = state
-
 
 @register
 class CountCopy(_Stateful):
@@ -206,13 +204,34 @@ class CountFail(_Stateful):
 
 
 @register
+class Shared(Backend):
+    name = "stateful:shared"
+    family = "test state"
+    calls = 0
+
+    def _solve(self, problem, warm_start):
+        type(self).calls += 1
+        sol = exact_solution(problem)
+        sol.iterations = type(self).calls
+        return sol
+
+
+@register
+class Single(_Stateful):
+    name = "stateful:single"
+
+    def fresh(self):
+        raise RuntimeError("one instance only")
+
+
+@register
 class LastNative(Backend):
     name = "stateful:last-native"
     family = "test state"
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._lock = threading.Lock()  # makes copy.deepcopy fail, like a native handle
+        self._lock = threading.Lock()  # cannot be copied, like a native handle
         self.last = None
 
     def reset(self):

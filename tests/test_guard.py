@@ -93,23 +93,54 @@ def test_reset_before_marks_state_reset_in_sequential_mode_only(records):
 
 @pytest.mark.parametrize("name", ["stateful:count-state", "stateful:count-copy"])
 def test_repeats_start_from_the_same_state(records, name):
+    """Each timed repeat solves on its own replica, caught up with the kept one's history."""
     runner = local(name)
     runner.solve(records[0].problem)
-    out = runner.solve(records[1].problem, repeat=4, prev_problem=records[0].problem)
+    out = runner.solve(records[1].problem, repeat=4)
     assert len(out.wall_times_s) == 4
-    assert out.solution.iterations == 2  # each repeat restarted from state "1 solve done"
+    assert out.solution.iterations == 2  # each repeat started from state "1 solve done"
+    assert out.repeat_exact and out.repeat_note == ""
+    assert [b.count for b in runner.replicas.members] == [2, 2, 2, 2]
     assert runner.solve(records[2].problem).solution.iterations == 3
-    expected = {"stateful:count-state": "state", "stateful:count-copy": "deepcopy"}[name]
-    assert runner.restorer.method == expected
+    out = runner.solve(records[3].problem, repeat=3)  # replicas 1, 2 catch up on tick 2
+    assert out.solution.iterations == 4 and out.repeat_exact
 
 
-def test_repeats_restore_uncopyable_state_by_replay(records):
-    runner = local("stateful:last-native")
-    assert runner.solve(records[0].problem).solution.iterations == 0
-    out = runner.solve(records[1].problem, repeat=3, prev_problem=records[0].problem)
-    assert runner.restorer.method == "replay"
-    assert out.solution.iterations == 1 and len(out.wall_times_s) == 3
-    assert runner.solve(records[2].problem).solution.iterations == 2
+def test_repeats_of_uncopyable_state_follow_the_kept_replica(records):
+    runner = LocalRunner(get_backend("stateful:last-native"), 0.5, True, repeat=3)
+    assert len(runner.replicas.members) == 3  # made up front (warmed up with the first)
+    outs = [runner.solve(r.problem) for r in records]
+    assert [o.solution.iterations for o in outs] == [0, 1, 2, 3]
+    assert all(len(o.wall_times_s) == 3 and o.repeat_exact for o in outs)
+    runner.reset()
+    assert runner.solve(records[2].problem).solution.iterations == 0
+
+
+def test_replicas_that_disagree_are_reported(records):
+    """A backend whose instances share state: the repeats do other work, and the row says so."""
+    runner = local("stateful:shared")
+    out = runner.solve(records[0].problem, repeat=3)
+    assert out.solution.iterations == fb.Shared.calls - 2  # the kept (first) solve's
+    assert not out.repeat_exact
+    assert "repeat 2:" in out.repeat_note and "iterations against" in out.repeat_note
+
+
+def test_a_replica_that_cannot_be_made_leaves_one_timed_solve(records):
+    runner = local("stateful:single")
+    out = runner.solve(records[0].problem, repeat=3)
+    assert out.status == "optimal" and len(out.wall_times_s) == 1
+    assert out.repeat_exact  # the one timed solve is the kept one
+    assert out.repeat_note.startswith("1 of 3 solves timed: replica 2: RuntimeError")
+
+
+def test_failed_solve_is_not_repeated_and_replicas_catch_up(records):
+    runner = local("stateful:count-fail2")
+    for rec in records[:2]:
+        assert runner.solve(rec.problem, repeat=2).repeat_exact
+    out = runner.solve(records[2].problem, repeat=2)
+    assert out.status == "error" and len(out.wall_times_s) == 0
+    out = runner.solve(records[3].problem, repeat=2, reset_before=True)
+    assert out.solution.iterations == 1 and out.repeat_exact and len(out.wall_times_s) == 2
 
 
 def test_worker_survives_segfault_and_restarts(records, plugin_loaded):
@@ -135,11 +166,12 @@ def test_worker_hang_is_killed_at_the_deadline_and_state_is_lost(records, plugin
 
 
 def test_worker_times_inside_and_carries_state(records, plugin_loaded):
-    runner = IsolatedRunner("stateful:last-native", "default", {}, 5.0, True)
+    runner = IsolatedRunner("stateful:last-native", "default", {}, 5.0, True, repeat=2)
     try:
         outs = [runner.solve(r.problem) for r in records]
         assert [o.solution.iterations for o in outs] == [0, 1, 2, 3]
-        assert all(o.status == "optimal" and o.isolated and len(o.wall_times_s) == 1 for o in outs)
+        assert all(o.status == "optimal" and o.isolated and len(o.wall_times_s) == 2 for o in outs)
+        assert all(o.repeat_exact for o in outs)
         assert outs[0].solution.problem is records[0].problem  # re-attached in the parent
         np.testing.assert_allclose(
             outs[1].solution.x, fb.exact_solution(records[1].problem).x, atol=1e-9

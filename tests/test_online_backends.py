@@ -2,8 +2,8 @@
 
 What the generated tests of tests/test_backends.py do not cover: a long
 sequence of robot ticks solved tick after tick equals the same ticks solved
-independently, ``--repeat`` restores the state exactly, wrong shapes are
-refused, and the qpOASES shim's build and availability.
+independently, wrong shapes are refused, and the qpOASES shim's build and
+availability. (``--repeat`` against one solve: ``tests/test_contract.py``, for every backend.)
 """
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ import qpsolvers
 from qpbench.backends import backend_info, backend_names, get_backend
 from qpbench.exceptions import ParamError, ProblemFormatError
 from qpbench.formats import load_problems
-from qpbench.harness.guard import LocalRunner
 from qpbench.known import random_kkt_problem, robot_like_problem
 
 WALL = Path(__file__).resolve().parents[1] / "problems" / "wall"
@@ -84,31 +83,6 @@ def test_duals_follow_qpsolvers_convention_on_robot_ticks(name, wall_ticks):
                 getattr(ours, field), getattr(ref, field), atol=1e-6, err_msg=field
             )
         assert ours.dual_residual() < 1e-8
-
-
-@pytest.mark.parametrize("name", _online())
-def test_repeat_three_equals_repeat_one(name, wall_ticks):
-    """--repeat: each repeat starts from the first repeat's state, so answers and iterations are those of R = 1."""
-    problems = wall_ticks[:120]  # across the infeasible start
-
-    def run(repeat):
-        runner = LocalRunner(get_backend(name), time_limit=10.0, sequential=True)
-        out, prev = [], None
-        for problem in problems:
-            outcome = runner.solve(problem, repeat=repeat, prev_problem=prev)
-            sol = outcome.solution
-            out.append((outcome.status, None if sol.x is None else sol.x.copy(), sol.iterations))
-            prev = problem
-        return out, runner.restorer.method
-
-    once, _ = run(1)
-    thrice, method = run(3)
-    assert method in ("state", "replay", "deepcopy")
-    for k, ((s1, x1, i1), (s3, x3, i3)) in enumerate(zip(once, thrice)):
-        assert s1 == s3, k
-        if x1 is not None:
-            np.testing.assert_array_equal(x1, x3, err_msg=f"tick {k}")
-            assert i1 == i3, k
 
 
 @pytest.mark.parametrize("name", _online())

@@ -115,9 +115,8 @@ class Backend:
             up to :data:`qpbench.memory.DENSE_MAX_ENTRIES` only (a larger one is a
             ``skipped`` row).
 
-    Optional hooks the harness uses when present: ``get_state()`` and
-    ``set_state(state)`` restore a backend exactly between timed repeats
-    (otherwise it is deep-copied, or reset and re-warmed; see README).
+    ``--repeat`` times a problem on several instances of a backend fed the same
+    problems (:mod:`qpbench.harness.timing`); :meth:`fresh` makes them.
     """
 
     name: ClassVar[str] = ""
@@ -200,6 +199,15 @@ class Backend:
 
     def reset(self) -> None:
         """Forget every state kept between calls (persistent solver, warm start)."""
+
+    def fresh(self) -> Backend:
+        """A new instance with this one's profile and settings, in the reset state.
+
+        It must not share any state with this one: the two, fed the same problems,
+        give the same answers. Override when the constructor takes more than
+        ``(profile, **settings)``.
+        """
+        return type(self)(profile=self.profile, **self.settings)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r} profile={self.profile.name}>"

@@ -166,13 +166,23 @@ class _BenchRun:
     def _worker(self, name: str) -> IsolatedRunner:
         plan = self.plan
         return IsolatedRunner(
-            name, plan.profile, plan.settings[name], plan.profile.time_limit, self.sequential
+            name,
+            plan.profile,
+            plan.settings[name],
+            plan.profile.time_limit,
+            self.sequential,
+            self.config.repeat,
         )
 
     def _runner(self, name: str):
         if self._isolated(name):
             return self._worker(name)
-        return LocalRunner(self.plan.instances[name], self.plan.profile.time_limit, self.sequential)
+        return LocalRunner(
+            self.plan.instances[name],
+            self.plan.profile.time_limit,
+            self.sequential,
+            self.config.repeat,
+        )
 
     def run(self, progress: bool) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
@@ -214,7 +224,6 @@ class _BenchRun:
         if self.sequential:
             for name in active:
                 self.runners[name].reset()
-        prev = None
         for i in seq:
             record = self.plan.records[i]
             order = backend_order(record.name, self.config.backends, self.config.seed)
@@ -235,9 +244,8 @@ class _BenchRun:
                         (position, name, Outcome("skipped", error=self.plan.skips[(i, name)]))
                     )
                     continue
-                solved.append((position, name, self._solve(name, record, prev, needs_reset)))
+                solved.append((position, name, self._solve(name, record, needs_reset)))
             self._write_rows(i, solved)
-            prev = record.problem if self.sequential else None
 
     def _replay(self, name: str, record, status: str, needs_reset: dict) -> None:
         """Restore the state the original run had after ``record`` (resume)."""
@@ -253,14 +261,11 @@ class _BenchRun:
             log.warning("%s: replay of %s failed; state reset", name, record.name)
             needs_reset[name] = True
 
-    def _solve(self, name: str, record, prev, needs_reset: dict):
+    def _solve(self, name: str, record, needs_reset: dict):
         """One timed (repeated) solve; a backend that overran in this process moves to a worker."""
         self.plan.marker.mark((record.name, name, self.pname))
         outcome = self.runners[name].solve(
-            record.problem,
-            repeat=self.config.repeat,
-            reset_before=needs_reset[name],
-            prev_problem=prev,
+            record.problem, repeat=self.config.repeat, reset_before=needs_reset[name]
         )
         needs_reset[name] = self.sequential and outcome.status in FAILURE_STATUSES
         if (

@@ -26,14 +26,17 @@ timed region is identical in both cases.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
-from .timing import StateRestorer, timed_call
+from .timing import Replicas, difference, timed_call
 
 if TYPE_CHECKING:
     import qpsolvers
+
+log = logging.getLogger("qpbench.harness")
 
 
 @dataclass
@@ -42,8 +45,13 @@ class Outcome:
 
     Attributes:
         status: Backend status, or ``error``/``time_limit``/``invalid``/``crashed``.
-        solution: The solution of the last repeat (``None`` if there is none).
+        solution: The solution of the kept solve (``None`` if there is none): replica 0's,
+            the one a controller solving once gets (:mod:`qpbench.harness.timing`).
         wall_times_s: Wall time of each timed repeat in [s].
+        repeat_exact: Every timed repeat did the kept solve's work: it returned the
+            kept status, iterations and answer bit for bit.
+        repeat_note: Why ``repeat_exact`` is false or fewer repeats were timed than
+            asked (empty otherwise; a failed solve is not repeated and needs no note).
         error: ``"Type: message"`` or a description of the failure.
         state_reset: The solve did not start from the state the previous
             solve of the sequence left (a reset after a failure, a new worker).
@@ -56,34 +64,48 @@ class Outcome:
     error: str | None = None
     state_reset: bool = False
     isolated: bool = False
+    repeat_exact: bool = True
+    repeat_note: str = ""
 
 
 class LocalRunner:
     """Run one backend's solves in this process, guarded and timed.
 
     Args:
-        backend: A backend instance (its profile carries the time limit).
+        backend: A backend instance (its profile carries the time limit): replica 0.
         time_limit: Per-solve limit in [s], checked when the solve returns.
         sequential: State carried between solves (else reset before each).
+        repeat: Timed solves per problem: the replicas made now (and warmed up by
+            :meth:`warmup`); :meth:`solve` makes more if asked for more.
     """
 
     isolated = False
 
-    def __init__(self, backend, time_limit: float, sequential: bool):
-        self.backend = backend
+    def __init__(self, backend, time_limit: float, sequential: bool, repeat: int = 1):
+        self.replicas = Replicas(backend)
         self.name = backend.name
         self.time_limit = float(time_limit)
         self.sequential = sequential
-        self.restorer = StateRestorer(sequential)
+        self.repeat = max(1, int(repeat))
+        if self.repeat > 1:
+            try:
+                self.replicas.make(self.repeat)
+            except Exception as exc:  # noqa: BLE001 - reported by the first repeated solve
+                log.debug("%s: cannot make replicas now (%s)", self.name, exc)
+
+    @property
+    def backend(self):
+        """Replica 0: the backend whose answers are kept."""
+        return self.replicas.members[0]
 
     # -- helpers -------------------------------------------------------------
-    def _guarded(self, problem) -> Outcome:
-        """One solve: an :class:`Outcome` with one wall time, never an exception.
-
-        The solve runs to its end; a late one is ``time_limit`` by its wall time.
+    def _guarded(self, problem, backend=None) -> Outcome:
+        """One solve by ``backend`` (default: replica 0): an :class:`Outcome` with one wall
+        time, never an exception. The solve runs to its end; a late one is ``time_limit`` by
+        its wall time.
         """
         try:
-            solution, ns = timed_call(self.backend, problem)
+            solution, ns = timed_call(self.backend if backend is None else backend, problem)
         except Exception as exc:  # noqa: BLE001 - turned into a status on purpose
             return Outcome("error", None, [], describe_exception(exc))
         wall = ns * 1e-9
@@ -92,63 +114,70 @@ class LocalRunner:
 
     # -- interface shared with IsolatedRunner -----------------------------------
     def reset(self) -> None:
-        """Forget the backend's state (a new sequence starts)."""
-        try:
-            self.backend.reset()
-        except Exception:  # noqa: BLE001 - a failing reset shows up at the next solve
-            pass
+        """Forget the backend's state (a new sequence starts): every replica's."""
+        self.replicas.reset()
 
     def warmup(self, problem: qpsolvers.Problem) -> str:
-        """A discarded solve (imports, first-call allocations, a compile for an unusual
-        problem shape), then a reset. Its status and time have no consequence."""
-        outcome = self._guarded(problem)
+        """A discarded solve by each replica (imports, first-call allocations, a compile for an
+        unusual problem shape), then a reset. Its status and time have no consequence."""
+        status = self._guarded(problem).status
+        for backend in self.replicas.members[1:]:
+            self._guarded(problem, backend)
         self.reset()
-        return outcome.status
+        return status
 
     def replay(self, problem: qpsolvers.Problem) -> str:
-        """An untimed, unrecorded solve that only moves the state forward (resume)."""
-        return self._guarded(problem).status
+        """An untimed, unrecorded solve that only moves the state forward (resume); the other
+        replicas follow at their next solve (:meth:`Replicas.ready`)."""
+        outcome = self._guarded(problem)
+        self.replicas.solved(0, problem)
+        return outcome.status
 
     # Same signature as IsolatedRunner.solve, on purpose: harness/bench.py calls either runner
     # the same way (tests/test_guard.py drives both).
     def solve(
-        self,
-        problem: qpsolvers.Problem,
-        repeat: int = 1,
-        reset_before: bool = False,
-        prev_problem: qpsolvers.Problem | None = None,
+        self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False
     ) -> Outcome:
-        """Solve ``problem`` ``repeat`` times from the same state; time each.
+        """Solve ``problem`` once per replica, each from the same state; time each.
 
         Args:
             problem: The QP.
-            repeat: Number of timed solves (R >= 1).
+            repeat: Number of timed solves (R >= 1; default: the runner's).
             reset_before: Reset the backend first (independent mode, or after a failure).
-            prev_problem: The previous problem of the sequence (for restoring by replay).
         """
         if reset_before or not self.sequential:
             self.reset()
-        if repeat <= 1:
-            outcome = self._guarded(problem)
-        else:
-            times = []
-            self.restorer.snapshot(self.backend)
-            for r in range(repeat):
-                if r > 0:
-                    try:
-                        self.backend = self.restorer.restore(self.backend, prev_problem)
-                    except Exception as exc:  # noqa: BLE001
-                        outcome = Outcome(
-                            "error", None, times, f"restoring state: {describe_exception(exc)}"
-                        )
-                        break
-                outcome = self._guarded(problem)
-                times.extend(outcome.wall_times_s)
-                if outcome.status in FAILURE_STATUSES:
-                    break
-            outcome.wall_times_s = times
+        count = self.repeat if repeat is None else max(1, int(repeat))
+        outcome = self._guarded(problem)
+        self.replicas.solved(0, problem)
+        if count > 1 and outcome.status not in FAILURE_STATUSES:
+            self._repeat(problem, outcome, count)
         outcome.state_reset = bool(reset_before and self.sequential)
         return outcome
+
+    def _repeat(self, problem, outcome: Outcome, count: int) -> None:
+        """Time ``problem`` on replicas 1..count-1; their times and agreement go into ``outcome``."""
+        notes = []
+        for r in range(1, count):
+            try:
+                backend = self.replicas.ready(r)
+            except Exception as exc:  # noqa: BLE001 - the row says so; the kept answer stands
+                notes.append(
+                    f"{r} of {count} solves timed: replica {r + 1}: {describe_exception(exc)}"
+                )
+                break
+            other = self._guarded(problem, backend)
+            self.replicas.solved(r, problem)
+            outcome.wall_times_s.extend(other.wall_times_s)
+            if other.status == "error":  # raised: its state is suspect, a new one is made next time
+                self.replicas.drop(r)
+            diff = difference(outcome.solution, other.solution)
+            if diff is None and other.status == "error":
+                diff = other.error
+            if diff is not None:
+                outcome.repeat_exact = False
+                notes.append(f"repeat {r + 1}: {diff}")
+        outcome.repeat_note = "; ".join(notes)
 
     def close(self) -> None:
         """Nothing to release in this process (the interface of :class:`IsolatedRunner`)."""

@@ -105,7 +105,7 @@ def _worker_main(conn, spec: dict) -> None:
         warmup()  # loads the kernels the parent compiled; nothing is timed yet
         load_plugins(spec["plugins"])
         backend = get_backend(spec["backend"], spec["profile"], **spec["settings"])
-        runner = LocalRunner(backend, spec["time_limit"], spec["sequential"])
+        runner = LocalRunner(backend, spec["time_limit"], spec["sequential"], spec["repeat"])
     except BaseException as exc:  # noqa: BLE001
         conn.send(("exc", describe_exception(exc)))
         return
@@ -120,8 +120,8 @@ def _worker_main(conn, spec: dict) -> None:
             if op == "stop":
                 return
             if op == "solve":
-                _, problem, repeat, reset_before, prev_problem = request
-                answer = _strip(runner.solve(problem, repeat, reset_before, prev_problem))
+                _, problem, repeat, reset_before = request
+                answer = _strip(runner.solve(problem, repeat, reset_before))
             elif op == "warmup":
                 answer = runner.warmup(request[1])
             elif op == "replay":
@@ -151,6 +151,8 @@ class IsolatedRunner:
         name: Backend name; profile, settings: as for :func:`qpbench.backends.get_backend`.
         time_limit: Per-solve limit in [s].
         sequential: State carried between solves.
+        repeat: Timed solves per problem (the worker's :class:`LocalRunner` keeps that
+            many replicas).
 
     The worker loads this process's plugin files
     (:func:`qpbench.backends.plugin_files`) before building the backend.
@@ -158,7 +160,15 @@ class IsolatedRunner:
 
     isolated = True
 
-    def __init__(self, name: str, profile, settings: dict, time_limit: float, sequential: bool):
+    def __init__(
+        self,
+        name: str,
+        profile,
+        settings: dict,
+        time_limit: float,
+        sequential: bool,
+        repeat: int = 1,
+    ):
         from ..backends import plugin_files
 
         self.name = name
@@ -171,6 +181,7 @@ class IsolatedRunner:
             "plugins": plugin_files(),
             "time_limit": float(time_limit),
             "sequential": sequential,
+            "repeat": max(1, int(repeat)),
         }
         self._proc = None
         self._conn = None
@@ -262,15 +273,11 @@ class IsolatedRunner:
     # Same signature as LocalRunner.solve, on purpose: harness/bench.py calls either runner the
     # same way, and the worker passes these arguments on to a LocalRunner.
     def solve(
-        self,
-        problem: qpsolvers.Problem,
-        repeat: int = 1,
-        reset_before: bool = False,
-        prev_problem: qpsolvers.Problem | None = None,
+        self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False
     ) -> Outcome:
-        n = max(1, repeat) * (2 if prev_problem is not None else 1)
+        n = self.spec["repeat"] if repeat is None else max(1, int(repeat))
         try:
-            outcome = self._call(("solve", problem, repeat, reset_before, prev_problem), n, "solve")
+            outcome = self._call(("solve", problem, repeat, reset_before), n, "solve")
         except WorkerDied as died:
             outcome = Outcome(died.status, None, [], died.message)
         if outcome.solution is not None:

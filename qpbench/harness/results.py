@@ -54,6 +54,8 @@ TAIL_COLUMNS = (
     "position",
     "order_seed",
     "repeat",
+    "repeat_exact",
+    "repeat_note",
     "n",
     "m_eq",
     "m_ineq",

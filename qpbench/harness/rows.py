@@ -79,6 +79,8 @@ class _RowMaker:
             "position": position,
             "order_seed": seed,
             "repeat": len(times),
+            "repeat_exact": outcome.repeat_exact,
+            "repeat_note": outcome.repeat_note or None,
             "n": n,
             "m_eq": m_eq,
             "m_ineq": m_ineq,

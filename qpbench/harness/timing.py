@@ -1,4 +1,4 @@
-"""How a solve is timed, and how a backend's state is restored between repeats.
+"""How a solve is timed, and how ``--repeat`` times it again from the same state.
 
 The timed region is the backend call and the reading of its answer::
 
@@ -9,46 +9,50 @@ The timed region is the backend call and the reading of its answer::
 Reading ``y``, ``z`` and ``z_box`` inside the region makes every backend pay
 for its full answer: most build it inside ``solve``, while a backend may
 defer the duals until first read (the online network's
-:class:`~qpbench.backends.rnn.TickSolution`: about 1 us a tick on
-``problems/wall``). The objective is not read: a solver that reports one
-computed it inside its call; a backend without one (``pinv``, ``rnn``) gets
-it computed from ``x`` on first read by
+:class:`~qpbench.backends.rnn.TickSolution`). The objective is not read: a
+solver that reports one computed it inside its call; a backend without one
+(``pinv``, ``rnn``) gets it computed from ``x`` on first read by
 :class:`~qpbench.backends.base.BackendSolution`, a Python computation the
 harness does for every backend anyway (:func:`qpbench.metrics.objective`),
 which would charge those backends microseconds the others do not pay. For a
 backend that built everything already the reads are attribute look-ups.
 
 Loading, reference solutions, metrics, CSV writing and inter-process
-communication are all outside it. With ``--repeat R`` the same problem is
-solved R times from the same backend state; the row reports the minimum and
-the median of the R wall times and the metrics of the last repeat.
+communication are all outside it.
 
-A backend carries state from tick to tick (a persistent solver object, a warm
-start, the network state of ``rnn``). So that each repeat starts from the
-state the first one started from, :class:`StateRestorer` uses, in this order:
-
-1. ``backend.get_state()`` / ``backend.set_state(state)`` when the backend has
-   them (exact, cheap);
-2. ``copy.deepcopy(backend)`` of the backend taken before the first repeat,
-   deep-copied again for each repeat (exact for pure-Python/numpy state);
-3. when neither works (a native handle that cannot be copied):
-   ``backend.reset()`` then an untimed solve of the previous problem of the
-   sequence. This rebuilds the state exactly for backends whose state is a
-   function of the last problem they solved (a persistent OSQP/Clarabel/
-   ProxQP object warm-started from its last answer), which is what every
-   built-in stateful backend keeps.
-
-In ``independent`` mode there is nothing to restore: every repeat starts
-with ``backend.reset()``.
+Repeats. A backend carries state from tick to tick (a persistent solver
+object warm-started from its last iterate, OSQP's adapted ``rho``, an
+active set, the network state of ``rnn``), and most of that state lives in
+native objects that can be neither copied nor restored exactly. So
+``--repeat R`` never restores a state: the harness keeps R instances of the
+backend (:class:`Replicas`, made by :meth:`~qpbench.backends.base.Backend.fresh`),
+feeds them the same problems in the same order, resets them at the same
+points, and times each one's solve of the problem once. Replica 0 is the
+backend a controller running once would have: its answer (status, ``x``,
+duals, iterations) is the row's, and it is exactly the answer of
+``--repeat 1``. Replicas 1..R-1 do the same work from the same state, so
+their times are times of the kept solve; the harness checks that (the same
+status, iterations and ``x``, ``y``, ``z``, ``z_box`` bit for bit) and the
+row says when it does not hold (``repeat_exact``, ``repeat_note``: a solver
+that is not deterministic, a replica that raised). A replica made after
+replica 0 has solved problems of the sequence (a ``--repeat`` raised
+mid-sequence, a replica dropped after an exception) first solves, untimed,
+the problems replica 0 solved since its last reset (:attr:`Replicas.history`),
+in order; if that cannot be done the row's other solves are not timed and
+``repeat_note`` says why. A failed solve of replica 0 (``error``,
+``time_limit``, ``invalid``) is not repeated; the harness resets every
+replica before the next solve. In ``independent`` mode every replica is reset
+before every problem.
 """
 
 from __future__ import annotations
 
-import copy
 import gc
 import logging
 import time
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -85,53 +89,89 @@ def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSol
     return solution, t1 - t0
 
 
-class StateRestorer:
-    """Snapshot a backend before repeat 1 and bring it back before repeats 2..R.
+class Replicas:
+    """The instances of one backend that ``--repeat`` times (see the module docstring).
 
     Args:
-        sequential: ``False`` for independent mode (restore = reset).
+        backend: Replica 0, the backend whose answers are kept.
 
     Attributes:
-        method: ``"reset"``, ``"state"``, ``"deepcopy"`` or ``"replay"``, the
-            method used for the last snapshot.
+        members: The replicas made so far; ``members[0]`` is ``backend``.
+        history: Problems replica 0 solved since its last reset, in order.
     """
 
-    def __init__(self, sequential: bool):
-        self.sequential = sequential
-        self.method = "reset" if not sequential else None
-        self._snap = None
-        self._no_deepcopy: set[str] = set()
+    def __init__(self, backend: Backend):
+        self.members: list[Backend] = [backend]
+        self.history: list[qpsolvers.Problem] = []
+        self._solved = [0]  # how many problems of ``history`` each member has solved
 
-    def snapshot(self, backend: Backend) -> None:
-        """Remember ``backend``'s current state."""
-        if not self.sequential:
-            return
-        if hasattr(backend, "get_state") and hasattr(backend, "set_state"):
-            self.method = "state"
-            self._snap = backend.get_state()
-            return
-        if backend.name not in self._no_deepcopy:
+    def reset(self) -> None:
+        """Reset every replica (a failing ``reset`` shows up at the next solve)."""
+        for backend in self.members:
             try:
-                self._snap = copy.deepcopy(backend)
-                self.method = "deepcopy"
-                return
-            except Exception as exc:  # native handles that cannot be copied
-                log.debug("%s cannot be deep-copied (%s): restoring by replay", backend.name, exc)
-                self._no_deepcopy.add(backend.name)
-        self.method = "replay"
-        self._snap = None
+                backend.reset()
+            except Exception:  # noqa: BLE001
+                pass
+        self.history.clear()
+        self._solved = [0] * len(self.members)
 
-    def restore(self, backend: Backend, prev_problem: qpsolvers.Problem | None) -> Backend:
-        """Return a backend in the snapshot state (``backend`` itself or a copy)."""
-        if self.method == "reset":
-            backend.reset()
-            return backend
-        if self.method == "state":
-            backend.set_state(self._snap)
-            return backend
-        if self.method == "deepcopy":
-            return copy.deepcopy(self._snap)
-        backend.reset()
-        if prev_problem is not None:
-            backend.solve(prev_problem)
+    def solved(self, r: int, problem: qpsolvers.Problem) -> None:
+        """Record that replica ``r`` solved ``problem`` (replica 0: the next problem of the history)."""
+        if r == 0:
+            self.history.append(problem)
+        self._solved[r] += 1
+
+    def drop(self, r: int) -> None:
+        """Forget replica ``r`` (its state is suspect); a new one is made when needed."""
+        del self.members[r:]
+        del self._solved[r:]
+
+    def ready(self, r: int) -> Backend:
+        """Replica ``r`` (``r >= 1``) in the state replica 0 had before its last solve.
+
+        Made when missing, then brought forward by solving, untimed, the problems of
+        :attr:`history` it has not solved yet (all but the last).
+
+        Raises:
+            Exception: the replica cannot be made, or a catch-up solve raised (it is dropped).
+        """
+        self.make(r + 1)
+        backend = self.members[r]
+        target = len(self.history) - 1
+        try:
+            while self._solved[r] < target:
+                solution = backend.solve(self.history[self._solved[r]])
+                if solution is not None:
+                    read_answer(solution)
+                self._solved[r] += 1
+        except Exception:
+            self.drop(r)
+            raise
         return backend
+
+    def make(self, count: int) -> None:
+        """Make replicas up to ``count`` (new ones start from the reset state)."""
+        while len(self.members) < count:
+            self.members.append(self.members[0].fresh())
+            self._solved.append(0)
+
+
+def difference(kept: BackendSolution | None, other: BackendSolution | None) -> str | None:
+    """How ``other`` differs from ``kept`` (status, iterations, answer bit for bit), or ``None``."""
+    if kept is None or other is None:
+        return None if kept is other else "one repeat has no solution"
+    if kept.status != other.status:
+        return f"status {other.status} against {kept.status}"
+    if kept.iterations != other.iterations:
+        return f"{other.iterations} iterations against {kept.iterations}"
+    for name in ANSWER_FIELDS:
+        a, b = getattr(kept, name, None), getattr(other, name, None)
+        if a is None or b is None:
+            if (a is None) != (b is None):
+                return f"{name} missing in one repeat"
+            continue
+        a, b = np.asarray(a), np.asarray(b)
+        if a.shape != b.shape or a.tobytes() != b.tobytes():
+            gap = float(np.max(np.abs(a - b))) if a.shape == b.shape and a.size else float("nan")
+            return f"{name} differs (by {gap:.3g})"
+    return None
