@@ -48,7 +48,12 @@ problems (HS118 of Maros-Meszaros, which the dense box API solves): there an
 infeasibility verdict is checked by one fresh solve with ``eps_primal_inf`` and
 ``eps_dual_inf`` at the profile's ``eps_abs``, whose status is kept (a truly
 infeasible problem stays infeasible). ``retry_cold=False`` in the settings
-turns both checks off.
+turns both checks off. After an infeasibility verdict the object is dropped
+and the next tick builds a new one (a cold start): warm-started from the
+iterate of an infeasibility exit, ProxQP 0.8 does not give the same answer
+twice for the same sequence of ticks (iterations and ``x`` vary between two
+objects fed the same ticks in one process), so neither a controller's
+behaviour nor ``--repeat``'s timings would be reproducible.
 :meth:`ProxqpBackend.reset` drops the object.
 
 Per-call cost. Dense float64 inputs are passed as they are (other inputs
@@ -340,6 +345,7 @@ class ProxqpBackend(Backend):
             sol.iterations += int(first_iter)
             sol.solver_time_s += float(first_time) * 1e-6
         if status == "primal_infeasible" or status == "dual_infeasible":
+            self.reset()  # no warm start from an infeasibility exit (see the module docstring)
             return sol
         return self._read_solution(qp, sol, info, n, n_eq, n_in, with_box)
 
