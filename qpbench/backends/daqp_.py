@@ -22,9 +22,8 @@ Duals. DAQP's multipliers ``lam`` (one per entry of ``bupper``) satisfy
 bound and ``< 0`` at an active lower bound: qpsolvers' convention, so
 ``z_box = lam[:n]``, ``y = lam[n:n+me]``, ``z = lam[n+me:]`` as they are.
 
-Persistence. None: ``daqp.solve`` builds its workspace per call (so
-``get_state``/``set_state``, the harness's restore between timed repeats,
-have nothing to do; a deep copy of the backend rebuilds the buffers' views). DAQP also
+Persistence. None: ``daqp.solve`` builds its workspace per call (a deep
+copy of the backend rebuilds the buffers' views). DAQP also
 offers ``daqp.Model`` (workspace kept, ``update`` + ``solve``, active set of
 the previous solve reused): that route is the backend ``daqp``
 (:mod:`.daqp_model`); for n = 4 its ``update`` + ``solve`` costs about what
@@ -227,16 +226,6 @@ class DaqpBackend(Backend):
 
     def reset(self) -> None:
         self._buffers.clear()
-
-    # DAQP keeps nothing from one call to the next (the buffers are scratch
-    # space, filled completely before every solve): a timed repeat needs no
-    # restoring, and these hooks tell the harness so (no deep copy per repeat).
-    def get_state(self) -> None:
-        """The state carried between calls: none."""
-        return None
-
-    def set_state(self, state: None) -> None:
-        """Nothing to restore (see :meth:`get_state`)."""
 
     def _solve(self, problem, warm_start):
         daqp = _DAQP[0] if _DAQP else _daqp()

@@ -24,12 +24,10 @@ another shape without an error and would solve the previous problem again. A
 failed ``setup``/``update`` (negative flag) or a solve that is not optimal
 drops the model, so the next tick sets up afresh. :meth:`reset` drops it too.
 
-Repeats. A ``daqp.Model`` cannot be copied; the harness's ``--repeat`` then
-restores the backend by reset and an untimed solve of the previous problem
-(:class:`qpbench.harness.timing.StateRestorer`), which gives DAQP the working
-set of the previous tick's solution, the state a consecutive solve starts from
-(``tests/test_daqp_model.py`` checks that repeats give the first repeat's
-answer and iterations).
+Repeats. A ``daqp.Model`` cannot be copied; ``--repeat`` times each repeat on
+another instance of the backend fed the same ticks (:mod:`qpbench.harness.timing`),
+so every repeat starts from the working set the kept solve starts from
+(``tests/test_contract.py``).
 
 Settings, statuses. As ``daqp-stateless``: ``primal_tol = dual_tol = eps_abs``,
 ``iter_limit = max_iter``, ``time_limit`` [s], DAQP's own settings verbatim

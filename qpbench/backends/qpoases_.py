@@ -40,8 +40,9 @@ homotopy from the last solution). A status other than optimal leaves qpOASES
 mid-homotopy, so the next tick calls ``init()`` again. ``warm_start`` is
 ignored (qpOASES' warm start is the working set, which it keeps itself).
 :meth:`QpoasesBackend.reset` drops the object. ``get_state``/``set_state``
-copy the whole ``SQProblem`` (qpOASES' deep copy), so ``--repeat`` restarts
-each repeat from the same working set.
+copy the whole ``SQProblem`` (qpOASES' deep copy: a snapshot of the working
+set to solve from again; ``--repeat`` does not need it, see
+:mod:`qpbench.harness.timing`).
 
 Settings. ``max_iter`` -> ``nWSR`` (working-set recalculations),
 ``time_limit`` -> qpOASES' CPU-time limit [s] (measured by qpOASES with
