@@ -88,10 +88,12 @@ def read_runs(table: pd.DataFrame) -> pd.DataFrame:
     A table written before real time was judged has no ``realtime``,
     ``realtime_reason`` or ``solver_time_p99_s``: its runs read as real time
     ``unknown`` (never recommended, never a ``--strict`` failure) and
-    solver time unknown. This is the one place that tolerates their absence.
+    solver time unknown; one written before verdicts has no ``verdict`` (no
+    run of it is recommended). This is the one place that tolerates their absence.
     """
     table = table.copy()
     for column, missing in (
+        ("verdict", ""),
         ("realtime", "unknown"),
         ("realtime_reason", ""),
         ("solver_time_p99_s", math.nan),
