@@ -14,7 +14,6 @@ from test_report import parse_tables
 from qpbench.cli import main
 from qpbench.commands.options import strict_exit
 from qpbench.report import recommend as rec
-from qpbench.report.markdown import HOW_TO_READ
 from qpbench.report.markdown_table import md_table
 
 
@@ -282,7 +281,7 @@ def test_the_report_opens_with_the_answer(closed_loop_csv, tmp_path):
     how = md.index("## How to read this\n")
     assert how == len("# qpbench report\n\n" + answer) + 1
     lines = md[how:].split("\n\n")[1].splitlines()
-    assert lines == [f"- {line}" for line in HOW_TO_READ] and len(lines) == 5
+    assert lines == [f"- {line}" for line in rec.HOW_TO_READ] and len(lines) == 5
     assert how < md.index("## Machine") < md.index("## Closed loop")
     tables = parse_tables(md)
     assert tables[0]["headings"] == {1: "qpbench report", 2: "Recommendation"}

@@ -6,7 +6,7 @@ heading and caption):
 
 - the answer first: the recommendation (:mod:`qpbench.report.recommend`,
   from the closed-loop rows), then five lines of how to read the rest
-  (:data:`HOW_TO_READ`);
+  (:func:`qpbench.report.recommend.opening`);
 - header: date, result files (kind, rows, SHA-256), machine, package versions;
 - per tick (bench CSVs), per (profile, mode): success rate and shifted
   geometric means as ratios to the best and as absolute values, constraint
@@ -37,28 +37,11 @@ from . import tables
 from .machine import machine_info, package_versions
 from .markdown_closed_loop import closed_loop_section
 from .markdown_table import US, fmt, md_table
+from .recommend import opening
 from .tables import slug
 
 #: Mark of a backend with rows solved in a worker process.
 ISOLATED_MARK = "\u2020"
-
-#: The report's "How to read this", five lines under the recommendation.
-HOW_TO_READ = (
-    "A run's *verdict*, worst first: `failed` (the backend gave no usable answer or the run "
-    "crashed), `unsafe` (the arm's body inside an obstacle, or a key point closer than d_safe "
-    "minus the margin), `limits` (a joint angle or speed beyond its limit), `incomplete` (the "
-    "run stopped before its end), `diverged` (tracking or force error beyond its threshold), "
-    "else `ok`; the reasons are in the closed-loop tables.",
-    "*Real time* is judged at each scenario's control period dt from the measured call times "
-    "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
-    "calling its C or C++ library would pay.",
-    "A backend is recommended where every run of it was `ok` and real time, ranked by its p99 "
-    "call time; the closed-loop section below gives every run's figures.",
-    "The per-tick benchmark solves each QP exported from the loop with every backend and judges "
-    "success against reference solutions; times are the minimum of the timed repeats.",
-    "Units: times in us, distances and tracking errors in mm, forces in N; `-` is a value that "
-    "does not exist (a backend that reports no time of its own, a run without a solution).",
-)
 
 
 def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
@@ -370,24 +353,6 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     return out
 
 
-def _answer(results: tables.Results) -> list[str]:
-    """The report's opening: the recommendation, then "How to read this" (five lines)."""
-    from .recommend import recommend
-    from .recommend import render as render_answer
-
-    out = []
-    if not results.closed_loop.empty:
-        out.append(render_answer(recommend(results.closed_loop), markdown=True))
-    elif not results.bench.empty:
-        out.append(
-            "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "
-            "the loop (`qpbench closed-loop` or `qpbench run`).\n"
-        )
-    out.append("## How to read this\n")
-    out.append("\n".join(f"- {line}" for line in HOW_TO_READ) + "\n")
-    return out
-
-
 def render(
     results: tables.Results, plot_files: dict[str, str] | None = None, date: str | None = None
 ) -> str:
@@ -402,7 +367,7 @@ def render(
     plot_files = plot_files or {}
     date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = ["# qpbench report\n"]
-    lines.extend(_answer(results))
+    lines.extend(opening(results.closed_loop, has_bench=not results.bench.empty))
     lines.append(
         "Per-tick QPs of the compliant redundant manipulator of Zhou, Xu & Li (2019), "
         "benchmarked per tick and in the closed loop. Every number below is recomputed "

@@ -14,8 +14,10 @@ its reasons in a few words, each naming the scenario ("unsafe in wall: ...",
 
 :func:`recommend` decides, :func:`render` writes it (plain text for a
 terminal, Markdown for ``report.md``: the same lines, padded tables that
-read aligned in both), :func:`shortfalls` gives the one line of a
-``--strict`` exit (:func:`qpbench.commands.options.strict_exit`).
+read aligned in both), :func:`opening` puts it at the top of ``report.md``
+with five lines of how to read the rest (:data:`HOW_TO_READ`),
+:func:`shortfalls` gives the one line of a ``--strict`` exit
+(:func:`qpbench.commands.options.strict_exit`).
 """
 
 from __future__ import annotations
@@ -28,10 +30,12 @@ import pandas as pd
 from .markdown_table import US, md_table
 
 __all__ = [
+    "HOW_TO_READ",
     "MAX_REASONS",
     "Pick",
     "Recommendation",
     "Scope",
+    "opening",
     "read_runs",
     "recommend",
     "render",
@@ -40,6 +44,24 @@ __all__ = [
 
 #: Reasons shown per backend in the overall list; the rest are counted ("and 3 more").
 MAX_REASONS = 2
+
+#: The report's "How to read this", five lines under the recommendation.
+HOW_TO_READ = (
+    "A run's *verdict*, worst first: `failed` (the backend gave no usable answer or the run "
+    "crashed), `unsafe` (the arm's body inside an obstacle, or a key point closer than d_safe "
+    "minus the margin), `limits` (a joint angle or speed beyond its limit), `incomplete` (the "
+    "run stopped before its end), `diverged` (tracking or force error beyond its threshold), "
+    "else `ok`; the reasons are in the closed-loop tables.",
+    "*Real time* is judged at each scenario's control period dt from the measured call times "
+    "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
+    "calling its C or C++ library would pay.",
+    "A backend is recommended where every run of it was `ok` and real time, ranked by its p99 "
+    "call time; the closed-loop section below gives every run's figures.",
+    "The per-tick benchmark solves each QP exported from the loop with every backend and judges "
+    "success against reference solutions; times are the minimum of the timed repeats.",
+    "Units: times in us, distances and tracking errors in mm, forces in N; `-` is a value that "
+    "does not exist (a backend that reports no time of its own, a run without a solution).",
+)
 
 #: Row statuses of a run that produced no result (as in :mod:`qpbench.harness.loop_rows`).
 _NO_RESULT = ("error", "crashed", "time_limit")
@@ -247,6 +269,22 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
             rows.append([backend, why])
         lines.append(md_table(["backend", "why"], rows, pad=True, left=2).rstrip("\n") + gap)
     return "\n".join(lines) + "\n"
+
+
+def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
+    """The opening of ``report.md`` under its title: the recommendation from the closed-loop rows
+    (a line saying there is none for a report of bench results only), then "How to read this"."""
+    out = []
+    if not closed_loop.empty:
+        out.append(render(recommend(closed_loop), markdown=True))
+    elif has_bench:
+        out.append(
+            "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "
+            "the loop (`qpbench closed-loop` or `qpbench run`).\n"
+        )
+    out.append("## How to read this\n")
+    out.append("\n".join(f"- {line}" for line in HOW_TO_READ) + "\n")
+    return out
 
 
 def shortfalls(runs: pd.DataFrame | None = None, failed_solves: int = 0) -> list[str]:
