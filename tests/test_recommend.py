@@ -122,6 +122,12 @@ def test_reasons_in_a_few_words():
             run("wall", "bad", verdict="failed", verdict_reasons="3 ticks whose solve raised"),
             run(
                 "wall",
+                "deep",
+                verdict="unsafe",
+                verdict_reasons="d_min -29.1 mm (A4/lower at 0.049 s; 47 ticks); joint speed",
+            ),
+            run(
+                "wall",
                 "late",
                 realtime="no",
                 realtime_reason="p99 1.8 ms > 1 ms; 12 % of ticks over dt",
@@ -146,6 +152,7 @@ def test_reasons_in_a_few_words():
     assert why["cut"] == ("incomplete in wall (stopped at 1.5 s)",)
     assert why["crash"] == ("failed in wall: run crashed (worker process killed by SIGSEGV)",)
     assert why["bad"] == ("failed in wall: 3 ticks whose solve raised",)
+    assert why["deep"] == ("unsafe in wall: d_min -29.1 mm (A4/lower at 0.049 s; 47 ticks)",)
     assert why["late"] == ("not real time in wall: p99 1.8 ms > 1 ms",)
     assert why["both"] == (
         "limits in wall: joint speed limit broken",

@@ -142,8 +142,13 @@ def _number(value: object) -> float:
 
 
 def _first(reasons: object) -> str:
-    """The first of ``"; "``-separated reasons."""
-    return _text(reasons).split("; ")[0]
+    """The first of ``"; "``-separated reasons (a ``"; "`` inside parentheses is part of one)."""
+    text, depth = _text(reasons), 0
+    for i, c in enumerate(text):
+        depth += {"(": 1, ")": -1}.get(c, 0)
+        if depth == 0 and text.startswith("; ", i):
+            return text[:i]
+    return text
 
 
 def _reasons(row: dict, place: str) -> list[str]:
