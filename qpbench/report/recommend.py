@@ -273,7 +273,7 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
                 why += f" (and {len(reasons) - MAX_REASONS} more)"
             rows.append([backend, why])
         lines.append(md_table(["backend", "why"], rows, pad=True, left=2).rstrip("\n") + gap)
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines).rstrip("\n") + "\n"
 
 
 def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
