@@ -8,9 +8,10 @@ Plugin backends (:func:`qpbench.backends.load_plugins`: ``--plugin FILE``,
 before or after the sub-command, ``QPBENCH_PLUGINS``, entry points of group
 ``qpbench.backends``) are loaded here, once, before any command runs.
 
-Exit codes: 0 success; 1 the run completed but some solves failed;
-2 usage or input error (one line on stderr naming the file, key or value);
-130 interrupted.
+Exit codes (``docs/exit-codes.md``): 0 success (for the commands that benchmark many
+backends, outputs written whatever the verdicts); 1 ``simulate``'s verdict not ``ok``, or
+with ``--strict`` a run or solve that did not pass (:func:`qpbench.commands.options.strict_exit`);
+2 usage or input error (one line on stderr naming the file, key or value); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ EXAMPLES = """examples:
   qpbench bench problems/wall --backends daqp,osqp,rnn --out wall.csv
   qpbench simulate --scenario narrow --backend daqp --summary narrow.json --snapshot narrow.png
 
-every command has --help with an example; exit codes: 0 ok, 1 some solves or runs failed, 2 bad input"""
+every command has --help with an example; exit codes: 0 done (whatever the verdicts), 1 simulate's
+verdict not ok or, with --strict, a run or solve that did not pass, 2 bad input"""
 
 log = logging.getLogger("qpbench")
 

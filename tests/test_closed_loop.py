@@ -295,9 +295,10 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
             "8",  # covers the worker's start too (forkserver's imports on a loaded machine)
             "--plugin",
             PLUGIN,
+            "--strict",
         ),
     ]
-    assert main(args) == 1  # failed runs
+    assert main(args) == 1  # failed runs, and --strict
     table = pd.read_csv(out / rows.CSV_NAME)
     assert list(table["backend"]) == ["faulty:segfault", "faulty:hang", "daqp"]
     crashed, hung, daqp = (table.iloc[i] for i in range(3))
@@ -371,10 +372,10 @@ def test_guard_parameters(tmp_path):
 from slow_backends import registered  # noqa: E402
 
 
-def test_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
+def test_pinv_through_the_wall_is_unsafe_and_exits_1_with_strict(tmp_path, capsys):
     """pinv ignores obstacles: its A2 dips below d_safe - 0.5 mm at 1.48 s of wall; daqp keeps d_safe."""
     out = tmp_path / "o"
-    code = main(_cli_args("wall", "daqp,pinv", "1.6", out))
+    code = main(_cli_args("wall", "daqp,pinv", "1.6", out, "--strict"))
     assert code == 1
     table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]

@@ -1,4 +1,8 @@
-"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve."""
+"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve.
+
+Exit code: 0 once the CSV is written, whatever the solves gave; with ``--strict``, 1 when a
+solve failed (one line says how many); 2 on bad input.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +13,7 @@ import sys
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
 from .inspect_ import add_memory_argument
-from .options import add_force_resume
+from .options import add_force_resume, add_strict, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -97,6 +101,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete an existing --out and start again",
         resume="keep the rows of an existing --out and run the rest",
     )
+    add_strict(parser)
 
 
 def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
@@ -179,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"bench: {summary.line()}")
         print(summary.table())
-    return summary.exit_code
+    return strict_exit(args, failed_solves=summary.failures)
 
 
 def _reference_source(args: argparse.Namespace, config) -> object:

@@ -13,10 +13,11 @@ points) run here and in the workers. ``--run-budget`` gives each run a wall-time
 budget: a run that spends it stops between ticks (status ``budget``, the row
 says how far it got).
 
-Every run gets a verdict (:mod:`qpbench.sim.verdict`): ``ok``, or ``failed``,
-``unsafe``, ``limits``, ``diverged`` with the reasons; a run that is not ``ok``
-is printed as a WARNING. Exit code: 0 when every run in the table is ``ok``,
-1 when one is not (or failed to run), 2 on bad input.
+Every run gets a verdict (:mod:`qpbench.sim.verdict`) with the reasons; a
+run that is not ``ok`` is printed as a WARNING. The last lines printed are the
+recommendation (:mod:`qpbench.report.recommend`). Exit code: 0 once the table
+is written, whatever the verdicts; with ``--strict``, 1 when a run in the
+table is not ``ok`` or not real time (one line says why); 2 on bad input.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import logging
 from typing import TYPE_CHECKING
 
 from ..statuses import FORMULATIONS
-from .options import add_force_resume
+from .options import add_force_resume, add_strict, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -126,6 +127,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="replace an existing table and its logs",
         resume="keep the rows already done (same formulation and duration) and run the rest",
     )
+    add_strict(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -178,7 +180,12 @@ def run(args: argparse.Namespace) -> int:
     )
     if not args.quiet and len(outcome.table):
         print(summary_table(outcome.table))
-    return 1 if outcome.errors or outcome.not_ok else 0
+    code = strict_exit(args, runs=outcome.table)
+    if not args.quiet and len(outcome.table):
+        from ..report.recommend import recommend, render
+
+        print("\n" + render(recommend(outcome.table)), end="")
+    return code
 
 
 def summary_table(table: pd.DataFrame) -> str:

@@ -10,8 +10,11 @@ package); a run killed half-way leaves the previous results whole, and
 ``--resume`` continues it. So ``qpbench run`` twice simply refreshes
 ``results/``.
 
-Exit code: 0, or 1 when a solve failed in the bench or a closed-loop run
-raised or failed its verdict (:mod:`qpbench.sim.verdict`), 2 on bad input.
+The last lines printed are the recommendation (:mod:`qpbench.report.recommend`),
+also at the top of the report. Exit code: 0 once the results are written,
+whatever the verdicts; with ``--strict``, 1 when a solve failed in the bench
+or a closed-loop run is not ``ok`` (:mod:`qpbench.sim.verdict`) or not real
+time (one line says why); 2 on bad input.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, REPEAT, RUN_BUDGET_S
-from .options import add_force_resume
+from .options import add_force_resume, add_strict, strict_exit
 
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
@@ -108,6 +111,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "if no previous 'qpbench run' wrote them",
         resume="continue an interrupted run from OUT/.partial/",
     )
+    add_strict(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -146,11 +150,20 @@ def run(args: argparse.Namespace) -> int:
     config.scenarios = select_scenarios(args.scenarios)
     config.backends = select_backends(args.backends)
     outcome = run_all(config)
-    log.info(
-        "qpbench run: %s in %.0f s (%d failed solves, failed runs or runs that failed their verdict); report %s",
-        args.out,
-        outcome.wall_time_s,
-        outcome.failures,
-        outcome.report,
-    )
-    return 1 if outcome.failures else 0
+    log.info("qpbench run: %s in %.0f s; report %s", args.out, outcome.wall_time_s, outcome.report)
+    return _answer(args, outcome)
+
+
+def _answer(args: argparse.Namespace, outcome) -> int:
+    """The run's ending: the exit code (:func:`~.options.strict_exit`), then the recommendation
+    as the last lines printed."""
+    import pandas as pd
+
+    from ..harness.loop_rows import CSV_NAME
+    from ..report.recommend import recommend, render
+
+    table = pd.read_csv(Path(args.out) / CSV_NAME)
+    code = strict_exit(args, runs=table, failed_solves=outcome.failed_solves)
+    if not args.quiet:
+        print(render(recommend(table)), end="")
+    return code

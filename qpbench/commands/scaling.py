@@ -1,4 +1,8 @@
-"""``qpbench scaling``: solve time against arm and obstacle size, on generated arms of 4 to 64 links."""
+"""``qpbench scaling``: solve time against arm and obstacle size, on generated arms of 4 to 64 links.
+
+Exit code: 0 once the outputs are written, whatever the solves gave; with ``--strict``, 1 when a
+solve failed (one line says how many); 2 on bad input.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .options import add_force_resume
+from .options import add_force_resume, add_strict, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
@@ -77,6 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete this command's outputs in --out and start again",
         resume="keep the sizes done in --out and run the rest",
     )
+    add_strict(parser)
 
 
 def _config(args):
@@ -148,10 +153,10 @@ def run(args: argparse.Namespace) -> int:
                 target.unlink()
     warmup_logged(log)  # no compile inside a timed solve or build
     progress = not args.quiet and sys.stderr.isatty()
-    code = run_scaling(config, out, resume=args.resume, progress=progress)
+    failed_solves = run_scaling(config, out, resume=args.resume, progress=progress)
     if not args.no_report:
         from ..scaling.report import write_scaling_report
 
         path = write_scaling_report(out, out, force=True, quiet=args.quiet)
         log.info("wrote %s", path)
-    return code
+    return strict_exit(args, failed_solves=failed_solves)

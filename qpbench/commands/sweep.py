@@ -8,9 +8,10 @@ real-time factor) are only clean serially (``--jobs 1``): runs solving at the
 same time share the cores' caches, memory bandwidth and clock, and on a
 2-core machine the operating system's own work lands on one of them.
 
-Exit code: 0 when every run gave a result (whatever its verdict: the
-verdicts are what a sweep measures), 1 when a run raised or its worker was
-lost twice, 2 on bad input (nothing written).
+Exit code: 0 once the table is written, whatever the verdicts (they are what
+a sweep measures); with ``--strict``, 1 when a row's verdict is not ``ok`` (a run
+that raised or whose worker was lost twice included) or a run was not real
+time (one line says why); 2 on bad input (nothing written).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from .options import add_force_resume
+from .options import add_force_resume, add_strict, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
@@ -94,6 +95,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="start again: replace the table and the instances",
         resume="keep the rows with a result and run the rest (missing, error, crashed)",
     )
+    add_strict(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -141,7 +143,9 @@ def run(args: argparse.Namespace) -> int:
         outcome.failed,
         outcome.csv_path,
     )
-    return 1 if outcome.failed else 0
+    import pandas as pd
+
+    return strict_exit(args, runs=pd.DataFrame(outcome.rows))
 
 
 def _run(args, spec, backends, executor, plugins):

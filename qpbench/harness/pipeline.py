@@ -127,11 +127,13 @@ class RunConfig:
 
 @dataclass
 class RunOutcome:
-    """What :func:`run_all` did: failed solves, failed runs and runs that failed their verdict."""
+    """What :func:`run_all` did: failed solves, failed runs and runs that failed their verdict,
+    the report, the time it took [s], and the bench's failed solves alone (``failed_solves``)."""
 
     failures: int
     report: Path
     wall_time_s: float
+    failed_solves: int = 0
 
 
 def _check_out(out: Path, force: bool) -> None:
@@ -278,7 +280,7 @@ def run_all(config: RunConfig) -> RunOutcome:
             bar.set_description(f"problem set {s}")
             make_problem_set(s, problems / s, _dump_backend(config.backends))
             bar.update(1)
-        failures = _bench(config, bench_scenarios, staging / "bench", bar)
+        failures = failed_solves = _bench(config, bench_scenarios, staging / "bench", bar)
         bar.set_description("closed loop")
         table, not_ok = _closed_loop(config, staging, bar)
         failures += not_ok  # failed runs and runs that failed their verdict
@@ -296,7 +298,7 @@ def run_all(config: RunConfig) -> RunOutcome:
         _promote(staging, out)
     finally:
         bar.close()
-    return RunOutcome(failures, out / "report.md", time.perf_counter() - started)
+    return RunOutcome(failures, out / "report.md", time.perf_counter() - started, failed_solves)
 
 
 def _bench_scenarios(scenarios: list[str]) -> list[str]:

@@ -4,6 +4,9 @@ Layout (each table is preceded by a one-line caption ending in ``:``, so two
 reports diff cleanly and a reader, or a test, can find a table by its
 heading and caption):
 
+- the answer first: the recommendation (:mod:`qpbench.report.recommend`,
+  from the closed-loop rows), then five lines of how to read the rest
+  (:func:`qpbench.report.recommend.opening`);
 - header: date, result files (kind, rows, SHA-256), machine, package versions;
 - per tick (bench CSVs), per (profile, mode): success rate and shifted
   geometric means as ratios to the best and as absolute values, constraint
@@ -34,6 +37,7 @@ from . import tables
 from .machine import machine_info, package_versions
 from .markdown_closed_loop import closed_loop_section
 from .markdown_table import US, fmt, md_table
+from .recommend import opening
 from .tables import slug
 
 #: Mark of a backend with rows solved in a worker process.
@@ -363,6 +367,7 @@ def render(
     plot_files = plot_files or {}
     date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = ["# qpbench report\n"]
+    lines.extend(opening(results.closed_loop, has_bench=not results.bench.empty))
     lines.append(
         "Per-tick QPs of the compliant redundant manipulator of Zhou, Xu & Li (2019), "
         "benchmarked per tick and in the closed loop. Every number below is recomputed "

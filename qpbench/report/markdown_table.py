@@ -35,19 +35,31 @@ def fmt(value: object) -> str:
     return text.replace("|", "\\|").replace("\n", " ") if text else "-"
 
 
-def md_table(header: list[str], rows: list[list]) -> str:
-    """A Markdown table (first column left-aligned, the others right-aligned)."""
+def md_table(header: list[str], rows: list[list], pad: bool = False, left: int = 1) -> str:
+    """A Markdown table: the first ``left`` columns left-aligned (text), the others right-aligned.
+
+    ``pad``: every column padded to its widest cell, so the table also reads
+    aligned as plain text (on a terminal).
+    """
     cells = [[fmt(c) for c in r] for r in rows]
+    widths = [max(3, len(h)) for h in header]
+
+    def align(i: int, text: str) -> str:
+        return text.ljust(widths[i]) if i < left else text.rjust(widths[i])
+
+    if pad:
+        widths = [max([w] + [len(r[i]) for r in cells]) for i, w in enumerate(widths)]
+        header = [align(i, h) for i, h in enumerate(header)]
+        cells = [[align(i, c) for i, c in enumerate(r)] for r in cells]
     head = "| " + " | ".join(header) + " |"
-    align = (
-        "|:"
-        + "-" * max(3, len(header[0]))
-        + "|"
-        + "|".join("-" * max(3, len(h)) + ":" for h in header[1:])
+    dashes = [w + 1 if pad else w for w in widths]  # padded: as wide as the cells around them
+    rule = (
+        "|"
+        + "|".join(":" + "-" * w if i < left else "-" * w + ":" for i, w in enumerate(dashes))
         + "|"
     )
     body = ["| " + " | ".join(r) + " |" for r in cells]
-    return "\n".join([head, align, *body]) + "\n"
+    return "\n".join([head, rule, *body]) + "\n"
 
 
 #: Seconds to microseconds and metres to millimetres (display units).

@@ -320,7 +320,7 @@ def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
 def run_size(
     size: Size, config: ScalingConfig, out: Path, slow: dict, progress: bool = False
 ) -> tuple[list[dict], int]:
-    """Everything for one size (module docstring); returns its summary rows and the bench exit code."""
+    """Everything for one size (module docstring); returns its summary rows and its failed solves."""
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
 
@@ -330,7 +330,7 @@ def run_size(
     base.update(build_median_s=float(np.median(built)), build_p99_s=float(np.percentile(built, 99)))
     skipped = {name: _skip_reason(name, size, slow, config) for name in config.backends}
     run = [name for name in config.backends if skipped[name] is None]
-    rows, code = [], 0
+    rows, failed = [], 0
     if run:
         problem_set = load_problems(out / "sets" / size.name)
         csv_path = out / "bench" / f"{size.name}.csv"
@@ -341,7 +341,7 @@ def run_size(
         summary = run_bench(
             problem_set, bench, csv_path, resume=csv_path.exists(), progress=progress
         )
-        code = summary.exit_code
+        failed = summary.failures
         from ..harness.results import read_results
 
         by_backend: dict[str, list[dict]] = {}
@@ -363,13 +363,14 @@ def run_size(
                     "skip_reason": skipped[name],
                 }
             )
-    return rows, code
+    return rows, failed
 
 
 def run_scaling(
     config: ScalingConfig, out: str | Path, resume: bool = False, progress: bool = False
 ) -> int:
-    """Run every size of ``config`` into folder ``out``; return 1 if some solve failed, else 0."""
+    """Run every size of ``config`` into folder ``out``; return the failed solves of every size
+    in the summary (those kept by ``resume`` included)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary_path = out / SUMMARY_NAME
@@ -384,10 +385,13 @@ def run_scaling(
                 and float(r["time_median_s"]) > config.slow_limit
             ):
                 slow[(r["axis"], r["backend"])] = (r["size"], float(r["time_median_s"]))
-    code = 0
+    failed = 0
     for size in config.sizes:
         if size.name in done:
             log.info("%s: done in %s, skipped", size.name, summary_path)
+            failed += sum(
+                int(float(r["failures"] or 0)) for r in done[size.name] if r["status"] == "measured"
+            )
             continue
         started = time.perf_counter()
         shape = qp_shape(size)
@@ -399,8 +403,8 @@ def run_scaling(
             size.key_points,
             size.cloud_points,
         )
-        rows, size_code = run_size(size, config, out, slow, progress)
+        rows, size_failed = run_size(size, config, out, slow, progress)
         append_rows(summary_path, rows)
-        code = max(code, size_code)
+        failed += size_failed
         log.info("%s: done in %.1f s", size.name, time.perf_counter() - started)
-    return code
+    return failed

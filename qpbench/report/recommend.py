@@ -1,0 +1,316 @@
+"""The answer, stated: which backends to trust in the loop, from a closed-loop table.
+
+A backend is *recommended* for a scenario when every run of it there has
+verdict ``ok`` (:mod:`qpbench.sim.verdict`: the whole body clear, limits
+kept, tracking and force within their thresholds, the run complete) and was
+real time (``realtime == "yes"``: judged at the scenario's ``dt`` from the
+measured call times). It is recommended *overall* when it is recommended in
+every scenario of the table. Recommended backends are ranked by their p99
+call time (``solve_time_p99_s``, the largest over the runs counted), with
+the solver's own p99 (``solver_time_p99_s``, what a C or C++ controller
+calling the library would pay) beside. Every other backend is listed with
+its reasons in a few words, each naming the scenario ("unsafe in wall: ...",
+"not real time in narrow: ...", "incomplete in wall (stopped at 1.5 s)").
+
+:func:`recommend` decides, :func:`render` writes it (plain text for a
+terminal, Markdown for ``report.md``: the same lines, padded tables that
+read aligned in both), :func:`opening` puts it at the top of ``report.md``
+with five lines of how to read the rest (:data:`HOW_TO_READ`),
+:func:`shortfalls` gives the one line of a ``--strict`` exit
+(:func:`qpbench.commands.options.strict_exit`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from .markdown_table import US, md_table
+
+__all__ = [
+    "HOW_TO_READ",
+    "MAX_REASONS",
+    "Pick",
+    "Recommendation",
+    "Scope",
+    "opening",
+    "read_runs",
+    "recommend",
+    "render",
+    "shortfalls",
+]
+
+#: Reasons shown per backend in the overall list; the rest are counted ("and 3 more").
+MAX_REASONS = 2
+
+#: The report's "How to read this", five lines under the recommendation.
+HOW_TO_READ = (
+    "A run's *verdict*, worst first: `failed` (the backend gave no usable answer or the run "
+    "crashed), `unsafe` (the arm's body inside an obstacle, or a key point closer than d_safe "
+    "minus the margin), `limits` (a joint angle or speed beyond its limit), `incomplete` (the "
+    "run stopped before its end), `diverged` (tracking or force error beyond its threshold), "
+    "else `ok`; the reasons are in the closed-loop tables.",
+    "*Real time* is judged at each scenario's control period dt from the measured call times "
+    "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
+    "calling its C or C++ library would pay.",
+    "A backend is recommended where every run of it was `ok` and real time, ranked by its p99 "
+    "call time; the closed-loop section below gives every run's figures.",
+    "The per-tick benchmark solves each QP exported from the loop with every backend and judges "
+    "success against reference solutions; times are the minimum of the timed repeats.",
+    "Units: times in us, distances and tracking errors in mm, forces in N; `-` is a value that "
+    "does not exist (a backend that reports no time of its own, a run without a solution).",
+)
+
+#: Row statuses of a run that produced no result (as in :mod:`qpbench.harness.loop_rows`).
+_NO_RESULT = ("error", "crashed", "time_limit")
+
+
+@dataclass(frozen=True)
+class Pick:
+    """A recommended backend: its p99 call time and the solver's own p99 [s] (NaN: not reported)."""
+
+    backend: str
+    call_p99_s: float
+    solver_p99_s: float
+
+
+@dataclass(frozen=True)
+class Scope:
+    """The answer for one scenario, or for all of them (``name`` ``"all scenarios"``).
+
+    Attributes:
+        recommended: Backends ok and real time in every run, fastest p99 call first.
+        not_recommended: Every other backend -> its reasons, in the table's order.
+    """
+
+    name: str
+    recommended: tuple[Pick, ...] = ()
+    not_recommended: dict[str, tuple[str, ...]] = field(default_factory=dict)
+
+    @property
+    def backends(self) -> list[str]:
+        """The recommended backends' names, fastest first."""
+        return [p.backend for p in self.recommended]
+
+
+@dataclass(frozen=True)
+class Recommendation:
+    """:func:`recommend`'s answer: overall, then per scenario in the table's order."""
+
+    overall: Scope
+    scenarios: tuple[Scope, ...]
+    runs: int
+
+
+def read_runs(table: pd.DataFrame) -> pd.DataFrame:
+    """The closed-loop (or sweep) table with the columns the answer reads.
+
+    A table written before real time was judged has no ``realtime``,
+    ``realtime_reason`` or ``solver_time_p99_s``: its runs read as real time
+    ``unknown`` (never recommended, never a ``--strict`` failure) and
+    solver time unknown; one written before verdicts has no ``verdict`` (no
+    run of it is recommended). This is the one place that tolerates their absence.
+    """
+    table = table.copy()
+    for column, missing in (
+        ("verdict", ""),
+        ("realtime", "unknown"),
+        ("realtime_reason", ""),
+        ("solver_time_p99_s", math.nan),
+        ("verdict_reasons", ""),
+        ("error", ""),
+        ("simulated_s", math.nan),
+    ):
+        if column not in table.columns:
+            table[column] = missing
+    return table
+
+
+def _text(value: object) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    return str(value).strip()
+
+
+def _number(value: object) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _first(reasons: object) -> str:
+    """The first of ``"; "``-separated reasons (a ``"; "`` inside parentheses is part of one)."""
+    text, depth = _text(reasons), 0
+    for i, c in enumerate(text):
+        depth += {"(": 1, ")": -1}.get(c, 0)
+        if depth == 0 and text.startswith("; ", i):
+            return text[:i]
+    return text
+
+
+def _reasons(row: dict, place: str) -> list[str]:
+    """Why one run does not count for a recommendation, in a few words each (empty: it counts)."""
+    out = []
+    status, verdict = _text(row.get("status")), _text(row.get("verdict"))
+    if status == "skipped":
+        return [f"skipped in {place}: {_text(row.get('error')) or 'not run'}"]
+    if verdict == "incomplete":
+        simulated = _number(row.get("simulated_s"))
+        how = [status] if status not in ("ok", "budget", "") else []
+        if math.isfinite(simulated):
+            how.append(f"stopped at {simulated:.3g} s")
+        out.append(f"incomplete in {place}" + (f" ({', '.join(how)})" if how else ""))
+    elif verdict == "failed" and status in _NO_RESULT:
+        error = _text(row.get("error"))
+        out.append(f"failed in {place}: run {status}" + (f" ({error})" if error else ""))
+    elif verdict != "ok":
+        why = _first(row.get("verdict_reasons"))
+        out.append(f"{verdict or 'no verdict'} in {place}" + (f": {why}" if why else ""))
+    realtime = _text(row.get("realtime"))
+    if realtime == "no":
+        why = _first(row.get("realtime_reason"))
+        out.append(f"not real time in {place}" + (f": {why}" if why else ""))
+    elif realtime != "yes" and verdict == "ok":
+        out.append(f"real time not judged in {place}")
+    return out
+
+
+def _scope(name: str, runs: pd.DataFrame, place) -> Scope:
+    """One scope's answer from its runs; ``place(row)`` names a run's scenario in a reason."""
+    picks, rejected = [], {}
+    for backend, mine in runs.groupby(runs["backend"].astype(str), sort=False):
+        reasons = [r for row in mine.to_dict("records") for r in _reasons(row, place(row))]
+        if reasons:
+            rejected[backend] = tuple(dict.fromkeys(reasons))
+            continue
+        call = pd.to_numeric(mine["solve_time_p99_s"], errors="coerce").max()
+        solver = pd.to_numeric(mine["solver_time_p99_s"], errors="coerce").max()
+        picks.append(Pick(backend, float(call), float(solver)))
+    picks.sort(key=lambda p: (math.isnan(p.call_p99_s), p.call_p99_s, p.backend))
+    return Scope(name, tuple(picks), rejected)
+
+
+def recommend(table: pd.DataFrame) -> Recommendation:
+    """Per scenario and overall: the backends ok and real time in every run, fastest first, and
+    why each other one is not recommended (module docstring).
+
+    Args:
+        table: A closed-loop table (``closed_loop.csv``), one row per run, any number of runs
+            per (scenario, backend) (formulations, resumed tables).
+    """
+    runs = read_runs(table)
+    if runs.empty:
+        return Recommendation(Scope("all scenarios"), (), 0)
+    runs["scenario"] = runs["scenario"].astype(str)
+    several = "formulation" in runs.columns and runs["formulation"].nunique(dropna=True) > 1
+
+    def place(row: dict) -> str:
+        return f"{row['scenario']} ({row['formulation']})" if several else row["scenario"]
+
+    scenarios = tuple(_scope(s, g, place) for s, g in runs.groupby("scenario", sort=False))
+    every = _scope("all scenarios", runs, place)
+    rejected = dict(every.not_recommended)
+    for pick in every.recommended:
+        missing = [s.name for s in scenarios if pick.backend not in s.backends]
+        if missing:  # ok wherever it ran, but not run everywhere
+            rejected[pick.backend] = (f"not run in {', '.join(missing)}",)
+    picks = tuple(p for p in every.recommended if p.backend not in rejected)
+    names = ", ".join(s.name for s in scenarios)
+    return Recommendation(Scope(f"all scenarios ({names})", picks, rejected), scenarios, len(runs))
+
+
+def _us(seconds: float) -> str:
+    return "-" if math.isnan(seconds) else f"{seconds * US:.4g}"
+
+
+def render(answer: Recommendation, markdown: bool = False) -> str:
+    """The answer as text: Markdown (``report.md``) or plain (a terminal), the same lines;
+    the tables are padded Markdown tables, aligned on a terminal too."""
+    head = "## Recommendation\n" if markdown else "Recommendation"
+    if not answer.runs:
+        return f"{head}\nNo closed-loop run: nothing to recommend.\n"
+    gap = "\n" if markdown else ""
+    overall = answer.overall
+    lines = [head]
+    if overall.recommended:
+        lines.append(
+            f"Backends ok and real time in every run of {overall.name}, fastest first "
+            f"(p99 call time, the largest over their runs; the solver's own p99 beside, "
+            f"- when it reports none):{gap}"
+        )
+        lines.append(
+            md_table(
+                ["rank", "backend", "call p99 (us)", "solver p99 (us)"],
+                [
+                    [str(i), p.backend, _us(p.call_p99_s), _us(p.solver_p99_s)]
+                    for i, p in enumerate(overall.recommended, 1)
+                ],
+                pad=True,
+                left=2,
+            ).rstrip("\n")
+            + gap
+        )
+    else:
+        lines.append(f"No backend was ok and real time in every run of {overall.name}.{gap}")
+    if len(answer.scenarios) > 1:
+        lines.append(f"Per scenario, ok and real time in every run, fastest first:{gap}")
+        for scope in answer.scenarios:
+            picks = ", ".join(
+                f"{p.backend} {_us(p.call_p99_s)} us (solver {_us(p.solver_p99_s)})"
+                for p in scope.recommended
+            )
+            lines.append(f"- {scope.name}: {picks or 'none'}")
+        lines[-1] += gap
+    if overall.not_recommended:
+        lines.append(f"Not recommended:{gap}")
+        rows = []
+        for backend, reasons in overall.not_recommended.items():
+            why = "; ".join(reasons[:MAX_REASONS])
+            if len(reasons) > MAX_REASONS:
+                why += f" (and {len(reasons) - MAX_REASONS} more)"
+            rows.append([backend, why])
+        lines.append(md_table(["backend", "why"], rows, pad=True, left=2).rstrip("\n") + gap)
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
+    """The opening of ``report.md`` under its title: the recommendation from the closed-loop rows
+    (a line saying there is none for a report of bench results only), then "How to read this"."""
+    out = []
+    if not closed_loop.empty:
+        out.append(render(recommend(closed_loop), markdown=True))
+    elif has_bench:
+        out.append(
+            "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "
+            "the loop (`qpbench closed-loop` or `qpbench run`).\n"
+        )
+    out.append("## How to read this\n")
+    out.append("\n".join(f"- {line}" for line in HOW_TO_READ) + "\n")
+    return out
+
+
+def shortfalls(runs: pd.DataFrame | None = None, failed_solves: int = 0) -> list[str]:
+    """What makes a ``--strict`` run exit 1, one phrase each (empty: nothing).
+
+    Args:
+        runs: Closed-loop or sweep rows: a run whose verdict is not ``ok`` (a skipped or
+            failed run included) and a run that was not real time (``realtime == "no"``).
+        failed_solves: Failed solves of a bench.
+    """
+    out = []
+    if failed_solves:
+        out.append(f"{failed_solves} failed solves")
+    if runs is not None and len(runs):
+        runs = read_runs(runs)
+        verdict = runs["verdict"].map(_text)
+        bad = verdict[verdict != "ok"].replace("", "no verdict")
+        if len(bad):
+            counts = ", ".join(f"{v} {n}" for v, n in bad.value_counts(sort=False).items())
+            out.append(f"{len(bad)} of {len(runs)} runs not ok ({counts})")
+        slow = int((runs["realtime"].map(_text) == "no").sum())
+        if slow:
+            out.append(f"{slow} of {len(runs)} runs not real time")
+    return out

@@ -1,0 +1,302 @@
+"""The recommendation (qpbench.report.recommend) on closed-loop tables built here, its place at the
+top of report.md, and the ``--strict`` exit helper it feeds (qpbench.commands.options)."""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+
+import pandas as pd
+import pytest
+from test_report import parse_tables
+
+from qpbench.cli import main
+from qpbench.commands.options import strict_exit
+from qpbench.report import recommend as rec
+from qpbench.report.markdown_table import md_table
+
+
+def run(scenario, backend, verdict="ok", realtime="yes", p99=50e-6, solver=20e-6, **extra):
+    """One closed-loop row with the columns the recommendation reads (times in [s])."""
+    row = {
+        "scenario": scenario,
+        "backend": backend,
+        "formulation": "paper",
+        "duration_s": 2.0,
+        "simulated_s": 2.0,
+        "status": "ok",
+        "error": math.nan,
+        "verdict": verdict,
+        "verdict_reasons": math.nan,
+        "realtime": realtime,
+        "realtime_reason": math.nan,
+        "realtime_solver": "yes",
+        "solve_time_p99_s": p99,
+        "solver_time_p99_s": solver,
+        "min_body_distance": 0.02,
+        "key_point_rule": "held",
+        "log_file": f"logs/{scenario}__{backend}.parquet",
+    }
+    row.update(extra)
+    return row
+
+
+def test_ranked_by_p99_call_time_with_the_solvers_own_beside():
+    table = pd.DataFrame(
+        [
+            run("wall", "slow", p99=300e-6, solver=100e-6),
+            run("wall", "fast", p99=40e-6, solver=math.nan),
+            run("wall", "mid", p99=90e-6, solver=30e-6),
+            # a second run of 'fast' in wall (another formulation): its worse p99 counts
+            run("wall", "fast", p99=120e-6, solver=math.nan, formulation="soft"),
+        ]
+    )
+    answer = rec.recommend(table)
+    assert answer.runs == 4 and [s.name for s in answer.scenarios] == ["wall"]
+    assert answer.scenarios[0].backends == ["mid", "fast", "slow"]
+    assert answer.overall.backends == ["mid", "fast", "slow"]
+    fast = answer.overall.recommended[1]
+    assert fast.call_p99_s == 120e-6 and math.isnan(fast.solver_p99_s)
+    assert answer.overall.not_recommended == {}
+    text = rec.render(answer)
+    assert text.splitlines()[0] == "Recommendation"
+    (table_md,) = parse_tables(rec.render(answer, markdown=True))
+    assert table_md["header"] == ["rank", "backend", "call p99 (us)", "solver p99 (us)"]
+    assert table_md["rows"] == [
+        ["1", "mid", "90", "30"],
+        ["2", "fast", "120", "-"],
+        ["3", "slow", "300", "100"],
+    ]
+
+
+def test_ok_in_one_scenario_but_not_another_is_not_recommended_overall():
+    reason = "link 2 3.0 mm inside disk 'blob' at 1.20 s; d_min 4.1 mm < d_safe - 0.5 mm = 9.5 mm"
+    table = pd.DataFrame(
+        [
+            run("wall", "a", p99=30e-6),
+            run("wall", "b", p99=60e-6),
+            run("narrow", "a", verdict="unsafe", verdict_reasons=reason, p99=35e-6),
+            run("narrow", "b", p99=70e-6),
+        ]
+    )
+    answer = rec.recommend(table)
+    wall, narrow = answer.scenarios
+    assert (wall.name, wall.backends) == ("wall", ["a", "b"])
+    assert (narrow.name, narrow.backends) == ("narrow", ["b"])
+    assert narrow.not_recommended == {
+        "a": ("unsafe in narrow: link 2 3.0 mm inside disk 'blob' at 1.20 s",)
+    }
+    assert answer.overall.name == "all scenarios (wall, narrow)"
+    assert answer.overall.backends == ["b"] and answer.overall.recommended[0].call_p99_s == 70e-6
+    assert answer.overall.not_recommended == narrow.not_recommended
+    text = rec.render(answer)
+    assert "- wall: a 30 us (solver 20), b 60 us (solver 20)" in text
+    assert "- narrow: b 70 us (solver 20)" in text
+    assert [c.strip() for c in text.rstrip().splitlines()[-1].split("|")[1:3]] == [
+        "a",
+        "unsafe in narrow: link 2 3.0 mm inside disk 'blob' at 1.20 s",
+    ]
+
+
+def test_reasons_in_a_few_words():
+    table = pd.DataFrame(
+        [
+            run("wall", "ok"),
+            run(
+                "wall",
+                "cut",
+                verdict="incomplete",
+                status="budget",
+                simulated_s=1.5,
+                verdict_reasons="stopped by its wall-time budget at 1.5 s of 2 s",
+            ),
+            run(
+                "wall",
+                "crash",
+                verdict="failed",
+                status="crashed",
+                simulated_s=math.nan,
+                error="worker process killed by SIGSEGV",
+            ),
+            run("wall", "bad", verdict="failed", verdict_reasons="3 ticks whose solve raised"),
+            run(
+                "wall",
+                "deep",
+                verdict="unsafe",
+                verdict_reasons="d_min -29.1 mm (A4/lower at 0.049 s; 47 ticks); joint speed",
+            ),
+            run(
+                "wall",
+                "late",
+                realtime="no",
+                realtime_reason="p99 1.8 ms > 1 ms; 12 % of ticks over dt",
+            ),
+            run(
+                "wall",
+                "both",
+                verdict="limits",
+                realtime="no",
+                verdict_reasons="joint speed limit broken",
+                realtime_reason="p99 2 ms > 1 ms",
+            ),
+            run("wall", "absent", status="skipped", verdict=math.nan, error="not installed"),
+            run("narrow", "ok"),
+            run("narrow", "everywhere", verdict="diverged", verdict_reasons="tracking error 9 mm"),
+            run("wall", "everywhere", verdict="unsafe", verdict_reasons="link 4 inside"),
+            run("free", "everywhere", verdict="limits", verdict_reasons="joint 2 limit"),
+            run("free", "ok"),
+        ]
+    )
+    why = rec.recommend(table).overall.not_recommended
+    assert why["cut"] == ("incomplete in wall (stopped at 1.5 s)",)
+    assert why["crash"] == ("failed in wall: run crashed (worker process killed by SIGSEGV)",)
+    assert why["bad"] == ("failed in wall: 3 ticks whose solve raised",)
+    assert why["deep"] == ("unsafe in wall: d_min -29.1 mm (A4/lower at 0.049 s; 47 ticks)",)
+    assert why["late"] == ("not real time in wall: p99 1.8 ms > 1 ms",)
+    assert why["both"] == (
+        "limits in wall: joint speed limit broken",
+        "not real time in wall: p99 2 ms > 1 ms",
+    )
+    assert why["absent"] == ("skipped in wall: not installed",)
+    assert rec.recommend(table).overall.backends == ["ok"]
+    assert len(why["everywhere"]) == 3
+    shown = rec.render(rec.recommend(table))
+    assert (
+        "diverged in narrow: tracking error 9 mm; unsafe in wall: link 4 inside (and 1 more)"
+        in shown
+    )
+
+
+def test_ok_where_it_ran_but_missing_from_a_scenario_is_not_recommended_overall():
+    table = pd.DataFrame([run("wall", "a"), run("wall", "b"), run("narrow", "a")])
+    answer = rec.recommend(table)
+    assert answer.scenarios[0].backends == ["a", "b"]
+    assert answer.overall.backends == ["a"]
+    assert answer.overall.not_recommended == {"b": ("not run in narrow",)}
+
+
+def test_a_table_without_real_time_recommends_nothing_and_says_why():
+    table = pd.DataFrame([run("wall", "a"), run("wall", "b", verdict="unsafe")]).drop(
+        columns=["realtime", "realtime_reason", "solver_time_p99_s"]
+    )
+    answer = rec.recommend(table)
+    assert answer.overall.backends == []
+    assert answer.overall.not_recommended == {
+        "a": ("real time not judged in wall",),
+        "b": ("unsafe in wall",),
+    }
+    assert "No backend was ok and real time in every run of all scenarios (wall)." in rec.render(
+        answer
+    )
+    assert rec.shortfalls(table) == ["1 of 2 runs not ok (unsafe 1)"]
+
+
+def test_empty_table():
+    answer = rec.recommend(pd.DataFrame())
+    assert answer.runs == 0 and "nothing to recommend" in rec.render(answer)
+
+
+def test_text_and_markdown_are_the_same_lines_but_the_heading():
+    table = pd.DataFrame(
+        [run("wall", "a"), run("narrow", "a"), run("wall", "b", realtime="no"), run("narrow", "b")]
+    )
+    answer = rec.recommend(table)
+    text, md = rec.render(answer), rec.render(answer, markdown=True)
+    assert md.startswith("## Recommendation\n")
+    assert [x for x in md.splitlines()[1:] if x] == [x for x in text.splitlines()[1:] if x]
+    # padded tables: every line of a table is as wide as its header
+    tables = itertools.groupby(text.splitlines(), key=lambda x: x.startswith("|"))
+    widths = [{len(x) for x in lines} for is_table, lines in tables if is_table]
+    assert len(widths) == 2 and all(len(w) == 1 for w in widths)
+
+
+def test_md_table_pad_changes_spacing_only():
+    rows = [["daqp", 1.5, "x"], ["qpoases-long-name", 12345.678, "yy"]]
+    plain, padded = (
+        md_table(["backend", "t", "c"], rows),
+        md_table(["backend", "t", "c"], rows, True),
+    )
+    assert plain == "| backend | t | c |\n|:-------|---:|---:|\n| daqp | 1.5 | x |\n" + (
+        "| qpoases-long-name | 1.235e+04 | yy |\n"
+    )
+    assert [[c.strip() for c in x.split("|")] for x in padded.splitlines()] == [
+        [c.strip() for c in x.split("|")] for x in plain.splitlines()
+    ][:1] + [
+        ["", ":" + "-" * 18, "-" * 10 + ":", "----:", ""],
+    ] + [[c.strip() for c in x.split("|")] for x in plain.splitlines()][2:]
+    assert len({len(x) for x in padded.splitlines()}) == 1
+
+
+def test_shortfalls_count_verdicts_real_time_and_failed_solves():
+    table = pd.DataFrame(
+        [
+            run("wall", "a"),
+            run("wall", "b", verdict="unsafe"),
+            run("wall", "c", verdict="incomplete"),
+            run("wall", "d", realtime="no"),
+            run("wall", "e", verdict="unsafe", realtime="no"),
+            run("wall", "f", status="skipped", verdict=math.nan),
+        ]
+    )
+    assert rec.shortfalls(table) == [
+        "4 of 6 runs not ok (unsafe 2, incomplete 1, no verdict 1)",
+        "2 of 6 runs not real time",
+    ]
+    assert rec.shortfalls(failed_solves=3) == ["3 failed solves"]
+    assert rec.shortfalls(pd.DataFrame([run("wall", "a")])) == []
+
+
+def test_strict_exit(capsys):
+    def args(strict):
+        return argparse.Namespace(strict=strict, command="closed-loop")
+
+    bad = pd.DataFrame([run("wall", "a"), run("wall", "b", realtime="no")])
+    good = pd.DataFrame([run("wall", "a")])
+    assert strict_exit(args(False), runs=bad, failed_solves=2) == 0
+    assert capsys.readouterr().err == ""
+    assert strict_exit(args(True), runs=good) == 0
+    assert strict_exit(args(True)) == 0
+    assert capsys.readouterr().err == ""
+    assert strict_exit(args(True), runs=bad, failed_solves=2) == 1
+    assert capsys.readouterr().err == (
+        "qpbench closed-loop: --strict: 2 failed solves; 1 of 2 runs not real time\n"
+    )
+
+
+@pytest.fixture
+def closed_loop_csv(tmp_path):
+    table = pd.DataFrame(
+        [
+            run("wall", "daqp", p99=45e-6, solver=12e-6),
+            run("wall", "pinv", verdict="unsafe", verdict_reasons="link 4 (end effector) inside"),
+            run("narrow", "daqp", p99=50e-6, solver=13e-6),
+            run("narrow", "pinv", realtime="no", realtime_reason="p99 1.8 ms > 1 ms"),
+        ]
+    )
+    path = tmp_path / "closed_loop.csv"
+    table.to_csv(path, index=False)
+    return path, table
+
+
+def test_the_report_opens_with_the_answer(closed_loop_csv, tmp_path):
+    path, table = closed_loop_csv
+    assert main(["-q", "report", str(path), "--out", str(tmp_path / "r"), "--no-plots"]) == 0
+    md = (tmp_path / "r" / "report.md").read_text()
+    answer = rec.render(rec.recommend(table), markdown=True)
+    assert md.startswith("# qpbench report\n\n" + answer)
+    how = md.index("## How to read this\n")
+    assert how == len("# qpbench report\n\n" + answer) + 1
+    lines = md[how:].split("\n\n")[1].splitlines()
+    assert lines == [f"- {line}" for line in rec.HOW_TO_READ] and len(lines) == 5
+    assert how < md.index("## Machine") < md.index("## Closed loop")
+    tables = parse_tables(md)
+    assert tables[0]["headings"] == {1: "qpbench report", 2: "Recommendation"}
+    assert [r[1] for r in tables[0]["rows"]] == ["daqp"]
+    assert tables[1]["rows"] == [
+        [
+            "pinv",
+            "unsafe in wall: link 4 (end effector) inside; not real time in narrow: "
+            "p99 1.8 ms > 1 ms",
+        ],
+    ]
