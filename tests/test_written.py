@@ -113,3 +113,26 @@ def test_scaling_says_in_one_line_why_it_exits_1(tmp_path, capsys):
     why = [line for line in err.splitlines() if "exit 1:" in line]
     assert len(why) == 1, err
     assert "faulty:raise 2 on n4-p1-m1" in why[0] and "daqp" not in why[0], why[0]
+
+
+def test_bench_progress_off_a_terminal_is_a_line_with_the_time_left():
+    import logging
+
+    from qpbench.harness.bench import LogBar
+
+    lines: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: lines.append(record.getMessage())
+    logger = logging.getLogger("qpbench.harness")
+    logger.addHandler(handler)
+    level, logger.level = logger.level, logging.INFO
+    try:
+        bar = LogBar(4, "x.csv", every_s=0.0)
+        bar.update(1)
+        bar.update(3)  # the last solve: no line (the bench's own summary follows)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+    assert len(lines) == 1 and re.fullmatch(
+        r"bench x\.csv: 1/4 solves in \d+ s, about \d+ s left", lines[0]
+    ), lines

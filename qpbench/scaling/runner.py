@@ -371,7 +371,7 @@ def run_size(
             csv_path,
             resume=csv_path.exists(),
             references=references,
-            progress=progress,
+            progress=progress or "log",
         )
         code = summary.exit_code
         from ..harness.results import read_results
