@@ -75,8 +75,13 @@ def test_closed_loop_and_report_list_their_files(tmp_path, capsys, monkeypatch):
     ]
     assert len(logs) == 2 and sorted(listed) == sorted(["loop/closed_loop.csv", *logs])
     assert main(["report", "loop/closed_loop.csv", "--out", "rep"]) == 0
-    listed = _wrote(capsys.readouterr().err)
+    err = capsys.readouterr().err
+    listed = _wrote(err)
     assert "rep/report.md" in listed and re.search(r"rep/plots/", listed), listed
+    # its phases, off a terminal as lines: the tables read, then the figures as they are drawn
+    figures = len(list((tmp_path / "rep" / "plots").glob("*.png")))
+    assert "report: 0 bench rows and 1 closed-loop runs read in" in err, err
+    assert f"report: {figures} figures in" in err.splitlines()[-2], err
 
 
 def _scaling(out: Path, *extra: str) -> list[str]:
