@@ -1,7 +1,14 @@
-"""Writing outputs so that a killed run never leaves a truncated file that looks complete.
+"""Writing outputs so that a killed run never leaves a truncated file that looks complete,
+and the list of the files a command wrote.
 
 Every report, problem set and manifest is written to a temporary name in the
 same folder and renamed into place (:func:`os.replace` is atomic on POSIX).
+
+Every output that a command writes is recorded here (:func:`record`; :func:`atomic_path`
+records its file, the appending writers theirs, :func:`rename` follows a staging
+folder renamed into place), and ``qpbench`` prints them once when the command ends
+(:func:`listing`), e.g. ``wrote: wall.csv, problems/wall/reference-auto.parquet``.
+Files that worker processes write are recorded by the process that receives their rows.
 """
 
 from __future__ import annotations
@@ -15,7 +22,63 @@ from typing import TYPE_CHECKING
 from .exceptions import OutputExistsError
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
+    from collections.abc import Callable, Iterator
+
+
+#: Files written since :func:`recording` started, in the order first written (``None``: not recording).
+_written: dict[Path, None] | None = None
+
+
+@contextlib.contextmanager
+def recording() -> Iterator[Callable[[], list[Path]]]:
+    """Record the outputs written inside the ``with`` block; yields a function that lists
+    those that exist (absolute paths, in the order first written)."""
+    global _written
+    outer = _written
+    mine: dict[Path, None] = {}
+    _written = mine
+    try:
+        yield lambda: [p for p in mine if p.is_file()]
+    finally:
+        _written = outer
+        if outer is not None:  # a nested recording hands its files on
+            outer.update(mine)
+
+
+def record(path: str | Path) -> None:
+    """Note ``path`` as an output of this command (nothing happens when not recording)."""
+    if _written is not None:
+        _written[Path(os.path.abspath(path))] = None
+
+
+def rename(src: str | Path, dst: str | Path) -> None:
+    """:func:`os.replace` ``src`` by ``dst``; recorded files under ``src`` are now under ``dst``."""
+    os.replace(src, dst)
+    if _written:
+        src, dst = Path(os.path.abspath(src)), Path(os.path.abspath(dst))
+        moved = [dst / p.relative_to(src) if p == src or src in p.parents else p for p in _written]
+        _written.clear()
+        _written.update(dict.fromkeys(moved))
+
+
+def listing(paths: list[Path], cwd: str | Path | None = None, most: int = 3) -> str:
+    """``wrote: a.csv, out/report.md, out/logs/ (20 files)``: paths relative to ``cwd`` where
+    they are under it; a folder holding more than ``most`` of them is named once with its count."""
+    cwd = Path(os.path.abspath(cwd or os.getcwd()))
+
+    def shown(p: Path) -> str:
+        return str(p.relative_to(cwd)) if cwd in p.parents else str(p)
+
+    by_folder: dict[Path, list[Path]] = {}
+    for p in paths:
+        by_folder.setdefault(p.parent, []).append(p)
+    parts: list[str] = []
+    for folder, files in by_folder.items():
+        if len(files) > most:
+            parts.append(f"{shown(folder / 'x')[:-1]} ({len(files)} files)")
+        else:
+            parts += [shown(p) for p in files]
+    return "wrote: " + ", ".join(parts)
 
 
 @contextlib.contextmanager
@@ -38,6 +101,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
+        record(path)
     finally:
         if tmp.exists():
             tmp.unlink()

@@ -166,14 +166,23 @@ def main(argv: list[str] | None = None) -> int:
     )
     from tqdm.contrib.logging import logging_redirect_tqdm
 
+    from .atomic import listing, recording
     from .backends import load_plugins
     from .native_output import silence_native_stdout
 
     try:
         load_plugins([*args.plugins_before, *getattr(args, "plugins_after", [])])
         # log lines go through tqdm.write: a progress bar is redrawn below them, never mixed into one line
-        with silence_native_stdout(enabled=not args.verbose), logging_redirect_tqdm(loggers=[log]):
-            return int(args._run(args) or 0)
+        with (
+            silence_native_stdout(enabled=not args.verbose),
+            logging_redirect_tqdm(loggers=[log]),
+            recording() as written,
+        ):
+            try:
+                return int(args._run(args) or 0)
+            finally:
+                if written():  # every file the command wrote, once, whatever its exit code
+                    log.info("%s", listing(written()))
     except QpbenchError as exc:
         print(f"qpbench {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -1,4 +1,5 @@
-"""Every ``--help`` example of every command and every snippet of the READMEs runs as written.
+"""Every ``--help`` example of every command and every snippet of the documents runs as written
+(README.md, ``docs/*.md``, the other READMEs it links and ``problems/README.md``).
 
 Each runs with bash in a temporary folder holding copies of the repository's
 ``problems/`` and ``results/`` (so nothing in the checkout is written), with
@@ -168,30 +169,63 @@ def test_every_command_has_an_example():
     assert {n for n, _ in EXAMPLES} == {n for n, _ in command_modules()}
 
 
-@pytest.mark.parametrize("readme", ["README.md", "problems/README.md"])
-def test_readme_snippets_run(readme, workdir):
-    snippets = readme_snippets(ROOT / readme)
-    assert snippets
-    for lang, code in snippets:
-        if lang == "python":
-            proc = subprocess.run(
-                [sys.executable, "-c", code],
-                cwd=workdir,
-                capture_output=True,
-                text=True,
-                timeout=600,
-            )
-            assert proc.returncode == 0, f"{code}\n{proc.stderr[-3000:]}"
-            continue
-        for line in _bash_lines(code):
-            if SKIP.search(line):
+def documents() -> list[Path]:
+    """The documents whose snippets run, in the order a reader meets them: README.md, the pages
+    it links (``docs/``, ``bench/``, ``problems/``) in the order of its links, any other
+    ``docs/*.md``, then ``problems/README.md``. A link to a page that does not exist is left out."""
+    readme = ROOT / "README.md"
+    linked = re.findall(r"\]\(((?:docs|bench|problems)/[\w./-]+\.md)\)", readme.read_text())
+    pages = [readme, *(ROOT / p for p in linked), *sorted((ROOT / "docs").glob("*.md"))]
+    pages.append(ROOT / "problems" / "README.md")
+    return [p for p in dict.fromkeys(pages) if p.is_file()]
+
+
+def test_documents_run_in_order(workdir):
+    """Every snippet of every document runs as written, one document after the other in one
+    folder, as a reader would in a fresh clone: a command that clashes with an output an earlier
+    one wrote (exit 2) or needs an option it does not give fails here."""
+    ran = []
+    for doc in documents():
+        where = doc.relative_to(ROOT)
+        for lang, code in readme_snippets(doc):
+            if lang == "python":
+                proc = subprocess.run(
+                    [sys.executable, "-c", code],
+                    cwd=workdir,
+                    capture_output=True,
+                    text=True,
+                    timeout=600,
+                )
+                assert proc.returncode == 0, f"{where}:\n{code}\n{proc.stderr[-3000:]}"
+                ran.append(where)
                 continue
-            command = sliced(INSTALL.sub("", line))
-            proc = _run(command, workdir)
-            assert proc.returncode in (0, 1), f"{command}\n{proc.stderr[-3000:]}"
-    if readme == "problems/README.md":  # what its snippets write: a scenario file, a bench CSV
-        assert (workdir / "my.toml").read_text().startswith("# Paper section 4.3")
-        assert set(pd.read_csv(workdir / "wall.csv")["backend"]) == {"daqp", "osqp"}
+            for line in _bash_lines(code):
+                if SKIP.search(line):
+                    continue
+                command = sliced(INSTALL.sub("", line))
+                proc = _run(command, workdir)
+                assert proc.returncode in (0, 1), f"{where}: {command}\n{proc.stderr[-3000:]}"
+                if " --out " in command and "qpbench" in command:  # what it wrote, it says
+                    assert "wrote: " in proc.stderr, f"{where}: {command}\n{proc.stderr[-3000:]}"
+                ran.append(where)
+    assert {Path("README.md"), Path("problems/README.md")} <= set(ran)
+    # what the snippets wrote: README's quick bench, problems/README's scenario file and its bench
+    # of ten exported ticks, which are feasible (the scenario's infeasible start is not exported)
+    assert set(pd.read_csv(workdir / "wall.csv")["backend"]) == {"daqp", "osqp", "clarabel"}
+    assert (workdir / "my.toml").read_text().startswith("# Paper section 4.3")
+    exported = pd.read_csv(workdir / "wall-npz.csv")
+    assert set(exported["backend"]) == {"daqp", "osqp"}
+    assert set(exported["status"]) == {"optimal"}, exported[["problem", "backend", "status"]]
+
+
+def test_every_docs_page_is_linked_from_readme():
+    linked = set(re.findall(r"\]\((docs/[\w.-]+\.md)\)", (ROOT / "README.md").read_text()))
+    pages = {p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md")}
+    assert pages <= linked, pages - linked
+
+
+def test_readme_is_short():
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 250
 
 
 def test_slice_rule():

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
 # command module: cli.py reads these names; the repetition is that interface, not shared logic.
 HELP = "write problems as qpsolvers .npz files or a Parquet problem set (subset with --problems/--every/--limit)"
-EXAMPLE = "qpbench export problems/wall --format npz --limit 10 --out wall-npz"
+EXAMPLE = "qpbench export problems/wall --format npz --problems 'wall_paper_001*' --limit 10 --out wall-npz"
 
 log = logging.getLogger("qpbench")
 
@@ -54,6 +54,7 @@ def _safe_name(name: str) -> str:
 
 def export(records: list[ProblemRecord], fmt: str, out: Path, source: str) -> Path:
     """Write ``records`` to ``out`` in ``fmt``; the folder appears complete or not at all."""
+    from ..atomic import rename
     from ..formats import save_npz, write_problem_set
 
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
@@ -73,10 +74,10 @@ def export(records: list[ProblemRecord], fmt: str, out: Path, source: str) -> Pa
         if out.exists():
             old = out.with_name(f".{out.name}.old")
             out.rename(old)
-            staging.rename(out)
+            rename(staging, out)
             shutil.rmtree(old)
         else:
-            staging.rename(out)
+            rename(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise

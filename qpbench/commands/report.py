@@ -41,11 +41,8 @@ def run(args: argparse.Namespace) -> int:
     scaling = [
         r for r in args.results if is_scaling_dir(r)
     ]  # folders written by ``qpbench scaling``
-    for folder in scaling:
-        log.info(
-            "wrote %s",
-            write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots),
-        )
+    for folder in scaling:  # the files written are listed when the command ends
+        write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots)
     rest = [r for r in args.results if r not in scaling]
     if rest:
         from ..sweep.report import split_sweep_paths, sweep_section
@@ -54,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
             rest
         )  # tables written by ``qpbench sweep``: their own section
         sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
-        path = write_report(
+        write_report(
             rest,
             args.out,
             force=args.force,
@@ -62,5 +59,4 @@ def run(args: argparse.Namespace) -> int:
             prefer=args.prefer,
             sections=sections,
         )
-        log.info("wrote %s", path)
     return 0

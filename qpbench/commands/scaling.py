@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out",
         required=True,
         metavar="DIR",
-        help="folder of scaling.csv, bench/, sets/, scenarios/ and the report",
+        help="folder of scaling.csv, bench/, scenarios/ and the report (and sets/ with --keep-sets)",
     )
     parser.add_argument(
         "--sizes",
@@ -75,6 +75,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--no-report", action="store_true", help="do not write scaling.md and scaling.png"
+    )
+    parser.add_argument(
+        "--keep-sets",
+        action="store_true",
+        help="keep each size's problem set in sets/ (tens of MB for the large sizes; by default "
+        "a size's set is removed once its rows are written: the same --seed makes it again)",
     )
     add_force_resume(
         parser,
@@ -125,13 +131,14 @@ def _config(args):
         profile=args.profile,
         dense_limit=args.dense_limit,
         slow_limit=args.slow_limit,
+        keep_sets=args.keep_sets,
     )
 
 
 def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output
     from ..jit import warmup_logged
-    from ..scaling.runner import SUMMARY_NAME, run_scaling
+    from ..scaling.runner import SUMMARY_NAME, failure_line, run_scaling
 
     config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
@@ -157,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_report:
         from ..scaling.report import write_scaling_report
 
-        path = write_scaling_report(out, out, force=True, quiet=args.quiet)
-        log.info("wrote %s", path)
+        write_scaling_report(out, out, force=True, quiet=args.quiet)
+    if failed_solves:
+        log.warning("%s", failure_line(out / SUMMARY_NAME))
     return strict_exit(args, failed_solves=failed_solves)

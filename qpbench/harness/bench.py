@@ -184,12 +184,14 @@ class _BenchRun:
             self.config.repeat,
         )
 
-    def run(self, progress: bool) -> None:
+    def run(self, progress: bool | str) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
         self.plan.marker.open(
             self.plan.learned, catch_faults=any(not r.isolated for r in self.runners.values())
         )
-        if progress and self.total_todo:
+        if progress == "log" and self.total_todo:
+            self.bar = LogBar(self.total_todo, self.writer.path.name)
+        elif progress and self.total_todo:
             from tqdm import tqdm
 
             self.bar = tqdm(total=self.total_todo, unit="solve", desc="bench", leave=False)
@@ -332,6 +334,33 @@ class _BenchRun:
         return summary
 
 
+class LogBar:
+    """Off a terminal, the bench's progress bar as log lines: at most one per ``every_s``
+    seconds, with the solves done, the time so far and the time left at this pace."""
+
+    def __init__(self, total: int, name: str, every_s: float = 10.0):
+        self.total, self.name, self.every_s, self.n = total, name, every_s, 0
+        self.started = self.last = time.monotonic()
+
+    def update(self, n: int) -> None:
+        self.n += n
+        now = time.monotonic()
+        if now - self.last >= self.every_s and self.n < self.total:
+            self.last = now
+            spent = now - self.started
+            log.info(
+                "bench %s: %d/%d solves in %.0f s, about %.0f s left",
+                self.name,
+                self.n,
+                self.total,
+                spent,
+                spent * (self.total - self.n) / self.n,
+            )
+
+    def close(self) -> None:
+        pass
+
+
 def run_bench(
     problem_set: ProblemSet,
     config: BenchConfig,
@@ -340,7 +369,7 @@ def run_bench(
     force: bool = False,
     resume: bool = False,
     references: list | None = None,
-    progress: bool = False,
+    progress: bool | str = False,
 ) -> BenchSummary:
     """Benchmark ``config.backends`` on ``problem_set``; write rows to ``out`` (CSV).
 
@@ -356,7 +385,7 @@ def run_bench(
         resume: Keep the rows of an existing ``out`` and run the missing keys only.
         references: Reference solutions (one per record, ``None`` entries for none), or a function
             of the problem set that returns them; computed (and cached) if ``None``.
-        progress: Show a progress bar on stderr.
+        progress: Show a progress bar on stderr (``"log"``: a log line every 10 s, :class:`LogBar`).
 
     Raises:
         OutputExistsError: ``out`` exists and neither ``force`` nor ``resume``.

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..atomic import check_folder, check_output
+from ..atomic import check_folder, check_output, record
 from ..exceptions import ParamError
 from ..selection import parse_list
 from ..statuses import FORMULATIONS
@@ -105,6 +105,12 @@ class _Table:
         row["isolated"] = self.isolated(key[1])
         row["run_budget_s"] = self.run_budget
         self.rows[key] = row
+        if isinstance(row.get("log_file"), str):  # written here or by a worker process
+            from ..sim.figure_log import figure_log_path
+
+            log_path = self.csv_path.parent / row["log_file"]
+            record(log_path)
+            record(figure_log_path(log_path))
         write_table(self.all_rows(), self.csv_path)
         if self.on_row is not None:
             self.on_row(row)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..atomic import record, rename
 from ..exceptions import ParamError
 
 if TYPE_CHECKING:
@@ -229,6 +230,7 @@ def _compress_bench(bench_dir: Path) -> None:
         gz_path = csv_path.with_name(csv_path.name + ".gz")
         with open(csv_path, "rb") as src, gzip.GzipFile(gz_path, "wb", mtime=0) as dst:
             shutil.copyfileobj(src, dst)
+        record(gz_path)
         csv_path.unlink()
 
 
@@ -245,11 +247,11 @@ def _promote(staging: Path, out: Path) -> None:
                 shutil.rmtree(old)
             if dst.exists():
                 os.replace(dst, old)
-            os.replace(src, dst)
+            rename(src, dst)
             if old.exists():
                 shutil.rmtree(old)
         else:
-            os.replace(src, dst)
+            rename(src, dst)
     shutil.rmtree(staging, ignore_errors=True)
 
 

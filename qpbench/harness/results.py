@@ -239,6 +239,9 @@ class ResultsWriter:
         if new:
             flags |= os.O_TRUNC
         self._fd = os.open(self.path, flags, 0o644)
+        from ..atomic import record
+
+        record(self.path)
         if new:
             self._write(header_bytes(self.columns))
         self.count = 0

@@ -467,7 +467,9 @@ def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: 
     tmp = path.with_name(f".{path.name}.tmp{suffix}")
     try:
         anim.save(tmp, writer=writer, progress_callback=callback)
-        tmp.replace(path)
+        from ..atomic import rename
+
+        rename(tmp, path)
     finally:
         if bar is not None:
             bar.close()

@@ -7,6 +7,11 @@ two imports the other).
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import sys
+import threading
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,6 +24,43 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
 __all__ = ["write_report"]
+
+log = logging.getLogger("qpbench.report")
+
+
+@contextlib.contextmanager
+def figure_progress(folder: Path, every_s: float = 5.0):
+    """While the figures are drawn: a bar of the figures written into ``folder`` on a terminal,
+    else a log line every ``every_s`` seconds (and one at the end)."""
+    started = time.time()
+    stop = threading.Event()
+    bar = None
+    if sys.stderr.isatty() and log.isEnabledFor(logging.INFO):
+        from tqdm import tqdm
+
+        bar = tqdm(unit="figure", desc="report figures", leave=False)
+
+    def count() -> int:
+        return sum(1 for p in folder.glob("*.png") if p.stat().st_mtime >= started - 1)
+
+    def beat() -> None:
+        while not stop.wait(0.5 if bar is not None else every_s):
+            done = count()
+            if bar is not None:
+                bar.update(done - bar.n)
+            else:
+                log.info("report: %d figures in %.0f s", done, time.time() - started)
+
+    thread = threading.Thread(target=beat, name="report-progress", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+        if bar is not None:
+            bar.close()
+        log.info("report: %d figures in %.1f s", count(), time.time() - started)
 
 
 def write_report(
@@ -52,16 +94,25 @@ def write_report(
     check_folder(out)
     if out.exists():
         check_output(report_path, force=force)
+    started = time.perf_counter()
     results = (
         tables.read_results(paths, prefer=prefer)
         if paths or sections is None
         else tables.Results(pd.DataFrame(), pd.DataFrame())
     )
+    log.info(
+        "report: %d bench rows and %d closed-loop runs read in %.1f s",
+        len(results.bench),
+        len(results.closed_loop),
+        time.perf_counter() - started,
+    )
     plot_files: dict[str, str] = {}
     if plots:
         from .plots import write_plots
 
-        plot_files = write_plots(results, out / "plots", relative_to=out)
+        (out / "plots").mkdir(parents=True, exist_ok=True)
+        with figure_progress(out / "plots"):
+            plot_files = write_plots(results, out / "plots", relative_to=out)
     text = render(results, plot_files)
     if sections is not None:
         text += "\n" + "\n".join(sections(out, plots))

@@ -5,7 +5,9 @@ For each size (:mod:`qpbench.scaling.sizes`), in the output folder ``DIR``:
 1. ``scenarios/<size>.toml``: the size as a scenario file;
 2. ``sets/<size>/``: the closed loop run for ``duration`` seconds with the
    ``driver`` backend (an exact QP solver), every ``every``-th tick's QP kept
-   as a problem set (:func:`qpbench.sim.loop.simulate` with ``dump``). The
+   as a problem set (:func:`qpbench.sim.loop.simulate` with ``dump``; removed
+   once the size is done unless ``keep_sets``: the sets of the large sizes are
+   tens of MB and the same seed makes them again). The
    closed loop, not a scripted trajectory: the QPs are the ones the
    controller meets (the arm in contact, its key points pushed by the
    approaching cloud, obstacle rows becoming active), and nothing in them
@@ -35,6 +37,7 @@ import io
 import logging
 import math
 import os
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -152,6 +155,7 @@ class ScalingConfig:
         profile: Settings profile.
         dense_limit: Largest ``n x rows`` a dense-only backend is run on.
         slow_limit: Median solve time [s] past which a backend skips the larger sizes of an axis.
+        keep_sets: Keep each size's problem set (``sets/<size>/``) once the size is done.
     """
 
     backends: list[str]
@@ -165,6 +169,7 @@ class ScalingConfig:
     profile: str = "default"
     dense_limit: int = 1_000_000
     slow_limit: float = 0.02
+    keep_sets: bool = False
 
 
 def _cell(value) -> str:
@@ -182,7 +187,10 @@ def append_rows(path: Path, rows: list[dict]) -> None:
         writer.writerow(COLUMNS)
     for row in rows:
         writer.writerow([_cell(row.get(c)) for c in COLUMNS])
+    from ..atomic import record
+
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    record(path)
     try:
         os.write(fd, buf.getvalue().encode("utf-8"))
         os.fsync(fd)
@@ -320,11 +328,23 @@ def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
 def run_size(
     size: Size, config: ScalingConfig, out: Path, slow: dict, progress: bool = False
 ) -> tuple[list[dict], int]:
-    """Everything for one size (module docstring); returns its summary rows and its failed solves."""
+    """Everything for one size (module docstring); returns its summary rows and its failed solves.
+
+    Each phase says so in a log line (``progress``: the references and the bench also show a bar)."""
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
+    from ..reference import reference_solutions
 
+    started = time.perf_counter()
     scenario, states = _dump_ticks(size, config, out)
+    log.info(
+        "%s: closed loop of %g s with %s: %d ticks kept in %.1f s",
+        size.name,
+        config.duration,
+        config.driver,
+        len(states),
+        time.perf_counter() - started,
+    )
     built = build_times(scenario.make_controller(), states, config.build_repeat)
     base = _size_columns(size, config)
     base.update(build_median_s=float(np.median(built)), build_p99_s=float(np.percentile(built, 99)))
@@ -338,8 +358,20 @@ def run_size(
         bench = BenchConfig(
             backends=run, profile=config.profile, repeat=config.repeat, seed=config.seed
         )
+
+        def references(subset):  # progress of the reference solves: a bar, else log lines
+            from tqdm import tqdm
+
+            return reference_solutions(subset, progress=tqdm if progress else "log")
+
+        log.info("%s: bench of %s on %d ticks", size.name, ", ".join(run), len(problem_set))
         summary = run_bench(
-            problem_set, bench, csv_path, resume=csv_path.exists(), progress=progress
+            problem_set,
+            bench,
+            csv_path,
+            resume=csv_path.exists(),
+            references=references,
+            progress=progress or "log",
         )
         failed = summary.failures
         from ..harness.results import read_results
@@ -405,6 +437,33 @@ def run_scaling(
         )
         rows, size_failed = run_size(size, config, out, slow, progress)
         append_rows(summary_path, rows)
+        if not config.keep_sets:
+            shutil.rmtree(out / "sets" / size.name, ignore_errors=True)
         failed += size_failed
-        log.info("%s: done in %.1f s", size.name, time.perf_counter() - started)
+        log.info(
+            "%s: done in %.1f s%s",
+            size.name,
+            time.perf_counter() - started,
+            f"; {size_failed} failed solves" if size_failed else "",
+        )
+    if not config.keep_sets and (out / "sets").is_dir() and not any((out / "sets").iterdir()):
+        (out / "sets").rmdir()
     return failed
+
+
+def failure_line(path: str | Path) -> str | None:
+    """The failed solves of a scaling run, in one line from its ``scaling.csv`` (``None``: no failed solve)."""
+    counts: dict[str, int] = {}
+    sizes: dict[str, list[str]] = {}
+    for r in read_summary(path):
+        n = int(float(r["failures"])) if r["failures"] else 0
+        if n:
+            counts[r["backend"]] = counts.get(r["backend"], 0) + n
+            sizes.setdefault(r["backend"], []).append(r["size"])
+    if not counts:
+        return None
+    per_backend = "; ".join(f"{b} {n} on {', '.join(sizes[b])}" for b, n in counts.items())
+    return (
+        f"{sum(counts.values())} failed solves (error, time_limit, invalid, crashed, or not "
+        f"optimal where the reference is): {per_backend} (column 'failures' of {path})"
+    )
