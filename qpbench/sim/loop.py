@@ -84,11 +84,11 @@ solve_log = logging.getLogger("qpbench.solves")
 class _Raised:
     """Stands for the solution of a solve that raised (status ``error``, no answer)."""
 
-    __slots__ = ("status", "x", "y", "z", "error")
+    __slots__ = ("status", "x", "y", "z", "error", "solver_time_s")
 
     def __init__(self, error: str):
         self.status = "error"
-        self.x = self.y = self.z = None
+        self.x = self.y = self.z = self.solver_time_s = None
         self.error = error
 
 
@@ -250,6 +250,7 @@ class _Run:
         data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
         theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
         c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
+        c_own = self.cidx[tick_log.SOLVER_TIME]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
         post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
@@ -275,6 +276,8 @@ class _Run:
                 sol = _Raised(describe_exception(exc))
             solve_s = perf() - t0
             status = sol.status
+            if (own := getattr(sol, "solver_time_s", None)) is not None:
+                data[k, c_own] = own  # the solver's own time [s] (tick log: solver_time_s)
             x = sol.x
             force = -1.0
             # the fast path: an answer classify() would call optimal (finite x, in time), or an online one
@@ -375,6 +378,9 @@ class _Run:
                 if self.first_error is None:
                     self.first_error, self.first_error_t = f"fallback: {fb.error}", t
                 _reset(be)
+            if (own := getattr(fb, "solver_time_s", None)) is not None:
+                c = self.cidx[tick_log.SOLVER_TIME]  # the fallback's own time adds to the tick's
+                self.data[k, c] = np.nansum([self.data[k, c], own])
             if fb_status == "optimal":
                 mode, x = FALLBACK, np.asarray(fb.x, dtype=np.float64)
                 z = none if fb.z is None else fb.z
