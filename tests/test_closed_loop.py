@@ -20,6 +20,7 @@ from qpbench.exceptions import OutputExistsError, ParamError
 from qpbench.harness import closed_loop as cl
 from qpbench.harness import loop_rows as rows
 from qpbench.harness import loop_workers as workers
+from qpbench.sim.log import TIME_COLUMNS
 
 SCENARIOS = ["wall", "narrow"]
 BACKENDS = ["qpsolvers:daqp", "pinv"]
@@ -270,8 +271,8 @@ def _same_daqp_run(out_a, row_a, out_b, row_b):
     pd.testing.assert_series_equal(
         _untimed(row_a).sort_index(), _untimed(row_b).sort_index(), check_names=False
     )
-    log_a = pd.read_parquet(out_a / row_a["log_file"]).drop(columns="solve_time_s")
-    log_b = pd.read_parquet(out_b / row_b["log_file"]).drop(columns="solve_time_s")
+    log_a = pd.read_parquet(out_a / row_a["log_file"]).drop(columns=list(TIME_COLUMNS))
+    log_b = pd.read_parquet(out_b / row_b["log_file"]).drop(columns=list(TIME_COLUMNS))
     pd.testing.assert_frame_equal(log_a, log_b)
 
 
@@ -439,8 +440,8 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
     whole_log = pd.read_parquet(whole_out / whole["log_file"])
     pd.testing.assert_frame_equal(
-        cut_log.drop(columns="solve_time_s"),
-        whole_log.drop(columns="solve_time_s").iloc[: len(cut_log)],
+        cut_log.drop(columns=list(TIME_COLUMNS)),
+        whole_log.drop(columns=list(TIME_COLUMNS)).iloc[: len(cut_log)],
     )
     # resume keeps a budget row made under the same budget, and reruns it under another
     seen = []

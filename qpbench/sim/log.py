@@ -56,6 +56,8 @@ FALLBACK = "fallback"
 ZERO_VELOCITY = "zero_velocity"
 SOLVE_TIME = "solve_time_s"
 SOLVER_TIME = "solver_time_s"
+#: Columns that depend on the machine's timing, not on the trajectory.
+TIME_COLUMNS = (SOLVE_TIME, SOLVER_TIME)
 Y_0, Y_1 = "y_0", "y_1"
 Z_MAX = "z_max"
 KP_HAT, KD_HAT = "kp_hat", "kd_hat"
