@@ -250,12 +250,11 @@ class _Run:
         data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
         theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
         c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
-        c_own = self.cidx[tick_log.SOLVER_TIME]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
         post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
         noisy, fd, f64 = surface.noise_std > 0.0, ctrl.task.desired_force, np.dtype(np.float64)
-        kp, kd, v = ctrl.kp, ctrl.kd, np.zeros(ctrl.n)
+        kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
         run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
         bar = self._progress_bar(run_name) if progress else None
@@ -275,10 +274,8 @@ class _Run:
             except Exception as exc:  # noqa: BLE001 - a backend's exception is the tick's status
                 sol = _Raised(describe_exception(exc))
             solve_s = perf() - t0
-            status = sol.status
-            if (own := getattr(sol, "solver_time_s", None)) is not None:
-                data[k, c_own] = own  # the solver's own time [s] (tick log: solver_time_s)
-            x = sol.x
+            status, x = sol.status, sol.x
+            data[k, c_own] = getattr(sol, "solver_time_s", None)  # its own time [s]; None: NaN
             force = -1.0
             # the fast path: an answer classify() would call optimal (finite x, in time), or an online one
             if x is not None and (online or status == "optimal") and solve_s <= limit:
