@@ -68,8 +68,6 @@ def test_safety_margin_defaults_to_half_a_millimetre(tmp_path):
         (r"^max_force_error = .*$", 'max_force_error = "two"', "verdict.max_force_error"),
         (r"^max_force_error = .*$", "max_force_error = -2.0", "verdict.max_force_error"),
         (r"^safety_margin = .*$", "safety_margin = -0.001", "verdict.safety_margin"),
-        # settle_time < duration: else tracking and force are never judged
-        (r"^settle_time = .*$", "settle_time = 20.0", "verdict.settle_time"),
         # safety_margin < d_safe: else a key point may touch the obstacle and pass
         (r"^safety_margin = .*$", "safety_margin = 0.01", "verdict.safety_margin"),
         (
@@ -128,14 +126,15 @@ def test_bad_thresholds_set_on_the_command_line_exit_2_naming_the_key(tmp_path, 
     assert not out.exists()
 
 
-def test_a_shorter_duration_asked_is_a_short_run_not_an_error():
-    """``simulation.duration`` below ``settle_time`` in the scenario is refused; a run asked shorter
-    (``--duration``) is judged on what it simulated and says tracking and force were not judged."""
+def test_a_settle_time_set_past_the_duration_is_refused_a_shorter_run_is_not():
+    """``--set verdict.settle_time`` at or past the duration is refused; a run set shorter
+    than the settle time is judged on what it simulated and says tracking and force were not
+    judged."""
     with pytest.raises(ScenarioError) as err:
-        load_scenario("wall", overrides={"simulation.duration": 1.0})
+        load_scenario("wall", overrides={"verdict.settle_time": 1.0, "simulation.duration": 1.0})
     assert err.value.key == "verdict.settle_time" and "simulation.duration = 1 s" in str(err.value)
-    sc = load_scenario("wall", overrides={"simulation.duration": 1.0, "verdict.settle_time": 0.5})
-    assert sc.verdict.settle_time == 0.5
+    sc = load_scenario("wall", overrides={"simulation.duration": 1.0})
+    assert sc.verdict.settle_time == 2.0 and sc.duration == 1.0
 
 
 def _without(text: str, table: str) -> str:

@@ -210,7 +210,7 @@ def parse_scenario(
         raise ScenarioError(f"not valid TOML: {exc}", path=file) from None
     if overrides:
         raw = apply_overrides(raw, overrides, file)
-    data, rnn = validate(raw, file)
+    data, rnn = validate(raw, file, tuple(overrides or ()))
     _warn_verdict_overrides(overrides or {}, file)
     scenario = Scenario(
         name=data["scenario"]["name"],
