@@ -145,6 +145,13 @@ SUMMARY_TIME_KEYS = frozenset(
         "solve_time_p99_s",
         "solve_time_max_s",
         "deadline_misses",
+        "over_dt_share",
+        "solver_time_p99_s",
+        "solver_over_dt_share",
+        "realtime",
+        "realtime_reason",
+        "realtime_solver",
+        "realtime_solver_reason",
     }
 )
 

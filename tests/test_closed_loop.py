@@ -7,7 +7,6 @@ against the per-tick logs they came from.
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pandas as pd
@@ -20,6 +19,7 @@ from qpbench.exceptions import OutputExistsError, ParamError
 from qpbench.harness import closed_loop as cl
 from qpbench.harness import loop_rows as rows
 from qpbench.harness import loop_workers as workers
+from qpbench.sim.log import TIME_COLUMNS
 
 SCENARIOS = ["wall", "narrow"]
 BACKENDS = ["qpsolvers:daqp", "pinv"]
@@ -259,6 +259,13 @@ TIMED = (
     "solve_time_median_s",
     "wall_time_s",
     "deadline_misses",
+    "over_dt_share",
+    "solver_time_p99_s",
+    "solver_over_dt_share",
+    "realtime",
+    "realtime_reason",
+    "realtime_solver",
+    "realtime_solver_reason",
 )
 
 
@@ -270,8 +277,8 @@ def _same_daqp_run(out_a, row_a, out_b, row_b):
     pd.testing.assert_series_equal(
         _untimed(row_a).sort_index(), _untimed(row_b).sort_index(), check_names=False
     )
-    log_a = pd.read_parquet(out_a / row_a["log_file"]).drop(columns="solve_time_s")
-    log_b = pd.read_parquet(out_b / row_b["log_file"]).drop(columns="solve_time_s")
+    log_a = pd.read_parquet(out_a / row_a["log_file"]).drop(columns=list(TIME_COLUMNS))
+    log_b = pd.read_parquet(out_b / row_b["log_file"]).drop(columns=list(TIME_COLUMNS))
     pd.testing.assert_frame_equal(log_a, log_b)
 
 
@@ -304,7 +311,7 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     crashed, hung, daqp = (table.iloc[i] for i in range(3))
     assert crashed["status"] == "crashed" and "SIGSEGV" in crashed["error"]
     assert hung["status"] == "time_limit" and "killed" in hung["error"]
-    assert crashed["verdict"] == hung["verdict"] == "failed" and daqp["verdict"] == "ok"
+    assert crashed["verdict"] == hung["verdict"] == "incomplete" and daqp["verdict"] == "ok"
     assert crashed["verdict_reasons"].startswith("run crashed: worker process killed by SIGSEGV")
     assert hung["verdict_reasons"].startswith("run overran its deadline: no result after 8 s")
     assert (
@@ -379,7 +386,9 @@ def test_pinv_through_the_wall_is_unsafe_and_exits_1_with_strict(tmp_path, capsy
     assert code == 1
     table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]
-    assert daqp["verdict"] == "ok" and math.isnan(daqp["verdict_reasons"])  # empty in the CSV
+    assert daqp["verdict"] == "ok" and daqp["verdict_reasons"] == (
+        "tracking and force not judged (settle time 2 s not reached)"  # a run of 1.6 s
+    )
     assert pinv["status"] == "ok" and pinv["verdict"] == "unsafe"
     assert pinv["verdict_reasons"].startswith(
         f"d_min {pinv['min_obstacle_distance'] * 1e3:.1f} mm < d_safe - 0.5 mm = 9.5 mm"
@@ -419,29 +428,30 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
         "--isolate",
         "never",
     ]
-    assert (
-        main([*args, "--out", str(out), "--run-budget", "0.4"]) == 0
-    )  # stopped early is not a failure
+    # stopped early: its verdict is incomplete, a verdict that is not ok
+    assert main([*args, "--out", str(out), "--run-budget", "0.4"]) == 1
     row = pd.read_csv(out / rows.CSV_NAME).iloc[0]
-    assert row["status"] == "budget" and row["verdict"] == "ok" and row["run_budget_s"] == 0.4
+    assert row["status"] == "budget" and row["verdict"] == "incomplete"
+    assert row["run_budget_s"] == 0.4 and row["realtime"] == "no"  # about 4 ms a tick
     assert 0 < row["simulated_s"] < row["duration_s"] == 1.0
     assert row["ticks"] == round(row["simulated_s"] / 0.001)
-    assert row["verdict_reasons"].startswith(
-        f"stopped at {row['simulated_s']:.3g} s of 1 s (wall-time budget 0.4 s)"
+    assert row["verdict_reasons"] == (
+        f"stopped at {row['simulated_s']:.2f} s of 1 s (wall-time budget 0.4 s): "
+        "tracking and force not judged (settle time 2 s not reached)"
     )
     assert row["real_time_factor"] == pytest.approx(row["simulated_s"] / row["wall_time_s"])
-    assert "INFO: wall / test-slow-exact: ok (budget; stopped at" in capsys.readouterr().err
+    assert "WARNING: wall / test-slow-exact: incomplete (stopped at" in capsys.readouterr().err
     cut_log = pd.read_parquet(out / row["log_file"])
     assert len(cut_log) == row["ticks"]
     # the uncut run: its first ticks are the budgeted run's log
     whole_out = tmp_path / "whole"
-    assert main([*args, "--out", str(whole_out)]) == 0
+    assert main([*args, "--out", str(whole_out)]) == 0  # not real time: no change of the exit code
     whole = pd.read_csv(whole_out / rows.CSV_NAME).iloc[0]
     assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
     whole_log = pd.read_parquet(whole_out / whole["log_file"])
     pd.testing.assert_frame_equal(
-        cut_log.drop(columns="solve_time_s"),
-        whole_log.drop(columns="solve_time_s").iloc[: len(cut_log)],
+        cut_log.drop(columns=list(TIME_COLUMNS)),
+        whole_log.drop(columns=list(TIME_COLUMNS)).iloc[: len(cut_log)],
     )
     # resume keeps a budget row made under the same budget, and reruns it under another
     seen = []

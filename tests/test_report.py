@@ -188,6 +188,10 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
                     solve_time_p99_s=rng.uniform(3e-5, 1e-4),
                     solve_time_max_s=rng.uniform(1e-4, 1e-3),
                     real_time_factor=rng.uniform(5, 80),
+                    realtime="no" if backend == "rnn" else "yes",
+                    realtime_solver="unknown" if backend == "rnn" else "yes",
+                    over_dt_share=rng.uniform(0, 1e-3),
+                    solver_time_p99_s=np.nan if backend == "rnn" else rng.uniform(1e-5, 5e-5),
                     log_file=log_name,
                     kp_hat_final=5000.0,
                     simulated_s=3.0,
@@ -206,8 +210,10 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
             status="error",
             error="RuntimeError: boom | bad",
             log_file="",
-            verdict="failed",
+            verdict="incomplete",
             verdict_reasons="run raised: RuntimeError: boom | bad",
+            realtime="no",
+            realtime_solver="unknown",
         )
     )
     path = folder / "closed_loop.csv"
@@ -400,7 +406,7 @@ def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
         [s, b, "paper", v] for s, b, v in zip(bad["scenario"], bad["backend"], bad["verdict"])
     ]
     assert [r[4] for r in tabs[0]["rows"][:-1]] == list(bad["verdict_reasons"])[:-1]
-    assert "| failed | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
+    assert "| incomplete | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
     # a table of runs that are all ok says so, and an older table without verdicts has no such list
     from qpbench.report.markdown_closed_loop import failed_verdicts
 

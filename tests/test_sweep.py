@@ -291,7 +291,8 @@ def test_lost_worker_loses_only_its_run_and_resume_fills_it(serial, tmp_path, mo
     assert all(
         r["status"] == "crashed"
         and r["attempts"] == "2"
-        and r["verdict"] == "failed"
+        and r["verdict"] == "incomplete"
+        and r["realtime"] == "no"
         and "SIGKILL" in r["error"]
         for r in dead
     )

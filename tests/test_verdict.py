@@ -16,9 +16,10 @@ from slow_backends import SlowExact
 
 from qpbench.cli import main
 from qpbench.exceptions import ParamError, ScenarioError
+from qpbench.sim.log import TIME_COLUMNS
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario, scenario_names
-from qpbench.sim.verdict import VerdictSettings, failed_run, judge
+from qpbench.sim.verdict import VerdictSettings, failed_run, judge, judge_realtime
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
@@ -31,6 +32,8 @@ def test_every_shipped_scenario_has_thresholds():
     for name in scenario_names():
         v = load_scenario(name).verdict
         assert v.settle_time == 2.0 and v.max_tracking_error == 0.001 and v.safety_margin == 0.0005
+        assert v.max_p99_fraction_of_dt == 0.5 and v.max_over_dt_share == 0.001
+        assert v == VerdictSettings(max_force_error=v.max_force_error)  # the defaults, written out
         # the paper's adaptation gain leaves a 5 N force bias for tens of seconds: twice that is allowed
         assert v.max_force_error == (10.0 if name == "adaptive" else 2.0)
 
@@ -65,7 +68,20 @@ def test_safety_margin_defaults_to_half_a_millimetre(tmp_path):
         (r"^max_force_error = .*$", 'max_force_error = "two"', "verdict.max_force_error"),
         (r"^max_force_error = .*$", "max_force_error = -2.0", "verdict.max_force_error"),
         (r"^safety_margin = .*$", "safety_margin = -0.001", "verdict.safety_margin"),
-        (r"^settle_time = .*$", "", "verdict.settle_time"),  # missing
+        # safety_margin < d_safe: else a key point may touch the obstacle and pass
+        (r"^safety_margin = .*$", "safety_margin = 0.01", "verdict.safety_margin"),
+        (
+            r"^max_p99_fraction_of_dt = .*$",
+            "max_p99_fraction_of_dt = 0.0",
+            "verdict.max_p99_fraction_of_dt",
+        ),
+        (
+            r"^max_p99_fraction_of_dt = .*$",
+            "max_p99_fraction_of_dt = 1.5",
+            "verdict.max_p99_fraction_of_dt",
+        ),
+        (r"^max_over_dt_share = .*$", "max_over_dt_share = -0.1", "verdict.max_over_dt_share"),
+        (r"^max_over_dt_share = .*$", "max_over_dt_share = 1.0", "verdict.max_over_dt_share"),
         (r"^settle_time = ", "settle_tim = ", "verdict.settle_tim"),  # typo
         (r"^\[verdict\]", "[verdit]", "verdit"),  # misspelt table
     ],
@@ -82,14 +98,81 @@ def test_bad_thresholds_are_refused_naming_file_and_key(tmp_path, capsys, old, n
     assert not out.exists()
 
 
-def test_a_file_without_the_verdict_table_is_refused(tmp_path):
+@pytest.mark.parametrize(
+    "key,value",
+    [
+        ("verdict.settle_time", "100"),  # past the 20 s duration
+        ("verdict.safety_margin", "1.0"),  # past d_safe = 10 mm
+        ("verdict.max_tracking_error", "0"),
+        ("verdict.max_force_error", "-2"),
+        ("verdict.max_p99_fraction_of_dt", "2"),
+        ("verdict.max_over_dt_share", "1"),
+    ],
+)
+def test_bad_thresholds_set_on_the_command_line_exit_2_naming_the_key(tmp_path, capsys, key, value):
+    out = tmp_path / "s.json"
+    argv = [
+        *simulate_args("wall", "daqp", "0.05", "--set", f"{key}={value}"),
+        "--summary",
+        str(out),
+    ]
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(lines) == 1
+        and f"key '{key}'" in lines[0]
+        and lines[0].startswith("qpbench simulate: error")
+    )
+    assert not out.exists()
+
+
+def test_a_settle_time_set_past_the_duration_is_refused_a_shorter_run_is_not():
+    """``--set verdict.settle_time`` at or past the duration is refused; a run set shorter
+    than the settle time is judged on what it simulated and says tracking and force were not
+    judged."""
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("wall", overrides={"verdict.settle_time": 1.0, "simulation.duration": 1.0})
+    assert err.value.key == "verdict.settle_time" and "simulation.duration = 1 s" in str(err.value)
+    sc = load_scenario("wall", overrides={"simulation.duration": 1.0})
+    assert sc.verdict.settle_time == 2.0 and sc.duration == 1.0
+
+
+def _without(text: str, table: str) -> str:
+    head, rest = text.split(f"[{table}]\n")
+    nxt = rest.find("\n[")
+    return head + (rest[nxt + 1 :] if nxt >= 0 else "")
+
+
+def test_a_file_without_verdict_rnn_adaptive_runs_on_the_defaults(tmp_path):
     text = (SHIPPED / "wall.toml").read_text()
-    head, rest = text.split("[verdict]\n")
-    f = tmp_path / "old.toml"
-    f.write_text(head + rest[rest.index("[rnn]") :])
-    with pytest.raises(ScenarioError, match="missing table") as err:
-        load_scenario(f)
-    assert err.value.key == "verdict"
+    for table in ("verdict", "rnn", "adaptive"):
+        text = _without(text, table)
+    assert "[verdict]" not in text and "[rnn]" not in text and "[adaptive]" not in text
+    f = tmp_path / "task_only.toml"
+    f.write_text(text)
+    bare, shipped = load_scenario(f), load_scenario("wall")
+    assert bare.verdict == shipped.verdict == VerdictSettings()
+    assert bare.rnn == shipped.rnn == {"eps": 0.02}
+    assert not bare.adaptive_enabled
+    np.testing.assert_array_equal(bare.data["adaptive"]["gain"], shipped.data["adaptive"]["gain"])
+    assert bare.data["adaptive"]["kp_min"] == shipped.data["adaptive"]["kp_min"]
+    # a threshold set over a table the file leaves out: the table's defaults, then the key
+    assert (
+        load_scenario(f, overrides={"verdict.max_force_error": 3.0}).verdict.max_force_error == 3.0
+    )
+    s = simulate(bare, "daqp", duration=0.1).summary
+    assert s["verdict"] == "ok" and s["verdict_reasons"] == (
+        "tracking and force not judged (settle time 2 s not reached)"
+    )
+    # defaults that fit the task: a short scenario's settle time is half its duration, a small
+    # d_safe's margin half of it
+    f.write_text(
+        text.replace("duration = 20.0", "duration = 1.0").replace(
+            "d_safe = 0.01", "d_safe = 0.0004"
+        )
+    )
+    short = load_scenario(f).verdict
+    assert short.settle_time == 0.5 and short.safety_margin == 0.0002
 
 
 # ---------------------------------------------------------------- the rules, on logs made by hand
@@ -123,6 +206,7 @@ def _log(n=3000, dt=1e-3, **over):
 
 
 def _judge(frame, **summary):
+    summary.setdefault("simulated_s", len(frame) * 1e-3)  # as the summary has it
     return judge(
         frame,
         SETTINGS,
@@ -202,14 +286,24 @@ def test_precedence_failed_unsafe_limits_diverged_with_every_reason():
     )
 
 
-def test_a_run_stopped_early_is_judged_on_what_it_simulated():
+def test_a_run_stopped_early_is_incomplete_and_judged_on_what_it_simulated():
     short = _log(n=800)  # 0.8 s: before the settle time
     v = _judge(short, stopped_early=True, simulated_s=0.8, duration=20.0, wall_budget_s=5.0)
-    assert v.verdict == "ok"
+    assert v.verdict == "incomplete"
     assert v.text == (
-        "stopped at 0.8 s of 20 s (wall-time budget 5 s): tracking and force not judged "
+        "stopped at 0.80 s of 20 s (wall-time budget 5 s): tracking and force not judged "
         "(settle time 1 s not reached)"
     )
+    # a run asked shorter than the settle time reached its end: ok, with the note
+    v = _judge(short, simulated_s=0.8, duration=0.8)
+    assert (
+        v.verdict == "ok"
+        and v.text == "tracking and force not judged (settle time 1 s not reached)"
+    )
+    # worse verdicts rank above incomplete, diverged below it
+    diverging = _log(force_error=lambda t: np.where(t > 2.0, 2.5, 0.0))
+    v = _judge(diverging, stopped_early=True, simulated_s=3.0, duration=20.0, wall_budget_s=5.0)
+    assert v.verdict == "incomplete" and v.reasons[1].startswith("force error 2.5 N")
     v = _judge(
         _log(d_A1_wall=lambda t: np.full_like(t, 0.001)),
         stopped_early=True,
@@ -223,7 +317,7 @@ def test_a_run_stopped_early_is_judged_on_what_it_simulated():
 def test_failed_run_verdict():
     v = failed_run("crashed", "worker process killed by SIGSEGV\n during the run")
     assert (
-        v.verdict == "failed"
+        v.verdict == "incomplete"
         and v.text == "run crashed: worker process killed by SIGSEGV during the run"
     )
 
@@ -283,10 +377,19 @@ def test_simulate_exact_backend_is_ok_and_exits_0(tmp_path, capsys):
         == 0
     )
     s = json.loads(out.read_text())
-    assert (s["verdict"], s["verdict_reasons"]) == ("ok", "")
+    assert (s["verdict"], s["verdict_reasons"]) == (
+        "ok",
+        "tracking and force not judged (settle time 2 s not reached)",
+    )
+    assert s["verdict_overrides"] == {}
     err = capsys.readouterr().err.splitlines()
     assert not [line for line in err if line.startswith("WARNING")]
-    assert [line for line in err if line.startswith("INFO: verdict ok; min obstacle distance ")]
+    assert [
+        line
+        for line in err
+        if line.startswith("INFO: verdict ok: tracking and force not judged")
+        and "; min obstacle distance " in line
+    ]
 
 
 def test_faulty_backend_fails_its_verdict():
@@ -299,7 +402,9 @@ def test_faulty_backend_fails_its_verdict():
         and "RuntimeError: tick fault" in s["verdict_reasons"]
     )
     s = simulate("wall", "faulty-ticks:nan", duration=0.1).summary
-    assert s["verdict"] == "failed" and s["verdict_reasons"] == "10 non-finite answers"
+    assert s["verdict"] == "failed" and s["verdict_reasons"] == (
+        "10 non-finite answers; tracking and force not judged (settle time 2 s not reached)"
+    )
 
 
 # ---------------------------------------------------------------- the wall-time budget
@@ -313,14 +418,16 @@ def test_budget_stops_between_ticks_with_the_uncut_prefix():
     assert s["simulated_s"] == pytest.approx(s["ticks"] * 0.001) and s["duration"] == 0.5
     assert s["real_time_factor"] == pytest.approx(s["simulated_s"] / s["wall_time_s"])
     assert s["wall_time_s"] >= 0.25  # it stopped because the budget was spent
-    assert s["verdict"] == "ok" and s["verdict_reasons"].startswith(
-        f"stopped at {s['simulated_s']:.3g} s of 0.5 s"
+    assert s["verdict"] == "incomplete" and s["verdict_reasons"] == (
+        f"stopped at {s['simulated_s']:.2f} s of 0.5 s (wall-time budget 0.25 s): "
+        "tracking and force not judged (settle time 2 s not reached)"
     )
     whole = simulate("wall", SlowExact(), duration=0.5)
     assert not whole.summary["stopped_early"] and whole.summary["ticks"] == 500
     n = s["ticks"]
     pd.testing.assert_frame_equal(
-        cut.log.drop(columns="solve_time_s"), whole.log.drop(columns="solve_time_s").iloc[:n]
+        cut.log.drop(columns=list(TIME_COLUMNS)),
+        whole.log.drop(columns=list(TIME_COLUMNS)).iloc[:n],
     )
     json.dumps(s, allow_nan=False)
 
@@ -328,3 +435,159 @@ def test_budget_stops_between_ticks_with_the_uncut_prefix():
 def test_bad_budget():
     with pytest.raises(ParamError, match="positive"):
         simulate("wall", "daqp", duration=0.01, wall_budget_s=0.0)
+
+
+# ---------------------------------------------------------------- real time, beside the verdict
+
+#: A plugin file: ``daqp``'s answers after a sleep of 20 ms per solve (20 times a 1 kHz period).
+SLEEPY_PLUGIN = """
+import time
+
+from qpbench.backends import Backend, get_backend, register
+
+
+@register
+class Sleepy(Backend):
+    name = "test-sleepy-20ms"
+    family = "test"
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        self.inner = get_backend("daqp", profile)
+
+    def reset(self):
+        self.inner.reset()
+
+    def _solve(self, problem, warm_start):
+        time.sleep(0.02)
+        return self.inner.solve(problem, warm_start)
+"""
+
+
+def test_judge_realtime_rules():
+    dt, s = 1e-3, VerdictSettings()
+    fast = np.full(1000, 100e-6)
+    assert judge_realtime(fast, dt, s) == (
+        "yes",
+        "p99 call 100 µs <= 50% of dt 1 ms; 0 of 1000 ticks over dt (0.00%; <= 0.10%)",
+    )
+    # the p99 rule: 2% of the ticks at 0.6 ms puts the p99 above half of dt, none over dt
+    tail = fast.copy()
+    tail[:20] = 0.6e-3
+    verdict, why = judge_realtime(tail, dt, s)
+    assert verdict == "no" and why.startswith("p99 call 600 µs > 50% of dt 1 ms; 0 of 1000")
+    # the share rule: 2 ticks of 1000 over dt, the p99 fine
+    spikes = fast.copy()
+    spikes[:2] = 5e-3
+    verdict, why = judge_realtime(spikes, dt, s)
+    assert verdict == "no" and why.endswith("2 of 1000 ticks over dt (0.20%; > 0.10%)")
+    assert judge_realtime(spikes, dt, VerdictSettings(max_over_dt_share=0.002))[0] == "yes"
+    # no time reported: unknown
+    assert judge_realtime(np.full(5, np.nan), dt, s, "solver") == (
+        "unknown",
+        "no solver time reported",
+    )
+
+
+def test_a_sleeping_plugin_backend_is_not_real_time_without_any_flag(tmp_path, capsys):
+    plugin = tmp_path / "sleepy.py"
+    plugin.write_text(SLEEPY_PLUGIN)
+    out = tmp_path / "s.json"
+    argv = ["--plugin", str(plugin), *simulate_args("wall", "test-sleepy-20ms", "0.02")]
+    assert main([*argv, "--summary", str(out)]) == 0  # real time is not part of the verdict
+    s = json.loads(out.read_text())
+    assert s["verdict"] == "ok" and s["deadline_s"] is None
+    assert s["realtime"] == "no" and s["over_dt_share"] == 1.0
+    assert (
+        s["realtime_reason"].startswith("p99 call ")
+        and "20 of 20 ticks over dt" in (s["realtime_reason"])
+    )
+    assert s["solve_time_p99_s"] >= 0.02
+    # daqp reports its own time: a C controller calling it would keep up
+    assert s["realtime_solver"] == "yes" and 0 < s["solver_time_p99_s"] < 1e-3
+    err = capsys.readouterr().err
+    assert "INFO: real time at dt = 1 ms: no (p99 call" in err
+
+
+def test_solver_time_is_logged_per_tick_and_unknown_without_one():
+    import faulty_backends  # noqa: F401 - registers the faulty-ticks:* backends
+
+    run = simulate("wall", "daqp", duration=0.02)
+    own = run.log["solver_time_s"].to_numpy()
+    assert np.isfinite(own).all() and (own > 0).all()
+    assert (own <= run.log["solve_time_s"].to_numpy()).all()  # inside the call it is part of
+    assert run.summary["solver_time_p99_s"] == pytest.approx(np.quantile(own, 0.99))
+    # pinv reports no time of its own
+    s = simulate("wall", "pinv", duration=0.02).summary
+    assert s["realtime_solver"] == "unknown" and s["solver_time_p99_s"] is None
+    assert s["realtime"] in ("yes", "no") and s["realtime_reason"].startswith("p99 call ")
+
+
+# ---------------------------------------------------------------- thresholds set on the command line
+
+
+def test_a_verdict_override_is_warned_and_recorded(tmp_path, capsys):
+    out = tmp_path / "s.json"
+    argv = simulate_args(
+        "wall", "daqp", "0.05", "--set", "verdict.max_force_error=3.5", "--set", "rnn.eps=0.01"
+    )
+    assert main([*argv, "--summary", str(out)]) == 0
+    s = json.loads(out.read_text())
+    assert s["verdict_overrides"] == {"max_force_error": 3.5}  # only the [verdict] keys
+    assert s["scenario_overrides"] == {"verdict.max_force_error": 3.5, "rnn.eps": 0.01}
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "WARNING" in line]
+    assert len(warnings) == 1 and "verdict.max_force_error=3.5" in warnings[0]
+
+
+def test_the_report_marks_a_verdict_judged_on_overridden_thresholds():
+    from qpbench.report.markdown_closed_loop import FOOTNOTE, OVERRIDDEN, failed_verdicts
+
+    df = pd.DataFrame(
+        [
+            dict(
+                scenario="wall",
+                backend="a",
+                formulation="paper",
+                verdict="diverged",
+                verdict_reasons="x",
+                verdict_overrides='{"settle_time": 5.0}',
+            ),
+            dict(
+                scenario="wall",
+                backend="b",
+                formulation="paper",
+                verdict="incomplete",
+                verdict_reasons="y",
+                verdict_overrides="{}",
+            ),
+        ]
+    )
+    text = "".join(failed_verdicts(df))
+    assert f"diverged{OVERRIDDEN}" in text and "| incomplete |" in text
+    assert f"incomplete{OVERRIDDEN}" not in text and OVERRIDDEN in FOOTNOTE
+
+
+# ---------------------------------------------------------------- a scenario with every default
+
+
+@pytest.mark.parametrize("name", ["wall", "adaptive", "free"])
+def test_show_filled_prints_a_file_that_loads_back_to_the_same_scenario(tmp_path, capsys, name):
+    text = (SHIPPED / f"{name}.toml").read_text()
+    for table in ("verdict", "rnn", "adaptive"):
+        text = _without(text, table)
+    source = tmp_path / f"{name}_task_only.toml"
+    source.write_text(text)
+    assert main(["scenarios", "show", str(source), "--filled"]) == 0
+    printed = capsys.readouterr().out
+    for table in ("[verdict]", "[rnn]", "[adaptive]", "max_over_dt_share = 0.001"):
+        assert table in printed
+    back = tmp_path / "filled.toml"
+    back.write_text(printed)
+    a, b = load_scenario(source), load_scenario(back)
+    assert (a.name, a.rnn, a.verdict) == (b.name, b.rnn, b.verdict)
+    assert a.data.keys() == b.data.keys()
+    for table in a.data:
+        assert repr(a.data[table]) == repr(b.data[table]), table  # arrays and types alike
+    # and again: the filled file filled is the same text
+    assert main(["scenarios", "show", str(back), "--filled"]) == 0
+    assert capsys.readouterr().out.split("\n", 2)[2] == printed.split("\n", 2)[2]

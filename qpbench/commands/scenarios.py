@@ -4,7 +4,12 @@
 duration, obstacles, description); ``qpbench scenarios show NAME`` prints
 the file itself, every parameter with its unit in a comment: copy it, change
 it, and pass its path (``qpbench simulate --scenario my.toml``).
-``--json``: one object per scenario (list), or the file's tables (show).
+``show NAME --filled`` (NAME a shipped name or a file) prints the scenario as
+it is run: every table and key written out, the defaults of the keys and
+tables the file leaves out filled in (:data:`qpbench.sim.scenario_schema.DEFAULTS`);
+the text is a scenario file that loads back to the same scenario.
+``--json``: one object per scenario (list), or the file's tables (show; with
+``--filled``, every table).
 """
 
 from __future__ import annotations
@@ -13,7 +18,10 @@ import argparse
 import json
 
 HELP = "list the shipped scenarios; 'show NAME' prints one's TOML file to start your own from"
-EXAMPLE = "qpbench scenarios    (qpbench scenarios show wall > my.toml; qpbench scenarios --json)"
+EXAMPLE = (
+    "qpbench scenarios    (qpbench scenarios show wall > my.toml; "
+    "qpbench scenarios show my.toml --filled; qpbench scenarios --json)"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,6 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--json", action="store_true", help="JSON: one object per scenario, or the file's tables"
+    )
+    parser.add_argument(
+        "--filled",
+        action="store_true",
+        help="show: every table and key, the defaults of those the file leaves out filled in",
     )
 
 
@@ -45,16 +58,34 @@ def _listing(name: str) -> dict:
     }
 
 
-def _show(name: str, as_json: bool) -> None:
+def filled_text(name: str) -> str:
+    """Scenario ``name`` (shipped name or file) as a file with every default filled in."""
+    from ..sim.scenario import load_scenario
+    from ..sim.scenario_schema import filled
+    from ..sweep.toml_text import dumps
+
+    sc = load_scenario(name)
+    header = (
+        f"Scenario {sc.name!r} ({name}) with every default filled in: the file as it is run.\n"
+        "Keys, units and defaults: qpbench.sim.scenario_schema; why these thresholds: "
+        "docs/verdicts.md."
+    )
+    return dumps(filled(sc.data, sc.rnn), header=header)
+
+
+def _show(name: str, as_json: bool, fill: bool) -> None:
     import tomllib
 
     from ..sim.scenario import load_scenario
 
-    sc = load_scenario(name)  # checked: what is printed is a file that loads
-    if as_json:
-        print(json.dumps(tomllib.loads(sc.source), indent=2))
+    if fill:
+        text = filled_text(name)
     else:
-        print(sc.source, end="" if sc.source.endswith("\n") else "\n")
+        text = load_scenario(name).source  # checked: what is printed is a file that loads
+    if as_json:
+        print(json.dumps(tomllib.loads(text), indent=2))
+    else:
+        print(text, end="" if text.endswith("\n") else "\n")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "show":
         if not args.name:
             raise ParamError("which scenario? (qpbench scenarios show NAME)", key="NAME")
-        _show(args.name, args.json)
+        _show(args.name, args.json, args.filled)
         return 0
     if args.name:
         raise ParamError(

@@ -3,8 +3,11 @@
 The run's verdict (:mod:`qpbench.sim.verdict`, thresholds from the scenario's
 ``[verdict]`` table) ends the output: an INFO line when it is ``ok``, else a
 WARNING with the reasons (the smallest obstacle distance among them when the
-run is unsafe). Exit code: 0 when the verdict is ``ok``, 1 when it is not,
-2 on bad input.
+run is unsafe), after an INFO line saying whether the run kept real time
+(``realtime``, ``realtime_solver``: beside the verdict, not in it). Thresholds set
+with ``--set verdict.KEY=VALUE`` are printed as a WARNING and recorded in the
+summary (``verdict_overrides``). Exit code: 0 when the verdict is ``ok``, 1 when
+it is not, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -159,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
     )
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)
+    log_realtime(result.summary)
     return log_verdict(result.summary)
 
 
@@ -314,3 +318,15 @@ def log_verdict(s: dict) -> int:
         return 0
     log.warning("verdict %s%s%s", s["verdict"], reasons, distance)
     return 1
+
+
+def log_realtime(s: dict) -> None:
+    """Log whether the run kept real time (beside the verdict: it does not change the exit code)."""
+    log.info(
+        "real time at dt = %g ms: %s (%s); the solver's own time: %s (%s)",
+        s["dt"] * 1e3,
+        s["realtime"],
+        s["realtime_reason"],
+        s["realtime_solver"],
+        s["realtime_solver_reason"],
+    )

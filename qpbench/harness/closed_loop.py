@@ -73,7 +73,7 @@ class ClosedLoopOutcome:
     """What :func:`run_closed_loop` did: the full table, the runs that failed
     (``errors``: status ``error``, ``crashed`` or ``time_limit``), the runs made
     now (``ran``), those kept or skipped, and the rows of the table whose
-    verdict is not ``ok`` (``not_ok``: failed, unsafe, limits or diverged;
+    verdict is not ``ok`` (``not_ok``: every verdict of ``BAD_VERDICTS``;
     the failed runs among them)."""
 
     table: pd.DataFrame

@@ -20,12 +20,25 @@ status, error               ``ok``; ``budget`` (stopped early by the run's
                             ``crashed`` (the worker died; the signal),
                             ``time_limit`` (the run overran its deadline) or
                             ``skipped`` (and why)
-verdict                     ``ok``, ``diverged``, ``limits``, ``unsafe`` or
-                            ``failed`` (:mod:`qpbench.sim.verdict`: from the
-                            simulator's summary as it is; ``failed`` for a run
-                            without a result; empty for a skipped one)
+verdict                     ``ok``, ``diverged``, ``incomplete``, ``limits``,
+                            ``unsafe`` or ``failed`` (:data:`qpbench.sim.verdict.VERDICTS`:
+                            from the simulator's summary as it is; ``incomplete``
+                            for a run stopped by its budget or without a result;
+                            empty for a skipped one)
 verdict_reasons             why, plain text, ``"; "`` between reasons (a
-                            budget-stopped run also says where it stopped)
+                            budget-stopped run says where it stopped)
+realtime                    ``yes``/``no``: the measured call times kept ``dt``
+                            (:func:`qpbench.sim.verdict.judge_realtime`; beside
+                            the verdict, not part of it; ``no`` without a result)
+realtime_reason             why: the p99 call time and ``over_dt_share`` against
+                            the scenario's ``[verdict]`` real-time thresholds
+realtime_solver             the same from the solver's own reported times
+                            (``unknown`` when the backend reports none)
+realtime_solver_reason      why
+over_dt_share               share of ticks whose call time exceeded ``dt``
+solver_time_p99_s           p99 of the solver's own reported time [s] (empty: none)
+verdict_overrides           ``[verdict]`` thresholds set over the scenario file's
+                            (JSON object, ``{}`` when none; the report marks the row)
 ticks                       control ticks simulated
 tracking_rms_after_2s       tangential tracking error RMS for t >= 2 s [m]
 tracking_max_after_2s       its maximum [m]
@@ -63,6 +76,7 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path
+from ..sim.verdict import BAD_VERDICTS
 from ..statuses import describe_exception
 
 __all__ = [
@@ -98,6 +112,10 @@ COLUMNS = (
     "error",
     "verdict",
     "verdict_reasons",
+    "realtime",
+    "realtime_reason",
+    "realtime_solver",
+    "realtime_solver_reason",
     "ticks",
     "tracking_rms_after_2s",
     "tracking_max_after_2s",
@@ -111,7 +129,10 @@ COLUMNS = (
     "solve_time_p50_s",
     "solve_time_p99_s",
     "solve_time_max_s",
+    "over_dt_share",
+    "solver_time_p99_s",
     "real_time_factor",
+    "verdict_overrides",
     "log_file",
 )
 
@@ -120,8 +141,14 @@ TABLE_NAMES = {"duration": "duration_s", "solve_time_median_s": "solve_time_p50_
 
 #: Statuses of a run that produced no result.
 FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
-#: Verdicts that fail a run (every verdict but ``ok``).
-BAD_VERDICTS = ("failed", "unsafe", "limits", "diverged")
+#: Fields of a row without a result (no tick was timed: not real time, nothing overridden).
+_NO_RESULT = dict(
+    realtime="no",
+    realtime_reason="no result to time",
+    realtime_solver="unknown",
+    realtime_solver_reason="no result to time",
+    verdict_overrides="{}",
+)
 
 
 def cell(value: object) -> object:
@@ -202,7 +229,7 @@ def failure_row(
     scenario: str, backend: str, formulation: str, duration: float | None, status: str, message: str
 ) -> dict:
     """The row of a run that produced no result: ``status`` (``error``, ``crashed``,
-    ``time_limit``) and why in ``error``; verdict ``failed``."""
+    ``time_limit``) and why in ``error``; verdict ``incomplete``, real time ``no``."""
     from ..sim.verdict import failed_run
 
     verdict = failed_run(status, message)
@@ -215,6 +242,7 @@ def failure_row(
         error=message,
         verdict=verdict.verdict,
         verdict_reasons=verdict.text,
+        **_NO_RESULT,
     )
 
 
@@ -258,19 +286,26 @@ def write_table(rows: list[dict], path: Path) -> pd.DataFrame:
     return df
 
 
+#: Text columns whose empty cells read back as ``""``.
+_TEXT_COLUMNS = (
+    "error",
+    "log_file",
+    "verdict",
+    "verdict_reasons",
+    "realtime",
+    "realtime_reason",
+    "realtime_solver",
+    "realtime_solver_reason",
+)
+
+
 def read_rows(path: Path) -> list[dict]:
     """The rows of an existing table, text cells that were empty as ``""`` (for resuming)."""
     rows = []
     for rec in pd.read_csv(path, keep_default_na=True).to_dict("records"):
         rows.append(
             {
-                k: (
-                    ""
-                    if k in ("error", "log_file", "verdict", "verdict_reasons")
-                    and isinstance(v, float)
-                    and math.isnan(v)
-                    else v
-                )
+                k: ("" if k in _TEXT_COLUMNS and isinstance(v, float) and math.isnan(v) else v)
                 for k, v in rec.items()
             }
         )

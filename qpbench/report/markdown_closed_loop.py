@@ -1,7 +1,7 @@
 """The closed-loop section of ``report.md`` (see :mod:`qpbench.report.markdown`).
 
 The runs that failed their verdict (with the reasons), then per scenario:
-verdict, simulated time, tracking, force, obstacle distance, limit
+verdict, real time (measured call times; the solver's own), simulated time, tracking, force, obstacle distance, limit
 violations, infeasible and fallback ticks, ``int ||v||^2 dt``, solve-time
 tail and real-time factor, and the paper's figures per backend.
 """
@@ -12,6 +12,7 @@ import math
 
 import pandas as pd
 
+from ..sim.verdict import BAD_VERDICTS
 from . import tables
 from .markdown_table import MM, US, fmt, md_table
 from .tables import slug
@@ -20,6 +21,8 @@ from .tables import slug
 CLOSED_LOOP_TABLE = (
     ("status", "status", None),
     ("verdict", "verdict", None),
+    ("real time", "realtime", None),
+    ("real time (solver's own)", "realtime_solver", None),
     ("simulated (s)", "simulated_s", 1.0),
     ("tracking RMS (mm)", "tracking_rms_after_2s", MM),
     ("tracking max (mm)", "tracking_max_after_2s", MM),
@@ -33,12 +36,30 @@ CLOSED_LOOP_TABLE = (
     ("solve p50 (us)", "solve_time_p50_s", US),
     ("solve p99 (us)", "solve_time_p99_s", US),
     ("solve max (us)", "solve_time_max_s", US),
+    ("ticks over dt (%)", "over_dt_share", 100.0),
+    ("solver's own p99 (us)", "solver_time_p99_s", US),
     ("real-time factor", "real_time_factor", 1.0),
 )
 
 
+#: Marks a verdict judged on thresholds set on the command line (footnote :data:`FOOTNOTE`).
+OVERRIDDEN = "\u2020"
+FOOTNOTE = (
+    f"{OVERRIDDEN} judged on `[verdict]` thresholds set on the command line, not the scenario "
+    "file's (the row's `verdict_overrides` says which).\n"
+)
+
+
+def _overridden(row: pd.Series) -> bool:
+    """The row's verdict was judged on thresholds set over the scenario file's."""
+    value = row.get("verdict_overrides")
+    return isinstance(value, str) and value.strip() not in ("", "{}")
+
+
 def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
     value = row.get(column)
+    if column == "verdict" and _overridden(row):
+        return f"{value}{OVERRIDDEN}"
     if scale is None:
         return (
             "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
@@ -54,7 +75,7 @@ def failed_verdicts(df: pd.DataFrame) -> list[str]:
     """The "Runs that failed their verdict" table (nothing when every run is ``ok``)."""
     if "verdict" not in df.columns:
         return []
-    bad = df[df["verdict"].astype(str).isin(("failed", "unsafe", "limits", "diverged"))]
+    bad = df[df["verdict"].astype(str).isin(BAD_VERDICTS)]
     if bad.empty:
         return ["Every run's verdict is ok.\n"]
     out = ["### Runs that failed their verdict\n"]
@@ -67,7 +88,7 @@ def failed_verdicts(df: pd.DataFrame) -> list[str]:
                     str(r["scenario"]),
                     str(r["backend"]),
                     r.get("formulation"),
-                    str(r["verdict"]),
+                    str(r["verdict"]) + (OVERRIDDEN if _overridden(r) else ""),
                     r.get("verdict_reasons"),
                 ]
                 for _, r in bad.iterrows()
@@ -87,14 +108,22 @@ def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> 
         "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
         "factor is simulated time over wall time. Each run's *verdict* (thresholds in the "
         "scenario file's `[verdict]` table) is `failed` (the backend raised, answered with "
-        "NaN, too late or not at all, or the run crashed), `unsafe` (a key point closer to "
+        "NaN, too late or not at all), `unsafe` (a key point closer to "
         "an obstacle than d_safe minus the safety margin), `limits` (a joint angle or speed "
-        "beyond its limit), `diverged` (tracking or force error beyond its threshold after "
-        "the settle time), else `ok`; the first that holds, every reason listed. Status "
-        "`budget`: the run stopped when its wall-time budget was spent, after `simulated (s)`; "
-        "its figures are of what it simulated.\n"
+        "beyond its limit), `incomplete` (the run stopped before its duration: wall-time "
+        "budget, crash, the run's deadline or an error), `diverged` (tracking or force error "
+        "beyond its threshold after the settle time), else `ok`; the first that holds, every "
+        "reason listed. Status `budget`: the run stopped when its wall-time budget was spent, "
+        "after `simulated (s)`; its figures are of what it simulated. *Real time*, beside the "
+        "verdict: `yes` when the p99 of the per-tick times is at most the scenario's "
+        "`max_p99_fraction_of_dt` of dt and at most `max_over_dt_share` of the ticks took "
+        "longer than dt; judged on the measured call times (what a Python controller sees) "
+        "and on the solver's own reported times (what a C or C++ controller calling the "
+        "solver sees; `unknown` when the backend reports none).\n"
     )
     out.extend(failed_verdicts(df))
+    if "verdict_overrides" in df.columns and df.apply(_overridden, axis=1).any():
+        out.append(FOOTNOTE)
     for (scenario, formulation), g in df.groupby(
         [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
     ):

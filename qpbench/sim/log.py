@@ -25,6 +25,8 @@ status              the backend's status on the tick's QP, one of
 fallback            the soft fallback's answer was applied
 zero_velocity       zero velocity was commanded (fallback failed too)
 solve_time_s        wall time of the tick's solve call(s) [s]
+solver_time_s       the solve time the solver itself reported for them [s]
+                    (NaN when the backend reports none)
 y_0, y_1            equality duals of the applied solution (paper formulation)
 z_max               largest inequality (obstacle row) dual
 kp_hat, kd_hat      interaction coefficients the tick's QP used
@@ -53,6 +55,9 @@ STATUS = "status"
 FALLBACK = "fallback"
 ZERO_VELOCITY = "zero_velocity"
 SOLVE_TIME = "solve_time_s"
+SOLVER_TIME = "solver_time_s"
+#: Columns that depend on the machine's timing, not on the trajectory.
+TIME_COLUMNS = (SOLVE_TIME, SOLVER_TIME)
 Y_0, Y_1 = "y_0", "y_1"
 Z_MAX = "z_max"
 KP_HAT, KD_HAT = "kp_hat", "kd_hat"
@@ -76,6 +81,7 @@ _TAIL = (
     Z_MAX,
     KP_HAT,
     KD_HAT,
+    SOLVER_TIME,  # written by the loop, not by the tick kernel
 )
 _MIDDLE = (EE_X, EE_Y, XD_X, XD_Y, TRACKING_ERROR, FORCE, FORCE_ERROR)
 

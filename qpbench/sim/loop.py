@@ -84,11 +84,11 @@ solve_log = logging.getLogger("qpbench.solves")
 class _Raised:
     """Stands for the solution of a solve that raised (status ``error``, no answer)."""
 
-    __slots__ = ("status", "x", "y", "z", "error")
+    __slots__ = ("status", "x", "y", "z", "error", "solver_time_s")
 
     def __init__(self, error: str):
         self.status = "error"
-        self.x = self.y = self.z = None
+        self.x = self.y = self.z = self.solver_time_s = None
         self.error = error
 
 
@@ -254,7 +254,7 @@ class _Run:
         post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
         noisy, fd, f64 = surface.noise_std > 0.0, ctrl.task.desired_force, np.dtype(np.float64)
-        kp, kd, v = ctrl.kp, ctrl.kd, np.zeros(ctrl.n)
+        kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
         run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
         bar = self._progress_bar(run_name) if progress else None
@@ -274,8 +274,8 @@ class _Run:
             except Exception as exc:  # noqa: BLE001 - a backend's exception is the tick's status
                 sol = _Raised(describe_exception(exc))
             solve_s = perf() - t0
-            status = sol.status
-            x = sol.x
+            status, x = sol.status, sol.x
+            data[k, c_own] = getattr(sol, "solver_time_s", None)  # its own time [s]; None: NaN
             force = -1.0
             # the fast path: an answer classify() would call optimal (finite x, in time), or an online one
             if x is not None and (online or status == "optimal") and solve_s <= limit:
@@ -375,6 +375,9 @@ class _Run:
                 if self.first_error is None:
                     self.first_error, self.first_error_t = f"fallback: {fb.error}", t
                 _reset(be)
+            if (own := getattr(fb, "solver_time_s", None)) is not None:
+                c = self.cidx[tick_log.SOLVER_TIME]  # the fallback's own time adds to the tick's
+                self.data[k, c] = np.nansum([self.data[k, c], own])
             if fb_status == "optimal":
                 mode, x = FALLBACK, np.asarray(fb.x, dtype=np.float64)
                 z = none if fb.z is None else fb.z

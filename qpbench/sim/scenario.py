@@ -12,6 +12,7 @@ see :func:`apply_overrides`; the validation is the same.
 from __future__ import annotations
 
 import copy
+import logging
 import re
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -32,7 +33,13 @@ if TYPE_CHECKING:
     from ..control.controller import Controller
     from ..control.terms import CosinePath, PolylinePath
 
+#: Tables a scenario file may leave out (every key has a default).
+OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
+
+log = logging.getLogger(__name__)
+
 __all__ = [
+    "OPTIONAL_TABLES",
     "Scenario",
     "apply_overrides",
     "load_scenario",
@@ -203,7 +210,8 @@ def parse_scenario(
         raise ScenarioError(f"not valid TOML: {exc}", path=file) from None
     if overrides:
         raw = apply_overrides(raw, overrides, file)
-    data, rnn = validate(raw, file)
+    data, rnn = validate(raw, file, tuple(overrides or ()))
+    _warn_verdict_overrides(overrides or {}, file)
     scenario = Scenario(
         name=data["scenario"]["name"],
         path=None if path is None else Path(path),
@@ -221,6 +229,19 @@ def parse_scenario(
     except InputError as exc:
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
     return scenario
+
+
+def _warn_verdict_overrides(overrides: dict, file) -> None:
+    """A WARNING naming the ``[verdict]`` thresholds set over the file's: a verdict judged
+    on other thresholds than the scenario's (the summary records them: ``verdict_overrides``)."""
+    changed = {k: v for k, v in overrides.items() if str(k).startswith("verdict.")}
+    if changed:
+        log.warning(
+            "%s: verdict thresholds changed on the command line: %s (the verdict is not judged "
+            "on the scenario's own thresholds)",
+            file,
+            ", ".join(f"{k}={v!r}" for k, v in changed.items()),
+        )
 
 
 _OVERRIDE_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
@@ -256,6 +277,8 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
                 )
             target = obstacles[int(index)]
         else:
+            if table in OPTIONAL_TABLES and table not in raw:
+                raw[table] = {}  # a table the file may leave out: defaults, then this key
             target = raw.get(table)
             if table == "obstacles" or not isinstance(target, dict):
                 tables = ", ".join(sorted(t for t in raw if isinstance(raw[t], dict)))

@@ -1,12 +1,12 @@
 """The scenario file's schema: every table and key, typed and checked (paper section 4).
 
-Layout (every key required unless marked optional; a missing, unknown,
+Layout (every key required unless it has a default; a missing, unknown,
 mistyped or impossible key raises :class:`~qpbench.exceptions.ScenarioError`
 naming the file and the key)::
 
     obstacles = [ ... ]            # or [[obstacles]] tables, see below
-    [scenario]    name, description, paper_section, in_paper (optional, default
-                  false: one of the paper's scenarios, whose ticks ``qpbench run``
+    [scenario]    name, description, paper_section, in_paper (default false:
+                  one of the paper's scenarios, whose ticks ``qpbench run``
                   also benchmarks)
     [robot]       link_lengths [m], theta0 [rad], theta_min, theta_max [rad],
                   velocity_min, velocity_max [rad/s]
@@ -17,13 +17,36 @@ naming the file and the key)::
                   force_noise_std [N], noise_seed
     [controller]  desired_force [N], kp [N/m], kd [N s/m], alpha [1/s], k [1/s],
                   d_safe [m], rho
-    [adaptive]    enabled, gain [kp part, kd part], kp_min, kd_min
     [simulation]  dt [s], duration [s]
-    [rnn]         eps [s] and any further settings of the ``rnn`` backend
-                  (passed through: ``get_backend("rnn", **scenario.rnn)``)
-    [verdict]     settle_time [s], max_tracking_error [m], max_force_error [N],
-                  safety_margin [m] (optional, default 0.0005): the thresholds
-                  of a run's verdict (:mod:`qpbench.sim.verdict`)
+
+Tables that describe how a run is judged or how a backend is tuned, not the
+task, may be left out; every key of them has a default (:data:`DEFAULTS`;
+``qpbench scenarios show NAME --filled`` prints a scenario with every default
+filled in)::
+
+    [adaptive]    enabled (default false), gain [kp part, kd part] (default
+                  [500, 20], the paper's), kp_min [N/m] (default 100), kd_min
+                  [N s/m] (default 1)
+    [rnn]         eps [s] (default 0.02, the paper's) and any further settings
+                  of the ``rnn`` backends (passed through:
+                  ``get_backend("rnn", **scenario.rnn)``)
+    [verdict]     the thresholds of a run's verdict and of its real time
+                  (:class:`qpbench.sim.verdict.VerdictSettings`; ``docs/verdicts.md``
+                  says why each default):
+                  settle_time [s] (default 2.0: twice the paper's transient of
+                  about 1 s, or half the duration when that is shorter; set on
+                  the command line, it must be < simulation.duration),
+                  max_tracking_error [m] (default 0.001), max_force_error [N]
+                  (default 2.0), safety_margin [m] (default 0.0005, or half of
+                  d_safe when that is smaller; 0 <= safety_margin < d_safe,
+                  0 when d_safe = 0),
+                  max_p99_fraction_of_dt (default 0.5: the p99 of a run's
+                  per-tick times may take at most half the control period, the
+                  rest of a tick is sensing, the model, the QP's construction,
+                  the drives' bus and the operating system's jitter; in (0, 1]),
+                  max_over_dt_share (default 0.001: at most one tick in a
+                  thousand may take longer than dt, where a drive holds the last
+                  command once; in [0, 1))
 
 Obstacles (``[[obstacles]]``, each with ``kind``, ``name`` and ``velocity``
 [m/s]): ``line`` (point, normal to the free side), ``segment`` (a, b),
@@ -37,13 +60,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..exceptions import ScenarioError, check_known_keys
-from .verdict import DEFAULT_SAFETY_MARGIN
+from ..exceptions import InputError, ScenarioError, check_known_keys
+from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 if TYPE_CHECKING:
     from pathlib import Path
 
-__all__ = ["check_simulation", "validate"]
+__all__ = ["DEFAULTS", "check_simulation", "filled", "validate"]
 
 _NUM = "number"
 _INT = "int"
@@ -95,15 +118,27 @@ _OBSTACLE_SCHEMA = {
     "points": {"kind": _STR, "name": _STR, "points": _PTS, "velocity": _VEC2},
 }
 _TOP = set(_SCHEMA) | {"path", "obstacles", "rnn", "verdict"}
-#: ``[verdict]`` keys: required ones, then the optional ``safety_margin`` (see :mod:`qpbench.sim.verdict`).
+#: ``[verdict]`` keys (:class:`qpbench.sim.verdict.VerdictSettings`).
 _VERDICT_SCHEMA = {
     "settle_time": _NUM,
     "max_tracking_error": _NUM,
     "max_force_error": _NUM,
     "safety_margin": _NUM,
+    "max_p99_fraction_of_dt": _NUM,
+    "max_over_dt_share": _NUM,
 }
-#: Optional keys and their defaults, per table.
-_OPTIONAL = {"scenario": {"in_paper": False}, "verdict": {"safety_margin": DEFAULT_SAFETY_MARGIN}}
+_VERDICT_DEFAULTS = VerdictSettings()
+#: Defaults of the keys that may be left out, per table (module docstring). ``settle_time``
+#: defaults to at most half the duration, ``safety_margin`` to at most half of ``d_safe``
+#: (:func:`_verdict_table`).
+DEFAULTS: dict[str, dict] = {
+    "scenario": {"in_paper": False},
+    "adaptive": {"enabled": False, "gain": [500.0, 20.0], "kp_min": 100.0, "kd_min": 1.0},
+    "rnn": {"eps": 0.02},
+    "verdict": {key: getattr(_VERDICT_DEFAULTS, key) for key in _VERDICT_SCHEMA},
+}
+#: Tables a file may leave out (all their keys have defaults).
+_OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 
 
 def _typed(value, kind: str, file, key: str):
@@ -151,7 +186,7 @@ def _typed(value, kind: str, file, key: str):
 def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
     if not isinstance(raw, dict):
         raise ScenarioError("expected a table", path=file, key=prefix)
-    raw = {**_OPTIONAL.get(prefix, {}), **raw}
+    raw = {**DEFAULTS.get(prefix, {}), **raw}
     check_known_keys(raw, schema, file, prefix, ScenarioError)
     out = {}
     for key, kind in schema.items():
@@ -161,8 +196,9 @@ def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
     return out
 
 
-def validate(raw: dict, file: str | Path) -> tuple[dict, dict]:
-    """The parsed TOML tables ``raw`` checked against the schema.
+def validate(raw: dict, file: str | Path, set_keys=()) -> tuple[dict, dict]:
+    """The parsed TOML tables ``raw`` checked against the schema (``set_keys``: the dotted
+    keys set over the file's on the command line, checked by the rules for them).
 
     Returns:
         ``(data, rnn)``: the validated tables (numbers as floats, vectors as
@@ -176,6 +212,7 @@ def validate(raw: dict, file: str | Path) -> tuple[dict, dict]:
             raise ScenarioError(
                 f"unknown table (expected one of: {', '.join(sorted(_TOP))})", path=file, key=key
             )
+    raw = {**{t: {} for t in _OPTIONAL_TABLES}, **raw}
     for key in sorted(_TOP):
         if key not in raw:
             raise ScenarioError("missing table", path=file, key=key)
@@ -183,9 +220,9 @@ def validate(raw: dict, file: str | Path) -> tuple[dict, dict]:
     data["path"] = _path_table(raw["path"], file)
     data["obstacles"] = _obstacles(raw["obstacles"], file)
     rnn = _rnn_table(raw["rnn"], file)
-    data["verdict"] = _verdict_table(raw["verdict"], file)
     _check_values(data, file)
     check_simulation(data, file)
+    data["verdict"] = _verdict_table(raw["verdict"], data, file, set_keys)
     return data, rnn
 
 
@@ -236,29 +273,45 @@ def _rnn_table(rnn, file) -> dict:
     """Settings of another component: ``eps`` required, the rest passed through."""
     if not isinstance(rnn, dict):
         raise ScenarioError("expected a table", path=file, key="rnn")
-    if "eps" not in rnn:
-        raise ScenarioError("missing key", path=file, key="rnn.eps")
+    rnn = {**DEFAULTS["rnn"], **rnn}
     eps = _typed(rnn["eps"], _NUM, file, "rnn.eps")
     if not eps > 0:
         raise ScenarioError(f"must be > 0 [s], got {eps}", path=file, key="rnn.eps")
     return dict(rnn)
 
 
-def _verdict_table(raw, file) -> dict:
-    """The ``[verdict]`` table, validated (``safety_margin`` defaults to 0.0005 m)."""
+def _verdict_table(raw, data: dict, file, set_keys=()) -> dict:
+    """The ``[verdict]`` table, validated by :class:`~qpbench.sim.verdict.VerdictSettings`
+    and against the task: ``0 <= safety_margin < d_safe`` (``safety_margin = 0`` when
+    ``d_safe = 0``; its default is at most half of ``d_safe``) and, for a ``settle_time``
+    set on the command line (``set_keys``), ``settle_time < duration``. A file whose own
+    ``duration`` is not above its ``settle_time`` (a short check, a sweep's short
+    instances) is a short run: its verdict says tracking and force were not judged."""
+    d_safe, duration = data["controller"]["d_safe"], data["simulation"]["duration"]
+    if isinstance(raw, dict):  # defaults that fit the task (module docstring)
+        raw = {
+            "settle_time": min(_VERDICT_DEFAULTS.settle_time, duration / 2),
+            "safety_margin": min(DEFAULT_SAFETY_MARGIN, d_safe / 2),
+            **raw,
+        }
     out = _table(raw, _VERDICT_SCHEMA, file, "verdict")
-    if not out["settle_time"] >= 0:
+    try:
+        VerdictSettings(**out)
+    except InputError as exc:
+        raise ScenarioError(exc.message, path=file, key=exc.key) from None
+    if "verdict.settle_time" in set_keys and not out["settle_time"] < duration:
         raise ScenarioError(
-            f"must be >= 0 [s], got {out['settle_time']}", path=file, key="verdict.settle_time"
+            f"must be < simulation.duration = {duration:g} s (tracking and force are judged "
+            f"after it), got {out['settle_time']:g} s",
+            path=file,
+            key="verdict.settle_time",
         )
-    for key, unit in (("max_tracking_error", "m"), ("max_force_error", "N")):
-        if not out[key] > 0:
-            raise ScenarioError(
-                f"must be > 0 [{unit}], got {out[key]}", path=file, key=f"verdict.{key}"
-            )
-    if not out["safety_margin"] >= 0:
+    margin = out["safety_margin"]
+    if not (margin < d_safe or margin == d_safe == 0):
         raise ScenarioError(
-            f"must be >= 0 [m], got {out['safety_margin']}", path=file, key="verdict.safety_margin"
+            f"must be < controller.d_safe = {d_safe:g} m (0 when d_safe is 0), got {margin:g} m",
+            path=file,
+            key="verdict.safety_margin",
         )
     return out
 
@@ -378,3 +431,32 @@ def check_simulation(data: dict, file: str | Path) -> None:
             path=file,
             key="controller.alpha",
         )
+
+
+#: Order of the tables in a filled-in scenario file (:func:`filled`).
+_ORDER = (
+    "scenario",
+    "robot",
+    "key_points",
+    "path",
+    "contact",
+    "controller",
+    "adaptive",
+    "simulation",
+    "verdict",
+    "rnn",
+)
+
+
+def filled(data: dict, rnn: dict) -> dict:
+    """The validated tables (:func:`validate`) as TOML-ready tables, every default filled in:
+    what a scenario file with every key written out holds (vectors as lists)."""
+
+    def plain(value):
+        return value.tolist() if isinstance(value, np.ndarray) else value
+
+    out = {"obstacles": [{k: plain(v) for k, v in o.items()} for o in data["obstacles"]]}
+    for table in _ORDER:
+        source = rnn if table == "rnn" else data[table]
+        out[table] = {k: plain(v) for k, v in source.items()}
+    return out

@@ -45,8 +45,18 @@ status sets are :mod:`qpbench.statuses`'):
   :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
   thresholds.
 
+- real time, beside the verdict (:func:`qpbench.sim.verdict.judge_realtime`, thresholds
+  ``max_p99_fraction_of_dt`` and ``max_over_dt_share`` of ``[verdict]``):
+  ``realtime`` (``yes``/``no``) and ``realtime_reason`` from the measured call
+  times of every tick (``solve_time_s``; their p99 is ``solve_time_p99_s``,
+  the share of ticks longer than ``dt`` ``over_dt_share``); ``realtime_solver``
+  (``yes``/``no``/``unknown``) and ``realtime_solver_reason`` from the time the
+  solver itself reported (``solver_time_s``; p99 ``solver_time_p99_s``, share
+  over ``dt`` ``solver_over_dt_share``; ``None`` when the backend reports none).
+
 ``scenario_overrides`` holds the values set over the scenario file's
-(``qpbench simulate --set``), empty when none. ``fallback_ticks``
+(``qpbench simulate --set``), empty when none; ``verdict_overrides`` those of
+them that change a ``[verdict]`` threshold (by key, ``{}`` when none). ``fallback_ticks``
 applied the soft formulation's answer,
 ``zero_velocity_ticks`` commanded zero. Errors "after 2 s" use the ticks
 with ``t >=`` :data:`SETTLE_TIME`; limit violations count ticks with an angle or a
@@ -66,7 +76,7 @@ from ..control.controller import Controller
 from ..statuses import INFEASIBLE_OR_UNCLASSIFIED
 from . import log
 from .scenario import Scenario
-from .verdict import VIOLATION_TOL, judge
+from .verdict import VIOLATION_TOL, judge, judge_realtime
 
 __all__ = [
     "ACTIVE_MARGIN",
@@ -93,12 +103,19 @@ STRUCTURED_FIGURES = (
     "obstacle_active_intervals",
     "scenario_overrides",
     "status_counts",
+    "verdict_overrides",
 )
 
 
 def jsonable(overrides: dict) -> dict:
     """Scenario overrides as JSON-able values (arrays as lists)."""
     return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in overrides.items()}
+
+
+def verdict_overrides(overrides: dict) -> dict:
+    """The ``[verdict]`` thresholds among scenario overrides, by key (``settle_time``)."""
+    prefix = "verdict."
+    return {k[len(prefix) :]: v for k, v in jsonable(overrides).items() if k.startswith(prefix)}
 
 
 def _none(x):
@@ -137,6 +154,7 @@ def summarize(
     out = {
         "scenario": scenario.name,
         "scenario_overrides": jsonable(scenario.overrides),
+        "verdict_overrides": verdict_overrides(scenario.overrides),
         "backend": backend,
         "formulation": formulation,
         "dt": dt,
@@ -170,7 +188,27 @@ def summarize(
     )
     out["verdict"] = verdict.verdict
     out["verdict_reasons"] = verdict.text
+    out.update(_realtime_figures(frame, dt, scenario))
     return out
+
+
+def _realtime_figures(frame: pd.DataFrame, dt: float, scenario: Scenario) -> dict:
+    """Real time at ``dt`` [s] from the measured call times and from the solver's own times."""
+    settings = scenario.verdict
+    calls = frame[log.SOLVE_TIME].to_numpy(dtype=float)
+    own = frame[log.SOLVER_TIME].to_numpy(dtype=float)
+    own = own[np.isfinite(own)]
+    realtime, why = judge_realtime(calls, dt, settings, "call")
+    solver, solver_why = judge_realtime(own, dt, settings, "solver")
+    return {
+        "over_dt_share": _none(np.mean(calls > dt)) if calls.size else None,
+        "solver_time_p99_s": _none(np.quantile(own, 0.99)) if own.size else None,
+        "solver_over_dt_share": _none(np.mean(own > dt)) if own.size else None,
+        "realtime": "yes" if realtime == "yes" else "no",
+        "realtime_reason": why if calls.size else "no tick simulated",
+        "realtime_solver": solver,
+        "realtime_solver_reason": solver_why,
+    }
 
 
 def _rms(x: np.ndarray) -> float | None:

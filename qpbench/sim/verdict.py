@@ -1,10 +1,11 @@
-"""Verdict of a closed-loop run: ``ok``, ``diverged``, ``limits``, ``unsafe`` or ``failed``.
+"""Verdict of a closed-loop run (``ok``, ``diverged``, ``incomplete``, ``limits``, ``unsafe``,
+``failed``) and, beside it, whether the run kept real time.
 
 One function, :func:`judge`, decides; :func:`qpbench.sim.summary.summarize` calls
 it and puts ``verdict`` and ``verdict_reasons`` into the summary, which the
 closed-loop table (:mod:`qpbench.harness.loop_rows`) copies as they are.
 :func:`failed_run` gives the verdict of a run that produced no result at all
-(a crash, an overrun deadline, an exception outside the ticks).
+(a crash, an overrun deadline, an exception outside the ticks): ``incomplete``.
 
 Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettings`):
 
@@ -12,22 +13,38 @@ Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettin
   reported ``error``, a non-finite answer (``invalid``), an answer later than
   the per-tick deadline (``time_limit``, with ``--deadline``), a fallback solve that raised, or a
   tick left without any command (zero velocity: no answer and no soft
-  fallback); or the run itself crashed, overran its deadline or raised;
+  fallback);
 - ``unsafe``: a key point came closer to an obstacle than
   ``d_safe - safety_margin`` [m];
 - ``limits``: a joint angle or a commanded joint speed went beyond its limit
   by more than :data:`VIOLATION_TOL`;
+- ``incomplete``: the run stopped before its ``duration``: its wall-time
+  budget ran out (the reason says how far it got), or it produced no result
+  at all (crash, the run's own deadline, an exception outside the ticks:
+  :func:`failed_run`);
 - ``diverged``: for ``t >= settle_time`` [s], ``|tracking_error|`` exceeded
   ``max_tracking_error`` [m] or ``|force_error|`` exceeded ``max_force_error``
   [N] (or either was not finite).
 
-When several hold, the verdict is the first of failed > unsafe > limits >
-diverged and ``verdict_reasons`` lists every one, in that order, ``"; "``
-between them. A run stopped early by a wall-time budget is judged on the
+When several hold, the verdict is the first of :data:`VERDICTS` (failed >
+unsafe > limits > incomplete > diverged) and ``verdict_reasons`` lists every
+one, in that order, ``"; "`` between them. A run stopped early is judged on the
 ticks it simulated (a simulated trajectory does not depend on how long its
-solves took, only how far it got does); a reason says where it stopped, and
-that tracking and force were not judged when it stopped before
-``settle_time``. Such a note does not change the verdict.
+solves took, only how far it got does). A run whose simulated time does not
+reach ``settle_time`` (stopped early, or asked for a shorter ``duration``)
+says that tracking and force were not judged; for a run that did reach its
+duration that note does not change the verdict.
+
+Real time is judged beside the verdict, never in it (the verdict is about
+what the run did, real time about the machine it ran on): :func:`judge_realtime`
+gives ``realtime`` (``yes``/``no``) from the measured call times of every tick
+(``solve_time_s``: what a Python controller calling the backend would see) and
+``realtime_solver`` (``yes``/``no``/``unknown``) from the time the solver
+itself reports (``solver_time_s``: what a C or C++ controller calling the
+solver directly would see; ``unknown`` when the backend reports none). Each
+is ``yes`` when the p99 of the tick times is at most ``max_p99_fraction_of_dt``
+of ``dt`` and at most ``max_over_dt_share`` of the ticks took longer than
+``dt``.
 """
 
 from __future__ import annotations
@@ -46,6 +63,7 @@ if TYPE_CHECKING:
     from ..control.terms import EscapeVelocityLimits
 
 __all__ = [
+    "BAD_VERDICTS",
     "DEFAULT_SAFETY_MARGIN",
     "VERDICTS",
     "VIOLATION_TOL",
@@ -53,37 +71,75 @@ __all__ = [
     "VerdictSettings",
     "failed_run",
     "judge",
+    "judge_realtime",
 ]
 
 #: Verdicts, from the worst: the verdict of a run is the first whose rule holds.
-VERDICTS = ("failed", "unsafe", "limits", "diverged", "ok")
+VERDICTS = ("failed", "unsafe", "limits", "incomplete", "diverged", "ok")
+#: Every verdict but ``ok``.
+BAD_VERDICTS = VERDICTS[:-1]
 
 #: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks
 #: (solvers meet bounds to their own accuracy, about 1e-9 here).
 VIOLATION_TOL = 1e-6
 
 #: Default of ``[verdict] safety_margin`` [m]: how far below ``d_safe`` a key
-#: point may come before the run is unsafe (the QP backends keep ``d_safe`` to
-#: about 1e-4 m of slack at a tick: the velocity damper acts one tick late).
+#: point may come before the run is unsafe (the velocity damper acts one tick
+#: late, so exact QP solutions dip below ``d_safe`` by far less). A scenario
+#: whose ``d_safe`` is not above it defaults to half its ``d_safe``.
 DEFAULT_SAFETY_MARGIN = 5e-4
 
 
 @dataclass(frozen=True)
 class VerdictSettings:
-    """Thresholds of the verdict (the scenario's ``[verdict]`` table).
+    """Thresholds of the verdict and of real time (the scenario's ``[verdict]`` table).
+
+    Every field has a default (the shipped scenarios' values; why each, in
+    ``docs/verdicts.md``); values are checked here, where they are held
+    (:class:`~qpbench.exceptions.InputError` naming ``verdict.<key>``); the
+    rules that involve other tables (``settle_time < duration``,
+    ``safety_margin < d_safe``) in :mod:`qpbench.sim.scenario_schema`.
 
     Attributes:
-        settle_time: Start of the judged span of tracking and force errors [s].
-        max_tracking_error: Largest ``|tangential tracking error|`` after it [m].
-        max_force_error: Largest ``|contact force - Fd|`` after it [N].
+        settle_time: Start of the judged span of tracking and force errors [s]
+            (default 2: twice the paper's transient of about 1 s).
+        max_tracking_error: Largest ``|tangential tracking error|`` after it [m]
+            (default 0.001).
+        max_force_error: Largest ``|contact force - Fd|`` after it [N] (default 2).
         safety_margin: A key point closer than ``d_safe - safety_margin`` to
-            an obstacle is unsafe [m].
+            an obstacle is unsafe [m] (default :data:`DEFAULT_SAFETY_MARGIN`).
+        max_p99_fraction_of_dt: Real time: the p99 of the per-tick times may
+            be at most this fraction of ``dt`` (default 0.5: the QP is not the
+            only work of a tick).
+        max_over_dt_share: Real time: at most this share of the ticks may take
+            longer than ``dt`` (default 0.001: one tick in a thousand).
     """
 
-    settle_time: float
-    max_tracking_error: float
-    max_force_error: float
+    settle_time: float = 2.0
+    max_tracking_error: float = 1e-3
+    max_force_error: float = 2.0
     safety_margin: float = DEFAULT_SAFETY_MARGIN
+    max_p99_fraction_of_dt: float = 0.5
+    max_over_dt_share: float = 1e-3
+
+    def __post_init__(self):
+        from ..exceptions import InputError
+
+        def bad(key, rule, unit=""):  # NaN fails every rule below
+            value = getattr(self, key)
+            raise InputError(f"must be {rule}{unit}, got {value!r}", key=f"verdict.{key}")
+
+        if not self.settle_time >= 0:
+            bad("settle_time", ">= 0", " [s]")
+        for key, unit in (("max_tracking_error", " [m]"), ("max_force_error", " [N]")):
+            if not getattr(self, key) > 0:
+                bad(key, "> 0", unit)
+        if not self.safety_margin >= 0:
+            bad("safety_margin", ">= 0", " [m]")
+        if not 0 < self.max_p99_fraction_of_dt <= 1:
+            bad("max_p99_fraction_of_dt", "> 0 and <= 1 (a fraction of dt)")
+        if not 0 <= self.max_over_dt_share < 1:
+            bad("max_over_dt_share", ">= 0 and < 1 (a share of the ticks)")
 
 
 @dataclass(frozen=True)
@@ -249,28 +305,73 @@ def judge(
         "limits": _limit_reasons(frame, limits, n),
         "diverged": _diverged_reasons(frame, settings) if len(frame) else [],
     }
-    notes = []
-    if summary.get("stopped_early"):
-        simulated = float(summary.get("simulated_s") or 0.0)
-        note = (
-            f"stopped at {simulated:.3g} s of {_g(float(summary.get('duration') or math.nan))} s "
-            f"(wall-time budget {_g(float(summary.get('wall_budget_s') or math.nan))} s)"
-        )
-        if simulated <= settings.settle_time:
-            note += f": tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
-        else:
-            note += ": judged on what was simulated"
-        notes.append(note)
+    found["incomplete"], notes = _incomplete_reasons(summary, settings)
     return _verdict(found, notes)
+
+
+def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[str], list[str]]:
+    """``(reasons, notes)``: where a run stopped early stopped (an ``incomplete`` reason), and
+    whether tracking and force went unjudged (part of that reason; a note for a run that
+    reached its duration)."""
+    simulated = float(summary.get("simulated_s") or 0.0)
+    unjudged = (
+        f"tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
+        if simulated <= settings.settle_time
+        else ""
+    )
+    if not summary.get("stopped_early"):
+        return [], [unjudged] if unjudged else []
+    budget = summary.get("wall_budget_s")
+    why = f" (wall-time budget {_g(float(budget))} s)" if budget is not None else ""
+    where = (
+        f"stopped at {simulated:.2f} s of {_g(float(summary.get('duration') or math.nan))} s{why}"
+    )
+    return [f"{where}: {unjudged or 'judged on what was simulated'}"], []
+
+
+def judge_realtime(
+    times: np.ndarray, dt: float, settings: VerdictSettings, what: str = "call"
+) -> tuple[str, str]:
+    """Whether per-tick times [s] keep a loop of period ``dt`` [s]: ``(yes|no|unknown, why)``.
+
+    ``yes`` when the p99 of the finite ``times`` is at most
+    ``settings.max_p99_fraction_of_dt * dt`` and at most ``settings.max_over_dt_share``
+    of them exceed ``dt``; ``unknown`` when no time is finite (a backend that reports
+    no solve time of its own). ``what`` names the times in the reason.
+    """
+    times = np.asarray(times, dtype=float)
+    times = times[np.isfinite(times)]
+    if not times.size:
+        return "unknown", f"no {what} time reported"
+    p99 = float(np.quantile(times, 0.99))
+    over = int(np.count_nonzero(times > dt))
+    share = over / times.size
+    limit = settings.max_p99_fraction_of_dt * dt
+    frac = f"{settings.max_p99_fraction_of_dt:.0%}"
+    p99_ok, share_ok = p99 <= limit, share <= settings.max_over_dt_share
+    p99_text = f"p99 {what} {_us(p99)} {'<=' if p99_ok else '>'} {frac} of dt {_us(dt)}"
+    share_text = (
+        f"{over} of {times.size} ticks over dt ({share:.2%}; "
+        f"{'<=' if share_ok else '>'} {settings.max_over_dt_share:.2%})"
+    )
+    return ("yes" if p99_ok and share_ok else "no"), f"{p99_text}; {share_text}"
+
+
+def _us(seconds: float) -> str:
+    """A time [s] in the unit that reads best (µs below 1 ms)."""
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.3g} µs"
+    return f"{seconds * 1e3:.3g} ms" if seconds < 1 else f"{seconds:.3g} s"
 
 
 def failed_run(status: str, message: str) -> Verdict:
     """The verdict of a run that produced no result: ``status`` (``error``,
-    ``crashed``, ``time_limit``) and the harness's message."""
+    ``crashed``, ``time_limit``) and the harness's message; ``incomplete``,
+    nothing of it could be judged."""
     what = {
         "crashed": "run crashed",
         "time_limit": "run overran its deadline",
         "error": "run raised",
     }.get(status, f"run {status}")
     message = " ".join(str(message).split())
-    return Verdict("failed", (f"{what}: {message}" if message else what,))
+    return Verdict("incomplete", (f"{what}: {message}" if message else what,))

@@ -3,8 +3,8 @@
 Every number is recomputed from ``sweep.csv`` (:mod:`qpbench.sweep.rows`).
 
 - **Rates**: per backend, the share of runs whose verdict is ``unsafe``,
-  ``diverged``, ``limits`` and ``failed`` (a run that raised or whose worker
-  was lost counts as failed) among the runs of valid instances, with 95 %
+  ``diverged``, ``limits``, ``incomplete`` (a run that raised or whose worker
+  was lost counts as incomplete) and ``failed`` among the runs of valid instances, with 95 %
   Wilson score intervals (:func:`wilson`): unlike the normal approximation
   they stay inside [0, 1] and are honest at 0 of n.
 - **Paired comparisons**: two backends on the same instances. Of the
@@ -27,13 +27,16 @@ import numpy as np
 import pandas as pd
 
 from ..exceptions import InputError
+from ..sim.verdict import VERDICTS
 
 __all__ = ["is_sweep_csv", "mcnemar_exact", "split_sweep_paths", "sweep_section", "wilson"]
 
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
-#: Verdict severity, worst first (an ``error``/``crashed`` row's verdict is ``failed``).
-SEVERITY = ("failed", "unsafe", "limits", "diverged", "ok")
+#: Verdict severity, worst first (an ``error``/``crashed`` row's verdict is ``incomplete``).
+SEVERITY = VERDICTS
+#: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
+RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
 #: Runs listed per backend among the worst.
 WORST = 5
 #: ECDF panels: column, label, scale.
@@ -108,7 +111,7 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
             int((g["status"] == "invalid_scenario").sum()),
             int((valid["verdict"] == "ok").sum()),
         ]
-        for verdict in ("unsafe", "diverged", "limits", "failed"):
+        for verdict in RATED:
             k = int((valid["verdict"] == verdict).sum())
             lo, hi = wilson(k, n)
             row.append(f"{k} ({100 * k / n:.1f} %, {100 * lo:.1f}-{100 * hi:.1f})" if n else "-")
@@ -286,6 +289,7 @@ def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
                 "unsafe",
                 "diverged",
                 "limits",
+                "incomplete",
                 "failed",
                 "of which error/crashed",
             ],

@@ -19,7 +19,7 @@ status                          ``ok`` (the run gave a result, whatever its verd
                                 ``invalid_scenario`` (the loader refused the instance)
 attempts                        runs started for this row (2: its first worker was lost)
 verdict, verdict_reasons        the closed loop's verdict (:mod:`qpbench.sim.verdict`);
-                                ``failed`` for ``error``/``crashed``; empty when invalid
+                                ``incomplete`` for ``error``/``crashed``; empty when invalid
 duration_s, simulated_s, dt     asked and simulated time [s], control period [s]
 tracking_*_after_2s             tangential tracking error, RMS and max, t >= 2 s [m]
 force_error_*_after_2s          contact-force error, RMS and max, t >= 2 s [N]
@@ -33,6 +33,12 @@ infeasible_ticks ...            ticks: declared infeasible, not optimal, soft fa
                                 applied, zero velocity, raised/error, non-finite answer
 solve_time_{median,p99,max}_s   per-tick solve time [s] (timing)
 deadline_misses                 ticks whose solve took longer than dt (timing)
+realtime, realtime_reason       the run kept real time at dt, from the measured call
+                                times (``yes``/``no``; :mod:`qpbench.sim.summary`; timing)
+realtime_solver, ..._reason     the same from the solver's own times (``unknown``: none)
+over_dt_share                   share of ticks whose call took longer than dt (timing)
+solver_time_p99_s               p99 of the solver's own time [s]; ``solver_over_dt_share``
+verdict_overrides               ``[verdict]`` thresholds set over the file's (JSON, ``{}``)
 ticks_over_1ms                  ticks whose solve took longer than 1 ms: missed at 1 kHz
 wall_time_s, real_time_factor   the run's wall time [s], simulated / wall (timing)
 executor, host, worker          where it ran
@@ -120,6 +126,15 @@ _SOLVE_TIMES = (  # from the summary
     "solve_time_max_s",
     "deadline_misses",
 )
+_REALTIME = (  # from the summary (timing)
+    "realtime",
+    "realtime_reason",
+    "realtime_solver",
+    "realtime_solver_reason",
+    "over_dt_share",
+    "solver_time_p99_s",
+    "solver_over_dt_share",
+)
 _WALL = ("wall_time_s", "real_time_factor")  # from the summary
 _PLACE = ("executor", "host", "worker", "concurrent_solves")
 
@@ -127,7 +142,7 @@ _PLACE = ("executor", "host", "worker", "concurrent_solves")
 RENAMED = {"duration": "duration_s"}
 
 #: Figures copied from the closed loop's summary as they are (column: ``RENAMED`` or the key).
-SUMMARY_COLUMNS = _RUN + _SAFETY + _SOLVE_TIMES + _WALL
+SUMMARY_COLUMNS = _RUN + _SAFETY + _SOLVE_TIMES + _REALTIME + _WALL
 
 #: Columns of ``sweep.csv``, in order.
 COLUMNS = (
@@ -137,12 +152,14 @@ COLUMNS = (
     + _SAFETY
     + _SOLVE_TIMES
     + ("ticks_over_1ms",)
+    + _REALTIME
     + _WALL
+    + ("verdict_overrides",)
     + _PLACE
 )
 
 #: Columns that depend on timing or on where the run was made (ignored when comparing two sweeps).
-TIMING_COLUMNS = ("attempts",) + _SOLVE_TIMES + ("ticks_over_1ms",) + _WALL + _PLACE
+TIMING_COLUMNS = ("attempts",) + _SOLVE_TIMES + ("ticks_over_1ms",) + _REALTIME + _WALL + _PLACE
 
 #: One tick's solve longer than this misses a 1 kHz loop's deadline [s].
 KHZ_DEADLINE_S = 1e-3
@@ -190,6 +207,7 @@ def result_row(meta: dict, summary: dict, log: pd.DataFrame) -> dict:
         summary.get("verdict"),
         summary.get("verdict_reasons", ""),
     )
+    row["verdict_overrides"] = json.dumps(summary.get("verdict_overrides") or {})
     t = log["t"].to_numpy(dtype=float)
     row["t_converge_force_s"] = time_to_converge(
         t, log["force_error"].to_numpy(), meta["force_band"]
@@ -203,7 +221,7 @@ def result_row(meta: dict, summary: dict, log: pd.DataFrame) -> dict:
 
 
 def failed_row(meta: dict, status: str, message: str) -> dict:
-    """The row of a run without a result: ``error``/``crashed`` (verdict ``failed``) or ``invalid_scenario``."""
+    """The row of a run without a result: ``error``/``crashed`` (verdict ``incomplete``) or ``invalid_scenario``."""
     row = _head(meta)
     row["status"], row["error"] = status, " ".join(str(message).split())
     if status == "invalid_scenario":
@@ -213,6 +231,8 @@ def failed_row(meta: dict, status: str, message: str) -> dict:
 
         verdict = failed_run(status, row["error"])
         row["verdict"], row["verdict_reasons"] = verdict.verdict, verdict.text
+        row["realtime"], row["realtime_reason"] = "no", "no result to time"
+        row["realtime_solver"], row["realtime_solver_reason"] = "unknown", "no result to time"
     return row
 
 
