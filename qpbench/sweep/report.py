@@ -198,47 +198,76 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
 
 
 def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
-    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend, runs with a result only."""
-    import matplotlib
+    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend, runs with a result only.
 
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    Backends in their look (:func:`qpbench.report.style.look`); more than
+    :data:`qpbench.report.style.MAX_SERIES` backends: one row of panels per group of them,
+    the others grey behind. The legend outside the panels, on the right.
+    """
+    from ..report import style
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
     ok = df[df["status"] == "ok"]
-    for ax, (col, label, scale) in zip(axes.flat, ECDF_PANELS):
-        for backend, g in ok.groupby("backend", sort=True):
+    everyone = sorted(ok["backend"].astype(str).unique())
+    groups = style.groups(everyone) or [("", [])]
+    fig, axes = style.pyplot().subplots(
+        len(groups),
+        len(ECDF_PANELS),
+        figsize=(3.6 * len(ECDF_PANELS) + 2.0, 3.0 * len(groups) + 0.8),
+        squeeze=False,
+        layout="constrained",
+    )
+    curves = {}
+    for col, label, scale in ECDF_PANELS:
+        for backend, g in ok.groupby(ok["backend"].astype(str), sort=True):
             v = np.sort(pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale)
             if len(v):
-                ax.step(
+                curves[col, backend] = (
                     np.r_[v[0], v],
                     np.r_[0.0, np.arange(1, len(v) + 1) / len(v)],
-                    where="post",
-                    label=backend,
                 )
-        if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
-            ax.set_xscale("log")
-        if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
-            ax.axvline(
-                float(ok["d_safe"].dropna().iloc[0]) * 1e3,
-                color="k",
-                lw=0.8,
-                ls="--",
-                label="d_safe",
+    for row, (group_title, group) in enumerate(groups):
+        for ax, (col, label, scale) in zip(axes[row], ECDF_PANELS):
+            _ecdf_panel(ax, ok, curves, col, everyone, group)
+            ax.set_xlabel(label)
+        axes[row, 0].set_ylabel(
+            f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
+        )
+        handles, labels = axes[row, 2].get_legend_handles_labels()
+        if handles:
+            axes[row, -1].legend(
+                handles,
+                labels,
+                loc="upper left",
+                bbox_to_anchor=(1.02, 1.0),
+                fontsize=8,
+                frameon=False,
             )
-        ax.set_xlabel(label)
-        ax.set_ylabel("fraction of runs")
-        ax.set_ylim(0.0, 1.02)
-        ax.grid(alpha=0.3)
-    for ax in axes.flat:
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
-            break
     fig.suptitle(title)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    style.save(fig, path)
+
+
+def _ecdf_panel(ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, group: list) -> None:
+    """One ECDF panel: ``group`` in its look over the other backends in grey; ``d_safe`` on d_min."""
+    from ..report import style
+
+    for backend, lit in style.highlighted(everyone, group):
+        if (col, backend) not in curves:
+            continue
+        x, y = curves[col, backend]
+        kw = (
+            style.look(backend).line(len(x), lw=1.3, label=backend, zorder=3)
+            if lit
+            else dict(color=style.GREY, lw=0.8, zorder=1)
+        )
+        ax.step(x, y, where="post", **kw)
+    if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
+        ax.set_xscale("log")
+    if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
+        ax.axvline(
+            float(ok["d_safe"].dropna().iloc[0]) * 1e3, color="k", lw=0.8, ls="--", label="d_safe"
+        )
+    ax.set_ylim(0.0, 1.02)
+    ax.grid(alpha=0.3)
 
 
 def _manifest_lines(folder: Path) -> list[str]:
