@@ -142,8 +142,8 @@ def closed_loop_figure(
             _plot_log(axes, logs[backend], backend, lit, has_d, adaptive)
         _label_axes(axes, logs, has_d, d_safe, budget_s, first=col == 0)
         axes[panels[-1]].set_xlabel("t [s]")
-        _legend(axes, group, group_title)
-    fig.suptitle(title)
+        _legend(axes, group, group_title, references=col == 0)
+    fig.suptitle(title + "; grey: the other backends" if len(groups) > 1 else title)
     return style.save(fig, path, dpi=100)
 
 
@@ -153,7 +153,7 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
     if lit:
         look = style.look(backend)
         c = look.colour
-        style_kw = look.line(len(t), lw=1.0, label=backend, zorder=3)
+        style_kw = look.line(t, lw=1.0, label=backend, zorder=3)
     else:
         c = style.GREY
         style_kw = dict(color=c, lw=0.7, zorder=1)
@@ -230,18 +230,20 @@ def _label_axes(
             ax.set_ylabel(labels[name], fontsize=9)
 
 
-def _legend(axes: dict, group: list, title: str) -> None:
-    """The column's legend above its first panel: its backends, then the reference lines."""
+def _legend(axes: dict, group: list, title: str, references: bool) -> None:
+    """The column's legend above its first panel: its backends, then (``references``) the
+    reference lines (d_safe, the time budget) and what the band on top means."""
     top = axes["tracking"]
     handles, labels = top.get_legend_handles_labels()
-    for name in ("distance", "time"):
-        if name in axes:
-            h, lab = axes[name].get_legend_handles_labels()
-            keep = [(hh, ll) for hh, ll in zip(h, lab) if ll not in group]
-            handles += [hh for hh, _ in keep]
-            labels += [ll for _, ll in keep]
-    head = (title + "; " if title else "") + "band on top: fallback or zero velocity"
-    style.legend_above(top, handles, labels, ncol=2, title=head, title_fontsize=7.5)
+    if references:
+        for name in ("distance", "time"):
+            if name in axes:
+                h, lab = axes[name].get_legend_handles_labels()
+                keep = [(hh, ll) for hh, ll in zip(h, lab) if ll not in group]
+                handles += [hh for hh, _ in keep]
+                labels += [ll for _, ll in keep]
+        title = (title + "\n" if title else "") + "band on top: fallback or zero velocity"
+    style.legend_above(top, handles, labels, ncol=2, title=title or None, title_fontsize=8)
 
 
 def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:

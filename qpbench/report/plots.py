@@ -72,7 +72,7 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
     for ax, (title, group) in zip(axes[0], groups):
         for backend, lit in style.highlighted(profiles, group):
             kw = (
-                style.look(backend).line(len(taus), lw=1.5, label=backend, zorder=3)
+                style.look(backend).line(np.log(taus), lw=1.5, label=backend, zorder=3)
                 if lit
                 else dict(color=style.GREY, lw=0.8, zorder=1)
             )
@@ -108,7 +108,7 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
         for backend, lit in style.highlighted(series, group):
             t, times, gap = series[backend]
             kw = (
-                style.look(backend).line(len(t), lw=0.9, label=backend, zorder=3)
+                style.look(backend).line(t, lw=0.9, label=backend, zorder=3)
                 if lit
                 else dict(color=style.GREY, lw=0.6, zorder=1)
             )
@@ -270,8 +270,10 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
     )
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
     if close is not None:
-        ax.plot([close[0]], [close[1] * 1e3], **look.line(lw=0, ms=7, zorder=4))
-    ax.plot([], [], **look.line(lw=1.0, label=label))  # legend entry: line and marker
+        ax.plot([close[0]], [close[1] * 1e3], **look.line(lw=0, ms=7, zorder=4, markevery=None))
+    ax.plot(
+        [], [], **look.line(lw=1.0, label=label, markevery=None)
+    )  # legend entry: line and marker
     if "d_body_min" in d.columns:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 

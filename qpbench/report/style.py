@@ -64,12 +64,36 @@ class Look:
     marker: str
     linestyle: str
 
-    def line(self, points: int = 0, **extra) -> dict:
-        """Keyword arguments of ``Axes.plot`` for a line of ``points`` points (about 8 markers on it)."""
+    def line(self, x=None, **extra) -> dict:
+        """Keyword arguments of ``Axes.plot``: colour, line style, marker; ``extra`` added or overriding.
+
+        ``x``: the line's x values; the markers then go at the points nearest to
+        :data:`MARKS` evenly spaced x values (a decimated log's ticks are bunched: every
+        k-th point would bunch the markers too). Without ``x``, no marker on the line
+        (its legend entry still shows it).
+        """
         kw = {"color": self.colour, "ls": self.linestyle, "marker": self.marker, "ms": 4.5}
-        kw["markevery"] = max(1, points // 8) if points else None
+        kw["markevery"] = [] if x is None else marks(x)
         kw["markerfacecolor"] = "white" if self.linestyle != "-" else self.colour
         return kw | extra
+
+
+#: Markers along a line (:meth:`Look.line`).
+MARKS = 10
+
+
+def marks(x) -> list[int]:
+    """Indices of the points of ``x`` nearest to :data:`MARKS` evenly spaced values (inner ones)."""
+    import numpy as np
+
+    x = np.asarray(x, dtype=float)
+    ok = np.flatnonzero(np.isfinite(x))
+    if ok.size == 0:
+        return []
+    lo, hi = x[ok].min(), x[ok].max()
+    wanted = lo + (hi - lo) * (np.arange(MARKS) + 0.5) / MARKS
+    idx = ok[np.argmin(np.abs(x[ok][None, :] - wanted[:, None]), axis=1)]
+    return sorted({int(i) for i in idx})
 
 
 def _table() -> dict[str, Look]:

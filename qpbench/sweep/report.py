@@ -255,7 +255,7 @@ def _ecdf_panel(ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, gr
             continue
         x, y = curves[col, backend]
         kw = (
-            style.look(backend).line(len(x), lw=1.3, label=backend, zorder=3)
+            style.look(backend).line(np.arange(len(x)), lw=1.3, label=backend, zorder=3)
             if lit
             else dict(color=style.GREY, lw=0.8, zorder=1)
         )
