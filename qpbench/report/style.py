@@ -69,11 +69,13 @@ class Look:
 
         ``x``: the line's x values; the markers then go at the points nearest to
         :data:`MARKS` evenly spaced x values (a decimated log's ticks are bunched: every
-        k-th point would bunch the markers too). Without ``x``, no marker on the line
-        (its legend entry still shows it).
+        k-th point would bunch the markers too), shifted by a share of the spacing that
+        differs by marker, so backends whose lines coincide show each its own markers.
+        Without ``x``, no marker on the line (its legend entry still shows it).
         """
         kw = {"color": self.colour, "ls": self.linestyle, "marker": self.marker, "ms": 4.5}
-        kw["markevery"] = [] if x is None else marks(x)
+        phase = (MARKERS.index(self.marker) + 0.5) / len(MARKERS) if self.marker in MARKERS else 0.5
+        kw["markevery"] = [] if x is None else marks(x, phase)
         kw["markerfacecolor"] = "white" if self.linestyle != "-" else self.colour
         return kw | extra
 
@@ -82,8 +84,9 @@ class Look:
 MARKS = 10
 
 
-def marks(x) -> list[int]:
-    """Indices of the points of ``x`` nearest to :data:`MARKS` evenly spaced values (inner ones)."""
+def marks(x, phase: float = 0.5) -> list[int]:
+    """Indices of the points of ``x`` nearest to :data:`MARKS` evenly spaced values, the
+    ``k``-th at ``(k + phase) / MARKS`` of the way from the smallest to the largest."""
     import numpy as np
 
     x = np.asarray(x, dtype=float)
@@ -91,7 +94,7 @@ def marks(x) -> list[int]:
     if ok.size == 0:
         return []
     lo, hi = x[ok].min(), x[ok].max()
-    wanted = lo + (hi - lo) * (np.arange(MARKS) + 0.5) / MARKS
+    wanted = lo + (hi - lo) * (np.arange(MARKS) + phase) / MARKS
     idx = ok[np.argmin(np.abs(x[ok][None, :] - wanted[:, None]), axis=1)]
     return sorted({int(i) for i in idx})
 

@@ -40,7 +40,7 @@ WORST = 5
 ECDF_PANELS = (
     ("tracking_max_after_2s", "max |tracking error| after 2 s [mm]", 1e3),
     ("force_error_max_after_2s", "max |force error| after 2 s [N]", 1.0),
-    ("min_obstacle_distance", "d_min [mm]", 1e3),
+    ("min_obstacle_distance", "d_min [mm] (linear below d_safe, log above)", 1e3),
     ("solve_time_p99_s", "p99 solve time [us]", 1e6),
 )
 
@@ -232,7 +232,7 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         axes[row, 0].set_ylabel(
             f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
         )
-        handles, labels = axes[row, 2].get_legend_handles_labels()
+        handles, labels = axes[row, 2].get_legend_handles_labels()  # d_min's: with d_safe
         if handles:
             axes[row, -1].legend(
                 handles,
@@ -263,9 +263,14 @@ def _ecdf_panel(ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, gr
     if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
         ax.set_xscale("log")
     if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
-        ax.axvline(
-            float(ok["d_safe"].dropna().iloc[0]) * 1e3, color="k", lw=0.8, ls="--", label="d_safe"
-        )
+        # linear up to d_safe, log beyond: d_safe and the 0.5 mm below it readable beside the tail
+        d_safe = float(ok["d_safe"].dropna().iloc[0]) * 1e3
+        ax.set_xscale("symlog", linthresh=d_safe, linscale=1.5)
+        ax.axvline(d_safe, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
+        ax.axvline(d_safe - 0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
+        lowest = min(0.0, float(pd.to_numeric(ok[col], errors="coerce").min() * 1e3))
+        ax.axvspan(lowest - 0.1 * d_safe, d_safe - 0.5, color="red", alpha=0.06, lw=0)
+        ax.set_xlim(left=lowest - 0.1 * d_safe)
     ax.set_ylim(0.0, 1.02)
     ax.grid(alpha=0.3)
 
