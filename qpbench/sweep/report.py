@@ -12,7 +12,7 @@ Every number is recomputed from ``sweep.csv`` (:mod:`qpbench.sweep.rows`).
   reverse; McNemar's exact test (a two-sided binomial test of the discordant
   pairs, :func:`mcnemar_exact`) says whether the difference could be chance.
 - **Distributions**: ECDFs of tracking error, force error (max after 2 s),
-  closest approach d_min and p99 solve time, one line per backend.
+  closest approach d_min (as its margin to ``d_safe``) and p99 solve time, one line per backend.
 - **Worst instances**: per backend, the runs with the worst verdicts and the
   smallest margin to ``d_safe``, each with the command that re-runs it.
 """
@@ -34,13 +34,15 @@ __all__ = ["is_sweep_csv", "mcnemar_exact", "split_sweep_paths", "sweep_section"
 Z95 = 1.959963984540054
 #: Verdict severity, worst first (an ``error``/``crashed`` row's verdict is ``failed``).
 SEVERITY = ("failed", "unsafe", "limits", "diverged", "ok")
+#: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
+MARGIN_LABEL = "d_min - d_safe [mm] (linear within 0.5 mm, log beyond)"
 #: Runs listed per backend among the worst.
 WORST = 5
 #: ECDF panels: column, label, scale.
 ECDF_PANELS = (
     ("tracking_max_after_2s", "max |tracking error| after 2 s [mm]", 1e3),
     ("force_error_max_after_2s", "max |force error| after 2 s [N]", 1.0),
-    ("min_obstacle_distance", "d_min [mm] (linear below d_safe, log above)", 1e3),
+    ("min_obstacle_distance", "d_min [mm]", 1e3),
     ("solve_time_p99_s", "p99 solve time [us]", 1e6),
 )
 
@@ -216,10 +218,17 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         squeeze=False,
         layout="constrained",
     )
+    d_safe = (
+        float(ok["d_safe"].dropna().iloc[0]) * 1e3
+        if "d_safe" in ok and ok["d_safe"].notna().any()
+        else None
+    )
     curves = {}
     for col, label, scale in ECDF_PANELS:
+        shift = d_safe if col == "min_obstacle_distance" and d_safe is not None else 0.0
         for backend, g in ok.groupby(ok["backend"].astype(str), sort=True):
-            v = np.sort(pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale)
+            v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale - shift
+            v = np.sort(v)
             if len(v):
                 curves[col, backend] = (
                     np.r_[v[0], v],
@@ -227,8 +236,9 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                 )
     for row, (group_title, group) in enumerate(groups):
         for ax, (col, label, scale) in zip(axes[row], ECDF_PANELS):
-            _ecdf_panel(ax, ok, curves, col, everyone, group)
-            ax.set_xlabel(label)
+            _ecdf_panel(ax, ok, curves, col, everyone, group, d_safe)
+            shifted = col == "min_obstacle_distance" and d_safe is not None
+            ax.set_xlabel(MARGIN_LABEL if shifted else label)
         axes[row, 0].set_ylabel(
             f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
         )
@@ -246,8 +256,11 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
     style.save(fig, path)
 
 
-def _ecdf_panel(ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, group: list) -> None:
-    """One ECDF panel: ``group`` in its look over the other backends in grey; ``d_safe`` on d_min."""
+def _ecdf_panel(
+    ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, group: list, d_safe
+) -> None:
+    """One ECDF panel: ``group`` in its look over the other backends in grey; d_min as its
+    margin to ``d_safe`` [mm] (``None``: no d_safe, d_min itself)."""
     from ..report import style
 
     for backend, lit in style.highlighted(everyone, group):
@@ -262,15 +275,16 @@ def _ecdf_panel(ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, gr
         ax.step(x, y, where="post", **kw)
     if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
         ax.set_xscale("log")
-    if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
-        # linear up to d_safe, log beyond: d_safe and the 0.5 mm below it readable beside the tail
-        d_safe = float(ok["d_safe"].dropna().iloc[0]) * 1e3
-        ax.set_xscale("symlog", linthresh=d_safe, linscale=1.5)
-        ax.axvline(d_safe, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
-        ax.axvline(d_safe - 0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
-        lowest = min(0.0, float(pd.to_numeric(ok[col], errors="coerce").min() * 1e3))
-        ax.axvspan(lowest - 0.1 * d_safe, d_safe - 0.5, color="red", alpha=0.06, lw=0)
-        ax.set_xlim(left=lowest - 0.1 * d_safe)
+    if col == "min_obstacle_distance" and d_safe is not None:
+        # the margin to d_safe, linear within 0.5 mm of it and log beyond: the unsafe line
+        # at -0.5 mm readable beside a tail of tens of mm
+        ax.set_xscale("symlog", linthresh=0.5, linscale=1.0)
+        ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
+        ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
+        lo, hi = ax.get_xlim()
+        left = min(lo, -1.0)
+        ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
+        ax.set_xlim(left, max(hi, 1.0))
     ax.set_ylim(0.0, 1.02)
     ax.grid(alpha=0.3)
 
