@@ -35,7 +35,9 @@ Z95 = 1.959963984540054
 #: Verdict severity, worst first (an ``error``/``crashed`` row's verdict is ``failed``).
 SEVERITY = ("failed", "unsafe", "limits", "diverged", "ok")
 #: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
-MARGIN_LABEL = "d_min - d_safe [mm] (linear within 0.5 mm, log beyond)"
+MARGIN_LABEL = "d_min - d_safe [mm] (runs further away leave on the right)"
+#: Right edge of the d_min panel [mm beyond d_safe].
+ZOOM_MM = 2.0
 #: Runs listed per backend among the worst.
 WORST = 5
 #: ECDF panels: column, label, scale.
@@ -276,15 +278,14 @@ def _ecdf_panel(
     if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
         ax.set_xscale("log")
     if col == "min_obstacle_distance" and d_safe is not None:
-        # the margin to d_safe, linear within 0.5 mm of it and log beyond: the unsafe line
-        # at -0.5 mm readable beside a tail of tens of mm
-        ax.set_xscale("symlog", linthresh=0.5, linscale=1.0)
+        # the margin to d_safe, zoomed to -1..+2 mm (further left when a run went deeper):
+        # the unsafe line at -0.5 mm readable; runs further than 2 mm away leave on the right
         ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
         ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
-        lo, hi = ax.get_xlim()
-        left = min(lo, -1.0)
+        lowest = min((x[0] for (c, _), (x, _) in curves.items() if c == col), default=0.0)
+        left = min(-1.0, 1.1 * lowest)
         ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
-        ax.set_xlim(left, max(hi, 1.0))
+        ax.set_xlim(left, ZOOM_MM)
     ax.set_ylim(0.0, 1.02)
     ax.grid(alpha=0.3)
 
