@@ -242,7 +242,7 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
 
         title = f"{scenario.name} / {s['backend']}"
         if args.snapshot is not None:
-            draw_snapshot(scenario, result.log, args.snapshot, title=title)
+            draw_snapshot(scenario, result.log, args.snapshot, title=title, backend=s["backend"])
         if args.animate is not None:
             animate(
                 scenario,

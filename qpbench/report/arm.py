@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from . import style
+
 if TYPE_CHECKING:
     import pandas as pd
 
@@ -33,6 +35,8 @@ __all__ = ["animate", "closest_approach", "draw_snapshot"]
 
 #: Colour of the arm (links and joints), of the key points, of obstacles and of the surface.
 ARM, KEY, OBSTACLE, SURFACE = "#1f3b73", "#d9480f", "#5c5f66", "#2b8a3e"
+#: Colour of the actual end-effector path when no backend is named.
+PATH = "#e8590c"
 
 
 def _thetas(log, n: int) -> np.ndarray:
@@ -87,16 +91,16 @@ def _view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]
     return (lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad)
 
 
-def _draw_line(ax, point, normal, xlim, ylim, **style) -> None:
+def _draw_line(ax, point, normal, xlim, ylim, **line) -> None:
     """The line through ``point`` perpendicular to ``normal``, clipped to the view; hatched on the far side."""
     tangent = np.array([-normal[1], normal[0]])
     span = 4.0 * max(xlim[1] - xlim[0], ylim[1] - ylim[0])
     a, b = point - span * tangent, point + span * tangent
-    ax.plot([a[0], b[0]], [a[1], b[1]], **style)
+    ax.plot([a[0], b[0]], [a[1], b[1]], **line)
     # the solid side (opposite the normal), lightly filled
     depth = 0.04 * span
     poly = np.array([a, b, b - depth * normal, a - depth * normal])
-    ax.fill(poly[:, 0], poly[:, 1], color=style.get("color", OBSTACLE), alpha=0.12, lw=0)
+    ax.fill(poly[:, 0], poly[:, 1], color=line.get("color", OBSTACLE), alpha=0.12, lw=0)
 
 
 def _draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> None:
@@ -201,8 +205,8 @@ def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
                 )
 
 
-def _draw_paths(ax, log: pd.DataFrame) -> None:
-    """The desired and actual end-effector paths [m], and the arm's base."""
+def _draw_paths(ax, log: pd.DataFrame, colour: str = PATH) -> None:
+    """The desired and actual end-effector paths [m] (the actual in ``colour``), and the arm's base."""
     ax.plot(
         log["xd_x"],
         log["xd_y"],
@@ -216,8 +220,8 @@ def _draw_paths(ax, log: pd.DataFrame) -> None:
         log["ee_x"],
         log["ee_y"],
         "-",
-        color="#e8590c",
-        lw=1.0,
+        color=colour,
+        lw=1.2,
         alpha=0.9,
         label="actual end-effector path",
         zorder=2,
@@ -262,6 +266,7 @@ def draw_snapshot(
     *,
     instants: int = 8,
     title: str | None = None,
+    backend: str | None = None,
 ) -> Path:
     """Draw the run ``log`` of ``scenario`` as stick figures at ``instants`` times; save to ``path`` (PNG, SVG, PDF).
 
@@ -271,15 +276,13 @@ def draw_snapshot(
         path: Output file; its suffix picks the format.
         instants: Number of arm poses drawn, evenly spaced in time (first and last included).
         title: Figure title (default: scenario name and duration).
+        backend: The backend of the run: its actual end-effector path in the backend's colour
+            (:func:`qpbench.report.style.look`); ``None``: orange.
 
     Returns:
         ``path``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = style.pyplot()
     path = Path(path)
     arm, keys, surface, obstacles = _frame_parts(scenario)
     theta = _thetas(log, arm.n)
@@ -304,7 +307,7 @@ def draw_snapshot(
     _draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
     _draw_poses(ax, arm, keys, theta, _instants(t, instants))
-    _draw_paths(ax, log)
+    _draw_paths(ax, log, PATH if backend is None else style.look(backend).colour)
 
     _mark_closest_approach(ax, log, scenario, arm, keys, theta)
 
@@ -314,14 +317,7 @@ def draw_snapshot(
     )
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
-    from ..atomic import atomic_path
-
-    try:
-        with atomic_path(path) as tmp:  # never a half-written picture under the final name
-            fig.savefig(tmp, format=path.suffix.lstrip(".").lower() or "png", bbox_inches="tight")
-    finally:
-        plt.close(fig)
-    return path
+    return style.save(fig, path, dpi=110)
 
 
 def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
@@ -346,7 +342,7 @@ def _animation_artists(ax) -> tuple:
     """The artists each frame updates: links, key points, end-effector trace, time label."""
     (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
     keys_plot = ax.scatter([], [], s=14, color=KEY, zorder=4)
-    (trace,) = ax.plot([], [], "-", color="#e8590c", lw=1.0, zorder=2)
+    (trace,) = ax.plot([], [], "-", color=PATH, lw=1.0, zorder=2)
     label = ax.text(
         0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8, family="monospace"
     )

@@ -1,25 +1,31 @@
-"""The closed-loop figure: one or several backends' runs of one scenario, overlaid.
+"""The closed-loop figure: one or several backends' runs of one scenario, side by side.
 
-Panels, top to bottom (each backend one colour, the legend outside the axes):
+Rows of panels, top to bottom:
 
 1. magnitude of the tangential tracking error [mm], log scale so that a
    1e-4 mm steady state and a 100 mm transient are both readable;
 2. magnitude of the contact-force error ``|F - Fd|`` [N], log scale;
-3. smallest key-point distance to an obstacle [mm], with the safety
-   distance ``d_safe`` and the ``d_safe - 0.5 mm`` line a run must not cross
+3. smallest key-point distance to an obstacle [mm] against the safety
+   distance ``d_safe`` and the ``d_safe - 0.5 mm`` line a run must not cross,
+   on a scale linear up to ``d_safe`` and logarithmic beyond
+   (:func:`distance_axis`), so that ``d_safe`` shows beside a 300 mm excursion
    (scenarios with obstacles only);
 4. solve time per tick [µs], log scale, with the 1 ms budget of a 1 kHz loop;
 5. ``|v|^2`` [rad²/s²], log scale;
 6. the adaptive estimate ``Kp_hat`` [N/m] (adaptive scenarios only).
 
-Ticks where a backend's own answer was not applied (the soft fallback's or
-zero velocity was) are shaded in its colour along the top of the first panel.
+One column per group of at most eight backends
+(:func:`qpbench.report.style.groups`): a column's backends in their own look
+(:func:`qpbench.report.style.look`), the others in grey behind; the legend
+above each column. Ticks where a highlighted backend's own answer was not
+applied (the soft fallback's or zero velocity was) are shaded in its colour
+along the top of the first panel.
 
 Columns read are the tick log's, by the names :mod:`qpbench.sim.log` gives
 them (``t``, ``tracking_error``, ``force_error``, ``d_min``, ``solve_time_s``,
 ``v_sq``, ``kp_hat``, ``fallback``, ``zero_velocity``). One run's figure
-(``qpbench simulate --plot``) and a scenario's runs overlaid (the report) are
-both drawn by :func:`closed_loop_figure`.
+(``qpbench simulate --plot``) and a scenario's runs (the report) are both
+drawn by :func:`closed_loop_figure`.
 """
 
 from __future__ import annotations
@@ -30,21 +36,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..sim import log as tick_log
+from . import style
 
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["closed_loop_figure", "run_figure"]
+__all__ = ["closed_loop_figure", "distance_axis", "run_figure"]
 
 #: Margin below ``d_safe`` at which a run counts as unsafe [m] (drawn as a line).
 UNSAFE_MARGIN = 5e-4
-
-
-def _palette(count: int) -> list:
-    import matplotlib
-
-    cmap = matplotlib.colormaps["tab10" if count <= 10 else "tab20"]
-    return [cmap(i % cmap.N) for i in range(count)]
+#: Width of one column of panels and height of one panel [in].
+COLUMN_IN, PANEL_IN = 4.6, 1.75
 
 
 def _floor(values: np.ndarray, floor: float) -> np.ndarray:
@@ -60,6 +62,29 @@ def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.r_[idx[0], idx[breaks + 1]], np.r_[idx[breaks], idx[-1]]))
 
 
+def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> None:
+    """Scale and reference lines of a distance axis in [mm] against ``d_safe`` [m].
+
+    Linear from ``-d_safe`` to ``d_safe``, logarithmic beyond (symlog), so a
+    10 mm ``d_safe`` takes as much height as the decade above it; the
+    ``d_safe`` line (dashed), the ``d_safe - 0.5 mm`` line a run must not
+    cross (dotted red) and the region below it shaded. ``lowest_mm``: the
+    smallest distance drawn, so the axis reaches it. Without ``d_safe``: a
+    symlog axis linear up to 10 mm.
+    """
+    lin = d_safe * 1e3 if d_safe is not None and d_safe > 0 else 10.0
+    ax.set_yscale("symlog", linthresh=lin, linscale=1.0)
+    if d_safe is None:
+        return
+    bad = (d_safe - UNSAFE_MARGIN) * 1e3
+    ax.axhline(d_safe * 1e3, color="black", ls="--", lw=0.9, label=f"d_safe {d_safe * 1e3:g} mm")
+    ax.axhline(bad, color="red", ls=":", lw=1.0, label="d_safe - 0.5 mm")
+    lo = min(0.0, lowest_mm if lowest_mm is not None and np.isfinite(lowest_mm) else 0.0)
+    bottom = lo - 0.3 * max(abs(lo), lin) if lo < 0 else -0.3 * lin
+    ax.axhspan(bottom, bad, color="red", alpha=0.06, lw=0)
+    ax.set_ylim(bottom=bottom)
+
+
 def closed_loop_figure(
     logs: dict,
     path: str | Path,
@@ -72,7 +97,7 @@ def closed_loop_figure(
     """Draw the closed-loop figure of ``logs`` (backend name -> tick log) to ``path`` (PNG).
 
     Args:
-        logs: Tick logs by backend name, in legend order.
+        logs: Tick logs by backend name.
         path: Output file.
         title: Figure title.
         d_safe: Safety distance [m]; ``None`` draws no safety lines.
@@ -82,14 +107,7 @@ def closed_loop_figure(
     Returns:
         ``path``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..atomic import atomic_path
-
-    path = Path(path)
+    plt = style.pyplot()
     logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
@@ -108,50 +126,59 @@ def closed_loop_figure(
         + ["time", "speed"]
         + (["kp"] if adaptive else [])
     )
-    colours = dict(zip(logs, _palette(len(logs))))
-
-    fig, axes = plt.subplots(
-        len(panels), 1, figsize=(9.5, 1.9 * len(panels) + 0.8), sharex=True, squeeze=False
+    groups = style.groups(logs)
+    fig, grid = plt.subplots(
+        len(panels),
+        len(groups),
+        figsize=(COLUMN_IN * len(groups) + 1.0, PANEL_IN * len(panels) + 1.4),
+        sharex=True,
+        sharey="row",
+        squeeze=False,
+        layout="constrained",
     )
-    axes = {name: ax for name, ax in zip(panels, axes[:, 0])}
-    for backend, d in logs.items():
-        _plot_log(axes, d, backend, colours[backend], has_d, adaptive)
-    _label_axes(axes, logs, has_d, adaptive, d_safe, budget_s)
-    axes[panels[-1]].set_xlabel("t [s]")
-    _legend(fig, axes, logs)
-    fig.suptitle(title)
-    fig.tight_layout()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=100, bbox_inches="tight")
-    finally:
-        plt.close(fig)
-    return path
+    for col, (group_title, group) in enumerate(groups):
+        axes = {name: ax for name, ax in zip(panels, grid[:, col])}
+        for backend, lit in style.highlighted(logs, group):
+            _plot_log(axes, logs[backend], backend, lit, has_d, adaptive)
+        _label_axes(axes, logs, has_d, d_safe, budget_s, first=col == 0)
+        axes[panels[-1]].set_xlabel("t [s]")
+        _legend(axes, group, group_title, references=col == 0)
+    fig.suptitle(title + "; grey: the other backends" if len(groups) > 1 else title)
+    return style.save(fig, path, dpi=100)
 
 
-def _plot_log(axes: dict, d, backend: str, c, has_d: bool, adaptive: bool) -> None:
-    """One backend's tick log on every panel, and a band on top of the first where it did not answer."""
+def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: bool) -> None:
+    """One backend's tick log on every panel of a column: in its look when ``lit``, else grey."""
     t = d[tick_log.T].to_numpy(float)
-    style = dict(color=c, lw=0.9, label=backend)
+    if lit:
+        look = style.look(backend)
+        c = look.colour
+        style_kw = look.line(t, lw=1.0, label=backend, zorder=3)
+    else:
+        c = style.GREY
+        style_kw = dict(color=c, lw=0.7, zorder=1)
     axes["tracking"].plot(
-        t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style
+        t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
     )
-    axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style)
+    axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw)
     if has_d and tick_log.D_MIN in d.columns:
-        axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style)
+        axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style_kw)
     axes["time"].plot(
         t,
         d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6,
         color=c,
         lw=0.0,
         marker=".",
-        ms=1.2,
-        alpha=0.6,
+        ms=1.6 if lit else 1.0,
+        alpha=0.7 if lit else 0.5,
         rasterized=True,
+        zorder=3 if lit else 1,
     )
-    axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style)
+    axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style_kw)
     if adaptive and tick_log.KP_HAT in d.columns:
-        axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style)
+        axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style_kw)
+    if not lit:
+        return
     # ticks without the backend's own answer: a band along the top of the first panel
     not_own = np.zeros(len(d), dtype=bool)
     for col in (tick_log.FALLBACK, tick_log.ZERO_VELOCITY):
@@ -170,60 +197,53 @@ def _plot_log(axes: dict, d, backend: str, c, has_d: bool, adaptive: bool) -> No
 
 
 def _label_axes(
-    axes: dict, logs: dict, has_d: bool, adaptive: bool, d_safe: float | None, budget_s: float
+    axes: dict, logs: dict, has_d: bool, d_safe: float | None, budget_s: float, first: bool
 ) -> None:
-    """Scales, labels, the safety lines and the time budget of the panels."""
-    ax = axes["tracking"]
-    ax.set_yscale("log")
-    ax.set_ylabel("|tracking error|\n[mm]")
-    ax = axes["force"]
-    ax.set_yscale("log")
-    ax.set_ylabel("|force error|\n|F - Fd| [N]")
+    """Scales, labels (first column only), the safety lines and the time budget of a column."""
+    labels = {
+        "tracking": "|tracking error|\n[mm]",
+        "force": "|force error|\n|F - Fd| [N]",
+        "distance": "closest key point\nto an obstacle [mm]",
+        "time": "solve time\nper tick [µs]",
+        "speed": "joint speed\n|v|² [rad²/s²]",
+        "kp": "estimated\nKp_hat [N/m]",
+    }
+    for name in ("tracking", "force", "time", "speed"):
+        axes[name].set_yscale("log")
     if has_d:
-        ax = axes["distance"]
-        if d_safe is not None:
-            ax.axhline(d_safe * 1e3, color="black", ls="--", lw=0.8, label="d_safe")
-            ax.axhline(
-                (d_safe - UNSAFE_MARGIN) * 1e3, color="red", ls=":", lw=0.9, label="d_safe - 0.5 mm"
-            )
-            lo = min(
+        lowest = min(
+            (
                 float(np.nanmin(d[tick_log.D_MIN].to_numpy(float)))
                 for d in logs.values()
                 if tick_log.D_MIN in d.columns
-            )
-            ax.set_ylim(bottom=min(lo * 1e3 - 1.0, d_safe * 1e3 - 2.0))
-        ax.set_ylabel("closest key point\nto an obstacle [mm]")
-    ax = axes["time"]
-    ax.set_yscale("log")
-    ax.axhline(budget_s * 1e6, color="red", ls="--", lw=0.9, label=f"{budget_s * 1e3:g} ms budget")
-    ax.set_ylabel("solve time\nper tick [µs]")
-    ax = axes["speed"]
-    ax.set_yscale("log")
-    ax.set_ylabel("joint speed\n|v|² [rad²/s²]")
-    if adaptive:
-        axes["kp"].set_ylabel("estimated\nKp_hat [N/m]")
-    for ax in axes.values():
-        ax.grid(True, alpha=0.3, which="major")
-
-
-def _legend(fig, axes: dict, logs: dict) -> None:
-    """One legend for the figure: the backends, then the reference lines (d_safe, budget)."""
-    handles, labels = axes["tracking"].get_legend_handles_labels()
-    extra = []
-    for name in ("distance", "time"):
-        if name in axes:
-            h, lab = axes[name].get_legend_handles_labels()
-            extra += [(hh, ll) for hh, ll in zip(h, lab) if ll not in logs]
-    fig.legend(
-        handles + [h for h, _ in extra],
-        labels + [lab for _, lab in extra],
-        loc="upper left",
-        bbox_to_anchor=(1.0, 0.97),
-        fontsize=8,
-        frameon=False,
-        title="band on top: fallback\nor zero velocity",
-        title_fontsize=7,
+                and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
+            ),
+            default=None,
+        )
+        distance_axis(axes["distance"], d_safe, None if lowest is None else lowest * 1e3)
+    axes["time"].axhline(
+        budget_s * 1e6, color="red", ls="--", lw=0.9, label=f"{budget_s * 1e3:g} ms budget"
     )
+    for name, ax in axes.items():
+        ax.grid(True, alpha=0.3, which="major")
+        if first:
+            ax.set_ylabel(labels[name], fontsize=9)
+
+
+def _legend(axes: dict, group: list, title: str, references: bool) -> None:
+    """The column's legend above its first panel: its backends, then (``references``) the
+    reference lines (d_safe, the time budget) and what the band on top means."""
+    top = axes["tracking"]
+    handles, labels = top.get_legend_handles_labels()
+    if references:
+        for name in ("distance", "time"):
+            if name in axes:
+                h, lab = axes[name].get_legend_handles_labels()
+                keep = [(hh, ll) for hh, ll in zip(h, lab) if ll not in group]
+                handles += [hh for hh, _ in keep]
+                labels += [ll for _, ll in keep]
+        title = (title + "\n" if title else "") + "band on top: fallback or zero velocity"
+    style.legend_above(top, handles, labels, ncol=2, title=title or None, title_fontsize=8)
 
 
 def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:

@@ -4,15 +4,19 @@ Keys of the returned mapping (used by :mod:`qpbench.report.markdown`):
 
 - ``perf_profile_<group>``: Dolan-More performance profile of runtime;
 - ``per_tick_<group>_<scenario>``: solve time and optimality gap against t;
-- ``closed_loop_<scenario>_<formulation>``: every backend's run overlaid
+- ``closed_loop_<scenario>_<formulation>``: every backend's run
   (:func:`qpbench.report.loop_figure.closed_loop_figure`): tracking and force
   error on log scales, the closest key point against ``d_safe``, solve time
   per tick against the 1 ms budget, ``|v|^2``, ``Kp_hat`` when adapting;
-- ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one panel per backend;
-- ``closed_loop_d_<scenario>_<formulation>``: every key point's distance to every
-  obstacle, one panel per backend;
+- ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one small panel per backend;
+- ``closed_loop_d_<scenario>_<formulation>``: each backend's closest key point to an
+  obstacle against ``d_safe``, its closest approach named (:func:`distance_plot`);
 - ``snapshot_<role>_<scenario>_<formulation>``: the arm, for the fastest exact
   backend and the network (:mod:`qpbench.report.snapshots`).
+
+Figures with several backends follow :mod:`qpbench.report.style`: one look per
+backend, at most eight highlighted in a panel (one column of panels per group of
+backends, the others grey behind), legends outside the data.
 
 Closed-loop figures read each run's tick log, or its figure log when the tick
 log is absent (:func:`qpbench.report.logs.read_log`). Figures of a previous report in the folder
@@ -29,9 +33,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_path
 from ..sim import log as tick_log
-from . import tables
+from . import style, tables
 from .logs import read_log as _read_log
 from .snapshots import write_snapshots
 from .tables import slug
@@ -47,49 +50,45 @@ def _velocity_columns(df: pd.DataFrame) -> list[str]:
     return tick_log.velocity_columns(tick_log.joint_count(df))
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _colours(ax, n: int) -> None:
-    """Distinct colours for up to 20 lines (matplotlib's default cycle has 10)."""
-    if n > 10:
-        plt = _pyplot()
-        ax.set_prop_cycle(color=plt.cm.tab20.colors)
-
-
-def _save(fig, path: Path) -> None:
-    plt = _pyplot()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
+def _columns_of_groups(backends, rows: int, width: float, height: float, **kw):
+    """A figure with ``rows`` rows of panels and one column per group of backends
+    (:func:`qpbench.report.style.groups`); returns ``(fig, axes, groups)``."""
+    groups = style.groups(backends)
+    fig, axes = style.pyplot().subplots(
+        rows,
+        len(groups),
+        figsize=(width * len(groups) + 0.8, height * rows + 1.6),
+        squeeze=False,
+        layout="constrained",
+        **kw,
+    )
+    return fig, axes, groups
 
 
 def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None:
-    """Dolan-More profile ``rho_s(tau)`` of runtime for each backend (log-scale tau)."""
-    plt = _pyplot()
+    """Dolan-More profile ``rho_s(tau)`` of runtime (log-scale tau), one panel per group of backends."""
     taus, profiles = tables.performance_profile(rows)
-    fig, ax = plt.subplots(figsize=(6.5, 4.0))
-    _colours(ax, len(profiles))
-    for backend, rho in profiles.items():
-        ax.step(taus, rho, where="post", label=backend)
-    ax.set_xscale("log")
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_xlabel("tau (runtime / best runtime)")
-    ax.set_ylabel("fraction of problems solved")
-    ax.set_title(f"Performance profile of runtime ({label})")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
-    _save(fig, path)
+    fig, axes, groups = _columns_of_groups(profiles, 1, 4.6, 3.4, sharey=True)
+    for ax, (title, group) in zip(axes[0], groups):
+        for backend, lit in style.highlighted(profiles, group):
+            kw = (
+                style.look(backend).line(np.log(taus), lw=1.5, label=backend, zorder=3)
+                if lit
+                else dict(color=style.GREY, lw=0.8, zorder=1)
+            )
+            ax.step(taus, profiles[backend], where="post", **kw)
+        ax.set_xscale("log")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_xlabel("tau (runtime / best runtime)")
+        ax.grid(True, which="both", alpha=0.3)
+        style.legend_above(ax, title=title or None, title_fontsize=8)
+    axes[0, 0].set_ylabel("fraction of problems solved")
+    fig.suptitle(f"Performance profile of runtime ({label}); grey: the other backends")
+    style.save(fig, path)
 
 
 def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
-    """Solve time [us] and |optimality gap| against t [s], one line per backend."""
+    """Solve time [us] and |optimality gap| against t [s], one column per group of backends."""
     if "t" not in rows.columns:
         return False
     df = rows.copy()
@@ -97,43 +96,41 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     df = df[np.isfinite(df["t"])]
     if df.empty:
         return False
-    plt = _pyplot()
-    fig, (ax_t, ax_g) = plt.subplots(2, 1, figsize=(7.5, 5.5), sharex=True)
-    _colours(ax_t, df["backend"].nunique())
-    _colours(ax_g, df["backend"].nunique())
-    drawn = {ax_t: False, ax_g: False}
+    series = {}
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
-        t = g["t"].to_numpy(float)
         times = pd.to_numeric(g[tables.runtime_column(g)], errors="coerce").to_numpy(float) * 1e6
-        ax_t.plot(t, times, lw=0.8, label=backend)
         gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
         gap = np.maximum(np.where(g["found"].to_numpy(bool), gap, np.nan), 1e-16)
-        ax_g.plot(t, gap, lw=0.8, label=backend)
-        drawn[ax_t] |= bool(np.any(np.isfinite(times) & (times > 0)))
-        drawn[ax_g] |= bool(np.any(np.isfinite(gap)))
-    for ax, shown in drawn.items():
-        if shown:  # a log axis needs one positive value (no solution found: nothing to draw)
-            ax.set_yscale("log")
-        else:
-            ax.text(0.5, 0.5, "no solution found", transform=ax.transAxes, ha="center", va="center")
-    ax_t.set_ylabel("solve time (us)")
-    ax_t.set_title(title)
-    ax_g.set_ylabel("|optimality gap|")
-    ax_g.set_xlabel("t (s)")
-    for ax in (ax_t, ax_g):
-        ax.grid(True, which="both", alpha=0.3)
-    ax_t.legend(fontsize=7, ncol=2)
-    _save(fig, path)
+        series[str(backend)] = (g["t"].to_numpy(float), times, gap)
+    fig, axes, groups = _columns_of_groups(series, 2, 4.6, 2.4, sharex=True, sharey="row")
+    shown = [any(np.any(np.isfinite(s[k]) & (s[k] > 0)) for s in series.values()) for k in (1, 2)]
+    for col, (group_title, group) in enumerate(groups):
+        for backend, lit in style.highlighted(series, group):
+            t, times, gap = series[backend]
+            kw = (
+                style.look(backend).line(t, lw=0.9, label=backend, zorder=3)
+                if lit
+                else dict(color=style.GREY, lw=0.6, zorder=1)
+            )
+            axes[0, col].plot(t, times, **kw)
+            axes[1, col].plot(t, gap, **kw)
+        for ax, ok in zip(axes[:, col], shown):
+            if ok:  # a log axis needs one positive value (no solution found: nothing to draw)
+                ax.set_yscale("log")
+            else:
+                ax.text(0.5, 0.5, "no solution found", transform=ax.transAxes, ha="center")
+            ax.grid(True, which="both", alpha=0.3)
+        axes[1, col].set_xlabel("t (s)")
+        style.legend_above(axes[0, col], title=group_title or None, title_fontsize=8)
+    axes[0, 0].set_ylabel("solve time (us)")
+    axes[1, 0].set_ylabel("|optimality gap|")
+    fig.suptitle(f"{title}; grey: the other backends")
+    style.save(fig, path)
     return True
 
 
-def closed_loop_plots(
-    runs: pd.DataFrame, scenario: str, formulation: str, path: Path, path_v: Path
-) -> tuple[bool, bool]:
-    """The closed-loop figure of one scenario, every backend overlaid
-    (:func:`qpbench.report.loop_figure.closed_loop_figure`), and the joint velocities per backend."""
-    from .loop_figure import closed_loop_figure
-
+def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
+    """The tick (or figure) logs of ``runs`` by backend, and their ``d_safe`` [m]."""
     logs = {}
     d_safe = None
     for _, r in runs.iterrows():
@@ -143,58 +140,142 @@ def closed_loop_plots(
             value = r.get("d_safe")
             if value is not None and np.isfinite(float(value)):
                 d_safe = float(value)
+    return logs, d_safe
+
+
+def closed_loop_plots(
+    runs: pd.DataFrame, scenario: str, formulation: str, path: Path, path_v: Path
+) -> tuple[bool, bool]:
+    """The closed-loop figure of one scenario, every backend
+    (:func:`qpbench.report.loop_figure.closed_loop_figure`), and the joint velocities per backend."""
+    from .loop_figure import closed_loop_figure
+
+    logs, d_safe = _logs(runs)
     if not logs:
         return False, False
     closed_loop_figure(logs, path, title=f"Closed loop, {scenario} ({formulation})", d_safe=d_safe)
-    done_v = _per_backend_figure(
-        logs,
-        _velocity_columns,
-        "v (rad/s)",
-        1.0,
-        f"Joint velocities, {scenario} ({formulation})",
-        path_v,
-    )
+    done_v = velocity_plot(logs, f"Joint velocities, {scenario} ({formulation})", path_v)
     return True, done_v
 
 
-def _per_backend_figure(
-    logs: dict, columns, ylabel: str, scale: float, title: str, path: Path
-) -> bool:
-    """One panel per backend, one line per column that ``columns(log)`` names."""
-    with_cols = {b: d for b, d in logs.items() if columns(d)}
+def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
+    """Joint velocities [rad/s] against t, one small panel per backend (titled in its colour),
+    ``columns`` panels a row; one colour per joint (viridis, not a backend's)."""
+    with_cols = {b: d for b, d in logs.items() if _velocity_columns(d)}
     if not with_cols:
         return False
-    plt = _pyplot()
+    plt = style.pyplot()
+    names = [b for _, group in style.groups(with_cols, max_series=len(with_cols)) for b in group]
+    ncol = min(columns, len(names))
+    nrow = -(-len(names) // ncol)
     fig, axes = plt.subplots(
-        len(with_cols), 1, figsize=(7.5, 1.8 * len(with_cols) + 0.6), sharex=True, squeeze=False
+        nrow,
+        ncol,
+        figsize=(3.0 * ncol + 0.6, 1.55 * nrow + 1.0),
+        sharex=True,
+        squeeze=False,
+        layout="constrained",
     )
-    for ax, (backend, d) in zip(axes[:, 0], with_cols.items()):
-        for c in columns(d):
-            ax.plot(d[tick_log.T].to_numpy(float), d[c].to_numpy(float) * scale, lw=0.8, label=c)
-        ax.set_ylabel(f"{backend}\n{ylabel}", fontsize=8)
+    for ax in axes.flat[len(names) :]:
+        ax.set_visible(False)
+    for ax, backend in zip(axes.flat, names):
+        d = with_cols[backend]
+        cols = _velocity_columns(d)
+        joint_colours = plt.cm.viridis(np.linspace(0.0, 0.85, len(cols)))
+        for c, colour in zip(cols, joint_colours):
+            ax.plot(
+                d[tick_log.T].to_numpy(float), d[c].to_numpy(float), lw=0.8, color=colour, label=c
+            )
+        ax.set_title(backend, fontsize=9, color=style.look(backend).colour, loc="left")
+        ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)
-    axes[0, 0].set_title(title)
-    axes[0, 0].legend(fontsize=6, ncol=4)
-    axes[-1, 0].set_xlabel("t (s)")
-    _save(fig, path)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("v (rad/s)", fontsize=8)
+    for ax in axes[-1, :]:
+        ax.set_xlabel("t (s)", fontsize=8)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(
+        handles, labels, loc="outside upper right", ncol=len(labels), fontsize=8, frameon=False
+    )
+    fig.suptitle(title, ha="left", x=0.02)
+    style.save(fig, path)
     return True
 
 
 def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Path) -> bool:
-    """Distance of every key point to every obstacle [mm], one panel per backend."""
-    logs = {}
-    for _, r in runs.iterrows():
-        df = _read_log(r.get("log_path"))
-        if df is not None and tick_log.T in df.columns and len(df):
-            logs[str(r["backend"])] = df
-    return _per_backend_figure(
-        logs,
-        tick_log.distance_columns,
-        "distance (mm)",
-        1e3,
-        f"Key-point distances, {scenario} ({formulation})",
-        path,
+    """Each backend's closest key point to an obstacle [mm] against ``d_safe`` (see :func:`distance_plot`)."""
+    logs, d_safe = _logs(runs)
+    return distance_plot(
+        logs, f"Closest key point to an obstacle, {scenario} ({formulation})", path, d_safe
     )
+
+
+def _closest(d: pd.DataFrame) -> tuple[float, float, str] | None:
+    """``(t [s], distance [m], "key point / obstacle")`` of a log's closest approach, or ``None``."""
+    cols = [c for c in tick_log.distance_columns(d) if not str(c).startswith("d_body")]
+    if not cols:
+        return None
+    D = d[cols].to_numpy(float)
+    if not np.isfinite(D).any():
+        return None
+    k, c = divmod(int(np.nanargmin(D)), D.shape[1])
+    _, key, obstacle = cols[c].split("_", 2)
+    return float(d[tick_log.T].iloc[k]), float(D[k, c]), f"{key} / {obstacle}"
+
+
+def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> bool:
+    """The distance figure of one scenario: each backend's ``d_min`` [mm] against t, one panel per
+    group of backends (:func:`qpbench.report.style.groups`), on the axis of
+    :func:`qpbench.report.loop_figure.distance_axis` (``d_safe`` readable beside a
+    300 mm excursion); each highlighted backend's closest approach marked and named
+    (key point / obstacle, mm) in the legend. A log's body distance ``d_body_min``, when
+    it has one, is drawn dashed in the same colour."""
+    from .loop_figure import distance_axis
+
+    logs = {
+        b: d
+        for b, d in logs.items()
+        if tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
+    }
+    if not logs:
+        return False
+    fig, axes, groups = _columns_of_groups(logs, 1, 4.6, 3.6, sharey=True)
+    lowest = min(float(np.nanmin(d[tick_log.D_MIN].to_numpy(float))) for d in logs.values())
+    for ax, (group_title, group) in zip(axes[0], groups):
+        for backend, lit in style.highlighted(logs, group):
+            _distance_series(ax, backend, logs[backend], lit)
+        distance_axis(ax, d_safe, lowest * 1e3)
+        ax.set_xlabel("t [s]")
+        ax.grid(True, which="major", alpha=0.3)
+        style.legend_above(ax, ncol=1, title=group_title or None, title_fontsize=8)
+    axes[0, 0].set_ylabel("closest key point to an obstacle [mm]\n(linear below d_safe, log above)")
+    fig.suptitle(f"{title}; grey: the other backends")
+    style.save(fig, path)
+    return True
+
+
+def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
+    """One backend's ``d_min`` (and ``d_body_min``) on the distance panel; its closest approach marked."""
+    t = d[tick_log.T].to_numpy(float)
+    dist = d[tick_log.D_MIN].to_numpy(float) * 1e3
+    if not lit:
+        ax.plot(t, dist, color=style.GREY, lw=0.7, zorder=1)
+        return
+    look = style.look(backend)
+    close = _closest(d)
+    label = (
+        backend
+        if close is None
+        else f"{backend}: {close[1] * 1e3:.1f} mm, {close[2]}, {close[0]:.2f} s"
+    )
+    ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
+    if close is not None:
+        ax.plot([close[0]], [close[1] * 1e3], **look.line(lw=0, ms=7, zorder=4, markevery=None))
+    ax.plot(
+        [], [], **look.line(lw=1.0, label=label, markevery=None)
+    )  # legend entry: line and marker
+    if "d_body_min" in d.columns:
+        ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 
 
 def write_plots(

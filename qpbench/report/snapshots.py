@@ -104,6 +104,12 @@ def write_snapshots(
             continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         path = folder / f"{key}.png"
-        draw_snapshot(scene, frame, path, title=f"{scenario}: {row['backend']} ({ROLES[role]})")
+        draw_snapshot(
+            scene,
+            frame,
+            path,
+            title=f"{scenario}: {row['backend']} ({ROLES[role]})",
+            backend=str(row["backend"]),
+        )
         files[key] = path
     return files

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import atomic_path, write_text
+from ..atomic import write_text
 from .fit import crossing, extrapolated_crossing, first_above, fit_power_law
 
 __all__ = ["TICK_S", "is_scaling_dir", "write_scaling_report"]
@@ -133,50 +133,73 @@ def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
-    """Two log-log panels (module docstring) as a PNG at ``path``."""
-    import matplotlib
+    """Two log-log panels (module docstring) as a PNG at ``path``.
 
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    Each backend in its colour (:func:`qpbench.report.style.look`); squares
+    dense, circles sparse; more than :data:`qpbench.report.style.MAX_SERIES` backends:
+    one row of panels per group of them, the others grey behind. Legends outside,
+    on the right.
+    """
     import matplotlib.ticker
+
+    from ..report import style
 
     m = frame[frame["status"] == "measured"]
     backends = sorted(m["backend"].unique())
-    colors = {b: plt.cm.tab20(i % 20) for i, b in enumerate(backends)}
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2))
-    for ax, (axis, (xcol, label)) in zip(axes, AXES.items()):
-        a = m[m["axis"] == axis]
-        for b in backends:
-            g = a[a["backend"] == b].sort_values(xcol)
-            if g.empty:
-                continue
-            fit = fitted.get((b, axis))
-            tag = f"{b} ({fit.text()})" if fit is not None else b
-            style = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
-            ax.plot(g[xcol], g["time_median_s"] * 1e6, style, color=colors[b], label=tag)
-            if fit is not None and not math.isnan(fit.slope):
-                xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
-                ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colors[b], lw=1)
-        ax.axhline(TICK_S * 1e6, color="k", lw=0.8, ls=":")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ticks = sorted(a[xcol].unique())
-        if ticks:  # the measured sizes as plain numbers
-            ax.set_xticks(ticks, [f"{int(v):,}" for v in ticks])
-            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xlabel(label)
-        ax.set_ylabel("median solve time per tick [us]")
-        ax.set_title(
-            f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)", fontsize=9
-        )
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-        ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
+    groups = style.groups(backends) or [("", [])]
+    fig, axes = style.pyplot().subplots(
+        len(groups),
+        len(AXES),
+        figsize=(14, 4.6 * len(groups) + 0.6),
+        squeeze=False,
+        layout="constrained",
+    )
+    for row, (_, group) in enumerate(groups):
+        for ax, (axis, (xcol, label)) in zip(axes[row], AXES.items()):
+            a = m[m["axis"] == axis]
+            for b, lit in style.highlighted(backends, group):
+                _scaling_series(
+                    ax, a[a["backend"] == b].sort_values(xcol), xcol, b, lit, fitted.get((b, axis))
+                )
+            ax.axhline(TICK_S * 1e6, color="k", lw=0.8, ls=":")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ticks = sorted(a[xcol].unique())
+            if ticks:  # the measured sizes as plain numbers
+                ax.set_xticks(ticks, [f"{int(v):,}" for v in ticks])
+                ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.set_xlabel(label)
+            ax.set_ylabel("median solve time per tick [us]")
+            ax.set_title(
+                f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)",
+                fontsize=9,
+            )
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
+            ax.grid(True, which="both", alpha=0.3)
+    return style.save(fig, path)
+
+
+def _scaling_series(ax, g: pd.DataFrame, xcol: str, b: str, lit: bool, fit) -> None:
+    """One backend's medians (square: dense, circle: sparse) and its fitted power law (dashed)."""
+    from ..report import style
+
+    if g.empty:
+        return
+    colour = style.look(b).colour if lit else style.GREY
+    marker = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
+    tag = f"{b} ({fit.text()})" if fit is not None else b
+    ax.plot(
+        g[xcol],
+        g["time_median_s"] * 1e6,
+        marker,
+        color=colour,
+        label=tag if lit else None,
+        zorder=3 if lit else 1,
+    )
+    if fit is not None and not math.isnan(fit.slope):
+        xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
+        ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=3 if lit else 1)
 
 
 def _fmt_us(v) -> str:

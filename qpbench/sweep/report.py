@@ -12,7 +12,7 @@ Every number is recomputed from ``sweep.csv`` (:mod:`qpbench.sweep.rows`).
   reverse; McNemar's exact test (a two-sided binomial test of the discordant
   pairs, :func:`mcnemar_exact`) says whether the difference could be chance.
 - **Distributions**: ECDFs of tracking error, force error (max after 2 s),
-  closest approach d_min and p99 solve time, one line per backend.
+  closest approach d_min (as its margin to ``d_safe``) and p99 solve time, one line per backend.
 - **Worst instances**: per backend, the runs with the worst verdicts and the
   smallest margin to ``d_safe``, each with the command that re-runs it.
 """
@@ -37,6 +37,10 @@ Z95 = 1.959963984540054
 SEVERITY = VERDICTS
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
 RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
+#: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
+MARGIN_LABEL = "d_min - d_safe [mm] (runs further away leave on the right)"
+#: Right edge of the d_min panel [mm beyond d_safe].
+ZOOM_MM = 2.0
 #: Runs listed per backend among the worst.
 WORST = 5
 #: ECDF panels: column, label, scale.
@@ -201,49 +205,92 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
 
 
 def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
-    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend, runs with a result only."""
-    import matplotlib
+    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend, runs with a result only.
 
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
+    Backends in their look (:func:`qpbench.report.style.look`); more than
+    :data:`qpbench.report.style.MAX_SERIES` backends: one row of panels per group of them,
+    the others grey behind. The legend outside the panels, on the right.
+    """
+    from ..report import style
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
     ok = df[df["status"] == "ok"]
-    for ax, (col, label, scale) in zip(axes.flat, ECDF_PANELS):
-        for backend, g in ok.groupby("backend", sort=True):
-            v = np.sort(pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale)
+    everyone = sorted(ok["backend"].astype(str).unique())
+    groups = style.groups(everyone) or [("", [])]
+    fig, axes = style.pyplot().subplots(
+        len(groups),
+        len(ECDF_PANELS),
+        figsize=(3.6 * len(ECDF_PANELS) + 2.0, 3.0 * len(groups) + 0.8),
+        squeeze=False,
+        layout="constrained",
+    )
+    d_safe = (
+        float(ok["d_safe"].dropna().iloc[0]) * 1e3
+        if "d_safe" in ok and ok["d_safe"].notna().any()
+        else None
+    )
+    curves = {}
+    for col, label, scale in ECDF_PANELS:
+        shift = d_safe if col == "min_obstacle_distance" and d_safe is not None else 0.0
+        for backend, g in ok.groupby(ok["backend"].astype(str), sort=True):
+            v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale - shift
+            v = np.sort(v)
             if len(v):
-                ax.step(
+                curves[col, backend] = (
                     np.r_[v[0], v],
                     np.r_[0.0, np.arange(1, len(v) + 1) / len(v)],
-                    where="post",
-                    label=backend,
                 )
-        if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
-            ax.set_xscale("log")
-        if col == "min_obstacle_distance" and "d_safe" in ok and ok["d_safe"].notna().any():
-            ax.axvline(
-                float(ok["d_safe"].dropna().iloc[0]) * 1e3,
-                color="k",
-                lw=0.8,
-                ls="--",
-                label="d_safe",
+    for row, (group_title, group) in enumerate(groups):
+        for ax, (col, label, scale) in zip(axes[row], ECDF_PANELS):
+            _ecdf_panel(ax, ok, curves, col, everyone, group, d_safe)
+            shifted = col == "min_obstacle_distance" and d_safe is not None
+            ax.set_xlabel(MARGIN_LABEL if shifted else label)
+        axes[row, 0].set_ylabel(
+            f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
+        )
+        handles, labels = axes[row, 2].get_legend_handles_labels()  # d_min's: with d_safe
+        if handles:
+            axes[row, -1].legend(
+                handles,
+                labels,
+                loc="upper left",
+                bbox_to_anchor=(1.02, 1.0),
+                fontsize=8,
+                frameon=False,
             )
-        ax.set_xlabel(label)
-        ax.set_ylabel("fraction of runs")
-        ax.set_ylim(0.0, 1.02)
-        ax.grid(alpha=0.3)
-    for ax in axes.flat:
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
-            break
     fig.suptitle(title)
-    fig.tight_layout()
-    from ..atomic import atomic_path
+    style.save(fig, path)
 
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+
+def _ecdf_panel(
+    ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, group: list, d_safe
+) -> None:
+    """One ECDF panel: ``group`` in its look over the other backends in grey; d_min as its
+    margin to ``d_safe`` [mm] (``None``: no d_safe, d_min itself)."""
+    from ..report import style
+
+    for backend, lit in style.highlighted(everyone, group):
+        if (col, backend) not in curves:
+            continue
+        x, y = curves[col, backend]
+        kw = (
+            style.look(backend).line(np.arange(len(x)), lw=1.3, label=backend, zorder=3)
+            if lit
+            else dict(color=style.GREY, lw=0.8, zorder=1)
+        )
+        ax.step(x, y, where="post", **kw)
+    if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
+        ax.set_xscale("log")
+    if col == "min_obstacle_distance" and d_safe is not None:
+        # the margin to d_safe, zoomed to -1..+2 mm (further left when a run went deeper):
+        # the unsafe line at -0.5 mm readable; runs further than 2 mm away leave on the right
+        ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
+        ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
+        lowest = min((x[0] for (c, _), (x, _) in curves.items() if c == col), default=0.0)
+        left = min(-1.0, 1.1 * lowest)
+        ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
+        ax.set_xlim(left, ZOOM_MM)
+    ax.set_ylim(0.0, 1.02)
+    ax.grid(alpha=0.3)
 
 
 def _manifest_lines(folder: Path) -> list[str]:

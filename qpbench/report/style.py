@@ -1,0 +1,291 @@
+"""One look per backend, the same in every figure, and the one place figures are saved.
+
+Every figure that draws backends (the report's, ``simulate --plot``, the
+sweep's ECDFs, the scaling study's) takes a backend's colour, marker and
+line style from :func:`look`: a fixed table (:data:`LOOKS`) for the backends
+this package knows, and for any other name a look picked from
+:data:`SPARE` by a stable hash of the name (the same in every run and every
+process), so the same backend looks the same everywhere.
+
+Readability rules the figures follow:
+
+- at most :data:`MAX_SERIES` highlighted series in one panel: backends are
+  split into :func:`groups` (own-API QP solvers, networks and the
+  pseudo-inverse, qpsolvers routes; at most :data:`MAX_SERIES` each), one
+  column of panels per group, the other groups' backends drawn in light grey
+  behind (:func:`highlighted`) so every panel keeps the whole field as context;
+- legends outside the axes (:func:`legend_above`);
+- no figure taller than :data:`MAX_HEIGHT_PX` pixels (:func:`save`, the one
+  function that writes a figure, checks it).
+"""
+
+from __future__ import annotations
+
+import logging
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Iterator
+
+__all__ = [
+    "GREY",
+    "LOOKS",
+    "MAX_HEIGHT_PX",
+    "MAX_SERIES",
+    "Look",
+    "groups",
+    "highlighted",
+    "legend_above",
+    "look",
+    "pyplot",
+    "save",
+]
+
+log = logging.getLogger("qpbench.report")
+
+#: Highest PNG a figure may be [px]; :func:`save` lowers the resolution of a taller one.
+MAX_HEIGHT_PX = 2000
+#: Most backends highlighted in one panel.
+MAX_SERIES = 8
+#: Colour of the backends a panel does not highlight (context).
+GREY = "#c8c8c8"
+#: Markers, in the order a group's backends take them.
+MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
+
+
+@dataclass(frozen=True)
+class Look:
+    """How one backend is drawn: ``colour`` (hex), ``marker`` (matplotlib), ``linestyle``."""
+
+    colour: str
+    marker: str
+    linestyle: str
+
+    def line(self, x=None, **extra) -> dict:
+        """Keyword arguments of ``Axes.plot``: colour, line style, marker; ``extra`` added or overriding.
+
+        ``x``: the line's x values; the markers then go at the points nearest to
+        :data:`MARKS` evenly spaced x values (a decimated log's ticks are bunched: every
+        k-th point would bunch the markers too), shifted by a share of the spacing that
+        differs by marker, so backends whose lines coincide show each its own markers.
+        Without ``x``, no marker on the line (its legend entry still shows it).
+        """
+        kw = {"color": self.colour, "ls": self.linestyle, "marker": self.marker, "ms": 4.5}
+        phase = (MARKERS.index(self.marker) + 0.5) / len(MARKERS) if self.marker in MARKERS else 0.5
+        kw["markevery"] = [] if x is None else marks(x, phase)
+        kw["markerfacecolor"] = "white" if self.linestyle != "-" else self.colour
+        return kw | extra
+
+
+#: Markers along a line (:meth:`Look.line`).
+MARKS = 10
+
+
+def marks(x, phase: float = 0.5) -> list[int]:
+    """Indices of the points of ``x`` nearest to :data:`MARKS` evenly spaced values, the
+    ``k``-th at ``(k + phase) / MARKS`` of the way from the smallest to the largest."""
+    import numpy as np
+
+    x = np.asarray(x, dtype=float)
+    ok = np.flatnonzero(np.isfinite(x))
+    if ok.size == 0:
+        return []
+    lo, hi = x[ok].min(), x[ok].max()
+    wanted = lo + (hi - lo) * (np.arange(MARKS) + phase) / MARKS
+    idx = ok[np.argmin(np.abs(x[ok][None, :] - wanted[:, None]), axis=1)]
+    return sorted({int(i) for i in idx})
+
+
+def _table() -> dict[str, Look]:
+    own = {  # own-API QP solvers: solid lines
+        "daqp": "#1f77b4",
+        "daqp-stateless": "#8c564b",
+        "qpoases": "#ff7f0e",
+        "osqp": "#2ca02c",
+        "proxqp": "#d62728",
+        "clarabel": "#9467bd",
+        "piqp": "#e377c2",
+        "cvxpy": "#808000",
+    }
+    other = {  # the network and the pseudo-inverse: dash-dot
+        "rnn-tuned": "#000000",
+        "rnn": "#f0a30a",
+        "rnn-converged": "#17becf",
+        "pinv": "#a0522d",
+    }
+    routes = {  # qpsolvers routes: dashed, hollow markers
+        "qpsolvers:daqp": "#003f5c",
+        "qpsolvers:quadprog": "#00a087",
+        "qpsolvers:osqp": "#005a32",
+        "qpsolvers:clarabel": "#5e3c99",
+        "qpsolvers:proxqp": "#8b0000",
+        "qpsolvers:piqp": "#c51b7d",
+        "qpsolvers:highs": "#b8860b",
+        "qpsolvers:scs": "#6b8e23",
+        "qpsolvers:qpalm": "#4682b4",
+        "qpsolvers:ecos": "#dc143c",
+        "qpsolvers:cvxopt": "#d2691e",
+        "qpsolvers:gurobi": "#2f4f4f",
+        "qpsolvers:mosek": "#9932cc",
+        "qpsolvers:qpoases": "#ff4500",
+        "qpsolvers:hpipm": "#20b2aa",
+        "qpsolvers:sip": "#556b2f",
+    }
+    out = {}
+    for colours, ls in ((own, "-"), (other, "-."), (routes, "--")):
+        for i, (name, colour) in enumerate(colours.items()):
+            out[name] = Look(colour, MARKERS[i % len(MARKERS)], ls)
+    return out
+
+
+#: The look of every backend this package knows (colours distinct from one another and from
+#: :data:`GREY`).
+LOOKS: dict[str, Look] = _table()
+#: Colours of backends :data:`LOOKS` does not name, picked by a stable hash of the name.
+SPARE = (
+    "#e6194b",
+    "#3cb44b",
+    "#4363d8",
+    "#f58231",
+    "#911eb4",
+    "#f032e6",
+    "#469990",
+    "#9a6324",
+    "#800000",
+    "#000075",
+    "#808080",
+    "#6a5acd",
+)
+
+
+def look(backend: str) -> Look:
+    """The look of ``backend``: :data:`LOOKS`, else a stable pick from :data:`SPARE` by name."""
+    name = str(backend)
+    if name in LOOKS:
+        return LOOKS[name]
+    h = zlib.crc32(name.encode())
+    return Look(SPARE[h % len(SPARE)], MARKERS[(h // len(SPARE)) % len(MARKERS)], ":")
+
+
+def _kind(backend: str) -> int:
+    """0: own-API QP solvers, 1: the network and the pseudo-inverse, 2: qpsolvers routes, 3: others."""
+    name = str(backend)
+    if name.startswith("qpsolvers:"):
+        return 2
+    if name.startswith("rnn") or name == "pinv":
+        return 1
+    return 0 if name in LOOKS else 3
+
+
+_KIND_TITLES = (
+    "QP solvers (own API)",
+    "network and pseudo-inverse",
+    "qpsolvers routes",
+    "other backends",
+)
+
+
+def _order(backend: str) -> tuple:
+    names = list(LOOKS)
+    return (names.index(backend), "") if backend in LOOKS else (len(names), str(backend))
+
+
+def groups(backends: Iterable[str], max_series: int = MAX_SERIES) -> list[tuple[str, list[str]]]:
+    """``backends`` split into panels of at most ``max_series``: ``[(title, names), ...]``.
+
+    Backends of a kind (own-API QP solvers, the network and the pseudo-inverse,
+    qpsolvers routes, others) share a panel; a kind with more than
+    ``max_series`` is cut into equal parts. When all fit in one panel, one
+    group titled ``""``. Order: the kinds as listed, within one :data:`LOOKS`'s.
+    """
+    names = sorted(dict.fromkeys(str(b) for b in backends), key=_order)
+    if len(names) <= max_series:
+        return [("", names)] if names else []
+    out = []
+    for kind, title in enumerate(_KIND_TITLES):
+        members = [b for b in names if _kind(b) == kind]
+        parts = -(-len(members) // max_series)
+        for p in range(parts):
+            chunk = members[p::parts] if parts > 1 else members
+            chunk = sorted(chunk, key=_order)
+            out.append((f"{title} ({p + 1}/{parts})" if parts > 1 else title, chunk))
+    return out
+
+
+def highlighted(everyone: Iterable[str], group: Iterable[str]) -> Iterator[tuple[str, bool]]:
+    """``(backend, highlighted)`` for every backend: the grey rest first (drawn below), then ``group``."""
+    group = list(group)
+    chosen = set(group)
+    for b in everyone:
+        if b not in chosen:
+            yield b, False
+    for b in group:
+        yield b, True
+
+
+def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
+    """A legend above ``ax``, outside the data (``handles``/``labels``: the axes' own by default)."""
+    if handles is None:
+        handles, labels = ax.get_legend_handles_labels()
+    if not handles:
+        return None
+    return ax.legend(
+        handles,
+        labels,
+        loc="lower left",
+        bbox_to_anchor=(0.0, 1.02, 1.0, 0.2),
+        mode="expand",
+        ncol=ncol,
+        fontsize=kw.pop("fontsize", 7.5),
+        frameon=False,
+        borderaxespad=0.0,
+        **kw,
+    )
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
+    """Write ``fig`` to ``path`` atomically (format from the suffix, tight box) and close it.
+
+    The one place a figure is written. A PNG taller than :data:`MAX_HEIGHT_PX`
+    is written at the resolution that makes it fit, with a warning naming the file
+    (a figure designed taller is a fault of its design; the test of the report's
+    figures fails on the warning).
+    """
+    from ..atomic import atomic_path
+
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    try:
+        fig.canvas.draw()
+        tight = fig.get_tightbbox(fig.canvas.get_renderer())
+        height_in = tight.height + 2 * 0.1  # savefig's pad_inches
+        if fmt == "png" and height_in * dpi > MAX_HEIGHT_PX:
+            fitted = (MAX_HEIGHT_PX - 1) / height_in
+            log.warning(
+                "%s: figure %.0f px tall at %g dpi, over %d px; written at %.0f dpi",
+                path,
+                height_in * dpi,
+                dpi,
+                MAX_HEIGHT_PX,
+                fitted,
+            )
+            dpi = fitted
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:  # never a half-written figure under the final name
+            fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight", **kw)
+    finally:
+        pyplot().close(fig)
+    return path
