@@ -94,7 +94,7 @@ class _Table:
     others: list[dict]
     csv_path: Path
     isolated: Callable[[str], bool]
-    run_budget: float | None
+    budget: Callable[[str], float | None]
     on_row: Callable[[dict], None] | None
 
     def all_rows(self) -> list[dict]:
@@ -103,7 +103,7 @@ class _Table:
     def emit(self, key: tuple[str, str], row: dict) -> None:
         """Add a run's row and rewrite the table (atomically); tell ``on_row``."""
         row["isolated"] = self.isolated(key[1])
-        row["run_budget_s"] = self.run_budget
+        row["run_budget_s"] = self.budget(key[1])
         self.rows[key] = row
         write_table(self.all_rows(), self.csv_path)
         if self.on_row is not None:
@@ -126,6 +126,7 @@ def run_closed_loop(
     run_time_limit: float | None = None,
     deadline: float | None = None,
     run_budget: float | None = None,
+    budgets: dict[str, float] | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``
     (the module docstring says how; the table: :mod:`qpbench.harness.loop_rows`).
@@ -145,6 +146,8 @@ def run_closed_loop(
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
         run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
             it is spent (status ``budget``), the verdict judged on what was simulated.
+        budgets: Backend -> its own budget [s], in place of ``run_budget`` (``qpbench run``
+            decides them from the backends' per-tick times: :func:`~qpbench.harness.pipeline.closed_loop_budgets`).
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -170,18 +173,22 @@ def run_closed_loop(
     csv_path, previous_rows = _prepare_output(out, force, resume)
 
     order = [(s, b) for s in scenarios for b in backends]
-    rows, others = _kept_rows(order, previous_rows, formulation, duration, run_budget, skip or {})
+
+    def budget(backend: str) -> float | None:
+        return (budgets or {}).get(backend, run_budget)
+
+    rows, others = _kept_rows(order, previous_rows, formulation, duration, budget, skip or {})
     todo = [k for k in order if k not in rows]
 
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
-    table = _Table(order, rows, others, csv_path, _isolated, run_budget, on_row)
+    table = _Table(order, rows, others, csv_path, _isolated, budget, on_row)
     # (key, what to run, deadline of an isolated run or None)
     items = [
         (
             (s, b),
-            RunSpec(s, b, formulation, duration, str(out), deadline, run_budget),
+            RunSpec(s, b, formulation, duration, str(out), deadline, budget(b)),
             run_deadline(s, duration, run_time_limit) if _isolated(b) else None,
         )
         for s, b in todo
@@ -229,7 +236,7 @@ def _kept_rows(
     previous_rows: list[dict],
     formulation: str,
     duration: float | None,
-    run_budget: float | None,
+    budget: Callable[[str], float | None],
     skip: dict[str, str],
 ) -> tuple[dict, list[dict]]:
     """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
@@ -237,7 +244,7 @@ def _kept_rows(
     done = {
         (str(r["scenario"]), str(r["backend"])): r
         for r in previous_rows
-        if same_run(r, formulation, duration, run_budget)
+        if same_run(r, formulation, duration, budget(str(r["backend"])))
     }
     others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
     rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
