@@ -82,8 +82,9 @@ class WarmupReport:
             loaded from numba's cache, or were already in memory).
         seconds: Wall time of the call [s].
         cache: Where numba keeps the compiled kernels.
-        kernels: The groups prepared by this call (of :data:`KERNELS`); empty
-            without numba or when none was asked for.
+        kernels: The groups prepared by this call, or (``in_memory``) ready
+            before it (of :data:`KERNELS`); empty without numba or when none
+            was asked for.
         in_memory: What was asked for was already prepared in this process (nothing loaded).
         shims_compiled: Native shims (the qpoases backend's) compiled by this call.
     """
@@ -243,9 +244,13 @@ def prepare(wanted: Iterable[str]) -> WarmupReport:
     """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
     from .rnn.network import numba_available
 
+    wanted = tuple(wanted)
+    if not wanted:  # nothing these backends need: said once in the log
+        return WarmupReport(0, 0.0, cache_location() if numba_available() else "", ())
     todo = [k for k in wanted if k not in _DONE]
     if not todo:
-        return WarmupReport(0, 0.0, cache_location(), (), in_memory=True)
+        ready = tuple(k for k in wanted if k in KERNELS) if numba_available() else ()
+        return WarmupReport(0, 0.0, cache_location(), ready, in_memory=True)
     start = time.perf_counter()
     kernels = tuple(k for k in todo if k in KERNELS)
     compiled = 0

@@ -17,6 +17,7 @@ from conftest import simulate_args
 from test_report import assert_close, parse_tables, qpbenchmark_ratios
 
 from qpbench.cli import COMMANDS, build_parser, main
+from qpbench.harness.pipeline import RUN_BUDGET_S
 from qpbench.profiles import get_profile
 
 MAROS = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
@@ -210,8 +211,16 @@ def test_run_end_to_end(tmp_path, monkeypatch):
     assert manifest["backends"] == ["qpsolvers:daqp", "pinv"]
     assert (
         manifest["closed_loop_not_ok"] == {"wall/pinv": "limits"}
-        and manifest["run_budget_s"] == 5.0
+        and manifest["run_budget_s"] == RUN_BUDGET_S
     )
+    # each backend's closed-loop budget, decided from its bench median, is the one its row ran under
+    assert set(manifest["closed_loop_budget_s"]) == {"qpsolvers:daqp", "pinv"}
+    assert dict(zip(loop["backend"], loop["run_budget_s"])) == manifest["closed_loop_budget_s"]
+    # the wall time of every phase, in the order run
+    assert list(manifest["phase_wall_time_s"]) == [
+        "compile", "problem set wall", "references", "bench wall", "closed loop", "report",
+    ]  # fmt: skip
+    assert all(t >= 0 for t in manifest["phase_wall_time_s"].values())
     assert not (out / ".partial").exists()
     # a second run replaces the previous run's outputs (run.json marks the folder as ours)
     first = (out / "closed_loop.csv").stat().st_mtime_ns

@@ -29,7 +29,7 @@ HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
     "write results/ and report.md"
 )
-EXAMPLE = "qpbench run    (a short run with the same report sections: qpbench run --quick)"
+EXAMPLE = "qpbench run    (quick: qpbench run --quick)"
 
 #: What ``--quick`` sets, unless given: a short run of every scenario with a few fast backends
 #: that need no compiled kernel of their own, into ``./quick`` (``results/`` is left alone).
