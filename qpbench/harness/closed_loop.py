@@ -128,31 +128,27 @@ def run_closed_loop(
     run_budget: float | None = None,
     budgets: dict[str, float] | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop and tabulate them into ``out``
-    (the module docstring says how; the table: :mod:`qpbench.harness.loop_rows`).
+    """Run every (scenario, backend) pair in the loop, tabulated in ``out`` (module docstring).
 
     Args:
         scenarios, backends: Scenario names or TOML paths; backend names (each once).
-        out: Output folder (``closed_loop.csv`` and ``logs/``).
+        out: Output folder (``closed_loop.csv``, columns :mod:`~qpbench.harness.loop_rows`; ``logs/``).
         duration: Simulated time per run [s]; ``None`` keeps each scenario's ``T``.
         formulation: ``paper`` (hard task, eq. 11) or ``soft``.
         force, resume: Replace an existing table and its logs; keep its rows done under the same terms.
         jobs: Runs in parallel, each in a worker process of its own (with 1, only isolated ones).
         on_row: Called with each new row as soon as it is written.
         skip: Backend -> reason: a ``skipped`` row per scenario instead of a run.
-        isolate: ``auto`` (backends whose class has ``risky = True``), ``always``
-            or ``never``: an isolated run is made in a worker process with a
-            deadline (``run_time_limit`` [s], default :func:`~qpbench.harness.loop_workers.run_deadline`).
+        isolate: ``auto`` (backends whose class has ``risky = True``), ``always`` or ``never``: an
+            isolated run is made in a worker process with a deadline (``run_time_limit`` [s],
+            default :func:`~qpbench.harness.loop_workers.run_deadline`).
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
-        run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
-            it is spent (status ``budget``), the verdict judged on what was simulated.
-        budgets: Backend -> its own budget [s], in place of ``run_budget`` (``qpbench run``
-            decides them from the backends' per-tick times: :func:`~qpbench.harness.pipeline.closed_loop_budgets`).
+        run_budget: Wall-time budget of each run [s] (default: none), of a backend's in ``budgets``
+            (backend -> [s]): a run stops between ticks once it is spent (status ``budget``).
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
-        ParamError: a bad formulation, duration or job count, or a backend or
-            scenario listed twice.
+        ParamError: a bad formulation, duration or job count, or a name listed twice.
     """
     _check_arguments(
         scenarios,
@@ -174,9 +170,7 @@ def run_closed_loop(
 
     order = [(s, b) for s in scenarios for b in backends]
 
-    def budget(backend: str) -> float | None:
-        return (budgets or {}).get(backend, run_budget)
-
+    budget = {b: (budgets or {}).get(b, run_budget) for b in backends}.get  # backend -> budget
     rows, others = _kept_rows(order, previous_rows, formulation, duration, budget, skip or {})
     todo = [k for k in order if k not in rows]
 
