@@ -340,3 +340,28 @@ def test_run_bench_subset_solves_references_of_the_kept_records_only(tmp_path, m
     solved.clear()
     assert bench_subset(read_problem_set(folder), None, 400)[1][1].name == refs[2].name
     assert solved == []  # every 400th is among every 200th: read from the cache
+
+
+def test_closed_loop_budgets_follow_the_bench():
+    """Each backend's budget from its bench median: room to finish for one that keeps up, the floor
+    for one that cannot finish within --run-budget, --run-budget for one without a bench time."""
+    from qpbench.harness.pipeline import (
+        BUDGET_FLOOR_S,
+        BUDGET_MARGIN,
+        RunConfig,
+        closed_loop_budgets,
+    )
+
+    config = RunConfig(out=Path("x"), problems=Path("p"), scenarios=["wall"],
+                       backends=["fast", "medium", "slow", "unbenched"], duration=2.0,
+                       run_budget=10.0)  # fmt: skip
+    ticks = 2000  # 2 s of wall at dt = 1 ms
+    per_tick = {"fast": 1e-5, "medium": 1e-3, "slow": 1e-2}
+    budgets = closed_loop_budgets(config, per_tick)
+    assert budgets["fast"] == BUDGET_FLOOR_S  # 3 x 0.02 s predicted: the floor
+    assert budgets["medium"] == pytest.approx(BUDGET_MARGIN * ticks * 1e-3)  # 6 s
+    assert budgets["medium"] > ticks * 1e-3  # it can finish
+    assert budgets["slow"] == BUDGET_FLOOR_S  # would need 60 s > 10 s: cut at the floor
+    assert budgets["unbenched"] == 10.0
+    config.run_budget = None
+    assert closed_loop_budgets(config, per_tick) == {}
