@@ -182,8 +182,12 @@ def _warm_network(problems) -> None:
 def _warm_shims() -> int:
     """Compile (first time) and load the qpoases backend's native shim; 1 if it was compiled."""
     from .backends import backend_class
+    from .exceptions import BackendNotFound
 
-    qpoases = backend_class("qpoases")
+    try:
+        qpoases = backend_class("qpoases")
+    except BackendNotFound:  # a backend that is not registered has nothing to prepare
+        return 0
     if qpoases.unavailable_reason() is not None:
         return 0
     from .backends import _qpoases_shim as shim
@@ -206,16 +210,16 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
     from .backends import backend_class
     from .exceptions import BackendNotFound
 
-    wanted = set(LOOP_KERNELS) if loop else set()
     if backends is None:
         return (*KERNELS, SHIM)
+    wanted = set(LOOP_KERNELS) if loop else set()
     for name in backends:
         try:
             cls = backend_class(name)
         except BackendNotFound:
             continue
         wanted.update(cls.kernels)
-        if issubclass(cls, backend_class("qpoases")):
+        if cls.name == "qpoases":
             wanted.add(SHIM)
     return tuple(k for k in (*KERNELS, SHIM) if k in wanted)
 
