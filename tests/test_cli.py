@@ -353,15 +353,16 @@ def test_closed_loop_budgets_follow_the_bench():
     )
 
     config = RunConfig(out=Path("x"), problems=Path("p"), scenarios=["wall"],
-                       backends=["fast", "medium", "slow", "unbenched"], duration=2.0,
+                       backends=["fast", "medium", "tight", "slow", "unbenched"], duration=2.0,
                        run_budget=10.0)  # fmt: skip
     ticks = 2000  # 2 s of wall at dt = 1 ms
-    per_tick = {"fast": 1e-5, "medium": 1e-3, "slow": 1e-2}
+    per_tick = {"fast": 1e-5, "medium": 1e-3, "tight": 3e-3, "slow": 1e-2}
     budgets = closed_loop_budgets(config, per_tick)
     assert budgets["fast"] == BUDGET_FLOOR_S  # 3 x 0.02 s predicted: the floor
     assert budgets["medium"] == pytest.approx(BUDGET_MARGIN * ticks * 1e-3)  # 6 s
     assert budgets["medium"] > ticks * 1e-3  # it can finish
-    assert budgets["slow"] == BUDGET_FLOOR_S  # would need 60 s > 10 s: cut at the floor
+    assert budgets["tight"] == 10.0  # 6 s of solves: all of --run-budget, not 3 x 6 s
+    assert budgets["slow"] == BUDGET_FLOOR_S  # 20 s of solves alone > 10 s: cut at the floor
     assert budgets["unbenched"] == 10.0
     config.run_budget = None
     assert closed_loop_budgets(config, per_tick) == {}

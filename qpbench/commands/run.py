@@ -104,8 +104,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help=f"the most wall time a closed-loop run may take in [s] (default: {RUN_BUDGET_S:g}); "
         "each backend's budget comes from its per-tick time in the run's bench (run.json lists "
-        "them): one that keeps up with the loop can finish, one that would need more than S is "
-        "cut early. A run stops between ticks when its budget is spent; its row says how far "
+        "them): one that keeps up with the loop can finish, one whose solves alone would take "
+        "more than S is cut early. A run stops between ticks when its budget is spent; its row says how far "
         "it got (simulated_s). 0: no budget (slow backends then take minutes per scenario)",
     )
     parser.add_argument(

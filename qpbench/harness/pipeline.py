@@ -72,8 +72,8 @@ EVERY = 10
 BENCH_EVERY = 5
 #: The most wall time a closed-loop run may take [s] (``--run-budget``). Each backend's own
 #: budget is decided from its per-tick time in the run's bench (:func:`closed_loop_budgets`):
-#: the backends that keep up with the loop finish their runs; one whose run would need more
-#: than this is cut at :data:`BUDGET_FLOOR_S` (how far each gets: the run's closed_loop.csv).
+#: the backends that keep up with the loop finish their runs; one whose solves alone would take
+#: longer is cut at :data:`BUDGET_FLOOR_S` (how far each gets: the run's closed_loop.csv).
 RUN_BUDGET_S = 10.0
 #: A backend's closed-loop budget is this many times the run its bench median predicts
 #: (:func:`closed_loop_budgets`): room for the loop's own work and a busy machine.
@@ -384,12 +384,13 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
     A backend whose bench median ``t`` predicts a run of ``ticks * t`` [s]
     (``ticks``: the longest chosen scenario's) gets :data:`BUDGET_MARGIN`
     times that, at least :data:`BUDGET_FLOOR_S` (the loop's own work per
-    tick), so that a backend that keeps up with the loop finishes its runs.
-    One whose run would need more than ``run_budget`` gets
-    :data:`BUDGET_FLOOR_S` only: it cannot finish within the budget, so its
-    row is cut (status ``budget``) either way, and the time goes to the runs
-    that can finish. No bench time (not benched, every solve failed): the
-    ``run_budget``. ``run_budget`` ``None``: no budgets (``{}``).
+    tick) and at most ``run_budget``, so that a backend that keeps up with
+    the loop finishes its runs. One whose solves alone would take longer
+    than ``run_budget`` gets :data:`BUDGET_FLOOR_S` only: it cannot finish
+    within the budget, so its row is cut (status ``budget``) either way, and
+    the time goes to the runs that can finish. No bench time (not benched,
+    every solve failed): the ``run_budget``. ``run_budget`` ``None``: no
+    budgets (``{}``).
     """
     if config.run_budget is None:
         return {}
@@ -407,8 +408,13 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
         if t is None or not math.isfinite(t):
             budgets[backend] = config.run_budget
             continue
-        need = BUDGET_MARGIN * ticks * t
-        budgets[backend] = round(max(floor, need) if need <= config.run_budget else floor, 3)
+        predicted = ticks * t
+        if predicted > config.run_budget:
+            budgets[backend] = floor
+        else:
+            budgets[backend] = round(
+                min(config.run_budget, max(floor, BUDGET_MARGIN * predicted)), 3
+            )
     return budgets
 
 
