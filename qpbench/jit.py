@@ -6,9 +6,11 @@ about a minute on a fresh machine), the machine code kept on disk
 (:mod:`qpbench.cache` says where) and loaded by every later process (well
 under a second). A compile inside a timed or time-limited call would be
 measured as the solver's time, so every entry point that times something
-(``qpbench run``, ``bench``, ``simulate``, ``closed-loop``, and
-:func:`qpbench.sim.loop.simulate` itself) calls :func:`warmup` first;
-``qpbench warmup`` does only that. Worker processes find the kernels on disk
+(``qpbench run``, ``bench``, ``simulate``, ``closed-loop``, ``sweep``,
+``scaling``, and the harness before each closed-loop run) calls :func:`warmup`
+first with the backends it will run, and so prepares only what those
+backends and the closed loop use: ``qpbench bench --backends daqp`` compiles
+no kernel and builds no shim. ``qpbench warmup`` prepares everything. Worker processes find the kernels on disk
 and load them when they start (:mod:`qpbench.harness.isolation`), outside any
 time limit.
 
@@ -31,6 +33,9 @@ network         the network's integrator (:func:`qpbench.rnn.network.kernel`)
                 :func:`~qpbench.rnn.network.packed_kernel`)
 ==============  ===============================================================
 
+Native shims: the ``qpoases`` backend's (built by a C++ compiler on first
+use, then loaded), only when ``qpoases`` is among the backends.
+
 A problem of yet another shape (a foreign problem set without bounds, say)
 compiles its own integrator on its first solve: the bench's discarded
 warm-up solve, whose time has no consequence.
@@ -41,15 +46,29 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 log = logging.getLogger("qpbench")
 
-__all__ = ["KERNELS", "WarmupReport", "warmup"]
+__all__ = [
+    "KERNELS",
+    "LOOP_KERNELS",
+    "SHIM",
+    "WarmupReport",
+    "kernels_for",
+    "prepare",
+    "prepared",
+    "warmup",
+]
 
 #: Kernel groups :func:`warmup` prepares, in order.
 KERNELS = ("controller", "post", "network")
+#: The groups every closed loop runs (the controller's tick build, the plant step).
+LOOP_KERNELS = ("controller", "post")
 
+#: The name :func:`kernels_for` gives the qpoases backend's native shim.
+SHIM = "qpoases-shim"
 #: Shipped scenarios whose controllers give the QP shapes warmed: obstacle rows, none.
 _SCENARIOS = ("wall", "free")
 
@@ -63,8 +82,10 @@ class WarmupReport:
             loaded from numba's cache, or were already in memory).
         seconds: Wall time of the call [s].
         cache: Where numba keeps the compiled kernels.
-        kernels: The groups prepared (:data:`KERNELS`); empty without numba.
-        in_memory: The kernels were already prepared in this process (nothing loaded).
+        kernels: The groups prepared by this call, or (``in_memory``) ready
+            before it (of :data:`KERNELS`); empty without numba or when none
+            was asked for.
+        in_memory: What was asked for was already prepared in this process (nothing loaded).
         shims_compiled: Native shims (the qpoases backend's) compiled by this call.
     """
 
@@ -82,10 +103,14 @@ class WarmupReport:
 
     def line(self) -> str:
         """One line for the log."""
-        if not self.kernels:
-            return "numba is not installed: the numpy paths run, nothing to compile"
         if self.in_memory:
             return "kernels already loaded in this process"
+        if not self.kernels:
+            if self.cache == "":
+                return "numba is not installed: the numpy paths run, nothing to compile"
+            if self.shims_compiled:
+                return f"native shim: compiled {self.shims_compiled} in {self.seconds:.1f} s"
+            return "kernels: none needed by these backends"
         shims = f" and {self.shims_compiled} native shim" if self.shims_compiled else ""
         if self.compiled or self.shims_compiled:
             return (
@@ -97,7 +122,8 @@ class WarmupReport:
         )
 
 
-_READY: WarmupReport | None = None
+#: Kernel groups and shims prepared in this process so far.
+_DONE: set[str] = set()
 
 
 def cache_location() -> str:
@@ -154,59 +180,112 @@ def _warm_network(problems) -> None:
 
 
 def _warm_shims() -> int:
-    """Compile (first time) and load the native shims of backends that have one; how many were compiled."""
+    """Compile (first time) and load the qpoases backend's native shim; 1 if it was compiled."""
     from .backends import backend_class
+    from .exceptions import BackendNotFound
 
-    compiled = 0
     try:
         qpoases = backend_class("qpoases")
-    except Exception:  # noqa: BLE001 - a backend that is not registered has nothing to prepare
+    except BackendNotFound:  # a backend that is not registered has nothing to prepare
         return 0
-    if qpoases.unavailable_reason() is None:
-        from .backends import _qpoases_shim as shim
+    if qpoases.unavailable_reason() is not None:
+        return 0
+    from .backends import _qpoases_shim as shim
 
-        before = shim.LOADED[:]
-        existed = shim.shim_path(shim.qpoases_prefix()).is_file()
-        qpoases.prepare()
-        compiled += int(not existed and not before)
-    return compiled
+    before = shim.LOADED[:]
+    existed = shim.shim_path(shim.qpoases_prefix()).is_file()
+    qpoases.prepare()
+    return int(not existed and not before)
 
 
-def warmup() -> WarmupReport:
-    """Compile, or load from numba's on-disk cache, every compiled kernel of qpbench.
+def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str, ...]:
+    """What :func:`warmup` prepares for ``backends`` (``None``: every backend).
 
-    Idempotent: a second call in the same process returns at once. Returns
-    how many kernel specialisations had to be compiled (0 once the cache
-    holds them) and how long it took. Without numba nothing needs compiling.
+    The kernel groups of :data:`KERNELS` (in that order): :data:`LOOP_KERNELS`
+    when ``loop`` (the run builds the controller's QPs), ``network`` when a
+    backend runs the network (its class names it in ``kernels``); then
+    ``"qpoases-shim"`` when the ``qpoases`` backend is among them. Names that
+    are no registered backend need nothing.
     """
-    global _READY
-    if _READY is not None:
-        return WarmupReport(0, 0.0, _READY.cache, _READY.kernels, in_memory=True)
+    from .backends import backend_class
+    from .exceptions import BackendNotFound
+
+    if backends is None:
+        return (*KERNELS, SHIM)
+    wanted = set(LOOP_KERNELS) if loop else set()
+    for name in backends:
+        try:
+            cls = backend_class(name)
+        except BackendNotFound:
+            continue
+        wanted.update(cls.kernels)
+        if cls.name == "qpoases":
+            wanted.add(SHIM)
+    return tuple(k for k in (*KERNELS, SHIM) if k in wanted)
+
+
+def prepared() -> tuple[str, ...]:
+    """The kernel groups (and shims) prepared in this process so far, in :data:`KERNELS` order."""
+    return tuple(k for k in (*KERNELS, SHIM) if k in _DONE)
+
+
+def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:
+    """Compile, or load from numba's on-disk cache, the kernels ``backends`` use.
+
+    ``backends``: the backend names the command will run (``None``: every
+    kernel and shim, as ``qpbench warmup``); ``loop``: the command runs
+    closed loops (or makes problem sets), so the controller's and the
+    plant's kernels too (:func:`kernels_for`). Idempotent: what this process
+    prepared already is not prepared again (a call with nothing new returns
+    at once, ``in_memory``). Returns how many kernel specialisations had to
+    be compiled (0 once the cache holds them) and how long it took. Without
+    numba no kernel needs compiling.
+    """
+    return prepare(kernels_for(backends, loop))
+
+
+def prepare(wanted: Iterable[str]) -> WarmupReport:
+    """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
     from .rnn.network import numba_available
 
-    if not numba_available():
-        start = time.perf_counter()
-        shims = _warm_shims()
-        _READY = WarmupReport(0, time.perf_counter() - start, "", (), shims_compiled=shims)
-        return _READY
-    from numba.core import event
-
+    wanted = tuple(wanted)
+    if not wanted:  # nothing these backends need: said once in the log
+        return WarmupReport(0, 0.0, cache_location() if numba_available() else "", ())
+    todo = [k for k in wanted if k not in _DONE]
+    if not todo:
+        ready = tuple(k for k in wanted if k in KERNELS) if numba_available() else ()
+        return WarmupReport(0, 0.0, cache_location(), ready, in_memory=True)
     start = time.perf_counter()
-    with event.install_recorder("numba:compile") as recorder:
-        problems = _problems()
-        _warm_post(problems)
-        _warm_network(problems)
-    compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)
-    shims = _warm_shims()
-    _READY = WarmupReport(
-        compiled, time.perf_counter() - start, cache_location(), KERNELS, shims_compiled=shims
-    )
-    return _READY
+    kernels = tuple(k for k in todo if k in KERNELS)
+    compiled = 0
+    if kernels and numba_available():
+        from numba.core import event
+
+        with event.install_recorder("numba:compile") as recorder:
+            problems = _problems()  # also warms the controller's build kernel
+            if "post" in kernels:
+                _warm_post(problems)
+            if "network" in kernels:
+                _warm_network(problems)
+        compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)
+        cache = cache_location()
+        kernels = tuple(k for k in KERNELS if k in kernels or k == "controller")
+        todo.append("controller")
+    else:
+        cache = cache_location() if numba_available() else ""
+        kernels = kernels if numba_available() else ()
+    shims = _warm_shims() if SHIM in todo else 0
+    _DONE.update(todo)
+    return WarmupReport(compiled, time.perf_counter() - start, cache, kernels, shims_compiled=shims)
 
 
-def warmup_logged(logger: logging.Logger | None = None) -> WarmupReport:
+def warmup_logged(
+    logger: logging.Logger | None = None,
+    backends: Iterable[str] | None = None,
+    loop: bool = True,
+) -> WarmupReport:
     """:func:`warmup`, then one INFO line saying what it did and how long it took."""
-    report = warmup()
+    report = warmup(backends, loop)
     if not report.in_memory:
         (logger or log).info("%s", report.line())
     return report

@@ -18,6 +18,7 @@ from conftest import simulate_args
 from test_report import assert_close, parse_tables, qpbenchmark_ratios
 
 from qpbench.cli import COMMANDS, build_parser, main
+from qpbench.harness.pipeline import RUN_BUDGET_S
 from qpbench.profiles import get_profile
 
 MAROS = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
@@ -213,8 +214,16 @@ def test_run_end_to_end(tmp_path, monkeypatch, capsys):
     assert manifest["backends"] == ["qpsolvers:daqp", "pinv"]
     assert (
         manifest["closed_loop_not_ok"] == {"wall/pinv": "limits"}
-        and manifest["run_budget_s"] == 5.0
+        and manifest["run_budget_s"] == RUN_BUDGET_S
     )
+    # each backend's closed-loop budget, decided from its bench median, is the one its row ran under
+    assert set(manifest["closed_loop_budget_s"]) == {"qpsolvers:daqp", "pinv"}
+    assert dict(zip(loop["backend"], loop["run_budget_s"])) == manifest["closed_loop_budget_s"]
+    # the wall time of every phase, in the order run
+    assert list(manifest["phase_wall_time_s"]) == [
+        "compile", "problem set wall", "references", "bench wall", "closed loop", "report",
+    ]  # fmt: skip
+    assert all(t >= 0 for t in manifest["phase_wall_time_s"].values())
     assert not (out / ".partial").exists()
     # a second run replaces the previous run's outputs (run.json marks the folder as ours);
     # --strict: exit 1 with one line saying why; without -q the recommendation is printed last
@@ -341,3 +350,29 @@ def test_run_bench_subset_solves_references_of_the_kept_records_only(tmp_path, m
     solved.clear()
     assert bench_subset(read_problem_set(folder), None, 400)[1][1].name == refs[2].name
     assert solved == []  # every 400th is among every 200th: read from the cache
+
+
+def test_closed_loop_budgets_follow_the_bench():
+    """Each backend's budget from its bench median: room to finish for one that keeps up, the floor
+    for one that cannot finish within --run-budget, --run-budget for one without a bench time."""
+    from qpbench.harness.pipeline import (
+        BUDGET_FLOOR_S,
+        BUDGET_MARGIN,
+        RunConfig,
+        closed_loop_budgets,
+    )
+
+    config = RunConfig(out=Path("x"), problems=Path("p"), scenarios=["wall"],
+                       backends=["fast", "medium", "tight", "slow", "unbenched"], duration=2.0,
+                       run_budget=10.0)  # fmt: skip
+    ticks = 2000  # 2 s of wall at dt = 1 ms
+    per_tick = {"fast": 1e-5, "medium": 1e-3, "tight": 3e-3, "slow": 1e-2}
+    budgets = closed_loop_budgets(config, per_tick)
+    assert budgets["fast"] == BUDGET_FLOOR_S  # 3 x 0.02 s predicted: the floor
+    assert budgets["medium"] == pytest.approx(BUDGET_MARGIN * ticks * 1e-3)  # 6 s
+    assert budgets["medium"] > ticks * 1e-3  # it can finish
+    assert budgets["tight"] == 10.0  # 6 s of solves: all of --run-budget, not 3 x 6 s
+    assert budgets["slow"] == BUDGET_FLOOR_S  # 20 s of solves alone > 10 s: cut at the floor
+    assert budgets["unbenched"] == 10.0
+    config.run_budget = None
+    assert closed_loop_budgets(config, per_tick) == {}

@@ -65,3 +65,62 @@ def test_verbosity_levels(capsys):
         "4",
     ]
     assert not any(" tick " in line and line.startswith("DEBUG: wall daqp") for line in v)
+
+
+def test_phases_off_a_terminal_one_line_at_start_and_end(caplog):
+    """Off a terminal a phase is two log lines (start, end with its time) and no bar; its time is kept.
+    A phase that raises says no "done"."""
+    import logging
+    import re
+
+    import pytest
+
+    from qpbench.harness.phases import Phases
+
+    logger = logging.getLogger("qpbench.test_phases")
+    phases = Phases(logger, bars=None)  # stderr is no terminal under pytest: no bars
+    assert phases.bars is False
+    with caplog.at_level(logging.INFO, logger=logger.name):
+        for name in ("compile", "bench wall"):
+            with phases.phase(name, total=3) as phase:
+                assert phase.bar is None
+                for _ in range(3):
+                    phase.update()
+                logger.info("inside %s", name)
+        with pytest.raises(RuntimeError), phases.phase("report"):
+            raise RuntimeError("boom")
+    lines = [re.sub(r"done in \d+\.\d s$", "done in T s", r.getMessage()) for r in caplog.records]
+    assert lines == [
+        "compile: started",
+        "inside compile",
+        "compile: done in T s",
+        "bench wall: started",
+        "inside bench wall",
+        "bench wall: done in T s",
+        "report: started",
+    ]
+    assert list(phases.times_s) == ["compile", "bench wall"]
+    assert all(t >= 0 for t in phases.times_s.values())
+
+
+def test_run_tells_each_phase_off_a_terminal(tmp_path, capsys):
+    """``qpbench run`` off a terminal: one line when each phase starts and one when it ends, in order,
+    and no progress bar (no carriage return)."""
+    out = tmp_path / "out"
+    args = ["run", "--duration", "0.05", "--bench-every", "400", "--repeat", "1",
+            "--scenarios", "wall", "--backends", "qpsolvers:daqp,pinv",
+            "--problems", str(tmp_path / "problems"), "--out", str(out)]  # fmt: skip
+    capsys.readouterr()
+    assert main(args) in (0, 1)  # 1: pinv fails its verdict
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    phases = ["compile", "problem set wall", "references", "bench wall", "closed loop", "report"]
+    told = [
+        line.split(": ", 1)[1]
+        for line in err.splitlines()
+        if line.startswith("INFO: ") and (line.endswith(": started") or ": done in " in line)
+    ]
+    expected = []
+    for name in phases:
+        expected += [f"{name}: started", f"{name}: done in"]
+    assert [t if t.endswith("started") else t.rsplit(" ", 2)[0] for t in told] == expected

@@ -112,3 +112,30 @@ def test_warmup_twice_in_one_process_does_nothing_more():
     again = jit.warmup()
     assert again.in_memory and again.compiled == 0 and again.kernels == first.kernels
     assert "already loaded" in again.line()
+
+
+def test_warmup_selects_the_kernels_of_the_backends_run():
+    """Only what the backends run: no kernel for daqp's bench, the network for rnn, the shim for qpoases."""
+    from qpbench.jit import KERNELS, LOOP_KERNELS, SHIM, kernels_for
+
+    assert kernels_for(["daqp", "osqp", "qpsolvers:daqp"], loop=False) == ()
+    assert kernels_for(["daqp"]) == LOOP_KERNELS  # a closed loop builds the controller's QPs
+    assert kernels_for(["rnn-tuned"], loop=False) == ("network",)
+    assert kernels_for(["daqp", "rnn"]) == KERNELS
+    assert kernels_for(["qpoases"], loop=False) == (SHIM,)
+    assert kernels_for(["no-such-backend"], loop=False) == ()
+    assert kernels_for(None) == (*KERNELS, SHIM)  # qpbench warmup: everything
+
+
+def test_bench_of_daqp_compiles_nothing(tmp_path):
+    """``qpbench bench --backends daqp`` in an empty kernel cache: no kernel compiled or loaded
+    (nothing written to the cache), no shim; the log says so."""
+    cache = tmp_path / "kernels"
+    cache.mkdir()
+    problems = Path(__file__).resolve().parents[1] / "problems" / "wall"
+    args = ["bench", str(problems), "--backends", "daqp", "--limit", "3", "--repeat", "1",
+            "--out", str(tmp_path / "bench.csv")]  # fmt: skip
+    proc = _qpbench(args, cache, tmp_path)
+    assert "kernels: none needed by these backends" in proc.stderr
+    assert "compiled" not in proc.stderr and "native shim" not in proc.stderr
+    assert not any(cache.rglob("*.nbi")) and not any(cache.rglob("*.nbc"))

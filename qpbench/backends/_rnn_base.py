@@ -66,6 +66,7 @@ class NetworkBackend(Backend):
     online: ClassVar[bool] = False
     #: A closed loop builds the network with the scenario's ``[rnn]`` table.
     scenario_table: ClassVar[str | None] = "rnn"
+    kernels: ClassVar[tuple[str, ...]] = ("network",)
     certifies_infeasibility = False
     infeasibility_note = (
         "the network's state moves towards the projection; no certificate, only no convergence"

@@ -114,6 +114,10 @@ class Backend:
             they are; the others make them dense, so the bench gives them problems
             up to :data:`qpbench.memory.DENSE_MAX_ENTRIES` only (a larger one is a
             ``skipped`` row).
+        kernels: The numba kernel groups the backend runs (names of
+            :data:`qpbench.jit.KERNELS`, e.g. ``("network",)``): a command
+            compiles or loads them before timing anything, and only those of
+            the backends it runs.
 
     ``--repeat`` times a problem on several instances of a backend fed the same
     problems (:mod:`qpbench.harness.timing`); :meth:`fresh` makes them.
@@ -129,6 +133,7 @@ class Backend:
     certifies_infeasibility: ClassVar[bool | None] = None
     infeasibility_note: ClassVar[str] = ""
     sparse: ClassVar[bool] = False
+    kernels: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

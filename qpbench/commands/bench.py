@@ -170,7 +170,8 @@ def run(args: argparse.Namespace) -> int:
     problem_set = select_set(load_problems(args.problems), args.pattern, args.every, args.limit)
     log.info("%s", _cache_line(args, problem_set))
     log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
-    warmup_logged(log)  # no compile inside a timed solve, here or in a worker
+    # no compile inside a timed solve, here or in a worker; only what these backends run
+    warmup_logged(log, backends, loop=False)
     progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,

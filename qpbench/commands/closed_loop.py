@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
 
     scenarios = select_scenarios(args.scenarios)
     backends = select_backends(args.backends)
-    warmup_logged(log)  # compiled here once: the worker processes load them
+    warmup_logged(log, backends)  # compiled here once: the worker processes load them
     bar = None
     total = len(scenarios) * len(backends)
     if not args.quiet:

@@ -32,17 +32,39 @@ HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
     "write results/ and report.md"
 )
-EXAMPLE = (
-    "qpbench run    (quick: qpbench run --duration 0.5 --scenarios wall "
-    "--backends qpsolvers:daqp,pinv --out quick)"
-)
+EXAMPLE = "qpbench run    (quick: qpbench run --quick)"
+
+#: What ``--quick`` sets, unless given: a short run of every scenario with a few fast backends
+#: that need no compiled kernel of their own, into ``./quick`` (``results/`` is left alone).
+QUICK = {
+    "out": "quick",
+    "backends": "daqp,osqp,clarabel,pinv",
+    "duration": 1.0,
+    "bench_every": 10,
+    "repeat": 1,
+}
+#: The defaults without ``--quick``.
+FULL = {
+    "out": "results",
+    "backends": "all",
+    "duration": None,
+    "bench_every": BENCH_EVERY,
+    "repeat": REPEAT,
+}
 
 log = logging.getLogger("qpbench.run")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--out", default="results", metavar="DIR", help="results folder (default: ./results)"
+        "--quick",
+        action="store_true",
+        help="a short run with the same report sections, into ./quick: every scenario for "
+        f"{QUICK['duration']:g} s with {QUICK['backends']}, every {QUICK['bench_every']}th "
+        f"problem timed {QUICK['repeat']} time (options given too override these)",
+    )
+    parser.add_argument(
+        "--out", default=None, metavar="DIR", help="results folder (default: ./results)"
     )
     parser.add_argument(
         "--problems",
@@ -59,7 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--backends",
-        default="all",
+        default=None,
         help="comma-separated backends, or 'all' available ones (default: all)",
     )
     parser.add_argument(
@@ -73,7 +95,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bench-every",
         type=int,
-        default=BENCH_EVERY,
+        default=None,
         metavar="K",
         help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 400 of each set's "
         "2,000, every 50th control tick; 1: all of them, about 4x longer)",
@@ -83,15 +105,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=RUN_BUDGET_S,
         metavar="S",
-        help=f"wall-time budget of each closed-loop run in [s] (default: {RUN_BUDGET_S:g}): a run "
-        "that spends it stops between ticks; its row says how far it got (simulated_s) and "
-        "its verdict is of what it simulated. 0: no budget, every run simulates its full "
-        "duration (slow backends then take minutes per scenario)",
+        help=f"the most wall time a closed-loop run may take in [s] (default: {RUN_BUDGET_S:g}); "
+        "each backend's budget comes from its per-tick time in the run's bench (run.json lists "
+        "them): one that keeps up with the loop can finish, one whose solves alone would take "
+        "more than S is cut early. A run stops between ticks when its budget is spent; its row says how far "
+        "it got (simulated_s). 0: no budget (slow backends then take minutes per scenario)",
     )
     parser.add_argument(
         "--repeat",
         type=int,
-        default=REPEAT,
+        default=None,
         metavar="R",
         help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})",
     )
@@ -128,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
             f"must be a number of seconds >= 0 (0: no budget), got {args.run_budget}",
             key="--run-budget",
         )
+    for key, value in (QUICK if args.quick else FULL).items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
     config = RunConfig(
         out=Path(args.out),
         problems=Path(args.problems),

@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     backend = select_backend(args.backend)
     scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
-    warmup_logged(log)
+    warmup_logged(log, [backend])
     result = simulate(
         scenario,
         backend,

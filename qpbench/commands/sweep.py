@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     check_folder(args.out)  # before any worker starts
     if Path(args.out).exists():
         check_output(Path(args.out) / CSV_NAME, force=args.force, resume=args.resume)
-    warmup_logged(log)
+    warmup_logged(log, backends)
     executor = make_executor(args.executor, args.jobs, args.scheduler, args.security)
     try:
         if executor.concurrency > 1:

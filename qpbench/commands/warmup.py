@@ -1,8 +1,9 @@
 """``qpbench warmup``: compile (or load from the cache) every numba kernel, and nothing else.
 
-``run``, ``bench``, ``simulate`` and ``closed-loop`` do the same before their
-first timed call; this command does it ahead (after an install, in a CI
-image) and says whether the cache already held the kernels.
+``run``, ``bench``, ``simulate``, ``closed-loop``, ``sweep`` and ``scaling``
+prepare the kernels (and the qpOASES shim) of the backends they run before
+their first timed call; this command prepares all of them ahead (after an
+install, in a CI image) and says whether the cache already held the kernels.
 """
 
 from __future__ import annotations

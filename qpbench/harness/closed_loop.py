@@ -94,7 +94,7 @@ class _Table:
     others: list[dict]
     csv_path: Path
     isolated: Callable[[str], bool]
-    run_budget: float | None
+    budget: Callable[[str], float | None]
     on_row: Callable[[dict], None] | None
 
     def all_rows(self) -> list[dict]:
@@ -103,7 +103,7 @@ class _Table:
     def emit(self, key: tuple[str, str], row: dict) -> None:
         """Add a run's row and rewrite the table (atomically); tell ``on_row``."""
         row["isolated"] = self.isolated(key[1])
-        row["run_budget_s"] = self.run_budget
+        row["run_budget_s"] = self.budget(key[1])
         self.rows[key] = row
         if isinstance(row.get("log_file"), str):  # written here or by a worker process
             from ..sim.figure_log import figure_log_path
@@ -132,30 +132,29 @@ def run_closed_loop(
     run_time_limit: float | None = None,
     deadline: float | None = None,
     run_budget: float | None = None,
+    budgets: dict[str, float] | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop and tabulate them into ``out``
-    (the module docstring says how; the table: :mod:`qpbench.harness.loop_rows`).
+    """Run every (scenario, backend) pair in the loop, tabulated in ``out`` (module docstring).
 
     Args:
         scenarios, backends: Scenario names or TOML paths; backend names (each once).
-        out: Output folder (``closed_loop.csv`` and ``logs/``).
+        out: Output folder (``closed_loop.csv``, columns :mod:`~qpbench.harness.loop_rows`; ``logs/``).
         duration: Simulated time per run [s]; ``None`` keeps each scenario's ``T``.
         formulation: ``paper`` (hard task, eq. 11) or ``soft``.
         force, resume: Replace an existing table and its logs; keep its rows done under the same terms.
         jobs: Runs in parallel, each in a worker process of its own (with 1, only isolated ones).
         on_row: Called with each new row as soon as it is written.
         skip: Backend -> reason: a ``skipped`` row per scenario instead of a run.
-        isolate: ``auto`` (backends whose class has ``risky = True``), ``always``
-            or ``never``: an isolated run is made in a worker process with a
-            deadline (``run_time_limit`` [s], default :func:`~qpbench.harness.loop_workers.run_deadline`).
+        isolate: ``auto`` (backends whose class has ``risky = True``), ``always`` or ``never``: an
+            isolated run is made in a worker process with a deadline (``run_time_limit`` [s],
+            default :func:`~qpbench.harness.loop_workers.run_deadline`).
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
-        run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
-            it is spent (status ``budget``), the verdict judged on what was simulated.
+        run_budget: Wall-time budget of each run [s] (default: none), of a backend's in ``budgets``
+            (backend -> [s]): a run stops between ticks once it is spent (status ``budget``).
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
-        ParamError: a bad formulation, duration or job count, or a backend or
-            scenario listed twice.
+        ParamError: a bad formulation, duration or job count, or a name listed twice.
     """
     _check_arguments(
         scenarios,
@@ -176,18 +175,20 @@ def run_closed_loop(
     csv_path, previous_rows = _prepare_output(out, force, resume)
 
     order = [(s, b) for s in scenarios for b in backends]
-    rows, others = _kept_rows(order, previous_rows, formulation, duration, run_budget, skip or {})
+
+    budget = {b: (budgets or {}).get(b, run_budget) for b in backends}.get  # backend -> budget
+    rows, others = _kept_rows(order, previous_rows, formulation, duration, budget, skip or {})
     todo = [k for k in order if k not in rows]
 
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
-    table = _Table(order, rows, others, csv_path, _isolated, run_budget, on_row)
+    table = _Table(order, rows, others, csv_path, _isolated, budget, on_row)
     # (key, what to run, deadline of an isolated run or None)
     items = [
         (
             (s, b),
-            RunSpec(s, b, formulation, duration, str(out), deadline, run_budget),
+            RunSpec(s, b, formulation, duration, str(out), deadline, budget(b)),
             run_deadline(s, duration, run_time_limit) if _isolated(b) else None,
         )
         for s, b in todo
@@ -235,7 +236,7 @@ def _kept_rows(
     previous_rows: list[dict],
     formulation: str,
     duration: float | None,
-    run_budget: float | None,
+    budget: Callable[[str], float | None],
     skip: dict[str, str],
 ) -> tuple[dict, list[dict]]:
     """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
@@ -243,7 +244,7 @@ def _kept_rows(
     done = {
         (str(r["scenario"]), str(r["backend"])): r
         for r in previous_rows
-        if same_run(r, formulation, duration, run_budget)
+        if same_run(r, formulation, duration, budget(str(r["backend"])))
     }
     others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
     rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}

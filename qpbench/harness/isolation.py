@@ -102,7 +102,8 @@ def _worker_main(conn, spec: dict) -> None:
         from ..backends import get_backend, load_plugins
         from ..jit import warmup
 
-        warmup()  # loads the kernels the parent compiled; nothing is timed yet
+        # loads the kernels the parent compiled for this backend; nothing is timed yet
+        warmup([spec["backend"]], loop=False)
         load_plugins(spec["plugins"])
         backend = get_backend(spec["backend"], spec["profile"], **spec["settings"])
         runner = LocalRunner(backend, spec["time_limit"], spec["sequential"], spec["repeat"])

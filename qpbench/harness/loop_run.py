@@ -60,11 +60,13 @@ def simulate_one(spec: RunSpec, log_path: Path | None) -> tuple[dict, pd.DataFra
     :func:`qpbench.sim.loop.simulate`; the warm-up is outside it).
     Exceptions propagate (the caller turns them into an error row).
     """
+    from ..jit import warmup
     from ..sim.figure_log import figure_log_path, write_figure_log
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
     scenario = load_scenario(spec.scenario)
+    warmup([spec.backend])  # the loop's and this backend's kernels, before the clock
     # warm-up: a discarded run of a few ticks, so one-off costs (solver imports, first-call
     # allocations; the numba kernels are ready before, see qpbench.jit) stay out of the timed run
     simulate(

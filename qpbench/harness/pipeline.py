@@ -13,12 +13,20 @@
    the minimum), one CSV per scenario in ``OUT/bench/``;
 3. closed loop: every chosen scenario with every chosen backend in the loop,
    ``OUT/closed_loop.csv`` and ``OUT/logs/`` (:mod:`qpbench.harness.closed_loop`).
-   No backend is left out: each run has a wall-time budget (``run_budget``,
-   default :data:`RUN_BUDGET_S`) and stops between ticks when it is spent;
+   No backend is left out: each run has a wall-time budget, the backend's own,
+   decided from its per-tick time in step 2 (:func:`closed_loop_budgets`, at most
+   ``run_budget``, default :data:`RUN_BUDGET_S`; ``run.json`` lists them), and
+   stops between ticks when it is spent;
    its row then has status ``budget``, the simulated time it reached and a
    verdict of what it simulated (the trajectory up to the stop is the uncut
    run's: a simulated trajectory does not depend on how long a solve took);
 4. report: ``OUT/report.md`` and ``OUT/plots/`` (:func:`qpbench.report.write_report`).
+
+Before step 1 the kernels of the chosen backends are compiled or loaded
+(:func:`qpbench.jit.warmup`), and the references of step 2 are solved (or
+read from the cache) once per set. Each step is a phase with a line when it
+starts and ends (a bar with its ETA on a terminal); ``run.json`` keeps their
+wall times (``phase_wall_time_s``).
 
 The run works in ``OUT/.partial/`` and, once everything is done, replaces
 the previous run's outputs in ``OUT`` (:data:`OUTPUTS`), each by a rename: a
@@ -63,10 +71,16 @@ EVERY = 10
 #: README's first command (install, compile, bench, closed loop, report) stays within
 #: its time target on 2 cores (measured times: README). ``--bench-every 1`` benches all 2,000.
 BENCH_EVERY = 5
-#: Wall-time budget of each closed-loop run [s] (``--run-budget``): the backends that keep
-#: up with the loop finish their runs well within it; the slow ones get as far as it allows,
-#: which bounds the whole job (how far each gets, measured: README).
-RUN_BUDGET_S = 5.0
+#: The most wall time a closed-loop run may take [s] (``--run-budget``). Each backend's own
+#: budget is decided from its per-tick time in the run's bench (:func:`closed_loop_budgets`):
+#: the backends that keep up with the loop finish their runs; one whose solves alone would take
+#: longer is cut at :data:`BUDGET_FLOOR_S` (how far each gets: the run's closed_loop.csv).
+RUN_BUDGET_S = 10.0
+#: A backend's closed-loop budget is this many times the run its bench median predicts
+#: (:func:`closed_loop_budgets`): room for the loop's own work and a busy machine.
+BUDGET_MARGIN = 3.0
+#: The least closed-loop budget of a backend [s] (:func:`closed_loop_budgets`).
+BUDGET_FLOOR_S = 2.0
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
 REPEAT = 3
 #: Backends that may regenerate a missing problem set, first available wins.
@@ -256,8 +270,14 @@ def _promote(staging: Path, out: Path) -> None:
 
 
 def run_all(config: RunConfig) -> RunOutcome:
-    """Problem sets, bench, closed loop and report (module docstring); outputs replaced at the end."""
+    """Problem sets, bench, closed loop and report (module docstring); outputs replaced at the end.
+
+    Each step is a phase of :class:`~qpbench.harness.phases.Phases` (a line when
+    it starts and ends, a bar with its ETA on a terminal); their wall times go
+    into ``run.json`` (``phase_wall_time_s``).
+    """
     from ..jit import warmup_logged
+    from .phases import Phases
 
     started = time.perf_counter()
     config.validate()
@@ -269,37 +289,39 @@ def run_all(config: RunConfig) -> RunOutcome:
         shutil.rmtree(staging)
     staging.mkdir(parents=True, exist_ok=True)
 
-    warmup_logged(log)  # before anything is timed; the worker processes load them from the cache
+    phases = Phases(log, bars=None if config.progress else False)
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
-    total = len(missing) + len(bench_scenarios) + len(config.scenarios) * len(config.backends) + 1
-    from tqdm import tqdm
-
-    bar = tqdm(
-        total=total, unit="step", desc="qpbench run", disable=None if config.progress else True
-    )
-    try:
-        for s in missing:
-            bar.set_description(f"problem set {s}")
-            make_problem_set(s, problems / s, _dump_backend(config.backends))
-            bar.update(1)
-        failures = failed_solves = _bench(config, bench_scenarios, staging / "bench", bar)
-        bar.set_description("closed loop")
-        table, not_ok = _closed_loop(config, staging, bar)
-        failures += not_ok  # failed runs and runs that failed their verdict
-        bar.set_description("report")
-        manifest = _manifest(config, bench_scenarios, table)
+    dump = [_dump_backend(config.backends)] if missing else []
+    with phases.phase("compile"):
+        # only the kernels and shims of the backends this run runs, before anything is timed;
+        # the worker processes load them from the cache
+        warmup_logged(log, [*config.backends, *dump])
+    for s in missing:
+        with phases.phase(f"problem set {s}"):
+            make_problem_set(s, problems / s, dump[0])
+    with phases.phase("references", total=len(bench_scenarios), unit="set") as phase:
+        subsets = {}
+        for s in bench_scenarios:
+            phase.describe(s)
+            subsets[s] = _bench_subset(config, s)
+            phase.update()
+    failures, per_tick_s = _bench(config, subsets, staging / "bench", phases)
+    failed_solves = failures
+    budgets = closed_loop_budgets(config, per_tick_s)
+    table, not_ok = _closed_loop(config, staging, phases, budgets)
+    failures += not_ok  # failed runs and runs that failed their verdict
+    with phases.phase("report"):
         from ..report import write_report
 
         write_report([staging / "bench", staging / "closed_loop.csv"], staging, force=True)
         _compress_bench(staging / "bench")
-        bar.update(1)
-        manifest["wall_time_s"] = round(time.perf_counter() - started, 1)
-        from ..atomic import write_text
+    manifest = _manifest(config, bench_scenarios, table, budgets)
+    manifest["phase_wall_time_s"] = dict(phases.times_s)
+    manifest["wall_time_s"] = round(time.perf_counter() - started, 1)
+    from ..atomic import write_text
 
-        write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
-        _promote(staging, out)
-    finally:
-        bar.close()
+    write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
+    _promote(staging, out)
     return RunOutcome(failures, out / "report.md", time.perf_counter() - started, failed_solves)
 
 
@@ -311,66 +333,138 @@ def _bench_scenarios(scenarios: list[str]) -> list[str]:
     return [s for s in scenarios if s in paper] or list(scenarios)
 
 
-def _bench(config: RunConfig, scenarios: list[str], bench_dir: Path, bar) -> int:
-    """Bench every backend on each scenario's problem set; the number of failed solves."""
+def _bench_subset(config: RunConfig, scenario: str) -> tuple[ProblemSet, list]:
+    """A scenario's bench problems and their references (:func:`bench_subset`)."""
     from ..formats import load_problems
+
+    return bench_subset(
+        load_problems(Path(config.problems) / scenario), config.duration, config.bench_every
+    )
+
+
+def _bench(
+    config: RunConfig, subsets: dict, bench_dir: Path, phases
+) -> tuple[int, dict[str, float]]:
+    """Bench every backend on each scenario's problems (one phase per set).
+
+    Returns the number of failed solves and each backend's median per-tick
+    time over all sets [s] (the minimum of its timed repeats per problem;
+    backends without a timed solve are left out).
+    """
+    import statistics
+
     from .bench import BenchConfig, run_bench
 
     failures = 0
-    for s in scenarios:
-        bar.set_description(f"bench {s}")
-        subset, refs = bench_subset(
-            load_problems(Path(config.problems) / s), config.duration, config.bench_every
-        )
-        summary = run_bench(
-            subset,
-            BenchConfig(
-                backends=list(config.backends),
-                profile="default",
-                mode="sequential",
-                repeat=config.repeat,
-                memory_budget=config.memory_budget,
-            ),
-            bench_dir / f"{s}.csv",
-            resume=config.resume,
-            force=not config.resume,
-            references=refs,
-        )
+    times: dict[str, list[float]] = {}
+    for s, (subset, refs) in subsets.items():
+        with phases.phase(f"bench {s}", bar=False):
+            summary = run_bench(
+                subset,
+                BenchConfig(
+                    backends=list(config.backends),
+                    profile="default",
+                    mode="sequential",
+                    repeat=config.repeat,
+                    memory_budget=config.memory_budget,
+                ),
+                bench_dir / f"{s}.csv",
+                resume=config.resume,
+                force=not config.resume,
+                references=refs,
+                progress=bool(phases.bars),  # its own bar, one step per solve
+            )
         log.info("bench %s: %s", s, summary.line())
         for line in summary.table().splitlines():
-            log.info("bench %s: %s", s, line)
+            log.debug("bench %s: %s", s, line)
         failures += summary.failures
-        bar.update(1)
-    return failures
+        for name, stats in summary.backends.items():
+            times.setdefault(name, []).extend(stats.times_s)
+    return failures, {b: statistics.median(t) for b, t in times.items() if t}
 
 
-def _closed_loop(config: RunConfig, staging: Path, bar):
+def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict[str, float]:
+    """Each backend's closed-loop wall-time budget [s], from its per-tick time in this run's bench.
+
+    A backend whose bench median ``t`` predicts a run of ``ticks * t`` [s]
+    (``ticks``: the longest chosen scenario's) gets :data:`BUDGET_MARGIN`
+    times that, at least :data:`BUDGET_FLOOR_S` (the loop's own work per
+    tick) and at most ``run_budget``, so that a backend that keeps up with
+    the loop finishes its runs. One whose solves alone would take longer
+    than ``run_budget`` gets :data:`BUDGET_FLOOR_S` only: it cannot finish
+    within the budget, so its row is cut (status ``budget``) either way, and
+    the time goes to the runs that can finish. No bench time (not benched,
+    every solve failed): the ``run_budget``. ``run_budget`` ``None``: no
+    budgets (``{}``).
+    """
+    if config.run_budget is None:
+        return {}
+    from ..sim.scenario import load_scenario
+
+    ticks = 0
+    for name in config.scenarios:
+        sc = load_scenario(name)
+        duration = config.duration if config.duration is not None else sc.duration
+        ticks = max(ticks, math.ceil(duration / sc.dt))
+    floor = min(BUDGET_FLOOR_S, config.run_budget)
+    budgets = {}
+    for backend in config.backends:
+        t = per_tick_s.get(backend)
+        if t is None or not math.isfinite(t):
+            budgets[backend] = config.run_budget
+            continue
+        predicted = ticks * t
+        if predicted > config.run_budget:
+            budgets[backend] = floor
+        else:
+            budgets[backend] = round(
+                min(config.run_budget, max(floor, BUDGET_MARGIN * predicted)), 3
+            )
+    return budgets
+
+
+def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, float]):
     """Every scenario with every backend in the loop; the table and its runs that are not ok."""
     from .closed_loop import run_closed_loop
 
-    def on_row(row):
-        bar.set_description(f"closed loop {row['scenario']}")
-        bar.update(1)
-        if config.on_row is not None:
-            config.on_row(row)
+    runs = len(config.scenarios) * len(config.backends)
+    left = {s: len(config.backends) for s in config.scenarios}
+    with phases.phase("closed loop", total=runs, unit="run") as phase:
+        started = time.perf_counter()
 
-    outcome = run_closed_loop(
-        config.scenarios,
-        config.backends,
-        staging,
-        duration=config.duration,
-        formulation="paper",
-        force=not config.resume,
-        resume=config.resume,
-        jobs=config.jobs,
-        on_row=on_row,
-        run_budget=config.run_budget,
-    )
+        def on_row(row):
+            phase.describe(f"{row['scenario']} {row['backend']}")
+            phase.update()
+            s = row["scenario"]
+            left[s] = left.get(s, 1) - 1
+            if left[s] == 0:  # a scenario's last run: one line per scenario
+                log.info(
+                    "closed loop %s: %d runs done (%.1f s into the closed loop)",
+                    s,
+                    len(config.backends),
+                    time.perf_counter() - started,
+                )
+            if config.on_row is not None:
+                config.on_row(row)
+
+        outcome = run_closed_loop(
+            config.scenarios,
+            config.backends,
+            staging,
+            duration=config.duration,
+            formulation="paper",
+            force=not config.resume,
+            resume=config.resume,
+            jobs=config.jobs,
+            on_row=on_row,
+            run_budget=config.run_budget,
+            budgets=budgets or None,
+        )
     return outcome.table, outcome.not_ok
 
 
-def _manifest(config: RunConfig, bench_scenarios: list[str], table) -> dict:
-    """``run.json``: what was asked, and which closed-loop runs were cut or not ok."""
+def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dict) -> dict:
+    """``run.json``: what was asked, each backend's closed-loop budget, which runs were cut or not ok."""
     stopped = table[table["status"] == "budget"]
     return {
         "command": "qpbench run",
@@ -379,6 +473,8 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table) -> dict:
         "backends": config.backends,
         "duration_s": config.duration,
         "run_budget_s": config.run_budget,
+        # each backend's budget, decided from its per-tick time in this run's bench
+        "closed_loop_budget_s": budgets,
         "bench_every": config.bench_every,
         "closed_loop_stopped_by_budget": {
             f"{r.scenario}/{r.backend}": round(float(r.simulated_s), 3)
@@ -391,5 +487,6 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table) -> dict:
         },
         "bench_repeat": config.repeat,
         "problems": str(config.problems),
+        "phase_wall_time_s": {},
         "wall_time_s": None,
     }

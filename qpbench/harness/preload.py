@@ -1,8 +1,9 @@
 """Imported by the worker processes' forkserver only: the kernels loaded once, for every fork.
 
 :func:`qpbench.harness.workers.context` names this module in the
-forkserver's preload list, after the parent has compiled every numba kernel
-into the on-disk cache (:func:`qpbench.jit.warmup`). Importing it loads them
+forkserver's preload list, after the parent has compiled the kernels it runs
+into the on-disk cache (:func:`qpbench.jit.warmup`). Importing it loads those
+the parent prepared (named in :data:`qpbench.harness.workers.PRELOAD_KERNELS_ENV`)
 into the forkserver, so each worker forked from it starts with them in
 memory (its own :func:`~qpbench.jit.warmup` returns at once) instead of
 loading them again. This is the one qpbench module that does work when
@@ -14,8 +15,11 @@ an exception would stop the forkserver.
 from __future__ import annotations
 
 try:
-    from ..jit import warmup
+    import os
 
-    warmup()
+    from ..jit import prepare
+    from .workers import PRELOAD_KERNELS_ENV
+
+    prepare([k for k in os.environ.get(PRELOAD_KERNELS_ENV, "").split(",") if k])
 except Exception:  # noqa: BLE001 - see the module docstring
     pass

@@ -7,13 +7,14 @@ so both start workers the same way and word a death the same way.
 Start method: ``forkserver`` where the platform has one, else ``spawn``. The
 forkserver is started once, before the first worker's clock, with qpbench
 preloaded (:mod:`qpbench.harness.preload` loads the numba kernels the parent
-compiled into the on-disk cache), so a worker is a fork of a process that
+prepared, and only those, from the on-disk cache), so a worker is a fork of a process that
 already holds qpbench and the kernels and never compiles.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 from typing import TYPE_CHECKING
 
@@ -34,6 +35,10 @@ __all__ = [
 #: Time allowed for the forkserver's preload and for a worker to start [s].
 START_TIMEOUT_S = 120.0
 
+#: Environment variable naming the kernel groups the forkserver's preload prepares
+#: (:func:`qpbench.jit.prepared` of the process that starts it, comma-separated).
+PRELOAD_KERNELS_ENV = "QPBENCH_PRELOAD_KERNELS"
+
 #: Modules the forkserver imports once, for every worker forked from it.
 PRELOAD = (
     "qpbench.harness.workers",
@@ -48,21 +53,23 @@ _CTX = None
 
 
 def context() -> multiprocessing.context.BaseContext:
-    """The start method's context, every numba kernel compiled in this process first.
+    """The start method's context; the forkserver preloads the kernels this process prepared.
 
-    Called before each worker starts: the warm-up compiles what the on-disk
-    cache lacks here, once, so that no worker ever compiles (it only loads).
+    The command has compiled (or loaded) the kernels of the backends it runs
+    before (:func:`qpbench.jit.warmup`), so no worker ever compiles: it
+    only loads them.
     """
     global _CTX
-    from ..jit import warmup
+    from ..jit import prepared
 
-    warmup()  # at once after the first call
     if _CTX is None:
         method = (
             "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         )
         ctx = multiprocessing.get_context(method)
         if method == "forkserver":
+            # the forkserver loads what this process prepared (the command's backends' kernels)
+            os.environ[PRELOAD_KERNELS_ENV] = ",".join(prepared())
             ctx.set_forkserver_preload(list(PRELOAD))
             # start the server now and wait for its preload (a no-op child), so that no
             # worker's deadline ever covers it

@@ -236,10 +236,12 @@ class _Run:
         self.wall = 0.0
 
     def warm(self) -> None:
-        """Compile (or load from the numba cache) every kernel before the clock starts."""
-        from ..jit import warmup
+        """Compile (or load from the numba cache) the loop's own kernels before the clock starts.
 
-        warmup()
+        The backend's kernels (the network's) are the caller's to prepare,
+        with :func:`qpbench.jit.warmup` for the backends it runs, as every
+        command and the harness do.
+        """
         ctrl = self.ctrl
         arrays = ctrl.build_arrays(self.theta, 0.0, ctrl.kp, ctrl.kd, self.soft_primary)
         warm_post_kernel(ctrl, self.surface, self.dt, self.theta, arrays)

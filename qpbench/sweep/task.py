@@ -57,8 +57,10 @@ def closed_loop_run(scenario: Scenario, backend: str) -> tuple[dict, pd.DataFram
     backend goes by name, so the ``rnn`` backends get the scenario's
     ``[rnn]`` settings and its ``dt``.
     """
+    from ..jit import warmup
     from ..sim.loop import simulate
 
+    warmup([backend])  # loads what the parent compiled (nothing more), before the clock
     simulate(scenario, backend, duration=WARMUP_TICKS * scenario.dt)
     result = simulate(scenario, backend)
     return result.summary, result.log

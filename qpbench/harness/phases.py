@@ -1,0 +1,81 @@
+"""A long job told phase by phase: a progress bar on a terminal, one line per phase off it.
+
+:class:`Phases` times each phase of a job (``qpbench run``: compile,
+references, bench per set, closed loop, report). Every phase logs one line
+when it starts and one when it ends, with its wall time; on a terminal the
+phase also draws a tqdm bar with its ETA (``phase.update(n)`` as work is
+done), off a terminal there is no bar, so a log file gets exactly those two
+lines per phase. The wall times (:attr:`Phases.times_s`) go into the job's
+``run.json``.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+__all__ = ["Phase", "Phases"]
+
+
+@dataclass
+class Phase:
+    """One phase in progress: :meth:`update` counts work done (draws the bar on a terminal)."""
+
+    name: str
+    bar: object | None = None
+
+    def update(self, n: int = 1) -> None:
+        if self.bar is not None:
+            self.bar.update(n)
+
+    def describe(self, text: str) -> None:
+        """Show what is being done now beside the bar (a terminal only)."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(text, refresh=False)
+
+
+@dataclass
+class Phases:
+    """The phases of a job, each timed and told (module docstring).
+
+    Attributes:
+        log: Where the start and end lines go (INFO).
+        bars: Draw progress bars: ``None`` (the default) when stderr is a
+            terminal, ``False`` never (``-q``, or a bar drawn by the phase's
+            own code).
+        times_s: Wall time of each finished phase [s], in the order run.
+    """
+
+    log: logging.Logger
+    bars: bool | None = None
+    times_s: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.bars is None:
+            self.bars = sys.stderr.isatty()
+
+    @contextmanager
+    def phase(self, name: str, total: int | None = None, unit: str = "step", bar: bool = True):
+        """Run a phase: log its start, yield a :class:`Phase`, log its end and keep its time.
+
+        ``total``: the work units the phase will count (its bar's length, for
+        the ETA); ``bar=False``: the phase's own code draws one.
+        """
+        self.log.info("%s: started", name)
+        progress = None
+        if self.bars and bar:
+            from tqdm import tqdm
+
+            progress = tqdm(total=total, unit=unit, desc=name, leave=False, file=sys.stderr)
+        start = time.perf_counter()
+        try:
+            yield Phase(name, progress)
+        finally:
+            if progress is not None:
+                progress.close()
+        seconds = time.perf_counter() - start
+        self.times_s[name] = round(self.times_s.get(name, 0.0) + seconds, 1)
+        self.log.info("%s: done in %.1f s", name, seconds)
