@@ -10,7 +10,11 @@ naming the file and the key)::
                   also benchmarks)
     [robot]       link_lengths [m], theta0 [rad], theta_min, theta_max [rad],
                   velocity_min, velocity_max [rad/s]
-    [key_points]  points_per_link, include_joints, link_radius [m]
+    [key_points]  points_per_link, include_joints, link_radius [m], kind (optional,
+                  default "paper": the paper's fixed key points; "closest": an
+                  obstacle row at each link's point closest to each obstacle, end
+                  effector's link included, beyond the paper; see
+                  :class:`qpbench.robot.kinematics.KeyPoints`)
     [path]        kind = "cosine": centre, amplitude [m], omega [rad/s], phase [rad]
                   kind = "polyline": times [s], points [[x, y], ...] [m]
     [contact]     point [m], normal, stiffness [N/m], damping [N s/m],
@@ -38,6 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..exceptions import ScenarioError, check_known_keys
+from ..robot.kinematics import KEY_POINT_KINDS
 from .verdict import DEFAULT_SAFETY_MARGIN
 
 if TYPE_CHECKING:
@@ -63,7 +68,12 @@ _SCHEMA: dict[str, dict[str, str]] = {
         "velocity_min": _VEC,
         "velocity_max": _VEC,
     },
-    "key_points": {"points_per_link": _INT, "include_joints": _BOOL, "link_radius": _NUM},
+    "key_points": {
+        "points_per_link": _INT,
+        "include_joints": _BOOL,
+        "link_radius": _NUM,
+        "kind": _STR,
+    },
     "contact": {
         "point": _VEC2,
         "normal": _VEC2,
@@ -103,7 +113,11 @@ _VERDICT_SCHEMA = {
     "safety_margin": _NUM,
 }
 #: Optional keys and their defaults, per table.
-_OPTIONAL = {"scenario": {"in_paper": False}, "verdict": {"safety_margin": DEFAULT_SAFETY_MARGIN}}
+_OPTIONAL = {
+    "scenario": {"in_paper": False},
+    "verdict": {"safety_margin": DEFAULT_SAFETY_MARGIN},
+    "key_points": {"kind": "paper"},
+}
 
 
 def _typed(value, kind: str, file, key: str):
@@ -315,6 +329,12 @@ def _check_values(data: dict, file) -> None:
             "no key points (points_per_link = 0 and include_joints = false)",
             path=file,
             key="key_points.points_per_link",
+        )
+    if kp["kind"] not in KEY_POINT_KINDS:
+        raise ScenarioError(
+            f"expected one of {', '.join(KEY_POINT_KINDS)}, got {kp['kind']!r}",
+            path=file,
+            key="key_points.kind",
         )
     if kp["link_radius"] < 0:
         raise ScenarioError(
