@@ -126,6 +126,7 @@ def run_closed_loop(
     run_time_limit: float | None = None,
     deadline: float | None = None,
     run_budget: float | None = None,
+    overrides: dict | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop and tabulate them into ``out``
     (the module docstring says how; the table: :mod:`qpbench.harness.loop_rows`).
@@ -145,6 +146,9 @@ def run_closed_loop(
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
         run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
             it is spent (status ``budget``), the verdict judged on what was simulated.
+        overrides: Values set over every scenario file's (dotted key -> value,
+            :func:`qpbench.sim.scenario.apply_overrides`; ``--set``); a resumed row is kept only
+            when it was made under the same ones (its ``scenario_overrides``).
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -170,7 +174,10 @@ def run_closed_loop(
     csv_path, previous_rows = _prepare_output(out, force, resume)
 
     order = [(s, b) for s in scenarios for b in backends]
-    rows, others = _kept_rows(order, previous_rows, formulation, duration, run_budget, skip or {})
+    overrides = dict(overrides or {})
+    rows, others = _kept_rows(
+        order, previous_rows, formulation, duration, run_budget, skip or {}, overrides
+    )
     todo = [k for k in order if k not in rows]
 
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
@@ -181,7 +188,16 @@ def run_closed_loop(
     items = [
         (
             (s, b),
-            RunSpec(s, b, formulation, duration, str(out), deadline, run_budget),
+            RunSpec(
+                s,
+                b,
+                formulation,
+                duration,
+                str(out),
+                deadline,
+                run_budget,
+                tuple(overrides.items()),
+            ),
             run_deadline(s, duration, run_time_limit) if _isolated(b) else None,
         )
         for s, b in todo
@@ -231,13 +247,14 @@ def _kept_rows(
     duration: float | None,
     run_budget: float | None,
     skip: dict[str, str],
+    overrides: dict,
 ) -> tuple[dict, list[dict]]:
     """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
     and the resumed table's rows of other pairs (kept, after this run's)."""
     done = {
         (str(r["scenario"]), str(r["backend"])): r
         for r in previous_rows
-        if same_run(r, formulation, duration, run_budget)
+        if same_run(r, formulation, duration, run_budget, overrides)
     }
     others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
     rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
