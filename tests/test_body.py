@@ -276,8 +276,9 @@ def test_disk_on_path_closest_keeps_the_body_out_and_the_task_goes_infeasible():
 
 @pytest.mark.parametrize("kind", ["paper", "closest"])
 def test_moving_disk(kind):
-    """A disk crossing link 2 between key points: the paper's key points let it 20+ mm into the
-    link (every key point clear); closest-point rows keep the whole body d_safe away, task held."""
+    """A disk crossing link 2 between key points: by 10 s the paper's key points let it 15+ mm
+    into the link, every key point clear; closest-point rows keep the whole body d_safe away,
+    the task held."""
     from qpbench.sim.loop import simulate
     from qpbench.sim.scenario import load_scenario
 
@@ -288,7 +289,7 @@ def test_moving_disk(kind):
     s = simulate(scenario, "daqp").summary
     assert s["key_point_rule"] == "held"
     if kind == "paper":
-        assert s["verdict"] == "unsafe" and s["min_body_distance"] < -0.02
+        assert s["verdict"] == "unsafe" and s["min_body_distance"] < -0.015
         assert (
             s["verdict_reasons"].startswith("link 2 ")
             and "inside disk 'blob'" in (s["verdict_reasons"])

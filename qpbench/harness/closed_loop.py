@@ -146,9 +146,8 @@ def run_closed_loop(
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
         run_budget: Wall-time budget of each run [s] (default: none): a run stops between ticks once
             it is spent (status ``budget``), the verdict judged on what was simulated.
-        overrides: Values set over every scenario file's (dotted key -> value,
-            :func:`qpbench.sim.scenario.apply_overrides`; ``--set``); a resumed row is kept only
-            when it was made under the same ones (its ``scenario_overrides``).
+        overrides: Values set over every scenario file's (``--set``; a resumed row is kept
+            only when made under the same: its ``scenario_overrides``).
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -175,36 +174,32 @@ def run_closed_loop(
 
     order = [(s, b) for s in scenarios for b in backends]
     overrides = dict(overrides or {})
-    rows, others = _kept_rows(
-        order, previous_rows, formulation, duration, run_budget, skip or {}, overrides
-    )
+    kept = (formulation, duration, run_budget, skip or {}, overrides)
+    rows, others = _kept_rows(order, previous_rows, *kept)
     todo = [k for k in order if k not in rows]
 
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
     table = _Table(order, rows, others, csv_path, _isolated, run_budget, on_row)
-    # (key, what to run, deadline of an isolated run or None)
-    items = [
-        (
-            (s, b),
-            RunSpec(
-                s,
-                b,
-                formulation,
-                duration,
-                str(out),
-                deadline,
-                run_budget,
-                tuple(overrides.items()),
-            ),
-            run_deadline(s, duration, run_time_limit) if _isolated(b) else None,
-        )
-        for s, b in todo
-    ]
+    spec = dict(formulation=formulation, duration=duration, out=str(out), deadline=deadline)
+    spec.update(run_budget=run_budget, overrides=tuple(overrides.items()))
+    items = _items(todo, spec, _isolated, run_time_limit)
     _run_items(items, jobs, plugins, table.emit)
     write_table(table.all_rows(), csv_path)
     return _outcome(csv_path, len(todo), len(order) - len(todo))
+
+
+def _items(todo, spec: dict, isolated, run_time_limit: float | None) -> list[tuple]:
+    """(key, what to run, deadline of an isolated run or None) of each pair to run."""
+    return [
+        (
+            (s, b),
+            RunSpec(s, b, **spec),
+            run_deadline(s, spec["duration"], run_time_limit) if isolated(b) else None,
+        )
+        for s, b in todo
+    ]
 
 
 def _prepare_output(out: Path, force: bool, resume: bool) -> tuple[Path, list[dict]]:

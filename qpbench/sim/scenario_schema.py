@@ -317,29 +317,7 @@ def _check_values(data: dict, file) -> None:
             path=file,
             key="robot.velocity_min",
         )
-    kp = data["key_points"]
-    if kp["points_per_link"] < 0:
-        raise ScenarioError(
-            f"must be >= 0, got {kp['points_per_link']}",
-            path=file,
-            key="key_points.points_per_link",
-        )
-    if kp["points_per_link"] == 0 and not kp["include_joints"]:
-        raise ScenarioError(
-            "no key points (points_per_link = 0 and include_joints = false)",
-            path=file,
-            key="key_points.points_per_link",
-        )
-    if kp["kind"] not in KEY_POINT_KINDS:
-        raise ScenarioError(
-            f"expected one of {', '.join(KEY_POINT_KINDS)}, got {kp['kind']!r}",
-            path=file,
-            key="key_points.kind",
-        )
-    if kp["link_radius"] < 0:
-        raise ScenarioError(
-            f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius"
-        )
+    _check_key_points(data["key_points"], file)
     c = data["contact"]
     if np.hypot(*c["normal"]) < 1e-12:
         raise ScenarioError("must not be zero", path=file, key="contact.normal")
@@ -362,6 +340,32 @@ def _check_values(data: dict, file) -> None:
             raise ScenarioError(
                 f"must be > 0 [m], got {o['radius']}", path=file, key=f"obstacles[{i}].radius"
             )
+
+
+def _check_key_points(kp: dict, file) -> None:
+    """The ``[key_points]`` table: some key points, a known kind, a radius >= 0."""
+    if kp["points_per_link"] < 0:
+        raise ScenarioError(
+            f"must be >= 0, got {kp['points_per_link']}",
+            path=file,
+            key="key_points.points_per_link",
+        )
+    if kp["points_per_link"] == 0 and not kp["include_joints"]:
+        raise ScenarioError(
+            "no key points (points_per_link = 0 and include_joints = false)",
+            path=file,
+            key="key_points.points_per_link",
+        )
+    if kp["kind"] not in KEY_POINT_KINDS:
+        raise ScenarioError(
+            f"expected one of {', '.join(KEY_POINT_KINDS)}, got {kp['kind']!r}",
+            path=file,
+            key="key_points.kind",
+        )
+    if kp["link_radius"] < 0:
+        raise ScenarioError(
+            f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius"
+        )
 
 
 def _check_signs(
