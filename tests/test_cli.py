@@ -168,8 +168,12 @@ def test_closed_loop_then_report(tmp_path):
             row = table[(table["scenario"] == scenario) & (table["backend"] == r[0])].iloc[0]
             head = t["header"]
             assert_close(
-                r[head.index("min obstacle dist (mm)")], row["min_obstacle_distance"] * 1e3, "dist"
+                r[head.index("min key-point dist (mm)")], row["min_obstacle_distance"] * 1e3, "dist"
             )
+            assert_close(
+                r[head.index("min body dist (mm)")], row["min_body_distance"] * 1e3, "body"
+            )
+            assert r[head.index("key-point rule")] == row["key_point_rule"]
             assert_close(r[head.index("solve p99 (us)")], row["solve_time_p99_s"] * 1e6, "p99")
             assert_close(r[head.index("int v^2 dt")], row["v2_integral"], "v2")
             assert int(r[head.index("infeasible ticks")]) == row["infeasible_ticks"]

@@ -7,6 +7,7 @@ against the per-tick logs they came from.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pandas as pd
@@ -380,24 +381,28 @@ from slow_backends import registered  # noqa: E402
 
 
 def test_pinv_through_the_wall_is_unsafe_and_exits_1_with_strict(tmp_path, capsys):
-    """pinv ignores obstacles: its A2 dips below d_safe - 0.5 mm at 1.48 s of wall; daqp keeps d_safe."""
+    """pinv ignores obstacles: its A2 dips below d_safe - 0.5 mm at 1.48 s of wall and link 1 goes
+    through the wall by 1.92 s; daqp keeps d_safe."""
     out = tmp_path / "o"
-    code = main(_cli_args("wall", "daqp,pinv", "1.6", out, "--strict"))
+    code = main(_cli_args("wall", "daqp,pinv", "2.2", out, "--strict"))
     assert code == 1
     table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]
-    assert daqp["verdict"] == "ok" and daqp["verdict_reasons"] == (
-        "tracking and force not judged (settle time 2 s not reached)"  # a run of 1.6 s
-    )
+    assert daqp["verdict"] == "ok" and math.isnan(daqp["verdict_reasons"])  # empty in the CSV
     assert pinv["status"] == "ok" and pinv["verdict"] == "unsafe"
     assert pinv["verdict_reasons"].startswith(
+        f"link 1 {-pinv['min_body_distance'] * 1e3:.1f} mm inside line 'wall' at "
+    )
+    assert pinv["min_body_distance"] < 0 and pinv["min_body_distance_link"] == 1
+    assert pinv["key_point_rule"] == "broken" and daqp["key_point_rule"] == "held"
+    assert pinv["key_point_rule_reason"].startswith(
         f"d_min {pinv['min_obstacle_distance'] * 1e3:.1f} mm < d_safe - 0.5 mm = 9.5 mm"
     )
-    assert pinv["min_obstacle_distance"] < 0.0095
+    assert pinv["min_obstacle_distance"] < 0.0095 and daqp["min_body_distance"] > 0.0095
     # the verdict is the simulator's, never recomputed: the tick log gives the same one
     from qpbench.sim.loop import simulate
 
-    again = simulate("wall", "pinv", duration=1.6).summary
+    again = simulate("wall", "pinv", duration=2.2).summary
     assert (again["verdict"], again["verdict_reasons"]) == (
         pinv["verdict"],
         pinv["verdict_reasons"],

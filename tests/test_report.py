@@ -180,6 +180,11 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
                     force_error_rms_after_2s=rng.uniform(0, 1e-3),
                     force_error_max_after_2s=rng.uniform(1e-3, 1e-2),
                     min_obstacle_distance=rng.uniform(0.0099, 0.0101),
+                    min_body_distance=rng.uniform(-0.03, 0.0101),
+                    min_body_distance_link=int(rng.integers(1, 5)),
+                    min_body_distance_obstacle=scenario,
+                    min_body_distance_t=rng.uniform(0, 3),
+                    key_point_rule="broken" if backend == "rnn" else "held",
                     joint_limit_violations=0,
                     infeasible_ticks=int(rng.integers(0, 200)),
                     fallback_ticks=int(rng.integers(0, 200)),
@@ -388,8 +393,20 @@ def test_closed_loop_tables_equal_csv(report_dir):
             csv_row = cl[(cl["scenario"] == scenario) & (cl["backend"] == r[0])].iloc[0]
             for (head, column, scale), shown in zip(CLOSED_LOOP_TABLE, r[1:]):
                 assert head in t["header"]
-                if scale is None:
-                    assert shown == str(csv_row[column])
+                if column == "min_body_where":  # link, obstacle and time of three columns
+                    where = (
+                        "-"
+                        if pd.isna(csv_row["min_body_distance_t"])
+                        else (
+                            f"link {int(csv_row['min_body_distance_link'])} / "
+                            f"{csv_row['min_body_distance_obstacle']} at "
+                            f"{float(csv_row['min_body_distance_t']):.2f} s"
+                        )
+                    )
+                    assert shown == where
+                elif scale is None:
+                    value = csv_row[column]
+                    assert shown == ("-" if pd.isna(value) else str(value))
                 else:
                     assert_close(
                         shown, float(csv_row[column]) * scale, f"{scenario}/{r[0]}/{column}"

@@ -25,8 +25,9 @@ PAPER = ("free", "wall", "adaptive", "narrow")
 
 def test_the_paper_scenarios_come_from_the_files_in_section_order(tmp_path, monkeypatch):
     assert paper_scenarios() == list(PAPER)
-    assert scenario_names() == [*PAPER, "adaptive_fast"]
-    assert [load_scenario(n).in_paper for n in scenario_names()] == [True] * 4 + [False]
+    OTHERS = ["adaptive_fast", "disk_on_path", "moving_disk"]
+    assert scenario_names() == [*PAPER, *OTHERS]
+    assert [load_scenario(n).in_paper for n in scenario_names()] == [True] * 4 + [False] * 3
     # a new file is a new scenario: in_paper and its section decide where it goes
     for f in SHIPPED.glob("*.toml"):
         (tmp_path / f.name).write_bytes(f.read_bytes())
@@ -45,7 +46,7 @@ def test_the_paper_scenarios_come_from_the_files_in_section_order(tmp_path, monk
 
     monkeypatch.setattr(files, "shipped_dir", lambda: tmp_path)
     assert paper_scenarios() == [*PAPER, "corner"]
-    assert scenario_names() == [*PAPER, "corner", "adaptive_fast", "aside"]
+    assert scenario_names() == [*PAPER, "corner", "adaptive_fast", "aside", *OTHERS[1:]]
     assert load_scenario("corner").name == "corner"
 
 

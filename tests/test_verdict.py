@@ -199,6 +199,9 @@ def _log(n=3000, dt=1e-3, **over):
         "tracking_error": np.zeros(n),
         "force_error": np.zeros(n),
         "d_A1_wall": np.full(n, 0.02),
+        "d_body_min": np.full(n, 0.02),
+        "d_body_link": np.full(n, 2),
+        "d_body_obstacle": np.full(n, "wall"),
     }
     for k, f in over.items():
         cols[k] = f(t)
@@ -214,6 +217,7 @@ def _judge(frame, **summary):
         limits=LIMITS,
         obstacle_columns=[("A1", "wall")],
         summary=summary,
+        obstacle_kinds={"wall": "line"},
     )
 
 
@@ -231,9 +235,25 @@ def test_clean_run_is_ok():
 
 
 def test_each_rule_and_its_reason():
-    unsafe = _judge(_log(d_A1_wall=lambda t: np.where((t >= 1.5) & (t < 1.6), 0.0064, 0.02)))
+    # the key-point rule broken, the body clear: reported beside an ok verdict
+    near = _judge(_log(d_A1_wall=lambda t: np.where((t >= 1.5) & (t < 1.6), 0.0064, 0.02)))
+    assert near.verdict == "ok" and near.key_point_rule == "broken"
+    assert near.key_point_rule_reason == (
+        "d_min 6.4 mm < d_safe - 0.5 mm = 9.5 mm (A1/wall at 1.500 s; 100 ticks)"
+    )
+    assert _judge(_log()).key_point_rule == "held"
+    # the body inside an obstacle: unsafe, naming link, obstacle, depth and time
+    unsafe = _judge(
+        _log(
+            d_body_min=lambda t: np.where((t >= 1.5) & (t < 1.6), -0.03 + (t - 1.5) / 10, 0.02),
+            d_body_link=lambda t: np.where(t >= 1.5, 2, 1),
+        )
+    )
     assert unsafe.verdict == "unsafe"
-    assert unsafe.text == "d_min 6.4 mm < d_safe - 0.5 mm = 9.5 mm (A1/wall at 1.500 s; 100 ticks)"
+    assert unsafe.text == (
+        "link 2 (end effector) 30.0 mm inside line 'wall' at 1.50 s "
+        "(the body inside an obstacle on 100 ticks from 1.500 s)"
+    )
     limits = _judge(
         _log(
             v_1=lambda t: np.where(t == 0.25, -0.7, 0.0),
@@ -269,13 +289,15 @@ def test_each_rule_and_its_reason():
 def test_precedence_failed_unsafe_limits_diverged_with_every_reason():
     frame = _log(
         d_A1_wall=lambda t: np.full_like(t, -0.09),
+        d_body_min=lambda t: np.full_like(t, -0.09),
         v_0=lambda t: np.full_like(t, 2.0),
         tracking_error=lambda t: np.full_like(t, 0.3),
     )
     v = _judge(frame)
     assert v.verdict == "unsafe"
-    assert [r.split()[0] for r in v.reasons] == ["d_min", "joint", "tracking"]
-    assert "d_min -90.0 mm" in v.reasons[0]
+    assert [r.split()[0] for r in v.reasons] == ["link", "joint", "tracking"]
+    assert v.reasons[0].startswith("link 2 (end effector) 90.0 mm inside line 'wall' at 0.00 s")
+    assert v.key_point_rule == "broken" and "d_min -90.0 mm" in v.key_point_rule_reason
     v = _judge(frame, invalid_ticks=2)
     assert v.verdict == "failed" and len(v.reasons) == 4 and v.reasons[0] == "2 non-finite answers"
     assert (
@@ -305,7 +327,7 @@ def test_a_run_stopped_early_is_incomplete_and_judged_on_what_it_simulated():
     v = _judge(diverging, stopped_early=True, simulated_s=3.0, duration=20.0, wall_budget_s=5.0)
     assert v.verdict == "incomplete" and v.reasons[1].startswith("force error 2.5 N")
     v = _judge(
-        _log(d_A1_wall=lambda t: np.full_like(t, 0.001)),
+        _log(d_body_min=lambda t: np.full_like(t, -0.001)),
         stopped_early=True,
         simulated_s=3.0,
         duration=20.0,
@@ -333,16 +355,18 @@ def test_exact_qp_passes_and_paper_rnn_fails_every_shipped_scenario(scenario):
     rnn = simulate(scenario, "rnn").summary
     assert rnn["verdict"] in ("unsafe", "diverged")
     assert "tracking error" in rnn["verdict_reasons"]  # it misses the tracking threshold everywhere
-    if scenario != "free":
-        assert rnn["verdict"] == "unsafe" and rnn["verdict_reasons"].startswith("d_min ")
+    if scenario != "free":  # its key points cross the obstacles, and so does its body
+        assert rnn["key_point_rule"] == "broken" and rnn["min_body_distance"] < 0
+        assert rnn["verdict"] == "unsafe" and rnn["verdict_reasons"].startswith("link ")
 
 
 def test_simulate_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
-    """pinv ignores the obstacle: A2 is 9.5 mm from the wall by 1.5 s (and it breaks the speed limit at t = 0)."""
+    """pinv ignores the obstacle: A2 is 9.5 mm from the wall by 1.5 s, link 1 through it by 1.92 s
+    (and it breaks the speed limit at t = 0)."""
     out = tmp_path / "s.json"
     code = main(
         [
-            *simulate_args("wall", "pinv", "1.6"),
+            *simulate_args("wall", "pinv", "2.2"),
             "--summary",
             str(out),
         ]
@@ -351,15 +375,22 @@ def test_simulate_pinv_through_the_wall_is_unsafe_and_exits_1(tmp_path, capsys):
     s = json.loads(out.read_text())
     assert s["verdict"] == "unsafe"
     assert (
-        s["verdict_reasons"].startswith("d_min ")
-        and "< d_safe - 0.5 mm = 9.5 mm (A2/wall at " in s["verdict_reasons"]
+        s["verdict_reasons"].startswith("link 1 ")
+        and " inside line 'wall' at 2.20 s" in (s["verdict_reasons"])
     )
     assert "joint speed limit broken" in s["verdict_reasons"]
+    assert s["min_body_distance"] < 0 and s["min_body_distance_link"] == 1
+    assert s["key_point_rule"] == "broken"
+    assert "< d_safe - 0.5 mm = 9.5 mm (A2/wall at " in s["key_point_rule_reason"]
     assert s["min_obstacle_distance"] < 0.0095
     err = capsys.readouterr().err.splitlines()
     warnings = [line for line in err if line.startswith("WARNING: ")]
-    # the distance is part of the verdict's output, not a plain INFO line
-    assert warnings == [f"WARNING: verdict unsafe: {s['verdict_reasons']}"]
+    # the distances are part of the verdict's output, not plain INFO lines
+    assert warnings == [
+        f"WARNING: verdict unsafe: {s['verdict_reasons']}; key-point rule broken: "
+        f"{s['key_point_rule_reason']}"
+    ]
+    assert f"{-s['min_body_distance'] * 1e3:.1f} mm inside" in warnings[0]
     assert f"d_min {s['min_obstacle_distance'] * 1e3:.1f} mm" in warnings[0]
     assert not [line for line in err if line.startswith("INFO: ") and "obstacle distance" in line]
 
@@ -388,7 +419,8 @@ def test_simulate_exact_backend_is_ok_and_exits_0(tmp_path, capsys):
         line
         for line in err
         if line.startswith("INFO: verdict ok: tracking and force not judged")
-        and "; min obstacle distance " in line
+        and "; min body distance " in line
+        and "; key-point rule held: min obstacle distance " in line
     ]
 
 

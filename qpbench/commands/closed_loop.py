@@ -71,6 +71,15 @@ def _add_selection_arguments(parser: argparse.ArgumentParser) -> None:
         default="paper",
         help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)",
     )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="overrides",
+        help="set a value over every scenario file's (repeatable), as simulate --set, e.g. "
+        "--set key_points.kind=closest",
+    )
 
 
 def _add_execution_arguments(parser: argparse.ArgumentParser) -> None:
@@ -133,9 +142,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..harness.closed_loop import log_row, run_closed_loop
     from ..jit import warmup_logged
-    from ..selection import select_backends, select_scenarios
+    from ..selection import parse_overrides, select_backends, select_scenarios
+    from ..sim.scenario import load_scenario
 
     scenarios = select_scenarios(args.scenarios)
+    overrides = parse_overrides(args.overrides)
+    for name in scenarios if overrides else ():
+        load_scenario(name, overrides=overrides)  # a bad key or value: one line naming it, exit 2
     backends = select_backends(args.backends)
     warmup_logged(log, backends)  # compiled here once: the worker processes load them
     bar = None
@@ -165,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
             run_time_limit=args.run_time_limit,
             deadline=args.deadline,
             run_budget=args.run_budget,
+            overrides=overrides,
         )
     finally:
         if bar is not None:
@@ -208,6 +222,7 @@ def summary_table(table: pd.DataFrame) -> str:
         "tracking max mm",
         "force err max N",
         "d_min mm",
+        "body mm",
         "solve p99 us",
         "ticks > dt",
     )
@@ -222,6 +237,7 @@ def summary_table(table: pd.DataFrame) -> str:
                 num(r.get("tracking_max_after_2s"), 1e3),
                 num(r.get("force_error_max_after_2s")),
                 num(r.get("min_obstacle_distance"), 1e3, ".4g"),
+                num(r.get("min_body_distance"), 1e3, ".4g"),
                 num(r.get("solve_time_p99_s"), 1e6, ".4g"),
                 num(r.get("deadline_misses"), spec=".0f"),
             )

@@ -302,13 +302,23 @@ def _log_summary(s: dict) -> None:
 def log_verdict(s: dict) -> int:
     """Log the verdict line and return the exit code: 0 ok, 1 not.
 
-    The smallest obstacle distance is on the line: in the reasons when the
-    run is unsafe, else appended as a figure.
+    The body's smallest clearance to an obstacle is on the line: in the
+    reasons when the run is unsafe, else appended as a figure; then the
+    key-point rule: the smallest key-point distance when it held, why when it
+    broke.
     """
     distance = ""
-    if s.get("min_obstacle_distance") is not None and s["verdict"] != "unsafe":
+    if s.get("min_body_distance") is not None and s["verdict"] != "unsafe":
         distance = (
-            f"; min obstacle distance {s['min_obstacle_distance'] * 1e3:.3f} mm "
+            f"; min body distance {s['min_body_distance'] * 1e3:.3f} mm "
+            f"(link {s.get('min_body_distance_link')}/{s.get('min_body_distance_obstacle')} "
+            f"at t = {s['min_body_distance_t']:.3f} s)"
+        )
+    if s.get("key_point_rule") == "broken":
+        distance += f"; key-point rule broken: {s.get('key_point_rule_reason')}"
+    elif s.get("min_obstacle_distance") is not None:
+        distance += (
+            f"; key-point rule held: min obstacle distance {s['min_obstacle_distance'] * 1e3:.3f} mm "
             f"({s.get('min_obstacle_distance_key_point') or '-'}/{s.get('min_obstacle_distance_obstacle') or '-'} "
             f"at t = {s['min_obstacle_distance_t']:.3f} s, d_safe {s['d_safe'] * 1e3:g} mm)"
         )

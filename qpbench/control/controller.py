@@ -17,6 +17,16 @@ key point (A1 against every obstacle point, then A2, ...), every pair kept so
 the row count is fixed for a scenario and a solver can keep a persistent
 object. ``P`` is a dense ndarray; no obstacle means ``G = h = None``.
 
+Key points of kind ``closest`` (``[key_points] kind = "closest"``, beyond the
+paper): the key point of link i against an obstacle point is the link's point
+closest to it at this tick (end effector's link included), with that point's
+Jacobian and its distance to the link's capsule
+(:meth:`qpbench.control.terms.ObstacleAvoidance.closest_rows`), one row per
+(link, obstacle point), link major. The end effector's link has no rows
+against an obstacle that is the contact surface (``exempt``; the lower line
+of ``narrow``: it presses into it by design; :mod:`qpbench.robot.body`). These
+ticks are built by the numpy terms (the compiled kernel knows fixed key points only).
+
 The per-tick build runs one compiled numba kernel (kinematics, impedance
 reference, bounds, obstacle rows; :mod:`qpbench.control.build_kernel`, compiled
 on first call and cached on disk)
@@ -121,6 +131,9 @@ class Controller:
         rho: Task weight of the ``soft`` formulation [s^2/m^2 relative to ``|v|^2``].
         kp, kd: The controller's interaction coefficients ``Kp`` [N/m], ``Kd`` [N s/m]
             (overridden per call by an adaptive estimate).
+        exempt: Per obstacle, it is the contact surface: no rows of the end
+            effector's link against it (key points of kind ``closest``; the
+            paper's key points never include the end effector).
     """
 
     def __init__(
@@ -135,6 +148,7 @@ class Controller:
         rho: float,
         kp: float,
         kd: float,
+        exempt: list[bool] | None = None,
     ):
         self.arm = arm
         self.key_points = key_points
@@ -151,9 +165,19 @@ class Controller:
         #: Obstacle points per obstacle, and the total per key point.
         self.points_per_obstacle = [o.n_points for o in self.obstacles]
         self.n_obstacle_points = int(sum(self.points_per_obstacle))
+        self.closest = key_points.kind == "closest"
+        self.exempt = list(exempt) if exempt is not None else [False] * len(self.obstacles)
+        #: (key point, obstacle) pairs with rows, in row order; the end effector's link
+        #: against the contact surface is left out for key points of kind ``closest``.
+        self.pairs = [
+            (i, j)
+            for i in range(len(key_points))
+            for j in range(len(self.obstacles))
+            if not (self.closest and self.exempt[j] and i == self.n - 1)
+        ]
         #: Inequality rows per tick (fixed).
-        self.n_rows = len(key_points) * self.n_obstacle_points
-        self._compiled = all(o.KERNEL_KIND is not None for o in self.obstacles)
+        self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
+        self._compiled = not self.closest and all(o.KERNEL_KIND is not None for o in self.obstacles)
         if self.obstacles:
             self._prims = np.ascontiguousarray(
                 np.vstack([o.primitives() for o in self.obstacles]), dtype=float
@@ -301,10 +325,21 @@ class Controller:
             J=arrays.J,
             b0=arrays.b0,
             ee=arrays.ee,
-            distances=arrays.dist.reshape(len(self.key_points), self.n_obstacle_points),
+            distances=self._distance_grid(arrays.dist),
             x_d=np.array(xd[:2]),
             xdot_d=np.array(xd[2:]),
         )
+
+    def _distance_grid(self, dist: np.ndarray) -> np.ndarray:
+        """The flat distances as (key point, obstacle point), ``inf`` for a pair without rows."""
+        a, m = len(self.key_points), self.n_obstacle_points
+        if self.n_rows == a * m:
+            return dist.reshape(a, m)
+        grid = np.full((a, m), np.inf)
+        starts = np.concatenate([[0], np.cumsum(self.points_per_obstacle)])
+        for (i, j), (_, _, s) in zip(self.pairs, self.obstacle_columns()):
+            grid[i, starts[j] : starts[j + 1]] = dist[s]
+        return grid
 
     # -- numpy reference path ---------------------------------------------------
     def _arrays_from_terms(self, theta, t, kp, kd, soft):
@@ -321,6 +356,9 @@ class Controller:
             P, q = self.task.cost(J, b0, self.rho)
         else:
             P, q = np.eye(n), np.zeros(n)
+        if self.closest:
+            G, h, dist = self._closest_rows(theta, t)
+            return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
         a = len(self.key_points)
         key_xy, key_J = self.arm.points_jacobians(
             theta, self.key_points.links, self.key_points.fracs
@@ -340,6 +378,19 @@ class Controller:
             G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
         return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
+    def _closest_rows(self, theta, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``G, h, dist`` of key points of kind ``closest``, in the order of :attr:`pairs`."""
+        n = self.n
+        if not self.pairs:
+            return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+        joints = self.arm.joint_positions(theta)
+        radius = self.key_points.radius
+        per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
+        G = np.concatenate([per[j][0].reshape(n, -1, n)[i] for i, j in self.pairs])
+        h = np.concatenate([per[j][1].reshape(n, -1)[i] for i, j in self.pairs])
+        dist = np.concatenate([per[j][2][i] for i, j in self.pairs])
+        return G, h, dist
+
     # Same arguments as build (see there): its numpy reference, for checks.
     def build_reference(
         self,
@@ -355,13 +406,13 @@ class Controller:
         return self._tick(arrays, soft, formulation)
 
     def obstacle_columns(self) -> list[tuple[str, str, slice]]:
-        """``(key point name, obstacle name, slice of obstacle points)`` for each log column."""
-        cols = []
-        for name in self.key_points.names:
-            start = 0
-            for o in self.obstacles:
-                cols.append((name, o.name, slice(start, start + o.n_points)))
-                start += o.n_points
+        """``(key point name, obstacle name, slice of the flat distance array)`` for each log
+        column: one per pair of :attr:`pairs`, in row order."""
+        cols, start = [], 0
+        for i, j in self.pairs:
+            m = self.points_per_obstacle[j]
+            cols.append((self.key_points.names[i], self.obstacles[j].name, slice(start, start + m)))
+            start += m
         return cols
 
 

@@ -196,3 +196,32 @@ class ObstacleAvoidance:
         G = -np.einsum("amk,akn->amn", u, key_J).reshape(a * m, -1)
         h = (self.k * (dist - self.d_safe) - u @ self.obstacle.velocity).reshape(a * m)
         return G, h, dist
+
+    def closest_rows(
+        self, joints: np.ndarray, t: float, radius: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rows at the closest point of each link (``[key_points] kind = "closest"``).
+
+        Link i is the segment ``joints[i] -> joints[i+1]``; its point ``A`` closest
+        to each obstacle point ``B`` (:meth:`~qpbench.robot.environment.Obstacle.closest_on_segments`)
+        gets the damper row above, with the Jacobian of ``A`` as a point of link i
+        and ``dist`` the distance to the link's capsule (``radius`` subtracted).
+
+        Args:
+            joints: Base, joints and end effector (n+1, 2) [m].
+            t: Time [s].
+            radius: Link radius [m].
+
+        Returns:
+            G (n*m, n), h (n*m,), dist (n, m) in [m], link major.
+        """
+        n = joints.shape[0] - 1
+        A, _, dist, u = self.obstacle.closest_on_segments(joints[:-1], joints[1:], t)
+        dist = dist - radius
+        m = dist.shape[1]
+        rel = A[:, :, None, :] - joints[None, None, :-1, :]  # (n links, m, n joints, 2)
+        mask = (np.arange(n)[None, :] <= np.arange(n)[:, None]).astype(float)[:, None, :]
+        J = np.stack([-rel[..., 1] * mask, rel[..., 0] * mask], axis=2)  # (n, m, 2, n)
+        G = -np.einsum("lmk,lmkn->lmn", u, J).reshape(n * m, n)
+        h = (self.k * (dist - self.d_safe) - u @ self.obstacle.velocity).reshape(n * m)
+        return G, h, dist

@@ -133,6 +133,7 @@ def run_closed_loop(
     deadline: float | None = None,
     run_budget: float | None = None,
     budgets: dict[str, float] | None = None,
+    overrides: dict | None = None,
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop, tabulated in ``out`` (module docstring).
 
@@ -150,7 +151,10 @@ def run_closed_loop(
             default :func:`~qpbench.harness.loop_workers.run_deadline`).
         deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
         run_budget: Wall-time budget of each run [s] (default: none), of a backend's in ``budgets``
-            (backend -> [s]): a run stops between ticks once it is spent (status ``budget``).
+            (backend -> [s]): a run stops between ticks once it is spent (status ``budget``,
+            verdict ``incomplete``).
+        overrides: Values set over every scenario file's (``--set``; a resumed row is kept
+            only when made under the same: its ``scenario_overrides``).
 
     Raises:
         OutputExistsError: the table exists and neither ``force`` nor ``resume``.
@@ -175,27 +179,35 @@ def run_closed_loop(
     csv_path, previous_rows = _prepare_output(out, force, resume)
 
     order = [(s, b) for s in scenarios for b in backends]
-
     budget = {b: (budgets or {}).get(b, run_budget) for b in backends}.get  # backend -> budget
-    rows, others = _kept_rows(order, previous_rows, formulation, duration, budget, skip or {})
+    overrides = dict(overrides or {})
+    rows, others = _kept_rows(
+        order, previous_rows, formulation, duration, budget, skip or {}, overrides
+    )
     todo = [k for k in order if k not in rows]
 
     def _isolated(backend: str) -> bool:  # in a worker process with a deadline
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
     table = _Table(order, rows, others, csv_path, _isolated, budget, on_row)
-    # (key, what to run, deadline of an isolated run or None)
-    items = [
-        (
-            (s, b),
-            RunSpec(s, b, formulation, duration, str(out), deadline, budget(b)),
-            run_deadline(s, duration, run_time_limit) if _isolated(b) else None,
-        )
-        for s, b in todo
-    ]
+    spec = dict(formulation=formulation, duration=duration, out=str(out), deadline=deadline)
+    spec.update(overrides=tuple(overrides.items()))
+    items = _items(todo, spec, budget, _isolated, run_time_limit)
     _run_items(items, jobs, plugins, table.emit)
     write_table(table.all_rows(), csv_path)
     return _outcome(csv_path, len(todo), len(order) - len(todo))
+
+
+def _items(todo, spec: dict, budget, isolated, run_time_limit: float | None) -> list[tuple]:
+    """(key, what to run, deadline of an isolated run or None) of each pair to run."""
+    return [
+        (
+            (s, b),
+            RunSpec(s, b, **spec, run_budget=budget(b)),
+            run_deadline(s, spec["duration"], run_time_limit) if isolated(b) else None,
+        )
+        for s, b in todo
+    ]
 
 
 def _prepare_output(out: Path, force: bool, resume: bool) -> tuple[Path, list[dict]]:
@@ -238,13 +250,14 @@ def _kept_rows(
     duration: float | None,
     budget: Callable[[str], float | None],
     skip: dict[str, str],
+    overrides: dict,
 ) -> tuple[dict, list[dict]]:
     """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
     and the resumed table's rows of other pairs (kept, after this run's)."""
     done = {
         (str(r["scenario"]), str(r["backend"])): r
         for r in previous_rows
-        if same_run(r, formulation, duration, budget(str(r["backend"])))
+        if same_run(r, formulation, duration, budget(str(r["backend"])), overrides)
     }
     others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
     rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}

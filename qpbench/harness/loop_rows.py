@@ -45,6 +45,16 @@ tracking_max_after_2s       its maximum [m]
 force_error_rms_after_2s    contact-force error RMS for t >= 2 s [N]
 force_error_max_after_2s    its maximum [N]
 min_obstacle_distance       smallest key-point to obstacle distance [m]
+min_body_distance           the body's smallest clearance to an obstacle [m]: the
+                            link capsules' signed distance, < 0 inside
+                            (:mod:`qpbench.robot.body`); ``min_body_distance_link``
+                            (1-based, the last carries the end effector),
+                            ``min_body_distance_obstacle`` and ``min_body_distance_t``
+                            [s] among the other figures
+key_point_rule              the paper's guarantee, key points kept ``d_safe -
+                            safety_margin`` from obstacles: ``held``, ``broken``
+                            or ``-`` without obstacles; ``key_point_rule_reason``
+                            says where it broke
 joint_limit_violations      ticks with a joint angle outside its limits
 infeasible_ticks            ticks the backend declared infeasible or could not
                             classify (:data:`qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`)
@@ -122,6 +132,8 @@ COLUMNS = (
     "force_error_rms_after_2s",
     "force_error_max_after_2s",
     "min_obstacle_distance",
+    "min_body_distance",
+    "key_point_rule",
     "joint_limit_violations",
     "infeasible_ticks",
     "fallback_ticks",
@@ -247,11 +259,18 @@ def failure_row(
 
 
 def same_run(
-    row: dict, formulation: str, duration: float | None, run_budget: float | None = None
+    row: dict,
+    formulation: str,
+    duration: float | None,
+    run_budget: float | None = None,
+    overrides: dict | None = None,
 ) -> bool:
-    """``row`` (read back from the table) is a finished run of this formulation, duration and budget."""
+    """``row`` (read back from the table) is a finished run of this formulation, duration, budget
+    and scenario overrides (``--set``; its ``scenario_overrides``)."""
     status = str(row.get("status"))
     if str(row.get("formulation")) != formulation:
+        return False
+    if _row_overrides(row) != json.loads(json.dumps(overrides or {})):
         return False
     if status == "budget":  # a budget-stopped run is the same run only under the same budget
         try:
@@ -271,6 +290,18 @@ def same_run(
         )
     except (TypeError, ValueError):
         return False
+
+
+def _row_overrides(row: dict) -> dict | None:
+    """A row's ``scenario_overrides`` as a dict (``{}`` when empty; ``None`` when unreadable)."""
+    value = row.get("scenario_overrides")
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
+        return {}
+    try:
+        out = json.loads(value) if isinstance(value, str) else value
+    except ValueError:
+        return None
+    return out if isinstance(out, dict) else None
 
 
 def write_table(rows: list[dict], path: Path) -> pd.DataFrame:

@@ -32,6 +32,7 @@ class RunSpec:
         formulation: ``paper`` or ``soft``. duration: Simulated time [s] (``None``: the scenario's).
         out: Output folder (the tick log goes to ``out/logs/``, its figure log to ``out/figure_logs/``).
         deadline: Per-tick deadline [s] or ``None``. run_budget: Wall-time budget [s] or ``None``.
+        overrides: ``(dotted key, value)`` pairs set over the scenario file's (``--set``).
     """
 
     scenario: str
@@ -41,6 +42,7 @@ class RunSpec:
     out: str
     deadline: float | None = None
     run_budget: float | None = None
+    overrides: tuple = ()
 
     @property
     def log_path(self) -> Path:
@@ -65,7 +67,7 @@ def simulate_one(spec: RunSpec, log_path: Path | None) -> tuple[dict, pd.DataFra
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
-    scenario = load_scenario(spec.scenario)
+    scenario = load_scenario(spec.scenario, overrides=dict(spec.overrides) or None)
     warmup([spec.backend])  # the loop's and this backend's kernels, before the clock
     # warm-up: a discarded run of a few ticks, so one-off costs (solver imports, first-call
     # allocations; the numba kernels are ready before, see qpbench.jit) stay out of the timed run

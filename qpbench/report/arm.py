@@ -50,7 +50,9 @@ def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
     [m] from the link's surface, ``k`` the tick index), or ``None`` when the
     scenario has no obstacle.
     """
-    cols = [c for c in log.columns if c.startswith("d_") and c != "d_min"]
+    from ..sim.log import distance_columns
+
+    cols = distance_columns(log)
     if not cols:
         return None
     D = log[cols].to_numpy(dtype=float)
@@ -393,7 +395,9 @@ def animate(
     frames = _frame_ticks(t, scenario.dt, fps, speed)
     xlim, ylim = _view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
-    dcols = [c for c in log.columns if c.startswith("d_") and c != "d_min"]
+    from ..sim.log import distance_columns
+
+    dcols = distance_columns(log)
 
     fig, ax = plt.subplots(figsize=(6, 5), dpi=dpi)
     static = _animation_background(ax, surface, log, obstacles, xlim, ylim)

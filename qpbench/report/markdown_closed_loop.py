@@ -1,7 +1,9 @@
 """The closed-loop section of ``report.md`` (see :mod:`qpbench.report.markdown`).
 
 The runs that failed their verdict (with the reasons), then per scenario:
-verdict, real time (measured call times; the solver's own), simulated time, tracking, force, obstacle distance, limit
+verdict, real time (measured call times; the solver's own), simulated time, tracking, force,
+the body's clearance to the obstacles and the key points' distance with the paper's key-point
+rule, limit
 violations, infeasible and fallback ticks, ``int ||v||^2 dt``, solve-time
 tail and real-time factor, and the paper's figures per backend.
 """
@@ -28,7 +30,10 @@ CLOSED_LOOP_TABLE = (
     ("tracking max (mm)", "tracking_max_after_2s", MM),
     ("force err RMS (N)", "force_error_rms_after_2s", 1.0),
     ("force err max (N)", "force_error_max_after_2s", 1.0),
-    ("min obstacle dist (mm)", "min_obstacle_distance", MM),
+    ("min body dist (mm)", "min_body_distance", MM),
+    ("body closest at", "min_body_where", None),
+    ("min key-point dist (mm)", "min_obstacle_distance", MM),
+    ("key-point rule", "key_point_rule", None),
     ("joint-limit violations", "joint_limit_violations", 1.0),
     ("infeasible ticks", "infeasible_ticks", 1.0),
     ("fallback ticks", "fallback_ticks", 1.0),
@@ -56,7 +61,23 @@ def _overridden(row: pd.Series) -> bool:
     return isinstance(value, str) and value.strip() not in ("", "{}")
 
 
+def _body_where(row: pd.Series) -> str:
+    """``"link 4 / blob at 3.14 s"``: where and when the body came closest to an obstacle."""
+    try:
+        link, t = (
+            int(float(row.get("min_body_distance_link"))),
+            float(row.get("min_body_distance_t")),
+        )
+    except (TypeError, ValueError):
+        return "-"
+    if math.isnan(t):
+        return "-"
+    return f"link {link} / {row.get('min_body_distance_obstacle')} at {t:.2f} s"
+
+
 def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
+    if column == "min_body_where":
+        return _body_where(row)
     value = row.get(column)
     if column == "verdict" and _overridden(row):
         return f"{value}{OVERRIDDEN}"
@@ -108,14 +129,18 @@ def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> 
         "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
         "factor is simulated time over wall time. Each run's *verdict* (thresholds in the "
         "scenario file's `[verdict]` table) is `failed` (the backend raised, answered with "
-        "NaN, too late or not at all), `unsafe` (a key point closer to "
-        "an obstacle than d_safe minus the safety margin), `limits` (a joint angle or speed "
-        "beyond its limit), `incomplete` (the run stopped before its duration: wall-time "
-        "budget, crash, the run's deadline or an error), `diverged` (tracking or force error "
-        "beyond its threshold after the settle time), else `ok`; the first that holds, every "
-        "reason listed. Status `budget`: the run stopped when its wall-time budget was spent, "
-        "after `simulated (s)`; its figures are of what it simulated. *Real time*, beside the "
-        "verdict: `yes` when the p99 of the per-tick times is at most the scenario's "
+        "NaN, too late or not at all), `unsafe` (the arm's body, its links as capsules with the "
+        "end effector's, went into an obstacle: `min body dist` below 0), `limits` (a joint "
+        "angle or speed beyond its limit), `incomplete` (the run stopped before its duration: "
+        "wall-time budget, crash, the run's deadline or an error), `diverged` (tracking or "
+        "force error beyond its threshold after the settle time), else `ok`; the first that "
+        "holds, every reason listed. Status `budget`: the run stopped when its wall-time "
+        "budget was spent, after `simulated (s)`; its figures are of what it simulated. Beside "
+        "the verdict, the paper's own guarantee: the `key-point rule` is `held` when every key "
+        "point kept d_safe minus the safety margin from every obstacle, `broken` when one did "
+        "not (`-`: no obstacles); the paper's key points leave the end effector and most of "
+        "each link unguarded, so a run can hold it and still be `unsafe`. *Real time*, beside "
+        "the verdict: `yes` when the p99 of the per-tick times is at most the scenario's "
         "`max_p99_fraction_of_dt` of dt and at most `max_over_dt_share` of the ticks took "
         "longer than dt; judged on the measured call times (what a Python controller sees) "
         "and on the solver's own reported times (what a C or C++ controller calling the "
@@ -124,11 +149,17 @@ def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> 
     out.extend(failed_verdicts(df))
     if "verdict_overrides" in df.columns and df.apply(_overridden, axis=1).any():
         out.append(FOOTNOTE)
-    for (scenario, formulation), g in df.groupby(
-        [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
+    kinds = (
+        df["key_points_kind"].fillna("paper").astype(str)
+        if "key_points_kind" in df.columns
+        else pd.Series("paper", index=df.index)
+    )
+    for (scenario, formulation, kind), g in df.groupby(
+        [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str), kinds], sort=False
     ):
         duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
-        out.append(f"### Scenario {scenario} ({formulation})\n")
+        shown = formulation if kind == "paper" else f"{formulation}, key points: {kind}"
+        out.append(f"### Scenario {scenario} ({shown})\n")
         out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
         out.append(
             md_table(

@@ -20,6 +20,15 @@ a shape without one makes the controller use its numpy path.
 Distances of the ``line`` kind are signed (positive on the side ``normal``
 points to): a wall is a half-plane, and a key point that crossed it is not
 mistaken for one far away on the allowed side.
+
+The whole body: :meth:`Obstacle.closest_on_segments` gives, for each link
+segment ``P0 -> P1``, the point of the segment closest to the obstacle and the
+signed distance between them (the exact distance of a segment to the shape;
+negative inside a disk or behind a wall, and for a segment crossing a
+``segment`` obstacle its depth, see there; a cloud point has no inside).
+:mod:`qpbench.robot.body` turns it into the capsule clearance of each link
+(``link_radius`` subtracted); the controller's closest-point obstacle rows
+use the same points.
 """
 
 from __future__ import annotations
@@ -164,6 +173,28 @@ class Obstacle:
         """Rows ``[kind, p0x, p0y, p1x, p1y, radius, vx, vy]`` (m, 8) of the compiled kernel, at t = 0."""
         raise NotImplementedError
 
+    def closest_on_segments(
+        self, P0: np.ndarray, P1: np.ndarray, t
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Exact closest points of segments ``P0 -> P1`` (s, 2) [m] to the obstacle at time(s) ``t`` [s].
+
+        ``t`` is a number or one time per segment, shape (s,). For each segment
+        and obstacle point ``B_j`` (m per segment, as :meth:`closest`):
+
+        Returns:
+            ``A`` (s, m, 2): the point of the segment closest to the obstacle [m];
+            ``B`` (s, m, 2): the obstacle's point closest to ``A`` [m];
+            ``dist`` (s, m): the signed distance [m] (``< 0``: the segment is inside
+            the shape; its depth); ``u`` (s, m, 2): the unit direction in which
+            moving ``A`` increases ``dist`` (``(A - B) / |A - B|`` outside the shape).
+        """
+        raise NotImplementedError
+
+    def _at(self, start: np.ndarray, t, s: int) -> np.ndarray:
+        """``start + velocity * t`` for each of ``s`` segments, shape (s, 2)."""
+        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
+        return start + t[:, None] * self.velocity
+
     @staticmethod
     def _from_diff(diff: np.ndarray, radius: float = 0.0):
         dist = np.sqrt(np.einsum("...i,...i->...", diff, diff))
@@ -199,6 +230,19 @@ class LineObstacle(Obstacle):
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.point, *self.normal, 0.0, *self.velocity]])
 
+    def closest_on_segments(self, P0, P1, t):
+        P0, P1 = np.asarray(P0, dtype=float), np.asarray(P1, dtype=float)
+        p = self._at(self.point, t, P0.shape[0])
+        # the signed distance is linear along a segment: its minimum is at an end
+        d0 = np.einsum("si,i->s", P0 - p, self.normal)
+        d1 = np.einsum("si,i->s", P1 - p, self.normal)
+        first = d0 <= d1
+        A = np.where(first[:, None], P0, P1)
+        dist = np.where(first, d0, d1)
+        B = A - dist[:, None] * self.normal
+        u = np.broadcast_to(self.normal, A.shape).copy()
+        return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
+
 
 # The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest, primitives) on
 # purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
@@ -228,6 +272,29 @@ class SegmentObstacle(Obstacle):
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.a, *self.b, 0.0, *self.velocity]])
 
+    def closest_on_segments(self, P0, P1, t):
+        """Segment to segment. Apart, ``dist`` is their distance. Crossing, it is minus the
+        smallest distance of one segment's end to the other segment (the shortest way out
+        along the crossing; 0 when an end touches), and ``u`` points from ``A`` to ``B``:
+        the witness end and its foot, the way the link must move to come free."""
+        P0, P1 = np.asarray(P0, dtype=float), np.asarray(P1, dtype=float)
+        a = self._at(self.a, t, P0.shape[0])
+        b = a + (self.b - self.a)
+        # four candidate pairs: each end of one segment against the other segment
+        cand_A = np.stack([P0, P1, _foot(a, P0, P1), _foot(b, P0, P1)], axis=1)
+        cand_B = np.stack([_foot(P0, a, b), _foot(P1, a, b), a, b], axis=1)
+        gap = np.linalg.norm(cand_A - cand_B, axis=2)
+        j = np.argmin(gap, axis=1)
+        rows = np.arange(P0.shape[0])
+        A, B, dist = cand_A[rows, j], cand_B[rows, j], gap[rows, j]
+        crossing = _segments_cross(P0, P1, a, b)
+        diff = A - B
+        norm = np.where(dist > 0, dist, 1.0)
+        u = np.where((dist > 0)[:, None], diff / norm[:, None], 0.0)
+        u = np.where(crossing[:, None], -u, u)
+        dist = np.where(crossing, -dist, dist)
+        return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
+
 
 class DiskObstacle(Obstacle):
     """A disk of centre ``center`` and radius ``radius`` in [m]."""
@@ -254,6 +321,15 @@ class DiskObstacle(Obstacle):
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.center, 0.0, 0.0, self.radius, *self.velocity]])
 
+    def closest_on_segments(self, P0, P1, t):
+        P0, P1 = np.asarray(P0, dtype=float), np.asarray(P1, dtype=float)
+        c = self._at(self.center, t, P0.shape[0])
+        A = _foot(c, P0, P1)
+        dist, u = self._from_diff(A - c, self.radius)
+        u = _normal_where_zero(u, P0, P1)
+        B = c + self.radius * u
+        return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
+
 
 class PointCloudObstacle(Obstacle):
     """A set of points ``B_1..B_m`` in [m] (paper section 2.2: obstacles as key points)."""
@@ -277,6 +353,19 @@ class PointCloudObstacle(Obstacle):
         dist, u = self._from_diff(A[:, None, :] - B)
         return B, dist, u
 
+    def closest_on_segments(self, P0, P1, t):
+        """Each cloud point against each segment; a point on a segment is at distance 0."""
+        P0, P1 = np.asarray(P0, dtype=float), np.asarray(P1, dtype=float)
+        s, m = P0.shape[0], self.n_points
+        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
+        C = self.points[None, :, :] + t[:, None, None] * self.velocity  # (s, m, 2)
+        Q0 = np.broadcast_to(P0[:, None, :], C.shape).reshape(-1, 2)
+        Q1 = np.broadcast_to(P1[:, None, :], C.shape).reshape(-1, 2)
+        A = _foot(C.reshape(-1, 2), Q0, Q1)
+        dist, u = self._from_diff(A - C.reshape(-1, 2))
+        u = _normal_where_zero(u, Q0, Q1)
+        return A.reshape(s, m, 2), C, dist.reshape(s, m), u.reshape(s, m, 2)
+
     def primitives(self) -> np.ndarray:
         m = self.n_points
         rows = np.zeros((m, PRIMITIVE_WIDTH))
@@ -284,6 +373,36 @@ class PointCloudObstacle(Obstacle):
         rows[:, 1:3] = self.points
         rows[:, 6:8] = self.velocity
         return rows
+
+
+def _foot(X: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> np.ndarray:
+    """The point of each segment ``P0 -> P1`` closest to ``X`` (all (s, 2)) [m]."""
+    e = P1 - P0
+    ee = np.einsum("si,si->s", e, e)
+    f = np.einsum("si,si->s", X - P0, e) / np.where(ee > 0, ee, 1.0)
+    return P0 + np.clip(f, 0.0, 1.0)[:, None] * e
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+
+def _segments_cross(P0, P1, Q0, Q1) -> np.ndarray:
+    """Segments ``P0 -> P1`` and ``Q0 -> Q1`` cross strictly (each splits the other's ends)."""
+    e, f = P1 - P0, Q1 - Q0
+    s1, s2 = _cross(e, Q0 - P0), _cross(e, Q1 - P0)
+    s3, s4 = _cross(f, P0 - Q0), _cross(f, P1 - Q0)
+    return (s1 * s2 < 0) & (s3 * s4 < 0)
+
+
+def _normal_where_zero(u: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> np.ndarray:
+    """``u``, with a unit normal of the segment where ``u`` is zero (the shape's centre on the
+    segment: any way off the segment's line is a way out)."""
+    e = P1 - P0
+    norm = np.linalg.norm(e, axis=1)
+    n = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.where(norm > 0, norm, 1.0)[:, None]
+    zero = ~np.any(u != 0, axis=1)
+    return np.where(zero[:, None], n, u)
 
 
 #: Obstacle kind name (as written in scenario files) -> class.

@@ -28,7 +28,10 @@ import numpy as np
 
 from ..exceptions import InputError
 
-__all__ = ["KeyPoints", "PlanarArm", "default_key_points"]
+__all__ = ["KEY_POINT_KINDS", "KeyPoints", "PlanarArm", "closest_key_points", "default_key_points"]
+
+#: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
+KEY_POINT_KINDS = ("paper", "closest")
 
 
 class PlanarArm:
@@ -107,18 +110,27 @@ class PlanarArm:
 class KeyPoints:
     """Points of the robot kept away from obstacles (paper section 2.2, 4.1).
 
+    Two kinds (``[key_points] kind``):
+
+    - ``paper``: fixed points on the links (the paper's key points, :func:`default_key_points`);
+    - ``closest``: one point per link, the link's point closest to each obstacle,
+      found anew at every tick (named ``L1..Ln``; ``links`` are the links and
+      ``fracs`` their midpoints, only where a picture needs a fixed point).
+
     Attributes:
         links: Link index of each key point, shape (a,).
         fracs: Position along its link, 0 = the link's inner joint, 1 = its outer joint.
-        names: ``A1..Aa`` in the paper's order.
+        names: ``A1..Aa`` in the paper's order (``L1..Ln`` for ``closest``).
         radius: Link radius in [m]; distances to obstacles are measured from
             the link's surface (``|A - B| - radius``).
+        kind: ``paper`` or ``closest``.
     """
 
     links: np.ndarray
     fracs: np.ndarray
     names: tuple[str, ...]
     radius: float = 0.0
+    kind: str = "paper"
 
     def __len__(self) -> int:
         return int(self.links.size)
@@ -160,4 +172,21 @@ def default_key_points(
     names = tuple(f"A{i + 1}" for i in range(len(links)))
     return KeyPoints(
         np.array(links, dtype=np.int64), np.array(fracs, dtype=float), names, float(radius)
+    )
+
+
+def closest_key_points(n: int, radius: float = 0.0) -> KeyPoints:
+    """Closest-point key points of an n-link chain: one per link, ``L1..Ln``, the end effector's
+    link included (:class:`KeyPoints`, kind ``closest``).
+
+    Args:
+        n: Number of links.
+        radius: Link radius in [m].
+    """
+    return KeyPoints(
+        np.arange(n, dtype=np.int64),
+        np.full(n, 0.5),
+        tuple(f"L{i + 1}" for i in range(n)),
+        float(radius),
+        "closest",
     )

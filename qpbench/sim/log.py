@@ -15,6 +15,14 @@ force               measured contact force [N]; force_error = force - Fd [N]
 d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
                     point cloud's points; link radius subtracted)
 d_min               smallest of those [m]
+d_body_min          the body's clearance [m]: the smallest signed distance of a
+                    link's capsule to an obstacle (< 0: inside it, by that
+                    depth; exact; :mod:`qpbench.robot.body`; NaN without
+                    obstacles; the end effector's link not against the
+                    contact surface)
+d_body_link         its link, 1-based (the last carries the end effector; 0
+                    without obstacles)
+d_body_obstacle     its obstacle's name ("" without obstacles)
 v_sq                ``|v|^2`` [rad^2/s^2]
 task_residual       ``|J v - b0|`` [m/s]
 status              the backend's status on the tick's QP, one of
@@ -61,6 +69,7 @@ TIME_COLUMNS = (SOLVE_TIME, SOLVER_TIME)
 Y_0, Y_1 = "y_0", "y_1"
 Z_MAX = "z_max"
 KP_HAT, KD_HAT = "kp_hat", "kd_hat"
+D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE = "d_body_min", "d_body_link", "d_body_obstacle"
 
 #: Prefixes of the per-joint columns ``theta_i`` [rad] and ``v_i`` [rad/s].
 THETA_PREFIX, V_PREFIX = "theta", "v"
@@ -107,8 +116,14 @@ def joint_count(frame: pd.DataFrame) -> int:
 
 
 def distance_columns(frame: pd.DataFrame) -> list[str]:
-    """The ``d_<A>_<obstacle>`` columns of a tick log, in its order (``d_min`` excluded)."""
-    return [c for c in frame.columns if str(c).startswith(f"{DISTANCE_PREFIX}_") and c != D_MIN]
+    """The ``d_<A>_<obstacle>`` columns of a tick log, in its order (``d_min`` and the
+    ``d_body_*`` columns excluded)."""
+    return [
+        c
+        for c in frame.columns
+        if str(c).startswith(f"{DISTANCE_PREFIX}_")
+        and c not in (D_MIN, D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE)
+    ]
 
 
 def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
@@ -146,3 +161,22 @@ def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.Da
         pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)),
     )
     return frame
+
+
+def add_body_columns(frame: pd.DataFrame, body, obstacle_names: list[str]) -> None:
+    """Insert ``d_body_min``, ``d_body_link``, ``d_body_obstacle`` after ``d_min``.
+
+    Args:
+        frame: The tick log.
+        body: The ticks' :class:`qpbench.robot.body.BodyClearance`.
+        obstacle_names: Names of the obstacles, in the controller's order.
+    """
+    at = list(frame.columns).index(D_MIN) + 1
+    names = np.array(list(obstacle_names) + [""], dtype=object)
+    frame.insert(at, D_BODY_MIN, body.d_min)
+    frame.insert(at + 1, D_BODY_LINK, body.link.astype(np.int64))
+    frame.insert(
+        at + 2,
+        D_BODY_OBSTACLE,
+        pd.Categorical(names[body.obstacle], categories=list(dict.fromkeys(names))),
+    )

@@ -48,7 +48,10 @@ compiled build kernel (which also returns the end-effector position, the
 key-point distances and ``x_d``: nothing is recomputed), the backend's
 ``solve``, and one call of the compiled tick kernel
 (:mod:`qpbench.sim.tick_kernel`) that senses, writes the tick's log row into
-a preallocated array and advances the plant. Statuses are collected as
+a preallocated array and advances the plant. The body's clearance to the
+obstacles (``d_body_*``, :mod:`qpbench.robot.body`) is computed after the
+loop, for every tick at once, from the logged joint angles and times: exact
+at every tick, and nothing added to the loop. Statuses are collected as
 strings and coded once at the end, when the log becomes a
 :class:`pandas.DataFrame`, one row per tick (columns: :mod:`qpbench.sim.log`).
 The run's figures and verdict: :mod:`qpbench.sim.summary`.
@@ -66,6 +69,7 @@ import numpy as np
 import pandas as pd
 
 from ..backends import Backend
+from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
 from .arguments import check_arguments, resolve_backend
@@ -422,6 +426,16 @@ class _Run:
         done = len(self.statuses)
         misses = int(np.count_nonzero(self.data[:done, self.cidx[tick_log.SOLVE_TIME]] > dt))
         frame = tick_log.to_frame(self.data, self.cols, self.statuses)
+        ctrl = self.ctrl
+        body = body_clearance(
+            ctrl.arm,
+            frame[tick_log.theta_columns(ctrl.n)].to_numpy(),
+            frame[tick_log.T].to_numpy(),
+            ctrl.obstacles,
+            ctrl.key_points.radius,
+            ctrl.exempt,
+        )
+        tick_log.add_body_columns(frame, body, [o.name for o in ctrl.obstacles])
         summary = summarize(
             frame,
             scenario,

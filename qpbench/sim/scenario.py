@@ -22,8 +22,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError
+from ..robot.body import contact_obstacles
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
-from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
+from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
 from .scenario_files import paper_scenarios, scenario_names, scenario_path
 from .scenario_schema import check_simulation, validate
 from .verdict import VerdictSettings
@@ -120,6 +121,8 @@ class Scenario:
 
     def make_key_points(self) -> KeyPoints:
         kp = self.data["key_points"]
+        if kp["kind"] == "closest":
+            return closest_key_points(len(self.data["robot"]["link_lengths"]), kp["link_radius"])
         return default_key_points(
             len(self.data["robot"]["link_lengths"]),
             kp["points_per_link"],
@@ -166,17 +169,19 @@ class Scenario:
         limits = EscapeVelocityLimits(
             r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
         )
+        obstacles = self.make_obstacles()
         return Controller(
             self.make_arm(),
             self.make_key_points(),
             task,
             limits,
-            self.make_obstacles(),
+            obstacles,
             k=c["k"],
             d_safe=c["d_safe"],
             rho=c["rho"],
             kp=c["kp"],
             kd=c["kd"],
+            exempt=contact_obstacles(obstacles, self.make_surface()),
         )
 
     def make_adaptive(self) -> AdaptiveImpedance | None:

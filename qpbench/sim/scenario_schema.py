@@ -10,7 +10,11 @@ naming the file and the key)::
                   also benchmarks)
     [robot]       link_lengths [m], theta0 [rad], theta_min, theta_max [rad],
                   velocity_min, velocity_max [rad/s]
-    [key_points]  points_per_link, include_joints, link_radius [m]
+    [key_points]  points_per_link, include_joints, link_radius [m], kind (optional,
+                  default "paper": the paper's fixed key points; "closest": an
+                  obstacle row at each link's point closest to each obstacle, end
+                  effector's link included, beyond the paper; see
+                  :class:`qpbench.robot.kinematics.KeyPoints`)
     [path]        kind = "cosine": centre, amplitude [m], omega [rad/s], phase [rad]
                   kind = "polyline": times [s], points [[x, y], ...] [m]
     [contact]     point [m], normal, stiffness [N/m], damping [N s/m],
@@ -61,6 +65,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys
+from ..robot.kinematics import KEY_POINT_KINDS
 from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 if TYPE_CHECKING:
@@ -86,7 +91,12 @@ _SCHEMA: dict[str, dict[str, str]] = {
         "velocity_min": _VEC,
         "velocity_max": _VEC,
     },
-    "key_points": {"points_per_link": _INT, "include_joints": _BOOL, "link_radius": _NUM},
+    "key_points": {
+        "points_per_link": _INT,
+        "include_joints": _BOOL,
+        "link_radius": _NUM,
+        "kind": _STR,
+    },
     "contact": {
         "point": _VEC2,
         "normal": _VEC2,
@@ -133,6 +143,7 @@ _VERDICT_DEFAULTS = VerdictSettings()
 #: (:func:`_verdict_table`).
 DEFAULTS: dict[str, dict] = {
     "scenario": {"in_paper": False},
+    "key_points": {"kind": "paper"},
     "adaptive": {"enabled": False, "gain": [500.0, 20.0], "kp_min": 100.0, "kd_min": 1.0},
     "rnn": {"eps": 0.02},
     "verdict": {key: getattr(_VERDICT_DEFAULTS, key) for key in _VERDICT_SCHEMA},
@@ -356,23 +367,7 @@ def _check_values(data: dict, file) -> None:
             path=file,
             key="robot.velocity_min",
         )
-    kp = data["key_points"]
-    if kp["points_per_link"] < 0:
-        raise ScenarioError(
-            f"must be >= 0, got {kp['points_per_link']}",
-            path=file,
-            key="key_points.points_per_link",
-        )
-    if kp["points_per_link"] == 0 and not kp["include_joints"]:
-        raise ScenarioError(
-            "no key points (points_per_link = 0 and include_joints = false)",
-            path=file,
-            key="key_points.points_per_link",
-        )
-    if kp["link_radius"] < 0:
-        raise ScenarioError(
-            f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius"
-        )
+    _check_key_points(data["key_points"], file)
     c = data["contact"]
     if np.hypot(*c["normal"]) < 1e-12:
         raise ScenarioError("must not be zero", path=file, key="contact.normal")
@@ -395,6 +390,32 @@ def _check_values(data: dict, file) -> None:
             raise ScenarioError(
                 f"must be > 0 [m], got {o['radius']}", path=file, key=f"obstacles[{i}].radius"
             )
+
+
+def _check_key_points(kp: dict, file) -> None:
+    """The ``[key_points]`` table: some key points, a known kind, a radius >= 0."""
+    if kp["points_per_link"] < 0:
+        raise ScenarioError(
+            f"must be >= 0, got {kp['points_per_link']}",
+            path=file,
+            key="key_points.points_per_link",
+        )
+    if kp["points_per_link"] == 0 and not kp["include_joints"]:
+        raise ScenarioError(
+            "no key points (points_per_link = 0 and include_joints = false)",
+            path=file,
+            key="key_points.points_per_link",
+        )
+    if kp["kind"] not in KEY_POINT_KINDS:
+        raise ScenarioError(
+            f"expected one of {', '.join(KEY_POINT_KINDS)}, got {kp['kind']!r}",
+            path=file,
+            key="key_points.kind",
+        )
+    if kp["link_radius"] < 0:
+        raise ScenarioError(
+            f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius"
+        )
 
 
 def _check_signs(

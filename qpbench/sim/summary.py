@@ -53,6 +53,17 @@ status sets are :mod:`qpbench.statuses`'):
   (``yes``/``no``/``unknown``) and ``realtime_solver_reason`` from the time the
   solver itself reported (``solver_time_s``; p99 ``solver_time_p99_s``, share
   over ``dt`` ``solver_over_dt_share``; ``None`` when the backend reports none).
+- ``min_body_distance`` [m]: the smallest clearance of the arm's link
+  capsules to an obstacle over the run (tick-log column ``d_body_min``;
+  ``< 0``: the body went into an obstacle, by that depth; ``None`` without
+  obstacles), ``min_body_distance_link`` (1-based, the last link carries the
+  end effector), ``min_body_distance_obstacle`` (its name) and
+  ``min_body_distance_t`` [s]. The end effector's link is not judged against
+  an obstacle that is the contact surface (:mod:`qpbench.robot.body`).
+- ``key_point_rule`` (``held``, ``broken``, ``-`` without obstacles) and
+  ``key_point_rule_reason``: the paper's guarantee, key points kept
+  ``d_safe - safety_margin`` from obstacles (:mod:`qpbench.sim.verdict`);
+  ``key_points_kind``: ``paper`` or ``closest`` (``[key_points] kind``).
 
 ``scenario_overrides`` holds the values set over the scenario file's
 (``qpbench simulate --set``), empty when none; ``verdict_overrides`` those of
@@ -167,6 +178,8 @@ def summarize(
     dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
     closest, active = _obstacle_figures(frame, t, dt, dcols, controller.d_safe)
     out.update(closest)
+    out.update(_body_figures(frame, t))
+    out["key_points_kind"] = controller.key_points.kind
     out.update(_effort_figures(frame, controller, dt, t >= SETTLE_TIME - 1e-12))
     out.update(
         {
@@ -185,9 +198,12 @@ def summarize(
         limits=controller.limits,
         obstacle_columns=dcols,
         summary=out,
+        obstacle_kinds={o.name: o.KIND for o in controller.obstacles},
     )
     out["verdict"] = verdict.verdict
     out["verdict_reasons"] = verdict.text
+    out["key_point_rule"] = verdict.key_point_rule
+    out["key_point_rule_reason"] = verdict.key_point_rule_reason
     out.update(_realtime_figures(frame, dt, scenario))
     return out
 
@@ -281,6 +297,30 @@ def _obstacle_figures(
         if near[:, c].any()
     }
     return closest, {"obstacle_active_intervals": active}
+
+
+def _body_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
+    """The body's closest approach to an obstacle (``d_body_*`` columns of the log): the
+    clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles."""
+    out = {
+        "min_body_distance": None,
+        "min_body_distance_link": None,
+        "min_body_distance_obstacle": None,
+        "min_body_distance_t": None,
+    }
+    if log.D_BODY_MIN not in frame.columns:
+        return out
+    d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
+    if not np.isfinite(d).any():
+        return out
+    k = int(np.nanargmin(d))
+    out.update(
+        min_body_distance=_none(d[k]),
+        min_body_distance_link=int(frame[log.D_BODY_LINK].iloc[k]),
+        min_body_distance_obstacle=str(frame[log.D_BODY_OBSTACLE].iloc[k]),
+        min_body_distance_t=_none(t[k]),
+    )
+    return out
 
 
 def _effort_figures(

@@ -138,11 +138,9 @@ def post_constants(
     normal = controller.task.normal
     tangent = np.array([-normal[1], normal[0]])
     obstacle_cols = controller.obstacle_columns()
-    n_pts = controller.n_obstacle_points
-    n_obs = max(len(controller.obstacles), 1)
-    # log column c is key point c // n_obs against one obstacle: its points in the flat distance array
-    col_start = [(c // n_obs) * n_pts + s.start for c, (_, _, s) in enumerate(obstacle_cols)]
-    col_end = [(c // n_obs) * n_pts + s.stop for c, (_, _, s) in enumerate(obstacle_cols)]
+    # log column c: its (key point, obstacle)'s points in the flat distance array
+    col_start = [s.start for _, _, s in obstacle_cols]
+    col_end = [s.stop for _, _, s in obstacle_cols]
     first_theta, first_v = log.theta_columns(1)[0], log.velocity_columns(1)[0]
     names = (
         first_theta,

@@ -14,8 +14,13 @@ Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettin
   the per-tick deadline (``time_limit``, with ``--deadline``), a fallback solve that raised, or a
   tick left without any command (zero velocity: no answer and no soft
   fallback);
-- ``unsafe``: a key point came closer to an obstacle than
-  ``d_safe - safety_margin`` [m];
+- ``unsafe``: the body went into an obstacle: the clearance of a link's
+  capsule to an obstacle (tick-log column ``d_body_min``, exact at every tick,
+  :mod:`qpbench.robot.body`) was below 0. The reason names the link, the
+  obstacle, the depth and the time: ``link 4 (end effector) 30.0 mm inside
+  disk 'blob' at 7.21 s``. The end effector's link is not judged against an
+  obstacle that is the contact surface (it presses into it by design);
+  every other link is;
 - ``limits``: a joint angle or a commanded joint speed went beyond its limit
   by more than :data:`VIOLATION_TOL`;
 - ``incomplete``: the run stopped before its ``duration``: its wall-time
@@ -25,6 +30,18 @@ Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettin
 - ``diverged``: for ``t >= settle_time`` [s], ``|tracking_error|`` exceeded
   ``max_tracking_error`` [m] or ``|force_error|`` exceeded ``max_force_error``
   [N] (or either was not finite).
+
+The paper's own guarantee is a separate rule, reported beside the verdict
+(``key_point_rule``: ``held``, ``broken``, ``-`` without obstacles, and
+``key_point_rule_reason``): every key point (``[key_points] kind``: the
+paper's fixed points, or each link's closest point) kept
+``d_safe - safety_margin`` [m] from every obstacle. A broken key-point rule
+alone does not make a run ``unsafe``: ``d_safe`` is a margin the controller
+keeps, not a collision, and the key points are not the body (the paper's
+leave the end effector and most of each link unguarded, so a run can hold
+the rule and still drive the end effector into an obstacle). A key point
+inside an obstacle is part of the body inside it, so such a run is
+``unsafe`` by the body rule as well.
 
 When several hold, the verdict is the first of :data:`VERDICTS` (failed >
 unsafe > limits > incomplete > diverged) and ``verdict_reasons`` lists every
@@ -72,6 +89,7 @@ __all__ = [
     "failed_run",
     "judge",
     "judge_realtime",
+    "key_point_rule",
 ]
 
 #: Verdicts, from the worst: the verdict of a run is the first whose rule holds.
@@ -144,10 +162,13 @@ class VerdictSettings:
 
 @dataclass(frozen=True)
 class Verdict:
-    """A verdict and why (``reasons`` empty for a clean ``ok``)."""
+    """A verdict and why (``reasons`` empty for a clean ``ok``), and the key-point rule
+    reported beside it (``held``, ``broken`` with its reason, ``-`` without obstacles)."""
 
     verdict: str
     reasons: tuple[str, ...] = ()
+    key_point_rule: str = "-"
+    key_point_rule_reason: str = ""
 
     @property
     def ok(self) -> bool:
@@ -198,17 +219,47 @@ def _failed_reasons(summary: dict) -> list[str]:
     return out
 
 
-def _unsafe_reasons(
-    frame, d_safe: float, margin: float, columns: list[tuple[str, str]]
-) -> list[str]:
-    if not columns or not len(frame):
+def _unsafe_reasons(frame, n: int, obstacle_kinds: dict[str, str] | None) -> list[str]:
+    """The body rule: a link's capsule inside an obstacle (``d_body_min < 0``) at some tick."""
+    if log.D_BODY_MIN not in frame.columns or not len(frame):
         return []
+    d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
+    inside = d < 0.0
+    if not inside.any():
+        return []
+    from ..robot.body import link_label
+
+    t = frame[log.T].to_numpy(dtype=float)
+    k = int(np.argmin(np.where(inside, d, np.inf)))
+    link = int(frame[log.D_BODY_LINK].iloc[k])
+    name = str(frame[log.D_BODY_OBSTACLE].iloc[k])
+    kind = (obstacle_kinds or {}).get(name, "obstacle")
+    rows = np.flatnonzero(inside)
+    ticks = f"{rows.size} tick{'s' if rows.size > 1 else ''}"
+    return [
+        f"{link_label(link, n)} {-d[k] * 1e3:.1f} mm inside {kind} '{name}' at {t[k]:.2f} s "
+        f"(the body inside an obstacle on {ticks} from {t[rows[0]]:.3f} s)"
+    ]
+
+
+def key_point_rule(
+    frame, d_safe: float, margin: float, columns: list[tuple[str, str]]
+) -> tuple[str, str]:
+    """The paper's guarantee: every key point kept ``d_safe - margin`` [m] from every obstacle.
+
+    Returns:
+        ``("held", "")``, ``("broken", reason)`` or ``("-", "")`` without obstacles.
+    """
+    if not columns:
+        return "-", ""
+    if not len(frame):
+        return "held", ""
     D = frame[[log.distance_column(a, o) for a, o in columns]].to_numpy(dtype=float)
     t = frame[log.T].to_numpy(dtype=float)
     limit = d_safe - margin
     below = ~(D >= limit)  # a NaN distance counts as below
     if not below.any():
-        return []
+        return "held", ""
     rows = np.flatnonzero(below.any(axis=1))
     filled = np.where(np.isnan(D), -np.inf, D)
     k, c = divmod(int(np.argmin(filled)), D.shape[1])
@@ -216,10 +267,10 @@ def _unsafe_reasons(
     value = D[k, c]
     shown = f"{value * 1e3:.1f} mm" if math.isfinite(value) else "not finite"
     first = f", below from {t[rows[0]]:.3f} s" if rows[0] != k else ""
-    return [
+    return "broken", (
         f"d_min {shown} < d_safe - {margin * 1e3:g} mm = {limit * 1e3:.1f} mm "
         f"({a}/{o} at {t[k]:.3f} s{first}; {rows.size} ticks)"
-    ]
+    )
 
 
 def _limit_reasons(frame, limits, n: int) -> list[str]:
@@ -279,6 +330,7 @@ def judge(
     limits: EscapeVelocityLimits,
     obstacle_columns: list[tuple[str, str]],
     summary: dict,
+    obstacle_kinds: dict[str, str] | None = None,
 ) -> Verdict:
     """The verdict of one simulated run (rules in the module docstring).
 
@@ -290,7 +342,11 @@ def judge(
         d_safe: The controller's safety distance [m].
         limits: The controller's joint limits (``theta_min``, ``theta_max``
             [rad], ``v_min``, ``v_max`` [rad/s]).
-        obstacle_columns: ``(key point, obstacle)`` of each distance column.
+        obstacle_columns: ``(key point, obstacle)`` of each distance column
+            (the key-point rule).
+        obstacle_kinds: Kind (``disk``, ``line``, ...) of each obstacle, by name,
+            for the body rule's reason (``obstacle`` when not given); the body rule
+            reads the log's ``d_body_min``, ``d_body_link``, ``d_body_obstacle``.
         summary: The run's counts: ``error_ticks``, ``invalid_ticks``,
             ``time_limit_ticks``, ``zero_velocity_ticks``, ``fallback_errors``,
             ``first_error``, ``first_error_t`` [s], ``deadline_s`` [s];
@@ -301,12 +357,14 @@ def judge(
     n = len(limits.theta_min)
     found = {
         "failed": _failed_reasons(summary),
-        "unsafe": _unsafe_reasons(frame, d_safe, settings.safety_margin, obstacle_columns),
+        "unsafe": _unsafe_reasons(frame, n, obstacle_kinds),
         "limits": _limit_reasons(frame, limits, n),
         "diverged": _diverged_reasons(frame, settings) if len(frame) else [],
     }
     found["incomplete"], notes = _incomplete_reasons(summary, settings)
-    return _verdict(found, notes)
+    verdict = _verdict(found, notes)
+    rule, why = key_point_rule(frame, d_safe, settings.safety_margin, obstacle_columns)
+    return Verdict(verdict.verdict, verdict.reasons, rule, why)
 
 
 def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[str], list[str]]:
