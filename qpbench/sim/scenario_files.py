@@ -22,7 +22,7 @@ from ..exceptions import ScenarioError
 if TYPE_CHECKING:
     from importlib.resources.abc import Traversable
 
-__all__ = ["paper_scenarios", "scenario_names", "scenario_path", "shipped_dir"]
+__all__ = ["paper_scenarios", "run_scenarios", "scenario_names", "scenario_path", "shipped_dir"]
 
 
 def shipped_dir() -> Traversable:
@@ -59,6 +59,12 @@ def scenario_names() -> list[str]:
     """Names of the shipped scenarios: the paper's in its order, then the others sorted."""
     paper = paper_scenarios()
     return paper + [name for name in _shipped_names() if name not in paper]
+
+
+def run_scenarios() -> list[str]:
+    """The shipped scenarios ``qpbench run`` runs by default (``[scenario] in_run``, default
+    true), in the order of :func:`scenario_names`."""
+    return [name for name in scenario_names() if _scenario_table(name).get("in_run", True)]
 
 
 def scenario_path(name_or_path: str | Path) -> Path:

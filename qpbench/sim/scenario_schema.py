@@ -7,7 +7,8 @@ naming the file and the key)::
     obstacles = [ ... ]            # or [[obstacles]] tables, see below
     [scenario]    name, description, paper_section, in_paper (default false:
                   one of the paper's scenarios, whose ticks ``qpbench run``
-                  also benchmarks)
+                  also benchmarks), in_run (default true: ``qpbench run``
+                  runs it when no ``--scenarios`` are given)
     [robot]       link_lengths [m], theta0 [rad], theta_min, theta_max [rad],
                   velocity_min, velocity_max [rad/s]
     [key_points]  points_per_link, include_joints, link_radius [m], kind (optional,
@@ -82,7 +83,13 @@ _VEC2 = "vector2"
 _PTS = "points"  # list of [x, y]
 
 _SCHEMA: dict[str, dict[str, str]] = {
-    "scenario": {"name": _STR, "description": _STR, "paper_section": _STR, "in_paper": _BOOL},
+    "scenario": {
+        "name": _STR,
+        "description": _STR,
+        "paper_section": _STR,
+        "in_paper": _BOOL,
+        "in_run": _BOOL,
+    },
     "robot": {
         "link_lengths": _VEC,
         "theta0": _VEC,
@@ -142,7 +149,7 @@ _VERDICT_DEFAULTS = VerdictSettings()
 #: defaults to at most half the duration, ``safety_margin`` to at most half of ``d_safe``
 #: (:func:`_verdict_table`).
 DEFAULTS: dict[str, dict] = {
-    "scenario": {"in_paper": False},
+    "scenario": {"in_paper": False, "in_run": True},
     "key_points": {"kind": "paper"},
     "adaptive": {"enabled": False, "gain": [500.0, 20.0], "kp_min": 100.0, "kd_min": 1.0},
     "rnn": {"eps": 0.02},
