@@ -153,7 +153,7 @@ def test_reasons_in_a_few_words():
     assert why["crash"] == ("failed in wall: run crashed (worker process killed by SIGSEGV)",)
     assert why["bad"] == ("failed in wall: 3 ticks whose solve raised",)
     assert why["deep"] == ("unsafe in wall: d_min -29.1 mm (A4/lower at 0.049 s; 47 ticks)",)
-    assert why["late"] == ("not real time in wall: p99 1.8 ms > 1 ms",)
+    assert why["late"] == ("not real time in wall: p99 1.8 ms > 1 ms; 12 % of ticks over dt",)
     assert why["both"] == (
         "limits in wall: joint speed limit broken",
         "not real time in wall: p99 2 ms > 1 ms",

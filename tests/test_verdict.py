@@ -515,7 +515,8 @@ def test_judge_realtime_rules():
     spikes = fast.copy()
     spikes[:2] = 5e-3
     verdict, why = judge_realtime(spikes, dt, s)
-    assert verdict == "no" and why.endswith("2 of 1000 ticks over dt (0.20%; > 0.10%)")
+    # the failed criterion first: it is what a one-line reason shows
+    assert verdict == "no" and why.startswith("2 of 1000 ticks over dt (0.20%; > 0.10%); p99 call")
     assert judge_realtime(spikes, dt, VerdictSettings(max_over_dt_share=0.002))[0] == "yes"
     # no time reported: unknown
     assert judge_realtime(np.full(5, np.nan), dt, s, "solver") == (

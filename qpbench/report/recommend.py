@@ -171,7 +171,7 @@ def _reasons(row: dict, place: str) -> list[str]:
         out.append(f"{verdict or 'no verdict'} in {place}" + (f": {why}" if why else ""))
     realtime = _text(row.get("realtime"))
     if realtime == "no":
-        why = _first(row.get("realtime_reason"))
+        why = _text(row.get("realtime_reason"))  # both criteria: p99 and ticks over dt
         out.append(f"not real time in {place}" + (f": {why}" if why else ""))
     elif realtime != "yes" and verdict == "ok":
         out.append(f"real time not judged in {place}")
