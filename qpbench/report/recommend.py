@@ -47,11 +47,11 @@ MAX_REASONS = 2
 
 #: The report's "How to read this", five lines under the recommendation.
 HOW_TO_READ = (
-    "A run's *verdict*, worst first: `failed` (the backend gave no usable answer or the run "
-    "crashed), `unsafe` (the arm's body inside an obstacle, or a key point closer than d_safe "
-    "minus the margin), `limits` (a joint angle or speed beyond its limit), `incomplete` (the "
-    "run stopped before its end), `diverged` (tracking or force error beyond its threshold), "
-    "else `ok`; the reasons are in the closed-loop tables.",
+    "A run's *verdict*, worst first: `failed` (the backend gave no usable answer), `unsafe` "
+    "(the arm's body, every link a capsule, inside an obstacle; the paper's key-point rule is "
+    "reported beside it), `limits` (a joint angle or speed beyond its limit), `incomplete` (the "
+    "run stopped before its end: budget, crash, error), `diverged` (tracking or force error "
+    "beyond its threshold), else `ok`; the reasons are in the closed-loop tables.",
     "*Real time* is judged at each scenario's control period dt from the measured call times "
     "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
     "calling its C or C++ library would pay.",
