@@ -297,7 +297,8 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     manifest = json.loads((tmp_path / "r" / "run.json").read_text())
     assert "closed_loop_skipped" not in manifest and "min_rtf" not in manifest
     # a budget that runs out: the run stops and says how far it got, it is not left out
-    assert main([*args, "--run-budget", "0.2"]) == 1  # a run cut short is incomplete
+    # a run cut short is incomplete: exit 0 (the outputs are written), 1 with --strict
+    assert main([*args, "--run-budget", "0.2", "--strict"]) == 1
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv").set_index(["scenario", "backend"])
     cut = loop.loc[("wall", slow)]
     assert cut["status"] == "budget" and 0 < cut["simulated_s"] < 0.3

@@ -433,8 +433,8 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
         "--isolate",
         "never",
     ]
-    # stopped early: its verdict is incomplete, a verdict that is not ok
-    assert main([*args, "--out", str(out), "--run-budget", "0.4"]) == 1
+    # stopped early: its verdict is incomplete, a verdict that is not ok (exit 1 with --strict)
+    assert main([*args, "--out", str(out), "--run-budget", "0.4", "--strict"]) == 1
     row = pd.read_csv(out / rows.CSV_NAME).iloc[0]
     assert row["status"] == "budget" and row["verdict"] == "incomplete"
     assert row["run_budget_s"] == 0.4 and row["realtime"] == "no"  # about 4 ms a tick

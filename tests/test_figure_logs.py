@@ -111,9 +111,7 @@ def loop_dir(tmp_path_factory):
     )
     verdicts = pd.read_csv(out / "closed_loop.csv").set_index("backend")["verdict"]
     assert verdicts["daqp"] == verdicts["rnn-tuned"] == "ok"
-    assert code == (
-        0 if (verdicts == "ok").all() else 1
-    )  # pinv ignores the wall: it may fail its verdict
+    assert code == 0  # outputs written: 0 whatever pinv's verdict (1 only with --strict)
     return out
 
 

@@ -112,7 +112,9 @@ def test_scaling_keeps_its_problem_sets_only_when_asked(tmp_path, capsys):
 
 
 def test_scaling_says_in_one_line_why_it_exits_1(tmp_path, capsys):
-    args = _scaling(tmp_path / "s", "--backends", "daqp,faulty:raise", "--plugin", PLUGIN)
+    args = _scaling(
+        tmp_path / "s", "--backends", "daqp,faulty:raise", "--plugin", PLUGIN, "--strict"
+    )
     assert main(args) == 1
     err = capsys.readouterr().err
     why = [line for line in err.splitlines() if "exit 1:" in line]

@@ -27,7 +27,7 @@ import logging
 from typing import TYPE_CHECKING
 
 from ..statuses import FORMULATIONS
-from .options import add_force_resume, add_strict, strict_exit
+from .options import add_force_resume, add_set, add_strict, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -71,13 +71,9 @@ def _add_selection_arguments(parser: argparse.ArgumentParser) -> None:
         default="paper",
         help="per-tick QP: paper (hard task equality, eq. 11) or soft (default: paper)",
     )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="overrides",
-        help="set a value over every scenario file's (repeatable), as simulate --set, e.g. "
+    add_set(
+        parser,
+        "set a value over every scenario file's (repeatable), as simulate --set, e.g. "
         "--set key_points.kind=closest",
     )
 

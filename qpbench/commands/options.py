@@ -18,6 +18,15 @@ def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -
     group.add_argument("--resume", action="store_true", help=resume)
 
 
+def add_set(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--set KEY=VALUE`` (repeatable, into ``args.overrides``): scenario values set over the
+    file's (:func:`qpbench.sim.scenario.load_scenario`'s ``overrides``); ``help`` is the
+    command's text."""
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides", help=help
+    )
+
+
 def add_strict(parser: argparse.ArgumentParser) -> None:
     """``--strict``: exit 1 when the outputs show a run or a solve that did not pass (for CI)."""
     parser.add_argument(

@@ -63,9 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         f"{QUICK['duration']:g} s with {QUICK['backends']}, every {QUICK['bench_every']}th "
         f"problem timed {QUICK['repeat']} time (options given too override these)",
     )
-    parser.add_argument(
-        "--out", default=None, metavar="DIR", help="results folder (default: ./results)"
-    )
+    parser.add_argument("--out", metavar="DIR", help="results folder (default: ./results)")
     parser.add_argument(
         "--problems",
         default="problems",

@@ -166,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
         from ..scaling.report import write_scaling_report
 
         write_scaling_report(out, out, force=True, quiet=args.quiet)
-    if failed_solves:
-        log.warning("%s", failure_line(out / SUMMARY_NAME))
-    return strict_exit(args, failed_solves=failed_solves)
+    code = strict_exit(args, failed_solves=failed_solves)
+    if failed_solves:  # which backends failed how many solves, in one line
+        log.warning("%s%s", f"exit {code}: " if code else "", failure_line(out / SUMMARY_NAME))
+    return code
