@@ -55,6 +55,9 @@ SLICE = {
     ],
     "scaling": ["--sizes", "n4-p1-m1", "--duration", "0.05", "--repeat", "1"],
     "sweep": ["--samples", "2", "--duration", "0.05"],
+    # the tables only: every figure of the shipped results took 100 s here; the figures are
+    # drawn and checked by tests/test_figures.py and tests/test_figure_logs.py
+    "report": ["--no-plots"],
 }
 #: Counts of work that a command gives itself, lowered to the slice's when larger (``--samples
 #: 211`` runs 2 instances: the command line and its outputs are the same, at a fraction of the time).
