@@ -260,32 +260,38 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     """Write ``fig`` to ``path`` atomically (format from the suffix, tight box) and close it.
 
     The one place a figure is written. A PNG taller than :data:`MAX_HEIGHT_PX`
-    is written at the resolution that makes it fit, with a warning naming the file
-    (a figure designed taller is a fault of its design; the test of the report's
-    figures fails on the warning).
+    is written again at the resolution that makes it fit, with a warning naming the
+    file (a figure designed taller is a fault of its design; the test of the report's
+    figures fails on the warning). The height is read from the written PNG: drawing
+    the figure once more to measure it first would cost as much as writing it.
     """
     from ..atomic import atomic_path
 
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
     try:
-        fig.canvas.draw()
-        tight = fig.get_tightbbox(fig.canvas.get_renderer())
-        height_in = tight.height + 2 * 0.1  # savefig's pad_inches
-        if fmt == "png" and height_in * dpi > MAX_HEIGHT_PX:
-            fitted = (MAX_HEIGHT_PX - 1) / height_in
-            log.warning(
-                "%s: figure %.0f px tall at %g dpi, over %d px; written at %.0f dpi",
-                path,
-                height_in * dpi,
-                dpi,
-                MAX_HEIGHT_PX,
-                fitted,
-            )
-            dpi = fitted
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:  # never a half-written figure under the final name
             fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight", **kw)
+            height = png_size(tmp)[1] if fmt == "png" else 0
+            if height > MAX_HEIGHT_PX:
+                fitted = dpi * (MAX_HEIGHT_PX - 1) / height
+                log.warning(
+                    "%s: figure %d px tall at %g dpi, over %d px; written at %.0f dpi",
+                    path,
+                    height,
+                    dpi,
+                    MAX_HEIGHT_PX,
+                    fitted,
+                )
+                fig.savefig(tmp, format=fmt, dpi=fitted, bbox_inches="tight", **kw)
     finally:
         pyplot().close(fig)
     return path
+
+
+def png_size(path: str | Path) -> tuple[int, int]:
+    """``(width, height)`` [px] of a PNG file, from its header."""
+    with open(path, "rb") as f:
+        head = f.read(24)
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")

@@ -486,16 +486,20 @@ def kernel(use_numba: bool = True) -> Callable:
         _frobenius2_jit = inline(_frobenius2)
         _nominal_steps_jit = inline(_nominal_steps)
         _clamped_steps_jit = inline(_clamped_steps)
-        # inlined into their callers (numba IR): a call costs more than these small products
+        # inlined into their callers (numba IR): a call costs more than these small products,
+        # and the Euler step's loop runs them hundreds of times a solve. The integrator itself
+        # and the online tick are called once a solve and compiled as calls: inlining them
+        # copied their IR into every caller and type, most of the compile time, for no speed
+        # (``python bench/rnn_speed.py``; bench/README.md).
         _matvec_jit = inline(_matvec_off)
         _grad_products_jit = inline(_grad_products)
         _step_jit = inline(_step)
         _residuals_jit = inline(_residuals)
-        _COMPILED = _integrate_jit = inline(_integrate_loops)
+        _COMPILED = _integrate_jit = jit(_integrate_loops)
     return _COMPILED
 
 
-def online_kernel(strict: bool = True, inline: bool = False) -> Callable:
+def online_kernel(strict: bool = True) -> Callable:
     """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``.
 
     Same arguments as :func:`kernel`'s result, ``sol`` of length
@@ -505,12 +509,11 @@ def online_kernel(strict: bool = True, inline: bool = False) -> Callable:
     else: any other argument (``None``, a sparse matrix, a list, another
     dtype or layout) raises ``TypeError`` in numba's dispatcher, which is the
     whole type check of the online backend's per-tick path. Without
-    ``strict`` it compiles for what it is given (the general path); with
-    ``inline`` too, numba inlines it into a compiled caller
-    (:func:`packed_kernel`). All compile the same code and give the same
-    numbers.
+    ``strict`` it compiles for what it is given (the general path, also
+    called by :func:`packed_kernel`). Both compile the same code and give the
+    same numbers.
     """
-    fn = _ONLINE.get((strict, inline))
+    fn = _ONLINE.get(strict)
     if fn is None:
         import numba
 
@@ -521,8 +524,8 @@ def online_kernel(strict: bool = True, inline: bool = False) -> Callable:
             sig = numba.int64(a2, a1, a2, a1, a2, a1, a1, a1, a1, a1, a1)
             fn = numba.njit(sig, cache=True)(_online_tick_loops)
         else:
-            fn = numba.njit(cache=True, inline="always" if inline else "never")(_online_tick_loops)
-        _ONLINE[(strict, inline)] = fn
+            fn = numba.njit(cache=True)(_online_tick_loops)
+        _ONLINE[strict] = fn
     return fn
 
 
@@ -541,7 +544,7 @@ def packed_kernel() -> Callable:
     if _PACKED is None:
         import numba
 
-        _online_tick_jit = online_kernel(strict=False, inline=True)
+        _online_tick_jit = online_kernel(strict=False)
         _part_fits_jit = numba.njit(cache=True, inline="always")(_part_fits)
         a1 = numba.types.Array(numba.float64, 1, "C")
         disp = numba.njit(numba.int64(a1, a1, a1, a1), cache=True)(_online_tick_packed_loops)
