@@ -274,8 +274,8 @@ def _name_key_points(ax, names, points) -> None:
 
 
 def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
-    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look, its
-    markers evenly spaced in time), and the arm's base."""
+    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look: its
+    colour and line style, its marker in the legend), and the arm's base."""
     ax.plot(
         log["xd_x"],
         log["xd_y"],
@@ -289,8 +289,7 @@ def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
     ax.plot(
         log["ee_x"],
         log["ee_y"],
-        **look.line(
-            log["t"].to_numpy(float),
+        **look.line(  # no markers along it (they would read as key points); the legend shows it
             lw=1.6,
             label=f"{backend}: actual end-effector path" if backend else "actual end-effector path",
             zorder=5,
