@@ -228,3 +228,38 @@ def qpb():
     root.handlers[:] = handlers
     root.setLevel(level)
     return qpb
+
+
+def figures_closed(monkeypatch) -> list:
+    """Every matplotlib figure closed from now on (as the code under test closes each one it
+    saves), drawn, so that a test can read its artists and their extents afterwards."""
+    import matplotlib.pyplot as plt
+
+    seen: list = []
+    real_close = plt.close
+
+    def close(fig=None):
+        if fig is not None and hasattr(fig, "axes"):
+            seen.append(fig)
+        return real_close(fig)
+
+    monkeypatch.setattr(plt, "close", close)
+    return seen
+
+
+def legends_over_data(fig) -> list[str]:
+    """The legends of ``fig`` that overlap the data area of one of its axes (none should)."""
+    if not hasattr(fig.canvas, "get_renderer"):  # a closed figure keeps only a bare canvas
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        FigureCanvasAgg(fig).draw()
+    renderer = fig.canvas.get_renderer()
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    legends += list(fig.legends)
+    over = []
+    for legend in legends:
+        box = legend.get_window_extent(renderer)
+        for ax in fig.axes:
+            if box.overlaps(ax.get_window_extent(renderer)):
+                over.append(f"legend {[t.get_text() for t in legend.get_texts()][:3]} over {ax}")
+    return over

@@ -94,3 +94,78 @@ def test_simulate_refuses_a_snapshot_format_before_running(tmp_path, capsys):
     )
     assert "--snapshot" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def _lines_of(fig, colour: str) -> list:
+    import matplotlib.colors as mcolors
+
+    return [
+        line
+        for ax in fig.axes
+        for line in ax.get_lines()
+        if mcolors.to_hex(line.get_color()) == colour and len(line.get_xdata())
+    ]
+
+
+@pytest.mark.parametrize("backend", ["daqp", "rnn-tuned"])
+def test_snapshot_follows_the_report_style(wall_run, tmp_path, monkeypatch, backend):
+    """The backend's path and distance line in its one look, the arm in none of the backends'
+    colours, the legend outside the data, d_safe readable, the PNG under the height limit."""
+    from conftest import figures_closed, legends_over_data
+
+    from qpbench.report import arm, style
+
+    scenario, run = wall_run
+    figures = figures_closed(monkeypatch)
+    out = draw_snapshot(scenario, run.log, tmp_path / "wall.png", backend=backend)
+    with Image.open(out) as img:
+        assert img.size[1] <= style.MAX_HEIGHT_PX
+    (fig,) = figures
+    look = style.look(backend)
+    coloured = _lines_of(fig, look.colour)
+    labels = [str(line.get_label()) for line in coloured]
+    assert f"{backend}: actual end-effector path" in labels
+    assert f"{backend}: closest key point [mm]" in labels
+    assert {line.get_marker() for line in coloured if line.get_label() in labels[:2]} == {
+        look.marker
+    }
+    assert arm.ARM not in {lk.colour for lk in style.LOOKS.values()}
+    assert legends_over_data(fig) == []
+    workspace, distance = fig.axes
+    assert distance.get_yscale() == "symlog"
+    d_safe_mm = scenario.data["controller"]["d_safe"] * 1e3
+    lo, hi = distance.get_ylim()
+    assert lo < d_safe_mm - 0.5 < d_safe_mm < hi
+    # d_safe takes a readable share of the panel's height (not squashed against 0)
+    to_px = distance.transData.transform
+    share = (to_px((0, d_safe_mm))[1] - to_px((0, 0))[1]) / (to_px((0, hi))[1] - to_px((0, lo))[1])
+    assert share > 0.15
+    assert workspace.get_aspect() == 1.0
+
+
+def test_snapshot_without_obstacles_has_no_distance_panel(tmp_path, monkeypatch):
+    from conftest import figures_closed
+
+    scenario = load_scenario("free").with_overrides(duration=0.05)
+    run = simulate(scenario, "qpsolvers:daqp")
+    figures = figures_closed(monkeypatch)
+    draw_snapshot(scenario, run.log, tmp_path / "free.png", backend="daqp")
+    (fig,) = figures
+    assert len(fig.axes) == 1
+
+
+def test_animation_takes_the_backend_look_and_stamps_time_outside_the_data(
+    wall_run, tmp_path, monkeypatch
+):
+    from conftest import figures_closed
+
+    from qpbench.report import style
+
+    scenario, run = wall_run
+    figures = figures_closed(monkeypatch)
+    animate(scenario, run.log, tmp_path / "wall.gif", fps=10, speed=0.3, backend="osqp")
+    (fig,) = figures
+    (ax,) = fig.axes
+    assert _lines_of(fig, style.look("osqp").colour)  # the end effector's trace
+    assert "t =" in ax.get_title(loc="left")
+    assert not [t for t in ax.texts if "t =" in t.get_text()]

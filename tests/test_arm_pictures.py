@@ -42,8 +42,8 @@ def test_committed_gifs_are_small(gif):
 def test_documented_command_regenerates_the_free_pictures(tmp_path):
     command = documented_command("free")
     assert (
-        command
-        == "qpbench simulate --scenario free --backend daqp --snapshot free.png --animate free.gif --speed 4 --fps 12"
+        command == "qpbench simulate --scenario free --backend daqp --snapshot free.png "
+        "--animate free.gif --speed 4 --fps 12 --force"
     )
     proc = subprocess.run(
         [str(BIN / "qpbench"), *command.split()[1:]],
@@ -59,3 +59,32 @@ def test_documented_command_regenerates_the_free_pictures(tmp_path):
             assert a.size == b.size
         assert _frames(made) == _frames(committed)
         assert 0.7 < made.stat().st_size / committed.stat().st_size < 1.3
+
+
+SHIPPED = sorted((ROOT / "results" / "arm").glob("*.png")) + sorted(
+    (ROOT / "results" / "simulate").glob("*.png")
+)
+
+
+@pytest.mark.parametrize("png", SHIPPED, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_shipped_pictures_are_under_the_height_limit(png):
+    from qpbench.report import style
+
+    with Image.open(png) as im:
+        assert im.size[1] <= style.MAX_HEIGHT_PX
+
+
+def test_every_shipped_picture_has_its_command_beside_it():
+    """Each picture under results/arm/ and results/simulate/ is named by the command its README gives."""
+    readme = " ".join(ROOT.joinpath("README.md").read_text().split())
+    network = re.search(r"`(qpbench simulate --scenario S --backend rnn-tuned [^`]*)`", readme)
+    assert network, "README no longer documents how the network's pictures are made"
+    made = set()
+    for scenario in ("free", "wall", "adaptive", "narrow"):
+        for command in (documented_command(scenario), network.group(1)):
+            command = command.replace(" S ", f" {scenario} ").replace("/S", f"/{scenario}")
+            made |= {w.replace("results/arm/", "") for w in command.split() if "." in w}
+    assert {p.name for p in ARM.iterdir() if p.suffix in (".png", ".gif")} <= made
+    simulate_readme = (ROOT / "results" / "simulate" / "README.md").read_text()
+    for png in (ROOT / "results" / "simulate").glob("*.png"):
+        assert f"--plot results/simulate/{png.name}" in simulate_readme

@@ -70,3 +70,27 @@ def test_no_log_is_an_error(tmp_path):
     with pytest.raises(ValueError):
         loop_figure.closed_loop_figure({}, tmp_path / "x.png", title="x")
     assert not (tmp_path / "x.png").exists()
+
+
+def test_simulate_plot_follows_the_report_style(tmp_path, monkeypatch):
+    """``simulate --plot``: the backend in its one look, legends outside the data, the distance
+    panel against d_safe on the report's axis, the PNG under the height limit."""
+    import matplotlib.colors as mcolors
+    from conftest import figures_closed, legends_over_data, simulate_args
+
+    from qpbench.cli import main
+    from qpbench.report import style
+
+    figures = figures_closed(monkeypatch)
+    png = tmp_path / "wall.png"
+    assert main(["-q", *simulate_args("wall", "daqp", "0.3", "--plot", str(png))]) == 0
+    with Image.open(png) as img:
+        assert img.size[1] <= style.MAX_HEIGHT_PX
+    (fig,) = figures
+    assert legends_over_data(fig) == []
+    named = [line for ax in fig.axes for line in ax.get_lines() if line.get_label() == "daqp"]
+    assert named
+    assert {mcolors.to_hex(line.get_color()) for line in named} == {style.look("daqp").colour}
+    (distance,) = [ax for ax in fig.axes if "closest key point" in ax.get_ylabel()]
+    assert distance.get_yscale() == "symlog"
+    assert "10" in [t.get_text() for t in distance.get_yticklabels()]  # d_safe, in mm

@@ -249,6 +249,7 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
                 speed=args.speed,
                 progress=progress,
                 title=title,
+                backend=s["backend"],
             )
 
 

@@ -5,10 +5,20 @@ instants (stick figures, fading from pale at the start to solid at the end),
 its key points, the obstacles at the last drawn instant (lines, segments,
 disks, point clouds; moving ones also as a faint trace of where they started),
 the contact surface, the desired and the actual end-effector paths, and the
-closest approach of a key point to an obstacle, marked and labelled.
+closest approach of a key point to an obstacle, ringed; below, when the
+scenario has obstacles, the closest key point's distance against ``d_safe``
+over time, on the report's distance axis
+(:func:`qpbench.report.loop_figure.distance_axis`).
 
 :func:`animate` renders the same scene frame by frame to a GIF (Pillow, which
 matplotlib requires) or an MP4 (when ``ffmpeg`` is on the PATH).
+
+Both follow :mod:`qpbench.report.style`: the run's backend is the one coloured
+thing (its end-effector path, and its distance line, in the backend's look, as
+in every other figure); the arm, its key points and the obstacles are neutral
+greys, the contact surface green, and red means closer than ``d_safe``; the
+legend and the time stamp sit outside the workspace; the snapshot is written by
+:func:`qpbench.report.style.save`.
 
 Both read only the tick log of :func:`qpbench.sim.loop.simulate` (columns
 ``t``, ``theta_i``, ``ee_x``, ``ee_y``, ``xd_x``, ``xd_y``, ``d_<A>_<obstacle>``)
@@ -33,10 +43,19 @@ if TYPE_CHECKING:
 
 __all__ = ["animate", "closest_approach", "draw_snapshot"]
 
-#: Colour of the arm (links and joints), of the key points, of obstacles and of the surface.
-ARM, KEY, OBSTACLE, SURFACE = "#1f3b73", "#d9480f", "#5c5f66", "#2b8a3e"
-#: Colour of the actual end-effector path when no backend is named.
-PATH = "#e8590c"
+#: Colour of the arm (links and joints), of the key points' edges, of obstacles and of the
+#: surface: neutral, so that the backend's look is the only colour that names a backend.
+ARM, KEY, OBSTACLE, SURFACE = "#343a40", "#212529", "#868e96", "#2b8a3e"
+#: Look of the actual end-effector path when no backend is named.
+PATH = style.Look("#495057", "o", "-")
+#: Width of the workspace (its height follows the view's proportions) and height of the
+#: distance panel below it [in].
+WORKSPACE_IN, DISTANCE_IN = 5.0, 1.6
+
+
+def _look(backend: str | None) -> style.Look:
+    """The backend's look (:func:`qpbench.report.style.look`), or :data:`PATH` when none is named."""
+    return PATH if backend is None else style.look(backend)
 
 
 def _thetas(log, n: int) -> np.ndarray:
@@ -82,15 +101,45 @@ def _instants(t: np.ndarray, count: int) -> np.ndarray:
 
 
 def _view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Axis limits holding the arm's reach around the base and the paths, with a margin [m]."""
+    """Axis limits [m] around what the run shows: the arm's joints at every drawn tick (400 at
+    most, evenly spread), the base, both end-effector paths, the nearest point of each line
+    obstacle and of the surface to the base, and the disks, segments and clouds within twice
+    the arm's reach; with a margin. (A box of the arm's whole reach left most of the picture
+    empty.)"""
     reach = float(np.sum(arm.lengths))
-    xs = np.r_[log["ee_x"].to_numpy(float), log["xd_x"].to_numpy(float), 0.0]
-    ys = np.r_[log["ee_y"].to_numpy(float), log["xd_y"].to_numpy(float), 0.0]
-    xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
-    lo = np.array([min(xs.min(), -0.25 * reach), min(ys.min(), -0.6 * reach)])
-    hi = np.array([max(xs.max(), 0.6 * reach), max(ys.max(), 0.6 * reach)])
-    pad = 0.08 * float(np.max(hi - lo))
+    theta = _thetas(log, arm.n)
+    every = max(1, len(theta) // 400)
+    parts = [np.zeros((1, 2))]
+    parts += [arm.joint_positions(q) for q in theta[::every] if np.isfinite(q).all()]
+    for x, y in (("ee_x", "ee_y"), ("xd_x", "xd_y")):
+        parts.append(log[[x, y]].to_numpy(float))
+    surface = scenario.make_surface()
+    parts.append(_foot(surface.point, surface.normal)[None, :])
+    for ob in scenario.make_obstacles():
+        kind = type(ob).__name__
+        if kind == "LineObstacle":
+            near = _foot(ob.point, ob.normal)[None, :]
+        elif kind == "SegmentObstacle":
+            near = np.array([ob.a, ob.b])
+        elif kind == "DiskObstacle":
+            near = ob.center + ob.radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
+        elif kind == "PointCloudObstacle":
+            near = np.asarray(ob.points, dtype=float)
+        else:
+            continue
+        parts.append(near[np.linalg.norm(near, axis=1) <= 2.0 * reach])
+    pts = np.concatenate([p.reshape(-1, 2) for p in parts])
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.12 * max(float(np.max(hi - lo)), 0.5 * reach)
     return (lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad)
+
+
+def _foot(point, normal) -> np.ndarray:
+    """The point of the line through ``point`` perpendicular to ``normal`` nearest the base (the origin)."""
+    point, normal = np.asarray(point, float), np.asarray(normal, float)
+    normal = normal / np.linalg.norm(normal)
+    return normal * float(normal @ point)
 
 
 def _draw_line(ax, point, normal, xlim, ylim, **line) -> None:
@@ -187,46 +236,64 @@ def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
             alpha=shade,
             lw=2.6 if last else 1.6,
             ms=4 if last else 2.5,
-            label="arm (pale: earlier)" if last else None,
+            label="arm (pale: earlier poses)" if last else None,
             zorder=3,
         )
         kp = arm.points(theta[k], keys.links, keys.fracs)
         ax.scatter(
             kp[:, 0],
             kp[:, 1],
-            s=16 if last else 8,
-            color=KEY,
+            s=26 if last else 10,
+            facecolors="white",
+            edgecolors=KEY,
+            linewidths=1.0 if last else 0.6,
             alpha=shade,
             zorder=4,
-            label="key points" if last else None,
+            label="key points (last pose named)" if last else None,
         )
         if last:
-            for name, q in zip(keys.names, kp):
-                ax.annotate(
-                    name, q, textcoords="offset points", xytext=(4, 4), fontsize=7, color=KEY
-                )
+            _name_key_points(ax, keys.names, kp)
 
 
-def _draw_paths(ax, log: pd.DataFrame, colour: str = PATH) -> None:
-    """The desired and actual end-effector paths [m] (the actual in ``colour``), and the arm's base."""
+def _name_key_points(ax, names, points) -> None:
+    """Each key point's name beside it, on a white halo so that links behind it do not hide it."""
+    from matplotlib import patheffects
+
+    halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
+    for name, q in zip(names, points):
+        ax.annotate(
+            name,
+            q,
+            textcoords="offset points",
+            xytext=(5, 4),
+            fontsize=7.5,
+            color=KEY,
+            path_effects=halo,
+            zorder=7,
+        )
+
+
+def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
+    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look: its
+    colour and line style, its marker in the legend), and the arm's base."""
     ax.plot(
         log["xd_x"],
         log["xd_y"],
-        "--",
-        color="0.45",
-        lw=1.2,
+        ":",
+        color="0.35",
+        lw=1.3,
         label="desired end-effector path",
         zorder=2,
     )
+    look = _look(backend)
     ax.plot(
         log["ee_x"],
         log["ee_y"],
-        "-",
-        color=colour,
-        lw=1.2,
-        alpha=0.9,
-        label="actual end-effector path",
-        zorder=2,
+        **look.line(  # no markers along it (they would read as key points); the legend shows it
+            lw=1.6,
+            label=f"{backend}: actual end-effector path" if backend else "actual end-effector path",
+            zorder=5,
+        ),
     )
     ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
 
@@ -243,21 +310,13 @@ def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys,
     ax.scatter(
         [q[0]],
         [q[1]],
-        s=140,
+        s=170,
         facecolors="none",
         edgecolors="red" if bad else "black",
         lw=1.8,
         zorder=6,
-        label="closest approach",
-    )
-    ax.annotate(
-        f"{close['key_point']}: {close['distance'] * 1e3:.1f} mm from {close['obstacle']}\n"
-        f"at t = {close['t']:.2f} s (d_safe {d_safe * 1e3:.0f} mm)",
-        q,
-        textcoords="offset points",
-        xytext=(10, -28),
-        fontsize=8,
-        color="red" if bad else "black",
+        label=f"closest approach: {close['key_point']} {close['distance'] * 1e3:.1f} mm "
+        f"from {close['obstacle']}\nat t = {close['t']:.2f} s (d_safe {d_safe * 1e3:g} mm)",
     )
 
 
@@ -272,14 +331,18 @@ def draw_snapshot(
 ) -> Path:
     """Draw the run ``log`` of ``scenario`` as stick figures at ``instants`` times; save to ``path`` (PNG, SVG, PDF).
 
+    Below the workspace, when the log has the closest key point's distance
+    (``d_min``), a panel of it against ``d_safe`` over time: the report's
+    distance panel (:func:`qpbench.report.plots.distance_plot`) for this one run.
+
     Args:
         scenario: The :class:`~qpbench.sim.scenario.Scenario` the log was simulated from.
         log: The tick log (:attr:`qpbench.sim.loop.SimResult.log`).
         path: Output file; its suffix picks the format.
         instants: Number of arm poses drawn, evenly spaced in time (first and last included).
         title: Figure title (default: scenario name and duration).
-        backend: The backend of the run: its actual end-effector path in the backend's colour
-            (:func:`qpbench.report.style.look`); ``None``: orange.
+        backend: The backend of the run: its actual end-effector path and its distance line
+            in the backend's look (:func:`qpbench.report.style.look`); ``None``: dark grey.
 
     Returns:
         ``path``.
@@ -291,8 +354,20 @@ def draw_snapshot(
     t = log["t"].to_numpy(float)
     ticks = len(log)
     xlim, ylim = _view(scenario, log, arm)
+    d_safe = scenario.data["controller"]["d_safe"]
+    has_d = _has_distance(log)
 
-    fig, ax = plt.subplots(figsize=(7.5, 6.2), dpi=110)
+    # the workspace's height follows its view's proportions (equal axes), within limits
+    high = float(np.clip(WORKSPACE_IN * np.ptp(ylim) / np.ptp(xlim), 2.4, 1.3 * WORKSPACE_IN))
+    fig, axes = plt.subplots(
+        2 if has_d else 1,
+        1,
+        figsize=(WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0)),
+        height_ratios=[high, DISTANCE_IN] if has_d else None,
+        squeeze=False,
+        layout="constrained",
+    )
+    ax = axes[0, 0]
     _draw_line(
         ax,
         surface.point,
@@ -309,7 +384,7 @@ def draw_snapshot(
     _draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
     _draw_poses(ax, arm, keys, theta, _instants(t, instants))
-    _draw_paths(ax, log, PATH if backend is None else style.look(backend).colour)
+    _draw_paths(ax, log, backend)
 
     _mark_closest_approach(ax, log, scenario, arm, keys, theta)
 
@@ -317,9 +392,63 @@ def draw_snapshot(
     ax.set_title(
         title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s"
     )
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    fig.tight_layout()
+    handles, labels = ax.get_legend_handles_labels()
+    if has_d:
+        _distance_panel(axes[1, 0], log, backend, d_safe)
+        h, lab = axes[1, 0].get_legend_handles_labels()
+        handles, labels = handles + h, labels + lab
+    ax.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(1.02, 1.0),
+        fontsize=8,
+        frameon=False,
+        borderaxespad=0.0,
+    )
     return style.save(fig, path, dpi=110)
+
+
+def _has_distance(log: pd.DataFrame) -> bool:
+    from ..sim import log as tick_log
+
+    return tick_log.D_MIN in log.columns and np.isfinite(log[tick_log.D_MIN].to_numpy(float)).any()
+
+
+def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -> None:
+    """The closest key point's distance [mm] against t in the run's look (and the body's,
+    dashed, when the log has it), its closest approach ringed as in the workspace, on the
+    report's distance axis (:func:`qpbench.report.loop_figure.distance_axis`: ``d_safe``
+    and the line a run must not cross)."""
+    from ..sim import log as tick_log
+    from .loop_figure import UNSAFE_MARGIN, distance_axis
+
+    look = _look(backend)
+    name = f"{backend}: " if backend else ""
+    t = log[tick_log.T].to_numpy(float)
+    d = log[tick_log.D_MIN].to_numpy(float) * 1e3
+    ax.plot(t, d, **look.line(t, lw=1.2, label=f"{name}closest key point [mm]", zorder=3))
+    if tick_log.D_BODY_MIN in log.columns:
+        body = log[tick_log.D_BODY_MIN].to_numpy(float) * 1e3
+        if np.isfinite(body).any():
+            ax.plot(
+                t,
+                body,
+                color=look.colour,
+                ls=(0, (2, 2)),
+                lw=0.9,
+                label=f"{name}closest point of the body [mm]",
+                zorder=2,
+            )
+    k = int(np.nanargmin(d))
+    bad = d[k] < (d_safe - UNSAFE_MARGIN) * 1e3
+    ax.scatter(
+        [t[k]], [d[k]], s=110, facecolors="none", edgecolors="red" if bad else "black", lw=1.6
+    )
+    distance_axis(ax, d_safe, float(np.nanmin(d)))
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("distance to an\nobstacle [mm]", fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
 
 
 def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
@@ -340,14 +469,14 @@ def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim)
     return static
 
 
-def _animation_artists(ax) -> tuple:
-    """The artists each frame updates: links, key points, end-effector trace, time label."""
+def _animation_artists(ax, backend: str | None = None) -> tuple:
+    """The artists each frame updates: links, key points, end-effector trace (in ``backend``'s
+    look), and the time stamp (the axes' title: outside the workspace, never over the arm)."""
     (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
-    keys_plot = ax.scatter([], [], s=14, color=KEY, zorder=4)
-    (trace,) = ax.plot([], [], "-", color=PATH, lw=1.0, zorder=2)
-    label = ax.text(
-        0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8, family="monospace"
-    )
+    keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
+    look = _look(backend)
+    (trace,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
+    label = ax.set_title("", fontsize=8, family="monospace", loc="left")
     return link_line, keys_plot, trace, label
 
 
@@ -361,6 +490,7 @@ def animate(
     progress: bool = False,
     title: str | None = None,
     dpi: int = 70,
+    backend: str | None = None,
 ) -> Path:
     """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
 
@@ -373,6 +503,8 @@ def animate(
         progress: Show a progress bar (stderr).
         title: Title prefix (default: the scenario's name).
         dpi: Resolution; the default keeps a 20 s GIF at about 1-2 MB.
+        backend: The backend of the run: its end-effector trace in the backend's look
+            (:func:`qpbench.report.style.look`); ``None``: dark grey.
 
     Returns:
         ``path``.
@@ -399,9 +531,11 @@ def animate(
 
     dcols = distance_columns(log)
 
-    fig, ax = plt.subplots(figsize=(6, 5), dpi=dpi)
+    # equal axes: the frame's height follows the view's proportions
+    high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
+    fig, ax = plt.subplots(figsize=(6, high), dpi=dpi, layout="constrained")
     static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
-    link_line, keys_plot, trace, label = _animation_artists(ax)
+    link_line, keys_plot, trace, label = _animation_artists(ax, backend)
     moving_artists: list = []
     head = title or scenario.name
 
@@ -467,9 +601,10 @@ def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: 
     tmp = path.with_name(f".{path.name}.tmp{suffix}")
     try:
         anim.save(tmp, writer=writer, progress_callback=callback)
-        from ..atomic import rename
+        from ..atomic import record, rename
 
         rename(tmp, path)
+        record(path)  # listed with the command's other outputs
     finally:
         if bar is not None:
             bar.close()

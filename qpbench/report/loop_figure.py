@@ -74,6 +74,7 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     """
     lin = d_safe * 1e3 if d_safe is not None and d_safe > 0 else 10.0
     ax.set_yscale("symlog", linthresh=lin, linscale=1.0)
+    _distance_ticks(ax, lin)
     if d_safe is None:
         return
     bad = (d_safe - UNSAFE_MARGIN) * 1e3
@@ -83,6 +84,18 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     bottom = lo - 0.3 * max(abs(lo), lin) if lo < 0 else -0.3 * lin
     ax.axhspan(bottom, bad, color="red", alpha=0.06, lw=0)
     ax.set_ylim(bottom=bottom)
+
+
+def _distance_ticks(ax, lin: float) -> None:
+    """Ticks of a distance axis in plain millimetres: 0, ``+-lin`` (``d_safe``) and 1-2-5
+    steps beyond (the symlog axis's own are powers of ten, ``d_safe`` read as 10^1)."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter
+
+    steps = [m * 10.0**e for e in range(-3, 6) for m in (1, 2, 5)]
+    beyond = [v for v in steps if v >= 1.8 * lin]
+    ticks = sorted({0.0, lin, -lin, *beyond, *(-v for v in beyond)})
+    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
 
 
 def closed_loop_figure(
