@@ -267,13 +267,15 @@ _EMPTIES: dict = {}
 
 
 def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Cached read-only ``(zeros((0, n)), zeros(0))``."""
+    """Cached ``(zeros((0, n)), zeros(0))``: no rows.
+
+    Writable, as the arrays of rows a problem has (they hold no element to protect): numba
+    types a read-only array apart, so read-only empties would compile the integrator once
+    more for every combination of absent and present rows.
+    """
     pair = _EMPTIES.get(n)
     if pair is None:
-        pair = (np.zeros((0, n)), np.zeros(0))
-        for a in pair:
-            a.flags.writeable = False
-        _EMPTIES[n] = pair
+        pair = _EMPTIES[n] = (np.zeros((0, n)), np.zeros(0))
     return pair
 
 

@@ -49,11 +49,13 @@ class DenseQP:
 _EMPTY_CACHE: dict[tuple, np.ndarray] = {}
 
 
-def _cached(key: tuple, make) -> np.ndarray:
+def _cached(key: tuple, make, writeable: bool = False) -> np.ndarray:
+    """A cached array, read-only unless ``writeable`` (empty rows: see
+    :func:`qpbench.backends._rnn_base.empty_rows`)."""
     arr = _EMPTY_CACHE.get(key)
     if arr is None:
         arr = make()
-        arr.flags.writeable = False
+        arr.flags.writeable = writeable
         _EMPTY_CACHE[key] = arr
     return arr
 
@@ -61,7 +63,10 @@ def _cached(key: tuple, make) -> np.ndarray:
 def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Constraint rows ``M x (=|<=) v`` as float64 arrays; no rows (cached empties) when ``M`` is None."""
     if M is None:
-        return _cached(("A", n), lambda: np.zeros((0, n))), _cached(("v", 0), lambda: np.zeros(0))
+        return (
+            _cached(("A", n), lambda: np.zeros((0, n)), writeable=True),
+            _cached(("v", 0), lambda: np.zeros(0), writeable=True),
+        )
     M = _f64(M, m_name, 2)
     v = _f64(v, v_name, 1)
     if M.shape[1] != n or v.shape[0] != M.shape[0]:
