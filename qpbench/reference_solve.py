@@ -42,7 +42,7 @@ The objective is ``1/2 x'Px + q'x + offset`` (:func:`qpbench.metrics.objective`)
 
 Time limit (:func:`solve_candidate`): Clarabel gets ``time_limit``; PIQP has
 none, so a limit that must hold whatever the solver does needs a worker
-process (:mod:`qpbench.reference_pool`). An answer that arrives after the
+process (:func:`qpbench.runner.process.run_tasks`). An answer that arrives after the
 limit is discarded: that solver's status is ``unknown`` with the reason
 (``timed_out``), and :func:`settle` treats it as no verdict.
 
@@ -348,6 +348,16 @@ def solve_candidate(
     if status != "optimal":
         return Candidate(solver, status, None, reason=error, wall_s=wall)
     return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
+
+
+def solve_task(task: tuple) -> Candidate:
+    """:func:`solve_candidate` of ``(record, solver, time_limit)`` in a worker process: a
+    plain (picklable) answer, and a bug in one task an ``unknown`` answer, not the others' end."""
+    record, solver, time_limit = task
+    try:
+        return solve_candidate(record, solver, time_limit).plain()
+    except Exception as exc:  # noqa: BLE001 - see the docstring
+        return Candidate(solver, "unknown", None, reason=f"{type(exc).__name__}: {exc}")
 
 
 def _clarabel_timed_out(solver: str, sol) -> bool:

@@ -5,11 +5,12 @@ a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
     exceptions statuses profiles published memory atomic cache packed known native_output
-    robot rnn backends metrics formats reference reference_solve reference_pool
+    runner
+    robot rnn backends metrics formats reference reference_solve
     control
     sim
     selection report jit
-    harness scaling sweep executors
+    harness scaling sweep
     commands cli
 
 ``jit`` warms the compiled kernels (the network's, the controller's, the
@@ -44,6 +45,7 @@ LAYERS = [
         "native_output",
         "qpbench",
     },
+    {"runner"},
     {
         "robot",
         "rnn",
@@ -52,12 +54,11 @@ LAYERS = [
         "formats",
         "reference",
         "reference_solve",
-        "reference_pool",
     },
     {"control"},
     {"sim"},
     {"selection", "report", "jit"},
-    {"harness", "scaling", "sweep", "executors"},
+    {"harness", "scaling", "sweep"},
     {"commands", "cli"},
 ]
 #: Allowed across layers in both directions (none: every package has its layer).
