@@ -27,14 +27,14 @@ Start method: ``forkserver`` where the platform has one, else ``spawn``
 clock, with qpbench preloaded (:mod:`qpbench.harness.preload` loads the numba
 kernels the parent prepared, and only those, from the on-disk cache), so a
 worker is a fork of a process that already holds qpbench and the kernels and
-never compiles. A
-worker says it is ready before any deadline runs (within
-:data:`START_TIMEOUT_S`). A worker takes the environment of the process
+never compiles. A worker imports the task's module and says it is ready before
+any deadline runs (within :data:`START_TIMEOUT_S`). A worker takes the environment of the process
 that starts it, not the one the forkserver was started with.
 """
 
 from __future__ import annotations
 
+import importlib
 import math
 import multiprocessing
 import os
@@ -165,11 +165,14 @@ def requests(conn: Connection) -> Iterator:
         yield request
 
 
-def _serve(conn, environ: dict) -> None:
-    """Body of every worker process: answer ``(fn, arg)`` requests until ``None``."""
+def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
+    """Body of every worker process: import ``imports``, say ready, answer ``(fn, arg)``
+    requests until ``None``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
     os.environ.clear()
     os.environ.update(environ)
+    for module in imports:
+        importlib.import_module(module)
     conn.send(("ready", None))
     for fn, arg in requests(conn):
         try:
@@ -197,13 +200,16 @@ class Worker:
     Args:
         ctx: ``multiprocessing`` context (default :func:`context`).
         name: Process name.
+        imports: Modules the worker imports before it says ready (outside any deadline).
     """
 
-    def __init__(self, ctx: BaseContext | None = None, name: str = "qpbench-worker"):
+    def __init__(
+        self, ctx: BaseContext | None = None, name: str = "qpbench-worker", imports: tuple = ()
+    ):
         ctx = ctx if ctx is not None else context()
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(
-            target=_serve, args=(child, dict(os.environ)), daemon=True, name=name
+            target=_serve, args=(child, dict(os.environ), tuple(imports)), daemon=True, name=name
         )
         self.proc.start()
         child.close()
@@ -360,13 +366,14 @@ def run_tasks(
     host = socket.gethostname()
     queue = deque((key, arg, timeout, 0) for key, arg, timeout in tasks)
     slots = max(1, min(int(jobs), len(tasks)))
-    workers = [Worker(ctx, f"{name}-{i}") for i in range(slots)]
+    imports = (fn.__module__,)  # the task's module is loaded before any deadline runs
+    workers = [Worker(ctx, f"{name}-{i}", imports) for i in range(slots)]
     try:
         while queue or any(w.task for w in workers):
             for i, w in enumerate(workers):
                 if w.task is None and queue:
                     if not w.alive:
-                        workers[i] = w = Worker(ctx, f"{name}-{i}")
+                        workers[i] = w = Worker(ctx, f"{name}-{i}", imports)
                     key, arg, timeout, tried = queue.popleft()
                     w.task = (key, arg, timeout, tried + 1)
                     w.send(fn, arg, timeout)
