@@ -175,15 +175,14 @@ def _compute(
             out[record.name] = ref
             on_done(ref, time.perf_counter() - started)
         return out
-    import multiprocessing
-
-    from .reference_solve import _is_unconstrained, _problem_for_reference, solve_task
+    from .reference_solve import needs_solver, solve_task
+    from .runner.process import context as worker_context
     from .runner.process import deadline, run_tasks
 
     tasks, waiting = [], {}
     timeout = deadline(time_limit) if limited else None
     for record in records:
-        if _is_unconstrained(_problem_for_reference(record)):  # no solver involved
+        if not needs_solver(record):  # no solver involved
             out[record.name] = reference_solution(record, method, time_limit)
             on_done(out[record.name], 0.0)
             continue
@@ -192,7 +191,7 @@ def _compute(
             ((record.name, s), (record, s, time_limit if limited else None), timeout)
             for s in solvers
         )
-    ctx = context if context is not None else multiprocessing.get_context("spawn")
+    ctx = context if context is not None else worker_context(fresh=True)
     for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
         name, solver = done.key
         got = waiting[name]

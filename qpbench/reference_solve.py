@@ -240,6 +240,12 @@ def _is_unconstrained(p) -> bool:
     return p.G is None and p.A is None and no_bounds
 
 
+def needs_solver(record: ProblemRecord) -> bool:
+    """Whether ``record``'s reference takes a solver: ``False`` for a problem without any
+    constraint, which :func:`reference_solution` solves by least squares at once."""
+    return not _is_unconstrained(_problem_for_reference(record))
+
+
 def relative_difference(f1: float, f2: float) -> float:
     """``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN when either is NaN)."""
     if math.isnan(f1) or math.isnan(f2):
@@ -401,7 +407,7 @@ def reference_solution(
     """
     if method not in METHODS:
         raise ValueError(f"unknown reference method '{method}'")
-    if _is_unconstrained(_problem_for_reference(record)):
+    if not needs_solver(record):
         return _unconstrained(
             ProblemRecord(_problem_for_reference(record), record.name, offset=record.offset)
         )

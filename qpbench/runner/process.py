@@ -106,14 +106,19 @@ def preload_kernels(names) -> None:
     _KERNELS = tuple(names)
 
 
-def context() -> BaseContext:
+def context(fresh: bool = False) -> BaseContext:
     """The start method's context; the forkserver preloads the kernels this process prepared.
 
     The command has compiled (or loaded) the kernels of the backends it runs
     before (:func:`qpbench.jit.warmup`, which names them here through
     :func:`preload_kernels`), so no worker ever compiles: it only loads them.
+    ``fresh``: ``spawn`` instead, each worker a new interpreter with nothing
+    preloaded and never a fork of a process that may hold threads and locks
+    (reference solves called from the Python API).
     """
     global _CTX
+    if fresh:
+        return multiprocessing.get_context("spawn")
     if _CTX is None:
         method = (
             "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
