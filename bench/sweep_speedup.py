@@ -31,7 +31,6 @@ The machine's load average is printed with the figures (it may be shared).
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import os
 import statistics
 import tempfile
@@ -205,9 +204,9 @@ class _Alone:
     (the reference: a closed loop in a process of its own, as in this process without Dask)."""
 
     def __init__(self):
-        from qpbench.runner.process import Worker
+        from qpbench.runner.process import Worker, context
 
-        self.worker = Worker(multiprocessing.get_context("spawn"), "sweep-speedup-alone")
+        self.worker = Worker(context(fresh=True), "sweep-speedup-alone")
 
     def run(self, task) -> dict:
         return self.worker.call(_on_worker, task, None, "task")

@@ -17,12 +17,12 @@ deadline (:func:`~qpbench.runner.process.deadline`)::
 - the worker dies (segfault, abort, ``os._exit``) -> the solve is
   ``crashed`` with the signal or exit code in ``error``, a new worker starts.
 
-A new worker has lost the backend's state: in sequential mode the next row
-says ``state_reset = True``.
+A new worker has lost the backend's state (and its replicas'): in sequential
+mode the next row says ``state_reset = True``.
 
-No compile in a worker: the parent prepares every numba kernel before it
-starts one (:func:`qpbench.jit.warmup`, which leaves them in the on-disk
-cache); the forkserver, started and preloaded before the first worker's
+No compile in a worker: the parent prepares the kernels of the backends it
+runs before it starts one (:func:`qpbench.jit.warmup`, which leaves them in the
+on-disk cache); the forkserver, started and preloaded before the first worker's
 clock, imports qpbench and loads the kernels from the cache once
 (:mod:`qpbench.harness.preload`), so each worker is forked with them in
 memory. A worker started otherwise (``spawn``) loads them when it starts,
