@@ -13,7 +13,7 @@
    one at a time, in a process of its own (spawned, the run in its main
    thread with nothing beside it: the in-process reference) and on three
    1-worker clusters, open together and used in turn run by run: Dask's
-   defaults, qpbench's own (:data:`qpbench.executors.dask_.WORKER_CONFIG`),
+   defaults, qpbench's own (:data:`qpbench.runner.dask_.WORKER_CONFIG`),
    and Dask's defaults reached as an existing cluster, where the executor
    registers its worker plugin; medians. The overhead (total through Dask
    minus the total in a process of its own) is split into the time before
@@ -31,7 +31,6 @@ The machine's load average is printed with the figures (it may be shared).
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import os
 import statistics
 import tempfile
@@ -39,8 +38,8 @@ import time
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from qpbench.executors import DaskExecutor, ProcessExecutor, SerialExecutor
 from qpbench.jit import warmup
+from qpbench.runner import DaskExecutor, ProcessExecutor, SerialExecutor
 from qpbench.sweep.rows import same_outside_timing
 from qpbench.sweep.runner import read_sweep_rows, run_sweep
 from qpbench.sweep.spec import load_sweep
@@ -200,27 +199,17 @@ def _timed(client, task) -> tuple:
     )
 
 
-def _alone_loop(conn) -> None:
-    from qpbench.reference_pool import requests
-
-    for task in requests(conn):
-        conn.send(_on_worker(task))
-
-
 class _Alone:
     """A spawned process that runs each task in its main thread, with nothing else running in it
     (the reference: a closed loop in a process of its own, as in this process without Dask)."""
 
     def __init__(self):
-        ctx = multiprocessing.get_context("spawn")
-        self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_alone_loop, args=(child,), daemon=True)
-        self.proc.start()
-        child.close()
+        from qpbench.runner.process import Worker, context
+
+        self.worker = Worker(context(fresh=True), "sweep-speedup-alone")
 
     def run(self, task) -> dict:
-        self.conn.send(task)
-        return self.conn.recv()
+        return self.worker.call(_on_worker, task, None, "task")
 
     def submit(self, fn, task, pure=False):  # the warm-up's call, as on a Dask client
         self.run(task)
@@ -230,8 +219,7 @@ class _Alone:
         return None
 
     def close(self) -> None:
-        self.conn.send(None)
-        self.proc.join(30)
+        self.worker.stop()
 
 
 @contextmanager
@@ -255,7 +243,7 @@ def _empty_tasks(client, n: int) -> float:
 def dask_overhead(args) -> None:
     import logging
 
-    logging.getLogger("qpbench.executors").setLevel(logging.ERROR)  # the plain tcp:// warning
+    logging.getLogger("qpbench.runner").setLevel(logging.ERROR)  # the plain tcp:// warning
     task, short = _wall_task(20.0), _wall_task(0.01)
     _on_worker(short)
     setups = (("a process of its own", _alone),) + SETUPS

@@ -247,6 +247,7 @@ def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupRe
 def prepare(wanted: Iterable[str]) -> WarmupReport:
     """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
     from .rnn.network import numba_available
+    from .runner.process import preload_kernels
 
     wanted = tuple(wanted)
     if not wanted:  # nothing these backends need: said once in the log
@@ -276,6 +277,7 @@ def prepare(wanted: Iterable[str]) -> WarmupReport:
         kernels = kernels if numba_available() else ()
     shims = _warm_shims() if SHIM in todo else 0
     _DONE.update(todo)
+    preload_kernels(prepared())  # what the worker processes' forkserver loads
     return WarmupReport(compiled, time.perf_counter() - start, cache, kernels, shims_compiled=shims)
 
 

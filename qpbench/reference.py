@@ -19,9 +19,12 @@ Where the reference of each problem comes from (:func:`bench_references`,
 Computing (:func:`reference_solutions`): each reference solve has a time
 limit (the profile's ``reference_time_limit``; ``None`` here means none).
 With a limit, or with ``jobs > 1``, the solves run in worker processes
-(:mod:`qpbench.reference_pool`), each task one solver on one problem, up to
-``jobs`` at once; otherwise in this process. Both give the same answers. A
-solve that times out or fails is an ``unknown`` answer with its reason; a
+(:func:`qpbench.runner.process.run_tasks`), each task one solver on one
+problem, up to ``jobs`` at once; otherwise in this process. Both give the same
+answers, whatever ``jobs`` is and in whatever order the tasks finish. A task
+past its deadline (:func:`qpbench.runner.process.deadline` of the limit) has
+its worker killed and replaced. A solve that times out, fails or whose worker
+dies is an ``unknown`` answer with its reason; a
 problem left without a reference has status ``unknown`` and its rows an
 empty optimality gap, with the reason in the ``reference_note`` column. The
 run goes on. ``progress`` is called once per finished problem.
@@ -172,28 +175,41 @@ def _compute(
             out[record.name] = ref
             on_done(ref, time.perf_counter() - started)
         return out
-    from .reference_pool import solve_in_workers
-    from .reference_solve import _is_unconstrained, _problem_for_reference
+    from .reference_solve import needs_solver, solve_task
+    from .runner.process import context as worker_context
+    from .runner.process import deadline, run_tasks
 
     tasks, waiting = [], {}
+    timeout = deadline(time_limit) if limited else None
     for record in records:
-        if _is_unconstrained(_problem_for_reference(record)):  # no solver involved
+        if not needs_solver(record):  # no solver involved
             out[record.name] = reference_solution(record, method, time_limit)
             on_done(out[record.name], 0.0)
             continue
         waiting[record.name] = {}
-        tasks.extend(((record.name, s), record, s) for s in solvers)
-
-    def done(key, candidate) -> None:
-        name, solver = key
+        tasks.extend(
+            ((record.name, s), (record, s, time_limit if limited else None), timeout)
+            for s in solvers
+        )
+    ctx = context if context is not None else worker_context(fresh=True)
+    for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
+        name, solver = done.key
         got = waiting[name]
-        got[solver] = candidate
+        got[solver] = done.value if done.status is None else _lost(solver, done, time_limit)
         if len(got) == len(solvers):
             out[name] = assemble(name, [got[s] for s in solvers], time_limit)
             on_done(out[name], sum(c.wall_s for c in got.values() if math.isfinite(c.wall_s)))
-
-    solve_in_workers(tasks, time_limit if limited else None, jobs, done, context)
     return out
+
+
+def _lost(solver: str, done, time_limit: float | None) -> Candidate:
+    """The ``unknown`` answer of a task that gave none (deadline, dead worker, error)."""
+    if done.status == "time_limit":
+        why = f"no answer within the time limit of {time_limit:g} s; worker stopped"
+        return Candidate(solver, "unknown", None, reason=why, timed_out=True)
+    if done.status == "crashed":
+        return Candidate(solver, "unknown", None, reason=f"reference {done.lost}")
+    return Candidate(solver, "unknown", None, reason=done.lost)
 
 
 class LogProgress:
@@ -240,8 +256,8 @@ def reference_solutions(
         method: ``auto``, ``clarabel`` or ``piqp``.
         time_limit: Limit of each reference solve in [s] (``None``: none).
         jobs: Worker processes solving at once.
-        context: ``multiprocessing`` context of the workers (default ``spawn``;
-            :mod:`qpbench.reference_pool`).
+        context: ``multiprocessing`` context of the workers (default ``spawn``, a fresh
+            interpreter, never a fork of this process, which may hold threads and locks).
         cache_dir: Folder of the cache (default: :func:`cache_folder`'s rule).
     """
     if method not in METHODS:

@@ -42,7 +42,7 @@ The objective is ``1/2 x'Px + q'x + offset`` (:func:`qpbench.metrics.objective`)
 
 Time limit (:func:`solve_candidate`): Clarabel gets ``time_limit``; PIQP has
 none, so a limit that must hold whatever the solver does needs a worker
-process (:mod:`qpbench.reference_pool`). An answer that arrives after the
+process (:func:`qpbench.runner.process.run_tasks`). An answer that arrives after the
 limit is discarded: that solver's status is ``unknown`` with the reason
 (``timed_out``), and :func:`settle` treats it as no verdict.
 
@@ -240,6 +240,12 @@ def _is_unconstrained(p) -> bool:
     return p.G is None and p.A is None and no_bounds
 
 
+def needs_solver(record: ProblemRecord) -> bool:
+    """Whether ``record``'s reference takes a solver: ``False`` for a problem without any
+    constraint, which :func:`reference_solution` solves by least squares at once."""
+    return not _is_unconstrained(_problem_for_reference(record))
+
+
 def relative_difference(f1: float, f2: float) -> float:
     """``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN when either is NaN)."""
     if math.isnan(f1) or math.isnan(f2):
@@ -350,6 +356,16 @@ def solve_candidate(
     return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
 
 
+def solve_task(task: tuple) -> Candidate:
+    """:func:`solve_candidate` of ``(record, solver, time_limit)`` in a worker process: a
+    plain (picklable) answer, and a bug in one task an ``unknown`` answer, not the others' end."""
+    record, solver, time_limit = task
+    try:
+        return solve_candidate(record, solver, time_limit).plain()
+    except Exception as exc:  # noqa: BLE001 - see the docstring
+        return Candidate(solver, "unknown", None, reason=f"{type(exc).__name__}: {exc}")
+
+
 def _clarabel_timed_out(solver: str, sol) -> bool:
     if solver != "clarabel" or sol is None:
         return False
@@ -391,7 +407,7 @@ def reference_solution(
     """
     if method not in METHODS:
         raise ValueError(f"unknown reference method '{method}'")
-    if _is_unconstrained(_problem_for_reference(record)):
+    if not needs_solver(record):
         return _unconstrained(
             ProblemRecord(_problem_for_reference(record), record.name, offset=record.offset)
         )

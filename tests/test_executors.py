@@ -10,7 +10,7 @@ import pytest
 from test_sweep import PLUGIN, rows_of, write_sweep
 
 from qpbench.cli import main
-from qpbench.reference_pool import requests
+from qpbench.runner.process import requests
 
 pytest.importorskip("distributed")
 
@@ -42,7 +42,7 @@ def _quiet(settings: dict) -> bool:
 
 
 def test_local_cluster_workers_start_quiet():
-    from qpbench.executors import DaskExecutor
+    from qpbench.runner import DaskExecutor
 
     ex = DaskExecutor(jobs=1)
     try:
@@ -62,7 +62,7 @@ def test_local_cluster_workers_start_quiet():
 def test_worker_plugin_quiets_an_existing_cluster_until_close():
     from distributed import Client, LocalCluster
 
-    from qpbench.executors import DaskExecutor
+    from qpbench.runner import DaskExecutor
 
     with (
         LocalCluster(

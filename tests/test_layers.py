@@ -5,16 +5,21 @@ a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
     exceptions statuses profiles published memory atomic cache packed known native_output
-    robot rnn backends metrics formats reference reference_solve reference_pool
+    runner
+    robot rnn backends metrics formats reference reference_solve
     control
     sim
     selection report jit
-    harness scaling sweep executors
+    harness scaling sweep
     commands cli
 
 ``jit`` warms the compiled kernels (the network's, the controller's, the
 loop's) and so sits above ``sim``: the commands and the harness call it with
 the backends they run before any clock starts; nothing below imports it.
+``runner`` sits low because the reference solves, the isolated bench and
+the closed loop's runs all take their worker processes from it: no module but
+``runner/process.py`` starts one (:data:`PROCESS_OWNER`), defines the pool's
+settings or has a private name imported by another.
 
 Sizes: no module of the package over :data:`MAX_MODULE_LINES` lines (``wc -l``)
 and no function over :data:`MAX_FUNCTION_LINES` lines (from ``def`` to its last
@@ -44,6 +49,7 @@ LAYERS = [
         "native_output",
         "qpbench",
     },
+    {"runner"},
     {
         "robot",
         "rnn",
@@ -52,12 +58,11 @@ LAYERS = [
         "formats",
         "reference",
         "reference_solve",
-        "reference_pool",
     },
     {"control"},
     {"sim"},
     {"selection", "report", "jit"},
-    {"harness", "scaling", "sweep", "executors"},
+    {"harness", "scaling", "sweep"},
     {"commands", "cli"},
 ]
 #: Allowed across layers in both directions (none: every package has its layer).
@@ -154,6 +159,108 @@ def test_markdown_and_plots_do_not_import_each_other():
     graph = _graph()
     assert "qpbench.report.plots" not in graph["qpbench.report.markdown"]
     assert "qpbench.report.markdown" not in graph["qpbench.report.plots"]
+
+
+#: The one module that starts, feeds, times out and reaps worker processes (docs/architecture.md,
+#: "Worker processes"); the Dask executor (runner/dask_.py) hands tasks to a cluster's workers,
+#: which Dask starts.
+PROCESS_OWNER = "qpbench.runner.process"
+#: Calls that start, connect to or stop a process, or choose how one starts.
+PROCESS_CALLS = {
+    "Process",
+    "Pipe",
+    "get_context",
+    "set_start_method",
+    "set_forkserver_preload",
+    "ProcessPoolExecutor",
+    "Popen",
+    "fork",
+    "kill",
+    "terminate",
+}
+#: Modules that start processes their own way.
+PROCESS_MODULES = {"multiprocessing", "subprocess", "concurrent.futures", "loky", "pebble"}
+#: Modules other than the owner allowed to import :data:`PROCESS_MODULES`, with the reason.
+PROCESS_EXCEPTIONS = {
+    "qpbench.backends._qpoases_shim": "runs the C++ compiler once to build the native shim",
+}
+#: The pool's settings, each defined in :data:`PROCESS_OWNER` only.
+POOL_SETTINGS = ("START_TIMEOUT_S", "DEADLINE_MARGIN_S", "MAX_ATTEMPTS", "PRELOAD_KERNELS_ENV")
+
+
+def _trees() -> dict[str, ast.Module]:
+    return {name: ast.parse(path.read_text()) for name, path in _modules().items()}
+
+
+def _typing_only(tree: ast.Module) -> set[ast.AST]:
+    """The imports under ``if TYPE_CHECKING:`` (names for annotations, nothing run)."""
+    nodes = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+            nodes.update(n for stmt in node.body for n in ast.walk(stmt))
+    return nodes
+
+
+def test_only_runner_process_starts_worker_processes():
+    found = []
+    for module, tree in _trees().items():
+        if module == PROCESS_OWNER:
+            continue
+        typing_only = _typing_only(tree)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call):
+                func = node.func
+                called = getattr(func, "attr", None) or getattr(func, "id", None)
+                if called in PROCESS_CALLS:
+                    found.append(f"{module}: calls {called}()")
+            elif isinstance(node, (ast.Import, ast.ImportFrom)) and node not in typing_only:
+                names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+                if isinstance(node, ast.ImportFrom) and not node.level:
+                    names = [node.module or ""]
+                for name in names:
+                    root = next(
+                        (m for m in PROCESS_MODULES if f"{name}.".startswith(f"{m}.")), None
+                    )
+                    if root is not None and module not in PROCESS_EXCEPTIONS:
+                        found.append(f"{module}: imports {name}")
+    assert found == []
+
+
+def test_process_exceptions_are_still_needed():
+    """Each exception imports a process module, so dropping that import drops the exception."""
+    sources = {name: path.read_text() for name, path in _modules().items()}
+    for module in PROCESS_EXCEPTIONS:
+        assert any(f"import {m}" in sources[module] for m in PROCESS_MODULES), module
+
+
+def test_the_pools_settings_are_defined_once_in_runner_process():
+    defined = {}
+    for module, tree in _trees().items():
+        for node in ast.walk(tree):
+            targets = node.targets if isinstance(node, ast.Assign) else []
+            if isinstance(node, ast.AnnAssign):
+                targets = [node.target]
+            for target in targets:
+                if getattr(target, "id", None) in POOL_SETTINGS:
+                    defined.setdefault(target.id, []).append(module)
+    assert defined == {name: [PROCESS_OWNER] for name in POOL_SETTINGS}
+
+
+def test_no_private_name_of_the_runner_is_imported_elsewhere():
+    found = []
+    for module, tree in _trees().items():
+        package = module if _modules()[module].name == "__init__.py" else module.rpartition(".")[0]
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            source = node.module or ""
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                source = ".".join(base + ([node.module] if node.module else []))
+            if not source.startswith("qpbench.runner"):
+                continue
+            found += [f"{module}: {source}.{a.name}" for a in node.names if a.name.startswith("_")]
+    assert found == []
 
 
 MAX_MODULE_LINES = 500

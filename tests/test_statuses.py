@@ -20,7 +20,7 @@ from qpbench.backends import STATUSES, get_backend
 from qpbench.cli import main
 from qpbench.harness.guard import LocalRunner
 from qpbench.harness.isolation import IsolatedRunner
-from qpbench.harness.workers import death_message
+from qpbench.runner.process import death_message
 from qpbench.sim.loop import simulate
 
 PLUGIN = str(Path(fb.__file__).resolve())

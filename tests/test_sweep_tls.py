@@ -71,7 +71,7 @@ def make_certificates(folder: Path) -> tuple[Path, Path, Path]:
 def test_sweep_on_a_tls_cluster(tmp_path):
     from distributed import LocalCluster
 
-    from qpbench.executors import load_security
+    from qpbench.runner import load_security
 
     ca, cert, key = make_certificates(tmp_path)
     security_file = tmp_path / "tls.toml"

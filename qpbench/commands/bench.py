@@ -232,7 +232,7 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         progress = tqdm if sys.stderr.isatty() else "log"
 
     def compute(problem_set):
-        from ..harness.workers import context as worker_context
+        from ..runner.process import context as worker_context
 
         return bench_references(
             problem_set,

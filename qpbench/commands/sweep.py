@@ -1,7 +1,7 @@
 """``qpbench sweep``: many perturbed instances of a scenario, each in closed loop with each backend.
 
 See :mod:`qpbench.sweep` (the sweep file, the instances, the table) and
-:mod:`qpbench.executors` (where the runs are made). The trajectory of a run
+:mod:`qpbench.runner` (where the runs are made). The trajectory of a run
 never depends on how long its solves took, so every executor gives the same
 rows apart from the timing columns; those (solve times, ticks over 1 ms,
 real-time factor) are only clean serially (``--jobs 1``): runs solving at the
@@ -36,7 +36,7 @@ TIMED = "solve_time_*, deadline_misses, ticks_over_1ms, real_time_factor"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..executors import EXECUTORS, default_jobs
+    from ..runner import EXECUTORS, default_jobs
 
     parser.add_argument(
         "sweep",
@@ -102,8 +102,8 @@ def run(args: argparse.Namespace) -> int:
     from ..atomic import check_folder, check_output
     from ..backends import plugin_files
     from ..exceptions import ParamError
-    from ..executors import make_executor
     from ..jit import warmup_logged
+    from ..runner import make_executor
     from ..selection import select_backends
     from ..sweep.rows import CSV_NAME
     from ..sweep.spec import load_sweep

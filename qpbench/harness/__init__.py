@@ -3,9 +3,8 @@
 - :mod:`.bench`: :func:`run_bench` (``qpbench bench``), sequences, rows;
 - :mod:`.timing`: the timed region and state restoration between repeats;
 - :mod:`.guard`: guarded in-process solves (exceptions, time limit, non-finite answers);
-- :mod:`.isolation`: solves in a worker process (hangs and crashes);
-- :mod:`.workers`: starting, stopping and wording the death of a worker process
-  (per-tick isolation and isolated closed-loop runs alike);
+- :mod:`.isolation`: solves in a worker process (hangs and crashes), through
+  :mod:`qpbench.runner.process`, the one module that owns worker processes;
 - :mod:`.results`: CSV rows appended as produced, read back on resume;
 - :mod:`.plugins`: extra backend modules (``--plugin``, ``QPBENCH_PLUGINS``);
 - :mod:`.closed_loop`: :func:`run_closed_loop` (``qpbench closed-loop``), with

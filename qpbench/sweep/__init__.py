@@ -4,6 +4,6 @@
 keys), :mod:`.sample` draws the instances (full scenario files),
 :mod:`.task` runs one (instance, backend) through the closed loop,
 :mod:`.rows` makes its row and :mod:`.runner` runs them all on an executor
-(:mod:`qpbench.executors`) into a crash-safe, resumable table. The report's
+(:mod:`qpbench.runner`) into a crash-safe, resumable table. The report's
 section is :mod:`qpbench.sweep.report`.
 """

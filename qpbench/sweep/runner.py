@@ -34,7 +34,7 @@ from .spec import SweepSpec
 from .task import SweepTask, run_task
 
 if TYPE_CHECKING:
-    from ..executors import DaskExecutor, ProcessExecutor, SerialExecutor
+    from ..runner import DaskExecutor, ProcessExecutor, SerialExecutor
 
 log = logging.getLogger("qpbench.sweep")
 
@@ -165,7 +165,7 @@ def run_sweep(
     plugins: list[str] | None = None,
     on_row: Callable[[dict], None] | None = None,
 ) -> SweepOutcome:
-    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.executors`) into ``out``.
+    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``.
 
     Rows are appended to ``out/sweep.csv`` as runs end (``on_row`` is called
     with each); an instance the scenario loader refuses gets an

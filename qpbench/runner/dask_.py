@@ -12,7 +12,7 @@ scheduler first applies its own ``distributed.scheduler.allowed-failures``.
 A task is a whole closed-loop run: pure computation in a thread beside the
 worker's event loop, which shares its GIL. The workers of the local cluster
 are started with :data:`WORKER_CONFIG`; on an existing cluster the client
-registers :class:`qpbench.executors.dask_worker.QuietWorker`, which does the
+registers :class:`qpbench.runner.dask_worker.QuietWorker`, which does the
 same on every worker while the executor is open.
 """
 
@@ -25,22 +25,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..exceptions import InputError, ParamError
-from .local import MAX_ATTEMPTS, Done, run_located
+from .process import MAX_ATTEMPTS, Done, run_located
 
 if TYPE_CHECKING:
     from distributed.security import Security
 
-log = logging.getLogger("qpbench.executors")
+log = logging.getLogger("qpbench.runner")
 
 __all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
 
 #: Dask settings of the workers a sweep runs on. The statistical profiler samples the task's
 #: stack every 10 ms and the event loop checks its own health every 20 ms, both on the worker's
-#: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`). Measured on a
-#: 20 s wall instance with DAQP (``bench/sweep_speedup.py``, idle machine): with Dask's defaults the
-#: worker's other threads took 19 ms of CPU time during the task's 0.41 s and the task's thread
-#: waited 129 times (+11.1 % wall); with these settings 4 ms and 39 waits (-2.8 %, within noise;
-#: the memory monitor and heartbeats remain).
+#: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`; what that
+#: costs: ``bench/sweep_speedup.py`` and the README). The memory monitor and heartbeats remain.
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
@@ -119,7 +116,7 @@ class DaskExecutor:
         jobs: Workers of the local cluster.
 
     On an existing cluster the client registers
-    :class:`~qpbench.executors.dask_worker.QuietWorker` (the equivalent of
+    :class:`~qpbench.runner.dask_worker.QuietWorker` (the equivalent of
     :data:`WORKER_CONFIG` on running workers, and on workers that join later)
     and removes it at :meth:`close`, which restores the workers' settings.
     """

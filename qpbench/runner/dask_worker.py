@@ -10,7 +10,7 @@ pure computation runs slower on a worker than in a process of its own.
 :class:`QuietWorker` stops those timers while it is registered (the client
 registers it on every worker of the cluster, present and future, and
 removes it when done, which restores them). A worker started with the same
-settings needs no plugin (:data:`qpbench.executors.dask_.WORKER_CONFIG`).
+settings needs no plugin (:data:`qpbench.runner.dask_.WORKER_CONFIG`).
 
 This module imports ``distributed``: import it only where Dask is installed.
 """

@@ -1,0 +1,420 @@
+"""Worker processes: the one place that starts, feeds, times out and reaps them.
+
+A worker runs ``fn(arg)`` requests (``fn`` a module-level function, ``arg``
+picklable) one at a time and sends each value back over a pipe. Two ways to
+use one:
+
+- :class:`Worker`: one worker, one request at a time, each with a deadline
+  (:meth:`Worker.call`); module globals of the worker keep state between
+  requests (the per-tick bench's isolated backend);
+- :func:`run_tasks`: the pool. ``(key, arg, timeout)`` tasks on up to
+  ``jobs`` workers; each task ends as a :class:`Done`, in the order they
+  finish. A task past its deadline has its worker killed; a task whose worker
+  died is retried up to ``attempts`` times; a killed or dead worker is
+  replaced by a new one before the next task.
+
+How a request ends (the ``status`` of :class:`Done` and :class:`WorkerDied`):
+
+- answered -> ``None``;
+- ``fn`` raised -> ``error`` (``"Type: message"``); the worker lives on;
+- no answer by the deadline -> ``time_limit``: the worker is killed (SIGKILL,
+  which needs no cooperation from a solver hung in native code);
+- the worker died (segfault, abort, ``os._exit``, the out-of-memory killer)
+  -> ``crashed``, worded by :func:`death_message`.
+
+Start method: ``forkserver`` where the platform has one, else ``spawn``
+(:func:`context`). The forkserver is started once, before the first worker's
+clock, with qpbench preloaded (:mod:`qpbench.harness.preload` loads the numba
+kernels the parent prepared, and only those, from the on-disk cache), so a
+worker is a fork of a process that already holds qpbench and the kernels and
+never compiles. A worker imports the task's module and says it is ready before
+any deadline runs (within :data:`START_TIMEOUT_S`). A worker takes the environment of the process
+that starts it, not the one the forkserver was started with.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import multiprocessing
+import os
+import signal
+import socket
+import sys
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from multiprocessing.connection import wait
+from typing import TYPE_CHECKING
+
+from ..statuses import describe_exception
+
+if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+    from multiprocessing.context import BaseContext
+
+__all__ = [
+    "DEADLINE_MARGIN_S",
+    "MAX_ATTEMPTS",
+    "PRELOAD_KERNELS_ENV",
+    "START_TIMEOUT_S",
+    "Done",
+    "Worker",
+    "WorkerDied",
+    "context",
+    "deadline",
+    "death_message",
+    "preload_kernels",
+    "requests",
+    "run_located",
+    "run_tasks",
+]
+
+#: Time allowed for the forkserver's preload and for a worker to start [s].
+START_TIMEOUT_S = 120.0
+#: Least slack added to a solve's time limit before its worker is killed [s] (pipe, pickling,
+#: scheduling on a loaded machine); the slack is ``max(DEADLINE_MARGIN_S, time_limit / 2)``.
+DEADLINE_MARGIN_S = 1.0
+#: Runs of a task before it is reported lost (the first and one retry), in a pool that retries.
+MAX_ATTEMPTS = 2
+
+#: Modules the forkserver imports once, for every worker forked from it.
+PRELOAD = (
+    "qpbench.runner.process",
+    "qpbench.harness.isolation",
+    "qpbench.backends",
+    "numpy",
+    "scipy.sparse",
+    "qpbench.harness.preload",
+)
+
+#: Environment variable of the forkserver naming the kernels its preload loads
+#: (:func:`preload_kernels`, comma-separated), written when the forkserver starts.
+PRELOAD_KERNELS_ENV = "QPBENCH_PRELOAD_KERNELS"
+
+_CTX = None
+#: What :func:`preload_kernels` named last.
+_KERNELS: tuple[str, ...] = ()
+
+
+def preload_kernels(names) -> None:
+    """Name the compiled kernels the forkserver loads for every worker: those this process
+    prepared (:func:`qpbench.jit.prepare` calls this). A forkserver started later sees them.
+    """
+    global _KERNELS
+    _KERNELS = tuple(names)
+
+
+def context(fresh: bool = False) -> BaseContext:
+    """The start method's context; the forkserver preloads the kernels this process prepared.
+
+    The command has compiled (or loaded) the kernels of the backends it runs
+    before (:func:`qpbench.jit.warmup`, which names them here through
+    :func:`preload_kernels`), so no worker ever compiles: it only loads them.
+    ``fresh``: ``spawn`` instead, each worker a new interpreter with nothing
+    preloaded and never a fork of a process that may hold threads and locks
+    (reference solves called from the Python API).
+    """
+    global _CTX
+    if fresh:
+        return multiprocessing.get_context("spawn")
+    if _CTX is None:
+        method = (
+            "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        )
+        ctx = multiprocessing.get_context(method)
+        if method == "forkserver":
+            # what this process prepared, never a value inherited from the process that started it
+            os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
+            ctx.set_forkserver_preload(list(PRELOAD))
+            # start the server now and wait for its preload (a no-op child), so that no
+            # worker's deadline ever covers it
+            proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
+            proc.start()
+            proc.join(START_TIMEOUT_S)
+        _CTX = ctx
+    return _CTX
+
+
+def _noop() -> None:
+    """A child that does nothing: its start waits for the forkserver's preload."""
+
+
+def deadline(time_limit: float, solves: int = 1) -> float:
+    """Deadline [s] of a request of ``solves`` solves of at most ``time_limit`` [s] each:
+    ``time_limit * solves + max(DEADLINE_MARGIN_S, time_limit / 2)``."""
+    return time_limit * solves + max(DEADLINE_MARGIN_S, time_limit / 2)
+
+
+def death_message(exitcode: int | None) -> str:
+    """How a worker ended without an answer: ``worker process killed by SIGSEGV``, or
+    ``worker process exited with code 3``."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"worker process killed by {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"worker process killed by signal {-exitcode}"
+    return f"worker process exited with code {exitcode}"
+
+
+def requests(conn: Connection) -> Iterator:
+    """Each request a worker process receives on ``conn``, until ``None`` or the other end closes."""
+    while True:
+        try:
+            request = conn.recv()
+        except EOFError:
+            return
+        if request is None:
+            return
+        yield request
+
+
+def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
+    """Body of every worker process: import ``imports``, say ready, answer ``(fn, arg)``
+    requests until ``None``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    os.environ.clear()
+    os.environ.update(environ)
+    for module in imports:
+        importlib.import_module(module)
+    conn.send(("ready", None))
+    for fn, arg in requests(conn):
+        try:
+            answer = ("ok", fn(arg))
+        except BaseException as exc:  # noqa: BLE001 - reported, the worker lives on
+            answer = ("exc", describe_exception(exc))
+        try:
+            conn.send(answer)
+        except Exception as exc:  # noqa: BLE001 - an unpicklable answer
+            conn.send(("exc", describe_exception(exc)))
+
+
+class WorkerDied(Exception):
+    """A request gave no answer; ``status`` is ``error``, ``crashed`` or ``time_limit``."""
+
+    def __init__(self, status: str, message: str):
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+class Worker:
+    """One worker process (a daemon: it dies with this process) and its pipe.
+
+    Args:
+        ctx: ``multiprocessing`` context (default :func:`context`).
+        name: Process name.
+        imports: Modules the worker imports before it says ready (outside any deadline).
+    """
+
+    def __init__(
+        self, ctx: BaseContext | None = None, name: str = "qpbench-worker", imports: tuple = ()
+    ):
+        ctx = ctx if ctx is not None else context()
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(
+            target=_serve, args=(child, dict(os.environ), tuple(imports)), daemon=True, name=name
+        )
+        self.proc.start()
+        child.close()
+        self.ready = False
+        self.alive = True
+        self.task = None  # the pool's (key, arg, timeout, attempts)
+        self.timeout: float | None = None
+        self.deadline = math.inf
+
+    def send(self, fn: Callable, arg, timeout: float | None) -> None:
+        """Start request ``fn(arg)``, answered within ``timeout`` [s] (``None``: no limit).
+
+        Raises:
+            WorkerDied: the worker did not start (``crashed``, ``time_limit``).
+        """
+        if not self.ready:
+            self.deadline, self.timeout = time.monotonic() + START_TIMEOUT_S, START_TIMEOUT_S
+            status, payload = self._wait()
+            if status != "ready":
+                raise WorkerDied(status, f"{payload} during start")
+            self.ready = True
+        self.timeout = timeout
+        self.deadline = math.inf if timeout is None else time.monotonic() + timeout
+        self.conn.send((fn, arg))
+
+    def poll(self) -> tuple[str, object] | None:
+        """``(status, payload)`` once the request is over, else ``None``.
+
+        ``("ok", value)``, ``("error", text)``, ``("crashed", death message)`` or
+        ``("time_limit", text)``; after the last two the worker is gone.
+        """
+        try:
+            if self.conn.poll():
+                kind, payload = self.conn.recv()
+                return {"exc": "error"}.get(kind, kind), payload
+        except (EOFError, OSError):
+            pass
+        if not self.proc.is_alive():
+            self.proc.join(2)
+            message = death_message(self.proc.exitcode)
+            self.kill()
+            return "crashed", message
+        if time.monotonic() >= self.deadline:
+            self.kill()
+            return "time_limit", f"no answer after {self.timeout:.3g} s"
+        return None
+
+    def _wait(self) -> tuple[str, object]:
+        while (answer := self.poll()) is None:
+            left = self.deadline - time.monotonic()
+            wait([self.conn, self.proc.sentinel], None if math.isinf(left) else max(left, 0.0))
+        return answer
+
+    def call(self, fn: Callable, arg, timeout: float | None, what: str):
+        """``fn(arg)`` in the worker, answered within ``timeout`` [s]; its value.
+
+        Raises:
+            WorkerDied: ``error`` (``fn`` raised), ``crashed`` or ``time_limit`` (the
+                worker is gone), the message naming ``what`` (``during solve``).
+        """
+        self.send(fn, arg, timeout)
+        status, payload = self._wait()
+        if status == "ok":
+            return payload
+        if status == "time_limit":
+            payload = f"{payload} during {what}; worker killed"
+        elif status == "crashed":
+            payload = f"{payload} during {what}"
+        raise WorkerDied(status, payload)
+
+    def kill(self) -> None:
+        """Kill the worker if it is alive (SIGKILL), reap it and close the pipe."""
+        self.alive = False
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.proc.join(5)
+        self.conn.close()
+
+    def stop(self) -> None:
+        """Ask the worker to end (it finishes nothing more), then :meth:`kill` what is left."""
+        if self.alive and self.proc.is_alive():
+            try:
+                self.conn.send(None)
+                self.proc.join(2)
+            except (OSError, ValueError):
+                pass
+        self.kill()
+
+
+def run_located(fn: Callable, arg) -> tuple:
+    """``fn(arg)`` with the host and worker that ran it (on a Dask worker: its address)."""
+    worker = f"pid{os.getpid()}"
+    if "distributed" in sys.modules:
+        try:
+            worker = sys.modules["distributed"].get_worker().address
+        except ValueError:
+            pass
+    return fn(arg), socket.gethostname(), worker
+
+
+@dataclass
+class Done:
+    """A finished task.
+
+    Attributes:
+        key: The task's key, as given.
+        value: ``fn(arg)``, or ``None`` when the task gave none.
+        lost: Why it gave nothing (the last attempt's error, death or deadline), else ``None``.
+        attempts: Times it was started.
+        host, worker: Where its last attempt ran.
+        concurrent: Tasks that could run at once on that host.
+        status: ``None`` (a value), ``error``, ``crashed`` or ``time_limit``.
+    """
+
+    key: object
+    value: object
+    lost: str | None
+    attempts: int
+    host: str
+    worker: str
+    concurrent: int
+    status: str | None = None
+
+
+def run_tasks(
+    fn: Callable,
+    tasks: list[tuple],
+    jobs: int,
+    *,
+    ctx: BaseContext | None = None,
+    attempts: int = 1,
+    fresh: bool = False,
+    name: str = "qpbench-worker",
+    on_retry: Callable | None = None,
+) -> Iterator[Done]:
+    """``fn(arg)`` of each task ``(key, arg, timeout)`` on up to ``jobs`` worker processes.
+
+    Args:
+        fn: A module-level function.
+        tasks: ``timeout`` in [s] from the moment the task is sent, ``None`` for none.
+        jobs: Workers at once (at least 1).
+        ctx: ``multiprocessing`` context (default :func:`context`).
+        attempts: Runs of a task whose worker died before it is reported lost.
+        fresh: A new worker for every task (none carries anything from another).
+        on_retry: ``on_retry(key, why)`` before a task runs again.
+
+    Yields:
+        A :class:`Done` per task as it ends. Workers left running when the
+        caller stops iterating (an interrupt) are killed.
+    """
+    if not tasks:
+        return
+    ctx = ctx if ctx is not None else context()
+    host = socket.gethostname()
+    queue = deque((key, arg, timeout, 0) for key, arg, timeout in tasks)
+    slots = max(1, min(int(jobs), len(tasks)))
+    imports = (fn.__module__,)  # the task's module is loaded before any deadline runs
+    workers = [Worker(ctx, f"{name}-{i}", imports) for i in range(slots)]
+    try:
+        while queue or any(w.task for w in workers):
+            for i, w in enumerate(workers):
+                if w.task is None and queue:
+                    if not w.alive:
+                        workers[i] = w = Worker(ctx, f"{name}-{i}", imports)
+                    key, arg, timeout, tried = queue.popleft()
+                    w.task = (key, arg, timeout, tried + 1)
+                    w.send(fn, arg, timeout)
+            busy = [w for w in workers if w.task]
+            left = min(w.deadline for w in busy) - time.monotonic()
+            wait(
+                [w.conn for w in busy] + [w.proc.sentinel for w in busy],
+                None if math.isinf(left) else max(left, 0.0),
+            )
+            for w in busy:
+                answer = w.poll()
+                if answer is None:
+                    continue
+                (key, arg, timeout, tried), w.task = w.task, None
+                status, payload = answer
+                if fresh:
+                    w.stop()  # a new worker for the next task; this one's memory is freed now
+                if status == "crashed" and tried < attempts:
+                    if on_retry is not None:
+                        on_retry(key, payload)
+                    queue.appendleft((key, arg, timeout, tried))
+                    continue
+                ok = status == "ok"
+                yield Done(
+                    key,
+                    payload if ok else None,
+                    None if ok else payload,
+                    tried,
+                    host,
+                    f"pid{w.proc.pid}",
+                    slots,
+                    None if ok else status,
+                )
+    finally:
+        for w in workers:
+            if w.task is not None:
+                w.kill()
+            else:
+                w.stop()
