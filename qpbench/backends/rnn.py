@@ -31,11 +31,11 @@ tick             the duration in [s] ``substeps`` divides (default 1e-3, the
                  control period of every shipped scenario)
 safety           fraction of the stability bound per step, in (0, 1]
                  (default 0.9; on the robot's QPs the steps to converge fall
-                 as r grows up to the bound: 0.5 takes 1.8x the steps of 0.9)
+                 as r grows up to the bound)
 l1_clip          clip ``l1`` to +-l1_clip after every step (anti-windup);
                  default none
 method           ``euler`` (default of ``rnn``: the note's reading) or
-                 ``semi-implicit`` (default of ``rnn-converged``: 2.6x fewer
+                 ``semi-implicit`` (default of ``rnn-converged``: fewer
                  steps to 1e-6 on the robot's QPs, same cost a step)
 use_numba        compiled loop (default when numba is installed) or numpy
 max_iter         step budget of ``rnn-converged`` (default: profile's)
@@ -82,11 +82,9 @@ __all__ = [
 #: A setting that works in the closed loop of every shipped scenario (the
 #: paper's ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps
 #: per 1 ms (a step of 50 us, r = 0.5) and ``l1`` clipped to +-10. It keeps
-#: every key point at least 9.8 mm from the obstacles (d_safe 10 mm, bar
-#: 9.5 mm) in free, wall, adaptive, narrow and adaptive_fast, at a few
-#: microseconds per tick (the frontier in results/rnn/README.md;
-#: ``python bench/rnn_frontier.py``). The earlier setting, eps = 1 ms with 5
-#: Euler steps, reaches 6.4 mm in narrow.
+#: every key point within the bar (``d_safe - 0.5 mm``) in every shipped
+#: scenario, where eps = 1 ms with 5 Euler steps does not (narrow); the
+#: frontier of settings: results/rnn/README.md, ``python bench/rnn_frontier.py``.
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 
@@ -123,10 +121,10 @@ class TickSolution(BackendSolution):
 
     The kernel writes ``[x; y; z; z_box]`` into one fresh array. ``x`` is a
     view of it made at once; ``y``, ``z`` and ``z_box`` are views made on the
-    first read of any of them (three views cost about as much as the
-    network's five sub-steps; a controller applying ``x`` does not need
-    them). The values are fixed when :meth:`RNNOnline.solve` returns: the
-    array is never written again. The bench's timed region reads every field
+    first read of any of them (a controller applying ``x`` does not need
+    them, and on this path the views are a sizeable part of a tick). The
+    values are fixed when :meth:`RNNOnline.solve` returns: the array is never
+    written again. The bench's timed region reads every field
     of the answer (:func:`qpbench.harness.timing.timed_call`), so there the
     three views are paid for inside the timing, as other backends pay for
     the duals they build.

@@ -36,8 +36,10 @@ __all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
 
 #: Dask settings of the workers a sweep runs on. The statistical profiler samples the task's
 #: stack every 10 ms and the event loop checks its own health every 20 ms, both on the worker's
-#: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`; what that
-#: costs: ``bench/sweep_speedup.py`` and the README). The memory monitor and heartbeats remain.
+#: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`): with Dask's
+#: defaults the task's thread waits for the GIL and a closed-loop run takes longer than in a
+#: process of its own (``bench/sweep_speedup.py``); these settings stop both timers (the memory
+#: monitor and heartbeats remain).
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
