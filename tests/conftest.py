@@ -67,6 +67,22 @@ def _own_user_cache(tmp_path_factory):
         os.environ["XDG_CACHE_HOME"] = previous
 
 
+@pytest.fixture(autouse=True)
+def _logging_restored():
+    """The ``qpbench`` loggers as they were before each test: ``qpbench.cli.main`` run in a test
+    sets their handlers, levels and propagation for its command, and a later test that reads
+    the log through ``caplog`` (the root logger) must see it whichever tests ran before."""
+    import logging
+
+    loggers = [logging.getLogger(name) for name in ("qpbench", "qpbench.solves")]
+    saved = [(lg, list(lg.handlers), lg.level, lg.propagate) for lg in loggers]
+    yield
+    for lg, handlers, level, propagate in saved:
+        lg.handlers[:] = handlers
+        lg.setLevel(level)
+        lg.propagate = propagate
+
+
 #: The Maros-Meszaros subset the repository ships.
 MAROS_MESZAROS_DIR = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
 

@@ -125,7 +125,8 @@ class QpoasesSolution(BackendSolution):
     ``x``, ``z_box``, ``y`` and ``z`` are views of one copy of the shim's output
     (``x``, then the multipliers with qpsolvers' sign): ``x`` is made with the
     solution, the multipliers on first read and then kept (a closed loop reads
-    only ``x``; the three views cost 0.2 us a tick). Assigning a field replaces
+    only ``x``, and making the three views is a measurable share of a tick:
+    ``python bench/backend_overhead.py``). Assigning a field replaces
     it, as on any :class:`qpsolvers.Solution`. ``z_box`` is empty when the
     problem has no bounds.
     """

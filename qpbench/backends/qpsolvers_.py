@@ -152,7 +152,8 @@ def _wrapper(solver: str):
     dispatches through (read from its globals: the table's module moved between qpsolvers
     4.4 and 4.13), called as ``solve_problem`` calls it. Without that table (another
     qpsolvers), ``solve_problem`` itself. Calling it directly saves ``solve_problem``'s frame
-    and keyword repacking, 0.2-0.3 us of a 14 us DAQP call."""
+    and keyword repacking, which ``python bench/backend_overhead.py`` shows on the fastest
+    routes (the routes' ratio to ``solve_problem``)."""
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     wrapper = table.get(solver) if isinstance(table, dict) else None
     if wrapper is not None:
@@ -173,9 +174,10 @@ def _float_array(v):
 _F64 = np.dtype(np.float64)
 
 #: Solvers whose qpsolvers wrapper hands ``x``, ``y``, ``z`` and ``z_box`` back as float64
-#: arrays (or None): their results are taken as given, without the four type checks (0.2 us
-#: of a 14 us DAQP call). tests/test_backends.py checks it of every installed one through
-#: qpsolvers.solve_problem itself, so a qpsolvers release that changes a wrapper fails there;
+#: arrays (or None): their results are taken as given, without the four type checks (a share
+#: of the fastest routes' call: ``python bench/backend_overhead.py``). tests/test_backends.py
+#: checks it of every installed one through qpsolvers.solve_problem itself, so a qpsolvers
+#: release that changes a wrapper fails there;
 #: any other solver's results (clarabel's duals are lists) are checked and converted.
 FLOAT64_WRAPPERS = frozenset(
     {

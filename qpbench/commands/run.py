@@ -96,8 +96,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         default=None,
         metavar="K",
-        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 400 of each set's "
-        "2,000, every 50th control tick; 1: all of them, about 4x longer)",
+        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 200 of each set's "
+        "2,000, every 100th control tick; 1: all of them, about 10x longer)",
     )
     parser.add_argument(
         "--run-budget",

@@ -235,7 +235,8 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
 
         run_figure(result.log, s, args.plot)
     if args.snapshot is not None or args.animate is not None:
-        from ..report.arm import animate, draw_snapshot
+        from ..report.animation import animate
+        from ..report.arm import draw_snapshot
 
         title = f"{scenario.name} / {s['backend']}"
         if args.snapshot is not None:

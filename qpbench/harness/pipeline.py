@@ -66,11 +66,12 @@ OUTPUTS = ("bench", "logs", "figure_logs", "plots", "closed_loop.csv", "report.m
 STAGING = ".partial"
 #: Every k-th tick goes into a problem set.
 EVERY = 10
-#: The bench of ``run`` takes every k-th problem of each set: 400 of each set's 2,000
-#: (every 50th control tick, 0.05 s apart over the 20 s), timed 3 times each, so that
+#: The bench of ``run`` takes every k-th problem of each set: 200 of each set's 2,000
+#: (every 100th control tick, 0.1 s apart over the 20 s), timed 3 times each, so that
 #: README's first command (install, compile, bench, closed loop, report) stays within
-#: its time target on 2 cores (measured times: README). ``--bench-every 1`` benches all 2,000.
-BENCH_EVERY = 5
+#: its time target on 2 cores (measured phase times: bench/README.md). The closed loop
+#: judges every tick; ``--bench-every 1`` benches all 2,000.
+BENCH_EVERY = 10
 #: The most wall time a closed-loop run may take [s] (``--run-budget``). Each backend's own
 #: budget is decided from its per-tick time in the run's bench (:func:`closed_loop_budgets`):
 #: the backends that keep up with the loop finish their runs; one whose solves alone would take
@@ -79,8 +80,13 @@ RUN_BUDGET_S = 10.0
 #: A backend's closed-loop budget is this many times the run its bench median predicts
 #: (:func:`closed_loop_budgets`): room for the loop's own work and a busy machine.
 BUDGET_MARGIN = 3.0
-#: The least closed-loop budget of a backend [s] (:func:`closed_loop_budgets`).
+#: The least closed-loop budget of a backend that keeps up [s] (:func:`closed_loop_budgets`):
+#: room for the loop's own work per tick, which its bench time leaves out.
 BUDGET_FLOOR_S = 2.0
+#: The budget of a backend whose solves alone would take longer than ``run_budget`` [s]
+#: (:func:`closed_loop_budgets`): it cannot finish, so it is cut either way; this is hundreds
+#: of its ticks, enough to see it miss the rate and how far it gets.
+CUT_BUDGET_S = 1.0
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
 REPEAT = 3
 #: Backends that may regenerate a missing problem set, first available wins.
@@ -391,7 +397,7 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
     times that, at least :data:`BUDGET_FLOOR_S` (the loop's own work per
     tick) and at most ``run_budget``, so that a backend that keeps up with
     the loop finishes its runs. One whose solves alone would take longer
-    than ``run_budget`` gets :data:`BUDGET_FLOOR_S` only: it cannot finish
+    than ``run_budget`` gets :data:`CUT_BUDGET_S` only: it cannot finish
     within the budget, so its row is cut (status ``budget``) either way, and
     the time goes to the runs that can finish. No bench time (not benched,
     every solve failed): the ``run_budget``. ``run_budget`` ``None``: no
@@ -415,7 +421,7 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
             continue
         predicted = ticks * t
         if predicted > config.run_budget:
-            budgets[backend] = floor
+            budgets[backend] = min(CUT_BUDGET_S, config.run_budget)
         else:
             budgets[backend] = round(
                 min(config.run_budget, max(floor, BUDGET_MARGIN * predicted)), 3

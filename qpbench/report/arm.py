@@ -10,8 +10,8 @@ scenario has obstacles, the closest key point's distance against ``d_safe``
 over time, on the report's distance axis
 (:func:`qpbench.report.loop_figure.distance_axis`).
 
-:func:`animate` renders the same scene frame by frame to a GIF (Pillow, which
-matplotlib requires) or an MP4 (when ``ffmpeg`` is on the PATH).
+The same scene frame by frame is :func:`qpbench.report.animation.animate`, drawn with this
+module's pieces (:func:`frame_parts`, :func:`view`, :func:`draw_obstacles`, ...).
 
 Both follow :mod:`qpbench.report.style`: the run's backend is the one coloured
 thing (its end-effector path, and its distance line, in the backend's look, as
@@ -27,8 +27,6 @@ and the scenario; lengths are in metres, drawn with equal axes.
 
 from __future__ import annotations
 
-import math
-import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -41,7 +39,17 @@ if TYPE_CHECKING:
 
     from ..sim.scenario import Scenario
 
-__all__ = ["animate", "closest_approach", "draw_snapshot"]
+__all__ = [
+    "backend_look",
+    "closest_approach",
+    "draw_line",
+    "draw_obstacles",
+    "draw_snapshot",
+    "frame_parts",
+    "thetas",
+    "view",
+    "workspace_axes",
+]
 
 #: Colour of the arm (links and joints), of the key points' edges, of obstacles and of the
 #: surface: neutral, so that the backend's look is the only colour that names a backend.
@@ -53,12 +61,12 @@ PATH = style.Look("#495057", "o", "-")
 WORKSPACE_IN, DISTANCE_IN = 5.0, 1.6
 
 
-def _look(backend: str | None) -> style.Look:
+def backend_look(backend: str | None) -> style.Look:
     """The backend's look (:func:`qpbench.report.style.look`), or :data:`PATH` when none is named."""
     return PATH if backend is None else style.look(backend)
 
 
-def _thetas(log, n: int) -> np.ndarray:
+def thetas(log, n: int) -> np.ndarray:
     return log[[f"theta_{i}" for i in range(n)]].to_numpy(dtype=float)
 
 
@@ -100,14 +108,14 @@ def _instants(t: np.ndarray, count: int) -> np.ndarray:
     return np.unique(k)
 
 
-def _view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
+def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
     """Axis limits [m] around what the run shows: the arm's joints at every drawn tick (400 at
     most, evenly spread), the base, both end-effector paths, the nearest point of each line
     obstacle and of the surface to the base, and the disks, segments and clouds within twice
     the arm's reach; with a margin. (A box of the arm's whole reach left most of the picture
     empty.)"""
     reach = float(np.sum(arm.lengths))
-    theta = _thetas(log, arm.n)
+    theta = thetas(log, arm.n)
     every = max(1, len(theta) // 400)
     parts = [np.zeros((1, 2))]
     parts += [arm.joint_positions(q) for q in theta[::every] if np.isfinite(q).all()]
@@ -142,7 +150,7 @@ def _foot(point, normal) -> np.ndarray:
     return normal * float(normal @ point)
 
 
-def _draw_line(ax, point, normal, xlim, ylim, **line) -> None:
+def draw_line(ax, point, normal, xlim, ylim, **line) -> None:
     """The line through ``point`` perpendicular to ``normal``, clipped to the view; hatched on the far side."""
     tangent = np.array([-normal[1], normal[0]])
     span = 4.0 * max(xlim[1] - xlim[0], ylim[1] - ylim[0])
@@ -154,7 +162,7 @@ def _draw_line(ax, point, normal, xlim, ylim, **line) -> None:
     ax.fill(poly[:, 0], poly[:, 1], color=line.get("color", OBSTACLE), alpha=0.12, lw=0)
 
 
-def _draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> None:
+def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> None:
     from matplotlib.patches import Circle
 
     alpha = 0.25 if faint else 1.0
@@ -165,7 +173,7 @@ def _draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) ->
         if kind == "LineObstacle":
             if faint and not np.any(ob.velocity):
                 continue
-            _draw_line(
+            draw_line(
                 ax,
                 ob.point + shift,
                 ob.normal,
@@ -204,7 +212,7 @@ def _draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) ->
             ax.scatter(pts[:, 0], pts[:, 1], s=6, color=OBSTACLE, alpha=alpha, label=label)
 
 
-def _workspace_axes(ax, xlim, ylim) -> None:
+def workspace_axes(ax, xlim, ylim) -> None:
     """Equal-aspect axes in metres over the view, with a light grid."""
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
@@ -214,7 +222,7 @@ def _workspace_axes(ax, xlim, ylim) -> None:
     ax.grid(alpha=0.25)
 
 
-def _frame_parts(scenario):
+def frame_parts(scenario):
     arm = scenario.make_arm()
     keys = scenario.make_key_points()
     surface = scenario.make_surface()
@@ -285,7 +293,7 @@ def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
         label="desired end-effector path",
         zorder=2,
     )
-    look = _look(backend)
+    look = backend_look(backend)
     ax.plot(
         log["ee_x"],
         log["ee_y"],
@@ -349,11 +357,11 @@ def draw_snapshot(
     """
     plt = style.pyplot()
     path = Path(path)
-    arm, keys, surface, obstacles = _frame_parts(scenario)
-    theta = _thetas(log, arm.n)
+    arm, keys, surface, obstacles = frame_parts(scenario)
+    theta = thetas(log, arm.n)
     t = log["t"].to_numpy(float)
     ticks = len(log)
-    xlim, ylim = _view(scenario, log, arm)
+    xlim, ylim = view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
     has_d = _has_distance(log)
 
@@ -368,34 +376,33 @@ def draw_snapshot(
         layout="constrained",
     )
     ax = axes[0, 0]
-    _draw_line(
-        ax,
-        surface.point,
-        -surface.normal,
-        xlim,
-        ylim,
-        color=SURFACE,
-        lw=2.5,
-        label="contact surface",
-    )
+    surface_line = dict(color=SURFACE, lw=2.5, label="contact surface")
+    draw_line(ax, surface.point, -surface.normal, xlim, ylim, **surface_line)
     moving = any(np.any(ob.velocity) for ob in obstacles)
     if moving:
-        _draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
-    _draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
+        draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
+    draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
     _draw_poses(ax, arm, keys, theta, _instants(t, instants))
     _draw_paths(ax, log, backend)
 
     _mark_closest_approach(ax, log, scenario, arm, keys, theta)
 
-    _workspace_axes(ax, xlim, ylim)
+    workspace_axes(ax, xlim, ylim)
     ax.set_title(
         title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s"
     )
-    handles, labels = ax.get_legend_handles_labels()
     if has_d:
         _distance_panel(axes[1, 0], log, backend, d_safe)
-        h, lab = axes[1, 0].get_legend_handles_labels()
+    _legend_beside(ax, axes[:, 0])
+    return style.save(fig, path, dpi=110)
+
+
+def _legend_beside(ax, axes) -> None:
+    """One legend of every panel of ``axes``, to the right of ``ax`` (outside the workspace)."""
+    handles, labels = [], []
+    for a in axes:
+        h, lab = a.get_legend_handles_labels()
         handles, labels = handles + h, labels + lab
     ax.legend(
         handles,
@@ -406,7 +413,6 @@ def draw_snapshot(
         frameon=False,
         borderaxespad=0.0,
     )
-    return style.save(fig, path, dpi=110)
 
 
 def _has_distance(log: pd.DataFrame) -> bool:
@@ -423,7 +429,7 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
     from ..sim import log as tick_log
     from .loop_figure import UNSAFE_MARGIN, distance_axis
 
-    look = _look(backend)
+    look = backend_look(backend)
     name = f"{backend}: " if backend else ""
     t = log[tick_log.T].to_numpy(float)
     d = log[tick_log.D_MIN].to_numpy(float) * 1e3
@@ -449,165 +455,3 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
     ax.set_xlabel("t [s]")
     ax.set_ylabel("distance to an\nobstacle [mm]", fontsize=9)
     ax.grid(True, which="major", alpha=0.3)
-
-
-def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
-    """Ticks shown as frames: every ``speed / (fps * dt)``-th, ``dt`` [s] from ``t`` when it can."""
-    dt = float(t[1] - t[0]) if len(t) > 1 else dt
-    step = max(1, int(round(speed / (fps * dt))))
-    return list(range(0, len(t), step))
-
-
-def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim) -> bool:
-    """Axes, surface, desired path and (if none moves) the obstacles; True when none moves."""
-    _workspace_axes(ax, xlim, ylim)
-    _draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=SURFACE, lw=2.5)
-    ax.plot(log["xd_x"], log["xd_y"], "--", color="0.6", lw=1.0)
-    static = not any(np.any(ob.velocity) for ob in obstacles)
-    if static:
-        _draw_obstacles(ax, obstacles, 0.0, xlim, ylim)
-    return static
-
-
-def _animation_artists(ax, backend: str | None = None) -> tuple:
-    """The artists each frame updates: links, key points, end-effector trace (in ``backend``'s
-    look), and the time stamp (the axes' title: outside the workspace, never over the arm)."""
-    (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
-    keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
-    look = _look(backend)
-    (trace,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
-    label = ax.set_title("", fontsize=8, family="monospace", loc="left")
-    return link_line, keys_plot, trace, label
-
-
-def animate(
-    scenario: Scenario,
-    log: pd.DataFrame,
-    path: str | Path,
-    *,
-    fps: int = 20,
-    speed: float = 1.0,
-    progress: bool = False,
-    title: str | None = None,
-    dpi: int = 70,
-    backend: str | None = None,
-) -> Path:
-    """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
-
-    Args:
-        scenario: The scenario the log was simulated from.
-        log: The tick log.
-        path: ``.gif`` or ``.mp4``.
-        fps: Frames per second of the file.
-        speed: Simulated seconds per second of animation (2.0: twice as fast as real time).
-        progress: Show a progress bar (stderr).
-        title: Title prefix (default: the scenario's name).
-        dpi: Resolution; the default keeps a 20 s GIF at about 1-2 MB.
-        backend: The backend of the run: its end-effector trace in the backend's look
-            (:func:`qpbench.report.style.look`); ``None``: dark grey.
-
-    Returns:
-        ``path``.
-
-    Raises:
-        ParamError: an unknown suffix, ``.mp4`` without ffmpeg, or a non-positive ``fps``/``speed``.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib import animation
-
-    path = Path(path)
-    _check_animation(path, fps, speed)
-
-    arm, keys, surface, obstacles = _frame_parts(scenario)
-    theta = _thetas(log, arm.n)
-    t = log["t"].to_numpy(float)
-    frames = _frame_ticks(t, scenario.dt, fps, speed)
-    xlim, ylim = _view(scenario, log, arm)
-    d_safe = scenario.data["controller"]["d_safe"]
-    from ..sim.log import distance_columns
-
-    dcols = distance_columns(log)
-
-    # equal axes: the frame's height follows the view's proportions
-    high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
-    fig, ax = plt.subplots(figsize=(6, high), dpi=dpi, layout="constrained")
-    static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
-    link_line, keys_plot, trace, label = _animation_artists(ax, backend)
-    moving_artists: list = []
-    head = title or scenario.name
-
-    def draw(k):
-        for art in moving_artists:
-            art.remove()
-        moving_artists.clear()
-        if not static:
-            before = set(ax.lines) | set(ax.collections) | set(ax.patches)
-            _draw_obstacles(ax, obstacles, float(t[k]), xlim, ylim)
-            moving_artists.extend((set(ax.lines) | set(ax.collections) | set(ax.patches)) - before)
-        p = arm.joint_positions(theta[k])
-        link_line.set_data(p[:, 0], p[:, 1])
-        keys_plot.set_offsets(arm.points(theta[k], keys.links, keys.fracs))
-        trace.set_data(log["ee_x"].to_numpy()[: k + 1], log["ee_y"].to_numpy()[: k + 1])
-        dmin = np.nanmin(log[dcols].to_numpy()[k]) if dcols else float("nan")
-        near = dcols and dmin < d_safe - 5e-4
-        label.set_text(
-            f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else "")
-        )
-        label.set_color("red" if near else "black")
-        return [link_line, keys_plot, trace, label, *moving_artists]
-
-    anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
-    _save_animation(anim, fig, path, fps, len(frames), progress)
-    return path
-
-
-def _check_animation(path: Path, fps: float, speed: float) -> None:
-    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
-    from ..exceptions import ParamError
-
-    suffix = path.suffix.lower()
-    if suffix not in (".gif", ".mp4"):
-        raise ParamError(
-            f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate"
-        )
-    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
-        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
-    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
-        raise ParamError(
-            f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate"
-        )
-
-
-def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
-    """Write ``anim`` to ``path`` atomically (temporary file, then rename) and close ``fig``."""
-    import matplotlib.pyplot as plt
-    from matplotlib import animation
-
-    suffix = path.suffix.lower()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n_frames, unit="frame", desc=f"animate {path.name}", leave=False)
-    callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
-
-    writer = (
-        animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
-    )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{suffix}")
-    try:
-        anim.save(tmp, writer=writer, progress_callback=callback)
-        from ..atomic import record, rename
-
-        rename(tmp, path)
-        record(path)  # listed with the command's other outputs
-    finally:
-        if bar is not None:
-            bar.close()
-        plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()

@@ -1,0 +1,191 @@
+"""The arm's run as an animation: the scene of :mod:`qpbench.report.arm` frame by frame.
+
+:func:`animate` renders a closed-loop run to a GIF (Pillow, which matplotlib
+requires) or an MP4 (when ``ffmpeg`` is on the PATH): the arm, its key points,
+the end-effector trace in the backend's look (:mod:`qpbench.report.style`),
+the obstacles where they are at each frame, and a time stamp outside the
+workspace, red while a key point is closer than ``d_safe``. It reads the tick
+log of :func:`qpbench.sim.loop.simulate` and the scenario; lengths in metres.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import arm as scene
+from . import style
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..sim.scenario import Scenario
+
+__all__ = ["animate"]
+
+
+def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
+    """Ticks shown as frames: every ``speed / (fps * dt)``-th, ``dt`` [s] from ``t`` when it can."""
+    dt = float(t[1] - t[0]) if len(t) > 1 else dt
+    step = max(1, int(round(speed / (fps * dt))))
+    return list(range(0, len(t), step))
+
+
+def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim) -> bool:
+    """Axes, surface, desired path and (if none moves) the obstacles; True when none moves."""
+    scene.workspace_axes(ax, xlim, ylim)
+    scene.draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=scene.SURFACE, lw=2.5)
+    ax.plot(log["xd_x"], log["xd_y"], "--", color="0.6", lw=1.0)
+    static = not any(np.any(ob.velocity) for ob in obstacles)
+    if static:
+        scene.draw_obstacles(ax, obstacles, 0.0, xlim, ylim)
+    return static
+
+
+def _animation_artists(ax, backend: str | None = None) -> tuple:
+    """The artists each frame updates: links, key points, end-effector trace (in ``backend``'s
+    look), and the time stamp (the axes' title: outside the workspace, never over the arm)."""
+    (link_line,) = ax.plot([], [], "-o", color=scene.ARM, lw=2.4, ms=4, zorder=3)
+    keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=scene.KEY, lw=0.9, zorder=4)
+    look = scene.backend_look(backend)
+    (trace,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
+    label = ax.set_title("", fontsize=8, family="monospace", loc="left")
+    return link_line, keys_plot, trace, label
+
+
+def animate(
+    scenario: Scenario,
+    log: pd.DataFrame,
+    path: str | Path,
+    *,
+    fps: int = 20,
+    speed: float = 1.0,
+    progress: bool = False,
+    title: str | None = None,
+    dpi: int = 70,
+    backend: str | None = None,
+) -> Path:
+    """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
+
+    Args:
+        scenario: The scenario the log was simulated from.
+        log: The tick log.
+        path: ``.gif`` or ``.mp4``.
+        fps: Frames per second of the file.
+        speed: Simulated seconds per second of animation (2.0: twice as fast as real time).
+        progress: Show a progress bar (stderr).
+        title: Title prefix (default: the scenario's name).
+        dpi: Resolution; the default keeps a 20 s GIF at about 1-2 MB.
+        backend: The backend of the run: its end-effector trace in the backend's look
+            (:func:`qpbench.report.style.look`); ``None``: dark grey.
+
+    Returns:
+        ``path``.
+
+    Raises:
+        ParamError: an unknown suffix, ``.mp4`` without ffmpeg, or a non-positive ``fps``/``speed``.
+    """
+    from matplotlib import animation
+
+    plt = style.pyplot()
+    path = Path(path)
+    _check_animation(path, fps, speed)
+
+    arm, keys, surface, obstacles = scene.frame_parts(scenario)
+    theta = scene.thetas(log, arm.n)
+    t = log["t"].to_numpy(float)
+    frames = _frame_ticks(t, scenario.dt, fps, speed)
+    xlim, ylim = scene.view(scenario, log, arm)
+    d_safe = scenario.data["controller"]["d_safe"]
+    dcols = _distance_columns(log)
+
+    # equal axes: the frame's height follows the view's proportions
+    high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
+    fig, ax = plt.subplots(figsize=(6, high), dpi=dpi, layout="constrained")
+    static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
+    link_line, keys_plot, trace, label = _animation_artists(ax, backend)
+    moving_artists: list = []
+    head = title or scenario.name
+
+    def draw(k):
+        for art in moving_artists:
+            art.remove()
+        moving_artists.clear()
+        if not static:
+            before = set(ax.lines) | set(ax.collections) | set(ax.patches)
+            scene.draw_obstacles(ax, obstacles, float(t[k]), xlim, ylim)
+            moving_artists.extend((set(ax.lines) | set(ax.collections) | set(ax.patches)) - before)
+        p = arm.joint_positions(theta[k])
+        link_line.set_data(p[:, 0], p[:, 1])
+        keys_plot.set_offsets(arm.points(theta[k], keys.links, keys.fracs))
+        trace.set_data(log["ee_x"].to_numpy()[: k + 1], log["ee_y"].to_numpy()[: k + 1])
+        dmin = np.nanmin(log[dcols].to_numpy()[k]) if dcols else float("nan")
+        near = dcols and dmin < d_safe - 5e-4
+        label.set_text(
+            f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else "")
+        )
+        label.set_color("red" if near else "black")
+        return [link_line, keys_plot, trace, label, *moving_artists]
+
+    anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    _save_animation(anim, fig, path, fps, len(frames), progress)
+    return path
+
+
+def _distance_columns(log: pd.DataFrame) -> list[str]:
+    from ..sim.log import distance_columns
+
+    return distance_columns(log)
+
+
+def _check_animation(path: Path, fps: float, speed: float) -> None:
+    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
+    from ..exceptions import ParamError
+
+    suffix = path.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise ParamError(
+            f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate"
+        )
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
+    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
+        raise ParamError(
+            f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate"
+        )
+
+
+def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
+    """Write ``anim`` to ``path`` atomically (temporary file, then rename) and close ``fig``."""
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+
+    suffix = path.suffix.lower()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_frames, unit="frame", desc=f"animate {path.name}", leave=False)
+    callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
+
+    writer = (
+        animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{suffix}")
+    try:
+        anim.save(tmp, writer=writer, progress_callback=callback)
+        from ..atomic import record, rename
+
+        rename(tmp, path)
+        record(path)  # listed with the command's other outputs
+    finally:
+        if bar is not None:
+            bar.close()
+        plt.close(fig)
+        if tmp.exists():
+            tmp.unlink()
