@@ -265,14 +265,22 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     figures fails on the warning). The height is read from the written PNG: drawing
     the figure once more to measure it first would cost as much as writing it.
     """
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
     from ..atomic import atomic_path
 
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
+    # a constrained layout already fits everything inside the figure; the tight box would
+    # draw the figure a second time (layout included) only to measure it
+    kw.setdefault(
+        "bbox_inches",
+        None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight",
+    )
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:  # never a half-written figure under the final name
-            fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches="tight", **kw)
+            fig.savefig(tmp, format=fmt, dpi=dpi, **kw)
             height = png_size(tmp)[1] if fmt == "png" else 0
             if height > MAX_HEIGHT_PX:
                 fitted = dpi * (MAX_HEIGHT_PX - 1) / height
@@ -284,7 +292,7 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
                     MAX_HEIGHT_PX,
                     fitted,
                 )
-                fig.savefig(tmp, format=fmt, dpi=fitted, bbox_inches="tight", **kw)
+                fig.savefig(tmp, format=fmt, dpi=fitted, **kw)
     finally:
         pyplot().close(fig)
     return path
