@@ -382,3 +382,18 @@ def test_closed_loop_budgets_follow_the_bench():
     assert budgets["unbenched"] == 10.0
     config.run_budget = None
     assert closed_loop_budgets(config, per_tick) == {}
+
+
+def test_run_runs_closed_loops_side_by_side_one_per_core(monkeypatch):
+    """`run`'s closed-loop runs: LOOP_JOBS at once, never more than the machine's cores; 0 refused."""
+    from qpbench.exceptions import ParamError
+    from qpbench.harness import pipeline
+
+    monkeypatch.setattr(pipeline.os, "cpu_count", lambda: 1)
+    assert pipeline.default_jobs() == 1
+    monkeypatch.setattr(pipeline.os, "cpu_count", lambda: 64)
+    assert pipeline.default_jobs() == pipeline.LOOP_JOBS
+    config = pipeline.RunConfig(out=Path("x"), problems=Path("p"), scenarios=["wall"],
+                                backends=["daqp"], jobs=0)  # fmt: skip
+    with pytest.raises(ParamError, match="--jobs"):
+        config.validate()

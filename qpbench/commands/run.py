@@ -23,7 +23,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from ..harness.pipeline import BENCH_EVERY, REPEAT, RUN_BUDGET_S
+from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
 from .options import add_force_resume, add_strict, strict_exit
 
 # The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
@@ -120,9 +120,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--jobs",
         type=int,
-        default=1,
+        default=None,
         metavar="N",
-        help="closed-loop runs in parallel worker processes (default: 1)",
+        help=f"closed-loop runs at once, each in a worker process of its own (default: "
+        f"{LOOP_JOBS}, at most one per core; the bench's timed solves stay one at a time)",
     )
     from .inspect_ import add_memory_argument
 
@@ -161,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
         bench_every=args.bench_every,
         run_budget=args.run_budget or None,
         repeat=args.repeat,
-        jobs=args.jobs,
+        jobs=args.jobs if args.jobs is not None else default_jobs(),
         force=args.force,
         resume=args.resume,
         progress=not args.quiet,

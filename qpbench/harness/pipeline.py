@@ -56,7 +56,17 @@ from ..exceptions import ParamError
 if TYPE_CHECKING:
     from ..formats import ProblemSet
 
-__all__ = ["BENCH_EVERY", "OUTPUTS", "REPEAT", "RUN_BUDGET_S", "RunConfig", "RunOutcome", "run_all"]
+__all__ = [
+    "BENCH_EVERY",
+    "LOOP_JOBS",
+    "OUTPUTS",
+    "REPEAT",
+    "RUN_BUDGET_S",
+    "RunConfig",
+    "RunOutcome",
+    "default_jobs",
+    "run_all",
+]
 
 log = logging.getLogger("qpbench.run")
 
@@ -87,10 +97,19 @@ BUDGET_FLOOR_S = 2.0
 #: (:func:`closed_loop_budgets`): it cannot finish, so it is cut either way; this is hundreds
 #: of its ticks, enough to see it miss the rate and how far it gets.
 CUT_BUDGET_S = 1.0
+#: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process of its own, on
+#: a machine with that many cores: per-tick solve times of runs side by side on two cores
+#: match those of runs one at a time (bench/README.md, "Closed-loop runs side by side").
+LOOP_JOBS = 2
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
 REPEAT = 3
 #: Backends that may regenerate a missing problem set, first available wins.
 DUMP_BACKENDS = ("qpsolvers:daqp", "clarabel", "proxqp", "qpsolvers:quadprog", "osqp")
+
+
+def default_jobs() -> int:
+    """Closed-loop runs at once by default: :data:`LOOP_JOBS`, at most one per core."""
+    return max(1, min(LOOP_JOBS, os.cpu_count() or 1))
 
 
 @dataclass
@@ -144,6 +163,8 @@ class RunConfig:
             )
         if self.repeat < 1:
             raise ParamError(f"must be an integer >= 1, got {self.repeat}", key="--repeat")
+        if self.jobs < 1:
+            raise ParamError(f"must be an integer >= 1, got {self.jobs}", key="--jobs")
 
 
 @dataclass
@@ -492,6 +513,7 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dic
             if str(r.verdict) not in ("ok", "nan", "")
         },
         "bench_repeat": config.repeat,
+        "closed_loop_jobs": config.jobs,
         "problems": str(config.problems),
         "phase_wall_time_s": {},
         "wall_time_s": None,
