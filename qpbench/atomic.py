@@ -186,3 +186,29 @@ def check_output(
             " or --resume to continue" if resume is not None else ""
         )
         raise OutputExistsError(f"{path}: exists; {hint}")
+
+
+def promote(staging: Path, out: Path, names) -> None:
+    """Replace the outputs ``names`` in ``out`` by those in ``staging`` (one rename each; a
+    folder's previous version is moved aside first and removed after), then remove
+    ``staging``: a reader of ``out`` sees the previous outputs or the new ones, and a run
+    killed before this call leaves the previous outputs whole."""
+    import shutil
+
+    for name in names:
+        src = staging / name
+        dst = out / name
+        if not src.exists():
+            continue
+        if src.is_dir():
+            old = out / f".old-{name}"
+            if old.exists():
+                shutil.rmtree(old)
+            if dst.exists():
+                os.replace(dst, old)
+            rename(src, dst)
+            if old.exists():
+                shutil.rmtree(old)
+        else:
+            rename(src, dst)
+    shutil.rmtree(staging, ignore_errors=True)

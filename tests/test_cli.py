@@ -277,7 +277,9 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
         )
         == 0
     )
-    args = run_args("wall,free", f"daqp,{slow}", "r")
+    # one run at a time, in this process: the slow backend is registered here only, and a
+    # worker process (``--jobs 2``) would not know it
+    args = [*run_args("wall,free", f"daqp,{slow}", "r"), "--jobs", "1"]
     assert main(args) == 0
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv")
     assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..atomic import record, rename
+from ..atomic import promote, record
 from ..exceptions import ParamError
 
 if TYPE_CHECKING:
@@ -275,27 +275,6 @@ def _compress_bench(bench_dir: Path) -> None:
         csv_path.unlink()
 
 
-def _promote(staging: Path, out: Path) -> None:
-    """Replace the previous run's outputs in ``out`` by the staged ones (one rename each)."""
-    for name in OUTPUTS:
-        src = staging / name
-        dst = out / name
-        if not src.exists():
-            continue
-        if src.is_dir():
-            old = out / f".old-{name}"
-            if old.exists():
-                shutil.rmtree(old)
-            if dst.exists():
-                os.replace(dst, old)
-            rename(src, dst)
-            if old.exists():
-                shutil.rmtree(old)
-        else:
-            rename(src, dst)
-    shutil.rmtree(staging, ignore_errors=True)
-
-
 def run_all(config: RunConfig) -> RunOutcome:
     """Problem sets, bench, closed loop and report (module docstring); outputs replaced at the end.
 
@@ -348,7 +327,7 @@ def run_all(config: RunConfig) -> RunOutcome:
     from ..atomic import write_text
 
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
-    _promote(staging, out)
+    promote(staging, out, OUTPUTS)
     return RunOutcome(failures, out / "report.md", time.perf_counter() - started, failed_solves)
 
 
