@@ -404,15 +404,7 @@ def _legend_beside(ax, axes) -> None:
     for a in axes:
         h, lab = a.get_legend_handles_labels()
         handles, labels = handles + h, labels + lab
-    ax.legend(
-        handles,
-        labels,
-        loc="upper left",
-        bbox_to_anchor=(1.02, 1.0),
-        fontsize=8,
-        frameon=False,
-        borderaxespad=0.0,
-    )
+    style.legend_beside(ax, handles, labels)
 
 
 def _has_distance(log: pd.DataFrame) -> bool:

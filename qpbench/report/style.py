@@ -39,6 +39,7 @@ __all__ = [
     "groups",
     "highlighted",
     "legend_above",
+    "legend_beside",
     "look",
     "pyplot",
     "save",
@@ -240,6 +241,25 @@ def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
         mode="expand",
         ncol=ncol,
         fontsize=kw.pop("fontsize", 7.5),
+        frameon=False,
+        borderaxespad=0.0,
+        **kw,
+    )
+
+
+def legend_beside(ax, handles=None, labels=None, **kw):
+    """A legend to the right of ``ax``, outside the data (``handles``/``labels``: the axes' own
+    by default)."""
+    if handles is None:
+        handles, labels = ax.get_legend_handles_labels()
+    if not handles:
+        return None
+    return ax.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(1.02, 1.0),
+        fontsize=kw.pop("fontsize", 8),
         frameon=False,
         borderaxespad=0.0,
         **kw,

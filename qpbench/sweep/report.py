@@ -248,15 +248,7 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
             f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
         )
         handles, labels = axes[row, 2].get_legend_handles_labels()  # d_min's: with d_safe
-        if handles:
-            axes[row, -1].legend(
-                handles,
-                labels,
-                loc="upper left",
-                bbox_to_anchor=(1.02, 1.0),
-                fontsize=8,
-                frameon=False,
-            )
+        style.legend_beside(axes[row, -1], handles, labels)
     fig.suptitle(title)
     style.save(fig, path)
 
