@@ -108,6 +108,22 @@ def _lines_of(fig, colour: str) -> list:
     ]
 
 
+def test_snapshot_legend_of_a_long_run_is_not_cut(tmp_path, monkeypatch):
+    """Past the closest approach (wall, 4 s in) the legend's longest line names it; the arm's
+    view is the whole workspace: the legend beside it reaches past the figure's own width."""
+    from conftest import figures_closed
+
+    scenario = load_scenario("wall").with_overrides(duration=4.5)
+    run = simulate(scenario, "daqp")
+    figures = figures_closed(monkeypatch)
+    out = draw_snapshot(scenario, run.log, tmp_path / "wall.png", backend="daqp")
+    with Image.open(out) as img:
+        size_px = img.size
+    (fig,) = figures
+    # wider than the figure at the 110 dpi it was written at: the legend is in, not cut
+    assert size_px[0] > round(fig.get_figwidth() * 110) + 10
+
+
 @pytest.mark.parametrize("backend", ["daqp", "rnn-tuned"])
 def test_snapshot_follows_the_report_style(wall_run, tmp_path, monkeypatch, backend):
     """The backend's path and distance line in its one look, the arm in none of the backends'
