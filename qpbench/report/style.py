@@ -229,40 +229,25 @@ def highlighted(everyone: Iterable[str], group: Iterable[str]) -> Iterator[tuple
 
 def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
     """A legend above ``ax``, outside the data (``handles``/``labels``: the axes' own by default)."""
-    if handles is None:
-        handles, labels = ax.get_legend_handles_labels()
-    if not handles:
-        return None
-    return ax.legend(
-        handles,
-        labels,
-        loc="lower left",
-        bbox_to_anchor=(0.0, 1.02, 1.0, 0.2),
-        mode="expand",
-        ncol=ncol,
-        fontsize=kw.pop("fontsize", 7.5),
-        frameon=False,
-        borderaxespad=0.0,
-        **kw,
-    )
+    where = dict(loc="lower left", bbox_to_anchor=(0.0, 1.02, 1.0, 0.2), mode="expand", ncol=ncol)
+    return _legend_outside(ax, handles, labels, where, kw.pop("fontsize", 7.5), kw)
 
 
 def legend_beside(ax, handles=None, labels=None, **kw):
     """A legend to the right of ``ax``, outside the data (``handles``/``labels``: the axes' own
     by default)."""
+    where = dict(loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    return _legend_outside(ax, handles, labels, where, kw.pop("fontsize", 8), kw)
+
+
+def _legend_outside(ax, handles, labels, where: dict, fontsize: float, kw: dict):
+    """``ax``'s legend at ``where`` (outside the data), frameless; ``None`` without entries."""
     if handles is None:
         handles, labels = ax.get_legend_handles_labels()
     if not handles:
         return None
     return ax.legend(
-        handles,
-        labels,
-        loc="upper left",
-        bbox_to_anchor=(1.02, 1.0),
-        fontsize=kw.pop("fontsize", 8),
-        frameon=False,
-        borderaxespad=0.0,
-        **kw,
+        handles, labels, fontsize=fontsize, frameon=False, borderaxespad=0.0, **where, **kw
     )
 
 
