@@ -395,8 +395,7 @@ def draw_snapshot(
     if has_d:
         _distance_panel(axes[1, 0], log, backend, d_safe)
     _legend_beside(ax, axes[:, 0])
-    # the legend beside equal axes: the layout places it before the aspect shrinks the axes
-    return style.save(fig, path, dpi=110, bbox_inches="tight")
+    return style.save(fig, path, dpi=110)
 
 
 def _legend_beside(ax, axes) -> None:

@@ -262,13 +262,18 @@ def pyplot():
 
 
 def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
-    """Write ``fig`` to ``path`` atomically (format from the suffix, tight box) and close it.
+    """Write ``fig`` to ``path`` atomically (format from the suffix) and close it.
 
     The one place a figure is written. A PNG taller than :data:`MAX_HEIGHT_PX`
     is written again at the resolution that makes it fit, with a warning naming the
     file (a figure designed taller is a fault of its design; the test of the report's
     figures fails on the warning). The height is read from the written PNG: drawing
     the figure once more to measure it first would cost as much as writing it.
+
+    A figure with a constrained layout and no axes of fixed aspect is written as it is: the
+    layout keeps every artist inside it. Any other is written in its tight box, which draws
+    it once more to measure it; equal axes are the case that needs it, since the layout
+    places what stands beside them (a legend) before the aspect shrinks them.
     """
     from matplotlib.layout_engine import ConstrainedLayoutEngine
 
@@ -276,17 +281,14 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
 
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
-    # a constrained layout already fits everything inside the figure; the tight box would
-    # draw the figure a second time (layout included) only to measure it
-    kw.setdefault(
-        "bbox_inches",
-        None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight",
-    )
+    laid_out = isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine)
+    free_aspect = all(ax.get_aspect() == "auto" for ax in fig.axes)
+    kw.setdefault("bbox_inches", None if laid_out and free_aspect else "tight")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:  # never a half-written figure under the final name
             fig.savefig(tmp, format=fmt, dpi=dpi, **kw)
-            height = png_size(tmp)[1] if fmt == "png" else 0
+            height = _png_height(tmp) if fmt == "png" else 0
             if height > MAX_HEIGHT_PX:
                 fitted = dpi * (MAX_HEIGHT_PX - 1) / height
                 log.warning(
@@ -303,8 +305,9 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     return path
 
 
-def png_size(path: str | Path) -> tuple[int, int]:
-    """``(width, height)`` [px] of a PNG file, from its header."""
-    with open(path, "rb") as f:
-        head = f.read(24)
-    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+def _png_height(path: Path) -> int:
+    """Height of a PNG file [px]."""
+    from PIL import Image  # matplotlib's own dependency
+
+    with Image.open(path) as img:
+        return img.size[1]
