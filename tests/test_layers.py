@@ -21,9 +21,9 @@ the closed loop's runs all take their worker processes from it: no module but
 ``runner/process.py`` starts one (:data:`PROCESS_OWNER`), defines the pool's
 settings or has a private name imported by another.
 
-Sizes: no module of the package over :data:`MAX_MODULE_LINES` lines (``wc -l``)
-and no function over :data:`MAX_FUNCTION_LINES` lines (from ``def`` to its last
-line, docstring included), except the numba kernels of :data:`SIZE_EXCEPTIONS`.
+Modules are cut by concept, not by length: no function over
+:data:`MAX_FUNCTION_LINES` lines (from ``def`` to its last line, docstring
+included), except the numba kernels of :data:`SIZE_EXCEPTIONS`.
 """
 
 from __future__ import annotations
@@ -263,17 +263,12 @@ def test_no_private_name_of_the_runner_is_imported_elsewhere():
     assert found == []
 
 
-MAX_MODULE_LINES = 500
 MAX_FUNCTION_LINES = 80
 
-#: The only modules and functions allowed past the size limits: numba kernels kept whole by
+#: The only functions allowed past the size limit: numba kernels kept whole by
 #: necessity (each has the reason in a comment beside it, too). Keys: a module's path from the
-#: repository root, or ``path:function`` (``path:Class.method`` for a method).
+#: repository root and ``path:function`` (``path:Class.method`` for a method).
 SIZE_EXCEPTIONS = {
-    "qpbench/rnn/kernels.py": (
-        "the network's numba kernels: the names they call are module globals numba freezes at "
-        "compile time, so the kernels and their bindings stay in one module"
-    ),
     "qpbench/rnn/kernels.py:_integrate_loops": (
         "numba kernel: the integrator's main loop, one compiled loop pinned bit for bit by its "
         "numpy twin"
@@ -309,16 +304,13 @@ def _function_lengths(source: str) -> dict[str, int]:
     return lengths
 
 
-def _too_long() -> tuple[dict[str, int], dict[str, int]]:
-    modules, functions = {}, {}
+def _too_long() -> dict[str, int]:
+    functions = {}
     for path, source in _sources().items():
-        lines = source.count("\n")
-        if lines > MAX_MODULE_LINES:
-            modules[path] = lines
         for name, length in _function_lengths(source).items():
             if length > MAX_FUNCTION_LINES:
                 functions[f"{path}:{name}"] = length
-    return modules, functions
+    return functions
 
 
 def test_size_limits_measure_what_they_say():
@@ -328,19 +320,12 @@ def test_size_limits_measure_what_they_say():
     assert _function_lengths(source) == {"f": 3, "C.m": 2}
 
 
-def test_no_module_over_500_lines():
-    modules, _ = _too_long()
-    over = {path: lines for path, lines in modules.items() if path not in SIZE_EXCEPTIONS}
-    assert over == {}, f"modules over {MAX_MODULE_LINES} lines: {over}"
-
-
 def test_no_function_over_80_lines():
-    _, functions = _too_long()
+    functions = _too_long()
     over = {name: lines for name, lines in functions.items() if name not in SIZE_EXCEPTIONS}
     assert over == {}, f"functions over {MAX_FUNCTION_LINES} lines: {over}"
 
 
 def test_size_exceptions_are_still_needed():
-    modules, functions = _too_long()
-    stale = sorted(set(SIZE_EXCEPTIONS) - set(modules) - set(functions))
+    stale = sorted(set(SIZE_EXCEPTIONS) - set(_too_long()))
     assert stale == [], f"within the limits now, drop from SIZE_EXCEPTIONS: {stale}"
