@@ -7,6 +7,7 @@ offending file, key or value so the CLI can print one clear line and exit 2
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 
@@ -79,3 +80,17 @@ class BackendError(QpbenchError):
 
 class OutputExistsError(QpbenchError):
     """An output exists and neither ``--force`` nor ``--resume`` was given."""
+
+
+def positive_seconds(value, key: str, path: str | Path | None = None) -> float:
+    """``value`` as a duration [s] if it is a finite number > 0, else :class:`ParamError` naming ``key``.
+
+    The one check of every time argument (durations, deadlines, budgets, time limits).
+    """
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        seconds = float("nan")
+    if isinstance(value, bool) or not (seconds > 0 and math.isfinite(seconds)):
+        raise ParamError(f"must be a positive number of seconds, got {value!r}", path=path, key=key)
+    return seconds
