@@ -34,7 +34,7 @@ for every own-API backend, ``ours/qpsolvers`` within 1.05 for the
 the route is meant to cost what qpsolvers costs).
 
 Problems: consecutive ticks of the ``wall`` scenario (an obstacle row active)
-when :mod:`qpbench.sim` can produce them, else :func:`qpbench.known.robot_like_problem`.
+when :mod:`qpbench.sim` can produce them, else ``robot_like_problem`` of ``tests/known.py``.
 Each method runs over the whole sequence ``--repeat`` times (fresh state each
 pass, passes interleaved between methods); the median is over all calls, or
 with ``--stat min`` the median over problems of each problem's fastest pass
@@ -54,6 +54,7 @@ import statistics
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import qpsolvers
@@ -61,7 +62,10 @@ import scipy.sparse as spa
 
 from qpbench.backends import backend_names, get_backend
 from qpbench.backends.qpsolvers_ import native_settings
-from qpbench.known import robot_like_problem
+
+# The known-solution problems are a test oracle: they live with the tests.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from known import robot_like_problem  # noqa: E402
 
 # ----------------------------------------------------------------- problems
 

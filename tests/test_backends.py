@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import qpsolvers
 from conftest import sparse_copy
+from known import random_kkt_problem, robot_like_problem
 
 from qpbench import backends
 from qpbench.backends import (
@@ -24,7 +25,6 @@ from qpbench.backends import (
     objective,
 )
 from qpbench.exceptions import BackendNotFound
-from qpbench.known import random_kkt_problem, robot_like_problem
 
 EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged"}  # tested in test_rnn.py
 #: The package's backends (not those other tests register to inject faults).
@@ -544,7 +544,7 @@ def test_persistent_on_robot_ticks(name, robot_ticks):
 
 def test_clarabel_reports_no_solver_time_after_an_update():
     """Clarabel's solve_time after update() exceeds the call's wall time; it is left out."""
-    from qpbench.known import robot_like_problem
+    from known import robot_like_problem
 
     backend = get_backend("clarabel")
     rng = np.random.default_rng(3)

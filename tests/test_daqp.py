@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import qpsolvers
+from known import random_kkt_problem, robot_like_problem
 
 from qpbench.backends import backend_names, get_backend
 from qpbench.exceptions import ParamError
-from qpbench.known import random_kkt_problem, robot_like_problem
 
 pytestmark = pytest.mark.skipif("daqp" not in backend_names(), reason="daqp unavailable")
 

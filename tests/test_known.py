@@ -1,4 +1,4 @@
-"""Tests of qpbench.known: the generated QPs really have the announced solution."""
+"""Tests of tests/known.py: the generated QPs really have the announced solution."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import qpsolvers
 import scipy.optimize
+from known import random_kkt_problem, robot_like_problem
 
 from qpbench.exceptions import ParamError
-from qpbench.known import random_kkt_problem, robot_like_problem
 
 
 def _cases():

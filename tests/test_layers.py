@@ -4,7 +4,7 @@ Every ``import`` statement of the package counts, at module level or inside
 a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
-    exceptions statuses profiles published memory atomic cache packed known native_output
+    exceptions statuses profiles published memory atomic cache packed native_output
     runner
     robot rnn backends metrics formats reference reference_solve
     control
@@ -45,7 +45,6 @@ LAYERS = [
         "atomic",
         "cache",
         "packed",
-        "known",
         "native_output",
         "qpbench",
     },

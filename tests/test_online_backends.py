@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import qpsolvers
+from known import random_kkt_problem, robot_like_problem
 
 from qpbench.backends import backend_info, backend_names, get_backend
 from qpbench.exceptions import ParamError, ProblemFormatError
 from qpbench.formats import load_problems
-from qpbench.known import random_kkt_problem, robot_like_problem
 
 WALL = Path(__file__).resolve().parents[1] / "problems" / "wall"
 ONLINE = ("qpoases", "daqp", "piqp")

@@ -8,12 +8,12 @@ import pickle
 import numpy as np
 import pytest
 import qpsolvers
+from known import robot_like_problem
 
 from qpbench.backends import get_backend
 from qpbench.backends.base import Backend
 from qpbench.backends.rnn import WORKING_SETTINGS, TickSolution
 from qpbench.exceptions import ProblemFormatError
-from qpbench.known import robot_like_problem
 from qpbench.packed import HEADER, PackedProblem, pack
 from qpbench.rnn import network as nw
 

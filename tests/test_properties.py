@@ -1,6 +1,6 @@
 """Property-based tests (hypothesis): backends vs. references, metric invariances, Jacobians, rows.
 
-Random feasible QPs come from :func:`qpbench.known.random_kkt_problem` (a chosen
+Random feasible QPs come from :func:`known.random_kkt_problem` (a chosen
 KKT point, so the optimum is known independently of any solver), sizes 1 to
 50, with and without each constraint kind.
 
@@ -28,11 +28,11 @@ import pytest
 import qpsolvers
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
+from known import random_kkt_problem
 
 from qpbench.backends import backend_names
 from qpbench.formats import ProblemRecord, ProblemSet
 from qpbench.harness import BenchConfig, read_results, run_bench
-from qpbench.known import random_kkt_problem
 from qpbench.metrics import evaluate
 from qpbench.profiles import PROFILES
 from qpbench.reference import reference_solution

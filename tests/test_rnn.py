@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import qpsolvers
 from conftest import sparse_copy
+from known import random_kkt_problem, robot_like_problem
 
 from qpbench.backends import get_backend
 from qpbench.backends.rnn import WORKING_SETTINGS
 from qpbench.exceptions import ParamError, ProblemFormatError
-from qpbench.known import random_kkt_problem, robot_like_problem
 from qpbench.rnn import network as nw
 
 pytestmark = pytest.mark.filterwarnings("ignore::qpsolvers.warnings.SparseConversionWarning")

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import qpsolvers
 
-from .exceptions import ParamError
+from qpbench.exceptions import ParamError
 
 
 def _check_kkt_counts(
