@@ -1,85 +1,65 @@
-"""References of a problem set: computed (time-limited, in parallel), cached, or given.
+"""Reference solutions of a problem set: computed, cached, or read from known objectives.
 
-Where the reference of each problem comes from (:func:`bench_references`,
-``qpbench bench --reference``):
+Sources (:func:`bench_references`, ``bench --reference``): ``auto`` (Clarabel and PIQP
+at 1e-10, settled by their KKT residuals), ``clarabel`` or ``piqp`` alone (no
+cross-check), ``none`` (success is qpbenchmark's rule, :mod:`qpbench.metrics`), or a
+CSV of known optimal objectives ``problem,objective``
+(:func:`qpbench.published.read_objectives`): a listed problem's reference is
+``optimal`` with that objective (no ``x``), an unlisted one ``unknown``.
 
-- ``auto`` (default): Clarabel and PIQP at 1e-10, the answer with the smaller
-  KKT residuals kept (:mod:`qpbench.reference_solve`); ``clarabel`` or
-  ``piqp``: that solver alone;
-- ``none``: no reference. Rows have an empty reference and optimality gap, and
-  success is qpbenchmark's rule (found and residuals strictly below the
-  tolerances; :mod:`qpbench.metrics`);
-- a file (``FILE``): known optimal objectives, a CSV with a header and
-  columns ``problem,objective`` (:func:`qpbench.published.read_objectives`).
-  Each listed problem's reference is ``optimal`` with that objective (no
-  ``x``: the optimality gap is computed, residuals are the solution's own); a
-  problem the file does not list has reference status ``unknown``, an empty
-  gap and a note saying so.
+Statuses: Clarabel's ``Solved`` -> ``optimal``, ``(Almost)PrimalInfeasible`` ->
+``primal_infeasible``, ``(Almost)DualInfeasible`` -> ``dual_infeasible``,
+``AlmostSolved`` -> ``optimal`` when qpsolvers' residuals and gap are all <=
+:data:`ALMOST_TOL`; PIQP's likewise; anything else ``unknown``. A problem without any
+constraint is ``P x = -q`` by least squares (``dual_infeasible`` when unsolvable).
 
-Computing (:func:`reference_solutions`): each reference solve has a time
-limit (the profile's ``reference_time_limit``; ``None`` here means none).
-With a limit, or with ``jobs > 1``, the solves run in worker processes
-(:func:`qpbench.runner.process.run_tasks`), each task one solver on one
-problem, up to ``jobs`` at once; otherwise in this process. Both give the same
-answers, whatever ``jobs`` is and in whatever order the tasks finish. A task
-past its deadline (:func:`qpbench.runner.process.deadline` of the limit) has
-its worker killed and replaced. A solve that times out, fails or whose worker
-dies is an ``unknown`` answer with its reason; a
-problem left without a reference has status ``unknown`` and its rows an
-empty optimality gap, with the reason in the ``reference_note`` column. The
-run goes on. ``progress`` is called once per finished problem.
+Which answer is kept is decided by the evidence, never the solver's name
+(:func:`settle`); ``kkt`` is the worst of qpsolvers' primal residual, dual residual and
+duality gap at an answer (``inf`` without one):
 
-Cache: one Parquet file, ``reference-<sha[:16]>.parquet``
-(``reference-<method>-<sha[:16]>.parquet`` for ``clarabel`` / ``piqp``; beside a
-single file ``<file stem>.reference-...``), keyed by the set's SHA-256 (the
-manifest hash of a problem-set folder; for a folder of ``.npz`` / ``.mat`` files
-or a bare Parquet file, a SHA-256 of the files' names and bytes:
-:func:`qpbench.formats.content_sha256`). It holds each problem's status,
-solution, both solvers' objectives and KKT residuals, which was kept, the note
-and the time limit. The full hash and :data:`REFERENCE_VERSION` are checked on
-read, so a changed set, a changed method or a corrupt cache is recomputed; an
-entry that timed out is recomputed when the limit is now larger. A set built
-in memory is not cached; a folder counts as read-only without write
-permission or with no write bit at all (as for shared data folders). Writes are atomic; stale
-caches of the same method in a problem-set folder are removed. Where
-(:func:`cache_folder`): a folder given by the caller (``bench --cache-dir``);
-else beside the set when that folder is writable and the set is ours (its
-``manifest.json``, or a reference cache of ours, is there); else the user cache folder,
-``$XDG_CACHE_HOME/qpbench/references`` (default ``~/.cache/qpbench/references``).
-A subset of a
-set (``--problems``, ``--every``, ``--limit``) reads the set's cache and adds
-what it lacks; it never replaces the cache with fewer problems.
+- both optimal: the smaller ``kkt``;
+- one optimal: kept if the other is ``unknown`` or its ``kkt <= ALMOST_TOL`` (a point
+  meeting the optimality conditions refutes an infeasibility claim), else the
+  other's infeasibility;
+- neither: the common status; ``unknown`` and a verdict: the verdict; two verdicts:
+  ``unknown``.
+
+They agree when both statuses match and, when optimal, ``|f1 - f2| / max(1, |f1|,
+|f2|) <= AGREE_RTOL``; a disagreement is logged. The objective is ``1/2 x'Px + q'x +
+offset``. Every reference carries a ``note``: each solver's answer, which was kept
+and why.
+
+Time limit [s]: Clarabel is given it, PIQP has none, so with a limit (or ``jobs >
+1``) each solver runs on each problem as a task of :func:`qpbench.runner.process.run_tasks`,
+killed past its deadline; a late, failed or lost answer is ``unknown`` with its reason.
+
+Cache: ``reference-[<method>-]<sha[:16]>.parquet`` (beside a single file
+``<stem>.reference-...``), keyed by :func:`qpbench.formats.content_sha256` and
+:data:`REFERENCE_VERSION`, both checked on read; an entry that timed out under a
+smaller limit is recomputed, a subset adds what it lacks and never shrinks the
+cache. Where: :func:`cache_folder`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
 import re
 import time
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
 import numpy as np
+import qpsolvers
 
 from .atomic import write_bytes
-from .formats import ProblemSet, content_sha256
-from .reference_solve import (  # noqa: F401 - the public names of references live here too
-    AGREE_RTOL,
-    ALMOST_TOL,
-    METHODS,
-    REFERENCE_STATUSES,
-    REFERENCE_VERSION,
-    Candidate,
-    ReferenceSolution,
-    assemble,
-    combine,
-    reference_solution,
-    relative_difference,
-    settle,
-    solve_candidate,
-)
+from .formats import ProblemRecord, ProblemSet, content_sha256, list_column, solver_problem
+from .metrics import objective
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -87,11 +67,323 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.reference")
 
+#: Bumped when the way references are computed changes (invalidates caches).
+REFERENCE_VERSION = "3"
+CLARABEL_SETTINGS = dict(
+    tol_gap_abs=1e-10,
+    tol_gap_rel=1e-10,
+    tol_feas=1e-10,
+    tol_ktratio=1e-8,
+    tol_infeas_abs=1e-10,
+    tol_infeas_rel=1e-10,
+    max_iter=500,
+)
+PIQP_SETTINGS = dict(
+    eps_abs=1e-10,
+    eps_rel=0.0,
+    check_duality_gap=True,
+    eps_duality_gap_abs=1e-10,
+    eps_duality_gap_rel=0.0,
+    max_iter=500,
+)
+SOLVER_SETTINGS = {"clarabel": CLARABEL_SETTINGS, "piqp": PIQP_SETTINGS}
+#: Ways of computing a reference: both solvers settled by residuals, or one alone.
+METHODS = ("auto", "clarabel", "piqp")
 #: What ``--reference`` accepts besides a file.
 SOURCES = METHODS + ("none",)
+#: Relative objective difference within which the two solvers agree.
+AGREE_RTOL = 1e-7
+#: KKT residual accepting Clarabel's ``AlmostSolved`` and refuting an infeasibility claim.
+ALMOST_TOL = 1e-7
+
+_VEC_KEYS = ("x", "y", "z", "z_box")
 
 
-# ---------------------------------------------------------------- sources
+@dataclass
+class ReferenceSolution:
+    """High-accuracy solution of one problem.
+
+    ``status`` is ``optimal``, ``primal_infeasible``, ``dual_infeasible`` or ``unknown``;
+    ``x, y, z, z_box`` (qpsolvers' signs) only when optimal. ``objective``/``kkt`` are
+    the kept answer's, ``check_*`` the other solver's; ``agreement`` is their relative
+    objective difference (NaN unless both optimal); ``time_limit_s`` [s] the limit of
+    each solve (``inf``: none).
+    """
+
+    status: str
+    x: np.ndarray | None = None
+    y: np.ndarray | None = None
+    z: np.ndarray | None = None
+    z_box: np.ndarray | None = None
+    objective: float = math.nan
+    solver: str = "clarabel"
+    check_solver: str | None = None
+    check_status: str | None = None
+    check_objective: float = math.nan
+    agree: bool | None = None
+    agreement: float = math.nan
+    kkt: float = math.nan
+    check_kkt: float = math.nan
+    name: str | None = None
+    note: str = ""
+    time_limit_s: float = math.inf
+    timed_out: bool = False
+
+
+# ---------------------------------------------------------------- one solver's answer
+
+
+def _worst_residual(solution) -> float:
+    if solution.x is None or not np.all(np.isfinite(solution.x)):
+        return math.inf
+    s = solution if solution.found else dataclasses.replace(solution, found=True)
+    return max(s.primal_residual(), s.dual_residual(), s.duality_gap())
+
+
+def _status(solver: str, solution) -> str:
+    """The reference status of a qpsolvers solution of ``solver`` (module docstring)."""
+    if solver == "clarabel":
+        import clarabel
+
+        S = clarabel.SolverStatus
+        status = solution.extras.get("status")
+        if status == S.Solved or (
+            status == S.AlmostSolved and _worst_residual(solution) <= ALMOST_TOL
+        ):
+            return "optimal"
+        primal = (S.PrimalInfeasible, S.AlmostPrimalInfeasible)
+        dual = (S.DualInfeasible, S.AlmostDualInfeasible)
+    else:
+        import piqp
+
+        status = getattr(solution.extras.get("info"), "status", None)
+        if status == piqp.PIQP_SOLVED:
+            return "optimal"
+        primal, dual = (piqp.PIQP_PRIMAL_INFEASIBLE,), (piqp.PIQP_DUAL_INFEASIBLE,)
+    if status in primal:
+        return "primal_infeasible"
+    return "dual_infeasible" if status in dual else "unknown"
+
+
+@dataclass
+class Candidate:
+    """One reference solver's answer; ``wall_s`` [s], ``known_kkt`` a worker's computed ``kkt``."""
+
+    solver: str
+    status: str
+    solution: object | None
+    objective: float = math.nan
+    reason: str = ""
+    timed_out: bool = False
+    wall_s: float = math.nan
+    known_kkt: float | None = None
+
+    @property
+    def kkt(self) -> float:
+        if self.known_kkt is not None:
+            return self.known_kkt
+        return math.inf if self.solution is None else float(_worst_residual(self.solution))
+
+    def plain(self) -> Candidate:
+        """The same answer without the solver's objects (picklable: a worker sends it back)."""
+        sol = self.solution
+        if sol is not None:
+            sol = SimpleNamespace(**{k: getattr(sol, k, None) for k in _VEC_KEYS})
+        return dataclasses.replace(self, solution=sol, known_kkt=self.kkt)
+
+    def describe(self) -> str:
+        """``solver status`` with its objective and KKT residual, or the reason for no verdict."""
+        text = f"{self.solver} {self.status}"
+        if self.status == "optimal":
+            text += f" f = {self.objective:.10g} (KKT {self.kkt:.2g})"
+        return text + (f" ({self.reason})" if self.reason else "")
+
+
+def solve_candidate(
+    record: ProblemRecord, solver: str, time_limit: float | None = None
+) -> Candidate:
+    """One reference solver's answer; never raises for solver trouble. An answer later
+    than ``time_limit`` [s] is discarded (``unknown``, ``timed_out``)."""
+    settings = dict(SOLVER_SETTINGS[solver])
+    limited = time_limit is not None and math.isfinite(time_limit)
+    if limited and solver == "clarabel":
+        settings["time_limit"] = float(time_limit)
+    started = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sol = qpsolvers.solve_problem(solver_problem(record.problem), solver=solver, **settings)
+        error = ""
+    except Exception as exc:  # a solver crash is an "unknown" reference, not a traceback
+        log.debug("reference: %s failed: %s", solver, exc)
+        sol, error = None, f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    wall = time.perf_counter() - started
+    if limited and (wall > time_limit or _clarabel_max_time(solver, sol)):
+        why = f"no answer within the time limit of {time_limit:g} s"
+        return Candidate(solver, "unknown", None, reason=why, timed_out=True, wall_s=wall)
+    status = "unknown" if sol is None else _status(solver, sol)
+    if status != "optimal":
+        return Candidate(solver, status, None, reason=error, wall_s=wall)
+    return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
+
+
+def _clarabel_max_time(solver: str, sol) -> bool:
+    if solver != "clarabel" or sol is None:
+        return False
+    import clarabel
+
+    return (sol.extras or {}).get("status") == clarabel.SolverStatus.MaxTime
+
+
+def solve_task(task: tuple) -> Candidate:
+    """:func:`solve_candidate` of ``(record, solver, time_limit)`` in a worker: a picklable
+    answer, and a bug in one task an ``unknown`` answer, not the others' end."""
+    record, solver, time_limit = task
+    try:
+        return solve_candidate(record, solver, time_limit).plain()
+    except Exception as exc:  # noqa: BLE001 - see the docstring
+        return Candidate(solver, "unknown", None, reason=f"{type(exc).__name__}: {exc}")
+
+
+# ---------------------------------------------------------------- one problem's reference
+
+
+def needs_solver(record: ProblemRecord) -> bool:
+    """``False`` for a problem without any constraint (solved by least squares at once)."""
+    p = record.problem
+    no_bounds = all(v is None or np.all(np.isinf(v)) for v in (p.lb, p.ub))
+    return not (p.G is None and p.A is None and no_bounds)
+
+
+def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
+    problem = solver_problem(record.problem)
+    P, q = problem.P, problem.q
+    P = P.toarray() if hasattr(P, "toarray") else P  # no constraint at all: small in practice
+    x, *_ = np.linalg.lstsq(P, -q, rcond=None)
+    if float(np.max(np.abs(P @ x + q))) > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
+        note = "no constraints and P x = -q has no solution: unbounded"
+        return ReferenceSolution("dual_infeasible", solver="lstsq", name=record.name, note=note)
+    no_box = problem.lb is None and problem.ub is None
+    return ReferenceSolution(
+        "optimal",
+        x=x,
+        y=np.empty(0),
+        z=np.empty(0),
+        z_box=np.empty(0) if no_box else np.zeros(q.shape[0]),
+        objective=objective(record, x),
+        solver="lstsq",
+        name=record.name,
+        note="no constraints: P x = -q solved by least squares",
+    )
+
+
+def _solvers(method: str) -> tuple[str, ...]:
+    if method not in METHODS:
+        raise ValueError(f"unknown reference method '{method}'")
+    return ("clarabel", "piqp") if method == "auto" else (method,)
+
+
+def reference_solution(
+    record: ProblemRecord, method: str = "auto", time_limit: float | None = None
+) -> ReferenceSolution:
+    """The reference of one problem by ``method`` (:data:`METHODS`), solved in this process;
+    ``time_limit`` [s] per solve (``None``: none)."""
+    solvers = _solvers(method)
+    if not needs_solver(record):
+        return _unconstrained(record)
+    return assemble(
+        record.name, [solve_candidate(record, s, time_limit) for s in solvers], time_limit
+    )
+
+
+def relative_difference(f1: float, f2: float) -> float:
+    """``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN when either is NaN)."""
+    if math.isnan(f1) or math.isnan(f2):
+        return math.nan
+    return abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
+
+
+def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str]:
+    """``(kept, other, status)`` by the rules of the module docstring."""
+    s1, s2 = first.status, second.status
+    if s1 == s2 == "optimal":
+        return (first, second, s1) if first.kkt <= second.kkt else (second, first, s2)
+    if "optimal" in (s1, s2):
+        opt, other = (first, second) if s1 == "optimal" else (second, first)
+        if other.status == "unknown" or opt.kkt <= ALMOST_TOL:
+            return opt, other, "optimal"
+        return other, opt, other.status
+    if s1 == s2:
+        return first, second, s1
+    if "unknown" in (s1, s2):
+        verdict, other = (first, second) if s2 == "unknown" else (second, first)
+        return verdict, other, verdict.status
+    return first, second, "unknown"
+
+
+def assemble(
+    name: str | None, candidates: list[Candidate], time_limit: float | None = None
+) -> ReferenceSolution:
+    """The reference made of one solver's answer, or of two (:func:`combine`)."""
+    if len(candidates) == 2:
+        ref = combine(name, *candidates)
+    else:
+        (only,) = candidates
+        ref = _from_candidate(name, only, only.status)
+        ref.note = f"{only.describe()}; {only.solver} alone (no cross-check)"
+    ref.time_limit_s = math.inf if time_limit is None else float(time_limit)
+    ref.timed_out = any(c.timed_out for c in candidates)
+    return ref
+
+
+def _from_candidate(name, keep: Candidate, status: str) -> ReferenceSolution:
+    ref = ReferenceSolution(status=status, solver=keep.solver, kkt=keep.kkt, name=name)
+    if status == "optimal":
+        ref.objective = keep.objective
+        for k in _VEC_KEYS:
+            v = getattr(keep.solution, k, None)
+            setattr(ref, k, None if v is None else np.asarray(v, dtype=np.float64))
+    return ref
+
+
+def _why(keep: Candidate, other: Candidate, status: str) -> str:
+    if status == "optimal" and other.status == "optimal":
+        return f"kept {keep.solver}: smaller KKT residuals"
+    if status == "optimal":
+        return f"kept {keep.solver}: the only optimal answer"
+    if status == "unknown":
+        return "no reference: " + (
+            "no verdict from either solver"
+            if keep.status == other.status
+            else "the solvers' verdicts contradict each other"
+        )
+    return f"kept {keep.solver}'s verdict {status}"
+
+
+def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
+    """The reference made of two solvers' answers (:func:`settle`)."""
+    agreement = relative_difference(first.objective, second.objective)
+    agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
+    keep, other, status = settle(first, second)
+    verdict = "agree" if agree else "disagree"
+    if first.status == second.status == "optimal":
+        verdict += f" (objectives differ by {agreement:.2g} relative)"
+    note = f"{first.describe()}; {second.describe()}; {verdict}; {_why(keep, other, status)}"
+    if not agree:
+        log.warning("reference of '%s': %s", name, note)
+    return dataclasses.replace(
+        _from_candidate(name, keep, status),
+        check_solver=other.solver,
+        check_status=other.status,
+        check_objective=other.objective,
+        agree=agree,
+        agreement=agreement,
+        check_kkt=other.kkt,
+        note=note,
+    )
+
+
+# ---------------------------------------------------------------- a set's references
 
 
 def bench_references(
@@ -105,14 +397,8 @@ def bench_references(
     context: BaseContext | None = None,
     cache_dir: str | Path | None = None,
 ) -> list:
-    """One reference per record of ``problem_set`` from ``source`` (see the module docstring).
-
-    Returns:
-        A list of :class:`ReferenceSolution` (``None`` entries for ``none``).
-
-    Raises:
-        InputError: ``source`` is neither a method, ``none``, nor a readable objectives file.
-    """
+    """One reference per record from ``source`` (a method, ``none``: ``None`` entries, or
+    a file of objectives; :class:`~qpbench.exceptions.InputError` if unreadable)."""
     if source == "none":
         return [None] * len(problem_set.records)
     if source in METHODS:
@@ -137,60 +423,44 @@ def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Pat
     for record in problem_set.records:
         f = objectives.get(record.name)
         if f is None:
-            refs.append(
-                ReferenceSolution(
-                    "unknown",
-                    solver="file",
-                    name=record.name,
-                    note=f"no reference: '{record.name}' is not in {source}",
-                )
-            )
+            note = f"no reference: '{record.name}' is not in {source}"
+            refs.append(ReferenceSolution("unknown", solver="file", name=record.name, note=note))
         else:
+            note = f"optimal objective {float(f):.10g} from {source}"
             refs.append(
                 ReferenceSolution(
-                    "optimal",
-                    objective=float(f),
-                    solver="file",
-                    name=record.name,
-                    note=f"optimal objective {float(f):.10g} from {source}",
+                    "optimal", objective=float(f), solver="file", name=record.name, note=note
                 )
             )
     return refs
-
-
-# ---------------------------------------------------------------- computing
 
 
 def _compute(
     records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None
 ) -> dict:
     """``{name: ReferenceSolution}`` of ``records``, in this process or in workers."""
-    solvers = ("clarabel", "piqp") if method == "auto" else (method,)
+    solvers = _solvers(method)
     limited = time_limit is not None and math.isfinite(time_limit)
     out = {}
     if not limited and jobs <= 1:
         for record in records:
             started = time.perf_counter()
-            ref = reference_solution(record, method, None)
-            out[record.name] = ref
-            on_done(ref, time.perf_counter() - started)
+            out[record.name] = reference_solution(record, method, None)
+            on_done(out[record.name], time.perf_counter() - started)
         return out
-    from .reference_solve import needs_solver, solve_task
     from .runner.process import context as worker_context
     from .runner.process import deadline, run_tasks
 
     tasks, waiting = [], {}
     timeout = deadline(time_limit) if limited else None
     for record in records:
-        if not needs_solver(record):  # no solver involved
+        if not needs_solver(record):
             out[record.name] = reference_solution(record, method, time_limit)
             on_done(out[record.name], 0.0)
             continue
         waiting[record.name] = {}
-        tasks.extend(
-            ((record.name, s), (record, s, time_limit if limited else None), timeout)
-            for s in solvers
-        )
+        limit = time_limit if limited else None
+        tasks.extend(((record.name, s), (record, s, limit), timeout) for s in solvers)
     ctx = context if context is not None else worker_context(fresh=True)
     for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
         name, solver = done.key
@@ -207,13 +477,12 @@ def _lost(solver: str, done, time_limit: float | None) -> Candidate:
     if done.status == "time_limit":
         why = f"no answer within the time limit of {time_limit:g} s; worker stopped"
         return Candidate(solver, "unknown", None, reason=why, timed_out=True)
-    if done.status == "crashed":
-        return Candidate(solver, "unknown", None, reason=f"reference {done.lost}")
-    return Candidate(solver, "unknown", None, reason=done.lost)
+    why = f"reference {done.lost}" if done.status == "crashed" else done.lost
+    return Candidate(solver, "unknown", None, reason=why)
 
 
 class LogProgress:
-    """Progress of reference solves as log lines on stderr (at most one per ``every_s`` seconds, and the last)."""
+    """Progress as log lines: at most one per ``every_s`` [s], the last, and every failure."""
 
     def __init__(self, total: int, every_s: float = 5.0):
         self.total, self.every_s, self.done = total, every_s, 0
@@ -235,6 +504,17 @@ class LogProgress:
             )
 
 
+def _progress(progress, total: int):
+    """``(on_done(ref, wall_s), close())`` for the ``progress`` argument."""
+    if progress is None or total == 0:
+        return (lambda ref, wall: None), (lambda: None)
+    if progress == "log":
+        log.info("references: %d problems to solve", total)
+        return LogProgress(total), (lambda: None)
+    bar = progress(None, total=total, unit="problem", desc="references")
+    return (lambda ref, wall: bar.update(1)), bar.close
+
+
 def reference_solutions(
     problem_set: ProblemSet,
     cache: bool = True,
@@ -246,69 +526,46 @@ def reference_solutions(
     context: BaseContext | None = None,
     cache_dir: str | Path | None = None,
 ) -> list[ReferenceSolution]:
-    """References of every problem of a set, in order, read from or written to the cache.
+    """References of every problem of a set, in order, read from or added to the cache.
 
-    Args:
-        problem_set: The set (from :func:`qpbench.formats.load_problems`).
-        cache: Use the cache (in :func:`cache_folder`).
-        progress: ``None``, a callable wrapping an iterable (e.g. ``tqdm.tqdm``; called
-            with ``total=``), or ``"log"`` (:class:`LogProgress`).
-        method: ``auto``, ``clarabel`` or ``piqp``.
-        time_limit: Limit of each reference solve in [s] (``None``: none).
-        jobs: Worker processes solving at once.
-        context: ``multiprocessing`` context of the workers (default ``spawn``, a fresh
-            interpreter, never a fork of this process, which may hold threads and locks).
-        cache_dir: Folder of the cache (default: :func:`cache_folder`'s rule).
+    ``progress``: ``None``, a tqdm-like callable (called with ``total=``) or ``"log"``;
+    ``time_limit`` [s] per solve; ``jobs`` workers at once, started by ``context``
+    (default ``spawn``: never a fork of this process, which may hold threads and locks).
     """
-    if method not in METHODS:
-        raise ValueError(f"unknown reference method '{method}'")
+    _solvers(method)
     path = cache_path(problem_set, method, cache_dir) if cache else None
     sha = content_sha256(problem_set)
     names = [r.name for r in problem_set.records]
     limit = math.inf if time_limit is None else float(time_limit)
     known: dict[str, ReferenceSolution] = {}
+
+    def stale(name):  # missing, or timed out under a smaller limit
+        return name not in known or (known[name].timed_out and known[name].time_limit_s < limit)
+
     if path is not None and path.exists():
         known = {ref.name: ref for ref in (_read_cache(path, sha) or [])}
-        if all(n in known and not _stale(known[n], limit) for n in names):
+        if not any(stale(n) for n in names):
             return [known[n] for n in names]
-    todo = [r for r in problem_set.records if r.name not in known or _stale(known[r.name], limit)]
+    todo = [r for r in problem_set.records if stale(r.name)]
     on_done, close = _progress(progress, len(todo))
     try:
         known.update(_compute(todo, method, time_limit, jobs, on_done, context))
     finally:
         close()
-    refs = [known[n] for n in names]
     if path is not None and _make(path.parent):
         _write_cache(path, problem_set, list(known.values()), sha, method)
-    return refs
-
-
-def _progress(progress, total: int):
-    """``(on_done(ref, wall_s), close())`` for the ``progress`` argument of :func:`reference_solutions`."""
-    if progress is None or total == 0:
-        return (lambda ref, wall: None), (lambda: None)
-    if progress == "log":
-        log.info("references: %d problems to solve", total)
-        return LogProgress(total), (lambda: None)
-    bar = progress(None, total=total, unit="problem", desc="references")
-    return (lambda ref, wall: bar.update(1)), bar.close
-
-
-def _stale(ref: ReferenceSolution, limit: float) -> bool:
-    """A cached reference that timed out under a smaller limit than ``limit`` is recomputed."""
-    return bool(ref.timed_out) and ref.time_limit_s < limit
+    return [known[n] for n in names]
 
 
 # ---------------------------------------------------------------- cache
 
 
 def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -> Path | None:
-    """The folder the references of ``problem_set`` are cached in (``None``: not cached).
+    """Where references of ``problem_set`` are cached (``None``: built in memory).
 
-    ``cache_dir`` when given; else the set's folder (the folder of a single
-    file) when it is writable and the set is ours (``manifest.json`` or a
-    ``reference-*.parquet`` of ours there);
-    else the user cache folder (:func:`qpbench.cache.user_cache_dir` / ``references``).
+    ``cache_dir`` when given; else the set's folder (a single file's folder) when it is
+    writable and ours (``manifest.json`` or a ``reference-*.parquet`` there); else
+    :func:`qpbench.cache.user_cache_dir` / ``references``.
     """
     if problem_set.path is None:
         return None
@@ -327,7 +584,7 @@ def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -
 def cache_path(
     problem_set: ProblemSet, method: str = "auto", cache_dir: str | Path | None = None
 ) -> Path | None:
-    """Where the references of ``problem_set`` computed by ``method`` are cached (``None``: not cached)."""
+    """The cache file of ``problem_set``'s references by ``method`` (``None``: not cached)."""
     sha = content_sha256(problem_set)
     folder = cache_folder(problem_set, cache_dir)
     if sha is None or folder is None:
@@ -339,7 +596,6 @@ def cache_path(
     return folder / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
 
 
-_VEC_KEYS = ("x", "y", "z", "z_box")
 _FLOAT_KEYS = ("objective", "check_objective", "agreement", "kkt", "check_kkt", "time_limit_s")
 _TEXT_KEYS = ("name", "status", "solver", "check_solver", "check_status", "note")
 
@@ -347,11 +603,11 @@ _TEXT_KEYS = ("name", "status", "solver", "check_solver", "check_status", "note"
 def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
     import pyarrow as pa
 
-    from .formats import _list_column, table_to_bytes
+    from .formats import table_to_bytes
 
     cols = {
         **{k: pa.array([getattr(r, k) for r in refs], type=pa.string()) for k in _TEXT_KEYS},
-        **{k: _list_column([getattr(r, k) for r in refs]) for k in _VEC_KEYS},
+        **{k: list_column([getattr(r, k) for r in refs]) for k in _VEC_KEYS},
         **{k: pa.array([getattr(r, k) for r in refs], type=pa.float64()) for k in _FLOAT_KEYS},
         "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
         "timed_out": pa.array([bool(r.timed_out) for r in refs], type=pa.bool_()),
@@ -372,7 +628,6 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
             return None
         if meta.get(b"qpbench_reference_version", b"").decode() != REFERENCE_VERSION:
             return None
-        rows = table.to_pylist()
         return [
             ReferenceSolution(
                 **{k: r[k] for k in _TEXT_KEYS if k != "note"},
@@ -384,7 +639,7 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
                 agree=r["agree"],
                 timed_out=bool(r["timed_out"]),
             )
-            for r in rows
+            for r in table.to_pylist()
         ]
     except Exception as exc:  # corrupt cache: recompute
         log.warning("%s: unreadable reference cache, recomputing (%s)", path, exc)
@@ -392,6 +647,7 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
 
 
 def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str, method: str) -> None:
+    """Write atomically; remove stale caches of the same method in a problem-set folder."""
     try:
         write_bytes(path, _to_bytes(refs, sha))
     except OSError as exc:
@@ -415,8 +671,8 @@ def _make(folder: Path) -> bool:
 
 
 def _writable(folder: Path) -> bool:
-    """Whether to write into ``folder``: it must be writable and not marked read-only
-    (no write bit at all; this holds even for root, who may write anywhere)."""
+    """Writable and not marked read-only (no write bit at all: a shared data folder, even
+    for root, who may write anywhere)."""
     try:
         return os.access(folder, os.W_OK) and bool(folder.stat().st_mode & 0o222)
     except OSError:

@@ -14,7 +14,7 @@ import pytest
 import qpsolvers
 from conftest import random_problem
 
-import qpbench.reference_solve as reference_solve
+import qpbench.reference as reference_module
 from qpbench.cli import main
 from qpbench.formats import ProblemRecord, ProblemSet, load_problems
 from qpbench.reference import bench_references, cache_path, reference_solutions
@@ -29,14 +29,14 @@ def test_a_less_accurate_solver_loses_whatever_its_name(monkeypatch, loose):
     """One solver stopped at 1e-3: its answer is off by about 1e-4 and the other one's is kept."""
     settings = {
         "clarabel": dict(
-            reference_solve.CLARABEL_SETTINGS, tol_feas=1e-3, tol_gap_abs=1e-3, tol_gap_rel=1e-3
+            reference_module.CLARABEL_SETTINGS, tol_feas=1e-3, tol_gap_abs=1e-3, tol_gap_rel=1e-3
         ),
-        "piqp": dict(reference_solve.PIQP_SETTINGS, eps_abs=1e-3, eps_duality_gap_abs=1e-3),
+        "piqp": dict(reference_module.PIQP_SETTINGS, eps_abs=1e-3, eps_duality_gap_abs=1e-3),
     }
     record = _record()
-    exact = reference_solve.reference_solution(record)
-    monkeypatch.setitem(reference_solve.SOLVER_SETTINGS, loose, settings[loose])
-    ref = reference_solve.reference_solution(record)
+    exact = reference_module.reference_solution(record)
+    monkeypatch.setitem(reference_module.SOLVER_SETTINGS, loose, settings[loose])
+    ref = reference_module.reference_solution(record)
     accurate = "piqp" if loose == "clarabel" else "clarabel"
     assert ref.status == "optimal" and ref.solver == accurate and ref.check_solver == loose
     assert ref.agree is False and ref.agreement > 1e-7

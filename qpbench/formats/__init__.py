@@ -73,7 +73,7 @@ from .convexity import Convexity, assess_convexity
 from .maros_meszaros import load_maros_meszaros
 from .npz import load_npz, save_npz
 from .parquet import (
-    _list_column,  # noqa: F401  (qpbench.reference writes its cache with it)
+    list_column,
     package_versions,
     read_manifest,
     read_parquet,
@@ -193,6 +193,7 @@ __all__ = [
     "dense_problem",
     "load_maros_meszaros",
     "load_npz",
+    "list_column",
     "load_problems",
     "package_versions",
     "problem_sizes",

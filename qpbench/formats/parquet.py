@@ -59,7 +59,8 @@ def _schema(sparse_keys=()):
     )
 
 
-def _list_column(values: list[np.ndarray | None], kind: str = "float64"):
+def list_column(values: list[np.ndarray | None], kind: str = "float64"):
+    """A pyarrow list column of ``kind`` holding each array flattened (null for ``None``)."""
     import pyarrow as pa
 
     lengths = [0 if v is None else v.size for v in values]
@@ -106,7 +107,7 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
-    cols = [_list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
+    cols = [list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
     cols += [
         pa.array(names, type=pa.string()),
         pa.array([r.scenario for r in records], type=pa.string()),
@@ -121,7 +122,7 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
     for k in sparse_keys:
         parts = [_csc_parts(getattr(r.problem, k)) for r in records]
         for j, (_, kind) in enumerate(CSC_COLUMNS):
-            cols.append(_list_column([None if p is None else p[j] for p in parts], kind))
+            cols.append(list_column([None if p is None else p[j] for p in parts], kind))
     return pa.Table.from_arrays(cols, schema=_schema(sparse_keys))
 
 
