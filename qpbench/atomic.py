@@ -1,14 +1,10 @@
-"""Writing outputs so that a killed run never leaves a truncated file that looks complete,
-and the list of the files a command wrote.
+"""Outputs written atomically, checked before a run, and listed when a command ends.
 
-Every report, problem set and manifest is written to a temporary name in the
-same folder and renamed into place (:func:`os.replace` is atomic on POSIX).
-
-Every output that a command writes is recorded here (:func:`record`; :func:`atomic_path`
-records its file, the appending writers theirs, :func:`rename` follows a staging
-folder renamed into place), and ``qpbench`` prints them once when the command ends
-(:func:`listing`), e.g. ``wrote: wall.csv, problems/wall/reference-auto.parquet``.
-Files that worker processes write are recorded by the process that receives their rows.
+Every output goes to a temporary name in its folder and is renamed into place
+(:func:`os.replace` is atomic on POSIX), so a killed run never leaves a truncated file
+that looks complete. Each one is recorded (:func:`record`) and ``qpbench`` prints them
+once at the end (:func:`listing`); files of worker processes are recorded by the
+process that receives their rows.
 """
 
 from __future__ import annotations
@@ -83,10 +79,8 @@ def listing(paths: list[Path], cwd: str | Path | None = None, most: int = 3) -> 
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it to ``path`` on success.
-
-    On an exception the temporary file is removed and ``path`` is untouched.
-    """
+    """Yield a temporary path beside ``path``, renamed to ``path`` on success (removed,
+    ``path`` untouched, on an exception)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -120,25 +114,8 @@ def write_bytes(path: str | Path, data: bytes) -> None:
 
 
 def check_folder(path: str | Path, key: str = "out") -> None:
-    """Check an output folder before anything is written into it.
-
-    The folder may exist (the caller decides what may be replaced inside it)
-    or not (it is created later), but its parent must exist: qpbench creates an
-    output folder, never the folders above it.
-
-    Raises:
-        ParamError: ``path`` is a file, or its parent is missing or a file.
-    """
-    from .exceptions import ParamError
-
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ParamError(f"{path}: is a file; expected a folder", key=key)
-    parent = path.parent
-    if parent.exists() and not parent.is_dir():
-        raise ParamError(f"{parent}: is a file; expected a folder", key=key)
-    if not path.exists() and not parent.exists():
-        raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key=key)
+    """An output folder may exist or not, but its parent must (:func:`check_output`)."""
+    check_output(path, force=True, kind="dir", key=key)
 
 
 def check_output(
@@ -147,40 +124,30 @@ def check_output(
     resume: bool | None = None,
     kind: str = "file",
     make_parent: bool = False,
+    key: str = "out",
 ) -> None:
-    """Refuse to overwrite an existing output unless ``force`` or ``resume``.
-
-    Args:
-        path: The output file or folder.
-        force: ``--force`` was given.
-        resume: ``--resume`` was given; ``None`` when the command has no
-            ``--resume`` (the message then does not offer it).
-        kind: ``"file"`` or ``"dir"``: what ``path`` must be if it exists.
-        make_parent: The caller creates the parent folder itself (an internal
-            staging folder); otherwise a missing parent is an error.
+    """Check an output before anything is written: it is a ``kind`` (``file`` or ``dir``)
+    or nothing yet, its parent folder exists (qpbench never creates the folders above an
+    output, so a typo does not grow a tree) unless ``make_parent`` (an internal staging
+    folder), and it exists only with ``force`` or ``resume`` (``None``: the command has
+    no ``--resume``, and the message does not offer it).
 
     Raises:
+        ParamError: a folder or file in the wrong place, or a missing parent.
         OutputExistsError: ``path`` exists and neither flag was given.
-        ParamError: ``path`` is a folder where a file is expected (``kind="file"``),
-            a file where a folder is (the output or its parent), or its parent
-            folder does not exist (qpbench creates an output file or folder,
-            never the folders above it).
     """
     from .exceptions import ParamError
 
     path = Path(path)
     if kind == "file" and path.is_dir():
-        raise ParamError(f"{path}: is a folder; expected a file name", key="out")
+        raise ParamError(f"{path}: is a folder; expected a file name", key=key)
     if kind == "dir" and path.exists() and not path.is_dir():
-        raise ParamError(f"{path}: is a file; expected a folder", key="out")
+        raise ParamError(f"{path}: is a file; expected a folder", key=key)
     parent = path.parent
     if parent.exists() and not parent.is_dir():
-        raise ParamError(f"{parent}: is a file; expected a folder", key="out")
+        raise ParamError(f"{parent}: is a file; expected a folder", key=key)
     if not parent.exists() and not make_parent:
-        # Outputs are created, their parents never: a typo in a path must not grow a tree of folders.
-        raise ParamError(
-            f"{path}: parent folder {parent} does not exist; create it first", key="out"
-        )
+        raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key=key)
     if path.exists() and not (force or resume):
         hint = "pass --force to overwrite" + (
             " or --resume to continue" if resume is not None else ""
@@ -189,10 +156,9 @@ def check_output(
 
 
 def promote(staging: Path, out: Path, names) -> None:
-    """Replace the outputs ``names`` in ``out`` by those in ``staging`` (one rename each; a
-    folder's previous version is moved aside first and removed after), then remove
-    ``staging``: a reader of ``out`` sees the previous outputs or the new ones, and a run
-    killed before this call leaves the previous outputs whole."""
+    """Replace the outputs ``names`` in ``out`` by those in ``staging``, one rename each (a
+    folder's previous version moved aside, then removed), and remove ``staging``: a
+    reader sees the previous outputs or the new ones."""
     import shutil
 
     for name in names:

@@ -1,16 +1,9 @@
-"""Where qpbench keeps what it compiles: numba's kernels and native shims.
+"""Where qpbench keeps what it compiles (numba's kernels, native shims): one rule, so a
+worker, a second run and a test find what the first compile left.
 
-One rule for every compiled artefact, so that a worker process, a second run
-and a test all find what the first compile left:
-
-1. ``$NUMBA_CACHE_DIR`` when it is set (numba's own variable, honoured as is);
-2. else the package folder, when it can be written (numba's default: a
-   ``__pycache__`` beside each source file; shims go to ``qpbench/__cache__``);
-3. else the user cache folder, ``$XDG_CACHE_HOME/qpbench`` (default
-   ``~/.cache/qpbench``).
-
-Nothing here runs at import; call :func:`configure_numba_cache` before numba
-compiles anything (the CLI does, first thing).
+``$NUMBA_CACHE_DIR`` when set; else the package folder when writable (numba's
+``__pycache__`` beside the sources, shims in ``qpbench/__cache__``); else
+:func:`user_cache_dir`. Call :func:`configure_numba_cache` before numba compiles.
 """
 
 from __future__ import annotations
@@ -59,13 +52,8 @@ def shim_dir(name: str) -> Path:
 
 
 def configure_numba_cache() -> str | None:
-    """Point numba's cache at a writable folder when the package folder is not writable.
-
-    Sets ``NUMBA_CACHE_DIR`` (inherited by worker processes) only when it is
-    unset and the package folder cannot be written; returns the folder numba
-    caches to, or ``None`` for numba's default (beside the sources).
-    Call it before numba is imported.
-    """
+    """Set ``NUMBA_CACHE_DIR`` (inherited by workers) when unset and the package folder is
+    not writable; the folder numba caches to, ``None`` for its default beside the sources."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return os.environ["NUMBA_CACHE_DIR"]
     if _writable(PACKAGE_DIR / "__pycache__"):

@@ -1,9 +1,5 @@
-"""Exceptions of qpbench.
-
-One base, :class:`QpbenchError`, and a few precise subclasses. Each carries the
-offending file, key or value so the CLI can print one clear line and exit 2
-(input errors) or 1 (a run that completed with failures).
-"""
+"""Exceptions of qpbench: each names the offending file, key or value, so the CLI prints
+one clear line and exits with :attr:`QpbenchError.exit_code`."""
 
 from __future__ import annotations
 
@@ -19,13 +15,7 @@ class QpbenchError(Exception):
 
 
 class InputError(QpbenchError):
-    """Bad user input: a file, key or value that cannot be used.
-
-    Args:
-        message: What is wrong, in one line.
-        path: The offending file or folder, if any.
-        key: The offending key, column or option, if any.
-    """
+    """Bad user input: ``message`` (one line) about a ``path`` and ``key``, if any."""
 
     def __init__(self, message: str, path: str | Path | None = None, key: str | None = None):
         self.path = None if path is None else Path(path)
@@ -83,10 +73,8 @@ class OutputExistsError(QpbenchError):
 
 
 def positive_seconds(value, key: str, path: str | Path | None = None) -> float:
-    """``value`` as a duration [s] if it is a finite number > 0, else :class:`ParamError` naming ``key``.
-
-    The one check of every time argument (durations, deadlines, budgets, time limits).
-    """
+    """``value`` as a duration [s] if a finite number > 0, else a :class:`ParamError` naming
+    ``key``: the one check of every time argument."""
     try:
         seconds = float(value)
     except (TypeError, ValueError):

@@ -1,25 +1,13 @@
-"""A memory budget: what a step may allocate, and estimates of what a solve needs.
+"""A memory budget: what a solve may allocate, and estimates of what it needs.
 
-The budget (``--memory-budget`` of ``bench``, ``inspect`` and ``run``; bytes,
-e.g. ``2GB``, ``512MB``, ``1.5GiB``) defaults to :data:`DEFAULT_FRACTION` of the
-machine's physical memory, and never more than what an address-space limit
-(``ulimit -v``, ``RLIMIT_AS``) leaves above what the process maps already.
-A solve whose estimate (:func:`solve_bytes`) exceeds it is a ``skipped`` row
-saying so, never an out-of-memory kill.
-
-Estimates (bytes; float64 values, 4-byte indices):
-
-- a dense copy of a problem: ``8 n (n + m_eq + m_ineq)``, plus vectors;
-- a sparse solver (OSQP, Clarabel, qpsolvers' sparse routes): its KKT matrix
-  holds ``nnz(P) + nnz(A) + nnz(G) + n + m`` entries; its factor is counted as
-  :data:`FILL` times that, at 12 bytes an entry, plus 50 vectors of ``n + m``.
-  Fill-in depends on the ordering and the structure: the estimate is the order
-  of magnitude a budget needs, not a prediction.
-
-A dense-only backend (``sparse = False``: daqp, quadprog, pinv, the network,
-ProxQP and PIQP dense, qpOASES, cvxpy) is given problems up to
-:data:`DENSE_MAX_ENTRIES` entries made dense (``n (n + m)``, 200 MB of float64;
-e.g. n = 5,000 with no rows): above it the row says ``skipped`` with the sizes.
+The budget (``--memory-budget``, bytes: ``2GB``, ``512MB``, ``1.5GiB``) defaults to
+:data:`DEFAULT_FRACTION` of physical memory, within what ``RLIMIT_AS`` leaves. A solve
+whose estimate exceeds it is a ``skipped`` row, never an out-of-memory kill. Estimates
+(float64 values, 4-byte indices) are orders of magnitude, not predictions: a dense copy
+is ``8 n (n + m)`` bytes plus vectors; a sparse solver's KKT matrix holds ``nnz(P) +
+nnz(A) + nnz(G) + n + m`` entries and its factor :data:`FILL` times that, at 12 bytes an
+entry, plus 50 vectors of ``n + m``. A dense-only backend (``sparse = False``) is given
+problems up to :data:`DENSE_MAX_ENTRIES` entries made dense.
 """
 
 from __future__ import annotations
@@ -61,11 +49,7 @@ _UNITS = {
 
 
 def parse_size(text: str) -> int:
-    """Bytes of ``"2GB"`` (10^9), ``"1.5GiB"`` (2^30), ``"512MB"``, ``"100000"``.
-
-    Raises:
-        ParamError: not a positive size.
-    """
+    """Bytes of ``"2GB"`` (10^9), ``"1.5GiB"`` (2^30), ``"512MB"``, ``"100000"``."""
     match = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e[0-9]+)?)\s*([a-zA-Z]*)\s*", str(text))
     unit = match.group(2).lower() if match else None
     if not match or unit not in _UNITS or float(match.group(1)) <= 0:
@@ -119,6 +103,12 @@ def resolve_budget(text: str | None) -> int:
     return default_budget() if text is None else parse_size(text)
 
 
+def _n_m(problem: qpsolvers.Problem) -> tuple[int, int]:
+    """Variables and rows (equalities and inequalities) of ``problem``."""
+    n = int(np.asarray(problem.q).shape[0])
+    return n, sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+
+
 def _nnz(M) -> int:
     if M is None:
         return 0
@@ -127,23 +117,20 @@ def _nnz(M) -> int:
 
 def dense_bytes(problem: qpsolvers.Problem) -> int:
     """A dense copy of ``problem``'s matrices and vectors, in bytes."""
-    n = int(np.asarray(problem.q).shape[0])
-    m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    n, m = _n_m(problem)
     return 8 * (n * (n + m) + 4 * (n + m))
 
 
 def sparse_solver_bytes(problem: qpsolvers.Problem) -> int:
     """What a sparse solver needs for ``problem`` (KKT matrix, its factor, vectors), in bytes."""
-    n = int(np.asarray(problem.q).shape[0])
-    m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    n, m = _n_m(problem)
     kkt = _nnz(problem.P) + _nnz(problem.A) + _nnz(problem.G) + n + m
     return 12 * kkt * (1 + FILL) + 8 * 50 * (n + m)
 
 
 def dense_entries(problem: qpsolvers.Problem) -> int:
     """``n (n + m_eq + m_ineq)``: entries of the problem's matrices made dense."""
-    n = int(np.asarray(problem.q).shape[0])
-    m = sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    n, m = _n_m(problem)
     return n * (n + m)
 
 

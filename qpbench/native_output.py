@@ -1,13 +1,10 @@
 """Keeping solvers' native chatter off the terminal.
 
-Some solvers print from C code whatever their ``verbose`` setting (HiGHS's
-banner, OSQP's "Polishing not needed ..."), straight to file descriptor 1,
-where Python cannot intercept it. :func:`silence_native_stdout` points
-descriptor 1 at ``/dev/null`` for the duration of a command and gives
-Python's ``sys.stdout`` a private duplicate of the real one, so qpbench's own
-output still reaches the terminal or pipe while native writes vanish. It is
-set up once around a whole command, never around a timed solve, and worker
-processes started inside it inherit the silenced descriptor.
+Some solvers print from C whatever their ``verbose`` setting (HiGHS's banner, OSQP's
+"Polishing not needed"), straight to file descriptor 1. :func:`silence_native_stdout`
+points descriptor 1 at ``/dev/null`` for a whole command (never around a timed solve)
+and gives ``sys.stdout`` a private duplicate of the real one; worker processes started
+inside inherit the silenced descriptor.
 """
 
 from __future__ import annotations
@@ -22,8 +19,6 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-__all__ = ["silence_native_stdout"]
-
 
 def _flush_c_stdio() -> None:
     """Flush C's stdio buffers (text a solver printed but the C library has not written yet)."""
@@ -35,12 +30,8 @@ def _flush_c_stdio() -> None:
 
 @contextlib.contextmanager
 def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
-    """Send native writes to descriptor 1 to ``/dev/null``; Python's ``sys.stdout`` keeps the real output.
-
-    Does nothing when ``enabled`` is false, or when ``sys.stdout`` is not the
-    process's descriptor 1 (already redirected in Python, e.g. by pytest's
-    capture: native output does not reach it anyway).
-    """
+    """Send native writes to descriptor 1 to ``/dev/null``; ``sys.stdout`` keeps the real
+    output. Nothing happens when ``sys.stdout`` is not descriptor 1 (e.g. pytest's capture)."""
     try:
         fd = sys.stdout.fileno()
     except (AttributeError, OSError, io.UnsupportedOperation):

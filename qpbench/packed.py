@@ -1,22 +1,15 @@
 """A :class:`qpsolvers.Problem` whose arrays are views of one float64 buffer.
 
-A control loop builds one small QP per tick. Handing its eight arrays to a
-compiled kernel costs more than the kernel's arithmetic (numba unboxes every
-array argument; see ``bench/rnn_speed.py``), so the controller writes the
-whole tick into one buffer and a backend that knows the layout passes that
-one array. Every other consumer sees an ordinary :class:`qpsolvers.Problem`:
-``P, q, G, h, A, b, lb, ub`` are ndarrays (views of the buffer) or ``None``.
+A control tick's small QP goes to a compiled kernel as one array instead of eight
+(numba unboxes every array argument; ``bench/rnn_speed.py``); every other consumer
+sees an ordinary :class:`qpsolvers.Problem`. Layout of the 1-D buffer::
 
-Layout of :attr:`PackedProblem.buffer` (1-D, C-contiguous float64)::
+    [0 : HEADER]   n, me, mi, then the offsets of P, q, A, b, G, h, lb, ub (-1: absent)
+    at the offsets the arrays, row-major; anything may follow (the controller keeps
+    the end-effector position and distances there)
 
-    [0 : HEADER]   n, me, mi, then the offsets of P, q, A, b, G, h, lb, ub
-                   (-1 where the part is absent)
-    at the offsets the arrays, row-major; anything else may follow (the
-    controller keeps the end-effector position and distances there)
-
-The fields cannot be reassigned (the buffer would no longer describe the
-problem): to change a problem, make a :class:`qpsolvers.Problem`. Writing into
-the arrays writes into the buffer, so the two stay one.
+The fields cannot be reassigned (the buffer would no longer describe the problem);
+writing into the arrays writes into the buffer.
 """
 
 from __future__ import annotations
@@ -25,8 +18,6 @@ import numpy as np
 import qpsolvers
 
 from .exceptions import ProblemFormatError
-
-__all__ = ["HEADER", "PackedProblem", "pack"]
 
 #: Length of the header, and the index of each entry in it.
 HEADER = 11
@@ -50,16 +41,8 @@ def _shapes(n: int, me: int, mi: int) -> dict[str, tuple[int, ...]]:
 
 
 class PackedProblem(qpsolvers.Problem):
-    """A QP in qpsolvers form stored in one buffer (module docstring).
-
-    Args:
-        buffer: The packed problem, 1-D float64 (copied only if it is not
-            C-contiguous float64 already).
-
-    Raises:
-        ProblemFormatError: the header does not describe arrays inside the
-            buffer, or a required part (``P``, ``q``) is absent.
-    """
+    """A QP in qpsolvers form stored in one buffer (copied unless C-contiguous float64);
+    a :class:`ProblemFormatError` when the header does not describe arrays inside it."""
 
     def __init__(self, buffer):
         buf = np.ascontiguousarray(buffer, dtype=np.float64)
@@ -98,7 +81,7 @@ class PackedProblem(qpsolvers.Problem):
         _init(self, buf, fields)
 
     @classmethod
-    def _trusted(cls, buf, P, q, G, h, A, b, lb, ub) -> PackedProblem:
+    def from_views(cls, buf, P, q, G, h, A, b, lb, ub) -> PackedProblem:
         """A problem from views the caller made of ``buf`` after writing its header (no checks)."""
         self = _new(cls)
         d = self.__dict__
@@ -143,11 +126,7 @@ def _init(self, buf, fields) -> None:
 
 
 def pack(problem: qpsolvers.Problem) -> PackedProblem:
-    """The :class:`PackedProblem` of any problem in qpsolvers form (dense copies).
-
-    Raises:
-        ProblemFormatError: inconsistent shapes (names the field).
-    """
+    """The :class:`PackedProblem` of any problem in qpsolvers form (dense copies)."""
     import scipy.sparse as spa
 
     arrays = {}

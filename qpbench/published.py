@@ -1,21 +1,6 @@
 """qpbenchmark's own rules and published numbers, read from its installed modules and files.
 
-- :func:`qpbenchmark_settings`: the keyword arguments qpbenchmark's runner
-  passes to ``qpsolvers.solve_problem`` per settings name and solver, and its
-  ``Tolerance`` per settings name, taken from a ``qpbenchmark.TestSet`` built
-  here (``define_tolerances`` and ``define_solver_settings`` run as they do for
-  any of its test sets; ``runtime`` is the time limit of its
-  ``define_tolerances``: 10 s by default, 1000 s in its Maros-Meszaros test set).
-- :func:`qpbenchmark_success`: its success rule, as its
-  ``Results.build_success_rate_df`` computes it: ``found`` and each of the
-  primal residual, dual residual and duality gap strictly below the tolerance.
-- :func:`read_published_results`: a results file of qpbenchmark (columns
-  ``problem, solver, settings, runtime, found, primal_residual, dual_residual,
-  duality_gap``, as its ``Results`` writes them).
-- :func:`read_objectives`: a file of known optimal objectives (``--reference FILE``).
-
-Importing qpbenchmark configures the root logger (``qpbenchmark.spdlog``);
-:func:`import_qpbenchmark` undoes that, so nothing here changes logging.
+Importing qpbenchmark configures the root logger; :func:`import_qpbenchmark` undoes that.
 """
 
 from __future__ import annotations
@@ -62,17 +47,10 @@ def import_qpbenchmark() -> ModuleType:
 
 @functools.lru_cache(maxsize=None)
 def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
-    """``(kwargs, tolerances)`` of qpbenchmark's test sets.
-
-    Args:
-        runtime: Time limit in [s] given to its ``define_tolerances`` (``None``: its default).
-
-    Returns:
-        ``kwargs[settings][solver]``: the keyword arguments its runner passes to
-        ``qpsolvers.solve_problem`` (a fresh dict per call of this function's
-        caller is not made: do not modify); ``tolerances[settings]``: its
-        ``Tolerance`` (``primal``, ``dual``, ``gap``, ``runtime``).
-    """
+    """``(kwargs, tolerances)`` of a ``qpbenchmark.TestSet`` built here: per settings name,
+    the keyword arguments its runner passes to ``qpsolvers.solve_problem`` per solver
+    (shared: do not modify) and its ``Tolerance``; ``runtime`` [s] is given to its
+    ``define_tolerances`` (``None``: its default)."""
     qpb = import_qpbenchmark()
 
     class _Settings(qpb.TestSet):
@@ -90,9 +68,8 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
                 super().define_tolerances(runtime=float(runtime))
 
     previous = logging.root.manager.disable
-    logging.disable(
-        logging.WARNING
-    )  # "solver X is available but skipped as its settings are unknown"
+    # "solver X is available but skipped as its settings are unknown"
+    logging.disable(logging.WARNING)
     try:
         test_set = _Settings()
     finally:
@@ -108,18 +85,15 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
 def qpbenchmark_success(
     found: bool, primal: float, dual: float, gap: float, tolerance: object
 ) -> bool:
-    """qpbenchmark's success rule: ``found`` and each residual strictly below ``tolerance``'s."""
+    """qpbenchmark's success rule (its ``build_success_rate_df``): ``found`` and each
+    residual strictly below ``tolerance``'s."""
     return (
         bool(found) and primal < tolerance.primal and dual < tolerance.dual and gap < tolerance.gap
     )
 
 
 def read_published_results(path: str | Path) -> pd.DataFrame:
-    """A qpbenchmark results file (CSV or Parquet) as a DataFrame with :data:`RESULTS_COLUMNS`.
-
-    Raises:
-        InputError: unreadable file or missing columns.
-    """
+    """A qpbenchmark results file (CSV or Parquet, as its ``Results`` writes them)."""
     import pandas as pd
 
     path = Path(path)
@@ -144,17 +118,9 @@ def read_published_results(path: str | Path) -> pd.DataFrame:
 
 
 def read_objectives(path: str | Path) -> dict[str, float]:
-    """Known optimal objectives from a CSV file with a header and columns ``problem,objective``.
-
-    The objective is ``1/2 x'Px + q'x + r`` with the problem's constant ``r``
-    (as Maros and Meszaros publish them); other columns are ignored, blank
-    lines skipped. A problem of the set that the file does not list gets no
-    reference.
-
-    Raises:
-        InputError: unreadable file, missing column, a value that is not a
-            finite number, or a problem listed twice (naming the line).
-    """
+    """Known optimal objectives ``1/2 x'Px + q'x + r`` (as Maros and Meszaros publish them)
+    of a CSV with a header ``problem,objective`` (other columns ignored, blank lines
+    skipped); an :class:`InputError` names a bad line."""
     import csv
 
     path = Path(path)

@@ -1,43 +1,16 @@
 """The one vocabulary of solve outcomes, and how a returned answer is classified.
 
-A backend reports one of :data:`STATUSES`; the harness adds :data:`GUARD_STATUSES`
-when a solve went wrong in a way the backend did not (or could not) say. The
-per-tick guard (:mod:`qpbench.harness.guard`) and the closed loop
-(:mod:`qpbench.sim.loop`) both turn an exception into text with
-:func:`describe_exception` and an answer into a status with :func:`classify`,
-so the same answer gets the same status in a bench row and in a tick log.
-
-Sets, named by what they mean:
-
-- :data:`CERTIFIED_INFEASIBLE`: the backend proved there is no solution
-  (a bench row against an infeasible reference is right with one of these);
-- :data:`INFEASIBLE_OR_UNCLASSIFIED`: those, plus ``not_solved``, the status
-  of a backend that cannot classify a failure (qpsolvers' route to DAQP,
-  quadprog or HiGHS keeps only ``found=False``); on the controller's QPs
-  such a failure is the infeasible start, so the closed loop counts these
-  ticks as ``infeasible_ticks``;
-- :data:`FAILURE_STATUSES`: a failure whatever the reference says; the
-  backend's state is suspect after one and it is reset before its next solve
-  (the closed loop keeps one exception, see :mod:`qpbench.sim.loop`).
-
-:data:`FORMULATIONS` names the controller's two QP formulations.
+A backend reports one of :data:`STATUSES`; the harness adds :data:`GUARD_STATUSES`. The
+per-tick guard and the closed loop both use :func:`describe_exception` and
+:func:`classify`, so the same answer gets the same status in a bench row and a tick log.
+``not_solved`` is the status of a backend that cannot classify a failure (qpsolvers'
+route to DAQP, quadprog or HiGHS keeps only ``found=False``); on the controller's QPs
+that is the infeasible start, hence :data:`INFEASIBLE_OR_UNCLASSIFIED`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-__all__ = [
-    "CERTIFIED_INFEASIBLE",
-    "FAILURE_STATUSES",
-    "FORMULATIONS",
-    "GUARD_STATUSES",
-    "INFEASIBLE_OR_UNCLASSIFIED",
-    "STATUSES",
-    "TICK_STATUSES",
-    "classify",
-    "describe_exception",
-]
 
 #: Statuses a backend reports.
 STATUSES = (
@@ -77,13 +50,9 @@ def describe_exception(exc: BaseException) -> str:
 
 
 def classify(solution: object, wall_s: float, time_limit: float) -> tuple[str, str | None]:
-    """Status and error text of an answer a backend returned in ``wall_s`` [s].
-
-    - a non-finite ``x`` -> ``invalid``; ``optimal`` without ``x`` -> ``invalid``;
-    - else an answer later than ``time_limit`` [s] -> ``time_limit``;
-    - else the backend's status (``optimal``/``not_solved`` from ``found`` for
-      a plain :class:`qpsolvers.Solution`) and its ``error`` text, if any.
-    """
+    """Status and error text of an answer returned in ``wall_s`` [s]: ``invalid`` for a
+    non-finite ``x`` or ``optimal`` without one, else ``time_limit`` past ``time_limit``
+    [s], else the backend's status (from ``found`` for a plain :class:`qpsolvers.Solution`)."""
     status = getattr(solution, "status", None) or (
         "optimal" if getattr(solution, "found", False) else "not_solved"
     )

@@ -163,7 +163,7 @@ def test_a_header_that_lies_goes_to_the_general_path(rng):
     good = pack(problems[4])
     bad = good.buffer.copy()
     bad[2] = 70.0  # mi far beyond the buffer
-    liar = PackedProblem._trusted(bad, *(getattr(good, f) for f in FIELDS))
+    liar = PackedProblem.from_views(bad, *(getattr(good, f) for f in FIELDS))
     a, b = be.solve(liar), ref.solve(problems[4])
     np.testing.assert_array_equal(a.x, b.x)
     np.testing.assert_array_equal(be.state.xi, ref.state.xi)

@@ -80,7 +80,7 @@ class TickArrays(NamedTuple):
 _kernel = None
 _Problem = qpsolvers.Problem
 _new_problem = object.__new__
-_trusted = PackedProblem._trusted
+_trusted = PackedProblem.from_views
 _empty = np.empty
 
 

@@ -1,32 +1,17 @@
 """Is ``P`` positive semidefinite? Cheap for 100,000 variables, tolerant of rounding.
 
-The answer is the ratio ``lambda_min(P) / lambda_max(P)`` (dimensionless) and a
-verdict (:class:`Convexity`):
+The verdict rests on ``ratio = lambda_min(P) / lambda_max(P)``: ``convex`` when
+``ratio >= -ROUNDING_RATIO``; ``rounding`` (a published problem's rounded data: solved,
+with a warning) down to ``-NONCONVEX_RATIO``; ``nonconvex`` (skipped) below.
 
-- ``convex``: ``ratio >= -ROUNDING_RATIO`` (1e-10: what eigen-solvers return for
-  a semidefinite ``P``);
-- ``rounding``: ``-NONCONVEX_RATIO <= ratio < -ROUNDING_RATIO`` (a published
-  problem whose data was rounded, e.g. -1.2e-6): solved, with a warning in
-  its rows;
-- ``nonconvex``: ``ratio < -NONCONVEX_RATIO`` (1e-5): its rows say
-  ``skipped: nonconvex (lambda_min / lambda_max = ...)``.
-
-How (:func:`assess_convexity`), never a dense copy of a large matrix:
-
-1. ``n <= DENSE_EIG_MAX_N`` (1,000): ``numpy.linalg.eigvalsh`` (exact).
-2. Gershgorin discs: every ``P_ii >= sum_j |P_ij|`` (diagonal, diagonally
-   dominant: most large published problems) proves ``P >= 0`` in ``O(nnz)``.
-3. A scale ``lambda_max`` (:func:`_top_eigenvalue`: 30 power iterations), then the
-   inertia of ``P + delta I`` for ``delta = NONCONVEX_RATIO lambda_max``
-   and ``delta = ROUNDING_RATIO lambda_max``: a sparse LU with diagonal pivots
-   in symmetric mode (SuperLU) is an ``L D L'`` factorization, and by
-   Sylvester's law the number of negative pivots is the number of
-   eigenvalues of ``P`` below ``-delta``. Only a ``rounding`` or ``nonconvex``
-   answer then finds the ratio for the message, to 2 %, by bisection on the
-   shift (about ten more factorizations; Lanczos for the bottom of the
-   clustered spectra of PDE problems takes minutes).
-   If a factorization had to pivot off the diagonal, the verdict is
-   ``rounding`` with method ``undecided`` (solved, with a warning).
+How, never making a large matrix dense: ``numpy.linalg.eigvalsh`` up to
+``DENSE_EIG_MAX_N`` variables; else Gershgorin discs (a diagonally dominant ``P`` is
+convex in ``O(nnz)``); else a scale ``lambda_max`` by power iteration and the inertia
+of ``P + delta I`` at ``delta = NONCONVEX_RATIO lambda_max`` and ``ROUNDING_RATIO
+lambda_max``: a diagonal-pivot sparse LU in symmetric mode is an ``L D L'``, whose
+negative pivots count the eigenvalues below ``-delta`` (Sylvester's law). A
+``rounding`` or ``nonconvex`` answer then finds the ratio to 2 % by bisection on the
+shift. A factorization that pivoted off the diagonal gives ``rounding`` / ``undecided``.
 """
 
 from __future__ import annotations
@@ -48,14 +33,8 @@ VERDICTS = ("convex", "rounding", "nonconvex")
 
 @dataclass(frozen=True)
 class Convexity:
-    """What :func:`assess_convexity` found.
-
-    Attributes:
-        verdict: ``convex``, ``rounding`` or ``nonconvex``.
-        ratio: ``lambda_min / lambda_max`` (NaN when only a bound is known).
-        bound: The ratio is known to be below this (with NaN ``ratio``).
-        method: ``eigvalsh``, ``gershgorin``, ``inertia``, ``undecided`` or ``zero``.
-    """
+    """What :func:`assess_convexity` found: a ``verdict`` of :data:`VERDICTS`, the ``ratio``
+    (NaN when only a ``bound`` above it is known) and the ``method``."""
 
     verdict: str
     ratio: float = math.nan
@@ -132,8 +111,7 @@ def _bisect_ratio(P, hi: float, low: float, high: float, rtol: float = 0.02) -> 
 
 def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
     """A lower bound of ``lambda_max``, close to it: the larger of ``max_i P_ii`` and the
-    Rayleigh quotient after ``steps`` power iterations from a seeded random vector
-    (Lanczos to a tolerance can take seconds on the clustered spectra of PDE problems)."""
+    Rayleigh quotient after ``steps`` power iterations from a seeded random vector."""
     v = np.random.default_rng(0).standard_normal(P.shape[0])
     for _ in range(steps):
         w = P @ v

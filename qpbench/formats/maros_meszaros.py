@@ -1,4 +1,11 @@
-"""Maros-Meszaros ``.mat`` files (keys ``P q r A l u n m``)."""
+"""Maros-Meszaros ``.mat`` files: ``min 1/2 x'Px + q'x + r`` s.t. ``l <= A x <= u``.
+
+``A = [C; I_n]``: rows of ``C`` with ``l == u`` become ``A x = b``, the others one
+``G x <= h`` row per finite side (upper sides first, then ``-C x <= -l``); the last
+``n`` rows give ``lb, ub``. ``|value| >= MM_INFINITY`` is infinite. A triangular ``P``
+is mirrored; ``P, G, A`` stay CSC; ``r`` is the record's ``offset``, so the objective
+equals the published optimal values.
+"""
 
 from __future__ import annotations
 
@@ -13,14 +20,7 @@ from .records import MM_INFINITY, ProblemRecord, check_record
 
 
 def load_maros_meszaros(path: str | Path) -> ProblemRecord:
-    """Read one Maros-Meszaros problem (``.mat`` with keys ``P q r A l u n m``).
-
-    See the module docstring for the conversion. The record's ``offset`` is ``r``
-    and its name is the file stem.
-
-    Raises:
-        ProblemFormatError: unreadable file, missing key, inconsistent sizes.
-    """
+    """One Maros-Meszaros problem, named by the file stem."""
     import scipy.io
 
     path = Path(path)
@@ -107,7 +107,7 @@ def _rows(M: spa.csr_matrix, mask: np.ndarray) -> spa.csc_matrix:
 
 
 def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: int) -> tuple:
-    """``(G, h, A_eq, b, lb, ub)`` of ``lo <= A x <= up`` (see the package docstring)."""
+    """``(G, h, A_eq, b, lb, ub)`` of ``lo <= A x <= up``."""
     rows = A.tocsr()
     identity = m >= n and (rows[m - n :] != spa.identity(n, format="csr")).nnz == 0
     if identity:

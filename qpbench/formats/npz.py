@@ -12,16 +12,17 @@ import scipy.sparse as spa
 
 from ..atomic import atomic_path
 from ..exceptions import ProblemFormatError
+from ..memory import dense_entries
 from .records import (
-    _MATRIX_KEYS,
     ARRAY_KEYS,
     DENSE_COPY_MAX,
+    MATRIX_KEYS,
     NPZ_META_KEY,
     ProblemRecord,
     check_record,
-    dense_entries,
     dense_problem,
     solver_problem,
+    sorted_csc,
 )
 
 #: Stored arrays of a sparse matrix ``M``: ``M_csc_data``, ``M_csc_indices``, ``M_csc_indptr``,
@@ -30,8 +31,7 @@ CSC_PARTS = ("data", "indices", "indptr", "shape")
 
 
 def _csc_members(key: str, M) -> dict[str, np.ndarray]:
-    M = spa.csc_matrix(M, dtype=np.float64)
-    M.sort_indices()
+    M = sorted_csc(M)
     return {
         f"{key}_csc_data": M.data,
         f"{key}_csc_indices": M.indices,
@@ -48,24 +48,14 @@ def _append(path: Path, members: dict[str, np.ndarray]) -> None:
 
 
 def save_npz(record: ProblemRecord, path: str | Path) -> Path:
-    """Write one record to ``path`` (``.npz``) through :meth:`qpsolvers.Problem.save`.
-
-    The metadata is one extra member, ``qpbench_record`` (JSON in a 0-d unicode
-    array). A scipy.sparse matrix ``M`` is also written as CSC (members
-    ``M_csc_data, M_csc_indices, M_csc_indptr, M_csc_shape``), which this reader
-    prefers, so it reads back bit for bit as the same sparse matrix; its dense
-    copy for :meth:`qpsolvers.Problem.load` is written only while the problem's
-    matrices hold at most :data:`~qpbench.formats.records.DENSE_COPY_MAX` entries
-    (a larger file is read by qpbench only). The write is atomic.
-
-    Returns:
-        The path written.
-    """
+    """Write one record to ``path`` atomically, through :meth:`qpsolvers.Problem.save`
+    while the problem is at most ``DENSE_COPY_MAX`` entries dense (a larger one is read by
+    qpbench only), then the metadata and CSC members."""
     path = Path(path)
     check_record(record, path=path)
     sparse = {
         k: getattr(record.problem, k)
-        for k in _MATRIX_KEYS
+        for k in MATRIX_KEYS
         if spa.issparse(getattr(record.problem, k))
     }
     with atomic_path(path) as tmp:
@@ -107,12 +97,8 @@ def _read_members(data, path: Path) -> qpsolvers.Problem:
 
 
 def load_npz(path: str | Path) -> ProblemRecord:
-    """Read one record from a ``.npz`` written by :func:`save_npz` or by
-    :meth:`qpsolvers.Problem.save` (then the name is the file stem).
-
-    Raises:
-        ProblemFormatError: unreadable, truncated or inconsistent file.
-    """
+    """One record of a ``.npz`` of :func:`save_npz` or :meth:`qpsolvers.Problem.save`
+    (named by the file stem)."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:

@@ -13,19 +13,20 @@ import scipy.sparse as spa
 
 from ..atomic import write_bytes, write_text
 from ..exceptions import ProblemFormatError
+from ..memory import dense_entries
 from .records import (
-    _MATRIX_KEYS,
     ARRAY_KEYS,
     DENSE_COPY_MAX,
     FORMAT_VERSION,
     MANIFEST_NAME,
+    MATRIX_KEYS,
     META_KEYS,
     PARQUET_NAME,
     PROBLEM_KEYS,
     ProblemRecord,
     ProblemSet,
     check_record,
-    dense_entries,
+    sorted_csc,
 )
 
 if TYPE_CHECKING:
@@ -86,19 +87,13 @@ def _stored(problem, key: str):
 def _csc_parts(M) -> tuple | None:
     if not spa.issparse(M):
         return None
-    M = spa.csc_matrix(M, dtype=np.float64)
-    M.sort_indices()
+    M = sorted_csc(M)
     return M.data, M.indices, M.indptr
 
 
 def records_to_table(records: list[ProblemRecord], path: str | Path | None = None) -> pa.Table:
-    """The records as a ``pyarrow.Table`` in the problem-set schema.
-
-    A scipy.sparse matrix is stored in its CSC columns (read back bit for bit as
-    the same sparse matrix) and, while the problem is small enough
-    (:data:`~qpbench.formats.records.DENSE_COPY_MAX`), dense in qpbenchmark's
-    column too; a set without sparse matrices has no CSC columns at all.
-    """
+    """The records as a ``pyarrow.Table`` in the problem-set schema (CSC columns only for
+    a set holding sparse matrices)."""
     import pyarrow as pa
 
     for r in records:
@@ -117,7 +112,7 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
         pa.array([float(r.offset) for r in records], type=pa.float64()),
     ]
     sparse_keys = [
-        k for k in _MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)
+        k for k in MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)
     ]
     for k in sparse_keys:
         parts = [_csc_parts(getattr(r.problem, k)) for r in records]
@@ -127,7 +122,7 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
 
 
 def table_to_bytes(table: pa.Table) -> bytes:
-    """Serialise a table to Parquet with pinned writer options (deterministic bytes)."""
+    """The table as Parquet with pinned writer options (deterministic bytes)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -152,8 +147,7 @@ def table_to_bytes(table: pa.Table) -> bytes:
 def package_versions(
     names: tuple[str, ...] = ("qpbench", "numpy", "scipy", "qpsolvers", "pyarrow"),
 ) -> dict[str, str | None]:
-    """Installed version of each distribution in ``names`` (``None`` when absent); by default
-    the packages that shape the files and the numbers."""
+    """Installed version of each distribution (``None`` when absent)."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = {}
@@ -180,20 +174,10 @@ def sha256_file(path: str | Path) -> str:
 def write_problem_set(
     folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
 ) -> Path:
-    """Write ``records`` to ``folder/problems.parquet`` and ``folder/manifest.json``.
+    """Write ``records`` (unique names) to ``folder/problems.parquet`` and ``manifest.json``.
 
-    Args:
-        folder: Output folder (created if needed; existing files are replaced).
-        records: The problems, in order; names must be unique.
-        generator: What produced the set, e.g. ``{"name": "simulate", "scenario":
-            "wall", "backend": "clarabel", "duration": 2.0}`` (JSON-able).
-        extra: More JSON-able information for the manifest.
-
-    Returns:
-        The folder.
-
-    Both files are written atomically, Parquet first, so a manifest never
-    describes a Parquet file that is not complete.
+    ``generator`` (what produced the set) and ``extra`` are JSON-able. Both files are
+    written atomically, Parquet first, so a manifest never describes a partial file.
     """
     folder = Path(folder)
     table = records_to_table(records, path=folder / PARQUET_NAME)
@@ -297,7 +281,7 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
     arrays = {k: _list_values(table, k, path) for k in ARRAY_KEYS}
     csc = {
         k: [_list_values(table, f"{k}_csc_{part}", path, kind) for part, kind in CSC_COLUMNS]
-        for k in _MATRIX_KEYS
+        for k in MATRIX_KEYS
         if f"{k}_csc_data" in table.column_names
     }
     names = table.column("name").to_pylist()
@@ -320,7 +304,7 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
         if n == 0:
             fail("q", "no variables")
         data = {
-            k: _matrix(arrays, csc, k, i, n, fail) if k in _MATRIX_KEYS else arrays[k][i]
+            k: _matrix(arrays, csc, k, i, n, fail) if k in MATRIX_KEYS else arrays[k][i]
             for k in ARRAY_KEYS
         }
         if data["P"] is None:
@@ -358,16 +342,8 @@ def read_manifest(folder: str | Path) -> dict:
 
 
 def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
-    """Read a problem-set folder written by :func:`write_problem_set`.
-
-    Args:
-        folder: The folder (or its ``problems.parquet``).
-        verify_hash: Check the SHA-256 and row count against the manifest.
-
-    Raises:
-        ProblemFormatError: missing file, hash or count mismatch, corrupt
-            Parquet, missing column, bad shapes or values.
-    """
+    """Read a problem-set folder (or its ``problems.parquet``); ``verify_hash`` checks
+    the SHA-256 and the row count against the manifest."""
     folder = Path(folder)
     if folder.name == PARQUET_NAME:
         folder = folder.parent

@@ -1,7 +1,4 @@
-"""Problem records and sets, and the data rules every reader checks.
-
-See :mod:`qpbench.formats` for the formats and the rules.
-"""
+"""Problem records and sets, and the data rules every reader checks."""
 
 from __future__ import annotations
 
@@ -30,30 +27,24 @@ NPZ_META_KEY = "qpbench_record"
 FORMAT_VERSION = 1
 #: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
 MM_INFINITY = 1e20
-#: A sparse problem whose matrices hold more entries than this (P, G and A made dense;
-#: 8 MB of float64) is not also written dense for qpsolvers / qpbenchmark readers.
+#: A sparse problem whose ``P, G, A`` made dense hold more entries than this is not also
+#: written dense for qpsolvers / qpbenchmark readers.
 DENSE_COPY_MAX = 1_000_000
 #: ``P`` is symmetric when ``max |P - P'| <= SYMMETRY_RTOL max |P|``.
 SYMMETRY_RTOL = 1e-9
 
-_MATRIX_KEYS = ("P", "G", "A")
+#: The matrices of a problem (the parts that may be scipy.sparse).
+MATRIX_KEYS = ("P", "G", "A")
 
 
 @dataclass
 class ProblemRecord:
     """One QP and where it comes from.
 
-    Attributes:
-        problem: The QP (``qpsolvers.Problem``).
-        name: Unique name within its set (e.g. ``wall/tick-000123`` or ``HS21``).
-        scenario: Scenario that produced it, if any.
-        tick: Control tick index, if any.
-        t: Simulated time of the tick in [s], if any.
-        formulation: ``"paper"`` (hard task equality, paper eq. 11), ``"soft"``
-            (task as a weighted cost) or ``None``.
-        offset: Constant term of the objective (Maros-Meszaros ``r``).
-        convexity: What :func:`~qpbench.formats.convexity.assess_convexity` found
-            (set by :func:`check_record`, which every reader calls).
+    ``name`` is unique in its set (``wall/tick-000123``, ``HS21``); ``t`` is the tick's
+    time [s]; ``formulation`` ``paper`` (hard task equality, eq. 11) or ``soft``;
+    ``offset`` the objective's constant (Maros-Meszaros ``r``); ``convexity`` is set by
+    :func:`check_record`.
     """
 
     problem: qpsolvers.Problem
@@ -67,7 +58,7 @@ class ProblemRecord:
 
     @property
     def sizes(self) -> tuple[int, int, int]:
-        """``(n, m_eq, m_ineq)``: variables, equality rows, inequality rows (bounds excluded)."""
+        """``(n, m_eq, m_ineq)`` (:func:`problem_sizes`)."""
         return problem_sizes(self.problem)
 
     def meta(self) -> dict:
@@ -84,17 +75,10 @@ class ProblemRecord:
 
 @dataclass
 class ProblemSet:
-    """A sequence of problem records read from (or written to) disk.
+    """Problem records read from a folder or file (``path``; ``None``: built in memory).
 
-    Attributes:
-        name: Folder or file stem.
-        path: Where it was read from (a folder or a file), ``None`` if built in memory.
-        records: The problems, in file order.
-        manifest: Content of ``manifest.json`` (``None`` for other formats).
-        sha256: SHA-256 of ``problems.parquet`` (``None`` for other formats).
-        kind: ``"set"``, ``"parquet"``, ``"npz"`` or ``"mat"``.
-        files: The files the records were read from.
-        hash_ok: Whether the manifest hash matched (``None`` if not checked).
+    ``kind`` is ``set``, ``parquet``, ``npz`` or ``mat``; ``manifest``, ``sha256`` (of
+    ``problems.parquet``) and ``hash_ok`` belong to a problem-set folder.
     """
 
     name: str
@@ -140,21 +124,13 @@ def _dense(M, key: str, path, name) -> np.ndarray | None:
 def dense_problem(
     problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
 ) -> qpsolvers.Problem:
-    """A copy of ``problem`` with dense float64 arrays (a dense problem's arrays pass through
-    unchanged when they already are float64)."""
+    """``problem`` with dense float64 arrays."""
     arrays = [_dense(getattr(problem, k), k, path, name) for k in ARRAY_KEYS]
     return qpsolvers.Problem(*arrays)
 
 
-def dense_entries(problem: qpsolvers.Problem) -> int:
-    """Entries of ``P``, ``G`` and ``A`` made dense: ``n (n + m_ineq + m_eq)``."""
-    n, m_eq, m_ineq = problem_sizes(problem)
-    return n * (n + m_eq + m_ineq)
-
-
 def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
-    """``problem`` with float64 arrays, its sparse matrices kept sparse (CSC): what a
-    solver with a sparse API is given. A dense problem of float64 arrays passes through."""
+    """``problem`` with float64 arrays, sparse matrices as CSC: what a sparse API is given."""
     parts = []
     for k in ARRAY_KEYS:
         v = getattr(problem, k)
@@ -166,6 +142,13 @@ def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
             )
         parts.append(v)
     return qpsolvers.Problem(*parts)
+
+
+def sorted_csc(M) -> spa.csc_matrix:
+    """``M`` as float64 CSC with sorted indices: how a sparse matrix is stored."""
+    M = spa.csc_matrix(M, dtype=np.float64)
+    M.sort_indices()
+    return M
 
 
 def _numeric(v, key: str, fail):
@@ -198,13 +181,10 @@ def _asymmetry(P) -> float:
 def check_problem(
     problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
 ) -> None:
-    """Check shapes and values of a problem (see :mod:`qpbench.formats` for the rules).
-
-    Sparse matrices are checked through their stored values: nothing is made dense.
-    Convexity is not a format rule (:func:`~qpbench.formats.convexity.assess_convexity`).
-
-    Raises:
-        ProblemFormatError: naming ``path``, the problem ``name`` and the field.
+    """Check shapes and values (sparse matrices through their stored values, never dense):
+    ``P`` ``n x n`` and symmetric (``max |P - P'| <= SYMMETRY_RTOL max |P|``); ``G, h``
+    and ``A, b`` in pairs; ``P q G h A b`` finite (several solvers reject ``h = inf``);
+    ``lb`` may be ``-inf``, ``ub`` ``+inf``. A :class:`ProblemFormatError` names the field.
     """
 
     def fail(key, msg):
