@@ -31,20 +31,12 @@ DENSE_MAX_ENTRIES = 25_000_000
 #: Factor fill-in assumed by :func:`solve_bytes` for a sparse solver.
 FILL = 10
 
-_UNITS = {
-    "": 1,
-    "b": 1,
-    "kb": 1e3,
-    "mb": 1e6,
-    "gb": 1e9,
-    "tb": 1e12,
-    "kib": 2**10,
-    "mib": 2**20,
-    "gib": 2**30,
-    "tib": 2**40,
-    "k": 1e3,
-    "m": 1e6,
-    "g": 1e9,
+#: Units of a size: ``kB``/``k`` (10^3) to ``TB``, ``KiB`` (2^10) to ``TiB``, any case.
+_UNITS = {"": 1, "b": 1} | {
+    prefix + suffix: base**power
+    for power, prefix in enumerate("kmgt", start=1)
+    for suffix, base in (("b", 1e3), ("ib", 2**10), ("", 1e3))
+    if suffix or prefix != "t"
 }
 
 

@@ -78,7 +78,7 @@ class PackedProblem(qpsolvers.Problem):
             fields["h"] is None
         ):
             raise ProblemFormatError("A and b (G and h) must be present together", key="buffer")
-        _init(self, buf, fields)
+        self.__dict__.update(buffer=buf, **fields)
 
     @classmethod
     def from_views(cls, buf, P, q, G, h, A, b, lb, ub) -> PackedProblem:
@@ -117,12 +117,6 @@ class PackedProblem(qpsolvers.Problem):
 
 
 _new = object.__new__
-
-
-def _init(self, buf, fields) -> None:
-    d = self.__dict__
-    d["buffer"] = buf
-    d.update(fields)
 
 
 def pack(problem: qpsolvers.Problem) -> PackedProblem:

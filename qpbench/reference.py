@@ -1,17 +1,10 @@
 """Reference solutions of a problem set: computed, cached, or read from known objectives.
 
-Sources (:func:`bench_references`, ``bench --reference``): ``auto`` (Clarabel and PIQP
-at 1e-10, settled by their KKT residuals), ``clarabel`` or ``piqp`` alone (no
-cross-check), ``none`` (success is qpbenchmark's rule, :mod:`qpbench.metrics`), or a
-CSV of known optimal objectives ``problem,objective``
-(:func:`qpbench.published.read_objectives`): a listed problem's reference is
-``optimal`` with that objective (no ``x``), an unlisted one ``unknown``.
-
-Statuses: Clarabel's ``Solved`` -> ``optimal``, ``(Almost)PrimalInfeasible`` ->
-``primal_infeasible``, ``(Almost)DualInfeasible`` -> ``dual_infeasible``,
-``AlmostSolved`` -> ``optimal`` when qpsolvers' residuals and gap are all <=
-:data:`ALMOST_TOL`; PIQP's likewise; anything else ``unknown``. A problem without any
-constraint is ``P x = -q`` by least squares (``dual_infeasible`` when unsolvable).
+Sources (``bench --reference``): ``auto`` (Clarabel and PIQP at 1e-10, settled by their
+KKT residuals), ``clarabel`` or ``piqp`` alone, ``none`` (success is qpbenchmark's rule,
+:mod:`qpbench.metrics`), or a CSV of known optimal objectives ``problem,objective``: a
+listed problem's reference is ``optimal`` with that objective (no ``x``), an unlisted
+one ``unknown``.
 
 Which answer is kept is decided by the evidence, never the solver's name
 (:func:`settle`); ``kkt`` is the worst of qpsolvers' primal residual, dual residual and
@@ -24,20 +17,16 @@ duality gap at an answer (``inf`` without one):
 - neither: the common status; ``unknown`` and a verdict: the verdict; two verdicts:
   ``unknown``.
 
-They agree when both statuses match and, when optimal, ``|f1 - f2| / max(1, |f1|,
-|f2|) <= AGREE_RTOL``; a disagreement is logged. The objective is ``1/2 x'Px + q'x +
-offset``. Every reference carries a ``note``: each solver's answer, which was kept
-and why.
-
-Time limit [s]: Clarabel is given it, PIQP has none, so with a limit (or ``jobs >
-1``) each solver runs on each problem as a task of :func:`qpbench.runner.process.run_tasks`,
-killed past its deadline; a late, failed or lost answer is ``unknown`` with its reason.
+They agree when both statuses match and, when optimal, :func:`relative_difference` <=
+``AGREE_RTOL``. Every reference carries a ``note``: each solver's answer, which was kept
+and why. Clarabel is given the time limit [s], PIQP has none, so with a limit (or
+``jobs > 1``) each solve is a task of :func:`qpbench.runner.process.run_tasks`, killed
+past its deadline; a late, failed or lost answer is ``unknown`` with its reason.
 
 Cache: ``reference-[<method>-]<sha[:16]>.parquet`` (beside a single file
-``<stem>.reference-...``), keyed by :func:`qpbench.formats.content_sha256` and
-:data:`REFERENCE_VERSION`, both checked on read; an entry that timed out under a
-smaller limit is recomputed, a subset adds what it lacks and never shrinks the
-cache. Where: :func:`cache_folder`.
+``<stem>.reference-...``; where: :func:`cache_folder`), keyed by
+:func:`qpbench.formats.content_sha256` and :data:`REFERENCE_VERSION`; an entry that
+timed out under a smaller limit is recomputed, and a subset adds what it lacks.
 """
 
 from __future__ import annotations
@@ -386,32 +375,13 @@ def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceS
 # ---------------------------------------------------------------- a set's references
 
 
-def bench_references(
-    problem_set: ProblemSet,
-    source: str = "auto",
-    *,
-    time_limit: float | None = None,
-    jobs: int = 1,
-    progress: Callable | str | None = None,
-    cache: bool = True,
-    context: BaseContext | None = None,
-    cache_dir: str | Path | None = None,
-) -> list:
-    """One reference per record from ``source`` (a method, ``none``: ``None`` entries, or
-    a file of objectives; :class:`~qpbench.exceptions.InputError` if unreadable)."""
+def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
+    """One reference per record from ``source``: a method (``options`` go to
+    :func:`reference_solutions`), ``none`` (``None`` entries) or a file of objectives."""
     if source == "none":
         return [None] * len(problem_set.records)
     if source in METHODS:
-        return reference_solutions(
-            problem_set,
-            cache=cache,
-            progress=progress,
-            method=source,
-            time_limit=time_limit,
-            jobs=jobs,
-            context=context,
-            cache_dir=cache_dir,
-        )
+        return reference_solutions(problem_set, method=source, **options)
     from .published import read_objectives
 
     return from_objectives(problem_set, read_objectives(source), source)
@@ -481,38 +451,27 @@ def _lost(solver: str, done, time_limit: float | None) -> Candidate:
     return Candidate(solver, "unknown", None, reason=why)
 
 
-class LogProgress:
-    """Progress as log lines: at most one per ``every_s`` [s], the last, and every failure."""
-
-    def __init__(self, total: int, every_s: float = 5.0):
-        self.total, self.every_s, self.done = total, every_s, 0
-        self.last = time.monotonic()
-
-    def __call__(self, ref, wall_s: float) -> None:
-        self.done += 1
-        now = time.monotonic()
-        if now - self.last >= self.every_s or self.done == self.total or ref.status != "optimal":
-            self.last = now
-            log.info(
-                "references: %d/%d; %s: %s in %.1f s%s",
-                self.done,
-                self.total,
-                ref.name,
-                ref.status,
-                wall_s,
-                "" if ref.status == "optimal" else f" ({ref.note})",
-            )
-
-
 def _progress(progress, total: int):
-    """``(on_done(ref, wall_s), close())`` for the ``progress`` argument."""
+    """``(on_done(ref, wall_s), close())`` for the ``progress`` argument; ``"log"``: a line
+    at most every 5 s, the last one and every failure."""
     if progress is None or total == 0:
         return (lambda ref, wall: None), (lambda: None)
-    if progress == "log":
-        log.info("references: %d problems to solve", total)
-        return LogProgress(total), (lambda: None)
-    bar = progress(None, total=total, unit="problem", desc="references")
-    return (lambda ref, wall: bar.update(1)), bar.close
+    if progress != "log":
+        bar = progress(None, total=total, unit="problem", desc="references")
+        return (lambda ref, wall: bar.update(1)), bar.close
+    log.info("references: %d problems to solve", total)
+    state = {"done": 0, "last": time.monotonic()}
+
+    def on_done(ref, wall_s: float) -> None:
+        state["done"] += 1
+        now = time.monotonic()
+        if now - state["last"] >= 5.0 or state["done"] == total or ref.status != "optimal":
+            state["last"] = now
+            why = "" if ref.status == "optimal" else f" ({ref.note})"
+            done = f"{state['done']}/{total}"
+            log.info(f"references: {done}; {ref.name}: {ref.status} in {wall_s:.1f} s{why}")
+
+    return on_done, (lambda: None)
 
 
 def reference_solutions(

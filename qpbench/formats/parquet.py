@@ -37,27 +37,15 @@ if TYPE_CHECKING:
 CSC_COLUMNS = (("data", "float64"), ("indices", "int32"), ("indptr", "int64"))
 
 
-def _schema(sparse_keys=()):
-    import pyarrow as pa
-
-    lst = pa.list_(pa.float64())
-    csc = [
-        (f"{k}_csc_{part}", pa.list_(getattr(pa, kind)()))
-        for k in sparse_keys
-        for part, kind in CSC_COLUMNS
-    ]
-    return pa.schema(
-        [(k, lst) for k in ARRAY_KEYS]
-        + [
-            ("name", pa.string()),
-            ("scenario", pa.string()),
-            ("tick", pa.int64()),
-            ("t", pa.float64()),
-            ("formulation", pa.string()),
-            ("offset", pa.float64()),
-        ]
-        + csc
-    )
+#: The metadata columns and their Arrow types (after the array columns).
+META_TYPES = (
+    ("name", "string"),
+    ("scenario", "string"),
+    ("tick", "int64"),
+    ("t", "float64"),
+    ("formulation", "string"),
+    ("offset", "float64"),
+)
 
 
 def list_column(values: list[np.ndarray | None], kind: str = "float64"):
@@ -102,23 +90,18 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
+    lst = pa.list_(pa.float64())
+    fields = [(k, lst) for k in ARRAY_KEYS] + [(k, getattr(pa, t)()) for k, t in META_TYPES]
     cols = [list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
-    cols += [
-        pa.array(names, type=pa.string()),
-        pa.array([r.scenario for r in records], type=pa.string()),
-        pa.array([None if r.tick is None else int(r.tick) for r in records], type=pa.int64()),
-        pa.array([None if r.t is None else float(r.t) for r in records], type=pa.float64()),
-        pa.array([r.formulation for r in records], type=pa.string()),
-        pa.array([float(r.offset) for r in records], type=pa.float64()),
-    ]
-    sparse_keys = [
-        k for k in MATRIX_KEYS if any(spa.issparse(getattr(r.problem, k)) for r in records)
-    ]
-    for k in sparse_keys:
+    cols += [pa.array([getattr(r, k) for r in records], type=t) for k, t in fields[len(cols) :]]
+    for k in MATRIX_KEYS:
+        if not any(spa.issparse(getattr(r.problem, k)) for r in records):
+            continue
         parts = [_csc_parts(getattr(r.problem, k)) for r in records]
-        for j, (_, kind) in enumerate(CSC_COLUMNS):
+        for j, (part, kind) in enumerate(CSC_COLUMNS):
+            fields.append((f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())))
             cols.append(list_column([None if p is None else p[j] for p in parts], kind))
-    return pa.Table.from_arrays(cols, schema=_schema(sparse_keys))
+    return pa.Table.from_arrays(cols, schema=pa.schema(fields))
 
 
 def table_to_bytes(table: pa.Table) -> bytes:
@@ -159,10 +142,6 @@ def package_versions(
     return out
 
 
-def sha256_bytes(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
 def sha256_file(path: str | Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -182,7 +161,7 @@ def write_problem_set(
     folder = Path(folder)
     table = records_to_table(records, path=folder / PARQUET_NAME)
     data = table_to_bytes(table)
-    digest = sha256_bytes(data)
+    digest = hashlib.sha256(data).hexdigest()
     manifest = {
         "format": "qpbench-problem-set",
         "format_version": FORMAT_VERSION,
