@@ -71,18 +71,13 @@ def _verdict(ratio: float) -> str:
 
 def assess_convexity(P: np.ndarray | spa.spmatrix | spa.sparray) -> Convexity:
     """The convexity of ``x'Px`` for a symmetric ``P`` (dense or scipy.sparse)."""
-    n = P.shape[0]
-    if spa.issparse(P):
-        if P.nnz == 0 or not np.any(P.data):
-            return Convexity("convex", 0.0, method="zero")
-        if n <= DENSE_EIG_MAX_N:
-            return _dense(P.toarray())
-        return _sparse(spa.csc_matrix(P))
-    P = np.asarray(P, dtype=np.float64)
-    if not np.any(P):
+    sparse = spa.issparse(P)
+    if not sparse:
+        P = np.asarray(P, dtype=np.float64)
+    if not np.any(P.data if sparse else P):
         return Convexity("convex", 0.0, method="zero")
-    if n <= DENSE_EIG_MAX_N:
-        return _dense(P)
+    if P.shape[0] <= DENSE_EIG_MAX_N:
+        return _dense(P.toarray() if sparse else P)
     return _sparse(spa.csc_matrix(P))
 
 

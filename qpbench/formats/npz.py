@@ -20,7 +20,6 @@ from .records import (
     NPZ_META_KEY,
     ProblemRecord,
     check_record,
-    dense_problem,
     solver_problem,
     sorted_csc,
 )
@@ -61,7 +60,7 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             if dense_entries(record.problem) <= DENSE_COPY_MAX:
-                dense_problem(record.problem, path=path, name=record.name).save(fh)
+                solver_problem(record.problem, dense=True).save(fh)
             else:
                 np.savez(
                     fh,

@@ -108,38 +108,16 @@ def problem_sizes(problem: qpsolvers.Problem) -> tuple[int, int, int]:
     return n, m_eq, m_ineq
 
 
-def _dense(M, key: str, path, name) -> np.ndarray | None:
-    if M is None:
-        return None
-    if spa.issparse(M):
-        M = M.toarray()
-    try:
-        return np.asarray(M, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ProblemFormatError(
-            f"problem '{name}': not numeric ({exc})", path=path, key=key
-        ) from None
-
-
-def dense_problem(
-    problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
-) -> qpsolvers.Problem:
-    """``problem`` with dense float64 arrays."""
-    arrays = [_dense(getattr(problem, k), k, path, name) for k in ARRAY_KEYS]
-    return qpsolvers.Problem(*arrays)
-
-
-def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
-    """``problem`` with float64 arrays, sparse matrices as CSC: what a sparse API is given."""
+def solver_problem(problem: qpsolvers.Problem, dense: bool = False) -> qpsolvers.Problem:
+    """``problem`` with float64 arrays, sparse matrices as CSC (what a sparse API is given)
+    or, with ``dense``, made dense."""
     parts = []
     for k in ARRAY_KEYS:
         v = getattr(problem, k)
-        if v is not None:
-            v = (
-                spa.csc_matrix(v, dtype=np.float64)
-                if spa.issparse(v)
-                else np.asarray(v, dtype=np.float64)
-            )
+        if spa.issparse(v) and not dense:
+            v = spa.csc_matrix(v, dtype=np.float64)
+        elif v is not None:
+            v = np.asarray(v.toarray() if spa.issparse(v) else v, dtype=np.float64)
         parts.append(v)
     return qpsolvers.Problem(*parts)
 
