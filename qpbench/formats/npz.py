@@ -31,12 +31,8 @@ CSC_PARTS = ("data", "indices", "indptr", "shape")
 
 def _csc_members(key: str, M) -> dict[str, np.ndarray]:
     M = sorted_csc(M)
-    return {
-        f"{key}_csc_data": M.data,
-        f"{key}_csc_indices": M.indices,
-        f"{key}_csc_indptr": M.indptr,
-        f"{key}_csc_shape": np.asarray(M.shape, dtype=np.int64),
-    }
+    parts = (M.data, M.indices, M.indptr, np.asarray(M.shape, dtype=np.int64))
+    return {f"{key}_csc_{part}": v for part, v in zip(CSC_PARTS, parts)}
 
 
 def _append(path: Path, members: dict[str, np.ndarray]) -> None:
@@ -77,7 +73,7 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     return path
 
 
-def _read_members(data, path: Path) -> qpsolvers.Problem:
+def _read_members(data) -> qpsolvers.Problem:
     """The problem of a file with CSC members (dense members for the other parts)."""
     parts = []
     for k in ARRAY_KEYS:
@@ -108,7 +104,7 @@ def load_npz(path: str | Path) -> ProblemRecord:
                 raise ProblemFormatError("missing array", path=path, key=missing[0])
             meta = json.loads(str(data[NPZ_META_KEY])) if NPZ_META_KEY in data.files else {}
             compact = any(f.endswith("_csc_data") for f in data.files)
-            problem = _read_members(data, path) if compact else None
+            problem = _read_members(data) if compact else None
         if problem is None:
             problem = qpsolvers.Problem.load(str(path))
     except FileNotFoundError:
@@ -129,12 +125,9 @@ def load_npz(path: str | Path) -> ProblemRecord:
     except (TypeError, ValueError) as exc:
         raise ProblemFormatError(f"problem '{name}': not numeric ({exc})", path=path) from None
     record = ProblemRecord(
-        problem=problem,
-        name=name,
-        scenario=meta.get("scenario"),
-        tick=meta.get("tick"),
-        t=meta.get("t"),
-        formulation=meta.get("formulation"),
+        problem,
+        name,
+        **{k: meta.get(k) for k in ("scenario", "tick", "t", "formulation")},
         offset=float(meta.get("offset", 0.0)),
     )
     check_record(record, path=path)
