@@ -125,12 +125,11 @@ def read_objectives(path: str | Path) -> dict[str, float]:
 
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        rows = list(csv.reader(path.read_text(encoding="utf-8").splitlines()))
     except FileNotFoundError:
         raise InputError("no such reference file", path=path) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"unreadable reference file ({exc})", path=path) from None
-    rows = list(csv.reader(text.splitlines()))
     header = [c.strip() for c in rows[0]] if rows else []
     for key in ("problem", "objective"):
         if key not in header:
@@ -142,26 +141,20 @@ def read_objectives(path: str | Path) -> dict[str, float]:
     for line, row in enumerate(rows[1:], start=2):
         if not any(c.strip() for c in row):
             continue
+
+        def bad(message: str, key: str = "objective", line=line):
+            raise InputError(f"line {line}: {message}", path=path, key=key)
+
         if len(row) <= max(ip, io):
-            raise InputError(
-                f"line {line}: {len(row)} fields, expected {len(header)}",
-                path=path,
-                key="objective",
-            )
+            bad(f"{len(row)} fields, expected {len(header)}")
         name, value = row[ip].strip(), row[io].strip()
         try:
             f = float(value)
         except ValueError:
             f = math.nan
         if not math.isfinite(f):
-            raise InputError(
-                f"line {line}: objective of '{name}' is not a finite number: '{value}'",
-                path=path,
-                key="objective",
-            )
+            bad(f"objective of '{name}' is not a finite number: '{value}'")
         if name in out:
-            raise InputError(
-                f"line {line}: problem '{name}' listed twice", path=path, key="problem"
-            )
+            bad(f"problem '{name}' listed twice", key="problem")
         out[name] = f
     return out
