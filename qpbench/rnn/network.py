@@ -39,41 +39,18 @@ of ``C`` gives the 2x2 step matrix ``[[1 - r p, r sigma], [-r sigma (1 - r p),
 Euler's ``1 / sigma^2``. For a ``P`` that is not a multiple of the identity the
 semi-implicit method uses Euler's bound.
 
-Two integrators compute the same thing: a numba-compiled loop (compiled on
-first call, cached on disk; :mod:`.kernels`) and a pure-numpy path (used when
-numba is absent or not wanted; :mod:`.integrate_numpy`). They agree to
-rounding (1e-12 and below).
-
-This module is the network's front: the entry points (:func:`integrate`,
-:func:`duals`) and, under their usual names, the pieces the other modules of
-this package hold: the parameter block's layout (:mod:`.layout`), the problem
-and state (:mod:`.problem`), the step bound (:mod:`.step_bound`) and the
-kernels (:mod:`.kernels`).
-
-The online backend calls the compiled loop through two thin per-tick
-kernels that also return the tick's verdict: :func:`online_kernel` (the
-problem's eight arrays, compiled for exactly one argument type) and
-:func:`packed_kernel` (a :class:`qpbench.packed.PackedProblem`'s one buffer).
-Both run the same compiled loop and give the same numbers bit for bit.
+The integrator itself is :mod:`.kernels` (compiled loops); this module is its
+front, and the name every caller reads the network's names by.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..exceptions import ParamError, ProblemFormatError
-from .kernels import (  # noqa: F401 - the network's names, read through this module
-    _HEADER,
-    kernel,
-    numba_available,
-    online_kernel,
-    packed_kernel,
-)
-
-# The layout's names re-exported one by one (the list repeats kernels.py's): callers read the
-# network's slots as ``network.NAME``, and this list says which names that covers.
-from .layout import (  # noqa: F401 - the network's names, read through this module
-    _SQUARINGS,
+from .kernels import (  # noqa: F401 - also the names callers read as ``network.NAME``
     CLAMP,
     COMPL,
     DIVERGED,
@@ -103,97 +80,127 @@ from .layout import (  # noqa: F401 - the network's names, read through this mod
     SEMI,
     SHAPE_MISMATCH,
     SIG2,
+    SQUARINGS,
     STATE_ME,
     STEPS,
     SUBSTEPS,
     TOL,
+    kernel,
+    numba_available,
+    online_kernel,
+    packed_kernel,
+    ratio_max,
 )
-from .problem import (  # noqa: F401 - the network's names, read through this module
-    DenseQP,
-    IntegrationResult,
-    NetworkState,
-    dense_qp,
-)
-from .step_bound import (  # noqa: F401 - the network's names, read through this module
-    _sigma2_bound_numpy,
-    make_params,
-    p_eigen_range,
-    stable_ratio,
-)
+from .problem import DenseQP, IntegrationResult, NetworkState, dense_qp  # noqa: F401
 
 
-# The keywords repeat step_bound.make_params' on purpose: this is the public entry, whose signature
-# documents each setting with its default; it passes them on to make_params unchanged.
-def integrate(
-    qp: DenseQP,
-    state: NetworkState,
+def p_eigen_range(P: np.ndarray) -> tuple[float, float]:
+    """``(lambda_min, lambda_max)`` of the symmetric part of ``P``."""
+    if P.shape[0] == 0:
+        return 1.0, 1.0
+    w = np.linalg.eigvalsh(0.5 * (P + P.T))
+    return float(w[0]), float(w[-1])
+
+
+def sigma2_bound(A: np.ndarray, G: np.ndarray) -> float:
+    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``."""
+    B = A.T @ A + G.T @ G
+    t = float(np.trace(B))
+    if not t > 0.0:
+        return 0.0
+    logc = math.log(t)
+    B = B / t
+    for _ in range(SQUARINGS):
+        B = B @ B
+        t = float(np.trace(B))
+        if not t > 0.0:
+            return 0.0
+        logc = 2.0 * logc + math.log(t)
+        B = B / t
+    return math.exp(logc / 2.0**SQUARINGS)
+
+
+def stable_ratio(qp: DenseQP, method: str = "euler") -> float:
+    """Largest stable ``r = h / eps`` of one step for ``qp``; 0 when ``P`` is not positive definite."""
+    pmin, pmax = p_eigen_range(qp.P)
+    return ratio_max(pmin, pmax, sigma2_bound(qp.A, qp.G), method == "semi-implicit")
+
+
+def make_params(
     *,
+    p_range: tuple[float, float],
+    method: str = "euler",
     r_total: float = 0.0,
     substeps: int = 0,
     safety: float = 0.9,
     max_steps: int = 100_000,
     tol: float = -1.0,
     l1_clip: float | None = None,
-    method: str = "euler",
-    use_numba: bool = True,
-    p_range: tuple[float, float] | None = None,
     step_ratio: float = 0.0,
     clamp: bool = True,
-) -> IntegrationResult:
-    """Integrate the network on ``qp`` from ``state`` (updated in place).
+) -> np.ndarray:
+    """The parameter block ``prm`` of the kernels.
 
     Two modes:
 
     - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
-      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``: their count
-      follows the duration), else ``substeps`` equal steps, else (both 0)
-      the fewest steps with ``r <= safety * ratio_max``. With ``clamp``, a
-      forced step above ``safety * ratio_max`` is shortened to it (more
-      steps; :attr:`IntegrationResult.clamped`); the bound is computed only
-      when the step is above a cheap lower estimate of it (Gershgorin bounds
-      of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
+      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``), else
+      ``substeps`` equal steps, else (both 0) the fewest steps with
+      ``r <= safety * ratio_max``. With ``clamp``, a forced step above
+      ``safety * ratio_max`` is shortened to it (more steps); the bound is
+      computed only when the step is above a cheap lower estimate of it
+      (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
     - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
       until primal residual, dual residual and complementarity are all
       ``<= tol``, or ``max_steps`` steps.
 
-    Args:
-        qp: The problem (:func:`dense_qp`).
-        state: Network state, updated in place; its shape must match ``qp``.
-        r_total: Duration of the integration over ``eps`` (dimensionless).
-        substeps: Forced number of steps of a fixed-duration integration.
-        step_ratio: Ratio ``h / eps`` of one step of a fixed-duration
-            integration (over ``substeps`` when both are given).
-        safety: Fraction of the stability bound used for the step, in (0, 1].
-        max_steps: Step budget of a convergence run.
-        tol: Residual tolerance of a convergence run (negative: never stop early).
-        l1_clip: Clip ``l1`` to ``[-l1_clip, l1_clip]`` after each step
-            (anti-windup); ``None`` for no clip.
-        method: ``"euler"`` or ``"semi-implicit"``.
-        use_numba: Use the compiled loop (else the numpy path).
-        p_range: ``(lambda_min, lambda_max)`` of ``P`` if known.
-        clamp: Shorten a forced step above ``safety * ratio_max`` (more
-            steps); ``False`` runs it as given (to study instability).
+    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``safety`` in (0, 1];
+    ``tol`` negative: never stop early; ``l1_clip``: clip ``l1`` to
+    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of
+    :data:`METHODS`.
+    """
+    if method not in METHODS:
+        raise ParamError(
+            f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
+        )
+    prm = np.zeros(PRM_SIZE)
+    prm[PMIN], prm[PMAX] = p_range
+    prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
+    prm[R_TOTAL] = r_total
+    prm[SUBSTEPS] = substeps
+    prm[SAFETY] = safety
+    prm[MAX_STEPS] = max_steps
+    prm[TOL] = tol
+    prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
+    prm[R_STEP] = step_ratio
+    prm[CLAMP] = 1.0 if clamp else 0.0
+    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
+    prm[STATE_ME] = -1.0
+    prm[STEPS] = np.nan
+    prm[NOTE] = NOTE_NONE
+    return prm
 
-    Returns:
-        An :class:`IntegrationResult` (``steps == NO_STABLE_STEP`` when ``P``
-        is not positive definite and no step count was forced).
+
+def integrate(
+    qp: DenseQP,
+    state: NetworkState,
+    *,
+    use_numba: bool = True,
+    p_range: tuple[float, float] | None = None,
+    **settings,
+) -> IntegrationResult:
+    """Integrate the network on ``qp`` from ``state`` (updated in place).
+
+    ``settings``: those of :func:`make_params` (``r_total`` is the duration
+    over ``eps``); ``p_range`` defaults to the eigenvalues of ``P``.
+    ``steps == NO_STABLE_STEP`` when ``P`` is not positive definite and no
+    step count was forced.
     """
     if state.shape != qp.shape:
         raise ParamError(
             f"state shape {state.shape} does not match problem {qp.shape}", key="state"
         )
-    prm = make_params(
-        p_range=p_range if p_range is not None else p_eigen_range(qp.P),
-        method=method,
-        r_total=r_total,
-        substeps=substeps,
-        safety=safety,
-        max_steps=max_steps,
-        tol=tol,
-        l1_clip=l1_clip,
-        step_ratio=step_ratio,
-        clamp=clamp,
-    )
+    prm = make_params(p_range=p_range or p_eigen_range(qp.P), **settings)
     steps = kernel(use_numba)(
         qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL
     )
@@ -218,12 +225,7 @@ def result(prm: np.ndarray) -> IntegrationResult:
 
 
 def step_note(prm: np.ndarray) -> str | None:
-    """What the last fixed-step call did against the setting, if anything (else ``None``).
-
-    A forced step above ``safety * ratio_max`` was shortened (more steps),
-    or no step size is proven stable (``P`` not positive definite) and the
-    setting's steps ran as given.
-    """
+    """What the last fixed-step call did against the setting (:data:`NOTE`), or ``None``."""
     note = prm[NOTE]
     nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
     if note == NOTE_CLAMPED:

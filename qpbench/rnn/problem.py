@@ -1,7 +1,4 @@
-"""The network's problem and state: a QP as dense C-contiguous arrays, the state ``(v, l1, l2)``.
-
-See :mod:`qpbench.rnn.network` for the network (eq. 15) itself.
-"""
+"""The network's problem and state: a QP as dense C-contiguous arrays, the state ``(v, l1, l2)``."""
 
 from __future__ import annotations
 
@@ -21,13 +18,8 @@ if TYPE_CHECKING:
 class DenseQP:
     """A QP as dense float64 arrays, absent parts replaced by neutral ones.
 
-    Attributes:
-        P: Cost matrix, shape (n, n).
-        q: Cost vector, shape (n,).
-        A, b: Equalities ``A v = b``, shapes (me, n), (me,); me may be 0.
-        G, h: Inequalities ``G v <= h``, shapes (mi, n), (mi,); mi may be 0.
-        lb, ub: Box, shape (n,), ``-inf`` / ``+inf`` where absent.
-        has_box: Whether the problem had ``lb`` or ``ub``.
+    ``A v = b`` and ``G v <= h`` may have no rows (``me``, ``mi`` = 0); ``lb``,
+    ``ub`` are ``-inf`` / ``+inf`` where absent (``has_box``: the problem had one).
     """
 
     P: np.ndarray
@@ -46,27 +38,35 @@ class DenseQP:
         return self.q.shape[0], self.b.shape[0], self.h.shape[0]
 
 
-_EMPTY_CACHE: dict[tuple, np.ndarray] = {}
+_EMPTIES: dict = {}
 
 
-def _cached(key: tuple, make, writeable: bool = False) -> np.ndarray:
-    """A cached array, read-only unless ``writeable`` (empty rows: see
-    :func:`qpbench.backends._rnn_base.empty_rows`)."""
-    arr = _EMPTY_CACHE.get(key)
+def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cached ``(zeros((0, n)), zeros(0))``: no constraint rows.
+
+    Writable like the rows a problem has (they hold nothing to protect): numba types a
+    read-only array apart, so read-only empties would compile the integrator again for
+    every combination of absent and present rows.
+    """
+    pair = _EMPTIES.get(n)
+    if pair is None:
+        pair = _EMPTIES[n] = (np.zeros((0, n)), np.zeros(0))
+    return pair
+
+
+def infinite(n: int, value: float) -> np.ndarray:
+    """Cached read-only ``full(n, value)``: an absent bound."""
+    arr = _EMPTIES.get((n, value))
     if arr is None:
-        arr = make()
-        arr.flags.writeable = writeable
-        _EMPTY_CACHE[key] = arr
+        arr = _EMPTIES[(n, value)] = np.full(n, value)
+        arr.flags.writeable = False
     return arr
 
 
 def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Constraint rows ``M x (=|<=) v`` as float64 arrays; no rows (cached empties) when ``M`` is None."""
+    """Constraint rows ``M x (=|<=) v`` as float64 arrays (:func:`empty_rows` when ``M`` is None)."""
     if M is None:
-        return (
-            _cached(("A", n), lambda: np.zeros((0, n)), writeable=True),
-            _cached(("v", 0), lambda: np.zeros(0), writeable=True),
-        )
+        return empty_rows(n)
     M = _f64(M, m_name, 2)
     v = _f64(v, v_name, 1)
     if M.shape[1] != n or v.shape[0] != M.shape[0]:
@@ -105,14 +105,8 @@ def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
     A, b = _rows(problem.A, problem.b, "A", "b", n)
     G, h = _rows(problem.G, problem.h, "G", "h", n)
     has_box = problem.lb is not None or problem.ub is not None
-    if problem.lb is None:
-        lb = _cached(("lb", n), lambda: np.full(n, -np.inf))
-    else:
-        lb = _f64(problem.lb, "lb", 1)
-    if problem.ub is None:
-        ub = _cached(("ub", n), lambda: np.full(n, np.inf))
-    else:
-        ub = _f64(problem.ub, "ub", 1)
+    lb = infinite(n, -np.inf) if problem.lb is None else _f64(problem.lb, "lb", 1)
+    ub = infinite(n, np.inf) if problem.ub is None else _f64(problem.ub, "ub", 1)
     if lb.shape[0] != n or ub.shape[0] != n:
         raise ProblemFormatError(f"lb {lb.shape} / ub {ub.shape} do not fit n = {n}", key="lb")
     return DenseQP(P, q, A, b, G, h, lb, ub, has_box)
@@ -121,12 +115,9 @@ def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
 class NetworkState:
     """State of the network, stored as one vector ``xi = [v; l1; l2]``.
 
-    Attributes:
-        xi: The whole state, shape (n + me + mi,).
-        v: Output (the joint-velocity command in the paper), shape (n,), [rad/s]
-            (a view of ``xi``).
-        l1: Equality dual state, shape (me,) (qpsolvers ``y = -l1``).
-        l2: Inequality dual state, shape (mi,), >= 0 (qpsolvers ``z = l2``).
+    ``v``: the output (the paper's joint-velocity command [rad/s]); ``l1``: equality
+    dual state (qpsolvers ``y = -l1``); ``l2``: inequality dual state, >= 0
+    (qpsolvers ``z = l2``); all three views of ``xi``.
     """
 
     __slots__ = ("xi", "n", "me", "mi")
@@ -148,8 +139,7 @@ class NetworkState:
         return cls(xi, n, me, mi)
 
     def resized(self, n: int, me: int, mi: int) -> NetworkState:
-        """A state for a problem of shape ``(n, me, mi)``: parts whose size
-        changed restart at zero (all of it when ``n`` changes)."""
+        """The state for shape ``(n, me, mi)``: parts whose size changed restart at zero."""
         if n != self.n:
             return NetworkState.cold(n, me, mi)
         new = NetworkState.cold(n, me, mi, self.v)
@@ -188,30 +178,17 @@ class NetworkState:
 
 @dataclass
 class IntegrationResult:
-    """What one call of :func:`integrate` did.
+    """What one call of :func:`qpbench.rnn.network.integrate` did.
 
-    Attributes:
-        steps: Integration steps taken, or :data:`NO_STABLE_STEP` when ``P``
-            is not positive definite and no step size is proven stable.
-        primal_residual: ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``
-            at the final state (inf-norm).
-        dual_residual: ``|v - P_Omega(v - g)|_inf`` with
-            ``g = P v + q - A^T l1 + G^T l2``: qpsolvers' dual residual with the
-            ``z_box`` of :func:`duals`.
-        complementarity: ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero iff
-            ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``).
-        objective: ``1/2 v^T P v + q^T v`` at the final state.
-        ratio: ``r = h / eps`` of one step.
-        ratio_max: Stability bound on ``r`` (module docstring); a ``ratio``
-            above it may diverge.
-        sigma2_bound: Upper bound on ``sigma_max([A; G])^2`` used.
-        nominal_steps: Steps the setting asked for (a forced count, or the
-            duration over a fixed step); 0 when the bound chose the count.
-            ``steps > nominal_steps > 0``: the step was clamped to the bound.
-
-    ``ratio_max`` and ``sigma2_bound`` are NaN when a forced step was not
-    checked against the bound, or was below a cheap lower estimate of it
-    (then it is within the bound: see :func:`integrate`).
+    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms):
+    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual
+    ``|v - P_Omega(v - g)|_inf`` with ``g = P v + q - A^T l1 + G^T l2`` (qpsolvers' with
+    the ``z_box`` of ``duals``); complementarity ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero
+    iff ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``). ``ratio``: ``r = h / eps``
+    of one step; ``ratio_max``: its stability bound, ``sigma2_bound``: the bound on
+    ``sigma_max([A; G])^2`` used, both NaN when a forced step was not checked against the
+    bound or was below a cheap lower estimate of it. ``nominal_steps``: steps the setting
+    asked for (0 when the bound chose the count).
     """
 
     steps: int
@@ -226,5 +203,5 @@ class IntegrationResult:
 
     @property
     def clamped(self) -> bool:
-        """The step of the setting exceeded the stability bound and was shortened."""
+        """The setting's step exceeded the stability bound and was shortened."""
         return self.steps > self.nominal_steps > 0

@@ -1,16 +1,15 @@
-"""The network's numpy integrator: the compiled kernel's algorithm with array operations.
+"""The network's integrator with numpy array operations: the test oracle of the compiled loops.
 
 Same contract and the same numbers (to rounding, 1e-12 and below) as
-:func:`qpbench.rnn.kernels.kernel`'s compiled loop; used when numba is absent
-or not wanted, and by the tests as the compiled loop's reference.
+:func:`qpbench.rnn.kernels.kernel`'s result; written apart from the loops on purpose,
+as the reference they are checked against.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-# The layout's names one by one, as in kernels.py (the twin reads the same slots by the same names).
-from .layout import (
+from qpbench.rnn.kernels import (
     CLAMP,
     COMPL,
     DUAL,
@@ -38,18 +37,14 @@ from .layout import (
     STEPS,
     SUBSTEPS,
     TOL,
+    clamped_steps,
+    nominal_steps,
+    ratio_max,
 )
-from .step_bound import (
-    _clamped_steps,
-    _nominal_steps,
-    _ratio_max,
-    _sigma2_bound_numpy,
-    p_eigen_range,
-)
+from qpbench.rnn.network import p_eigen_range, sigma2_bound
 
 
-def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
-    """Same contract as the compiled kernel (see :func:`kernel`)."""
+def integrate(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     n, me, mi = q.shape[0], b.shape[0], h.shape[0]
     if (
         P.shape != (n, n)
@@ -64,13 +59,9 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     v, l1, l2 = xi[:n], xi[n : n + me], xi[n + me :]
     semi = prm[SEMI] != 0.0
     r_total, l1_clip = prm[R_TOTAL], prm[L1_CLIP]
-    nominal = _nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
+    nominal = nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
     forced = nominal > 0
     prm[NOMINAL] = nominal
-    # From here on the same lines as the compiled loop (qpbench/rnn/kernels.py:_integrate_loops),
-    # kept twice on purpose: this is its numpy twin, the reference the tests compare it with
-    # (tests/test_rnn.py::test_numba_and_numpy_agree_online_and_converged), it runs without numba,
-    # and numba compiles only its own module's functions (see that module's docstring).
     nsteps, rmax, sig2, note = _step_bound(P, A, G, prm, nominal, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
@@ -80,7 +71,7 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         return NO_STABLE_STEP
     if r_total > 0.0:
         if not forced:
-            nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
+            nsteps = clamped_steps(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
         if nsteps >= prm[MAX_STEPS] and r_total / nsteps > prm[SAFETY] * rmax:
             note = NOTE_CAPPED
         r = r_total / nsteps
@@ -140,8 +131,8 @@ def _step_bound(P, A, G, prm, nominal, semi):
     r_total = prm[R_TOTAL]
     note = NOTE_NONE
     if nominal <= 0:
-        sig2 = _sigma2_bound_numpy(A, G)
-        return 0, _ratio_max(prm[PMIN], prm[PMAX], sig2, semi), sig2, note
+        sig2 = sigma2_bound(A, G)
+        return 0, ratio_max(prm[PMIN], prm[PMAX], sig2, semi), sig2, note
     rmax = sig2 = np.nan
     nsteps = nominal
     if prm[CLAMP] != 0.0:
@@ -152,15 +143,15 @@ def _step_bound(P, A, G, prm, nominal, semi):
             exact = not radius.any()
         else:
             glo, ghi, exact = 1.0, 1.0, True
-        low = _ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
+        low = ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
         if not r_total / nominal <= prm[SAFETY] * low:
             pmin, pmax = (glo, ghi) if exact else p_eigen_range(P)
-            sig2 = _sigma2_bound_numpy(A, G)
-            rmax = _ratio_max(pmin, pmax, sig2, semi)
+            sig2 = sigma2_bound(A, G)
+            rmax = ratio_max(pmin, pmax, sig2, semi)
             if rmax <= 0.0:
                 note = NOTE_UNPROVEN
             elif r_total / nominal > prm[SAFETY] * rmax:
-                nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                nsteps = clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
                 note = NOTE_CLAMPED
     return nsteps, rmax, sig2, note
 
