@@ -7,6 +7,8 @@ as the reference they are checked against.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from qpbench.rnn.kernels import (
@@ -34,6 +36,7 @@ from qpbench.rnn.kernels import (
     SEMI,
     SHAPE_MISMATCH,
     SIG2,
+    SQUARINGS,
     STEPS,
     SUBSTEPS,
     TOL,
@@ -41,7 +44,7 @@ from qpbench.rnn.kernels import (
     nominal_steps,
     ratio_max,
 )
-from qpbench.rnn.network import p_eigen_range, sigma2_bound
+from qpbench.rnn.network import DenseQP, NetworkState, p_eigen_range
 
 
 def integrate(P, q, A, b, G, h, lb, ub, xi, prm, sol):
@@ -169,3 +172,45 @@ def _fill_solution(sol, v, l1, l2, g, Av, Gv, lb, ub):
     sol[n : n + me] = -l1
     sol[n + me : n + me + mi] = l2
     sol[n + me + mi : 2 * n + me + mi] = w - np.minimum(np.maximum(w, lb), ub)
+
+
+def sigma2_bound(A: np.ndarray, G: np.ndarray) -> float:
+    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``."""
+    B = A.T @ A + G.T @ G
+    t = float(np.trace(B))
+    if not t > 0.0:
+        return 0.0
+    logc = math.log(t)
+    B = B / t
+    for _ in range(SQUARINGS):
+        B = B @ B
+        t = float(np.trace(B))
+        if not t > 0.0:
+            return 0.0
+        logc = 2.0 * logc + math.log(t)
+        B = B / t
+    return math.exp(logc / 2.0**SQUARINGS)
+
+
+def stable_ratio(qp: DenseQP, method: str = "euler") -> float:
+    """Largest stable ``r = h / eps`` of one step for ``qp``; 0 when ``P`` is not positive definite."""
+    pmin, pmax = p_eigen_range(qp.P)
+    return ratio_max(pmin, pmax, sigma2_bound(qp.A, qp.G), method == "semi-implicit")
+
+
+def duals(qp: DenseQP, state: NetworkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """qpsolvers duals ``(y, z, z_box)`` of a network state.
+
+    ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with
+    ``w = v - (P v + q + A^T y + G^T z)``: the part of ``w`` the projection
+    cuts off. At an equilibrium (``v = P_Omega(w)``) this is the note's
+    ``z_box = -(P v + q + A^T y + G^T z)``; away from it ``z_box`` keeps the
+    signs qpsolvers requires (< 0 only at a lower bound, > 0 only at an upper
+    one) and qpsolvers' dual residual equals ``|v - P_Omega(w)|_inf``.
+    Absent parts give ``None``.
+    """
+    n, me, mi = qp.shape
+    v, l1, l2 = state.v, state.l1, state.l2
+    w = v - (qp.P @ v + qp.q - qp.A.T @ l1 + qp.G.T @ l2)
+    z_box = w - np.minimum(np.maximum(w, qp.lb), qp.ub)
+    return (-l1 if me else None), (l2.copy() if mi else None), (z_box if qp.has_box else None)

@@ -55,8 +55,8 @@ import numpy as np
 
 from ..exceptions import ParamError, ProblemFormatError
 from ..packed import PackedProblem
+from ..rnn import kernels as nk
 from ..rnn import network as nw
-from ..rnn.problem import empty_rows, infinite
 from . import register
 from .base import Backend, BackendSolution
 
@@ -96,35 +96,28 @@ SETTING_NAMES = tuple(_DEFAULTS)
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 
-def _positive(
-    key: str,
-    value: object,
-    integer: bool = False,
-    allow_none: bool = False,
-    upper: float | None = None,
-) -> float | int | None:
-    """``value`` if it is a finite number > 0 (and <= ``upper``), else :class:`ParamError`."""
-    if value is None and allow_none:
-        return None
+def _positive(key: str, value: object, integer: bool = False, upper: float = math.inf):
+    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``)."""
     try:
         number = int(value) if integer else float(value)
     except (TypeError, ValueError):
         raise ParamError(f"{value!r} is not a number", key=key) from None
     if integer and number != value:
         raise ParamError(f"{value!r} is not an integer", key=key)
-    if not (number > 0 and math.isfinite(number)) or (upper is not None and number > upper):
-        bound = f" and <= {upper}" if upper is not None else ""
+    if not (0 < number <= upper and math.isfinite(number)):
+        bound = f" and <= {upper}" if upper < math.inf else ""
         raise ParamError(f"{value!r} must be finite, > 0{bound}", key=key)
     return number
 
 
 class NetworkBackend(Backend):
-    """Shared settings, state handling and solution building."""
+    """Shared settings, state handling and solution building.
+
+    An ``online`` backend integrates ``dt`` per call; the others integrate to ``tol``.
+    """
 
     family: ClassVar[str] = "recurrent neural network"
     package: ClassVar[str | None] = "qpbench"
-    #: A closed loop applies ``x`` of an online backend whatever its status.
-    online: ClassVar[bool] = False
     #: A closed loop builds the network with the scenario's ``[rnn]`` table.
     scenario_table: ClassVar[str | None] = "rnn"
     kernels: ClassVar[tuple[str, ...]] = ("network",)
@@ -153,44 +146,38 @@ class NetworkBackend(Backend):
         s = {**_DEFAULTS, **settings}
         self.eps = _positive("eps", s["eps"])
         self.dt = _positive("dt", s["dt"])
-        self.substeps = _positive("substeps", s["substeps"], integer=True, allow_none=True)
         self.tick = _positive("tick", s["tick"])
         self.safety = _positive("safety", s["safety"], upper=1.0)
-        self.l1_clip = _positive("l1_clip", s["l1_clip"], allow_none=True)
+        self.substeps = s["substeps"]
+        if self.substeps is not None:
+            self.substeps = _positive("substeps", self.substeps, integer=True)
+        self.l1_clip = None if s["l1_clip"] is None else _positive("l1_clip", s["l1_clip"])
         self.method = self.default_method if s["method"] is None else s["method"]
-        if s["use_numba"] is None:
-            self.use_numba = nw.numba_available()
-        elif s["use_numba"] in (True, False):
-            if s["use_numba"] and not nw.numba_available():
-                raise ParamError("numba is not installed", key="use_numba")
-            self.use_numba = bool(s["use_numba"])
-        else:
-            raise ParamError(f"{s['use_numba']!r} is not true or false", key="use_numba")
-        self.max_iter = _positive(
-            "max_iter",
-            self.profile.max_iter if s["max_iter"] is None else s["max_iter"],
-            integer=True,
-        )
+        use = s["use_numba"]
+        if use not in (None, True, False):
+            raise ParamError(f"{use!r} is not true or false", key="use_numba")
+        if use and not nk.numba_available():
+            raise ParamError("numba is not installed", key="use_numba")
+        self.use_numba = nk.numba_available() if use is None else bool(use)
+        max_iter = self.profile.max_iter if s["max_iter"] is None else s["max_iter"]
+        self.max_iter = _positive("max_iter", max_iter, integer=True)
         self.tol = _positive("tol", self.profile.eps_abs if s["tol"] is None else s["tol"])
         self._p_key: bytes | None = None
-        self._prm = nw.make_params(
+        self._prm = nk.make_params(
             p_range=(1.0, 1.0),
             method=self.method,
-            r_total=self._r_total(),
+            r_total=self.dt / self.eps if self.online else 0.0,
             safety=self.safety,
             max_steps=self.max_iter,
-            tol=self._stop_tol(),
+            tol=-1.0 if self.online else self.tol,
             l1_clip=self.l1_clip,
             step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0,
-            clamp=True,
         )
         self._kernel = None
-        # A call is "optimal" when its residuals meet the profile's success
-        # thresholds (and the stop tolerance, when it is tighter).
-        self._ok_primal = max(self.tol, self.profile.tolerance.primal)
-        self._ok_dual = max(self.tol, self.profile.tolerance.dual)
-        self._prm[nw.OK_PRIMAL] = self._ok_primal
-        self._prm[nw.OK_DUAL] = self._ok_dual
+        # "optimal": the residuals meet the profile's success thresholds (and the stop
+        # tolerance, when it is tighter)
+        self._prm[nk.OK_PRIMAL] = max(self.tol, self.profile.tolerance.primal)
+        self._prm[nk.OK_DUAL] = max(self.tol, self.profile.tolerance.dual)
         self.state = None
 
     @property
@@ -201,32 +188,24 @@ class NetworkBackend(Backend):
     @state.setter
     def state(self, st: nw.NetworkState | None) -> None:
         self._state = st
-        self._prm[nw.STATE_ME] = -1.0 if st is None else st.me
+        self._prm[nk.STATE_ME] = -1.0 if st is None else st.me
         self._state_changed()
 
     def _state_changed(self) -> None:
         """Hook: the state object was replaced (or dropped)."""
 
-    def _r_total(self) -> float:
-        """``duration / eps`` of one call; 0 to integrate to convergence."""
-        raise NotImplementedError
-
-    def _stop_tol(self) -> float:
-        """Residual tolerance that ends a call early (negative: never)."""
-        raise NotImplementedError
-
     def reset(self) -> None:
         """Forget the network state (the next call starts cold)."""
         self.state = None
-        self._prm[nw.STEPS] = np.nan
+        self._prm[nk.STEPS] = np.nan
 
     @property
     def last(self) -> nw.IntegrationResult | None:
         """What the last call's integration did (``None`` before any call or after :meth:`reset`)."""
         p = self._prm
-        if math.isnan(p[nw.STEPS]):
+        if math.isnan(p[nk.STEPS]):
             return None
-        return nw.result(p)
+        return nk.result(p)
 
     def _diverged(self, problem, steps: int) -> BackendSolution:
         """The answer of a call whose state is no longer finite (the state is dropped)."""
@@ -236,10 +215,10 @@ class NetworkBackend(Backend):
             problem=problem,
             status="error",
             iterations=steps,
-            error=f"FloatingPointError: network state diverged (r = {prm[nw.RATIO]:.3g}, "
+            error=f"FloatingPointError: network state diverged (r = {prm[nk.RATIO]:.3g}, "
             + (
-                f"stable below {prm[nw.RATIO_MAX]:.3g})"
-                if math.isfinite(prm[nw.RATIO_MAX])
+                f"stable below {prm[nk.RATIO_MAX]:.3g})"
+                if math.isfinite(prm[nk.RATIO_MAX])
                 else "below a lower estimate of the stability bound)"
             ),
         )
@@ -247,7 +226,7 @@ class NetworkBackend(Backend):
     # -- the call ---------------------------------------------------------
     def _run(self, problem, warm_start) -> BackendSolution:
         if self._kernel is None:
-            self._kernel = nw.kernel(self.use_numba)
+            self._kernel = nk.kernel(self.use_numba)
         P, q, A, b = problem.P, problem.q, problem.A, problem.b
         G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
         # only the types that choose the route are tested here (the kernel checks the shapes)
@@ -262,13 +241,13 @@ class NetworkBackend(Backend):
         else:
             n = q.shape[0]
             if A is None:
-                A, b = empty_rows(n)
+                A, b = nw.empty_rows(n)
             if G is None:
-                G, h = empty_rows(n)
+                G, h = nw.empty_rows(n)
             if lb is None:
-                lb = infinite(n, -np.inf)
+                lb = nw.infinite(n, -np.inf)
             if ub is None:
-                ub = infinite(n, np.inf)
+                ub = nw.infinite(n, np.inf)
         n, me, mi = q.shape[0], b.shape[0], h.shape[0]
         st = self.state
         if st is None:
@@ -278,28 +257,28 @@ class NetworkBackend(Backend):
         prm = self._prm
         key = P.tobytes()
         if key != self._p_key:
-            prm[nw.PMIN], prm[nw.PMAX] = nw.p_eigen_range(np.asarray(P, dtype=np.float64))
+            prm[nk.PMIN], prm[nk.PMAX] = nw.p_eigen_range(np.asarray(P, dtype=np.float64))
             self._p_key = key
         sol = np.empty(3 * n + 2 * (me + mi))  # outputs, then scratch
         steps = self._kernel(P, q, A, b, G, h, lb, ub, st.xi, prm, sol)
-        if steps == nw.SHAPE_MISMATCH:
+        if steps == nk.SHAPE_MISMATCH:
             nw.dense_qp(problem)  # raises ProblemFormatError naming the matrix
             raise ProblemFormatError("inconsistent problem shapes", key="P")  # pragma: no cover
-        if steps == nw.NO_STABLE_STEP:
+        if steps == nk.NO_STABLE_STEP:
             return BackendSolution(
                 problem=problem,
                 status="error",
                 iterations=0,
-                error=f"ParamError: P is not positive definite (lambda_min {prm[nw.PMIN]:.3g}); "
+                error=f"ParamError: P is not positive definite (lambda_min {prm[nk.PMIN]:.3g}); "
                 "no step size of the network is proven stable",
             )
-        obj = prm.item(nw.OBJ)
-        if not math.isfinite(obj) or not math.isfinite(prm.item(nw.PRIMAL)):
+        obj = prm.item(nk.OBJ)
+        if not math.isfinite(obj) or not math.isfinite(prm.item(nk.PRIMAL)):
             return self._diverged(problem, steps)
         ok = (
-            prm.item(nw.PRIMAL) <= self._ok_primal
-            and prm.item(nw.DUAL) <= self._ok_dual
-            and prm.item(nw.COMPL) <= self._ok_primal
+            prm.item(nk.PRIMAL) <= prm.item(nk.OK_PRIMAL)
+            and prm.item(nk.DUAL) <= prm.item(nk.OK_DUAL)
+            and prm.item(nk.COMPL) <= prm.item(nk.OK_PRIMAL)
         )
         return BackendSolution(
             problem=problem,
@@ -312,7 +291,7 @@ class NetworkBackend(Backend):
             obj=obj if self._kernel_obj else None,
             status="optimal" if ok else "max_iter",
             iterations=steps,
-            error=nw.step_note(prm),
+            error=nk.step_note(prm),
         )
 
 
@@ -385,12 +364,6 @@ class RNNOnline(NetworkBackend):
         # P's eigenvalues are read by the kernel only when it picks the sub-steps itself
         self._needs_p = self.substeps is None
 
-    def _r_total(self) -> float:
-        return self.dt / self.eps
-
-    def _stop_tol(self) -> float:
-        return -1.0
-
     def _state_changed(self) -> None:
         """Arm the per-tick path for the state's shape (disarm without a state)."""
         st = self._state
@@ -405,10 +378,10 @@ class RNNOnline(NetworkBackend):
             slice(n + me + mi, 2 * n + me + mi),
         )
         # the strict kernel takes arrays only: absent parts (None) go to the general path
-        strict = nw.online_kernel(strict=True) if me and mi else None
+        strict = nk.online_kernel(strict=True) if me and mi else None
         self._fast = (
             self._needs_p,
-            nw.packed_kernel(),
+            nk.packed_kernel(),
             st.xi,
             self._prm,
             3 * n + 2 * (me + mi),
@@ -433,13 +406,13 @@ class RNNOnline(NetworkBackend):
                 else:
                     p_key = P.tobytes()
                     if p_key != self._p_key:
-                        prm[nw.PMIN], prm[nw.PMAX] = nw.p_eigen_range(P)
+                        prm[nk.PMIN], prm[nk.PMAX] = nw.p_eigen_range(P)
                         self._p_key = p_key
             out = _alloc(size)
             if type(problem) is _Packed and packed is not None:
                 code = packed(problem.buffer, xi, prm, out)
             elif strict is None:
-                code = nw.SHAPE_MISMATCH
+                code = nk.SHAPE_MISMATCH
             else:
                 try:
                     code = strict(
@@ -456,7 +429,7 @@ class RNNOnline(NetworkBackend):
                         out,
                     )
                 except TypeError:  # numba's dispatcher: not the one argument type compiled
-                    code = nw.SHAPE_MISMATCH
+                    code = nk.SHAPE_MISMATCH
             if code >= 0:
                 sol = _new(TickSolution)
                 sol.problem = problem
@@ -465,7 +438,7 @@ class RNNOnline(NetworkBackend):
                 sol._slices = slices
                 sol.iterations = code >> 2
                 if code & 2:  # the step was clamped to the bound (or none is proven stable)
-                    sol.error = nw.step_note(prm)
+                    sol.error = nk.step_note(prm)
                 if code & 1:
                     sol.status = "optimal"
                     sol.found = True
@@ -475,8 +448,8 @@ class RNNOnline(NetworkBackend):
                 sol.backend = name
                 sol.wall_time_s = _perf() - start
                 return sol
-            if code == nw.DIVERGED:
-                sol = self._diverged(problem, int(prm[nw.STEPS]))
+            if code == nk.DIVERGED:
+                sol = self._diverged(problem, int(prm[nk.STEPS]))
             else:  # refused before touching the state: the general path says why or copes
                 sol = self._run(problem, warm_start)
         else:  # first call, odd input: the general path converts, checks, sets up the state
@@ -504,12 +477,6 @@ class RNNConverged(NetworkBackend):
 
     name = "rnn-converged"
     default_method = "semi-implicit"
-
-    def _r_total(self) -> float:
-        return 0.0
-
-    def _stop_tol(self) -> float:
-        return self.tol
 
     def _solve(self, problem, warm_start):
         if (

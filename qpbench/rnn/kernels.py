@@ -9,11 +9,13 @@ compile. Without numba (``use_numba=False``) Python runs the same functions.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from types import FunctionType
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..exceptions import ParamError
 from ..packed import HEADER
 
 if TYPE_CHECKING:
@@ -25,8 +27,8 @@ METHODS = ("euler", "semi-implicit")
 #: Squarings in the trace-power bound of ``sigma_max(C)^2``.
 SQUARINGS = 5
 
-# Slots of the parameter block ``prm``, one float64 array per call (built by
-# :func:`qpbench.rnn.network.make_params`); the kernels read them as constants.
+# Slots of the parameter block ``prm``, one float64 array per call (:func:`make_params`);
+# the kernels read them as constants.
 #: Inputs.
 PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
 #: Outputs.
@@ -53,6 +55,118 @@ NO_STABLE_STEP = -1
 SHAPE_MISMATCH = -2
 #: Per-tick kernel only: the state is no longer finite.
 DIVERGED = -3
+
+
+def make_params(
+    *,
+    p_range: tuple[float, float],
+    method: str = "euler",
+    r_total: float = 0.0,
+    substeps: int = 0,
+    safety: float = 0.9,
+    max_steps: int = 100_000,
+    tol: float = -1.0,
+    l1_clip: float | None = None,
+    step_ratio: float = 0.0,
+    clamp: bool = True,
+) -> np.ndarray:
+    """The parameter block ``prm`` of the kernels.
+
+    Two modes:
+
+    - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
+      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``), else
+      ``substeps`` equal steps, else (both 0) the fewest steps with
+      ``r <= safety * ratio_max``. With ``clamp``, a forced step above
+      ``safety * ratio_max`` is shortened to it (more steps); the bound is
+      computed only when the step is above a cheap lower estimate of it
+      (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
+    - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
+      until primal residual, dual residual and complementarity are all
+      ``<= tol``, or ``max_steps`` steps.
+
+    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``safety`` in (0, 1];
+    ``tol`` negative: never stop early; ``l1_clip``: clip ``l1`` to
+    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of
+    :data:`METHODS`.
+    """
+    if method not in METHODS:
+        raise ParamError(
+            f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
+        )
+    prm = np.zeros(PRM_SIZE)
+    prm[PMIN], prm[PMAX] = p_range
+    prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
+    prm[R_TOTAL] = r_total
+    prm[SUBSTEPS] = substeps
+    prm[SAFETY] = safety
+    prm[MAX_STEPS] = max_steps
+    prm[TOL] = tol
+    prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
+    prm[R_STEP] = step_ratio
+    prm[CLAMP] = 1.0 if clamp else 0.0
+    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
+    prm[STATE_ME] = -1.0
+    prm[STEPS] = np.nan
+    prm[NOTE] = NOTE_NONE
+    return prm
+
+
+@dataclass
+class IntegrationResult:
+    """What one call of :func:`qpbench.rnn.network.integrate` did.
+
+    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms):
+    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual
+    ``|v - P_Omega(v - g)|_inf`` with ``g = P v + q - A^T l1 + G^T l2`` (qpsolvers' with
+    the ``z_box`` of ``duals``); complementarity ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero
+    iff ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``). ``ratio``: ``r = h / eps``
+    of one step; ``ratio_max``: its stability bound, ``sigma2_bound``: the bound on
+    ``sigma_max([A; G])^2`` used, both NaN when a forced step was not checked against the
+    bound or was below a cheap lower estimate of it. ``nominal_steps``: steps the setting
+    asked for (0 when the bound chose the count).
+    """
+
+    steps: int
+    primal_residual: float
+    dual_residual: float
+    complementarity: float
+    objective: float
+    ratio: float
+    ratio_max: float
+    sigma2_bound: float
+    nominal_steps: int = 0
+
+    @property
+    def clamped(self) -> bool:
+        """The setting's step exceeded the stability bound and was shortened."""
+        return self.steps > self.nominal_steps > 0
+
+
+def result(prm: np.ndarray) -> IntegrationResult:
+    """The :class:`IntegrationResult` of the last kernel call on ``prm``."""
+    out = prm[[STEPS, PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2, NOMINAL]].tolist()
+    return IntegrationResult(int(out[0]), *out[1:-1], int(out[-1]))
+
+
+def step_note(prm: np.ndarray) -> str | None:
+    """What the last fixed-step call did against the setting (:data:`NOTE`), or ``None``."""
+    note = prm[NOTE]
+    nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
+    if note == NOTE_CLAMPED:
+        r_set = prm[R_TOTAL] / nominal
+        return (
+            f"step clamped to the stability bound: r = h/eps = {r_set:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g}; "
+            f"{steps} steps instead of {nominal}"
+        )
+    if note == NOTE_UNPROVEN:
+        return f"no step size is proven stable (P not positive definite); {steps} steps as set"
+    if note == NOTE_CAPPED:
+        return (
+            f"step above the stability bound: r = h/eps = {prm[RATIO]:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g} "
+            f"even at the step budget ({steps} steps, max_iter)"
+        )
+    return None
 
 
 def ratio_max(pmin, pmax, sig2, semi):
@@ -123,7 +237,8 @@ def clamped_steps(r_total, r_max, at_least, max_steps):
     return max(at_least, int(math.ceil(need)))
 
 
-def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
+def sigma2_bound(A, G):
+    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``, ``k = SQUARINGS``."""
     n = A.shape[1]
     B = np.zeros((n, n))
     for k in range(A.shape[0]):
@@ -474,8 +589,8 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
     )
 
 
-# The names the kernels call; :func:`kernel` and :func:`packed_kernel` bind them to compiled versions.
-_sigma2_bound_jit = _sigma2_bound_loops
+# The names the kernels call: plain functions until kernel() and packed_kernel() compile them.
+_sigma2_bound_jit = sigma2_bound
 _ratio_max_jit = ratio_max
 _gershgorin_jit = gershgorin
 _frobenius2_jit = frobenius2
@@ -518,7 +633,8 @@ def kernel(use_numba: bool = True) -> Callable:
     ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the
     inputs ``PMIN .. L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``;
     ``sol`` (length ``2n + me + mi``, or 0 to skip) receives ``[x; y; z; z_box]``
-    as :func:`qpbench.rnn.network.duals` defines them. Returns the step count,
+    (``y = -l1``, ``z = l2``, ``z_box = w - P_Omega(w)`` with
+    ``w = v - g``: the part of ``w`` the projection cuts off). Returns the step count,
     :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`. Compiled on the first call
     of the result; ``use_numba=False``: the same loops run by Python (slow).
     """
@@ -534,7 +650,7 @@ def kernel(use_numba: bool = True) -> Callable:
 
         jit = numba.njit(cache=True)
         inline = numba.njit(cache=True, inline="always")
-        _sigma2_bound_jit = jit(_sigma2_bound_loops)
+        _sigma2_bound_jit = jit(sigma2_bound)
         _ratio_max_jit = jit(ratio_max)
         _gershgorin_jit = inline(gershgorin)
         _frobenius2_jit = inline(frobenius2)

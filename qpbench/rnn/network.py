@@ -39,59 +39,193 @@ of ``C`` gives the 2x2 step matrix ``[[1 - r p, r sigma], [-r sigma (1 - r p),
 Euler's ``1 / sigma^2``. For a ``P`` that is not a multiple of the identity the
 semi-implicit method uses Euler's bound.
 
-The integrator itself is :mod:`.kernels` (compiled loops); this module is its
-front, and the name every caller reads the network's names by.
+This module holds the problem, the state and the entry points; the integrator, its
+parameter block and its step bound are :mod:`.kernels`.
 """
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
-from .kernels import (  # noqa: F401 - also the names callers read as ``network.NAME``
-    CLAMP,
-    COMPL,
-    DIVERGED,
-    DUAL,
-    L1_CLIP,
-    MAX_STEPS,
+from .kernels import (  # noqa: F401 - also the network's names for its callers
     METHODS,
-    NO_STABLE_STEP,
-    NOMINAL,
-    NOTE,
-    NOTE_CAPPED,
-    NOTE_CLAMPED,
-    NOTE_NONE,
-    NOTE_UNPROVEN,
-    OBJ,
-    OK_DUAL,
-    OK_PRIMAL,
-    PMAX,
-    PMIN,
-    PRIMAL,
-    PRM_SIZE,
-    R_STEP,
-    R_TOTAL,
-    RATIO,
-    RATIO_MAX,
-    SAFETY,
-    SEMI,
     SHAPE_MISMATCH,
-    SIG2,
-    SQUARINGS,
-    STATE_ME,
-    STEPS,
-    SUBSTEPS,
-    TOL,
+    IntegrationResult,
     kernel,
-    numba_available,
-    online_kernel,
+    make_params,
     packed_kernel,
-    ratio_max,
+    result,
 )
-from .problem import DenseQP, IntegrationResult, NetworkState, dense_qp  # noqa: F401
+
+if TYPE_CHECKING:
+    import qpsolvers
+
+
+@dataclass
+class DenseQP:
+    """A QP as dense float64 arrays, absent parts replaced by neutral ones.
+
+    ``A v = b`` and ``G v <= h`` may have no rows (``me``, ``mi`` = 0); ``lb``,
+    ``ub`` are ``-inf`` / ``+inf`` where absent (``has_box``: the problem had one).
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    has_box: bool
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(n, me, mi)``: variables, equalities, inequalities."""
+        return self.q.shape[0], self.b.shape[0], self.h.shape[0]
+
+
+_EMPTIES: dict = {}
+
+
+def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cached ``(zeros((0, n)), zeros(0))``: no constraint rows.
+
+    Writable like the rows a problem has (they hold nothing to protect): numba types a
+    read-only array apart, so read-only empties would compile the integrator again for
+    every combination of absent and present rows.
+    """
+    pair = _EMPTIES.get(n)
+    if pair is None:
+        pair = _EMPTIES[n] = (np.zeros((0, n)), np.zeros(0))
+    return pair
+
+
+def infinite(n: int, value: float) -> np.ndarray:
+    """Cached read-only ``full(n, value)``: an absent bound."""
+    arr = _EMPTIES.get((n, value))
+    if arr is None:
+        arr = _EMPTIES[(n, value)] = np.full(n, value)
+        arr.flags.writeable = False
+    return arr
+
+
+def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Constraint rows ``M x (=|<=) v`` as float64 arrays (:func:`empty_rows` when ``M`` is None)."""
+    if M is None:
+        return empty_rows(n)
+    M = _f64(M, m_name, 2)
+    v = _f64(v, v_name, 1)
+    if M.shape[1] != n or v.shape[0] != M.shape[0]:
+        raise ProblemFormatError(
+            f"{m_name} {M.shape} and {v_name} {v.shape} do not fit n = {n}", key=m_name
+        )
+    return M, v
+
+
+def _f64(a, name: str, ndim: int) -> np.ndarray:
+    if spa.issparse(a):
+        a = a.toarray()
+    if type(a) is not np.ndarray or a.dtype != np.float64 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.ndim != ndim:
+        if ndim == 2 and a.ndim == 1:
+            a = a.reshape(1, -1)
+        elif ndim == 1 and a.ndim == 2 and 1 in a.shape:
+            a = a.ravel()
+        else:
+            raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
+    return a
+
+
+def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
+    """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`.
+
+    Raises:
+        ProblemFormatError: inconsistent shapes (names the matrix).
+    """
+    P = _f64(problem.P, "P", 2)
+    q = _f64(problem.q, "q", 1)
+    n = q.shape[0]
+    if P.shape != (n, n):
+        raise ProblemFormatError(f"P has shape {P.shape}, expected ({n}, {n})", key="P")
+    A, b = _rows(problem.A, problem.b, "A", "b", n)
+    G, h = _rows(problem.G, problem.h, "G", "h", n)
+    has_box = problem.lb is not None or problem.ub is not None
+    lb = infinite(n, -np.inf) if problem.lb is None else _f64(problem.lb, "lb", 1)
+    ub = infinite(n, np.inf) if problem.ub is None else _f64(problem.ub, "ub", 1)
+    if lb.shape[0] != n or ub.shape[0] != n:
+        raise ProblemFormatError(f"lb {lb.shape} / ub {ub.shape} do not fit n = {n}", key="lb")
+    return DenseQP(P, q, A, b, G, h, lb, ub, has_box)
+
+
+class NetworkState:
+    """State of the network, stored as one vector ``xi = [v; l1; l2]``.
+
+    ``v``: the output (the paper's joint-velocity command [rad/s]); ``l1``: equality
+    dual state (qpsolvers ``y = -l1``); ``l2``: inequality dual state, >= 0
+    (qpsolvers ``z = l2``); all three views of ``xi``.
+    """
+
+    __slots__ = ("xi", "n", "me", "mi")
+
+    def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
+        if xi.shape != (n + me + mi,):
+            raise ParamError(
+                f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state"
+            )
+        self.xi = xi
+        self.n, self.me, self.mi = n, me, mi
+
+    @classmethod
+    def cold(cls, n: int, me: int, mi: int, v0: np.ndarray | None = None) -> NetworkState:
+        """All-zero state (``v = v0`` if given)."""
+        xi = np.zeros(n + me + mi)
+        if v0 is not None:
+            xi[:n] = np.asarray(v0, dtype=np.float64).reshape(n)
+        return cls(xi, n, me, mi)
+
+    def resized(self, n: int, me: int, mi: int) -> NetworkState:
+        """The state for shape ``(n, me, mi)``: parts whose size changed restart at zero."""
+        if n != self.n:
+            return NetworkState.cold(n, me, mi)
+        new = NetworkState.cold(n, me, mi, self.v)
+        if me == self.me:
+            new.l1[:] = self.l1
+        if mi == self.mi:
+            new.l2[:] = self.l2
+        return new
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.xi[: self.n]
+
+    @v.setter
+    def v(self, value: np.ndarray) -> None:
+        self.xi[: self.n] = value
+
+    @property
+    def l1(self) -> np.ndarray:
+        return self.xi[self.n : self.n + self.me]
+
+    @property
+    def l2(self) -> np.ndarray:
+        return self.xi[self.n + self.me :]
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.n, self.me, self.mi
+
+    def copy(self) -> NetworkState:
+        return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
+
+    def __repr__(self) -> str:
+        return f"NetworkState(v={self.v!r}, l1={self.l1!r}, l2={self.l2!r})"
 
 
 def p_eigen_range(P: np.ndarray) -> tuple[float, float]:
@@ -100,85 +234,6 @@ def p_eigen_range(P: np.ndarray) -> tuple[float, float]:
         return 1.0, 1.0
     w = np.linalg.eigvalsh(0.5 * (P + P.T))
     return float(w[0]), float(w[-1])
-
-
-def sigma2_bound(A: np.ndarray, G: np.ndarray) -> float:
-    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``."""
-    B = A.T @ A + G.T @ G
-    t = float(np.trace(B))
-    if not t > 0.0:
-        return 0.0
-    logc = math.log(t)
-    B = B / t
-    for _ in range(SQUARINGS):
-        B = B @ B
-        t = float(np.trace(B))
-        if not t > 0.0:
-            return 0.0
-        logc = 2.0 * logc + math.log(t)
-        B = B / t
-    return math.exp(logc / 2.0**SQUARINGS)
-
-
-def stable_ratio(qp: DenseQP, method: str = "euler") -> float:
-    """Largest stable ``r = h / eps`` of one step for ``qp``; 0 when ``P`` is not positive definite."""
-    pmin, pmax = p_eigen_range(qp.P)
-    return ratio_max(pmin, pmax, sigma2_bound(qp.A, qp.G), method == "semi-implicit")
-
-
-def make_params(
-    *,
-    p_range: tuple[float, float],
-    method: str = "euler",
-    r_total: float = 0.0,
-    substeps: int = 0,
-    safety: float = 0.9,
-    max_steps: int = 100_000,
-    tol: float = -1.0,
-    l1_clip: float | None = None,
-    step_ratio: float = 0.0,
-    clamp: bool = True,
-) -> np.ndarray:
-    """The parameter block ``prm`` of the kernels.
-
-    Two modes:
-
-    - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
-      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``), else
-      ``substeps`` equal steps, else (both 0) the fewest steps with
-      ``r <= safety * ratio_max``. With ``clamp``, a forced step above
-      ``safety * ratio_max`` is shortened to it (more steps); the bound is
-      computed only when the step is above a cheap lower estimate of it
-      (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
-    - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
-      until primal residual, dual residual and complementarity are all
-      ``<= tol``, or ``max_steps`` steps.
-
-    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``safety`` in (0, 1];
-    ``tol`` negative: never stop early; ``l1_clip``: clip ``l1`` to
-    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of
-    :data:`METHODS`.
-    """
-    if method not in METHODS:
-        raise ParamError(
-            f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
-        )
-    prm = np.zeros(PRM_SIZE)
-    prm[PMIN], prm[PMAX] = p_range
-    prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
-    prm[R_TOTAL] = r_total
-    prm[SUBSTEPS] = substeps
-    prm[SAFETY] = safety
-    prm[MAX_STEPS] = max_steps
-    prm[TOL] = tol
-    prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
-    prm[R_STEP] = step_ratio
-    prm[CLAMP] = 1.0 if clamp else 0.0
-    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
-    prm[STATE_ME] = -1.0
-    prm[STEPS] = np.nan
-    prm[NOTE] = NOTE_NONE
-    return prm
 
 
 def integrate(
@@ -209,57 +264,4 @@ def integrate(
     return result(prm)
 
 
-def result(prm: np.ndarray) -> IntegrationResult:
-    """The :class:`IntegrationResult` of the last kernel call on ``prm``."""
-    return IntegrationResult(
-        int(prm[STEPS]),
-        float(prm[PRIMAL]),
-        float(prm[DUAL]),
-        float(prm[COMPL]),
-        float(prm[OBJ]),
-        float(prm[RATIO]),
-        float(prm[RATIO_MAX]),
-        float(prm[SIG2]),
-        int(prm[NOMINAL]),
-    )
-
-
-def step_note(prm: np.ndarray) -> str | None:
-    """What the last fixed-step call did against the setting (:data:`NOTE`), or ``None``."""
-    note = prm[NOTE]
-    nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
-    if note == NOTE_CLAMPED:
-        r_set = prm[R_TOTAL] / nominal
-        return (
-            f"step clamped to the stability bound: r = h/eps = {r_set:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g}; "
-            f"{steps} steps instead of {nominal}"
-        )
-    if note == NOTE_UNPROVEN:
-        return f"no step size is proven stable (P not positive definite); {steps} steps as set"
-    if note == NOTE_CAPPED:
-        return (
-            f"step above the stability bound: r = h/eps = {prm[RATIO]:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g} "
-            f"even at the step budget ({steps} steps, max_iter)"
-        )
-    return None
-
-
 _NO_SOL = np.zeros(0)
-
-
-def duals(qp: DenseQP, state: NetworkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """qpsolvers duals ``(y, z, z_box)`` of a network state.
-
-    ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with
-    ``w = v - (P v + q + A^T y + G^T z)``: the part of ``w`` the projection
-    cuts off. At an equilibrium (``v = P_Omega(w)``) this is the note's
-    ``z_box = -(P v + q + A^T y + G^T z)``; away from it ``z_box`` keeps the
-    signs qpsolvers requires (< 0 only at a lower bound, > 0 only at an upper
-    one) and qpsolvers' dual residual equals ``|v - P_Omega(w)|_inf``.
-    Absent parts give ``None``.
-    """
-    n, me, mi = qp.shape
-    v, l1, l2 = state.v, state.l1, state.l2
-    w = v - (qp.P @ v + qp.q - qp.A.T @ l1 + qp.G.T @ l2)
-    z_box = w - np.minimum(np.maximum(w, qp.lb), qp.ub)
-    return (-l1 if me else None), (l2.copy() if mi else None), (z_box if qp.has_box else None)
