@@ -199,7 +199,7 @@ def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupRe
 
 def prepare(wanted: Iterable[str]) -> WarmupReport:
     """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
-    from .rnn.network import numba_available
+    from .rnn.kernels import numba_available
     from .runner.process import preload_kernels
 
     wanted = tuple(wanted)

@@ -68,6 +68,8 @@ def integrate(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     nsteps, rmax, sig2, note = _step_bound(P, A, G, prm, nominal, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
+    # the step-count logic is the compiled loop's (qpbench/rnn/kernels.py:_integrate_loops),
+    # line for line on purpose: the twin must choose the same steps and notes
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
         prm[STEPS] = NO_STABLE_STEP

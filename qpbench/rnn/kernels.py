@@ -181,7 +181,7 @@ def ratio_max(pmin, pmax, sig2, semi):
     return bound
 
 
-def gershgorin(P):
+def _gershgorin(P):
     """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``.
 
     ``exact`` when that matrix is diagonal (the bounds are its eigenvalues).
@@ -204,7 +204,7 @@ def gershgorin(P):
     return lo, hi, exact
 
 
-def frobenius2(A, G):
+def _frobenius2(A, G):
     """``|A|_F^2 + |G|_F^2``: an upper bound on ``sigma_max([A; G])^2``."""
     t = 0.0
     for i in range(A.shape[0]):
@@ -592,8 +592,8 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
 # The names the kernels call: plain functions until kernel() and packed_kernel() compile them.
 _sigma2_bound_jit = sigma2_bound
 _ratio_max_jit = ratio_max
-_gershgorin_jit = gershgorin
-_frobenius2_jit = frobenius2
+_gershgorin_jit = _gershgorin
+_frobenius2_jit = _frobenius2
 _nominal_steps_jit = nominal_steps
 _clamped_steps_jit = clamped_steps
 _matvec_jit = _matvec_off
@@ -652,8 +652,8 @@ def kernel(use_numba: bool = True) -> Callable:
         inline = numba.njit(cache=True, inline="always")
         _sigma2_bound_jit = jit(sigma2_bound)
         _ratio_max_jit = jit(ratio_max)
-        _gershgorin_jit = inline(gershgorin)
-        _frobenius2_jit = inline(frobenius2)
+        _gershgorin_jit = inline(_gershgorin)
+        _frobenius2_jit = inline(_frobenius2)
         _nominal_steps_jit = inline(nominal_steps)
         _clamped_steps_jit = inline(clamped_steps)
         # inlined into their callers (numba IR): a call costs more than these small products,
