@@ -278,7 +278,7 @@ def sigma2_bound(A, G):
     return math.exp(logc / 2.0**SQUARINGS)
 
 
-def _matvec_off(M, xi, off, y):  # pragma: no cover - runs compiled
+def _matvec_off(M, xi, off, y):
     """``y = M @ xi[off : off + M.shape[1]]``."""
     for i in range(M.shape[0]):
         s = 0.0
@@ -287,7 +287,7 @@ def _matvec_off(M, xi, off, y):  # pragma: no cover - runs compiled
         y[i] = s
 
 
-def _grad_products(P, q, A, G, xi, g, Av, Gv, products):  # pragma: no cover - runs compiled
+def _grad_products(P, q, A, G, xi, g, Av, Gv, products):
     """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``.
 
     Each (contiguous) row of ``A`` and ``G`` is read once for both.
@@ -320,9 +320,7 @@ def _grad_products(P, q, A, G, xi, g, Av, Gv, products):  # pragma: no cover - r
             Gv[i] = s
 
 
-def _step(
-    P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip
-):  # pragma: no cover - runs compiled
+def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
     """One step of ratio ``r`` from ``xi`` and its ``g`` (and ``Av``, ``Gv``); refreshes them."""
     n = q.shape[0]
     me = b.shape[0]
@@ -345,7 +343,7 @@ def _step(
     _grad_products_jit(P, q, A, G, xi, g, Av, Gv, not semi)
 
 
-def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
+def _residuals(b, h, lb, ub, xi, g, Av, Gv):
     """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`).
 
     Maxima that propagate NaN: a diverged state must not look converged.
@@ -383,7 +381,7 @@ def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
 # Over 80 lines, kept whole on purpose: the integrator is one compiled function (the per-step
 # functions it calls are inlined by numba); moving its set-up or its stopping tests out would add
 # calls inside the loop or another compiled function to rebind before the first compile.
-def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
+def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     n = q.shape[0]
     me = b.shape[0]
     mi = h.shape[0]
@@ -510,7 +508,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     return steps
 
 
-def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
+def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
     """One call of the online network: :func:`_integrate_loops` plus its verdict.
 
     Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and
@@ -533,11 +531,11 @@ def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no co
     return 4 * steps + (2 if prm[NOTE] != NOTE_NONE else 0) + (1 if ok else 0)
 
 
-def _part_fits(off, size, length):  # pragma: no cover - runs compiled
+def _part_fits(off, size, length):  # pragma: no cover - compiled
     return off >= HEADER and size >= 0 and off + size <= length
 
 
-def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs compiled
+def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
     """:func:`_online_tick_loops` on a :class:`qpbench.packed.PackedProblem`'s buffer.
 
     Reads the header, checks that every part lies inside the buffer and that
