@@ -144,11 +144,7 @@ def _f64(a, name: str, ndim: int) -> np.ndarray:
 
 
 def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
-    """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`.
-
-    Raises:
-        ProblemFormatError: inconsistent shapes (names the matrix).
-    """
+    """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`; ProblemFormatError names a bad part."""
     P = _f64(problem.P, "P", 2)
     q = _f64(problem.q, "q", 1)
     n = q.shape[0]
