@@ -1,44 +1,19 @@
-"""Every compiled kernel of qpbench, compiled (or loaded) before anything is timed.
+"""Every compiled kernel of qpbench, compiled (or loaded from numba's on-disk cache) before any clock.
 
-qpbench's hot paths are numba kernels with ``cache=True``: compiled on their
-first call with a given argument type (seconds to a minute each, in total
-about a minute on a fresh machine), the machine code kept on disk
-(:mod:`qpbench.cache` says where) and loaded by every later process (well
-under a second). A compile inside a timed or time-limited call would be
-measured as the solver's time, so every entry point that times something
-(``qpbench run``, ``bench``, ``simulate``, ``closed-loop``, ``sweep``,
-``scaling``, and the harness before each closed-loop run) calls :func:`warmup`
-first with the backends it will run, and so prepares only what those
-backends and the closed loop use: ``qpbench bench --backends daqp`` compiles
-no kernel and builds no shim. ``qpbench warmup`` prepares everything. Worker processes find the kernels on disk
-and load them when they start (:mod:`qpbench.harness.isolation`), outside any
-time limit.
+A compile inside a timed or time-limited call would count as the solver's time, so every
+command that times something, and the harness before each closed-loop run, calls
+:func:`warmup` first with the backends it will run; it prepares only what those backends
+and the closed loop use (``qpbench bench --backends daqp`` compiles no kernel and builds no
+shim). ``qpbench warmup`` prepares everything. Worker processes load the kernels from the
+cache when they start (:mod:`qpbench.harness.isolation`), outside any time limit.
 
-:func:`warmup` calls each kernel's builder on tiny inputs of every argument
-type qpbench passes it:
-
-==============  ===============================================================
-kernel          argument types warmed
-==============  ===============================================================
-controller      the controller's packed tick build
-                (:mod:`qpbench.control.build_kernel`; one type)
-post            the closed loop's sense, log and plant step
-                (:func:`qpbench.sim.tick_kernel.warm_post_kernel`; one type)
-network         the network's integrator (:func:`qpbench.rnn.network.kernel`)
-                for the controller's four QP shapes: with and without the
-                task's equality rows (``paper``, ``soft``), with and without
-                obstacle rows (absent parts are read-only empty arrays, another
-                numba type); the online backend's per-tick kernels
-                (:func:`~qpbench.rnn.network.online_kernel` strict,
-                :func:`~qpbench.rnn.network.packed_kernel`)
-==============  ===============================================================
-
-Native shims: the ``qpoases`` backend's (built by a C++ compiler on first
-use, then loaded), only when ``qpoases`` is among the backends.
-
-A problem of yet another shape (a foreign problem set without bounds, say)
-compiles its own integrator on its first solve: the bench's discarded
-warm-up solve, whose time has no consequence.
+Kernel groups, each warmed on tiny inputs of every argument type qpbench passes it:
+``controller`` (the packed tick build, :mod:`qpbench.control.build_kernel`), ``post`` (the
+closed loop's sense, log and plant step, :mod:`qpbench.sim.tick_kernel`) and ``network``
+(the integrator, :mod:`qpbench.rnn.kernels`, for the controller's four QP shapes: with and
+without the task's equality rows and the obstacle rows; the online per-tick kernels). The
+``qpoases`` backend's native shim is built (C++) only when ``qpoases`` is among the backends.
+A problem of yet another shape compiles its own integrator in the bench's discarded warm-up solve.
 """
 
 from __future__ import annotations
@@ -77,16 +52,9 @@ _SCENARIOS = ("wall", "free")
 class WarmupReport:
     """What :func:`warmup` did.
 
-    Attributes:
-        compiled: Kernel specialisations compiled by this call (0: all were
-            loaded from numba's cache, or were already in memory).
-        seconds: Wall time of the call [s].
-        cache: Where numba keeps the compiled kernels.
-        kernels: The groups prepared by this call, or (``in_memory``) ready
-            before it (of :data:`KERNELS`); empty without numba or when none
-            was asked for.
-        in_memory: What was asked for was already prepared in this process (nothing loaded).
-        shims_compiled: Native shims (the qpoases backend's) compiled by this call.
+    ``compiled``: kernel specialisations compiled (0: all loaded, or in memory);
+    ``seconds`` [s]; ``cache``: numba's folder (``""`` without numba); ``kernels``:
+    the groups prepared, or (``in_memory``) ready before the call.
     """
 
     compiled: int
@@ -96,18 +64,13 @@ class WarmupReport:
     in_memory: bool = False
     shims_compiled: int = 0
 
-    @property
-    def loaded(self) -> bool:
-        """Nothing was compiled: every kernel came from the cache (or memory)."""
-        return self.compiled == 0
-
     def line(self) -> str:
         """One line for the log."""
         if self.in_memory:
             return "kernels already loaded in this process"
         if not self.kernels:
             if self.cache == "":
-                return "numba is not installed: the numpy paths run, nothing to compile"
+                return "numba is not installed: nothing to compile"
             if self.shims_compiled:
                 return f"native shim: compiled {self.shims_compiled} in {self.seconds:.1f} s"
             return "kernels: none needed by these backends"
@@ -137,7 +100,7 @@ def cache_location() -> str:
 
 
 def _problems():
-    """The controllers' tick QPs of :data:`_SCENARIOS`, both formulations; also warms the build kernel."""
+    """The tick QPs of :data:`_SCENARIOS`, both formulations; also warms the build kernel."""
     from .sim.scenario import load_scenario
 
     out = []
@@ -154,9 +117,8 @@ def _problems():
 def _warm_post(problems) -> None:
     from .sim.tick_kernel import warm_post_kernel
 
-    for sc, ctrl, theta, arrays, _ in problems[
-        ::2
-    ]:  # one per scenario (the formulation does not change types)
+    # one per scenario (the formulation does not change types)
+    for sc, ctrl, theta, arrays, _ in problems[::2]:
         warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
 
 
@@ -199,13 +161,10 @@ def _warm_shims() -> int:
 
 
 def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str, ...]:
-    """What :func:`warmup` prepares for ``backends`` (``None``: every backend).
+    """What :func:`warmup` prepares for ``backends`` (``None``: everything), in :data:`KERNELS` order.
 
-    The kernel groups of :data:`KERNELS` (in that order): :data:`LOOP_KERNELS`
-    when ``loop`` (the run builds the controller's QPs), ``network`` when a
-    backend runs the network (its class names it in ``kernels``); then
-    ``"qpoases-shim"`` when the ``qpoases`` backend is among them. Names that
-    are no registered backend need nothing.
+    :data:`LOOP_KERNELS` when ``loop`` (the run builds the controller's QPs), the groups
+    the backends' classes name in ``kernels``, then :data:`SHIM` for ``qpoases``.
     """
     from .backends import backend_class
     from .exceptions import BackendNotFound
@@ -230,36 +189,30 @@ def prepared() -> tuple[str, ...]:
 
 
 def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:
-    """Compile, or load from numba's on-disk cache, the kernels ``backends`` use.
+    """Compile, or load from numba's on-disk cache, what ``backends`` use (:func:`kernels_for`).
 
-    ``backends``: the backend names the command will run (``None``: every
-    kernel and shim, as ``qpbench warmup``); ``loop``: the command runs
-    closed loops (or makes problem sets), so the controller's and the
-    plant's kernels too (:func:`kernels_for`). Idempotent: what this process
-    prepared already is not prepared again (a call with nothing new returns
-    at once, ``in_memory``). Returns how many kernel specialisations had to
-    be compiled (0 once the cache holds them) and how long it took. Without
-    numba no kernel needs compiling.
+    ``loop``: the command runs closed loops (or makes problem sets). What this
+    process prepared already is not prepared again (``in_memory``).
     """
     return prepare(kernels_for(backends, loop))
 
 
 def prepare(wanted: Iterable[str]) -> WarmupReport:
     """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
-    from .rnn.network import numba_available
+    from .rnn.kernels import numba_available
     from .runner.process import preload_kernels
 
     wanted = tuple(wanted)
-    if not wanted:  # nothing these backends need: said once in the log
-        return WarmupReport(0, 0.0, cache_location() if numba_available() else "", ())
+    numba = numba_available()
+    cache = cache_location() if numba else ""
     todo = [k for k in wanted if k not in _DONE]
-    if not todo:
-        ready = tuple(k for k in wanted if k in KERNELS) if numba_available() else ()
-        return WarmupReport(0, 0.0, cache_location(), ready, in_memory=True)
+    if not todo:  # nothing these backends need (said once in the log), or all prepared before
+        ready = tuple(k for k in wanted if k in KERNELS) if numba else ()
+        return WarmupReport(0, 0.0, cache, ready, in_memory=bool(wanted))
     start = time.perf_counter()
-    kernels = tuple(k for k in todo if k in KERNELS)
+    kernels = tuple(k for k in todo if k in KERNELS) if numba else ()
     compiled = 0
-    if kernels and numba_available():
+    if kernels:
         from numba.core import event
 
         with event.install_recorder("numba:compile") as recorder:
@@ -269,12 +222,8 @@ def prepare(wanted: Iterable[str]) -> WarmupReport:
             if "network" in kernels:
                 _warm_network(problems)
         compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)
-        cache = cache_location()
         kernels = tuple(k for k in KERNELS if k in kernels or k == "controller")
         todo.append("controller")
-    else:
-        cache = cache_location() if numba_available() else ""
-        kernels = kernels if numba_available() else ()
     shims = _warm_shims() if SHIM in todo else 0
     _DONE.update(todo)
     preload_kernels(prepared())  # what the worker processes' forkserver loads

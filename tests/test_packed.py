@@ -15,7 +15,7 @@ from qpbench.backends.base import Backend
 from qpbench.backends.rnn import WORKING_SETTINGS, TickSolution
 from qpbench.exceptions import ProblemFormatError
 from qpbench.packed import HEADER, PackedProblem, pack
-from qpbench.rnn import network as nw
+from qpbench.rnn import kernels
 
 FIELDS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
 
@@ -93,7 +93,7 @@ def test_bad_buffers_are_refused(robot_qp):
 
 
 def test_kernel_header_length_is_the_format_s():
-    assert nw._HEADER == HEADER
+    assert kernels.HEADER is HEADER
 
 
 # ---------------------------------------------------------------------------

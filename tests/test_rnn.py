@@ -8,12 +8,14 @@ from dataclasses import astuple, replace
 import numpy as np
 import pytest
 import qpsolvers
+import rnn_numpy
 from conftest import sparse_copy
 from known import random_kkt_problem, robot_like_problem
 
 from qpbench.backends import get_backend
 from qpbench.backends.rnn import WORKING_SETTINGS
 from qpbench.exceptions import ParamError, ProblemFormatError
+from qpbench.rnn import kernels
 from qpbench.rnn import network as nw
 
 pytestmark = pytest.mark.filterwarnings("ignore::qpsolvers.warnings.SparseConversionWarning")
@@ -48,10 +50,12 @@ def test_sigma_bound_is_an_upper_bound_and_tight(rng):
         C = rng.standard_normal((m, n)) * rng.uniform(0.01, 10)
         k = int(rng.integers(0, m + 1))
         true = np.linalg.eigvalsh(C.T @ C)[-1]
-        bound = nw._sigma2_bound_numpy(C[:k], C[k:])
         rank = np.linalg.matrix_rank(C)
-        assert true * (1 - 1e-12) <= bound <= true * rank ** (1 / 32) * (1 + 1e-12)
-    assert nw._sigma2_bound_numpy(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
+        for sigma2_bound in (kernels.sigma2_bound, rnn_numpy.sigma2_bound):
+            bound = sigma2_bound(C[:k], C[k:])
+            assert true * (1 - 1e-12) <= bound <= true * rank ** (1 / 32) * (1 + 1e-12)
+    assert kernels.sigma2_bound(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
+    assert rnn_numpy.sigma2_bound(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
 
 
 @pytest.mark.parametrize("method", nw.METHODS)
@@ -63,7 +67,7 @@ def test_step_bound_separates_stable_from_unstable(rng, method):
     qp = nw.dense_qp(problem)
     sig2 = np.linalg.eigvalsh(A.T @ A)[-1]
     exact = 1 / sig2 if method == "euler" else 4 / (1 + np.sqrt(1 + 4 * sig2))
-    r_max = nw.stable_ratio(qp, method)
+    r_max = rnn_numpy.stable_ratio(qp, method)
     assert exact / 2 ** (1 / 32) <= r_max <= exact * (1 + 1e-12)
     for factor, stable in ((0.95, True), (1.05, False)):
         state = nw.NetworkState.cold(n, 2, 0)
@@ -219,9 +223,12 @@ def test_converged_step_budget_gives_max_iter():
 
 
 # ---------------------------------------------------------------------------
-# numba and numpy paths
+# numba, Python and numpy paths
 # ---------------------------------------------------------------------------
-def test_numba_and_numpy_agree_online_and_converged():
+def test_numba_and_numpy_agree_online_and_converged(monkeypatch):
+    """The compiled loops against their oracle, the numpy twin (tests/rnn_numpy.py)."""
+    compiled = nw.kernel
+    monkeypatch.setattr(nw, "kernel", lambda use: compiled(True) if use else rnn_numpy.integrate)
     run = robot_ticks("narrow", 0.6, every=3)
     problems = [r.problem for r in run.records]
     rng = np.random.default_rng(3)
@@ -253,18 +260,33 @@ def test_numba_and_numpy_agree_online_and_converged():
                 slow.state = fast.state.copy()
 
 
+def test_python_runs_the_compiled_loops_to_the_same_numbers():
+    """``use_numba=False``: Python runs the same loops as the compiled kernel."""
+    rng = np.random.default_rng(5)
+    problems = [robot_like_problem(rng)[0] for _ in range(4)]
+    for name, settings in (("rnn", dict(eps=1e-3, l1_clip=10.0)), ("rnn-converged", {})):
+        fast = get_backend(name, use_numba=True, max_iter=300, **settings)
+        slow = get_backend(name, use_numba=False, max_iter=300, **settings)
+        for problem in problems:
+            a, b = fast.solve(problem), slow.solve(problem)
+            assert (a.status, a.error, a.iterations) == (b.status, b.error, b.iterations)
+            for u, w in ((a.x, b.x), (a.y, b.y), (a.z, b.z), (a.z_box, b.z_box)):
+                np.testing.assert_allclose(u, w, rtol=1e-13, atol=1e-13)
+            np.testing.assert_allclose(fast.state.xi, slow.state.xi, rtol=1e-13, atol=1e-13)
+
+
 def test_kernel_outputs_match_duals_function(rng):
     problem, *_ = robot_like_problem(rng)
     qp = nw.dense_qp(problem)
     state = nw.NetworkState.cold(*qp.shape)
     nw.integrate(qp, state, r_total=3.0, substeps=20)
     n, me, mi = qp.shape
-    for use in (True, False):
+    for integrate in (nw.kernel(True), nw.kernel(False), rnn_numpy.integrate):
         sol = np.empty(2 * n + me + mi)
         prm = nw.make_params(p_range=nw.p_eigen_range(qp.P), r_total=1e-9, substeps=1)
         st = state.copy()
-        nw.kernel(use)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, st.xi, prm, sol)
-        y, z, z_box = nw.duals(qp, st)
+        integrate(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, st.xi, prm, sol)
+        y, z, z_box = rnn_numpy.duals(qp, st)
         np.testing.assert_allclose(sol, np.concatenate([st.v, y, z, z_box]), rtol=0, atol=1e-14)
 
 
@@ -313,7 +335,7 @@ def test_online_step_is_fixed_and_its_count_follows_the_integrated_time(dt, step
 def test_online_step_above_the_bound_is_clamped_and_said(rng):
     """A forced step above safety x the computed bound is shortened (more steps) and the solution says so."""
     problem, *_ = robot_like_problem(rng)
-    bound = nw.stable_ratio(nw.dense_qp(problem))
+    bound = rnn_numpy.stable_ratio(nw.dense_qp(problem))
     be = get_backend("rnn", eps=1e-3, dt=1e-3, substeps=2)  # r = 0.5 per step, over 10x the bound
     sol = be.solve(problem)
     last = be.last

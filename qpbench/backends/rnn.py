@@ -1,71 +1,64 @@
-"""Backends ``rnn`` and ``rnn-converged``: the paper's recurrent neural network (eq. 15).
+"""Backends ``rnn``, ``rnn-tuned`` and ``rnn-converged``: the paper's recurrent neural network (eq. 15).
 
-``rnn`` is the paper's online use. The network's state ``(v, l1, l2)`` lives
+``rnn`` is the paper's online use: the network's state ``(v, l1, l2)`` lives
 across successive :meth:`~Backend.solve` calls (the control ticks of one
-sequence). Each call integrates the network for one tick of ``dt`` seconds
-on that tick's QP and returns the state's ``v`` as ``x``. It never reports
-infeasibility: its answer is a compromise that the metrics judge. Its status
-is ``optimal`` when the KKT residuals at the end of the tick are within the
-profile's ``eps_abs`` and ``max_iter`` otherwise; the class attribute
-``online = True`` tells a closed loop to apply ``x`` whatever the status (the
-network's own state is the controller; no fallback solver).
+sequence); each call integrates the network for ``dt`` seconds on that tick's
+QP and returns the state's ``v`` as ``x``. It never reports infeasibility.
+Its status is ``optimal`` when the KKT residuals at the end of the call are
+within the profile's ``eps_abs``, else ``max_iter``; ``online = True`` tells a
+closed loop to apply ``x`` whatever the status (no fallback solver).
 
 ``rnn-converged`` integrates from the state the previous call left (cold after
 :meth:`reset`) until primal residual, dual residual and complementarity are
-all within the profile's ``eps_abs``, or ``max_iter`` steps (then
-``found=False``, status ``max_iter``). ``iterations`` counts integration steps.
+all within the profile's ``eps_abs``, or ``max_iter`` steps (status
+``max_iter``). ``iterations`` counts integration steps.
 
-Settings (keyword arguments of :func:`qpbench.backends.get_backend`):
+Settings (keyword arguments of :func:`qpbench.backends.get_backend`; a scenario's ``[rnn]`` table):
 
 ================ ========================================================
 eps              gain of eq. 15 in [s] (default 0.02, the paper's); only
-                 ``rnn`` depends on it (it sets ``r = dt / eps`` per tick)
+                 ``rnn`` depends on it (``r = dt / eps`` per call)
 dt               time integrated per call in [s] (default 1e-3, one control
-                 tick; a per-tick benchmark of a set that keeps every K-th
-                 tick passes K ticks); ``rnn`` only
+                 tick; a bench of a set that keeps every K-th tick passes K
+                 ticks); ``rnn`` only
 substeps         steps per ``tick`` of integrated time (``rnn``): a fixed
-                 step ``h = tick / substeps``, so a call of ``dt`` takes
-                 ``dt / h`` steps (rounded up); default: the fewest steps
-                 with ``h / eps <= safety * bound`` (:mod:`qpbench.rnn.network`)
-tick             the duration in [s] ``substeps`` divides (default 1e-3, the
-                 control period of every shipped scenario)
+                 step ``h = tick / substeps``, so a call takes ``dt / h``
+                 steps (rounded up); default: the fewest steps with
+                 ``h / eps <= safety * bound`` (:mod:`qpbench.rnn.network`)
+tick             the duration in [s] ``substeps`` divides (default 1e-3)
 safety           fraction of the stability bound per step, in (0, 1]
-                 (default 0.9; on the robot's QPs the steps to converge fall
-                 as r grows up to the bound)
+                 (default 0.9)
 l1_clip          clip ``l1`` to +-l1_clip after every step (anti-windup);
                  default none
 method           ``euler`` (default of ``rnn``: the note's reading) or
-                 ``semi-implicit`` (default of ``rnn-converged``: fewer
-                 steps to 1e-6 on the robot's QPs, same cost a step)
-use_numba        compiled loop (default when numba is installed) or numpy
+                 ``semi-implicit`` (default of ``rnn-converged``)
+use_numba        compiled loops (default when numba is installed) or the
+                 same loops run by Python
 max_iter         step budget of ``rnn-converged`` (default: profile's)
 tol              residual tolerance (default: profile's ``eps_abs``)
 ================ ========================================================
 
-No setting exceeds the stability bound silently: a step ``h = tick /
-substeps`` with ``h / eps`` above ``safety`` times the bound of the call's
-QP is shortened to it (more steps), and the solution says so in ``error``
-(``step clamped to the stability bound: ...``; a bench row carries it in its
-``error`` column; ``last.clamped``). The bound is computed only when the
-step is above a cheap lower estimate of it (module :mod:`qpbench.rnn.network`).
-
-When the problem's shape changes between calls the state is re-initialised
-part by part: ``v`` (and everything) when ``n`` changes, ``l1`` when the
-number of equalities changes, ``l2`` when the number of inequalities does.
+No setting exceeds the stability bound silently: a step with ``h / eps``
+above ``safety`` times the bound of the call's QP is shortened to it (more
+steps), and ``error`` says so (``step clamped to the stability bound: ...``;
+``last.clamped``). When the problem's shape changes between calls, the state's
+parts whose size changed restart at zero (all of it when ``n`` changes).
 """
 
 from __future__ import annotations
 
+import math
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
+from ..exceptions import ParamError, ProblemFormatError
 from ..packed import PackedProblem
+from ..rnn import kernels as nk
 from ..rnn import network as nw
 from . import register
-from ._rnn_base import SETTING_NAMES, NetworkBackend
-from .base import BackendSolution
+from .base import Backend, BackendSolution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -79,21 +72,234 @@ __all__ = [
     "TickSolution",
 ]
 
-#: A setting that works in the closed loop of every shipped scenario (the
-#: paper's ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps
-#: per 1 ms (a step of 50 us, r = 0.5) and ``l1`` clipped to +-10. It keeps
-#: every key point within the bar (``d_safe - 0.5 mm``) in every shipped
-#: scenario, where eps = 1 ms with 5 Euler steps does not (narrow); the
-#: frontier of settings: results/rnn/README.md, ``python bench/rnn_frontier.py``.
+_DEFAULTS = {
+    "eps": 0.02,
+    "dt": 1e-3,
+    "substeps": None,
+    "tick": 1e-3,
+    "safety": 0.9,
+    "l1_clip": None,
+    "method": None,
+    "use_numba": None,
+    "max_iter": None,
+    "tol": None,
+}
+
+#: Names of the settings the rnn backends accept (a scenario's ``[rnn]`` table).
+SETTING_NAMES = tuple(_DEFAULTS)
+
+#: A setting that works in the closed loop of every shipped scenario (the paper's
+#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms (a
+#: step of 50 us, r = 0.5) and ``l1`` clipped to +-10 (anti-windup during the
+#: infeasible start). The frontier of settings: results/rnn/README.md,
+#: ``python bench/rnn_frontier.py``.
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
+
+
+def _positive(key: str, value: object, integer: bool = False, upper: float = math.inf):
+    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``)."""
+    try:
+        number = int(value) if integer else float(value)
+    except (TypeError, ValueError):
+        raise ParamError(f"{value!r} is not a number", key=key) from None
+    if integer and number != value:
+        raise ParamError(f"{value!r} is not an integer", key=key)
+    if not (0 < number <= upper and math.isfinite(number)):
+        bound = f" and <= {upper}" if upper < math.inf else ""
+        raise ParamError(f"{value!r} must be finite, > 0{bound}", key=key)
+    return number
+
+
+class NetworkBackend(Backend):
+    """Shared settings, state handling and solution building.
+
+    An ``online`` backend integrates ``dt`` per call; the others integrate to ``tol``.
+    """
+
+    family: ClassVar[str] = "recurrent neural network"
+    package: ClassVar[str | None] = "qpbench"
+    #: A closed loop builds the network with the scenario's ``[rnn]`` table.
+    scenario_table: ClassVar[str | None] = "rnn"
+    kernels: ClassVar[tuple[str, ...]] = ("network",)
+    certifies_infeasibility = False
+    infeasibility_note = (
+        "the network's state moves towards the projection; no certificate, only no convergence"
+    )
+    #: Integration method unless the ``method`` setting says otherwise.
+    default_method: ClassVar[str] = "euler"
+    #: Whether ``obj`` is the kernel's (else computed from ``x`` on first read).
+    _kernel_obj: ClassVar[bool] = True
+
+    @classmethod
+    def setting_names(cls) -> frozenset[str]:
+        return frozenset(_DEFAULTS)
+
+    def __init__(self, profile="default", **settings):
+        super().__init__(profile, **settings)
+        unknown = sorted(set(settings) - set(_DEFAULTS))
+        if unknown:
+            raise ParamError(
+                f"unknown setting '{unknown[0]}' for backend '{self.name}' "
+                f"(allowed: {', '.join(_DEFAULTS)})",
+                key=unknown[0],
+            )
+        s = {**_DEFAULTS, **settings}
+        self.eps = _positive("eps", s["eps"])
+        self.dt = _positive("dt", s["dt"])
+        self.tick = _positive("tick", s["tick"])
+        self.safety = _positive("safety", s["safety"], upper=1.0)
+        self.substeps = s["substeps"]
+        if self.substeps is not None:
+            self.substeps = _positive("substeps", self.substeps, integer=True)
+        self.l1_clip = None if s["l1_clip"] is None else _positive("l1_clip", s["l1_clip"])
+        self.method = self.default_method if s["method"] is None else s["method"]
+        use = s["use_numba"]
+        if use not in (None, True, False):
+            raise ParamError(f"{use!r} is not true or false", key="use_numba")
+        if use and not nk.numba_available():
+            raise ParamError("numba is not installed", key="use_numba")
+        self.use_numba = nk.numba_available() if use is None else bool(use)
+        max_iter = self.profile.max_iter if s["max_iter"] is None else s["max_iter"]
+        self.max_iter = _positive("max_iter", max_iter, integer=True)
+        self.tol = _positive("tol", self.profile.eps_abs if s["tol"] is None else s["tol"])
+        self._p_key: bytes | None = None
+        self._prm = nk.make_params(
+            p_range=(1.0, 1.0),
+            method=self.method,
+            r_total=self.dt / self.eps if self.online else 0.0,
+            safety=self.safety,
+            max_steps=self.max_iter,
+            tol=-1.0 if self.online else self.tol,
+            l1_clip=self.l1_clip,
+            step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0,
+        )
+        self._kernel = None
+        # "optimal": the residuals meet the profile's success thresholds (and the stop
+        # tolerance, when it is tighter)
+        self._prm[nk.OK_PRIMAL] = max(self.tol, self.profile.tolerance.primal)
+        self._prm[nk.OK_DUAL] = max(self.tol, self.profile.tolerance.dual)
+        self.state = None
+
+    @property
+    def state(self) -> nw.NetworkState | None:
+        """The network's state ``(v, l1, l2)``, or ``None`` (the next call starts cold)."""
+        return self._state
+
+    @state.setter
+    def state(self, st: nw.NetworkState | None) -> None:
+        self._state = st
+        self._prm[nk.STATE_ME] = -1.0 if st is None else st.me
+        self._state_changed()
+
+    def _state_changed(self) -> None:
+        """Hook: the state object was replaced (or dropped)."""
+
+    def reset(self) -> None:
+        """Forget the network state (the next call starts cold)."""
+        self.state = None
+        self._prm[nk.STEPS] = np.nan
+
+    @property
+    def last(self) -> nw.IntegrationResult | None:
+        """What the last call's integration did (``None`` before any call or after :meth:`reset`)."""
+        p = self._prm
+        if math.isnan(p[nk.STEPS]):
+            return None
+        return nk.result(p)
+
+    def _diverged(self, problem, steps: int) -> BackendSolution:
+        """The answer of a call whose state is no longer finite (the state is dropped)."""
+        self.state = None
+        prm = self._prm
+        return BackendSolution(
+            problem=problem,
+            status="error",
+            iterations=steps,
+            error=f"FloatingPointError: network state diverged (r = {prm[nk.RATIO]:.3g}, "
+            + (
+                f"stable below {prm[nk.RATIO_MAX]:.3g})"
+                if math.isfinite(prm[nk.RATIO_MAX])
+                else "below a lower estimate of the stability bound)"
+            ),
+        )
+
+    # -- the call ---------------------------------------------------------
+    def _run(self, problem, warm_start) -> BackendSolution:
+        if self._kernel is None:
+            self._kernel = nk.kernel(self.use_numba)
+        P, q, A, b = problem.P, problem.q, problem.A, problem.b
+        G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
+        # only the types that choose the route are tested here (the kernel checks the shapes)
+        if (
+            not self.use_numba
+            or type(P) is not np.ndarray
+            or (A is not None and type(A) is not np.ndarray)
+            or (G is not None and type(G) is not np.ndarray)
+        ):
+            qp = nw.dense_qp(problem)  # checks and converts (sparse, lists, shapes)
+            P, q, A, b, G, h, lb, ub = qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub
+        else:
+            n = q.shape[0]
+            if A is None:
+                A, b = nw.empty_rows(n)
+            if G is None:
+                G, h = nw.empty_rows(n)
+            if lb is None:
+                lb = nw.infinite(n, -np.inf)
+            if ub is None:
+                ub = nw.infinite(n, np.inf)
+        n, me, mi = q.shape[0], b.shape[0], h.shape[0]
+        st = self.state
+        if st is None:
+            st = self.state = nw.NetworkState.cold(n, me, mi, warm_start)
+        elif st.n != n or st.me != me or st.mi != mi:
+            st = self.state = st.resized(n, me, mi)
+        prm = self._prm
+        key = P.tobytes()
+        if key != self._p_key:
+            prm[nk.PMIN], prm[nk.PMAX] = nw.p_eigen_range(np.asarray(P, dtype=np.float64))
+            self._p_key = key
+        sol = np.empty(3 * n + 2 * (me + mi))  # outputs, then scratch
+        steps = self._kernel(P, q, A, b, G, h, lb, ub, st.xi, prm, sol)
+        if steps == nk.SHAPE_MISMATCH:
+            nw.dense_qp(problem)  # raises ProblemFormatError naming the matrix
+            raise ProblemFormatError("inconsistent problem shapes", key="P")  # pragma: no cover
+        if steps == nk.NO_STABLE_STEP:
+            return BackendSolution(
+                problem=problem,
+                status="error",
+                iterations=0,
+                error=f"ParamError: P is not positive definite (lambda_min {prm[nk.PMIN]:.3g}); "
+                "no step size of the network is proven stable",
+            )
+        obj = prm.item(nk.OBJ)
+        if not math.isfinite(obj) or not math.isfinite(prm.item(nk.PRIMAL)):
+            return self._diverged(problem, steps)
+        ok = (
+            prm.item(nk.PRIMAL) <= prm.item(nk.OK_PRIMAL)
+            and prm.item(nk.DUAL) <= prm.item(nk.OK_DUAL)
+            and prm.item(nk.COMPL) <= prm.item(nk.OK_PRIMAL)
+        )
+        return BackendSolution(
+            problem=problem,
+            x=sol[:n],
+            y=sol[n : n + me] if me else None,
+            z=sol[n + me : n + me + mi] if mi else None,
+            z_box=sol[n + me + mi : 2 * n + me + mi]
+            if (problem.lb is not None or problem.ub is not None)
+            else None,
+            obj=obj if self._kernel_obj else None,
+            status="optimal" if ok else "max_iter",
+            iterations=steps,
+            error=nk.step_note(prm),
+        )
 
 
 class _Duals:
     """``y``, ``z`` and ``z_box`` of a :class:`TickSolution`, made on the first read of any.
 
-    A non-data descriptor: the first read puts views of the tick's output
-    array for all three into the instance (those not set already), and
-    later reads find them there without calling this.
+    A non-data descriptor: the first read puts all three views into the
+    instance, where later reads find them without calling this.
     """
 
     __slots__ = ("name",)
@@ -119,15 +325,11 @@ class _Duals:
 class TickSolution(BackendSolution):
     """The online network's answer to one tick (a :class:`BackendSolution`).
 
-    The kernel writes ``[x; y; z; z_box]`` into one fresh array. ``x`` is a
-    view of it made at once; ``y``, ``z`` and ``z_box`` are views made on the
-    first read of any of them (a controller applying ``x`` does not need
-    them, and on this path the views are a sizeable part of a tick). The
-    values are fixed when :meth:`RNNOnline.solve` returns: the array is never
-    written again. The bench's timed region reads every field
-    of the answer (:func:`qpbench.harness.timing.timed_call`), so there the
-    three views are paid for inside the timing, as other backends pay for
-    the duals they build.
+    The kernel writes ``[x; y; z; z_box]`` into one fresh array, never written
+    again. ``x`` is a view of it made at once; ``y``, ``z`` and ``z_box`` are
+    views made on the first read of any (a controller applying ``x`` does not
+    need them). The bench's timed region reads every field
+    (:func:`qpbench.harness.timing.timed_call`), so it pays for the views.
     """
 
     y = _Duals("y")
@@ -137,27 +339,19 @@ class TickSolution(BackendSolution):
 
 @register
 class RNNOnline(NetworkBackend):
-    """The network integrated for one tick of ``dt`` per call (the paper's use).
+    """The network integrated for ``dt`` per call (the paper's use).
 
-    Per-tick path. A control loop calls this once per tick with problems of
-    one shape (what the controller builds). Once a first call has set up the
-    state, :meth:`solve` hands the kernel
-
-    - a :class:`~qpbench.packed.PackedProblem` (the controller's): its one
-      buffer, to :func:`qpbench.rnn.network.packed_kernel`, which reads the
-      header and checks it against the buffer and the state;
-    - any other problem: its eight arrays, to a kernel compiled for exactly
-      C-contiguous float64 arrays (:func:`qpbench.rnn.network.online_kernel`),
-      numba's dispatcher being the type check.
-
-    The kernel returns the step count, the status and whether the step was
-    clamped to the stability bound in one integer; the
-    answer is a :class:`TickSolution`. Anything the kernel refuses (absent
-    parts, sparse matrices, another dtype or layout, a shape change) goes to
-    the general path, which converts, checks, re-shapes the state and raises
-    what is wrong. All paths give the same numbers bit for bit (tested);
-    ``obj`` is computed from ``x`` on first read (a controller does not read
-    it). ``bench/rnn_speed.py`` measures the cost of a tick and its parts.
+    Per-tick path: once a first call has set up the state, :meth:`solve` hands
+    a :class:`~qpbench.packed.PackedProblem` (the controller's) as its one
+    buffer to :func:`~qpbench.rnn.kernels.packed_kernel`, any other problem as
+    its eight arrays to the strict :func:`~qpbench.rnn.kernels.online_kernel`
+    (numba's dispatcher being the type check). The kernel returns the step
+    count, the status and the clamp note in one integer; the answer is a
+    :class:`TickSolution`. What the kernel refuses (absent parts, sparse
+    matrices, another dtype or layout, a shape change) goes to the general
+    path, which converts, checks, re-shapes the state and raises what is
+    wrong. All paths give the same numbers bit for bit; ``obj`` is computed
+    from ``x`` on first read. Cost of a tick: ``bench/rnn_speed.py``.
     """
 
     name = "rnn"
@@ -169,12 +363,6 @@ class RNNOnline(NetworkBackend):
         super().__init__(profile, **settings)
         # P's eigenvalues are read by the kernel only when it picks the sub-steps itself
         self._needs_p = self.substeps is None
-
-    def _r_total(self) -> float:
-        return self.dt / self.eps
-
-    def _stop_tol(self) -> float:
-        return -1.0
 
     def _state_changed(self) -> None:
         """Arm the per-tick path for the state's shape (disarm without a state)."""
@@ -190,10 +378,10 @@ class RNNOnline(NetworkBackend):
             slice(n + me + mi, 2 * n + me + mi),
         )
         # the strict kernel takes arrays only: absent parts (None) go to the general path
-        strict = nw.online_kernel(strict=True) if me and mi else None
+        strict = nk.online_kernel(strict=True) if me and mi else None
         self._fast = (
             self._needs_p,
-            nw.packed_kernel(),
+            nk.packed_kernel(),
             st.xi,
             self._prm,
             3 * n + 2 * (me + mi),
@@ -218,13 +406,13 @@ class RNNOnline(NetworkBackend):
                 else:
                     p_key = P.tobytes()
                     if p_key != self._p_key:
-                        prm[nw.PMIN], prm[nw.PMAX] = nw.p_eigen_range(P)
+                        prm[nk.PMIN], prm[nk.PMAX] = nw.p_eigen_range(P)
                         self._p_key = p_key
             out = _alloc(size)
             if type(problem) is _Packed and packed is not None:
                 code = packed(problem.buffer, xi, prm, out)
             elif strict is None:
-                code = nw.SHAPE_MISMATCH
+                code = nk.SHAPE_MISMATCH
             else:
                 try:
                     code = strict(
@@ -241,7 +429,7 @@ class RNNOnline(NetworkBackend):
                         out,
                     )
                 except TypeError:  # numba's dispatcher: not the one argument type compiled
-                    code = nw.SHAPE_MISMATCH
+                    code = nk.SHAPE_MISMATCH
             if code >= 0:
                 sol = _new(TickSolution)
                 sol.problem = problem
@@ -250,7 +438,7 @@ class RNNOnline(NetworkBackend):
                 sol._slices = slices
                 sol.iterations = code >> 2
                 if code & 2:  # the step was clamped to the bound (or none is proven stable)
-                    sol.error = nw.step_note(prm)
+                    sol.error = nk.step_note(prm)
                 if code & 1:
                     sol.status = "optimal"
                     sol.found = True
@@ -260,8 +448,8 @@ class RNNOnline(NetworkBackend):
                 sol.backend = name
                 sol.wall_time_s = _perf() - start
                 return sol
-            if code == nw.DIVERGED:
-                sol = self._diverged(problem, int(prm[nw.STEPS]))
+            if code == nk.DIVERGED:
+                sol = self._diverged(problem, int(prm[nk.STEPS]))
             else:  # refused before touching the state: the general path says why or copes
                 sol = self._run(problem, warm_start)
         else:  # first call, odd input: the general path converts, checks, sets up the state
@@ -290,12 +478,6 @@ class RNNConverged(NetworkBackend):
     name = "rnn-converged"
     default_method = "semi-implicit"
 
-    def _r_total(self) -> float:
-        return 0.0
-
-    def _stop_tol(self) -> float:
-        return self.tol
-
     def _solve(self, problem, warm_start):
         if (
             warm_start is not None
@@ -310,12 +492,8 @@ class RNNConverged(NetworkBackend):
 class RNNTuned(RNNOnline):
     """The online network with :data:`WORKING_SETTINGS`, not the paper's ``eps``.
 
-    ``eps = 1e-4`` s, 20 semi-implicit sub-steps per 1 ms of integrated time
-    (a step of 50 us whatever ``dt``) and ``l1`` clipped to +-10 (anti-windup
-    during the infeasible start): the setting with which the network keeps
-    ``d_safe - 0.5 mm`` in every shipped scenario (results/rnn/README.md).
-    It ignores a scenario's ``[rnn]`` table, which carries the paper's values;
-    settings given explicitly still override.
+    It ignores a scenario's ``[rnn]`` table (the paper's values); settings
+    given explicitly still override.
     """
 
     name = "rnn-tuned"

@@ -1,66 +1,244 @@
-"""The network's numba kernels: the integrator as explicit loops, compiled on first use and cached.
+"""The network's kernels: its parameter block ``prm``, its step bound and its integrator as loops.
 
-Kept together in one module, past the usual 500 lines, by necessity: numba
-resolves the functions a kernel calls from the globals of the module that
-defines the kernel (``_step_jit``, ``_residuals_jit`` ... are rebound to
-their compiled versions by :func:`kernel`, :func:`online_kernel` and
-:func:`packed_kernel` before the first compile), so the loops and the
-functions that compile them must share one namespace. The numpy twin of the
-loop is :mod:`qpbench.rnn.integrate_numpy` (same algorithm, tested equal).
+One module by necessity: numba resolves the functions a kernel calls (the ``*_jit`` names) from
+the globals of the module that defines the kernel, and :func:`kernel`, :func:`online_kernel` and
+:func:`packed_kernel` rebind those names to compiled versions (cached on disk) before the first
+compile. Without numba (``use_numba=False``) Python runs the same functions.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from types import FunctionType
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .integrate_numpy import _integrate_numpy
-
-# Each slot name imported on its own (the list repeats the other rnn modules'): the kernels read
-# them as plain module globals, which numba freezes as constants at compile time.
-from .layout import (
-    _SQUARINGS,
-    CLAMP,
-    COMPL,
-    DIVERGED,
-    DUAL,
-    L1_CLIP,
-    MAX_STEPS,
-    NO_STABLE_STEP,
-    NOMINAL,
-    NOTE,
-    NOTE_CAPPED,
-    NOTE_CLAMPED,
-    NOTE_NONE,
-    NOTE_UNPROVEN,
-    OBJ,
-    OK_DUAL,
-    OK_PRIMAL,
-    PMAX,
-    PMIN,
-    PRIMAL,
-    R_STEP,
-    R_TOTAL,
-    RATIO,
-    RATIO_MAX,
-    SAFETY,
-    SEMI,
-    SHAPE_MISMATCH,
-    SIG2,
-    STATE_ME,
-    STEPS,
-    SUBSTEPS,
-    TOL,
-)
-from .step_bound import _clamped_steps, _frobenius2, _gershgorin, _nominal_steps, _ratio_max
+from ..exceptions import ParamError
+from ..packed import HEADER
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+#: Integration methods.
+METHODS = ("euler", "semi-implicit")
 
-def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
+#: Squarings in the trace-power bound of ``sigma_max(C)^2``.
+SQUARINGS = 5
+
+# Slots of the parameter block ``prm``, one float64 array per call (:func:`make_params`);
+# the kernels read them as constants.
+#: Inputs.
+PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
+#: Outputs.
+PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
+#: Inputs of the per-tick kernel: the residual bounds of status ``optimal`` and the
+#: equality count of the state (-1: not checked); output of every kernel: the last
+#: call's step count or code (NaN: none yet).
+OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
+#: Inputs of a fixed step: the ratio ``r = h / eps`` of one step (0: ``SUBSTEPS`` or
+#: the bound decides the count) and whether to clamp a forced step to the stability
+#: bound; output: the step count the setting asked for (0 when the bound chose it).
+R_STEP, CLAMP, NOMINAL = range(20, 23)
+#: Output: what a fixed-duration call did against its setting (``NOTE_*``).
+NOTE = 23
+PRM_SIZE = 24
+
+#: ``prm[NOTE]``: nothing to say; the step was clamped to the bound (more steps); no
+#: step is proven stable (``P`` not positive definite: the steps ran as set); the
+#: steps the bound needs exceed ``MAX_STEPS`` (capped there, above the bound).
+NOTE_NONE, NOTE_CLAMPED, NOTE_UNPROVEN, NOTE_CAPPED = 0, 1, 2, 3
+
+#: Kernel return codes besides a step count.
+NO_STABLE_STEP = -1
+SHAPE_MISMATCH = -2
+#: Per-tick kernel only: the state is no longer finite.
+DIVERGED = -3
+
+
+def make_params(
+    *,
+    p_range: tuple[float, float],
+    method: str = "euler",
+    r_total: float = 0.0,
+    substeps: int = 0,
+    safety: float = 0.9,
+    max_steps: int = 100_000,
+    tol: float = -1.0,
+    l1_clip: float | None = None,
+    step_ratio: float = 0.0,
+    clamp: bool = True,
+) -> np.ndarray:
+    """The parameter block ``prm`` of the kernels.
+
+    Two modes:
+
+    - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
+      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``), else
+      ``substeps`` equal steps, else (both 0) the fewest steps with
+      ``r <= safety * ratio_max``. With ``clamp``, a forced step above
+      ``safety * ratio_max`` is shortened to it (more steps); the bound is
+      computed only when the step is above a cheap lower estimate of it
+      (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
+    - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
+      until primal residual, dual residual and complementarity are all
+      ``<= tol``, or ``max_steps`` steps.
+
+    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``safety`` in (0, 1];
+    ``tol`` negative: never stop early; ``l1_clip``: clip ``l1`` to
+    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of
+    :data:`METHODS`.
+    """
+    if method not in METHODS:
+        raise ParamError(
+            f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
+        )
+    prm = np.zeros(PRM_SIZE)
+    prm[PMIN], prm[PMAX] = p_range
+    prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
+    prm[R_TOTAL] = r_total
+    prm[SUBSTEPS] = substeps
+    prm[SAFETY] = safety
+    prm[MAX_STEPS] = max_steps
+    prm[TOL] = tol
+    prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
+    prm[R_STEP] = step_ratio
+    prm[CLAMP] = 1.0 if clamp else 0.0
+    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
+    prm[STATE_ME] = -1.0
+    prm[STEPS] = np.nan
+    prm[NOTE] = NOTE_NONE
+    return prm
+
+
+@dataclass
+class IntegrationResult:
+    """What one call of :func:`qpbench.rnn.network.integrate` did.
+
+    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms):
+    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual
+    ``|v - P_Omega(v - g)|_inf`` with ``g = P v + q - A^T l1 + G^T l2`` (qpsolvers' with
+    the ``z_box`` of ``duals``); complementarity ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero
+    iff ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``). ``ratio``: ``r = h / eps``
+    of one step; ``ratio_max``: its stability bound, ``sigma2_bound``: the bound on
+    ``sigma_max([A; G])^2`` used, both NaN when a forced step was not checked against the
+    bound or was below a cheap lower estimate of it. ``nominal_steps``: steps the setting
+    asked for (0 when the bound chose the count).
+    """
+
+    steps: int
+    primal_residual: float
+    dual_residual: float
+    complementarity: float
+    objective: float
+    ratio: float
+    ratio_max: float
+    sigma2_bound: float
+    nominal_steps: int = 0
+
+    @property
+    def clamped(self) -> bool:
+        """The setting's step exceeded the stability bound and was shortened."""
+        return self.steps > self.nominal_steps > 0
+
+
+def result(prm: np.ndarray) -> IntegrationResult:
+    """The :class:`IntegrationResult` of the last kernel call on ``prm``."""
+    out = prm[[STEPS, PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2, NOMINAL]].tolist()
+    return IntegrationResult(int(out[0]), *out[1:-1], int(out[-1]))
+
+
+def step_note(prm: np.ndarray) -> str | None:
+    """What the last fixed-step call did against the setting (:data:`NOTE`), or ``None``."""
+    note = prm[NOTE]
+    nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
+    if note == NOTE_CLAMPED:
+        r_set = prm[R_TOTAL] / nominal
+        return (
+            f"step clamped to the stability bound: r = h/eps = {r_set:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g}; "
+            f"{steps} steps instead of {nominal}"
+        )
+    if note == NOTE_UNPROVEN:
+        return f"no step size is proven stable (P not positive definite); {steps} steps as set"
+    if note == NOTE_CAPPED:
+        return (
+            f"step above the stability bound: r = h/eps = {prm[RATIO]:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g} "
+            f"even at the step budget ({steps} steps, max_iter)"
+        )
+    return None
+
+
+def ratio_max(pmin, pmax, sig2, semi):
+    """Largest stable ``r = h/eps`` (:mod:`qpbench.rnn.network`); 0 if none."""
+    if pmin <= 0.0:
+        return 0.0
+    if semi and pmin == pmax:
+        return min(2.0 / pmax, 4.0 / (pmax + math.sqrt(pmax * pmax + 4.0 * sig2)))
+    bound = 2.0 / pmax
+    if sig2 > 0.0:
+        bound = min(bound, pmin / sig2)
+    return bound
+
+
+def _gershgorin(P):
+    """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``.
+
+    ``exact`` when that matrix is diagonal (the bounds are its eigenvalues).
+    """
+    n = P.shape[0]
+    lo = np.inf
+    hi = -np.inf
+    exact = True
+    for i in range(n):
+        radius = 0.0
+        for j in range(n):
+            if j != i:
+                radius += abs(0.5 * (P[i, j] + P[j, i]))
+        if radius != 0.0:
+            exact = False
+        lo = min(lo, P[i, i] - radius)
+        hi = max(hi, P[i, i] + radius)
+    if n == 0:
+        return 1.0, 1.0, True
+    return lo, hi, exact
+
+
+def _frobenius2(A, G):
+    """``|A|_F^2 + |G|_F^2``: an upper bound on ``sigma_max([A; G])^2``."""
+    t = 0.0
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            t += A[i, j] * A[i, j]
+    for i in range(G.shape[0]):
+        for j in range(G.shape[1]):
+            t += G[i, j] * G[i, j]
+    return t
+
+
+def nominal_steps(r_total, r_step, substeps):
+    """Steps a fixed-duration call takes before any clamp (0: the bound decides).
+
+    ``r_step > 0``: the fewest steps of ratio at most ``r_step`` (a duration a
+    hair above a multiple of the step, from rounding, adds none); else ``substeps``.
+    """
+    if r_total <= 0.0:
+        return 0
+    if r_step > 0.0:
+        return max(1, int(math.ceil(r_total / r_step - 1e-9)))
+    return substeps
+
+
+def clamped_steps(r_total, r_max, at_least, max_steps):
+    """The fewest steps (at least ``at_least``, at most ``max_steps``) of ratio ``<= r_max``."""
+    need = r_total / r_max
+    if not need < max_steps:  # also a tiny or zero bound (need inf or NaN)
+        return int(max(at_least, max_steps))
+    return max(at_least, int(math.ceil(need)))
+
+
+def sigma2_bound(A, G):
+    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``, ``k = SQUARINGS``."""
     n = A.shape[1]
     B = np.zeros((n, n))
     for k in range(A.shape[0]):
@@ -81,7 +259,7 @@ def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
         for j in range(n):
             B[i, j] /= t
     C = np.empty((n, n))
-    for _ in range(_SQUARINGS):
+    for _ in range(SQUARINGS):
         for i in range(n):
             for j in range(n):
                 s = 0.0
@@ -97,10 +275,10 @@ def _sigma2_bound_loops(A, G):  # pragma: no cover - runs compiled
         for i in range(n):
             for j in range(n):
                 B[i, j] = C[i, j] / t
-    return math.exp(logc / 2.0**_SQUARINGS)
+    return math.exp(logc / 2.0**SQUARINGS)
 
 
-def _matvec_off(M, xi, off, y):  # pragma: no cover - runs compiled
+def _matvec_off(M, xi, off, y):
     """``y = M @ xi[off : off + M.shape[1]]``."""
     for i in range(M.shape[0]):
         s = 0.0
@@ -109,11 +287,10 @@ def _matvec_off(M, xi, off, y):  # pragma: no cover - runs compiled
         y[i] = s
 
 
-def _grad_products(P, q, A, G, xi, g, Av, Gv, products):  # pragma: no cover - runs compiled
+def _grad_products(P, q, A, G, xi, g, Av, Gv, products):
     """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``.
 
-    Row by row: each row of ``A`` and ``G`` is read once for both its
-    product with ``v`` and its share of ``g`` (the rows are contiguous).
+    Each (contiguous) row of ``A`` and ``G`` is read once for both.
     """
     n = P.shape[0]
     me = A.shape[0]
@@ -143,10 +320,8 @@ def _grad_products(P, q, A, G, xi, g, Av, Gv, products):  # pragma: no cover - r
             Gv[i] = s
 
 
-def _step(
-    P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip
-):  # pragma: no cover - runs compiled
-    """One step of ratio ``r`` from the state ``xi`` whose ``g`` (and ``Av``, ``Gv``) are given; refreshes them."""
+def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
+    """One step of ratio ``r`` from ``xi`` and its ``g`` (and ``Av``, ``Gv``); refreshes them."""
     n = q.shape[0]
     me = b.shape[0]
     mi = h.shape[0]
@@ -168,8 +343,8 @@ def _step(
     _grad_products_jit(P, q, A, G, xi, g, Av, Gv, not semi)
 
 
-def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
-    """``(primal, dual, complementarity)`` residuals of the state (see :class:`IntegrationResult`).
+def _residuals(b, h, lb, ub, xi, g, Av, Gv):
+    """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`).
 
     Maxima that propagate NaN: a diverged state must not look converged.
     """
@@ -203,12 +378,10 @@ def _residuals(b, h, lb, ub, xi, g, Av, Gv):  # pragma: no cover - runs compiled
     return pr, du, co
 
 
-# Over 80 lines, kept whole on purpose: the integrator's main loop is one compiled loop (the
-# per-step functions it calls are already separate kernels, inlined by numba); moving its
-# set-up or its stopping tests out would add calls inside the loop or another compiled
-# function to rebind before the first compile, and the bit-identical tests against the
-# numpy twin (qpbench/rnn/integrate_numpy.py) pin its numbers.
-def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
+# Over 80 lines, kept whole on purpose: the integrator is one compiled function (the per-step
+# functions it calls are inlined by numba); moving its set-up or its stopping tests out would add
+# calls inside the loop or another compiled function to rebind before the first compile.
+def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     n = q.shape[0]
     me = b.shape[0]
     mi = h.shape[0]
@@ -255,8 +428,6 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
                     w = np.linalg.eigvalsh(0.5 * (P + P.T))
                     pmin = w[0]
                     pmax = w[n - 1]
-                # same logic as _integrate_numpy's (the numpy twin, kept apart on purpose: numba
-                # compiles this one; tests/test_rnn.py checks both give the same steps and notes)
                 sig2 = _sigma2_bound_jit(A, G)
                 rmax = _ratio_max_jit(pmin, pmax, sig2, semi)
                 if rmax <= 0.0:
@@ -271,9 +442,6 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
         rmax = _ratio_max_jit(prm[PMIN], prm[PMAX], sig2, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
-    # From here on the same lines as the numpy twin (qpbench/rnn/integrate_numpy.py), kept twice
-    # on purpose: numba cannot call the twin's array code, the twin runs without numba, and it is
-    # this loop's reference (tests/test_rnn.py::test_numba_and_numpy_agree_online_and_converged).
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
         prm[STEPS] = NO_STABLE_STEP
@@ -340,7 +508,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cove
     return steps
 
 
-def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - runs compiled
+def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
     """One call of the online network: :func:`_integrate_loops` plus its verdict.
 
     Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and
@@ -363,11 +531,11 @@ def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no co
     return 4 * steps + (2 if prm[NOTE] != NOTE_NONE else 0) + (1 if ok else 0)
 
 
-def _part_fits(off, size, length):  # pragma: no cover - runs compiled
-    return off >= _HEADER and size >= 0 and off + size <= length
+def _part_fits(off, size, length):  # pragma: no cover - compiled
+    return off >= HEADER and size >= 0 and off + size <= length
 
 
-def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs compiled
+def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
     """:func:`_online_tick_loops` on a :class:`qpbench.packed.PackedProblem`'s buffer.
 
     Reads the header, checks that every part lies inside the buffer and that
@@ -376,7 +544,7 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
     path handles it).
     """
     length = buf.shape[0]
-    if length < _HEADER:
+    if length < HEADER:
         return SHAPE_MISMATCH
     n = int(buf[0])
     me = int(buf[1])
@@ -401,9 +569,9 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
     ):
         return SHAPE_MISMATCH
     if me == 0:
-        oA = ob = _HEADER
+        oA = ob = HEADER
     if mi == 0:
-        oG = oh = _HEADER
+        oG = oh = HEADER
     return _online_tick_jit(
         buf[oP : oP + n * n].reshape((n, n)),
         buf[oq : oq + n],
@@ -419,13 +587,13 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - runs com
     )
 
 
-# Names the compiled kernels call; bound to jitted functions by :func:`kernel`.
-_sigma2_bound_jit = _sigma2_bound_loops
-_ratio_max_jit = _ratio_max
+# The names the kernels call: plain functions until kernel() and packed_kernel() compile them.
+_sigma2_bound_jit = sigma2_bound
+_ratio_max_jit = ratio_max
 _gershgorin_jit = _gershgorin
 _frobenius2_jit = _frobenius2
-_nominal_steps_jit = _nominal_steps
-_clamped_steps_jit = _clamped_steps
+_nominal_steps_jit = nominal_steps
+_clamped_steps_jit = clamped_steps
 _matvec_jit = _matvec_off
 _grad_products_jit = _grad_products
 _step_jit = _step
@@ -434,9 +602,9 @@ _integrate_jit = _integrate_loops
 _online_tick_jit = _online_tick_loops
 _part_fits_jit = _part_fits
 _COMPILED = None
+_INTERPRETED = None
 _ONLINE = {}
 _PACKED = None
-_HEADER = 11  # qpbench.packed.HEADER (a test keeps them equal)
 
 
 def numba_available() -> bool:
@@ -448,49 +616,48 @@ def numba_available() -> bool:
     return True
 
 
+def _interpreted() -> Callable:
+    """:func:`_integrate_loops` run by Python on the plain functions, whatever is compiled."""
+    names = dict(globals())
+    for name, fn in list(names.items()):
+        if name.endswith("_jit"):
+            names[name] = FunctionType(getattr(fn, "py_func", fn).__code__, names)
+    return names["_integrate_jit"]
+
+
 def kernel(use_numba: bool = True) -> Callable:
     """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
 
     ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the
-    inputs ``PMIN .. L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``
-    (index constants of this module); ``sol`` (length ``2n + me + mi``, or 0
-    to skip) receives ``[x; y; z; z_box]`` as :func:`duals` defines them.
-    Returns the step count, :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`.
-    The numba version is compiled on the first call of this function's result
-    (and cached on disk); the numpy version computes the same numbers.
+    inputs ``PMIN .. L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``;
+    ``sol`` (length ``2n + me + mi``, or 0 to skip) receives ``[x; y; z; z_box]``
+    (``y = -l1``, ``z = l2``, ``z_box = w - P_Omega(w)`` with
+    ``w = v - g``: the part of ``w`` the projection cuts off). Returns the step count,
+    :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`. Compiled on the first call
+    of the result; ``use_numba=False``: the same loops run by Python (slow).
     """
+    global _COMPILED, _INTERPRETED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit
+    global _grad_products_jit, _integrate_jit, _step_jit, _residuals_jit, _gershgorin_jit
+    global _frobenius2_jit, _nominal_steps_jit, _clamped_steps_jit
     if not use_numba:
-        return _integrate_numpy
-    global \
-        _COMPILED, \
-        _sigma2_bound_jit, \
-        _ratio_max_jit, \
-        _matvec_jit, \
-        _grad_products_jit, \
-        _integrate_jit
-    global \
-        _step_jit, \
-        _residuals_jit, \
-        _gershgorin_jit, \
-        _frobenius2_jit, \
-        _nominal_steps_jit, \
-        _clamped_steps_jit
+        if _INTERPRETED is None:
+            _INTERPRETED = _interpreted()
+        return _INTERPRETED
     if _COMPILED is None:
         import numba
 
         jit = numba.njit(cache=True)
         inline = numba.njit(cache=True, inline="always")
-        _sigma2_bound_jit = jit(_sigma2_bound_loops)
-        _ratio_max_jit = jit(_ratio_max)
+        _sigma2_bound_jit = jit(sigma2_bound)
+        _ratio_max_jit = jit(ratio_max)
         _gershgorin_jit = inline(_gershgorin)
         _frobenius2_jit = inline(_frobenius2)
-        _nominal_steps_jit = inline(_nominal_steps)
-        _clamped_steps_jit = inline(_clamped_steps)
+        _nominal_steps_jit = inline(nominal_steps)
+        _clamped_steps_jit = inline(clamped_steps)
         # inlined into their callers (numba IR): a call costs more than these small products,
-        # and the Euler step's loop runs them hundreds of times a solve. The integrator itself
-        # and the online tick are called once a solve and compiled as calls: inlining them
-        # copied their IR into every caller and type, most of the compile time, for no speed
-        # (``python bench/rnn_speed.py``; bench/README.md).
+        # run hundreds of times a solve by the Euler step's loop. The integrator and the online
+        # tick, called once a solve, are compiled as calls: inlining them copies their IR into
+        # every caller and type, most of the compile time, for no speed (bench/rnn_speed.py).
         _matvec_jit = inline(_matvec_off)
         _grad_products_jit = inline(_grad_products)
         _step_jit = inline(_step)
@@ -502,16 +669,11 @@ def kernel(use_numba: bool = True) -> Callable:
 def online_kernel(strict: bool = True) -> Callable:
     """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``.
 
-    Same arguments as :func:`kernel`'s result, ``sol`` of length
-    ``3 n + 2 (me + mi)``; returns :func:`_online_tick_loops`'s code. With
-    ``strict`` it is compiled for exactly one argument type (C-contiguous,
-    writable float64 arrays; ``P``, ``A``, ``G`` 2-D) and compiles nothing
-    else: any other argument (``None``, a sparse matrix, a list, another
-    dtype or layout) raises ``TypeError`` in numba's dispatcher, which is the
-    whole type check of the online backend's per-tick path. Without
-    ``strict`` it compiles for what it is given (the general path, also
-    called by :func:`packed_kernel`). Both compile the same code and give the
-    same numbers.
+    :func:`kernel`'s arguments, ``sol`` of length ``3 n + 2 (me + mi)``;
+    returns :func:`_online_tick_loops`'s code. ``strict``: compiled for exactly
+    C-contiguous writable float64 arrays (``P``, ``A``, ``G`` 2-D), so numba's
+    dispatcher raises ``TypeError`` for anything else: the whole type check of
+    the online backend's per-tick path. Else compiled for what it is given.
     """
     fn = _ONLINE.get(strict)
     if fn is None:
@@ -532,13 +694,10 @@ def online_kernel(strict: bool = True) -> Callable:
 def packed_kernel() -> Callable:
     """The per-tick kernel on a packed buffer: ``f(buffer, xi, prm, sol) -> code``.
 
-    Compiled for 1-D C-contiguous float64 arrays only. Returned is the
-    compiled function's own entry point when numba exposes it: it skips the
-    dispatcher's type matching (a quarter of a call's cost here), so every
-    argument must be of that type. :class:`qpbench.packed.PackedProblem`
-    guarantees it for its buffer (made by its checked constructor or by the
-    controller, and never reassigned); the kernel checks the header against
-    the buffer's length and the state before reading.
+    Compiled for 1-D C-contiguous float64 arrays only, and returned as the
+    compiled function's own entry point when numba exposes it (it skips the
+    dispatcher's type matching), so every argument must be of that type:
+    :class:`qpbench.packed.PackedProblem` guarantees it for its buffer.
     """
     global _PACKED, _online_tick_jit, _part_fits_jit
     if _PACKED is None:

@@ -39,161 +39,219 @@ of ``C`` gives the 2x2 step matrix ``[[1 - r p, r sigma], [-r sigma (1 - r p),
 Euler's ``1 / sigma^2``. For a ``P`` that is not a multiple of the identity the
 semi-implicit method uses Euler's bound.
 
-Two integrators compute the same thing: a numba-compiled loop (compiled on
-first call, cached on disk; :mod:`.kernels`) and a pure-numpy path (used when
-numba is absent or not wanted; :mod:`.integrate_numpy`). They agree to
-rounding (1e-12 and below).
-
-This module is the network's front: the entry points (:func:`integrate`,
-:func:`duals`) and, under their usual names, the pieces the other modules of
-this package hold: the parameter block's layout (:mod:`.layout`), the problem
-and state (:mod:`.problem`), the step bound (:mod:`.step_bound`) and the
-kernels (:mod:`.kernels`).
-
-The online backend calls the compiled loop through two thin per-tick
-kernels that also return the tick's verdict: :func:`online_kernel` (the
-problem's eight arrays, compiled for exactly one argument type) and
-:func:`packed_kernel` (a :class:`qpbench.packed.PackedProblem`'s one buffer).
-Both run the same compiled loop and give the same numbers bit for bit.
+This module holds the problem, the state and the entry points; the integrator, its
+parameter block and its step bound are :mod:`.kernels`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import numpy as np
+import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
-from .kernels import (  # noqa: F401 - the network's names, read through this module
-    _HEADER,
-    kernel,
-    numba_available,
-    online_kernel,
-    packed_kernel,
-)
-
-# The layout's names re-exported one by one (the list repeats kernels.py's): callers read the
-# network's slots as ``network.NAME``, and this list says which names that covers.
-from .layout import (  # noqa: F401 - the network's names, read through this module
-    _SQUARINGS,
-    CLAMP,
-    COMPL,
-    DIVERGED,
-    DUAL,
-    L1_CLIP,
-    MAX_STEPS,
+from .kernels import (  # noqa: F401 - also the network's names for its callers
     METHODS,
-    NO_STABLE_STEP,
-    NOMINAL,
-    NOTE,
-    NOTE_CAPPED,
-    NOTE_CLAMPED,
-    NOTE_NONE,
-    NOTE_UNPROVEN,
-    OBJ,
-    OK_DUAL,
-    OK_PRIMAL,
-    PMAX,
-    PMIN,
-    PRIMAL,
-    PRM_SIZE,
-    R_STEP,
-    R_TOTAL,
-    RATIO,
-    RATIO_MAX,
-    SAFETY,
-    SEMI,
     SHAPE_MISMATCH,
-    SIG2,
-    STATE_ME,
-    STEPS,
-    SUBSTEPS,
-    TOL,
-)
-from .problem import (  # noqa: F401 - the network's names, read through this module
-    DenseQP,
     IntegrationResult,
-    NetworkState,
-    dense_qp,
-)
-from .step_bound import (  # noqa: F401 - the network's names, read through this module
-    _sigma2_bound_numpy,
+    kernel,
     make_params,
-    p_eigen_range,
-    stable_ratio,
+    packed_kernel,
+    result,
 )
 
+if TYPE_CHECKING:
+    import qpsolvers
 
-# The keywords repeat step_bound.make_params' on purpose: this is the public entry, whose signature
-# documents each setting with its default; it passes them on to make_params unchanged.
+
+@dataclass
+class DenseQP:
+    """A QP as dense float64 arrays, absent parts replaced by neutral ones.
+
+    ``A v = b`` and ``G v <= h`` may have no rows (``me``, ``mi`` = 0); ``lb``,
+    ``ub`` are ``-inf`` / ``+inf`` where absent (``has_box``: the problem had one).
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    has_box: bool
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(n, me, mi)``: variables, equalities, inequalities."""
+        return self.q.shape[0], self.b.shape[0], self.h.shape[0]
+
+
+_EMPTIES: dict = {}
+
+
+def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cached ``(zeros((0, n)), zeros(0))``: no constraint rows.
+
+    Writable like the rows a problem has (they hold nothing to protect): numba types a
+    read-only array apart, so read-only empties would compile the integrator again for
+    every combination of absent and present rows.
+    """
+    pair = _EMPTIES.get(n)
+    if pair is None:
+        pair = _EMPTIES[n] = (np.zeros((0, n)), np.zeros(0))
+    return pair
+
+
+def infinite(n: int, value: float) -> np.ndarray:
+    """Cached read-only ``full(n, value)``: an absent bound."""
+    arr = _EMPTIES.get((n, value))
+    if arr is None:
+        arr = _EMPTIES[(n, value)] = np.full(n, value)
+        arr.flags.writeable = False
+    return arr
+
+
+def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Constraint rows ``M x (=|<=) v`` as float64 arrays (:func:`empty_rows` when ``M`` is None)."""
+    if M is None:
+        return empty_rows(n)
+    M = _f64(M, m_name, 2)
+    v = _f64(v, v_name, 1)
+    if M.shape[1] != n or v.shape[0] != M.shape[0]:
+        raise ProblemFormatError(
+            f"{m_name} {M.shape} and {v_name} {v.shape} do not fit n = {n}", key=m_name
+        )
+    return M, v
+
+
+def _f64(a, name: str, ndim: int) -> np.ndarray:
+    if spa.issparse(a):
+        a = a.toarray()
+    if type(a) is not np.ndarray or a.dtype != np.float64 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+    if a.ndim != ndim:
+        if ndim == 2 and a.ndim == 1:
+            a = a.reshape(1, -1)
+        elif ndim == 1 and a.ndim == 2 and 1 in a.shape:
+            a = a.ravel()
+        else:
+            raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
+    return a
+
+
+def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
+    """The QP of a :class:`qpsolvers.Problem` as a :class:`DenseQP`; ProblemFormatError names a bad part."""
+    P = _f64(problem.P, "P", 2)
+    q = _f64(problem.q, "q", 1)
+    n = q.shape[0]
+    if P.shape != (n, n):
+        raise ProblemFormatError(f"P has shape {P.shape}, expected ({n}, {n})", key="P")
+    A, b = _rows(problem.A, problem.b, "A", "b", n)
+    G, h = _rows(problem.G, problem.h, "G", "h", n)
+    has_box = problem.lb is not None or problem.ub is not None
+    lb = infinite(n, -np.inf) if problem.lb is None else _f64(problem.lb, "lb", 1)
+    ub = infinite(n, np.inf) if problem.ub is None else _f64(problem.ub, "ub", 1)
+    if lb.shape[0] != n or ub.shape[0] != n:
+        raise ProblemFormatError(f"lb {lb.shape} / ub {ub.shape} do not fit n = {n}", key="lb")
+    return DenseQP(P, q, A, b, G, h, lb, ub, has_box)
+
+
+class NetworkState:
+    """State of the network, stored as one vector ``xi = [v; l1; l2]``.
+
+    ``v``: the output (the paper's joint-velocity command [rad/s]); ``l1``: equality
+    dual state (qpsolvers ``y = -l1``); ``l2``: inequality dual state, >= 0
+    (qpsolvers ``z = l2``); all three views of ``xi``.
+    """
+
+    __slots__ = ("xi", "n", "me", "mi")
+
+    def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
+        if xi.shape != (n + me + mi,):
+            raise ParamError(
+                f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state"
+            )
+        self.xi = xi
+        self.n, self.me, self.mi = n, me, mi
+
+    @classmethod
+    def cold(cls, n: int, me: int, mi: int, v0: np.ndarray | None = None) -> NetworkState:
+        """All-zero state (``v = v0`` if given)."""
+        xi = np.zeros(n + me + mi)
+        if v0 is not None:
+            xi[:n] = np.asarray(v0, dtype=np.float64).reshape(n)
+        return cls(xi, n, me, mi)
+
+    def resized(self, n: int, me: int, mi: int) -> NetworkState:
+        """The state for shape ``(n, me, mi)``: parts whose size changed restart at zero."""
+        if n != self.n:
+            return NetworkState.cold(n, me, mi)
+        new = NetworkState.cold(n, me, mi, self.v)
+        if me == self.me:
+            new.l1[:] = self.l1
+        if mi == self.mi:
+            new.l2[:] = self.l2
+        return new
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.xi[: self.n]
+
+    @v.setter
+    def v(self, value: np.ndarray) -> None:
+        self.xi[: self.n] = value
+
+    @property
+    def l1(self) -> np.ndarray:
+        return self.xi[self.n : self.n + self.me]
+
+    @property
+    def l2(self) -> np.ndarray:
+        return self.xi[self.n + self.me :]
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.n, self.me, self.mi
+
+    def copy(self) -> NetworkState:
+        return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
+
+    def __repr__(self) -> str:
+        return f"NetworkState(v={self.v!r}, l1={self.l1!r}, l2={self.l2!r})"
+
+
+def p_eigen_range(P: np.ndarray) -> tuple[float, float]:
+    """``(lambda_min, lambda_max)`` of the symmetric part of ``P``."""
+    if P.shape[0] == 0:
+        return 1.0, 1.0
+    w = np.linalg.eigvalsh(0.5 * (P + P.T))
+    return float(w[0]), float(w[-1])
+
+
 def integrate(
     qp: DenseQP,
     state: NetworkState,
     *,
-    r_total: float = 0.0,
-    substeps: int = 0,
-    safety: float = 0.9,
-    max_steps: int = 100_000,
-    tol: float = -1.0,
-    l1_clip: float | None = None,
-    method: str = "euler",
     use_numba: bool = True,
     p_range: tuple[float, float] | None = None,
-    step_ratio: float = 0.0,
-    clamp: bool = True,
+    **settings,
 ) -> IntegrationResult:
     """Integrate the network on ``qp`` from ``state`` (updated in place).
 
-    Two modes:
-
-    - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
-      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``: their count
-      follows the duration), else ``substeps`` equal steps, else (both 0)
-      the fewest steps with ``r <= safety * ratio_max``. With ``clamp``, a
-      forced step above ``safety * ratio_max`` is shortened to it (more
-      steps; :attr:`IntegrationResult.clamped`); the bound is computed only
-      when the step is above a cheap lower estimate of it (Gershgorin bounds
-      of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
-    - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
-      until primal residual, dual residual and complementarity are all
-      ``<= tol``, or ``max_steps`` steps.
-
-    Args:
-        qp: The problem (:func:`dense_qp`).
-        state: Network state, updated in place; its shape must match ``qp``.
-        r_total: Duration of the integration over ``eps`` (dimensionless).
-        substeps: Forced number of steps of a fixed-duration integration.
-        step_ratio: Ratio ``h / eps`` of one step of a fixed-duration
-            integration (over ``substeps`` when both are given).
-        safety: Fraction of the stability bound used for the step, in (0, 1].
-        max_steps: Step budget of a convergence run.
-        tol: Residual tolerance of a convergence run (negative: never stop early).
-        l1_clip: Clip ``l1`` to ``[-l1_clip, l1_clip]`` after each step
-            (anti-windup); ``None`` for no clip.
-        method: ``"euler"`` or ``"semi-implicit"``.
-        use_numba: Use the compiled loop (else the numpy path).
-        p_range: ``(lambda_min, lambda_max)`` of ``P`` if known.
-        clamp: Shorten a forced step above ``safety * ratio_max`` (more
-            steps); ``False`` runs it as given (to study instability).
-
-    Returns:
-        An :class:`IntegrationResult` (``steps == NO_STABLE_STEP`` when ``P``
-        is not positive definite and no step count was forced).
+    ``settings``: those of :func:`make_params` (``r_total`` is the duration
+    over ``eps``); ``p_range`` defaults to the eigenvalues of ``P``.
+    ``steps == NO_STABLE_STEP`` when ``P`` is not positive definite and no
+    step count was forced.
     """
     if state.shape != qp.shape:
         raise ParamError(
             f"state shape {state.shape} does not match problem {qp.shape}", key="state"
         )
-    prm = make_params(
-        p_range=p_range if p_range is not None else p_eigen_range(qp.P),
-        method=method,
-        r_total=r_total,
-        substeps=substeps,
-        safety=safety,
-        max_steps=max_steps,
-        tol=tol,
-        l1_clip=l1_clip,
-        step_ratio=step_ratio,
-        clamp=clamp,
-    )
+    prm = make_params(p_range=p_range or p_eigen_range(qp.P), **settings)
     steps = kernel(use_numba)(
         qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL
     )
@@ -202,62 +260,4 @@ def integrate(
     return result(prm)
 
 
-def result(prm: np.ndarray) -> IntegrationResult:
-    """The :class:`IntegrationResult` of the last kernel call on ``prm``."""
-    return IntegrationResult(
-        int(prm[STEPS]),
-        float(prm[PRIMAL]),
-        float(prm[DUAL]),
-        float(prm[COMPL]),
-        float(prm[OBJ]),
-        float(prm[RATIO]),
-        float(prm[RATIO_MAX]),
-        float(prm[SIG2]),
-        int(prm[NOMINAL]),
-    )
-
-
-def step_note(prm: np.ndarray) -> str | None:
-    """What the last fixed-step call did against the setting, if anything (else ``None``).
-
-    A forced step above ``safety * ratio_max`` was shortened (more steps),
-    or no step size is proven stable (``P`` not positive definite) and the
-    setting's steps ran as given.
-    """
-    note = prm[NOTE]
-    nominal, steps = int(prm[NOMINAL]), int(prm[STEPS])
-    if note == NOTE_CLAMPED:
-        r_set = prm[R_TOTAL] / nominal
-        return (
-            f"step clamped to the stability bound: r = h/eps = {r_set:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g}; "
-            f"{steps} steps instead of {nominal}"
-        )
-    if note == NOTE_UNPROVEN:
-        return f"no step size is proven stable (P not positive definite); {steps} steps as set"
-    if note == NOTE_CAPPED:
-        return (
-            f"step above the stability bound: r = h/eps = {prm[RATIO]:.3g} > {prm[SAFETY]:g} x {prm[RATIO_MAX]:.3g} "
-            f"even at the step budget ({steps} steps, max_iter)"
-        )
-    return None
-
-
 _NO_SOL = np.zeros(0)
-
-
-def duals(qp: DenseQP, state: NetworkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """qpsolvers duals ``(y, z, z_box)`` of a network state.
-
-    ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with
-    ``w = v - (P v + q + A^T y + G^T z)``: the part of ``w`` the projection
-    cuts off. At an equilibrium (``v = P_Omega(w)``) this is the note's
-    ``z_box = -(P v + q + A^T y + G^T z)``; away from it ``z_box`` keeps the
-    signs qpsolvers requires (< 0 only at a lower bound, > 0 only at an upper
-    one) and qpsolvers' dual residual equals ``|v - P_Omega(w)|_inf``.
-    Absent parts give ``None``.
-    """
-    n, me, mi = qp.shape
-    v, l1, l2 = state.v, state.l1, state.l2
-    w = v - (qp.P @ v + qp.q - qp.A.T @ l1 + qp.G.T @ l2)
-    z_box = w - np.minimum(np.maximum(w, qp.lb), qp.ub)
-    return (-l1 if me else None), (l2.copy() if mi else None), (z_box if qp.has_box else None)

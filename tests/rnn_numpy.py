@@ -1,16 +1,17 @@
-"""The network's numpy integrator: the compiled kernel's algorithm with array operations.
+"""The network's integrator with numpy array operations: the test oracle of the compiled loops.
 
 Same contract and the same numbers (to rounding, 1e-12 and below) as
-:func:`qpbench.rnn.kernels.kernel`'s compiled loop; used when numba is absent
-or not wanted, and by the tests as the compiled loop's reference.
+:func:`qpbench.rnn.kernels.kernel`'s result; written apart from the loops on purpose,
+as the reference they are checked against.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-# The layout's names one by one, as in kernels.py (the twin reads the same slots by the same names).
-from .layout import (
+from qpbench.rnn.kernels import (
     CLAMP,
     COMPL,
     DUAL,
@@ -35,21 +36,18 @@ from .layout import (
     SEMI,
     SHAPE_MISMATCH,
     SIG2,
+    SQUARINGS,
     STEPS,
     SUBSTEPS,
     TOL,
+    clamped_steps,
+    nominal_steps,
+    ratio_max,
 )
-from .step_bound import (
-    _clamped_steps,
-    _nominal_steps,
-    _ratio_max,
-    _sigma2_bound_numpy,
-    p_eigen_range,
-)
+from qpbench.rnn.network import DenseQP, NetworkState, p_eigen_range
 
 
-def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
-    """Same contract as the compiled kernel (see :func:`kernel`)."""
+def integrate(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     n, me, mi = q.shape[0], b.shape[0], h.shape[0]
     if (
         P.shape != (n, n)
@@ -64,23 +62,21 @@ def _integrate_numpy(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     v, l1, l2 = xi[:n], xi[n : n + me], xi[n + me :]
     semi = prm[SEMI] != 0.0
     r_total, l1_clip = prm[R_TOTAL], prm[L1_CLIP]
-    nominal = _nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
+    nominal = nominal_steps(r_total, prm[R_STEP], int(prm[SUBSTEPS]))
     forced = nominal > 0
     prm[NOMINAL] = nominal
-    # From here on the same lines as the compiled loop (qpbench/rnn/kernels.py:_integrate_loops),
-    # kept twice on purpose: this is its numpy twin, the reference the tests compare it with
-    # (tests/test_rnn.py::test_numba_and_numpy_agree_online_and_converged), it runs without numba,
-    # and numba compiles only its own module's functions (see that module's docstring).
     nsteps, rmax, sig2, note = _step_bound(P, A, G, prm, nominal, semi)
     prm[RATIO_MAX] = rmax
     prm[SIG2] = sig2
+    # the step-count logic is the compiled loop's (qpbench/rnn/kernels.py:_integrate_loops),
+    # line for line on purpose: the twin must choose the same steps and notes
     if not forced and rmax <= 0.0:
         prm[RATIO] = 0.0
         prm[STEPS] = NO_STABLE_STEP
         return NO_STABLE_STEP
     if r_total > 0.0:
         if not forced:
-            nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
+            nsteps = clamped_steps(r_total, prm[SAFETY] * rmax, 1, prm[MAX_STEPS])
         if nsteps >= prm[MAX_STEPS] and r_total / nsteps > prm[SAFETY] * rmax:
             note = NOTE_CAPPED
         r = r_total / nsteps
@@ -140,8 +136,8 @@ def _step_bound(P, A, G, prm, nominal, semi):
     r_total = prm[R_TOTAL]
     note = NOTE_NONE
     if nominal <= 0:
-        sig2 = _sigma2_bound_numpy(A, G)
-        return 0, _ratio_max(prm[PMIN], prm[PMAX], sig2, semi), sig2, note
+        sig2 = sigma2_bound(A, G)
+        return 0, ratio_max(prm[PMIN], prm[PMAX], sig2, semi), sig2, note
     rmax = sig2 = np.nan
     nsteps = nominal
     if prm[CLAMP] != 0.0:
@@ -152,15 +148,15 @@ def _step_bound(P, A, G, prm, nominal, semi):
             exact = not radius.any()
         else:
             glo, ghi, exact = 1.0, 1.0, True
-        low = _ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
+        low = ratio_max(glo, ghi, float(np.sum(A * A) + np.sum(G * G)), semi)
         if not r_total / nominal <= prm[SAFETY] * low:
             pmin, pmax = (glo, ghi) if exact else p_eigen_range(P)
-            sig2 = _sigma2_bound_numpy(A, G)
-            rmax = _ratio_max(pmin, pmax, sig2, semi)
+            sig2 = sigma2_bound(A, G)
+            rmax = ratio_max(pmin, pmax, sig2, semi)
             if rmax <= 0.0:
                 note = NOTE_UNPROVEN
             elif r_total / nominal > prm[SAFETY] * rmax:
-                nsteps = _clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
+                nsteps = clamped_steps(r_total, prm[SAFETY] * rmax, nominal, prm[MAX_STEPS])
                 note = NOTE_CLAMPED
     return nsteps, rmax, sig2, note
 
@@ -178,3 +174,45 @@ def _fill_solution(sol, v, l1, l2, g, Av, Gv, lb, ub):
     sol[n : n + me] = -l1
     sol[n + me : n + me + mi] = l2
     sol[n + me + mi : 2 * n + me + mi] = w - np.minimum(np.maximum(w, lb), ub)
+
+
+def sigma2_bound(A: np.ndarray, G: np.ndarray) -> float:
+    """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``."""
+    B = A.T @ A + G.T @ G
+    t = float(np.trace(B))
+    if not t > 0.0:
+        return 0.0
+    logc = math.log(t)
+    B = B / t
+    for _ in range(SQUARINGS):
+        B = B @ B
+        t = float(np.trace(B))
+        if not t > 0.0:
+            return 0.0
+        logc = 2.0 * logc + math.log(t)
+        B = B / t
+    return math.exp(logc / 2.0**SQUARINGS)
+
+
+def stable_ratio(qp: DenseQP, method: str = "euler") -> float:
+    """Largest stable ``r = h / eps`` of one step for ``qp``; 0 when ``P`` is not positive definite."""
+    pmin, pmax = p_eigen_range(qp.P)
+    return ratio_max(pmin, pmax, sigma2_bound(qp.A, qp.G), method == "semi-implicit")
+
+
+def duals(qp: DenseQP, state: NetworkState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """qpsolvers duals ``(y, z, z_box)`` of a network state.
+
+    ``y = -l1``, ``z = l2`` and ``z_box = w - P_Omega(w)`` with
+    ``w = v - (P v + q + A^T y + G^T z)``: the part of ``w`` the projection
+    cuts off. At an equilibrium (``v = P_Omega(w)``) this is the note's
+    ``z_box = -(P v + q + A^T y + G^T z)``; away from it ``z_box`` keeps the
+    signs qpsolvers requires (< 0 only at a lower bound, > 0 only at an upper
+    one) and qpsolvers' dual residual equals ``|v - P_Omega(w)|_inf``.
+    Absent parts give ``None``.
+    """
+    n, me, mi = qp.shape
+    v, l1, l2 = state.v, state.l1, state.l2
+    w = v - (qp.P @ v + qp.q - qp.A.T @ l1 + qp.G.T @ l2)
+    z_box = w - np.minimum(np.maximum(w, qp.lb), qp.ub)
+    return (-l1 if me else None), (l2.copy() if mi else None), (z_box if qp.has_box else None)
