@@ -1,30 +1,23 @@
 """Backend ``clarabel``: Clarabel (interior point) through its own Python API, with a persistent solver.
 
-Formulation. Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with::
-
-    C = [A; G; -I; I],   d = [b; h; -lb; ub],   K = {0}^meq x R+^(rest)
-
-Rows with an infinite bound are left out (which ones is part of the problem's pattern): the
-rows the ``qpsolvers:clarabel`` route builds after Clarabel's presolve, in the same order, so
-a cold solve takes the same steps on both routes. Clarabel's ``w`` (``P x + q + C' w = 0``,
-``w >= 0`` on the cone rows) gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
+Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with
+``C = [A; G; -I; I]``, ``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``. Rows with an
+infinite bound are left out (which ones is part of the pattern), as Clarabel's presolve does
+on the ``qpsolvers:clarabel`` route, in the same order: a cold solve takes the same steps on
+both routes. Its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
 ``z_box = w_ub - w_lb``.
 
-Persistence. A ``DefaultSolver`` is built once and ``update``-d with the new values while
-shape and pattern hold (dense blocks stored with every entry; needs ``presolve_enable=False``
-and ``input_sparse_dropzeros=False``, set here, and ``is_data_update_allowed()``). Clarabel
-starts each solve from its own initial point: ``warm_start`` is ignored, the saving is the
-skipped set-up. Clarabel's ``solve_time`` is reported for a freshly built solver only: after
-``update`` it grows with every update and exceeds the wall time of the call.
+A ``DefaultSolver`` is built once and ``update``-d with the new values while shape and pattern
+hold (dense blocks stored with every entry; needs ``presolve_enable=False`` and
+``input_sparse_dropzeros=False``, set here). An interior-point method starts from its own
+initial point: ``warm_start`` is ignored. Clarabel's ``solve_time`` is reported for a freshly
+built solver only: after ``update`` it grows with every update and exceeds the call's time.
 
-Settings. ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
-``time_limit`` [s]; other settings set on ``DefaultSettings`` verbatim. Under a
+Settings: ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
+``time_limit`` [s], others set on ``DefaultSettings`` verbatim; under a
 ``qpbenchmark:<settings>`` profile what the ``qpsolvers:clarabel`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`), plus the two settings persistence
-needs.
-
-Statuses: :data:`CLARABEL_STATUSES`, the rest (``Almost...``, ``InsufficientProgress``)
--> not_solved (raw status in ``extras["raw_status"]``). ``ValueError``, ``TypeError`` and
+(:func:`~qpbench.backends._common.qpbenchmark_options`) plus what persistence needs.
+Statuses: :data:`CLARABEL_STATUSES`, the rest not_solved; ``ValueError``, ``TypeError`` and
 Rust panics raised by Clarabel become status ``error``.
 """
 
@@ -39,11 +32,13 @@ from . import register
 from ._common import (
     GENERIC_KEYS,
     all_dense,
+    all_finite,
     dense_bounds,
     dense_upper_layout,
     generic_settings,
     own_settings,
     qpbenchmark_options,
+    structure_key,
 )
 from .base import Backend, BackendSolution
 
@@ -101,10 +96,7 @@ class ConeLayout:
                 self.m_all,
                 self.with_box,
                 *masks,
-                Pc.indptr.tobytes(),
-                Pc.indices.tobytes(),
-                Cc.indptr.tobytes(),
-                Cc.indices.tobytes(),
+                structure_key(Pc, Cc),
             )
 
     def _sparse(self, problem):
@@ -367,7 +359,7 @@ class ClarabelBackend(Backend):
         if status in ("primal_infeasible", "dual_infeasible"):
             return sol
         x = np.array(res.x)
-        if x.size == layout.n and np.isfinite(x).all():
+        if x.size == layout.n and all_finite(x):
             sol.x = x
             sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.z))
         if status == "optimal":

@@ -31,7 +31,7 @@ import warnings
 import numpy as np
 
 from . import register
-from ._common import as_dense, dense_bounds, generic_settings
+from ._common import as_dense, dense_bounds, generic_settings, native_settings
 from .base import Backend, BackendSolution
 
 
@@ -133,27 +133,11 @@ class CvxpyBackend(Backend):
 
     def _solver_options(self, cp) -> tuple[str, dict]:
         generic, native = generic_settings(self)
-        installed = cp.installed_solvers()
-        if "OSQP" in installed:
-            solver = "OSQP"
-            options = {
-                "eps_abs": generic["eps_abs"],
-                "eps_rel": generic["eps_rel"],
-                "max_iter": int(generic["max_iter"]),
-                "time_limit": float(generic["time_limit"]),
-                "polish": generic["eps_abs"] <= 1e-7,
-            }
-        else:
-            solver = "CLARABEL"
-            options = {
-                "tol_feas": generic["eps_abs"],
-                "tol_gap_abs": generic["eps_abs"],
-                "tol_gap_rel": generic["eps_rel"],
-                "max_iter": int(generic["max_iter"]),
-                "time_limit": float(generic["time_limit"]),
-            }
-        options.update(native)
-        return solver, options
+        if "OSQP" in cp.installed_solvers():
+            options = native_settings("osqp", **generic)
+            options["polish"] = options.pop("polishing", False)  # cvxpy's name
+            return "OSQP", {**options, **native}
+        return "CLARABEL", {**native_settings("clarabel", **generic), **native}
 
     def _solve(self, problem, warm_start):
         import cvxpy as cp

@@ -1,39 +1,31 @@
 """Backends ``daqp`` (a persistent ``daqp.Model``) and ``daqp-stateless`` (``daqp.solve``):
 DAQP, a dual active-set solver, through its own Python API.
 
-Formulation. DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x_box; A x] <= bupper``,
-the first entries of the bounds being simple bounds on the variables (native, no row of
-``A``)::
+DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with simple bounds
+native::
 
     H = P,  f = q,  A = [A_eq; G],
     bupper = [ub; b; h],  blower = [lb; b; -inf],  sense = [0 (n); 5 (me); 0 (mi)]
 
-(sense 5: an equality, active and immutable; without ``lb``/``ub`` the box block is left
-out). The stacked arrays are buffers kept per shape and filled through views (DAQP copies
-its input). DAQP's multipliers ``lam`` have qpsolvers' signs: ``z_box = lam[:n]``,
-``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an optimal solve carries ``x`` and duals.
+(sense 5: an active, immutable equality; no box block without ``lb``/``ub``). The stacked
+arrays are buffers kept per shape (DAQP copies its input). DAQP's multipliers ``lam`` have
+qpsolvers' signs: ``z_box = lam[:n]``, ``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an
+optimal solve carries ``x`` and duals. ``warm_start`` is ignored (as DAQP's ``primal_start``
+it costs more per call than it saves: ``bench/backend_overhead.py``).
 
-``daqp``: one ``daqp.Model`` per shape ``(n, me, mi, with box)``, ``setup`` on its first
-tick, then ``update`` + ``solve``. ``H`` and ``f`` go to ``update`` only when they differ
-from the previous tick's (the paper's ``P = I``, ``q = 0`` never do, so DAQP keeps its
-factorisation); ``sense`` is not passed, so DAQP starts from the working set of its previous
-solve (its own warm start). Every array is checked against the shape first
+``daqp``: one ``daqp.Model`` per shape, ``setup`` on its first tick, then ``update`` +
+``solve``, starting from the working set of the previous solve (``sense`` is not passed).
+``H`` and ``f`` go to ``update`` only when they changed (the paper's ``P = I``, ``q = 0``
+never do, so DAQP keeps its factorisation). Shapes are checked first
 (:func:`~qpbench.backends._common.check_shapes`): DAQP ignores an update of another shape
 without an error. A refused ``setup``/``update`` or a solve that is not optimal drops the
-model. A ``daqp.Model`` cannot be copied; ``--repeat`` uses fresh instances
-(:mod:`qpbench.harness.timing`). ``solver_time_s`` is DAQP's ``setup_time + solve_time``
-(``setup_time`` is 0 after an ``update``).
+model. ``solver_time_s`` is DAQP's ``setup_time + solve_time`` (0 set-up after ``update``).
 
-``warm_start`` is ignored by both (as DAQP's ``primal_start`` it costs more per call than
-it saves: ``bench/backend_overhead.py``).
-
-Settings: ``primal_tol = dual_tol = eps_abs``, ``iter_limit = max_iter``, ``time_limit``
-[s]; under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:daqp`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are DAQP's own
-(the keys of ``daqp.Model().settings``; ``eps_prox < 0``, the default, regularises a
-singular ``H``, so LPs are solved too); an unknown name is a
-:class:`~qpbench.exceptions.ParamError`. ``ValueError``/``TypeError`` raised by the
-binding become status ``error``.
+Settings: ``primal_tol = dual_tol = eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s];
+under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:daqp`` route gets
+(:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are DAQP's own (the
+keys of ``daqp.Model().settings``; the default ``eps_prox < 0`` regularises a singular ``H``,
+so LPs are solved too). ``ValueError``/``TypeError`` from the binding become status ``error``.
 """
 
 from __future__ import annotations
@@ -179,9 +171,6 @@ class DaqpBackend(Backend):
     def reset(self) -> None:
         self._buffers.clear()
 
-    def __deepcopy__(self, memo):
-        return self.fresh()  # the buffers are scratch space; a copy makes its own
-
     def _stack(self, P, q, A, b, G, h, lb, ub) -> tuple[tuple, _Buffers]:
         """The shape key and the buffers of that shape, filled with this problem."""
         box = lb is not None or ub is not None
@@ -219,11 +208,6 @@ class DaqpModelBackend(DaqpBackend):
         super().reset()
         self._model = self._key = None
         self._H = self._f = None  # copies of the H and f the model holds
-
-    def __deepcopy__(self, memo):
-        if self._model is not None:
-            raise TypeError("a daqp.Model cannot be copied")
-        return self.fresh()
 
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)

@@ -1,29 +1,21 @@
 """Backend ``osqp``: OSQP (ADMM) through its own Python API, with a persistent solver.
 
-Formulation. OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with::
+OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
+``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds). Its multiplier
+``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
 
-    C = [G; A; I],   l = [-inf; b; lb],   u = [h; b; ub]
+The solver is set up once and ``update``-d while shape and sparsity pattern hold (dense blocks
+stored with every entry, the identity with its diagonal), warm-starting from its previous
+iterate or from ``warm_start``. A tick of the kept dense shape takes the short route: ``C``'s
+data and ``l`` written into kept buffers, ``P``'s upper triangle one ``take``, and OSQP 1.x's
+fresh ``x`` and multiplier handed back uncopied.
 
-(the identity rows only with bounds). OSQP's multiplier ``w`` of ``C x`` has qpsolvers'
-signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
-
-Persistence. The solver is set up once and ``update``-d while the shape and sparsity pattern
-hold (dense blocks stored with every entry, the identity with its diagonal), warm-starting
-from its previous iterate (OSQP's ``warm_starting``) or from ``warm_start``. A tick of the
-kept dense shape takes the short route: ``C``'s data and ``l`` written into kept buffers,
-``P``'s upper triangle one ``take``, and OSQP 1.x's fresh ``x`` and multiplier handed back
-uncopied.
-
-Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, ``time_limit``; ``polishing=True`` at
-``eps_abs <= 1e-7`` (ADMM alone seldom reaches a 1e-9 residual; the polishing step, a solve
-of the KKT system of the guessed active set, does); other settings go to ``OSQP.setup``
-verbatim. Under a ``qpbenchmark:<settings>`` profile, what the ``qpsolvers:osqp`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`), so both routes stop at the same
-iterate.
-
-Statuses: :func:`osqp_statuses`; the ``... inaccurate`` variants and ``unsolved`` ->
-not_solved (raw status in ``extras["raw_status"]``). ``OSQPException`` and ``ValueError``
-become status ``error``.
+Settings as the ``qpsolvers:osqp`` route (:func:`~qpbench.backends._common.native_settings`:
+``polishing`` at ``eps_abs <= 1e-7``, since ADMM alone seldom reaches a 1e-9 residual), other
+settings to ``OSQP.setup`` verbatim; under a ``qpbenchmark:<settings>`` profile that route's
+arguments (:func:`~qpbench.backends._common.qpbenchmark_options`), so both stop at the same
+iterate. Statuses: :func:`osqp_statuses`, the ``... inaccurate`` ones and ``unsolved`` ->
+not_solved. ``OSQPException`` and ``ValueError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -37,11 +29,13 @@ from . import register
 from ._common import (
     GENERIC_KEYS,
     all_dense,
+    all_finite,
     dense_bounds,
     dense_upper_layout,
     generic_settings,
     native_settings,
     qpbenchmark_options,
+    structure_key,
 )
 from .base import Backend, BackendSolution, new_solution
 
@@ -87,17 +81,7 @@ class StackedLayout:
             Pc, Cc = self._sparse(problem)
             self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
             self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
-            self.key = (
-                "sparse",
-                n,
-                self.m,
-                self.meq,
-                with_box,
-                Pc.indptr.tobytes(),
-                Pc.indices.tobytes(),
-                Cc.indptr.tobytes(),
-                Cc.indices.tobytes(),
-            )
+            self.key = ("sparse", n, self.m, self.meq, with_box, structure_key(Pc, Cc))
 
     def _tick_buffers(self, per_col: int) -> None:
         """What :meth:`tick_data` reuses: the shapes it takes, ``P``'s flat upper-triangle
@@ -320,7 +304,7 @@ class OsqpBackend(Backend):
             sol.extras["dual_inf_cert"] = np.array(res.dual_inf_cert)
             return sol
         x = res.x
-        if x is not None and np.isfinite(x).all():
+        if x is not None and all_finite(x):
             sol.x = np.array(x)
             sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.y))
         return sol

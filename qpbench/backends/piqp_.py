@@ -1,29 +1,21 @@
 """Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs, with a persistent solver.
 
-Formulation. ``piqp.DenseSolver`` solves
-``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,  x_l <= x <= x_u`` with ``c = q``,
-``h_l = -inf`` (left out), ``h_u = h`` and the bounds native. PIQP's multipliers are
-non-negative per side and ``y`` has qpsolvers' sign: ``z = z_u - z_l``,
-``z_box = z_bu - z_bl``. A scipy.sparse problem, or one too large made dense
-(:func:`~qpbench.backends._common.wants_sparse`), goes to ``piqp.SparseSolver`` (``P`` as
-its upper triangle), kept per structure.
+``piqp.DenseSolver`` solves ``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,
+x_l <= x <= x_u`` with ``h_l = -inf`` and the bounds native. Its multipliers are non-negative
+per side: ``z = z_u - z_l``, ``z_box = z_bu - z_bl``. A scipy.sparse problem, or one too large
+made dense (:func:`~qpbench.backends._common.dense_route`), goes to ``piqp.SparseSolver``
+(``P`` as its upper triangle).
 
-Persistence. The solver is ``setup`` once per shape and then ``update``-d (PIQP reuses its
-allocation and preconditioner). PIQP starts every solve from its own initial point:
-``warm_start`` is ignored. A status other than optimal drops the solver. Shapes are checked
-at set-up (:func:`~qpbench.backends._common.check_shapes`): PIQP keeps its old data on an
-update of the wrong shape.
+The solver is ``setup`` once per shape (per structure on the sparse route) and then
+``update``-d; shapes are checked at set-up (PIQP keeps its old data on an update of another
+shape). PIQP starts every solve from its own initial point: ``warm_start`` is ignored. A
+status other than optimal drops the solver. ``solver_time_s`` is PIQP's ``info.run_time``;
+the objective is computed from ``x`` when read.
 
-Settings. As ``qpsolvers:piqp`` (:func:`~qpbench.backends._common.native_settings`); PIQP
-has no time limit; under a ``qpbenchmark:<settings>`` profile what that route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`). ``compute_timings`` on,
-``verbose`` off; other settings are set on the solver's settings verbatim, an unknown name
-is a :class:`~qpbench.exceptions.ParamError`.
-
-``solver_time_s`` is PIQP's ``info.run_time`` (set-up or update, plus solve). The objective
-is computed from ``x`` when read, not read from the binding per tick. Statuses:
-:func:`piqp_statuses` (raw name in ``extras["raw_status"]``); ``ValueError``/``TypeError``/
-``RuntimeError`` raised by the binding become status ``error``.
+Settings as ``qpsolvers:piqp`` (:func:`~qpbench.backends._common.native_settings`; no time
+limit), or under a ``qpbenchmark:<settings>`` profile that route's arguments; others set on
+the solver's settings verbatim. Statuses: :func:`piqp_statuses`; ``ValueError``,
+``TypeError`` and ``RuntimeError`` from the binding become status ``error``.
 """
 
 from __future__ import annotations

@@ -1,43 +1,35 @@
 """Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's dense and sparse APIs.
 
-Formulation. ``proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)`` solves
-``min 1/2 x'Hx + g'x  s.t.  A x = b,  l <= C x <= u,  l_box <= x <= u_box`` with
-``H = P, g = q, C = G, l = -inf, u = h`` and the bounds as ProxQP's own box. Its multipliers
-have qpsolvers' signs (``z_box``: the last ``n`` entries of ProxQP's ``z``).
+``proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)`` with ``H = P, g = q, C = G,
+l = -inf, u = h`` and the bounds as ProxQP's own box; its multipliers have qpsolvers' signs
+(``z_box``: the last ``n`` entries of its ``z``). A scipy.sparse problem, or one too large made
+dense (:func:`~qpbench.backends._common.dense_route`), goes to ``proxqp.sparse.QP``, which has
+no box: the bounds are stacked under ``G`` as qpsolvers does.
 
-Sparse route. A scipy.sparse problem, or one too large made dense
-(:func:`~qpbench.backends._common.wants_sparse`), goes to ``proxqp.sparse.QP``, which has
-no box: the bounds are stacked under ``G`` as qpsolvers does (``C = [G; I]``). The object is
-kept per structure and ``update``-d like the dense one.
+Persistence. The ``QP`` object is ``init``-ed once per shape (per structure on the sparse
+route) and then ``update``-d. Its first solve starts from
+``EQUALITY_CONSTRAINED_INITIAL_GUESS``, as the ``qpsolvers:proxqp`` route does (a cold solve
+takes the same iterations on both routes); then from ``WARM_START_WITH_PREVIOUS_RESULT``, the
+one change made after ``init`` (ProxQP 0.8 loops forever in ``solve`` after others). An
+explicit ``warm_start`` goes to ``QP.solve(x, None, None)``. The preconditioner is kept at
+``update`` (``update_preconditioner=True`` recomputes it).
 
-Persistence. The ``QP`` object is ``init``-ed once per shape ``(n, n_eq, n_in, with
-bounds)`` and then ``update``-d. A new object's first solve starts from
-``EQUALITY_CONSTRAINED_INITIAL_GUESS``, as ``proxqp.dense.solve`` on the ``qpsolvers:proxqp``
-route does (a cold solve takes the same iterations on both routes); then
-``WARM_START_WITH_PREVIOUS_RESULT``, the one change made after ``init`` (ProxQP 0.8 loops
-forever in ``solve`` after other changes of ``initial_guess``). An explicit ``warm_start`` is
-passed to ``QP.solve(x, None, None)``. The preconditioner is kept at ``update``
-(``update_preconditioner=True`` recomputes it).
-
-Infeasibility verdicts. Warm-started from the previous result of an unrelated problem of
-the same shape (a shuffled problem set), ProxQP 0.8 often stops with a false
-``PRIMAL_INFEASIBLE`` (its ``eps_primal_inf = 1e-4`` test fires on the dual iterates' jump);
-on the sparse route it also fires on cold solves of feasible problems (HS118 of
-Maros-Meszaros). So such a verdict is checked by one cold re-solve on a fresh object (on the
-sparse route with ``eps_primal_inf`` and ``eps_dual_inf`` at the profile's ``eps_abs``),
-whose status is kept; iterations and solve time add up and ``extras["cold_retry"]`` says
-so. ``retry_cold=False`` turns this off. After a verdict the object is dropped: warm-started
+Infeasibility verdicts. Warm-started from the result of an unrelated problem of the same
+shape, ProxQP 0.8 often stops with a false ``PRIMAL_INFEASIBLE`` (its ``eps_primal_inf = 1e-4``
+test fires on the dual iterates' jump); on the sparse route it also fires on cold solves of
+feasible problems (HS118 of Maros-Meszaros). Such a verdict is checked by one cold re-solve
+on a fresh object (sparse route: ``eps_primal_inf``, ``eps_dual_inf`` at the profile's
+``eps_abs``) whose status is kept; iterations and times add up, ``extras["cold_retry"]`` says
+so; ``retry_cold=False`` turns this off. After a verdict the object is dropped: warm-started
 from an infeasibility exit, ProxQP 0.8 does not give the same answer twice for the same
 ticks, so neither a controller nor ``--repeat`` would be reproducible.
 
 Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, and at ``eps_abs <= 1e-7``
-``check_duality_gap`` with ``eps_duality_gap_abs/rel`` (as qpbenchmark at high accuracy);
-ProxQP has no time limit. Under a ``qpbenchmark:<settings>`` profile, what the
-``qpsolvers:proxqp`` route gets (:func:`~qpbench.backends._common.qpbenchmark_options`).
-``compute_timings`` is on; other settings are set on ``QP.settings`` verbatim.
-
-Statuses: :func:`proxqp_statuses`, anything else -> not_solved. ``ValueError`` and
-``RuntimeError`` raised by proxsuite become status ``error``.
+``check_duality_gap`` with ``eps_duality_gap_abs/rel`` (as qpbenchmark at high accuracy); no
+time limit. Under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:proxqp`` route
+gets (:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are set on
+``QP.settings`` verbatim. Statuses: :func:`proxqp_statuses`, the rest not_solved;
+``ValueError`` and ``RuntimeError`` raised by proxsuite become status ``error``.
 """
 
 from __future__ import annotations
@@ -48,6 +40,7 @@ import scipy.sparse as spa
 from . import register
 from ._common import (
     GENERIC_KEYS,
+    all_finite,
     dense_bounds,
     dense_route,
     generic_settings,
@@ -287,7 +280,7 @@ class ProxqpBackend(Backend):
             views = self._views = (res.x, res.y, res.z, slice(0, n_in), slice(n_in, n_in + n))
         x_view, y_view, z_view, part_z, part_box = views
         x = x_view.copy()
-        if np.isfinite(x).all():
+        if all_finite(x):
             sol.x = x
             sol.y = y_view.copy() if n_eq else np.zeros(0)
             # One copy of ProxQP's z, then views: [z; z_box] with a box.

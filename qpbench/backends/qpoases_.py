@@ -1,44 +1,35 @@
 """Backend ``qpoases``: qpOASES (online active set) with hotstart, through a small compiled shim.
 
-Route. qpOASES' library and headers come from the ``cmeel-qpoases`` wheel; a C shim
-around ``qpOASES::SQProblem`` (:mod:`._qpoases_shim`) is compiled on first use. Call
-:meth:`QpoasesBackend.prepare` (constructing the backend does) before any timed call. The
-other route that installs from PyPI, casadi's ``conic('qpoases')``, costs over ten times a
-call of this backend per hotstart, and prints a banner.
+qpOASES comes from the ``cmeel-qpoases`` wheel; a C shim around ``qpOASES::SQProblem``
+(:mod:`._qpoases_shim`) is compiled on first use: call :meth:`QpoasesBackend.prepare`
+(constructing the backend does) before timing anything. (casadi's ``conic('qpoases')``, the
+other route from PyPI, costs over ten times as much per hotstart and prints a banner.)
 
-Formulation. ``SQProblem(n, me + mi)`` solves
-``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with::
+Formulation: ``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with ``H = P``,
+``g = q``, ``A = [A_eq; G]``, ``lbA = [b; -inf]``, ``ubA = [b; h]`` (infinite bounds as
+qpOASES' ``INFTY = 1e20``). qpOASES' multipliers are positive at an active *lower* bound: the
+shim negates them into qpsolvers' sign.
 
-    H = P,  g = q,  A = [A_eq; G],  lbA = [b; -inf],  ubA = [b; h]
+Per tick, the arrays are copied into the one buffer the shim reads (shapes checked in full
+only when the sizes change: a copy into a buffer of another shape raises); ``x`` and the
+multipliers come out of one copy (:class:`QpoasesSolution`). The first tick of a shape calls
+``init()``, the next ones ``hotstart()`` from the previous working set; a status other than
+optimal leaves qpOASES mid-homotopy, so the next tick calls ``init()``. ``warm_start`` is
+ignored. ``get_state``/``set_state`` copy the whole ``SQProblem``.
 
-(infinite bounds passed as qpOASES' ``INFTY = 1e20``). qpOASES' multipliers are positive at
-an active *lower* bound, the opposite of qpsolvers' sign: the shim negates them.
-
-Per-call cost. The tick's arrays are copied into the one buffer the shim reads; the shapes
-are checked in full only when the sizes change (a copy into a buffer of another shape
-raises); ``x`` and the multipliers come out of one copy, the multipliers as views made on
-first read (:class:`QpoasesSolution`).
-
-Persistence. The first tick of a shape ``(n, me, mi, with box)`` calls ``init()``, the next
-ones ``hotstart()`` with the whole new data, starting from the previous working set. A
-status other than optimal leaves qpOASES mid-homotopy, so the next tick calls ``init()``.
-``warm_start`` is ignored. ``get_state``/``set_state`` copy the whole ``SQProblem``.
-
-Settings. ``max_iter`` -> ``nWSR``, ``time_limit`` -> qpOASES' CPU-time limit [s].
+Settings. ``max_iter`` -> ``nWSR``, ``time_limit`` -> qpOASES' CPU-time limit [s];
 ``eps_abs``/``eps_rel`` are not used (an active-set method ends on the exact solution of its
-final working set). Also ``preset`` (qpOASES' ``setTo...()`` option sets, :data:`PRESETS`)
-and qpOASES' options by name (:data:`OPTION_NAMES`); an unknown name is a
-:class:`~qpbench.exceptions.ParamError`.
+final working set). Also ``preset`` (:data:`PRESETS`) and qpOASES' options by name
+(:data:`OPTION_NAMES`).
 
-Time. ``solver_time_s`` is the time of ``init()``/``hotstart()`` measured in the shim with
-``CLOCK_MONOTONIC``: qpOASES' own CPU time (``extras["qpoases_cputime_s"]``) comes from
-``gettimeofday``, too coarse for a hotstart of microseconds.
+``solver_time_s`` is the time of ``init()``/``hotstart()`` measured in the shim with
+``CLOCK_MONOTONIC`` (qpOASES' own CPU time, ``extras["qpoases_cputime_s"]``, comes from
+``gettimeofday``: too coarse for a hotstart of microseconds).
 
-Statuses. ``SUCCESSFUL_RETURN`` -> optimal; infeasibility / unboundedness (qpOASES' flags
-or return values) -> primal_infeasible / dual_infeasible; ``RET_MAX_NWSR_REACHED`` ->
-max_iter, or time_limit when fewer than ``nWSR`` recalculations were done; any other
-return value -> error with qpOASES' message (``extras["raw_status"]``: the return value).
-Only an optimal solve carries ``x`` and duals.
+Statuses: ``SUCCESSFUL_RETURN`` -> optimal; infeasibility / unboundedness -> primal_infeasible
+/ dual_infeasible; ``RET_MAX_NWSR_REACHED`` -> max_iter, or time_limit when fewer than
+``nWSR`` recalculations were done; anything else -> error with qpOASES' message
+(``extras["raw_status"]``: the return value). Only an optimal solve carries ``x`` and duals.
 """
 
 from __future__ import annotations
