@@ -188,7 +188,8 @@ def _iter_iter(extras: dict) -> int:
 
 
 def _iter_quadprog(extras: dict) -> int:
-    return int(np.ravel(extras["iterations"])[0])  # quadprog's (iterations, active-set changes)
+    it = extras["iterations"]  # quadprog's (iterations, active-set changes)
+    return int(it.item(0) if type(it) is _ndarray else np.ravel(it)[0])
 
 
 def _iter_cvxopt(extras: dict) -> int:
