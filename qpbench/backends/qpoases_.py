@@ -151,12 +151,7 @@ class QpoasesBackend(Backend):
 
     def get_state(self) -> Workspace | None:
         """A deep copy of the ``SQProblem`` (working set, factorisations); None before a tick."""
-        ws = self._ws
-        if ws is None:
-            return None
-        return Workspace(
-            ws.key, self._lib, self._preset, {}, self._nwsr, self._time_limit, clone_of=ws.handle
-        )
+        return None if self._ws is None else self._copy(self._ws)
 
     def set_state(self, state: Workspace | None) -> None:
         if state is None:
@@ -164,15 +159,11 @@ class QpoasesBackend(Backend):
         elif self._ws is not None and self._ws.key == state.key:
             self._lib.qpb_assign(self._ws.handle, state.handle)
         else:
-            self._ws = Workspace(
-                state.key,
-                self._lib,
-                self._preset,
-                {},
-                self._nwsr,
-                self._time_limit,
-                clone_of=state.handle,
-            )
+            self._ws = self._copy(state)
+
+    def _copy(self, ws: Workspace) -> Workspace:
+        lib, preset, nwsr, limit = self._lib, self._preset, self._nwsr, self._time_limit
+        return Workspace(ws.key, lib, preset, {}, nwsr, limit, clone_of=ws.handle)
 
     def __deepcopy__(self, memo):
         other = type(self)(self.profile, **self.settings)
