@@ -120,11 +120,6 @@ def _plain(value, extras) -> str:
     return str(value)
 
 
-def _qpalm_status(extras) -> str | None:
-    info = extras.get("info")
-    return None if info is None else str(info.status)
-
-
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
     "clarabel": _status_clarabel,
@@ -154,7 +149,7 @@ STATUS_READERS = {
         _plain,
     ),
     "qpalm": _table_reader(
-        _qpalm_status,
+        lambda e: None if e.get("info") is None else str(e["info"].status),
         {
             "solved": "optimal",
             "primal infeasible": "primal_infeasible",
@@ -179,34 +174,22 @@ STATUS_READERS = {
 }
 
 
-def _iter_info(extras: dict) -> int:
-    return int(extras["info"].iter)
-
-
-def _iter_iter(extras: dict) -> int:
-    return int(extras["iter"])
-
-
 def _iter_quadprog(extras: dict) -> int:
     it = extras["iterations"]  # quadprog's (iterations, active-set changes)
     return int(it.item(0) if type(it) is _ndarray else np.ravel(it)[0])
 
 
-def _iter_cvxopt(extras: dict) -> int:
-    return int(extras["iterations"])
-
-
 #: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps
 #: (raising one of :data:`_ITERATION_ERRORS` when ``extras`` lacks it).
 ITERATION_READERS = {
-    "osqp": _iter_info,
-    "proxqp": _iter_info,
-    "piqp": _iter_info,
-    "scs": _iter_iter,
+    "osqp": lambda e: int(e["info"].iter),
+    "proxqp": lambda e: int(e["info"].iter),
+    "piqp": lambda e: int(e["info"].iter),
+    "scs": lambda e: int(e["iter"]),
     "quadprog": _iter_quadprog,
-    "ecos": _iter_iter,
-    "cvxopt": _iter_cvxopt,
-    "qpalm": _iter_info,
+    "ecos": lambda e: int(e["iter"]),
+    "cvxopt": lambda e: int(e["iterations"]),
+    "qpalm": lambda e: int(e["info"].iter),
 }
 _ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
