@@ -9,6 +9,7 @@ availability. (``--repeat`` against one solve: ``tests/test_contract.py``, for e
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +52,9 @@ def test_wall_sequence_equals_independent_solves(name, wall_ticks):
     statuses = set()
     iters_carried, iters_fresh = [], []
     for k, problem in enumerate(wall_ticks):
+        start = time.perf_counter()
         a = carried.solve(problem)
+        wall_time_s = time.perf_counter() - start
         fresh.reset()
         b = fresh.solve(problem)
         assert a.status == b.status, (k, a.status, b.status)
@@ -59,7 +62,7 @@ def test_wall_sequence_equals_independent_solves(name, wall_ticks):
         if a.status == "optimal":
             np.testing.assert_allclose(a.x, b.x, atol=1e-8, rtol=0, err_msg=f"tick {k}")
             assert a.primal_residual() < 1e-6 and a.dual_residual() < 1e-6, k
-            assert a.solver_time_s is not None and 0 < a.solver_time_s <= a.wall_time_s
+            assert a.solver_time_s is not None and 0 < a.solver_time_s <= wall_time_s
             iters_carried.append(a.iterations)
             iters_fresh.append(b.iterations)
     assert statuses == {"primal_infeasible", "optimal"}
@@ -114,7 +117,7 @@ def test_daqp_model_updates_only_what_changed(monkeypatch, wall_ticks):
     """H and f go to Model.update only when they changed; A and the bounds every tick; one Model per shape."""
     if "daqp" not in backend_names():
         pytest.skip("daqp unavailable")
-    from qpbench.backends import daqp_model
+    from qpbench.backends import daqp_ as daqp_model
 
     real = daqp_model._daqp()
     calls = []

@@ -64,7 +64,6 @@ import pandas as pd
 import pytest
 
 from qpbench.backends import get_backend
-from qpbench.backends.qpsolvers_ import solver_default_limits
 from qpbench.cli import main
 from qpbench.formats import load_problems
 from qpbench.harness.bench import BenchConfig, run_bench
@@ -94,6 +93,42 @@ RTOL_SAME = 1e-12
 
 
 # ---------------------------------------------------------------- helpers
+
+
+def solver_default_limits(solver: str) -> dict | None:
+    """The solver's own defaults (native names, read from the installed package) of the options
+    qpbench adds beyond qpbenchmark's; ``None`` when this function does not know them."""
+    if solver == "clarabel":
+        import clarabel
+
+        s = clarabel.DefaultSettings()
+        return {"max_iter": s.max_iter, "time_limit": s.time_limit}
+    if solver == "daqp":
+        import daqp
+
+        return {"iter_limit": daqp.Model().settings["iter_limit"]}
+    if solver == "osqp":
+        import osqp
+        import scipy.sparse as spa
+
+        one = spa.csc_matrix(np.eye(1))
+        o = osqp.OSQP()
+        o.setup(one, np.zeros(1), one, -np.ones(1), np.ones(1), verbose=False)
+        return {"max_iter": int(o.settings.max_iter), "polishing": bool(o.settings.polishing)}
+    if solver == "piqp":
+        import piqp
+
+        return {"max_iter": piqp.DenseSolver().settings.max_iter}
+    if solver == "proxqp":
+        import proxsuite
+
+        return {"max_iter": proxsuite.proxqp.dense.QP(1, 0, 0).settings.max_iter}
+    if solver == "scs":
+        # SCS's Python binding does not expose its defaults; 1e5 is SCS 3's documented max_iters.
+        return {"max_iters": 100_000}
+    if solver in ("highs", "quadprog"):
+        return {}
+    return None
 
 
 def _test_set_class(qpb):

@@ -10,7 +10,7 @@ import scipy.sparse as spa
 from conftest import LIMITED_CLI, MAROS_MESZAROS_DIR, random_problem, write_band_set
 
 from qpbench.backends import backend_class, get_backend
-from qpbench.backends._sparse import wants_sparse
+from qpbench.backends._common import wants_sparse
 from qpbench.formats import load_problems
 
 ROUTES = ("proxqp", "piqp")
@@ -113,11 +113,11 @@ def test_sparse_update_keeps_solver_per_structure(name):
 def test_large_dense_input_goes_sparse(name, monkeypatch):
     """A dense problem above the dense-only limit is handed to the sparse API (limit lowered here)."""
     _skip_unavailable(name)
-    import qpbench.backends._sparse as routes
+    import qpbench.backends._common as routes
 
     problem = random_problem(np.random.default_rng(7), n=6, n_ineq=4, n_eq=2)
     monkeypatch.setattr(routes, "DENSE_MAX_ENTRIES", 10)
-    monkeypatch.setattr(f"qpbench.backends.{name}_._SMALL_N", 2)
+    monkeypatch.setattr(routes, "_SMALL_N", 2)
     backend = get_backend(name)
     sol = backend.solve(problem)
     assert sol.status == "optimal" and _sparse_solver_kind(backend) == "sparse"

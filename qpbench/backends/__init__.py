@@ -1,38 +1,34 @@
 """Registry of solver backends, keyed by name.
 
-Registering a backend is one decorator::
+Built-in backends live one module each in this package (modules starting with ``_`` are
+helpers); each imports its solver lazily, so a missing package makes the backend
+"unavailable (reason)" rather than an import error. Every solver of
+:data:`qpsolvers.available_solvers` is also ``qpsolvers:<name>``.
 
-    @register
-    class MyBackend(Backend):
-        name = "mine"
-        ...
+Backends from outside the package, loaded once per process after the built-in ones (a
+plugin's backend may replace a built-in of the same name):
 
-Built-in backends live one module each in this package, found by listing
-the package (:func:`pkgutil.iter_modules`; modules whose name starts with
-``_`` are helpers, not backends): a new backend is one file. Each imports its
-solver lazily, so a missing optional package makes the backend
-"unavailable (reason)" rather than an import error. Every solver that
-:data:`qpsolvers.available_solvers` lists is also exposed as
-``qpsolvers:<name>``.
-
-Backends from outside the package (:mod:`._plugins`): the entry points of
-group ``qpbench.backends`` of installed distributions, and plugin files named
-by ``qpbench --plugin FILE`` or ``QPBENCH_PLUGINS``; :func:`load_plugins`
-loads them once per process, after the built-in backends. Worker processes
-load :func:`plugin_files` of their parent.
+- entry points of group ``qpbench.backends`` of installed distributions, naming a module
+  that registers backends when imported (``mine = "mypkg.backend"``) or a :class:`Backend`
+  subclass, registered here (``mine = "mypkg.backend:MyBackend"``);
+- Python files named by ``qpbench --plugin FILE`` or ``QPBENCH_PLUGINS`` (separated by
+  :data:`os.pathsep`), keyed by resolved path; worker processes load :func:`plugin_files`.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import os
 import pkgutil
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
 
-from ..exceptions import BackendNotFound
+from ..exceptions import BackendNotFound, ParamError
 from ..profiles import Profile
-from . import _plugins
 from .base import STATUSES, Backend, BackendSolution, objective
 
 __all__ = [
@@ -51,9 +47,18 @@ __all__ = [
     "resolve_name",
 ]
 
+#: Entry-point group of installed backend plugins.
+ENTRY_POINT_GROUP = "qpbench.backends"
+#: Environment variable naming plugin files (separated by :data:`os.pathsep`).
+ENV_VAR = "QPBENCH_PLUGINS"
+
 _REGISTRY: dict[str, type[Backend]] = {}
 _builtins_loaded = False
 _plugins_checked = False
+#: Plugin files loaded in this process: resolved path -> module name.
+_FILES: dict[Path, str] = {}
+#: Entry points loaded in this process, as ``name = value``.
+_ENTRY_POINTS: set[str] = set()
 
 
 def register(cls: type[Backend]) -> type[Backend]:
@@ -78,11 +83,7 @@ def _load_builtins() -> None:
 
 
 def load_plugins(files: Iterable[str | Path] = ()) -> None:
-    """Load the plugins: entry points, ``QPBENCH_PLUGINS`` files, then ``files``.
-
-    Each is loaded once per process, after the built-in backends (a plugin's
-    backend may replace a built-in of the same name). Nothing is imported
-    when there is no plugin at all.
+    """Load the plugins not loaded yet: entry points, ``QPBENCH_PLUGINS`` files, then ``files``.
 
     Raises:
         ParamError: a plugin file or entry point cannot be loaded (naming it).
@@ -91,19 +92,74 @@ def load_plugins(files: Iterable[str | Path] = ()) -> None:
     files = list(files)
     if not _plugins_checked:
         _plugins_checked = True
-        found, env = _plugins.group_entry_points(), _plugins.env_files()
+        found = sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda ep: (ep.name, ep.value))
+        env = [f.strip() for f in os.environ.get(ENV_VAR, "").split(os.pathsep) if f.strip()]
         if found or env:
             _load_builtins()
-            _plugins.load_entry_points(found, register, Backend)
-            _plugins.load_files(env)
+            _load_entry_points(found)
+            _load_files(env)
     if files:
         _load_builtins()
-        _plugins.load_files(files)
+        _load_files(files)
 
 
 def plugin_files() -> list[str]:
     """The plugin files loaded in this process (absolute paths): what a worker process loads."""
-    return _plugins.loaded_files()
+    return [str(path) for path in _FILES]
+
+
+def _one_line(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+
+
+def _load_entry_points(found) -> None:
+    for ep in found:
+        key = f"{ep.name} = {ep.value}"
+        if key in _ENTRY_POINTS:
+            continue
+        _ENTRY_POINTS.add(key)
+        try:
+            obj = ep.load()
+        except Exception as exc:  # noqa: BLE001 - any import failure is a bad plugin
+            dist = getattr(getattr(ep, "dist", None), "name", None) or "an installed distribution"
+            raise ParamError(
+                f"cannot load the entry point '{key}' of {dist}: {_one_line(exc)}",
+                key=ENTRY_POINT_GROUP,
+            ) from None
+        if isinstance(obj, type) and issubclass(obj, Backend):
+            register(obj)
+
+
+def _load_files(files: Iterable[str | Path]) -> None:
+    for spec in files:
+        path = Path(spec).expanduser().resolve()
+        if path in _FILES:
+            continue
+        if not path.is_file():
+            raise ParamError("no such plugin file", path=path)
+        if path.suffix != ".py":
+            raise ParamError(
+                f"a plugin is a .py file (an installed package declares an entry point in group "
+                f"'{ENTRY_POINT_GROUP}' instead)",
+                path=path,
+            )
+        # A module name no other loaded file has.
+        base = f"qpbench_plugin_{''.join(c if c.isalnum() else '_' for c in path.stem)}"
+        name, i = base, 1
+        while name in sys.modules:
+            i += 1
+            name = f"{base}_{i}"
+        module_spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(module_spec)
+        sys.modules[name] = module
+        try:
+            module_spec.loader.exec_module(module)
+        except BaseException as exc:  # noqa: BLE001 - a plugin that fails is bad input, whatever it raised
+            del sys.modules[name]
+            if isinstance(exc, KeyboardInterrupt):
+                raise
+            raise ParamError(f"cannot load plugin: {_one_line(exc)}", path=path) from None
+        _FILES[path] = name
 
 
 def _registry() -> dict[str, type[Backend]]:
@@ -128,11 +184,8 @@ def backend_info() -> list[BackendInfo]:
     infos = []
     for name, cls in sorted(_registry().items()):
         reason = cls.unavailable_reason()
-        infos.append(
-            BackendInfo(
-                name, reason is None, cls.version() if reason is None else None, cls.family, reason
-            )
-        )
+        version = cls.version() if reason is None else None
+        infos.append(BackendInfo(name, reason is None, version, cls.family, reason))
     return infos
 
 
@@ -149,8 +202,8 @@ def resolve_name(name: str) -> str:
     """The registered spelling of backend ``name``, matched without regard to case.
 
     Raises:
-        BackendNotFound: no backend of that name; the message offers the
-            closest names ("did you mean ...") and lists the available ones.
+        BackendNotFound: no such backend; the message offers the closest names and lists
+            the available ones.
     """
     registry = _registry()
     if name in registry:
@@ -169,27 +222,20 @@ def resolve_name(name: str) -> str:
 
 
 def backend_class(name: str) -> type[Backend]:
-    """The registered class of backend ``name`` (case-insensitive; see :func:`resolve_name`).
-
-    Raises:
-        BackendNotFound: no backend of that name.
-    """
+    """The registered class of backend ``name`` (case-insensitive, :func:`resolve_name`)."""
     return _registry()[resolve_name(name)]
 
 
 def get_backend(name: str, profile: str | Profile = "default", **settings: object) -> Backend:
-    """A fresh backend instance called ``name`` (matched without regard to case).
+    """A fresh instance of backend ``name`` (case-insensitive).
 
     Raises:
-        BackendNotFound: no such backend, or it is unavailable here; the
-            message offers close names and lists the available ones.
+        BackendNotFound: no such backend, or it is unavailable here.
     """
-    registry = _registry()
-    name = resolve_name(name)
-    cls = registry[name]
+    cls = backend_class(name)
     reason = cls.unavailable_reason()
     if reason is not None:
         raise BackendNotFound(
-            f"backend '{name}' is unavailable ({reason}); available: {', '.join(backend_names())}"
+            f"backend '{cls.name}' is unavailable ({reason}); available: {', '.join(backend_names())}"
         )
     return cls(profile=profile, **settings)

@@ -1,27 +1,25 @@
-"""Small helpers shared by the backend modules (no solver imports here).
+"""What the backend modules share: settings, and a problem's arrays in the forms solvers take.
 
-- :func:`generic_settings` merges a profile with the user's settings;
-- :func:`qpbenchmark_options` gives an own-API backend qpbenchmark's arguments
-  for its solver under a ``qpbenchmark:<settings>`` profile;
-- :func:`dense_bounds` turns optional ``lb``/``ub`` into full vectors;
-- :func:`as_dense`, :func:`all_dense` handle dense/sparse input cheaply;
-- :func:`dense_f64_parts` is the dense backends' per-tick fast path, :func:`dense_parts`
-  the conversion of anything else;
-- :func:`dense_upper_layout` gives the CSC structure of a dense cost matrix's
-  upper triangle with *every* entry stored.
+The sparse solvers' backends store dense blocks with their full pattern: the robot's
+Jacobian has entries that are zero in some ticks only, so a pattern taken from the
+non-zeros would change from tick to tick and force a rebuild of the solver.
 
-Dense blocks are stored with their full (dense) pattern by the sparse solvers'
-backends: the robot's QPs are tiny and some Jacobian entries are
-structurally zero in some ticks only, so a pattern taken from the non-zeros
-would change from tick to tick and force a rebuild of the solver.
+Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one
+when a matrix is scipy.sparse or when made dense it would exceed
+:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`); they keep a
+sparse solver per :func:`structure_key` and ``update`` it.
 """
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as spa
+
+from ..exceptions import ParamError, ProblemFormatError
+from ..memory import DENSE_MAX_ENTRIES
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -35,14 +33,8 @@ GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 
 
 def generic_settings(backend: Backend) -> tuple[dict, dict]:
-    """Split a backend's settings into generic values and native solver options.
-
-    Returns:
-        ``(generic, native)``: ``generic`` holds :data:`GENERIC_KEYS` from the
-        profile overridden by the user's settings of the same name; ``native``
-        holds the other user settings, passed to the solver verbatim (they
-        override what the backend derives from ``generic``).
-    """
+    """``(generic, native)``: :data:`GENERIC_KEYS` from the profile overridden by the user's
+    settings of the same name, and the user's other settings (passed to the solver verbatim)."""
     profile = backend.profile
     generic = {
         "eps_abs": profile.eps_abs,
@@ -59,28 +51,106 @@ def generic_settings(backend: Backend) -> tuple[dict, dict]:
     return generic, native
 
 
+#: Each solver's option names for the generic settings, as qpbenchmark's ``SolverSettings``
+#: sets them plus iteration limits: native name -> the generic key whose value it takes, or a
+#: function of the generic values (``e``: eps_abs, ``r``: eps_rel, ``k``: max_iter, ``t``:
+#: time_limit) where the value is derived.
+_NATIVE: dict[str, dict[str, object]] = {
+    "clarabel": {
+        "tol_feas": "eps_abs",
+        "tol_gap_abs": "eps_abs",
+        "tol_gap_rel": "eps_rel",
+        "max_iter": lambda e, r, k, t: min(k, 2**32 - 1),  # Clarabel's u32
+        "time_limit": "time_limit",
+    },
+    "daqp": {"primal_tol": "eps_abs", "dual_tol": "eps_abs", "iter_limit": "max_iter"},
+    "highs": {
+        "primal_feasibility_tolerance": "eps_abs",
+        "dual_feasibility_tolerance": "eps_abs",
+        "time_limit": "time_limit",
+    },
+    "osqp": {key: key for key in ("eps_abs", "eps_rel", "max_iter", "time_limit")},
+    "piqp": {
+        "eps_abs": "eps_abs",
+        "eps_rel": "eps_rel",
+        "eps_duality_gap_abs": "eps_abs",
+        "eps_duality_gap_rel": "eps_rel",
+        "max_iter": "max_iter",
+    },
+    "scs": {
+        "eps_abs": "eps_abs",
+        "eps_rel": "eps_rel",
+        "max_iters": "max_iter",
+        "time_limit_secs": "time_limit",
+    },
+    # qpbenchmark sets feastol only; the gap tolerances (defaults 1e-7 absolute, 1e-6 relative)
+    # would stop cvxopt far from a 1e-9 answer.
+    "cvxopt": {
+        "feastol": "eps_abs",
+        "abstol": "eps_abs",
+        "reltol": lambda e, r, k, t: max(r, e),
+        "maxiters": "max_iter",
+    },
+    # qpbenchmark's (feastol only): tighter gap tolerances make ECOS's dual residual worse, not better.
+    "ecos": {"feastol": "eps_abs"},
+    # qpbenchmark's; Gurobi refuses tolerances below 1e-9 (a GurobiError: status error; high_accuracy asks 1e-9).
+    "gurobi": {"FeasibilityTol": "eps_abs", "OptimalityTol": "eps_abs", "TimeLimit": "time_limit"},
+    "hpipm": {
+        "tol_dual_gap": "eps_abs",
+        "tol_eq": "eps_abs",
+        "tol_ineq": "eps_abs",
+        "tol_stat": "eps_abs",
+    },
+    "qpswift": {"RELTOL": lambda e, r, k, t: e * np.sqrt(3.0)},
+    "qpoases": {"time_limit": "time_limit"},
+    "sip": {"eps_abs": "eps_abs", "eps_rel": "eps_rel", "time_limit": "time_limit"},
+}
+_NATIVE["proxqp"] = _NATIVE["piqp"]
+_NATIVE["kvxopt"] = _NATIVE["cvxopt"]
+_NATIVE["qpalm"] = _NATIVE["osqp"]
+
+#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (ADMM
+#: alone seldom reaches a 1e-9 residual; the polishing step, a solve of the KKT system of the
+#: guessed active set, does), PIQP's and ProxQP's duality-gap test.
+_HIGH_ACCURACY = {
+    "osqp": {"polishing": True},
+    "piqp": {"check_duality_gap": True},
+    "proxqp": {"check_duality_gap": True},
+}
+
+
+def native_settings(
+    solver: str, eps_abs: float, eps_rel: float, max_iter: int, time_limit: float
+) -> dict:
+    """Solver options (qpsolvers keyword arguments) for the generic settings (``time_limit``
+    in [s]); ``{}`` for a solver without a translation (quadprog has no tolerance setting)."""
+    names = _NATIVE.get(solver)
+    if names is None:
+        return {}
+    generic = {
+        "eps_abs": eps_abs,
+        "eps_rel": eps_rel,
+        "max_iter": int(max_iter),
+        "time_limit": time_limit,
+    }
+    args = tuple(generic.values())
+    settings = {
+        name: generic[key] if type(key) is str else key(*args) for name, key in names.items()
+    }
+    if eps_abs <= 1e-7:
+        settings.update(_HIGH_ACCURACY.get(solver, {}))
+    return settings
+
+
 def qpbenchmark_options(
     backend: Backend, solver: str, translate: Callable[[dict], dict]
 ) -> dict | None:
-    """The options an own-API backend gives ``solver`` under a qpbenchmark profile.
+    """The options an own-API backend gives ``solver`` under a ``qpbenchmark:<settings>``
+    profile, ``None`` under qpbench's own profiles.
 
-    Under ``qpbenchmark:<settings>`` the ``qpsolvers:<solver>`` route passes
-    qpbenchmark's keyword arguments for the solver verbatim and nothing else
-    (:mod:`qpbench.backends.qpsolvers_`); the solver's own-API backend does the
-    same work from the same options: qpbenchmark's arguments (native names, as
-    qpsolvers hands them on), then the generic settings the user gave
-    (``--set osqp.eps_abs=...``, through ``translate``), then the user's native
-    ones. Nothing of qpbench's own profiles is added (no tighter tolerance,
-    iteration limit or polishing): under ``qpbenchmark:default`` the solver runs
-    with its own defaults and qpbenchmark's time limit where it sets one.
-
-    Args:
-        backend: The backend (its profile and settings).
-        solver: qpsolvers' name of the solver (the key of qpbenchmark's arguments).
-        translate: Maps a dict of some of :data:`GENERIC_KEYS` to the solver's option names.
-
-    Returns:
-        The options, or ``None`` under qpbench's own profiles.
+    As the ``qpsolvers:<solver>`` route: qpbenchmark's arguments for the solver, then the
+    generic settings the user gave (through ``translate`` to the solver's names), then the
+    user's native ones; nothing of qpbench's own profiles is added.
     """
     given = backend.profile.solver_options
     if given is None:
@@ -89,6 +159,23 @@ def qpbenchmark_options(
     options.update(translate({k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}))
     options.update({k: v for k, v in backend.settings.items() if k not in GENERIC_KEYS})
     return options
+
+
+def refuse_unknown(backend: str, native: dict, allowed, own: str) -> None:
+    """Raise :class:`~qpbench.exceptions.ParamError` naming the first key of ``native`` not in
+    ``allowed`` (``own``: how the message names the solver's settings)."""
+    for key in native:
+        if key not in allowed:
+            raise ParamError(
+                f"unknown setting '{key}' for backend '{backend}' ({own}: "
+                f"{', '.join(allowed)}; generic: {', '.join(GENERIC_KEYS)})",
+                key=key,
+            )
+
+
+def own_settings(obj: object) -> set[str]:
+    """The public data attributes of a solver's settings object (its setting names)."""
+    return {a for a in dir(obj) if not a.startswith("_") and not callable(getattr(obj, a))}
 
 
 def dense_bounds(problem: qpsolvers.Problem, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -111,83 +198,50 @@ def as_dense(M: np.ndarray | spa.spmatrix | spa.sparray) -> np.ndarray:
 
 
 def all_dense(*matrices: object) -> bool:
-    """True when every given matrix is a numpy array or None (fast path of the backends)."""
+    """True when every given matrix is a numpy array or None."""
     return all(M is None or type(M) is np.ndarray for M in matrices)
 
 
 def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
-    """Index arrays of the CSC upper triangle of a dense ``n x n`` matrix, every entry stored.
-
-    Returns:
-        ``((rows, cols), indices, indptr)``: ``P[rows, cols]`` is the CSC data
-        vector (column-major order), ``indices``/``indptr`` its structure.
-    """
-    rows = (
-        np.concatenate([np.arange(j + 1) for j in range(n)]).astype(np.int64)
-        if n
-        else np.zeros(0, np.int64)
-    )
-    cols = (
-        np.concatenate([np.full(j + 1, j) for j in range(n)]).astype(np.int64)
-        if n
-        else np.zeros(0, np.int64)
-    )
+    """``((rows, cols), indices, indptr)`` of the CSC upper triangle of a dense ``n x n``
+    matrix with every entry stored: ``P[rows, cols]`` is its data vector."""
+    rows = np.concatenate([np.arange(j + 1) for j in range(n)] or [[]]).astype(np.int64)
+    cols = np.concatenate([np.full(j + 1, j) for j in range(n)] or [[]]).astype(np.int64)
     indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
     return (rows, cols), rows, indptr
 
 
 def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
-    """The problem's ``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept).
-
-    ``A`` and ``G`` are 2-D (a single row given as a vector becomes one row); the vectors
-    are 1-D. The dense-API backends (daqp, qpoases, piqp) read a problem through this.
-    """
+    """``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept; ``A``, ``G`` 2-D)."""
     P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
     q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
     n = q.shape[0]
-
-    def rows(M, v):
-        if M is None:
-            return None, None
-        return as_dense(M).reshape(-1, n), np.asarray(v, dtype=np.float64).reshape(-1)
-
-    A, b = rows(problem.A, problem.b)
-    G, h = rows(problem.G, problem.h)
-    lb = None if problem.lb is None else np.asarray(problem.lb, dtype=np.float64).reshape(-1)
-    ub = None if problem.ub is None else np.asarray(problem.ub, dtype=np.float64).reshape(-1)
+    A, G = (None if M is None else as_dense(M).reshape(-1, n) for M in (problem.A, problem.G))
+    b, h, lb, ub = (
+        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
+        for v in (problem.b, problem.h, problem.lb, problem.ub)
+    )
     return P, q, A, b, G, h, lb, ub
 
 
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
-    """The problem's ``P, q, A, b, G, h, lb, ub`` as they are, or ``None`` when one needs converting.
+    """``P, q, A, b, G, h, lb, ub`` as they are when they are what a controller builds (float64
+    arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts).
 
-    The per-tick fast path of the dense backends: the arrays a controller builds (numpy
-    arrays of float64, ``q`` 1-D, ``A`` and ``G`` 2-D, absent parts ``None``) are passed on
-    untouched; for anything else (sparse, lists, a single row as a vector, other dtypes)
-    this returns ``None`` and the backend converts, with :func:`dense_parts` or its own
-    route. Shapes are not compared here (see :mod:`._shapes`).
-
-    Each dtype is tested by identity first (the float64 descriptor is a singleton except
-    in unpickled arrays, which fall back to ``==``): this keeps the call as cheap as the
-    inline tests it replaces. The tests of ``A, b`` and ``G, h`` are written out twice on
-    purpose: a helper for one block would cost a call per block and tick.
+    The dense backends' per-tick path; shapes are not compared here (:func:`check_shapes`).
+    Dtypes are tested by identity first (numpy's float64 descriptor is a singleton except in
+    unpickled arrays, which take the ``==``).
     """
-    P = problem.P
-    q = problem.q
-    A = problem.A
-    b = problem.b
-    G = problem.G
-    h = problem.h
-    lb = problem.lb
-    ub = problem.ub
-    if (
+    P, q, A, b = problem.P, problem.q, problem.A, problem.b
+    G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
+    # One chain of tests, (A, b) and (G, h) written out alike: a loop or a helper per block
+    # costs a measurable share of the fastest ticks (qpoases, daqp).
+    if not (
         type(P) is _ndarray
         and (P.dtype is _f64 or P.dtype == _f64)
         and type(q) is _ndarray
         and (q.dtype is _f64 or q.dtype == _f64)
         and q.ndim == 1
-        # The tests of (A, b) and (G, h) are the same, written out twice: a helper per block
-        # would cost a Python call per block and tick (see the docstring).
         and (
             A is None
             or (
@@ -211,9 +265,117 @@ def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]
         and (lb is None or (type(lb) is _ndarray and (lb.dtype is _f64 or lb.dtype == _f64)))
         and (ub is None or (type(ub) is _ndarray and (ub.dtype is _f64 or ub.dtype == _f64)))
     ):
-        return P, q, A, b, G, h, lb, ub
-    return None
+        return None
+    return P, q, A, b, G, h, lb, ub
 
 
 _ndarray = np.ndarray
 _f64 = np.dtype(np.float64)
+
+
+def all_finite(x: np.ndarray) -> bool:
+    """Whether every entry of ``x`` is finite; for a robot-sized vector a Python loop, several
+    times faster than numpy's ufunc and reduction (a share of a tick: ``bench/backend_overhead.py``)."""
+    return all(map(_isfinite, x.tolist())) if x.size <= 32 else bool(np.isfinite(x).all())
+
+
+_isfinite = math.isfinite
+
+
+def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]:
+    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
+
+    Solvers that keep a workspace of one shape must not be handed arrays of another: DAQP
+    ignores such an update without a word, numpy would broadcast a 1-row ``b`` into two slots.
+
+    Raises:
+        ProblemFormatError: an array whose shape does not fit ``n`` and the rows of ``A``
+            and ``G`` (naming the backend, the array and both shapes).
+    """
+    if P.shape != (n, n):
+        _refuse(backend, "P", P.shape, (n, n))
+    me = _rows(backend, A, b, n, ("A", "b", "me"))
+    mi = _rows(backend, G, h, n, ("G", "h", "mi"))
+    for key, v in (("lb", lb), ("ub", ub)):
+        if v is not None and v.shape != (n,):
+            _refuse(backend, key, v.shape, (n,))
+    return me, mi
+
+
+def _refuse(backend: str, key: str, shape, expected) -> None:
+    raise ProblemFormatError(
+        f"backend '{backend}': {key} has shape {tuple(shape)}, expected {tuple(expected)} "
+        "(from q and the rows of A and G)",
+        key=key,
+    )
+
+
+def _rows(backend: str, M, v, n: int, names: tuple[str, str, str]) -> int:
+    if M is None:
+        return 0
+    matrix, vector, count = names
+    if M.ndim != 2 or M.shape[1] != n:
+        _refuse(backend, matrix, M.shape, (count, n))
+    m = M.shape[0]
+    if v is None or v.shape != (m,):
+        _refuse(backend, vector, () if v is None else v.shape, (m,))
+    return m
+
+
+def wants_sparse(problem: qpsolvers.Problem) -> bool:
+    """True when the problem goes to a sparse API: a scipy.sparse matrix, or too large made dense."""
+    P, A, G = problem.P, problem.A, problem.G
+    if spa.issparse(P) or spa.issparse(A) or spa.issparse(G):
+        return True
+    n = np.shape(problem.q)[0]
+    m = sum(0 if M is None else np.atleast_2d(M).shape[0] for M in (A, G))
+    return n * (n + m) > DENSE_MAX_ENTRIES
+
+
+def dense_route(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
+    """The dense parts of a problem for a backend with a dense and a sparse API, or ``None``
+    when it goes to the sparse one."""
+    parts = dense_f64_parts(problem)
+    if parts is not None and parts[1].shape[0] <= _SMALL_N:
+        return parts
+    return None if wants_sparse(problem) else dense_parts(problem)
+
+
+#: Above this many variables :func:`dense_route` asks :func:`wants_sparse` (``n (n + m)`` entries).
+_SMALL_N = 2_000
+
+
+def _csc(M, n: int) -> spa.csc_matrix | None:
+    """``M`` as CSC float64 of ``n`` columns (explicit zeros dropped, indices sorted)."""
+    if M is None:
+        return None
+    if spa.issparse(M):
+        M = spa.csc_matrix(M, dtype=np.float64)
+    else:
+        M = spa.csc_matrix(np.asarray(M, dtype=np.float64).reshape(-1, n))
+    M.eliminate_zeros()
+    M.sort_indices()
+    return M
+
+
+def sparse_parts(problem: qpsolvers.Problem, upper: bool = False) -> tuple:
+    """``P, q, A, b, G, h, lb, ub`` with the matrices as CSC float64 (``None`` kept);
+    ``upper``: only the upper triangle of ``P`` (what PIQP's sparse API reads)."""
+    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+    n = q.shape[0]
+    P = _csc(problem.P, n)
+    if upper:
+        P = spa.triu(P, format="csc")
+        P.sort_indices()
+    b, h, lb, ub = (
+        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
+        for v in (problem.b, problem.h, problem.lb, problem.ub)
+    )
+    return P, q, _csc(problem.A, n), b, _csc(problem.G, n), h, lb, ub
+
+
+def structure_key(*matrices) -> tuple:
+    """Shapes and sparsity patterns of CSC matrices (``None`` kept): equal keys, same structure."""
+    return tuple(
+        None if M is None else (M.shape, M.indptr.tobytes(), M.indices.tobytes()) for M in matrices
+    )

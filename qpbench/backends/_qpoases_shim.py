@@ -1,12 +1,11 @@
 """The qpOASES shim of the ``qpoases`` backend: its C++ source, its build and load, its buffers.
 
-A helper of :mod:`qpbench.backends.qpoases_` (not a backend). The shim wraps
-``qpOASES::SQProblem`` in a few ``extern "C"`` functions; it is compiled by
-the system's C++ compiler against the ``cmeel-qpoases`` wheel on first use,
-once per machine and version, into ``qpbench.cache.shim_dir("qpoases")``
-(temporary file, then rename), and loaded once per process. A
-:class:`Workspace` holds the float64/int buffers one ``SQProblem`` reads and
-writes (layout in :data:`SHIM_SOURCE`'s comment).
+The shim wraps ``qpOASES::SQProblem`` in a few ``extern "C"`` functions. It is compiled by
+the system's C++ compiler (``$CXX``, else ``g++``, else ``c++``) against the
+``cmeel-qpoases`` wheel on first use, once per machine and version, into
+``qpbench.cache.shim_dir("qpoases")`` (a temporary file, then renamed, so another process
+never loads a half-written library), and loaded once per process. A :class:`Workspace`
+holds the buffers one ``SQProblem`` reads and writes.
 """
 
 from __future__ import annotations
@@ -23,55 +22,30 @@ import numpy as np
 
 from ..exceptions import BackendError
 
-#: qpOASES options the ``qpoases`` backend accepts as settings (set as numbers), each with
-#: the C type the shim stores it as: ``bool`` (given as 0/1), ``int`` or ``real``.
+#: qpOASES options the ``qpoases`` backend accepts as settings (set as numbers), by the C
+#: type the shim stores them as: ``bool`` (given as 0/1), ``int`` or ``real``.
 _OPTION_TYPES = {
-    "enableRamping": "bool",
-    "enableFarBounds": "bool",
-    "enableFlippingBounds": "bool",
-    "enableRegularisation": "bool",
-    "enableFullLITests": "bool",
-    "enableNZCTests": "bool",
-    "enableDriftCorrection": "int",
-    "enableCholeskyRefactorisation": "int",
-    "enableEqualities": "bool",
-    "terminationTolerance": "real",
-    "boundTolerance": "real",
-    "boundRelaxation": "real",
-    "epsNum": "real",
-    "epsDen": "real",
-    "maxPrimalJump": "real",
-    "maxDualJump": "real",
-    "initialRamping": "real",
-    "finalRamping": "real",
-    "initialFarBounds": "real",
-    "growFarBounds": "real",
-    "epsFlipping": "real",
-    "numRegularisationSteps": "int",
-    "epsRegularisation": "real",
-    "numRefinementSteps": "int",
-    "epsIterRef": "real",
-    "epsLITests": "real",
-    "epsNZCTests": "real",
-    "rcondSMin": "real",
-    "enableInertiaCorrection": "bool",
+    "bool": """enableRamping enableFarBounds enableFlippingBounds enableRegularisation
+        enableFullLITests enableNZCTests enableEqualities enableInertiaCorrection""",
+    "int": """enableDriftCorrection enableCholeskyRefactorisation numRegularisationSteps
+        numRefinementSteps""",
+    "real": """terminationTolerance boundTolerance boundRelaxation epsNum epsDen maxPrimalJump
+        maxDualJump initialRamping finalRamping initialFarBounds growFarBounds epsFlipping
+        epsRegularisation epsIterRef epsLITests epsNZCTests rcondSMin""",
 }
+_OPTION_KINDS = {name: kind for kind, names in _OPTION_TYPES.items() for name in names.split()}
 #: qpOASES option names the ``qpoases`` backend accepts as settings.
-OPTION_NAMES = tuple(_OPTION_TYPES)
+OPTION_NAMES = tuple(_OPTION_KINDS)
+#: qpOASES' option sets (``Options::setTo...()``) by name.
 PRESETS = {"default": 0, "mpc": 1, "reliable": 2, "fast": 3}
+_SETTERS = {"bool": "(v != 0.0 ? BT_TRUE : BT_FALSE)", "int": "(int_t) v", "real": "(real_t) v"}
 
 
 def _option_setters() -> str:
-    lines = []
-    for name, kind in _OPTION_TYPES.items():
-        if kind == "bool":
-            value = "(v != 0.0 ? BT_TRUE : BT_FALSE)"
-        elif kind == "int":
-            value = "(int_t) v"
-        else:
-            value = "(real_t) v"
-        lines.append(f'    if (!strcmp(name, "{name}")) {{ o.{name} = {value}; return 0; }}')
-    return "\n".join(lines)
+    return "\n".join(
+        f'    if (!strcmp(name, "{name}")) {{ o.{name} = {_SETTERS[kind]}; return 0; }}'
+        for name, kind in _OPTION_KINDS.items()
+    )
 
 
 #: The shim's C++ source. Data layout of the buffer ``d`` (float64), all
@@ -242,20 +216,8 @@ def compile_shim(prefix: Path, target: Path) -> None:
     try:
         with os.fdopen(fd, "w") as handle:
             handle.write(SHIM_SOURCE)
-        cmd = [
-            cxx,
-            "-O2",
-            "-shared",
-            "-fPIC",
-            "-std=c++11",
-            src,
-            f"-I{include}",
-            f"-L{lib}",
-            "-lqpOASES",
-            f"-Wl,-rpath,{lib}",
-            "-o",
-            tmp_so,
-        ]
+        flags = ["-O2", "-shared", "-fPIC", "-std=c++11", "-lqpOASES", f"-Wl,-rpath,{lib}"]
+        cmd = [cxx, src, f"-I{include}", f"-L{lib}", *flags, "-o", tmp_so]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
             raise BackendError(
@@ -285,7 +247,6 @@ def load() -> ctypes.CDLL:
         [vp, ctypes.c_char_p, ctypes.c_double],
         ip,
     )
-    lib.qpb_known_option.argtypes, lib.qpb_known_option.restype = [ctypes.c_char_p], ip
     lib.qpb_free.argtypes, lib.qpb_free.restype = [vp], None
     lib.qpb_clone.argtypes, lib.qpb_clone.restype = [vp, vp, vp], vp
     lib.qpb_assign.argtypes, lib.qpb_assign.restype = [vp, vp], None
@@ -298,32 +259,6 @@ def load() -> ctypes.CDLL:
 class Workspace:
     """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object)."""
 
-    __slots__ = (
-        "key",
-        "d",
-        "iv",
-        "handle",
-        "H",
-        "g",
-        "A_eq",
-        "A_in",
-        "lb",
-        "ub",
-        "lbA_eq",
-        "ubA_eq",
-        "ubA_in",
-        "x",
-        "y",
-        "xy",
-        "parts",
-        "s",
-        "n",
-        "me",
-        "mi",
-        "sizes",
-        "_free",
-    )
-
     def __init__(
         self,
         key: tuple[int, int, int, bool],
@@ -334,46 +269,32 @@ class Workspace:
         time_limit: float,
         clone_of: int | None = None,
     ) -> None:
-        n, me, mi, box = key
+        n, me, mi, box = self.key = key
         m = me + mi
-        self.key, self.n, self.me, self.mi = key, n, me, mi
         d = self.d = np.zeros(n * n + n + m * n + 2 * n + 2 * m + n + n + m + 4)
         self.iv = np.zeros(5, dtype=np.intc)
-        o = 0
-        self.H = d[o : o + n * n].reshape(n, n)
-        o += n * n
-        self.g = d[o : o + n]
-        o += n
-        A = d[o : o + m * n].reshape(m, n)
-        o += m * n
+        # Views of d in the order of SHIM_SOURCE's layout.
+        ends = np.cumsum([0, n * n, n, m * n, n, n, m, m, 2 * n + m])
+        H, self.g, A, self.lb, self.ub, lbA, ubA, self.xy = (
+            d[a:b] for a, b in zip(ends[:-1], ends[1:])
+        )
+        self.H = H.reshape(n, n)
+        A = A.reshape(m, n)
         self.A_eq, self.A_in = A[:me], A[me:]
-        self.lb = d[o : o + n]
-        o += n
-        self.ub = d[o : o + n]
-        o += n
-        lbA = d[o : o + m]
-        o += m
-        ubA = d[o : o + m]
-        o += m
         self.lbA_eq, self.ubA_eq, self.ubA_in = lbA[:me], ubA[:me], ubA[me:]
         lbA[me:] = -np.inf
         if not box:
             self.lb[:] = -np.inf
             self.ub[:] = np.inf
-        self.xy = d[o : o + 2 * n + m]
-        # Where x, z_box, y and z lie in a copy of ``xy``.
+        # Where x, z_box, y and z lie in a copy of ``xy`` (no bounds: an empty z_box).
         self.parts = (
             slice(0, n),
-            slice(n, 2 * n if box else n),  # no bounds: an empty z_box
+            slice(n, 2 * n if box else n),
             slice(2 * n, 2 * n + me),
             slice(2 * n + me, None),
         )
-        self.x = d[o : o + n]
-        o += n
-        self.y = d[o : o + n + m]
-        o += n + m
         self.sizes = None  # sizes of the arrays last written (their shapes checked then)
-        self.s = d[o:]
+        self.s = d[ends[-1] :]
         self.s[1] = time_limit
         self.iv[0] = nwsr
         self._free = lib.qpb_free

@@ -1,49 +1,24 @@
 """Backend ``clarabel``: Clarabel (interior point) through its own Python API, with a persistent solver.
 
-Formulation. Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K``.
-The qpsolvers problem is stacked as::
+Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with
+``C = [A; G; -I; I]``, ``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``. Rows with an
+infinite bound are left out (which ones is part of the pattern), as Clarabel's presolve does
+on the ``qpsolvers:clarabel`` route, in the same order: a cold solve takes the same steps on
+both routes. Its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
+``z_box = w_ub - w_lb``.
 
-    C = [A; G; -I; I],   d = [b; h; -lb; ub],   K = {0}^meq x R+^(rest)
+A ``DefaultSolver`` is built once and ``update``-d with the new values while shape and pattern
+hold (dense blocks stored with every entry; needs ``presolve_enable=False`` and
+``input_sparse_dropzeros=False``, set here). An interior-point method starts from its own
+initial point: ``warm_start`` is ignored. Clarabel's ``solve_time`` is reported for a freshly
+built solver only: after ``update`` it grows with every update and exceeds the call's time.
 
-Rows whose bound is infinite (``h``, ``lb`` or ``ub`` entries of +-inf) are
-left out, so Clarabel never sees an infinite right-hand side; which rows are
-kept is part of the problem's pattern. The rows are those the
-``qpsolvers:clarabel`` route builds (``-I`` before ``I``) after Clarabel's
-presolve has dropped the infinite ones, in the same order: a cold solve of a
-problem takes the same steps on both routes. Clarabel's multiplier ``w`` satisfies
-``P x + q + C' w = 0`` with ``w >= 0`` on the cone rows, so ``y = w_A``,
-``z = w_G`` (zero on the rows left out) and ``z_box = w_ub - w_lb``, which is
-qpsolvers' convention (negative where a lower bound is active).
-
-Persistence. A ``clarabel.DefaultSolver`` is built once and then updated
-in place (``DefaultSolver.update(P=..., q=..., A=..., b=...)`` with the
-new non-zero values) while the problem keeps its shape and sparsity pattern.
-Updates need ``presolve_enable=False`` and ``input_sparse_dropzeros=False``
-(both set here) and are used only when ``is_data_update_allowed()``. Dense
-blocks are stored with every entry, zeros included (the robot's Jacobian has
-entries that are zero in some ticks only), the ``+-I`` blocks with their
-diagonal; sparse inputs keep their own pattern. Clarabel is an interior-point
-method and starts each solve from its own initial point: ``warm_start`` is
-ignored, the saving is the skipped set-up (equilibration structure, symbolic
-factorisation). :meth:`ClarabelBackend.reset` drops the solver. The solver's
-own ``solve_time`` is reported only for a freshly built solver: after
-``update`` it grows with every update and exceeds the wall time of the call.
-
-Settings. ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``,
-``max_iter``, ``time_limit`` [s] from the profile, ``verbose`` off; other
-settings are set on ``DefaultSettings`` verbatim. Under a
-``qpbenchmark:<settings>`` profile Clarabel gets what the ``qpsolvers:clarabel``
-route gets, qpbenchmark's arguments and nothing else
-(:func:`~qpbench.backends._common.qpbenchmark_options`; under
-``qpbenchmark:default`` Clarabel's own tolerances, iteration limit and no time
-limit), with the two settings persistence needs.
-
-Statuses. ``Solved`` -> optimal, ``PrimalInfeasible`` / ``DualInfeasible``
-(Clarabel's certificates) -> primal_infeasible / dual_infeasible,
-``MaxIterations`` -> max_iter, ``MaxTime`` -> time_limit, ``NumericalError``
--> error; the ``Almost...`` statuses, ``InsufficientProgress`` and the rest
--> not_solved (raw status in ``extras["raw_status"]``). ``ValueError``,
-``TypeError`` and Rust panics raised by Clarabel become status ``error``.
+Settings: ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
+``time_limit`` [s], others set on ``DefaultSettings`` verbatim; under a
+``qpbenchmark:<settings>`` profile what the ``qpsolvers:clarabel`` route gets
+(:func:`~qpbench.backends._common.qpbenchmark_options`) plus what persistence needs.
+Statuses: :data:`CLARABEL_STATUSES`, the rest not_solved; ``ValueError``, ``TypeError`` and
+Rust panics raised by Clarabel become status ``error``.
 """
 
 from __future__ import annotations
@@ -54,15 +29,16 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
-
-# The same helpers as osqp_ imports (dense CSC layouts with every entry, settings); the
-# stacking into cones is this module's own.
 from ._common import (
+    GENERIC_KEYS,
     all_dense,
+    all_finite,
     dense_bounds,
     dense_upper_layout,
     generic_settings,
+    own_settings,
     qpbenchmark_options,
+    structure_key,
 )
 from .base import Backend, BackendSolution
 
@@ -120,10 +96,7 @@ class ConeLayout:
                 self.m_all,
                 self.with_box,
                 *masks,
-                Pc.indptr.tobytes(),
-                Pc.indices.tobytes(),
-                Cc.indptr.tobytes(),
-                Cc.indices.tobytes(),
+                structure_key(Pc, Cc),
             )
 
     def _sparse(self, problem):
@@ -301,15 +274,10 @@ class ClarabelBackend(Backend):
 
     @classmethod
     def setting_names(cls) -> frozenset[str]:
-        """The generic settings and Clarabel's own: the attributes of the installed package's
-        ``clarabel.DefaultSettings()``."""
+        """The generic settings and the attributes of ``clarabel.DefaultSettings()``."""
         import clarabel
 
-        from ._common import GENERIC_KEYS
-
-        s = clarabel.DefaultSettings()
-        own = {a for a in dir(s) if not a.startswith("_") and not callable(getattr(s, a))}
-        return frozenset(own | set(GENERIC_KEYS))
+        return frozenset(own_settings(clarabel.DefaultSettings()) | set(GENERIC_KEYS))
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
@@ -391,7 +359,7 @@ class ClarabelBackend(Backend):
         if status in ("primal_infeasible", "dual_infeasible"):
             return sol
         x = np.array(res.x)
-        if x.size == layout.n and np.isfinite(x).all():
+        if x.size == layout.n and all_finite(x):
             sol.x = x
             sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.z))
         if status == "optimal":

@@ -1,40 +1,27 @@
 """Backend ``cvxpy``: the modelling-layer route, a parametrised cvxpy model re-solved with new values.
 
-Model (built once per shape, then only parameter values change)::
+Model, built once per shape (then only parameter values change)::
 
     minimize    1/2 ||L' x||^2 + q' x          P = L L'
     subject to  A x == b,  G_f x <= h_f,  x[i_l] >= lb_f,  x[i_u] <= ub_f
 
-with ``cp.Parameter`` for ``L, q, A, b, G_f, h_f, lb_f, ub_f``. ``quad_form(x, P)``
-with a parameter ``P`` is not DPP, so the cost is written with a factor
-``L``: the Cholesky factor of ``P`` when ``P`` is positive definite, else
-``V diag(sqrt(max(lambda, 0)))`` from ``P``'s eigendecomposition (exact for a
-positive semidefinite ``P``, no regularisation). Rows of ``G x <= h`` and
-bounds with an infinite right-hand side are left out of the model (which ones
-is part of the cache key, with the shapes). The DPP compilation happens at
-the first solve of each shape; later solves only map the new parameter
-values to the solver's data, which is the overhead this backend shows.
+``quad_form(x, P)`` with a parameter ``P`` is not DPP, so the cost uses a factor ``L``
+(Cholesky, else ``V diag(sqrt(max(lambda, 0)))``: exact for a positive semidefinite ``P``).
+Rows and bounds with an infinite right-hand side are left out (which ones is part of the
+cache key). The DPP compilation happens at the first solve of each shape.
 
-Solver. cvxpy's default QP solver, OSQP (cvxpy 1.9 picks OSQP for a QP when
-it is installed; Clarabel otherwise). The solver is passed explicitly so that
-the profile's tolerances can be given in its own names: for OSQP
-``eps_abs, eps_rel, max_iter, time_limit`` and ``polish=True`` when
-``eps_abs <= 1e-7``; for Clarabel ``tol_feas, tol_gap_abs, tol_gap_rel,
-max_iter, time_limit``. cvxpy's ``warm_start=True`` reuses the previous
-solution; an explicit ``warm_start`` sets ``x.value`` first. Other settings
-are passed to ``Problem.solve`` verbatim. The solver's iteration count and
-solve time come from ``problem.solver_stats``.
+Solver: cvxpy's default QP solver, OSQP (Clarabel when OSQP is missing), passed explicitly
+so that the profile's tolerances can be given in its own names (for OSQP ``polish=True`` at
+``eps_abs <= 1e-7``). ``warm_start=True``; an explicit ``warm_start`` sets ``x.value``.
+Other settings go to ``Problem.solve`` verbatim; every key is passed on (cvxpy lists no
+names its solving chain accepts).
 
-Duals. cvxpy's dual of ``A x == b`` already has qpsolvers' sign; the duals
-of ``G x <= h`` are ``z`` (zero on rows left out); ``z_box = nu - mu`` from
-the duals ``mu >= 0`` of ``x >= lb`` and ``nu >= 0`` of ``x <= ub``.
+Duals: cvxpy's dual of ``A x == b`` has qpsolvers' sign; ``z`` is the dual of ``G x <= h``
+(zero on rows left out); ``z_box = nu - mu`` from the duals of ``x >= lb`` and ``x <= ub``.
 
-Statuses. ``optimal`` -> optimal, ``infeasible`` -> primal_infeasible,
-``unbounded`` -> dual_infeasible, ``user_limit`` -> max_iter, the
-``..._inaccurate`` statuses -> not_solved, except that an inaccurate answer
-after ``max_iter`` iterations is max_iter (raw status in
-``extras["raw_status"]``). ``cvxpy.error.SolverError`` (the solver failed)
-becomes status ``error``.
+Statuses: ``optimal`` -> optimal, ``infeasible`` -> primal_infeasible, ``unbounded`` ->
+dual_infeasible, ``user_limit`` -> max_iter, ``..._inaccurate`` -> not_solved except after
+``max_iter`` iterations (max_iter). ``cvxpy.error.SolverError`` becomes status ``error``.
 """
 
 from __future__ import annotations
@@ -44,7 +31,7 @@ import warnings
 import numpy as np
 
 from . import register
-from ._common import as_dense, dense_bounds, generic_settings
+from ._common import as_dense, dense_bounds, generic_settings, native_settings
 from .base import Backend, BackendSolution
 
 
@@ -136,11 +123,6 @@ class CvxpyBackend(Backend):
     package = "cvxpy"
     module = "cvxpy"
 
-    # ``setting_names()`` stays ``None`` (every ``--set`` key is passed on): ``Problem.solve``
-    # takes its own keywords, its solving chain takes more (``solver_path``, ``solver_verbose``,
-    # ``use_quad_obj``) and passes the rest to the solver it picked (OSQP or Clarabel, whichever
-    # is installed); cvxpy lists none of them, so no list can tell which keys it accepts.
-
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
         self._models: dict[tuple, _Model] = {}
@@ -151,27 +133,11 @@ class CvxpyBackend(Backend):
 
     def _solver_options(self, cp) -> tuple[str, dict]:
         generic, native = generic_settings(self)
-        installed = cp.installed_solvers()
-        if "OSQP" in installed:
-            solver = "OSQP"
-            options = {
-                "eps_abs": generic["eps_abs"],
-                "eps_rel": generic["eps_rel"],
-                "max_iter": int(generic["max_iter"]),
-                "time_limit": float(generic["time_limit"]),
-                "polish": generic["eps_abs"] <= 1e-7,
-            }
-        else:
-            solver = "CLARABEL"
-            options = {
-                "tol_feas": generic["eps_abs"],
-                "tol_gap_abs": generic["eps_abs"],
-                "tol_gap_rel": generic["eps_rel"],
-                "max_iter": int(generic["max_iter"]),
-                "time_limit": float(generic["time_limit"]),
-            }
-        options.update(native)
-        return solver, options
+        if "OSQP" in cp.installed_solvers():
+            options = native_settings("osqp", **generic)
+            options["polish"] = options.pop("polishing", False)  # cvxpy's name
+            return "OSQP", {**options, **native}
+        return "CLARABEL", {**native_settings("clarabel", **generic), **native}
 
     def _solve(self, problem, warm_start):
         import cvxpy as cp

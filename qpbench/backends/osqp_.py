@@ -1,50 +1,21 @@
 """Backend ``osqp``: OSQP (ADMM) through its own Python API, with a persistent solver.
 
-Formulation. OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u``. The
-qpsolvers problem is stacked as::
+OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
+``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds). Its multiplier
+``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
 
-    C = [G; A; I],   l = [-inf; b; lb],   u = [h; b; ub]
+The solver is set up once and ``update``-d while shape and sparsity pattern hold (dense blocks
+stored with every entry, the identity with its diagonal), warm-starting from its previous
+iterate or from ``warm_start``. A tick of the kept dense shape takes the short route: ``C``'s
+data and ``l`` written into kept buffers, ``P``'s upper triangle one ``take``, and OSQP 1.x's
+fresh ``x`` and multiplier handed back uncopied.
 
-(the identity rows only when the problem has bounds). OSQP's multiplier ``w``
-of ``C x`` satisfies ``P x + q + C' w = 0``, positive at an active upper side
-and negative at an active lower side, which is qpsolvers' convention
-already: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
-
-Persistence. A solver object is set up once and then updated
-(``OSQP.update(q, l, u, Px, Ax)``) while the problem keeps the same shape and
-sparsity pattern; OSQP then warm-starts from its previous iterate (its
-``warm_starting`` setting, on by default), or from ``warm_start`` when given.
-Dense blocks are stored with every entry (zeros included), so a Jacobian
-entry that is zero in one tick does not change the pattern; the identity
-block holds its diagonal only; sparse inputs keep their own pattern. Any
-other change of shape or pattern (or of settings) rebuilds the solver.
-:meth:`OsqpBackend.reset` drops it.
-
-Per-call cost. A tick whose blocks are all there, dense and of the kept
-shape (the robot's) takes the short route: ``C``'s data and ``l`` are written
-into buffers the layout keeps (OSQP copies what ``update`` is given), ``P``'s
-upper triangle is one ``take`` of precomputed flat indices, and OSQP 1.x's
-``x`` and multiplier, fresh arrays on every solve, are handed back uncopied
-(``y``, ``z``, ``z_box`` as views of the multiplier).
-
-Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, ``time_limit`` from the
-profile; ``polishing=True`` when ``eps_abs <= 1e-7`` (the ``high_accuracy``
-profile): ADMM alone seldom reaches a 1e-9 residual, the polishing step
-(a solve of the KKT system of the guessed active set) does. ``verbose`` is
-off. Other settings are passed to ``OSQP.setup`` verbatim. Under a
-``qpbenchmark:<settings>`` profile OSQP gets what the ``qpsolvers:osqp`` route
-gets, qpbenchmark's arguments and nothing else
-(:func:`~qpbench.backends._common.qpbenchmark_options`): under
-``qpbenchmark:default`` OSQP's own tolerances (``eps_abs = eps_rel = 1e-3``),
-iteration limit and no polishing, so both routes stop at the same iterate
-(``tests/test_own_api_routes.py``).
-
-Statuses. ``solved`` -> optimal, ``primal infeasible`` / ``dual infeasible``
-(OSQP's certificates) -> primal_infeasible / dual_infeasible,
-``maximum iterations reached`` -> max_iter, ``run time limit reached`` ->
-time_limit, ``problem non convex`` -> error; the ``... inaccurate`` variants
-and ``unsolved`` -> not_solved (raw status in ``extras["raw_status"]``).
-``OSQPException`` and ``ValueError`` from OSQP become status ``error``.
+Settings as the ``qpsolvers:osqp`` route (:func:`~qpbench.backends._common.native_settings`:
+``polishing`` at ``eps_abs <= 1e-7``, since ADMM alone seldom reaches a 1e-9 residual), other
+settings to ``OSQP.setup`` verbatim; under a ``qpbenchmark:<settings>`` profile that route's
+arguments (:func:`~qpbench.backends._common.qpbenchmark_options`), so both stop at the same
+iterate. Statuses: :func:`osqp_statuses`, the ``... inaccurate`` ones and ``unsolved`` ->
+not_solved. ``OSQPException`` and ``ValueError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -55,18 +26,18 @@ import numpy as np
 import scipy.sparse as spa
 
 from . import register
-
-# The same helpers as clarabel_ imports: both backends lay a dense problem out as CSC with
-# every entry stored, and take settings the same way; only the stacking differs.
 from ._common import (
     GENERIC_KEYS,
     all_dense,
+    all_finite,
     dense_bounds,
     dense_upper_layout,
     generic_settings,
+    native_settings,
     qpbenchmark_options,
+    structure_key,
 )
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, new_solution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -79,24 +50,18 @@ class StackedLayout:
     so an update costs two fancy-indexing operations.
     """
 
-    def __init__(self, problem, with_box: bool, upper_P: bool = True):
+    def __init__(self, problem, with_box: bool):
         P, G, A = problem.P, problem.G, problem.A
         self.n = n = problem.q.shape[0]
         self.m = 0 if G is None else G.shape[0]
         self.meq = 0 if A is None else A.shape[0]
         self.with_box = with_box
-        self.upper_P = upper_P
         k = self.m + self.meq
         #: Where ``y``, ``z`` and ``z_box`` lie in OSQP's multiplier of ``[G; A; I]``.
         self.parts = (slice(self.m, k), slice(0, self.m), slice(k, None))
         self.dense = all_dense(P, G, A)
         if self.dense:
-            if upper_P:
-                (rows, cols), _, indptr = dense_upper_layout(n)
-            else:
-                rows = np.tile(np.arange(n), n).astype(np.int64)
-                cols = np.repeat(np.arange(n), n).astype(np.int64)
-                indptr = np.arange(0, n * n + 1, n, dtype=np.int64)
+            (rows, cols), _, indptr = dense_upper_layout(n)
             self._P_idx = (rows, cols)
             self.P_indices, self.P_indptr = rows, indptr
             k = self.m + self.meq
@@ -109,25 +74,14 @@ class StackedLayout:
             else:
                 self.C_indices = np.tile(col_rows, n)
             self.C_indptr = np.arange(0, per_col * n + 1, per_col, dtype=np.int64)
-            self.key = ("dense", n, self.m, self.meq, with_box, upper_P)
+            self.key = ("dense", n, self.m, self.meq, with_box)
             self._tick_buffers(per_col)
         else:
             self.tick_shapes = None
             Pc, Cc = self._sparse(problem)
             self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
             self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
-            self.key = (
-                "sparse",
-                n,
-                self.m,
-                self.meq,
-                with_box,
-                upper_P,
-                Pc.indptr.tobytes(),
-                Pc.indices.tobytes(),
-                Cc.indptr.tobytes(),
-                Cc.indices.tobytes(),
-            )
+            self.key = ("sparse", n, self.m, self.meq, with_box, structure_key(Pc, Cc))
 
     def _tick_buffers(self, per_col: int) -> None:
         """What :meth:`tick_data` reuses: the shapes it takes, ``P``'s flat upper-triangle
@@ -166,9 +120,7 @@ class StackedLayout:
 
     def _sparse(self, problem):
         n = self.n
-        P = spa.csc_matrix(problem.P, dtype=float)
-        if self.upper_P:
-            P = spa.triu(P, format="csc")
+        P = spa.triu(spa.csc_matrix(problem.P, dtype=float), format="csc")
         blocks = [spa.csc_matrix(M, dtype=float) for M in (problem.G, problem.A) if M is not None]
         if self.with_box:
             blocks.append(spa.identity(n, format="csc"))
@@ -230,9 +182,11 @@ class StackedLayout:
 _STATUS_MAP: dict = {}
 
 
-def _status_map(osqp) -> dict:
-    """OSQP ``status_val`` (int) -> our status, built once."""
+def osqp_statuses() -> dict:
+    """OSQP's ``status_val`` (int) -> our status, built once (also read by ``qpsolvers:osqp``)."""
     if not _STATUS_MAP:
+        import osqp
+
         S = osqp.SolverStatus
         _STATUS_MAP.update(
             {
@@ -296,18 +250,8 @@ class OsqpBackend(Backend):
         given = qpbenchmark_options(self, "osqp", dict)  # the generic names are OSQP's own
         if given is not None:
             return {"verbose": False, **given}
-        generic, native = generic_settings(self)
-        settings = {
-            "eps_abs": generic["eps_abs"],
-            "eps_rel": generic["eps_rel"],
-            "max_iter": int(generic["max_iter"]),
-            "time_limit": float(generic["time_limit"]),
-            "verbose": False,
-        }
-        if generic["eps_abs"] <= 1e-7:
-            settings["polishing"] = True
-        settings.update(native)
-        return settings
+        generic, native = generic_settings(self)  # as the qpsolvers:osqp route
+        return {**native_settings("osqp", **generic), "verbose": False, **native}
 
     def _solve(self, problem, warm_start):
         osqp = _OSQP[0] if _OSQP else _import_osqp()
@@ -337,10 +281,7 @@ class OsqpBackend(Backend):
             return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
         info = res.info
         status_val = info.status_val
-        # Without __init__ (BackendSolution's defaults are class attributes): a microsecond less per call.
-        sol = _new(BackendSolution)
-        sol.problem = problem
-        sol.extras = {"raw_status": info.status, "info": info}
+        sol = new_solution(problem, "not_solved", {"raw_status": info.status, "info": info})
         sol.iterations = info.iter
         sol.solver_time_s = info.run_time
         if status_val == _SOLVED:
@@ -363,7 +304,7 @@ class OsqpBackend(Backend):
             sol.extras["dual_inf_cert"] = np.array(res.dual_inf_cert)
             return sol
         x = res.x
-        if x is not None and np.isfinite(x).all():
+        if x is not None and all_finite(x):
             sol.x = np.array(x)
             sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.y))
         return sol
@@ -401,7 +342,6 @@ class OsqpBackend(Backend):
 _OSQP: list = []
 _SOLVED = None  # OSQP_SOLVED's status_val, read at the first import of osqp
 _ndarray = np.ndarray
-_new = object.__new__
 _EMPTY = np.zeros(0)
 _EMPTY.flags.writeable = False
 
@@ -411,7 +351,7 @@ def _import_osqp():
     global _SOLVED
     import osqp
 
-    _status_map(osqp)
+    osqp_statuses()
     _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
     _OSQP.append(osqp)
     return osqp

@@ -1,22 +1,14 @@
 """Backend ``pinv``: the paper's comparison baseline, Jacobian Moore-Penrose inverse (JMPI).
 
-The JMPI controller of the paper's section 4 computes the joint velocity
-``v = J^+ b0`` and ignores obstacles and joint limits. As a QP "solver":
+The JMPI controller of the paper's section 4, ``v = J^+ b0``, ignores obstacles and joint
+limits. As a QP "solver": with equalities ``x = A^+ b`` (the minimum-norm solution, the
+QP's minimiser when ``P = I, q = 0`` as in the paper's eq. 11), ignoring everything else;
+without, ``x = -P^+ q``. Status is ``optimal`` whenever an ``x`` was produced; the metrics
+show its constraint violation and optimality gap.
 
-- with equalities ``A x = b``: ``x = A^+ b`` (from a thin SVD of ``A``, the
-  minimum-norm solution, which is the QP's minimiser when ``P = I, q = 0`` as
-  in the paper's eq. 11); ``P``, ``q``, ``G``, ``h``, ``lb``, ``ub`` are ignored;
-- without equalities: the unconstrained minimiser ``x = -P^+ q`` (least
-  squares of ``P x = -q``), ignoring ``G``, ``h``, ``lb``, ``ub``.
-
-Status is ``optimal`` whenever an ``x`` was produced: the method has no notion
-of failure; the metrics show its constraint violation and optimality gap.
-
-Duals: ``y = -(A')^+ (P x + q)``, the least-squares solution of the
-stationarity condition ``A' y = -(P x + q)`` (same SVD), and ``z``, ``z_box``
-are zero vectors (the method treats every inequality and bound as
-inactive), so the dual residual reported for it is exactly the stationarity
-error of that claim.
+Duals: ``y = -(A')^+ (P x + q)`` (least squares of the stationarity condition), ``z`` and
+``z_box`` zero (every inequality treated as inactive), so the dual residual reported is the
+stationarity error of that claim.
 """
 
 from __future__ import annotations
