@@ -16,19 +16,16 @@ _T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _
 )
 _NPAR = 16
 
-_kernel = None
 _build_kernel_jit = None
 
 
 def compiled_build_kernel():
-    """The compiled packed build kernel (numba imported and compiled on first use only)."""
-    global _kernel, _build_kernel_jit
-    if _kernel is None:
-        import numba
+    """Compile (or load from numba's cache) the packed build kernel; the controller keeps it."""
+    global _build_kernel_jit
+    import numba
 
-        _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
-        _kernel = numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
-    return _kernel
+    _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
+    return numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
 
 
 def parameter_vector(
@@ -77,26 +74,16 @@ def _build_packed_py(
     """Write the tick into ``buf`` (layout of :func:`packed_layout`) and its header."""
     n = theta.shape[0]
     nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
-    o = PACKED_HEADER
-    oP = o
-    o += n * n
-    oq = o
-    o += n
-    oG = o
-    o += nr * n
-    oh = o
-    o += nr
-    oJ = o
-    o += 2 * n
-    ob = o
-    o += 2
-    olb = o
-    o += n
-    oub = o
-    o += n
-    oee = o
-    o += 2
-    od = o
+    oP = PACKED_HEADER
+    oq = oP + n * n
+    oG = oq + n
+    oh = oG + nr * n
+    oJ = oh + nr
+    ob = oJ + 2 * n
+    olb = ob + 2
+    oub = olb + n
+    oee = oub + n
+    od = oee + 2
     soft = par[_SOFT] != 0.0
     buf[0] = n
     buf[1] = 0 if soft else 2

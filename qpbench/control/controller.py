@@ -300,40 +300,22 @@ class Controller:
             P, q = self.task.cost(J, b0, self.rho)
         else:
             P, q = np.eye(n), np.zeros(n)
-        if self.closest:
-            G, h, dist = self._closest_rows(theta, t)
-            return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
-        a = len(self.key_points)
-        key_xy, key_J = self.arm.points_jacobians(
-            theta, self.key_points.links, self.key_points.fracs
-        )
-        Gs, hs, ds = [], [], []
-        for term in self.avoidance:
-            G, h, dist = term.rows(key_xy, key_J, t, self.key_points.radius)
-            m = dist.shape[1]
-            Gs.append(G.reshape(a, m, n))
-            hs.append(h.reshape(a, m))
-            ds.append(dist)
-        if Gs:
-            G = np.concatenate(Gs, axis=1).reshape(a * self.n_obstacle_points, n)
-            h = np.concatenate(hs, axis=1).reshape(-1)
-            dist = np.concatenate(ds, axis=1).reshape(-1)
-        else:
-            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
-        return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
-
-    def _closest_rows(self, theta, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``G, h, dist`` of key points of kind ``closest``, in the order of :attr:`pairs`."""
-        n = self.n
+        a, radius = len(self.key_points), self.key_points.radius
         if not self.pairs:
-            return np.zeros((0, n)), np.zeros(0), np.zeros(0)
-        joints = self.arm.joint_positions(theta)
-        radius = self.key_points.radius
-        per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
-        G = np.concatenate([per[j][0].reshape(n, -1, n)[i] for i, j in self.pairs])
-        h = np.concatenate([per[j][1].reshape(n, -1)[i] for i, j in self.pairs])
+            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
+            return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
+        if self.closest:  # one key point per link: its point closest to each obstacle point
+            joints = self.arm.joint_positions(theta)
+            per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
+        else:
+            links, fracs = self.key_points.links, self.key_points.fracs
+            key_xy, key_J = self.arm.points_jacobians(theta, links, fracs)
+            per = [term.rows(key_xy, key_J, t, radius) for term in self.avoidance]
+        # each term's rows are key point major; the QP's rows follow the pairs
+        G = np.concatenate([per[j][0].reshape(a, -1, n)[i] for i, j in self.pairs])
+        h = np.concatenate([per[j][1].reshape(a, -1)[i] for i, j in self.pairs])
         dist = np.concatenate([per[j][2][i] for i, j in self.pairs])
-        return G, h, dist
+        return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
     def obstacle_columns(self) -> list[tuple[str, str, slice]]:
         """``(key point name, obstacle name, slice of the flat distance array)`` for each log

@@ -99,14 +99,10 @@ class ContactSurface:
         sensor reads it (noise included)."""
         n0, n1 = self.normal
         delta = self.penetration(x)
+        f = 0.0
         if delta > 0.0:
-            f = self.stiffness * delta + self.damping * (n0 * xdot[0] + n1 * xdot[1])
-            f = f if f > 0.0 else 0.0
-        else:
-            f = 0.0
-        if self.noise_std > 0.0:
-            f += self.noise()
-        return f
+            f = max(0.0, self.stiffness * delta + self.damping * (n0 * xdot[0] + n1 * xdot[1]))
+        return f + self.noise()
 
     def noise(self) -> float:
         """One sample of the force-sensor noise in [N] (0.0 when ``noise_std`` is 0)."""

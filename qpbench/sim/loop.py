@@ -196,7 +196,7 @@ class _Run:
         ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
         data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
         theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
-        c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
+        c_force = self.cidx[tick_log.FORCE]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
         post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
@@ -204,11 +204,7 @@ class _Run:
         kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
         run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=ticks, unit="tick", desc=run_name, mininterval=0.5)
+        bar = _progress_bar(ticks, run_name) if progress else None
         start = perf()
         stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
         for k in range(ticks):
@@ -266,17 +262,14 @@ class _Run:
                 )
             if noisy:
                 force += surface.noise()
-                data[k, c_force] = force
-                data[k, c_ferr] = force - fd
+                data[k, c_force], data[k, c_force + 1] = force, force - fd  # force, force_error
             if adaptive is not None:
                 xd = arrays.xd
                 kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
             if bar is not None and (k + 1) % 500 == 0:
                 bar.update(500)
         self.wall = perf() - start
-        if bar is not None:
-            bar.update(bar.total - bar.n)
-            bar.close()
+        _finish(bar)
 
     def _without_answer(self, k, t, sol, solve_s, t0, arrays, kp, kd, v):
         """A tick whose own answer is not applied: classify it (:func:`~qpbench.statuses.classify`),
@@ -332,9 +325,8 @@ class _Run:
 
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated."""
-        scenario, dt, deadline, ctrl = self.scenario, self.dt, self.deadline, self.ctrl
+        scenario, deadline, ctrl = self.scenario, self.deadline, self.ctrl
         done = len(self.statuses)
-        misses = int(np.count_nonzero(self.data[:done, self.cidx[tick_log.SOLVE_TIME]] > dt))
         frame = tick_log.to_frame(self.data, self.cols, self.statuses)
         body = body_clearance(
             ctrl.arm,
@@ -347,7 +339,6 @@ class _Run:
         tick_log.add_body_columns(frame, body, [o.name for o in ctrl.obstacles])
         run_info = dict(
             deadline_s=deadline if deadline is None else float(deadline),
-            deadline_misses=misses,
             deadline_dropped=None if deadline is None else self.n_dropped,
             raised_ticks=self.n_raised,
             fallback_errors=self.n_fallback_errors,
@@ -376,3 +367,17 @@ class _Run:
                 for k, t, p in self.records
             ]
         return SimResult(frame, summary, recs)
+
+
+def _progress_bar(ticks: int, desc: str):
+    """A tqdm bar over a run's ticks (the loop updates it every 500 ticks)."""
+    from tqdm import tqdm
+
+    return tqdm(total=ticks, unit="tick", desc=desc, mininterval=0.5)
+
+
+def _finish(bar) -> None:
+    """Bring a progress bar (or ``None``) to the ticks simulated and close it."""
+    if bar is not None:
+        bar.update(bar.total - bar.n)
+        bar.close()

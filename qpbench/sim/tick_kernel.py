@@ -123,48 +123,23 @@ def post_constants(
     controller: Controller, surface: ContactSurface, dt: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The tick log's float columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
-    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in controller.obstacle_columns()])
-    cidx = {c: i for i, c in enumerate(cols)}
-    normal = controller.task.normal
-    tangent = np.array([-normal[1], normal[0]])
     obstacle_cols = controller.obstacle_columns()
-    # log column c: its (key point, obstacle)'s points in the flat distance array
-    col_start = [s.start for _, _, s in obstacle_cols]
-    col_end = [s.stop for _, _, s in obstacle_cols]
-    first_theta, first_v = log.theta_columns(1)[0], log.velocity_columns(1)[0]
-    names = (
-        first_theta,
-        first_v,
-        log.EE_X,
-        None,
-        log.FORCE,
-        log.FALLBACK,
-        log.ZERO_VELOCITY,
-        log.SOLVE_TIME,
-        log.Y_0,
-        log.Z_MAX,
-        log.KP_HAT,
-        log.KD_HAT,
-    )
+    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in obstacle_cols])
+    cidx = {c: i for i, c in enumerate(cols)}
+    first = (log.theta_columns(1)[0], log.velocity_columns(1)[0], log.EE_X)
+    flags = (log.FALLBACK, log.ZERO_VELOCITY, log.SOLVE_TIME, log.Y_0, log.Z_MAX)
+    names = (*first, None, log.FORCE, *flags, log.KP_HAT, log.KD_HAT)  # None: the first distance
     ci = np.array(
         [cidx[log.D_MIN] - len(obstacle_cols) if c is None else cidx[c] for c in names]
-        + col_start
-        + col_end,
+        # log column c: its (key point, obstacle)'s points in the flat distance array
+        + [s.start for _, _, s in obstacle_cols]
+        + [s.stop for _, _, s in obstacle_cols],
         dtype=np.int64,
     )
-    cf = np.array(
-        [
-            tangent[0],
-            tangent[1],
-            normal[0],
-            normal[1],
-            float(normal @ surface.point),
-            surface.stiffness,
-            surface.damping,
-            controller.task.desired_force,
-            dt,
-        ]
-    )
+    normal = controller.task.normal
+    surf = [*normal, float(normal @ surface.point), surface.stiffness, surface.damping]
+    # tangent, surface, Fd, dt
+    cf = np.array([-normal[1], normal[0], *surf, controller.task.desired_force, dt])
     return cols, cidx, ci, cf
 
 

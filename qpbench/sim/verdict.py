@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..robot.body import link_label
 from . import log
 
 if TYPE_CHECKING:
@@ -130,37 +131,27 @@ def _n(count: int, noun: str) -> str:
 
 
 def _failed_reasons(summary: dict) -> list[str]:
-    first, t, limit = (
-        summary.get("first_error"),
-        summary.get("first_error_t"),
-        summary.get("deadline_s"),
-    )
+    get = summary.get
+    first, t, limit = get("first_error"), get("first_error_t"), get("deadline_s")
     where = f" (first at {t:.3f} s: {first})" if first and t is not None else ""
     within = f" ({_g(limit)} s)" if limit is not None else ""
+    zero = " without a command (no answer, no soft fallback: zero velocity)"
     kinds = (
         ("error_ticks", "tick", f" with an error{where}"),
         ("invalid_ticks", "non-finite answer", ""),
         ("time_limit_ticks", "answer", f" dropped past the per-tick deadline{within}"),
         ("fallback_errors", "fallback solve", " raised"),
-        (
-            "zero_velocity_ticks",
-            "tick",
-            " without a command (no answer, no soft fallback: zero velocity)",
-        ),
+        ("zero_velocity_ticks", "tick", zero),
     )
-    return [_n(n, noun) + rest for key, noun, rest in kinds if (n := int(summary.get(key) or 0))]
+    return [_n(n, noun) + rest for key, noun, rest in kinds if (n := int(get(key) or 0))]
 
 
 def _unsafe_reasons(frame, n: int, obstacle_kinds: dict[str, str] | None) -> list[str]:
     """The body rule: a link's capsule inside an obstacle (``d_body_min < 0``) at some tick."""
-    if log.D_BODY_MIN not in frame.columns or not len(frame):
-        return []
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     inside = d < 0.0
     if not inside.any():
         return []
-    from ..robot.body import link_label
-
     t = frame[log.T].to_numpy(dtype=float)
     k = int(np.argmin(np.where(inside, d, np.inf)))
     link = int(frame[log.D_BODY_LINK].iloc[k])
@@ -303,23 +294,20 @@ def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[
 
 
 def judge_realtime(
-    times: np.ndarray, dt: float, settings: VerdictSettings, what: str = "call"
+    p99: float | None, over: int, ticks: int, dt: float, settings: VerdictSettings, what: str
 ) -> tuple[str, str]:
-    """Whether per-tick times [s] keep a loop of period ``dt`` [s]: ``(yes|no|unknown, why)``;
-    ``unknown`` when no time is finite (a backend that reports none). ``what`` names the times."""
-    times = np.asarray(times, dtype=float)
-    times = times[np.isfinite(times)]
-    if not times.size:
+    """Whether per-tick times keep a loop of period ``dt`` [s], from their p99 [s] and the count
+    ``over`` of the ``ticks`` times longer than ``dt`` (figures of :mod:`qpbench.sim.summary`):
+    ``(yes|no|unknown, why)``; ``unknown`` without times. ``what`` names the times."""
+    if not ticks:
         return "unknown", f"no {what} time reported"
-    p99 = float(np.quantile(times, 0.99))
-    over = int(np.count_nonzero(times > dt))
-    share = over / times.size
+    share = over / ticks
     limit = settings.max_p99_fraction_of_dt * dt
     frac = f"{settings.max_p99_fraction_of_dt:.0%}"
     p99_ok, share_ok = p99 <= limit, share <= settings.max_over_dt_share
     p99_text = f"p99 {what} {_us(p99)} {'<=' if p99_ok else '>'} {frac} of dt {_us(dt)}"
     share_text = (
-        f"{over} of {times.size} ticks over dt ({share:.2%}; "
+        f"{over} of {ticks} ticks over dt ({share:.2%}; "
         f"{'<=' if share_ok else '>'} {settings.max_over_dt_share:.2%})"
     )
     # the criterion that failed first: the reason's first part says why a run is not real time
