@@ -126,8 +126,11 @@ class Obstacle:
 
     def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Obstacle points ``B`` (a, m, 2) [m] nearest to key points ``A`` (a, 2) at time ``t``
-        [s], ``dist`` (a, m) [m] and ``u`` (a, m, 2) from ``B`` to ``A`` (zero where ``dist`` is 0)."""
-        raise NotImplementedError
+        [s], ``dist`` (a, m) [m] and ``u`` (a, m, 2) from ``B`` to ``A`` (zero where ``dist`` is 0):
+        :meth:`closest_on_segments` of the points as segments of length 0."""
+        A = np.asarray(A, dtype=float)
+        _, B, dist, u = self.closest_on_segments(A, A, t)
+        return B, dist, u
 
     def primitives(self) -> np.ndarray:
         """Rows ``[kind, p0x, p0y, p1x, p1y, radius, vx, vy]`` (m, 8) of the compiled kernel, at t = 0."""
@@ -167,14 +170,6 @@ class LineObstacle(Obstacle):
         self.point = _vec2(point, f"obstacles.{name}.point")
         self.normal = _unit(normal, f"obstacles.{name}.normal")
 
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        p = self.point + self.velocity * t
-        dist = (A - p) @ self.normal  # signed
-        B = A - dist[:, None] * self.normal
-        u = np.broadcast_to(self.normal, A.shape).copy()
-        return B[:, None, :], dist[:, None], u[:, None, :]
-
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.point, *self.normal, 0.0, *self.velocity]])
 
@@ -192,8 +187,8 @@ class LineObstacle(Obstacle):
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
 
 
-# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest, primitives) on
-# purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
+# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest_on_segments,
+# primitives) on purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
 # touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
@@ -207,15 +202,6 @@ class SegmentObstacle(Obstacle):
         self.b = _vec2(b, f"obstacles.{name}.b")
         if np.allclose(self.a, self.b):
             raise InputError("segment end points must differ", key=f"obstacles.{name}.b")
-
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        a = self.a + self.velocity * t
-        ab = self.b - self.a
-        s = np.clip(((A - a) @ ab) / (ab @ ab), 0.0, 1.0)
-        B = a + s[:, None] * ab
-        dist, u = self._from_diff(A - B)
-        return B[:, None, :], dist[:, None], u[:, None, :]
 
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.a, *self.b, 0.0, *self.velocity]])
@@ -259,13 +245,6 @@ class DiskObstacle(Obstacle):
             )
         self.radius = float(radius)
 
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        c = self.center + self.velocity * t
-        dist, u = self._from_diff(A - c, self.radius)
-        B = c + self.radius * u
-        return B[:, None, :], dist[:, None], u[:, None, :]
-
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.center, 0.0, 0.0, self.radius, *self.velocity]])
 
@@ -294,12 +273,6 @@ class PointCloudObstacle(Obstacle):
             )
         self.points = pts
         self.n_points = pts.shape[0]
-
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        B = np.broadcast_to(self.points + self.velocity * t, (A.shape[0], self.n_points, 2)).copy()
-        dist, u = self._from_diff(A[:, None, :] - B)
-        return B, dist, u
 
     def closest_on_segments(self, P0, P1, t):
         """Each cloud point against each segment; a point on a segment is at distance 0."""

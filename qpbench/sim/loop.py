@@ -182,7 +182,6 @@ class _Run:
         self.statuses: list[str] = []
         self.n_dropped = self.n_raised = self.n_fallback_errors = 0
         self.first_error = self.first_error_t = None
-        self.wall = 0.0
 
     def warm(self) -> None:
         """Compile (or load) the loop's own kernels before the clock starts; the backend's are
