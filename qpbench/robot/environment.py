@@ -188,8 +188,8 @@ class LineObstacle(Obstacle):
 
 
 # The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest_on_segments,
-# primitives) on purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
-# touches one class; the repeated lines are that protocol, not shared logic.
+# primitives) on purpose: one class per obstacle kind, each with its own geometry, so that adding
+# a kind touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 

@@ -100,10 +100,9 @@ def simulate(
     folder the kept QPs are written to as a problem set). ``deadline`` [s]: an answer arriving
     later is dropped (status ``time_limit``; the run then depends on the machine's speed).
     ``wall_budget_s`` [s]: checked between ticks; once spent the run stops with the ticks done
-    (the same rows an uncut run has) and the summary says ``stopped_early``. The summary also
-    holds ``deadline_s``, ``deadline_misses`` (ticks whose solve calls took longer than ``dt``),
-    ``deadline_dropped`` (``None`` without a deadline), ``raised_ticks``, ``fallback_errors``,
-    ``first_error`` and ``first_error_t`` [s].
+    (the same rows an uncut run has) and the summary says ``stopped_early``. The run adds to
+    the summary ``deadline_s``, ``deadline_dropped`` (``None`` without a deadline),
+    ``raised_ticks``, ``fallback_errors``, ``first_error`` and ``first_error_t`` [s].
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)

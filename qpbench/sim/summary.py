@@ -26,9 +26,7 @@ status sets are :mod:`qpbench.statuses`'):
   (an exception or an ``error`` status, an answer dropped past the
   deadline or a budget, a non-finite answer). :func:`qpbench.sim.loop.simulate` adds, in
   ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
-  none, every answer applied), ``deadline_misses`` (ticks whose solve
-  calls took longer than ``dt``: the loop did not keep up with its rate
-  there), ``deadline_dropped`` (answers dropped past the deadline;
+  none, every answer applied), ``deadline_dropped`` (answers dropped past the deadline;
   ``None`` without one), ``raised_ticks`` (ticks whose
   solve raised), ``fallback_errors`` (fallback solves that raised),
   ``first_error`` (``"Type: message"`` of the first exception, else the
@@ -49,7 +47,8 @@ status sets are :mod:`qpbench.statuses`'):
   ``max_p99_fraction_of_dt`` and ``max_over_dt_share`` of ``[verdict]``):
   ``realtime`` (``yes``/``no``) and ``realtime_reason`` from the measured call
   times of every tick (``solve_time_s``; their p99 is ``solve_time_p99_s``,
-  the share of ticks longer than ``dt`` ``over_dt_share``); ``realtime_solver``
+  the share of ticks longer than ``dt`` ``over_dt_share``, their count
+  ``deadline_misses``); ``realtime_solver``
   (``yes``/``no``/``unknown``) and ``realtime_solver_reason`` from the time the
   solver itself reported (``solver_time_s``; p99 ``solver_time_p99_s``, share
   over ``dt`` ``solver_over_dt_share``; ``None`` when the backend reports none).
