@@ -216,9 +216,9 @@ class Controller:
         )
 
     def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
-        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output, its fields set directly
-        (the arrays already have the types the constructor checks, at a cost above the
-        kernel's; the tests check the result equals the constructor's)."""
+        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output, its fields set directly:
+        the arrays already have the types the constructor checks (its cost: ``bench/build_qp.py``;
+        the tests check the result equals the constructor's)."""
         P, q, G, h, J, b, lb, ub = arrays[:8]
         if self.n_rows == 0:
             G = h = None
