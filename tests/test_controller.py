@@ -9,7 +9,7 @@ import pytest
 import qpsolvers
 
 from qpbench.control.adaptive import AdaptiveImpedance
-from qpbench.control.controller import Controller, build_problem
+from qpbench.control.controller import Controller
 from qpbench.control.terms import CosinePath, EscapeVelocityLimits, ImpedanceTask, PolylinePath
 from qpbench.exceptions import ParamError
 from qpbench.packed import PackedProblem
@@ -121,7 +121,7 @@ def test_independent_cvxpy_model_has_the_same_optimum(runs, name, formulation):
         row = log.iloc[k]
         theta = row[[f"theta_{i}" for i in range(n)]].to_numpy(float)
         t, kp, kd = float(row["t"]), float(row["kp_hat"]), float(row["kd_hat"])
-        problem = build_problem(ctrl, theta, t, kp, kd, formulation)
+        problem = ctrl.build(theta, t, kp, kd, formulation).problem
         ref, const = independent_qp(sc.data, theta, t, kp, kd, formulation)
         ref.solve(solver=cp.CLARABEL)
         sol = qpsolvers.solve_problem(

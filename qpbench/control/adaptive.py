@@ -1,18 +1,13 @@
 """Adaptive interaction coefficients (paper section 4.4).
 
-The controller does not know the environment's ``Kp, Kd``; it estimates
-``W = [Kp_hat; Kd_hat]`` from the measured force with the paper's law::
+The controller estimates the environment's ``W = [Kp_hat; Kd_hat]`` from the measured force::
 
     Wdot = -K_in eta (Fd - F),     eta = [n . (x - x_d); n . (xdot - xdot_d)]
 
-``K_in = diag(gain_kp, gain_kd)`` scales the two parts; ``eta`` is projected
-on the pressing direction ``n`` so that ``W`` stays two scalars (the paper
-writes vectors without saying how they reduce). Integrated with explicit
-Euler at the control period. In steady contact ``n . xdot`` is about zero, so
-``Kd_hat`` is not identifiable: only ``Kp_hat`` moves.
-
-The estimates are kept at or above ``kp_min``, ``kd_min`` (``b0`` divides by
-``Kd``).
+``K_in = diag(gain_kp, gain_kd)``; ``eta`` is projected on the pressing direction ``n`` so
+``W`` stays two scalars. Explicit Euler at the control period; the estimates are kept at or
+above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``). In steady contact ``n . xdot`` is about
+zero, so only ``Kp_hat`` moves.
 """
 
 from __future__ import annotations
@@ -26,16 +21,8 @@ __all__ = ["AdaptiveImpedance"]
 
 
 class AdaptiveImpedance:
-    """Online estimate of ``Kp``, ``Kd`` (paper section 4.4).
-
-    Args:
-        kp0: Initial ``Kp_hat`` in [N/m] (paper: 4000).
-        kd0: Initial ``Kd_hat`` in [N s/m] (paper: 80).
-        gain: ``K_in`` diagonal ``(gain_kp, gain_kd)`` (paper: (500, 20)).
-        normal: Pressing direction (unit), shape (2,).
-        desired_force: ``Fd`` in [N].
-        kp_min, kd_min: Lower clamps of the estimates.
-    """
+    """Online estimate of ``Kp`` [N/m], ``Kd`` [N s/m] from ``kp0``, ``kd0`` (paper: 4000, 80),
+    ``gain = K_in`` diagonal (paper: (500, 20)), unit ``normal`` and ``Fd`` [N]."""
 
     def __init__(
         self,
@@ -72,14 +59,8 @@ class AdaptiveImpedance:
         xdot_d: np.ndarray,
         force: float,
     ) -> tuple[float, float]:
-        """One Euler step of ``Wdot = -K_in eta (Fd - F)`` over ``dt`` [s]; returns the new ``(Kp_hat, Kd_hat)``.
-
-        Args:
-            dt: Step in [s].
-            x, x_d: End-effector and desired positions in [m].
-            xdot, xdot_d: End-effector and desired velocities in [m/s].
-            force: Measured contact force in [N].
-        """
+        """One Euler step over ``dt`` [s] from positions [m], velocities [m/s] and the measured
+        force [N]; returns the new ``(Kp_hat, Kd_hat)``."""
         nx, ny = self.nx, self.ny
         eta_p = nx * (x[0] - x_d[0]) + ny * (x[1] - x_d[1])
         eta_d = nx * (xdot[0] - xdot_d[0]) + ny * (xdot[1] - xdot_d[1])

@@ -1,11 +1,6 @@
-"""The controller's compiled per-tick build (numba): kinematics, impedance reference,
-escape-velocity bounds and obstacle rows of one tick's QP, written into one packed buffer.
-
-:class:`qpbench.control.controller.Controller` calls :func:`compiled_build_kernel`'s
-result once per tick; :func:`packed_layout` says where each array lies in the
-buffer (after the :mod:`qpbench.packed` header) and :func:`parameter_vector`
-holds the controller's constants in the kernel's parameter vector.
-"""
+"""The controller's compiled per-tick build (numba): kinematics, impedance reference (eq. 4),
+escape-velocity bounds (eq. 11c) and obstacle rows (eqs. 8-10) of one tick's QP, written into one
+packed buffer (:func:`packed_layout`, after the :mod:`qpbench.packed` header)."""
 
 from __future__ import annotations
 
@@ -21,38 +16,25 @@ _T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _
 )
 _NPAR = 16
 
-_kernel = None
 _build_kernel_jit = None
 
 
 def compiled_build_kernel():
-    """The compiled packed build kernel (numba imported and compiled on first use only)."""
-    global _kernel, _build_kernel_jit
-    if _kernel is None:
-        import numba
+    """Compile (or load from numba's cache) the packed build kernel; the controller keeps it."""
+    global _build_kernel_jit
+    import numba
 
-        _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
-        _kernel = numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
-    return _kernel
+    _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
+    return numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
 
 
 def parameter_vector(
     normal, desired_force: float, k: float, d_safe: float, alpha: float, rho: float, radius: float
 ) -> np.ndarray:
-    """The kernel's parameter vector with a controller's constants set.
-
-    Per tick the controller sets the time, ``x_d``, ``xdot_d``, ``Kp``, ``Kd``
-    and the formulation flag (indices 0-4, 8, 9, 14) before each call.
-
-    Args:
-        normal: Pressing direction (unit vector) of the impedance task.
-        desired_force: Desired contact force [N].
-        k: Obstacle damper gain [1/s].
-        d_safe: Safety distance [m].
-        alpha: Escape-velocity gain [1/s].
-        rho: Task weight of the ``soft`` formulation.
-        radius: Key-point radius [m].
-    """
+    """The kernel's parameter vector with a controller's constants: pressing direction, ``Fd``
+    [N], damper gain ``k`` [1/s], ``d_safe`` [m], escape gain ``alpha`` [1/s], ``rho``, key-point
+    radius [m]. The controller sets the time, ``x_d``, ``xdot_d``, ``Kp``, ``Kd`` and the
+    formulation flag (indices 0-4, 8, 9, 14) before each call."""
     par = np.zeros(_NPAR)
     par[_NX], par[_NY] = normal
     par[_FD] = desired_force
@@ -65,11 +47,8 @@ def parameter_vector(
 
 
 def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[int, ...]]]]:
-    """Size of a tick's buffer and ``{name: (offset, shape)}`` of its arrays.
-
-    Order after the :mod:`qpbench.packed` header: ``P, q, G, h, J, b, lb, ub,
-    ee, dist`` (the kernel :func:`_build_packed_py` computes the same).
-    """
+    """Size of a tick's buffer and ``{name: (offset, shape)}`` of its arrays, in the order
+    :func:`_build_packed_py` lays them out."""
     shapes = {
         "P": (n, n),
         "q": (n,),
@@ -95,26 +74,16 @@ def _build_packed_py(
     """Write the tick into ``buf`` (layout of :func:`packed_layout`) and its header."""
     n = theta.shape[0]
     nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
-    o = PACKED_HEADER
-    oP = o
-    o += n * n
-    oq = o
-    o += n
-    oG = o
-    o += nr * n
-    oh = o
-    o += nr
-    oJ = o
-    o += 2 * n
-    ob = o
-    o += 2
-    olb = o
-    o += n
-    oub = o
-    o += n
-    oee = o
-    o += 2
-    od = o
+    oP = PACKED_HEADER
+    oq = oP + n * n
+    oG = oq + n
+    oh = oG + nr * n
+    oJ = oh + nr
+    ob = oJ + 2 * n
+    olb = ob + 2
+    oub = olb + n
+    oee = oub + n
+    od = oee + 2
     soft = par[_SOFT] != 0.0
     buf[0] = n
     buf[1] = 0 if soft else 2
@@ -154,7 +123,7 @@ def _build_packed_py(
 def _build_kernel_py(
     theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist
 ):  # pragma: no cover - compiled
-    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick (see the module docstring)."""
+    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick."""
     n = theta.shape[0]
     px = np.empty(n + 1)
     py = np.empty(n + 1)

@@ -1,46 +1,27 @@
-"""The controller: build one control tick's QP (paper eq. 11) as a :class:`qpsolvers.Problem`.
-
-Two formulations of the same tick, both with ``n`` variables ``v`` (joint
-velocities in [rad/s]):
+"""The controller: one control tick's QP (paper eq. 11) in joint velocities ``v`` [rad/s].
 
 ``paper`` (hard task, eq. 11)::
 
     minimize 1/2 v^T v   s.t.  J v = b0,  G v <= h,  lb <= v <= ub
 
-``soft`` (task as a weighted cost; feasible whenever the robot is within its
-limits and static obstacles are at least ``d_safe`` away)::
+``soft`` (task as a weighted cost; feasible whenever the robot is within its limits and static
+obstacles are at least ``d_safe`` away)::
 
     minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
 
-``G`` holds one row per (key point, obstacle point) pair, ordered key point by
-key point (A1 against every obstacle point, then A2, ...), every pair kept so
-the row count is fixed for a scenario and a solver can keep a persistent
-object. ``P`` is a dense ndarray; no obstacle means ``G = h = None``.
-
-Key points of kind ``closest`` (``[key_points] kind = "closest"``, beyond the
-paper): the key point of link i against an obstacle point is the link's point
-closest to it at this tick (end effector's link included), with that point's
-Jacobian and its distance to the link's capsule
-(:meth:`qpbench.control.terms.ObstacleAvoidance.closest_rows`), one row per
-(link, obstacle point), link major. The end effector's link has no rows
-against an obstacle that is the contact surface (``exempt``; the lower line
-of ``narrow``: it presses into it by design; :mod:`qpbench.robot.body`). These
-ticks are built by the numpy terms (the compiled kernel knows fixed key points only).
-
-The per-tick build runs one compiled numba kernel (kinematics, impedance
-reference, bounds, obstacle rows; :mod:`qpbench.control.build_kernel`, compiled
-on first call and cached on disk)
-writing into one freshly allocated buffer, so a returned problem is never
-changed by a later build. The problem is a :class:`qpbench.packed.PackedProblem`:
-its arrays are views of that buffer, and a backend that knows the layout (the
-online network) hands the kernel one array instead of eight. :meth:`Controller.build_reference` assembles the same
-problem from the numpy terms of :mod:`qpbench.control.terms`; the tests
-check the two agree.
+``G`` holds one row per (key point, obstacle point) pair, key point major, every pair kept so the
+row count is fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind
+``closest`` (beyond the paper) take each link's point closest to each obstacle point, one row
+per (link, obstacle point), the end effector's link exempt against the contact surface; they
+are built by the numpy terms (:mod:`qpbench.control.terms`), which are also the reference the
+tests check the compiled build (:mod:`qpbench.control.build_kernel`) against. The compiled build
+writes into one fresh buffer per tick, returned as a :class:`qpbench.packed.PackedProblem`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partialmethod
 from typing import NamedTuple
 
 import numpy as np
@@ -54,14 +35,14 @@ from ..statuses import FORMULATIONS
 from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
-__all__ = ["FORMULATIONS", "Controller", "TickArrays", "TickQP", "build_problem"]
+__all__ = ["FORMULATIONS", "Controller", "TickArrays", "TickQP"]
 
 
 class TickArrays(NamedTuple):
-    """One tick's arrays (:meth:`Controller.build_arrays`): cost and obstacle rows ``P, q, G, h``,
-    task row ``J v = b0`` (eq. 11), escape-velocity bounds ``lb, ub`` [rad/s], end effector ``ee``
-    [m], key-point distances ``dist`` [m] (flat, key point major), ``xd = (x_d, xdot_d)`` [m, m/s],
-    the packed ``buffer`` the others view (``None`` on the numpy reference path)."""
+    """One tick's arrays: cost and obstacle rows ``P, q, G, h``, task row ``J v = b0`` (eq. 11),
+    escape-velocity bounds ``lb, ub`` [rad/s], end effector ``ee`` [m], key-point distances
+    ``dist`` [m] (flat, key point major), ``xd = (x_d, xdot_d)`` [m, m/s], the packed ``buffer``
+    the others view (``None`` on the numpy reference path)."""
 
     P: np.ndarray
     q: np.ndarray
@@ -85,8 +66,7 @@ _empty = np.empty
 
 
 def _get_kernel():
-    """The compiled packed build kernel (:mod:`qpbench.control.build_kernel`), kept here so
-    the per-tick call reads a global of this module."""
+    """The compiled build kernel, kept in a global of this module for the per-tick call."""
     global _kernel
     if _kernel is None:
         _kernel = compiled_build_kernel()
@@ -95,17 +75,9 @@ def _get_kernel():
 
 @dataclass
 class TickQP:
-    """One tick's QP and the robot quantities it was built from.
-
-    Attributes:
-        problem: The QP.
-        formulation: ``paper`` or ``soft``.
-        J: End-effector Jacobian (2, n) in [m/rad].
-        b0: Impedance reference (eq. 4) in [m/s].
-        ee: End-effector position in [m].
-        distances: Distance of each key point to each obstacle point (a, m) in [m].
-        x_d: Desired position in [m]; ``xdot_d`` desired velocity in [m/s].
-    """
+    """One tick's QP and what it was built from: Jacobian ``J`` [m/rad], impedance reference
+    ``b0`` (eq. 4) [m/s], end effector ``ee`` [m], ``distances`` of each key point to each
+    obstacle point (a, m) [m], ``x_d`` [m], ``xdot_d`` [m/s]."""
 
     problem: qpsolvers.Problem
     formulation: str
@@ -120,20 +92,10 @@ class TickQP:
 class Controller:
     """Builds the per-tick QP of the paper's collision-free compliance controller.
 
-    Args:
-        arm: The robot.
-        key_points: Points of the robot kept away from obstacles.
-        task: The impedance task (path, pressing direction, desired force).
-        limits: Joint-angle and joint-velocity limits and the escape gain.
-        obstacles: The obstacles.
-        k: Obstacle damper gain in [1/s].
-        d_safe: Safety distance in [m].
-        rho: Task weight of the ``soft`` formulation [s^2/m^2 relative to ``|v|^2``].
-        kp, kd: The controller's interaction coefficients ``Kp`` [N/m], ``Kd`` [N s/m]
-            (overridden per call by an adaptive estimate).
-        exempt: Per obstacle, it is the contact surface: no rows of the end
-            effector's link against it (key points of kind ``closest``; the
-            paper's key points never include the end effector).
+    ``k``: obstacle damper gain [1/s]; ``d_safe`` [m]; ``rho``: task weight of the ``soft``
+    formulation [s^2/m^2]; ``kp`` [N/m], ``kd`` [N s/m]: the interaction coefficients (an
+    adaptive estimate overrides them per call); ``exempt``: per obstacle, it is the contact
+    surface (no rows of the end effector's link against it, key points of kind ``closest``).
     """
 
     def __init__(
@@ -162,7 +124,6 @@ class Controller:
         self.kp = float(kp)
         self.kd = float(kd)
         self.n = arm.n
-        #: Obstacle points per obstacle, and the total per key point.
         self.points_per_obstacle = [o.n_points for o in self.obstacles]
         self.n_obstacle_points = int(sum(self.points_per_obstacle))
         self.closest = key_points.kind == "closest"
@@ -214,17 +175,8 @@ class Controller:
         kd: float | None = None,
         soft: bool = False,
     ) -> TickArrays:
-        """The tick's :class:`TickArrays` ``(P, q, G, h, J, b0, lb, ub, ee, dist, xd, buffer)``, freshly allocated.
-
-        All but ``xd`` are views of ``buffer``, the tick's
-        :class:`qpbench.packed.PackedProblem` buffer (layout of :func:`packed_layout`).
-        On the numpy reference path (obstacles without a kernel) ``buffer`` is ``None``.
-
-        ``xd`` is ``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)``; ``dist`` is flat
-        (a * m,), key point major. This is the loop's hot path: ``theta`` must
-        be a contiguous float64 array (:meth:`build` converts; it wraps the
-        result into a :class:`TickQP`).
-        """
+        """The tick's :class:`TickArrays`, freshly allocated (the loop's hot path: ``theta``
+        must be a contiguous float64 array; :meth:`build` converts)."""
         if not self._compiled:
             return self._arrays_from_terms(theta, t, kp, kd, soft)
         n = self.n
@@ -264,14 +216,9 @@ class Controller:
         )
 
     def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
-        """A :class:`qpsolvers.Problem` from :meth:`build_arrays`' output
-        (a :class:`~qpbench.packed.PackedProblem` when it came with its buffer).
-
-        The arrays already have the types and shapes :class:`qpsolvers.Problem`
-        checks for (dense float64 matrices, 1-D vectors), so its fields are set
-        directly: the constructor's checks cost more than the kernel that fills
-        them. The tests check the result equals the constructor's.
-        """
+        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output, its fields set directly:
+        the arrays already have the types the constructor checks (its cost: ``bench/build_qp.py``;
+        the tests check the result equals the constructor's)."""
         P, q, G, h, J, b, lb, ub = arrays[:8]
         if self.n_rows == 0:
             G = h = None
@@ -290,9 +237,6 @@ class Controller:
         problem.ub = ub
         return problem
 
-    # build, build_reference and build_problem take the same arguments on purpose: the reference
-    # path is called like the compiled one (tests/test_controller.py compares them tick by tick),
-    # and build_problem is build for callers that want only the qpsolvers Problem.
     def build(
         self,
         theta: np.ndarray,
@@ -300,21 +244,21 @@ class Controller:
         kp: float | None = None,
         kd: float | None = None,
         formulation: str = "paper",
+        reference: bool = False,
     ) -> TickQP:
-        """Build the tick's QP at joint angles ``theta`` [rad] and time ``t`` [s].
-
-        Args:
-            theta: Joint angles in [rad], shape (n,).
-            t: Time in [s] (sets ``x_d(t)`` and moving obstacles' positions).
-            kp, kd: Interaction coefficients (default: the controller's).
-            formulation: ``paper`` or ``soft``.
-        """
+        """The tick's QP at joint angles ``theta`` [rad], time ``t`` [s], ``kp, kd`` (default: the
+        controller's); ``reference``: assembled from the numpy terms (slower; for checks)."""
         soft = _check_formulation(formulation)
         theta = np.ascontiguousarray(theta, dtype=np.float64)
         if theta.shape != (self.n,):
             raise ParamError(f"theta must have shape ({self.n},), got {theta.shape}", key="theta")
-        arrays = self.build_arrays(theta, float(t), kp, kd, soft)
+        if reference:
+            arrays = self._arrays_from_terms(theta, float(t), kp, kd, soft)
+        else:
+            arrays = self.build_arrays(theta, float(t), kp, kd, soft)
         return self._tick(arrays, soft, formulation)
+
+    build_reference = partialmethod(build, reference=True)
 
     def _tick(self, arrays, soft, formulation) -> TickQP:
         problem = self.make_problem(arrays, soft)
@@ -356,54 +300,22 @@ class Controller:
             P, q = self.task.cost(J, b0, self.rho)
         else:
             P, q = np.eye(n), np.zeros(n)
-        if self.closest:
-            G, h, dist = self._closest_rows(theta, t)
-            return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
-        a = len(self.key_points)
-        key_xy, key_J = self.arm.points_jacobians(
-            theta, self.key_points.links, self.key_points.fracs
-        )
-        Gs, hs, ds = [], [], []
-        for term in self.avoidance:
-            G, h, dist = term.rows(key_xy, key_J, t, self.key_points.radius)
-            m = dist.shape[1]
-            Gs.append(G.reshape(a, m, n))
-            hs.append(h.reshape(a, m))
-            ds.append(dist)
-        if Gs:
-            G = np.concatenate(Gs, axis=1).reshape(a * self.n_obstacle_points, n)
-            h = np.concatenate(hs, axis=1).reshape(-1)
-            dist = np.concatenate(ds, axis=1).reshape(-1)
-        else:
-            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
-        return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
-
-    def _closest_rows(self, theta, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``G, h, dist`` of key points of kind ``closest``, in the order of :attr:`pairs`."""
-        n = self.n
+        a, radius = len(self.key_points), self.key_points.radius
         if not self.pairs:
-            return np.zeros((0, n)), np.zeros(0), np.zeros(0)
-        joints = self.arm.joint_positions(theta)
-        radius = self.key_points.radius
-        per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
-        G = np.concatenate([per[j][0].reshape(n, -1, n)[i] for i, j in self.pairs])
-        h = np.concatenate([per[j][1].reshape(n, -1)[i] for i, j in self.pairs])
+            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
+            return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
+        if self.closest:  # one key point per link: its point closest to each obstacle point
+            joints = self.arm.joint_positions(theta)
+            per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
+        else:
+            links, fracs = self.key_points.links, self.key_points.fracs
+            key_xy, key_J = self.arm.points_jacobians(theta, links, fracs)
+            per = [term.rows(key_xy, key_J, t, radius) for term in self.avoidance]
+        # each term's rows are key point major; the QP's rows follow the pairs
+        G = np.concatenate([per[j][0].reshape(a, -1, n)[i] for i, j in self.pairs])
+        h = np.concatenate([per[j][1].reshape(a, -1)[i] for i, j in self.pairs])
         dist = np.concatenate([per[j][2][i] for i, j in self.pairs])
-        return G, h, dist
-
-    # Same arguments as build (see there): its numpy reference, for checks.
-    def build_reference(
-        self,
-        theta: np.ndarray,
-        t: float,
-        kp: float | None = None,
-        kd: float | None = None,
-        formulation: str = "paper",
-    ) -> TickQP:
-        """Same as :meth:`build`, assembled from the numpy terms (slower; for checks)."""
-        soft = _check_formulation(formulation)
-        arrays = self._arrays_from_terms(theta, t, kp, kd, soft)
-        return self._tick(arrays, soft, formulation)
+        return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
     def obstacle_columns(self) -> list[tuple[str, str, slice]]:
         """``(key point name, obstacle name, slice of the flat distance array)`` for each log
@@ -423,16 +335,3 @@ def _check_formulation(formulation: str) -> bool:
             key="formulation",
         )
     return formulation == "soft"
-
-
-# Same arguments as Controller.build (see there), which it calls.
-def build_problem(
-    controller: Controller,
-    theta: np.ndarray,
-    t: float,
-    kp: float | None = None,
-    kd: float | None = None,
-    formulation: str = "paper",
-) -> qpsolvers.Problem:
-    """The tick's :class:`qpsolvers.Problem` at joint angles ``theta`` [rad], time ``t`` [s] (paper eq. 11)."""
-    return controller.build(theta, t, kp, kd, formulation).problem

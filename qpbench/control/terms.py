@@ -1,17 +1,7 @@
-"""The pieces of the controller's QP (paper eq. 11), one small class each.
-
-- :class:`CosinePath`, :class:`PolylinePath`: the desired path ``x_d(t)``.
-- :class:`ImpedanceTask`: the impedance reference ``b0`` (eq. 4) and the task
-  rows ``J v = b0`` (eq. 11b) or, in the soft formulation, the cost
-  ``rho/2 |J v - b0|^2``.
-- :class:`EscapeVelocityLimits`: joint-angle and joint-velocity limits as
-  bounds on ``v`` (eq. 11c).
-- :class:`ObstacleAvoidance`: one velocity-damper row per (key point,
-  obstacle point) pair (eqs. 8-10, signs fixed as in the project's notes).
-
-These are the readable numpy reference; :class:`qpbench.control.controller.Controller`
-assembles the same rows in one compiled kernel on its fast path.
-"""
+"""The pieces of the controller's QP (paper eq. 11) in numpy: the desired path ``x_d(t)``, the
+impedance reference ``b0`` (eq. 4), the escape-velocity bounds (eq. 11c) and the obstacles'
+velocity-damper rows (eqs. 8-10, signs as in the project's notes). The readable reference of
+what :mod:`qpbench.control.build_kernel` computes on the fast path."""
 
 from __future__ import annotations
 
@@ -32,21 +22,11 @@ __all__ = [
 
 
 class CosinePath:
-    """``x_d(t) = centre + amplitude * cos(omega t + phase)`` per axis, in [m] (paper sections 4.2-4.5).
-
-    Args:
-        centre: [m], shape (2,).
-        amplitude: [m], shape (2,).
-        omega: [rad/s], shape (2,).
-        phase: [rad], shape (2,).
-    """
+    """``x_d(t) = centre + amplitude * cos(omega t + phase)`` per axis (paper sections 4.2-4.5):
+    ``centre``, ``amplitude`` [m], ``omega`` [rad/s], ``phase`` [rad], each of shape (2,)."""
 
     def __init__(self, centre, amplitude, omega, phase=(0.0, 0.0)):
-        self.centre = np.asarray(centre, dtype=float)
-        self.amplitude = np.asarray(amplitude, dtype=float)
-        self.omega = np.asarray(omega, dtype=float)
-        self.phase = np.asarray(phase, dtype=float)
-        self._c = tuple(float(v) for v in (*self.centre, *self.amplitude, *self.omega, *self.phase))
+        self._c = tuple(float(v) for v in np.concatenate([centre, amplitude, omega, phase]))
 
     def __call__(self, t: float) -> tuple[float, float, float, float]:
         """``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)`` at time t [s], in [m] and [m/s]."""
@@ -61,12 +41,8 @@ class CosinePath:
 
 
 class PolylinePath:
-    """A piecewise-linear ``x_d(t)`` through ``points`` at ``times``; it holds the last point after the end.
-
-    Args:
-        times: Increasing times in [s], shape (m,), m >= 2.
-        points: [m], shape (m, 2).
-    """
+    """A piecewise-linear ``x_d(t)`` through ``points`` (m, 2) [m] at increasing ``times`` (m,)
+    [s], m >= 2; it holds the last point after the end."""
 
     def __init__(self, times, points):
         self.times = np.asarray(times, dtype=float)
@@ -94,16 +70,12 @@ class PolylinePath:
 
 
 class ImpedanceTask:
-    """Position-force task as a task-space velocity reference (paper eqs. 3, 4, 11b).
+    """Position-force task as a task-space velocity reference (paper eqs. 3, 4, 11b)::
 
-    ``b0 = xdot_d - Kd^-1 Kp (x - x_d) + Kd^-1 Fd n``: at rest in contact the end
-    effector sits ``Fd/Kp`` past ``x_d`` along ``n`` and the environment's spring
-    returns ``Fd`` when the estimate ``Kp`` is right.
+        b0 = xdot_d - Kd^-1 Kp (x - x_d) + Kd^-1 Fd n
 
-    Args:
-        path: The desired path, ``path(t) -> (x_d, xdot_d)`` components.
-        normal: Unit direction in which the robot presses.
-        desired_force: ``Fd`` in [N].
+    ``path(t) -> (x_d, xdot_d)`` components, ``normal`` the unit pressing direction, ``Fd`` [N].
+    At rest in contact the end effector sits ``Fd/Kp`` past ``x_d`` along ``n``.
     """
 
     def __init__(self, path, normal, desired_force: float):
@@ -119,11 +91,6 @@ class ImpedanceTask:
         return xdot_d - (kp / kd) * (np.asarray(x) - x_d) + (self.desired_force / kd) * self.normal
 
     @staticmethod
-    def rows(J: np.ndarray, b0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Equality rows ``A = J``, ``b = b0`` of the ``paper`` formulation (eq. 11b)."""
-        return J.copy(), b0.copy()
-
-    @staticmethod
     def cost(J: np.ndarray, b0: np.ndarray, rho: float) -> tuple[np.ndarray, np.ndarray]:
         """``(P, q)`` of ``1/2 v^T v + rho/2 |J v - b0|^2`` (``soft`` formulation):
         ``I + rho J^T J``, ``-rho J^T b0``."""
@@ -136,13 +103,8 @@ class EscapeVelocityLimits:
 
         lb = max(alpha (theta_min - theta), v_min),   ub = min(v_max, alpha (theta_max - theta))
 
-    With the plant ``theta += dt v`` and ``alpha dt < 1`` the angle never leaves
-    ``[theta_min, theta_max]`` once inside.
-
-    Args:
-        theta_min, theta_max: Joint-angle limits in [rad], shape (n,).
-        v_min, v_max: Joint-velocity limits in [rad/s], shape (n,).
-        alpha: Escape gain in [1/s].
+    ``theta_*`` [rad], ``v_*`` [rad/s], escape gain ``alpha`` [1/s]. With the plant
+    ``theta += dt v`` and ``alpha dt < 1`` the angle never leaves its limits once inside.
     """
 
     def __init__(self, theta_min, theta_max, v_min, v_max, alpha: float):
@@ -168,13 +130,7 @@ class ObstacleAvoidance:
         d/dt dist = u . (J_Ai v - Bdot_j) >= -k (dist - d_safe)
         =>  G row = -u^T J_Ai,   h = k (dist - d_safe) - u . Bdot_j
 
-    One row per pair, all pairs kept (fixed row count), rows ordered by key
-    point, then obstacle point.
-
-    Args:
-        obstacle: The obstacle.
-        k: Damper gain in [1/s] (> 0).
-        d_safe: Safety distance in [m].
+    Damper gain ``k`` [1/s], ``d_safe`` [m]; one row per pair, key point major.
     """
 
     def __init__(self, obstacle: Obstacle, k: float, d_safe: float):
@@ -185,11 +141,8 @@ class ObstacleAvoidance:
     def rows(
         self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(G, h, dist)`` for key points ``key_xy`` (a, 2) with Jacobians ``key_J`` (a, 2, n).
-
-        Returns:
-            G (a*m, n), h (a*m,), dist (a, m) in [m] (link radius subtracted).
-        """
+        """``G`` (a*m, n), ``h`` (a*m,), ``dist`` (a, m) [m] (``radius`` subtracted) for key
+        points ``key_xy`` (a, 2) [m] with Jacobians ``key_J`` (a, 2, n)."""
         _, dist, u = self.obstacle.closest(key_xy, t)
         dist = dist - radius
         a, m = dist.shape
@@ -200,20 +153,10 @@ class ObstacleAvoidance:
     def closest_rows(
         self, joints: np.ndarray, t: float, radius: float = 0.0
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rows at the closest point of each link (``[key_points] kind = "closest"``).
+        """Rows at each link's point closest to each obstacle point (key points ``closest``).
 
-        Link i is the segment ``joints[i] -> joints[i+1]``; its point ``A`` closest
-        to each obstacle point ``B`` (:meth:`~qpbench.robot.environment.Obstacle.closest_on_segments`)
-        gets the damper row above, with the Jacobian of ``A`` as a point of link i
-        and ``dist`` the distance to the link's capsule (``radius`` subtracted).
-
-        Args:
-            joints: Base, joints and end effector (n+1, 2) [m].
-            t: Time [s].
-            radius: Link radius [m].
-
-        Returns:
-            G (n*m, n), h (n*m,), dist (n, m) in [m], link major.
+        ``joints``: base, joints and end effector (n+1, 2) [m]; ``radius`` [m]. Returns ``G``
+        (n*m, n), ``h`` (n*m,) and ``dist`` (n, m) [m] to the link's capsule, link major.
         """
         n = joints.shape[0] - 1
         A, _, dist, u = self.obstacle.closest_on_segments(joints[:-1], joints[1:], t)

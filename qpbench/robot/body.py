@@ -1,19 +1,10 @@
 """The whole body: exact clearance of the arm's link capsules to the obstacles.
 
-The arm is a chain of capsules: link i is the segment from joint ``p[i]`` to
-``p[i+1]`` (the last one ends at the end effector) swollen by the link radius
-``r`` (``[key_points] link_radius``). The clearance of link i to an obstacle is
-the exact signed distance of its segment to the obstacle's shape
-(:meth:`qpbench.robot.environment.Obstacle.closest_on_segments`) minus ``r``
-[m]: ``< 0`` means the capsule is inside the obstacle, by that depth. The
-smallest over the obstacle's points is the link's clearance to it.
-
-The contact surface is the task, not an obstacle: a ``line`` obstacle that
-is the contact surface (the same line, its free side against the pressing
-direction, as the lower line of ``narrow``) is exempt for the end effector's
-link, which presses into it by design; every other link is judged against it
-(:func:`contact_obstacles`). The controller's closest-point obstacle rows
-(``[key_points] kind = "closest"``) use the same exemption.
+Link i is the segment ``p[i] -> p[i+1]`` swollen by the link radius ``r`` (``[key_points]
+link_radius``); its clearance to an obstacle is the exact signed distance of the segment to the
+shape minus ``r`` [m] (``< 0``: inside, by that depth). A static ``line`` obstacle that is the
+contact surface (:func:`contact_obstacles`) is exempt for the end effector's link, which presses
+into it by design; the closest-point key points use the same exemption.
 """
 
 from __future__ import annotations
@@ -25,13 +16,13 @@ from .kinematics import PlanarArm
 
 __all__ = ["BodyClearance", "body_clearance", "contact_obstacles", "link_label"]
 
-#: Tolerance of "the same line" when an obstacle is recognised as the contact surface [m, rad].
+#: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
 SAME_LINE_TOL = 1e-9
 
 
 def contact_obstacles(obstacles: list[Obstacle], surface: ContactSurface) -> list[bool]:
-    """For each obstacle: it is the contact surface (a static ``line`` through the surface's
-    point whose free side faces against the pressing direction ``surface.normal``)."""
+    """For each obstacle: it is the contact surface (a static ``line`` through its point, free
+    side against the pressing direction)."""
     out = []
     for o in obstacles:
         same = (
@@ -50,15 +41,9 @@ def link_label(link: int, n: int) -> str:
 
 
 class BodyClearance:
-    """Clearance of every link to every obstacle at a series of ticks.
-
-    Attributes:
-        d: ``(T, n, o)`` signed clearance [m] of link i to obstacle j at tick k
-            (``+inf`` where exempt: the end effector's link against the contact surface).
-        d_min: ``(T,)`` the smallest over links and obstacles [m] (``nan`` without obstacles).
-        link: ``(T,)`` the 1-based link of ``d_min`` (0 without obstacles).
-        obstacle: ``(T,)`` index of its obstacle (-1 without obstacles).
-    """
+    """Clearance ``d`` (T, n, o) [m] of every link to every obstacle per tick (``+inf`` where
+    exempt); per tick its smallest ``d_min`` [m] (NaN without obstacles), that one's 1-based
+    ``link`` (0 without) and ``obstacle`` index (-1 without)."""
 
     def __init__(self, d: np.ndarray):
         self.d = d
@@ -84,27 +69,15 @@ def body_clearance(
     radius: float = 0.0,
     exempt: list[bool] | None = None,
 ) -> BodyClearance:
-    """Clearance of the arm's capsules at joint angles ``theta`` (T, n) [rad] and times ``t`` (T,) [s].
-
-    Args:
-        arm: The robot.
-        theta: Joint angles per tick [rad].
-        t: The ticks' times [s] (moving obstacles' positions).
-        obstacles: The obstacles.
-        radius: Link radius [m].
-        exempt: Per obstacle, the end effector's link is not judged against it
-            (:func:`contact_obstacles`).
-    """
+    """Clearance of the arm's capsules of ``radius`` [m] at joint angles ``theta`` (T, n) [rad]
+    and times ``t`` (T,) [s]; ``exempt``: per obstacle, the end effector's link is not judged."""
     theta = np.atleast_2d(np.asarray(theta, dtype=float))
     T, n = theta.shape
     t = np.broadcast_to(np.asarray(t, dtype=float), (T,))
     d = np.empty((T, n, len(obstacles)))
     if not obstacles or T == 0:
         return BodyClearance(d)
-    phi = np.cumsum(theta, axis=1)
-    seg = arm.lengths[None, :, None] * np.stack([np.cos(phi), np.sin(phi)], axis=2)
-    p = np.zeros((T, n + 1, 2))
-    np.cumsum(seg, axis=1, out=p[:, 1:])
+    p = arm.joint_positions(theta)
     P0 = p[:, :-1].reshape(-1, 2)
     P1 = p[:, 1:].reshape(-1, 2)
     ts = np.repeat(t, n)

@@ -1,34 +1,18 @@
 """The robot's surroundings: the contact surface and the obstacles (paper sections 2.1, 2.2, 4).
 
-Contact surface: a line through ``point`` with unit normal ``normal``, the
-direction in which the robot presses. Penetration ``delta = n . (x - point)``;
-the force is a spring-damper acting only while penetrating (paper eq. 3 read
-as the environment's law)::
+Contact surface: a line through ``point`` with unit normal ``normal`` (the pressing direction);
+penetration ``delta = n . (x - point)``; a spring-damper force while penetrating (paper eq. 3
+read as the environment's law)::
 
     F = max(0, Kp_env delta + Kd_env deltadot)   if delta > 0, else 0     [N]
 
-Obstacles: every obstacle kind gives, for each key point ``A``, one or more
-obstacle points ``B`` (the closest point of an analytic shape, or each point
-of a point cloud), the distance ``dist`` and the unit vector ``u`` from ``B``
-to ``A`` (the gradient of ``dist`` with respect to ``A``). Every obstacle may
-translate with a constant velocity ``velocity`` [m/s]; its position at time t
-is its position at t = 0 plus ``velocity * t``. Adding a shape means adding one
-class here with :meth:`Obstacle.closest` (numpy) and, for the compiled
-per-tick build, a ``KERNEL_KIND`` code the kernel knows (the built-in four);
-a shape without one makes the controller use its numpy path.
-
-Distances of the ``line`` kind are signed (positive on the side ``normal``
-points to): a wall is a half-plane, and a key point that crossed it is not
-mistaken for one far away on the allowed side.
-
-The whole body: :meth:`Obstacle.closest_on_segments` gives, for each link
-segment ``P0 -> P1``, the point of the segment closest to the obstacle and the
-signed distance between them (the exact distance of a segment to the shape;
-negative inside a disk or behind a wall, and for a segment crossing a
-``segment`` obstacle its depth, see there; a cloud point has no inside).
-:mod:`qpbench.robot.body` turns it into the capsule clearance of each link
-(``link_radius`` subtracted); the controller's closest-point obstacle rows
-use the same points.
+Obstacles give, for each key point ``A``, one or more obstacle points ``B`` (the closest point of
+a shape, or each point of a cloud), the distance ``dist`` [m] (signed for a ``line``: a wall is a
+half-plane) and the unit vector ``u`` from ``B`` to ``A``. An obstacle may translate with a
+constant ``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance
+of link segments to a shape (negative inside), for the body's clearance
+(:mod:`qpbench.robot.body`) and the closest-point key points. A shape with a ``KERNEL_KIND`` is
+known to the compiled build; one without makes the controller use its numpy path.
 """
 
 from __future__ import annotations
@@ -49,8 +33,8 @@ __all__ = [
     "OBSTACLE_KINDS",
 ]
 
-#: Number of floats per obstacle point in the compiled kernel's table:
-#: ``[kind, p0x, p0y, p1x, p1y, radius, vx, vy]``.
+#: Floats per obstacle point in the compiled kernel's table: ``[kind, p0x, p0y, p1x, p1y, radius,
+#: vx, vy]``.
 PRIMITIVE_WIDTH = 8
 
 
@@ -70,16 +54,9 @@ def _unit(value, key: str) -> np.ndarray:
 
 
 class ContactSurface:
-    """A line the end effector presses on, with a spring-damper law (paper section 2.1, Figure 1).
-
-    Args:
-        point: A point of the surface in [m].
-        normal: Direction the robot presses in (normalised here).
-        stiffness: ``Kp_env`` in [N/m].
-        damping: ``Kd_env`` in [N s/m].
-        noise_std: Standard deviation of additive force-sensor noise in [N] (0: none).
-        seed: Seed of the noise generator (same seed, same noise).
-    """
+    """A line the end effector presses on (paper section 2.1, Figure 1): ``point`` [m], pressing
+    ``normal`` (normalised here), ``stiffness`` ``Kp_env`` [N/m], ``damping`` ``Kd_env``
+    [N s/m], force-sensor noise ``noise_std`` [N] drawn from ``seed``."""
 
     def __init__(
         self,
@@ -118,22 +95,14 @@ class ContactSurface:
         return float(self.normal[0] * x[0] + self.normal[1] * x[1] - self._offset)
 
     def force(self, x: np.ndarray, xdot: np.ndarray) -> float:
-        """Contact force magnitude along the normal in [N], as a sensor reads it (noise included).
-
-        Args:
-            x: End-effector position in [m].
-            xdot: End-effector velocity in [m/s].
-        """
+        """Contact force [N] at end-effector position ``x`` [m] and velocity ``xdot`` [m/s], as a
+        sensor reads it (noise included)."""
         n0, n1 = self.normal
-        delta = n0 * x[0] + n1 * x[1] - self._offset
+        delta = self.penetration(x)
+        f = 0.0
         if delta > 0.0:
-            f = self.stiffness * delta + self.damping * (n0 * xdot[0] + n1 * xdot[1])
-            f = f if f > 0.0 else 0.0
-        else:
-            f = 0.0
-        if self.noise_std > 0.0:
-            f += self.noise()
-        return f
+            f = max(0.0, self.stiffness * delta + self.damping * (n0 * xdot[0] + n1 * xdot[1]))
+        return f + self.noise()
 
     def noise(self) -> float:
         """One sample of the force-sensor noise in [N] (0.0 when ``noise_std`` is 0)."""
@@ -143,13 +112,8 @@ class ContactSurface:
 
 
 class Obstacle:
-    """Base class of the obstacle kinds.
-
-    Attributes:
-        name: Label used in log columns (``d_A2_wall``).
-        velocity: Constant translation velocity in [m/s], shape (2,).
-        n_points: Obstacle points ``B_j`` per key point (1 for analytic shapes).
-    """
+    """Base class of the obstacle kinds: ``name`` (in log columns, ``d_A2_wall``), constant
+    ``velocity`` [m/s], ``n_points`` obstacle points ``B_j`` per key point."""
 
     KIND: str = ""
     #: Code of the shape in the controller's compiled kernel (None: numpy path only).
@@ -161,13 +125,12 @@ class Obstacle:
         self.velocity = _vec2(velocity, f"obstacles.{name}.velocity")
 
     def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Obstacle points nearest to key points ``A`` (a, 2) at time ``t`` [s].
-
-        Returns:
-            ``B`` (a, m, 2) in [m], ``dist`` (a, m) in [m], ``u`` (a, m, 2), the
-            unit vector from ``B`` to ``A`` (zero where ``dist`` is 0).
-        """
-        raise NotImplementedError
+        """Obstacle points ``B`` (a, m, 2) [m] nearest to key points ``A`` (a, 2) at time ``t``
+        [s], ``dist`` (a, m) [m] and ``u`` (a, m, 2) from ``B`` to ``A`` (zero where ``dist`` is 0):
+        :meth:`closest_on_segments` of the points as segments of length 0."""
+        A = np.asarray(A, dtype=float)
+        _, B, dist, u = self.closest_on_segments(A, A, t)
+        return B, dist, u
 
     def primitives(self) -> np.ndarray:
         """Rows ``[kind, p0x, p0y, p1x, p1y, radius, vx, vy]`` (m, 8) of the compiled kernel, at t = 0."""
@@ -176,18 +139,10 @@ class Obstacle:
     def closest_on_segments(
         self, P0: np.ndarray, P1: np.ndarray, t
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Exact closest points of segments ``P0 -> P1`` (s, 2) [m] to the obstacle at time(s) ``t`` [s].
-
-        ``t`` is a number or one time per segment, shape (s,). For each segment
-        and obstacle point ``B_j`` (m per segment, as :meth:`closest`):
-
-        Returns:
-            ``A`` (s, m, 2): the point of the segment closest to the obstacle [m];
-            ``B`` (s, m, 2): the obstacle's point closest to ``A`` [m];
-            ``dist`` (s, m): the signed distance [m] (``< 0``: the segment is inside
-            the shape; its depth); ``u`` (s, m, 2): the unit direction in which
-            moving ``A`` increases ``dist`` (``(A - B) / |A - B|`` outside the shape).
-        """
+        """Exact closest points of segments ``P0 -> P1`` (s, 2) [m] to the obstacle at ``t`` [s]
+        (a number or one per segment): per segment and obstacle point, ``A`` (s, m, 2) on the
+        segment, ``B`` (s, m, 2) on the obstacle [m], the signed ``dist`` (s, m) [m] (``< 0``:
+        inside, by that depth) and ``u`` (s, m, 2), the way moving ``A`` increases ``dist``."""
         raise NotImplementedError
 
     def _at(self, start: np.ndarray, t, s: int) -> np.ndarray:
@@ -204,12 +159,8 @@ class Obstacle:
 
 
 class LineObstacle(Obstacle):
-    """An infinite line (a wall), the half-plane ``normal . (x - point) < 0`` being forbidden.
-
-    Args:
-        point: A point on the line at t = 0 in [m].
-        normal: Unit normal pointing to the free side (normalised here).
-    """
+    """An infinite line (a wall) through ``point`` [m] at t = 0; ``normal`` points to the free
+    side (normalised here), the half-plane ``normal . (x - point) < 0`` is forbidden."""
 
     KIND = "line"
     KERNEL_KIND = 0
@@ -218,14 +169,6 @@ class LineObstacle(Obstacle):
         super().__init__(name, velocity)
         self.point = _vec2(point, f"obstacles.{name}.point")
         self.normal = _unit(normal, f"obstacles.{name}.normal")
-
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        p = self.point + self.velocity * t
-        dist = (A - p) @ self.normal  # signed
-        B = A - dist[:, None] * self.normal
-        u = np.broadcast_to(self.normal, A.shape).copy()
-        return B[:, None, :], dist[:, None], u[:, None, :]
 
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.point, *self.normal, 0.0, *self.velocity]])
@@ -244,9 +187,9 @@ class LineObstacle(Obstacle):
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
 
 
-# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest, primitives) on
-# purpose: one class per obstacle kind, each with its own geometry, so that adding a kind
-# touches one class; the repeated lines are that protocol, not shared logic.
+# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest_on_segments,
+# primitives) on purpose: one class per obstacle kind, each with its own geometry, so that adding
+# a kind touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 
@@ -259,15 +202,6 @@ class SegmentObstacle(Obstacle):
         self.b = _vec2(b, f"obstacles.{name}.b")
         if np.allclose(self.a, self.b):
             raise InputError("segment end points must differ", key=f"obstacles.{name}.b")
-
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        a = self.a + self.velocity * t
-        ab = self.b - self.a
-        s = np.clip(((A - a) @ ab) / (ab @ ab), 0.0, 1.0)
-        B = a + s[:, None] * ab
-        dist, u = self._from_diff(A - B)
-        return B[:, None, :], dist[:, None], u[:, None, :]
 
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.a, *self.b, 0.0, *self.velocity]])
@@ -311,13 +245,6 @@ class DiskObstacle(Obstacle):
             )
         self.radius = float(radius)
 
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        c = self.center + self.velocity * t
-        dist, u = self._from_diff(A - c, self.radius)
-        B = c + self.radius * u
-        return B[:, None, :], dist[:, None], u[:, None, :]
-
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.center, 0.0, 0.0, self.radius, *self.velocity]])
 
@@ -346,12 +273,6 @@ class PointCloudObstacle(Obstacle):
             )
         self.points = pts
         self.n_points = pts.shape[0]
-
-    def closest(self, A: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        A = np.asarray(A, dtype=float)
-        B = np.broadcast_to(self.points + self.velocity * t, (A.shape[0], self.n_points, 2)).copy()
-        dist, u = self._from_diff(A[:, None, :] - B)
-        return B, dist, u
 
     def closest_on_segments(self, P0, P1, t):
         """Each cloud point against each segment; a point on a segment is at distance 0."""

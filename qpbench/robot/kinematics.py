@@ -1,23 +1,14 @@
 """Planar serial chain: forward kinematics, Jacobians and key points (paper sections 2.1, 2.2).
 
-A chain of ``n >= 2`` revolute joints about z. ``theta[k]`` is the relative
-angle of joint k in [rad]; the absolute angle of link i is
+``theta[k]`` is the relative angle of joint k [rad]; link i's absolute angle is
 ``phi[i] = sum(theta[:i+1])``. Joint positions (eq. 1)::
 
     p[0] = 0,   p[i+1] = p[i] + l[i] [cos phi[i], sin phi[i]]
 
-The end effector is ``p[n]``. A point ``x`` rigidly attached to link i has the
-Jacobian (eq. 2, 7b) whose column k <= i is ``z x (x - p[k]) = [-(x - p[k])_y,
-(x - p[k])_x]`` and whose columns k > i are zero.
-
-A point on a link is named by ``(link, frac)``: ``x = p[link] + frac * l[link]
-[cos phi, sin phi]``; ``frac = 1`` is the next joint, ``frac = 0.5`` the link's
-midpoint.
-
-The functions here are vectorised numpy (no loop over joints). The
-controller's compiled per-tick build (:mod:`qpbench.control.controller`)
-repeats the same maths inside one numba kernel; the tests check both against
-finite differences and against each other.
+The end effector is ``p[n]``. A point ``x`` on link i has the Jacobian (eqs. 2, 7b) whose column
+k <= i is ``[-(x - p[k])_y, (x - p[k])_x]`` and whose columns k > i are zero. A point on a link
+is ``(link, frac)``: ``x = p[link] + frac * l[link] [cos phi, sin phi]`` (``frac = 1``: the next
+joint). Vectorised numpy; :mod:`qpbench.control.build_kernel` repeats the maths compiled.
 """
 
 from __future__ import annotations
@@ -35,14 +26,7 @@ KEY_POINT_KINDS = ("paper", "closest")
 
 
 class PlanarArm:
-    """A planar serial chain of revolute joints.
-
-    Args:
-        lengths: Link lengths in [m], shape (n,), n >= 2, every length > 0.
-
-    Raises:
-        InputError: fewer than two links, or a length that is not positive.
-    """
+    """A planar serial chain of revolute joints with link ``lengths`` (n,) [m], n >= 2."""
 
     def __init__(self, lengths):
         lengths = np.asarray(lengths, dtype=float)
@@ -59,17 +43,17 @@ class PlanarArm:
         self.lengths = lengths
         self.n = lengths.size
 
-    # -- positions -----------------------------------------------------------
     def absolute_angles(self, theta: np.ndarray) -> np.ndarray:
-        """``phi[i] = sum(theta[:i+1])`` in [rad], shape (n,)."""
-        return np.cumsum(np.asarray(theta, dtype=float))
+        """``phi[i] = sum(theta[:i+1])`` in [rad], shape (..., n)."""
+        return np.cumsum(np.asarray(theta, dtype=float), axis=-1)
 
     def joint_positions(self, theta: np.ndarray) -> np.ndarray:
-        """Positions of the base, the joints and the end effector in [m], shape (n+1, 2)."""
+        """Positions of the base, the joints and the end effector [m], shape (..., n+1, 2), at
+        joint angles ``theta`` of shape (..., n) [rad]."""
         phi = self.absolute_angles(theta)
-        seg = self.lengths[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
-        p = np.zeros((self.n + 1, 2))
-        np.cumsum(seg, axis=0, out=p[1:])
+        seg = self.lengths[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+        p = np.zeros((*phi.shape[:-1], self.n + 1, 2))
+        np.cumsum(seg, axis=-2, out=p[..., 1:, :])
         return p
 
     def end_effector(self, theta: np.ndarray) -> np.ndarray:
@@ -85,7 +69,6 @@ class PlanarArm:
         d = np.stack([np.cos(phi[links]), np.sin(phi[links])], axis=1)
         return p[links] + (fracs * self.lengths[links])[:, None] * d
 
-    # -- Jacobians -----------------------------------------------------------
     def points_jacobians(
         self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -108,22 +91,12 @@ class PlanarArm:
 
 @dataclass(frozen=True)
 class KeyPoints:
-    """Points of the robot kept away from obstacles (paper section 2.2, 4.1).
+    """Points of the robot kept away from obstacles (paper sections 2.2, 4.1).
 
-    Two kinds (``[key_points] kind``):
-
-    - ``paper``: fixed points on the links (the paper's key points, :func:`default_key_points`);
-    - ``closest``: one point per link, the link's point closest to each obstacle,
-      found anew at every tick (named ``L1..Ln``; ``links`` are the links and
-      ``fracs`` their midpoints, only where a picture needs a fixed point).
-
-    Attributes:
-        links: Link index of each key point, shape (a,).
-        fracs: Position along its link, 0 = the link's inner joint, 1 = its outer joint.
-        names: ``A1..Aa`` in the paper's order (``L1..Ln`` for ``closest``).
-        radius: Link radius in [m]; distances to obstacles are measured from
-            the link's surface (``|A - B| - radius``).
-        kind: ``paper`` or ``closest``.
+    ``kind`` ``paper``: fixed points ``(links, fracs)`` named ``A1..Aa`` (:func:`default_key_points`);
+    ``closest``: each link's point closest to each obstacle, found anew every tick (``L1..Ln``;
+    ``fracs`` the midpoints, for pictures). Distances are from the link's surface: ``|A - B| -
+    radius`` [m].
     """
 
     links: np.ndarray
@@ -139,19 +112,12 @@ class KeyPoints:
 def default_key_points(
     n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0
 ) -> KeyPoints:
-    """Key points of an n-link chain: evenly spaced points on each link and the joints J2..Jn.
+    """Key points of an n-link chain: ``points_per_link`` evenly spaced points on each link
+    (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn; ``radius`` [m].
 
-    With ``points_per_link = 1`` and joints included this is the paper's set
-    for n = 4: A1, A3, A5, A7 at the link midpoints, A2, A4, A6 at J2, J3, J4.
-    The end effector is not a key point: it must be free to touch the contact
-    surface. Order: link by link, the link's points from the inner joint
-    outwards, then the link's outer joint (not after the last link).
-
-    Args:
-        n: Number of links.
-        points_per_link: Points on each link at fractions ``j / (m + 1)``, j = 1..m.
-        include_joints: Add the joints J2..Jn.
-        radius: Link radius in [m].
+    With one point per link this is the paper's set for n = 4: A1, A3, A5, A7 at the link
+    midpoints, A2, A4, A6 at J2, J3, J4. The end effector is not a key point (it touches the
+    contact surface). Order: link by link, inner joint outwards.
     """
     if points_per_link < 0:
         raise InputError(
@@ -176,13 +142,8 @@ def default_key_points(
 
 
 def closest_key_points(n: int, radius: float = 0.0) -> KeyPoints:
-    """Closest-point key points of an n-link chain: one per link, ``L1..Ln``, the end effector's
-    link included (:class:`KeyPoints`, kind ``closest``).
-
-    Args:
-        n: Number of links.
-        radius: Link radius in [m].
-    """
+    """Closest-point key points of an n-link chain (one per link, ``L1..Ln``, the end effector's
+    link included; ``radius`` [m])."""
     return KeyPoints(
         np.arange(n, dtype=np.int64),
         np.full(n, 0.5),

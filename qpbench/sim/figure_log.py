@@ -1,28 +1,11 @@
 """The figure log: what the closed-loop figures and the arm's pictures draw, small enough to keep.
 
-A run's full tick log (:mod:`qpbench.sim.log`, ``<out>/logs/*.parquet``) holds
-every column of every tick in float64: about 4 MB a run. The figures of a
-report (:mod:`qpbench.report.loop_figure`, :mod:`qpbench.report.plots`) and the
-arm's snapshot (:mod:`qpbench.report.arm`) need less: the columns they draw,
-at the detail a figure about 1,000 pixels wide can show. The figure log
-(``<out>/figure_logs/<same name>.parquet``) keeps:
-
-- the columns drawn: ``t``, ``theta_i``, ``v_i``, ``ee_x``, ``ee_y``,
-  ``xd_x``, ``xd_y``, ``tracking_error``, ``force_error``, every
-  ``d_<A>_<obstacle>``, ``d_min``, ``v_sq``, ``solve_time_s``, ``kp_hat``,
-  ``status``, ``fallback``, ``zero_velocity`` (floats as float32: 7
-  significant digits, far below a pixel);
-- the ticks: the run cut into :data:`BUCKETS` equal spans of ticks, and of
-  each span its first tick and the ticks of the smallest and the largest
-  value of every drawn quantity (``|tracking error|``, ``|force error|``,
-  ``d_min``, ``solve_time_s``, ``v_sq``), so no peak, dip or worst point is
-  lost (min-max decimation); and every tick whose QP was infeasible or not
-  solved, failed, or whose backend answer was not applied (fallback, zero
-  velocity), with its neighbours, so the shaded bands keep their edges;
-- written with zstd compression, the floats' bytes split by stream: about 50 kB a
-  run of 20,000 ticks.
-
-A log of at most ``3 * BUCKETS`` ticks is kept whole.
+The figure log (``<out>/figure_logs/<same name as in logs/>.parquet``) keeps of a full tick
+log the drawn columns (floats as float32 with :data:`MANTISSA_BITS` of mantissa, far below a
+pixel) and, of each of :data:`BUCKETS` equal spans of ticks, its first tick and the ticks of
+the smallest and largest value of each drawn quantity (min-max decimation: no peak is lost),
+plus every tick not solved, failed or without the backend's own answer and its neighbours (the
+shaded bands keep their edges). A log of at most ``3 * BUCKETS`` ticks is kept whole.
 """
 
 from __future__ import annotations
@@ -42,7 +25,7 @@ FIGURE_LOG_DIR = "figure_logs"
 #: Spans of ticks a run is cut into (a figure is about 1,000 pixels wide).
 BUCKETS = 300
 
-#: Mantissa bits kept of each drawn value: a relative step of 2**-12 = 2.4e-4, below a pixel.
+#: Mantissa bits kept of each drawn value (a relative step of 2**-12).
 MANTISSA_BITS = 12
 
 #: Columns kept besides the per-joint and per-distance ones.
@@ -83,12 +66,8 @@ def _columns(frame: pd.DataFrame) -> list[str]:
 
 def _special(frame: pd.DataFrame) -> np.ndarray:
     """Ticks not solved, failed, or without the backend's own answer, and their neighbours."""
-    mask = np.zeros(len(frame), dtype=bool)
-    if tick_log.STATUS in frame.columns:
-        mask |= frame[tick_log.STATUS].astype(str).isin(_NOT_SOLVED).to_numpy()
-    for col in (tick_log.FALLBACK, tick_log.ZERO_VELOCITY):
-        if col in frame.columns:
-            mask |= frame[col].to_numpy(bool)
+    flags = frame[[tick_log.FALLBACK, tick_log.ZERO_VELOCITY]].to_numpy(bool).any(axis=1)
+    mask = frame[tick_log.STATUS].astype(str).isin(_NOT_SOLVED).to_numpy() | flags
     near = mask.copy()
     near[1:] |= mask[:-1]
     near[:-1] |= mask[1:]
@@ -102,8 +81,6 @@ def _extremes(frame: pd.DataFrame, buckets: int) -> np.ndarray:
     starts = edges[:-1][np.diff(edges) > 0]
     keep = [starts, np.array([n - 1])]
     for col, absolute in _EXTREMES:
-        if col not in frame.columns:
-            continue
         x = frame[col].to_numpy(float)
         x = np.abs(x) if absolute else x
         lo = np.where(np.isfinite(x), x, np.inf)
@@ -137,8 +114,7 @@ def figure_log(frame: pd.DataFrame, buckets: int = BUCKETS) -> pd.DataFrame:
             out[col] = out[col].astype(np.float32)
         elif out[col].dtype == np.float64:
             out[col] = _coarse(out[col].to_numpy())
-    if tick_log.STATUS in out.columns:
-        out[tick_log.STATUS] = out[tick_log.STATUS].astype(str)
+    out[tick_log.STATUS] = out[tick_log.STATUS].astype(str)
     return out
 
 

@@ -1,10 +1,5 @@
 """The closed loop's tick log: its columns, by name, in one place.
 
-:func:`qpbench.sim.loop.simulate` writes one row per tick; the summary
-(:mod:`qpbench.sim.summary`), the verdict (:mod:`qpbench.sim.verdict`), the
-figures (:mod:`qpbench.report.loop_figure`, :mod:`qpbench.report.plots`) and
-the arm's pictures read them through the names below, never by guessing.
-
 =================== ===========================================================
 t                   time [s]
 theta_i, v_i        joint angles [rad] and commanded velocities [rad/s]
@@ -15,26 +10,19 @@ force               measured contact force [N]; force_error = force - Fd [N]
 d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
                     point cloud's points; link radius subtracted)
 d_min               smallest of those [m]
-d_body_min          the body's clearance [m]: the smallest signed distance of a
-                    link's capsule to an obstacle (< 0: inside it, by that
-                    depth; exact; :mod:`qpbench.robot.body`; NaN without
-                    obstacles; the end effector's link not against the
-                    contact surface)
-d_body_link         its link, 1-based (the last carries the end effector; 0
-                    without obstacles)
+d_body_min          the body's clearance [m]: smallest signed distance of a link's
+                    capsule to an obstacle (< 0: inside; :mod:`qpbench.robot.body`;
+                    NaN without obstacles)
+d_body_link         its link, 1-based (0 without obstacles)
 d_body_obstacle     its obstacle's name ("" without obstacles)
 v_sq                ``|v|^2`` [rad^2/s^2]
 task_residual       ``|J v - b0|`` [m/s]
-status              the backend's status on the tick's QP, one of
-                    :data:`qpbench.statuses.TICK_STATUSES` (the backends'
-                    statuses, plus ``invalid``: a non-finite answer; ``error``
-                    is also an exception, ``time_limit`` also an answer
-                    dropped past the ``deadline``)
+status              the backend's status on the tick's QP
+                    (:data:`qpbench.statuses.TICK_STATUSES`)
 fallback            the soft fallback's answer was applied
 zero_velocity       zero velocity was commanded (fallback failed too)
 solve_time_s        wall time of the tick's solve call(s) [s]
-solver_time_s       the solve time the solver itself reported for them [s]
-                    (NaN when the backend reports none)
+solver_time_s       the solver's own reported time for them [s] (NaN: none)
 y_0, y_1            equality duals of the applied solution (paper formulation)
 z_max               largest inequality (obstacle row) dual
 kp_hat, kd_hat      interaction coefficients the tick's QP used
@@ -116,8 +104,7 @@ def joint_count(frame: pd.DataFrame) -> int:
 
 
 def distance_columns(frame: pd.DataFrame) -> list[str]:
-    """The ``d_<A>_<obstacle>`` columns of a tick log, in its order (``d_min`` and the
-    ``d_body_*`` columns excluded)."""
+    """The ``d_<A>_<obstacle>`` columns of a tick log, in its order."""
     return [
         c
         for c in frame.columns
@@ -127,12 +114,8 @@ def distance_columns(frame: pd.DataFrame) -> list[str]:
 
 
 def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
-    """The float block the tick kernel fills, in order (every column but ``status``).
-
-    Args:
-        n: Joints.
-        obstacle_columns: ``(key point, obstacle)`` of each distance column.
-    """
+    """The float block the tick kernel fills, in order (every column but ``status``), for ``n``
+    joints and the ``(key point, obstacle)`` of each distance column."""
     return (
         [T]
         + theta_columns(n)
@@ -144,17 +127,16 @@ def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
 
 
 def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.DataFrame:
-    """The tick log as a frame: the first ``len(statuses)`` rows of ``data``, flags as
-    booleans, ``status`` a categorical of :data:`~qpbench.statuses.TICK_STATUSES`
-    (a status outside them counts as ``error``)."""
+    """The first ``len(statuses)`` rows of ``data`` as a frame, ``status`` a categorical of
+    :data:`~qpbench.statuses.TICK_STATUSES` (another status counts as ``error``)."""
     done = len(statuses)
     codes = {s: i for i, s in enumerate(TICK_STATUSES)}
     status_codes = np.fromiter(
         (codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done
     )
     frame = pd.DataFrame(data[:done], columns=columns)
-    frame[FALLBACK] = frame[FALLBACK].astype(bool)
-    frame[ZERO_VELOCITY] = frame[ZERO_VELOCITY].astype(bool)
+    for flag in (FALLBACK, ZERO_VELOCITY):
+        frame[flag] = frame[flag].astype(bool)
     frame.insert(
         columns.index(FALLBACK),
         STATUS,
@@ -164,13 +146,7 @@ def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.Da
 
 
 def add_body_columns(frame: pd.DataFrame, body, obstacle_names: list[str]) -> None:
-    """Insert ``d_body_min``, ``d_body_link``, ``d_body_obstacle`` after ``d_min``.
-
-    Args:
-        frame: The tick log.
-        body: The ticks' :class:`qpbench.robot.body.BodyClearance`.
-        obstacle_names: Names of the obstacles, in the controller's order.
-    """
+    """Insert the ticks' :class:`qpbench.robot.body.BodyClearance` after ``d_min``."""
     at = list(frame.columns).index(D_MIN) + 1
     names = np.array(list(obstacle_names) + [""], dtype=object)
     frame.insert(at, D_BODY_MIN, body.d_min)

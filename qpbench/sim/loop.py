@@ -1,60 +1,26 @@
 """Closed-loop simulation: the controller's QP solved every tick by a backend, a kinematic plant.
 
-One tick at ``t_k = k dt`` (k = 0 .. ticks-1):
+One tick at ``t_k = k dt``:
 
-1. sense: end-effector position ``x_k`` (forward kinematics), velocity
-   ``xdot_k = (x_k - x_{k-1}) / dt`` (0 at k = 0), contact force ``F_k`` of the
-   environment's spring-damper (with the scenario's sensor noise);
-2. build the tick's QP (eq. 11, the chosen formulation) with the current
-   ``Kp_hat, Kd_hat``;
-3. solve it with the backend (warm-started from the previous command). If the
-   backend returns no solution (infeasible, failure), solve the
-   ``soft`` formulation of the same tick with the same backend (fallback); if
-   that fails too, command zero velocity. An *online* backend (class attribute
-   ``online = True``, the RNN) is its own controller: its ``x`` is applied
-   whatever its status, with no fallback. A non-finite ``x`` counts as no
-   solution. (A backend that cannot classify infeasibility and stops on a
-   budget, like ``rnn-converged``, spends that budget on every infeasible
-   tick of the ``paper`` formulation; on the scenarios' infeasible start its
-   soft fallback fails too and the arm stops: see results/rnn/README.md).
-   Every solve is guarded, so a faulty backend cannot stop the loop, and
-   classified as the per-tick bench's guard does (:mod:`qpbench.statuses`):
-   a Python exception escaping the backend makes the tick's status ``error``
-   (the first exception's ``"Type: message"`` is kept in the summary as
-   ``first_error``); an ``x`` holding a NaN or an infinity (or ``optimal``
-   without an ``x``) is ``invalid``. After either, or an ``error`` the
-   backend reported, the backend is reset (a late answer is dropped, not
-   distrusted: its solver state is the tick's, so it is not reset). Each of these is a tick without a
-   solution: soft fallback, else zero velocity (an online backend: zero
-   velocity). An exception of the fallback's own solve counts as a failed
-   fallback (zero velocity; ``fallback_errors`` in the summary).
-   Time never changes the trajectory unless asked to: an answer is applied
-   however long it took (its time is in ``solve_time_s`` and the summary's
-   ``deadline_misses`` counts the ticks slower than ``dt``), so a run is the
-   same on a fresh machine (kernels compiled first, before the clock:
-   :func:`qpbench.jit.warmup`) and on the next. With a ``deadline``
-   (``--deadline``) an answer, or a fallback's, that arrives later is
-   dropped (status ``time_limit``, counted in ``deadline_dropped``), as a
-   real-time controller would. A solve is never interrupted, so a backend
-   that hangs (in native code) hangs the loop; ``qpbench closed-loop``
-   guards against that (and against a crash of the process) by running such
-   a backend's simulation in a worker process with a deadline for the whole
-   run (:mod:`qpbench.harness.closed_loop`);
+1. sense: end-effector position ``x_k``, velocity ``(x_k - x_{k-1}) / dt`` (0 at k = 0) and the
+   contact force ``F_k`` of the environment's spring-damper (plus the scenario's sensor noise);
+2. build the tick's QP (eq. 11, the chosen formulation) with the current ``Kp_hat, Kd_hat``;
+3. solve it, warm-started from the previous command. A tick without a usable answer (no
+   solution, a non-finite ``x``, an exception: status ``error``, an answer later than
+   ``deadline``: ``time_limit``) solves the ``soft`` formulation with the same backend
+   (fallback), else commands zero velocity; an online backend (``online = True``, the RNN) is
+   its own controller: its ``x`` is applied whatever its status, never a fallback. After a
+   failure the backend is reset. Without a ``deadline`` every answer is applied however long
+   it took, so the trajectory does not depend on the machine; a solve is never interrupted
+   (``qpbench closed-loop`` runs a run in a worker process with a deadline for the whole run);
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
 5. plant: ``theta_{k+1} = theta_k + dt v_k``.
 
-Per tick the Python side does the least it can: one call of the controller's
-compiled build kernel (which also returns the end-effector position, the
-key-point distances and ``x_d``: nothing is recomputed), the backend's
-``solve``, and one call of the compiled tick kernel
-(:mod:`qpbench.sim.tick_kernel`) that senses, writes the tick's log row into
-a preallocated array and advances the plant. The body's clearance to the
-obstacles (``d_body_*``, :mod:`qpbench.robot.body`) is computed after the
-loop, for every tick at once, from the logged joint angles and times: exact
-at every tick, and nothing added to the loop. Statuses are collected as
-strings and coded once at the end, when the log becomes a
-:class:`pandas.DataFrame`, one row per tick (columns: :mod:`qpbench.sim.log`).
-The run's figures and verdict: :mod:`qpbench.sim.summary`.
+Per tick: one call of the controller's compiled build kernel, the backend's ``solve`` and one
+call of the compiled tick kernel (:mod:`qpbench.sim.tick_kernel`: sensing, the log row, the
+plant). The body's clearance (``d_body_*``, :mod:`qpbench.robot.body`) is computed after the
+loop for every tick at once. The log is one row per tick (:mod:`qpbench.sim.log`); the run's
+figures and verdict: :mod:`qpbench.sim.summary`.
 """
 
 from __future__ import annotations
@@ -73,12 +39,11 @@ from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
 from .arguments import check_arguments, resolve_backend
-from .dump import write_dump
 from .scenario import Scenario, load_scenario
-from .summary import summarize
+from .summary import jsonable, summarize
 from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
 
-__all__ = ["SimResult", "resolve_backend", "simulate", "write_dump"]
+__all__ = ["SimResult", "resolve_backend", "simulate"]
 
 log = logging.getLogger(__name__)
 #: One line per solve, shown by ``qpbench -vv`` (the CLI sets its level).
@@ -106,14 +71,8 @@ def _reset(backend: Backend) -> None:
 
 @dataclass
 class SimResult:
-    """What :func:`simulate` returns.
-
-    Attributes:
-        log: One row per tick (columns: :mod:`qpbench.sim.log`).
-        summary: Figures of the whole run (:func:`qpbench.sim.summary.summarize`).
-        records: The dumped ticks' QPs (:class:`qpbench.formats.ProblemRecord`),
-            when ``dump`` or ``every`` was given.
-    """
+    """The tick log (:mod:`qpbench.sim.log`), the summary (:func:`~qpbench.sim.summary.summarize`)
+    and the kept ticks' QPs (:class:`qpbench.formats.ProblemRecord`, with ``dump`` or ``every``)."""
 
     log: pd.DataFrame
     summary: dict
@@ -135,39 +94,15 @@ def simulate(
 ) -> SimResult:
     """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
 
-    Args:
-        scenario: A :class:`Scenario`, a shipped scenario's name or a file path.
-        backend: A backend name (``"qpsolvers:daqp"``, ``"clarabel"``, ``"rnn"``) or instance.
-        formulation: ``paper`` (hard task, eq. 11) or ``soft``.
-        duration: Simulated time in [s] (default: the scenario's).
-        dt: Control period in [s] (default: the scenario's).
-        every: Keep every K-th tick's QP as a record (default 1 when dumping).
-        dump: Folder to write the kept QPs to as a problem set
-            (:func:`qpbench.formats.write_problem_set`).
-        progress: Show a tqdm progress bar.
-        profile: Settings profile of a backend given by name.
-        deadline: Per-tick deadline in [s], ``None`` (the default) for none.
-            Without one, every answer is applied whenever it arrives: the
-            trajectory does not depend on how long a solve took (a compile, a
-            loaded machine). With one, an answer that arrives later is
-            dropped: status ``time_limit``, and the tick goes on as a tick
-            without a solution (soft fallback, else zero velocity); the run then
-            depends on the machine's speed. A solve is never interrupted.
-        wall_budget_s: Wall-time budget of the loop in [s] (default: none).
-            Checked between ticks: once spent, the run stops and the log
-            holds the ticks simulated so far, the same rows an uncut run
-            has (nothing simulated depends on how long a solve took, only
-            how far the run gets); the summary says ``stopped_early``.
-
-    Returns:
-        The per-tick log, the summary and the kept records. Besides
-        :func:`qpbench.sim.summary.summarize`'s figures the summary holds ``deadline_s`` (the
-        deadline or ``None``), ``deadline_misses`` (ticks whose solve calls
-        took longer than the control period ``dt``: the ticks a 1/dt loop
-        would not have kept up with; a time figure, like ``solve_time_*``),
-        ``deadline_dropped`` (ticks whose answer was dropped for arriving
-        after the deadline; ``None`` without a deadline), ``raised_ticks``,
-        ``fallback_errors``, ``first_error`` and ``first_error_t``.
+    ``scenario`` is a :class:`Scenario`, a shipped scenario's name or a file; ``backend`` a name
+    or an instance; ``formulation`` ``paper`` (eq. 11) or ``soft``; ``duration``, ``dt`` [s]
+    override the scenario's. ``every`` keeps every K-th tick's QP (default 1 with ``dump``, a
+    folder the kept QPs are written to as a problem set). ``deadline`` [s]: an answer arriving
+    later is dropped (status ``time_limit``; the run then depends on the machine's speed).
+    ``wall_budget_s`` [s]: checked between ticks; once spent the run stops with the ticks done
+    (the same rows an uncut run has) and the summary says ``stopped_early``. The run adds to
+    the summary ``deadline_s``, ``deadline_dropped`` (``None`` without a deadline),
+    ``raised_ticks``, ``fallback_errors``, ``first_error`` and ``first_error_t`` [s].
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
@@ -181,24 +116,37 @@ def simulate(
     run.loop(progress, wall_budget_s)
     result = run.result(wall_budget_s)
     if dump is not None:
-        write_dump(
-            dump,
-            result.records,
-            scenario,
-            be.name,
-            formulation,
-            keep_every,
-            scenario.duration,
-            scenario.dt,
-        )
+        _write_dump(dump, result.records, scenario, be.name, formulation, keep_every)
     return result
 
 
-class _Run:
-    """One closed-loop run, in named steps: set up, warm the kernels, loop over the ticks, tabulate.
+def _write_dump(folder, records, scenario: Scenario, backend_name, formulation, every) -> None:
+    """Write the kept ticks' QPs as a problem set; the manifest holds the scenario file's text."""
+    from ..formats import write_problem_set
 
-    The per-tick state lives in local variables of :meth:`loop` (the hot path);
-    a tick whose own answer is not applied goes through :meth:`_without_answer`.
+    generator = {
+        "name": "qpbench simulate",
+        "scenario": scenario.name,
+        "backend": backend_name,
+        "formulation": formulation,
+        "every": every,
+        "duration": scenario.duration,
+        "dt": scenario.dt,
+    }
+    extra = {
+        "scenario_file": scenario.path.name if scenario.path is not None else None,
+        "scenario_toml": scenario.source,
+        "ticks_per_record": every,
+    }
+    if scenario.overrides:  # values set over the file's (the TOML above is the file as it is)
+        extra["scenario_overrides"] = jsonable(scenario.overrides)
+    write_problem_set(folder, records, generator=generator, extra=extra)
+
+
+class _Run:
+    """One closed-loop run: set up, warm the kernels, loop over the ticks, tabulate.
+
+    The per-tick state lives in local variables of :meth:`loop` (the hot path).
     """
 
     def __init__(
@@ -209,12 +157,8 @@ class _Run:
         keep_every: int | None,
         deadline: float | None,
     ):
-        self.scenario, self.be, self.formulation, self.keep_every = (
-            scenario,
-            backend,
-            formulation,
-            keep_every,
-        )
+        self.scenario, self.be = scenario, backend
+        self.formulation, self.keep_every = formulation, keep_every
         self.deadline = deadline
         # a late answer is dropped only past a deadline
         self.limit = math.inf if deadline is None else float(deadline)
@@ -235,17 +179,12 @@ class _Run:
         self.none = np.zeros(0)
         self.records: list = []
         self.statuses: list[str] = []
-        self.n_fallback = self.n_zero = self.n_dropped = self.n_raised = self.n_fallback_errors = 0
+        self.n_dropped = self.n_raised = self.n_fallback_errors = 0
         self.first_error = self.first_error_t = None
-        self.wall = 0.0
 
     def warm(self) -> None:
-        """Compile (or load from the numba cache) the loop's own kernels before the clock starts.
-
-        The backend's kernels (the network's) are the caller's to prepare,
-        with :func:`qpbench.jit.warmup` for the backends it runs, as every
-        command and the harness do.
-        """
+        """Compile (or load) the loop's own kernels before the clock starts; the backend's are
+        the caller's (:func:`qpbench.jit.warmup`)."""
         ctrl = self.ctrl
         arrays = ctrl.build_arrays(self.theta, 0.0, ctrl.kp, ctrl.kd, self.soft_primary)
         warm_post_kernel(ctrl, self.surface, self.dt, self.theta, arrays)
@@ -255,7 +194,7 @@ class _Run:
         ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
         data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
         theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
-        c_force, c_ferr = self.cidx[tick_log.FORCE], self.cidx[tick_log.FORCE_ERROR]
+        c_force = self.cidx[tick_log.FORCE]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
         post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
@@ -263,7 +202,7 @@ class _Run:
         kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
         run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
-        bar = self._progress_bar(run_name) if progress else None
+        bar = _progress_bar(ticks, run_name) if progress else None
         start = perf()
         stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
         for k in range(ticks):
@@ -321,8 +260,7 @@ class _Run:
                 )
             if noisy:
                 force += surface.noise()
-                data[k, c_force] = force
-                data[k, c_ferr] = force - fd
+                data[k, c_force], data[k, c_force + 1] = force, force - fd  # force, force_error
             if adaptive is not None:
                 xd = arrays.xd
                 kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
@@ -331,25 +269,8 @@ class _Run:
         self.wall = perf() - start
         _finish(bar)
 
-    def _progress_bar(self, run_name: str):
-        """A tqdm bar over the run's ticks (the loop updates it every 500 ticks)."""
-        from tqdm import tqdm
-
-        return tqdm(total=self.ticks, unit="tick", desc=run_name, mininterval=0.5)
-
-    def _without_answer(
-        self,
-        k: int,
-        t: float,
-        sol,
-        solve_s: float,
-        t0: float,
-        arrays,
-        kp: float,
-        kd: float,
-        v: np.ndarray,
-    ) -> tuple[str, np.ndarray, float]:
-        """A tick whose own answer is not applied: say why (:func:`~qpbench.statuses.classify`),
+    def _without_answer(self, k, t, sol, solve_s, t0, arrays, kp, kd, v):
+        """A tick whose own answer is not applied: classify it (:func:`~qpbench.statuses.classify`),
         then apply the soft formulation's answer (same backend), else zero velocity.
 
         Returns the tick's status, the velocity applied [rad/s] and the noise-free force [N].
@@ -391,42 +312,20 @@ class _Run:
         if force < 0.0:  # the fallback's answer was not finite either
             mode, x = ZERO, zeros
             force = self._post(k, t, arrays, x, none, mode, kp, kd, t0)
-        if mode == FALLBACK:
-            self.n_fallback += 1
-            return status, x, force
-        self.n_zero += 1
-        return status, zeros.copy(), force
+        return status, (x if mode == FALLBACK else zeros.copy()), force
 
     def _post(self, k, t, arrays, x, z, mode, kp, kd, t0) -> float:
-        return get_post_kernel()(
-            self.theta,
-            x,
-            arrays.ee,
-            self.sensed,
-            arrays.J,
-            arrays.b0,
-            arrays.dist,
-            arrays.xd,
-            self.none,
-            z,
-            self.data,
-            k,
-            self.ci,
-            self.cf,
-            t,
-            mode,
-            kp,
-            kd,
-            time.perf_counter() - t0,
-        )
+        """The tick kernel on a tick without its own answer (no equality duals)."""
+        a = arrays
+        geometry = (a.ee, self.sensed, a.J, a.b0, a.dist, a.xd)
+        tail = (self.data, k, self.ci, self.cf, t, mode, kp, kd, time.perf_counter() - t0)
+        return get_post_kernel()(self.theta, x, *geometry, self.none, z, *tail)
 
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated."""
-        scenario, dt, deadline = self.scenario, self.dt, self.deadline
+        scenario, deadline, ctrl = self.scenario, self.deadline, self.ctrl
         done = len(self.statuses)
-        misses = int(np.count_nonzero(self.data[:done, self.cidx[tick_log.SOLVE_TIME]] > dt))
         frame = tick_log.to_frame(self.data, self.cols, self.statuses)
-        ctrl = self.ctrl
         body = body_clearance(
             ctrl.arm,
             frame[tick_log.theta_columns(ctrl.n)].to_numpy(),
@@ -436,24 +335,18 @@ class _Run:
             ctrl.exempt,
         )
         tick_log.add_body_columns(frame, body, [o.name for o in ctrl.obstacles])
+        run_info = dict(
+            deadline_s=deadline if deadline is None else float(deadline),
+            deadline_dropped=None if deadline is None else self.n_dropped,
+            raised_ticks=self.n_raised,
+            fallback_errors=self.n_fallback_errors,
+            first_error=self.first_error,
+            first_error_t=self.first_error_t,
+            wall_budget_s=wall_budget_s,
+            stopped_early=done < self.ticks,
+        )
         summary = summarize(
-            frame,
-            scenario,
-            self.ctrl,
-            self.be.name,
-            self.formulation,
-            self.wall,
-            run_info=dict(
-                deadline_s=deadline if deadline is None else float(deadline),
-                deadline_misses=misses,
-                deadline_dropped=None if deadline is None else self.n_dropped,
-                raised_ticks=self.n_raised,
-                fallback_errors=self.n_fallback_errors,
-                first_error=self.first_error,
-                first_error_t=self.first_error_t,
-                wall_budget_s=wall_budget_s,
-                stopped_early=done < self.ticks,
-            ),
+            frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info=run_info
         )
         recs = []
         if self.keep_every is not None:
@@ -472,6 +365,13 @@ class _Run:
                 for k, t, p in self.records
             ]
         return SimResult(frame, summary, recs)
+
+
+def _progress_bar(ticks: int, desc: str):
+    """A tqdm bar over a run's ticks (the loop updates it every 500 ticks)."""
+    from tqdm import tqdm
+
+    return tqdm(total=ticks, unit="tick", desc=desc, mininterval=0.5)
 
 
 def _finish(bar) -> None:

@@ -26,9 +26,7 @@ status sets are :mod:`qpbench.statuses`'):
   (an exception or an ``error`` status, an answer dropped past the
   deadline or a budget, a non-finite answer). :func:`qpbench.sim.loop.simulate` adds, in
   ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
-  none, every answer applied), ``deadline_misses`` (ticks whose solve
-  calls took longer than ``dt``: the loop did not keep up with its rate
-  there), ``deadline_dropped`` (answers dropped past the deadline;
+  none, every answer applied), ``deadline_dropped`` (answers dropped past the deadline;
   ``None`` without one), ``raised_ticks`` (ticks whose
   solve raised), ``fallback_errors`` (fallback solves that raised),
   ``first_error`` (``"Type: message"`` of the first exception, else the
@@ -49,7 +47,8 @@ status sets are :mod:`qpbench.statuses`'):
   ``max_p99_fraction_of_dt`` and ``max_over_dt_share`` of ``[verdict]``):
   ``realtime`` (``yes``/``no``) and ``realtime_reason`` from the measured call
   times of every tick (``solve_time_s``; their p99 is ``solve_time_p99_s``,
-  the share of ticks longer than ``dt`` ``over_dt_share``); ``realtime_solver``
+  the share of ticks longer than ``dt`` ``over_dt_share``, their count
+  ``deadline_misses``); ``realtime_solver``
   (``yes``/``no``/``unknown``) and ``realtime_solver_reason`` from the time the
   solver itself reported (``solver_time_s``; p99 ``solver_time_p99_s``, share
   over ``dt`` ``solver_over_dt_share``; ``None`` when the backend reports none).
@@ -204,22 +203,28 @@ def summarize(
     out["verdict_reasons"] = verdict.text
     out["key_point_rule"] = verdict.key_point_rule
     out["key_point_rule_reason"] = verdict.key_point_rule_reason
-    out.update(_realtime_figures(frame, dt, scenario))
+    out.update(_realtime_figures(frame, dt, scenario, out["solve_time_p99_s"]))
     return out
 
 
-def _realtime_figures(frame: pd.DataFrame, dt: float, scenario: Scenario) -> dict:
-    """Real time at ``dt`` [s] from the measured call times and from the solver's own times."""
+def _realtime_figures(
+    frame: pd.DataFrame, dt: float, scenario: Scenario, p99: float | None
+) -> dict:
+    """Real time at ``dt`` [s] from the measured call times (p99 ``p99`` [s]) and from the
+    solver's own times; ``deadline_misses``: the calls longer than ``dt``."""
     settings = scenario.verdict
     calls = frame[log.SOLVE_TIME].to_numpy(dtype=float)
     own = frame[log.SOLVER_TIME].to_numpy(dtype=float)
     own = own[np.isfinite(own)]
-    realtime, why = judge_realtime(calls, dt, settings, "call")
-    solver, solver_why = judge_realtime(own, dt, settings, "solver")
+    misses, own_over = int(np.count_nonzero(calls > dt)), int(np.count_nonzero(own > dt))
+    own_p99 = _none(np.quantile(own, 0.99)) if own.size else None
+    realtime, why = judge_realtime(p99, misses, calls.size, dt, settings, "call")
+    solver, solver_why = judge_realtime(own_p99, own_over, own.size, dt, settings, "solver")
     return {
-        "over_dt_share": _none(np.mean(calls > dt)) if calls.size else None,
-        "solver_time_p99_s": _none(np.quantile(own, 0.99)) if own.size else None,
-        "solver_over_dt_share": _none(np.mean(own > dt)) if own.size else None,
+        "deadline_misses": misses,
+        "over_dt_share": misses / calls.size if calls.size else None,
+        "solver_time_p99_s": own_p99,
+        "solver_over_dt_share": own_over / own.size if own.size else None,
         "realtime": "yes" if realtime == "yes" else "no",
         "realtime_reason": why if calls.size else "no tick simulated",
         "realtime_solver": solver,

@@ -1,11 +1,5 @@
-"""The closed loop's per-tick compiled step: log the tick, sense, advance the plant.
-
-One call of :func:`_post_py` (compiled by numba) per tick writes the tick's row
-of the log (:mod:`qpbench.sim.log`) into a preallocated array by index (no
-dict, no pandas), senses the end effector's velocity and the contact force,
-and integrates ``theta += dt v``. Its float and int constant blocks are made
-once per run by :func:`post_constants`.
-"""
+"""The closed loop's per-tick compiled step: write the tick's log row (:mod:`qpbench.sim.log`)
+by index, sense the end effector's velocity and the contact force, advance ``theta += dt v``."""
 
 from __future__ import annotations
 
@@ -37,8 +31,7 @@ def get_post_kernel() -> Callable:
     return _post_kernel
 
 
-#: ``mode`` argument of the post kernel: the tick's own answer applied, the
-#: soft fallback's, or zero velocity.
+#: ``mode`` of the post kernel: the tick's own answer applied, the soft fallback's, zero velocity.
 APPLIED, FALLBACK, ZERO = 0, 1, 2
 
 # Layout of the kernel's constant float block ``cf``: tangent (2), surface (6), dt.
@@ -53,10 +46,8 @@ def _post_py(
 ):  # pragma: no cover - compiled
     """Log tick ``k`` into ``data[k]`` and advance the plant ``theta += dt v``.
 
-    Returns the noise-free contact force [N], and leaves the sensed end-effector position
-    [m] in ``sensed[0:2]`` and its finite-difference velocity [m/s] in
-    ``sensed[2:4]``. When ``v`` holds a NaN or an infinity nothing is written
-    or advanced and -1.0 is returned (the caller falls back).
+    Returns the noise-free contact force [N] (-1.0, nothing written, when ``v`` is not finite);
+    leaves the end-effector position [m] and velocity [m/s] in ``sensed``.
     """
     n = theta.shape[0]
     for i in range(n):
@@ -87,8 +78,7 @@ def _post_py(
         xd1 = (ee[1] - sensed[1]) / dt
     sensed[0], sensed[1], sensed[2], sensed[3] = ee[0], ee[1], xd0, xd1
     # Compiled twin of ContactSurface.force (noise-free; surf = [nx, ny, n . point, stiffness,
-    # damping, Fd] in cf): kept inline so the kernel stays one call per tick with no Python object
-    # inside; tests/test_tick_kernel.py::test_post_kernel_force_matches_contact_surface checks they agree.
+    # damping, Fd]): inline so a tick is one call; tests/test_tick_kernel.py checks they agree.
     nx, ny = cf[_CF_SURF], cf[_CF_SURF + 1]
     delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
     force = 0.0
@@ -133,48 +123,23 @@ def post_constants(
     controller: Controller, surface: ContactSurface, dt: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The tick log's float columns and the post kernel's constant blocks ``(cols, cidx, ci, cf)``."""
-    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in controller.obstacle_columns()])
-    cidx = {c: i for i, c in enumerate(cols)}
-    normal = controller.task.normal
-    tangent = np.array([-normal[1], normal[0]])
     obstacle_cols = controller.obstacle_columns()
-    # log column c: its (key point, obstacle)'s points in the flat distance array
-    col_start = [s.start for _, _, s in obstacle_cols]
-    col_end = [s.stop for _, _, s in obstacle_cols]
-    first_theta, first_v = log.theta_columns(1)[0], log.velocity_columns(1)[0]
-    names = (
-        first_theta,
-        first_v,
-        log.EE_X,
-        None,
-        log.FORCE,
-        log.FALLBACK,
-        log.ZERO_VELOCITY,
-        log.SOLVE_TIME,
-        log.Y_0,
-        log.Z_MAX,
-        log.KP_HAT,
-        log.KD_HAT,
-    )
+    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in obstacle_cols])
+    cidx = {c: i for i, c in enumerate(cols)}
+    first = (log.theta_columns(1)[0], log.velocity_columns(1)[0], log.EE_X)
+    flags = (log.FALLBACK, log.ZERO_VELOCITY, log.SOLVE_TIME, log.Y_0, log.Z_MAX)
+    names = (*first, None, log.FORCE, *flags, log.KP_HAT, log.KD_HAT)  # None: the first distance
     ci = np.array(
         [cidx[log.D_MIN] - len(obstacle_cols) if c is None else cidx[c] for c in names]
-        + col_start
-        + col_end,
+        # log column c: its (key point, obstacle)'s points in the flat distance array
+        + [s.start for _, _, s in obstacle_cols]
+        + [s.stop for _, _, s in obstacle_cols],
         dtype=np.int64,
     )
-    cf = np.array(
-        [
-            tangent[0],
-            tangent[1],
-            normal[0],
-            normal[1],
-            float(normal @ surface.point),
-            surface.stiffness,
-            surface.damping,
-            controller.task.desired_force,
-            dt,
-        ]
-    )
+    normal = controller.task.normal
+    surf = [*normal, float(normal @ surface.point), surface.stiffness, surface.damping]
+    # tangent, surface, Fd, dt
+    cf = np.array([-normal[1], normal[0], *surf, controller.task.desired_force, dt])
     return cols, cidx, ci, cf
 
 
@@ -185,38 +150,17 @@ def warm_post_kernel(
     theta: np.ndarray,
     arrays: TickArrays,
 ) -> None:
-    """Compile (or load) the post kernel for the argument types :func:`simulate` passes.
-
-    ``arrays`` is a :meth:`Controller.build_arrays` result; ``theta`` is not changed.
-    """
+    """Compile (or load) the post kernel for the argument types the loop passes (``theta`` is
+    not changed)."""
     cols, _, ci, cf = post_constants(controller, surface, dt)
     post = get_post_kernel()
-    none = np.zeros(0)
+    none, v = np.zeros(0), np.zeros(controller.n)
     row = np.zeros((1, len(cols)))
     kp, kd = controller.kp, controller.kd
+    geometry = (arrays.ee, np.zeros(4), arrays.J, arrays.b0, arrays.dist, arrays.xd)
     # an applied answer with duals, and a fallback/zero-velocity tick without
     for y, z, mode in (
         (np.zeros(2), np.zeros(max(controller.n_rows, 1)), APPLIED),
         (none, none, ZERO),
     ):
-        post(
-            theta.copy(),
-            np.zeros(controller.n),
-            arrays.ee,
-            np.zeros(4),
-            arrays.J,
-            arrays.b0,
-            arrays.dist,
-            arrays.xd,
-            y,
-            z,
-            row,
-            0,
-            ci,
-            cf,
-            0.0,
-            mode,
-            kp,
-            kd,
-            0.0,
-        )
+        post(theta.copy(), v, *geometry, y, z, row, 0, ci, cf, 0.0, mode, kp, kd, 0.0)

@@ -1,67 +1,23 @@
-"""Verdict of a closed-loop run (``ok``, ``diverged``, ``incomplete``, ``limits``, ``unsafe``,
-``failed``) and, beside it, whether the run kept real time.
+"""Verdict of a closed-loop run and, beside it, whether the run kept real time.
 
-One function, :func:`judge`, decides; :func:`qpbench.sim.summary.summarize` calls
-it and puts ``verdict`` and ``verdict_reasons`` into the summary, which the
-closed-loop table (:mod:`qpbench.harness.loop_rows`) copies as they are.
-:func:`failed_run` gives the verdict of a run that produced no result at all
-(a crash, an overrun deadline, an exception outside the ticks): ``incomplete``.
+:func:`judge` decides (called by :func:`qpbench.sim.summary.summarize`); :func:`failed_run` gives
+``incomplete`` to a run that produced no result. The rules, worst first (:data:`VERDICTS`; every
+reason is listed, ``"; "`` between them), thresholds from the scenario's ``[verdict]`` table:
 
-Rules, thresholds from the scenario's ``[verdict]`` table (:class:`VerdictSettings`):
+- ``failed``: a tick whose solve raised or reported ``error``, a non-finite answer
+  (``invalid``), an answer dropped past the per-tick deadline, a fallback solve that raised,
+  or a tick left at zero velocity;
+- ``unsafe``: a link's capsule inside an obstacle (``d_body_min < 0``, :mod:`qpbench.robot.body`;
+  the end effector's link is not judged against the contact surface);
+- ``limits``: a joint angle or commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
+- ``incomplete``: the run stopped before ``duration`` (wall-time budget) or produced no result;
+- ``diverged``: for ``t >= settle_time`` [s], ``|tracking_error| > max_tracking_error`` [m] or
+  ``|force_error| > max_force_error`` [N] (or not finite).
 
-- ``failed``: the backend did not answer usably: a tick whose solve raised or
-  reported ``error``, a non-finite answer (``invalid``), an answer later than
-  the per-tick deadline (``time_limit``, with ``--deadline``), a fallback solve that raised, or a
-  tick left without any command (zero velocity: no answer and no soft
-  fallback);
-- ``unsafe``: the body went into an obstacle: the clearance of a link's
-  capsule to an obstacle (tick-log column ``d_body_min``, exact at every tick,
-  :mod:`qpbench.robot.body`) was below 0. The reason names the link, the
-  obstacle, the depth and the time: ``link 4 (end effector) 30.0 mm inside
-  disk 'blob' at 7.21 s``. The end effector's link is not judged against an
-  obstacle that is the contact surface (it presses into it by design);
-  every other link is;
-- ``limits``: a joint angle or a commanded joint speed went beyond its limit
-  by more than :data:`VIOLATION_TOL`;
-- ``incomplete``: the run stopped before its ``duration``: its wall-time
-  budget ran out (the reason says how far it got), or it produced no result
-  at all (crash, the run's own deadline, an exception outside the ticks:
-  :func:`failed_run`);
-- ``diverged``: for ``t >= settle_time`` [s], ``|tracking_error|`` exceeded
-  ``max_tracking_error`` [m] or ``|force_error|`` exceeded ``max_force_error``
-  [N] (or either was not finite).
-
-The paper's own guarantee is a separate rule, reported beside the verdict
-(``key_point_rule``: ``held``, ``broken``, ``-`` without obstacles, and
-``key_point_rule_reason``): every key point (``[key_points] kind``: the
-paper's fixed points, or each link's closest point) kept
-``d_safe - safety_margin`` [m] from every obstacle. A broken key-point rule
-alone does not make a run ``unsafe``: ``d_safe`` is a margin the controller
-keeps, not a collision, and the key points are not the body (the paper's
-leave the end effector and most of each link unguarded, so a run can hold
-the rule and still drive the end effector into an obstacle). A key point
-inside an obstacle is part of the body inside it, so such a run is
-``unsafe`` by the body rule as well.
-
-When several hold, the verdict is the first of :data:`VERDICTS` (failed >
-unsafe > limits > incomplete > diverged) and ``verdict_reasons`` lists every
-one, in that order, ``"; "`` between them. A run stopped early is judged on the
-ticks it simulated (a simulated trajectory does not depend on how long its
-solves took, only how far it got does). A run whose simulated time does not
-reach ``settle_time`` (stopped early, or asked for a shorter ``duration``)
-says that tracking and force were not judged; for a run that did reach its
-duration that note does not change the verdict.
-
-Real time is judged beside the verdict, never in it (the verdict is about
-what the run did, real time about the machine it ran on): :func:`judge_realtime`
-gives ``realtime`` (``yes``/``no``) from the measured call times of every tick
-(``solve_time_s``: what a Python controller calling the backend would see) and
-``realtime_solver`` (``yes``/``no``/``unknown``) from the time the solver
-itself reports (``solver_time_s``: what a C or C++ controller calling the
-solver directly would see; ``unknown`` when the backend reports none). Each
-is ``yes`` when the p99 of the tick times is at most ``max_p99_fraction_of_dt``
-of ``dt`` and at most ``max_over_dt_share`` of the ticks took longer than
-``dt``.
+The paper's guarantee, every key point kept ``d_safe - safety_margin`` [m] from every obstacle,
+is reported beside the verdict (``key_point_rule``): the key points are not the body, so a broken
+rule alone is not ``unsafe``. Real time (:func:`judge_realtime`) is judged beside it too, from
+the measured call times (``solve_time_s``) and from the solver's own (``solver_time_s``).
 """
 
 from __future__ import annotations
@@ -72,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..robot.body import link_label
 from . import log
 
 if TYPE_CHECKING:
@@ -97,40 +54,25 @@ VERDICTS = ("failed", "unsafe", "limits", "incomplete", "diverged", "ok")
 #: Every verdict but ``ok``.
 BAD_VERDICTS = VERDICTS[:-1]
 
-#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks
-#: (solvers meet bounds to their own accuracy, about 1e-9 here).
+#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks.
 VIOLATION_TOL = 1e-6
 
-#: Default of ``[verdict] safety_margin`` [m]: how far below ``d_safe`` a key
-#: point may come before the run is unsafe (the velocity damper acts one tick
-#: late, so exact QP solutions dip below ``d_safe`` by far less). A scenario
-#: whose ``d_safe`` is not above it defaults to half its ``d_safe``.
+#: Default of ``[verdict] safety_margin`` [m]: how far below ``d_safe`` a key point may come (the
+#: velocity damper acts one tick late); a scenario whose ``d_safe`` is not above it: ``d_safe / 2``.
 DEFAULT_SAFETY_MARGIN = 5e-4
 
 
 @dataclass(frozen=True)
 class VerdictSettings:
-    """Thresholds of the verdict and of real time (the scenario's ``[verdict]`` table).
+    """Thresholds of the verdict and of real time (the scenario's ``[verdict]`` table), checked
+    here (``verdict.<key>``); rules across tables in :mod:`qpbench.sim.scenario_schema`. Why each
+    default: ``docs/verdicts.md``.
 
-    Every field has a default (the shipped scenarios' values; why each, in
-    ``docs/verdicts.md``); values are checked here, where they are held
-    (:class:`~qpbench.exceptions.InputError` naming ``verdict.<key>``); the
-    rules that involve other tables (``settle_time < duration``,
-    ``safety_margin < d_safe``) in :mod:`qpbench.sim.scenario_schema`.
-
-    Attributes:
-        settle_time: Start of the judged span of tracking and force errors [s]
-            (default 2: twice the paper's transient of about 1 s).
-        max_tracking_error: Largest ``|tangential tracking error|`` after it [m]
-            (default 0.001).
-        max_force_error: Largest ``|contact force - Fd|`` after it [N] (default 2).
-        safety_margin: A key point closer than ``d_safe - safety_margin`` to
-            an obstacle is unsafe [m] (default :data:`DEFAULT_SAFETY_MARGIN`).
-        max_p99_fraction_of_dt: Real time: the p99 of the per-tick times may
-            be at most this fraction of ``dt`` (default 0.5: the QP is not the
-            only work of a tick).
-        max_over_dt_share: Real time: at most this share of the ticks may take
-            longer than ``dt`` (default 0.001: one tick in a thousand).
+    ``settle_time`` [s]: start of the judged span of tracking and force errors (twice the paper's
+    transient); ``max_tracking_error`` [m], ``max_force_error`` [N]: largest errors after it;
+    ``safety_margin`` [m]: the key-point rule's margin below ``d_safe``; real time: the p99 of
+    the tick times at most ``max_p99_fraction_of_dt`` of ``dt`` and at most
+    ``max_over_dt_share`` of the ticks longer than ``dt``.
     """
 
     settle_time: float = 2.0
@@ -180,76 +122,53 @@ class Verdict:
         return "; ".join(self.reasons)
 
 
-def _verdict(found: dict[str, list[str]], notes: list[str]) -> Verdict:
-    reasons = [r for v in VERDICTS[:-1] for r in found.get(v, [])]
-    worst = next((v for v in VERDICTS[:-1] if found.get(v)), "ok")
-    return Verdict(worst, tuple(reasons + notes))
-
-
 def _g(x: float) -> str:
     return f"{x:.3g}"
 
 
+def _n(count: int, noun: str) -> str:
+    return f"{count} {noun}{'s' if count > 1 else ''}"
+
+
 def _failed_reasons(summary: dict) -> list[str]:
-    out = []
-    # One branch per kind of tick that did not go as planned, each with its own sentence and
-    # details (first error, deadline): alike in shape, kept apart so each reads as its sentence.
-    n = int(summary.get("error_ticks") or 0)
-    if n:
-        first = summary.get("first_error")
-        t = summary.get("first_error_t")
-        where = f" (first at {t:.3f} s: {first})" if first and t is not None else ""
-        out.append(f"{n} tick{'s' if n > 1 else ''} with an error{where}")
-    n = int(summary.get("invalid_ticks") or 0)
-    if n:
-        out.append(f"{n} non-finite answer{'s' if n > 1 else ''}")
-    n = int(summary.get("time_limit_ticks") or 0)
-    if n:
-        limit = summary.get("deadline_s")
-        what = f" ({_g(limit)} s)" if limit is not None else ""
-        out.append(f"{n} answer{'s' if n > 1 else ''} dropped past the per-tick deadline{what}")
-    n = int(summary.get("fallback_errors") or 0)
-    if n:
-        out.append(f"{n} fallback solve{'s' if n > 1 else ''} raised")
-    n = int(summary.get("zero_velocity_ticks") or 0)
-    if n:
-        out.append(
-            f"{n} tick{'s' if n > 1 else ''} without a command (no answer, no soft fallback: zero velocity)"
-        )
-    return out
+    get = summary.get
+    first, t, limit = get("first_error"), get("first_error_t"), get("deadline_s")
+    where = f" (first at {t:.3f} s: {first})" if first and t is not None else ""
+    within = f" ({_g(limit)} s)" if limit is not None else ""
+    zero = " without a command (no answer, no soft fallback: zero velocity)"
+    kinds = (
+        ("error_ticks", "tick", f" with an error{where}"),
+        ("invalid_ticks", "non-finite answer", ""),
+        ("time_limit_ticks", "answer", f" dropped past the per-tick deadline{within}"),
+        ("fallback_errors", "fallback solve", " raised"),
+        ("zero_velocity_ticks", "tick", zero),
+    )
+    return [_n(n, noun) + rest for key, noun, rest in kinds if (n := int(get(key) or 0))]
 
 
 def _unsafe_reasons(frame, n: int, obstacle_kinds: dict[str, str] | None) -> list[str]:
     """The body rule: a link's capsule inside an obstacle (``d_body_min < 0``) at some tick."""
-    if log.D_BODY_MIN not in frame.columns or not len(frame):
-        return []
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     inside = d < 0.0
     if not inside.any():
         return []
-    from ..robot.body import link_label
-
     t = frame[log.T].to_numpy(dtype=float)
     k = int(np.argmin(np.where(inside, d, np.inf)))
     link = int(frame[log.D_BODY_LINK].iloc[k])
     name = str(frame[log.D_BODY_OBSTACLE].iloc[k])
     kind = (obstacle_kinds or {}).get(name, "obstacle")
     rows = np.flatnonzero(inside)
-    ticks = f"{rows.size} tick{'s' if rows.size > 1 else ''}"
     return [
         f"{link_label(link, n)} {-d[k] * 1e3:.1f} mm inside {kind} '{name}' at {t[k]:.2f} s "
-        f"(the body inside an obstacle on {ticks} from {t[rows[0]]:.3f} s)"
+        f"(the body inside an obstacle on {_n(rows.size, 'tick')} from {t[rows[0]]:.3f} s)"
     ]
 
 
 def key_point_rule(
     frame, d_safe: float, margin: float, columns: list[tuple[str, str]]
 ) -> tuple[str, str]:
-    """The paper's guarantee: every key point kept ``d_safe - margin`` [m] from every obstacle.
-
-    Returns:
-        ``("held", "")``, ``("broken", reason)`` or ``("-", "")`` without obstacles.
-    """
+    """The paper's guarantee, every key point kept ``d_safe - margin`` [m] from every obstacle:
+    ``("held", "")``, ``("broken", reason)`` or ``("-", "")`` without obstacles."""
     if not columns:
         return "-", ""
     if not len(frame):
@@ -291,9 +210,8 @@ def _limit_reasons(frame, limits, n: int) -> list[str]:
         k, i = divmod(int(np.argmax(excess)), n)
         x = X[k, i]
         bound = f"< {_g(lo[i])}" if x < lo[i] else f"> {_g(hi[i])}"
-        ticks = int(bad.sum())
         out.append(
-            f"joint {what} limit broken on {ticks} tick{'s' if ticks > 1 else ''} "
+            f"joint {what} limit broken on {_n(int(bad.sum()), 'tick')} "
             f"(worst {sym}_{i} = {_g(x)} {unit} {bound} {unit} at {t[k]:.3f} s)"
         )
     return out
@@ -334,25 +252,13 @@ def judge(
 ) -> Verdict:
     """The verdict of one simulated run (rules in the module docstring).
 
-    Args:
-        frame: The run's tick log (:func:`qpbench.sim.loop.simulate`; columns
-            ``t``, ``theta_i``, ``v_i``, ``tracking_error`` [m],
-            ``force_error`` [N], ``d_<key point>_<obstacle>`` [m]).
-        settings: The scenario's thresholds.
-        d_safe: The controller's safety distance [m].
-        limits: The controller's joint limits (``theta_min``, ``theta_max``
-            [rad], ``v_min``, ``v_max`` [rad/s]).
-        obstacle_columns: ``(key point, obstacle)`` of each distance column
-            (the key-point rule).
-        obstacle_kinds: Kind (``disk``, ``line``, ...) of each obstacle, by name,
-            for the body rule's reason (``obstacle`` when not given); the body rule
-            reads the log's ``d_body_min``, ``d_body_link``, ``d_body_obstacle``.
-        summary: The run's counts: ``error_ticks``, ``invalid_ticks``,
-            ``time_limit_ticks``, ``zero_velocity_ticks``, ``fallback_errors``,
-            ``first_error``, ``first_error_t`` [s], ``deadline_s`` [s];
-            ``stopped_early``, ``simulated_s``, ``duration`` [s] and
-            ``wall_budget_s`` [s] for a run cut by a wall-time budget. Missing
-            counts are 0.
+    ``frame`` is the tick log; ``d_safe`` [m]; ``limits`` the joint limits [rad, rad/s];
+    ``obstacle_columns`` the ``(key point, obstacle)`` of each distance column;
+    ``obstacle_kinds`` the kind of each obstacle by name (the body rule's reason). ``summary``
+    holds the run's counts (``error_ticks``, ``invalid_ticks``, ``time_limit_ticks``,
+    ``zero_velocity_ticks``, ``fallback_errors``; missing ones are 0), ``first_error``,
+    ``first_error_t`` [s], ``deadline_s`` [s], ``stopped_early``, ``simulated_s``, ``duration``
+    and ``wall_budget_s`` [s].
     """
     n = len(limits.theta_min)
     found = {
@@ -362,15 +268,15 @@ def judge(
         "diverged": _diverged_reasons(frame, settings) if len(frame) else [],
     }
     found["incomplete"], notes = _incomplete_reasons(summary, settings)
-    verdict = _verdict(found, notes)
+    reasons = [r for v in BAD_VERDICTS for r in found[v]]
+    worst = next((v for v in BAD_VERDICTS if found[v]), "ok")
     rule, why = key_point_rule(frame, d_safe, settings.safety_margin, obstacle_columns)
-    return Verdict(verdict.verdict, verdict.reasons, rule, why)
+    return Verdict(worst, tuple(reasons + notes), rule, why)
 
 
 def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[str], list[str]]:
-    """``(reasons, notes)``: where a run stopped early stopped (an ``incomplete`` reason), and
-    whether tracking and force went unjudged (part of that reason; a note for a run that
-    reached its duration)."""
+    """``(reasons, notes)``: where a run stopped early stopped, and whether tracking and force
+    went unjudged (part of that reason; a note for a run that reached its duration)."""
     simulated = float(summary.get("simulated_s") or 0.0)
     unjudged = (
         f"tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
@@ -388,28 +294,20 @@ def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[
 
 
 def judge_realtime(
-    times: np.ndarray, dt: float, settings: VerdictSettings, what: str = "call"
+    p99: float | None, over: int, ticks: int, dt: float, settings: VerdictSettings, what: str
 ) -> tuple[str, str]:
-    """Whether per-tick times [s] keep a loop of period ``dt`` [s]: ``(yes|no|unknown, why)``.
-
-    ``yes`` when the p99 of the finite ``times`` is at most
-    ``settings.max_p99_fraction_of_dt * dt`` and at most ``settings.max_over_dt_share``
-    of them exceed ``dt``; ``unknown`` when no time is finite (a backend that reports
-    no solve time of its own). ``what`` names the times in the reason.
-    """
-    times = np.asarray(times, dtype=float)
-    times = times[np.isfinite(times)]
-    if not times.size:
+    """Whether per-tick times keep a loop of period ``dt`` [s], from their p99 [s] and the count
+    ``over`` of the ``ticks`` times longer than ``dt`` (figures of :mod:`qpbench.sim.summary`):
+    ``(yes|no|unknown, why)``; ``unknown`` without times. ``what`` names the times."""
+    if not ticks:
         return "unknown", f"no {what} time reported"
-    p99 = float(np.quantile(times, 0.99))
-    over = int(np.count_nonzero(times > dt))
-    share = over / times.size
+    share = over / ticks
     limit = settings.max_p99_fraction_of_dt * dt
     frac = f"{settings.max_p99_fraction_of_dt:.0%}"
     p99_ok, share_ok = p99 <= limit, share <= settings.max_over_dt_share
     p99_text = f"p99 {what} {_us(p99)} {'<=' if p99_ok else '>'} {frac} of dt {_us(dt)}"
     share_text = (
-        f"{over} of {times.size} ticks over dt ({share:.2%}; "
+        f"{over} of {ticks} ticks over dt ({share:.2%}; "
         f"{'<=' if share_ok else '>'} {settings.max_over_dt_share:.2%})"
     )
     # the criterion that failed first: the reason's first part says why a run is not real time
@@ -425,9 +323,8 @@ def _us(seconds: float) -> str:
 
 
 def failed_run(status: str, message: str) -> Verdict:
-    """The verdict of a run that produced no result: ``status`` (``error``,
-    ``crashed``, ``time_limit``) and the harness's message; ``incomplete``,
-    nothing of it could be judged."""
+    """``incomplete``: the verdict of a run that produced no result (``status`` ``error``,
+    ``crashed`` or ``time_limit``, and the harness's message)."""
     what = {
         "crashed": "run crashed",
         "time_limit": "run overran its deadline",
