@@ -1,43 +1,28 @@
 """The per-tick benchmark: every backend on every problem of a set, one row each.
 
-:func:`run_bench` walks the problems in sequence order, problem by problem,
-and solves each with every backend (a :class:`~qpbench.harness.guard.LocalRunner`
-in this process or an :class:`~qpbench.harness.isolation.IsolatedRunner` in a
-worker). The rows of a problem are appended to the CSV and ``fsync``-ed before
-the next problem starts.
+:func:`run_bench` walks the problems in sequence order (:func:`~.bench_plan.sequences`) and
+solves each with every backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
+(:class:`~.isolation.IsolatedRunner`); a problem's rows are made once all its solves are done
+and appended to the CSV before the next problem starts.
 
-Sequences (``mode="sequential"``): problems of the same ``scenario`` form one
-sequence, in tick order (file order breaks ties); a problem without a scenario
-is a sequence of its own. Each backend's state is carried along a sequence
-(the way a controller calls its solver tick after tick) and reset between
-sequences. After a failure that leaves the state suspect (``error``,
-``time_limit``, ``invalid``, ``crashed``) the backend is reset and the next
-row says ``state_reset = True``. ``mode="independent"`` resets before every
-problem.
+``mode="sequential"``: a backend's state is carried along a sequence (as a controller calls
+its solver tick after tick) and reset between sequences and after a failure that leaves it
+suspect (:data:`~qpbench.statuses.FAILURE_STATUSES`; the next row says ``state_reset``).
+``mode="independent"`` resets before every problem.
 
-Order of the backends: each problem is solved by every backend in an order
-drawn for that problem (:func:`backend_order`: a permutation of the sorted
-backend names from a generator seeded with ``(seed, SHA-256 of the problem
-name)``). A backend that ran first on one problem runs later on another, so
-the cold caches the harness leaves between two problems (metrics, CSV write,
-``fsync``) do not always fall on the same backend. The rows record the
-``position`` (0 = first) and the ``order_seed``; the order depends only on the
-seed, the problem's name and the set of backends, so a resumed run solves in
-the order the interrupted one did. All backends of a problem are solved before
-any of its rows is made (metrics and references are outside the sequence of
-solves).
+The backends solve each problem in an order drawn for it (:func:`backend_order`), so the cold
+caches the harness leaves between problems do not always fall on the same backend; rows record
+``position`` and ``order_seed``.
 
-Resuming (``resume=True``): rows already in the CSV are kept and their keys
-``(problem, backend, profile)`` skipped. In sequential mode a backend that
-still has problems left in a sequence is brought back to the state it had by
-replaying, untimed and unrecorded, the earlier problems of that sequence,
-following the recorded statuses (a recorded failure means "reset here", as the
-original run did). Deterministic backends then produce the same rows as an
-uninterrupted run.
+Resuming keeps the rows in the CSV and skips their keys. In sequential mode a backend with
+problems left in a sequence is brought back to its state by replaying, untimed, the earlier
+problems of the sequence, resetting where the recorded statuses say the original run did;
+deterministic backends then give the rows of an uninterrupted run.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 import statistics
@@ -61,14 +46,10 @@ from .bench_plan import (
     references_for,
     sequences,
 )
-from .bench_summary import DEFAULT_SEED, BackendStats, BenchSummary, is_failure
+from .bench_summary import DEFAULT_SEED, BackendStats, BenchSummary, as_float, is_failure
 from .guard import LocalRunner, Outcome
 from .isolation import IsolatedRunner
-from .results import (
-    ResultsWriter,
-    row_key,
-)
-from .rows import _RowMaker
+from .results import ResultsWriter, row_key
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -79,16 +60,9 @@ log = logging.getLogger("qpbench.harness")
 
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
-    """The order in which ``backends`` solve ``problem``: a seeded permutation.
-
-    The permutation of the sorted names is drawn by
-    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``:
-    it depends on the seed, the problem's name and the set of backends only
-    (not on the order given, nor on what ran before), so a resumed run
-    repeats it.
-    """
-    import hashlib
-
+    """The order in which ``backends`` solve ``problem``: a permutation of the sorted names by
+    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``, so it depends on
+    the seed, the name and the set of backends only (a resumed run repeats it)."""
     digest = hashlib.sha256(str(problem).encode("utf-8")).digest()
     words = [int.from_bytes(digest[i : i + 8], "little") for i in range(0, 32, 8)]
     names = sorted(backends)
@@ -109,12 +83,8 @@ def _structure(problem) -> tuple[bool, ...]:
 
 
 def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
-    """The first problem of the run, then the first of each other structure (:func:`_structure`).
-
-    A backend's first solve of a structure may pay one-off costs (a compiled
-    kernel specialises on which parts are present): the discarded warm-up
-    solves pay them, not a timed one.
-    """
+    """The first problem of the run, then the first of each other structure (:func:`_structure`):
+    a compiled kernel specialises on the parts present, and the warm-up pays for that."""
     out, seen = [], set()
     for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
         if i in skipped:  # a problem the backend does not solve is no warm-up either
@@ -124,6 +94,15 @@ def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
             seen.add(key)
             out.append(records[i].problem)
     return out
+
+
+def _n_box(problem) -> int:
+    """Finite bounds of a problem."""
+    return sum(
+        int(np.isfinite(np.asarray(b, dtype=float)).sum())
+        for b in (problem.lb, problem.ub)
+        if b is not None
+    )
 
 
 class _BenchRun:
@@ -140,8 +119,7 @@ class _BenchRun:
         self.summary = BenchSummary(
             isolated=[n for n in config.backends if self.runners[n].isolated], seed=int(config.seed)
         )
-        self.make_row = _RowMaker(None, plan.profile, config.mode, plan.sha, plan.versions)
-        # Keys still to run, per backend and sequence (to know when replay is needed).
+        # per backend and sequence: keys still to run (to know when replay is needed)
         self.todo = {
             name: [
                 any((plan.records[i].name, name, self.pname) not in done for i in seq)
@@ -156,26 +134,22 @@ class _BenchRun:
         self.overheads: list[float] = []
         self.bar = None
 
-    def _isolated(self, name: str) -> bool:
-        if self.config.isolate == "always":
-            return True
-        if self.config.isolate == "never":
-            return False
-        return backend_class(name).risky or name in self.plan.learned
-
     def _worker(self, name: str) -> IsolatedRunner:
-        plan = self.plan
+        plan, config = self.plan, self.config
         return IsolatedRunner(
             name,
             plan.profile,
             plan.settings[name],
             plan.profile.time_limit,
             self.sequential,
-            self.config.repeat,
+            config.repeat,
         )
 
     def _runner(self, name: str):
-        if self._isolated(name):
+        isolate = self.config.isolate
+        if isolate == "always" or (
+            isolate == "auto" and (backend_class(name).risky or name in self.plan.learned)
+        ):
             return self._worker(name)
         return LocalRunner(
             self.plan.instances[name],
@@ -222,31 +196,26 @@ class _BenchRun:
         active = [name for name in self.config.backends if self.todo[name][s]]
         if not active:
             return
-        needs_reset = {name: False for name in active}
+        needs_reset = dict.fromkeys(active, False)
         if self.sequential:
             for name in active:
                 self.runners[name].reset()
         for i in seq:
             record = self.plan.records[i]
-            order = backend_order(record.name, self.config.backends, self.config.seed)
             solved = []
+            order = backend_order(record.name, self.config.backends, self.config.seed)
             for position, name in enumerate(order):
                 if not self.todo[name][s]:
                     continue
                 key = (record.name, name, self.pname)
+                skip = self.plan.skips.get((i, name))
                 if key in self.done:
-                    if self.sequential and (i, name) not in self.plan.skips:
+                    if self.sequential and skip is None:
                         self._replay(name, record, self.done[key]["status"], needs_reset)
-                    continue
-                if (
-                    i,
-                    name,
-                ) in self.plan.skips:  # never handed to the backend; its state is untouched
-                    solved.append(
-                        (position, name, Outcome("skipped", error=self.plan.skips[(i, name)]))
-                    )
-                    continue
-                solved.append((position, name, self._solve(name, record, needs_reset)))
+                elif skip is not None:  # never handed to the backend; its state is untouched
+                    solved.append((position, name, Outcome("skipped", error=skip)))
+                else:
+                    solved.append((position, name, self._solve(name, record, needs_reset)))
             self._write_rows(i, solved)
 
     def _replay(self, name: str, record, status: str, needs_reset: dict) -> None:
@@ -275,9 +244,7 @@ class _BenchRun:
             and not self.runners[name].isolated
             and self.config.isolate == "auto"
         ):
-            # In this process a solve is never interrupted (an exception raised
-            # into foreign code can break it): a backend that overran once goes
-            # to a worker process, which is killed at its deadline.
+            # a solve in this process is never interrupted; a worker is killed at its deadline
             log.warning(
                 "%s overran its time limit on %s in this process; it runs in a worker process from now on",
                 name,
@@ -291,14 +258,61 @@ class _BenchRun:
             needs_reset[name] = self.sequential
         return outcome
 
+    def _row(self, i: int, backend: str, outcome: Outcome, position: int) -> dict:
+        """The CSV row of ``backend``'s ``outcome`` on record ``i``, scored against its reference."""
+        from ..formats import problem_sizes
+        from ..metrics import evaluate, metric_columns
+
+        record, profile = self.plan.records[i], self.plan.profile
+        sol, status = outcome.solution, outcome.status
+        if sol is not None:
+            sol.found = status == "optimal"
+            if status == "invalid":
+                sol = None
+        metrics = evaluate(record, sol, self.references[i], profile.tolerance)
+        times = outcome.wall_times_s
+        n, m_eq, m_ineq = problem_sizes(record.problem)
+        kept = outcome.solution
+        return {
+            "problem": record.name,
+            "scenario": record.scenario,
+            "tick": record.tick,
+            "t": record.t,
+            "backend": backend,
+            "profile": profile.name,
+            "mode": self.config.mode,
+            "status": status,
+            "found": bool(metrics["found"]) and status == "optimal",
+            "success": bool(metrics["success"]) and status not in FAILURE_STATUSES,
+            **{c: metrics[c] for c in metric_columns()},
+            "wall_time_min_s": min(times) if times else None,
+            "wall_time_median_s": statistics.median(times) if times else None,
+            "solver_time_s": None
+            if kept is None
+            else as_float(getattr(sol, "solver_time_s", None)),
+            "iterations": None if kept is None else getattr(kept, "iterations", None),
+            "error": outcome.error if status != "optimal" or outcome.error else None,
+            "state_reset": outcome.state_reset,
+            "isolated": outcome.isolated,
+            "position": position,
+            "order_seed": int(self.config.seed),
+            "repeat": len(times),
+            "repeat_exact": outcome.repeat_exact,
+            "repeat_note": outcome.repeat_note or None,
+            "n": n,
+            "m_eq": m_eq,
+            "m_ineq": m_ineq,
+            "n_box": _n_box(record.problem),
+            "problem_set_sha256": self.plan.sha or "",
+            "backend_version": self.plan.versions.get(backend),
+        }
+
     def _write_rows(self, i: int, solved: list) -> None:
         """Rows (metrics against the reference) once every backend has solved problem ``i``."""
-        record, backends = self.plan.records[i], self.config.backends
+        backends = self.config.backends
         batch = []
         for position, name, outcome in sorted(solved, key=lambda item: backends.index(item[1])):
-            row = self.make_row(
-                record, name, outcome, self.references[i], position, int(self.config.seed)
-            )
+            row = self._row(i, name, outcome, position)
             if i in self.plan.notes and outcome.status != "skipped":
                 row["error"] = "; ".join(filter(None, [self.plan.notes[i], row["error"]]))
             batch.append(row)
@@ -371,21 +385,12 @@ def run_bench(
     references: list | None = None,
     progress: bool | str = False,
 ) -> BenchSummary:
-    """Benchmark ``config.backends`` on ``problem_set``; write rows to ``out`` (CSV).
+    """Benchmark ``config.backends`` on ``problem_set`` (loaded and validated); rows to ``out``.
 
-    Everything that can fail on user input (backend names, the existing
-    output, the problems' names) is checked before ``out`` is created or
-    changed.
-
-    Args:
-        problem_set: A :class:`~qpbench.formats.ProblemSet` (already loaded and validated).
-        config: What to run.
-        out: CSV path.
-        force: Delete an existing ``out`` and start again.
-        resume: Keep the rows of an existing ``out`` and run the missing keys only.
-        references: Reference solutions (one per record, ``None`` entries for none), or a function
-            of the problem set that returns them; computed (and cached) if ``None``.
-        progress: Show a progress bar on stderr (``"log"``: a log line every 10 s, :class:`LogBar`).
+    Everything that can fail on user input is checked before ``out`` is created or changed.
+    ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
+    per record (``None`` entries for none), or a function of the set returning them; computed
+    (and cached) if ``None``. ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
 
     Raises:
         OutputExistsError: ``out`` exists and neither ``force`` nor ``resume``.

@@ -1,15 +1,13 @@
 """What a bench run will do, checked before anything is written.
 
-:class:`BenchConfig` says what to run; :func:`make_plan` checks it against the
-problem set and an existing output (backend names, modes, a resumed file's
-seed and set) and returns a :class:`Plan`; :func:`open_output` is the run's
-first write.
+:class:`BenchConfig` says what to run and checks its values; :func:`make_plan` checks it
+against the problem set and an existing output (backend names, a resumed file's mode, seed and
+set) and returns a :class:`Plan`; :func:`open_output` is the run's first write.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -17,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..backends import backend_class
-from ..exceptions import InputError, ParamError
+from ..exceptions import InputError, ParamError, positive_seconds
 from ..profiles import Profile, get_profile
 from .bench_summary import DEFAULT_SEED
 from .results import ExistingResults, InflightMarker, read_results, row_key
@@ -35,21 +33,18 @@ ISOLATE = ("auto", "always", "never")
 
 @dataclass
 class BenchConfig:
-    """What to run.
+    """What to run, checked when made.
 
     Attributes:
-        backends: Backend names.
         profile: Profile name or :class:`~qpbench.profiles.Profile`.
         repeat: Timed solves per (problem, backend); the row has their min and median.
-        mode: ``sequential`` or ``independent``.
-        time_limit: Per-solve limit in [s]; ``None`` = the profile's.
-        isolate: ``auto`` (only backends marked ``risky`` or seen to crash in
-            this process), ``always`` or ``never``.
-        warmup: Discarded solves per backend before the first timed one: the
-            first problem, and the first of each other structure (parts present).
-        settings: Extra solver settings passed to every backend.
-        backend_settings: Extra settings per backend name (over ``settings``).
-        seed: Seed of the per-problem backend order (:func:`backend_order`).
+        time_limit: Per-solve limit [s]; ``None``: the profile's.
+        isolate: ``auto`` (backends marked ``risky`` or seen to crash in this process),
+            ``always`` or ``never``.
+        warmup: Discarded solves per backend before the first timed one: the first problem,
+            and the first of each other structure (parts present).
+        settings: Solver settings for every backend; ``backend_settings``: per backend name.
+        seed: Seed of the per-problem backend order (:func:`~qpbench.harness.bench.backend_order`).
         memory_budget: Bytes a solve may need (:mod:`qpbench.memory`; ``None``: the default).
     """
 
@@ -65,7 +60,7 @@ class BenchConfig:
     seed: int = DEFAULT_SEED
     memory_budget: int | None = None
 
-    def validate(self) -> None:
+    def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParamError(
                 f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode"
@@ -77,13 +72,8 @@ class BenchConfig:
             )
         if int(self.repeat) < 1:
             raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
-        if self.time_limit is not None and not (
-            self.time_limit > 0 and math.isfinite(self.time_limit)
-        ):
-            raise ParamError(
-                f"time limit must be a positive number of seconds, got {self.time_limit}",
-                key="time-limit",
-            )
+        if self.time_limit is not None:
+            self.time_limit = positive_seconds(self.time_limit, "time-limit")
         if (
             isinstance(self.seed, bool)
             or not isinstance(self.seed, (int, np.integer))
@@ -97,11 +87,8 @@ class BenchConfig:
 
 
 def record_period(problem_set: ProblemSet) -> float | None:
-    """Time in [s] between two consecutive records of a dumped sequence, if known.
-
-    A set dumped by ``qpbench simulate --dump`` records its control period
-    ``dt`` and the stride ``every`` in its manifest's ``generator``.
-    """
+    """Time [s] between two records of a set dumped by ``qpbench simulate --dump`` (its
+    manifest's ``generator``: ``dt`` times the stride ``every``), if known."""
     generator = (getattr(problem_set, "manifest", None) or {}).get("generator") or {}
     try:
         return float(generator["dt"]) * int(generator.get("every", 1))
@@ -110,12 +97,8 @@ def record_period(problem_set: ProblemSet) -> float | None:
 
 
 def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) -> dict:
-    """Settings for backend ``name``: the run's, its own, plus ``dt`` for an online backend.
-
-    An online backend (the ``rnn`` network) integrates for ``dt`` per call:
-    replaying a set that keeps every K-th tick, that is K control periods, the
-    time the controller's state evolves between two records.
-    """
+    """Settings for backend ``name``: the run's, its own, and for an online backend (``rnn``)
+    ``dt`` = the time between two records (:func:`record_period`), which it integrates per call."""
     settings = {**config.settings, **config.backend_settings.get(name, {})}
     if backend_class(name).online and "dt" not in settings:
         period = record_period(problem_set)
@@ -125,46 +108,29 @@ def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) ->
 
 
 def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
-    """Indices of ``records`` grouped into sequences, each in tick order.
+    """Indices of ``records`` grouped into sequences.
 
-    Sequential: one sequence per scenario (first-appearance order), sorted by
-    tick (stable); records without a scenario are one-problem sequences.
-    Independent: one sequence per record, in file order.
+    Sequential: one per scenario (first-appearance order), sorted by tick (stable); a record
+    without a scenario is a sequence of its own. Independent: one per record, in file order.
     """
     if mode == "independent":
         return [[i] for i in range(len(records))]
     groups: dict[object, list[int]] = {}
-    order: list[object] = []
     for i, rec in enumerate(records):
         key = ("scenario", rec.scenario) if rec.scenario is not None else ("single", i)
-        if key not in groups:
-            groups[key] = []
-            order.append(key)
-        groups[key].append(i)
-    out = []
-    for key in order:
-        idx = groups[key]
-        idx.sort(
-            key=lambda i: (
-                records[i].tick is None,
-                records[i].tick if records[i].tick is not None else 0,
-            )
-        )
-        out.append(idx)
-    return out
+        groups.setdefault(key, []).append(i)
+    return [
+        sorted(idx, key=lambda i: (records[i].tick is None, records[i].tick or 0))
+        for idx in groups.values()
+    ]
 
 
-def _check_existing(
-    existing: ExistingResults,
-    path: Path,
-    config_mode: str,
-    sha: str | None,
-    seed: int = DEFAULT_SEED,
-) -> None:
+def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed: int) -> None:
+    """A resumed file's rows must be of this run's mode, seed and problem set."""
     for row in existing.rows:
-        if row["mode"] != config_mode:
+        if row["mode"] != mode:
             raise InputError(
-                f"holds rows of mode '{row['mode']}', this run is '{config_mode}'; use --force to start again",
+                f"holds rows of mode '{row['mode']}', this run is '{mode}'; use --force to start again",
                 path=path,
                 key="mode",
             )
@@ -185,22 +151,16 @@ def _check_existing(
 
 @dataclass
 class Plan:
-    """A checked run before anything is written: records, backends, output state.
+    """A checked run before anything is written.
 
     Attributes:
-        records: The problems, in file order.
-        seqs: Their sequences (:func:`sequences`).
+        seqs: The records' sequences (:func:`sequences`).
         profile: The profile in force, with the run's time limit.
-        settings: Settings per backend name.
         instances: In-process backend instances (a bad name failed while making them).
-        versions: Backend versions.
         sha: Content SHA-256 of the set.
-        resuming: An existing output is continued.
-        existing: Its rows (empty when not resuming).
-        learned: Backends known to crash in this process (from the in-flight marker).
-        marker: The in-flight marker of ``out``.
-        skips: ``(record index, backend) -> reason`` of the solves not made
-            (:func:`skipped_solves`).
+        resuming: An existing output is continued; ``existing``: its rows.
+        learned: Backends known to crash in this process (from the in-flight ``marker``).
+        skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
         notes: ``record index -> warning`` written in its rows' ``error`` column.
     """
 
@@ -234,8 +194,8 @@ def _check_records(problem_set) -> list:
 
 
 def _learn_from_crash(plan: Plan, config: BenchConfig) -> None:
-    """Read the in-flight marker of an interrupted run: a backend that died in this process
-    while solving goes to a worker from now on (under ``--isolate auto``)."""
+    """A backend that died in this process while solving (in-flight marker of the interrupted
+    run) goes to a worker from now on (under ``--isolate auto``)."""
     learned, inflight, crash = plan.marker.read()
     plan.learned[:] = learned
     done_keys = {row_key(r) for r in plan.existing.rows}
@@ -263,18 +223,15 @@ def make_plan(
     from ..backends import get_backend
     from ..formats import content_sha256
 
-    config.validate()
-    check_output(
-        out, force=force, resume=resume, make_parent=True
-    )  # the command checked the user's path
+    check_output(out, force=force, resume=resume, make_parent=True)
     profile = get_profile(config.profile)
-    time_limit = (
-        float(config.time_limit) if config.time_limit is not None else float(profile.time_limit)
+    run_profile = profile.with_time_limit(
+        config.time_limit if config.time_limit is not None else float(profile.time_limit)
     )
-    run_profile = profile.with_time_limit(time_limit)
     records = _check_records(problem_set)
     settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
     instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
+    skips, notes = skipped_solves(records, config)
     plan = Plan(
         records=records,
         seqs=sequences(records, config.mode),
@@ -287,9 +244,10 @@ def make_plan(
         existing=ExistingResults([]),
         learned=[],
         marker=InflightMarker(InflightMarker.for_output(out)),
+        skips=skips,
+        notes=notes,
+        budget=config.memory_budget,
     )
-    plan.skips, plan.notes = skipped_solves(records, config)
-    plan.budget = config.memory_budget
     if plan.resuming:
         plan.existing = read_results(out, repair=False)
         _check_existing(plan.existing, out, config.mode, plan.sha, int(config.seed))
@@ -298,12 +256,11 @@ def make_plan(
 
 
 def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[dict, dict]:
-    """``(skips, notes)``: which solves are not made and why, and the warnings of the rest.
+    """``(skips, notes)``: the solves not made and why, and the warnings of the rest.
 
-    A clearly nonconvex problem is skipped by every backend; a slightly indefinite one is
-    solved with a warning (:mod:`qpbench.formats.convexity`); a problem too large for a
-    dense-only backend or for the memory budget is skipped by that backend
-    (:func:`qpbench.memory.skip_reason`).
+    A clearly nonconvex problem is skipped by every backend, a slightly indefinite one solved
+    with a warning (:mod:`qpbench.formats.convexity`); one too large for a dense-only backend
+    or the memory budget is skipped by that backend (:func:`qpbench.memory.skip_reason`).
     """
     from ..formats.convexity import assess_convexity
     from ..memory import resolve_budget, skip_reason
@@ -318,8 +275,7 @@ def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[d
             notes[i] = f"warning: {record.convexity.warning}"
             log.warning("%s: %s", record.name, record.convexity.warning)
         for name in config.backends:
-            sparse = backend_class(name).sparse
-            why = reason or skip_reason(record.problem, sparse, budget)
+            why = reason or skip_reason(record.problem, backend_class(name).sparse, budget)
             if why:
                 skips[(i, name)] = why
     return skips, notes
@@ -328,11 +284,10 @@ def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[d
 def references_for(
     problem_set: ProblemSet, plan: Plan, references: list | Callable[[ProblemSet], list] | None
 ) -> list:
-    """One reference per record (``references``: the list, a function of a problem set
-    that computes it, or ``None`` for :func:`qpbench.reference.reference_solutions`); none is
-    computed for a record no backend solves, or one
-    beyond the memory budget (its reference status is then ``unknown``)."""
-    from dataclasses import replace as copy_with
+    """One reference per record: ``references`` as given, or computed by it (a function of a
+    problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
+    backend solves within the memory budget (the others' status is ``unknown``)."""
+    from dataclasses import replace
 
     from ..memory import resolve_budget, sparse_solver_bytes
     from ..reference import ReferenceSolution
@@ -342,14 +297,13 @@ def references_for(
 
         compute = reference_solutions if references is None else references
         budget = resolve_budget(None) if plan.budget is None else plan.budget
-        backends = {name for _, name in plan.skips} | set(plan.settings)
         wanted = [
             i
             for i, r in enumerate(plan.records)
-            if any((i, name) not in plan.skips for name in backends)
+            if any((i, name) not in plan.skips for name in plan.settings)
             and sparse_solver_bytes(r.problem) <= budget
         ]
-        subset = copy_with(problem_set, records=[plan.records[i] for i in wanted])
+        subset = replace(problem_set, records=[plan.records[i] for i in wanted])
         computed = dict(zip(wanted, compute(subset))) if wanted else {}
         references = [
             computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
@@ -369,6 +323,5 @@ def open_output(plan: Plan, out: Path, force: bool) -> dict:
         plan.existing = read_results(out, repair=True)
     elif force and out.exists():
         out.unlink()
-        if plan.marker.path.exists():
-            plan.marker.path.unlink()
+        plan.marker.path.unlink(missing_ok=True)
     return plan.existing.by_key()

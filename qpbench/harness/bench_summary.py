@@ -17,13 +17,9 @@ DEFAULT_SEED = 0
 class BackendStats:
     """One backend's rows in a bench run (a line of the closing table).
 
-    Attributes:
-        rows: Rows of the backend.
-        successes: Rows with ``success`` true.
-        times_s: ``wall_time_min_s`` of the rows that have one, in [s].
-        violations: ``constraint_violation`` of the rows that have one (an ``x``).
-        failures: Failed solves (:func:`is_failure`) by status.
-        isolated: Rows solved in a worker process.
+    ``times_s``: ``wall_time_min_s`` of its rows [s]; ``violations``: ``constraint_violation``
+    of the rows with an ``x``; ``failures``: failed solves (:func:`is_failure`) by status;
+    ``isolated``: rows solved in a worker process.
     """
 
     rows: int = 0
@@ -48,10 +44,10 @@ class BackendStats:
             self.successes += 1
         if _truth(row.get("isolated")):
             self.isolated += 1
-        t = _float(row.get("wall_time_min_s"))
+        t = as_float(row.get("wall_time_min_s"))
         if t is not None and math.isfinite(t):
             self.times_s.append(t)
-        v = _float(row.get("constraint_violation"))
+        v = as_float(row.get("constraint_violation"))
         if v is not None and not math.isnan(v):
             self.violations.append(v)
         status = str(row.get("status"))
@@ -64,18 +60,13 @@ class BenchSummary:
     """What a bench run did (the data of the closing line and table).
 
     Attributes:
-        rows: Rows of this run's keys in the CSV (resumed and new).
-        new_rows: Rows written by this invocation.
-        failures: Rows counted as failed solves (see :func:`is_failure`).
-        statuses: Count of each status over ``rows``.
-        backends: Per backend (in the run's order), its :class:`BackendStats`.
-        elapsed_s: Duration of this invocation in [s].
-        timed_s: Sum of the reported wall times (min over repeats) of the new rows in [s].
-        overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s``
-            (our timed region minus what the solver reports), NaN if no backend reports a time.
-        overhead_rows: Rows with both times.
+        rows: Rows of this run's keys in the CSV (resumed and new); ``new_rows``: written now.
+        failures: Rows counted as failed solves (:func:`is_failure`).
+        elapsed_s: Duration of this invocation [s].
+        timed_s: Sum of the new rows' ``wall_time_min_s`` [s].
+        overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s`` [s]
+            (NaN if no backend reports a time), over ``overhead_rows`` rows.
         isolated: Backends that ran in a worker process.
-        seed: Seed of the backend order.
     """
 
     rows: int = 0
@@ -127,12 +118,8 @@ class BenchSummary:
         return text
 
     def table(self) -> str:
-        """Per backend: rows, success %, time p50/p99, max constraint violation, failures by status.
-
-        Plain text with aligned columns; times in [us] (``wall_time_min_s``),
-        violation in the problem's units over the rows with an ``x``; a
-        backend solved in a worker process (some rows) is marked ``*``.
-        """
+        """Per backend: rows, success %, time p50/p99 [us], max constraint violation (problem
+        units), failures by status; ``*`` marks a backend solved in a worker process."""
         header = [
             "backend",
             "rows",
@@ -190,7 +177,8 @@ def is_failure(status: str, reference_status: str | None) -> bool:
     return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
 
 
-def _float(value) -> float | None:
+def as_float(value) -> float | None:
+    """A number cell (a new row's value or a resumed row's string) as a float, else ``None``."""
     if value is None:
         return None
     try:
