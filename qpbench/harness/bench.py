@@ -336,10 +336,8 @@ class _BenchRun:
             if key not in wanted:
                 continue
             summary.rows += 1
-            status = str(row["status"])
-            summary.statuses[status] = summary.statuses.get(status, 0) + 1
             summary.backends[key[1]].add(row)
-            if is_failure(status, row["reference_status"] or None):
+            if is_failure(str(row["status"]), row["reference_status"] or None):
                 summary.failures += 1
         if self.overheads:
             summary.overhead_median_s = statistics.median(self.overheads)

@@ -72,7 +72,6 @@ class BenchSummary:
     rows: int = 0
     new_rows: int = 0
     failures: int = 0
-    statuses: dict = field(default_factory=dict)
     backends: dict = field(default_factory=dict)
     elapsed_s: float = 0.0
     timed_s: float = 0.0
@@ -81,30 +80,17 @@ class BenchSummary:
     isolated: list = field(default_factory=list)
     seed: int = DEFAULT_SEED
 
-    @property
-    def exit_code(self) -> int:
-        return 1 if self.failures else 0
-
-    @property
-    def failures_by_backend(self) -> dict:
-        """Failed solves per backend (only backends with some)."""
-        return {b: s.n_failures for b, s in self.backends.items() if s.n_failures}
-
-    @property
-    def unsuccessful_by_backend(self) -> dict:
-        """Rows without ``success`` per backend (only backends with some)."""
-        return {b: s.unsuccessful for b, s in self.backends.items() if s.unsuccessful}
-
     def line(self) -> str:
         """The closing line: rows, failed and unsuccessful solves by backend, times."""
 
         def by_backend(counts: dict) -> str:
             return " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
 
-        unsuccessful = self.unsuccessful_by_backend
+        failed = {b: s.n_failures for b, s in self.backends.items() if s.n_failures}
+        unsuccessful = {b: s.unsuccessful for b, s in self.backends.items() if s.unsuccessful}
         text = (
             f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; "
-            f"{self.failures} failed solves{by_backend(self.failures_by_backend)}; "
+            f"{self.failures} failed solves{by_backend(failed)}; "
             f"{sum(unsuccessful.values())} without success{by_backend(unsuccessful)}; "
             f"timed solves {self.timed_s:.3f} s; backend order seed {self.seed}"
         )

@@ -148,9 +148,7 @@ def _check_out(out: Path, force: bool) -> None:
     from ..exceptions import OutputExistsError
 
     check_folder(out)
-    if not out.exists():
-        return
-    if (out / "run.json").exists() or force:
+    if not out.exists() or (out / "run.json").exists() or force:
         return
     clash = sorted(name for name in OUTPUTS if (out / name).exists())
     if clash:
@@ -171,22 +169,6 @@ def _dump_backend(backends: list[str]) -> str:
     raise BackendNotFound(
         f"no QP backend to generate problem sets with (tried {', '.join(DUMP_BACKENDS)})"
     )
-
-
-def make_problem_set(scenario: str, folder: Path, backend: str) -> Path:
-    """Regenerate a scenario's problem set: every 10th tick of its full run, paper formulation."""
-    from ..sim.loop import simulate
-    from ..sim.scenario import load_scenario
-
-    log.info(
-        "problem set %s missing: simulating %s with %s to dump every %dth tick",
-        folder,
-        scenario,
-        backend,
-        EVERY,
-    )
-    simulate(load_scenario(scenario), backend, formulation="paper", every=EVERY, dump=folder)
-    return folder
 
 
 def bench_subset(
@@ -229,7 +211,10 @@ def _compress_bench(bench_dir: Path) -> None:
 def run_all(config: RunConfig) -> RunOutcome:
     """Problem sets, bench, closed loop and report (module docstring); outputs replaced at the
     end; ``run.json`` keeps the phases' wall times (``phase_wall_time_s``) and the run's."""
+    from ..formats import load_problems
     from ..jit import warmup_logged
+    from ..sim.loop import simulate
+    from ..sim.scenario import load_scenario
     from .phases import Phases
 
     started = time.perf_counter()
@@ -251,12 +236,15 @@ def run_all(config: RunConfig) -> RunOutcome:
         warmup_logged(log, [*config.backends, *dump])
     for s in missing:
         with phases.phase(f"problem set {s}"):
-            make_problem_set(s, problems / s, dump[0])
+            log.info("simulating %s with %s to dump every %dth tick", s, dump[0], EVERY)
+            simulate(load_scenario(s), dump[0], formulation="paper", every=EVERY, dump=problems / s)
     with phases.phase("references", total=len(bench_scenarios), unit="set") as phase:
         subsets = {}
         for s in bench_scenarios:
             phase.describe(s)
-            subsets[s] = _bench_subset(config, s)
+            subsets[s] = bench_subset(
+                load_problems(problems / s), config.duration, config.bench_every
+            )
             phase.update()
     failures, per_tick_s = _bench(config, subsets, staging / "bench", phases)
     failed_solves = failures
@@ -268,13 +256,13 @@ def run_all(config: RunConfig) -> RunOutcome:
 
         write_report([staging / "bench", staging / "closed_loop.csv"], staging, force=True)
         _compress_bench(staging / "bench")
+    elapsed = time.perf_counter() - started
     manifest = _manifest(config, bench_scenarios, table, budgets)
     manifest["phase_wall_time_s"] = dict(phases.times_s)
-    manifest["wall_time_s"] = round(time.perf_counter() - started, 1)
-
+    manifest["wall_time_s"] = round(elapsed, 1)
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
     promote(staging, out, OUTPUTS)
-    return RunOutcome(failures, out / "report.md", time.perf_counter() - started, failed_solves)
+    return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
 
 
 def _bench_scenarios(scenarios: list[str]) -> list[str]:
@@ -283,15 +271,6 @@ def _bench_scenarios(scenarios: list[str]) -> list[str]:
 
     paper = paper_scenarios()
     return [s for s in scenarios if s in paper] or list(scenarios)
-
-
-def _bench_subset(config: RunConfig, scenario: str) -> tuple[ProblemSet, list]:
-    """A scenario's bench problems and their references (:func:`bench_subset`)."""
-    from ..formats import load_problems
-
-    return bench_subset(
-        load_problems(Path(config.problems) / scenario), config.duration, config.bench_every
-    )
 
 
 def _bench(
