@@ -113,21 +113,15 @@ class RunConfig:
         """Every value checked before anything is written (one-line errors naming the option)."""
         if self.duration is not None:
             self.duration = positive_seconds(self.duration, "--duration")
-        if self.bench_every < 1:
-            raise ParamError(
-                f"must be an integer >= 1, got {self.bench_every}", key="--bench-every"
-            )
-        if self.run_budget is not None and not (
-            self.run_budget > 0 and math.isfinite(self.run_budget)
+        if self.run_budget is not None:
+            self.run_budget = positive_seconds(self.run_budget, "--run-budget")
+        for key, value in (
+            ("--bench-every", self.bench_every),
+            ("--repeat", self.repeat),
+            ("--jobs", self.jobs),
         ):
-            raise ParamError(
-                f"must be a number of seconds >= 0 (0: no budget), got {self.run_budget}",
-                key="--run-budget",
-            )
-        if self.repeat < 1:
-            raise ParamError(f"must be an integer >= 1, got {self.repeat}", key="--repeat")
-        if self.jobs < 1:
-            raise ParamError(f"must be an integer >= 1, got {self.jobs}", key="--jobs")
+            if value < 1:
+                raise ParamError(f"must be an integer >= 1, got {value}", key=key)
 
 
 @dataclass
