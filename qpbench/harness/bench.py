@@ -188,6 +188,7 @@ class Plan:
         learned: Backends known to crash in this process (from the in-flight ``marker``).
         skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
         notes: ``record index -> warning`` written in its rows' ``error`` column.
+        budget: Bytes a solve may need (:func:`qpbench.memory.resolve_budget`).
     """
 
     records: list
@@ -203,7 +204,7 @@ class Plan:
     marker: InflightMarker
     skips: dict = field(default_factory=dict)
     notes: dict = field(default_factory=dict)
-    budget: int | None = None
+    budget: int = 0
 
 
 def _check_records(problem_set) -> list:
@@ -257,7 +258,10 @@ def make_plan(
     records = _check_records(problem_set)
     settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
     instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
-    skips, notes = skipped_solves(records, config)
+    from ..memory import resolve_budget
+
+    budget = resolve_budget(None) if config.memory_budget is None else config.memory_budget
+    skips, notes = skipped_solves(records, config.backends, budget)
     plan = Plan(
         records=records,
         seqs=sequences(records, config.mode),
@@ -272,7 +276,7 @@ def make_plan(
         marker=InflightMarker(InflightMarker.for_output(out)),
         skips=skips,
         notes=notes,
-        budget=config.memory_budget,
+        budget=budget,
     )
     if plan.resuming:
         plan.existing = read_results(out, repair=False)
@@ -281,7 +285,9 @@ def make_plan(
     return plan
 
 
-def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[dict, dict]:
+def skipped_solves(
+    records: list[ProblemRecord], backends: list[str], budget: int
+) -> tuple[dict, dict]:
     """``(skips, notes)``: the solves not made and why, and the warnings of the rest.
 
     A clearly nonconvex problem is skipped by every backend, a slightly indefinite one solved
@@ -289,9 +295,8 @@ def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[d
     or the memory budget is skipped by that backend (:func:`qpbench.memory.skip_reason`).
     """
     from ..formats.convexity import assess_convexity
-    from ..memory import resolve_budget, skip_reason
+    from ..memory import skip_reason
 
-    budget = config.memory_budget if config.memory_budget is not None else resolve_budget(None)
     skips, notes = {}, {}
     for i, record in enumerate(records):
         if record.convexity is None:
@@ -300,7 +305,7 @@ def skipped_solves(records: list[ProblemRecord], config: BenchConfig) -> tuple[d
         if record.convexity.warning:
             notes[i] = f"warning: {record.convexity.warning}"
             log.warning("%s: %s", record.name, record.convexity.warning)
-        for name in config.backends:
+        for name in backends:
             why = reason or skip_reason(record.problem, backend_class(name).sparse, budget)
             if why:
                 skips[(i, name)] = why
@@ -315,19 +320,18 @@ def references_for(
     backend solves within the memory budget (the others' status is ``unknown``)."""
     from dataclasses import replace
 
-    from ..memory import resolve_budget, sparse_solver_bytes
+    from ..memory import sparse_solver_bytes
     from ..reference import ReferenceSolution
 
     if references is None or callable(references):
         from ..reference import reference_solutions
 
         compute = reference_solutions if references is None else references
-        budget = resolve_budget(None) if plan.budget is None else plan.budget
         wanted = [
             i
             for i, r in enumerate(plan.records)
             if any((i, name) not in plan.skips for name in plan.settings)
-            and sparse_solver_bytes(r.problem) <= budget
+            and sparse_solver_bytes(r.problem) <= plan.budget
         ]
         subset = replace(problem_set, records=[plan.records[i] for i in wanted])
         computed = dict(zip(wanted, compute(subset))) if wanted else {}

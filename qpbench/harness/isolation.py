@@ -139,26 +139,23 @@ class IsolatedRunner:
                 self.restarts += 1
             raise
 
-    def reset(self) -> None:
-        if self._worker is None:
-            return  # a new worker has no state anyway
+    def _status(self, request: tuple, timeout: float, what: str):
+        """The worker's answer to ``request``, or the status of its failure."""
         try:
-            self._call(("reset",), deadline(self.time_limit), "reset")
-        except WorkerDied:
-            pass
+            return self._call(request, timeout, what)
+        except WorkerDied as died:
+            return died.status
+
+    def reset(self) -> None:
+        if self._worker is not None:  # a new worker has no state anyway
+            self._status(("reset",), deadline(self.time_limit), "reset")
 
     def warmup(self, problem: qpsolvers.Problem) -> str:
-        try:
-            timeout = max(WARMUP_TIMEOUT_S, 2 * self.time_limit)
-            return self._call(("warmup", problem), timeout, "warm-up")
-        except WorkerDied as died:
-            return died.status
+        timeout = max(WARMUP_TIMEOUT_S, 2 * self.time_limit)
+        return self._status(("warmup", problem), timeout, "warm-up")
 
     def replay(self, problem: qpsolvers.Problem) -> str:
-        try:
-            return self._call(("replay", problem), deadline(self.time_limit), "replay")
-        except WorkerDied as died:
-            return died.status
+        return self._status(("replay", problem), deadline(self.time_limit), "replay")
 
     def solve(
         self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False

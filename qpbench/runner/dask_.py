@@ -166,10 +166,15 @@ class DaskExecutor:
 
         hosts, threads = self._per_host()
         pending = {}
-        for i, (key, arg) in enumerate(items):
-            fut = self.client.submit(run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-1")
-            pending[fut] = (i, key, arg, 1)
-        queue = as_completed(list(pending))
+
+        def submit(i: int, key, arg, attempt: int):
+            fut = self.client.submit(
+                run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempt}"
+            )
+            pending[fut] = (i, key, arg, attempt)
+            return fut
+
+        queue = as_completed([submit(i, key, arg, 1) for i, (key, arg) in enumerate(items)])
         for fut in queue:
             i, key, arg, attempts = pending.pop(fut)
             if fut.status == "finished":
@@ -183,11 +188,7 @@ class DaskExecutor:
             why = f"{type(fut.exception()).__name__}: {fut.exception()}"
             if attempts < MAX_ATTEMPTS:
                 log.warning("%s: %s; running it again", key, why)
-                new = self.client.submit(
-                    run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempts + 1}"
-                )
-                pending[new] = (i, key, arg, attempts + 1)
-                queue.add(new)
+                queue.add(submit(i, key, arg, attempts + 1))
                 continue
             yield Done(
                 key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0
