@@ -629,12 +629,8 @@ class _BenchRun:
         wanted = {(r.name, b, pname) for r in self.plan.records for b in self.config.backends}
         summary.backends = {name: BackendStats() for name in self.config.backends}
         for key, row in self.done.items():
-            if key not in wanted:
-                continue
-            summary.rows += 1
-            summary.backends[key[1]].add(row)
-            if is_failure(str(row["status"]), row["reference_status"] or None):
-                summary.failures += 1
+            if key in wanted:
+                summary.backends[key[1]].add(row)
         if self.overheads:
             summary.overhead_median_s = statistics.median(self.overheads)
             summary.overhead_rows = len(self.overheads)
@@ -689,8 +685,8 @@ class BenchSummary:
     """What a bench run did (the data of the closing line and table).
 
     Attributes:
-        rows: Rows of this run's keys in the CSV (resumed and new); ``new_rows``: written now.
-        failures: Rows counted as failed solves (:func:`is_failure`).
+        backends: Each backend's :class:`BackendStats` over the rows of this run's keys in the
+            CSV (resumed and new); ``new_rows``: rows written now.
         elapsed_s: Duration of this invocation [s].
         timed_s: Sum of the new rows' ``wall_time_min_s`` [s].
         overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s`` [s]
@@ -698,9 +694,7 @@ class BenchSummary:
         isolated: Backends that ran in a worker process.
     """
 
-    rows: int = 0
     new_rows: int = 0
-    failures: int = 0
     backends: dict = field(default_factory=dict)
     elapsed_s: float = 0.0
     timed_s: float = 0.0
@@ -708,6 +702,15 @@ class BenchSummary:
     overhead_rows: int = 0
     isolated: list = field(default_factory=list)
     seed: int = DEFAULT_SEED
+
+    @property
+    def rows(self) -> int:
+        return sum(s.rows for s in self.backends.values())
+
+    @property
+    def failures(self) -> int:
+        """Rows counted as failed solves (:func:`is_failure`)."""
+        return sum(s.n_failures for s in self.backends.values())
 
     def line(self) -> str:
         """The closing line: rows, failed and unsuccessful solves by backend, times."""
