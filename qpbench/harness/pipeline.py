@@ -109,8 +109,8 @@ class RunConfig:
     progress: bool = True
     on_row: Callable[[dict], None] | None = field(default=None, repr=False)
 
-    def validate(self) -> None:
-        """Every value checked before anything is written (one-line errors naming the option)."""
+    def __post_init__(self) -> None:
+        """Every value checked when made (one-line errors naming the option)."""
         if self.duration is not None:
             self.duration = positive_seconds(self.duration, "--duration")
         if self.run_budget is not None:
@@ -212,7 +212,6 @@ def run_all(config: RunConfig) -> RunOutcome:
     from .phases import Phases
 
     started = time.perf_counter()
-    config.validate()
     out, problems = Path(config.out), Path(config.problems)
     bench_scenarios = _bench_scenarios(config.scenarios)
     _check_out(out, config.force)
