@@ -115,14 +115,10 @@ def death_message(exitcode: int | None) -> str:
 
 def requests(conn: Connection) -> Iterator:
     """Each request a worker process receives on ``conn``, until ``None`` or the other end closes."""
-    while True:
-        try:
-            request = conn.recv()
-        except EOFError:
-            return
-        if request is None:
-            return
-        yield request
+    try:
+        yield from iter(conn.recv, None)
+    except EOFError:
+        return
 
 
 def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
