@@ -1,61 +1,25 @@
 """Metrics of a solution against its problem and its reference solution.
 
-The per-tick metrics are a declared list (:data:`PER_TICK_METRICS`), each a
-function of one :class:`Tick` registered with :func:`per_tick_metric`; their
-names are the metric columns of a bench CSV, in that order
-(:func:`metric_columns`; :mod:`qpbench.harness.results` puts them between the
-outcome and the timings). A new per-tick metric is one such function here;
-a report table shows it only if one is written for it.
+The per-tick metrics are a declared list (:data:`PER_TICK_METRICS`) of functions of one
+:class:`Tick` registered with :func:`per_tick_metric`; their names are a bench CSV's metric
+columns, in order (:func:`metric_columns`). For a record ``(P, q, G, h, A, b, lb, ub)`` with
+constant ``r`` (:attr:`~qpbench.formats.ProblemRecord.offset`):
 
-For a record with problem ``(P, q, G, h, A, b, lb, ub)`` and constant ``r``
-(:attr:`~qpbench.formats.ProblemRecord.offset`), :func:`evaluate` returns
-every registered metric and ``status``, ``found``, ``success`` and
-``optimality_gap_signed``:
+- ``objective``: ``f(x) = 1/2 x'Px + q'x + r``, computed here; ``reference_objective``: ``f*``
+  of an optimal reference; ``optimality_gap``: ``|f(x) - f*| / max(1, |f*|)``; NaN when missing.
+- ``reference_status``; ``reference_agreement``: the relative objective difference of the two
+  reference solvers.
+- ``primal_residual``, ``dual_residual``, ``duality_gap``: qpsolvers' (``inf`` when not found or
+  the duals are missing).
+- ``violation_ineq``, ``violation_eq``, ``violation_box`` and their maximum
+  ``constraint_violation`` (:func:`constraint_violation`), whether ``found`` or not, so a
+  solution that is not found shows how far off it is.
 
-- ``objective``: ``f(x) = 1/2 x'Px + q'x + r`` computed here (``Solution.obj``
-  is ``None`` for some solvers and never includes ``r``); NaN without ``x``.
-- ``reference_objective``: ``f*`` of an optimal reference, else NaN;
-  ``reference_status``: the reference's status; ``reference_agreement``: the
-  relative objective difference of the two reference solvers.
-- ``optimality_gap_signed``: ``(f(x) - f*) / max(1, |f*|)`` (dimensionless);
-  ``optimality_gap``: its absolute value. NaN when either side is missing.
-- ``primal_residual``, ``dual_residual``, ``duality_gap``: qpsolvers'
-  :meth:`~qpsolvers.Solution.primal_residual`, ``dual_residual`` and
-  ``duality_gap`` on the solution as given (``inf`` when ``found`` is false or
-  the duals are missing, as qpsolvers defines them).
-- constraint violation of ``x``, whether the backend reported ``found`` or
-  not (so a baseline that ignores constraints, a solver stopped at its
-  iteration limit or the online network, whose answers are not ``found``, shows
-  how far off it is); absolute, in the problem's units, NaN without ``x``
-  (:func:`constraint_violation`):
-
-  - ``violation_ineq``: ``max_i max(0, (G x - h)_i)``;
-  - ``violation_eq``: ``max_i |(A x - b)_i|``;
-  - ``violation_box``: ``max_i max(0, lb_i - x_i, x_i - ub_i)``;
-  - ``constraint_violation``: the largest of the three (0 for a problem
-    without constraints). It equals qpsolvers' primal residual of a found
-    solution.
-- ``status``, ``found``: as reported by the backend (``status`` of a
-  :class:`~qpbench.backends.base.BackendSolution`, or ``extras["status"]`` when
-  it is one of :data:`STATUSES`; for a plain ``qpsolvers.Solution``,
-  ``optimal`` if found else ``not_solved``).
-- ``success``: the rule below.
-
-Success rule (qpbenchmark's, plus the reference):
-
-- reference ``primal_infeasible`` or ``dual_infeasible``: success iff the
-  backend reported that same status (a solution "found" there is wrong);
-- otherwise: ``found`` and ``primal_residual <= tol.primal`` and
-  ``dual_residual <= tol.dual`` and ``duality_gap <= tol.gap``, and, when the
-  reference is ``optimal``, ``optimality_gap <= tol.gap``, i.e.
-  ``|f(x) - f*| <= tol.gap * max(1, |f*|)``: absolute for objectives below 1
-  in magnitude, relative above. A reference with status ``unknown`` (or no
-  reference) adds no condition.
-
-Under ``tolerance.rule == "qpbenchmark"`` (qpbenchmark's profiles, and
-``bench --reference none``) success is qpbenchmark's rule exactly: ``found``
-and each of the three residuals strictly below its threshold; the reference
-plays no part (:func:`qpbench.published.qpbenchmark_success`).
+Success (:func:`evaluate`): against a reference ``primal_infeasible`` or ``dual_infeasible``, the
+backend reporting that same status; otherwise ``found``, the residuals and duality gap within the
+profile's tolerance and, against an ``optimal`` reference, ``optimality_gap <= tol.gap``. Under
+``tolerance.rule == "qpbenchmark"`` it is qpbenchmark's rule exactly: ``found`` and each residual
+strictly below its threshold, no reference (:func:`qpbench.published.qpbenchmark_success`).
 """
 
 from __future__ import annotations
@@ -110,16 +74,9 @@ def _dense(M):
 def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> dict:
     """How far ``x`` is from satisfying ``problem``'s constraints (absolute, problem units).
 
-    Args:
-        problem: ``qpsolvers.Problem`` with ``G, h, A, b, lb, ub`` (any may be ``None``).
-        x: Primal point of shape (n,), or ``None``.
-
-    Returns:
-        ``{"violation_ineq": max(0, max(G x - h)), "violation_eq": max|A x - b|,
-        "violation_box": max(0, max(lb - x), max(x - ub)), "constraint_violation":
-        the largest of the three}``; a part the problem lacks is 0; all NaN
-        when ``x`` is ``None``. A non-finite ``x`` gives ``inf`` or NaN as
-        arithmetic does.
+    ``violation_ineq = max(0, max(G x - h))``, ``violation_eq = max|A x - b|``,
+    ``violation_box = max(0, max(lb - x), max(x - ub))``, ``constraint_violation``: the largest;
+    a part the problem lacks is 0; all NaN when ``x`` is ``None``.
     """
     if x is None:
         return dict.fromkeys(VIOLATION_KEYS, math.nan)
@@ -150,15 +107,8 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
 
 @dataclass
 class Tick:
-    """What a per-tick metric reads.
-
-    Attributes:
-        record: The :class:`~qpbench.formats.ProblemRecord` that was solved.
-        solution: The backend's ``qpsolvers.Solution`` (``None`` without one).
-        reference: The record's :class:`~qpbench.reference.ReferenceSolution`, or ``None``.
-        values: The metrics computed before this one, by column (a metric may
-            read an earlier one instead of computing it again).
-    """
+    """What a per-tick metric reads: the record, the solution and reference (or ``None``), and
+    ``values``, the metrics computed before this one, by column."""
 
     record: object
     solution: object
@@ -182,12 +132,8 @@ PER_TICK_METRICS: list[tuple[tuple[str, ...], Callable[[Tick], object]]] = []
 def per_tick_metric(
     fn: Callable | None = None, *, columns: tuple[str, ...] | None = None
 ) -> Callable:
-    """Register ``fn(tick) -> value`` as a per-tick metric; its name is the column.
-
-    ``columns=("a", "b")``: the function returns ``{"a": ..., "b": ...}``.
-    Usable bare (``@per_tick_metric``) or with ``columns``. A name already
-    registered is replaced in place (its column keeps its position).
-    """
+    """Register ``fn(tick) -> value`` as a per-tick metric named after its column, or returning
+    ``{"a": ..., "b": ...}`` for ``columns=("a", "b")``; a registered name is replaced in place."""
 
     def add(f: Callable) -> Callable:
         cols = tuple(columns) if columns else (f.__name__,)
@@ -279,20 +225,9 @@ def evaluate(
     reference: object | None,
     tolerance: Tolerance,
 ) -> dict:
-    """Score ``solution`` of ``record`` against ``reference`` under ``tolerance``.
-
-    Args:
-        record: :class:`~qpbench.formats.ProblemRecord` that was solved.
-        solution: ``qpsolvers.Solution`` (or a subclass) whose ``problem`` is the
-            record's problem; ``None`` when the backend returned nothing.
-        reference: :class:`~qpbench.reference.ReferenceSolution` or ``None``.
-        tolerance: :class:`~qpbench.profiles.Tolerance` (``primal``, ``dual``, ``gap``).
-
-    Returns:
-        ``status``, ``found``, every metric of :data:`PER_TICK_METRICS` (by
-        column, in order), ``optimality_gap_signed`` and ``success`` (see the
-        module docstring).
-    """
+    """Score ``solution`` (``None``: the backend returned nothing) of ``record`` against
+    ``reference`` under ``tolerance``: ``status``, ``found``, every per-tick metric, in order,
+    ``optimality_gap_signed`` and ``success`` (module docstring)."""
     tick = Tick(record, solution, reference)
     for columns, fn in PER_TICK_METRICS:
         value = fn(tick)

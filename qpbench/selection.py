@@ -1,18 +1,9 @@
 """What a command works on, parsed and checked before any work starts.
 
-Problem subsets: the same three options on every command that reads a
-problem set (``qpbench list``, ``qpbench export``, ``qpbench bench``):
-``--problems PATTERN`` keeps the records whose name matches a shell-style
-pattern (``wall_paper_0001*``; several patterns separated by commas),
-``--every K`` keeps every K-th of those, ``--limit N`` the first N of what
-is left. Order is the file's.
-
-Backend lists, scenario lists and ``--set`` overrides, for ``bench``,
-``simulate``, ``closed-loop`` and ``run`` alike (:func:`select_backends`,
-:func:`select_scenarios`, :func:`parse_overrides`, :func:`backend_settings`):
-``all`` or comma-separated names; a name given twice is refused with one line
-naming it; a backend setting is checked against the backend's own list where
-the backend can tell.
+Problem subsets (``--problems PATTERN``: comma-separated shell-style patterns on the name;
+``--every K`` of those; ``--limit N`` of what is left; file order), backend and scenario lists
+(``all`` or comma-separated names, none twice) and ``--set`` overrides, checked against the
+backend's own settings where it can tell.
 """
 
 from __future__ import annotations
@@ -25,29 +16,12 @@ from .exceptions import ParamError
 if TYPE_CHECKING:
     from .formats import ProblemSet
 
-__all__ = [
-    "backend_settings",
-    "parse_list",
-    "parse_overrides",
-    "select_backend",
-    "select_backends",
-    "select_records",
-    "select_scenarios",
-    "select_set",
-]
-
 
 def select_records(
     records: list, pattern: str | None = None, every: int | None = None, limit: int | None = None
 ) -> list:
-    """The records kept by ``pattern``, then ``every``, then ``limit`` (file order).
-
-    Args:
-        records: Problem records (anything with a ``name``).
-        pattern: Comma-separated shell-style patterns on the name, case-sensitive;
-            ``None`` keeps all.
-        every: Keep every K-th record (K >= 1) of those that match.
-        limit: Keep at most N records (N >= 1).
+    """The records (anything with a ``name``) kept by ``pattern`` (case-sensitive), then every
+    ``every``-th, then the first ``limit``.
 
     Raises:
         ParamError: ``every`` or ``limit`` below 1, or a pattern that matches nothing.
@@ -80,10 +54,8 @@ def select_set(
 ) -> ProblemSet:
     """A copy of ``problem_set`` holding the records :func:`select_records` keeps.
 
-    With ``every`` > 1 the manifest's generator stride (``every``, ticks per
-    record of a dumped sequence) is multiplied by it, so that an online backend
-    integrates the real time between two kept records. The set's SHA-256 (of
-    its file) is kept: rows stay tied to the file they came from.
+    The manifest's generator stride (ticks per record) is multiplied by ``every``, so that an
+    online backend integrates the time between two kept records; the set's SHA-256 is kept.
     """
     from dataclasses import replace
 
@@ -102,15 +74,9 @@ def select_set(
     return replace(problem_set, records=records, manifest=manifest)
 
 
-# -- backends, scenarios and --set overrides: parsed and checked before any work starts ----------
-
-
 def parse_list(value: str | list[str] | None, option: str) -> list[str]:
-    """Split a comma-separated option value (empty items dropped, order kept).
-
-    Raises:
-        ParamError: the list is empty, or an item is given twice.
-    """
+    """Split a comma-separated option value (empty items dropped, order kept); refuse an empty
+    list or an item given twice."""
     if value is None:
         return []
     items = value if isinstance(value, list) else value.split(",")
@@ -130,12 +96,8 @@ def parse_list(value: str | list[str] | None, option: str) -> list[str]:
 
 
 def select_scenarios(value: str | list[str] | None, option: str = "--scenarios") -> list[str]:
-    """``all`` (or nothing) -> every shipped scenario (the paper's four first); else the names
-    or paths given, each loaded once here so that a typo or a broken file is one line naming it.
-
-    Raises:
-        ParamError: an empty list or a name given twice. ScenarioError: a scenario that does not load.
-    """
+    """``all`` (or nothing): every shipped scenario (the paper's four first); else the names or
+    paths given, each loaded here so that a typo or a broken file is one line naming it."""
     from .sim.scenario import load_scenario, scenario_names
 
     names = parse_list(value or "all", option)
@@ -147,21 +109,14 @@ def select_scenarios(value: str | list[str] | None, option: str = "--scenarios")
 
 
 def select_backends(value: str | list[str] | None, option: str = "--backends") -> list[str]:
-    """``all`` (or nothing) -> every available backend; else the names given, in their
-    registered spelling, each available here.
-
-    Raises:
-        ParamError: an empty list, or a backend given twice (also under two spellings).
-        BackendNotFound: a name is not registered or not available here (with close names).
-    """
+    """``all`` (or nothing): every available backend; else the names given, in their registered
+    spelling, each available here (:class:`BackendNotFound` with close names otherwise)."""
     from .backends import backend_names, get_backend, resolve_name
 
     names = parse_list(value or "all", option)
     if names == ["all"]:
         return list(backend_names(available_only=True))
-    resolved = [
-        resolve_name(name) for name in names
-    ]  # the registered spelling; a typo gets a suggestion
+    resolved = [resolve_name(name) for name in names]  # a typo gets a suggestion
     for i, name in enumerate(resolved):
         if name in resolved[:i]:
             raise ParamError(
@@ -173,11 +128,7 @@ def select_backends(value: str | list[str] | None, option: str = "--backends") -
 
 
 def select_backend(name: str, option: str = "--backend") -> str:
-    """One backend name (not a list, not ``all``), in its registered spelling, available here.
-
-    Raises:
-        ParamError: a list or ``all``. BackendNotFound: see :func:`select_backends`.
-    """
+    """One backend name (not a list, not ``all``), as :func:`select_backends` checks it."""
     names = parse_list(name, option)
     if len(names) != 1 or names == ["all"]:
         raise ParamError(f"expected one backend name, got '{name}'", key=option)
@@ -185,17 +136,9 @@ def select_backend(name: str, option: str = "--backend") -> str:
 
 
 def parse_overrides(items: list[str] | None, option: str = "--set") -> dict:
-    """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``.
-
-    A value is read as a TOML value (``0.001``, ``5``, ``true``, ``[0.0, 0.1]``,
-    ``"text"``); one that is not valid TOML is taken as a string (``euler``).
-    A later setting of the same key wins. Scenario keys are checked by the
-    scenario loader (:func:`qpbench.sim.scenario.apply_overrides`), backend
-    keys by :func:`backend_settings`.
-
-    Raises:
-        ParamError: an item without ``=`` or with an empty key.
-    """
+    """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``: each value read as TOML, else
+    as a string (``euler``); a later setting of a key wins. The keys are checked by their users
+    (:func:`qpbench.sim.scenario.apply_overrides`, :func:`backend_settings`)."""
     import tomllib
 
     out = {}
@@ -216,15 +159,9 @@ def parse_overrides(items: list[str] | None, option: str = "--set") -> dict:
 def backend_settings(
     items: list[str] | None, backends: list[str], option: str = "--set"
 ) -> dict[str, dict]:
-    """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked.
-
-    A key is checked against the settings the backend says it accepts
-    (:meth:`qpbench.backends.base.Backend.setting_names`) where it can tell:
-    ``osqp.rhoo`` is refused with "did you mean 'rho'".
-
-    Raises:
-        ParamError: ``BACKEND`` is not one of ``backends``, or ``KEY`` is not a setting of it.
-    """
+    """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked against
+    :meth:`~qpbench.backends.base.Backend.setting_names` where the backend can tell (``osqp.rhoo``:
+    "did you mean 'rho'")."""
     import difflib
 
     from .backends import backend_class

@@ -395,7 +395,6 @@ def test_run_runs_closed_loops_side_by_side_one_per_core(monkeypatch):
     assert pipeline.default_jobs() == 1
     monkeypatch.setattr(pipeline.os, "cpu_count", lambda: 64)
     assert pipeline.default_jobs() == pipeline.LOOP_JOBS
-    config = pipeline.RunConfig(out=Path("x"), problems=Path("p"), scenarios=["wall"],
-                                backends=["daqp"], jobs=0)  # fmt: skip
     with pytest.raises(ParamError, match="--jobs"):
-        config.validate()
+        pipeline.RunConfig(out=Path("x"), problems=Path("p"), scenarios=["wall"],
+                           backends=["daqp"], jobs=0)  # fmt: skip

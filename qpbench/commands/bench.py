@@ -140,15 +140,13 @@ def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_output
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..jit import warmup_logged
     from ..memory import resolve_budget
     from ..selection import backend_settings, select_backends
 
-    # Nothing is written before the input is known to be good.
-    check_output(args.out, force=args.force, resume=args.resume)
+    # Nothing is written before the input is known to be good (run_bench checks --out).
     backends = select_backends(args.backends)
     per_backend = backend_settings(args.sets, backends)
     config = BenchConfig(
@@ -163,7 +161,6 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         memory_budget=resolve_budget(args.memory_budget),
     )
-    config.validate()
     from ..selection import select_set
 
     references = _reference_source(args, config)
@@ -194,11 +191,10 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     ``--reference none`` also makes the success rule qpbenchmark's (there is no
     reference to judge against); the profile keeps its name.
     """
-    import math
     from dataclasses import replace
     from pathlib import Path
 
-    from ..exceptions import ParamError
+    from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
     from ..reference import SOURCES, bench_references, from_objectives
@@ -207,14 +203,11 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     if args.jobs < 1:
         raise ParamError(f"--jobs must be >= 1, got {args.jobs}", key="jobs")
     limit = args.reference_time_limit
-    if limit is not None and not (limit > 0 and math.isfinite(limit)):
-        raise ParamError(
-            f"reference time limit must be a positive number of seconds, got {limit}",
-            key="reference-time-limit",
-        )
     profile = get_profile(config.profile)
     if limit is None:
         limit = profile.reference_time_limit
+    else:
+        limit = positive_seconds(limit, "reference-time-limit")
     if source == "none":
         config.profile = replace(profile, tolerance=replace(profile.tolerance, rule="qpbenchmark"))
         return lambda problem_set: [None] * len(problem_set.records)

@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     for key, value in (QUICK if args.quick else FULL).items():
         if getattr(args, key) is None:
             setattr(args, key, value)
-    config = RunConfig(
+    config = RunConfig(  # checks the numbers first, before any scenario is loaded
         out=Path(args.out),
         problems=Path(args.problems),
         duration=args.duration,
@@ -173,7 +173,6 @@ def run(args: argparse.Namespace) -> int:
             log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None
         ),
     )
-    config.validate()  # the numbers first, as before any scenario is loaded
     config.scenarios = select_scenarios(args.scenarios or ",".join(run_scenarios()))
     config.backends = select_backends(args.backends)
     outcome = run_all(config)

@@ -1,94 +1,366 @@
 """The per-tick benchmark: every backend on every problem of a set, one row each.
 
-:func:`run_bench` walks the problems in sequence order, problem by problem,
-and solves each with every backend (a :class:`~qpbench.harness.guard.LocalRunner`
-in this process or an :class:`~qpbench.harness.isolation.IsolatedRunner` in a
-worker). The rows of a problem are appended to the CSV and ``fsync``-ed before
-the next problem starts.
+:class:`BenchConfig` says what to run; :func:`make_plan` checks it against the problem set and
+an existing output before anything is written; :class:`BenchSummary` is what the run did.
 
-Sequences (``mode="sequential"``): problems of the same ``scenario`` form one
-sequence, in tick order (file order breaks ties); a problem without a scenario
-is a sequence of its own. Each backend's state is carried along a sequence
-(the way a controller calls its solver tick after tick) and reset between
-sequences. After a failure that leaves the state suspect (``error``,
-``time_limit``, ``invalid``, ``crashed``) the backend is reset and the next
-row says ``state_reset = True``. ``mode="independent"`` resets before every
-problem.
+:func:`run_bench` walks the problems in sequence order (:func:`sequences`) and
+solves each with every backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
+(:class:`~.isolation.IsolatedRunner`); a problem's rows are made once all its solves are done
+and appended to the CSV before the next problem starts.
 
-Order of the backends: each problem is solved by every backend in an order
-drawn for that problem (:func:`backend_order`: a permutation of the sorted
-backend names from a generator seeded with ``(seed, SHA-256 of the problem
-name)``). A backend that ran first on one problem runs later on another, so
-the cold caches the harness leaves between two problems (metrics, CSV write,
-``fsync``) do not always fall on the same backend. The rows record the
-``position`` (0 = first) and the ``order_seed``; the order depends only on the
-seed, the problem's name and the set of backends, so a resumed run solves in
-the order the interrupted one did. All backends of a problem are solved before
-any of its rows is made (metrics and references are outside the sequence of
-solves).
+``mode="sequential"``: a backend's state is carried along a sequence (as a controller calls
+its solver tick after tick) and reset between sequences and after a failure that leaves it
+suspect (:data:`~qpbench.statuses.FAILURE_STATUSES`; the next row says ``state_reset``).
+``mode="independent"`` resets before every problem.
 
-Resuming (``resume=True``): rows already in the CSV are kept and their keys
-``(problem, backend, profile)`` skipped. In sequential mode a backend that
-still has problems left in a sequence is brought back to the state it had by
-replaying, untimed and unrecorded, the earlier problems of that sequence,
-following the recorded statuses (a recorded failure means "reset here", as the
-original run did). Deterministic backends then produce the same rows as an
-uninterrupted run.
+The backends solve each problem in an order drawn for it (:func:`backend_order`), so the cold
+caches the harness leaves between problems do not always fall on the same backend; rows record
+``position`` and ``order_seed``.
+
+Resuming keeps the rows in the CSV and skips their keys. In sequential mode a backend with
+problems left in a sequence is brought back to its state by replaying, untimed, the earlier
+problems of the sequence, resetting where the recorded statuses say the original run did;
+deterministic backends then give the rows of an uninterrupted run.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 import statistics
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..backends import backend_class
+from ..exceptions import InputError, ParamError, positive_seconds
+from ..profiles import Profile, get_profile
 from ..statuses import FAILURE_STATUSES
-from .bench_plan import (
-    ISOLATE,
-    MODES,
-    BenchConfig,
-    Plan,
-    backend_settings,
-    make_plan,
-    open_output,
-    record_period,
-    references_for,
-    sequences,
-)
-from .bench_summary import DEFAULT_SEED, BackendStats, BenchSummary, is_failure
 from .guard import LocalRunner, Outcome
 from .isolation import IsolatedRunner
-from .results import (
-    ResultsWriter,
-    row_key,
-)
-from .rows import _RowMaker
+from .results import ExistingResults, InflightMarker, ResultsWriter, read_results, row_key
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    from collections.abc import Callable, Iterable
 
-    from ..formats import ProblemSet
+    from ..formats import ProblemRecord, ProblemSet
 
 log = logging.getLogger("qpbench.harness")
 
+#: Seed of the per-problem backend order unless ``--seed`` says otherwise.
+DEFAULT_SEED = 0
+MODES = ("sequential", "independent")
+ISOLATE = ("auto", "always", "never")
+
+
+@dataclass
+class BenchConfig:
+    """What to run, checked when made.
+
+    Attributes:
+        profile: Profile name or :class:`~qpbench.profiles.Profile`.
+        repeat: Timed solves per (problem, backend); the row has their min and median.
+        time_limit: Per-solve limit [s]; ``None``: the profile's.
+        isolate: ``auto`` (backends marked ``risky`` or seen to crash in this process),
+            ``always`` or ``never``.
+        warmup: Discarded solves per backend before the first timed one: the first problem,
+            and the first of each other structure (parts present).
+        settings: Solver settings for every backend; ``backend_settings``: per backend name.
+        seed: Seed of the per-problem backend order (:func:`backend_order`).
+        memory_budget: Bytes a solve may need (:mod:`qpbench.memory`; ``None``: the default).
+    """
+
+    backends: list[str]
+    profile: str | Profile = "default"
+    repeat: int = 1
+    mode: str = "sequential"
+    time_limit: float | None = None
+    isolate: str = "auto"
+    warmup: bool = True
+    settings: dict = field(default_factory=dict)
+    backend_settings: dict = field(default_factory=dict)
+    seed: int = DEFAULT_SEED
+    memory_budget: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ParamError(
+                f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode"
+            )
+        if self.isolate not in ISOLATE:
+            raise ParamError(
+                f"unknown isolation '{self.isolate}' (choose from {', '.join(ISOLATE)})",
+                key="isolate",
+            )
+        if int(self.repeat) < 1:
+            raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
+        if self.time_limit is not None:
+            self.time_limit = positive_seconds(self.time_limit, "time-limit")
+        if (
+            isinstance(self.seed, bool)
+            or not isinstance(self.seed, (int, np.integer))
+            or self.seed < 0
+        ):
+            raise ParamError(f"seed must be an integer >= 0, got {self.seed!r}", key="seed")
+        if not self.backends:
+            raise ParamError("no backend to run", key="backends")
+        if len(set(self.backends)) != len(self.backends):
+            raise ParamError(f"backend listed twice in {','.join(self.backends)}", key="backends")
+
+
+def record_period(problem_set: ProblemSet) -> float | None:
+    """Time [s] between two records of a set dumped by ``qpbench simulate --dump`` (its
+    manifest's ``generator``: ``dt`` times the stride ``every``), if known."""
+    generator = (getattr(problem_set, "manifest", None) or {}).get("generator") or {}
+    try:
+        return float(generator["dt"]) * int(generator.get("every", 1))
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) -> dict:
+    """Settings for backend ``name``: the run's, its own, and for an online backend (``rnn``)
+    ``dt`` = the time between two records (:func:`record_period`), which it integrates per call."""
+    settings = {**config.settings, **config.backend_settings.get(name, {})}
+    if backend_class(name).online and "dt" not in settings:
+        period = record_period(problem_set)
+        if period is not None:
+            settings["dt"] = period
+    return settings
+
+
+def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
+    """Indices of ``records`` grouped into sequences.
+
+    Sequential: one per scenario (first-appearance order), sorted by tick (stable); a record
+    without a scenario is a sequence of its own. Independent: one per record, in file order.
+    """
+    if mode == "independent":
+        return [[i] for i in range(len(records))]
+    groups: dict[object, list[int]] = {}
+    for i, rec in enumerate(records):
+        key = ("scenario", rec.scenario) if rec.scenario is not None else ("single", i)
+        groups.setdefault(key, []).append(i)
+    return [
+        sorted(idx, key=lambda i: (records[i].tick is None, records[i].tick or 0))
+        for idx in groups.values()
+    ]
+
+
+def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed: int) -> None:
+    """A resumed file's rows must be of this run's mode, seed and problem set."""
+    for row in existing.rows:
+        if row["mode"] != mode:
+            raise InputError(
+                f"holds rows of mode '{row['mode']}', this run is '{mode}'; use --force to start again",
+                path=path,
+                key="mode",
+            )
+        if row["order_seed"] != str(seed):
+            raise InputError(
+                f"holds rows ordered with seed {row['order_seed'] or 'none'}, this run's is {seed}; "
+                f"resume with --seed {row['order_seed']} or use --force to start again",
+                path=path,
+                key="order_seed",
+            )
+        if sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
+            raise InputError(
+                "holds rows of another problem set (SHA-256 differs); use --force to start again",
+                path=path,
+                key="problem_set_sha256",
+            )
+
+
+@dataclass
+class Plan:
+    """A checked run before anything is written.
+
+    Attributes:
+        seqs: The records' sequences (:func:`sequences`).
+        profile: The profile in force, with the run's time limit.
+        instances: In-process backend instances (a bad name failed while making them).
+        sha: Content SHA-256 of the set.
+        resuming: An existing output is continued; ``existing``: its rows.
+        learned: Backends known to crash in this process (from the in-flight ``marker``).
+        skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
+        notes: ``record index -> warning`` written in its rows' ``error`` column.
+        budget: Bytes a solve may need (:func:`qpbench.memory.resolve_budget`).
+    """
+
+    records: list
+    seqs: list
+    profile: Profile
+    settings: dict
+    instances: dict
+    versions: dict
+    sha: str | None
+    resuming: bool
+    existing: ExistingResults
+    learned: list
+    marker: InflightMarker
+    skips: dict = field(default_factory=dict)
+    notes: dict = field(default_factory=dict)
+    budget: int = 0
+
+
+def _check_records(problem_set) -> list:
+    records = list(problem_set.records)
+    if not records:
+        raise InputError("problem set is empty", path=getattr(problem_set, "path", None))
+    names = [r.name for r in records]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise InputError(
+            f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path
+        )
+    return records
+
+
+def _learn_from_crash(plan: Plan, config: BenchConfig) -> None:
+    """A backend that died in this process while solving (in-flight marker of the interrupted
+    run) goes to a worker from now on (under ``--isolate auto``)."""
+    learned, inflight, crash = plan.marker.read()
+    plan.learned[:] = learned
+    done_keys = {row_key(r) for r in plan.existing.rows}
+    if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
+        return
+    suspect = inflight[1]
+    if suspect in plan.instances and suspect not in plan.learned:
+        plan.learned.append(suspect)
+        log.warning(
+            "the previous run died while %s was solving %s in this process (%s); %s",
+            suspect,
+            inflight[0],
+            crash.splitlines()[0],
+            "it runs in a worker process from now on"
+            if config.isolate == "auto"
+            else "use --isolate auto or always to isolate it",
+        )
+
+
+def make_plan(
+    problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
+) -> Plan:
+    """Every check that can fail on user input, before ``out`` is created or changed."""
+    from ..atomic import check_output
+    from ..backends import get_backend
+    from ..formats import content_sha256
+
+    check_output(out, force=force, resume=resume, make_parent=True)
+    profile = get_profile(config.profile)
+    run_profile = profile.with_time_limit(
+        config.time_limit if config.time_limit is not None else float(profile.time_limit)
+    )
+    records = _check_records(problem_set)
+    settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
+    instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
+    from ..memory import resolve_budget
+
+    budget = resolve_budget(None) if config.memory_budget is None else config.memory_budget
+    skips, notes = skipped_solves(records, config.backends, budget)
+    plan = Plan(
+        records=records,
+        seqs=sequences(records, config.mode),
+        profile=run_profile,
+        settings=settings,
+        instances=instances,
+        versions={name: type(b).version() for name, b in instances.items()},
+        sha=content_sha256(problem_set),
+        resuming=resume and out.exists() and not force,
+        existing=ExistingResults([]),
+        learned=[],
+        marker=InflightMarker(InflightMarker.for_output(out)),
+        skips=skips,
+        notes=notes,
+        budget=budget,
+    )
+    if plan.resuming:
+        plan.existing = read_results(out, repair=False)
+        _check_existing(plan.existing, out, config.mode, plan.sha, int(config.seed))
+        _learn_from_crash(plan, config)
+    return plan
+
+
+def skipped_solves(
+    records: list[ProblemRecord], backends: list[str], budget: int
+) -> tuple[dict, dict]:
+    """``(skips, notes)``: the solves not made and why, and the warnings of the rest.
+
+    A clearly nonconvex problem is skipped by every backend, a slightly indefinite one solved
+    with a warning (:mod:`qpbench.formats.convexity`); one too large for a dense-only backend
+    or the memory budget is skipped by that backend (:func:`qpbench.memory.skip_reason`).
+    """
+    from ..formats.convexity import assess_convexity
+    from ..memory import skip_reason
+
+    skips, notes = {}, {}
+    for i, record in enumerate(records):
+        if record.convexity is None:
+            record.convexity = assess_convexity(record.problem.P)
+        reason = record.convexity.skip_reason
+        if record.convexity.warning:
+            notes[i] = f"warning: {record.convexity.warning}"
+            log.warning("%s: %s", record.name, record.convexity.warning)
+        for name in backends:
+            why = reason or skip_reason(record.problem, backend_class(name).sparse, budget)
+            if why:
+                skips[(i, name)] = why
+    return skips, notes
+
+
+def references_for(
+    problem_set: ProblemSet, plan: Plan, references: list | Callable[[ProblemSet], list] | None
+) -> list:
+    """One reference per record: ``references`` as given, or computed by it (a function of a
+    problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
+    backend solves within the memory budget (the others' status is ``unknown``)."""
+    from dataclasses import replace
+
+    from ..memory import sparse_solver_bytes
+    from ..reference import ReferenceSolution
+
+    if references is None or callable(references):
+        from ..reference import reference_solutions
+
+        compute = reference_solutions if references is None else references
+        wanted = [
+            i
+            for i, r in enumerate(plan.records)
+            if any((i, name) not in plan.skips for name in plan.settings)
+            and sparse_solver_bytes(r.problem) <= plan.budget
+        ]
+        subset = replace(problem_set, records=[plan.records[i] for i in wanted])
+        computed = dict(zip(wanted, compute(subset))) if wanted else {}
+        references = [
+            computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
+            for i, r in enumerate(plan.records)
+        ]
+    if len(references) != len(plan.records):
+        raise InputError(
+            f"{len(references)} reference solutions for {len(plan.records)} problems",
+            path=problem_set.path,
+        )
+    return references
+
+
+def open_output(plan: Plan, out: Path, force: bool) -> dict:
+    """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
+    if plan.resuming:
+        plan.existing = read_results(out, repair=True)
+    elif force and out.exists():
+        out.unlink()
+        plan.marker.path.unlink(missing_ok=True)
+    return plan.existing.by_key()
+
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
-    """The order in which ``backends`` solve ``problem``: a seeded permutation.
-
-    The permutation of the sorted names is drawn by
-    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``:
-    it depends on the seed, the problem's name and the set of backends only
-    (not on the order given, nor on what ran before), so a resumed run
-    repeats it.
-    """
-    import hashlib
-
+    """The order in which ``backends`` solve ``problem``: a permutation of the sorted names by
+    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``, so it depends on
+    the seed, the name and the set of backends only (a resumed run repeats it)."""
     digest = hashlib.sha256(str(problem).encode("utf-8")).digest()
     words = [int.from_bytes(digest[i : i + 8], "little") for i in range(0, 32, 8)]
     names = sorted(backends)
@@ -109,12 +381,8 @@ def _structure(problem) -> tuple[bool, ...]:
 
 
 def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
-    """The first problem of the run, then the first of each other structure (:func:`_structure`).
-
-    A backend's first solve of a structure may pay one-off costs (a compiled
-    kernel specialises on which parts are present): the discarded warm-up
-    solves pay them, not a timed one.
-    """
+    """The first problem of the run, then the first of each other structure (:func:`_structure`):
+    a compiled kernel specialises on the parts present, and the warm-up pays for that."""
     out, seen = [], set()
     for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
         if i in skipped:  # a problem the backend does not solve is no warm-up either
@@ -124,6 +392,15 @@ def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
             seen.add(key)
             out.append(records[i].problem)
     return out
+
+
+def _n_box(problem) -> int:
+    """Finite bounds of a problem."""
+    return sum(
+        int(np.isfinite(np.asarray(b, dtype=float)).sum())
+        for b in (problem.lb, problem.ub)
+        if b is not None
+    )
 
 
 class _BenchRun:
@@ -140,8 +417,7 @@ class _BenchRun:
         self.summary = BenchSummary(
             isolated=[n for n in config.backends if self.runners[n].isolated], seed=int(config.seed)
         )
-        self.make_row = _RowMaker(None, plan.profile, config.mode, plan.sha, plan.versions)
-        # Keys still to run, per backend and sequence (to know when replay is needed).
+        # per backend and sequence: keys still to run (to know when replay is needed)
         self.todo = {
             name: [
                 any((plan.records[i].name, name, self.pname) not in done for i in seq)
@@ -156,26 +432,22 @@ class _BenchRun:
         self.overheads: list[float] = []
         self.bar = None
 
-    def _isolated(self, name: str) -> bool:
-        if self.config.isolate == "always":
-            return True
-        if self.config.isolate == "never":
-            return False
-        return backend_class(name).risky or name in self.plan.learned
-
     def _worker(self, name: str) -> IsolatedRunner:
-        plan = self.plan
+        plan, config = self.plan, self.config
         return IsolatedRunner(
             name,
             plan.profile,
             plan.settings[name],
             plan.profile.time_limit,
             self.sequential,
-            self.config.repeat,
+            config.repeat,
         )
 
     def _runner(self, name: str):
-        if self._isolated(name):
+        isolate = self.config.isolate
+        if isolate == "always" or (
+            isolate == "auto" and (backend_class(name).risky or name in self.plan.learned)
+        ):
             return self._worker(name)
         return LocalRunner(
             self.plan.instances[name],
@@ -222,31 +494,26 @@ class _BenchRun:
         active = [name for name in self.config.backends if self.todo[name][s]]
         if not active:
             return
-        needs_reset = {name: False for name in active}
+        needs_reset = dict.fromkeys(active, False)
         if self.sequential:
             for name in active:
                 self.runners[name].reset()
         for i in seq:
             record = self.plan.records[i]
-            order = backend_order(record.name, self.config.backends, self.config.seed)
             solved = []
+            order = backend_order(record.name, self.config.backends, self.config.seed)
             for position, name in enumerate(order):
                 if not self.todo[name][s]:
                     continue
                 key = (record.name, name, self.pname)
+                skip = self.plan.skips.get((i, name))
                 if key in self.done:
-                    if self.sequential and (i, name) not in self.plan.skips:
+                    if self.sequential and skip is None:
                         self._replay(name, record, self.done[key]["status"], needs_reset)
-                    continue
-                if (
-                    i,
-                    name,
-                ) in self.plan.skips:  # never handed to the backend; its state is untouched
-                    solved.append(
-                        (position, name, Outcome("skipped", error=self.plan.skips[(i, name)]))
-                    )
-                    continue
-                solved.append((position, name, self._solve(name, record, needs_reset)))
+                elif skip is not None:  # never handed to the backend; its state is untouched
+                    solved.append((position, name, Outcome("skipped", error=skip)))
+                else:
+                    solved.append((position, name, self._solve(name, record, needs_reset)))
             self._write_rows(i, solved)
 
     def _replay(self, name: str, record, status: str, needs_reset: dict) -> None:
@@ -275,9 +542,7 @@ class _BenchRun:
             and not self.runners[name].isolated
             and self.config.isolate == "auto"
         ):
-            # In this process a solve is never interrupted (an exception raised
-            # into foreign code can break it): a backend that overran once goes
-            # to a worker process, which is killed at its deadline.
+            # a solve in this process is never interrupted; a worker is killed at its deadline
             log.warning(
                 "%s overran its time limit on %s in this process; it runs in a worker process from now on",
                 name,
@@ -291,14 +556,59 @@ class _BenchRun:
             needs_reset[name] = self.sequential
         return outcome
 
+    def _row(self, i: int, backend: str, outcome: Outcome, position: int) -> dict:
+        """The CSV row of ``backend``'s ``outcome`` on record ``i``, scored against its reference."""
+        from ..formats import problem_sizes
+        from ..metrics import evaluate, metric_columns
+
+        record, profile = self.plan.records[i], self.plan.profile
+        sol, status = outcome.solution, outcome.status
+        if sol is not None:
+            sol.found = status == "optimal"
+            if status == "invalid":
+                sol = None
+        metrics = evaluate(record, sol, self.references[i], profile.tolerance)
+        times = outcome.wall_times_s
+        n, m_eq, m_ineq = problem_sizes(record.problem)
+        kept = outcome.solution
+        return {
+            "problem": record.name,
+            "scenario": record.scenario,
+            "tick": record.tick,
+            "t": record.t,
+            "backend": backend,
+            "profile": profile.name,
+            "mode": self.config.mode,
+            "status": status,
+            "found": bool(metrics["found"]) and status == "optimal",
+            "success": bool(metrics["success"]) and status not in FAILURE_STATUSES,
+            **{c: metrics[c] for c in metric_columns()},
+            "wall_time_min_s": min(times) if times else None,
+            "wall_time_median_s": statistics.median(times) if times else None,
+            "solver_time_s": None if kept is None else _float(getattr(sol, "solver_time_s", None)),
+            "iterations": None if kept is None else getattr(kept, "iterations", None),
+            "error": outcome.error if status != "optimal" or outcome.error else None,
+            "state_reset": outcome.state_reset,
+            "isolated": outcome.isolated,
+            "position": position,
+            "order_seed": int(self.config.seed),
+            "repeat": len(times),
+            "repeat_exact": outcome.repeat_exact,
+            "repeat_note": outcome.repeat_note or None,
+            "n": n,
+            "m_eq": m_eq,
+            "m_ineq": m_ineq,
+            "n_box": _n_box(record.problem),
+            "problem_set_sha256": self.plan.sha or "",
+            "backend_version": self.plan.versions.get(backend),
+        }
+
     def _write_rows(self, i: int, solved: list) -> None:
         """Rows (metrics against the reference) once every backend has solved problem ``i``."""
-        record, backends = self.plan.records[i], self.config.backends
+        backends = self.config.backends
         batch = []
         for position, name, outcome in sorted(solved, key=lambda item: backends.index(item[1])):
-            row = self.make_row(
-                record, name, outcome, self.references[i], position, int(self.config.seed)
-            )
+            row = self._row(i, name, outcome, position)
             if i in self.plan.notes and outcome.status != "skipped":
                 row["error"] = "; ".join(filter(None, [self.plan.notes[i], row["error"]]))
             batch.append(row)
@@ -319,19 +629,180 @@ class _BenchRun:
         wanted = {(r.name, b, pname) for r in self.plan.records for b in self.config.backends}
         summary.backends = {name: BackendStats() for name in self.config.backends}
         for key, row in self.done.items():
-            if key not in wanted:
-                continue
-            summary.rows += 1
-            status = str(row["status"])
-            summary.statuses[status] = summary.statuses.get(status, 0) + 1
-            summary.backends[key[1]].add(row)
-            if is_failure(status, row["reference_status"] or None):
-                summary.failures += 1
+            if key in wanted:
+                summary.backends[key[1]].add(row)
         if self.overheads:
             summary.overhead_median_s = statistics.median(self.overheads)
             summary.overhead_rows = len(self.overheads)
         summary.elapsed_s = time.perf_counter() - started
         return summary
+
+
+@dataclass
+class BackendStats:
+    """One backend's rows in a bench run (a line of the closing table).
+
+    ``times_s``: ``wall_time_min_s`` of its rows [s]; ``violations``: ``constraint_violation``
+    of the rows with an ``x``; ``failures``: failed solves (:func:`is_failure`) by status;
+    ``isolated``: rows solved in a worker process.
+    """
+
+    rows: int = 0
+    successes: int = 0
+    times_s: list = field(default_factory=list)
+    violations: list = field(default_factory=list)
+    failures: dict = field(default_factory=dict)
+    isolated: int = 0
+
+    @property
+    def n_failures(self) -> int:
+        return sum(self.failures.values())
+
+    @property
+    def unsuccessful(self) -> int:
+        return self.rows - self.successes
+
+    def add(self, row: dict) -> None:
+        """Count one row (a new row's values or a resumed row's strings)."""
+        self.rows += 1
+        if _truth(row.get("success")):
+            self.successes += 1
+        if _truth(row.get("isolated")):
+            self.isolated += 1
+        t = _float(row.get("wall_time_min_s"))
+        if t is not None and math.isfinite(t):
+            self.times_s.append(t)
+        v = _float(row.get("constraint_violation"))
+        if v is not None and not math.isnan(v):
+            self.violations.append(v)
+        status = str(row.get("status"))
+        if is_failure(status, row.get("reference_status") or None):
+            self.failures[status] = self.failures.get(status, 0) + 1
+
+
+@dataclass
+class BenchSummary:
+    """What a bench run did (the data of the closing line and table).
+
+    Attributes:
+        backends: Each backend's :class:`BackendStats` over the rows of this run's keys in the
+            CSV (resumed and new); ``new_rows``: rows written now.
+        elapsed_s: Duration of this invocation [s].
+        timed_s: Sum of the new rows' ``wall_time_min_s`` [s].
+        overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s`` [s]
+            (NaN if no backend reports a time), over ``overhead_rows`` rows.
+        isolated: Backends that ran in a worker process.
+    """
+
+    new_rows: int = 0
+    backends: dict = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    timed_s: float = 0.0
+    overhead_median_s: float = math.nan
+    overhead_rows: int = 0
+    isolated: list = field(default_factory=list)
+    seed: int = DEFAULT_SEED
+
+    @property
+    def rows(self) -> int:
+        return sum(s.rows for s in self.backends.values())
+
+    @property
+    def failures(self) -> int:
+        """Rows counted as failed solves (:func:`is_failure`)."""
+        return sum(s.n_failures for s in self.backends.values())
+
+    def line(self) -> str:
+        """The closing line: rows, failed and unsuccessful solves by backend, times."""
+
+        def by_backend(counts: dict) -> str:
+            return " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
+
+        failed = {b: s.n_failures for b, s in self.backends.items() if s.n_failures}
+        unsuccessful = {b: s.unsuccessful for b, s in self.backends.items() if s.unsuccessful}
+        text = (
+            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; "
+            f"{self.failures} failed solves{by_backend(failed)}; "
+            f"{sum(unsuccessful.values())} without success{by_backend(unsuccessful)}; "
+            f"timed solves {self.timed_s:.3f} s; backend order seed {self.seed}"
+        )
+        if self.overhead_rows:
+            text += (
+                f"; harness overhead (wall - solver-reported time) median "
+                f"{self.overhead_median_s * 1e6:.1f} us over {self.overhead_rows} solves"
+            )
+        if self.isolated:
+            text += f"; isolated: {', '.join(self.isolated)}"
+        return text
+
+    def table(self) -> str:
+        """Per backend: rows, success %, time p50/p99 [us], max constraint violation (problem
+        units), failures by status; ``*`` marks a backend solved in a worker process."""
+        header = [
+            "backend",
+            "rows",
+            "success %",
+            "time p50 (us)",
+            "time p99 (us)",
+            "max violation",
+            "failures",
+        ]
+        lines = [header]
+        for name, st in self.backends.items():
+            times = np.asarray(st.times_s, dtype=float)
+            viol = np.asarray(st.violations, dtype=float)
+            fails = ", ".join(f"{k} {v}" for k, v in sorted(st.failures.items())) or "0"
+            lines.append(
+                [
+                    name + (" *" if st.isolated else ""),
+                    str(st.rows),
+                    f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
+                    f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
+                    f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
+                    f"{viol.max():.3g}" if viol.size else "-",
+                    fails if not st.n_failures else f"{st.n_failures} ({fails})",
+                ]
+            )
+        widths = [max(len(r[j]) for r in lines) for j in range(len(header))]
+        out = []
+        for r in lines:
+            cells = (
+                [r[0].ljust(widths[0])]
+                + [c.rjust(w) for c, w in zip(r[1:-1], widths[1:-1])]
+                + [r[-1]]
+            )
+            out.append("  ".join(cells).rstrip())
+        if any(st.isolated for st in self.backends.values()):
+            out.append("* some or all rows solved in a worker process (times taken inside it)")
+        return "\n".join(out)
+
+
+def _truth(value) -> bool:
+    """A boolean cell: ``True`` / ``"True"`` (a resumed row) is true."""
+    if isinstance(value, str):
+        return value.strip().lower() in ("true", "1")
+    return bool(value)
+
+
+def is_failure(status: str, reference_status: str | None) -> bool:
+    """A failed solve: a harness failure status, or not ``optimal`` where the reference is.
+
+    A ``skipped`` row (a solve not made: nonconvex, beyond a dense-only backend's size or
+    the memory budget; the reason in ``error``) is not a failure.
+    """
+    if status == "skipped":
+        return False
+    return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
+
+
+def _float(value) -> float | None:
+    """A number cell (a new row's value or a resumed row's string) as a float, else ``None``."""
+    if value is None:
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
 
 
 class LogBar:
@@ -371,21 +842,12 @@ def run_bench(
     references: list | None = None,
     progress: bool | str = False,
 ) -> BenchSummary:
-    """Benchmark ``config.backends`` on ``problem_set``; write rows to ``out`` (CSV).
+    """Benchmark ``config.backends`` on ``problem_set`` (loaded and validated); rows to ``out``.
 
-    Everything that can fail on user input (backend names, the existing
-    output, the problems' names) is checked before ``out`` is created or
-    changed.
-
-    Args:
-        problem_set: A :class:`~qpbench.formats.ProblemSet` (already loaded and validated).
-        config: What to run.
-        out: CSV path.
-        force: Delete an existing ``out`` and start again.
-        resume: Keep the rows of an existing ``out`` and run the missing keys only.
-        references: Reference solutions (one per record, ``None`` entries for none), or a function
-            of the problem set that returns them; computed (and cached) if ``None``.
-        progress: Show a progress bar on stderr (``"log"``: a log line every 10 s, :class:`LogBar`).
+    Everything that can fail on user input is checked before ``out`` is created or changed.
+    ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
+    per record (``None`` entries for none), or a function of the set returning them; computed
+    (and cached) if ``None``. ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
 
     Raises:
         OutputExistsError: ``out`` exists and neither ``force`` nor ``resume``.
@@ -399,19 +861,3 @@ def run_bench(
     bench_run = _BenchRun(plan, config, references, done, out)
     bench_run.run(progress)
     return bench_run.finish(started)
-
-
-__all__ = [
-    "DEFAULT_SEED",
-    "ISOLATE",
-    "MODES",
-    "BackendStats",
-    "BenchConfig",
-    "BenchSummary",
-    "backend_order",
-    "backend_settings",
-    "is_failure",
-    "record_period",
-    "run_bench",
-    "sequences",
-]

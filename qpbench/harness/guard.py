@@ -1,27 +1,12 @@
-"""Guarded solves in this process.
+"""Guarded solves in this process: every way a solve can go wrong becomes a status.
 
-:class:`LocalRunner` wraps one backend instance and turns every way a solve
-can go wrong into a status, never an exception:
-
-- a Python exception escaping the backend -> ``error``, with
-  ``"Type: message"`` in :attr:`Outcome.error`;
-- a solve longer than the time limit -> ``time_limit``. The solve is never
-  interrupted: its wall time is compared with the limit when it returns.
-  Raising an exception asynchronously inside a backend (a signal handler, as
-  ``SIGALRM`` would) can land in foreign code (a solver's Python wrapper,
-  numba's compiler, a C extension's callback) and leave it broken, so this
-  process does not; a solve that must be stopped (a hang in native or Python
-  code) needs a worker process, which is killed at its deadline (see
-  :mod:`qpbench.harness.isolation`; the bench moves a backend that overran
-  its limit in this process to one, under ``--isolate auto``);
-- a non-finite ``x`` (or ``optimal`` without ``x``) -> ``invalid``.
-
-After ``error``, ``time_limit`` and ``invalid`` (:data:`qpbench.statuses.FAILURE_STATUSES`) the
-backend is reset before its next solve: its state can no longer be trusted. The
-classification itself (:func:`qpbench.statuses.classify`) is shared with the closed loop.
-
-The same class runs inside the worker process of an isolated backend, so the
-timed region is identical in both cases.
+:class:`LocalRunner` turns an exception escaping the backend into ``error`` (``"Type:
+message"``), a non-finite or missing ``x`` into ``invalid`` and a solve that returned after its
+time limit into ``time_limit`` (:func:`qpbench.statuses.classify`). A solve is never interrupted
+here: an exception raised asynchronously (``SIGALRM``) can land in foreign code and break it, so
+a solve that must be stopped needs a worker process (:mod:`qpbench.harness.isolation`). After a
+failure (:data:`qpbench.statuses.FAILURE_STATUSES`) the backend is reset before its next solve.
+The same class runs inside an isolated backend's worker, so the timed region is the same.
 """
 
 from __future__ import annotations
@@ -45,16 +30,12 @@ class Outcome:
 
     Attributes:
         status: Backend status, or ``error``/``time_limit``/``invalid``/``crashed``.
-        solution: The solution of the kept solve (``None`` if there is none): replica 0's,
-            the one a controller solving once gets (:mod:`qpbench.harness.timing`).
-        wall_times_s: Wall time of each timed repeat in [s].
-        repeat_exact: Every timed repeat did the kept solve's work: it returned the
-            kept status, iterations and answer bit for bit.
-        repeat_note: Why ``repeat_exact`` is false or fewer repeats were timed than
-            asked (empty otherwise; a failed solve is not repeated and needs no note).
-        error: ``"Type: message"`` or a description of the failure.
-        state_reset: The solve did not start from the state the previous
-            solve of the sequence left (a reset after a failure, a new worker).
+        solution: Replica 0's solution (:mod:`qpbench.harness.timing`), ``None`` without one.
+        wall_times_s: Wall time of each timed repeat [s].
+        repeat_exact: Every timed repeat returned the kept status, iterations and answer bit for bit.
+        repeat_note: Why ``repeat_exact`` is false or fewer repeats were timed than asked.
+        state_reset: The solve did not start from the state the previous solve of the
+            sequence left (a reset after a failure, a new worker).
         isolated: The solve ran in a worker process.
     """
 
@@ -69,14 +50,13 @@ class Outcome:
 
 
 class LocalRunner:
-    """Run one backend's solves in this process, guarded and timed.
+    """One backend's guarded, timed solves in this process.
 
     Args:
-        backend: A backend instance (its profile carries the time limit): replica 0.
-        time_limit: Per-solve limit in [s], checked when the solve returns.
+        backend: A backend instance: replica 0.
+        time_limit: Per-solve limit [s], checked when the solve returns.
         sequential: State carried between solves (else reset before each).
-        repeat: Timed solves per problem: the replicas made now (and warmed up by
-            :meth:`warmup`); :meth:`solve` makes more if asked for more.
+        repeat: Timed solves per problem: the replicas made now (and warmed up).
     """
 
     isolated = False
@@ -98,12 +78,8 @@ class LocalRunner:
         """Replica 0: the backend whose answers are kept."""
         return self.replicas.members[0]
 
-    # -- helpers -------------------------------------------------------------
     def _guarded(self, problem, backend=None) -> Outcome:
-        """One solve by ``backend`` (default: replica 0): an :class:`Outcome` with one wall
-        time, never an exception. The solve runs to its end; a late one is ``time_limit`` by
-        its wall time.
-        """
+        """One timed solve by ``backend`` (default: replica 0), never an exception."""
         try:
             solution, ns = timed_call(self.backend if backend is None else backend, problem)
         except Exception as exc:  # noqa: BLE001 - turned into a status on purpose
@@ -112,14 +88,13 @@ class LocalRunner:
         status, error = classify(solution, wall, self.time_limit)
         return Outcome(status, solution, [wall], error)
 
-    # -- interface shared with IsolatedRunner -----------------------------------
+    # The interface shared with IsolatedRunner: harness/bench.py calls either the same way.
     def reset(self) -> None:
-        """Forget the backend's state (a new sequence starts): every replica's."""
+        """Forget every replica's state (a new sequence starts)."""
         self.replicas.reset()
 
     def warmup(self, problem: qpsolvers.Problem) -> str:
-        """A discarded solve by each replica (imports, first-call allocations, a compile for an
-        unusual problem shape), then a reset. Its status and time have no consequence."""
+        """A discarded solve by each replica (first-call costs), then a reset."""
         status = self._guarded(problem).status
         for backend in self.replicas.members[1:]:
             self._guarded(problem, backend)
@@ -127,24 +102,17 @@ class LocalRunner:
         return status
 
     def replay(self, problem: qpsolvers.Problem) -> str:
-        """An untimed, unrecorded solve that only moves the state forward (resume); the other
-        replicas follow at their next solve (:meth:`Replicas.ready`)."""
+        """An unrecorded solve that only moves the state forward (resume); the other replicas
+        follow at their next solve (:meth:`Replicas.ready`)."""
         outcome = self._guarded(problem)
         self.replicas.solved(0, problem)
         return outcome.status
 
-    # Same signature as IsolatedRunner.solve, on purpose: harness/bench.py calls either runner
-    # the same way (tests/test_guard.py drives both).
     def solve(
         self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False
     ) -> Outcome:
-        """Solve ``problem`` once per replica, each from the same state; time each.
-
-        Args:
-            problem: The QP.
-            repeat: Number of timed solves (R >= 1; default: the runner's).
-            reset_before: Reset the backend first (independent mode, or after a failure).
-        """
+        """Solve ``problem`` once per replica (``repeat``, default the runner's), each from the
+        same state, each timed; ``reset_before``: reset first (after a failure)."""
         if reset_before or not self.sequential:
             self.reset()
         count = self.repeat if repeat is None else max(1, int(repeat))
@@ -180,4 +148,4 @@ class LocalRunner:
         outcome.repeat_note = "; ".join(notes)
 
     def close(self) -> None:
-        """Nothing to release in this process (the interface of :class:`IsolatedRunner`)."""
+        """Nothing to release in this process."""

@@ -1,40 +1,14 @@
 """Solves in a worker process, for backends that may hang in native code or crash.
 
-:class:`IsolatedRunner` has the interface of
-:class:`~qpbench.harness.guard.LocalRunner` but keeps the backend in a child
-process (a :class:`~qpbench.runner.process.Worker`: a fork of a server that
-imported qpbench once, so a restart costs milliseconds rather than a fresh
-interpreter). Requests and results travel over a pipe; every request has a
-deadline (:func:`~qpbench.runner.process.deadline`)::
-
-    deadline = time_limit * (solves in the request) + max(1 s, time_limit / 2)
-
-- no answer by the deadline -> the worker is killed (SIGKILL), the solve is
-  ``time_limit``, a new worker starts at the next request. This is the only
-  place a solve is stopped: inside the worker, as in the parent, a solve is
-  never interrupted (see :mod:`qpbench.harness.guard`); one that returns
-  late but before the deadline is ``time_limit`` by its wall time;
-- the worker dies (segfault, abort, ``os._exit``) -> the solve is
-  ``crashed`` with the signal or exit code in ``error``, a new worker starts.
-
-A new worker has lost the backend's state (and its replicas'): in sequential
-mode the next row says ``state_reset = True``.
-
-No compile in a worker: the parent prepares the kernels of the backends it
-runs before it starts one (:func:`qpbench.jit.warmup`, which leaves them in the
-on-disk cache); the forkserver, started and preloaded before the first worker's
-clock, imports qpbench and loads the kernels from the cache once
-(:mod:`qpbench.harness.preload`), so each worker is forked with them in
-memory. A worker started otherwise (``spawn``) loads them when it starts,
-before it reports ready (within :data:`~qpbench.runner.process.START_TIMEOUT_S`, outside any
-solve's deadline). The
-discarded warm-up solve has an allowance of its own (:data:`WARMUP_TIMEOUT_S`):
-a slow one is not a reason to kill the worker.
-
-The timing is taken inside the worker by the same
-:class:`~qpbench.harness.guard.LocalRunner` code that runs in-process, around
-the backend call only, so pickling and the pipe are not in the reported wall
-times; they only add to the run's total duration.
+:class:`IsolatedRunner` has the interface of :class:`~qpbench.harness.guard.LocalRunner` and
+runs one in a :class:`~qpbench.runner.process.Worker`, which times the solves itself (pickling
+and the pipe stay outside the wall times). Each request has a deadline
+(:func:`~qpbench.runner.process.deadline`); past it the worker is killed and the solve is
+``time_limit``; a worker that dies makes the solve ``crashed``. Either way a new worker starts
+at the next request, without the backend's state (the next row says ``state_reset``). Workers
+never compile: they are forked with the kernels the parent prepared
+(:mod:`qpbench.harness.preload`); the warm-up solve has its own allowance
+(:data:`WARMUP_TIMEOUT_S`).
 """
 
 from __future__ import annotations
@@ -52,8 +26,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.harness")
 
-#: Time allowed for the discarded warm-up solve in [s] (at least twice the time limit):
-#: first-call costs (imports, a solver's set-up) are no reason to kill the worker.
+#: Time allowed for the discarded warm-up solve [s] (at least twice the time limit).
 WARMUP_TIMEOUT_S = 30.0
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
@@ -67,7 +40,6 @@ _FIELDS = (
     "status",
     "iterations",
     "solver_time_s",
-    "wall_time_s",
     "backend",
     "error",
 )
@@ -94,12 +66,11 @@ def _strip(outcome: Outcome) -> Outcome:
 
 
 def _build(spec: dict) -> None:
-    """In the worker: load the plugins, build the backend and its :class:`LocalRunner`."""
+    """In the worker: load the kernels and plugins, build the backend and its :class:`LocalRunner`."""
     global _RUNNER
     from ..backends import get_backend, load_plugins
     from ..jit import warmup
 
-    # loads the kernels the parent compiled for this backend; nothing is timed yet
     warmup([spec["backend"]], loop=False)
     load_plugins(spec["plugins"])
     backend = get_backend(spec["backend"], spec["profile"], **spec["settings"])
@@ -115,17 +86,10 @@ def _request(request: tuple):
 
 
 class IsolatedRunner:
-    """A backend living in a worker process; same interface as :class:`LocalRunner`.
+    """A backend in a worker process, which first loads this process's plugin files.
 
-    Args:
-        name: Backend name; profile, settings: as for :func:`qpbench.backends.get_backend`.
-        time_limit: Per-solve limit in [s].
-        sequential: State carried between solves.
-        repeat: Timed solves per problem (the worker's :class:`LocalRunner` keeps that
-            many replicas).
-
-    The worker loads this process's plugin files
-    (:func:`qpbench.backends.plugin_files`) before building the backend.
+    ``profile``, ``settings``: as for :func:`qpbench.backends.get_backend`; ``time_limit`` [s],
+    ``sequential``, ``repeat``: as for :class:`LocalRunner`.
     """
 
     isolated = True
@@ -175,31 +139,24 @@ class IsolatedRunner:
                 self.restarts += 1
             raise
 
-    # -- interface shared with LocalRunner -------------------------------------------
-    def reset(self) -> None:
-        if self._worker is None:
-            return  # a new worker has no state anyway
+    def _status(self, request: tuple, timeout: float, what: str):
+        """The worker's answer to ``request``, or the status of its failure."""
         try:
-            self._call(("reset",), deadline(self.time_limit), "reset")
-        except WorkerDied:
-            pass
+            return self._call(request, timeout, what)
+        except WorkerDied as died:
+            return died.status
+
+    def reset(self) -> None:
+        if self._worker is not None:  # a new worker has no state anyway
+            self._status(("reset",), deadline(self.time_limit), "reset")
 
     def warmup(self, problem: qpsolvers.Problem) -> str:
-        """The discarded warm-up solve, allowed :data:`WARMUP_TIMEOUT_S` (its slowness has no consequence)."""
-        try:
-            timeout = max(WARMUP_TIMEOUT_S, 2 * self.time_limit)
-            return self._call(("warmup", problem), timeout, "warm-up")
-        except WorkerDied as died:
-            return died.status
+        timeout = max(WARMUP_TIMEOUT_S, 2 * self.time_limit)
+        return self._status(("warmup", problem), timeout, "warm-up")
 
     def replay(self, problem: qpsolvers.Problem) -> str:
-        try:
-            return self._call(("replay", problem), deadline(self.time_limit), "replay")
-        except WorkerDied as died:
-            return died.status
+        return self._status(("replay", problem), deadline(self.time_limit), "replay")
 
-    # Same signature as LocalRunner.solve, on purpose: harness/bench.py calls either runner the
-    # same way, and the worker passes these arguments on to a LocalRunner.
     def solve(
         self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False
     ) -> Outcome:

@@ -1,13 +1,5 @@
-"""A long job told phase by phase: a progress bar on a terminal, one line per phase off it.
-
-:class:`Phases` times each phase of a job (``qpbench run``: compile,
-references, bench per set, closed loop, report). Every phase logs one line
-when it starts and one when it ends, with its wall time; on a terminal the
-phase also draws a tqdm bar with its ETA (``phase.update(n)`` as work is
-done), off a terminal there is no bar, so a log file gets exactly those two
-lines per phase. The wall times (:attr:`Phases.times_s`) go into the job's
-``run.json``.
-"""
+"""A long job told phase by phase: one line when a phase starts and ends (with its wall time),
+and on a terminal a progress bar with its ETA; the wall times go into the job's ``run.json``."""
 
 from __future__ import annotations
 
@@ -16,8 +8,6 @@ import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-
-__all__ = ["Phase", "Phases"]
 
 
 @dataclass
@@ -39,15 +29,8 @@ class Phase:
 
 @dataclass
 class Phases:
-    """The phases of a job, each timed and told (module docstring).
-
-    Attributes:
-        log: Where the start and end lines go (INFO).
-        bars: Draw progress bars: ``None`` (the default) when stderr is a
-            terminal, ``False`` never (``-q``, or a bar drawn by the phase's
-            own code).
-        times_s: Wall time of each finished phase [s], in the order run.
-    """
+    """The phases of a job, each timed and told; ``bars``: ``None`` when stderr is a terminal,
+    ``False`` never; ``times_s``: wall time of each finished phase [s], in the order run."""
 
     log: logging.Logger
     bars: bool | None = None
@@ -59,11 +42,8 @@ class Phases:
 
     @contextmanager
     def phase(self, name: str, total: int | None = None, unit: str = "step", bar: bool = True):
-        """Run a phase: log its start, yield a :class:`Phase`, log its end and keep its time.
-
-        ``total``: the work units the phase will count (its bar's length, for
-        the ETA); ``bar=False``: the phase's own code draws one.
-        """
+        """Run a phase: log its start, yield a :class:`Phase`, log its end and keep its time;
+        ``total``: the work units it counts (the bar's length); ``bar=False``: its code draws one."""
         self.log.info("%s: started", name)
         progress = None
         if self.bars and bar:

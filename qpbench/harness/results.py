@@ -1,16 +1,10 @@
-"""Results rows: long format, appended and flushed as they are produced, resumable.
+"""The results table: typed rows appended and ``fsync``-ed as they are produced, resumable.
 
-One row per (problem, backend, profile), the key of a result (as in
-qpbenchmark's ``Results``). The CSV is written with the :mod:`csv` module, one
-physical line per row (newlines inside a field are replaced by spaces), so a
-kill at any moment leaves at most one half-written line, at the end of the
-file. :func:`read_results` finds it, drops it with a warning and truncates the
-file to its last complete line before a run resumes.
-
-Every batch of rows (one problem, all backends) goes out in one ``write``
-call on an ``O_APPEND`` descriptor and is ``fsync``-ed before the next
-problem starts: a process kill loses only the problem being solved, a power
-loss at most that one too.
+One row per key (a bench's ``(problem, backend, profile)``; other studies pass their own
+columns). Each row is one physical line (newlines in a field become spaces) and each batch one
+``write`` on an ``O_APPEND`` descriptor, ``fsync``-ed before the next: a kill loses at most the
+batch in progress and leaves at most one half-written last line, which :func:`read_results`
+drops (and, with ``repair``, truncates) before a run resumes.
 """
 
 from __future__ import annotations
@@ -66,15 +60,14 @@ TAIL_COLUMNS = (
 
 
 def columns() -> tuple[str, ...]:
-    """Columns of a bench CSV, in order: lead, every per-tick metric (:func:`qpbench.metrics.metric_columns`), tail."""
+    """Columns of a bench CSV: lead, the per-tick metrics (:func:`~qpbench.metrics.metric_columns`), tail."""
     return LEAD_COLUMNS + metric_columns() + TAIL_COLUMNS
 
 
 #: :func:`columns` under a name that a ``columns`` parameter does not hide.
 bench_columns = columns
 
-
-#: Columns that identify a result: a resumed run skips rows with a known key.
+#: Columns that identify a bench result: a resumed run skips rows with a known key.
 KEY_COLUMNS = ("problem", "backend", "profile")
 
 #: Columns that depend on timing only (ignored when comparing two runs).
@@ -86,18 +79,12 @@ def row_key(row: dict) -> tuple[str, str, str]:
     return tuple(str(row[c]) for c in KEY_COLUMNS)
 
 
-def _cell(value) -> str:
+def cell(value) -> str:
     """Text of one CSV cell: empty for None/NaN, repr-exact floats, one line."""
     if value is None:
         return ""
-    if isinstance(value, bool):
-        return "True" if value else "False"
     if isinstance(value, float):
-        if math.isnan(value):
-            return ""
-        return repr(value)
-    if isinstance(value, int):
-        return str(value)
+        return "" if math.isnan(value) else repr(value)
     text = str(value)
     if "\n" in text or "\r" in text:
         text = " ".join(text.split())
@@ -105,29 +92,23 @@ def _cell(value) -> str:
 
 
 def format_rows(rows: list[dict], columns: tuple[str, ...] | None = None) -> bytes:
-    """CSV bytes of ``rows`` (no header), one line each, in ``columns`` order (default: the bench's,
-    :func:`bench_columns`)."""
+    """CSV bytes of ``rows`` (no header), one line each, in ``columns`` order (default: the bench's)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     names = bench_columns() if columns is None else columns
     for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in names])
+        writer.writerow([cell(row.get(c)) for c in names])
     return buf.getvalue().encode("utf-8")
 
 
 def header_bytes(columns: tuple[str, ...] | None = None) -> bytes:
-    """The header line of a bench CSV (or of another table of ``columns``)."""
+    """The header line of a table of ``columns`` (default: the bench's)."""
     return (",".join(bench_columns() if columns is None else columns) + "\n").encode("utf-8")
 
 
 @dataclass
 class ExistingResults:
-    """What a resumed run finds in its ``--out``.
-
-    Attributes:
-        rows: Complete rows as dicts of strings, in file order.
-        dropped: Number of partial lines dropped (0 or 1 in practice).
-    """
+    """What a resumed run finds: complete rows (dicts of strings, file order), partial lines dropped."""
 
     rows: list[dict]
     dropped: int = 0
@@ -142,15 +123,13 @@ def read_results(
     columns: tuple[str, ...] | None = None,
     kind: str = "bench",
 ) -> ExistingResults:
-    """Read a bench CSV written by :class:`ResultsWriter` (or a ``kind`` table of ``columns``).
+    """Read a table written by :class:`ResultsWriter` (default: a bench CSV).
 
-    A last line without its newline (the run was killed while writing it) or
-    a line with the wrong number of fields is dropped with a warning; with
-    ``repair=True`` the file is also truncated to its last complete line so
-    that appending continues cleanly.
+    A last line without its newline or a trailing line with the wrong number of fields is
+    dropped with a warning; ``repair=True`` also truncates the file to its last complete line.
 
     Raises:
-        InputError: the file is not a bench CSV (missing or different header).
+        InputError: the header is not ``columns``, or a malformed line is followed by good ones.
     """
     path = Path(path)
     names = bench_columns() if columns is None else tuple(columns)
@@ -168,15 +147,11 @@ def read_results(
         if repair:
             os.truncate(path, cut)
     if not data:
-        if repair:
-            # killed before the header was complete: start the file again
-            with open(path, "wb") as fh:
-                fh.write(header_bytes(names))
-                fh.flush()
-                os.fsync(fh.fileno())
+        if repair:  # killed before the header was complete: start the file again
+            with ResultsWriter(path, new=True, columns=names):
+                pass
         return ExistingResults([], dropped)
-    text = data.decode("utf-8", errors="replace")
-    lines = text.split("\n")[:-1]
+    lines = data.decode("utf-8", errors="replace").split("\n")[:-1]
     header = next(csv.reader([lines[0]]))
     if tuple(header) != names:
         missing = [c for c in names if c not in header]
@@ -186,11 +161,11 @@ def read_results(
             path=path,
         )
     rows = []
-    good_end = len(lines[0]) + 1
-    offset = good_end
+    good_end = offset = len(lines[0]) + 1
     bad_tail = False
     for line in lines[1:]:
         fields = next(csv.reader([line])) if line else []
+        offset += len(line.encode("utf-8")) + 1
         if len(fields) != len(names):
             log.warning(
                 "%s: dropping a malformed line (%d fields, expected %d)",
@@ -200,28 +175,23 @@ def read_results(
             )
             dropped += 1
             bad_tail = True
+        elif bad_tail:
+            raise InputError(
+                "malformed line in the middle of the file; use --force to start again", path=path
+            )
         else:
-            if bad_tail:
-                raise InputError(
-                    "malformed line in the middle of the file; use --force to start again",
-                    path=path,
-                )
             rows.append(dict(zip(names, fields)))
-            good_end = offset + len(line.encode("utf-8")) + 1
-        offset += len(line.encode("utf-8")) + 1
+            good_end = offset
     if repair and bad_tail:
         os.truncate(path, good_end)
     return ExistingResults(rows, dropped)
 
 
 class ResultsWriter:
-    """Append rows to a bench CSV, one ``write`` + ``fsync`` per batch.
+    """Append rows to a table, one ``write`` + ``fsync`` per batch.
 
-    Args:
-        path: The CSV file.
-        new: Create (truncate) the file and write the header; else append.
-        fsync: Call ``os.fsync`` after each batch (off only in tests of speed).
-        columns: The table's columns (default: the bench's, :func:`bench_columns`).
+    ``new``: create (truncate) the file and write the header, else append; ``fsync`` off only
+    in tests of speed; ``columns``: the table's (default: the bench's).
     """
 
     def __init__(
@@ -231,26 +201,22 @@ class ResultsWriter:
         fsync: bool = True,
         columns: tuple[str, ...] | None = None,
     ):
+        from ..atomic import record
+
         self.path = Path(path)
         self.fsync = fsync
         self.columns = bench_columns() if columns is None else tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT
-        if new:
-            flags |= os.O_TRUNC
+        flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | (os.O_TRUNC if new else 0)
         self._fd = os.open(self.path, flags, 0o644)
-        from ..atomic import record
-
         record(self.path)
         if new:
             self._write(header_bytes(self.columns))
-        self.count = 0
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
         while view:
-            done = os.write(self._fd, view)
-            view = view[done:]
+            view = view[os.write(self._fd, view) :]
         if self.fsync:
             os.fsync(self._fd)
 
@@ -258,7 +224,6 @@ class ResultsWriter:
         """Append ``rows`` and make them durable before returning."""
         if rows:
             self._write(format_rows(rows, self.columns))
-            self.count += len(rows)
 
     def close(self) -> None:
         if self._fd is not None:
@@ -273,25 +238,17 @@ class ResultsWriter:
 
 
 class InflightMarker:
-    """A small side file naming the solve in progress, and what killed the run.
+    """A side file naming the solve in progress, and what killed the run.
 
-    Written before every solve (two system calls, outside the timed region;
-    no fsync: it only has to outlive this process, and the page cache does).
-    While the run lasts, :mod:`faulthandler` writes to the end of the same file
-    (a second descriptor opened with ``O_APPEND``) when this process gets a
-    fatal signal (SIGSEGV, SIGFPE, SIGABRT, SIGBUS, SIGILL). So after a run died:
-
-    - the key names a solve that has no row, and a traceback follows: a
-      backend crashed this process; with ``--isolate auto`` the next
-      ``--resume`` runs that backend in a worker process from then on;
-    - no traceback: the process was killed from outside (SIGKILL, power): the
-      solve is simply run again.
-
-    Removed when a run ends normally.
+    Rewritten before every solve (outside the timed region, no fsync: it only has to outlive
+    this process). :mod:`faulthandler` appends to it on a fatal signal, so after a run died a
+    key without a row followed by a traceback means a backend crashed this process (under
+    ``--isolate auto`` the next ``--resume`` isolates it); no traceback means a kill from
+    outside. Removed when a run ends normally.
 
     Format: line 1, the comma-separated backends to isolate; line 2, the key
-    ``problem<TAB>backend<TAB>profile`` (``warmup <TAB>...`` or
-    ``replay <problem><TAB>...`` outside recorded solves); then the traceback, if any.
+    ``problem<TAB>backend<TAB>profile`` (``warmup<TAB>...`` or ``replay <problem><TAB>...``
+    outside recorded solves); then the traceback, if any.
     """
 
     def __init__(self, path: str | Path):
@@ -311,10 +268,9 @@ class InflightMarker:
         if not self.path.exists():
             return [], None, ""
         lines = self.path.read_text(errors="replace").split("\n")
-        isolate = [b for b in lines[0].split(",") if b] if lines else []
+        isolate = [b for b in lines[0].split(",") if b]
         key = tuple(lines[1].split("\t")) if len(lines) > 1 and lines[1] else None
-        crash = "\n".join(lines[2:]).strip()
-        return isolate, key, crash
+        return isolate, key, "\n".join(lines[2:]).strip()
 
     def open(self, isolate: list[str], catch_faults: bool = True) -> None:
         self.isolate = list(isolate)
@@ -353,5 +309,4 @@ class InflightMarker:
 
     def remove(self) -> None:
         self.close()
-        if self.path.exists():
-            self.path.unlink()
+        self.path.unlink(missing_ok=True)

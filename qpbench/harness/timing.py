@@ -1,54 +1,22 @@
-"""How a solve is timed, and how ``--repeat`` times it again from the same state.
+"""The one clock around a solve, and how ``--repeat`` times a solve again from the same state.
 
-The timed region is the backend call and the reading of its answer::
+The timed region (:func:`timed_call`) is the backend call and the reading of its answer
+(:data:`ANSWER_FIELDS`, so that a backend deferring its duals pays for them), gc off. The
+objective is not read: :class:`~qpbench.backends.base.BackendSolution` computes a missing one
+from ``x`` on first read, as the harness does for every backend (:func:`qpbench.metrics.objective`).
 
-    gc.disable(); t0 = perf_counter_ns()
-    sol = backend.solve(problem); sol.x; sol.y; sol.z; sol.z_box
-    t1 = perf_counter_ns(); gc.enable()
-
-Reading ``y``, ``z`` and ``z_box`` inside the region makes every backend pay
-for its full answer: most build it inside ``solve``, while a backend may
-defer the duals until first read (the online network's
-:class:`~qpbench.backends.rnn.TickSolution`). The objective is not read: a
-solver that reports one computed it inside its call; a backend without one
-(``pinv``, ``rnn``) gets it computed from ``x`` on first read by
-:class:`~qpbench.backends.base.BackendSolution`, a Python computation the
-harness does for every backend anyway (:func:`qpbench.metrics.objective`),
-which would charge those backends microseconds the others do not pay. For a
-backend that built everything already the reads are attribute look-ups.
-
-Loading, reference solutions, metrics, CSV writing and inter-process
-communication are all outside it.
-
-Repeats. A backend carries state from tick to tick (a persistent solver
-object warm-started from its last iterate, OSQP's adapted ``rho``, an
-active set, the network state of ``rnn``), and most of that state lives in
-native objects that can be neither copied nor restored exactly. So
-``--repeat R`` never restores a state: the harness keeps R instances of the
-backend (:class:`Replicas`, made by :meth:`~qpbench.backends.base.Backend.fresh`),
-feeds them the same problems in the same order, resets them at the same
-points, and times each one's solve of the problem once. Replica 0 is the
-backend a controller running once would have: its answer (status, ``x``,
-duals, iterations) is the row's, and it is exactly the answer of
-``--repeat 1``. Replicas 1..R-1 do the same work from the same state, so
-their times are times of the kept solve; the harness checks that (the same
-status, iterations and ``x``, ``y``, ``z``, ``z_box`` bit for bit) and the
-row says when it does not hold (``repeat_exact``, ``repeat_note``: a solver
-that is not deterministic, a replica that raised). A replica made after
-replica 0 has solved problems of the sequence (a ``--repeat`` raised
-mid-sequence, a replica dropped after an exception) first solves, untimed,
-the problems replica 0 solved since its last reset (:attr:`Replicas.history`),
-in order; if that cannot be done the row's other solves are not timed and
-``repeat_note`` says why. A failed solve of replica 0 (``error``,
-``time_limit``, ``invalid``) is not repeated; the harness resets every
-replica before the next solve. In ``independent`` mode every replica is reset
-before every problem.
+A backend's state (warm starts, adapted ``rho``, an active set, the ``rnn`` network) mostly lives
+in native objects that cannot be restored, so ``--repeat R`` keeps R instances
+(:class:`Replicas`, made by :meth:`~qpbench.backends.base.Backend.fresh`) fed the same problems
+and resets. Replica 0's answer is the row's (exactly that of ``--repeat 1``); replicas 1..R-1
+time the same work from the same state, and the row says when their answers differ
+(``repeat_exact``, ``repeat_note``). A replica made or dropped mid-sequence first solves,
+untimed, the problems replica 0 solved since its last reset (:attr:`Replicas.history`).
 """
 
 from __future__ import annotations
 
 import gc
-import logging
 import time
 from typing import TYPE_CHECKING
 
@@ -59,10 +27,7 @@ if TYPE_CHECKING:
 
     from ..backends.base import Backend, BackendSolution
 
-log = logging.getLogger("qpbench.harness")
-
-
-#: Fields of a solution read inside the timed region (see the module docstring).
+#: Fields of a solution read inside the timed region.
 ANSWER_FIELDS = ("x", "y", "z", "z_box")
 
 
@@ -73,8 +38,7 @@ def read_answer(solution: BackendSolution) -> None:
 
 
 def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSolution, int]:
-    """``(solution, wall time in [ns])`` of ``backend.solve(problem)`` and the reading of
-    its answer (:func:`read_answer`), gc off."""
+    """``(solution, wall time [ns])`` of ``backend.solve(problem)`` and :func:`read_answer`, gc off."""
     enabled = gc.isenabled()
     gc.disable()
     try:
@@ -90,14 +54,9 @@ def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSol
 
 
 class Replicas:
-    """The instances of one backend that ``--repeat`` times (see the module docstring).
+    """The instances of one backend that ``--repeat`` times; ``members[0]`` is the kept one.
 
-    Args:
-        backend: Replica 0, the backend whose answers are kept.
-
-    Attributes:
-        members: The replicas made so far; ``members[0]`` is ``backend``.
-        history: Problems replica 0 solved since its last reset, in order.
+    ``history``: the problems replica 0 solved since its last reset, in order.
     """
 
     def __init__(self, backend: Backend):
@@ -116,30 +75,27 @@ class Replicas:
         self._solved = [0] * len(self.members)
 
     def solved(self, r: int, problem: qpsolvers.Problem) -> None:
-        """Record that replica ``r`` solved ``problem`` (replica 0: the next problem of the history)."""
+        """Record that replica ``r`` solved ``problem`` (replica 0: the next of the history)."""
         if r == 0:
             self.history.append(problem)
         self._solved[r] += 1
 
     def drop(self, r: int) -> None:
-        """Forget replica ``r`` (its state is suspect); a new one is made when needed."""
+        """Forget replica ``r`` and later ones (state suspect); new ones are made when needed."""
         del self.members[r:]
         del self._solved[r:]
 
     def ready(self, r: int) -> Backend:
-        """Replica ``r`` (``r >= 1``) in the state replica 0 had before its last solve.
-
-        Made when missing, then brought forward by solving, untimed, the problems of
-        :attr:`history` it has not solved yet (all but the last).
+        """Replica ``r >= 1`` in the state replica 0 had before its last solve: made if missing,
+        then brought forward by solving, untimed, the history it has not solved (all but the last).
 
         Raises:
             Exception: the replica cannot be made, or a catch-up solve raised (it is dropped).
         """
         self.make(r + 1)
         backend = self.members[r]
-        target = len(self.history) - 1
         try:
-            while self._solved[r] < target:
+            while self._solved[r] < len(self.history) - 1:
                 solution = backend.solve(self.history[self._solved[r]])
                 if solution is not None:
                     read_answer(solution)

@@ -1,30 +1,12 @@
 """Where work runs: this process, local worker processes, or a Dask cluster.
 
-:mod:`.process` is the one module that starts, feeds, times out and reaps
-worker processes (:class:`~.process.Worker`, the pool
-:func:`~.process.run_tasks`); every other module goes through it.
+:mod:`.process` is the one module that starts worker processes. The sweep's executors run
+independent tasks ``fn(arg)`` (``fn`` module-level, ``arg`` plain picklable data) and yield a
+:class:`Done` per task as it finishes; every executor gives the same values, only where and when
+they ran differs. A task whose worker dies is retried once (:data:`MAX_ATTEMPTS`), then lost.
 
-The sweep's executors run independent tasks ``fn(arg)`` (``fn`` a
-module-level function, so that a worker can import it by name; ``arg``
-plain picklable data); each value comes back as a :class:`Done`, in the
-order the tasks finish. Every executor gives the same values for the same
-tasks: only where and when they ran differs.
-
-- :class:`SerialExecutor`: in this process, one task after the other (for
-  the Python API; a crash in a solver ends the process).
-- :class:`ProcessExecutor`: ``jobs`` long-lived local worker processes; a
-  worker that dies loses only its task, retried once, then reported lost.
-- :class:`DaskExecutor`: an existing ``distributed`` cluster (``scheduler``
-  address, ``tls://`` with a :func:`load_security` file) or an in-process
-  ``LocalCluster`` bound to 127.0.0.1, with the same retry (:mod:`.dask_`).
-
-Dask's workers run whatever pickled code their scheduler sends them: a
-scheduler reachable by others lets them run code on every worker. Hence the
-local cluster listens on 127.0.0.1 only, and a remote cluster should be
-reached over ``tls://`` with certificates (:func:`load_security`).
-
-Only :mod:`.dask_worker` imports ``distributed`` at import time, and only
-:class:`DaskExecutor` imports it.
+Dask workers run whatever pickled code their scheduler sends: the local cluster listens on
+127.0.0.1 only, and a remote one should be reached over ``tls://`` (:func:`load_security`).
 """
 
 from __future__ import annotations
@@ -64,7 +46,7 @@ def default_jobs() -> int:
 
 
 class SerialExecutor:
-    """Every task in this process, in order."""
+    """Every task in this process, in order (a crash in a solver ends the process)."""
 
     name = "serial"
     concurrency = 1
@@ -79,20 +61,12 @@ class SerialExecutor:
 
 
 class ProcessExecutor:
-    """``jobs`` long-lived local worker processes (:func:`~.process.run_tasks`, forked from
-    the forkserver that holds qpbench and its compiled kernels).
-
-    A worker that dies (a segfault in a solver, SIGKILL from the out-of-memory
-    killer) loses only its task: it is retried once on a fresh worker, then
-    reported lost. With one job the tasks run one after the other, the only
-    setting in which solve times are not disturbed by other runs.
-    """
+    """``jobs`` long-lived local worker processes (:func:`~.process.run_tasks`); with one job
+    the tasks run one after the other, undisturbed by each other, and a crash loses only its task."""
 
     name = "processes"
 
     def __init__(self, jobs: int):
-        if jobs < 1:
-            raise ParamError(f"must be >= 1, got {jobs}", key="--jobs")
         self.concurrency = jobs
 
     def run(self, fn: Callable, items: list[tuple]) -> Iterator[Done]:
@@ -116,16 +90,11 @@ def _log_retry(key, why: str) -> None:
 def make_executor(
     name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None
 ) -> SerialExecutor | ProcessExecutor | DaskExecutor:
-    """The executor of ``--executor NAME --jobs N [--scheduler ADDRESS --security FILE]``.
-
-    ``local`` is :class:`ProcessExecutor`: with one job the runs are made
-    one after the other, as serially as in this process (the worker times
-    them itself) but a crash in a solver loses only the run it hit;
-    ``dask`` is :class:`DaskExecutor`.
+    """The executor of ``--executor local|dask --jobs N [--scheduler ADDRESS --security FILE]``.
 
     Raises:
-        ParamError: an unknown executor, a scheduler or security file without
-            ``dask``, a ``tls://`` address without a security file.
+        ParamError: an unknown executor, ``jobs`` below 1, a scheduler or security file
+            without ``dask``, a ``tls://`` address without a security file or the reverse.
     """
     if name not in EXECUTORS:
         raise ParamError(

@@ -1,19 +1,10 @@
 """Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1.
 
-:class:`DaskExecutor` reaches the cluster at a ``scheduler`` address
-(``tls://`` with a :func:`load_security` file) or starts an in-process
-``LocalCluster`` bound to 127.0.0.1. Tasks are submitted at once and
-collected with ``distributed.as_completed``; a task whose worker was lost
-(``KilledWorker``) is submitted once more, then reported lost. The local
-cluster's scheduler gives up on a task at its first lost worker
-(``allowed-failures = 0``) so that the retry is this module's; an external
-scheduler first applies its own ``distributed.scheduler.allowed-failures``.
-
-A task is a whole closed-loop run: pure computation in a thread beside the
-worker's event loop, which shares its GIL. The workers of the local cluster
-are started with :data:`WORKER_CONFIG`; on an existing cluster the client
-registers :class:`qpbench.runner.dask_worker.QuietWorker`, which does the
-same on every worker while the executor is open.
+Tasks are submitted at once and collected as they complete; a task whose worker was lost
+(``KilledWorker``) is submitted once more, then reported lost (the local cluster's scheduler
+allows no failure of its own, ``allowed-failures = 0``, so the retry is this module's). A task
+runs in a thread beside the worker's event loop, sharing its GIL: the workers are quieted
+(:data:`WORKER_CONFIG`, or :class:`qpbench.runner.dask_worker.QuietWorker` on an existing cluster).
 """
 
 from __future__ import annotations
@@ -34,12 +25,8 @@ log = logging.getLogger("qpbench.runner")
 
 __all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
 
-#: Dask settings of the workers a sweep runs on. The statistical profiler samples the task's
-#: stack every 10 ms and the event loop checks its own health every 20 ms, both on the worker's
-#: event loop and holding the GIL the task's thread needs (see :mod:`.dask_worker`): with Dask's
-#: defaults the task's thread waits for the GIL and a closed-loop run takes longer than in a
-#: process of its own (``bench/sweep_speedup.py``); these settings stop both timers (the memory
-#: monitor and heartbeats remain).
+#: Dask settings of a sweep's workers: no statistical profiler, a slower event-loop health check
+#: (both take the GIL from the task's thread; :mod:`.dask_worker`, ``bench/sweep_speedup.py``).
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
@@ -50,16 +37,12 @@ QUIET_SLOW = {"tick": 1.0}
 
 
 def load_security(path: str | Path) -> Security:
-    """A ``distributed.security.Security`` from a small TOML or YAML file.
-
-    The file names PEM files (relative paths are read from the file's folder)::
+    """A ``distributed.security.Security`` (encryption required) from a TOML or YAML file
+    naming PEM files relative to its folder::
 
         ca_file = "ca.pem"       # the certificate authority that signed every certificate
-        cert_file = "node.pem"   # this machine's certificate
+        cert_file = "node.pem"   # this machine's certificate (client, local scheduler, workers)
         key_file = "node-key.pem"
-
-    The same certificate serves the client and, for the in-process local
-    cluster, its scheduler and workers. Encryption is required.
 
     Raises:
         InputError: unreadable file, unknown or missing key, missing PEM file.
@@ -108,19 +91,11 @@ def load_security(path: str | Path) -> Security:
 
 
 class DaskExecutor:
-    """Tasks on a Dask ``distributed`` cluster: the one at ``scheduler``, or a local one on 127.0.0.1.
+    """Tasks on the cluster at ``scheduler``, or (``None``) on a ``LocalCluster`` of ``jobs``
+    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS.
 
-    Args:
-        scheduler: Address of an existing cluster's scheduler; ``None`` starts
-            a ``LocalCluster`` of ``jobs`` single-threaded worker processes with
-            :data:`WORKER_CONFIG`.
-        security: A ``distributed.security.Security`` (:func:`load_security`) for TLS.
-        jobs: Workers of the local cluster.
-
-    On an existing cluster the client registers
-    :class:`~qpbench.runner.dask_worker.QuietWorker` (the equivalent of
-    :data:`WORKER_CONFIG` on running workers, and on workers that join later)
-    and removes it at :meth:`close`, which restores the workers' settings.
+    On an existing cluster :class:`~qpbench.runner.dask_worker.QuietWorker` is registered
+    until :meth:`close`, which restores the workers' settings.
     """
 
     name = "dask"
@@ -160,7 +135,7 @@ class DaskExecutor:
         self.address = self.client.scheduler.address
 
     def _quiet_workers(self) -> None:
-        """Register :class:`~.dask_worker.QuietWorker` on the cluster's workers (until :meth:`close`)."""
+        """Register :class:`~.dask_worker.QuietWorker` on the cluster's workers."""
         from .dask_worker import PLUGIN_NAME, QuietWorker
 
         try:
@@ -191,10 +166,15 @@ class DaskExecutor:
 
         hosts, threads = self._per_host()
         pending = {}
-        for i, (key, arg) in enumerate(items):
-            fut = self.client.submit(run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-1")
-            pending[fut] = (i, key, arg, 1)
-        queue = as_completed(list(pending))
+
+        def submit(i: int, key, arg, attempt: int):
+            fut = self.client.submit(
+                run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempt}"
+            )
+            pending[fut] = (i, key, arg, attempt)
+            return fut
+
+        queue = as_completed([submit(i, key, arg, 1) for i, (key, arg) in enumerate(items)])
         for fut in queue:
             i, key, arg, attempts = pending.pop(fut)
             if fut.status == "finished":
@@ -208,11 +188,7 @@ class DaskExecutor:
             why = f"{type(fut.exception()).__name__}: {fut.exception()}"
             if attempts < MAX_ATTEMPTS:
                 log.warning("%s: %s; running it again", key, why)
-                new = self.client.submit(
-                    run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempts + 1}"
-                )
-                pending[new] = (i, key, arg, attempts + 1)
-                queue.add(new)
+                queue.add(submit(i, key, arg, attempts + 1))
                 continue
             yield Done(
                 key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0

@@ -1,17 +1,8 @@
 """A Dask worker plugin that keeps a worker's event loop out of the way of the task's thread.
 
-A Dask worker runs each task in a thread beside its event loop, and both
-need the GIL. The event loop wakes on its own timers: the statistical
-profiler (``profile``, every 10 ms: it walks the task's stack while holding
-the GIL) and the event loop's health check (``tick``, every 20 ms). Each
-wake takes the GIL from the task's thread, so a closed-loop run that is
-pure computation runs slower on a worker than in a process of its own.
-
-:class:`QuietWorker` stops those timers while it is registered (the client
-registers it on every worker of the cluster, present and future, and
-removes it when done, which restores them). A worker started with the same
-settings needs no plugin (:data:`qpbench.runner.dask_.WORKER_CONFIG`).
-
+A task runs in a thread beside the worker's event loop, and both need the GIL; the loop's timers
+(the statistical profiler ``profile``, which walks the task's stack, and the health check
+``tick``) take it from the task. :class:`QuietWorker` stops or slows them while registered.
 This module imports ``distributed``: import it only where Dask is installed.
 """
 
@@ -21,22 +12,17 @@ from distributed.diagnostics.plugin import WorkerPlugin
 
 __all__ = ["PLUGIN_NAME", "QuietWorker"]
 
-#: Name of the plugin on the cluster (one registration per cluster: the last client to leave restores).
+#: Name of the plugin on the cluster (one registration per cluster).
 PLUGIN_NAME = "qpbench-quiet-worker"
 
 
 class QuietWorker(WorkerPlugin):
-    """Take the worker's periodic callbacks ``stop`` away, run ``slow`` less often, while registered.
+    """Stop the worker's periodic callbacks ``stop`` and run ``slow`` (``{name: period [s]}``)
+    less often, while registered.
 
-    Args:
-        stop: Names of the worker's periodic callbacks to stop (``Worker.periodic_callbacks``).
-        slow: ``{name: period in [s]}`` of callbacks to run less often.
-
-    A stopped callback leaves ``Worker.periodic_callbacks`` (so that a
-    worker that joins the cluster later, which sets its plugins up before it
-    starts its callbacks, does not start it) and comes back, running, at
-    teardown. Callbacks the worker does not have (a worker started with the
-    profiler off has no ``profile``) are left alone.
+    A stopped callback leaves ``Worker.periodic_callbacks`` (so a worker that joins later, which
+    sets its plugins up before it starts its callbacks, does not start it) and comes back,
+    running, at teardown.
     """
 
     name = PLUGIN_NAME
@@ -61,7 +47,7 @@ class QuietWorker(WorkerPlugin):
                 _retime(pc, period * 1e3)
 
     def teardown(self, worker) -> None:
-        """Runs on the worker's event loop, also when the worker closes (which then stops every callback)."""
+        """Runs on the worker's event loop, also when the worker closes."""
         callbacks = worker.periodic_callbacks
         for name, ms in self._periods.items():
             if name in callbacks:

@@ -1,35 +1,15 @@
 """Worker processes: the one place that starts, feeds, times out and reaps them.
 
-A worker runs ``fn(arg)`` requests (``fn`` a module-level function, ``arg``
-picklable) one at a time and sends each value back over a pipe. Two ways to
-use one:
+A worker answers ``fn(arg)`` requests (``fn`` module-level, ``arg`` picklable) one at a time
+over a pipe. :class:`Worker` is one worker whose module globals keep state between requests
+(an isolated bench backend); :func:`run_tasks` is the pool, with retries.
 
-- :class:`Worker`: one worker, one request at a time, each with a deadline
-  (:meth:`Worker.call`); module globals of the worker keep state between
-  requests (the per-tick bench's isolated backend);
-- :func:`run_tasks`: the pool. ``(key, arg, timeout)`` tasks on up to
-  ``jobs`` workers; each task ends as a :class:`Done`, in the order they
-  finish. A task past its deadline has its worker killed; a task whose worker
-  died is retried up to ``attempts`` times; a killed or dead worker is
-  replaced by a new one before the next task.
-
-How a request ends (the ``status`` of :class:`Done` and :class:`WorkerDied`):
-
-- answered -> ``None``;
-- ``fn`` raised -> ``error`` (``"Type: message"``); the worker lives on;
-- no answer by the deadline -> ``time_limit``: the worker is killed (SIGKILL,
-  which needs no cooperation from a solver hung in native code);
-- the worker died (segfault, abort, ``os._exit``, the out-of-memory killer)
-  -> ``crashed``, worded by :func:`death_message`.
-
-Start method: ``forkserver`` where the platform has one, else ``spawn``
-(:func:`context`). The forkserver is started once, before the first worker's
-clock, with qpbench preloaded (:mod:`qpbench.harness.preload` loads the numba
-kernels the parent prepared, and only those, from the on-disk cache), so a
-worker is a fork of a process that already holds qpbench and the kernels and
-never compiles. A worker imports the task's module and says it is ready before
-any deadline runs (within :data:`START_TIMEOUT_S`). A worker takes the environment of the process
-that starts it, not the one the forkserver was started with.
+A request ends answered (``ok``), raising (``error``, the worker lives on), past its deadline
+(``time_limit``: the worker is killed with SIGKILL, which needs no cooperation from a solver hung
+in native code) or with the worker dead (``crashed``, :func:`death_message`). Workers are forked
+from a forkserver started once, before any deadline, with qpbench and the kernels this process
+prepared preloaded (:mod:`qpbench.harness.preload`), so a worker never compiles; ``spawn`` where
+there is no forkserver. A worker takes the environment of the process that starts it.
 """
 
 from __future__ import annotations
@@ -54,27 +34,9 @@ if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.context import BaseContext
 
-__all__ = [
-    "DEADLINE_MARGIN_S",
-    "MAX_ATTEMPTS",
-    "PRELOAD_KERNELS_ENV",
-    "START_TIMEOUT_S",
-    "Done",
-    "Worker",
-    "WorkerDied",
-    "context",
-    "deadline",
-    "death_message",
-    "preload_kernels",
-    "requests",
-    "run_located",
-    "run_tasks",
-]
-
 #: Time allowed for the forkserver's preload and for a worker to start [s].
 START_TIMEOUT_S = 120.0
-#: Least slack added to a solve's time limit before its worker is killed [s] (pipe, pickling,
-#: scheduling on a loaded machine); the slack is ``max(DEADLINE_MARGIN_S, time_limit / 2)``.
+#: Least slack added to a solve's time limit before its worker is killed [s] (:func:`deadline`).
 DEADLINE_MARGIN_S = 1.0
 #: Runs of a task before it is reported lost (the first and one retry), in a pool that retries.
 MAX_ATTEMPTS = 2
@@ -99,22 +61,16 @@ _KERNELS: tuple[str, ...] = ()
 
 
 def preload_kernels(names) -> None:
-    """Name the compiled kernels the forkserver loads for every worker: those this process
-    prepared (:func:`qpbench.jit.prepare` calls this). A forkserver started later sees them.
-    """
+    """Name the compiled kernels the forkserver loads for every worker (:func:`qpbench.jit.prepare`)."""
     global _KERNELS
     _KERNELS = tuple(names)
 
 
 def context(fresh: bool = False) -> BaseContext:
-    """The start method's context; the forkserver preloads the kernels this process prepared.
+    """The start method's context, its forkserver started and preloaded now (:func:`preload_kernels`).
 
-    The command has compiled (or loaded) the kernels of the backends it runs
-    before (:func:`qpbench.jit.warmup`, which names them here through
-    :func:`preload_kernels`), so no worker ever compiles: it only loads them.
-    ``fresh``: ``spawn`` instead, each worker a new interpreter with nothing
-    preloaded and never a fork of a process that may hold threads and locks
-    (reference solves called from the Python API).
+    ``fresh``: ``spawn``, each worker a new interpreter, never a fork of a process that may
+    hold threads and locks (reference solves called from the Python API).
     """
     global _CTX
     if fresh:
@@ -128,8 +84,7 @@ def context(fresh: bool = False) -> BaseContext:
             # what this process prepared, never a value inherited from the process that started it
             os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
             ctx.set_forkserver_preload(list(PRELOAD))
-            # start the server now and wait for its preload (a no-op child), so that no
-            # worker's deadline ever covers it
+            # start the server and wait for its preload now (a no-op child): no deadline covers it
             proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
             proc.start()
             proc.join(START_TIMEOUT_S)
@@ -160,19 +115,14 @@ def death_message(exitcode: int | None) -> str:
 
 def requests(conn: Connection) -> Iterator:
     """Each request a worker process receives on ``conn``, until ``None`` or the other end closes."""
-    while True:
-        try:
-            request = conn.recv()
-        except EOFError:
-            return
-        if request is None:
-            return
-        yield request
+    try:
+        yield from iter(conn.recv, None)
+    except EOFError:
+        return
 
 
 def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
-    """Body of every worker process: import ``imports``, say ready, answer ``(fn, arg)``
-    requests until ``None``."""
+    """A worker: import ``imports``, say ready, answer ``(fn, arg)`` requests until ``None``."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
     os.environ.clear()
     os.environ.update(environ)
@@ -200,13 +150,8 @@ class WorkerDied(Exception):
 
 
 class Worker:
-    """One worker process (a daemon: it dies with this process) and its pipe.
-
-    Args:
-        ctx: ``multiprocessing`` context (default :func:`context`).
-        name: Process name.
-        imports: Modules the worker imports before it says ready (outside any deadline).
-    """
+    """One worker process (a daemon: it dies with this process) and its pipe; ``imports``: modules
+    it imports before it says ready (outside any deadline)."""
 
     def __init__(
         self, ctx: BaseContext | None = None, name: str = "qpbench-worker", imports: tuple = ()
@@ -228,7 +173,7 @@ class Worker:
         """Start request ``fn(arg)``, answered within ``timeout`` [s] (``None``: no limit).
 
         Raises:
-            WorkerDied: the worker did not start (``crashed``, ``time_limit``).
+            WorkerDied: the worker did not start.
         """
         if not self.ready:
             self.deadline, self.timeout = time.monotonic() + START_TIMEOUT_S, START_TIMEOUT_S
@@ -241,11 +186,8 @@ class Worker:
         self.conn.send((fn, arg))
 
     def poll(self) -> tuple[str, object] | None:
-        """``(status, payload)`` once the request is over, else ``None``.
-
-        ``("ok", value)``, ``("error", text)``, ``("crashed", death message)`` or
-        ``("time_limit", text)``; after the last two the worker is gone.
-        """
+        """``(status, payload)`` once the request is over (``ok``, ``error``, ``crashed``,
+        ``time_limit``; after the last two the worker is gone), else ``None``."""
         try:
             if self.conn.poll():
                 kind, payload = self.conn.recv()
@@ -269,11 +211,10 @@ class Worker:
         return answer
 
     def call(self, fn: Callable, arg, timeout: float | None, what: str):
-        """``fn(arg)`` in the worker, answered within ``timeout`` [s]; its value.
+        """``fn(arg)`` in the worker, answered within ``timeout`` [s].
 
         Raises:
-            WorkerDied: ``error`` (``fn`` raised), ``crashed`` or ``time_limit`` (the
-                worker is gone), the message naming ``what`` (``during solve``).
+            WorkerDied: ``error``, ``crashed`` or ``time_limit``, the message naming ``what``.
         """
         self.send(fn, arg, timeout)
         status, payload = self._wait()
@@ -317,17 +258,9 @@ def run_located(fn: Callable, arg) -> tuple:
 
 @dataclass
 class Done:
-    """A finished task.
-
-    Attributes:
-        key: The task's key, as given.
-        value: ``fn(arg)``, or ``None`` when the task gave none.
-        lost: Why it gave nothing (the last attempt's error, death or deadline), else ``None``.
-        attempts: Times it was started.
-        host, worker: Where its last attempt ran.
-        concurrent: Tasks that could run at once on that host.
-        status: ``None`` (a value), ``error``, ``crashed`` or ``time_limit``.
-    """
+    """A finished task: ``value`` (``fn(arg)``) or ``lost`` (why not: the last attempt's error,
+    death or deadline, ``status`` saying which); where its last attempt ran; ``concurrent``: the
+    tasks that could run at once on that host."""
 
     key: object
     value: object
@@ -350,20 +283,11 @@ def run_tasks(
     name: str = "qpbench-worker",
     on_retry: Callable | None = None,
 ) -> Iterator[Done]:
-    """``fn(arg)`` of each task ``(key, arg, timeout)`` on up to ``jobs`` worker processes.
+    """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs`` workers.
 
-    Args:
-        fn: A module-level function.
-        tasks: ``timeout`` in [s] from the moment the task is sent, ``None`` for none.
-        jobs: Workers at once (at least 1).
-        ctx: ``multiprocessing`` context (default :func:`context`).
-        attempts: Runs of a task whose worker died before it is reported lost.
-        fresh: A new worker for every task (none carries anything from another).
-        on_retry: ``on_retry(key, why)`` before a task runs again.
-
-    Yields:
-        A :class:`Done` per task as it ends. Workers left running when the
-        caller stops iterating (an interrupt) are killed.
+    ``attempts``: runs of a task whose worker died before it is lost (``on_retry(key, why)``
+    before each rerun); ``fresh``: a new worker for every task. Workers left running when the
+    caller stops iterating are killed.
     """
     if not tasks:
         return

@@ -238,12 +238,12 @@ def failed_row(meta: dict, status: str, message: str) -> dict:
 
 def same_outside_timing(a: dict, b: dict) -> list[str]:
     """Columns where rows ``a`` and ``b`` differ, timing columns aside (floats compared exactly, as text)."""
-    from ..harness.results import _cell
+    from ..harness.results import cell
 
     return [
         c
         for c in COLUMNS
-        if c not in TIMING_COLUMNS and _cell(_parse(a.get(c))) != _cell(_parse(b.get(c)))
+        if c not in TIMING_COLUMNS and cell(_parse(a.get(c))) != cell(_parse(b.get(c)))
     ]
 
 
