@@ -7,9 +7,8 @@
   :mod:`qpbench.runner.process`, the one module that owns worker processes;
 - :mod:`.results`: CSV rows appended as produced, read back on resume;
 - :mod:`.plugins`: extra backend modules (``--plugin``, ``QPBENCH_PLUGINS``);
-- :mod:`.closed_loop`: :func:`run_closed_loop` (``qpbench closed-loop``), with
-  :mod:`.loop_run` (one run), :mod:`.loop_workers` (isolated runs) and
-  :mod:`.loop_rows` (``closed_loop.csv``);
+- :mod:`.closed_loop`: :func:`run_row` (one closed-loop run, every command's) and
+  :func:`run_closed_loop` (``qpbench closed-loop``, ``closed_loop.csv``);
 - :mod:`.pipeline`: :func:`run_all` (``qpbench run``): problem sets, bench,
   closed loop, report.
 """

@@ -86,7 +86,7 @@ def row_key(row: dict) -> tuple[str, str, str]:
     return tuple(str(row[c]) for c in KEY_COLUMNS)
 
 
-def _cell(value) -> str:
+def cell_text(value) -> str:
     """Text of one CSV cell: empty for None/NaN, repr-exact floats, one line."""
     if value is None:
         return ""
@@ -111,7 +111,7 @@ def format_rows(rows: list[dict], columns: tuple[str, ...] | None = None) -> byt
     writer = csv.writer(buf, lineterminator="\n")
     names = bench_columns() if columns is None else columns
     for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in names])
+        writer.writerow([cell_text(row.get(c)) for c in names])
     return buf.getvalue().encode("utf-8")
 
 

@@ -32,11 +32,8 @@ solve on a smaller size of the same axis took longer than ``slow_limit``.
 
 from __future__ import annotations
 
-import csv
-import io
 import logging
 import math
-import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -45,6 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..harness.results import ResultsWriter
 from .sizes import Size, generate, qp_shape, scenario_toml
 
 if TYPE_CHECKING:
@@ -172,62 +170,11 @@ class ScalingConfig:
     keep_sets: bool = False
 
 
-def _cell(value) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    return repr(value) if isinstance(value, float) else str(value)
-
-
-def append_rows(path: Path, rows: list[dict]) -> None:
-    """Append ``rows`` to ``scaling.csv`` (header first if new) in one ``write``, then ``fsync``."""
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    new = not path.exists() or path.stat().st_size == 0
-    if new:
-        writer.writerow(COLUMNS)
-    for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in COLUMNS])
-    from ..atomic import record
-
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    record(path)
-    try:
-        os.write(fd, buf.getvalue().encode("utf-8"))
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
-    """Rows of a ``scaling.csv`` (strings); a half-written last line is dropped (and cut with ``repair``).
+    """Rows of a ``scaling.csv`` (strings; :func:`qpbench.harness.results.read_results`)."""
+    from ..harness.results import read_results
 
-    Raises:
-        InputError: not a scaling CSV (its header differs).
-    """
-    from ..exceptions import InputError
-
-    path = Path(path)
-    data = path.read_bytes()
-    if data and not data.endswith(b"\n"):
-        cut = data.rfind(b"\n") + 1
-        log.warning("%s: dropping a half-written last line left by an interrupted run", path)
-        data = data[:cut]
-        if repair:
-            os.truncate(path, cut)
-    lines = data.decode("utf-8").splitlines()
-    if not lines:
-        return []
-    header = next(csv.reader([lines[0]]))
-    if tuple(header) != COLUMNS:
-        raise InputError(
-            "not a scaling CSV of this version (columns differ); use --force to start again",
-            path=path,
-        )
-    return [
-        dict(zip(COLUMNS, fields))
-        for fields in csv.reader(lines[1:])
-        if len(fields) == len(COLUMNS)
-    ]
+    return read_results(path, repair=repair, columns=COLUMNS, kind="scaling").rows
 
 
 def build_times(
@@ -436,7 +383,9 @@ def run_scaling(
             size.cloud_points,
         )
         rows, size_failed = run_size(size, config, out, slow, progress)
-        append_rows(summary_path, rows)
+        new = not summary_path.exists() or summary_path.stat().st_size == 0
+        with ResultsWriter(summary_path, new=new, columns=COLUMNS) as writer:
+            writer.write_rows(rows)
         if not config.keep_sets:
             shutil.rmtree(out / "sets" / size.name, ignore_errors=True)
         failed += size_failed

@@ -3,7 +3,7 @@
 :func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able
 dict; ``qpbench simulate --summary`` writes it, and each row of
 ``closed_loop.csv`` is that dict under the table's column names
-(:mod:`qpbench.harness.loop_rows`), nothing recomputed.
+(:mod:`qpbench.harness.closed_loop`), nothing recomputed.
 
 Figures (statuses are those of the QP of the run's formulation at each tick; the
 status sets are :mod:`qpbench.statuses`'):
@@ -94,8 +94,10 @@ __all__ = [
     "MAX_INTERVALS",
     "SETTLE_TIME",
     "STRUCTURED_FIGURES",
+    "convergence_figures",
     "jsonable",
     "summarize",
+    "time_to_converge",
 ]
 
 #: Time from which tracking and force errors are judged [s] (paper: transient about 1 s);
@@ -104,6 +106,9 @@ SETTLE_TIME = 2.0
 
 #: A key point within this of ``d_safe`` [m] counts as touching its obstacle row (summary intervals).
 ACTIVE_MARGIN = 1e-4
+
+#: One tick's solve longer than this misses a 1 kHz loop's deadline [s].
+KHZ_DEADLINE_S = 1e-3
 
 #: At most this many intervals per list in a summary.
 MAX_INTERVALS = 20
@@ -206,6 +211,30 @@ def summarize(
     out["key_point_rule_reason"] = verdict.key_point_rule_reason
     out.update(_realtime_figures(frame, dt, scenario))
     return out
+
+
+def time_to_converge(t: np.ndarray, error: np.ndarray, band: float) -> float | None:
+    """First time [s] from which ``|error| <= band`` holds to the end (``None``: not at the end)."""
+    if len(t) == 0:
+        return None
+    outside = ~(np.abs(np.asarray(error, dtype=float)) <= band)
+    if outside[-1]:
+        return None
+    idx = np.flatnonzero(outside)
+    return float(t[0]) if idx.size == 0 else float(t[idx[-1] + 1])
+
+
+def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: float) -> dict:
+    """Times to converge [s] into the force band [N] and the tracking band [m], and the ticks
+    whose solve missed a 1 kHz loop's deadline (a sweep's figures)."""
+    t = frame[log.T].to_numpy(dtype=float)
+    force, tracking = frame[log.FORCE_ERROR], frame[log.TRACKING_ERROR]
+    solve = frame[log.SOLVE_TIME].to_numpy(dtype=float)
+    return {
+        "t_converge_force_s": time_to_converge(t, force.to_numpy(), force_band),
+        "t_converge_tracking_s": time_to_converge(t, tracking.to_numpy(), tracking_band),
+        "ticks_over_1ms": int(np.count_nonzero(solve > KHZ_DEADLINE_S)),
+    }
 
 
 def _realtime_figures(frame: pd.DataFrame, dt: float, scenario: Scenario) -> dict:

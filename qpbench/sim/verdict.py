@@ -3,7 +3,7 @@
 
 One function, :func:`judge`, decides; :func:`qpbench.sim.summary.summarize` calls
 it and puts ``verdict`` and ``verdict_reasons`` into the summary, which the
-closed-loop table (:mod:`qpbench.harness.loop_rows`) copies as they are.
+closed-loop table (:mod:`qpbench.harness.closed_loop`) copies as they are.
 :func:`failed_run` gives the verdict of a run that produced no result at all
 (a crash, an overrun deadline, an exception outside the ticks): ``incomplete``.
 

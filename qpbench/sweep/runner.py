@@ -27,11 +27,11 @@ from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
+from ..harness.closed_loop import LoopTask, run_row
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
-from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row
+from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row, sweep_row
 from .sample import Instance, sample_instances
 from .spec import SweepSpec
-from .task import SweepTask, run_task
 
 if TYPE_CHECKING:
     from ..runner import DaskExecutor, ProcessExecutor, SerialExecutor
@@ -122,6 +122,18 @@ def _meta(spec: SweepSpec, inst: Instance, backend: str) -> dict:
     }
 
 
+def task(meta: dict, inst: Instance, plugins: list[str] | None = None) -> LoopTask:
+    """The closed-loop task of one (instance, backend): the instance's text travels with it."""
+    bands = (meta["force_band"], meta["tracking_band"])
+    return LoopTask(
+        meta["instance_file"],
+        meta["backend"],
+        plugins=tuple(plugins or ()),
+        scenario_text=inst.text,
+        bands=bands,
+    )
+
+
 def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
     csv_path = out / CSV_NAME
     check_folder(out)
@@ -183,7 +195,7 @@ def run_sweep(
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     ran = failed = 0
-    items = []
+    items, metas = [], {}
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
         def emit(row):
@@ -200,16 +212,14 @@ def run_sweep(
                 if inst.invalid is not None:
                     emit(failed_row(meta, "invalid_scenario", inst.invalid))
                     continue
-                items.append(
-                    ((inst.name, backend), SweepTask(meta, inst.text, tuple(plugins or ())))
-                )
-        metas = {key: task.meta for key, task in items}
-        for done in executor.run(run_task, items):
-            row = (
-                done.value
-                if done.lost is None
-                else failed_row(metas[done.key], "crashed", done.lost)
-            )
+                metas[(inst.name, backend)] = meta
+                items.append(((inst.name, backend), task(meta, inst, plugins)))
+        for done in executor.run(run_row, items):
+            meta = metas[done.key]
+            if done.lost is None:
+                row = sweep_row(meta, done.value)
+            else:
+                row = failed_row(meta, "crashed", done.lost)
             row.update(
                 executor=executor.name,
                 host=done.host,
