@@ -40,22 +40,6 @@ from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
 from ..statuses import FORMULATIONS, describe_exception
 
-__all__ = [
-    "COLUMNS",
-    "CSV_NAME",
-    "ISOLATE",
-    "LOG_DIR",
-    "WARMUP_TICKS",
-    "ClosedLoopOutcome",
-    "LoopTask",
-    "failure_fields",
-    "is_risky",
-    "log_row",
-    "run_closed_loop",
-    "run_deadline",
-    "run_row",
-]
-
 log = logging.getLogger("qpbench.harness")
 
 CSV_NAME = "closed_loop.csv"
@@ -111,17 +95,8 @@ COLUMNS = (
 #: The tables' names of summary figures named otherwise in the summary.
 TABLE_NAMES = {"duration": "duration_s"}
 
-#: Text columns whose empty cells read back as ``""``.
-_TEXT_COLUMNS = (
-    "error",
-    "log_file",
-    "verdict",
-    "verdict_reasons",
-    "realtime",
-    "realtime_reason",
-    "realtime_solver",
-    "realtime_solver_reason",
-)
+#: Text columns whose empty cells read back as ``""`` (``error`` to ``realtime_solver_reason``).
+_TEXT_COLUMNS = COLUMNS[6:13] + ("log_file",)
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,8 @@
 """Power laws fitted to solve times, and where the curves cross (scaling study).
 
 A backend's median solve time ``T`` against a size ``s`` (variables or rows)
-is fitted as ``T = C s^k``: ordinary least squares of ``log10 T`` on
-``log10 s`` over the sizes of one grid axis. The slope ``k`` comes with its
-standard error ``se = sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (N sizes;
-undefined, NaN, for N = 2, where the line goes through both points).
-
-``k = 1``: time doubles when the size doubles; ``k = 2``: quadruples. A
-slope near 0 says the size does not matter there (fixed costs dominate: the
-Python call, the set-up).
+is fitted as ``T = C s^k``: least squares of ``log10 T`` on ``log10 s`` over one grid axis, the
+slope's standard error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (NaN for N = 2 sizes).
 """
 
 from __future__ import annotations
@@ -17,8 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-__all__ = ["PowerFit", "crossing", "fit_power_law", "first_above"]
 
 
 @dataclass(frozen=True)

@@ -17,17 +17,6 @@ from __future__ import annotations
 import json
 import math
 
-__all__ = [
-    "COLUMNS",
-    "CSV_NAME",
-    "KEY_COLUMNS",
-    "STATUSES",
-    "TIMING_COLUMNS",
-    "failed_row",
-    "same_outside_timing",
-    "sweep_row",
-]
-
 #: Name of the table inside the sweep's folder.
 CSV_NAME = "sweep.csv"
 

@@ -38,8 +38,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.sweep")
 
-__all__ = ["MANIFEST_NAME", "INSTANCE_DIR", "SweepOutcome", "run_sweep", "read_sweep_rows"]
-
 MANIFEST_NAME = "sweep.json"
 INSTANCE_DIR = "instances"
 #: Statuses a resumed sweep keeps.
@@ -122,24 +120,10 @@ def _meta(spec: SweepSpec, inst: Instance, backend: str) -> dict:
     }
 
 
-def task(meta: dict, inst: Instance, plugins: list[str] | None = None) -> LoopTask:
-    """The closed-loop task of one (instance, backend): the instance's text travels with it."""
-    bands = (meta["force_band"], meta["tracking_band"])
-    return LoopTask(
-        meta["instance_file"],
-        meta["backend"],
-        plugins=tuple(plugins or ()),
-        scenario_text=inst.text,
-        bands=bands,
-    )
-
-
 def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
     csv_path = out / CSV_NAME
     check_folder(out)
-    check_output(
-        out / CSV_NAME, force=force, resume=resume, make_parent=True
-    )  # out is created below
+    check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
     if resume and csv_path.exists() and not force:
         _check_resumable(out, spec)
     elif force:
@@ -179,11 +163,9 @@ def run_sweep(
 ) -> SweepOutcome:
     """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``.
 
-    Rows are appended to ``out/sweep.csv`` as runs end (``on_row`` is called
-    with each); an instance the scenario loader refuses gets an
-    ``invalid_scenario`` row per backend, a run that raises an ``error`` row, a
-    run whose worker was lost twice a ``crashed`` row. At the end the table is
-    rewritten atomically in instance and backend order, one row per key.
+    Each run is :func:`qpbench.harness.closed_loop.run_row`; its row is appended to ``sweep.csv``
+    as it ends (then ``on_row``). At the end the table is rewritten atomically in instance and
+    backend order, one row per key.
 
     Raises:
         OutputExistsError: ``out/sweep.csv`` exists without ``force`` or ``resume``.
@@ -213,7 +195,14 @@ def run_sweep(
                     emit(failed_row(meta, "invalid_scenario", inst.invalid))
                     continue
                 metas[(inst.name, backend)] = meta
-                items.append(((inst.name, backend), task(meta, inst, plugins)))
+                task = LoopTask(
+                    meta["instance_file"],
+                    backend,
+                    plugins=tuple(plugins or ()),
+                    scenario_text=inst.text,  # the instance travels with its task
+                    bands=(spec.force_band, spec.tracking_band),
+                )
+                items.append(((inst.name, backend), task))
         for done in executor.run(run_row, items):
             meta = metas[done.key]
             if done.lost is None:

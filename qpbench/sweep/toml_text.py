@@ -12,8 +12,6 @@ import json
 import math
 import re
 
-__all__ = ["dumps"]
-
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
 
 
