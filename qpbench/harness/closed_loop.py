@@ -95,9 +95,6 @@ COLUMNS = (
 #: The tables' names of summary figures named otherwise in the summary.
 TABLE_NAMES = {"duration": "duration_s"}
 
-#: Text columns whose empty cells read back as ``""`` (``error`` to ``realtime_solver_reason``).
-_TEXT_COLUMNS = COLUMNS[6:13] + ("log_file",)
-
 
 @dataclass(frozen=True)
 class LoopTask:
@@ -419,11 +416,7 @@ def _prepare_output(out: Path, force: bool, resume: bool) -> list[dict]:
         check_output(csv_path, force=force, resume=resume)
     previous = []
     if csv_path.exists() and resume and not force:
-        for rec in pd.read_csv(csv_path).to_dict("records"):
-            empty = {k for k, v in rec.items() if isinstance(v, float) and math.isnan(v)}
-            previous.append(
-                {k: "" if k in empty & set(_TEXT_COLUMNS) else v for k, v in rec.items()}
-            )
+        previous = pd.read_csv(csv_path).to_dict("records")
     if force:
         csv_path.unlink(missing_ok=True)
         for folder in (LOG_DIR, FIGURE_LOG_DIR):
@@ -438,7 +431,7 @@ def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
     done = {
         (str(r["scenario"]), str(r["backend"])): r
         for r in previous
-        if same_run(r, formulation, duration, budget(str(r["backend"])), overrides)
+        if _same_run(r, formulation, duration, budget(str(r["backend"])), overrides)
     }
     others = [r for r in previous if (str(r["scenario"]), str(r["backend"])) not in set(order)]
     rows = {k: done[k] for k in order if k in done}
@@ -448,7 +441,7 @@ def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
     return rows, others
 
 
-def same_run(
+def _same_run(
     row: dict,
     formulation: str,
     duration: float | None,

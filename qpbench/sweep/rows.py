@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 import math
 
+from ..harness.closed_loop import TABLE_NAMES, failure_fields
+
 #: Name of the table inside the sweep's folder.
 CSV_NAME = "sweep.csv"
 
@@ -88,16 +90,13 @@ _REALTIME = (  # from the summary (timing)
 _WALL = ("wall_time_s", "real_time_factor")  # from the summary
 _PLACE = ("executor", "host", "worker", "concurrent_solves")
 
-#: Summary keys whose column has another name.
-RENAMED = {"duration": "duration_s"}
-
-#: Figures copied from the closed loop's summary as they are (column: ``RENAMED`` or the key).
+#: Figures copied from the closed loop's row (column: ``TABLE_NAMES`` or the key).
 SUMMARY_COLUMNS = _RUN + _SAFETY + _SOLVE_TIMES + _REALTIME + _WALL
 
 #: Columns of ``sweep.csv``, in order.
 COLUMNS = (
     _HEAD
-    + tuple(RENAMED.get(key, key) for key in _RUN)
+    + tuple(TABLE_NAMES.get(key, key) for key in _RUN)
     + _CONVERGENCE
     + _SAFETY
     + _SOLVE_TIMES
@@ -134,8 +133,6 @@ def sweep_row(meta: dict, row: dict) -> dict:
 
 def failed_row(meta: dict, status: str, message: str) -> dict:
     """The row of a run without a result (:func:`qpbench.harness.closed_loop.failure_fields`)."""
-    from ..harness.closed_loop import failure_fields
-
     return {**_head(meta), **failure_fields(status, message)}
 
 
