@@ -35,11 +35,8 @@ class PowerFit:
 
 
 def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
-    """Least squares of ``log10 times`` on ``log10 sizes`` (module docstring).
-
-    Non-positive or non-finite pairs are left out; fewer than two distinct
-    sizes give a NaN fit.
-    """
+    """Least squares of ``log10 times`` on ``log10 sizes``, non-positive or non-finite pairs left
+    out (NaN with fewer than two distinct sizes)."""
     s = np.asarray(sizes, dtype=float)
     t = np.asarray(times, dtype=float)
     keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
@@ -70,11 +67,8 @@ def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | 
 
 
 def crossing(sizes: np.ndarray, slower: np.ndarray, faster: np.ndarray) -> float | None:
-    """The first size from which ``faster`` stays strictly below ``slower``, else None.
-
-    ``slower`` and ``faster`` are times per size (NaN where not measured;
-    such sizes are left out).
-    """
+    """The first size from which time ``faster`` stays strictly below ``slower`` (NaN: not
+    measured, left out), else None."""
     s = np.asarray(sizes, dtype=float)
     a = np.asarray(slower, dtype=float)
     b = np.asarray(faster, dtype=float)

@@ -80,13 +80,9 @@ def _clear_offset(
 def place_cloud(
     gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud"
 ) -> PointCloudObstacle:
-    """The cloud beside ``gen`` at ``theta0``: every key point at least ``d_safe + clearance`` [m] from every point.
-
-    The disk starts on the middle key point's outer normal (then, if nearer,
-    its inner one) and steps outwards by 1 mm until the whole arm clears it by
-    ``d_safe + clearance`` (a bent arm may curl towards it); the side that
-    needs the smaller step wins. It moves back towards the arm at ``spec.speed``.
-    """
+    """The cloud beside ``gen`` at ``theta0``, every key point ``d_safe + clearance`` [m] from it:
+    stepped outwards by 1 mm along the middle key point's outer (or inner) normal until the arm
+    clears it, the side needing the smaller step; it moves towards the arm at ``spec.speed``."""
     xy = gen.key_point_positions()
     i = len(gen.key_points) // 2
     u = _outer_normal(gen, i)

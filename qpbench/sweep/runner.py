@@ -1,18 +1,10 @@
 """A sweep's run: sample the instances, save them, run every (instance, backend), append the rows.
 
-``DIR`` (``--out``) holds:
-
-- ``sweep.json``: the manifest (the sweep file's text and SHA-256, seed,
-  sample count, duration, base scenario, backends, qpbench's version);
-- ``instances/<name>.toml``: every instance's full scenario file;
-- ``sweep.csv``: one row per (instance, backend) (:mod:`qpbench.sweep.rows`).
-
-Resuming (``resume=True``) keeps every row whose run gave a result (status
-``ok``) or whose instance is invalid, and runs the rest again: the missing
-keys (a killed sweep) and the ``error`` and ``crashed`` rows. It refuses a
-folder made from another sweep file or with another duration; the sample
-count and the backends may differ (instance ``i`` is the same whatever the
-count).
+``DIR`` holds ``sweep.json`` (the manifest: the sweep file's text and SHA-256, seed, samples,
+duration, base, backends, qpbench's version), ``instances/<name>.toml`` and ``sweep.csv``
+(:mod:`qpbench.sweep.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
+rest again; it refuses a folder of another sweep file or duration (samples and backends may
+differ: instance ``i`` is the same whatever the count).
 """
 
 from __future__ import annotations
