@@ -24,7 +24,7 @@ from pathlib import Path
 import pandas as pd
 
 BACKENDS = "daqp,qpoases,osqp,proxqp,piqp,clarabel"
-FIGURES = ("solve_time_p50_s", "solve_time_p99_s")
+FIGURES = ("solve_time_median_s", "solve_time_p99_s")
 
 
 def closed_loop(scenarios: str, backends: str, jobs: int, out: Path) -> pd.DataFrame:

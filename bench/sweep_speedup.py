@@ -87,23 +87,11 @@ def speedup(args) -> None:
 
 def _wall_task(duration: float):
     """The sweep's task of scenario wall (``duration`` s) with DAQP."""
+    from qpbench.harness.closed_loop import LoopTask
     from qpbench.sim.scenario import scenario_path
-    from qpbench.sweep.task import SweepTask
 
     text = scenario_path("wall").read_text().replace("duration = 20.0", f"duration = {duration!r}")
-    meta = {
-        "instance": "wall",
-        "backend": "daqp",
-        "instance_file": "wall.toml",
-        "sample": 0,
-        "sweep": "bench",
-        "base_scenario": "wall",
-        "parameters": {},
-        "duration": duration,
-        "force_band": 0.2,
-        "tracking_band": 1e-4,
-    }
-    return SweepTask(meta, text)
+    return LoopTask("wall.toml", "daqp", scenario_text=text, bands=(0.2, 1e-4))
 
 
 def _blocked() -> int:
@@ -117,13 +105,13 @@ def _blocked() -> int:
 
 
 def _on_worker(task) -> dict:
-    """``run_task(task)`` where it runs: wall-clock start and end [s since the epoch], CPU time of
+    """``run_row(task)`` where it runs: wall-clock start and end [s since the epoch], CPU time of
     this thread and of the whole process [s], the thread's waits, and the closed loop's own time."""
-    from qpbench.sweep.task import run_task
+    from qpbench.harness.closed_loop import run_row
 
     waits, cpu, process = _blocked(), time.thread_time(), time.process_time()
     start = time.time()
-    row = run_task(task)
+    row = run_row(task)
     end = time.time()
     return {
         "start": start,
@@ -173,7 +161,7 @@ SETUPS = (
 )
 
 
-#: What :func:`_timed` gives per run: total [s], submit to start [s], run_task on the worker [s],
+#: What :func:`_timed` gives per run: total [s], submit to start [s], run_row on the worker [s],
 #: end to result [s], closed loop [s], CPU of the task's thread and of the others [s], waits.
 FIELDS = ("total", "before", "run", "after", "loop", "cpu", "others", "waits")
 
@@ -273,7 +261,7 @@ def _print_overhead(args, runs: dict, first: dict, per_task: float) -> None:
         "one run of each set-up in turn:"
     )
     print(
-        f"  {'':30s} {'total':>7s} {'overhead':>18s} {'run_task':>8s} {'loop':>7s} {'before':>7s} "
+        f"  {'':30s} {'total':>7s} {'overhead':>18s} {'run_row':>8s} {'loop':>7s} {'before':>7s} "
         f"{'after':>7s} {'cpu':>7s} {'others':>7s} {'waits':>5s} {'1st run':>7s}"
     )
     for label, m in med.items():
@@ -285,7 +273,7 @@ def _print_overhead(args, runs: dict, first: dict, per_task: float) -> None:
             f"{1e3 * m['others']:4.0f} ms {m['waits']:5.0f} {first[label]:5.3f} s"
         )
     print(
-        "  overhead: total minus the total in a process of its own (target < 5 %); run_task: its time where it ran; "
+        "  overhead: total minus the total in a process of its own (target < 5 %); run_row: its time where it ran; "
         "loop: the closed loop's wall_time_s;\n  before/after: submit to start, end to result; cpu: the task "
         "thread's CPU time; others: CPU time of the process's other threads meanwhile (the worker's "
         "event loop);\n  waits: the task thread's voluntary context switches (waits for the GIL); 1st run: the "

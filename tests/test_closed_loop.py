@@ -1,4 +1,4 @@
-"""Tests of qpbench.harness.closed_loop (and its loop_rows, loop_run, loop_workers) and ``qpbench closed-loop``.
+"""Tests of qpbench.harness.closed_loop and ``qpbench closed-loop``.
 
 Real simulator runs, shortened to 0.5 s: the table's figures are checked
 against the per-tick logs they came from.
@@ -18,8 +18,6 @@ from qpbench import selection
 from qpbench.cli import main
 from qpbench.exceptions import OutputExistsError, ParamError
 from qpbench.harness import closed_loop as cl
-from qpbench.harness import loop_rows as rows
-from qpbench.harness import loop_workers as workers
 from qpbench.sim.log import TIME_COLUMNS
 
 SCENARIOS = ["wall", "narrow"]
@@ -51,8 +49,8 @@ def table_dir(tmp_path_factory):
 
 def test_table_has_one_row_per_pair(table_dir):
     out, outcome = table_dir
-    table = pd.read_csv(out / rows.CSV_NAME)
-    assert list(table.columns[: len(rows.COLUMNS)]) == list(rows.COLUMNS)
+    table = pd.read_csv(out / cl.CSV_NAME)
+    assert list(table.columns[: len(cl.COLUMNS)]) == list(cl.COLUMNS)
     assert [(r.scenario, r.backend) for r in table.itertuples()] == [
         (s, b) for s in SCENARIOS for b in BACKENDS
     ]
@@ -72,7 +70,7 @@ def test_table_has_one_row_per_pair(table_dir):
 
 def test_figures_equal_the_tick_logs(table_dir):
     out, _ = table_dir
-    table = pd.read_csv(out / rows.CSV_NAME)
+    table = pd.read_csv(out / cl.CSV_NAME)
     for r in table.itertuples():
         log = pd.read_parquet(out / r.log_file)
         assert len(log) == r.ticks
@@ -81,7 +79,7 @@ def test_figures_equal_the_tick_logs(table_dir):
         v = log[[c for c in log.columns if c.startswith("v_") and c[2:].isdigit()]].to_numpy()
         assert r.v2_integral == pytest.approx(np.sum(v**2) * dt, rel=1e-9)
         st = log["solve_time_s"].to_numpy()
-        assert r.solve_time_p50_s == pytest.approx(np.percentile(st, 50))
+        assert r.solve_time_median_s == pytest.approx(np.percentile(st, 50))
         assert r.solve_time_p99_s == pytest.approx(np.percentile(st, 99))
         assert r.solve_time_max_s == pytest.approx(st.max())
         assert r.min_obstacle_distance == pytest.approx(log["d_min"].min())
@@ -102,13 +100,13 @@ def test_a_row_is_the_summary_under_the_table_names(table_dir):
     from qpbench.sim.loop import simulate
 
     out, _ = table_dir
-    table = pd.read_csv(out / rows.CSV_NAME)
+    table = pd.read_csv(out / cl.CSV_NAME)
     row = table[(table["scenario"] == "wall") & (table["backend"] == "pinv")].iloc[0]
     summary = simulate("wall", "pinv", duration=0.5).summary
     for key, value in summary.items():
         if key in SUMMARY_TIME_KEYS or key in ("scenario", "backend"):
             continue
-        column = rows.TABLE_NAMES.get(key, key)
+        column = cl.TABLE_NAMES.get(key, key)
         cell = row[column]
         if value is None or value == "":
             assert pd.isna(cell), key  # an empty cell
@@ -118,8 +116,8 @@ def test_a_row_is_the_summary_under_the_table_names(table_dir):
             assert cell == pytest.approx(value, rel=1e-12, abs=1e-15), key
         else:
             assert cell == value or str(cell) == str(value), key
-    # one column per figure: the summary's two older names appear only under the table's
-    assert "duration" not in table.columns and "solve_time_median_s" not in table.columns
+    # one column per figure, one name: the summary's duration only as duration_s
+    assert "duration" not in table.columns and "solve_time_p50_s" not in table.columns
     assert len(set(table.columns)) == len(table.columns)
     assert summary["v2_integral"] == pytest.approx(row["v2_integral"], rel=1e-12)
 
@@ -128,13 +126,13 @@ def test_structured_cells_are_json_and_the_report_reads_them_back(table_dir):
     from qpbench.report.tables import read_results
 
     out, _ = table_dir
-    text = (out / rows.CSV_NAME).read_text()
+    text = (out / cl.CSV_NAME).read_text()
     assert "{'" not in text  # no Python repr
-    table = pd.read_csv(out / rows.CSV_NAME)
+    table = pd.read_csv(out / cl.CSV_NAME)
     narrow = table[(table["scenario"] == "narrow") & (table["backend"] == "qpsolvers:daqp")].iloc[0]
     counts = json.loads(narrow["status_counts"])
     assert sum(counts.values()) == narrow["ticks"]
-    loops = read_results([out / rows.CSV_NAME]).closed_loop
+    loops = read_results([out / cl.CSV_NAME]).closed_loop
     read_back = loops[
         (loops["scenario"] == "narrow") & (loops["backend"] == "qpsolvers:daqp")
     ].iloc[0]
@@ -145,8 +143,8 @@ def test_structured_cells_are_json_and_the_report_reads_them_back(table_dir):
 
 def test_cell_writes_json():
     value = {"A2/wall": [[1.613, 6.467], [7.0, 7.5]]}
-    assert json.loads(rows.cell(value)) == value
-    assert rows.cell(np.float64(0.5)) == 0.5 and rows.cell(None) is None and rows.cell("x") == "x"
+    assert json.loads(cl.cell(value)) == value
+    assert cl.cell(np.float64(0.5)) == 0.5 and cl.cell(None) is None and cl.cell("x") == "x"
 
 
 def test_duplicate_backends_are_refused_like_in_bench(tmp_path, capsys):
@@ -180,13 +178,13 @@ def test_resume_force_and_refusal(tmp_path):
     assert first.ran == 2
     with pytest.raises(OutputExistsError):
         cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05)
-    before = pd.read_csv(out / rows.CSV_NAME)
+    before = pd.read_csv(out / cl.CSV_NAME)
     again = cl.run_closed_loop(
         ["wall", "free"], ["pinv", "qpsolvers:daqp"], out, duration=0.05, resume=True
     )
     assert again.ran == 2 and again.skipped == 2  # only the new scenario runs
     kept = again.table[again.table["scenario"] == "wall"].reset_index(drop=True)
-    pd.testing.assert_series_equal(kept["solve_time_p50_s"], before["solve_time_p50_s"])
+    pd.testing.assert_series_equal(kept["solve_time_median_s"], before["solve_time_median_s"])
     # another duration is another run: resume does not keep it
     longer = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.08, resume=True)
     assert longer.ran == 1
@@ -197,7 +195,7 @@ def test_resume_force_and_refusal(tmp_path):
     assert longer.table.iloc[0]["duration_s"] == 0.08
     forced = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05, force=True)
     assert forced.ran == 1 and len(forced.table) == 1
-    assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == ["wall__pinv.parquet"]
+    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == ["wall__pinv.parquet"]
 
 
 def test_skipped_backends_get_a_row(tmp_path):
@@ -253,11 +251,10 @@ PLUGIN = str(Path(fb.__file__).resolve())
 
 #: Columns that hold timings (differ between two runs of the same thing).
 TIMED = (
-    "solve_time_p50_s",
+    "solve_time_median_s",
     "solve_time_p99_s",
     "solve_time_max_s",
     "real_time_factor",
-    "solve_time_median_s",
     "wall_time_s",
     "deadline_misses",
     "over_dt_share",
@@ -287,7 +284,7 @@ def _same_daqp_run(out_a, row_a, out_b, row_b):
 def daqp_alone(tmp_path_factory):
     out = tmp_path_factory.mktemp("alone")
     assert main(["-q", *_cli_args("wall", "daqp", "0.1", out)]) == 0
-    return out, pd.read_csv(out / rows.CSV_NAME).iloc[0]
+    return out, pd.read_csv(out / cl.CSV_NAME).iloc[0]
 
 
 def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alone):
@@ -307,7 +304,7 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
         ),
     ]
     assert main(args) == 1  # failed runs, and --strict
-    table = pd.read_csv(out / rows.CSV_NAME)
+    table = pd.read_csv(out / cl.CSV_NAME)
     assert list(table["backend"]) == ["faulty:segfault", "faulty:hang", "daqp"]
     crashed, hung, daqp = (table.iloc[i] for i in range(3))
     assert crashed["status"] == "crashed" and "SIGSEGV" in crashed["error"]
@@ -320,7 +317,7 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     )  # auto: risky ones
     assert daqp["status"] == "ok"
     _same_daqp_run(out, daqp, *daqp_alone)
-    assert sorted(p.name for p in (out / rows.LOG_DIR).iterdir()) == [
+    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == [
         "wall__daqp.parquet"
     ]  # no partial logs
     # resume keeps the ok row and retries only the failed ones
@@ -369,9 +366,9 @@ def test_guard_parameters(tmp_path):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, isolate="sometimes")
     with pytest.raises(ParamError):
         cl.run_closed_loop(["wall"], ["pinv"], tmp_path, run_time_limit=0.0)
-    assert workers.run_deadline("wall", 0.1) == workers.RUN_TIME_LIMIT_MIN_S
-    assert workers.run_deadline("wall", 100.0) == 100.0 * workers.RUN_TIME_LIMIT_PER_SIM_S
-    assert workers.run_deadline("wall", None, 7.0) == 7.0
+    assert cl.run_deadline("wall", 0.1) == cl.RUN_TIME_LIMIT_MIN_S
+    assert cl.run_deadline("wall", 100.0) == 100.0 * cl.RUN_TIME_LIMIT_PER_SIM_S
+    assert cl.run_deadline("wall", None, 7.0) == 7.0
     assert cl.is_risky("faulty:hang") and not cl.is_risky("daqp") and not cl.is_risky("nosuch")
 
 
@@ -386,7 +383,7 @@ def test_pinv_through_the_wall_is_unsafe_and_exits_1_with_strict(tmp_path, capsy
     out = tmp_path / "o"
     code = main(_cli_args("wall", "daqp,pinv", "2.2", out, "--strict"))
     assert code == 1
-    table = pd.read_csv(out / rows.CSV_NAME).set_index("backend")
+    table = pd.read_csv(out / cl.CSV_NAME).set_index("backend")
     pinv, daqp = table.loc["pinv"], table.loc["daqp"]
     assert daqp["verdict"] == "ok" and math.isnan(daqp["verdict_reasons"])  # empty in the CSV
     assert pinv["status"] == "ok" and pinv["verdict"] == "unsafe"
@@ -415,7 +412,7 @@ def test_pinv_through_the_wall_is_unsafe_and_exits_1_with_strict(tmp_path, capsy
 def test_exact_backend_short_run_is_ok_and_exits_0(tmp_path):
     out = tmp_path / "o"
     assert main(["-q", *_cli_args("wall,narrow", "qpsolvers:daqp", "0.3", out)]) == 0
-    table = pd.read_csv(out / rows.CSV_NAME)
+    table = pd.read_csv(out / cl.CSV_NAME)
     assert (table["verdict"] == "ok").all() and (table["simulated_s"] == 0.3).all()
 
 
@@ -435,7 +432,7 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     ]
     # stopped early: its verdict is incomplete, a verdict that is not ok (exit 1 with --strict)
     assert main([*args, "--out", str(out), "--run-budget", "0.4", "--strict"]) == 1
-    row = pd.read_csv(out / rows.CSV_NAME).iloc[0]
+    row = pd.read_csv(out / cl.CSV_NAME).iloc[0]
     assert row["status"] == "budget" and row["verdict"] == "incomplete"
     assert row["run_budget_s"] == 0.4 and row["realtime"] == "no"  # about 4 ms a tick
     assert 0 < row["simulated_s"] < row["duration_s"] == 1.0
@@ -451,7 +448,7 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     # the uncut run: its first ticks are the budgeted run's log
     whole_out = tmp_path / "whole"
     assert main([*args, "--out", str(whole_out)]) == 0  # not real time: no change of the exit code
-    whole = pd.read_csv(whole_out / rows.CSV_NAME).iloc[0]
+    whole = pd.read_csv(whole_out / cl.CSV_NAME).iloc[0]
     assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
     whole_log = pd.read_parquet(whole_out / whole["log_file"])
     pd.testing.assert_frame_equal(

@@ -168,7 +168,7 @@ def test_snapshot_roles(loop_dir):
     # pinv ignores the obstacles: it is never the exact backend, however fast
     assert chosen["exact"]["backend"] == "daqp" and chosen["network"]["backend"] == "rnn-tuned"
     slow = runs.assign(
-        solve_time_p50_s=np.where(runs["backend"] == "daqp", 1.0, runs["solve_time_p50_s"])
+        solve_time_median_s=np.where(runs["backend"] == "daqp", 1.0, runs["solve_time_median_s"])
     )
     assert snapshot_runs(slow)["exact"]["backend"] == "daqp"  # the only exact one
     rnn = runs.assign(backend=runs["backend"].replace({"rnn-tuned": "rnn"}))

@@ -189,7 +189,7 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
                     infeasible_ticks=int(rng.integers(0, 200)),
                     fallback_ticks=int(rng.integers(0, 200)),
                     v2_integral=rng.uniform(0.5, 2),
-                    solve_time_p50_s=rng.uniform(1e-5, 2e-5),
+                    solve_time_median_s=rng.uniform(1e-5, 2e-5),
                     solve_time_p99_s=rng.uniform(3e-5, 1e-4),
                     solve_time_max_s=rng.uniform(1e-4, 1e-3),
                     real_time_factor=rng.uniform(5, 80),

@@ -13,7 +13,8 @@ import pytest
 from qpbench.cli import main
 from qpbench.exceptions import InputError
 from qpbench.sim.scenario import scenario_names, scenario_path
-from qpbench.sweep.rows import COLUMNS, TIMING_COLUMNS, same_outside_timing, time_to_converge
+from qpbench.sim.summary import time_to_converge
+from qpbench.sweep.rows import COLUMNS, TIMING_COLUMNS, same_outside_timing
 from qpbench.sweep.runner import read_sweep_rows
 from qpbench.sweep.sample import sample_instances
 from qpbench.sweep.spec import load_sweep, parse_sweep

@@ -185,7 +185,7 @@ def _answer(args: argparse.Namespace, outcome) -> int:
     as the last lines printed."""
     import pandas as pd
 
-    from ..harness.loop_rows import CSV_NAME
+    from ..harness.closed_loop import CSV_NAME
     from ..report.recommend import recommend, render
 
     table = pd.read_csv(Path(args.out) / CSV_NAME)

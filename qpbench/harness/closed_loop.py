@@ -1,60 +1,229 @@
-"""Closed-loop comparison: each scenario with each backend in the loop, one table.
+"""Closed-loop runs: one (scenario, backend) run made into a row, and the table of many.
 
-For every (scenario, backend) pair :func:`qpbench.sim.loop.simulate` runs the
-scenario with that backend solving every tick's QP
-(:mod:`qpbench.harness.loop_run`). Each run writes its per-tick log to
-``OUT/logs/<scenario>__<backend>.parquet`` and one row to
-``OUT/closed_loop.csv`` (columns: :mod:`qpbench.harness.loop_rows`; the row is
-the run's summary, nothing recomputed). The table is rewritten atomically
-after each run (rows appear as they are produced); a run that raises becomes
-a row with status ``error`` and the others continue.
+:func:`run_row` is the one closed-loop run of every command (``closed-loop``, ``run``, ``sweep``):
+a discarded warm-up of :data:`WARMUP_TICKS` ticks, the timed run
+(:func:`qpbench.sim.loop.simulate`) and its row. Its :class:`LoopTask` is plain picklable data, so
+it runs the same in this process, in a worker process (:mod:`qpbench.runner`) or on Dask.
 
-Guards against a hang in native code and a process death (segfault, abort):
-``isolate`` (``--isolate``) ``auto`` (the default: backends whose class has
-``risky = True``, e.g. ``proxqp``), ``always`` or ``never``. An isolated run
-is made in a worker process of its own with a deadline
-(:mod:`qpbench.harness.loop_workers`; ``run_time_limit``,
-``--run-time-limit``). With ``jobs > 1`` every run is made in a worker
-process of its own (the deadline only for isolated ones), so one crash loses
-no other run's row. No worker compiles: the kernels are compiled (or loaded)
-in this process before the first worker starts (:mod:`qpbench.jit`).
-``resume`` keeps the rows already done with the same formulation and
-duration (status ``ok``) and runs the rest (rows of pairs not asked for this
-time stay in the table); ``force`` starts again.
+:func:`run_closed_loop` makes every pair into ``OUT/closed_loop.csv`` (rewritten atomically after
+each run) and ``OUT/logs/<scenario>__<backend>.parquet``. An isolated run (``isolate``: ``auto``,
+backends whose class says ``risky = True``; ``always``; ``never``) is made in a worker process of
+its own with a deadline (:func:`run_deadline`): a hang gives a ``time_limit`` row, a crash a
+``crashed`` one, and the other runs go on. With ``jobs > 1`` every run has a worker of its own.
+
+A row is the run's summary (:mod:`qpbench.sim.summary` describes every figure) under
+:data:`TABLE_NAMES`, lists and dicts as JSON text: :data:`COLUMNS` first, then ``isolated``,
+``run_budget_s`` [s] and the other figures sorted by name. ``status``: ``ok``; ``budget`` (stopped
+between ticks by its wall-time budget; verdict ``incomplete``); ``error``, ``crashed`` or
+``time_limit`` (no result: ``error`` says why, verdict ``incomplete``, ``realtime`` ``no``);
+``skipped`` (why in ``error``, no verdict). ``log_file`` is relative to the CSV's folder.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
+import re
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
-from ..atomic import check_folder, check_output, record
-from ..exceptions import ParamError
+from ..atomic import atomic_path, check_folder, check_output, record
+from ..exceptions import ParamError, positive_seconds
+from ..runner.process import run_tasks
 from ..selection import parse_list
-from ..statuses import FORMULATIONS
-from .loop_rows import (
-    BAD_VERDICTS,
-    CSV_NAME,
-    FAILED_RUN_STATUSES,
-    LOG_DIR,
-    read_rows,
-    same_run,
-    skipped_row,
-    write_table,
-)
-from .loop_run import RunSpec, run_guarded
-from .loop_workers import run_deadline, run_in_workers
+from ..sim.verdict import BAD_VERDICTS, failed_run
+from ..statuses import FORMULATIONS, describe_exception
 
-__all__ = ["ISOLATE", "ClosedLoopOutcome", "is_risky", "log_row", "run_closed_loop"]
+log = logging.getLogger("qpbench.harness")
 
-#: Choices of ``isolate``: ``auto`` isolates backends whose class says ``risky = True``.
+CSV_NAME = "closed_loop.csv"
+LOG_DIR = "logs"
+#: Ticks of the discarded warm-up run before each timed run (one-off costs out of the clock).
+WARMUP_TICKS = 3
+#: Choices of ``isolate``.
 ISOLATE = ("auto", "always", "never")
+#: Statuses of a run that produced no result.
+FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
+#: Least deadline of an isolated run [s].
+RUN_TIME_LIMIT_MIN_S = 600.0
+#: Deadline of an isolated run per simulated second [s] (a real-time factor of 1/50).
+RUN_TIME_LIMIT_PER_SIM_S = 50.0
+
+#: Leading columns of the table, in order.
+COLUMNS = (
+    "scenario",
+    "backend",
+    "formulation",
+    "duration_s",
+    "simulated_s",
+    "status",
+    "error",
+    "verdict",
+    "verdict_reasons",
+    "realtime",
+    "realtime_reason",
+    "realtime_solver",
+    "realtime_solver_reason",
+    "ticks",
+    "tracking_rms_after_2s",
+    "tracking_max_after_2s",
+    "force_error_rms_after_2s",
+    "force_error_max_after_2s",
+    "min_obstacle_distance",
+    "min_body_distance",
+    "key_point_rule",
+    "joint_limit_violations",
+    "infeasible_ticks",
+    "fallback_ticks",
+    "v2_integral",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "over_dt_share",
+    "solver_time_p99_s",
+    "real_time_factor",
+    "verdict_overrides",
+    "log_file",
+)
+
+#: The tables' names of summary figures named otherwise in the summary.
+TABLE_NAMES = {"duration": "duration_s"}
+
+
+@dataclass(frozen=True)
+class LoopTask:
+    """One closed-loop run, as plain picklable data.
+
+    ``scenario``: a name or TOML path (with ``scenario_text``, the path naming that text).
+    ``duration``, ``deadline`` (per tick), ``run_budget`` (wall time of the timed run): [s] or
+    ``None``. ``overrides``: ``(dotted key, value)`` pairs (``--set``). ``out``: the folder whose
+    ``logs/`` and ``figure_logs/`` get the run's logs (``None``: none written). ``plugins``: files
+    to load first. ``bands``: ``(force [N], tracking [m])``: add the time-to-converge figures.
+    """
+
+    scenario: str
+    backend: str
+    formulation: str = "paper"
+    duration: float | None = None
+    deadline: float | None = None
+    run_budget: float | None = None
+    overrides: tuple = ()
+    out: str | None = None
+    plugins: tuple = ()
+    scenario_text: str | None = None
+    bands: tuple | None = None
+
+
+def run_row(task: LoopTask) -> dict:
+    """The row of one run (module docstring); a run that raises is an ``error`` row."""
+    try:
+        from ..backends import load_plugins
+
+        load_plugins(list(task.plugins))
+        return _run(task)
+    except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
+        log.warning(
+            "closed loop %s with %s failed: %s",
+            task.scenario,
+            task.backend,
+            describe_exception(exc),
+        )
+        return failure_row(task, "error", describe_exception(exc))
+
+
+def _run(task: LoopTask) -> dict:
+    """Warm-up, timed run, row; its logs written when ``task.out`` is set."""
+    from ..jit import warmup
+    from ..sim.loop import simulate
+    from ..sim.scenario import load_scenario, parse_scenario
+    from ..sim.summary import convergence_figures
+
+    if task.scenario_text is None:
+        scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
+    else:
+        scenario = parse_scenario(task.scenario_text, path=task.scenario)
+    warmup([task.backend])  # loads what the parent compiled (qpbench.jit), before the clock
+    terms = dict(formulation=task.formulation, deadline=task.deadline)
+    simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
+    result = simulate(
+        scenario, task.backend, duration=task.duration, wall_budget_s=task.run_budget, **terms
+    )
+    summary = dict(result.summary)
+    if task.bands is not None:
+        summary.update(convergence_figures(result.log, *task.bands))
+    row = {
+        "scenario": task.scenario,
+        "backend": task.backend,
+        "status": "budget" if summary.get("stopped_early") else "ok",
+        "error": "",
+        "log_file": "",
+    }
+    for key, value in summary.items():
+        if key not in ("scenario", "backend"):
+            row[TABLE_NAMES.get(key, key)] = cell(value)
+    if task.out is not None:
+        from ..sim.figure_log import figure_log_path, write_figure_log
+
+        name = log_name(task.scenario, task.backend)
+        with atomic_path(Path(task.out) / LOG_DIR / name) as tmp:
+            result.log.to_parquet(tmp, index=False)
+        write_figure_log(result.log, figure_log_path(Path(task.out) / LOG_DIR / name))
+        row["log_file"] = f"{LOG_DIR}/{name}"
+    return row
+
+
+def cell(value: object) -> object:
+    """A summary value as one CSV cell: scalars as they are, lists and dicts as JSON text."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, np.generic):
+        return value.item()
+    return json.dumps(value, default=lambda v: v.tolist() if isinstance(v, np.ndarray) else str(v))
+
+
+def log_name(scenario: str, backend: str) -> str:
+    """File name of a run's tick log (``:`` and ``/`` of backend names made safe)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", f"{scenario}__{backend}") + ".parquet"
+
+
+def failure_fields(status: str, message: str) -> dict:
+    """Fields of a row without a result: ``status``, why (``error``) and its verdict (none for
+    ``skipped`` or ``invalid_scenario``; else ``incomplete``, nothing timed, nothing overridden)."""
+    message = " ".join(str(message).split())
+    if status in ("skipped", "invalid_scenario"):
+        return dict(status=status, error=message, verdict="", verdict_reasons="")
+    verdict = failed_run(status, message)
+    return dict(
+        status=status,
+        error=message,
+        verdict=verdict.verdict,
+        verdict_reasons=verdict.text,
+        realtime="no",
+        realtime_reason="no result to time",
+        realtime_solver="unknown",
+        realtime_solver_reason="no result to time",
+        verdict_overrides="{}",
+    )
+
+
+def failure_row(task: LoopTask, status: str, message: str) -> dict:
+    """The table row of a run without a result (:func:`failure_fields`), no figures."""
+    row = {c: math.nan for c in COLUMNS}
+    row.update(
+        scenario=task.scenario,
+        backend=task.backend,
+        formulation=task.formulation,
+        duration_s=float(task.duration) if task.duration is not None else math.nan,
+        log_file="",
+        **failure_fields(status, message),
+    )
+    return row
 
 
 def is_risky(backend: str) -> bool:
@@ -68,13 +237,28 @@ def is_risky(backend: str) -> bool:
         return False
 
 
+def run_deadline(
+    scenario: str, duration: float | None, run_time_limit: float | None = None
+) -> float:
+    """Deadline [s] of an isolated run (warm-up, run and log writing): ``run_time_limit``, else
+    ``max(RUN_TIME_LIMIT_MIN_S, RUN_TIME_LIMIT_PER_SIM_S * simulated seconds)``."""
+    if run_time_limit is not None:
+        return float(run_time_limit)
+    if duration is None:
+        try:
+            from ..sim.scenario import load_scenario
+
+            duration = load_scenario(scenario).duration
+        except Exception:  # noqa: BLE001 - the run itself reports a bad scenario
+            duration = 0.0
+    return max(RUN_TIME_LIMIT_MIN_S, RUN_TIME_LIMIT_PER_SIM_S * float(duration))
+
+
 @dataclass
 class ClosedLoopOutcome:
-    """What :func:`run_closed_loop` did: the full table, the runs that failed
-    (``errors``: status ``error``, ``crashed`` or ``time_limit``), the runs made
-    now (``ran``), those kept or skipped, and the rows of the table whose
-    verdict is not ``ok`` (``not_ok``: every verdict of ``BAD_VERDICTS``;
-    the failed runs among them)."""
+    """What :func:`run_closed_loop` did: the table, its failed runs (``errors``), the runs made now
+    (``ran``) and kept (``skipped``), and the rows whose verdict is in ``BAD_VERDICTS`` or whose
+    run failed (``not_ok``)."""
 
     table: pd.DataFrame
     csv_path: Path
@@ -82,38 +266,6 @@ class ClosedLoopOutcome:
     ran: int
     skipped: int
     not_ok: int = 0
-
-
-@dataclass
-class _Table:
-    """The table as it grows: its rows in the order asked (``order``: (scenario, backend) keys),
-    then the rows kept from an earlier table for pairs not asked this time (``others``)."""
-
-    order: list[tuple[str, str]]
-    rows: dict[tuple[str, str], dict]
-    others: list[dict]
-    csv_path: Path
-    isolated: Callable[[str], bool]
-    budget: Callable[[str], float | None]
-    on_row: Callable[[dict], None] | None
-
-    def all_rows(self) -> list[dict]:
-        return [self.rows[k] for k in self.order if k in self.rows] + self.others
-
-    def emit(self, key: tuple[str, str], row: dict) -> None:
-        """Add a run's row and rewrite the table (atomically); tell ``on_row``."""
-        row["isolated"] = self.isolated(key[1])
-        row["run_budget_s"] = self.budget(key[1])
-        self.rows[key] = row
-        if isinstance(row.get("log_file"), str):  # written here or by a worker process
-            from ..sim.figure_log import figure_log_path
-
-            log_path = self.csv_path.parent / row["log_file"]
-            record(log_path)
-            record(figure_log_path(log_path))
-        write_table(self.all_rows(), self.csv_path)
-        if self.on_row is not None:
-            self.on_row(row)
 
 
 def run_closed_loop(
@@ -135,90 +287,67 @@ def run_closed_loop(
     budgets: dict[str, float] | None = None,
     overrides: dict | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop, tabulated in ``out`` (module docstring).
+    """Run every (scenario, backend) pair in the loop into ``out`` (module docstring).
 
-    Args:
-        scenarios, backends: Scenario names or TOML paths; backend names (each once).
-        out: Output folder (``closed_loop.csv``, columns :mod:`~qpbench.harness.loop_rows`; ``logs/``).
-        duration: Simulated time per run [s]; ``None`` keeps each scenario's ``T``.
-        formulation: ``paper`` (hard task, eq. 11) or ``soft``.
-        force, resume: Replace an existing table and its logs; keep its rows done under the same terms.
-        jobs: Runs in parallel, each in a worker process of its own (with 1, only isolated ones).
-        on_row: Called with each new row as soon as it is written.
-        skip: Backend -> reason: a ``skipped`` row per scenario instead of a run.
-        isolate: ``auto`` (backends whose class has ``risky = True``), ``always`` or ``never``: an
-            isolated run is made in a worker process with a deadline (``run_time_limit`` [s],
-            default :func:`~qpbench.harness.loop_workers.run_deadline`).
-        deadline: Per-tick deadline [s] (default none; :func:`qpbench.sim.loop.simulate`).
-        run_budget: Wall-time budget of each run [s] (default: none), of a backend's in ``budgets``
-            (backend -> [s]): a run stops between ticks once it is spent (status ``budget``,
-            verdict ``incomplete``).
-        overrides: Values set over every scenario file's (``--set``; a resumed row is kept
-            only when made under the same: its ``scenario_overrides``).
-
-    Raises:
-        OutputExistsError: the table exists and neither ``force`` nor ``resume``.
-        ParamError: a bad formulation, duration or job count, or a name listed twice.
+    ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
+    ``resume`` keeps the ``ok`` rows made under the same formulation, duration, budget and
+    ``overrides`` (``--set``) and the rows of pairs not asked; ``force`` removes table and logs;
+    ``skip``: backend -> reason, a ``skipped`` row instead of a run; ``run_time_limit``: an isolated
+    run's deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a
+    backend's in ``budgets``); ``on_row`` is called with each row as soon as it is written.
+    Raises OutputExistsError (the table exists, neither ``force`` nor ``resume``) or ParamError
+    (a bad argument, before anything is written or run).
     """
-    _check_arguments(
-        scenarios,
-        backends,
-        duration,
-        formulation,
-        jobs,
-        isolate,
-        run_time_limit,
-        deadline,
-        run_budget,
-    )
+    times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
+    times["--run-budget"] = run_budget
+    _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
     from ..backends import plugin_files
 
-    # loaded by the CLI or the caller (qpbench.backends.load_plugins); workers load them too
-    plugins = plugin_files()
     out = Path(out)
-    csv_path, previous_rows = _prepare_output(out, force, resume)
-
+    csv_path = out / CSV_NAME
+    previous = _prepare_output(out, force, resume)
     order = [(s, b) for s in scenarios for b in backends]
-    budget = {b: (budgets or {}).get(b, run_budget) for b in backends}.get  # backend -> budget
+    budget = {b: (budgets or {}).get(b, run_budget) for b in backends}.get
     overrides = dict(overrides or {})
-    rows, others = _kept_rows(
-        order, previous_rows, formulation, duration, budget, skip or {}, overrides
-    )
+    rows, others = _kept_rows(order, previous, formulation, duration, budget, skip or {}, overrides)
     todo = [k for k in order if k not in rows]
 
-    def _isolated(backend: str) -> bool:  # in a worker process with a deadline
+    def isolated(backend: str) -> bool:
         return isolate == "always" or (isolate == "auto" and is_risky(backend))
 
-    table = _Table(order, rows, others, csv_path, _isolated, budget, on_row)
-    spec = dict(formulation=formulation, duration=duration, out=str(out), deadline=deadline)
-    spec.update(overrides=tuple(overrides.items()))
-    items = _items(todo, spec, budget, _isolated, run_time_limit)
-    _run_items(items, jobs, plugins, table.emit)
-    write_table(table.all_rows(), csv_path)
-    return _outcome(csv_path, len(todo), len(order) - len(todo))
+    def emit(key: tuple[str, str], row: dict) -> None:
+        row["isolated"] = isolated(key[1])
+        row["run_budget_s"] = budget(key[1])
+        rows[key] = row
+        if row["log_file"]:  # written here or by a worker process
+            from ..sim.figure_log import figure_log_path
 
+            record(out / row["log_file"])
+            record(figure_log_path(out / row["log_file"]))
+        _write_table([rows[k] for k in order if k in rows] + others, csv_path)
+        if on_row is not None:
+            on_row(row)
 
-def _items(todo, spec: dict, budget, isolated, run_time_limit: float | None) -> list[tuple]:
-    """(key, what to run, deadline of an isolated run or None) of each pair to run."""
-    return [
+    terms = LoopTask("", "", formulation, duration, deadline, overrides=tuple(overrides.items()))
+    terms = replace(terms, out=str(out), plugins=tuple(plugin_files()))  # workers load them too
+    items = [
         (
             (s, b),
-            RunSpec(s, b, **spec, run_budget=budget(b)),
-            run_deadline(s, spec["duration"], run_time_limit) if isolated(b) else None,
+            replace(terms, scenario=s, backend=b, run_budget=budget(b)),
+            run_deadline(s, duration, run_time_limit) if isolated(b) else None,
         )
         for s, b in todo
     ]
-
-
-def _prepare_output(out: Path, force: bool, resume: bool) -> tuple[Path, list[dict]]:
-    """Check the output folder and its table (force, resume), read the rows to keep, make ``logs/``."""
-    csv_path = out / CSV_NAME
-    check_folder(out)
-    if out.exists():
-        check_output(csv_path, force=force, resume=resume)
-    previous_rows = _previous_rows(out, force, resume)
-    (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
-    return csv_path, previous_rows
+    if jobs > 1:  # every run in a worker: a crash is that run's row, not the pool's end
+        _run_in_workers(items, jobs, emit)
+    else:
+        for key, task, limit in items:
+            if limit is None:
+                emit(key, run_row(task))
+            else:
+                _run_in_workers([(key, task, limit)], 1, emit)
+    _write_table([rows[k] for k in order if k in rows] + others, csv_path)
+    return _outcome(csv_path, len(todo), len(order) - len(todo))
 
 
 def _outcome(csv_path: Path, ran: int, skipped: int) -> ClosedLoopOutcome:
@@ -229,48 +358,36 @@ def _outcome(csv_path: Path, ran: int, skipped: int) -> ClosedLoopOutcome:
     return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, skipped, not_ok)
 
 
-def _run_items(items: list[tuple], jobs: int, plugins: list[str], emit: Callable) -> None:
-    """Make the runs: with one job, those not isolated in this process and the isolated ones
-    each in a worker; with more, every run in a worker of its own (a crash is that run's row,
-    not the pool's end)."""
-    if jobs > 1:
-        run_in_workers(items, jobs, plugins, emit)
-        return
-    for key, spec, deadline_s in items:
-        if deadline_s is None:
-            emit(key, run_guarded(spec))
+def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
+    """Each run in a worker process of its own, ``jobs`` at a time: a run that dies or overruns its
+    deadline is a ``crashed`` or ``time_limit`` row and takes no other run's row with it."""
+    tasks = {key: (task, deadline_s) for key, task, deadline_s in items}
+    for done in run_tasks(run_row, items, jobs, fresh=True, name="qpbench-closed-loop"):
+        if done.status is None:
+            emit(done.key, done.value)
+            continue
+        task, deadline_s = tasks[done.key]
+        if done.status == "time_limit":
+            message = f"no result after {deadline_s:.3g} s (run time limit); worker killed"
         else:
-            run_in_workers([(key, spec, deadline_s)], 1, plugins, emit)
+            message = f"{done.lost} during the closed-loop run"
+        _drop_partial_logs(task)
+        log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
+        emit(done.key, failure_row(task, done.status, message))
 
 
-def _kept_rows(
-    order: list[tuple[str, str]],
-    previous_rows: list[dict],
-    formulation: str,
-    duration: float | None,
-    budget: Callable[[str], float | None],
-    skip: dict[str, str],
-    overrides: dict,
-) -> tuple[dict, list[dict]]:
-    """Rows of this run's pairs that need no run (done before under the same terms, or skipped),
-    and the resumed table's rows of other pairs (kept, after this run's)."""
-    done = {
-        (str(r["scenario"]), str(r["backend"])): r
-        for r in previous_rows
-        if same_run(r, formulation, duration, budget(str(r["backend"])), overrides)
-    }
-    others = [r for r in previous_rows if (str(r["scenario"]), str(r["backend"])) not in set(order)]
-    rows: dict[tuple[str, str], dict] = {k: done[k] for k in order if k in done}
-    for key in order:
-        if key not in rows and key[1] in skip:
-            rows[key] = skipped_row(key[0], key[1], formulation, duration, skip[key[1]])
-    return rows, others
+def _drop_partial_logs(task: LoopTask) -> None:
+    """Remove the temporary logs a dead worker may have left (never a complete one)."""
+    from ..sim.figure_log import FIGURE_LOG_DIR
+
+    name = log_name(task.scenario, task.backend)
+    for folder in (LOG_DIR, FIGURE_LOG_DIR):
+        for tmp in (Path(task.out) / folder).glob(f".{name}.*.tmp"):
+            tmp.unlink(missing_ok=True)
 
 
-def _check_arguments(
-    scenarios, backends, duration, formulation, jobs, isolate, run_time_limit, deadline, run_budget
-) -> None:
-    """Every argument checked before anything is written or run (one-line errors naming the option)."""
+def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dict) -> None:
+    """The arguments checked before anything is written or run (errors naming the option)."""
     if formulation not in FORMULATIONS:
         raise ParamError(
             f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
@@ -278,43 +395,100 @@ def _check_arguments(
         )
     parse_list(list(scenarios), "--scenarios")  # a name given twice is refused, as everywhere
     parse_list(list(backends), "--backends")
-    if duration is not None and not (duration > 0 and math.isfinite(duration)):
-        raise ParamError(
-            f"duration must be a positive number of seconds, got {duration}", key="--duration"
-        )
+    for key, value in times.items():
+        if value is not None:
+            positive_seconds(value, key)
     if jobs < 1:
         raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
     if isolate not in ISOLATE:
         raise ParamError(
             f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate"
         )
-    for value, key in (
-        (run_time_limit, "--run-time-limit"),
-        (deadline, "--deadline"),
-        (run_budget, "--run-budget"),
-    ):
-        if value is not None and not (value > 0 and math.isfinite(value)):
-            raise ParamError(f"must be a positive number of seconds, got {value}", key=key)
 
 
-def _previous_rows(out: Path, force: bool, resume: bool) -> list[dict]:
-    """The rows of the table to resume (none without ``resume``); ``force`` removes table and logs."""
+def _prepare_output(out: Path, force: bool, resume: bool) -> list[dict]:
+    """Check the output; the rows to resume (``force`` removes table and logs); make ``logs/``."""
     from ..sim.figure_log import FIGURE_LOG_DIR
 
     csv_path = out / CSV_NAME
+    check_folder(out)
+    if out.exists():
+        check_output(csv_path, force=force, resume=resume)
+    previous = []
     if csv_path.exists() and resume and not force:
-        return read_rows(csv_path)
+        previous = pd.read_csv(csv_path).to_dict("records")
     if force:
-        if csv_path.exists():
-            csv_path.unlink()
+        csv_path.unlink(missing_ok=True)
         for folder in (LOG_DIR, FIGURE_LOG_DIR):
-            if (out / folder).exists():
-                shutil.rmtree(out / folder)
-    return []
+            shutil.rmtree(out / folder, ignore_errors=True)
+    (out / LOG_DIR).mkdir(parents=True, exist_ok=True)
+    return previous
+
+
+def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
+    """Rows of the pairs asked that need no run (done under the same terms, or skipped), and the
+    resumed table's rows of other pairs (kept after this run's)."""
+    done = {
+        (str(r["scenario"]), str(r["backend"])): r
+        for r in previous
+        if _same_run(r, formulation, duration, budget(str(r["backend"])), overrides)
+    }
+    others = [r for r in previous if (str(r["scenario"]), str(r["backend"])) not in set(order)]
+    rows = {k: done[k] for k in order if k in done}
+    for s, b in order:
+        if (s, b) not in rows and b in skip:
+            rows[(s, b)] = failure_row(LoopTask(s, b, formulation, duration), "skipped", skip[b])
+    return rows, others
+
+
+def _same_run(
+    row: dict,
+    formulation: str,
+    duration: float | None,
+    run_budget: float | None = None,
+    overrides: dict | None = None,
+) -> bool:
+    """``row`` (read back) is a finished run of this formulation, duration, budget and overrides."""
+    if str(row.get("formulation")) != formulation:
+        return False
+    if _row_overrides(row) != json.loads(json.dumps(overrides or {})):
+        return False
+    try:
+        if row.get("status") == "budget":  # the same run only under the same budget
+            if run_budget is None or not math.isclose(float(row["run_budget_s"]), run_budget):
+                return False
+        elif row.get("status") != "ok":
+            return False
+        return duration is None or math.isclose(
+            float(row.get("duration_s")), float(duration), rel_tol=1e-9, abs_tol=1e-12
+        )
+    except (TypeError, ValueError):
+        return False
+
+
+def _row_overrides(row: dict) -> dict | None:
+    """A row's ``scenario_overrides`` as a dict (``{}`` when empty; ``None`` when unreadable)."""
+    value = row.get("scenario_overrides")
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
+        return {}
+    try:
+        out = json.loads(value) if isinstance(value, str) else value
+    except ValueError:
+        return None
+    return out if isinstance(out, dict) else None
+
+
+def _write_table(rows: list[dict], path: Path) -> None:
+    """Write the table atomically (:data:`COLUMNS`, then the rest sorted)."""
+    df = pd.DataFrame(rows)
+    extra = sorted(c for c in df.columns if c not in COLUMNS)
+    df = df.reindex(columns=list(COLUMNS) + extra)
+    with atomic_path(path) as tmp:
+        df.to_csv(tmp, index=False)
 
 
 def log_row(logger: logging.Logger, row: dict) -> None:
-    """One line per run: INFO when its verdict is ``ok`` (or it was skipped), else WARNING with the reasons."""
+    """One line per run: INFO when its verdict is ``ok`` (or skipped), else WARNING with why."""
     verdict = row.get("verdict")
     verdict = verdict if isinstance(verdict, str) else ""
     reasons = row.get("verdict_reasons")

@@ -38,7 +38,7 @@ CLOSED_LOOP_TABLE = (
     ("infeasible ticks", "infeasible_ticks", 1.0),
     ("fallback ticks", "fallback_ticks", 1.0),
     ("int v^2 dt", "v2_integral", 1.0),
-    ("solve p50 (us)", "solve_time_p50_s", US),
+    ("solve p50 (us)", "solve_time_median_s", US),
     ("solve p99 (us)", "solve_time_p99_s", US),
     ("solve max (us)", "solve_time_max_s", US),
     ("ticks over dt (%)", "over_dt_share", 100.0),

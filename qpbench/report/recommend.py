@@ -63,7 +63,7 @@ HOW_TO_READ = (
     "does not exist (a backend that reports no time of its own, a run without a solution).",
 )
 
-#: Row statuses of a run that produced no result (as in :mod:`qpbench.harness.loop_rows`).
+#: Row statuses of a run that produced no result (as in :mod:`qpbench.harness.closed_loop`).
 _NO_RESULT = ("error", "crashed", "time_limit")
 
 

@@ -68,7 +68,7 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
         is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)
     ]
     if not exact.empty:
-        p50 = pd.to_numeric(exact["solve_time_p50_s"], errors="coerce").fillna(np.inf)
+        p50 = pd.to_numeric(exact["solve_time_median_s"], errors="coerce").fillna(np.inf)
         chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
     networks = runs[np.array([_is_network(b) for b in backends], dtype=bool)]
     if not networks.empty:

@@ -1,21 +1,11 @@
 """Generated planar arms for the scaling study: n links, key points, a start in contact.
 
-An arm of ``n`` links has link lengths summing to :data:`REACH` (the paper
-arm's ``0.3 + 0.4 + 0.15 + 0.15 = 1.0`` m), drawn from a seed: ``l_i = REACH
-w_i / sum(w)`` with ``w_i`` uniform in [0.5, 1.5], so no link is more than
-three times another. Its key points are the paper's rule generalised
-(:func:`qpbench.robot.kinematics.default_key_points`): ``p`` evenly spaced
-points on every link and the joints J2..Jn, ``a = n p + (n - 1)`` key points
-(``p = 1``, ``n = 4``: the paper's A1..A7).
-
-The start ``theta0`` puts the end effector where the impedance task wants it
-at rest in contact (paper eq. 4): ``x_d(0) + (Fd / Kp) n``, the desired point
-pushed ``Fd/Kp`` along the pressing direction, so that ``b0 = xdot_d`` and the
-first ticks' QPs are feasible. The arm is a bent arc: every relative angle
-but the first is the same ``c``, found by bisection so that the distance from
-the base to the end effector is ``|x*|``; the first joint then turns the whole
-chain onto ``x*`` (exact, no iterative inverse kinematics). ``|c| <= 2 pi / n``
-keeps every joint inside the limits ``+-3`` rad for ``n >= 4``.
+Link lengths sum to :data:`REACH` (the paper arm's 1.0 m): ``l_i = REACH w_i / sum(w)``, ``w_i``
+uniform in [0.5, 1.5]. Key points: the paper's rule generalised (``p`` per link and the joints
+J2..Jn, ``a = n p + n - 1``; ``p = 1``, ``n = 4``: A1..A7). The start puts the end effector at rest
+in contact (paper eq. 4: ``x_d(0) + (Fd / Kp) n``), so the first QPs are feasible: a bent arc of
+equal relative angles ``c`` (bisection on the reach, ``|c| <= 2 pi / n`` keeps the joints within
++-3 rad for n >= 4), turned onto the target by the first joint.
 """
 
 from __future__ import annotations
@@ -28,8 +18,6 @@ import numpy as np
 from ..exceptions import ParamError
 from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
 
-__all__ = ["REACH", "ArmSpec", "GeneratedArm", "generate_arm", "link_lengths", "bent_arm_angles"]
-
 #: Sum of the link lengths of every generated arm in [m] (the paper arm's reach).
 REACH = 1.0
 #: Joint-angle limits in [rad] (the paper's, for every joint).
@@ -40,13 +28,7 @@ VELOCITY_LIMIT = 1.0
 
 @dataclass(frozen=True)
 class ArmSpec:
-    """What to generate.
-
-    Attributes:
-        links: Number of links ``n`` (>= 2).
-        points_per_link: Key points ``p`` per link (>= 1), besides the joints.
-        seed: Seed of the link lengths.
-    """
+    """``links`` n >= 2, ``points_per_link`` p >= 1 besides the joints, ``seed`` of the lengths."""
 
     links: int
     points_per_link: int
@@ -68,15 +50,7 @@ class ArmSpec:
 
 @dataclass
 class GeneratedArm:
-    """An arm, its key points and a start in contact.
-
-    Attributes:
-        spec: What was asked for.
-        arm: The chain (link lengths in [m]).
-        key_points: Its key points.
-        theta0: Start joint angles in [rad], shape (n,).
-        target: End-effector position at ``theta0`` in [m].
-    """
+    """An arm (lengths [m]), its key points, a start ``theta0`` [rad] in contact at ``target`` [m]."""
 
     spec: ArmSpec
     arm: PlanarArm

@@ -1,14 +1,8 @@
 """Power laws fitted to solve times, and where the curves cross (scaling study).
 
 A backend's median solve time ``T`` against a size ``s`` (variables or rows)
-is fitted as ``T = C s^k``: ordinary least squares of ``log10 T`` on
-``log10 s`` over the sizes of one grid axis. The slope ``k`` comes with its
-standard error ``se = sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (N sizes;
-undefined, NaN, for N = 2, where the line goes through both points).
-
-``k = 1``: time doubles when the size doubles; ``k = 2``: quadruples. A
-slope near 0 says the size does not matter there (fixed costs dominate: the
-Python call, the set-up).
+is fitted as ``T = C s^k``: least squares of ``log10 T`` on ``log10 s`` over one grid axis, the
+slope's standard error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (NaN for N = 2 sizes).
 """
 
 from __future__ import annotations
@@ -17,8 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-__all__ = ["PowerFit", "crossing", "fit_power_law", "first_above"]
 
 
 @dataclass(frozen=True)
@@ -43,11 +35,8 @@ class PowerFit:
 
 
 def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
-    """Least squares of ``log10 times`` on ``log10 sizes`` (module docstring).
-
-    Non-positive or non-finite pairs are left out; fewer than two distinct
-    sizes give a NaN fit.
-    """
+    """Least squares of ``log10 times`` on ``log10 sizes``, non-positive or non-finite pairs left
+    out (NaN with fewer than two distinct sizes)."""
     s = np.asarray(sizes, dtype=float)
     t = np.asarray(times, dtype=float)
     keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
@@ -78,11 +67,8 @@ def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | 
 
 
 def crossing(sizes: np.ndarray, slower: np.ndarray, faster: np.ndarray) -> float | None:
-    """The first size from which ``faster`` stays strictly below ``slower``, else None.
-
-    ``slower`` and ``faster`` are times per size (NaN where not measured;
-    such sizes are left out).
-    """
+    """The first size from which time ``faster`` stays strictly below ``slower`` (NaN: not
+    measured, left out), else None."""
     s = np.asarray(sizes, dtype=float)
     a = np.asarray(slower, dtype=float)
     b = np.asarray(faster, dtype=float)

@@ -1,24 +1,11 @@
 """Point-cloud obstacles beside a generated arm, approaching it (scaling study).
 
-How a cloud gives rows: the paper keeps every (key point, obstacle point)
-pair (section 2.2, obstacles as key points ``B_j``), one velocity-damper row
-each (eqs. 8-10), and so does the controller for a ``points`` obstacle
-(:class:`qpbench.robot.environment.PointCloudObstacle`): a cloud of ``m``
-points facing ``a`` key points gives ``a m`` rows, every tick, whether near or
-far (a fixed row count, as a solver with a persistent object needs). That
-per-point rule is what makes thousands of rows: 7 key points and 1,000 points
-are 7,000 rows of 4 variables. (The alternative, one row per key point and
-cloud through the cloud's nearest point, gives ``a`` rows per cloud whatever
-its size: it would measure the distance query, not the solver.)
-
-The cloud: ``m`` points spread uniformly over a disk of radius
-:data:`CLOUD_RADIUS`, drawn from a seed (one point: the disk's centre). The
-disk is put on the outer side of the arm at its middle key point (the side
-away from the chord base -> end effector), its nearest point ``d_safe +
-clearance`` from the nearest key point, and moves towards the arm at
-``speed`` [m/s]: its damper rows start inactive and become active within the
-first tenths of a second (``h = k (dist - d_safe) - u . Bdot`` reaches 0 at
-``dist - d_safe = speed / k``), so the dumped ticks hold both.
+As in the paper (section 2.2, obstacles as key points ``B_j``; eqs. 8-10) every (key point, cloud
+point) pair is one velocity-damper row, every tick: ``a`` key points and ``m`` points give ``a m``
+rows (a fixed count, as a persistent solver needs). The cloud fills a disk of :data:`CLOUD_RADIUS`
+on the outer side of the arm at its middle key point, ``d_safe + clearance`` away, and approaches
+at ``speed`` [m/s]: its rows start inactive and become active within the first tenths of a second,
+so the dumped ticks hold both.
 """
 
 from __future__ import annotations
@@ -30,8 +17,6 @@ import numpy as np
 
 from ..robot.environment import PointCloudObstacle
 from .arms import GeneratedArm
-
-__all__ = ["CLOUD_RADIUS", "CloudSpec", "cloud_points", "min_key_point_distance", "place_cloud"]
 
 #: Radius of the disk the cloud's points fill, in [m].
 CLOUD_RADIUS = 0.03
@@ -95,13 +80,9 @@ def _clear_offset(
 def place_cloud(
     gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud"
 ) -> PointCloudObstacle:
-    """The cloud beside ``gen`` at ``theta0``: every key point at least ``d_safe + clearance`` [m] from every point.
-
-    The disk starts on the middle key point's outer normal (then, if nearer,
-    its inner one) and steps outwards by 1 mm until the whole arm clears it by
-    ``d_safe + clearance`` (a bent arm may curl towards it); the side that
-    needs the smaller step wins. It moves back towards the arm at ``spec.speed``.
-    """
+    """The cloud beside ``gen`` at ``theta0``, every key point ``d_safe + clearance`` [m] from it:
+    stepped outwards by 1 mm along the middle key point's outer (or inner) normal until the arm
+    clears it, the side needing the smaller step; it moves towards the arm at ``spec.speed``."""
     xy = gen.key_point_positions()
     i = len(gen.key_points) // 2
     u = _outer_normal(gen, i)

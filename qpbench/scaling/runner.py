@@ -1,42 +1,23 @@
 """The scaling study: per size, dump ticks of the closed loop, bench them, summarise.
 
-For each size (:mod:`qpbench.scaling.sizes`), in the output folder ``DIR``:
+For each size (:mod:`qpbench.scaling.sizes`), in ``DIR``: ``scenarios/<size>.toml`` (the size as a
+scenario file); ``sets/<size>/``, every ``every``-th tick's QP of the closed loop run for
+``duration`` [s] with the exact ``driver`` (the QPs the controller meets: the arm in contact, the
+approaching cloud's rows becoming active; removed once the size is done unless ``keep_sets``); the
+time to build a tick's QP (the minimum of ``build_repeat`` calls); ``bench/<size>.csv``
+(:func:`qpbench.harness.bench.run_bench`, as ``qpbench bench``, resumable); and one row per
+(size, backend) appended to ``scaling.csv`` (:data:`COLUMNS`) once the size is done (a resumed
+run skips the sizes it holds).
 
-1. ``scenarios/<size>.toml``: the size as a scenario file;
-2. ``sets/<size>/``: the closed loop run for ``duration`` seconds with the
-   ``driver`` backend (an exact QP solver), every ``every``-th tick's QP kept
-   as a problem set (:func:`qpbench.sim.loop.simulate` with ``dump``; removed
-   once the size is done unless ``keep_sets``: the sets of the large sizes are
-   tens of MB and the same seed makes them again). The
-   closed loop, not a scripted trajectory: the QPs are the ones the
-   controller meets (the arm in contact, its key points pushed by the
-   approaching cloud, obstacle rows becoming active), and nothing in them
-   depends on timing;
-3. the time to build one tick's QP (``Controller.build`` at each kept tick's
-   state; the minimum of ``build_repeat`` calls per tick, as a solve's
-   ``wall_time_min_s``);
-4. ``bench/<size>.csv``: :func:`qpbench.harness.bench.run_bench` on the set,
-   every backend that is not skipped: the same timed region, warm-up, state
-   carried tick to tick, references (Clarabel and PIQP at 1e-10, cached beside
-   the set) and metrics as ``qpbench bench``, rows appended and ``fsync``-ed,
-   resumable;
-5. ``scaling.csv``: one row per (size, backend), appended once the size is
-   done (:data:`COLUMNS`). A resumed run skips the sizes it holds and resumes
-   the bench CSV of an interrupted one.
-
-Skips (a ``skipped`` row with the reason, never a run of minutes): a
-dense-only backend (:func:`matrix_format`) on a size whose inequality matrix
-has more than ``dense_limit`` entries (``n x rows``); any backend whose median
-solve on a smaller size of the same axis took longer than ``slow_limit``.
+Skipped (a ``skipped`` row with the reason, never a run of minutes): a dense-only backend
+(:func:`matrix_format`) on a size with more than ``dense_limit`` entries ``n x rows``; a backend
+whose median solve on a smaller size of the same axis took longer than ``slow_limit`` [s].
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import logging
 import math
-import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -45,21 +26,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..harness.results import ResultsWriter
 from .sizes import Size, generate, qp_shape, scenario_toml
 
 if TYPE_CHECKING:
     from ..control.controller import Controller
 
 log = logging.getLogger("qpbench.scaling")
-
-__all__ = [
-    "COLUMNS",
-    "TEXT_COLUMNS",
-    "ScalingConfig",
-    "matrix_format",
-    "read_summary",
-    "run_scaling",
-]
 
 #: Columns of ``scaling.csv``, in order.
 COLUMNS = (
@@ -141,22 +114,8 @@ def matrix_format(name: str) -> str:
 
 @dataclass
 class ScalingConfig:
-    """What to run.
-
-    Attributes:
-        backends: Backend names to measure.
-        sizes: The sizes, in the order to run (smallest first within an axis).
-        driver: Backend solving the closed loop whose ticks are dumped.
-        duration: Simulated time per size in [s].
-        every: Keep every K-th tick.
-        repeat: Timed solves per (tick, backend); the row keeps the minimum.
-        build_repeat: Timed builds per tick.
-        seed: Seed of the arms, clouds and the bench's backend order.
-        profile: Settings profile.
-        dense_limit: Largest ``n x rows`` a dense-only backend is run on.
-        slow_limit: Median solve time [s] past which a backend skips the larger sizes of an axis.
-        keep_sets: Keep each size's problem set (``sets/<size>/``) once the size is done.
-    """
+    """What to run (module docstring): ``sizes`` smallest first within an axis, ``duration`` [s],
+    ``repeat`` timed solves per (tick, backend) (the row keeps the minimum), ``slow_limit`` [s]."""
 
     backends: list[str]
     sizes: list[Size]
@@ -172,62 +131,11 @@ class ScalingConfig:
     keep_sets: bool = False
 
 
-def _cell(value) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    return repr(value) if isinstance(value, float) else str(value)
-
-
-def append_rows(path: Path, rows: list[dict]) -> None:
-    """Append ``rows`` to ``scaling.csv`` (header first if new) in one ``write``, then ``fsync``."""
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    new = not path.exists() or path.stat().st_size == 0
-    if new:
-        writer.writerow(COLUMNS)
-    for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in COLUMNS])
-    from ..atomic import record
-
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    record(path)
-    try:
-        os.write(fd, buf.getvalue().encode("utf-8"))
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
-    """Rows of a ``scaling.csv`` (strings); a half-written last line is dropped (and cut with ``repair``).
+    """Rows of a ``scaling.csv`` (strings; :func:`qpbench.harness.results.read_results`)."""
+    from ..harness.results import read_results
 
-    Raises:
-        InputError: not a scaling CSV (its header differs).
-    """
-    from ..exceptions import InputError
-
-    path = Path(path)
-    data = path.read_bytes()
-    if data and not data.endswith(b"\n"):
-        cut = data.rfind(b"\n") + 1
-        log.warning("%s: dropping a half-written last line left by an interrupted run", path)
-        data = data[:cut]
-        if repair:
-            os.truncate(path, cut)
-    lines = data.decode("utf-8").splitlines()
-    if not lines:
-        return []
-    header = next(csv.reader([lines[0]]))
-    if tuple(header) != COLUMNS:
-        raise InputError(
-            "not a scaling CSV of this version (columns differ); use --force to start again",
-            path=path,
-        )
-    return [
-        dict(zip(COLUMNS, fields))
-        for fields in csv.reader(lines[1:])
-        if len(fields) == len(COLUMNS)
-    ]
+    return read_results(path, repair=repair, columns=COLUMNS, kind="scaling").rows
 
 
 def build_times(
@@ -436,7 +344,9 @@ def run_scaling(
             size.cloud_points,
         )
         rows, size_failed = run_size(size, config, out, slow, progress)
-        append_rows(summary_path, rows)
+        new = not summary_path.exists() or summary_path.stat().st_size == 0
+        with ResultsWriter(summary_path, new=new, columns=COLUMNS) as writer:
+            writer.write_rows(rows)
         if not config.keep_sets:
             shutil.rmtree(out / "sets" / size.name, ignore_errors=True)
         failed += size_failed

@@ -8,17 +8,9 @@ cloud of ``m`` points. Its tick's QP (paper eq. 11, ``paper`` formulation) has
     inequality rows a m,  a = n p + n - 1 (one per key point and cloud point)
     bounds          n lower, n upper      (escape-velocity joint limits)
 
-(:func:`qp_shape`). The default grid has two axes, so that time can be read
-against each dimension with the other held:
-
-- ``cloud``: the paper's 4-link arm layout (``p = 1``, 7 key points) facing
-  1, 10, 100 and 1,000 points: 4 variables, 7 to 7,000 rows;
-- ``arm``: 4, 8, 16, 32 and 64 links with ``p = 2`` (3n - 1 key points)
-  facing 16 points: 4 to 64 variables, 176 to 3,056 rows.
-
-:func:`scenario_toml` writes a size as an ordinary scenario file (the wall
-scenario's task, contact and gains; the generated arm, start and cloud), so
-``qpbench simulate --scenario FILE`` runs any size on its own.
+The default grid has two axes, each dimension read with the other held: ``cloud`` (the paper's
+4-link layout, ``p = 1``, facing 1 to 1,000 points) and ``arm`` (4 to 64 links, ``p = 2``, facing
+16 points). :func:`scenario_toml` writes a size as an ordinary scenario file.
 """
 
 from __future__ import annotations
@@ -35,8 +27,6 @@ from .obstacles import CloudSpec, place_cloud
 
 if TYPE_CHECKING:
     from ..robot.environment import PointCloudObstacle
-
-__all__ = ["DEFAULT_SIZES", "Size", "parse_sizes", "qp_shape", "scenario_toml", "TASK"]
 
 #: The task every size shares (the ``wall`` scenario's, the path started mid-stroke so the arm moves at once).
 TASK = {
@@ -60,11 +50,8 @@ TASK = {
 
 @dataclass(frozen=True)
 class Size:
-    """One size: ``links`` links, ``points_per_link`` key points per link, a cloud of ``cloud_points`` points.
-
-    Attributes:
-        axis: The grid axis it belongs to (``cloud`` or ``arm``), for the fits.
-    """
+    """``links`` links, ``points_per_link`` key points per link, a cloud of ``cloud_points``
+    points; ``axis``: its grid axis (``cloud`` or ``arm``), for the fits."""
 
     links: int
     points_per_link: int
@@ -98,13 +85,8 @@ DEFAULT_SIZES = tuple(
 
 
 def parse_sizes(text: str | None) -> list[Size]:
-    """Sizes named in ``text``: ``default``/None, or comma-separated ``nN-pP-mM`` names.
-
-    A name of the default grid keeps its axis; another is on the ``arm`` axis.
-
-    Raises:
-        ParamError: a name that is not ``nN-pP-mM`` with N >= 2, P >= 1, 1 <= M <= 100000.
-    """
+    """Sizes named in ``text``: ``default``/None, or comma-separated ``nN-pP-mM`` names (a name not
+    of the default grid is on the ``arm`` axis); :class:`ParamError` for another name."""
     if text is None or text.strip() in ("", "default"):
         return list(DEFAULT_SIZES)
     known = {s.name: s for s in DEFAULT_SIZES}

@@ -1,78 +1,35 @@
 """The figures of a closed-loop run and its verdict: computed here and nowhere else.
 
-:func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able
-dict; ``qpbench simulate --summary`` writes it, and each row of
-``closed_loop.csv`` is that dict under the table's column names
-(:mod:`qpbench.harness.loop_rows`), nothing recomputed.
+:func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able dict (``None`` where a
+figure does not exist); ``qpbench simulate --summary`` writes it, and a row of ``closed_loop.csv``
+or ``sweep.csv`` is that dict (:mod:`qpbench.harness.closed_loop`), nothing recomputed.
 
-Figures (statuses are those of the QP of the run's formulation at each tick; the
-status sets are :mod:`qpbench.statuses`'):
-
-- ``infeasible_ticks``: ticks the backend declared infeasible (status
-  ``primal_infeasible`` or ``dual_infeasible``), plus ticks with status
-  ``not_solved``: a backend that cannot classify a failure (qpsolvers'
-  route to DAQP, quadprog or HiGHS keeps only ``found=False``) reports
-  that, and on the controller's QPs such a failure is the infeasible
-  start. ``first_infeasible_t``, ``last_infeasible_t`` and
-  ``infeasible_intervals`` (runs as ``[first t, last t]``) are of these
-  ticks. A backend that stops on a budget (``max_iter``, ``time_limit``)
-  or fails (``error``) is not counted here.
-- ``non_optimal_ticks``: ticks whose QP was not solved to ``optimal``,
-  whatever the reason (a superset of the above; for the online ``rnn``
-  nearly every tick, since its state is applied after one tick of
-  integration, not at convergence).
-- ``status_counts``: the breakdown by status; ``error_ticks``,
-  ``time_limit_ticks`` and ``invalid_ticks`` count the guarded failures
-  (an exception or an ``error`` status, an answer dropped past the
-  deadline or a budget, a non-finite answer). :func:`qpbench.sim.loop.simulate` adds, in
-  ``run_info``, ``deadline_s`` (the per-tick deadline [s], ``None``:
-  none, every answer applied), ``deadline_dropped`` (answers dropped past the deadline;
-  ``None`` without one), ``raised_ticks`` (ticks whose
-  solve raised), ``fallback_errors`` (fallback solves that raised),
-  ``first_error`` (``"Type: message"`` of the first exception, else the
-  first error a backend reported; ``None`` when none), ``first_error_t``
-  [s], ``wall_budget_s`` (the loop's wall-time budget [s], ``None`` when
-  none) and ``stopped_early`` (the budget ran out before ``duration``).
-- ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s] (rectangle rule), the
-  joint-speed effort of the run.
-- ``duration`` is the simulated time asked for [s], ``simulated_s`` the
-  time simulated (``ticks * dt``, less than ``duration`` when stopped
-  early); ``real_time_factor`` is ``simulated_s / wall_time_s``.
-- ``verdict`` (``ok``, ``diverged``, ``limits``, ``unsafe``, ``failed``)
-  and ``verdict_reasons`` (plain text, ``"; "`` between reasons): see
-  :func:`qpbench.sim.verdict.judge`, with the scenario's ``[verdict]``
-  thresholds.
-
-- real time, beside the verdict (:func:`qpbench.sim.verdict.judge_realtime`, thresholds
-  ``max_p99_fraction_of_dt`` and ``max_over_dt_share`` of ``[verdict]``):
-  ``realtime`` (``yes``/``no``) and ``realtime_reason`` from the measured call
-  times of every tick (``solve_time_s``; their p99 is ``solve_time_p99_s``,
-  the share of ticks longer than ``dt`` ``over_dt_share``, their count
-  ``deadline_misses``); ``realtime_solver``
-  (``yes``/``no``/``unknown``) and ``realtime_solver_reason`` from the time the
-  solver itself reported (``solver_time_s``; p99 ``solver_time_p99_s``, share
-  over ``dt`` ``solver_over_dt_share``; ``None`` when the backend reports none).
-- ``min_body_distance`` [m]: the smallest clearance of the arm's link
-  capsules to an obstacle over the run (tick-log column ``d_body_min``;
-  ``< 0``: the body went into an obstacle, by that depth; ``None`` without
-  obstacles), ``min_body_distance_link`` (1-based, the last link carries the
-  end effector), ``min_body_distance_obstacle`` (its name) and
-  ``min_body_distance_t`` [s]. The end effector's link is not judged against
-  an obstacle that is the contact surface (:mod:`qpbench.robot.body`).
-- ``key_point_rule`` (``held``, ``broken``, ``-`` without obstacles) and
-  ``key_point_rule_reason``: the paper's guarantee, key points kept
-  ``d_safe - safety_margin`` from obstacles (:mod:`qpbench.sim.verdict`);
-  ``key_points_kind``: ``paper`` or ``closest`` (``[key_points] kind``).
-
-``scenario_overrides`` holds the values set over the scenario file's
-(``qpbench simulate --set``), empty when none; ``verdict_overrides`` those of
-them that change a ``[verdict]`` threshold (by key, ``{}`` when none). ``fallback_ticks``
-applied the soft formulation's answer,
-``zero_velocity_ticks`` commanded zero. Errors "after 2 s" use the ticks
-with ``t >=`` :data:`SETTLE_TIME`; limit violations count ticks with an angle or a
-commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
-``obstacle_active_intervals`` lists, per (key point, obstacle), when it
-was within :data:`ACTIVE_MARGIN` of ``d_safe``.
+- ``infeasible_ticks``: ticks declared ``primal_infeasible``/``dual_infeasible`` or ``not_solved``
+  (a backend that cannot classify a failure, e.g. qpsolvers' routes keeping only ``found=False``;
+  on these QPs that is the infeasible start); ``first_infeasible_t``, ``last_infeasible_t``,
+  ``infeasible_intervals`` ([first t, last t] runs) [s]. ``non_optimal_ticks``: any status but
+  ``optimal`` (nearly every tick of the online ``rnn``). ``status_counts``; ``error_ticks``,
+  ``time_limit_ticks``, ``invalid_ticks``: the guarded failures. ``fallback_ticks`` applied the
+  soft formulation's answer, ``zero_velocity_ticks`` commanded zero.
+- From :func:`qpbench.sim.loop.simulate` (``run_info``): ``deadline_s`` [s], ``deadline_dropped``, ``raised_ticks``, ``fallback_errors``,
+  ``first_error`` (``"Type: message"``), ``first_error_t`` [s], ``wall_budget_s`` [s],
+  ``stopped_early``.
+- ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
+  ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations: ticks beyond a limit by more
+  than :data:`VIOLATION_TOL`. ``duration`` asked, ``simulated_s`` reached [s];
+  ``real_time_factor = simulated_s / wall_time_s``.
+- ``min_obstacle_distance`` [m] (key points, with ``..._key_point``, ``..._obstacle``, ``..._t``);
+  ``min_body_distance`` [m]: the link capsules' clearance, < 0 inside (``..._link`` 1-based,
+  ``..._obstacle``, ``..._t``; :mod:`qpbench.robot.body`); ``obstacle_active_intervals``: per
+  (key point, obstacle), when within :data:`ACTIVE_MARGIN` of ``d_safe``.
+- ``verdict``, ``verdict_reasons``, ``key_point_rule`` (the paper's guarantee: ``held``,
+  ``broken``, ``-``): :func:`qpbench.sim.verdict.judge` with the scenario's ``[verdict]``.
+  Beside it, ``realtime`` (``yes``/``no``) from the call times (p99 ``solve_time_p99_s``, share
+  over ``dt`` ``over_dt_share``, their count ``deadline_misses``) and ``realtime_solver`` (``unknown`` without them) from the
+  solver's own (``solver_time_p99_s``, ``solver_over_dt_share``):
+  :func:`qpbench.sim.verdict.judge_realtime`.
+- ``scenario_overrides``: values set over the file's (``--set``); ``verdict_overrides``: those of
+  ``[verdict]``.
 """
 
 from __future__ import annotations
@@ -88,21 +45,15 @@ from . import log
 from .scenario import Scenario
 from .verdict import VIOLATION_TOL, judge, judge_realtime
 
-__all__ = [
-    "ACTIVE_MARGIN",
-    "MAX_INTERVALS",
-    "SETTLE_TIME",
-    "STRUCTURED_FIGURES",
-    "jsonable",
-    "summarize",
-]
-
 #: Time from which tracking and force errors are judged [s] (paper: transient about 1 s);
 #: the ``*_after_2s`` figures.
 SETTLE_TIME = 2.0
 
 #: A key point within this of ``d_safe`` [m] counts as touching its obstacle row (summary intervals).
 ACTIVE_MARGIN = 1e-4
+
+#: One tick's solve longer than this misses a 1 kHz loop's deadline [s].
+KHZ_DEADLINE_S = 1e-3
 
 #: At most this many intervals per list in a summary.
 MAX_INTERVALS = 20
@@ -153,11 +104,7 @@ def summarize(
     wall_time_s: float,
     run_info: dict | None = None,
 ) -> dict:
-    """Figures of a run (JSON-able; ``None`` where a figure does not exist) and its verdict.
-
-    The figures are listed in the module docstring. ``run_info`` (from
-    :func:`qpbench.sim.loop.simulate`) adds the run's own counts and settings.
-    """
+    """Figures of a run and its verdict (module docstring); ``run_info`` from the loop's own."""
     t = frame[log.T].to_numpy()
     dt = scenario.dt
     ticks = len(frame)
@@ -205,6 +152,30 @@ def summarize(
     out["key_point_rule_reason"] = verdict.key_point_rule_reason
     out.update(_realtime_figures(frame, dt, scenario, out["solve_time_p99_s"]))
     return out
+
+
+def time_to_converge(t: np.ndarray, error: np.ndarray, band: float) -> float | None:
+    """First time [s] from which ``|error| <= band`` holds to the end (``None``: not at the end)."""
+    if len(t) == 0:
+        return None
+    outside = ~(np.abs(np.asarray(error, dtype=float)) <= band)
+    if outside[-1]:
+        return None
+    idx = np.flatnonzero(outside)
+    return float(t[0]) if idx.size == 0 else float(t[idx[-1] + 1])
+
+
+def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: float) -> dict:
+    """Times to converge [s] into the force band [N] and the tracking band [m], and the ticks
+    whose solve missed a 1 kHz loop's deadline (a sweep's figures)."""
+    t = frame[log.T].to_numpy(dtype=float)
+    force, tracking = frame[log.FORCE_ERROR], frame[log.TRACKING_ERROR]
+    solve = frame[log.SOLVE_TIME].to_numpy(dtype=float)
+    return {
+        "t_converge_force_s": time_to_converge(t, force.to_numpy(), force_band),
+        "t_converge_tracking_s": time_to_converge(t, tracking.to_numpy(), tracking_band),
+        "ticks_over_1ms": int(np.count_nonzero(solve > KHZ_DEADLINE_S)),
+    }
 
 
 def _realtime_figures(

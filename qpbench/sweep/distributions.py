@@ -1,10 +1,5 @@
-"""The distributions of a sweep file's ``[parameters]``: checking and drawing.
-
-The kinds, their fields and what they draw are described in
-:mod:`qpbench.sweep.spec`; here a ``[parameters]`` entry is checked against
-the base scenario's value of its key (:func:`checked_distribution`) and
-drawn from (:meth:`Distribution.draw`).
-"""
+"""The distributions of a sweep file's ``[parameters]`` (described in :mod:`qpbench.sweep.spec`):
+checked against the base scenario's value of their key, and drawn from."""
 
 from __future__ import annotations
 
@@ -36,14 +31,8 @@ def finite_number(v) -> bool:
 
 @dataclass(frozen=True)
 class Distribution:
-    """One key's distribution, checked against the base value's shape.
-
-    Attributes:
-        key: The scenario key (``controller.desired_force``).
-        kind: One of :data:`DISTRIBUTIONS`.
-        params: Its fields as given (numbers as arrays of the key's shape).
-        base: The base scenario's value (a float, an int or an array).
-    """
+    """One key's distribution: ``params`` its fields (numbers as arrays of the key's shape),
+    ``base`` the base scenario's value."""
 
     key: str
     kind: str
@@ -59,9 +48,7 @@ class Distribution:
             return copy.deepcopy(p["values"][i])
         if self.kind == "integers":
             return int(rng.integers(p["low"], p["high"], endpoint=True))
-        if p.get(
-            "same"
-        ):  # one draw for every component: an offset from the base value, or the value itself
+        if p.get("same"):  # one draw for every component: an offset from the base, or the value
             relative = "spread" in p or (self.kind == "normal" and "mean" not in p)
             first = float(np.ravel(base)[0])
             one = Distribution(

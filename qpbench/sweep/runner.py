@@ -1,18 +1,10 @@
 """A sweep's run: sample the instances, save them, run every (instance, backend), append the rows.
 
-``DIR`` (``--out``) holds:
-
-- ``sweep.json``: the manifest (the sweep file's text and SHA-256, seed,
-  sample count, duration, base scenario, backends, qpbench's version);
-- ``instances/<name>.toml``: every instance's full scenario file;
-- ``sweep.csv``: one row per (instance, backend) (:mod:`qpbench.sweep.rows`).
-
-Resuming (``resume=True``) keeps every row whose run gave a result (status
-``ok``) or whose instance is invalid, and runs the rest again: the missing
-keys (a killed sweep) and the ``error`` and ``crashed`` rows. It refuses a
-folder made from another sweep file or with another duration; the sample
-count and the backends may differ (instance ``i`` is the same whatever the
-count).
+``DIR`` holds ``sweep.json`` (the manifest: the sweep file's text and SHA-256, seed, samples,
+duration, base, backends, qpbench's version), ``instances/<name>.toml`` and ``sweep.csv``
+(:mod:`qpbench.sweep.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
+rest again; it refuses a folder of another sweep file or duration (samples and backends may
+differ: instance ``i`` is the same whatever the count).
 """
 
 from __future__ import annotations
@@ -27,18 +19,16 @@ from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
+from ..harness.closed_loop import LoopTask, run_row
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
-from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row
+from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row, sweep_row
 from .sample import Instance, sample_instances
 from .spec import SweepSpec
-from .task import SweepTask, run_task
 
 if TYPE_CHECKING:
     from ..runner import DaskExecutor, ProcessExecutor, SerialExecutor
 
 log = logging.getLogger("qpbench.sweep")
-
-__all__ = ["MANIFEST_NAME", "INSTANCE_DIR", "SweepOutcome", "run_sweep", "read_sweep_rows"]
 
 MANIFEST_NAME = "sweep.json"
 INSTANCE_DIR = "instances"
@@ -125,9 +115,7 @@ def _meta(spec: SweepSpec, inst: Instance, backend: str) -> dict:
 def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
     csv_path = out / CSV_NAME
     check_folder(out)
-    check_output(
-        out / CSV_NAME, force=force, resume=resume, make_parent=True
-    )  # out is created below
+    check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
     if resume and csv_path.exists() and not force:
         _check_resumable(out, spec)
     elif force:
@@ -167,11 +155,9 @@ def run_sweep(
 ) -> SweepOutcome:
     """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``.
 
-    Rows are appended to ``out/sweep.csv`` as runs end (``on_row`` is called
-    with each); an instance the scenario loader refuses gets an
-    ``invalid_scenario`` row per backend, a run that raises an ``error`` row, a
-    run whose worker was lost twice a ``crashed`` row. At the end the table is
-    rewritten atomically in instance and backend order, one row per key.
+    Each run is :func:`qpbench.harness.closed_loop.run_row`; its row is appended to ``sweep.csv``
+    as it ends (then ``on_row``). At the end the table is rewritten atomically in instance and
+    backend order, one row per key.
 
     Raises:
         OutputExistsError: ``out/sweep.csv`` exists without ``force`` or ``resume``.
@@ -183,7 +169,7 @@ def run_sweep(
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     ran = failed = 0
-    items = []
+    items, metas = [], {}
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
         def emit(row):
@@ -200,16 +186,21 @@ def run_sweep(
                 if inst.invalid is not None:
                     emit(failed_row(meta, "invalid_scenario", inst.invalid))
                     continue
-                items.append(
-                    ((inst.name, backend), SweepTask(meta, inst.text, tuple(plugins or ())))
+                metas[(inst.name, backend)] = meta
+                task = LoopTask(
+                    meta["instance_file"],
+                    backend,
+                    plugins=tuple(plugins or ()),
+                    scenario_text=inst.text,  # the instance travels with its task
+                    bands=(spec.force_band, spec.tracking_band),
                 )
-        metas = {key: task.meta for key, task in items}
-        for done in executor.run(run_task, items):
-            row = (
-                done.value
-                if done.lost is None
-                else failed_row(metas[done.key], "crashed", done.lost)
-            )
+                items.append(((inst.name, backend), task))
+        for done in executor.run(run_row, items):
+            meta = metas[done.key]
+            if done.lost is None:
+                row = sweep_row(meta, done.value)
+            else:
+                row = failed_row(meta, "crashed", done.lost)
             row.update(
                 executor=executor.name,
                 host=done.host,

@@ -1,16 +1,9 @@
 """Instances of a sweep: the base scenario with every swept key drawn, as a full scenario file.
 
-:func:`sample_instances` draws instance ``i``'s values from the streams of
-:meth:`SweepSpec.rng` and writes them over the base scenario's tables; the
-result is the text of a complete scenario file (:func:`instance_text`),
-saved as ``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario
-DIR/instances/<name>.toml --backend B`` re-runs that one instance alone. An
-instance the scenario loader refuses (a theta0 drawn outside the joint
-limits, ``alpha * dt >= 1``, ...) keeps the loader's one-line reason in
-:attr:`Instance.invalid`: the sweep records it and goes on. So does one
-whose start puts a key point inside ``d_safe`` of an obstacle (unless
-``[sweep] safe_start = false``): every backend would be ``unsafe`` at
-``t = 0``, which says nothing about the backends.
+Saved as ``DIR/instances/<name>.toml``, so ``qpbench simulate --scenario`` re-runs one alone. An
+instance the loader refuses keeps its one-line reason (:attr:`Instance.invalid`), as does one
+starting with a key point inside ``d_safe`` (unless ``[sweep] safe_start = false``): every backend
+would be ``unsafe`` at ``t = 0``, which says nothing about the backends.
 """
 
 from __future__ import annotations
@@ -20,26 +13,17 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ..exceptions import ScenarioError
-from .spec import SweepSpec
+from .spec import SCENARIO_KEY, SweepSpec
 from .toml_text import dumps, value_text
 
 if TYPE_CHECKING:
     from ..sim.scenario import Scenario
 
-__all__ = ["Instance", "instance_name", "sample_instances"]
-
 
 @dataclass(frozen=True)
 class Instance:
-    """One sampled scenario of a sweep.
-
-    Attributes:
-        index: 0-based sample index.
-        name: ``i00003`` (file stem, the rows' ``instance``).
-        values: Swept key -> drawn value (JSON-able), in the sweep file's order.
-        text: The full scenario file (TOML).
-        invalid: Why the scenario loader refused it, or ``None``.
-    """
+    """One sampled scenario: ``values`` swept key -> drawn value, ``text`` its scenario file,
+    ``invalid`` why the loader (or ``safe_start``) refused it, else ``None``."""
 
     index: int
     name: str
@@ -54,9 +38,7 @@ def instance_name(index: int, samples: int) -> str:
 
 
 def _set(raw: dict, key: str, value) -> None:
-    from .spec import _KEY
-
-    table, index, name = _KEY.fullmatch(key).groups()
+    table, index, name = SCENARIO_KEY.fullmatch(key).groups()
     target = raw["obstacles"][int(index)] if index is not None else raw[table]
     target[name] = value
 

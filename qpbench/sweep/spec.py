@@ -28,47 +28,14 @@ distribution to draw that key's value from for every instance::
     "obstacles[1].radius" = { dist = "loguniform", low = 0.01, high = 0.05 }
     "simulation.dt" = { dist = "choice", values = [0.001, 0.0005] }
 
-Keys are the scenario's own dotted keys (those of ``qpbench simulate
---set``), quoted, or nested tables (``[parameters.controller]``
-``desired_force = {...}``). What the sweeps of paper-like situations vary:
-
-=============================  ===========================================
-quantity                       scenario key
-=============================  ===========================================
-start configuration theta0     ``robot.theta0`` [rad]
-link lengths                   ``robot.link_lengths`` [m]
-obstacle position              ``obstacles[i].point`` (line), ``.center``
-                               (disk), ``.a``/``.b`` (segment) [m]
-obstacle size                  ``obstacles[i].radius`` (disk) [m]
-obstacle velocity              ``obstacles[i].velocity`` [m/s]
-desired force Fd               ``controller.desired_force`` [N]
-path centre, amplitude, speed  ``path.centre``, ``path.amplitude`` [m],
-                               ``path.omega`` [rad/s]
-force-sensor noise             ``contact.force_noise_std`` [N]
-                               (``contact.noise_seed`` with ``integers``)
-contact stiffness              ``contact.stiffness`` [N/m]
-control period dt              ``simulation.dt`` [s]
-=============================  ===========================================
-
-Distributions (every bound a number, or a list of the key's shape; a vector
-key draws each component independently):
-
-- ``uniform``: ``low``, ``high``; or ``spread``: the base value +- spread;
-- ``normal``: ``std``, ``mean`` (default: the base value), optional ``low``,
-  ``high`` (truncated: draws outside are drawn again);
-- ``loguniform``: ``low``, ``high`` (> 0): uniform in ``log``;
-- ``choice``: ``values`` (each a whole value of the key), optional ``weights``;
-- ``integers``: ``low``, ``high`` (inclusive), for integer keys.
-
-``same = true`` (uniform, normal, loguniform; numbers only) draws once for
-every component of a vector key: with ``spread`` (or a normal around the
-base) the same offset is added to each component, e.g. ``path.centre``
-moved along (1, 1), which is wall's surface tangent; else every component
-gets the value drawn, e.g. ``path.amplitude = [a, a]``.
-
-Instance ``i`` draws key ``k`` from its own stream
-``numpy.random.default_rng([seed, i, crc32(k)])``: the same instance has the
-same values whatever the sample count and whatever other keys are swept.
+Keys are the scenario's own dotted keys (those of ``simulate --set``), quoted, or nested tables.
+Distributions (bounds: a number, or a list of the key's shape, each component drawn on its own):
+``uniform`` (``low``, ``high``; or ``spread`` around the base value), ``normal`` (``std``,
+``mean`` default the base value, optional truncation ``low``, ``high``), ``loguniform`` (``low``,
+``high`` > 0), ``choice`` (``values``, optional ``weights``), ``integers`` (inclusive, integer
+keys). ``same = true`` draws once for every component: an offset added to each with ``spread``
+(or a normal around the base), else the value itself. Instance ``i`` draws key ``k`` from
+``default_rng([seed, i, crc32(k)])``: the same whatever the sample count and the other keys.
 """
 
 from __future__ import annotations
@@ -84,10 +51,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exceptions import InputError, ScenarioError, check_known_keys
-from .distributions import DISTRIBUTIONS, Distribution, checked_distribution, finite_number
-
-__all__ = ["DISTRIBUTIONS", "Distribution", "SweepSpec", "load_sweep", "parse_sweep"]
+from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
+from .distributions import Distribution, checked_distribution, finite_number
 
 #: Names a reader may try for a key, and the scenario key meant.
 ALIASES = {
@@ -116,27 +81,13 @@ _SWEEP_KEYS = {
     "safe_start": bool,
 }
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
-_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
+SCENARIO_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
 
 
 @dataclass
 class SweepSpec:
-    """A parsed sweep file.
-
-    Attributes:
-        path: The sweep file.
-        text: Its text (kept in the output's manifest).
-        name, seed, samples: ``[sweep]`` values (``samples`` after any override).
-        duration: Simulated time of every instance [s], ``None``: the base's.
-        base: The base scenario's name or path as written.
-        base_path: The base scenario's file.
-        base_raw: The base scenario's tables (as ``tomllib`` reads them), with the
-            sweep's ``[[obstacles]]`` appended and ``duration`` set.
-        parameters: The distributions, in file order.
-        force_band: Band of the force's time to converge [N].
-        tracking_band: Band of the tracking error's time to converge [m].
-        safe_start: An instance whose start has a key point inside ``d_safe`` is invalid.
-    """
+    """A parsed sweep file: ``duration`` [s] (``None``: the base's), ``base_raw`` the base
+    scenario's tables with the sweep's ``[[obstacles]]`` and duration, bands [N] and [m]."""
 
     path: Path
     text: str
@@ -195,14 +146,8 @@ def parse_sweep(
         head["samples"] = _positive_int(samples, path, "--samples")
     if duration is not None:
         head["duration"] = duration
-    if head.get("duration") is not None and not (
-        finite_number(head["duration"]) and head["duration"] > 0
-    ):
-        raise InputError(
-            f"must be a positive number of seconds, got {head['duration']!r}",
-            path=path,
-            key="sweep.duration",
-        )
+    if head.get("duration") is not None:
+        positive_seconds(head["duration"], "sweep.duration", path)
     base_path, base_raw = _base(head["base"], path)
     extra = raw.get("obstacles", [])
     if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
@@ -217,7 +162,8 @@ def parse_sweep(
             "expected a [parameters] table with at least one key", path=path, key="parameters"
         )
     distributions = [
-        _distribution(key, spec, base_raw, path) for key, spec in _flatten(params, path)
+        checked_distribution(key, spec, _base_value(key, base_raw, path), path)
+        for key, spec in _flatten(params, path)
     ]
     force_band, tracking_band = _bands(raw.get("convergence", {}), scenario.verdict, path)
     return SweepSpec(
@@ -319,7 +265,7 @@ def _flatten(params: dict, path, prefix: str = ""):
 
 def _base_value(key: str, base_raw: dict, path):
     where = f"parameters.{key}"
-    match = _KEY.fullmatch(key)
+    match = SCENARIO_KEY.fullmatch(key)
     if match is None:
         hint = ALIASES.get(key.casefold())
         raise InputError(
@@ -359,10 +305,6 @@ def _base_value(key: str, base_raw: dict, path):
             f"unknown parameter key: [{table}] has no key {name!r}{hint}", path=path, key=where
         )
     return target[name]
-
-
-def _distribution(key: str, spec: dict, base_raw: dict, path) -> Distribution:
-    return checked_distribution(key, spec, _base_value(key, base_raw, path), path)
 
 
 def _bands(conv, verdict, path) -> tuple[float, float]:

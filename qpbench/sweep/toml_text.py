@@ -1,9 +1,7 @@
 """TOML text of a scenario's tables (what :mod:`tomllib` reads, written back exactly).
 
-Floats are written with :func:`repr` (the shortest text that reads back to
-the same float), so ``tomllib.loads(dumps(raw)) == raw`` for the tables a
-scenario file holds: tables of numbers, booleans, strings, lists of them and
-lists of lists, and arrays of tables (``[[obstacles]]``).
+Floats are written with :func:`repr`, so ``tomllib.loads(dumps(raw)) == raw`` for the tables a
+scenario file holds (numbers, booleans, strings, nested lists, arrays of tables).
 """
 
 from __future__ import annotations
@@ -11,8 +9,6 @@ from __future__ import annotations
 import json
 import math
 import re
-
-__all__ = ["dumps"]
 
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
 
