@@ -10,8 +10,8 @@ from those files. Statistics live in :mod:`.tables`, the Markdown in
 
 from __future__ import annotations
 
+from .inputs import Results, read_results
 from .markdown import render
-from .tables import Results, read_results
 from .write import write_report
 
 __all__ = ["Results", "read_results", "render", "write_report"]

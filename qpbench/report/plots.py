@@ -1,26 +1,11 @@
-"""PNG figures of a report (matplotlib, Agg backend, imported inside the functions).
+"""PNG figures of a report; :func:`write_plots` returns them by key (used by :mod:`.markdown`).
 
-Keys of the returned mapping (used by :mod:`qpbench.report.markdown`):
-
-- ``perf_profile_<group>``: Dolan-More performance profile of runtime;
-- ``per_tick_<group>_<scenario>``: solve time and optimality gap against t;
-- ``closed_loop_<scenario>_<formulation>``: every backend's run
-  (:func:`qpbench.report.loop_figure.closed_loop_figure`): tracking and force
-  error on log scales, the closest key point against ``d_safe``, solve time
-  per tick against the 1 ms budget, ``|v|^2``, ``Kp_hat`` when adapting;
-- ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one small panel per backend;
-- ``closed_loop_d_<scenario>_<formulation>``: each backend's closest key point to an
-  obstacle against ``d_safe``, its closest approach named (:func:`distance_plot`);
-- ``snapshot_<role>_<scenario>_<formulation>``: the arm, for the fastest exact
-  backend and the network (:mod:`qpbench.report.snapshots`).
-
-Figures with several backends follow :mod:`qpbench.report.style`: one look per
-backend, at most eight highlighted in a panel (one column of panels per group of
-backends, the others grey behind), legends outside the data.
-
-Closed-loop figures read each run's tick log, or its figure log when the tick
-log is absent (:func:`qpbench.report.logs.read_log`). Figures of a previous report in the folder
-that this one no longer links are removed (:func:`remove_unlinked`).
+Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<group>_<scenario>``
+(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>`` (every
+backend's run, :mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities),
+``closed_loop_d_...`` (closest key point against ``d_safe``), ``snapshot_<role>_...`` (the
+arm, :mod:`.snapshots`). Closed-loop figures read each run's tick log, else its figure log
+(:func:`.logs.read_log`). Figures of a previous report this one no longer links are removed.
 """
 
 from __future__ import annotations
@@ -35,9 +20,10 @@ import pandas as pd
 
 from ..sim import log as tick_log
 from . import style, tables
-from .logs import read_log as _read_log
+from .inputs import Results, scenario_key
+from .logs import read_log
+from .markdown_table import slug
 from .snapshots import write_snapshots
-from .tables import slug
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -89,8 +75,6 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
 
 def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     """Solve time [us] and |optimality gap| against t [s], one column per group of backends."""
-    if "t" not in rows.columns:
-        return False
     df = rows.copy()
     df["t"] = pd.to_numeric(df["t"], errors="coerce")
     df = df[np.isfinite(df["t"])]
@@ -98,7 +82,7 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
         return False
     series = {}
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
-        times = pd.to_numeric(g[tables.runtime_column(g)], errors="coerce").to_numpy(float) * 1e6
+        times = pd.to_numeric(g[tables.RUNTIME], errors="coerce").to_numpy(float) * 1e6
         gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
         gap = np.maximum(np.where(g["found"].to_numpy(bool), gap, np.nan), 1e-16)
         series[str(backend)] = (g["t"].to_numpy(float), times, gap)
@@ -134,7 +118,7 @@ def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     logs = {}
     d_safe = None
     for _, r in runs.iterrows():
-        df = _read_log(r.get("log_path"))
+        df = read_log(r["log_path"])
         if df is not None and tick_log.T in df.columns and len(df):
             logs[str(r["backend"])] = df
             value = r.get("d_safe")
@@ -278,9 +262,7 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 
 
-def write_plots(
-    results: tables.Results, folder: str | Path, relative_to: str | Path
-) -> dict[str, str]:
+def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
     """Write every figure of a report into ``folder``; return key -> path relative to ``relative_to``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -293,11 +275,10 @@ def write_plots(
         key = f"perf_profile_{slug(label)}"
         performance_profile_plot(rows, label, folder / f"{key}.png")
         files[key] = _rel(folder / f"{key}.png")
-        if "scenario" in rows.columns:
-            for scenario, g in rows.groupby(rows["scenario"].map(tables.scenario_key), sort=True):
-                key = f"per_tick_{slug(label)}_{slug(scenario)}"
-                if per_tick_plot(g, f"{scenario} ({label})", folder / f"{key}.png"):
-                    files[key] = _rel(folder / f"{key}.png")
+        for scenario, g in rows.groupby(rows["scenario"].map(scenario_key), sort=True):
+            key = f"per_tick_{slug(label)}_{slug(scenario)}"
+            if per_tick_plot(g, f"{scenario} ({label})", folder / f"{key}.png"):
+                files[key] = _rel(folder / f"{key}.png")
     df = results.closed_loop
     if not df.empty:
         for (scenario, formulation), g in df.groupby(

@@ -205,7 +205,7 @@ def recommend(table: pd.DataFrame) -> Recommendation:
     if runs.empty:
         return Recommendation(Scope("all scenarios"), (), 0)
     runs["scenario"] = runs["scenario"].astype(str)
-    several = "formulation" in runs.columns and runs["formulation"].nunique(dropna=True) > 1
+    several = runs["formulation"].nunique(dropna=True) > 1
 
     def place(row: dict) -> str:
         return f"{row['scenario']} ({row['formulation']})" if several else row["scenario"]

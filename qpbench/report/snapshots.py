@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from .logs import log_file, read_log
-from .tables import slug
+from .markdown_table import slug
 
 __all__ = ["ROLES", "snapshot_runs", "write_snapshots"]
 
@@ -54,8 +54,6 @@ def _is_exact(backend: str) -> bool:
 
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     """Of one scenario's runs (one formulation), the row of each role that has one (see the module docstring)."""
-    if "log_path" not in runs.columns:
-        return {}
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
     whole = (
