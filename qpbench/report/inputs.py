@@ -1,9 +1,9 @@
 """Reading result CSVs for a report: bench or closed-loop (by their columns), duplicates, repeats.
 
 A result key ``(problem, scenario, backend, profile, mode)`` in two files is an error unless
-``prefer`` (``first`` or ``last`` file given) says which to keep; so is a backend whose rows in
-one ``(profile, mode)`` come from files timed with different ``repeat`` counts (the minimum of
-3 solves is not comparable to a single shot); with ``prefer`` they are kept, with a note.
+``prefer`` (``first`` or ``last`` file) says which to keep; so is a backend whose rows in one
+``(profile, mode)`` come from files timed with different ``repeat`` counts (a minimum of 3
+solves is not comparable to a single shot); with ``prefer`` they are kept, with a note.
 """
 
 from __future__ import annotations
@@ -39,6 +39,14 @@ BENCH_COLUMNS = (
     "duality_gap",
     "optimality_gap",
 )
+#: What reading a damaged CSV raises.
+CSV_ERRORS = (
+    pd.errors.ParserError,
+    pd.errors.EmptyDataError,
+    UnicodeDecodeError,
+    OSError,
+    EOFError,
+)
 #: Columns that make a CSV a closed-loop result.
 CLOSED_LOOP_COLUMNS = ("scenario", "backend", "status", "log_file")
 
@@ -64,7 +72,7 @@ class Results:
 
 
 def _from_json(text):
-    """A list- or dict-valued cell of a closed-loop CSV (JSON text) as its value; empty stays NaN."""
+    """A list- or dict-valued cell of a closed-loop CSV (JSON text) as its value."""
     if not isinstance(text, str):
         return text
     try:
@@ -77,17 +85,9 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
     if series.dtype == bool:
         return series
     # an empty cell (a row whose solve crashed) counts as false
-    mapping = {
-        "true": True,
-        "false": False,
-        "1": True,
-        "0": False,
-        "1.0": True,
-        "0.0": False,
-        "nan": False,
-        "": False,
-        "none": False,
-    }
+    mapping = dict.fromkeys(("true", "1", "1.0"), True) | dict.fromkeys(
+        ("false", "0", "0.0", "nan", "", "none"), False
+    )
     text = series.astype(str).str.strip().str.lower()
     bad = ~text.isin(list(mapping))
     if bad.any():
@@ -100,7 +100,7 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
 
 
 def expand_paths(paths: list[str | Path]) -> list[Path]:
-    """CSV files named directly, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
+    """CSV files named, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
 
     Raises:
         InputError: a path does not exist, or a folder holds no CSV.
@@ -142,20 +142,14 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     for path in expand_paths(paths):
         try:
             df = pd.read_csv(path)
-        except (
-            pd.errors.ParserError,
-            pd.errors.EmptyDataError,
-            UnicodeDecodeError,
-            OSError,
-            EOFError,
-        ) as exc:
+        except CSV_ERRORS as exc:
             raise InputError(f"not a readable CSV ({exc})", path=path) from None
         cols = set(df.columns)
+        df["source"] = str(path)
         if set(BENCH_COLUMNS) <= cols:
             df["found"] = _as_bool(df["found"], path, "found")
             df["success"] = _as_bool(df["success"], path, "success")
             df["isolated"] = _as_bool(df["isolated"], path, "isolated")
-            df["source"] = str(path)
             bench.append(df)
             kind = "bench"
         elif set(CLOSED_LOOP_COLUMNS) <= cols:
@@ -164,7 +158,6 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
             df["log_path"] = [
                 str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
             ]
-            df["source"] = str(path)
             loops.append(df)
             kind = "closed-loop"
         else:
@@ -196,10 +189,10 @@ def _key_frame(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
-    """Bench rows with each result key once (see the module docstring).
+    """Bench rows with each result key once (module docstring).
 
     Raises:
-        InputError: a key in two files and ``prefer`` is ``None`` (naming both files and the key).
+        InputError: a key in two files and ``prefer`` is ``None``.
     """
     keys = _key_frame(bench)
     dup = keys.duplicated(keep=False)

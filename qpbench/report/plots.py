@@ -20,6 +20,7 @@ import pandas as pd
 
 from ..sim import log as tick_log
 from . import style, tables
+from .arm import closest_approach
 from .inputs import Results, scenario_key
 from .logs import read_log
 from .markdown_table import slug
@@ -37,8 +38,7 @@ def _velocity_columns(df: pd.DataFrame) -> list[str]:
 
 
 def _columns_of_groups(backends, rows: int, width: float, height: float, **kw):
-    """A figure with ``rows`` rows of panels and one column per group of backends
-    (:func:`qpbench.report.style.groups`); returns ``(fig, axes, groups)``."""
+    """``(fig, axes, groups)``: ``rows`` rows of panels, a column per group of backends."""
     groups = style.groups(backends)
     fig, axes = style.pyplot().subplots(
         rows,
@@ -52,7 +52,7 @@ def _columns_of_groups(backends, rows: int, width: float, height: float, **kw):
 
 
 def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None:
-    """Dolan-More profile ``rho_s(tau)`` of runtime (log-scale tau), one panel per group of backends."""
+    """Dolan-More profile ``rho_s(tau)`` of runtime (log tau), one panel per group of backends."""
     taus, profiles = tables.performance_profile(rows)
     fig, axes, groups = _columns_of_groups(profiles, 1, 4.6, 3.4, sharey=True)
     for ax, (title, group) in zip(axes[0], groups):
@@ -127,21 +127,6 @@ def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     return logs, d_safe
 
 
-def closed_loop_plots(
-    runs: pd.DataFrame, scenario: str, formulation: str, path: Path, path_v: Path
-) -> tuple[bool, bool]:
-    """The closed-loop figure of one scenario, every backend
-    (:func:`qpbench.report.loop_figure.closed_loop_figure`), and the joint velocities per backend."""
-    from .loop_figure import closed_loop_figure
-
-    logs, d_safe = _logs(runs)
-    if not logs:
-        return False, False
-    closed_loop_figure(logs, path, title=f"Closed loop, {scenario} ({formulation})", d_safe=d_safe)
-    done_v = velocity_plot(logs, f"Joint velocities, {scenario} ({formulation})", path_v)
-    return True, done_v
-
-
 def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
     """Joint velocities [rad/s] against t, one small panel per backend (titled in its colour),
     ``columns`` panels a row; one colour per joint (viridis, not a backend's)."""
@@ -186,41 +171,13 @@ def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
     return True
 
 
-def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Path) -> bool:
-    """Each backend's closest key point to an obstacle [mm] against ``d_safe`` (see :func:`distance_plot`)."""
-    logs, d_safe = _logs(runs)
-    return distance_plot(
-        logs, f"Closest key point to an obstacle, {scenario} ({formulation})", path, d_safe
-    )
-
-
-def _closest(d: pd.DataFrame) -> tuple[float, float, str] | None:
-    """``(t [s], distance [m], "key point / obstacle")`` of a log's closest approach, or ``None``."""
-    cols = [c for c in tick_log.distance_columns(d) if not str(c).startswith("d_body")]
-    if not cols:
-        return None
-    D = d[cols].to_numpy(float)
-    if not np.isfinite(D).any():
-        return None
-    k, c = divmod(int(np.nanargmin(D)), D.shape[1])
-    _, key, obstacle = cols[c].split("_", 2)
-    return float(d[tick_log.T].iloc[k]), float(D[k, c]), f"{key} / {obstacle}"
-
-
 def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> bool:
-    """The distance figure of one scenario: each backend's ``d_min`` [mm] against t, one panel per
-    group of backends (:func:`qpbench.report.style.groups`), on the axis of
-    :func:`qpbench.report.loop_figure.distance_axis` (``d_safe`` readable beside a
-    300 mm excursion); each highlighted backend's closest approach marked and named
-    (key point / obstacle, mm) in the legend. A log's body distance ``d_body_min``, when
-    it has one, is drawn dashed in the same colour."""
-    from .loop_figure import distance_axis
+    """Each backend's ``d_min`` [mm] against t (its ``d_body_min`` dashed), one panel per group of
+    backends, on the distance axis of :mod:`.loop_figure`; each closest approach marked and
+    named in the legend."""
+    from .loop_figure import distance_axis, has_distance
 
-    logs = {
-        b: d
-        for b, d in logs.items()
-        if tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
-    }
+    logs = {b: d for b, d in logs.items() if has_distance(d)}
     if not logs:
         return False
     fig, axes, groups = _columns_of_groups(logs, 1, 4.6, 3.6, sharey=True)
@@ -239,22 +196,27 @@ def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> b
 
 
 def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
-    """One backend's ``d_min`` (and ``d_body_min``) on the distance panel; its closest approach marked."""
+    """One backend's ``d_min`` (and ``d_body_min``); its closest approach marked."""
     t = d[tick_log.T].to_numpy(float)
     dist = d[tick_log.D_MIN].to_numpy(float) * 1e3
     if not lit:
         ax.plot(t, dist, color=style.GREY, lw=0.7, zorder=1)
         return
     look = style.look(backend)
-    close = _closest(d)
+    close = closest_approach(d)
     label = (
         backend
         if close is None
-        else f"{backend}: {close[1] * 1e3:.1f} mm, {close[2]}, {close[0]:.2f} s"
+        else f"{backend}: {close['distance'] * 1e3:.1f} mm, {close['key_point']} / "
+        f"{close['obstacle']}, {close['t']:.2f} s"
     )
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
     if close is not None:
-        ax.plot([close[0]], [close[1] * 1e3], **look.line(lw=0, ms=7, zorder=4, markevery=None))
+        ax.plot(
+            [close["t"]],
+            [close["distance"] * 1e3],
+            **look.line(lw=0, ms=7, zorder=4, markevery=None),
+        )
     ax.plot(
         [], [], **look.line(lw=1.0, label=label, markevery=None)
     )  # legend entry: line and marker
@@ -281,24 +243,26 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
                 files[key] = _rel(folder / f"{key}.png")
     df = results.closed_loop
     if not df.empty:
+        from .loop_figure import closed_loop_figure
+
         for (scenario, formulation), g in df.groupby(
             [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
         ):
-            key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
-            key_v = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
-            done, done_v = closed_loop_plots(
-                g, scenario, formulation, folder / f"{key}.png", folder / f"{key_v}.png"
-            )
-            if done:
-                files[key] = _rel(folder / f"{key}.png")
-            if done_v:
-                files[key_v] = _rel(folder / f"{key_v}.png")
-            key_d = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
-            if done and keypoint_plot(g, scenario, formulation, folder / f"{key_d}.png"):
-                files[key_d] = _rel(folder / f"{key_d}.png")
-            files.update(
-                {k: _rel(p) for k, p in write_snapshots(g, scenario, formulation, folder).items()}
-            )
+            logs, d_safe = _logs(g)
+            name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
+            if logs:
+                path = folder / f"closed_loop_{name}.png"
+                closed_loop_figure(logs, path, title=f"Closed loop, {where}", d_safe=d_safe)
+                files[f"closed_loop_{name}"] = _rel(path)
+                path = folder / f"closed_loop_v_{name}.png"
+                if velocity_plot(logs, f"Joint velocities, {where}", path):
+                    files[f"closed_loop_v_{name}"] = _rel(path)
+                path = folder / f"closed_loop_d_{name}.png"
+                title = f"Closest key point to an obstacle, {where}"
+                if distance_plot(logs, title, path, d_safe):
+                    files[f"closed_loop_d_{name}"] = _rel(path)
+            snapshots = write_snapshots(g, scenario, formulation, folder)
+            files.update({k: _rel(p) for k, p in snapshots.items()})
     remove_unlinked(folder, files.values(), relative_to)
     return files
 
@@ -310,11 +274,8 @@ FIGURE_PATTERN = re.compile(r"(perf_profile|per_tick|closed_loop|snapshot)_[A-Za
 def remove_unlinked(
     folder: str | Path, linked: Iterable[str], relative_to: str | Path
 ) -> list[Path]:
-    """Remove the figures of a previous report in ``folder`` that the new one does not link.
-
-    Only files named as :func:`write_plots` names its figures
-    (:data:`FIGURE_PATTERN`) are removed; any other file stays. Returns them.
-    """
+    """Remove (and return) the figures of a previous report in ``folder`` the new one does not
+    link; only files named as :func:`write_plots` names them (:data:`FIGURE_PATTERN`)."""
     keep = {(Path(relative_to) / p).resolve() for p in linked}
     removed = []
     for path in sorted(Path(folder).iterdir()):

@@ -1,17 +1,8 @@
-"""The report's pictures of the arm: one snapshot per scenario for two backends, side by side.
-
-Of each scenario's closed-loop runs (one formulation at a time) the report
-draws (:func:`qpbench.report.arm.draw_snapshot`):
-
-- the *fastest exact backend*: a QP solver (not the network, not the
-  pseudo-inverse, which ignores the inequalities), whose run ended ``ok``
-  and lasted its whole duration, with the smallest median solve time;
-- the *network*: ``rnn-tuned``, else ``rnn``, else any other network backend.
-
-Each from its run's tick log, or its figure log (:mod:`qpbench.sim.figure_log`)
-when the tick log is absent. Keys of the returned mapping:
-``snapshot_<role>_<scenario>_<formulation>``, ``role`` ``exact`` or ``network``.
-"""
+"""The report's pictures of the arm (:func:`qpbench.report.arm.draw_snapshot`): per scenario
+and formulation, the *fastest exact backend* (a QP solver, neither the network nor the
+pseudo-inverse, whose run ended ``ok`` and whole, with the smallest median solve time) and the
+*network* (``rnn-tuned``, else ``rnn``, else another), from each run's tick or figure log.
+Keys: ``snapshot_<role>_<scenario>_<formulation>``."""
 
 from __future__ import annotations
 
@@ -53,7 +44,7 @@ def _is_exact(backend: str) -> bool:
 
 
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
-    """Of one scenario's runs (one formulation), the row of each role that has one (see the module docstring)."""
+    """Of one scenario's runs (one formulation), the row of each role that has one."""
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
     whole = (

@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..exceptions import InputError
+from ..report.inputs import CSV_ERRORS, expand_paths
 from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
 
@@ -85,8 +86,6 @@ def is_sweep_csv(path: Path) -> bool:
 
 def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
     """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
-    from ..report.inputs import expand_paths
-
     files = expand_paths(paths)
     sweeps = [p for p in files if p.suffix == ".csv" and is_sweep_csv(p)]
     return [p for p in files if p not in sweeps], sweeps
@@ -95,7 +94,7 @@ def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
 def _read(path: Path) -> pd.DataFrame:
     try:
         df = pd.read_csv(path, keep_default_na=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
+    except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
     df = df.drop_duplicates(["instance", "backend"], keep="last")
     df["verdict"] = df["verdict"].fillna("").astype(str)
