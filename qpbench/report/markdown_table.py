@@ -75,13 +75,14 @@ def md_table(header: list[str], rows: list[list], pad: bool = False, left=1) -> 
 
 @dataclass(frozen=True)
 class Column:
-    """A typed table column: ``header``, the record ``key`` it shows, times ``scale`` when it is
-    a number (``None``: as it is), or ``cell(record)`` when it is computed; ``text`` columns are
-    left-aligned."""
+    """A typed table column: ``header``, the record ``key`` it shows, as it is or, a number,
+    times ``scale`` and printed with the format spec ``form`` (``-`` when not finite; default:
+    :func:`fmt`); or ``cell(record)`` when computed. ``text`` columns are left-aligned."""
 
     header: str
     key: str | None = None
     scale: float | None = None
+    form: str | None = None
     cell: Callable[[dict], object] | None = None
     text: bool = False
 
@@ -89,12 +90,15 @@ class Column:
         if self.cell is not None:
             return self.cell(record)
         value = record[self.key]
-        if self.scale is None:
+        if self.scale is None and self.form is None:
             return value
         try:
-            return float(value) * self.scale
+            v = float(value) * (1.0 if self.scale is None else self.scale)
         except (TypeError, ValueError):
             return math.nan
+        if self.form is None:
+            return v
+        return f"{v:{self.form}}" if math.isfinite(v) else "-"
 
 
 def titled(title: str, header: list[str], rows: list[list], **kw) -> list[str]:

@@ -5,7 +5,7 @@ Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<grou
 backend's run, :mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities),
 ``closed_loop_d_...`` (closest key point against ``d_safe``), ``snapshot_<role>_...`` (the
 arm, :mod:`.snapshots`). Closed-loop figures read each run's tick log, else its figure log
-(:func:`.logs.read_log`). Figures of a previous report this one no longer links are removed.
+(:func:`.snapshots.read_log`). Figures of a previous report this one no longer links are removed.
 """
 
 from __future__ import annotations
@@ -22,9 +22,8 @@ from ..sim import log as tick_log
 from . import style, tables
 from .arm import closest_approach
 from .inputs import Results, scenario_key
-from .logs import read_log
 from .markdown_table import slug
-from .snapshots import write_snapshots
+from .snapshots import read_log, write_snapshots
 
 if TYPE_CHECKING:
     from collections.abc import Iterable

@@ -12,10 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .logs import log_file, read_log
 from .markdown_table import slug
 
-__all__ = ["ROLES", "snapshot_runs", "write_snapshots"]
+__all__ = ["ROLES", "log_file", "read_log", "snapshot_runs", "write_snapshots"]
 
 log = logging.getLogger("qpbench.report")
 
@@ -23,6 +22,30 @@ log = logging.getLogger("qpbench.report")
 ROLES = {"exact": "fastest exact backend", "network": "network"}
 #: Network backends in order of preference.
 NETWORKS = ("rnn-tuned", "rnn")
+
+
+def log_file(path: str | Path) -> str | None:
+    """A run's tick log; else its figure log (:mod:`qpbench.sim.figure_log`); else ``None``."""
+    from ..sim.figure_log import figure_log_path
+
+    if not isinstance(path, str) or not path:
+        return None
+    if Path(path).exists():
+        return path
+    compact = figure_log_path(path)
+    return str(compact) if compact.exists() else None
+
+
+def read_log(path: str | Path) -> pd.DataFrame | None:
+    """The frame of :func:`log_file` (``None``: no log, or a damaged one, with a warning)."""
+    path = log_file(path)
+    if path is None:
+        return None
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - a damaged log only loses its curve
+        log.warning("%s: cannot read tick log (%s)", path, exc)
+        return None
 
 
 def _family(backend: str) -> str:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..report.markdown_table import Column, table
+from ..report.markdown_table import US, Column, table
 from .fit import crossing, extrapolated_crossing, first_above, fit_power_law
 
 __all__ = ["TICK_S", "is_scaling_dir", "write_scaling_report"]
@@ -183,34 +183,29 @@ def _scaling_series(ax, g: pd.DataFrame, xcol: str, b: str, lit: bool, fit) -> N
         ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=3 if lit else 1)
 
 
-def _us(header: str, key: str) -> Column:
-    """Seconds shown in [us], one decimal, thousands separated."""
-
-    def cell(r) -> str:
-        v = r[key]
-        return "-" if v is None or not math.isfinite(v) else f"{v * 1e6:,.1f}"
-
-    return Column(header, cell=cell)
-
-
-def _int(header: str, key: str) -> Column:
-    return Column(header, cell=lambda r: int(r[key]))
-
-
 def _text(key: str) -> Column:
     return Column(key, key, text=True)
+
+
+def _over(stat: str) -> Column:
+    """The first size whose ``stat`` tick is over 1 ms, and the largest such tick [us]."""
+    return Column(
+        f"{stat} tick over 1 ms from",
+        cell=lambda r: f"{r[stat]} (largest {r[f'largest {stat}'] * US:,.0f})",
+        text=True,
+    )
 
 
 #: The tables of ``scaling.md``, as typed columns of the rows they show.
 SIZE_COLUMNS = (
     _text("size"),
     _text("axis"),
-    _int("variables", "n"),
-    _int("key points", "key_points"),
-    _int("cloud points", "cloud_points"),
-    Column("rows", cell=lambda r: f"{int(r['rows']):,}"),
-    _us("build p50 [us]", "build_median_s"),
-    _us("build p99 [us]", "build_p99_s"),
+    Column("variables", "n"),
+    Column("key points", "key_points"),
+    Column("cloud points", "cloud_points"),
+    Column("rows", "rows", form=",.0f"),
+    Column("build p50 [us]", "build_median_s", US, ",.1f"),
+    Column("build p99 [us]", "build_p99_s", US, ",.1f"),
 )
 SLOPE_COLUMNS = (
     _text("backend"),
@@ -218,32 +213,14 @@ SLOPE_COLUMNS = (
     Column("slope vs variables (arm axis)", "arm"),
     Column("slope vs rows (cloud axis)", "cloud"),
 )
-DEADLINE_COLUMNS = (
-    _text("backend"),
-    _text("axis"),
-    Column(
-        "p99 tick over 1 ms from",
-        cell=lambda r: f"{r['p99']} (largest {r['largest p99'] * 1e6:,.0f})",
-        text=True,
-    ),
-    Column(
-        "median tick over 1 ms from",
-        cell=lambda r: f"{r['median']} (largest {r['largest median'] * 1e6:,.0f})",
-        text=True,
-    ),
-)
+DEADLINE_COLUMNS = (_text("backend"), _text("axis"), _over("p99"), _over("median"))
 ROW_COLUMNS = (
     _text("size"),
     _text("backend"),
-    _us("median [us]", "time_median_s"),
-    _us("p99 [us]", "time_p99_s"),
-    Column(
-        "success %",
-        cell=lambda r: (
-            f"{100 * r['success_rate']:.0f}" if math.isfinite(r["success_rate"]) else "-"
-        ),
-    ),
-    Column("gap max", cell=lambda r: f"{r['gap_max']:.1e}" if math.isfinite(r["gap_max"]) else "-"),
+    Column("median [us]", "time_median_s", US, ",.1f"),
+    Column("p99 [us]", "time_p99_s", US, ",.1f"),
+    Column("success %", "success_rate", 100.0, ".0f"),
+    Column("gap max", "gap_max", form=".1e"),
     Column(
         "status",
         cell=lambda r: r["status"] if r["status"] == "measured" else f"skipped: {r['skip_reason']}",

@@ -43,8 +43,10 @@ ECDF_PANELS = (
     ("solve_time_p99_s", "p99 solve time [us]", 1e6, "p99 solve p50 us"),
 )
 RATE_HEADER = ["backend", "runs", "invalid instances", "ok", *RATED, "of which error/crashed"]
-PAIRED_HEADER = ["A", "B", "instances", "both ok", "A ok, B not", "B ok, A not", "neither"]
-PAIRED_HEADER.append("p (McNemar)")
+PAIRED_HEADER = [
+    *("A", "B", "instances", "both ok"),
+    *("A ok, B not", "B ok, A not", "neither", "p (McNemar)"),
+]
 QUANTILE_HEADER = [
     "backend",
     *(h for *_, median in ECDF_PANELS for h in (median, "p90", "max")),
