@@ -11,6 +11,7 @@ forces in [N]; a backend with rows solved in a worker process is marked with a d
 from __future__ import annotations
 
 import datetime
+from operator import attrgetter
 
 import pandas as pd
 
@@ -24,6 +25,22 @@ from .recommend import opening
 
 #: Mark of a backend with rows solved in a worker process.
 ISOLATED_MARK = "\u2020"
+
+
+#: The profiles table: settings asked of every backend and success tolerances.
+PROFILE_COLUMNS = tuple(
+    Column(header, cell=attrgetter(attribute), text=header == "profile")
+    for header, attribute in (
+        ("profile", "name"),
+        ("eps_abs", "eps_abs"),
+        ("eps_rel", "eps_rel"),
+        ("max_iter", "max_iter"),
+        ("time limit (s)", "time_limit"),
+        ("primal tol", "tolerance.primal"),
+        ("dual tol", "tolerance.dual"),
+        ("gap tol", "tolerance.gap"),
+    )
+)
 
 
 def _records(frame: pd.DataFrame, names: dict[str, str]) -> list[dict]:
@@ -302,34 +319,7 @@ def render(
         profiles_used = sorted(set(results.bench["profile"].astype(str)))
         lines.append("## Profiles\n")
         lines.append("Settings asked of every backend and success tolerances:\n")
-        lines.append(
-            md_table(
-                [
-                    "profile",
-                    "eps_abs",
-                    "eps_rel",
-                    "max_iter",
-                    "time limit (s)",
-                    "primal tol",
-                    "dual tol",
-                    "gap tol",
-                ],
-                [
-                    [
-                        p.name,
-                        p.eps_abs,
-                        p.eps_rel,
-                        p.max_iter,
-                        p.time_limit,
-                        p.tolerance.primal,
-                        p.tolerance.dual,
-                        p.tolerance.gap,
-                    ]
-                    for n, p in PROFILES.items()
-                    if n in profiles_used
-                ],
-            )
-        )
+        lines += table(PROFILE_COLUMNS, [p for n, p in PROFILES.items() if n in profiles_used])
     if not results.closed_loop.empty:
         lines.extend(closed_loop_section(results, plot_files))
     return "\n".join(lines)
