@@ -63,13 +63,9 @@ def figure_progress(folder: Path, every_s: float = 5.0):
 
 
 def publish(out: str | Path, name: str, force: bool, render: Callable[[Path], str]) -> Path:
-    """The one write of a report folder: ``out`` is checked (its parent must exist) and so is
-    ``out/name`` (refused when it exists, unless ``force``); ``render(out)`` draws the figures
-    into ``out`` and returns the text, written last, atomically, to ``out/name``.
-
-    Raises:
-        OutputExistsError: ``out/name`` exists and ``force`` is false.
-    """
+    """The one write of a report folder: check ``out`` (its parent must exist) and ``out/name``
+    (refused when it exists, unless ``force``); ``render(out)`` draws the figures into ``out``
+    and returns the text, written last and atomically to ``out/name``."""
     from ..atomic import check_folder, check_output, write_text
 
     out = Path(out)
@@ -93,11 +89,8 @@ def write_report(
 ) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 
-    Args:
-        sections: ``sections(out, plots) -> markdown lines`` appended after the tables (the
-            sweep section of :mod:`qpbench.sweep.report`); with it, ``paths`` may be empty.
-        prefer: Which file's row to keep for a key in several bench CSVs (``first``/``last``;
-            ``None``: refuse), see :func:`qpbench.report.inputs.read_results`.
+    ``sections(out, plots)``: markdown lines appended after the tables (the sweep section);
+    with it, ``paths`` may be empty. ``prefer``: see :func:`qpbench.report.inputs.read_results`.
 
     Raises:
         InputError: a path is missing or not a result CSV, a duplicate key or mixed repeat

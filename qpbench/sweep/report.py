@@ -156,6 +156,7 @@ def paired_rows(df: pd.DataFrame) -> list[list]:
 
 
 def _quantile_rows(df: pd.DataFrame) -> list[list]:
+    """Per backend, over the runs with a result: median, p90 and max of each ECDF's figure."""
     out = []
     for backend, g in df[df["status"] == "ok"].groupby("backend", sort=True):
         row = [backend]
@@ -185,23 +186,10 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
             if r["verdict"] == "ok":
                 continue
             path = Path(r["folder"]) / str(r["instance_file"])
-            reasons = (
-                r["verdict_reasons"]
-                if isinstance(r["verdict_reasons"], str)
-                else r.get("error", "")
-            )
-            out.append(
-                [
-                    backend,
-                    r["instance"],
-                    r["verdict"],
-                    r["min_obstacle_distance"] * 1e3
-                    if pd.notna(r["min_obstacle_distance"])
-                    else None,
-                    str(reasons)[:160],
-                    f"`qpbench simulate --scenario {path} --backend {backend}`",
-                ]
-            )
+            why = r["verdict_reasons"] if isinstance(r["verdict_reasons"], str) else r["error"]
+            rerun = f"`qpbench simulate --scenario {path} --backend {backend}`"
+            distance = r["min_obstacle_distance"] * 1e3
+            out.append([backend, r["instance"], r["verdict"], distance, str(why)[:160], rerun])
     return out
 
 
