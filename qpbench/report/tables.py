@@ -37,14 +37,12 @@ if TYPE_CHECKING:
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
 SHIFT = 10.0
 
-#: Metrics whose mean means nothing without a found solution (NaN for a backend with none).
-FOUND_ONLY_METRICS = ("primal_residual", "dual_residual", "duality_gap", "optimality_gap")
-
 
 #: The runtime column of bench rows [s].
 RUNTIME = "wall_time_min_s"
 #: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?): the
-#: columns of the report's summary tables.
+#: columns of the report's summary tables; a floored mean means nothing without a found
+#: solution (NaN for a backend with none).
 SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
     "runtime": (RUNTIME, "runtime", False),
     "primal_residual": ("primal_residual", "primal", True),
@@ -52,14 +50,6 @@ SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
     "duality_gap": ("duality_gap", "gap", True),
     "optimality_gap": ("optimality_gap", "gap", True),
 }
-
-
-def profile_tolerance(profile: str, path: str | None = None) -> Tolerance:
-    """The success thresholds of a profile named in a CSV's ``profile`` column."""
-    try:
-        return get_profile(str(profile)).tolerance
-    except InputError as exc:
-        raise InputError(exc.message, path=path, key="profile") from None
 
 
 def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.ndarray:
@@ -102,7 +92,10 @@ def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataF
         return
     df = bench.assign(mode=bench["mode"].fillna(""))
     for (profile, mode), rows in df.groupby(["profile", "mode"], sort=True):
-        tolerance = profile_tolerance(profile, rows["source"].iloc[0])
+        try:
+            tolerance = get_profile(str(profile)).tolerance
+        except InputError as exc:
+            raise InputError(exc.message, path=rows["source"].iloc[0], key="profile") from None
         yield group_label(profile, mode or None), tolerance, rows
 
 
@@ -132,7 +125,7 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
             "isolated": int(g["isolated"].sum()),
         }
         for metric in SHGEOM_METRICS:
-            if metric in FOUND_ONLY_METRICS and not found:
+            if SHGEOM_METRICS[metric][2] and not found:
                 rec[metric] = math.nan
             else:
                 rec[metric] = shgeom_of(metric_values(g, metric, tolerance))
