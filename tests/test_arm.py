@@ -21,7 +21,7 @@ def wall_run():
 
 def test_closest_approach_is_the_summarys(wall_run):
     scenario, run = wall_run
-    close = closest_approach(run.log, scenario)
+    close = closest_approach(run.log)
     assert close["distance"] == pytest.approx(run.summary["min_obstacle_distance"], abs=1e-12)
     assert close["key_point"] == run.summary["min_obstacle_distance_key_point"]
     assert close["obstacle"] == run.summary["min_obstacle_distance_obstacle"]
@@ -31,7 +31,7 @@ def test_closest_approach_is_the_summarys(wall_run):
 def test_closest_approach_without_obstacles():
     scenario = load_scenario("free").with_overrides(duration=0.05)
     run = simulate(scenario, "qpsolvers:daqp")
-    assert closest_approach(run.log, scenario) is None
+    assert closest_approach(run.log) is None
 
 
 def test_snapshot_is_an_image(wall_run, tmp_path):

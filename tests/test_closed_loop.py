@@ -123,7 +123,7 @@ def test_a_row_is_the_summary_under_the_table_names(table_dir):
 
 
 def test_structured_cells_are_json_and_the_report_reads_them_back(table_dir):
-    from qpbench.report.tables import read_results
+    from qpbench.report.inputs import read_results
 
     out, _ = table_dir
     text = (out / cl.CSV_NAME).read_text()

@@ -9,10 +9,11 @@ import math
 
 import pandas as pd
 import pytest
-from test_report import parse_tables
+from test_report import every_column, parse_tables
 
 from qpbench.cli import main
 from qpbench.commands.options import strict_exit
+from qpbench.harness.loop_rows import COLUMNS as LOOP_COLUMNS
 from qpbench.report import recommend as rec
 from qpbench.report.markdown_table import md_table
 
@@ -275,7 +276,7 @@ def closed_loop_csv(tmp_path):
         ]
     )
     path = tmp_path / "closed_loop.csv"
-    table.to_csv(path, index=False)
+    every_column(table, LOOP_COLUMNS).to_csv(path, index=False)
     return path, table
 
 

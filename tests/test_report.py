@@ -19,6 +19,8 @@ import pandas as pd
 import pytest
 
 from qpbench.cli import main
+from qpbench.harness.loop_rows import COLUMNS as LOOP_COLUMNS
+from qpbench.harness.results import bench_columns
 from qpbench.profiles import get_profile
 from qpbench.report import tables
 
@@ -84,6 +86,11 @@ def assert_close(shown: str, expected: float, what: str) -> None:
         )
 
 
+def every_column(df: pd.DataFrame, written: tuple[str, ...]) -> pd.DataFrame:
+    """``df`` with every column the program writes (those it does not set: empty)."""
+    return df.reindex(columns=[*df.columns, *(c for c in written if c not in df.columns)])
+
+
 def synthetic_bench(rng: np.random.Generator, n_ticks: int = 30) -> pd.DataFrame:
     rows = []
     tol = get_profile("default").tolerance
@@ -132,10 +139,11 @@ def synthetic_bench(rng: np.random.Generator, n_ticks: int = 30) -> pd.DataFrame
                         wall_time_median_s=wall,
                         solver_time_s=wall * 0.8 if j != 2 else None,
                         iterations=10,
+                        isolated=False,
                         error="",
                     )
                 )
-    return pd.DataFrame(rows)
+    return every_column(pd.DataFrame(rows), bench_columns())
 
 
 def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
@@ -222,7 +230,7 @@ def synthetic_closed_loop(folder: Path, rng: np.random.Generator) -> Path:
         )
     )
     path = folder / "closed_loop.csv"
-    pd.DataFrame(rows).to_csv(path, index=False)
+    every_column(pd.DataFrame(rows), LOOP_COLUMNS).to_csv(path, index=False)
     return path
 
 
@@ -391,7 +399,8 @@ def test_closed_loop_tables_equal_csv(report_dir):
         scenario = re.match(r"Scenario (\S+) ", t["headings"][3]).group(1)
         for r in t["rows"]:
             csv_row = cl[(cl["scenario"] == scenario) & (cl["backend"] == r[0])].iloc[0]
-            for (head, column, scale), shown in zip(CLOSED_LOOP_TABLE, r[1:]):
+            for col, shown in zip(CLOSED_LOOP_TABLE, r[1:]):
+                head, column, scale = col.header, col.key, col.scale
                 assert head in t["header"]
                 if column == "min_body_where":  # link, obstacle and time of three columns
                     where = (
@@ -424,11 +433,10 @@ def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
     ]
     assert [r[4] for r in tabs[0]["rows"][:-1]] == list(bad["verdict_reasons"])[:-1]
     assert "| incomplete | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
-    # a table of runs that are all ok says so, and an older table without verdicts has no such list
+    # a table of runs that are all ok says so
     from qpbench.report.markdown_closed_loop import failed_verdicts
 
     assert failed_verdicts(cl[cl["verdict"] == "ok"]) == ["Every run's verdict is ok.\n"]
-    assert failed_verdicts(cl.drop(columns=["verdict", "verdict_reasons"])) == []
 
 
 def test_report_refuses_overwrite_and_bad_input(report_dir, tmp_path, capsys):
@@ -453,8 +461,9 @@ def test_performance_profile_known_values():
     rows = pd.DataFrame(
         {
             "problem": ["p1", "p1", "p2", "p2", "p3", "p3"],
+            "scenario": [None] * 6,
             "backend": ["a", "b"] * 3,
-            "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6, 5e-6, 1e-6],
+            "wall_time_min_s": [1e-6, 2e-6, 4e-6, 2e-6, 5e-6, 1e-6],
             "success": [True, True, True, True, False, True],
         }
     )
@@ -469,7 +478,7 @@ def test_same_problem_name_in_two_scenarios_kept_apart():
             "problem": ["p", "p", "p", "p"],
             "scenario": ["s1", "s1", "s2", "s2"],
             "backend": ["a", "b", "a", "b"],
-            "wall_time_median_s": [1e-6, 2e-6, 4e-6, 2e-6],
+            "wall_time_min_s": [1e-6, 2e-6, 4e-6, 2e-6],
             "success": [True] * 4,
         }
     )

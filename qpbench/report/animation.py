@@ -1,12 +1,6 @@
-"""The arm's run as an animation: the scene of :mod:`qpbench.report.arm` frame by frame.
-
-:func:`animate` renders a closed-loop run to a GIF (Pillow, which matplotlib
-requires) or an MP4 (when ``ffmpeg`` is on the PATH): the arm, its key points,
-the end-effector trace in the backend's look (:mod:`qpbench.report.style`),
-the obstacles where they are at each frame, and a time stamp outside the
-workspace, red while a key point is closer than ``d_safe``. It reads the tick
-log of :func:`qpbench.sim.loop.simulate` and the scenario; lengths in metres.
-"""
+"""The arm's run as an animation (GIF, or MP4 with ``ffmpeg``): the scene of :mod:`.arm` frame
+by frame, with a time stamp outside the workspace, red while a key point is closer than
+``d_safe``."""
 
 from __future__ import annotations
 
@@ -69,27 +63,17 @@ def animate(
     dpi: int = 70,
     backend: str | None = None,
 ) -> Path:
-    """Render the run as an animation: GIF (Pillow) or MP4 (needs ``ffmpeg`` on the PATH).
+    """Render the tick log of a run of ``scenario`` to ``path`` (``.gif`` or ``.mp4``); return it.
 
-    Args:
-        scenario: The scenario the log was simulated from.
-        log: The tick log.
-        path: ``.gif`` or ``.mp4``.
-        fps: Frames per second of the file.
-        speed: Simulated seconds per second of animation (2.0: twice as fast as real time).
-        progress: Show a progress bar (stderr).
-        title: Title prefix (default: the scenario's name).
-        dpi: Resolution; the default keeps a 20 s GIF at about 1-2 MB.
-        backend: The backend of the run: its end-effector trace in the backend's look
-            (:func:`qpbench.report.style.look`); ``None``: dark grey.
-
-    Returns:
-        ``path``.
+    ``speed``: simulated seconds per second of animation; ``backend``: the run's backend, whose
+    look its end-effector trace takes (``None``: dark grey).
 
     Raises:
         ParamError: an unknown suffix, ``.mp4`` without ffmpeg, or a non-positive ``fps``/``speed``.
     """
     from matplotlib import animation
+
+    from ..sim.log import distance_columns
 
     plt = style.pyplot()
     path = Path(path)
@@ -101,7 +85,7 @@ def animate(
     frames = _frame_ticks(t, scenario.dt, fps, speed)
     xlim, ylim = scene.view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
-    dcols = _distance_columns(log)
+    dcols = distance_columns(log)
 
     # equal axes: the frame's height follows the view's proportions
     high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
@@ -136,14 +120,8 @@ def animate(
     return path
 
 
-def _distance_columns(log: pd.DataFrame) -> list[str]:
-    from ..sim.log import distance_columns
-
-    return distance_columns(log)
-
-
 def _check_animation(path: Path, fps: float, speed: float) -> None:
-    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
+    """Reject an animation :func:`animate` cannot write."""
     from ..exceptions import ParamError
 
     suffix = path.suffix.lower()

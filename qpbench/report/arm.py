@@ -1,28 +1,13 @@
 """Pictures of the arm in its workspace, as the paper's figures show it first.
 
-:func:`draw_snapshot` draws a closed-loop run on one figure: the arm at several
-instants (stick figures, fading from pale at the start to solid at the end),
-its key points, the obstacles at the last drawn instant (lines, segments,
-disks, point clouds; moving ones also as a faint trace of where they started),
-the contact surface, the desired and the actual end-effector paths, and the
-closest approach of a key point to an obstacle, ringed; below, when the
-scenario has obstacles, the closest key point's distance against ``d_safe``
-over time, on the report's distance axis
-(:func:`qpbench.report.loop_figure.distance_axis`).
-
-The same scene frame by frame is :func:`qpbench.report.animation.animate`, drawn with this
-module's pieces (:func:`frame_parts`, :func:`view`, :func:`draw_obstacles`, ...).
-
-Both follow :mod:`qpbench.report.style`: the run's backend is the one coloured
-thing (its end-effector path, and its distance line, in the backend's look, as
-in every other figure); the arm, its key points and the obstacles are neutral
-greys, the contact surface green, and red means closer than ``d_safe``; the
-legend and the time stamp sit outside the workspace; the snapshot is written by
-:func:`qpbench.report.style.save`.
-
-Both read only the tick log of :func:`qpbench.sim.loop.simulate` (columns
-``t``, ``theta_i``, ``ee_x``, ``ee_y``, ``xd_x``, ``xd_y``, ``d_<A>_<obstacle>``)
-and the scenario; lengths are in metres, drawn with equal axes.
+:func:`draw_snapshot` draws a closed-loop run on one figure: the arm at several instants
+(fading from pale to solid), its key points, the obstacles at the last instant (moving ones
+also faint where they started), the contact surface, the desired and actual end-effector
+paths, the closest approach of a key point to an obstacle ringed; below, the closest key
+point's distance against ``d_safe`` over time. :mod:`.animation` draws the same scene frame by
+frame with these pieces. The backend's look is the one colour naming a backend; the arm and
+the obstacles are greys, the surface green, red means closer than ``d_safe``. Lengths in [m],
+equal axes; read from the tick log of :func:`qpbench.sim.loop.simulate` and the scenario.
 """
 
 from __future__ import annotations
@@ -70,13 +55,9 @@ def thetas(log, n: int) -> np.ndarray:
     return log[[f"theta_{i}" for i in range(n)]].to_numpy(dtype=float)
 
 
-def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
-    """Where and when a key point came closest to an obstacle.
-
-    Returns ``{"t", "k", "key_point", "obstacle", "distance"}`` (distance in
-    [m] from the link's surface, ``k`` the tick index), or ``None`` when the
-    scenario has no obstacle.
-    """
+def closest_approach(log: pd.DataFrame) -> dict | None:
+    """Where and when a key point came closest to an obstacle: ``{"t", "k" (tick index),
+    "key_point", "obstacle", "distance" [m]}``; ``None`` without obstacles."""
     from ..sim.log import distance_columns
 
     cols = distance_columns(log)
@@ -85,8 +66,7 @@ def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
     D = log[cols].to_numpy(dtype=float)
     if not np.isfinite(D).any():
         return None
-    flat = int(np.nanargmin(D))
-    k, c = divmod(flat, D.shape[1])
+    k, c = divmod(int(np.nanargmin(D)), D.shape[1])
     _, key, obstacle = cols[c].split("_", 2)
     return {
         "t": float(log["t"].iloc[k]),
@@ -98,7 +78,7 @@ def closest_approach(log: pd.DataFrame, scenario: Scenario) -> dict | None:
 
 
 def _instants(t: np.ndarray, count: int) -> np.ndarray:
-    """Ticks nearest to ``count`` times evenly spaced over ``t`` (a decimated log's ticks are not evenly spaced)."""
+    """Ticks nearest to ``count`` times evenly spaced over ``t`` (a decimated log's are not)."""
     if len(t) < 2:
         return np.zeros(len(t), dtype=int)
     count = max(2, min(int(count), len(t)))
@@ -109,11 +89,9 @@ def _instants(t: np.ndarray, count: int) -> np.ndarray:
 
 
 def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Axis limits [m] around what the run shows: the arm's joints at every drawn tick (400 at
-    most, evenly spread), the base, both end-effector paths, the nearest point of each line
-    obstacle and of the surface to the base, and the disks, segments and clouds within twice
-    the arm's reach; with a margin. (A box of the arm's whole reach left most of the picture
-    empty.)"""
+    """Axis limits [m] around what the run shows: the arm's joints (400 ticks at most), the
+    base, both end-effector paths, the nearest point of each line and of the surface to the
+    base, the disks, segments and clouds within twice the arm's reach; with a margin."""
     reach = float(np.sum(arm.lengths))
     theta = thetas(log, arm.n)
     every = max(1, len(theta) // 400)
@@ -144,14 +122,14 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
 
 
 def _foot(point, normal) -> np.ndarray:
-    """The point of the line through ``point`` perpendicular to ``normal`` nearest the base (the origin)."""
+    """The point of the line through ``point`` perpendicular to ``normal`` nearest the origin."""
     point, normal = np.asarray(point, float), np.asarray(normal, float)
     normal = normal / np.linalg.norm(normal)
     return normal * float(normal @ point)
 
 
 def draw_line(ax, point, normal, xlim, ylim, **line) -> None:
-    """The line through ``point`` perpendicular to ``normal``, clipped to the view; hatched on the far side."""
+    """The line through ``point`` perpendicular to ``normal``, its solid side lightly filled."""
     tangent = np.array([-normal[1], normal[0]])
     span = 4.0 * max(xlim[1] - xlim[0], ylim[1] - ylim[0])
     a, b = point - span * tangent, point + span * tangent
@@ -173,17 +151,8 @@ def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> 
         if kind == "LineObstacle":
             if faint and not np.any(ob.velocity):
                 continue
-            draw_line(
-                ax,
-                ob.point + shift,
-                ob.normal,
-                xlim,
-                ylim,
-                color=OBSTACLE,
-                lw=2,
-                alpha=alpha,
-                label=label,
-            )
+            line = dict(color=OBSTACLE, lw=2, alpha=alpha, label=label)
+            draw_line(ax, ob.point + shift, ob.normal, xlim, ylim, **line)
         elif kind == "SegmentObstacle":
             a, b = ob.a + shift, ob.b + shift
             ax.plot(
@@ -197,16 +166,7 @@ def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> 
             )
         elif kind == "DiskObstacle":
             c = ob.center + shift
-            ax.add_patch(
-                Circle(
-                    c,
-                    ob.radius,
-                    facecolor=OBSTACLE,
-                    edgecolor=OBSTACLE,
-                    alpha=0.35 * alpha,
-                    label=label,
-                )
-            )
+            ax.add_patch(Circle(c, ob.radius, color=OBSTACLE, alpha=0.35 * alpha, label=label))
         elif kind == "PointCloudObstacle":
             pts = ob.points + shift
             ax.scatter(pts[:, 0], pts[:, 1], s=6, color=OBSTACLE, alpha=alpha, label=label)
@@ -223,15 +183,17 @@ def workspace_axes(ax, xlim, ylim) -> None:
 
 
 def frame_parts(scenario):
-    arm = scenario.make_arm()
-    keys = scenario.make_key_points()
-    surface = scenario.make_surface()
-    obstacles = scenario.make_obstacles()
-    return arm, keys, surface, obstacles
+    """The scene's arm, key points, surface and obstacles."""
+    return (
+        scenario.make_arm(),
+        scenario.make_key_points(),
+        scenario.make_surface(),
+        scenario.make_obstacles(),
+    )
 
 
 def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
-    """The arm and its key points at ticks ``idx``, paler the earlier; the last pose's key points named."""
+    """The arm and its key points at ticks ``idx``, paler the earlier; the last one's named."""
     for j, k in enumerate(idx):
         shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
         p = arm.joint_positions(theta[k])
@@ -264,7 +226,7 @@ def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
 
 
 def _name_key_points(ax, names, points) -> None:
-    """Each key point's name beside it, on a white halo so that links behind it do not hide it."""
+    """Each key point's name beside it, on a white halo (links behind it do not hide it)."""
     from matplotlib import patheffects
 
     halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
@@ -282,17 +244,10 @@ def _name_key_points(ax, names, points) -> None:
 
 
 def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
-    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look: its
-    colour and line style, its marker in the legend), and the arm's base."""
-    ax.plot(
-        log["xd_x"],
-        log["xd_y"],
-        ":",
-        color="0.35",
-        lw=1.3,
-        label="desired end-effector path",
-        zorder=2,
-    )
+    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look), and
+    the arm's base."""
+    desired = dict(color="0.35", lw=1.3, label="desired end-effector path", zorder=2)
+    ax.plot(log["xd_x"], log["xd_y"], ":", **desired)
     look = backend_look(backend)
     ax.plot(
         log["ee_x"],
@@ -308,7 +263,7 @@ def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
 
 def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys, theta) -> None:
     """Ring the key point at its closest approach to an obstacle, red when closer than d_safe."""
-    close = closest_approach(log, scenario)
+    close = closest_approach(log)
     if close is None or close["key_point"] not in keys.names:
         return
     a = list(keys.names).index(close["key_point"])
@@ -337,24 +292,13 @@ def draw_snapshot(
     title: str | None = None,
     backend: str | None = None,
 ) -> Path:
-    """Draw the run ``log`` of ``scenario`` as stick figures at ``instants`` times; save to ``path`` (PNG, SVG, PDF).
+    """Draw the tick log of a run of ``scenario`` at ``instants`` poses evenly spaced in time
+    (module docstring) into ``path`` (its suffix picks PNG, SVG or PDF); return it.
 
-    Below the workspace, when the log has the closest key point's distance
-    (``d_min``), a panel of it against ``d_safe`` over time: the report's
-    distance panel (:func:`qpbench.report.plots.distance_plot`) for this one run.
-
-    Args:
-        scenario: The :class:`~qpbench.sim.scenario.Scenario` the log was simulated from.
-        log: The tick log (:attr:`qpbench.sim.loop.SimResult.log`).
-        path: Output file; its suffix picks the format.
-        instants: Number of arm poses drawn, evenly spaced in time (first and last included).
-        title: Figure title (default: scenario name and duration).
-        backend: The backend of the run: its actual end-effector path and its distance line
-            in the backend's look (:func:`qpbench.report.style.look`); ``None``: dark grey.
-
-    Returns:
-        ``path``.
+    ``backend``: the run's backend, whose look its path and distance line take (``None``: grey).
     """
+    from .loop_figure import has_distance
+
     plt = style.pyplot()
     path = Path(path)
     arm, keys, surface, obstacles = frame_parts(scenario)
@@ -363,7 +307,7 @@ def draw_snapshot(
     ticks = len(log)
     xlim, ylim = view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
-    has_d = _has_distance(log)
+    has_d = has_distance(log)
 
     # the workspace's height follows its view's proportions (equal axes), within limits
     high = float(np.clip(WORKSPACE_IN * np.ptp(ylim) / np.ptp(xlim), 2.4, 1.3 * WORKSPACE_IN))
@@ -407,17 +351,9 @@ def _legend_beside(ax, axes) -> None:
     style.legend_beside(ax, handles, labels)
 
 
-def _has_distance(log: pd.DataFrame) -> bool:
-    from ..sim import log as tick_log
-
-    return tick_log.D_MIN in log.columns and np.isfinite(log[tick_log.D_MIN].to_numpy(float)).any()
-
-
 def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -> None:
-    """The closest key point's distance [mm] against t in the run's look (and the body's,
-    dashed, when the log has it), its closest approach ringed as in the workspace, on the
-    report's distance axis (:func:`qpbench.report.loop_figure.distance_axis`: ``d_safe``
-    and the line a run must not cross)."""
+    """The closest key point's distance [mm] against t in the run's look (the body's dashed),
+    its closest approach ringed, on the report's distance axis (:mod:`.loop_figure`)."""
     from ..sim import log as tick_log
     from .loop_figure import UNSAFE_MARGIN, distance_axis
 
@@ -429,15 +365,8 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
     if tick_log.D_BODY_MIN in log.columns:
         body = log[tick_log.D_BODY_MIN].to_numpy(float) * 1e3
         if np.isfinite(body).any():
-            ax.plot(
-                t,
-                body,
-                color=look.colour,
-                ls=(0, (2, 2)),
-                lw=0.9,
-                label=f"{name}closest point of the body [mm]",
-                zorder=2,
-            )
+            label = f"{name}closest point of the body [mm]"
+            ax.plot(t, body, color=look.colour, ls=(0, (2, 2)), lw=0.9, label=label, zorder=2)
     k = int(np.nanargmin(d))
     bad = d[k] < (d_safe - UNSAFE_MARGIN) * 1e3
     ax.scatter(

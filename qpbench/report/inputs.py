@@ -1,25 +1,15 @@
-"""Reading result CSVs for a report: which kind each is, duplicates, repeat counts.
+"""Reading result CSVs for a report: bench or closed-loop (by their columns), duplicates, repeats.
 
-Two kinds of CSV are recognised by their columns:
-
-- **bench** (``qpbench bench``): one row per (problem, backend, profile, mode);
-- **closed-loop** (``qpbench closed-loop``): one row per (scenario, backend),
-  with a ``log_file`` column naming the per-tick log beside it.
-
-Rows from several CSVs (:func:`read_results`): a result key
-``(problem, scenario, backend, profile, mode)`` present in two files is an
-error unless ``prefer`` (``first`` or ``last`` file in the order given) says
-which to keep; so is a backend whose rows in one ``(profile, mode)`` come from
-files timed with different ``repeat`` counts (the minimum of 3 solves is not
-comparable to a single shot), unless ``prefer`` is given, in which case the
-rows are kept and :attr:`Results.notes` says so.
+A result key ``(problem, scenario, backend, profile, mode)`` in two files is an error unless
+``prefer`` (``first`` or ``last`` file) says which to keep; so is a backend whose rows in one
+``(profile, mode)`` come from files timed with different ``repeat`` counts (a minimum of 3
+solves is not comparable to a single shot); with ``prefer`` they are kept, with a note.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,15 +22,10 @@ from ..sim.summary import STRUCTURED_FIGURES
 
 __all__ = ["ResultFile", "Results", "expand_paths", "group_label", "read_results", "scenario_key"]
 
-
 #: Columns that identify a bench result across CSVs.
 DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
-
-
 #: Values of ``prefer``.
 PREFER = ("first", "last")
-
-
 #: Columns that make a CSV a bench result.
 BENCH_COLUMNS = (
     "problem",
@@ -54,8 +39,14 @@ BENCH_COLUMNS = (
     "duality_gap",
     "optimality_gap",
 )
-
-
+#: What reading a damaged CSV raises.
+CSV_ERRORS = (
+    pd.errors.ParserError,
+    pd.errors.EmptyDataError,
+    UnicodeDecodeError,
+    OSError,
+    EOFError,
+)
 #: Columns that make a CSV a closed-loop result.
 CLOSED_LOOP_COLUMNS = ("scenario", "backend", "status", "log_file")
 
@@ -80,13 +71,8 @@ class Results:
     notes: list[str] = field(default_factory=list)
 
 
-def slug(text: str) -> str:
-    """File-name-safe form of a label (plot keys and file names of a report)."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
-
-
 def _from_json(text):
-    """A list- or dict-valued cell of a closed-loop CSV (JSON text) as its value; empty stays NaN."""
+    """A list- or dict-valued cell of a closed-loop CSV (JSON text) as its value."""
     if not isinstance(text, str):
         return text
     try:
@@ -99,17 +85,9 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
     if series.dtype == bool:
         return series
     # an empty cell (a row whose solve crashed) counts as false
-    mapping = {
-        "true": True,
-        "false": False,
-        "1": True,
-        "0": False,
-        "1.0": True,
-        "0.0": False,
-        "nan": False,
-        "": False,
-        "none": False,
-    }
+    mapping = dict.fromkeys(("true", "1", "1.0"), True) | dict.fromkeys(
+        ("false", "0", "0.0", "nan", "", "none"), False
+    )
     text = series.astype(str).str.strip().str.lower()
     bad = ~text.isin(list(mapping))
     if bad.any():
@@ -122,7 +100,7 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
 
 
 def expand_paths(paths: list[str | Path]) -> list[Path]:
-    """CSV files named directly, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
+    """CSV files named, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
 
     Raises:
         InputError: a path does not exist, or a folder holds no CSV.
@@ -147,17 +125,10 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
 
 
 def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
-    """Read bench and closed-loop CSVs (folders are searched for ``*.csv``).
+    """Read bench and closed-loop CSVs (folders are searched); ``prefer``: module docstring.
 
-    Closed-loop rows get ``log_path``: their ``log_file`` resolved against the
-    CSV's folder (or ``None`` when the run left no log). Bench rows get
-    ``source`` (their file).
-
-    Args:
-        paths: Files or folders.
-        prefer: ``None`` (duplicates across files and mixed ``repeat`` counts
-            are errors), ``"first"`` or ``"last"`` (keep the row of the first
-            or last file holding a key; mixed repeats are noted).
+    Rows get ``source`` (their file); closed-loop rows ``log_path``, their ``log_file``
+    resolved against the CSV's folder (``None`` when the run left no log).
 
     Raises:
         InputError: unreadable CSV, one that is neither kind (naming the file),
@@ -171,31 +142,22 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     for path in expand_paths(paths):
         try:
             df = pd.read_csv(path)
-        except (
-            pd.errors.ParserError,
-            pd.errors.EmptyDataError,
-            UnicodeDecodeError,
-            OSError,
-            EOFError,
-        ) as exc:
+        except CSV_ERRORS as exc:
             raise InputError(f"not a readable CSV ({exc})", path=path) from None
         cols = set(df.columns)
+        df["source"] = str(path)
         if set(BENCH_COLUMNS) <= cols:
             df["found"] = _as_bool(df["found"], path, "found")
             df["success"] = _as_bool(df["success"], path, "success")
-            if "isolated" in cols:
-                df["isolated"] = _as_bool(df["isolated"], path, "isolated")
-            df["source"] = str(path)
+            df["isolated"] = _as_bool(df["isolated"], path, "isolated")
             bench.append(df)
             kind = "bench"
         elif set(CLOSED_LOOP_COLUMNS) <= cols:
-            for column in STRUCTURED_FIGURES:
-                if column in cols:
-                    df[column] = df[column].map(_from_json)
+            for column in set(STRUCTURED_FIGURES) & cols:  # a table of failed runs has none
+                df[column] = df[column].map(_from_json)
             df["log_path"] = [
                 str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
             ]
-            df["source"] = str(path)
             loops.append(df)
             kind = "closed-loop"
         else:
@@ -222,18 +184,15 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
 
 
 def _key_frame(df: pd.DataFrame) -> pd.DataFrame:
-    """The :data:`DUPLICATE_KEY` columns as text (missing columns and empty cells: ``-``)."""
-    out = {}
-    for c in DUPLICATE_KEY:
-        out[c] = df[c].map(scenario_key) if c in df.columns else pd.Series("-", index=df.index)
-    return pd.DataFrame(out, index=df.index)
+    """The :data:`DUPLICATE_KEY` columns as text (empty cells: ``-``)."""
+    return pd.DataFrame({c: df[c].map(scenario_key) for c in DUPLICATE_KEY}, index=df.index)
 
 
 def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
-    """Bench rows with each result key once (see the module docstring).
+    """Bench rows with each result key once (module docstring).
 
     Raises:
-        InputError: a key in two files and ``prefer`` is ``None`` (naming both files and the key).
+        InputError: a key in two files and ``prefer`` is ``None``.
     """
     keys = _key_frame(bench)
     dup = keys.duplicated(keep=False)
@@ -257,20 +216,15 @@ def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
 
 
 def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
-    """Notes on backends timed with different ``repeat`` counts in one table.
-
-    A file's repeat count for a backend is the largest ``repeat`` of its rows
-    (failed solves are not repeated). Without ``prefer`` a mix is an error.
+    """Notes on backends timed with different ``repeat`` counts in one table (a file's count for
+    a backend: the largest ``repeat`` of its rows, failed solves are not repeated).
 
     Raises:
         InputError: a mix and ``prefer`` is ``None``.
     """
-    if "repeat" not in bench.columns:
-        return []
     notes = []
     df = bench.assign(
-        _repeat=pd.to_numeric(bench["repeat"], errors="coerce"),
-        _mode=bench["mode"].fillna("") if "mode" in bench.columns else "",
+        _repeat=pd.to_numeric(bench["repeat"], errors="coerce"), _mode=bench["mode"].fillna("")
     )
     for (profile, mode), table in df.groupby(["profile", "_mode"], sort=True):
         per_backend = table.groupby("backend", sort=True)["_repeat"].max().dropna()

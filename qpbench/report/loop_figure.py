@@ -1,31 +1,11 @@
 """The closed-loop figure: one or several backends' runs of one scenario, side by side.
 
-Rows of panels, top to bottom:
-
-1. magnitude of the tangential tracking error [mm], log scale so that a
-   1e-4 mm steady state and a 100 mm transient are both readable;
-2. magnitude of the contact-force error ``|F - Fd|`` [N], log scale;
-3. smallest key-point distance to an obstacle [mm] against the safety
-   distance ``d_safe`` and the ``d_safe - 0.5 mm`` line a run must not cross,
-   on a scale linear up to ``d_safe`` and logarithmic beyond
-   (:func:`distance_axis`), so that ``d_safe`` shows beside a 300 mm excursion
-   (scenarios with obstacles only);
-4. solve time per tick [µs], log scale, with the 1 ms budget of a 1 kHz loop;
-5. ``|v|^2`` [rad²/s²], log scale;
-6. the adaptive estimate ``Kp_hat`` [N/m] (adaptive scenarios only).
-
-One column per group of at most eight backends
-(:func:`qpbench.report.style.groups`): a column's backends in their own look
-(:func:`qpbench.report.style.look`), the others in grey behind; the legend
-above each column. Ticks where a highlighted backend's own answer was not
-applied (the soft fallback's or zero velocity was) are shaded in its colour
-along the top of the first panel.
-
-Columns read are the tick log's, by the names :mod:`qpbench.sim.log` gives
-them (``t``, ``tracking_error``, ``force_error``, ``d_min``, ``solve_time_s``,
-``v_sq``, ``kp_hat``, ``fallback``, ``zero_velocity``). One run's figure
-(``qpbench simulate --plot``) and a scenario's runs (the report) are both
-drawn by :func:`closed_loop_figure`.
+Panels, top to bottom: |tracking error| [mm] and |F - Fd| [N] (log scales: a 1e-4 mm steady
+state and a 100 mm transient both readable); the closest key point to an obstacle [mm] against
+``d_safe`` (:func:`distance_axis`; scenarios with obstacles); solve time per tick [µs] against
+the 1 ms budget; ``|v|^2`` [rad²/s²]; ``Kp_hat`` [N/m] (adaptive scenarios). One column per group
+of backends (:func:`qpbench.report.style.groups`); ticks where a backend's own answer was not
+applied (fallback or zero velocity) shaded in its colour along the top of the first panel.
 """
 
 from __future__ import annotations
@@ -41,7 +21,7 @@ from . import style
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["closed_loop_figure", "distance_axis", "run_figure"]
+__all__ = ["closed_loop_figure", "distance_axis", "has_distance", "run_figure"]
 
 #: Margin below ``d_safe`` at which a run counts as unsafe [m] (drawn as a line).
 UNSAFE_MARGIN = 5e-4
@@ -54,6 +34,11 @@ def _floor(values: np.ndarray, floor: float) -> np.ndarray:
     return np.maximum(values, floor)
 
 
+def has_distance(log: pd.DataFrame) -> bool:
+    """The tick log has a finite closest key-point distance ``d_min``."""
+    return tick_log.D_MIN in log.columns and np.isfinite(log[tick_log.D_MIN].to_numpy(float)).any()
+
+
 def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
     if not mask.any():
         return []
@@ -63,15 +48,9 @@ def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> None:
-    """Scale and reference lines of a distance axis in [mm] against ``d_safe`` [m].
-
-    Linear from ``-d_safe`` to ``d_safe``, logarithmic beyond (symlog), so a
-    10 mm ``d_safe`` takes as much height as the decade above it; the
-    ``d_safe`` line (dashed), the ``d_safe - 0.5 mm`` line a run must not
-    cross (dotted red) and the region below it shaded. ``lowest_mm``: the
-    smallest distance drawn, so the axis reaches it. Without ``d_safe``: a
-    symlog axis linear up to 10 mm.
-    """
+    """A distance axis in [mm]: linear up to ``d_safe`` [m] (else 10 mm), logarithmic beyond,
+    with the ``d_safe`` line and the ``d_safe - 0.5 mm`` line a run must not cross (the region
+    below shaded); ``lowest_mm``: the smallest distance drawn, which the axis reaches."""
     lin = d_safe * 1e3 if d_safe is not None and d_safe > 0 else 10.0
     ax.set_yscale("symlog", linthresh=lin, linscale=1.0)
     _distance_ticks(ax, lin)
@@ -87,8 +66,8 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
 
 
 def _distance_ticks(ax, lin: float) -> None:
-    """Ticks of a distance axis in plain millimetres: 0, ``+-lin`` (``d_safe``) and 1-2-5
-    steps beyond (the symlog axis's own are powers of ten, ``d_safe`` read as 10^1)."""
+    """Ticks of a distance axis in plain [mm]: 0, ``+-lin`` (``d_safe``) and 1-2-5 steps beyond
+    (the symlog axis's own are powers of ten)."""
     from matplotlib.ticker import FixedLocator, FuncFormatter
 
     steps = [m * 10.0**e for e in range(-3, 6) for m in (1, 2, 5)]
@@ -107,27 +86,16 @@ def closed_loop_figure(
     adaptive: bool | None = None,
     budget_s: float = 1e-3,
 ) -> Path:
-    """Draw the closed-loop figure of ``logs`` (backend name -> tick log) to ``path`` (PNG).
+    """Draw the closed-loop figure of ``logs`` (backend -> tick log) to ``path``; return it.
 
-    Args:
-        logs: Tick logs by backend name.
-        path: Output file.
-        title: Figure title.
-        d_safe: Safety distance [m]; ``None`` draws no safety lines.
-        adaptive: Draw the ``Kp_hat`` panel; ``None``: when any log's ``kp_hat`` varies.
-        budget_s: Per-tick time budget [s] drawn on the solve-time panel (1 ms: 1 kHz).
-
-    Returns:
-        ``path``.
+    ``d_safe`` [m] (``None``: no safety lines); ``adaptive``: the ``Kp_hat`` panel (``None``:
+    when a log's ``kp_hat`` varies); ``budget_s``: the per-tick time budget [s].
     """
     plt = style.pyplot()
     logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
-    has_d = any(
-        tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
-        for d in logs.values()
-    )
+    has_d = any(has_distance(d) for d in logs.values())
     if adaptive is None:
         adaptive = any(
             tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
@@ -225,12 +193,7 @@ def _label_axes(
         axes[name].set_yscale("log")
     if has_d:
         lowest = min(
-            (
-                float(np.nanmin(d[tick_log.D_MIN].to_numpy(float)))
-                for d in logs.values()
-                if tick_log.D_MIN in d.columns
-                and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
-            ),
+            (float(np.nanmin(d[tick_log.D_MIN])) for d in logs.values() if has_distance(d)),
             default=None,
         )
         distance_axis(axes["distance"], d_safe, None if lowest is None else lowest * 1e3)
@@ -244,8 +207,8 @@ def _label_axes(
 
 
 def _legend(axes: dict, group: list, title: str, references: bool) -> None:
-    """The column's legend above its first panel: its backends, then (``references``) the
-    reference lines (d_safe, the time budget) and what the band on top means."""
+    """The column's legend above it: its backends, then (``references``) the reference lines
+    and what the band on top means."""
     top = axes["tracking"]
     handles, labels = top.get_legend_handles_labels()
     if references:

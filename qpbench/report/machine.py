@@ -1,8 +1,4 @@
-"""The machine a report was produced on: CPU, cores, OS, Python and package versions.
-
-Read at report time (nothing is probed at import). The CPU name comes from
-``/proc/cpuinfo`` when it exists, else from :mod:`platform`.
-"""
+"""The machine a report was produced on: CPU, cores, OS, Python and package versions."""
 
 from __future__ import annotations
 

@@ -1,47 +1,90 @@
 """``report.md``: every number recomputed from the result CSVs it is given.
 
-Layout (each table is preceded by a one-line caption ending in ``:``, so two
-reports diff cleanly and a reader, or a test, can find a table by its
-heading and caption):
-
-- the answer first: the recommendation (:mod:`qpbench.report.recommend`,
-  from the closed-loop rows), then five lines of how to read the rest
-  (:func:`qpbench.report.recommend.opening`);
-- header: date, result files (kind, rows, SHA-256), machine, package versions;
-- per tick (bench CSVs), per (profile, mode): success rate and shifted
-  geometric means as ratios to the best and as absolute values, constraint
-  violation per backend (with a sentence for each backend that never found a
-  solution), the Dolan-More performance profile of runtime, then
-  per-scenario tables and plots of time and optimality gap against t. A
-  backend with rows solved in a worker process is marked with a dagger in
-  every table showing its times, with a footnote; a residual or gap column
-  of a backend without a found solution shows ``-``, with a footnote;
-- closed loop (closed-loop CSVs; :mod:`qpbench.report.markdown_closed_loop`):
-  the runs that failed their verdict (with the reasons), then per scenario:
-  verdict, simulated time, tracking, force, obstacle distance, limit
-  violations, infeasible and fallback ticks, ``int ||v||^2 dt``, solve-time
-  tail and real-time factor, and the paper's figures per backend.
-
-Display units: times in [us], distances and tracking errors in [mm], forces in
-[N]; every other number as in the CSV. Floats print with 4 significant digits.
+The recommendation and how to read the rest (:mod:`.recommend`); the result files, machine and
+package versions; per (profile, mode) of the bench rows: success and shifted geometric means,
+constraint violation, the performance profile, then per scenario; the closed loop
+(:mod:`.markdown_closed_loop`). Each table follows a one-line caption ending in ``:``, so a
+reader (or a test) finds a table by its heading and caption. Times in [us], distances in [mm],
+forces in [N]; a backend with rows solved in a worker process is marked with a dagger.
 """
 
 from __future__ import annotations
 
 import datetime
+from operator import attrgetter
 
 import pandas as pd
 
 from ..profiles import PROFILES
 from . import tables
+from .inputs import Results, scenario_key
 from .machine import machine_info, package_versions
 from .markdown_closed_loop import closed_loop_section
-from .markdown_table import US, fmt, md_table
+from .markdown_table import US, Column, fmt, md_table, slug, table
 from .recommend import opening
-from .tables import slug
 
 #: Mark of a backend with rows solved in a worker process.
 ISOLATED_MARK = "\u2020"
+
+
+#: The profiles table: settings asked of every backend and success tolerances.
+PROFILE_COLUMNS = tuple(
+    Column(header, cell=attrgetter(attribute), text=header == "profile")
+    for header, attribute in (
+        ("profile", "name"),
+        ("eps_abs", "eps_abs"),
+        ("eps_rel", "eps_rel"),
+        ("max_iter", "max_iter"),
+        ("time limit (s)", "time_limit"),
+        ("primal tol", "tolerance.primal"),
+        ("dual tol", "tolerance.dual"),
+        ("gap tol", "tolerance.gap"),
+    )
+)
+
+
+def _records(frame: pd.DataFrame, names: dict[str, str]) -> list[dict]:
+    """A per-backend frame's rows as records, ``backend`` its name as shown (``names``)."""
+    return [{"backend": names.get(b, b), **r} for b, r in frame.iterrows()]
+
+
+_BACKEND = Column("backend", "backend", text=True)
+_BACKEND_PROBLEMS = (
+    _BACKEND,
+    Column("problems", "problems"),
+    Column("success (%)", "success_rate"),
+)
+#: The per-scenario runtime table.
+SCENARIO_COLUMNS = (
+    *_BACKEND_PROBLEMS,
+    Column("runtime shm ratio", "runtime_ratio"),
+    Column("runtime p50 (us)", "runtime_p50_s", US),
+    Column("runtime p99 (us)", "runtime_p99_s", US),
+    Column("runtime max (us)", "runtime_max_s", US),
+    Column("max optimality gap", "optimality_gap_max"),
+)
+#: The solver's own time against the timed call.
+SOLVER_TIME_COLUMNS = (
+    _BACKEND,
+    Column("rows", "rows"),
+    *(
+        Column(f"{what} {q} (us)", f"{key}_{q}", US)
+        for what, key in (("call", "call"), ("solver", "solver"))
+        for q in ("p50", "p99")
+    ),
+    *(Column(f"call - solver {q} (us)", f"around_{q}", US) for q in ("p50", "p99")),
+)
+#: Constraint violation per backend.
+VIOLATION_COLUMNS = (
+    _BACKEND,
+    Column("problems", "problems"),
+    Column("found", "found"),
+    Column("rows with x", "with_x"),
+    Column("max", "max"),
+    Column("p99", "p99"),
+    Column("max (feasible)", "feasible_max"),
+    Column("p99 (feasible)", "feasible_p99"),
+)
 
 
 def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
@@ -66,7 +109,7 @@ def _never_found(summary: pd.DataFrame) -> list[str]:
     return [str(b) for b, r in summary.iterrows() if int(r["found"]) == 0]
 
 
-def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
+def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
     """The per-tick benchmark's section: what a success and the means are, then one part per profile."""
     out = ["## Per-tick benchmark\n"]
     bench = results.bench
@@ -102,29 +145,24 @@ def _bench_section(results: tables.Results, plot_files: dict[str, str]) -> list[
 
 
 def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
-    """How far the two reference solvers' objectives are apart, per problem (when the column is there)."""
-    out: list[str] = []
-    if "reference_agreement" in bench.columns:
-        per_problem = (
-            bench.assign(
-                _a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
-                _s=[
-                    tables.scenario_key(v)
-                    for v in bench.get("scenario", pd.Series("-", index=bench.index))
-                ],
-            )
-            .groupby(["_s", "problem"], sort=False)["_a"]
-            .max()
-            .dropna()
+    """How far the two reference solvers' objectives are apart, per problem."""
+    per_problem = (
+        bench.assign(
+            _a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
+            _s=bench["scenario"].map(scenario_key),
         )
-        if len(per_problem):
-            out.append(
-                f"Reference solutions: Clarabel and PIQP both optimal on {len(per_problem)} problems, relative "
-                f"objective difference max {fmt(per_problem.max())}, "
-                f"{int((per_problem > 1e-7).sum())} above 1e-7 (the kept answer is the one with the smaller "
-                "KKT residuals; `reference_agreement` column).\n"
-            )
-    return out
+        .groupby(["_s", "problem"], sort=False)["_a"]
+        .max()
+        .dropna()
+    )
+    if not len(per_problem):
+        return []
+    return [
+        f"Reference solutions: Clarabel and PIQP both optimal on {len(per_problem)} problems, relative "
+        f"objective difference max {fmt(per_problem.max())}, "
+        f"{int((per_problem > 1e-7).sum())} above 1e-7 (the kept answer is the one with the smaller "
+        "KKT residuals; `reference_agreement` column).\n"
+    ]
 
 
 def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str]) -> list[str]:
@@ -146,52 +184,28 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
             "not-found value, floored at the tolerance, they would score as the best.\n"
         )
     accuracy = [m for m in tables.SHGEOM_METRICS if m != "runtime"]  # residuals and gaps, in order
+    records = _records(summary, names)
     out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
-    out.append(
-        md_table(
-            [
-                "backend",
-                "problems",
-                "success (%)",
-                "runtime",
-                "runtime (feasible)",
-                *(m.replace("_", " ") for m in accuracy),
-            ],
-            [
-                [
-                    names[b],
-                    int(r["problems"]),
-                    r["success_rate"],
-                    r["runtime_ratio"],
-                    r["runtime_feasible_ratio"],
-                    *(r[f"{m}_ratio"] for m in accuracy),
-                ]
-                for b, r in summary.iterrows()
-            ],
-        )
+    out += table(
+        [
+            *_BACKEND_PROBLEMS,
+            Column("runtime", "runtime_ratio"),
+            Column("runtime (feasible)", "runtime_feasible_ratio"),
+            *(Column(m.replace("_", " "), f"{m}_ratio") for m in accuracy),
+        ],
+        records,
     )
     out.extend(isolated_notes + never_note)
     out.append("Shifted geometric means, absolute values:\n")
-    out.append(
-        md_table(
-            [
-                "backend",
-                "runtime (us)",
-                "runtime feasible (us)",
-                *(m.replace("_", " ") for m in accuracy),
-                "harness overhead p50 (us)",
-            ],
-            [
-                [
-                    names[b],
-                    r["runtime"] * US,
-                    r["runtime_feasible"] * US,
-                    *(r[m] for m in accuracy),
-                    r["overhead_median_s"] * US,
-                ]
-                for b, r in summary.iterrows()
-            ],
-        )
+    out += table(
+        [
+            _BACKEND,
+            Column("runtime (us)", "runtime", US),
+            Column("runtime feasible (us)", "runtime_feasible", US),
+            *(Column(m.replace("_", " "), m) for m in accuracy),
+            Column("harness overhead p50 (us)", "overhead_median_s", US),
+        ],
+        records,
     )
     out.extend(isolated_notes + never_note)
     out.extend(_violation_part(rows, never))
@@ -202,14 +216,14 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
             "solves successfully within tau times the best backend's time):\n"
         )
         out.append(f"![performance profile, {label}]({plot_files[key]})\n")
-    for scenario, table in tables.scenario_summary(rows, tol).items():
-        out.extend(_scenario_part(scenario, table, label, rows, names, isolated_notes, plot_files))
+    for scenario, frame in tables.scenario_summary(rows, tol).items():
+        out.extend(_scenario_part(scenario, frame, label, rows, names, isolated_notes, plot_files))
     return out
 
 
 def _scenario_part(
     scenario: str,
-    table: pd.DataFrame,
+    frame: pd.DataFrame,
     label: str,
     rows: pd.DataFrame,
     names: dict[str, str],
@@ -220,34 +234,8 @@ def _scenario_part(
     out: list[str] = []
     out.append(f"#### Scenario {scenario} ({label})\n")
     out.append("Per backend, runtime over every problem of the scenario:\n")
-    out.append(
-        md_table(
-            [
-                "backend",
-                "problems",
-                "success (%)",
-                "runtime shm ratio",
-                "runtime p50 (us)",
-                "runtime p99 (us)",
-                "runtime max (us)",
-                "max optimality gap",
-            ],
-            [
-                [
-                    names[b],
-                    int(r["problems"]),
-                    r["success_rate"],
-                    r["runtime_ratio"],
-                    r["runtime_p50_s"] * US,
-                    r["runtime_p99_s"] * US,
-                    r["runtime_max_s"] * US,
-                    r["optimality_gap_max"],
-                ]
-                for b, r in table.iterrows()
-            ],
-        )
-    )
-    if any(names[b] != b for b in table.index):
+    out += table(SCENARIO_COLUMNS, _records(frame, names))
+    if any(names[b] != b for b in frame.index):
         out.extend(isolated_notes)
     out.extend(_solver_time_part(rows, scenario, names))
     key = f"per_tick_{slug(label)}_{slug(scenario)}"
@@ -258,87 +246,33 @@ def _scenario_part(
 
 def _solver_time_part(rows: pd.DataFrame, scenario: str, names: dict[str, str]) -> list[str]:
     """Per backend of one scenario: the solver's own time against the whole call."""
-    if "scenario" in rows.columns:
-        rows = rows[[tables.scenario_key(v) == scenario for v in rows["scenario"]]]
-    table = tables.solver_time_summary(rows)
-    if table.empty:
+    rows = rows[[scenario_key(v) == scenario for v in rows["scenario"]]]
+    frame = tables.solver_time_summary(rows)
+    if frame.empty:
         return []
     out = [
         "What the solver reports for its own work (`solver_time_s`: what a controller calling its "
         "C or C++ library pays) against the timed call, and their difference per tick (what the "
         "Python layers add); backends that report no time of their own are not listed:\n"
     ]
-    out.append(
-        md_table(
-            [
-                "backend",
-                "rows",
-                "call p50 (us)",
-                "call p99 (us)",
-                "solver p50 (us)",
-                "solver p99 (us)",
-                "call - solver p50 (us)",
-                "call - solver p99 (us)",
-            ],
-            [
-                [
-                    names.get(b, b),
-                    int(r["rows"]),
-                    r["call_p50"] * US,
-                    r["call_p99"] * US,
-                    r["solver_p50"] * US,
-                    r["solver_p99"] * US,
-                    r["around_p50"] * US,
-                    r["around_p99"] * US,
-                ]
-                for b, r in table.iterrows()
-            ],
-        )
-    )
-    return out
+    return out + table(SOLVER_TIME_COLUMNS, _records(frame, names))
 
 
 def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     """Constraint violation per backend, and a sentence for each backend that never found a solution."""
-    table = tables.violation_summary(rows)
-    if table.empty:
+    frame = tables.violation_summary(rows)
+    if frame.empty:
         return []
     out = [
         "Constraint violation of the answers, max(0, Gx - h), |Ax - b| and bound violation, the "
         "largest of the three per row (absolute, in the problem's units), over the rows with an x "
         "(found or not), and over those whose reference is optimal:\n"
     ]
-    out.append(
-        md_table(
-            [
-                "backend",
-                "problems",
-                "found",
-                "rows with x",
-                "max",
-                "p99",
-                "max (feasible)",
-                "p99 (feasible)",
-            ],
-            [
-                [
-                    b,
-                    int(r["problems"]),
-                    int(r["found"]),
-                    int(r["with_x"]),
-                    r["max"],
-                    r["p99"],
-                    r["feasible_max"],
-                    r["feasible_p99"],
-                ]
-                for b, r in table.iterrows()
-            ],
-        )
-    )
+    out += table(VIOLATION_COLUMNS, _records(frame, {}))
     for b in never:
-        if b not in table.index:
+        if b not in frame.index:
             continue
-        r = table.loc[b]
+        r = frame.loc[b]
         if int(r["with_x"]) == 0:
             out.append(
                 f"{b} never found a solution and returned no x: it has no accuracy figure.\n"
@@ -354,16 +288,10 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
 
 
 def render(
-    results: tables.Results, plot_files: dict[str, str] | None = None, date: str | None = None
+    results: Results, plot_files: dict[str, str] | None = None, date: str | None = None
 ) -> str:
-    """The text of ``report.md``.
-
-    Args:
-        results: The rows read by :func:`qpbench.report.tables.read_results`.
-        plot_files: Plot key -> path relative to the report (keys as made by
-            :mod:`qpbench.report.plots`); missing keys are simply not shown.
-        date: Date line (default: now, UTC).
-    """
+    """The text of ``report.md``; ``plot_files``: figure key -> path relative to the report (keys
+    of :mod:`.plots`, a missing one not shown); ``date``: default now, UTC."""
     plot_files = plot_files or {}
     date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = ["# qpbench report\n"]
@@ -391,34 +319,7 @@ def render(
         profiles_used = sorted(set(results.bench["profile"].astype(str)))
         lines.append("## Profiles\n")
         lines.append("Settings asked of every backend and success tolerances:\n")
-        lines.append(
-            md_table(
-                [
-                    "profile",
-                    "eps_abs",
-                    "eps_rel",
-                    "max_iter",
-                    "time limit (s)",
-                    "primal tol",
-                    "dual tol",
-                    "gap tol",
-                ],
-                [
-                    [
-                        p.name,
-                        p.eps_abs,
-                        p.eps_rel,
-                        p.max_iter,
-                        p.time_limit,
-                        p.tolerance.primal,
-                        p.tolerance.dual,
-                        p.tolerance.gap,
-                    ]
-                    for n, p in PROFILES.items()
-                    if n in profiles_used
-                ],
-            )
-        )
+        lines += table(PROFILE_COLUMNS, [p for n, p in PROFILES.items() if n in profiles_used])
     if not results.closed_loop.empty:
         lines.extend(closed_loop_section(results, plot_files))
     return "\n".join(lines)

@@ -1,12 +1,5 @@
-"""The closed-loop section of ``report.md`` (see :mod:`qpbench.report.markdown`).
-
-The runs that failed their verdict (with the reasons), then per scenario:
-verdict, real time (measured call times; the solver's own), simulated time, tracking, force,
-the body's clearance to the obstacles and the key points' distance with the paper's key-point
-rule, limit
-violations, infeasible and fallback ticks, ``int ||v||^2 dt``, solve-time
-tail and real-time factor, and the paper's figures per backend.
-"""
+"""The closed-loop section of ``report.md``: the runs that failed their verdict, then per
+scenario each backend's figures (:data:`CLOSED_LOOP_TABLE`) and the scenario's figures."""
 
 from __future__ import annotations
 
@@ -15,37 +8,8 @@ import math
 import pandas as pd
 
 from ..sim.verdict import BAD_VERDICTS
-from . import tables
-from .markdown_table import MM, US, fmt, md_table
-from .tables import slug
-
-#: Closed-loop table: (header, column, scale to display units).
-CLOSED_LOOP_TABLE = (
-    ("status", "status", None),
-    ("verdict", "verdict", None),
-    ("real time", "realtime", None),
-    ("real time (solver's own)", "realtime_solver", None),
-    ("simulated (s)", "simulated_s", 1.0),
-    ("tracking RMS (mm)", "tracking_rms_after_2s", MM),
-    ("tracking max (mm)", "tracking_max_after_2s", MM),
-    ("force err RMS (N)", "force_error_rms_after_2s", 1.0),
-    ("force err max (N)", "force_error_max_after_2s", 1.0),
-    ("min body dist (mm)", "min_body_distance", MM),
-    ("body closest at", "min_body_where", None),
-    ("min key-point dist (mm)", "min_obstacle_distance", MM),
-    ("key-point rule", "key_point_rule", None),
-    ("joint-limit violations", "joint_limit_violations", 1.0),
-    ("infeasible ticks", "infeasible_ticks", 1.0),
-    ("fallback ticks", "fallback_ticks", 1.0),
-    ("int v^2 dt", "v2_integral", 1.0),
-    ("solve p50 (us)", "solve_time_median_s", US),
-    ("solve p99 (us)", "solve_time_p99_s", US),
-    ("solve max (us)", "solve_time_max_s", US),
-    ("ticks over dt (%)", "over_dt_share", 100.0),
-    ("solver's own p99 (us)", "solver_time_p99_s", US),
-    ("real-time factor", "real_time_factor", 1.0),
-)
-
+from .inputs import Results
+from .markdown_table import MM, US, Column, fmt, md_table, slug, table
 
 #: Marks a verdict judged on thresholds set on the command line (footnote :data:`FOOTNOTE`).
 OVERRIDDEN = "\u2020"
@@ -55,47 +19,55 @@ FOOTNOTE = (
 )
 
 
-def _overridden(row: pd.Series) -> bool:
+def _overridden(row) -> bool:
     """The row's verdict was judged on thresholds set over the scenario file's."""
-    value = row.get("verdict_overrides")
+    value = row["verdict_overrides"]
     return isinstance(value, str) and value.strip() not in ("", "{}")
 
 
-def _body_where(row: pd.Series) -> str:
+def _verdict(row) -> str:
+    return f"{row['verdict']}{OVERRIDDEN}" if _overridden(row) else row["verdict"]
+
+
+def _body_where(row) -> str:
     """``"link 4 / blob at 3.14 s"``: where and when the body came closest to an obstacle."""
-    try:
-        link, t = (
-            int(float(row.get("min_body_distance_link"))),
-            float(row.get("min_body_distance_t")),
-        )
-    except (TypeError, ValueError):
-        return "-"
+    t = float(row.get("min_body_distance_t", math.nan))  # figures of a run with a result only
     if math.isnan(t):
         return "-"
-    return f"link {link} / {row.get('min_body_distance_obstacle')} at {t:.2f} s"
+    link = int(float(row["min_body_distance_link"]))
+    return f"link {link} / {row['min_body_distance_obstacle']} at {t:.2f} s"
 
 
-def _closed_loop_cell(row: pd.Series, column: str, scale: float | None):
-    if column == "min_body_where":
-        return _body_where(row)
-    value = row.get(column)
-    if column == "verdict" and _overridden(row):
-        return f"{value}{OVERRIDDEN}"
-    if scale is None:
-        return (
-            "-" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
-        )
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return math.nan
-    return v * scale
+#: The closed-loop table: one column per figure of a run, in display units (right-aligned).
+CLOSED_LOOP_TABLE = (
+    Column("status", "status"),
+    Column("verdict", "verdict", cell=_verdict),
+    Column("real time", "realtime"),
+    Column("real time (solver's own)", "realtime_solver"),
+    Column("simulated (s)", "simulated_s", 1.0),
+    Column("tracking RMS (mm)", "tracking_rms_after_2s", MM),
+    Column("tracking max (mm)", "tracking_max_after_2s", MM),
+    Column("force err RMS (N)", "force_error_rms_after_2s", 1.0),
+    Column("force err max (N)", "force_error_max_after_2s", 1.0),
+    Column("min body dist (mm)", "min_body_distance", MM),
+    Column("body closest at", "min_body_where", cell=_body_where),
+    Column("min key-point dist (mm)", "min_obstacle_distance", MM),
+    Column("key-point rule", "key_point_rule"),
+    Column("joint-limit violations", "joint_limit_violations", 1.0),
+    Column("infeasible ticks", "infeasible_ticks", 1.0),
+    Column("fallback ticks", "fallback_ticks", 1.0),
+    Column("int v^2 dt", "v2_integral", 1.0),
+    Column("solve p50 (us)", "solve_time_median_s", US),
+    Column("solve p99 (us)", "solve_time_p99_s", US),
+    Column("solve max (us)", "solve_time_max_s", US),
+    Column("ticks over dt (%)", "over_dt_share", 100.0),
+    Column("solver's own p99 (us)", "solver_time_p99_s", US),
+    Column("real-time factor", "real_time_factor", 1.0),
+)
 
 
 def failed_verdicts(df: pd.DataFrame) -> list[str]:
-    """The "Runs that failed their verdict" table (nothing when every run is ``ok``)."""
-    if "verdict" not in df.columns:
-        return []
+    """The "Runs that failed their verdict" table (a line saying so when every run is ``ok``)."""
     bad = df[df["verdict"].astype(str).isin(BAD_VERDICTS)]
     if bad.empty:
         return ["Every run's verdict is ok.\n"]
@@ -108,9 +80,9 @@ def failed_verdicts(df: pd.DataFrame) -> list[str]:
                 [
                     str(r["scenario"]),
                     str(r["backend"]),
-                    r.get("formulation"),
-                    str(r["verdict"]) + (OVERRIDDEN if _overridden(r) else ""),
-                    r.get("verdict_reasons"),
+                    r["formulation"],
+                    _verdict(r),
+                    r["verdict_reasons"],
                 ]
                 for _, r in bad.iterrows()
             ],
@@ -119,7 +91,7 @@ def failed_verdicts(df: pd.DataFrame) -> list[str]:
     return out
 
 
-def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> list[str]:
+def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[str]:
     """The closed loop's section: the failed verdicts, then per scenario its table and figures."""
     df = results.closed_loop
     out = ["## Closed loop\n"]
@@ -147,13 +119,9 @@ def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> 
         "solver sees; `unknown` when the backend reports none).\n"
     )
     out.extend(failed_verdicts(df))
-    if "verdict_overrides" in df.columns and df.apply(_overridden, axis=1).any():
+    if df.apply(_overridden, axis=1).any():
         out.append(FOOTNOTE)
-    kinds = (
-        df["key_points_kind"].fillna("paper").astype(str)
-        if "key_points_kind" in df.columns
-        else pd.Series("paper", index=df.index)
-    )
+    kinds = df.get("key_points_kind", pd.Series("paper", index=df.index)).fillna("paper")
     for (scenario, formulation, kind), g in df.groupby(
         [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str), kinds], sort=False
     ):
@@ -161,28 +129,20 @@ def closed_loop_section(results: tables.Results, plot_files: dict[str, str]) -> 
         shown = formulation if kind == "paper" else f"{formulation}, key points: {kind}"
         out.append(f"### Scenario {scenario} ({shown})\n")
         out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
-        out.append(
-            md_table(
-                ["backend"] + [h for h, _, _ in CLOSED_LOOP_TABLE],
-                [
-                    [str(r["backend"])]
-                    + [_closed_loop_cell(r, c, s) for _, c, s in CLOSED_LOOP_TABLE]
-                    for _, r in g.iterrows()
-                ],
-            )
+        out += table(
+            (Column("backend", "backend", text=True), *CLOSED_LOOP_TABLE), g.to_dict("records")
         )
         errors = g[~g["status"].isin(("ok", "budget"))]
         for _, r in errors.iterrows():
-            out.append(f"- {r['backend']}: {fmt(r.get('error'))}\n")
-        key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
-        if key in plot_files:
-            out.append(f"![closed loop, {scenario}]({plot_files[key]})\n")
-        key = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
-        if key in plot_files:
-            out.append(f"![joint velocities, {scenario}]({plot_files[key]})\n")
-        key = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
-        if key in plot_files:
-            out.append(f"![key-point distances, {scenario}]({plot_files[key]})\n")
+            out.append(f"- {r['backend']}: {fmt(r['error'])}\n")
+        for kind, alt in (
+            ("", "closed loop"),
+            ("v_", "joint velocities"),
+            ("d_", "key-point distances"),
+        ):
+            key = f"closed_loop_{kind}{slug(scenario)}_{slug(formulation)}"
+            if key in plot_files:
+                out.append(f"![{alt}, {scenario}]({plot_files[key]})\n")
         out.extend(_snapshot_row(scenario, formulation, plot_files))
     return out
 

@@ -1,21 +1,35 @@
-"""Cells and tables of ``report.md``: how a number prints, and a Markdown table.
+"""The one renderer of report tables: how a value prints, typed columns, a Markdown table.
 
-Floats print with :data:`DIGITS` significant digits; times are shown in [us]
-(:data:`US`) and distances in [mm] (:data:`MM`).
+Floats print with :data:`DIGITS` significant digits; times are shown in [us] (:data:`US`) and
+distances in [mm] (:data:`MM`).
 """
 
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable
+
 #: Significant digits of every float in the report.
 DIGITS = 4
+#: Seconds to microseconds and metres to millimetres (display units).
+US = 1e6
+MM = 1e3
+
+
+def slug(text: str) -> str:
+    """File-name-safe form of a label (figure keys and file names of a report)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
 
 
 def fmt(value: object) -> str:
-    """One table cell: ``-`` for missing, ``inf``, integers as is, floats to 4 significant digits."""
+    """One cell: ``-`` for missing, ``inf``, integers as is, floats to :data:`DIGITS` digits."""
     if value is None:
         return "-"
     if isinstance(value, (bool, np.bool_)):
@@ -35,17 +49,18 @@ def fmt(value: object) -> str:
     return text.replace("|", "\\|").replace("\n", " ") if text else "-"
 
 
-def md_table(header: list[str], rows: list[list], pad: bool = False, left: int = 1) -> str:
-    """A Markdown table: the first ``left`` columns left-aligned (text), the others right-aligned.
+def md_table(header: list[str], rows: list[list], pad: bool = False, left=1) -> str:
+    """A Markdown table; ``left``: the first ``left`` columns (or the columns of these indices)
+    are left-aligned (text), the others right-aligned.
 
-    ``pad``: every column padded to its widest cell, so the table also reads
-    aligned as plain text (on a terminal).
+    ``pad``: every column padded to its widest cell, so the table also reads aligned as plain text.
     """
+    lefts = set(range(left)) if isinstance(left, int) else set(left)
     cells = [[fmt(c) for c in r] for r in rows]
     widths = [max(3, len(h)) for h in header]
 
     def align(i: int, text: str) -> str:
-        return text.ljust(widths[i]) if i < left else text.rjust(widths[i])
+        return text.ljust(widths[i]) if i in lefts else text.rjust(widths[i])
 
     if pad:
         widths = [max([w] + [len(r[i]) for r in cells]) for i, w in enumerate(widths)]
@@ -53,15 +68,47 @@ def md_table(header: list[str], rows: list[list], pad: bool = False, left: int =
         cells = [[align(i, c) for i, c in enumerate(r)] for r in cells]
     head = "| " + " | ".join(header) + " |"
     dashes = [w + 1 if pad else w for w in widths]  # padded: as wide as the cells around them
-    rule = (
-        "|"
-        + "|".join(":" + "-" * w if i < left else "-" * w + ":" for i, w in enumerate(dashes))
-        + "|"
-    )
+    rule = "|".join(":" + "-" * w if i in lefts else "-" * w + ":" for i, w in enumerate(dashes))
     body = ["| " + " | ".join(r) + " |" for r in cells]
-    return "\n".join([head, rule, *body]) + "\n"
+    return "\n".join([head, f"|{rule}|", *body]) + "\n"
 
 
-#: Seconds to microseconds and metres to millimetres (display units).
-US = 1e6  # s -> us
-MM = 1e3  # m -> mm
+@dataclass(frozen=True)
+class Column:
+    """A typed table column: ``header``, the record ``key`` it shows, as it is or, a number,
+    times ``scale`` and printed with the format spec ``form`` (``-`` when not finite; default:
+    :func:`fmt`); or ``cell(record)`` when computed. ``text`` columns are left-aligned."""
+
+    header: str
+    key: str | None = None
+    scale: float | None = None
+    form: str | None = None
+    cell: Callable[[dict], object] | None = None
+    text: bool = False
+
+    def value(self, record) -> object:
+        if self.cell is not None:
+            return self.cell(record)
+        value = record[self.key]
+        if self.scale is None and self.form is None:
+            return value
+        try:
+            v = float(value) * (1.0 if self.scale is None else self.scale)
+        except (TypeError, ValueError):
+            return math.nan
+        if self.form is None:
+            return v
+        return f"{v:{self.form}}" if math.isfinite(v) else "-"
+
+
+def titled(title: str, header: list[str], rows: list[list], **kw) -> list[str]:
+    """``title`` and the table of ``rows``; nothing when there are no rows."""
+    return [title, md_table(header, rows, **kw)] if rows else []
+
+
+def table(columns: Iterable[Column], records: Iterable) -> list[str]:
+    """The Markdown table of ``records`` (mappings) under ``columns``."""
+    columns = list(columns)
+    rows = [[c.value(r) for c in columns] for r in records]
+    left = [i for i, c in enumerate(columns) if c.text]
+    return [md_table([c.header for c in columns], rows, left=left)]

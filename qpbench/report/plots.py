@@ -1,26 +1,11 @@
-"""PNG figures of a report (matplotlib, Agg backend, imported inside the functions).
+"""PNG figures of a report; :func:`write_plots` returns them by key (used by :mod:`.markdown`).
 
-Keys of the returned mapping (used by :mod:`qpbench.report.markdown`):
-
-- ``perf_profile_<group>``: Dolan-More performance profile of runtime;
-- ``per_tick_<group>_<scenario>``: solve time and optimality gap against t;
-- ``closed_loop_<scenario>_<formulation>``: every backend's run
-  (:func:`qpbench.report.loop_figure.closed_loop_figure`): tracking and force
-  error on log scales, the closest key point against ``d_safe``, solve time
-  per tick against the 1 ms budget, ``|v|^2``, ``Kp_hat`` when adapting;
-- ``closed_loop_v_<scenario>_<formulation>``: joint velocities, one small panel per backend;
-- ``closed_loop_d_<scenario>_<formulation>``: each backend's closest key point to an
-  obstacle against ``d_safe``, its closest approach named (:func:`distance_plot`);
-- ``snapshot_<role>_<scenario>_<formulation>``: the arm, for the fastest exact
-  backend and the network (:mod:`qpbench.report.snapshots`).
-
-Figures with several backends follow :mod:`qpbench.report.style`: one look per
-backend, at most eight highlighted in a panel (one column of panels per group of
-backends, the others grey behind), legends outside the data.
-
-Closed-loop figures read each run's tick log, or its figure log when the tick
-log is absent (:func:`qpbench.report.logs.read_log`). Figures of a previous report in the folder
-that this one no longer links are removed (:func:`remove_unlinked`).
+Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<group>_<scenario>``
+(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>`` (every
+backend's run, :mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities),
+``closed_loop_d_...`` (closest key point against ``d_safe``), ``snapshot_<role>_...`` (the
+arm, :mod:`.snapshots`). Closed-loop figures read each run's tick log, else its figure log
+(:func:`.snapshots.read_log`). Figures of a previous report this one no longer links are removed.
 """
 
 from __future__ import annotations
@@ -35,9 +20,10 @@ import pandas as pd
 
 from ..sim import log as tick_log
 from . import style, tables
-from .logs import read_log as _read_log
-from .snapshots import write_snapshots
-from .tables import slug
+from .arm import closest_approach
+from .inputs import Results, scenario_key
+from .markdown_table import slug
+from .snapshots import read_log, write_snapshots
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -51,8 +37,7 @@ def _velocity_columns(df: pd.DataFrame) -> list[str]:
 
 
 def _columns_of_groups(backends, rows: int, width: float, height: float, **kw):
-    """A figure with ``rows`` rows of panels and one column per group of backends
-    (:func:`qpbench.report.style.groups`); returns ``(fig, axes, groups)``."""
+    """``(fig, axes, groups)``: ``rows`` rows of panels, a column per group of backends."""
     groups = style.groups(backends)
     fig, axes = style.pyplot().subplots(
         rows,
@@ -66,7 +51,7 @@ def _columns_of_groups(backends, rows: int, width: float, height: float, **kw):
 
 
 def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None:
-    """Dolan-More profile ``rho_s(tau)`` of runtime (log-scale tau), one panel per group of backends."""
+    """Dolan-More profile ``rho_s(tau)`` of runtime (log tau), one panel per group of backends."""
     taus, profiles = tables.performance_profile(rows)
     fig, axes, groups = _columns_of_groups(profiles, 1, 4.6, 3.4, sharey=True)
     for ax, (title, group) in zip(axes[0], groups):
@@ -89,8 +74,6 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
 
 def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     """Solve time [us] and |optimality gap| against t [s], one column per group of backends."""
-    if "t" not in rows.columns:
-        return False
     df = rows.copy()
     df["t"] = pd.to_numeric(df["t"], errors="coerce")
     df = df[np.isfinite(df["t"])]
@@ -98,7 +81,7 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
         return False
     series = {}
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
-        times = pd.to_numeric(g[tables.runtime_column(g)], errors="coerce").to_numpy(float) * 1e6
+        times = pd.to_numeric(g[tables.RUNTIME], errors="coerce").to_numpy(float) * 1e6
         gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
         gap = np.maximum(np.where(g["found"].to_numpy(bool), gap, np.nan), 1e-16)
         series[str(backend)] = (g["t"].to_numpy(float), times, gap)
@@ -134,28 +117,13 @@ def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     logs = {}
     d_safe = None
     for _, r in runs.iterrows():
-        df = _read_log(r.get("log_path"))
+        df = read_log(r["log_path"])
         if df is not None and tick_log.T in df.columns and len(df):
             logs[str(r["backend"])] = df
             value = r.get("d_safe")
             if value is not None and np.isfinite(float(value)):
                 d_safe = float(value)
     return logs, d_safe
-
-
-def closed_loop_plots(
-    runs: pd.DataFrame, scenario: str, formulation: str, path: Path, path_v: Path
-) -> tuple[bool, bool]:
-    """The closed-loop figure of one scenario, every backend
-    (:func:`qpbench.report.loop_figure.closed_loop_figure`), and the joint velocities per backend."""
-    from .loop_figure import closed_loop_figure
-
-    logs, d_safe = _logs(runs)
-    if not logs:
-        return False, False
-    closed_loop_figure(logs, path, title=f"Closed loop, {scenario} ({formulation})", d_safe=d_safe)
-    done_v = velocity_plot(logs, f"Joint velocities, {scenario} ({formulation})", path_v)
-    return True, done_v
 
 
 def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
@@ -202,41 +170,13 @@ def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
     return True
 
 
-def keypoint_plot(runs: pd.DataFrame, scenario: str, formulation: str, path: Path) -> bool:
-    """Each backend's closest key point to an obstacle [mm] against ``d_safe`` (see :func:`distance_plot`)."""
-    logs, d_safe = _logs(runs)
-    return distance_plot(
-        logs, f"Closest key point to an obstacle, {scenario} ({formulation})", path, d_safe
-    )
-
-
-def _closest(d: pd.DataFrame) -> tuple[float, float, str] | None:
-    """``(t [s], distance [m], "key point / obstacle")`` of a log's closest approach, or ``None``."""
-    cols = [c for c in tick_log.distance_columns(d) if not str(c).startswith("d_body")]
-    if not cols:
-        return None
-    D = d[cols].to_numpy(float)
-    if not np.isfinite(D).any():
-        return None
-    k, c = divmod(int(np.nanargmin(D)), D.shape[1])
-    _, key, obstacle = cols[c].split("_", 2)
-    return float(d[tick_log.T].iloc[k]), float(D[k, c]), f"{key} / {obstacle}"
-
-
 def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> bool:
-    """The distance figure of one scenario: each backend's ``d_min`` [mm] against t, one panel per
-    group of backends (:func:`qpbench.report.style.groups`), on the axis of
-    :func:`qpbench.report.loop_figure.distance_axis` (``d_safe`` readable beside a
-    300 mm excursion); each highlighted backend's closest approach marked and named
-    (key point / obstacle, mm) in the legend. A log's body distance ``d_body_min``, when
-    it has one, is drawn dashed in the same colour."""
-    from .loop_figure import distance_axis
+    """Each backend's ``d_min`` [mm] against t (its ``d_body_min`` dashed), one panel per group of
+    backends, on the distance axis of :mod:`.loop_figure`; each closest approach marked and
+    named in the legend."""
+    from .loop_figure import distance_axis, has_distance
 
-    logs = {
-        b: d
-        for b, d in logs.items()
-        if tick_log.D_MIN in d.columns and np.isfinite(d[tick_log.D_MIN].to_numpy(float)).any()
-    }
+    logs = {b: d for b, d in logs.items() if has_distance(d)}
     if not logs:
         return False
     fig, axes, groups = _columns_of_groups(logs, 1, 4.6, 3.6, sharey=True)
@@ -255,22 +195,27 @@ def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> b
 
 
 def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
-    """One backend's ``d_min`` (and ``d_body_min``) on the distance panel; its closest approach marked."""
+    """One backend's ``d_min`` (and ``d_body_min``); its closest approach marked."""
     t = d[tick_log.T].to_numpy(float)
     dist = d[tick_log.D_MIN].to_numpy(float) * 1e3
     if not lit:
         ax.plot(t, dist, color=style.GREY, lw=0.7, zorder=1)
         return
     look = style.look(backend)
-    close = _closest(d)
+    close = closest_approach(d)
     label = (
         backend
         if close is None
-        else f"{backend}: {close[1] * 1e3:.1f} mm, {close[2]}, {close[0]:.2f} s"
+        else f"{backend}: {close['distance'] * 1e3:.1f} mm, {close['key_point']} / "
+        f"{close['obstacle']}, {close['t']:.2f} s"
     )
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
     if close is not None:
-        ax.plot([close[0]], [close[1] * 1e3], **look.line(lw=0, ms=7, zorder=4, markevery=None))
+        ax.plot(
+            [close["t"]],
+            [close["distance"] * 1e3],
+            **look.line(lw=0, ms=7, zorder=4, markevery=None),
+        )
     ax.plot(
         [], [], **look.line(lw=1.0, label=label, markevery=None)
     )  # legend entry: line and marker
@@ -278,9 +223,7 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 
 
-def write_plots(
-    results: tables.Results, folder: str | Path, relative_to: str | Path
-) -> dict[str, str]:
+def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
     """Write every figure of a report into ``folder``; return key -> path relative to ``relative_to``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -293,31 +236,32 @@ def write_plots(
         key = f"perf_profile_{slug(label)}"
         performance_profile_plot(rows, label, folder / f"{key}.png")
         files[key] = _rel(folder / f"{key}.png")
-        if "scenario" in rows.columns:
-            for scenario, g in rows.groupby(rows["scenario"].map(tables.scenario_key), sort=True):
-                key = f"per_tick_{slug(label)}_{slug(scenario)}"
-                if per_tick_plot(g, f"{scenario} ({label})", folder / f"{key}.png"):
-                    files[key] = _rel(folder / f"{key}.png")
+        for scenario, g in rows.groupby(rows["scenario"].map(scenario_key), sort=True):
+            key = f"per_tick_{slug(label)}_{slug(scenario)}"
+            if per_tick_plot(g, f"{scenario} ({label})", folder / f"{key}.png"):
+                files[key] = _rel(folder / f"{key}.png")
     df = results.closed_loop
     if not df.empty:
+        from .loop_figure import closed_loop_figure
+
         for (scenario, formulation), g in df.groupby(
             [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
         ):
-            key = f"closed_loop_{slug(scenario)}_{slug(formulation)}"
-            key_v = f"closed_loop_v_{slug(scenario)}_{slug(formulation)}"
-            done, done_v = closed_loop_plots(
-                g, scenario, formulation, folder / f"{key}.png", folder / f"{key_v}.png"
-            )
-            if done:
-                files[key] = _rel(folder / f"{key}.png")
-            if done_v:
-                files[key_v] = _rel(folder / f"{key_v}.png")
-            key_d = f"closed_loop_d_{slug(scenario)}_{slug(formulation)}"
-            if done and keypoint_plot(g, scenario, formulation, folder / f"{key_d}.png"):
-                files[key_d] = _rel(folder / f"{key_d}.png")
-            files.update(
-                {k: _rel(p) for k, p in write_snapshots(g, scenario, formulation, folder).items()}
-            )
+            logs, d_safe = _logs(g)
+            name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
+            if logs:
+                path = folder / f"closed_loop_{name}.png"
+                closed_loop_figure(logs, path, title=f"Closed loop, {where}", d_safe=d_safe)
+                files[f"closed_loop_{name}"] = _rel(path)
+                path = folder / f"closed_loop_v_{name}.png"
+                if velocity_plot(logs, f"Joint velocities, {where}", path):
+                    files[f"closed_loop_v_{name}"] = _rel(path)
+                path = folder / f"closed_loop_d_{name}.png"
+                title = f"Closest key point to an obstacle, {where}"
+                if distance_plot(logs, title, path, d_safe):
+                    files[f"closed_loop_d_{name}"] = _rel(path)
+            snapshots = write_snapshots(g, scenario, formulation, folder)
+            files.update({k: _rel(p) for k, p in snapshots.items()})
     remove_unlinked(folder, files.values(), relative_to)
     return files
 
@@ -329,11 +273,8 @@ FIGURE_PATTERN = re.compile(r"(perf_profile|per_tick|closed_loop|snapshot)_[A-Za
 def remove_unlinked(
     folder: str | Path, linked: Iterable[str], relative_to: str | Path
 ) -> list[Path]:
-    """Remove the figures of a previous report in ``folder`` that the new one does not link.
-
-    Only files named as :func:`write_plots` names its figures
-    (:data:`FIGURE_PATTERN`) are removed; any other file stays. Returns them.
-    """
+    """Remove (and return) the figures of a previous report in ``folder`` the new one does not
+    link; only files named as :func:`write_plots` names them (:data:`FIGURE_PATTERN`)."""
     keep = {(Path(relative_to) / p).resolve() for p in linked}
     removed = []
     for path in sorted(Path(folder).iterdir()):

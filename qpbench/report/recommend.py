@@ -1,23 +1,12 @@
 """The answer, stated: which backends to trust in the loop, from a closed-loop table.
 
-A backend is *recommended* for a scenario when every run of it there has
-verdict ``ok`` (:mod:`qpbench.sim.verdict`: the whole body clear, limits
-kept, tracking and force within their thresholds, the run complete) and was
-real time (``realtime == "yes"``: judged at the scenario's ``dt`` from the
-measured call times). It is recommended *overall* when it is recommended in
-every scenario of the table. Recommended backends are ranked by their p99
-call time (``solve_time_p99_s``, the largest over the runs counted), with
-the solver's own p99 (``solver_time_p99_s``, what a C or C++ controller
-calling the library would pay) beside. Every other backend is listed with
-its reasons in a few words, each naming the scenario ("unsafe in wall: ...",
-"not real time in narrow: ...", "incomplete in wall (stopped at 1.5 s)").
-
-:func:`recommend` decides, :func:`render` writes it (plain text for a
-terminal, Markdown for ``report.md``: the same lines, padded tables that
-read aligned in both), :func:`opening` puts it at the top of ``report.md``
-with five lines of how to read the rest (:data:`HOW_TO_READ`),
-:func:`shortfalls` gives the one line of a ``--strict`` exit
-(:func:`qpbench.commands.options.strict_exit`).
+A backend is *recommended* for a scenario when every run of it there has verdict ``ok``
+(:mod:`qpbench.sim.verdict`) and was real time (``realtime == "yes"``), overall when it is in
+every scenario; ranked by p99 call time (``solve_time_p99_s``, the largest over its runs), with
+the solver's own p99 beside. Every other backend is listed with its reasons, each naming the
+scenario. :func:`recommend` decides, :func:`render` writes it (padded Markdown tables that read
+aligned on a terminal too), :func:`opening` puts it atop ``report.md``, :func:`shortfalls`
+gives the line of a ``--strict`` exit.
 """
 
 from __future__ import annotations
@@ -78,12 +67,8 @@ class Pick:
 
 @dataclass(frozen=True)
 class Scope:
-    """The answer for one scenario, or for all of them (``name`` ``"all scenarios"``).
-
-    Attributes:
-        recommended: Backends ok and real time in every run, fastest p99 call first.
-        not_recommended: Every other backend -> its reasons, in the table's order.
-    """
+    """The answer for one scenario, or for all of them: the backends ok and real time in every
+    run, fastest first, and every other one -> its reasons."""
 
     name: str
     recommended: tuple[Pick, ...] = ()
@@ -105,14 +90,8 @@ class Recommendation:
 
 
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
-    """The closed-loop (or sweep) table with the columns the answer reads.
-
-    A table written before real time was judged has no ``realtime``,
-    ``realtime_reason`` or ``solver_time_p99_s``: its runs read as real time
-    ``unknown`` (never recommended, never a ``--strict`` failure) and
-    solver time unknown; one written before verdicts has no ``verdict`` (no
-    run of it is recommended). This is the one place that tolerates their absence.
-    """
+    """The closed-loop (or sweep) table with the columns the answer reads; a table written
+    before verdicts and real time were judged reads as no verdict, real time ``unknown``."""
     table = table.copy()
     for column, missing in (
         ("verdict", ""),
@@ -194,18 +173,13 @@ def _scope(name: str, runs: pd.DataFrame, place) -> Scope:
 
 
 def recommend(table: pd.DataFrame) -> Recommendation:
-    """Per scenario and overall: the backends ok and real time in every run, fastest first, and
-    why each other one is not recommended (module docstring).
-
-    Args:
-        table: A closed-loop table (``closed_loop.csv``), one row per run, any number of runs
-            per (scenario, backend) (formulations, resumed tables).
-    """
+    """Per scenario and overall: the backends ok and real time in every run of ``table`` (one
+    row per run, any number per scenario and backend), fastest first, and why not the others."""
     runs = read_runs(table)
     if runs.empty:
         return Recommendation(Scope("all scenarios"), (), 0)
     runs["scenario"] = runs["scenario"].astype(str)
-    several = "formulation" in runs.columns and runs["formulation"].nunique(dropna=True) > 1
+    several = runs["formulation"].nunique(dropna=True) > 1
 
     def place(row: dict) -> str:
         return f"{row['scenario']} ({row['formulation']})" if several else row["scenario"]
@@ -277,8 +251,8 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
 
 
 def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
-    """The opening of ``report.md`` under its title: the recommendation from the closed-loop rows
-    (a line saying there is none for a report of bench results only), then "How to read this"."""
+    """The opening of ``report.md``: the recommendation (or a line saying there is none), then
+    "How to read this"."""
     out = []
     if not closed_loop.empty:
         out.append(render(recommend(closed_loop), markdown=True))
@@ -293,13 +267,8 @@ def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
 
 
 def shortfalls(runs: pd.DataFrame | None = None, failed_solves: int = 0) -> list[str]:
-    """What makes a ``--strict`` run exit 1, one phrase each (empty: nothing).
-
-    Args:
-        runs: Closed-loop or sweep rows: a run whose verdict is not ``ok`` (a skipped or
-            failed run included) and a run that was not real time (``realtime == "no"``).
-        failed_solves: Failed solves of a bench.
-    """
+    """What makes a ``--strict`` run exit 1, one phrase each (empty: nothing): failed solves of
+    a bench, runs whose verdict is not ``ok``, runs not real time."""
     out = []
     if failed_solves:
         out.append(f"{failed_solves} failed solves")

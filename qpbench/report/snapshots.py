@@ -1,17 +1,8 @@
-"""The report's pictures of the arm: one snapshot per scenario for two backends, side by side.
-
-Of each scenario's closed-loop runs (one formulation at a time) the report
-draws (:func:`qpbench.report.arm.draw_snapshot`):
-
-- the *fastest exact backend*: a QP solver (not the network, not the
-  pseudo-inverse, which ignores the inequalities), whose run ended ``ok``
-  and lasted its whole duration, with the smallest median solve time;
-- the *network*: ``rnn-tuned``, else ``rnn``, else any other network backend.
-
-Each from its run's tick log, or its figure log (:mod:`qpbench.sim.figure_log`)
-when the tick log is absent. Keys of the returned mapping:
-``snapshot_<role>_<scenario>_<formulation>``, ``role`` ``exact`` or ``network``.
-"""
+"""The report's pictures of the arm (:func:`qpbench.report.arm.draw_snapshot`): per scenario
+and formulation, the *fastest exact backend* (a QP solver, neither the network nor the
+pseudo-inverse, whose run ended ``ok`` and whole, with the smallest median solve time) and the
+*network* (``rnn-tuned``, else ``rnn``, else another), from each run's tick or figure log.
+Keys: ``snapshot_<role>_<scenario>_<formulation>``."""
 
 from __future__ import annotations
 
@@ -21,10 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .logs import log_file, read_log
-from .tables import slug
+from .markdown_table import slug
 
-__all__ = ["ROLES", "snapshot_runs", "write_snapshots"]
+__all__ = ["ROLES", "log_file", "read_log", "snapshot_runs", "write_snapshots"]
 
 log = logging.getLogger("qpbench.report")
 
@@ -32,6 +22,30 @@ log = logging.getLogger("qpbench.report")
 ROLES = {"exact": "fastest exact backend", "network": "network"}
 #: Network backends in order of preference.
 NETWORKS = ("rnn-tuned", "rnn")
+
+
+def log_file(path: str | Path) -> str | None:
+    """A run's tick log; else its figure log (:mod:`qpbench.sim.figure_log`); else ``None``."""
+    from ..sim.figure_log import figure_log_path
+
+    if not isinstance(path, str) or not path:
+        return None
+    if Path(path).exists():
+        return path
+    compact = figure_log_path(path)
+    return str(compact) if compact.exists() else None
+
+
+def read_log(path: str | Path) -> pd.DataFrame | None:
+    """The frame of :func:`log_file` (``None``: no log, or a damaged one, with a warning)."""
+    path = log_file(path)
+    if path is None:
+        return None
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - a damaged log only loses its curve
+        log.warning("%s: cannot read tick log (%s)", path, exc)
+        return None
 
 
 def _family(backend: str) -> str:
@@ -53,9 +67,7 @@ def _is_exact(backend: str) -> bool:
 
 
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
-    """Of one scenario's runs (one formulation), the row of each role that has one (see the module docstring)."""
-    if "log_path" not in runs.columns:
-        return {}
+    """Of one scenario's runs (one formulation), the row of each role that has one."""
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
     whole = (

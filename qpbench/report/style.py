@@ -1,22 +1,10 @@
 """One look per backend, the same in every figure, and the one place figures are saved.
 
-Every figure that draws backends (the report's, ``simulate --plot``, the
-sweep's ECDFs, the scaling study's) takes a backend's colour, marker and
-line style from :func:`look`: a fixed table (:data:`LOOKS`) for the backends
-this package knows, and for any other name a look picked from
-:data:`SPARE` by a stable hash of the name (the same in every run and every
-process), so the same backend looks the same everywhere.
-
-Readability rules the figures follow:
-
-- at most :data:`MAX_SERIES` highlighted series in one panel: backends are
-  split into :func:`groups` (own-API QP solvers, networks and the
-  pseudo-inverse, qpsolvers routes; at most :data:`MAX_SERIES` each), one
-  column of panels per group, the other groups' backends drawn in light grey
-  behind (:func:`highlighted`) so every panel keeps the whole field as context;
-- legends outside the axes (:func:`legend_above`);
-- no figure taller than :data:`MAX_HEIGHT_PX` pixels (:func:`save`, the one
-  function that writes a figure, checks it).
+A backend's colour, marker and line style come from :func:`look`: a fixed table
+(:data:`LOOKS`) for the backends this package knows, else a pick from :data:`SPARE` by a stable
+hash of the name. At most :data:`MAX_SERIES` backends are highlighted in a panel: backends are
+split into :func:`groups`, one column of panels each, the others grey behind
+(:func:`highlighted`); legends sit outside the axes; :func:`save` writes every figure.
 """
 
 from __future__ import annotations
@@ -66,13 +54,12 @@ class Look:
     linestyle: str
 
     def line(self, x=None, **extra) -> dict:
-        """Keyword arguments of ``Axes.plot``: colour, line style, marker; ``extra`` added or overriding.
+        """Keyword arguments of ``Axes.plot`` (``extra`` added or overriding).
 
-        ``x``: the line's x values; the markers then go at the points nearest to
-        :data:`MARKS` evenly spaced x values (a decimated log's ticks are bunched: every
-        k-th point would bunch the markers too), shifted by a share of the spacing that
-        differs by marker, so backends whose lines coincide show each its own markers.
-        Without ``x``, no marker on the line (its legend entry still shows it).
+        ``x``: the line's x values; the markers go at the points nearest to :data:`MARKS` evenly
+        spaced x values (a decimated log's ticks are bunched), shifted by a share that differs
+        by marker, so coinciding lines each show their markers. Without ``x``: no marker on
+        the line (its legend entry still shows it).
         """
         kw = {"color": self.colour, "ls": self.linestyle, "marker": self.marker, "ms": 4.5}
         phase = (MARKERS.index(self.marker) + 0.5) / len(MARKERS) if self.marker in MARKERS else 0.5
@@ -86,8 +73,8 @@ MARKS = 10
 
 
 def marks(x, phase: float = 0.5) -> list[int]:
-    """Indices of the points of ``x`` nearest to :data:`MARKS` evenly spaced values, the
-    ``k``-th at ``(k + phase) / MARKS`` of the way from the smallest to the largest."""
+    """Indices of the points of ``x`` nearest to :data:`MARKS` values, the ``k``-th at
+    ``(k + phase) / MARKS`` of the way from the smallest to the largest."""
     import numpy as np
 
     x = np.asarray(x, dtype=float)
@@ -195,13 +182,9 @@ def _order(backend: str) -> tuple:
 
 
 def groups(backends: Iterable[str], max_series: int = MAX_SERIES) -> list[tuple[str, list[str]]]:
-    """``backends`` split into panels of at most ``max_series``: ``[(title, names), ...]``.
-
-    Backends of a kind (own-API QP solvers, the network and the pseudo-inverse,
-    qpsolvers routes, others) share a panel; a kind with more than
-    ``max_series`` is cut into equal parts. When all fit in one panel, one
-    group titled ``""``. Order: the kinds as listed, within one :data:`LOOKS`'s.
-    """
+    """``backends`` split into panels of at most ``max_series``: ``[(title, names), ...]``; a
+    kind (:data:`_KIND_TITLES`) shares a panel, cut into equal parts when too many. All in one
+    panel: one group titled ``""``."""
     names = sorted(dict.fromkeys(str(b) for b in backends), key=_order)
     if len(names) <= max_series:
         return [("", names)] if names else []
@@ -234,8 +217,7 @@ def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
 
 
 def legend_beside(ax, handles=None, labels=None, **kw):
-    """A legend to the right of ``ax``, outside the data (``handles``/``labels``: the axes' own
-    by default)."""
+    """A legend to the right of ``ax``, outside the data."""
     where = dict(loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return _legend_outside(ax, handles, labels, where, kw.pop("fontsize", 8), kw)
 
@@ -264,16 +246,10 @@ def pyplot():
 def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     """Write ``fig`` to ``path`` atomically (format from the suffix) and close it.
 
-    The one place a figure is written. A PNG taller than :data:`MAX_HEIGHT_PX`
-    is written again at the resolution that makes it fit, with a warning naming the
-    file (a figure designed taller is a fault of its design; the test of the report's
-    figures fails on the warning). The height is read from the written PNG: drawing
-    the figure once more to measure it first would cost as much as writing it.
-
-    A figure with a constrained layout and no axes of fixed aspect is written as it is: the
-    layout keeps every artist inside it. Any other is written in its tight box, which draws
-    it once more to measure it; equal axes are the case that needs it, since the layout
-    places what stands beside them (a legend) before the aspect shrinks them.
+    A PNG taller than :data:`MAX_HEIGHT_PX` is written again at the resolution that fits, with
+    a warning (a design fault; the figures' test fails on it). A constrained layout without
+    fixed-aspect axes is written as it is; any other in its tight box (equal axes need it: the
+    layout places a legend beside them before the aspect shrinks them).
     """
     from matplotlib.layout_engine import ConstrainedLayoutEngine
 

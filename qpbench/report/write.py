@@ -1,8 +1,7 @@
-"""``report.md`` and its figures from result CSVs: the one entry point of a report.
+"""The write of every report folder (:func:`publish`), and ``report.md`` with its figures.
 
-:mod:`.tables` reads the CSVs, :mod:`.plots` draws the figures, :mod:`.markdown`
-renders the text; this module calls them in that order (neither of the last
-two imports the other).
+:mod:`.inputs` reads the CSVs, :mod:`.plots` draws the figures, :mod:`.markdown` renders the
+text (neither of the last two imports the other).
 """
 
 from __future__ import annotations
@@ -17,13 +16,13 @@ from typing import TYPE_CHECKING
 
 import pandas as pd
 
-from . import tables
+from .inputs import Results, read_results
 from .markdown import render
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-__all__ = ["write_report"]
+__all__ = ["publish", "write_report"]
 
 log = logging.getLogger("qpbench.report")
 
@@ -63,6 +62,22 @@ def figure_progress(folder: Path, every_s: float = 5.0):
         log.info("report: %d figures in %.1f s", count(), time.time() - started)
 
 
+def publish(out: str | Path, name: str, force: bool, render: Callable[[Path], str]) -> Path:
+    """The one write of a report folder: check ``out`` (its parent must exist) and ``out/name``
+    (refused when it exists, unless ``force``); ``render(out)`` draws the figures into ``out``
+    and returns the text, written last and atomically to ``out/name``."""
+    from ..atomic import check_folder, check_output, write_text
+
+    out = Path(out)
+    check_folder(out)
+    if out.exists():
+        check_output(out / name, force=force)
+    text = render(out)
+    out.mkdir(exist_ok=True)
+    write_text(out / name, text)
+    return out / name
+
+
 def write_report(
     paths: list[str | Path],
     out: str | Path,
@@ -74,47 +89,38 @@ def write_report(
 ) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 
-    Args:
-        sections: ``sections(out, plots) -> list of markdown lines`` appended after the
-            tables, called once the output is checked (the sweep section of
-            :mod:`qpbench.sweep.report`); with it, ``paths`` may be empty.
-        prefer: Which file's row to keep for a key present in several bench
-            CSVs (``first``/``last``; ``None``: refuse), see
-            :func:`qpbench.report.tables.read_results`.
+    ``sections(out, plots)``: markdown lines appended after the tables (the sweep section);
+    with it, ``paths`` may be empty. ``prefer``: see :func:`qpbench.report.inputs.read_results`.
 
     Raises:
-        InputError: a path is missing or not a result CSV, a duplicate key or
-            mixed repeat counts without ``prefer``.
+        InputError: a path is missing or not a result CSV, a duplicate key or mixed repeat
+            counts without ``prefer``.
         OutputExistsError: ``out/report.md`` exists and ``force`` is false.
     """
-    from ..atomic import check_folder, check_output, write_text
 
-    out = Path(out)
-    report_path = out / "report.md"
-    check_folder(out)
-    if out.exists():
-        check_output(report_path, force=force)
-    started = time.perf_counter()
-    results = (
-        tables.read_results(paths, prefer=prefer)
-        if paths or sections is None
-        else tables.Results(pd.DataFrame(), pd.DataFrame())
-    )
-    log.info(
-        "report: %d bench rows and %d closed-loop runs read in %.1f s",
-        len(results.bench),
-        len(results.closed_loop),
-        time.perf_counter() - started,
-    )
-    plot_files: dict[str, str] = {}
-    if plots:
-        from .plots import write_plots
+    def render_all(out: Path) -> str:
+        started = time.perf_counter()
+        results = (
+            read_results(paths, prefer=prefer)
+            if paths or sections is None
+            else Results(pd.DataFrame(), pd.DataFrame())
+        )
+        log.info(
+            "report: %d bench rows and %d closed-loop runs read in %.1f s",
+            len(results.bench),
+            len(results.closed_loop),
+            time.perf_counter() - started,
+        )
+        plot_files: dict[str, str] = {}
+        if plots:
+            from .plots import write_plots
 
-        (out / "plots").mkdir(parents=True, exist_ok=True)
-        with figure_progress(out / "plots"):
-            plot_files = write_plots(results, out / "plots", relative_to=out)
-    text = render(results, plot_files)
-    if sections is not None:
-        text += "\n" + "\n".join(sections(out, plots))
-    write_text(report_path, text)
-    return report_path
+            (out / "plots").mkdir(parents=True, exist_ok=True)
+            with figure_progress(out / "plots"):
+                plot_files = write_plots(results, out / "plots", relative_to=out)
+        text = render(results, plot_files)
+        if sections is not None:
+            text += "\n" + "\n".join(sections(out, plots))
+        return text
+
+    return publish(out, "report.md", force, render_all)

@@ -1,19 +1,8 @@
 """The scaling study's report: ``scaling.md`` and ``scaling.png`` from ``scaling.csv``.
 
-Every number is recomputed from the CSV (:mod:`qpbench.scaling.runner`):
-
-- the plot: median solve time per tick against variables (the ``arm`` axis:
-  4 to 64 links, a 16-point cloud) and against constraint rows (the ``cloud``
-  axis: the 4-link arm, 1 to 1,000 cloud points), log-log, one colour per
-  backend, its fitted power law dashed, the 1 ms tick as a line;
-- the slopes (:func:`qpbench.scaling.fit.fit_power_law`) with their standard
-  errors;
-- where sparse solvers overtake dense ones: per axis, the first size from
-  which the fastest sparse backend's median stays below the fastest dense
-  one's (and where their fitted lines meet, when that is beyond the grid);
-- where each backend stops fitting a 1 ms tick: the first size from which
-  the tick's p99 build time plus the backend's p99 solve time stay above 1 ms
-  (and the same with medians).
+Median solve time per tick against variables (the ``arm`` axis) and against constraint rows
+(the ``cloud`` axis), log-log, with fitted power laws (:mod:`.fit`); where the fastest sparse
+backend overtakes the fastest dense one; where build + solve stops fitting a 1 ms tick.
 """
 
 from __future__ import annotations
@@ -24,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..atomic import write_text
+from ..report.markdown_table import US, Column, table
 from .fit import crossing, extrapolated_crossing, first_above, fit_power_law
 
 __all__ = ["TICK_S", "is_scaling_dir", "write_scaling_report"]
@@ -46,25 +35,23 @@ def is_scaling_dir(path: str | Path) -> bool:
 
 
 def load(folder: str | Path) -> pd.DataFrame:
-    """``scaling.csv`` of ``folder`` as a frame (numbers typed)."""
+    """``scaling.csv`` of ``folder`` as a frame, numbers typed (empty without rows)."""
     from .runner import COLUMNS, SUMMARY_NAME, TEXT_COLUMNS, read_summary
 
-    rows = read_summary(Path(folder) / SUMMARY_NAME)
-    frame = pd.DataFrame(rows)
-    for col in COLUMNS:
-        if col in frame and col not in TEXT_COLUMNS:
-            frame[col] = pd.to_numeric(frame[col], errors="coerce")
+    frame = pd.DataFrame(read_summary(Path(folder) / SUMMARY_NAME), columns=list(COLUMNS))
+    for col in set(COLUMNS) - set(TEXT_COLUMNS):
+        frame[col] = pd.to_numeric(frame[col], errors="coerce")
     return frame
 
 
 def fits(frame: pd.DataFrame) -> dict:
     """``{(backend, axis): PowerFit}`` of median solve time on each axis."""
-    out = {}
     measured = frame[frame["status"] == "measured"]
-    for (backend, axis), g in measured.groupby(["backend", "axis"]):
-        if axis in AXES:
-            out[(backend, axis)] = fit_power_law(g[AXES[axis][0]], g["time_median_s"])
-    return out
+    return {
+        (backend, axis): fit_power_law(g[AXES[axis][0]], g["time_median_s"])
+        for (backend, axis), g in measured.groupby(["backend", "axis"])
+        if axis in AXES
+    }
 
 
 def _size_label(frame: pd.DataFrame, name) -> str:
@@ -114,7 +101,8 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
 
 
 def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
-    """Per backend and axis: the first size whose build + solve exceeds :data:`TICK_S`, at p99 and at the median."""
+    """Per backend and axis: the first size whose build + solve exceeds :data:`TICK_S`, at p99
+    and at the median, and the largest such tick [s]."""
     out = []
     m = frame[frame["status"] == "measured"]
     for (backend, axis), g in m.groupby(["backend", "axis"]):
@@ -122,9 +110,7 @@ def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
         g = g.sort_values(xcol)
         row = {"backend": backend, "axis": axis}
         for stat in ("p99", "median"):
-            tick = (
-                g[f"build_{'p99' if stat == 'p99' else 'median'}_s"].fillna(0) + g[f"time_{stat}_s"]
-            )
+            tick = g[f"build_{stat}_s"].fillna(0) + g[f"time_{stat}_s"]
             at = first_above(g[xcol].values, tick.values, TICK_S)
             row[stat] = _size_label(frame, None if at is None else g[g[xcol] == at]["size"].iloc[0])
             row[f"largest {stat}"] = tick.max()
@@ -133,13 +119,8 @@ def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
-    """Two log-log panels (module docstring) as a PNG at ``path``.
-
-    Each backend in its colour (:func:`qpbench.report.style.look`); squares
-    dense, circles sparse; more than :data:`qpbench.report.style.MAX_SERIES` backends:
-    one row of panels per group of them, the others grey behind. Legends outside,
-    on the right.
-    """
+    """Two log-log panels (module docstring) as a PNG at ``path``: squares dense, circles sparse,
+    one row of panels per group of backends (:func:`qpbench.report.style.groups`)."""
     import matplotlib.ticker
 
     from ..report import style
@@ -202,8 +183,50 @@ def _scaling_series(ax, g: pd.DataFrame, xcol: str, b: str, lit: bool, fit) -> N
         ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=3 if lit else 1)
 
 
-def _fmt_us(v) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v * 1e6:,.1f}"
+def _text(key: str) -> Column:
+    return Column(key, key, text=True)
+
+
+def _over(stat: str) -> Column:
+    """The first size whose ``stat`` tick is over 1 ms, and the largest such tick [us]."""
+    return Column(
+        f"{stat} tick over 1 ms from",
+        cell=lambda r: f"{r[stat]} (largest {r[f'largest {stat}'] * US:,.0f})",
+        text=True,
+    )
+
+
+#: The tables of ``scaling.md``, as typed columns of the rows they show.
+SIZE_COLUMNS = (
+    _text("size"),
+    _text("axis"),
+    Column("variables", "n"),
+    Column("key points", "key_points"),
+    Column("cloud points", "cloud_points"),
+    Column("rows", "rows", form=",.0f"),
+    Column("build p50 [us]", "build_median_s", US, ",.1f"),
+    Column("build p99 [us]", "build_p99_s", US, ",.1f"),
+)
+SLOPE_COLUMNS = (
+    _text("backend"),
+    _text("format"),
+    Column("slope vs variables (arm axis)", "arm"),
+    Column("slope vs rows (cloud axis)", "cloud"),
+)
+DEADLINE_COLUMNS = (_text("backend"), _text("axis"), _over("p99"), _over("median"))
+ROW_COLUMNS = (
+    _text("size"),
+    _text("backend"),
+    Column("median [us]", "time_median_s", US, ",.1f"),
+    Column("p99 [us]", "time_p99_s", US, ",.1f"),
+    Column("success %", "success_rate", 100.0, ".0f"),
+    Column("gap max", "gap_max", form=".1e"),
+    Column(
+        "status",
+        cell=lambda r: r["status"] if r["status"] == "measured" else f"skipped: {r['skip_reason']}",
+        text=True,
+    ),
+)
 
 
 def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
@@ -221,34 +244,24 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
     ]
     if image:
         lines += [f"![scaling]({image})", ""]
-    sizes = frame.drop_duplicates("size")[
-        ["size", "axis", "n", "key_points", "cloud_points", "rows", "build_median_s", "build_p99_s"]
-    ]
+    lines += ["## Sizes", ""]
+    lines += table(SIZE_COLUMNS, frame.drop_duplicates("size").to_dict("records"))
     lines += [
-        "## Sizes",
-        "",
-        "| size | axis | variables | key points | cloud points | rows | build p50 [us] | build p99 [us] |",
-        "|:--|:--|--:|--:|--:|--:|--:|--:|",
-    ]
-    for _, r in sizes.iterrows():
-        lines.append(
-            f"| {r['size']} | {r['axis']} | {int(r['n'])} | {int(r['key_points'])} | {int(r['cloud_points'])} "
-            f"| {int(r['rows']):,} | {_fmt_us(r['build_median_s'])} | {_fmt_us(r['build_p99_s'])} |"
-        )
-    lines += [
-        "",
         "## Slopes",
         "",
         "Least squares of log10(median time) on log10(size) per axis; +- one standard error.",
         "",
-        "| backend | format | slope vs variables (arm axis) | slope vs rows (cloud axis) |",
-        "|:--|:--|--:|--:|",
     ]
-    for b in sorted(m["backend"].unique()):
-        fmt = m[m["backend"] == b]["matrix_format"].iloc[0]
-        cells = [fitted[(b, ax)].text() if (b, ax) in fitted else "-" for ax in AXES]
-        lines.append(f"| {b} | {fmt} | {cells[0]} | {cells[1]} |")
-    lines += ["", "## Sparse against dense", ""] + crossover_lines(frame, fitted)
+    slopes = [
+        {
+            "backend": b,
+            "format": g["matrix_format"].iloc[0],
+            **{ax: fitted[(b, ax)].text() if (b, ax) in fitted else "-" for ax in AXES},
+        }
+        for b, g in m.groupby("backend", sort=True)
+    ]
+    lines += table(SLOPE_COLUMNS, slopes)
+    lines += ["## Sparse against dense", ""] + crossover_lines(frame, fitted)
     lines += [
         "",
         "## The 1 ms tick",
@@ -256,30 +269,11 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
         "First size from which build + solve stays above 1 ms: p99 build + p99 solve (every tick must fit), "
         "and median build + median solve (a typical tick fits); largest tick over the axis in brackets [us].",
         "",
-        "| backend | axis | p99 tick over 1 ms from | median tick over 1 ms from |",
-        "|:--|:--|:--|:--|",
     ]
-    for _, r in deadline_table(frame).iterrows():
-        lines.append(
-            f"| {r['backend']} | {r['axis']} | {r['p99']} (largest {r['largest p99'] * 1e6:,.0f}) "
-            f"| {r['median']} (largest {r['largest median'] * 1e6:,.0f}) |"
-        )
-    lines.append("")
-    lines += [
-        "## Every size and backend",
-        "",
-        "| size | backend | median [us] | p99 [us] | success % | gap max | status |",
-        "|:--|:--|--:|--:|--:|--:|:--|",
-    ]
-    for _, r in frame.iterrows():
-        status = r["status"] if r["status"] == "measured" else f"skipped: {r['skip_reason']}"
-        succ = "-" if not math.isfinite(r["success_rate"]) else f"{100 * r['success_rate']:.0f}"
-        gap = "-" if not math.isfinite(r["gap_max"]) else f"{r['gap_max']:.1e}"
-        lines.append(
-            f"| {r['size']} | {r['backend']} | {_fmt_us(r['time_median_s'])} | {_fmt_us(r['time_p99_s'])} "
-            f"| {succ} | {gap} | {status} |"
-        )
-    return "\n".join(lines) + "\n"
+    lines += table(DEADLINE_COLUMNS, deadline_table(frame).to_dict("records"))
+    lines += ["## Every size and backend", ""]
+    lines += table(ROW_COLUMNS, frame.to_dict("records"))
+    return "\n".join(lines)
 
 
 def write_scaling_report(
@@ -289,30 +283,26 @@ def write_scaling_report(
     plots: bool = True,
     quiet: bool = False,
 ) -> Path:
-    """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``; return the .md path.
+    """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``.
 
     Raises:
         InputError: ``folder`` holds no scaling.csv or no row.
         OutputExistsError: ``out/scaling.md`` exists and not ``force``.
     """
-    from ..atomic import check_output
     from ..exceptions import InputError
+    from ..report.write import publish
 
     if not is_scaling_dir(folder):
         raise InputError("not a scaling folder (no scaling.csv)", path=folder)
     frame = load(folder)
     if frame.empty:
         raise InputError("no rows", path=Path(folder) / "scaling.csv")
-    out = Path(out)
-    md = out / "scaling.md"
-    check_output(out, force=True, kind="dir")  # a folder or nothing yet
-    if md.exists():
-        check_output(md, force=force)
-    out.mkdir(parents=True, exist_ok=True)
     fitted = fits(frame)
-    image = None
-    if plots and (frame["status"] == "measured").any():
+
+    def figures(out: Path) -> str | None:
+        if not (plots and (frame["status"] == "measured").any()):
+            return None
         plot(frame, fitted, out / "scaling.png")
-        image = "scaling.png"
-    write_text(md, markdown(frame, fitted, image))
-    return md
+        return "scaling.png"
+
+    return publish(out, "scaling.md", force, lambda out: markdown(frame, fitted, figures(out)))

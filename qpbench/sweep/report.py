@@ -1,20 +1,10 @@
-"""The report's sweep section: failure rates with confidence intervals, paired comparisons, ECDFs, worst instances.
+"""The report's sweep section, every number recomputed from ``sweep.csv`` (:mod:`.rows`).
 
-Every number is recomputed from ``sweep.csv`` (:mod:`qpbench.sweep.rows`).
-
-- **Rates**: per backend, the share of runs whose verdict is ``unsafe``,
-  ``diverged``, ``limits``, ``incomplete`` (a run that raised or whose worker
-  was lost counts as incomplete) and ``failed`` among the runs of valid instances, with 95 %
-  Wilson score intervals (:func:`wilson`): unlike the normal approximation
-  they stay inside [0, 1] and are honest at 0 of n.
-- **Paired comparisons**: two backends on the same instances. Of the
-  instances both ran, how many are ``ok`` with A and not with B, and the
-  reverse; McNemar's exact test (a two-sided binomial test of the discordant
-  pairs, :func:`mcnemar_exact`) says whether the difference could be chance.
-- **Distributions**: ECDFs of tracking error, force error (max after 2 s),
-  closest approach d_min (as its margin to ``d_safe``) and p99 solve time, one line per backend.
-- **Worst instances**: per backend, the runs with the worst verdicts and the
-  smallest margin to ``d_safe``, each with the command that re-runs it.
+Per backend the rate of each bad verdict among the runs of valid instances with its 95 %
+Wilson score interval (:func:`wilson`: inside [0, 1] and honest at 0 of n); every pair of
+backends on the instances both ran, with McNemar's exact test of the discordant pairs
+(:func:`mcnemar_exact`); ECDFs and quantiles of the per-run figures; the worst runs, each with
+the command that re-runs it.
 """
 
 from __future__ import annotations
@@ -27,6 +17,8 @@ import numpy as np
 import pandas as pd
 
 from ..exceptions import InputError
+from ..report.inputs import CSV_ERRORS, expand_paths
+from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
 
 __all__ = ["is_sweep_csv", "mcnemar_exact", "split_sweep_paths", "sweep_section", "wilson"]
@@ -43,13 +35,24 @@ MARGIN_LABEL = "d_min - d_safe [mm] (runs further away leave on the right)"
 ZOOM_MM = 2.0
 #: Runs listed per backend among the worst.
 WORST = 5
-#: ECDF panels: column, label, scale.
+#: ECDF panels: column, label, scale, header of its median in the distributions table.
 ECDF_PANELS = (
-    ("tracking_max_after_2s", "max |tracking error| after 2 s [mm]", 1e3),
-    ("force_error_max_after_2s", "max |force error| after 2 s [N]", 1.0),
-    ("min_obstacle_distance", "d_min [mm]", 1e3),
-    ("solve_time_p99_s", "p99 solve time [us]", 1e6),
+    ("tracking_max_after_2s", "max |tracking error| after 2 s [mm]", 1e3, "track p50 mm"),
+    ("force_error_max_after_2s", "max |force error| after 2 s [N]", 1.0, "force err p50 N"),
+    ("min_obstacle_distance", "d_min [mm]", 1e3, "d_min p50 mm"),
+    ("solve_time_p99_s", "p99 solve time [us]", 1e6, "p99 solve p50 us"),
 )
+RATE_HEADER = ["backend", "runs", "invalid instances", "ok", *RATED, "of which error/crashed"]
+PAIRED_HEADER = [
+    *("A", "B", "instances", "both ok"),
+    *("A ok, B not", "B ok, A not", "neither", "p (McNemar)"),
+]
+QUANTILE_HEADER = [
+    "backend",
+    *(h for *_, median in ECDF_PANELS for h in (median, "p90", "max")),
+    *("t conv. force s", "not conv.", "t conv. track s", "not conv.", "runs with ticks > 1 ms"),
+]
+WORST_HEADER = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
 
 
 def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
@@ -85,8 +88,6 @@ def is_sweep_csv(path: Path) -> bool:
 
 def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
     """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
-    from ..report.inputs import expand_paths
-
     files = expand_paths(paths)
     sweeps = [p for p in files if p.suffix == ".csv" and is_sweep_csv(p)]
     return [p for p in files if p not in sweeps], sweeps
@@ -95,7 +96,7 @@ def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
 def _read(path: Path) -> pd.DataFrame:
     try:
         df = pd.read_csv(path, keep_default_na=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
+    except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
     df = df.drop_duplicates(["instance", "backend"], keep="last")
     df["verdict"] = df["verdict"].fillna("").astype(str)
@@ -155,10 +156,11 @@ def paired_rows(df: pd.DataFrame) -> list[list]:
 
 
 def _quantile_rows(df: pd.DataFrame) -> list[list]:
+    """Per backend, over the runs with a result: median, p90 and max of each ECDF's figure."""
     out = []
     for backend, g in df[df["status"] == "ok"].groupby("backend", sort=True):
         row = [backend]
-        for col, _, scale in ECDF_PANELS:
+        for col, _, scale, _ in ECDF_PANELS:
             v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale
             row += [np.median(v), np.quantile(v, 0.9), np.max(v)] if len(v) else [None] * 3
         for col in ("t_converge_force_s", "t_converge_tracking_s"):
@@ -184,33 +186,16 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
             if r["verdict"] == "ok":
                 continue
             path = Path(r["folder"]) / str(r["instance_file"])
-            reasons = (
-                r["verdict_reasons"]
-                if isinstance(r["verdict_reasons"], str)
-                else r.get("error", "")
-            )
-            out.append(
-                [
-                    backend,
-                    r["instance"],
-                    r["verdict"],
-                    r["min_obstacle_distance"] * 1e3
-                    if pd.notna(r["min_obstacle_distance"])
-                    else None,
-                    str(reasons)[:160],
-                    f"`qpbench simulate --scenario {path} --backend {backend}`",
-                ]
-            )
+            why = r["verdict_reasons"] if isinstance(r["verdict_reasons"], str) else r["error"]
+            rerun = f"`qpbench simulate --scenario {path} --backend {backend}`"
+            distance = r["min_obstacle_distance"] * 1e3
+            out.append([backend, r["instance"], r["verdict"], distance, str(why)[:160], rerun])
     return out
 
 
 def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
-    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend, runs with a result only.
-
-    Backends in their look (:func:`qpbench.report.style.look`); more than
-    :data:`qpbench.report.style.MAX_SERIES` backends: one row of panels per group of them,
-    the others grey behind. The legend outside the panels, on the right.
-    """
+    """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend (runs with a result), one
+    row of panels per group of backends (:func:`qpbench.report.style.groups`)."""
     from ..report import style
 
     ok = df[df["status"] == "ok"]
@@ -223,13 +208,9 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         squeeze=False,
         layout="constrained",
     )
-    d_safe = (
-        float(ok["d_safe"].dropna().iloc[0]) * 1e3
-        if "d_safe" in ok and ok["d_safe"].notna().any()
-        else None
-    )
+    d_safe = float(ok["d_safe"].dropna().iloc[0]) * 1e3 if ok["d_safe"].notna().any() else None
     curves = {}
-    for col, label, scale in ECDF_PANELS:
+    for col, _, scale, _ in ECDF_PANELS:
         shift = d_safe if col == "min_obstacle_distance" and d_safe is not None else 0.0
         for backend, g in ok.groupby(ok["backend"].astype(str), sort=True):
             v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale - shift
@@ -240,7 +221,7 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                     np.r_[0.0, np.arange(1, len(v) + 1) / len(v)],
                 )
     for row, (group_title, group) in enumerate(groups):
-        for ax, (col, label, scale) in zip(axes[row], ECDF_PANELS):
+        for ax, (col, label, _, _) in zip(axes[row], ECDF_PANELS):
             _ecdf_panel(ax, ok, curves, col, everyone, group, d_safe)
             shifted = col == "min_obstacle_distance" and d_safe is not None
             ax.set_xlabel(MARGIN_LABEL if shifted else label)
@@ -312,31 +293,21 @@ def sweep_section(paths: list[Path], out: Path, plots: bool = True) -> list[str]
 
 def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
     """One sweep table's lines: rates, paired comparisons, distributions, ECDFs, worst runs."""
-    from ..report.markdown import md_table, slug
-
     df = _read(path)
     name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
-    lines = [f"### Sweep {name}\n"]
-    lines += _manifest_lines(path.parent)
-    lines.append(
-        md_table(
-            [
-                "backend",
-                "runs",
-                "invalid instances",
-                "ok",
-                "unsafe",
-                "diverged",
-                "limits",
-                "incomplete",
-                "failed",
-                "of which error/crashed",
-            ],
-            rate_rows(df),
-        )
+    lines = [f"### Sweep {name}\n", *_manifest_lines(path.parent)]
+    lines.append(md_table(RATE_HEADER, rate_rows(df)))
+    lines += titled(
+        "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
+        "pairs):\n",
+        PAIRED_HEADER,
+        paired_rows(df),
     )
-    lines += _paired_lines(df)
-    lines += _distribution_lines(df)
+    lines.append(
+        "Distributions over the runs with a result (median, p90, max; time to converge: median, "
+        "runs not converged at the end):\n"
+    )
+    lines.append(md_table(QUANTILE_HEADER, _quantile_rows(df)))
     concurrent = pd.to_numeric(df["concurrent_solves"], errors="coerce").max()
     if pd.notna(concurrent) and concurrent > 1:
         lines.append(
@@ -347,69 +318,10 @@ def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
         key = f"sweep_ecdf_{slug(path.parent.name)}_{slug(name)}"
         ecdf_plot(df, out / "plots" / f"{key}.png", f"sweep {name}")
         lines.append(f"![ECDFs, sweep {name}](plots/{key}.png)\n")
-    lines += _worst_lines(df)
-    return lines
-
-
-def _titled_table(title: str, header: list[str], rows: list) -> list[str]:
-    """``title`` and the table of ``rows`` under ``header``; nothing when there are no rows."""
-    from ..report.markdown import md_table
-
-    return [title, md_table(header, rows)] if rows else []
-
-
-def _paired_lines(df: pd.DataFrame) -> list[str]:
-    """The paired comparison of backends on the same instances (nothing for a single backend)."""
-    return _titled_table(
-        "Paired on the same instances (ok = verdict ok; McNemar's exact test of the discordant "
-        "pairs):\n",
-        ["A", "B", "instances", "both ok", "A ok, B not", "B ok, A not", "neither", "p (McNemar)"],
-        paired_rows(df),
-    )
-
-
-def _distribution_lines(df: pd.DataFrame) -> list[str]:
-    """The quantiles of each backend's per-run figures."""
-    from ..report.markdown import md_table
-
-    lines = []
-    lines.append(
-        "Distributions over the runs with a result (median, p90, max; time to converge: median, "
-        "runs not converged at the end):\n"
-    )
-    lines.append(
-        md_table(
-            [
-                "backend",
-                "track p50 mm",
-                "p90",
-                "max",
-                "force err p50 N",
-                "p90",
-                "max",
-                "d_min p50 mm",
-                "p90",
-                "max",
-                "p99 solve p50 us",
-                "p90",
-                "max",
-                "t conv. force s",
-                "not conv.",
-                "t conv. track s",
-                "not conv.",
-                "runs with ticks > 1 ms",
-            ],
-            _quantile_rows(df),
-        )
-    )
-    return lines
-
-
-def _worst_lines(df: pd.DataFrame) -> list[str]:
-    """The worst runs, each with the command re-running it alone."""
-    return _titled_table(
+    lines += titled(
         "Worst runs (worst verdict, then the smallest margin to d_safe), each re-run alone by its "
         "command:\n",
-        ["backend", "instance", "verdict", "d_min mm", "why", "re-run"],
+        WORST_HEADER,
         worst_rows(df),
     )
+    return lines
