@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import sys
 from pathlib import Path
 
@@ -163,43 +162,29 @@ def run(args: argparse.Namespace) -> int:
     return log_verdict(result.summary)
 
 
-def _check_arguments(args: argparse.Namespace) -> None:
-    """Every option checked, and no output in the way, before anything runs."""
-    from ..atomic import check_folder, check_output
-    from ..exceptions import ParamError
+#: The file suffixes of the outputs whose format the suffix picks (--animate: check_animation).
+SUFFIXES = {"log": (".csv", ".parquet"), "snapshot": (".png", ".svg", ".pdf")}
 
-    if args.log is not None and Path(args.log).suffix not in (".csv", ".parquet"):
-        raise ParamError(f"--log must end in .csv or .parquet, got {args.log}", key="--log")
-    if args.every is not None and args.every < 1:
-        raise ParamError(f"--every must be >= 1, got {args.every}", key="--every")
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """The options only the command has checked, and no output in the way, before anything runs
+    (:func:`qpbench.sim.loop.simulate` checks its own arguments)."""
+    from ..atomic import check_folder, check_output
+    from ..exceptions import ParamError, positive_seconds
+    from ..report.animation import check_animation
+
+    for key, suffixes in SUFFIXES.items():
+        value = getattr(args, key)
+        if value is not None and Path(value).suffix.lower() not in suffixes:
+            raise ParamError(f"must end in {' or '.join(suffixes)}, got {value}", key=f"--{key}")
     if args.every is not None and args.dump is None:
         raise ParamError("--every needs --dump", key="--every")
-    if args.snapshot is not None and Path(args.snapshot).suffix.lower() not in (
-        ".png",
-        ".svg",
-        ".pdf",
-    ):
-        raise ParamError(
-            f"--snapshot must end in .png, .svg or .pdf, got {args.snapshot}", key="--snapshot"
-        )
-    if args.animate is not None and Path(args.animate).suffix.lower() not in (".gif", ".mp4"):
-        raise ParamError(f"--animate must end in .gif or .mp4, got {args.animate}", key="--animate")
-    if args.animate is not None and Path(args.animate).suffix.lower() == ".mp4":
-        import shutil
-
-        if shutil.which("ffmpeg") is None:
-            raise ParamError("--animate .mp4 needs ffmpeg on the PATH; use a .gif", key="--animate")
-    if not (args.speed > 0 and args.fps > 0):
-        raise ParamError(
-            f"--speed and --fps must be positive, got {args.speed} and {args.fps}", key="--speed"
-        )
-    for out in (
-        args.log,
-        None if args.summary == "-" else args.summary,
-        args.plot,
-        args.snapshot,
-        args.animate,
-    ):
+    if args.deadline is not None:
+        positive_seconds(args.deadline, "--deadline")
+    if args.animate is not None:
+        check_animation(Path(args.animate), args.fps, args.speed)
+    summary = None if args.summary == "-" else args.summary
+    for out in (args.log, summary, args.plot, args.snapshot, args.animate):
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
@@ -207,12 +192,6 @@ def _check_arguments(args: argparse.Namespace) -> None:
         for name in ("problems.parquet", "manifest.json"):
             if Path(args.dump).exists():
                 check_output(Path(args.dump) / name, force=args.force)
-
-    if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
-        raise ParamError(
-            f"--deadline must be a positive number of seconds, got {args.deadline}",
-            key="--deadline",
-        )
 
 
 def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:
@@ -222,7 +201,7 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
     s = result.summary
     if args.log is not None:
         with atomic_path(args.log) as tmp:
-            if args.log.endswith(".csv"):
+            if Path(args.log).suffix.lower() == ".csv":
                 result.log.to_csv(tmp, index=False, float_format="%.10g")
             else:
                 result.log.to_parquet(tmp, index=False)

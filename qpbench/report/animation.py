@@ -93,7 +93,7 @@ def animate(
 
     plt = style.pyplot()
     path = Path(path)
-    _check_animation(path, fps, speed)
+    check_animation(path, fps, speed)
 
     arm, keys, surface, obstacles = scene.frame_parts(scenario)
     theta = scene.thetas(log, arm.n)
@@ -142,7 +142,7 @@ def _distance_columns(log: pd.DataFrame) -> list[str]:
     return distance_columns(log)
 
 
-def _check_animation(path: Path, fps: float, speed: float) -> None:
+def check_animation(path: Path, fps: float, speed: float) -> None:
     """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
     from ..exceptions import ParamError
 
