@@ -21,13 +21,11 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .list_ import add_selection_arguments
+from .options import add
 
 if TYPE_CHECKING:
     from ..formats import ProblemRecord
 
-# The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
-# command module: cli.py reads these names; the repetition is that interface, not shared logic.
 HELP = "write problems as qpsolvers .npz files or a Parquet problem set (subset with --problems/--every/--limit)"
 EXAMPLE = "qpbench export problems/wall --format npz --problems 'wall_paper_001*' --limit 10 --out wall-npz"
 
@@ -44,8 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", required=True, metavar="DIR", help="output folder (must not exist unless --force)"
     )
-    parser.add_argument("--force", action="store_true", help="replace an existing output folder")
-    add_selection_arguments(parser)
+    add(parser, "--force", help="replace an existing output folder")
+    add(parser, "--problems", "--every", "--limit")
 
 
 def _safe_name(name: str) -> str:

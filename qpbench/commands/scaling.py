@@ -12,7 +12,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .options import add_force_resume, add_strict, strict_exit
+from .options import add, add_force_resume, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
@@ -30,11 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..scaling.runner import ScalingConfig
 
     d = ScalingConfig(backends=[], sizes=[])
-    parser.add_argument(
-        "--backends",
-        required=True,
-        help="comma-separated backend names, or 'all' (every available backend)",
-    )
+    add(parser, "--backends", required=True)
     parser.add_argument(
         "--out",
         required=True,
@@ -87,24 +83,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete this command's outputs in --out and start again",
         resume="keep the sizes done in --out and run the rest",
     )
-    add_strict(parser)
+    add(parser, "--strict")
 
 
 def _config(args):
-    from ..backends import backend_names, resolve_name
     from ..exceptions import ParamError
     from ..profiles import get_profile
     from ..scaling.runner import ScalingConfig
     from ..scaling.sizes import parse_sizes
+    from ..selection import select_backend, select_backends
 
-    if args.backends.strip() == "all":
-        backends = backend_names(available_only=True)
-    else:
-        backends = [resolve_name(b.strip()) for b in args.backends.split(",") if b.strip()]
-    if not backends:
-        raise ParamError("no backend given", key="--backends")
-    if len(set(backends)) != len(backends):
-        raise ParamError(f"a backend is listed twice in '{args.backends}'", key="--backends")
+    backends = select_backends(args.backends)
     get_profile(args.profile)
     for key, value, ok in (
         ("--duration", args.duration, args.duration > 0),
@@ -123,7 +112,7 @@ def _config(args):
     return ScalingConfig(
         backends=backends,
         sizes=parse_sizes(args.sizes),
-        driver=resolve_name(args.driver),
+        driver=select_backend(args.driver, "--driver"),
         duration=args.duration,
         every=args.every,
         repeat=args.repeat,
@@ -142,9 +131,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
-    check_output(
-        out, force=True, kind="dir"
-    )  # a folder (or nothing); its scaling.csv is checked below
+    check_output(out, force=True, kind="dir")  # a folder (or nothing); its table is checked below
     if (out / SUMMARY_NAME).exists() and not (args.force or args.resume):
         from ..exceptions import OutputExistsError
 

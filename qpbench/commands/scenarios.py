@@ -17,6 +17,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from .options import add, aligned
+
 HELP = "list the shipped scenarios; 'show NAME' prints one's TOML file to start your own from"
 EXAMPLE = (
     "qpbench scenarios    (qpbench scenarios show wall > my.toml; "
@@ -34,9 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="the scenario to show (a shipped name or a .toml path)",
     )
-    parser.add_argument(
-        "--json", action="store_true", help="JSON: one object per scenario, or the file's tables"
-    )
+    add(parser, "--json", help="JSON: one object per scenario, or the file's tables")
     parser.add_argument(
         "--filled",
         action="store_true",
@@ -125,7 +125,5 @@ def run(args: argparse.Namespace) -> int:
                 item["description"],
             )
         )
-    widths = [max(len(r[c]) for r in rows) for c in range(4)]
-    for r in rows:
-        print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4])
+    print(aligned(rows, left=4, free_last=True))
     return 0

@@ -1,13 +1,8 @@
 """``qpbench simulate``: run a scenario in closed loop with one backend; log, summary, dump, plot.
 
-The run's verdict (:mod:`qpbench.sim.verdict`, thresholds from the scenario's
-``[verdict]`` table) ends the output: an INFO line when it is ``ok``, else a
-WARNING with the reasons (the smallest obstacle distance among them when the
-run is unsafe), after an INFO line saying whether the run kept real time
-(``realtime``, ``realtime_solver``: beside the verdict, not in it). Thresholds set
-with ``--set verdict.KEY=VALUE`` are printed as a WARNING and recorded in the
-summary (``verdict_overrides``). Exit code: 0 when the verdict is ``ok``, 1 when
-it is not, 2 on bad input.
+The output ends with a line saying whether the run kept real time (beside the verdict, not in
+it), then the verdict (:mod:`qpbench.sim.verdict`): INFO when ``ok``, else a WARNING with the
+reasons. Exit code: 0 when the verdict is ``ok``, 1 when it is not, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -18,8 +13,7 @@ import logging
 import sys
 from pathlib import Path
 
-from ..statuses import FORMULATIONS
-from .options import add_set
+from .options import add
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
@@ -32,8 +26,7 @@ EXAMPLE = (
 log = logging.getLogger("qpbench")
 
 
-def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
-    """What to simulate: scenario, backend, formulation, times, overrides, profile, deadline."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scenario",
         required=True,
@@ -46,72 +39,26 @@ def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="backend name (see `qpbench backends`), e.g. qpsolvers:daqp, clarabel, rnn",
     )
+    add(parser, "--formulation", "--duration", "--set", "--profile", "--deadline")
     parser.add_argument(
-        "--formulation",
-        default="paper",
-        choices=FORMULATIONS,
-        help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)",
+        "--dt", type=float, metavar="S", help="control period in [s] (default: the scenario's)"
     )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        default=None,
-        metavar="S",
-        help="simulated time in s (default: the scenario's)",
-    )
-    parser.add_argument(
-        "--dt",
-        type=float,
-        default=None,
-        metavar="S",
-        help="control period in s (default: the scenario's)",
-    )
-    add_set(
-        parser,
-        "set a scenario value over the file's (repeatable): TABLE.KEY=VALUE or obstacles[i].KEY=VALUE, "
-        "VALUE in TOML syntax (a bare word is a string), e.g. --set rnn.eps=0.001 --set rnn.substeps=5",
-    )
-    parser.add_argument(
-        "--profile", default="default", help="backend settings profile (default: default)"
-    )
-    parser.add_argument(
-        "--deadline",
-        type=float,
-        default=None,
-        metavar="SECONDS",
-        help="drop an answer that arrives later than this (status time_limit; soft fallback, else zero velocity), "
-        "as a real-time controller would; the run then depends on the machine's speed. Default: none, every "
-        "answer is applied and the summary's deadline_misses counts ticks slower than dt",
-    )
-
-
-def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
-    """What to write: log, summary, dumped QPs, figure, snapshot, animation."""
-    parser.add_argument(
-        "--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet"
-    )
-    parser.add_argument(
-        "--summary", default=None, metavar="FILE", help="summary as JSON ('-': to stdout)"
-    )
+    parser.add_argument("--log", metavar="FILE", help="per-tick log, .csv or .parquet")
+    parser.add_argument("--summary", metavar="FILE", help="summary as JSON ('-': to stdout)")
     parser.add_argument(
         "--dump",
-        default=None,
         metavar="DIR",
         help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)",
     )
-    parser.add_argument(
-        "--every", type=int, default=None, metavar="K", help="dump every K-th tick (default 1)"
-    )
-    parser.add_argument("--plot", default=None, metavar="FILE", help="figure of the run (.png)")
+    parser.add_argument("--every", type=int, metavar="K", help="dump every K-th tick (default 1)")
+    parser.add_argument("--plot", metavar="FILE", help="figure of the run (.png)")
     parser.add_argument(
         "--snapshot",
-        default=None,
         metavar="FILE",
         help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)",
     )
     parser.add_argument(
         "--animate",
-        default=None,
         metavar="FILE",
         help="animation of the run (.gif; .mp4 when ffmpeg is installed)",
     )
@@ -125,12 +72,7 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--fps", type=int, default=15, help="frames per second of the animation (default 15)"
     )
-    parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    _add_run_arguments(parser)
-    _add_output_arguments(parser)
+    add(parser, "--force", help="overwrite existing outputs")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -278,13 +220,8 @@ def _log_summary(s: dict) -> None:
 
 
 def log_verdict(s: dict) -> int:
-    """Log the verdict line and return the exit code: 0 ok, 1 not.
-
-    The body's smallest clearance to an obstacle is on the line: in the
-    reasons when the run is unsafe, else appended as a figure; then the
-    key-point rule: the smallest key-point distance when it held, why when it
-    broke.
-    """
+    """Log the verdict line, with the body's smallest clearance (in the reasons when unsafe)
+    and the key-point rule (its smallest distance, or why it broke); return 0 if ok, else 1."""
     distance = ""
     if s.get("min_body_distance") is not None and s["verdict"] != "unsafe":
         distance = (

@@ -11,16 +11,14 @@ from __future__ import annotations
 import argparse
 import json
 
+from .options import add
+
 HELP = "compile every numba kernel into the on-disk cache (or load it from there) and report which"
 EXAMPLE = "qpbench warmup    (NUMBA_CACHE_DIR=/tmp/kernels qpbench warmup --json)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--json",
-        action="store_true",
-        help="print {compiled, seconds, cache, kernels} as JSON on stdout",
-    )
+    add(parser, "--json", help="print {compiled, seconds, cache, kernels} as JSON on stdout")
 
 
 def run(args: argparse.Namespace) -> int:

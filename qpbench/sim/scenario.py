@@ -93,6 +93,12 @@ class Scenario:
     def adaptive_enabled(self) -> bool:
         return self.data["adaptive"]["enabled"]
 
+    @property
+    def normal(self) -> np.ndarray:
+        """The contact surface's unit normal."""
+        normal = self.data["contact"]["normal"]
+        return normal / np.linalg.norm(normal)
+
     def with_overrides(self, dt: float | None = None, duration: float | None = None) -> Scenario:
         """A copy with another control period or duration (validated like the file's values)."""
         data = copy.deepcopy(self.data)
@@ -137,12 +143,10 @@ class Scenario:
         )
 
     def make_obstacles(self) -> list[Obstacle]:
-        out = []
-        for o in self.data["obstacles"]:
-            kind = o["kind"]
-            args = {k: v for k, v in o.items() if k != "kind"}
-            out.append(OBSTACLE_KINDS[kind](**args))
-        return out
+        return [
+            OBSTACLE_KINDS[o["kind"]](**{k: v for k, v in o.items() if k != "kind"})
+            for o in self.data["obstacles"]
+        ]
 
     def make_controller(self) -> Controller:
         """The scenario's :class:`~qpbench.control.controller.Controller`."""
@@ -150,9 +154,7 @@ class Scenario:
         from ..control.terms import EscapeVelocityLimits, ImpedanceTask
 
         r, c = self.data["robot"], self.data["controller"]
-        normal = self.data["contact"]["normal"]
-        normal = normal / np.linalg.norm(normal)
-        task = ImpedanceTask(self.make_path(), normal, c["desired_force"])
+        task = ImpedanceTask(self.make_path(), self.normal, c["desired_force"])
         limits = EscapeVelocityLimits(
             r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
         )
@@ -179,10 +181,8 @@ class Scenario:
         if not a["enabled"]:
             return None
         c = self.data["controller"]
-        normal = self.data["contact"]["normal"]
-        normal = normal / np.linalg.norm(normal)
         return AdaptiveImpedance(
-            c["kp"], c["kd"], a["gain"], normal, c["desired_force"], a["kp_min"], a["kd_min"]
+            c["kp"], c["kd"], a["gain"], self.normal, c["desired_force"], a["kp_min"], a["kd_min"]
         )
 
 
