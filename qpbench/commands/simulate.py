@@ -100,7 +100,6 @@ def run(args: argparse.Namespace) -> int:
     )
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)
-    log_realtime(result.summary)
     return log_verdict(result.summary)
 
 
@@ -176,47 +175,30 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
 
 
 def _log_summary(s: dict) -> None:
-    """Four INFO lines: ticks and fallbacks, errors after 2 s, limits and Kp_hat, time."""
+    """INFO lines: ticks and fallbacks, errors after 2 s, limits and Kp_hat, time, real time."""
 
-    def fmt(x, spec=".3g"):
-        return "-" if x is None else format(x, spec)
+    def g(key, spec=".3g"):
+        return "-" if s[key] is None else format(s[key], spec)
 
-    log.info(
-        "%s / %s / %s: %d ticks, %d infeasible (%s..%s s), %d fallback, %d zero-velocity",
-        s["scenario"],
-        s["backend"],
-        s["formulation"],
-        s["ticks"],
-        s["infeasible_ticks"],
-        fmt(s["first_infeasible_t"]),
-        fmt(s["last_infeasible_t"]),
-        s["fallback_ticks"],
-        s["zero_velocity_ticks"],
-    )
-    log.info(
-        "after 2 s: tracking rms %s m, max %s m; force error rms %s N, max %s N",
-        fmt(s["tracking_rms_after_2s"]),
-        fmt(s["tracking_max_after_2s"]),
-        fmt(s["force_error_rms_after_2s"]),
-        fmt(s["force_error_max_after_2s"]),
-    )
-    log.info(
-        "limit violations: angle %d, speed %d; Kp_hat %s, Kd_hat %s",
-        s["joint_limit_violations"],
-        s["joint_velocity_limit_violations"],
-        fmt(s["kp_hat_final"], ".6g"),
-        fmt(s["kd_hat_final"], ".6g"),
-    )
-    log.info(
-        "wall time %.3f s, real-time factor %s; %d ticks slower than dt = %g s%s",
-        s["wall_time_s"],
-        fmt(s["real_time_factor"]),
-        s["deadline_misses"],
-        s["dt"],
-        ""
-        if s["deadline_dropped"] is None
-        else f", {s['deadline_dropped']} dropped past the deadline",
-    )
+    dropped = s["deadline_dropped"]
+    for line in (
+        f"{s['scenario']} / {s['backend']} / {s['formulation']}: {s['ticks']} ticks, "
+        f"{s['infeasible_ticks']} infeasible ({g('first_infeasible_t')}..{g('last_infeasible_t')}"
+        f" s), {s['fallback_ticks']} fallback, {s['zero_velocity_ticks']} zero-velocity",
+        f"after 2 s: tracking rms {g('tracking_rms_after_2s')} m, max "
+        f"{g('tracking_max_after_2s')} m; force error rms {g('force_error_rms_after_2s')} N, "
+        f"max {g('force_error_max_after_2s')} N",
+        f"limit violations: angle {s['joint_limit_violations']}, speed "
+        f"{s['joint_velocity_limit_violations']}; Kp_hat {g('kp_hat_final', '.6g')}, Kd_hat "
+        f"{g('kd_hat_final', '.6g')}",
+        f"wall time {s['wall_time_s']:.3f} s, real-time factor {g('real_time_factor')}; "
+        f"{s['deadline_misses']} ticks slower than dt = {s['dt']:g} s"
+        + ("" if dropped is None else f", {dropped} dropped past the deadline"),
+        # beside the verdict: real time does not change the exit code
+        f"real time at dt = {s['dt'] * 1e3:g} ms: {s['realtime']} ({s['realtime_reason']}); "
+        f"the solver's own time: {s['realtime_solver']} ({s['realtime_solver_reason']})",
+    ):
+        log.info("%s", line)
 
 
 def log_verdict(s: dict) -> int:
@@ -243,15 +225,3 @@ def log_verdict(s: dict) -> int:
         return 0
     log.warning("verdict %s%s%s", s["verdict"], reasons, distance)
     return 1
-
-
-def log_realtime(s: dict) -> None:
-    """Log whether the run kept real time (beside the verdict: it does not change the exit code)."""
-    log.info(
-        "real time at dt = %g ms: %s (%s); the solver's own time: %s (%s)",
-        s["dt"] * 1e3,
-        s["realtime"],
-        s["realtime_reason"],
-        s["realtime_solver"],
-        s["realtime_solver_reason"],
-    )

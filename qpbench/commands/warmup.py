@@ -1,9 +1,7 @@
 """``qpbench warmup``: compile (or load from the cache) every numba kernel, and nothing else.
 
-``run``, ``bench``, ``simulate``, ``closed-loop``, ``sweep`` and ``scaling``
-prepare the kernels (and the qpOASES shim) of the backends they run before
-their first timed call; this command prepares all of them ahead (after an
-install, in a CI image) and says whether the cache already held the kernels.
+The commands that solve prepare their backends' kernels themselves; this prepares all of them
+ahead (after an install, in a CI image) and says whether the cache already held them.
 """
 
 from __future__ import annotations

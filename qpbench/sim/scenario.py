@@ -113,15 +113,10 @@ class Scenario:
         return PlanarArm(self.data["robot"]["link_lengths"])
 
     def make_key_points(self) -> KeyPoints:
-        kp = self.data["key_points"]
+        kp, n = self.data["key_points"], len(self.data["robot"]["link_lengths"])
         if kp["kind"] == "closest":
-            return closest_key_points(len(self.data["robot"]["link_lengths"]), kp["link_radius"])
-        return default_key_points(
-            len(self.data["robot"]["link_lengths"]),
-            kp["points_per_link"],
-            kp["include_joints"],
-            kp["link_radius"],
-        )
+            return closest_key_points(n, kp["link_radius"])
+        return default_key_points(n, kp["points_per_link"], kp["include_joints"], kp["link_radius"])
 
     def make_path(self) -> CosinePath | PolylinePath:
         from ..control.terms import CosinePath, PolylinePath
@@ -132,15 +127,8 @@ class Scenario:
         return PolylinePath(p["times"], p["points"])
 
     def make_surface(self) -> ContactSurface:
-        c = self.data["contact"]
-        return ContactSurface(
-            c["point"],
-            c["normal"],
-            c["stiffness"],
-            c["damping"],
-            c["force_noise_std"],
-            c["noise_seed"],
-        )
+        keys = ("point", "normal", "stiffness", "damping", "force_noise_std", "noise_seed")
+        return ContactSurface(*(self.data["contact"][k] for k in keys))
 
     def make_obstacles(self) -> list[Obstacle]:
         return [

@@ -14,6 +14,7 @@ at most half of ``d_safe``.
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -94,29 +95,19 @@ _OBSTACLE_SCHEMA = {
     "disk": {"kind": "str", "name": "str", "center": "vec2", "radius": "num>0", "velocity": "vec2"},
     "points": {"kind": "str", "name": "str", "points": "points", "velocity": "vec2"},
 }
-#: ``[verdict]`` keys (:class:`qpbench.sim.verdict.VerdictSettings` checks their ranges).
-_VERDICT_SCHEMA = dict.fromkeys(
-    (
-        "settle_time",
-        "max_tracking_error",
-        "max_force_error",
-        "safety_margin",
-        "max_p99_fraction_of_dt",
-        "max_over_dt_share",
-    ),
-    "num",
-)
+#: ``[verdict]``: the fields of :class:`qpbench.sim.verdict.VerdictSettings`, which checks them.
+_VERDICT_DEFAULTS = VerdictSettings()
+_VERDICT_SCHEMA = dict.fromkeys(asdict(_VERDICT_DEFAULTS), "num")
 #: Tables a file may leave out (all their keys have defaults).
 OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 _TOP = (*_SCHEMA, "path", "obstacles", "rnn", "verdict")
-_VERDICT_DEFAULTS = VerdictSettings()
 #: Defaults of the keys that may be left out, per table (``[verdict]``: see the module docstring).
 DEFAULTS: dict[str, dict] = {
     "scenario": {"in_paper": False, "in_run": True},
     "key_points": {"kind": "paper"},
     "adaptive": {"enabled": False, "gain": [500.0, 20.0], "kp_min": 100.0, "kd_min": 1.0},
     "rnn": {"eps": 0.02},
-    "verdict": {key: getattr(_VERDICT_DEFAULTS, key) for key in _VERDICT_SCHEMA},
+    "verdict": asdict(_VERDICT_DEFAULTS),
 }
 
 
