@@ -28,15 +28,9 @@ log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "problems",
-        metavar="PROBLEMS",
-        help="problem-set folder, qpbenchmark .parquet, folder of .npz or .mat, or one .npz/.mat file",
-    )
+    add(parser, "path")
     add(parser, "--backends", required=True)
-    parser.add_argument(
-        "--out", required=True, help="CSV file of results (rows appended as they are produced)"
-    )
+    add(parser, "--out", metavar="OUT", help="CSV file of results (rows appended as produced)")
     add(
         parser,
         "--profile",
@@ -149,9 +143,9 @@ def run(args: argparse.Namespace) -> int:
     )
     config.validate()
     references = _reference_source(args, config)
-    problem_set = select_set(load_problems(args.problems), args.pattern, args.every, args.limit)
+    problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
     log.info("%s", _cache_line(args, problem_set))
-    log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
+    log.info("%s: %d problems; backends: %s", args.path, len(problem_set), ", ".join(backends))
     # no compile inside a timed solve, here or in a worker; only what these backends run
     warmup_logged(log, backends, loop=False)
     summary = run_bench(

@@ -32,10 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="comma-separated scenario names or TOML paths, or 'all' (default: all)",
     )
     add(parser, "--backends", default="all")
-    parser.add_argument(
+    add(
+        parser,
         "--out",
-        required=True,
-        metavar="DIR",
         help="output folder: closed_loop.csv and logs/<scenario>__<backend>.parquet",
     )
     add(parser, "--duration", help="simulated time per run in [s] (default: each scenario's)")
@@ -134,44 +133,33 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
+#: The figures of the table printed after the runs: header, row key, scale, format.
+COLUMNS = (
+    ("simulated s", "simulated_s", 1.0, ".4g"),
+    ("tracking max mm", "tracking_max_after_2s", 1e3, ".3g"),
+    ("force err max N", "force_error_max_after_2s", 1.0, ".3g"),
+    ("d_min mm", "min_obstacle_distance", 1e3, ".4g"),
+    ("body mm", "min_body_distance", 1e3, ".4g"),
+    ("solve p99 us", "solve_time_p99_s", 1e6, ".4g"),
+    ("ticks > dt", "deadline_misses", 1.0, ".0f"),
+)
+
+
 def summary_table(table: pd.DataFrame) -> str:
     """One line per run: verdict, how far it got, errors after the transient, closest key point
     and body, p99 solve time, ticks slower than dt."""
     import math
 
-    def num(value, scale=1.0, spec=".3g"):
+    def num(value, scale, spec):
         try:
             value = float(value)
         except (TypeError, ValueError):
             return "-"
         return "-" if math.isnan(value) else format(value * scale, spec)
 
-    header = (
-        "scenario",
-        "backend",
-        "verdict",
-        "simulated s",
-        "tracking max mm",
-        "force err max N",
-        "d_min mm",
-        "body mm",
-        "solve p99 us",
-        "ticks > dt",
-    )
-    rows = [header]
+    rows = [("scenario", "backend", "verdict", *(c[0] for c in COLUMNS))]
     for r in table.to_dict("records"):
-        rows.append(
-            (
-                str(r.get("scenario")),
-                str(r.get("backend")),
-                str(r.get("verdict") or r.get("status")),
-                num(r.get("simulated_s"), spec=".4g"),
-                num(r.get("tracking_max_after_2s"), 1e3),
-                num(r.get("force_error_max_after_2s")),
-                num(r.get("min_obstacle_distance"), 1e3, ".4g"),
-                num(r.get("min_body_distance"), 1e3, ".4g"),
-                num(r.get("solve_time_p99_s"), 1e6, ".4g"),
-                num(r.get("deadline_misses"), spec=".0f"),
-            )
-        )
+        figures = (num(r.get(key), scale, spec) for _, key, scale, spec in COLUMNS)
+        verdict = r.get("verdict") or r.get("status")
+        rows.append((str(r.get("scenario")), str(r.get("backend")), str(verdict), *figures))
     return aligned(rows, left=3)

@@ -26,15 +26,9 @@ log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "path",
-        metavar="PROBLEMS",
-        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat",
-    )
+    add(parser, "path")
     parser.add_argument("--format", required=True, choices=("npz", "parquet"), help="output format")
-    parser.add_argument(
-        "--out", required=True, metavar="DIR", help="output folder (must not exist unless --force)"
-    )
+    add(parser, "--out", help="output folder (must not exist unless --force)")
     add(parser, "--force", help="replace an existing output folder")
     add(parser, "--problems", "--every", "--limit")
 

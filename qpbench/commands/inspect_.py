@@ -18,9 +18,7 @@ EXAMPLE = "qpbench inspect problems/wall    (qpbench inspect problems/wall --jso
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "path", help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat"
-    )
+    add(parser, "path")
     add(parser, "--json", help="print one JSON object instead of the table")
     add_memory_budget(parser)
 

@@ -18,11 +18,7 @@ EXAMPLE = "qpbench list problems/wall --limit 5      (qpbench list problems/maro
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "path",
-        metavar="PROBLEMS",
-        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat",
-    )
+    add(parser, "path")
     add(parser, "--problems", "--every", "--limit")
     add(parser, "--json", help="one JSON object per problem, one per line")
 

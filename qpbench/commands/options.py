@@ -11,6 +11,11 @@ from ..statuses import FORMULATIONS
 
 #: Flag -> ``add_argument`` keywords of the options several commands take.
 SHARED: dict[str, dict] = {
+    "path": {
+        "metavar": "PROBLEMS",
+        "help": "problem-set folder, qpbenchmark .parquet, .npz or .mat file, or a folder of them",
+    },
+    "--out": {"required": True, "metavar": "DIR"},
     "--backends": {"help": "comma-separated backend names, or 'all' (every available backend)"},
     "--duration": {
         "type": float,

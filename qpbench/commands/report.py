@@ -21,9 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="bench, closed-loop or sweep CSV files, or folders searched for *.csv (a sweep's "
         "sweep.csv adds the sweep section)",
     )
-    parser.add_argument(
-        "--out", required=True, metavar="DIR", help="folder of report.md and plots/"
-    )
+    add(parser, "--out", help="folder of report.md and plots/")
     add(parser, "--force", help="replace an existing report.md")
     parser.add_argument("--no-plots", action="store_true", help="write report.md only")
     parser.add_argument(

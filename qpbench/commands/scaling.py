@@ -31,10 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     d = ScalingConfig(backends=[], sizes=[])
     add(parser, "--backends", required=True)
-    parser.add_argument(
+    add(
+        parser,
         "--out",
-        required=True,
-        metavar="DIR",
         help="folder of scaling.csv, bench/, scenarios/ and the report (and sets/ with --keep-sets)",
     )
     parser.add_argument(

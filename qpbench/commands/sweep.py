@@ -38,10 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sweep file: base scenario, distributions, seed, samples",
     )
     add(parser, "--backends", required=True)
-    parser.add_argument(
+    add(
+        parser,
         "--out",
-        required=True,
-        metavar="DIR",
         help="folder: sweep.csv, sweep.json and instances/<name>.toml (each re-runs alone with "
         "qpbench simulate --scenario)",
     )
