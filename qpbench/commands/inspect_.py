@@ -57,9 +57,8 @@ def _notes(ps, budget: int) -> list[str]:
     return out
 
 
-def describe(ps: ProblemSet, sizes: list[tuple[int, int, int]], budget: int | None = None) -> dict:
+def describe(ps: ProblemSet, budget: int) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
-    from ..memory import resolve_budget
 
     def span(values):
         return [min(values), max(values)] if values else None
@@ -68,6 +67,7 @@ def describe(ps: ProblemSet, sizes: list[tuple[int, int, int]], budget: int | No
         return dict(Counter("-" if v is None else v for v in values))
 
     ts = [r.t for r in ps.records if r.t is not None]
+    sizes = [r.sizes for r in ps.records]
     return {
         "path": str(ps.path),
         "kind": ps.kind,
@@ -78,7 +78,7 @@ def describe(ps: ProblemSet, sizes: list[tuple[int, int, int]], budget: int | No
         "nnz": span([_nnz(r.problem) for r in ps.records]),
         "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
         "convexity": count(r.convexity and r.convexity.verdict for r in ps.records),
-        "notes": _notes(ps, resolve_budget(None) if budget is None else budget),
+        "notes": _notes(ps, budget),
         "with_bounds": sum(
             r.problem.lb is not None or r.problem.ub is not None for r in ps.records
         ),
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     budget = resolve_budget(args.memory_budget)
     # The hash is checked and reported, not enforced, so a changed set can be inspected.
     ps = load_problems(args.path, verify_hash=False)
-    info = describe(ps, [r.sizes for r in ps.records], budget)
+    info = describe(ps, budget)
     if args.json:
         print(json.dumps(info, indent=2))
         return 2 if ps.hash_ok is False else 0

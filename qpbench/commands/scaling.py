@@ -131,12 +131,8 @@ def run(args: argparse.Namespace) -> int:
     config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
     check_output(out, force=True, kind="dir")  # a folder (or nothing); its table is checked below
-    if (out / SUMMARY_NAME).exists() and not (args.force or args.resume):
-        from ..exceptions import OutputExistsError
-
-        raise OutputExistsError(
-            f"{out / SUMMARY_NAME}: exists; pass --force to overwrite or --resume to continue"
-        )
+    if out.exists():
+        check_output(out / SUMMARY_NAME, force=args.force, resume=args.resume)
     if args.force:
         for name in OWNED:
             target = out / name

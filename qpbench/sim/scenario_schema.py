@@ -200,8 +200,7 @@ def validate(raw: dict, file: str | Path, set_keys=()) -> tuple[dict, dict]:
         raise ScenarioError("expected a table", path=file, key="rnn")
     rnn = {**DEFAULTS["rnn"], **raw["rnn"]}  # eps checked, the rest passed to the backend
     _typed(rnn["eps"], "num>0", file, "rnn.eps")
-    _check_robot(data["robot"], file)
-    _check_values(data, file)
+    _check_across_keys(data, file)
     check_simulation(data, file)
     data["verdict"] = _verdict_table(raw["verdict"], data, file, set_keys)
     return data, rnn
@@ -260,9 +259,10 @@ def _verdict_table(raw, data: dict, file, set_keys=()) -> dict:
     return out
 
 
-def _check_robot(r: dict, file) -> None:
-    """At least two links, one value per link, ``theta_min < theta0 < theta_max`` and
-    ``velocity_min <= 0 <= velocity_max``."""
+def _check_across_keys(data: dict, file) -> None:
+    """At least two links, one value per link, ``theta_min < theta0 < theta_max``,
+    ``velocity_min <= 0 <= velocity_max``, some key points, a contact normal that is not zero."""
+    r = data["robot"]
     n = r["link_lengths"].size
     if n < 2:
         raise ScenarioError(
@@ -295,10 +295,6 @@ def _check_robot(r: dict, file) -> None:
             path=file,
             key="robot.velocity_min",
         )
-
-
-def _check_values(data: dict, file) -> None:
-    """Some key points, and a contact normal that is not zero."""
     kp = data["key_points"]
     if kp["points_per_link"] == 0 and not kp["include_joints"]:
         raise ScenarioError(
