@@ -90,10 +90,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=RUN_BUDGET_S,
         metavar="S",
         help=f"the most wall time a closed-loop run may take in [s] (default: {RUN_BUDGET_S:g}); "
-        "each backend's budget comes from its per-tick time in the run's bench (run.json lists "
-        "them): one that keeps up with the loop can finish, one whose solves alone would take "
-        "more than S is cut early. A run stops between ticks when its budget is spent; its row says how far "
-        "it got (simulated_s). 0: no budget (slow backends then take minutes per scenario)",
+        "each backend's budget follows from its per-tick time in the bench (run.json lists "
+        "them); a run that spends it stops between ticks and its row says how far it got "
+        "(simulated_s). 0: no budget (slow backends then take minutes per scenario)",
     )
     parser.add_argument(
         "--repeat",
