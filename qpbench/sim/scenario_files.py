@@ -26,10 +26,8 @@ def shipped_dir() -> Traversable:
 
 
 def _scenario_table(name: str) -> dict:
-    """The ``[scenario]`` table of shipped scenario ``name`` (as written; the schema checks it on load)."""
-    text = (shipped_dir() / f"{name}.toml").read_text(encoding="utf-8")
-    table = tomllib.loads(text).get("scenario", {})
-    return table if isinstance(table, dict) else {}
+    """The ``[scenario]`` table of shipped scenario ``name``, as written."""
+    return tomllib.loads((shipped_dir() / f"{name}.toml").read_text(encoding="utf-8"))["scenario"]
 
 
 def _section_key(section) -> tuple[int, ...]:
