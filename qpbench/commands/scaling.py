@@ -86,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _config(args):
-    from ..exceptions import ParamError
+    from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
     from ..scaling.runner import ScalingConfig
     from ..scaling.sizes import parse_sizes
@@ -94,13 +94,13 @@ def _config(args):
 
     backends = select_backends(args.backends)
     get_profile(args.profile)
+    positive_seconds(args.duration, "--duration")
+    positive_seconds(args.slow_limit, "--slow-limit")
     for key, value, ok in (
-        ("--duration", args.duration, args.duration > 0),
         ("--every", args.every, args.every >= 1),
         ("--repeat", args.repeat, args.repeat >= 1),
         ("--seed", args.seed, args.seed >= 0),
         ("--dense-limit", args.dense_limit, args.dense_limit >= 1),
-        ("--slow-limit", args.slow_limit, args.slow_limit > 0),
     ):
         if not ok:
             raise ParamError(f"out of range: {value}", key=key)
