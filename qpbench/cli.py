@@ -1,17 +1,11 @@
-"""The ``qpbench`` command line: argument parsing and logging set-up only.
+"""The ``qpbench`` command line: argument parsing, logging set-up, plugins and exit codes.
 
-Each sub-command lives in :mod:`qpbench.commands` as a module with
-``HELP`` (one line), ``EXAMPLE`` (shown under ``--help``),
-``add_arguments(parser)`` and ``run(args) -> int``.
-
-Plugin backends (:func:`qpbench.backends.load_plugins`: ``--plugin FILE``,
-before or after the sub-command, ``QPBENCH_PLUGINS``, entry points of group
-``qpbench.backends``) are loaded here, once, before any command runs.
-
-Exit codes (``docs/exit-codes.md``): 0 success (for the commands that benchmark many
-backends, outputs written whatever the verdicts); 1 ``simulate``'s verdict not ``ok``, or
-with ``--strict`` a run or solve that did not pass (:func:`qpbench.commands.options.strict_exit`);
-2 usage or input error (one line on stderr naming the file, key or value); 130 interrupted.
+Each sub-command is a module of :mod:`qpbench.commands` with ``HELP`` (one line), ``EXAMPLE``
+(shown under ``--help``), ``add_arguments(parser)`` and ``run(args) -> int``. Plugin backends
+(:func:`qpbench.backends.load_plugins`) are loaded once, before any command runs. Exit codes
+(``docs/exit-codes.md``): 0 done; 1 ``simulate``'s verdict not ``ok``, or with ``--strict`` a
+run or solve that did not pass; 2 usage or input error (one line on stderr naming the file, key
+or value); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -25,21 +19,13 @@ import sys
 from . import __version__
 from .exceptions import QpbenchError
 
-#: Sub-command name -> module under qpbench.commands.
+#: Sub-command name -> module under qpbench.commands (``inspect_``, ``list_``: not builtins).
 COMMANDS = {
-    "run": "run",
-    "bench": "bench",
-    "closed-loop": "closed_loop",
-    "simulate": "simulate",
-    "sweep": "sweep",
-    "report": "report",
-    "backends": "backends",
-    "scenarios": "scenarios",
-    "inspect": "inspect_",
-    "list": "list_",
-    "export": "export",
-    "warmup": "warmup",
-    "scaling": "scaling",
+    name: name.replace("-", "_") + ("_" if name in ("inspect", "list") else "")
+    for name in (
+        "run bench closed-loop simulate sweep report backends scenarios inspect list export "
+        "warmup scaling"
+    ).split()
 }
 
 #: Shown at the end of ``qpbench --help``.
@@ -124,8 +110,8 @@ def _add_plugin_option(parser: argparse.ArgumentParser, dest: str) -> None:
 
 
 def _configure_logging(args: argparse.Namespace) -> None:
-    """``-q``: errors only; default: progress and results; ``-v``: settings and
-    per-backend details (DEBUG); ``-vv``: also every solve (:data:`SOLVE_LOGGER`)."""
+    """``-q``: errors only; default: progress and results; ``-v``: DEBUG; ``-vv``: also every
+    solve (:data:`SOLVE_LOGGER`)."""
     level = logging.ERROR if args.quiet else logging.DEBUG if args.verbose else logging.INFO
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))

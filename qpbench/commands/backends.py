@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .options import add, aligned
+
 HELP = "list solver backends: name, available, version, algorithm family, reason if unavailable"
 EXAMPLE = "qpbench backends    (qpbench backends --available --json)"
 
@@ -12,9 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--available", action="store_true", help="list only the backends that can run here"
     )
-    parser.add_argument(
-        "--json", action="store_true", help="one JSON object per backend, one per line"
-    )
+    add(parser, "--json", help="one JSON object per backend, one per line")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,7 +33,5 @@ def run(args: argparse.Namespace) -> int:
         rows.append(
             (i.name, "yes" if i.available else "no", i.version or "-", i.family, i.reason or "")
         )
-    widths = [max(len(r[c]) for r in rows) for c in range(4)]
-    for r in rows:
-        print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + ("  " + r[4] if r[4] else ""))
+    print(aligned(rows, left=4, free_last=True))
     return 0

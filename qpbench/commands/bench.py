@@ -12,8 +12,7 @@ import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .inspect_ import add_memory_argument
-from .options import add_force_resume, add_strict, strict_exit
+from .options import add, add_force_resume, add_memory_budget, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -29,27 +28,17 @@ log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "problems",
-        metavar="PROBLEMS",
-        help="problem-set folder, qpbenchmark .parquet, folder of .npz or .mat, or one .npz/.mat file",
-    )
-    parser.add_argument(
-        "--backends",
-        required=True,
-        help="comma-separated backend names, or 'all' (every available backend)",
-    )
-    parser.add_argument(
-        "--out", required=True, help="CSV file of results (rows appended as they are produced)"
-    )
-    parser.add_argument(
+    add(parser, "path")
+    add(parser, "--backends", required=True)
+    add(parser, "--out", metavar="OUT", help="CSV file of results (rows appended as produced)")
+    add(
+        parser,
         "--profile",
-        default="default",
         choices=profile_names(),
-        help="settings profile (default: default); qpbenchmark:<settings> applies qpbenchmark's solver arguments, "
-        "time limit and success rule verbatim",
+        help="settings profile (default: default); qpbenchmark:<settings> applies qpbenchmark's "
+        "solver arguments, time limit and success rule verbatim",
     )
-    add_reference_arguments(parser)
+    _add_reference_arguments(parser)
     parser.add_argument(
         "--repeat",
         type=int,
@@ -70,21 +59,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sequential: tick order, state carried (default); independent: reset before each problem",
     )
     parser.add_argument(
-        "--time-limit",
-        type=float,
-        default=None,
-        help="per-solve time limit in s (default: the profile's)",
+        "--time-limit", type=float, help="per-solve time limit in s (default: the profile's)"
     )
-    parser.add_argument(
+    add(
+        parser,
         "--isolate",
-        default="auto",
-        choices=("auto", "always", "never"),
         help="run solves in a worker process: auto = backends marked risky or seen to crash (default)",
     )
     parser.add_argument(
         "--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend"
     )
-    add_memory_argument(parser)
+    add_memory_budget(parser)
     parser.add_argument(
         "--set",
         dest="sets",
@@ -93,19 +78,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="BACKEND.KEY=VALUE",
         help="a solver setting for one backend, over the profile's, e.g. osqp.rho=0.1 or rnn.eps=0.001; repeatable",
     )
-    from .list_ import add_selection_arguments
-
-    add_selection_arguments(parser)
+    add(parser, "--problems", "--every", "--limit")
     add_force_resume(
         parser,
         force="delete an existing --out and start again",
         resume="keep the rows of an existing --out and run the rest",
     )
-    add_strict(parser)
+    add(parser, "--strict")
 
 
-def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--reference``, ``--reference-time-limit``, ``--jobs``: where the references come from."""
+def _add_reference_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--reference",
         default="auto",
@@ -117,23 +99,20 @@ def add_reference_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--reference-time-limit",
         type=float,
-        default=None,
         metavar="S",
         help="time limit of each reference solve in s (default: the profile's, 60 s); a reference that times out "
         "leaves its problem's rows with an empty optimality gap and the reason",
     )
     parser.add_argument(
         "--cache-dir",
-        default=None,
         metavar="DIR",
         help="folder of the reference cache (default: beside the set when that folder is writable and holds "
         "qpbench's manifest.json, else the user cache folder, ~/.cache/qpbench/references)",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--jobs",
-        type=int,
         default=1,
-        metavar="N",
         help="worker processes computing reference solutions at once (default 1); the benchmark's timed solves "
         "stay one at a time",
     )
@@ -144,13 +123,12 @@ def run(args: argparse.Namespace) -> int:
     from ..harness.bench import BenchConfig, run_bench
     from ..jit import warmup_logged
     from ..memory import resolve_budget
-    from ..selection import backend_settings, select_backends
+    from ..selection import backend_settings, select_backends, select_set
 
     # Nothing is written before the input is known to be good (run_bench checks --out).
     backends = select_backends(args.backends)
-    per_backend = backend_settings(args.sets, backends)
     config = BenchConfig(
-        backend_settings=per_backend,
+        backend_settings=backend_settings(args.sets, backends),
         backends=backends,
         profile=args.profile,
         repeat=args.repeat,
@@ -161,22 +139,19 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         memory_budget=resolve_budget(args.memory_budget),
     )
-    from ..selection import select_set
-
     references = _reference_source(args, config)
-    problem_set = select_set(load_problems(args.problems), args.pattern, args.every, args.limit)
+    problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
     log.info("%s", _cache_line(args, problem_set))
-    log.info("%s: %d problems; backends: %s", args.problems, len(problem_set), ", ".join(backends))
+    log.info("%s: %d problems; backends: %s", args.path, len(problem_set), ", ".join(backends))
     # no compile inside a timed solve, here or in a worker; only what these backends run
     warmup_logged(log, backends, loop=False)
-    progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,
         config,
         args.out,
         force=args.force,
         resume=args.resume,
-        progress=progress,
+        progress=not args.quiet and sys.stderr.isatty(),
         references=references,
     )
     if not args.quiet:
@@ -186,10 +161,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _reference_source(args: argparse.Namespace, config) -> object:
-    """What ``run_bench`` gets as ``references``: a function of the set, called once the run's input is checked.
+    """``run_bench``'s ``references``: a function of the set, called once the input is checked.
 
-    ``--reference none`` also makes the success rule qpbenchmark's (there is no
-    reference to judge against); the profile keeps its name.
+    ``--reference none`` also makes the success rule qpbenchmark's (nothing to judge against).
     """
     from dataclasses import replace
     from pathlib import Path
@@ -202,12 +176,10 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     source = args.reference
     if args.jobs < 1:
         raise ParamError(f"--jobs must be >= 1, got {args.jobs}", key="jobs")
-    limit = args.reference_time_limit
     profile = get_profile(config.profile)
-    if limit is None:
-        limit = profile.reference_time_limit
-    else:
-        limit = positive_seconds(limit, "reference-time-limit")
+    limit = profile.reference_time_limit
+    if args.reference_time_limit is not None:
+        limit = positive_seconds(args.reference_time_limit, "reference-time-limit")
     if source == "none":
         config.profile = replace(profile, tolerance=replace(profile.tolerance, rule="qpbenchmark"))
         return lambda problem_set: [None] * len(problem_set.records)
@@ -241,7 +213,7 @@ def _reference_source(args: argparse.Namespace, config) -> object:
 
 
 def _cache_line(args: argparse.Namespace, problem_set) -> str:
-    """The first line of a run: where the references of ``problem_set`` are cached."""
+    """Where the references of ``problem_set`` are cached (the run's first line)."""
     from ..reference import SOURCES, cache_folder
 
     if args.reference not in SOURCES:

@@ -8,6 +8,8 @@ import sys
 from collections import Counter
 from typing import TYPE_CHECKING
 
+from .options import add, add_memory_budget
+
 if TYPE_CHECKING:
     from ..formats import ProblemSet
 
@@ -15,38 +17,14 @@ HELP = "show what a problem set, .parquet, .npz, .mat or folder holds (count, si
 EXAMPLE = "qpbench inspect problems/wall    (qpbench inspect problems/wall --json)"
 
 
-def add_memory_argument(parser: argparse.ArgumentParser) -> None:
-    """``--memory-budget`` (bench, inspect, run)."""
-    from ..memory import DEFAULT_FRACTION
-
-    parser.add_argument(
-        "--memory-budget",
-        default=None,
-        metavar="SIZE",
-        help="bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
-        f"{DEFAULT_FRACTION * 100:.0f}%% of the machine's memory, within ulimit -v); a problem that needs more is "
-        "a 'skipped' row saying so",
-    )
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "path", help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat"
-    )
-    parser.add_argument(
-        "--json", action="store_true", help="print one JSON object instead of the table"
-    )
-    add_memory_argument(parser)
+    add(parser, "path")
+    add(parser, "--json", help="print one JSON object instead of the table")
+    add_memory_budget(parser)
 
 
-def _range(values: list[int]) -> str:
-    lo, hi = min(values), max(values)
-    return f"{lo}" if lo == hi else f"{lo}-{hi}"
-
-
-def _counts(values) -> str:
-    c = Counter("-" if v is None else str(v) for v in values)
-    return ", ".join(f"{k} ({n})" for k, n in sorted(c.items()))
+def _counts(counts: dict) -> str:
+    return ", ".join(f"{k} ({n})" for k, n in sorted(counts.items()))
 
 
 def _nnz(problem) -> int:
@@ -79,14 +57,17 @@ def _notes(ps, budget: int) -> list[str]:
     return out
 
 
-def describe(ps: ProblemSet, sizes: list[tuple[int, int, int]], budget: int | None = None) -> dict:
+def describe(ps: ProblemSet, budget: int) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
-    from ..memory import resolve_budget
 
     def span(values):
         return [min(values), max(values)] if values else None
 
+    def count(values):
+        return dict(Counter("-" if v is None else v for v in values))
+
     ts = [r.t for r in ps.records if r.t is not None]
+    sizes = [r.sizes for r in ps.records]
     return {
         "path": str(ps.path),
         "kind": ps.kind,
@@ -96,17 +77,13 @@ def describe(ps: ProblemSet, sizes: list[tuple[int, int, int]], budget: int | No
         "m_ineq": span([s[2] for s in sizes]),
         "nnz": span([_nnz(r.problem) for r in ps.records]),
         "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
-        "convexity": dict(
-            Counter("-" if r.convexity is None else r.convexity.verdict for r in ps.records)
-        ),
-        "notes": _notes(ps, resolve_budget(None) if budget is None else budget),
+        "convexity": count(r.convexity and r.convexity.verdict for r in ps.records),
+        "notes": _notes(ps, budget),
         "with_bounds": sum(
             r.problem.lb is not None or r.problem.ub is not None for r in ps.records
         ),
-        "formulation": dict(
-            Counter("-" if r.formulation is None else r.formulation for r in ps.records)
-        ),
-        "scenario": dict(Counter("-" if r.scenario is None else r.scenario for r in ps.records)),
+        "formulation": count(r.formulation for r in ps.records),
+        "scenario": count(r.scenario for r in ps.records),
         "t": span(ts),
         "generator": (ps.manifest or {}).get("generator"),
         "sha256": ps.sha256,
@@ -124,12 +101,10 @@ def _print_table(ps, info: dict) -> None:
             lo, hi = info[key]
             print(f"{key:<12} {lo}" + ("" if lo == hi else f"-{hi}"))
         print(f"sparse P     {info['sparse']}")
-        print(
-            f"convexity    {', '.join(f'{k} ({v})' for k, v in sorted(info['convexity'].items()))}"
-        )
+        print(f"convexity    {_counts(info['convexity'])}")
         print(f"with bounds  {info['with_bounds']}")
-        print(f"formulation  {_counts(r.formulation for r in ps.records)}")
-        print(f"scenario     {_counts(r.scenario for r in ps.records)}")
+        print(f"formulation  {_counts(info['formulation'])}")
+        print(f"scenario     {_counts(info['scenario'])}")
         if info["t"]:
             print(f"t [s]        {info['t'][0]:g}-{info['t'][1]:g}")
         for line in info["notes"]:
@@ -152,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     budget = resolve_budget(args.memory_budget)
     # The hash is checked and reported, not enforced, so a changed set can be inspected.
     ps = load_problems(args.path, verify_hash=False)
-    info = describe(ps, [r.sizes for r in ps.records], budget)
+    info = describe(ps, budget)
     if args.json:
         print(json.dumps(info, indent=2))
         return 2 if ps.hash_ok is False else 0

@@ -6,6 +6,8 @@ import argparse
 import json
 from typing import TYPE_CHECKING
 
+from .options import add
+
 if TYPE_CHECKING:
     from ..formats import ProblemRecord
 
@@ -15,33 +17,10 @@ HELP = (
 EXAMPLE = "qpbench list problems/wall --limit 5      (qpbench list problems/maros_meszaros --json)"
 
 
-def add_selection_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--problems``, ``--every``, ``--limit`` (see :mod:`qpbench.selection`)."""
-    parser.add_argument(
-        "--problems",
-        dest="pattern",
-        default=None,
-        metavar="PATTERN",
-        help="keep problems whose name matches a shell-style pattern (comma-separated patterns)",
-    )
-    parser.add_argument(
-        "--every", type=int, default=None, metavar="K", help="keep every K-th problem"
-    )
-    parser.add_argument(
-        "--limit", type=int, default=None, metavar="N", help="keep the first N problems"
-    )
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "path",
-        metavar="PROBLEMS",
-        help="problem-set folder, .parquet, .npz, .mat, or a folder of .npz/.mat",
-    )
-    add_selection_arguments(parser)
-    parser.add_argument(
-        "--json", action="store_true", help="one JSON object per problem, one per line"
-    )
+    add(parser, "path")
+    add(parser, "--problems", "--every", "--limit")
+    add(parser, "--json", help="one JSON object per problem, one per line")
 
 
 def rows(records: list[ProblemRecord]) -> list[dict]:

@@ -1,58 +1,122 @@
-"""Arguments several commands share in form, each with the command's own help text, and the
-exit code of the commands that benchmark many backends (:func:`strict_exit`)."""
+"""Options several commands take, one definition each (a command may give its own help text),
+the exit code of the commands that benchmark many backends (:func:`strict_exit`) and their
+plain-text tables (:func:`aligned`)."""
 
 from __future__ import annotations
 
 import argparse
+import sys
+
+from ..statuses import FORMULATIONS
+
+#: Flag -> ``add_argument`` keywords of the options several commands take.
+SHARED: dict[str, dict] = {
+    "path": {
+        "metavar": "PROBLEMS",
+        "help": "problem-set folder, qpbenchmark .parquet, .npz or .mat file, or a folder of them",
+    },
+    "--out": {"required": True, "metavar": "DIR"},
+    "--backends": {"help": "comma-separated backend names, or 'all' (every available backend)"},
+    "--duration": {
+        "type": float,
+        "metavar": "S",
+        "help": "simulated time in [s] (default: the scenario's)",
+    },
+    "--formulation": {
+        "default": "paper",
+        "choices": FORMULATIONS,
+        "help": "the per-tick QP: paper (hard task equality, eq. 11) or soft (task as a weighted "
+        "cost) (default: paper)",
+    },
+    "--deadline": {
+        "type": float,
+        "metavar": "SECONDS",
+        "help": "per-tick deadline in [s]: a later answer is dropped (status time_limit; soft "
+        "fallback, else zero velocity), as a real-time controller would, and the run depends on "
+        "the machine's speed (default: none, every answer is applied; deadline_misses counts "
+        "ticks slower than dt)",
+    },
+    "--isolate": {"default": "auto", "choices": ("auto", "always", "never")},
+    "--jobs": {"type": int, "metavar": "N"},
+    "--profile": {"default": "default", "help": "settings profile (default: default)"},
+    "--set": {
+        "action": "append",
+        "default": [],
+        "metavar": "KEY=VALUE",
+        "dest": "overrides",
+        "help": "set a scenario value over the file's (repeatable): TABLE.KEY=VALUE or "
+        "obstacles[i].KEY=VALUE, VALUE in TOML syntax (a bare word is a string), e.g. "
+        "--set rnn.eps=0.001 --set key_points.kind=closest",
+    },
+    "--json": {"action": "store_true"},
+    "--force": {"action": "store_true"},
+    "--strict": {
+        "action": "store_true",
+        "help": "exit 1 when a run's verdict is not ok, a run was not real time or a solve "
+        "failed, with one line saying why (for CI); without it the exit code is 0 once the "
+        "outputs are written, whatever the verdicts",
+    },
+    # which problems of a set (qpbench.selection)
+    "--problems": {
+        "dest": "pattern",
+        "metavar": "PATTERN",
+        "help": "keep problems whose name matches a shell-style pattern (comma-separated patterns)",
+    },
+    "--every": {"type": int, "metavar": "K", "help": "keep every K-th problem"},
+    "--limit": {"type": int, "metavar": "N", "help": "keep the first N problems"},
+}
+
+
+def add(parser: argparse.ArgumentParser, *flags: str, **kw) -> None:
+    """Add the shared options ``flags``; ``kw`` (a command's own help, ``required``...) over
+    their keywords."""
+    for flag in flags:
+        parser.add_argument(flag, **{**SHARED[flag], **kw})
+
+
+def add_memory_budget(parser: argparse.ArgumentParser) -> None:
+    """``--memory-budget`` (its default's help text needs :mod:`qpbench.memory`)."""
+    from ..memory import DEFAULT_FRACTION
+
+    parser.add_argument(
+        "--memory-budget",
+        metavar="SIZE",
+        help="bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
+        f"{DEFAULT_FRACTION * 100:.0f}%% of the machine's memory, within ulimit -v); a problem "
+        "that needs more is a 'skipped' row saying so",
+    )
 
 
 def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -> None:
-    """``--force`` or ``--resume`` (not both): what to do with an output that is already there.
-
-    ``force`` and ``resume`` are the help texts: what the command replaces or
-    keeps (:func:`qpbench.atomic.check_output` refuses an existing output
-    without either).
-    """
+    """``--force`` or ``--resume`` (not both), with the command's help texts: what to do with an
+    output that is already there (:func:`qpbench.atomic.check_output`)."""
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help=force)
     group.add_argument("--resume", action="store_true", help=resume)
 
 
-def add_set(parser: argparse.ArgumentParser, help: str) -> None:
-    """``--set KEY=VALUE`` (repeatable, into ``args.overrides``): scenario values set over the
-    file's (:func:`qpbench.sim.scenario.load_scenario`'s ``overrides``); ``help`` is the
-    command's text."""
-    parser.add_argument(
-        "--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides", help=help
-    )
-
-
-def add_strict(parser: argparse.ArgumentParser) -> None:
-    """``--strict``: exit 1 when the outputs show a run or a solve that did not pass (for CI)."""
-    parser.add_argument(
-        "--strict",
-        action="store_true",
-        help="exit 1 when a run's verdict is not ok, a run was not real time or a solve failed, "
-        "with one line saying why (for CI); without it the exit code is 0 once the outputs are "
-        "written, whatever the verdicts",
-    )
-
-
 def strict_exit(args: argparse.Namespace, *, runs=None, failed_solves: int = 0) -> int:
-    """The exit code of a command that benchmarks many backends and wrote its outputs.
-
-    0 whatever the verdicts; with ``--strict``, 1 when :func:`qpbench.report.recommend.shortfalls`
-    finds something in ``runs`` (closed-loop or sweep rows, a DataFrame) or ``failed_solves``,
-    with one line on stderr saying what. (Bad input never gets here: it is exit 2.)
-    """
-    import sys
-
+    """0 once the outputs are written; with ``--strict``, 1 when
+    :func:`qpbench.report.recommend.shortfalls` finds something in ``runs`` (closed-loop or
+    sweep rows) or ``failed_solves``, with one line on stderr saying what."""
     from ..report.recommend import shortfalls
 
-    if not getattr(args, "strict", False):
-        return 0
-    found = shortfalls(runs, failed_solves)
+    found = shortfalls(runs, failed_solves) if getattr(args, "strict", False) else None
     if not found:
         return 0
     print(f"qpbench {args.command}: --strict: {'; '.join(found)}", file=sys.stderr)
     return 1
+
+
+def aligned(rows: list, left: int = 1, free_last: bool = False) -> str:
+    """Rows of text cells as columns: the first ``left`` left-aligned, the others right-aligned;
+    ``free_last``: the last column (free text) not padded."""
+    n = len(rows[0]) - free_last
+    widths = [max(len(r[c]) for r in rows) for c in range(n)]
+    return "\n".join(
+        "  ".join(
+            [c.ljust(w) if i < left else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))]
+            + list(r[n:])
+        ).rstrip()
+        for r in rows
+    )

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import logging
 
+from .options import add
+
 HELP = "write report.md and PNG plots from bench, closed-loop and sweep result CSVs (every number recomputed)"
 EXAMPLE = "qpbench report results/bench results/closed_loop.csv --out results --force"
 
@@ -19,10 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="bench, closed-loop or sweep CSV files, or folders searched for *.csv (a sweep's "
         "sweep.csv adds the sweep section)",
     )
-    parser.add_argument(
-        "--out", required=True, metavar="DIR", help="folder of report.md and plots/"
-    )
-    parser.add_argument("--force", action="store_true", help="replace an existing report.md")
+    add(parser, "--out", help="folder of report.md and plots/")
+    add(parser, "--force", help="replace an existing report.md")
     parser.add_argument("--no-plots", action="store_true", help="write report.md only")
     parser.add_argument(
         "--prefer",

@@ -1,20 +1,10 @@
 """``qpbench run``: the main job. Problem sets, bench, closed loop and report into results/.
 
-With no arguments, on a fresh clone: the paper's problem sets in
-``./problems`` (missing ones regenerated), every available backend benched
-on them, every shipped scenario with every available backend in the closed
-loop, ``results/report.md`` (:func:`qpbench.harness.pipeline.run_all`, whose
-docstring gives the steps). Outputs go to ``--out`` (default ``./results``,
-relative to the current folder, also when qpbench is installed as a
-package); a run killed half-way leaves the previous results whole, and
-``--resume`` continues it. So ``qpbench run`` twice simply refreshes
-``results/``.
-
-The last lines printed are the recommendation (:mod:`qpbench.report.recommend`),
-also at the top of the report. Exit code: 0 once the results are written,
-whatever the verdicts; with ``--strict``, 1 when a solve failed in the bench
-or a closed-loop run is not ``ok`` (:mod:`qpbench.sim.verdict`) or not real
-time (one line says why); 2 on bad input.
+The steps: :func:`qpbench.harness.pipeline.run_all`. A run killed half-way leaves the previous
+results whole, and ``--resume`` continues it. The last lines printed are the recommendation
+(:mod:`qpbench.report.recommend`). Exit code: 0 once the results are written, whatever the
+verdicts; with ``--strict``, 1 when a solve failed or a closed-loop run is not ``ok`` or not
+real time; 2 on bad input.
 """
 
 from __future__ import annotations
@@ -24,10 +14,8 @@ import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
-from .options import add_force_resume, add_strict, strict_exit
+from .options import add, add_force_resume, add_memory_budget, strict_exit
 
-# The command protocol (HELP, EXAMPLE, a logger, add_arguments, run), the same shape in every
-# command module: cli.py reads these names; the repetition is that interface, not shared logic.
 HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
     "write results/ and report.md"
@@ -78,23 +66,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "[scenario] in_run = true: the paper's four and adaptive_fast; the bench uses the "
         "paper's four among them)",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--backends",
-        default=None,
         help="comma-separated backends, or 'all' available ones (default: all)",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--duration",
-        type=float,
-        default=None,
-        metavar="S",
         help="closed-loop time per run in [s] (default: the scenario's, 20 s); the bench "
         "then uses only the problems with t < S (quick runs)",
     )
     parser.add_argument(
         "--bench-every",
         type=int,
-        default=None,
         metavar="K",
         help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 200 of each set's "
         "2,000, every 100th control tick; 1: all of them, about 10x longer)",
@@ -105,53 +90,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=RUN_BUDGET_S,
         metavar="S",
         help=f"the most wall time a closed-loop run may take in [s] (default: {RUN_BUDGET_S:g}); "
-        "each backend's budget comes from its per-tick time in the run's bench (run.json lists "
-        "them): one that keeps up with the loop can finish, one whose solves alone would take "
-        "more than S is cut early. A run stops between ticks when its budget is spent; its row says how far "
-        "it got (simulated_s). 0: no budget (slow backends then take minutes per scenario)",
+        "each backend's budget follows from its per-tick time in the bench (run.json lists "
+        "them); a run that spends it stops between ticks and its row says how far it got "
+        "(simulated_s). 0: no budget (slow backends then take minutes per scenario)",
     )
     parser.add_argument(
         "--repeat",
         type=int,
-        default=None,
         metavar="R",
         help=f"timed solves per bench problem; the report uses the minimum (default: {REPEAT})",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--jobs",
-        type=int,
-        default=None,
-        metavar="N",
         help=f"closed-loop runs at once, each in a worker process of its own (default: "
         f"{LOOP_JOBS}, at most one per core; the bench's timed solves stay one at a time)",
     )
-    from .inspect_ import add_memory_argument
-
-    add_memory_argument(parser)
+    add_memory_budget(parser)
     add_force_resume(
         parser,
         force="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
         "if no previous 'qpbench run' wrote them",
         resume="continue an interrupted run from OUT/.partial/",
     )
-    add_strict(parser)
+    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
-    import math
-
-    from ..exceptions import ParamError
     from ..harness.closed_loop import log_row
     from ..harness.pipeline import RunConfig, run_all
     from ..memory import resolve_budget
     from ..selection import select_backends, select_scenarios
     from ..sim.scenario_files import run_scenarios
 
-    if not (args.run_budget >= 0 and math.isfinite(args.run_budget)):
-        raise ParamError(
-            f"must be a number of seconds >= 0 (0: no budget), got {args.run_budget}",
-            key="--run-budget",
-        )
     for key, value in (QUICK if args.quick else FULL).items():
         if getattr(args, key) is None:
             setattr(args, key, value)
@@ -181,8 +152,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _answer(args: argparse.Namespace, outcome) -> int:
-    """The run's ending: the exit code (:func:`~.options.strict_exit`), then the recommendation
-    as the last lines printed."""
+    """The exit code, then the recommendation as the last lines printed."""
     import pandas as pd
 
     from ..harness.closed_loop import CSV_NAME

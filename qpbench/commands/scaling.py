@@ -12,7 +12,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .options import add_force_resume, add_strict, strict_exit
+from .options import add, add_force_resume, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
@@ -30,15 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..scaling.runner import ScalingConfig
 
     d = ScalingConfig(backends=[], sizes=[])
-    parser.add_argument(
-        "--backends",
-        required=True,
-        help="comma-separated backend names, or 'all' (every available backend)",
-    )
-    parser.add_argument(
+    add(parser, "--backends", required=True)
+    add(
+        parser,
         "--out",
-        required=True,
-        metavar="DIR",
         help="folder of scaling.csv, bench/, scenarios/ and the report (and sets/ with --keep-sets)",
     )
     parser.add_argument(
@@ -87,32 +82,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete this command's outputs in --out and start again",
         resume="keep the sizes done in --out and run the rest",
     )
-    add_strict(parser)
+    add(parser, "--strict")
 
 
 def _config(args):
-    from ..backends import backend_names, resolve_name
-    from ..exceptions import ParamError
+    from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
     from ..scaling.runner import ScalingConfig
     from ..scaling.sizes import parse_sizes
+    from ..selection import select_backend, select_backends
 
-    if args.backends.strip() == "all":
-        backends = backend_names(available_only=True)
-    else:
-        backends = [resolve_name(b.strip()) for b in args.backends.split(",") if b.strip()]
-    if not backends:
-        raise ParamError("no backend given", key="--backends")
-    if len(set(backends)) != len(backends):
-        raise ParamError(f"a backend is listed twice in '{args.backends}'", key="--backends")
+    backends = select_backends(args.backends)
     get_profile(args.profile)
+    positive_seconds(args.duration, "--duration")
+    positive_seconds(args.slow_limit, "--slow-limit")
     for key, value, ok in (
-        ("--duration", args.duration, args.duration > 0),
         ("--every", args.every, args.every >= 1),
         ("--repeat", args.repeat, args.repeat >= 1),
         ("--seed", args.seed, args.seed >= 0),
         ("--dense-limit", args.dense_limit, args.dense_limit >= 1),
-        ("--slow-limit", args.slow_limit, args.slow_limit > 0),
     ):
         if not ok:
             raise ParamError(f"out of range: {value}", key=key)
@@ -123,7 +111,7 @@ def _config(args):
     return ScalingConfig(
         backends=backends,
         sizes=parse_sizes(args.sizes),
-        driver=resolve_name(args.driver),
+        driver=select_backend(args.driver, "--driver"),
         duration=args.duration,
         every=args.every,
         repeat=args.repeat,
@@ -142,15 +130,9 @@ def run(args: argparse.Namespace) -> int:
 
     config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
-    check_output(
-        out, force=True, kind="dir"
-    )  # a folder (or nothing); its scaling.csv is checked below
-    if (out / SUMMARY_NAME).exists() and not (args.force or args.resume):
-        from ..exceptions import OutputExistsError
-
-        raise OutputExistsError(
-            f"{out / SUMMARY_NAME}: exists; pass --force to overwrite or --resume to continue"
-        )
+    check_output(out, force=True, kind="dir")  # a folder (or nothing); its table is checked below
+    if out.exists():
+        check_output(out / SUMMARY_NAME, force=args.force, resume=args.resume)
     if args.force:
         for name in OWNED:
             target = out / name

@@ -1,21 +1,16 @@
 """``qpbench scenarios``: the shipped scenario files; ``show NAME`` prints one to start your own from.
 
-``qpbench scenarios`` lists every shipped scenario (name, the paper's section,
-duration, obstacles, description); ``qpbench scenarios show NAME`` prints
-the file itself, every parameter with its unit in a comment: copy it, change
-it, and pass its path (``qpbench simulate --scenario my.toml``).
-``show NAME --filled`` (NAME a shipped name or a file) prints the scenario as
-it is run: every table and key written out, the defaults of the keys and
-tables the file leaves out filled in (:data:`qpbench.sim.scenario_schema.DEFAULTS`);
-the text is a scenario file that loads back to the same scenario.
-``--json``: one object per scenario (list), or the file's tables (show; with
-``--filled``, every table).
+``show NAME --filled`` (a shipped name or a file) prints the scenario as it is run, every
+default filled in (:data:`qpbench.sim.scenario_schema.DEFAULTS`): a file that loads back to the
+same scenario.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+
+from .options import add, aligned
 
 HELP = "list the shipped scenarios; 'show NAME' prints one's TOML file to start your own from"
 EXAMPLE = (
@@ -34,9 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="the scenario to show (a shipped name or a .toml path)",
     )
-    parser.add_argument(
-        "--json", action="store_true", help="JSON: one object per scenario, or the file's tables"
-    )
+    add(parser, "--json", help="JSON: one object per scenario, or the file's tables")
     parser.add_argument(
         "--filled",
         action="store_true",
@@ -114,18 +107,9 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(item))
         return 0
     rows = [("name", "paper", "duration", "obstacles", "description")]
-    for item in listing:
-        obstacles = ", ".join(item["obstacles"]) or "none"
-        rows.append(
-            (
-                item["name"],
-                item["paper_section"],
-                f"{item['duration_s']:g} s",
-                obstacles,
-                item["description"],
-            )
-        )
-    widths = [max(len(r[c]) for r in rows) for c in range(4)]
-    for r in rows:
-        print("  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4])
+    for i in listing:
+        duration = f"{i['duration_s']:g} s"
+        obstacles = ", ".join(i["obstacles"]) or "none"
+        rows.append((i["name"], i["paper_section"], duration, obstacles, i["description"]))
+    print(aligned(rows, left=4, free_last=True))
     return 0

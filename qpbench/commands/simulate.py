@@ -1,13 +1,8 @@
 """``qpbench simulate``: run a scenario in closed loop with one backend; log, summary, dump, plot.
 
-The run's verdict (:mod:`qpbench.sim.verdict`, thresholds from the scenario's
-``[verdict]`` table) ends the output: an INFO line when it is ``ok``, else a
-WARNING with the reasons (the smallest obstacle distance among them when the
-run is unsafe), after an INFO line saying whether the run kept real time
-(``realtime``, ``realtime_solver``: beside the verdict, not in it). Thresholds set
-with ``--set verdict.KEY=VALUE`` are printed as a WARNING and recorded in the
-summary (``verdict_overrides``). Exit code: 0 when the verdict is ``ok``, 1 when
-it is not, 2 on bad input.
+The output ends with a line saying whether the run kept real time (beside the verdict, not in
+it), then the verdict (:mod:`qpbench.sim.verdict`): INFO when ``ok``, else a WARNING with the
+reasons. Exit code: 0 when the verdict is ``ok``, 1 when it is not, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -15,12 +10,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import sys
 from pathlib import Path
 
-from ..statuses import FORMULATIONS
-from .options import add_set
+from .options import add
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
@@ -33,8 +26,7 @@ EXAMPLE = (
 log = logging.getLogger("qpbench")
 
 
-def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
-    """What to simulate: scenario, backend, formulation, times, overrides, profile, deadline."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scenario",
         required=True,
@@ -47,72 +39,26 @@ def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="backend name (see `qpbench backends`), e.g. qpsolvers:daqp, clarabel, rnn",
     )
+    add(parser, "--formulation", "--duration", "--set", "--profile", "--deadline")
     parser.add_argument(
-        "--formulation",
-        default="paper",
-        choices=FORMULATIONS,
-        help="paper: hard task equality (eq. 11); soft: task as a weighted cost (default: paper)",
+        "--dt", type=float, metavar="S", help="control period in [s] (default: the scenario's)"
     )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        default=None,
-        metavar="S",
-        help="simulated time in s (default: the scenario's)",
-    )
-    parser.add_argument(
-        "--dt",
-        type=float,
-        default=None,
-        metavar="S",
-        help="control period in s (default: the scenario's)",
-    )
-    add_set(
-        parser,
-        "set a scenario value over the file's (repeatable): TABLE.KEY=VALUE or obstacles[i].KEY=VALUE, "
-        "VALUE in TOML syntax (a bare word is a string), e.g. --set rnn.eps=0.001 --set rnn.substeps=5",
-    )
-    parser.add_argument(
-        "--profile", default="default", help="backend settings profile (default: default)"
-    )
-    parser.add_argument(
-        "--deadline",
-        type=float,
-        default=None,
-        metavar="SECONDS",
-        help="drop an answer that arrives later than this (status time_limit; soft fallback, else zero velocity), "
-        "as a real-time controller would; the run then depends on the machine's speed. Default: none, every "
-        "answer is applied and the summary's deadline_misses counts ticks slower than dt",
-    )
-
-
-def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
-    """What to write: log, summary, dumped QPs, figure, snapshot, animation."""
-    parser.add_argument(
-        "--log", default=None, metavar="FILE", help="per-tick log, .csv or .parquet"
-    )
-    parser.add_argument(
-        "--summary", default=None, metavar="FILE", help="summary as JSON ('-': to stdout)"
-    )
+    parser.add_argument("--log", metavar="FILE", help="per-tick log, .csv or .parquet")
+    parser.add_argument("--summary", metavar="FILE", help="summary as JSON ('-': to stdout)")
     parser.add_argument(
         "--dump",
-        default=None,
         metavar="DIR",
         help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)",
     )
-    parser.add_argument(
-        "--every", type=int, default=None, metavar="K", help="dump every K-th tick (default 1)"
-    )
-    parser.add_argument("--plot", default=None, metavar="FILE", help="figure of the run (.png)")
+    parser.add_argument("--every", type=int, metavar="K", help="dump every K-th tick (default 1)")
+    parser.add_argument("--plot", metavar="FILE", help="figure of the run (.png)")
     parser.add_argument(
         "--snapshot",
-        default=None,
         metavar="FILE",
         help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)",
     )
     parser.add_argument(
         "--animate",
-        default=None,
         metavar="FILE",
         help="animation of the run (.gif; .mp4 when ffmpeg is installed)",
     )
@@ -126,12 +72,7 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--fps", type=int, default=15, help="frames per second of the animation (default 15)"
     )
-    parser.add_argument("--force", action="store_true", help="overwrite existing outputs")
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    _add_run_arguments(parser)
-    _add_output_arguments(parser)
+    add(parser, "--force", help="overwrite existing outputs")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -159,47 +100,32 @@ def run(args: argparse.Namespace) -> int:
     )
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)
-    log_realtime(result.summary)
     return log_verdict(result.summary)
 
 
-def _check_arguments(args: argparse.Namespace) -> None:
-    """Every option checked, and no output in the way, before anything runs."""
-    from ..atomic import check_folder, check_output
-    from ..exceptions import ParamError
+#: The file suffixes of the outputs whose format the suffix picks (--animate: check_animation).
+SUFFIXES = {"log": (".csv", ".parquet"), "snapshot": (".png", ".svg", ".pdf")}
 
-    if args.log is not None and Path(args.log).suffix not in (".csv", ".parquet"):
-        raise ParamError(f"--log must end in .csv or .parquet, got {args.log}", key="--log")
-    if args.every is not None and args.every < 1:
-        raise ParamError(f"--every must be >= 1, got {args.every}", key="--every")
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """The options only the command has checked, and no output in the way, before anything runs
+    (:func:`qpbench.sim.loop.simulate` checks its own arguments)."""
+    from ..atomic import check_folder, check_output
+    from ..exceptions import ParamError, positive_seconds
+    from ..report.animation import check_animation
+
+    for key, suffixes in SUFFIXES.items():
+        value = getattr(args, key)
+        if value is not None and Path(value).suffix.lower() not in suffixes:
+            raise ParamError(f"must end in {' or '.join(suffixes)}, got {value}", key=f"--{key}")
     if args.every is not None and args.dump is None:
         raise ParamError("--every needs --dump", key="--every")
-    if args.snapshot is not None and Path(args.snapshot).suffix.lower() not in (
-        ".png",
-        ".svg",
-        ".pdf",
-    ):
-        raise ParamError(
-            f"--snapshot must end in .png, .svg or .pdf, got {args.snapshot}", key="--snapshot"
-        )
-    if args.animate is not None and Path(args.animate).suffix.lower() not in (".gif", ".mp4"):
-        raise ParamError(f"--animate must end in .gif or .mp4, got {args.animate}", key="--animate")
-    if args.animate is not None and Path(args.animate).suffix.lower() == ".mp4":
-        import shutil
-
-        if shutil.which("ffmpeg") is None:
-            raise ParamError("--animate .mp4 needs ffmpeg on the PATH; use a .gif", key="--animate")
-    if not (args.speed > 0 and args.fps > 0):
-        raise ParamError(
-            f"--speed and --fps must be positive, got {args.speed} and {args.fps}", key="--speed"
-        )
-    for out in (
-        args.log,
-        None if args.summary == "-" else args.summary,
-        args.plot,
-        args.snapshot,
-        args.animate,
-    ):
+    if args.deadline is not None:
+        positive_seconds(args.deadline, "--deadline")
+    if args.animate is not None:
+        check_animation(Path(args.animate), args.fps, args.speed)
+    summary = None if args.summary == "-" else args.summary
+    for out in (args.log, summary, args.plot, args.snapshot, args.animate):
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
@@ -207,12 +133,6 @@ def _check_arguments(args: argparse.Namespace) -> None:
         for name in ("problems.parquet", "manifest.json"):
             if Path(args.dump).exists():
                 check_output(Path(args.dump) / name, force=args.force)
-
-    if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
-        raise ParamError(
-            f"--deadline must be a positive number of seconds, got {args.deadline}",
-            key="--deadline",
-        )
 
 
 def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:
@@ -222,7 +142,7 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
     s = result.summary
     if args.log is not None:
         with atomic_path(args.log) as tmp:
-            if args.log.endswith(".csv"):
+            if Path(args.log).suffix.lower() == ".csv":
                 result.log.to_csv(tmp, index=False, float_format="%.10g")
             else:
                 result.log.to_parquet(tmp, index=False)
@@ -255,57 +175,35 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
 
 
 def _log_summary(s: dict) -> None:
-    """Four INFO lines: ticks and fallbacks, errors after 2 s, limits and Kp_hat, time."""
+    """INFO lines: ticks and fallbacks, errors after 2 s, limits and Kp_hat, time, real time."""
 
-    def fmt(x, spec=".3g"):
-        return "-" if x is None else format(x, spec)
+    def g(key, spec=".3g"):
+        return "-" if s[key] is None else format(s[key], spec)
 
-    log.info(
-        "%s / %s / %s: %d ticks, %d infeasible (%s..%s s), %d fallback, %d zero-velocity",
-        s["scenario"],
-        s["backend"],
-        s["formulation"],
-        s["ticks"],
-        s["infeasible_ticks"],
-        fmt(s["first_infeasible_t"]),
-        fmt(s["last_infeasible_t"]),
-        s["fallback_ticks"],
-        s["zero_velocity_ticks"],
-    )
-    log.info(
-        "after 2 s: tracking rms %s m, max %s m; force error rms %s N, max %s N",
-        fmt(s["tracking_rms_after_2s"]),
-        fmt(s["tracking_max_after_2s"]),
-        fmt(s["force_error_rms_after_2s"]),
-        fmt(s["force_error_max_after_2s"]),
-    )
-    log.info(
-        "limit violations: angle %d, speed %d; Kp_hat %s, Kd_hat %s",
-        s["joint_limit_violations"],
-        s["joint_velocity_limit_violations"],
-        fmt(s["kp_hat_final"], ".6g"),
-        fmt(s["kd_hat_final"], ".6g"),
-    )
-    log.info(
-        "wall time %.3f s, real-time factor %s; %d ticks slower than dt = %g s%s",
-        s["wall_time_s"],
-        fmt(s["real_time_factor"]),
-        s["deadline_misses"],
-        s["dt"],
-        ""
-        if s["deadline_dropped"] is None
-        else f", {s['deadline_dropped']} dropped past the deadline",
-    )
+    dropped = s["deadline_dropped"]
+    for line in (
+        f"{s['scenario']} / {s['backend']} / {s['formulation']}: {s['ticks']} ticks, "
+        f"{s['infeasible_ticks']} infeasible ({g('first_infeasible_t')}..{g('last_infeasible_t')}"
+        f" s), {s['fallback_ticks']} fallback, {s['zero_velocity_ticks']} zero-velocity",
+        f"after 2 s: tracking rms {g('tracking_rms_after_2s')} m, max "
+        f"{g('tracking_max_after_2s')} m; force error rms {g('force_error_rms_after_2s')} N, "
+        f"max {g('force_error_max_after_2s')} N",
+        f"limit violations: angle {s['joint_limit_violations']}, speed "
+        f"{s['joint_velocity_limit_violations']}; Kp_hat {g('kp_hat_final', '.6g')}, Kd_hat "
+        f"{g('kd_hat_final', '.6g')}",
+        f"wall time {s['wall_time_s']:.3f} s, real-time factor {g('real_time_factor')}; "
+        f"{s['deadline_misses']} ticks slower than dt = {s['dt']:g} s"
+        + ("" if dropped is None else f", {dropped} dropped past the deadline"),
+        # beside the verdict: real time does not change the exit code
+        f"real time at dt = {s['dt'] * 1e3:g} ms: {s['realtime']} ({s['realtime_reason']}); "
+        f"the solver's own time: {s['realtime_solver']} ({s['realtime_solver_reason']})",
+    ):
+        log.info("%s", line)
 
 
 def log_verdict(s: dict) -> int:
-    """Log the verdict line and return the exit code: 0 ok, 1 not.
-
-    The body's smallest clearance to an obstacle is on the line: in the
-    reasons when the run is unsafe, else appended as a figure; then the
-    key-point rule: the smallest key-point distance when it held, why when it
-    broke.
-    """
+    """Log the verdict line, with the body's smallest clearance (in the reasons when unsafe)
+    and the key-point rule (its smallest distance, or why it broke); return 0 if ok, else 1."""
     distance = ""
     if s.get("min_body_distance") is not None and s["verdict"] != "unsafe":
         distance = (
@@ -327,15 +225,3 @@ def log_verdict(s: dict) -> int:
         return 0
     log.warning("verdict %s%s%s", s["verdict"], reasons, distance)
     return 1
-
-
-def log_realtime(s: dict) -> None:
-    """Log whether the run kept real time (beside the verdict: it does not change the exit code)."""
-    log.info(
-        "real time at dt = %g ms: %s (%s); the solver's own time: %s (%s)",
-        s["dt"] * 1e3,
-        s["realtime"],
-        s["realtime_reason"],
-        s["realtime_solver"],
-        s["realtime_solver_reason"],
-    )

@@ -1,17 +1,11 @@
 """``qpbench sweep``: many perturbed instances of a scenario, each in closed loop with each backend.
 
-See :mod:`qpbench.sweep` (the sweep file, the instances, the table) and
-:mod:`qpbench.runner` (where the runs are made). The trajectory of a run
-never depends on how long its solves took, so every executor gives the same
-rows apart from the timing columns; those (solve times, ticks over 1 ms,
-real-time factor) are only clean serially (``--jobs 1``): runs solving at the
-same time share the cores' caches, memory bandwidth and clock, and on a
-2-core machine the operating system's own work lands on one of them.
-
-Exit code: 0 once the table is written, whatever the verdicts (they are what
-a sweep measures); with ``--strict``, 1 when a row's verdict is not ``ok`` (a run
-that raised or whose worker was lost twice included) or a run was not real
-time (one line says why); 2 on bad input (nothing written).
+See :mod:`qpbench.sweep` (the sweep file, the instances, the table) and :mod:`qpbench.runner`
+(where the runs are made). Every executor gives the same rows apart from the timing columns,
+which are clean only serially (``--jobs 1``): runs solving at once share the cores' caches,
+memory bandwidth and clock. Exit code: 0 once the table is written, whatever the verdicts;
+with ``--strict``, 1 when a row's verdict is not ``ok`` or a run was not real time; 2 on bad
+input (nothing written).
 """
 
 from __future__ import annotations
@@ -20,7 +14,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from .options import add_force_resume, add_strict, strict_exit
+from .options import add, add_force_resume, aligned, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
@@ -43,31 +37,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SWEEP.toml",
         help="sweep file: base scenario, distributions, seed, samples",
     )
-    parser.add_argument(
-        "--backends", required=True, help="comma-separated backend names, or 'all' available ones"
-    )
-    parser.add_argument(
+    add(parser, "--backends", required=True)
+    add(
+        parser,
         "--out",
-        required=True,
-        metavar="DIR",
         help="folder: sweep.csv, sweep.json and instances/<name>.toml (each re-runs alone with "
         "qpbench simulate --scenario)",
     )
-    parser.add_argument(
-        "--samples", type=int, default=None, metavar="N", help="instances (default: the file's)"
-    )
-    parser.add_argument(
+    parser.add_argument("--samples", type=int, metavar="N", help="instances (default: the file's)")
+    add(
+        parser,
         "--duration",
-        type=float,
-        default=None,
-        metavar="S",
         help="simulated time of every instance in [s] (default: the file's, else the base's)",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--jobs",
-        type=int,
         default=default_jobs(),
-        metavar="N",
         help=f"runs at once: local worker processes, or the local Dask cluster's workers "
         f"(default: this machine's cores, {default_jobs()}). Timings are clean only with 1",
     )
@@ -79,14 +65,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--scheduler",
-        default=None,
         metavar="ADDRESS",
         help="address of a running Dask scheduler (tls://HOST:8786 with --security); without it "
         "--executor dask starts a local cluster on 127.0.0.1",
     )
     parser.add_argument(
         "--security",
-        default=None,
         metavar="FILE",
         help="TOML or YAML naming ca_file, cert_file, key_file (PEM) for a tls:// scheduler",
     )
@@ -95,24 +79,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="start again: replace the table and the instances",
         resume="keep the rows with a result and run the rest (missing, error, crashed)",
     )
-    add_strict(parser)
+    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
     from ..atomic import check_folder, check_output
     from ..backends import plugin_files
-    from ..exceptions import ParamError
     from ..jit import warmup_logged
     from ..runner import make_executor
     from ..selection import select_backends
     from ..sweep.rows import CSV_NAME
     from ..sweep.spec import load_sweep
 
-    if args.samples is not None and args.samples < 1:
-        raise ParamError(f"must be >= 1, got {args.samples}", key="--samples")
-    plugins = (
-        plugin_files()
-    )  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker loads them too
+    plugins = plugin_files()  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker too
     spec = load_sweep(args.sweep, samples=args.samples, duration=args.duration)
     backends = select_backends(args.backends)
     check_folder(args.out)  # before any worker starts
@@ -154,13 +133,7 @@ def _run(args, spec, backends, executor, plugins):
     from ..sweep.runner import run_sweep
 
     total = spec.samples * len(backends)
-    bar = tqdm(
-        total=total,
-        unit="run",
-        desc=f"sweep {spec.name}",
-        disable=None if not args.quiet else True,
-        mininterval=0.5,
-    )
+    bar = tqdm(total=total, unit="run", desc=f"sweep {spec.name}", disable=args.quiet or None)
 
     def on_row(row):
         bar.update(1)
@@ -170,7 +143,7 @@ def _run(args, spec, backends, executor, plugins):
             )
 
     try:
-        outcome = run_sweep(
+        return run_sweep(
             spec,
             backends,
             args.out,
@@ -182,11 +155,10 @@ def _run(args, spec, backends, executor, plugins):
         )
     finally:
         bar.close()
-    return outcome
 
 
 def summary_table(rows: list[dict], backends: list[str]) -> str:
-    """Per backend: runs and how many of each verdict (plain text, aligned)."""
+    """Per backend: runs and how many of each verdict."""
     from ..sim.verdict import VERDICTS
 
     header = ["backend", "runs"] + list(VERDICTS) + ["error/crashed", "invalid"]
@@ -202,10 +174,4 @@ def summary_table(rows: list[dict], backends: list[str]) -> str:
                 str(sum(r["status"] == "invalid_scenario" for r in mine)),
             ]
         )
-    widths = [max(len(line[i]) for line in lines) for i in range(len(header))]
-    return "\n".join(
-        "  ".join(
-            c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths))
-        )
-        for line in lines
-    )
+    return aligned(lines)

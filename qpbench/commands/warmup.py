@@ -1,9 +1,7 @@
 """``qpbench warmup``: compile (or load from the cache) every numba kernel, and nothing else.
 
-``run``, ``bench``, ``simulate``, ``closed-loop``, ``sweep`` and ``scaling``
-prepare the kernels (and the qpOASES shim) of the backends they run before
-their first timed call; this command prepares all of them ahead (after an
-install, in a CI image) and says whether the cache already held the kernels.
+The commands that solve prepare their backends' kernels themselves; this prepares all of them
+ahead (after an install, in a CI image) and says whether the cache already held them.
 """
 
 from __future__ import annotations
@@ -11,16 +9,14 @@ from __future__ import annotations
 import argparse
 import json
 
+from .options import add
+
 HELP = "compile every numba kernel into the on-disk cache (or load it from there) and report which"
 EXAMPLE = "qpbench warmup    (NUMBA_CACHE_DIR=/tmp/kernels qpbench warmup --json)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--json",
-        action="store_true",
-        help="print {compiled, seconds, cache, kernels} as JSON on stdout",
-    )
+    add(parser, "--json", help="print {compiled, seconds, cache, kernels} as JSON on stdout")
 
 
 def run(args: argparse.Namespace) -> int:

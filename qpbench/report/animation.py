@@ -77,7 +77,7 @@ def animate(
 
     plt = style.pyplot()
     path = Path(path)
-    _check_animation(path, fps, speed)
+    check_animation(path, fps, speed)
 
     arm, keys, surface, obstacles = scene.frame_parts(scenario)
     theta = scene.thetas(log, arm.n)
@@ -120,8 +120,8 @@ def animate(
     return path
 
 
-def _check_animation(path: Path, fps: float, speed: float) -> None:
-    """Reject an animation :func:`animate` cannot write."""
+def check_animation(path: Path, fps: float, speed: float) -> None:
+    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
     from ..exceptions import ParamError
 
     suffix = path.suffix.lower()

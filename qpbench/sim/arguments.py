@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..backends import Backend, backend_class, get_backend
-from ..exceptions import ParamError
+from ..exceptions import ParamError, positive_seconds
 from ..statuses import FORMULATIONS
 from .scenario import Scenario
 
@@ -19,10 +17,9 @@ def resolve_backend(
 ) -> Backend:
     """A backend instance for ``scenario``: by name, or the given instance checked.
 
-    A backend class whose ``scenario_table`` names a table of the scenario
-    (the ``rnn`` backends: ``"rnn"``) gets that table's settings; an online
-    backend (``online = True``) also the control period ``dt``. An instance
-    with a ``dt`` of its own must match the loop's ``dt``.
+    A backend class whose ``scenario_table`` names a table of the scenario (the ``rnn``
+    backends) gets that table's settings; an online backend also the control period ``dt``
+    [s], which an instance's own ``dt`` must match.
     """
     if isinstance(backend, str):
         cls = backend_class(backend)
@@ -44,15 +41,6 @@ def resolve_backend(
     return backend
 
 
-def _positive_seconds(value) -> bool:
-    return (
-        isinstance(value, (int, float, np.floating))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and value > 0
-    )
-
-
 def check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
     """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
     if formulation not in FORMULATIONS:
@@ -62,9 +50,8 @@ def check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
         )
     if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
         raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
-    if deadline is not None and not _positive_seconds(deadline):
-        raise ParamError(f"must be a positive number of seconds, got {deadline!r}", key="deadline")
-    if wall_budget_s is not None and not _positive_seconds(wall_budget_s):
-        raise ParamError(
-            f"must be a positive number of seconds, got {wall_budget_s!r}", key="wall_budget_s"
-        )
+    for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):
+        if isinstance(value, str):  # float() would read it, but the API takes numbers
+            raise ParamError(f"expected a positive number of seconds, got {value!r}", key=key)
+        if value is not None:
+            positive_seconds(value, key)

@@ -1,12 +1,9 @@
 """Scenarios: one TOML file holds every parameter of a simulation (paper section 4).
 
-:func:`load_scenario` reads a shipped scenario by name (``wall``; see
-:mod:`.scenario_files`) or a file by path, and checks it against the schema
-(:mod:`.scenario_schema`, which lists every table and key with its unit).
-
-Values can be set over a file's without copying it (``load_scenario(name,
-overrides={"rnn.eps": 1e-3})``, ``qpbench simulate --set rnn.eps=0.001``):
-see :func:`apply_overrides`; the validation is the same.
+:func:`load_scenario` reads a shipped scenario by name (:mod:`.scenario_files`) or a file by
+path and checks it against the schema (:mod:`.scenario_schema`). Values can be set over a
+file's without copying it (``overrides={"rnn.eps": 1e-3}``, ``qpbench simulate --set
+rnn.eps=0.001``; :func:`apply_overrides`), checked like the file's own.
 """
 
 from __future__ import annotations
@@ -26,7 +23,7 @@ from ..robot.body import contact_obstacles
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
 from .scenario_files import paper_scenarios, scenario_names, scenario_path
-from .scenario_schema import check_simulation, validate
+from .scenario_schema import OPTIONAL_TABLES, check_simulation, validate
 from .verdict import VerdictSettings
 
 if TYPE_CHECKING:
@@ -34,13 +31,9 @@ if TYPE_CHECKING:
     from ..control.controller import Controller
     from ..control.terms import CosinePath, PolylinePath
 
-#: Tables a scenario file may leave out (every key has a default).
-OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
-
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "OPTIONAL_TABLES",
     "Scenario",
     "apply_overrides",
     "load_scenario",
@@ -55,16 +48,10 @@ __all__ = [
 class Scenario:
     """Everything a simulation needs, read from one TOML file.
 
-    Attributes:
-        name: Scenario name (``[scenario] name``).
-        path: The file it came from (None when parsed from text).
-        source: The file's full text (stored in dumped problem sets' manifests).
-        data: The parsed, validated tables (numbers as floats, vectors as arrays).
-        rnn: Settings of the ``rnn`` backend (``eps`` and more), as a plain dict.
-        overrides: Values set over the file's (:func:`apply_overrides`), by
-            dotted key; empty when the file is used as it is.
-        dt: Control period in [s].
-        duration: Simulated time in [s].
+    ``path`` is None when parsed from text; ``source`` is the file's text (stored in dumped
+    problem sets' manifests); ``data`` the validated tables (numbers as floats, vectors as
+    arrays); ``rnn`` the ``rnn`` backends' settings; ``overrides`` the values set over the
+    file's, by dotted key.
     """
 
     name: str
@@ -74,7 +61,6 @@ class Scenario:
     rnn: dict = field(default_factory=dict)
     overrides: dict = field(default_factory=dict)
 
-    # -- convenience views -------------------------------------------------------
     @property
     def description(self) -> str:
         return self.data["scenario"]["description"]
@@ -86,10 +72,12 @@ class Scenario:
 
     @property
     def dt(self) -> float:
+        """Control period [s]."""
         return self.data["simulation"]["dt"]
 
     @property
     def duration(self) -> float:
+        """Simulated time [s]."""
         return self.data["simulation"]["duration"]
 
     @property
@@ -105,6 +93,12 @@ class Scenario:
     def adaptive_enabled(self) -> bool:
         return self.data["adaptive"]["enabled"]
 
+    @property
+    def normal(self) -> np.ndarray:
+        """The contact surface's unit normal."""
+        normal = self.data["contact"]["normal"]
+        return normal / np.linalg.norm(normal)
+
     def with_overrides(self, dt: float | None = None, duration: float | None = None) -> Scenario:
         """A copy with another control period or duration (validated like the file's values)."""
         data = copy.deepcopy(self.data)
@@ -115,20 +109,14 @@ class Scenario:
         check_simulation(data, self.path or "<override>")
         return replace(self, data=data)
 
-    # -- builders ----------------------------------------------------------------
     def make_arm(self) -> PlanarArm:
         return PlanarArm(self.data["robot"]["link_lengths"])
 
     def make_key_points(self) -> KeyPoints:
-        kp = self.data["key_points"]
+        kp, n = self.data["key_points"], len(self.data["robot"]["link_lengths"])
         if kp["kind"] == "closest":
-            return closest_key_points(len(self.data["robot"]["link_lengths"]), kp["link_radius"])
-        return default_key_points(
-            len(self.data["robot"]["link_lengths"]),
-            kp["points_per_link"],
-            kp["include_joints"],
-            kp["link_radius"],
-        )
+            return closest_key_points(n, kp["link_radius"])
+        return default_key_points(n, kp["points_per_link"], kp["include_joints"], kp["link_radius"])
 
     def make_path(self) -> CosinePath | PolylinePath:
         from ..control.terms import CosinePath, PolylinePath
@@ -139,23 +127,14 @@ class Scenario:
         return PolylinePath(p["times"], p["points"])
 
     def make_surface(self) -> ContactSurface:
-        c = self.data["contact"]
-        return ContactSurface(
-            c["point"],
-            c["normal"],
-            c["stiffness"],
-            c["damping"],
-            c["force_noise_std"],
-            c["noise_seed"],
-        )
+        keys = ("point", "normal", "stiffness", "damping", "force_noise_std", "noise_seed")
+        return ContactSurface(*(self.data["contact"][k] for k in keys))
 
     def make_obstacles(self) -> list[Obstacle]:
-        out = []
-        for o in self.data["obstacles"]:
-            kind = o["kind"]
-            args = {k: v for k, v in o.items() if k != "kind"}
-            out.append(OBSTACLE_KINDS[kind](**args))
-        return out
+        return [
+            OBSTACLE_KINDS[o["kind"]](**{k: v for k, v in o.items() if k != "kind"})
+            for o in self.data["obstacles"]
+        ]
 
     def make_controller(self) -> Controller:
         """The scenario's :class:`~qpbench.control.controller.Controller`."""
@@ -163,9 +142,7 @@ class Scenario:
         from ..control.terms import EscapeVelocityLimits, ImpedanceTask
 
         r, c = self.data["robot"], self.data["controller"]
-        normal = self.data["contact"]["normal"]
-        normal = normal / np.linalg.norm(normal)
-        task = ImpedanceTask(self.make_path(), normal, c["desired_force"])
+        task = ImpedanceTask(self.make_path(), self.normal, c["desired_force"])
         limits = EscapeVelocityLimits(
             r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
         )
@@ -192,22 +169,16 @@ class Scenario:
         if not a["enabled"]:
             return None
         c = self.data["controller"]
-        normal = self.data["contact"]["normal"]
-        normal = normal / np.linalg.norm(normal)
         return AdaptiveImpedance(
-            c["kp"], c["kd"], a["gain"], normal, c["desired_force"], a["kp_min"], a["kd_min"]
+            c["kp"], c["kd"], a["gain"], self.normal, c["desired_force"], a["kp_min"], a["kd_min"]
         )
 
 
 def parse_scenario(
     text: str, path: str | Path | None = None, overrides: dict | None = None
 ) -> Scenario:
-    """Parse and validate a scenario from TOML text (``path`` only names it in errors).
-
-    ``overrides`` (dotted key -> value, see :func:`apply_overrides`) replace
-    the file's values before the validation, which then names the key of a
-    wrong one exactly as for a wrong value in the file.
-    """
+    """Parse and validate a scenario from TOML text (``path`` only names it in errors);
+    ``overrides`` (:func:`apply_overrides`) are set before the validation."""
     file = path if path is not None else "<scenario>"
     try:
         raw = tomllib.loads(text)
@@ -229,16 +200,16 @@ def parse_scenario(
     try:
         scenario.make_controller()
         scenario.make_surface()
-    except ScenarioError:
-        raise
     except InputError as exc:
+        if isinstance(exc, ScenarioError):
+            raise
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
     return scenario
 
 
 def _warn_verdict_overrides(overrides: dict, file) -> None:
-    """A WARNING naming the ``[verdict]`` thresholds set over the file's: a verdict judged
-    on other thresholds than the scenario's (the summary records them: ``verdict_overrides``)."""
+    """A WARNING naming the ``[verdict]`` thresholds set over the file's (the summary records
+    them: ``verdict_overrides``)."""
     changed = {k: v for k, v in overrides.items() if str(k).startswith("verdict.")}
     if changed:
         log.warning(
@@ -255,13 +226,9 @@ _OVERRIDE_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][
 def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>") -> dict:
     """A copy of the parsed TOML tables ``raw`` with ``overrides`` set over them.
 
-    Keys are dotted: ``table.key`` (``rnn.eps``, ``controller.k``,
-    ``simulation.duration``) or ``obstacles[i].key`` (``obstacles[0].velocity``).
-    A key must name a table the file has and, in ``[rnn]``, a setting of the
-    ``rnn`` backends (an ``[rnn]`` key may be new: the file need not list
-    every setting); anything else is checked by the usual validation of
-    :func:`parse_scenario` (an unknown key of another table is reported
-    there). Errors name the file and the key.
+    Keys are ``table.key`` (``rnn.eps``, ``simulation.duration``) or ``obstacles[i].key``.
+    A key must name a table the file has (or may leave out) and, in ``[rnn]``, a setting of
+    the ``rnn`` backends; the values are checked by :func:`parse_scenario`'s validation.
     """
     raw = copy.deepcopy(raw)
     for key, value in overrides.items():
@@ -309,15 +276,8 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
 
 
 def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Scenario:
-    """Load a scenario by shipped name (``wall``) or by path (``my/scene.toml``).
-
-    ``overrides`` (dotted key -> value) replace values of the file
-    (:func:`apply_overrides`); they are validated like the file's own.
-
-    Raises:
-        ScenarioError: unknown name, unreadable file, or a missing, unknown or
-            impossible key (the message names the file and the key).
-    """
+    """Load a scenario by shipped name (``wall``) or by path, with ``overrides``
+    (:func:`apply_overrides`); a :class:`ScenarioError` names the file and the key."""
     path = scenario_path(name_or_path)
     try:
         text = path.read_text(encoding="utf-8")

@@ -1,12 +1,7 @@
 """The shipped scenario files (``qpbench/data/scenarios/*.toml``), by name.
 
-A scenario is named by a file path, or by the name of a shipped file
-(``free``, ``wall``, ``adaptive``, ``adaptive_fast``, ``narrow``;
-:func:`scenario_names`; ``qpbench scenarios`` lists them and ``qpbench
-scenarios show NAME`` prints one to start your own file from). A new shipped
-scenario is one file there; one whose ``[scenario] in_paper = true`` is one of
-the paper's (:func:`paper_scenarios`), whose per-tick QPs ``qpbench run``
-benchmarks too.
+A new shipped scenario is one file there; one with ``[scenario] in_paper = true`` is one of
+the paper's (:func:`paper_scenarios`), whose per-tick QPs ``qpbench run`` benchmarks too.
 """
 
 from __future__ import annotations
@@ -26,15 +21,13 @@ __all__ = ["paper_scenarios", "run_scenarios", "scenario_names", "scenario_path"
 
 
 def shipped_dir() -> Traversable:
-    """The package folder of the shipped scenario files (a :mod:`importlib.resources` traversable)."""
+    """The package folder of the shipped scenario files."""
     return resources.files("qpbench") / "data" / "scenarios"
 
 
 def _scenario_table(name: str) -> dict:
-    """The ``[scenario]`` table of shipped scenario ``name`` (as written; the schema checks it on load)."""
-    text = (shipped_dir() / f"{name}.toml").read_text(encoding="utf-8")
-    table = tomllib.loads(text).get("scenario", {})
-    return table if isinstance(table, dict) else {}
+    """The ``[scenario]`` table of shipped scenario ``name``, as written."""
+    return tomllib.loads((shipped_dir() / f"{name}.toml").read_text(encoding="utf-8"))["scenario"]
 
 
 def _section_key(section) -> tuple[int, ...]:
@@ -68,14 +61,8 @@ def run_scenarios() -> list[str]:
 
 
 def scenario_path(name_or_path: str | Path) -> Path:
-    """The file a scenario name or path refers to.
-
-    A name without a suffix or slash is looked up among the shipped scenarios
-    first; anything else is a path.
-
-    Raises:
-        ScenarioError: no such file or shipped scenario.
-    """
+    """The file a scenario name or path refers to (a name without a suffix or slash is
+    looked up among the shipped scenarios first)."""
     text = str(name_or_path)
     if "/" not in text and not text.endswith(".toml"):
         candidate = shipped_dir() / f"{text}.toml"

@@ -1,66 +1,20 @@
-"""The scenario file's schema: every table and key, typed and checked (paper section 4).
+"""The scenario file's schema: every table and key with its type, unit and range (paper section 4).
 
-Layout (every key required unless it has a default; a missing, unknown,
-mistyped or impossible key raises :class:`~qpbench.exceptions.ScenarioError`
-naming the file and the key)::
-
-    obstacles = [ ... ]            # or [[obstacles]] tables, see below
-    [scenario]    name, description, paper_section, in_paper (default false:
-                  one of the paper's scenarios, whose ticks ``qpbench run``
-                  also benchmarks), in_run (default true: ``qpbench run``
-                  runs it when no ``--scenarios`` are given)
-    [robot]       link_lengths [m], theta0 [rad], theta_min, theta_max [rad],
-                  velocity_min, velocity_max [rad/s]
-    [key_points]  points_per_link, include_joints, link_radius [m], kind (optional,
-                  default "paper": the paper's fixed key points; "closest": an
-                  obstacle row at each link's point closest to each obstacle, end
-                  effector's link included, beyond the paper; see
-                  :class:`qpbench.robot.kinematics.KeyPoints`)
-    [path]        kind = "cosine": centre, amplitude [m], omega [rad/s], phase [rad]
-                  kind = "polyline": times [s], points [[x, y], ...] [m]
-    [contact]     point [m], normal, stiffness [N/m], damping [N s/m],
-                  force_noise_std [N], noise_seed
-    [controller]  desired_force [N], kp [N/m], kd [N s/m], alpha [1/s], k [1/s],
-                  d_safe [m], rho
-    [simulation]  dt [s], duration [s]
-
-Tables that describe how a run is judged or how a backend is tuned, not the
-task, may be left out; every key of them has a default (:data:`DEFAULTS`;
-``qpbench scenarios show NAME --filled`` prints a scenario with every default
-filled in)::
-
-    [adaptive]    enabled (default false), gain [kp part, kd part] (default
-                  [500, 20], the paper's), kp_min [N/m] (default 100), kd_min
-                  [N s/m] (default 1)
-    [rnn]         eps [s] (default 0.02, the paper's) and any further settings
-                  of the ``rnn`` backends (passed through:
-                  ``get_backend("rnn", **scenario.rnn)``)
-    [verdict]     the thresholds of a run's verdict and of its real time
-                  (:class:`qpbench.sim.verdict.VerdictSettings`; ``docs/verdicts.md``
-                  says why each default):
-                  settle_time [s] (default 2.0: twice the paper's transient of
-                  about 1 s, or half the duration when that is shorter; set on
-                  the command line, it must be < simulation.duration),
-                  max_tracking_error [m] (default 0.001), max_force_error [N]
-                  (default 2.0), safety_margin [m] (default 0.0005, or half of
-                  d_safe when that is smaller; 0 <= safety_margin < d_safe,
-                  0 when d_safe = 0),
-                  max_p99_fraction_of_dt (default 0.5: the p99 of a run's
-                  per-tick times may take at most half the control period, the
-                  rest of a tick is sensing, the model, the QP's construction,
-                  the drives' bus and the operating system's jitter; in (0, 1]),
-                  max_over_dt_share (default 0.001: at most one tick in a
-                  thousand may take longer than dt, where a drive holds the last
-                  command once; in [0, 1))
-
-Obstacles (``[[obstacles]]``, each with ``kind``, ``name`` and ``velocity``
-[m/s]): ``line`` (point, normal to the free side), ``segment`` (a, b),
-``disk`` (center, radius), ``points`` (points).
+A missing, unknown, mistyped or impossible key raises :class:`~qpbench.exceptions.ScenarioError`
+naming the file and the key. ``[adaptive]``, ``[rnn]`` and ``[verdict]`` may be left out: every
+key of them has a default (:data:`DEFAULTS`; ``qpbench scenarios show NAME --filled`` prints a
+scenario with every default filled in). ``[rnn]`` holds ``eps`` [s] and any further settings of
+the ``rnn`` backends (``get_backend("rnn", **scenario.rnn)``). ``[verdict]`` holds the thresholds
+of :class:`qpbench.sim.verdict.VerdictSettings` (``docs/verdicts.md`` says why each default);
+``settle_time`` defaults to at most half the duration and, set on the command line, must be
+< ``simulation.duration``; ``0 <= safety_margin < d_safe`` (0 when ``d_safe`` is 0), by default
+at most half of ``d_safe``.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -72,187 +26,184 @@ from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 if TYPE_CHECKING:
     from pathlib import Path
 
-__all__ = ["DEFAULTS", "check_simulation", "filled", "validate"]
+__all__ = ["DEFAULTS", "OPTIONAL_TABLES", "check_simulation", "filled", "validate"]
 
-_NUM = "number"
-_INT = "int"
-_BOOL = "bool"
-_STR = "str"
-_VEC = "vector"  # list of numbers
-_VEC2 = "vector2"
-_PTS = "points"  # list of [x, y]
-
-_SCHEMA: dict[str, dict[str, str]] = {
+# Types: num, int, bool, str, vec (numbers), vec2 (two numbers), points ([[x, y], ...]), a tuple
+# (one of its strings); ">0" or ">=0" after a type bounds a number or every entry of a vector.
+_SCHEMA: dict[str, dict] = {
+    # in_paper: one of the paper's scenarios, whose ticks ``qpbench run`` also benchmarks;
+    # in_run: ``qpbench run`` runs it when no ``--scenarios`` are given
     "scenario": {
-        "name": _STR,
-        "description": _STR,
-        "paper_section": _STR,
-        "in_paper": _BOOL,
-        "in_run": _BOOL,
+        "name": "str",
+        "description": "str",
+        "paper_section": "str",
+        "in_paper": "bool",
+        "in_run": "bool",
     },
     "robot": {
-        "link_lengths": _VEC,
-        "theta0": _VEC,
-        "theta_min": _VEC,
-        "theta_max": _VEC,
-        "velocity_min": _VEC,
-        "velocity_max": _VEC,
+        "link_lengths": "vec>0",  # [m]
+        "theta0": "vec",  # [rad]
+        "theta_min": "vec",  # [rad]
+        "theta_max": "vec",  # [rad]
+        "velocity_min": "vec",  # [rad/s]
+        "velocity_max": "vec",  # [rad/s]
     },
+    # kind "paper": the paper's fixed key points; "closest": a row at each link's point closest
+    # to each obstacle, beyond the paper (:class:`qpbench.robot.kinematics.KeyPoints`)
     "key_points": {
-        "points_per_link": _INT,
-        "include_joints": _BOOL,
-        "link_radius": _NUM,
-        "kind": _STR,
+        "points_per_link": "int>=0",
+        "include_joints": "bool",
+        "link_radius": "num>=0",  # [m]
+        "kind": KEY_POINT_KINDS,
     },
     "contact": {
-        "point": _VEC2,
-        "normal": _VEC2,
-        "stiffness": _NUM,
-        "damping": _NUM,
-        "force_noise_std": _NUM,
-        "noise_seed": _INT,
+        "point": "vec2",  # [m]
+        "normal": "vec2",
+        "stiffness": "num>0",  # [N/m]
+        "damping": "num>=0",  # [N s/m]
+        "force_noise_std": "num>=0",  # [N]
+        "noise_seed": "int",
     },
     "controller": {
-        "desired_force": _NUM,
-        "kp": _NUM,
-        "kd": _NUM,
-        "alpha": _NUM,
-        "k": _NUM,
-        "d_safe": _NUM,
-        "rho": _NUM,
+        "desired_force": "num>=0",  # [N]
+        "kp": "num>0",  # [N/m]
+        "kd": "num>0",  # [N s/m]
+        "alpha": "num>0",  # [1/s]
+        "k": "num>0",  # [1/s]
+        "d_safe": "num>=0",  # [m]
+        "rho": "num>0",
     },
-    "adaptive": {"enabled": _BOOL, "gain": _VEC2, "kp_min": _NUM, "kd_min": _NUM},
-    "simulation": {"dt": _NUM, "duration": _NUM},
+    # gain: [kp part, kd part]; kp_min [N/m], kd_min [N s/m]
+    "adaptive": {"enabled": "bool", "gain": "vec2>=0", "kp_min": "num>0", "kd_min": "num>0"},
+    "simulation": {"dt": "num", "duration": "num"},  # [s] (check_simulation)
 }
+#: ``[path]`` by kind: centre, amplitude [m], omega [rad/s], phase [rad]; times [s], points [m].
 _PATH_SCHEMA = {
-    "cosine": {"kind": _STR, "centre": _VEC2, "amplitude": _VEC2, "omega": _VEC2, "phase": _VEC2},
-    "polyline": {"kind": _STR, "times": _VEC, "points": _PTS},
+    "cosine": {
+        "kind": "str",
+        "centre": "vec2",
+        "amplitude": "vec2",
+        "omega": "vec2",
+        "phase": "vec2",
+    },
+    "polyline": {"kind": "str", "times": "vec", "points": "points"},
 }
+#: ``[[obstacles]]`` by kind; points [m], velocity [m/s]; a line's normal points to the free side.
 _OBSTACLE_SCHEMA = {
-    "line": {"kind": _STR, "name": _STR, "point": _VEC2, "normal": _VEC2, "velocity": _VEC2},
-    "segment": {"kind": _STR, "name": _STR, "a": _VEC2, "b": _VEC2, "velocity": _VEC2},
-    "disk": {"kind": _STR, "name": _STR, "center": _VEC2, "radius": _NUM, "velocity": _VEC2},
-    "points": {"kind": _STR, "name": _STR, "points": _PTS, "velocity": _VEC2},
+    "line": {"kind": "str", "name": "str", "point": "vec2", "normal": "vec2", "velocity": "vec2"},
+    "segment": {"kind": "str", "name": "str", "a": "vec2", "b": "vec2", "velocity": "vec2"},
+    "disk": {"kind": "str", "name": "str", "center": "vec2", "radius": "num>0", "velocity": "vec2"},
+    "points": {"kind": "str", "name": "str", "points": "points", "velocity": "vec2"},
 }
-_TOP = set(_SCHEMA) | {"path", "obstacles", "rnn", "verdict"}
-#: ``[verdict]`` keys (:class:`qpbench.sim.verdict.VerdictSettings`).
-_VERDICT_SCHEMA = {
-    "settle_time": _NUM,
-    "max_tracking_error": _NUM,
-    "max_force_error": _NUM,
-    "safety_margin": _NUM,
-    "max_p99_fraction_of_dt": _NUM,
-    "max_over_dt_share": _NUM,
-}
+#: ``[verdict]``: the fields of :class:`qpbench.sim.verdict.VerdictSettings`, which checks them.
 _VERDICT_DEFAULTS = VerdictSettings()
-#: Defaults of the keys that may be left out, per table (module docstring). ``settle_time``
-#: defaults to at most half the duration, ``safety_margin`` to at most half of ``d_safe``
-#: (:func:`_verdict_table`).
+_VERDICT_SCHEMA = dict.fromkeys(asdict(_VERDICT_DEFAULTS), "num")
+#: Tables a file may leave out (all their keys have defaults).
+OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
+_TOP = (*_SCHEMA, "path", "obstacles", "rnn", "verdict")
+#: Defaults of the keys that may be left out, per table (``[verdict]``: see the module docstring).
 DEFAULTS: dict[str, dict] = {
     "scenario": {"in_paper": False, "in_run": True},
     "key_points": {"kind": "paper"},
     "adaptive": {"enabled": False, "gain": [500.0, 20.0], "kp_min": 100.0, "kd_min": 1.0},
     "rnn": {"eps": 0.02},
-    "verdict": {key: getattr(_VERDICT_DEFAULTS, key) for key in _VERDICT_SCHEMA},
+    "verdict": asdict(_VERDICT_DEFAULTS),
 }
-#: Tables a file may leave out (all their keys have defaults).
-_OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 
 
-def _typed(value, kind: str, file, key: str):
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _typed(value, kind, file, key: str):
+    """``value`` converted to ``kind`` (a schema type), else a :class:`ScenarioError` naming ``key``."""
+
     def bad(what):
         raise ScenarioError(f"expected {what}, got {value!r}", path=file, key=key)
 
-    def number(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-    if kind == _NUM:
-        if not number(value):
+    if isinstance(kind, tuple):
+        if value not in kind:
+            bad(f"one of {', '.join(kind)}")
+        return value
+    kind, _, bound = kind.partition(">")
+    if kind == "num":
+        if not _number(value):
             bad("a finite number")
-        return float(value)
-    if kind == _INT:
+        out = float(value)
+    elif kind == "int":
         if not isinstance(value, int) or isinstance(value, bool):
             bad("an integer")
-        return int(value)
-    if kind == _BOOL:
-        if not isinstance(value, bool):
-            bad("true or false")
+        out = int(value)
+    elif kind in ("bool", "str"):
+        if not isinstance(value, bool if kind == "bool" else str):
+            bad("true or false" if kind == "bool" else "a string")
         return value
-    if kind == _STR:
-        if not isinstance(value, str):
-            bad("a string")
-        return value
-    if kind in (_VEC, _VEC2):
-        if not isinstance(value, list) or not all(number(v) for v in value) or not value:
+    elif kind in ("vec", "vec2"):
+        if not isinstance(value, list) or not value or not all(_number(v) for v in value):
             bad("a list of finite numbers")
-        if kind == _VEC2 and len(value) != 2:
+        if kind == "vec2" and len(value) != 2:
             bad("a list of two numbers")
-        return np.array(value, dtype=float)
-    if kind == _PTS:
-        if (
-            not isinstance(value, list)
-            or not value
-            or not all(
-                isinstance(p, list) and len(p) == 2 and all(number(v) for v in p) for p in value
-            )
+        out = np.array(value, dtype=float)
+    else:  # points
+        if not (
+            isinstance(value, list)
+            and value
+            and all(isinstance(p, list) and len(p) == 2 and all(map(_number, p)) for p in value)
         ):
             bad("a list of [x, y] pairs")
         return np.array(value, dtype=float)
-    raise AssertionError(kind)  # pragma: no cover
+    if bound and not np.all(out > 0 if bound == "0" else out >= 0):
+        raise ScenarioError(f"must be >{bound[:-1]} 0, got {value}", path=file, key=key)
+    return out
 
 
-def _table(raw: dict, schema: dict[str, str], file, prefix: str) -> dict:
+def _table(raw, schema: dict, file, prefix: str) -> dict:
     if not isinstance(raw, dict):
         raise ScenarioError("expected a table", path=file, key=prefix)
     raw = {**DEFAULTS.get(prefix, {}), **raw}
     check_known_keys(raw, schema, file, prefix, ScenarioError)
-    out = {}
-    for key, kind in schema.items():
+    for key in schema:
         if key not in raw:
             raise ScenarioError("missing key", path=file, key=f"{prefix}.{key}")
-        out[key] = _typed(raw[key], kind, file, f"{prefix}.{key}")
-    return out
+    return {key: _typed(raw[key], kind, file, f"{prefix}.{key}") for key, kind in schema.items()}
+
+
+def _by_kind(raw, schemas: dict, file, prefix: str) -> dict:
+    """A table whose ``kind`` picks its schema (``[path]``, an obstacle)."""
+    kind = raw.get("kind") if isinstance(raw, dict) else None
+    if isinstance(raw, dict) and kind not in schemas:
+        raise ScenarioError(
+            f"expected one of {', '.join(schemas)}, got {kind!r}", path=file, key=f"{prefix}.kind"
+        )
+    return _table(raw, schemas.get(kind, {}), file, prefix)
 
 
 def validate(raw: dict, file: str | Path, set_keys=()) -> tuple[dict, dict]:
-    """The parsed TOML tables ``raw`` checked against the schema (``set_keys``: the dotted
-    keys set over the file's on the command line, checked by the rules for them).
+    """The parsed TOML tables ``raw`` checked against the schema: ``(data, rnn)``, the tables
+    (numbers as floats, vectors as arrays) and the ``[rnn]`` settings as a plain dict.
 
-    Returns:
-        ``(data, rnn)``: the validated tables (numbers as floats, vectors as
-        arrays), and the ``[rnn]`` settings as a plain dict.
-
-    Raises:
-        ScenarioError: a missing, unknown, mistyped or impossible table or key.
+    ``set_keys``: the dotted keys set over the file's on the command line.
     """
     for key in raw:
         if key not in _TOP:
             raise ScenarioError(
                 f"unknown table (expected one of: {', '.join(sorted(_TOP))})", path=file, key=key
             )
-    raw = {**{t: {} for t in _OPTIONAL_TABLES}, **raw}
+    raw = {**{t: {} for t in OPTIONAL_TABLES}, **raw}
     for key in sorted(_TOP):
         if key not in raw:
             raise ScenarioError("missing table", path=file, key=key)
     data = {name: _table(raw[name], schema, file, name) for name, schema in _SCHEMA.items()}
-    data["path"] = _path_table(raw["path"], file)
+    data["path"] = _by_kind(raw["path"], _PATH_SCHEMA, file, "path")
     data["obstacles"] = _obstacles(raw["obstacles"], file)
-    rnn = _rnn_table(raw["rnn"], file)
-    _check_values(data, file)
+    if not isinstance(raw["rnn"], dict):
+        raise ScenarioError("expected a table", path=file, key="rnn")
+    rnn = {**DEFAULTS["rnn"], **raw["rnn"]}  # eps checked, the rest passed to the backend
+    _typed(rnn["eps"], "num>0", file, "rnn.eps")
+    _check_across_keys(data, file)
     check_simulation(data, file)
     data["verdict"] = _verdict_table(raw["verdict"], data, file, set_keys)
     return data, rnn
-
-
-def _path_table(p, file) -> dict:
-    if not isinstance(p, dict):
-        raise ScenarioError("expected a table", path=file, key="path")
-    kind = p.get("kind")
-    if kind not in _PATH_SCHEMA:
-        raise ScenarioError(
-            f"expected one of {', '.join(_PATH_SCHEMA)}, got {kind!r}", path=file, key="path.kind"
-        )
-    return _table(p, _PATH_SCHEMA[kind], file, "path")
 
 
 def _obstacles(obstacles, file) -> list[dict]:
@@ -263,50 +214,24 @@ def _obstacles(obstacles, file) -> list[dict]:
             key="obstacles",
         )
     out = []
-    names = set()
     for i, o in enumerate(obstacles):
-        prefix = f"obstacles[{i}]"
-        if not isinstance(o, dict):
-            raise ScenarioError("expected a table", path=file, key=prefix)
-        kind = o.get("kind")
-        if kind not in _OBSTACLE_SCHEMA:
-            raise ScenarioError(
-                f"expected one of {', '.join(_OBSTACLE_SCHEMA)}, got {kind!r}",
-                path=file,
-                key=f"{prefix}.kind",
-            )
-        entry = _table(o, _OBSTACLE_SCHEMA[kind], file, prefix)
-        if entry["name"] in names or not entry["name"]:
+        entry = _by_kind(o, _OBSTACLE_SCHEMA, file, f"obstacles[{i}]")
+        if not entry["name"] or entry["name"] in [e["name"] for e in out]:
             raise ScenarioError(
                 f"obstacle names must be non-empty and unique, got {entry['name']!r}",
                 path=file,
-                key=f"{prefix}.name",
+                key=f"obstacles[{i}].name",
             )
-        names.add(entry["name"])
         out.append(entry)
     return out
 
 
-def _rnn_table(rnn, file) -> dict:
-    """Settings of another component: ``eps`` required, the rest passed through."""
-    if not isinstance(rnn, dict):
-        raise ScenarioError("expected a table", path=file, key="rnn")
-    rnn = {**DEFAULTS["rnn"], **rnn}
-    eps = _typed(rnn["eps"], _NUM, file, "rnn.eps")
-    if not eps > 0:
-        raise ScenarioError(f"must be > 0 [s], got {eps}", path=file, key="rnn.eps")
-    return dict(rnn)
-
-
 def _verdict_table(raw, data: dict, file, set_keys=()) -> dict:
-    """The ``[verdict]`` table, validated by :class:`~qpbench.sim.verdict.VerdictSettings`
-    and against the task: ``0 <= safety_margin < d_safe`` (``safety_margin = 0`` when
-    ``d_safe = 0``; its default is at most half of ``d_safe``) and, for a ``settle_time``
-    set on the command line (``set_keys``), ``settle_time < duration``. A file whose own
-    ``duration`` is not above its ``settle_time`` (a short check, a sweep's short
-    instances) is a short run: its verdict says tracking and force were not judged."""
+    """The ``[verdict]`` table, checked by :class:`~qpbench.sim.verdict.VerdictSettings` and
+    against the task. A file whose own ``duration`` is not above its ``settle_time`` is a short
+    run: its verdict says tracking and force were not judged."""
     d_safe, duration = data["controller"]["d_safe"], data["simulation"]["duration"]
-    if isinstance(raw, dict):  # defaults that fit the task (module docstring)
+    if isinstance(raw, dict):  # defaults that fit the task
         raw = {
             "settle_time": min(_VERDICT_DEFAULTS.settle_time, duration / 2),
             "safety_margin": min(DEFAULT_SAFETY_MARGIN, d_safe / 2),
@@ -334,18 +259,14 @@ def _verdict_table(raw, data: dict, file, set_keys=()) -> dict:
     return out
 
 
-def _check_values(data: dict, file) -> None:
+def _check_across_keys(data: dict, file) -> None:
+    """At least two links, one value per link, ``theta_min < theta0 < theta_max``,
+    ``velocity_min <= 0 <= velocity_max``, some key points, a contact normal that is not zero."""
     r = data["robot"]
     n = r["link_lengths"].size
     if n < 2:
         raise ScenarioError(
             f"a planar arm needs at least 2 links, got {n}", path=file, key="robot.link_lengths"
-        )
-    if np.any(r["link_lengths"] <= 0):
-        raise ScenarioError(
-            f"every link length must be > 0 [m], got {r['link_lengths'].tolist()}",
-            path=file,
-            key="robot.link_lengths",
         )
     for key in ("theta0", "theta_min", "theta_max", "velocity_min", "velocity_max"):
         if r[key].size != n:
@@ -374,77 +295,25 @@ def _check_values(data: dict, file) -> None:
             path=file,
             key="robot.velocity_min",
         )
-    _check_key_points(data["key_points"], file)
-    c = data["contact"]
-    if np.hypot(*c["normal"]) < 1e-12:
-        raise ScenarioError("must not be zero", path=file, key="contact.normal")
-    _check_signs(
-        c, "contact", file, positive=("stiffness",), non_negative=("damping", "force_noise_std")
-    )
-    _check_signs(
-        data["controller"],
-        "controller",
-        file,
-        positive=("kp", "kd", "alpha", "k", "rho"),
-        non_negative=("d_safe", "desired_force"),
-    )
-    a = data["adaptive"]
-    if np.any(a["gain"] < 0):
-        raise ScenarioError("gains must be >= 0", path=file, key="adaptive.gain")
-    _check_signs(a, "adaptive", file, positive=("kp_min", "kd_min"))
-    for i, o in enumerate(data["obstacles"]):
-        if o["kind"] == "disk" and not o["radius"] > 0:
-            raise ScenarioError(
-                f"must be > 0 [m], got {o['radius']}", path=file, key=f"obstacles[{i}].radius"
-            )
-
-
-def _check_key_points(kp: dict, file) -> None:
-    """The ``[key_points]`` table: some key points, a known kind, a radius >= 0."""
-    if kp["points_per_link"] < 0:
-        raise ScenarioError(
-            f"must be >= 0, got {kp['points_per_link']}",
-            path=file,
-            key="key_points.points_per_link",
-        )
+    kp = data["key_points"]
     if kp["points_per_link"] == 0 and not kp["include_joints"]:
         raise ScenarioError(
             "no key points (points_per_link = 0 and include_joints = false)",
             path=file,
             key="key_points.points_per_link",
         )
-    if kp["kind"] not in KEY_POINT_KINDS:
-        raise ScenarioError(
-            f"expected one of {', '.join(KEY_POINT_KINDS)}, got {kp['kind']!r}",
-            path=file,
-            key="key_points.kind",
-        )
-    if kp["link_radius"] < 0:
-        raise ScenarioError(
-            f"must be >= 0 [m], got {kp['link_radius']}", path=file, key="key_points.link_radius"
-        )
-
-
-def _check_signs(
-    table: dict, name: str, file, positive: tuple = (), non_negative: tuple = ()
-) -> None:
-    """Reject a value of ``table`` (the TOML table ``name``) that is not > 0 / not >= 0 (NaN included)."""
-    for key in positive:
-        if not table[key] > 0:
-            raise ScenarioError(f"must be > 0, got {table[key]}", path=file, key=f"{name}.{key}")
-    for key in non_negative:
-        if not table[key] >= 0:
-            raise ScenarioError(f"must be >= 0, got {table[key]}", path=file, key=f"{name}.{key}")
+    if np.hypot(*data["contact"]["normal"]) < 1e-12:
+        raise ScenarioError("must not be zero", path=file, key="contact.normal")
 
 
 def check_simulation(data: dict, file: str | Path) -> None:
+    """``dt`` and ``duration`` > 0 [s], at least one tick, and ``alpha * dt < 1``."""
     s = data["simulation"]
-    if not s["dt"] > 0:
-        raise ScenarioError(f"must be > 0 [s], got {s['dt']}", path=file, key="simulation.dt")
-    if not s["duration"] > 0:
-        raise ScenarioError(
-            f"must be > 0 [s], got {s['duration']}", path=file, key="simulation.duration"
-        )
+    for key in ("dt", "duration"):
+        if not s[key] > 0:
+            raise ScenarioError(
+                f"must be > 0 [s], got {s[key]}", path=file, key=f"simulation.{key}"
+            )
     if s["duration"] < s["dt"]:
         raise ScenarioError(
             f"shorter than one control period dt = {s['dt']} s",
@@ -472,19 +341,17 @@ _ORDER = (
     "adaptive",
     "simulation",
     "verdict",
-    "rnn",
 )
 
 
 def filled(data: dict, rnn: dict) -> dict:
-    """The validated tables (:func:`validate`) as TOML-ready tables, every default filled in:
-    what a scenario file with every key written out holds (vectors as lists)."""
+    """The validated tables (:func:`validate`) as TOML-ready tables, every default filled in
+    (vectors as lists)."""
 
-    def plain(value):
-        return value.tolist() if isinstance(value, np.ndarray) else value
+    def plain(table: dict) -> dict:
+        return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in table.items()}
 
-    out = {"obstacles": [{k: plain(v) for k, v in o.items()} for o in data["obstacles"]]}
-    for table in _ORDER:
-        source = rnn if table == "rnn" else data[table]
-        out[table] = {k: plain(v) for k, v in source.items()}
+    out = {"obstacles": [plain(o) for o in data["obstacles"]]}
+    out.update((table, plain(data[table])) for table in _ORDER)
+    out["rnn"] = plain(rnn)
     return out
