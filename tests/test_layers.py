@@ -6,7 +6,7 @@ layer or below):
 
     exceptions statuses profiles published memory atomic cache packed native_output
     runner
-    robot rnn backends metrics formats reference reference_solve
+    robot rnn backends metrics formats reference
     control
     sim
     selection report jit
@@ -56,7 +56,6 @@ LAYERS = [
         "metrics",
         "formats",
         "reference",
-        "reference_solve",
     },
     {"control"},
     {"sim"},

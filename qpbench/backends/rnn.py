@@ -48,7 +48,6 @@ parts whose size changed restart at zero (all of it when ``n`` changes).
 from __future__ import annotations
 
 import math
-import time
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -395,7 +394,6 @@ class RNNOnline(NetworkBackend):
         self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None
     ) -> BackendSolution:
         """One tick of integration; see :meth:`Backend.solve` (same fields)."""
-        start = _perf()
         fast = self._fast
         if fast is not None:
             needs_p, packed, xi, prm, size, sx, slices, name, strict = fast
@@ -446,7 +444,6 @@ class RNNOnline(NetworkBackend):
                     sol.status = "max_iter"
                     sol.found = False
                 sol.backend = name
-                sol.wall_time_s = _perf() - start
                 return sol
             if code == nk.DIVERGED:
                 sol = self._diverged(problem, int(prm[nk.STEPS]))
@@ -454,7 +451,6 @@ class RNNOnline(NetworkBackend):
                 sol = self._run(problem, warm_start)
         else:  # first call, odd input: the general path converts, checks, sets up the state
             sol = self._run(problem, warm_start)
-        sol.wall_time_s = _perf() - start
         sol.backend = self.name
         sol.found = sol.status == "optimal"
         return sol
@@ -463,7 +459,6 @@ class RNNOnline(NetworkBackend):
         return self._run(problem, warm_start)
 
 
-_perf = time.perf_counter
 _ndarray = np.ndarray
 _f64 = np.dtype(np.float64)
 _alloc = np.empty

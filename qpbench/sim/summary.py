@@ -11,8 +11,8 @@ or ``sweep.csv`` is that dict (:mod:`qpbench.harness.closed_loop`), nothing reco
   ``optimal`` (nearly every tick of the online ``rnn``). ``status_counts``; ``error_ticks``,
   ``time_limit_ticks``, ``invalid_ticks``: the guarded failures. ``fallback_ticks`` applied the
   soft formulation's answer, ``zero_velocity_ticks`` commanded zero.
-- From :func:`qpbench.sim.loop.simulate` (``run_info``): ``deadline_s`` [s], ``deadline_dropped``, ``raised_ticks``, ``fallback_errors``,
-  ``first_error`` (``"Type: message"``), ``first_error_t`` [s], ``wall_budget_s`` [s],
+- From :func:`qpbench.sim.loop.simulate` (``run_info``): ``deadline_s`` [s], ``deadline_dropped``,
+  ``raised_ticks``, ``fallback_errors``, ``first_error`` (``"Type: message"``), ``first_error_t`` [s], ``wall_budget_s`` [s],
   ``stopped_early``.
 - ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
   ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations: ticks beyond a limit by more
@@ -25,8 +25,8 @@ or ``sweep.csv`` is that dict (:mod:`qpbench.harness.closed_loop`), nothing reco
 - ``verdict``, ``verdict_reasons``, ``key_point_rule`` (the paper's guarantee: ``held``,
   ``broken``, ``-``): :func:`qpbench.sim.verdict.judge` with the scenario's ``[verdict]``.
   Beside it, ``realtime`` (``yes``/``no``) from the call times (p99 ``solve_time_p99_s``, share
-  over ``dt`` ``over_dt_share``, their count ``deadline_misses``) and ``realtime_solver`` (``unknown`` without them) from the
-  solver's own (``solver_time_p99_s``, ``solver_over_dt_share``):
+  over ``dt`` ``over_dt_share``, their count ``deadline_misses``) and ``realtime_solver``
+  (``unknown`` without them) from the solver's own (``solver_time_p99_s``, ``solver_over_dt_share``):
   :func:`qpbench.sim.verdict.judge_realtime`.
 - ``scenario_overrides``: values set over the file's (``--set``); ``verdict_overrides``: those of
   ``[verdict]``.
