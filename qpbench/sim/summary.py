@@ -12,8 +12,8 @@ or ``sweep.csv`` is that dict (:mod:`qpbench.harness.closed_loop`), nothing reco
   ``time_limit_ticks``, ``invalid_ticks``: the guarded failures. ``fallback_ticks`` applied the
   soft formulation's answer, ``zero_velocity_ticks`` commanded zero.
 - From :func:`qpbench.sim.loop.simulate` (``run_info``): ``deadline_s`` [s], ``deadline_dropped``,
-  ``raised_ticks``, ``fallback_errors``, ``first_error`` (``"Type: message"``), ``first_error_t`` [s], ``wall_budget_s`` [s],
-  ``stopped_early``.
+  ``raised_ticks``, ``fallback_errors``, ``first_error`` (``"Type: message"``),
+  ``first_error_t`` [s], ``wall_budget_s`` [s], ``stopped_early``.
 - ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
   ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations: ticks beyond a limit by more
   than :data:`VIOLATION_TOL`. ``duration`` asked, ``simulated_s`` reached [s];
