@@ -13,7 +13,7 @@ from test_report import every_column, parse_tables
 
 from qpbench.cli import main
 from qpbench.commands.options import strict_exit
-from qpbench.harness.loop_rows import COLUMNS as LOOP_COLUMNS
+from qpbench.harness.closed_loop import COLUMNS as LOOP_COLUMNS
 from qpbench.report import recommend as rec
 from qpbench.report.markdown_table import md_table
 

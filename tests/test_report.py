@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from qpbench.cli import main
-from qpbench.harness.loop_rows import COLUMNS as LOOP_COLUMNS
+from qpbench.harness.closed_loop import COLUMNS as LOOP_COLUMNS
 from qpbench.harness.results import bench_columns
 from qpbench.profiles import get_profile
 from qpbench.report import tables
