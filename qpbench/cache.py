@@ -15,14 +15,12 @@ from pathlib import Path
 PACKAGE_DIR = Path(__file__).resolve().parent
 
 
-def _writable(folder: Path) -> bool:
-    """``folder`` exists (or can be made) and a file can be created in it."""
+def writable(folder: Path) -> bool:
+    """``folder`` exists (made if missing), may be written and has a write bit (none at all:
+    a shared data folder, even for root, who may write anywhere)."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / f".write-probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-        return True
+        return os.access(folder, os.W_OK) and bool(folder.stat().st_mode & 0o222)
     except OSError:
         return False
 
@@ -39,7 +37,7 @@ def cache_root() -> Path:
     if env:
         return Path(env)
     local = PACKAGE_DIR / "__cache__"
-    if _writable(local):
+    if writable(local):
         return local
     return user_cache_dir()
 
@@ -56,7 +54,7 @@ def configure_numba_cache() -> str | None:
     not writable; the folder numba caches to, ``None`` for its default beside the sources."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return os.environ["NUMBA_CACHE_DIR"]
-    if _writable(PACKAGE_DIR / "__pycache__"):
+    if writable(PACKAGE_DIR / "__pycache__"):
         return None
     folder = user_cache_dir() / "numba"
     folder.mkdir(parents=True, exist_ok=True)

@@ -1,32 +1,13 @@
 """Reference solutions of a problem set: computed, cached, or read from known objectives.
 
-Sources (``bench --reference``): ``auto`` (Clarabel and PIQP at 1e-10, settled by their
-KKT residuals), ``clarabel`` or ``piqp`` alone, ``none`` (success is qpbenchmark's rule,
-:mod:`qpbench.metrics`), or a CSV of known optimal objectives ``problem,objective``: a
-listed problem's reference is ``optimal`` with that objective (no ``x``), an unlisted
-one ``unknown``.
+Sources (:data:`SOURCES` or a CSV ``problem,objective``: docs/methodology.md): ``auto``
+solves with Clarabel and PIQP at 1e-10 and keeps an answer by its KKT residuals
+(:func:`settle`), never by the solver's name; ``kkt`` is the worst of qpsolvers' primal
+residual, dual residual and duality gap at an answer (``inf`` without one). Every
+reference carries a ``note``: each solver's answer, which was kept and why.
 
-Which answer is kept is decided by the evidence, never the solver's name
-(:func:`settle`); ``kkt`` is the worst of qpsolvers' primal residual, dual residual and
-duality gap at an answer (``inf`` without one):
-
-- both optimal: the smaller ``kkt``;
-- one optimal: kept if the other is ``unknown`` or its ``kkt <= ALMOST_TOL`` (a point
-  meeting the optimality conditions refutes an infeasibility claim), else the
-  other's infeasibility;
-- neither: the common status; ``unknown`` and a verdict: the verdict; two verdicts:
-  ``unknown``.
-
-They agree when both statuses match and, when optimal, :func:`relative_difference` <=
-``AGREE_RTOL``. Every reference carries a ``note``: each solver's answer, which was kept
-and why. Clarabel is given the time limit [s], PIQP has none, so with a limit (or
-``jobs > 1``) each solve is a task of :func:`qpbench.runner.process.run_tasks`, killed
-past its deadline; a late, failed or lost answer is ``unknown`` with its reason.
-
-Cache: ``reference-[<method>-]<sha[:16]>.parquet`` (beside a single file
-``<stem>.reference-...``; where: :func:`cache_folder`), keyed by
-:func:`qpbench.formats.content_sha256` and :data:`REFERENCE_VERSION`; an entry that
-timed out under a smaller limit is recomputed, and a subset adds what it lacks.
+Cache: ``reference-[<method>-]<sha[:16]>.parquet`` (:func:`cache_path`), keyed by
+:func:`qpbench.formats.content_sha256` and :data:`REFERENCE_VERSION`.
 """
 
 from __future__ import annotations
@@ -34,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import os
 import re
 import time
 import warnings
@@ -47,6 +27,7 @@ import numpy as np
 import qpsolvers
 
 from .atomic import write_bytes
+from .cache import user_cache_dir, writable
 from .formats import ProblemRecord, ProblemSet, content_sha256, list_column, solver_problem
 from .metrics import objective
 
@@ -130,12 +111,15 @@ def _worst_residual(solution) -> float:
 
 
 def _status(solver: str, solution) -> str:
-    """The reference status of a qpsolvers solution of ``solver`` (module docstring)."""
+    """The reference status of a qpsolvers solution of ``solver`` (``time_limit``: Clarabel's
+    ``MaxTime``; ``AlmostSolved`` is optimal when its ``kkt <= ALMOST_TOL``)."""
     if solver == "clarabel":
         import clarabel
 
         S = clarabel.SolverStatus
         status = solution.extras.get("status")
+        if status == S.MaxTime:
+            return "time_limit"
         if status == S.Solved or (
             status == S.AlmostSolved and _worst_residual(solution) <= ALMOST_TOL
         ):
@@ -207,21 +191,13 @@ def solve_candidate(
         log.debug("reference: %s failed: %s", solver, exc)
         sol, error = None, f"{type(exc).__name__}: {' '.join(str(exc).split())}"
     wall = time.perf_counter() - started
-    if limited and (wall > time_limit or _clarabel_max_time(solver, sol)):
+    status = "unknown" if sol is None else _status(solver, sol)
+    if limited and (wall > time_limit or status == "time_limit"):
         why = f"no answer within the time limit of {time_limit:g} s"
         return Candidate(solver, "unknown", None, reason=why, timed_out=True, wall_s=wall)
-    status = "unknown" if sol is None else _status(solver, sol)
     if status != "optimal":
         return Candidate(solver, status, None, reason=error, wall_s=wall)
     return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
-
-
-def _clarabel_max_time(solver: str, sol) -> bool:
-    if solver != "clarabel" or sol is None:
-        return False
-    import clarabel
-
-    return (sol.extras or {}).get("status") == clarabel.SolverStatus.MaxTime
 
 
 def solve_task(task: tuple) -> Candidate:
@@ -293,7 +269,10 @@ def relative_difference(f1: float, f2: float) -> float:
 
 
 def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str]:
-    """``(kept, other, status)`` by the rules of the module docstring."""
+    """``(kept, other, status)``: of two optimal answers the smaller ``kkt``; one optimal
+    answer is kept if the other is ``unknown`` or its ``kkt <= ALMOST_TOL`` (it refutes an
+    infeasibility claim), else the other's verdict; neither: the common status, a verdict
+    over ``unknown``, ``unknown`` for two different verdicts."""
     s1, s2 = first.status, second.status
     if s1 == s2 == "optimal":
         return (first, second, s1) if first.kkt <= second.kkt else (second, first, s2)
@@ -350,7 +329,8 @@ def _why(keep: Candidate, other: Candidate, status: str) -> str:
 
 
 def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
-    """The reference made of two solvers' answers (:func:`settle`)."""
+    """The reference made of two solvers' answers (:func:`settle`); they agree when their
+    statuses match and, when optimal, :func:`relative_difference` <= ``AGREE_RTOL``."""
     agreement = relative_difference(first.objective, second.objective)
     agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
     keep, other, status = settle(first, second)
@@ -391,54 +371,49 @@ def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Pat
     """References from known optimal objectives (``{problem name: objective}``)."""
     refs = []
     for record in problem_set.records:
-        f = objectives.get(record.name)
-        if f is None:
-            note = f"no reference: '{record.name}' is not in {source}"
-            refs.append(ReferenceSolution("unknown", solver="file", name=record.name, note=note))
-        else:
-            note = f"optimal objective {float(f):.10g} from {source}"
-            refs.append(
-                ReferenceSolution(
-                    "optimal", objective=float(f), solver="file", name=record.name, note=note
-                )
-            )
+        f = float(objectives.get(record.name, math.nan))
+        status, note = (
+            ("unknown", f"no reference: '{record.name}' is not in {source}")
+            if math.isnan(f)
+            else ("optimal", f"optimal objective {f:.10g} from {source}")
+        )
+        refs.append(
+            ReferenceSolution(status, objective=f, solver="file", name=record.name, note=note)
+        )
     return refs
 
 
 def _compute(
     records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None
 ) -> dict:
-    """``{name: ReferenceSolution}`` of ``records``, in this process or in workers."""
+    """``{name: ReferenceSolution}`` of ``records``: in this process without a time limit
+    and with one job, else each solve a task of a worker."""
     solvers = _solvers(method)
-    limited = time_limit is not None and math.isfinite(time_limit)
-    out = {}
-    if not limited and jobs <= 1:
-        for record in records:
+    limit = time_limit if time_limit is not None and math.isfinite(time_limit) else None
+    out, tasks = {}, []
+    for record in records:
+        if (limit is None and jobs <= 1) or not needs_solver(record):
             started = time.perf_counter()
-            out[record.name] = reference_solution(record, method, None)
+            out[record.name] = reference_solution(record, method)
             on_done(out[record.name], time.perf_counter() - started)
+        else:
+            tasks += [((record.name, s), (record, s, limit)) for s in solvers]
+    if not tasks:
         return out
     from .runner.process import context as worker_context
     from .runner.process import deadline, run_tasks
 
-    tasks, waiting = [], {}
-    timeout = deadline(time_limit) if limited else None
-    for record in records:
-        if not needs_solver(record):
-            out[record.name] = reference_solution(record, method, time_limit)
-            on_done(out[record.name], 0.0)
-            continue
-        waiting[record.name] = {}
-        limit = time_limit if limited else None
-        tasks.extend(((record.name, s), (record, s, limit), timeout) for s in solvers)
+    timeout = None if limit is None else deadline(limit)
     ctx = context if context is not None else worker_context(fresh=True)
+    tasks = [(key, arg, timeout) for key, arg in tasks]
+    got: dict[str, dict] = {}
     for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
         name, solver = done.key
-        got = waiting[name]
-        got[solver] = done.value if done.status is None else _lost(solver, done, time_limit)
-        if len(got) == len(solvers):
-            out[name] = assemble(name, [got[s] for s in solvers], time_limit)
-            on_done(out[name], sum(c.wall_s for c in got.values() if math.isfinite(c.wall_s)))
+        answers = got.setdefault(name, {})
+        answers[solver] = done.value if done.status is None else _lost(solver, done, limit)
+        if len(answers) == len(solvers):
+            out[name] = assemble(name, [answers[s] for s in solvers], limit)
+            on_done(out[name], sum(c.wall_s for c in answers.values() if math.isfinite(c.wall_s)))
     return out
 
 
@@ -511,7 +486,7 @@ def reference_solutions(
         known.update(_compute(todo, method, time_limit, jobs, on_done, context))
     finally:
         close()
-    if path is not None and _make(path.parent):
+    if path is not None and writable(path.parent):
         _write_cache(path, problem_set, list(known.values()), sha, method)
     return [known[n] for n in names]
 
@@ -533,11 +508,7 @@ def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -
     path = Path(problem_set.path)
     folder = path if path.is_dir() else path.parent
     ours = (folder / "manifest.json").is_file() or any(folder.glob("*reference-*.parquet"))
-    if ours and _writable(folder):
-        return folder
-    from .cache import user_cache_dir
-
-    return user_cache_dir() / "references"
+    return folder if ours and writable(folder) else user_cache_dir() / "references"
 
 
 def cache_path(
@@ -555,8 +526,8 @@ def cache_path(
     return folder / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
 
 
-_FLOAT_KEYS = ("objective", "check_objective", "agreement", "kkt", "check_kkt", "time_limit_s")
-_TEXT_KEYS = ("name", "status", "solver", "check_solver", "check_status", "note")
+#: Arrow type of a field of :class:`ReferenceSolution` by its annotation (vectors: lists).
+_ARROW_TYPES = {"str": "string", "float": "float64", "bool": "bool_"}
 
 
 def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
@@ -564,13 +535,14 @@ def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
 
     from .formats import table_to_bytes
 
-    cols = {
-        **{k: pa.array([getattr(r, k) for r in refs], type=pa.string()) for k in _TEXT_KEYS},
-        **{k: list_column([getattr(r, k) for r in refs]) for k in _VEC_KEYS},
-        **{k: pa.array([getattr(r, k) for r in refs], type=pa.float64()) for k in _FLOAT_KEYS},
-        "agree": pa.array([r.agree for r in refs], type=pa.bool_()),
-        "timed_out": pa.array([bool(r.timed_out) for r in refs], type=pa.bool_()),
-    }
+    cols = {}
+    for f in dataclasses.fields(ReferenceSolution):
+        values = [getattr(r, f.name) for r in refs]
+        if f.name in _VEC_KEYS:
+            cols[f.name] = list_column(values)
+        else:
+            kind = _ARROW_TYPES[f.type.removesuffix(" | None")]
+            cols[f.name] = pa.array(values, getattr(pa, kind)())
     table = pa.table(cols).replace_schema_metadata(
         {"qpbench_set_sha256": sha, "qpbench_reference_version": REFERENCE_VERSION}
     )
@@ -589,14 +561,10 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
             return None
         return [
             ReferenceSolution(
-                **{k: r[k] for k in _TEXT_KEYS if k != "note"},
-                note=r["note"] or "",
-                **{k: math.nan if r[k] is None else float(r[k]) for k in _FLOAT_KEYS},
                 **{
-                    k: None if r[k] is None else np.array(r[k], dtype=np.float64) for k in _VEC_KEYS
-                },
-                agree=r["agree"],
-                timed_out=bool(r["timed_out"]),
+                    k: v if v is None or k not in _VEC_KEYS else np.array(v, np.float64)
+                    for k, v in r.items()
+                }
             )
             for r in table.to_pylist()
         ]
@@ -618,21 +586,3 @@ def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str, meth
         for stale in Path(problem_set.path).glob("reference-*.parquet"):
             if stale != path and same_method.fullmatch(stale.name):
                 stale.unlink(missing_ok=True)
-
-
-def _make(folder: Path) -> bool:
-    """Create ``folder`` (and parents); whether it is then writable."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return False
-    return _writable(folder)
-
-
-def _writable(folder: Path) -> bool:
-    """Writable and not marked read-only (no write bit at all: a shared data folder, even
-    for root, who may write anywhere)."""
-    try:
-        return os.access(folder, os.W_OK) and bool(folder.stat().st_mode & 0o222)
-    except OSError:
-        return False
