@@ -45,6 +45,16 @@ class ParamError(InputError):
     """A backend, profile or command parameter has a value that is not allowed."""
 
 
+def did_you_mean(name: str, choices) -> str:
+    """``"did you mean 'a' or 'b'? "``: the (up to three) ``choices`` closest to ``name``,
+    ignoring case, or ``""``."""
+    import difflib
+
+    folded = {str(c).casefold(): c for c in choices}
+    close = difflib.get_close_matches(str(name).casefold(), list(folded), n=3, cutoff=0.6)
+    return f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""
+
+
 def check_known_keys(
     table: dict, known, path: str | Path | None, prefix: str, error: type[InputError] = InputError
 ) -> None:

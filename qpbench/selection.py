@@ -11,7 +11,7 @@ from __future__ import annotations
 import fnmatch
 from typing import TYPE_CHECKING
 
-from .exceptions import ParamError
+from .exceptions import ParamError, did_you_mean
 
 if TYPE_CHECKING:
     from .formats import ProblemSet
@@ -162,8 +162,6 @@ def backend_settings(
     """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked against
     :meth:`~qpbench.backends.base.Backend.setting_names` where the backend can tell (``osqp.rhoo``:
     "did you mean 'rho'")."""
-    import difflib
-
     from .backends import backend_class
 
     out: dict[str, dict] = {}
@@ -179,11 +177,10 @@ def backend_settings(
             )
         allowed = backend_class(backend).setting_names()
         if allowed is not None and setting not in allowed:
-            close = difflib.get_close_matches(setting, sorted(allowed), n=3, cutoff=0.6)
-            hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
             listed = f"its settings: {', '.join(sorted(allowed))}" if allowed else "it has none"
             raise ParamError(
-                f"'{setting}' is not a setting of backend '{backend}'; {hint}{listed}",
+                f"'{setting}' is not a setting of backend '{backend}'; "
+                f"{did_you_mean(setting, sorted(allowed))}{listed}",
                 key=f"{option} {key}",
             )
         out.setdefault(backend, {})[setting] = value

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from ..exceptions import BackendNotFound, ParamError
+from ..exceptions import BackendNotFound, ParamError, did_you_mean
 from ..profiles import Profile
 from .base import STATUSES, Backend, BackendSolution, objective
 
@@ -212,12 +212,9 @@ def resolve_name(name: str) -> str:
     key = folded.get(str(name).strip().casefold())
     if key is not None:
         return key
-    import difflib
-
-    close = difflib.get_close_matches(str(name).casefold(), list(folded), n=3, cutoff=0.6)
-    hint = f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""
     raise BackendNotFound(
-        f"unknown backend '{name}'; {hint}available: {', '.join(backend_names())}"
+        f"unknown backend '{name}'; {did_you_mean(name, registry)}"
+        f"available: {', '.join(backend_names())}"
     )
 
 

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..exceptions import InputError, ScenarioError
+from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
@@ -261,12 +261,8 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
                 from ..backends.rnn import SETTING_NAMES
 
                 if name not in SETTING_NAMES:
-                    import difflib
-
-                    close = difflib.get_close_matches(name, SETTING_NAMES, n=3, cutoff=0.6)
-                    hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
                     raise ScenarioError(
-                        f"unknown setting of the rnn backends; {hint}"
+                        f"unknown setting of the rnn backends; {did_you_mean(name, SETTING_NAMES)}"
                         f"expected one of: {', '.join(SETTING_NAMES)}",
                         path=file,
                         key=key,
