@@ -1,25 +1,14 @@
 """Metrics of a solution against its problem and its reference solution.
 
-The per-tick metrics are a declared list (:data:`PER_TICK_METRICS`) of functions of one
-:class:`Tick` registered with :func:`per_tick_metric`; their names are a bench CSV's metric
-columns, in order (:func:`metric_columns`). For a record ``(P, q, G, h, A, b, lb, ub)`` with
-constant ``r`` (:attr:`~qpbench.formats.ProblemRecord.offset`):
+The per-tick metrics are functions of one :class:`Tick` registered with
+:func:`per_tick_metric`, in column order; their names are a bench CSV's metric columns
+(:func:`metric_columns`; meanings: docs/methodology.md). ``objective`` is ``1/2 x'Px + q'x
++ r`` (``r``: :attr:`~qpbench.formats.ProblemRecord.offset`), the residuals qpsolvers'.
 
-- ``objective``: ``f(x) = 1/2 x'Px + q'x + r``, computed here; ``reference_objective``: ``f*``
-  of an optimal reference; ``optimality_gap``: ``|f(x) - f*| / max(1, |f*|)``; NaN when missing.
-- ``reference_status``; ``reference_agreement``: the relative objective difference of the two
-  reference solvers.
-- ``primal_residual``, ``dual_residual``, ``duality_gap``: qpsolvers' (``inf`` when not found or
-  the duals are missing).
-- ``violation_ineq``, ``violation_eq``, ``violation_box`` and their maximum
-  ``constraint_violation`` (:func:`constraint_violation`), whether ``found`` or not, so a
-  solution that is not found shows how far off it is.
-
-Success (:func:`evaluate`): against a reference ``primal_infeasible`` or ``dual_infeasible``, the
-backend reporting that same status; otherwise ``found``, the residuals and duality gap within the
-profile's tolerance and, against an ``optimal`` reference, ``optimality_gap <= tol.gap``. Under
-``tolerance.rule == "qpbenchmark"`` it is qpbenchmark's rule exactly: ``found`` and each residual
-strictly below its threshold, no reference (:func:`qpbench.published.qpbenchmark_success`).
+Success (:func:`evaluate`): against a reference ``primal_infeasible`` or ``dual_infeasible``,
+the backend reporting that status; otherwise ``found``, each residual within the profile's
+tolerance and, against an ``optimal`` reference, ``optimality_gap <= tol.gap``. Under
+``tolerance.rule == "qpbenchmark"``: :func:`qpbench.published.qpbenchmark_success`.
 """
 
 from __future__ import annotations
@@ -31,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .published import qpbenchmark_success
 from .statuses import CERTIFIED_INFEASIBLE, STATUSES
 
 if TYPE_CHECKING:
@@ -66,9 +56,12 @@ def solution_status(solution: qpsolvers.Solution) -> str | None:
 VIOLATION_KEYS = ("violation_ineq", "violation_eq", "violation_box", "constraint_violation")
 
 
-def _dense(M):
-    """``M`` as it is when scipy.sparse (``M @ x`` is sparse-times-vector), else a float array."""
-    return M if hasattr(M, "toarray") else np.asarray(M, dtype=np.float64)
+def _excess(M, v, x: np.ndarray) -> np.ndarray | None:
+    """``M x - v`` (``None`` for rows the problem lacks); scipy.sparse ``M`` kept sparse."""
+    if M is None or v is None or not np.size(v):
+        return None
+    M = M if hasattr(M, "toarray") else np.asarray(M, dtype=np.float64)
+    return M @ x - np.asarray(v, dtype=np.float64)
 
 
 def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> dict:
@@ -81,22 +74,15 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
     if x is None:
         return dict.fromkeys(VIOLATION_KEYS, math.nan)
     x = np.asarray(x, dtype=np.float64).reshape(-1)
-    ineq = eq = box = 0.0
-    if problem.G is not None and problem.h is not None and np.size(problem.h):
-        ineq = max(
-            0.0, float(np.max(_dense(problem.G) @ x - np.asarray(problem.h, dtype=np.float64)))
-        )
-    if problem.A is not None and problem.b is not None and np.size(problem.b):
-        eq = float(np.max(np.abs(_dense(problem.A) @ x - np.asarray(problem.b, dtype=np.float64))))
+    ineq, eq = _excess(problem.G, problem.h, x), _excess(problem.A, problem.b, x)
+    ineq = 0.0 if ineq is None else max(0.0, float(np.max(ineq)))
+    eq = 0.0 if eq is None else float(np.max(np.abs(eq)))
+    box = 0.0
     with np.errstate(invalid="ignore"):  # inf - inf of an infinite bound at an infinite x
-        if problem.lb is not None and np.size(problem.lb):
-            low = np.asarray(problem.lb, dtype=np.float64) - x
-            low = low[~np.isnan(low)]
-            box = max(box, float(np.max(low, initial=0.0)))
-        if problem.ub is not None and np.size(problem.ub):
-            high = x - np.asarray(problem.ub, dtype=np.float64)
-            high = high[~np.isnan(high)]
-            box = max(box, float(np.max(high, initial=0.0)))
+        for lower, upper in ((problem.lb, x), (x, problem.ub)):
+            if lower is not None and upper is not None and np.size(lower) and np.size(upper):
+                d = np.asarray(lower, dtype=np.float64) - np.asarray(upper, dtype=np.float64)
+                box = max(box, float(np.max(d[~np.isnan(d)], initial=0.0)))
     return {
         "violation_ineq": ineq,
         "violation_eq": eq,
@@ -174,11 +160,7 @@ def reference_status(tick: Tick) -> str | None:
 
 @per_tick_metric
 def reference_agreement(tick: Tick) -> float | None:
-    value = getattr(tick.reference, "agreement", None)
-    try:
-        return None if value is None else float(value)
-    except (TypeError, ValueError):
-        return None
+    return None if tick.reference is None else float(tick.reference.agreement)
 
 
 @per_tick_metric
@@ -238,22 +220,14 @@ def evaluate(
     found = bool(solution is not None and solution.found)
     status = solution_status(solution)
     signed = _signed_gap(m)
-    if getattr(tolerance, "rule", "qpbench") == "qpbenchmark":
-        success = (
-            found
-            and m["primal_residual"] < tolerance.primal
-            and m["dual_residual"] < tolerance.dual
-            and m["duality_gap"] < tolerance.gap
-        )
+    residuals = (m["primal_residual"], m["dual_residual"], m["duality_gap"])
+    if tolerance.rule == "qpbenchmark":
+        success = qpbenchmark_success(found, *residuals, tolerance)
     elif tick.reference_status in CERTIFIED_INFEASIBLE:
         success = status == tick.reference_status
     else:
-        success = (
-            found
-            and m["primal_residual"] <= tolerance.primal
-            and m["dual_residual"] <= tolerance.dual
-            and m["duality_gap"] <= tolerance.gap
-        )
+        limits = (tolerance.primal, tolerance.dual, tolerance.gap)
+        success = found and all(v <= t for v, t in zip(residuals, limits))
         if success and tick.reference_status == "optimal":
             success = abs(signed) <= tolerance.gap
     return {
