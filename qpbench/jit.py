@@ -1,19 +1,14 @@
 """Every compiled kernel of qpbench, compiled (or loaded from numba's on-disk cache) before any clock.
 
-A compile inside a timed or time-limited call would count as the solver's time, so every
-command that times something, and the harness before each closed-loop run, calls
-:func:`warmup` first with the backends it will run; it prepares only what those backends
-and the closed loop use (``qpbench bench --backends daqp`` compiles no kernel and builds no
-shim). ``qpbench warmup`` prepares everything. Worker processes load the kernels from the
-cache when they start (:mod:`qpbench.harness.isolation`), outside any time limit.
+Every command that times something, and the harness before each closed-loop run, calls
+:func:`warmup` with the backends it runs; it prepares only what those backends and the
+closed loop use. Worker processes load the kernels from the cache when they start.
 
-Kernel groups, each warmed on tiny inputs of every argument type qpbench passes it:
-``controller`` (the packed tick build, :mod:`qpbench.control.build_kernel`), ``post`` (the
-closed loop's sense, log and plant step, :mod:`qpbench.sim.tick_kernel`) and ``network``
-(the integrator, :mod:`qpbench.rnn.kernels`, for the controller's four QP shapes: with and
-without the task's equality rows and the obstacle rows; the online per-tick kernels). The
-``qpoases`` backend's native shim is built (C++) only when ``qpoases`` is among the backends.
-A problem of yet another shape compiles its own integrator in the bench's discarded warm-up solve.
+Kernel groups (:data:`KERNELS`), each warmed on the QPs of :data:`_SCENARIOS`' controllers:
+``controller`` (:mod:`qpbench.control.build_kernel`), ``post`` (the closed loop's step,
+:mod:`qpbench.sim.tick_kernel`) and ``network`` (:mod:`qpbench.rnn.kernels`); :data:`SHIM`,
+the ``qpoases`` backend's native shim. A problem of another shape compiles its own
+integrator in the bench's discarded warm-up solve.
 """
 
 from __future__ import annotations
@@ -25,17 +20,6 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 log = logging.getLogger("qpbench")
-
-__all__ = [
-    "KERNELS",
-    "LOOP_KERNELS",
-    "SHIM",
-    "WarmupReport",
-    "kernels_for",
-    "prepare",
-    "prepared",
-    "warmup",
-]
 
 #: Kernel groups :func:`warmup` prepares, in order.
 KERNELS = ("controller", "post", "network")
@@ -66,19 +50,20 @@ class WarmupReport:
 
     def line(self) -> str:
         """One line for the log."""
+        shims = self.shims_compiled
         if self.in_memory:
             return "kernels already loaded in this process"
+        if not self.kernels and self.cache == "":
+            return "numba is not installed: nothing to compile"
         if not self.kernels:
-            if self.cache == "":
-                return "numba is not installed: nothing to compile"
-            if self.shims_compiled:
-                return f"native shim: compiled {self.shims_compiled} in {self.seconds:.1f} s"
+            if shims:
+                return f"native shim: compiled {shims} in {self.seconds:.1f} s"
             return "kernels: none needed by these backends"
-        shims = f" and {self.shims_compiled} native shim" if self.shims_compiled else ""
-        if self.compiled or self.shims_compiled:
+        if self.compiled or shims:
             return (
-                f"kernels: compiled {self.compiled}{shims} (first run with this cache) and cached in "
-                f"{self.cache} in {self.seconds:.1f} s; later runs load them"
+                f"kernels: compiled {self.compiled}{f' and {shims} native shim' if shims else ''}"
+                f" (first run with this cache) and cached in {self.cache} in {self.seconds:.1f} s;"
+                " later runs load them"
             )
         return (
             f"kernels: loaded from the cache in {self.cache} in {self.seconds:.2f} s (0 compiled)"
