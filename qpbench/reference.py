@@ -30,6 +30,7 @@ from .atomic import write_bytes
 from .cache import user_cache_dir, writable
 from .formats import ProblemRecord, ProblemSet, content_sha256, list_column, solver_problem
 from .metrics import objective
+from .statuses import describe_exception
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -100,9 +101,6 @@ class ReferenceSolution:
     timed_out: bool = False
 
 
-# ---------------------------------------------------------------- one solver's answer
-
-
 def _worst_residual(solution) -> float:
     if solution.x is None or not np.all(np.isfinite(solution.x)):
         return math.inf
@@ -157,13 +155,6 @@ class Candidate:
             return self.known_kkt
         return math.inf if self.solution is None else float(_worst_residual(self.solution))
 
-    def plain(self) -> Candidate:
-        """The same answer without the solver's objects (picklable: a worker sends it back)."""
-        sol = self.solution
-        if sol is not None:
-            sol = SimpleNamespace(**{k: getattr(sol, k, None) for k in _VEC_KEYS})
-        return dataclasses.replace(self, solution=sol, known_kkt=self.kkt)
-
     def describe(self) -> str:
         """``solver status`` with its objective and KKT residual, or the reason for no verdict."""
         text = f"{self.solver} {self.status}"
@@ -189,7 +180,7 @@ def solve_candidate(
         error = ""
     except Exception as exc:  # a solver crash is an "unknown" reference, not a traceback
         log.debug("reference: %s failed: %s", solver, exc)
-        sol, error = None, f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        sol, error = None, describe_exception(exc)
     wall = time.perf_counter() - started
     status = "unknown" if sol is None else _status(solver, sol)
     if limited and (wall > time_limit or status == "time_limit"):
@@ -202,15 +193,14 @@ def solve_candidate(
 
 def solve_task(task: tuple) -> Candidate:
     """:func:`solve_candidate` of ``(record, solver, time_limit)`` in a worker: a picklable
-    answer, and a bug in one task an ``unknown`` answer, not the others' end."""
+    answer (no solver objects), and a bug in one task an ``unknown`` answer, not the others' end."""
     record, solver, time_limit = task
     try:
-        return solve_candidate(record, solver, time_limit).plain()
+        c = solve_candidate(record, solver, time_limit)
     except Exception as exc:  # noqa: BLE001 - see the docstring
-        return Candidate(solver, "unknown", None, reason=f"{type(exc).__name__}: {exc}")
-
-
-# ---------------------------------------------------------------- one problem's reference
+        return Candidate(solver, "unknown", None, reason=describe_exception(exc))
+    sol = c.solution and SimpleNamespace(**{k: getattr(c.solution, k) for k in _VEC_KEYS})
+    return dataclasses.replace(c, solution=sol, known_kkt=c.kkt)
 
 
 def needs_solver(record: ProblemRecord) -> bool:
@@ -309,7 +299,7 @@ def _from_candidate(name, keep: Candidate, status: str) -> ReferenceSolution:
     if status == "optimal":
         ref.objective = keep.objective
         for k in _VEC_KEYS:
-            v = getattr(keep.solution, k, None)
+            v = getattr(keep.solution, k)
             setattr(ref, k, None if v is None else np.asarray(v, dtype=np.float64))
     return ref
 
@@ -350,9 +340,6 @@ def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceS
         check_kkt=other.kkt,
         note=note,
     )
-
-
-# ---------------------------------------------------------------- a set's references
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
@@ -489,9 +476,6 @@ def reference_solutions(
     if path is not None and writable(path.parent):
         _write_cache(path, problem_set, list(known.values()), sha, method)
     return [known[n] for n in names]
-
-
-# ---------------------------------------------------------------- cache
 
 
 def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -> Path | None:
