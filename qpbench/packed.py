@@ -28,16 +28,9 @@ _FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
 
 
 def _shapes(n: int, me: int, mi: int) -> dict[str, tuple[int, ...]]:
-    return {
-        "P": (n, n),
-        "q": (n,),
-        "A": (me, n),
-        "b": (me,),
-        "G": (mi, n),
-        "h": (mi,),
-        "lb": (n,),
-        "ub": (n,),
-    }
+    """The shape of each field, in header order."""
+    shapes = ((n, n), (n,), (me, n), (me,), (mi, n), (mi,), (n,), (n,))
+    return dict(zip(_FIELDS, shapes))
 
 
 class PackedProblem(qpsolvers.Problem):
@@ -84,16 +77,7 @@ class PackedProblem(qpsolvers.Problem):
     def from_views(cls, buf, P, q, G, h, A, b, lb, ub) -> PackedProblem:
         """A problem from views the caller made of ``buf`` after writing its header (no checks)."""
         self = _new(cls)
-        d = self.__dict__
-        d["buffer"] = buf
-        d["P"] = P
-        d["q"] = q
-        d["G"] = G
-        d["h"] = h
-        d["A"] = A
-        d["b"] = b
-        d["lb"] = lb
-        d["ub"] = ub
+        self.__dict__.update(buffer=buf, P=P, q=q, G=G, h=h, A=A, b=b, lb=lb, ub=ub)
         return self
 
     @property

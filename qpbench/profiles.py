@@ -1,33 +1,10 @@
 """Settings profiles: what accuracy a solve is asked for and judged against.
 
-Each profile pairs the settings given to every backend with the thresholds of a success,
-as qpbenchmark pairs its settings with a ``Tolerance``:
-
-============== ========= ======== ========== ===================================
-profile        eps_abs   max_iter time_limit success: primal, dual, gap (each)
-============== ========= ======== ========== ===================================
-low_accuracy   1e-4      1e4      1 s        1e-3
-default        1e-7      1e5      10 s       1e-6
-high_accuracy  1e-9      1e6      10 s       1e-9
-============== ========= ======== ========== ===================================
-
-``low_accuracy`` and ``default`` ask for ten times the accuracy they judge (a solver's
-own stopping test does not match qpsolvers' unscaled residuals exactly); ``high_accuracy``
-asks for what it judges, as qpbenchmark does (``bench/accuracy_margin.py`` compares the
-margins). Relative tolerances are zero so that every backend stops on the same absolute
-criterion. A solve succeeds when each residual is at most its threshold and, against an
-optimal reference, so is the optimality gap (:mod:`qpbench.metrics`).
-``reference_time_limit`` [s] bounds each reference solve.
-
-``qpbenchmark:<settings>`` (:func:`qpbenchmark_profile`) applies qpbenchmark's runner as
-read from its installed modules (:func:`qpbench.published.qpbenchmark_settings`): a
-``qpsolvers:<name>`` backend gets its keyword arguments verbatim (``--set`` still adds);
-the time limit is its ``Tolerance.runtime`` (``--time-limit`` replaces it in the solvers'
-arguments too, as its ``set_time_limit`` does); success is its strict rule (``rule =
-"qpbenchmark"``), the reference playing no part. The own-API backends of those solvers
-get the same arguments (:func:`qpbench.backends._common.qpbenchmark_options`); other
-backends get ``eps_abs`` (qpbench's ``default`` where qpbenchmark asks for none),
-``eps_rel = 0``, ``max_iter`` 1e6 and the time limit.
+A :class:`Profile` pairs the settings given to every backend with the thresholds of a
+success (:class:`Tolerance`), as qpbenchmark pairs its settings with a ``Tolerance``
+(docs/backends.md). Relative tolerances are zero so that every backend stops on the same
+absolute criterion. ``qpbenchmark:<settings>`` (:func:`qpbenchmark_profile`) applies
+qpbenchmark's runner as read from its installed modules (docs/methodology.md).
 """
 
 from __future__ import annotations
@@ -39,15 +16,14 @@ from .exceptions import ParamError
 
 #: Prefix of the profiles that apply qpbenchmark's own settings.
 QPBENCHMARK_PREFIX = "qpbenchmark:"
-#: Success rules: ``qpbench`` (thresholds included, optimality gap and infeasibility
-#: verdicts of the reference) and ``qpbenchmark`` (its rule, strict, no reference).
-RULES = ("qpbench", "qpbenchmark")
 
 
 @dataclass(frozen=True)
 class Tolerance:
     """Thresholds of a success: max primal residual, dual residual and absolute duality gap
-    (inf-norms), the time limit ``runtime`` [s] (as qpbenchmark's) and the ``rule``."""
+    (inf-norms), the time limit ``runtime`` [s] (as qpbenchmark's) and the ``rule``:
+    ``qpbench`` (thresholds included, the reference's optimality gap and infeasibility
+    verdicts) or ``qpbenchmark`` (its strict rule, no reference)."""
 
     primal: float
     dual: float

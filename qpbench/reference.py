@@ -453,7 +453,6 @@ def reference_solutions(
     ``time_limit`` [s] per solve; ``jobs`` workers at once, started by ``context``
     (default ``spawn``: never a fork of this process, which may hold threads and locks).
     """
-    _solvers(method)
     path = cache_path(problem_set, method, cache_dir) if cache else None
     sha = content_sha256(problem_set)
     names = [r.name for r in problem_set.records]
@@ -474,7 +473,7 @@ def reference_solutions(
     finally:
         close()
     if path is not None and writable(path.parent):
-        _write_cache(path, problem_set, list(known.values()), sha, method)
+        _write_cache(path, problem_set, list(known.values()), sha)
     return [known[n] for n in names]
 
 
@@ -557,7 +556,7 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
         return None
 
 
-def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str, method: str) -> None:
+def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str) -> None:
     """Write atomically; remove stale caches of the same method in a problem-set folder."""
     try:
         write_bytes(path, _to_bytes(refs, sha))
@@ -565,8 +564,8 @@ def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str, meth
         log.debug("%s: reference cache not written (%s)", path, exc)
         return
     if problem_set.kind == "set" and path.parent == Path(problem_set.path):
-        tag = "" if method == "auto" else f"{method}-"
-        same_method = re.compile(rf"reference-{re.escape(tag)}[0-9a-f]{{16}}\.parquet")
-        for stale in Path(problem_set.path).glob("reference-*.parquet"):
+        prefix = path.name.removesuffix(".parquet")[:-16]  # reference-[<method>-]
+        same_method = re.compile(rf"{re.escape(prefix)}[0-9a-f]{{16}}\.parquet")
+        for stale in path.parent.glob("reference-*.parquet"):
             if stale != path and same_method.fullmatch(stale.name):
                 stale.unlink(missing_ok=True)
