@@ -19,6 +19,8 @@ import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from .cache import PACKAGE_DIR
+
 log = logging.getLogger("qpbench")
 
 #: Kernel groups :func:`warmup` prepares, in order.
@@ -28,6 +30,8 @@ LOOP_KERNELS = ("controller", "post")
 
 #: The name :func:`kernels_for` gives the qpoases backend's native shim.
 SHIM = "qpoases-shim"
+#: Everything :func:`warmup` can prepare, in order.
+_ALL = (*KERNELS, SHIM)
 #: Shipped scenarios whose controllers give the QP shapes warmed: obstacle rows, none.
 _SCENARIOS = ("wall", "free")
 
@@ -76,12 +80,7 @@ _DONE: set[str] = set()
 
 def cache_location() -> str:
     """Where numba keeps qpbench's compiled kernels (``NUMBA_CACHE_DIR`` or beside the sources)."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    if env:
-        return env
-    from .cache import PACKAGE_DIR
-
-    return f"{PACKAGE_DIR}/**/__pycache__"
+    return os.environ.get("NUMBA_CACHE_DIR") or f"{PACKAGE_DIR}/**/__pycache__"
 
 
 def _problems():
@@ -155,7 +154,7 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
     from .exceptions import BackendNotFound
 
     if backends is None:
-        return (*KERNELS, SHIM)
+        return _ALL
     wanted = set(LOOP_KERNELS) if loop else set()
     for name in backends:
         try:
@@ -165,12 +164,12 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
         wanted.update(cls.kernels)
         if cls.name == "qpoases":
             wanted.add(SHIM)
-    return tuple(k for k in (*KERNELS, SHIM) if k in wanted)
+    return tuple(k for k in _ALL if k in wanted)
 
 
 def prepared() -> tuple[str, ...]:
     """The kernel groups (and shims) prepared in this process so far, in :data:`KERNELS` order."""
-    return tuple(k for k in (*KERNELS, SHIM) if k in _DONE)
+    return tuple(k for k in _ALL if k in _DONE)
 
 
 def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:

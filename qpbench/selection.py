@@ -63,13 +63,9 @@ def select_set(
         return problem_set
     records = select_records(problem_set.records, pattern, every, limit)
     manifest = problem_set.manifest
-    if (
-        every is not None
-        and every > 1
-        and manifest
-        and (manifest.get("generator") or {}).get("every") is not None
-    ):
-        generator = dict(manifest["generator"], every=int(manifest["generator"]["every"]) * every)
+    generator = (manifest or {}).get("generator") or {}
+    if every is not None and generator.get("every") is not None:
+        generator = dict(generator, every=int(generator["every"]) * every)
         manifest = dict(manifest, generator=generator)
     return replace(problem_set, records=records, manifest=manifest)
 
