@@ -15,7 +15,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .exceptions import OutputExistsError
+from .exceptions import OutputExistsError, ParamError
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
@@ -136,8 +136,6 @@ def check_output(
         ParamError: a folder or file in the wrong place, or a missing parent.
         OutputExistsError: ``path`` exists and neither flag was given.
     """
-    from .exceptions import ParamError
-
     path = Path(path)
     if kind == "file" and path.is_dir():
         raise ParamError(f"{path}: is a folder; expected a file name", key=key)
@@ -166,15 +164,10 @@ def promote(staging: Path, out: Path, names) -> None:
         dst = out / name
         if not src.exists():
             continue
-        if src.is_dir():
-            old = out / f".old-{name}"
-            if old.exists():
-                shutil.rmtree(old)
-            if dst.exists():
-                os.replace(dst, old)
-            rename(src, dst)
-            if old.exists():
-                shutil.rmtree(old)
-        else:
-            rename(src, dst)
+        old = out / f".old-{name}"
+        shutil.rmtree(old, ignore_errors=True)
+        if src.is_dir() and dst.exists():
+            os.replace(dst, old)
+        rename(src, dst)
+        shutil.rmtree(old, ignore_errors=True)
     shutil.rmtree(staging, ignore_errors=True)

@@ -59,11 +59,6 @@ def format_size(n: float) -> str:
     return f"{int(n)} B"
 
 
-def machine_memory() -> int:
-    """Physical memory of the machine in bytes."""
-    return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-
-
 def _mapped_bytes() -> int:
     """Virtual memory this process maps now (``VmSize``), 0 if unknown."""
     try:
@@ -78,7 +73,7 @@ def _mapped_bytes() -> int:
 
 def default_budget() -> int:
     """:data:`DEFAULT_FRACTION` of physical memory, within what ``RLIMIT_AS`` leaves."""
-    budget = int(DEFAULT_FRACTION * machine_memory())
+    budget = int(DEFAULT_FRACTION * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
     try:
         import resource
 
@@ -107,12 +102,6 @@ def _nnz(M) -> int:
     return int(M.nnz) if spa.issparse(M) else int(np.count_nonzero(M))
 
 
-def dense_bytes(problem: qpsolvers.Problem) -> int:
-    """A dense copy of ``problem``'s matrices and vectors, in bytes."""
-    n, m = _n_m(problem)
-    return 8 * (n * (n + m) + 4 * (n + m))
-
-
 def sparse_solver_bytes(problem: qpsolvers.Problem) -> int:
     """What a sparse solver needs for ``problem`` (KKT matrix, its factor, vectors), in bytes."""
     n, m = _n_m(problem)
@@ -135,7 +124,8 @@ def skip_reason(problem: qpsolvers.Problem, sparse_backend: bool, budget: int) -
                 f"dense-only backend: n (n + m) = {entries:.3g} entries > {DENSE_MAX_ENTRIES:.3g} "
                 f"({format_size(8 * entries)} dense)"
             )
-        need = dense_bytes(problem) * 3  # the problem's dense copy, the solver's, its workspace
+        n, m = _n_m(problem)  # the problem's dense copy, the solver's and its workspace:
+        need = 3 * 8 * (entries + 4 * (n + m))
     else:
         need = sparse_solver_bytes(problem)
     if need > budget:
