@@ -83,12 +83,7 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
             if lower is not None and upper is not None and np.size(lower) and np.size(upper):
                 d = np.asarray(lower, dtype=np.float64) - np.asarray(upper, dtype=np.float64)
                 box = max(box, float(np.max(d[~np.isnan(d)], initial=0.0)))
-    return {
-        "violation_ineq": ineq,
-        "violation_eq": eq,
-        "violation_box": box,
-        "constraint_violation": max(ineq, eq, box),
-    }
+    return dict(zip(VIOLATION_KEYS, (ineq, eq, box, max(ineq, eq, box))))
 
 
 @dataclass
@@ -148,9 +143,7 @@ def _objective(tick: Tick) -> float:
 
 @per_tick_metric
 def reference_objective(tick: Tick) -> float:
-    ref = tick.reference
-    value = ref.objective if tick.reference_status == "optimal" else None
-    return math.nan if value is None else float(value)
+    return float(tick.reference.objective) if tick.reference_status == "optimal" else math.nan
 
 
 @per_tick_metric
@@ -181,17 +174,14 @@ def optimality_gap(tick: Tick) -> float:
     return abs(_signed_gap(tick.values))
 
 
-@per_tick_metric(columns=("primal_residual", "dual_residual", "duality_gap"))
+_RESIDUALS = ("primal_residual", "dual_residual", "duality_gap")
+
+
+@per_tick_metric(columns=_RESIDUALS)
 def residuals(tick: Tick) -> dict:
     """qpsolvers' residuals and duality gap (``inf`` without a solution)."""
     sol = tick.solution
-    if sol is None:
-        return dict.fromkeys(("primal_residual", "dual_residual", "duality_gap"), math.inf)
-    return {
-        "primal_residual": float(sol.primal_residual()),
-        "dual_residual": float(sol.dual_residual()),
-        "duality_gap": float(sol.duality_gap()),
-    }
+    return {k: math.inf if sol is None else float(getattr(sol, k)()) for k in _RESIDUALS}
 
 
 @per_tick_metric(
@@ -220,14 +210,14 @@ def evaluate(
     found = bool(solution is not None and solution.found)
     status = solution_status(solution)
     signed = _signed_gap(m)
-    residuals = (m["primal_residual"], m["dual_residual"], m["duality_gap"])
+    res = tuple(m[k] for k in _RESIDUALS)
     if tolerance.rule == "qpbenchmark":
-        success = qpbenchmark_success(found, *residuals, tolerance)
+        success = qpbenchmark_success(found, *res, tolerance)
     elif tick.reference_status in CERTIFIED_INFEASIBLE:
         success = status == tick.reference_status
     else:
         limits = (tolerance.primal, tolerance.dual, tolerance.gap)
-        success = found and all(v <= t for v, t in zip(residuals, limits))
+        success = found and all(v <= t for v, t in zip(res, limits))
         if success and tick.reference_status == "optimal":
             success = abs(signed) <= tolerance.gap
     return {

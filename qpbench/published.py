@@ -62,10 +62,7 @@ def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
             return iter(())
 
         def define_tolerances(self) -> None:
-            if runtime is None:
-                super().define_tolerances()
-            else:
-                super().define_tolerances(runtime=float(runtime))
+            super().define_tolerances(**({} if runtime is None else {"runtime": float(runtime)}))
 
     previous = logging.root.manager.disable
     # "solver X is available but skipped as its settings are unknown"
