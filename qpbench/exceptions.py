@@ -24,13 +24,8 @@ class InputError(QpbenchError):
         super().__init__(message)
 
     def __str__(self) -> str:
-        where = []
-        if self.path is not None:
-            where.append(str(self.path))
-        if self.key is not None:
-            where.append(f"key '{self.key}'")
-        prefix = ": ".join(where)
-        return f"{prefix}: {self.message}" if prefix else self.message
+        key = None if self.key is None else f"key '{self.key}'"
+        return ": ".join(str(w) for w in (self.path, key, self.message) if w is not None)
 
 
 class ProblemFormatError(InputError):
