@@ -30,6 +30,8 @@ from .atomic import write_bytes
 from .cache import user_cache_dir, writable
 from .formats import ProblemRecord, ProblemSet, content_sha256, list_column, solver_problem
 from .metrics import objective
+from .runner.process import context as worker_context
+from .runner.process import deadline, run_tasks
 from .statuses import describe_exception
 
 if TYPE_CHECKING:
@@ -377,6 +379,7 @@ def _compute(
     and with one job, else each solve a task of a worker."""
     solvers = _solvers(method)
     limit = time_limit if time_limit is not None and math.isfinite(time_limit) else None
+    timeout = None if limit is None else deadline(limit)
     out, tasks = {}, []
     for record in records:
         if (limit is None and jobs <= 1) or not needs_solver(record):
@@ -384,15 +387,10 @@ def _compute(
             out[record.name] = reference_solution(record, method)
             on_done(out[record.name], time.perf_counter() - started)
         else:
-            tasks += [((record.name, s), (record, s, limit)) for s in solvers]
+            tasks += [((record.name, s), (record, s, limit), timeout) for s in solvers]
     if not tasks:
         return out
-    from .runner.process import context as worker_context
-    from .runner.process import deadline, run_tasks
-
-    timeout = None if limit is None else deadline(limit)
     ctx = context if context is not None else worker_context(fresh=True)
-    tasks = [(key, arg, timeout) for key, arg in tasks]
     got: dict[str, dict] = {}
     for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
         name, solver = done.key
