@@ -22,10 +22,8 @@ if TYPE_CHECKING:
 
 def _flush_c_stdio() -> None:
     """Flush C's stdio buffers (text a solver printed but the C library has not written yet)."""
-    try:
+    with contextlib.suppress(OSError, AttributeError):  # no C library to talk to
         ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):  # pragma: no cover - no C library to talk to
-        pass
 
 
 @contextlib.contextmanager
@@ -52,16 +50,12 @@ def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
         sys.stdout = private
         yield
     finally:
-        try:
+        with contextlib.suppress(BrokenPipeError):  # the reader went away (``| head``)
             private.flush()
-        except BrokenPipeError:  # the reader went away (``| head``): nothing more to say
-            pass
         _flush_c_stdio()
         os.dup2(saved, 1)
         sys.stdout = old_stdout
-        try:
+        with contextlib.suppress(BrokenPipeError):
             private.close()
-        except BrokenPipeError:
-            pass
         os.close(saved)
         os.close(devnull)
