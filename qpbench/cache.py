@@ -33,13 +33,8 @@ def user_cache_dir() -> Path:
 
 def cache_root() -> Path:
     """The folder compiled artefacts of qpbench go to (rule in the module docstring)."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    if env:
-        return Path(env)
-    local = PACKAGE_DIR / "__cache__"
-    if writable(local):
-        return local
-    return user_cache_dir()
+    env, local = os.environ.get("NUMBA_CACHE_DIR"), PACKAGE_DIR / "__cache__"
+    return Path(env) if env else local if writable(local) else user_cache_dir()
 
 
 def shim_dir(name: str) -> Path:
@@ -52,10 +47,9 @@ def shim_dir(name: str) -> Path:
 def configure_numba_cache() -> str | None:
     """Set ``NUMBA_CACHE_DIR`` (inherited by workers) when unset and the package folder is
     not writable; the folder numba caches to, ``None`` for its default beside the sources."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return os.environ["NUMBA_CACHE_DIR"]
-    if writable(PACKAGE_DIR / "__pycache__"):
-        return None
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env or writable(PACKAGE_DIR / "__pycache__"):
+        return env or None
     folder = user_cache_dir() / "numba"
     folder.mkdir(parents=True, exist_ok=True)
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
