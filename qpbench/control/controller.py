@@ -9,13 +9,11 @@ obstacles are at least ``d_safe`` away)::
 
     minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
 
-``G`` holds one row per (key point, obstacle point) pair, key point major, every pair kept so the
-row count is fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind
-``closest`` (beyond the paper) take each link's point closest to each obstacle point, one row
-per (link, obstacle point), the end effector's link exempt against the contact surface; they
-are built by the numpy terms (:mod:`qpbench.control.terms`), which are also the reference the
-tests check the compiled build (:mod:`qpbench.control.build_kernel`) against. The compiled build
-writes into one fresh buffer per tick, returned as a :class:`qpbench.packed.PackedProblem`.
+``G`` holds one row per (key point, obstacle point) pair, key point major, so the row count is
+fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind ``closest`` take
+each link's point closest to each obstacle point, the end effector's link exempt against the
+contact surface; they are built by the numpy terms (:mod:`qpbench.control.terms`), every other
+kind by the compiled build (:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
 """
 
 from __future__ import annotations
@@ -35,7 +33,7 @@ from ..statuses import FORMULATIONS
 from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
-__all__ = ["FORMULATIONS", "Controller", "TickArrays", "TickQP"]
+__all__ = ["Controller", "TickArrays", "TickQP", "check_formulation"]
 
 
 class TickArrays(NamedTuple):
@@ -59,10 +57,6 @@ class TickArrays(NamedTuple):
 
 
 _kernel = None
-_Problem = qpsolvers.Problem
-_new_problem = object.__new__
-_trusted = PackedProblem.from_views
-_empty = np.empty
 
 
 def _get_kernel():
@@ -188,7 +182,7 @@ class Controller:
         par[8] = self.kp if kp is None else kp
         par[9] = self.kd if kd is None else kd
         par[14] = 1.0 if soft else 0.0
-        buf = _empty(self._packed_size)
+        buf = np.empty(self._packed_size)
         (_kernel or _get_kernel())(
             theta,
             self._lengths,
@@ -216,26 +210,16 @@ class Controller:
         )
 
     def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
-        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output, its fields set directly:
-        the arrays already have the types the constructor checks (its cost: ``bench/build_qp.py``;
-        the tests check the result equals the constructor's)."""
+        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output (a
+        :class:`~qpbench.packed.PackedProblem` on the compiled build's buffer)."""
         P, q, G, h, J, b, lb, ub = arrays[:8]
         if self.n_rows == 0:
             G = h = None
         if soft:
             J = b = None
         if arrays.buffer is not None:  # one buffer (the kernel's): its header says the same
-            return _trusted(arrays.buffer, P, q, G, h, J, b, lb, ub)
-        problem = _new_problem(_Problem)
-        problem.P = P
-        problem.q = q
-        problem.G = G
-        problem.h = h
-        problem.A = J
-        problem.b = b
-        problem.lb = lb
-        problem.ub = ub
-        return problem
+            return PackedProblem.from_views(arrays.buffer, P, q, G, h, J, b, lb, ub)
+        return qpsolvers.Problem(P, q, G, h, J, b, lb, ub)
 
     def build(
         self,
@@ -248,7 +232,7 @@ class Controller:
     ) -> TickQP:
         """The tick's QP at joint angles ``theta`` [rad], time ``t`` [s], ``kp, kd`` (default: the
         controller's); ``reference``: assembled from the numpy terms (slower; for checks)."""
-        soft = _check_formulation(formulation)
+        soft = check_formulation(formulation)
         theta = np.ascontiguousarray(theta, dtype=np.float64)
         if theta.shape != (self.n,):
             raise ParamError(f"theta must have shape ({self.n},), got {theta.shape}", key="theta")
@@ -256,15 +240,9 @@ class Controller:
             arrays = self._arrays_from_terms(theta, float(t), kp, kd, soft)
         else:
             arrays = self.build_arrays(theta, float(t), kp, kd, soft)
-        return self._tick(arrays, soft, formulation)
-
-    build_reference = partialmethod(build, reference=True)
-
-    def _tick(self, arrays, soft, formulation) -> TickQP:
-        problem = self.make_problem(arrays, soft)
         xd = arrays.xd
         return TickQP(
-            problem=problem,
+            problem=self.make_problem(arrays, soft),
             formulation=formulation,
             J=arrays.J,
             b0=arrays.b0,
@@ -273,6 +251,8 @@ class Controller:
             x_d=np.array(xd[:2]),
             xdot_d=np.array(xd[2:]),
         )
+
+    build_reference = partialmethod(build, reference=True)
 
     def _distance_grid(self, dist: np.ndarray) -> np.ndarray:
         """The flat distances as (key point, obstacle point), ``inf`` for a pair without rows."""
@@ -328,7 +308,8 @@ class Controller:
         return cols
 
 
-def _check_formulation(formulation: str) -> bool:
+def check_formulation(formulation: str) -> bool:
+    """Whether ``formulation`` (one of :data:`FORMULATIONS`) is ``soft``; else :class:`ParamError`."""
     if formulation not in FORMULATIONS:
         raise ParamError(
             f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",

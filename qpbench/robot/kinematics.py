@@ -33,12 +33,12 @@ class PlanarArm:
         if lengths.ndim != 1 or lengths.size < 2:
             raise InputError(
                 f"a planar arm needs at least 2 link lengths, got {lengths.tolist()}",
-                key="link_lengths",
+                key="robot.link_lengths",
             )
         if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
             raise InputError(
                 f"link lengths must be finite and > 0 [m], got {lengths.tolist()}",
-                key="link_lengths",
+                key="robot.link_lengths",
             )
         self.lengths = lengths
         self.n = lengths.size
@@ -120,9 +120,7 @@ def default_key_points(
     contact surface). Order: link by link, inner joint outwards.
     """
     if points_per_link < 0:
-        raise InputError(
-            f"points_per_link must be >= 0, got {points_per_link}", key="points_per_link"
-        )
+        raise InputError(f"must be >= 0, got {points_per_link}", key="key_points.points_per_link")
     links, fracs = [], []
     for i in range(n):
         for j in range(1, points_per_link + 1):
@@ -133,7 +131,8 @@ def default_key_points(
             fracs.append(1.0)
     if not links:
         raise InputError(
-            "no key points: points_per_link = 0 and include_joints = false", key="key_points"
+            "no key points: points_per_link = 0 and include_joints = false",
+            key="key_points.points_per_link",
         )
     names = tuple(f"A{i + 1}" for i in range(len(links)))
     return KeyPoints(

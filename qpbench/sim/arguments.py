@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..backends import Backend, backend_class, get_backend
+from ..control.controller import check_formulation
 from ..exceptions import ParamError, positive_seconds
-from ..statuses import FORMULATIONS
 from .scenario import Scenario
 
 __all__ = ["check_arguments", "resolve_backend"]
@@ -43,11 +43,7 @@ def resolve_backend(
 
 def check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
     """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
-    if formulation not in FORMULATIONS:
-        raise ParamError(
-            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
-            key="formulation",
-        )
+    check_formulation(formulation)
     if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
         raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
     for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):

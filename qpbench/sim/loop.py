@@ -6,21 +6,16 @@ One tick at ``t_k = k dt``:
    contact force ``F_k`` of the environment's spring-damper (plus the scenario's sensor noise);
 2. build the tick's QP (eq. 11, the chosen formulation) with the current ``Kp_hat, Kd_hat``;
 3. solve it, warm-started from the previous command. A tick without a usable answer (no
-   solution, a non-finite ``x``, an exception: status ``error``, an answer later than
-   ``deadline``: ``time_limit``) solves the ``soft`` formulation with the same backend
-   (fallback), else commands zero velocity; an online backend (``online = True``, the RNN) is
-   its own controller: its ``x`` is applied whatever its status, never a fallback. After a
-   failure the backend is reset. Without a ``deadline`` every answer is applied however long
-   it took, so the trajectory does not depend on the machine; a solve is never interrupted
-   (``qpbench closed-loop`` runs a run in a worker process with a deadline for the whole run);
+   solution, a non-finite ``x``, an exception: ``error``, an answer later than ``deadline``:
+   ``time_limit``) solves the ``soft`` formulation with the same backend (fallback), else
+   commands zero velocity; an online backend (the RNN) is its own controller: its ``x`` is
+   applied whatever its status. After a failure the backend is reset. A solve is never
+   interrupted;
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
-5. plant: ``theta_{k+1} = theta_k + dt v_k``.
+5. plant: ``theta_{k+1} = theta_k + dt v_k`` (steps 1 and 5 and the log row:
+   :mod:`qpbench.sim.tick_kernel`).
 
-Per tick: one call of the controller's compiled build kernel, the backend's ``solve`` and one
-call of the compiled tick kernel (:mod:`qpbench.sim.tick_kernel`: sensing, the log row, the
-plant). The body's clearance (``d_body_*``, :mod:`qpbench.robot.body`) is computed after the
-loop for every tick at once. The log is one row per tick (:mod:`qpbench.sim.log`); the run's
-figures and verdict: :mod:`qpbench.sim.summary`.
+The body's clearance (``d_body_*``) is computed after the loop for every tick at once.
 """
 
 from __future__ import annotations
@@ -71,8 +66,7 @@ def _reset(backend: Backend) -> None:
 
 @dataclass
 class SimResult:
-    """The tick log (:mod:`qpbench.sim.log`), the summary (:func:`~qpbench.sim.summary.summarize`)
-    and the kept ticks' QPs (:class:`qpbench.formats.ProblemRecord`, with ``dump`` or ``every``)."""
+    """The tick log, the summary and the kept ticks' QPs (:class:`qpbench.formats.ProblemRecord`)."""
 
     log: pd.DataFrame
     summary: dict
@@ -97,12 +91,9 @@ def simulate(
     ``scenario`` is a :class:`Scenario`, a shipped scenario's name or a file; ``backend`` a name
     or an instance; ``formulation`` ``paper`` (eq. 11) or ``soft``; ``duration``, ``dt`` [s]
     override the scenario's. ``every`` keeps every K-th tick's QP (default 1 with ``dump``, a
-    folder the kept QPs are written to as a problem set). ``deadline`` [s]: an answer arriving
-    later is dropped (status ``time_limit``; the run then depends on the machine's speed).
-    ``wall_budget_s`` [s]: checked between ticks; once spent the run stops with the ticks done
-    (the same rows an uncut run has) and the summary says ``stopped_early``. The run adds to
-    the summary ``deadline_s``, ``deadline_dropped`` (``None`` without a deadline),
-    ``raised_ticks``, ``fallback_errors``, ``first_error`` and ``first_error_t`` [s].
+    folder the kept QPs are written to as a problem set). ``deadline`` [s]: a later answer is
+    dropped (``time_limit``). ``wall_budget_s`` [s]: checked between ticks; once spent the run
+    stops with the ticks done (``stopped_early``).
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
@@ -144,10 +135,7 @@ def _write_dump(folder, records, scenario: Scenario, backend_name, formulation, 
 
 
 class _Run:
-    """One closed-loop run: set up, warm the kernels, loop over the ticks, tabulate.
-
-    The per-tick state lives in local variables of :meth:`loop` (the hot path).
-    """
+    """One closed-loop run: set up, warm the kernels, loop over the ticks, tabulate."""
 
     def __init__(
         self,

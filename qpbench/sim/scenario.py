@@ -198,8 +198,8 @@ def parse_scenario(
     )
     # build every object once so constructor checks surface here, naming the file
     try:
-        scenario.make_controller()
         scenario.make_surface()
+        scenario.make_controller()
     except InputError as exc:
         if isinstance(exc, ScenarioError):
             raise
