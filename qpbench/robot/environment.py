@@ -2,7 +2,7 @@
 
 Contact surface: a line through ``point`` with unit normal ``normal`` (the pressing direction);
 penetration ``delta = n . (x - point)``; a spring-damper force while penetrating (paper eq. 3
-read as the environment's law)::
+read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
 
     F = max(0, Kp_env delta + Kd_env deltadot)   if delta > 0, else 0     [N]
 
@@ -83,26 +83,11 @@ class ContactSurface:
         self.damping = float(damping)
         self.noise_std = float(noise_std)
         self.seed = seed
-        self._rng = np.random.default_rng(seed)
-        self._offset = float(self.normal @ self.point)
+        self.reset()
 
     def reset(self) -> None:
         """Restart the noise sequence from the seed."""
         self._rng = np.random.default_rng(self.seed)
-
-    def penetration(self, x: np.ndarray) -> float:
-        """``delta = n . (x - point)`` in [m] (positive inside the surface)."""
-        return float(self.normal[0] * x[0] + self.normal[1] * x[1] - self._offset)
-
-    def force(self, x: np.ndarray, xdot: np.ndarray) -> float:
-        """Contact force [N] at end-effector position ``x`` [m] and velocity ``xdot`` [m/s], as a
-        sensor reads it (noise included)."""
-        n0, n1 = self.normal
-        delta = self.penetration(x)
-        f = 0.0
-        if delta > 0.0:
-            f = max(0.0, self.stiffness * delta + self.damping * (n0 * xdot[0] + n1 * xdot[1]))
-        return f + self.noise()
 
     def noise(self) -> float:
         """One sample of the force-sensor noise in [N] (0.0 when ``noise_std`` is 0)."""
@@ -187,9 +172,6 @@ class LineObstacle(Obstacle):
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
 
 
-# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest_on_segments,
-# primitives) on purpose: one class per obstacle kind, each with its own geometry, so that adding
-# a kind touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 

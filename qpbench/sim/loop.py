@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import namedtuple
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,15 +46,10 @@ log = logging.getLogger(__name__)
 solve_log = logging.getLogger("qpbench.solves")
 
 
-class _Raised:
-    """Stands for the solution of a solve that raised (status ``error``, no answer)."""
-
-    __slots__ = ("status", "x", "y", "z", "error", "solver_time_s")
-
-    def __init__(self, error: str):
-        self.status = "error"
-        self.x = self.y = self.z = self.solver_time_s = None
-        self.error = error
+#: Stands for the solution of a solve that raised (status ``error``, no answer).
+_Raised = namedtuple(
+    "_Raised", "error status x y z solver_time_s", defaults=("error",) + (None,) * 4
+)
 
 
 def _reset(backend: Backend) -> None:

@@ -90,10 +90,6 @@ class Scenario:
         return VerdictSettings(**self.data["verdict"])
 
     @property
-    def adaptive_enabled(self) -> bool:
-        return self.data["adaptive"]["enabled"]
-
-    @property
     def normal(self) -> np.ndarray:
         """The contact surface's unit normal."""
         normal = self.data["contact"]["normal"]

@@ -77,8 +77,7 @@ def _post_py(
         xd0 = (ee[0] - sensed[0]) / dt
         xd1 = (ee[1] - sensed[1]) / dt
     sensed[0], sensed[1], sensed[2], sensed[3] = ee[0], ee[1], xd0, xd1
-    # Compiled twin of ContactSurface.force (noise-free; surf = [nx, ny, n . point, stiffness,
-    # damping, Fd]): inline so a tick is one call; tests/test_tick_kernel.py checks they agree.
+    # the contact force law (noise-free; surf = [nx, ny, n . point, stiffness, damping, Fd])
     nx, ny = cf[_CF_SURF], cf[_CF_SURF + 1]
     delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
     force = 0.0
