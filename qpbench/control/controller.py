@@ -56,17 +56,6 @@ class TickArrays(NamedTuple):
     buffer: np.ndarray | None = None
 
 
-_kernel = None
-
-
-def _get_kernel():
-    """The compiled build kernel, kept in a global of this module for the per-tick call."""
-    global _kernel
-    if _kernel is None:
-        _kernel = compiled_build_kernel()
-    return _kernel
-
-
 @dataclass
 class TickQP:
     """One tick's QP and what it was built from: Jacobian ``J`` [m/rad], impedance reference
@@ -183,7 +172,7 @@ class Controller:
         par[9] = self.kd if kd is None else kd
         par[14] = 1.0 if soft else 0.0
         buf = np.empty(self._packed_size)
-        (_kernel or _get_kernel())(
+        compiled_build_kernel()(
             theta,
             self._lengths,
             self._kp_link,

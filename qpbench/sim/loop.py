@@ -30,11 +30,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..backends import Backend
+from ..backends import Backend, backend_class, get_backend
+from ..control.controller import check_formulation
+from ..exceptions import ParamError, positive_seconds
 from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
-from .arguments import check_arguments, resolve_backend
 from .scenario import Scenario, load_scenario
 from .summary import jsonable, summarize
 from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
@@ -50,6 +51,47 @@ solve_log = logging.getLogger("qpbench.solves")
 _Raised = namedtuple(
     "_Raised", "error status x y z solver_time_s", defaults=("error",) + (None,) * 4
 )
+
+
+def resolve_backend(
+    backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default"
+) -> Backend:
+    """A backend instance for ``scenario``: by name, or the given instance checked.
+
+    A backend class whose ``scenario_table`` names a table of the scenario (the ``rnn``
+    backends) gets that table's settings; an online backend also the control period ``dt``
+    [s], which an instance's own ``dt`` must match.
+    """
+    if isinstance(backend, str):
+        cls = backend_class(backend)
+        settings = {}
+        if cls.scenario_table:
+            settings.update(getattr(scenario, cls.scenario_table))
+        if cls.online:
+            settings.setdefault("dt", dt)
+        return get_backend(backend, profile=profile, **settings)
+    if not isinstance(backend, Backend):
+        raise ParamError(
+            f"expected a backend name or instance, got {type(backend).__name__}", key="backend"
+        )
+    own_dt = getattr(backend, "dt", None)
+    if own_dt is not None and abs(float(own_dt) - dt) > 1e-15:
+        raise ParamError(
+            f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt"
+        )
+    return backend
+
+
+def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
+    """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
+    check_formulation(formulation)
+    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
+        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):
+        if isinstance(value, str):  # float() would read it, but the API takes numbers
+            raise ParamError(f"expected a positive number of seconds, got {value!r}", key=key)
+        if value is not None:
+            positive_seconds(value, key)
 
 
 def _reset(backend: Backend) -> None:
@@ -93,7 +135,7 @@ def simulate(
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    check_arguments(formulation, every, deadline, wall_budget_s)
+    _check_arguments(formulation, every, deadline, wall_budget_s)
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     keep_every = every if every is not None else (1 if dump is not None else None)

@@ -183,7 +183,6 @@ def parse_scenario(
     if overrides:
         raw = apply_overrides(raw, overrides, file)
     data, rnn = validate(raw, file, tuple(overrides or ()))
-    _warn_verdict_overrides(overrides or {}, file)
     scenario = Scenario(
         name=data["scenario"]["name"],
         path=None if path is None else Path(path),
@@ -194,12 +193,14 @@ def parse_scenario(
     )
     # build every object once so constructor checks surface here, naming the file
     try:
+        scenario.verdict  # noqa: B018
         scenario.make_surface()
         scenario.make_controller()
     except InputError as exc:
         if isinstance(exc, ScenarioError):
             raise
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
+    _warn_verdict_overrides(overrides or {}, file)
     return scenario
 
 
