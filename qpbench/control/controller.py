@@ -122,12 +122,8 @@ class Controller:
         #: Inequality rows per tick (fixed).
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
         self._compiled = not self.closest and all(o.KERNEL_KIND is not None for o in self.obstacles)
-        if self.obstacles:
-            self._prims = np.ascontiguousarray(
-                np.vstack([o.primitives() for o in self.obstacles]), dtype=float
-            )
-        else:
-            self._prims = np.zeros((0, PRIMITIVE_WIDTH))
+        prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, PRIMITIVE_WIDTH))]
+        self._prims = np.ascontiguousarray(np.vstack(prims), dtype=float)
         self._lengths = np.ascontiguousarray(arm.lengths, dtype=float)
         self._kp_link = np.ascontiguousarray(key_points.links, dtype=np.int64)
         self._kp_frac = np.ascontiguousarray(key_points.fracs, dtype=float)

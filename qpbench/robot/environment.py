@@ -45,6 +45,13 @@ def _vec2(value, key: str) -> np.ndarray:
     return arr
 
 
+def _not_negative(value, key: str, unit: str, strict: bool = False) -> float:
+    """``value`` as a float if ``>= 0`` (``> 0`` when ``strict``), else an :class:`InputError`."""
+    if not (value > 0 if strict else value >= 0):
+        raise InputError(f"must be {'>' if strict else '>='} 0 {unit}, got {value}", key=key)
+    return float(value)
+
+
 def _unit(value, key: str) -> np.ndarray:
     arr = _vec2(value, key)
     norm = math.hypot(arr[0], arr[1])
@@ -69,19 +76,9 @@ class ContactSurface:
     ):
         self.point = _vec2(point, "contact.point")
         self.normal = _unit(normal, "contact.normal")
-        if not stiffness > 0:
-            raise InputError(
-                f"stiffness must be > 0 [N/m], got {stiffness}", key="contact.stiffness"
-            )
-        if not damping >= 0:
-            raise InputError(f"damping must be >= 0 [N s/m], got {damping}", key="contact.damping")
-        if not noise_std >= 0:
-            raise InputError(
-                f"noise_std must be >= 0 [N], got {noise_std}", key="contact.force_noise_std"
-            )
-        self.stiffness = float(stiffness)
-        self.damping = float(damping)
-        self.noise_std = float(noise_std)
+        self.stiffness = _not_negative(stiffness, "contact.stiffness", "[N/m]", strict=True)
+        self.damping = _not_negative(damping, "contact.damping", "[N s/m]")
+        self.noise_std = _not_negative(noise_std, "contact.force_noise_std", "[N]")
         self.seed = seed
         self.reset()
 
@@ -221,11 +218,7 @@ class DiskObstacle(Obstacle):
     def __init__(self, name: str, center, radius: float, velocity=(0.0, 0.0)):
         super().__init__(name, velocity)
         self.center = _vec2(center, f"obstacles.{name}.center")
-        if not radius > 0:
-            raise InputError(
-                f"radius must be > 0 [m], got {radius}", key=f"obstacles.{name}.radius"
-            )
-        self.radius = float(radius)
+        self.radius = _not_negative(radius, f"obstacles.{name}.radius", "[m]", strict=True)
 
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.center, 0.0, 0.0, self.radius, *self.velocity]])

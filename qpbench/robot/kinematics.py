@@ -30,14 +30,12 @@ class PlanarArm:
 
     def __init__(self, lengths):
         lengths = np.asarray(lengths, dtype=float)
-        if lengths.ndim != 1 or lengths.size < 2:
+        ok = (
+            lengths.ndim == 1 and lengths.size >= 2 and np.all(np.isfinite(lengths) & (lengths > 0))
+        )
+        if not ok:
             raise InputError(
-                f"a planar arm needs at least 2 link lengths, got {lengths.tolist()}",
-                key="robot.link_lengths",
-            )
-        if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
-            raise InputError(
-                f"link lengths must be finite and > 0 [m], got {lengths.tolist()}",
+                f"a planar arm needs at least 2 finite link lengths > 0 [m], got {lengths.tolist()}",
                 key="robot.link_lengths",
             )
         self.lengths = lengths

@@ -70,7 +70,7 @@ def _none(x):
     return None if not math.isfinite(x) else x
 
 
-def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
+def _intervals(mask: np.ndarray, t: np.ndarray) -> list[list[float]]:
     """Runs of consecutive True ticks as ``[first t, last t]`` pairs [s]."""
     if not mask.any():
         return []
@@ -208,7 +208,7 @@ def _status_figures(frame: pd.DataFrame, t: np.ndarray, dt: float) -> dict:
         "zero_velocity_ticks": int(frame[log.ZERO_VELOCITY].sum()),
         "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
         "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
-        "infeasible_intervals": _intervals(infeasible, t, dt),
+        "infeasible_intervals": _intervals(infeasible, t),
         "status_counts": {str(k): int(v) for k, v in status.value_counts().items() if v},
         "error_ticks": int((status == "error").sum()),
         "time_limit_ticks": int((status == "time_limit").sum()),
@@ -254,7 +254,7 @@ def _obstacle_figures(
     )
     near = D <= d_safe + ACTIVE_MARGIN
     active = {
-        f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS]
+        f"{a}/{o}": _intervals(near[:, c], t)[:MAX_INTERVALS]
         for c, (a, o) in enumerate(dcols)
         if near[:, c].any()
     }
