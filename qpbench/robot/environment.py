@@ -8,11 +8,10 @@ read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
 
 Obstacles give, for each key point ``A``, one or more obstacle points ``B`` (the closest point of
 a shape, or each point of a cloud), the distance ``dist`` [m] (signed for a ``line``: a wall is a
-half-plane) and the unit vector ``u`` from ``B`` to ``A``. An obstacle may translate with a
-constant ``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance
-of link segments to a shape (negative inside), for the body's clearance
-(:mod:`qpbench.robot.body`) and the closest-point key points. A shape with a ``KERNEL_KIND`` is
-known to the compiled build; one without makes the controller use its numpy path.
+half-plane) and the unit vector ``u`` from ``B`` to ``A``; they may translate with a constant
+``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance of link
+segments to a shape (negative inside). A shape without a ``KERNEL_KIND`` makes the controller
+use its numpy path.
 """
 
 from __future__ import annotations

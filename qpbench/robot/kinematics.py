@@ -110,13 +110,9 @@ class KeyPoints:
 def default_key_points(
     n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0
 ) -> KeyPoints:
-    """Key points of an n-link chain: ``points_per_link`` evenly spaced points on each link
-    (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn; ``radius`` [m].
-
-    With one point per link this is the paper's set for n = 4: A1, A3, A5, A7 at the link
-    midpoints, A2, A4, A6 at J2, J3, J4. The end effector is not a key point (it touches the
-    contact surface). Order: link by link, inner joint outwards.
-    """
+    """Key points of an n-link chain, link by link: ``points_per_link`` evenly spaced points on
+    each link (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn;
+    ``radius`` [m]. One point per link, n = 4: the paper's A1..A7 (no end effector)."""
     if points_per_link < 0:
         raise InputError(f"must be >= 0, got {points_per_link}", key="key_points.points_per_link")
     links, fracs = [], []

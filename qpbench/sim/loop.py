@@ -197,6 +197,7 @@ class _Run:
         self.adaptive = scenario.make_adaptive()
         self.soft_primary = formulation == "soft"
         self.cols, self.cidx, self.ci, self.cf = post_constants(ctrl, self.surface, dt)
+        self.post = get_post_kernel()
         self.data = np.full((self.ticks, len(self.cols)), np.nan)
         self.theta = scenario.theta0.astype(float)
         self.sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
@@ -218,17 +219,21 @@ class _Run:
     def loop(self, progress: bool, wall_budget_s: float | None) -> None:
         """The ticks (module docstring, steps 1-5), until ``duration`` or the wall-time budget."""
         ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
-        data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
-        theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
+        data, sensed, adaptive = self.data, self.sensed, self.adaptive
+        theta, records, statuses = self.theta, self.records, self.statuses
         c_force = self.cidx[tick_log.FORCE]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
-        post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
+        build, make_problem = ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
         noisy, fd, f64 = surface.noise_std > 0.0, ctrl.task.desired_force, np.dtype(np.float64)
         kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
         run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
-        bar = _progress_bar(ticks, run_name) if progress else None
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=ticks, unit="tick", desc=run_name, mininterval=0.5)
         start = perf()
         stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
         for k in range(ticks):
@@ -252,29 +257,8 @@ class _Run:
             if x is not None and (online or status == "optimal") and solve_s <= limit:
                 if type(x) is not np.ndarray or x.dtype != f64:
                     x = np.asarray(x, dtype=np.float64)
-                y, z = sol.y, sol.z
                 # -1.0 when x is not finite: nothing logged, the plant not moved
-                force = post(
-                    theta,
-                    x,
-                    arrays.ee,
-                    sensed,
-                    arrays.J,
-                    arrays.b0,
-                    arrays.dist,
-                    arrays.xd,
-                    none if y is None else y,
-                    none if z is None else z,
-                    data,
-                    k,
-                    ci,
-                    cf,
-                    t,
-                    APPLIED,
-                    kp,
-                    kd,
-                    solve_s,
-                )
+                force = self._post(k, t, arrays, x, sol.y, sol.z, APPLIED, kp, kd, solve_s)
                 if force >= 0.0:
                     v = x
             if force < 0.0:
@@ -293,7 +277,9 @@ class _Run:
             if bar is not None and (k + 1) % 500 == 0:
                 bar.update(500)
         self.wall = perf() - start
-        _finish(bar)
+        if bar is not None:  # to the ticks simulated
+            bar.update(bar.total - bar.n)
+            bar.close()
 
     def _without_answer(self, k, t, sol, solve_s, t0, arrays, kp, kd, v):
         """A tick whose own answer is not applied: classify it (:func:`~qpbench.statuses.classify`),
@@ -334,18 +320,20 @@ class _Run:
             if fb_status == "optimal":
                 mode, x = FALLBACK, np.asarray(fb.x, dtype=np.float64)
                 z = none if fb.z is None else fb.z
-        force = self._post(k, t, arrays, x, z, mode, kp, kd, t0)
+        force = self._post(k, t, arrays, x, None, z, mode, kp, kd, time.perf_counter() - t0)
         if force < 0.0:  # the fallback's answer was not finite either
             mode, x = ZERO, zeros
-            force = self._post(k, t, arrays, x, none, mode, kp, kd, t0)
+            force = self._post(k, t, arrays, x, None, None, mode, kp, kd, time.perf_counter() - t0)
         return status, (x if mode == FALLBACK else zeros.copy()), force
 
-    def _post(self, k, t, arrays, x, z, mode, kp, kd, t0) -> float:
-        """The tick kernel on a tick without its own answer (no equality duals)."""
-        a = arrays
+    def _post(self, k, t, arrays, x, y, z, mode, kp, kd, solve_s) -> float:
+        """The tick kernel (:mod:`qpbench.sim.tick_kernel`) on tick ``k`` with velocity ``x``
+        [rad/s], duals ``y, z`` (``None``: none) and the tick's solve time ``solve_s`` [s]."""
+        a, none = arrays, self.none
+        y, z = none if y is None else y, none if z is None else z
         geometry = (a.ee, self.sensed, a.J, a.b0, a.dist, a.xd)
-        tail = (self.data, k, self.ci, self.cf, t, mode, kp, kd, time.perf_counter() - t0)
-        return get_post_kernel()(self.theta, x, *geometry, self.none, z, *tail)
+        tail = (self.data, k, self.ci, self.cf, t, mode, kp, kd, solve_s)
+        return self.post(self.theta, x, *geometry, y, z, *tail)
 
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated."""
@@ -391,17 +379,3 @@ class _Run:
                 for k, t, p in self.records
             ]
         return SimResult(frame, summary, recs)
-
-
-def _progress_bar(ticks: int, desc: str):
-    """A tqdm bar over a run's ticks (the loop updates it every 500 ticks)."""
-    from tqdm import tqdm
-
-    return tqdm(total=ticks, unit="tick", desc=desc, mininterval=0.5)
-
-
-def _finish(bar) -> None:
-    """Bring a progress bar (or ``None``) to the ticks simulated and close it."""
-    if bar is not None:
-        bar.update(bar.total - bar.n)
-        bar.close()

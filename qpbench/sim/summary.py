@@ -270,8 +270,6 @@ def _body_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
         "min_body_distance_obstacle": None,
         "min_body_distance_t": None,
     }
-    if log.D_BODY_MIN not in frame.columns:
-        return out
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     if not np.isfinite(d).any():
         return out
