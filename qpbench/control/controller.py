@@ -123,21 +123,19 @@ class Controller:
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
         self._compiled = not self.closest and all(o.KERNEL_KIND is not None for o in self.obstacles)
         prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, PRIMITIVE_WIDTH))]
-        self._prims = np.ascontiguousarray(np.vstack(prims), dtype=float)
-        self._lengths = np.ascontiguousarray(arm.lengths, dtype=float)
-        self._kp_link = np.ascontiguousarray(key_points.links, dtype=np.int64)
-        self._kp_frac = np.ascontiguousarray(key_points.fracs, dtype=float)
-        self._lim = np.ascontiguousarray(
-            np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max]), dtype=float
-        )
+        lim = np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max])
         self._par = parameter_vector(
-            task.normal,
-            task.desired_force,
-            self.k,
-            self.d_safe,
-            limits.alpha,
-            self.rho,
-            key_points.radius,
+            task.normal, task.desired_force, k, d_safe, limits.alpha, rho, key_points.radius
+        )
+        #: The build kernel's arguments after ``theta``: lengths, key points, obstacles, limits
+        #: and the parameter vector (set per tick by :meth:`build_arrays`).
+        self._kernel_args = (
+            np.ascontiguousarray(arm.lengths, dtype=float),
+            np.ascontiguousarray(key_points.links, dtype=np.int64),
+            np.ascontiguousarray(key_points.fracs, dtype=float),
+            np.ascontiguousarray(np.vstack(prims), dtype=float),
+            np.ascontiguousarray(lim, dtype=float),
+            self._par,
         )
         self._path = task.path
         self._packed_size, layout = packed_layout(self.n, self.n_rows)
@@ -168,16 +166,7 @@ class Controller:
         par[9] = self.kd if kd is None else kd
         par[14] = 1.0 if soft else 0.0
         buf = np.empty(self._packed_size)
-        compiled_build_kernel()(
-            theta,
-            self._lengths,
-            self._kp_link,
-            self._kp_frac,
-            self._prims,
-            self._lim,
-            par,
-            buf,
-        )
+        compiled_build_kernel()(theta, *self._kernel_args, buf)
         sP, sq, sG, sh, sJ, sb, slb, sub, see, sd = self._packed_slices
         return TickArrays(
             buf[sP].reshape(n, n),
