@@ -58,18 +58,14 @@ class TickArrays(NamedTuple):
 
 @dataclass
 class TickQP:
-    """One tick's QP and what it was built from: Jacobian ``J`` [m/rad], impedance reference
-    ``b0`` (eq. 4) [m/s], end effector ``ee`` [m], ``distances`` of each key point to each
-    obstacle point (a, m) [m], ``x_d`` [m], ``xdot_d`` [m/s]."""
+    """One tick's QP, its Jacobian ``J`` [m/rad], impedance reference ``b0`` (eq. 4) [m/s], end
+    effector ``ee`` [m] and the ``distances`` of each key point to each obstacle point (a, m) [m]."""
 
     problem: qpsolvers.Problem
-    formulation: str
     J: np.ndarray
     b0: np.ndarray
     ee: np.ndarray
     distances: np.ndarray
-    x_d: np.ndarray
-    xdot_d: np.ndarray
 
 
 class Controller:
@@ -214,17 +210,8 @@ class Controller:
             arrays = self._arrays_from_terms(theta, float(t), kp, kd, soft)
         else:
             arrays = self.build_arrays(theta, float(t), kp, kd, soft)
-        xd = arrays.xd
-        return TickQP(
-            problem=self.make_problem(arrays, soft),
-            formulation=formulation,
-            J=arrays.J,
-            b0=arrays.b0,
-            ee=arrays.ee,
-            distances=self._distance_grid(arrays.dist),
-            x_d=np.array(xd[:2]),
-            xdot_d=np.array(xd[2:]),
-        )
+        problem = self.make_problem(arrays, soft)
+        return TickQP(problem, arrays.J, arrays.b0, arrays.ee, self._distance_grid(arrays.dist))
 
     build_reference = partialmethod(build, reference=True)
 
