@@ -143,18 +143,10 @@ class Scenario:
             r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
         )
         obstacles = self.make_obstacles()
+        gains = {key: c[key] for key in ("k", "d_safe", "rho", "kp", "kd")}
+        exempt = contact_obstacles(obstacles, self.make_surface())
         return Controller(
-            self.make_arm(),
-            self.make_key_points(),
-            task,
-            limits,
-            obstacles,
-            k=c["k"],
-            d_safe=c["d_safe"],
-            rho=c["rho"],
-            kp=c["kp"],
-            kd=c["kd"],
-            exempt=contact_obstacles(obstacles, self.make_surface()),
+            self.make_arm(), self.make_key_points(), task, limits, obstacles, **gains, exempt=exempt
         )
 
     def make_adaptive(self) -> AdaptiveImpedance | None:
