@@ -15,11 +15,16 @@ from qpbench.robot.environment import (
 )
 
 
+def penetration(surface, x) -> float:
+    """``delta = n . (x - point)`` [m] (positive inside the surface)."""
+    return float(surface.normal @ (np.asarray(x, dtype=float) - surface.point))
+
+
 def contact_force(surface, x, xdot) -> float:
     """The contact force [N] a sensor reads (paper eq. 3 as the environment's law, noise
     included): the numpy oracle of the tick kernel's compiled force law."""
     n = surface.normal
-    delta = float(n @ (np.asarray(x, dtype=float) - surface.point))
+    delta = penetration(surface, x)
     f = 0.0
     if delta > 0.0:
         f = max(0.0, surface.stiffness * delta + surface.damping * float(n @ np.asarray(xdot)))
@@ -38,6 +43,7 @@ def test_contact_force_law():
     # tangential motion adds nothing
     t = np.array([n[1], -n[0]])
     assert contact_force(s, x0 + 0.004 * n, 3.0 * t) == pytest.approx(20.0)
+    assert penetration(s, x0 + 0.004 * n) == pytest.approx(0.004)
 
 
 def test_force_noise_is_seeded():
