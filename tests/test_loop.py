@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 import qpsolvers
 from conftest import SUMMARY_TIME_KEYS, simulate_args
+from test_environment import contact_force
 
 from qpbench.backends import backend_names
 from qpbench.backends.base import Backend, BackendSolution
@@ -70,7 +71,7 @@ def test_paper_scenarios_in_closed_loop(short_runs, name):
     surf = sc.make_surface()
     ee = log[["ee_x", "ee_y"]].to_numpy()
     k = 2500
-    f = surf.force(ee[k], (ee[k] - ee[k - 1]) / sc.dt)
+    f = contact_force(surf, ee[k], (ee[k] - ee[k - 1]) / sc.dt)
     assert log["force"].iloc[k] == pytest.approx(f, abs=1e-9)
     # ||J v - b0|| is zero (to solver accuracy) on feasible ticks of the paper formulation
     feasible = log["status"] == "optimal"
@@ -463,7 +464,7 @@ def test_force_sensor_noise_is_logged():
     ee = log[["ee_x", "ee_y"]].to_numpy()
     law = np.array(
         [
-            quiet.force(ee[k], (ee[k] - ee[k - 1]) / sc.dt if k else np.zeros(2))
+            contact_force(quiet, ee[k], (ee[k] - ee[k - 1]) / sc.dt if k else np.zeros(2))
             for k in range(len(log))
         ]
     )

@@ -153,7 +153,7 @@ def test_a_file_without_verdict_rnn_adaptive_runs_on_the_defaults(tmp_path):
     bare, shipped = load_scenario(f), load_scenario("wall")
     assert bare.verdict == shipped.verdict == VerdictSettings()
     assert bare.rnn == shipped.rnn == {"eps": 0.02}
-    assert not bare.adaptive_enabled
+    assert not bare.data["adaptive"]["enabled"]
     np.testing.assert_array_equal(bare.data["adaptive"]["gain"], shipped.data["adaptive"]["gain"])
     assert bare.data["adaptive"]["kp_min"] == shipped.data["adaptive"]["kp_min"]
     # a threshold set over a table the file leaves out: the table's defaults, then the key

@@ -4,6 +4,8 @@ packed buffer (:func:`packed_layout`, after the :mod:`qpbench.packed` header).""
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
 from ..packed import HEADER as PACKED_HEADER
@@ -19,8 +21,9 @@ _NPAR = 16
 _build_kernel_jit = None
 
 
+@cache
 def compiled_build_kernel():
-    """Compile (or load from numba's cache) the packed build kernel; the controller keeps it."""
+    """The packed build kernel, compiled (or loaded from numba's cache) on the first call."""
     global _build_kernel_jit
     import numba
 

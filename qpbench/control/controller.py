@@ -9,13 +9,11 @@ obstacles are at least ``d_safe`` away)::
 
     minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
 
-``G`` holds one row per (key point, obstacle point) pair, key point major, every pair kept so the
-row count is fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind
-``closest`` (beyond the paper) take each link's point closest to each obstacle point, one row
-per (link, obstacle point), the end effector's link exempt against the contact surface; they
-are built by the numpy terms (:mod:`qpbench.control.terms`), which are also the reference the
-tests check the compiled build (:mod:`qpbench.control.build_kernel`) against. The compiled build
-writes into one fresh buffer per tick, returned as a :class:`qpbench.packed.PackedProblem`.
+``G`` holds one row per (key point, obstacle point) pair, key point major, so the row count is
+fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind ``closest`` take
+each link's point closest to each obstacle point, the end effector's link exempt against the
+contact surface; they are built by the numpy terms (:mod:`qpbench.control.terms`), every other
+kind by the compiled build (:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
 """
 
 from __future__ import annotations
@@ -35,7 +33,7 @@ from ..statuses import FORMULATIONS
 from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
-__all__ = ["FORMULATIONS", "Controller", "TickArrays", "TickQP"]
+__all__ = ["Controller", "TickArrays", "TickQP", "check_formulation"]
 
 
 class TickArrays(NamedTuple):
@@ -58,35 +56,16 @@ class TickArrays(NamedTuple):
     buffer: np.ndarray | None = None
 
 
-_kernel = None
-_Problem = qpsolvers.Problem
-_new_problem = object.__new__
-_trusted = PackedProblem.from_views
-_empty = np.empty
-
-
-def _get_kernel():
-    """The compiled build kernel, kept in a global of this module for the per-tick call."""
-    global _kernel
-    if _kernel is None:
-        _kernel = compiled_build_kernel()
-    return _kernel
-
-
 @dataclass
 class TickQP:
-    """One tick's QP and what it was built from: Jacobian ``J`` [m/rad], impedance reference
-    ``b0`` (eq. 4) [m/s], end effector ``ee`` [m], ``distances`` of each key point to each
-    obstacle point (a, m) [m], ``x_d`` [m], ``xdot_d`` [m/s]."""
+    """One tick's QP, its Jacobian ``J`` [m/rad], impedance reference ``b0`` (eq. 4) [m/s], end
+    effector ``ee`` [m] and the ``distances`` of each key point to each obstacle point (a, m) [m]."""
 
     problem: qpsolvers.Problem
-    formulation: str
     J: np.ndarray
     b0: np.ndarray
     ee: np.ndarray
     distances: np.ndarray
-    x_d: np.ndarray
-    xdot_d: np.ndarray
 
 
 class Controller:
@@ -139,26 +118,20 @@ class Controller:
         #: Inequality rows per tick (fixed).
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
         self._compiled = not self.closest and all(o.KERNEL_KIND is not None for o in self.obstacles)
-        if self.obstacles:
-            self._prims = np.ascontiguousarray(
-                np.vstack([o.primitives() for o in self.obstacles]), dtype=float
-            )
-        else:
-            self._prims = np.zeros((0, PRIMITIVE_WIDTH))
-        self._lengths = np.ascontiguousarray(arm.lengths, dtype=float)
-        self._kp_link = np.ascontiguousarray(key_points.links, dtype=np.int64)
-        self._kp_frac = np.ascontiguousarray(key_points.fracs, dtype=float)
-        self._lim = np.ascontiguousarray(
-            np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max]), dtype=float
-        )
+        prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, PRIMITIVE_WIDTH))]
+        lim = np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max])
         self._par = parameter_vector(
-            task.normal,
-            task.desired_force,
-            self.k,
-            self.d_safe,
-            limits.alpha,
-            self.rho,
-            key_points.radius,
+            task.normal, task.desired_force, k, d_safe, limits.alpha, rho, key_points.radius
+        )
+        #: The build kernel's arguments after ``theta``: lengths, key points, obstacles, limits
+        #: and the parameter vector (set per tick by :meth:`build_arrays`).
+        self._kernel_args = (
+            np.ascontiguousarray(arm.lengths, dtype=float),
+            np.ascontiguousarray(key_points.links, dtype=np.int64),
+            np.ascontiguousarray(key_points.fracs, dtype=float),
+            np.ascontiguousarray(np.vstack(prims), dtype=float),
+            np.ascontiguousarray(lim, dtype=float),
+            self._par,
         )
         self._path = task.path
         self._packed_size, layout = packed_layout(self.n, self.n_rows)
@@ -188,17 +161,8 @@ class Controller:
         par[8] = self.kp if kp is None else kp
         par[9] = self.kd if kd is None else kd
         par[14] = 1.0 if soft else 0.0
-        buf = _empty(self._packed_size)
-        (_kernel or _get_kernel())(
-            theta,
-            self._lengths,
-            self._kp_link,
-            self._kp_frac,
-            self._prims,
-            self._lim,
-            par,
-            buf,
-        )
+        buf = np.empty(self._packed_size)
+        compiled_build_kernel()(theta, *self._kernel_args, buf)
         sP, sq, sG, sh, sJ, sb, slb, sub, see, sd = self._packed_slices
         return TickArrays(
             buf[sP].reshape(n, n),
@@ -216,26 +180,16 @@ class Controller:
         )
 
     def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
-        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output, its fields set directly:
-        the arrays already have the types the constructor checks (its cost: ``bench/build_qp.py``;
-        the tests check the result equals the constructor's)."""
+        """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output (a
+        :class:`~qpbench.packed.PackedProblem` on the compiled build's buffer)."""
         P, q, G, h, J, b, lb, ub = arrays[:8]
         if self.n_rows == 0:
             G = h = None
         if soft:
             J = b = None
         if arrays.buffer is not None:  # one buffer (the kernel's): its header says the same
-            return _trusted(arrays.buffer, P, q, G, h, J, b, lb, ub)
-        problem = _new_problem(_Problem)
-        problem.P = P
-        problem.q = q
-        problem.G = G
-        problem.h = h
-        problem.A = J
-        problem.b = b
-        problem.lb = lb
-        problem.ub = ub
-        return problem
+            return PackedProblem.from_views(arrays.buffer, P, q, G, h, J, b, lb, ub)
+        return qpsolvers.Problem(P, q, G, h, J, b, lb, ub)
 
     def build(
         self,
@@ -248,7 +202,7 @@ class Controller:
     ) -> TickQP:
         """The tick's QP at joint angles ``theta`` [rad], time ``t`` [s], ``kp, kd`` (default: the
         controller's); ``reference``: assembled from the numpy terms (slower; for checks)."""
-        soft = _check_formulation(formulation)
+        soft = check_formulation(formulation)
         theta = np.ascontiguousarray(theta, dtype=np.float64)
         if theta.shape != (self.n,):
             raise ParamError(f"theta must have shape ({self.n},), got {theta.shape}", key="theta")
@@ -256,23 +210,10 @@ class Controller:
             arrays = self._arrays_from_terms(theta, float(t), kp, kd, soft)
         else:
             arrays = self.build_arrays(theta, float(t), kp, kd, soft)
-        return self._tick(arrays, soft, formulation)
+        problem = self.make_problem(arrays, soft)
+        return TickQP(problem, arrays.J, arrays.b0, arrays.ee, self._distance_grid(arrays.dist))
 
     build_reference = partialmethod(build, reference=True)
-
-    def _tick(self, arrays, soft, formulation) -> TickQP:
-        problem = self.make_problem(arrays, soft)
-        xd = arrays.xd
-        return TickQP(
-            problem=problem,
-            formulation=formulation,
-            J=arrays.J,
-            b0=arrays.b0,
-            ee=arrays.ee,
-            distances=self._distance_grid(arrays.dist),
-            x_d=np.array(xd[:2]),
-            xdot_d=np.array(xd[2:]),
-        )
 
     def _distance_grid(self, dist: np.ndarray) -> np.ndarray:
         """The flat distances as (key point, obstacle point), ``inf`` for a pair without rows."""
@@ -328,7 +269,8 @@ class Controller:
         return cols
 
 
-def _check_formulation(formulation: str) -> bool:
+def check_formulation(formulation: str) -> bool:
+    """Whether ``formulation`` (one of :data:`FORMULATIONS`) is ``soft``; else :class:`ParamError`."""
     if formulation not in FORMULATIONS:
         raise ParamError(
             f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",

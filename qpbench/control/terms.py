@@ -1,7 +1,6 @@
 """The pieces of the controller's QP (paper eq. 11) in numpy: the desired path ``x_d(t)``, the
 impedance reference ``b0`` (eq. 4), the escape-velocity bounds (eq. 11c) and the obstacles'
-velocity-damper rows (eqs. 8-10, signs as in the project's notes). The readable reference of
-what :mod:`qpbench.control.build_kernel` computes on the fast path."""
+velocity-damper rows (eqs. 8-10); :mod:`qpbench.control.build_kernel` computes the same compiled."""
 
 from __future__ import annotations
 

@@ -23,16 +23,13 @@ SAME_LINE_TOL = 1e-9
 def contact_obstacles(obstacles: list[Obstacle], surface: ContactSurface) -> list[bool]:
     """For each obstacle: it is the contact surface (a static ``line`` through its point, free
     side against the pressing direction)."""
-    out = []
-    for o in obstacles:
-        same = (
-            isinstance(o, LineObstacle)
-            and not np.any(o.velocity)
-            and float(o.normal @ surface.normal) <= -1.0 + SAME_LINE_TOL
-            and abs(float(o.normal @ (surface.point - o.point))) <= SAME_LINE_TOL
-        )
-        out.append(bool(same))
-    return out
+    return [
+        isinstance(o, LineObstacle)
+        and not np.any(o.velocity)
+        and float(o.normal @ surface.normal) <= -1.0 + SAME_LINE_TOL
+        and abs(float(o.normal @ (surface.point - o.point))) <= SAME_LINE_TOL
+        for o in obstacles
+    ]
 
 
 def link_label(link: int, n: int) -> str:

@@ -2,17 +2,16 @@
 
 Contact surface: a line through ``point`` with unit normal ``normal`` (the pressing direction);
 penetration ``delta = n . (x - point)``; a spring-damper force while penetrating (paper eq. 3
-read as the environment's law)::
+read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
 
     F = max(0, Kp_env delta + Kd_env deltadot)   if delta > 0, else 0     [N]
 
 Obstacles give, for each key point ``A``, one or more obstacle points ``B`` (the closest point of
 a shape, or each point of a cloud), the distance ``dist`` [m] (signed for a ``line``: a wall is a
-half-plane) and the unit vector ``u`` from ``B`` to ``A``. An obstacle may translate with a
-constant ``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance
-of link segments to a shape (negative inside), for the body's clearance
-(:mod:`qpbench.robot.body`) and the closest-point key points. A shape with a ``KERNEL_KIND`` is
-known to the compiled build; one without makes the controller use its numpy path.
+half-plane) and the unit vector ``u`` from ``B`` to ``A``; they may translate with a constant
+``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance of link
+segments to a shape (negative inside). A shape without a ``KERNEL_KIND`` makes the controller
+use its numpy path.
 """
 
 from __future__ import annotations
@@ -45,6 +44,13 @@ def _vec2(value, key: str) -> np.ndarray:
     return arr
 
 
+def _not_negative(value, key: str, unit: str, strict: bool = False) -> float:
+    """``value`` as a float if ``>= 0`` (``> 0`` when ``strict``), else an :class:`InputError`."""
+    if not (value > 0 if strict else value >= 0):
+        raise InputError(f"must be {'>' if strict else '>='} 0 {unit}, got {value}", key=key)
+    return float(value)
+
+
 def _unit(value, key: str) -> np.ndarray:
     arr = _vec2(value, key)
     norm = math.hypot(arr[0], arr[1])
@@ -69,40 +75,15 @@ class ContactSurface:
     ):
         self.point = _vec2(point, "contact.point")
         self.normal = _unit(normal, "contact.normal")
-        if not stiffness > 0:
-            raise InputError(
-                f"stiffness must be > 0 [N/m], got {stiffness}", key="contact.stiffness"
-            )
-        if not damping >= 0:
-            raise InputError(f"damping must be >= 0 [N s/m], got {damping}", key="contact.damping")
-        if not noise_std >= 0:
-            raise InputError(
-                f"noise_std must be >= 0 [N], got {noise_std}", key="contact.force_noise_std"
-            )
-        self.stiffness = float(stiffness)
-        self.damping = float(damping)
-        self.noise_std = float(noise_std)
+        self.stiffness = _not_negative(stiffness, "contact.stiffness", "[N/m]", strict=True)
+        self.damping = _not_negative(damping, "contact.damping", "[N s/m]")
+        self.noise_std = _not_negative(noise_std, "contact.force_noise_std", "[N]")
         self.seed = seed
-        self._rng = np.random.default_rng(seed)
-        self._offset = float(self.normal @ self.point)
+        self.reset()
 
     def reset(self) -> None:
         """Restart the noise sequence from the seed."""
         self._rng = np.random.default_rng(self.seed)
-
-    def penetration(self, x: np.ndarray) -> float:
-        """``delta = n . (x - point)`` in [m] (positive inside the surface)."""
-        return float(self.normal[0] * x[0] + self.normal[1] * x[1] - self._offset)
-
-    def force(self, x: np.ndarray, xdot: np.ndarray) -> float:
-        """Contact force [N] at end-effector position ``x`` [m] and velocity ``xdot`` [m/s], as a
-        sensor reads it (noise included)."""
-        n0, n1 = self.normal
-        delta = self.penetration(x)
-        f = 0.0
-        if delta > 0.0:
-            f = max(0.0, self.stiffness * delta + self.damping * (n0 * xdot[0] + n1 * xdot[1]))
-        return f + self.noise()
 
     def noise(self) -> float:
         """One sample of the force-sensor noise in [N] (0.0 when ``noise_std`` is 0)."""
@@ -187,9 +168,6 @@ class LineObstacle(Obstacle):
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
 
 
-# The obstacle classes share one shape (KIND, KERNEL_KIND, __init__, closest_on_segments,
-# primitives) on purpose: one class per obstacle kind, each with its own geometry, so that adding
-# a kind touches one class; the repeated lines are that protocol, not shared logic.
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 
@@ -239,11 +217,7 @@ class DiskObstacle(Obstacle):
     def __init__(self, name: str, center, radius: float, velocity=(0.0, 0.0)):
         super().__init__(name, velocity)
         self.center = _vec2(center, f"obstacles.{name}.center")
-        if not radius > 0:
-            raise InputError(
-                f"radius must be > 0 [m], got {radius}", key=f"obstacles.{name}.radius"
-            )
-        self.radius = float(radius)
+        self.radius = _not_negative(radius, f"obstacles.{name}.radius", "[m]", strict=True)
 
     def primitives(self) -> np.ndarray:
         return np.array([[self.KERNEL_KIND, *self.center, 0.0, 0.0, self.radius, *self.velocity]])

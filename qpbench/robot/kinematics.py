@@ -30,15 +30,13 @@ class PlanarArm:
 
     def __init__(self, lengths):
         lengths = np.asarray(lengths, dtype=float)
-        if lengths.ndim != 1 or lengths.size < 2:
+        ok = (
+            lengths.ndim == 1 and lengths.size >= 2 and np.all(np.isfinite(lengths) & (lengths > 0))
+        )
+        if not ok:
             raise InputError(
-                f"a planar arm needs at least 2 link lengths, got {lengths.tolist()}",
-                key="link_lengths",
-            )
-        if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
-            raise InputError(
-                f"link lengths must be finite and > 0 [m], got {lengths.tolist()}",
-                key="link_lengths",
+                f"a planar arm needs at least 2 finite link lengths > 0 [m], got {lengths.tolist()}",
+                key="robot.link_lengths",
             )
         self.lengths = lengths
         self.n = lengths.size
@@ -112,17 +110,11 @@ class KeyPoints:
 def default_key_points(
     n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0
 ) -> KeyPoints:
-    """Key points of an n-link chain: ``points_per_link`` evenly spaced points on each link
-    (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn; ``radius`` [m].
-
-    With one point per link this is the paper's set for n = 4: A1, A3, A5, A7 at the link
-    midpoints, A2, A4, A6 at J2, J3, J4. The end effector is not a key point (it touches the
-    contact surface). Order: link by link, inner joint outwards.
-    """
+    """Key points of an n-link chain, link by link: ``points_per_link`` evenly spaced points on
+    each link (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn;
+    ``radius`` [m]. One point per link, n = 4: the paper's A1..A7 (no end effector)."""
     if points_per_link < 0:
-        raise InputError(
-            f"points_per_link must be >= 0, got {points_per_link}", key="points_per_link"
-        )
+        raise InputError(f"must be >= 0, got {points_per_link}", key="key_points.points_per_link")
     links, fracs = [], []
     for i in range(n):
         for j in range(1, points_per_link + 1):
@@ -133,7 +125,8 @@ def default_key_points(
             fracs.append(1.0)
     if not links:
         raise InputError(
-            "no key points: points_per_link = 0 and include_joints = false", key="key_points"
+            "no key points: points_per_link = 0 and include_joints = false",
+            key="key_points.points_per_link",
         )
     names = tuple(f"A{i + 1}" for i in range(len(links)))
     return KeyPoints(

@@ -2,7 +2,6 @@
 
 - :mod:`.scenario`: a scenario file -> a typed :class:`~.scenario.Scenario`;
 - :mod:`.loop`: :func:`~.loop.simulate`, the closed loop, tick by tick;
-  :mod:`.arguments` checks its arguments;
 - :mod:`.tick_kernel`: the compiled per-tick step (log row, sensing, plant);
 - :mod:`.log`: the tick log's columns; :mod:`.summary`: a run's figures;
   :mod:`.verdict`: its verdict.

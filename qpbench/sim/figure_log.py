@@ -74,10 +74,10 @@ def _special(frame: pd.DataFrame) -> np.ndarray:
     return near
 
 
-def _extremes(frame: pd.DataFrame, buckets: int) -> np.ndarray:
+def _extremes(frame: pd.DataFrame) -> np.ndarray:
     """Each span's first tick and the ticks of each quantity's smallest and largest value."""
     n = len(frame)
-    edges = np.linspace(0, n, buckets + 1).astype(int)
+    edges = np.linspace(0, n, BUCKETS + 1).astype(int)
     starts = edges[:-1][np.diff(edges) > 0]
     keep = [starts, np.array([n - 1])]
     for col, absolute in _EXTREMES:
@@ -101,12 +101,12 @@ def _coarse(x: np.ndarray) -> np.ndarray:
     return np.where(finite, rounded, x.astype(np.float32))
 
 
-def figure_log(frame: pd.DataFrame, buckets: int = BUCKETS) -> pd.DataFrame:
+def figure_log(frame: pd.DataFrame) -> pd.DataFrame:
     """The figure log of a full tick log (rule in the module docstring)."""
     frame = frame[_columns(frame)]
-    if len(frame) > 3 * buckets:
+    if len(frame) > 3 * BUCKETS:
         keep = np.zeros(len(frame), dtype=bool)
-        keep[_extremes(frame, buckets)] = True
+        keep[_extremes(frame)] = True
         frame = frame[keep | _special(frame)]
     out = frame.reset_index(drop=True).copy()
     for col in out.columns:
@@ -118,7 +118,7 @@ def figure_log(frame: pd.DataFrame, buckets: int = BUCKETS) -> pd.DataFrame:
     return out
 
 
-def write_figure_log(frame: pd.DataFrame, path: str | Path, buckets: int = BUCKETS) -> Path:
+def write_figure_log(frame: pd.DataFrame, path: str | Path) -> Path:
     """Write the figure log of ``frame`` to ``path`` (Parquet, zstd), atomically."""
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -127,7 +127,7 @@ def write_figure_log(frame: pd.DataFrame, path: str | Path, buckets: int = BUCKE
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    table = pa.Table.from_pandas(figure_log(frame, buckets), preserve_index=False)
+    table = pa.Table.from_pandas(figure_log(frame), preserve_index=False)
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     with atomic_path(path) as tmp:
         # byte-stream split puts the (mostly zero) low bytes of the floats together: half the size

@@ -6,21 +6,16 @@ One tick at ``t_k = k dt``:
    contact force ``F_k`` of the environment's spring-damper (plus the scenario's sensor noise);
 2. build the tick's QP (eq. 11, the chosen formulation) with the current ``Kp_hat, Kd_hat``;
 3. solve it, warm-started from the previous command. A tick without a usable answer (no
-   solution, a non-finite ``x``, an exception: status ``error``, an answer later than
-   ``deadline``: ``time_limit``) solves the ``soft`` formulation with the same backend
-   (fallback), else commands zero velocity; an online backend (``online = True``, the RNN) is
-   its own controller: its ``x`` is applied whatever its status, never a fallback. After a
-   failure the backend is reset. Without a ``deadline`` every answer is applied however long
-   it took, so the trajectory does not depend on the machine; a solve is never interrupted
-   (``qpbench closed-loop`` runs a run in a worker process with a deadline for the whole run);
+   solution, a non-finite ``x``, an exception: ``error``, an answer later than ``deadline``:
+   ``time_limit``) solves the ``soft`` formulation with the same backend (fallback), else
+   commands zero velocity; an online backend (the RNN) is its own controller: its ``x`` is
+   applied whatever its status. After a failure the backend is reset. A solve is never
+   interrupted;
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
-5. plant: ``theta_{k+1} = theta_k + dt v_k``.
+5. plant: ``theta_{k+1} = theta_k + dt v_k`` (steps 1 and 5 and the log row:
+   :mod:`qpbench.sim.tick_kernel`).
 
-Per tick: one call of the controller's compiled build kernel, the backend's ``solve`` and one
-call of the compiled tick kernel (:mod:`qpbench.sim.tick_kernel`: sensing, the log row, the
-plant). The body's clearance (``d_body_*``, :mod:`qpbench.robot.body`) is computed after the
-loop for every tick at once. The log is one row per tick (:mod:`qpbench.sim.log`); the run's
-figures and verdict: :mod:`qpbench.sim.summary`.
+The body's clearance (``d_body_*``) is computed after the loop for every tick at once.
 """
 
 from __future__ import annotations
@@ -28,17 +23,19 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import namedtuple
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from ..backends import Backend
+from ..backends import Backend, backend_class, get_backend
+from ..control.controller import check_formulation
+from ..exceptions import ParamError, positive_seconds
 from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
-from .arguments import check_arguments, resolve_backend
 from .scenario import Scenario, load_scenario
 from .summary import jsonable, summarize
 from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
@@ -50,15 +47,51 @@ log = logging.getLogger(__name__)
 solve_log = logging.getLogger("qpbench.solves")
 
 
-class _Raised:
-    """Stands for the solution of a solve that raised (status ``error``, no answer)."""
+#: Stands for the solution of a solve that raised (status ``error``, no answer).
+_Raised = namedtuple(
+    "_Raised", "error status x y z solver_time_s", defaults=("error",) + (None,) * 4
+)
 
-    __slots__ = ("status", "x", "y", "z", "error", "solver_time_s")
 
-    def __init__(self, error: str):
-        self.status = "error"
-        self.x = self.y = self.z = self.solver_time_s = None
-        self.error = error
+def resolve_backend(
+    backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default"
+) -> Backend:
+    """A backend instance for ``scenario``: by name, or the given instance checked.
+
+    A backend class whose ``scenario_table`` names a table of the scenario (the ``rnn``
+    backends) gets that table's settings; an online backend also the control period ``dt``
+    [s], which an instance's own ``dt`` must match.
+    """
+    if isinstance(backend, str):
+        cls = backend_class(backend)
+        settings = {}
+        if cls.scenario_table:
+            settings.update(getattr(scenario, cls.scenario_table))
+        if cls.online:
+            settings.setdefault("dt", dt)
+        return get_backend(backend, profile=profile, **settings)
+    if not isinstance(backend, Backend):
+        raise ParamError(
+            f"expected a backend name or instance, got {type(backend).__name__}", key="backend"
+        )
+    own_dt = getattr(backend, "dt", None)
+    if own_dt is not None and abs(float(own_dt) - dt) > 1e-15:
+        raise ParamError(
+            f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt"
+        )
+    return backend
+
+
+def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
+    """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
+    check_formulation(formulation)
+    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
+        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):
+        if isinstance(value, str):  # float() would read it, but the API takes numbers
+            raise ParamError(f"expected a positive number of seconds, got {value!r}", key=key)
+        if value is not None:
+            positive_seconds(value, key)
 
 
 def _reset(backend: Backend) -> None:
@@ -71,8 +104,7 @@ def _reset(backend: Backend) -> None:
 
 @dataclass
 class SimResult:
-    """The tick log (:mod:`qpbench.sim.log`), the summary (:func:`~qpbench.sim.summary.summarize`)
-    and the kept ticks' QPs (:class:`qpbench.formats.ProblemRecord`, with ``dump`` or ``every``)."""
+    """The tick log, the summary and the kept ticks' QPs (:class:`qpbench.formats.ProblemRecord`)."""
 
     log: pd.DataFrame
     summary: dict
@@ -97,16 +129,13 @@ def simulate(
     ``scenario`` is a :class:`Scenario`, a shipped scenario's name or a file; ``backend`` a name
     or an instance; ``formulation`` ``paper`` (eq. 11) or ``soft``; ``duration``, ``dt`` [s]
     override the scenario's. ``every`` keeps every K-th tick's QP (default 1 with ``dump``, a
-    folder the kept QPs are written to as a problem set). ``deadline`` [s]: an answer arriving
-    later is dropped (status ``time_limit``; the run then depends on the machine's speed).
-    ``wall_budget_s`` [s]: checked between ticks; once spent the run stops with the ticks done
-    (the same rows an uncut run has) and the summary says ``stopped_early``. The run adds to
-    the summary ``deadline_s``, ``deadline_dropped`` (``None`` without a deadline),
-    ``raised_ticks``, ``fallback_errors``, ``first_error`` and ``first_error_t`` [s].
+    folder the kept QPs are written to as a problem set). ``deadline`` [s]: a later answer is
+    dropped (``time_limit``). ``wall_budget_s`` [s]: checked between ticks; once spent the run
+    stops with the ticks done (``stopped_early``).
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    check_arguments(formulation, every, deadline, wall_budget_s)
+    _check_arguments(formulation, every, deadline, wall_budget_s)
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     keep_every = every if every is not None else (1 if dump is not None else None)
@@ -144,10 +173,7 @@ def _write_dump(folder, records, scenario: Scenario, backend_name, formulation, 
 
 
 class _Run:
-    """One closed-loop run: set up, warm the kernels, loop over the ticks, tabulate.
-
-    The per-tick state lives in local variables of :meth:`loop` (the hot path).
-    """
+    """One closed-loop run: set up, warm the kernels, loop over the ticks, tabulate."""
 
     def __init__(
         self,
@@ -171,6 +197,7 @@ class _Run:
         self.adaptive = scenario.make_adaptive()
         self.soft_primary = formulation == "soft"
         self.cols, self.cidx, self.ci, self.cf = post_constants(ctrl, self.surface, dt)
+        self.post = get_post_kernel()
         self.data = np.full((self.ticks, len(self.cols)), np.nan)
         self.theta = scenario.theta0.astype(float)
         self.sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
@@ -192,17 +219,21 @@ class _Run:
     def loop(self, progress: bool, wall_budget_s: float | None) -> None:
         """The ticks (module docstring, steps 1-5), until ``duration`` or the wall-time budget."""
         ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
-        data, ci, cf, sensed, adaptive = self.data, self.ci, self.cf, self.sensed, self.adaptive
-        theta, none, records, statuses = self.theta, self.none, self.records, self.statuses
+        data, sensed, adaptive = self.data, self.sensed, self.adaptive
+        theta, records, statuses = self.theta, self.records, self.statuses
         c_force = self.cidx[tick_log.FORCE]
         online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
-        post, build, make_problem = get_post_kernel(), ctrl.build_arrays, ctrl.make_problem
+        build, make_problem = ctrl.build_arrays, ctrl.make_problem
         solve, perf, surface = be.solve, time.perf_counter, self.surface
         noisy, fd, f64 = surface.noise_std > 0.0, ctrl.task.desired_force, np.dtype(np.float64)
         kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
         run_name = f"{self.scenario.name} {be.name}"
         verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
-        bar = _progress_bar(ticks, run_name) if progress else None
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=ticks, unit="tick", desc=run_name, mininterval=0.5)
         start = perf()
         stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
         for k in range(ticks):
@@ -226,29 +257,8 @@ class _Run:
             if x is not None and (online or status == "optimal") and solve_s <= limit:
                 if type(x) is not np.ndarray or x.dtype != f64:
                     x = np.asarray(x, dtype=np.float64)
-                y, z = sol.y, sol.z
                 # -1.0 when x is not finite: nothing logged, the plant not moved
-                force = post(
-                    theta,
-                    x,
-                    arrays.ee,
-                    sensed,
-                    arrays.J,
-                    arrays.b0,
-                    arrays.dist,
-                    arrays.xd,
-                    none if y is None else y,
-                    none if z is None else z,
-                    data,
-                    k,
-                    ci,
-                    cf,
-                    t,
-                    APPLIED,
-                    kp,
-                    kd,
-                    solve_s,
-                )
+                force = self._post(k, t, arrays, x, sol.y, sol.z, APPLIED, kp, kd, solve_s)
                 if force >= 0.0:
                     v = x
             if force < 0.0:
@@ -267,7 +277,9 @@ class _Run:
             if bar is not None and (k + 1) % 500 == 0:
                 bar.update(500)
         self.wall = perf() - start
-        _finish(bar)
+        if bar is not None:  # to the ticks simulated
+            bar.update(bar.total - bar.n)
+            bar.close()
 
     def _without_answer(self, k, t, sol, solve_s, t0, arrays, kp, kd, v):
         """A tick whose own answer is not applied: classify it (:func:`~qpbench.statuses.classify`),
@@ -308,18 +320,20 @@ class _Run:
             if fb_status == "optimal":
                 mode, x = FALLBACK, np.asarray(fb.x, dtype=np.float64)
                 z = none if fb.z is None else fb.z
-        force = self._post(k, t, arrays, x, z, mode, kp, kd, t0)
+        force = self._post(k, t, arrays, x, None, z, mode, kp, kd, time.perf_counter() - t0)
         if force < 0.0:  # the fallback's answer was not finite either
             mode, x = ZERO, zeros
-            force = self._post(k, t, arrays, x, none, mode, kp, kd, t0)
+            force = self._post(k, t, arrays, x, None, None, mode, kp, kd, time.perf_counter() - t0)
         return status, (x if mode == FALLBACK else zeros.copy()), force
 
-    def _post(self, k, t, arrays, x, z, mode, kp, kd, t0) -> float:
-        """The tick kernel on a tick without its own answer (no equality duals)."""
-        a = arrays
+    def _post(self, k, t, arrays, x, y, z, mode, kp, kd, solve_s) -> float:
+        """The tick kernel (:mod:`qpbench.sim.tick_kernel`) on tick ``k`` with velocity ``x``
+        [rad/s], duals ``y, z`` (``None``: none) and the tick's solve time ``solve_s`` [s]."""
+        a, none = arrays, self.none
+        y, z = none if y is None else y, none if z is None else z
         geometry = (a.ee, self.sensed, a.J, a.b0, a.dist, a.xd)
-        tail = (self.data, k, self.ci, self.cf, t, mode, kp, kd, time.perf_counter() - t0)
-        return get_post_kernel()(self.theta, x, *geometry, self.none, z, *tail)
+        tail = (self.data, k, self.ci, self.cf, t, mode, kp, kd, solve_s)
+        return self.post(self.theta, x, *geometry, y, z, *tail)
 
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated."""
@@ -365,17 +379,3 @@ class _Run:
                 for k, t, p in self.records
             ]
         return SimResult(frame, summary, recs)
-
-
-def _progress_bar(ticks: int, desc: str):
-    """A tqdm bar over a run's ticks (the loop updates it every 500 ticks)."""
-    from tqdm import tqdm
-
-    return tqdm(total=ticks, unit="tick", desc=desc, mininterval=0.5)
-
-
-def _finish(bar) -> None:
-    """Bring a progress bar (or ``None``) to the ticks simulated and close it."""
-    if bar is not None:
-        bar.update(bar.total - bar.n)
-        bar.close()

@@ -90,10 +90,6 @@ class Scenario:
         return VerdictSettings(**self.data["verdict"])
 
     @property
-    def adaptive_enabled(self) -> bool:
-        return self.data["adaptive"]["enabled"]
-
-    @property
     def normal(self) -> np.ndarray:
         """The contact surface's unit normal."""
         normal = self.data["contact"]["normal"]
@@ -147,18 +143,10 @@ class Scenario:
             r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
         )
         obstacles = self.make_obstacles()
+        gains = {key: c[key] for key in ("k", "d_safe", "rho", "kp", "kd")}
+        exempt = contact_obstacles(obstacles, self.make_surface())
         return Controller(
-            self.make_arm(),
-            self.make_key_points(),
-            task,
-            limits,
-            obstacles,
-            k=c["k"],
-            d_safe=c["d_safe"],
-            rho=c["rho"],
-            kp=c["kp"],
-            kd=c["kd"],
-            exempt=contact_obstacles(obstacles, self.make_surface()),
+            self.make_arm(), self.make_key_points(), task, limits, obstacles, **gains, exempt=exempt
         )
 
     def make_adaptive(self) -> AdaptiveImpedance | None:
@@ -187,7 +175,6 @@ def parse_scenario(
     if overrides:
         raw = apply_overrides(raw, overrides, file)
     data, rnn = validate(raw, file, tuple(overrides or ()))
-    _warn_verdict_overrides(overrides or {}, file)
     scenario = Scenario(
         name=data["scenario"]["name"],
         path=None if path is None else Path(path),
@@ -198,12 +185,14 @@ def parse_scenario(
     )
     # build every object once so constructor checks surface here, naming the file
     try:
-        scenario.make_controller()
+        scenario.verdict  # noqa: B018
         scenario.make_surface()
+        scenario.make_controller()
     except InputError as exc:
         if isinstance(exc, ScenarioError):
             raise
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
+    _warn_verdict_overrides(overrides or {}, file)
     return scenario
 
 

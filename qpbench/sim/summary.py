@@ -1,35 +1,22 @@
 """The figures of a closed-loop run and its verdict: computed here and nowhere else.
 
 :func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able dict (``None`` where a
-figure does not exist); ``qpbench simulate --summary`` writes it, and a row of ``closed_loop.csv``
-or ``sweep.csv`` is that dict (:mod:`qpbench.harness.closed_loop`), nothing recomputed.
+figure does not exist); a row of ``closed_loop.csv`` or ``sweep.csv`` is that dict.
 
-- ``infeasible_ticks``: ticks declared ``primal_infeasible``/``dual_infeasible`` or ``not_solved``
-  (a backend that cannot classify a failure, e.g. qpsolvers' routes keeping only ``found=False``;
-  on these QPs that is the infeasible start); ``first_infeasible_t``, ``last_infeasible_t``,
-  ``infeasible_intervals`` ([first t, last t] runs) [s]. ``non_optimal_ticks``: any status but
-  ``optimal`` (nearly every tick of the online ``rnn``). ``status_counts``; ``error_ticks``,
-  ``time_limit_ticks``, ``invalid_ticks``: the guarded failures. ``fallback_ticks`` applied the
-  soft formulation's answer, ``zero_velocity_ticks`` commanded zero.
-- From :func:`qpbench.sim.loop.simulate` (``run_info``): ``deadline_s`` [s], ``deadline_dropped``,
-  ``raised_ticks``, ``fallback_errors``, ``first_error`` (``"Type: message"``),
-  ``first_error_t`` [s], ``wall_budget_s`` [s], ``stopped_early``.
+- ``infeasible_ticks``: ticks declared infeasible or ``not_solved``
+  (:data:`~qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`), with when [s];
+  ``non_optimal_ticks``: any status but ``optimal``; the guarded failures by status.
+- From the loop (``run_info``): ``deadline_s`` [s], ``deadline_dropped``, ``raised_ticks``,
+  ``fallback_errors``, ``first_error``, ``first_error_t`` [s], ``wall_budget_s`` [s],
+  ``stopped_early``.
 - ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
-  ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations: ticks beyond a limit by more
-  than :data:`VIOLATION_TOL`. ``duration`` asked, ``simulated_s`` reached [s];
-  ``real_time_factor = simulated_s / wall_time_s``.
-- ``min_obstacle_distance`` [m] (key points, with ``..._key_point``, ``..._obstacle``, ``..._t``);
-  ``min_body_distance`` [m]: the link capsules' clearance, < 0 inside (``..._link`` 1-based,
-  ``..._obstacle``, ``..._t``; :mod:`qpbench.robot.body`); ``obstacle_active_intervals``: per
+  ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations beyond
+  :data:`~qpbench.sim.verdict.VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
+- ``min_obstacle_distance`` [m] of the key points; ``min_body_distance`` [m] of the link
+  capsules (< 0 inside, :mod:`qpbench.robot.body`); ``obstacle_active_intervals``: per
   (key point, obstacle), when within :data:`ACTIVE_MARGIN` of ``d_safe``.
-- ``verdict``, ``verdict_reasons``, ``key_point_rule`` (the paper's guarantee: ``held``,
-  ``broken``, ``-``): :func:`qpbench.sim.verdict.judge` with the scenario's ``[verdict]``.
-  Beside it, ``realtime`` (``yes``/``no``) from the call times (p99 ``solve_time_p99_s``, share
-  over ``dt`` ``over_dt_share``, their count ``deadline_misses``) and ``realtime_solver``
-  (``unknown`` without them) from the solver's own (``solver_time_p99_s``, ``solver_over_dt_share``):
-  :func:`qpbench.sim.verdict.judge_realtime`.
-- ``scenario_overrides``: values set over the file's (``--set``); ``verdict_overrides``: those of
-  ``[verdict]``.
+- ``verdict``, ``verdict_reasons``, ``key_point_rule`` and ``realtime``, ``realtime_solver``:
+  :mod:`qpbench.sim.verdict` on these figures.
 """
 
 from __future__ import annotations
@@ -45,8 +32,7 @@ from . import log
 from .scenario import Scenario
 from .verdict import VIOLATION_TOL, judge, judge_realtime
 
-#: Time from which tracking and force errors are judged [s] (paper: transient about 1 s);
-#: the ``*_after_2s`` figures.
+#: Time from which the ``*_after_2s`` figures are taken [s].
 SETTLE_TIME = 2.0
 
 #: A key point within this of ``d_safe`` [m] counts as touching its obstacle row (summary intervals).
@@ -84,7 +70,7 @@ def _none(x):
     return None if not math.isfinite(x) else x
 
 
-def _intervals(mask: np.ndarray, t: np.ndarray, dt: float) -> list[list[float]]:
+def _intervals(mask: np.ndarray, t: np.ndarray) -> list[list[float]]:
     """Runs of consecutive True ticks as ``[first t, last t]`` pairs [s]."""
     if not mask.any():
         return []
@@ -222,7 +208,7 @@ def _status_figures(frame: pd.DataFrame, t: np.ndarray, dt: float) -> dict:
         "zero_velocity_ticks": int(frame[log.ZERO_VELOCITY].sum()),
         "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
         "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
-        "infeasible_intervals": _intervals(infeasible, t, dt),
+        "infeasible_intervals": _intervals(infeasible, t),
         "status_counts": {str(k): int(v) for k, v in status.value_counts().items() if v},
         "error_ticks": int((status == "error").sum()),
         "time_limit_ticks": int((status == "time_limit").sum()),
@@ -268,7 +254,7 @@ def _obstacle_figures(
     )
     near = D <= d_safe + ACTIVE_MARGIN
     active = {
-        f"{a}/{o}": _intervals(near[:, c], t, dt)[:MAX_INTERVALS]
+        f"{a}/{o}": _intervals(near[:, c], t)[:MAX_INTERVALS]
         for c, (a, o) in enumerate(dcols)
         if near[:, c].any()
     }
@@ -284,8 +270,6 @@ def _body_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
         "min_body_distance_obstacle": None,
         "min_body_distance_t": None,
     }
-    if log.D_BODY_MIN not in frame.columns:
-        return out
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     if not np.isfinite(d).any():
         return out

@@ -4,6 +4,7 @@ by index, sense the end effector's velocity and the contact force, advance ``the
 from __future__ import annotations
 
 import math
+from functools import cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -18,17 +19,13 @@ if TYPE_CHECKING:
 
 __all__ = ["APPLIED", "FALLBACK", "ZERO", "get_post_kernel", "post_constants", "warm_post_kernel"]
 
-_post_kernel = None
 
-
+@cache
 def get_post_kernel() -> Callable:
     """The compiled :func:`_post_py` (compiled, or loaded from numba's cache, on first call)."""
-    global _post_kernel
-    if _post_kernel is None:
-        import numba
+    import numba
 
-        _post_kernel = numba.njit(cache=True, nogil=True)(_post_py)
-    return _post_kernel
+    return numba.njit(cache=True, nogil=True)(_post_py)
 
 
 #: ``mode`` of the post kernel: the tick's own answer applied, the soft fallback's, zero velocity.
@@ -77,8 +74,7 @@ def _post_py(
         xd0 = (ee[0] - sensed[0]) / dt
         xd1 = (ee[1] - sensed[1]) / dt
     sensed[0], sensed[1], sensed[2], sensed[3] = ee[0], ee[1], xd0, xd1
-    # Compiled twin of ContactSurface.force (noise-free; surf = [nx, ny, n . point, stiffness,
-    # damping, Fd]): inline so a tick is one call; tests/test_tick_kernel.py checks they agree.
+    # the contact force law (noise-free; surf = [nx, ny, n . point, stiffness, damping, Fd])
     nx, ny = cf[_CF_SURF], cf[_CF_SURF + 1]
     delta = nx * ee[0] + ny * ee[1] - cf[_CF_SURF + 2]
     force = 0.0

@@ -1,23 +1,8 @@
 """Verdict of a closed-loop run and, beside it, whether the run kept real time.
 
-:func:`judge` decides (called by :func:`qpbench.sim.summary.summarize`); :func:`failed_run` gives
-``incomplete`` to a run that produced no result. The rules, worst first (:data:`VERDICTS`; every
-reason is listed, ``"; "`` between them), thresholds from the scenario's ``[verdict]`` table:
-
-- ``failed``: a tick whose solve raised or reported ``error``, a non-finite answer
-  (``invalid``), an answer dropped past the per-tick deadline, a fallback solve that raised,
-  or a tick left at zero velocity;
-- ``unsafe``: a link's capsule inside an obstacle (``d_body_min < 0``, :mod:`qpbench.robot.body`;
-  the end effector's link is not judged against the contact surface);
-- ``limits``: a joint angle or commanded speed beyond its limit by more than :data:`VIOLATION_TOL`;
-- ``incomplete``: the run stopped before ``duration`` (wall-time budget) or produced no result;
-- ``diverged``: for ``t >= settle_time`` [s], ``|tracking_error| > max_tracking_error`` [m] or
-  ``|force_error| > max_force_error`` [N] (or not finite).
-
-The paper's guarantee, every key point kept ``d_safe - safety_margin`` [m] from every obstacle,
-is reported beside the verdict (``key_point_rule``): the key points are not the body, so a broken
-rule alone is not ``unsafe``. Real time (:func:`judge_realtime`) is judged beside it too, from
-the measured call times (``solve_time_s``) and from the solver's own (``solver_time_s``).
+:func:`judge` decides (called by :func:`qpbench.sim.summary.summarize`) on the scenario's
+``[verdict]`` thresholds; the rules, worst first (:data:`VERDICTS`), are in
+``docs/verdicts.md``. :func:`failed_run` gives ``incomplete`` to a run that produced no result.
 """
 
 from __future__ import annotations
@@ -57,19 +42,17 @@ BAD_VERDICTS = VERDICTS[:-1]
 #: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks.
 VIOLATION_TOL = 1e-6
 
-#: Default of ``[verdict] safety_margin`` [m]: how far below ``d_safe`` a key point may come (the
-#: velocity damper acts one tick late); a scenario whose ``d_safe`` is not above it: ``d_safe / 2``.
+#: Default of ``[verdict] safety_margin`` [m] (``d_safe / 2`` when that is smaller).
 DEFAULT_SAFETY_MARGIN = 5e-4
 
 
 @dataclass(frozen=True)
 class VerdictSettings:
     """Thresholds of the verdict and of real time (the scenario's ``[verdict]`` table), checked
-    here (``verdict.<key>``); rules across tables in :mod:`qpbench.sim.scenario_schema`. Why each
-    default: ``docs/verdicts.md``.
+    here (``verdict.<key>``).
 
-    ``settle_time`` [s]: start of the judged span of tracking and force errors (twice the paper's
-    transient); ``max_tracking_error`` [m], ``max_force_error`` [N]: largest errors after it;
+    ``settle_time`` [s]: start of the judged span of tracking and force errors;
+    ``max_tracking_error`` [m], ``max_force_error`` [N]: largest errors after it;
     ``safety_margin`` [m]: the key-point rule's margin below ``d_safe``; real time: the p99 of
     the tick times at most ``max_p99_fraction_of_dt`` of ``dt`` and at most
     ``max_over_dt_share`` of the ticks longer than ``dt``.
@@ -250,16 +233,10 @@ def judge(
     summary: dict,
     obstacle_kinds: dict[str, str] | None = None,
 ) -> Verdict:
-    """The verdict of one simulated run (rules in the module docstring).
-
-    ``frame`` is the tick log; ``d_safe`` [m]; ``limits`` the joint limits [rad, rad/s];
-    ``obstacle_columns`` the ``(key point, obstacle)`` of each distance column;
-    ``obstacle_kinds`` the kind of each obstacle by name (the body rule's reason). ``summary``
-    holds the run's counts (``error_ticks``, ``invalid_ticks``, ``time_limit_ticks``,
-    ``zero_velocity_ticks``, ``fallback_errors``; missing ones are 0), ``first_error``,
-    ``first_error_t`` [s], ``deadline_s`` [s], ``stopped_early``, ``simulated_s``, ``duration``
-    and ``wall_budget_s`` [s].
-    """
+    """The verdict of one simulated run: ``frame`` the tick log, ``d_safe`` [m], ``limits`` the
+    joint limits [rad, rad/s], ``obstacle_columns`` the ``(key point, obstacle)`` of each
+    distance column, ``summary`` the run's figures (:mod:`qpbench.sim.summary`; missing counts
+    are 0), ``obstacle_kinds`` each obstacle's kind by name."""
     n = len(limits.theta_min)
     found = {
         "failed": _failed_reasons(summary),
