@@ -1,26 +1,11 @@
-"""The per-tick benchmark: every backend on every problem of a set, one row each.
+"""The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row each.
 
 :class:`BenchConfig` says what to run; :func:`make_plan` checks it against the problem set and
-an existing output before anything is written; :class:`BenchSummary` is what the run did.
-
-:func:`run_bench` walks the problems in sequence order (:func:`sequences`) and
-solves each with every backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
-(:class:`~.isolation.IsolatedRunner`); a problem's rows are made once all its solves are done
-and appended to the CSV before the next problem starts.
-
-``mode="sequential"``: a backend's state is carried along a sequence (as a controller calls
-its solver tick after tick) and reset between sequences and after a failure that leaves it
-suspect (:data:`~qpbench.statuses.FAILURE_STATUSES`; the next row says ``state_reset``).
-``mode="independent"`` resets before every problem.
-
-The backends solve each problem in an order drawn for it (:func:`backend_order`), so the cold
-caches the harness leaves between problems do not always fall on the same backend; rows record
-``position`` and ``order_seed``.
-
-Resuming keeps the rows in the CSV and skips their keys. In sequential mode a backend with
-problems left in a sequence is brought back to its state by replaying, untimed, the earlier
-problems of the sequence, resetting where the recorded statuses say the original run did;
-deterministic backends then give the rows of an uninterrupted run.
+an existing output before anything is written; :func:`run_bench` solves each problem with every
+backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
+(:class:`~.isolation.IsolatedRunner`), in an order drawn per problem (:func:`backend_order`),
+and appends the problem's rows before the next starts; :class:`BenchSummary` is what it did.
+Modes, resuming and the order: docs/architecture.md, "The bench".
 """
 
 from __future__ import annotations
@@ -30,7 +15,7 @@ import logging
 import math
 import statistics
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -41,7 +26,7 @@ from ..exceptions import InputError, ParamError, positive_seconds
 from ..profiles import Profile, get_profile
 from ..statuses import FAILURE_STATUSES
 from .guard import LocalRunner, Outcome
-from .isolation import IsolatedRunner
+from .isolation import ISOLATE, IsolatedRunner, wants_worker
 from .results import ExistingResults, InflightMarker, ResultsWriter, read_results, row_key
 
 if TYPE_CHECKING:
@@ -54,7 +39,6 @@ log = logging.getLogger("qpbench.harness")
 #: Seed of the per-problem backend order unless ``--seed`` says otherwise.
 DEFAULT_SEED = 0
 MODES = ("sequential", "independent")
-ISOLATE = ("auto", "always", "never")
 
 
 @dataclass
@@ -64,6 +48,8 @@ class BenchConfig:
     Attributes:
         profile: Profile name or :class:`~qpbench.profiles.Profile`.
         repeat: Timed solves per (problem, backend); the row has their min and median.
+        mode: ``sequential`` (state carried along a sequence) or ``independent`` (reset before
+            every problem).
         time_limit: Per-solve limit [s]; ``None``: the profile's.
         isolate: ``auto`` (backends marked ``risky`` or seen to crash in this process),
             ``always`` or ``never``.
@@ -87,25 +73,19 @@ class BenchConfig:
     memory_budget: int | None = None
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ParamError(
-                f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode"
-            )
-        if self.isolate not in ISOLATE:
-            raise ParamError(
-                f"unknown isolation '{self.isolate}' (choose from {', '.join(ISOLATE)})",
-                key="isolate",
-            )
+        for key, what, choices in (("mode", "mode", MODES), ("isolate", "isolation", ISOLATE)):
+            value = getattr(self, key)
+            if value not in choices:
+                raise ParamError(
+                    f"unknown {what} '{value}' (choose from {', '.join(choices)})", key=key
+                )
         if int(self.repeat) < 1:
             raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
         if self.time_limit is not None:
             self.time_limit = positive_seconds(self.time_limit, "time-limit")
-        if (
-            isinstance(self.seed, bool)
-            or not isinstance(self.seed, (int, np.integer))
-            or self.seed < 0
-        ):
-            raise ParamError(f"seed must be an integer >= 0, got {self.seed!r}", key="seed")
+        seed = self.seed
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ParamError(f"seed must be an integer >= 0, got {seed!r}", key="seed")
         if not self.backends:
             raise ParamError("no backend to run", key="backends")
         if len(set(self.backends)) != len(self.backends):
@@ -155,24 +135,20 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
     """A resumed file's rows must be of this run's mode, seed and problem set."""
     for row in existing.rows:
         if row["mode"] != mode:
-            raise InputError(
-                f"holds rows of mode '{row['mode']}', this run is '{mode}'; use --force to start again",
-                path=path,
-                key="mode",
+            key, why = "mode", f"holds rows of mode '{row['mode']}', this run is '{mode}'; "
+        elif row["order_seed"] != str(seed):
+            key, why = (
+                "order_seed",
+                (
+                    f"holds rows ordered with seed {row['order_seed'] or 'none'}, this run's is "
+                    f"{seed}; resume with --seed {row['order_seed']} or "
+                ),
             )
-        if row["order_seed"] != str(seed):
-            raise InputError(
-                f"holds rows ordered with seed {row['order_seed'] or 'none'}, this run's is {seed}; "
-                f"resume with --seed {row['order_seed']} or use --force to start again",
-                path=path,
-                key="order_seed",
-            )
-        if sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
-            raise InputError(
-                "holds rows of another problem set (SHA-256 differs); use --force to start again",
-                path=path,
-                key="problem_set_sha256",
-            )
+        elif sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
+            key, why = "problem_set_sha256", "holds rows of another problem set (SHA-256 differs); "
+        else:
+            continue
+        raise InputError(why + "use --force to start again", path=path, key=key)
 
 
 @dataclass
@@ -249,23 +225,21 @@ def make_plan(
     from ..atomic import check_output
     from ..backends import get_backend
     from ..formats import content_sha256
+    from ..memory import resolve_budget
 
     check_output(out, force=force, resume=resume, make_parent=True)
     profile = get_profile(config.profile)
-    run_profile = profile.with_time_limit(
+    profile = profile.with_time_limit(
         config.time_limit if config.time_limit is not None else float(profile.time_limit)
     )
     records = _check_records(problem_set)
     settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
-    instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
-    from ..memory import resolve_budget
-
+    instances = {name: get_backend(name, profile, **settings[name]) for name in config.backends}
     budget = resolve_budget(None) if config.memory_budget is None else config.memory_budget
-    skips, notes = skipped_solves(records, config.backends, budget)
     plan = Plan(
         records=records,
         seqs=sequences(records, config.mode),
-        profile=run_profile,
+        profile=profile,
         settings=settings,
         instances=instances,
         versions={name: type(b).version() for name, b in instances.items()},
@@ -274,10 +248,9 @@ def make_plan(
         existing=ExistingResults([]),
         learned=[],
         marker=InflightMarker(InflightMarker.for_output(out)),
-        skips=skips,
-        notes=notes,
         budget=budget,
     )
+    plan.skips, plan.notes = skipped_solves(records, config.backends, budget)
     if plan.resuming:
         plan.existing = read_results(out, repair=False)
         _check_existing(plan.existing, out, config.mode, plan.sha, int(config.seed))
@@ -318,15 +291,11 @@ def references_for(
     """One reference per record: ``references`` as given, or computed by it (a function of a
     problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
     backend solves within the memory budget (the others' status is ``unknown``)."""
-    from dataclasses import replace
-
     from ..memory import sparse_solver_bytes
-    from ..reference import ReferenceSolution
+    from ..reference import ReferenceSolution, reference_solutions
 
     if references is None or callable(references):
-        from ..reference import reference_solutions
-
-        compute = reference_solutions if references is None else references
+        compute = references or reference_solutions
         wanted = [
             i
             for i, r in enumerate(plan.records)
@@ -396,65 +365,41 @@ def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
 
 def _n_box(problem) -> int:
     """Finite bounds of a problem."""
-    return sum(
-        int(np.isfinite(np.asarray(b, dtype=float)).sum())
-        for b in (problem.lb, problem.ub)
-        if b is not None
-    )
+    bounds = [b for b in (problem.lb, problem.ub) if b is not None]
+    return sum(int(np.isfinite(np.asarray(b, dtype=float)).sum()) for b in bounds)
 
 
 class _BenchRun:
     """The solving part of :func:`run_bench`: runners, warm-up, sequences, rows."""
 
     def __init__(self, plan: Plan, config: BenchConfig, references: list, done: dict, out: Path):
-        self.plan = plan
-        self.config = config
-        self.references = references
-        self.done = done
+        self.plan, self.config, self.references, self.done = plan, config, references, done
         self.sequential = config.mode == "sequential"
         self.pname = plan.profile.name
         self.runners = {name: self._runner(name) for name in config.backends}
         self.summary = BenchSummary(
             isolated=[n for n in config.backends if self.runners[n].isolated], seed=int(config.seed)
         )
-        # per backend and sequence: keys still to run (to know when replay is needed)
-        self.todo = {
-            name: [
-                any((plan.records[i].name, name, self.pname) not in done for i in seq)
-                for seq in plan.seqs
-            ]
+        left = {
+            name: [(r.name, name, self.pname) not in done for r in plan.records]
             for name in config.backends
         }
-        self.total_todo = sum(
-            1 for r in plan.records for b in config.backends if (r.name, b, self.pname) not in done
-        )
+        # per backend and sequence: keys still to run (to know when replay is needed)
+        self.todo = {name: [any(left[name][i] for i in seq) for seq in plan.seqs] for name in left}
+        self.total_todo = sum(sum(v) for v in left.values())
         self.writer = ResultsWriter(out, new=not (plan.resuming and out.exists()))
         self.overheads: list[float] = []
         self.bar = None
 
-    def _worker(self, name: str) -> IsolatedRunner:
+    def _runner(self, name: str, isolate: bool = False):
         plan, config = self.plan, self.config
-        return IsolatedRunner(
-            name,
-            plan.profile,
-            plan.settings[name],
-            plan.profile.time_limit,
-            self.sequential,
-            config.repeat,
-        )
-
-    def _runner(self, name: str):
-        isolate = self.config.isolate
-        if isolate == "always" or (
-            isolate == "auto" and (backend_class(name).risky or name in self.plan.learned)
-        ):
-            return self._worker(name)
-        return LocalRunner(
-            self.plan.instances[name],
-            self.plan.profile.time_limit,
-            self.sequential,
-            self.config.repeat,
-        )
+        limit = plan.profile.time_limit
+        if isolate or wants_worker(config.isolate, name, plan.learned):
+            settings = plan.settings[name]
+            return IsolatedRunner(
+                name, plan.profile, settings, limit, self.sequential, config.repeat
+            )
+        return LocalRunner(plan.instances[name], limit, self.sequential, config.repeat)
 
     def run(self, progress: bool | str) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
@@ -531,25 +476,22 @@ class _BenchRun:
             needs_reset[name] = True
 
     def _solve(self, name: str, record, needs_reset: dict):
-        """One timed (repeated) solve; a backend that overran in this process moves to a worker."""
+        """One timed (repeated) solve; a backend that overran in this process moves to a worker
+        (a solve in this process is never interrupted; a worker is killed at its deadline)."""
         self.plan.marker.mark((record.name, name, self.pname))
-        outcome = self.runners[name].solve(
+        runner = self.runners[name]
+        outcome = runner.solve(
             record.problem, repeat=self.config.repeat, reset_before=needs_reset[name]
         )
         needs_reset[name] = self.sequential and outcome.status in FAILURE_STATUSES
-        if (
-            outcome.status == "time_limit"
-            and not self.runners[name].isolated
-            and self.config.isolate == "auto"
-        ):
-            # a solve in this process is never interrupted; a worker is killed at its deadline
+        if outcome.status == "time_limit" and not runner.isolated and self.config.isolate == "auto":
             log.warning(
                 "%s overran its time limit on %s in this process; it runs in a worker process from now on",
                 name,
                 record.name,
             )
-            self.runners[name].close()
-            self.runners[name] = self._worker(name)
+            runner.close()
+            self.runners[name] = self._runner(name, isolate=True)
             self.plan.learned.append(name)
             self.plan.marker.isolate = list(self.plan.learned)
             self.summary.isolated.append(name)
@@ -562,15 +504,16 @@ class _BenchRun:
         from ..metrics import evaluate, metric_columns
 
         record, profile = self.plan.records[i], self.plan.profile
-        sol, status = outcome.solution, outcome.status
-        if sol is not None:
-            sol.found = status == "optimal"
-            if status == "invalid":
-                sol = None
+        kept, status = outcome.solution, outcome.status
+        if kept is not None:
+            kept.found = status == "optimal"
+        sol = None if status == "invalid" else kept
         metrics = evaluate(record, sol, self.references[i], profile.tolerance)
         times = outcome.wall_times_s
         n, m_eq, m_ineq = problem_sizes(record.problem)
-        kept = outcome.solution
+        error = outcome.error if status != "optimal" or outcome.error else None
+        if i in self.plan.notes and status != "skipped":
+            error = "; ".join(filter(None, [self.plan.notes[i], error]))
         return {
             "problem": record.name,
             "scenario": record.scenario,
@@ -585,9 +528,9 @@ class _BenchRun:
             **{c: metrics[c] for c in metric_columns()},
             "wall_time_min_s": min(times) if times else None,
             "wall_time_median_s": statistics.median(times) if times else None,
-            "solver_time_s": None if kept is None else _float(getattr(sol, "solver_time_s", None)),
-            "iterations": None if kept is None else getattr(kept, "iterations", None),
-            "error": outcome.error if status != "optimal" or outcome.error else None,
+            "solver_time_s": _float(getattr(sol, "solver_time_s", None)),
+            "iterations": getattr(kept, "iterations", None),
+            "error": error,
             "state_reset": outcome.state_reset,
             "isolated": outcome.isolated,
             "position": position,
@@ -606,19 +549,15 @@ class _BenchRun:
     def _write_rows(self, i: int, solved: list) -> None:
         """Rows (metrics against the reference) once every backend has solved problem ``i``."""
         backends = self.config.backends
-        batch = []
-        for position, name, outcome in sorted(solved, key=lambda item: backends.index(item[1])):
-            row = self._row(i, name, outcome, position)
-            if i in self.plan.notes and outcome.status != "skipped":
-                row["error"] = "; ".join(filter(None, [self.plan.notes[i], row["error"]]))
-            batch.append(row)
+        solved = sorted(solved, key=lambda item: backends.index(item[1]))
+        batch = [self._row(i, name, outcome, position) for position, name, outcome in solved]
+        for row in batch:
             if row["wall_time_min_s"] is not None:
                 self.summary.timed_s += row["wall_time_min_s"]
                 if row["solver_time_s"] is not None and math.isfinite(row["solver_time_s"]):
                     self.overheads.append(row["wall_time_min_s"] - row["solver_time_s"])
         self.writer.write_rows(batch)
-        for row in batch:
-            self.done[row_key(row)] = row
+        self.done.update((row_key(row), row) for row in batch)
         self.summary.new_rows += len(batch)
         if self.bar is not None and batch:
             self.bar.update(len(batch))
@@ -658,17 +597,11 @@ class BackendStats:
     def n_failures(self) -> int:
         return sum(self.failures.values())
 
-    @property
-    def unsuccessful(self) -> int:
-        return self.rows - self.successes
-
     def add(self, row: dict) -> None:
         """Count one row (a new row's values or a resumed row's strings)."""
         self.rows += 1
-        if _truth(row.get("success")):
-            self.successes += 1
-        if _truth(row.get("isolated")):
-            self.isolated += 1
+        self.successes += _truth(row.get("success"))
+        self.isolated += _truth(row.get("isolated"))
         t = _float(row.get("wall_time_min_s"))
         if t is not None and math.isfinite(t):
             self.times_s.append(t)
@@ -715,15 +648,18 @@ class BenchSummary:
     def line(self) -> str:
         """The closing line: rows, failed and unsuccessful solves by backend, times."""
 
-        def by_backend(counts: dict) -> str:
-            return " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
+        def counted(label: str, counts: dict) -> str:
+            counts = {b: n for b, n in counts.items() if n}
+            text = f"{sum(counts.values())} {label}"
+            return text + (
+                " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
+            )
 
-        failed = {b: s.n_failures for b, s in self.backends.items() if s.n_failures}
-        unsuccessful = {b: s.unsuccessful for b, s in self.backends.items() if s.unsuccessful}
+        failed = counted("failed solves", {b: s.n_failures for b, s in self.backends.items()})
+        unsuccessful = {b: s.rows - s.successes for b, s in self.backends.items()}
         text = (
-            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; "
-            f"{self.failures} failed solves{by_backend(failed)}; "
-            f"{sum(unsuccessful.values())} without success{by_backend(unsuccessful)}; "
+            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; {failed}; "
+            f"{counted('without success', unsuccessful)}; "
             f"timed solves {self.timed_s:.3f} s; backend order seed {self.seed}"
         )
         if self.overhead_rows:
@@ -738,19 +674,10 @@ class BenchSummary:
     def table(self) -> str:
         """Per backend: rows, success %, time p50/p99 [us], max constraint violation (problem
         units), failures by status; ``*`` marks a backend solved in a worker process."""
-        header = [
-            "backend",
-            "rows",
-            "success %",
-            "time p50 (us)",
-            "time p99 (us)",
-            "max violation",
-            "failures",
-        ]
-        lines = [header]
+        lines = [["backend", "rows", "success %", "time p50 (us)", "time p99 (us)"]]
+        lines[0] += ["max violation", "failures"]
         for name, st in self.backends.items():
             times = np.asarray(st.times_s, dtype=float)
-            viol = np.asarray(st.violations, dtype=float)
             fails = ", ".join(f"{k} {v}" for k, v in sorted(st.failures.items())) or "0"
             lines.append(
                 [
@@ -759,19 +686,15 @@ class BenchSummary:
                     f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
                     f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
                     f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
-                    f"{viol.max():.3g}" if viol.size else "-",
+                    f"{max(st.violations):.3g}" if st.violations else "-",
                     fails if not st.n_failures else f"{st.n_failures} ({fails})",
                 ]
             )
-        widths = [max(len(r[j]) for r in lines) for j in range(len(header))]
-        out = []
-        for r in lines:
-            cells = (
-                [r[0].ljust(widths[0])]
-                + [c.rjust(w) for c, w in zip(r[1:-1], widths[1:-1])]
-                + [r[-1]]
-            )
-            out.append("  ".join(cells).rstrip())
+        widths = [max(len(r[j]) for r in lines) for j in range(len(lines[0]) - 1)]
+        out = [
+            "  ".join([r[0].ljust(widths[0]), *map(str.rjust, r[1:-1], widths[1:]), r[-1]]).rstrip()
+            for r in lines
+        ]
         if any(st.isolated for st in self.backends.values()):
             out.append("* some or all rows solved in a worker process (times taken inside it)")
         return "\n".join(out)
@@ -785,11 +708,8 @@ def _truth(value) -> bool:
 
 
 def is_failure(status: str, reference_status: str | None) -> bool:
-    """A failed solve: a harness failure status, or not ``optimal`` where the reference is.
-
-    A ``skipped`` row (a solve not made: nonconvex, beyond a dense-only backend's size or
-    the memory budget; the reason in ``error``) is not a failure.
-    """
+    """A failed solve: a harness failure status, or not ``optimal`` where the reference is;
+    a ``skipped`` row (a solve not made, the reason in ``error``) is none."""
     if status == "skipped":
         return False
     return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
@@ -797,8 +717,6 @@ def is_failure(status: str, reference_status: str | None) -> bool:
 
 def _float(value) -> float | None:
     """A number cell (a new row's value or a resumed row's string) as a float, else ``None``."""
-    if value is None:
-        return None
     try:
         return float(value)
     except (TypeError, ValueError):
@@ -819,14 +737,9 @@ class LogBar:
         if now - self.last >= self.every_s and self.n < self.total:
             self.last = now
             spent = now - self.started
-            log.info(
-                "bench %s: %d/%d solves in %.0f s, about %.0f s left",
-                self.name,
-                self.n,
-                self.total,
-                spent,
-                spent * (self.total - self.n) / self.n,
-            )
+            left = spent * (self.total - self.n) / self.n
+            msg = "bench %s: %d/%d solves in %.0f s, about %.0f s left"
+            log.info(msg, self.name, self.n, self.total, spent, left)
 
     def close(self) -> None:
         pass

@@ -2,21 +2,13 @@
 
 :func:`run_row` is the one closed-loop run of every command (``closed-loop``, ``run``, ``sweep``):
 a discarded warm-up of :data:`WARMUP_TICKS` ticks, the timed run
-(:func:`qpbench.sim.loop.simulate`) and its row. Its :class:`LoopTask` is plain picklable data, so
-it runs the same in this process, in a worker process (:mod:`qpbench.runner`) or on Dask.
-
+(:func:`qpbench.sim.loop.simulate`) and its row; its :class:`LoopTask` is plain picklable data.
 :func:`run_closed_loop` makes every pair into ``OUT/closed_loop.csv`` (rewritten atomically after
-each run) and ``OUT/logs/<scenario>__<backend>.parquet``. An isolated run (``isolate``: ``auto``,
-backends whose class says ``risky = True``; ``always``; ``never``) is made in a worker process of
-its own with a deadline (:func:`run_deadline`): a hang gives a ``time_limit`` row, a crash a
-``crashed`` one, and the other runs go on. With ``jobs > 1`` every run has a worker of its own.
-
-A row is the run's summary (:mod:`qpbench.sim.summary` describes every figure) under
-:data:`TABLE_NAMES`, lists and dicts as JSON text: :data:`COLUMNS` first, then ``isolated``,
-``run_budget_s`` [s] and the other figures sorted by name. ``status``: ``ok``; ``budget`` (stopped
-between ticks by its wall-time budget; verdict ``incomplete``); ``error``, ``crashed`` or
-``time_limit`` (no result: ``error`` says why, verdict ``incomplete``, ``realtime`` ``no``);
-``skipped`` (why in ``error``, no verdict). ``log_file`` is relative to the CSV's folder.
+each run) and ``OUT/logs/<scenario>__<backend>.parquet``, an isolated run in a worker process of
+its own with a deadline (:func:`run_deadline`). A row is the run's summary
+(:mod:`qpbench.sim.summary`) under :data:`TABLE_NAMES`, lists and dicts as JSON text:
+:data:`COLUMNS` first, then ``isolated``, ``run_budget_s`` [s] and the other figures sorted by
+name; its statuses: docs/architecture.md, "Closed-loop runs".
 """
 
 from __future__ import annotations
@@ -39,6 +31,7 @@ from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
 from ..statuses import FORMULATIONS, describe_exception
+from .isolation import ISOLATE, wants_worker
 
 log = logging.getLogger("qpbench.harness")
 
@@ -46,8 +39,6 @@ CSV_NAME = "closed_loop.csv"
 LOG_DIR = "logs"
 #: Ticks of the discarded warm-up run before each timed run (one-off costs out of the clock).
 WARMUP_TICKS = 3
-#: Choices of ``isolate``.
-ISOLATE = ("auto", "always", "never")
 #: Statuses of a run that produced no result.
 FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
 #: Least deadline of an isolated run [s].
@@ -226,17 +217,6 @@ def failure_row(task: LoopTask, status: str, message: str) -> dict:
     return row
 
 
-def is_risky(backend: str) -> bool:
-    """The backend's class says ``risky = True`` (``False`` for an unknown name)."""
-    from ..backends import backend_class
-    from ..exceptions import BackendNotFound
-
-    try:
-        return bool(backend_class(backend).risky)
-    except BackendNotFound:
-        return False
-
-
 def run_deadline(
     scenario: str, duration: float | None, run_time_limit: float | None = None
 ) -> float:
@@ -312,11 +292,8 @@ def run_closed_loop(
     rows, others = _kept_rows(order, previous, formulation, duration, budget, skip or {}, overrides)
     todo = [k for k in order if k not in rows]
 
-    def isolated(backend: str) -> bool:
-        return isolate == "always" or (isolate == "auto" and is_risky(backend))
-
     def emit(key: tuple[str, str], row: dict) -> None:
-        row["isolated"] = isolated(key[1])
+        row["isolated"] = wants_worker(isolate, key[1])
         row["run_budget_s"] = budget(key[1])
         rows[key] = row
         if row["log_file"]:  # written here or by a worker process
@@ -334,7 +311,7 @@ def run_closed_loop(
         (
             (s, b),
             replace(terms, scenario=s, backend=b, run_budget=budget(b)),
-            run_deadline(s, duration, run_time_limit) if isolated(b) else None,
+            run_deadline(s, duration, run_time_limit) if wants_worker(isolate, b) else None,
         )
         for s, b in todo
     ]
@@ -441,19 +418,17 @@ def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
     return rows, others
 
 
-def _same_run(
-    row: dict,
-    formulation: str,
-    duration: float | None,
-    run_budget: float | None = None,
-    overrides: dict | None = None,
-) -> bool:
+def _same_run(row: dict, formulation, duration, run_budget, overrides: dict) -> bool:
     """``row`` (read back) is a finished run of this formulation, duration, budget and overrides."""
-    if str(row.get("formulation")) != formulation:
-        return False
-    if _row_overrides(row) != json.loads(json.dumps(overrides or {})):
-        return False
+    text = row.get("scenario_overrides")
     try:
+        stored = (
+            json.loads(text) if isinstance(text, str) and text else {} if pd.isna(text) else None
+        )
+        if str(row.get("formulation")) != formulation or stored != json.loads(
+            json.dumps(overrides)
+        ):
+            return False
         if row.get("status") == "budget":  # the same run only under the same budget
             if run_budget is None or not math.isclose(float(row["run_budget_s"]), run_budget):
                 return False
@@ -464,18 +439,6 @@ def _same_run(
         )
     except (TypeError, ValueError):
         return False
-
-
-def _row_overrides(row: dict) -> dict | None:
-    """A row's ``scenario_overrides`` as a dict (``{}`` when empty; ``None`` when unreadable)."""
-    value = row.get("scenario_overrides")
-    if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
-        return {}
-    try:
-        out = json.loads(value) if isinstance(value, str) else value
-    except ValueError:
-        return None
-    return out if isinstance(out, dict) else None
 
 
 def _write_table(rows: list[dict], path: Path) -> None:

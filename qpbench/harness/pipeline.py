@@ -1,19 +1,12 @@
 """The main job (``qpbench run``): problem sets, bench, closed loop and report into one folder.
 
-:func:`run_all` with a :class:`RunConfig`, each step a phase (:class:`~.phases.Phases`):
-compile the chosen backends' kernels; regenerate a missing problem set of the paper's four
-scenarios (every :data:`EVERY`-th tick, ``paper`` formulation, solved by one of
-:data:`DUMP_BACKENDS`); solve the references; bench every backend on every ``bench_every``-th
-problem of each set (one CSV per scenario in ``OUT/bench/``); run every scenario with every
-backend in the closed loop (``OUT/closed_loop.csv``, ``OUT/logs/``), each run within a wall-time
-budget of its own decided from its bench time (:func:`closed_loop_budgets`; a run that spends
-it stops between ticks with status ``budget``); write the report (``OUT/report.md``,
-``OUT/plots/``).
-
+:func:`run_all` with a :class:`RunConfig`, each step a phase (:class:`~.phases.Phases`): compile
+the chosen backends' kernels; regenerate a missing problem set of the paper's four scenarios;
+solve the references; bench every ``bench_every``-th problem of each set (``OUT/bench/``); run
+every scenario with every backend in the closed loop (``OUT/closed_loop.csv``), each within a
+wall-time budget decided from its bench time (:func:`closed_loop_budgets`); write the report.
 The run works in ``OUT/.partial/`` and then replaces the previous run's :data:`OUTPUTS`, each by
-a rename, so a killed run leaves the previous results whole; other files in ``OUT`` are never
-touched. Those names are a previous run's when ``OUT/run.json`` exists, else someone else's
-(``force`` needed). ``resume`` continues from ``OUT/.partial/``.
+a rename (docs/architecture.md, "The run pipeline").
 """
 
 from __future__ import annotations
@@ -35,18 +28,6 @@ from ..exceptions import ParamError, positive_seconds
 if TYPE_CHECKING:
     from ..formats import ProblemSet
 
-__all__ = [
-    "BENCH_EVERY",
-    "LOOP_JOBS",
-    "OUTPUTS",
-    "REPEAT",
-    "RUN_BUDGET_S",
-    "RunConfig",
-    "RunOutcome",
-    "default_jobs",
-    "run_all",
-]
-
 log = logging.getLogger("qpbench.run")
 
 #: Outputs of a run inside ``--out`` (replaced as a whole at the end of a run).
@@ -55,8 +36,7 @@ OUTPUTS = ("bench", "logs", "figure_logs", "plots", "closed_loop.csv", "report.m
 STAGING = ".partial"
 #: Every k-th tick goes into a problem set.
 EVERY = 10
-#: The bench of ``run`` takes every k-th problem of each set (every 100th control tick), so
-#: that README's first command stays within its time target (phase times: bench/README.md).
+#: The bench of ``run`` takes every k-th problem of each set (every 100th control tick).
 BENCH_EVERY = 10
 #: The most wall time a closed-loop run may take [s] (``--run-budget``).
 RUN_BUDGET_S = 10.0
@@ -66,8 +46,7 @@ BUDGET_MARGIN = 3.0
 BUDGET_FLOOR_S = 2.0
 #: The budget of a backend whose solves alone would take longer than ``run_budget`` [s].
 CUT_BUDGET_S = 1.0
-#: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process, at most one per
-#: core (runs side by side: bench/README.md, "Closed-loop runs side by side").
+#: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process, at most one per core.
 LOOP_JOBS = 2
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
 REPEAT = 3
@@ -152,7 +131,8 @@ def _check_out(out: Path, force: bool) -> None:
         )
 
 
-def _dump_backend(backends: list[str]) -> str:
+def _dump_backend() -> str:
+    """The first available of :data:`DUMP_BACKENDS`."""
     from ..backends import backend_names
     from ..exceptions import BackendNotFound
 
@@ -160,9 +140,8 @@ def _dump_backend(backends: list[str]) -> str:
     for name in DUMP_BACKENDS:
         if name in available:
             return name
-    raise BackendNotFound(
-        f"no QP backend to generate problem sets with (tried {', '.join(DUMP_BACKENDS)})"
-    )
+    tried = ", ".join(DUMP_BACKENDS)
+    raise BackendNotFound(f"no QP backend to generate problem sets with (tried {tried})")
 
 
 def bench_subset(
@@ -222,7 +201,7 @@ def run_all(config: RunConfig) -> RunOutcome:
 
     phases = Phases(log, bars=None if config.progress else False)
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
-    dump = [_dump_backend(config.backends)] if missing else []
+    dump = [_dump_backend()] if missing else []
     with phases.phase("compile"):
         # only the kernels and shims of the backends this run runs, before anything is timed;
         # the worker processes load them from the cache
