@@ -1,6 +1,6 @@
 """The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row each.
 
-:class:`BenchConfig` says what to run; :func:`make_plan` checks it against the problem set and
+:class:`BenchConfig` says what to run; :class:`Plan` checks it against the problem set and
 an existing output before anything is written; :func:`run_bench` solves each problem with every
 backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
 (:class:`~.isolation.IsolatedRunner`), in an order drawn per problem (:func:`backend_order`),
@@ -151,38 +151,6 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
         raise InputError(why + "use --force to start again", path=path, key=key)
 
 
-@dataclass
-class Plan:
-    """A checked run before anything is written.
-
-    Attributes:
-        seqs: The records' sequences (:func:`sequences`).
-        profile: The profile in force, with the run's time limit.
-        instances: In-process backend instances (a bad name failed while making them).
-        sha: Content SHA-256 of the set.
-        resuming: An existing output is continued; ``existing``: its rows.
-        learned: Backends known to crash in this process (from the in-flight ``marker``).
-        skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
-        notes: ``record index -> warning`` written in its rows' ``error`` column.
-        budget: Bytes a solve may need (:func:`qpbench.memory.resolve_budget`).
-    """
-
-    records: list
-    seqs: list
-    profile: Profile
-    settings: dict
-    instances: dict
-    versions: dict
-    sha: str | None
-    resuming: bool
-    existing: ExistingResults
-    learned: list
-    marker: InflightMarker
-    skips: dict = field(default_factory=dict)
-    notes: dict = field(default_factory=dict)
-    budget: int = 0
-
-
 def _check_records(problem_set) -> list:
     records = list(problem_set.records)
     if not records:
@@ -196,66 +164,85 @@ def _check_records(problem_set) -> list:
     return records
 
 
-def _learn_from_crash(plan: Plan, config: BenchConfig) -> None:
-    """A backend that died in this process while solving (in-flight marker of the interrupted
-    run) goes to a worker from now on (under ``--isolate auto``)."""
-    learned, inflight, crash = plan.marker.read()
-    plan.learned[:] = learned
-    done_keys = {row_key(r) for r in plan.existing.rows}
-    if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
-        return
-    suspect = inflight[1]
-    if suspect in plan.instances and suspect not in plan.learned:
-        plan.learned.append(suspect)
-        log.warning(
-            "the previous run died while %s was solving %s in this process (%s); %s",
-            suspect,
-            inflight[0],
-            crash.splitlines()[0],
-            "it runs in a worker process from now on"
-            if config.isolate == "auto"
-            else "use --isolate auto or always to isolate it",
+class Plan:
+    """A checked run: every check that can fail on user input, made before ``out`` is created
+    or changed.
+
+    Attributes:
+        seqs: The records' sequences (:func:`sequences`).
+        profile: The profile in force, with the run's time limit.
+        instances: In-process backend instances (a bad name failed while making them).
+        budget: Bytes a solve may need (:func:`qpbench.memory.resolve_budget`).
+        skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
+        notes: ``record index -> warning`` written in its rows' ``error`` column.
+        sha: Content SHA-256 of the set.
+        resuming: An existing output is continued; ``existing``: its rows.
+        learned: Backends known to crash in this process (from the in-flight ``marker``).
+    """
+
+    def __init__(
+        self, problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
+    ):
+        from ..atomic import check_output
+        from ..backends import get_backend
+        from ..formats import content_sha256
+        from ..memory import resolve_budget
+
+        check_output(out, force=force, resume=resume, make_parent=True)
+        profile = get_profile(config.profile)
+        self.profile = profile.with_time_limit(
+            config.time_limit if config.time_limit is not None else float(profile.time_limit)
         )
+        self.records = records = _check_records(problem_set)
+        self.seqs = sequences(records, config.mode)
+        self.settings = {
+            name: backend_settings(name, config, problem_set) for name in config.backends
+        }
+        self.instances = {
+            name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
+        }
+        self.versions = {name: type(b).version() for name, b in self.instances.items()}
+        budget = config.memory_budget
+        self.budget = resolve_budget(None) if budget is None else budget
+        self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
+        self.sha = content_sha256(problem_set)
+        self.resuming = resume and out.exists() and not force
+        self.existing = ExistingResults([])
+        self.marker = InflightMarker(InflightMarker.for_output(out))
+        self.learned: list[str] = []
+        if self.resuming:
+            self.existing = read_results(out, repair=False)
+            _check_existing(self.existing, out, config.mode, self.sha, int(config.seed))
+            self._learn_from_crash(config.isolate)
 
+    def _learn_from_crash(self, isolate: str) -> None:
+        """A backend that died in this process while solving (in-flight marker of the
+        interrupted run) goes to a worker from now on (under ``--isolate auto``)."""
+        self.learned, inflight, crash = self.marker.read()
+        done_keys = {row_key(r) for r in self.existing.rows}
+        if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
+            return
+        suspect = inflight[1]
+        if suspect in self.instances and suspect not in self.learned:
+            self.learned.append(suspect)
+            log.warning(
+                "the previous run died while %s was solving %s in this process (%s); %s",
+                suspect,
+                inflight[0],
+                crash.splitlines()[0],
+                "it runs in a worker process from now on"
+                if isolate == "auto"
+                else "use --isolate auto or always to isolate it",
+            )
 
-def make_plan(
-    problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
-) -> Plan:
-    """Every check that can fail on user input, before ``out`` is created or changed."""
-    from ..atomic import check_output
-    from ..backends import get_backend
-    from ..formats import content_sha256
-    from ..memory import resolve_budget
-
-    check_output(out, force=force, resume=resume, make_parent=True)
-    profile = get_profile(config.profile)
-    profile = profile.with_time_limit(
-        config.time_limit if config.time_limit is not None else float(profile.time_limit)
-    )
-    records = _check_records(problem_set)
-    settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
-    instances = {name: get_backend(name, profile, **settings[name]) for name in config.backends}
-    budget = resolve_budget(None) if config.memory_budget is None else config.memory_budget
-    plan = Plan(
-        records=records,
-        seqs=sequences(records, config.mode),
-        profile=profile,
-        settings=settings,
-        instances=instances,
-        versions={name: type(b).version() for name, b in instances.items()},
-        sha=content_sha256(problem_set),
-        resuming=resume and out.exists() and not force,
-        existing=ExistingResults([]),
-        learned=[],
-        marker=InflightMarker(InflightMarker.for_output(out)),
-        budget=budget,
-    )
-    plan.skips, plan.notes = skipped_solves(records, config.backends, budget)
-    if plan.resuming:
-        plan.existing = read_results(out, repair=False)
-        _check_existing(plan.existing, out, config.mode, plan.sha, int(config.seed))
-        _learn_from_crash(plan, config)
-    return plan
+    def open_output(self, out: Path, force: bool) -> dict:
+        """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
+        if self.resuming:
+            self.existing = read_results(out, repair=True)
+        elif force and out.exists():
+            out.unlink()
+            self.marker.path.unlink(missing_ok=True)
+        return self.existing.by_key()
 
 
 def skipped_solves(
@@ -314,16 +301,6 @@ def references_for(
             path=problem_set.path,
         )
     return references
-
-
-def open_output(plan: Plan, out: Path, force: bool) -> dict:
-    """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
-    if plan.resuming:
-        plan.existing = read_results(out, repair=True)
-    elif force and out.exists():
-        out.unlink()
-        plan.marker.path.unlink(missing_ok=True)
-    return plan.existing.by_key()
 
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
@@ -768,9 +745,9 @@ def run_bench(
     """
     started = time.perf_counter()
     out = Path(out)
-    plan = make_plan(problem_set, config, out, force, resume)
+    plan = Plan(problem_set, config, out, force, resume)
     references = references_for(problem_set, plan, references)
-    done = open_output(plan, out, force)  # from here on, the output is created or changed
+    done = plan.open_output(out, force)  # from here on, the output is created or changed
     bench_run = _BenchRun(plan, config, references, done, out)
     bench_run.run(progress)
     return bench_run.finish(started)

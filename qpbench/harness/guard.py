@@ -1,12 +1,10 @@
 """Guarded solves in this process: every way a solve can go wrong becomes a status.
 
-:class:`LocalRunner` turns an exception escaping the backend into ``error`` (``"Type:
-message"``), a non-finite or missing ``x`` into ``invalid`` and a solve that returned after its
-time limit into ``time_limit`` (:func:`qpbench.statuses.classify`). A solve is never interrupted
-here: an exception raised asynchronously (``SIGALRM``) can land in foreign code and break it, so
-a solve that must be stopped needs a worker process (:mod:`qpbench.harness.isolation`). After a
-failure (:data:`qpbench.statuses.FAILURE_STATUSES`) the backend is reset before its next solve.
-The same class runs inside an isolated backend's worker, so the timed region is the same.
+:class:`LocalRunner` turns an exception escaping the backend into ``error``, a non-finite or
+missing ``x`` into ``invalid`` and a solve that returned after its time limit into
+``time_limit`` (:func:`qpbench.statuses.classify`). A solve is never interrupted here (an
+asynchronous exception can land in foreign code); one that must be stopped needs a worker
+process (:mod:`qpbench.harness.isolation`), which runs this same class.
 """
 
 from __future__ import annotations
@@ -88,7 +86,6 @@ class LocalRunner:
         status, error = classify(solution, wall, self.time_limit)
         return Outcome(status, solution, [wall], error)
 
-    # The interface shared with IsolatedRunner: harness/bench.py calls either the same way.
     def reset(self) -> None:
         """Forget every replica's state (a new sequence starts)."""
         self.replicas.reset()
@@ -148,4 +145,4 @@ class LocalRunner:
         outcome.repeat_note = "; ".join(notes)
 
     def close(self) -> None:
-        """Nothing to release in this process."""
+        pass

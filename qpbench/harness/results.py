@@ -1,10 +1,9 @@
 """The results table: typed rows appended and ``fsync``-ed as they are produced, resumable.
 
 One row per key (a bench's ``(problem, backend, profile)``; other studies pass their own
-columns). Each row is one physical line (newlines in a field become spaces) and each batch one
-``write`` on an ``O_APPEND`` descriptor, ``fsync``-ed before the next: a kill loses at most the
-batch in progress and leaves at most one half-written last line, which :func:`read_results`
-drops (and, with ``repair``, truncates) before a run resumes.
+columns), one physical line each; each batch is one ``write`` on an ``O_APPEND`` descriptor,
+``fsync``-ed before the next, so a kill leaves at most one half-written last line, which
+:func:`read_results` drops (and, with ``repair``, truncates) before a run resumes.
 """
 
 from __future__ import annotations
@@ -127,9 +126,7 @@ def read_results(
 
     A last line without its newline or a trailing line with the wrong number of fields is
     dropped with a warning; ``repair=True`` also truncates the file to its last complete line.
-
-    Raises:
-        InputError: the header is not ``columns``, or a malformed line is followed by good ones.
+    :class:`InputError` if the header is not ``columns`` or a malformed line is followed by good ones.
     """
     path = Path(path)
     names = bench_columns() if columns is None else tuple(columns)
@@ -188,23 +185,13 @@ def read_results(
 
 
 class ResultsWriter:
-    """Append rows to a table, one ``write`` + ``fsync`` per batch.
+    """Append rows to a table, one ``write`` + ``fsync`` per batch; ``new``: create (truncate)
+    the file and write the header, else append; ``columns``: the table's (default: the bench's)."""
 
-    ``new``: create (truncate) the file and write the header, else append; ``fsync`` off only
-    in tests of speed; ``columns``: the table's (default: the bench's).
-    """
-
-    def __init__(
-        self,
-        path: str | Path,
-        new: bool,
-        fsync: bool = True,
-        columns: tuple[str, ...] | None = None,
-    ):
+    def __init__(self, path: str | Path, new: bool, columns: tuple[str, ...] | None = None):
         from ..atomic import record
 
         self.path = Path(path)
-        self.fsync = fsync
         self.columns = bench_columns() if columns is None else tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | (os.O_TRUNC if new else 0)
@@ -217,8 +204,7 @@ class ResultsWriter:
         view = memoryview(data)
         while view:
             view = view[os.write(self._fd, view) :]
-        if self.fsync:
-            os.fsync(self._fd)
+        os.fsync(self._fd)
 
     def write_rows(self, rows: list[dict]) -> None:
         """Append ``rows`` and make them durable before returning."""
@@ -238,18 +224,9 @@ class ResultsWriter:
 
 
 class InflightMarker:
-    """A side file naming the solve in progress, and what killed the run.
-
-    Rewritten before every solve (outside the timed region, no fsync: it only has to outlive
-    this process). :mod:`faulthandler` appends to it on a fatal signal, so after a run died a
-    key without a row followed by a traceback means a backend crashed this process (under
-    ``--isolate auto`` the next ``--resume`` isolates it); no traceback means a kill from
-    outside. Removed when a run ends normally.
-
-    Format: line 1, the comma-separated backends to isolate; line 2, the key
-    ``problem<TAB>backend<TAB>profile`` (``warmup<TAB>...`` or ``replay <problem><TAB>...``
-    outside recorded solves); then the traceback, if any.
-    """
+    """A side file naming the solve in progress, and what killed the run (docs/architecture.md,
+    "The bench"): line 1, the comma-separated backends to isolate; line 2, the key
+    ``problem<TAB>backend<TAB>profile``; then the :mod:`faulthandler` traceback, if any."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
