@@ -45,19 +45,13 @@ MODES = ("sequential", "independent")
 class BenchConfig:
     """What to run, checked when made.
 
-    Attributes:
-        profile: Profile name or :class:`~qpbench.profiles.Profile`.
-        repeat: Timed solves per (problem, backend); the row has their min and median.
-        mode: ``sequential`` (state carried along a sequence) or ``independent`` (reset before
-            every problem).
-        time_limit: Per-solve limit [s]; ``None``: the profile's.
-        isolate: ``auto`` (backends marked ``risky`` or seen to crash in this process),
-            ``always`` or ``never``.
-        warmup: Discarded solves per backend before the first timed one: the first problem,
-            and the first of each other structure (parts present).
-        settings: Solver settings for every backend; ``backend_settings``: per backend name.
-        seed: Seed of the per-problem backend order (:func:`backend_order`).
-        memory_budget: Bytes a solve may need (:mod:`qpbench.memory`; ``None``: the default).
+    ``profile``: a name or :class:`~qpbench.profiles.Profile`; ``repeat``: timed solves per
+    (problem, backend), the row has their min and median; ``mode``: :data:`MODES`;
+    ``time_limit``: per solve [s] (``None``: the profile's); ``isolate``: :data:`ISOLATE`
+    (:func:`~.isolation.wants_worker`); ``warmup``: discarded solves per backend first (the first
+    problem of each structure); ``settings``: solver settings of every backend,
+    ``backend_settings`` per backend name; ``seed``: of :func:`backend_order`;
+    ``memory_budget``: bytes a solve may need (``None``: :mod:`qpbench.memory`'s default).
     """
 
     backends: list[str]
@@ -166,19 +160,9 @@ def _check_records(problem_set) -> list:
 
 class Plan:
     """A checked run: every check that can fail on user input, made before ``out`` is created
-    or changed.
-
-    Attributes:
-        seqs: The records' sequences (:func:`sequences`).
-        profile: The profile in force, with the run's time limit.
-        instances: In-process backend instances (a bad name failed while making them).
-        budget: Bytes a solve may need (:func:`qpbench.memory.resolve_budget`).
-        skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
-        notes: ``record index -> warning`` written in its rows' ``error`` column.
-        sha: Content SHA-256 of the set.
-        resuming: An existing output is continued; ``existing``: its rows.
-        learned: Backends known to crash in this process (from the in-flight ``marker``).
-    """
+    or changed. ``profile``: with the run's time limit; ``instances``: in-process backends;
+    ``skips``, ``notes``: :func:`skipped_solves`; ``resuming``: ``out`` is continued
+    (``existing``: its rows); ``learned``: backends seen to crash in this process (``marker``)."""
 
     def __init__(
         self, problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
@@ -248,12 +232,8 @@ class Plan:
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
-    """``(skips, notes)``: the solves not made and why, and the warnings of the rest.
-
-    A clearly nonconvex problem is skipped by every backend, a slightly indefinite one solved
-    with a warning (:mod:`qpbench.formats.convexity`); one too large for a dense-only backend
-    or the memory budget is skipped by that backend (:func:`qpbench.memory.skip_reason`).
-    """
+    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made (nonconvex,
+    :func:`qpbench.memory.skip_reason`) and ``record index -> warning`` (slightly indefinite)."""
     from ..formats.convexity import assess_convexity
     from ..memory import skip_reason
 
@@ -556,12 +536,8 @@ class _BenchRun:
 
 @dataclass
 class BackendStats:
-    """One backend's rows in a bench run (a line of the closing table).
-
-    ``times_s``: ``wall_time_min_s`` of its rows [s]; ``violations``: ``constraint_violation``
-    of the rows with an ``x``; ``failures``: failed solves (:func:`is_failure`) by status;
-    ``isolated``: rows solved in a worker process.
-    """
+    """One backend's rows (a line of the closing table): ``times_s``: ``wall_time_min_s`` [s];
+    ``failures``: :func:`is_failure` by status; ``isolated``: rows solved in a worker."""
 
     rows: int = 0
     successes: int = 0
@@ -592,17 +568,10 @@ class BackendStats:
 
 @dataclass
 class BenchSummary:
-    """What a bench run did (the data of the closing line and table).
-
-    Attributes:
-        backends: Each backend's :class:`BackendStats` over the rows of this run's keys in the
-            CSV (resumed and new); ``new_rows``: rows written now.
-        elapsed_s: Duration of this invocation [s].
-        timed_s: Sum of the new rows' ``wall_time_min_s`` [s].
-        overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s`` [s]
-            (NaN if no backend reports a time), over ``overhead_rows`` rows.
-        isolated: Backends that ran in a worker process.
-    """
+    """What a bench run did: each backend's :class:`BackendStats` over the rows of this run's
+    keys (resumed and new); ``elapsed_s`` [s] of this invocation; ``timed_s``: sum of the new
+    rows' ``wall_time_min_s`` [s]; ``overhead_median_s``: median over the new rows of
+    ``wall_time_min_s - solver_time_s`` [s]; ``isolated``: backends run in a worker."""
 
     new_rows: int = 0
     backends: dict = field(default_factory=dict)
@@ -732,16 +701,11 @@ def run_bench(
     references: list | None = None,
     progress: bool | str = False,
 ) -> BenchSummary:
-    """Benchmark ``config.backends`` on ``problem_set`` (loaded and validated); rows to ``out``.
+    """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``.
 
-    Everything that can fail on user input is checked before ``out`` is created or changed.
     ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
-    per record (``None`` entries for none), or a function of the set returning them; computed
-    (and cached) if ``None``. ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
-
-    Raises:
-        OutputExistsError: ``out`` exists and neither ``force`` nor ``resume``.
-        ParamError, BackendNotFound, InputError: bad configuration or a foreign ``out``.
+    per record, or a function of the set returning them (:func:`references_for`).
+    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
     """
     started = time.perf_counter()
     out = Path(out)

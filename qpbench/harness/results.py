@@ -148,8 +148,8 @@ def read_results(
             with ResultsWriter(path, new=True, columns=names):
                 pass
         return ExistingResults([], dropped)
-    lines = data.decode("utf-8", errors="replace").split("\n")[:-1]
-    header = next(csv.reader([lines[0]]))
+    lines = data.split(b"\n")[:-1]
+    header, *body = (next(csv.reader([ln.decode("utf-8", errors="replace")])) for ln in lines)
     if tuple(header) != names:
         missing = [c for c in names if c not in header]
         raise InputError(
@@ -157,31 +157,21 @@ def read_results(
             "columns differ); use --force to start again",
             path=path,
         )
-    rows = []
-    good_end = offset = len(lines[0]) + 1
-    bad_tail = False
-    for line in lines[1:]:
-        fields = next(csv.reader([line])) if line else []
-        offset += len(line.encode("utf-8")) + 1
-        if len(fields) != len(names):
-            log.warning(
-                "%s: dropping a malformed line (%d fields, expected %d)",
-                path,
-                len(fields),
-                len(names),
-            )
-            dropped += 1
-            bad_tail = True
-        elif bad_tail:
-            raise InputError(
-                "malformed line in the middle of the file; use --force to start again", path=path
-            )
-        else:
-            rows.append(dict(zip(names, fields)))
-            good_end = offset
-    if repair and bad_tail:
-        os.truncate(path, good_end)
-    return ExistingResults(rows, dropped)
+    n = len(body)  # the rows before the malformed lines at the end
+    while n and len(body[n - 1]) != len(names):
+        n -= 1
+    if any(len(fields) != len(names) for fields in body[:n]):
+        raise InputError(
+            "malformed line in the middle of the file; use --force to start again", path=path
+        )
+    for fields in body[n:]:
+        log.warning(
+            "%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(names)
+        )
+    if repair and n < len(body):
+        os.truncate(path, sum(len(ln) + 1 for ln in lines[: n + 1]))
+    rows = [dict(zip(names, fields)) for fields in body[:n]]
+    return ExistingResults(rows, dropped + len(body) - n)
 
 
 class ResultsWriter:

@@ -1,10 +1,9 @@
 """Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1.
 
 Tasks are submitted at once and collected as they complete; a task whose worker was lost
-(``KilledWorker``) is submitted once more, then reported lost (the local cluster's scheduler
-allows no failure of its own, ``allowed-failures = 0``, so the retry is this module's). A task
-runs in a thread beside the worker's event loop, sharing its GIL: the workers are quieted
-(:data:`WORKER_CONFIG`, or :class:`qpbench.runner.dask_worker.QuietWorker` on an existing cluster).
+(``KilledWorker``) is submitted once more, then reported lost (the local scheduler allows no
+failure of its own). A task runs in a thread beside the worker's event loop, sharing its GIL,
+so the workers are quieted (:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster).
 """
 
 from __future__ import annotations
@@ -23,10 +22,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.runner")
 
-__all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
-
-#: Dask settings of a sweep's workers: no statistical profiler, a slower event-loop health check
-#: (both take the GIL from the task's thread; :mod:`.dask_worker`, ``bench/sweep_speedup.py``).
+#: Dask settings of a sweep's workers: no statistical profiler, a slower event-loop health check.
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
@@ -44,8 +40,7 @@ def load_security(path: str | Path) -> Security:
         cert_file = "node.pem"   # this machine's certificate (client, local scheduler, workers)
         key_file = "node-key.pem"
 
-    Raises:
-        InputError: unreadable file, unknown or missing key, missing PEM file.
+    :class:`InputError` for an unreadable file, an unknown or missing key, a missing PEM file.
     """
     path = Path(path)
     try:
@@ -92,11 +87,8 @@ def load_security(path: str | Path) -> Security:
 
 class DaskExecutor:
     """Tasks on the cluster at ``scheduler``, or (``None``) on a ``LocalCluster`` of ``jobs``
-    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS.
-
-    On an existing cluster :class:`~qpbench.runner.dask_worker.QuietWorker` is registered
-    until :meth:`close`, which restores the workers' settings.
-    """
+    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS. On an
+    existing cluster :class:`~.dask_worker.QuietWorker` is registered until :meth:`close`."""
 
     name = "dask"
 
@@ -135,7 +127,6 @@ class DaskExecutor:
         self.address = self.client.scheduler.address
 
     def _quiet_workers(self) -> None:
-        """Register :class:`~.dask_worker.QuietWorker` on the cluster's workers."""
         from .dask_worker import PLUGIN_NAME, QuietWorker
 
         try:
