@@ -61,17 +61,10 @@ def default_jobs() -> int:
 
 @dataclass
 class RunConfig:
-    """What ``qpbench run`` does (module docstring).
-
-    Attributes:
-        problems: Folder of the problem sets ``<problems>/<scenario>/``.
-        scenarios, backends: Checked lists (:mod:`qpbench.selection`).
-        duration: Closed-loop time per run [s] (``None``: the scenario's); the bench then
-            uses only the problems with ``t < duration``.
-        run_budget: Most wall time of a closed-loop run [s] (``None``: no budget).
-        memory_budget: Bytes a bench solve may need (:mod:`qpbench.memory`; ``None``: the default).
-        on_row: Called with each closed-loop row as it is written.
-    """
+    """What ``qpbench run`` does: ``problems``: folder of the sets ``<problems>/<scenario>/``;
+    ``duration``: closed-loop time per run [s] (``None``: the scenario's; the bench then takes the
+    problems with ``t < duration``); ``run_budget``: most wall time of a closed-loop run [s];
+    ``memory_budget``: bytes a bench solve may need; ``on_row``: called with each closed-loop row."""
 
     out: Path
     problems: Path
@@ -89,7 +82,6 @@ class RunConfig:
     on_row: Callable[[dict], None] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        """Every value checked when made (one-line errors naming the option)."""
         if self.duration is not None:
             self.duration = positive_seconds(self.duration, "--duration")
         if self.run_budget is not None:
@@ -202,9 +194,7 @@ def run_all(config: RunConfig) -> RunOutcome:
     phases = Phases(log, bars=None if config.progress else False)
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
     dump = [_dump_backend()] if missing else []
-    with phases.phase("compile"):
-        # only the kernels and shims of the backends this run runs, before anything is timed;
-        # the worker processes load them from the cache
+    with phases.phase("compile"):  # only the backends this run runs, before anything is timed
         warmup_logged(log, [*config.backends, *dump])
     for s in missing:
         with phases.phase(f"problem set {s}"):
@@ -256,17 +246,14 @@ def _bench(
 
     failures = 0
     times: dict[str, list[float]] = {}
+    bench = BenchConfig(
+        list(config.backends), repeat=config.repeat, memory_budget=config.memory_budget
+    )
     for s, (subset, refs) in subsets.items():
         with phases.phase(f"bench {s}", bar=False):
             summary = run_bench(
                 subset,
-                BenchConfig(
-                    backends=list(config.backends),
-                    profile="default",
-                    mode="sequential",
-                    repeat=config.repeat,
-                    memory_budget=config.memory_budget,
-                ),
+                bench,
                 bench_dir / f"{s}.csv",
                 resume=config.resume,
                 force=not config.resume,

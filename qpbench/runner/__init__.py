@@ -57,20 +57,12 @@ class ProcessExecutor:
 
     def run(self, fn: Callable, items: list[tuple]) -> Iterator[Done]:
         tasks = [(key, arg, None) for key, arg in items]
-        for done in run_tasks(
-            fn, tasks, self.concurrency, attempts=MAX_ATTEMPTS, on_retry=_log_retry
-        ):
-            if done.status == "crashed":
-                done.lost += f" (attempt {done.attempts} of {MAX_ATTEMPTS})"
+        for done in run_tasks(fn, tasks, self.concurrency, attempts=MAX_ATTEMPTS):
             done.concurrent = self.concurrency
             yield done
 
     def close(self) -> None:
         """Nothing to release: :meth:`run` stops its workers when it ends."""
-
-
-def _log_retry(key, why: str) -> None:
-    log.warning("%s: %s; running it again", key, why)
 
 
 def make_executor(

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..exceptions import InputError, ParamError
-from .process import MAX_ATTEMPTS, Done, run_located
+from .process import Done, retry_note, run_located
 
 if TYPE_CHECKING:
     from distributed.security import Security
@@ -176,14 +176,11 @@ class DaskExecutor:
                     key, value, None, attempts, host, worker, threads.get(hosts.get(worker), 1)
                 )
                 continue
-            why = f"{type(fut.exception()).__name__}: {fut.exception()}"
-            if attempts < MAX_ATTEMPTS:
-                log.warning("%s: %s; running it again", key, why)
+            lost = retry_note(key, f"{type(fut.exception()).__name__}: {fut.exception()}", attempts)
+            if lost is None:
                 queue.add(submit(i, key, arg, attempts + 1))
-                continue
-            yield Done(
-                key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0
-            )
+            else:
+                yield Done(key, None, lost, attempts, "", "", 0)
 
     def close(self) -> None:
         if self._plugin:

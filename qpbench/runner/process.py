@@ -12,6 +12,7 @@ forkserver preloaded with qpbench and the kernels this process prepared
 from __future__ import annotations
 
 import importlib
+import logging
 import math
 import multiprocessing
 import os
@@ -30,6 +31,8 @@ from ..statuses import describe_exception
 if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.context import BaseContext
+
+log = logging.getLogger("qpbench.runner")
 
 #: Time allowed for the forkserver's preload and for a worker to start [s].
 START_TIMEOUT_S = 120.0
@@ -256,6 +259,15 @@ class Done:
     status: str | None = None
 
 
+def retry_note(key, why: str, attempt: int, attempts: int = MAX_ATTEMPTS) -> str | None:
+    """After attempt ``attempt`` of a task lost ``why``: ``None`` (logged: it runs again) while
+    attempts are left, else why it is lost, with the attempts made."""
+    if attempt < attempts:
+        log.warning("%s: %s; running it again", key, why)
+        return None
+    return f"{why} (attempt {attempt} of {attempts})"
+
+
 def run_tasks(
     fn: Callable,
     tasks: list[tuple],
@@ -265,12 +277,11 @@ def run_tasks(
     attempts: int = 1,
     fresh: bool = False,
     name: str = "qpbench-worker",
-    on_retry: Callable | None = None,
 ) -> Iterator[Done]:
     """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs`` workers.
 
-    ``attempts``: runs of a task whose worker died before it is lost (``on_retry(key, why)``
-    before each rerun); ``fresh``: a new worker for every task.
+    ``attempts``: runs of a task whose worker died before it is lost (:func:`retry_note`);
+    ``fresh``: a new worker for every task.
     """
     if not tasks:
         return
@@ -303,11 +314,11 @@ def run_tasks(
                 status, payload = answer
                 if fresh:
                     w.stop()  # a new worker for the next task; this one's memory is freed now
-                if status == "crashed" and tried < attempts:
-                    if on_retry is not None:
-                        on_retry(key, payload)
-                    queue.appendleft((key, arg, timeout, tried))
-                    continue
+                if status == "crashed" and attempts > 1:
+                    payload = retry_note(key, payload, tried, attempts)
+                    if payload is None:
+                        queue.appendleft((key, arg, timeout, tried))
+                        continue
                 ok = status == "ok"
                 yield Done(
                     key,
