@@ -24,18 +24,10 @@ log = logging.getLogger("qpbench.harness")
 
 @dataclass
 class Outcome:
-    """What one guarded (possibly repeated) solve produced.
-
-    Attributes:
-        status: Backend status, or ``error``/``time_limit``/``invalid``/``crashed``.
-        solution: Replica 0's solution (:mod:`qpbench.harness.timing`), ``None`` without one.
-        wall_times_s: Wall time of each timed repeat [s].
-        repeat_exact: Every timed repeat returned the kept status, iterations and answer bit for bit.
-        repeat_note: Why ``repeat_exact`` is false or fewer repeats were timed than asked.
-        state_reset: The solve did not start from the state the previous solve of the
-            sequence left (a reset after a failure, a new worker).
-        isolated: The solve ran in a worker process.
-    """
+    """What one guarded (possibly repeated) solve produced: its status, replica 0's solution,
+    ``wall_times_s`` of each timed repeat [s]; ``repeat_exact``: every repeat gave the kept
+    answer bit for bit (else why in ``repeat_note``); ``state_reset``: the solve did not start
+    from the state the previous one left; ``isolated``: it ran in a worker process."""
 
     status: str
     solution: object | None = None
@@ -48,14 +40,9 @@ class Outcome:
 
 
 class LocalRunner:
-    """One backend's guarded, timed solves in this process.
-
-    Args:
-        backend: A backend instance: replica 0.
-        time_limit: Per-solve limit [s], checked when the solve returns.
-        sequential: State carried between solves (else reset before each).
-        repeat: Timed solves per problem: the replicas made now (and warmed up).
-    """
+    """One backend's guarded, timed solves in this process: ``backend`` is replica 0;
+    ``time_limit`` [s] is checked when a solve returns; ``sequential``: state carried between
+    solves (else reset before each); ``repeat``: timed solves per problem (replicas made now)."""
 
     isolated = False
 

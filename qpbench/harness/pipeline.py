@@ -282,25 +282,21 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
         return {}
     from ..sim.scenario import load_scenario
 
-    ticks = 0
-    for name in config.scenarios:
-        sc = load_scenario(name)
-        duration = config.duration if config.duration is not None else sc.duration
-        ticks = max(ticks, math.ceil(duration / sc.dt))
-    floor = min(BUDGET_FLOOR_S, config.run_budget)
+    scenarios = [load_scenario(name) for name in config.scenarios]
+    ticks = max(
+        (math.ceil((config.duration or sc.duration) / sc.dt) for sc in scenarios), default=0
+    )
+    run_budget = config.run_budget
+    floor = min(BUDGET_FLOOR_S, run_budget)
     budgets = {}
     for backend in config.backends:
-        t = per_tick_s.get(backend)
-        if t is None or not math.isfinite(t):
-            budgets[backend] = config.run_budget
-            continue
-        predicted = ticks * t
-        if predicted > config.run_budget:
-            budgets[backend] = min(CUT_BUDGET_S, config.run_budget)
+        predicted = ticks * per_tick_s.get(backend, math.nan)
+        if not math.isfinite(predicted):
+            budgets[backend] = run_budget
+        elif predicted > run_budget:
+            budgets[backend] = min(CUT_BUDGET_S, run_budget)
         else:
-            budgets[backend] = round(
-                min(config.run_budget, max(floor, BUDGET_MARGIN * predicted)), 3
-            )
+            budgets[backend] = round(min(run_budget, max(floor, BUDGET_MARGIN * predicted)), 3)
     return budgets
 
 
@@ -319,12 +315,9 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             s = row["scenario"]
             left[s] = left.get(s, 1) - 1
             if left[s] == 0:  # a scenario's last run: one line per scenario
-                log.info(
-                    "closed loop %s: %d runs done (%.1f s into the closed loop)",
-                    s,
-                    len(config.backends),
-                    time.perf_counter() - started,
-                )
+                spent = time.perf_counter() - started
+                n = len(config.backends)
+                log.info("closed loop %s: %d runs done (%.1f s into the closed loop)", s, n, spent)
             if config.on_row is not None:
                 config.on_row(row)
 
