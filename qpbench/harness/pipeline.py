@@ -144,20 +144,10 @@ def bench_subset(
     from ..reference import reference_solutions
     from ..selection import select_set
 
-    if duration is None and every == 1:
-        return problem_set, reference_solutions(problem_set)
-    keep = [
-        i
-        for i, r in enumerate(problem_set.records)
-        if i % every == 0 and (duration is None or r.t is None or r.t < duration)
-    ]
-    if not keep:
-        keep = [0]
-    kept = [problem_set.records[i] for i in keep]
-    # only the kept problems' references (they share the whole set's cache)
-    refs = reference_solutions(replace(problem_set, records=kept))
-    stretched = select_set(problem_set, every=every) if every > 1 else problem_set
-    return replace(stretched, records=kept), refs
+    stretched = select_set(problem_set, every=every)
+    kept = [r for r in stretched.records if duration is None or r.t is None or r.t < duration]
+    subset = replace(stretched, records=kept or stretched.records[:1])
+    return subset, reference_solutions(subset)
 
 
 def _compress_bench(bench_dir: Path) -> None:
