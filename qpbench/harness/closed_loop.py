@@ -119,13 +119,7 @@ def run_row(task: LoopTask) -> dict:
         load_plugins(list(task.plugins))
         return _run(task)
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
-        log.warning(
-            "closed loop %s with %s failed: %s",
-            task.scenario,
-            task.backend,
-            describe_exception(exc),
-        )
-        return failure_row(task, "error", describe_exception(exc))
+        return failure_row(task, "error", describe_exception(exc), warn=True)
 
 
 def _run(task: LoopTask) -> dict:
@@ -203,8 +197,11 @@ def failure_fields(status: str, message: str) -> dict:
     )
 
 
-def failure_row(task: LoopTask, status: str, message: str) -> dict:
-    """The table row of a run without a result (:func:`failure_fields`), no figures."""
+def failure_row(task: LoopTask, status: str, message: str, warn: bool = False) -> dict:
+    """The table row of a run without a result (:func:`failure_fields`), no figures; ``warn``:
+    the message logged as a warning."""
+    if warn:
+        log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
     row = {c: math.nan for c in COLUMNS}
     row.update(
         scenario=task.scenario,
@@ -349,8 +346,7 @@ def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
         else:
             message = f"{done.lost} during the closed-loop run"
         _drop_partial_logs(task)
-        log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
-        emit(done.key, failure_row(task, done.status, message))
+        emit(done.key, failure_row(task, done.status, message, warn=True))
 
 
 def _drop_partial_logs(task: LoopTask) -> None:
