@@ -131,13 +131,9 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
         if row["mode"] != mode:
             key, why = "mode", f"holds rows of mode '{row['mode']}', this run is '{mode}'; "
         elif row["order_seed"] != str(seed):
-            key, why = (
-                "order_seed",
-                (
-                    f"holds rows ordered with seed {row['order_seed'] or 'none'}, this run's is "
-                    f"{seed}; resume with --seed {row['order_seed']} or "
-                ),
-            )
+            key, seeded = "order_seed", row["order_seed"]
+            why = f"holds rows ordered with seed {seeded or 'none'}, this run's is {seed}; "
+            why += f"resume with --seed {seeded} or "
         elif sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
             key, why = "problem_set_sha256", "holds rows of another problem set (SHA-256 differs); "
         else:

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path, check_folder, check_output, record
+from ..backends import plugin_files
 from ..exceptions import ParamError, positive_seconds
 from ..runner.process import run_tasks
 from ..selection import parse_list
@@ -267,19 +268,15 @@ def run_closed_loop(
     """Run every (scenario, backend) pair in the loop into ``out`` (module docstring).
 
     ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
-    ``resume`` keeps the ``ok`` rows made under the same formulation, duration, budget and
-    ``overrides`` (``--set``) and the rows of pairs not asked; ``force`` removes table and logs;
-    ``skip``: backend -> reason, a ``skipped`` row instead of a run; ``run_time_limit``: an isolated
-    run's deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a
-    backend's in ``budgets``); ``on_row`` is called with each row as soon as it is written.
-    Raises OutputExistsError (the table exists, neither ``force`` nor ``resume``) or ParamError
-    (a bad argument, before anything is written or run).
+    ``resume`` keeps the ``ok`` rows made under the same terms (formulation, duration, budget,
+    ``overrides``) and the rows of pairs not asked; ``force`` removes table and logs; ``skip``:
+    backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's deadline [s];
+    ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's in ``budgets``);
+    ``on_row`` is called with each row once written. Arguments are checked before anything runs.
     """
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
-    from ..backends import plugin_files
-
     out = Path(out)
     csv_path = out / CSV_NAME
     previous = _prepare_output(out, force, resume)
@@ -321,15 +318,11 @@ def run_closed_loop(
             else:
                 _run_in_workers([(key, task, limit)], 1, emit)
     _write_table([rows[k] for k in order if k in rows] + others, csv_path)
-    return _outcome(csv_path, len(todo), len(order) - len(todo))
-
-
-def _outcome(csv_path: Path, ran: int, skipped: int) -> ClosedLoopOutcome:
-    """The outcome, counted from the table as written."""
-    table = pd.read_csv(csv_path)
+    table = pd.read_csv(csv_path)  # the outcome, counted from the table as written
     failed = table["status"].isin(FAILED_RUN_STATUSES)
     not_ok = int((table["verdict"].isin(BAD_VERDICTS) | failed).sum()) if len(table) else 0
-    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, skipped, not_ok)
+    ran = len(todo)
+    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, len(order) - ran, not_ok)
 
 
 def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:

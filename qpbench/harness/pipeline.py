@@ -169,12 +169,13 @@ def run_all(config: RunConfig) -> RunOutcome:
     from ..formats import load_problems
     from ..jit import warmup_logged
     from ..sim.loop import simulate
-    from ..sim.scenario import load_scenario
+    from ..sim.scenario import load_scenario, paper_scenarios
     from .phases import Phases
 
     started = time.perf_counter()
     out, problems = Path(config.out), Path(config.problems)
-    bench_scenarios = _bench_scenarios(config.scenarios)
+    paper = paper_scenarios()  # the bench's: the paper's four among those asked, else all asked
+    bench_scenarios = [s for s in config.scenarios if s in paper] or list(config.scenarios)
     _check_out(out, config.force)
     staging = out / STAGING
     if staging.exists() and not config.resume:
@@ -215,14 +216,6 @@ def run_all(config: RunConfig) -> RunOutcome:
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
     promote(staging, out, OUTPUTS)
     return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
-
-
-def _bench_scenarios(scenarios: list[str]) -> list[str]:
-    """The scenarios the bench uses: the paper's four among those asked, else all asked."""
-    from ..sim.scenario import paper_scenarios
-
-    paper = paper_scenarios()
-    return [s for s in scenarios if s in paper] or list(scenarios)
 
 
 def _bench(
