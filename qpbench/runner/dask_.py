@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..exceptions import InputError, ParamError
+from ..statuses import describe_exception
 from .process import Done, retry_note, run_located
 
 if TYPE_CHECKING:
@@ -141,9 +142,7 @@ class DaskExecutor:
 
     @property
     def concurrency(self) -> int:
-        return (
-            sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()) or 1
-        )
+        return sum(self._per_host()[1].values()) or 1
 
     def _per_host(self) -> tuple[dict, dict]:
         workers = self.client.scheduler_info()["workers"]
@@ -172,15 +171,12 @@ class DaskExecutor:
                 value, host, worker = fut.result()
                 if worker not in hosts:
                     hosts, threads = self._per_host()
-                yield Done(
-                    key, value, None, attempts, host, worker, threads.get(hosts.get(worker), 1)
-                )
-                continue
-            lost = retry_note(key, f"{type(fut.exception()).__name__}: {fut.exception()}", attempts)
-            if lost is None:
-                queue.add(submit(i, key, arg, attempts + 1))
-            else:
+                concurrent = threads.get(hosts.get(worker), 1)
+                yield Done(key, value, None, attempts, host, worker, concurrent)
+            elif lost := retry_note(key, describe_exception(fut.exception()), attempts):
                 yield Done(key, None, lost, attempts, "", "", 0)
+            else:
+                queue.add(submit(i, key, arg, attempts + 1))
 
     def close(self) -> None:
         if self._plugin:
