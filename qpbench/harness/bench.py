@@ -188,7 +188,7 @@ class Plan:
         self.sha = content_sha256(problem_set)
         self.resuming = resume and out.exists() and not force
         self.existing = ExistingResults([])
-        self.marker = InflightMarker(InflightMarker.for_output(out))
+        self.marker = InflightMarker(out)
         self.learned: list[str] = []
         if self.resuming:
             self.existing = read_results(out, repair=False)
@@ -222,7 +222,7 @@ class Plan:
         elif force and out.exists():
             out.unlink()
             self.marker.path.unlink(missing_ok=True)
-        return self.existing.by_key()
+        return {row_key(r): r for r in self.existing.rows}
 
 
 def skipped_solves(

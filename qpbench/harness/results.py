@@ -112,9 +112,6 @@ class ExistingResults:
     rows: list[dict]
     dropped: int = 0
 
-    def by_key(self) -> dict[tuple[str, str, str], dict]:
-        return {row_key(r): r for r in self.rows}
-
 
 def read_results(
     path: str | Path,
@@ -216,19 +213,15 @@ class ResultsWriter:
 class InflightMarker:
     """A side file naming the solve in progress, and what killed the run (docs/architecture.md,
     "The bench"): line 1, the comma-separated backends to isolate; line 2, the key
-    ``problem<TAB>backend<TAB>profile``; then the :mod:`faulthandler` traceback, if any."""
+    ``problem<TAB>backend<TAB>profile``; then the :mod:`faulthandler` traceback, if any. ``out``:
+    the output whose marker it is (``.<out>.inflight`` beside it)."""
 
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
+    def __init__(self, out: str | Path):
+        self.path = Path(out).with_name(f".{Path(out).name}.inflight")
         self.isolate: list[str] = []
         self._fd = None
         self._fault_fd = None
         self._faulthandler_was = None
-
-    @staticmethod
-    def for_output(out: str | Path) -> Path:
-        out = Path(out)
-        return out.with_name(f".{out.name}.inflight")
 
     def read(self) -> tuple[list[str], tuple[str, ...] | None, str]:
         """``(backends to isolate, last in-flight key or None, fatal-error text)`` of a previous run."""
