@@ -17,6 +17,7 @@ import numpy as np
 
 from ..runner.process import START_TIMEOUT_S, Worker, WorkerDied, deadline
 from .guard import LocalRunner, Outcome
+from .timing import ANSWER_FIELDS
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -29,8 +30,16 @@ ISOLATE = ("auto", "always", "never")
 WARMUP_TIMEOUT_S = 30.0
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
-_FIELDS = ("x", "y", "z", "z_box", "found", "obj", "status", "iterations", "solver_time_s")
-_FIELDS += ("backend", "error")
+_FIELDS = (
+    *ANSWER_FIELDS,
+    "found",
+    "obj",
+    "status",
+    "iterations",
+    "solver_time_s",
+    "backend",
+    "error",
+)
 _PLAIN = (int, float, str, bool, type(None), np.ndarray, np.generic)
 
 #: In a worker process: the guarded backend the requests go to (:func:`_build`).
