@@ -24,6 +24,7 @@ import numpy as np
 from ..backends import backend_class
 from ..exceptions import InputError, ParamError, positive_seconds
 from ..profiles import Profile, get_profile
+from ..selection import parse_list
 from ..statuses import FAILURE_STATUSES
 from .guard import LocalRunner, Outcome
 from .isolation import ISOLATE, IsolatedRunner, wants_worker
@@ -80,10 +81,7 @@ class BenchConfig:
         seed = self.seed
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ParamError(f"seed must be an integer >= 0, got {seed!r}", key="seed")
-        if not self.backends:
-            raise ParamError("no backend to run", key="backends")
-        if len(set(self.backends)) != len(self.backends):
-            raise ParamError(f"backend listed twice in {','.join(self.backends)}", key="backends")
+        parse_list(list(self.backends), "backends")  # none twice, not empty, as everywhere
 
 
 def record_period(problem_set: ProblemSet) -> float | None:
