@@ -58,10 +58,15 @@ class LocalRunner:
             except Exception as exc:  # noqa: BLE001 - reported by the first repeated solve
                 log.debug("%s: cannot make replicas now (%s)", self.name, exc)
 
+    @property
+    def backend(self):
+        """Replica 0: the backend whose answers are kept."""
+        return self.replicas.members[0]
+
     def _guarded(self, problem, backend=None) -> Outcome:
         """One timed solve by ``backend`` (default: replica 0), never an exception."""
         try:
-            solution, ns = timed_call(backend or self.replicas.members[0], problem)
+            solution, ns = timed_call(self.backend if backend is None else backend, problem)
         except Exception as exc:  # noqa: BLE001 - turned into a status on purpose
             return Outcome("error", None, [], describe_exception(exc))
         wall = ns * 1e-9
