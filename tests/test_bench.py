@@ -13,8 +13,8 @@ import pytest
 
 from qpbench.cli import main
 from qpbench.formats import write_problem_set
-from qpbench.harness import columns, sequences
-from qpbench.harness.results import TIMING_COLUMNS
+from qpbench.harness.bench import sequences
+from qpbench.harness.results import TIMING_COLUMNS, columns
 from qpbench.profiles import PROFILES
 
 PLUGIN = str(Path(fb.__file__).resolve())
@@ -320,8 +320,7 @@ def test_all_means_every_available_backend(tmp_path):
 def test_online_backend_integrates_the_time_between_records(tmp_path):
     """A set keeping every 10th tick of a 1 ms loop: the network integrates 10 ms per record."""
     from qpbench.formats import read_problem_set
-    from qpbench.harness import BenchConfig
-    from qpbench.harness.bench import backend_settings
+    from qpbench.harness.bench import BenchConfig, backend_settings
 
     folder = write_problem_set(
         tmp_path / "s",

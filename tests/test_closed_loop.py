@@ -369,7 +369,10 @@ def test_guard_parameters(tmp_path):
     assert cl.run_deadline("wall", 0.1) == cl.RUN_TIME_LIMIT_MIN_S
     assert cl.run_deadline("wall", 100.0) == 100.0 * cl.RUN_TIME_LIMIT_PER_SIM_S
     assert cl.run_deadline("wall", None, 7.0) == 7.0
-    assert cl.is_risky("faulty:hang") and not cl.is_risky("daqp") and not cl.is_risky("nosuch")
+    from qpbench.harness.isolation import wants_worker
+
+    risky = [wants_worker("auto", b) for b in ("faulty:hang", "daqp", "nosuch")]
+    assert risky == [True, False, False]
 
 
 # ---------------------------------------------------------------- verdicts and the wall-time budget

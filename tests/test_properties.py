@@ -32,7 +32,8 @@ from known import random_kkt_problem
 
 from qpbench.backends import backend_names
 from qpbench.formats import ProblemRecord, ProblemSet
-from qpbench.harness import BenchConfig, read_results, run_bench
+from qpbench.harness.bench import BenchConfig, run_bench
+from qpbench.harness.results import read_results
 from qpbench.metrics import evaluate
 from qpbench.profiles import PROFILES
 from qpbench.reference import reference_solution
@@ -250,7 +251,7 @@ def test_any_row_round_trips_through_the_csv(values, tmp_path_factory):
     for key, value in zip(targets, values):
         row[key] = value
     path = tmp_path_factory.mktemp("csv") / "r.csv"
-    with ResultsWriter(path, new=True, fsync=False) as writer:
+    with ResultsWriter(path, new=True) as writer:
         writer.write_rows([row])
     back = read_results(path).rows
     assert len(back) == 1 and path.read_text().count("\n") == 2

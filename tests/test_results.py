@@ -120,7 +120,7 @@ def test_foreign_csv_is_an_input_error(tmp_path):
 
 
 def test_inflight_marker_records_key_and_isolation(tmp_path):
-    marker = InflightMarker(InflightMarker.for_output(tmp_path / "out.csv"))
+    marker = InflightMarker(tmp_path / "out.csv")
     assert marker.path.name == ".out.csv.inflight"
     assert marker.read() == ([], None, "")
     marker.open(["qpsolvers:scs"], catch_faults=False)

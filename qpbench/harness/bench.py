@@ -1,26 +1,11 @@
-"""The per-tick benchmark: every backend on every problem of a set, one row each.
+"""The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row each.
 
-:class:`BenchConfig` says what to run; :func:`make_plan` checks it against the problem set and
-an existing output before anything is written; :class:`BenchSummary` is what the run did.
-
-:func:`run_bench` walks the problems in sequence order (:func:`sequences`) and
-solves each with every backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
-(:class:`~.isolation.IsolatedRunner`); a problem's rows are made once all its solves are done
-and appended to the CSV before the next problem starts.
-
-``mode="sequential"``: a backend's state is carried along a sequence (as a controller calls
-its solver tick after tick) and reset between sequences and after a failure that leaves it
-suspect (:data:`~qpbench.statuses.FAILURE_STATUSES`; the next row says ``state_reset``).
-``mode="independent"`` resets before every problem.
-
-The backends solve each problem in an order drawn for it (:func:`backend_order`), so the cold
-caches the harness leaves between problems do not always fall on the same backend; rows record
-``position`` and ``order_seed``.
-
-Resuming keeps the rows in the CSV and skips their keys. In sequential mode a backend with
-problems left in a sequence is brought back to its state by replaying, untimed, the earlier
-problems of the sequence, resetting where the recorded statuses say the original run did;
-deterministic backends then give the rows of an uninterrupted run.
+:class:`BenchConfig` says what to run; :class:`Plan` checks it against the problem set and
+an existing output before anything is written; :func:`run_bench` solves each problem with every
+backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
+(:class:`~.isolation.IsolatedRunner`), in an order drawn per problem (:func:`backend_order`),
+and appends the problem's rows before the next starts; :class:`BenchSummary` is what it did.
+Modes, resuming and the order: docs/architecture.md, "The bench".
 """
 
 from __future__ import annotations
@@ -30,7 +15,7 @@ import logging
 import math
 import statistics
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -39,9 +24,10 @@ import numpy as np
 from ..backends import backend_class
 from ..exceptions import InputError, ParamError, positive_seconds
 from ..profiles import Profile, get_profile
+from ..selection import parse_list
 from ..statuses import FAILURE_STATUSES
 from .guard import LocalRunner, Outcome
-from .isolation import IsolatedRunner
+from .isolation import ISOLATE, IsolatedRunner, wants_worker
 from .results import ExistingResults, InflightMarker, ResultsWriter, read_results, row_key
 
 if TYPE_CHECKING:
@@ -54,24 +40,19 @@ log = logging.getLogger("qpbench.harness")
 #: Seed of the per-problem backend order unless ``--seed`` says otherwise.
 DEFAULT_SEED = 0
 MODES = ("sequential", "independent")
-ISOLATE = ("auto", "always", "never")
 
 
 @dataclass
 class BenchConfig:
     """What to run, checked when made.
 
-    Attributes:
-        profile: Profile name or :class:`~qpbench.profiles.Profile`.
-        repeat: Timed solves per (problem, backend); the row has their min and median.
-        time_limit: Per-solve limit [s]; ``None``: the profile's.
-        isolate: ``auto`` (backends marked ``risky`` or seen to crash in this process),
-            ``always`` or ``never``.
-        warmup: Discarded solves per backend before the first timed one: the first problem,
-            and the first of each other structure (parts present).
-        settings: Solver settings for every backend; ``backend_settings``: per backend name.
-        seed: Seed of the per-problem backend order (:func:`backend_order`).
-        memory_budget: Bytes a solve may need (:mod:`qpbench.memory`; ``None``: the default).
+    ``profile``: a name or :class:`~qpbench.profiles.Profile`; ``repeat``: timed solves per
+    (problem, backend), the row has their min and median; ``mode``: :data:`MODES`;
+    ``time_limit``: per solve [s] (``None``: the profile's); ``isolate``: :data:`ISOLATE`
+    (:func:`~.isolation.wants_worker`); ``warmup``: discarded solves per backend first (the first
+    problem of each structure); ``settings``: solver settings of every backend,
+    ``backend_settings`` per backend name; ``seed``: of :func:`backend_order`;
+    ``memory_budget``: bytes a solve may need (``None``: :mod:`qpbench.memory`'s default).
     """
 
     backends: list[str]
@@ -87,29 +68,20 @@ class BenchConfig:
     memory_budget: int | None = None
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ParamError(
-                f"unknown mode '{self.mode}' (choose from {', '.join(MODES)})", key="mode"
-            )
-        if self.isolate not in ISOLATE:
-            raise ParamError(
-                f"unknown isolation '{self.isolate}' (choose from {', '.join(ISOLATE)})",
-                key="isolate",
-            )
+        for key, what, choices in (("mode", "mode", MODES), ("isolate", "isolation", ISOLATE)):
+            value = getattr(self, key)
+            if value not in choices:
+                raise ParamError(
+                    f"unknown {what} '{value}' (choose from {', '.join(choices)})", key=key
+                )
         if int(self.repeat) < 1:
             raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
         if self.time_limit is not None:
             self.time_limit = positive_seconds(self.time_limit, "time-limit")
-        if (
-            isinstance(self.seed, bool)
-            or not isinstance(self.seed, (int, np.integer))
-            or self.seed < 0
-        ):
-            raise ParamError(f"seed must be an integer >= 0, got {self.seed!r}", key="seed")
-        if not self.backends:
-            raise ParamError("no backend to run", key="backends")
-        if len(set(self.backends)) != len(self.backends):
-            raise ParamError(f"backend listed twice in {','.join(self.backends)}", key="backends")
+        seed = self.seed
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ParamError(f"seed must be an integer >= 0, got {seed!r}", key="seed")
+        parse_list(list(self.backends), "backends")  # none twice, not empty, as everywhere
 
 
 def record_period(problem_set: ProblemSet) -> float | None:
@@ -155,56 +127,16 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
     """A resumed file's rows must be of this run's mode, seed and problem set."""
     for row in existing.rows:
         if row["mode"] != mode:
-            raise InputError(
-                f"holds rows of mode '{row['mode']}', this run is '{mode}'; use --force to start again",
-                path=path,
-                key="mode",
-            )
-        if row["order_seed"] != str(seed):
-            raise InputError(
-                f"holds rows ordered with seed {row['order_seed'] or 'none'}, this run's is {seed}; "
-                f"resume with --seed {row['order_seed']} or use --force to start again",
-                path=path,
-                key="order_seed",
-            )
-        if sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
-            raise InputError(
-                "holds rows of another problem set (SHA-256 differs); use --force to start again",
-                path=path,
-                key="problem_set_sha256",
-            )
-
-
-@dataclass
-class Plan:
-    """A checked run before anything is written.
-
-    Attributes:
-        seqs: The records' sequences (:func:`sequences`).
-        profile: The profile in force, with the run's time limit.
-        instances: In-process backend instances (a bad name failed while making them).
-        sha: Content SHA-256 of the set.
-        resuming: An existing output is continued; ``existing``: its rows.
-        learned: Backends known to crash in this process (from the in-flight ``marker``).
-        skips: ``(record index, backend) -> reason`` of the solves not made (:func:`skipped_solves`).
-        notes: ``record index -> warning`` written in its rows' ``error`` column.
-        budget: Bytes a solve may need (:func:`qpbench.memory.resolve_budget`).
-    """
-
-    records: list
-    seqs: list
-    profile: Profile
-    settings: dict
-    instances: dict
-    versions: dict
-    sha: str | None
-    resuming: bool
-    existing: ExistingResults
-    learned: list
-    marker: InflightMarker
-    skips: dict = field(default_factory=dict)
-    notes: dict = field(default_factory=dict)
-    budget: int = 0
+            key, why = "mode", f"holds rows of mode '{row['mode']}', this run is '{mode}'; "
+        elif row["order_seed"] != str(seed):
+            key, seeded = "order_seed", row["order_seed"]
+            why = f"holds rows ordered with seed {seeded or 'none'}, this run's is {seed}; "
+            why += f"resume with --seed {seeded} or "
+        elif sha and row["problem_set_sha256"] and row["problem_set_sha256"] != sha:
+            key, why = "problem_set_sha256", "holds rows of another problem set (SHA-256 differs); "
+        else:
+            continue
+        raise InputError(why + "use --force to start again", path=path, key=key)
 
 
 def _check_records(problem_set) -> list:
@@ -220,80 +152,82 @@ def _check_records(problem_set) -> list:
     return records
 
 
-def _learn_from_crash(plan: Plan, config: BenchConfig) -> None:
-    """A backend that died in this process while solving (in-flight marker of the interrupted
-    run) goes to a worker from now on (under ``--isolate auto``)."""
-    learned, inflight, crash = plan.marker.read()
-    plan.learned[:] = learned
-    done_keys = {row_key(r) for r in plan.existing.rows}
-    if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
-        return
-    suspect = inflight[1]
-    if suspect in plan.instances and suspect not in plan.learned:
-        plan.learned.append(suspect)
-        log.warning(
-            "the previous run died while %s was solving %s in this process (%s); %s",
-            suspect,
-            inflight[0],
-            crash.splitlines()[0],
-            "it runs in a worker process from now on"
-            if config.isolate == "auto"
-            else "use --isolate auto or always to isolate it",
+class Plan:
+    """A checked run: every check that can fail on user input, made before ``out`` is created
+    or changed. ``profile``: with the run's time limit; ``instances``: in-process backends;
+    ``skips``, ``notes``: :func:`skipped_solves`; ``resuming``: ``out`` is continued
+    (``existing``: its rows); ``learned``: backends seen to crash in this process (``marker``)."""
+
+    def __init__(
+        self, problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
+    ):
+        from ..atomic import check_output
+        from ..backends import get_backend
+        from ..formats import content_sha256
+        from ..memory import resolve_budget
+
+        check_output(out, force=force, resume=resume, make_parent=True)
+        profile = get_profile(config.profile)
+        self.profile = profile.with_time_limit(
+            config.time_limit if config.time_limit is not None else float(profile.time_limit)
         )
+        self.records = records = _check_records(problem_set)
+        self.seqs = sequences(records, config.mode)
+        self.settings = {
+            name: backend_settings(name, config, problem_set) for name in config.backends
+        }
+        self.instances = {
+            name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
+        }
+        self.versions = {name: type(b).version() for name, b in self.instances.items()}
+        budget = config.memory_budget
+        self.budget = resolve_budget(None) if budget is None else budget
+        self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
+        self.sha = content_sha256(problem_set)
+        self.resuming = resume and out.exists() and not force
+        self.existing = ExistingResults([])
+        self.marker = InflightMarker(out)
+        self.learned: list[str] = []
+        if self.resuming:
+            self.existing = read_results(out, repair=False)
+            _check_existing(self.existing, out, config.mode, self.sha, int(config.seed))
+            self._learn_from_crash(config.isolate)
 
+    def _learn_from_crash(self, isolate: str) -> None:
+        """A backend that died in this process while solving (in-flight marker of the
+        interrupted run) goes to a worker from now on (under ``--isolate auto``)."""
+        self.learned, inflight, crash = self.marker.read()
+        done_keys = {row_key(r) for r in self.existing.rows}
+        if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
+            return
+        suspect = inflight[1]
+        if suspect in self.instances and suspect not in self.learned:
+            self.learned.append(suspect)
+            log.warning(
+                "the previous run died while %s was solving %s in this process (%s); %s",
+                suspect,
+                inflight[0],
+                crash.splitlines()[0],
+                "it runs in a worker process from now on"
+                if isolate == "auto"
+                else "use --isolate auto or always to isolate it",
+            )
 
-def make_plan(
-    problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
-) -> Plan:
-    """Every check that can fail on user input, before ``out`` is created or changed."""
-    from ..atomic import check_output
-    from ..backends import get_backend
-    from ..formats import content_sha256
-
-    check_output(out, force=force, resume=resume, make_parent=True)
-    profile = get_profile(config.profile)
-    run_profile = profile.with_time_limit(
-        config.time_limit if config.time_limit is not None else float(profile.time_limit)
-    )
-    records = _check_records(problem_set)
-    settings = {name: backend_settings(name, config, problem_set) for name in config.backends}
-    instances = {name: get_backend(name, run_profile, **settings[name]) for name in config.backends}
-    from ..memory import resolve_budget
-
-    budget = resolve_budget(None) if config.memory_budget is None else config.memory_budget
-    skips, notes = skipped_solves(records, config.backends, budget)
-    plan = Plan(
-        records=records,
-        seqs=sequences(records, config.mode),
-        profile=run_profile,
-        settings=settings,
-        instances=instances,
-        versions={name: type(b).version() for name, b in instances.items()},
-        sha=content_sha256(problem_set),
-        resuming=resume and out.exists() and not force,
-        existing=ExistingResults([]),
-        learned=[],
-        marker=InflightMarker(InflightMarker.for_output(out)),
-        skips=skips,
-        notes=notes,
-        budget=budget,
-    )
-    if plan.resuming:
-        plan.existing = read_results(out, repair=False)
-        _check_existing(plan.existing, out, config.mode, plan.sha, int(config.seed))
-        _learn_from_crash(plan, config)
-    return plan
+    def open_output(self, out: Path, force: bool) -> dict:
+        """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
+        if self.resuming:
+            self.existing = read_results(out, repair=True)
+        elif force and out.exists():
+            out.unlink()
+            self.marker.path.unlink(missing_ok=True)
+        return {row_key(r): r for r in self.existing.rows}
 
 
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
-    """``(skips, notes)``: the solves not made and why, and the warnings of the rest.
-
-    A clearly nonconvex problem is skipped by every backend, a slightly indefinite one solved
-    with a warning (:mod:`qpbench.formats.convexity`); one too large for a dense-only backend
-    or the memory budget is skipped by that backend (:func:`qpbench.memory.skip_reason`).
-    """
+    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made (nonconvex,
+    :func:`qpbench.memory.skip_reason`) and ``record index -> warning`` (slightly indefinite)."""
     from ..formats.convexity import assess_convexity
     from ..memory import skip_reason
 
@@ -318,15 +252,11 @@ def references_for(
     """One reference per record: ``references`` as given, or computed by it (a function of a
     problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
     backend solves within the memory budget (the others' status is ``unknown``)."""
-    from dataclasses import replace
-
     from ..memory import sparse_solver_bytes
-    from ..reference import ReferenceSolution
+    from ..reference import ReferenceSolution, reference_solutions
 
     if references is None or callable(references):
-        from ..reference import reference_solutions
-
-        compute = reference_solutions if references is None else references
+        compute = references or reference_solutions
         wanted = [
             i
             for i, r in enumerate(plan.records)
@@ -345,16 +275,6 @@ def references_for(
             path=problem_set.path,
         )
     return references
-
-
-def open_output(plan: Plan, out: Path, force: bool) -> dict:
-    """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
-    if plan.resuming:
-        plan.existing = read_results(out, repair=True)
-    elif force and out.exists():
-        out.unlink()
-        plan.marker.path.unlink(missing_ok=True)
-    return plan.existing.by_key()
 
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
@@ -396,65 +316,41 @@ def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
 
 def _n_box(problem) -> int:
     """Finite bounds of a problem."""
-    return sum(
-        int(np.isfinite(np.asarray(b, dtype=float)).sum())
-        for b in (problem.lb, problem.ub)
-        if b is not None
-    )
+    bounds = [b for b in (problem.lb, problem.ub) if b is not None]
+    return sum(int(np.isfinite(np.asarray(b, dtype=float)).sum()) for b in bounds)
 
 
 class _BenchRun:
     """The solving part of :func:`run_bench`: runners, warm-up, sequences, rows."""
 
     def __init__(self, plan: Plan, config: BenchConfig, references: list, done: dict, out: Path):
-        self.plan = plan
-        self.config = config
-        self.references = references
-        self.done = done
+        self.plan, self.config, self.references, self.done = plan, config, references, done
         self.sequential = config.mode == "sequential"
         self.pname = plan.profile.name
         self.runners = {name: self._runner(name) for name in config.backends}
         self.summary = BenchSummary(
             isolated=[n for n in config.backends if self.runners[n].isolated], seed=int(config.seed)
         )
-        # per backend and sequence: keys still to run (to know when replay is needed)
-        self.todo = {
-            name: [
-                any((plan.records[i].name, name, self.pname) not in done for i in seq)
-                for seq in plan.seqs
-            ]
+        left = {
+            name: [(r.name, name, self.pname) not in done for r in plan.records]
             for name in config.backends
         }
-        self.total_todo = sum(
-            1 for r in plan.records for b in config.backends if (r.name, b, self.pname) not in done
-        )
+        # per backend and sequence: keys still to run (to know when replay is needed)
+        self.todo = {name: [any(left[name][i] for i in seq) for seq in plan.seqs] for name in left}
+        self.total_todo = sum(sum(v) for v in left.values())
         self.writer = ResultsWriter(out, new=not (plan.resuming and out.exists()))
         self.overheads: list[float] = []
         self.bar = None
 
-    def _worker(self, name: str) -> IsolatedRunner:
+    def _runner(self, name: str, isolate: bool = False):
         plan, config = self.plan, self.config
-        return IsolatedRunner(
-            name,
-            plan.profile,
-            plan.settings[name],
-            plan.profile.time_limit,
-            self.sequential,
-            config.repeat,
-        )
-
-    def _runner(self, name: str):
-        isolate = self.config.isolate
-        if isolate == "always" or (
-            isolate == "auto" and (backend_class(name).risky or name in self.plan.learned)
-        ):
-            return self._worker(name)
-        return LocalRunner(
-            self.plan.instances[name],
-            self.plan.profile.time_limit,
-            self.sequential,
-            self.config.repeat,
-        )
+        limit = plan.profile.time_limit
+        if isolate or wants_worker(config.isolate, name, plan.learned):
+            settings = plan.settings[name]
+            return IsolatedRunner(
+                name, plan.profile, settings, limit, self.sequential, config.repeat
+            )
+        return LocalRunner(plan.instances[name], limit, self.sequential, config.repeat)
 
     def run(self, progress: bool | str) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
@@ -531,25 +427,22 @@ class _BenchRun:
             needs_reset[name] = True
 
     def _solve(self, name: str, record, needs_reset: dict):
-        """One timed (repeated) solve; a backend that overran in this process moves to a worker."""
+        """One timed (repeated) solve; a backend that overran in this process moves to a worker
+        (a solve in this process is never interrupted; a worker is killed at its deadline)."""
         self.plan.marker.mark((record.name, name, self.pname))
-        outcome = self.runners[name].solve(
+        runner = self.runners[name]
+        outcome = runner.solve(
             record.problem, repeat=self.config.repeat, reset_before=needs_reset[name]
         )
         needs_reset[name] = self.sequential and outcome.status in FAILURE_STATUSES
-        if (
-            outcome.status == "time_limit"
-            and not self.runners[name].isolated
-            and self.config.isolate == "auto"
-        ):
-            # a solve in this process is never interrupted; a worker is killed at its deadline
+        if outcome.status == "time_limit" and not runner.isolated and self.config.isolate == "auto":
             log.warning(
                 "%s overran its time limit on %s in this process; it runs in a worker process from now on",
                 name,
                 record.name,
             )
-            self.runners[name].close()
-            self.runners[name] = self._worker(name)
+            runner.close()
+            self.runners[name] = self._runner(name, isolate=True)
             self.plan.learned.append(name)
             self.plan.marker.isolate = list(self.plan.learned)
             self.summary.isolated.append(name)
@@ -562,15 +455,16 @@ class _BenchRun:
         from ..metrics import evaluate, metric_columns
 
         record, profile = self.plan.records[i], self.plan.profile
-        sol, status = outcome.solution, outcome.status
-        if sol is not None:
-            sol.found = status == "optimal"
-            if status == "invalid":
-                sol = None
+        kept, status = outcome.solution, outcome.status
+        if kept is not None:
+            kept.found = status == "optimal"
+        sol = None if status == "invalid" else kept
         metrics = evaluate(record, sol, self.references[i], profile.tolerance)
         times = outcome.wall_times_s
         n, m_eq, m_ineq = problem_sizes(record.problem)
-        kept = outcome.solution
+        error = outcome.error if status != "optimal" or outcome.error else None
+        if i in self.plan.notes and status != "skipped":
+            error = "; ".join(filter(None, [self.plan.notes[i], error]))
         return {
             "problem": record.name,
             "scenario": record.scenario,
@@ -585,9 +479,9 @@ class _BenchRun:
             **{c: metrics[c] for c in metric_columns()},
             "wall_time_min_s": min(times) if times else None,
             "wall_time_median_s": statistics.median(times) if times else None,
-            "solver_time_s": None if kept is None else _float(getattr(sol, "solver_time_s", None)),
-            "iterations": None if kept is None else getattr(kept, "iterations", None),
-            "error": outcome.error if status != "optimal" or outcome.error else None,
+            "solver_time_s": _float(getattr(sol, "solver_time_s", None)),
+            "iterations": getattr(kept, "iterations", None),
+            "error": error,
             "state_reset": outcome.state_reset,
             "isolated": outcome.isolated,
             "position": position,
@@ -606,19 +500,15 @@ class _BenchRun:
     def _write_rows(self, i: int, solved: list) -> None:
         """Rows (metrics against the reference) once every backend has solved problem ``i``."""
         backends = self.config.backends
-        batch = []
-        for position, name, outcome in sorted(solved, key=lambda item: backends.index(item[1])):
-            row = self._row(i, name, outcome, position)
-            if i in self.plan.notes and outcome.status != "skipped":
-                row["error"] = "; ".join(filter(None, [self.plan.notes[i], row["error"]]))
-            batch.append(row)
+        solved = sorted(solved, key=lambda item: backends.index(item[1]))
+        batch = [self._row(i, name, outcome, position) for position, name, outcome in solved]
+        for row in batch:
             if row["wall_time_min_s"] is not None:
                 self.summary.timed_s += row["wall_time_min_s"]
                 if row["solver_time_s"] is not None and math.isfinite(row["solver_time_s"]):
                     self.overheads.append(row["wall_time_min_s"] - row["solver_time_s"])
         self.writer.write_rows(batch)
-        for row in batch:
-            self.done[row_key(row)] = row
+        self.done.update((row_key(row), row) for row in batch)
         self.summary.new_rows += len(batch)
         if self.bar is not None and batch:
             self.bar.update(len(batch))
@@ -640,12 +530,8 @@ class _BenchRun:
 
 @dataclass
 class BackendStats:
-    """One backend's rows in a bench run (a line of the closing table).
-
-    ``times_s``: ``wall_time_min_s`` of its rows [s]; ``violations``: ``constraint_violation``
-    of the rows with an ``x``; ``failures``: failed solves (:func:`is_failure`) by status;
-    ``isolated``: rows solved in a worker process.
-    """
+    """One backend's rows (a line of the closing table): ``times_s``: ``wall_time_min_s`` [s];
+    ``failures``: :func:`is_failure` by status; ``isolated``: rows solved in a worker."""
 
     rows: int = 0
     successes: int = 0
@@ -658,17 +544,11 @@ class BackendStats:
     def n_failures(self) -> int:
         return sum(self.failures.values())
 
-    @property
-    def unsuccessful(self) -> int:
-        return self.rows - self.successes
-
     def add(self, row: dict) -> None:
         """Count one row (a new row's values or a resumed row's strings)."""
         self.rows += 1
-        if _truth(row.get("success")):
-            self.successes += 1
-        if _truth(row.get("isolated")):
-            self.isolated += 1
+        self.successes += _truth(row.get("success"))
+        self.isolated += _truth(row.get("isolated"))
         t = _float(row.get("wall_time_min_s"))
         if t is not None and math.isfinite(t):
             self.times_s.append(t)
@@ -682,17 +562,10 @@ class BackendStats:
 
 @dataclass
 class BenchSummary:
-    """What a bench run did (the data of the closing line and table).
-
-    Attributes:
-        backends: Each backend's :class:`BackendStats` over the rows of this run's keys in the
-            CSV (resumed and new); ``new_rows``: rows written now.
-        elapsed_s: Duration of this invocation [s].
-        timed_s: Sum of the new rows' ``wall_time_min_s`` [s].
-        overhead_median_s: Median over new rows of ``wall_time_min_s - solver_time_s`` [s]
-            (NaN if no backend reports a time), over ``overhead_rows`` rows.
-        isolated: Backends that ran in a worker process.
-    """
+    """What a bench run did: each backend's :class:`BackendStats` over the rows of this run's
+    keys (resumed and new); ``elapsed_s`` [s] of this invocation; ``timed_s``: sum of the new
+    rows' ``wall_time_min_s`` [s]; ``overhead_median_s``: median over the new rows of
+    ``wall_time_min_s - solver_time_s`` [s]; ``isolated``: backends run in a worker."""
 
     new_rows: int = 0
     backends: dict = field(default_factory=dict)
@@ -715,15 +588,18 @@ class BenchSummary:
     def line(self) -> str:
         """The closing line: rows, failed and unsuccessful solves by backend, times."""
 
-        def by_backend(counts: dict) -> str:
-            return " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
+        def counted(label: str, counts: dict) -> str:
+            counts = {b: n for b, n in counts.items() if n}
+            text = f"{sum(counts.values())} {label}"
+            return text + (
+                " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
+            )
 
-        failed = {b: s.n_failures for b, s in self.backends.items() if s.n_failures}
-        unsuccessful = {b: s.unsuccessful for b, s in self.backends.items() if s.unsuccessful}
+        failed = counted("failed solves", {b: s.n_failures for b, s in self.backends.items()})
+        unsuccessful = {b: s.rows - s.successes for b, s in self.backends.items()}
         text = (
-            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; "
-            f"{self.failures} failed solves{by_backend(failed)}; "
-            f"{sum(unsuccessful.values())} without success{by_backend(unsuccessful)}; "
+            f"{self.rows} rows ({self.new_rows} new) in {self.elapsed_s:.1f} s; {failed}; "
+            f"{counted('without success', unsuccessful)}; "
             f"timed solves {self.timed_s:.3f} s; backend order seed {self.seed}"
         )
         if self.overhead_rows:
@@ -738,19 +614,10 @@ class BenchSummary:
     def table(self) -> str:
         """Per backend: rows, success %, time p50/p99 [us], max constraint violation (problem
         units), failures by status; ``*`` marks a backend solved in a worker process."""
-        header = [
-            "backend",
-            "rows",
-            "success %",
-            "time p50 (us)",
-            "time p99 (us)",
-            "max violation",
-            "failures",
-        ]
-        lines = [header]
+        lines = [["backend", "rows", "success %", "time p50 (us)", "time p99 (us)"]]
+        lines[0] += ["max violation", "failures"]
         for name, st in self.backends.items():
             times = np.asarray(st.times_s, dtype=float)
-            viol = np.asarray(st.violations, dtype=float)
             fails = ", ".join(f"{k} {v}" for k, v in sorted(st.failures.items())) or "0"
             lines.append(
                 [
@@ -759,19 +626,15 @@ class BenchSummary:
                     f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
                     f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
                     f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
-                    f"{viol.max():.3g}" if viol.size else "-",
+                    f"{max(st.violations):.3g}" if st.violations else "-",
                     fails if not st.n_failures else f"{st.n_failures} ({fails})",
                 ]
             )
-        widths = [max(len(r[j]) for r in lines) for j in range(len(header))]
-        out = []
-        for r in lines:
-            cells = (
-                [r[0].ljust(widths[0])]
-                + [c.rjust(w) for c, w in zip(r[1:-1], widths[1:-1])]
-                + [r[-1]]
-            )
-            out.append("  ".join(cells).rstrip())
+        widths = [max(len(r[j]) for r in lines) for j in range(len(lines[0]) - 1)]
+        out = [
+            "  ".join([r[0].ljust(widths[0]), *map(str.rjust, r[1:-1], widths[1:]), r[-1]]).rstrip()
+            for r in lines
+        ]
         if any(st.isolated for st in self.backends.values()):
             out.append("* some or all rows solved in a worker process (times taken inside it)")
         return "\n".join(out)
@@ -785,11 +648,8 @@ def _truth(value) -> bool:
 
 
 def is_failure(status: str, reference_status: str | None) -> bool:
-    """A failed solve: a harness failure status, or not ``optimal`` where the reference is.
-
-    A ``skipped`` row (a solve not made: nonconvex, beyond a dense-only backend's size or
-    the memory budget; the reason in ``error``) is not a failure.
-    """
+    """A failed solve: a harness failure status, or not ``optimal`` where the reference is;
+    a ``skipped`` row (a solve not made, the reason in ``error``) is none."""
     if status == "skipped":
         return False
     return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
@@ -797,8 +657,6 @@ def is_failure(status: str, reference_status: str | None) -> bool:
 
 def _float(value) -> float | None:
     """A number cell (a new row's value or a resumed row's string) as a float, else ``None``."""
-    if value is None:
-        return None
     try:
         return float(value)
     except (TypeError, ValueError):
@@ -819,14 +677,9 @@ class LogBar:
         if now - self.last >= self.every_s and self.n < self.total:
             self.last = now
             spent = now - self.started
-            log.info(
-                "bench %s: %d/%d solves in %.0f s, about %.0f s left",
-                self.name,
-                self.n,
-                self.total,
-                spent,
-                spent * (self.total - self.n) / self.n,
-            )
+            left = spent * (self.total - self.n) / self.n
+            msg = "bench %s: %d/%d solves in %.0f s, about %.0f s left"
+            log.info(msg, self.name, self.n, self.total, spent, left)
 
     def close(self) -> None:
         pass
@@ -842,22 +695,17 @@ def run_bench(
     references: list | None = None,
     progress: bool | str = False,
 ) -> BenchSummary:
-    """Benchmark ``config.backends`` on ``problem_set`` (loaded and validated); rows to ``out``.
+    """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``.
 
-    Everything that can fail on user input is checked before ``out`` is created or changed.
     ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
-    per record (``None`` entries for none), or a function of the set returning them; computed
-    (and cached) if ``None``. ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
-
-    Raises:
-        OutputExistsError: ``out`` exists and neither ``force`` nor ``resume``.
-        ParamError, BackendNotFound, InputError: bad configuration or a foreign ``out``.
+    per record, or a function of the set returning them (:func:`references_for`).
+    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
     """
     started = time.perf_counter()
     out = Path(out)
-    plan = make_plan(problem_set, config, out, force, resume)
+    plan = Plan(problem_set, config, out, force, resume)
     references = references_for(problem_set, plan, references)
-    done = open_output(plan, out, force)  # from here on, the output is created or changed
+    done = plan.open_output(out, force)  # from here on, the output is created or changed
     bench_run = _BenchRun(plan, config, references, done, out)
     bench_run.run(progress)
     return bench_run.finish(started)

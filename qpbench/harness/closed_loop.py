@@ -2,21 +2,13 @@
 
 :func:`run_row` is the one closed-loop run of every command (``closed-loop``, ``run``, ``sweep``):
 a discarded warm-up of :data:`WARMUP_TICKS` ticks, the timed run
-(:func:`qpbench.sim.loop.simulate`) and its row. Its :class:`LoopTask` is plain picklable data, so
-it runs the same in this process, in a worker process (:mod:`qpbench.runner`) or on Dask.
-
+(:func:`qpbench.sim.loop.simulate`) and its row; its :class:`LoopTask` is plain picklable data.
 :func:`run_closed_loop` makes every pair into ``OUT/closed_loop.csv`` (rewritten atomically after
-each run) and ``OUT/logs/<scenario>__<backend>.parquet``. An isolated run (``isolate``: ``auto``,
-backends whose class says ``risky = True``; ``always``; ``never``) is made in a worker process of
-its own with a deadline (:func:`run_deadline`): a hang gives a ``time_limit`` row, a crash a
-``crashed`` one, and the other runs go on. With ``jobs > 1`` every run has a worker of its own.
-
-A row is the run's summary (:mod:`qpbench.sim.summary` describes every figure) under
-:data:`TABLE_NAMES`, lists and dicts as JSON text: :data:`COLUMNS` first, then ``isolated``,
-``run_budget_s`` [s] and the other figures sorted by name. ``status``: ``ok``; ``budget`` (stopped
-between ticks by its wall-time budget; verdict ``incomplete``); ``error``, ``crashed`` or
-``time_limit`` (no result: ``error`` says why, verdict ``incomplete``, ``realtime`` ``no``);
-``skipped`` (why in ``error``, no verdict). ``log_file`` is relative to the CSV's folder.
+each run) and ``OUT/logs/<scenario>__<backend>.parquet``, an isolated run in a worker process of
+its own with a deadline (:func:`run_deadline`). A row is the run's summary
+(:mod:`qpbench.sim.summary`) under :data:`TABLE_NAMES`, lists and dicts as JSON text:
+:data:`COLUMNS` first, then ``isolated``, ``run_budget_s`` [s] and the other figures sorted by
+name; its statuses: docs/architecture.md, "Closed-loop runs".
 """
 
 from __future__ import annotations
@@ -34,11 +26,13 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path, check_folder, check_output, record
+from ..backends import plugin_files
 from ..exceptions import ParamError, positive_seconds
 from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
 from ..statuses import FORMULATIONS, describe_exception
+from .isolation import ISOLATE, wants_worker
 
 log = logging.getLogger("qpbench.harness")
 
@@ -46,8 +40,6 @@ CSV_NAME = "closed_loop.csv"
 LOG_DIR = "logs"
 #: Ticks of the discarded warm-up run before each timed run (one-off costs out of the clock).
 WARMUP_TICKS = 3
-#: Choices of ``isolate``.
-ISOLATE = ("auto", "always", "never")
 #: Statuses of a run that produced no result.
 FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
 #: Least deadline of an isolated run [s].
@@ -128,13 +120,7 @@ def run_row(task: LoopTask) -> dict:
         load_plugins(list(task.plugins))
         return _run(task)
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
-        log.warning(
-            "closed loop %s with %s failed: %s",
-            task.scenario,
-            task.backend,
-            describe_exception(exc),
-        )
-        return failure_row(task, "error", describe_exception(exc))
+        return failure_row(task, "error", describe_exception(exc), warn=True)
 
 
 def _run(task: LoopTask) -> dict:
@@ -212,8 +198,11 @@ def failure_fields(status: str, message: str) -> dict:
     )
 
 
-def failure_row(task: LoopTask, status: str, message: str) -> dict:
-    """The table row of a run without a result (:func:`failure_fields`), no figures."""
+def failure_row(task: LoopTask, status: str, message: str, warn: bool = False) -> dict:
+    """The table row of a run without a result (:func:`failure_fields`), no figures; ``warn``:
+    the message logged as a warning."""
+    if warn:
+        log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
     row = {c: math.nan for c in COLUMNS}
     row.update(
         scenario=task.scenario,
@@ -224,17 +213,6 @@ def failure_row(task: LoopTask, status: str, message: str) -> dict:
         **failure_fields(status, message),
     )
     return row
-
-
-def is_risky(backend: str) -> bool:
-    """The backend's class says ``risky = True`` (``False`` for an unknown name)."""
-    from ..backends import backend_class
-    from ..exceptions import BackendNotFound
-
-    try:
-        return bool(backend_class(backend).risky)
-    except BackendNotFound:
-        return False
 
 
 def run_deadline(
@@ -290,19 +268,15 @@ def run_closed_loop(
     """Run every (scenario, backend) pair in the loop into ``out`` (module docstring).
 
     ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
-    ``resume`` keeps the ``ok`` rows made under the same formulation, duration, budget and
-    ``overrides`` (``--set``) and the rows of pairs not asked; ``force`` removes table and logs;
-    ``skip``: backend -> reason, a ``skipped`` row instead of a run; ``run_time_limit``: an isolated
-    run's deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a
-    backend's in ``budgets``); ``on_row`` is called with each row as soon as it is written.
-    Raises OutputExistsError (the table exists, neither ``force`` nor ``resume``) or ParamError
-    (a bad argument, before anything is written or run).
+    ``resume`` keeps the ``ok`` rows made under the same terms (formulation, duration, budget,
+    ``overrides``) and the rows of pairs not asked; ``force`` removes table and logs; ``skip``:
+    backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's deadline [s];
+    ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's in ``budgets``);
+    ``on_row`` is called with each row once written. Arguments are checked before anything runs.
     """
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
-    from ..backends import plugin_files
-
     out = Path(out)
     csv_path = out / CSV_NAME
     previous = _prepare_output(out, force, resume)
@@ -312,11 +286,8 @@ def run_closed_loop(
     rows, others = _kept_rows(order, previous, formulation, duration, budget, skip or {}, overrides)
     todo = [k for k in order if k not in rows]
 
-    def isolated(backend: str) -> bool:
-        return isolate == "always" or (isolate == "auto" and is_risky(backend))
-
     def emit(key: tuple[str, str], row: dict) -> None:
-        row["isolated"] = isolated(key[1])
+        row["isolated"] = wants_worker(isolate, key[1])
         row["run_budget_s"] = budget(key[1])
         rows[key] = row
         if row["log_file"]:  # written here or by a worker process
@@ -334,7 +305,7 @@ def run_closed_loop(
         (
             (s, b),
             replace(terms, scenario=s, backend=b, run_budget=budget(b)),
-            run_deadline(s, duration, run_time_limit) if isolated(b) else None,
+            run_deadline(s, duration, run_time_limit) if wants_worker(isolate, b) else None,
         )
         for s, b in todo
     ]
@@ -347,15 +318,11 @@ def run_closed_loop(
             else:
                 _run_in_workers([(key, task, limit)], 1, emit)
     _write_table([rows[k] for k in order if k in rows] + others, csv_path)
-    return _outcome(csv_path, len(todo), len(order) - len(todo))
-
-
-def _outcome(csv_path: Path, ran: int, skipped: int) -> ClosedLoopOutcome:
-    """The outcome, counted from the table as written."""
-    table = pd.read_csv(csv_path)
+    table = pd.read_csv(csv_path)  # the outcome, counted from the table as written
     failed = table["status"].isin(FAILED_RUN_STATUSES)
     not_ok = int((table["verdict"].isin(BAD_VERDICTS) | failed).sum()) if len(table) else 0
-    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, skipped, not_ok)
+    ran = len(todo)
+    return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, len(order) - ran, not_ok)
 
 
 def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
@@ -372,8 +339,7 @@ def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
         else:
             message = f"{done.lost} during the closed-loop run"
         _drop_partial_logs(task)
-        log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
-        emit(done.key, failure_row(task, done.status, message))
+        emit(done.key, failure_row(task, done.status, message, warn=True))
 
 
 def _drop_partial_logs(task: LoopTask) -> None:
@@ -441,19 +407,17 @@ def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
     return rows, others
 
 
-def _same_run(
-    row: dict,
-    formulation: str,
-    duration: float | None,
-    run_budget: float | None = None,
-    overrides: dict | None = None,
-) -> bool:
+def _same_run(row: dict, formulation, duration, run_budget, overrides: dict) -> bool:
     """``row`` (read back) is a finished run of this formulation, duration, budget and overrides."""
-    if str(row.get("formulation")) != formulation:
-        return False
-    if _row_overrides(row) != json.loads(json.dumps(overrides or {})):
-        return False
+    text = row.get("scenario_overrides")
     try:
+        stored = (
+            json.loads(text) if isinstance(text, str) and text else {} if pd.isna(text) else None
+        )
+        if str(row.get("formulation")) != formulation or stored != json.loads(
+            json.dumps(overrides)
+        ):
+            return False
         if row.get("status") == "budget":  # the same run only under the same budget
             if run_budget is None or not math.isclose(float(row["run_budget_s"]), run_budget):
                 return False
@@ -464,18 +428,6 @@ def _same_run(
         )
     except (TypeError, ValueError):
         return False
-
-
-def _row_overrides(row: dict) -> dict | None:
-    """A row's ``scenario_overrides`` as a dict (``{}`` when empty; ``None`` when unreadable)."""
-    value = row.get("scenario_overrides")
-    if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
-        return {}
-    try:
-        out = json.loads(value) if isinstance(value, str) else value
-    except ValueError:
-        return None
-    return out if isinstance(out, dict) else None
 
 
 def _write_table(rows: list[dict], path: Path) -> None:

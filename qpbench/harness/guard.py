@@ -1,12 +1,10 @@
 """Guarded solves in this process: every way a solve can go wrong becomes a status.
 
-:class:`LocalRunner` turns an exception escaping the backend into ``error`` (``"Type:
-message"``), a non-finite or missing ``x`` into ``invalid`` and a solve that returned after its
-time limit into ``time_limit`` (:func:`qpbench.statuses.classify`). A solve is never interrupted
-here: an exception raised asynchronously (``SIGALRM``) can land in foreign code and break it, so
-a solve that must be stopped needs a worker process (:mod:`qpbench.harness.isolation`). After a
-failure (:data:`qpbench.statuses.FAILURE_STATUSES`) the backend is reset before its next solve.
-The same class runs inside an isolated backend's worker, so the timed region is the same.
+:class:`LocalRunner` turns an exception escaping the backend into ``error``, a non-finite or
+missing ``x`` into ``invalid`` and a solve that returned after its time limit into
+``time_limit`` (:func:`qpbench.statuses.classify`). A solve is never interrupted here (an
+asynchronous exception can land in foreign code); one that must be stopped needs a worker
+process (:mod:`qpbench.harness.isolation`), which runs this same class.
 """
 
 from __future__ import annotations
@@ -26,18 +24,10 @@ log = logging.getLogger("qpbench.harness")
 
 @dataclass
 class Outcome:
-    """What one guarded (possibly repeated) solve produced.
-
-    Attributes:
-        status: Backend status, or ``error``/``time_limit``/``invalid``/``crashed``.
-        solution: Replica 0's solution (:mod:`qpbench.harness.timing`), ``None`` without one.
-        wall_times_s: Wall time of each timed repeat [s].
-        repeat_exact: Every timed repeat returned the kept status, iterations and answer bit for bit.
-        repeat_note: Why ``repeat_exact`` is false or fewer repeats were timed than asked.
-        state_reset: The solve did not start from the state the previous solve of the
-            sequence left (a reset after a failure, a new worker).
-        isolated: The solve ran in a worker process.
-    """
+    """What one guarded (possibly repeated) solve produced: its status, replica 0's solution,
+    ``wall_times_s`` of each timed repeat [s]; ``repeat_exact``: every repeat gave the kept
+    answer bit for bit (else why in ``repeat_note``); ``state_reset``: the solve did not start
+    from the state the previous one left; ``isolated``: it ran in a worker process."""
 
     status: str
     solution: object | None = None
@@ -50,14 +40,9 @@ class Outcome:
 
 
 class LocalRunner:
-    """One backend's guarded, timed solves in this process.
-
-    Args:
-        backend: A backend instance: replica 0.
-        time_limit: Per-solve limit [s], checked when the solve returns.
-        sequential: State carried between solves (else reset before each).
-        repeat: Timed solves per problem: the replicas made now (and warmed up).
-    """
+    """One backend's guarded, timed solves in this process: ``backend`` is replica 0;
+    ``time_limit`` [s] is checked when a solve returns; ``sequential``: state carried between
+    solves (else reset before each); ``repeat``: timed solves per problem (replicas made now)."""
 
     isolated = False
 
@@ -88,7 +73,6 @@ class LocalRunner:
         status, error = classify(solution, wall, self.time_limit)
         return Outcome(status, solution, [wall], error)
 
-    # The interface shared with IsolatedRunner: harness/bench.py calls either the same way.
     def reset(self) -> None:
         """Forget every replica's state (a new sequence starts)."""
         self.replicas.reset()
@@ -148,4 +132,4 @@ class LocalRunner:
         outcome.repeat_note = "; ".join(notes)
 
     def close(self) -> None:
-        """Nothing to release in this process."""
+        pass

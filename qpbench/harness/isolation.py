@@ -2,13 +2,10 @@
 
 :class:`IsolatedRunner` has the interface of :class:`~qpbench.harness.guard.LocalRunner` and
 runs one in a :class:`~qpbench.runner.process.Worker`, which times the solves itself (pickling
-and the pipe stay outside the wall times). Each request has a deadline
-(:func:`~qpbench.runner.process.deadline`); past it the worker is killed and the solve is
-``time_limit``; a worker that dies makes the solve ``crashed``. Either way a new worker starts
-at the next request, without the backend's state (the next row says ``state_reset``). Workers
-never compile: they are forked with the kernels the parent prepared
-(:mod:`qpbench.harness.preload`); the warm-up solve has its own allowance
-(:data:`WARMUP_TIMEOUT_S`).
+and the pipe stay outside the wall times). A request past its deadline
+(:func:`~qpbench.runner.process.deadline`) kills the worker (``time_limit``); a worker that dies
+makes the solve ``crashed``. Either way a new worker starts at the next request, without the
+backend's state (the next row says ``state_reset``).
 """
 
 from __future__ import annotations
@@ -20,21 +17,21 @@ import numpy as np
 
 from ..runner.process import START_TIMEOUT_S, Worker, WorkerDied, deadline
 from .guard import LocalRunner, Outcome
+from .timing import ANSWER_FIELDS
 
 if TYPE_CHECKING:
     import qpsolvers
 
 log = logging.getLogger("qpbench.harness")
 
+#: Choices of ``isolate`` (:func:`wants_worker`).
+ISOLATE = ("auto", "always", "never")
 #: Time allowed for the discarded warm-up solve [s] (at least twice the time limit).
 WARMUP_TIMEOUT_S = 30.0
 
 #: Solution attributes sent back from a worker (extras may hold native objects).
 _FIELDS = (
-    "x",
-    "y",
-    "z",
-    "z_box",
+    *ANSWER_FIELDS,
     "found",
     "obj",
     "status",
@@ -47,6 +44,20 @@ _PLAIN = (int, float, str, bool, type(None), np.ndarray, np.generic)
 
 #: In a worker process: the guarded backend the requests go to (:func:`_build`).
 _RUNNER: LocalRunner | None = None
+
+
+def wants_worker(isolate: str, backend: str, learned=()) -> bool:
+    """Whether ``backend`` runs in a worker under ``isolate`` (:data:`ISOLATE`): ``always``, or
+    ``auto`` and its class says ``risky = True`` or it is in ``learned`` (seen to crash here)."""
+    from ..backends import backend_class
+    from ..exceptions import BackendNotFound
+
+    if isolate != "auto":
+        return isolate == "always"
+    try:
+        return backend in learned or bool(backend_class(backend).risky)
+    except BackendNotFound:
+        return False
 
 
 def _strip(outcome: Outcome) -> Outcome:
@@ -95,13 +106,7 @@ class IsolatedRunner:
     isolated = True
 
     def __init__(
-        self,
-        name: str,
-        profile,
-        settings: dict,
-        time_limit: float,
-        sequential: bool,
-        repeat: int = 1,
+        self, name: str, profile, settings: dict, time_limit: float, sequential: bool, repeat=1
     ):
         from ..backends import plugin_files
 
@@ -161,10 +166,9 @@ class IsolatedRunner:
         self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False
     ) -> Outcome:
         n = self.spec["repeat"] if repeat is None else max(1, int(repeat))
+        request = ("solve", problem, repeat, reset_before)
         try:
-            outcome = self._call(
-                ("solve", problem, repeat, reset_before), deadline(self.time_limit, n), "solve"
-            )
+            outcome = self._call(request, deadline(self.time_limit, n), "solve")
         except WorkerDied as died:
             outcome = Outcome(died.status, None, [], died.message)
         if outcome.solution is not None:

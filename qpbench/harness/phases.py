@@ -22,7 +22,7 @@ class Phase:
             self.bar.update(n)
 
     def describe(self, text: str) -> None:
-        """Show what is being done now beside the bar (a terminal only)."""
+        """Show what is being done now beside the bar."""
         if self.bar is not None:
             self.bar.set_postfix_str(text, refresh=False)
 

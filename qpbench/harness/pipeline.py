@@ -1,19 +1,12 @@
 """The main job (``qpbench run``): problem sets, bench, closed loop and report into one folder.
 
-:func:`run_all` with a :class:`RunConfig`, each step a phase (:class:`~.phases.Phases`):
-compile the chosen backends' kernels; regenerate a missing problem set of the paper's four
-scenarios (every :data:`EVERY`-th tick, ``paper`` formulation, solved by one of
-:data:`DUMP_BACKENDS`); solve the references; bench every backend on every ``bench_every``-th
-problem of each set (one CSV per scenario in ``OUT/bench/``); run every scenario with every
-backend in the closed loop (``OUT/closed_loop.csv``, ``OUT/logs/``), each run within a wall-time
-budget of its own decided from its bench time (:func:`closed_loop_budgets`; a run that spends
-it stops between ticks with status ``budget``); write the report (``OUT/report.md``,
-``OUT/plots/``).
-
+:func:`run_all` with a :class:`RunConfig`, each step a phase (:class:`~.phases.Phases`): compile
+the chosen backends' kernels; regenerate a missing problem set of the paper's four scenarios;
+solve the references; bench every ``bench_every``-th problem of each set (``OUT/bench/``); run
+every scenario with every backend in the closed loop (``OUT/closed_loop.csv``), each within a
+wall-time budget decided from its bench time (:func:`closed_loop_budgets`); write the report.
 The run works in ``OUT/.partial/`` and then replaces the previous run's :data:`OUTPUTS`, each by
-a rename, so a killed run leaves the previous results whole; other files in ``OUT`` are never
-touched. Those names are a previous run's when ``OUT/run.json`` exists, else someone else's
-(``force`` needed). ``resume`` continues from ``OUT/.partial/``.
+a rename (docs/architecture.md, "The run pipeline").
 """
 
 from __future__ import annotations
@@ -35,18 +28,6 @@ from ..exceptions import ParamError, positive_seconds
 if TYPE_CHECKING:
     from ..formats import ProblemSet
 
-__all__ = [
-    "BENCH_EVERY",
-    "LOOP_JOBS",
-    "OUTPUTS",
-    "REPEAT",
-    "RUN_BUDGET_S",
-    "RunConfig",
-    "RunOutcome",
-    "default_jobs",
-    "run_all",
-]
-
 log = logging.getLogger("qpbench.run")
 
 #: Outputs of a run inside ``--out`` (replaced as a whole at the end of a run).
@@ -55,8 +36,7 @@ OUTPUTS = ("bench", "logs", "figure_logs", "plots", "closed_loop.csv", "report.m
 STAGING = ".partial"
 #: Every k-th tick goes into a problem set.
 EVERY = 10
-#: The bench of ``run`` takes every k-th problem of each set (every 100th control tick), so
-#: that README's first command stays within its time target (phase times: bench/README.md).
+#: The bench of ``run`` takes every k-th problem of each set (every 100th control tick).
 BENCH_EVERY = 10
 #: The most wall time a closed-loop run may take [s] (``--run-budget``).
 RUN_BUDGET_S = 10.0
@@ -66,8 +46,7 @@ BUDGET_MARGIN = 3.0
 BUDGET_FLOOR_S = 2.0
 #: The budget of a backend whose solves alone would take longer than ``run_budget`` [s].
 CUT_BUDGET_S = 1.0
-#: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process, at most one per
-#: core (runs side by side: bench/README.md, "Closed-loop runs side by side").
+#: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process, at most one per core.
 LOOP_JOBS = 2
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
 REPEAT = 3
@@ -82,17 +61,10 @@ def default_jobs() -> int:
 
 @dataclass
 class RunConfig:
-    """What ``qpbench run`` does (module docstring).
-
-    Attributes:
-        problems: Folder of the problem sets ``<problems>/<scenario>/``.
-        scenarios, backends: Checked lists (:mod:`qpbench.selection`).
-        duration: Closed-loop time per run [s] (``None``: the scenario's); the bench then
-            uses only the problems with ``t < duration``.
-        run_budget: Most wall time of a closed-loop run [s] (``None``: no budget).
-        memory_budget: Bytes a bench solve may need (:mod:`qpbench.memory`; ``None``: the default).
-        on_row: Called with each closed-loop row as it is written.
-    """
+    """What ``qpbench run`` does: ``problems``: folder of the sets ``<problems>/<scenario>/``;
+    ``duration``: closed-loop time per run [s] (``None``: the scenario's; the bench then takes the
+    problems with ``t < duration``); ``run_budget``: most wall time of a closed-loop run [s];
+    ``memory_budget``: bytes a bench solve may need; ``on_row``: called with each closed-loop row."""
 
     out: Path
     problems: Path
@@ -110,7 +82,6 @@ class RunConfig:
     on_row: Callable[[dict], None] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        """Every value checked when made (one-line errors naming the option)."""
         if self.duration is not None:
             self.duration = positive_seconds(self.duration, "--duration")
         if self.run_budget is not None:
@@ -152,7 +123,8 @@ def _check_out(out: Path, force: bool) -> None:
         )
 
 
-def _dump_backend(backends: list[str]) -> str:
+def _dump_backend() -> str:
+    """The first available of :data:`DUMP_BACKENDS`."""
     from ..backends import backend_names
     from ..exceptions import BackendNotFound
 
@@ -160,9 +132,8 @@ def _dump_backend(backends: list[str]) -> str:
     for name in DUMP_BACKENDS:
         if name in available:
             return name
-    raise BackendNotFound(
-        f"no QP backend to generate problem sets with (tried {', '.join(DUMP_BACKENDS)})"
-    )
+    tried = ", ".join(DUMP_BACKENDS)
+    raise BackendNotFound(f"no QP backend to generate problem sets with (tried {tried})")
 
 
 def bench_subset(
@@ -173,20 +144,10 @@ def bench_subset(
     from ..reference import reference_solutions
     from ..selection import select_set
 
-    if duration is None and every == 1:
-        return problem_set, reference_solutions(problem_set)
-    keep = [
-        i
-        for i, r in enumerate(problem_set.records)
-        if i % every == 0 and (duration is None or r.t is None or r.t < duration)
-    ]
-    if not keep:
-        keep = [0]
-    kept = [problem_set.records[i] for i in keep]
-    # only the kept problems' references (they share the whole set's cache)
-    refs = reference_solutions(replace(problem_set, records=kept))
-    stretched = select_set(problem_set, every=every) if every > 1 else problem_set
-    return replace(stretched, records=kept), refs
+    stretched = select_set(problem_set, every=every)
+    kept = [r for r in stretched.records if duration is None or r.t is None or r.t < duration]
+    subset = replace(stretched, records=kept or stretched.records[:1])
+    return subset, reference_solutions(subset)
 
 
 def _compress_bench(bench_dir: Path) -> None:
@@ -208,12 +169,13 @@ def run_all(config: RunConfig) -> RunOutcome:
     from ..formats import load_problems
     from ..jit import warmup_logged
     from ..sim.loop import simulate
-    from ..sim.scenario import load_scenario
+    from ..sim.scenario import load_scenario, paper_scenarios
     from .phases import Phases
 
     started = time.perf_counter()
     out, problems = Path(config.out), Path(config.problems)
-    bench_scenarios = _bench_scenarios(config.scenarios)
+    paper = paper_scenarios()  # the bench's: the paper's four among those asked, else all asked
+    bench_scenarios = [s for s in config.scenarios if s in paper] or list(config.scenarios)
     _check_out(out, config.force)
     staging = out / STAGING
     if staging.exists() and not config.resume:
@@ -222,10 +184,8 @@ def run_all(config: RunConfig) -> RunOutcome:
 
     phases = Phases(log, bars=None if config.progress else False)
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
-    dump = [_dump_backend(config.backends)] if missing else []
-    with phases.phase("compile"):
-        # only the kernels and shims of the backends this run runs, before anything is timed;
-        # the worker processes load them from the cache
+    dump = [_dump_backend()] if missing else []
+    with phases.phase("compile"):  # only the backends this run runs, before anything is timed
         warmup_logged(log, [*config.backends, *dump])
     for s in missing:
         with phases.phase(f"problem set {s}"):
@@ -258,14 +218,6 @@ def run_all(config: RunConfig) -> RunOutcome:
     return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
 
 
-def _bench_scenarios(scenarios: list[str]) -> list[str]:
-    """The scenarios the bench uses: the paper's four among those asked, else all asked."""
-    from ..sim.scenario import paper_scenarios
-
-    paper = paper_scenarios()
-    return [s for s in scenarios if s in paper] or list(scenarios)
-
-
 def _bench(
     config: RunConfig, subsets: dict, bench_dir: Path, phases
 ) -> tuple[int, dict[str, float]]:
@@ -277,17 +229,14 @@ def _bench(
 
     failures = 0
     times: dict[str, list[float]] = {}
+    bench = BenchConfig(
+        list(config.backends), repeat=config.repeat, memory_budget=config.memory_budget
+    )
     for s, (subset, refs) in subsets.items():
         with phases.phase(f"bench {s}", bar=False):
             summary = run_bench(
                 subset,
-                BenchConfig(
-                    backends=list(config.backends),
-                    profile="default",
-                    mode="sequential",
-                    repeat=config.repeat,
-                    memory_budget=config.memory_budget,
-                ),
+                bench,
                 bench_dir / f"{s}.csv",
                 resume=config.resume,
                 force=not config.resume,
@@ -316,25 +265,21 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
         return {}
     from ..sim.scenario import load_scenario
 
-    ticks = 0
-    for name in config.scenarios:
-        sc = load_scenario(name)
-        duration = config.duration if config.duration is not None else sc.duration
-        ticks = max(ticks, math.ceil(duration / sc.dt))
-    floor = min(BUDGET_FLOOR_S, config.run_budget)
+    scenarios = [load_scenario(name) for name in config.scenarios]
+    ticks = max(
+        (math.ceil((config.duration or sc.duration) / sc.dt) for sc in scenarios), default=0
+    )
+    run_budget = config.run_budget
+    floor = min(BUDGET_FLOOR_S, run_budget)
     budgets = {}
     for backend in config.backends:
-        t = per_tick_s.get(backend)
-        if t is None or not math.isfinite(t):
-            budgets[backend] = config.run_budget
-            continue
-        predicted = ticks * t
-        if predicted > config.run_budget:
-            budgets[backend] = min(CUT_BUDGET_S, config.run_budget)
+        predicted = ticks * per_tick_s.get(backend, math.nan)
+        if not math.isfinite(predicted):
+            budgets[backend] = run_budget
+        elif predicted > run_budget:
+            budgets[backend] = min(CUT_BUDGET_S, run_budget)
         else:
-            budgets[backend] = round(
-                min(config.run_budget, max(floor, BUDGET_MARGIN * predicted)), 3
-            )
+            budgets[backend] = round(min(run_budget, max(floor, BUDGET_MARGIN * predicted)), 3)
     return budgets
 
 
@@ -353,12 +298,9 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             s = row["scenario"]
             left[s] = left.get(s, 1) - 1
             if left[s] == 0:  # a scenario's last run: one line per scenario
-                log.info(
-                    "closed loop %s: %d runs done (%.1f s into the closed loop)",
-                    s,
-                    len(config.backends),
-                    time.perf_counter() - started,
-                )
+                spent = time.perf_counter() - started
+                n = len(config.backends)
+                log.info("closed loop %s: %d runs done (%.1f s into the closed loop)", s, n, spent)
             if config.on_row is not None:
                 config.on_row(row)
 

@@ -1,10 +1,9 @@
 """The results table: typed rows appended and ``fsync``-ed as they are produced, resumable.
 
 One row per key (a bench's ``(problem, backend, profile)``; other studies pass their own
-columns). Each row is one physical line (newlines in a field become spaces) and each batch one
-``write`` on an ``O_APPEND`` descriptor, ``fsync``-ed before the next: a kill loses at most the
-batch in progress and leaves at most one half-written last line, which :func:`read_results`
-drops (and, with ``repair``, truncates) before a run resumes.
+columns), one physical line each; each batch is one ``write`` on an ``O_APPEND`` descriptor,
+``fsync``-ed before the next, so a kill leaves at most one half-written last line, which
+:func:`read_results` drops (and, with ``repair``, truncates) before a run resumes.
 """
 
 from __future__ import annotations
@@ -113,9 +112,6 @@ class ExistingResults:
     rows: list[dict]
     dropped: int = 0
 
-    def by_key(self) -> dict[tuple[str, str, str], dict]:
-        return {row_key(r): r for r in self.rows}
-
 
 def read_results(
     path: str | Path,
@@ -127,9 +123,7 @@ def read_results(
 
     A last line without its newline or a trailing line with the wrong number of fields is
     dropped with a warning; ``repair=True`` also truncates the file to its last complete line.
-
-    Raises:
-        InputError: the header is not ``columns``, or a malformed line is followed by good ones.
+    :class:`InputError` if the header is not ``columns`` or a malformed line is followed by good ones.
     """
     path = Path(path)
     names = bench_columns() if columns is None else tuple(columns)
@@ -151,8 +145,8 @@ def read_results(
             with ResultsWriter(path, new=True, columns=names):
                 pass
         return ExistingResults([], dropped)
-    lines = data.decode("utf-8", errors="replace").split("\n")[:-1]
-    header = next(csv.reader([lines[0]]))
+    lines = data.split(b"\n")[:-1]
+    header, *body = (next(csv.reader([ln.decode("utf-8", errors="replace")])) for ln in lines)
     if tuple(header) != names:
         missing = [c for c in names if c not in header]
         raise InputError(
@@ -160,51 +154,31 @@ def read_results(
             "columns differ); use --force to start again",
             path=path,
         )
-    rows = []
-    good_end = offset = len(lines[0]) + 1
-    bad_tail = False
-    for line in lines[1:]:
-        fields = next(csv.reader([line])) if line else []
-        offset += len(line.encode("utf-8")) + 1
-        if len(fields) != len(names):
-            log.warning(
-                "%s: dropping a malformed line (%d fields, expected %d)",
-                path,
-                len(fields),
-                len(names),
-            )
-            dropped += 1
-            bad_tail = True
-        elif bad_tail:
-            raise InputError(
-                "malformed line in the middle of the file; use --force to start again", path=path
-            )
-        else:
-            rows.append(dict(zip(names, fields)))
-            good_end = offset
-    if repair and bad_tail:
-        os.truncate(path, good_end)
-    return ExistingResults(rows, dropped)
+    n = len(body)  # the rows before the malformed lines at the end
+    while n and len(body[n - 1]) != len(names):
+        n -= 1
+    if any(len(fields) != len(names) for fields in body[:n]):
+        raise InputError(
+            "malformed line in the middle of the file; use --force to start again", path=path
+        )
+    for fields in body[n:]:
+        log.warning(
+            "%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(names)
+        )
+    if repair and n < len(body):
+        os.truncate(path, sum(len(ln) + 1 for ln in lines[: n + 1]))
+    rows = [dict(zip(names, fields)) for fields in body[:n]]
+    return ExistingResults(rows, dropped + len(body) - n)
 
 
 class ResultsWriter:
-    """Append rows to a table, one ``write`` + ``fsync`` per batch.
+    """Append rows to a table, one ``write`` + ``fsync`` per batch; ``new``: create (truncate)
+    the file and write the header, else append; ``columns``: the table's (default: the bench's)."""
 
-    ``new``: create (truncate) the file and write the header, else append; ``fsync`` off only
-    in tests of speed; ``columns``: the table's (default: the bench's).
-    """
-
-    def __init__(
-        self,
-        path: str | Path,
-        new: bool,
-        fsync: bool = True,
-        columns: tuple[str, ...] | None = None,
-    ):
+    def __init__(self, path: str | Path, new: bool, columns: tuple[str, ...] | None = None):
         from ..atomic import record
 
         self.path = Path(path)
-        self.fsync = fsync
         self.columns = bench_columns() if columns is None else tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | (os.O_TRUNC if new else 0)
@@ -217,8 +191,7 @@ class ResultsWriter:
         view = memoryview(data)
         while view:
             view = view[os.write(self._fd, view) :]
-        if self.fsync:
-            os.fsync(self._fd)
+        os.fsync(self._fd)
 
     def write_rows(self, rows: list[dict]) -> None:
         """Append ``rows`` and make them durable before returning."""
@@ -238,30 +211,17 @@ class ResultsWriter:
 
 
 class InflightMarker:
-    """A side file naming the solve in progress, and what killed the run.
+    """A side file naming the solve in progress, and what killed the run (docs/architecture.md,
+    "The bench"): line 1, the comma-separated backends to isolate; line 2, the key
+    ``problem<TAB>backend<TAB>profile``; then the :mod:`faulthandler` traceback, if any. ``out``:
+    the output whose marker it is (``.<out>.inflight`` beside it)."""
 
-    Rewritten before every solve (outside the timed region, no fsync: it only has to outlive
-    this process). :mod:`faulthandler` appends to it on a fatal signal, so after a run died a
-    key without a row followed by a traceback means a backend crashed this process (under
-    ``--isolate auto`` the next ``--resume`` isolates it); no traceback means a kill from
-    outside. Removed when a run ends normally.
-
-    Format: line 1, the comma-separated backends to isolate; line 2, the key
-    ``problem<TAB>backend<TAB>profile`` (``warmup<TAB>...`` or ``replay <problem><TAB>...``
-    outside recorded solves); then the traceback, if any.
-    """
-
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
+    def __init__(self, out: str | Path):
+        self.path = Path(out).with_name(f".{Path(out).name}.inflight")
         self.isolate: list[str] = []
         self._fd = None
         self._fault_fd = None
         self._faulthandler_was = None
-
-    @staticmethod
-    def for_output(out: str | Path) -> Path:
-        out = Path(out)
-        return out.with_name(f".{out.name}.inflight")
 
     def read(self) -> tuple[list[str], tuple[str, ...] | None, str]:
         """``(backends to isolate, last in-flight key or None, fatal-error text)`` of a previous run."""

@@ -1,17 +1,11 @@
 """The one clock around a solve, and how ``--repeat`` times a solve again from the same state.
 
 The timed region (:func:`timed_call`) is the backend call and the reading of its answer
-(:data:`ANSWER_FIELDS`, so that a backend deferring its duals pays for them), gc off. The
-objective is not read: :class:`~qpbench.backends.base.BackendSolution` computes a missing one
-from ``x`` on first read, as the harness does for every backend (:func:`qpbench.metrics.objective`).
-
-A backend's state (warm starts, adapted ``rho``, an active set, the ``rnn`` network) mostly lives
-in native objects that cannot be restored, so ``--repeat R`` keeps R instances
-(:class:`Replicas`, made by :meth:`~qpbench.backends.base.Backend.fresh`) fed the same problems
-and resets. Replica 0's answer is the row's (exactly that of ``--repeat 1``); replicas 1..R-1
-time the same work from the same state, and the row says when their answers differ
-(``repeat_exact``, ``repeat_note``). A replica made or dropped mid-sequence first solves,
-untimed, the problems replica 0 solved since its last reset (:attr:`Replicas.history`).
+(:data:`ANSWER_FIELDS`, so that a backend deferring its duals pays for them), gc off.
+``--repeat R`` keeps R instances of a backend (:class:`Replicas`) fed the same problems and
+resets, since its state mostly lives in native objects that cannot be restored: replica 0's
+answer is the row's, replicas 1..R-1 time the same work from the same state
+(``repeat_exact``, ``repeat_note``).
 """
 
 from __future__ import annotations
@@ -31,21 +25,17 @@ if TYPE_CHECKING:
 ANSWER_FIELDS = ("x", "y", "z", "z_box")
 
 
-def read_answer(solution: BackendSolution) -> None:
-    """Read every field of :data:`ANSWER_FIELDS` (materialises fields a backend defers)."""
-    for name in ANSWER_FIELDS:
-        getattr(solution, name, None)
-
-
 def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSolution, int]:
-    """``(solution, wall time [ns])`` of ``backend.solve(problem)`` and :func:`read_answer`, gc off."""
+    """``(solution, wall time [ns])`` of ``backend.solve(problem)`` and the reading of its
+    :data:`ANSWER_FIELDS`, gc off."""
     enabled = gc.isenabled()
     gc.disable()
     try:
         t0 = time.perf_counter_ns()
         solution = backend.solve(problem)
-        if solution is not None:
-            read_answer(solution)
+        if solution is not None:  # materialises the fields a backend defers
+            for name in ANSWER_FIELDS:
+                getattr(solution, name, None)
         t1 = time.perf_counter_ns()
     finally:
         if enabled:
@@ -54,10 +44,8 @@ def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSol
 
 
 class Replicas:
-    """The instances of one backend that ``--repeat`` times; ``members[0]`` is the kept one.
-
-    ``history``: the problems replica 0 solved since its last reset, in order.
-    """
+    """The instances of one backend that ``--repeat`` times; ``members[0]`` is the kept one;
+    ``history``: the problems replica 0 solved since its last reset, in order."""
 
     def __init__(self, backend: Backend):
         self.members: list[Backend] = [backend]
@@ -87,18 +75,13 @@ class Replicas:
 
     def ready(self, r: int) -> Backend:
         """Replica ``r >= 1`` in the state replica 0 had before its last solve: made if missing,
-        then brought forward by solving, untimed, the history it has not solved (all but the last).
-
-        Raises:
-            Exception: the replica cannot be made, or a catch-up solve raised (it is dropped).
-        """
+        then brought forward by solving, untimed, the history it has not solved (all but the last);
+        raises what making it or a catch-up solve raised (it is dropped)."""
         self.make(r + 1)
         backend = self.members[r]
         try:
             while self._solved[r] < len(self.history) - 1:
-                solution = backend.solve(self.history[self._solved[r]])
-                if solution is not None:
-                    read_answer(solution)
+                timed_call(backend, self.history[self._solved[r]])  # untimed: only the state counts
                 self._solved[r] += 1
         except Exception:
             self.drop(r)

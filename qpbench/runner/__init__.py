@@ -2,11 +2,9 @@
 
 :mod:`.process` is the one module that starts worker processes. The sweep's executors run
 independent tasks ``fn(arg)`` (``fn`` module-level, ``arg`` plain picklable data) and yield a
-:class:`Done` per task as it finishes; every executor gives the same values, only where and when
-they ran differs. A task whose worker dies is retried once (:data:`MAX_ATTEMPTS`), then lost.
-
-Dask workers run whatever pickled code their scheduler sends: the local cluster listens on
-127.0.0.1 only, and a remote one should be reached over ``tls://`` (:func:`load_security`).
+:class:`Done` per task as it finishes, the same values wherever they ran. A task whose worker
+dies is retried once (:data:`MAX_ATTEMPTS`), then lost. A remote Dask cluster should be reached
+over ``tls://`` (:func:`load_security`): its workers run whatever code their scheduler sends.
 """
 
 from __future__ import annotations
@@ -20,18 +18,6 @@ from .dask_ import DaskExecutor, load_security
 from .process import MAX_ATTEMPTS, Done, run_located, run_tasks
 
 log = logging.getLogger("qpbench.runner")
-
-__all__ = [
-    "EXECUTORS",
-    "MAX_ATTEMPTS",
-    "DaskExecutor",
-    "Done",
-    "ProcessExecutor",
-    "SerialExecutor",
-    "default_jobs",
-    "load_security",
-    "make_executor",
-]
 
 #: Names of ``--executor``.
 EXECUTORS = ("local", "dask")
@@ -71,20 +57,12 @@ class ProcessExecutor:
 
     def run(self, fn: Callable, items: list[tuple]) -> Iterator[Done]:
         tasks = [(key, arg, None) for key, arg in items]
-        for done in run_tasks(
-            fn, tasks, self.concurrency, attempts=MAX_ATTEMPTS, on_retry=_log_retry
-        ):
-            if done.status == "crashed":
-                done.lost += f" (attempt {done.attempts} of {MAX_ATTEMPTS})"
+        for done in run_tasks(fn, tasks, self.concurrency, attempts=MAX_ATTEMPTS):
             done.concurrent = self.concurrency
             yield done
 
     def close(self) -> None:
         """Nothing to release: :meth:`run` stops its workers when it ends."""
-
-
-def _log_retry(key, why: str) -> None:
-    log.warning("%s: %s; running it again", key, why)
 
 
 def make_executor(
@@ -106,13 +84,14 @@ def make_executor(
         if scheduler is not None or security_file is not None:
             raise ParamError("--scheduler and --security need --executor dask", key="--scheduler")
         return ProcessExecutor(jobs)
-    if scheduler is not None and scheduler.startswith("tls://") and security_file is None:
+    tls = scheduler is not None and scheduler.startswith("tls://")
+    if tls and security_file is None:
         raise ParamError(
             "a tls:// scheduler needs --security FILE (CA, certificate, key)", key="--security"
         )
-    if security_file is not None and scheduler is not None and not scheduler.startswith("tls://"):
-        raise ParamError("--security needs a tls:// scheduler address", key="--scheduler")
-    if scheduler is not None and not scheduler.startswith("tls://"):
+    if scheduler is not None and not tls:
+        if security_file is not None:
+            raise ParamError("--security needs a tls:// scheduler address", key="--scheduler")
         log.warning(
             "Dask scheduler %s without TLS: whoever can reach it can run code on every worker "
             "(use tls:// and --security)",

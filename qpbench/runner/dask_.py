@@ -1,10 +1,9 @@
 """Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1.
 
 Tasks are submitted at once and collected as they complete; a task whose worker was lost
-(``KilledWorker``) is submitted once more, then reported lost (the local cluster's scheduler
-allows no failure of its own, ``allowed-failures = 0``, so the retry is this module's). A task
-runs in a thread beside the worker's event loop, sharing its GIL: the workers are quieted
-(:data:`WORKER_CONFIG`, or :class:`qpbench.runner.dask_worker.QuietWorker` on an existing cluster).
+(``KilledWorker``) is submitted once more, then reported lost (the local scheduler allows no
+failure of its own). A task runs in a thread beside the worker's event loop, sharing its GIL,
+so the workers are quieted (:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster).
 """
 
 from __future__ import annotations
@@ -16,17 +15,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..exceptions import InputError, ParamError
-from .process import MAX_ATTEMPTS, Done, run_located
+from ..statuses import describe_exception
+from .process import Done, retry_note, run_located
 
 if TYPE_CHECKING:
     from distributed.security import Security
 
 log = logging.getLogger("qpbench.runner")
 
-__all__ = ["WORKER_CONFIG", "DaskExecutor", "load_security"]
-
-#: Dask settings of a sweep's workers: no statistical profiler, a slower event-loop health check
-#: (both take the GIL from the task's thread; :mod:`.dask_worker`, ``bench/sweep_speedup.py``).
+#: Dask settings of a sweep's workers: no statistical profiler, a slower event-loop health check.
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
@@ -44,8 +41,7 @@ def load_security(path: str | Path) -> Security:
         cert_file = "node.pem"   # this machine's certificate (client, local scheduler, workers)
         key_file = "node-key.pem"
 
-    Raises:
-        InputError: unreadable file, unknown or missing key, missing PEM file.
+    :class:`InputError` for an unreadable file, an unknown or missing key, a missing PEM file.
     """
     path = Path(path)
     try:
@@ -92,11 +88,8 @@ def load_security(path: str | Path) -> Security:
 
 class DaskExecutor:
     """Tasks on the cluster at ``scheduler``, or (``None``) on a ``LocalCluster`` of ``jobs``
-    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS.
-
-    On an existing cluster :class:`~qpbench.runner.dask_worker.QuietWorker` is registered
-    until :meth:`close`, which restores the workers' settings.
-    """
+    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS. On an
+    existing cluster :class:`~.dask_worker.QuietWorker` is registered until :meth:`close`."""
 
     name = "dask"
 
@@ -135,7 +128,6 @@ class DaskExecutor:
         self.address = self.client.scheduler.address
 
     def _quiet_workers(self) -> None:
-        """Register :class:`~.dask_worker.QuietWorker` on the cluster's workers."""
         from .dask_worker import PLUGIN_NAME, QuietWorker
 
         try:
@@ -150,9 +142,7 @@ class DaskExecutor:
 
     @property
     def concurrency(self) -> int:
-        return (
-            sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()) or 1
-        )
+        return sum(self._per_host()[1].values()) or 1
 
     def _per_host(self) -> tuple[dict, dict]:
         workers = self.client.scheduler_info()["workers"]
@@ -181,18 +171,12 @@ class DaskExecutor:
                 value, host, worker = fut.result()
                 if worker not in hosts:
                     hosts, threads = self._per_host()
-                yield Done(
-                    key, value, None, attempts, host, worker, threads.get(hosts.get(worker), 1)
-                )
-                continue
-            why = f"{type(fut.exception()).__name__}: {fut.exception()}"
-            if attempts < MAX_ATTEMPTS:
-                log.warning("%s: %s; running it again", key, why)
+                concurrent = threads.get(hosts.get(worker), 1)
+                yield Done(key, value, None, attempts, host, worker, concurrent)
+            elif lost := retry_note(key, describe_exception(fut.exception()), attempts):
+                yield Done(key, None, lost, attempts, "", "", 0)
+            else:
                 queue.add(submit(i, key, arg, attempts + 1))
-                continue
-            yield Done(
-                key, None, f"{why} (attempt {attempts} of {MAX_ATTEMPTS})", attempts, "", "", 0
-            )
 
     def close(self) -> None:
         if self._plugin:

@@ -1,16 +1,11 @@
-"""A Dask worker plugin that keeps a worker's event loop out of the way of the task's thread.
-
-A task runs in a thread beside the worker's event loop, and both need the GIL; the loop's timers
-(the statistical profiler ``profile``, which walks the task's stack, and the health check
-``tick``) take it from the task. :class:`QuietWorker` stops or slows them while registered.
-This module imports ``distributed``: import it only where Dask is installed.
+"""A Dask worker plugin that keeps a worker's event loop timers (the statistical profiler
+``profile``, the health check ``tick``) from taking the GIL from the task's thread. It imports
+``distributed``: import it only where Dask is installed.
 """
 
 from __future__ import annotations
 
 from distributed.diagnostics.plugin import WorkerPlugin
-
-__all__ = ["PLUGIN_NAME", "QuietWorker"]
 
 #: Name of the plugin on the cluster (one registration per cluster).
 PLUGIN_NAME = "qpbench-quiet-worker"
@@ -18,12 +13,8 @@ PLUGIN_NAME = "qpbench-quiet-worker"
 
 class QuietWorker(WorkerPlugin):
     """Stop the worker's periodic callbacks ``stop`` and run ``slow`` (``{name: period [s]}``)
-    less often, while registered.
-
-    A stopped callback leaves ``Worker.periodic_callbacks`` (so a worker that joins later, which
-    sets its plugins up before it starts its callbacks, does not start it) and comes back,
-    running, at teardown.
-    """
+    less often, while registered. A stopped callback leaves ``Worker.periodic_callbacks`` (so a
+    worker that joins later does not start it) and comes back, running, at teardown."""
 
     name = PLUGIN_NAME
 
@@ -34,7 +25,6 @@ class QuietWorker(WorkerPlugin):
         self._periods: dict[str, float] = {}
 
     def setup(self, worker) -> None:
-        """Runs on the worker's event loop (the callbacks' own thread)."""
         callbacks = worker.periodic_callbacks
         for name in self.stop:
             if name in callbacks:
@@ -47,7 +37,6 @@ class QuietWorker(WorkerPlugin):
                 _retime(pc, period * 1e3)
 
     def teardown(self, worker) -> None:
-        """Runs on the worker's event loop, also when the worker closes."""
         callbacks = worker.periodic_callbacks
         for name, ms in self._periods.items():
             if name in callbacks:

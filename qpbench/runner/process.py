@@ -1,20 +1,18 @@
 """Worker processes: the one place that starts, feeds, times out and reaps them.
 
-A worker answers ``fn(arg)`` requests (``fn`` module-level, ``arg`` picklable) one at a time
-over a pipe. :class:`Worker` is one worker whose module globals keep state between requests
-(an isolated bench backend); :func:`run_tasks` is the pool, with retries.
-
-A request ends answered (``ok``), raising (``error``, the worker lives on), past its deadline
-(``time_limit``: the worker is killed with SIGKILL, which needs no cooperation from a solver hung
-in native code) or with the worker dead (``crashed``, :func:`death_message`). Workers are forked
-from a forkserver started once, before any deadline, with qpbench and the kernels this process
-prepared preloaded (:mod:`qpbench.harness.preload`), so a worker never compiles; ``spawn`` where
-there is no forkserver. A worker takes the environment of the process that starts it.
+A worker answers ``fn(arg)`` requests (``fn`` module-level, ``arg`` picklable) one at a time over
+a pipe: :class:`Worker` is one worker whose module globals keep state between requests;
+:func:`run_tasks` is the pool, with retries. A request ends ``ok``, ``error`` (it raised; the
+worker lives on), ``time_limit`` (past its deadline: SIGKILL, which needs no cooperation from a
+solver hung in native code) or ``crashed`` (:func:`death_message`). Workers are forked from a
+forkserver preloaded with qpbench and the kernels this process prepared
+(:mod:`qpbench.harness.preload`), so a worker never compiles.
 """
 
 from __future__ import annotations
 
 import importlib
+import logging
 import math
 import multiprocessing
 import os
@@ -34,6 +32,8 @@ if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.context import BaseContext
 
+log = logging.getLogger("qpbench.runner")
+
 #: Time allowed for the forkserver's preload and for a worker to start [s].
 START_TIMEOUT_S = 120.0
 #: Least slack added to a solve's time limit before its worker is killed [s] (:func:`deadline`).
@@ -51,8 +51,7 @@ PRELOAD = (
     "qpbench.harness.preload",
 )
 
-#: Environment variable of the forkserver naming the kernels its preload loads
-#: (:func:`preload_kernels`, comma-separated), written when the forkserver starts.
+#: Environment variable naming the kernels the forkserver's preload loads (comma-separated).
 PRELOAD_KERNELS_ENV = "QPBENCH_PRELOAD_KERNELS"
 
 _CTX = None
@@ -67,11 +66,8 @@ def preload_kernels(names) -> None:
 
 
 def context(fresh: bool = False) -> BaseContext:
-    """The start method's context, its forkserver started and preloaded now (:func:`preload_kernels`).
-
-    ``fresh``: ``spawn``, each worker a new interpreter, never a fork of a process that may
-    hold threads and locks (reference solves called from the Python API).
-    """
+    """The start method's context, its forkserver started and preloaded now (:func:`preload_kernels`);
+    ``fresh``: ``spawn``, never a fork of a process that may hold threads and locks."""
     global _CTX
     if fresh:
         return multiprocessing.get_context("spawn")
@@ -81,10 +77,9 @@ def context(fresh: bool = False) -> BaseContext:
         )
         ctx = multiprocessing.get_context(method)
         if method == "forkserver":
-            # what this process prepared, never a value inherited from the process that started it
             os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
             ctx.set_forkserver_preload(list(PRELOAD))
-            # start the server and wait for its preload now (a no-op child): no deadline covers it
+            # wait for the preload now (a no-op child): no deadline covers it
             proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
             proc.start()
             proc.join(START_TIMEOUT_S)
@@ -93,7 +88,7 @@ def context(fresh: bool = False) -> BaseContext:
 
 
 def _noop() -> None:
-    """A child that does nothing: its start waits for the forkserver's preload."""
+    """A child that does nothing."""
 
 
 def deadline(time_limit: float, solves: int = 1) -> float:
@@ -103,8 +98,7 @@ def deadline(time_limit: float, solves: int = 1) -> float:
 
 
 def death_message(exitcode: int | None) -> str:
-    """How a worker ended without an answer: ``worker process killed by SIGSEGV``, or
-    ``worker process exited with code 3``."""
+    """How a worker ended without an answer (``worker process killed by SIGSEGV``)."""
     if exitcode is not None and exitcode < 0:
         try:
             return f"worker process killed by {signal.Signals(-exitcode).name}"
@@ -123,7 +117,7 @@ def requests(conn: Connection) -> Iterator:
 
 def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
     """A worker: import ``imports``, say ready, answer ``(fn, arg)`` requests until ``None``."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.clear()
     os.environ.update(environ)
     for module in imports:
@@ -150,8 +144,8 @@ class WorkerDied(Exception):
 
 
 class Worker:
-    """One worker process (a daemon: it dies with this process) and its pipe; ``imports``: modules
-    it imports before it says ready (outside any deadline)."""
+    """One worker process (a daemon) and its pipe; ``imports``: modules it imports before it says
+    ready (outside any deadline)."""
 
     def __init__(
         self, ctx: BaseContext | None = None, name: str = "qpbench-worker", imports: tuple = ()
@@ -170,11 +164,8 @@ class Worker:
         self.deadline = math.inf
 
     def send(self, fn: Callable, arg, timeout: float | None) -> None:
-        """Start request ``fn(arg)``, answered within ``timeout`` [s] (``None``: no limit).
-
-        Raises:
-            WorkerDied: the worker did not start.
-        """
+        """Start request ``fn(arg)``, answered within ``timeout`` [s] (``None``: no limit);
+        :class:`WorkerDied` if the worker did not start."""
         if not self.ready:
             self.deadline, self.timeout = time.monotonic() + START_TIMEOUT_S, START_TIMEOUT_S
             status, payload = self._wait()
@@ -211,11 +202,7 @@ class Worker:
         return answer
 
     def call(self, fn: Callable, arg, timeout: float | None, what: str):
-        """``fn(arg)`` in the worker, answered within ``timeout`` [s].
-
-        Raises:
-            WorkerDied: ``error``, ``crashed`` or ``time_limit``, the message naming ``what``.
-        """
+        """``fn(arg)`` in the worker within ``timeout`` [s], else :class:`WorkerDied` naming ``what``."""
         self.send(fn, arg, timeout)
         status, payload = self._wait()
         if status == "ok":
@@ -272,6 +259,15 @@ class Done:
     status: str | None = None
 
 
+def retry_note(key, why: str, attempt: int, attempts: int = MAX_ATTEMPTS) -> str | None:
+    """After attempt ``attempt`` of a task lost ``why``: ``None`` (logged: it runs again) while
+    attempts are left, else why it is lost, with the attempts made."""
+    if attempt < attempts:
+        log.warning("%s: %s; running it again", key, why)
+        return None
+    return f"{why} (attempt {attempt} of {attempts})"
+
+
 def run_tasks(
     fn: Callable,
     tasks: list[tuple],
@@ -281,13 +277,11 @@ def run_tasks(
     attempts: int = 1,
     fresh: bool = False,
     name: str = "qpbench-worker",
-    on_retry: Callable | None = None,
 ) -> Iterator[Done]:
     """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs`` workers.
 
-    ``attempts``: runs of a task whose worker died before it is lost (``on_retry(key, why)``
-    before each rerun); ``fresh``: a new worker for every task. Workers left running when the
-    caller stops iterating are killed.
+    ``attempts``: runs of a task whose worker died before it is lost (:func:`retry_note`);
+    ``fresh``: a new worker for every task.
     """
     if not tasks:
         return
@@ -320,11 +314,11 @@ def run_tasks(
                 status, payload = answer
                 if fresh:
                     w.stop()  # a new worker for the next task; this one's memory is freed now
-                if status == "crashed" and tried < attempts:
-                    if on_retry is not None:
-                        on_retry(key, payload)
-                    queue.appendleft((key, arg, timeout, tried))
-                    continue
+                if status == "crashed" and attempts > 1:
+                    payload = retry_note(key, payload, tried, attempts)
+                    if payload is None:
+                        queue.appendleft((key, arg, timeout, tried))
+                        continue
                 ok = status == "ok"
                 yield Done(
                     key,
