@@ -26,33 +26,10 @@ THETA_LIMIT = 3.0
 VELOCITY_LIMIT = 1.0
 
 
-@dataclass(frozen=True)
-class ArmSpec:
-    """``links`` n >= 2, ``points_per_link`` p >= 1 besides the joints, ``seed`` of the lengths."""
-
-    links: int
-    points_per_link: int
-    seed: int = 0
-
-    def __post_init__(self):
-        if int(self.links) < 2:
-            raise ParamError(f"an arm needs at least 2 links, got {self.links}", key="links")
-        if int(self.points_per_link) < 1:
-            raise ParamError(
-                f"points_per_link must be >= 1, got {self.points_per_link}", key="points_per_link"
-            )
-
-    @property
-    def key_point_count(self) -> int:
-        """``a = n p + (n - 1)``: p points per link and the joints J2..Jn."""
-        return self.links * self.points_per_link + self.links - 1
-
-
 @dataclass
 class GeneratedArm:
     """An arm (lengths [m]), its key points, a start ``theta0`` [rad] in contact at ``target`` [m]."""
 
-    spec: ArmSpec
     arm: PlanarArm
     key_points: KeyPoints
     theta0: np.ndarray
@@ -108,9 +85,12 @@ def bent_arm_angles(lengths: np.ndarray, target: np.ndarray) -> np.ndarray:
     return theta
 
 
-def generate_arm(spec: ArmSpec, target: np.ndarray) -> GeneratedArm:
-    """The arm of ``spec`` with its end effector at ``target`` [m] (module docstring)."""
-    lengths = link_lengths(spec.links, spec.seed)
+def generate_arm(
+    links: int, points_per_link: int, target: np.ndarray, seed: int = 0
+) -> GeneratedArm:
+    """The arm of ``links`` links with ``points_per_link`` key points per link besides the joints
+    J2..Jn, lengths drawn from ``seed``, its end effector at ``target`` [m] (module docstring)."""
+    lengths = link_lengths(links, seed)
     arm = PlanarArm(lengths)
     theta0 = bent_arm_angles(lengths, target)
     if np.any(np.abs(theta0) > THETA_LIMIT):
@@ -118,5 +98,5 @@ def generate_arm(spec: ArmSpec, target: np.ndarray) -> GeneratedArm:
             f"start angles {theta0.tolist()} leave the joint limits +-{THETA_LIMIT} rad",
             key="theta0",
         )
-    key_points = default_key_points(spec.links, spec.points_per_link, include_joints=True)
-    return GeneratedArm(spec, arm, key_points, theta0, arm.end_effector(theta0))
+    key_points = default_key_points(links, points_per_link, include_joints=True)
+    return GeneratedArm(arm, key_points, theta0, arm.end_effector(theta0))

@@ -11,7 +11,6 @@ so the dumped ticks hold both.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -20,16 +19,6 @@ from .arms import GeneratedArm
 
 #: Radius of the disk the cloud's points fill, in [m].
 CLOUD_RADIUS = 0.03
-
-
-@dataclass(frozen=True)
-class CloudSpec:
-    """A cloud of ``points`` points, ``clearance`` [m] beyond ``d_safe``, moving at ``speed`` [m/s]."""
-
-    points: int
-    clearance: float = 0.015
-    speed: float = 0.1
-    seed: int = 0
 
 
 def cloud_points(m: int, seed: int = 0, radius: float = CLOUD_RADIUS) -> np.ndarray:
@@ -78,18 +67,24 @@ def _clear_offset(
 
 
 def place_cloud(
-    gen: GeneratedArm, spec: CloudSpec, d_safe: float, name: str = "cloud"
+    gen: GeneratedArm,
+    points: int,
+    d_safe: float,
+    seed: int = 0,
+    clearance: float = 0.015,
+    speed: float = 0.1,
 ) -> PointCloudObstacle:
-    """The cloud beside ``gen`` at ``theta0``, every key point ``d_safe + clearance`` [m] from it:
-    stepped outwards by 1 mm along the middle key point's outer (or inner) normal until the arm
-    clears it, the side needing the smaller step; it moves towards the arm at ``spec.speed``."""
+    """A cloud of ``points`` points (drawn from ``seed``) beside ``gen`` at ``theta0``, every key
+    point ``d_safe + clearance`` [m] from it: stepped outwards by 1 mm along the middle key point's
+    outer (or inner) normal until the arm clears it, the side needing the smaller step; it moves
+    towards the arm at ``speed`` [m/s]."""
     xy = gen.key_point_positions()
     i = len(gen.key_points) // 2
     u = _outer_normal(gen, i)
-    pts = cloud_points(spec.points, spec.seed)
-    want = d_safe + spec.clearance
+    pts = cloud_points(points, seed)
+    want = d_safe + clearance
     offset, side = min(
         (_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0))
     )
     u = u if side == 0 else -u
-    return PointCloudObstacle(name, xy[i] + offset * u + pts, velocity=-spec.speed * u)
+    return PointCloudObstacle("cloud", xy[i] + offset * u + pts, velocity=-speed * u)

@@ -281,7 +281,6 @@ def write_scaling_report(
     out: str | Path,
     force: bool = False,
     plots: bool = True,
-    quiet: bool = False,
 ) -> Path:
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``.
 

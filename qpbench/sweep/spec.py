@@ -1,41 +1,8 @@
-"""Sweep files: a base scenario and distributions over its parameters.
-
-A sweep file (TOML) names a base scenario and, per scenario key, a
-distribution to draw that key's value from for every instance::
-
-    [sweep]
-    name = "wall"                 # names the instances (wall-i00003)
-    base = "wall"                 # shipped scenario name, or a path (relative to this file)
-    seed = 1                      # every draw follows from it
-    samples = 500                 # instances
-    duration = 6.0                # s, optional: simulated time of every instance (default: the base's)
-    safe_start = true             # optional (default true): an instance starting inside d_safe is invalid
-
-    [convergence]                 # optional: bands of the time-to-converge figures
-    force_band = 0.5              # N   (default: a tenth of the base's [verdict] max_force_error)
-    tracking_band = 1e-4          # m   (default: a tenth of its max_tracking_error)
-
-    [[obstacles]]                 # optional: obstacles added to the base's (scenario schema)
-    kind = "disk"
-    name = "post"
-    center = [0.1, 0.3]
-    radius = 0.03
-    velocity = [0.0, 0.0]
-
-    [parameters]                  # scenario key = distribution
-    "robot.theta0" = { dist = "normal", std = 0.05 }
-    "controller.desired_force" = { dist = "uniform", low = 10.0, high = 30.0 }
-    "obstacles[1].radius" = { dist = "loguniform", low = 0.01, high = 0.05 }
-    "simulation.dt" = { dist = "choice", values = [0.001, 0.0005] }
-
-Keys are the scenario's own dotted keys (those of ``simulate --set``), quoted, or nested tables.
-Distributions (bounds: a number, or a list of the key's shape, each component drawn on its own):
-``uniform`` (``low``, ``high``; or ``spread`` around the base value), ``normal`` (``std``,
-``mean`` default the base value, optional truncation ``low``, ``high``), ``loguniform`` (``low``,
-``high`` > 0), ``choice`` (``values``, optional ``weights``), ``integers`` (inclusive, integer
-keys). ``same = true`` draws once for every component: an offset added to each with ``spread``
-(or a normal around the base), else the value itself. Instance ``i`` draws key ``k`` from
-``default_rng([seed, i, crc32(k)])``: the same whatever the sample count and the other keys.
+"""Sweep files (format: ``docs/sweeps.md``): a base scenario and, per scenario key, a
+distribution to draw that key's value from for every instance; instance ``i`` draws key ``k`` from
+``default_rng([seed, i, crc32(k)])``, the same whatever the sample count and the other keys.
+``[convergence]`` holds the bands of the time-to-converge figures, ``force_band`` [N] and
+``tracking_band`` [m] (default: a tenth of the base's ``[verdict]`` maximum errors).
 """
 
 from __future__ import annotations
@@ -43,6 +10,7 @@ from __future__ import annotations
 import copy
 import difflib
 import hashlib
+import math
 import re
 import tomllib
 import zlib
@@ -52,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
-from .distributions import Distribution, checked_distribution, finite_number
 
 #: Names a reader may try for a key, and the scenario key meant.
 ALIASES = {
@@ -72,16 +39,227 @@ ALIASES = {
     "duration": "[sweep] duration",
 }
 
-_SWEEP_KEYS = {
-    "name": str,
-    "base": str,
-    "seed": int,
-    "samples": int,
-    "duration": float,
-    "safe_start": bool,
-}
+_SWEEP_KEYS = ("name", "base", "seed", "samples", "duration", "safe_start")
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
 SCENARIO_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
+
+
+#: Distribution kinds and their allowed fields (``dist`` aside).
+DISTRIBUTIONS = {
+    "uniform": ("low", "high", "spread", "same"),
+    "normal": ("mean", "std", "low", "high", "same"),
+    "loguniform": ("low", "high", "same"),
+    "choice": ("values", "weights"),
+    "integers": ("low", "high"),
+}
+
+#: Draws of a truncated normal tried before giving up on a component.
+_MAX_REDRAWS = 1000
+
+
+def finite_number(v) -> bool:
+    """True for an int or float (not a bool) that is finite."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """One key's distribution: ``params`` its fields (numbers as arrays of the key's shape),
+    ``base`` the base scenario's value."""
+
+    key: str
+    kind: str
+    params: dict
+    base: object
+
+    def draw(self, rng: np.random.Generator) -> object:
+        """One value of the key (a float, an int, or a list of the base's shape)."""
+        p, base = self.params, self.base
+        shape = np.shape(base)
+        if self.kind == "choice":
+            i = int(rng.choice(len(p["values"]), p=p.get("weights")))
+            return copy.deepcopy(p["values"][i])
+        if self.kind == "integers":
+            return int(rng.integers(p["low"], p["high"], endpoint=True))
+        if p.get("same"):  # one draw for every component: an offset from the base, or the value
+            relative = "spread" in p or (self.kind == "normal" and "mean" not in p)
+            first = float(np.ravel(base)[0])
+            one = Distribution(
+                self.key, self.kind, {k: v for k, v in p.items() if k != "same"}, first
+            ).draw(rng)
+            value = base + (one - first) if relative else np.full(shape, one)
+            return value.tolist() if shape else float(value)
+        if self.kind == "uniform":
+            low, high = (
+                (base - p["spread"], base + p["spread"]) if "spread" in p else (p["low"], p["high"])
+            )
+            value = rng.uniform(low, high, size=shape)
+        elif self.kind == "loguniform":
+            value = np.exp(rng.uniform(np.log(p["low"]), np.log(p["high"]), size=shape))
+        else:
+            value = self._truncated_normal(rng, shape)
+        return value.tolist() if shape else float(value)
+
+    def _truncated_normal(self, rng, shape):
+        p = self.params
+        mean = p.get("mean", np.asarray(self.base, dtype=float))
+        mean, std = np.broadcast_to(mean, shape), np.broadcast_to(p["std"], shape)
+        low = np.broadcast_to(p.get("low", -np.inf), shape)
+        high = np.broadcast_to(p.get("high", np.inf), shape)
+        value = np.asarray(rng.normal(mean, std), dtype=float)
+        for _ in range(_MAX_REDRAWS):
+            bad = (value < low) | (value > high)
+            if not bad.any():
+                return value
+            value = np.where(bad, rng.normal(mean, std), value)
+        raise InputError(
+            f"a truncated normal draw stayed outside [low, high] {_MAX_REDRAWS} times", key=self.key
+        )
+
+
+def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
+    """Key ``key``'s distribution ``spec`` (a ``[parameters]`` entry), checked against ``base``,
+    the base scenario's value of the key; :class:`InputError` naming ``path`` and the key if wrong."""
+    where = f"parameters.{key}"
+    kind = spec.get("dist")
+    if kind not in DISTRIBUTIONS:
+        raise InputError(
+            f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})",
+            path=path,
+            key=f"{where}.dist",
+        )
+    for f in spec:
+        if f != "dist" and f not in DISTRIBUTIONS[kind]:
+            raise InputError(
+                f"unknown field of a {kind} distribution (expected: {', '.join(DISTRIBUTIONS[kind])})",
+                path=path,
+                key=f"{where}.{f}",
+            )
+    if kind == "choice":
+        return Distribution(key, kind, _choice(spec, base, path, where), base)
+    is_int = isinstance(base, int) and not isinstance(base, bool)
+    if kind == "integers" or is_int:
+        if not (kind == "integers" and is_int):
+            raise InputError(
+                f"{'an integer key takes integers or choice' if is_int else 'integers is for integer keys'}",
+                path=path,
+                key=f"{where}.dist",
+            )
+        lo, hi = spec.get("low"), spec.get("high")
+        if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
+            raise InputError(f"need integers low <= high, got {lo!r}, {hi!r}", path=path, key=where)
+        return Distribution(key, kind, {"low": lo, "high": hi}, base)
+    base_arr = _numeric(base, None, path, where, "the base value")
+    same = spec.get("same", False)
+    if not isinstance(same, bool):
+        raise InputError(f"expected true or false, got {same!r}", path=path, key=f"{where}.same")
+    shape = None if same else np.shape(base_arr)  # same: numbers only, checked below
+    params = {
+        f: _numeric(v, shape, path, f"{where}.{f}", f)
+        for f, v in spec.items()
+        if f not in ("dist", "same")
+    }
+    if same and any(np.ndim(v) for v in params.values()):
+        raise InputError(
+            "same = true takes numbers, not lists (one draw for every component)",
+            path=path,
+            key=f"{where}.same",
+        )
+    if same:
+        params["same"] = True
+    _check_bounds(kind, params, path, where)
+    return Distribution(key, kind, params, base_arr if np.ndim(base_arr) else float(base_arr))
+
+
+def _numeric(value, shape, path, where, what):
+    """``value`` as a float array broadcastable to ``shape`` (or any numeric shape when ``shape`` is None)."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if (
+        arr is None
+        or arr.dtype == object
+        or not np.all(np.isfinite(arr))
+        or isinstance(value, bool)
+    ):
+        raise InputError(f"{what}: expected finite numbers, got {value!r}", path=path, key=where)
+    if shape is not None and arr.ndim and arr.shape != tuple(shape):
+        raise InputError(
+            f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
+            path=path,
+            key=where,
+        )
+    return arr
+
+
+def _check_bounds(kind: str, p: dict, path, where) -> None:
+    def need(*names):
+        for n in names:
+            if n not in p:
+                raise InputError(
+                    f"a {kind} distribution needs {' and '.join(names)}",
+                    path=path,
+                    key=f"{where}.{n}",
+                )
+
+    if kind == "uniform":
+        if "spread" in p:
+            if "low" in p or "high" in p:
+                raise InputError(
+                    "give either spread or low and high", path=path, key=f"{where}.spread"
+                )
+            if np.any(p["spread"] < 0):
+                raise InputError("spread must be >= 0", path=path, key=f"{where}.spread")
+            return
+        need("low", "high")
+    elif kind == "loguniform":
+        need("low", "high")
+        if np.any(p["low"] <= 0):
+            raise InputError("loguniform needs low > 0", path=path, key=f"{where}.low")
+    elif kind == "normal":
+        need("std")
+        if np.any(p["std"] < 0):
+            raise InputError("std must be >= 0", path=path, key=f"{where}.std")
+    if "low" in p and "high" in p and np.any(p["low"] > p["high"]):
+        raise InputError("low must be <= high", path=path, key=f"{where}.low")
+
+
+def _choice(spec: dict, base, path, where) -> dict:
+    values = spec.get("values")
+    if not isinstance(values, list) or not values:
+        raise InputError(
+            "a choice needs a non-empty list of values", path=path, key=f"{where}.values"
+        )
+    for v in values:
+        if type(v) is not type(base) and not (finite_number(v) and finite_number(base)):
+            raise InputError(
+                f"each value must be like the base value {base!r}, got {v!r}",
+                path=path,
+                key=f"{where}.values",
+            )
+        if isinstance(base, list) and np.shape(v) != np.shape(base):
+            raise InputError(
+                f"each value must have the base value's shape {list(np.shape(base))}, got {v!r}",
+                path=path,
+                key=f"{where}.values",
+            )
+    out = {"values": values}
+    if "weights" in spec:
+        w = spec["weights"]
+        if not (
+            isinstance(w, list)
+            and len(w) == len(values)
+            and all(finite_number(x) and x >= 0 for x in w)
+            and sum(w) > 0
+        ):
+            raise InputError(
+                "weights: one number >= 0 per value, not all zero",
+                path=path,
+                key=f"{where}.weights",
+            )
+        out["weights"] = [x / sum(w) for x in w]
+    return out
 
 
 @dataclass
@@ -143,17 +321,16 @@ def parse_sweep(
             raise InputError(f"unknown table (expected: {', '.join(_TOP)})", path=path, key=key)
     head = _sweep_table(raw.get("sweep"), path)
     if samples is not None:
-        head["samples"] = _positive_int(samples, path, "--samples")
+        head["samples"] = _integer(samples, 1, path, "--samples")
     if duration is not None:
         head["duration"] = duration
-    if head.get("duration") is not None:
-        positive_seconds(head["duration"], "sweep.duration", path)
     base_path, base_raw = _base(head["base"], path)
     extra = raw.get("obstacles", [])
     if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
         raise InputError("expected [[obstacles]] tables", path=path, key="obstacles")
     base_raw["obstacles"] = list(base_raw.get("obstacles", [])) + copy.deepcopy(extra)
     if head.get("duration") is not None:
+        positive_seconds(head["duration"], "sweep.duration", path)
         base_raw.setdefault("simulation", {})["duration"] = float(head["duration"])
     scenario = _check_base(base_raw, path)
     params = raw.get("parameters", {})
@@ -183,9 +360,9 @@ def parse_sweep(
     )
 
 
-def _positive_int(value, path, key) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-        raise InputError(f"must be an integer >= 1, got {value!r}", path=path, key=key)
+def _integer(value, least: int, path, key) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or value < least:
+        raise InputError(f"expected an integer >= {least}, got {value!r}", path=path, key=key)
     return value
 
 
@@ -203,11 +380,8 @@ def _sweep_table(head, path) -> dict:
         raise InputError(
             "letters, digits, '_', '.' and '-' only (it names files)", path=path, key="sweep.name"
         )
-    if not isinstance(head["seed"], int) or isinstance(head["seed"], bool) or head["seed"] < 0:
-        raise InputError(
-            f"expected an integer >= 0, got {head['seed']!r}", path=path, key="sweep.seed"
-        )
-    _positive_int(head["samples"], path, "sweep.samples")
+    _integer(head["seed"], 0, path, "sweep.seed")
+    _integer(head["samples"], 1, path, "sweep.samples")
     if not isinstance(head.get("safe_start", True), bool):
         raise InputError("expected true or false", path=path, key="sweep.safe_start")
     return dict(head)
@@ -310,22 +484,12 @@ def _base_value(key: str, base_raw: dict, path):
 def _bands(conv, verdict, path) -> tuple[float, float]:
     if not isinstance(conv, dict):
         raise InputError("expected a table", path=path, key="convergence")
-    for key in conv:
-        if key not in ("force_band", "tracking_band"):
-            raise InputError(
-                "unknown key (expected force_band, tracking_band)",
-                path=path,
-                key=f"convergence.{key}",
-            )
-    out = []
-    for key, default in (
-        ("force_band", verdict.max_force_error / 10),
-        ("tracking_band", verdict.max_tracking_error / 10),
-    ):
-        value = conv.get(key, default)
+    check_known_keys(conv, ("force_band", "tracking_band"), path, "convergence")
+    force = conv.get("force_band", verdict.max_force_error / 10)
+    tracking = conv.get("tracking_band", verdict.max_tracking_error / 10)
+    for key, value in (("force_band", force), ("tracking_band", tracking)):
         if not (finite_number(value) and value > 0):
             raise InputError(
                 f"must be a positive number, got {value!r}", path=path, key=f"convergence.{key}"
             )
-        out.append(float(value))
-    return out[0], out[1]
+    return float(force), float(tracking)
