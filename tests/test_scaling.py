@@ -10,10 +10,9 @@ import pytest
 
 from qpbench.cli import main
 from qpbench.robot.kinematics import PlanarArm
-from qpbench.scaling.arms import REACH, THETA_LIMIT, generate_arm
 from qpbench.scaling.fit import crossing, extrapolated_crossing, first_above, fit_power_law
-from qpbench.scaling.obstacles import min_key_point_distance
 from qpbench.scaling.runner import COLUMNS, read_summary
+from qpbench.scaling.scene import REACH, THETA_LIMIT, generate_arm, min_key_point_distance
 from qpbench.scaling.sizes import (
     DEFAULT_SIZES,
     TASK,

@@ -34,16 +34,6 @@ def is_scaling_dir(path: str | Path) -> bool:
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
 
 
-def load(folder: str | Path) -> pd.DataFrame:
-    """``scaling.csv`` of ``folder`` as a frame, numbers typed (empty without rows)."""
-    from .runner import COLUMNS, SUMMARY_NAME, TEXT_COLUMNS, read_summary
-
-    frame = pd.DataFrame(read_summary(Path(folder) / SUMMARY_NAME), columns=list(COLUMNS))
-    for col in set(COLUMNS) - set(TEXT_COLUMNS):
-        frame[col] = pd.to_numeric(frame[col], errors="coerce")
-    return frame
-
-
 def fits(frame: pd.DataFrame) -> dict:
     """``{(backend, axis): PowerFit}`` of median solve time on each axis."""
     measured = frame[frame["status"] == "measured"]
@@ -277,10 +267,7 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
 
 
 def write_scaling_report(
-    folder: str | Path,
-    out: str | Path,
-    force: bool = False,
-    plots: bool = True,
+    folder: str | Path, out: str | Path, force: bool = False, plots: bool = True
 ) -> Path:
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``.
 
@@ -290,12 +277,13 @@ def write_scaling_report(
     """
     from ..exceptions import InputError
     from ..report.write import publish
+    from .runner import SUMMARY_NAME
 
     if not is_scaling_dir(folder):
         raise InputError("not a scaling folder (no scaling.csv)", path=folder)
-    frame = load(folder)
+    frame = pd.read_csv(Path(folder) / SUMMARY_NAME)
     if frame.empty:
-        raise InputError("no rows", path=Path(folder) / "scaling.csv")
+        raise InputError("no rows", path=Path(folder) / SUMMARY_NAME)
     fitted = fits(frame)
 
     def figures(out: Path) -> str | None:

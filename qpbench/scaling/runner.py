@@ -1,17 +1,11 @@
-"""The scaling study: per size, dump ticks of the closed loop, bench them, summarise.
+"""The scaling study's run, per size (:mod:`.sizes`), in ``DIR``: ``scenarios/<size>.toml``, the
+ticks of its closed loop dumped into ``sets/<size>/``, their build times, ``bench/<size>.csv``
+(:func:`qpbench.harness.bench.run_bench`, resumable) and one row per (size, backend) appended to
+``scaling.csv`` (:data:`COLUMNS`) once the size is done; a resumed run skips the sizes it holds.
 
-For each size (:mod:`qpbench.scaling.sizes`), in ``DIR``: ``scenarios/<size>.toml`` (the size as a
-scenario file); ``sets/<size>/``, every ``every``-th tick's QP of the closed loop run for
-``duration`` [s] with the exact ``driver`` (the QPs the controller meets: the arm in contact, the
-approaching cloud's rows becoming active; removed once the size is done unless ``keep_sets``); the
-time to build a tick's QP (the minimum of ``build_repeat`` calls); ``bench/<size>.csv``
-(:func:`qpbench.harness.bench.run_bench`, as ``qpbench bench``, resumable); and one row per
-(size, backend) appended to ``scaling.csv`` (:data:`COLUMNS`) once the size is done (a resumed
-run skips the sizes it holds).
-
-Skipped (a ``skipped`` row with the reason, never a run of minutes): a dense-only backend
-(:func:`matrix_format`) on a size with more than ``dense_limit`` entries ``n x rows``; a backend
-whose median solve on a smaller size of the same axis took longer than ``slow_limit`` [s].
+Skipped, with the reason in a ``skipped`` row: a dense-only backend (:func:`matrix_format`) on a
+size of more than ``dense_limit`` entries ``n x rows``; a backend whose median solve on a smaller
+size of the same axis took longer than ``slow_limit`` [s].
 """
 
 from __future__ import annotations
@@ -65,8 +59,6 @@ COLUMNS = (
     "repeat",
     "seed",
 )
-#: The columns of :data:`COLUMNS` that hold text; every other one holds a number.
-TEXT_COLUMNS = ("size", "axis", "backend", "matrix_format", "status", "skip_reason", "driver")
 SUMMARY_NAME = "scaling.csv"
 
 #: How the built-in solvers take their matrices: ``dense`` (a dense factorisation or dense
@@ -93,8 +85,10 @@ def matrix_format(name: str) -> str:
 
 @dataclass
 class ScalingConfig:
-    """What to run (module docstring): ``sizes`` smallest first within an axis, ``duration`` [s],
-    ``repeat`` timed solves per (tick, backend) (the row keeps the minimum), ``slow_limit`` [s]."""
+    """What to run (module docstring): ``sizes`` smallest first within an axis; the closed loop of
+    ``duration`` [s] driven by ``driver``, every ``every``-th tick kept (``sets/`` removed once a
+    size is done unless ``keep_sets``); ``repeat`` timed solves per (tick, backend) and
+    ``build_repeat`` builds per tick (the minimum kept); ``slow_limit`` [s]."""
 
     backends: list[str]
     sizes: list[Size]

@@ -24,8 +24,7 @@ import numpy as np
 
 from ..exceptions import ParamError
 from ..sweep.toml_text import dumps
-from .arms import THETA_LIMIT, VELOCITY_LIMIT, GeneratedArm, generate_arm
-from .obstacles import place_cloud
+from .scene import THETA_LIMIT, VELOCITY_LIMIT, GeneratedArm, generate_arm, place_cloud
 
 if TYPE_CHECKING:
     from ..robot.environment import PointCloudObstacle

@@ -16,14 +16,17 @@ from __future__ import annotations
 
 import json
 import math
+from typing import TYPE_CHECKING
 
 from ..harness.closed_loop import TABLE_NAMES, failure_fields
 
-#: Name of the table inside the sweep's folder.
-CSV_NAME = "sweep.csv"
+if TYPE_CHECKING:
+    from .sample import Instance
+    from .spec import SweepSpec
 
-#: Statuses of a row (see the module docstring).
-STATUSES = ("ok", "error", "crashed", "invalid_scenario")
+#: Names of the table and of the instances' folder inside the sweep's folder.
+CSV_NAME = "sweep.csv"
+INSTANCE_DIR = "instances"
 
 #: A row's key.
 KEY_COLUMNS = ("instance", "backend")
@@ -111,19 +114,28 @@ COLUMNS = (
 TIMING_COLUMNS = ("attempts",) + _SOLVE_TIMES + ("ticks_over_1ms",) + _REALTIME + _WALL + _PLACE
 
 
-def _head(meta: dict) -> dict:
-    row = {c: None for c in COLUMNS}
-    for key in ("instance", "backend", "instance_file", "sample", "sweep", "base_scenario"):
-        row[key] = meta[key]
-    row["parameters"] = json.dumps(meta["parameters"], separators=(",", ":"))
-    row["force_band_n"], row["tracking_band_m"] = meta["force_band"], meta["tracking_band"]
-    row["duration_s"] = meta.get("duration")
+def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
+    """The row of ``backend``'s run of instance ``inst`` of sweep ``spec``, without its figures."""
+    row = dict.fromkeys(COLUMNS)
+    row.update(
+        instance=inst.name,
+        backend=backend,
+        instance_file=f"{INSTANCE_DIR}/{inst.name}.toml",
+        sample=inst.index,
+        sweep=spec.name,
+        base_scenario=spec.base,
+        parameters=json.dumps(inst.values, separators=(",", ":")),
+        duration_s=spec.duration,
+        force_band_n=spec.force_band,
+        tracking_band_m=spec.tracking_band,
+    )
     return row
 
 
-def sweep_row(meta: dict, row: dict) -> dict:
-    """The sweep's row of a closed-loop row (:func:`qpbench.harness.closed_loop.run_row`)."""
-    out = _head(meta)
+def sweep_row(head: dict, row: dict) -> dict:
+    """The sweep's row (``head``: :func:`head_row`) of a closed-loop row
+    (:func:`qpbench.harness.closed_loop.run_row`)."""
+    out = dict(head)
     for key in COLUMNS:
         if key in row and key not in _HEAD[:7]:
             value = row[key]
@@ -131,9 +143,9 @@ def sweep_row(meta: dict, row: dict) -> dict:
     return out
 
 
-def failed_row(meta: dict, status: str, message: str) -> dict:
+def failed_row(head: dict, status: str, message: str) -> dict:
     """The row of a run without a result (:func:`qpbench.harness.closed_loop.failure_fields`)."""
-    return {**_head(meta), **failure_fields(status, message)}
+    return {**head, **failure_fields(status, message)}
 
 
 def same_outside_timing(a: dict, b: dict) -> list[str]:

@@ -120,59 +120,53 @@ class Distribution:
 def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
     """Key ``key``'s distribution ``spec`` (a ``[parameters]`` entry), checked against ``base``,
     the base scenario's value of the key; :class:`InputError` naming ``path`` and the key if wrong."""
-    where = f"parameters.{key}"
+
+    def bad(message: str, field: str | None = None) -> InputError:
+        return InputError(
+            message, path=path, key=".".join(filter(None, ("parameters", key, field)))
+        )
+
     kind = spec.get("dist")
     if kind not in DISTRIBUTIONS:
-        raise InputError(
-            f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})",
-            path=path,
-            key=f"{where}.dist",
-        )
+        raise bad(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", "dist")
     for f in spec:
         if f != "dist" and f not in DISTRIBUTIONS[kind]:
-            raise InputError(
-                f"unknown field of a {kind} distribution (expected: {', '.join(DISTRIBUTIONS[kind])})",
-                path=path,
-                key=f"{where}.{f}",
-            )
+            expected = ", ".join(DISTRIBUTIONS[kind])
+            raise bad(f"unknown field of a {kind} distribution (expected: {expected})", f)
     if kind == "choice":
-        return Distribution(key, kind, _choice(spec, base, path, where), base)
+        return Distribution(key, kind, _choice(spec, base, bad), base)
     is_int = isinstance(base, int) and not isinstance(base, bool)
     if kind == "integers" or is_int:
         if not (kind == "integers" and is_int):
-            raise InputError(
-                f"{'an integer key takes integers or choice' if is_int else 'integers is for integer keys'}",
-                path=path,
-                key=f"{where}.dist",
+            why = (
+                "an integer key takes integers or choice"
+                if is_int
+                else "integers is for integer keys"
             )
+            raise bad(why, "dist")
         lo, hi = spec.get("low"), spec.get("high")
         if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
-            raise InputError(f"need integers low <= high, got {lo!r}, {hi!r}", path=path, key=where)
+            raise bad(f"need integers low <= high, got {lo!r}, {hi!r}")
         return Distribution(key, kind, {"low": lo, "high": hi}, base)
-    base_arr = _numeric(base, None, path, where, "the base value")
+    base_arr = _numeric(base, None, bad, None, "the base value")
     same = spec.get("same", False)
     if not isinstance(same, bool):
-        raise InputError(f"expected true or false, got {same!r}", path=path, key=f"{where}.same")
+        raise bad(f"expected true or false, got {same!r}", "same")
     shape = None if same else np.shape(base_arr)  # same: numbers only, checked below
     params = {
-        f: _numeric(v, shape, path, f"{where}.{f}", f)
-        for f, v in spec.items()
-        if f not in ("dist", "same")
+        f: _numeric(v, shape, bad, f, f) for f, v in spec.items() if f not in ("dist", "same")
     }
     if same and any(np.ndim(v) for v in params.values()):
-        raise InputError(
-            "same = true takes numbers, not lists (one draw for every component)",
-            path=path,
-            key=f"{where}.same",
-        )
+        raise bad("same = true takes numbers, not lists (one draw for every component)", "same")
     if same:
         params["same"] = True
-    _check_bounds(kind, params, path, where)
+    _check_bounds(kind, params, bad)
     return Distribution(key, kind, params, base_arr if np.ndim(base_arr) else float(base_arr))
 
 
-def _numeric(value, shape, path, where, what):
-    """``value`` as a float array broadcastable to ``shape`` (or any numeric shape when ``shape`` is None)."""
+def _numeric(value, shape, bad, field, what):
+    """``value`` as a float array broadcastable to ``shape`` (or any numeric shape when ``shape``
+    is None); ``bad(message, field)`` makes the error."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -183,67 +177,44 @@ def _numeric(value, shape, path, where, what):
         or not np.all(np.isfinite(arr))
         or isinstance(value, bool)
     ):
-        raise InputError(f"{what}: expected finite numbers, got {value!r}", path=path, key=where)
+        raise bad(f"{what}: expected finite numbers, got {value!r}", field)
     if shape is not None and arr.ndim and arr.shape != tuple(shape):
-        raise InputError(
+        raise bad(
             f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
-            path=path,
-            key=where,
+            field,
         )
     return arr
 
 
-def _check_bounds(kind: str, p: dict, path, where) -> None:
-    def need(*names):
-        for n in names:
-            if n not in p:
-                raise InputError(
-                    f"a {kind} distribution needs {' and '.join(names)}",
-                    path=path,
-                    key=f"{where}.{n}",
-                )
-
-    if kind == "uniform":
-        if "spread" in p:
-            if "low" in p or "high" in p:
-                raise InputError(
-                    "give either spread or low and high", path=path, key=f"{where}.spread"
-                )
-            if np.any(p["spread"] < 0):
-                raise InputError("spread must be >= 0", path=path, key=f"{where}.spread")
-            return
-        need("low", "high")
-    elif kind == "loguniform":
-        need("low", "high")
-        if np.any(p["low"] <= 0):
-            raise InputError("loguniform needs low > 0", path=path, key=f"{where}.low")
-    elif kind == "normal":
-        need("std")
-        if np.any(p["std"] < 0):
-            raise InputError("std must be >= 0", path=path, key=f"{where}.std")
+def _check_bounds(kind: str, p: dict, bad) -> None:
+    if kind == "uniform" and "spread" in p:
+        if "low" in p or "high" in p:
+            raise bad("give either spread or low and high", "spread")
+        if np.any(p["spread"] < 0):
+            raise bad("spread must be >= 0", "spread")
+        return
+    needs = ("std",) if kind == "normal" else ("low", "high")
+    for name in needs:
+        if name not in p:
+            raise bad(f"a {kind} distribution needs {' and '.join(needs)}", name)
+    if kind == "normal" and np.any(p["std"] < 0):
+        raise bad("std must be >= 0", "std")
+    if kind == "loguniform" and np.any(p["low"] <= 0):
+        raise bad("loguniform needs low > 0", "low")
     if "low" in p and "high" in p and np.any(p["low"] > p["high"]):
-        raise InputError("low must be <= high", path=path, key=f"{where}.low")
+        raise bad("low must be <= high", "low")
 
 
-def _choice(spec: dict, base, path, where) -> dict:
+def _choice(spec: dict, base, bad) -> dict:
     values = spec.get("values")
     if not isinstance(values, list) or not values:
-        raise InputError(
-            "a choice needs a non-empty list of values", path=path, key=f"{where}.values"
-        )
+        raise bad("a choice needs a non-empty list of values", "values")
     for v in values:
         if type(v) is not type(base) and not (finite_number(v) and finite_number(base)):
-            raise InputError(
-                f"each value must be like the base value {base!r}, got {v!r}",
-                path=path,
-                key=f"{where}.values",
-            )
+            raise bad(f"each value must be like the base value {base!r}, got {v!r}", "values")
         if isinstance(base, list) and np.shape(v) != np.shape(base):
-            raise InputError(
-                f"each value must have the base value's shape {list(np.shape(base))}, got {v!r}",
-                path=path,
-                key=f"{where}.values",
-            )
+            shape = list(np.shape(base))
+            raise bad(f"each value must have the base value's shape {shape}, got {v!r}", "values")
     out = {"values": values}
     if "weights" in spec:
         w = spec["weights"]
@@ -253,11 +224,7 @@ def _choice(spec: dict, base, path, where) -> dict:
             and all(finite_number(x) and x >= 0 for x in w)
             and sum(w) > 0
         ):
-            raise InputError(
-                "weights: one number >= 0 per value, not all zero",
-                path=path,
-                key=f"{where}.weights",
-            )
+            raise bad("weights: one number >= 0 per value, not all zero", "weights")
         out["weights"] = [x / sum(w) for x in w]
     return out
 
@@ -388,23 +355,15 @@ def _sweep_table(head, path) -> dict:
 
 
 def _base(name: str, path: Path) -> tuple[Path, dict]:
-    from ..sim.scenario import scenario_path
+    """The base scenario's file and tables (``name``: shipped, or a path relative to ``path``'s)."""
+    from ..sim.scenario import load_scenario
 
-    candidate = (
-        (path.parent / name)
-        if ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
-        else name
-    )
+    relative = ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
     try:
-        base_path = scenario_path(candidate)
-        raw = tomllib.loads(base_path.read_text(encoding="utf-8"))
+        base = load_scenario(path.parent / name if relative else name)
     except ScenarioError as exc:
         raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise InputError(
-            f"base scenario {name!r} unreadable: {exc}", path=path, key="sweep.base"
-        ) from None
-    return base_path, raw
+    return base.path, tomllib.loads(base.source)
 
 
 def _check_base(base_raw: dict, path: Path):
@@ -438,46 +397,33 @@ def _flatten(params: dict, path, prefix: str = ""):
 
 
 def _base_value(key: str, base_raw: dict, path):
-    where = f"parameters.{key}"
+    def bad(message: str) -> InputError:
+        return InputError(message, path=path, key=f"parameters.{key}")
+
     match = SCENARIO_KEY.fullmatch(key)
     if match is None:
         hint = ALIASES.get(key.casefold())
-        raise InputError(
-            "unknown parameter key"
-            + (
-                f"; the key is {hint}"
-                if hint
-                else " (expected a scenario key TABLE.KEY or obstacles[i].KEY, e.g. controller.desired_force)"
-            ),
-            path=path,
-            key=where,
+        raise bad(
+            f"unknown parameter key; the key is {hint}"
+            if hint
+            else "unknown parameter key (expected a scenario key TABLE.KEY or obstacles[i].KEY, "
+            "e.g. controller.desired_force)"
         )
     table, index, name = match.groups()
     if index is not None:
         obstacles = base_raw.get("obstacles", []) if table == "obstacles" else []
         if table != "obstacles" or int(index) >= len(obstacles):
-            raise InputError(
-                f"no such obstacle (base and sweep have {len(obstacles)})", path=path, key=where
-            )
+            raise bad(f"no such obstacle (base and sweep have {len(obstacles)})")
         target = obstacles[int(index)]
     else:
         target = base_raw.get(table)
         if table == "obstacles" or not isinstance(target, dict):
-            raise InputError(
-                f"unknown parameter key: the base scenario has no table [{table}]",
-                path=path,
-                key=where,
-            )
+            raise bad(f"unknown parameter key: the base scenario has no table [{table}]")
     if name not in target:
         close = difflib.get_close_matches(name, list(target), n=1)
-        hint = (
-            f"; did you mean {table}{'' if index is None else f'[{index}]'}.{close[0]}?"
-            if close
-            else ""
-        )
-        raise InputError(
-            f"unknown parameter key: [{table}] has no key {name!r}{hint}", path=path, key=where
-        )
+        where = table if index is None else f"{table}[{index}]"
+        hint = f"; did you mean {where}.{close[0]}?" if close else ""
+        raise bad(f"unknown parameter key: [{table}] has no key {name!r}{hint}")
     return target[name]
 
 
