@@ -10,18 +10,18 @@ import pytest
 
 from qpbench.cli import main
 from qpbench.robot.kinematics import PlanarArm
-from qpbench.scaling.fit import crossing, extrapolated_crossing, first_above, fit_power_law
+from qpbench.scaling.report import crossing, extrapolated_crossing, first_above, fit_power_law
 from qpbench.scaling.runner import COLUMNS, read_summary
 from qpbench.scaling.scene import REACH, THETA_LIMIT, generate_arm, min_key_point_distance
 from qpbench.scaling.sizes import (
     DEFAULT_SIZES,
-    TASK,
     Size,
     generate,
     parse_sizes,
     qp_shape,
     scenario_toml,
     start_target,
+    task,
 )
 from qpbench.sim.scenario import parse_scenario
 
@@ -75,15 +75,15 @@ def test_start_state_is_feasible(size):
     # every key point outside the cloud by d_safe and a margin
     assert (
         min_key_point_distance(gen.key_point_positions(), cloud.points)
-        >= TASK["controller"]["d_safe"] + 0.01
+        >= task()["controller"]["d_safe"] + 0.01
     )
     assert np.all(np.abs(gen.theta0) < THETA_LIMIT)
     # the end effector rests in contact: Fd / Kp past x_d(0) along the pressing direction
     np.testing.assert_allclose(gen.arm.end_effector(gen.theta0), start_target(), atol=1e-9)
-    normal = np.array(TASK["contact"]["normal"]) / np.hypot(*TASK["contact"]["normal"])
-    penetration = normal @ (gen.target - np.array(TASK["path"]["centre"]))
+    normal = np.array(task()["contact"]["normal"]) / np.hypot(*task()["contact"]["normal"])
+    penetration = normal @ (gen.target - np.array(task()["path"]["centre"]))
     assert penetration == pytest.approx(
-        TASK["controller"]["desired_force"] / TASK["controller"]["kp"]
+        task()["controller"]["desired_force"] / task()["controller"]["kp"]
     )
     # the cloud approaches the arm
     assert np.hypot(*cloud.velocity) == pytest.approx(0.1)

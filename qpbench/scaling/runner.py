@@ -322,17 +322,17 @@ def run_scaling(
 
 def failure_line(path: str | Path) -> str | None:
     """The failed solves of a scaling run, in one line from its ``scaling.csv`` (``None``: no failed solve)."""
-    counts: dict[str, int] = {}
-    sizes: dict[str, list[str]] = {}
-    for r in read_summary(path):
-        n = int(float(r["failures"])) if r["failures"] else 0
-        if n:
-            counts[r["backend"]] = counts.get(r["backend"], 0) + n
-            sizes.setdefault(r["backend"], []).append(r["size"])
-    if not counts:
+    import pandas as pd
+
+    frame = pd.read_csv(path)
+    failed = frame[frame["failures"].fillna(0) > 0]
+    if failed.empty:
         return None
-    per_backend = "; ".join(f"{b} {n} on {', '.join(sizes[b])}" for b, n in counts.items())
+    per_backend = "; ".join(
+        f"{b} {int(g['failures'].sum())} on {', '.join(g['size'])}"
+        for b, g in failed.groupby("backend", sort=False)
+    )
     return (
-        f"{sum(counts.values())} failed solves (error, time_limit, invalid, crashed, or not "
-        f"optimal where the reference is): {per_backend} (column 'failures' of {path})"
+        f"{int(failed['failures'].sum())} failed solves (error, time_limit, invalid, crashed, or "
+        f"not optimal where the reference is): {per_backend} (column 'failures' of {path})"
     )

@@ -15,8 +15,11 @@ The default grid has two axes, each dimension read with the other held: ``cloud`
 
 from __future__ import annotations
 
+import copy
+import functools
 import math
 import re
+import tomllib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -29,42 +32,17 @@ from .scene import THETA_LIMIT, VELOCITY_LIMIT, GeneratedArm, generate_arm, plac
 if TYPE_CHECKING:
     from ..robot.environment import PointCloudObstacle
 
-#: The scenario tables every size shares: the ``wall`` scenario's task, the path started
-#: mid-stroke so the arm moves at once; lengths [m], angles [rad], times [s], forces [N].
-TASK = {
-    "path": {
-        "kind": "cosine",
-        "centre": [0.4, 0.5],
-        "amplitude": [0.1, 0.1],
-        "omega": [0.5, 0.5],  # [rad/s]
-        "phase": [-math.pi / 2, -math.pi / 2],
-    },
-    "contact": {
-        "point": [0.4, 0.5],
-        "normal": [1.0, -1.0],
-        "stiffness": 5000.0,  # [N/m]
-        "damping": 50.0,  # [N s/m]
-        "force_noise_std": 0.0,
-        "noise_seed": 0,
-    },
-    "controller": {
-        "desired_force": 20.0,
-        "kp": 5000.0,  # [N/m]
-        "kd": 50.0,  # [N s/m]
-        "alpha": 8.0,  # [1/s]
-        "k": 10.0,  # [1/s]
-        "d_safe": 0.01,
-        "rho": 1.0e4,
-    },
-    "verdict": {
-        "settle_time": 2.0,
-        "max_tracking_error": 0.001,
-        "max_force_error": 2.0,
-        "safety_margin": 0.0005,
-    },
-}
-#: The control period [s].
-DT = 0.001
+
+@functools.cache
+def task() -> dict:
+    """The scenario tables every size shares: the ``wall`` scenario's but its ``[scenario]``,
+    ``[robot]`` and obstacles, the path started mid-stroke (phase -pi/2) so the arm moves at once."""
+    from ..sim.scenario import scenario_path
+
+    raw = tomllib.loads(scenario_path("wall").read_text(encoding="utf-8"))
+    del raw["scenario"], raw["robot"], raw["obstacles"]
+    raw["path"]["phase"] = [-math.pi / 2, -math.pi / 2]
+    return raw
 
 
 @dataclass(frozen=True)
@@ -135,7 +113,7 @@ def parse_sizes(text: str | None) -> list[Size]:
 
 def start_target() -> np.ndarray:
     """Where the end effector rests in contact at t = 0 in [m]: ``x_d(0) + (Fd / Kp) n``."""
-    path, contact, control = TASK["path"], TASK["contact"], TASK["controller"]
+    path, contact, control = task()["path"], task()["contact"], task()["controller"]
     x_d = np.array(path["centre"]) + np.array(path["amplitude"]) * np.cos(path["phase"])
     normal = np.array(contact["normal"]) / np.hypot(*contact["normal"])
     return x_d + control["desired_force"] / control["kp"] * normal
@@ -144,38 +122,31 @@ def start_target() -> np.ndarray:
 def generate(size: Size, seed: int = 0) -> tuple[GeneratedArm, PointCloudObstacle]:
     """``(GeneratedArm, PointCloudObstacle)`` of a size, deterministic in ``seed``."""
     gen = generate_arm(size.links, size.points_per_link, start_target(), seed)
-    return gen, place_cloud(gen, size.cloud_points, TASK["controller"]["d_safe"], seed)
+    return gen, place_cloud(gen, size.cloud_points, task()["controller"]["d_safe"], seed)
 
 
 def scenario_toml(size: Size, gen: GeneratedArm, cloud: PointCloudObstacle, duration: float) -> str:
     """The size as a scenario file's text (:mod:`qpbench.sim.scenario` layout), ``duration`` [s]."""
     n, a, m = size.links, size.key_points, size.cloud_points
-    raw = {
-        "scenario": {
-            "name": size.name,
-            "description": f"Scaling study: {n} links, {a} key points, a cloud of {m} points "
-            f"({a * m} obstacle rows).",
-            "paper_section": "scaling (beyond the paper)",
-        },
-        "robot": {
-            "link_lengths": gen.arm.lengths,
-            "theta0": gen.theta0,
-            "theta_min": [-THETA_LIMIT] * n,
-            "theta_max": [THETA_LIMIT] * n,
-            "velocity_min": [-VELOCITY_LIMIT] * n,
-            "velocity_max": [VELOCITY_LIMIT] * n,
-        },
-        "key_points": {
-            "points_per_link": size.points_per_link,
-            "include_joints": True,
-            "link_radius": 0.0,
-        },
-        **TASK,
-        "simulation": {"dt": DT, "duration": float(duration)},
-        "obstacles": [
-            {"kind": "points", "name": "cloud", "velocity": cloud.velocity, "points": cloud.points}
-        ],
+    raw = copy.deepcopy(task())
+    raw["scenario"] = {
+        "name": size.name,
+        "description": f"Scaling study: {n} links, {a} key points, a cloud of {m} points "
+        f"({a * m} obstacle rows).",
+        "paper_section": "scaling (beyond the paper)",
     }
+    raw["robot"] = {
+        "link_lengths": gen.arm.lengths,
+        "theta0": gen.theta0,
+        "theta_min": [-THETA_LIMIT] * n,
+        "theta_max": [THETA_LIMIT] * n,
+        "velocity_min": [-VELOCITY_LIMIT] * n,
+        "velocity_max": [VELOCITY_LIMIT] * n,
+    }
+    raw["key_points"]["points_per_link"] = size.points_per_link
+    raw["simulation"]["duration"] = float(duration)
+    points = {"kind": "points", "name": "cloud", "velocity": cloud.velocity, "points": cloud.points}
+    raw["obstacles"] = [points]
     header = (
         f"Scaling study size {size.name}: a generated {n}-link arm ({size.points_per_link} key "
         f"points per link and the joints: {a} key points)\nfacing a cloud of {m} points that "

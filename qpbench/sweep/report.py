@@ -1,10 +1,7 @@
-"""The report's sweep section, every number recomputed from ``sweep.csv`` (:mod:`.rows`).
-
-Per backend the rate of each bad verdict among the runs of valid instances with its 95 %
-Wilson score interval (:func:`wilson`: inside [0, 1] and honest at 0 of n); every pair of
-backends on the instances both ran, with McNemar's exact test of the discordant pairs
-(:func:`mcnemar_exact`); ECDFs and quantiles of the per-run figures; the worst runs, each with
-the command that re-runs it.
+"""The report's sweep section (``docs/sweeps.md``), every number recomputed from ``sweep.csv``:
+per backend each bad verdict's rate with its 95 % Wilson score interval (:func:`wilson`), every
+pair of backends with McNemar's exact test (:func:`mcnemar_exact`), ECDFs and quantiles of the
+per-run figures, the worst runs with the command that re-runs each.
 """
 
 from __future__ import annotations
@@ -20,8 +17,6 @@ from ..exceptions import InputError
 from ..report.inputs import CSV_ERRORS, expand_paths
 from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
-
-__all__ = ["is_sweep_csv", "mcnemar_exact", "split_sweep_paths", "sweep_section", "wilson"]
 
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
@@ -93,7 +88,7 @@ def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
 
 def _read(path: Path) -> pd.DataFrame:
     try:
-        df = pd.read_csv(path, keep_default_na=True)
+        df = pd.read_csv(path)
     except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
     df = df.drop_duplicates(["instance", "backend"], keep="last")
@@ -108,12 +103,8 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
     for backend, g in df.groupby("backend", sort=True):
         valid = g[g["status"] != "invalid_scenario"]
         n = len(valid)
-        row = [
-            backend,
-            n,
-            int((g["status"] == "invalid_scenario").sum()),
-            int((valid["verdict"] == "ok").sum()),
-        ]
+        invalid = int((g["status"] == "invalid_scenario").sum())
+        row = [backend, n, invalid, int((valid["verdict"] == "ok").sum())]
         for verdict in RATED:
             k = int((valid["verdict"] == verdict).sum())
             lo, hi = wilson(k, n)
@@ -138,18 +129,8 @@ def paired_rows(df: pd.DataFrame) -> list[list]:
                 continue
             xa, xb = both[a].astype(bool).to_numpy(), both[b].astype(bool).to_numpy()
             n10, n01 = int((xa & ~xb).sum()), int((~xa & xb).sum())
-            out.append(
-                [
-                    a,
-                    b,
-                    len(both),
-                    int((xa & xb).sum()),
-                    n10,
-                    n01,
-                    int((~xa & ~xb).sum()),
-                    mcnemar_exact(n10, n01),
-                ]
-            )
+            both_ok, neither = int((xa & xb).sum()), int((~xa & ~xb).sum())
+            out.append([a, b, len(both), both_ok, n10, n01, neither, mcnemar_exact(n10, n01)])
     return out
 
 

@@ -1,15 +1,14 @@
-"""The sweep table ``DIR/sweep.csv``: one row per (instance, backend), appended as runs end.
+"""The sweep table ``DIR/sweep.csv``: one row per (instance, backend), appended as runs end; a
+resumed sweep appends the rows it re-runs, and the table is rewritten at the end with the last row
+of each key.
 
-Written by :class:`qpbench.harness.results.ResultsWriter` (a kill loses at most the runs in
-flight); a resumed sweep appends the rows it re-runs, and the table is rewritten at the end with
-the last row of each key. A run's figures are its closed-loop summary's
-(:mod:`qpbench.sim.summary`; ``duration_s`` is ``duration``), with the time-to-converge figures:
-``t_converge_force_s`` (first time from which ``|force - Fd| <= force_band_n`` [N] to the end [s];
-empty: not converged), ``t_converge_tracking_s`` (the same for ``tracking_band_m`` [m]) and
-``ticks_over_1ms``. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it raised),
-``crashed`` (its worker was lost twice; ``attempts``: runs started) or ``invalid_scenario`` (the
-loader refused the instance; no verdict). ``executor``, ``host``, ``worker``,
-``concurrent_solves``: where it ran.
+A run's figures are its closed-loop summary's (:mod:`qpbench.sim.summary`; ``duration_s`` is
+``duration``) with the time-to-converge figures ``t_converge_force_s`` and
+``t_converge_tracking_s`` (empty: not converged) of the bands ``force_band_n`` [N] and
+``tracking_band_m`` [m]. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it
+raised), ``crashed`` (its worker was lost twice; ``attempts``: runs started) or
+``invalid_scenario`` (the loader refused the instance; no verdict). ``executor``, ``host``,
+``worker``, ``concurrent_solves``: where it ran.
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
-"""A sweep's run: sample the instances, save them, run every (instance, backend), append the rows.
-
-``DIR`` holds ``sweep.json`` (the manifest: the sweep file's text and SHA-256, seed, samples,
-duration, base, backends, qpbench's version), ``instances/<name>.toml`` and ``sweep.csv``
-(:mod:`qpbench.sweep.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
-rest again; it refuses a folder of another sweep file or duration (samples and backends may
-differ: instance ``i`` is the same whatever the count).
+"""A sweep's run into ``DIR``: ``sweep.json`` (the manifest: the sweep file's text and SHA-256,
+seed, samples, duration, base, backends, qpbench's version), ``instances/<name>.toml`` and
+``sweep.csv`` (:mod:`.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
+rest again; it refuses a folder of another sweep file or duration (instance ``i`` is the same
+whatever the sample count).
 """
 
 from __future__ import annotations

@@ -21,23 +21,8 @@ import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
 
-#: Names a reader may try for a key, and the scenario key meant.
-ALIASES = {
-    "theta0": "robot.theta0",
-    "fd": "controller.desired_force",
-    "desired_force": "controller.desired_force",
-    "dt": "simulation.dt",
-    "stiffness": "contact.stiffness",
-    "noise": "contact.force_noise_std",
-    "force_noise_std": "contact.force_noise_std",
-    "link_lengths": "robot.link_lengths",
-    "centre": "path.centre",
-    "center": "path.centre",
-    "amplitude": "path.amplitude",
-    "speed": "path.omega",
-    "omega": "path.omega",
-    "duration": "[sweep] duration",
-}
+#: Other names a reader may give a scenario key (the table is found in the base scenario).
+ALIASES = {"fd": "desired_force", "noise": "force_noise_std", "speed": "omega", "center": "centre"}
 
 _SWEEP_KEYS = ("name", "base", "seed", "samples", "duration", "safe_start")
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
@@ -402,7 +387,9 @@ def _base_value(key: str, base_raw: dict, path):
 
     match = SCENARIO_KEY.fullmatch(key)
     if match is None:
-        hint = ALIASES.get(key.casefold())
+        name = ALIASES.get(key.casefold(), key.casefold())
+        tables = [t for t, v in base_raw.items() if isinstance(v, dict) and name in v]
+        hint = f"{tables[0]}.{name}" if tables else None
         raise bad(
             f"unknown parameter key; the key is {hint}"
             if hint

@@ -7,7 +7,6 @@ scenario file holds (numbers, booleans, strings, nested lists, arrays of tables)
 from __future__ import annotations
 
 import json
-import math
 import re
 
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -23,11 +22,7 @@ def value_text(value: object) -> str:
         return "true" if value else "false"
     if isinstance(value, int):
         return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
+    if isinstance(value, float):  # repr: inf, -inf and nan as TOML writes them
         text = repr(value)
         return text if any(c in text for c in ".en") else text + ".0"
     if isinstance(value, str):
