@@ -72,11 +72,8 @@ def is_sweep_csv(path: Path) -> bool:
     """``path`` starts with the sweep table's header."""
     from .rows import COLUMNS
 
-    try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            return fh.readline().rstrip("\n") == ",".join(COLUMNS)
-    except OSError:
-        return False
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        return fh.readline().rstrip("\n") == ",".join(COLUMNS)
 
 
 def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:

@@ -14,7 +14,7 @@ import math
 import re
 import tomllib
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -228,10 +228,10 @@ class SweepSpec:
     base: str
     base_path: Path
     base_raw: dict
-    parameters: list[Distribution] = field(default_factory=list)
-    force_band: float = 0.2
-    tracking_band: float = 1e-4
-    safe_start: bool = True
+    parameters: list[Distribution]
+    force_band: float
+    tracking_band: float
+    safe_start: bool
 
     @property
     def sha256(self) -> str:
