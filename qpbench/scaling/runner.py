@@ -14,7 +14,7 @@ import logging
 import math
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -130,13 +130,10 @@ def build_times(
 def _size_columns(size: Size, config: ScalingConfig) -> dict:
     shape = qp_shape(size)
     return {
-        "size": size.name,
-        "axis": size.axis,
-        "links": size.links,
-        "points_per_link": size.points_per_link,
-        "key_points": size.key_points,
-        "cloud_points": size.cloud_points,
+        **asdict(size),
         **shape,
+        "size": size.name,
+        "key_points": size.key_points,
         "rows": shape["m_eq"] + shape["m_ineq"],
         "driver": config.driver,
         "repeat": config.repeat,

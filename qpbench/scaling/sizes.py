@@ -74,12 +74,11 @@ class Size:
 
 
 def qp_shape(size: Size) -> dict:
-    """``{"n", "m_eq", "m_ineq", "n_box"}`` of the size's tick QP (module docstring)."""
+    """``{"n", "m_eq", "m_ineq"}`` of the size's tick QP (module docstring)."""
     return {
         "n": size.links,
         "m_eq": 2,
         "m_ineq": size.key_points * size.cloud_points,
-        "n_box": 2 * size.links,
     }
 
 

@@ -45,16 +45,11 @@ def dumps(raw: dict, header: str = "") -> str:
     tables, arrays = [], []
     for key, value in raw.items():
         if isinstance(value, dict):
-            tables.append((key, value))
+            tables.append((f"[{_key(key)}]", value))
         elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-            arrays.append((key, value))
+            arrays += [(f"[[{_key(key)}]]", table) for table in value]
         else:
             lines.append(f"{_key(key)} = {value_text(value)}")
-    for key, table in tables:
-        lines += ["", f"[{_key(key)}]"] + [f"{_key(k)} = {value_text(v)}" for k, v in table.items()]
-    for key, items in arrays:
-        for table in items:
-            lines += ["", f"[[{_key(key)}]]"] + [
-                f"{_key(k)} = {value_text(v)}" for k, v in table.items()
-            ]
+    for head, table in tables + arrays:
+        lines += ["", head] + [f"{_key(k)} = {value_text(v)}" for k, v in table.items()]
     return "\n".join(lines).lstrip("\n") + "\n"
