@@ -10,19 +10,18 @@ import pytest
 
 from qpbench.cli import main
 from qpbench.robot.kinematics import PlanarArm
-from qpbench.scaling.arms import REACH, THETA_LIMIT, ArmSpec, generate_arm
-from qpbench.scaling.fit import crossing, extrapolated_crossing, first_above, fit_power_law
-from qpbench.scaling.obstacles import min_key_point_distance
+from qpbench.scaling.report import crossing, extrapolated_crossing, first_above, fit_power_law
 from qpbench.scaling.runner import COLUMNS, read_summary
+from qpbench.scaling.scene import REACH, THETA_LIMIT, generate_arm, min_key_point_distance
 from qpbench.scaling.sizes import (
     DEFAULT_SIZES,
-    TASK,
     Size,
     generate,
     parse_sizes,
     qp_shape,
     scenario_toml,
     start_target,
+    task,
 )
 from qpbench.sim.scenario import parse_scenario
 
@@ -43,9 +42,9 @@ def _fd_jacobian(arm: PlanarArm, theta, links, fracs, h=1e-6) -> np.ndarray:
 
 @pytest.mark.parametrize("n", LINKS)
 def test_generated_arm_jacobians_match_finite_differences(n):
-    gen = generate_arm(ArmSpec(n, 2, seed=3), start_target())
+    gen = generate_arm(n, 2, start_target(), seed=3)
     kp = gen.key_points
-    assert len(kp) == 3 * n - 1 == ArmSpec(n, 2).key_point_count
+    assert len(kp) == 3 * n - 1 == Size(n, 2, 1).key_points
     assert gen.arm.lengths.sum() == pytest.approx(REACH)
     _, J = gen.arm.points_jacobians(gen.theta0, kp.links, kp.fracs)
     np.testing.assert_allclose(J, _fd_jacobian(gen.arm, gen.theta0, kp.links, kp.fracs), atol=1e-8)
@@ -74,13 +73,18 @@ def test_qp_obstacle_rows_are_minus_u_times_the_finite_difference_jacobian(n):
 def test_start_state_is_feasible(size):
     gen, cloud = generate(size)
     # every key point outside the cloud by d_safe and a margin
-    assert min_key_point_distance(gen.key_point_positions(), cloud.points) >= TASK["d_safe"] + 0.01
+    assert (
+        min_key_point_distance(gen.key_point_positions(), cloud.points)
+        >= task()["controller"]["d_safe"] + 0.01
+    )
     assert np.all(np.abs(gen.theta0) < THETA_LIMIT)
     # the end effector rests in contact: Fd / Kp past x_d(0) along the pressing direction
     np.testing.assert_allclose(gen.arm.end_effector(gen.theta0), start_target(), atol=1e-9)
-    normal = np.array(TASK["normal"]) / np.hypot(*TASK["normal"])
-    penetration = normal @ (gen.target - np.array(TASK["centre"]))
-    assert penetration == pytest.approx(TASK["desired_force"] / TASK["kp"])
+    normal = np.array(task()["contact"]["normal"]) / np.hypot(*task()["contact"]["normal"])
+    penetration = normal @ (gen.target - np.array(task()["path"]["centre"]))
+    assert penetration == pytest.approx(
+        task()["controller"]["desired_force"] / task()["controller"]["kp"]
+    )
     # the cloud approaches the arm
     assert np.hypot(*cloud.velocity) == pytest.approx(0.1)
 

@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_report:
         from ..scaling.report import write_scaling_report
 
-        write_scaling_report(out, out, force=True, quiet=args.quiet)
+        write_scaling_report(out, out, force=True)
     code = strict_exit(args, failed_solves=failed_solves)
     if failed_solves:  # which backends failed how many solves, in one line
         log.warning("%s%s", f"exit {code}: " if code else "", failure_line(out / SUMMARY_NAME))

@@ -1,22 +1,24 @@
 """The scaling study's report: ``scaling.md`` and ``scaling.png`` from ``scaling.csv``.
 
 Median solve time per tick against variables (the ``arm`` axis) and against constraint rows
-(the ``cloud`` axis), log-log, with fitted power laws (:mod:`.fit`); where the fastest sparse
-backend overtakes the fastest dense one; where build + solve stops fitting a 1 ms tick.
+(the ``cloud`` axis), log-log, with fitted power laws; where the fastest sparse backend overtakes
+the fastest dense one; where build + solve stops fitting a 1 ms tick.
+
+A backend's median solve time ``T`` against a size ``s`` (variables or rows) is fitted as
+``T = C s^k``: least squares of ``log10 T`` on ``log10 s`` over one grid axis, the slope's
+standard error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (NaN for N = 2 sizes).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from ..report.markdown_table import US, Column, table
-from .fit import crossing, extrapolated_crossing, first_above, fit_power_law
-
-__all__ = ["TICK_S", "is_scaling_dir", "write_scaling_report"]
 
 #: The control period a tick must fit in [s].
 TICK_S = 1e-3
@@ -27,21 +29,82 @@ AXES = {
 }
 
 
+@dataclass(frozen=True)
+class PowerFit:
+    """``T = 10**intercept * s**slope``, from ``points`` sizes; ``slope_se`` its standard error."""
+
+    slope: float
+    slope_se: float
+    intercept: float
+    points: int
+
+    def predict(self, s: float | np.ndarray) -> np.ndarray:
+        """Fitted time at size(s) ``s`` (same units as the data)."""
+        return 10.0 ** (self.intercept + self.slope * np.log10(np.asarray(s, dtype=float)))
+
+    def text(self) -> str:
+        """``1.23 +- 0.05`` (``+- n/a`` with two points)."""
+        if math.isnan(self.slope):
+            return "-"
+        se = "n/a" if math.isnan(self.slope_se) else f"{self.slope_se:.2f}"
+        return f"{self.slope:.2f} +- {se}"
+
+
+def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
+    """Least squares of ``log10 times`` on ``log10 sizes``, non-positive or non-finite pairs left
+    out (NaN with fewer than two distinct sizes)."""
+    s = np.asarray(sizes, dtype=float)
+    t = np.asarray(times, dtype=float)
+    keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
+    x, y = np.log10(s[keep]), np.log10(t[keep])
+    if x.size < 2 or np.ptp(x) == 0:
+        return PowerFit(math.nan, math.nan, math.nan, int(x.size))
+    xm = x.mean()
+    sxx = float(((x - xm) ** 2).sum())
+    slope = float(((x - xm) * (y - y.mean())).sum() / sxx)
+    intercept = float(y.mean() - slope * xm)
+    if x.size > 2:
+        rss = float(((y - intercept - slope * x) ** 2).sum())
+        se = math.sqrt(rss / (x.size - 2) / sxx)
+    else:
+        se = math.nan
+    return PowerFit(slope, se, intercept, int(x.size))
+
+
+def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | None:
+    """The first size (in increasing order) from which every value exceeds ``limit``, else None."""
+    order = np.argsort(np.asarray(sizes, dtype=float), kind="stable")
+    s = np.asarray(sizes)[order]
+    v = np.asarray(values, dtype=float)[order]
+    for i in range(s.size):
+        if np.all(v[i:] > limit):
+            return s[i].item()
+    return None
+
+
+def crossing(sizes: np.ndarray, slower: np.ndarray, faster: np.ndarray) -> float | None:
+    """The first size from which time ``faster`` stays strictly below ``slower`` (NaN: not
+    measured, left out), else None."""
+    s = np.asarray(sizes, dtype=float)
+    a = np.asarray(slower, dtype=float)
+    b = np.asarray(faster, dtype=float)
+    keep = np.isfinite(a) & np.isfinite(b)
+    return first_above(s[keep], (a - b)[keep], 0.0)
+
+
+def extrapolated_crossing(fit_a: PowerFit, fit_b: PowerFit) -> float | None:
+    """Size where two fitted lines meet (``None`` when parallel or not fitted)."""
+    if any(math.isnan(v) for v in (fit_a.slope, fit_b.slope)) or fit_a.slope == fit_b.slope:
+        return None
+    x = (fit_b.intercept - fit_a.intercept) / (fit_a.slope - fit_b.slope)
+    return float(10.0**x)
+
+
 def is_scaling_dir(path: str | Path) -> bool:
     """Whether ``path`` is a folder written by ``qpbench scaling`` (it holds ``scaling.csv``)."""
     from .runner import SUMMARY_NAME
 
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
-
-
-def load(folder: str | Path) -> pd.DataFrame:
-    """``scaling.csv`` of ``folder`` as a frame, numbers typed (empty without rows)."""
-    from .runner import COLUMNS, SUMMARY_NAME, TEXT_COLUMNS, read_summary
-
-    frame = pd.DataFrame(read_summary(Path(folder) / SUMMARY_NAME), columns=list(COLUMNS))
-    for col in set(COLUMNS) - set(TEXT_COLUMNS):
-        frame[col] = pd.to_numeric(frame[col], errors="coerce")
-    return frame
 
 
 def fits(frame: pd.DataFrame) -> dict:
@@ -277,11 +340,7 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
 
 
 def write_scaling_report(
-    folder: str | Path,
-    out: str | Path,
-    force: bool = False,
-    plots: bool = True,
-    quiet: bool = False,
+    folder: str | Path, out: str | Path, force: bool = False, plots: bool = True
 ) -> Path:
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``.
 
@@ -291,12 +350,13 @@ def write_scaling_report(
     """
     from ..exceptions import InputError
     from ..report.write import publish
+    from .runner import SUMMARY_NAME
 
     if not is_scaling_dir(folder):
         raise InputError("not a scaling folder (no scaling.csv)", path=folder)
-    frame = load(folder)
+    frame = pd.read_csv(Path(folder) / SUMMARY_NAME)
     if frame.empty:
-        raise InputError("no rows", path=Path(folder) / "scaling.csv")
+        raise InputError("no rows", path=Path(folder) / SUMMARY_NAME)
     fitted = fits(frame)
 
     def figures(out: Path) -> str | None:

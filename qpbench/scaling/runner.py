@@ -1,17 +1,11 @@
-"""The scaling study: per size, dump ticks of the closed loop, bench them, summarise.
+"""The scaling study's run, per size (:mod:`.sizes`), in ``DIR``: ``scenarios/<size>.toml``, the
+ticks of its closed loop dumped into ``sets/<size>/``, their build times, ``bench/<size>.csv``
+(:func:`qpbench.harness.bench.run_bench`, resumable) and one row per (size, backend) appended to
+``scaling.csv`` (:data:`COLUMNS`) once the size is done; a resumed run skips the sizes it holds.
 
-For each size (:mod:`qpbench.scaling.sizes`), in ``DIR``: ``scenarios/<size>.toml`` (the size as a
-scenario file); ``sets/<size>/``, every ``every``-th tick's QP of the closed loop run for
-``duration`` [s] with the exact ``driver`` (the QPs the controller meets: the arm in contact, the
-approaching cloud's rows becoming active; removed once the size is done unless ``keep_sets``); the
-time to build a tick's QP (the minimum of ``build_repeat`` calls); ``bench/<size>.csv``
-(:func:`qpbench.harness.bench.run_bench`, as ``qpbench bench``, resumable); and one row per
-(size, backend) appended to ``scaling.csv`` (:data:`COLUMNS`) once the size is done (a resumed
-run skips the sizes it holds).
-
-Skipped (a ``skipped`` row with the reason, never a run of minutes): a dense-only backend
-(:func:`matrix_format`) on a size with more than ``dense_limit`` entries ``n x rows``; a backend
-whose median solve on a smaller size of the same axis took longer than ``slow_limit`` [s].
+Skipped, with the reason in a ``skipped`` row: a dense-only backend (:func:`matrix_format`) on a
+size of more than ``dense_limit`` entries ``n x rows``; a backend whose median solve on a smaller
+size of the same axis took longer than ``slow_limit`` [s].
 """
 
 from __future__ import annotations
@@ -20,7 +14,7 @@ import logging
 import math
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -65,39 +59,14 @@ COLUMNS = (
     "repeat",
     "seed",
 )
-#: The columns of :data:`COLUMNS` that hold text; every other one holds a number.
-TEXT_COLUMNS = ("size", "axis", "backend", "matrix_format", "status", "skip_reason", "driver")
 SUMMARY_NAME = "scaling.csv"
 
-#: How each built-in route takes its matrices: ``dense`` (a dense factorisation or
-#: dense active set: cost grows with n x rows whatever the zeros) or ``sparse``.
-#: A backend class may say so itself with a ``matrix_format`` attribute.
-_MATRIX_FORMATS = {
-    "daqp": "dense",
-    "daqp-stateless": "dense",
-    "qpoases": "dense",
-    "piqp": "dense",
-    "proxqp": "dense",
-    "pinv": "dense",
-    "rnn": "dense",
-    "rnn-tuned": "dense",
-    "rnn-converged": "dense",
-    "qpsolvers:daqp": "dense",
-    "qpsolvers:quadprog": "dense",
-    "qpsolvers:proxqp": "dense",
-    "qpsolvers:piqp": "dense",
-    "qpsolvers:cvxopt": "dense",
-    "qpsolvers:qpalm": "sparse",
-    "osqp": "sparse",
-    "clarabel": "sparse",
-    "cvxpy": "sparse",
-    "qpsolvers:osqp": "sparse",
-    "qpsolvers:clarabel": "sparse",
-    "qpsolvers:scs": "sparse",
-    "qpsolvers:highs": "sparse",
-    "qpsolvers:ecos": "sparse",
-    "qpsolvers:gurobi": "sparse",
-}
+#: How the built-in solvers take their matrices: ``dense`` (a dense factorisation or dense
+#: active set: cost grows with n x rows whatever the zeros) or ``sparse``; a route
+#: ``qpsolvers:NAME`` or a variant ``NAME-...`` as ``NAME``. A backend class may say so itself
+#: with a ``matrix_format`` attribute.
+_DENSE = ("daqp", "qpoases", "piqp", "proxqp", "pinv", "rnn", "quadprog", "cvxopt")
+_SPARSE = ("qpalm", "osqp", "clarabel", "cvxpy", "scs", "highs", "ecos", "gurobi")
 
 
 def matrix_format(name: str) -> str:
@@ -109,13 +78,17 @@ def matrix_format(name: str) -> str:
         declared = getattr(backend_class(name), "matrix_format", None)
     except QpbenchError:
         declared = None
-    return declared or _MATRIX_FORMATS.get(name, "unknown")
+    solver = name.removeprefix("qpsolvers:").split("-")[0]
+    known = "dense" if solver in _DENSE else "sparse" if solver in _SPARSE else "unknown"
+    return declared or known
 
 
 @dataclass
 class ScalingConfig:
-    """What to run (module docstring): ``sizes`` smallest first within an axis, ``duration`` [s],
-    ``repeat`` timed solves per (tick, backend) (the row keeps the minimum), ``slow_limit`` [s]."""
+    """What to run (module docstring): ``sizes`` smallest first within an axis; the closed loop of
+    ``duration`` [s] driven by ``driver``, every ``every``-th tick kept (``sets/`` removed once a
+    size is done unless ``keep_sets``); ``repeat`` timed solves per (tick, backend) and
+    ``build_repeat`` builds per tick (the minimum kept); ``slow_limit`` [s]."""
 
     backends: list[str]
     sizes: list[Size]
@@ -157,13 +130,10 @@ def build_times(
 def _size_columns(size: Size, config: ScalingConfig) -> dict:
     shape = qp_shape(size)
     return {
-        "size": size.name,
-        "axis": size.axis,
-        "links": size.links,
-        "points_per_link": size.points_per_link,
-        "key_points": size.key_points,
-        "cloud_points": size.cloud_points,
+        **asdict(size),
         **shape,
+        "size": size.name,
+        "key_points": size.key_points,
         "rows": shape["m_eq"] + shape["m_ineq"],
         "driver": config.driver,
         "repeat": config.repeat,
@@ -173,30 +143,27 @@ def _size_columns(size: Size, config: ScalingConfig) -> dict:
 
 def _backend_row(base: dict, name: str, rows: list[dict]) -> dict:
     """Summary of one backend's bench rows on one size."""
-    from ..harness.bench import is_failure
+    from ..harness.bench import BackendStats
 
-    def col(key):
-        return np.array([float(r[key]) if r[key] not in ("", None) else math.nan for r in rows])
-
-    times, gaps, viol = col("wall_time_min_s"), col("optimality_gap"), col("constraint_violation")
-    times = times[np.isfinite(times)]
+    stats = BackendStats()
+    for r in rows:
+        stats.add(r)
+    times = np.asarray(stats.times_s)
+    gaps = np.array([float(r["optimality_gap"] or "nan") for r in rows])
     gaps = gaps[np.isfinite(gaps)]
-    viol = viol[np.isfinite(viol)]
-    success = [str(r["success"]) == "True" for r in rows]
-    failures = sum(1 for r in rows if is_failure(r["status"], r["reference_status"] or None))
     return {
         **base,
         "backend": name,
         "matrix_format": matrix_format(name),
         "status": "measured",
-        "problems": len(rows),
-        "success_rate": float(np.mean(success)) if rows else math.nan,
-        "failures": failures,
+        "problems": stats.rows,
+        "success_rate": stats.successes / stats.rows if rows else math.nan,
+        "failures": stats.n_failures,
         "time_median_s": float(np.median(times)) if times.size else math.nan,
         "time_p99_s": float(np.percentile(times, 99)) if times.size else math.nan,
         "gap_median": float(np.median(gaps)) if gaps.size else math.nan,
         "gap_max": float(gaps.max()) if gaps.size else math.nan,
-        "violation_max": float(viol.max()) if viol.size else math.nan,
+        "violation_max": max(stats.violations, default=math.nan),
         "reference_optimal": sum(1 for r in rows if r["reference_status"] == "optimal"),
     }
 
@@ -239,10 +206,6 @@ def run_size(
     """Everything for one size (module docstring); returns its summary rows and its failed solves.
 
     Each phase says so in a log line (``progress``: the references and the bench also show a bar)."""
-    from ..formats import load_problems
-    from ..harness.bench import BenchConfig, run_bench
-    from ..reference import reference_solutions
-
     started = time.perf_counter()
     scenario, states = _dump_ticks(size, config, out)
     log.info(
@@ -256,54 +219,53 @@ def run_size(
     built = build_times(scenario.make_controller(), states, config.build_repeat)
     base = _size_columns(size, config)
     base.update(build_median_s=float(np.median(built)), build_p99_s=float(np.percentile(built, 99)))
-    skipped = {name: _skip_reason(name, size, slow, config) for name in config.backends}
-    run = [name for name in config.backends if skipped[name] is None]
-    rows, failed = [], 0
-    if run:
-        problem_set = load_problems(out / "sets" / size.name)
-        csv_path = out / "bench" / f"{size.name}.csv"
-        csv_path.parent.mkdir(parents=True, exist_ok=True)
-        bench = BenchConfig(
-            backends=run, profile=config.profile, repeat=config.repeat, seed=config.seed
-        )
-
-        def references(subset):  # progress of the reference solves: a bar, else log lines
-            from tqdm import tqdm
-
-            return reference_solutions(subset, progress=tqdm if progress else "log")
-
-        log.info("%s: bench of %s on %d ticks", size.name, ", ".join(run), len(problem_set))
-        summary = run_bench(
-            problem_set,
-            bench,
-            csv_path,
-            resume=csv_path.exists(),
-            references=references,
-            progress=progress or "log",
-        )
-        failed = summary.failures
-        from ..harness.results import read_results
-
-        by_backend: dict[str, list[dict]] = {}
-        for r in read_results(csv_path).rows:
-            by_backend.setdefault(r["backend"], []).append(r)
-        for name in run:
-            row = _backend_row(base, name, by_backend.get(name, []))
-            rows.append(row)
-            if row["time_median_s"] > config.slow_limit:
-                slow[(size.axis, name)] = (size.name, row["time_median_s"])
-    for name in config.backends:
-        if skipped[name] is not None:
-            rows.append(
-                {
-                    **base,
-                    "backend": name,
-                    "matrix_format": matrix_format(name),
-                    "status": "skipped",
-                    "skip_reason": skipped[name],
-                }
-            )
+    reasons = {name: _skip_reason(name, size, slow, config) for name in config.backends}
+    run = [name for name, why in reasons.items() if why is None]
+    rows, failed = _bench_size(size, config, out, run, base, progress) if run else ([], 0)
+    for row in rows:
+        _note_slow(slow, row, config.slow_limit)
+    for name, why in reasons.items():
+        if why is not None:
+            skipped = {"status": "skipped", "skip_reason": why}
+            rows.append({**base, "backend": name, "matrix_format": matrix_format(name), **skipped})
     return rows, failed
+
+
+def _note_slow(slow: dict, row: dict, limit: float) -> None:
+    """Note a measured row (new, or read back) whose median solve took over ``limit`` [s]: the
+    backend is skipped on the larger sizes of that axis."""
+    median = float(row["time_median_s"] or "nan")
+    if row["status"] == "measured" and median > limit:
+        slow[(row["axis"], row["backend"])] = (row["size"], median)
+
+
+def _bench_size(size: Size, config: ScalingConfig, out: Path, run: list, base: dict, progress):
+    """Bench the backends ``run`` on the size's dumped ticks: their rows and the failed solves."""
+    from tqdm import tqdm
+
+    from ..formats import load_problems
+    from ..harness.bench import BenchConfig, run_bench
+    from ..harness.results import read_results
+    from ..reference import reference_solutions
+
+    problem_set = load_problems(out / "sets" / size.name)
+    csv_path = out / "bench" / f"{size.name}.csv"
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    bench = BenchConfig(
+        backends=run, profile=config.profile, repeat=config.repeat, seed=config.seed
+    )
+    log.info("%s: bench of %s on %d ticks", size.name, ", ".join(run), len(problem_set))
+    summary = run_bench(
+        problem_set,
+        bench,
+        csv_path,
+        resume=csv_path.exists(),
+        references=lambda subset: reference_solutions(subset, progress=tqdm if progress else "log"),
+        progress=progress or "log",
+    )
+    done = read_results(csv_path).rows
+    rows = [_backend_row(base, b, [r for r in done if r["backend"] == b]) for b in run]
+    return rows, summary.failures
 
 
 def run_scaling(
@@ -316,15 +278,9 @@ def run_scaling(
     summary_path = out / SUMMARY_NAME
     done: dict[str, list[dict]] = {}
     slow: dict = {}
-    if resume and summary_path.exists():
-        for r in read_summary(summary_path, repair=True):
-            done.setdefault(r["size"], []).append(r)
-            if (
-                r["status"] == "measured"
-                and r["time_median_s"]
-                and float(r["time_median_s"]) > config.slow_limit
-            ):
-                slow[(r["axis"], r["backend"])] = (r["size"], float(r["time_median_s"]))
+    for r in read_summary(summary_path, repair=True) if resume and summary_path.exists() else []:
+        done.setdefault(r["size"], []).append(r)
+        _note_slow(slow, r, config.slow_limit)
     failed = 0
     for size in config.sizes:
         if size.name in done:
@@ -363,17 +319,17 @@ def run_scaling(
 
 def failure_line(path: str | Path) -> str | None:
     """The failed solves of a scaling run, in one line from its ``scaling.csv`` (``None``: no failed solve)."""
-    counts: dict[str, int] = {}
-    sizes: dict[str, list[str]] = {}
-    for r in read_summary(path):
-        n = int(float(r["failures"])) if r["failures"] else 0
-        if n:
-            counts[r["backend"]] = counts.get(r["backend"], 0) + n
-            sizes.setdefault(r["backend"], []).append(r["size"])
-    if not counts:
+    import pandas as pd
+
+    frame = pd.read_csv(path)
+    failed = frame[frame["failures"].fillna(0) > 0]
+    if failed.empty:
         return None
-    per_backend = "; ".join(f"{b} {n} on {', '.join(sizes[b])}" for b, n in counts.items())
+    per_backend = "; ".join(
+        f"{b} {int(g['failures'].sum())} on {', '.join(g['size'])}"
+        for b, g in failed.groupby("backend", sort=False)
+    )
     return (
-        f"{sum(counts.values())} failed solves (error, time_limit, invalid, crashed, or not "
-        f"optimal where the reference is): {per_backend} (column 'failures' of {path})"
+        f"{int(failed['failures'].sum())} failed solves (error, time_limit, invalid, crashed, or "
+        f"not optimal where the reference is): {per_backend} (column 'failures' of {path})"
     )

@@ -1,10 +1,7 @@
-"""The report's sweep section, every number recomputed from ``sweep.csv`` (:mod:`.rows`).
-
-Per backend the rate of each bad verdict among the runs of valid instances with its 95 %
-Wilson score interval (:func:`wilson`: inside [0, 1] and honest at 0 of n); every pair of
-backends on the instances both ran, with McNemar's exact test of the discordant pairs
-(:func:`mcnemar_exact`); ECDFs and quantiles of the per-run figures; the worst runs, each with
-the command that re-runs it.
+"""The report's sweep section (``docs/sweeps.md``), every number recomputed from ``sweep.csv``:
+per backend each bad verdict's rate with its 95 % Wilson score interval (:func:`wilson`), every
+pair of backends with McNemar's exact test (:func:`mcnemar_exact`), ECDFs and quantiles of the
+per-run figures, the worst runs with the command that re-runs each.
 """
 
 from __future__ import annotations
@@ -21,12 +18,8 @@ from ..report.inputs import CSV_ERRORS, expand_paths
 from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
 
-__all__ = ["is_sweep_csv", "mcnemar_exact", "split_sweep_paths", "sweep_section", "wilson"]
-
 #: z of a two-sided 95 % interval.
 Z95 = 1.959963984540054
-#: Verdict severity, worst first (an ``error``/``crashed`` row's verdict is ``incomplete``).
-SEVERITY = VERDICTS
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
 RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
 #: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
@@ -79,11 +72,8 @@ def is_sweep_csv(path: Path) -> bool:
     """``path`` starts with the sweep table's header."""
     from .rows import COLUMNS
 
-    try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            return fh.readline().rstrip("\n") == ",".join(COLUMNS)
-    except OSError:
-        return False
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        return fh.readline().rstrip("\n") == ",".join(COLUMNS)
 
 
 def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
@@ -95,7 +85,7 @@ def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
 
 def _read(path: Path) -> pd.DataFrame:
     try:
-        df = pd.read_csv(path, keep_default_na=True)
+        df = pd.read_csv(path)
     except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
     df = df.drop_duplicates(["instance", "backend"], keep="last")
@@ -110,12 +100,8 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
     for backend, g in df.groupby("backend", sort=True):
         valid = g[g["status"] != "invalid_scenario"]
         n = len(valid)
-        row = [
-            backend,
-            n,
-            int((g["status"] == "invalid_scenario").sum()),
-            int((valid["verdict"] == "ok").sum()),
-        ]
+        invalid = int((g["status"] == "invalid_scenario").sum())
+        row = [backend, n, invalid, int((valid["verdict"] == "ok").sum())]
         for verdict in RATED:
             k = int((valid["verdict"] == verdict).sum())
             lo, hi = wilson(k, n)
@@ -140,18 +126,8 @@ def paired_rows(df: pd.DataFrame) -> list[list]:
                 continue
             xa, xb = both[a].astype(bool).to_numpy(), both[b].astype(bool).to_numpy()
             n10, n01 = int((xa & ~xb).sum()), int((~xa & xb).sum())
-            out.append(
-                [
-                    a,
-                    b,
-                    len(both),
-                    int((xa & xb).sum()),
-                    n10,
-                    n01,
-                    int((~xa & ~xb).sum()),
-                    mcnemar_exact(n10, n01),
-                ]
-            )
+            both_ok, neither = int((xa & xb).sum()), int((~xa & ~xb).sum())
+            out.append([a, b, len(both), both_ok, n10, n01, neither, mcnemar_exact(n10, n01)])
     return out
 
 
@@ -161,12 +137,11 @@ def _quantile_rows(df: pd.DataFrame) -> list[list]:
     for backend, g in df[df["status"] == "ok"].groupby("backend", sort=True):
         row = [backend]
         for col, _, scale, _ in ECDF_PANELS:
-            v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale
+            v = g[col].dropna().to_numpy() * scale
             row += [np.median(v), np.quantile(v, 0.9), np.max(v)] if len(v) else [None] * 3
         for col in ("t_converge_force_s", "t_converge_tracking_s"):
-            v = pd.to_numeric(g[col], errors="coerce")
-            row += [v.median() if v.notna().any() else None, int(v.isna().sum())]
-        row += [int((pd.to_numeric(g["ticks_over_1ms"], errors="coerce") > 0).sum())]
+            row += [g[col].median() if g[col].notna().any() else None, int(g[col].isna().sum())]
+        row += [int((g["ticks_over_1ms"] > 0).sum())]
         out.append(row)
     return out
 
@@ -174,12 +149,9 @@ def _quantile_rows(df: pd.DataFrame) -> list[list]:
 def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
     """Per backend the ``k`` worst runs: worst verdict first, then the smallest margin to ``d_safe``."""
     valid = df[df["status"] != "invalid_scenario"].copy()
-    valid["severity"] = valid["verdict"].map({v: i for i, v in enumerate(SEVERITY)}).fillna(0)
-    margin = pd.to_numeric(valid["min_obstacle_distance"], errors="coerce") - pd.to_numeric(
-        valid["d_safe"], errors="coerce"
-    )
-    valid["margin"] = margin.fillna(np.inf)
-    valid["tracking"] = -pd.to_numeric(valid["tracking_max_after_2s"], errors="coerce").fillna(0)
+    valid["severity"] = valid["verdict"].map({v: i for i, v in enumerate(VERDICTS)}).fillna(0)
+    valid["margin"] = (valid["min_obstacle_distance"] - valid["d_safe"]).fillna(np.inf)
+    valid["tracking"] = -valid["tracking_max_after_2s"].fillna(0)
     out = []
     for backend, g in valid.groupby("backend", sort=True):
         for r in g.sort_values(["severity", "margin", "tracking"]).head(k).to_dict("records"):
@@ -195,11 +167,12 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
 
 def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
     """Four ECDF panels (:data:`ECDF_PANELS`), one line per backend (runs with a result), one
-    row of panels per group of backends (:func:`qpbench.report.style.groups`)."""
+    row of panels per group of backends (:func:`qpbench.report.style.groups`): the group in its
+    look over the other backends in grey; d_min as its margin to ``d_safe`` [mm] if there is one."""
     from ..report import style
 
     ok = df[df["status"] == "ok"]
-    everyone = sorted(ok["backend"].astype(str).unique())
+    everyone = sorted(ok["backend"].unique())
     groups = style.groups(everyone) or [("", [])]
     fig, axes = style.pyplot().subplots(
         len(groups),
@@ -209,22 +182,28 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         layout="constrained",
     )
     d_safe = float(ok["d_safe"].dropna().iloc[0]) * 1e3 if ok["d_safe"].notna().any() else None
-    curves = {}
-    for col, _, scale, _ in ECDF_PANELS:
-        shift = d_safe if col == "min_obstacle_distance" and d_safe is not None else 0.0
-        for backend, g in ok.groupby(ok["backend"].astype(str), sort=True):
-            v = pd.to_numeric(g[col], errors="coerce").dropna().to_numpy() * scale - shift
-            v = np.sort(v)
-            if len(v):
-                curves[col, backend] = (
-                    np.r_[v[0], v],
-                    np.r_[0.0, np.arange(1, len(v) + 1) / len(v)],
-                )
     for row, (group_title, group) in enumerate(groups):
-        for ax, (col, label, _, _) in zip(axes[row], ECDF_PANELS):
-            _ecdf_panel(ax, ok, curves, col, everyone, group, d_safe)
-            shifted = col == "min_obstacle_distance" and d_safe is not None
-            ax.set_xlabel(MARGIN_LABEL if shifted else label)
+        for ax, (col, label, scale, _) in zip(axes[row], ECDF_PANELS):
+            margin = col == "min_obstacle_distance" and d_safe is not None
+            shift = d_safe if margin else 0.0
+            for backend, lit in style.highlighted(everyone, group):
+                v = np.sort(ok.loc[ok["backend"] == backend, col].dropna().to_numpy() * scale)
+                if not len(v):
+                    continue
+                kw = (
+                    style.look(backend).line(np.arange(len(v) + 1), lw=1.3, label=backend, zorder=3)
+                    if lit
+                    else dict(color=style.GREY, lw=0.8, zorder=1)
+                )
+                y = np.r_[0.0, np.arange(1, len(v) + 1) / len(v)]
+                ax.step(np.r_[v[0], v] - shift, y, where="post", **kw)
+            if margin:
+                _margin_axis(ax, d_safe, float(ok[col].min()) * scale - d_safe)
+            elif col != "min_obstacle_distance" and ax.has_data() and (ok[col] > 0).any():
+                ax.set_xscale("log")
+            ax.set_ylim(0.0, 1.02)
+            ax.grid(alpha=0.3)
+            ax.set_xlabel(MARGIN_LABEL if margin else label)
         axes[row, 0].set_ylabel(
             f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
         )
@@ -234,36 +213,15 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
     style.save(fig, path)
 
 
-def _ecdf_panel(
-    ax, ok: pd.DataFrame, curves: dict, col: str, everyone: list, group: list, d_safe
-) -> None:
-    """One ECDF panel: ``group`` in its look over the other backends in grey; d_min as its
-    margin to ``d_safe`` [mm] (``None``: no d_safe, d_min itself)."""
-    from ..report import style
-
-    for backend, lit in style.highlighted(everyone, group):
-        if (col, backend) not in curves:
-            continue
-        x, y = curves[col, backend]
-        kw = (
-            style.look(backend).line(np.arange(len(x)), lw=1.3, label=backend, zorder=3)
-            if lit
-            else dict(color=style.GREY, lw=0.8, zorder=1)
-        )
-        ax.step(x, y, where="post", **kw)
-    if col != "min_obstacle_distance" and ax.has_data() and (ok[col].astype(float) > 0).any():
-        ax.set_xscale("log")
-    if col == "min_obstacle_distance" and d_safe is not None:
-        # the margin to d_safe, zoomed to -1..+2 mm (further left when a run went deeper):
-        # the unsafe line at -0.5 mm readable; runs further than 2 mm away leave on the right
-        ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
-        ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
-        lowest = min((x[0] for (c, _), (x, _) in curves.items() if c == col), default=0.0)
-        left = min(-1.0, 1.1 * lowest)
-        ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
-        ax.set_xlim(left, ZOOM_MM)
-    ax.set_ylim(0.0, 1.02)
-    ax.grid(alpha=0.3)
+def _margin_axis(ax, d_safe: float, lowest: float) -> None:
+    """The d_min panel as the margin to ``d_safe`` [mm], zoomed to -1..+2 mm (further left to
+    ``lowest`` when a run went deeper): the unsafe line at -0.5 mm readable; runs further than
+    2 mm away leave on the right."""
+    ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
+    ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
+    left = min(-1.0, 1.1 * lowest) if np.isfinite(lowest) else -1.0
+    ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
+    ax.set_xlim(left, ZOOM_MM)
 
 
 def _manifest_lines(folder: Path) -> list[str]:
@@ -308,7 +266,7 @@ def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
         "runs not converged at the end):\n"
     )
     lines.append(md_table(QUANTILE_HEADER, _quantile_rows(df)))
-    concurrent = pd.to_numeric(df["concurrent_solves"], errors="coerce").max()
+    concurrent = df["concurrent_solves"].max()
     if pd.notna(concurrent) and concurrent > 1:
         lines.append(
             f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "

@@ -1,29 +1,31 @@
-"""The sweep table ``DIR/sweep.csv``: one row per (instance, backend), appended as runs end.
+"""The sweep table ``DIR/sweep.csv``: one row per (instance, backend), appended as runs end; a
+resumed sweep appends the rows it re-runs, and the table is rewritten at the end with the last row
+of each key.
 
-Written by :class:`qpbench.harness.results.ResultsWriter` (a kill loses at most the runs in
-flight); a resumed sweep appends the rows it re-runs, and the table is rewritten at the end with
-the last row of each key. A run's figures are its closed-loop summary's
-(:mod:`qpbench.sim.summary`; ``duration_s`` is ``duration``), with the time-to-converge figures:
-``t_converge_force_s`` (first time from which ``|force - Fd| <= force_band_n`` [N] to the end [s];
-empty: not converged), ``t_converge_tracking_s`` (the same for ``tracking_band_m`` [m]) and
-``ticks_over_1ms``. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it raised),
-``crashed`` (its worker was lost twice; ``attempts``: runs started) or ``invalid_scenario`` (the
-loader refused the instance; no verdict). ``executor``, ``host``, ``worker``,
-``concurrent_solves``: where it ran.
+A run's figures are its closed-loop summary's (:mod:`qpbench.sim.summary`; ``duration_s`` is
+``duration``) with the time-to-converge figures ``t_converge_force_s`` and
+``t_converge_tracking_s`` (empty: not converged) of the bands ``force_band_n`` [N] and
+``tracking_band_m`` [m]. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it
+raised), ``crashed`` (its worker was lost twice; ``attempts``: runs started) or
+``invalid_scenario`` (the loader refused the instance; no verdict). ``executor``, ``host``,
+``worker``, ``concurrent_solves``: where it ran.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from typing import TYPE_CHECKING
 
 from ..harness.closed_loop import TABLE_NAMES, failure_fields
 
-#: Name of the table inside the sweep's folder.
-CSV_NAME = "sweep.csv"
+if TYPE_CHECKING:
+    from .sample import Instance
+    from .spec import SweepSpec
 
-#: Statuses of a row (see the module docstring).
-STATUSES = ("ok", "error", "crashed", "invalid_scenario")
+#: Names of the table and of the instances' folder inside the sweep's folder.
+CSV_NAME = "sweep.csv"
+INSTANCE_DIR = "instances"
 
 #: A row's key.
 KEY_COLUMNS = ("instance", "backend")
@@ -111,19 +113,28 @@ COLUMNS = (
 TIMING_COLUMNS = ("attempts",) + _SOLVE_TIMES + ("ticks_over_1ms",) + _REALTIME + _WALL + _PLACE
 
 
-def _head(meta: dict) -> dict:
-    row = {c: None for c in COLUMNS}
-    for key in ("instance", "backend", "instance_file", "sample", "sweep", "base_scenario"):
-        row[key] = meta[key]
-    row["parameters"] = json.dumps(meta["parameters"], separators=(",", ":"))
-    row["force_band_n"], row["tracking_band_m"] = meta["force_band"], meta["tracking_band"]
-    row["duration_s"] = meta.get("duration")
+def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
+    """The row of ``backend``'s run of instance ``inst`` of sweep ``spec``, without its figures."""
+    row = dict.fromkeys(COLUMNS)
+    row.update(
+        instance=inst.name,
+        backend=backend,
+        instance_file=f"{INSTANCE_DIR}/{inst.name}.toml",
+        sample=inst.index,
+        sweep=spec.name,
+        base_scenario=spec.base,
+        parameters=json.dumps(inst.values, separators=(",", ":")),
+        duration_s=spec.duration,
+        force_band_n=spec.force_band,
+        tracking_band_m=spec.tracking_band,
+    )
     return row
 
 
-def sweep_row(meta: dict, row: dict) -> dict:
-    """The sweep's row of a closed-loop row (:func:`qpbench.harness.closed_loop.run_row`)."""
-    out = _head(meta)
+def sweep_row(head: dict, row: dict) -> dict:
+    """The sweep's row (``head``: :func:`head_row`) of a closed-loop row
+    (:func:`qpbench.harness.closed_loop.run_row`)."""
+    out = dict(head)
     for key in COLUMNS:
         if key in row and key not in _HEAD[:7]:
             value = row[key]
@@ -131,9 +142,9 @@ def sweep_row(meta: dict, row: dict) -> dict:
     return out
 
 
-def failed_row(meta: dict, status: str, message: str) -> dict:
+def failed_row(head: dict, status: str, message: str) -> dict:
     """The row of a run without a result (:func:`qpbench.harness.closed_loop.failure_fields`)."""
-    return {**_head(meta), **failure_fields(status, message)}
+    return {**head, **failure_fields(status, message)}
 
 
 def same_outside_timing(a: dict, b: dict) -> list[str]:

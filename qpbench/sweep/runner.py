@@ -1,10 +1,8 @@
-"""A sweep's run: sample the instances, save them, run every (instance, backend), append the rows.
-
-``DIR`` holds ``sweep.json`` (the manifest: the sweep file's text and SHA-256, seed, samples,
-duration, base, backends, qpbench's version), ``instances/<name>.toml`` and ``sweep.csv``
-(:mod:`qpbench.sweep.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
-rest again; it refuses a folder of another sweep file or duration (samples and backends may
-differ: instance ``i`` is the same whatever the count).
+"""A sweep's run into ``DIR``: ``sweep.json`` (the manifest: the sweep file's text and SHA-256,
+seed, samples, duration, base, backends, qpbench's version), ``instances/<name>.toml`` and
+``sweep.csv`` (:mod:`.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
+rest again; it refuses a folder of another sweep file or duration (instance ``i`` is the same
+whatever the sample count).
 """
 
 from __future__ import annotations
@@ -21,8 +19,8 @@ from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
 from ..harness.closed_loop import LoopTask, run_row
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
-from .rows import COLUMNS, CSV_NAME, KEY_COLUMNS, failed_row, sweep_row
-from .sample import Instance, sample_instances
+from .rows import COLUMNS, CSV_NAME, INSTANCE_DIR, KEY_COLUMNS, failed_row, head_row, sweep_row
+from .sample import sample_instances
 from .spec import SweepSpec
 
 if TYPE_CHECKING:
@@ -31,7 +29,6 @@ if TYPE_CHECKING:
 log = logging.getLogger("qpbench.sweep")
 
 MANIFEST_NAME = "sweep.json"
-INSTANCE_DIR = "instances"
 #: Statuses a resumed sweep keeps.
 KEPT_STATUSES = ("ok", "invalid_scenario")
 
@@ -68,7 +65,8 @@ def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
     }
 
 
-def _check_resumable(out: Path, spec: SweepSpec) -> None:
+def _resumable(out: Path, spec: SweepSpec) -> dict:
+    """The manifest of the sweep in ``out``, if made from the same sweep file and duration."""
     path = out / MANIFEST_NAME
     try:
         old = json.loads(path.read_text())
@@ -76,18 +74,17 @@ def _check_resumable(out: Path, spec: SweepSpec) -> None:
         raise InputError(
             f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path
         ) from None
-    if old.get("sweep_sha256") != spec.sha256:
-        raise InputError(
-            f"cannot resume: made from another sweep file ({old.get('sweep_file')}); use --force",
-            path=path,
-            key="sweep_sha256",
-        )
-    if old.get("duration") != spec.duration:
-        raise InputError(
-            f"cannot resume: made with duration {old.get('duration')}, not {spec.duration}; use --force",
-            path=path,
-            key="duration",
-        )
+    for key, value, what in (
+        ("sweep_sha256", spec.sha256, f"made from another sweep file ({old.get('sweep_file')})"),
+        (
+            "duration",
+            spec.duration,
+            f"made with duration {old.get('duration')}, not {spec.duration}",
+        ),
+    ):
+        if old.get(key) != value:
+            raise InputError(f"cannot resume: {what}; use --force", path=path, key=key)
+    return old
 
 
 def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
@@ -97,27 +94,18 @@ def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
     return list(last.values())
 
 
-def _meta(spec: SweepSpec, inst: Instance, backend: str) -> dict:
-    return {
-        "instance": inst.name,
-        "backend": backend,
-        "instance_file": f"{INSTANCE_DIR}/{inst.name}.toml",
-        "sample": inst.index,
-        "sweep": spec.name,
-        "base_scenario": spec.base,
-        "parameters": inst.values,
-        "duration": spec.duration,
-        "force_band": spec.force_band,
-        "tracking_band": spec.tracking_band,
-    }
-
-
 def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
+    """Check ``out``, write the instances and the manifest; the instances and the kept rows."""
     csv_path = out / CSV_NAME
     check_folder(out)
     check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
-    if resume and csv_path.exists() and not force:
-        _check_resumable(out, spec)
+    manifest, kept = _manifest(spec, backends), {}
+    if resume and csv_path.exists():  # the table holds the earlier runs' rows too
+        old = _resumable(out, spec)
+        manifest["backends"] = list(dict.fromkeys(old.get("backends", []) + backends))
+        manifest["samples"] = max(int(old.get("samples", 0)), spec.samples)
+        rows = read_sweep_rows(csv_path, repair=True)
+        kept = {(r["instance"], r["backend"]): r for r in rows if r["status"] in KEPT_STATUSES}
     elif force:
         csv_path.unlink(missing_ok=True)
         shutil.rmtree(out / INSTANCE_DIR, ignore_errors=True)
@@ -126,19 +114,7 @@ def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resum
         path = out / INSTANCE_DIR / f"{inst.name}.toml"
         if not path.exists() or path.read_text(encoding="utf-8") != inst.text:
             write_text(path, inst.text)
-    manifest = _manifest(spec, backends)
-    if resume and (out / MANIFEST_NAME).exists():  # the table holds the earlier runs' rows too
-        old = json.loads((out / MANIFEST_NAME).read_text())
-        manifest["backends"] = list(dict.fromkeys(old.get("backends", []) + backends))
-        manifest["samples"] = max(int(old.get("samples", 0)), spec.samples)
     write_text(out / MANIFEST_NAME, json.dumps(manifest, indent=2) + "\n")
-    kept = {}
-    if csv_path.exists():
-        kept = {
-            tuple(r[c] for c in KEY_COLUMNS): r
-            for r in read_sweep_rows(csv_path, repair=True)
-            if r["status"] in KEPT_STATUSES
-        }
     return instances, kept
 
 
@@ -169,7 +145,7 @@ def run_sweep(
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     ran = failed = 0
-    items, metas = [], {}
+    items, heads = [], {}
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
         def emit(row):
@@ -182,13 +158,13 @@ def run_sweep(
             for backend in backends:
                 if (inst.name, backend) in kept:
                     continue
-                meta = _meta(spec, inst, backend)
+                head = head_row(spec, inst, backend)
                 if inst.invalid is not None:
-                    emit(failed_row(meta, "invalid_scenario", inst.invalid))
+                    emit(failed_row(head, "invalid_scenario", inst.invalid))
                     continue
-                metas[(inst.name, backend)] = meta
+                heads[(inst.name, backend)] = head
                 task = LoopTask(
-                    meta["instance_file"],
+                    head["instance_file"],
                     backend,
                     plugins=tuple(plugins or ()),
                     scenario_text=inst.text,  # the instance travels with its task
@@ -196,11 +172,11 @@ def run_sweep(
                 )
                 items.append(((inst.name, backend), task))
         for done in executor.run(run_row, items):
-            meta = metas[done.key]
+            head = heads[done.key]
             if done.lost is None:
-                row = sweep_row(meta, done.value)
+                row = sweep_row(head, done.value)
             else:
-                row = failed_row(meta, "crashed", done.lost)
+                row = failed_row(head, "crashed", done.lost)
             row.update(
                 executor=executor.name,
                 host=done.host,

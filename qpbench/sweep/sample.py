@@ -8,12 +8,11 @@ would be ``unsafe`` at ``t = 0``, which says nothing about the backends.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ..exceptions import ScenarioError
-from .spec import SCENARIO_KEY, SweepSpec
+from .spec import SweepSpec
 from .toml_text import dumps, value_text
 
 if TYPE_CHECKING:
@@ -37,22 +36,15 @@ def instance_name(index: int, samples: int) -> str:
     return f"i{index:0{max(5, len(str(samples - 1)))}d}"
 
 
-def _set(raw: dict, key: str, value) -> None:
-    table, index, name = SCENARIO_KEY.fullmatch(key).groups()
-    target = raw["obstacles"][int(index)] if index is not None else raw[table]
-    target[name] = value
-
-
 def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
     """The scenario file of instance ``name``: a header saying where it comes from, then every table."""
-    raw = copy.deepcopy(spec.base_raw)
-    for key, value in values.items():
-        _set(raw, key, value)
-    raw["scenario"] = dict(raw.get("scenario", {}))
-    raw["scenario"]["name"] = f"{spec.name}-{name}"
-    base_description = raw["scenario"].get("description", "")
-    raw["scenario"]["description"] = (
-        f"Instance {index} of sweep {spec.name!r}, around: {base_description}"
+    from ..sim.scenario import apply_overrides
+
+    raw = apply_overrides(spec.base_raw, values)
+    about = raw["scenario"]
+    about["name"] = f"{spec.name}-{name}"
+    about["description"] = (
+        f"Instance {index} of sweep {spec.name!r}, around: {about['description']}"
     )
     header = [
         f"Instance {name} (sample {index}) of sweep {spec.name!r} ({spec.path.name}, sha256 {spec.sha256[:16]}, "

@@ -1,41 +1,8 @@
-"""Sweep files: a base scenario and distributions over its parameters.
-
-A sweep file (TOML) names a base scenario and, per scenario key, a
-distribution to draw that key's value from for every instance::
-
-    [sweep]
-    name = "wall"                 # names the instances (wall-i00003)
-    base = "wall"                 # shipped scenario name, or a path (relative to this file)
-    seed = 1                      # every draw follows from it
-    samples = 500                 # instances
-    duration = 6.0                # s, optional: simulated time of every instance (default: the base's)
-    safe_start = true             # optional (default true): an instance starting inside d_safe is invalid
-
-    [convergence]                 # optional: bands of the time-to-converge figures
-    force_band = 0.5              # N   (default: a tenth of the base's [verdict] max_force_error)
-    tracking_band = 1e-4          # m   (default: a tenth of its max_tracking_error)
-
-    [[obstacles]]                 # optional: obstacles added to the base's (scenario schema)
-    kind = "disk"
-    name = "post"
-    center = [0.1, 0.3]
-    radius = 0.03
-    velocity = [0.0, 0.0]
-
-    [parameters]                  # scenario key = distribution
-    "robot.theta0" = { dist = "normal", std = 0.05 }
-    "controller.desired_force" = { dist = "uniform", low = 10.0, high = 30.0 }
-    "obstacles[1].radius" = { dist = "loguniform", low = 0.01, high = 0.05 }
-    "simulation.dt" = { dist = "choice", values = [0.001, 0.0005] }
-
-Keys are the scenario's own dotted keys (those of ``simulate --set``), quoted, or nested tables.
-Distributions (bounds: a number, or a list of the key's shape, each component drawn on its own):
-``uniform`` (``low``, ``high``; or ``spread`` around the base value), ``normal`` (``std``,
-``mean`` default the base value, optional truncation ``low``, ``high``), ``loguniform`` (``low``,
-``high`` > 0), ``choice`` (``values``, optional ``weights``), ``integers`` (inclusive, integer
-keys). ``same = true`` draws once for every component: an offset added to each with ``spread``
-(or a normal around the base), else the value itself. Instance ``i`` draws key ``k`` from
-``default_rng([seed, i, crc32(k)])``: the same whatever the sample count and the other keys.
+"""Sweep files (format: ``docs/sweeps.md``): a base scenario and, per scenario key, a
+distribution to draw that key's value from for every instance; instance ``i`` draws key ``k`` from
+``default_rng([seed, i, crc32(k)])``, the same whatever the sample count and the other keys.
+``[convergence]`` holds the bands of the time-to-converge figures, ``force_band`` [N] and
+``tracking_band`` [m] (default: a tenth of the base's ``[verdict]`` maximum errors).
 """
 
 from __future__ import annotations
@@ -43,45 +10,208 @@ from __future__ import annotations
 import copy
 import difflib
 import hashlib
+import math
 import re
 import tomllib
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
-from .distributions import Distribution, checked_distribution, finite_number
 
-#: Names a reader may try for a key, and the scenario key meant.
-ALIASES = {
-    "theta0": "robot.theta0",
-    "fd": "controller.desired_force",
-    "desired_force": "controller.desired_force",
-    "dt": "simulation.dt",
-    "stiffness": "contact.stiffness",
-    "noise": "contact.force_noise_std",
-    "force_noise_std": "contact.force_noise_std",
-    "link_lengths": "robot.link_lengths",
-    "centre": "path.centre",
-    "center": "path.centre",
-    "amplitude": "path.amplitude",
-    "speed": "path.omega",
-    "omega": "path.omega",
-    "duration": "[sweep] duration",
-}
+#: Other names a reader may give a scenario key (the table is found in the base scenario).
+ALIASES = {"fd": "desired_force", "noise": "force_noise_std", "speed": "omega", "center": "centre"}
 
-_SWEEP_KEYS = {
-    "name": str,
-    "base": str,
-    "seed": int,
-    "samples": int,
-    "duration": float,
-    "safe_start": bool,
-}
+_SWEEP_KEYS = ("name", "base", "seed", "samples", "duration", "safe_start")
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
 SCENARIO_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
+
+
+#: Distribution kinds and their allowed fields (``dist`` aside).
+DISTRIBUTIONS = {
+    "uniform": ("low", "high", "spread", "same"),
+    "normal": ("mean", "std", "low", "high", "same"),
+    "loguniform": ("low", "high", "same"),
+    "choice": ("values", "weights"),
+    "integers": ("low", "high"),
+}
+
+#: Draws of a truncated normal tried before giving up on a component.
+_MAX_REDRAWS = 1000
+
+
+def finite_number(v) -> bool:
+    """True for an int or float (not a bool) that is finite."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """One key's distribution: ``params`` its fields (numbers as arrays of the key's shape),
+    ``base`` the base scenario's value."""
+
+    key: str
+    kind: str
+    params: dict
+    base: object
+
+    def draw(self, rng: np.random.Generator) -> object:
+        """One value of the key (a float, an int, or a list of the base's shape)."""
+        p, base = self.params, self.base
+        shape = np.shape(base)
+        if self.kind == "choice":
+            i = int(rng.choice(len(p["values"]), p=p.get("weights")))
+            return copy.deepcopy(p["values"][i])
+        if self.kind == "integers":
+            return int(rng.integers(p["low"], p["high"], endpoint=True))
+        if p.get("same"):  # one draw for every component: an offset from the base, or the value
+            relative = "spread" in p or (self.kind == "normal" and "mean" not in p)
+            first = float(np.ravel(base)[0])
+            one = Distribution(
+                self.key, self.kind, {k: v for k, v in p.items() if k != "same"}, first
+            ).draw(rng)
+            value = base + (one - first) if relative else np.full(shape, one)
+            return value.tolist() if shape else float(value)
+        if self.kind == "uniform":
+            low, high = (
+                (base - p["spread"], base + p["spread"]) if "spread" in p else (p["low"], p["high"])
+            )
+            value = rng.uniform(low, high, size=shape)
+        elif self.kind == "loguniform":
+            value = np.exp(rng.uniform(np.log(p["low"]), np.log(p["high"]), size=shape))
+        else:
+            value = self._truncated_normal(rng, shape)
+        return value.tolist() if shape else float(value)
+
+    def _truncated_normal(self, rng, shape):
+        p = self.params
+        mean = p.get("mean", np.asarray(self.base, dtype=float))
+        mean, std = np.broadcast_to(mean, shape), np.broadcast_to(p["std"], shape)
+        low = np.broadcast_to(p.get("low", -np.inf), shape)
+        high = np.broadcast_to(p.get("high", np.inf), shape)
+        value = np.asarray(rng.normal(mean, std), dtype=float)
+        for _ in range(_MAX_REDRAWS):
+            bad = (value < low) | (value > high)
+            if not bad.any():
+                return value
+            value = np.where(bad, rng.normal(mean, std), value)
+        raise InputError(
+            f"a truncated normal draw stayed outside [low, high] {_MAX_REDRAWS} times", key=self.key
+        )
+
+
+def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
+    """Key ``key``'s distribution ``spec`` (a ``[parameters]`` entry), checked against ``base``,
+    the base scenario's value of the key; :class:`InputError` naming ``path`` and the key if wrong."""
+
+    def bad(message: str, field: str | None = None) -> InputError:
+        return InputError(
+            message, path=path, key=".".join(filter(None, ("parameters", key, field)))
+        )
+
+    kind = spec.get("dist")
+    if kind not in DISTRIBUTIONS:
+        raise bad(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", "dist")
+    for f in spec:
+        if f != "dist" and f not in DISTRIBUTIONS[kind]:
+            expected = ", ".join(DISTRIBUTIONS[kind])
+            raise bad(f"unknown field of a {kind} distribution (expected: {expected})", f)
+    if kind == "choice":
+        return Distribution(key, kind, _choice(spec, base, bad), base)
+    is_int = isinstance(base, int) and not isinstance(base, bool)
+    if kind == "integers" or is_int:
+        if not (kind == "integers" and is_int):
+            why = (
+                "an integer key takes integers or choice"
+                if is_int
+                else "integers is for integer keys"
+            )
+            raise bad(why, "dist")
+        lo, hi = spec.get("low"), spec.get("high")
+        if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
+            raise bad(f"need integers low <= high, got {lo!r}, {hi!r}")
+        return Distribution(key, kind, {"low": lo, "high": hi}, base)
+    base_arr = _numeric(base, None, bad, None, "the base value")
+    same = spec.get("same", False)
+    if not isinstance(same, bool):
+        raise bad(f"expected true or false, got {same!r}", "same")
+    shape = None if same else np.shape(base_arr)  # same: numbers only, checked below
+    params = {
+        f: _numeric(v, shape, bad, f, f) for f, v in spec.items() if f not in ("dist", "same")
+    }
+    if same and any(np.ndim(v) for v in params.values()):
+        raise bad("same = true takes numbers, not lists (one draw for every component)", "same")
+    if same:
+        params["same"] = True
+    _check_bounds(kind, params, bad)
+    return Distribution(key, kind, params, base_arr if np.ndim(base_arr) else float(base_arr))
+
+
+def _numeric(value, shape, bad, field, what):
+    """``value`` as a float array broadcastable to ``shape`` (or any numeric shape when ``shape``
+    is None); ``bad(message, field)`` makes the error."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if (
+        arr is None
+        or arr.dtype == object
+        or not np.all(np.isfinite(arr))
+        or isinstance(value, bool)
+    ):
+        raise bad(f"{what}: expected finite numbers, got {value!r}", field)
+    if shape is not None and arr.ndim and arr.shape != tuple(shape):
+        raise bad(
+            f"expected a number or {list(shape)} numbers (the base value's shape), got {value!r}",
+            field,
+        )
+    return arr
+
+
+def _check_bounds(kind: str, p: dict, bad) -> None:
+    if kind == "uniform" and "spread" in p:
+        if "low" in p or "high" in p:
+            raise bad("give either spread or low and high", "spread")
+        if np.any(p["spread"] < 0):
+            raise bad("spread must be >= 0", "spread")
+        return
+    needs = ("std",) if kind == "normal" else ("low", "high")
+    for name in needs:
+        if name not in p:
+            raise bad(f"a {kind} distribution needs {' and '.join(needs)}", name)
+    if kind == "normal" and np.any(p["std"] < 0):
+        raise bad("std must be >= 0", "std")
+    if kind == "loguniform" and np.any(p["low"] <= 0):
+        raise bad("loguniform needs low > 0", "low")
+    if "low" in p and "high" in p and np.any(p["low"] > p["high"]):
+        raise bad("low must be <= high", "low")
+
+
+def _choice(spec: dict, base, bad) -> dict:
+    values = spec.get("values")
+    if not isinstance(values, list) or not values:
+        raise bad("a choice needs a non-empty list of values", "values")
+    for v in values:
+        if type(v) is not type(base) and not (finite_number(v) and finite_number(base)):
+            raise bad(f"each value must be like the base value {base!r}, got {v!r}", "values")
+        if isinstance(base, list) and np.shape(v) != np.shape(base):
+            shape = list(np.shape(base))
+            raise bad(f"each value must have the base value's shape {shape}, got {v!r}", "values")
+    out = {"values": values}
+    if "weights" in spec:
+        w = spec["weights"]
+        if not (
+            isinstance(w, list)
+            and len(w) == len(values)
+            and all(finite_number(x) and x >= 0 for x in w)
+            and sum(w) > 0
+        ):
+            raise bad("weights: one number >= 0 per value, not all zero", "weights")
+        out["weights"] = [x / sum(w) for x in w]
+    return out
 
 
 @dataclass
@@ -98,10 +228,10 @@ class SweepSpec:
     base: str
     base_path: Path
     base_raw: dict
-    parameters: list[Distribution] = field(default_factory=list)
-    force_band: float = 0.2
-    tracking_band: float = 1e-4
-    safe_start: bool = True
+    parameters: list[Distribution]
+    force_band: float
+    tracking_band: float
+    safe_start: bool
 
     @property
     def sha256(self) -> str:
@@ -143,17 +273,16 @@ def parse_sweep(
             raise InputError(f"unknown table (expected: {', '.join(_TOP)})", path=path, key=key)
     head = _sweep_table(raw.get("sweep"), path)
     if samples is not None:
-        head["samples"] = _positive_int(samples, path, "--samples")
+        head["samples"] = _integer(samples, 1, path, "--samples")
     if duration is not None:
         head["duration"] = duration
-    if head.get("duration") is not None:
-        positive_seconds(head["duration"], "sweep.duration", path)
     base_path, base_raw = _base(head["base"], path)
     extra = raw.get("obstacles", [])
     if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
         raise InputError("expected [[obstacles]] tables", path=path, key="obstacles")
     base_raw["obstacles"] = list(base_raw.get("obstacles", [])) + copy.deepcopy(extra)
     if head.get("duration") is not None:
+        positive_seconds(head["duration"], "sweep.duration", path)
         base_raw.setdefault("simulation", {})["duration"] = float(head["duration"])
     scenario = _check_base(base_raw, path)
     params = raw.get("parameters", {})
@@ -183,9 +312,9 @@ def parse_sweep(
     )
 
 
-def _positive_int(value, path, key) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-        raise InputError(f"must be an integer >= 1, got {value!r}", path=path, key=key)
+def _integer(value, least: int, path, key) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or value < least:
+        raise InputError(f"expected an integer >= {least}, got {value!r}", path=path, key=key)
     return value
 
 
@@ -203,34 +332,23 @@ def _sweep_table(head, path) -> dict:
         raise InputError(
             "letters, digits, '_', '.' and '-' only (it names files)", path=path, key="sweep.name"
         )
-    if not isinstance(head["seed"], int) or isinstance(head["seed"], bool) or head["seed"] < 0:
-        raise InputError(
-            f"expected an integer >= 0, got {head['seed']!r}", path=path, key="sweep.seed"
-        )
-    _positive_int(head["samples"], path, "sweep.samples")
+    _integer(head["seed"], 0, path, "sweep.seed")
+    _integer(head["samples"], 1, path, "sweep.samples")
     if not isinstance(head.get("safe_start", True), bool):
         raise InputError("expected true or false", path=path, key="sweep.safe_start")
     return dict(head)
 
 
 def _base(name: str, path: Path) -> tuple[Path, dict]:
-    from ..sim.scenario import scenario_path
+    """The base scenario's file and tables (``name``: shipped, or a path relative to ``path``'s)."""
+    from ..sim.scenario import load_scenario
 
-    candidate = (
-        (path.parent / name)
-        if ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
-        else name
-    )
+    relative = ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
     try:
-        base_path = scenario_path(candidate)
-        raw = tomllib.loads(base_path.read_text(encoding="utf-8"))
+        base = load_scenario(path.parent / name if relative else name)
     except ScenarioError as exc:
         raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise InputError(
-            f"base scenario {name!r} unreadable: {exc}", path=path, key="sweep.base"
-        ) from None
-    return base_path, raw
+    return base.path, tomllib.loads(base.source)
 
 
 def _check_base(base_raw: dict, path: Path):
@@ -264,68 +382,47 @@ def _flatten(params: dict, path, prefix: str = ""):
 
 
 def _base_value(key: str, base_raw: dict, path):
-    where = f"parameters.{key}"
+    def bad(message: str) -> InputError:
+        return InputError(message, path=path, key=f"parameters.{key}")
+
     match = SCENARIO_KEY.fullmatch(key)
     if match is None:
-        hint = ALIASES.get(key.casefold())
-        raise InputError(
-            "unknown parameter key"
-            + (
-                f"; the key is {hint}"
-                if hint
-                else " (expected a scenario key TABLE.KEY or obstacles[i].KEY, e.g. controller.desired_force)"
-            ),
-            path=path,
-            key=where,
+        name = ALIASES.get(key.casefold(), key.casefold())
+        tables = [t for t, v in base_raw.items() if isinstance(v, dict) and name in v]
+        hint = f"{tables[0]}.{name}" if tables else None
+        raise bad(
+            f"unknown parameter key; the key is {hint}"
+            if hint
+            else "unknown parameter key (expected a scenario key TABLE.KEY or obstacles[i].KEY, "
+            "e.g. controller.desired_force)"
         )
     table, index, name = match.groups()
     if index is not None:
         obstacles = base_raw.get("obstacles", []) if table == "obstacles" else []
         if table != "obstacles" or int(index) >= len(obstacles):
-            raise InputError(
-                f"no such obstacle (base and sweep have {len(obstacles)})", path=path, key=where
-            )
+            raise bad(f"no such obstacle (base and sweep have {len(obstacles)})")
         target = obstacles[int(index)]
     else:
         target = base_raw.get(table)
         if table == "obstacles" or not isinstance(target, dict):
-            raise InputError(
-                f"unknown parameter key: the base scenario has no table [{table}]",
-                path=path,
-                key=where,
-            )
+            raise bad(f"unknown parameter key: the base scenario has no table [{table}]")
     if name not in target:
         close = difflib.get_close_matches(name, list(target), n=1)
-        hint = (
-            f"; did you mean {table}{'' if index is None else f'[{index}]'}.{close[0]}?"
-            if close
-            else ""
-        )
-        raise InputError(
-            f"unknown parameter key: [{table}] has no key {name!r}{hint}", path=path, key=where
-        )
+        where = table if index is None else f"{table}[{index}]"
+        hint = f"; did you mean {where}.{close[0]}?" if close else ""
+        raise bad(f"unknown parameter key: [{table}] has no key {name!r}{hint}")
     return target[name]
 
 
 def _bands(conv, verdict, path) -> tuple[float, float]:
     if not isinstance(conv, dict):
         raise InputError("expected a table", path=path, key="convergence")
-    for key in conv:
-        if key not in ("force_band", "tracking_band"):
-            raise InputError(
-                "unknown key (expected force_band, tracking_band)",
-                path=path,
-                key=f"convergence.{key}",
-            )
-    out = []
-    for key, default in (
-        ("force_band", verdict.max_force_error / 10),
-        ("tracking_band", verdict.max_tracking_error / 10),
-    ):
-        value = conv.get(key, default)
+    check_known_keys(conv, ("force_band", "tracking_band"), path, "convergence")
+    force = conv.get("force_band", verdict.max_force_error / 10)
+    tracking = conv.get("tracking_band", verdict.max_tracking_error / 10)
+    for key, value in (("force_band", force), ("tracking_band", tracking)):
         if not (finite_number(value) and value > 0):
             raise InputError(
                 f"must be a positive number, got {value!r}", path=path, key=f"convergence.{key}"
             )
-        out.append(float(value))
-    return out[0], out[1]
+    return float(force), float(tracking)

@@ -7,7 +7,6 @@ scenario file holds (numbers, booleans, strings, nested lists, arrays of tables)
 from __future__ import annotations
 
 import json
-import math
 import re
 
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -23,11 +22,7 @@ def value_text(value: object) -> str:
         return "true" if value else "false"
     if isinstance(value, int):
         return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
+    if isinstance(value, float):  # repr: inf, -inf and nan as TOML writes them
         text = repr(value)
         return text if any(c in text for c in ".en") else text + ".0"
     if isinstance(value, str):
@@ -50,16 +45,11 @@ def dumps(raw: dict, header: str = "") -> str:
     tables, arrays = [], []
     for key, value in raw.items():
         if isinstance(value, dict):
-            tables.append((key, value))
+            tables.append((f"[{_key(key)}]", value))
         elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-            arrays.append((key, value))
+            arrays += [(f"[[{_key(key)}]]", table) for table in value]
         else:
             lines.append(f"{_key(key)} = {value_text(value)}")
-    for key, table in tables:
-        lines += ["", f"[{_key(key)}]"] + [f"{_key(k)} = {value_text(v)}" for k, v in table.items()]
-    for key, items in arrays:
-        for table in items:
-            lines += ["", f"[[{_key(key)}]]"] + [
-                f"{_key(k)} = {value_text(v)}" for k, v in table.items()
-            ]
+    for head, table in tables + arrays:
+        lines += ["", head] + [f"{_key(k)} = {value_text(v)}" for k, v in table.items()]
     return "\n".join(lines).lstrip("\n") + "\n"
