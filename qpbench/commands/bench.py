@@ -12,7 +12,7 @@ import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .options import add, add_force_resume, add_memory_budget, strict_exit
+from .options import add, add_force_resume, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -69,7 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend"
     )
-    add_memory_budget(parser)
+    add(parser, "--memory-budget")
     parser.add_argument(
         "--set",
         dest="sets",
@@ -119,13 +119,15 @@ def _add_reference_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..atomic import check_output
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..jit import warmup_logged
     from ..memory import resolve_budget
     from ..selection import backend_settings, select_backends, select_set
 
-    # Nothing is written before the input is known to be good (run_bench checks --out).
+    # Nothing is written or logged before the input is known to be good.
+    check_output(args.out, force=args.force, resume=args.resume)
     backends = select_backends(args.backends)
     config = BenchConfig(
         backend_settings=backend_settings(args.sets, backends),
@@ -171,7 +173,8 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
-    from ..reference import SOURCES, bench_references, from_objectives
+    from ..reference import SOURCES, from_objectives, reference_solutions
+    from ..runner.process import context
 
     source = args.reference
     if args.jobs < 1:
@@ -195,21 +198,15 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         from tqdm import tqdm
 
         progress = tqdm if sys.stderr.isatty() else "log"
-
-    def compute(problem_set):
-        from ..runner.process import context as worker_context
-
-        return bench_references(
-            problem_set,
-            source,
-            time_limit=limit,
-            jobs=args.jobs,
-            progress=progress,
-            context=worker_context(),
-            cache_dir=args.cache_dir,
-        )
-
-    return compute
+    return lambda problem_set: reference_solutions(
+        problem_set,
+        method=source,
+        time_limit=limit,
+        jobs=args.jobs,
+        progress=progress,
+        context=context(),
+        cache_dir=args.cache_dir,
+    )
 
 
 def _cache_line(args: argparse.Namespace, problem_set) -> str:
@@ -220,7 +217,5 @@ def _cache_line(args: argparse.Namespace, problem_set) -> str:
         return f"references: {args.reference} (not cached)"
     folder = cache_folder(problem_set, args.cache_dir)
     return (
-        "references: not cached (set built in memory)"
-        if folder is None
-        else f"reference cache: {folder}"
+        f"reference cache: {folder}" if folder else "references: not cached (set built in memory)"
     )

@@ -14,7 +14,7 @@ import argparse
 import logging
 from typing import TYPE_CHECKING
 
-from .options import add, add_force_resume, aligned, strict_exit
+from .options import add, add_force_resume, aligned, run_bar, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -75,8 +75,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..harness.closed_loop import log_row, run_closed_loop
     from ..jit import warmup_logged
     from ..selection import parse_overrides, select_backends, select_scenarios
@@ -89,13 +87,7 @@ def run(args: argparse.Namespace) -> int:
     backends = select_backends(args.backends)
     warmup_logged(log, backends)  # compiled here once: the worker processes load them
     total = len(scenarios) * len(backends)
-    bar = tqdm(total=total, unit="run", desc="closed loop", leave=False, disable=args.quiet or None)
-
-    def on_row(row):
-        bar.update(1)
-        log_row(log, row)
-
-    try:
+    with run_bar(args, total, "closed loop", lambda row: log_row(log, row), leave=False) as on_row:
         outcome = run_closed_loop(
             scenarios,
             backends,
@@ -112,8 +104,6 @@ def run(args: argparse.Namespace) -> int:
             run_budget=args.run_budget,
             overrides=overrides,
         )
-    finally:
-        bar.close()
     log.info(
         "%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",
         len(outcome.table),
@@ -123,14 +113,10 @@ def run(args: argparse.Namespace) -> int:
         outcome.not_ok,
         outcome.csv_path,
     )
-    if not args.quiet and len(outcome.table):
-        print(summary_table(outcome.table))
-    code = strict_exit(args, runs=outcome.table)
-    if not args.quiet and len(outcome.table):
-        from ..report.recommend import recommend, render
-
-        print("\n" + render(recommend(outcome.table)), end="")
-    return code
+    shown = len(outcome.table) > 0
+    if not args.quiet and shown:
+        print(summary_table(outcome.table) + "\n")
+    return strict_exit(args, runs=outcome.table, recommend=shown)
 
 
 #: The figures of the table printed after the runs: header, row key, scale, format.
@@ -162,4 +148,4 @@ def summary_table(table: pd.DataFrame) -> str:
         figures = (num(r.get(key), scale, spec) for _, key, scale, spec in COLUMNS)
         verdict = r.get("verdict") or r.get("status")
         rows.append((str(r.get("scenario")), str(r.get("backend")), str(verdict), *figures))
-    return aligned(rows, left=3)
+    return aligned(rows, "lll")

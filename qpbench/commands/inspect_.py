@@ -8,7 +8,7 @@ import sys
 from collections import Counter
 from typing import TYPE_CHECKING
 
-from .options import add, add_memory_budget
+from .options import add
 
 if TYPE_CHECKING:
     from ..formats import ProblemSet
@@ -20,7 +20,7 @@ EXAMPLE = "qpbench inspect problems/wall    (qpbench inspect problems/wall --jso
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(parser, "path")
     add(parser, "--json", help="print one JSON object instead of the table")
-    add_memory_budget(parser)
+    add(parser, "--memory-budget")
 
 
 def _counts(counts: dict) -> str:

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import TYPE_CHECKING
 
-from .options import add
+from .options import add, print_listing
 
 if TYPE_CHECKING:
     from ..formats import ProblemRecord
@@ -24,23 +23,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def rows(records: list[ProblemRecord]) -> list[dict]:
+    """One JSON-able dict per problem; ``n_box``: finite bounds."""
     out = []
     for r in records:
         n, m_eq, m_ineq = r.sizes
         p = r.problem
         n_box = sum(int((x is not None) and (abs(x) < float("inf")).sum()) for x in (p.lb, p.ub))
         out.append(
-            {
-                "name": r.name,
-                "n": n,
-                "m_eq": m_eq,
-                "m_ineq": m_ineq,
-                "n_box": n_box,
-                "scenario": r.scenario,
-                "tick": r.tick,
-                "t": r.t,
-                "formulation": r.formulation,
-            }
+            dict(name=r.name, n=n, m_eq=m_eq, m_ineq=m_ineq, n_box=n_box, scenario=r.scenario)
+            | dict(tick=r.tick, t=r.t, formulation=r.formulation)
         )
     return out
 
@@ -51,19 +42,10 @@ def run(args: argparse.Namespace) -> int:
 
     ps = load_problems(args.path)
     table = rows(select_records(ps.records, args.pattern, args.every, args.limit))
-    if args.json:
-        for row in table:
-            print(json.dumps(row))
-        return 0
-    width = max([len("name")] + [len(r["name"]) for r in table])
-    print(
-        f"{'name':<{width}}  {'n':>6} {'m_eq':>6} {'m_ineq':>6} {'bounds':>6}  scenario  {'tick':>6} {'t [s]':>8}"
-    )
+    lines = [("name", "n", "m_eq", "m_ineq", "bounds", "scenario", "tick", "t [s]")]
     for r in table:
-        t = "" if r["t"] is None else f"{r['t']:.3f}"
+        sizes = [str(r[k]) for k in ("n", "m_eq", "m_ineq", "n_box")]
         tick = "" if r["tick"] is None else str(r["tick"])
-        print(
-            f"{r['name']:<{width}}  {r['n']:>6} {r['m_eq']:>6} {r['m_ineq']:>6} {r['n_box']:>6}  "
-            f"{r['scenario'] or '-':<8}  {tick:>6} {t:>8}"
-        )
-    return 0
+        t = "" if r["t"] is None else f"{r['t']:.3f}"
+        lines.append((r["name"], *sizes, r["scenario"] or "-", tick, t))
+    return print_listing(args, table, lines, align="lrrrrl")

@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
-from .options import add, add_force_resume, add_memory_budget, strict_exit
+from .options import add, add_force_resume, strict_exit
 
 HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
@@ -32,13 +32,7 @@ QUICK = {
     "repeat": 1,
 }
 #: The defaults without ``--quick``.
-FULL = {
-    "out": "results",
-    "backends": "all",
-    "duration": None,
-    "bench_every": BENCH_EVERY,
-    "repeat": REPEAT,
-}
+FULL = {"out": "results", "backends": "all", "bench_every": BENCH_EVERY, "repeat": REPEAT}
 
 log = logging.getLogger("qpbench.run")
 
@@ -106,7 +100,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"closed-loop runs at once, each in a worker process of its own (default: "
         f"{LOOP_JOBS}, at most one per core; the bench's timed solves stay one at a time)",
     )
-    add_memory_budget(parser)
+    add(parser, "--memory-budget")
     add_force_resume(
         parser,
         force="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
@@ -117,7 +111,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..harness.closed_loop import log_row
+    import pandas as pd
+
+    from ..harness.closed_loop import CSV_NAME, log_row
     from ..harness.pipeline import RunConfig, run_all
     from ..memory import resolve_budget
     from ..selection import select_backends, select_scenarios
@@ -148,18 +144,6 @@ def run(args: argparse.Namespace) -> int:
     config.backends = select_backends(args.backends)
     outcome = run_all(config)
     log.info("qpbench run: %s in %.0f s; report %s", args.out, outcome.wall_time_s, outcome.report)
-    return _answer(args, outcome)
-
-
-def _answer(args: argparse.Namespace, outcome) -> int:
-    """The exit code, then the recommendation as the last lines printed."""
-    import pandas as pd
-
-    from ..harness.closed_loop import CSV_NAME
-    from ..report.recommend import recommend, render
-
     table = pd.read_csv(Path(args.out) / CSV_NAME)
-    code = strict_exit(args, runs=table, failed_solves=outcome.failed_solves)
-    if not args.quiet:
-        print(render(recommend(table)), end="")
-    return code
+    # the exit code, then the recommendation as the last lines printed
+    return strict_exit(args, runs=table, failed_solves=outcome.failed_solves, recommend=True)

@@ -12,7 +12,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .options import add, add_force_resume, strict_exit
+from .options import add, add_force_resume, check_tables, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
@@ -24,6 +24,8 @@ log = logging.getLogger("qpbench")
 
 #: What a --force removes from --out (nothing else in the folder is touched).
 OWNED = ("scaling.csv", "scaling.md", "scaling.png", "bench", "sets", "scenarios")
+#: The options that are :class:`qpbench.scaling.runner.ScalingConfig` fields of the same name.
+FIELDS = "duration every repeat seed profile dense_limit slow_limit keep_sets".split()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -85,61 +87,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(parser, "--strict")
 
 
-def _config(args):
-    from ..exceptions import ParamError, positive_seconds
-    from ..profiles import get_profile
-    from ..scaling.runner import ScalingConfig
+def run(args: argparse.Namespace) -> int:
+    from ..jit import warmup_logged
+    from ..scaling.runner import SUMMARY_NAME, ScalingConfig, failure_line, run_scaling
     from ..scaling.sizes import parse_sizes
     from ..selection import select_backend, select_backends
 
-    backends = select_backends(args.backends)
-    get_profile(args.profile)
-    positive_seconds(args.duration, "--duration")
-    positive_seconds(args.slow_limit, "--slow-limit")
-    for key, value, ok in (
-        ("--every", args.every, args.every >= 1),
-        ("--repeat", args.repeat, args.repeat >= 1),
-        ("--seed", args.seed, args.seed >= 0),
-        ("--dense-limit", args.dense_limit, args.dense_limit >= 1),
-    ):
-        if not ok:
-            raise ParamError(f"out of range: {value}", key=key)
-    if args.duration / 0.001 < args.every:
-        raise ParamError(
-            f"{args.duration} s at 1 kHz keeps no tick with --every {args.every}", key="--every"
-        )
-    return ScalingConfig(
-        backends=backends,
+    config = ScalingConfig(  # every input checked before anything is written
+        backends=select_backends(args.backends),
         sizes=parse_sizes(args.sizes),
         driver=select_backend(args.driver, "--driver"),
-        duration=args.duration,
-        every=args.every,
-        repeat=args.repeat,
-        seed=args.seed,
-        profile=args.profile,
-        dense_limit=args.dense_limit,
-        slow_limit=args.slow_limit,
-        keep_sets=args.keep_sets,
+        **{k: getattr(args, k) for k in FIELDS},
     )
-
-
-def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_output
-    from ..jit import warmup_logged
-    from ..scaling.runner import SUMMARY_NAME, failure_line, run_scaling
-
-    config = _config(args)  # every input checked before anything is written
     out = Path(args.out)
-    check_output(out, force=True, kind="dir")  # a folder (or nothing); its table is checked below
-    if out.exists():
-        check_output(out / SUMMARY_NAME, force=args.force, resume=args.resume)
-    if args.force:
-        for name in OWNED:
-            target = out / name
-            if target.is_dir():
-                shutil.rmtree(target)
-            elif target.exists():
-                target.unlink()
+    check_tables(out, [SUMMARY_NAME], args)
+    for name in OWNED if args.force else ():
+        target = out / name
+        if target.is_dir():
+            shutil.rmtree(target)
+        else:
+            target.unlink(missing_ok=True)
     # no compile inside a timed solve or build: the driver's loop and the benched backends
     warmup_logged(log, [config.driver, *config.backends])
     progress = not args.quiet and sys.stderr.isatty()

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from .options import add, aligned
+from .options import add, print_listing
 
 HELP = "list the shipped scenarios; 'show NAME' prints one's TOML file to start your own from"
 EXAMPLE = (
@@ -102,14 +102,9 @@ def run(args: argparse.Namespace) -> int:
             key="NAME",
         )
     listing = [_listing(name) for name in scenario_names()]
-    if args.json:
-        for item in listing:
-            print(json.dumps(item))
-        return 0
     rows = [("name", "paper", "duration", "obstacles", "description")]
     for i in listing:
         duration = f"{i['duration_s']:g} s"
         obstacles = ", ".join(i["obstacles"]) or "none"
         rows.append((i["name"], i["paper_section"], duration, obstacles, i["description"]))
-    print(aligned(rows, left=4, free_last=True))
-    return 0
+    return print_listing(args, listing, rows, align="llll", free_last=True)

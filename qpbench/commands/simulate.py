@@ -13,7 +13,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .options import add
+from .options import add, check_tables
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
@@ -110,7 +110,7 @@ SUFFIXES = {"log": (".csv", ".parquet"), "snapshot": (".png", ".svg", ".pdf")}
 def _check_arguments(args: argparse.Namespace) -> None:
     """The options only the command has checked, and no output in the way, before anything runs
     (:func:`qpbench.sim.loop.simulate` checks its own arguments)."""
-    from ..atomic import check_folder, check_output
+    from ..atomic import check_output
     from ..exceptions import ParamError, positive_seconds
     from ..report.animation import check_animation
 
@@ -129,10 +129,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
-        check_folder(args.dump, key="--dump")
-        for name in ("problems.parquet", "manifest.json"):
-            if Path(args.dump).exists():
-                check_output(Path(args.dump) / name, force=args.force)
+        check_tables(args.dump, ["problems.parquet", "manifest.json"], args, key="--dump")
 
 
 def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import argparse
 import logging
-from pathlib import Path
 
-from .options import add, add_force_resume, aligned, strict_exit
+from .options import add, add_force_resume, aligned, check_tables, run_bar, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
@@ -83,7 +82,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_folder, check_output
     from ..backends import plugin_files
     from ..jit import warmup_logged
     from ..runner import make_executor
@@ -94,9 +92,7 @@ def run(args: argparse.Namespace) -> int:
     plugins = plugin_files()  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker too
     spec = load_sweep(args.sweep, samples=args.samples, duration=args.duration)
     backends = select_backends(args.backends)
-    check_folder(args.out)  # before any worker starts
-    if Path(args.out).exists():
-        check_output(Path(args.out) / CSV_NAME, force=args.force, resume=args.resume)
+    check_tables(args.out, [CSV_NAME], args)  # before any worker starts
     warmup_logged(log, backends)
     executor = make_executor(args.executor, args.jobs, args.scheduler, args.security)
     try:
@@ -128,21 +124,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args, spec, backends, executor, plugins):
-    from tqdm import tqdm
-
     from ..sweep.runner import run_sweep
 
-    total = spec.samples * len(backends)
-    bar = tqdm(total=total, unit="run", desc=f"sweep {spec.name}", disable=args.quiet or None)
-
-    def on_row(row):
-        bar.update(1)
+    def warn(row):
         if row["status"] in ("error", "crashed"):
             log.warning(
                 "%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"]
             )
 
-    try:
+    total = spec.samples * len(backends)
+    with run_bar(args, total, f"sweep {spec.name}", warn) as on_row:
         return run_sweep(
             spec,
             backends,
@@ -153,8 +144,6 @@ def _run(args, spec, backends, executor, plugins):
             plugins=plugins,
             on_row=on_row,
         )
-    finally:
-        bar.close()
 
 
 def summary_table(rows: list[dict], backends: list[str]) -> str:
