@@ -1,8 +1,4 @@
-"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve.
-
-Exit code: 0 once the CSV is written, whatever the solves gave; with ``--strict``, 1 when a
-solve failed (one line says how many); 2 on bad input.
-"""
+"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve."""
 
 from __future__ import annotations
 

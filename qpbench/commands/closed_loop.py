@@ -1,12 +1,5 @@
-"""``qpbench closed-loop``: every scenario with every backend in the loop, tabulated.
-
-Guarded (:mod:`qpbench.harness.closed_loop`): a tick whose backend raises or answers with
-non-finite values is a tick without a solution; with ``--isolate`` a run goes to a worker
-process with a deadline, so a hang or a crash is a row and the other runs go on. Every run gets
-a verdict (:mod:`qpbench.sim.verdict`); the last lines printed are the recommendation
-(:mod:`qpbench.report.recommend`). Exit code: 0 once the table is written, whatever the
-verdicts; with ``--strict``, 1 when a run is not ``ok`` or not real time; 2 on bad input.
-"""
+"""``qpbench closed-loop``: every scenario with every backend in the loop
+(:mod:`qpbench.harness.closed_loop`), tabulated, the recommendation printed last."""
 
 from __future__ import annotations
 
@@ -59,10 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="deadline of an isolated run in [s], worker start and warm-up included (default: "
         "max(600, 50 x simulated seconds))",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--run-budget",
-        type=float,
-        metavar="S",
         help="wall-time budget of each run in [s]: a run that spends it stops between ticks "
         "(status budget; simulated_s says how far it got) (default: none)",
     )
@@ -119,33 +111,23 @@ def run(args: argparse.Namespace) -> int:
     return strict_exit(args, runs=outcome.table, recommend=shown)
 
 
-#: The figures of the table printed after the runs: header, row key, scale, format.
-COLUMNS = (
-    ("simulated s", "simulated_s", 1.0, ".4g"),
-    ("tracking max mm", "tracking_max_after_2s", 1e3, ".3g"),
-    ("force err max N", "force_error_max_after_2s", 1.0, ".3g"),
-    ("d_min mm", "min_obstacle_distance", 1e3, ".4g"),
-    ("body mm", "min_body_distance", 1e3, ".4g"),
-    ("solve p99 us", "solve_time_p99_s", 1e6, ".4g"),
-    ("ticks > dt", "deadline_misses", 1.0, ".0f"),
-)
-
-
 def summary_table(table: pd.DataFrame) -> str:
     """One line per run: verdict, how far it got, errors after the transient, closest key point
     and body, p99 solve time, ticks slower than dt."""
-    import math
+    from ..report.markdown_table import MM, US, Column, fmt
 
-    def num(value, scale, spec):
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            return "-"
-        return "-" if math.isnan(value) else format(value * scale, spec)
-
-    rows = [("scenario", "backend", "verdict", *(c[0] for c in COLUMNS))]
+    columns = (
+        Column("simulated s", "simulated_s", 1.0, ".4g"),
+        Column("tracking max mm", "tracking_max_after_2s", MM, ".3g"),
+        Column("force err max N", "force_error_max_after_2s", 1.0, ".3g"),
+        Column("d_min mm", "min_obstacle_distance", MM, ".4g"),
+        Column("body mm", "min_body_distance", MM, ".4g"),
+        Column("solve p99 us", "solve_time_p99_s", US, ".4g"),
+        Column("ticks > dt", cell=lambda r: r["over_dt_share"] * r["ticks"]),
+    )
+    rows = [("scenario", "backend", "verdict", *(c.header for c in columns))]
     for r in table.to_dict("records"):
-        figures = (num(r.get(key), scale, spec) for _, key, scale, spec in COLUMNS)
+        figures = (fmt(c.value(r)) for c in columns)
         verdict = r.get("verdict") or r.get("status")
         rows.append((str(r.get("scenario")), str(r.get("backend")), str(verdict), *figures))
     return aligned(rows, "lll")

@@ -1,9 +1,5 @@
-"""``qpbench export PROBLEMS --format npz|parquet --out DIR``: problems in the ecosystem's formats.
-
-``npz``: ``DIR/<name>.npz`` per problem, read back with ``qpsolvers.Problem.load`` (qpbench's
-metadata rides along as an extra member); ``parquet``: a problem set (qpbenchmark's columns).
-The folder appears only once complete: a failed export leaves nothing behind.
-"""
+"""``qpbench export PROBLEMS --format npz|parquet --out DIR``: problems in the ecosystem's formats
+(``npz``: one ``qpsolvers.Problem`` file each; ``parquet``: a problem set)."""
 
 from __future__ import annotations
 

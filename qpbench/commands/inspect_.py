@@ -27,16 +27,6 @@ def _counts(counts: dict) -> str:
     return ", ".join(f"{k} ({n})" for k, n in sorted(counts.items()))
 
 
-def _nnz(problem) -> int:
-    """Stored entries of ``P``, ``G`` and ``A`` (non-zeros of a dense one)."""
-    import numpy as np
-
-    return sum(
-        0 if M is None else int(M.nnz) if hasattr(M, "nnz") else int(np.count_nonzero(M))
-        for M in (problem.P, problem.G, problem.A)
-    )
-
-
 def _notes(ps, budget: int) -> list[str]:
     """One line per problem a bench would warn about or skip for every backend."""
     from ..memory import format_size, sparse_solver_bytes
@@ -60,6 +50,8 @@ def _notes(ps, budget: int) -> list[str]:
 def describe(ps: ProblemSet, budget: int) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
 
+    from ..memory import nnz
+
     def span(values):
         return [min(values), max(values)] if values else None
 
@@ -75,7 +67,7 @@ def describe(ps: ProblemSet, budget: int) -> dict:
         "n": span([s[0] for s in sizes]),
         "m_eq": span([s[1] for s in sizes]),
         "m_ineq": span([s[2] for s in sizes]),
-        "nnz": span([_nnz(r.problem) for r in ps.records]),
+        "nnz": span([sum(map(nnz, (r.problem.P, r.problem.G, r.problem.A))) for r in ps.records]),
         "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
         "convexity": count(r.convexity and r.convexity.verdict for r in ps.records),
         "notes": _notes(ps, budget),
@@ -93,31 +85,29 @@ def describe(ps: ProblemSet, budget: int) -> dict:
 
 
 def _print_table(ps, info: dict) -> None:
-    print(f"path         {ps.path}")
-    print(f"kind         {ps.kind}")
-    print(f"problems     {len(ps)}")
+    lines = [("path", ps.path), ("kind", ps.kind), ("problems", len(ps))]
     if len(ps):
-        for key in ("n", "m_eq", "m_ineq", "nnz"):
-            lo, hi = info[key]
-            print(f"{key:<12} {lo}" + ("" if lo == hi else f"-{hi}"))
-        print(f"sparse P     {info['sparse']}")
-        print(f"convexity    {_counts(info['convexity'])}")
-        print(f"with bounds  {info['with_bounds']}")
-        print(f"formulation  {_counts(info['formulation'])}")
-        print(f"scenario     {_counts(info['scenario'])}")
+        spans = {k: info[k] for k in ("n", "m_eq", "m_ineq", "nnz")}
+        lines += [(k, f"{lo}" + ("" if lo == hi else f"-{hi}")) for k, (lo, hi) in spans.items()]
+        lines += [("sparse P", info["sparse"]), ("convexity", _counts(info["convexity"]))]
+        lines += [("with bounds", info["with_bounds"])]
+        lines += [(k, _counts(info[k])) for k in ("formulation", "scenario")]
         if info["t"]:
-            print(f"t [s]        {info['t'][0]:g}-{info['t'][1]:g}")
-        for line in info["notes"]:
-            print(f"note         {line}")
+            lines.append(("t [s]", f"{info['t'][0]:g}-{info['t'][1]:g}"))
+        lines += [("note", line) for line in info["notes"]]
     if ps.manifest is not None:
         gen = ps.manifest.get("generator") or {}
-        print(f"generator    {', '.join(f'{k}={v}' for k, v in gen.items()) or '-'}")
+        lines.append(("generator", ", ".join(f"{k}={v}" for k, v in gen.items()) or "-"))
         state = "matches" if ps.hash_ok else "DOES NOT MATCH (file changed after it was written)"
-        print(f"sha256       {ps.sha256} ({state} manifest)")
+        lines.append(("sha256", f"{ps.sha256} ({state} manifest)"))
         if ps.manifest.get("count") != len(ps):
-            print(f"count        manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
+            lines.append(
+                ("count", f"manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
+            )
     else:
-        print("manifest     none (hash not checked)")
+        lines.append(("manifest", "none (hash not checked)"))
+    for label, value in lines:
+        print(f"{label:<12} {value}")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -41,6 +41,7 @@ SHARED: dict[str, dict] = {
     },
     "--isolate": {"default": "auto", "choices": ("auto", "always", "never")},
     "--jobs": {"type": int, "metavar": "N"},
+    "--run-budget": {"type": float, "metavar": "S"},
     "--profile": {"default": "default", "help": "settings profile (default: default)"},
     "--set": {
         "action": "append",

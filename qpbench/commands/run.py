@@ -1,11 +1,5 @@
-"""``qpbench run``: the main job. Problem sets, bench, closed loop and report into results/.
-
-The steps: :func:`qpbench.harness.pipeline.run_all`. A run killed half-way leaves the previous
-results whole, and ``--resume`` continues it. The last lines printed are the recommendation
-(:mod:`qpbench.report.recommend`). Exit code: 0 once the results are written, whatever the
-verdicts; with ``--strict``, 1 when a solve failed or a closed-loop run is not ``ok`` or not
-real time; 2 on bad input.
-"""
+"""``qpbench run``: the main job (:func:`qpbench.harness.pipeline.run_all`): problem sets, bench,
+closed loop and report into results/, the recommendation printed last."""
 
 from __future__ import annotations
 
@@ -78,11 +72,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 200 of each set's "
         "2,000, every 100th control tick; 1: all of them, about 10x longer)",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--run-budget",
-        type=float,
         default=RUN_BUDGET_S,
-        metavar="S",
         help=f"the most wall time a closed-loop run may take in [s] (default: {RUN_BUDGET_S:g}); "
         "each backend's budget follows from its per-tick time in the bench (run.json lists "
         "them); a run that spends it stops between ticks and its row says how far it got "

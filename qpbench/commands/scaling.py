@@ -1,8 +1,4 @@
-"""``qpbench scaling``: solve time against arm and obstacle size, on generated arms of 4 to 64 links.
-
-Exit code: 0 once the outputs are written, whatever the solves gave; with ``--strict``, 1 when a
-solve failed (one line says how many); 2 on bad input.
-"""
+"""``qpbench scaling``: solve time against arm and obstacle size (:mod:`qpbench.scaling`)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,4 @@
-"""``qpbench scenarios``: the shipped scenario files; ``show NAME`` prints one to start your own from.
-
-``show NAME --filled`` (a shipped name or a file) prints the scenario as it is run, every
-default filled in (:data:`qpbench.sim.scenario_schema.DEFAULTS`): a file that loads back to the
-same scenario.
-"""
+"""``qpbench scenarios``: the shipped scenario files; ``show NAME [--filled]`` prints one."""
 
 from __future__ import annotations
 

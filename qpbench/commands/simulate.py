@@ -1,9 +1,7 @@
 """``qpbench simulate``: run a scenario in closed loop with one backend; log, summary, dump, plot.
 
-The output ends with a line saying whether the run kept real time (beside the verdict, not in
-it), then the verdict (:mod:`qpbench.sim.verdict`): INFO when ``ok``, else a WARNING with the
-reasons. Exit code: 0 when the verdict is ``ok``, 1 when it is not, 2 on bad input.
-"""
+The output ends with the real-time line, then the verdict (:mod:`qpbench.sim.verdict`), which
+is the exit code."""
 
 from __future__ import annotations
 
@@ -151,24 +149,16 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
         from ..report.loop_figure import run_figure
 
         run_figure(result.log, s, args.plot)
-    if args.snapshot is not None or args.animate is not None:
-        from ..report.animation import animate
+    kw = {"title": f"{scenario.name} / {s['backend']}", "backend": s["backend"]}
+    if args.snapshot is not None:
         from ..report.arm import draw_snapshot
 
-        title = f"{scenario.name} / {s['backend']}"
-        if args.snapshot is not None:
-            draw_snapshot(scenario, result.log, args.snapshot, title=title, backend=s["backend"])
-        if args.animate is not None:
-            animate(
-                scenario,
-                result.log,
-                args.animate,
-                fps=args.fps,
-                speed=args.speed,
-                progress=progress,
-                title=title,
-                backend=s["backend"],
-            )
+        draw_snapshot(scenario, result.log, args.snapshot, **kw)
+    if args.animate is not None:
+        from ..report.animation import animate
+
+        speed, fps = args.speed, args.fps
+        animate(scenario, result.log, args.animate, fps=fps, speed=speed, progress=progress, **kw)
 
 
 def _log_summary(s: dict) -> None:

@@ -1,12 +1,5 @@
-"""``qpbench sweep``: many perturbed instances of a scenario, each in closed loop with each backend.
-
-See :mod:`qpbench.sweep` (the sweep file, the instances, the table) and :mod:`qpbench.runner`
-(where the runs are made). Every executor gives the same rows apart from the timing columns,
-which are clean only serially (``--jobs 1``): runs solving at once share the cores' caches,
-memory bandwidth and clock. Exit code: 0 once the table is written, whatever the verdicts;
-with ``--strict``, 1 when a row's verdict is not ``ok`` or a run was not real time; 2 on bad
-input (nothing written).
-"""
+"""``qpbench sweep``: perturbed instances of a scenario (:mod:`qpbench.sweep`), each in closed loop
+with each backend, run by an executor of :mod:`qpbench.runner`."""
 
 from __future__ import annotations
 
@@ -82,11 +75,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from contextlib import closing
+
+    import pandas as pd
+
     from ..backends import plugin_files
     from ..jit import warmup_logged
     from ..runner import make_executor
     from ..selection import select_backends
     from ..sweep.rows import CSV_NAME
+    from ..sweep.runner import run_sweep
     from ..sweep.spec import load_sweep
 
     plugins = plugin_files()  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker too
@@ -94,20 +92,28 @@ def run(args: argparse.Namespace) -> int:
     backends = select_backends(args.backends)
     check_tables(args.out, [CSV_NAME], args)  # before any worker starts
     warmup_logged(log, backends)
-    executor = make_executor(args.executor, args.jobs, args.scheduler, args.security)
-    try:
-        if executor.concurrency > 1:
+
+    def warn(row):
+        if row["status"] in ("error", "crashed"):
             log.warning(
-                "%d closed loops solve at once (%s executor): the timing columns (%s) are disturbed by "
-                "each other (shared caches, memory bandwidth, clock); each row records host, worker and "
-                "concurrent_solves. Take timings with --jobs 1",
-                executor.concurrency,
-                executor.name,
+                "%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"]
+            )
+
+    with (
+        closing(make_executor(args.executor, args.jobs, args.scheduler, args.security)) as pool,
+        run_bar(args, spec.samples * len(backends), f"sweep {spec.name}", warn) as on_row,
+    ):
+        if pool.concurrency > 1:
+            log.warning(
+                "%d closed loops solve at once (%s executor): the timing columns (%s) are "
+                "disturbed by each other (shared caches, memory bandwidth, clock); each row "
+                "records host, worker and concurrent_solves. Take timings with --jobs 1",
+                pool.concurrency,
+                pool.name,
                 TIMED,
             )
-        outcome = _run(args, spec, backends, executor, plugins)
-    finally:
-        executor.close()
+        kw = {"force": args.force, "resume": args.resume, "plugins": plugins, "on_row": on_row}
+        outcome = run_sweep(spec, backends, args.out, pool, **kw)
     if not args.quiet:
         print(summary_table(outcome.rows, backends))
     log.info(
@@ -118,49 +124,18 @@ def run(args: argparse.Namespace) -> int:
         outcome.failed,
         outcome.csv_path,
     )
-    import pandas as pd
-
     return strict_exit(args, runs=pd.DataFrame(outcome.rows))
-
-
-def _run(args, spec, backends, executor, plugins):
-    from ..sweep.runner import run_sweep
-
-    def warn(row):
-        if row["status"] in ("error", "crashed"):
-            log.warning(
-                "%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"]
-            )
-
-    total = spec.samples * len(backends)
-    with run_bar(args, total, f"sweep {spec.name}", warn) as on_row:
-        return run_sweep(
-            spec,
-            backends,
-            args.out,
-            executor,
-            force=args.force,
-            resume=args.resume,
-            plugins=plugins,
-            on_row=on_row,
-        )
 
 
 def summary_table(rows: list[dict], backends: list[str]) -> str:
     """Per backend: runs and how many of each verdict."""
     from ..sim.verdict import VERDICTS
 
-    header = ["backend", "runs"] + list(VERDICTS) + ["error/crashed", "invalid"]
-    lines = [header]
+    lines = [["backend", "runs", *VERDICTS, "error/crashed", "invalid"]]
     for b in backends + sorted({r["backend"] for r in rows} - set(backends)):
         mine = [r for r in rows if r["backend"] == b]
         counts = [sum(r["verdict"] == v and r["status"] == "ok" for r in mine) for v in VERDICTS]
-        lines.append(
-            [b, str(len(mine))]
-            + [str(c) for c in counts]
-            + [
-                str(sum(r["status"] in ("error", "crashed") for r in mine)),
-                str(sum(r["status"] == "invalid_scenario" for r in mine)),
-            ]
-        )
+        failed = sum(r["status"] in ("error", "crashed") for r in mine)
+        invalid = sum(r["status"] == "invalid_scenario" for r in mine)
+        lines.append([b, *map(str, [len(mine), *counts, failed, invalid])])
     return aligned(lines)
