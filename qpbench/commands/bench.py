@@ -8,7 +8,7 @@ import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .options import add, add_force_resume, strict_exit
+from .options import add, add_force_resume, pick, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -80,7 +80,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete an existing --out and start again",
         resume="keep the rows of an existing --out and run the rest",
     )
-    add(parser, "--strict")
 
 
 def _add_reference_arguments(parser: argparse.ArgumentParser) -> None:
@@ -128,14 +127,9 @@ def run(args: argparse.Namespace) -> int:
     config = BenchConfig(
         backend_settings=backend_settings(args.sets, backends),
         backends=backends,
-        profile=args.profile,
-        repeat=args.repeat,
-        mode=args.mode,
-        time_limit=args.time_limit,
-        isolate=args.isolate,
         warmup=not args.no_warmup,
-        seed=args.seed,
         memory_budget=resolve_budget(args.memory_budget),
+        **pick(args, "profile repeat mode time_limit isolate seed"),
     )
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)

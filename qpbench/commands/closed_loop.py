@@ -7,7 +7,7 @@ import argparse
 import logging
 from typing import TYPE_CHECKING
 
-from .options import add, add_force_resume, aligned, run_bar, strict_exit
+from .options import add, add_force_resume, aligned, pick, run_bar, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -63,7 +63,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="replace an existing table and its logs",
         resume="keep the rows already done (same formulation and duration) and run the rest",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,21 +79,12 @@ def run(args: argparse.Namespace) -> int:
     warmup_logged(log, backends)  # compiled here once: the worker processes load them
     total = len(scenarios) * len(backends)
     with run_bar(args, total, "closed loop", lambda row: log_row(log, row), leave=False) as on_row:
+        settings = pick(
+            args,
+            "duration formulation force resume jobs isolate run_time_limit deadline run_budget",
+        )
         outcome = run_closed_loop(
-            scenarios,
-            backends,
-            args.out,
-            duration=args.duration,
-            formulation=args.formulation,
-            force=args.force,
-            resume=args.resume,
-            jobs=args.jobs,
-            on_row=on_row,
-            isolate=args.isolate,
-            run_time_limit=args.run_time_limit,
-            deadline=args.deadline,
-            run_budget=args.run_budget,
-            overrides=overrides,
+            scenarios, backends, args.out, on_row=on_row, overrides=overrides, **settings
         )
     log.info(
         "%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",

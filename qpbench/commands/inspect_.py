@@ -28,22 +28,19 @@ def _counts(counts: dict) -> str:
 
 
 def _notes(ps, budget: int) -> list[str]:
-    """One line per problem a bench would warn about or skip for every backend."""
-    from ..memory import format_size, sparse_solver_bytes
+    """One line per problem a bench would warn about or skip for every backend (the memory a
+    sparse solver needs, the least any backend needs, over ``budget`` [bytes])."""
+    from ..memory import skip_reason
 
     out = []
     for r in ps.records:
         conv = r.convexity
-        if conv is not None and conv.skip_reason:
-            out.append(f"{r.name}: skipped: {conv.skip_reason}")
-        elif conv is not None and conv.warning:
-            out.append(f"{r.name}: warning: {conv.warning}")
-        need = sparse_solver_bytes(r.problem)
-        if need > budget:
-            out.append(
-                f"{r.name}: skipped: memory: a sparse solver needs about {format_size(need)} "
-                f"> budget {format_size(budget)}"
-            )
+        if conv is not None and (conv.skip_reason or conv.warning):
+            kind = "skipped" if conv.skip_reason else "warning"
+            out.append(f"{r.name}: {kind}: {conv.skip_reason or conv.warning}")
+        why = skip_reason(r.problem, True, budget)
+        if why is not None:
+            out.append(f"{r.name}: skipped: {why} (every backend)")
     return out
 
 

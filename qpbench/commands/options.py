@@ -84,12 +84,20 @@ def add(parser: argparse.ArgumentParser, *flags: str, **kw) -> None:
         parser.add_argument(flag, **{**SHARED[flag], **kw})
 
 
+def pick(args: argparse.Namespace, names: str) -> dict:
+    """The options ``names`` (space-separated destinations) as keyword arguments of the call
+    that takes them under the same names."""
+    return {name: getattr(args, name) for name in names.split()}
+
+
 def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -> None:
     """``--force`` or ``--resume`` (not both), with the command's help texts: what to do with an
-    output that is already there (:func:`qpbench.atomic.check_output`)."""
+    output that is already there (:func:`qpbench.atomic.check_output`); and ``--strict``
+    (:func:`strict_exit`), which every command that can resume takes."""
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help=force)
     group.add_argument("--resume", action="store_true", help=resume)
+    add(parser, "--strict")
 
 
 def check_tables(folder, names, args: argparse.Namespace, key: str = "out") -> None:

@@ -100,7 +100,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "if no previous 'qpbench run' wrote them",
         resume="continue an interrupted run from OUT/.partial/",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:

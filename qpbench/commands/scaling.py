@@ -8,7 +8,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .options import add, add_force_resume, check_tables, strict_exit
+from .options import add, add_force_resume, check_tables, pick, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
@@ -20,8 +20,6 @@ log = logging.getLogger("qpbench")
 
 #: What a --force removes from --out (nothing else in the folder is touched).
 OWNED = ("scaling.csv", "scaling.md", "scaling.png", "bench", "sets", "scenarios")
-#: The options that are :class:`qpbench.scaling.runner.ScalingConfig` fields of the same name.
-FIELDS = "duration every repeat seed profile dense_limit slow_limit keep_sets".split()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -80,7 +78,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete this command's outputs in --out and start again",
         resume="keep the sizes done in --out and run the rest",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -93,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         backends=select_backends(args.backends),
         sizes=parse_sizes(args.sizes),
         driver=select_backend(args.driver, "--driver"),
-        **{k: getattr(args, k) for k in FIELDS},
+        **pick(args, "duration every repeat seed profile dense_limit slow_limit keep_sets"),
     )
     out = Path(args.out)
     check_tables(out, [SUMMARY_NAME], args)

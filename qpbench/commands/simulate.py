@@ -11,7 +11,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .options import add, check_tables
+from .options import add, check_tables, pick
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
@@ -41,25 +41,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--dt", type=float, metavar="S", help="control period in [s] (default: the scenario's)"
     )
-    parser.add_argument("--log", metavar="FILE", help="per-tick log, .csv or .parquet")
-    parser.add_argument("--summary", metavar="FILE", help="summary as JSON ('-': to stdout)")
-    parser.add_argument(
-        "--dump",
-        metavar="DIR",
-        help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)",
-    )
+    for flag, metavar, text in (
+        ("--log", "FILE", "per-tick log, .csv or .parquet"),
+        ("--summary", "FILE", "summary as JSON ('-': to stdout)"),
+        ("--dump", "DIR", "the ticks' QPs as a problem set (problems.parquet + manifest.json)"),
+        ("--plot", "FILE", "figure of the run (.png)"),
+        ("--snapshot", "FILE", "picture of the arm at several instants (.png, .svg or .pdf)"),
+        ("--animate", "FILE", "animation of the run (.gif; .mp4 when ffmpeg is installed)"),
+    ):
+        parser.add_argument(flag, metavar=metavar, help=text)
     parser.add_argument("--every", type=int, metavar="K", help="dump every K-th tick (default 1)")
-    parser.add_argument("--plot", metavar="FILE", help="figure of the run (.png)")
-    parser.add_argument(
-        "--snapshot",
-        metavar="FILE",
-        help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)",
-    )
-    parser.add_argument(
-        "--animate",
-        metavar="FILE",
-        help="animation of the run (.gif; .mp4 when ffmpeg is installed)",
-    )
     parser.add_argument(
         "--speed",
         type=float,
@@ -84,18 +75,8 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log, [backend])
-    result = simulate(
-        scenario,
-        backend,
-        formulation=args.formulation,
-        duration=args.duration,
-        dt=args.dt,
-        every=args.every,
-        dump=args.dump,
-        progress=progress,
-        profile=args.profile,
-        deadline=args.deadline,
-    )
+    settings = pick(args, "formulation duration dt every dump profile deadline")
+    result = simulate(scenario, backend, progress=progress, **settings)
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)
     return log_verdict(result.summary)

@@ -71,7 +71,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="start again: replace the table and the instances",
         resume="keep the rows with a result and run the rest (missing, error, crashed)",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
