@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
     from ..harness.bench import BenchConfig, run_bench
     from ..jit import warmup_logged
     from ..memory import resolve_budget
+    from ..reference import SOURCES, cache_folder
     from ..selection import backend_settings, select_backends, select_set
 
     # Nothing is written or logged before the input is known to be good.
@@ -133,18 +134,23 @@ def run(args: argparse.Namespace) -> int:
     )
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
-    log.info("%s", _cache_line(args, problem_set))
+    cached = args.reference in SOURCES  # where the references are kept
+    folder = cache_folder(problem_set, args.cache_dir) if cached else None
+    where = (
+        f"reference cache: {folder}" if folder else "references: not cached (set built in memory)"
+    )
+    log.info("%s", where if cached else f"references: {args.reference} (not cached)")
     log.info("%s: %d problems; backends: %s", args.path, len(problem_set), ", ".join(backends))
     # no compile inside a timed solve, here or in a worker; only what these backends run
     warmup_logged(log, backends, loop=False)
+    progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,
         config,
         args.out,
-        force=args.force,
-        resume=args.resume,
-        progress=not args.quiet and sys.stderr.isatty(),
+        progress=progress,
         references=references,
+        **pick(args, "force resume"),
     )
     if not args.quiet:
         print(f"bench: {summary.line()}")
@@ -159,6 +165,8 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     """
     from dataclasses import replace
     from pathlib import Path
+
+    from tqdm import tqdm
 
     from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
@@ -183,11 +191,7 @@ def _reference_source(args: argparse.Namespace, config) -> object:
             )
         objectives = read_objectives(source)  # a bad file fails here, before anything is written
         return lambda problem_set: from_objectives(problem_set, objectives, source)
-    progress = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        progress = tqdm if sys.stderr.isatty() else "log"
+    progress = None if args.quiet else tqdm if sys.stderr.isatty() else "log"
     return lambda problem_set: reference_solutions(
         problem_set,
         method=source,
@@ -196,16 +200,4 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         progress=progress,
         context=context(),
         cache_dir=args.cache_dir,
-    )
-
-
-def _cache_line(args: argparse.Namespace, problem_set) -> str:
-    """Where the references of ``problem_set`` are cached (the run's first line)."""
-    from ..reference import SOURCES, cache_folder
-
-    if args.reference not in SOURCES:
-        return f"references: {args.reference} (not cached)"
-    folder = cache_folder(problem_set, args.cache_dir)
-    return (
-        f"reference cache: {folder}" if folder else "references: not cached (set built in memory)"
     )

@@ -8,7 +8,7 @@ import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
-from .options import add, add_force_resume, strict_exit
+from .options import add, add_force_resume, pick, strict_exit
 
 HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
@@ -90,6 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(
         parser,
         "--jobs",
+        default=default_jobs(),
         help=f"closed-loop runs at once, each in a worker process of its own (default: "
         f"{LOOP_JOBS}, at most one per core; the bench's timed solves stay one at a time)",
     )
@@ -117,17 +118,12 @@ def run(args: argparse.Namespace) -> int:
     config = RunConfig(  # checks the numbers first, before any scenario is loaded
         out=Path(args.out),
         problems=Path(args.problems),
-        duration=args.duration,
-        bench_every=args.bench_every,
         run_budget=args.run_budget or None,
-        repeat=args.repeat,
-        jobs=args.jobs if args.jobs is not None else default_jobs(),
-        force=args.force,
-        resume=args.resume,
         progress=not args.quiet,
         scenarios=[],
         backends=[],
         memory_budget=resolve_budget(args.memory_budget),
+        **pick(args, "duration bench_every repeat jobs force resume"),
         on_row=lambda row: (
             log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None
         ),
