@@ -117,8 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     from .cache import configure_numba_cache
 
     configure_numba_cache()  # before numba is imported: workers inherit the variable it may set
-    # pyarrow's default allocator reserves about 1 GB of address space on first use; the system
-    # allocator does not, so an address-space limit (ulimit -v) counts memory used, not reserved
+    # the system allocator, not pyarrow's, which reserves address space that ulimit -v counts
     os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
     parser = build_parser()
     args = parser.parse_args(argv)

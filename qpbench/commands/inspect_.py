@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import Counter
 from typing import TYPE_CHECKING
 
@@ -108,6 +107,7 @@ def _print_table(ps, info: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..exceptions import InputError
     from ..formats import load_problems
     from ..memory import resolve_budget
 
@@ -117,12 +117,8 @@ def run(args: argparse.Namespace) -> int:
     info = describe(ps, budget)
     if args.json:
         print(json.dumps(info, indent=2))
-        return 2 if ps.hash_ok is False else 0
-    _print_table(ps, info)
+    else:
+        _print_table(ps, info)
     if ps.hash_ok is False:
-        print(
-            f"qpbench inspect: error: {ps.files[0]}: key 'sha256': does not match manifest.json",
-            file=sys.stderr,
-        )
-        return 2
+        raise InputError("does not match manifest.json", path=ps.files[0], key="sha256")
     return 0

@@ -3,12 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
 
 from .options import add, print_listing
-
-if TYPE_CHECKING:
-    from ..formats import ProblemRecord
 
 HELP = (
     "list the problems of a set: name, n, equality and inequality rows, bounds, scenario, tick, t"
@@ -22,26 +18,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(parser, "--json", help="one JSON object per problem, one per line")
 
 
-def rows(records: list[ProblemRecord]) -> list[dict]:
-    """One JSON-able dict per problem; ``n_box``: finite bounds."""
-    out = []
-    for r in records:
-        n, m_eq, m_ineq = r.sizes
-        p = r.problem
-        n_box = sum(int((x is not None) and (abs(x) < float("inf")).sum()) for x in (p.lb, p.ub))
-        out.append(
-            dict(name=r.name, n=n, m_eq=m_eq, m_ineq=m_ineq, n_box=n_box, scenario=r.scenario)
-            | dict(tick=r.tick, t=r.t, formulation=r.formulation)
-        )
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     from ..formats import load_problems
     from ..selection import select_records
 
     ps = load_problems(args.path)
-    table = rows(select_records(ps.records, args.pattern, args.every, args.limit))
+    table = []
+    for r in select_records(ps.records, args.pattern, args.every, args.limit):
+        n, m_eq, m_ineq = r.sizes
+        p = r.problem
+        n_box = sum(int((x is not None) and (abs(x) < float("inf")).sum()) for x in (p.lb, p.ub))
+        table.append(
+            dict(name=r.name, n=n, m_eq=m_eq, m_ineq=m_ineq, n_box=n_box, scenario=r.scenario)
+            | dict(tick=r.tick, t=r.t, formulation=r.formulation)
+        )
     lines = [("name", "n", "m_eq", "m_ineq", "bounds", "scenario", "tick", "t [s]")]
     for r in table:
         sizes = [str(r[k]) for k in ("n", "m_eq", "m_ineq", "n_box")]

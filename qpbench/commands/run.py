@@ -18,15 +18,11 @@ EXAMPLE = "qpbench run    (quick: qpbench run --quick)"
 
 #: What ``--quick`` sets, unless given: a short run of every scenario with a few fast backends
 #: that need no compiled kernel of their own, into ``./quick`` (``results/`` is left alone).
-QUICK = {
-    "out": "quick",
-    "backends": "daqp,osqp,clarabel,pinv",
-    "duration": 1.0,
-    "bench_every": 10,
-    "repeat": 1,
-}
+QUICK = dict(
+    out="quick", backends="daqp,osqp,clarabel,pinv", duration=1.0, bench_every=10, repeat=1
+)
 #: The defaults without ``--quick``.
-FULL = {"out": "results", "backends": "all", "bench_every": BENCH_EVERY, "repeat": REPEAT}
+FULL = dict(out="results", backends="all", bench_every=BENCH_EVERY, repeat=REPEAT)
 
 log = logging.getLogger("qpbench.run")
 

@@ -41,27 +41,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
     def option(flag, text, spec="", **kw):
-        # the default is ScalingConfig's field of the same name, and the help text says it
+        # default and type: ScalingConfig's field of the same name; the help text says it
         value = getattr(d, flag[2:].replace("-", "_"))
-        parser.add_argument(flag, default=value, help=f"{text} (default {value:{spec}})", **kw)
+        kw = {"default": value, "type": type(value), **kw}
+        parser.add_argument(flag, help=f"{text} (default {value:{spec}})", **kw)
 
     option("--driver", "backend solving the closed loop whose ticks are dumped")
-    option("--duration", "simulated seconds per size", type=float)
-    option("--every", "keep every K-th tick", type=int)
-    option("--repeat", "timed solves per tick, minimum kept", type=int)
-    option("--seed", "seed of the arms, clouds and backend order", type=int)
+    option("--duration", "simulated seconds per size")
+    option("--every", "keep every K-th tick")
+    option("--repeat", "timed solves per tick, minimum kept")
+    option("--seed", "seed of the arms, clouds and backend order")
     option("--profile", "settings profile")
     option(
         "--dense-limit",
         "skip dense-only backends when n x rows exceeds this",
         ",",
-        type=int,
         metavar="ENTRIES",
     )
     option(
         "--slow-limit",
         "skip a backend on the larger sizes of an axis once its median solve exceeds S seconds",
-        type=float,
         metavar="S",
     )
     parser.add_argument(

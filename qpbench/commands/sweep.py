@@ -17,9 +17,6 @@ EXAMPLE = (
 
 log = logging.getLogger("qpbench.sweep")
 
-#: Columns whose values depend on timing (the warning of a parallel run names them).
-TIMED = "solve_time_*, deadline_misses, ticks_over_1ms, real_time_factor"
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..runner import EXECUTORS, default_jobs
@@ -104,12 +101,12 @@ def run(args: argparse.Namespace) -> int:
     ):
         if pool.concurrency > 1:
             log.warning(
-                "%d closed loops solve at once (%s executor): the timing columns (%s) are "
-                "disturbed by each other (shared caches, memory bandwidth, clock); each row "
-                "records host, worker and concurrent_solves. Take timings with --jobs 1",
+                "%d closed loops solve at once (%s executor): the timing columns (solve_time_*, "
+                "deadline_misses, ticks_over_1ms, real_time_factor) are disturbed by each other "
+                "(shared caches, memory bandwidth, clock); each row records host, worker and "
+                "concurrent_solves. Take timings with --jobs 1",
                 pool.concurrency,
                 pool.name,
-                TIMED,
             )
         kw = {"force": args.force, "resume": args.resume, "plugins": plugins, "on_row": on_row}
         outcome = run_sweep(spec, backends, args.out, pool, **kw)
