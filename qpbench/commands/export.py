@@ -17,11 +17,10 @@ log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add(parser, "path")
     parser.add_argument("--format", required=True, choices=("npz", "parquet"), help="output format")
     add(parser, "--out", help="output folder (must not exist unless --force)")
     add(parser, "--force", help="replace an existing output folder")
-    add(parser, "--problems", "--every", "--limit")
+    add(parser, "path", "--problems", "--every", "--limit")
 
 
 def _safe_name(name: str) -> str:

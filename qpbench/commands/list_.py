@@ -13,8 +13,7 @@ EXAMPLE = "qpbench list problems/wall --limit 5      (qpbench list problems/maro
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add(parser, "path")
-    add(parser, "--problems", "--every", "--limit")
+    add(parser, "path", "--problems", "--every", "--limit")
     add(parser, "--json", help="one JSON object per problem, one per line")
 
 
