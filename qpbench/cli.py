@@ -1,11 +1,8 @@
 """The ``qpbench`` command line: argument parsing, logging set-up, plugins and exit codes.
 
 Each sub-command is a module of :mod:`qpbench.commands` with ``HELP`` (one line), ``EXAMPLE``
-(shown under ``--help``), ``add_arguments(parser)`` and ``run(args) -> int``. Plugin backends
-(:func:`qpbench.backends.load_plugins`) are loaded once, before any command runs. Exit codes
-(``docs/exit-codes.md``): 0 done; 1 ``simulate``'s verdict not ``ok``, or with ``--strict`` a
-run or solve that did not pass; 2 usage or input error (one line on stderr naming the file, key
-or value); 130 interrupted.
+(shown under ``--help``), ``add_arguments(parser)`` and ``run(args) -> int``. Exit codes:
+``docs/exit-codes.md``.
 """
 
 from __future__ import annotations
@@ -41,12 +38,9 @@ log = logging.getLogger("qpbench")
 
 
 def _available_commands():
+    """``(name, module)`` of each sub-command."""
     for name, module in COMMANDS.items():
-        try:
-            yield name, importlib.import_module(f"qpbench.commands.{module}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"qpbench.commands.{module}":
-                raise
+        yield name, importlib.import_module(f"qpbench.commands.{module}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -91,10 +85,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: Logger of the one-line-per-solve messages; shown from ``-vv`` on.
-SOLVE_LOGGER = "qpbench.solves"
-
-
 def _add_plugin_option(parser: argparse.ArgumentParser, dest: str) -> None:
     # Two destinations: a sub-command's parser starts from a namespace of its own and would
     # replace a list given before the sub-command (``qpbench --plugin a.py bench --plugin b.py``).
@@ -111,17 +101,15 @@ def _add_plugin_option(parser: argparse.ArgumentParser, dest: str) -> None:
 
 def _configure_logging(args: argparse.Namespace) -> None:
     """``-q``: errors only; default: progress and results; ``-v``: DEBUG; ``-vv``: also every
-    solve (:data:`SOLVE_LOGGER`)."""
+    solve (logger ``qpbench.solves``)."""
     level = logging.ERROR if args.quiet else logging.DEBUG if args.verbose else logging.INFO
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
-    root = logging.getLogger("qpbench")
-    root.handlers[:] = [handler]
-    root.setLevel(level)
-    root.propagate = False
-    logging.getLogger(SOLVE_LOGGER).setLevel(
-        logging.DEBUG if args.verbose >= 2 else max(level, logging.INFO)
-    )
+    log.handlers[:] = [handler]
+    log.setLevel(level)
+    log.propagate = False
+    solves = logging.DEBUG if args.verbose >= 2 else max(level, logging.INFO)
+    logging.getLogger("qpbench.solves").setLevel(solves)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -129,8 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     from .cache import configure_numba_cache
 
     configure_numba_cache()  # before numba is imported: workers inherit the variable it may set
-    # pyarrow's default allocator reserves about 1 GB of address space on first use; the system
-    # allocator does not, so an address-space limit (ulimit -v) counts memory used, not reserved
+    # the system allocator, not pyarrow's, which reserves address space that ulimit -v counts
     os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -140,16 +127,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _configure_logging(args)
-    log.debug(
-        "qpbench %s %s: %s",
-        __version__,
-        args.command,
-        ", ".join(
-            f"{k}={v!r}"
-            for k, v in sorted(vars(args).items())
-            if not k.startswith("_") and k != "command"
-        ),
-    )
+    shown = {k: v for k, v in sorted(vars(args).items()) if k[0] != "_" and k != "command"}
+    settings = ", ".join(f"{k}={v!r}" for k, v in shown.items())
+    log.debug("qpbench %s %s: %s", __version__, args.command, settings)
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     from .atomic import listing, recording

@@ -96,7 +96,8 @@ def _n_m(problem: qpsolvers.Problem) -> tuple[int, int]:
     return n, sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
 
 
-def _nnz(M) -> int:
+def nnz(M) -> int:
+    """Stored entries of a sparse matrix, non-zeros of a dense one, 0 for ``None``."""
     if M is None:
         return 0
     return int(M.nnz) if spa.issparse(M) else int(np.count_nonzero(M))
@@ -105,7 +106,7 @@ def _nnz(M) -> int:
 def sparse_solver_bytes(problem: qpsolvers.Problem) -> int:
     """What a sparse solver needs for ``problem`` (KKT matrix, its factor, vectors), in bytes."""
     n, m = _n_m(problem)
-    kkt = _nnz(problem.P) + _nnz(problem.A) + _nnz(problem.G) + n + m
+    kkt = nnz(problem.P) + nnz(problem.A) + nnz(problem.G) + n + m
     return 12 * kkt * (1 + FILL) + 8 * 50 * (n + m)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .options import add, aligned
+from .options import add, print_listing
 
 HELP = "list solver backends: name, available, version, algorithm family, reason if unavailable"
 EXAMPLE = "qpbench backends    (qpbench backends --available --json)"
@@ -18,20 +18,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
     from ..backends import backend_info
 
     infos = [i for i in backend_info() if i.available or not args.available]
-    if args.json:
-        import dataclasses
-        import json
-
-        for i in infos:
-            print(json.dumps(dataclasses.asdict(i)))
-        return 0
     rows = [("name", "available", "version", "family", "reason")]
     for i in infos:
-        rows.append(
-            (i.name, "yes" if i.available else "no", i.version or "-", i.family, i.reason or "")
-        )
-    print(aligned(rows, left=4, free_last=True))
-    return 0
+        available = "yes" if i.available else "no"
+        rows.append((i.name, available, i.version or "-", i.family, i.reason or ""))
+    return print_listing(args, [asdict(i) for i in infos], rows, align="llll", free_last=True)

@@ -1,8 +1,4 @@
-"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve.
-
-Exit code: 0 once the CSV is written, whatever the solves gave; with ``--strict``, 1 when a
-solve failed (one line says how many); 2 on bad input.
-"""
+"""``qpbench bench``: every backend on every problem of a set, one CSV row per solve."""
 
 from __future__ import annotations
 
@@ -12,7 +8,7 @@ import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .options import add, add_force_resume, add_memory_budget, strict_exit
+from .options import add, add_force_resume, pick, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -69,7 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-warmup", action="store_true", help="skip the discarded warm-up solve of each backend"
     )
-    add_memory_budget(parser)
+    add(parser, "--memory-budget")
     parser.add_argument(
         "--set",
         dest="sets",
@@ -84,7 +80,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete an existing --out and start again",
         resume="keep the rows of an existing --out and run the rest",
     )
-    add(parser, "--strict")
 
 
 def _add_reference_arguments(parser: argparse.ArgumentParser) -> None:
@@ -119,40 +114,43 @@ def _add_reference_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..atomic import check_output
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
     from ..jit import warmup_logged
     from ..memory import resolve_budget
+    from ..reference import SOURCES, cache_folder
     from ..selection import backend_settings, select_backends, select_set
 
-    # Nothing is written before the input is known to be good (run_bench checks --out).
+    # Nothing is written or logged before the input is known to be good.
+    check_output(args.out, force=args.force, resume=args.resume)
     backends = select_backends(args.backends)
     config = BenchConfig(
         backend_settings=backend_settings(args.sets, backends),
         backends=backends,
-        profile=args.profile,
-        repeat=args.repeat,
-        mode=args.mode,
-        time_limit=args.time_limit,
-        isolate=args.isolate,
         warmup=not args.no_warmup,
-        seed=args.seed,
         memory_budget=resolve_budget(args.memory_budget),
+        **pick(args, "profile repeat mode time_limit isolate seed"),
     )
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
-    log.info("%s", _cache_line(args, problem_set))
+    cached = args.reference in SOURCES  # where the references are kept
+    folder = cache_folder(problem_set, args.cache_dir) if cached else None
+    where = (
+        f"reference cache: {folder}" if folder else "references: not cached (set built in memory)"
+    )
+    log.info("%s", where if cached else f"references: {args.reference} (not cached)")
     log.info("%s: %d problems; backends: %s", args.path, len(problem_set), ", ".join(backends))
     # no compile inside a timed solve, here or in a worker; only what these backends run
     warmup_logged(log, backends, loop=False)
+    progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,
         config,
         args.out,
-        force=args.force,
-        resume=args.resume,
-        progress=not args.quiet and sys.stderr.isatty(),
+        progress=progress,
         references=references,
+        **pick(args, "force resume"),
     )
     if not args.quiet:
         print(f"bench: {summary.line()}")
@@ -168,10 +166,13 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     from dataclasses import replace
     from pathlib import Path
 
+    from tqdm import tqdm
+
     from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
-    from ..reference import SOURCES, bench_references, from_objectives
+    from ..reference import SOURCES, from_objectives, reference_solutions
+    from ..runner.process import context
 
     source = args.reference
     if args.jobs < 1:
@@ -190,37 +191,13 @@ def _reference_source(args: argparse.Namespace, config) -> object:
             )
         objectives = read_objectives(source)  # a bad file fails here, before anything is written
         return lambda problem_set: from_objectives(problem_set, objectives, source)
-    progress = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        progress = tqdm if sys.stderr.isatty() else "log"
-
-    def compute(problem_set):
-        from ..runner.process import context as worker_context
-
-        return bench_references(
-            problem_set,
-            source,
-            time_limit=limit,
-            jobs=args.jobs,
-            progress=progress,
-            context=worker_context(),
-            cache_dir=args.cache_dir,
-        )
-
-    return compute
-
-
-def _cache_line(args: argparse.Namespace, problem_set) -> str:
-    """Where the references of ``problem_set`` are cached (the run's first line)."""
-    from ..reference import SOURCES, cache_folder
-
-    if args.reference not in SOURCES:
-        return f"references: {args.reference} (not cached)"
-    folder = cache_folder(problem_set, args.cache_dir)
-    return (
-        "references: not cached (set built in memory)"
-        if folder is None
-        else f"reference cache: {folder}"
+    progress = None if args.quiet else tqdm if sys.stderr.isatty() else "log"
+    return lambda problem_set: reference_solutions(
+        problem_set,
+        method=source,
+        time_limit=limit,
+        jobs=args.jobs,
+        progress=progress,
+        context=context(),
+        cache_dir=args.cache_dir,
     )

@@ -1,12 +1,5 @@
-"""``qpbench closed-loop``: every scenario with every backend in the loop, tabulated.
-
-Guarded (:mod:`qpbench.harness.closed_loop`): a tick whose backend raises or answers with
-non-finite values is a tick without a solution; with ``--isolate`` a run goes to a worker
-process with a deadline, so a hang or a crash is a row and the other runs go on. Every run gets
-a verdict (:mod:`qpbench.sim.verdict`); the last lines printed are the recommendation
-(:mod:`qpbench.report.recommend`). Exit code: 0 once the table is written, whatever the
-verdicts; with ``--strict``, 1 when a run is not ``ok`` or not real time; 2 on bad input.
-"""
+"""``qpbench closed-loop``: every scenario with every backend in the loop
+(:mod:`qpbench.harness.closed_loop`), tabulated, the recommendation printed last."""
 
 from __future__ import annotations
 
@@ -14,7 +7,7 @@ import argparse
 import logging
 from typing import TYPE_CHECKING
 
-from .options import add, add_force_resume, aligned, strict_exit
+from .options import add, add_force_resume, aligned, pick, run_bar, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -59,10 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="deadline of an isolated run in [s], worker start and warm-up included (default: "
         "max(600, 50 x simulated seconds))",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--run-budget",
-        type=float,
-        metavar="S",
         help="wall-time budget of each run in [s]: a run that spends it stops between ticks "
         "(status budget; simulated_s says how far it got) (default: none)",
     )
@@ -71,12 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="replace an existing table and its logs",
         resume="keep the rows already done (same formulation and duration) and run the rest",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..harness.closed_loop import log_row, run_closed_loop
     from ..jit import warmup_logged
     from ..selection import parse_overrides, select_backends, select_scenarios
@@ -89,31 +78,14 @@ def run(args: argparse.Namespace) -> int:
     backends = select_backends(args.backends)
     warmup_logged(log, backends)  # compiled here once: the worker processes load them
     total = len(scenarios) * len(backends)
-    bar = tqdm(total=total, unit="run", desc="closed loop", leave=False, disable=args.quiet or None)
-
-    def on_row(row):
-        bar.update(1)
-        log_row(log, row)
-
-    try:
-        outcome = run_closed_loop(
-            scenarios,
-            backends,
-            args.out,
-            duration=args.duration,
-            formulation=args.formulation,
-            force=args.force,
-            resume=args.resume,
-            jobs=args.jobs,
-            on_row=on_row,
-            isolate=args.isolate,
-            run_time_limit=args.run_time_limit,
-            deadline=args.deadline,
-            run_budget=args.run_budget,
-            overrides=overrides,
+    with run_bar(args, total, "closed loop", lambda row: log_row(log, row), leave=False) as on_row:
+        settings = pick(
+            args,
+            "duration formulation force resume jobs isolate run_time_limit deadline run_budget",
         )
-    finally:
-        bar.close()
+        outcome = run_closed_loop(
+            scenarios, backends, args.out, on_row=on_row, overrides=overrides, **settings
+        )
     log.info(
         "%d runs (%d new, %d kept), %d failed to run, %d failed their verdict; table in %s",
         len(outcome.table),
@@ -123,43 +95,29 @@ def run(args: argparse.Namespace) -> int:
         outcome.not_ok,
         outcome.csv_path,
     )
-    if not args.quiet and len(outcome.table):
-        print(summary_table(outcome.table))
-    code = strict_exit(args, runs=outcome.table)
-    if not args.quiet and len(outcome.table):
-        from ..report.recommend import recommend, render
-
-        print("\n" + render(recommend(outcome.table)), end="")
-    return code
-
-
-#: The figures of the table printed after the runs: header, row key, scale, format.
-COLUMNS = (
-    ("simulated s", "simulated_s", 1.0, ".4g"),
-    ("tracking max mm", "tracking_max_after_2s", 1e3, ".3g"),
-    ("force err max N", "force_error_max_after_2s", 1.0, ".3g"),
-    ("d_min mm", "min_obstacle_distance", 1e3, ".4g"),
-    ("body mm", "min_body_distance", 1e3, ".4g"),
-    ("solve p99 us", "solve_time_p99_s", 1e6, ".4g"),
-    ("ticks > dt", "deadline_misses", 1.0, ".0f"),
-)
+    shown = len(outcome.table) > 0
+    if not args.quiet and shown:
+        print(summary_table(outcome.table) + "\n")
+    return strict_exit(args, runs=outcome.table, recommend=shown)
 
 
 def summary_table(table: pd.DataFrame) -> str:
     """One line per run: verdict, how far it got, errors after the transient, closest key point
     and body, p99 solve time, ticks slower than dt."""
-    import math
+    from ..report.markdown_table import MM, US, Column, fmt
 
-    def num(value, scale, spec):
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            return "-"
-        return "-" if math.isnan(value) else format(value * scale, spec)
-
-    rows = [("scenario", "backend", "verdict", *(c[0] for c in COLUMNS))]
+    columns = (
+        Column("simulated s", "simulated_s", 1.0, ".4g"),
+        Column("tracking max mm", "tracking_max_after_2s", MM, ".3g"),
+        Column("force err max N", "force_error_max_after_2s", 1.0, ".3g"),
+        Column("d_min mm", "min_obstacle_distance", MM, ".4g"),
+        Column("body mm", "min_body_distance", MM, ".4g"),
+        Column("solve p99 us", "solve_time_p99_s", US, ".4g"),
+        Column("ticks > dt", cell=lambda r: r["over_dt_share"] * r["ticks"]),
+    )
+    rows = [("scenario", "backend", "verdict", *(c.header for c in columns))]
     for r in table.to_dict("records"):
-        figures = (num(r.get(key), scale, spec) for _, key, scale, spec in COLUMNS)
+        figures = (fmt(c.value(r)) for c in columns)
         verdict = r.get("verdict") or r.get("status")
         rows.append((str(r.get("scenario")), str(r.get("backend")), str(verdict), *figures))
-    return aligned(rows, left=3)
+    return aligned(rows, "lll")

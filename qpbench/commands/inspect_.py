@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import Counter
 from typing import TYPE_CHECKING
 
-from .options import add, add_memory_budget
+from .options import add
 
 if TYPE_CHECKING:
     from ..formats import ProblemSet
@@ -20,45 +19,34 @@ EXAMPLE = "qpbench inspect problems/wall    (qpbench inspect problems/wall --jso
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(parser, "path")
     add(parser, "--json", help="print one JSON object instead of the table")
-    add_memory_budget(parser)
+    add(parser, "--memory-budget")
 
 
 def _counts(counts: dict) -> str:
     return ", ".join(f"{k} ({n})" for k, n in sorted(counts.items()))
 
 
-def _nnz(problem) -> int:
-    """Stored entries of ``P``, ``G`` and ``A`` (non-zeros of a dense one)."""
-    import numpy as np
-
-    return sum(
-        0 if M is None else int(M.nnz) if hasattr(M, "nnz") else int(np.count_nonzero(M))
-        for M in (problem.P, problem.G, problem.A)
-    )
-
-
 def _notes(ps, budget: int) -> list[str]:
-    """One line per problem a bench would warn about or skip for every backend."""
-    from ..memory import format_size, sparse_solver_bytes
+    """One line per problem a bench would warn about or skip for every backend (the memory a
+    sparse solver needs, the least any backend needs, over ``budget`` [bytes])."""
+    from ..memory import skip_reason
 
     out = []
     for r in ps.records:
         conv = r.convexity
-        if conv is not None and conv.skip_reason:
-            out.append(f"{r.name}: skipped: {conv.skip_reason}")
-        elif conv is not None and conv.warning:
-            out.append(f"{r.name}: warning: {conv.warning}")
-        need = sparse_solver_bytes(r.problem)
-        if need > budget:
-            out.append(
-                f"{r.name}: skipped: memory: a sparse solver needs about {format_size(need)} "
-                f"> budget {format_size(budget)}"
-            )
+        if conv is not None and (conv.skip_reason or conv.warning):
+            kind = "skipped" if conv.skip_reason else "warning"
+            out.append(f"{r.name}: {kind}: {conv.skip_reason or conv.warning}")
+        why = skip_reason(r.problem, True, budget)
+        if why is not None:
+            out.append(f"{r.name}: skipped: {why} (every backend)")
     return out
 
 
 def describe(ps: ProblemSet, budget: int) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
+
+    from ..memory import nnz
 
     def span(values):
         return [min(values), max(values)] if values else None
@@ -75,7 +63,7 @@ def describe(ps: ProblemSet, budget: int) -> dict:
         "n": span([s[0] for s in sizes]),
         "m_eq": span([s[1] for s in sizes]),
         "m_ineq": span([s[2] for s in sizes]),
-        "nnz": span([_nnz(r.problem) for r in ps.records]),
+        "nnz": span([sum(map(nnz, (r.problem.P, r.problem.G, r.problem.A))) for r in ps.records]),
         "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
         "convexity": count(r.convexity and r.convexity.verdict for r in ps.records),
         "notes": _notes(ps, budget),
@@ -93,34 +81,33 @@ def describe(ps: ProblemSet, budget: int) -> dict:
 
 
 def _print_table(ps, info: dict) -> None:
-    print(f"path         {ps.path}")
-    print(f"kind         {ps.kind}")
-    print(f"problems     {len(ps)}")
+    lines = [("path", ps.path), ("kind", ps.kind), ("problems", len(ps))]
     if len(ps):
-        for key in ("n", "m_eq", "m_ineq", "nnz"):
-            lo, hi = info[key]
-            print(f"{key:<12} {lo}" + ("" if lo == hi else f"-{hi}"))
-        print(f"sparse P     {info['sparse']}")
-        print(f"convexity    {_counts(info['convexity'])}")
-        print(f"with bounds  {info['with_bounds']}")
-        print(f"formulation  {_counts(info['formulation'])}")
-        print(f"scenario     {_counts(info['scenario'])}")
+        spans = {k: info[k] for k in ("n", "m_eq", "m_ineq", "nnz")}
+        lines += [(k, f"{lo}" + ("" if lo == hi else f"-{hi}")) for k, (lo, hi) in spans.items()]
+        lines += [("sparse P", info["sparse"]), ("convexity", _counts(info["convexity"]))]
+        lines += [("with bounds", info["with_bounds"])]
+        lines += [(k, _counts(info[k])) for k in ("formulation", "scenario")]
         if info["t"]:
-            print(f"t [s]        {info['t'][0]:g}-{info['t'][1]:g}")
-        for line in info["notes"]:
-            print(f"note         {line}")
+            lines.append(("t [s]", f"{info['t'][0]:g}-{info['t'][1]:g}"))
+        lines += [("note", line) for line in info["notes"]]
     if ps.manifest is not None:
         gen = ps.manifest.get("generator") or {}
-        print(f"generator    {', '.join(f'{k}={v}' for k, v in gen.items()) or '-'}")
+        lines.append(("generator", ", ".join(f"{k}={v}" for k, v in gen.items()) or "-"))
         state = "matches" if ps.hash_ok else "DOES NOT MATCH (file changed after it was written)"
-        print(f"sha256       {ps.sha256} ({state} manifest)")
+        lines.append(("sha256", f"{ps.sha256} ({state} manifest)"))
         if ps.manifest.get("count") != len(ps):
-            print(f"count        manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
+            lines.append(
+                ("count", f"manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
+            )
     else:
-        print("manifest     none (hash not checked)")
+        lines.append(("manifest", "none (hash not checked)"))
+    for label, value in lines:
+        print(f"{label:<12} {value}")
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..exceptions import InputError
     from ..formats import load_problems
     from ..memory import resolve_budget
 
@@ -130,12 +117,8 @@ def run(args: argparse.Namespace) -> int:
     info = describe(ps, budget)
     if args.json:
         print(json.dumps(info, indent=2))
-        return 2 if ps.hash_ok is False else 0
-    _print_table(ps, info)
+    else:
+        _print_table(ps, info)
     if ps.hash_ok is False:
-        print(
-            f"qpbench inspect: error: {ps.files[0]}: key 'sha256': does not match manifest.json",
-            file=sys.stderr,
-        )
-        return 2
+        raise InputError("does not match manifest.json", path=ps.files[0], key="sha256")
     return 0

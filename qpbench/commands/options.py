@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import contextmanager
+from pathlib import Path
 
+from ..memory import DEFAULT_FRACTION
 from ..statuses import FORMULATIONS
 
 #: Flag -> ``add_argument`` keywords of the options several commands take.
@@ -38,6 +41,7 @@ SHARED: dict[str, dict] = {
     },
     "--isolate": {"default": "auto", "choices": ("auto", "always", "never")},
     "--jobs": {"type": int, "metavar": "N"},
+    "--run-budget": {"type": float, "metavar": "S"},
     "--profile": {"default": "default", "help": "settings profile (default: default)"},
     "--set": {
         "action": "append",
@@ -64,6 +68,12 @@ SHARED: dict[str, dict] = {
     },
     "--every": {"type": int, "metavar": "K", "help": "keep every K-th problem"},
     "--limit": {"type": int, "metavar": "N", "help": "keep the first N problems"},
+    "--memory-budget": {
+        "metavar": "SIZE",
+        "help": "bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
+        f"{DEFAULT_FRACTION * 100:.0f}%% of the machine's memory, within ulimit -v); a problem "
+        "that needs more is a 'skipped' row saying so",
+    },
 }
 
 
@@ -74,49 +84,84 @@ def add(parser: argparse.ArgumentParser, *flags: str, **kw) -> None:
         parser.add_argument(flag, **{**SHARED[flag], **kw})
 
 
-def add_memory_budget(parser: argparse.ArgumentParser) -> None:
-    """``--memory-budget`` (its default's help text needs :mod:`qpbench.memory`)."""
-    from ..memory import DEFAULT_FRACTION
-
-    parser.add_argument(
-        "--memory-budget",
-        metavar="SIZE",
-        help="bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
-        f"{DEFAULT_FRACTION * 100:.0f}%% of the machine's memory, within ulimit -v); a problem "
-        "that needs more is a 'skipped' row saying so",
-    )
+def pick(args: argparse.Namespace, names: str) -> dict:
+    """The options ``names`` (space-separated destinations) as keyword arguments of the call
+    that takes them under the same names."""
+    return {name: getattr(args, name) for name in names.split()}
 
 
 def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -> None:
     """``--force`` or ``--resume`` (not both), with the command's help texts: what to do with an
-    output that is already there (:func:`qpbench.atomic.check_output`)."""
+    output that is already there (:func:`qpbench.atomic.check_output`); and ``--strict``
+    (:func:`strict_exit`), which every command that can resume takes."""
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help=force)
     group.add_argument("--resume", action="store_true", help=resume)
+    add(parser, "--strict")
 
 
-def strict_exit(args: argparse.Namespace, *, runs=None, failed_solves: int = 0) -> int:
+def check_tables(folder, names, args: argparse.Namespace, key: str = "out") -> None:
+    """Output folder ``folder`` may exist (its parent must), its files ``names`` only with
+    ``--force`` or ``--resume`` (:func:`qpbench.atomic.check_output`)."""
+    from ..atomic import check_folder, check_output
+
+    check_folder(folder, key=key)
+    for name in names if Path(folder).exists() else ():
+        check_output(Path(folder) / name, force=args.force, resume=getattr(args, "resume", None))
+
+
+def strict_exit(
+    args: argparse.Namespace, *, runs=None, failed_solves: int = 0, recommend: bool = False
+) -> int:
     """0 once the outputs are written; with ``--strict``, 1 when
     :func:`qpbench.report.recommend.shortfalls` finds something in ``runs`` (closed-loop or
-    sweep rows) or ``failed_solves``, with one line on stderr saying what."""
-    from ..report.recommend import shortfalls
+    sweep rows) or ``failed_solves``, with one line on stderr saying what. ``recommend``: then
+    print the recommendation from ``runs`` (closed-loop rows) as the last lines."""
+    from ..report import recommend as rec
 
-    found = shortfalls(runs, failed_solves) if getattr(args, "strict", False) else None
-    if not found:
-        return 0
-    print(f"qpbench {args.command}: --strict: {'; '.join(found)}", file=sys.stderr)
-    return 1
+    found = rec.shortfalls(runs, failed_solves) if getattr(args, "strict", False) else None
+    if found:
+        print(f"qpbench {args.command}: --strict: {'; '.join(found)}", file=sys.stderr)
+    if recommend and not args.quiet:
+        print(rec.render(rec.recommend(runs)), end="")
+    return 1 if found else 0
 
 
-def aligned(rows: list, left: int = 1, free_last: bool = False) -> str:
-    """Rows of text cells as columns: the first ``left`` left-aligned, the others right-aligned;
-    ``free_last``: the last column (free text) not padded."""
+@contextmanager
+def run_bar(args: argparse.Namespace, total: int, desc: str, on_row, leave: bool = True):
+    """A progress bar of ``total`` runs (none with ``-q``); yields the ``on_row`` to give the
+    runner: one step of the bar, then ``on_row(row)``."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="run", desc=desc, leave=leave, disable=args.quiet or None)
+    try:
+        yield lambda row: (bar.update(1), on_row(row))
+    finally:
+        bar.close()
+
+
+def aligned(rows: list, align: str = "l", free_last: bool = False) -> str:
+    """Rows of text cells as columns, column ``i`` left-aligned if ``align[i]`` is ``l``, else
+    (or past ``align``) right-aligned; ``free_last``: the last column (free text) not padded."""
     n = len(rows[0]) - free_last
     widths = [max(len(r[c]) for r in rows) for c in range(n)]
     return "\n".join(
         "  ".join(
-            [c.ljust(w) if i < left else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))]
+            [
+                c.ljust(w) if align[i : i + 1] == "l" else c.rjust(w)
+                for i, (c, w) in enumerate(zip(r, widths))
+            ]
             + list(r[n:])
         ).rstrip()
         for r in rows
     )
+
+
+def print_listing(args: argparse.Namespace, items: list[dict], rows: list, **kw) -> int:
+    """``items`` as one JSON object per line with ``--json``, else the table of ``rows``
+    (:func:`aligned` with ``kw``); the exit code 0."""
+    import json
+
+    for line in [json.dumps(item) for item in items] if args.json else [aligned(rows, **kw)]:
+        print(line)
+    return 0

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import logging
 
 from .options import add
 
 HELP = "write report.md and PNG plots from bench, closed-loop and sweep result CSVs (every number recomputed)"
 EXAMPLE = "qpbench report results/bench results/closed_loop.csv --out results --force"
-
-log = logging.getLogger("qpbench.report")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,26 +34,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..report import write_report
     from ..scaling.report import is_scaling_dir, write_scaling_report
+    from ..sweep.report import split_sweep_paths, sweep_section
 
-    scaling = [
-        r for r in args.results if is_scaling_dir(r)
-    ]  # folders written by ``qpbench scaling``
-    for folder in scaling:  # the files written are listed when the command ends
-        write_scaling_report(folder, args.out, force=args.force, plots=not args.no_plots)
-    rest = [r for r in args.results if r not in scaling]
-    if rest:
-        from ..sweep.report import split_sweep_paths, sweep_section
-
-        rest, sweeps = split_sweep_paths(
-            rest
-        )  # tables written by ``qpbench sweep``: their own section
+    plots = not args.no_plots
+    # folders written by ``qpbench scaling``, tables by ``qpbench sweep``: their own sections
+    scaling = [r for r in args.results if is_scaling_dir(r)]
+    for folder in scaling:
+        write_scaling_report(folder, args.out, force=args.force, plots=plots)
+    others = [r for r in args.results if r not in scaling]
+    if others:
+        rest, sweeps = split_sweep_paths(others)
         sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
         write_report(
-            rest,
-            args.out,
-            force=args.force,
-            plots=not args.no_plots,
-            prefer=args.prefer,
-            sections=sections,
+            rest, args.out, force=args.force, plots=plots, prefer=args.prefer, sections=sections
         )
     return 0

@@ -1,11 +1,5 @@
-"""``qpbench run``: the main job. Problem sets, bench, closed loop and report into results/.
-
-The steps: :func:`qpbench.harness.pipeline.run_all`. A run killed half-way leaves the previous
-results whole, and ``--resume`` continues it. The last lines printed are the recommendation
-(:mod:`qpbench.report.recommend`). Exit code: 0 once the results are written, whatever the
-verdicts; with ``--strict``, 1 when a solve failed or a closed-loop run is not ``ok`` or not
-real time; 2 on bad input.
-"""
+"""``qpbench run``: the main job (:func:`qpbench.harness.pipeline.run_all`): problem sets, bench,
+closed loop and report into results/, the recommendation printed last."""
 
 from __future__ import annotations
 
@@ -14,7 +8,7 @@ import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
-from .options import add, add_force_resume, add_memory_budget, strict_exit
+from .options import add, add_force_resume, pick, strict_exit
 
 HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
@@ -24,21 +18,11 @@ EXAMPLE = "qpbench run    (quick: qpbench run --quick)"
 
 #: What ``--quick`` sets, unless given: a short run of every scenario with a few fast backends
 #: that need no compiled kernel of their own, into ``./quick`` (``results/`` is left alone).
-QUICK = {
-    "out": "quick",
-    "backends": "daqp,osqp,clarabel,pinv",
-    "duration": 1.0,
-    "bench_every": 10,
-    "repeat": 1,
-}
+QUICK = dict(
+    out="quick", backends="daqp,osqp,clarabel,pinv", duration=1.0, bench_every=10, repeat=1
+)
 #: The defaults without ``--quick``.
-FULL = {
-    "out": "results",
-    "backends": "all",
-    "duration": None,
-    "bench_every": BENCH_EVERY,
-    "repeat": REPEAT,
-}
+FULL = dict(out="results", backends="all", bench_every=BENCH_EVERY, repeat=REPEAT)
 
 log = logging.getLogger("qpbench.run")
 
@@ -84,11 +68,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 200 of each set's "
         "2,000, every 100th control tick; 1: all of them, about 10x longer)",
     )
-    parser.add_argument(
+    add(
+        parser,
         "--run-budget",
-        type=float,
         default=RUN_BUDGET_S,
-        metavar="S",
         help=f"the most wall time a closed-loop run may take in [s] (default: {RUN_BUDGET_S:g}); "
         "each backend's budget follows from its per-tick time in the bench (run.json lists "
         "them); a run that spends it stops between ticks and its row says how far it got "
@@ -103,21 +86,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(
         parser,
         "--jobs",
+        default=default_jobs(),
         help=f"closed-loop runs at once, each in a worker process of its own (default: "
         f"{LOOP_JOBS}, at most one per core; the bench's timed solves stay one at a time)",
     )
-    add_memory_budget(parser)
+    add(parser, "--memory-budget")
     add_force_resume(
         parser,
         force="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
         "if no previous 'qpbench run' wrote them",
         resume="continue an interrupted run from OUT/.partial/",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..harness.closed_loop import log_row
+    import pandas as pd
+
+    from ..harness.closed_loop import CSV_NAME, log_row
     from ..harness.pipeline import RunConfig, run_all
     from ..memory import resolve_budget
     from ..selection import select_backends, select_scenarios
@@ -129,17 +114,12 @@ def run(args: argparse.Namespace) -> int:
     config = RunConfig(  # checks the numbers first, before any scenario is loaded
         out=Path(args.out),
         problems=Path(args.problems),
-        duration=args.duration,
-        bench_every=args.bench_every,
         run_budget=args.run_budget or None,
-        repeat=args.repeat,
-        jobs=args.jobs if args.jobs is not None else default_jobs(),
-        force=args.force,
-        resume=args.resume,
         progress=not args.quiet,
         scenarios=[],
         backends=[],
         memory_budget=resolve_budget(args.memory_budget),
+        **pick(args, "duration bench_every repeat jobs force resume"),
         on_row=lambda row: (
             log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None
         ),
@@ -148,18 +128,6 @@ def run(args: argparse.Namespace) -> int:
     config.backends = select_backends(args.backends)
     outcome = run_all(config)
     log.info("qpbench run: %s in %.0f s; report %s", args.out, outcome.wall_time_s, outcome.report)
-    return _answer(args, outcome)
-
-
-def _answer(args: argparse.Namespace, outcome) -> int:
-    """The exit code, then the recommendation as the last lines printed."""
-    import pandas as pd
-
-    from ..harness.closed_loop import CSV_NAME
-    from ..report.recommend import recommend, render
-
     table = pd.read_csv(Path(args.out) / CSV_NAME)
-    code = strict_exit(args, runs=table, failed_solves=outcome.failed_solves)
-    if not args.quiet:
-        print(render(recommend(table)), end="")
-    return code
+    # the exit code, then the recommendation as the last lines printed
+    return strict_exit(args, runs=table, failed_solves=outcome.failed_solves, recommend=True)

@@ -1,8 +1,4 @@
-"""``qpbench scaling``: solve time against arm and obstacle size, on generated arms of 4 to 64 links.
-
-Exit code: 0 once the outputs are written, whatever the solves gave; with ``--strict``, 1 when a
-solve failed (one line says how many); 2 on bad input.
-"""
+"""``qpbench scaling``: solve time against arm and obstacle size (:mod:`qpbench.scaling`)."""
 
 from __future__ import annotations
 
@@ -12,7 +8,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from .options import add, add_force_resume, strict_exit
+from .options import add, add_force_resume, check_tables, pick, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
@@ -45,27 +41,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
     def option(flag, text, spec="", **kw):
-        # the default is ScalingConfig's field of the same name, and the help text says it
+        # default and type: ScalingConfig's field of the same name; the help text says it
         value = getattr(d, flag[2:].replace("-", "_"))
-        parser.add_argument(flag, default=value, help=f"{text} (default {value:{spec}})", **kw)
+        kw = {"default": value, "type": type(value), **kw}
+        parser.add_argument(flag, help=f"{text} (default {value:{spec}})", **kw)
 
     option("--driver", "backend solving the closed loop whose ticks are dumped")
-    option("--duration", "simulated seconds per size", type=float)
-    option("--every", "keep every K-th tick", type=int)
-    option("--repeat", "timed solves per tick, minimum kept", type=int)
-    option("--seed", "seed of the arms, clouds and backend order", type=int)
+    option("--duration", "simulated seconds per size")
+    option("--every", "keep every K-th tick")
+    option("--repeat", "timed solves per tick, minimum kept")
+    option("--seed", "seed of the arms, clouds and backend order")
     option("--profile", "settings profile")
     option(
         "--dense-limit",
         "skip dense-only backends when n x rows exceeds this",
         ",",
-        type=int,
         metavar="ENTRIES",
     )
     option(
         "--slow-limit",
         "skip a backend on the larger sizes of an axis once its median solve exceeds S seconds",
-        type=float,
         metavar="S",
     )
     parser.add_argument(
@@ -82,64 +77,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="delete this command's outputs in --out and start again",
         resume="keep the sizes done in --out and run the rest",
     )
-    add(parser, "--strict")
-
-
-def _config(args):
-    from ..exceptions import ParamError, positive_seconds
-    from ..profiles import get_profile
-    from ..scaling.runner import ScalingConfig
-    from ..scaling.sizes import parse_sizes
-    from ..selection import select_backend, select_backends
-
-    backends = select_backends(args.backends)
-    get_profile(args.profile)
-    positive_seconds(args.duration, "--duration")
-    positive_seconds(args.slow_limit, "--slow-limit")
-    for key, value, ok in (
-        ("--every", args.every, args.every >= 1),
-        ("--repeat", args.repeat, args.repeat >= 1),
-        ("--seed", args.seed, args.seed >= 0),
-        ("--dense-limit", args.dense_limit, args.dense_limit >= 1),
-    ):
-        if not ok:
-            raise ParamError(f"out of range: {value}", key=key)
-    if args.duration / 0.001 < args.every:
-        raise ParamError(
-            f"{args.duration} s at 1 kHz keeps no tick with --every {args.every}", key="--every"
-        )
-    return ScalingConfig(
-        backends=backends,
-        sizes=parse_sizes(args.sizes),
-        driver=select_backend(args.driver, "--driver"),
-        duration=args.duration,
-        every=args.every,
-        repeat=args.repeat,
-        seed=args.seed,
-        profile=args.profile,
-        dense_limit=args.dense_limit,
-        slow_limit=args.slow_limit,
-        keep_sets=args.keep_sets,
-    )
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_output
     from ..jit import warmup_logged
-    from ..scaling.runner import SUMMARY_NAME, failure_line, run_scaling
+    from ..scaling.runner import SUMMARY_NAME, ScalingConfig, failure_line, run_scaling
+    from ..scaling.sizes import parse_sizes
+    from ..selection import select_backend, select_backends
 
-    config = _config(args)  # every input checked before anything is written
+    config = ScalingConfig(  # every input checked before anything is written
+        backends=select_backends(args.backends),
+        sizes=parse_sizes(args.sizes),
+        driver=select_backend(args.driver, "--driver"),
+        **pick(args, "duration every repeat seed profile dense_limit slow_limit keep_sets"),
+    )
     out = Path(args.out)
-    check_output(out, force=True, kind="dir")  # a folder (or nothing); its table is checked below
-    if out.exists():
-        check_output(out / SUMMARY_NAME, force=args.force, resume=args.resume)
-    if args.force:
-        for name in OWNED:
-            target = out / name
-            if target.is_dir():
-                shutil.rmtree(target)
-            elif target.exists():
-                target.unlink()
+    check_tables(out, [SUMMARY_NAME], args)
+    for name in OWNED if args.force else ():
+        target = out / name
+        if target.is_dir():
+            shutil.rmtree(target)
+        else:
+            target.unlink(missing_ok=True)
     # no compile inside a timed solve or build: the driver's loop and the benched backends
     warmup_logged(log, [config.driver, *config.backends])
     progress = not args.quiet and sys.stderr.isatty()

@@ -1,16 +1,11 @@
-"""``qpbench scenarios``: the shipped scenario files; ``show NAME`` prints one to start your own from.
-
-``show NAME --filled`` (a shipped name or a file) prints the scenario as it is run, every
-default filled in (:data:`qpbench.sim.scenario_schema.DEFAULTS`): a file that loads back to the
-same scenario.
-"""
+"""``qpbench scenarios``: the shipped scenario files; ``show NAME [--filled]`` prints one."""
 
 from __future__ import annotations
 
 import argparse
 import json
 
-from .options import add, aligned
+from .options import add, print_listing
 
 HELP = "list the shipped scenarios; 'show NAME' prints one's TOML file to start your own from"
 EXAMPLE = (
@@ -51,30 +46,24 @@ def _listing(name: str) -> dict:
     }
 
 
-def filled_text(name: str) -> str:
-    """Scenario ``name`` (shipped name or file) as a file with every default filled in."""
+def _show(name: str, as_json: bool, fill: bool) -> None:
+    """Print scenario ``name`` (shipped name or file) as its TOML file (a file that loads), or
+    ``fill``: with every default filled in; ``as_json``: its tables as JSON."""
+    import tomllib
+
     from ..sim.scenario import load_scenario
     from ..sim.scenario_schema import filled
     from ..sweep.toml_text import dumps
 
     sc = load_scenario(name)
-    header = (
-        f"Scenario {sc.name!r} ({name}) with every default filled in: the file as it is run.\n"
-        "Keys, units and defaults: qpbench.sim.scenario_schema; why these thresholds: "
-        "docs/verdicts.md."
-    )
-    return dumps(filled(sc.data, sc.rnn), header=header)
-
-
-def _show(name: str, as_json: bool, fill: bool) -> None:
-    import tomllib
-
-    from ..sim.scenario import load_scenario
-
+    text = sc.source
     if fill:
-        text = filled_text(name)
-    else:
-        text = load_scenario(name).source  # checked: what is printed is a file that loads
+        header = (
+            f"Scenario {sc.name!r} ({name}) with every default filled in: the file as it is run.\n"
+            "Keys, units and defaults: qpbench.sim.scenario_schema; why these thresholds: "
+            "docs/verdicts.md."
+        )
+        text = dumps(filled(sc.data, sc.rnn), header=header)
     if as_json:
         print(json.dumps(tomllib.loads(text), indent=2))
     else:
@@ -85,31 +74,24 @@ def run(args: argparse.Namespace) -> int:
     from ..exceptions import ParamError
     from ..sim.scenario import scenario_names
 
-    if args.action not in ("list", "show"):
+    stray = (
+        args.action if args.action not in ("list", "show") else args.action == "list" and args.name
+    )
+    if stray:
         raise ParamError(
-            f"unknown action '{args.action}' (list or show; did you mean: qpbench scenarios show "
-            f"{args.action}?)",
-            key="action",
+            f"unexpected '{stray}' (list, or show NAME; did you mean: qpbench scenarios show "
+            f"{stray}?)",
+            key="NAME",
         )
     if args.action == "show":
         if not args.name:
             raise ParamError("which scenario? (qpbench scenarios show NAME)", key="NAME")
         _show(args.name, args.json, args.filled)
         return 0
-    if args.name:
-        raise ParamError(
-            f"unexpected '{args.name}' (did you mean: qpbench scenarios show {args.name}?)",
-            key="NAME",
-        )
     listing = [_listing(name) for name in scenario_names()]
-    if args.json:
-        for item in listing:
-            print(json.dumps(item))
-        return 0
     rows = [("name", "paper", "duration", "obstacles", "description")]
     for i in listing:
         duration = f"{i['duration_s']:g} s"
         obstacles = ", ".join(i["obstacles"]) or "none"
         rows.append((i["name"], i["paper_section"], duration, obstacles, i["description"]))
-    print(aligned(rows, left=4, free_last=True))
-    return 0
+    return print_listing(args, listing, rows, align="llll", free_last=True)

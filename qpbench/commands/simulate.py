@@ -1,9 +1,7 @@
 """``qpbench simulate``: run a scenario in closed loop with one backend; log, summary, dump, plot.
 
-The output ends with a line saying whether the run kept real time (beside the verdict, not in
-it), then the verdict (:mod:`qpbench.sim.verdict`): INFO when ``ok``, else a WARNING with the
-reasons. Exit code: 0 when the verdict is ``ok``, 1 when it is not, 2 on bad input.
-"""
+The output ends with the real-time line, then the verdict (:mod:`qpbench.sim.verdict`), which
+is the exit code."""
 
 from __future__ import annotations
 
@@ -13,7 +11,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .options import add
+from .options import add, check_tables, pick
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
@@ -43,25 +41,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--dt", type=float, metavar="S", help="control period in [s] (default: the scenario's)"
     )
-    parser.add_argument("--log", metavar="FILE", help="per-tick log, .csv or .parquet")
-    parser.add_argument("--summary", metavar="FILE", help="summary as JSON ('-': to stdout)")
-    parser.add_argument(
-        "--dump",
-        metavar="DIR",
-        help="write the ticks' QPs as a problem set (problems.parquet + manifest.json)",
-    )
+    for flag, metavar, text in (
+        ("--log", "FILE", "per-tick log, .csv or .parquet"),
+        ("--summary", "FILE", "summary as JSON ('-': to stdout)"),
+        ("--dump", "DIR", "the ticks' QPs as a problem set (problems.parquet + manifest.json)"),
+        ("--plot", "FILE", "figure of the run (.png)"),
+        ("--snapshot", "FILE", "picture of the arm at several instants (.png, .svg or .pdf)"),
+        ("--animate", "FILE", "animation of the run (.gif; .mp4 when ffmpeg is installed)"),
+    ):
+        parser.add_argument(flag, metavar=metavar, help=text)
     parser.add_argument("--every", type=int, metavar="K", help="dump every K-th tick (default 1)")
-    parser.add_argument("--plot", metavar="FILE", help="figure of the run (.png)")
-    parser.add_argument(
-        "--snapshot",
-        metavar="FILE",
-        help="picture of the arm in its workspace at several instants (.png, .svg or .pdf)",
-    )
-    parser.add_argument(
-        "--animate",
-        metavar="FILE",
-        help="animation of the run (.gif; .mp4 when ffmpeg is installed)",
-    )
     parser.add_argument(
         "--speed",
         type=float,
@@ -86,18 +75,8 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log, [backend])
-    result = simulate(
-        scenario,
-        backend,
-        formulation=args.formulation,
-        duration=args.duration,
-        dt=args.dt,
-        every=args.every,
-        dump=args.dump,
-        progress=progress,
-        profile=args.profile,
-        deadline=args.deadline,
-    )
+    settings = pick(args, "formulation duration dt every dump profile deadline")
+    result = simulate(scenario, backend, progress=progress, **settings)
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)
     return log_verdict(result.summary)
@@ -110,7 +89,7 @@ SUFFIXES = {"log": (".csv", ".parquet"), "snapshot": (".png", ".svg", ".pdf")}
 def _check_arguments(args: argparse.Namespace) -> None:
     """The options only the command has checked, and no output in the way, before anything runs
     (:func:`qpbench.sim.loop.simulate` checks its own arguments)."""
-    from ..atomic import check_folder, check_output
+    from ..atomic import check_output
     from ..exceptions import ParamError, positive_seconds
     from ..report.animation import check_animation
 
@@ -129,10 +108,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
         if out is not None:
             check_output(out, force=args.force)
     if args.dump is not None:
-        check_folder(args.dump, key="--dump")
-        for name in ("problems.parquet", "manifest.json"):
-            if Path(args.dump).exists():
-                check_output(Path(args.dump) / name, force=args.force)
+        check_tables(args.dump, ["problems.parquet", "manifest.json"], args, key="--dump")
 
 
 def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:
@@ -154,24 +130,16 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
         from ..report.loop_figure import run_figure
 
         run_figure(result.log, s, args.plot)
-    if args.snapshot is not None or args.animate is not None:
-        from ..report.animation import animate
+    kw = {"title": f"{scenario.name} / {s['backend']}", "backend": s["backend"]}
+    if args.snapshot is not None:
         from ..report.arm import draw_snapshot
 
-        title = f"{scenario.name} / {s['backend']}"
-        if args.snapshot is not None:
-            draw_snapshot(scenario, result.log, args.snapshot, title=title, backend=s["backend"])
-        if args.animate is not None:
-            animate(
-                scenario,
-                result.log,
-                args.animate,
-                fps=args.fps,
-                speed=args.speed,
-                progress=progress,
-                title=title,
-                backend=s["backend"],
-            )
+        draw_snapshot(scenario, result.log, args.snapshot, **kw)
+    if args.animate is not None:
+        from ..report.animation import animate
+
+        speed, fps = args.speed, args.fps
+        animate(scenario, result.log, args.animate, fps=fps, speed=speed, progress=progress, **kw)
 
 
 def _log_summary(s: dict) -> None:

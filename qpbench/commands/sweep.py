@@ -1,20 +1,12 @@
-"""``qpbench sweep``: many perturbed instances of a scenario, each in closed loop with each backend.
-
-See :mod:`qpbench.sweep` (the sweep file, the instances, the table) and :mod:`qpbench.runner`
-(where the runs are made). Every executor gives the same rows apart from the timing columns,
-which are clean only serially (``--jobs 1``): runs solving at once share the cores' caches,
-memory bandwidth and clock. Exit code: 0 once the table is written, whatever the verdicts;
-with ``--strict``, 1 when a row's verdict is not ``ok`` or a run was not real time; 2 on bad
-input (nothing written).
-"""
+"""``qpbench sweep``: perturbed instances of a scenario (:mod:`qpbench.sweep`), each in closed loop
+with each backend, run by an executor of :mod:`qpbench.runner`."""
 
 from __future__ import annotations
 
 import argparse
 import logging
-from pathlib import Path
 
-from .options import add, add_force_resume, aligned, strict_exit
+from .options import add, add_force_resume, aligned, check_tables, run_bar, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
@@ -24,9 +16,6 @@ EXAMPLE = (
 )
 
 log = logging.getLogger("qpbench.sweep")
-
-#: Columns whose values depend on timing (the warning of a parallel run names them).
-TIMED = "solve_time_*, deadline_misses, ticks_over_1ms, real_time_factor"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -79,39 +68,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         force="start again: replace the table and the instances",
         resume="keep the rows with a result and run the rest (missing, error, crashed)",
     )
-    add(parser, "--strict")
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_folder, check_output
+    from contextlib import closing
+
+    import pandas as pd
+
     from ..backends import plugin_files
     from ..jit import warmup_logged
     from ..runner import make_executor
     from ..selection import select_backends
     from ..sweep.rows import CSV_NAME
+    from ..sweep.runner import run_sweep
     from ..sweep.spec import load_sweep
 
     plugins = plugin_files()  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker too
     spec = load_sweep(args.sweep, samples=args.samples, duration=args.duration)
     backends = select_backends(args.backends)
-    check_folder(args.out)  # before any worker starts
-    if Path(args.out).exists():
-        check_output(Path(args.out) / CSV_NAME, force=args.force, resume=args.resume)
+    check_tables(args.out, [CSV_NAME], args)  # before any worker starts
     warmup_logged(log, backends)
-    executor = make_executor(args.executor, args.jobs, args.scheduler, args.security)
-    try:
-        if executor.concurrency > 1:
+
+    def warn(row):
+        if row["status"] in ("error", "crashed"):
             log.warning(
-                "%d closed loops solve at once (%s executor): the timing columns (%s) are disturbed by "
-                "each other (shared caches, memory bandwidth, clock); each row records host, worker and "
-                "concurrent_solves. Take timings with --jobs 1",
-                executor.concurrency,
-                executor.name,
-                TIMED,
+                "%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"]
             )
-        outcome = _run(args, spec, backends, executor, plugins)
-    finally:
-        executor.close()
+
+    with (
+        closing(make_executor(args.executor, args.jobs, args.scheduler, args.security)) as pool,
+        run_bar(args, spec.samples * len(backends), f"sweep {spec.name}", warn) as on_row,
+    ):
+        if pool.concurrency > 1:
+            log.warning(
+                "%d closed loops solve at once (%s executor): the timing columns (solve_time_*, "
+                "deadline_misses, ticks_over_1ms, real_time_factor) are disturbed by each other "
+                "(shared caches, memory bandwidth, clock); each row records host, worker and "
+                "concurrent_solves. Take timings with --jobs 1",
+                pool.concurrency,
+                pool.name,
+            )
+        kw = {"force": args.force, "resume": args.resume, "plugins": plugins, "on_row": on_row}
+        outcome = run_sweep(spec, backends, args.out, pool, **kw)
     if not args.quiet:
         print(summary_table(outcome.rows, backends))
     log.info(
@@ -122,56 +120,18 @@ def run(args: argparse.Namespace) -> int:
         outcome.failed,
         outcome.csv_path,
     )
-    import pandas as pd
-
     return strict_exit(args, runs=pd.DataFrame(outcome.rows))
-
-
-def _run(args, spec, backends, executor, plugins):
-    from tqdm import tqdm
-
-    from ..sweep.runner import run_sweep
-
-    total = spec.samples * len(backends)
-    bar = tqdm(total=total, unit="run", desc=f"sweep {spec.name}", disable=args.quiet or None)
-
-    def on_row(row):
-        bar.update(1)
-        if row["status"] in ("error", "crashed"):
-            log.warning(
-                "%s / %s: %s (%s)", row["instance"], row["backend"], row["status"], row["error"]
-            )
-
-    try:
-        return run_sweep(
-            spec,
-            backends,
-            args.out,
-            executor,
-            force=args.force,
-            resume=args.resume,
-            plugins=plugins,
-            on_row=on_row,
-        )
-    finally:
-        bar.close()
 
 
 def summary_table(rows: list[dict], backends: list[str]) -> str:
     """Per backend: runs and how many of each verdict."""
     from ..sim.verdict import VERDICTS
 
-    header = ["backend", "runs"] + list(VERDICTS) + ["error/crashed", "invalid"]
-    lines = [header]
+    lines = [["backend", "runs", *VERDICTS, "error/crashed", "invalid"]]
     for b in backends + sorted({r["backend"] for r in rows} - set(backends)):
         mine = [r for r in rows if r["backend"] == b]
         counts = [sum(r["verdict"] == v and r["status"] == "ok" for r in mine) for v in VERDICTS]
-        lines.append(
-            [b, str(len(mine))]
-            + [str(c) for c in counts]
-            + [
-                str(sum(r["status"] in ("error", "crashed") for r in mine)),
-                str(sum(r["status"] == "invalid_scenario" for r in mine)),
-            ]
-        )
+        failed = sum(r["status"] in ("error", "crashed") for r in mine)
+        invalid = sum(r["status"] == "invalid_scenario" for r in mine)
+        lines.append([b, *map(str, [len(mine), *counts, failed, invalid])])
     return aligned(lines)

@@ -1,8 +1,4 @@
-"""``qpbench warmup``: compile (or load from the cache) every numba kernel, and nothing else.
-
-The commands that solve prepare their backends' kernels themselves; this prepares all of them
-ahead (after an install, in a CI image) and says whether the cache already held them.
-"""
+"""``qpbench warmup``: compile (or load from the cache) every numba kernel, and nothing else."""
 
 from __future__ import annotations
 
@@ -20,21 +16,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
     from ..jit import warmup
 
     report = warmup()
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "compiled": report.compiled,
-                    "seconds": round(report.seconds, 3),
-                    "cache": report.cache,
-                    "kernels": list(report.kernels),
-                    "shims_compiled": report.shims_compiled,
-                }
-            )
-        )
+        info = {**asdict(report), "seconds": round(report.seconds, 3)}
+        del info["in_memory"]
+        print(json.dumps(info))
     elif not args.quiet:
         print(report.line())
     return 0

@@ -103,6 +103,27 @@ class ScalingConfig:
     slow_limit: float = 0.02
     keep_sets: bool = False
 
+    def __post_init__(self) -> None:
+        """Every value checked when made (one-line errors naming the option)."""
+        from ..exceptions import ParamError, positive_seconds
+        from ..profiles import get_profile
+
+        get_profile(self.profile)
+        positive_seconds(self.duration, "--duration")
+        positive_seconds(self.slow_limit, "--slow-limit")
+        for key, value, low in (
+            ("--every", self.every, 1),
+            ("--repeat", self.repeat, 1),
+            ("--seed", self.seed, 0),
+            ("--dense-limit", self.dense_limit, 1),
+        ):
+            if value < low:
+                raise ParamError(f"out of range: {value}", key=key)
+        if self.duration / 0.001 < self.every:
+            raise ParamError(
+                f"{self.duration} s at 1 kHz keeps no tick with --every {self.every}", key="--every"
+            )
+
 
 def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
     """Rows of a ``scaling.csv`` (strings; :func:`qpbench.harness.results.read_results`)."""
