@@ -114,16 +114,13 @@ def _add_reference_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_output
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
-    from ..jit import warmup_logged
     from ..memory import resolve_budget
-    from ..reference import SOURCES, cache_folder
     from ..selection import backend_settings, select_backends, select_set
 
-    # Nothing is written or logged before the input is known to be good.
-    check_output(args.out, force=args.force, resume=args.resume)
+    # Nothing is written or logged before the input is known to be good: run_bench checks
+    # --out, then logs, warms up and calls for the references.
     backends = select_backends(args.backends)
     config = BenchConfig(
         backend_settings=backend_settings(args.sets, backends),
@@ -134,15 +131,6 @@ def run(args: argparse.Namespace) -> int:
     )
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
-    cached = args.reference in SOURCES  # where the references are kept
-    folder = cache_folder(problem_set, args.cache_dir) if cached else None
-    where = (
-        f"reference cache: {folder}" if folder else "references: not cached (set built in memory)"
-    )
-    log.info("%s", where if cached else f"references: {args.reference} (not cached)")
-    log.info("%s: %d problems; backends: %s", args.path, len(problem_set), ", ".join(backends))
-    # no compile inside a timed solve, here or in a worker; only what these backends run
-    warmup_logged(log, backends, loop=False)
     progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,
@@ -150,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
         args.out,
         progress=progress,
         references=references,
+        make_parent=False,
         **pick(args, "force resume"),
     )
     if not args.quiet:
@@ -171,7 +160,7 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     from ..exceptions import ParamError, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
-    from ..reference import SOURCES, from_objectives, reference_solutions
+    from ..reference import SOURCES, cache_folder, from_objectives, reference_solutions
     from ..runner.process import context
 
     source = args.reference
@@ -192,12 +181,18 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         objectives = read_objectives(source)  # a bad file fails here, before anything is written
         return lambda problem_set: from_objectives(problem_set, objectives, source)
     progress = None if args.quiet else tqdm if sys.stderr.isatty() else "log"
-    return lambda problem_set: reference_solutions(
-        problem_set,
-        method=source,
-        time_limit=limit,
-        jobs=args.jobs,
-        progress=progress,
-        context=context(),
-        cache_dir=args.cache_dir,
-    )
+
+    def solved(problem_set):
+        folder = cache_folder(problem_set, args.cache_dir)
+        log.info("%s", f"reference cache: {folder}" if folder else "references: not cached")
+        return reference_solutions(
+            problem_set,
+            method=source,
+            time_limit=limit,
+            jobs=args.jobs,
+            progress=progress,
+            context=context(),
+            cache_dir=args.cache_dir,
+        )
+
+    return solved

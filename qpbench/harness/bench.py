@@ -159,14 +159,20 @@ class Plan:
     (``existing``: its rows); ``learned``: backends seen to crash in this process (``marker``)."""
 
     def __init__(
-        self, problem_set: ProblemSet, config: BenchConfig, out: Path, force: bool, resume: bool
+        self,
+        problem_set: ProblemSet,
+        config: BenchConfig,
+        out: Path,
+        force: bool,
+        resume: bool,
+        make_parent: bool = True,
     ):
         from ..atomic import check_output
         from ..backends import get_backend
         from ..formats import content_sha256
         from ..memory import resolve_budget
 
-        check_output(out, force=force, resume=resume, make_parent=True)
+        check_output(out, force=force, resume=resume, make_parent=make_parent)
         profile = get_profile(config.profile)
         self.profile = profile.with_time_limit(
             config.time_limit if config.time_limit is not None else float(profile.time_limit)
@@ -694,16 +700,22 @@ def run_bench(
     resume: bool = False,
     references: list | None = None,
     progress: bool | str = False,
+    make_parent: bool = True,
 ) -> BenchSummary:
     """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``.
 
     ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
     per record, or a function of the set returning them (:func:`references_for`).
-    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`).
+    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`). ``make_parent``: create
+    ``out``'s folder (the command line refuses a missing one instead).
     """
     started = time.perf_counter()
     out = Path(out)
-    plan = Plan(problem_set, config, out, force, resume)
+    plan = Plan(problem_set, config, out, force, resume, make_parent)
+    from ..jit import warmup_logged
+
+    log.info("%d problems; backends: %s", len(problem_set), ", ".join(config.backends))
+    warmup_logged(log, config.backends, loop=False)  # no compile inside a timed solve
     references = references_for(problem_set, plan, references)
     done = plan.open_output(out, force)  # from here on, the output is created or changed
     bench_run = _BenchRun(plan, config, references, done, out)
