@@ -67,20 +67,24 @@ def _own_user_cache(tmp_path_factory):
         os.environ["XDG_CACHE_HOME"] = previous
 
 
+#: The ``qpbench`` loggers as the package leaves them (no handler, propagating to the root).
+_PRISTINE_LOGGERS = ("qpbench", "qpbench.solves")
+
+
 @pytest.fixture(autouse=True)
 def _logging_restored():
-    """The ``qpbench`` loggers as they were before each test: ``qpbench.cli.main`` run in a test
-    sets their handlers, levels and propagation for its command, and a later test that reads
-    the log through ``caplog`` (the root logger) must see it whichever tests ran before."""
+    """The ``qpbench`` loggers as the package leaves them after each test: ``qpbench.cli.main``
+    run in a test (or in a module fixture, outside any test) sets their handlers, levels and
+    propagation for its command, and a later test that reads the log through ``caplog`` (the
+    root logger) must see it whichever tests ran before."""
     import logging
 
-    loggers = [logging.getLogger(name) for name in ("qpbench", "qpbench.solves")]
-    saved = [(lg, list(lg.handlers), lg.level, lg.propagate) for lg in loggers]
     yield
-    for lg, handlers, level, propagate in saved:
-        lg.handlers[:] = handlers
-        lg.setLevel(level)
-        lg.propagate = propagate
+    for name in _PRISTINE_LOGGERS:
+        lg = logging.getLogger(name)
+        lg.handlers[:] = []
+        lg.setLevel(logging.NOTSET)
+        lg.propagate = True
 
 
 #: The Maros-Meszaros subset the repository ships.
