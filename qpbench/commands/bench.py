@@ -172,19 +172,22 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         limit = positive_seconds(args.reference_time_limit, "reference-time-limit")
     if source == "none":
         config.profile = replace(profile, tolerance=replace(profile.tolerance, rule="qpbenchmark"))
-        return lambda problem_set: [None] * len(problem_set.records)
+        return _said("references: none (not cached)", lambda ps: [None] * len(ps.records))
     if source not in SOURCES:
         if not Path(source).is_file():
             raise ParamError(
                 f"'{source}' is neither {', '.join(SOURCES)} nor a file", key="reference"
             )
         objectives = read_objectives(source)  # a bad file fails here, before anything is written
-        return lambda problem_set: from_objectives(problem_set, objectives, source)
+        return _said(
+            f"references: {source} (not cached)", lambda ps: from_objectives(ps, objectives, source)
+        )
     progress = None if args.quiet else tqdm if sys.stderr.isatty() else "log"
 
     def solved(problem_set):
         folder = cache_folder(problem_set, args.cache_dir)
-        log.info("%s", f"reference cache: {folder}" if folder else "references: not cached")
+        where = "references: not cached (set built in memory)"
+        log.info("%s", f"reference cache: {folder}" if folder else where)
         return reference_solutions(
             problem_set,
             method=source,
@@ -196,3 +199,13 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         )
 
     return solved
+
+
+def _said(line: str, references):
+    """``references``, saying ``line`` when called (once the run's input is checked)."""
+
+    def called(problem_set):
+        log.info("%s", line)
+        return references(problem_set)
+
+    return called

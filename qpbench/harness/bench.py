@@ -714,9 +714,9 @@ def run_bench(
     plan = Plan(problem_set, config, out, force, resume, make_parent)
     from ..jit import warmup_logged
 
+    references = references_for(problem_set, plan, references)
     log.info("%d problems; backends: %s", len(problem_set), ", ".join(config.backends))
     warmup_logged(log, config.backends, loop=False)  # no compile inside a timed solve
-    references = references_for(problem_set, plan, references)
     done = plan.open_output(out, force)  # from here on, the output is created or changed
     bench_run = _BenchRun(plan, config, references, done, out)
     bench_run.run(progress)
