@@ -19,8 +19,6 @@ if TYPE_CHECKING:
 
     from ..sim.scenario import Scenario
 
-__all__ = ["animate"]
-
 
 def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
     """Ticks shown as frames: every ``speed / (fps * dt)``-th, ``dt`` [s] from ``t`` when it can."""

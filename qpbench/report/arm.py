@@ -24,17 +24,6 @@ if TYPE_CHECKING:
 
     from ..sim.scenario import Scenario
 
-__all__ = [
-    "backend_look",
-    "closest_approach",
-    "draw_line",
-    "draw_obstacles",
-    "draw_snapshot",
-    "frame_parts",
-    "thetas",
-    "view",
-    "workspace_axes",
-]
 
 #: Colour of the arm (links and joints), of the key points' edges, of obstacles and of the
 #: surface: neutral, so that the backend's look is the only colour that names a backend.

@@ -20,8 +20,6 @@ from ..exceptions import InputError
 from ..formats import sha256_file
 from ..sim.summary import STRUCTURED_FIGURES
 
-__all__ = ["ResultFile", "Results", "expand_paths", "group_label", "read_results", "scenario_key"]
-
 #: Columns that identify a bench result across CSVs.
 DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
 #: Values of ``prefer``.

@@ -21,17 +21,11 @@ from . import style
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["closed_loop_figure", "distance_axis", "has_distance", "run_figure"]
 
 #: Margin below ``d_safe`` at which a run counts as unsafe [m] (drawn as a line).
 UNSAFE_MARGIN = 5e-4
 #: Width of one column of panels and height of one panel [in].
 COLUMN_IN, PANEL_IN = 4.6, 1.75
-
-
-def _floor(values: np.ndarray, floor: float) -> np.ndarray:
-    """``values`` with entries below ``floor`` raised to it (zeros on a log axis)."""
-    return np.maximum(values, floor)
 
 
 def has_distance(log: pd.DataFrame) -> bool:
@@ -91,7 +85,6 @@ def closed_loop_figure(
     ``d_safe`` [m] (``None``: no safety lines); ``adaptive``: the ``Kp_hat`` panel (``None``:
     when a log's ``kp_hat`` varies); ``budget_s``: the per-tick time budget [s].
     """
-    plt = style.pyplot()
     logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
@@ -107,15 +100,8 @@ def closed_loop_figure(
         + ["time", "speed"]
         + (["kp"] if adaptive else [])
     )
-    groups = style.groups(logs)
-    fig, grid = plt.subplots(
-        len(panels),
-        len(groups),
-        figsize=(COLUMN_IN * len(groups) + 1.0, PANEL_IN * len(panels) + 1.4),
-        sharex=True,
-        sharey="row",
-        squeeze=False,
-        layout="constrained",
+    fig, grid, groups = style.panels(
+        logs, len(panels), COLUMN_IN, PANEL_IN, pad=(1.0, 1.4), sharex=True, sharey="row"
     )
     for col, (group_title, group) in enumerate(groups):
         axes = {name: ax for name, ax in zip(panels, grid[:, col])}
@@ -131,17 +117,14 @@ def closed_loop_figure(
 def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: bool) -> None:
     """One backend's tick log on every panel of a column: in its look when ``lit``, else grey."""
     t = d[tick_log.T].to_numpy(float)
-    if lit:
-        look = style.look(backend)
-        c = look.colour
-        style_kw = look.line(t, lw=1.0, label=backend, zorder=3)
-    else:
-        c = style.GREY
-        style_kw = dict(color=c, lw=0.7, zorder=1)
+    style_kw = style.series(backend, lit, t, lw=1.0, grey_lw=0.7)
+    c = style_kw["color"]
     axes["tracking"].plot(
-        t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
+        t, np.maximum(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
     )
-    axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw)
+    axes["force"].plot(
+        t, np.maximum(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw
+    )
     if has_d and tick_log.D_MIN in d.columns:
         axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style_kw)
     axes["time"].plot(
@@ -155,7 +138,7 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
         rasterized=True,
         zorder=3 if lit else 1,
     )
-    axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style_kw)
+    axes["speed"].plot(t, np.maximum(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style_kw)
     if adaptive and tick_log.KP_HAT in d.columns:
         axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style_kw)
     if not lit:

@@ -45,19 +45,13 @@ def cpu_name() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
-def usable_cores() -> int:
-    """Cores this process may run on (the affinity mask where the OS has one)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 def machine_info() -> dict[str, str]:
     """CPU, core counts, OS and Python of the current machine, as display strings."""
+    from ..runner import default_jobs
+
     return {
         "CPU": cpu_name(),
-        "Cores (usable / logical)": f"{usable_cores()} / {os.cpu_count()}",
+        "Cores (usable / logical)": f"{default_jobs()} / {os.cpu_count()}",
         "OS": platform.platform(),
         "Python": f"{platform.python_implementation()} {platform.python_version()}",
     }

@@ -18,19 +18,6 @@ import pandas as pd
 
 from .markdown_table import US, md_table
 
-__all__ = [
-    "HOW_TO_READ",
-    "MAX_REASONS",
-    "Pick",
-    "Recommendation",
-    "Scope",
-    "opening",
-    "read_runs",
-    "recommend",
-    "render",
-    "shortfalls",
-]
-
 #: Reasons shown per backend in the overall list; the rest are counted ("and 3 more").
 MAX_REASONS = 2
 

@@ -14,8 +14,6 @@ import pandas as pd
 
 from .markdown_table import slug
 
-__all__ = ["ROLES", "log_file", "read_log", "snapshot_runs", "write_snapshots"]
-
 log = logging.getLogger("qpbench.report")
 
 #: The two pictures of a scenario, left to right: role -> column header in the report.
@@ -57,15 +55,6 @@ def _family(backend: str) -> str:
         return "recurrent neural network" if backend.startswith("rnn") else ""
 
 
-def _is_network(backend: str) -> bool:
-    return "neural network" in _family(backend)
-
-
-def _is_exact(backend: str) -> bool:
-    family = _family(backend)
-    return not ("neural network" in family or family.startswith("pseudo-inverse"))
-
-
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     """Of one scenario's runs (one formulation), the row of each role that has one."""
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
@@ -74,15 +63,16 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
         pd.to_numeric(runs["simulated_s"], errors="coerce")
         >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
     )
-    backends = [str(b) for b in runs["backend"]]
-    is_exact = np.array([_is_exact(b) for b in backends], dtype=bool)
+    families = [_family(str(b)) for b in runs["backend"]]
+    network = np.array(["neural network" in f for f in families], dtype=bool)
+    exact = ~network & ~np.array([f.startswith("pseudo-inverse") for f in families], dtype=bool)
     exact = runs[
-        is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)
+        exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)
     ]
     if not exact.empty:
         p50 = pd.to_numeric(exact["solve_time_median_s"], errors="coerce").fillna(np.inf)
         chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
-    networks = runs[np.array([_is_network(b) for b in backends], dtype=bool)]
+    networks = runs[network]
     if not networks.empty:
         rank = [
             NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)

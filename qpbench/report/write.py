@@ -22,7 +22,6 @@ from .markdown import render
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-__all__ = ["publish", "write_report"]
 
 log = logging.getLogger("qpbench.report")
 
