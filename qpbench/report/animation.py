@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import arm as scene
 from . import style
 
@@ -106,7 +107,7 @@ def animate(
         keys_plot.set_offsets(arm.points(theta[k], keys.links, keys.fracs))
         trace.set_data(log["ee_x"].to_numpy()[: k + 1], log["ee_y"].to_numpy()[: k + 1])
         dmin = np.nanmin(log[dcols].to_numpy()[k]) if dcols else float("nan")
-        near = dcols and dmin < d_safe - 5e-4
+        near = dcols and dmin < d_safe - DEFAULT_SAFETY_MARGIN
         label.set_text(
             f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else "")
         )

@@ -16,16 +16,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..sim import log as tick_log
+from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import style
 
 if TYPE_CHECKING:
     import pandas as pd
 
 
-#: Margin below ``d_safe`` at which a run counts as unsafe [m] (drawn as a line).
-UNSAFE_MARGIN = 5e-4
 #: Width of one column of panels and height of one panel [in].
 COLUMN_IN, PANEL_IN = 4.6, 1.75
+#: The per-tick time budget drawn on the solve-time panel [s].
+BUDGET_S = 1e-3
 
 
 def has_distance(log: pd.DataFrame) -> bool:
@@ -50,7 +51,7 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     _distance_ticks(ax, lin)
     if d_safe is None:
         return
-    bad = (d_safe - UNSAFE_MARGIN) * 1e3
+    bad = (d_safe - DEFAULT_SAFETY_MARGIN) * 1e3
     ax.axhline(d_safe * 1e3, color="black", ls="--", lw=0.9, label=f"d_safe {d_safe * 1e3:g} mm")
     ax.axhline(bad, color="red", ls=":", lw=1.0, label="d_safe - 0.5 mm")
     lo = min(0.0, lowest_mm if lowest_mm is not None and np.isfinite(lowest_mm) else 0.0)
@@ -72,28 +73,18 @@ def _distance_ticks(ax, lin: float) -> None:
 
 
 def closed_loop_figure(
-    logs: dict,
-    path: str | Path,
-    *,
-    title: str,
-    d_safe: float | None = None,
-    adaptive: bool | None = None,
-    budget_s: float = 1e-3,
+    logs: dict, path: str | Path, *, title: str, d_safe: float | None = None
 ) -> Path:
     """Draw the closed-loop figure of ``logs`` (backend -> tick log) to ``path``; return it.
-
-    ``d_safe`` [m] (``None``: no safety lines); ``adaptive``: the ``Kp_hat`` panel (``None``:
-    when a log's ``kp_hat`` varies); ``budget_s``: the per-tick time budget [s].
+    ``d_safe`` [m] (``None``: no safety lines); the ``Kp_hat`` panel when a log's ``kp_hat`` varies.
     """
-    logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
     has_d = any(has_distance(d) for d in logs.values())
-    if adaptive is None:
-        adaptive = any(
-            tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
-            for d in logs.values()
-        )
+    adaptive = any(
+        tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
+        for d in logs.values()
+    )
     panels = (
         ["tracking", "force"]
         + (["distance"] if has_d else [])
@@ -107,7 +98,7 @@ def closed_loop_figure(
         axes = {name: ax for name, ax in zip(panels, grid[:, col])}
         for backend, lit in style.highlighted(logs, group):
             _plot_log(axes, logs[backend], backend, lit, has_d, adaptive)
-        _label_axes(axes, logs, has_d, d_safe, budget_s, first=col == 0)
+        _label_axes(axes, logs, has_d, d_safe, first=col == 0)
         axes[panels[-1]].set_xlabel("t [s]")
         _legend(axes, group, group_title, references=col == 0)
     fig.suptitle(title + "; grey: the other backends" if len(groups) > 1 else title)
@@ -160,9 +151,7 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
         )
 
 
-def _label_axes(
-    axes: dict, logs: dict, has_d: bool, d_safe: float | None, budget_s: float, first: bool
-) -> None:
+def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first: bool) -> None:
     """Scales, labels (first column only), the safety lines and the time budget of a column."""
     labels = {
         "tracking": "|tracking error|\n[mm]",
@@ -181,7 +170,7 @@ def _label_axes(
         )
         distance_axis(axes["distance"], d_safe, None if lowest is None else lowest * 1e3)
     axes["time"].axhline(
-        budget_s * 1e6, color="red", ls="--", lw=0.9, label=f"{budget_s * 1e3:g} ms budget"
+        BUDGET_S * 1e6, color="red", ls="--", lw=0.9, label=f"{BUDGET_S * 1e3:g} ms budget"
     )
     for name, ax in axes.items():
         ax.grid(True, alpha=0.3, which="major")

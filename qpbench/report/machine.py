@@ -6,7 +6,7 @@ import os
 import platform
 from pathlib import Path
 
-#: Distributions whose versions every report lists (missing ones print "-").
+#: Distributions whose versions every report lists.
 PACKAGES = (
     "qpbench",
     "numpy",
@@ -55,10 +55,3 @@ def machine_info() -> dict[str, str]:
         "OS": platform.platform(),
         "Python": f"{platform.python_implementation()} {platform.python_version()}",
     }
-
-
-def package_versions(names: tuple[str, ...] = PACKAGES) -> dict[str, str]:
-    """Installed version of each distribution in ``names`` ("-" when absent)."""
-    from ..formats import package_versions as installed
-
-    return {name: version or "-" for name, version in installed(names).items()}

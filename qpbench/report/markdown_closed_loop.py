@@ -66,29 +66,23 @@ CLOSED_LOOP_TABLE = (
 )
 
 
+#: The runs that failed their verdict.
+FAILED_TABLE = (
+    Column("scenario", "scenario", text=True),
+    Column("backend", "backend"),
+    Column("formulation", "formulation"),
+    Column("verdict", cell=_verdict),
+    Column("reasons", "verdict_reasons"),
+)
+
+
 def failed_verdicts(df: pd.DataFrame) -> list[str]:
     """The "Runs that failed their verdict" table (a line saying so when every run is ``ok``)."""
     bad = df[df["verdict"].astype(str).isin(BAD_VERDICTS)]
     if bad.empty:
         return ["Every run's verdict is ok.\n"]
-    out = ["### Runs that failed their verdict\n"]
-    out.append("Runs whose verdict is not ok, and why:\n")
-    out.append(
-        md_table(
-            ["scenario", "backend", "formulation", "verdict", "reasons"],
-            [
-                [
-                    str(r["scenario"]),
-                    str(r["backend"]),
-                    r["formulation"],
-                    _verdict(r),
-                    r["verdict_reasons"],
-                ]
-                for _, r in bad.iterrows()
-            ],
-        )
-    )
-    return out
+    heading = ["### Runs that failed their verdict\n", "Runs whose verdict is not ok, and why:\n"]
+    return heading + table(FAILED_TABLE, bad.to_dict("records"))
 
 
 def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[str]:

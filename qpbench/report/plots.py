@@ -1,12 +1,9 @@
 """PNG figures of a report; :func:`write_plots` returns them by key (used by :mod:`.markdown`).
 
 Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<group>_<scenario>``
-(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>`` (every
-backend's run, :mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities),
-``closed_loop_d_...`` (closest key point against ``d_safe``), ``snapshot_<role>_...`` (the
-arm, :mod:`.snapshots`). Closed-loop figures read each run's tick log, else its figure log
-(:func:`.snapshots.read_log`). Figures of a previous report this one no longer links are removed.
-"""
+(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>``
+(:mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities), ``closed_loop_d_...`` (closest
+key point against ``d_safe``), ``snapshot_<role>_...`` (:mod:`.snapshots`)."""
 
 from __future__ import annotations
 
@@ -20,7 +17,7 @@ import pandas as pd
 from ..sim import log as tick_log
 from . import style, tables
 from .arm import closest_approach
-from .inputs import Results, scenario_key
+from .inputs import Results, numbers
 from .markdown_table import slug
 from .snapshots import read_log, write_snapshots
 
@@ -47,15 +44,14 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
 
 def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     """Solve time [us] and |optimality gap| against t [s], one column per group of backends."""
-    df = rows.copy()
-    df["t"] = pd.to_numeric(df["t"], errors="coerce")
+    df = rows.assign(t=numbers(rows, "t"))
     df = df[np.isfinite(df["t"])]
     if df.empty:
         return False
     series = {}
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
-        times = pd.to_numeric(g[tables.RUNTIME], errors="coerce").to_numpy(float) * 1e6
-        gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
+        times = numbers(g, tables.RUNTIME) * 1e6
+        gap = np.abs(numbers(g, "optimality_gap"))
         gap = np.maximum(np.where(g["found"].to_numpy(bool), gap, np.nan), 1e-16)
         series[str(backend)] = (g["t"].to_numpy(float), times, gap)
     fig, axes, groups = style.panels(series, 2, 4.6, 2.4, sharex=True, sharey="row")
@@ -208,7 +204,7 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
 
     for label, _tol, rows in tables.bench_groups(results.bench):
         draw(f"perf_profile_{slug(label)}", lambda p: performance_profile_plot(rows, label, p))
-        for scenario, g in rows.groupby(rows["scenario"].map(scenario_key), sort=True):
+        for scenario, g in rows.groupby("scenario", sort=True):
             title = f"{scenario} ({label})"
             draw(f"per_tick_{slug(label)}_{slug(scenario)}", lambda p: per_tick_plot(g, title, p))
     df = results.closed_loop

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .inputs import numbers
 from .markdown_table import slug
 
 log = logging.getLogger("qpbench.report")
@@ -59,19 +60,14 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     """Of one scenario's runs (one formulation), the row of each role that has one."""
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
-    whole = (
-        pd.to_numeric(runs["simulated_s"], errors="coerce")
-        >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
-    )
+    whole = numbers(runs, "simulated_s") >= numbers(runs, "duration_s") - 1e-9
     families = [_family(str(b)) for b in runs["backend"]]
     network = np.array(["neural network" in f for f in families], dtype=bool)
     exact = ~network & ~np.array([f.startswith("pseudo-inverse") for f in families], dtype=bool)
-    exact = runs[
-        exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)
-    ]
+    exact = runs[exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole]
     if not exact.empty:
-        p50 = pd.to_numeric(exact["solve_time_median_s"], errors="coerce").fillna(np.inf)
-        chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
+        p50 = numbers(exact, "solve_time_median_s")
+        chosen["exact"] = exact.iloc[int(np.argmin(np.where(np.isnan(p50), np.inf, p50)))]
     networks = runs[network]
     if not networks.empty:
         rank = [
@@ -86,6 +82,7 @@ def write_snapshots(
     runs: pd.DataFrame, scenario: str, formulation: str, folder: Path
 ) -> dict[str, Path]:
     """Draw the snapshots of one scenario's runs into ``folder``; return key -> file."""
+    from ..sim.log import theta_columns
     from ..sim.scenario import load_scenario
     from .arm import draw_snapshot
 
@@ -100,9 +97,7 @@ def write_snapshots(
         return files
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
-        if frame is None or not {f"theta_{i}" for i in range(scene.make_arm().n)} <= set(
-            frame.columns
-        ):
+        if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
             continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         path = folder / f"{key}.png"

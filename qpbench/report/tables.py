@@ -25,7 +25,7 @@ import pandas as pd
 from ..exceptions import InputError
 from ..profiles import Tolerance, get_profile
 from ..statuses import CERTIFIED_INFEASIBLE
-from .inputs import group_label, scenario_key
+from .inputs import group_label, numbers, scenario_key
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -46,11 +46,6 @@ SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
     "duality_gap": ("duality_gap", "gap", True),
     "optimality_gap": ("optimality_gap", "gap", True),
 }
-
-
-def numbers(rows: pd.DataFrame, column: str) -> np.ndarray:
-    """A column of ``rows`` as floats (NaN where not a number)."""
-    return pd.to_numeric(rows[column], errors="coerce").to_numpy(dtype=float)
 
 
 def _percentile(values: np.ndarray, q: float) -> float:
@@ -107,13 +102,12 @@ def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataF
     """Yield ``(label, tolerance, rows)`` per (profile, mode) of the bench rows."""
     if bench.empty:
         return
-    df = bench.assign(mode=bench["mode"].fillna(""))
-    for (profile, mode), rows in df.groupby(["profile", "mode"], sort=True):
+    for (profile, mode), rows in bench.groupby(["profile", "mode"], sort=True):
         try:
             tolerance = get_profile(str(profile)).tolerance
         except InputError as exc:
             raise InputError(exc.message, path=rows["source"].iloc[0], key="profile") from None
-        yield group_label(profile, mode or None), tolerance, rows
+        yield group_label(profile, mode), tolerance, rows
 
 
 def isolated_rows(rows: pd.DataFrame) -> dict[str, int]:
@@ -225,7 +219,7 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
         }
 
     tables = {}
-    for scenario, g in rows.groupby(rows["scenario"].map(scenario_key), sort=True):
+    for scenario, g in rows.groupby("scenario", sort=True):
         table = _per_backend(g, record)
         table["runtime_ratio"] = _ratio_to_best(table["runtime_shgeom"])
         tables[scenario] = table
