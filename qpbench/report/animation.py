@@ -59,7 +59,6 @@ def animate(
     speed: float = 1.0,
     progress: bool = False,
     title: str | None = None,
-    dpi: int = 70,
     backend: str | None = None,
 ) -> Path:
     """Render the tick log of a run of ``scenario`` to ``path`` (``.gif`` or ``.mp4``); return it.
@@ -74,7 +73,6 @@ def animate(
 
     from ..sim.log import distance_columns
 
-    plt = style.pyplot()
     path = Path(path)
     check_animation(path, fps, speed)
 
@@ -88,7 +86,7 @@ def animate(
 
     # equal axes: the frame's height follows the view's proportions
     high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
-    fig, ax = plt.subplots(figsize=(6, high), dpi=dpi, layout="constrained")
+    fig, ax = style.pyplot().subplots(figsize=(6, high), dpi=70, layout="constrained")
     static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
     link_line, keys_plot, trace, label = _animation_artists(ax, backend)
     moving_artists: list = []

@@ -288,19 +288,15 @@ def draw_snapshot(
     """
     from .loop_figure import has_distance
 
-    plt = style.pyplot()
-    path = Path(path)
     arm, keys, surface, obstacles = frame_parts(scenario)
     theta = thetas(log, arm.n)
     t = log["t"].to_numpy(float)
-    ticks = len(log)
     xlim, ylim = view(scenario, log, arm)
-    d_safe = scenario.data["controller"]["d_safe"]
     has_d = has_distance(log)
 
     # the workspace's height follows its view's proportions (equal axes), within limits
     high = float(np.clip(WORKSPACE_IN * np.ptp(ylim) / np.ptp(xlim), 2.4, 1.3 * WORKSPACE_IN))
-    fig, axes = plt.subplots(
+    fig, axes = style.pyplot().subplots(
         2 if has_d else 1,
         1,
         figsize=(WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0)),
@@ -311,8 +307,7 @@ def draw_snapshot(
     ax = axes[0, 0]
     surface_line = dict(color=SURFACE, lw=2.5, label="contact surface")
     draw_line(ax, surface.point, -surface.normal, xlim, ylim, **surface_line)
-    moving = any(np.any(ob.velocity) for ob in obstacles)
-    if moving:
+    if any(np.any(ob.velocity) for ob in obstacles):  # moving: also faint where they started
         draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
     draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
@@ -323,21 +318,12 @@ def draw_snapshot(
 
     workspace_axes(ax, xlim, ylim)
     ax.set_title(
-        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s"
+        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if len(t) > 1 else 0):.1f} s"
     )
     if has_d:
-        _distance_panel(axes[1, 0], log, backend, d_safe)
-    _legend_beside(ax, axes[:, 0])
+        _distance_panel(axes[1, 0], log, backend, scenario.data["controller"]["d_safe"])
+    style.legend_beside(ax, *style.entries(axes[:, 0]))
     return style.save(fig, path, dpi=110)
-
-
-def _legend_beside(ax, axes) -> None:
-    """One legend of every panel of ``axes``, to the right of ``ax`` (outside the workspace)."""
-    handles, labels = [], []
-    for a in axes:
-        h, lab = a.get_legend_handles_labels()
-        handles, labels = handles + h, labels + lab
-    style.legend_beside(ax, handles, labels)
 
 
 def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -> None:

@@ -184,12 +184,8 @@ def _legend(axes: dict, group: list, title: str, references: bool) -> None:
     top = axes["tracking"]
     handles, labels = top.get_legend_handles_labels()
     if references:
-        for name in ("distance", "time"):
-            if name in axes:
-                h, lab = axes[name].get_legend_handles_labels()
-                keep = [(hh, ll) for hh, ll in zip(h, lab) if ll not in group]
-                handles += [hh for hh, _ in keep]
-                labels += [ll for _, ll in keep]
+        lines = style.entries([axes[n] for n in ("distance", "time") if n in axes], skip=group)
+        handles, labels = handles + lines[0], labels + lines[1]
         title = (title + "\n" if title else "") + "band on top: fallback or zero velocity"
     style.legend_above(top, handles, labels, ncol=2, title=title or None, title_fontsize=8)
 

@@ -108,9 +108,9 @@ def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
 
 def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
     """The per-tick benchmark's section: what a success and the means are, then one part per profile."""
-    out = ["## Per-tick benchmark\n"]
     bench = results.bench
-    out.append(
+    out = [
+        "## Per-tick benchmark\n",
         f"{bench['problem'].nunique()} problems, {bench['backend'].nunique()} backends, "
         f"{len(bench)} rows. A solve is a *success* when the backend found a solution whose "
         "primal residual, dual residual, duality gap and optimality gap (against the "
@@ -131,10 +131,9 @@ def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
         "*runtime (feasible)* is the same mean over the problems whose reference "
         "solution is optimal only: on the paper formulation's infeasible ticks the right answer "
         'is "infeasible", and a backend that cannot say so (qpsolvers\' interface reports '
-        "not_solved) is charged the time limit for it in the plain column.\n"
-    )
-    for note in results.notes:
-        out.append(f"Note: {note}.\n")
+        "not_solved) is charged the time limit for it in the plain column.\n",
+        *(f"Note: {note}.\n" for note in results.notes),
+    ]
     out.extend(_reference_agreement_part(bench))
     for label, tol, rows in tables.bench_groups(bench):
         out.extend(_profile_part(label, tol, rows, plot_files))
@@ -280,28 +279,24 @@ def render(
     of :mod:`.plots`, a missing one not shown); ``date``: default now, UTC."""
     plot_files = plot_files or {}
     date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = ["# qpbench report\n"]
-    lines.extend(opening(results.closed_loop, has_bench=not results.bench.empty))
-    lines.append(
+    lines = [
+        "# qpbench report\n",
+        *opening(results.closed_loop, has_bench=not results.bench.empty),
         "Per-tick QPs of the compliant redundant manipulator of Zhou, Xu & Li (2019), "
         "benchmarked per tick and in the closed loop. Every number below is recomputed "
-        "from the result files listed here.\n"
-    )
-    lines.append(f"Date: {date}\n")
-    lines.append("Result files:\n")
-    lines.append(
+        "from the result files listed here.\n",
+        f"Date: {date}\n",
+        "Result files:\n",
         md_table(
             ["file", "kind", "rows", "sha256"],
             [[f.path.name, f.kind, f.rows, f.sha256[:16]] for f in results.files],
-        )
-    )
-    lines.append("## Machine\n")
-    lines.append("Machine the report was written on:\n")
-    lines.append(md_table(["property", "value"], [[k, v] for k, v in machine_info().items()]))
-    lines.append("Package versions:\n")
-    lines.append(
-        md_table(["package", "version"], [[k, v] for k, v in package_versions(PACKAGES).items()])
-    )
+        ),
+        "## Machine\n",
+        "Machine the report was written on:\n",
+        md_table(["property", "value"], list(machine_info().items())),
+        "Package versions:\n",
+        md_table(["package", "version"], list(package_versions(PACKAGES).items())),
+    ]
     if not results.bench.empty:
         lines.extend(_bench_section(results, plot_files))
         profiles_used = sorted(set(results.bench["profile"].astype(str)))

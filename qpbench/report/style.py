@@ -216,6 +216,15 @@ def panels(backends, rows: int, width: float, height: float, pad=(0.8, 1.6), **k
     return fig, axes, groups_
 
 
+def entries(axes, skip=()) -> tuple[list, list]:
+    """The legend handles and labels of every axes of ``axes`` in turn, but those labelled as
+    one of ``skip``."""
+    pairs = [
+        (h, t) for ax in axes for h, t in zip(*ax.get_legend_handles_labels()) if t not in skip
+    ]
+    return [h for h, _ in pairs], [t for _, t in pairs]
+
+
 def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
     """A legend above ``ax``, outside the data (``handles``/``labels``: the axes' own by default)."""
     where = dict(loc="lower left", bbox_to_anchor=(0.0, 1.02, 1.0, 0.2), mode="expand", ncol=ncol)
