@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import arm as scene
 from . import style
 
@@ -18,8 +19,6 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from ..sim.scenario import Scenario
-
-__all__ = ["animate"]
 
 
 def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
@@ -60,7 +59,6 @@ def animate(
     speed: float = 1.0,
     progress: bool = False,
     title: str | None = None,
-    dpi: int = 70,
     backend: str | None = None,
 ) -> Path:
     """Render the tick log of a run of ``scenario`` to ``path`` (``.gif`` or ``.mp4``); return it.
@@ -75,7 +73,6 @@ def animate(
 
     from ..sim.log import distance_columns
 
-    plt = style.pyplot()
     path = Path(path)
     check_animation(path, fps, speed)
 
@@ -89,7 +86,7 @@ def animate(
 
     # equal axes: the frame's height follows the view's proportions
     high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
-    fig, ax = plt.subplots(figsize=(6, high), dpi=dpi, layout="constrained")
+    fig, ax = style.pyplot().subplots(figsize=(6, high), dpi=70, layout="constrained")
     static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
     link_line, keys_plot, trace, label = _animation_artists(ax, backend)
     moving_artists: list = []
@@ -108,7 +105,7 @@ def animate(
         keys_plot.set_offsets(arm.points(theta[k], keys.links, keys.fracs))
         trace.set_data(log["ee_x"].to_numpy()[: k + 1], log["ee_y"].to_numpy()[: k + 1])
         dmin = np.nanmin(log[dcols].to_numpy()[k]) if dcols else float("nan")
-        near = dcols and dmin < d_safe - 5e-4
+        near = dcols and dmin < d_safe - DEFAULT_SAFETY_MARGIN
         label.set_text(
             f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else "")
         )

@@ -1,14 +1,10 @@
 """Pictures of the arm in its workspace, as the paper's figures show it first.
 
-:func:`draw_snapshot` draws a closed-loop run on one figure: the arm at several instants
-(fading from pale to solid), its key points, the obstacles at the last instant (moving ones
-also faint where they started), the contact surface, the desired and actual end-effector
-paths, the closest approach of a key point to an obstacle ringed; below, the closest key
-point's distance against ``d_safe`` over time. :mod:`.animation` draws the same scene frame by
-frame with these pieces. The backend's look is the one colour naming a backend; the arm and
-the obstacles are greys, the surface green, red means closer than ``d_safe``. Lengths in [m],
-equal axes; read from the tick log of :func:`qpbench.sim.loop.simulate` and the scenario.
-"""
+:func:`draw_snapshot` draws a closed-loop run: the arm at several instants (pale to solid), its
+key points, the obstacles, the contact surface, the desired and actual end-effector paths, the
+closest approach ringed; below, the closest key point's distance against ``d_safe``.
+:mod:`.animation` draws the same scene frame by frame. The backend's look is the one colour
+naming a backend; red means closer than ``d_safe``. Lengths in [m], equal axes."""
 
 from __future__ import annotations
 
@@ -17,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import style
 
 if TYPE_CHECKING:
@@ -24,17 +21,6 @@ if TYPE_CHECKING:
 
     from ..sim.scenario import Scenario
 
-__all__ = [
-    "backend_look",
-    "closest_approach",
-    "draw_line",
-    "draw_obstacles",
-    "draw_snapshot",
-    "frame_parts",
-    "thetas",
-    "view",
-    "workspace_axes",
-]
 
 #: Colour of the arm (links and joints), of the key points' edges, of obstacles and of the
 #: surface: neutral, so that the backend's look is the only colour that names a backend.
@@ -52,7 +38,10 @@ def backend_look(backend: str | None) -> style.Look:
 
 
 def thetas(log, n: int) -> np.ndarray:
-    return log[[f"theta_{i}" for i in range(n)]].to_numpy(dtype=float)
+    """The joint angles [rad] of every tick of ``log``, one row per tick."""
+    from ..sim.log import theta_columns
+
+    return log[theta_columns(n)].to_numpy(dtype=float)
 
 
 def closest_approach(log: pd.DataFrame) -> dict | None:
@@ -269,7 +258,7 @@ def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys,
     a = list(keys.names).index(close["key_point"])
     q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
     d_safe = scenario.data["controller"]["d_safe"]
-    bad = close["distance"] < d_safe - 5e-4
+    bad = close["distance"] < d_safe - DEFAULT_SAFETY_MARGIN
     ax.scatter(
         [q[0]],
         [q[1]],
@@ -299,19 +288,15 @@ def draw_snapshot(
     """
     from .loop_figure import has_distance
 
-    plt = style.pyplot()
-    path = Path(path)
     arm, keys, surface, obstacles = frame_parts(scenario)
     theta = thetas(log, arm.n)
     t = log["t"].to_numpy(float)
-    ticks = len(log)
     xlim, ylim = view(scenario, log, arm)
-    d_safe = scenario.data["controller"]["d_safe"]
     has_d = has_distance(log)
 
     # the workspace's height follows its view's proportions (equal axes), within limits
     high = float(np.clip(WORKSPACE_IN * np.ptp(ylim) / np.ptp(xlim), 2.4, 1.3 * WORKSPACE_IN))
-    fig, axes = plt.subplots(
+    fig, axes = style.pyplot().subplots(
         2 if has_d else 1,
         1,
         figsize=(WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0)),
@@ -322,8 +307,7 @@ def draw_snapshot(
     ax = axes[0, 0]
     surface_line = dict(color=SURFACE, lw=2.5, label="contact surface")
     draw_line(ax, surface.point, -surface.normal, xlim, ylim, **surface_line)
-    moving = any(np.any(ob.velocity) for ob in obstacles)
-    if moving:
+    if any(np.any(ob.velocity) for ob in obstacles):  # moving: also faint where they started
         draw_obstacles(ax, obstacles, 0.0, xlim, ylim, faint=True)
     draw_obstacles(ax, obstacles, float(t[-1]), xlim, ylim)
 
@@ -334,28 +318,19 @@ def draw_snapshot(
 
     workspace_axes(ax, xlim, ylim)
     ax.set_title(
-        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if ticks > 1 else 0):.1f} s"
+        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if len(t) > 1 else 0):.1f} s"
     )
     if has_d:
-        _distance_panel(axes[1, 0], log, backend, d_safe)
-    _legend_beside(ax, axes[:, 0])
+        _distance_panel(axes[1, 0], log, backend, scenario.data["controller"]["d_safe"])
+    style.legend_beside(ax, *style.entries(axes[:, 0]))
     return style.save(fig, path, dpi=110)
-
-
-def _legend_beside(ax, axes) -> None:
-    """One legend of every panel of ``axes``, to the right of ``ax`` (outside the workspace)."""
-    handles, labels = [], []
-    for a in axes:
-        h, lab = a.get_legend_handles_labels()
-        handles, labels = handles + h, labels + lab
-    style.legend_beside(ax, handles, labels)
 
 
 def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -> None:
     """The closest key point's distance [mm] against t in the run's look (the body's dashed),
     its closest approach ringed, on the report's distance axis (:mod:`.loop_figure`)."""
     from ..sim import log as tick_log
-    from .loop_figure import UNSAFE_MARGIN, distance_axis
+    from .loop_figure import distance_axis
 
     look = backend_look(backend)
     name = f"{backend}: " if backend else ""
@@ -368,7 +343,7 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
             label = f"{name}closest point of the body [mm]"
             ax.plot(t, body, color=look.colour, ls=(0, (2, 2)), lw=0.9, label=label, zorder=2)
     k = int(np.nanargmin(d))
-    bad = d[k] < (d_safe - UNSAFE_MARGIN) * 1e3
+    bad = d[k] < (d_safe - DEFAULT_SAFETY_MARGIN) * 1e3
     ax.scatter(
         [t[k]], [d[k]], s=110, facecolors="none", edgecolors="red" if bad else "black", lw=1.6
     )

@@ -20,12 +20,8 @@ from ..exceptions import InputError
 from ..formats import sha256_file
 from ..sim.summary import STRUCTURED_FIGURES
 
-__all__ = ["ResultFile", "Results", "expand_paths", "group_label", "read_results", "scenario_key"]
-
 #: Columns that identify a bench result across CSVs.
 DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
-#: Values of ``prefer``.
-PREFER = ("first", "last")
 #: Columns that make a CSV a bench result.
 BENCH_COLUMNS = (
     "problem",
@@ -127,17 +123,14 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
 def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     """Read bench and closed-loop CSVs (folders are searched); ``prefer``: module docstring.
 
-    Rows get ``source`` (their file); closed-loop rows ``log_path``, their ``log_file``
-    resolved against the CSV's folder (``None`` when the run left no log).
+    Rows get ``source`` (their file); bench rows their :func:`scenario_key` as ``scenario`` and
+    ``""`` for a missing ``mode``; closed-loop rows ``log_path``, their ``log_file`` resolved
+    against the CSV's folder (``None`` when the run left no log).
 
     Raises:
         InputError: unreadable CSV, one that is neither kind (naming the file),
             a duplicate key or mixed repeat counts without ``prefer``.
     """
-    if prefer is not None and prefer not in PREFER:
-        raise InputError(
-            f"unknown value '{prefer}' (choose from {', '.join(PREFER)})", key="--prefer"
-        )
     bench, loops, files = [], [], []
     for path in expand_paths(paths):
         try:
@@ -147,9 +140,8 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
         cols = set(df.columns)
         df["source"] = str(path)
         if set(BENCH_COLUMNS) <= cols:
-            df["found"] = _as_bool(df["found"], path, "found")
-            df["success"] = _as_bool(df["success"], path, "success")
-            df["isolated"] = _as_bool(df["isolated"], path, "isolated")
+            for key in ("found", "success", "isolated"):
+                df[key] = _as_bool(df[key], path, key)
             bench.append(df)
             kind = "bench"
         elif set(CLOSED_LOOP_COLUMNS) <= cols:
@@ -173,7 +165,8 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     bench_df = pd.concat(bench, ignore_index=True) if bench else pd.DataFrame()
     if bench:
         bench_df = drop_duplicates(bench_df, prefer)
-    if not bench_df.empty:
+        bench_df["scenario"] = bench_df["scenario"].map(scenario_key)
+        bench_df["mode"] = bench_df["mode"].fillna("")
         notes.extend(check_repeats(bench_df, prefer))
     return Results(
         bench=bench_df,
@@ -223,23 +216,21 @@ def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
         InputError: a mix and ``prefer`` is ``None``.
     """
     notes = []
-    df = bench.assign(
-        _repeat=pd.to_numeric(bench["repeat"], errors="coerce"), _mode=bench["mode"].fillna("")
-    )
-    for (profile, mode), table in df.groupby(["profile", "_mode"], sort=True):
+    df = bench.assign(_repeat=pd.to_numeric(bench["repeat"], errors="coerce"))
+    for (profile, mode), table in df.groupby(["profile", "mode"], sort=True):
         per_backend = table.groupby("backend", sort=True)["_repeat"].max().dropna()
         if per_backend.nunique() > 1:
             counts = ", ".join(f"{b} {int(r)}" for b, r in per_backend.items())
             notes.append(
-                f"backends timed with different --repeat counts in the tables of {group_label(profile, mode or None)} "
+                f"backends timed with different --repeat counts in the tables of {group_label(profile, mode)} "
                 f"({counts}): a single-shot time includes cold caches that a minimum over repeats does not"
             )
-    for (profile, mode, backend), g in df.groupby(["profile", "_mode", "backend"], sort=True):
+    for (profile, mode, backend), g in df.groupby(["profile", "mode", "backend"], sort=True):
         per_file = g.groupby("source", sort=False)["_repeat"].max().dropna()
         if per_file.nunique() <= 1:
             continue
         counts = ", ".join(f"{Path(f).name}: {int(r)}" for f, r in per_file.items())
-        text = f"{backend} ({group_label(profile, mode or None)}) mixes rows timed with different --repeat ({counts})"
+        text = f"{backend} ({group_label(profile, mode)}) mixes rows timed with different --repeat ({counts})"
         if prefer is None:
             raise InputError(
                 f"{text}; pass --prefer first|last to report them together anyway", key="repeat"
@@ -248,13 +239,19 @@ def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
     return notes
 
 
-def group_label(profile: str, mode: str | None) -> str:
+def numbers(rows: pd.DataFrame, column: str) -> np.ndarray:
+    """A column of ``rows`` as floats (NaN where not a number)."""
+    return pd.to_numeric(rows[column], errors="coerce").to_numpy(dtype=float)
+
+
+def group_label(profile: str, mode: str) -> str:
     """Heading of a (profile, mode) group, e.g. ``default, sequential``."""
     return f"{profile}, {mode}" if mode else str(profile)
 
 
 def scenario_key(value: object) -> str:
-    """Scenario label of a bench row (``-`` when the problem has no scenario)."""
+    """Scenario label of a bench row (``-`` when the problem has no scenario): the ``scenario``
+    of the rows :func:`read_results` returns."""
     if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
         return "-"
     return str(value)

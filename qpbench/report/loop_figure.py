@@ -16,22 +16,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..sim import log as tick_log
+from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import style
 
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["closed_loop_figure", "distance_axis", "has_distance", "run_figure"]
 
-#: Margin below ``d_safe`` at which a run counts as unsafe [m] (drawn as a line).
-UNSAFE_MARGIN = 5e-4
 #: Width of one column of panels and height of one panel [in].
 COLUMN_IN, PANEL_IN = 4.6, 1.75
-
-
-def _floor(values: np.ndarray, floor: float) -> np.ndarray:
-    """``values`` with entries below ``floor`` raised to it (zeros on a log axis)."""
-    return np.maximum(values, floor)
+#: The per-tick time budget drawn on the solve-time panel [s].
+BUDGET_S = 1e-3
 
 
 def has_distance(log: pd.DataFrame) -> bool:
@@ -56,7 +51,7 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     _distance_ticks(ax, lin)
     if d_safe is None:
         return
-    bad = (d_safe - UNSAFE_MARGIN) * 1e3
+    bad = (d_safe - DEFAULT_SAFETY_MARGIN) * 1e3
     ax.axhline(d_safe * 1e3, color="black", ls="--", lw=0.9, label=f"d_safe {d_safe * 1e3:g} mm")
     ax.axhline(bad, color="red", ls=":", lw=1.0, label="d_safe - 0.5 mm")
     lo = min(0.0, lowest_mm if lowest_mm is not None and np.isfinite(lowest_mm) else 0.0)
@@ -78,50 +73,32 @@ def _distance_ticks(ax, lin: float) -> None:
 
 
 def closed_loop_figure(
-    logs: dict,
-    path: str | Path,
-    *,
-    title: str,
-    d_safe: float | None = None,
-    adaptive: bool | None = None,
-    budget_s: float = 1e-3,
+    logs: dict, path: str | Path, *, title: str, d_safe: float | None = None
 ) -> Path:
     """Draw the closed-loop figure of ``logs`` (backend -> tick log) to ``path``; return it.
-
-    ``d_safe`` [m] (``None``: no safety lines); ``adaptive``: the ``Kp_hat`` panel (``None``:
-    when a log's ``kp_hat`` varies); ``budget_s``: the per-tick time budget [s].
+    ``d_safe`` [m] (``None``: no safety lines); the ``Kp_hat`` panel when a log's ``kp_hat`` varies.
     """
-    plt = style.pyplot()
-    logs = {name: df for name, df in logs.items() if df is not None and len(df)}
     if not logs:
         raise ValueError("no tick log to draw")
     has_d = any(has_distance(d) for d in logs.values())
-    if adaptive is None:
-        adaptive = any(
-            tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
-            for d in logs.values()
-        )
+    adaptive = any(
+        tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
+        for d in logs.values()
+    )
     panels = (
         ["tracking", "force"]
         + (["distance"] if has_d else [])
         + ["time", "speed"]
         + (["kp"] if adaptive else [])
     )
-    groups = style.groups(logs)
-    fig, grid = plt.subplots(
-        len(panels),
-        len(groups),
-        figsize=(COLUMN_IN * len(groups) + 1.0, PANEL_IN * len(panels) + 1.4),
-        sharex=True,
-        sharey="row",
-        squeeze=False,
-        layout="constrained",
+    fig, grid, groups = style.panels(
+        logs, len(panels), COLUMN_IN, PANEL_IN, pad=(1.0, 1.4), sharex=True, sharey="row"
     )
     for col, (group_title, group) in enumerate(groups):
         axes = {name: ax for name, ax in zip(panels, grid[:, col])}
         for backend, lit in style.highlighted(logs, group):
             _plot_log(axes, logs[backend], backend, lit, has_d, adaptive)
-        _label_axes(axes, logs, has_d, d_safe, budget_s, first=col == 0)
+        _label_axes(axes, logs, has_d, d_safe, first=col == 0)
         axes[panels[-1]].set_xlabel("t [s]")
         _legend(axes, group, group_title, references=col == 0)
     fig.suptitle(title + "; grey: the other backends" if len(groups) > 1 else title)
@@ -131,17 +108,14 @@ def closed_loop_figure(
 def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: bool) -> None:
     """One backend's tick log on every panel of a column: in its look when ``lit``, else grey."""
     t = d[tick_log.T].to_numpy(float)
-    if lit:
-        look = style.look(backend)
-        c = look.colour
-        style_kw = look.line(t, lw=1.0, label=backend, zorder=3)
-    else:
-        c = style.GREY
-        style_kw = dict(color=c, lw=0.7, zorder=1)
+    style_kw = style.series(backend, lit, t, lw=1.0, grey_lw=0.7)
+    c = style_kw["color"]
     axes["tracking"].plot(
-        t, _floor(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
+        t, np.maximum(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
     )
-    axes["force"].plot(t, _floor(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw)
+    axes["force"].plot(
+        t, np.maximum(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw
+    )
     if has_d and tick_log.D_MIN in d.columns:
         axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style_kw)
     axes["time"].plot(
@@ -155,7 +129,7 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
         rasterized=True,
         zorder=3 if lit else 1,
     )
-    axes["speed"].plot(t, _floor(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style_kw)
+    axes["speed"].plot(t, np.maximum(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style_kw)
     if adaptive and tick_log.KP_HAT in d.columns:
         axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style_kw)
     if not lit:
@@ -177,9 +151,7 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
         )
 
 
-def _label_axes(
-    axes: dict, logs: dict, has_d: bool, d_safe: float | None, budget_s: float, first: bool
-) -> None:
+def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first: bool) -> None:
     """Scales, labels (first column only), the safety lines and the time budget of a column."""
     labels = {
         "tracking": "|tracking error|\n[mm]",
@@ -198,7 +170,7 @@ def _label_axes(
         )
         distance_axis(axes["distance"], d_safe, None if lowest is None else lowest * 1e3)
     axes["time"].axhline(
-        budget_s * 1e6, color="red", ls="--", lw=0.9, label=f"{budget_s * 1e3:g} ms budget"
+        BUDGET_S * 1e6, color="red", ls="--", lw=0.9, label=f"{BUDGET_S * 1e3:g} ms budget"
     )
     for name, ax in axes.items():
         ax.grid(True, alpha=0.3, which="major")
@@ -212,12 +184,8 @@ def _legend(axes: dict, group: list, title: str, references: bool) -> None:
     top = axes["tracking"]
     handles, labels = top.get_legend_handles_labels()
     if references:
-        for name in ("distance", "time"):
-            if name in axes:
-                h, lab = axes[name].get_legend_handles_labels()
-                keep = [(hh, ll) for hh, ll in zip(h, lab) if ll not in group]
-                handles += [hh for hh, _ in keep]
-                labels += [ll for _, ll in keep]
+        lines = style.entries([axes[n] for n in ("distance", "time") if n in axes], skip=group)
+        handles, labels = handles + lines[0], labels + lines[1]
         title = (title + "\n" if title else "") + "band on top: fallback or zero velocity"
     style.legend_above(top, handles, labels, ncol=2, title=title or None, title_fontsize=8)
 

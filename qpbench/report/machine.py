@@ -6,7 +6,7 @@ import os
 import platform
 from pathlib import Path
 
-#: Distributions whose versions every report lists (missing ones print "-").
+#: Distributions whose versions every report lists.
 PACKAGES = (
     "qpbench",
     "numpy",
@@ -45,26 +45,13 @@ def cpu_name() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
-def usable_cores() -> int:
-    """Cores this process may run on (the affinity mask where the OS has one)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 def machine_info() -> dict[str, str]:
     """CPU, core counts, OS and Python of the current machine, as display strings."""
+    from ..runner import default_jobs
+
     return {
         "CPU": cpu_name(),
-        "Cores (usable / logical)": f"{usable_cores()} / {os.cpu_count()}",
+        "Cores (usable / logical)": f"{default_jobs()} / {os.cpu_count()}",
         "OS": platform.platform(),
         "Python": f"{platform.python_implementation()} {platform.python_version()}",
     }
-
-
-def package_versions(names: tuple[str, ...] = PACKAGES) -> dict[str, str]:
-    """Installed version of each distribution in ``names`` ("-" when absent)."""
-    from ..formats import package_versions as installed
-
-    return {name: version or "-" for name, version in installed(names).items()}

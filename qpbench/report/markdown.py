@@ -15,10 +15,11 @@ from operator import attrgetter
 
 import pandas as pd
 
+from ..formats import package_versions
 from ..profiles import PROFILES
 from . import tables
-from .inputs import Results, scenario_key
-from .machine import machine_info, package_versions
+from .inputs import Results
+from .machine import PACKAGES, machine_info
 from .markdown_closed_loop import closed_loop_section
 from .markdown_table import US, Column, fmt, md_table, slug, table
 from .recommend import opening
@@ -105,15 +106,11 @@ def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
     return labels, notes
 
 
-def _never_found(summary: pd.DataFrame) -> list[str]:
-    return [str(b) for b, r in summary.iterrows() if int(r["found"]) == 0]
-
-
 def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
     """The per-tick benchmark's section: what a success and the means are, then one part per profile."""
-    out = ["## Per-tick benchmark\n"]
     bench = results.bench
-    out.append(
+    out = [
+        "## Per-tick benchmark\n",
         f"{bench['problem'].nunique()} problems, {bench['backend'].nunique()} backends, "
         f"{len(bench)} rows. A solve is a *success* when the backend found a solution whose "
         "primal residual, dual residual, duality gap and optimality gap (against the "
@@ -134,10 +131,9 @@ def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
         "*runtime (feasible)* is the same mean over the problems whose reference "
         "solution is optimal only: on the paper formulation's infeasible ticks the right answer "
         'is "infeasible", and a backend that cannot say so (qpsolvers\' interface reports '
-        "not_solved) is charged the time limit for it in the plain column.\n"
-    )
-    for note in results.notes:
-        out.append(f"Note: {note}.\n")
+        "not_solved) is charged the time limit for it in the plain column.\n",
+        *(f"Note: {note}.\n" for note in results.notes),
+    ]
     out.extend(_reference_agreement_part(bench))
     for label, tol, rows in tables.bench_groups(bench):
         out.extend(_profile_part(label, tol, rows, plot_files))
@@ -147,11 +143,8 @@ def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
 def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
     """How far the two reference solvers' objectives are apart, per problem."""
     per_problem = (
-        bench.assign(
-            _a=pd.to_numeric(bench["reference_agreement"], errors="coerce"),
-            _s=bench["scenario"].map(scenario_key),
-        )
-        .groupby(["_s", "problem"], sort=False)["_a"]
+        bench.assign(_a=pd.to_numeric(bench["reference_agreement"], errors="coerce"))
+        .groupby(["scenario", "problem"], sort=False)["_a"]
         .max()
         .dropna()
     )
@@ -167,22 +160,23 @@ def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
 
 def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str]) -> list[str]:
     """One profile's tables: success and shifted geometric means, violations, then per scenario."""
-    out: list[str] = []
-    out.append(f"### Profile {label}\n")
-    out.append(
+    out = [
+        f"### Profile {label}\n",
         f"Tolerances: primal {tol.primal:g}, dual {tol.dual:g}, gap {tol.gap:g}, "
-        f"time limit {tol.runtime:g} s.\n"
-    )
+        f"time limit {tol.runtime:g} s.\n",
+    ]
     summary = tables.backend_summary(rows, tol)
     names, isolated_notes = _labels(rows)
-    never = _never_found(summary)
-    never_note = []
-    if never:
-        never_note.append(
-            f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows with "
-            "status optimal), so there is no residual or gap to average; counted with the "
+    never = [str(b) for b, r in summary.iterrows() if int(r["found"]) == 0]
+    never_note = (
+        [
+            f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows "
+            "with status optimal), so there is no residual or gap to average; counted with the "
             "not-found value, floored at the tolerance, they would score as the best.\n"
-        )
+        ]
+        if never
+        else []
+    )
     accuracy = [m for m in tables.SHGEOM_METRICS if m != "runtime"]  # residuals and gaps, in order
     records = _records(summary, names)
     out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
@@ -230,48 +224,39 @@ def _scenario_part(
     isolated_notes: list[str],
     plot_files: dict[str, str],
 ) -> list[str]:
-    """One scenario's runtime table of one profile, its solver-time part and its per-tick figure."""
-    out: list[str] = []
-    out.append(f"#### Scenario {scenario} ({label})\n")
-    out.append("Per backend, runtime over every problem of the scenario:\n")
-    out += table(SCENARIO_COLUMNS, _records(frame, names))
+    """One scenario's runtime table of one profile, the solver's own time against the whole
+    call, and its per-tick figure."""
+    out = [
+        f"#### Scenario {scenario} ({label})\n",
+        "Per backend, runtime over every problem of the scenario:\n",
+        *table(SCENARIO_COLUMNS, _records(frame, names)),
+    ]
     if any(names[b] != b for b in frame.index):
         out.extend(isolated_notes)
-    out.extend(_solver_time_part(rows, scenario, names))
+    times = tables.solver_time_summary(rows[rows["scenario"] == scenario])
+    if not times.empty:
+        out.append(
+            "What the solver reports for its own work (`solver_time_s`: what a controller calling "
+            "its C or C++ library pays) against the timed call, and their difference per tick (what "
+            "the Python layers add); backends that report no time of their own are not listed:\n"
+        )
+        out += table(SOLVER_TIME_COLUMNS, _records(times, names))
     key = f"per_tick_{slug(label)}_{slug(scenario)}"
     if key in plot_files:
         out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
     return out
 
 
-def _solver_time_part(rows: pd.DataFrame, scenario: str, names: dict[str, str]) -> list[str]:
-    """Per backend of one scenario: the solver's own time against the whole call."""
-    rows = rows[[scenario_key(v) == scenario for v in rows["scenario"]]]
-    frame = tables.solver_time_summary(rows)
-    if frame.empty:
-        return []
-    out = [
-        "What the solver reports for its own work (`solver_time_s`: what a controller calling its "
-        "C or C++ library pays) against the timed call, and their difference per tick (what the "
-        "Python layers add); backends that report no time of their own are not listed:\n"
-    ]
-    return out + table(SOLVER_TIME_COLUMNS, _records(frame, names))
-
-
 def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     """Constraint violation per backend, and a sentence for each backend that never found a solution."""
     frame = tables.violation_summary(rows)
-    if frame.empty:
-        return []
     out = [
         "Constraint violation of the answers, max(0, Gx - h), |Ax - b| and bound violation, the "
         "largest of the three per row (absolute, in the problem's units), over the rows with an x "
-        "(found or not), and over those whose reference is optimal:\n"
+        "(found or not), and over those whose reference is optimal:\n",
+        *table(VIOLATION_COLUMNS, _records(frame, {})),
     ]
-    out += table(VIOLATION_COLUMNS, _records(frame, {}))
     for b in never:
-        if b not in frame.index:
-            continue
         r = frame.loc[b]
         if int(r["with_x"]) == 0:
             out.append(
@@ -294,26 +279,24 @@ def render(
     of :mod:`.plots`, a missing one not shown); ``date``: default now, UTC."""
     plot_files = plot_files or {}
     date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = ["# qpbench report\n"]
-    lines.extend(opening(results.closed_loop, has_bench=not results.bench.empty))
-    lines.append(
+    lines = [
+        "# qpbench report\n",
+        *opening(results.closed_loop, has_bench=not results.bench.empty),
         "Per-tick QPs of the compliant redundant manipulator of Zhou, Xu & Li (2019), "
         "benchmarked per tick and in the closed loop. Every number below is recomputed "
-        "from the result files listed here.\n"
-    )
-    lines.append(f"Date: {date}\n")
-    lines.append("Result files:\n")
-    lines.append(
+        "from the result files listed here.\n",
+        f"Date: {date}\n",
+        "Result files:\n",
         md_table(
             ["file", "kind", "rows", "sha256"],
             [[f.path.name, f.kind, f.rows, f.sha256[:16]] for f in results.files],
-        )
-    )
-    lines.append("## Machine\n")
-    lines.append("Machine the report was written on:\n")
-    lines.append(md_table(["property", "value"], [[k, v] for k, v in machine_info().items()]))
-    lines.append("Package versions:\n")
-    lines.append(md_table(["package", "version"], [[k, v] for k, v in package_versions().items()]))
+        ),
+        "## Machine\n",
+        "Machine the report was written on:\n",
+        md_table(["property", "value"], list(machine_info().items())),
+        "Package versions:\n",
+        md_table(["package", "version"], list(package_versions(PACKAGES).items())),
+    ]
     if not results.bench.empty:
         lines.extend(_bench_section(results, plot_files))
         profiles_used = sorted(set(results.bench["profile"].astype(str)))

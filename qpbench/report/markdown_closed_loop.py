@@ -66,36 +66,30 @@ CLOSED_LOOP_TABLE = (
 )
 
 
+#: The runs that failed their verdict.
+FAILED_TABLE = (
+    Column("scenario", "scenario", text=True),
+    Column("backend", "backend"),
+    Column("formulation", "formulation"),
+    Column("verdict", cell=_verdict),
+    Column("reasons", "verdict_reasons"),
+)
+
+
 def failed_verdicts(df: pd.DataFrame) -> list[str]:
     """The "Runs that failed their verdict" table (a line saying so when every run is ``ok``)."""
     bad = df[df["verdict"].astype(str).isin(BAD_VERDICTS)]
     if bad.empty:
         return ["Every run's verdict is ok.\n"]
-    out = ["### Runs that failed their verdict\n"]
-    out.append("Runs whose verdict is not ok, and why:\n")
-    out.append(
-        md_table(
-            ["scenario", "backend", "formulation", "verdict", "reasons"],
-            [
-                [
-                    str(r["scenario"]),
-                    str(r["backend"]),
-                    r["formulation"],
-                    _verdict(r),
-                    r["verdict_reasons"],
-                ]
-                for _, r in bad.iterrows()
-            ],
-        )
-    )
-    return out
+    heading = ["### Runs that failed their verdict\n", "Runs whose verdict is not ok, and why:\n"]
+    return heading + table(FAILED_TABLE, bad.to_dict("records"))
 
 
 def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[str]:
     """The closed loop's section: the failed verdicts, then per scenario its table and figures."""
     df = results.closed_loop
-    out = ["## Closed loop\n"]
-    out.append(
+    out = [
+        "## Closed loop\n",
         "Each scenario with each backend solving every tick's QP in the loop. Tracking and "
         "force errors are taken after the transient (t >= 2 s); `int v^2 dt` is the integral "
         "of the joint-velocity norm squared [rad^2/s]; solve times are per tick; the real-time "
@@ -116,9 +110,9 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
         "`max_p99_fraction_of_dt` of dt and at most `max_over_dt_share` of the ticks took "
         "longer than dt; judged on the measured call times (what a Python controller sees) "
         "and on the solver's own reported times (what a C or C++ controller calling the "
-        "solver sees; `unknown` when the backend reports none).\n"
-    )
-    out.extend(failed_verdicts(df))
+        "solver sees; `unknown` when the backend reports none).\n",
+        *failed_verdicts(df),
+    ]
     if df.apply(_overridden, axis=1).any():
         out.append(FOOTNOTE)
     kinds = df.get("key_points_kind", pd.Series("paper", index=df.index)).fillna("paper")
@@ -127,14 +121,15 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
     ):
         duration = pd.to_numeric(g["duration_s"], errors="coerce").max()
         shown = formulation if kind == "paper" else f"{formulation}, key points: {kind}"
-        out.append(f"### Scenario {scenario} ({shown})\n")
-        out.append(f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n")
+        out += [
+            f"### Scenario {scenario} ({shown})\n",
+            f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n",
+        ]
         out += table(
             (Column("backend", "backend", text=True), *CLOSED_LOOP_TABLE), g.to_dict("records")
         )
-        errors = g[~g["status"].isin(("ok", "budget"))]
-        for _, r in errors.iterrows():
-            out.append(f"- {r['backend']}: {fmt(r['error'])}\n")
+        errors = g[~g["status"].isin(("ok", "budget"))].to_dict("records")
+        out += [f"- {r['backend']}: {fmt(r['error'])}\n" for r in errors]
         for kind, alt in (
             ("", "closed loop"),
             ("v_", "joint velocities"),

@@ -1,19 +1,15 @@
 """PNG figures of a report; :func:`write_plots` returns them by key (used by :mod:`.markdown`).
 
 Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<group>_<scenario>``
-(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>`` (every
-backend's run, :mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities),
-``closed_loop_d_...`` (closest key point against ``d_safe``), ``snapshot_<role>_...`` (the
-arm, :mod:`.snapshots`). Closed-loop figures read each run's tick log, else its figure log
-(:func:`.snapshots.read_log`). Figures of a previous report this one no longer links are removed.
-"""
+(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>``
+(:mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities), ``closed_loop_d_...`` (closest
+key point against ``d_safe``), ``snapshot_<role>_...`` (:mod:`.snapshots`)."""
 
 from __future__ import annotations
 
 import logging
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -21,46 +17,20 @@ import pandas as pd
 from ..sim import log as tick_log
 from . import style, tables
 from .arm import closest_approach
-from .inputs import Results, scenario_key
+from .inputs import Results, numbers
 from .markdown_table import slug
 from .snapshots import read_log, write_snapshots
 
-if TYPE_CHECKING:
-    from collections.abc import Iterable
-
 log = logging.getLogger("qpbench.report")
-
-
-def _velocity_columns(df: pd.DataFrame) -> list[str]:
-    """Joint-velocity columns ``v_i`` of a tick log, in joint order."""
-    return tick_log.velocity_columns(tick_log.joint_count(df))
-
-
-def _columns_of_groups(backends, rows: int, width: float, height: float, **kw):
-    """``(fig, axes, groups)``: ``rows`` rows of panels, a column per group of backends."""
-    groups = style.groups(backends)
-    fig, axes = style.pyplot().subplots(
-        rows,
-        len(groups),
-        figsize=(width * len(groups) + 0.8, height * rows + 1.6),
-        squeeze=False,
-        layout="constrained",
-        **kw,
-    )
-    return fig, axes, groups
 
 
 def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None:
     """Dolan-More profile ``rho_s(tau)`` of runtime (log tau), one panel per group of backends."""
     taus, profiles = tables.performance_profile(rows)
-    fig, axes, groups = _columns_of_groups(profiles, 1, 4.6, 3.4, sharey=True)
+    fig, axes, groups = style.panels(profiles, 1, 4.6, 3.4, sharey=True)
     for ax, (title, group) in zip(axes[0], groups):
         for backend, lit in style.highlighted(profiles, group):
-            kw = (
-                style.look(backend).line(np.log(taus), lw=1.5, label=backend, zorder=3)
-                if lit
-                else dict(color=style.GREY, lw=0.8, zorder=1)
-            )
+            kw = style.series(backend, lit, np.log(taus), lw=1.5, grey_lw=0.8)
             ax.step(taus, profiles[backend], where="post", **kw)
         ax.set_xscale("log")
         ax.set_ylim(-0.02, 1.02)
@@ -74,27 +44,22 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
 
 def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
     """Solve time [us] and |optimality gap| against t [s], one column per group of backends."""
-    df = rows.copy()
-    df["t"] = pd.to_numeric(df["t"], errors="coerce")
+    df = rows.assign(t=numbers(rows, "t"))
     df = df[np.isfinite(df["t"])]
     if df.empty:
         return False
     series = {}
     for backend, g in df.sort_values("t").groupby("backend", sort=True):
-        times = pd.to_numeric(g[tables.RUNTIME], errors="coerce").to_numpy(float) * 1e6
-        gap = np.abs(pd.to_numeric(g["optimality_gap"], errors="coerce").to_numpy(float))
+        times = numbers(g, tables.RUNTIME) * 1e6
+        gap = np.abs(numbers(g, "optimality_gap"))
         gap = np.maximum(np.where(g["found"].to_numpy(bool), gap, np.nan), 1e-16)
         series[str(backend)] = (g["t"].to_numpy(float), times, gap)
-    fig, axes, groups = _columns_of_groups(series, 2, 4.6, 2.4, sharex=True, sharey="row")
+    fig, axes, groups = style.panels(series, 2, 4.6, 2.4, sharex=True, sharey="row")
     shown = [any(np.any(np.isfinite(s[k]) & (s[k] > 0)) for s in series.values()) for k in (1, 2)]
     for col, (group_title, group) in enumerate(groups):
         for backend, lit in style.highlighted(series, group):
             t, times, gap = series[backend]
-            kw = (
-                style.look(backend).line(t, lw=0.9, label=backend, zorder=3)
-                if lit
-                else dict(color=style.GREY, lw=0.6, zorder=1)
-            )
+            kw = style.series(backend, lit, t, lw=0.9, grey_lw=0.6)
             axes[0, col].plot(t, times, **kw)
             axes[1, col].plot(t, gap, **kw)
         for ax, ok in zip(axes[:, col], shown):
@@ -126,15 +91,15 @@ def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     return logs, d_safe
 
 
-def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
+def velocity_plot(logs: dict, title: str, path: Path) -> bool:
     """Joint velocities [rad/s] against t, one small panel per backend (titled in its colour),
-    ``columns`` panels a row; one colour per joint (viridis, not a backend's)."""
-    with_cols = {b: d for b, d in logs.items() if _velocity_columns(d)}
-    if not with_cols:
+    five panels a row; one colour per joint (viridis, not a backend's)."""
+    joints = {b: tick_log.velocity_columns(tick_log.joint_count(d)) for b, d in logs.items()}
+    names = [b for _, group in style.groups(logs, max_series=len(logs)) for b in group if joints[b]]
+    if not names:
         return False
     plt = style.pyplot()
-    names = [b for _, group in style.groups(with_cols, max_series=len(with_cols)) for b in group]
-    ncol = min(columns, len(names))
+    ncol = min(5, len(names))
     nrow = -(-len(names) // ncol)
     fig, axes = plt.subplots(
         nrow,
@@ -147,8 +112,7 @@ def velocity_plot(logs: dict, title: str, path: Path, columns: int = 5) -> bool:
     for ax in axes.flat[len(names) :]:
         ax.set_visible(False)
     for ax, backend in zip(axes.flat, names):
-        d = with_cols[backend]
-        cols = _velocity_columns(d)
+        d, cols = logs[backend], joints[backend]
         joint_colours = plt.cm.viridis(np.linspace(0.0, 0.85, len(cols)))
         for c, colour in zip(cols, joint_colours):
             ax.plot(
@@ -179,7 +143,7 @@ def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> b
     logs = {b: d for b, d in logs.items() if has_distance(d)}
     if not logs:
         return False
-    fig, axes, groups = _columns_of_groups(logs, 1, 4.6, 3.6, sharey=True)
+    fig, axes, groups = style.panels(logs, 1, 4.6, 3.6, sharey=True)
     lowest = min(float(np.nanmin(d[tick_log.D_MIN].to_numpy(float))) for d in logs.values())
     for ax, (group_title, group) in zip(axes[0], groups):
         for backend, lit in style.highlighted(logs, group):
@@ -224,63 +188,60 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
 
 
 def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
-    """Write every figure of a report into ``folder``; return key -> path relative to ``relative_to``."""
+    """Write every figure of a report into ``folder``; return key -> path relative to
+    ``relative_to``. The figures of a previous report there (named as :data:`FIGURE_PATTERN`)
+    that this one does not link are removed."""
+    from .loop_figure import closed_loop_figure
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    files: dict[str, str] = {}
+    written: dict[str, Path] = {}
 
-    def _rel(p: Path) -> str:
-        return Path(p).resolve().relative_to(Path(relative_to).resolve()).as_posix()
+    def draw(key: str, figure) -> None:
+        """``figure(path)`` draws the figure ``key`` (``False``: nothing to draw)."""
+        if figure(folder / f"{key}.png") is not False:
+            written[key] = folder / f"{key}.png"
 
     for label, _tol, rows in tables.bench_groups(results.bench):
-        key = f"perf_profile_{slug(label)}"
-        performance_profile_plot(rows, label, folder / f"{key}.png")
-        files[key] = _rel(folder / f"{key}.png")
-        for scenario, g in rows.groupby(rows["scenario"].map(scenario_key), sort=True):
-            key = f"per_tick_{slug(label)}_{slug(scenario)}"
-            if per_tick_plot(g, f"{scenario} ({label})", folder / f"{key}.png"):
-                files[key] = _rel(folder / f"{key}.png")
+        draw(f"perf_profile_{slug(label)}", lambda p: performance_profile_plot(rows, label, p))
+        for scenario, g in rows.groupby("scenario", sort=True):
+            title = f"{scenario} ({label})"
+            draw(f"per_tick_{slug(label)}_{slug(scenario)}", lambda p: per_tick_plot(g, title, p))
     df = results.closed_loop
-    if not df.empty:
-        from .loop_figure import closed_loop_figure
-
-        for (scenario, formulation), g in df.groupby(
+    groups = (
+        []
+        if df.empty
+        else df.groupby(
             [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
-        ):
-            logs, d_safe = _logs(g)
-            name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
-            if logs:
-                path = folder / f"closed_loop_{name}.png"
-                closed_loop_figure(logs, path, title=f"Closed loop, {where}", d_safe=d_safe)
-                files[f"closed_loop_{name}"] = _rel(path)
-                path = folder / f"closed_loop_v_{name}.png"
-                if velocity_plot(logs, f"Joint velocities, {where}", path):
-                    files[f"closed_loop_v_{name}"] = _rel(path)
-                path = folder / f"closed_loop_d_{name}.png"
-                title = f"Closest key point to an obstacle, {where}"
-                if distance_plot(logs, title, path, d_safe):
-                    files[f"closed_loop_d_{name}"] = _rel(path)
-            snapshots = write_snapshots(g, scenario, formulation, folder)
-            files.update({k: _rel(p) for k, p in snapshots.items()})
-    remove_unlinked(folder, files.values(), relative_to)
-    return files
+        )
+    )
+    for (scenario, formulation), g in groups:
+        logs, d_safe = _logs(g)
+        name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
+        if logs:
+            title = f"Closed loop, {where}"
+            draw(
+                f"closed_loop_{name}",
+                lambda p: closed_loop_figure(logs, p, title=title, d_safe=d_safe),
+            )
+            title = f"Joint velocities, {where}"
+            draw(f"closed_loop_v_{name}", lambda p: velocity_plot(logs, title, p))
+            title = f"Closest key point to an obstacle, {where}"
+            draw(f"closed_loop_d_{name}", lambda p: distance_plot(logs, title, p, d_safe))
+        written.update(write_snapshots(g, scenario, formulation, folder))
+    keep = {p.resolve() for p in written.values()}
+    removed = [
+        p
+        for p in sorted(folder.iterdir())
+        if p.is_file() and FIGURE_PATTERN.fullmatch(p.name) and p.resolve() not in keep
+    ]
+    for p in removed:
+        p.unlink(missing_ok=True)
+    if removed:
+        log.info("%s: removed %d figures no longer in the report", folder, len(removed))
+    relative = Path(relative_to).resolve()
+    return {k: p.resolve().relative_to(relative).as_posix() for k, p in written.items()}
 
 
 #: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).
 FIGURE_PATTERN = re.compile(r"(perf_profile|per_tick|closed_loop|snapshot)_[A-Za-z0-9_.+-]*\.png")
-
-
-def remove_unlinked(
-    folder: str | Path, linked: Iterable[str], relative_to: str | Path
-) -> list[Path]:
-    """Remove (and return) the figures of a previous report in ``folder`` the new one does not
-    link; only files named as :func:`write_plots` names them (:data:`FIGURE_PATTERN`)."""
-    keep = {(Path(relative_to) / p).resolve() for p in linked}
-    removed = []
-    for path in sorted(Path(folder).iterdir()):
-        if path.is_file() and FIGURE_PATTERN.fullmatch(path.name) and path.resolve() not in keep:
-            path.unlink(missing_ok=True)
-            removed.append(path)
-    if removed:
-        log.info("%s: removed %d figures no longer in the report", folder, len(removed))
-    return removed

@@ -1,13 +1,9 @@
 """The answer, stated: which backends to trust in the loop, from a closed-loop table.
 
 A backend is *recommended* for a scenario when every run of it there has verdict ``ok``
-(:mod:`qpbench.sim.verdict`) and was real time (``realtime == "yes"``), overall when it is in
-every scenario; ranked by p99 call time (``solve_time_p99_s``, the largest over its runs), with
-the solver's own p99 beside. Every other backend is listed with its reasons, each naming the
-scenario. :func:`recommend` decides, :func:`render` writes it (padded Markdown tables that read
-aligned on a terminal too), :func:`opening` puts it atop ``report.md``, :func:`shortfalls`
-gives the line of a ``--strict`` exit.
-"""
+(:mod:`qpbench.sim.verdict`) and was real time, overall when it is in every scenario; ranked by
+p99 call time (``solve_time_p99_s``, the largest over its runs), the solver's own p99 beside.
+Every other backend is listed with its reasons, each naming the scenario."""
 
 from __future__ import annotations
 
@@ -17,19 +13,6 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from .markdown_table import US, md_table
-
-__all__ = [
-    "HOW_TO_READ",
-    "MAX_REASONS",
-    "Pick",
-    "Recommendation",
-    "Scope",
-    "opening",
-    "read_runs",
-    "recommend",
-    "render",
-    "shortfalls",
-]
 
 #: Reasons shown per backend in the overall list; the rest are counted ("and 3 more").
 MAX_REASONS = 2
@@ -92,32 +75,22 @@ class Recommendation:
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
     """The closed-loop (or sweep) table with the columns the answer reads; a table written
     before verdicts and real time were judged reads as no verdict, real time ``unknown``."""
-    table = table.copy()
-    for column, missing in (
-        ("verdict", ""),
-        ("realtime", "unknown"),
-        ("realtime_reason", ""),
-        ("solver_time_p99_s", math.nan),
-        ("verdict_reasons", ""),
-        ("error", ""),
-        ("simulated_s", math.nan),
-    ):
-        if column not in table.columns:
-            table[column] = missing
-    return table
+    missing = {
+        "verdict": "",
+        "realtime": "unknown",
+        "realtime_reason": "",
+        "solver_time_p99_s": math.nan,
+        "verdict_reasons": "",
+        "error": "",
+        "simulated_s": math.nan,
+    }
+    return table.assign(**{c: v for c, v in missing.items() if c not in table.columns})
 
 
 def _text(value: object) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return ""
     return str(value).strip()
-
-
-def _number(value: object) -> float:
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def _first(reasons: object) -> str:
@@ -137,7 +110,7 @@ def _reasons(row: dict, place: str) -> list[str]:
     if status == "skipped":
         return [f"skipped in {place}: {_text(row.get('error')) or 'not run'}"]
     if verdict == "incomplete":
-        simulated = _number(row.get("simulated_s"))
+        simulated = float(pd.to_numeric(row["simulated_s"], errors="coerce"))
         how = [status] if status not in ("ok", "budget", "") else []
         if math.isfinite(simulated):
             how.append(f"stopped at {simulated:.3g} s")

@@ -12,9 +12,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .inputs import numbers
 from .markdown_table import slug
-
-__all__ = ["ROLES", "log_file", "read_log", "snapshot_runs", "write_snapshots"]
 
 log = logging.getLogger("qpbench.report")
 
@@ -57,32 +56,19 @@ def _family(backend: str) -> str:
         return "recurrent neural network" if backend.startswith("rnn") else ""
 
 
-def _is_network(backend: str) -> bool:
-    return "neural network" in _family(backend)
-
-
-def _is_exact(backend: str) -> bool:
-    family = _family(backend)
-    return not ("neural network" in family or family.startswith("pseudo-inverse"))
-
-
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     """Of one scenario's runs (one formulation), the row of each role that has one."""
     runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
     chosen: dict[str, pd.Series] = {}
-    whole = (
-        pd.to_numeric(runs["simulated_s"], errors="coerce")
-        >= pd.to_numeric(runs["duration_s"], errors="coerce") - 1e-9
-    )
-    backends = [str(b) for b in runs["backend"]]
-    is_exact = np.array([_is_exact(b) for b in backends], dtype=bool)
-    exact = runs[
-        is_exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole.to_numpy(bool)
-    ]
+    whole = numbers(runs, "simulated_s") >= numbers(runs, "duration_s") - 1e-9
+    families = [_family(str(b)) for b in runs["backend"]]
+    network = np.array(["neural network" in f for f in families], dtype=bool)
+    exact = ~network & ~np.array([f.startswith("pseudo-inverse") for f in families], dtype=bool)
+    exact = runs[exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole]
     if not exact.empty:
-        p50 = pd.to_numeric(exact["solve_time_median_s"], errors="coerce").fillna(np.inf)
-        chosen["exact"] = exact.iloc[int(np.argmin(p50.to_numpy(float)))]
-    networks = runs[np.array([_is_network(b) for b in backends], dtype=bool)]
+        p50 = numbers(exact, "solve_time_median_s")
+        chosen["exact"] = exact.iloc[int(np.argmin(np.where(np.isnan(p50), np.inf, p50)))]
+    networks = runs[network]
     if not networks.empty:
         rank = [
             NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)
@@ -96,6 +82,7 @@ def write_snapshots(
     runs: pd.DataFrame, scenario: str, formulation: str, folder: Path
 ) -> dict[str, Path]:
     """Draw the snapshots of one scenario's runs into ``folder``; return key -> file."""
+    from ..sim.log import theta_columns
     from ..sim.scenario import load_scenario
     from .arm import draw_snapshot
 
@@ -110,9 +97,7 @@ def write_snapshots(
         return files
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
-        if frame is None or not {f"theta_{i}" for i in range(scene.make_arm().n)} <= set(
-            frame.columns
-        ):
+        if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
             continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         path = folder / f"{key}.png"

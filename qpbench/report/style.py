@@ -1,10 +1,9 @@
 """One look per backend, the same in every figure, and the one place figures are saved.
 
-A backend's colour, marker and line style come from :func:`look`: a fixed table
-(:data:`LOOKS`) for the backends this package knows, else a pick from :data:`SPARE` by a stable
-hash of the name. At most :data:`MAX_SERIES` backends are highlighted in a panel: backends are
-split into :func:`groups`, one column of panels each, the others grey behind
-(:func:`highlighted`); legends sit outside the axes; :func:`save` writes every figure.
+A backend's look (:func:`look`) is fixed for the backends this package knows (:data:`LOOKS`),
+else picked from :data:`SPARE` by a stable hash of its name. At most :data:`MAX_SERIES` backends
+are highlighted in a panel: :func:`groups` splits them, one column of panels each
+(:func:`panels`), the others grey behind (:func:`highlighted`, :func:`series`).
 """
 
 from __future__ import annotations
@@ -17,21 +16,6 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
-
-__all__ = [
-    "GREY",
-    "LOOKS",
-    "MAX_HEIGHT_PX",
-    "MAX_SERIES",
-    "Look",
-    "groups",
-    "highlighted",
-    "legend_above",
-    "legend_beside",
-    "look",
-    "pyplot",
-    "save",
-]
 
 log = logging.getLogger("qpbench.report")
 
@@ -194,7 +178,6 @@ def groups(backends: Iterable[str], max_series: int = MAX_SERIES) -> list[tuple[
         parts = -(-len(members) // max_series)
         for p in range(parts):
             chunk = members[p::parts] if parts > 1 else members
-            chunk = sorted(chunk, key=_order)
             out.append((f"{title} ({p + 1}/{parts})" if parts > 1 else title, chunk))
     return out
 
@@ -210,27 +193,52 @@ def highlighted(everyone: Iterable[str], group: Iterable[str]) -> Iterator[tuple
         yield b, True
 
 
+def series(backend: str, lit: bool, x, lw: float, grey_lw: float) -> dict:
+    """Keyword arguments of ``Axes.plot`` of one backend's series over ``x``: in its look and
+    named in the legend when ``lit``, else grey behind the others."""
+    if lit:
+        return look(backend).line(x, lw=lw, label=backend, zorder=3)
+    return dict(color=GREY, lw=grey_lw, zorder=1)
+
+
+def panels(backends, rows: int, width: float, height: float, pad=(0.8, 1.6), **kw):
+    """``(fig, axes, groups)``: ``rows`` rows of panels, a column per group of backends
+    (:func:`groups`), each ``width`` by ``height`` [in] plus ``pad`` (width, height) [in]."""
+    groups_ = groups(backends)
+    fig, axes = pyplot().subplots(
+        rows,
+        len(groups_),
+        figsize=(width * len(groups_) + pad[0], height * rows + pad[1]),
+        squeeze=False,
+        layout="constrained",
+        **kw,
+    )
+    return fig, axes, groups_
+
+
+def entries(axes, skip=()) -> tuple[list, list]:
+    """The legend handles and labels of every axes of ``axes`` in turn, but those labelled as
+    one of ``skip``."""
+    pairs = [
+        (h, t) for ax in axes for h, t in zip(*ax.get_legend_handles_labels()) if t not in skip
+    ]
+    return [h for h, _ in pairs], [t for _, t in pairs]
+
+
 def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
     """A legend above ``ax``, outside the data (``handles``/``labels``: the axes' own by default)."""
     where = dict(loc="lower left", bbox_to_anchor=(0.0, 1.02, 1.0, 0.2), mode="expand", ncol=ncol)
-    return _legend_outside(ax, handles, labels, where, kw.pop("fontsize", 7.5), kw)
+    return legend_beside(ax, handles, labels, **({"fontsize": 7.5} | where | kw))
 
 
 def legend_beside(ax, handles=None, labels=None, **kw):
-    """A legend to the right of ``ax``, outside the data."""
-    where = dict(loc="upper left", bbox_to_anchor=(1.02, 1.0))
-    return _legend_outside(ax, handles, labels, where, kw.pop("fontsize", 8), kw)
-
-
-def _legend_outside(ax, handles, labels, where: dict, fontsize: float, kw: dict):
-    """``ax``'s legend at ``where`` (outside the data), frameless; ``None`` without entries."""
+    """A legend to the right of ``ax``, outside the data, frameless; ``None`` without entries."""
     if handles is None:
         handles, labels = ax.get_legend_handles_labels()
     if not handles:
         return None
-    return ax.legend(
-        handles, labels, fontsize=fontsize, frameon=False, borderaxespad=0.0, **where, **kw
-    )
+    where = dict(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
+    return ax.legend(handles, labels, frameon=False, borderaxespad=0.0, **(where | kw))
 
 
 def pyplot():
@@ -247,11 +255,11 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     """Write ``fig`` to ``path`` atomically (format from the suffix) and close it.
 
     A PNG taller than :data:`MAX_HEIGHT_PX` is written again at the resolution that fits, with
-    a warning (a design fault; the figures' test fails on it). A constrained layout without
-    fixed-aspect axes is written as it is; any other in its tight box (equal axes need it: the
-    layout places a legend beside them before the aspect shrinks them).
+    a warning. A constrained layout without fixed-aspect axes is written as it is; any other in
+    its tight box (the layout places a legend beside equal axes before the aspect shrinks them).
     """
     from matplotlib.layout_engine import ConstrainedLayoutEngine
+    from PIL import Image
 
     from ..atomic import atomic_path
 
@@ -261,10 +269,12 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     free_aspect = all(ax.get_aspect() == "auto" for ax in fig.axes)
     kw.setdefault("bbox_inches", None if laid_out and free_aspect else "tight")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:  # never a half-written figure under the final name
             fig.savefig(tmp, format=fmt, dpi=dpi, **kw)
-            height = _png_height(tmp) if fmt == "png" else 0
+            height = 0
+            if fmt == "png":
+                with Image.open(tmp) as img:
+                    height = img.size[1]
             if height > MAX_HEIGHT_PX:
                 fitted = dpi * (MAX_HEIGHT_PX - 1) / height
                 log.warning(
@@ -279,11 +289,3 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     finally:
         pyplot().close(fig)
     return path
-
-
-def _png_height(path: Path) -> int:
-    """Height of a PNG file [px]."""
-    from PIL import Image  # matplotlib's own dependency
-
-    with Image.open(path) as img:
-        return img.size[1]

@@ -5,17 +5,13 @@
   (:func:`qpbenchmark.shgeom.shgeom`). A row without a found solution counts with the
   *not-found value*: the profile's time limit for runtime, its tolerance for residuals and
   gaps; a missing value (NaN) counts as not found, an infinite residual (no duals) stays
-  infinite. One departure, as our sets hold infeasible problems: a backend that reports the
-  infeasibility the reference found answered right and its runtime counts as measured.
-  Residuals and gaps are floored at their tolerance (over-accuracy neither rewarded nor
-  penalised);
+  infinite. A backend that reports the infeasibility the reference found answered right and
+  its runtime counts as measured. Residuals and gaps are floored at their tolerance;
 - ratios to the best: each backend's mean over the smallest. A backend that never found a
   solution would score best on residuals and gaps (the floor); it gets NaN there instead.
 
 Runtime is ``wall_time_min_s`` [s]: the harness's timing of the backend call and the reading
-of its answer, the minimum over the ``repeat`` timed solves. With ``sh = 10`` s the mean of
-microsecond runtimes is practically the arithmetic mean, dominated by failures: read it with
-the success rate and the per-scenario percentiles.
+of its answer, the minimum over the ``repeat`` timed solves.
 """
 
 from __future__ import annotations
@@ -29,7 +25,7 @@ import pandas as pd
 from ..exceptions import InputError
 from ..profiles import Tolerance, get_profile
 from ..statuses import CERTIFIED_INFEASIBLE
-from .inputs import group_label, scenario_key
+from .inputs import group_label, numbers, scenario_key
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -52,11 +48,27 @@ SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
 }
 
 
+def _percentile(values: np.ndarray, q: float) -> float:
+    return float(np.percentile(values, q)) if values.size else math.nan
+
+
+def _ratio_to_best(values: pd.Series) -> pd.Series | float:
+    """``values`` over the smallest finite positive one (NaN without one)."""
+    best = values.replace([np.inf], np.nan).min()
+    return values / best if best and best > 0 else math.nan
+
+
+def _per_backend(rows: pd.DataFrame, record) -> pd.DataFrame:
+    """One row per backend (sorted) of the dicts ``record(its rows)`` (``None``: no row)."""
+    out = {b: record(g) for b, g in rows.groupby("backend", sort=True)}
+    return pd.DataFrame.from_dict({b: r for b, r in out.items() if r is not None}, orient="index")
+
+
 def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.ndarray:
     """The values entering the shifted geometric mean of ``metric`` (see module doc)."""
     column, tol_attr, floored = SHGEOM_METRICS[metric]
     not_found = float(getattr(tolerance, tol_attr))
-    values = pd.to_numeric(df[column], errors="coerce").to_numpy(dtype=float)
+    values = numbers(df, column)
     if metric != "runtime":
         values = np.abs(values)
     answered = df["found"].to_numpy(dtype=bool)
@@ -90,13 +102,12 @@ def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataF
     """Yield ``(label, tolerance, rows)`` per (profile, mode) of the bench rows."""
     if bench.empty:
         return
-    df = bench.assign(mode=bench["mode"].fillna(""))
-    for (profile, mode), rows in df.groupby(["profile", "mode"], sort=True):
+    for (profile, mode), rows in bench.groupby(["profile", "mode"], sort=True):
         try:
             tolerance = get_profile(str(profile)).tolerance
         except InputError as exc:
             raise InputError(exc.message, path=rows["source"].iloc[0], key="profile") from None
-        yield group_label(profile, mode or None), tolerance, rows
+        yield group_label(profile, mode), tolerance, rows
 
 
 def isolated_rows(rows: pd.DataFrame) -> dict[str, int]:
@@ -109,13 +120,12 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
     """Per backend: success rate [%] and the shifted geometric mean (``<metric>``, runtime [s])
     and its ratio to the best (``<metric>_ratio``) of each metric of :data:`SHGEOM_METRICS`.
 
-    ``runtime_feasible``: the runtime mean over the problems whose reference is optimal only
-    (so the paper formulation's infeasible first ticks do not decide the ranking);
+    ``runtime_feasible``: the runtime mean over the problems whose reference is optimal only;
     ``overhead_median_s``: median of wall time minus solver-reported time, NaN when fewer than
-    half of the rows report a solver time.
+    half of the rows report a solver time (a median of a few would not describe the backend).
     """
-    out = {}
-    for backend, g in rows.groupby("backend", sort=True):
+
+    def record(g: pd.DataFrame) -> dict:
         found = int(g["found"].astype(bool).sum())
         rec = {
             "problems": len(g),
@@ -124,25 +134,19 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
             "found": found,
             "isolated": int(g["isolated"].sum()),
         }
-        for metric in SHGEOM_METRICS:
-            if SHGEOM_METRICS[metric][2] and not found:
-                rec[metric] = math.nan
-            else:
-                rec[metric] = shgeom_of(metric_values(g, metric, tolerance))
+        for metric, (_, _, floored) in SHGEOM_METRICS.items():
+            values = metric_values(g, metric, tolerance)
+            rec[metric] = math.nan if floored and not found else shgeom_of(values)
         feasible = g[g["reference_status"].astype(str) == "optimal"]
         rec["runtime_feasible"] = shgeom_of(metric_values(feasible, "runtime", tolerance))
-        diff = pd.to_numeric(g[RUNTIME], errors="coerce") - pd.to_numeric(
-            g["solver_time_s"], errors="coerce"
-        )
+        diff = numbers(g, RUNTIME) - numbers(g, "solver_time_s")
         diff = diff[np.isfinite(diff)]
-        # Only when most solves report a time: a median over a few rows (e.g. Clarabel, which
-        # reports its time only when freshly built, set-up included) would not describe it.
-        rec["overhead_median_s"] = float(diff.median()) if len(diff) >= 0.5 * len(g) else math.nan
-        out[backend] = rec
-    df = pd.DataFrame.from_dict(out, orient="index")
+        rec["overhead_median_s"] = float(np.median(diff)) if len(diff) >= 0.5 * len(g) else math.nan
+        return rec
+
+    df = _per_backend(rows, record)
     for metric in (*SHGEOM_METRICS, "runtime_feasible"):
-        best = df[metric].replace([np.inf], np.nan).min()
-        df[f"{metric}_ratio"] = df[metric] / best if best and best > 0 else math.nan
+        df[f"{metric}_ratio"] = _ratio_to_best(df[metric])
     return df
 
 
@@ -151,22 +155,25 @@ def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
     ``p99`` over the rows with an ``x`` (``with_x``), and ``feasible_max``, ``feasible_p99`` over
     those whose reference is optimal (on an infeasible problem every answer violates something).
     """
-    out = {}
-    for backend, g in rows.groupby("backend", sort=True):
-        v = pd.to_numeric(g["constraint_violation"], errors="coerce").to_numpy(dtype=float)
-        ok = ~np.isnan(v)
-        feasible = (g["reference_status"].astype(str) == "optimal").to_numpy()
-        vf = v[ok & feasible]
-        out[backend] = {
+
+    def record(g: pd.DataFrame) -> dict:
+        v = numbers(g, "constraint_violation")
+        v = v[~np.isnan(v)]
+        feasible = numbers(
+            g[g["reference_status"].astype(str) == "optimal"], "constraint_violation"
+        )
+        vf = feasible[~np.isnan(feasible)]
+        return {
             "problems": len(g),
             "found": int(g["found"].astype(bool).sum()),
-            "with_x": int(ok.sum()),
-            "max": float(v[ok].max()) if ok.any() else math.nan,
-            "p99": float(np.percentile(v[ok], 99)) if ok.any() else math.nan,
+            "with_x": len(v),
+            "max": float(v.max()) if v.size else math.nan,
+            "p99": _percentile(v, 99),
             "feasible_max": float(vf.max()) if vf.size else math.nan,
-            "feasible_p99": float(np.percentile(vf, 99)) if vf.size else math.nan,
+            "feasible_p99": _percentile(vf, 99),
         }
-    return pd.DataFrame.from_dict(out, orient="index")
+
+    return _per_backend(rows, record)
 
 
 def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
@@ -175,25 +182,19 @@ def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
     C++ library pays) and their difference per row (``around_*``) [s]. A backend reporting no
     time of its own has no row.
     """
-    out = {}
-    for backend, g in rows.groupby("backend", sort=True):
-        call = pd.to_numeric(g[RUNTIME], errors="coerce").to_numpy(dtype=float)
-        solver = pd.to_numeric(g["solver_time_s"], errors="coerce").to_numpy(dtype=float)
+
+    def record(g: pd.DataFrame) -> dict | None:
+        call, solver = numbers(g, RUNTIME), numbers(g, "solver_time_s")
         ok = np.isfinite(call) & np.isfinite(solver)
         if not ok.any():
-            continue
-        call, solver = call[ok], solver[ok]
-        around = call - solver
-        out[backend] = {
-            "rows": int(ok.sum()),
-            "call_p50": float(np.percentile(call, 50)),
-            "call_p99": float(np.percentile(call, 99)),
-            "solver_p50": float(np.percentile(solver, 50)),
-            "solver_p99": float(np.percentile(solver, 99)),
-            "around_p50": float(np.percentile(around, 50)),
-            "around_p99": float(np.percentile(around, 99)),
-        }
-    return pd.DataFrame.from_dict(out, orient="index")
+            return None
+        times = {"call": call[ok], "solver": solver[ok], "around": call[ok] - solver[ok]}
+        rec = {"rows": int(ok.sum())}
+        for name, values in times.items():
+            rec |= {f"{name}_p{q}": _percentile(values, q) for q in (50, 99)}
+        return rec
+
+    return _per_backend(rows, record)
 
 
 def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.DataFrame]:
@@ -201,27 +202,26 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
     ratio to the scenario's best, runtime percentiles over every row, found or not (the time a
     controller waits) [s], and the largest |optimality gap| of a found solution.
     """
-    df = rows.assign(_scenario=rows["scenario"].map(scenario_key))
+
+    def record(b: pd.DataFrame) -> dict:
+        t = numbers(b, RUNTIME)
+        t = t[np.isfinite(t)]
+        gap = np.abs(numbers(b, "optimality_gap"))
+        gap = gap[b["found"].to_numpy(dtype=bool) & np.isfinite(gap)]
+        return {
+            "problems": len(b),
+            "success_rate": 100.0 * b["success"].astype(float).mean(),
+            "runtime_shgeom": shgeom_of(metric_values(b, "runtime", tolerance)),
+            "runtime_p50_s": _percentile(t, 50),
+            "runtime_p99_s": _percentile(t, 99),
+            "runtime_max_s": float(t.max()) if len(t) else math.nan,
+            "optimality_gap_max": float(gap.max()) if len(gap) else math.nan,
+        }
+
     tables = {}
-    for scenario, g in df.groupby("_scenario", sort=True):
-        rec = {}
-        for backend, b in g.groupby("backend", sort=True):
-            t = pd.to_numeric(b[RUNTIME], errors="coerce").to_numpy(dtype=float)
-            t = t[np.isfinite(t)]
-            gap = np.abs(pd.to_numeric(b["optimality_gap"], errors="coerce").to_numpy(dtype=float))
-            gap = gap[b["found"].to_numpy(dtype=bool) & np.isfinite(gap)]
-            rec[backend] = {
-                "problems": len(b),
-                "success_rate": 100.0 * b["success"].astype(float).mean(),
-                "runtime_shgeom": shgeom_of(metric_values(b, "runtime", tolerance)),
-                "runtime_p50_s": float(np.percentile(t, 50)) if len(t) else math.nan,
-                "runtime_p99_s": float(np.percentile(t, 99)) if len(t) else math.nan,
-                "runtime_max_s": float(t.max()) if len(t) else math.nan,
-                "optimality_gap_max": float(gap.max()) if len(gap) else math.nan,
-            }
-        table = pd.DataFrame.from_dict(rec, orient="index")
-        best = table["runtime_shgeom"].replace([np.inf], np.nan).min()
-        table["runtime_ratio"] = table["runtime_shgeom"] / best if best and best > 0 else math.nan
+    for scenario, g in rows.groupby("scenario", sort=True):
+        table = _per_backend(g, record)
+        table["runtime_ratio"] = _ratio_to_best(table["runtime_shgeom"])
         tables[scenario] = table
     return tables
 

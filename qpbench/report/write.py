@@ -1,8 +1,4 @@
-"""The write of every report folder (:func:`publish`), and ``report.md`` with its figures.
-
-:mod:`.inputs` reads the CSVs, :mod:`.plots` draws the figures, :mod:`.markdown` renders the
-text (neither of the last two imports the other).
-"""
+"""The write of every report folder (:func:`publish`), and ``report.md`` with its figures."""
 
 from __future__ import annotations
 
@@ -14,15 +10,12 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import pandas as pd
-
-from .inputs import Results, read_results
+from .inputs import read_results
 from .markdown import render
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-__all__ = ["publish", "write_report"]
 
 log = logging.getLogger("qpbench.report")
 
@@ -100,11 +93,7 @@ def write_report(
 
     def render_all(out: Path) -> str:
         started = time.perf_counter()
-        results = (
-            read_results(paths, prefer=prefer)
-            if paths or sections is None
-            else Results(pd.DataFrame(), pd.DataFrame())
-        )
+        results = read_results(paths, prefer=prefer)
         log.info(
             "report: %d bench rows and %d closed-loop runs read in %.1f s",
             len(results.bench),
@@ -115,7 +104,6 @@ def write_report(
         if plots:
             from .plots import write_plots
 
-            (out / "plots").mkdir(parents=True, exist_ok=True)
             with figure_progress(out / "plots"):
                 plot_files = write_plots(results, out / "plots", relative_to=out)
         text = render(results, plot_files)
