@@ -71,8 +71,6 @@ struct Handle {
     bool initialised;
     Handle(int nV_, int nC_, double* d_, int* iv_)
         : qp(nV_, nC_), nV(nV_), nC(nC_), d(d_), iv(iv_), initialised(false) {}
-    Handle(const Handle& o, double* d_, int* iv_)
-        : qp(o.qp), options(o.options), nV(o.nV), nC(o.nC), d(d_), iv(iv_), initialised(o.initialised) {}
 };
 inline double now() { timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
 int set_option(Options& o, const char* name, double v) {
@@ -103,16 +101,6 @@ int qpb_set_option(void* p, const char* name, double v) {
 }
 int qpb_known_option(const char* name) { Options o; return set_option(o, name, 0.0) == 0; }
 void qpb_free(void* p) { delete static_cast<Handle*>(p); }
-void* qpb_clone(const void* p, double* d, int* iv) {
-    return new (std::nothrow) Handle(*static_cast<const Handle*>(p), d, iv);
-}
-void qpb_assign(void* dst, const void* src) {
-    Handle* a = static_cast<Handle*>(dst);
-    const Handle* b = static_cast<const Handle*>(src);
-    a->qp = b->qp;
-    a->options = b->options;
-    a->initialised = b->initialised;
-}
 const char* qpb_message(int rv) {
     return MessageHandling::getErrorCodeMessage((returnValue) rv);
 }
@@ -248,8 +236,6 @@ def load() -> ctypes.CDLL:
         ip,
     )
     lib.qpb_free.argtypes, lib.qpb_free.restype = [vp], None
-    lib.qpb_clone.argtypes, lib.qpb_clone.restype = [vp, vp, vp], vp
-    lib.qpb_assign.argtypes, lib.qpb_assign.restype = [vp, vp], None
     lib.qpb_message.argtypes, lib.qpb_message.restype = [ip], ctypes.c_char_p
     lib.qpb_solve.argtypes, lib.qpb_solve.restype = [vp], ip
     LOADED.append(lib)
@@ -267,7 +253,6 @@ class Workspace:
         options: dict[str, float],
         nwsr: int,
         time_limit: float,
-        clone_of: int | None = None,
     ) -> None:
         n, me, mi, box = self.key = key
         m = me + mi
@@ -298,16 +283,12 @@ class Workspace:
         self.s[1] = time_limit
         self.iv[0] = nwsr
         self._free = lib.qpb_free
-        if clone_of is None:
-            handle = lib.qpb_new(n, m, d.ctypes.data, self.iv.ctypes.data, preset)
-        else:
-            handle = lib.qpb_clone(clone_of, d.ctypes.data, self.iv.ctypes.data)
+        handle = lib.qpb_new(n, m, d.ctypes.data, self.iv.ctypes.data, preset)
         if not handle:
             raise MemoryError("qpoases: cannot allocate the SQProblem")
         self.handle = handle
-        if clone_of is None:
-            for name, value in options.items():
-                lib.qpb_set_option(handle, name.encode(), float(value))
+        for name, value in options.items():
+            lib.qpb_set_option(handle, name.encode(), float(value))
 
     def __del__(self) -> None:
         handle = getattr(self, "handle", None)

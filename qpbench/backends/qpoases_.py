@@ -15,7 +15,7 @@ only when the sizes change: a copy into a buffer of another shape raises); ``x``
 multipliers come out of one copy (:class:`QpoasesSolution`). The first tick of a shape calls
 ``init()``, the next ones ``hotstart()`` from the previous working set; a status other than
 optimal leaves qpOASES mid-homotopy, so the next tick calls ``init()``. ``warm_start`` is
-ignored. ``get_state``/``set_state`` copy the whole ``SQProblem``.
+ignored.
 
 Settings. ``max_iter`` -> ``nWSR``, ``time_limit`` -> qpOASES' CPU-time limit [s];
 ``eps_abs``/``eps_rel`` are not used (an active-set method ends on the exact solution of its
@@ -148,37 +148,6 @@ class QpoasesBackend(Backend):
 
     def reset(self) -> None:
         self._ws = None
-
-    def get_state(self) -> Workspace | None:
-        """A deep copy of the ``SQProblem`` (working set, factorisations); None before a tick."""
-        return None if self._ws is None else self._copy(self._ws)
-
-    def set_state(self, state: Workspace | None) -> None:
-        if state is None:
-            self._ws = None
-        elif self._ws is not None and self._ws.key == state.key:
-            self._lib.qpb_assign(self._ws.handle, state.handle)
-        else:
-            self._ws = self._copy(state)
-
-    def _copy(self, ws: Workspace) -> Workspace:
-        lib, preset, nwsr, limit = self._lib, self._preset, self._nwsr, self._time_limit
-        return Workspace(ws.key, lib, preset, {}, nwsr, limit, clone_of=ws.handle)
-
-    def __deepcopy__(self, memo):
-        other = type(self)(self.profile, **self.settings)
-        other.set_state(self.get_state())
-        return other
-
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state["_ws"] = None  # native object: a pickled backend starts afresh
-        state["_lib"] = None
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        self._lib = self.prepare()
 
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
