@@ -29,23 +29,9 @@ from pathlib import Path
 
 from ..exceptions import BackendNotFound, ParamError
 from ..profiles import Profile
-from .base import STATUSES, Backend, BackendSolution, objective
-
-__all__ = [
-    "STATUSES",
-    "Backend",
-    "BackendInfo",
-    "BackendSolution",
-    "backend_class",
-    "backend_info",
-    "backend_names",
-    "get_backend",
-    "load_plugins",
-    "objective",
-    "plugin_files",
-    "register",
-    "resolve_name",
-]
+from ..statuses import STATUSES as STATUSES
+from .base import Backend
+from .base import BackendSolution as BackendSolution
 
 #: Entry-point group of installed backend plugins.
 ENTRY_POINT_GROUP = "qpbench.backends"

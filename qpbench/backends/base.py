@@ -19,14 +19,14 @@ import numpy as np
 import qpsolvers
 
 from ..profiles import Profile, get_profile
-from ..statuses import STATUSES  # noqa: F401 - the vocabulary lives in qpbench.statuses; re-exported for backends
+from ..statuses import describe_exception
 
 
 @dataclass
 class BackendSolution(qpsolvers.Solution):
     """A :class:`qpsolvers.Solution` plus what a benchmark needs to know.
 
-    ``status`` is one of :data:`STATUSES`; ``solver_time_s`` [s] is the time the solver
+    ``status`` is one of :data:`qpbench.statuses.STATUSES`; ``solver_time_s`` [s] is the time the solver
     reports itself; ``error`` holds the exception type and message when ``status == "error"``.
     ``obj`` is the solver's objective, or ``1/2 x'Px + q'x`` computed from ``x`` on first
     read and kept (a closed loop that never reads it does not pay for it).
@@ -80,6 +80,11 @@ def new_solution(
 
 
 _new = object.__new__
+
+
+def error_solution(problem: qpsolvers.Problem, exc: BaseException) -> BackendSolution:
+    """Status ``error`` naming ``exc`` (a failure the solver raised on this problem)."""
+    return BackendSolution(problem, status="error", error=describe_exception(exc))
 
 
 class Backend:

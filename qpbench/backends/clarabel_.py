@@ -40,7 +40,7 @@ from ._common import (
     qpbenchmark_options,
     structure_key,
 )
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, error_solution
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -341,9 +341,7 @@ class ClarabelBackend(Backend):
             if not _is_clarabel_error(exc):
                 raise
             self.reset()
-            sol.status = "error"
-            sol.error = f"{type(exc).__name__}: {exc}"
-            return sol
+            return error_solution(problem, exc)
 
         name = _status_name(res.status)
         status = CLARABEL_STATUSES.get(name, "not_solved")

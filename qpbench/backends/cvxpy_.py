@@ -32,7 +32,7 @@ import numpy as np
 
 from . import register
 from ._common import as_dense, dense_bounds, generic_settings, native_settings
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, error_solution
 
 
 def cost_factor(P: np.ndarray) -> np.ndarray:
@@ -167,9 +167,7 @@ class CvxpyBackend(Backend):
                 warnings.simplefilter("ignore")  # "Solution may be inaccurate": the status says it
                 model.problem.solve(solver=solver, warm_start=True, verbose=False, **options)
         except cp.error.SolverError as exc:
-            sol.status = "error"
-            sol.error = f"SolverError: {exc}"
-            return sol
+            return error_solution(problem, exc)
         raw = model.problem.status
         status = {
             cp.OPTIMAL: "optimal",

@@ -42,7 +42,7 @@ from ._common import (
     qpbenchmark_options,
     refuse_unknown,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, BackendSolution, error_solution, new_solution
 
 #: DAQP exit flag -> (status, DAQP's name). CYCLE: no progress.
 EXITFLAGS = {
@@ -190,7 +190,7 @@ class DaqpBackend(Backend):
                 P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options
             )
         except (ValueError, TypeError) as exc:
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
         return read_result(problem, flag, x, fval, info, buf)
 
 
@@ -237,7 +237,7 @@ class DaqpModelBackend(DaqpBackend):
             x, fval, flag, info = model.solve()
         except (ValueError, TypeError) as exc:
             self._model = None
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
         sol = read_result(problem, flag, x, fval, info, buf)
         if sol.status != "optimal":
             self._model = None  # set up afresh on the next tick

@@ -37,7 +37,7 @@ from ._common import (
     qpbenchmark_options,
     structure_key,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, error_solution, new_solution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -278,7 +278,7 @@ class OsqpBackend(Backend):
             res = self._solver.solve(raise_error=False)
         except (osqp.OSQPException, ValueError) as exc:
             self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
         info = res.info
         status_val = info.status_val
         sol = new_solution(problem, "not_solved", {"raw_status": info.status, "info": info})

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import register
 from ._common import as_dense
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, error_solution
 
 
 @register
@@ -56,9 +56,7 @@ class PinvBackend(Backend):
                 x = np.linalg.lstsq(P, -q, rcond=None)[0]
                 y = np.zeros(0)
         except np.linalg.LinAlgError as exc:
-            sol.status = "error"
-            sol.error = f"LinAlgError: {exc}"
-            return sol
+            return error_solution(problem, exc)
         sol.x = x
         sol.y = y
         sol.z = np.zeros(0 if problem.G is None else problem.G.shape[0])

@@ -35,7 +35,7 @@ from ._common import (
     sparse_parts,
     structure_key,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, BackendSolution, error_solution, new_solution
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -53,20 +53,19 @@ def _piqp():
 
 
 def piqp_statuses() -> dict:
-    """PIQP's status -> (our status, raw name), built once (also read by ``qpsolvers:piqp``)."""
+    """PIQP's status -> our status, built once (also read by ``qpsolvers:piqp``)."""
     if not _STATUS_MAP:
         S = _piqp()
-        ours = {
-            S.PIQP_SOLVED: "optimal",
-            S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-            S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
-            S.PIQP_MAX_ITER_REACHED: "max_iter",
-            S.PIQP_NUMERICS: "error",
-            S.PIQP_INVALID_SETTINGS: "error",
-            S.PIQP_UNSOLVED: "not_solved",
-        }
-        for value, status in ours.items():
-            _STATUS_MAP[value] = (status, str(value).split(".")[-1])
+        _STATUS_MAP.update(
+            {
+                S.PIQP_SOLVED: "optimal",
+                S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+                S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
+                S.PIQP_MAX_ITER_REACHED: "max_iter",
+                S.PIQP_NUMERICS: "error",
+                S.PIQP_INVALID_SETTINGS: "error",
+            }
+        )
     return _STATUS_MAP
 
 
@@ -187,7 +186,7 @@ class PiqpBackend(Backend):
             raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
         except (ValueError, TypeError, RuntimeError) as exc:
             self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
         info = self._info
         if raw_status.value == _SOLVED[0]:
             # No objective read (a property read of the binding): computed from x if asked for.
@@ -198,7 +197,8 @@ class PiqpBackend(Backend):
             sol.z = _EMPTY if G is None else z_u - z_l
             sol.z_box = _EMPTY if lb is None and ub is None else z_bu - z_bl
         else:
-            status, raw = _STATUS_MAP.get(raw_status, ("not_solved", str(raw_status)))
+            status = _STATUS_MAP.get(raw_status, "not_solved")
+            raw = str(raw_status).split(".")[-1]
             sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
             self.reset()
             if status == "error":

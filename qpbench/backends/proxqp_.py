@@ -49,7 +49,7 @@ from ._common import (
     sparse_parts,
     structure_key,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, error_solution, new_solution
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -66,19 +66,24 @@ def _proxqp():
 
 
 def proxqp_statuses() -> dict:
-    """``QPSolverOutput`` -> (our status, raw name), built once (also read by ``qpsolvers:proxqp``)."""
+    """``QPSolverOutput`` -> our status, built once (also read by ``qpsolvers:proxqp``)."""
     if not _STATUS_MAP:
         O = _proxqp().QPSolverOutput
         _SOLVED.append(O.PROXQP_SOLVED)
-        ours = {
-            O.PROXQP_SOLVED: "optimal",
-            O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-            O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
-            O.PROXQP_MAX_ITER_REACHED: "max_iter",
-        }
-        for value in O.__members__.values():
-            _STATUS_MAP[value] = (ours.get(value, "not_solved"), str(value).split(".")[-1])
+        _STATUS_MAP.update(
+            {
+                O.PROXQP_SOLVED: "optimal",
+                O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+                O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
+                O.PROXQP_MAX_ITER_REACHED: "max_iter",
+            }
+        )
     return _STATUS_MAP
+
+
+def _status(value) -> tuple[str, str]:
+    """Our status and ProxQP's name of a ``QPSolverOutput``."""
+    return proxqp_statuses().get(value, "not_solved"), str(value).split(".")[-1]
 
 
 def _native_names(generic: dict) -> dict:
@@ -229,7 +234,7 @@ class ProxqpBackend(Backend):
             if _SOLVED and raw_status is _SOLVED[0]:
                 status, raw = "optimal", "PROXQP_SOLVED"
             else:
-                status, raw = (_STATUS_MAP or proxqp_statuses())[raw_status]
+                status, raw = _status(raw_status)
             retried = False
             sparse = len(key) > 4
             if sparse:  # the kept views' split of z depends on n_in, which the key does not pin
@@ -250,13 +255,13 @@ class ProxqpBackend(Backend):
                     qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
                 qp.solve()
                 info = self._info
-                status, raw = _STATUS_MAP[info.status]
+                status, raw = _status(info.status)
                 retried = True
             if not warm or retried:  # built cold (equality-constrained guess); warm from now on
                 qp.settings.initial_guess = _proxqp().InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
         except (ValueError, RuntimeError) as exc:
             self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
 
         sol = new_solution(problem, status, {"raw_status": raw, "cold_retry": retried})
         sol.iterations = info.iter  # a Python int (and solve_time a float) from the binding

@@ -36,7 +36,11 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings, native_settings
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, BackendSolution, error_solution, new_solution
+from .clarabel_ import CLARABEL_STATUSES
+from .osqp_ import osqp_statuses
+from .piqp_ import piqp_statuses
+from .proxqp_ import proxqp_statuses
 
 #: Each solver qpsolvers can drive: (algorithm family, Python distribution for the version column).
 SOLVERS: dict[str, tuple[str, str | None]] = {
@@ -68,50 +72,17 @@ SOLVERS: dict[str, tuple[str, str | None]] = {
 }
 
 
-def _status_clarabel(extras) -> tuple[str, str | None]:
-    from .clarabel_ import CLARABEL_STATUSES
-
-    raw = extras.get("status")
-    name = str(raw).split(".")[-1] if raw is not None else None
-    return CLARABEL_STATUSES.get(name, "not_solved"), name
-
-
-def _status_osqp(extras) -> tuple[str, str | None]:
-    from .osqp_ import osqp_statuses
-
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return osqp_statuses().get(int(info.status_val), "not_solved"), str(info.status)
-
-
-def _status_proxqp(extras) -> tuple[str, str | None]:
-    from .proxqp_ import proxqp_statuses
-
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return proxqp_statuses().get(info.status, ("not_solved",))[0], None
-
-
-def _status_piqp(extras) -> tuple[str, str | None]:
-    from .piqp_ import piqp_statuses
-
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return piqp_statuses().get(info.status, ("not_solved",))[0], None
-
-
-def _table_reader(read, table: dict, text) -> object:
+def _table_reader(read, table, text=None) -> object:
     """A status reader: ``read(extras)`` is the solver's status (None: no report), ``table``
-    maps it to ours, ``text(value, extras)`` is the raw status kept."""
+    (a dict, or a function returning one) maps it to ours, ``text(value, extras)`` is the raw
+    status kept (None: ``str(extras["info"].status)``, :meth:`QpsolversBackend._not_found`)."""
 
     def reader(extras) -> tuple[str, str | None]:
         value = read(extras)
         if value is None:
             return "not_solved", None
-        return table.get(value, "not_solved"), text(value, extras)
+        mapping = table() if callable(table) else table
+        return mapping.get(value, "not_solved"), None if text is None else text(value, extras)
 
     return reader
 
@@ -120,12 +91,21 @@ def _plain(value, extras) -> str:
     return str(value)
 
 
+def _info(read):
+    """``read(extras["info"])``, None without an info."""
+    return lambda e: None if e.get("info") is None else read(e["info"])
+
+
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
-    "clarabel": _status_clarabel,
-    "osqp": _status_osqp,
-    "proxqp": _status_proxqp,
-    "piqp": _status_piqp,
+    "clarabel": _table_reader(
+        lambda e: None if e.get("status") is None else str(e["status"]).split(".")[-1],
+        CLARABEL_STATUSES,
+        _plain,
+    ),
+    "osqp": _table_reader(_info(lambda info: int(info.status_val)), osqp_statuses),
+    "proxqp": _table_reader(_info(lambda info: info.status), proxqp_statuses),
+    "piqp": _table_reader(_info(lambda info: info.status), piqp_statuses),
     # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
     "scs": _table_reader(
         lambda e: e.get("status_val"),
@@ -149,7 +129,7 @@ STATUS_READERS = {
         _plain,
     ),
     "qpalm": _table_reader(
-        lambda e: None if e.get("info") is None else str(e["info"].status),
+        _info(lambda info: str(info.status)),
         {
             "solved": "optimal",
             "primal infeasible": "primal_infeasible",
@@ -382,7 +362,7 @@ class QpsolversBackend(Backend):
                 and type(exc).__name__ not in _SOLVER_ERRORS
             ):
                 raise
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
         extras = result.extras
         sol = new_solution(problem, "optimal", {} if extras is None else extras)
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
