@@ -202,13 +202,78 @@ def all_dense(*matrices: object) -> bool:
     return all(M is None or type(M) is np.ndarray for M in matrices)
 
 
-def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
-    """``((rows, cols), indices, indptr)`` of the CSC upper triangle of a dense ``n x n``
-    matrix with every entry stored: ``P[rows, cols]`` is its data vector."""
-    rows = np.concatenate([np.arange(j + 1) for j in range(n)] or [[]]).astype(np.int64)
-    cols = np.concatenate([np.full(j + 1, j) for j in range(n)] or [[]]).astype(np.int64)
-    indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
-    return (rows, cols), rows, indptr
+class StackedCsc:
+    """CSC patterns of ``P``'s upper triangle and of ``C = [D; s_1 I[idx_1]; s_2 I[idx_2] ...]``:
+    the rows of the matrices ``blocks`` (``D``) over one signed identity block per ``(s, idx)``
+    of ``eyes`` (rows ``idx`` of ``s I``).
+
+    Dense matrices are stored with every entry, so the pattern does not change with their
+    values; the others with theirs (:attr:`structure` then compares two).
+    """
+
+    def __init__(self, P, blocks: list, eyes: list[tuple[float, np.ndarray]], n: int):
+        self.n, self.eyes = n, eyes
+        self.k = k = sum(M.shape[0] for M in blocks)
+        self.rows = k + sum(idx.size for _, idx in eyes)
+        self.dense = all_dense(P, *blocks)
+        self.structure = ()
+        if not self.dense:
+            Pc, Cc = self._sparse(P, blocks)
+            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
+            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
+            self.structure = structure_key(Pc, Cc)
+            return
+        rows = np.concatenate([np.arange(j + 1) for j in range(n)] or [[]]).astype(np.int64)
+        cols = np.concatenate([np.full(j + 1, j) for j in range(n)] or [[]]).astype(np.int64)
+        #: ``P[P_index]`` is the data vector of ``P``'s upper triangle.
+        self.P_index = (rows, cols)
+        self.P_indices = rows
+        self.P_indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
+        # Column j of C: the k rows of D, then its row of each identity block that has one.
+        col_rows, offset = [np.tile(np.arange(k, dtype=np.int64), (n, 1))], k
+        for _, idx in eyes:
+            row = np.full(n, -1, np.int64)
+            row[idx] = offset + np.arange(idx.size)
+            col_rows.append(row[:, None])
+            offset += idx.size
+        col_rows = np.hstack(col_rows)
+        kept = col_rows >= 0
+        self._C_mask = None if kept.all() else kept.ravel()
+        self.C_indices = col_rows[kept]
+        self.C_indptr = np.concatenate([[0], np.cumsum(kept.sum(axis=1))]).astype(np.int64)
+
+    def _sparse(self, P, blocks) -> tuple[spa.csc_matrix, spa.csc_matrix]:
+        P = spa.triu(spa.csc_matrix(P, dtype=float), format="csc")
+        C = [spa.csc_matrix(M, dtype=float) for M in blocks]
+        eye = spa.identity(self.n, format="csr")
+        C += [sign * eye[idx] for sign, idx in self.eyes if idx.size]
+        C = spa.vstack(C, format="csc") if C else spa.csc_matrix((0, self.n))
+        P.sort_indices()
+        C.sort_indices()
+        return P, C
+
+    def data(self, P, blocks) -> tuple[np.ndarray, np.ndarray]:
+        """``(P_data, C_data)`` of a problem's ``P`` and ``blocks`` in this pattern's order."""
+        if not self.dense:
+            P, C = self._sparse(P, blocks)
+            return P.data, C.data
+        D = np.empty((self.k + len(self.eyes), self.n))
+        row = 0
+        for M in blocks:
+            D[row : row + M.shape[0]] = M
+            row += M.shape[0]
+        for i, (sign, _) in enumerate(self.eyes):
+            D[self.k + i] = sign
+        C_data = D.T.ravel()
+        P_data = np.asarray(P, dtype=float)[self.P_index]
+        return P_data, C_data if self._C_mask is None else C_data[self._C_mask]
+
+    def matrices(self, P, blocks) -> tuple[spa.csc_matrix, spa.csc_matrix]:
+        """``(P, C)`` as CSC matrices of this pattern."""
+        P_data, C_data = self.data(P, blocks)
+        n = self.n
+        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(n, n))
+        return P, spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, n))
 
 
 def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:

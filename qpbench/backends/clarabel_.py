@@ -31,14 +31,13 @@ import scipy.sparse as spa
 from . import register
 from ._common import (
     GENERIC_KEYS,
+    StackedCsc,
     all_dense,
     all_finite,
     dense_bounds,
-    dense_upper_layout,
     generic_settings,
     own_settings,
     qpbenchmark_options,
-    structure_key,
 )
 from .base import Backend, BackendSolution, error_solution
 
@@ -48,123 +47,49 @@ if TYPE_CHECKING:
     import qpsolvers
 
 
-class ConeLayout:
-    """CSC layout of ``P`` (upper) and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
+class ConeLayout(StackedCsc):
+    """The pattern of ``P`` and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
 
     def __init__(self, problem):
-        P, G, A = problem.P, problem.G, problem.A
+        G, A = problem.G, problem.A
         self.n = n = problem.q.shape[0]
         self.meq = 0 if A is None else A.shape[0]
         self.m_all = 0 if G is None else G.shape[0]
         lb, ub = dense_bounds(problem, n)
         self.with_box = lb is not None
-        self.g_keep = np.isfinite(problem.h) if G is not None else np.zeros(0, bool)
-        self.ub_keep = np.isfinite(ub) if self.with_box else np.zeros(n, bool)
-        self.lb_keep = np.isfinite(lb) if self.with_box else np.zeros(n, bool)
-        self.m = int(self.g_keep.sum())
-        self.n_ub = int(self.ub_keep.sum())
-        self.n_lb = int(self.lb_keep.sum())
-        self.rows = self.meq + self.m + self.n_lb + self.n_ub
-        self.dense = all_dense(P, G, A)
-        masks = (np.concatenate([self.g_keep, self.lb_keep, self.ub_keep]).tobytes(),)
-        self.all_kept = bool(self.g_keep.all() and self.ub_keep.all() and self.lb_keep.all())
-        self._g_idx = np.flatnonzero(self.g_keep)
-        self._ub_idx = np.flatnonzero(self.ub_keep)
-        self._lb_idx = np.flatnonzero(self.lb_keep)
-        if self.dense:
-            self._P_idx, self.P_indices, self.P_indptr = dense_upper_layout(n)
-            k = self.meq + self.m
-            # Column j: the k dense rows, then its -I row (if kept), then its +I row (if kept).
-            lb_row = np.full(n, -1, np.int64)
-            lb_row[self.lb_keep] = k + np.arange(self.n_lb)
-            ub_row = np.full(n, -1, np.int64)
-            ub_row[self.ub_keep] = k + self.n_lb + np.arange(self.n_ub)
-            col_rows = np.hstack([np.tile(np.arange(k), (n, 1)), lb_row[:, None], ub_row[:, None]])
-            self._C_mask = (col_rows >= 0).ravel()
-            self.C_indices = col_rows.ravel()[self._C_mask]
-            counts = (col_rows >= 0).sum(axis=1)
-            self.C_indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-            self.key = ("dense", n, self.meq, self.m_all, self.with_box) + masks
-        else:
-            Pc, Cc = self._sparse(problem)
-            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
-            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
-            self.key = (
-                "sparse",
-                n,
-                self.meq,
-                self.m_all,
-                self.with_box,
-                *masks,
-                structure_key(Pc, Cc),
-            )
+        g_keep = np.isfinite(problem.h) if G is not None else np.zeros(0, bool)
+        lb_keep = np.isfinite(lb) if self.with_box else np.zeros(n, bool)
+        ub_keep = np.isfinite(ub) if self.with_box else np.zeros(n, bool)
+        self.all_kept = bool(g_keep.all() and ub_keep.all() and lb_keep.all())
+        self._g_idx, self._lb_idx, self._ub_idx = map(np.flatnonzero, (g_keep, lb_keep, ub_keep))
+        self.m = self._g_idx.size
+        # What rhs takes of h, lb, ub: a slice (a view) when every row is kept.
+        self._sel = [
+            slice(None) if k.all() else i
+            for k, i in ((g_keep, self._g_idx), (lb_keep, self._lb_idx), (ub_keep, self._ub_idx))
+        ]
+        eyes = [(-1.0, self._lb_idx), (1.0, self._ub_idx)] if self.with_box else []
+        super().__init__(problem.P, self.blocks(problem), eyes, n)
+        masks = np.concatenate([g_keep, lb_keep, ub_keep]).tobytes()
+        self.key = (self.dense, n, self.meq, self.m_all, self.with_box, masks, self.structure)
 
-    def _sparse(self, problem):
-        n = self.n
-        P = spa.triu(spa.csc_matrix(problem.P, dtype=float), format="csc")
-        blocks = []
-        if problem.A is not None:
-            blocks.append(spa.csc_matrix(problem.A, dtype=float))
-        if problem.G is not None:
-            blocks.append(spa.csc_matrix(problem.G, dtype=float)[np.flatnonzero(self.g_keep)])
-        eye = spa.identity(n, format="csr")
-        if self.n_lb:
-            blocks.append(-eye[np.flatnonzero(self.lb_keep)])
-        if self.n_ub:
-            blocks.append(eye[np.flatnonzero(self.ub_keep)])
-        C = spa.vstack(blocks, format="csc") if blocks else spa.csc_matrix((0, n))
-        P.sort_indices()
-        C.sort_indices()
-        return P, C
-
-    def data(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
-        """``(P_data, C_data)`` in this layout's order."""
-        if self.dense and self.all_kept:
-            n, meq, k = self.n, self.meq, self.meq + self.m
-            P_data = problem.P[self._P_idx]
-            D = np.empty((k + 2, n))
-            if meq:
-                D[:meq] = problem.A
-            if k > meq:
-                D[meq:k] = problem.G
-            D[k] = -1.0
-            D[k + 1] = 1.0
-            return P_data, D.T.ravel()
-        if self.dense:
-            n = self.n
-            P_data = np.asarray(problem.P, dtype=float)[self._P_idx]
-            parts = []
-            if problem.A is not None:
-                parts.append(np.asarray(problem.A, dtype=float))
-            if problem.G is not None:
-                parts.append(np.asarray(problem.G, dtype=float)[self.g_keep])
-            parts.append(-np.ones((1, n)))
-            parts.append(np.ones((1, n)))
-            C_data = np.vstack(parts).T.ravel()[self._C_mask]
-            return P_data, C_data
-        P, C = self._sparse(problem)
-        return P.data, C.data
-
-    def matrices(self, problem: qpsolvers.Problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
-        P_data, C_data = self.data(problem)
-        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
-        C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, self.n))
-        return P, C
+    def blocks(self, problem) -> list:
+        """``[A; G_kept]``, the rows of ``C`` above the identity blocks."""
+        blocks = [] if problem.A is None else [problem.A]
+        G = problem.G
+        if G is not None and self.m < self.m_all:
+            G = (G if type(G) is np.ndarray else spa.csr_matrix(G))[self._g_idx]
+        return blocks if G is None else blocks + [G]
 
     def rhs(self, problem: qpsolvers.Problem) -> np.ndarray:
-        if self.all_kept and self.with_box:
-            lb, ub = dense_bounds(problem, self.n)
-            parts = [v for v in (problem.b, problem.h) if v is not None]
-            return np.concatenate(parts + [-lb, ub])
-        parts = []
-        if problem.A is not None:
-            parts.append(np.asarray(problem.b, dtype=float))
+        """``d = [b; h_kept; -lb_kept; ub_kept]``."""
+        g, l, u = self._sel
+        parts = [] if problem.A is None else [np.asarray(problem.b, dtype=float)]
         if problem.G is not None:
-            parts.append(np.asarray(problem.h, dtype=float)[self.g_keep])
+            parts.append(np.asarray(problem.h, dtype=float)[g])
         if self.with_box:
             lb, ub = dense_bounds(problem, self.n)
-            parts.append(-lb[self.lb_keep])
-            parts.append(ub[self.ub_keep])
+            parts += [-lb[l], ub[u]]
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def cones(self, clarabel: ModuleType) -> list:
@@ -189,8 +114,8 @@ class ConeLayout:
         if not self.with_box:
             return y, z, np.zeros(0)
         z_box = np.zeros(n)
-        z_box[self._lb_idx] -= w[meq + m : meq + m + self.n_lb]
-        z_box[self._ub_idx] += w[meq + m + self.n_lb :]
+        z_box[self._lb_idx] -= w[meq + m : meq + m + self._lb_idx.size]
+        z_box[self._ub_idx] += w[meq + m + self._lb_idx.size :]
         return y, z, z_box
 
 
@@ -232,14 +157,8 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     else:
         parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
     finite = np.isfinite(np.concatenate(parts))
-    return (
-        "dense",
-        n,
-        0 if A is None else A.shape[0],
-        0 if G is None else G.shape[0],
-        with_box,
-        finite.tobytes(),
-    )
+    meq, m = (0 if M is None else M.shape[0] for M in (A, G))
+    return (True, n, meq, m, with_box, finite.tobytes(), ())
 
 
 def _native_names(generic: dict) -> dict:
@@ -316,14 +235,14 @@ class ClarabelBackend(Backend):
                     key = ConeLayout(problem).key
                 same = key == layout.key
             if same:
-                P_data, C_data = layout.data(problem)
+                P_data, C_data = layout.data(problem.P, layout.blocks(problem))
                 self._solver.update(
                     P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem)
                 )
             else:
                 self._solver = None
                 layout = ConeLayout(problem)
-                P, C = layout.matrices(problem)
+                P, C = layout.matrices(problem.P, layout.blocks(problem))
                 solver = clarabel.DefaultSolver(
                     P,
                     np.asarray(problem.q, dtype=float),
