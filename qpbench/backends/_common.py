@@ -28,6 +28,10 @@ if TYPE_CHECKING:
 
     from .base import Backend
 
+#: An empty, read-only vector: the multipliers of an absent block.
+EMPTY = np.zeros(0)
+EMPTY.flags.writeable = False
+
 #: Setting names every backend understands; the profile provides their values.
 GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 

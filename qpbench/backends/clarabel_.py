@@ -1,24 +1,15 @@
-"""Backend ``clarabel``: Clarabel (interior point) through its own Python API, with a persistent solver.
+"""Backend ``clarabel``: Clarabel (interior point) through its own Python API.
 
-Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with
-``C = [A; G; -I; I]``, ``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``. Rows with an
-infinite bound are left out (which ones is part of the pattern), as Clarabel's presolve does
-on the ``qpsolvers:clarabel`` route, in the same order: a cold solve takes the same steps on
-both routes. Its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
-``z_box = w_ub - w_lb``.
-
-A ``DefaultSolver`` is built once and ``update``-d with the new values while shape and pattern
-hold (dense blocks stored with every entry; needs ``presolve_enable=False`` and
-``input_sparse_dropzeros=False``, set here). An interior-point method starts from its own
-initial point: ``warm_start`` is ignored. Clarabel's ``solve_time`` is reported for a freshly
-built solver only: after ``update`` it grows with every update and exceeds the call's time.
+Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with ``C = [A; G; -I; I]``,
+``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``, the rows with an infinite bound left out
+(part of the pattern); its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
+``z_box = w_ub - w_lb``. A ``DefaultSolver`` is built once and ``update``-d while shape and
+pattern hold; ``solver_time_s`` only for a freshly built one. ``warm_start`` is ignored.
 
 Settings: ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
-``time_limit`` [s], others set on ``DefaultSettings`` verbatim; under a
-``qpbenchmark:<settings>`` profile what the ``qpsolvers:clarabel`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`) plus what persistence needs.
-Statuses: :data:`CLARABEL_STATUSES`, the rest not_solved; ``ValueError``, ``TypeError`` and
-Rust panics raised by Clarabel become status ``error``.
+``time_limit`` [s], others set on ``DefaultSettings``; under a ``qpbenchmark:<settings>``
+profile :func:`~qpbench.backends._common.qpbenchmark_options`. ``ValueError``, ``TypeError``
+and Rust panics become status ``error``.
 """
 
 from __future__ import annotations
@@ -30,6 +21,7 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
     StackedCsc,
     all_dense,
@@ -102,21 +94,17 @@ class ConeLayout(StackedCsc):
 
     def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of Clarabel's multiplier ``w``."""
-        meq, m, n = self.meq, self.m, self.n
-        y = w[:meq]
+        meq, n_lb = self.meq, self._lb_idx.size
+        k = meq + self.m
         if self.all_kept:
-            z = w[meq : meq + m]
-            if not self.with_box:
-                return y, z, np.zeros(0)
-            return y, z, w[meq + m + n :] - w[meq + m : meq + m + n]
+            z_box = w[k + n_lb :] - w[k : k + n_lb] if self.with_box else EMPTY
+            return w[:meq], w[meq:k], z_box
         z = np.zeros(self.m_all)
-        z[self._g_idx] = w[meq : meq + m]
-        if not self.with_box:
-            return y, z, np.zeros(0)
-        z_box = np.zeros(n)
-        z_box[self._lb_idx] -= w[meq + m : meq + m + self._lb_idx.size]
-        z_box[self._ub_idx] += w[meq + m + self._lb_idx.size :]
-        return y, z, z_box
+        z[self._g_idx] = w[meq:k]
+        z_box = np.zeros(self.n if self.with_box else 0)
+        z_box[self._lb_idx] -= w[k : k + n_lb]
+        z_box[self._ub_idx] += w[k + n_lb :]
+        return w[:meq], z, z_box
 
 
 #: Clarabel status name -> our status (also used by ``qpsolvers:clarabel``).
@@ -200,19 +188,16 @@ class ClarabelBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._solver = None
-        self._layout: ConeLayout | None = None
+        self.reset()
 
     def reset(self) -> None:
         self._solver = None
-        self._layout = None
+        self._layout: ConeLayout | None = None
 
     def _settings(self, clarabel):
         s = clarabel.DefaultSettings()
         s.verbose = False
-        # what persistence needs; rows with an infinite bound are left out by ConeLayout,
-        # which is what Clarabel's presolve would do
-        s.presolve_enable = False
+        s.presolve_enable = False  # update() needs these two
         s.input_sparse_dropzeros = False
         options = qpbenchmark_options(self, "clarabel", _native_names)
         if options is None:
@@ -269,9 +254,6 @@ class ClarabelBackend(Backend):
         if status == "error":
             sol.error = f"Clarabel: {name}"
         sol.iterations = int(res.iterations)
-        # After update() Clarabel 0.11's solve_time is not the solve's time: it
-        # exceeds the wall time around the whole call and grows with every
-        # update. Report it only for a freshly built solver.
         sol.solver_time_s = None if same else float(res.solve_time)
         if status in ("primal_infeasible", "dual_infeasible"):
             return sol

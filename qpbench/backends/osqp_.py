@@ -1,21 +1,14 @@
-"""Backend ``osqp``: OSQP (ADMM) through its own Python API, with a persistent solver.
+"""Backend ``osqp``: OSQP (ADMM) through its own Python API.
 
 OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
-``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds). Its multiplier
+``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds); its multiplier
 ``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
 
-The solver is set up once and ``update``-d while shape and sparsity pattern hold (dense blocks
-stored with every entry, the identity with its diagonal), warm-starting from its previous
-iterate or from ``warm_start``. A tick of the kept dense shape takes the short route: ``C``'s
-data and ``l`` written into kept buffers, ``P``'s upper triangle one ``take``, and OSQP 1.x's
-fresh ``x`` and multiplier handed back uncopied.
-
-Settings as the ``qpsolvers:osqp`` route (:func:`~qpbench.backends._common.native_settings`:
-``polishing`` at ``eps_abs <= 1e-7``, since ADMM alone seldom reaches a 1e-9 residual), other
-settings to ``OSQP.setup`` verbatim; under a ``qpbenchmark:<settings>`` profile that route's
-arguments (:func:`~qpbench.backends._common.qpbenchmark_options`), so both stop at the same
-iterate. Statuses: :func:`osqp_statuses`, the ``... inaccurate`` ones and ``unsolved`` ->
-not_solved. ``OSQPException`` and ``ValueError`` become status ``error``.
+The solver is set up once and ``update``-d while shape and pattern hold, warm-starting from its
+previous iterate or from ``warm_start``. Settings as ``qpsolvers:osqp``, others to
+``OSQP.setup``; under a ``qpbenchmark:<settings>`` profile
+:func:`~qpbench.backends._common.qpbenchmark_options`. ``OSQPException`` and ``ValueError``
+become status ``error``.
 """
 
 from __future__ import annotations
@@ -26,6 +19,7 @@ import numpy as np
 
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
     StackedCsc,
     all_dense,
@@ -100,7 +94,7 @@ class StackedLayout(StackedCsc):
     def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of the stacked multiplier ``w`` (views into ``w``)."""
         part_y, part_z, part_box = self.parts
-        return w[part_y], w[part_z], w[part_box] if self.with_box else _EMPTY
+        return w[part_y], w[part_z], w[part_box] if self.with_box else EMPTY
 
 
 def _blocks(problem) -> list:
@@ -130,11 +124,8 @@ def osqp_statuses() -> dict:
 
 
 def _has_box(problem) -> bool:
-    """Stack box rows when there is a box, or when there is nothing else.
-
-    OSQP needs a constraint matrix with at least one row per column to lay out
-    its CSC pattern; an unconstrained problem gets free rows ``-inf <= x <= inf``.
-    """
+    """Whether ``C`` has the identity rows: with bounds, or with no other rows (OSQP needs a
+    row per column: an unconstrained problem gets free rows ``-inf <= x <= inf``)."""
     if problem.lb is not None or problem.ub is not None:
         return True
     no_G = problem.G is None or problem.G.shape[0] == 0
@@ -155,12 +146,11 @@ class OsqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._solver = None
-        self._layout: StackedLayout | None = None
+        self.reset()
 
     def reset(self) -> None:
         self._solver = None
-        self._layout = None
+        self._layout: StackedLayout | None = None
 
     @classmethod
     def setting_names(cls) -> frozenset[str]:
@@ -195,8 +185,7 @@ class OsqpBackend(Backend):
                 and lb is not None
                 and ub is not None
                 and (P.shape, G.shape, A.shape) == layout.tick_shapes
-            ):
-                # A tick of the robot: every block dense and of the kept shape.
+            ):  # a robot tick: every block dense, of the kept shape
                 l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
                 self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
             else:
@@ -212,8 +201,7 @@ class OsqpBackend(Backend):
         sol = new_solution(problem, "not_solved", {"raw_status": info.status, "info": info})
         sol.iterations = info.iter
         sol.solver_time_s = info.run_time
-        if status_val == _SOLVED:
-            # OSQP 1.x hands back fresh arrays: x and w need no copy; y, z, z_box are views of w.
+        if status_val == _SOLVED:  # OSQP 1.x hands back fresh arrays: no copy
             sol.status = "optimal"
             sol.x = res.x
             sol.y, sol.z, sol.z_box = layout.split_duals(res.y)
@@ -266,8 +254,6 @@ class OsqpBackend(Backend):
 _OSQP: list = []
 _SOLVED = None  # OSQP_SOLVED's status_val, read at the first import of osqp
 _ndarray = np.ndarray
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False
 
 
 def _import_osqp():

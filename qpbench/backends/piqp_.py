@@ -1,29 +1,21 @@
-"""Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs, with a persistent solver.
+"""Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs.
 
 ``piqp.DenseSolver`` solves ``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,
-x_l <= x <= x_u`` with ``h_l = -inf`` and the bounds native. Its multipliers are non-negative
-per side: ``z = z_u - z_l``, ``z_box = z_bu - z_bl``. A scipy.sparse problem, or one too large
-made dense (:func:`~qpbench.backends._common.dense_route`), goes to ``piqp.SparseSolver``
-(``P`` as its upper triangle).
+x_l <= x <= x_u`` with ``h_l = -inf``; its multipliers are non-negative per side: ``z = z_u -
+z_l``, ``z_box = z_bu - z_bl``. A problem :func:`~qpbench.backends._common.dense_route` sends to
+the sparse API goes to ``piqp.SparseSolver`` (``P``'s upper triangle).
 
-The solver is ``setup`` once per shape (per structure on the sparse route) and then
-``update``-d; shapes are checked at set-up (PIQP keeps its old data on an update of another
-shape). PIQP starts every solve from its own initial point: ``warm_start`` is ignored. A
-status other than optimal drops the solver. ``solver_time_s`` is PIQP's ``info.run_time``;
-the objective is computed from ``x`` when read.
-
-Settings as ``qpsolvers:piqp`` (:func:`~qpbench.backends._common.native_settings`; no time
-limit), or under a ``qpbenchmark:<settings>`` profile that route's arguments; others set on
-the solver's settings verbatim. Statuses: :func:`piqp_statuses`; ``ValueError``,
-``TypeError`` and ``RuntimeError`` from the binding become status ``error``.
+The solver is ``setup`` once per shape (per structure when sparse), then ``update``-d; a status
+other than optimal drops it. ``warm_start`` is ignored (PIQP starts from its own point).
+Settings as ``qpsolvers:piqp`` (no time limit); others set on the solver's settings.
+``ValueError``, ``TypeError`` and ``RuntimeError`` become status ``error``.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
     check_shapes,
     dense_route,
@@ -78,7 +70,6 @@ class PiqpBackend(Backend):
     family = "proximal interior point"
     package = "piqp"
     module = "piqp"
-    #: scipy.sparse input (or a problem too large made dense) goes to ``piqp.SparseSolver``.
     sparse = True
 
     @classmethod
@@ -90,18 +81,14 @@ class PiqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._solver = None
-        self._shapes = None
-        self._result = None
-        self._info = None
-        self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
+        self.reset()
         self._settings_dict = self._make_settings()
 
     def _make_settings(self) -> dict:
         given = qpbenchmark_options(
             self, "piqp", lambda g: {k: g[k] for k in g if k != "time_limit"}
         )
-        if given is not None:  # as the qpsolvers:piqp route under a qpbenchmark profile
+        if given is not None:
             settings, native = {"verbose": False, "compute_timings": True}, given
         else:
             generic, native = generic_settings(self)
@@ -113,11 +100,8 @@ class PiqpBackend(Backend):
         return settings
 
     def reset(self) -> None:
-        self._solver = None
-        self._shapes = None
-        self._result = None
-        self._info = None
-        self._views = None
+        self._solver = self._shapes = self._info = None
+        self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
 
     def _setup(self, cls, shapes, data):
         """A new ``cls`` solver (``DenseSolver`` or ``SparseSolver``) set up with ``data``; kept."""
@@ -128,10 +112,9 @@ class PiqpBackend(Backend):
             setattr(s, name, value)
         solver.setup(*data)
         self._solver, self._shapes = solver, shapes
-        res = self._result = solver.result
+        res = solver.result
         self._info = res.info
-        # Each attribute read of the result builds a new view; these views follow
-        # the live vectors, which update() and solve() overwrite in place (same shape).
+        # update() and solve() overwrite the vectors these views show (each read builds one)
         self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
         return solver
 
@@ -140,9 +123,7 @@ class PiqpBackend(Backend):
         if parts is None:
             return self._solve_sparse(problem)
         P, q, A, b, G, h, lb, ub = parts
-        # The shapes, not a helper's key: written out, they cost no call per tick. PIQP
-        # prints "... has wrong dimensions" and keeps its old data on a wrong shape, so an
-        # update needs the shapes the solver was set up with (checked then, in _run).
+        # PIQP keeps its old data on an update of another shape: updated only on the same shapes
         shapes = (
             P.shape,
             q.shape,
@@ -188,14 +169,13 @@ class PiqpBackend(Backend):
             self.reset()
             return error_solution(problem, exc)
         info = self._info
-        if raw_status.value == _SOLVED[0]:
-            # No objective read (a property read of the binding): computed from x if asked for.
+        if raw_status.value == _SOLVED[0]:  # the objective is computed from x when read
             sol = new_solution(problem, "optimal", {"raw_status": "PIQP_SOLVED"})
             x, y, z_l, z_u, z_bl, z_bu = self._views
             sol.x = x.copy()
-            sol.y = _EMPTY if A is None else y.copy()
-            sol.z = _EMPTY if G is None else z_u - z_l
-            sol.z_box = _EMPTY if lb is None and ub is None else z_bu - z_bl
+            sol.y = EMPTY if A is None else y.copy()
+            sol.z = EMPTY if G is None else z_u - z_l
+            sol.z_box = EMPTY if lb is None and ub is None else z_bu - z_bl
         else:
             status = _STATUS_MAP.get(raw_status, "not_solved")
             raw = str(raw_status).split(".")[-1]
@@ -206,7 +186,3 @@ class PiqpBackend(Backend):
         sol.iterations = info.iter
         sol.solver_time_s = info.run_time
         return sol
-
-
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False

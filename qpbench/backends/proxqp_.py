@@ -1,35 +1,21 @@
 """Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's dense and sparse APIs.
 
 ``proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)`` with ``H = P, g = q, C = G,
-l = -inf, u = h`` and the bounds as ProxQP's own box; its multipliers have qpsolvers' signs
-(``z_box``: the last ``n`` entries of its ``z``). A scipy.sparse problem, or one too large made
-dense (:func:`~qpbench.backends._common.dense_route`), goes to ``proxqp.sparse.QP``, which has
-no box: the bounds are stacked under ``G`` as qpsolvers does.
+l = -inf, u = h`` and the bounds as ProxQP's box (``z_box``: the last ``n`` entries of its
+``z``); a problem :func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
+``proxqp.sparse.QP`` with the bounds stacked under ``G``. Multipliers have qpsolvers' signs.
 
-Persistence. The ``QP`` object is ``init``-ed once per shape (per structure on the sparse
-route) and then ``update``-d. Its first solve starts from
-``EQUALITY_CONSTRAINED_INITIAL_GUESS``, as the ``qpsolvers:proxqp`` route does (a cold solve
-takes the same iterations on both routes); then from ``WARM_START_WITH_PREVIOUS_RESULT``, the
-one change made after ``init`` (ProxQP 0.8 loops forever in ``solve`` after others). An
-explicit ``warm_start`` goes to ``QP.solve(x, None, None)``. The preconditioner is kept at
-``update`` (``update_preconditioner=True`` recomputes it).
+The ``QP`` object is ``init``-ed once per shape (per structure when sparse), then ``update``-d.
+Its first solve starts from ``EQUALITY_CONSTRAINED_INITIAL_GUESS`` (as ``qpsolvers:proxqp``),
+the next ones from ``WARM_START_WITH_PREVIOUS_RESULT``; ``warm_start`` goes to
+``QP.solve(x, None, None)``; ``update_preconditioner=True`` recomputes the preconditioner at
+``update``. An infeasibility verdict after a warm start, or on the sparse route, is checked by
+one cold solve on a fresh object (``extras["cold_retry"]``, iterations and times added up;
+``retry_cold=False``: not); after a verdict the object is dropped.
 
-Infeasibility verdicts. Warm-started from the result of an unrelated problem of the same
-shape, ProxQP 0.8 often stops with a false ``PRIMAL_INFEASIBLE`` (its ``eps_primal_inf = 1e-4``
-test fires on the dual iterates' jump); on the sparse route it also fires on cold solves of
-feasible problems (HS118 of Maros-Meszaros). Such a verdict is checked by one cold re-solve
-on a fresh object (sparse route: ``eps_primal_inf``, ``eps_dual_inf`` at the profile's
-``eps_abs``) whose status is kept; iterations and times add up, ``extras["cold_retry"]`` says
-so; ``retry_cold=False`` turns this off. After a verdict the object is dropped: warm-started
-from an infeasibility exit, ProxQP 0.8 does not give the same answer twice for the same
-ticks, so neither a controller nor ``--repeat`` would be reproducible.
-
-Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, and at ``eps_abs <= 1e-7``
-``check_duality_gap`` with ``eps_duality_gap_abs/rel`` (as qpbenchmark at high accuracy); no
-time limit. Under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:proxqp`` route
-gets (:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are set on
-``QP.settings`` verbatim. Statuses: :func:`proxqp_statuses`, the rest not_solved;
-``ValueError`` and ``RuntimeError`` raised by proxsuite become status ``error``.
+Settings: :func:`~qpbench.backends._common.native_settings` (no time limit) or, under a
+``qpbenchmark:<settings>`` profile, :func:`~qpbench.backends._common.qpbenchmark_options`;
+others set on ``QP.settings``. ``ValueError`` and ``RuntimeError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -44,6 +30,7 @@ from ._common import (
     dense_bounds,
     dense_route,
     generic_settings,
+    native_settings,
     own_settings,
     qpbenchmark_options,
     sparse_parts,
@@ -100,11 +87,8 @@ class ProxqpBackend(Backend):
     family = "augmented Lagrangian"
     package = "proxsuite"
     module = "proxsuite"
-    #: scipy.sparse input (or a problem too large made dense) goes to ``proxqp.sparse.QP``.
     sparse = True
-    #: Solved in a worker process with a deadline under ``--isolate auto``:
-    #: ProxQP 0.8 was seen once to hang in native code (633 s) on a warm-started
-    #: robot tick, which an in-process time limit cannot interrupt.
+    #: ProxQP 0.8 was seen to hang in native code on a warm-started robot tick.
     risky = True
 
     @classmethod
@@ -137,13 +121,7 @@ class ProxqpBackend(Backend):
         native = qpbenchmark_options(self, "proxqp", _native_names)
         if native is None:
             generic, native = generic_settings(self)
-            s.eps_abs = float(generic["eps_abs"])
-            s.eps_rel = float(generic["eps_rel"])
-            s.max_iter = int(generic["max_iter"])
-            if generic["eps_abs"] <= 1e-7:
-                s.check_duality_gap = True
-                s.eps_duality_gap_abs = float(generic["eps_abs"])
-                s.eps_duality_gap_rel = float(generic["eps_rel"])
+            native = {**native_settings("proxqp", **generic), **native}
         update_preconditioner = bool(native.pop("update_preconditioner", False))
         self._retry_cold = bool(native.pop("retry_cold", True))
         for key, value in native.items():
@@ -162,8 +140,7 @@ class ProxqpBackend(Backend):
         self._update_preconditioner = self._apply_settings(qp, proxqp)
         qp.init(*data)
         self._qp, self._key = qp, key
-        # ``qp.results.info`` is a member of the object: its wrapper stays valid.
-        self._info = qp.results.info
+        self._info = qp.results.info  # a member of the object: the wrapper stays valid
         return qp
 
     def _lower(self, n_in: int) -> np.ndarray:
@@ -217,14 +194,11 @@ class ProxqpBackend(Backend):
             warm = self._qp is not None and key == self._key
             if warm:
                 qp = self._qp
-                # ``update_preconditioner`` as a keyword: nanobind dispatches
-                # this faster than the same call all positional.
                 qp.update(*data, update_preconditioner=self._update_preconditioner)
             else:
                 qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
             if warm_start is not None:
-                # ProxQP starts from x (y, z from zero) for this call; it assigns results.x
-                # from a copy of the guess, so the kept views are read again.
+                # results.x becomes a copy of the guess: the kept views are read again
                 qp.solve(np.asarray(warm_start, dtype=float), None, None)
                 self._views = None
             else:
@@ -246,10 +220,8 @@ class ProxqpBackend(Backend):
             ):
                 first_time = info.solve_time
                 first_iter = info.iter
-                # A fresh object: changing ``initial_guess`` after ``init`` makes
-                # ProxQP 0.8 loop forever in ``solve``.
                 qp = self._build(_proxqp(), key, data)
-                if sparse:  # bounds as rows: the verdict is checked at the profile's tolerance
+                if sparse:  # bounds as rows: the verdict checked at the profile's tolerance
                     eps = qp.settings.eps_abs
                     qp.settings.eps_primal_inf = min(qp.settings.eps_primal_inf, eps)
                     qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
@@ -270,7 +242,7 @@ class ProxqpBackend(Backend):
             sol.iterations += int(first_iter)
             sol.solver_time_s += float(first_time) * 1e-6
         if status == "primal_infeasible" or status == "dual_infeasible":
-            self.reset()  # no warm start from an infeasibility exit (see the module docstring)
+            self.reset()  # no warm start from an infeasibility exit
             return sol
         return self._read_solution(qp, sol, info, n, n_eq, n_in, with_box)
 
@@ -278,9 +250,7 @@ class ProxqpBackend(Backend):
         """Copy x, y, z (and z_box: the ``n`` rows after ``n_in``) out of ProxQP's results into ``sol``."""
         status = sol.status
         views = self._views
-        if views is None:
-            # Views of qp.results.x, y, z (each attribute read builds one), kept per QP object:
-            # update and solve write into the same buffers; and where z and z_box lie in z.
+        if views is None:  # update and solve write into the buffers these views show
             res = qp.results
             views = self._views = (res.x, res.y, res.z, slice(0, n_in), slice(n_in, n_in + n))
         x_view, y_view, z_view, part_z, part_box = views
@@ -288,8 +258,7 @@ class ProxqpBackend(Backend):
         if all_finite(x):
             sol.x = x
             sol.y = y_view.copy() if n_eq else np.zeros(0)
-            # One copy of ProxQP's z, then views: [z; z_box] with a box.
-            z = z_view.copy()
+            z = z_view.copy()  # [z; z_box] with a box
             if with_box:
                 sol.z = z[part_z]
                 sol.z_box = z[part_box]
