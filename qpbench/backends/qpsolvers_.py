@@ -1,28 +1,21 @@
 """Backends ``qpsolvers:<name>``: every solver qpsolvers can drive, through its wrapper.
 
-One stateless class per solver, generated at import and registered as ``qpsolvers:<name>``:
-for every solver of :data:`qpsolvers.available_solvers`, those qpbench depends on
-(:data:`EXPECTED_SOLVERS`) and those of the ``all-solvers`` extra (:data:`OPTIONAL_SOLVERS`),
-so a missing one shows as unavailable. A call is what :func:`qpsolvers.solve_problem` does
-(``check_constraints``, then qpsolvers' function for the solver with the same keywords)
-minus its dispatch (:func:`solver_function`); ``warm_start`` is passed as ``initvals``.
-Sparse-only solvers get CSC matrices, dense-only ones dense matrices.
+One stateless class per solver, generated at import and registered as ``qpsolvers:<name>``,
+for the solvers of :data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and
+:data:`OPTIONAL_SOLVERS` (a missing one shows as unavailable). A call is what
+:func:`qpsolvers.solve_problem` does (``check_constraints``, then qpsolvers' function for the
+solver, :func:`solver_function`); ``warm_start`` is passed as ``initvals``. Sparse-only solvers
+get CSC matrices, dense-only ones dense matrices.
 
-Settings. Under a ``qpbenchmark:<settings>`` profile, the keyword arguments qpbenchmark's
-runner passes for the solver, verbatim, plus the backend's own settings. Otherwise the
-profile's generic settings in each solver's own names (:func:`~qpbench.backends._common.native_settings`, following
-qpbenchmark's ``SolverSettings`` plus iteration limits; at ``eps_abs <= 1e-7`` also OSQP's
-polishing, without which ADMM rarely reaches a 1e-9 residual, and PIQP's and ProxQP's
-duality-gap test), then the other settings verbatim.
+Settings: :func:`~qpbench.backends._common.native_settings`, then the other settings
+verbatim; under a ``qpbenchmark:<settings>`` profile qpbenchmark's arguments for the solver
+plus the backend's settings. The wrapper's warnings are ignored
+(:func:`silence_wrapper_warnings`).
 
-Warnings. Constructing a backend adds a filter ignoring the warnings of qpsolvers' wrapper
-module for the solver (:func:`silence_wrapper_warnings`): free per call, where a
-``warnings.catch_warnings`` block around every call costs a share of a fast solve.
-
-Statuses. ``found`` -> ``optimal``; otherwise the status is read from the solver's own
-report in ``Solution.extras`` where qpsolvers keeps one (:data:`STATUS_READERS`, raw value
-in ``extras["raw_status"]``), else ``not_solved``. :class:`qpsolvers.QPError` and
-``ValueError`` raised from the call become status ``error``.
+Statuses: ``found`` -> ``optimal``; otherwise read from the solver's report in
+``Solution.extras`` where qpsolvers keeps one (:data:`STATUS_READERS`, raw value in
+``extras["raw_status"]``), else ``not_solved``. :class:`qpsolvers.QPError` and ``ValueError``
+become status ``error``.
 """
 
 from __future__ import annotations
@@ -72,23 +65,23 @@ SOLVERS: dict[str, tuple[str, str | None]] = {
 }
 
 
-def _table_reader(read, table, text=None) -> object:
+def _plain(value, extras) -> str:
+    return str(value)
+
+
+def _table_reader(read, table, text=_plain) -> object:
     """A status reader: ``read(extras)`` is the solver's status (None: no report), ``table``
     (a dict, or a function returning one) maps it to ours, ``text(value, extras)`` is the raw
-    status kept (None: ``str(extras["info"].status)``, :meth:`QpsolversBackend._not_found`)."""
+    status kept."""
 
     def reader(extras) -> tuple[str, str | None]:
         value = read(extras)
         if value is None:
             return "not_solved", None
         mapping = table() if callable(table) else table
-        return mapping.get(value, "not_solved"), None if text is None else text(value, extras)
+        return mapping.get(value, "not_solved"), text(value, extras)
 
     return reader
-
-
-def _plain(value, extras) -> str:
-    return str(value)
 
 
 def _info(read):
@@ -96,16 +89,21 @@ def _info(read):
     return lambda e: None if e.get("info") is None else read(e["info"])
 
 
+_INFO_STATUS = _info(lambda info: info.status)
+
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
     "clarabel": _table_reader(
         lambda e: None if e.get("status") is None else str(e["status"]).split(".")[-1],
         CLARABEL_STATUSES,
-        _plain,
     ),
-    "osqp": _table_reader(_info(lambda info: int(info.status_val)), osqp_statuses),
-    "proxqp": _table_reader(_info(lambda info: info.status), proxqp_statuses),
-    "piqp": _table_reader(_info(lambda info: info.status), piqp_statuses),
+    "osqp": _table_reader(
+        _info(lambda info: int(info.status_val)),
+        osqp_statuses,
+        lambda v, e: str(e["info"].status),
+    ),
+    "proxqp": _table_reader(_INFO_STATUS, proxqp_statuses),
+    "piqp": _table_reader(_INFO_STATUS, piqp_statuses),
     # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
     "scs": _table_reader(
         lambda e: e.get("status_val"),
@@ -126,7 +124,6 @@ STATUS_READERS = {
             "primal infeasible": "primal_infeasible",
             "dual infeasible": "dual_infeasible",
         },
-        _plain,
     ),
     "qpalm": _table_reader(
         _info(lambda info: str(info.status)),
@@ -137,7 +134,6 @@ STATUS_READERS = {
             "maximum iterations reached": "max_iter",
             "time limit exceeded": "time_limit",
         },
-        _plain,
     ),
     # Gurobi's model status codes; 4 (INF_OR_UNBD) says neither for sure.
     "gurobi": _table_reader(
@@ -149,7 +145,6 @@ STATUS_READERS = {
             7: "max_iter",
             9: "time_limit",
         },
-        _plain,
     ),
 }
 
@@ -229,11 +224,9 @@ _QPError = qpsolvers.QPError
 def solver_function(solver: str):
     """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it.
 
-    The entry of the table ``solve_problem`` dispatches through, read from its globals
-    (the table's module moved between qpsolvers 4.4 and 4.13); without that table,
-    ``solve_problem`` itself. Calling the entry directly saves ``solve_problem``'s frame and
-    keyword repacking: more than 5 % of the fastest routes' call
-    (``python bench/backend_overhead.py``, the routes' ratio to ``solve_problem``).
+    The entry of the table ``solve_problem`` dispatches through (read from its globals: the
+    table's module moved between qpsolvers 4.4 and 4.13), saving ``solve_problem``'s frame;
+    without that table, ``solve_problem`` itself.
     """
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     function = table.get(solver) if isinstance(table, dict) else None
@@ -253,9 +246,7 @@ def _float_array(v):
 
 
 #: Solvers whose qpsolvers wrapper hands ``x``, ``y``, ``z`` and ``z_box`` back as float64
-#: arrays (or None): taken as given (tests/test_backends.py checks it of every installed one
-#: through qpsolvers.solve_problem); any other solver's results (clarabel's duals are lists)
-#: are converted.
+#: arrays (or None): taken as given; any other solver's results are converted.
 FLOAT64_WRAPPERS = frozenset(
     "cvxopt daqp ecos gurobi highs osqp piqp proxqp qpalm quadprog scs".split()
 )
@@ -287,11 +278,11 @@ class QpsolversBackend(Backend):
         silence_wrapper_warnings(solver)
         generic, native = generic_settings(self)
         given = self.profile.solver_options
-        if given is not None:  # qpbenchmark's arguments, verbatim (qpbench.profiles)
+        if given is not None:
             self._solver_options = {**given.get(solver, {}), **self.settings}
         else:
             self._solver_options = {**native_settings(solver, **generic), **native}
-        # The keywords of every call: solve_problem passes verbose (default False) to the wrapper.
+        # solve_problem passes verbose (default False) to the wrapper
         self._call_options = {"verbose": False, **self._solver_options}
         self._function = solver_function(solver)
 
@@ -309,9 +300,7 @@ class QpsolversBackend(Backend):
     @classmethod
     def setting_names(cls) -> frozenset[str] | None:
         """For the solvers of :data:`SAME_SETTINGS_AS`: the direct backend's names plus the
-        keywords of qpsolvers' ``<solver>_solve_problem``. For the others ``None``: qpsolvers
-        hands them their keywords each in its own way, and no list of the solver's settings
-        tells which keys the route accepts."""
+        keywords of qpsolvers' ``<solver>_solve_problem``; ``None`` for the others."""
         import importlib
         import inspect
 
@@ -343,8 +332,7 @@ class QpsolversBackend(Backend):
                 solved = qpsolvers.Problem(spa.csc_matrix(P), q, G, h, A, b, lb, ub)
         elif self._dense_only:
             P, G, A = problem.P, problem.G, problem.A
-            # Type tests first: Problem.has_sparse's isinstance checks cost more.
-            if (
+            if (  # type tests first: Problem.has_sparse costs more
                 not (
                     type(P) is _ndarray
                     and (G is None or type(G) is _ndarray)
@@ -366,13 +354,7 @@ class QpsolversBackend(Backend):
         extras = result.extras
         sol = new_solution(problem, "optimal", {} if extras is None else extras)
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
-        # Tested by identity: anything else (lists, other dtypes) is converted.
-        if not self._float64_wrapper and not (
-            (x is None or (type(x) is _ndarray and x.dtype is _F64))
-            and (y is None or (type(y) is _ndarray and y.dtype is _F64))
-            and (z is None or (type(z) is _ndarray and z.dtype is _F64))
-            and (z_box is None or (type(z_box) is _ndarray and z_box.dtype is _F64))
-        ):
+        if not self._float64_wrapper:  # clarabel's duals are lists
             x, y, z, z_box = map(_float_array, (x, y, z, z_box))
         sol.x = x
         sol.y = y
@@ -395,8 +377,6 @@ class QpsolversBackend(Backend):
             status, raw = self._reader(extras)
             if status == "optimal":
                 status = "not_solved"  # the solver says solved but qpsolvers does not agree
-            if raw is None and "info" in extras:
-                raw = str(getattr(extras["info"], "status", None))
             if raw is not None:
                 sol.extras = dict(extras, raw_status=raw)
         sol.status = status
