@@ -1,13 +1,9 @@
 """What the backend modules share: settings, and a problem's arrays in the forms solvers take.
 
-The sparse solvers' backends store dense blocks with their full pattern: the robot's
-Jacobian has entries that are zero in some ticks only, so a pattern taken from the
-non-zeros would change from tick to tick and force a rebuild of the solver.
-
-Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one
-when a matrix is scipy.sparse or when made dense it would exceed
-:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`); they keep a
-sparse solver per :func:`structure_key` and ``update`` it.
+Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one when a
+matrix is scipy.sparse or when made dense it would exceed
+:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`), and keep a sparse
+solver per :func:`structure_key`.
 """
 
 from __future__ import annotations
@@ -39,19 +35,10 @@ GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 def generic_settings(backend: Backend) -> tuple[dict, dict]:
     """``(generic, native)``: :data:`GENERIC_KEYS` from the profile overridden by the user's
     settings of the same name, and the user's other settings (passed to the solver verbatim)."""
-    profile = backend.profile
-    generic = {
-        "eps_abs": profile.eps_abs,
-        "eps_rel": profile.eps_rel,
-        "max_iter": profile.max_iter,
-        "time_limit": profile.time_limit,
-    }
+    generic = {key: getattr(backend.profile, key) for key in GENERIC_KEYS}
     native = {}
     for key, value in backend.settings.items():
-        if key in generic:
-            generic[key] = value
-        else:
-            native[key] = value
+        (generic if key in generic else native)[key] = value
     return generic, native
 
 
@@ -113,9 +100,8 @@ _NATIVE["proxqp"] = _NATIVE["piqp"]
 _NATIVE["kvxopt"] = _NATIVE["cvxopt"]
 _NATIVE["qpalm"] = _NATIVE["osqp"]
 
-#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (ADMM
-#: alone seldom reaches a 1e-9 residual; the polishing step, a solve of the KKT system of the
-#: guessed active set, does), PIQP's and ProxQP's duality-gap test.
+#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (a
+#: solve of the KKT system of the guessed active set), PIQP's and ProxQP's duality-gap test.
 _HIGH_ACCURACY = {
     "osqp": {"polishing": True},
     "piqp": {"check_duality_gap": True},
@@ -283,28 +269,30 @@ class StackedCsc:
 def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
     """``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept; ``A``, ``G`` 2-D)."""
     P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
-    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+    q, b, h, lb, ub = _vectors(problem)
     n = q.shape[0]
     A, G = (None if M is None else as_dense(M).reshape(-1, n) for M in (problem.A, problem.G))
-    b, h, lb, ub = (
-        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
-        for v in (problem.b, problem.h, problem.lb, problem.ub)
-    )
     return P, q, A, b, G, h, lb, ub
+
+
+def _vectors(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
+    """``q, b, h, lb, ub`` as 1-D float64 arrays (``None`` kept)."""
+    return tuple(
+        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
+        for v in (problem.q, problem.b, problem.h, problem.lb, problem.ub)
+    )
 
 
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
     """``P, q, A, b, G, h, lb, ub`` as they are when they are what a controller builds (float64
-    arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts).
+    arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts); shapes are
+    not compared here (:func:`check_shapes`).
 
-    The dense backends' per-tick path; shapes are not compared here (:func:`check_shapes`).
-    Dtypes are tested by identity first (numpy's float64 descriptor is a singleton except in
-    unpickled arrays, which take the ``==``).
+    The dense backends' per-tick path: one chain of tests, dtypes by identity first (numpy's
+    float64 descriptor is a singleton except in unpickled arrays, which take the ``==``).
     """
     P, q, A, b = problem.P, problem.q, problem.A, problem.b
     G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
-    # One chain of tests, (A, b) and (G, h) written out alike: a loop or a helper per block
-    # costs a measurable share of the fastest ticks (qpoases, daqp).
     if not (
         type(P) is _ndarray
         and (P.dtype is _f64 or P.dtype == _f64)
@@ -343,8 +331,7 @@ _f64 = np.dtype(np.float64)
 
 
 def all_finite(x: np.ndarray) -> bool:
-    """Whether every entry of ``x`` is finite; for a robot-sized vector a Python loop, several
-    times faster than numpy's ufunc and reduction (a share of a tick: ``bench/backend_overhead.py``)."""
+    """Whether every entry of ``x`` is finite (a short vector by a Python loop: no ufunc call)."""
     return all(map(_isfinite, x.tolist())) if x.size <= 32 else bool(np.isfinite(x).all())
 
 
@@ -352,10 +339,8 @@ _isfinite = math.isfinite
 
 
 def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]:
-    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
-
-    Solvers that keep a workspace of one shape must not be handed arrays of another: DAQP
-    ignores such an update without a word, numpy would broadcast a 1-row ``b`` into two slots.
+    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape (a solver
+    keeping a workspace of one shape must not be handed arrays of another).
 
     Raises:
         ProblemFormatError: an array whose shape does not fit ``n`` and the rows of ``A``
@@ -430,16 +415,12 @@ def _csc(M, n: int) -> spa.csc_matrix | None:
 def sparse_parts(problem: qpsolvers.Problem, upper: bool = False) -> tuple:
     """``P, q, A, b, G, h, lb, ub`` with the matrices as CSC float64 (``None`` kept);
     ``upper``: only the upper triangle of ``P`` (what PIQP's sparse API reads)."""
-    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+    q, b, h, lb, ub = _vectors(problem)
     n = q.shape[0]
     P = _csc(problem.P, n)
     if upper:
         P = spa.triu(P, format="csc")
         P.sort_indices()
-    b, h, lb, ub = (
-        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
-        for v in (problem.b, problem.h, problem.lb, problem.ub)
-    )
     return P, q, _csc(problem.A, n), b, _csc(problem.G, n), h, lb, ub
 
 

@@ -7,25 +7,21 @@ native::
     H = P,  f = q,  A = [A_eq; G],
     bupper = [ub; b; h],  blower = [lb; b; -inf],  sense = [0 (n); 5 (me); 0 (mi)]
 
-(sense 5: an active, immutable equality; no box block without ``lb``/``ub``). The stacked
-arrays are buffers kept per shape (DAQP copies its input). DAQP's multipliers ``lam`` have
-qpsolvers' signs: ``z_box = lam[:n]``, ``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an
-optimal solve carries ``x`` and duals. ``warm_start`` is ignored (as DAQP's ``primal_start``
-it costs more per call than it saves: ``bench/backend_overhead.py``).
+(sense 5: an active, immutable equality; no box block without ``lb``/``ub``), stacked into
+buffers kept per shape. Its multipliers ``lam`` have qpsolvers' signs: ``z_box = lam[:n]``,
+``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an optimal solve carries ``x`` and duals.
+``warm_start`` is ignored.
 
-``daqp``: one ``daqp.Model`` per shape, ``setup`` on its first tick, then ``update`` +
-``solve``, starting from the working set of the previous solve (``sense`` is not passed).
-``H`` and ``f`` go to ``update`` only when they changed (the paper's ``P = I``, ``q = 0``
-never do, so DAQP keeps its factorisation). Shapes are checked first
-(:func:`~qpbench.backends._common.check_shapes`): DAQP ignores an update of another shape
-without an error. A refused ``setup``/``update`` or a solve that is not optimal drops the
-model. ``solver_time_s`` is DAQP's ``setup_time + solve_time`` (0 set-up after ``update``).
+``daqp``: one ``daqp.Model`` per shape (shapes checked first: DAQP ignores an update of another
+shape), ``setup`` on its first tick, then ``update`` + ``solve`` from the previous working set;
+``H`` and ``f`` go to ``update`` only when they changed, so DAQP keeps its factorisation. A
+refused ``setup``/``update`` or a solve that is not optimal drops the model.
+``solver_time_s``: DAQP's ``setup_time + solve_time``.
 
 Settings: ``primal_tol = dual_tol = eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s];
-under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:daqp`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are DAQP's own (the
-keys of ``daqp.Model().settings``; the default ``eps_prox < 0`` regularises a singular ``H``,
-so LPs are solved too). ``ValueError``/``TypeError`` from the binding become status ``error``.
+under a ``qpbenchmark:<settings>`` profile
+:func:`~qpbench.backends._common.qpbenchmark_options`; others are DAQP's own (the keys of
+``daqp.Model().settings``). ``ValueError``/``TypeError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -157,7 +153,7 @@ class DaqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._buffers: dict[tuple, _Buffers] = {}
+        self.reset()
         self._options = self.options()
 
     def options(self) -> dict:
@@ -169,7 +165,7 @@ class DaqpBackend(Backend):
         return given if given is not None else {**_native_names(generic), **native}
 
     def reset(self) -> None:
-        self._buffers.clear()
+        self._buffers: dict[tuple, _Buffers] = {}
 
     def _stack(self, P, q, A, b, G, h, lb, ub) -> tuple[tuple, _Buffers]:
         """The shape key and the buffers of that shape, filled with this problem."""
@@ -199,10 +195,6 @@ class DaqpModelBackend(DaqpBackend):
     """DAQP through a persistent ``daqp.Model`` (setup once per shape, update + solve per tick)."""
 
     name = "daqp"
-
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self.reset()
 
     def reset(self) -> None:
         super().reset()
