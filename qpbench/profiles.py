@@ -25,7 +25,7 @@ read from its installed modules (:func:`qpbench.published.qpbenchmark_settings`)
 the time limit is its ``Tolerance.runtime`` (``--time-limit`` replaces it in the solvers'
 arguments too, as its ``set_time_limit`` does); success is its strict rule (``rule =
 "qpbenchmark"``), the reference playing no part. The own-API backends of those solvers
-get the same arguments (:func:`qpbench.backends._common.qpbenchmark_options`); other
+get the same arguments (:func:`qpbench.backends._common.solver_options`); other
 backends get ``eps_abs`` (qpbench's ``default`` where qpbenchmark asks for none),
 ``eps_rel = 0``, ``max_iter`` 1e6 and the time limit.
 """

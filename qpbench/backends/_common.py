@@ -132,23 +132,25 @@ def native_settings(
     return settings
 
 
-def qpbenchmark_options(
-    backend: Backend, solver: str, translate: Callable[[dict], dict]
-) -> dict | None:
-    """The options an own-API backend gives ``solver`` under a ``qpbenchmark:<settings>``
-    profile, ``None`` under qpbench's own profiles.
+def solver_options(
+    backend: Backend, solver: str, translate: Callable[[dict], dict] | None = None
+) -> dict:
+    """The options an own-API backend gives ``solver``, as the ``qpsolvers:<solver>`` route.
 
-    As the ``qpsolvers:<solver>`` route: qpbenchmark's arguments for the solver, then the
-    generic settings the user gave (through ``translate`` to the solver's names), then the
-    user's native ones; nothing of qpbench's own profiles is added.
+    The generic settings (the profile's, overridden by the user's) in the solver's names
+    (``translate``, by default :func:`native_settings`), then the user's other settings. Under
+    a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then the
+    generic settings the user gave (``translate``-d, by default those the solver has under
+    the same name), then the other ones; nothing of qpbench's own profiles.
     """
+    generic, native = generic_settings(backend)
     given = backend.profile.solver_options
     if given is None:
-        return None
-    options = dict(given.get(solver, {}))
-    options.update(translate({k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}))
-    options.update({k: v for k, v in backend.settings.items() if k not in GENERIC_KEYS})
-    return options
+        own = translate(generic) if translate else native_settings(solver, **generic)
+        return {**own, **native}
+    user = {k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}
+    user = translate(user) if translate else {k: user[k] for k in user if k in _NATIVE[solver]}
+    return {**given.get(solver, {}), **user, **native}
 
 
 def refuse_unknown(backend: str, native: dict, allowed, own: str) -> None:

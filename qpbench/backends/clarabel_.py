@@ -7,9 +7,8 @@ Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with ``C = [A
 pattern hold; ``solver_time_s`` only for a freshly built one. ``warm_start`` is ignored.
 
 Settings: ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
-``time_limit`` [s], others set on ``DefaultSettings``; under a ``qpbenchmark:<settings>``
-profile :func:`~qpbench.backends._common.qpbenchmark_options`. ``ValueError``, ``TypeError``
-and Rust panics become status ``error``.
+``time_limit`` [s], others (:func:`~qpbench.backends._common.solver_options`) set on
+``DefaultSettings``. ``ValueError``, ``TypeError`` and Rust panics become status ``error``.
 """
 
 from __future__ import annotations
@@ -27,9 +26,8 @@ from ._common import (
     all_dense,
     all_finite,
     dense_bounds,
-    generic_settings,
     own_settings,
-    qpbenchmark_options,
+    solver_options,
 )
 from .base import Backend, BackendSolution, error_solution
 
@@ -199,10 +197,7 @@ class ClarabelBackend(Backend):
         s.verbose = False
         s.presolve_enable = False  # update() needs these two
         s.input_sparse_dropzeros = False
-        options = qpbenchmark_options(self, "clarabel", _native_names)
-        if options is None:
-            generic, native = generic_settings(self)
-            options = {**_native_names(generic), **native}
+        options = solver_options(self, "clarabel", _native_names)
         for key, value in options.items():
             setattr(s, key, value)
         return s

@@ -18,9 +18,8 @@ shape), ``setup`` on its first tick, then ``update`` + ``solve`` from the previo
 refused ``setup``/``update`` or a solve that is not optimal drops the model.
 ``solver_time_s``: DAQP's ``setup_time + solve_time``.
 
-Settings: ``primal_tol = dual_tol = eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s];
-under a ``qpbenchmark:<settings>`` profile
-:func:`~qpbench.backends._common.qpbenchmark_options`; others are DAQP's own (the keys of
+Settings (:func:`~qpbench.backends._common.solver_options`): ``primal_tol = dual_tol =
+eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s]; others are DAQP's own (the keys of
 ``daqp.Model().settings``). ``ValueError``/``TypeError`` become status ``error``.
 """
 
@@ -34,9 +33,8 @@ from ._common import (
     check_shapes,
     dense_f64_parts,
     dense_parts,
-    generic_settings,
-    qpbenchmark_options,
     refuse_unknown,
+    solver_options,
 )
 from .base import Backend, BackendSolution, error_solution, new_solution
 
@@ -158,11 +156,10 @@ class DaqpBackend(Backend):
 
     def options(self) -> dict:
         """The keyword settings given to DAQP (profile first, then the user's)."""
-        generic, native = generic_settings(self)
+        options = solver_options(self, "daqp", _native_names)
         allowed = sorted((_DAQP[0] if _DAQP else _daqp()).Model().settings)
-        refuse_unknown("daqp", native, allowed, "DAQP's own")
-        given = qpbenchmark_options(self, "daqp", _native_names)
-        return given if given is not None else {**_native_names(generic), **native}
+        refuse_unknown("daqp", options, allowed, "DAQP's own")
+        return options
 
     def reset(self) -> None:
         self._buffers: dict[tuple, _Buffers] = {}

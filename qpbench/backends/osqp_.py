@@ -5,10 +5,9 @@ OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
 ``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
 
 The solver is set up once and ``update``-d while shape and pattern hold, warm-starting from its
-previous iterate or from ``warm_start``. Settings as ``qpsolvers:osqp``, others to
-``OSQP.setup``; under a ``qpbenchmark:<settings>`` profile
-:func:`~qpbench.backends._common.qpbenchmark_options`. ``OSQPException`` and ``ValueError``
-become status ``error``.
+previous iterate or from ``warm_start``. Settings as ``qpsolvers:osqp``
+(:func:`~qpbench.backends._common.solver_options`), others to ``OSQP.setup``.
+``OSQPException`` and ``ValueError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -25,9 +24,7 @@ from ._common import (
     all_dense,
     all_finite,
     dense_bounds,
-    generic_settings,
-    native_settings,
-    qpbenchmark_options,
+    solver_options,
 )
 from .base import Backend, error_solution, new_solution
 
@@ -165,11 +162,7 @@ class OsqpBackend(Backend):
         )
 
     def _settings(self) -> dict:
-        given = qpbenchmark_options(self, "osqp", dict)  # the generic names are OSQP's own
-        if given is not None:
-            return {"verbose": False, **given}
-        generic, native = generic_settings(self)  # as the qpsolvers:osqp route
-        return {**native_settings("osqp", **generic), "verbose": False, **native}
+        return {"verbose": False, **solver_options(self, "osqp")}
 
     def _solve(self, problem, warm_start):
         osqp = _OSQP[0] if _OSQP else _import_osqp()

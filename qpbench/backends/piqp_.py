@@ -19,11 +19,9 @@ from ._common import (
     GENERIC_KEYS,
     check_shapes,
     dense_route,
-    generic_settings,
-    native_settings,
     own_settings,
-    qpbenchmark_options,
     refuse_unknown,
+    solver_options,
     sparse_parts,
     structure_key,
 )
@@ -85,19 +83,10 @@ class PiqpBackend(Backend):
         self._settings_dict = self._make_settings()
 
     def _make_settings(self) -> dict:
-        given = qpbenchmark_options(
-            self, "piqp", lambda g: {k: g[k] for k in g if k != "time_limit"}
-        )
-        if given is not None:
-            settings, native = {"verbose": False, "compute_timings": True}, given
-        else:
-            generic, native = generic_settings(self)
-            settings = native_settings("piqp", **generic)
-            settings.update(verbose=False, compute_timings=True)
+        options = solver_options(self, "piqp")
         allowed = sorted(a for a in dir(_piqp().DenseSolver().settings) if not a.startswith("_"))
-        refuse_unknown("piqp", native, allowed, "PIQP's own")
-        settings.update(native)
-        return settings
+        refuse_unknown("piqp", options, allowed, "PIQP's own")
+        return {"verbose": False, "compute_timings": True, **options}
 
     def reset(self) -> None:
         self._solver = self._shapes = self._info = None

@@ -13,9 +13,8 @@ the next ones from ``WARM_START_WITH_PREVIOUS_RESULT``; ``warm_start`` goes to
 one cold solve on a fresh object (``extras["cold_retry"]``, iterations and times added up;
 ``retry_cold=False``: not); after a verdict the object is dropped.
 
-Settings: :func:`~qpbench.backends._common.native_settings` (no time limit) or, under a
-``qpbenchmark:<settings>`` profile, :func:`~qpbench.backends._common.qpbenchmark_options`;
-others set on ``QP.settings``. ``ValueError`` and ``RuntimeError`` become status ``error``.
+Settings: :func:`~qpbench.backends._common.solver_options` (no time limit), set on
+``QP.settings``. ``ValueError`` and ``RuntimeError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -29,10 +28,8 @@ from ._common import (
     all_finite,
     dense_bounds,
     dense_route,
-    generic_settings,
-    native_settings,
     own_settings,
-    qpbenchmark_options,
+    solver_options,
     sparse_parts,
     structure_key,
 )
@@ -71,11 +68,6 @@ def proxqp_statuses() -> dict:
 def _status(value) -> tuple[str, str]:
     """Our status and ProxQP's name of a ``QPSolverOutput``."""
     return proxqp_statuses().get(value, "not_solved"), str(value).split(".")[-1]
-
-
-def _native_names(generic: dict) -> dict:
-    """ProxQP's settings for the generic ones given (it has no time limit: that one is dropped)."""
-    return {k: v for k, v in generic.items() if k != "time_limit"}
 
 
 @register
@@ -118,10 +110,7 @@ class ProxqpBackend(Backend):
         s.verbose = False
         s.compute_timings = True
         s.initial_guess = proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
-        native = qpbenchmark_options(self, "proxqp", _native_names)
-        if native is None:
-            generic, native = generic_settings(self)
-            native = {**native_settings("proxqp", **generic), **native}
+        native = solver_options(self, "proxqp")
         update_preconditioner = bool(native.pop("update_preconditioner", False))
         self._retry_cold = bool(native.pop("retry_cold", True))
         for key, value in native.items():
