@@ -30,6 +30,7 @@ from pathlib import Path
 from ..exceptions import BackendNotFound, ParamError
 from ..profiles import Profile
 from ..statuses import STATUSES as STATUSES
+from ..statuses import describe_exception
 from .base import Backend
 from .base import BackendSolution as BackendSolution
 
@@ -94,10 +95,6 @@ def plugin_files() -> list[str]:
     return [str(path) for path in _FILES]
 
 
-def _one_line(exc: BaseException) -> str:
-    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-
-
 def _load_entry_points(found) -> None:
     for ep in found:
         key = f"{ep.name} = {ep.value}"
@@ -109,7 +106,7 @@ def _load_entry_points(found) -> None:
         except Exception as exc:  # noqa: BLE001 - any import failure is a bad plugin
             dist = getattr(getattr(ep, "dist", None), "name", None) or "an installed distribution"
             raise ParamError(
-                f"cannot load the entry point '{key}' of {dist}: {_one_line(exc)}",
+                f"cannot load the entry point '{key}' of {dist}: {describe_exception(exc)}",
                 key=ENTRY_POINT_GROUP,
             ) from None
         if isinstance(obj, type) and issubclass(obj, Backend):
@@ -144,7 +141,7 @@ def _load_files(files: Iterable[str | Path]) -> None:
             del sys.modules[name]
             if isinstance(exc, KeyboardInterrupt):
                 raise
-            raise ParamError(f"cannot load plugin: {_one_line(exc)}", path=path) from None
+            raise ParamError(f"cannot load plugin: {describe_exception(exc)}", path=path) from None
         _FILES[path] = name
 
 

@@ -26,10 +26,9 @@ from ..statuses import describe_exception
 class BackendSolution(qpsolvers.Solution):
     """A :class:`qpsolvers.Solution` plus what a benchmark needs to know.
 
-    ``status`` is one of :data:`qpbench.statuses.STATUSES`; ``solver_time_s`` [s] is the time the solver
-    reports itself; ``error`` holds the exception type and message when ``status == "error"``.
-    ``obj`` is the solver's objective, or ``1/2 x'Px + q'x`` computed from ``x`` on first
-    read and kept (a closed loop that never reads it does not pay for it).
+    ``status`` is one of :data:`qpbench.statuses.STATUSES`; ``solver_time_s`` [s] is the time
+    the solver reports itself; ``error`` holds the exception when ``status == "error"``.
+    ``obj`` is the solver's objective, or ``1/2 x'Px + q'x`` computed from ``x`` on first read.
     """
 
     status: str = "not_solved"
@@ -38,9 +37,7 @@ class BackendSolution(qpsolvers.Solution):
     backend: str = ""
     error: str | None = None
 
-    def __getattr__(self, name: str):
-        # Only for attributes not set: an instance made by new_solution (no __init__) gets
-        # the defaults here. Fields with a plain default are class attributes.
+    def __getattr__(self, name: str):  # the defaults of an instance made by new_solution
         if name == "extras":
             extras = self.extras = {}
             return extras
@@ -67,11 +64,8 @@ BackendSolution.obj = property(_get_obj, _set_obj, doc="Primal objective at ``x`
 def new_solution(
     problem: qpsolvers.Problem, status: str, extras: dict, cls: type = BackendSolution
 ) -> BackendSolution:
-    """A :class:`BackendSolution` (or subclass ``cls``), every other field at its default.
-
-    The per-tick constructor of the fast backends: it skips the dataclass ``__init__``,
-    whose keyword fields are a measurable share of a call (``bench/backend_overhead.py``).
-    """
+    """A :class:`BackendSolution` (or subclass ``cls``), every other field at its default:
+    the per-tick constructor of the fast backends, without the dataclass ``__init__``."""
     sol = _new(cls)
     sol.problem = problem
     sol.status = status
