@@ -184,3 +184,33 @@ class Backend:
 def objective(problem: qpsolvers.Problem, x: np.ndarray) -> float:
     """Primal objective ``1/2 x^T P x + q^T x`` (plus no constant)."""
     return float(0.5 * x @ (problem.P @ x) + problem.q @ x)
+
+
+class PersistentBackend(Backend):
+    """A backend keeping its solver between calls: the constructor calls :meth:`reset` (which
+    builds the state), and a failure of the solver raised by :meth:`_attempt` (an instance of
+    :attr:`errors`, or of a class named in :attr:`error_names`) is status ``error`` and drops
+    the state."""
+
+    certifies_infeasibility = True
+    errors: ClassVar[tuple[type[BaseException], ...]] = (ValueError,)
+    #: Exception classes of the solver's package, by name (the package is imported lazily).
+    error_names: ClassVar[frozenset[str]] = frozenset()
+
+    def __init__(self, profile: str | Profile = "default", **settings):
+        super().__init__(profile, **settings)
+        self.reset()
+
+    def _solve(self, problem, warm_start):
+        try:
+            return self._attempt(problem, warm_start)
+        except BaseException as exc:
+            if not isinstance(exc, self.errors) and type(exc).__name__ not in self.error_names:
+                raise
+            self.reset()
+            return error_solution(problem, exc)
+
+    def _attempt(
+        self, problem: qpsolvers.Problem, warm_start: np.ndarray | None
+    ) -> BackendSolution:  # pragma: no cover - abstract
+        raise NotImplementedError

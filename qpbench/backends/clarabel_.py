@@ -29,7 +29,7 @@ from ._common import (
     own_settings,
     solver_options,
 )
-from .base import Backend, BackendSolution, error_solution
+from .base import BackendSolution, PersistentBackend
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -161,18 +161,14 @@ def _native_names(generic: dict) -> dict:
     return out
 
 
-def _is_clarabel_error(exc: BaseException) -> bool:
-    """Errors Clarabel raises on bad data (pyo3 panics derive from BaseException)."""
-    return isinstance(exc, (ValueError, TypeError)) or type(exc).__name__ == "PanicException"
-
-
 @register
-class ClarabelBackend(Backend):
+class ClarabelBackend(PersistentBackend):
     """Clarabel with a persistent ``DefaultSolver``, updated in place when the pattern holds."""
 
     name = "clarabel"
-    certifies_infeasibility = True
     sparse = True
+    errors = (ValueError, TypeError)
+    error_names = frozenset({"PanicException"})  # Rust panics (pyo3: a BaseException)
     family = "interior point"
     package = "clarabel"
     module = "clarabel"
@@ -183,10 +179,6 @@ class ClarabelBackend(Backend):
         import clarabel
 
         return frozenset(own_settings(clarabel.DefaultSettings()) | set(GENERIC_KEYS))
-
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self.reset()
 
     def reset(self) -> None:
         self._solver = None
@@ -202,46 +194,39 @@ class ClarabelBackend(Backend):
             setattr(s, key, value)
         return s
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         import clarabel
 
         sol = BackendSolution(problem)
-        try:
-            layout = self._layout
-            same = False
-            if self._solver is not None and layout is not None:
-                key = quick_key(problem) if layout.dense else None
-                if key is None:
-                    key = ConeLayout(problem).key
-                same = key == layout.key
-            if same:
-                P_data, C_data = layout.data(problem.P, layout.blocks(problem))
-                self._solver.update(
-                    P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem)
-                )
+        layout = self._layout
+        same = False
+        if self._solver is not None and layout is not None:
+            key = quick_key(problem) if layout.dense else None
+            if key is None:
+                key = ConeLayout(problem).key
+            same = key == layout.key
+        if same:
+            P_data, C_data = layout.data(problem.P, layout.blocks(problem))
+            self._solver.update(
+                P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem)
+            )
+        else:
+            self._solver = None
+            layout = ConeLayout(problem)
+            P, C = layout.matrices(problem.P, layout.blocks(problem))
+            solver = clarabel.DefaultSolver(
+                P,
+                np.asarray(problem.q, dtype=float),
+                C,
+                layout.rhs(problem),
+                layout.cones(clarabel),
+                self._settings(clarabel),
+            )
+            if solver.is_data_update_allowed():
+                self._solver, self._layout = solver, layout
             else:
-                self._solver = None
-                layout = ConeLayout(problem)
-                P, C = layout.matrices(problem.P, layout.blocks(problem))
-                solver = clarabel.DefaultSolver(
-                    P,
-                    np.asarray(problem.q, dtype=float),
-                    C,
-                    layout.rhs(problem),
-                    layout.cones(clarabel),
-                    self._settings(clarabel),
-                )
-                if solver.is_data_update_allowed():
-                    self._solver, self._layout = solver, layout
-                else:
-                    self._layout = None
-            res = (self._solver or solver).solve()
-        except BaseException as exc:
-            if not _is_clarabel_error(exc):
-                raise
-            self.reset()
-            return error_solution(problem, exc)
-
+                self._layout = None
+        res = (self._solver or solver).solve()
         name = _status_name(res.status)
         status = CLARABEL_STATUSES.get(name, "not_solved")
         sol.status = status

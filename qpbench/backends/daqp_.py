@@ -36,7 +36,7 @@ from ._common import (
     refuse_unknown,
     solver_options,
 )
-from .base import Backend, BackendSolution, error_solution, new_solution
+from .base import BackendSolution, PersistentBackend, new_solution
 
 #: DAQP exit flag -> (status, DAQP's name). CYCLE: no progress.
 EXITFLAGS = {
@@ -135,11 +135,11 @@ def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> B
 
 
 @register
-class DaqpBackend(Backend):
+class DaqpBackend(PersistentBackend):
     """DAQP through ``daqp.solve`` with simple bounds native and equalities by sense flags."""
 
     name = "daqp-stateless"
-    certifies_infeasibility = True
+    errors = (ValueError, TypeError)
     family = "active set (dual)"
     package = "daqp"
     module = "daqp"
@@ -151,7 +151,6 @@ class DaqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self.reset()
         self._options = self.options()
 
     def options(self) -> dict:
@@ -174,16 +173,11 @@ class DaqpBackend(Backend):
         buf.fill(A, b, G, h, lb, ub)
         return key, buf
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         daqp = _DAQP[0] if _DAQP else _daqp()
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
-        try:
-            _, buf = self._stack(P, q, A, b, G, h, lb, ub)
-            x, fval, flag, info = daqp.solve(
-                P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options
-            )
-        except (ValueError, TypeError) as exc:
-            return error_solution(problem, exc)
+        _, buf = self._stack(P, q, A, b, G, h, lb, ub)
+        x, fval, flag, info = daqp.solve(P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options)
         return read_result(problem, flag, x, fval, info, buf)
 
 
@@ -198,35 +192,31 @@ class DaqpModelBackend(DaqpBackend):
         self._model = self._key = None
         self._H = self._f = None  # copies of the H and f the model holds
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
         check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
         key, buf = self._stack(P, q, A, b, G, h, lb, ub)
         if key != self._key:
             self._model, self._key = None, key
         model = self._model
-        try:
-            if model is None:
-                model = _daqp().Model()
-                model.settings = dict(model.settings, **self._options)
-                flag, _ = model.setup(P, q, buf.A, buf.bu, buf.bl, buf.sense)
-                if flag >= 0:
-                    self._model = model
-                    self._H, self._f = P.copy(), q.copy()
-            else:
-                H = f = None
-                if P.tobytes() != self._H.tobytes():
-                    H = self._H = P.copy()
-                if q.tobytes() != self._f.tobytes():
-                    f = self._f = q.copy()
-                flag = model.update(H, f, buf.A, buf.bu, buf.bl)
-            if flag < 0:
-                self._model = None
-                return read_result(problem, flag)
-            x, fval, flag, info = model.solve()
-        except (ValueError, TypeError) as exc:
+        if model is None:
+            model = _daqp().Model()
+            model.settings = dict(model.settings, **self._options)
+            flag, _ = model.setup(P, q, buf.A, buf.bu, buf.bl, buf.sense)
+            if flag >= 0:
+                self._model = model
+                self._H, self._f = P.copy(), q.copy()
+        else:
+            H = f = None
+            if P.tobytes() != self._H.tobytes():
+                H = self._H = P.copy()
+            if q.tobytes() != self._f.tobytes():
+                f = self._f = q.copy()
+            flag = model.update(H, f, buf.A, buf.bu, buf.bl)
+        if flag < 0:
             self._model = None
-            return error_solution(problem, exc)
+            return read_result(problem, flag)
+        x, fval, flag, info = model.solve()
         sol = read_result(problem, flag, x, fval, info, buf)
         if sol.status != "optimal":
             self._model = None  # set up afresh on the next tick

@@ -26,7 +26,7 @@ from ._common import (
     dense_bounds,
     solver_options,
 )
-from .base import Backend, error_solution, new_solution
+from .base import PersistentBackend, new_solution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -131,19 +131,15 @@ def _has_box(problem) -> bool:
 
 
 @register
-class OsqpBackend(Backend):
+class OsqpBackend(PersistentBackend):
     """OSQP through ``osqp.OSQP`` with a persistent, updated solver object."""
 
     name = "osqp"
-    certifies_infeasibility = True
     sparse = True
+    error_names = frozenset({"OSQPException"})
     family = "ADMM"
     package = "osqp"
     module = "osqp"
-
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self.reset()
 
     def reset(self) -> None:
         self._solver = None
@@ -164,31 +160,27 @@ class OsqpBackend(Backend):
     def _settings(self) -> dict:
         return {"verbose": False, **solver_options(self, "osqp")}
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         osqp = _OSQP[0] if _OSQP else _import_osqp()
         P, G, A, lb, ub = problem.P, problem.G, problem.A, problem.lb, problem.ub
         layout = self._layout
-        try:
-            if (
-                layout is not None
-                and layout.tick_shapes is not None
-                and type(P) is _ndarray
-                and type(G) is _ndarray
-                and type(A) is _ndarray
-                and lb is not None
-                and ub is not None
-                and (P.shape, G.shape, A.shape) == layout.tick_shapes
-            ):  # a robot tick: every block dense, of the kept shape
-                l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
-                self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
-            else:
-                layout = self._update_or_setup(osqp, problem)
-            if warm_start is not None:
-                self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
-            res = self._solver.solve(raise_error=False)
-        except (osqp.OSQPException, ValueError) as exc:
-            self.reset()
-            return error_solution(problem, exc)
+        if (
+            layout is not None
+            and layout.tick_shapes is not None
+            and type(P) is _ndarray
+            and type(G) is _ndarray
+            and type(A) is _ndarray
+            and lb is not None
+            and ub is not None
+            and (P.shape, G.shape, A.shape) == layout.tick_shapes
+        ):  # a robot tick: every block dense, of the kept shape
+            l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
+            self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
+        else:
+            layout = self._update_or_setup(osqp, problem)
+        if warm_start is not None:
+            self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
+        res = self._solver.solve(raise_error=False)
         info = res.info
         status_val = info.status_val
         sol = new_solution(problem, "not_solved", {"raw_status": info.status, "info": info})

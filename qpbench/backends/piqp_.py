@@ -25,7 +25,7 @@ from ._common import (
     sparse_parts,
     structure_key,
 )
-from .base import Backend, BackendSolution, error_solution, new_solution
+from .base import BackendSolution, PersistentBackend, new_solution
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -60,11 +60,11 @@ def piqp_statuses() -> dict:
 
 
 @register
-class PiqpBackend(Backend):
+class PiqpBackend(PersistentBackend):
     """PIQP dense with a persistent ``DenseSolver``, updated per tick."""
 
     name = "piqp"
-    certifies_infeasibility = True
+    errors = (ValueError, TypeError, RuntimeError)
     family = "proximal interior point"
     package = "piqp"
     module = "piqp"
@@ -79,7 +79,6 @@ class PiqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self.reset()
         self._settings_dict = self._make_settings()
 
     def _make_settings(self) -> dict:
@@ -107,7 +106,7 @@ class PiqpBackend(Backend):
         self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
         return solver
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         parts = dense_route(problem)
         if parts is None:
             return self._solve_sparse(problem)
@@ -145,18 +144,14 @@ class PiqpBackend(Backend):
         (``None``: ``DenseSolver``) after checking the shapes; solve; the solution in
         qpsolvers' convention."""
         solver = self._solver
-        try:
-            if solver is not None and shapes == self._shapes:
-                solver.update(P, q, A, b, G, None, h, lb, ub)
-            else:
-                check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-                solver = self._setup(
-                    cls or _piqp().DenseSolver, shapes, (P, q, A, b, G, None, h, lb, ub)
-                )
-            raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
-        except (ValueError, TypeError, RuntimeError) as exc:
-            self.reset()
-            return error_solution(problem, exc)
+        if solver is not None and shapes == self._shapes:
+            solver.update(P, q, A, b, G, None, h, lb, ub)
+        else:
+            check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+            solver = self._setup(
+                cls or _piqp().DenseSolver, shapes, (P, q, A, b, G, None, h, lb, ub)
+            )
+        raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
         info = self._info
         if raw_status.value == _SOLVED[0]:  # the objective is computed from x when read
             sol = new_solution(problem, "optimal", {"raw_status": "PIQP_SOLVED"})

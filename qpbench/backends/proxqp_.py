@@ -33,7 +33,7 @@ from ._common import (
     sparse_parts,
     structure_key,
 )
-from .base import Backend, error_solution, new_solution
+from .base import PersistentBackend, new_solution
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -71,11 +71,11 @@ def _status(value) -> tuple[str, str]:
 
 
 @register
-class ProxqpBackend(Backend):
+class ProxqpBackend(PersistentBackend):
     """ProxQP dense with a persistent ``QP`` object, updated per problem."""
 
     name = "proxqp"
-    certifies_infeasibility = True
+    errors = (ValueError, RuntimeError)
     family = "augmented Lagrangian"
     package = "proxsuite"
     module = "proxsuite"
@@ -91,19 +91,10 @@ class ProxqpBackend(Backend):
         own |= own_settings(proxqp.sparse.QP(1, 0, 0).settings)
         return frozenset(own | {"retry_cold"} | set(GENERIC_KEYS))
 
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self._qp = None
-        self._key = None
+    def reset(self) -> None:
+        self._qp = self._key = self._l = None  # _l: ``l = -inf``, kept
         self._info = None  # ``qp.results.info`` of ``_qp``
         self._views = None  # ``(results.x, results.y, results.z)`` of ``_qp`` (numpy views)
-        self._l = None  # cached ``l = -inf``
-
-    def reset(self) -> None:
-        self._qp = None
-        self._key = None
-        self._info = None
-        self._views = None
 
     def _apply_settings(self, qp, proxqp) -> bool:
         s = qp.settings
@@ -139,7 +130,7 @@ class ProxqpBackend(Backend):
             l = self._l = np.full(n_in, -np.inf)
         return l
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         parts = dense_route(problem)
         if parts is None:
             return self._solve_sparse(problem, warm_start)
@@ -179,51 +170,46 @@ class ProxqpBackend(Backend):
         """Update (same ``key``) or build the ``QP`` object with ``data``, solve, read the result
         (``n_in`` rows of ``G`` lead ProxQP's ``z``; with ``with_box`` the next ``n`` are ``z_box``)."""
         n_eq = key[1]
-        try:
-            warm = self._qp is not None and key == self._key
-            if warm:
-                qp = self._qp
-                qp.update(*data, update_preconditioner=self._update_preconditioner)
-            else:
-                qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
-            if warm_start is not None:
-                # results.x becomes a copy of the guess: the kept views are read again
-                qp.solve(np.asarray(warm_start, dtype=float), None, None)
-                self._views = None
-            else:
-                qp.solve()
+        warm = self._qp is not None and key == self._key
+        if warm:
+            qp = self._qp
+            qp.update(*data, update_preconditioner=self._update_preconditioner)
+        else:
+            qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
+        if warm_start is not None:
+            # results.x becomes a copy of the guess: the kept views are read again
+            qp.solve(np.asarray(warm_start, dtype=float), None, None)
+            self._views = None
+        else:
+            qp.solve()
+        info = self._info
+        raw_status = info.status
+        if _SOLVED and raw_status is _SOLVED[0]:
+            status, raw = "optimal", "PROXQP_SOLVED"
+        else:
+            status, raw = _status(raw_status)
+        retried = False
+        sparse = len(key) > 4
+        if sparse:  # the kept views' split of z depends on n_in, which the key does not pin
+            self._views = None
+        if (
+            self._retry_cold
+            and (warm or warm_start is not None or sparse)
+            and status in ("primal_infeasible", "dual_infeasible")
+        ):
+            first_time = info.solve_time
+            first_iter = info.iter
+            qp = self._build(_proxqp(), key, data)
+            if sparse:  # bounds as rows: the verdict checked at the profile's tolerance
+                eps = qp.settings.eps_abs
+                qp.settings.eps_primal_inf = min(qp.settings.eps_primal_inf, eps)
+                qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
+            qp.solve()
             info = self._info
-            raw_status = info.status
-            if _SOLVED and raw_status is _SOLVED[0]:
-                status, raw = "optimal", "PROXQP_SOLVED"
-            else:
-                status, raw = _status(raw_status)
-            retried = False
-            sparse = len(key) > 4
-            if sparse:  # the kept views' split of z depends on n_in, which the key does not pin
-                self._views = None
-            if (
-                self._retry_cold
-                and (warm or warm_start is not None or sparse)
-                and status in ("primal_infeasible", "dual_infeasible")
-            ):
-                first_time = info.solve_time
-                first_iter = info.iter
-                qp = self._build(_proxqp(), key, data)
-                if sparse:  # bounds as rows: the verdict checked at the profile's tolerance
-                    eps = qp.settings.eps_abs
-                    qp.settings.eps_primal_inf = min(qp.settings.eps_primal_inf, eps)
-                    qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
-                qp.solve()
-                info = self._info
-                status, raw = _status(info.status)
-                retried = True
-            if not warm or retried:  # built cold (equality-constrained guess); warm from now on
-                qp.settings.initial_guess = _proxqp().InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-        except (ValueError, RuntimeError) as exc:
-            self.reset()
-            return error_solution(problem, exc)
-
+            status, raw = _status(info.status)
+            retried = True
+        if not warm or retried:  # built cold (equality-constrained guess); warm from now on
+            qp.settings.initial_guess = _proxqp().InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
         sol = new_solution(problem, status, {"raw_status": raw, "cold_retry": retried})
         sol.iterations = info.iter  # a Python int (and solve_time a float) from the binding
         sol.solver_time_s = info.solve_time * 1e-6  # ProxQP reports [us]
