@@ -1,18 +1,10 @@
 """Registry of solver backends, keyed by name.
 
 Built-in backends live one module each in this package (modules starting with ``_`` are
-helpers); each imports its solver lazily, so a missing package makes the backend
-"unavailable (reason)" rather than an import error. Every solver of
-:data:`qpsolvers.available_solvers` is also ``qpsolvers:<name>``.
-
-Backends from outside the package, loaded once per process after the built-in ones (a
-plugin's backend may replace a built-in of the same name):
-
-- entry points of group ``qpbench.backends`` of installed distributions, naming a module
-  that registers backends when imported (``mine = "mypkg.backend"``) or a :class:`Backend`
-  subclass, registered here (``mine = "mypkg.backend:MyBackend"``);
-- Python files named by ``qpbench --plugin FILE`` or ``QPBENCH_PLUGINS`` (separated by
-  :data:`os.pathsep`), keyed by resolved path; worker processes load :func:`plugin_files`.
+helpers), each importing its solver lazily: a missing package makes the backend unavailable,
+not an import error. Plugins (entry points of group :data:`ENTRY_POINT_GROUP`, files named by
+``qpbench --plugin FILE`` or :data:`ENV_VAR`) load once per process after the built-in ones
+and may replace one of the same name; worker processes load :func:`plugin_files`.
 """
 
 from __future__ import annotations
@@ -126,7 +118,6 @@ def _load_files(files: Iterable[str | Path]) -> None:
                 f"'{ENTRY_POINT_GROUP}' instead)",
                 path=path,
             )
-        # A module name no other loaded file has.
         base = f"qpbench_plugin_{''.join(c if c.isalnum() else '_' for c in path.stem)}"
         name, i = base, 1
         while name in sys.modules:

@@ -1,11 +1,9 @@
 """The qpOASES shim of the ``qpoases`` backend: its C++ source, its build and load, its buffers.
 
-The shim wraps ``qpOASES::SQProblem`` in a few ``extern "C"`` functions. It is compiled by
-the system's C++ compiler (``$CXX``, else ``g++``, else ``c++``) against the
-``cmeel-qpoases`` wheel on first use, once per machine and version, into
-``qpbench.cache.shim_dir("qpoases")`` (a temporary file, then renamed, so another process
-never loads a half-written library), and loaded once per process. A :class:`Workspace`
-holds the buffers one ``SQProblem`` reads and writes.
+The shim wraps ``qpOASES::SQProblem`` in a few ``extern "C"`` functions, compiled by the
+system's C++ compiler against the ``cmeel-qpoases`` wheel on first use (once per machine and
+version, into ``qpbench.cache.shim_dir("qpoases")``) and loaded once per process. A
+:class:`Workspace` holds the buffers one ``SQProblem`` reads and writes.
 """
 
 from __future__ import annotations
@@ -196,26 +194,18 @@ def compile_shim(prefix: Path, target: Path) -> None:
         raise BackendError(
             "qpoases: no C++ compiler (set $CXX or install g++) to build the qpOASES shim"
         )
-    folder = shim_dir("qpoases")
     include, lib = prefix / "include", prefix / "lib"
-    fd, tmp_so = tempfile.mkstemp(suffix=".so.tmp", dir=folder)
-    os.close(fd)
-    fd, src = tempfile.mkstemp(suffix=".cpp", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(SHIM_SOURCE)
+    with tempfile.TemporaryDirectory(dir=shim_dir("qpoases")) as tmp:
+        src, tmp_so = Path(tmp, "shim.cpp"), Path(tmp, "shim.so")
+        src.write_text(SHIM_SOURCE)
         flags = ["-O2", "-shared", "-fPIC", "-std=c++11", "-lqpOASES", f"-Wl,-rpath,{lib}"]
-        cmd = [cxx, src, f"-I{include}", f"-L{lib}", *flags, "-o", tmp_so]
+        cmd = [cxx, str(src), f"-I{include}", f"-L{lib}", *flags, "-o", str(tmp_so)]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
             raise BackendError(
                 f"qpoases: compiling the qpOASES shim failed: {' '.join(cmd)}\n{done.stderr[-2000:]}"
             )
         os.replace(tmp_so, target)
-    finally:
-        for path in (src, tmp_so):
-            if os.path.exists(path):
-                os.unlink(path)
 
 
 def load() -> ctypes.CDLL:
