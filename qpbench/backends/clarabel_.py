@@ -41,15 +41,9 @@ class ConeLayout(StackedCsc):
     """The pattern of ``P`` and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
 
     def __init__(self, problem):
-        G, A = problem.G, problem.A
         self.n = n = problem.q.shape[0]
-        self.meq = 0 if A is None else A.shape[0]
-        self.m_all = 0 if G is None else G.shape[0]
-        lb, ub = dense_bounds(problem, n)
-        self.with_box = lb is not None
-        g_keep = np.isfinite(problem.h) if G is not None else np.zeros(0, bool)
-        lb_keep = np.isfinite(lb) if self.with_box else np.zeros(n, bool)
-        ub_keep = np.isfinite(ub) if self.with_box else np.zeros(n, bool)
+        self.meq, self.m_all = (0 if M is None else M.shape[0] for M in (problem.A, problem.G))
+        self.with_box, g_keep, lb_keep, ub_keep = _kept(problem, n)
         self.all_kept = bool(g_keep.all() and ub_keep.all() and lb_keep.all())
         self._g_idx, self._lb_idx, self._ub_idx = map(np.flatnonzero, (g_keep, lb_keep, ub_keep))
         self.m = self._g_idx.size
@@ -105,6 +99,16 @@ class ConeLayout(StackedCsc):
         return w[:meq], z, z_box
 
 
+def _kept(problem, n: int) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray]:
+    """``(with_box, g_keep, lb_keep, ub_keep)``: whether the problem has bounds, and its rows
+    of ``G``, ``lb`` and ``ub`` with a finite bound."""
+    lb, ub = dense_bounds(problem, n)
+    g_keep = np.zeros(0, bool) if problem.G is None else np.isfinite(problem.h)
+    if lb is None:
+        return False, g_keep, np.zeros(n, bool), np.zeros(n, bool)
+    return True, g_keep, np.isfinite(lb), np.isfinite(ub)
+
+
 #: Clarabel status name -> our status (also used by ``qpsolvers:clarabel``).
 CLARABEL_STATUSES = {
     "Solved": "optimal",
@@ -134,17 +138,9 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     if not all_dense(P, G, A):
         return None
     n = problem.q.shape[0]
-    lb, ub = problem.lb, problem.ub
-    with_box = lb is not None or ub is not None
-    parts = [np.empty(0) if G is None else problem.h]
-    if with_box:
-        parts.append(np.full(n, -np.inf) if lb is None else lb)
-        parts.append(np.full(n, np.inf) if ub is None else ub)
-    else:
-        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
-    finite = np.isfinite(np.concatenate(parts))
+    with_box, *masks = _kept(problem, n)
     meq, m = (0 if M is None else M.shape[0] for M in (A, G))
-    return (True, n, meq, m, with_box, finite.tobytes(), ())
+    return (True, n, meq, m, with_box, np.concatenate(masks).tobytes(), ())
 
 
 def _native_names(generic: dict) -> dict:

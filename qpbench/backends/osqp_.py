@@ -70,23 +70,14 @@ class StackedLayout(StackedCsc):
 
     def vectors(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
         """``(l, u)`` of the stacked rows ``[G; A; I]``."""
-        parts_l, parts_u = [], []
-        if problem.G is not None:
-            parts_l.append(np.full(self.m, -np.inf))
-            parts_u.append(np.asarray(problem.h, dtype=float))
-        if problem.A is not None:
-            b = np.asarray(problem.b, dtype=float)
-            parts_l.append(b)
-            parts_u.append(b)
+        h, b = (None if v is None else np.asarray(v, dtype=float) for v in (problem.h, problem.b))
+        lb = ub = None
         if self.with_box:
             lb, ub = dense_bounds(problem, self.n)
             if lb is None:  # free rows of an unconstrained problem
                 lb, ub = np.full(self.n, -np.inf), np.full(self.n, np.inf)
-            parts_l.append(lb)
-            parts_u.append(ub)
-        if not parts_l:
-            return np.zeros(0), np.zeros(0)
-        return np.concatenate(parts_l), np.concatenate(parts_u)
+        lower = None if problem.G is None else np.full(self.m, -np.inf)
+        return _stack(lower, b, lb), _stack(h, b, ub)
 
     def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of the stacked multiplier ``w`` (views into ``w``)."""
@@ -96,6 +87,11 @@ class StackedLayout(StackedCsc):
 
 def _blocks(problem) -> list:
     return [M for M in (problem.G, problem.A) if M is not None]
+
+
+def _stack(*vectors) -> np.ndarray:
+    vectors = [v for v in vectors if v is not None]
+    return np.concatenate(vectors) if vectors else EMPTY
 
 
 _STATUS_MAP: dict = {}

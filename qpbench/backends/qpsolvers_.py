@@ -157,14 +157,10 @@ def _iter_quadprog(extras: dict) -> int:
 #: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps
 #: (raising one of :data:`_ITERATION_ERRORS` when ``extras`` lacks it).
 ITERATION_READERS = {
-    "osqp": lambda e: int(e["info"].iter),
-    "proxqp": lambda e: int(e["info"].iter),
-    "piqp": lambda e: int(e["info"].iter),
-    "scs": lambda e: int(e["iter"]),
+    **dict.fromkeys(("osqp", "proxqp", "piqp", "qpalm"), lambda e: int(e["info"].iter)),
+    **dict.fromkeys(("scs", "ecos"), lambda e: int(e["iter"])),
     "quadprog": _iter_quadprog,
-    "ecos": lambda e: int(e["iter"]),
     "cvxopt": lambda e: int(e["iterations"]),
-    "qpalm": lambda e: int(e["info"].iter),
 }
 _ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
