@@ -209,30 +209,20 @@ class StackedCsc:
         self.rows = k + sum(idx.size for _, idx in eyes)
         self.dense = all_dense(P, *blocks)
         self.structure = ()
-        if not self.dense:
-            Pc, Cc = self._sparse(P, blocks)
-            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
-            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
+        if self.dense:  # every entry stored: the pattern of all-ones blocks
+            P, blocks = np.ones((n, n)), [np.ones((k, n))]
+            kept = np.ones((n, k + len(eyes)), bool)  # C's data is D' (C order) where kept
+            for i, (_, idx) in enumerate(eyes):
+                kept[:, k + i] = np.isin(np.arange(n), idx)
+            self._C_mask = None if kept.all() else kept.ravel()
+        Pc, Cc = self._sparse(P, blocks)
+        self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
+        self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
+        if self.dense:
+            #: ``P[P_index]`` is the data vector of ``P``'s upper triangle.
+            self.P_index = (Pc.indices, np.repeat(np.arange(n), np.diff(Pc.indptr)))
+        else:
             self.structure = structure_key(Pc, Cc)
-            return
-        rows = np.concatenate([np.arange(j + 1) for j in range(n)] or [[]]).astype(np.int64)
-        cols = np.concatenate([np.full(j + 1, j) for j in range(n)] or [[]]).astype(np.int64)
-        #: ``P[P_index]`` is the data vector of ``P``'s upper triangle.
-        self.P_index = (rows, cols)
-        self.P_indices = rows
-        self.P_indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
-        # Column j of C: the k rows of D, then its row of each identity block that has one.
-        col_rows, offset = [np.tile(np.arange(k, dtype=np.int64), (n, 1))], k
-        for _, idx in eyes:
-            row = np.full(n, -1, np.int64)
-            row[idx] = offset + np.arange(idx.size)
-            col_rows.append(row[:, None])
-            offset += idx.size
-        col_rows = np.hstack(col_rows)
-        kept = col_rows >= 0
-        self._C_mask = None if kept.all() else kept.ravel()
-        self.C_indices = col_rows[kept]
-        self.C_indptr = np.concatenate([[0], np.cumsum(kept.sum(axis=1))]).astype(np.int64)
 
     def _sparse(self, P, blocks) -> tuple[spa.csc_matrix, spa.csc_matrix]:
         P = spa.triu(spa.csc_matrix(P, dtype=float), format="csc")
