@@ -195,18 +195,14 @@ NO_CERTIFICATE = {
 
 def silence_wrapper_warnings(solver: str) -> None:
     """Ignore, from now on in this process, the warnings of qpsolvers' wrapper module of
-    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it) and those
-    the solver's own package raises on qpsolvers' normal calls (:data:`_SOLVER_WARNINGS`)."""
+    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it) and those the
+    solver's package raises on qpsolvers' normal calls."""
     warnings.filterwarnings("ignore", module=rf"qpsolvers\.solvers\.{solver}_\Z")
-    for message, category in _SOLVER_WARNINGS.get(solver, ()):
-        warnings.filterwarnings("ignore", message=message, category=category)
+    if solver == "osqp":  # osqp 1.x: qpsolvers calls solve() without raise_error
+        warnings.filterwarnings(
+            "ignore", "The default value of raise_error will change", PendingDeprecationWarning
+        )
 
-
-#: Warnings of a solver's own package on every call qpsolvers makes (message regex, category).
-_SOLVER_WARNINGS = {
-    # osqp 1.x: qpsolvers calls solve() without raise_error.
-    "osqp": (("The default value of raise_error will change", PendingDeprecationWarning),),
-}
 
 #: Exception classes of solver packages (by name) that are solver failures, not bugs.
 _SOLVER_ERRORS = frozenset({"GurobiError"})
