@@ -77,10 +77,8 @@ class ConeLayout(StackedCsc):
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def cones(self, clarabel: ModuleType) -> list:
-        cones = []
-        if self.meq:
-            cones.append(clarabel.ZeroConeT(self.meq))
-        if self.rows - self.meq:
+        cones = [clarabel.ZeroConeT(self.meq)] if self.meq else []
+        if self.rows > self.meq:
             cones.append(clarabel.NonnegativeConeT(self.rows - self.meq))
         return cones
 

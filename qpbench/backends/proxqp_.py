@@ -24,6 +24,7 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
     all_finite,
     dense_bounds,
@@ -153,10 +154,9 @@ class ProxqpBackend(PersistentBackend):
         n_g = 0 if G is None else G.shape[0]
         C, u = G, h
         l = None if G is None else self._lower(n_g)
-        with_box = lb is not None or ub is not None
+        lb, ub = dense_bounds(problem, n)
+        with_box = lb is not None
         if with_box:
-            lb = np.full(n, -np.inf) if lb is None else lb
-            ub = np.full(n, np.inf) if ub is None else ub
             eye = spa.identity(n, format="csc")
             C = eye if G is None else spa.vstack([G, eye], format="csc")
             l = lb if G is None else np.concatenate([l, lb])
@@ -232,14 +232,9 @@ class ProxqpBackend(PersistentBackend):
         x = x_view.copy()
         if all_finite(x):
             sol.x = x
-            sol.y = y_view.copy() if n_eq else np.zeros(0)
+            sol.y = y_view.copy() if n_eq else EMPTY
             z = z_view.copy()  # [z; z_box] with a box
-            if with_box:
-                sol.z = z[part_z]
-                sol.z_box = z[part_box]
-            else:
-                sol.z = z
-                sol.z_box = np.zeros(0)
+            sol.z, sol.z_box = (z[part_z], z[part_box]) if with_box else (z, EMPTY)
         if status == "optimal":
             sol._obj = info.objValue  # a Python float from the binding
         return sol
