@@ -215,12 +215,14 @@ class StackedCsc:
             for i, (_, idx) in enumerate(eyes):
                 kept[:, k + i] = np.isin(np.arange(n), idx)
             self._C_mask = None if kept.all() else kept.ravel()
+            self._D = np.empty((k + len(eyes), n))  # [D; s_1; s_2 ...]: C' in C order, unmasked
+            self._D[k:] = np.array([sign for sign, _ in eyes]).reshape(-1, 1)
         Pc, Cc = self._sparse(P, blocks)
         self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
         self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
         if self.dense:
             #: ``P[P_index]`` is the data vector of ``P``'s upper triangle.
-            self.P_index = (Pc.indices, np.repeat(np.arange(n), np.diff(Pc.indptr)))
+            self.P_index = (Pc.indices.astype(np.intp), np.repeat(np.arange(n), np.diff(Pc.indptr)))
         else:
             self.structure = structure_key(Pc, Cc)
 
@@ -239,16 +241,13 @@ class StackedCsc:
         if not self.dense:
             P, C = self._sparse(P, blocks)
             return P.data, C.data
-        D = np.empty((self.k + len(self.eyes), self.n))
+        D = self._D  # its identity rows already set
         row = 0
         for M in blocks:
             D[row : row + M.shape[0]] = M
             row += M.shape[0]
-        for i, (sign, _) in enumerate(self.eyes):
-            D[self.k + i] = sign
-        C_data = D.T.ravel()
-        P_data = np.asarray(P, dtype=float)[self.P_index]
-        return P_data, C_data if self._C_mask is None else C_data[self._C_mask]
+        C_data = D.T.flatten()
+        return P[self.P_index], C_data if self._C_mask is None else C_data[self._C_mask]
 
     def matrices(self, P, blocks) -> tuple[spa.csc_matrix, spa.csc_matrix]:
         """``(P, C)`` as CSC matrices of this pattern."""

@@ -43,19 +43,16 @@ class ConeLayout(StackedCsc):
     def __init__(self, problem):
         self.n = n = problem.q.shape[0]
         self.meq, self.m_all = (0 if M is None else M.shape[0] for M in (problem.A, problem.G))
-        self.with_box, g_keep, lb_keep, ub_keep = _kept(problem, n)
+        self.with_box, kept = _kept(problem, n)
+        m = self.m_all
+        g_keep, lb_keep, ub_keep = kept[:m], kept[m : m + n], kept[m + n :]
         self.all_kept = bool(g_keep.all() and ub_keep.all() and lb_keep.all())
         self._g_idx, self._lb_idx, self._ub_idx = map(np.flatnonzero, (g_keep, lb_keep, ub_keep))
         self.m = self._g_idx.size
-        # What rhs takes of h, lb, ub: a slice (a view) when every row is kept.
-        self._sel = [
-            slice(None) if k.all() else i
-            for k, i in ((g_keep, self._g_idx), (lb_keep, self._lb_idx), (ub_keep, self._ub_idx))
-        ]
         eyes = [(-1.0, self._lb_idx), (1.0, self._ub_idx)] if self.with_box else []
         super().__init__(problem.P, self.blocks(problem), eyes, n)
-        masks = np.concatenate([g_keep, lb_keep, ub_keep]).tobytes()
-        self.key = (self.dense, n, self.meq, self.m_all, self.with_box, masks, self.structure)
+        kept = kept.tobytes()
+        self.key = (self.dense, n, self.meq, m, self.with_box, kept, self.structure)
 
     def blocks(self, problem) -> list:
         """``[A; G_kept]``, the rows of ``C`` above the identity blocks."""
@@ -67,14 +64,15 @@ class ConeLayout(StackedCsc):
 
     def rhs(self, problem: qpsolvers.Problem) -> np.ndarray:
         """``d = [b; h_kept; -lb_kept; ub_kept]``."""
-        g, l, u = self._sel
+        lb, ub = dense_bounds(problem, self.n)
+        if self.all_kept and self.with_box:
+            return np.concatenate([v for v in (problem.b, problem.h) if v is not None] + [-lb, ub])
         parts = [] if problem.A is None else [np.asarray(problem.b, dtype=float)]
         if problem.G is not None:
-            parts.append(np.asarray(problem.h, dtype=float)[g])
+            parts.append(np.asarray(problem.h, dtype=float)[self._g_idx])
         if self.with_box:
-            lb, ub = dense_bounds(problem, self.n)
-            parts += [-lb[l], ub[u]]
-        return np.concatenate(parts) if parts else np.zeros(0)
+            parts += [-lb[self._lb_idx], ub[self._ub_idx]]
+        return np.concatenate(parts) if parts else EMPTY
 
     def cones(self, clarabel: ModuleType) -> list:
         cones = [clarabel.ZeroConeT(self.meq)] if self.meq else []
@@ -97,14 +95,20 @@ class ConeLayout(StackedCsc):
         return w[:meq], z, z_box
 
 
-def _kept(problem, n: int) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray]:
-    """``(with_box, g_keep, lb_keep, ub_keep)``: whether the problem has bounds, and its rows
-    of ``G``, ``lb`` and ``ub`` with a finite bound."""
-    lb, ub = dense_bounds(problem, n)
-    g_keep = np.zeros(0, bool) if problem.G is None else np.isfinite(problem.h)
-    if lb is None:
-        return False, g_keep, np.zeros(n, bool), np.zeros(n, bool)
-    return True, g_keep, np.isfinite(lb), np.isfinite(ub)
+def _kept(problem, n: int) -> tuple[bool, np.ndarray]:
+    """``(with_box, kept)``: whether the problem has bounds, and which rows of ``G``, ``lb`` and
+    ``ub`` (in this order, ``n`` each of the bounds) have a finite bound."""
+    lb, ub = problem.lb, problem.ub
+    with_box = lb is not None or ub is not None
+    parts = [np.empty(0) if problem.G is None else problem.h]
+    if with_box:
+        parts += [
+            np.full(n, -np.inf) if lb is None else lb,
+            np.full(n, np.inf) if ub is None else ub,
+        ]
+    else:
+        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
+    return with_box, np.isfinite(np.concatenate(parts))
 
 
 #: Clarabel status name -> our status (also used by ``qpsolvers:clarabel``).
@@ -136,9 +140,9 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     if not all_dense(P, G, A):
         return None
     n = problem.q.shape[0]
-    with_box, *masks = _kept(problem, n)
-    meq, m = (0 if M is None else M.shape[0] for M in (A, G))
-    return (True, n, meq, m, with_box, np.concatenate(masks).tobytes(), ())
+    with_box, kept = _kept(problem, n)
+    m, meq = 0 if G is None else G.shape[0], 0 if A is None else A.shape[0]
+    return (True, n, meq, m, with_box, kept.tobytes(), ())
 
 
 def _native_names(generic: dict) -> dict:
