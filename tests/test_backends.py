@@ -22,8 +22,8 @@ from qpbench.backends import (
     backend_info,
     backend_names,
     get_backend,
-    objective,
 )
+from qpbench.backends.base import objective
 from qpbench.exceptions import BackendNotFound
 
 EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged"}  # tested in test_rnn.py

@@ -1,18 +1,10 @@
 """Registry of solver backends, keyed by name.
 
 Built-in backends live one module each in this package (modules starting with ``_`` are
-helpers); each imports its solver lazily, so a missing package makes the backend
-"unavailable (reason)" rather than an import error. Every solver of
-:data:`qpsolvers.available_solvers` is also ``qpsolvers:<name>``.
-
-Backends from outside the package, loaded once per process after the built-in ones (a
-plugin's backend may replace a built-in of the same name):
-
-- entry points of group ``qpbench.backends`` of installed distributions, naming a module
-  that registers backends when imported (``mine = "mypkg.backend"``) or a :class:`Backend`
-  subclass, registered here (``mine = "mypkg.backend:MyBackend"``);
-- Python files named by ``qpbench --plugin FILE`` or ``QPBENCH_PLUGINS`` (separated by
-  :data:`os.pathsep`), keyed by resolved path; worker processes load :func:`plugin_files`.
+helpers), each importing its solver lazily: a missing package makes the backend unavailable,
+not an import error. Plugins (entry points of group :data:`ENTRY_POINT_GROUP`, files named by
+``qpbench --plugin FILE`` or :data:`ENV_VAR`) load once per process after the built-in ones
+and may replace one of the same name; worker processes load :func:`plugin_files`.
 """
 
 from __future__ import annotations
@@ -29,23 +21,10 @@ from pathlib import Path
 
 from ..exceptions import BackendNotFound, ParamError, did_you_mean
 from ..profiles import Profile
-from .base import STATUSES, Backend, BackendSolution, objective
-
-__all__ = [
-    "STATUSES",
-    "Backend",
-    "BackendInfo",
-    "BackendSolution",
-    "backend_class",
-    "backend_info",
-    "backend_names",
-    "get_backend",
-    "load_plugins",
-    "objective",
-    "plugin_files",
-    "register",
-    "resolve_name",
-]
+from ..statuses import STATUSES as STATUSES
+from ..statuses import describe_exception
+from .base import Backend
+from .base import BackendSolution as BackendSolution
 
 #: Entry-point group of installed backend plugins.
 ENTRY_POINT_GROUP = "qpbench.backends"
@@ -108,10 +87,6 @@ def plugin_files() -> list[str]:
     return [str(path) for path in _FILES]
 
 
-def _one_line(exc: BaseException) -> str:
-    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-
-
 def _load_entry_points(found) -> None:
     for ep in found:
         key = f"{ep.name} = {ep.value}"
@@ -123,7 +98,7 @@ def _load_entry_points(found) -> None:
         except Exception as exc:  # noqa: BLE001 - any import failure is a bad plugin
             dist = getattr(getattr(ep, "dist", None), "name", None) or "an installed distribution"
             raise ParamError(
-                f"cannot load the entry point '{key}' of {dist}: {_one_line(exc)}",
+                f"cannot load the entry point '{key}' of {dist}: {describe_exception(exc)}",
                 key=ENTRY_POINT_GROUP,
             ) from None
         if isinstance(obj, type) and issubclass(obj, Backend):
@@ -143,7 +118,6 @@ def _load_files(files: Iterable[str | Path]) -> None:
                 f"'{ENTRY_POINT_GROUP}' instead)",
                 path=path,
             )
-        # A module name no other loaded file has.
         base = f"qpbench_plugin_{''.join(c if c.isalnum() else '_' for c in path.stem)}"
         name, i = base, 1
         while name in sys.modules:
@@ -158,7 +132,7 @@ def _load_files(files: Iterable[str | Path]) -> None:
             del sys.modules[name]
             if isinstance(exc, KeyboardInterrupt):
                 raise
-            raise ParamError(f"cannot load plugin: {_one_line(exc)}", path=path) from None
+            raise ParamError(f"cannot load plugin: {describe_exception(exc)}", path=path) from None
         _FILES[path] = name
 
 

@@ -1,13 +1,9 @@
 """What the backend modules share: settings, and a problem's arrays in the forms solvers take.
 
-The sparse solvers' backends store dense blocks with their full pattern: the robot's
-Jacobian has entries that are zero in some ticks only, so a pattern taken from the
-non-zeros would change from tick to tick and force a rebuild of the solver.
-
-Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one
-when a matrix is scipy.sparse or when made dense it would exceed
-:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`); they keep a
-sparse solver per :func:`structure_key` and ``update`` it.
+Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one when a
+matrix is scipy.sparse or when made dense it would exceed
+:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`), and keep a sparse
+solver per :func:`structure_key`.
 """
 
 from __future__ import annotations
@@ -28,6 +24,10 @@ if TYPE_CHECKING:
 
     from .base import Backend
 
+#: An empty, read-only vector: the multipliers of an absent block.
+EMPTY = np.zeros(0)
+EMPTY.flags.writeable = False
+
 #: Setting names every backend understands; the profile provides their values.
 GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 
@@ -35,19 +35,10 @@ GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 def generic_settings(backend: Backend) -> tuple[dict, dict]:
     """``(generic, native)``: :data:`GENERIC_KEYS` from the profile overridden by the user's
     settings of the same name, and the user's other settings (passed to the solver verbatim)."""
-    profile = backend.profile
-    generic = {
-        "eps_abs": profile.eps_abs,
-        "eps_rel": profile.eps_rel,
-        "max_iter": profile.max_iter,
-        "time_limit": profile.time_limit,
-    }
+    generic = {key: getattr(backend.profile, key) for key in GENERIC_KEYS}
     native = {}
     for key, value in backend.settings.items():
-        if key in generic:
-            generic[key] = value
-        else:
-            native[key] = value
+        (generic if key in generic else native)[key] = value
     return generic, native
 
 
@@ -109,9 +100,8 @@ _NATIVE["proxqp"] = _NATIVE["piqp"]
 _NATIVE["kvxopt"] = _NATIVE["cvxopt"]
 _NATIVE["qpalm"] = _NATIVE["osqp"]
 
-#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (ADMM
-#: alone seldom reaches a 1e-9 residual; the polishing step, a solve of the KKT system of the
-#: guessed active set, does), PIQP's and ProxQP's duality-gap test.
+#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (a
+#: solve of the KKT system of the guessed active set), PIQP's and ProxQP's duality-gap test.
 _HIGH_ACCURACY = {
     "osqp": {"polishing": True},
     "piqp": {"check_duality_gap": True},
@@ -142,23 +132,25 @@ def native_settings(
     return settings
 
 
-def qpbenchmark_options(
-    backend: Backend, solver: str, translate: Callable[[dict], dict]
-) -> dict | None:
-    """The options an own-API backend gives ``solver`` under a ``qpbenchmark:<settings>``
-    profile, ``None`` under qpbench's own profiles.
+def solver_options(
+    backend: Backend, solver: str, translate: Callable[[dict], dict] | None = None
+) -> dict:
+    """The options an own-API backend gives ``solver``, as the ``qpsolvers:<solver>`` route.
 
-    As the ``qpsolvers:<solver>`` route: qpbenchmark's arguments for the solver, then the
-    generic settings the user gave (through ``translate`` to the solver's names), then the
-    user's native ones; nothing of qpbench's own profiles is added.
+    The generic settings (the profile's, overridden by the user's) in the solver's names
+    (``translate``, by default :func:`native_settings`), then the user's other settings. Under
+    a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then the
+    generic settings the user gave (``translate``-d, by default those the solver has under
+    the same name), then the other ones; nothing of qpbench's own profiles.
     """
+    generic, native = generic_settings(backend)
     given = backend.profile.solver_options
     if given is None:
-        return None
-    options = dict(given.get(solver, {}))
-    options.update(translate({k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}))
-    options.update({k: v for k, v in backend.settings.items() if k not in GENERIC_KEYS})
-    return options
+        own = translate(generic) if translate else native_settings(solver, **generic)
+        return {**own, **native}
+    user = {k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}
+    user = translate(user) if translate else {k: user[k] for k in user if k in _NATIVE[solver]}
+    return {**given.get(solver, {}), **user, **native}
 
 
 def refuse_unknown(backend: str, native: dict, allowed, own: str) -> None:
@@ -202,40 +194,96 @@ def all_dense(*matrices: object) -> bool:
     return all(M is None or type(M) is np.ndarray for M in matrices)
 
 
-def dense_upper_layout(n: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
-    """``((rows, cols), indices, indptr)`` of the CSC upper triangle of a dense ``n x n``
-    matrix with every entry stored: ``P[rows, cols]`` is its data vector."""
-    rows = np.concatenate([np.arange(j + 1) for j in range(n)] or [[]]).astype(np.int64)
-    cols = np.concatenate([np.full(j + 1, j) for j in range(n)] or [[]]).astype(np.int64)
-    indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
-    return (rows, cols), rows, indptr
+class StackedCsc:
+    """CSC patterns of ``P``'s upper triangle and of ``C = [D; s_1 I[idx_1]; s_2 I[idx_2] ...]``:
+    the rows of the matrices ``blocks`` (``D``) over one signed identity block per ``(s, idx)``
+    of ``eyes`` (rows ``idx`` of ``s I``).
+
+    Dense matrices are stored with every entry, so the pattern does not change with their
+    values; the others with theirs (:attr:`structure` then compares two).
+    """
+
+    def __init__(self, P, blocks: list, eyes: list[tuple[float, np.ndarray]], n: int):
+        self.n, self.eyes = n, eyes
+        self.k = k = sum(M.shape[0] for M in blocks)
+        self.rows = k + sum(idx.size for _, idx in eyes)
+        self.dense = all_dense(P, *blocks)
+        self.structure = ()
+        if self.dense:  # every entry stored: the pattern of all-ones blocks
+            P, blocks = np.ones((n, n)), [np.ones((k, n))]
+            kept = np.ones((n, k + len(eyes)), bool)  # C's data is D' (C order) where kept
+            for i, (_, idx) in enumerate(eyes):
+                kept[:, k + i] = np.isin(np.arange(n), idx)
+            self._C_mask = None if kept.all() else kept.ravel()
+            self._D = np.empty((k + len(eyes), n))  # [D; s_1; s_2 ...]: C' in C order, unmasked
+            self._D[k:] = np.array([sign for sign, _ in eyes]).reshape(-1, 1)
+        Pc, Cc = self._sparse(P, blocks)
+        self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
+        self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
+        if self.dense:
+            #: ``P[P_index]`` is the data vector of ``P``'s upper triangle.
+            self.P_index = (Pc.indices.astype(np.intp), np.repeat(np.arange(n), np.diff(Pc.indptr)))
+        else:
+            self.structure = structure_key(Pc, Cc)
+
+    def _sparse(self, P, blocks) -> tuple[spa.csc_matrix, spa.csc_matrix]:
+        P = spa.triu(spa.csc_matrix(P, dtype=float), format="csc")
+        C = [spa.csc_matrix(M, dtype=float) for M in blocks]
+        eye = spa.identity(self.n, format="csr")
+        C += [sign * eye[idx] for sign, idx in self.eyes if idx.size]
+        C = spa.vstack(C, format="csc") if C else spa.csc_matrix((0, self.n))
+        P.sort_indices()
+        C.sort_indices()
+        return P, C
+
+    def data(self, P, blocks) -> tuple[np.ndarray, np.ndarray]:
+        """``(P_data, C_data)`` of a problem's ``P`` and ``blocks`` in this pattern's order."""
+        if not self.dense:
+            P, C = self._sparse(P, blocks)
+            return P.data, C.data
+        D = self._D  # its identity rows already set
+        row = 0
+        for M in blocks:
+            D[row : row + M.shape[0]] = M
+            row += M.shape[0]
+        C_data = D.T.flatten()
+        return P[self.P_index], C_data if self._C_mask is None else C_data[self._C_mask]
+
+    def matrices(self, P, blocks) -> tuple[spa.csc_matrix, spa.csc_matrix]:
+        """``(P, C)`` as CSC matrices of this pattern."""
+        P_data, C_data = self.data(P, blocks)
+        n = self.n
+        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(n, n))
+        return P, spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, n))
 
 
 def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
     """``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept; ``A``, ``G`` 2-D)."""
     P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
-    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+    q, b, h, lb, ub = _vectors(problem)
     n = q.shape[0]
     A, G = (None if M is None else as_dense(M).reshape(-1, n) for M in (problem.A, problem.G))
-    b, h, lb, ub = (
-        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
-        for v in (problem.b, problem.h, problem.lb, problem.ub)
-    )
     return P, q, A, b, G, h, lb, ub
+
+
+def _vectors(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
+    """``q, b, h, lb, ub`` as 1-D float64 arrays (``None`` kept)."""
+    return tuple(
+        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
+        for v in (problem.q, problem.b, problem.h, problem.lb, problem.ub)
+    )
 
 
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
     """``P, q, A, b, G, h, lb, ub`` as they are when they are what a controller builds (float64
-    arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts).
+    arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts); shapes are
+    not compared here (:func:`check_shapes`).
 
-    The dense backends' per-tick path; shapes are not compared here (:func:`check_shapes`).
-    Dtypes are tested by identity first (numpy's float64 descriptor is a singleton except in
-    unpickled arrays, which take the ``==``).
+    The dense backends' per-tick path: one chain of tests, dtypes by identity first (numpy's
+    float64 descriptor is a singleton except in unpickled arrays, which take the ``==``).
     """
     P, q, A, b = problem.P, problem.q, problem.A, problem.b
     G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
-    # One chain of tests, (A, b) and (G, h) written out alike: a loop or a helper per block
-    # costs a measurable share of the fastest ticks (qpoases, daqp).
     if not (
         type(P) is _ndarray
         and (P.dtype is _f64 or P.dtype == _f64)
@@ -274,8 +322,7 @@ _f64 = np.dtype(np.float64)
 
 
 def all_finite(x: np.ndarray) -> bool:
-    """Whether every entry of ``x`` is finite; for a robot-sized vector a Python loop, several
-    times faster than numpy's ufunc and reduction (a share of a tick: ``bench/backend_overhead.py``)."""
+    """Whether every entry of ``x`` is finite (a short vector by a Python loop: no ufunc call)."""
     return all(map(_isfinite, x.tolist())) if x.size <= 32 else bool(np.isfinite(x).all())
 
 
@@ -283,10 +330,8 @@ _isfinite = math.isfinite
 
 
 def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]:
-    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
-
-    Solvers that keep a workspace of one shape must not be handed arrays of another: DAQP
-    ignores such an update without a word, numpy would broadcast a 1-row ``b`` into two slots.
+    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape (a solver
+    keeping a workspace of one shape must not be handed arrays of another).
 
     Raises:
         ProblemFormatError: an array whose shape does not fit ``n`` and the rows of ``A``
@@ -361,16 +406,12 @@ def _csc(M, n: int) -> spa.csc_matrix | None:
 def sparse_parts(problem: qpsolvers.Problem, upper: bool = False) -> tuple:
     """``P, q, A, b, G, h, lb, ub`` with the matrices as CSC float64 (``None`` kept);
     ``upper``: only the upper triangle of ``P`` (what PIQP's sparse API reads)."""
-    q = np.asarray(problem.q, dtype=np.float64).reshape(-1)
+    q, b, h, lb, ub = _vectors(problem)
     n = q.shape[0]
     P = _csc(problem.P, n)
     if upper:
         P = spa.triu(P, format="csc")
         P.sort_indices()
-    b, h, lb, ub = (
-        None if v is None else np.asarray(v, dtype=np.float64).reshape(-1)
-        for v in (problem.b, problem.h, problem.lb, problem.ub)
-    )
     return P, q, _csc(problem.A, n), b, _csc(problem.G, n), h, lb, ub
 
 

@@ -1,11 +1,9 @@
 """The qpOASES shim of the ``qpoases`` backend: its C++ source, its build and load, its buffers.
 
-The shim wraps ``qpOASES::SQProblem`` in a few ``extern "C"`` functions. It is compiled by
-the system's C++ compiler (``$CXX``, else ``g++``, else ``c++``) against the
-``cmeel-qpoases`` wheel on first use, once per machine and version, into
-``qpbench.cache.shim_dir("qpoases")`` (a temporary file, then renamed, so another process
-never loads a half-written library), and loaded once per process. A :class:`Workspace`
-holds the buffers one ``SQProblem`` reads and writes.
+The shim wraps ``qpOASES::SQProblem`` in a few ``extern "C"`` functions, compiled by the
+system's C++ compiler against the ``cmeel-qpoases`` wheel on first use (once per machine and
+version, into ``qpbench.cache.shim_dir("qpoases")``) and loaded once per process. A
+:class:`Workspace` holds the buffers one ``SQProblem`` reads and writes.
 """
 
 from __future__ import annotations
@@ -71,8 +69,6 @@ struct Handle {
     bool initialised;
     Handle(int nV_, int nC_, double* d_, int* iv_)
         : qp(nV_, nC_), nV(nV_), nC(nC_), d(d_), iv(iv_), initialised(false) {}
-    Handle(const Handle& o, double* d_, int* iv_)
-        : qp(o.qp), options(o.options), nV(o.nV), nC(o.nC), d(d_), iv(iv_), initialised(o.initialised) {}
 };
 inline double now() { timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
 int set_option(Options& o, const char* name, double v) {
@@ -103,16 +99,6 @@ int qpb_set_option(void* p, const char* name, double v) {
 }
 int qpb_known_option(const char* name) { Options o; return set_option(o, name, 0.0) == 0; }
 void qpb_free(void* p) { delete static_cast<Handle*>(p); }
-void* qpb_clone(const void* p, double* d, int* iv) {
-    return new (std::nothrow) Handle(*static_cast<const Handle*>(p), d, iv);
-}
-void qpb_assign(void* dst, const void* src) {
-    Handle* a = static_cast<Handle*>(dst);
-    const Handle* b = static_cast<const Handle*>(src);
-    a->qp = b->qp;
-    a->options = b->options;
-    a->initialised = b->initialised;
-}
 const char* qpb_message(int rv) {
     return MessageHandling::getErrorCodeMessage((returnValue) rv);
 }
@@ -208,26 +194,18 @@ def compile_shim(prefix: Path, target: Path) -> None:
         raise BackendError(
             "qpoases: no C++ compiler (set $CXX or install g++) to build the qpOASES shim"
         )
-    folder = shim_dir("qpoases")
     include, lib = prefix / "include", prefix / "lib"
-    fd, tmp_so = tempfile.mkstemp(suffix=".so.tmp", dir=folder)
-    os.close(fd)
-    fd, src = tempfile.mkstemp(suffix=".cpp", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(SHIM_SOURCE)
+    with tempfile.TemporaryDirectory(dir=shim_dir("qpoases")) as tmp:
+        src, tmp_so = Path(tmp, "shim.cpp"), Path(tmp, "shim.so")
+        src.write_text(SHIM_SOURCE)
         flags = ["-O2", "-shared", "-fPIC", "-std=c++11", "-lqpOASES", f"-Wl,-rpath,{lib}"]
-        cmd = [cxx, src, f"-I{include}", f"-L{lib}", *flags, "-o", tmp_so]
+        cmd = [cxx, str(src), f"-I{include}", f"-L{lib}", *flags, "-o", str(tmp_so)]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
             raise BackendError(
                 f"qpoases: compiling the qpOASES shim failed: {' '.join(cmd)}\n{done.stderr[-2000:]}"
             )
         os.replace(tmp_so, target)
-    finally:
-        for path in (src, tmp_so):
-            if os.path.exists(path):
-                os.unlink(path)
 
 
 def load() -> ctypes.CDLL:
@@ -248,8 +226,6 @@ def load() -> ctypes.CDLL:
         ip,
     )
     lib.qpb_free.argtypes, lib.qpb_free.restype = [vp], None
-    lib.qpb_clone.argtypes, lib.qpb_clone.restype = [vp, vp, vp], vp
-    lib.qpb_assign.argtypes, lib.qpb_assign.restype = [vp, vp], None
     lib.qpb_message.argtypes, lib.qpb_message.restype = [ip], ctypes.c_char_p
     lib.qpb_solve.argtypes, lib.qpb_solve.restype = [vp], ip
     LOADED.append(lib)
@@ -267,7 +243,6 @@ class Workspace:
         options: dict[str, float],
         nwsr: int,
         time_limit: float,
-        clone_of: int | None = None,
     ) -> None:
         n, me, mi, box = self.key = key
         m = me + mi
@@ -298,16 +273,12 @@ class Workspace:
         self.s[1] = time_limit
         self.iv[0] = nwsr
         self._free = lib.qpb_free
-        if clone_of is None:
-            handle = lib.qpb_new(n, m, d.ctypes.data, self.iv.ctypes.data, preset)
-        else:
-            handle = lib.qpb_clone(clone_of, d.ctypes.data, self.iv.ctypes.data)
+        handle = lib.qpb_new(n, m, d.ctypes.data, self.iv.ctypes.data, preset)
         if not handle:
             raise MemoryError("qpoases: cannot allocate the SQProblem")
         self.handle = handle
-        if clone_of is None:
-            for name, value in options.items():
-                lib.qpb_set_option(handle, name.encode(), float(value))
+        for name, value in options.items():
+            lib.qpb_set_option(handle, name.encode(), float(value))
 
     def __del__(self) -> None:
         handle = getattr(self, "handle", None)

@@ -19,17 +19,16 @@ import numpy as np
 import qpsolvers
 
 from ..profiles import Profile, get_profile
-from ..statuses import STATUSES  # noqa: F401 - the vocabulary lives in qpbench.statuses; re-exported for backends
+from ..statuses import describe_exception
 
 
 @dataclass
 class BackendSolution(qpsolvers.Solution):
     """A :class:`qpsolvers.Solution` plus what a benchmark needs to know.
 
-    ``status`` is one of :data:`STATUSES`; ``solver_time_s`` [s] is the time the solver
-    reports itself; ``error`` holds the exception type and message when ``status == "error"``.
-    ``obj`` is the solver's objective, or ``1/2 x'Px + q'x`` computed from ``x`` on first
-    read and kept (a closed loop that never reads it does not pay for it).
+    ``status`` is one of :data:`qpbench.statuses.STATUSES`; ``solver_time_s`` [s] is the time
+    the solver reports itself; ``error`` holds the exception when ``status == "error"``.
+    ``obj`` is the solver's objective, or ``1/2 x'Px + q'x`` computed from ``x`` on first read.
     """
 
     status: str = "not_solved"
@@ -38,9 +37,7 @@ class BackendSolution(qpsolvers.Solution):
     backend: str = ""
     error: str | None = None
 
-    def __getattr__(self, name: str):
-        # Only for attributes not set: an instance made by new_solution (no __init__) gets
-        # the defaults here. Fields with a plain default are class attributes.
+    def __getattr__(self, name: str):  # the defaults of an instance made by new_solution
         if name == "extras":
             extras = self.extras = {}
             return extras
@@ -67,11 +64,8 @@ BackendSolution.obj = property(_get_obj, _set_obj, doc="Primal objective at ``x`
 def new_solution(
     problem: qpsolvers.Problem, status: str, extras: dict, cls: type = BackendSolution
 ) -> BackendSolution:
-    """A :class:`BackendSolution` (or subclass ``cls``), every other field at its default.
-
-    The per-tick constructor of the fast backends: it skips the dataclass ``__init__``,
-    whose keyword fields are a measurable share of a call (``bench/backend_overhead.py``).
-    """
+    """A :class:`BackendSolution` (or subclass ``cls``), every other field at its default:
+    the per-tick constructor of the fast backends, without the dataclass ``__init__``."""
     sol = _new(cls)
     sol.problem = problem
     sol.status = status
@@ -80,6 +74,11 @@ def new_solution(
 
 
 _new = object.__new__
+
+
+def error_solution(problem: qpsolvers.Problem, exc: BaseException) -> BackendSolution:
+    """Status ``error`` naming ``exc`` (a failure the solver raised on this problem)."""
+    return BackendSolution(problem, status="error", error=describe_exception(exc))
 
 
 class Backend:
@@ -185,3 +184,33 @@ class Backend:
 def objective(problem: qpsolvers.Problem, x: np.ndarray) -> float:
     """Primal objective ``1/2 x^T P x + q^T x`` (plus no constant)."""
     return float(0.5 * x @ (problem.P @ x) + problem.q @ x)
+
+
+class PersistentBackend(Backend):
+    """A backend keeping its solver between calls: the constructor calls :meth:`reset` (which
+    builds the state), and a failure of the solver raised by :meth:`_attempt` (an instance of
+    :attr:`errors`, or of a class named in :attr:`error_names`) is status ``error`` and drops
+    the state."""
+
+    certifies_infeasibility = True
+    errors: ClassVar[tuple[type[BaseException], ...]] = (ValueError,)
+    #: Exception classes of the solver's package, by name (the package is imported lazily).
+    error_names: ClassVar[frozenset[str]] = frozenset()
+
+    def __init__(self, profile: str | Profile = "default", **settings):
+        super().__init__(profile, **settings)
+        self.reset()
+
+    def _solve(self, problem, warm_start):
+        try:
+            return self._attempt(problem, warm_start)
+        except BaseException as exc:
+            if not isinstance(exc, self.errors) and type(exc).__name__ not in self.error_names:
+                raise
+            self.reset()
+            return error_solution(problem, exc)
+
+    def _attempt(
+        self, problem: qpsolvers.Problem, warm_start: np.ndarray | None
+    ) -> BackendSolution:  # pragma: no cover - abstract
+        raise NotImplementedError

@@ -1,24 +1,14 @@
-"""Backend ``clarabel``: Clarabel (interior point) through its own Python API, with a persistent solver.
+"""Backend ``clarabel``: Clarabel (interior point) through its own Python API.
 
-Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with
-``C = [A; G; -I; I]``, ``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``. Rows with an
-infinite bound are left out (which ones is part of the pattern), as Clarabel's presolve does
-on the ``qpsolvers:clarabel`` route, in the same order: a cold solve takes the same steps on
-both routes. Its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
-``z_box = w_ub - w_lb``.
-
-A ``DefaultSolver`` is built once and ``update``-d with the new values while shape and pattern
-hold (dense blocks stored with every entry; needs ``presolve_enable=False`` and
-``input_sparse_dropzeros=False``, set here). An interior-point method starts from its own
-initial point: ``warm_start`` is ignored. Clarabel's ``solve_time`` is reported for a freshly
-built solver only: after ``update`` it grows with every update and exceeds the call's time.
+Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with ``C = [A; G; -I; I]``,
+``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``, the rows with an infinite bound left out
+(part of the pattern); its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
+``z_box = w_ub - w_lb``. A ``DefaultSolver`` is built once and ``update``-d while shape and
+pattern hold; ``solver_time_s`` only for a freshly built one. ``warm_start`` is ignored.
 
 Settings: ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
-``time_limit`` [s], others set on ``DefaultSettings`` verbatim; under a
-``qpbenchmark:<settings>`` profile what the ``qpsolvers:clarabel`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`) plus what persistence needs.
-Statuses: :data:`CLARABEL_STATUSES`, the rest not_solved; ``ValueError``, ``TypeError`` and
-Rust panics raised by Clarabel become status ``error``.
+``time_limit`` [s], others (:func:`~qpbench.backends._common.solver_options`) set on
+``DefaultSettings``. ``ValueError``, ``TypeError`` and Rust panics become status ``error``.
 """
 
 from __future__ import annotations
@@ -30,17 +20,16 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
+    StackedCsc,
     all_dense,
     all_finite,
     dense_bounds,
-    dense_upper_layout,
-    generic_settings,
     own_settings,
-    qpbenchmark_options,
-    structure_key,
+    solver_options,
 )
-from .base import Backend, BackendSolution
+from .base import BackendSolution, PersistentBackend
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -48,150 +37,78 @@ if TYPE_CHECKING:
     import qpsolvers
 
 
-class ConeLayout:
-    """CSC layout of ``P`` (upper) and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
+class ConeLayout(StackedCsc):
+    """The pattern of ``P`` and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
 
     def __init__(self, problem):
-        P, G, A = problem.P, problem.G, problem.A
         self.n = n = problem.q.shape[0]
-        self.meq = 0 if A is None else A.shape[0]
-        self.m_all = 0 if G is None else G.shape[0]
-        lb, ub = dense_bounds(problem, n)
-        self.with_box = lb is not None
-        self.g_keep = np.isfinite(problem.h) if G is not None else np.zeros(0, bool)
-        self.ub_keep = np.isfinite(ub) if self.with_box else np.zeros(n, bool)
-        self.lb_keep = np.isfinite(lb) if self.with_box else np.zeros(n, bool)
-        self.m = int(self.g_keep.sum())
-        self.n_ub = int(self.ub_keep.sum())
-        self.n_lb = int(self.lb_keep.sum())
-        self.rows = self.meq + self.m + self.n_lb + self.n_ub
-        self.dense = all_dense(P, G, A)
-        masks = (np.concatenate([self.g_keep, self.lb_keep, self.ub_keep]).tobytes(),)
-        self.all_kept = bool(self.g_keep.all() and self.ub_keep.all() and self.lb_keep.all())
-        self._g_idx = np.flatnonzero(self.g_keep)
-        self._ub_idx = np.flatnonzero(self.ub_keep)
-        self._lb_idx = np.flatnonzero(self.lb_keep)
-        if self.dense:
-            self._P_idx, self.P_indices, self.P_indptr = dense_upper_layout(n)
-            k = self.meq + self.m
-            # Column j: the k dense rows, then its -I row (if kept), then its +I row (if kept).
-            lb_row = np.full(n, -1, np.int64)
-            lb_row[self.lb_keep] = k + np.arange(self.n_lb)
-            ub_row = np.full(n, -1, np.int64)
-            ub_row[self.ub_keep] = k + self.n_lb + np.arange(self.n_ub)
-            col_rows = np.hstack([np.tile(np.arange(k), (n, 1)), lb_row[:, None], ub_row[:, None]])
-            self._C_mask = (col_rows >= 0).ravel()
-            self.C_indices = col_rows.ravel()[self._C_mask]
-            counts = (col_rows >= 0).sum(axis=1)
-            self.C_indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-            self.key = ("dense", n, self.meq, self.m_all, self.with_box) + masks
-        else:
-            Pc, Cc = self._sparse(problem)
-            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
-            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
-            self.key = (
-                "sparse",
-                n,
-                self.meq,
-                self.m_all,
-                self.with_box,
-                *masks,
-                structure_key(Pc, Cc),
-            )
+        self.meq, self.m_all = (0 if M is None else M.shape[0] for M in (problem.A, problem.G))
+        self.with_box, kept = _kept(problem, n)
+        m = self.m_all
+        g_keep, lb_keep, ub_keep = kept[:m], kept[m : m + n], kept[m + n :]
+        self.all_kept = bool(g_keep.all() and ub_keep.all() and lb_keep.all())
+        self._g_idx, self._lb_idx, self._ub_idx = map(np.flatnonzero, (g_keep, lb_keep, ub_keep))
+        self.m = self._g_idx.size
+        eyes = [(-1.0, self._lb_idx), (1.0, self._ub_idx)] if self.with_box else []
+        super().__init__(problem.P, self.blocks(problem), eyes, n)
+        kept = kept.tobytes()
+        self.key = (self.dense, n, self.meq, m, self.with_box, kept, self.structure)
 
-    def _sparse(self, problem):
-        n = self.n
-        P = spa.triu(spa.csc_matrix(problem.P, dtype=float), format="csc")
-        blocks = []
-        if problem.A is not None:
-            blocks.append(spa.csc_matrix(problem.A, dtype=float))
-        if problem.G is not None:
-            blocks.append(spa.csc_matrix(problem.G, dtype=float)[np.flatnonzero(self.g_keep)])
-        eye = spa.identity(n, format="csr")
-        if self.n_lb:
-            blocks.append(-eye[np.flatnonzero(self.lb_keep)])
-        if self.n_ub:
-            blocks.append(eye[np.flatnonzero(self.ub_keep)])
-        C = spa.vstack(blocks, format="csc") if blocks else spa.csc_matrix((0, n))
-        P.sort_indices()
-        C.sort_indices()
-        return P, C
-
-    def data(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
-        """``(P_data, C_data)`` in this layout's order."""
-        if self.dense and self.all_kept:
-            n, meq, k = self.n, self.meq, self.meq + self.m
-            P_data = problem.P[self._P_idx]
-            D = np.empty((k + 2, n))
-            if meq:
-                D[:meq] = problem.A
-            if k > meq:
-                D[meq:k] = problem.G
-            D[k] = -1.0
-            D[k + 1] = 1.0
-            return P_data, D.T.ravel()
-        if self.dense:
-            n = self.n
-            P_data = np.asarray(problem.P, dtype=float)[self._P_idx]
-            parts = []
-            if problem.A is not None:
-                parts.append(np.asarray(problem.A, dtype=float))
-            if problem.G is not None:
-                parts.append(np.asarray(problem.G, dtype=float)[self.g_keep])
-            parts.append(-np.ones((1, n)))
-            parts.append(np.ones((1, n)))
-            C_data = np.vstack(parts).T.ravel()[self._C_mask]
-            return P_data, C_data
-        P, C = self._sparse(problem)
-        return P.data, C.data
-
-    def matrices(self, problem: qpsolvers.Problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
-        P_data, C_data = self.data(problem)
-        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
-        C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, self.n))
-        return P, C
+    def blocks(self, problem) -> list:
+        """``[A; G_kept]``, the rows of ``C`` above the identity blocks."""
+        blocks = [] if problem.A is None else [problem.A]
+        G = problem.G
+        if G is not None and self.m < self.m_all:
+            G = (G if type(G) is np.ndarray else spa.csr_matrix(G))[self._g_idx]
+        return blocks if G is None else blocks + [G]
 
     def rhs(self, problem: qpsolvers.Problem) -> np.ndarray:
+        """``d = [b; h_kept; -lb_kept; ub_kept]``."""
+        lb, ub = dense_bounds(problem, self.n)
         if self.all_kept and self.with_box:
-            lb, ub = dense_bounds(problem, self.n)
-            parts = [v for v in (problem.b, problem.h) if v is not None]
-            return np.concatenate(parts + [-lb, ub])
-        parts = []
-        if problem.A is not None:
-            parts.append(np.asarray(problem.b, dtype=float))
+            return np.concatenate([v for v in (problem.b, problem.h) if v is not None] + [-lb, ub])
+        parts = [] if problem.A is None else [np.asarray(problem.b, dtype=float)]
         if problem.G is not None:
-            parts.append(np.asarray(problem.h, dtype=float)[self.g_keep])
+            parts.append(np.asarray(problem.h, dtype=float)[self._g_idx])
         if self.with_box:
-            lb, ub = dense_bounds(problem, self.n)
-            parts.append(-lb[self.lb_keep])
-            parts.append(ub[self.ub_keep])
-        return np.concatenate(parts) if parts else np.zeros(0)
+            parts += [-lb[self._lb_idx], ub[self._ub_idx]]
+        return np.concatenate(parts) if parts else EMPTY
 
     def cones(self, clarabel: ModuleType) -> list:
-        cones = []
-        if self.meq:
-            cones.append(clarabel.ZeroConeT(self.meq))
-        if self.rows - self.meq:
+        cones = [clarabel.ZeroConeT(self.meq)] if self.meq else []
+        if self.rows > self.meq:
             cones.append(clarabel.NonnegativeConeT(self.rows - self.meq))
         return cones
 
     def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of Clarabel's multiplier ``w``."""
-        meq, m, n = self.meq, self.m, self.n
-        y = w[:meq]
+        meq, n_lb = self.meq, self._lb_idx.size
+        k = meq + self.m
         if self.all_kept:
-            z = w[meq : meq + m]
-            if not self.with_box:
-                return y, z, np.zeros(0)
-            return y, z, w[meq + m + n :] - w[meq + m : meq + m + n]
+            z_box = w[k + n_lb :] - w[k : k + n_lb] if self.with_box else EMPTY
+            return w[:meq], w[meq:k], z_box
         z = np.zeros(self.m_all)
-        z[self._g_idx] = w[meq : meq + m]
-        if not self.with_box:
-            return y, z, np.zeros(0)
-        z_box = np.zeros(n)
-        z_box[self._lb_idx] -= w[meq + m : meq + m + self.n_lb]
-        z_box[self._ub_idx] += w[meq + m + self.n_lb :]
-        return y, z, z_box
+        z[self._g_idx] = w[meq:k]
+        z_box = np.zeros(self.n if self.with_box else 0)
+        z_box[self._lb_idx] -= w[k : k + n_lb]
+        z_box[self._ub_idx] += w[k + n_lb :]
+        return w[:meq], z, z_box
+
+
+def _kept(problem, n: int) -> tuple[bool, np.ndarray]:
+    """``(with_box, kept)``: whether the problem has bounds, and which rows of ``G``, ``lb`` and
+    ``ub`` (in this order, ``n`` each of the bounds) have a finite bound."""
+    lb, ub = problem.lb, problem.ub
+    with_box = lb is not None or ub is not None
+    parts = [np.empty(0) if problem.G is None else problem.h]
+    if with_box:
+        parts += [
+            np.full(n, -np.inf) if lb is None else lb,
+            np.full(n, np.inf) if ub is None else ub,
+        ]
+    else:
+        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
+    return with_box, np.isfinite(np.concatenate(parts))
 
 
 #: Clarabel status name -> our status (also used by ``qpsolvers:clarabel``).
@@ -223,23 +140,9 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     if not all_dense(P, G, A):
         return None
     n = problem.q.shape[0]
-    lb, ub = problem.lb, problem.ub
-    with_box = lb is not None or ub is not None
-    parts = [np.empty(0) if G is None else problem.h]
-    if with_box:
-        parts.append(np.full(n, -np.inf) if lb is None else lb)
-        parts.append(np.full(n, np.inf) if ub is None else ub)
-    else:
-        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
-    finite = np.isfinite(np.concatenate(parts))
-    return (
-        "dense",
-        n,
-        0 if A is None else A.shape[0],
-        0 if G is None else G.shape[0],
-        with_box,
-        finite.tobytes(),
-    )
+    with_box, kept = _kept(problem, n)
+    m, meq = 0 if G is None else G.shape[0], 0 if A is None else A.shape[0]
+    return (True, n, meq, m, with_box, kept.tobytes(), ())
 
 
 def _native_names(generic: dict) -> dict:
@@ -256,18 +159,14 @@ def _native_names(generic: dict) -> dict:
     return out
 
 
-def _is_clarabel_error(exc: BaseException) -> bool:
-    """Errors Clarabel raises on bad data (pyo3 panics derive from BaseException)."""
-    return isinstance(exc, (ValueError, TypeError)) or type(exc).__name__ == "PanicException"
-
-
 @register
-class ClarabelBackend(Backend):
+class ClarabelBackend(PersistentBackend):
     """Clarabel with a persistent ``DefaultSolver``, updated in place when the pattern holds."""
 
     name = "clarabel"
-    certifies_infeasibility = True
     sparse = True
+    errors = (ValueError, TypeError)
+    error_names = frozenset({"PanicException"})  # Rust panics (pyo3: a BaseException)
     family = "interior point"
     package = "clarabel"
     module = "clarabel"
@@ -279,72 +178,53 @@ class ClarabelBackend(Backend):
 
         return frozenset(own_settings(clarabel.DefaultSettings()) | set(GENERIC_KEYS))
 
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self._solver = None
-        self._layout: ConeLayout | None = None
-
     def reset(self) -> None:
         self._solver = None
-        self._layout = None
+        self._layout: ConeLayout | None = None
 
     def _settings(self, clarabel):
         s = clarabel.DefaultSettings()
         s.verbose = False
-        # what persistence needs; rows with an infinite bound are left out by ConeLayout,
-        # which is what Clarabel's presolve would do
-        s.presolve_enable = False
+        s.presolve_enable = False  # update() needs these two
         s.input_sparse_dropzeros = False
-        options = qpbenchmark_options(self, "clarabel", _native_names)
-        if options is None:
-            generic, native = generic_settings(self)
-            options = {**_native_names(generic), **native}
+        options = solver_options(self, "clarabel", _native_names)
         for key, value in options.items():
             setattr(s, key, value)
         return s
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         import clarabel
 
         sol = BackendSolution(problem)
-        try:
-            layout = self._layout
-            same = False
-            if self._solver is not None and layout is not None:
-                key = quick_key(problem) if layout.dense else None
-                if key is None:
-                    key = ConeLayout(problem).key
-                same = key == layout.key
-            if same:
-                P_data, C_data = layout.data(problem)
-                self._solver.update(
-                    P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem)
-                )
+        layout = self._layout
+        same = False
+        if self._solver is not None and layout is not None:
+            key = quick_key(problem) if layout.dense else None
+            if key is None:
+                key = ConeLayout(problem).key
+            same = key == layout.key
+        if same:
+            P_data, C_data = layout.data(problem.P, layout.blocks(problem))
+            self._solver.update(
+                P=P_data, q=np.asarray(problem.q, dtype=float), A=C_data, b=layout.rhs(problem)
+            )
+        else:
+            self._solver = None
+            layout = ConeLayout(problem)
+            P, C = layout.matrices(problem.P, layout.blocks(problem))
+            solver = clarabel.DefaultSolver(
+                P,
+                np.asarray(problem.q, dtype=float),
+                C,
+                layout.rhs(problem),
+                layout.cones(clarabel),
+                self._settings(clarabel),
+            )
+            if solver.is_data_update_allowed():
+                self._solver, self._layout = solver, layout
             else:
-                self._solver = None
-                layout = ConeLayout(problem)
-                P, C = layout.matrices(problem)
-                solver = clarabel.DefaultSolver(
-                    P,
-                    np.asarray(problem.q, dtype=float),
-                    C,
-                    layout.rhs(problem),
-                    layout.cones(clarabel),
-                    self._settings(clarabel),
-                )
-                if solver.is_data_update_allowed():
-                    self._solver, self._layout = solver, layout
-                else:
-                    self._layout = None
-            res = (self._solver or solver).solve()
-        except BaseException as exc:
-            if not _is_clarabel_error(exc):
-                raise
-            self.reset()
-            sol.status = "error"
-            sol.error = f"{type(exc).__name__}: {exc}"
-            return sol
-
+                self._layout = None
+        res = (self._solver or solver).solve()
         name = _status_name(res.status)
         status = CLARABEL_STATUSES.get(name, "not_solved")
         sol.status = status
@@ -352,9 +232,6 @@ class ClarabelBackend(Backend):
         if status == "error":
             sol.error = f"Clarabel: {name}"
         sol.iterations = int(res.iterations)
-        # After update() Clarabel 0.11's solve_time is not the solve's time: it
-        # exceeds the wall time around the whole call and grows with every
-        # update. Report it only for a freshly built solver.
         sol.solver_time_s = None if same else float(res.solve_time)
         if status in ("primal_infeasible", "dual_infeasible"):
             return sol

@@ -5,23 +5,17 @@ Model, built once per shape (then only parameter values change)::
     minimize    1/2 ||L' x||^2 + q' x          P = L L'
     subject to  A x == b,  G_f x <= h_f,  x[i_l] >= lb_f,  x[i_u] <= ub_f
 
-``quad_form(x, P)`` with a parameter ``P`` is not DPP, so the cost uses a factor ``L``
-(Cholesky, else ``V diag(sqrt(max(lambda, 0)))``: exact for a positive semidefinite ``P``).
-Rows and bounds with an infinite right-hand side are left out (which ones is part of the
-cache key). The DPP compilation happens at the first solve of each shape.
+(``quad_form(x, P)`` with a parameter ``P`` is not DPP: :func:`cost_factor`), the rows and
+bounds with an infinite right-hand side left out (part of the cache key). Solver: cvxpy's
+default QP solver, OSQP (Clarabel when OSQP is missing), with the profile's tolerances in its
+own names (:func:`~qpbench.backends._common.native_settings`), ``warm_start=True``; an
+explicit ``warm_start`` sets ``x.value``. Other settings go to ``Problem.solve``.
 
-Solver: cvxpy's default QP solver, OSQP (Clarabel when OSQP is missing), passed explicitly
-so that the profile's tolerances can be given in its own names (for OSQP ``polish=True`` at
-``eps_abs <= 1e-7``). ``warm_start=True``; an explicit ``warm_start`` sets ``x.value``.
-Other settings go to ``Problem.solve`` verbatim; every key is passed on (cvxpy lists no
-names its solving chain accepts).
-
-Duals: cvxpy's dual of ``A x == b`` has qpsolvers' sign; ``z`` is the dual of ``G x <= h``
-(zero on rows left out); ``z_box = nu - mu`` from the duals of ``x >= lb`` and ``x <= ub``.
-
-Statuses: ``optimal`` -> optimal, ``infeasible`` -> primal_infeasible, ``unbounded`` ->
-dual_infeasible, ``user_limit`` -> max_iter, ``..._inaccurate`` -> not_solved except after
-``max_iter`` iterations (max_iter). ``cvxpy.error.SolverError`` becomes status ``error``.
+Duals: ``y`` of ``A x == b``, ``z`` of ``G x <= h`` (zero on rows left out), ``z_box = nu -
+mu`` from those of ``x >= lb`` and ``x <= ub``. Statuses: ``infeasible`` ->
+primal_infeasible, ``unbounded`` -> dual_infeasible, ``user_limit`` -> max_iter,
+``..._inaccurate`` -> not_solved except after ``max_iter`` iterations (max_iter).
+``cvxpy.error.SolverError`` becomes status ``error``.
 """
 
 from __future__ import annotations
@@ -32,7 +26,7 @@ import numpy as np
 
 from . import register
 from ._common import as_dense, dense_bounds, generic_settings, native_settings
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, error_solution
 
 
 def cost_factor(P: np.ndarray) -> np.ndarray:
@@ -55,27 +49,21 @@ class _Model:
         self.q = cp.Parameter(n)
         self.g_keep, self.lb_idx, self.ub_idx = g_keep, lb_idx, ub_idx
         self.m_all = g_keep.shape[0]
-        constraints = []
         self.eq = self.ineq = self.lower = self.upper = None
         if meq:
-            self.A = cp.Parameter((meq, n))
-            self.b = cp.Parameter(meq)
+            self.A, self.b = cp.Parameter((meq, n)), cp.Parameter(meq)
             self.eq = self.A @ x == self.b
-            constraints.append(self.eq)
         m = int(g_keep.sum())
         if m:
-            self.G = cp.Parameter((m, n))
-            self.h = cp.Parameter(m)
+            self.G, self.h = cp.Parameter((m, n)), cp.Parameter(m)
             self.ineq = self.G @ x <= self.h
-            constraints.append(self.ineq)
         if lb_idx.size:
             self.lb = cp.Parameter(lb_idx.size)
             self.lower = x[lb_idx] >= self.lb
-            constraints.append(self.lower)
         if ub_idx.size:
             self.ub = cp.Parameter(ub_idx.size)
             self.upper = x[ub_idx] <= self.ub
-            constraints.append(self.upper)
+        constraints = [c for c in (self.eq, self.ineq, self.lower, self.upper) if c is not None]
         objective = cp.Minimize(0.5 * cp.sum_squares(self.L.T @ x) + self.q @ x)
         self.problem = cp.Problem(objective, constraints)
 
@@ -101,16 +89,12 @@ class _Model:
                 else np.atleast_1d(np.asarray(c.dual_value, float))
             )
 
-        y = value(self.eq) if self.eq is not None else np.zeros(0)
         z = np.zeros(self.m_all)
-        if self.ineq is not None:
-            z[self.g_keep] = value(self.ineq)
+        z[self.g_keep] = value(self.ineq)
         z_box = np.zeros(n if with_box else 0)
-        if self.lower is not None:
-            z_box[self.lb_idx] -= value(self.lower)
-        if self.upper is not None:
-            z_box[self.ub_idx] += value(self.upper)
-        return y, z, z_box
+        z_box[self.lb_idx] -= value(self.lower)
+        z_box[self.ub_idx] += value(self.upper)
+        return value(self.eq), z, z_box
 
 
 @register
@@ -167,9 +151,7 @@ class CvxpyBackend(Backend):
                 warnings.simplefilter("ignore")  # "Solution may be inaccurate": the status says it
                 model.problem.solve(solver=solver, warm_start=True, verbose=False, **options)
         except cp.error.SolverError as exc:
-            sol.status = "error"
-            sol.error = f"SolverError: {exc}"
-            return sol
+            return error_solution(problem, exc)
         raw = model.problem.status
         status = {
             cp.OPTIMAL: "optimal",

@@ -7,25 +7,20 @@ native::
     H = P,  f = q,  A = [A_eq; G],
     bupper = [ub; b; h],  blower = [lb; b; -inf],  sense = [0 (n); 5 (me); 0 (mi)]
 
-(sense 5: an active, immutable equality; no box block without ``lb``/``ub``). The stacked
-arrays are buffers kept per shape (DAQP copies its input). DAQP's multipliers ``lam`` have
-qpsolvers' signs: ``z_box = lam[:n]``, ``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an
-optimal solve carries ``x`` and duals. ``warm_start`` is ignored (as DAQP's ``primal_start``
-it costs more per call than it saves: ``bench/backend_overhead.py``).
+(sense 5: an active, immutable equality; no box block without ``lb``/``ub``), stacked into
+buffers kept per shape. Its multipliers ``lam`` have qpsolvers' signs: ``z_box = lam[:n]``,
+``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an optimal solve carries ``x`` and duals.
+``warm_start`` is ignored.
 
-``daqp``: one ``daqp.Model`` per shape, ``setup`` on its first tick, then ``update`` +
-``solve``, starting from the working set of the previous solve (``sense`` is not passed).
-``H`` and ``f`` go to ``update`` only when they changed (the paper's ``P = I``, ``q = 0``
-never do, so DAQP keeps its factorisation). Shapes are checked first
-(:func:`~qpbench.backends._common.check_shapes`): DAQP ignores an update of another shape
-without an error. A refused ``setup``/``update`` or a solve that is not optimal drops the
-model. ``solver_time_s`` is DAQP's ``setup_time + solve_time`` (0 set-up after ``update``).
+``daqp``: one ``daqp.Model`` per shape (shapes checked first: DAQP ignores an update of another
+shape), ``setup`` on its first tick, then ``update`` + ``solve`` from the previous working set;
+``H`` and ``f`` go to ``update`` only when they changed, so DAQP keeps its factorisation. A
+refused ``setup``/``update`` or a solve that is not optimal drops the model.
+``solver_time_s``: DAQP's ``setup_time + solve_time``.
 
-Settings: ``primal_tol = dual_tol = eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s];
-under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:daqp`` route gets
-(:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are DAQP's own (the
-keys of ``daqp.Model().settings``; the default ``eps_prox < 0`` regularises a singular ``H``,
-so LPs are solved too). ``ValueError``/``TypeError`` from the binding become status ``error``.
+Settings (:func:`~qpbench.backends._common.solver_options`): ``primal_tol = dual_tol =
+eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s]; others are DAQP's own (the keys of
+``daqp.Model().settings``). ``ValueError``/``TypeError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -38,11 +33,10 @@ from ._common import (
     check_shapes,
     dense_f64_parts,
     dense_parts,
-    generic_settings,
-    qpbenchmark_options,
     refuse_unknown,
+    solver_options,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import BackendSolution, PersistentBackend, new_solution
 
 #: DAQP exit flag -> (status, DAQP's name). CYCLE: no progress.
 EXITFLAGS = {
@@ -141,11 +135,11 @@ def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> B
 
 
 @register
-class DaqpBackend(Backend):
+class DaqpBackend(PersistentBackend):
     """DAQP through ``daqp.solve`` with simple bounds native and equalities by sense flags."""
 
     name = "daqp-stateless"
-    certifies_infeasibility = True
+    errors = (ValueError, TypeError)
     family = "active set (dual)"
     package = "daqp"
     module = "daqp"
@@ -157,19 +151,17 @@ class DaqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._buffers: dict[tuple, _Buffers] = {}
         self._options = self.options()
 
     def options(self) -> dict:
         """The keyword settings given to DAQP (profile first, then the user's)."""
-        generic, native = generic_settings(self)
+        options = solver_options(self, "daqp", _native_names)
         allowed = sorted((_DAQP[0] if _DAQP else _daqp()).Model().settings)
-        refuse_unknown("daqp", native, allowed, "DAQP's own")
-        given = qpbenchmark_options(self, "daqp", _native_names)
-        return given if given is not None else {**_native_names(generic), **native}
+        refuse_unknown("daqp", options, allowed, "DAQP's own")
+        return options
 
     def reset(self) -> None:
-        self._buffers.clear()
+        self._buffers: dict[tuple, _Buffers] = {}
 
     def _stack(self, P, q, A, b, G, h, lb, ub) -> tuple[tuple, _Buffers]:
         """The shape key and the buffers of that shape, filled with this problem."""
@@ -181,16 +173,11 @@ class DaqpBackend(Backend):
         buf.fill(A, b, G, h, lb, ub)
         return key, buf
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         daqp = _DAQP[0] if _DAQP else _daqp()
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
-        try:
-            _, buf = self._stack(P, q, A, b, G, h, lb, ub)
-            x, fval, flag, info = daqp.solve(
-                P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options
-            )
-        except (ValueError, TypeError) as exc:
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        _, buf = self._stack(P, q, A, b, G, h, lb, ub)
+        x, fval, flag, info = daqp.solve(P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options)
         return read_result(problem, flag, x, fval, info, buf)
 
 
@@ -200,44 +187,36 @@ class DaqpModelBackend(DaqpBackend):
 
     name = "daqp"
 
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self.reset()
-
     def reset(self) -> None:
         super().reset()
         self._model = self._key = None
         self._H = self._f = None  # copies of the H and f the model holds
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
         check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
         key, buf = self._stack(P, q, A, b, G, h, lb, ub)
         if key != self._key:
             self._model, self._key = None, key
         model = self._model
-        try:
-            if model is None:
-                model = _daqp().Model()
-                model.settings = dict(model.settings, **self._options)
-                flag, _ = model.setup(P, q, buf.A, buf.bu, buf.bl, buf.sense)
-                if flag >= 0:
-                    self._model = model
-                    self._H, self._f = P.copy(), q.copy()
-            else:
-                H = f = None
-                if P.tobytes() != self._H.tobytes():
-                    H = self._H = P.copy()
-                if q.tobytes() != self._f.tobytes():
-                    f = self._f = q.copy()
-                flag = model.update(H, f, buf.A, buf.bu, buf.bl)
-            if flag < 0:
-                self._model = None
-                return read_result(problem, flag)
-            x, fval, flag, info = model.solve()
-        except (ValueError, TypeError) as exc:
+        if model is None:
+            model = _daqp().Model()
+            model.settings = dict(model.settings, **self._options)
+            flag, _ = model.setup(P, q, buf.A, buf.bu, buf.bl, buf.sense)
+            if flag >= 0:
+                self._model = model
+                self._H, self._f = P.copy(), q.copy()
+        else:
+            H = f = None
+            if P.tobytes() != self._H.tobytes():
+                H = self._H = P.copy()
+            if q.tobytes() != self._f.tobytes():
+                f = self._f = q.copy()
+            flag = model.update(H, f, buf.A, buf.bu, buf.bl)
+        if flag < 0:
             self._model = None
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return read_result(problem, flag)
+        x, fval, flag, info = model.solve()
         sol = read_result(problem, flag, x, fval, info, buf)
         if sol.status != "optimal":
             self._model = None  # set up afresh on the next tick

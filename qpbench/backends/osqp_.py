@@ -1,21 +1,13 @@
-"""Backend ``osqp``: OSQP (ADMM) through its own Python API, with a persistent solver.
+"""Backend ``osqp``: OSQP (ADMM) through its own Python API.
 
 OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
-``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds). Its multiplier
+``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds); its multiplier
 ``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
 
-The solver is set up once and ``update``-d while shape and sparsity pattern hold (dense blocks
-stored with every entry, the identity with its diagonal), warm-starting from its previous
-iterate or from ``warm_start``. A tick of the kept dense shape takes the short route: ``C``'s
-data and ``l`` written into kept buffers, ``P``'s upper triangle one ``take``, and OSQP 1.x's
-fresh ``x`` and multiplier handed back uncopied.
-
-Settings as the ``qpsolvers:osqp`` route (:func:`~qpbench.backends._common.native_settings`:
-``polishing`` at ``eps_abs <= 1e-7``, since ADMM alone seldom reaches a 1e-9 residual), other
-settings to ``OSQP.setup`` verbatim; under a ``qpbenchmark:<settings>`` profile that route's
-arguments (:func:`~qpbench.backends._common.qpbenchmark_options`), so both stop at the same
-iterate. Statuses: :func:`osqp_statuses`, the ``... inaccurate`` ones and ``unsolved`` ->
-not_solved. ``OSQPException`` and ``ValueError`` become status ``error``.
+The solver is set up once and ``update``-d while shape and pattern hold, warm-starting from its
+previous iterate or from ``warm_start``. Settings as ``qpsolvers:osqp``
+(:func:`~qpbench.backends._common.solver_options`), others to ``OSQP.setup``.
+``OSQPException`` and ``ValueError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -23,160 +15,83 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as spa
 
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
+    StackedCsc,
     all_dense,
     all_finite,
     dense_bounds,
-    dense_upper_layout,
-    generic_settings,
-    native_settings,
-    qpbenchmark_options,
-    structure_key,
+    solver_options,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import PersistentBackend, new_solution
 
 if TYPE_CHECKING:
     import qpsolvers
 
 
-class StackedLayout:
-    """CSC layout of ``P`` (upper triangle) and ``C = [G; A; I]`` of one problem shape.
-
-    For dense blocks the data vectors are gathered with precomputed indices,
-    so an update costs two fancy-indexing operations.
-    """
+class StackedLayout(StackedCsc):
+    """The pattern of ``P`` and ``C = [G; A; I]`` of one problem shape (``I`` with ``with_box``)."""
 
     def __init__(self, problem, with_box: bool):
-        P, G, A = problem.P, problem.G, problem.A
-        self.n = n = problem.q.shape[0]
+        G, A = problem.G, problem.A
+        n = problem.q.shape[0]
         self.m = 0 if G is None else G.shape[0]
         self.meq = 0 if A is None else A.shape[0]
         self.with_box = with_box
+        super().__init__(problem.P, _blocks(problem), [(1.0, np.arange(n))] if with_box else [], n)
         k = self.m + self.meq
         #: Where ``y``, ``z`` and ``z_box`` lie in OSQP's multiplier of ``[G; A; I]``.
         self.parts = (slice(self.m, k), slice(0, self.m), slice(k, None))
-        self.dense = all_dense(P, G, A)
-        if self.dense:
-            (rows, cols), _, indptr = dense_upper_layout(n)
-            self._P_idx = (rows, cols)
-            self.P_indices, self.P_indptr = rows, indptr
-            k = self.m + self.meq
-            per_col = k + (1 if with_box else 0)
-            col_rows = np.arange(k, dtype=np.int64)
-            if with_box:
-                self.C_indices = np.concatenate(
-                    [np.append(col_rows, k + j) for j in range(n)]
-                ).astype(np.int64)
-            else:
-                self.C_indices = np.tile(col_rows, n)
-            self.C_indptr = np.arange(0, per_col * n + 1, per_col, dtype=np.int64)
-            self.key = ("dense", n, self.m, self.meq, with_box)
-            self._tick_buffers(per_col)
-        else:
-            self.tick_shapes = None
-            Pc, Cc = self._sparse(problem)
-            self.P_indices, self.P_indptr = Pc.indices, Pc.indptr
-            self.C_indices, self.C_indptr = Cc.indices, Cc.indptr
-            self.key = ("sparse", n, self.m, self.meq, with_box, structure_key(Pc, Cc))
-
-    def _tick_buffers(self, per_col: int) -> None:
-        """What :meth:`tick_data` reuses: the shapes it takes, ``P``'s flat upper-triangle
-        indices, ``C'`` (n x per_col, C order: its ravel is ``C``'s CSC data, the box column
-        already 1) and ``l`` (its ``-inf`` rows of ``G`` already set)."""
-        n, m, k = self.n, self.m, self.m + self.meq
-        rows, cols = self._P_idx
-        self.P_flat = rows * n + cols
-        #: (P, G, A) shapes of a problem :meth:`tick_data` takes: every block there, box included.
-        self.tick_shapes = (
-            ((n, n), (m, n), (self.meq, n)) if m and k > m and self.with_box else None
-        )
-        self._CT = np.empty((n, per_col))
-        if self.with_box:
+        self.key = (self.dense, n, self.m, self.meq, with_box, self.structure)
+        #: (P, G, A) shapes of a problem :meth:`tick_data` takes: dense, every block there.
+        self.tick_shapes = None
+        if self.dense and self.m and self.meq and with_box:
+            self.tick_shapes = ((n, n), (self.m, n), (self.meq, n))
+            rows, cols = self.P_index
+            self._P_flat = rows * n + cols
+            self._CT = np.empty((n, k + 1))  # C' in C order: its ravel is C's data
             self._CT[:, k] = 1.0
-        self._l = np.empty(self.C_rows)
-        self._l[:m] = -np.inf
+            self._l = np.empty(self.rows)
+            self._l[: self.m] = -np.inf
 
     def tick_data(self, P, G, h, A, b, lb, ub) -> tuple[np.ndarray, ...]:
-        """``(l, u, Px, Ax)`` of ``OSQP.update`` for a dense tick of :attr:`tick_shapes`.
-
-        ``C``'s data and ``l`` are written into buffers kept here: OSQP copies what
-        ``update`` is given, and no caller keeps them.
-        """
+        """``(l, u, Px, Ax)`` of ``OSQP.update`` for a problem of :attr:`tick_shapes`, ``C``'s
+        data and ``l`` written into buffers kept here (OSQP copies what ``update`` is given)."""
         m, k = self.m, self.m + self.meq
         CT, l = self._CT, self._l
         CT[:, :m] = G.T
         CT[:, m:k] = A.T
         l[m:k] = b
         l[k:] = lb
-        return l, np.concatenate((h, b, ub)), P.take(self.P_flat), CT.ravel()
-
-    @property
-    def C_rows(self) -> int:
-        return self.m + self.meq + (self.n if self.with_box else 0)
-
-    def _sparse(self, problem):
-        n = self.n
-        P = spa.triu(spa.csc_matrix(problem.P, dtype=float), format="csc")
-        blocks = [spa.csc_matrix(M, dtype=float) for M in (problem.G, problem.A) if M is not None]
-        if self.with_box:
-            blocks.append(spa.identity(n, format="csc"))
-        C = spa.vstack(blocks, format="csc") if blocks else spa.csc_matrix((0, n))
-        P.sort_indices()
-        C.sort_indices()
-        return P, C
-
-    def data(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
-        """``(P_data, C_data)`` in this layout's order."""
-        if self.dense:
-            m, k = self.m, self.m + self.meq
-            P_data = problem.P[self._P_idx]
-            D = np.empty((k + (1 if self.with_box else 0), self.n))
-            if m:
-                D[:m] = problem.G
-            if k > m:
-                D[m:k] = problem.A
-            if self.with_box:
-                D[k] = 1.0
-            return P_data, D.T.ravel()
-        P, C = self._sparse(problem)
-        return P.data, C.data
-
-    def matrices(self, problem: qpsolvers.Problem) -> tuple[spa.csc_matrix, spa.csc_matrix]:
-        """``(P, C)`` as CSC matrices with this layout's pattern."""
-        P_data, C_data = self.data(problem)
-        P = spa.csc_matrix((P_data, self.P_indices, self.P_indptr), shape=(self.n, self.n))
-        C = spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.C_rows, self.n))
-        return P, C
+        return l, np.concatenate((h, b, ub)), P.take(self._P_flat), CT.ravel()
 
     def vectors(self, problem: qpsolvers.Problem) -> tuple[np.ndarray, np.ndarray]:
         """``(l, u)`` of the stacked rows ``[G; A; I]``."""
-        parts_l, parts_u = [], []
-        if problem.G is not None:
-            parts_l.append(np.full(self.m, -np.inf))
-            parts_u.append(np.asarray(problem.h, dtype=float))
-        if problem.A is not None:
-            b = np.asarray(problem.b, dtype=float)
-            parts_l.append(b)
-            parts_u.append(b)
+        h, b = (None if v is None else np.asarray(v, dtype=float) for v in (problem.h, problem.b))
+        lb = ub = None
         if self.with_box:
             lb, ub = dense_bounds(problem, self.n)
             if lb is None:  # free rows of an unconstrained problem
                 lb, ub = np.full(self.n, -np.inf), np.full(self.n, np.inf)
-            parts_l.append(lb)
-            parts_u.append(ub)
-        if not parts_l:
-            return np.zeros(0), np.zeros(0)
-        return np.concatenate(parts_l), np.concatenate(parts_u)
+        lower = None if problem.G is None else np.full(self.m, -np.inf)
+        return _stack(lower, b, lb), _stack(h, b, ub)
 
     def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of the stacked multiplier ``w`` (views into ``w``)."""
-        m, meq = self.m, self.meq
-        z_box = w[m + meq :] if self.with_box else np.zeros(0)
-        return w[m : m + meq], w[:m], z_box
+        part_y, part_z, part_box = self.parts
+        return w[part_y], w[part_z], w[part_box] if self.with_box else EMPTY
+
+
+def _blocks(problem) -> list:
+    return [M for M in (problem.G, problem.A) if M is not None]
+
+
+def _stack(*vectors) -> np.ndarray:
+    vectors = [v for v in vectors if v is not None]
+    return np.concatenate(vectors) if vectors else EMPTY
 
 
 _STATUS_MAP: dict = {}
@@ -202,11 +117,8 @@ def osqp_statuses() -> dict:
 
 
 def _has_box(problem) -> bool:
-    """Stack box rows when there is a box, or when there is nothing else.
-
-    OSQP needs a constraint matrix with at least one row per column to lay out
-    its CSC pattern; an unconstrained problem gets free rows ``-inf <= x <= inf``.
-    """
+    """Whether ``C`` has the identity rows: with bounds, or with no other rows (OSQP needs a
+    row per column: an unconstrained problem gets free rows ``-inf <= x <= inf``)."""
     if problem.lb is not None or problem.ub is not None:
         return True
     no_G = problem.G is None or problem.G.shape[0] == 0
@@ -215,24 +127,19 @@ def _has_box(problem) -> bool:
 
 
 @register
-class OsqpBackend(Backend):
+class OsqpBackend(PersistentBackend):
     """OSQP through ``osqp.OSQP`` with a persistent, updated solver object."""
 
     name = "osqp"
-    certifies_infeasibility = True
     sparse = True
+    error_names = frozenset({"OSQPException"})
     family = "ADMM"
     package = "osqp"
     module = "osqp"
 
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self._solver = None
-        self._layout: StackedLayout | None = None
-
     def reset(self) -> None:
         self._solver = None
-        self._layout = None
+        self._layout: StackedLayout | None = None
 
     @classmethod
     def setting_names(cls) -> frozenset[str]:
@@ -247,52 +154,38 @@ class OsqpBackend(Backend):
         )
 
     def _settings(self) -> dict:
-        given = qpbenchmark_options(self, "osqp", dict)  # the generic names are OSQP's own
-        if given is not None:
-            return {"verbose": False, **given}
-        generic, native = generic_settings(self)  # as the qpsolvers:osqp route
-        return {**native_settings("osqp", **generic), "verbose": False, **native}
+        return {"verbose": False, **solver_options(self, "osqp")}
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         osqp = _OSQP[0] if _OSQP else _import_osqp()
         P, G, A, lb, ub = problem.P, problem.G, problem.A, problem.lb, problem.ub
         layout = self._layout
-        try:
-            if (
-                layout is not None
-                and layout.tick_shapes is not None
-                and type(P) is _ndarray
-                and type(G) is _ndarray
-                and type(A) is _ndarray
-                and lb is not None
-                and ub is not None
-                and (P.shape, G.shape, A.shape) == layout.tick_shapes
-            ):
-                # A tick of the robot: every block dense and of the kept shape.
-                l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
-                self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
-            else:
-                layout = self._update_or_setup(osqp, problem)
-            if warm_start is not None:
-                self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
-            res = self._solver.solve(raise_error=False)
-        except (osqp.OSQPException, ValueError) as exc:
-            self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        if (
+            layout is not None
+            and layout.tick_shapes is not None
+            and type(P) is _ndarray
+            and type(G) is _ndarray
+            and type(A) is _ndarray
+            and lb is not None
+            and ub is not None
+            and (P.shape, G.shape, A.shape) == layout.tick_shapes
+        ):  # a robot tick: every block dense, of the kept shape
+            l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
+            self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
+        else:
+            layout = self._update_or_setup(osqp, problem)
+        if warm_start is not None:
+            self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
+        res = self._solver.solve(raise_error=False)
         info = res.info
         status_val = info.status_val
         sol = new_solution(problem, "not_solved", {"raw_status": info.status, "info": info})
         sol.iterations = info.iter
         sol.solver_time_s = info.run_time
-        if status_val == _SOLVED:
-            # OSQP 1.x hands back fresh arrays: x and w need no copy; y, z, z_box are views of w.
+        if status_val == _SOLVED:  # OSQP 1.x hands back fresh arrays: no copy
             sol.status = "optimal"
             sol.x = res.x
-            w = res.y
-            part_y, part_z, part_box = layout.parts
-            sol.y = w[part_y]
-            sol.z = w[part_z]
-            sol.z_box = w[part_box] if layout.with_box else _EMPTY
+            sol.y, sol.z, sol.z_box = layout.split_duals(res.y)
             sol._obj = info.obj_val
             return sol
         status = _STATUS_MAP.get(status_val, "not_solved")
@@ -325,13 +218,13 @@ class OsqpBackend(Backend):
             else:
                 reuse = StackedLayout(problem, with_box).key == layout.key
         if reuse:
-            P_data, C_data = layout.data(problem)
+            P_data, C_data = layout.data(problem.P, _blocks(problem))
             l, u = layout.vectors(problem)
             self._solver.update(q=problem.q, l=l, u=u, Px=P_data, Ax=C_data)
             return layout
         self._solver = None
         layout = StackedLayout(problem, with_box)
-        P, C = layout.matrices(problem)
+        P, C = layout.matrices(problem.P, _blocks(problem))
         l, u = layout.vectors(problem)
         solver = osqp.OSQP()
         solver.setup(P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings())
@@ -342,8 +235,6 @@ class OsqpBackend(Backend):
 _OSQP: list = []
 _SOLVED = None  # OSQP_SOLVED's status_val, read at the first import of osqp
 _ndarray = np.ndarray
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False
 
 
 def _import_osqp():

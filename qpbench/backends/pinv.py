@@ -1,14 +1,10 @@
 """Backend ``pinv``: the paper's comparison baseline, Jacobian Moore-Penrose inverse (JMPI).
 
 The JMPI controller of the paper's section 4, ``v = J^+ b0``, ignores obstacles and joint
-limits. As a QP "solver": with equalities ``x = A^+ b`` (the minimum-norm solution, the
-QP's minimiser when ``P = I, q = 0`` as in the paper's eq. 11), ignoring everything else;
-without, ``x = -P^+ q``. Status is ``optimal`` whenever an ``x`` was produced; the metrics
-show its constraint violation and optimality gap.
-
-Duals: ``y = -(A')^+ (P x + q)`` (least squares of the stationarity condition), ``z`` and
-``z_box`` zero (every inequality treated as inactive), so the dual residual reported is the
-stationarity error of that claim.
+limits. As a QP "solver": with equalities ``x = A^+ b`` (the minimum-norm solution, the QP's
+minimiser when ``P = I, q = 0`` as in the paper's eq. 11), else ``x = -P^+ q``; status
+``optimal`` whenever an ``x`` was produced. Duals: ``y = -(A')^+ (P x + q)`` (least squares of
+the stationarity condition), ``z`` and ``z_box`` zero.
 """
 
 from __future__ import annotations
@@ -17,7 +13,7 @@ import numpy as np
 
 from . import register
 from ._common import as_dense
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, error_solution
 
 
 @register
@@ -56,9 +52,7 @@ class PinvBackend(Backend):
                 x = np.linalg.lstsq(P, -q, rcond=None)[0]
                 y = np.zeros(0)
         except np.linalg.LinAlgError as exc:
-            sol.status = "error"
-            sol.error = f"LinAlgError: {exc}"
-            return sol
+            return error_solution(problem, exc)
         sol.x = x
         sol.y = y
         sol.z = np.zeros(0 if problem.G is None else problem.G.shape[0])

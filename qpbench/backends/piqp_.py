@@ -1,41 +1,31 @@
-"""Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs, with a persistent solver.
+"""Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs.
 
 ``piqp.DenseSolver`` solves ``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,
-x_l <= x <= x_u`` with ``h_l = -inf`` and the bounds native. Its multipliers are non-negative
-per side: ``z = z_u - z_l``, ``z_box = z_bu - z_bl``. A scipy.sparse problem, or one too large
-made dense (:func:`~qpbench.backends._common.dense_route`), goes to ``piqp.SparseSolver``
-(``P`` as its upper triangle).
+x_l <= x <= x_u`` with ``h_l = -inf``; its multipliers are non-negative per side: ``z = z_u -
+z_l``, ``z_box = z_bu - z_bl``. A problem :func:`~qpbench.backends._common.dense_route` sends to
+the sparse API goes to ``piqp.SparseSolver`` (``P``'s upper triangle).
 
-The solver is ``setup`` once per shape (per structure on the sparse route) and then
-``update``-d; shapes are checked at set-up (PIQP keeps its old data on an update of another
-shape). PIQP starts every solve from its own initial point: ``warm_start`` is ignored. A
-status other than optimal drops the solver. ``solver_time_s`` is PIQP's ``info.run_time``;
-the objective is computed from ``x`` when read.
-
-Settings as ``qpsolvers:piqp`` (:func:`~qpbench.backends._common.native_settings`; no time
-limit), or under a ``qpbenchmark:<settings>`` profile that route's arguments; others set on
-the solver's settings verbatim. Statuses: :func:`piqp_statuses`; ``ValueError``,
-``TypeError`` and ``RuntimeError`` from the binding become status ``error``.
+The solver is ``setup`` once per shape (per structure when sparse), then ``update``-d; a status
+other than optimal drops it. ``warm_start`` is ignored (PIQP starts from its own point).
+Settings as ``qpsolvers:piqp`` (no time limit); others set on the solver's settings.
+``ValueError``, ``TypeError`` and ``RuntimeError`` become status ``error``.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
     check_shapes,
     dense_route,
-    generic_settings,
-    native_settings,
     own_settings,
-    qpbenchmark_options,
     refuse_unknown,
+    solver_options,
     sparse_parts,
     structure_key,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import BackendSolution, PersistentBackend, new_solution
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -53,33 +43,31 @@ def _piqp():
 
 
 def piqp_statuses() -> dict:
-    """PIQP's status -> (our status, raw name), built once (also read by ``qpsolvers:piqp``)."""
+    """PIQP's status -> our status, built once (also read by ``qpsolvers:piqp``)."""
     if not _STATUS_MAP:
         S = _piqp()
-        ours = {
-            S.PIQP_SOLVED: "optimal",
-            S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-            S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
-            S.PIQP_MAX_ITER_REACHED: "max_iter",
-            S.PIQP_NUMERICS: "error",
-            S.PIQP_INVALID_SETTINGS: "error",
-            S.PIQP_UNSOLVED: "not_solved",
-        }
-        for value, status in ours.items():
-            _STATUS_MAP[value] = (status, str(value).split(".")[-1])
+        _STATUS_MAP.update(
+            {
+                S.PIQP_SOLVED: "optimal",
+                S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+                S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
+                S.PIQP_MAX_ITER_REACHED: "max_iter",
+                S.PIQP_NUMERICS: "error",
+                S.PIQP_INVALID_SETTINGS: "error",
+            }
+        )
     return _STATUS_MAP
 
 
 @register
-class PiqpBackend(Backend):
+class PiqpBackend(PersistentBackend):
     """PIQP dense with a persistent ``DenseSolver``, updated per tick."""
 
     name = "piqp"
-    certifies_infeasibility = True
+    errors = (ValueError, TypeError, RuntimeError)
     family = "proximal interior point"
     package = "piqp"
     module = "piqp"
-    #: scipy.sparse input (or a problem too large made dense) goes to ``piqp.SparseSolver``.
     sparse = True
 
     @classmethod
@@ -91,34 +79,17 @@ class PiqpBackend(Backend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._solver = None
-        self._shapes = None
-        self._result = None
-        self._info = None
-        self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
         self._settings_dict = self._make_settings()
 
     def _make_settings(self) -> dict:
-        given = qpbenchmark_options(
-            self, "piqp", lambda g: {k: g[k] for k in g if k != "time_limit"}
-        )
-        if given is not None:  # as the qpsolvers:piqp route under a qpbenchmark profile
-            settings, native = {"verbose": False, "compute_timings": True}, given
-        else:
-            generic, native = generic_settings(self)
-            settings = native_settings("piqp", **generic)
-            settings.update(verbose=False, compute_timings=True)
+        options = solver_options(self, "piqp")
         allowed = sorted(a for a in dir(_piqp().DenseSolver().settings) if not a.startswith("_"))
-        refuse_unknown("piqp", native, allowed, "PIQP's own")
-        settings.update(native)
-        return settings
+        refuse_unknown("piqp", options, allowed, "PIQP's own")
+        return {"verbose": False, "compute_timings": True, **options}
 
     def reset(self) -> None:
-        self._solver = None
-        self._shapes = None
-        self._result = None
-        self._info = None
-        self._views = None
+        self._solver = self._shapes = self._info = None
+        self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
 
     def _setup(self, cls, shapes, data):
         """A new ``cls`` solver (``DenseSolver`` or ``SparseSolver``) set up with ``data``; kept."""
@@ -129,21 +100,18 @@ class PiqpBackend(Backend):
             setattr(s, name, value)
         solver.setup(*data)
         self._solver, self._shapes = solver, shapes
-        res = self._result = solver.result
+        res = solver.result
         self._info = res.info
-        # Each attribute read of the result builds a new view; these views follow
-        # the live vectors, which update() and solve() overwrite in place (same shape).
+        # update() and solve() overwrite the vectors these views show (each read builds one)
         self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
         return solver
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         parts = dense_route(problem)
         if parts is None:
             return self._solve_sparse(problem)
         P, q, A, b, G, h, lb, ub = parts
-        # The shapes, not a helper's key: written out, they cost no call per tick. PIQP
-        # prints "... has wrong dimensions" and keeps its old data on a wrong shape, so an
-        # update needs the shapes the solver was set up with (checked then, in _run).
+        # PIQP keeps its old data on an update of another shape: updated only on the same shapes
         shapes = (
             P.shape,
             q.shape,
@@ -176,29 +144,25 @@ class PiqpBackend(Backend):
         (``None``: ``DenseSolver``) after checking the shapes; solve; the solution in
         qpsolvers' convention."""
         solver = self._solver
-        try:
-            if solver is not None and shapes == self._shapes:
-                solver.update(P, q, A, b, G, None, h, lb, ub)
-            else:
-                check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-                solver = self._setup(
-                    cls or _piqp().DenseSolver, shapes, (P, q, A, b, G, None, h, lb, ub)
-                )
-            raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
-        except (ValueError, TypeError, RuntimeError) as exc:
-            self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+        if solver is not None and shapes == self._shapes:
+            solver.update(P, q, A, b, G, None, h, lb, ub)
+        else:
+            check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+            solver = self._setup(
+                cls or _piqp().DenseSolver, shapes, (P, q, A, b, G, None, h, lb, ub)
+            )
+        raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
         info = self._info
-        if raw_status.value == _SOLVED[0]:
-            # No objective read (a property read of the binding): computed from x if asked for.
+        if raw_status.value == _SOLVED[0]:  # the objective is computed from x when read
             sol = new_solution(problem, "optimal", {"raw_status": "PIQP_SOLVED"})
             x, y, z_l, z_u, z_bl, z_bu = self._views
             sol.x = x.copy()
-            sol.y = _EMPTY if A is None else y.copy()
-            sol.z = _EMPTY if G is None else z_u - z_l
-            sol.z_box = _EMPTY if lb is None and ub is None else z_bu - z_bl
+            sol.y = EMPTY if A is None else y.copy()
+            sol.z = EMPTY if G is None else z_u - z_l
+            sol.z_box = EMPTY if lb is None and ub is None else z_bu - z_bl
         else:
-            status, raw = _STATUS_MAP.get(raw_status, ("not_solved", str(raw_status)))
+            status = _STATUS_MAP.get(raw_status, "not_solved")
+            raw = str(raw_status).split(".")[-1]
             sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
             self.reset()
             if status == "error":
@@ -206,7 +170,3 @@ class PiqpBackend(Backend):
         sol.iterations = info.iter
         sol.solver_time_s = info.run_time
         return sol
-
-
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False

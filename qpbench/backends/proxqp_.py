@@ -1,35 +1,20 @@
 """Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's dense and sparse APIs.
 
 ``proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)`` with ``H = P, g = q, C = G,
-l = -inf, u = h`` and the bounds as ProxQP's own box; its multipliers have qpsolvers' signs
-(``z_box``: the last ``n`` entries of its ``z``). A scipy.sparse problem, or one too large made
-dense (:func:`~qpbench.backends._common.dense_route`), goes to ``proxqp.sparse.QP``, which has
-no box: the bounds are stacked under ``G`` as qpsolvers does.
+l = -inf, u = h`` and the bounds as ProxQP's box (``z_box``: the last ``n`` entries of its
+``z``); a problem :func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
+``proxqp.sparse.QP`` with the bounds stacked under ``G``. Multipliers have qpsolvers' signs.
 
-Persistence. The ``QP`` object is ``init``-ed once per shape (per structure on the sparse
-route) and then ``update``-d. Its first solve starts from
-``EQUALITY_CONSTRAINED_INITIAL_GUESS``, as the ``qpsolvers:proxqp`` route does (a cold solve
-takes the same iterations on both routes); then from ``WARM_START_WITH_PREVIOUS_RESULT``, the
-one change made after ``init`` (ProxQP 0.8 loops forever in ``solve`` after others). An
-explicit ``warm_start`` goes to ``QP.solve(x, None, None)``. The preconditioner is kept at
-``update`` (``update_preconditioner=True`` recomputes it).
+The ``QP`` object is ``init``-ed once per shape (per structure when sparse), then ``update``-d.
+Its first solve starts from ``EQUALITY_CONSTRAINED_INITIAL_GUESS`` (as ``qpsolvers:proxqp``),
+the next ones from ``WARM_START_WITH_PREVIOUS_RESULT``; ``warm_start`` goes to
+``QP.solve(x, None, None)``; ``update_preconditioner=True`` recomputes the preconditioner at
+``update``. An infeasibility verdict after a warm start, or on the sparse route, is checked by
+one cold solve on a fresh object (``extras["cold_retry"]``, iterations and times added up;
+``retry_cold=False``: not); after a verdict the object is dropped.
 
-Infeasibility verdicts. Warm-started from the result of an unrelated problem of the same
-shape, ProxQP 0.8 often stops with a false ``PRIMAL_INFEASIBLE`` (its ``eps_primal_inf = 1e-4``
-test fires on the dual iterates' jump); on the sparse route it also fires on cold solves of
-feasible problems (HS118 of Maros-Meszaros). Such a verdict is checked by one cold re-solve
-on a fresh object (sparse route: ``eps_primal_inf``, ``eps_dual_inf`` at the profile's
-``eps_abs``) whose status is kept; iterations and times add up, ``extras["cold_retry"]`` says
-so; ``retry_cold=False`` turns this off. After a verdict the object is dropped: warm-started
-from an infeasibility exit, ProxQP 0.8 does not give the same answer twice for the same
-ticks, so neither a controller nor ``--repeat`` would be reproducible.
-
-Settings. ``eps_abs``, ``eps_rel``, ``max_iter``, and at ``eps_abs <= 1e-7``
-``check_duality_gap`` with ``eps_duality_gap_abs/rel`` (as qpbenchmark at high accuracy); no
-time limit. Under a ``qpbenchmark:<settings>`` profile what the ``qpsolvers:proxqp`` route
-gets (:func:`~qpbench.backends._common.qpbenchmark_options`). Other settings are set on
-``QP.settings`` verbatim. Statuses: :func:`proxqp_statuses`, the rest not_solved;
-``ValueError`` and ``RuntimeError`` raised by proxsuite become status ``error``.
+Settings: :func:`~qpbench.backends._common.solver_options` (no time limit), set on
+``QP.settings``. ``ValueError`` and ``RuntimeError`` become status ``error``.
 """
 
 from __future__ import annotations
@@ -39,17 +24,17 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import (
+    EMPTY,
     GENERIC_KEYS,
     all_finite,
     dense_bounds,
     dense_route,
-    generic_settings,
     own_settings,
-    qpbenchmark_options,
+    solver_options,
     sparse_parts,
     structure_key,
 )
-from .base import Backend, BackendSolution, new_solution
+from .base import PersistentBackend, new_solution
 
 _STATUS_MAP: dict = {}
 _MODULE: list = []
@@ -66,40 +51,37 @@ def _proxqp():
 
 
 def proxqp_statuses() -> dict:
-    """``QPSolverOutput`` -> (our status, raw name), built once (also read by ``qpsolvers:proxqp``)."""
+    """``QPSolverOutput`` -> our status, built once (also read by ``qpsolvers:proxqp``)."""
     if not _STATUS_MAP:
         O = _proxqp().QPSolverOutput
         _SOLVED.append(O.PROXQP_SOLVED)
-        ours = {
-            O.PROXQP_SOLVED: "optimal",
-            O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-            O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
-            O.PROXQP_MAX_ITER_REACHED: "max_iter",
-        }
-        for value in O.__members__.values():
-            _STATUS_MAP[value] = (ours.get(value, "not_solved"), str(value).split(".")[-1])
+        _STATUS_MAP.update(
+            {
+                O.PROXQP_SOLVED: "optimal",
+                O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
+                O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
+                O.PROXQP_MAX_ITER_REACHED: "max_iter",
+            }
+        )
     return _STATUS_MAP
 
 
-def _native_names(generic: dict) -> dict:
-    """ProxQP's settings for the generic ones given (it has no time limit: that one is dropped)."""
-    return {k: v for k, v in generic.items() if k != "time_limit"}
+def _status(value) -> tuple[str, str]:
+    """Our status and ProxQP's name of a ``QPSolverOutput``."""
+    return proxqp_statuses().get(value, "not_solved"), str(value).split(".")[-1]
 
 
 @register
-class ProxqpBackend(Backend):
+class ProxqpBackend(PersistentBackend):
     """ProxQP dense with a persistent ``QP`` object, updated per problem."""
 
     name = "proxqp"
-    certifies_infeasibility = True
+    errors = (ValueError, RuntimeError)
     family = "augmented Lagrangian"
     package = "proxsuite"
     module = "proxsuite"
-    #: scipy.sparse input (or a problem too large made dense) goes to ``proxqp.sparse.QP``.
     sparse = True
-    #: Solved in a worker process with a deadline under ``--isolate auto``:
-    #: ProxQP 0.8 was seen once to hang in native code (633 s) on a warm-started
-    #: robot tick, which an in-process time limit cannot interrupt.
+    #: ProxQP 0.8 was seen to hang in native code on a warm-started robot tick.
     risky = True
 
     @classmethod
@@ -110,35 +92,17 @@ class ProxqpBackend(Backend):
         own |= own_settings(proxqp.sparse.QP(1, 0, 0).settings)
         return frozenset(own | {"retry_cold"} | set(GENERIC_KEYS))
 
-    def __init__(self, profile="default", **settings):
-        super().__init__(profile, **settings)
-        self._qp = None
-        self._key = None
+    def reset(self) -> None:
+        self._qp = self._key = self._l = None  # _l: ``l = -inf``, kept
         self._info = None  # ``qp.results.info`` of ``_qp``
         self._views = None  # ``(results.x, results.y, results.z)`` of ``_qp`` (numpy views)
-        self._l = None  # cached ``l = -inf``
-
-    def reset(self) -> None:
-        self._qp = None
-        self._key = None
-        self._info = None
-        self._views = None
 
     def _apply_settings(self, qp, proxqp) -> bool:
         s = qp.settings
         s.verbose = False
         s.compute_timings = True
         s.initial_guess = proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
-        native = qpbenchmark_options(self, "proxqp", _native_names)
-        if native is None:
-            generic, native = generic_settings(self)
-            s.eps_abs = float(generic["eps_abs"])
-            s.eps_rel = float(generic["eps_rel"])
-            s.max_iter = int(generic["max_iter"])
-            if generic["eps_abs"] <= 1e-7:
-                s.check_duality_gap = True
-                s.eps_duality_gap_abs = float(generic["eps_abs"])
-                s.eps_duality_gap_rel = float(generic["eps_rel"])
+        native = solver_options(self, "proxqp")
         update_preconditioner = bool(native.pop("update_preconditioner", False))
         self._retry_cold = bool(native.pop("retry_cold", True))
         for key, value in native.items():
@@ -157,8 +121,7 @@ class ProxqpBackend(Backend):
         self._update_preconditioner = self._apply_settings(qp, proxqp)
         qp.init(*data)
         self._qp, self._key = qp, key
-        # ``qp.results.info`` is a member of the object: its wrapper stays valid.
-        self._info = qp.results.info
+        self._info = qp.results.info  # a member of the object: the wrapper stays valid
         return qp
 
     def _lower(self, n_in: int) -> np.ndarray:
@@ -168,7 +131,7 @@ class ProxqpBackend(Backend):
             l = self._l = np.full(n_in, -np.inf)
         return l
 
-    def _solve(self, problem, warm_start):
+    def _attempt(self, problem, warm_start):
         parts = dense_route(problem)
         if parts is None:
             return self._solve_sparse(problem, warm_start)
@@ -191,10 +154,9 @@ class ProxqpBackend(Backend):
         n_g = 0 if G is None else G.shape[0]
         C, u = G, h
         l = None if G is None else self._lower(n_g)
-        with_box = lb is not None or ub is not None
+        lb, ub = dense_bounds(problem, n)
+        with_box = lb is not None
         if with_box:
-            lb = np.full(n, -np.inf) if lb is None else lb
-            ub = np.full(n, np.inf) if ub is None else ub
             eye = spa.identity(n, format="csc")
             C = eye if G is None else spa.vstack([G, eye], format="csc")
             l = lb if G is None else np.concatenate([l, lb])
@@ -208,56 +170,46 @@ class ProxqpBackend(Backend):
         """Update (same ``key``) or build the ``QP`` object with ``data``, solve, read the result
         (``n_in`` rows of ``G`` lead ProxQP's ``z``; with ``with_box`` the next ``n`` are ``z_box``)."""
         n_eq = key[1]
-        try:
-            warm = self._qp is not None and key == self._key
-            if warm:
-                qp = self._qp
-                # ``update_preconditioner`` as a keyword: nanobind dispatches
-                # this faster than the same call all positional.
-                qp.update(*data, update_preconditioner=self._update_preconditioner)
-            else:
-                qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
-            if warm_start is not None:
-                # ProxQP starts from x (y, z from zero) for this call; it assigns results.x
-                # from a copy of the guess, so the kept views are read again.
-                qp.solve(np.asarray(warm_start, dtype=float), None, None)
-                self._views = None
-            else:
-                qp.solve()
+        warm = self._qp is not None and key == self._key
+        if warm:
+            qp = self._qp
+            qp.update(*data, update_preconditioner=self._update_preconditioner)
+        else:
+            qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
+        if warm_start is not None:
+            # results.x becomes a copy of the guess: the kept views are read again
+            qp.solve(np.asarray(warm_start, dtype=float), None, None)
+            self._views = None
+        else:
+            qp.solve()
+        info = self._info
+        raw_status = info.status
+        if _SOLVED and raw_status is _SOLVED[0]:
+            status, raw = "optimal", "PROXQP_SOLVED"
+        else:
+            status, raw = _status(raw_status)
+        retried = False
+        sparse = len(key) > 4
+        if sparse:  # the kept views' split of z depends on n_in, which the key does not pin
+            self._views = None
+        if (
+            self._retry_cold
+            and (warm or warm_start is not None or sparse)
+            and status in ("primal_infeasible", "dual_infeasible")
+        ):
+            first_time = info.solve_time
+            first_iter = info.iter
+            qp = self._build(_proxqp(), key, data)
+            if sparse:  # bounds as rows: the verdict checked at the profile's tolerance
+                eps = qp.settings.eps_abs
+                qp.settings.eps_primal_inf = min(qp.settings.eps_primal_inf, eps)
+                qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
+            qp.solve()
             info = self._info
-            raw_status = info.status
-            if _SOLVED and raw_status is _SOLVED[0]:
-                status, raw = "optimal", "PROXQP_SOLVED"
-            else:
-                status, raw = (_STATUS_MAP or proxqp_statuses())[raw_status]
-            retried = False
-            sparse = len(key) > 4
-            if sparse:  # the kept views' split of z depends on n_in, which the key does not pin
-                self._views = None
-            if (
-                self._retry_cold
-                and (warm or warm_start is not None or sparse)
-                and status in ("primal_infeasible", "dual_infeasible")
-            ):
-                first_time = info.solve_time
-                first_iter = info.iter
-                # A fresh object: changing ``initial_guess`` after ``init`` makes
-                # ProxQP 0.8 loop forever in ``solve``.
-                qp = self._build(_proxqp(), key, data)
-                if sparse:  # bounds as rows: the verdict is checked at the profile's tolerance
-                    eps = qp.settings.eps_abs
-                    qp.settings.eps_primal_inf = min(qp.settings.eps_primal_inf, eps)
-                    qp.settings.eps_dual_inf = min(qp.settings.eps_dual_inf, eps)
-                qp.solve()
-                info = self._info
-                status, raw = _STATUS_MAP[info.status]
-                retried = True
-            if not warm or retried:  # built cold (equality-constrained guess); warm from now on
-                qp.settings.initial_guess = _proxqp().InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-        except (ValueError, RuntimeError) as exc:
-            self.reset()
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
-
+            status, raw = _status(info.status)
+            retried = True
+        if not warm or retried:  # built cold (equality-constrained guess); warm from now on
+            qp.settings.initial_guess = _proxqp().InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
         sol = new_solution(problem, status, {"raw_status": raw, "cold_retry": retried})
         sol.iterations = info.iter  # a Python int (and solve_time a float) from the binding
         sol.solver_time_s = info.solve_time * 1e-6  # ProxQP reports [us]
@@ -265,7 +217,7 @@ class ProxqpBackend(Backend):
             sol.iterations += int(first_iter)
             sol.solver_time_s += float(first_time) * 1e-6
         if status == "primal_infeasible" or status == "dual_infeasible":
-            self.reset()  # no warm start from an infeasibility exit (see the module docstring)
+            self.reset()  # no warm start from an infeasibility exit
             return sol
         return self._read_solution(qp, sol, info, n, n_eq, n_in, with_box)
 
@@ -273,24 +225,16 @@ class ProxqpBackend(Backend):
         """Copy x, y, z (and z_box: the ``n`` rows after ``n_in``) out of ProxQP's results into ``sol``."""
         status = sol.status
         views = self._views
-        if views is None:
-            # Views of qp.results.x, y, z (each attribute read builds one), kept per QP object:
-            # update and solve write into the same buffers; and where z and z_box lie in z.
+        if views is None:  # update and solve write into the buffers these views show
             res = qp.results
             views = self._views = (res.x, res.y, res.z, slice(0, n_in), slice(n_in, n_in + n))
         x_view, y_view, z_view, part_z, part_box = views
         x = x_view.copy()
         if all_finite(x):
             sol.x = x
-            sol.y = y_view.copy() if n_eq else np.zeros(0)
-            # One copy of ProxQP's z, then views: [z; z_box] with a box.
-            z = z_view.copy()
-            if with_box:
-                sol.z = z[part_z]
-                sol.z_box = z[part_box]
-            else:
-                sol.z = z
-                sol.z_box = np.zeros(0)
+            sol.y = y_view.copy() if n_eq else EMPTY
+            z = z_view.copy()  # [z; z_box] with a box
+            sol.z, sol.z_box = (z[part_z], z[part_box]) if with_box else (z, EMPTY)
         if status == "optimal":
             sol._obj = info.objValue  # a Python float from the binding
         return sol

@@ -1,35 +1,25 @@
-"""Backend ``qpoases``: qpOASES (online active set) with hotstart, through a small compiled shim.
+"""Backend ``qpoases``: qpOASES (online active set) with hotstart, through a compiled shim.
 
-qpOASES comes from the ``cmeel-qpoases`` wheel; a C shim around ``qpOASES::SQProblem``
-(:mod:`._qpoases_shim`) is compiled on first use: call :meth:`QpoasesBackend.prepare`
-(constructing the backend does) before timing anything. (casadi's ``conic('qpoases')``, the
-other route from PyPI, costs over ten times as much per hotstart and prints a banner.)
+qpOASES comes from the ``cmeel-qpoases`` wheel; the C shim around ``qpOASES::SQProblem``
+(:mod:`._qpoases_shim`) is compiled on first use: :meth:`QpoasesBackend.prepare` (the
+constructor calls it) before timing anything.
 
-Formulation: ``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with ``H = P``,
-``g = q``, ``A = [A_eq; G]``, ``lbA = [b; -inf]``, ``ubA = [b; h]`` (infinite bounds as
-qpOASES' ``INFTY = 1e20``). qpOASES' multipliers are positive at an active *lower* bound: the
-shim negates them into qpsolvers' sign.
+``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with ``H = P``, ``g = q``,
+``A = [A_eq; G]``, ``lbA = [b; -inf]``, ``ubA = [b; h]`` (infinite bounds as ``INFTY = 1e20``);
+the shim negates qpOASES' multipliers into qpsolvers' sign. The arrays are copied into the
+one buffer the shim reads (shapes checked in full when the sizes change). The first tick of a
+shape calls ``init()``, the next ones ``hotstart()``; a status other than optimal makes the
+next tick call ``init()``. ``warm_start`` is ignored.
 
-Per tick, the arrays are copied into the one buffer the shim reads (shapes checked in full
-only when the sizes change: a copy into a buffer of another shape raises); ``x`` and the
-multipliers come out of one copy (:class:`QpoasesSolution`). The first tick of a shape calls
-``init()``, the next ones ``hotstart()`` from the previous working set; a status other than
-optimal leaves qpOASES mid-homotopy, so the next tick calls ``init()``. ``warm_start`` is
-ignored. ``get_state``/``set_state`` copy the whole ``SQProblem``.
+Settings: ``max_iter`` -> ``nWSR``, ``time_limit`` [s] -> qpOASES' CPU-time limit (``eps_abs``,
+``eps_rel`` unused: an active-set method ends on the exact solution of its working set);
+``preset`` (:data:`PRESETS`) and the options :data:`OPTION_NAMES`.
 
-Settings. ``max_iter`` -> ``nWSR``, ``time_limit`` -> qpOASES' CPU-time limit [s];
-``eps_abs``/``eps_rel`` are not used (an active-set method ends on the exact solution of its
-final working set). Also ``preset`` (:data:`PRESETS`) and qpOASES' options by name
-(:data:`OPTION_NAMES`).
-
-``solver_time_s`` is the time of ``init()``/``hotstart()`` measured in the shim with
-``CLOCK_MONOTONIC`` (qpOASES' own CPU time, ``extras["qpoases_cputime_s"]``, comes from
-``gettimeofday``: too coarse for a hotstart of microseconds).
-
-Statuses: ``SUCCESSFUL_RETURN`` -> optimal; infeasibility / unboundedness -> primal_infeasible
-/ dual_infeasible; ``RET_MAX_NWSR_REACHED`` -> max_iter, or time_limit when fewer than
-``nWSR`` recalculations were done; anything else -> error with qpOASES' message
-(``extras["raw_status"]``: the return value). Only an optimal solve carries ``x`` and duals.
+``solver_time_s``: the time of ``init()``/``hotstart()``, measured in the shim with
+``CLOCK_MONOTONIC`` (``extras["qpoases_cputime_s"]``: qpOASES' own, from ``gettimeofday``).
+Statuses: ``RET_MAX_NWSR_REACHED`` -> max_iter, or time_limit with fewer than ``nWSR``
+recalculations; infeasible / unbounded -> primal_infeasible / dual_infeasible; other failures
+-> error with qpOASES' message. Only an optimal solve carries ``x`` and duals.
 """
 
 from __future__ import annotations
@@ -51,8 +41,6 @@ from ._common import (
 )
 from ._qpoases_shim import OPTION_NAMES, PRESETS, Workspace
 from .base import Backend, BackendSolution, new_solution
-
-__all__ = ["OPTION_NAMES", "PRESETS", "QpoasesBackend"]
 
 #: Shim status -> our status.
 _STATUSES = {
@@ -89,8 +77,7 @@ _UNSET = object()
 
 class QpoasesSolution(BackendSolution):
     """A qpOASES tick's solution: ``x`` and the multipliers are views of one copy of the shim's
-    output, the multipliers made on first read (a closed loop reads only ``x``, and making
-    them is a measurable share of a tick: ``bench/backend_overhead.py``)."""
+    output, the multipliers made on first read (a closed loop reads only ``x``)."""
 
     z_box = _multipliers(1, "z_box", "Multipliers of the bounds ``lb <= x <= ub``.")
     y = _multipliers(2, "y", "Multipliers of the equalities ``A x = b``.")
@@ -149,42 +136,9 @@ class QpoasesBackend(Backend):
     def reset(self) -> None:
         self._ws = None
 
-    def get_state(self) -> Workspace | None:
-        """A deep copy of the ``SQProblem`` (working set, factorisations); None before a tick."""
-        return None if self._ws is None else self._copy(self._ws)
-
-    def set_state(self, state: Workspace | None) -> None:
-        if state is None:
-            self._ws = None
-        elif self._ws is not None and self._ws.key == state.key:
-            self._lib.qpb_assign(self._ws.handle, state.handle)
-        else:
-            self._ws = self._copy(state)
-
-    def _copy(self, ws: Workspace) -> Workspace:
-        lib, preset, nwsr, limit = self._lib, self._preset, self._nwsr, self._time_limit
-        return Workspace(ws.key, lib, preset, {}, nwsr, limit, clone_of=ws.handle)
-
-    def __deepcopy__(self, memo):
-        other = type(self)(self.profile, **self.settings)
-        other.set_state(self.get_state())
-        return other
-
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state["_ws"] = None  # native object: a pickled backend starts afresh
-        state["_lib"] = None
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        self._lib = self.prepare()
-
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
-        # The sizes decide: a copy into a buffer of another shape raises, and one of the same size
-        # cannot broadcast; check_shapes names the array when the sizes changed or a copy raised.
-        # Written out like piqp's shapes: a helper building the key would cost a call per tick.
+        # A copy into a buffer of another size raises: check_shapes then names the array.
         sizes = (
             P.size,
             q.size,
@@ -224,9 +178,7 @@ class QpoasesBackend(Backend):
         sol = new_solution(problem, _STATUSES[st], extras, QpoasesSolution)
         sol.iterations = iterations
         sol.solver_time_s = solve_time
-        if st == 0:
-            # x, then the multipliers (already with qpsolvers' sign): one copy; x a view of it
-            # through the workspace's slice object, the multipliers on first read.
+        if st == 0:  # x and the multipliers: one copy, x a view of it
             xy = sol._xy = ws.xy.copy()
             parts = sol._parts = ws.parts
             sol.x = xy[parts[0]]

@@ -1,28 +1,21 @@
 """Backends ``qpsolvers:<name>``: every solver qpsolvers can drive, through its wrapper.
 
-One stateless class per solver, generated at import and registered as ``qpsolvers:<name>``:
-for every solver of :data:`qpsolvers.available_solvers`, those qpbench depends on
-(:data:`EXPECTED_SOLVERS`) and those of the ``all-solvers`` extra (:data:`OPTIONAL_SOLVERS`),
-so a missing one shows as unavailable. A call is what :func:`qpsolvers.solve_problem` does
-(``check_constraints``, then qpsolvers' function for the solver with the same keywords)
-minus its dispatch (:func:`solver_function`); ``warm_start`` is passed as ``initvals``.
-Sparse-only solvers get CSC matrices, dense-only ones dense matrices.
+One stateless class per solver, generated at import and registered as ``qpsolvers:<name>``,
+for the solvers of :data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and
+:data:`OPTIONAL_SOLVERS` (a missing one shows as unavailable). A call is what
+:func:`qpsolvers.solve_problem` does (``check_constraints``, then qpsolvers' function for the
+solver, :func:`solver_function`); ``warm_start`` is passed as ``initvals``. Sparse-only solvers
+get CSC matrices, dense-only ones dense matrices.
 
-Settings. Under a ``qpbenchmark:<settings>`` profile, the keyword arguments qpbenchmark's
-runner passes for the solver, verbatim, plus the backend's own settings. Otherwise the
-profile's generic settings in each solver's own names (:func:`~qpbench.backends._common.native_settings`, following
-qpbenchmark's ``SolverSettings`` plus iteration limits; at ``eps_abs <= 1e-7`` also OSQP's
-polishing, without which ADMM rarely reaches a 1e-9 residual, and PIQP's and ProxQP's
-duality-gap test), then the other settings verbatim.
+Settings: :func:`~qpbench.backends._common.native_settings`, then the other settings
+verbatim; under a ``qpbenchmark:<settings>`` profile qpbenchmark's arguments for the solver
+plus the backend's settings. The wrapper's warnings are ignored
+(:func:`silence_wrapper_warnings`).
 
-Warnings. Constructing a backend adds a filter ignoring the warnings of qpsolvers' wrapper
-module for the solver (:func:`silence_wrapper_warnings`): free per call, where a
-``warnings.catch_warnings`` block around every call costs a share of a fast solve.
-
-Statuses. ``found`` -> ``optimal``; otherwise the status is read from the solver's own
-report in ``Solution.extras`` where qpsolvers keeps one (:data:`STATUS_READERS`, raw value
-in ``extras["raw_status"]``), else ``not_solved``. :class:`qpsolvers.QPError` and
-``ValueError`` raised from the call become status ``error``.
+Statuses: ``found`` -> ``optimal``; otherwise read from the solver's report in
+``Solution.extras`` where qpsolvers keeps one (:data:`STATUS_READERS`, raw value in
+``extras["raw_status"]``), else ``not_solved``. :class:`qpsolvers.QPError` and ``ValueError``
+become status ``error``.
 """
 
 from __future__ import annotations
@@ -36,7 +29,11 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings, native_settings
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, BackendSolution, error_solution, new_solution
+from .clarabel_ import CLARABEL_STATUSES
+from .osqp_ import osqp_statuses
+from .piqp_ import piqp_statuses
+from .proxqp_ import proxqp_statuses
 
 #: Each solver qpsolvers can drive: (algorithm family, Python distribution for the version column).
 SOLVERS: dict[str, tuple[str, str | None]] = {
@@ -68,64 +65,45 @@ SOLVERS: dict[str, tuple[str, str | None]] = {
 }
 
 
-def _status_clarabel(extras) -> tuple[str, str | None]:
-    from .clarabel_ import CLARABEL_STATUSES
-
-    raw = extras.get("status")
-    name = str(raw).split(".")[-1] if raw is not None else None
-    return CLARABEL_STATUSES.get(name, "not_solved"), name
+def _plain(value, extras) -> str:
+    return str(value)
 
 
-def _status_osqp(extras) -> tuple[str, str | None]:
-    from .osqp_ import osqp_statuses
-
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return osqp_statuses().get(int(info.status_val), "not_solved"), str(info.status)
-
-
-def _status_proxqp(extras) -> tuple[str, str | None]:
-    from .proxqp_ import proxqp_statuses
-
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return proxqp_statuses().get(info.status, ("not_solved",))[0], None
-
-
-def _status_piqp(extras) -> tuple[str, str | None]:
-    from .piqp_ import piqp_statuses
-
-    info = extras.get("info")
-    if info is None:
-        return "not_solved", None
-    return piqp_statuses().get(info.status, ("not_solved",))[0], None
-
-
-def _table_reader(read, table: dict, text) -> object:
+def _table_reader(read, table, text=_plain) -> object:
     """A status reader: ``read(extras)`` is the solver's status (None: no report), ``table``
-    maps it to ours, ``text(value, extras)`` is the raw status kept."""
+    (a dict, or a function returning one) maps it to ours, ``text(value, extras)`` is the raw
+    status kept."""
 
     def reader(extras) -> tuple[str, str | None]:
         value = read(extras)
         if value is None:
             return "not_solved", None
-        return table.get(value, "not_solved"), text(value, extras)
+        mapping = table() if callable(table) else table
+        return mapping.get(value, "not_solved"), text(value, extras)
 
     return reader
 
 
-def _plain(value, extras) -> str:
-    return str(value)
+def _info(read):
+    """``read(extras["info"])``, None without an info."""
+    return lambda e: None if e.get("info") is None else read(e["info"])
 
+
+_INFO_STATUS = _info(lambda info: info.status)
 
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
-    "clarabel": _status_clarabel,
-    "osqp": _status_osqp,
-    "proxqp": _status_proxqp,
-    "piqp": _status_piqp,
+    "clarabel": _table_reader(
+        lambda e: None if e.get("status") is None else str(e["status"]).split(".")[-1],
+        CLARABEL_STATUSES,
+    ),
+    "osqp": _table_reader(
+        _info(lambda info: int(info.status_val)),
+        osqp_statuses,
+        lambda v, e: str(e["info"].status),
+    ),
+    "proxqp": _table_reader(_INFO_STATUS, proxqp_statuses),
+    "piqp": _table_reader(_INFO_STATUS, piqp_statuses),
     # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
     "scs": _table_reader(
         lambda e: e.get("status_val"),
@@ -146,10 +124,9 @@ STATUS_READERS = {
             "primal infeasible": "primal_infeasible",
             "dual infeasible": "dual_infeasible",
         },
-        _plain,
     ),
     "qpalm": _table_reader(
-        lambda e: None if e.get("info") is None else str(e["info"].status),
+        _info(lambda info: str(info.status)),
         {
             "solved": "optimal",
             "primal infeasible": "primal_infeasible",
@@ -157,7 +134,6 @@ STATUS_READERS = {
             "maximum iterations reached": "max_iter",
             "time limit exceeded": "time_limit",
         },
-        _plain,
     ),
     # Gurobi's model status codes; 4 (INF_OR_UNBD) says neither for sure.
     "gurobi": _table_reader(
@@ -169,7 +145,6 @@ STATUS_READERS = {
             7: "max_iter",
             9: "time_limit",
         },
-        _plain,
     ),
 }
 
@@ -182,14 +157,10 @@ def _iter_quadprog(extras: dict) -> int:
 #: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps
 #: (raising one of :data:`_ITERATION_ERRORS` when ``extras`` lacks it).
 ITERATION_READERS = {
-    "osqp": lambda e: int(e["info"].iter),
-    "proxqp": lambda e: int(e["info"].iter),
-    "piqp": lambda e: int(e["info"].iter),
-    "scs": lambda e: int(e["iter"]),
+    **dict.fromkeys(("osqp", "proxqp", "piqp", "qpalm"), lambda e: int(e["info"].iter)),
+    **dict.fromkeys(("scs", "ecos"), lambda e: int(e["iter"])),
     "quadprog": _iter_quadprog,
-    "ecos": lambda e: int(e["iter"]),
     "cvxopt": lambda e: int(e["iterations"]),
-    "qpalm": lambda e: int(e["info"].iter),
 }
 _ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
@@ -224,18 +195,14 @@ NO_CERTIFICATE = {
 
 def silence_wrapper_warnings(solver: str) -> None:
     """Ignore, from now on in this process, the warnings of qpsolvers' wrapper module of
-    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it) and those
-    the solver's own package raises on qpsolvers' normal calls (:data:`_SOLVER_WARNINGS`)."""
+    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it) and those the
+    solver's package raises on qpsolvers' normal calls."""
     warnings.filterwarnings("ignore", module=rf"qpsolvers\.solvers\.{solver}_\Z")
-    for message, category in _SOLVER_WARNINGS.get(solver, ()):
-        warnings.filterwarnings("ignore", message=message, category=category)
+    if solver == "osqp":  # osqp 1.x: qpsolvers calls solve() without raise_error
+        warnings.filterwarnings(
+            "ignore", "The default value of raise_error will change", PendingDeprecationWarning
+        )
 
-
-#: Warnings of a solver's own package on every call qpsolvers makes (message regex, category).
-_SOLVER_WARNINGS = {
-    # osqp 1.x: qpsolvers calls solve() without raise_error.
-    "osqp": (("The default value of raise_error will change", PendingDeprecationWarning),),
-}
 
 #: Exception classes of solver packages (by name) that are solver failures, not bugs.
 _SOLVER_ERRORS = frozenset({"GurobiError"})
@@ -249,11 +216,9 @@ _QPError = qpsolvers.QPError
 def solver_function(solver: str):
     """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it.
 
-    The entry of the table ``solve_problem`` dispatches through, read from its globals
-    (the table's module moved between qpsolvers 4.4 and 4.13); without that table,
-    ``solve_problem`` itself. Calling the entry directly saves ``solve_problem``'s frame and
-    keyword repacking: more than 5 % of the fastest routes' call
-    (``python bench/backend_overhead.py``, the routes' ratio to ``solve_problem``).
+    The entry of the table ``solve_problem`` dispatches through (read from its globals: the
+    table's module moved between qpsolvers 4.4 and 4.13), saving ``solve_problem``'s frame;
+    without that table, ``solve_problem`` itself.
     """
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     function = table.get(solver) if isinstance(table, dict) else None
@@ -273,9 +238,7 @@ def _float_array(v):
 
 
 #: Solvers whose qpsolvers wrapper hands ``x``, ``y``, ``z`` and ``z_box`` back as float64
-#: arrays (or None): taken as given (tests/test_backends.py checks it of every installed one
-#: through qpsolvers.solve_problem); any other solver's results (clarabel's duals are lists)
-#: are converted.
+#: arrays (or None): taken as given; any other solver's results are converted.
 FLOAT64_WRAPPERS = frozenset(
     "cvxopt daqp ecos gurobi highs osqp piqp proxqp qpalm quadprog scs".split()
 )
@@ -307,11 +270,11 @@ class QpsolversBackend(Backend):
         silence_wrapper_warnings(solver)
         generic, native = generic_settings(self)
         given = self.profile.solver_options
-        if given is not None:  # qpbenchmark's arguments, verbatim (qpbench.profiles)
+        if given is not None:
             self._solver_options = {**given.get(solver, {}), **self.settings}
         else:
             self._solver_options = {**native_settings(solver, **generic), **native}
-        # The keywords of every call: solve_problem passes verbose (default False) to the wrapper.
+        # solve_problem passes verbose (default False) to the wrapper
         self._call_options = {"verbose": False, **self._solver_options}
         self._function = solver_function(solver)
 
@@ -329,9 +292,7 @@ class QpsolversBackend(Backend):
     @classmethod
     def setting_names(cls) -> frozenset[str] | None:
         """For the solvers of :data:`SAME_SETTINGS_AS`: the direct backend's names plus the
-        keywords of qpsolvers' ``<solver>_solve_problem``. For the others ``None``: qpsolvers
-        hands them their keywords each in its own way, and no list of the solver's settings
-        tells which keys the route accepts."""
+        keywords of qpsolvers' ``<solver>_solve_problem``; ``None`` for the others."""
         import importlib
         import inspect
 
@@ -363,8 +324,7 @@ class QpsolversBackend(Backend):
                 solved = qpsolvers.Problem(spa.csc_matrix(P), q, G, h, A, b, lb, ub)
         elif self._dense_only:
             P, G, A = problem.P, problem.G, problem.A
-            # Type tests first: Problem.has_sparse's isinstance checks cost more.
-            if (
+            if (  # type tests first: Problem.has_sparse costs more
                 not (
                     type(P) is _ndarray
                     and (G is None or type(G) is _ndarray)
@@ -382,17 +342,11 @@ class QpsolversBackend(Backend):
                 and type(exc).__name__ not in _SOLVER_ERRORS
             ):
                 raise
-            return BackendSolution(problem, status="error", error=f"{type(exc).__name__}: {exc}")
+            return error_solution(problem, exc)
         extras = result.extras
         sol = new_solution(problem, "optimal", {} if extras is None else extras)
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
-        # Tested by identity: anything else (lists, other dtypes) is converted.
-        if not self._float64_wrapper and not (
-            (x is None or (type(x) is _ndarray and x.dtype is _F64))
-            and (y is None or (type(y) is _ndarray and y.dtype is _F64))
-            and (z is None or (type(z) is _ndarray and z.dtype is _F64))
-            and (z_box is None or (type(z_box) is _ndarray and z_box.dtype is _F64))
-        ):
+        if not self._float64_wrapper:  # clarabel's duals are lists
             x, y, z, z_box = map(_float_array, (x, y, z, z_box))
         sol.x = x
         sol.y = y
@@ -415,8 +369,6 @@ class QpsolversBackend(Backend):
             status, raw = self._reader(extras)
             if status == "optimal":
                 status = "not_solved"  # the solver says solved but qpsolvers does not agree
-            if raw is None and "info" in extras:
-                raw = str(getattr(extras["info"], "status", None))
             if raw is not None:
                 sol.extras = dict(extras, raw_status=raw)
         sol.status = status
