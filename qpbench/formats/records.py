@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -12,12 +13,21 @@ import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
 
-#: Columns of qpbenchmark's ``ProblemList`` (order kept).
-PROBLEM_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub", "name")
 #: Array columns, in qpsolvers' argument order.
 ARRAY_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
+#: Columns of qpbenchmark's ``ProblemList`` (order kept).
+PROBLEM_KEYS = (*ARRAY_KEYS, "name")
+#: A record's metadata and its Arrow types (Parquet columns after the arrays).
+META_TYPES = {
+    "name": "string",
+    "scenario": "string",
+    "tick": "int64",
+    "t": "float64",
+    "formulation": "string",
+    "offset": "float64",
+}
 #: Metadata columns added by qpbench.
-META_KEYS = ("scenario", "tick", "t", "formulation", "offset")
+META_KEYS = tuple(META_TYPES)[1:]
 #: File names inside a problem-set folder.
 PARQUET_NAME = "problems.parquet"
 MANIFEST_NAME = "manifest.json"
@@ -35,6 +45,8 @@ SYMMETRY_RTOL = 1e-9
 
 #: The matrices of a problem (the parts that may be scipy.sparse).
 MATRIX_KEYS = ("P", "G", "A")
+#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types.
+CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 
 @dataclass
@@ -63,14 +75,7 @@ class ProblemRecord:
 
     def meta(self) -> dict:
         """The metadata as a JSON-able dict (everything but the problem)."""
-        return {
-            "name": self.name,
-            "scenario": self.scenario,
-            "tick": self.tick,
-            "t": self.t,
-            "formulation": self.formulation,
-            "offset": self.offset,
-        }
+        return {k: getattr(self, k) for k in META_TYPES}
 
 
 @dataclass
@@ -122,11 +127,27 @@ def solver_problem(problem: qpsolvers.Problem, dense: bool = False) -> qpsolvers
     return qpsolvers.Problem(*parts)
 
 
-def sorted_csc(M) -> spa.csc_matrix:
-    """``M`` as float64 CSC with sorted indices: how a sparse matrix is stored."""
+def csc_parts(M) -> dict[str, np.ndarray]:
+    """The stored arrays of a sparse matrix (:data:`CSC_TYPES`): its float64 CSC, indices
+    sorted."""
     M = spa.csc_matrix(M, dtype=np.float64)
     M.sort_indices()
-    return M
+    return {"data": M.data, "indices": M.indices, "indptr": M.indptr}
+
+
+@contextmanager
+def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Exception,)):
+    """Reading ``path``: a missing file is "no such file", one of ``errors`` "unreadable
+    ``what``", both a :class:`ProblemFormatError` naming the file."""
+    try:
+        yield
+    except FileNotFoundError:
+        raise ProblemFormatError("no such file", path=path) from None
+    except ProblemFormatError:
+        raise
+    except errors as exc:
+        msg = f"unreadable {what} ({type(exc).__name__}: {exc})"
+        raise ProblemFormatError(msg, path=path) from None
 
 
 def _numeric(v, key: str, fail):
