@@ -38,15 +38,6 @@ from .base import Backend, BackendSolution
 if TYPE_CHECKING:
     import qpsolvers
 
-__all__ = [
-    "SETTING_NAMES",
-    "WORKING_SETTINGS",
-    "RNNConverged",
-    "RNNOnline",
-    "RNNTuned",
-    "TickSolution",
-]
-
 _DEFAULTS = {
     "eps": 0.02,
     "dt": 1e-3,
@@ -71,7 +62,10 @@ WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_
 
 
 def _positive(key: str, value: object, integer: bool = False, upper: float = math.inf):
-    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``)."""
+    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``), or
+    ``None`` for a setting whose default is ``None``."""
+    if value is None and _DEFAULTS[key] is None:
+        return None
     try:
         number = int(value) if integer else float(value)
     except (TypeError, ValueError):
@@ -118,14 +112,10 @@ class NetworkBackend(Backend):
                 key=unknown[0],
             )
         s = {**_DEFAULTS, **settings}
-        self.eps = _positive("eps", s["eps"])
-        self.dt = _positive("dt", s["dt"])
-        self.tick = _positive("tick", s["tick"])
+        self.eps, self.dt, self.tick = (_positive(k, s[k]) for k in ("eps", "dt", "tick"))
         self.safety = _positive("safety", s["safety"], upper=1.0)
-        self.substeps = s["substeps"]
-        if self.substeps is not None:
-            self.substeps = _positive("substeps", self.substeps, integer=True)
-        self.l1_clip = None if s["l1_clip"] is None else _positive("l1_clip", s["l1_clip"])
+        self.substeps = _positive("substeps", s["substeps"], integer=True)
+        self.l1_clip = _positive("l1_clip", s["l1_clip"])
         self.method = self.default_method if s["method"] is None else s["method"]
         use = s["use_numba"]
         if use not in (None, True, False):

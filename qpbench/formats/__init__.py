@@ -1,25 +1,14 @@
-"""QP problems in the formats of the QP ecosystem.
+"""QP problems in the formats of the QP ecosystem (docs/formats.md).
 
-A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` (``min 1/2 x'Px + q'x + offset``
-s.t. ``G x <= h, A x = b, lb <= x <= ub``) with a name, scenario, tick, time [s],
-formulation and the constant ``offset``. Formats:
-
-- one problem <-> ``.npz`` (:mod:`.npz`): what ``qpsolvers.Problem.save``/``load`` read,
-  plus the metadata as JSON in a member ``qpbench_record`` and each scipy.sparse
-  matrix ``M`` as CSC members ``M_csc_*`` (read back bit for bit);
-- a problem set <-> a folder of ``problems.parquet`` (qpbenchmark's ``ProblemList``
-  columns ``P q G h A b lb ub name``, matrices flattened row-major, plus ``scenario tick
-  t formulation offset`` and, for sparse matrices, ``M_csc_data/indices/indptr``) and
-  ``manifest.json`` (generator, versions, row count, SHA-256 checked on read)
-  (:mod:`.parquet`); the same records give the same bytes;
-- Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`), sparse kept from file to solver.
-
-A sparse problem is also written dense for qpsolvers/qpbenchmark readers only while its
-``P, G, A`` made dense hold at most ``DENSE_COPY_MAX`` entries. Every reader checks the
-data rules (:func:`~.records.check_problem`: shapes, symmetric ``P``, finite data, ``lb``
-/ ``ub`` may be infinite outward) and records the convexity of ``P``
-(:mod:`.convexity`); a violation is a :class:`~qpbench.exceptions.ProblemFormatError`
-naming the file, the problem and the field.
+A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` with a name, scenario, tick, time
+[s], formulation and the objective's constant ``offset``: one problem <-> ``.npz``
+(:mod:`.npz`); a problem set <-> a folder of ``problems.parquet`` (qpbenchmark's
+``ProblemList`` columns plus the metadata and CSC columns) and ``manifest.json``
+(:mod:`.parquet`); Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`). Sparse matrices stay
+sparse from file to solver. Every reader checks the data rules
+(:func:`~.records.check_problem`) and records the convexity of ``P`` (:mod:`.convexity`); a
+violation is a :class:`~qpbench.exceptions.ProblemFormatError` naming the file, the problem
+and the field.
 """
 
 from __future__ import annotations
@@ -105,7 +94,6 @@ def content_sha256(problem_set: ProblemSet) -> str | None:
 
 __all__ = [
     "ARRAY_KEYS",
-    "MANIFEST_NAME",
     "ProblemRecord",
     "ProblemSet",
     "assess_convexity",

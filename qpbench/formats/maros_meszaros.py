@@ -16,7 +16,7 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
-from .records import MM_INFINITY, ProblemRecord, check_record
+from .records import MM_INFINITY, ProblemRecord, check_record, reading
 
 
 def load_maros_meszaros(path: str | Path) -> ProblemRecord:
@@ -25,20 +25,15 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
 
     path = Path(path)
     name = path.stem
-    try:
+    with reading(path, ".mat"):  # scipy raises ValueError, TypeError, OSError, MatReadError...
         data = scipy.io.loadmat(str(path))
-    except FileNotFoundError:
-        raise ProblemFormatError("no such file", path=path) from None
-    except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError...
-        raise ProblemFormatError(
-            f"unreadable .mat ({type(exc).__name__}: {exc})", path=path
-        ) from None
-    for k in ("P", "q", "r", "A", "l", "u", "n", "m"):
-        if k not in data:
-            raise ProblemFormatError(f"problem '{name}': missing key", path=path, key=k)
 
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
+
+    for k in ("P", "q", "r", "A", "l", "u", "n", "m"):
+        if k not in data:
+            fail(k, "missing key")
 
     try:
         n = int(np.asarray(data["n"]).item())

@@ -152,16 +152,13 @@ def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Except
 
 def _numeric(v, key: str, fail):
     """``v`` as float64 (CSC for a sparse matrix), or a failure naming ``key``."""
-    if spa.issparse(v):
-        if v.dtype.kind not in "fiub":
-            fail(key, f"dtype {v.dtype} is not numeric")
-        return (
-            spa.csc_matrix(v, dtype=np.float64) if v.format != "csc" or v.dtype != np.float64 else v
-        )
-    v = np.asarray(v)
+    sparse = spa.issparse(v)
+    v = v if sparse else np.asarray(v)
     if v.dtype.kind not in "fiub":
         fail(key, f"dtype {v.dtype} is not numeric")
-    return v.astype(np.float64, copy=False)
+    if not sparse:
+        return v.astype(np.float64, copy=False)
+    return v if v.format == "csc" and v.dtype == np.float64 else spa.csc_matrix(v, dtype=np.float64)
 
 
 def _values(M) -> np.ndarray:
@@ -223,17 +220,14 @@ def check_problem(
         if arr[k] is not None and not np.all(np.isfinite(_values(arr[k]))):
             bad = "NaN" if np.any(np.isnan(_values(arr[k]))) else "Inf"
             fail(k, f"holds {bad} (only lb/ub may be infinite)")
-    if arr["lb"] is not None and (np.any(np.isnan(arr["lb"])) or np.any(arr["lb"] == np.inf)):
-        fail("lb", "holds NaN or +inf")
-    if arr["ub"] is not None and (np.any(np.isnan(arr["ub"])) or np.any(arr["ub"] == -np.inf)):
-        fail("ub", "holds NaN or -inf")
+    for k, wrong in (("lb", np.inf), ("ub", -np.inf)):
+        if arr[k] is not None and (np.any(np.isnan(arr[k])) or np.any(arr[k] == wrong)):
+            fail(k, f"holds NaN or {wrong:+}")
     values = _values(P)
     scale = float(np.max(np.abs(values))) if values.size else 0.0
-    if _asymmetry(P) > SYMMETRY_RTOL * scale:
-        fail(
-            "P",
-            f"is not symmetric (max |P - P'| = {_asymmetry(P):.3g} > {SYMMETRY_RTOL:g} max |P|)",
-        )
+    asym = _asymmetry(P)
+    if asym > SYMMETRY_RTOL * scale:
+        fail("P", f"is not symmetric (max |P - P'| = {asym:.3g} > {SYMMETRY_RTOL:g} max |P|)")
 
 
 def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
@@ -241,15 +235,12 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     from .convexity import assess_convexity
 
     check_problem(record.problem, path=path, name=record.name)
-    if not isinstance(record.name, str) or not record.name:
-        raise ProblemFormatError(
-            f"problem name {record.name!r} is not a non-empty string", path=path, key="name"
-        )
-    if not np.isfinite(record.offset):
-        raise ProblemFormatError(
-            f"problem '{record.name}': offset {record.offset} is not finite",
-            path=path,
-            key="offset",
-        )
+    name, offset = record.name, record.offset
+    if not isinstance(name, str) or not name:
+        msg = f"problem name {name!r} is not a non-empty string"
+        raise ProblemFormatError(msg, path=path, key="name")
+    if not np.isfinite(offset):
+        msg = f"problem '{name}': offset {offset} is not finite"
+        raise ProblemFormatError(msg, path=path, key="offset")
     if record.convexity is None:
         record.convexity = assess_convexity(record.problem.P)

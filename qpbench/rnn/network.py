@@ -22,6 +22,7 @@ The integrator, its parameter block and its step bound are :mod:`.kernels`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,24 +59,18 @@ class DenseQP:
         return self.q.shape[0], self.b.shape[0], self.h.shape[0]
 
 
-_EMPTIES: dict = {}
-
-
+@cache
 def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Cached ``(zeros((0, n)), zeros(0))``: no constraint rows (writable like a problem's
-    rows: numba compiles a read-only array type apart)."""
-    pair = _EMPTIES.get(n)
-    if pair is None:
-        pair = _EMPTIES[n] = (np.zeros((0, n)), np.zeros(0))
-    return pair
+    """``(zeros((0, n)), zeros(0))``: no constraint rows (writable like a problem's rows: numba
+    compiles a read-only array type apart)."""
+    return np.zeros((0, n)), np.zeros(0)
 
 
+@cache
 def infinite(n: int, value: float) -> np.ndarray:
-    """Cached read-only ``full(n, value)``: an absent bound."""
-    arr = _EMPTIES.get((n, value))
-    if arr is None:
-        arr = _EMPTIES[(n, value)] = np.full(n, value)
-        arr.flags.writeable = False
+    """Read-only ``full(n, value)``: an absent bound."""
+    arr = np.full(n, value)
+    arr.flags.writeable = False
     return arr
 
 
