@@ -190,7 +190,7 @@ class NetworkBackend(Backend):
             error=f"FloatingPointError: network state diverged (r = {prm[nk.RATIO]:.3g}, {bound}",
         )
 
-    def _run(self, problem, warm_start) -> BackendSolution:
+    def _solve(self, problem, warm_start) -> BackendSolution:
         """The general path: convert and check ``problem``, set up the state, integrate."""
         qp = nw.dense_qp(problem)
         n, me, mi = qp.shape
@@ -279,7 +279,7 @@ class RNNOnline(NetworkBackend):
     strict :func:`~qpbench.rnn.kernels.online_kernel` (numba's dispatcher being the type
     check); the answer is a :class:`TickSolution`. What the kernels refuse (absent parts,
     sparse matrices, another dtype or layout, a shape change) goes to the general path
-    (:meth:`_run`). All paths give the same numbers bit for bit.
+    (:meth:`_solve`). All paths give the same numbers bit for bit.
     """
 
     name = "rnn"
@@ -344,13 +344,12 @@ class RNNOnline(NetworkBackend):
         sol.iterations = code >> 2
         if code & 2:  # the step was clamped to the bound (or none is proven stable)
             sol.error = nk.step_note(prm)
-        sol.found = ok = bool(code & 1)
-        sol.status = "optimal" if ok else "max_iter"
+        if code & 1:
+            sol.status, sol.found = "optimal", True
+        else:
+            sol.status, sol.found = "max_iter", False
         sol.backend = self.name
         return sol
-
-    def _solve(self, problem, warm_start):
-        return self._run(problem, warm_start)
 
 
 _ndarray = np.ndarray
@@ -370,13 +369,10 @@ class RNNConverged(NetworkBackend):
     default_method = "semi-implicit"
 
     def _solve(self, problem, warm_start):
-        if (
-            warm_start is not None
-            and self.state is not None
-            and self.state.n == np.size(warm_start)
-        ):
-            self.state.v = np.asarray(warm_start, dtype=np.float64).reshape(-1)
-        return self._run(problem, warm_start)
+        st = self.state
+        if warm_start is not None and st is not None and st.n == np.size(warm_start):
+            st.v = np.asarray(warm_start, dtype=np.float64).reshape(-1)
+        return super()._solve(problem, warm_start)
 
 
 @register

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 from types import FunctionType
 from typing import TYPE_CHECKING
 
@@ -162,7 +163,7 @@ def step_note(prm: np.ndarray) -> str | None:
 
 
 def ratio_max(pmin, pmax, sig2, semi):
-    """Largest stable ``r = h/eps`` (:mod:`qpbench.rnn.network`); 0 if none."""
+    """Largest stable ``r = h/eps`` (derivation: docs/architecture.md); 0 if none."""
     if pmin <= 0.0:
         return 0.0
     if semi and pmin == pmax:
@@ -270,12 +271,12 @@ def sigma2_bound(A, G):
     return math.exp(logc / 2.0**SQUARINGS)
 
 
-def _matvec_off(M, xi, off, y):
-    """``y = M @ xi[off : off + M.shape[1]]``."""
+def _matvec(M, xi, y):
+    """``y = M @ xi[: M.shape[1]]``."""
     for i in range(M.shape[0]):
         s = 0.0
         for j in range(M.shape[1]):
-            s += M[i, j] * xi[off + j]
+            s += M[i, j] * xi[j]
         y[i] = s
 
 
@@ -323,8 +324,8 @@ def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
         w = min(max(xi[j] - g[j], lb[j]), ub[j])
         xi[j] += r * (w - xi[j])
     if semi:
-        _matvec_jit(A, xi, 0, Av)
-        _matvec_jit(G, xi, 0, Gv)
+        _matvec_jit(A, xi, Av)
+        _matvec_jit(G, xi, Gv)
     for i in range(me):
         xi[o1 + i] += r * (b[i] - Av[i])
         if l1_clip < np.inf:
@@ -575,7 +576,7 @@ _gershgorin_jit = _gershgorin
 _frobenius2_jit = _frobenius2
 _nominal_steps_jit = nominal_steps
 _clamped_steps_jit = clamped_steps
-_matvec_jit = _matvec_off
+_matvec_jit = _matvec
 _grad_products_jit = _grad_products
 _step_jit = _step
 _residuals_jit = _residuals
@@ -585,8 +586,6 @@ _part_fits_jit = _part_fits
 _CALLS = ("_sigma2_bound_jit", "_ratio_max_jit", "_integrate_jit", "_online_tick_jit")
 _COMPILED = None
 _INTERPRETED = None
-_ONLINE = None
-_PACKED = None
 
 
 def numba_available() -> bool:
@@ -643,6 +642,7 @@ def _signature(*ndims):
     return numba.int64(*(numba.types.Array(numba.float64, d, "C") for d in ndims))
 
 
+@cache
 def online_kernel() -> Callable:
     """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``
     (:func:`_online_tick_loops`), ``sol`` of length ``3 n + 2 (me + mi)``.
@@ -651,28 +651,23 @@ def online_kernel() -> Callable:
     numba's dispatcher raises ``TypeError`` for anything else: the whole type check of the
     online backend's per-tick path.
     """
-    global _ONLINE
-    if _ONLINE is None:
-        import numba
+    import numba
 
-        kernel(True)  # binds the integrator the tick calls
-        sig = _signature(2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
-        _ONLINE = numba.njit(sig, cache=True)(_online_tick_loops)
-    return _ONLINE
+    kernel(True)  # binds the integrator the tick calls
+    sig = _signature(2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
+    return numba.njit(sig, cache=True)(_online_tick_loops)
 
 
+@cache
 def packed_kernel() -> Callable:
     """The per-tick kernel on a :class:`qpbench.packed.PackedProblem`'s buffer: ``f(buffer, xi,
     prm, sol) -> code``, for 1-D C-contiguous float64 arrays only: the compiled function's own
     entry point when numba exposes it (it skips the dispatcher's type matching)."""
-    global _PACKED
-    if _PACKED is None:
-        import numba
+    import numba
 
-        kernel(True)
-        disp = numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
-        try:
-            _PACKED = disp.overloads[disp.signatures[0]].entry_point
-        except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
-            _PACKED = disp
-    return _PACKED
+    kernel(True)
+    disp = numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
+    try:
+        return disp.overloads[disp.signatures[0]].entry_point
+    except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
+        return disp
