@@ -191,20 +191,31 @@ class NetworkBackend(Backend):
         )
 
     def _solve(self, problem, warm_start) -> BackendSolution:
-        """The general path: convert and check ``problem``, set up the state, integrate."""
-        qp = nw.dense_qp(problem)
-        n, me, mi = qp.shape
+        """The general path: convert ``problem`` (arrays as they are to the compiled kernel,
+        which checks the shapes), set up the state, integrate."""
+        p = problem
+        if self.use_numba and type(p.P) is _ndarray and {type(p.A), type(p.G)} <= _DENSE:
+            n = p.q.shape[0]
+            A, b = nw.empty_rows(n) if p.A is None else (p.A, p.b)
+            G, h = nw.empty_rows(n) if p.G is None else (p.G, p.h)
+            lb = nw.infinite(n, -np.inf) if p.lb is None else p.lb
+            ub = nw.infinite(n, np.inf) if p.ub is None else p.ub
+            args = (p.P, p.q, A, b, G, h, lb, ub)
+        else:
+            qp = nw.dense_qp(problem)  # converts and checks (sparse, lists, shapes)
+            args = (qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub)
+        n, me, mi = args[1].shape[0], args[3].shape[0], args[5].shape[0]
         st = self.state
         if st is None:
             st = self.state = nw.NetworkState.cold(n, me, mi, warm_start)
-        elif st.shape != qp.shape:
+        elif st.shape != (n, me, mi):
             st = self.state = st.resized(n, me, mi)
-        self._set_p(qp.P)
+        self._set_p(np.asarray(args[0], dtype=np.float64))
         prm = self._prm
         sol = np.empty(3 * n + 2 * (me + mi))  # outputs, then scratch
-        steps = nk.kernel(self.use_numba)(
-            qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, st.xi, prm, sol
-        )
+        steps = nk.kernel(self.use_numba)(*args, st.xi, prm, sol)
+        if steps == nk.SHAPE_MISMATCH:
+            nw.dense_qp(problem)  # raises ProblemFormatError naming the part
         if steps == nk.NO_STABLE_STEP:
             return BackendSolution(
                 problem=problem,
@@ -216,6 +227,7 @@ class NetworkBackend(Backend):
         obj = prm.item(nk.OBJ)
         if not math.isfinite(obj) or not math.isfinite(prm.item(nk.PRIMAL)):
             return self._diverged(problem, steps)
+        has_box = p.lb is not None or p.ub is not None
         ok = (
             prm.item(nk.PRIMAL) <= prm.item(nk.OK_PRIMAL)
             and prm.item(nk.DUAL) <= prm.item(nk.OK_DUAL)
@@ -226,7 +238,7 @@ class NetworkBackend(Backend):
             x=sol[:n],
             y=sol[n : n + me] if me else None,
             z=sol[n + me : n + me + mi] if mi else None,
-            z_box=sol[n + me + mi : 2 * n + me + mi] if qp.has_box else None,
+            z_box=sol[n + me + mi : 2 * n + me + mi] if has_box else None,
             obj=obj if self._kernel_obj else None,
             status="optimal" if ok else "max_iter",
             iterations=steps,
@@ -353,6 +365,7 @@ class RNNOnline(NetworkBackend):
 
 
 _ndarray = np.ndarray
+_DENSE = {np.ndarray, type(None)}
 _f64 = np.dtype(np.float64)
 _alloc = np.empty
 _new = object.__new__

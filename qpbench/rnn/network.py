@@ -87,11 +87,17 @@ def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarra
     return M, v
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _f64(a, name: str, ndim: int) -> np.ndarray:
-    if spa.issparse(a):
-        a = a.toarray()
-    if type(a) is not np.ndarray or a.dtype != np.float64 or not a.flags.c_contiguous:
-        a = np.ascontiguousarray(a, dtype=np.float64)
+    """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a row or a column
+    vector taken as the other)."""
+    if type(a) is np.ndarray and a.dtype == _F64 and a.flags.c_contiguous:
+        if a.ndim == ndim:
+            return a
+    else:
+        a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
     if a.ndim != ndim:
         if ndim == 2 and a.ndim == 1:
             a = a.reshape(1, -1)
