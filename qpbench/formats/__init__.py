@@ -39,17 +39,8 @@ from .records import (
     solver_problem,
 )
 
-
-def _folder(folder: Path, kind: str, load) -> ProblemSet:
-    """The ``*.<kind>`` files of ``folder``, sorted, each read by ``load``, as one set."""
-    files = sorted(folder.glob(f"*.{kind}"))
-    return ProblemSet(
-        name=folder.resolve().name,
-        path=folder,
-        records=[load(f) for f in files],
-        kind=kind,
-        files=files,
-    )
+#: Reader of one file, by file type.
+LOADERS = {"npz": load_npz, "mat": load_maros_meszaros}
 
 
 def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
@@ -59,23 +50,23 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
     if path.is_dir():
         if (path / PARQUET_NAME).exists():
             return read_problem_set(path, verify_hash=verify_hash)
-        if any(path.glob("*.npz")):
-            return _folder(path, "npz", load_npz)
-        if any(path.glob("*.mat")):
-            return _folder(path, "mat", load_maros_meszaros)
+        for kind, load in LOADERS.items():
+            files = sorted(path.glob(f"*.{kind}"))
+            if files:
+                records = [load(f) for f in files]
+                return ProblemSet(path.resolve().name, path, records, kind=kind, files=files)
         raise ProblemFormatError(f"folder holds no {PARQUET_NAME}, .npz or .mat files", path=path)
     if not path.exists():
         raise ProblemFormatError("no such file or folder", path=path)
-    suffix = path.suffix.lower()
-    if suffix == ".parquet":
+    kind = path.suffix.lower()[1:]
+    if kind == "parquet":
         if path.name == PARQUET_NAME and (path.parent / MANIFEST_NAME).exists():
             return read_problem_set(path.parent, verify_hash=verify_hash)
         return read_parquet(path)
-    load = {".npz": load_npz, ".mat": load_maros_meszaros}.get(suffix)
-    if load is not None:
-        return ProblemSet(path.stem, path, [load(path)], kind=suffix[1:], files=[path])
+    if kind in LOADERS:
+        return ProblemSet(path.stem, path, [LOADERS[kind](path)], kind=kind, files=[path])
     raise ProblemFormatError(
-        f"unknown file type '{suffix}' (expected a folder, .parquet, .npz or .mat)", path=path
+        f"unknown file type '.{kind}' (expected a folder, .parquet, .npz or .mat)", path=path
     )
 
 
@@ -104,7 +95,6 @@ __all__ = [
     "load_problems",
     "package_versions",
     "problem_sizes",
-    "read_parquet",
     "read_problem_set",
     "save_npz",
     "sha256_file",

@@ -87,21 +87,15 @@ def make_params(
         raise ParamError(
             f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
         )
-    prm = np.zeros(PRM_SIZE)
+    prm = np.zeros(PRM_SIZE)  # NOTE_NONE
     prm[PMIN], prm[PMAX] = p_range
+    prm[[R_TOTAL, SUBSTEPS, SAFETY]] = r_total, substeps, safety
+    prm[[MAX_STEPS, TOL, R_STEP]] = max_steps, tol, step_ratio
     prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
-    prm[R_TOTAL] = r_total
-    prm[SUBSTEPS] = substeps
-    prm[SAFETY] = safety
-    prm[MAX_STEPS] = max_steps
-    prm[TOL] = tol
     prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
-    prm[R_STEP] = step_ratio
     prm[CLAMP] = 1.0 if clamp else 0.0
-    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
-    prm[STATE_ME] = -1.0
+    prm[OK_PRIMAL] = prm[OK_DUAL] = prm[STATE_ME] = -1.0
     prm[STEPS] = np.nan
-    prm[NOTE] = NOTE_NONE
     return prm
 
 
