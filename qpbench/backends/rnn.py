@@ -1,24 +1,11 @@
 """Backends ``rnn``, ``rnn-tuned`` and ``rnn-converged``: the paper's recurrent neural network
 (eq. 15, :mod:`qpbench.rnn.network`).
 
-Settings (keyword arguments of :func:`qpbench.backends.get_backend`; a scenario's ``[rnn]``
-table):
-
-- ``eps``: gain of eq. 15 [s] (default 0.02, the paper's); ``rnn`` only;
-- ``dt``: time integrated per call [s] (default 1e-3, one control tick); ``rnn`` only;
-- ``substeps``: steps per ``tick`` [s] of integrated time (default 1e-3), a fixed step
-  ``h = tick / substeps``, so a call takes ``dt / h`` steps (rounded up); default: the fewest
-  steps with ``h / eps <= safety * bound``;
-- ``safety``: fraction of the stability bound per step, in (0, 1] (default 0.9);
-- ``l1_clip``: clip ``l1`` to +-l1_clip after every step (anti-windup; default none);
-- ``method``: ``euler`` (default of ``rnn``) or ``semi-implicit`` (of ``rnn-converged``);
-- ``use_numba``: compiled loops (default when numba is installed) or the same loops in Python;
-- ``max_iter``, ``tol``: step budget and residual tolerance of ``rnn-converged`` (default: the
-  profile's ``max_iter`` and ``eps_abs``).
-
-A step above ``safety`` times the stability bound of the call's QP is shortened to it (more
-steps) and ``error`` says so (``last.clamped``). When the problem's shape changes between
-calls, the state's parts whose size changed restart at zero (all of it when ``n`` changes).
+Settings: :data:`SETTING_NAMES` (keyword arguments of :func:`qpbench.backends.get_backend`; a
+scenario's ``[rnn]`` table). A step above ``safety`` times the stability bound of the call's
+QP is shortened to it (more steps) and ``error`` says so (``last.clamped``). When the
+problem's shape changes between calls, the state's parts whose size changed restart at zero
+(all of it when ``n`` changes).
 """
 
 from __future__ import annotations
@@ -39,16 +26,17 @@ if TYPE_CHECKING:
     import qpsolvers
 
 _DEFAULTS = {
-    "eps": 0.02,
-    "dt": 1e-3,
-    "substeps": None,
-    "tick": 1e-3,
-    "safety": 0.9,
-    "l1_clip": None,
-    "method": None,
-    "use_numba": None,
-    "max_iter": None,
-    "tol": None,
+    "eps": 0.02,  # gain of eq. 15 [s] (the paper's); rnn only
+    "dt": 1e-3,  # time integrated per call [s] (one control tick); rnn only
+    "substeps": None,  # steps per `tick` (a fixed step h = tick / substeps, dt / h steps a
+    # call, rounded up); None: the fewest steps with h / eps <= safety * bound
+    "tick": 1e-3,  # [s]
+    "safety": 0.9,  # fraction of the stability bound per step, in (0, 1]
+    "l1_clip": None,  # clip l1 to +-l1_clip after every step (anti-windup)
+    "method": None,  # euler (default of rnn) or semi-implicit (of rnn-converged)
+    "use_numba": None,  # compiled loops (None: when numba is installed) or the same in Python
+    "max_iter": None,  # step budget of rnn-converged (None: the profile's)
+    "tol": None,  # residual tolerance of rnn-converged (None: the profile's eps_abs)
 }
 
 #: Names of the settings the rnn backends accept (a scenario's ``[rnn]`` table).

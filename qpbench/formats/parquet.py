@@ -183,19 +183,6 @@ def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
     ]
 
 
-def _read_table(path: Path, require_meta: bool):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    with reading(path, "Parquet file", (pa.ArrowException, OSError, ValueError)):
-        table = pq.read_table(path)
-    required = list(PROBLEM_KEYS) + (list(META_KEYS) if require_meta else [])
-    for k in required:
-        if k not in table.column_names:
-            raise ProblemFormatError("missing column", path=path, key=k)
-    return table
-
-
 def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
     """Matrix ``k`` of row ``i``: from its CSC columns when they hold it, else the dense column."""
     parts = csc.get(k)
@@ -222,7 +209,14 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
 
 
 def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
-    table = _read_table(path, require_meta)
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    with reading(path, "Parquet file", (pa.ArrowException, OSError, ValueError)):
+        table = pq.read_table(path)
+    for k in PROBLEM_KEYS + (META_KEYS if require_meta else ()):
+        if k not in table.column_names:
+            raise ProblemFormatError("missing column", path=path, key=k)
     rows = table.num_rows
     arrays = {k: _list_values(table, k, path) for k in ARRAY_KEYS}
     csc = {
