@@ -71,6 +71,12 @@ def _csc(M, key: str, fail) -> spa.csc_matrix:
     except (TypeError, ValueError) as exc:
         fail(key, f"not a numeric matrix ({exc})")
     M.sum_duplicates()
+    return _sorted(M)
+
+
+def _sorted(M) -> spa.csc_matrix:
+    """``M`` as CSC with sorted indices."""
+    M = M.tocsc()
     M.sort_indices()
     return M
 
@@ -90,15 +96,8 @@ def _symmetric(P: spa.csc_matrix) -> spa.csc_matrix:
         return P
     upper, lower = spa.triu(P, format="csc"), spa.tril(P, format="csc")
     if (P != upper).nnz == 0 or (P != lower).nnz == 0:
-        P = (P + P.T - spa.diags(P.diagonal())).tocsc()
-        P.sort_indices()
+        P = _sorted(P + P.T - spa.diags(P.diagonal()))
     return P
-
-
-def _rows(M: spa.csr_matrix, mask: np.ndarray) -> spa.csc_matrix:
-    out = M[np.flatnonzero(mask)].tocsc()
-    out.sort_indices()
-    return out
 
 
 def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: int) -> tuple:
@@ -114,10 +113,9 @@ def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: i
     eq = (lc == uc) & np.isfinite(lc)
     upper = ~eq & np.isfinite(uc)
     lower = ~eq & np.isfinite(lc)
-    Aeq, beq = (_rows(C, eq), uc[eq]) if np.any(eq) else (None, None)
+    Aeq, beq = (_sorted(C[np.flatnonzero(eq)]), uc[eq]) if np.any(eq) else (None, None)
     if np.any(upper) or np.any(lower):
-        G = spa.vstack([_rows(C, upper), -_rows(C, lower)], format="csc")
-        G.sort_indices()
+        G = _sorted(spa.vstack([C[np.flatnonzero(upper)], -C[np.flatnonzero(lower)]]))
         h = np.concatenate([uc[upper], -lc[lower]])
     else:
         G = h = None
