@@ -16,7 +16,10 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
-from .records import MM_INFINITY, ProblemRecord, check_record, reading
+from .records import ProblemRecord, check_record, reading
+
+#: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
+MM_INFINITY = 1e20
 
 
 def load_maros_meszaros(path: str | Path) -> ProblemRecord:

@@ -35,8 +35,6 @@ MANIFEST_NAME = "manifest.json"
 NPZ_META_KEY = "qpbench_record"
 #: Version of the problem-set layout written in the manifest.
 FORMAT_VERSION = 1
-#: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
-MM_INFINITY = 1e20
 #: A sparse problem whose ``P, G, A`` made dense hold more entries than this is not also
 #: written dense for qpsolvers / qpbenchmark readers.
 DENSE_COPY_MAX = 1_000_000
