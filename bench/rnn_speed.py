@@ -166,6 +166,7 @@ def main() -> None:
 
     from qpbench.backends import backend_names, get_backend
     from qpbench.backends.rnn import WORKING_SETTINGS
+    from qpbench.rnn import kernels as nk
     from qpbench.rnn import network as nw
 
     warnings.simplefilter("ignore")
@@ -199,7 +200,7 @@ def main() -> None:
     for a, b in zip(sols, sols_plain):  # one network, whichever path: same numbers
         assert np.array_equal(a.x, b.x) and np.array_equal(a.z, b.z)
     # the packed kernel's call alone, same sequence
-    kern = nw.packed_kernel()
+    kern = nk.packed_kernel()
     t_kernel = np.full(len(problems), np.inf)
     perf = time.perf_counter_ns
     for _ in range(args.passes):

@@ -58,7 +58,7 @@ def test_sigma_bound_is_an_upper_bound_and_tight(rng):
     assert rnn_numpy.sigma2_bound(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
 
 
-@pytest.mark.parametrize("method", nw.METHODS)
+@pytest.mark.parametrize("method", kernels.METHODS)
 def test_step_bound_separates_stable_from_unstable(rng, method):
     """Equality-only QP with P = I: the computed bound on r = h/eps is the edge of stability."""
     n = 4
@@ -85,7 +85,7 @@ def test_step_bound_separates_stable_from_unstable(rng, method):
 
 def test_semi_implicit_takes_fewer_steps_on_robot_shaped_problems(rng):
     steps = {}
-    for method in nw.METHODS:
+    for method in kernels.METHODS:
         local = np.random.default_rng(7)
         total = 0
         for _ in range(10):

@@ -1,48 +1,11 @@
-"""Backends ``rnn``, ``rnn-tuned`` and ``rnn-converged``: the paper's recurrent neural network (eq. 15).
+"""Backends ``rnn``, ``rnn-tuned`` and ``rnn-converged``: the paper's recurrent neural network
+(eq. 15, :mod:`qpbench.rnn.network`).
 
-``rnn`` is the paper's online use: the network's state ``(v, l1, l2)`` lives
-across successive :meth:`~Backend.solve` calls (the control ticks of one
-sequence); each call integrates the network for ``dt`` seconds on that tick's
-QP and returns the state's ``v`` as ``x``. It never reports infeasibility.
-Its status is ``optimal`` when the KKT residuals at the end of the call are
-within the profile's ``eps_abs``, else ``max_iter``; ``online = True`` tells a
-closed loop to apply ``x`` whatever the status (no fallback solver).
-
-``rnn-converged`` integrates from the state the previous call left (cold after
-:meth:`reset`) until primal residual, dual residual and complementarity are
-all within the profile's ``eps_abs``, or ``max_iter`` steps (status
-``max_iter``). ``iterations`` counts integration steps.
-
-Settings (keyword arguments of :func:`qpbench.backends.get_backend`; a scenario's ``[rnn]`` table):
-
-================ ========================================================
-eps              gain of eq. 15 in [s] (default 0.02, the paper's); only
-                 ``rnn`` depends on it (``r = dt / eps`` per call)
-dt               time integrated per call in [s] (default 1e-3, one control
-                 tick; a bench of a set that keeps every K-th tick passes K
-                 ticks); ``rnn`` only
-substeps         steps per ``tick`` of integrated time (``rnn``): a fixed
-                 step ``h = tick / substeps``, so a call takes ``dt / h``
-                 steps (rounded up); default: the fewest steps with
-                 ``h / eps <= safety * bound`` (:mod:`qpbench.rnn.network`)
-tick             the duration in [s] ``substeps`` divides (default 1e-3)
-safety           fraction of the stability bound per step, in (0, 1]
-                 (default 0.9)
-l1_clip          clip ``l1`` to +-l1_clip after every step (anti-windup);
-                 default none
-method           ``euler`` (default of ``rnn``: the note's reading) or
-                 ``semi-implicit`` (default of ``rnn-converged``)
-use_numba        compiled loops (default when numba is installed) or the
-                 same loops run by Python
-max_iter         step budget of ``rnn-converged`` (default: profile's)
-tol              residual tolerance (default: profile's ``eps_abs``)
-================ ========================================================
-
-No setting exceeds the stability bound silently: a step with ``h / eps``
-above ``safety`` times the bound of the call's QP is shortened to it (more
-steps), and ``error`` says so (``step clamped to the stability bound: ...``;
-``last.clamped``). When the problem's shape changes between calls, the state's
-parts whose size changed restart at zero (all of it when ``n`` changes).
+Settings: :data:`SETTING_NAMES` (keyword arguments of :func:`qpbench.backends.get_backend`; a
+scenario's ``[rnn]`` table). A step above ``safety`` times the stability bound of the call's
+QP is shortened to it (more steps) and ``error`` says so (``last.clamped``). When the
+problem's shape changes between calls, the state's parts whose size changed restart at zero
+(all of it when ``n`` changes).
 """
 
 from __future__ import annotations
@@ -52,7 +15,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from ..exceptions import ParamError, ProblemFormatError
+from ..exceptions import ParamError
 from ..packed import PackedProblem
 from ..rnn import kernels as nk
 from ..rnn import network as nw
@@ -62,41 +25,35 @@ from .base import Backend, BackendSolution
 if TYPE_CHECKING:
     import qpsolvers
 
-__all__ = [
-    "SETTING_NAMES",
-    "WORKING_SETTINGS",
-    "RNNConverged",
-    "RNNOnline",
-    "RNNTuned",
-    "TickSolution",
-]
-
 _DEFAULTS = {
-    "eps": 0.02,
-    "dt": 1e-3,
-    "substeps": None,
-    "tick": 1e-3,
-    "safety": 0.9,
-    "l1_clip": None,
-    "method": None,
-    "use_numba": None,
-    "max_iter": None,
-    "tol": None,
+    "eps": 0.02,  # gain of eq. 15 [s] (the paper's); rnn only
+    "dt": 1e-3,  # time integrated per call [s] (one control tick); rnn only
+    "substeps": None,  # steps per `tick` (a fixed step h = tick / substeps, dt / h steps a
+    # call, rounded up); None: the fewest steps with h / eps <= safety * bound
+    "tick": 1e-3,  # [s]
+    "safety": 0.9,  # fraction of the stability bound per step, in (0, 1]
+    "l1_clip": None,  # clip l1 to +-l1_clip after every step (anti-windup)
+    "method": None,  # euler (default of rnn) or semi-implicit (of rnn-converged)
+    "use_numba": None,  # compiled loops (None: when numba is installed) or the same in Python
+    "max_iter": None,  # step budget of rnn-converged (None: the profile's)
+    "tol": None,  # residual tolerance of rnn-converged (None: the profile's eps_abs)
 }
 
 #: Names of the settings the rnn backends accept (a scenario's ``[rnn]`` table).
 SETTING_NAMES = tuple(_DEFAULTS)
 
 #: A setting that works in the closed loop of every shipped scenario (the paper's
-#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms (a
-#: step of 50 us, r = 0.5) and ``l1`` clipped to +-10 (anti-windup during the
-#: infeasible start). The frontier of settings: results/rnn/README.md,
-#: ``python bench/rnn_frontier.py``.
+#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms (a step of
+#: 50 us, r = 0.5) and ``l1`` clipped to +-10 (anti-windup during the infeasible start).
+#: The frontier of settings: results/rnn/README.md, ``python bench/rnn_frontier.py``.
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 
 def _positive(key: str, value: object, integer: bool = False, upper: float = math.inf):
-    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``)."""
+    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``), or
+    ``None`` for a setting whose default is ``None``."""
+    if value is None and _DEFAULTS[key] is None:
+        return None
     try:
         number = int(value) if integer else float(value)
     except (TypeError, ValueError):
@@ -143,14 +100,10 @@ class NetworkBackend(Backend):
                 key=unknown[0],
             )
         s = {**_DEFAULTS, **settings}
-        self.eps = _positive("eps", s["eps"])
-        self.dt = _positive("dt", s["dt"])
-        self.tick = _positive("tick", s["tick"])
+        self.eps, self.dt, self.tick = (_positive(k, s[k]) for k in ("eps", "dt", "tick"))
         self.safety = _positive("safety", s["safety"], upper=1.0)
-        self.substeps = s["substeps"]
-        if self.substeps is not None:
-            self.substeps = _positive("substeps", self.substeps, integer=True)
-        self.l1_clip = None if s["l1_clip"] is None else _positive("l1_clip", s["l1_clip"])
+        self.substeps = _positive("substeps", s["substeps"], integer=True)
+        self.l1_clip = _positive("l1_clip", s["l1_clip"])
         self.method = self.default_method if s["method"] is None else s["method"]
         use = s["use_numba"]
         if use not in (None, True, False):
@@ -172,7 +125,6 @@ class NetworkBackend(Backend):
             l1_clip=self.l1_clip,
             step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0,
         )
-        self._kernel = None
         # "optimal": the residuals meet the profile's success thresholds (and the stop
         # tolerance, when it is tighter)
         self._prm[nk.OK_PRIMAL] = max(self.tol, self.profile.tolerance.primal)
@@ -201,68 +153,57 @@ class NetworkBackend(Backend):
     @property
     def last(self) -> nw.IntegrationResult | None:
         """What the last call's integration did (``None`` before any call or after :meth:`reset`)."""
-        p = self._prm
-        if math.isnan(p[nk.STEPS]):
-            return None
-        return nk.result(p)
+        return None if math.isnan(self._prm[nk.STEPS]) else nk.result(self._prm)
+
+    def _set_p(self, P: np.ndarray) -> None:
+        """The eigenvalue range of ``P`` into the parameter block, when ``P`` changed."""
+        key = P.tobytes()
+        if key != self._p_key:
+            self._prm[nk.PMIN], self._prm[nk.PMAX] = nw.p_eigen_range(P)
+            self._p_key = key
 
     def _diverged(self, problem, steps: int) -> BackendSolution:
         """The answer of a call whose state is no longer finite (the state is dropped)."""
         self.state = None
         prm = self._prm
+        bound = (
+            f"stable below {prm[nk.RATIO_MAX]:.3g})"
+            if math.isfinite(prm[nk.RATIO_MAX])
+            else "below a lower estimate of the stability bound)"
+        )
         return BackendSolution(
             problem=problem,
             status="error",
             iterations=steps,
-            error=f"FloatingPointError: network state diverged (r = {prm[nk.RATIO]:.3g}, "
-            + (
-                f"stable below {prm[nk.RATIO_MAX]:.3g})"
-                if math.isfinite(prm[nk.RATIO_MAX])
-                else "below a lower estimate of the stability bound)"
-            ),
+            error=f"FloatingPointError: network state diverged (r = {prm[nk.RATIO]:.3g}, {bound}",
         )
 
-    # -- the call ---------------------------------------------------------
-    def _run(self, problem, warm_start) -> BackendSolution:
-        if self._kernel is None:
-            self._kernel = nk.kernel(self.use_numba)
-        P, q, A, b = problem.P, problem.q, problem.A, problem.b
-        G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
-        # only the types that choose the route are tested here (the kernel checks the shapes)
-        if (
-            not self.use_numba
-            or type(P) is not np.ndarray
-            or (A is not None and type(A) is not np.ndarray)
-            or (G is not None and type(G) is not np.ndarray)
-        ):
-            qp = nw.dense_qp(problem)  # checks and converts (sparse, lists, shapes)
-            P, q, A, b, G, h, lb, ub = qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub
+    def _solve(self, problem, warm_start) -> BackendSolution:
+        """The general path: convert ``problem`` (arrays as they are to the compiled kernel,
+        which checks the shapes), set up the state, integrate."""
+        p = problem
+        if self.use_numba and type(p.P) is _ndarray and {type(p.A), type(p.G)} <= _DENSE:
+            n = p.q.shape[0]
+            A, b = nw.empty_rows(n) if p.A is None else (p.A, p.b)
+            G, h = nw.empty_rows(n) if p.G is None else (p.G, p.h)
+            lb = nw.infinite(n, -np.inf) if p.lb is None else p.lb
+            ub = nw.infinite(n, np.inf) if p.ub is None else p.ub
+            args = (p.P, p.q, A, b, G, h, lb, ub)
         else:
-            n = q.shape[0]
-            if A is None:
-                A, b = nw.empty_rows(n)
-            if G is None:
-                G, h = nw.empty_rows(n)
-            if lb is None:
-                lb = nw.infinite(n, -np.inf)
-            if ub is None:
-                ub = nw.infinite(n, np.inf)
-        n, me, mi = q.shape[0], b.shape[0], h.shape[0]
+            qp = nw.dense_qp(problem)  # converts and checks (sparse, lists, shapes)
+            args = (qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub)
+        n, me, mi = args[1].shape[0], args[3].shape[0], args[5].shape[0]
         st = self.state
         if st is None:
             st = self.state = nw.NetworkState.cold(n, me, mi, warm_start)
-        elif st.n != n or st.me != me or st.mi != mi:
+        elif st.shape != (n, me, mi):
             st = self.state = st.resized(n, me, mi)
+        self._set_p(np.asarray(args[0], dtype=np.float64))
         prm = self._prm
-        key = P.tobytes()
-        if key != self._p_key:
-            prm[nk.PMIN], prm[nk.PMAX] = nw.p_eigen_range(np.asarray(P, dtype=np.float64))
-            self._p_key = key
         sol = np.empty(3 * n + 2 * (me + mi))  # outputs, then scratch
-        steps = self._kernel(P, q, A, b, G, h, lb, ub, st.xi, prm, sol)
+        steps = nk.kernel(self.use_numba)(*args, st.xi, prm, sol)
         if steps == nk.SHAPE_MISMATCH:
-            nw.dense_qp(problem)  # raises ProblemFormatError naming the matrix
-            raise ProblemFormatError("inconsistent problem shapes", key="P")  # pragma: no cover
+            nw.dense_qp(problem)  # raises ProblemFormatError naming the part
         if steps == nk.NO_STABLE_STEP:
             return BackendSolution(
                 problem=problem,
@@ -274,6 +215,7 @@ class NetworkBackend(Backend):
         obj = prm.item(nk.OBJ)
         if not math.isfinite(obj) or not math.isfinite(prm.item(nk.PRIMAL)):
             return self._diverged(problem, steps)
+        has_box = p.lb is not None or p.ub is not None
         ok = (
             prm.item(nk.PRIMAL) <= prm.item(nk.OK_PRIMAL)
             and prm.item(nk.DUAL) <= prm.item(nk.OK_DUAL)
@@ -284,9 +226,7 @@ class NetworkBackend(Backend):
             x=sol[:n],
             y=sol[n : n + me] if me else None,
             z=sol[n + me : n + me + mi] if mi else None,
-            z_box=sol[n + me + mi : 2 * n + me + mi]
-            if (problem.lb is not None or problem.ub is not None)
-            else None,
+            z_box=sol[n + me + mi : 2 * n + me + mi] if has_box else None,
             obj=obj if self._kernel_obj else None,
             status="optimal" if ok else "max_iter",
             iterations=steps,
@@ -297,13 +237,11 @@ class NetworkBackend(Backend):
 class _Duals:
     """``y``, ``z`` and ``z_box`` of a :class:`TickSolution`, made on the first read of any.
 
-    A non-data descriptor: the first read puts all three views into the
-    instance, where later reads find them without calling this.
+    A non-data descriptor: the first read puts all three views into the instance, where
+    later reads find them without calling this.
     """
 
-    __slots__ = ("name",)
-
-    def __init__(self, name: str):
+    def __set_name__(self, owner, name: str):
         self.name = name
 
     def __get__(self, sol, owner=None):
@@ -322,46 +260,31 @@ class _Duals:
 
 
 class TickSolution(BackendSolution):
-    """The online network's answer to one tick (a :class:`BackendSolution`).
+    """The online network's answer to one tick: ``x`` is a view of the kernel's fresh output
+    ``[x; y; z; z_box]``, ``y``, ``z``, ``z_box`` views made on the first read of any."""
 
-    The kernel writes ``[x; y; z; z_box]`` into one fresh array, never written
-    again. ``x`` is a view of it made at once; ``y``, ``z`` and ``z_box`` are
-    views made on the first read of any (a controller applying ``x`` does not
-    need them). The bench's timed region reads every field
-    (:func:`qpbench.harness.timing.timed_call`), so it pays for the views.
-    """
-
-    y = _Duals("y")
-    z = _Duals("z")
-    z_box = _Duals("z_box")
+    y = _Duals()
+    z = _Duals()
+    z_box = _Duals()
 
 
 @register
 class RNNOnline(NetworkBackend):
-    """The network integrated for ``dt`` per call (the paper's use).
+    """The network integrated for ``dt`` per call (the paper's use); it never reports
+    infeasibility, and a closed loop applies its ``x`` whatever the status.
 
-    Per-tick path: once a first call has set up the state, :meth:`solve` hands
-    a :class:`~qpbench.packed.PackedProblem` (the controller's) as its one
-    buffer to :func:`~qpbench.rnn.kernels.packed_kernel`, any other problem as
-    its eight arrays to the strict :func:`~qpbench.rnn.kernels.online_kernel`
-    (numba's dispatcher being the type check). The kernel returns the step
-    count, the status and the clamp note in one integer; the answer is a
-    :class:`TickSolution`. What the kernel refuses (absent parts, sparse
-    matrices, another dtype or layout, a shape change) goes to the general
-    path, which converts, checks, re-shapes the state and raises what is
-    wrong. All paths give the same numbers bit for bit; ``obj`` is computed
-    from ``x`` on first read. Cost of a tick: ``bench/rnn_speed.py``.
+    Per-tick path: once a first call has set up the state, :meth:`solve` hands a
+    :class:`~qpbench.packed.PackedProblem` as its one buffer to
+    :func:`~qpbench.rnn.kernels.packed_kernel`, any other problem as its eight arrays to the
+    strict :func:`~qpbench.rnn.kernels.online_kernel` (numba's dispatcher being the type
+    check); the answer is a :class:`TickSolution`. What the kernels refuse (absent parts,
+    sparse matrices, another dtype or layout, a shape change) goes to the general path
+    (:meth:`_solve`). All paths give the same numbers bit for bit.
     """
 
     name = "rnn"
     online = True
     _kernel_obj = False
-
-    def __init__(self, profile="default", **settings):
-        self._fast = None
-        super().__init__(profile, **settings)
-        # P's eigenvalues are read by the kernel only when it picks the sub-steps itself
-        self._needs_p = self.substeps is None
 
     def _state_changed(self) -> None:
         """Arm the per-tick path for the state's shape (disarm without a state)."""
@@ -369,7 +292,7 @@ class RNNOnline(NetworkBackend):
         if st is None or not self.use_numba:
             self._fast = None
             return
-        n, me, mi = st.n, st.me, st.mi
+        n, me, mi = st.shape
         slices = (
             slice(0, n),
             slice(n, n + me) if me else None,
@@ -377,89 +300,60 @@ class RNNOnline(NetworkBackend):
             slice(n + me + mi, 2 * n + me + mi),
         )
         # the strict kernel takes arrays only: absent parts (None) go to the general path
-        strict = nk.online_kernel(strict=True) if me and mi else None
-        self._fast = (
-            self._needs_p,
-            nk.packed_kernel(),
-            st.xi,
-            self._prm,
-            3 * n + 2 * (me + mi),
-            slices[0],
-            slices,
-            self.name,
-            strict,
-        )
+        strict = nk.online_kernel() if me and mi else None
+        # P's eigenvalues are read by the kernel only when it picks the sub-steps itself
+        needs_p = self.substeps is None
+        size = 3 * n + 2 * (me + mi)
+        self._fast = (needs_p, nk.packed_kernel(), st.xi, self._prm, size, slices, strict)
 
     def solve(
         self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None
     ) -> BackendSolution:
         """One tick of integration; see :meth:`Backend.solve` (same fields)."""
-        fast = self._fast
-        if fast is not None:
-            needs_p, packed, xi, prm, size, sx, slices, name, strict = fast
-            if needs_p:
-                P = problem.P
-                if type(P) is not _ndarray or P.dtype != _f64:
-                    packed = strict = None
-                else:
-                    p_key = P.tobytes()
-                    if p_key != self._p_key:
-                        prm[nk.PMIN], prm[nk.PMAX] = nw.p_eigen_range(P)
-                        self._p_key = p_key
-            out = _alloc(size)
-            if type(problem) is _Packed and packed is not None:
-                code = packed(problem.buffer, xi, prm, out)
-            elif strict is None:
-                code = nk.SHAPE_MISMATCH
+        if self._fast is None:  # first call, odd input: the general path sets up the state
+            return Backend.solve(self, problem, warm_start)
+        needs_p, packed, xi, prm, size, slices, strict = self._fast
+        if needs_p:
+            P = problem.P
+            if type(P) is not _ndarray or P.dtype != _f64:
+                packed = strict = None
             else:
-                try:
-                    code = strict(
-                        problem.P,
-                        problem.q,
-                        problem.A,
-                        problem.b,
-                        problem.G,
-                        problem.h,
-                        problem.lb,
-                        problem.ub,
-                        xi,
-                        prm,
-                        out,
-                    )
-                except TypeError:  # numba's dispatcher: not the one argument type compiled
-                    code = nk.SHAPE_MISMATCH
-            if code >= 0:
-                sol = _new(TickSolution)
-                sol.problem = problem
-                sol.x = out[sx]
-                sol._out = out
-                sol._slices = slices
-                sol.iterations = code >> 2
-                if code & 2:  # the step was clamped to the bound (or none is proven stable)
-                    sol.error = nk.step_note(prm)
-                if code & 1:
-                    sol.status = "optimal"
-                    sol.found = True
-                else:
-                    sol.status = "max_iter"
-                    sol.found = False
-                sol.backend = name
-                return sol
-            if code == nk.DIVERGED:
-                sol = self._diverged(problem, int(prm[nk.STEPS]))
-            else:  # refused before touching the state: the general path says why or copes
-                sol = self._run(problem, warm_start)
-        else:  # first call, odd input: the general path converts, checks, sets up the state
-            sol = self._run(problem, warm_start)
+                self._set_p(P)
+        out = _alloc(size)
+        if type(problem) is _Packed and packed is not None:
+            code = packed(problem.buffer, xi, prm, out)
+        elif strict is None:
+            code = nk.SHAPE_MISMATCH
+        else:
+            p = problem
+            try:
+                code = strict(p.P, p.q, p.A, p.b, p.G, p.h, p.lb, p.ub, xi, prm, out)
+            except TypeError:  # numba's dispatcher: not the one argument type compiled
+                code = nk.SHAPE_MISMATCH
+        if code < 0:
+            if code != nk.DIVERGED:  # refused before touching the state: the general path
+                return Backend.solve(self, problem, warm_start)
+            sol = self._diverged(problem, int(prm[nk.STEPS]))
+            sol.backend, sol.found = self.name, False
+            return sol
+        sol = _new(TickSolution)
+        sol.problem = problem
+        sol.x = out[slices[0]]
+        sol._out = out
+        sol._slices = slices
+        sol.iterations = code >> 2
+        if code & 2:  # the step was clamped to the bound (or none is proven stable)
+            sol.error = nk.step_note(prm)
+        if code & 1:
+            sol.status, sol.found = "optimal", True
+        else:
+            sol.status, sol.found = "max_iter", False
         sol.backend = self.name
-        sol.found = sol.status == "optimal"
         return sol
-
-    def _solve(self, problem, warm_start):
-        return self._run(problem, warm_start)
 
 
 _ndarray = np.ndarray
+_DENSE = {np.ndarray, type(None)}
 _f64 = np.dtype(np.float64)
 _alloc = np.empty
 _new = object.__new__
@@ -468,31 +362,27 @@ _Packed = PackedProblem
 
 @register
 class RNNConverged(NetworkBackend):
-    """The network integrated until its KKT residuals are within tolerance."""
+    """The network integrated until its KKT residuals are within ``tol``, or ``max_iter``
+    steps (status ``max_iter``), from the state the previous call left (cold after
+    :meth:`reset`); ``iterations`` counts integration steps."""
 
     name = "rnn-converged"
     default_method = "semi-implicit"
 
     def _solve(self, problem, warm_start):
-        if (
-            warm_start is not None
-            and self.state is not None
-            and self.state.n == np.size(warm_start)
-        ):
-            self.state.v = np.asarray(warm_start, dtype=np.float64).reshape(-1)
-        return self._run(problem, warm_start)
+        st = self.state
+        if warm_start is not None and st is not None and st.n == np.size(warm_start):
+            st.v = np.asarray(warm_start, dtype=np.float64).reshape(-1)
+        return super()._solve(problem, warm_start)
 
 
 @register
 class RNNTuned(RNNOnline):
-    """The online network with :data:`WORKING_SETTINGS`, not the paper's ``eps``.
-
-    It ignores a scenario's ``[rnn]`` table (the paper's values); settings
-    given explicitly still override.
-    """
+    """The online network with :data:`WORKING_SETTINGS`, not the paper's ``eps``; it ignores a
+    scenario's ``[rnn]`` table (the paper's values); settings given explicitly still override."""
 
     name = "rnn-tuned"
-    scenario_table = None  # its own settings, not the scenario's (the paper's values)
+    scenario_table = None
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **{**WORKING_SETTINGS, **settings})

@@ -1,25 +1,14 @@
-"""QP problems in the formats of the QP ecosystem.
+"""QP problems in the formats of the QP ecosystem (docs/formats.md).
 
-A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` (``min 1/2 x'Px + q'x + offset``
-s.t. ``G x <= h, A x = b, lb <= x <= ub``) with a name, scenario, tick, time [s],
-formulation and the constant ``offset``. Formats:
-
-- one problem <-> ``.npz`` (:mod:`.npz`): what ``qpsolvers.Problem.save``/``load`` read,
-  plus the metadata as JSON in a member ``qpbench_record`` and each scipy.sparse
-  matrix ``M`` as CSC members ``M_csc_*`` (read back bit for bit);
-- a problem set <-> a folder of ``problems.parquet`` (qpbenchmark's ``ProblemList``
-  columns ``P q G h A b lb ub name``, matrices flattened row-major, plus ``scenario tick
-  t formulation offset`` and, for sparse matrices, ``M_csc_data/indices/indptr``) and
-  ``manifest.json`` (generator, versions, row count, SHA-256 checked on read)
-  (:mod:`.parquet`); the same records give the same bytes;
-- Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`), sparse kept from file to solver.
-
-A sparse problem is also written dense for qpsolvers/qpbenchmark readers only while its
-``P, G, A`` made dense hold at most ``DENSE_COPY_MAX`` entries. Every reader checks the
-data rules (:func:`~.records.check_problem`: shapes, symmetric ``P``, finite data, ``lb``
-/ ``ub`` may be infinite outward) and records the convexity of ``P``
-(:mod:`.convexity`); a violation is a :class:`~qpbench.exceptions.ProblemFormatError`
-naming the file, the problem and the field.
+A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` with a name, scenario, tick, time
+[s], formulation and the objective's constant ``offset``: one problem <-> ``.npz``
+(:mod:`.npz`); a problem set <-> a folder of ``problems.parquet`` (qpbenchmark's
+``ProblemList`` columns plus the metadata and CSC columns) and ``manifest.json``
+(:mod:`.parquet`); Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`). Sparse matrices stay
+sparse from file to solver. Every reader checks the data rules
+(:func:`~.records.check_problem`) and records the convexity of ``P`` (:mod:`.convexity`); a
+violation is a :class:`~qpbench.exceptions.ProblemFormatError` naming the file, the problem
+and the field.
 """
 
 from __future__ import annotations
@@ -50,17 +39,8 @@ from .records import (
     solver_problem,
 )
 
-
-def _folder(folder: Path, kind: str, load) -> ProblemSet:
-    """The ``*.<kind>`` files of ``folder``, sorted, each read by ``load``, as one set."""
-    files = sorted(folder.glob(f"*.{kind}"))
-    return ProblemSet(
-        name=folder.resolve().name,
-        path=folder,
-        records=[load(f) for f in files],
-        kind=kind,
-        files=files,
-    )
+#: Reader of one file, by file type.
+LOADERS = {"npz": load_npz, "mat": load_maros_meszaros}
 
 
 def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
@@ -70,23 +50,23 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
     if path.is_dir():
         if (path / PARQUET_NAME).exists():
             return read_problem_set(path, verify_hash=verify_hash)
-        if any(path.glob("*.npz")):
-            return _folder(path, "npz", load_npz)
-        if any(path.glob("*.mat")):
-            return _folder(path, "mat", load_maros_meszaros)
+        for kind, load in LOADERS.items():
+            files = sorted(path.glob(f"*.{kind}"))
+            if files:
+                records = [load(f) for f in files]
+                return ProblemSet(path.resolve().name, path, records, kind=kind, files=files)
         raise ProblemFormatError(f"folder holds no {PARQUET_NAME}, .npz or .mat files", path=path)
     if not path.exists():
         raise ProblemFormatError("no such file or folder", path=path)
-    suffix = path.suffix.lower()
-    if suffix == ".parquet":
+    kind = path.suffix.lower()[1:]
+    if kind == "parquet":
         if path.name == PARQUET_NAME and (path.parent / MANIFEST_NAME).exists():
             return read_problem_set(path.parent, verify_hash=verify_hash)
         return read_parquet(path)
-    load = {".npz": load_npz, ".mat": load_maros_meszaros}.get(suffix)
-    if load is not None:
-        return ProblemSet(path.stem, path, [load(path)], kind=suffix[1:], files=[path])
+    if kind in LOADERS:
+        return ProblemSet(path.stem, path, [LOADERS[kind](path)], kind=kind, files=[path])
     raise ProblemFormatError(
-        f"unknown file type '{suffix}' (expected a folder, .parquet, .npz or .mat)", path=path
+        f"unknown file type '.{kind}' (expected a folder, .parquet, .npz or .mat)", path=path
     )
 
 
@@ -105,7 +85,6 @@ def content_sha256(problem_set: ProblemSet) -> str | None:
 
 __all__ = [
     "ARRAY_KEYS",
-    "MANIFEST_NAME",
     "ProblemRecord",
     "ProblemSet",
     "assess_convexity",
@@ -116,7 +95,6 @@ __all__ = [
     "load_problems",
     "package_versions",
     "problem_sizes",
-    "read_parquet",
     "read_problem_set",
     "save_npz",
     "sha256_file",

@@ -1,16 +1,12 @@
-"""Is ``P`` positive semidefinite? Cheap for 100,000 variables, tolerant of rounding.
+"""Is ``P`` positive semidefinite? By ``ratio = lambda_min(P) / lambda_max(P)``, never
+making a large matrix dense.
 
-The verdict rests on ``ratio = lambda_min(P) / lambda_max(P)``: ``convex`` when
-``ratio >= -ROUNDING_RATIO``; ``rounding`` (a published problem's rounded data: solved,
-with a warning) down to ``-NONCONVEX_RATIO``; ``nonconvex`` (skipped) below.
-
-How, never making a large matrix dense: ``numpy.linalg.eigvalsh`` up to
-``DENSE_EIG_MAX_N`` variables; else Gershgorin discs (a diagonally dominant ``P`` is
-convex in ``O(nnz)``); else a scale ``lambda_max`` by power iteration and the inertia
-of ``P + delta I`` at ``delta = NONCONVEX_RATIO lambda_max`` and ``ROUNDING_RATIO
-lambda_max``: a diagonal-pivot sparse LU in symmetric mode is an ``L D L'``, whose
-negative pivots count the eigenvalues below ``-delta`` (Sylvester's law). A
-``rounding`` or ``nonconvex`` answer then finds the ratio to 2 % by bisection on the
+``convex`` when ``ratio >= -ROUNDING_RATIO``; ``rounding`` (a published problem's rounded
+data: solved, with a warning) down to ``-NONCONVEX_RATIO``; ``nonconvex`` (skipped) below.
+Up to ``DENSE_EIG_MAX_N`` variables ``numpy.linalg.eigvalsh``; else Gershgorin discs
+(diagonal dominance); else ``lambda_max`` by power iteration and the inertia of ``P + delta
+I`` (Sylvester's law, from a diagonal-pivot sparse ``L D L'``) at ``delta = NONCONVEX_RATIO
+lambda_max`` and ``ROUNDING_RATIO lambda_max``, then the ratio to 2 % by bisection on the
 shift. A factorization that pivoted off the diagonal gives ``rounding`` / ``undecided``.
 """
 

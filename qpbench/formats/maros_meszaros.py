@@ -16,7 +16,10 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
-from .records import MM_INFINITY, ProblemRecord, check_record
+from .records import ProblemRecord, check_record, reading
+
+#: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
+MM_INFINITY = 1e20
 
 
 def load_maros_meszaros(path: str | Path) -> ProblemRecord:
@@ -25,20 +28,15 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
 
     path = Path(path)
     name = path.stem
-    try:
+    with reading(path, ".mat"):  # scipy raises ValueError, TypeError, OSError, MatReadError...
         data = scipy.io.loadmat(str(path))
-    except FileNotFoundError:
-        raise ProblemFormatError("no such file", path=path) from None
-    except Exception as exc:  # scipy raises ValueError, TypeError, OSError, MatReadError...
-        raise ProblemFormatError(
-            f"unreadable .mat ({type(exc).__name__}: {exc})", path=path
-        ) from None
-    for k in ("P", "q", "r", "A", "l", "u", "n", "m"):
-        if k not in data:
-            raise ProblemFormatError(f"problem '{name}': missing key", path=path, key=k)
 
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
+
+    for k in ("P", "q", "r", "A", "l", "u", "n", "m"):
+        if k not in data:
+            fail(k, "missing key")
 
     try:
         n = int(np.asarray(data["n"]).item())
@@ -76,6 +74,12 @@ def _csc(M, key: str, fail) -> spa.csc_matrix:
     except (TypeError, ValueError) as exc:
         fail(key, f"not a numeric matrix ({exc})")
     M.sum_duplicates()
+    return _sorted(M)
+
+
+def _sorted(M) -> spa.csc_matrix:
+    """``M`` as CSC with sorted indices."""
+    M = M.tocsc()
     M.sort_indices()
     return M
 
@@ -95,15 +99,8 @@ def _symmetric(P: spa.csc_matrix) -> spa.csc_matrix:
         return P
     upper, lower = spa.triu(P, format="csc"), spa.tril(P, format="csc")
     if (P != upper).nnz == 0 or (P != lower).nnz == 0:
-        P = (P + P.T - spa.diags(P.diagonal())).tocsc()
-        P.sort_indices()
+        P = _sorted(P + P.T - spa.diags(P.diagonal()))
     return P
-
-
-def _rows(M: spa.csr_matrix, mask: np.ndarray) -> spa.csc_matrix:
-    out = M[np.flatnonzero(mask)].tocsc()
-    out.sort_indices()
-    return out
 
 
 def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: int) -> tuple:
@@ -119,10 +116,9 @@ def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: i
     eq = (lc == uc) & np.isfinite(lc)
     upper = ~eq & np.isfinite(uc)
     lower = ~eq & np.isfinite(lc)
-    Aeq, beq = (_rows(C, eq), uc[eq]) if np.any(eq) else (None, None)
+    Aeq, beq = (_sorted(C[np.flatnonzero(eq)]), uc[eq]) if np.any(eq) else (None, None)
     if np.any(upper) or np.any(lower):
-        G = spa.vstack([_rows(C, upper), -_rows(C, lower)], format="csc")
-        G.sort_indices()
+        G = _sorted(spa.vstack([C[np.flatnonzero(upper)], -C[np.flatnonzero(lower)]]))
         h = np.concatenate([uc[upper], -lc[lower]])
     else:
         G = h = None

@@ -1,4 +1,8 @@
-"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save` / ``load``)."""
+"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save` / ``load``).
+
+A sparse matrix ``M`` is stored as members ``M_csc_data``, ``M_csc_indices``,
+``M_csc_indptr`` (:data:`~.records.CSC_TYPES`) and ``M_csc_shape``.
+"""
 
 from __future__ import annotations
 
@@ -15,24 +19,16 @@ from ..exceptions import ProblemFormatError
 from ..memory import dense_entries
 from .records import (
     ARRAY_KEYS,
+    CSC_TYPES,
     DENSE_COPY_MAX,
-    MATRIX_KEYS,
+    META_KEYS,
     NPZ_META_KEY,
     ProblemRecord,
     check_record,
+    csc_parts,
+    reading,
     solver_problem,
-    sorted_csc,
 )
-
-#: Stored arrays of a sparse matrix ``M``: ``M_csc_data``, ``M_csc_indices``, ``M_csc_indptr``,
-#: ``M_csc_shape`` (scipy's CSC, indices sorted).
-CSC_PARTS = ("data", "indices", "indptr", "shape")
-
-
-def _csc_members(key: str, M) -> dict[str, np.ndarray]:
-    M = sorted_csc(M)
-    parts = (M.data, M.indices, M.indptr, np.asarray(M.shape, dtype=np.int64))
-    return {f"{key}_csc_{part}": v for part, v in zip(CSC_PARTS, parts)}
 
 
 def _append(path: Path, members: dict[str, np.ndarray]) -> None:
@@ -48,27 +44,21 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     qpbench only), then the metadata and CSC members."""
     path = Path(path)
     check_record(record, path=path)
-    sparse = {
-        k: getattr(record.problem, k)
-        for k in MATRIX_KEYS
-        if spa.issparse(getattr(record.problem, k))
-    }
+    problem = record.problem
+    members = {NPZ_META_KEY: np.array(json.dumps(record.meta(), sort_keys=True))}
+    for key in ARRAY_KEYS:
+        M = getattr(problem, key)
+        if spa.issparse(M):
+            members.update({f"{key}_csc_{p}": v for p, v in csc_parts(M).items()})
+            members[f"{key}_csc_shape"] = np.asarray(M.shape, dtype=np.int64)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            if dense_entries(record.problem) <= DENSE_COPY_MAX:
-                solver_problem(record.problem, dense=True).save(fh)
+            if dense_entries(problem) <= DENSE_COPY_MAX:
+                solver_problem(problem, dense=True).save(fh)
             else:
-                np.savez(
-                    fh,
-                    **{
-                        k: np.asarray(getattr(record.problem, k), dtype=np.float64)
-                        for k in ARRAY_KEYS
-                        if k not in sparse and getattr(record.problem, k) is not None
-                    },
-                )
-        members = {NPZ_META_KEY: np.array(json.dumps(record.meta(), sort_keys=True))}
-        for key, M in sparse.items():
-            members.update(_csc_members(key, M))
+                parts = {k: getattr(problem, k) for k in ARRAY_KEYS}
+                dense = {k: v for k, v in parts.items() if v is not None and not spa.issparse(v)}
+                np.savez(fh, **{k: np.asarray(v, dtype=np.float64) for k, v in dense.items()})
         _append(tmp, members)
     return path
 
@@ -78,7 +68,7 @@ def _read_members(data) -> qpsolvers.Problem:
     parts = []
     for k in ARRAY_KEYS:
         if f"{k}_csc_data" in data.files:
-            d, i, p, shape = (data[f"{k}_csc_{part}"] for part in CSC_PARTS)
+            d, i, p, shape = (data[f"{k}_csc_{part}"] for part in (*CSC_TYPES, "shape"))
             parts.append(spa.csc_matrix((d, i, p), shape=tuple(int(v) for v in shape)))
         elif k in data.files:
             try:
@@ -95,7 +85,7 @@ def load_npz(path: str | Path) -> ProblemRecord:
     """One record of a ``.npz`` of :func:`save_npz` or :meth:`qpsolvers.Problem.save`
     (named by the file stem)."""
     path = Path(path)
-    try:
+    with reading(path, ".npz"):
         with np.load(path, allow_pickle=False) as data:
             missing = [
                 k for k in ("P", "q") if k not in data.files and f"{k}_csc_data" not in data.files
@@ -107,28 +97,8 @@ def load_npz(path: str | Path) -> ProblemRecord:
             problem = _read_members(data) if compact else None
         if problem is None:
             problem = qpsolvers.Problem.load(str(path))
-    except FileNotFoundError:
-        raise ProblemFormatError("no such file", path=path) from None
-    except ProblemFormatError:
-        raise
-    except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, ValueError, qpsolvers errors
-        raise ProblemFormatError(
-            f"unreadable .npz ({type(exc).__name__}: {exc})", path=path
-        ) from None
-    name = meta.get("name") or path.stem
-    if problem.P is None or problem.q is None:
-        raise ProblemFormatError(
-            f"problem '{name}': P or q is not a numeric array", path=path, key="P"
-        )
-    try:
-        problem = solver_problem(problem)
-    except (TypeError, ValueError) as exc:
-        raise ProblemFormatError(f"problem '{name}': not numeric ({exc})", path=path) from None
-    record = ProblemRecord(
-        problem,
-        name,
-        **{k: meta.get(k) for k in ("scenario", "tick", "t", "formulation")},
-        offset=float(meta.get("offset", 0.0)),
-    )
+    fields = {k: meta.get(k) for k in META_KEYS} | {"offset": float(meta.get("offset", 0.0))}
+    record = ProblemRecord(problem, meta.get("name") or path.stem, **fields)
     check_record(record, path=path)
+    record.problem = solver_problem(problem)
     return record

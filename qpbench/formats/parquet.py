@@ -16,36 +16,24 @@ from ..exceptions import ProblemFormatError
 from ..memory import dense_entries
 from .records import (
     ARRAY_KEYS,
+    CSC_TYPES,
     DENSE_COPY_MAX,
     FORMAT_VERSION,
     MANIFEST_NAME,
     MATRIX_KEYS,
     META_KEYS,
+    META_TYPES,
     PARQUET_NAME,
     PROBLEM_KEYS,
     ProblemRecord,
     ProblemSet,
     check_record,
-    sorted_csc,
+    csc_parts,
+    reading,
 )
 
 if TYPE_CHECKING:
     import pyarrow as pa
-
-#: Per sparse matrix ``M`` of a set (only when some record has one): CSC columns
-#: ``M_csc_data`` (list<double>), ``M_csc_indices`` (list<int32>), ``M_csc_indptr`` (list<int64>).
-CSC_COLUMNS = (("data", "float64"), ("indices", "int32"), ("indptr", "int64"))
-
-
-#: The metadata columns and their Arrow types (after the array columns).
-META_TYPES = (
-    ("name", "string"),
-    ("scenario", "string"),
-    ("tick", "int64"),
-    ("t", "float64"),
-    ("formulation", "string"),
-    ("offset", "float64"),
-)
 
 
 def list_column(values: list[np.ndarray | None], kind: str = "float64"):
@@ -72,16 +60,9 @@ def _stored(problem, key: str):
     return M.toarray() if dense_entries(problem) <= DENSE_COPY_MAX else None
 
 
-def _csc_parts(M) -> tuple | None:
-    if not spa.issparse(M):
-        return None
-    M = sorted_csc(M)
-    return M.data, M.indices, M.indptr
-
-
 def records_to_table(records: list[ProblemRecord], path: str | Path | None = None) -> pa.Table:
-    """The records as a ``pyarrow.Table`` in the problem-set schema (CSC columns only for
-    a set holding sparse matrices)."""
+    """The records as a ``pyarrow.Table`` in the problem-set schema: the arrays, the metadata,
+    and CSC columns ``M_csc_<part>`` of each matrix ``M`` sparse in some record."""
     import pyarrow as pa
 
     for r in records:
@@ -91,16 +72,17 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
         dup = next(n for n in names if names.count(n) > 1)
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
     lst = pa.list_(pa.float64())
-    fields = [(k, lst) for k in ARRAY_KEYS] + [(k, getattr(pa, t)()) for k, t in META_TYPES]
+    fields = [(k, lst) for k in ARRAY_KEYS] + [(k, getattr(pa, t)()) for k, t in META_TYPES.items()]
     cols = [list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
     cols += [pa.array([getattr(r, k) for r in records], type=t) for k, t in fields[len(cols) :]]
     for k in MATRIX_KEYS:
-        if not any(spa.issparse(getattr(r.problem, k)) for r in records):
+        matrices = [getattr(r.problem, k) for r in records]
+        if not any(spa.issparse(M) for M in matrices):
             continue
-        parts = [_csc_parts(getattr(r.problem, k)) for r in records]
-        for j, (part, kind) in enumerate(CSC_COLUMNS):
+        parts = [csc_parts(M) if spa.issparse(M) else None for M in matrices]
+        for part, kind in CSC_TYPES.items():
             fields.append((f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())))
-            cols.append(list_column([None if p is None else p[j] for p in parts], kind))
+            cols.append(list_column([None if p is None else p[part] for p in parts], kind))
     return pa.Table.from_arrays(cols, schema=pa.schema(fields))
 
 
@@ -173,14 +155,7 @@ def write_problem_set(
         "versions": package_versions(),
         "columns": list(table.column_names),
     }
-    try:
-        text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
-    except (TypeError, ValueError) as exc:
-        raise ProblemFormatError(
-            f"generator/extra is not JSON-able ({exc})",
-            path=folder / MANIFEST_NAME,
-            key="generator",
-        ) from None
+    text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
     write_bytes(folder / PARQUET_NAME, data)
     write_text(folder / MANIFEST_NAME, text)
     return folder
@@ -194,13 +169,11 @@ def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
     rows = table.num_rows
     if pa.types.is_null(col.type):
         return [None] * rows
-    if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)):
-        raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
-    chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-    if not (
-        pa.types.is_floating(chunk.type.value_type) or pa.types.is_integer(chunk.type.value_type)
+    if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)) or not (
+        pa.types.is_floating(col.type.value_type) or pa.types.is_integer(col.type.value_type)
     ):
         raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
+    chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
     offsets = chunk.offsets.to_numpy()
     values = chunk.values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
     nulls = chunk.is_null().to_numpy(zero_copy_only=False)
@@ -208,25 +181,6 @@ def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
         None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype)
         for i in range(rows)
     ]
-
-
-def _read_table(path: Path, require_meta: bool):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    try:
-        table = pq.read_table(path)
-    except FileNotFoundError:
-        raise ProblemFormatError("no such file", path=path) from None
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise ProblemFormatError(
-            f"unreadable Parquet file ({type(exc).__name__}: {exc})", path=path
-        ) from None
-    required = list(PROBLEM_KEYS) + (list(META_KEYS) if require_meta else [])
-    for k in required:
-        if k not in table.column_names:
-            raise ProblemFormatError("missing column", path=path, key=k)
-    return table
 
 
 def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
@@ -255,20 +209,26 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
 
 
 def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
-    table = _read_table(path, require_meta)
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    with reading(path, "Parquet file", (pa.ArrowException, OSError, ValueError)):
+        table = pq.read_table(path)
+    for k in PROBLEM_KEYS + (META_KEYS if require_meta else ()):
+        if k not in table.column_names:
+            raise ProblemFormatError("missing column", path=path, key=k)
     rows = table.num_rows
     arrays = {k: _list_values(table, k, path) for k in ARRAY_KEYS}
     csc = {
-        k: [_list_values(table, f"{k}_csc_{part}", path, kind) for part, kind in CSC_COLUMNS]
+        k: [_list_values(table, f"{k}_csc_{part}", path, kind) for part, kind in CSC_TYPES.items()]
         for k in MATRIX_KEYS
         if f"{k}_csc_data" in table.column_names
     }
     names = table.column("name").to_pylist()
-
-    def meta(key):
-        return table.column(key).to_pylist() if key in table.column_names else [None] * rows
-
-    scen, tick, t, form, off = (meta(k) for k in META_KEYS)
+    meta = {
+        k: table.column(k).to_pylist() if k in table.column_names else [None] * rows
+        for k in META_KEYS
+    }
     records = []
     for i in range(rows):
         name = names[i] if names[i] is not None else f"{path.stem}-{i}"
@@ -286,18 +246,11 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
             k: _matrix(arrays, csc, k, i, n, fail) if k in MATRIX_KEYS else arrays[k][i]
             for k in ARRAY_KEYS
         }
-        if data["P"] is None:
-            fail("P", "missing")
-        offset = off[i]
-        rec = ProblemRecord(
-            problem=qpsolvers.Problem(**data),
-            name=name,
-            scenario=scen[i],
-            tick=None if tick[i] is None else int(tick[i]),
-            t=t[i],
-            formulation=form[i],
-            offset=0.0 if offset is None else float(offset),
-        )
+        fields = {k: meta[k][i] for k in META_KEYS}
+        if fields["tick"] is not None:
+            fields["tick"] = int(fields["tick"])
+        fields["offset"] = 0.0 if fields["offset"] is None else float(fields["offset"])
+        rec = ProblemRecord(qpsolvers.Problem(**data), name, **fields)
         check_record(rec, path=path)
         records.append(rec)
     return records
@@ -306,12 +259,8 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
 def read_manifest(folder: str | Path) -> dict:
     """Read and check ``folder/manifest.json``."""
     mpath = Path(folder) / MANIFEST_NAME
-    try:
+    with reading(mpath, "manifest", (OSError, ValueError)):
         manifest = json.loads(mpath.read_text())
-    except FileNotFoundError:
-        raise ProblemFormatError("no such file", path=mpath) from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ProblemFormatError(f"unreadable manifest ({exc})", path=mpath) from None
     if not isinstance(manifest, dict):
         raise ProblemFormatError("manifest is not a JSON object", path=mpath)
     for k in ("sha256", "count"):

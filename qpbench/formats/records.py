@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -12,12 +13,21 @@ import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
 
-#: Columns of qpbenchmark's ``ProblemList`` (order kept).
-PROBLEM_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub", "name")
 #: Array columns, in qpsolvers' argument order.
 ARRAY_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
+#: Columns of qpbenchmark's ``ProblemList`` (order kept).
+PROBLEM_KEYS = (*ARRAY_KEYS, "name")
+#: A record's metadata and its Arrow types (Parquet columns after the arrays).
+META_TYPES = {
+    "name": "string",
+    "scenario": "string",
+    "tick": "int64",
+    "t": "float64",
+    "formulation": "string",
+    "offset": "float64",
+}
 #: Metadata columns added by qpbench.
-META_KEYS = ("scenario", "tick", "t", "formulation", "offset")
+META_KEYS = tuple(META_TYPES)[1:]
 #: File names inside a problem-set folder.
 PARQUET_NAME = "problems.parquet"
 MANIFEST_NAME = "manifest.json"
@@ -25,8 +35,6 @@ MANIFEST_NAME = "manifest.json"
 NPZ_META_KEY = "qpbench_record"
 #: Version of the problem-set layout written in the manifest.
 FORMAT_VERSION = 1
-#: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
-MM_INFINITY = 1e20
 #: A sparse problem whose ``P, G, A`` made dense hold more entries than this is not also
 #: written dense for qpsolvers / qpbenchmark readers.
 DENSE_COPY_MAX = 1_000_000
@@ -35,6 +43,8 @@ SYMMETRY_RTOL = 1e-9
 
 #: The matrices of a problem (the parts that may be scipy.sparse).
 MATRIX_KEYS = ("P", "G", "A")
+#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types.
+CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 
 @dataclass
@@ -63,14 +73,7 @@ class ProblemRecord:
 
     def meta(self) -> dict:
         """The metadata as a JSON-able dict (everything but the problem)."""
-        return {
-            "name": self.name,
-            "scenario": self.scenario,
-            "tick": self.tick,
-            "t": self.t,
-            "formulation": self.formulation,
-            "offset": self.offset,
-        }
+        return {k: getattr(self, k) for k in META_TYPES}
 
 
 @dataclass
@@ -122,25 +125,38 @@ def solver_problem(problem: qpsolvers.Problem, dense: bool = False) -> qpsolvers
     return qpsolvers.Problem(*parts)
 
 
-def sorted_csc(M) -> spa.csc_matrix:
-    """``M`` as float64 CSC with sorted indices: how a sparse matrix is stored."""
+def csc_parts(M) -> dict[str, np.ndarray]:
+    """The stored arrays of a sparse matrix (:data:`CSC_TYPES`): its float64 CSC, indices
+    sorted."""
     M = spa.csc_matrix(M, dtype=np.float64)
     M.sort_indices()
-    return M
+    return {"data": M.data, "indices": M.indices, "indptr": M.indptr}
+
+
+@contextmanager
+def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Exception,)):
+    """Reading ``path``: a missing file is "no such file", one of ``errors`` "unreadable
+    ``what``", both a :class:`ProblemFormatError` naming the file."""
+    try:
+        yield
+    except FileNotFoundError:
+        raise ProblemFormatError("no such file", path=path) from None
+    except ProblemFormatError:
+        raise
+    except errors as exc:
+        msg = f"unreadable {what} ({type(exc).__name__}: {exc})"
+        raise ProblemFormatError(msg, path=path) from None
 
 
 def _numeric(v, key: str, fail):
     """``v`` as float64 (CSC for a sparse matrix), or a failure naming ``key``."""
-    if spa.issparse(v):
-        if v.dtype.kind not in "fiub":
-            fail(key, f"dtype {v.dtype} is not numeric")
-        return (
-            spa.csc_matrix(v, dtype=np.float64) if v.format != "csc" or v.dtype != np.float64 else v
-        )
-    v = np.asarray(v)
+    sparse = spa.issparse(v)
+    v = v if sparse else np.asarray(v)
     if v.dtype.kind not in "fiub":
         fail(key, f"dtype {v.dtype} is not numeric")
-    return v.astype(np.float64, copy=False)
+    if not sparse:
+        return v.astype(np.float64, copy=False)
+    return v if v.format == "csc" and v.dtype == np.float64 else spa.csc_matrix(v, dtype=np.float64)
 
 
 def _values(M) -> np.ndarray:
@@ -202,17 +218,14 @@ def check_problem(
         if arr[k] is not None and not np.all(np.isfinite(_values(arr[k]))):
             bad = "NaN" if np.any(np.isnan(_values(arr[k]))) else "Inf"
             fail(k, f"holds {bad} (only lb/ub may be infinite)")
-    if arr["lb"] is not None and (np.any(np.isnan(arr["lb"])) or np.any(arr["lb"] == np.inf)):
-        fail("lb", "holds NaN or +inf")
-    if arr["ub"] is not None and (np.any(np.isnan(arr["ub"])) or np.any(arr["ub"] == -np.inf)):
-        fail("ub", "holds NaN or -inf")
+    for k, wrong in (("lb", np.inf), ("ub", -np.inf)):
+        if arr[k] is not None and (np.any(np.isnan(arr[k])) or np.any(arr[k] == wrong)):
+            fail(k, f"holds NaN or {wrong:+}")
     values = _values(P)
     scale = float(np.max(np.abs(values))) if values.size else 0.0
-    if _asymmetry(P) > SYMMETRY_RTOL * scale:
-        fail(
-            "P",
-            f"is not symmetric (max |P - P'| = {_asymmetry(P):.3g} > {SYMMETRY_RTOL:g} max |P|)",
-        )
+    asym = _asymmetry(P)
+    if asym > SYMMETRY_RTOL * scale:
+        fail("P", f"is not symmetric (max |P - P'| = {asym:.3g} > {SYMMETRY_RTOL:g} max |P|)")
 
 
 def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
@@ -220,15 +233,12 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     from .convexity import assess_convexity
 
     check_problem(record.problem, path=path, name=record.name)
-    if not isinstance(record.name, str) or not record.name:
-        raise ProblemFormatError(
-            f"problem name {record.name!r} is not a non-empty string", path=path, key="name"
-        )
-    if not np.isfinite(record.offset):
-        raise ProblemFormatError(
-            f"problem '{record.name}': offset {record.offset} is not finite",
-            path=path,
-            key="offset",
-        )
+    name, offset = record.name, record.offset
+    if not isinstance(name, str) or not name:
+        msg = f"problem name {name!r} is not a non-empty string"
+        raise ProblemFormatError(msg, path=path, key="name")
+    if not np.isfinite(offset):
+        msg = f"problem '{name}': offset {offset} is not finite"
+        raise ProblemFormatError(msg, path=path, key="offset")
     if record.convexity is None:
         record.convexity = assess_convexity(record.problem.P)

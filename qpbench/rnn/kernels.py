@@ -1,15 +1,15 @@
 """The network's kernels: its parameter block ``prm``, its step bound and its integrator as loops.
 
-One module by necessity: numba resolves the functions a kernel calls (the ``*_jit`` names) from
-the globals of the module that defines the kernel, and :func:`kernel`, :func:`online_kernel` and
-:func:`packed_kernel` rebind those names to compiled versions (cached on disk) before the first
-compile. Without numba (``use_numba=False``) Python runs the same functions.
+One module: numba resolves the functions a kernel calls (the ``*_jit`` names) from the globals of
+the module that defines the kernel, and :func:`kernel` rebinds them to compiled versions (cached
+on disk) before the first compile. Without numba Python runs the same functions.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 from types import FunctionType
 from typing import TYPE_CHECKING
 
@@ -72,43 +72,30 @@ def make_params(
 ) -> np.ndarray:
     """The parameter block ``prm`` of the kernels.
 
-    Two modes:
+    Fixed duration (``r_total = duration / eps > 0``): steps of ratio at most ``step_ratio``
+    (a fixed step ``h = step_ratio * eps``), else ``substeps`` equal steps, else (both 0) the
+    fewest steps with ``r <= safety * ratio_max``; with ``clamp``, a forced step above ``safety *
+    ratio_max`` is shortened to it (more steps), the bound computed only when the step is above
+    a cheap lower estimate of it (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2``). To
+    convergence (``r_total <= 0``): steps of ``r = safety * ratio_max`` until the three
+    residuals are ``<= tol`` (negative: never), or ``max_steps`` steps.
 
-    - fixed duration (``r_total = duration / eps > 0``): steps of ratio at
-      most ``step_ratio`` (a fixed step ``h = step_ratio * eps``), else
-      ``substeps`` equal steps, else (both 0) the fewest steps with
-      ``r <= safety * ratio_max``. With ``clamp``, a forced step above
-      ``safety * ratio_max`` is shortened to it (more steps); the bound is
-      computed only when the step is above a cheap lower estimate of it
-      (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2`` for ``sigma_max^2``);
-    - to convergence (``r_total <= 0``): steps of ``r = safety * ratio_max``
-      until primal residual, dual residual and complementarity are all
-      ``<= tol``, or ``max_steps`` steps.
-
-    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``safety`` in (0, 1];
-    ``tol`` negative: never stop early; ``l1_clip``: clip ``l1`` to
-    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of
-    :data:`METHODS`.
+    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``l1_clip``: clip ``l1`` to
+    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of :data:`METHODS`.
     """
     if method not in METHODS:
         raise ParamError(
             f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
         )
-    prm = np.zeros(PRM_SIZE)
+    prm = np.zeros(PRM_SIZE)  # NOTE_NONE
     prm[PMIN], prm[PMAX] = p_range
+    prm[[R_TOTAL, SUBSTEPS, SAFETY]] = r_total, substeps, safety
+    prm[[MAX_STEPS, TOL, R_STEP]] = max_steps, tol, step_ratio
     prm[SEMI] = 1.0 if method == "semi-implicit" else 0.0
-    prm[R_TOTAL] = r_total
-    prm[SUBSTEPS] = substeps
-    prm[SAFETY] = safety
-    prm[MAX_STEPS] = max_steps
-    prm[TOL] = tol
     prm[L1_CLIP] = np.inf if l1_clip is None else l1_clip
-    prm[R_STEP] = step_ratio
     prm[CLAMP] = 1.0 if clamp else 0.0
-    prm[OK_PRIMAL] = prm[OK_DUAL] = -1.0
-    prm[STATE_ME] = -1.0
+    prm[OK_PRIMAL] = prm[OK_DUAL] = prm[STATE_ME] = -1.0
     prm[STEPS] = np.nan
-    prm[NOTE] = NOTE_NONE
     return prm
 
 
@@ -170,7 +157,7 @@ def step_note(prm: np.ndarray) -> str | None:
 
 
 def ratio_max(pmin, pmax, sig2, semi):
-    """Largest stable ``r = h/eps`` (:mod:`qpbench.rnn.network`); 0 if none."""
+    """Largest stable ``r = h/eps`` (derivation: docs/architecture.md); 0 if none."""
     if pmin <= 0.0:
         return 0.0
     if semi and pmin == pmax:
@@ -278,12 +265,12 @@ def sigma2_bound(A, G):
     return math.exp(logc / 2.0**SQUARINGS)
 
 
-def _matvec_off(M, xi, off, y):
-    """``y = M @ xi[off : off + M.shape[1]]``."""
+def _matvec(M, xi, y):
+    """``y = M @ xi[: M.shape[1]]``."""
     for i in range(M.shape[0]):
         s = 0.0
         for j in range(M.shape[1]):
-            s += M[i, j] * xi[off + j]
+            s += M[i, j] * xi[j]
         y[i] = s
 
 
@@ -331,8 +318,8 @@ def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
         w = min(max(xi[j] - g[j], lb[j]), ub[j])
         xi[j] += r * (w - xi[j])
     if semi:
-        _matvec_jit(A, xi, 0, Av)
-        _matvec_jit(G, xi, 0, Gv)
+        _matvec_jit(A, xi, Av)
+        _matvec_jit(G, xi, Gv)
     for i in range(me):
         xi[o1 + i] += r * (b[i] - Av[i])
         if l1_clip < np.inf:
@@ -511,12 +498,10 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
 def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
     """One call of the online network: :func:`_integrate_loops` plus its verdict.
 
-    Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and
-    complementarity within ``prm[OK_PRIMAL]``, dual residual within
-    ``prm[OK_DUAL]``; ``note``: the setting's step was clamped to the
-    stability bound, or no step is proven stable, see :func:`step_note`), or
-    :data:`SHAPE_MISMATCH` (also when the equality count is not the state's
-    ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`.
+    Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and complementarity within
+    ``prm[OK_PRIMAL]``, dual residual within ``prm[OK_DUAL]``; ``note``: :func:`step_note` has
+    something to say), or :data:`SHAPE_MISMATCH` (also when the equality count is not the
+    state's ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`.
     """
     if prm[STATE_ME] >= 0.0 and b.shape[0] != prm[STATE_ME]:
         return SHAPE_MISMATCH
@@ -536,29 +521,17 @@ def _part_fits(off, size, length):  # pragma: no cover - compiled
 
 
 def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
-    """:func:`_online_tick_loops` on a :class:`qpbench.packed.PackedProblem`'s buffer.
-
-    Reads the header, checks that every part lies inside the buffer and that
-    the sizes are the state's, and integrates on views of the buffer. A
-    problem without ``lb`` or ``ub`` gives :data:`SHAPE_MISMATCH` (the general
-    path handles it).
-    """
+    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer,
+    or :data:`SHAPE_MISMATCH` when a part lies outside it, the sizes are not the state's or
+    ``lb`` or ``ub`` is absent."""
     length = buf.shape[0]
     if length < HEADER:
         return SHAPE_MISMATCH
-    n = int(buf[0])
-    me = int(buf[1])
-    mi = int(buf[2])
+    n, me, mi = int(buf[0]), int(buf[1]), int(buf[2])
     if n < 1 or me < 0 or mi < 0 or n + me + mi != xi.shape[0]:
         return SHAPE_MISMATCH
-    oP = int(buf[3])
-    oq = int(buf[4])
-    oA = int(buf[5])
-    ob = int(buf[6])
-    oG = int(buf[7])
-    oh = int(buf[8])
-    olb = int(buf[9])
-    oub = int(buf[10])
+    oP, oq, oA, ob = int(buf[3]), int(buf[4]), int(buf[5]), int(buf[6])
+    oG, oh, olb, oub = int(buf[7]), int(buf[8]), int(buf[9]), int(buf[10])
     if not (
         _part_fits_jit(oP, n * n, length)
         and _part_fits_jit(oq, n, length)
@@ -587,24 +560,26 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
     )
 
 
-# The names the kernels call: plain functions until kernel() and packed_kernel() compile them.
+# The names the kernels call: plain functions until kernel() compiles them (inlined into their
+# callers where marked: a call costs more than these small loops, run every step; the integrator
+# and the online tick, called once a solve, are compiled as calls: inlining them copies their IR
+# into every caller and type, for no speed).
 _sigma2_bound_jit = sigma2_bound
 _ratio_max_jit = ratio_max
 _gershgorin_jit = _gershgorin
 _frobenius2_jit = _frobenius2
 _nominal_steps_jit = nominal_steps
 _clamped_steps_jit = clamped_steps
-_matvec_jit = _matvec_off
+_matvec_jit = _matvec
 _grad_products_jit = _grad_products
 _step_jit = _step
 _residuals_jit = _residuals
 _integrate_jit = _integrate_loops
 _online_tick_jit = _online_tick_loops
 _part_fits_jit = _part_fits
+_CALLS = ("_sigma2_bound_jit", "_ratio_max_jit", "_integrate_jit", "_online_tick_jit")
 _COMPILED = None
 _INTERPRETED = None
-_ONLINE = {}
-_PACKED = None
 
 
 def numba_available() -> bool:
@@ -616,29 +591,30 @@ def numba_available() -> bool:
     return True
 
 
+def _plain(fn):
+    return getattr(fn, "py_func", fn)
+
+
 def _interpreted() -> Callable:
     """:func:`_integrate_loops` run by Python on the plain functions, whatever is compiled."""
     names = dict(globals())
     for name, fn in list(names.items()):
         if name.endswith("_jit"):
-            names[name] = FunctionType(getattr(fn, "py_func", fn).__code__, names)
+            names[name] = FunctionType(_plain(fn).__code__, names)
     return names["_integrate_jit"]
 
 
 def kernel(use_numba: bool = True) -> Callable:
     """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
 
-    ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the
-    inputs ``PMIN .. L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``;
-    ``sol`` (length ``2n + me + mi``, or 0 to skip) receives ``[x; y; z; z_box]``
-    (``y = -l1``, ``z = l2``, ``z_box = w - P_Omega(w)`` with
-    ``w = v - g``: the part of ``w`` the projection cuts off). Returns the step count,
-    :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`. Compiled on the first call
-    of the result; ``use_numba=False``: the same loops run by Python (slow).
+    ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the inputs ``PMIN ..
+    L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``; ``sol`` (length ``2n + me + mi``, or
+    0 to skip) receives ``[x; y; z; z_box]`` (``y = -l1``, ``z = l2``, ``z_box = w -
+    P_Omega(w)`` with ``w = v - g``). Returns the step count, :data:`NO_STABLE_STEP` or
+    :data:`SHAPE_MISMATCH`. Compiled (with every function the kernels call) on the first call
+    of the result; ``use_numba=False``: the same loops run by Python.
     """
-    global _COMPILED, _INTERPRETED, _sigma2_bound_jit, _ratio_max_jit, _matvec_jit
-    global _grad_products_jit, _integrate_jit, _step_jit, _residuals_jit, _gershgorin_jit
-    global _frobenius2_jit, _nominal_steps_jit, _clamped_steps_jit
+    global _COMPILED, _INTERPRETED
     if not use_numba:
         if _INTERPRETED is None:
             _INTERPRETED = _interpreted()
@@ -646,69 +622,46 @@ def kernel(use_numba: bool = True) -> Callable:
     if _COMPILED is None:
         import numba
 
-        jit = numba.njit(cache=True)
-        inline = numba.njit(cache=True, inline="always")
-        _sigma2_bound_jit = jit(sigma2_bound)
-        _ratio_max_jit = jit(ratio_max)
-        _gershgorin_jit = inline(_gershgorin)
-        _frobenius2_jit = inline(_frobenius2)
-        _nominal_steps_jit = inline(nominal_steps)
-        _clamped_steps_jit = inline(clamped_steps)
-        # inlined into their callers (numba IR): a call costs more than these small products,
-        # run hundreds of times a solve by the Euler step's loop. The integrator and the online
-        # tick, called once a solve, are compiled as calls: inlining them copies their IR into
-        # every caller and type, most of the compile time, for no speed (bench/rnn_speed.py).
-        _matvec_jit = inline(_matvec_off)
-        _grad_products_jit = inline(_grad_products)
-        _step_jit = inline(_step)
-        _residuals_jit = inline(_residuals)
-        _COMPILED = _integrate_jit = jit(_integrate_loops)
+        names = globals()
+        for name in [k for k in names if k.endswith("_jit")]:
+            inline = "never" if name in _CALLS else "always"
+            names[name] = numba.njit(cache=True, inline=inline)(_plain(names[name]))
+        _COMPILED = names["_integrate_jit"]
     return _COMPILED
 
 
-def online_kernel(strict: bool = True) -> Callable:
-    """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``.
+def _signature(*ndims):
+    import numba
 
-    :func:`kernel`'s arguments, ``sol`` of length ``3 n + 2 (me + mi)``;
-    returns :func:`_online_tick_loops`'s code. ``strict``: compiled for exactly
-    C-contiguous writable float64 arrays (``P``, ``A``, ``G`` 2-D), so numba's
-    dispatcher raises ``TypeError`` for anything else: the whole type check of
-    the online backend's per-tick path. Else compiled for what it is given.
+    return numba.int64(*(numba.types.Array(numba.float64, d, "C") for d in ndims))
+
+
+@cache
+def online_kernel() -> Callable:
+    """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``
+    (:func:`_online_tick_loops`), ``sol`` of length ``3 n + 2 (me + mi)``.
+
+    Compiled for exactly C-contiguous writable float64 arrays (``P``, ``A``, ``G`` 2-D), so
+    numba's dispatcher raises ``TypeError`` for anything else: the whole type check of the
+    online backend's per-tick path.
     """
-    fn = _ONLINE.get(strict)
-    if fn is None:
-        import numba
+    import numba
 
-        kernel(True)  # binds the integrator the tick calls
-        if strict:
-            a1 = numba.types.Array(numba.float64, 1, "C")
-            a2 = numba.types.Array(numba.float64, 2, "C")
-            sig = numba.int64(a2, a1, a2, a1, a2, a1, a1, a1, a1, a1, a1)
-            fn = numba.njit(sig, cache=True)(_online_tick_loops)
-        else:
-            fn = numba.njit(cache=True)(_online_tick_loops)
-        _ONLINE[strict] = fn
-    return fn
+    kernel(True)  # binds the integrator the tick calls
+    sig = _signature(2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
+    return numba.njit(sig, cache=True)(_online_tick_loops)
 
 
+@cache
 def packed_kernel() -> Callable:
-    """The per-tick kernel on a packed buffer: ``f(buffer, xi, prm, sol) -> code``.
+    """The per-tick kernel on a :class:`qpbench.packed.PackedProblem`'s buffer: ``f(buffer, xi,
+    prm, sol) -> code``, for 1-D C-contiguous float64 arrays only: the compiled function's own
+    entry point when numba exposes it (it skips the dispatcher's type matching)."""
+    import numba
 
-    Compiled for 1-D C-contiguous float64 arrays only, and returned as the
-    compiled function's own entry point when numba exposes it (it skips the
-    dispatcher's type matching), so every argument must be of that type:
-    :class:`qpbench.packed.PackedProblem` guarantees it for its buffer.
-    """
-    global _PACKED, _online_tick_jit, _part_fits_jit
-    if _PACKED is None:
-        import numba
-
-        _online_tick_jit = online_kernel(strict=False)
-        _part_fits_jit = numba.njit(cache=True, inline="always")(_part_fits)
-        a1 = numba.types.Array(numba.float64, 1, "C")
-        disp = numba.njit(numba.int64(a1, a1, a1, a1), cache=True)(_online_tick_packed_loops)
-        try:
-            _PACKED = disp.overloads[disp.signatures[0]].entry_point
-        except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
-            _PACKED = disp
-    return _PACKED
+    kernel(True)
+    disp = numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
+    try:
+        return disp.overloads[disp.signatures[0]].entry_point
+    except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
+        return disp

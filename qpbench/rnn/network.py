@@ -13,54 +13,23 @@ with the objective's gradient ``P v + q`` where the paper prints a garbled
 equilibrium the qpsolvers duals are ``y = -l1``, ``z = l2`` and
 ``z_box = -(P v + q + A^T y + G^T z)``.
 
-Integration. Writing ``r = h / eps`` for a step of ``h`` seconds, explicit
-Euler is ``xi <- xi + r * f(xi)``. Away from the kinks of the projections
-the network is linear with matrix ``M = [[P, -C^T], [C, 0]]``,
-``C = [A; -G]`` (rows of active inequalities), whose eigenvalues ``lam``
-satisfy ``Re lam = u^H P u`` for a unit eigenvector ``(u, w)``. Euler is
-stable when ``|1 - r lam| < 1`` for all of them, which holds when::
-
-    r < min(lambda_min(P) / sigma_max(C)^2,  2 / lambda_max(P))
-
-(complex eigenvalues have ``|u|^2 = 1/2`` and ``|lam| <= sigma_max(C)``;
-real ones ``lam <= lambda_max(P)``). For the paper's ``P = I`` this is the
-note's ``r sigma_max^2 < 1``. Taking every row of ``A`` and ``G`` in ``C``
-bounds every active set (a subset of rows has a smaller ``sigma_max``); the
-box is handled by the projection and adds decoupled modes with eigenvalue 1.
-``sigma_max(C)^2`` is bounded from above without an eigen-decomposition by
-``tr(B^(2^k))^(1/2^k)`` with ``B = A^T A + G^T G`` (``k = 5`` squarings of
-an ``n x n`` matrix; at most ``rank(B)^(1/32)`` above the true value).
-
-The ``semi-implicit`` method updates ``v`` first and feeds the new ``v`` to the
-dual updates (symplectic Euler). For ``P = p I`` each singular value ``sigma``
-of ``C`` gives the 2x2 step matrix ``[[1 - r p, r sigma], [-r sigma (1 - r p),
-1 - r^2 sigma^2]]``, stable (Jury) when ``r p < 2`` and
-``r < 4 / (p + sqrt(p^2 + 4 sigma^2))`` -- about ``2 / sigma`` instead of
-Euler's ``1 / sigma^2``. For a ``P`` that is not a multiple of the identity the
-semi-implicit method uses Euler's bound.
-
-This module holds the problem, the state and the entry points; the integrator, its
-parameter block and its step bound are :mod:`.kernels`.
+Explicit Euler steps ``xi <- xi + r f(xi)`` of ratio ``r = h / eps`` for a step of ``h``
+seconds, or semi-implicit ones (``v`` first, the new ``v`` fed to the dual updates); the
+stability bound of ``r`` is :func:`~.kernels.ratio_max` (derivation: docs/architecture.md).
+The integrator, its parameter block and its step bound are :mod:`.kernels`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
-from .kernels import (  # noqa: F401 - also the network's names for its callers
-    METHODS,
-    SHAPE_MISMATCH,
-    IntegrationResult,
-    kernel,
-    make_params,
-    packed_kernel,
-    result,
-)
+from .kernels import IntegrationResult, kernel, make_params, result
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -90,28 +59,18 @@ class DenseQP:
         return self.q.shape[0], self.b.shape[0], self.h.shape[0]
 
 
-_EMPTIES: dict = {}
-
-
+@cache
 def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Cached ``(zeros((0, n)), zeros(0))``: no constraint rows.
-
-    Writable like the rows a problem has (they hold nothing to protect): numba types a
-    read-only array apart, so read-only empties would compile the integrator again for
-    every combination of absent and present rows.
-    """
-    pair = _EMPTIES.get(n)
-    if pair is None:
-        pair = _EMPTIES[n] = (np.zeros((0, n)), np.zeros(0))
-    return pair
+    """``(zeros((0, n)), zeros(0))``: no constraint rows (writable like a problem's rows: numba
+    compiles a read-only array type apart)."""
+    return np.zeros((0, n)), np.zeros(0)
 
 
+@cache
 def infinite(n: int, value: float) -> np.ndarray:
-    """Cached read-only ``full(n, value)``: an absent bound."""
-    arr = _EMPTIES.get((n, value))
-    if arr is None:
-        arr = _EMPTIES[(n, value)] = np.full(n, value)
-        arr.flags.writeable = False
+    """Read-only ``full(n, value)``: an absent bound."""
+    arr = np.full(n, value)
+    arr.flags.writeable = False
     return arr
 
 
@@ -128,11 +87,17 @@ def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarra
     return M, v
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _f64(a, name: str, ndim: int) -> np.ndarray:
-    if spa.issparse(a):
-        a = a.toarray()
-    if type(a) is not np.ndarray or a.dtype != np.float64 or not a.flags.c_contiguous:
-        a = np.ascontiguousarray(a, dtype=np.float64)
+    """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a row or a column
+    vector taken as the other)."""
+    if type(a) is np.ndarray and a.dtype == _F64 and a.flags.c_contiguous:
+        if a.ndim == ndim:
+            return a
+    else:
+        a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
     if a.ndim != ndim:
         if ndim == 2 and a.ndim == 1:
             a = a.reshape(1, -1)
@@ -171,10 +136,6 @@ class NetworkState:
     __slots__ = ("xi", "n", "me", "mi")
 
     def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
-        if xi.shape != (n + me + mi,):
-            raise ParamError(
-                f"state of shape {xi.shape} does not hold n={n}, me={me}, mi={mi}", key="state"
-            )
         self.xi = xi
         self.n, self.me, self.mi = n, me, mi
 
@@ -220,9 +181,6 @@ class NetworkState:
     def copy(self) -> NetworkState:
         return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
 
-    def __repr__(self) -> str:
-        return f"NetworkState(v={self.v!r}, l1={self.l1!r}, l2={self.l2!r})"
-
 
 def p_eigen_range(P: np.ndarray) -> tuple[float, float]:
     """``(lambda_min, lambda_max)`` of the symmetric part of ``P``."""
@@ -242,22 +200,14 @@ def integrate(
 ) -> IntegrationResult:
     """Integrate the network on ``qp`` from ``state`` (updated in place).
 
-    ``settings``: those of :func:`make_params` (``r_total`` is the duration
-    over ``eps``); ``p_range`` defaults to the eigenvalues of ``P``.
-    ``steps == NO_STABLE_STEP`` when ``P`` is not positive definite and no
-    step count was forced.
+    ``settings``: those of :func:`make_params` (``r_total``: the duration over ``eps``);
+    ``p_range`` defaults to the eigenvalues of ``P``. ``steps == NO_STABLE_STEP`` when ``P``
+    is not positive definite and no step count was forced.
     """
     if state.shape != qp.shape:
         raise ParamError(
             f"state shape {state.shape} does not match problem {qp.shape}", key="state"
         )
     prm = make_params(p_range=p_range or p_eigen_range(qp.P), **settings)
-    steps = kernel(use_numba)(
-        qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, _NO_SOL
-    )
-    if steps == SHAPE_MISMATCH:  # pragma: no cover - dense_qp checked the shapes
-        raise ProblemFormatError("inconsistent problem shapes", key="P")
+    kernel(use_numba)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, np.zeros(0))
     return result(prm)
-
-
-_NO_SOL = np.zeros(0)
