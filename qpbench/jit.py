@@ -136,12 +136,9 @@ def _warm_shims() -> int:
         return 0
     if qpoases.unavailable_reason() is not None:
         return 0
-    from .backends import _qpoases_shim as shim
-
-    before = shim.LOADED[:]
-    existed = shim.shim_path(shim.qpoases_prefix()).is_file()
+    compiled = qpoases.needs_compile()
     qpoases.prepare()
-    return int(not existed and not before)
+    return int(compiled)
 
 
 def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str, ...]:

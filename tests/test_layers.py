@@ -244,23 +244,6 @@ def test_the_pools_settings_are_defined_once_in_runner_process():
     assert defined == {name: [PROCESS_OWNER] for name in POOL_SETTINGS}
 
 
-def test_no_private_name_of_the_runner_is_imported_elsewhere():
-    found = []
-    for module, tree in _trees().items():
-        package = module if _modules()[module].name == "__init__.py" else module.rpartition(".")[0]
-        for node in ast.walk(tree):
-            if not isinstance(node, ast.ImportFrom):
-                continue
-            source = node.module or ""
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                source = ".".join(base + ([node.module] if node.module else []))
-            if not source.startswith("qpbench.runner"):
-                continue
-            found += [f"{module}: {source}.{a.name}" for a in node.names if a.name.startswith("_")]
-    assert found == []
-
-
 MAX_FUNCTION_LINES = 80
 
 #: The only functions allowed past the size limit: numba kernels kept whole by
@@ -327,3 +310,49 @@ def test_no_function_over_80_lines():
 def test_size_exceptions_are_still_needed():
     stale = sorted(set(SIZE_EXCEPTIONS) - set(_too_long()))
     assert stale == [], f"within the limits now, drop from SIZE_EXCEPTIONS: {stale}"
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _private_imports() -> list[str]:
+    """``module: source.name`` for every private name, or private module, a module imports from
+    outside its own package (a module's private names are its own; a package's private modules,
+    ``backends._common``, are its package's)."""
+    found = []
+    for module, tree in _trees().items():
+        package = module if _modules()[module].name == "__init__.py" else module.rpartition(".")[0]
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                source = node.module or ""
+                if node.level:
+                    parts = package.split(".")
+                    base = parts[: len(parts) - node.level + 1]
+                    source = ".".join(base + ([node.module] if node.module else []))
+                pairs = [(source, a.name) for a in node.names]
+            elif isinstance(node, ast.Import):
+                pairs = [tuple(a.name.rpartition(".")[::2]) for a in node.names]
+            else:
+                continue
+            for source, name in pairs:
+                if not source.startswith("qpbench"):
+                    continue
+                target = f"{source}.{name}"
+                if target in _modules():  # a module: private ones stay in their package
+                    owner = source
+                    if _private(name) and not (module + ".").startswith(owner + "."):
+                        found.append(f"{module}: {target}")
+                    continue
+                if _private(name) and source != module:
+                    found.append(f"{module}: {target}")
+                hidden = [p for p in source.split(".") if _private(p)]
+                if hidden:
+                    owner = source[: source.index("." + hidden[0])]
+                    if not (module + ".").startswith(owner + "."):
+                        found.append(f"{module}: {target}")
+    return sorted(found)
+
+
+def test_no_module_imports_another_modules_private_names():
+    assert _private_imports() == []

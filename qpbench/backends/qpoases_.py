@@ -123,11 +123,16 @@ class QpoasesBackend(Backend):
         return shim.load()
 
     @classmethod
-    def unavailable_reason(cls) -> str | None:
+    def needs_compile(cls) -> bool:
+        """Whether :meth:`prepare` would compile the shim (neither loaded nor built yet)."""
         prefix = shim.qpoases_prefix()
-        if prefix is None:
+        return not shim.LOADED and not (prefix and shim.shim_path(prefix).is_file())
+
+    @classmethod
+    def unavailable_reason(cls) -> str | None:
+        if shim.qpoases_prefix() is None:
             return "cmeel-qpoases is not installed (pip install cmeel-qpoases)"
-        if shim.LOADED or shim.shim_path(prefix).is_file():
+        if not cls.needs_compile():
             return None
         if shim.compiler() is None:
             return "no C++ compiler ($CXX, g++ or c++) to build the qpOASES shim"
