@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import register
+
+# the same helpers as clarabel_'s: both solve the stacked CSC layout of _common
 from ._common import (
     EMPTY,
     GENERIC_KEYS,
