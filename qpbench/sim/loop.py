@@ -330,10 +330,27 @@ class _Run:
         """The tick kernel (:mod:`qpbench.sim.tick_kernel`) on tick ``k`` with velocity ``x``
         [rad/s], duals ``y, z`` (``None``: none) and the tick's solve time ``solve_s`` [s]."""
         a, none = arrays, self.none
-        y, z = none if y is None else y, none if z is None else z
-        geometry = (a.ee, self.sensed, a.J, a.b0, a.dist, a.xd)
-        tail = (self.data, k, self.ci, self.cf, t, mode, kp, kd, solve_s)
-        return self.post(self.theta, x, *geometry, y, z, *tail)
+        return self.post(
+            self.theta,
+            x,
+            a.ee,
+            self.sensed,
+            a.J,
+            a.b0,
+            a.dist,
+            a.xd,
+            none if y is None else y,
+            none if z is None else z,
+            self.data,
+            k,
+            self.ci,
+            self.cf,
+            t,
+            mode,
+            kp,
+            kd,
+            solve_s,
+        )  # arguments spelled out: no tuples built on the per-tick path
 
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated."""
