@@ -269,11 +269,12 @@ class Controller:
         return cols
 
 
-def check_formulation(formulation: str) -> bool:
-    """Whether ``formulation`` (one of :data:`FORMULATIONS`) is ``soft``; else :class:`ParamError`."""
+def check_formulation(formulation: str, key: str = "formulation") -> bool:
+    """Whether ``formulation`` (one of :data:`FORMULATIONS`) is ``soft``; else :class:`ParamError`
+    naming ``key``."""
     if formulation not in FORMULATIONS:
         raise ParamError(
             f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
-            key="formulation",
+            key=key,
         )
     return formulation == "soft"

@@ -27,11 +27,12 @@ import pandas as pd
 
 from ..atomic import atomic_path, check_folder, check_output, record
 from ..backends import plugin_files
+from ..control.controller import check_formulation
 from ..exceptions import ParamError, positive_seconds
 from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
-from ..statuses import FORMULATIONS, describe_exception
+from ..statuses import describe_exception
 from .isolation import ISOLATE, wants_worker
 
 log = logging.getLogger("qpbench.harness")
@@ -354,11 +355,7 @@ def _drop_partial_logs(task: LoopTask) -> None:
 
 def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dict) -> None:
     """The arguments checked before anything is written or run (errors naming the option)."""
-    if formulation not in FORMULATIONS:
-        raise ParamError(
-            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
-            key="--formulation",
-        )
+    check_formulation(formulation, key="--formulation")
     parse_list(list(scenarios), "--scenarios")  # a name given twice is refused, as everywhere
     parse_list(list(backends), "--backends")
     for key, value in times.items():

@@ -209,7 +209,8 @@ def _warn_verdict_overrides(overrides: dict, file) -> None:
         )
 
 
-_OVERRIDE_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
+#: ``table.key`` or ``table[index].key``: a key of ``--set`` and of a sweep's parameters.
+OVERRIDE_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
 
 
 def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>") -> dict:
@@ -221,7 +222,7 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
     """
     raw = copy.deepcopy(raw)
     for key, value in overrides.items():
-        match = _OVERRIDE_KEY.fullmatch(str(key))
+        match = OVERRIDE_KEY.fullmatch(str(key))
         if match is None:
             raise ScenarioError("expected TABLE.KEY or obstacles[i].KEY", path=file, key=key)
         table, index, name = match.groups()

@@ -20,13 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
+from ..sim.scenario import OVERRIDE_KEY
 
 #: Other names a reader may give a scenario key (the table is found in the base scenario).
 ALIASES = {"fd": "desired_force", "noise": "force_noise_std", "speed": "omega", "center": "centre"}
 
 _SWEEP_KEYS = ("name", "base", "seed", "samples", "duration", "safe_start")
 _TOP = ("sweep", "parameters", "convergence", "obstacles")
-SCENARIO_KEY = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?\.([A-Za-z_][A-Za-z0-9_]*)")
 
 
 #: Distribution kinds and their allowed fields (``dist`` aside).
@@ -385,7 +385,7 @@ def _base_value(key: str, base_raw: dict, path):
     def bad(message: str) -> InputError:
         return InputError(message, path=path, key=f"parameters.{key}")
 
-    match = SCENARIO_KEY.fullmatch(key)
+    match = OVERRIDE_KEY.fullmatch(key)
     if match is None:
         name = ALIASES.get(key.casefold(), key.casefold())
         tables = [t for t, v in base_raw.items() if isinstance(v, dict) and name in v]
