@@ -4,6 +4,7 @@ one clear line and exits with :attr:`QpbenchError.exit_code`."""
 from __future__ import annotations
 
 import math
+import numbers
 from pathlib import Path
 
 
@@ -87,3 +88,11 @@ def positive_seconds(value, key: str, path: str | Path | None = None) -> float:
     if isinstance(value, bool) or not (seconds > 0 and math.isfinite(seconds)):
         raise ParamError(f"must be a positive number of seconds, got {value!r}", path=path, key=key)
     return seconds
+
+
+def positive_count(value, key: str, path: str | Path | None = None) -> int:
+    """``value`` if an integer >= 1, else a :class:`ParamError` naming ``key``: the one check of
+    every count argument (jobs, repeats, strides, limits)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise ParamError(f"must be an integer >= 1, got {value!r}", path=path, key=key)
+    return int(value)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import fnmatch
 from typing import TYPE_CHECKING
 
-from .exceptions import ParamError, did_you_mean
+from .exceptions import ParamError, did_you_mean, positive_count
 
 if TYPE_CHECKING:
     from .formats import ProblemSet
@@ -26,10 +26,9 @@ def select_records(
     Raises:
         ParamError: ``every`` or ``limit`` below 1, or a pattern that matches nothing.
     """
-    if every is not None and every < 1:
-        raise ParamError(f"must be an integer >= 1, got {every}", key="every")
-    if limit is not None and limit < 1:
-        raise ParamError(f"must be an integer >= 1, got {limit}", key="limit")
+    for key, value in (("every", every), ("limit", limit)):
+        if value is not None:
+            positive_count(value, key)
     kept = list(records)
     if pattern:
         pats = [p.strip() for p in pattern.split(",") if p.strip()]

@@ -157,15 +157,14 @@ def _reference_source(args: argparse.Namespace, config) -> object:
 
     from tqdm import tqdm
 
-    from ..exceptions import ParamError, positive_seconds
+    from ..exceptions import ParamError, positive_count, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
     from ..reference import SOURCES, cache_folder, from_objectives, reference_solutions
     from ..runner.process import context
 
     source = args.reference
-    if args.jobs < 1:
-        raise ParamError(f"--jobs must be >= 1, got {args.jobs}", key="jobs")
+    positive_count(args.jobs, "jobs")
     profile = get_profile(config.profile)
     limit = profile.reference_time_limit
     if args.reference_time_limit is not None:

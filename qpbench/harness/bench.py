@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..backends import backend_class
-from ..exceptions import InputError, ParamError, positive_seconds
+from ..exceptions import InputError, ParamError, positive_count, positive_seconds
 from ..profiles import Profile, get_profile
 from ..selection import parse_list
 from ..statuses import FAILURE_STATUSES
@@ -74,8 +74,7 @@ class BenchConfig:
                 raise ParamError(
                     f"unknown {what} '{value}' (choose from {', '.join(choices)})", key=key
                 )
-        if int(self.repeat) < 1:
-            raise ParamError(f"repeat must be >= 1, got {self.repeat}", key="repeat")
+        positive_count(self.repeat, "repeat")
         if self.time_limit is not None:
             self.time_limit = positive_seconds(self.time_limit, "time-limit")
         seed = self.seed

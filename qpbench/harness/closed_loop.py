@@ -28,7 +28,7 @@ import pandas as pd
 from ..atomic import atomic_path, check_folder, check_output, record
 from ..backends import plugin_files
 from ..control.controller import check_formulation
-from ..exceptions import ParamError, positive_seconds
+from ..exceptions import ParamError, positive_count, positive_seconds
 from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
@@ -361,8 +361,7 @@ def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dic
     for key, value in times.items():
         if value is not None:
             positive_seconds(value, key)
-    if jobs < 1:
-        raise ParamError(f"jobs must be >= 1, got {jobs}", key="--jobs")
+    positive_count(jobs, "--jobs")
     if isolate not in ISOLATE:
         raise ParamError(
             f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate"

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..atomic import promote, record, write_text
-from ..exceptions import ParamError, positive_seconds
+from ..exceptions import positive_count, positive_seconds
 
 if TYPE_CHECKING:
     from ..formats import ProblemSet
@@ -91,8 +91,7 @@ class RunConfig:
             ("--repeat", self.repeat),
             ("--jobs", self.jobs),
         ):
-            if value < 1:
-                raise ParamError(f"must be an integer >= 1, got {value}", key=key)
+            positive_count(value, key)
 
 
 @dataclass

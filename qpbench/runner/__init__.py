@@ -13,7 +13,7 @@ import logging
 import os
 from collections.abc import Callable, Iterator
 
-from ..exceptions import ParamError
+from ..exceptions import ParamError, positive_count
 from .dask_ import DaskExecutor, load_security
 from .process import MAX_ATTEMPTS, Done, run_located, run_tasks
 
@@ -78,8 +78,7 @@ def make_executor(
         raise ParamError(
             f"unknown executor '{name}' (choose from {', '.join(EXECUTORS)})", key="--executor"
         )
-    if jobs < 1:
-        raise ParamError(f"must be >= 1, got {jobs}", key="--jobs")
+    positive_count(jobs, "--jobs")
     if name == "local":
         if scheduler is not None or security_file is not None:
             raise ParamError("--scheduler and --security need --executor dask", key="--scheduler")

@@ -32,7 +32,7 @@ import pandas as pd
 
 from ..backends import Backend, backend_class, get_backend
 from ..control.controller import check_formulation
-from ..exceptions import ParamError, positive_seconds
+from ..exceptions import ParamError, positive_count, positive_seconds
 from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
@@ -85,8 +85,8 @@ def resolve_backend(
 def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
     """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
     check_formulation(formulation)
-    if every is not None and (not isinstance(every, (int, np.integer)) or every < 1):
-        raise ParamError(f"must be an integer >= 1, got {every!r}", key="every")
+    if every is not None:
+        positive_count(every, "every")
     for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):
         if isinstance(value, str):  # float() would read it, but the API takes numbers
             raise ParamError(f"expected a positive number of seconds, got {value!r}", key=key)
