@@ -140,7 +140,8 @@ def _status(solver: str, solution) -> str:
 
 @dataclass
 class Candidate:
-    """One reference solver's answer; ``wall_s`` [s], ``known_kkt`` a worker's computed ``kkt``."""
+    """One reference solver's answer; ``wall_s`` [s]; ``kkt`` computed from ``solution`` when
+    not given (``inf`` without one)."""
 
     solver: str
     status: str
@@ -149,13 +150,11 @@ class Candidate:
     reason: str = ""
     timed_out: bool = False
     wall_s: float = math.nan
-    known_kkt: float | None = None
+    kkt: float | None = None
 
-    @property
-    def kkt(self) -> float:
-        if self.known_kkt is not None:
-            return self.known_kkt
-        return math.inf if self.solution is None else float(_worst_residual(self.solution))
+    def __post_init__(self):
+        if self.kkt is None:
+            self.kkt = math.inf if self.solution is None else float(_worst_residual(self.solution))
 
     def describe(self) -> str:
         """``solver status`` with its objective and KKT residual, or the reason for no verdict."""
@@ -195,14 +194,10 @@ def solve_candidate(
 
 def solve_task(task: tuple) -> Candidate:
     """:func:`solve_candidate` of ``(record, solver, time_limit)`` in a worker: a picklable
-    answer (no solver objects), and a bug in one task an ``unknown`` answer, not the others' end."""
-    record, solver, time_limit = task
-    try:
-        c = solve_candidate(record, solver, time_limit)
-    except Exception as exc:  # noqa: BLE001 - see the docstring
-        return Candidate(solver, "unknown", None, reason=describe_exception(exc))
+    answer (the solution's vectors, no solver objects)."""
+    c = solve_candidate(*task)
     sol = c.solution and SimpleNamespace(**{k: getattr(c.solution, k) for k in _VEC_KEYS})
-    return dataclasses.replace(c, solution=sol, known_kkt=c.kkt)
+    return dataclasses.replace(c, solution=sol)
 
 
 def needs_solver(record: ProblemRecord) -> bool:
@@ -253,32 +248,25 @@ def reference_solution(
     )
 
 
-def relative_difference(f1: float, f2: float) -> float:
-    """``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN when either is NaN)."""
-    if math.isnan(f1) or math.isnan(f2):
-        return math.nan
-    return abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
-
-
-def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str]:
-    """``(kept, other, status)``: of two optimal answers the smaller ``kkt``; one optimal
+def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str, str]:
+    """``(kept, other, status, why)``: of two optimal answers the smaller ``kkt``; one optimal
     answer is kept if the other is ``unknown`` or its ``kkt <= ALMOST_TOL`` (it refutes an
     infeasibility claim), else the other's verdict; neither: the common status, a verdict
     over ``unknown``, ``unknown`` for two different verdicts."""
-    s1, s2 = first.status, second.status
-    if s1 == s2 == "optimal":
-        return (first, second, s1) if first.kkt <= second.kkt else (second, first, s2)
-    if "optimal" in (s1, s2):
-        opt, other = (first, second) if s1 == "optimal" else (second, first)
-        if other.status == "unknown" or opt.kkt <= ALMOST_TOL:
-            return opt, other, "optimal"
-        return other, opt, other.status
-    if s1 == s2:
-        return first, second, s1
-    if "unknown" in (s1, s2):
-        verdict, other = (first, second) if s2 == "unknown" else (second, first)
-        return verdict, other, verdict.status
-    return first, second, "unknown"
+    if first.status == second.status == "optimal":
+        keep, other = (first, second) if first.kkt <= second.kkt else (second, first)
+        return keep, other, "optimal", f"kept {keep.solver}: smaller KKT residuals"
+    swap = second.status == "optimal" or first.status == "unknown" != second.status
+    keep, other = (second, first) if swap else (first, second)
+    if keep.status == "optimal":
+        if other.status == "unknown" or keep.kkt <= ALMOST_TOL:
+            return keep, other, "optimal", f"kept {keep.solver}: the only optimal answer"
+        keep, other = other, keep
+    if keep.status == "unknown":
+        return keep, other, "unknown", "no reference: no verdict from either solver"
+    if other.status not in (keep.status, "unknown", "optimal"):
+        return keep, other, "unknown", "no reference: the solvers' verdicts contradict each other"
+    return keep, other, keep.status, f"kept {keep.solver}'s verdict {keep.status}"
 
 
 def assemble(
@@ -289,15 +277,15 @@ def assemble(
         ref = combine(name, *candidates)
     else:
         (only,) = candidates
-        ref = _from_candidate(name, only, only.status)
-        ref.note = f"{only.describe()}; {only.solver} alone (no cross-check)"
+        note = f"{only.describe()}; {only.solver} alone (no cross-check)"
+        ref = _from_candidate(name, only, only.status, note=note)
     ref.time_limit_s = math.inf if time_limit is None else float(time_limit)
     ref.timed_out = any(c.timed_out for c in candidates)
     return ref
 
 
-def _from_candidate(name, keep: Candidate, status: str) -> ReferenceSolution:
-    ref = ReferenceSolution(status=status, solver=keep.solver, kkt=keep.kkt, name=name)
+def _from_candidate(name, keep: Candidate, status: str, **fields) -> ReferenceSolution:
+    ref = ReferenceSolution(status, solver=keep.solver, kkt=keep.kkt, name=name, **fields)
     if status == "optimal":
         ref.objective = keep.objective
         for k in _VEC_KEYS:
@@ -306,34 +294,24 @@ def _from_candidate(name, keep: Candidate, status: str) -> ReferenceSolution:
     return ref
 
 
-def _why(keep: Candidate, other: Candidate, status: str) -> str:
-    if status == "optimal" and other.status == "optimal":
-        return f"kept {keep.solver}: smaller KKT residuals"
-    if status == "optimal":
-        return f"kept {keep.solver}: the only optimal answer"
-    if status == "unknown":
-        return "no reference: " + (
-            "no verdict from either solver"
-            if keep.status == other.status
-            else "the solvers' verdicts contradict each other"
-        )
-    return f"kept {keep.solver}'s verdict {status}"
-
-
 def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
     """The reference made of two solvers' answers (:func:`settle`); they agree when their
-    statuses match and, when optimal, :func:`relative_difference` <= ``AGREE_RTOL``."""
-    agreement = relative_difference(first.objective, second.objective)
+    statuses match and, when optimal, their ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)``
+    (NaN unless both are) is at most ``AGREE_RTOL``."""
+    f1, f2 = first.objective, second.objective
+    agreement = abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
     agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
-    keep, other, status = settle(first, second)
+    keep, other, status, why = settle(first, second)
     verdict = "agree" if agree else "disagree"
     if first.status == second.status == "optimal":
         verdict += f" (objectives differ by {agreement:.2g} relative)"
-    note = f"{first.describe()}; {second.describe()}; {verdict}; {_why(keep, other, status)}"
+    note = f"{first.describe()}; {second.describe()}; {verdict}; {why}"
     if not agree:
         log.warning("reference of '%s': %s", name, note)
-    return dataclasses.replace(
-        _from_candidate(name, keep, status),
+    return _from_candidate(
+        name,
+        keep,
+        status,
         check_solver=other.solver,
         check_status=other.status,
         check_objective=other.objective,
@@ -342,18 +320,6 @@ def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceS
         check_kkt=other.kkt,
         note=note,
     )
-
-
-def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
-    """One reference per record from ``source``: a method (``options`` go to
-    :func:`reference_solutions`), ``none`` (``None`` entries) or a file of objectives."""
-    if source == "none":
-        return [None] * len(problem_set.records)
-    if source in METHODS:
-        return reference_solutions(problem_set, method=source, **options)
-    from .published import read_objectives
-
-    return from_objectives(problem_set, read_objectives(source), source)
 
 
 def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Path = "file") -> list:
@@ -524,10 +490,14 @@ def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
         else:
             kind = _ARROW_TYPES[f.type.removesuffix(" | None")]
             cols[f.name] = pa.array(values, getattr(pa, kind)())
-    table = pa.table(cols).replace_schema_metadata(
-        {"qpbench_set_sha256": sha, "qpbench_reference_version": REFERENCE_VERSION}
-    )
-    return table_to_bytes(table)
+    return table_to_bytes(pa.table(cols).replace_schema_metadata(_meta(sha)))
+
+
+def _meta(sha: str) -> dict[bytes, bytes]:
+    return {
+        b"qpbench_set_sha256": sha.encode(),
+        b"qpbench_reference_version": REFERENCE_VERSION.encode(),
+    }
 
 
 def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
@@ -536,9 +506,7 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
     try:
         table = pq.read_table(path)
         meta = table.schema.metadata or {}
-        if meta.get(b"qpbench_set_sha256", b"").decode() != sha:
-            return None
-        if meta.get(b"qpbench_reference_version", b"").decode() != REFERENCE_VERSION:
+        if any(meta.get(k) != v for k, v in _meta(sha).items()):  # another set or version
             return None
         return [
             ReferenceSolution(

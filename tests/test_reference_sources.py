@@ -17,7 +17,7 @@ from conftest import random_problem
 import qpbench.reference as reference_module
 from qpbench.cli import main
 from qpbench.formats import ProblemRecord, ProblemSet, load_problems
-from qpbench.reference import bench_references, cache_path, reference_solutions
+from qpbench.reference import cache_path, reference_solutions
 
 
 def _record(seed=3, name="r"):
@@ -199,8 +199,8 @@ def test_a_bad_reference_file_is_an_input_error_and_nothing_is_written(
 def test_single_solver_references_are_cached_apart(mm_dir, tmp_path):
     folder = _mm_copy(mm_dir, tmp_path, ["HS21", "HS35"])
     ps = load_problems(folder)
-    auto = bench_references(ps, "auto")
-    only = bench_references(ps, "piqp")
+    auto = reference_solutions(ps)
+    only = reference_solutions(ps, method="piqp")
     assert (
         cache_path(ps).exists()
         and cache_path(ps, "piqp").exists()
@@ -213,7 +213,9 @@ def test_single_solver_references_are_cached_apart(mm_dir, tmp_path):
         for r in only
     )
     assert [r.objective for r in only] == pytest.approx([r.objective for r in auto], rel=1e-8)
-    assert bench_references(ps, "none") == [None, None]
+    out = tmp_path / "none.csv"  # --reference none: no reference at all
+    assert _bench(folder, out, "--reference", "none", quiet=True) in (0, 1)
+    assert pd.read_csv(out)["reference_status"].isna().all()
 
 
 @pytest.mark.parametrize(
