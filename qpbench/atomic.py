@@ -1,11 +1,6 @@
-"""Outputs written atomically, checked before a run, and listed when a command ends.
-
-Every output goes to a temporary name in its folder and is renamed into place
-(:func:`os.replace` is atomic on POSIX), so a killed run never leaves a truncated file
-that looks complete. Each one is recorded (:func:`record`) and ``qpbench`` prints them
-once at the end (:func:`listing`); files of worker processes are recorded by the
-process that receives their rows.
-"""
+"""Outputs written atomically (a temporary name in the folder renamed into place: a killed
+run never leaves a truncated file), checked before a run, and listed when a command ends
+(files of worker processes are recorded by the process that receives their rows)."""
 
 from __future__ import annotations
 
@@ -30,15 +25,11 @@ def recording() -> Iterator[Callable[[], list[Path]]]:
     """Record the outputs written inside the ``with`` block; yields a function that lists
     those that exist (absolute paths, in the order first written)."""
     global _written
-    outer = _written
-    mine: dict[Path, None] = {}
-    _written = mine
+    _written = mine = {}
     try:
         yield lambda: [p for p in mine if p.is_file()]
     finally:
-        _written = outer
-        if outer is not None:  # a nested recording hands its files on
-            outer.update(mine)
+        _written = None
 
 
 def record(path: str | Path) -> None:
@@ -126,16 +117,10 @@ def check_output(
     make_parent: bool = False,
     key: str = "out",
 ) -> None:
-    """Check an output before anything is written: it is a ``kind`` (``file`` or ``dir``)
-    or nothing yet, its parent folder exists (qpbench never creates the folders above an
-    output, so a typo does not grow a tree) unless ``make_parent`` (an internal staging
-    folder), and it exists only with ``force`` or ``resume`` (``None``: the command has
-    no ``--resume``, and the message does not offer it).
-
-    Raises:
-        ParamError: a folder or file in the wrong place, or a missing parent.
-        OutputExistsError: ``path`` exists and neither flag was given.
-    """
+    """Check an output before anything is written: it is a ``kind`` (``file`` or ``dir``) or
+    nothing yet (else :class:`ParamError`), its parent folder exists unless ``make_parent``
+    (an internal staging folder; else :class:`ParamError`), and it exists only with ``force``
+    or ``resume`` (``None``: the command has no ``--resume``; else :class:`OutputExistsError`)."""
     path = Path(path)
     if kind == "file" and path.is_dir():
         raise ParamError(f"{path}: is a folder; expected a file name", key=key)

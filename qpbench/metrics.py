@@ -43,13 +43,8 @@ def solution_status(solution: qpsolvers.Solution) -> str | None:
     """The backend's status string, if it reported one."""
     if solution is None:
         return None
-    status = getattr(solution, "status", None)
-    if status is None:
-        status = (solution.extras or {}).get("status")
-    if isinstance(status, str) and status in STATUSES:
-        return status
-    # a plain qpsolvers.Solution: its extras hold the solver's own status type
-    return "optimal" if solution.found else "not_solved"
+    status = getattr(solution, "status", None)  # a plain qpsolvers.Solution has none
+    return status if status in STATUSES else "optimal" if solution.found else "not_solved"
 
 
 #: Keys of :func:`constraint_violation`'s answer (also bench CSV columns).
@@ -141,25 +136,19 @@ def _objective(tick: Tick) -> float:
     return objective(tick.record, tick.x)
 
 
-@per_tick_metric
-def reference_objective(tick: Tick) -> float:
-    return float(tick.reference.objective) if tick.reference_status == "optimal" else math.nan
-
-
-@per_tick_metric
-def reference_status(tick: Tick) -> str | None:
-    return tick.reference_status
-
-
-@per_tick_metric
-def reference_agreement(tick: Tick) -> float | None:
-    return None if tick.reference is None else float(tick.reference.agreement)
-
-
-@per_tick_metric
-def reference_note(tick: Tick) -> str | None:
-    """Each reference solver's answer and which one was kept and why, or why there is no reference."""
-    return getattr(tick.reference, "note", None)
+@per_tick_metric(
+    columns=("reference_objective", "reference_status", "reference_agreement", "reference_note")
+)
+def _reference(tick: Tick) -> dict:
+    """The reference's objective (NaN unless optimal), status, agreement and note: each
+    solver's answer, which was kept and why, or why there is no reference."""
+    ref, status = tick.reference, tick.reference_status
+    return {
+        "reference_objective": float(ref.objective) if status == "optimal" else math.nan,
+        "reference_status": status,
+        "reference_agreement": None if ref is None else float(ref.agreement),
+        "reference_note": getattr(ref, "note", None),
+    }
 
 
 def _signed_gap(values: dict) -> float:

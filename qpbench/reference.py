@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import re
 import time
 import warnings
 from dataclasses import dataclass
@@ -28,11 +27,11 @@ import qpsolvers
 
 from .atomic import write_bytes
 from .cache import user_cache_dir, writable
-from .formats import ProblemRecord, ProblemSet, content_sha256, list_column, solver_problem
+from .formats import ProblemRecord, ProblemSet, content_sha256, solver_problem
 from .metrics import objective
 from .runner.process import context as worker_context
 from .runner.process import deadline, run_tasks
-from .statuses import describe_exception
+from .statuses import CERTIFIED_INFEASIBLE, describe_exception
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -111,31 +110,21 @@ def _worst_residual(solution) -> float:
 
 
 def _status(solver: str, solution) -> str:
-    """The reference status of a qpsolvers solution of ``solver`` (``time_limit``: Clarabel's
-    ``MaxTime``; ``AlmostSolved`` is optimal when its ``kkt <= ALMOST_TOL``)."""
+    """The reference status of a qpsolvers solution of ``solver`` by the backends' maps of
+    Clarabel's and PIQP's statuses (an ``Almost`` infeasibility is one; ``AlmostSolved`` is
+    optimal when its ``kkt <= ALMOST_TOL``); ``unknown`` for no verdict."""
     if solver == "clarabel":
-        import clarabel
+        from .backends.clarabel_ import CLARABEL_STATUSES
 
-        S = clarabel.SolverStatus
-        status = solution.extras.get("status")
-        if status == S.MaxTime:
-            return "time_limit"
-        if status == S.Solved or (
-            status == S.AlmostSolved and _worst_residual(solution) <= ALMOST_TOL
-        ):
-            return "optimal"
-        primal = (S.PrimalInfeasible, S.AlmostPrimalInfeasible)
-        dual = (S.DualInfeasible, S.AlmostDualInfeasible)
+        name = str(solution.extras.get("status")).split(".")[-1]
+        if name == "AlmostSolved":
+            return "optimal" if _worst_residual(solution) <= ALMOST_TOL else "unknown"
+        status = CLARABEL_STATUSES.get(name.removeprefix("Almost"))
     else:
-        import piqp
+        from .backends.piqp_ import piqp_statuses
 
-        status = getattr(solution.extras.get("info"), "status", None)
-        if status == piqp.PIQP_SOLVED:
-            return "optimal"
-        primal, dual = (piqp.PIQP_PRIMAL_INFEASIBLE,), (piqp.PIQP_DUAL_INFEASIBLE,)
-    if status in primal:
-        return "primal_infeasible"
-    return "dual_infeasible" if status in dual else "unknown"
+        status = piqp_statuses().get(getattr(solution.extras.get("info"), "status", None))
+    return status if status in ("optimal", "time_limit", *CERTIFIED_INFEASIBLE) else "unknown"
 
 
 @dataclass
@@ -272,54 +261,39 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
 def assemble(
     name: str | None, candidates: list[Candidate], time_limit: float | None = None
 ) -> ReferenceSolution:
-    """The reference made of one solver's answer, or of two (:func:`combine`)."""
-    if len(candidates) == 2:
-        ref = combine(name, *candidates)
+    """The reference made of one solver's answer or of two (:func:`settle`), each solve
+    limited to ``time_limit`` [s]; two agree when their statuses match and, when optimal,
+    their ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN unless both are) is at most
+    ``AGREE_RTOL``."""
+    check: dict = {}
+    if len(candidates) == 1:
+        (keep,) = candidates
+        status, note = keep.status, f"{keep.describe()}; {keep.solver} alone (no cross-check)"
     else:
-        (only,) = candidates
-        note = f"{only.describe()}; {only.solver} alone (no cross-check)"
-        ref = _from_candidate(name, only, only.status, note=note)
+        first, second = candidates
+        f1, f2 = first.objective, second.objective
+        agreement = abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
+        agree = first.status == second.status and (
+            first.status != "optimal" or agreement <= AGREE_RTOL
+        )
+        keep, other, status, why = settle(first, second)
+        verdict = "agree" if agree else "disagree"
+        if first.status == second.status == "optimal":
+            verdict += f" (objectives differ by {agreement:.2g} relative)"
+        note = f"{first.describe()}; {second.describe()}; {verdict}; {why}"
+        if not agree:
+            log.warning("reference of '%s': %s", name, note)
+        check = {f"check_{k}": getattr(other, k) for k in ("solver", "status", "objective", "kkt")}
+        check.update(agree=agree, agreement=agreement)
+    ref = ReferenceSolution(status, solver=keep.solver, kkt=keep.kkt, name=name, note=note, **check)
     ref.time_limit_s = math.inf if time_limit is None else float(time_limit)
     ref.timed_out = any(c.timed_out for c in candidates)
-    return ref
-
-
-def _from_candidate(name, keep: Candidate, status: str, **fields) -> ReferenceSolution:
-    ref = ReferenceSolution(status, solver=keep.solver, kkt=keep.kkt, name=name, **fields)
     if status == "optimal":
         ref.objective = keep.objective
         for k in _VEC_KEYS:
             v = getattr(keep.solution, k)
             setattr(ref, k, None if v is None else np.asarray(v, dtype=np.float64))
     return ref
-
-
-def combine(name: str | None, first: Candidate, second: Candidate) -> ReferenceSolution:
-    """The reference made of two solvers' answers (:func:`settle`); they agree when their
-    statuses match and, when optimal, their ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)``
-    (NaN unless both are) is at most ``AGREE_RTOL``."""
-    f1, f2 = first.objective, second.objective
-    agreement = abs(f1 - f2) / max(1.0, abs(f1), abs(f2))
-    agree = first.status == second.status and (first.status != "optimal" or agreement <= AGREE_RTOL)
-    keep, other, status, why = settle(first, second)
-    verdict = "agree" if agree else "disagree"
-    if first.status == second.status == "optimal":
-        verdict += f" (objectives differ by {agreement:.2g} relative)"
-    note = f"{first.describe()}; {second.describe()}; {verdict}; {why}"
-    if not agree:
-        log.warning("reference of '%s': %s", name, note)
-    return _from_candidate(
-        name,
-        keep,
-        status,
-        check_solver=other.solver,
-        check_status=other.status,
-        check_objective=other.objective,
-        agree=agree,
-        agreement=agreement,
-        check_kkt=other.kkt,
-        note=note,
-    )
 
 
 def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Path = "file") -> list:
@@ -354,9 +328,7 @@ def _compute(
             on_done(out[record.name], time.perf_counter() - started)
         else:
             tasks += [((record.name, s), (record, s, limit), timeout) for s in solvers]
-    if not tasks:
-        return out
-    ctx = context if context is not None else worker_context(fresh=True)
+    ctx = context or worker_context(fresh=True)
     got: dict[str, dict] = {}
     for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
         name, solver = done.key
@@ -473,24 +445,13 @@ def cache_path(
     return folder / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
 
 
-#: Arrow type of a field of :class:`ReferenceSolution` by its annotation (vectors: lists).
-_ARROW_TYPES = {"str": "string", "float": "float64", "bool": "bool_"}
-
-
 def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
     import pyarrow as pa
 
     from .formats import table_to_bytes
 
-    cols = {}
-    for f in dataclasses.fields(ReferenceSolution):
-        values = [getattr(r, f.name) for r in refs]
-        if f.name in _VEC_KEYS:
-            cols[f.name] = list_column(values)
-        else:
-            kind = _ARROW_TYPES[f.type.removesuffix(" | None")]
-            cols[f.name] = pa.array(values, getattr(pa, kind)())
-    return table_to_bytes(pa.table(cols).replace_schema_metadata(_meta(sha)))
+    table = pa.Table.from_pylist([vars(r) for r in refs])
+    return table_to_bytes(table.replace_schema_metadata(_meta(sha)))
 
 
 def _meta(sha: str) -> dict[bytes, bytes]:
@@ -531,7 +492,6 @@ def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str) -> N
         return
     if problem_set.kind == "set" and path.parent == Path(problem_set.path):
         prefix = path.name.removesuffix(".parquet")[:-16]  # reference-[<method>-]
-        same_method = re.compile(rf"{re.escape(prefix)}[0-9a-f]{{16}}\.parquet")
-        for stale in path.parent.glob("reference-*.parquet"):
-            if stale != path and same_method.fullmatch(stale.name):
+        for stale in path.parent.glob(prefix + "[0-9a-f]" * 16 + ".parquet"):
+            if stale != path:
                 stale.unlink(missing_ok=True)

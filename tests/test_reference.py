@@ -266,13 +266,13 @@ def _candidates(problem, record):
 
 
 def test_disagreeing_references_are_settled_by_kkt_residuals_not_by_name(make_record):
-    from qpbench.reference import Candidate, combine
+    from qpbench.reference import Candidate, assemble
 
     record = make_record("r")
     good, bad = _candidates(record.problem, record)
     for first, second in (("clarabel", "piqp"), ("piqp", "clarabel")):
         # the worse answer comes first, under either name
-        ref = combine("r", bad(first), good(second))
+        ref = assemble("r", [bad(first), good(second)])
         assert ref.solver == second and ref.check_solver == first
         assert (
             ref.objective == good(second).objective and ref.check_objective == bad(first).objective
@@ -284,24 +284,26 @@ def test_disagreeing_references_are_settled_by_kkt_residuals_not_by_name(make_re
         assert ref.agreement == pytest.approx(expected, rel=1e-12) and ref.agreement > 1e-7
         np.testing.assert_array_equal(ref.x, good(second).solution.x)
     # agreeing answers: agreement tiny, still the smaller residuals kept
-    ref = combine("r", good("clarabel"), good("piqp"))
+    ref = assemble("r", [good("clarabel"), good("piqp")])
     assert ref.agree is True and ref.agreement == 0.0
     # an optimal answer that satisfies the KKT conditions refutes an infeasibility claim ...
-    ref = combine("r", Candidate("clarabel", "primal_infeasible", None), good("piqp"))
+    ref = assemble("r", [Candidate("clarabel", "primal_infeasible", None), good("piqp")])
     assert ref.status == "optimal" and ref.solver == "piqp" and ref.agree is False
     assert math.isnan(ref.agreement)
     # ... one that does not, does not
-    ref = combine("r", bad("clarabel"), Candidate("piqp", "primal_infeasible", None))
+    ref = assemble("r", [bad("clarabel"), Candidate("piqp", "primal_infeasible", None)])
     assert ref.status == "primal_infeasible" and ref.solver == "piqp" and ref.x is None
     # no verdict vs a verdict: the verdict; two different verdicts: unknown
-    ref = combine(
-        "r", Candidate("clarabel", "unknown", None), Candidate("piqp", "dual_infeasible", None)
+    ref = assemble(
+        "r", [Candidate("clarabel", "unknown", None), Candidate("piqp", "dual_infeasible", None)]
     )
     assert ref.status == "dual_infeasible" and ref.solver == "piqp"
-    ref = combine(
+    ref = assemble(
         "r",
-        Candidate("clarabel", "primal_infeasible", None),
-        Candidate("piqp", "dual_infeasible", None),
+        [
+            Candidate("clarabel", "primal_infeasible", None),
+            Candidate("piqp", "dual_infeasible", None),
+        ],
     )
     assert ref.status == "unknown"
 

@@ -35,7 +35,9 @@ def test_a_staging_folder_renamed_into_place_is_listed_under_its_final_name(tmp_
         atomic.rename(staging, final)
         assert written() == [final / "report.md", tmp_path / "top.txt"]
     atomic.write_text(tmp_path / "later.txt", "z")  # not recording: nothing kept
-    assert atomic._written is None
+    assert written() == [final / "report.md", tmp_path / "top.txt"]
+    with atomic.recording() as written:
+        assert written() == []
 
 
 def test_export_lists_its_files(tmp_path, capsys, monkeypatch):
