@@ -1,13 +1,6 @@
-"""A memory budget: what a solve may allocate, and estimates of what it needs.
-
-The budget (``--memory-budget``, bytes: ``2GB``, ``512MB``, ``1.5GiB``) defaults to
-:data:`DEFAULT_FRACTION` of physical memory, within what ``RLIMIT_AS`` leaves. A solve
-whose estimate exceeds it is a ``skipped`` row, never an out-of-memory kill. Estimates
-(float64 values, 4-byte indices) are orders of magnitude, not predictions: a dense copy
-is ``8 n (n + m)`` bytes plus vectors; a sparse solver's KKT matrix holds ``nnz(P) +
-nnz(A) + nnz(G) + n + m`` entries and its factor :data:`FILL` times that, at 12 bytes an
-entry, plus 50 vectors of ``n + m``. A dense-only backend (``sparse = False``) is given
-problems up to :data:`DENSE_MAX_ENTRIES` entries made dense.
+"""A memory budget (``--memory-budget``) and estimates of what a solve needs: a solve whose
+estimate exceeds it is a ``skipped`` row, never an out-of-memory kill. Estimates (float64
+values, 4-byte indices) are orders of magnitude, not predictions.
 """
 
 from __future__ import annotations
@@ -71,8 +64,11 @@ def _mapped_bytes() -> int:
     return 0
 
 
-def default_budget() -> int:
-    """:data:`DEFAULT_FRACTION` of physical memory, within what ``RLIMIT_AS`` leaves."""
+def resolve_budget(text: str | None) -> int:
+    """The budget in bytes of a ``--memory-budget`` value (``None``: :data:`DEFAULT_FRACTION`
+    of physical memory, within what ``RLIMIT_AS`` leaves)."""
+    if text is not None:
+        return parse_size(text)
     budget = int(DEFAULT_FRACTION * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
     try:
         import resource
@@ -83,11 +79,6 @@ def default_budget() -> int:
     if soft != resource.RLIM_INFINITY:
         budget = min(budget, max(0, int(0.8 * (soft - _mapped_bytes()))))
     return budget
-
-
-def resolve_budget(text: str | None) -> int:
-    """The budget in bytes of a ``--memory-budget`` value (``None``: :func:`default_budget`)."""
-    return default_budget() if text is None else parse_size(text)
 
 
 def _n_m(problem: qpsolvers.Problem) -> tuple[int, int]:

@@ -39,16 +39,8 @@ def objective(record: ProblemRecord, x: np.ndarray | None) -> float:
     return float(0.5 * x @ (P @ x) + q @ x + record.offset)
 
 
-def solution_status(solution: qpsolvers.Solution) -> str | None:
-    """The backend's status string, if it reported one."""
-    if solution is None:
-        return None
-    status = getattr(solution, "status", None)  # a plain qpsolvers.Solution has none
-    return status if status in STATUSES else "optimal" if solution.found else "not_solved"
-
-
 #: Keys of :func:`constraint_violation`'s answer (also bench CSV columns).
-VIOLATION_KEYS = ("violation_ineq", "violation_eq", "violation_box", "constraint_violation")
+VIOLATION_KEYS = ("constraint_violation", "violation_ineq", "violation_eq", "violation_box")
 
 
 def _excess(M, v, x: np.ndarray) -> np.ndarray | None:
@@ -78,7 +70,7 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
             if lower is not None and upper is not None and np.size(lower) and np.size(upper):
                 d = np.asarray(lower, dtype=np.float64) - np.asarray(upper, dtype=np.float64)
                 box = max(box, float(np.max(d[~np.isnan(d)], initial=0.0)))
-    return dict(zip(VIOLATION_KEYS, (ineq, eq, box, max(ineq, eq, box))))
+    return dict(zip(VIOLATION_KEYS, (max(ineq, eq, box), ineq, eq, box)))
 
 
 @dataclass
@@ -173,9 +165,7 @@ def residuals(tick: Tick) -> dict:
     return {k: math.inf if sol is None else float(getattr(sol, k)()) for k in _RESIDUALS}
 
 
-@per_tick_metric(
-    columns=("constraint_violation", "violation_ineq", "violation_eq", "violation_box")
-)
+@per_tick_metric(columns=VIOLATION_KEYS)
 def _violation(tick: Tick) -> dict:
     return constraint_violation(tick.record.problem, tick.x)
 
@@ -197,7 +187,9 @@ def evaluate(
         )
     m = tick.values
     found = bool(solution is not None and solution.found)
-    status = solution_status(solution)
+    status = getattr(solution, "status", None)  # a plain qpsolvers.Solution has none
+    if solution is not None and status not in STATUSES:
+        status = "optimal" if found else "not_solved"
     signed = _signed_gap(m)
     res = tuple(m[k] for k in _RESIDUALS)
     if tolerance.rule == "qpbenchmark":

@@ -1,9 +1,6 @@
-"""Settings profiles: what accuracy a solve is asked for and judged against.
-
-A :class:`Profile` pairs the settings given to every backend with the thresholds of a
-success (:class:`Tolerance`), as qpbenchmark pairs its settings with a ``Tolerance``
-(docs/backends.md). Relative tolerances are zero so that every backend stops on the same
-absolute criterion. ``qpbenchmark:<settings>`` (:func:`qpbenchmark_profile`) applies
+"""Settings profiles: the settings given to every backend (relative tolerances zero, so that
+every backend stops on the same absolute criterion) and the thresholds of a success, as
+qpbenchmark pairs its settings with a ``Tolerance``; ``qpbenchmark:<settings>`` applies
 qpbenchmark's runner as read from its installed modules (docs/methodology.md).
 """
 
@@ -49,14 +46,10 @@ class Profile:
     reference_time_limit: float = 60.0
     solver_options: dict | None = field(default=None, hash=False)
 
-    @property
-    def is_qpbenchmark(self) -> bool:
-        return self.name.startswith(QPBENCHMARK_PREFIX)
-
     def with_time_limit(self, time_limit: float) -> Profile:
         """The same profile with another per-solve time limit [s] (a qpbenchmark profile's
         solver arguments change with it, as its ``set_time_limit`` makes them)."""
-        if self.is_qpbenchmark:
+        if self.name.startswith(QPBENCHMARK_PREFIX):
             rebuilt = qpbenchmark_profile(self.name[len(QPBENCHMARK_PREFIX) :], time_limit)
             return replace(rebuilt, reference_time_limit=self.reference_time_limit)
         return replace(

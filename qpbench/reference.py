@@ -59,10 +59,10 @@ PIQP_SETTINGS = dict(
     max_iter=500,
 )
 SOLVER_SETTINGS = {"clarabel": CLARABEL_SETTINGS, "piqp": PIQP_SETTINGS}
-#: Ways of computing a reference: both solvers settled by residuals, or one alone.
-METHODS = ("auto", "clarabel", "piqp")
+#: Ways of computing a reference, by their solvers: both settled by residuals, or one alone.
+METHODS = {"auto": ("clarabel", "piqp"), "clarabel": ("clarabel",), "piqp": ("piqp",)}
 #: What ``--reference`` accepts besides a file.
-SOURCES = METHODS + ("none",)
+SOURCES = (*METHODS, "none")
 #: Relative objective difference within which the two solvers agree.
 AGREE_RTOL = 1e-7
 #: KKT residual accepting Clarabel's ``AlmostSolved`` and refuting an infeasibility claim.
@@ -218,22 +218,15 @@ def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
     )
 
 
-def _solvers(method: str) -> tuple[str, ...]:
-    if method not in METHODS:
-        raise ValueError(f"unknown reference method '{method}'")
-    return ("clarabel", "piqp") if method == "auto" else (method,)
-
-
 def reference_solution(
     record: ProblemRecord, method: str = "auto", time_limit: float | None = None
 ) -> ReferenceSolution:
     """The reference of one problem by ``method`` (:data:`METHODS`), solved in this process;
     ``time_limit`` [s] per solve (``None``: none)."""
-    solvers = _solvers(method)
     if not needs_solver(record):
         return _unconstrained(record)
     return assemble(
-        record.name, [solve_candidate(record, s, time_limit) for s in solvers], time_limit
+        record.name, [solve_candidate(record, s, time_limit) for s in METHODS[method]], time_limit
     )
 
 
@@ -317,7 +310,7 @@ def _compute(
 ) -> dict:
     """``{name: ReferenceSolution}`` of ``records``: in this process without a time limit
     and with one job, else each solve a task of a worker."""
-    solvers = _solvers(method)
+    solvers = METHODS[method]
     limit = time_limit if time_limit is not None and math.isfinite(time_limit) else None
     timeout = None if limit is None else deadline(limit)
     out, tasks = {}, []

@@ -1,11 +1,6 @@
-"""The one vocabulary of solve outcomes, and how a returned answer is classified.
-
-A backend reports one of :data:`STATUSES`; the harness adds :data:`GUARD_STATUSES`. The
-per-tick guard and the closed loop both use :func:`describe_exception` and
-:func:`classify`, so the same answer gets the same status in a bench row and a tick log.
-``not_solved`` is the status of a backend that cannot classify a failure (qpsolvers'
-route to DAQP, quadprog or HiGHS keeps only ``found=False``); on the controller's QPs
-that is the infeasible start, hence :data:`INFEASIBLE_OR_UNCLASSIFIED`.
+"""The one vocabulary of solve outcomes, and how a returned answer is classified (the
+per-tick guard and the closed loop both use :func:`classify`, so the same answer gets the
+same status in a bench row and a tick log).
 """
 
 from __future__ import annotations
@@ -33,7 +28,9 @@ TICK_STATUSES = STATUSES + ("invalid",)
 #: The backend proved the QP has no solution.
 CERTIFIED_INFEASIBLE = ("primal_infeasible", "dual_infeasible")
 
-#: A certificate of infeasibility, or a failure the backend cannot classify.
+#: A certificate of infeasibility, or ``not_solved``: a failure the backend cannot classify
+#: (qpsolvers' route to DAQP, quadprog or HiGHS keeps only ``found=False``), on the
+#: controller's QPs the infeasible start.
 INFEASIBLE_OR_UNCLASSIFIED = CERTIFIED_INFEASIBLE + ("not_solved",)
 
 #: A failure whatever the reference says; the backend is reset after one.
