@@ -44,13 +44,10 @@ def shim_dir(name: str) -> Path:
     return folder
 
 
-def configure_numba_cache() -> str | None:
-    """Set ``NUMBA_CACHE_DIR`` (inherited by workers) when unset and the package folder is
-    not writable; the folder numba caches to, ``None`` for its default beside the sources."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    if env or writable(PACKAGE_DIR / "__pycache__"):
-        return env or None
-    folder = user_cache_dir() / "numba"
-    folder.mkdir(parents=True, exist_ok=True)
-    os.environ["NUMBA_CACHE_DIR"] = str(folder)
-    return str(folder)
+def configure_numba_cache() -> None:
+    """Set ``NUMBA_CACHE_DIR`` (inherited by workers) to :func:`user_cache_dir` / ``numba`` when
+    unset and the package folder is not writable (numba's default: beside the sources)."""
+    if not os.environ.get("NUMBA_CACHE_DIR") and not writable(PACKAGE_DIR / "__pycache__"):
+        folder = user_cache_dir() / "numba"
+        folder.mkdir(parents=True, exist_ok=True)
+        os.environ["NUMBA_CACHE_DIR"] = str(folder)

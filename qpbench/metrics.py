@@ -92,9 +92,9 @@ class Tick:
         return None if self.reference is None else self.reference.status
 
 
-#: The per-tick metrics in column order: ``(columns, function)``; a function of
-#: one column returns its value, one of several a dict of them.
-PER_TICK_METRICS: list[tuple[tuple[str, ...], Callable[[Tick], object]]] = []
+#: The per-tick metrics in column order: ``{columns: function}``; a function of one column
+#: returns its value, one of several a dict of them.
+PER_TICK_METRICS: dict[tuple[str, ...], Callable[[Tick], object]] = {}
 
 
 def per_tick_metric(
@@ -105,14 +105,10 @@ def per_tick_metric(
 
     def add(f: Callable) -> Callable:
         cols = tuple(columns) if columns else (f.__name__,)
-        for i, (old, _) in enumerate(PER_TICK_METRICS):
-            if old == cols:
-                PER_TICK_METRICS[i] = (cols, f)
-                return f
         taken = set(metric_columns()) & set(cols)
-        if taken:
+        if taken and cols not in PER_TICK_METRICS:
             raise ValueError(f"metric column(s) {', '.join(sorted(taken))} already registered")
-        PER_TICK_METRICS.append((cols, f))
+        PER_TICK_METRICS[cols] = f
         return f
 
     return add(fn) if fn is not None else add
@@ -120,7 +116,7 @@ def per_tick_metric(
 
 def metric_columns() -> tuple[str, ...]:
     """The bench CSV's metric columns, in order."""
-    return tuple(c for cols, _ in PER_TICK_METRICS for c in cols)
+    return tuple(c for cols in PER_TICK_METRICS for c in cols)
 
 
 @per_tick_metric(columns=("objective",))
@@ -180,7 +176,7 @@ def evaluate(
     ``reference`` under ``tolerance``: ``status``, ``found``, every per-tick metric, in order,
     ``optimality_gap_signed`` and ``success`` (module docstring)."""
     tick = Tick(record, solution, reference)
-    for columns, fn in PER_TICK_METRICS:
+    for columns, fn in PER_TICK_METRICS.items():
         value = fn(tick)
         tick.values.update(
             {c: value[c] for c in columns} if len(columns) > 1 else {columns[0]: value}

@@ -153,13 +153,11 @@ class Candidate:
         return text + (f" ({self.reason})" if self.reason else "")
 
 
-def solve_candidate(
-    record: ProblemRecord, solver: str, time_limit: float | None = None
-) -> Candidate:
+def solve_candidate(record: ProblemRecord, solver: str, time_limit: float = math.inf) -> Candidate:
     """One reference solver's answer; never raises for solver trouble. An answer later
     than ``time_limit`` [s] is discarded (``unknown``, ``timed_out``)."""
     settings = dict(SOLVER_SETTINGS[solver])
-    limited = time_limit is not None and math.isfinite(time_limit)
+    limited = math.isfinite(time_limit)
     if limited and solver == "clarabel":
         settings["time_limit"] = float(time_limit)
     started = time.perf_counter()
@@ -218,16 +216,11 @@ def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
     )
 
 
-def reference_solution(
-    record: ProblemRecord, method: str = "auto", time_limit: float | None = None
-) -> ReferenceSolution:
-    """The reference of one problem by ``method`` (:data:`METHODS`), solved in this process;
-    ``time_limit`` [s] per solve (``None``: none)."""
+def reference_solution(record: ProblemRecord, method: str = "auto") -> ReferenceSolution:
+    """The reference of one problem by ``method`` (:data:`METHODS`), solved in this process."""
     if not needs_solver(record):
         return _unconstrained(record)
-    return assemble(
-        record.name, [solve_candidate(record, s, time_limit) for s in METHODS[method]], time_limit
-    )
+    return assemble(record.name, [solve_candidate(record, s) for s in METHODS[method]])
 
 
 def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str, str]:
@@ -252,7 +245,7 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
 
 
 def assemble(
-    name: str | None, candidates: list[Candidate], time_limit: float | None = None
+    name: str | None, candidates: list[Candidate], time_limit: float = math.inf
 ) -> ReferenceSolution:
     """The reference made of one solver's answer or of two (:func:`settle`), each solve
     limited to ``time_limit`` [s]; two agree when their statuses match and, when optimal,
@@ -279,7 +272,7 @@ def assemble(
         check = {f"check_{k}": getattr(other, k) for k in ("solver", "status", "objective", "kkt")}
         check.update(agree=agree, agreement=agreement)
     ref = ReferenceSolution(status, solver=keep.solver, kkt=keep.kkt, name=name, note=note, **check)
-    ref.time_limit_s = math.inf if time_limit is None else float(time_limit)
+    ref.time_limit_s = time_limit
     ref.timed_out = any(c.timed_out for c in candidates)
     if status == "optimal":
         ref.objective = keep.objective
@@ -294,46 +287,43 @@ def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Pat
     refs = []
     for record in problem_set.records:
         f = float(objectives.get(record.name, math.nan))
-        status, note = (
-            ("unknown", f"no reference: '{record.name}' is not in {source}")
-            if math.isnan(f)
-            else ("optimal", f"optimal objective {f:.10g} from {source}")
-        )
-        refs.append(
-            ReferenceSolution(status, objective=f, solver="file", name=record.name, note=note)
-        )
+        ref = ReferenceSolution("optimal", objective=f, solver="file", name=record.name)
+        ref.note = f"optimal objective {f:.10g} from {source}"
+        if math.isnan(f):
+            ref.status, ref.note = "unknown", f"no reference: '{record.name}' is not in {source}"
+        refs.append(ref)
     return refs
 
 
 def _compute(
-    records: list, method: str, time_limit: float | None, jobs: int, on_done, context=None
+    records: list, method: str, time_limit: float, jobs: int, on_done, context=None
 ) -> dict:
     """``{name: ReferenceSolution}`` of ``records``: in this process without a time limit
-    and with one job, else each solve a task of a worker."""
+    (``inf``) and with one job, else each solve a task of a worker."""
     solvers = METHODS[method]
-    limit = time_limit if time_limit is not None and math.isfinite(time_limit) else None
-    timeout = None if limit is None else deadline(limit)
+    limited = math.isfinite(time_limit)
+    timeout = deadline(time_limit) if limited else None
     out, tasks = {}, []
     for record in records:
-        if (limit is None and jobs <= 1) or not needs_solver(record):
+        if (not limited and jobs <= 1) or not needs_solver(record):
             started = time.perf_counter()
             out[record.name] = reference_solution(record, method)
             on_done(out[record.name], time.perf_counter() - started)
         else:
-            tasks += [((record.name, s), (record, s, limit), timeout) for s in solvers]
+            tasks += [((record.name, s), (record, s, time_limit), timeout) for s in solvers]
     ctx = context or worker_context(fresh=True)
     got: dict[str, dict] = {}
     for done in run_tasks(solve_task, tasks, jobs, ctx=ctx, name="qpbench-reference"):
         name, solver = done.key
         answers = got.setdefault(name, {})
-        answers[solver] = done.value if done.status is None else _lost(solver, done, limit)
+        answers[solver] = done.value if done.status is None else _lost(solver, done, time_limit)
         if len(answers) == len(solvers):
-            out[name] = assemble(name, [answers[s] for s in solvers], limit)
+            out[name] = assemble(name, [answers[s] for s in solvers], time_limit)
             on_done(out[name], sum(c.wall_s for c in answers.values() if math.isfinite(c.wall_s)))
     return out
 
 
-def _lost(solver: str, done, time_limit: float | None) -> Candidate:
+def _lost(solver: str, done, time_limit: float) -> Candidate:
     """The ``unknown`` answer of a task that gave none (deadline, dead worker, error)."""
     if done.status == "time_limit":
         why = f"no answer within the time limit of {time_limit:g} s; worker stopped"
@@ -398,7 +388,7 @@ def reference_solutions(
     todo = [r for r in problem_set.records if stale(r.name)]
     on_done, close = _progress(progress, len(todo))
     try:
-        known.update(_compute(todo, method, time_limit, jobs, on_done, context))
+        known.update(_compute(todo, method, limit, jobs, on_done, context))
     finally:
         close()
     if path is not None and writable(path.parent):
@@ -438,15 +428,6 @@ def cache_path(
     return folder / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
 
 
-def _to_bytes(refs: list[ReferenceSolution], sha: str) -> bytes:
-    import pyarrow as pa
-
-    from .formats import table_to_bytes
-
-    table = pa.Table.from_pylist([vars(r) for r in refs])
-    return table_to_bytes(table.replace_schema_metadata(_meta(sha)))
-
-
 def _meta(sha: str) -> dict[bytes, bytes]:
     return {
         b"qpbench_set_sha256": sha.encode(),
@@ -478,8 +459,13 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
 
 def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str) -> None:
     """Write atomically; remove stale caches of the same method in a problem-set folder."""
+    import pyarrow as pa
+
+    from .formats import table_to_bytes
+
+    table = pa.Table.from_pylist([vars(r) for r in refs]).replace_schema_metadata(_meta(sha))
     try:
-        write_bytes(path, _to_bytes(refs, sha))
+        write_bytes(path, table_to_bytes(table))
     except OSError as exc:
         log.debug("%s: reference cache not written (%s)", path, exc)
         return

@@ -199,7 +199,7 @@ def test_a_metric_added_here_is_a_column_of_qpbench_bench(tmp_path, monkeypatch)
     from qpbench.cli import main
     from qpbench.harness.results import columns
 
-    monkeypatch.setattr(metrics, "PER_TICK_METRICS", list(metrics.PER_TICK_METRICS))
+    monkeypatch.setattr(metrics, "PER_TICK_METRICS", dict(metrics.PER_TICK_METRICS))
 
     @metrics.per_tick_metric
     def kkt_residual(tick):
