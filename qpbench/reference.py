@@ -1,13 +1,8 @@
-"""Reference solutions of a problem set: computed, cached, or read from known objectives.
-
-Sources (:data:`SOURCES` or a CSV ``problem,objective``: docs/methodology.md): ``auto``
-solves with Clarabel and PIQP at 1e-10 and keeps an answer by its KKT residuals
-(:func:`settle`), never by the solver's name; ``kkt`` is the worst of qpsolvers' primal
-residual, dual residual and duality gap at an answer (``inf`` without one). Every
-reference carries a ``note``: each solver's answer, which was kept and why.
-
-Cache: ``reference-[<method>-]<sha[:16]>.parquet`` (:func:`cache_path`), keyed by
-:func:`qpbench.formats.content_sha256` and :data:`REFERENCE_VERSION`.
+"""Reference solutions of a problem set: computed by :data:`METHODS` (``auto``: Clarabel and
+PIQP at 1e-10, an answer kept by its KKT residuals, :func:`settle`), cached (:func:`cache_path`)
+or read from known objectives (docs/methodology.md). ``kkt`` is the worst of qpsolvers' primal
+residual, dual residual and duality gap at an answer (``inf`` without one); every reference
+carries a ``note``: each solver's answer, which was kept and why.
 """
 
 from __future__ import annotations
@@ -154,8 +149,8 @@ class Candidate:
 
 
 def solve_candidate(record: ProblemRecord, solver: str, time_limit: float = math.inf) -> Candidate:
-    """One reference solver's answer; never raises for solver trouble. An answer later
-    than ``time_limit`` [s] is discarded (``unknown``, ``timed_out``)."""
+    """One reference solver's answer (its vectors only); never raises for solver trouble. An
+    answer later than ``time_limit`` [s] is discarded (``unknown``, ``timed_out``)."""
     settings = dict(SOLVER_SETTINGS[solver])
     limited = math.isfinite(time_limit)
     if limited and solver == "clarabel":
@@ -176,15 +171,14 @@ def solve_candidate(record: ProblemRecord, solver: str, time_limit: float = math
         return Candidate(solver, "unknown", None, reason=why, timed_out=True, wall_s=wall)
     if status != "optimal":
         return Candidate(solver, status, None, reason=error, wall_s=wall)
-    return Candidate(solver, status, sol, objective(record, sol.x), wall_s=wall)
+    vectors = SimpleNamespace(**{k: getattr(sol, k) for k in _VEC_KEYS})  # picklable
+    kkt = _worst_residual(sol)
+    return Candidate(solver, status, vectors, objective(record, sol.x), wall_s=wall, kkt=kkt)
 
 
 def solve_task(task: tuple) -> Candidate:
-    """:func:`solve_candidate` of ``(record, solver, time_limit)`` in a worker: a picklable
-    answer (the solution's vectors, no solver objects)."""
-    c = solve_candidate(*task)
-    sol = c.solution and SimpleNamespace(**{k: getattr(c.solution, k) for k in _VEC_KEYS})
-    return dataclasses.replace(c, solution=sol)
+    """:func:`solve_candidate` of ``(record, solver, time_limit)``, in a worker."""
+    return solve_candidate(*task)
 
 
 def needs_solver(record: ProblemRecord) -> bool:
@@ -335,22 +329,21 @@ def _lost(solver: str, done, time_limit: float) -> Candidate:
 def _progress(progress, total: int):
     """``(on_done(ref, wall_s), close())`` for the ``progress`` argument; ``"log"``: a line
     at most every 5 s, the last one and every failure."""
-    if progress is None or total == 0:
+    if progress is None:
         return (lambda ref, wall: None), (lambda: None)
     if progress != "log":
         bar = progress(None, total=total, unit="problem", desc="references")
         return (lambda ref, wall: bar.update(1)), bar.close
     log.info("references: %d problems to solve", total)
-    state = {"done": 0, "last": time.monotonic()}
+    done, last = 0, time.monotonic()
 
     def on_done(ref, wall_s: float) -> None:
-        state["done"] += 1
-        now = time.monotonic()
-        if now - state["last"] >= 5.0 or state["done"] == total or ref.status != "optimal":
-            state["last"] = now
+        nonlocal done, last
+        done += 1
+        if time.monotonic() - last >= 5.0 or done == total or ref.status != "optimal":
+            last = time.monotonic()
             why = "" if ref.status == "optimal" else f" ({ref.note})"
-            done = f"{state['done']}/{total}"
-            log.info(f"references: {done}; {ref.name}: {ref.status} in {wall_s:.1f} s{why}")
+            log.info(f"references: {done}/{total}; {ref.name}: {ref.status} in {wall_s:.1f} s{why}")
 
     return on_done, (lambda: None)
 
@@ -374,35 +367,30 @@ def reference_solutions(
     """
     path = cache_path(problem_set, method, cache_dir) if cache else None
     sha = content_sha256(problem_set)
-    names = [r.name for r in problem_set.records]
     limit = math.inf if time_limit is None else float(time_limit)
     known: dict[str, ReferenceSolution] = {}
-
-    def stale(name):  # missing, or timed out under a smaller limit
-        return name not in known or (known[name].timed_out and known[name].time_limit_s < limit)
-
     if path is not None and path.exists():
         known = {ref.name: ref for ref in (_read_cache(path, sha) or [])}
-        if not any(stale(n) for n in names):
-            return [known[n] for n in names]
-    todo = [r for r in problem_set.records if stale(r.name)]
-    on_done, close = _progress(progress, len(todo))
-    try:
-        known.update(_compute(todo, method, limit, jobs, on_done, context))
-    finally:
-        close()
-    if path is not None and writable(path.parent):
-        _write_cache(path, problem_set, list(known.values()), sha)
-    return [known[n] for n in names]
+    todo = [  # missing, or timed out under a smaller limit
+        r
+        for r in problem_set.records
+        if r.name not in known or (known[r.name].timed_out and known[r.name].time_limit_s < limit)
+    ]
+    if todo:
+        on_done, close = _progress(progress, len(todo))
+        try:
+            known.update(_compute(todo, method, limit, jobs, on_done, context))
+        finally:
+            close()
+        if path is not None and writable(path.parent):
+            _write_cache(path, problem_set, list(known.values()), sha)
+    return [known[r.name] for r in problem_set.records]
 
 
 def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -> Path | None:
-    """Where references of ``problem_set`` are cached (``None``: built in memory).
-
-    ``cache_dir`` when given; else the set's folder (a single file's folder) when it is
-    writable and ours (``manifest.json`` or a ``reference-*.parquet`` there); else
-    :func:`qpbench.cache.user_cache_dir` / ``references``.
-    """
+    """Where references of ``problem_set`` are cached (``None``: built in memory): ``cache_dir``
+    when given; else the set's folder (a single file's folder) when it is writable and ours
+    (``manifest.json`` or a ``reference-*.parquet`` there); else ``user_cache_dir()/references``."""
     if problem_set.path is None:
         return None
     if cache_dir is not None:
@@ -416,7 +404,8 @@ def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -
 def cache_path(
     problem_set: ProblemSet, method: str = "auto", cache_dir: str | Path | None = None
 ) -> Path | None:
-    """The cache file of ``problem_set``'s references by ``method`` (``None``: not cached)."""
+    """The cache file of ``problem_set``'s references by ``method`` (``None``: not cached),
+    keyed by :func:`qpbench.formats.content_sha256` and :data:`REFERENCE_VERSION`."""
     sha = content_sha256(problem_set)
     folder = cache_folder(problem_set, cache_dir)
     if sha is None or folder is None:
