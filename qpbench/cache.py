@@ -1,9 +1,5 @@
-"""Where qpbench keeps what it compiles (numba's kernels, native shims): one rule, so a
-worker, a second run and a test find what the first compile left.
-
-``$NUMBA_CACHE_DIR`` when set; else the package folder when writable (numba's
-``__pycache__`` beside the sources, shims in ``qpbench/__cache__``); else
-:func:`user_cache_dir`. Call :func:`configure_numba_cache` before numba compiles.
+"""Where qpbench keeps what it compiles (numba's kernels, native shims): one rule
+(:func:`cache_root`), so a worker, a second run and a test find what the first compile left.
 """
 
 from __future__ import annotations
@@ -32,7 +28,9 @@ def user_cache_dir() -> Path:
 
 
 def cache_root() -> Path:
-    """The folder compiled artefacts of qpbench go to (rule in the module docstring)."""
+    """The folder compiled artefacts go to: ``$NUMBA_CACHE_DIR`` when set; else the package
+    folder's ``__cache__`` when writable (numba's own: ``__pycache__`` beside the sources,
+    :func:`configure_numba_cache`); else :func:`user_cache_dir`."""
     env, local = os.environ.get("NUMBA_CACHE_DIR"), PACKAGE_DIR / "__cache__"
     return Path(env) if env else local if writable(local) else user_cache_dir()
 

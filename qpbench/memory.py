@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 DEFAULT_FRACTION = 0.5
 #: Largest ``n (n + m_eq + m_ineq)`` given to a dense-only backend.
 DENSE_MAX_ENTRIES = 25_000_000
-#: Factor fill-in assumed by :func:`solve_bytes` for a sparse solver.
+#: Factor fill-in assumed by :func:`sparse_solver_bytes`.
 FILL = 10
 
 #: Units of a size: ``kB``/``k`` (10^3) to ``TB``, ``KiB`` (2^10) to ``TiB``, any case.

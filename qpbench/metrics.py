@@ -1,14 +1,6 @@
-"""Metrics of a solution against its problem and its reference solution.
-
-The per-tick metrics are functions of one :class:`Tick` registered with
-:func:`per_tick_metric`, in column order; their names are a bench CSV's metric columns
-(:func:`metric_columns`; meanings: docs/methodology.md). ``objective`` is ``1/2 x'Px + q'x
-+ r`` (``r``: :attr:`~qpbench.formats.ProblemRecord.offset`), the residuals qpsolvers'.
-
-Success (:func:`evaluate`): against a reference ``primal_infeasible`` or ``dual_infeasible``,
-the backend reporting that status; otherwise ``found``, each residual within the profile's
-tolerance and, against an ``optimal`` reference, ``optimality_gap <= tol.gap``. Under
-``tolerance.rule == "qpbenchmark"``: :func:`qpbench.published.qpbenchmark_success`.
+"""Metrics of a solution against its problem and its reference solution: the per-tick metrics,
+functions of one :class:`Tick` registered with :func:`per_tick_metric` in column order, are a
+bench CSV's metric columns (meanings: docs/methodology.md); :func:`evaluate` scores a solve.
 """
 
 from __future__ import annotations
@@ -174,7 +166,10 @@ def evaluate(
 ) -> dict:
     """Score ``solution`` (``None``: the backend returned nothing) of ``record`` against
     ``reference`` under ``tolerance``: ``status``, ``found``, every per-tick metric, in order,
-    ``optimality_gap_signed`` and ``success`` (module docstring)."""
+    ``optimality_gap_signed`` and ``success``: against a ``primal_infeasible`` or
+    ``dual_infeasible`` reference, the backend reporting that status; otherwise ``found``, each
+    residual within the tolerance and, against an ``optimal`` reference, ``optimality_gap <=
+    tolerance.gap`` (``rule == "qpbenchmark"``: :func:`qpbench.published.qpbenchmark_success`)."""
     tick = Tick(record, solution, reference)
     for columns, fn in PER_TICK_METRICS.items():
         value = fn(tick)

@@ -10,6 +10,7 @@ import functools
 from dataclasses import dataclass, field, replace
 
 from .exceptions import ParamError
+from .published import SETTINGS_NAMES, qpbenchmark_settings
 
 #: Prefix of the profiles that apply qpbenchmark's own settings.
 QPBENCHMARK_PREFIX = "qpbenchmark:"
@@ -72,8 +73,6 @@ PROFILES: dict[str, Profile] = {
 
 def profile_names() -> tuple[str, ...]:
     """Every profile name ``--profile`` accepts: qpbench's, then qpbenchmark's."""
-    from .published import SETTINGS_NAMES
-
     return tuple(PROFILES) + tuple(QPBENCHMARK_PREFIX + s for s in SETTINGS_NAMES)
 
 
@@ -81,8 +80,6 @@ def profile_names() -> tuple[str, ...]:
 def qpbenchmark_profile(settings: str, time_limit: float | None = None) -> Profile:
     """The profile ``qpbenchmark:<settings>``; ``time_limit`` [s] per solve (``None``:
     qpbenchmark's default runtime)."""
-    from .published import SETTINGS_NAMES, qpbenchmark_settings
-
     if settings not in SETTINGS_NAMES:
         raise ParamError(
             f"unknown qpbenchmark settings '{settings}' (choose from {', '.join(SETTINGS_NAMES)})",

@@ -1,7 +1,4 @@
-"""qpbenchmark's own rules and published numbers, read from its installed modules and files.
-
-Importing qpbenchmark configures the root logger; :func:`import_qpbenchmark` undoes that.
-"""
+"""qpbenchmark's own rules and published numbers, read from its installed modules and files."""
 
 from __future__ import annotations
 
@@ -109,7 +106,6 @@ def read_published_results(path: str | Path) -> pd.DataFrame:
             path=path,
             key=missing[0],
         )
-    df = df.copy()
     df["found"] = df["found"].map(lambda v: str(v).strip().lower() in ("true", "1"))
     return df
 
