@@ -67,21 +67,16 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
 
 @dataclass
 class Tick:
-    """What a per-tick metric reads: the record, the solution and reference (or ``None``), and
-    ``values``, the metrics computed before this one, by column."""
+    """What a per-tick metric reads: the record, the solution and its ``x``, the reference and
+    its ``reference_status`` (each ``None`` when missing), and ``values``, the metrics computed
+    before this one, by column."""
 
     record: object
     solution: object
+    x: np.ndarray | None
     reference: object
+    reference_status: str | None
     values: dict = field(default_factory=dict)
-
-    @property
-    def x(self) -> np.ndarray | None:
-        return None if self.solution is None else self.solution.x
-
-    @property
-    def reference_status(self) -> str | None:
-        return None if self.reference is None else self.reference.status
 
 
 #: The per-tick metrics in column order: ``{columns: function}``; a function of one column
@@ -170,7 +165,8 @@ def evaluate(
     ``dual_infeasible`` reference, the backend reporting that status; otherwise ``found``, each
     residual within the tolerance and, against an ``optimal`` reference, ``optimality_gap <=
     tolerance.gap`` (``rule == "qpbenchmark"``: :func:`qpbench.published.qpbenchmark_success`)."""
-    tick = Tick(record, solution, reference)
+    x = getattr(solution, "x", None)
+    tick = Tick(record, solution, x, reference, getattr(reference, "status", None))
     for columns, fn in PER_TICK_METRICS.items():
         value = fn(tick)
         tick.values.update(

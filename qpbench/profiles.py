@@ -51,7 +51,7 @@ class Profile:
         """The same profile with another per-solve time limit [s] (a qpbenchmark profile's
         solver arguments change with it, as its ``set_time_limit`` makes them)."""
         if self.name.startswith(QPBENCHMARK_PREFIX):
-            rebuilt = qpbenchmark_profile(self.name[len(QPBENCHMARK_PREFIX) :], time_limit)
+            rebuilt = qpbenchmark_profile(self.name.removeprefix(QPBENCHMARK_PREFIX), time_limit)
             return replace(rebuilt, reference_time_limit=self.reference_time_limit)
         return replace(
             self,
@@ -78,13 +78,8 @@ def profile_names() -> tuple[str, ...]:
 
 @functools.lru_cache(maxsize=None)
 def qpbenchmark_profile(settings: str, time_limit: float | None = None) -> Profile:
-    """The profile ``qpbenchmark:<settings>``; ``time_limit`` [s] per solve (``None``:
-    qpbenchmark's default runtime)."""
-    if settings not in SETTINGS_NAMES:
-        raise ParamError(
-            f"unknown qpbenchmark settings '{settings}' (choose from {', '.join(SETTINGS_NAMES)})",
-            key="profile",
-        )
+    """The profile ``qpbenchmark:<settings>`` (``settings`` one of :data:`SETTINGS_NAMES`);
+    ``time_limit`` [s] per solve (``None``: qpbenchmark's default runtime)."""
     kwargs, tolerances = qpbenchmark_settings(time_limit)
     tol = tolerances[settings]
     options = kwargs[settings]
@@ -107,11 +102,10 @@ def get_profile(name: str | Profile) -> Profile:
     """The profile called ``name`` (a :class:`Profile` passes through)."""
     if isinstance(name, Profile):
         return name
-    if isinstance(name, str) and name.startswith(QPBENCHMARK_PREFIX):
-        return qpbenchmark_profile(name[len(QPBENCHMARK_PREFIX) :])
-    try:
-        return PROFILES[name]
-    except KeyError:
+    if name not in profile_names():
         raise ParamError(
             f"unknown profile '{name}' (choose from {', '.join(profile_names())})", key="profile"
-        ) from None
+        )
+    if name.startswith(QPBENCHMARK_PREFIX):
+        return qpbenchmark_profile(name.removeprefix(QPBENCHMARK_PREFIX))
+    return PROFILES[name]

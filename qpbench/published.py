@@ -44,10 +44,9 @@ def import_qpbenchmark() -> ModuleType:
 
 @functools.lru_cache(maxsize=None)
 def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
-    """``(kwargs, tolerances)`` of a ``qpbenchmark.TestSet`` built here: per settings name,
-    the keyword arguments its runner passes to ``qpsolvers.solve_problem`` per solver
-    (shared: do not modify) and its ``Tolerance``; ``runtime`` [s] is given to its
-    ``define_tolerances`` (``None``: its default)."""
+    """``(kwargs, tolerances)`` of a ``qpbenchmark.TestSet`` per settings name: the keyword
+    arguments its runner passes per solver (shared: do not modify) and its ``Tolerance``, under
+    a time limit ``runtime`` [s] (``None``: its default)."""
     qpb = import_qpbenchmark()
 
     class _Settings(qpb.TestSet):
@@ -93,8 +92,6 @@ def read_published_results(path: str | Path) -> pd.DataFrame:
     path = Path(path)
     try:
         df = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
-    except FileNotFoundError:
-        raise InputError("no such file", path=path) from None
     except Exception as exc:  # pandas raises many types for a bad file
         raise InputError(
             f"unreadable results file ({type(exc).__name__}: {exc})", path=path
@@ -119,8 +116,6 @@ def read_objectives(path: str | Path) -> dict[str, float]:
     path = Path(path)
     try:
         rows = list(csv.reader(path.read_text(encoding="utf-8").splitlines()))
-    except FileNotFoundError:
-        raise InputError("no such reference file", path=path) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"unreadable reference file ({exc})", path=path) from None
     header = [c.strip() for c in rows[0]] if rows else []

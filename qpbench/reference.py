@@ -189,9 +189,8 @@ def needs_solver(record: ProblemRecord) -> bool:
 
 
 def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
-    problem = solver_problem(record.problem)
+    problem = solver_problem(record.problem, dense=True)  # no constraint at all: small
     P, q = problem.P, problem.q
-    P = P.toarray() if hasattr(P, "toarray") else P  # no constraint at all: small in practice
     x, *_ = np.linalg.lstsq(P, -q, rcond=None)
     if float(np.max(np.abs(P @ x + q))) > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
         note = "no constraints and P x = -q has no solution: unbounded"
@@ -218,10 +217,8 @@ def reference_solution(record: ProblemRecord, method: str = "auto") -> Reference
 
 
 def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str, str]:
-    """``(kept, other, status, why)``: of two optimal answers the smaller ``kkt``; one optimal
-    answer is kept if the other is ``unknown`` or its ``kkt <= ALMOST_TOL`` (it refutes an
-    infeasibility claim), else the other's verdict; neither: the common status, a verdict
-    over ``unknown``, ``unknown`` for two different verdicts."""
+    """``(kept, other, status, why)`` of two answers: an optimal one is kept over an ``unknown``
+    one, or over an infeasibility claim when its ``kkt <= ALMOST_TOL`` (it refutes it)."""
     if first.status == second.status == "optimal":
         keep, other = (first, second) if first.kkt <= second.kkt else (second, first)
         return keep, other, "optimal", f"kept {keep.solver}: smaller KKT residuals"
@@ -241,10 +238,9 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
 def assemble(
     name: str | None, candidates: list[Candidate], time_limit: float = math.inf
 ) -> ReferenceSolution:
-    """The reference made of one solver's answer or of two (:func:`settle`), each solve
-    limited to ``time_limit`` [s]; two agree when their statuses match and, when optimal,
-    their ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)`` (NaN unless both are) is at most
-    ``AGREE_RTOL``."""
+    """The reference made of one solver's answer or of two (:func:`settle`), each solve limited
+    to ``time_limit`` [s]; two agree when their statuses match and, when optimal, their
+    ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)`` is at most ``AGREE_RTOL``."""
     check: dict = {}
     if len(candidates) == 1:
         (keep,) = candidates
@@ -360,11 +356,9 @@ def reference_solutions(
     cache_dir: str | Path | None = None,
 ) -> list[ReferenceSolution]:
     """References of every problem of a set, in order, read from or added to the cache.
-
     ``progress``: ``None``, a tqdm-like callable (called with ``total=``) or ``"log"``;
-    ``time_limit`` [s] per solve; ``jobs`` workers at once, started by ``context``
-    (default ``spawn``: never a fork of this process, which may hold threads and locks).
-    """
+    ``time_limit`` [s] per solve; ``jobs`` workers at once, started by ``context`` (default
+    ``spawn``: never a fork of this process, which may hold threads and locks)."""
     path = cache_path(problem_set, method, cache_dir) if cache else None
     sha = content_sha256(problem_set)
     limit = math.inf if time_limit is None else float(time_limit)
@@ -412,9 +406,8 @@ def cache_path(
         return None
     tag = "" if method == "auto" else f"{method}-"
     path = Path(problem_set.path)
-    if path.is_dir():
-        return folder / f"reference-{tag}{sha[:16]}.parquet"
-    return folder / f"{path.stem}.reference-{tag}{sha[:16]}.parquet"
+    stem = "" if path.is_dir() else f"{path.stem}."
+    return folder / f"{stem}reference-{tag}{sha[:16]}.parquet"
 
 
 def _meta(sha: str) -> dict[bytes, bytes]:
