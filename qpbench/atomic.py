@@ -117,11 +117,10 @@ def check_output(
     path = Path(path)
     if kind == "file" and path.is_dir():
         raise ParamError(f"{path}: is a folder; expected a file name", key=key)
-    if kind == "dir" and path.exists() and not path.is_dir():
-        raise ParamError(f"{path}: is a file; expected a folder", key=key)
     parent = path.parent
-    if parent.exists() and not parent.is_dir():
-        raise ParamError(f"{parent}: is a file; expected a folder", key=key)
+    for folder in [path, parent] if kind == "dir" else [parent]:
+        if folder.exists() and not folder.is_dir():
+            raise ParamError(f"{folder}: is a file; expected a folder", key=key)
     if not parent.exists() and not make_parent:
         raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key=key)
     if path.exists() and not (force or resume):

@@ -32,11 +32,9 @@ class Tolerance:
 
 @dataclass(frozen=True)
 class Profile:
-    """A named set of solver settings (``time_limit`` [s] per solve) and success thresholds.
-
+    """A named set of solver settings (``time_limit`` [s] per solve) and success thresholds;
     ``reference_time_limit`` [s] bounds each reference solve; ``solver_options`` (a
-    qpbenchmark profile's) are the keyword arguments its runner passes per solver.
-    """
+    qpbenchmark profile's) are the keyword arguments its runner passes per solver."""
 
     name: str
     eps_abs: float

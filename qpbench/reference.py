@@ -96,6 +96,11 @@ class ReferenceSolution:
     time_limit_s: float = math.inf
     timed_out: bool = False
 
+    def __post_init__(self):
+        for k in _VEC_KEYS:
+            if getattr(self, k) is not None:
+                setattr(self, k, np.asarray(getattr(self, k), dtype=np.float64))
+
 
 def _worst_residual(solution) -> float:
     if solution.x is None or not np.all(np.isfinite(solution.x)):
@@ -241,7 +246,7 @@ def assemble(
     """The reference made of one solver's answer or of two (:func:`settle`), each solve limited
     to ``time_limit`` [s]; two agree when their statuses match and, when optimal, their
     ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)`` is at most ``AGREE_RTOL``."""
-    check: dict = {}
+    fields: dict = {}
     if len(candidates) == 1:
         (keep,) = candidates
         status, note = keep.status, f"{keep.describe()}; {keep.solver} alone (no cross-check)"
@@ -259,16 +264,15 @@ def assemble(
         note = f"{first.describe()}; {second.describe()}; {verdict}; {why}"
         if not agree:
             log.warning("reference of '%s': %s", name, note)
-        check = {f"check_{k}": getattr(other, k) for k in ("solver", "status", "objective", "kkt")}
-        check.update(agree=agree, agreement=agreement)
-    ref = ReferenceSolution(status, solver=keep.solver, kkt=keep.kkt, name=name, note=note, **check)
+        fields = {f"check_{k}": getattr(other, k) for k in ("solver", "status", "objective", "kkt")}
+        fields.update(agree=agree, agreement=agreement)
+    if status == "optimal":
+        fields.update({k: getattr(keep.solution, k) for k in _VEC_KEYS}, objective=keep.objective)
+    ref = ReferenceSolution(
+        status, solver=keep.solver, kkt=keep.kkt, name=name, note=note, **fields
+    )
     ref.time_limit_s = time_limit
     ref.timed_out = any(c.timed_out for c in candidates)
-    if status == "optimal":
-        ref.objective = keep.objective
-        for k in _VEC_KEYS:
-            v = getattr(keep.solution, k)
-            setattr(ref, k, None if v is None else np.asarray(v, dtype=np.float64))
     return ref
 
 
@@ -425,15 +429,7 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
         meta = table.schema.metadata or {}
         if any(meta.get(k) != v for k, v in _meta(sha).items()):  # another set or version
             return None
-        return [
-            ReferenceSolution(
-                **{
-                    k: v if v is None or k not in _VEC_KEYS else np.array(v, np.float64)
-                    for k, v in r.items()
-                }
-            )
-            for r in table.to_pylist()
-        ]
+        return [ReferenceSolution(**r) for r in table.to_pylist()]
     except Exception as exc:  # corrupt cache: recompute
         log.warning("%s: unreadable reference cache, recomputing (%s)", path, exc)
         return None
