@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import os
 import secrets
+import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -134,8 +135,6 @@ def promote(staging: Path, out: Path, names) -> None:
     """Replace the outputs ``names`` in ``out`` by those in ``staging``, one rename each (a
     folder's previous version moved aside, then removed), and remove ``staging``: a
     reader sees the previous outputs or the new ones."""
-    import shutil
-
     for name in names:
         src = staging / name
         dst = out / name

@@ -3,6 +3,7 @@ one clear line and exits with :attr:`QpbenchError.exit_code`."""
 
 from __future__ import annotations
 
+import difflib
 import math
 import numbers
 from pathlib import Path
@@ -44,8 +45,6 @@ class ParamError(InputError):
 def did_you_mean(name: str, choices) -> str:
     """``"did you mean 'a' or 'b'? "``: the (up to three) ``choices`` closest to ``name``,
     ignoring case, or ``""``."""
-    import difflib
-
     folded = {str(c).casefold(): c for c in choices}
     close = difflib.get_close_matches(str(name).casefold(), list(folded), n=3, cutoff=0.6)
     return f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import os
 import re
+import resource
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -55,13 +57,9 @@ def format_size(n: float) -> str:
 def _mapped_bytes() -> int:
     """Virtual memory this process maps now (``VmSize``), 0 if unknown."""
     try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("VmSize:"):
-                    return int(line.split()[1]) * 1024
+        return int(Path("/proc/self/statm").read_text().split()[0]) * os.sysconf("SC_PAGE_SIZE")
     except OSError:
-        pass
-    return 0
+        return 0
 
 
 def resolve_budget(text: str | None) -> int:
@@ -70,12 +68,7 @@ def resolve_budget(text: str | None) -> int:
     if text is not None:
         return parse_size(text)
     budget = int(DEFAULT_FRACTION * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    try:
-        import resource
-
-        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    except (ImportError, OSError, ValueError):
-        return budget
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     if soft != resource.RLIM_INFINITY:
         budget = min(budget, max(0, int(0.8 * (soft - _mapped_bytes()))))
     return budget

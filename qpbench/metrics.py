@@ -67,9 +67,8 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
 
 @dataclass
 class Tick:
-    """What a per-tick metric reads: the record, the solution and its ``x``, the reference and
-    its ``reference_status`` (each ``None`` when missing), and ``values``, the metrics computed
-    before this one, by column."""
+    """What a per-tick metric reads: the record, the solution and its ``x``, the reference and its
+    status (each ``None`` when missing), and ``values``, the metrics before this one, by column."""
 
     record: object
     solution: object

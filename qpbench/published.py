@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import functools
 import logging
 import math
@@ -111,8 +112,6 @@ def read_objectives(path: str | Path) -> dict[str, float]:
     """Known optimal objectives ``1/2 x'Px + q'x + r`` (as Maros and Meszaros publish them)
     of a CSV with a header ``problem,objective`` (other columns ignored, blank lines
     skipped); an :class:`InputError` names a bad line."""
-    import csv
-
     path = Path(path)
     try:
         rows = list(csv.reader(path.read_text(encoding="utf-8").splitlines()))

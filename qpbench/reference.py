@@ -22,7 +22,7 @@ import qpsolvers
 
 from .atomic import write_bytes
 from .cache import user_cache_dir, writable
-from .formats import ProblemRecord, ProblemSet, content_sha256, solver_problem
+from .formats import ProblemRecord, ProblemSet, content_sha256, solver_problem, table_to_bytes
 from .metrics import objective
 from .runner.process import context as worker_context
 from .runner.process import deadline, run_tasks
@@ -68,14 +68,11 @@ _VEC_KEYS = ("x", "y", "z", "z_box")
 
 @dataclass
 class ReferenceSolution:
-    """High-accuracy solution of one problem.
-
-    ``status`` is ``optimal``, ``primal_infeasible``, ``dual_infeasible`` or ``unknown``;
-    ``x, y, z, z_box`` (qpsolvers' signs) only when optimal. ``objective``/``kkt`` are
-    the kept answer's, ``check_*`` the other solver's; ``agreement`` is their relative
-    objective difference (NaN unless both optimal); ``time_limit_s`` [s] the limit of
-    each solve (``inf``: none).
-    """
+    """High-accuracy solution of one problem: ``status`` ``optimal``, ``primal_infeasible``,
+    ``dual_infeasible`` or ``unknown``; ``x, y, z, z_box`` (qpsolvers' signs, float64) only when
+    optimal; ``objective``/``kkt`` the kept answer's, ``check_*`` the other solver's;
+    ``agreement`` their relative objective difference (NaN unless both optimal);
+    ``time_limit_s`` [s] the limit of each solve (``inf``: none)."""
 
     status: str
     x: np.ndarray | None = None
@@ -110,16 +107,15 @@ def _worst_residual(solution) -> float:
 
 
 def _status(solver: str, solution) -> str:
-    """The reference status of a qpsolvers solution of ``solver`` by the backends' maps of
-    Clarabel's and PIQP's statuses (an ``Almost`` infeasibility is one; ``AlmostSolved`` is
-    optimal when its ``kkt <= ALMOST_TOL``); ``unknown`` for no verdict."""
+    """The reference status of a qpsolvers solution of ``solver`` by the backends' status maps
+    (``AlmostSolved``: optimal when its ``kkt <= ALMOST_TOL``); ``unknown`` for no verdict."""
     if solver == "clarabel":
         from .backends.clarabel_ import CLARABEL_STATUSES
 
         name = str(solution.extras.get("status")).split(".")[-1]
         if name == "AlmostSolved":
             return "optimal" if _worst_residual(solution) <= ALMOST_TOL else "unknown"
-        status = CLARABEL_STATUSES.get(name.removeprefix("Almost"))
+        status = CLARABEL_STATUSES.get(name.removeprefix("Almost"))  # Almost...Infeasible as well
     else:
         from .backends.piqp_ import piqp_statuses
 
@@ -162,8 +158,7 @@ def solve_candidate(record: ProblemRecord, solver: str, time_limit: float = math
         settings["time_limit"] = float(time_limit)
     started = time.perf_counter()
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with warnings.catch_warnings(action="ignore"):
             sol = qpsolvers.solve_problem(solver_problem(record.problem), solver=solver, **settings)
         error = ""
     except Exception as exc:  # a solver crash is an "unknown" reference, not a traceback
@@ -438,8 +433,6 @@ def _read_cache(path: Path, sha: str) -> list[ReferenceSolution] | None:
 def _write_cache(path: Path, problem_set: ProblemSet, refs: list, sha: str) -> None:
     """Write atomically; remove stale caches of the same method in a problem-set folder."""
     import pyarrow as pa
-
-    from .formats import table_to_bytes
 
     table = pa.Table.from_pylist([vars(r) for r in refs]).replace_schema_metadata(_meta(sha))
     try:
