@@ -26,6 +26,7 @@ from .records import (
     ProblemRecord,
     check_record,
     csc_parts,
+    dense_copy,
     reading,
     solver_problem,
 )
@@ -51,14 +52,13 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
         if spa.issparse(M):
             members.update({f"{key}_csc_{p}": v for p, v in csc_parts(M).items()})
             members[f"{key}_csc_shape"] = np.asarray(M.shape, dtype=np.int64)
+    dense = dense_copy(problem)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             if dense_entries(problem) <= DENSE_COPY_MAX:
-                solver_problem(problem, dense=True).save(fh)
+                qpsolvers.Problem(*dense.values()).save(fh)
             else:
-                parts = {k: getattr(problem, k) for k in ARRAY_KEYS}
-                dense = {k: v for k, v in parts.items() if v is not None and not spa.issparse(v)}
-                np.savez(fh, **{k: np.asarray(v, dtype=np.float64) for k, v in dense.items()})
+                np.savez(fh, **{k: v for k, v in dense.items() if v is not None})
         _append(tmp, members)
     return path
 

@@ -13,11 +13,9 @@ import scipy.sparse as spa
 
 from ..atomic import write_bytes, write_text
 from ..exceptions import ProblemFormatError
-from ..memory import dense_entries
 from .records import (
     ARRAY_KEYS,
     CSC_TYPES,
-    DENSE_COPY_MAX,
     FORMAT_VERSION,
     MANIFEST_NAME,
     MATRIX_KEYS,
@@ -29,6 +27,7 @@ from .records import (
     ProblemSet,
     check_record,
     csc_parts,
+    dense_copy,
     reading,
 )
 
@@ -51,15 +50,6 @@ def list_column(values: list[np.ndarray | None], kind: str = "float64"):
     )
 
 
-def _stored(problem, key: str):
-    """What the qpbenchmark column of ``key`` holds: the dense array, or ``None`` for a
-    sparse matrix of a problem too large to be written dense too (``DENSE_COPY_MAX``)."""
-    M = getattr(problem, key)
-    if M is None or not spa.issparse(M):
-        return None if M is None else np.asarray(M, dtype=np.float64)
-    return M.toarray() if dense_entries(problem) <= DENSE_COPY_MAX else None
-
-
 def records_to_table(records: list[ProblemRecord], path: str | Path | None = None) -> pa.Table:
     """The records as a ``pyarrow.Table`` in the problem-set schema: the arrays, the metadata,
     and CSC columns ``M_csc_<part>`` of each matrix ``M`` sparse in some record."""
@@ -73,7 +63,8 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
     lst = pa.list_(pa.float64())
     fields = [(k, lst) for k in ARRAY_KEYS] + [(k, getattr(pa, t)()) for k, t in META_TYPES.items()]
-    cols = [list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
+    dense = [dense_copy(r.problem) for r in records]
+    cols = [list_column([d[k] for d in dense]) for k in ARRAY_KEYS]
     cols += [pa.array([getattr(r, k) for r in records], type=t) for k, t in fields[len(cols) :]]
     for k in MATRIX_KEYS:
         matrices = [getattr(r.problem, k) for r in records]
@@ -256,9 +247,13 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
     return records
 
 
-def read_manifest(folder: str | Path) -> dict:
-    """Read and check ``folder/manifest.json``."""
-    mpath = Path(folder) / MANIFEST_NAME
+def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
+    """Read a problem-set folder; ``verify_hash`` checks the SHA-256 and the row count
+    against the manifest."""
+    folder = Path(folder)
+    ppath, mpath = folder / PARQUET_NAME, folder / MANIFEST_NAME
+    if not ppath.is_file():
+        raise ProblemFormatError("no such file", path=ppath)
     with reading(mpath, "manifest", (OSError, ValueError)):
         manifest = json.loads(mpath.read_text())
     if not isinstance(manifest, dict):
@@ -266,19 +261,6 @@ def read_manifest(folder: str | Path) -> dict:
     for k in ("sha256", "count"):
         if k not in manifest:
             raise ProblemFormatError("missing key", path=mpath, key=k)
-    return manifest
-
-
-def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
-    """Read a problem-set folder (or its ``problems.parquet``); ``verify_hash`` checks
-    the SHA-256 and the row count against the manifest."""
-    folder = Path(folder)
-    if folder.name == PARQUET_NAME:
-        folder = folder.parent
-    ppath = folder / PARQUET_NAME
-    if not ppath.is_file():
-        raise ProblemFormatError("no such file", path=ppath)
-    manifest = read_manifest(folder)
     digest = sha256_file(ppath)
     hash_ok = digest == manifest["sha256"]
     if verify_hash and not hash_ok:

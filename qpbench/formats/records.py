@@ -12,6 +12,7 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
+from ..memory import dense_entries
 
 #: Array columns, in qpsolvers' argument order.
 ARRAY_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
@@ -111,18 +112,30 @@ def problem_sizes(problem: qpsolvers.Problem) -> tuple[int, int, int]:
     return n, m_eq, m_ineq
 
 
-def solver_problem(problem: qpsolvers.Problem, dense: bool = False) -> qpsolvers.Problem:
-    """``problem`` with float64 arrays, sparse matrices as CSC (what a sparse API is given)
-    or, with ``dense``, made dense."""
-    parts = []
+def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
+    """``problem`` with float64 arrays, sparse matrices as CSC (what a sparse API is given)."""
+    parts = (getattr(problem, k) for k in ARRAY_KEYS)
+    return qpsolvers.Problem(*(None if v is None else _float64(v) for v in parts))
+
+
+def _float64(v):
+    """``v`` as float64, a sparse matrix as CSC."""
+    if not spa.issparse(v):
+        return np.asarray(v, dtype=np.float64)
+    return v if v.format == "csc" and v.dtype == np.float64 else spa.csc_matrix(v, dtype=np.float64)
+
+
+def dense_copy(problem: qpsolvers.Problem) -> dict[str, np.ndarray | None]:
+    """Each array as qpsolvers and qpbenchmark read it: dense float64, ``None`` when absent or
+    sparse in a problem of more than ``DENSE_COPY_MAX`` entries made dense."""
+    small = dense_entries(problem) <= DENSE_COPY_MAX
+    out = {}
     for k in ARRAY_KEYS:
         v = getattr(problem, k)
-        if spa.issparse(v) and not dense:
-            v = spa.csc_matrix(v, dtype=np.float64)
-        elif v is not None:
-            v = np.asarray(v.toarray() if spa.issparse(v) else v, dtype=np.float64)
-        parts.append(v)
-    return qpsolvers.Problem(*parts)
+        if spa.issparse(v):
+            v = v.toarray() if small else None
+        out[k] = None if v is None else np.asarray(v, dtype=np.float64)
+    return out
 
 
 def csc_parts(M) -> dict[str, np.ndarray]:
@@ -150,13 +163,10 @@ def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Except
 
 def _numeric(v, key: str, fail):
     """``v`` as float64 (CSC for a sparse matrix), or a failure naming ``key``."""
-    sparse = spa.issparse(v)
-    v = v if sparse else np.asarray(v)
+    v = v if spa.issparse(v) else np.asarray(v)
     if v.dtype.kind not in "fiub":
         fail(key, f"dtype {v.dtype} is not numeric")
-    if not sparse:
-        return v.astype(np.float64, copy=False)
-    return v if v.format == "csc" and v.dtype == np.float64 else spa.csc_matrix(v, dtype=np.float64)
+    return _float64(v)
 
 
 def _values(M) -> np.ndarray:

@@ -1,8 +1,7 @@
 """The network's kernels: its parameter block ``prm``, its step bound and its integrator as loops.
 
-One module: numba resolves the functions a kernel calls (the ``*_jit`` names) from the globals of
-the module that defines the kernel, and :func:`kernel` rebinds them to compiled versions (cached
-on disk) before the first compile. Without numba Python runs the same functions.
+numba resolves the ``*_jit`` names a kernel calls from this module's globals: :func:`kernel`
+rebinds them to compiled versions before the first compile (without numba Python runs them).
 """
 
 from __future__ import annotations
@@ -72,16 +71,12 @@ def make_params(
 ) -> np.ndarray:
     """The parameter block ``prm`` of the kernels.
 
-    Fixed duration (``r_total = duration / eps > 0``): steps of ratio at most ``step_ratio``
-    (a fixed step ``h = step_ratio * eps``), else ``substeps`` equal steps, else (both 0) the
-    fewest steps with ``r <= safety * ratio_max``; with ``clamp``, a forced step above ``safety *
-    ratio_max`` is shortened to it (more steps), the bound computed only when the step is above
-    a cheap lower estimate of it (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2``). To
-    convergence (``r_total <= 0``): steps of ``r = safety * ratio_max`` until the three
-    residuals are ``<= tol`` (negative: never), or ``max_steps`` steps.
-
-    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``l1_clip``: clip ``l1`` to
-    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of :data:`METHODS`.
+    Fixed duration (``r_total = duration / eps > 0``): steps of ratio at most ``step_ratio``,
+    else ``substeps`` equal steps, else the fewest with ``r <= safety * ratio_max``; with
+    ``clamp`` a forced step above ``safety * ratio_max`` is shortened to it. To convergence
+    (``r_total <= 0``): steps of ``r = safety * ratio_max`` until the three residuals are
+    ``<= tol`` (negative: never), or ``max_steps``. ``p_range``: ``(lambda_min, lambda_max)``
+    of ``P``; ``l1_clip``: ``l1`` clipped to ``[-l1_clip, l1_clip]`` after each step.
     """
     if method not in METHODS:
         raise ParamError(
@@ -103,15 +98,12 @@ def make_params(
 class IntegrationResult:
     """What one call of :func:`qpbench.rnn.network.integrate` did.
 
-    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms):
-    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual
-    ``|v - P_Omega(v - g)|_inf`` with ``g = P v + q - A^T l1 + G^T l2`` (qpsolvers' with
-    the ``z_box`` of ``duals``); complementarity ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero
-    iff ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``). ``ratio``: ``r = h / eps``
-    of one step; ``ratio_max``: its stability bound, ``sigma2_bound``: the bound on
-    ``sigma_max([A; G])^2`` used, both NaN when a forced step was not checked against the
-    bound or was below a cheap lower estimate of it. ``nominal_steps``: steps the setting
-    asked for (0 when the bound chose the count).
+    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms): primal
+    ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual ``|v - P_Omega(v - g)|``
+    with ``g = P v + q - A^T l1 + G^T l2``; complementarity ``|l2 - max(l2 + G v - h, 0)|``.
+    ``ratio``: ``r = h / eps`` of one step; ``ratio_max``: its stability bound and
+    ``sigma2_bound`` the bound on ``sigma_max([A; G])^2`` used (NaN when not computed);
+    ``nominal_steps``: steps the setting asked for (0 when the bound chose the count).
     """
 
     steps: int
@@ -169,10 +161,8 @@ def ratio_max(pmin, pmax, sig2, semi):
 
 
 def _gershgorin(P):
-    """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``.
-
-    ``exact`` when that matrix is diagonal (the bounds are its eigenvalues).
-    """
+    """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``
+    (``exact``: it is diagonal)."""
     n = P.shape[0]
     lo = np.inf
     hi = -np.inf
@@ -204,11 +194,8 @@ def _frobenius2(A, G):
 
 
 def nominal_steps(r_total, r_step, substeps):
-    """Steps a fixed-duration call takes before any clamp (0: the bound decides).
-
-    ``r_step > 0``: the fewest steps of ratio at most ``r_step`` (a duration a
-    hair above a multiple of the step, from rounding, adds none); else ``substeps``.
-    """
+    """Steps a fixed-duration call takes before any clamp (0: the bound decides): the fewest
+    of ratio at most ``r_step`` (rounding adds none), else ``substeps``."""
     if r_total <= 0.0:
         return 0
     if r_step > 0.0:
@@ -365,9 +352,7 @@ def _residuals(b, h, lb, ub, xi, g, Av, Gv):
     return pr, du, co
 
 
-# Over 80 lines, kept whole on purpose: the integrator is one compiled function (the per-step
-# functions it calls are inlined by numba); moving its set-up or its stopping tests out would add
-# calls inside the loop or another compiled function to rebind before the first compile.
+# Over 80 lines: one compiled function, its per-step callees inlined by numba.
 def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     n = q.shape[0]
     me = b.shape[0]
@@ -496,13 +481,10 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
 
 
 def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
-    """One call of the online network: :func:`_integrate_loops` plus its verdict.
-
-    Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and complementarity within
-    ``prm[OK_PRIMAL]``, dual residual within ``prm[OK_DUAL]``; ``note``: :func:`step_note` has
-    something to say), or :data:`SHAPE_MISMATCH` (also when the equality count is not the
-    state's ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`.
-    """
+    """:func:`_integrate_loops` plus its verdict: ``4 * steps + 2 * note + ok`` (``ok``: the
+    residuals within ``prm[OK_PRIMAL]``, ``prm[OK_DUAL]``; ``note``: :func:`step_note` has
+    something to say), or :data:`SHAPE_MISMATCH` (also an equality count not
+    ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`."""
     if prm[STATE_ME] >= 0.0 and b.shape[0] != prm[STATE_ME]:
         return SHAPE_MISMATCH
     steps = _integrate_jit(P, q, A, b, G, h, lb, ub, xi, prm, sol)
@@ -560,10 +542,8 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
     )
 
 
-# The names the kernels call: plain functions until kernel() compiles them (inlined into their
-# callers where marked: a call costs more than these small loops, run every step; the integrator
-# and the online tick, called once a solve, are compiled as calls: inlining them copies their IR
-# into every caller and type, for no speed).
+# The names the kernels call: plain functions until kernel() compiles them, inlined into their
+# callers except those of _CALLS (called once a solve).
 _sigma2_bound_jit = sigma2_bound
 _ratio_max_jit = ratio_max
 _gershgorin_jit = _gershgorin
@@ -605,14 +585,10 @@ def _interpreted() -> Callable:
 
 
 def kernel(use_numba: bool = True) -> Callable:
-    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
-
-    ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the inputs ``PMIN ..
-    L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``; ``sol`` (length ``2n + me + mi``, or
-    0 to skip) receives ``[x; y; z; z_box]`` (``y = -l1``, ``z = l2``, ``z_box = w -
-    P_Omega(w)`` with ``w = v - g``). Returns the step count, :data:`NO_STABLE_STEP` or
-    :data:`SHAPE_MISMATCH`. Compiled (with every function the kernels call) on the first call
-    of the result; ``use_numba=False``: the same loops run by Python.
+    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (compiled, or with
+    ``use_numba=False`` run by Python): ``xi = [v; l1; l2]`` updated in place; ``prm`` the
+    inputs and outputs; ``sol`` (length ``2n + me + mi``, or 0) receives ``[x; y; z; z_box]``.
+    Returns the step count, :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`.
     """
     global _COMPILED, _INTERPRETED
     if not use_numba:
@@ -639,12 +615,8 @@ def _signature(*ndims):
 @cache
 def online_kernel() -> Callable:
     """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``
-    (:func:`_online_tick_loops`), ``sol`` of length ``3 n + 2 (me + mi)``.
-
-    Compiled for exactly C-contiguous writable float64 arrays (``P``, ``A``, ``G`` 2-D), so
-    numba's dispatcher raises ``TypeError`` for anything else: the whole type check of the
-    online backend's per-tick path.
-    """
+    (:func:`_online_tick_loops`), ``sol`` of length ``3 n + 2 (me + mi)``, compiled for
+    C-contiguous writable float64 arrays only (numba's dispatcher raises ``TypeError``)."""
     import numba
 
     kernel(True)  # binds the integrator the tick calls
@@ -655,13 +627,10 @@ def online_kernel() -> Callable:
 @cache
 def packed_kernel() -> Callable:
     """The per-tick kernel on a :class:`qpbench.packed.PackedProblem`'s buffer: ``f(buffer, xi,
-    prm, sol) -> code``, for 1-D C-contiguous float64 arrays only: the compiled function's own
-    entry point when numba exposes it (it skips the dispatcher's type matching)."""
+    prm, sol) -> code``, for 1-D C-contiguous float64 arrays: the compiled function's entry
+    point (no type matching)."""
     import numba
 
     kernel(True)
     disp = numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
-    try:
-        return disp.overloads[disp.signatures[0]].entry_point
-    except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
-        return disp
+    return disp.overloads[disp.signatures[0]].entry_point

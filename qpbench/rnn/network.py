@@ -9,14 +9,10 @@ with the objective's gradient ``P v + q`` where the paper prints a garbled
     eps l1dot = b - A v                                              (15b)
     eps l2dot = -l2 + max(l2 + G v - h, 0)                           (15c)
 
-``P_Omega`` clips to ``[lb, ub]`` (infinite where a bound is absent). At an
-equilibrium the qpsolvers duals are ``y = -l1``, ``z = l2`` and
-``z_box = -(P v + q + A^T y + G^T z)``.
-
-Explicit Euler steps ``xi <- xi + r f(xi)`` of ratio ``r = h / eps`` for a step of ``h``
-seconds, or semi-implicit ones (``v`` first, the new ``v`` fed to the dual updates); the
-stability bound of ``r`` is :func:`~.kernels.ratio_max` (derivation: docs/architecture.md).
-The integrator, its parameter block and its step bound are :mod:`.kernels`.
+``P_Omega`` clips to ``[lb, ub]``. At an equilibrium the qpsolvers duals are ``y = -l1``,
+``z = l2`` and ``z_box = -(P v + q + A^T y + G^T z)``. Explicit Euler steps ``xi <- xi + r
+f(xi)`` of ratio ``r = h / eps`` for a step of ``h`` [s], or semi-implicit ones (``v`` first);
+the integrator and its step bound are :mod:`.kernels`.
 """
 
 from __future__ import annotations
@@ -37,11 +33,8 @@ if TYPE_CHECKING:
 
 @dataclass
 class DenseQP:
-    """A QP as dense float64 arrays, absent parts replaced by neutral ones.
-
-    ``A v = b`` and ``G v <= h`` may have no rows (``me``, ``mi`` = 0); ``lb``,
-    ``ub`` are ``-inf`` / ``+inf`` where absent (``has_box``: the problem had one).
-    """
+    """A QP as dense float64 arrays: absent constraints have no rows, an absent bound is
+    infinite (``has_box``: the problem had one)."""
 
     P: np.ndarray
     q: np.ndarray
@@ -61,8 +54,8 @@ class DenseQP:
 
 @cache
 def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(zeros((0, n)), zeros(0))``: no constraint rows (writable like a problem's rows: numba
-    compiles a read-only array type apart)."""
+    """``(zeros((0, n)), zeros(0))``: no constraint rows (writable: numba compiles a read-only
+    array type apart)."""
     return np.zeros((0, n)), np.zeros(0)
 
 
@@ -87,25 +80,17 @@ def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarra
     return M, v
 
 
-_F64 = np.dtype(np.float64)
-
-
 def _f64(a, name: str, ndim: int) -> np.ndarray:
     """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a row or a column
     vector taken as the other)."""
-    if type(a) is np.ndarray and a.dtype == _F64 and a.flags.c_contiguous:
-        if a.ndim == ndim:
-            return a
-    else:
-        a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
-    if a.ndim != ndim:
-        if ndim == 2 and a.ndim == 1:
-            a = a.reshape(1, -1)
-        elif ndim == 1 and a.ndim == 2 and 1 in a.shape:
-            a = a.ravel()
-        else:
-            raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
-    return a
+    a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
+    if a.ndim == ndim:
+        return a
+    if ndim == 2 and a.ndim == 1:
+        return a.reshape(1, -1)
+    if ndim == 1 and a.ndim == 2 and 1 in a.shape:
+        return a.ravel()
+    raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
 
 
 def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
@@ -126,12 +111,8 @@ def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
 
 
 class NetworkState:
-    """State of the network, stored as one vector ``xi = [v; l1; l2]``.
-
-    ``v``: the output (the paper's joint-velocity command [rad/s]); ``l1``: equality
-    dual state (qpsolvers ``y = -l1``); ``l2``: inequality dual state, >= 0
-    (qpsolvers ``z = l2``); all three views of ``xi``.
-    """
+    """State of the network, one vector ``xi = [v; l1; l2]`` of which ``v`` (the output, the
+    paper's joint velocities [rad/s]), ``l1`` (``y = -l1``) and ``l2`` (``z = l2``) are views."""
 
     __slots__ = ("xi", "n", "me", "mi")
 
@@ -198,12 +179,8 @@ def integrate(
     p_range: tuple[float, float] | None = None,
     **settings,
 ) -> IntegrationResult:
-    """Integrate the network on ``qp`` from ``state`` (updated in place).
-
-    ``settings``: those of :func:`make_params` (``r_total``: the duration over ``eps``);
-    ``p_range`` defaults to the eigenvalues of ``P``. ``steps == NO_STABLE_STEP`` when ``P``
-    is not positive definite and no step count was forced.
-    """
+    """Integrate the network on ``qp`` from ``state`` (updated in place); ``settings``: those
+    of :func:`make_params`; ``p_range`` defaults to the eigenvalues of ``P``."""
     if state.shape != qp.shape:
         raise ParamError(
             f"state shape {state.shape} does not match problem {qp.shape}", key="state"
