@@ -6,7 +6,7 @@ A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` with a name, scenario, 
 ``ProblemList`` columns plus the metadata and CSC columns) and ``manifest.json``
 (:mod:`.parquet`); Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`). Sparse matrices stay
 sparse from file to solver. Every reader checks the data rules
-(:func:`~.records.check_problem`) and records the convexity of ``P`` (:mod:`.convexity`); a
+(:func:`~.records.check_record`) and records the convexity of ``P`` (:mod:`.convexity`); a
 violation is a :class:`~qpbench.exceptions.ProblemFormatError` naming the file, the problem
 and the field.
 """

@@ -16,7 +16,7 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
-from .records import ProblemRecord, check_record, reading
+from .records import ProblemRecord, check_record, reading, sorted_csc
 
 #: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
 MM_INFINITY = 1e20
@@ -73,14 +73,7 @@ def _csc(M, key: str, fail) -> spa.csc_matrix:
         M = spa.csc_matrix(M, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         fail(key, f"not a numeric matrix ({exc})")
-    M.sum_duplicates()
-    return _sorted(M)
-
-
-def _sorted(M) -> spa.csc_matrix:
-    """``M`` as CSC with sorted indices."""
-    M = M.tocsc()
-    M.sort_indices()
+    M.sum_duplicates()  # sorts the indices too
     return M
 
 
@@ -94,12 +87,12 @@ def _vector(v, key: str, fail) -> np.ndarray:
 
 def _symmetric(P: spa.csc_matrix) -> spa.csc_matrix:
     """``P`` mirrored when the file holds one triangle (a non-symmetric full ``P`` is left
-    to :func:`~qpbench.formats.records.check_problem`, which reports it)."""
+    to :func:`~qpbench.formats.records.check_record`, which reports it)."""
     if (P != P.T).nnz == 0:
         return P
     upper, lower = spa.triu(P, format="csc"), spa.tril(P, format="csc")
     if (P != upper).nnz == 0 or (P != lower).nnz == 0:
-        P = _sorted(P + P.T - spa.diags(P.diagonal()))
+        P = sorted_csc(P + P.T - spa.diags(P.diagonal()))
     return P
 
 
@@ -116,9 +109,9 @@ def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: i
     eq = (lc == uc) & np.isfinite(lc)
     upper = ~eq & np.isfinite(uc)
     lower = ~eq & np.isfinite(lc)
-    Aeq, beq = (_sorted(C[np.flatnonzero(eq)]), uc[eq]) if np.any(eq) else (None, None)
+    Aeq, beq = (sorted_csc(C[np.flatnonzero(eq)]), uc[eq]) if np.any(eq) else (None, None)
     if np.any(upper) or np.any(lower):
-        G = _sorted(spa.vstack([C[np.flatnonzero(upper)], -C[np.flatnonzero(lower)]]))
+        G = sorted_csc(spa.vstack([C[np.flatnonzero(upper)], -C[np.flatnonzero(lower)]]))
         h = np.concatenate([uc[upper], -lc[lower]])
     else:
         G = h = None

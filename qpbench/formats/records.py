@@ -138,11 +138,16 @@ def dense_copy(problem: qpsolvers.Problem) -> dict[str, np.ndarray | None]:
     return out
 
 
-def csc_parts(M) -> dict[str, np.ndarray]:
-    """The stored arrays of a sparse matrix (:data:`CSC_TYPES`): its float64 CSC, indices
-    sorted."""
+def sorted_csc(M) -> spa.csc_matrix:
+    """``M`` as float64 CSC with sorted indices."""
     M = spa.csc_matrix(M, dtype=np.float64)
     M.sort_indices()
+    return M
+
+
+def csc_parts(M) -> dict[str, np.ndarray]:
+    """The stored arrays of a sparse matrix (:data:`CSC_TYPES`): its :func:`sorted_csc`."""
+    M = sorted_csc(M)
     return {"data": M.data, "indices": M.indices, "indptr": M.indptr}
 
 
@@ -182,14 +187,16 @@ def _asymmetry(P) -> float:
     return float(np.max(np.abs(D), initial=0.0))
 
 
-def check_problem(
-    problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
-) -> None:
+def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     """Check shapes and values (sparse matrices through their stored values, never dense):
     ``P`` ``n x n`` and symmetric (``max |P - P'| <= SYMMETRY_RTOL max |P|``); ``G, h``
     and ``A, b`` in pairs; ``P q G h A b`` finite (several solvers reject ``h = inf``);
-    ``lb`` may be ``-inf``, ``ub`` ``+inf``. A :class:`ProblemFormatError` names the field.
+    ``lb`` may be ``-inf``, ``ub`` ``+inf``; the name and offset. A
+    :class:`ProblemFormatError` names the field. Sets :attr:`ProblemRecord.convexity`.
     """
+    from .convexity import assess_convexity
+
+    problem, name, offset = record.problem, record.name, record.offset
 
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
@@ -236,19 +243,10 @@ def check_problem(
     asym = _asymmetry(P)
     if asym > SYMMETRY_RTOL * scale:
         fail("P", f"is not symmetric (max |P - P'| = {asym:.3g} > {SYMMETRY_RTOL:g} max |P|)")
-
-
-def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
-    """:func:`check_problem` plus the metadata types; sets :attr:`ProblemRecord.convexity`."""
-    from .convexity import assess_convexity
-
-    check_problem(record.problem, path=path, name=record.name)
-    name, offset = record.name, record.offset
     if not isinstance(name, str) or not name:
         msg = f"problem name {name!r} is not a non-empty string"
         raise ProblemFormatError(msg, path=path, key="name")
     if not np.isfinite(offset):
-        msg = f"problem '{name}': offset {offset} is not finite"
-        raise ProblemFormatError(msg, path=path, key="offset")
+        fail("offset", f"offset {offset} is not finite")
     if record.convexity is None:
         record.convexity = assess_convexity(record.problem.P)
