@@ -1,8 +1,5 @@
-"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save` / ``load``).
-
-A sparse matrix ``M`` is stored as members ``M_csc_data``, ``M_csc_indices``,
-``M_csc_indptr`` (:data:`~.records.CSC_TYPES`) and ``M_csc_shape``.
-"""
+"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save`); a sparse matrix ``M``
+also as members ``M_csc_<part>`` (:data:`~.records.CSC_TYPES`) and ``M_csc_shape``."""
 
 from __future__ import annotations
 
@@ -32,13 +29,6 @@ from .records import (
 )
 
 
-def _append(path: Path, members: dict[str, np.ndarray]) -> None:
-    with zipfile.ZipFile(path, mode="a", compression=zipfile.ZIP_STORED) as zf:
-        for key, value in members.items():
-            with zf.open(f"{key}.npy", "w") as member:
-                np.lib.format.write_array(member, value, allow_pickle=False)
-
-
 def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     """Write one record to ``path`` atomically, through :meth:`qpsolvers.Problem.save`
     while the problem is at most ``DENSE_COPY_MAX`` entries dense (a larger one is read by
@@ -59,25 +49,28 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
                 qpsolvers.Problem(*dense.values()).save(fh)
             else:
                 np.savez(fh, **{k: v for k, v in dense.items() if v is not None})
-        _append(tmp, members)
+        with zipfile.ZipFile(tmp, mode="a", compression=zipfile.ZIP_STORED) as zf:
+            for key, value in members.items():
+                with zf.open(f"{key}.npy", "w") as member:
+                    np.lib.format.write_array(member, value, allow_pickle=False)
     return path
 
 
-def _read_members(data) -> qpsolvers.Problem:
-    """The problem of a file with CSC members (dense members for the other parts)."""
+def _read_members(data, compact: bool) -> qpsolvers.Problem:
+    """The problem of a file: CSC members, else dense ones (only a ``compact`` file, one with
+    CSC members, may lack a part: in a file of :meth:`qpsolvers.Problem.save` a KeyError)."""
     parts = []
     for k in ARRAY_KEYS:
         if f"{k}_csc_data" in data.files:
             d, i, p, shape = (data[f"{k}_csc_{part}"] for part in (*CSC_TYPES, "shape"))
             parts.append(spa.csc_matrix((d, i, p), shape=tuple(int(v) for v in shape)))
-        elif k in data.files:
-            try:
-                v = data[k]
-            except ValueError:  # qpsolvers writes an absent part as a pickled None
-                v = None
-            parts.append(None if v is None or v.dtype == object else v)
-        else:
+        elif compact and k not in data.files:
             parts.append(None)
+        else:
+            try:
+                parts.append(data[k])
+            except ValueError:  # qpsolvers writes an absent part as a pickled None
+                parts.append(None)
     return qpsolvers.Problem(*parts)
 
 
@@ -93,10 +86,7 @@ def load_npz(path: str | Path) -> ProblemRecord:
             if missing:
                 raise ProblemFormatError("missing array", path=path, key=missing[0])
             meta = json.loads(str(data[NPZ_META_KEY])) if NPZ_META_KEY in data.files else {}
-            compact = any(f.endswith("_csc_data") for f in data.files)
-            problem = _read_members(data) if compact else None
-        if problem is None:
-            problem = qpsolvers.Problem.load(str(path))
+            problem = _read_members(data, any(f.endswith("_csc_data") for f in data.files))
     fields = {k: meta.get(k) for k in META_KEYS} | {"offset": float(meta.get("offset", 0.0))}
     record = ProblemRecord(problem, meta.get("name") or path.stem, **fields)
     check_record(record, path=path)
