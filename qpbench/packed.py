@@ -1,15 +1,10 @@
-"""A :class:`qpsolvers.Problem` whose arrays are views of one float64 buffer.
-
-A control tick's small QP goes to a compiled kernel as one array instead of eight
-(numba unboxes every array argument; ``bench/rnn_speed.py``); every other consumer
-sees an ordinary :class:`qpsolvers.Problem`. Layout of the 1-D buffer::
+"""A :class:`qpsolvers.Problem` whose arrays are views of one float64 buffer, so that a
+tick's QP goes to a compiled kernel as one array instead of eight. Layout::
 
     [0 : HEADER]   n, me, mi, then the offsets of P, q, A, b, G, h, lb, ub (-1: absent)
-    at the offsets the arrays, row-major; anything may follow (the controller keeps
-    the end-effector position and distances there)
+    at the offsets the arrays, row-major; anything may follow
 
-The fields cannot be reassigned (the buffer would no longer describe the problem);
-writing into the arrays writes into the buffer.
+The fields cannot be reassigned; writing into the arrays writes into the buffer.
 """
 
 from __future__ import annotations
@@ -28,7 +23,6 @@ _FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
 
 
 def _shapes(n: int, me: int, mi: int) -> dict[str, tuple[int, ...]]:
-    """The shape of each field, in header order."""
     shapes = ((n, n), (n,), (me, n), (me,), (mi, n), (mi,), (n,), (n,))
     return dict(zip(_FIELDS, shapes))
 
@@ -111,15 +105,11 @@ def pack(problem: qpsolvers.Problem) -> PackedProblem:
     for name in _FIELDS:
         value = getattr(problem, name)
         if value is not None:
-            value = value.toarray() if spa.issparse(value) else value
-            value = np.asarray(value, dtype=np.float64)
+            value = np.asarray(value.toarray() if spa.issparse(value) else value, dtype=np.float64)
         arrays[name] = value
     if arrays["P"] is None or arrays["q"] is None:
         raise ProblemFormatError("a problem needs P and q", key="P" if arrays["P"] is None else "q")
     n = arrays["q"].size
-    for mat, vec in (("A", "b"), ("G", "h")):
-        if arrays[mat] is not None and arrays[mat].ndim == 1:
-            arrays[mat] = arrays[mat].reshape(1, -1)
     me = 0 if arrays["b"] is None else arrays["b"].size
     mi = 0 if arrays["h"] is None else arrays["h"].size
     parts, head, off = [], [n, me, mi], HEADER

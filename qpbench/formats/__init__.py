@@ -1,14 +1,8 @@
-"""QP problems in the formats of the QP ecosystem (docs/formats.md).
-
-A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` with a name, scenario, tick, time
-[s], formulation and the objective's constant ``offset``: one problem <-> ``.npz``
-(:mod:`.npz`); a problem set <-> a folder of ``problems.parquet`` (qpbenchmark's
-``ProblemList`` columns plus the metadata and CSC columns) and ``manifest.json``
-(:mod:`.parquet`); Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`). Sparse matrices stay
-sparse from file to solver. Every reader checks the data rules
-(:func:`~.records.check_record`) and records the convexity of ``P`` (:mod:`.convexity`); a
-violation is a :class:`~qpbench.exceptions.ProblemFormatError` naming the file, the problem
-and the field.
+"""QP problems in the formats of the QP ecosystem (docs/formats.md): one problem <-> ``.npz``;
+a problem set <-> a folder of ``problems.parquet`` and ``manifest.json``; Maros-Meszaros
+``.mat``. Sparse matrices stay sparse from file to solver. Every reader checks the data rules
+(:func:`~.records.check_record`), a violation a :class:`~qpbench.exceptions.ProblemFormatError`
+naming the file, the problem and the field.
 """
 
 from __future__ import annotations

@@ -1,13 +1,9 @@
 """Is ``P`` positive semidefinite? By ``ratio = lambda_min(P) / lambda_max(P)``, never
-making a large matrix dense.
-
-``convex`` when ``ratio >= -ROUNDING_RATIO``; ``rounding`` (a published problem's rounded
-data: solved, with a warning) down to ``-NONCONVEX_RATIO``; ``nonconvex`` (skipped) below.
-Up to ``DENSE_EIG_MAX_N`` variables ``numpy.linalg.eigvalsh``; else Gershgorin discs
-(diagonal dominance); else ``lambda_max`` by power iteration and the inertia of ``P + delta
-I`` (Sylvester's law, from a diagonal-pivot sparse ``L D L'``) at ``delta = NONCONVEX_RATIO
-lambda_max`` and ``ROUNDING_RATIO lambda_max``, then the ratio to 2 % by bisection on the
-shift. A factorization that pivoted off the diagonal gives ``rounding`` / ``undecided``.
+making a large matrix dense: ``convex``, ``rounding`` (a published problem's rounded data:
+solved, with a warning) or ``nonconvex`` (skipped). Up to ``DENSE_EIG_MAX_N`` variables
+``eigvalsh``; else Gershgorin discs; else ``lambda_max`` by power iteration and the inertia
+of ``P + delta I`` (Sylvester's law, sparse ``L D L'``) at the two thresholds, then the ratio
+to 2 % by bisection on the shift.
 """
 
 from __future__ import annotations
@@ -29,8 +25,8 @@ VERDICTS = ("convex", "rounding", "nonconvex")
 
 @dataclass(frozen=True)
 class Convexity:
-    """What :func:`assess_convexity` found: a ``verdict`` of :data:`VERDICTS`, the ``ratio``
-    (NaN when only a ``bound`` above it is known) and the ``method``."""
+    """A ``verdict`` of :data:`VERDICTS`, the ``ratio`` (NaN when only a ``bound`` above it
+    is known) and the ``method``."""
 
     verdict: str
     ratio: float = math.nan
@@ -48,14 +44,12 @@ class Convexity:
 
     @property
     def warning(self) -> str | None:
-        """The note of a ``rounding`` problem's rows."""
         if self.verdict != "rounding":
             return None
         return f"P slightly indefinite ({self.text}, within {NONCONVEX_RATIO:g}); solved as given"
 
     @property
     def skip_reason(self) -> str | None:
-        """Why a ``nonconvex`` problem is skipped."""
         return f"nonconvex ({self.text})" if self.verdict == "nonconvex" else None
 
 
@@ -101,8 +95,8 @@ def _bisect_ratio(P, hi: float, low: float, high: float, rtol: float = 0.02) -> 
 
 
 def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
-    """A lower bound of ``lambda_max``, close to it: the larger of ``max_i P_ii`` and the
-    Rayleigh quotient after ``steps`` power iterations from a seeded random vector."""
+    """A lower bound of ``lambda_max``: the larger of ``max_i P_ii`` and the Rayleigh quotient
+    after ``steps`` power iterations."""
     v = np.random.default_rng(0).standard_normal(P.shape[0])
     for _ in range(steps):
         w = P @ v
