@@ -116,21 +116,15 @@ def package_versions(
 
 
 def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
     with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def write_problem_set(
     folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
 ) -> Path:
-    """Write ``records`` (unique names) to ``folder/problems.parquet`` and ``manifest.json``.
-
-    ``generator`` (what produced the set) and ``extra`` are JSON-able. Both files are
-    written atomically, Parquet first, so a manifest never describes a partial file.
-    """
+    """Write ``records`` (unique names) to ``folder/problems.parquet`` and ``manifest.json``
+    (with ``generator``, what produced the set, and ``extra``), atomically, Parquet first."""
     folder = Path(folder)
     table = records_to_table(records, path=folder / PARQUET_NAME)
     data = table_to_bytes(table)

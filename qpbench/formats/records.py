@@ -50,13 +50,9 @@ CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 @dataclass
 class ProblemRecord:
-    """One QP and where it comes from.
-
-    ``name`` is unique in its set (``wall/tick-000123``, ``HS21``); ``t`` is the tick's
-    time [s]; ``formulation`` ``paper`` (hard task equality, eq. 11) or ``soft``;
-    ``offset`` the objective's constant (Maros-Meszaros ``r``); ``convexity`` is set by
-    :func:`check_record`.
-    """
+    """One QP and where it comes from: ``name`` unique in its set; ``t`` the tick's time [s];
+    ``formulation`` ``paper`` (hard task equality, eq. 11) or ``soft``; ``offset`` the
+    objective's constant (Maros-Meszaros ``r``); ``convexity`` set by :func:`check_record`."""
 
     problem: qpsolvers.Problem
     name: str
@@ -69,7 +65,6 @@ class ProblemRecord:
 
     @property
     def sizes(self) -> tuple[int, int, int]:
-        """``(n, m_eq, m_ineq)`` (:func:`problem_sizes`)."""
         return problem_sizes(self.problem)
 
     def meta(self) -> dict:
@@ -79,11 +74,8 @@ class ProblemRecord:
 
 @dataclass
 class ProblemSet:
-    """Problem records read from a folder or file (``path``; ``None``: built in memory).
-
-    ``kind`` is ``set``, ``parquet``, ``npz`` or ``mat``; ``manifest``, ``sha256`` (of
-    ``problems.parquet``) and ``hash_ok`` belong to a problem-set folder.
-    """
+    """Problem records read from ``path`` (``None``: built in memory); ``kind``: ``set``,
+    ``parquet``, ``npz`` or ``mat``; ``manifest``, ``sha256``, ``hash_ok``: a set's folder."""
 
     name: str
     path: Path | None

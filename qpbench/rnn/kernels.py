@@ -26,27 +26,23 @@ METHODS = ("euler", "semi-implicit")
 #: Squarings in the trace-power bound of ``sigma_max(C)^2``.
 SQUARINGS = 5
 
-# Slots of the parameter block ``prm``, one float64 array per call (:func:`make_params`);
-# the kernels read them as constants.
+# Slots of the parameter block ``prm`` (:func:`make_params`).
 #: Inputs.
 PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
 #: Outputs.
 PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
-#: Inputs of the per-tick kernel: the residual bounds of status ``optimal`` and the
-#: equality count of the state (-1: not checked); output of every kernel: the last
-#: call's step count or code (NaN: none yet).
+#: Inputs of the per-tick kernel: the residual bounds of status ``optimal``, the state's
+#: equality count (-1: not checked); output: the last call's step count (NaN: none yet).
 OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
-#: Inputs of a fixed step: the ratio ``r = h / eps`` of one step (0: ``SUBSTEPS`` or
-#: the bound decides the count) and whether to clamp a forced step to the stability
-#: bound; output: the step count the setting asked for (0 when the bound chose it).
+#: Inputs: the ratio ``r = h / eps`` of a fixed step (0: none), whether to clamp a forced
+#: step to the bound; output: the step count the setting asked for (0: the bound chose).
 R_STEP, CLAMP, NOMINAL = range(20, 23)
 #: Output: what a fixed-duration call did against its setting (``NOTE_*``).
 NOTE = 23
 PRM_SIZE = 24
 
-#: ``prm[NOTE]``: nothing to say; the step was clamped to the bound (more steps); no
-#: step is proven stable (``P`` not positive definite: the steps ran as set); the
-#: steps the bound needs exceed ``MAX_STEPS`` (capped there, above the bound).
+#: ``prm[NOTE]``: nothing to say; the step was clamped to the bound; no step is proven stable
+#: (``P`` not positive definite); the steps the bound needs exceed ``MAX_STEPS``.
 NOTE_NONE, NOTE_CLAMPED, NOTE_UNPROVEN, NOTE_CAPPED = 0, 1, 2, 3
 
 #: Kernel return codes besides a step count.
@@ -262,10 +258,8 @@ def _matvec(M, xi, y):
 
 
 def _grad_products(P, q, A, G, xi, g, Av, Gv, products):
-    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``.
-
-    Each (contiguous) row of ``A`` and ``G`` is read once for both.
-    """
+    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``
+    (each row of ``A`` and ``G`` read once for both)."""
     n = P.shape[0]
     me = A.shape[0]
     mi = G.shape[0]
@@ -318,10 +312,8 @@ def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
 
 
 def _residuals(b, h, lb, ub, xi, g, Av, Gv):
-    """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`).
-
-    Maxima that propagate NaN: a diverged state must not look converged.
-    """
+    """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`),
+    maxima that propagate NaN (a diverged state must not look converged)."""
     n = lb.shape[0]
     me = b.shape[0]
     mi = h.shape[0]
