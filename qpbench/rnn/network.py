@@ -114,11 +114,14 @@ class NetworkState:
     """State of the network, one vector ``xi = [v; l1; l2]`` of which ``v`` (the output, the
     paper's joint velocities [rad/s]), ``l1`` (``y = -l1``) and ``l2`` (``z = l2``) are views."""
 
-    __slots__ = ("xi", "n", "me", "mi")
+    __slots__ = ("xi", "n", "me", "mi", "shape", "l1", "l2")
 
     def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
         self.xi = xi
         self.n, self.me, self.mi = n, me, mi
+        self.shape = (n, me, mi)
+        self.l1 = xi[n : n + me]
+        self.l2 = xi[n + me :]
 
     @classmethod
     def cold(cls, n: int, me: int, mi: int, v0: np.ndarray | None = None) -> NetworkState:
@@ -146,18 +149,6 @@ class NetworkState:
     @v.setter
     def v(self, value: np.ndarray) -> None:
         self.xi[: self.n] = value
-
-    @property
-    def l1(self) -> np.ndarray:
-        return self.xi[self.n : self.n + self.me]
-
-    @property
-    def l2(self) -> np.ndarray:
-        return self.xi[self.n + self.me :]
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        return self.n, self.me, self.mi
 
     def copy(self) -> NetworkState:
         return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
