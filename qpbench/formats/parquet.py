@@ -151,21 +151,13 @@ def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
     import pyarrow as pa
 
     col = table.column(key)
-    rows = table.num_rows
     if pa.types.is_null(col.type):
-        return [None] * rows
+        return [None] * table.num_rows
     if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)) or not (
         pa.types.is_floating(col.type.value_type) or pa.types.is_integer(col.type.value_type)
     ):
         raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
-    chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-    offsets = chunk.offsets.to_numpy()
-    values = chunk.values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
-    nulls = chunk.is_null().to_numpy(zero_copy_only=False)
-    return [
-        None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype)
-        for i in range(rows)
-    ]
+    return [None if v is None else np.array(v, dtype=dtype) for v in col.to_numpy()]
 
 
 def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
@@ -209,14 +201,13 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
         for k in MATRIX_KEYS
         if f"{k}_csc_data" in table.column_names
     }
-    names = table.column("name").to_pylist()
     meta = {
         k: table.column(k).to_pylist() if k in table.column_names else [None] * rows
-        for k in META_KEYS
+        for k in META_TYPES
     }
     records = []
     for i in range(rows):
-        name = names[i] if names[i] is not None else f"{path.stem}-{i}"
+        name = meta["name"][i] if meta["name"][i] is not None else f"{path.stem}-{i}"
 
         def fail(key, msg, name=name, i=i):
             raise ProblemFormatError(f"problem '{name}' (row {i}): {msg}", path=path, key=key)
