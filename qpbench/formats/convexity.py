@@ -20,13 +20,12 @@ ROUNDING_RATIO = 1e-10
 NONCONVEX_RATIO = 1e-5
 #: Up to this many variables the eigenvalues are computed densely.
 DENSE_EIG_MAX_N = 1000
-VERDICTS = ("convex", "rounding", "nonconvex")
 
 
 @dataclass(frozen=True)
 class Convexity:
-    """A ``verdict`` of :data:`VERDICTS`, the ``ratio`` (NaN when only a ``bound`` above it
-    is known) and the ``method``."""
+    """A ``verdict`` (``convex``, ``rounding``, ``nonconvex``), the ``ratio`` (NaN when only a
+    ``bound`` above it is known) and the ``method``."""
 
     verdict: str
     ratio: float = math.nan

@@ -65,15 +65,11 @@ def make_params(
     step_ratio: float = 0.0,
     clamp: bool = True,
 ) -> np.ndarray:
-    """The parameter block ``prm`` of the kernels.
-
-    Fixed duration (``r_total = duration / eps > 0``): steps of ratio at most ``step_ratio``,
-    else ``substeps`` equal steps, else the fewest with ``r <= safety * ratio_max``; with
-    ``clamp`` a forced step above ``safety * ratio_max`` is shortened to it. To convergence
-    (``r_total <= 0``): steps of ``r = safety * ratio_max`` until the three residuals are
-    ``<= tol`` (negative: never), or ``max_steps``. ``p_range``: ``(lambda_min, lambda_max)``
-    of ``P``; ``l1_clip``: ``l1`` clipped to ``[-l1_clip, l1_clip]`` after each step.
-    """
+    """The parameter block ``prm``. Fixed duration ``r_total = duration / eps > 0``: steps of
+    ratio at most ``step_ratio``, else ``substeps`` steps, else the fewest with ``r <= safety *
+    ratio_max`` (with ``clamp`` a forced step above it is shortened). Else steps of ``r = safety
+    * ratio_max`` until the residuals are ``<= tol`` (negative: never), or ``max_steps``.
+    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``l1_clip``: a bound on ``|l1|``."""
     if method not in METHODS:
         raise ParamError(
             f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
@@ -92,15 +88,11 @@ def make_params(
 
 @dataclass
 class IntegrationResult:
-    """What one call of :func:`qpbench.rnn.network.integrate` did.
-
-    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms): primal
-    ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual ``|v - P_Omega(v - g)|``
-    with ``g = P v + q - A^T l1 + G^T l2``; complementarity ``|l2 - max(l2 + G v - h, 0)|``.
-    ``ratio``: ``r = h / eps`` of one step; ``ratio_max``: its stability bound and
-    ``sigma2_bound`` the bound on ``sigma_max([A; G])^2`` used (NaN when not computed);
-    ``nominal_steps``: steps the setting asked for (0 when the bound chose the count).
-    """
+    """What one integration did: ``steps`` (or ``NO_STABLE_STEP``); residuals (inf-norms):
+    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``, dual ``|v - P_Omega(v -
+    g)|`` (``g = P v + q - A^T l1 + G^T l2``), complementarity ``|l2 - max(l2 + G v - h,
+    0)|``; ``ratio`` ``r = h / eps``, its bound ``ratio_max`` from ``sigma2_bound`` (NaN when
+    not computed); ``nominal_steps``: steps the setting asked for (0: the bound chose)."""
 
     steps: int
     primal_residual: float
@@ -381,8 +373,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         rmax = np.nan
         sig2 = np.nan
         if prm[CLAMP] != 0.0:
-            # the bound only when the step may exceed it: below a cheap lower
-            # estimate of it (Gershgorin for P, Frobenius for sigma_max^2) it cannot
+            # the bound only when the step is above a cheap lower estimate of it
             glo, ghi, exact = _gershgorin_jit(P)
             low = _ratio_max_jit(glo, ghi, _frobenius2_jit(A, G), semi)
             if not r_total / nominal <= prm[SAFETY] * low:

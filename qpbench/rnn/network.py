@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as spa
 
-from ..exceptions import ParamError, ProblemFormatError
+from ..exceptions import ProblemFormatError
 from .kernels import IntegrationResult, kernel, make_params, result
 
 if TYPE_CHECKING:
@@ -172,10 +172,6 @@ def integrate(
 ) -> IntegrationResult:
     """Integrate the network on ``qp`` from ``state`` (updated in place); ``settings``: those
     of :func:`make_params`; ``p_range`` defaults to the eigenvalues of ``P``."""
-    if state.shape != qp.shape:
-        raise ParamError(
-            f"state shape {state.shape} does not match problem {qp.shape}", key="state"
-        )
     prm = make_params(p_range=p_range or p_eigen_range(qp.P), **settings)
     kernel(use_numba)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, np.zeros(0))
     return result(prm)
