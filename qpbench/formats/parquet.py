@@ -50,11 +50,17 @@ def list_column(values: list[np.ndarray | None], kind: str = "float64"):
     )
 
 
-def records_to_table(records: list[ProblemRecord], path: str | Path | None = None) -> pa.Table:
-    """The records as a ``pyarrow.Table`` in the problem-set schema: the arrays, the metadata,
-    and CSC columns ``M_csc_<part>`` of each matrix ``M`` sparse in some record."""
+def write_problem_set(
+    folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
+) -> Path:
+    """Write ``records`` (unique names) to ``folder/problems.parquet`` (the arrays, the
+    metadata, and CSC columns ``M_csc_<part>`` of each matrix ``M`` sparse in some record) and
+    ``manifest.json`` (with ``generator``, what produced the set, and ``extra``), atomically,
+    Parquet first."""
     import pyarrow as pa
 
+    folder = Path(folder)
+    path = folder / PARQUET_NAME
     for r in records:
         check_record(r, path=path)
     names = [r.name for r in records]
@@ -74,7 +80,23 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
         for part, kind in CSC_TYPES.items():
             fields.append((f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())))
             cols.append(list_column([None if p is None else p[part] for p in parts], kind))
-    return pa.Table.from_arrays(cols, schema=pa.schema(fields))
+    table = pa.Table.from_arrays(cols, schema=pa.schema(fields))
+    data = table_to_bytes(table)
+    manifest = {
+        "format": "qpbench-problem-set",
+        "format_version": FORMAT_VERSION,
+        "file": PARQUET_NAME,
+        "count": len(records),
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "generator": generator,
+        "extra": extra or {},
+        "versions": package_versions(),
+        "columns": list(table.column_names),
+    }
+    text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    write_bytes(path, data)
+    write_text(folder / MANIFEST_NAME, text)
+    return folder
 
 
 def table_to_bytes(table: pa.Table) -> bytes:
@@ -120,32 +142,6 @@ def sha256_file(path: str | Path) -> str:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
-def write_problem_set(
-    folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
-) -> Path:
-    """Write ``records`` (unique names) to ``folder/problems.parquet`` and ``manifest.json``
-    (with ``generator``, what produced the set, and ``extra``), atomically, Parquet first."""
-    folder = Path(folder)
-    table = records_to_table(records, path=folder / PARQUET_NAME)
-    data = table_to_bytes(table)
-    digest = hashlib.sha256(data).hexdigest()
-    manifest = {
-        "format": "qpbench-problem-set",
-        "format_version": FORMAT_VERSION,
-        "file": PARQUET_NAME,
-        "count": len(records),
-        "sha256": digest,
-        "generator": generator,
-        "extra": extra or {},
-        "versions": package_versions(),
-        "columns": list(table.column_names),
-    }
-    text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
-    write_bytes(folder / PARQUET_NAME, data)
-    write_text(folder / MANIFEST_NAME, text)
-    return folder
-
-
 def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
     """Per row, the values of a list column as a numpy array (``None`` for a null)."""
     import pyarrow as pa
@@ -185,10 +181,13 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
     return v
 
 
-def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
+def read_parquet(path: str | Path, require_meta: bool = False) -> ProblemSet:
+    """Read a Parquet file of problems: qpbenchmark's (``ProblemList.to_parquet``), its
+    metadata columns read when present, or a problem set's (``require_meta``)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    path = Path(path)
     with reading(path, "Parquet file", (pa.ArrowException, OSError, ValueError)):
         table = pq.read_table(path)
     for k in PROBLEM_KEYS + (META_KEYS if require_meta else ()):
@@ -229,7 +228,7 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
         rec = ProblemRecord(qpsolvers.Problem(**data), name, **fields)
         check_record(rec, path=path)
         records.append(rec)
-    return records
+    return ProblemSet(name=path.stem, path=path, records=records, kind="parquet", files=[path])
 
 
 def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
@@ -255,7 +254,7 @@ def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet
             path=ppath,
             key="sha256",
         )
-    records = _read_parquet_records(ppath, require_meta=True)
+    records = read_parquet(ppath, require_meta=True).records
     if verify_hash and len(records) != manifest["count"]:
         raise ProblemFormatError(
             f"{len(records)} rows but manifest says {manifest['count']}", path=ppath, key="count"
@@ -270,11 +269,3 @@ def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet
         files=[ppath],
         hash_ok=hash_ok,
     )
-
-
-def read_parquet(path: str | Path) -> ProblemSet:
-    """Read a bare qpbenchmark Parquet file (``ProblemList.to_parquet``); the
-    metadata columns are read when present."""
-    path = Path(path)
-    records = _read_parquet_records(path, require_meta=False)
-    return ProblemSet(name=path.stem, path=path, records=records, kind="parquet", files=[path])

@@ -171,14 +171,6 @@ def _values(M) -> np.ndarray:
     return M.data if spa.issparse(M) else M
 
 
-def _asymmetry(P) -> float:
-    """``max |P - P'|`` without a dense copy of a sparse ``P``."""
-    D = P - P.T
-    if spa.issparse(D):
-        return float(abs(D).max()) if D.nnz else 0.0
-    return float(np.max(np.abs(D), initial=0.0))
-
-
 def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     """Check shapes and values (sparse matrices through their stored values, never dense):
     ``P`` ``n x n`` and symmetric (``max |P - P'| <= SYMMETRY_RTOL max |P|``); ``G, h``
@@ -230,9 +222,8 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     for k, wrong in (("lb", np.inf), ("ub", -np.inf)):
         if arr[k] is not None and (np.any(np.isnan(arr[k])) or np.any(arr[k] == wrong)):
             fail(k, f"holds NaN or {wrong:+}")
-    values = _values(P)
-    scale = float(np.max(np.abs(values))) if values.size else 0.0
-    asym = _asymmetry(P)
+    scale = float(np.max(np.abs(_values(P)), initial=0.0))
+    asym = float(np.max(np.abs(_values(P - P.T)), initial=0.0))
     if asym > SYMMETRY_RTOL * scale:
         fail("P", f"is not symmetric (max |P - P'| = {asym:.3g} > {SYMMETRY_RTOL:g} max |P|)")
     if not isinstance(name, str) or not name:

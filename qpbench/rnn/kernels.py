@@ -554,16 +554,12 @@ def numba_available() -> bool:
     return True
 
 
-def _plain(fn):
-    return getattr(fn, "py_func", fn)
-
-
 def _interpreted() -> Callable:
     """:func:`_integrate_loops` run by Python on the plain functions, whatever is compiled."""
     names = dict(globals())
     for name, fn in list(names.items()):
         if name.endswith("_jit"):
-            names[name] = FunctionType(_plain(fn).__code__, names)
+            names[name] = FunctionType(getattr(fn, "py_func", fn).__code__, names)
     return names["_integrate_jit"]
 
 
@@ -584,7 +580,7 @@ def kernel(use_numba: bool = True) -> Callable:
         names = globals()
         for name in [k for k in names if k.endswith("_jit")]:
             inline = "never" if name in _CALLS else "always"
-            names[name] = numba.njit(cache=True, inline=inline)(_plain(names[name]))
+            names[name] = numba.njit(cache=True, inline=inline)(names[name])
         _COMPILED = names["_integrate_jit"]
     return _COMPILED
 
