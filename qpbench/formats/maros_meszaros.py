@@ -44,9 +44,8 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
         r = float(np.asarray(data["r"], dtype=np.float64).item())
     except (ValueError, TypeError) as exc:
         fail("n", f"n, m and r must be scalars ({exc})")
-    P = _csc(data["P"], "P", fail)
-    A = _csc(data["A"], "A", fail)
-    q, lo, up = (_vector(data[k], k, fail) for k in ("q", "l", "u"))
+    P, A = (_array(data[k], k, fail, matrix=True) for k in ("P", "A"))
+    q, lo, up = (_array(data[k], k, fail) for k in ("q", "l", "u"))
     if P.shape != (n, n):
         fail("P", f"shape {P.shape} does not match n = {n}")
     if q.shape != (n,):
@@ -67,22 +66,16 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
     return record
 
 
-def _csc(M, key: str, fail) -> spa.csc_matrix:
-    """A matrix of the file as CSC float64 (sparse in the file or not), indices sorted."""
+def _array(v, key: str, fail, matrix: bool = False):
+    """A field of the file as float64: a CSC matrix (indices sorted), else a flat vector."""
     try:
-        M = spa.csc_matrix(M, dtype=np.float64)
+        if matrix:
+            M = spa.csc_matrix(v, dtype=np.float64)
+            M.sum_duplicates()  # sorts the indices too
+            return M
+        return np.asarray(v.toarray() if spa.issparse(v) else v, dtype=np.float64).ravel()
     except (TypeError, ValueError) as exc:
-        fail(key, f"not a numeric matrix ({exc})")
-    M.sum_duplicates()  # sorts the indices too
-    return M
-
-
-def _vector(v, key: str, fail) -> np.ndarray:
-    try:
-        v = v.toarray() if spa.issparse(v) else v
-        return np.asarray(v, dtype=np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        fail(key, f"not numeric ({exc})")
+        fail(key, f"not a numeric matrix ({exc})" if matrix else f"not numeric ({exc})")
 
 
 def _symmetric(P: spa.csc_matrix) -> spa.csc_matrix:

@@ -22,7 +22,6 @@ from .records import (
     META_KEYS,
     META_TYPES,
     PARQUET_NAME,
-    PROBLEM_KEYS,
     ProblemRecord,
     ProblemSet,
     check_record,
@@ -190,7 +189,7 @@ def read_parquet(path: str | Path, require_meta: bool = False) -> ProblemSet:
     path = Path(path)
     with reading(path, "Parquet file", (pa.ArrowException, OSError, ValueError)):
         table = pq.read_table(path)
-    for k in PROBLEM_KEYS + (META_KEYS if require_meta else ()):
+    for k in (*ARRAY_KEYS, "name", *(META_KEYS if require_meta else ())):
         if k not in table.column_names:
             raise ProblemFormatError("missing column", path=path, key=k)
     rows = table.num_rows

@@ -16,8 +16,6 @@ from ..memory import dense_entries
 
 #: Array columns, in qpsolvers' argument order.
 ARRAY_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
-#: Columns of qpbenchmark's ``ProblemList`` (order kept).
-PROBLEM_KEYS = (*ARRAY_KEYS, "name")
 #: A record's metadata and its Arrow types (Parquet columns after the arrays).
 META_TYPES = {
     "name": "string",
@@ -203,9 +201,8 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
         fail("P", f"shape {P.shape} does not match n = {n} (expected {(n, n)})")
     for M, v in (("G", "h"), ("A", "b")):
         if (arr[M] is None) != (arr[v] is None):
-            fail(
-                M if arr[M] is None else v, f"'{M}' and '{v}' must both be given or both be absent"
-            )
+            absent = M if arr[M] is None else v
+            fail(absent, f"'{M}' and '{v}' must both be given or both be absent")
         if arr[M] is None:
             continue
         if arr[M].ndim != 2 or arr[M].shape[1] != n:
