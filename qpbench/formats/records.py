@@ -188,10 +188,9 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
         for k in ARRAY_KEYS
     }
     P, q = arr["P"], arr["q"]
-    if P is None:
-        fail("P", "missing")
-    if q is None:
-        fail("q", "missing")
+    for k in ("P", "q"):
+        if arr[k] is None:
+            fail(k, "missing")
     if q.ndim != 1:
         fail("q", f"shape {q.shape} is not a vector")
     n = q.shape[0]

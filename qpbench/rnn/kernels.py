@@ -464,10 +464,9 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
 
 
 def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
-    """:func:`_integrate_loops` plus its verdict: ``4 * steps + 2 * note + ok`` (``ok``: the
-    residuals within ``prm[OK_PRIMAL]``, ``prm[OK_DUAL]``; ``note``: :func:`step_note` has
-    something to say), or :data:`SHAPE_MISMATCH` (also an equality count not
-    ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`."""
+    """:func:`_integrate_loops` and its verdict ``4 * steps + 2 * note + ok`` (``ok``: the
+    residuals within ``prm[OK_*]``; ``note``: :func:`step_note` has something to say), or
+    :data:`SHAPE_MISMATCH`, :data:`NO_STABLE_STEP`, :data:`DIVERGED`."""
     if prm[STATE_ME] >= 0.0 and b.shape[0] != prm[STATE_ME]:
         return SHAPE_MISMATCH
     steps = _integrate_jit(P, q, A, b, G, h, lb, ub, xi, prm, sol)
@@ -564,11 +563,9 @@ def _interpreted() -> Callable:
 
 
 def kernel(use_numba: bool = True) -> Callable:
-    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (compiled, or with
-    ``use_numba=False`` run by Python): ``xi = [v; l1; l2]`` updated in place; ``prm`` the
-    inputs and outputs; ``sol`` (length ``2n + me + mi``, or 0) receives ``[x; y; z; z_box]``.
-    Returns the step count, :data:`NO_STABLE_STEP` or :data:`SHAPE_MISMATCH`.
-    """
+    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (or a code < 0),
+    compiled or run by Python: ``xi = [v; l1; l2]`` updated in place; ``sol`` (length ``2n +
+    me + mi``, or 0) receives ``[x; y; z; z_box]``."""
     global _COMPILED, _INTERPRETED
     if not use_numba:
         if _INTERPRETED is None:

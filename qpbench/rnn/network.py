@@ -1,9 +1,6 @@
-"""The projection network of the paper's eq. 15 for any QP in qpsolvers form.
-
-For the QP ``min 1/2 v^T P v + q^T v  s.t.  A v = b, G v <= h, lb <= v <= ub``
-the network's state is ``(v, l1, l2)`` and its gain ``eps`` [s] (eq. 15a-c,
-with the objective's gradient ``P v + q`` where the paper prints a garbled
-``thetadot / ||thetadot||^2``)::
+"""The projection network of the paper's eq. 15 for ``min 1/2 v^T P v + q^T v  s.t.  A v = b,
+G v <= h, lb <= v <= ub``: state ``(v, l1, l2)``, gain ``eps`` [s], the objective's gradient
+``P v + q`` where the paper prints a garbled ``thetadot / ||thetadot||^2``::
 
     eps vdot  = -v + P_Omega(v - (P v + q - A^T l1 + G^T l2))      (15a)
     eps l1dot = b - A v                                              (15b)
