@@ -65,13 +65,9 @@ def assess_convexity(P: np.ndarray | spa.spmatrix | spa.sparray) -> Convexity:
         P = np.asarray(P, dtype=np.float64)
     if not np.any(P.data if sparse else P):
         return Convexity("convex", 0.0, method="zero")
-    if P.shape[0] <= DENSE_EIG_MAX_N:
-        return _dense(P.toarray() if sparse else P)
-    return _sparse(spa.csc_matrix(P))
-
-
-def _dense(P: np.ndarray) -> Convexity:
-    eig = np.linalg.eigvalsh(P)
+    if P.shape[0] > DENSE_EIG_MAX_N:
+        return _sparse(spa.csc_matrix(P))
+    eig = np.linalg.eigvalsh(P.toarray() if sparse else P)
     lo, hi = float(eig[0]), float(eig[-1])
     scale = max(abs(lo), abs(hi))
     ratio = lo / scale if scale > 0 else 0.0
