@@ -156,14 +156,6 @@ def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Except
         raise ProblemFormatError(msg, path=path) from None
 
 
-def _numeric(v, key: str, fail):
-    """``v`` as float64 (CSC for a sparse matrix), or a failure naming ``key``."""
-    v = v if spa.issparse(v) else np.asarray(v)
-    if v.dtype.kind not in "fiub":
-        fail(key, f"dtype {v.dtype} is not numeric")
-    return _float64(v)
-
-
 def _values(M) -> np.ndarray:
     """The stored values of a dense or sparse array (never a dense copy of a sparse one)."""
     return M.data if spa.issparse(M) else M
@@ -183,10 +175,15 @@ def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
 
-    arr = {
-        k: None if getattr(problem, k) is None else _numeric(getattr(problem, k), k, fail)
-        for k in ARRAY_KEYS
-    }
+    arr = {}  # float64, CSC for a sparse matrix
+    for k in ARRAY_KEYS:
+        v = getattr(problem, k)
+        if v is not None:
+            v = v if spa.issparse(v) else np.asarray(v)
+            if v.dtype.kind not in "fiub":
+                fail(k, f"dtype {v.dtype} is not numeric")
+            v = _float64(v)
+        arr[k] = v
     P, q = arr["P"], arr["q"]
     for k in ("P", "q"):
         if arr[k] is None:
