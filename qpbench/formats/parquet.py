@@ -38,15 +38,8 @@ def list_column(values: list[np.ndarray | None], kind: str = "float64"):
     """A pyarrow list column of ``kind`` holding each array flattened (null for ``None``)."""
     import pyarrow as pa
 
-    lengths = [0 if v is None else v.size for v in values]
-    offsets = np.zeros(len(values) + 1, dtype=np.int32)
-    np.cumsum(lengths, out=offsets[1:])
-    flat = [v.ravel(order="C") for v in values if v is not None]
-    data = np.concatenate(flat).astype(kind, copy=False) if flat else np.zeros(0, dtype=kind)
-    mask = pa.array([v is None for v in values], type=pa.bool_())
-    return pa.ListArray.from_arrays(
-        pa.array(offsets, type=pa.int32()), pa.array(data, type=getattr(pa, kind)()), mask=mask
-    )
+    flat = [None if v is None else v.ravel() for v in values]
+    return pa.array(flat, type=pa.list_(getattr(pa, kind)()))
 
 
 def write_problem_set(
