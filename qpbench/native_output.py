@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import io
 import os
 import sys
 from typing import TYPE_CHECKING
@@ -26,7 +25,7 @@ def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
     output. Nothing happens when ``sys.stdout`` is not descriptor 1 (e.g. pytest's capture)."""
     try:
         fd = sys.stdout.fileno()
-    except (AttributeError, OSError, io.UnsupportedOperation):
+    except (AttributeError, OSError):  # io.UnsupportedOperation is an OSError
         fd = None
     if not enabled or fd != 1:
         yield

@@ -80,11 +80,9 @@ def load_npz(path: str | Path) -> ProblemRecord:
     path = Path(path)
     with reading(path, ".npz"):
         with np.load(path, allow_pickle=False) as data:
-            missing = [
-                k for k in ("P", "q") if k not in data.files and f"{k}_csc_data" not in data.files
-            ]
-            if missing:
-                raise ProblemFormatError("missing array", path=path, key=missing[0])
+            for k in ("P", "q"):
+                if k not in data.files and f"{k}_csc_data" not in data.files:
+                    raise ProblemFormatError("missing array", path=path, key=k)
             meta = json.loads(str(data[NPZ_META_KEY])) if NPZ_META_KEY in data.files else {}
             problem = _read_members(data, any(f.endswith("_csc_data") for f in data.files))
     fields = {k: meta.get(k) for k in META_KEYS} | {"offset": float(meta.get("offset", 0.0))}

@@ -541,7 +541,6 @@ _online_tick_jit = _online_tick_loops
 _part_fits_jit = _part_fits
 _CALLS = ("_sigma2_bound_jit", "_ratio_max_jit", "_integrate_jit", "_online_tick_jit")
 _COMPILED = None
-_INTERPRETED = None
 
 
 def numba_available() -> bool:
@@ -553,6 +552,7 @@ def numba_available() -> bool:
     return True
 
 
+@cache
 def _interpreted() -> Callable:
     """:func:`_integrate_loops` run by Python on the plain functions, whatever is compiled."""
     names = dict(globals())
@@ -566,11 +566,9 @@ def kernel(use_numba: bool = True) -> Callable:
     """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (or a code < 0),
     compiled or run by Python: ``xi = [v; l1; l2]`` updated in place; ``sol`` (length ``2n +
     me + mi``, or 0) receives ``[x; y; z; z_box]``."""
-    global _COMPILED, _INTERPRETED
+    global _COMPILED
     if not use_numba:
-        if _INTERPRETED is None:
-            _INTERPRETED = _interpreted()
-        return _INTERPRETED
+        return _interpreted()
     if _COMPILED is None:
         import numba
 

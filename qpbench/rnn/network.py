@@ -45,7 +45,6 @@ class DenseQP:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        """``(n, me, mi)``: variables, equalities, inequalities."""
         return self.q.shape[0], self.b.shape[0], self.h.shape[0]
 
 
