@@ -1,11 +1,9 @@
 """Maros-Meszaros ``.mat`` files: ``min 1/2 x'Px + q'x + r`` s.t. ``l <= A x <= u``.
 
-``A = [C; I_n]``: rows of ``C`` with ``l == u`` become ``A x = b``, the others one
-``G x <= h`` row per finite side (upper sides first, then ``-C x <= -l``); the last
-``n`` rows give ``lb, ub``. ``|value| >= MM_INFINITY`` is infinite. A triangular ``P``
-is mirrored; ``P, G, A`` stay CSC; ``r`` is the record's ``offset``, so the objective
-equals the published optimal values.
-"""
+``A = [C; I_n]``: rows of ``C`` with ``l == u`` become ``A x = b``, the others one ``G x <=
+h`` row per finite side (upper sides first); the last ``n`` rows give ``lb, ub``. A
+triangular ``P`` is mirrored; ``r`` is the record's ``offset`` (objectives equal the
+published optimal values)."""
 
 from __future__ import annotations
 

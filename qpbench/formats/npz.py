@@ -22,10 +22,10 @@ from .records import (
     NPZ_META_KEY,
     ProblemRecord,
     check_record,
-    csc_parts,
     dense_copy,
     reading,
     solver_problem,
+    sorted_csc,
 )
 
 
@@ -40,7 +40,8 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     for key in ARRAY_KEYS:
         M = getattr(problem, key)
         if spa.issparse(M):
-            members.update({f"{key}_csc_{p}": v for p, v in csc_parts(M).items()})
+            S = sorted_csc(M)
+            members.update({f"{key}_csc_{p}": getattr(S, p) for p in CSC_TYPES})
             members[f"{key}_csc_shape"] = np.asarray(M.shape, dtype=np.int64)
     dense = dense_copy(problem)
     with atomic_path(path) as tmp:

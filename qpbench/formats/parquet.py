@@ -25,9 +25,9 @@ from .records import (
     ProblemRecord,
     ProblemSet,
     check_record,
-    csc_parts,
     dense_copy,
     reading,
+    sorted_csc,
 )
 
 if TYPE_CHECKING:
@@ -68,10 +68,10 @@ def write_problem_set(
         matrices = [getattr(r.problem, k) for r in records]
         if not any(spa.issparse(M) for M in matrices):
             continue
-        parts = [csc_parts(M) if spa.issparse(M) else None for M in matrices]
+        parts = [sorted_csc(M) if spa.issparse(M) else None for M in matrices]
         for part, kind in CSC_TYPES.items():
             fields.append((f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())))
-            cols.append(list_column([None if p is None else p[part] for p in parts], kind))
+            cols.append(list_column([None if p is None else getattr(p, part) for p in parts], kind))
     table = pa.Table.from_arrays(cols, schema=pa.schema(fields))
     data = table_to_bytes(table)
     manifest = {

@@ -42,7 +42,8 @@ SYMMETRY_RTOL = 1e-9
 
 #: The matrices of a problem (the parts that may be scipy.sparse).
 MATRIX_KEYS = ("P", "G", "A")
-#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types.
+#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types,
+#: the arrays of its :func:`sorted_csc`.
 CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 
@@ -133,12 +134,6 @@ def sorted_csc(M) -> spa.csc_matrix:
     M = spa.csc_matrix(M, dtype=np.float64)
     M.sort_indices()
     return M
-
-
-def csc_parts(M) -> dict[str, np.ndarray]:
-    """The stored arrays of a sparse matrix (:data:`CSC_TYPES`): its :func:`sorted_csc`."""
-    M = sorted_csc(M)
-    return {"data": M.data, "indices": M.indices, "indptr": M.indptr}
 
 
 @contextmanager
