@@ -149,8 +149,7 @@ def ratio_max(pmin, pmax, sig2, semi):
 
 
 def _gershgorin(P):
-    """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``
-    (``exact``: it is diagonal)."""
+    """``(lower, upper, exact)``: Gershgorin bounds of ``(P + P^T) / 2`` (exact if diagonal)."""
     n = P.shape[0]
     lo = np.inf
     hi = -np.inf
@@ -485,9 +484,8 @@ def _part_fits(off, size, length):  # pragma: no cover - compiled
 
 
 def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
-    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer,
-    or :data:`SHAPE_MISMATCH` when a part lies outside it, the sizes are not the state's or
-    ``lb`` or ``ub`` is absent."""
+    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer
+    (:data:`SHAPE_MISMATCH`: a part outside it or absent ``lb``, ``ub``, sizes not the state's)."""
     length = buf.shape[0]
     if length < HEADER:
         return SHAPE_MISMATCH
@@ -588,8 +586,7 @@ def _signature(*ndims):
 
 @cache
 def online_kernel() -> Callable:
-    """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``
-    (:func:`_online_tick_loops`), ``sol`` of length ``3 n + 2 (me + mi)``, compiled for
+    """:func:`_online_tick_loops` (``sol`` of length ``3 n + 2 (me + mi)``) compiled for
     C-contiguous writable float64 arrays only (numba's dispatcher raises ``TypeError``)."""
     import numba
 
@@ -600,9 +597,8 @@ def online_kernel() -> Callable:
 
 @cache
 def packed_kernel() -> Callable:
-    """The per-tick kernel on a :class:`qpbench.packed.PackedProblem`'s buffer: ``f(buffer, xi,
-    prm, sol) -> code``, for 1-D C-contiguous float64 arrays: the compiled function's entry
-    point (no type matching)."""
+    """:func:`_online_tick_packed_loops` ``f(buffer, xi, prm, sol) -> code``: the compiled
+    function's entry point, for 1-D C-contiguous float64 arrays (no type matching)."""
     import numba
 
     kernel(True)
