@@ -76,8 +76,7 @@ def _read_members(data, compact: bool) -> qpsolvers.Problem:
 
 
 def load_npz(path: str | Path) -> ProblemRecord:
-    """One record of a ``.npz`` of :func:`save_npz` or :meth:`qpsolvers.Problem.save`
-    (named by the file stem)."""
+    """One record of a ``.npz`` of :func:`save_npz` or :meth:`qpsolvers.Problem.save`."""
     path = Path(path)
     with reading(path, ".npz"):
         with np.load(path, allow_pickle=False) as data:

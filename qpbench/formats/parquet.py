@@ -45,10 +45,9 @@ def list_column(values: list[np.ndarray | None], kind: str = "float64"):
 def write_problem_set(
     folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
 ) -> Path:
-    """Write ``records`` (unique names) to ``folder/problems.parquet`` (the arrays, the
-    metadata, and CSC columns ``M_csc_<part>`` of each matrix ``M`` sparse in some record) and
-    ``manifest.json`` (with ``generator``, what produced the set, and ``extra``), atomically,
-    Parquet first."""
+    """Write ``records`` to ``folder/problems.parquet`` (arrays, metadata, CSC columns of each
+    matrix sparse in some record) and ``manifest.json`` (with ``generator``, what made the
+    set, and ``extra``), atomically, Parquet first."""
     import pyarrow as pa
 
     folder = Path(folder)
@@ -224,8 +223,7 @@ def read_parquet(path: str | Path, require_meta: bool = False) -> ProblemSet:
 
 
 def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
-    """Read a problem-set folder; ``verify_hash`` checks the SHA-256 and the row count
-    against the manifest."""
+    """Read a problem-set folder (``verify_hash``: its SHA-256 and row count, the manifest's)."""
     folder = Path(folder)
     ppath, mpath = folder / PARQUET_NAME, folder / MANIFEST_NAME
     if not ppath.is_file():

@@ -34,8 +34,7 @@ MANIFEST_NAME = "manifest.json"
 NPZ_META_KEY = "qpbench_record"
 #: Version of the problem-set layout written in the manifest.
 FORMAT_VERSION = 1
-#: A sparse problem whose ``P, G, A`` made dense hold more entries than this is not also
-#: written dense for qpsolvers / qpbenchmark readers.
+#: Entries of ``P, G, A`` made dense above which a sparse problem is not also written dense.
 DENSE_COPY_MAX = 1_000_000
 #: ``P`` is symmetric when ``max |P - P'| <= SYMMETRY_RTOL max |P|``.
 SYMMETRY_RTOL = 1e-9

@@ -30,8 +30,7 @@ if TYPE_CHECKING:
 
 @dataclass
 class DenseQP:
-    """A QP as dense float64 arrays: absent constraints have no rows, an absent bound is
-    infinite (``has_box``: the problem had one)."""
+    """A QP as dense float64 arrays: no rows, infinite bounds where absent (``has_box``)."""
 
     P: np.ndarray
     q: np.ndarray
@@ -50,8 +49,7 @@ class DenseQP:
 
 @cache
 def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(zeros((0, n)), zeros(0))``: no constraint rows (writable: numba compiles a read-only
-    array type apart)."""
+    """No constraint rows (writable: numba compiles a read-only array type apart)."""
     return np.zeros((0, n)), np.zeros(0)
 
 
@@ -77,8 +75,7 @@ def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarra
 
 
 def _f64(a, name: str, ndim: int) -> np.ndarray:
-    """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a row or a column
-    vector taken as the other)."""
+    """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a vector as a row)."""
     a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
     if a.ndim == ndim:
         return a
