@@ -58,8 +58,7 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
 
 
 def content_sha256(problem_set: ProblemSet) -> str | None:
-    """SHA-256 of a set's content: its manifest's, else of its files' names and bytes,
-    else ``None`` (built in memory)."""
+    """SHA-256 of a set's content: its manifest's, else of its files' names and bytes."""
     if problem_set.sha256:
         return problem_set.sha256
     if not problem_set.files:

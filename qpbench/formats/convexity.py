@@ -90,8 +90,7 @@ def _bisect_ratio(P, hi: float, low: float, high: float, rtol: float = 0.02) -> 
 
 
 def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
-    """A lower bound of ``lambda_max``: the larger of ``max_i P_ii`` and the Rayleigh quotient
-    after ``steps`` power iterations."""
+    """A lower bound of ``lambda_max``: ``max_i P_ii`` or a power iteration's Rayleigh quotient."""
     v = np.random.default_rng(0).standard_normal(P.shape[0])
     for _ in range(steps):
         w = P @ v
@@ -104,9 +103,8 @@ def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
 
 
 def negative_eigenvalues(P: spa.spmatrix | spa.sparray, shift: float) -> int | None:
-    """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift``
-    (inertia of ``P + shift I`` from a diagonal-pivot sparse LU); ``None`` if the
-    factorization pivoted off the diagonal (then Sylvester's law does not apply)."""
+    """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift`` (inertia of ``P +
+    shift I`` from a diagonal-pivot sparse LU); ``None`` if it pivoted off the diagonal."""
     from scipy.sparse.linalg import splu
 
     M = (P + shift * spa.identity(P.shape[0], format="csc")).tocsc()

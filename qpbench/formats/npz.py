@@ -30,9 +30,8 @@ from .records import (
 
 
 def save_npz(record: ProblemRecord, path: str | Path) -> Path:
-    """Write one record to ``path`` atomically, through :meth:`qpsolvers.Problem.save`
-    while the problem is at most ``DENSE_COPY_MAX`` entries dense (a larger one is read by
-    qpbench only), then the metadata and CSC members."""
+    """Write one record to ``path`` atomically: :meth:`qpsolvers.Problem.save`'s members (up
+    to ``DENSE_COPY_MAX`` entries dense), then the metadata and CSC members."""
     path = Path(path)
     check_record(record, path=path)
     problem = record.problem

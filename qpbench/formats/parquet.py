@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -244,18 +245,12 @@ def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet
             path=ppath,
             key="sha256",
         )
-    records = read_parquet(ppath, require_meta=True).records
-    if verify_hash and len(records) != manifest["count"]:
+    pset = read_parquet(ppath, require_meta=True)
+    if verify_hash and len(pset) != manifest["count"]:
         raise ProblemFormatError(
-            f"{len(records)} rows but manifest says {manifest['count']}", path=ppath, key="count"
+            f"{len(pset)} rows but manifest says {manifest['count']}", path=ppath, key="count"
         )
-    return ProblemSet(
-        name=folder.resolve().name,
-        path=folder,
-        records=records,
-        manifest=manifest,
-        sha256=digest,
-        kind="set",
-        files=[ppath],
-        hash_ok=hash_ok,
+    name = folder.resolve().name
+    return replace(
+        pset, name=name, path=folder, manifest=manifest, sha256=digest, kind="set", hash_ok=hash_ok
     )

@@ -88,11 +88,10 @@ def make_params(
 
 @dataclass
 class IntegrationResult:
-    """What one integration did: ``steps`` (or ``NO_STABLE_STEP``); residuals (inf-norms):
-    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``, dual ``|v - P_Omega(v -
-    g)|`` (``g = P v + q - A^T l1 + G^T l2``), complementarity ``|l2 - max(l2 + G v - h,
-    0)|``; ``ratio`` ``r = h / eps``, its bound ``ratio_max`` from ``sigma2_bound`` (NaN when
-    not computed); ``nominal_steps``: steps the setting asked for (0: the bound chose)."""
+    """What one integration did: ``steps`` (or ``NO_STABLE_STEP``); residuals (inf-norms): primal
+    ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``, dual ``|v - P_Omega(v - g)|`` (15a),
+    complementarity ``|l2 - max(l2 + G v - h, 0)|``; ``ratio`` ``r = h / eps``, its bound
+    ``ratio_max`` from ``sigma2_bound`` (NaN: not computed); ``nominal_steps`` (0: the bound's)."""
 
     steps: int
     primal_residual: float

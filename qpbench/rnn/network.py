@@ -6,10 +6,9 @@ G v <= h, lb <= v <= ub``: state ``(v, l1, l2)``, gain ``eps`` [s], the objectiv
     eps l1dot = b - A v                                              (15b)
     eps l2dot = -l2 + max(l2 + G v - h, 0)                           (15c)
 
-``P_Omega`` clips to ``[lb, ub]``. At an equilibrium the qpsolvers duals are ``y = -l1``,
-``z = l2`` and ``z_box = -(P v + q + A^T y + G^T z)``. Explicit Euler steps ``xi <- xi + r
-f(xi)`` of ratio ``r = h / eps`` for a step of ``h`` [s], or semi-implicit ones (``v`` first);
-the integrator and its step bound are :mod:`.kernels`.
+``P_Omega`` clips to ``[lb, ub]``; at an equilibrium ``y = -l1``, ``z = l2``, ``z_box = -(P v
++ q + A^T y + G^T z)``. The steps ``xi <- xi + r f(xi)`` of ratio ``r = h / eps`` (``h`` [s]),
+Euler or semi-implicit (``v`` first), are in :mod:`.kernels`.
 """
 
 from __future__ import annotations
