@@ -422,7 +422,6 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         Av = np.empty(me)
         Gv = np.empty(mi)
         g = np.empty(n)
-    # g = P v + q - A^T l1 + G^T l2, Av = A v, Gv = G v at the current state
     _grad_products_jit(P, q, A, G, xi, g, Av, Gv, True)
     if check:
         steps = 0
