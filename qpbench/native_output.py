@@ -1,17 +1,11 @@
-"""Keeping solvers' native chatter off the terminal.
-
-Some solvers print from C whatever their ``verbose`` setting (HiGHS's banner, OSQP's
-"Polishing not needed"), straight to file descriptor 1. :func:`silence_native_stdout`
-points descriptor 1 at ``/dev/null`` for a whole command (never around a timed solve)
-and gives ``sys.stdout`` a private duplicate of the real one; worker processes started
-inside inherit the silenced descriptor.
-"""
+"""Keeping solvers' native chatter (printed from C to file descriptor 1 whatever their
+``verbose`` setting) off the terminal, for a whole command; worker processes started inside
+inherit the silenced descriptor."""
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
-import io
 import os
 import sys
 from typing import TYPE_CHECKING
@@ -21,7 +15,6 @@ if TYPE_CHECKING:
 
 
 def _flush_c_stdio() -> None:
-    """Flush C's stdio buffers (text a solver printed but the C library has not written yet)."""
     with contextlib.suppress(OSError, AttributeError):  # no C library to talk to
         ctypes.CDLL(None).fflush(None)
 
@@ -32,7 +25,7 @@ def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
     output. Nothing happens when ``sys.stdout`` is not descriptor 1 (e.g. pytest's capture)."""
     try:
         fd = sys.stdout.fileno()
-    except (AttributeError, OSError, io.UnsupportedOperation):
+    except (AttributeError, OSError):  # io.UnsupportedOperation is an OSError
         fd = None
     if not enabled or fd != 1:
         yield

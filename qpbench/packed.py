@@ -1,15 +1,10 @@
-"""A :class:`qpsolvers.Problem` whose arrays are views of one float64 buffer.
-
-A control tick's small QP goes to a compiled kernel as one array instead of eight
-(numba unboxes every array argument; ``bench/rnn_speed.py``); every other consumer
-sees an ordinary :class:`qpsolvers.Problem`. Layout of the 1-D buffer::
+"""A :class:`qpsolvers.Problem` whose arrays are views of one float64 buffer, so that a
+tick's QP goes to a compiled kernel as one array instead of eight. Layout::
 
     [0 : HEADER]   n, me, mi, then the offsets of P, q, A, b, G, h, lb, ub (-1: absent)
-    at the offsets the arrays, row-major; anything may follow (the controller keeps
-    the end-effector position and distances there)
+    at the offsets the arrays, row-major; anything may follow
 
-The fields cannot be reassigned (the buffer would no longer describe the problem);
-writing into the arrays writes into the buffer.
+The fields cannot be reassigned; writing into the arrays writes into the buffer.
 """
 
 from __future__ import annotations
@@ -27,8 +22,11 @@ N, ME, MI, OFF_P, OFF_Q, OFF_A, OFF_B, OFF_G, OFF_H, OFF_LB, OFF_UB = range(HEAD
 _FIELDS = ("P", "q", "A", "b", "G", "h", "lb", "ub")
 
 
+def _bad(key: str, msg: str):
+    raise ProblemFormatError(msg, key=key)
+
+
 def _shapes(n: int, me: int, mi: int) -> dict[str, tuple[int, ...]]:
-    """The shape of each field, in header order."""
     shapes = ((n, n), (n,), (me, n), (me,), (mi, n), (mi,), (n,), (n,))
     return dict(zip(_FIELDS, shapes))
 
@@ -40,37 +38,29 @@ class PackedProblem(qpsolvers.Problem):
     def __init__(self, buffer):
         buf = np.ascontiguousarray(buffer, dtype=np.float64)
         if buf.ndim != 1 or buf.shape[0] < HEADER:
-            raise ProblemFormatError(
-                f"buffer of shape {buf.shape} has no header of {HEADER} values", key="buffer"
-            )
+            _bad("buffer", f"buffer of shape {buf.shape} has no header of {HEADER} values")
         head = buf[:HEADER]
         if not np.all(np.isfinite(head)) or np.any(head != np.round(head)):
-            raise ProblemFormatError("header values must be whole numbers", key="buffer")
+            _bad("buffer", "header values must be whole numbers")
         n, me, mi = (int(v) for v in head[:3])
         if n < 1 or me < 0 or mi < 0:
-            raise ProblemFormatError(
-                f"header sizes n={n}, me={me}, mi={mi} are not valid", key="buffer"
-            )
+            _bad("buffer", f"header sizes n={n}, me={me}, mi={mi} are not valid")
         fields = {}
         for k, (name, shape) in enumerate(_shapes(n, me, mi).items()):
             off = int(head[OFF_P + k])
             if off == -1:
                 if name in ("P", "q") or (name in ("A", "b") and me) or (name in ("G", "h") and mi):
-                    raise ProblemFormatError(
-                        f"'{name}' is absent but the header sizes need it", key=name
-                    )
+                    _bad(name, f"'{name}' is absent but the header sizes need it")
                 fields[name] = None
                 continue
             size = int(np.prod(shape))
             if off < HEADER or off + size > buf.shape[0]:
-                raise ProblemFormatError(
-                    f"'{name}' at offset {off} does not fit a buffer of {buf.shape[0]}", key=name
-                )
+                _bad(name, f"'{name}' at offset {off} does not fit a buffer of {buf.shape[0]}")
             fields[name] = buf[off : off + size].reshape(shape)
         if (fields["A"] is None) != (fields["b"] is None) or (fields["G"] is None) != (
             fields["h"] is None
         ):
-            raise ProblemFormatError("A and b (G and h) must be present together", key="buffer")
+            _bad("buffer", "A and b (G and h) must be present together")
         self.__dict__.update(buffer=buf, **fields)
 
     @classmethod
@@ -111,15 +101,11 @@ def pack(problem: qpsolvers.Problem) -> PackedProblem:
     for name in _FIELDS:
         value = getattr(problem, name)
         if value is not None:
-            value = value.toarray() if spa.issparse(value) else value
-            value = np.asarray(value, dtype=np.float64)
+            value = np.asarray(value.toarray() if spa.issparse(value) else value, dtype=np.float64)
         arrays[name] = value
     if arrays["P"] is None or arrays["q"] is None:
-        raise ProblemFormatError("a problem needs P and q", key="P" if arrays["P"] is None else "q")
+        _bad("P" if arrays["P"] is None else "q", "a problem needs P and q")
     n = arrays["q"].size
-    for mat, vec in (("A", "b"), ("G", "h")):
-        if arrays[mat] is not None and arrays[mat].ndim == 1:
-            arrays[mat] = arrays[mat].reshape(1, -1)
     me = 0 if arrays["b"] is None else arrays["b"].size
     mi = 0 if arrays["h"] is None else arrays["h"].size
     parts, head, off = [], [n, me, mi], HEADER
@@ -129,9 +115,7 @@ def pack(problem: qpsolvers.Problem) -> PackedProblem:
             head.append(-1)
             continue
         if value.size != int(np.prod(shape)) or (value.ndim == 2 and value.shape != shape):
-            raise ProblemFormatError(
-                f"'{name}' has shape {value.shape}, expected {shape}", key=name
-            )
+            _bad(name, f"'{name}' has shape {value.shape}, expected {shape}")
         head.append(off)
         parts.append(value.reshape(-1))
         off += value.size

@@ -1,14 +1,8 @@
-"""QP problems in the formats of the QP ecosystem (docs/formats.md).
-
-A :class:`ProblemRecord` is a :class:`qpsolvers.Problem` with a name, scenario, tick, time
-[s], formulation and the objective's constant ``offset``: one problem <-> ``.npz``
-(:mod:`.npz`); a problem set <-> a folder of ``problems.parquet`` (qpbenchmark's
-``ProblemList`` columns plus the metadata and CSC columns) and ``manifest.json``
-(:mod:`.parquet`); Maros-Meszaros ``.mat`` (:mod:`.maros_meszaros`). Sparse matrices stay
-sparse from file to solver. Every reader checks the data rules
-(:func:`~.records.check_problem`) and records the convexity of ``P`` (:mod:`.convexity`); a
-violation is a :class:`~qpbench.exceptions.ProblemFormatError` naming the file, the problem
-and the field.
+"""QP problems in the formats of the QP ecosystem (docs/formats.md): one problem <-> ``.npz``;
+a problem set <-> a folder of ``problems.parquet`` and ``manifest.json``; Maros-Meszaros
+``.mat``. Sparse matrices stay sparse from file to solver. Every reader checks the data rules
+(:func:`~.records.check_record`), a violation a :class:`~qpbench.exceptions.ProblemFormatError`
+naming the file, the problem and the field.
 """
 
 from __future__ import annotations
@@ -17,27 +11,20 @@ import hashlib
 from pathlib import Path
 
 from ..exceptions import ProblemFormatError
-from .convexity import assess_convexity
+from .convexity import assess_convexity as assess_convexity
 from .maros_meszaros import load_maros_meszaros
-from .npz import load_npz, save_npz
-from .parquet import (
-    list_column,
-    package_versions,
-    read_parquet,
-    read_problem_set,
-    sha256_file,
-    table_to_bytes,
-    write_problem_set,
-)
-from .records import (
-    ARRAY_KEYS,
-    MANIFEST_NAME,
-    PARQUET_NAME,
-    ProblemRecord,
-    ProblemSet,
-    problem_sizes,
-    solver_problem,
-)
+from .npz import load_npz
+from .npz import save_npz as save_npz
+from .parquet import list_column as list_column
+from .parquet import package_versions as package_versions
+from .parquet import read_parquet, read_problem_set, sha256_file
+from .parquet import table_to_bytes as table_to_bytes
+from .parquet import write_problem_set as write_problem_set
+from .records import ARRAY_KEYS as ARRAY_KEYS
+from .records import MANIFEST_NAME, PARQUET_NAME, ProblemSet
+from .records import ProblemRecord as ProblemRecord
+from .records import problem_sizes as problem_sizes
+from .records import solver_problem as solver_problem
 
 #: Reader of one file, by file type.
 LOADERS = {"npz": load_npz, "mat": load_maros_meszaros}
@@ -71,8 +58,7 @@ def load_problems(path: str | Path, verify_hash: bool = True) -> ProblemSet:
 
 
 def content_sha256(problem_set: ProblemSet) -> str | None:
-    """SHA-256 of a set's content: its manifest's, else of its files' names and bytes,
-    else ``None`` (built in memory)."""
+    """SHA-256 of a set's content: its manifest's, else of its files' names and bytes."""
     if problem_set.sha256:
         return problem_set.sha256
     if not problem_set.files:
@@ -81,24 +67,3 @@ def content_sha256(problem_set: ProblemSet) -> str | None:
     for f in sorted(problem_set.files, key=lambda p: p.name):
         h.update(f.name.encode() + b"\0" + sha256_file(f).encode())
     return h.hexdigest()
-
-
-__all__ = [
-    "ARRAY_KEYS",
-    "ProblemRecord",
-    "ProblemSet",
-    "assess_convexity",
-    "content_sha256",
-    "list_column",
-    "load_maros_meszaros",
-    "load_npz",
-    "load_problems",
-    "package_versions",
-    "problem_sizes",
-    "read_problem_set",
-    "save_npz",
-    "sha256_file",
-    "solver_problem",
-    "table_to_bytes",
-    "write_problem_set",
-]

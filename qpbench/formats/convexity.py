@@ -1,13 +1,9 @@
 """Is ``P`` positive semidefinite? By ``ratio = lambda_min(P) / lambda_max(P)``, never
-making a large matrix dense.
-
-``convex`` when ``ratio >= -ROUNDING_RATIO``; ``rounding`` (a published problem's rounded
-data: solved, with a warning) down to ``-NONCONVEX_RATIO``; ``nonconvex`` (skipped) below.
-Up to ``DENSE_EIG_MAX_N`` variables ``numpy.linalg.eigvalsh``; else Gershgorin discs
-(diagonal dominance); else ``lambda_max`` by power iteration and the inertia of ``P + delta
-I`` (Sylvester's law, from a diagonal-pivot sparse ``L D L'``) at ``delta = NONCONVEX_RATIO
-lambda_max`` and ``ROUNDING_RATIO lambda_max``, then the ratio to 2 % by bisection on the
-shift. A factorization that pivoted off the diagonal gives ``rounding`` / ``undecided``.
+making a large matrix dense: ``convex``, ``rounding`` (a published problem's rounded data:
+solved, with a warning) or ``nonconvex`` (skipped). Up to ``DENSE_EIG_MAX_N`` variables
+``eigvalsh``; else Gershgorin discs; else ``lambda_max`` by power iteration and the inertia
+of ``P + delta I`` (Sylvester's law, sparse ``L D L'``) at the two thresholds, then the ratio
+to 2 % by bisection on the shift.
 """
 
 from __future__ import annotations
@@ -24,13 +20,12 @@ ROUNDING_RATIO = 1e-10
 NONCONVEX_RATIO = 1e-5
 #: Up to this many variables the eigenvalues are computed densely.
 DENSE_EIG_MAX_N = 1000
-VERDICTS = ("convex", "rounding", "nonconvex")
 
 
 @dataclass(frozen=True)
 class Convexity:
-    """What :func:`assess_convexity` found: a ``verdict`` of :data:`VERDICTS`, the ``ratio``
-    (NaN when only a ``bound`` above it is known) and the ``method``."""
+    """A ``verdict`` (``convex``, ``rounding``, ``nonconvex``), the ``ratio`` (NaN when only a
+    ``bound`` above it is known) and the ``method``."""
 
     verdict: str
     ratio: float = math.nan
@@ -48,14 +43,12 @@ class Convexity:
 
     @property
     def warning(self) -> str | None:
-        """The note of a ``rounding`` problem's rows."""
         if self.verdict != "rounding":
             return None
         return f"P slightly indefinite ({self.text}, within {NONCONVEX_RATIO:g}); solved as given"
 
     @property
     def skip_reason(self) -> str | None:
-        """Why a ``nonconvex`` problem is skipped."""
         return f"nonconvex ({self.text})" if self.verdict == "nonconvex" else None
 
 
@@ -72,13 +65,9 @@ def assess_convexity(P: np.ndarray | spa.spmatrix | spa.sparray) -> Convexity:
         P = np.asarray(P, dtype=np.float64)
     if not np.any(P.data if sparse else P):
         return Convexity("convex", 0.0, method="zero")
-    if P.shape[0] <= DENSE_EIG_MAX_N:
-        return _dense(P.toarray() if sparse else P)
-    return _sparse(spa.csc_matrix(P))
-
-
-def _dense(P: np.ndarray) -> Convexity:
-    eig = np.linalg.eigvalsh(P)
+    if P.shape[0] > DENSE_EIG_MAX_N:
+        return _sparse(spa.csc_matrix(P))
+    eig = np.linalg.eigvalsh(P.toarray() if sparse else P)
     lo, hi = float(eig[0]), float(eig[-1])
     scale = max(abs(lo), abs(hi))
     ratio = lo / scale if scale > 0 else 0.0
@@ -101,8 +90,7 @@ def _bisect_ratio(P, hi: float, low: float, high: float, rtol: float = 0.02) -> 
 
 
 def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
-    """A lower bound of ``lambda_max``, close to it: the larger of ``max_i P_ii`` and the
-    Rayleigh quotient after ``steps`` power iterations from a seeded random vector."""
+    """A lower bound of ``lambda_max``: ``max_i P_ii`` or a power iteration's Rayleigh quotient."""
     v = np.random.default_rng(0).standard_normal(P.shape[0])
     for _ in range(steps):
         w = P @ v
@@ -115,9 +103,8 @@ def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
 
 
 def negative_eigenvalues(P: spa.spmatrix | spa.sparray, shift: float) -> int | None:
-    """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift``
-    (inertia of ``P + shift I`` from a diagonal-pivot sparse LU); ``None`` if the
-    factorization pivoted off the diagonal (then Sylvester's law does not apply)."""
+    """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift`` (inertia of ``P +
+    shift I`` from a diagonal-pivot sparse LU); ``None`` if it pivoted off the diagonal."""
     from scipy.sparse.linalg import splu
 
     M = (P + shift * spa.identity(P.shape[0], format="csc")).tocsc()

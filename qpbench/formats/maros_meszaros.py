@@ -1,11 +1,9 @@
 """Maros-Meszaros ``.mat`` files: ``min 1/2 x'Px + q'x + r`` s.t. ``l <= A x <= u``.
 
-``A = [C; I_n]``: rows of ``C`` with ``l == u`` become ``A x = b``, the others one
-``G x <= h`` row per finite side (upper sides first, then ``-C x <= -l``); the last
-``n`` rows give ``lb, ub``. ``|value| >= MM_INFINITY`` is infinite. A triangular ``P``
-is mirrored; ``P, G, A`` stay CSC; ``r`` is the record's ``offset``, so the objective
-equals the published optimal values.
-"""
+``A = [C; I_n]``: rows of ``C`` with ``l == u`` become ``A x = b``, the others one ``G x <=
+h`` row per finite side (upper sides first); the last ``n`` rows give ``lb, ub``. A
+triangular ``P`` is mirrored; ``r`` is the record's ``offset`` (objectives equal the
+published optimal values)."""
 
 from __future__ import annotations
 
@@ -16,7 +14,7 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
-from .records import ProblemRecord, check_record, reading
+from .records import ProblemRecord, check_record, reading, sorted_csc
 
 #: Maros-Meszaros convention: a bound with ``|value| >= 1e20`` is infinite.
 MM_INFINITY = 1e20
@@ -44,9 +42,8 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
         r = float(np.asarray(data["r"], dtype=np.float64).item())
     except (ValueError, TypeError) as exc:
         fail("n", f"n, m and r must be scalars ({exc})")
-    P = _csc(data["P"], "P", fail)
-    A = _csc(data["A"], "A", fail)
-    q, lo, up = (_vector(data[k], k, fail) for k in ("q", "l", "u"))
+    P, A = (_array(data[k], k, fail, matrix=True) for k in ("P", "A"))
+    q, lo, up = (_array(data[k], k, fail) for k in ("q", "l", "u"))
     if P.shape != (n, n):
         fail("P", f"shape {P.shape} does not match n = {n}")
     if q.shape != (n,):
@@ -67,39 +64,26 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
     return record
 
 
-def _csc(M, key: str, fail) -> spa.csc_matrix:
-    """A matrix of the file as CSC float64 (sparse in the file or not), indices sorted."""
+def _array(v, key: str, fail, matrix: bool = False):
+    """A field of the file as float64: a CSC matrix (indices sorted), else a flat vector."""
     try:
-        M = spa.csc_matrix(M, dtype=np.float64)
+        if matrix:
+            M = spa.csc_matrix(v, dtype=np.float64)
+            M.sum_duplicates()  # sorts the indices too
+            return M
+        return np.asarray(v.toarray() if spa.issparse(v) else v, dtype=np.float64).ravel()
     except (TypeError, ValueError) as exc:
-        fail(key, f"not a numeric matrix ({exc})")
-    M.sum_duplicates()
-    return _sorted(M)
-
-
-def _sorted(M) -> spa.csc_matrix:
-    """``M`` as CSC with sorted indices."""
-    M = M.tocsc()
-    M.sort_indices()
-    return M
-
-
-def _vector(v, key: str, fail) -> np.ndarray:
-    try:
-        v = v.toarray() if spa.issparse(v) else v
-        return np.asarray(v, dtype=np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        fail(key, f"not numeric ({exc})")
+        fail(key, f"not a numeric matrix ({exc})" if matrix else f"not numeric ({exc})")
 
 
 def _symmetric(P: spa.csc_matrix) -> spa.csc_matrix:
     """``P`` mirrored when the file holds one triangle (a non-symmetric full ``P`` is left
-    to :func:`~qpbench.formats.records.check_problem`, which reports it)."""
+    to :func:`~qpbench.formats.records.check_record`, which reports it)."""
     if (P != P.T).nnz == 0:
         return P
     upper, lower = spa.triu(P, format="csc"), spa.tril(P, format="csc")
     if (P != upper).nnz == 0 or (P != lower).nnz == 0:
-        P = _sorted(P + P.T - spa.diags(P.diagonal()))
+        P = sorted_csc(P + P.T - spa.diags(P.diagonal()))
     return P
 
 
@@ -116,9 +100,9 @@ def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: i
     eq = (lc == uc) & np.isfinite(lc)
     upper = ~eq & np.isfinite(uc)
     lower = ~eq & np.isfinite(lc)
-    Aeq, beq = (_sorted(C[np.flatnonzero(eq)]), uc[eq]) if np.any(eq) else (None, None)
+    Aeq, beq = (sorted_csc(C[np.flatnonzero(eq)]), uc[eq]) if np.any(eq) else (None, None)
     if np.any(upper) or np.any(lower):
-        G = _sorted(spa.vstack([C[np.flatnonzero(upper)], -C[np.flatnonzero(lower)]]))
+        G = sorted_csc(spa.vstack([C[np.flatnonzero(upper)], -C[np.flatnonzero(lower)]]))
         h = np.concatenate([uc[upper], -lc[lower]])
     else:
         G = h = None

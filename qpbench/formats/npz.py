@@ -1,8 +1,5 @@
-"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save` / ``load``).
-
-A sparse matrix ``M`` is stored as members ``M_csc_data``, ``M_csc_indices``,
-``M_csc_indptr`` (:data:`~.records.CSC_TYPES`) and ``M_csc_shape``.
-"""
+"""One problem <-> one ``.npz`` file (:meth:`qpsolvers.Problem.save`); a sparse matrix ``M``
+also as members ``M_csc_<part>`` (:data:`~.records.CSC_TYPES`) and ``M_csc_shape``."""
 
 from __future__ import annotations
 
@@ -25,23 +22,16 @@ from .records import (
     NPZ_META_KEY,
     ProblemRecord,
     check_record,
-    csc_parts,
+    dense_copy,
     reading,
     solver_problem,
+    sorted_csc,
 )
 
 
-def _append(path: Path, members: dict[str, np.ndarray]) -> None:
-    with zipfile.ZipFile(path, mode="a", compression=zipfile.ZIP_STORED) as zf:
-        for key, value in members.items():
-            with zf.open(f"{key}.npy", "w") as member:
-                np.lib.format.write_array(member, value, allow_pickle=False)
-
-
 def save_npz(record: ProblemRecord, path: str | Path) -> Path:
-    """Write one record to ``path`` atomically, through :meth:`qpsolvers.Problem.save`
-    while the problem is at most ``DENSE_COPY_MAX`` entries dense (a larger one is read by
-    qpbench only), then the metadata and CSC members."""
+    """Write one record to ``path`` atomically: :meth:`qpsolvers.Problem.save`'s members (up
+    to ``DENSE_COPY_MAX`` entries dense), then the metadata and CSC members."""
     path = Path(path)
     check_record(record, path=path)
     problem = record.problem
@@ -49,54 +39,51 @@ def save_npz(record: ProblemRecord, path: str | Path) -> Path:
     for key in ARRAY_KEYS:
         M = getattr(problem, key)
         if spa.issparse(M):
-            members.update({f"{key}_csc_{p}": v for p, v in csc_parts(M).items()})
+            S = sorted_csc(M)
+            members.update({f"{key}_csc_{p}": getattr(S, p) for p in CSC_TYPES})
             members[f"{key}_csc_shape"] = np.asarray(M.shape, dtype=np.int64)
+    dense = dense_copy(problem)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             if dense_entries(problem) <= DENSE_COPY_MAX:
-                solver_problem(problem, dense=True).save(fh)
+                qpsolvers.Problem(*dense.values()).save(fh)
             else:
-                parts = {k: getattr(problem, k) for k in ARRAY_KEYS}
-                dense = {k: v for k, v in parts.items() if v is not None and not spa.issparse(v)}
-                np.savez(fh, **{k: np.asarray(v, dtype=np.float64) for k, v in dense.items()})
-        _append(tmp, members)
+                np.savez(fh, **{k: v for k, v in dense.items() if v is not None})
+        with zipfile.ZipFile(tmp, mode="a", compression=zipfile.ZIP_STORED) as zf:
+            for key, value in members.items():
+                with zf.open(f"{key}.npy", "w") as member:
+                    np.lib.format.write_array(member, value, allow_pickle=False)
     return path
 
 
-def _read_members(data) -> qpsolvers.Problem:
-    """The problem of a file with CSC members (dense members for the other parts)."""
+def _read_members(data, compact: bool) -> qpsolvers.Problem:
+    """The problem of a file: CSC members, else dense ones (only a ``compact`` file, one with
+    CSC members, may lack a part: in a file of :meth:`qpsolvers.Problem.save` a KeyError)."""
     parts = []
     for k in ARRAY_KEYS:
         if f"{k}_csc_data" in data.files:
             d, i, p, shape = (data[f"{k}_csc_{part}"] for part in (*CSC_TYPES, "shape"))
             parts.append(spa.csc_matrix((d, i, p), shape=tuple(int(v) for v in shape)))
-        elif k in data.files:
-            try:
-                v = data[k]
-            except ValueError:  # qpsolvers writes an absent part as a pickled None
-                v = None
-            parts.append(None if v is None or v.dtype == object else v)
-        else:
+        elif compact and k not in data.files:
             parts.append(None)
+        else:
+            try:
+                parts.append(data[k])
+            except ValueError:  # qpsolvers writes an absent part as a pickled None
+                parts.append(None)
     return qpsolvers.Problem(*parts)
 
 
 def load_npz(path: str | Path) -> ProblemRecord:
-    """One record of a ``.npz`` of :func:`save_npz` or :meth:`qpsolvers.Problem.save`
-    (named by the file stem)."""
+    """One record of a ``.npz`` of :func:`save_npz` or :meth:`qpsolvers.Problem.save`."""
     path = Path(path)
     with reading(path, ".npz"):
         with np.load(path, allow_pickle=False) as data:
-            missing = [
-                k for k in ("P", "q") if k not in data.files and f"{k}_csc_data" not in data.files
-            ]
-            if missing:
-                raise ProblemFormatError("missing array", path=path, key=missing[0])
+            for k in ("P", "q"):
+                if k not in data.files and f"{k}_csc_data" not in data.files:
+                    raise ProblemFormatError("missing array", path=path, key=k)
             meta = json.loads(str(data[NPZ_META_KEY])) if NPZ_META_KEY in data.files else {}
-            compact = any(f.endswith("_csc_data") for f in data.files)
-            problem = _read_members(data) if compact else None
-        if problem is None:
-            problem = qpsolvers.Problem.load(str(path))
+            problem = _read_members(data, any(f.endswith("_csc_data") for f in data.files))
     fields = {k: meta.get(k) for k in META_KEYS} | {"offset": float(meta.get("offset", 0.0))}
     record = ProblemRecord(problem, meta.get("name") or path.stem, **fields)
     check_record(record, path=path)

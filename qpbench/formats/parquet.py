@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,23 +14,21 @@ import scipy.sparse as spa
 
 from ..atomic import write_bytes, write_text
 from ..exceptions import ProblemFormatError
-from ..memory import dense_entries
 from .records import (
     ARRAY_KEYS,
     CSC_TYPES,
-    DENSE_COPY_MAX,
     FORMAT_VERSION,
     MANIFEST_NAME,
     MATRIX_KEYS,
     META_KEYS,
     META_TYPES,
     PARQUET_NAME,
-    PROBLEM_KEYS,
     ProblemRecord,
     ProblemSet,
     check_record,
-    csc_parts,
+    dense_copy,
     reading,
+    sorted_csc,
 )
 
 if TYPE_CHECKING:
@@ -40,31 +39,20 @@ def list_column(values: list[np.ndarray | None], kind: str = "float64"):
     """A pyarrow list column of ``kind`` holding each array flattened (null for ``None``)."""
     import pyarrow as pa
 
-    lengths = [0 if v is None else v.size for v in values]
-    offsets = np.zeros(len(values) + 1, dtype=np.int32)
-    np.cumsum(lengths, out=offsets[1:])
-    flat = [v.ravel(order="C") for v in values if v is not None]
-    data = np.concatenate(flat).astype(kind, copy=False) if flat else np.zeros(0, dtype=kind)
-    mask = pa.array([v is None for v in values], type=pa.bool_())
-    return pa.ListArray.from_arrays(
-        pa.array(offsets, type=pa.int32()), pa.array(data, type=getattr(pa, kind)()), mask=mask
-    )
+    flat = [None if v is None else v.ravel() for v in values]
+    return pa.array(flat, type=pa.list_(getattr(pa, kind)()))
 
 
-def _stored(problem, key: str):
-    """What the qpbenchmark column of ``key`` holds: the dense array, or ``None`` for a
-    sparse matrix of a problem too large to be written dense too (``DENSE_COPY_MAX``)."""
-    M = getattr(problem, key)
-    if M is None or not spa.issparse(M):
-        return None if M is None else np.asarray(M, dtype=np.float64)
-    return M.toarray() if dense_entries(problem) <= DENSE_COPY_MAX else None
-
-
-def records_to_table(records: list[ProblemRecord], path: str | Path | None = None) -> pa.Table:
-    """The records as a ``pyarrow.Table`` in the problem-set schema: the arrays, the metadata,
-    and CSC columns ``M_csc_<part>`` of each matrix ``M`` sparse in some record."""
+def write_problem_set(
+    folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
+) -> Path:
+    """Write ``records`` to ``folder/problems.parquet`` (arrays, metadata, CSC columns of each
+    matrix sparse in some record) and ``manifest.json`` (with ``generator``, what made the
+    set, and ``extra``), atomically, Parquet first."""
     import pyarrow as pa
 
+    folder = Path(folder)
+    path = folder / PARQUET_NAME
     for r in records:
         check_record(r, path=path)
     names = [r.name for r in records]
@@ -73,17 +61,34 @@ def records_to_table(records: list[ProblemRecord], path: str | Path | None = Non
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
     lst = pa.list_(pa.float64())
     fields = [(k, lst) for k in ARRAY_KEYS] + [(k, getattr(pa, t)()) for k, t in META_TYPES.items()]
-    cols = [list_column([_stored(r.problem, k) for r in records]) for k in ARRAY_KEYS]
+    dense = [dense_copy(r.problem) for r in records]
+    cols = [list_column([d[k] for d in dense]) for k in ARRAY_KEYS]
     cols += [pa.array([getattr(r, k) for r in records], type=t) for k, t in fields[len(cols) :]]
     for k in MATRIX_KEYS:
         matrices = [getattr(r.problem, k) for r in records]
         if not any(spa.issparse(M) for M in matrices):
             continue
-        parts = [csc_parts(M) if spa.issparse(M) else None for M in matrices]
+        parts = [sorted_csc(M) if spa.issparse(M) else None for M in matrices]
         for part, kind in CSC_TYPES.items():
             fields.append((f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())))
-            cols.append(list_column([None if p is None else p[part] for p in parts], kind))
-    return pa.Table.from_arrays(cols, schema=pa.schema(fields))
+            cols.append(list_column([None if p is None else getattr(p, part) for p in parts], kind))
+    table = pa.Table.from_arrays(cols, schema=pa.schema(fields))
+    data = table_to_bytes(table)
+    manifest = {
+        "format": "qpbench-problem-set",
+        "format_version": FORMAT_VERSION,
+        "file": PARQUET_NAME,
+        "count": len(records),
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "generator": generator,
+        "extra": extra or {},
+        "versions": package_versions(),
+        "columns": list(table.column_names),
+    }
+    text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    write_bytes(path, data)
+    write_text(folder / MANIFEST_NAME, text)
+    return folder
 
 
 def table_to_bytes(table: pa.Table) -> bytes:
@@ -125,40 +130,8 @@ def package_versions(
 
 
 def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
     with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def write_problem_set(
-    folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
-) -> Path:
-    """Write ``records`` (unique names) to ``folder/problems.parquet`` and ``manifest.json``.
-
-    ``generator`` (what produced the set) and ``extra`` are JSON-able. Both files are
-    written atomically, Parquet first, so a manifest never describes a partial file.
-    """
-    folder = Path(folder)
-    table = records_to_table(records, path=folder / PARQUET_NAME)
-    data = table_to_bytes(table)
-    digest = hashlib.sha256(data).hexdigest()
-    manifest = {
-        "format": "qpbench-problem-set",
-        "format_version": FORMAT_VERSION,
-        "file": PARQUET_NAME,
-        "count": len(records),
-        "sha256": digest,
-        "generator": generator,
-        "extra": extra or {},
-        "versions": package_versions(),
-        "columns": list(table.column_names),
-    }
-    text = json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n"
-    write_bytes(folder / PARQUET_NAME, data)
-    write_text(folder / MANIFEST_NAME, text)
-    return folder
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
@@ -166,21 +139,13 @@ def _list_values(table, key: str, path: Path, dtype=np.float64) -> list:
     import pyarrow as pa
 
     col = table.column(key)
-    rows = table.num_rows
     if pa.types.is_null(col.type):
-        return [None] * rows
+        return [None] * table.num_rows
     if not (pa.types.is_list(col.type) or pa.types.is_large_list(col.type)) or not (
         pa.types.is_floating(col.type.value_type) or pa.types.is_integer(col.type.value_type)
     ):
         raise ProblemFormatError(f"type {col.type} is not a list of numbers", path=path, key=key)
-    chunk = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
-    offsets = chunk.offsets.to_numpy()
-    values = chunk.values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
-    nulls = chunk.is_null().to_numpy(zero_copy_only=False)
-    return [
-        None if nulls[i] else np.array(values[offsets[i] : offsets[i + 1]], dtype=dtype)
-        for i in range(rows)
-    ]
+    return [None if v is None else np.array(v, dtype=dtype) for v in col.to_numpy()]
 
 
 def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
@@ -208,13 +173,16 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
     return v
 
 
-def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]:
+def read_parquet(path: str | Path, require_meta: bool = False) -> ProblemSet:
+    """Read a Parquet file of problems: qpbenchmark's (``ProblemList.to_parquet``), its
+    metadata columns read when present, or a problem set's (``require_meta``)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    path = Path(path)
     with reading(path, "Parquet file", (pa.ArrowException, OSError, ValueError)):
         table = pq.read_table(path)
-    for k in PROBLEM_KEYS + (META_KEYS if require_meta else ()):
+    for k in (*ARRAY_KEYS, "name", *(META_KEYS if require_meta else ())):
         if k not in table.column_names:
             raise ProblemFormatError("missing column", path=path, key=k)
     rows = table.num_rows
@@ -224,14 +192,13 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
         for k in MATRIX_KEYS
         if f"{k}_csc_data" in table.column_names
     }
-    names = table.column("name").to_pylist()
     meta = {
         k: table.column(k).to_pylist() if k in table.column_names else [None] * rows
-        for k in META_KEYS
+        for k in META_TYPES
     }
     records = []
     for i in range(rows):
-        name = names[i] if names[i] is not None else f"{path.stem}-{i}"
+        name = meta["name"][i] if meta["name"][i] is not None else f"{path.stem}-{i}"
 
         def fail(key, msg, name=name, i=i):
             raise ProblemFormatError(f"problem '{name}' (row {i}): {msg}", path=path, key=key)
@@ -253,12 +220,15 @@ def _read_parquet_records(path: Path, require_meta: bool) -> list[ProblemRecord]
         rec = ProblemRecord(qpsolvers.Problem(**data), name, **fields)
         check_record(rec, path=path)
         records.append(rec)
-    return records
+    return ProblemSet(name=path.stem, path=path, records=records, kind="parquet", files=[path])
 
 
-def read_manifest(folder: str | Path) -> dict:
-    """Read and check ``folder/manifest.json``."""
-    mpath = Path(folder) / MANIFEST_NAME
+def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
+    """Read a problem-set folder (``verify_hash``: its SHA-256 and row count, the manifest's)."""
+    folder = Path(folder)
+    ppath, mpath = folder / PARQUET_NAME, folder / MANIFEST_NAME
+    if not ppath.is_file():
+        raise ProblemFormatError("no such file", path=ppath)
     with reading(mpath, "manifest", (OSError, ValueError)):
         manifest = json.loads(mpath.read_text())
     if not isinstance(manifest, dict):
@@ -266,19 +236,6 @@ def read_manifest(folder: str | Path) -> dict:
     for k in ("sha256", "count"):
         if k not in manifest:
             raise ProblemFormatError("missing key", path=mpath, key=k)
-    return manifest
-
-
-def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet:
-    """Read a problem-set folder (or its ``problems.parquet``); ``verify_hash`` checks
-    the SHA-256 and the row count against the manifest."""
-    folder = Path(folder)
-    if folder.name == PARQUET_NAME:
-        folder = folder.parent
-    ppath = folder / PARQUET_NAME
-    if not ppath.is_file():
-        raise ProblemFormatError("no such file", path=ppath)
-    manifest = read_manifest(folder)
     digest = sha256_file(ppath)
     hash_ok = digest == manifest["sha256"]
     if verify_hash and not hash_ok:
@@ -288,26 +245,12 @@ def read_problem_set(folder: str | Path, verify_hash: bool = True) -> ProblemSet
             path=ppath,
             key="sha256",
         )
-    records = _read_parquet_records(ppath, require_meta=True)
-    if verify_hash and len(records) != manifest["count"]:
+    pset = read_parquet(ppath, require_meta=True)
+    if verify_hash and len(pset) != manifest["count"]:
         raise ProblemFormatError(
-            f"{len(records)} rows but manifest says {manifest['count']}", path=ppath, key="count"
+            f"{len(pset)} rows but manifest says {manifest['count']}", path=ppath, key="count"
         )
-    return ProblemSet(
-        name=folder.resolve().name,
-        path=folder,
-        records=records,
-        manifest=manifest,
-        sha256=digest,
-        kind="set",
-        files=[ppath],
-        hash_ok=hash_ok,
+    name = folder.resolve().name
+    return replace(
+        pset, name=name, path=folder, manifest=manifest, sha256=digest, kind="set", hash_ok=hash_ok
     )
-
-
-def read_parquet(path: str | Path) -> ProblemSet:
-    """Read a bare qpbenchmark Parquet file (``ProblemList.to_parquet``); the
-    metadata columns are read when present."""
-    path = Path(path)
-    records = _read_parquet_records(path, require_meta=False)
-    return ProblemSet(name=path.stem, path=path, records=records, kind="parquet", files=[path])

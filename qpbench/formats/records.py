@@ -12,11 +12,10 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
+from ..memory import dense_entries
 
 #: Array columns, in qpsolvers' argument order.
 ARRAY_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
-#: Columns of qpbenchmark's ``ProblemList`` (order kept).
-PROBLEM_KEYS = (*ARRAY_KEYS, "name")
 #: A record's metadata and its Arrow types (Parquet columns after the arrays).
 META_TYPES = {
     "name": "string",
@@ -35,27 +34,23 @@ MANIFEST_NAME = "manifest.json"
 NPZ_META_KEY = "qpbench_record"
 #: Version of the problem-set layout written in the manifest.
 FORMAT_VERSION = 1
-#: A sparse problem whose ``P, G, A`` made dense hold more entries than this is not also
-#: written dense for qpsolvers / qpbenchmark readers.
+#: Entries of ``P, G, A`` made dense above which a sparse problem is not also written dense.
 DENSE_COPY_MAX = 1_000_000
 #: ``P`` is symmetric when ``max |P - P'| <= SYMMETRY_RTOL max |P|``.
 SYMMETRY_RTOL = 1e-9
 
 #: The matrices of a problem (the parts that may be scipy.sparse).
 MATRIX_KEYS = ("P", "G", "A")
-#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types.
+#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types,
+#: the arrays of its :func:`sorted_csc`.
 CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 
 @dataclass
 class ProblemRecord:
-    """One QP and where it comes from.
-
-    ``name`` is unique in its set (``wall/tick-000123``, ``HS21``); ``t`` is the tick's
-    time [s]; ``formulation`` ``paper`` (hard task equality, eq. 11) or ``soft``;
-    ``offset`` the objective's constant (Maros-Meszaros ``r``); ``convexity`` is set by
-    :func:`check_record`.
-    """
+    """One QP and where it comes from: ``name`` unique in its set; ``t`` the tick's time [s];
+    ``formulation`` ``paper`` (hard task equality, eq. 11) or ``soft``; ``offset`` the
+    objective's constant (Maros-Meszaros ``r``); ``convexity`` set by :func:`check_record`."""
 
     problem: qpsolvers.Problem
     name: str
@@ -68,7 +63,6 @@ class ProblemRecord:
 
     @property
     def sizes(self) -> tuple[int, int, int]:
-        """``(n, m_eq, m_ineq)`` (:func:`problem_sizes`)."""
         return problem_sizes(self.problem)
 
     def meta(self) -> dict:
@@ -78,11 +72,8 @@ class ProblemRecord:
 
 @dataclass
 class ProblemSet:
-    """Problem records read from a folder or file (``path``; ``None``: built in memory).
-
-    ``kind`` is ``set``, ``parquet``, ``npz`` or ``mat``; ``manifest``, ``sha256`` (of
-    ``problems.parquet``) and ``hash_ok`` belong to a problem-set folder.
-    """
+    """Problem records read from ``path`` (``None``: built in memory); ``kind``: ``set``,
+    ``parquet``, ``npz`` or ``mat``; ``manifest``, ``sha256``, ``hash_ok``: a set's folder."""
 
     name: str
     path: Path | None
@@ -111,26 +102,37 @@ def problem_sizes(problem: qpsolvers.Problem) -> tuple[int, int, int]:
     return n, m_eq, m_ineq
 
 
-def solver_problem(problem: qpsolvers.Problem, dense: bool = False) -> qpsolvers.Problem:
-    """``problem`` with float64 arrays, sparse matrices as CSC (what a sparse API is given)
-    or, with ``dense``, made dense."""
-    parts = []
+def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
+    """``problem`` with float64 arrays, sparse matrices as CSC (what a sparse API is given)."""
+    parts = (getattr(problem, k) for k in ARRAY_KEYS)
+    return qpsolvers.Problem(*(None if v is None else _float64(v) for v in parts))
+
+
+def _float64(v):
+    """``v`` as float64, a sparse matrix as CSC."""
+    if not spa.issparse(v):
+        return np.asarray(v, dtype=np.float64)
+    return v if v.format == "csc" and v.dtype == np.float64 else spa.csc_matrix(v, dtype=np.float64)
+
+
+def dense_copy(problem: qpsolvers.Problem) -> dict[str, np.ndarray | None]:
+    """Each array as qpsolvers and qpbenchmark read it: dense float64, ``None`` when absent or
+    sparse in a problem of more than ``DENSE_COPY_MAX`` entries made dense."""
+    small = dense_entries(problem) <= DENSE_COPY_MAX
+    out = {}
     for k in ARRAY_KEYS:
         v = getattr(problem, k)
-        if spa.issparse(v) and not dense:
-            v = spa.csc_matrix(v, dtype=np.float64)
-        elif v is not None:
-            v = np.asarray(v.toarray() if spa.issparse(v) else v, dtype=np.float64)
-        parts.append(v)
-    return qpsolvers.Problem(*parts)
+        if spa.issparse(v):
+            v = v.toarray() if small else None
+        out[k] = None if v is None else np.asarray(v, dtype=np.float64)
+    return out
 
 
-def csc_parts(M) -> dict[str, np.ndarray]:
-    """The stored arrays of a sparse matrix (:data:`CSC_TYPES`): its float64 CSC, indices
-    sorted."""
+def sorted_csc(M) -> spa.csc_matrix:
+    """``M`` as float64 CSC with sorted indices."""
     M = spa.csc_matrix(M, dtype=np.float64)
     M.sort_indices()
-    return {"data": M.data, "indices": M.indices, "indptr": M.indptr}
+    return M
 
 
 @contextmanager
@@ -148,51 +150,38 @@ def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Except
         raise ProblemFormatError(msg, path=path) from None
 
 
-def _numeric(v, key: str, fail):
-    """``v`` as float64 (CSC for a sparse matrix), or a failure naming ``key``."""
-    sparse = spa.issparse(v)
-    v = v if sparse else np.asarray(v)
-    if v.dtype.kind not in "fiub":
-        fail(key, f"dtype {v.dtype} is not numeric")
-    if not sparse:
-        return v.astype(np.float64, copy=False)
-    return v if v.format == "csc" and v.dtype == np.float64 else spa.csc_matrix(v, dtype=np.float64)
-
-
 def _values(M) -> np.ndarray:
     """The stored values of a dense or sparse array (never a dense copy of a sparse one)."""
     return M.data if spa.issparse(M) else M
 
 
-def _asymmetry(P) -> float:
-    """``max |P - P'|`` without a dense copy of a sparse ``P``."""
-    D = P - P.T
-    if spa.issparse(D):
-        return float(abs(D).max()) if D.nnz else 0.0
-    return float(np.max(np.abs(D), initial=0.0))
-
-
-def check_problem(
-    problem: qpsolvers.Problem, path: str | Path | None = None, name: str | None = None
-) -> None:
+def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
     """Check shapes and values (sparse matrices through their stored values, never dense):
     ``P`` ``n x n`` and symmetric (``max |P - P'| <= SYMMETRY_RTOL max |P|``); ``G, h``
     and ``A, b`` in pairs; ``P q G h A b`` finite (several solvers reject ``h = inf``);
-    ``lb`` may be ``-inf``, ``ub`` ``+inf``. A :class:`ProblemFormatError` names the field.
+    ``lb`` may be ``-inf``, ``ub`` ``+inf``; the name and offset. A
+    :class:`ProblemFormatError` names the field. Sets :attr:`ProblemRecord.convexity`.
     """
+    from .convexity import assess_convexity
+
+    problem, name, offset = record.problem, record.name, record.offset
 
     def fail(key, msg):
         raise ProblemFormatError(f"problem '{name}': {msg}", path=path, key=key)
 
-    arr = {
-        k: None if getattr(problem, k) is None else _numeric(getattr(problem, k), k, fail)
-        for k in ARRAY_KEYS
-    }
+    arr = {}  # float64, CSC for a sparse matrix
+    for k in ARRAY_KEYS:
+        v = getattr(problem, k)
+        if v is not None:
+            v = v if spa.issparse(v) else np.asarray(v)
+            if v.dtype.kind not in "fiub":
+                fail(k, f"dtype {v.dtype} is not numeric")
+            v = _float64(v)
+        arr[k] = v
     P, q = arr["P"], arr["q"]
-    if P is None:
-        fail("P", "missing")
-    if q is None:
-        fail("q", "missing")
+    for k in ("P", "q"):
+        if arr[k] is None:
+            fail(k, "missing")
     if q.ndim != 1:
         fail("q", f"shape {q.shape} is not a vector")
     n = q.shape[0]
@@ -202,9 +191,8 @@ def check_problem(
         fail("P", f"shape {P.shape} does not match n = {n} (expected {(n, n)})")
     for M, v in (("G", "h"), ("A", "b")):
         if (arr[M] is None) != (arr[v] is None):
-            fail(
-                M if arr[M] is None else v, f"'{M}' and '{v}' must both be given or both be absent"
-            )
+            absent = M if arr[M] is None else v
+            fail(absent, f"'{M}' and '{v}' must both be given or both be absent")
         if arr[M] is None:
             continue
         if arr[M].ndim != 2 or arr[M].shape[1] != n:
@@ -221,24 +209,14 @@ def check_problem(
     for k, wrong in (("lb", np.inf), ("ub", -np.inf)):
         if arr[k] is not None and (np.any(np.isnan(arr[k])) or np.any(arr[k] == wrong)):
             fail(k, f"holds NaN or {wrong:+}")
-    values = _values(P)
-    scale = float(np.max(np.abs(values))) if values.size else 0.0
-    asym = _asymmetry(P)
+    scale = float(np.max(np.abs(_values(P)), initial=0.0))
+    asym = float(np.max(np.abs(_values(P - P.T)), initial=0.0))
     if asym > SYMMETRY_RTOL * scale:
         fail("P", f"is not symmetric (max |P - P'| = {asym:.3g} > {SYMMETRY_RTOL:g} max |P|)")
-
-
-def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
-    """:func:`check_problem` plus the metadata types; sets :attr:`ProblemRecord.convexity`."""
-    from .convexity import assess_convexity
-
-    check_problem(record.problem, path=path, name=record.name)
-    name, offset = record.name, record.offset
     if not isinstance(name, str) or not name:
         msg = f"problem name {name!r} is not a non-empty string"
         raise ProblemFormatError(msg, path=path, key="name")
     if not np.isfinite(offset):
-        msg = f"problem '{name}': offset {offset} is not finite"
-        raise ProblemFormatError(msg, path=path, key="offset")
+        fail("offset", f"offset {offset} is not finite")
     if record.convexity is None:
         record.convexity = assess_convexity(record.problem.P)

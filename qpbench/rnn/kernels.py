@@ -1,8 +1,7 @@
 """The network's kernels: its parameter block ``prm``, its step bound and its integrator as loops.
 
-One module: numba resolves the functions a kernel calls (the ``*_jit`` names) from the globals of
-the module that defines the kernel, and :func:`kernel` rebinds them to compiled versions (cached
-on disk) before the first compile. Without numba Python runs the same functions.
+numba resolves the ``*_jit`` names a kernel calls from this module's globals: :func:`kernel`
+rebinds them to compiled versions before the first compile (without numba Python runs them).
 """
 
 from __future__ import annotations
@@ -27,27 +26,23 @@ METHODS = ("euler", "semi-implicit")
 #: Squarings in the trace-power bound of ``sigma_max(C)^2``.
 SQUARINGS = 5
 
-# Slots of the parameter block ``prm``, one float64 array per call (:func:`make_params`);
-# the kernels read them as constants.
+# Slots of the parameter block ``prm`` (:func:`make_params`).
 #: Inputs.
 PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
 #: Outputs.
 PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
-#: Inputs of the per-tick kernel: the residual bounds of status ``optimal`` and the
-#: equality count of the state (-1: not checked); output of every kernel: the last
-#: call's step count or code (NaN: none yet).
+#: Inputs of the per-tick kernel: the residual bounds of status ``optimal``, the state's
+#: equality count (-1: not checked); output: the last call's step count (NaN: none yet).
 OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
-#: Inputs of a fixed step: the ratio ``r = h / eps`` of one step (0: ``SUBSTEPS`` or
-#: the bound decides the count) and whether to clamp a forced step to the stability
-#: bound; output: the step count the setting asked for (0 when the bound chose it).
+#: Inputs: the ratio ``r = h / eps`` of a fixed step (0: none), whether to clamp a forced
+#: step to the bound; output: the step count the setting asked for (0: the bound chose).
 R_STEP, CLAMP, NOMINAL = range(20, 23)
 #: Output: what a fixed-duration call did against its setting (``NOTE_*``).
 NOTE = 23
 PRM_SIZE = 24
 
-#: ``prm[NOTE]``: nothing to say; the step was clamped to the bound (more steps); no
-#: step is proven stable (``P`` not positive definite: the steps ran as set); the
-#: steps the bound needs exceed ``MAX_STEPS`` (capped there, above the bound).
+#: ``prm[NOTE]``: nothing to say; the step was clamped to the bound; no step is proven stable
+#: (``P`` not positive definite); the steps the bound needs exceed ``MAX_STEPS``.
 NOTE_NONE, NOTE_CLAMPED, NOTE_UNPROVEN, NOTE_CAPPED = 0, 1, 2, 3
 
 #: Kernel return codes besides a step count.
@@ -70,19 +65,11 @@ def make_params(
     step_ratio: float = 0.0,
     clamp: bool = True,
 ) -> np.ndarray:
-    """The parameter block ``prm`` of the kernels.
-
-    Fixed duration (``r_total = duration / eps > 0``): steps of ratio at most ``step_ratio``
-    (a fixed step ``h = step_ratio * eps``), else ``substeps`` equal steps, else (both 0) the
-    fewest steps with ``r <= safety * ratio_max``; with ``clamp``, a forced step above ``safety *
-    ratio_max`` is shortened to it (more steps), the bound computed only when the step is above
-    a cheap lower estimate of it (Gershgorin bounds of ``P``, ``|A|_F^2 + |G|_F^2``). To
-    convergence (``r_total <= 0``): steps of ``r = safety * ratio_max`` until the three
-    residuals are ``<= tol`` (negative: never), or ``max_steps`` steps.
-
-    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``l1_clip``: clip ``l1`` to
-    ``[-l1_clip, l1_clip]`` after each step (anti-windup); ``method``: one of :data:`METHODS`.
-    """
+    """The parameter block ``prm``. Fixed duration ``r_total = duration / eps > 0``: steps of
+    ratio at most ``step_ratio``, else ``substeps`` steps, else the fewest with ``r <= safety *
+    ratio_max`` (with ``clamp`` a forced step above it is shortened). Else steps of ``r = safety
+    * ratio_max`` until the residuals are ``<= tol`` (negative: never), or ``max_steps``.
+    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``l1_clip``: a bound on ``|l1|``."""
     if method not in METHODS:
         raise ParamError(
             f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
@@ -101,18 +88,10 @@ def make_params(
 
 @dataclass
 class IntegrationResult:
-    """What one call of :func:`qpbench.rnn.network.integrate` did.
-
-    ``steps``: taken, or ``NO_STABLE_STEP``. Residuals at the final state (inf-norms):
-    primal ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``; dual
-    ``|v - P_Omega(v - g)|_inf`` with ``g = P v + q - A^T l1 + G^T l2`` (qpsolvers' with
-    the ``z_box`` of ``duals``); complementarity ``|l2 - max(l2 + G v - h, 0)|_inf`` (zero
-    iff ``l2 >= 0``, ``G v <= h`` and ``l2_i (h - G v)_i = 0``). ``ratio``: ``r = h / eps``
-    of one step; ``ratio_max``: its stability bound, ``sigma2_bound``: the bound on
-    ``sigma_max([A; G])^2`` used, both NaN when a forced step was not checked against the
-    bound or was below a cheap lower estimate of it. ``nominal_steps``: steps the setting
-    asked for (0 when the bound chose the count).
-    """
+    """What one integration did: ``steps`` (or ``NO_STABLE_STEP``); residuals (inf-norms): primal
+    ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``, dual ``|v - P_Omega(v - g)|`` (15a),
+    complementarity ``|l2 - max(l2 + G v - h, 0)|``; ``ratio`` ``r = h / eps``, its bound
+    ``ratio_max`` from ``sigma2_bound`` (NaN: not computed); ``nominal_steps`` (0: the bound's)."""
 
     steps: int
     primal_residual: float
@@ -169,10 +148,7 @@ def ratio_max(pmin, pmax, sig2, semi):
 
 
 def _gershgorin(P):
-    """``(lower, upper, exact)``: Gershgorin bounds on the eigenvalues of ``(P + P^T) / 2``.
-
-    ``exact`` when that matrix is diagonal (the bounds are its eigenvalues).
-    """
+    """``(lower, upper, exact)``: Gershgorin bounds of ``(P + P^T) / 2`` (exact if diagonal)."""
     n = P.shape[0]
     lo = np.inf
     hi = -np.inf
@@ -204,11 +180,8 @@ def _frobenius2(A, G):
 
 
 def nominal_steps(r_total, r_step, substeps):
-    """Steps a fixed-duration call takes before any clamp (0: the bound decides).
-
-    ``r_step > 0``: the fewest steps of ratio at most ``r_step`` (a duration a
-    hair above a multiple of the step, from rounding, adds none); else ``substeps``.
-    """
+    """Steps a fixed-duration call takes before any clamp (0: the bound decides): the fewest
+    of ratio at most ``r_step`` (rounding adds none), else ``substeps``."""
     if r_total <= 0.0:
         return 0
     if r_step > 0.0:
@@ -275,10 +248,8 @@ def _matvec(M, xi, y):
 
 
 def _grad_products(P, q, A, G, xi, g, Av, Gv, products):
-    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``.
-
-    Each (contiguous) row of ``A`` and ``G`` is read once for both.
-    """
+    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``
+    (each row of ``A`` and ``G`` read once for both)."""
     n = P.shape[0]
     me = A.shape[0]
     mi = G.shape[0]
@@ -331,10 +302,8 @@ def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
 
 
 def _residuals(b, h, lb, ub, xi, g, Av, Gv):
-    """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`).
-
-    Maxima that propagate NaN: a diverged state must not look converged.
-    """
+    """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`),
+    maxima that propagate NaN (a diverged state must not look converged)."""
     n = lb.shape[0]
     me = b.shape[0]
     mi = h.shape[0]
@@ -365,9 +334,7 @@ def _residuals(b, h, lb, ub, xi, g, Av, Gv):
     return pr, du, co
 
 
-# Over 80 lines, kept whole on purpose: the integrator is one compiled function (the per-step
-# functions it calls are inlined by numba); moving its set-up or its stopping tests out would add
-# calls inside the loop or another compiled function to rebind before the first compile.
+# Over 80 lines: one compiled function, its per-step callees inlined by numba.
 def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     n = q.shape[0]
     me = b.shape[0]
@@ -404,8 +371,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         rmax = np.nan
         sig2 = np.nan
         if prm[CLAMP] != 0.0:
-            # the bound only when the step may exceed it: below a cheap lower
-            # estimate of it (Gershgorin for P, Frobenius for sigma_max^2) it cannot
+            # the bound only when the step is above a cheap lower estimate of it
             glo, ghi, exact = _gershgorin_jit(P)
             low = _ratio_max_jit(glo, ghi, _frobenius2_jit(A, G), semi)
             if not r_total / nominal <= prm[SAFETY] * low:
@@ -456,7 +422,6 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
         Av = np.empty(me)
         Gv = np.empty(mi)
         g = np.empty(n)
-    # g = P v + q - A^T l1 + G^T l2, Av = A v, Gv = G v at the current state
     _grad_products_jit(P, q, A, G, xi, g, Av, Gv, True)
     if check:
         steps = 0
@@ -496,13 +461,9 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
 
 
 def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
-    """One call of the online network: :func:`_integrate_loops` plus its verdict.
-
-    Returns ``4 * steps + 2 * note + ok`` (``ok``: primal residual and complementarity within
-    ``prm[OK_PRIMAL]``, dual residual within ``prm[OK_DUAL]``; ``note``: :func:`step_note` has
-    something to say), or :data:`SHAPE_MISMATCH` (also when the equality count is not the
-    state's ``prm[STATE_ME]``), :data:`NO_STABLE_STEP` or :data:`DIVERGED`.
-    """
+    """:func:`_integrate_loops` and its verdict ``4 * steps + 2 * note + ok`` (``ok``: the
+    residuals within ``prm[OK_*]``; ``note``: :func:`step_note` has something to say), or
+    :data:`SHAPE_MISMATCH`, :data:`NO_STABLE_STEP`, :data:`DIVERGED`."""
     if prm[STATE_ME] >= 0.0 and b.shape[0] != prm[STATE_ME]:
         return SHAPE_MISMATCH
     steps = _integrate_jit(P, q, A, b, G, h, lb, ub, xi, prm, sol)
@@ -521,9 +482,8 @@ def _part_fits(off, size, length):  # pragma: no cover - compiled
 
 
 def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
-    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer,
-    or :data:`SHAPE_MISMATCH` when a part lies outside it, the sizes are not the state's or
-    ``lb`` or ``ub`` is absent."""
+    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer
+    (:data:`SHAPE_MISMATCH`: a part outside it or absent ``lb``, ``ub``, sizes not the state's)."""
     length = buf.shape[0]
     if length < HEADER:
         return SHAPE_MISMATCH
@@ -560,10 +520,8 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
     )
 
 
-# The names the kernels call: plain functions until kernel() compiles them (inlined into their
-# callers where marked: a call costs more than these small loops, run every step; the integrator
-# and the online tick, called once a solve, are compiled as calls: inlining them copies their IR
-# into every caller and type, for no speed).
+# The names the kernels call: plain functions until kernel() compiles them, inlined into their
+# callers except those of _CALLS (called once a solve).
 _sigma2_bound_jit = sigma2_bound
 _ratio_max_jit = ratio_max
 _gershgorin_jit = _gershgorin
@@ -579,7 +537,6 @@ _online_tick_jit = _online_tick_loops
 _part_fits_jit = _part_fits
 _CALLS = ("_sigma2_bound_jit", "_ratio_max_jit", "_integrate_jit", "_online_tick_jit")
 _COMPILED = None
-_INTERPRETED = None
 
 
 def numba_available() -> bool:
@@ -591,41 +548,30 @@ def numba_available() -> bool:
     return True
 
 
-def _plain(fn):
-    return getattr(fn, "py_func", fn)
-
-
+@cache
 def _interpreted() -> Callable:
     """:func:`_integrate_loops` run by Python on the plain functions, whatever is compiled."""
     names = dict(globals())
     for name, fn in list(names.items()):
         if name.endswith("_jit"):
-            names[name] = FunctionType(_plain(fn).__code__, names)
+            names[name] = FunctionType(getattr(fn, "py_func", fn).__code__, names)
     return names["_integrate_jit"]
 
 
 def kernel(use_numba: bool = True) -> Callable:
-    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps``.
-
-    ``xi`` (the state ``[v; l1; l2]``) is updated in place; ``prm`` holds the inputs ``PMIN ..
-    L1_CLIP`` and receives the outputs ``PRIMAL .. SIG2``; ``sol`` (length ``2n + me + mi``, or
-    0 to skip) receives ``[x; y; z; z_box]`` (``y = -l1``, ``z = l2``, ``z_box = w -
-    P_Omega(w)`` with ``w = v - g``). Returns the step count, :data:`NO_STABLE_STEP` or
-    :data:`SHAPE_MISMATCH`. Compiled (with every function the kernels call) on the first call
-    of the result; ``use_numba=False``: the same loops run by Python.
-    """
-    global _COMPILED, _INTERPRETED
+    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (or a code < 0),
+    compiled or run by Python: ``xi = [v; l1; l2]`` updated in place; ``sol`` (length ``2n +
+    me + mi``, or 0) receives ``[x; y; z; z_box]``."""
+    global _COMPILED
     if not use_numba:
-        if _INTERPRETED is None:
-            _INTERPRETED = _interpreted()
-        return _INTERPRETED
+        return _interpreted()
     if _COMPILED is None:
         import numba
 
         names = globals()
         for name in [k for k in names if k.endswith("_jit")]:
             inline = "never" if name in _CALLS else "always"
-            names[name] = numba.njit(cache=True, inline=inline)(_plain(names[name]))
+            names[name] = numba.njit(cache=True, inline=inline)(names[name])
         _COMPILED = names["_integrate_jit"]
     return _COMPILED
 
@@ -638,13 +584,8 @@ def _signature(*ndims):
 
 @cache
 def online_kernel() -> Callable:
-    """The per-tick kernel ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> code``
-    (:func:`_online_tick_loops`), ``sol`` of length ``3 n + 2 (me + mi)``.
-
-    Compiled for exactly C-contiguous writable float64 arrays (``P``, ``A``, ``G`` 2-D), so
-    numba's dispatcher raises ``TypeError`` for anything else: the whole type check of the
-    online backend's per-tick path.
-    """
+    """:func:`_online_tick_loops` (``sol`` of length ``3 n + 2 (me + mi)``) compiled for
+    C-contiguous writable float64 arrays only (numba's dispatcher raises ``TypeError``)."""
     import numba
 
     kernel(True)  # binds the integrator the tick calls
@@ -654,14 +595,10 @@ def online_kernel() -> Callable:
 
 @cache
 def packed_kernel() -> Callable:
-    """The per-tick kernel on a :class:`qpbench.packed.PackedProblem`'s buffer: ``f(buffer, xi,
-    prm, sol) -> code``, for 1-D C-contiguous float64 arrays only: the compiled function's own
-    entry point when numba exposes it (it skips the dispatcher's type matching)."""
+    """:func:`_online_tick_packed_loops` ``f(buffer, xi, prm, sol) -> code``: the compiled
+    function's entry point, for 1-D C-contiguous float64 arrays (no type matching)."""
     import numba
 
     kernel(True)
     disp = numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
-    try:
-        return disp.overloads[disp.signatures[0]].entry_point
-    except (AttributeError, KeyError, IndexError):  # pragma: no cover - another numba
-        return disp
+    return disp.overloads[disp.signatures[0]].entry_point

@@ -1,22 +1,14 @@
-"""The projection network of the paper's eq. 15 for any QP in qpsolvers form.
-
-For the QP ``min 1/2 v^T P v + q^T v  s.t.  A v = b, G v <= h, lb <= v <= ub``
-the network's state is ``(v, l1, l2)`` and its gain ``eps`` [s] (eq. 15a-c,
-with the objective's gradient ``P v + q`` where the paper prints a garbled
-``thetadot / ||thetadot||^2``)::
+"""The projection network of the paper's eq. 15 for ``min 1/2 v^T P v + q^T v  s.t.  A v = b,
+G v <= h, lb <= v <= ub``: state ``(v, l1, l2)``, gain ``eps`` [s], the objective's gradient
+``P v + q`` where the paper prints a garbled ``thetadot / ||thetadot||^2``::
 
     eps vdot  = -v + P_Omega(v - (P v + q - A^T l1 + G^T l2))      (15a)
     eps l1dot = b - A v                                              (15b)
     eps l2dot = -l2 + max(l2 + G v - h, 0)                           (15c)
 
-``P_Omega`` clips to ``[lb, ub]`` (infinite where a bound is absent). At an
-equilibrium the qpsolvers duals are ``y = -l1``, ``z = l2`` and
-``z_box = -(P v + q + A^T y + G^T z)``.
-
-Explicit Euler steps ``xi <- xi + r f(xi)`` of ratio ``r = h / eps`` for a step of ``h``
-seconds, or semi-implicit ones (``v`` first, the new ``v`` fed to the dual updates); the
-stability bound of ``r`` is :func:`~.kernels.ratio_max` (derivation: docs/architecture.md).
-The integrator, its parameter block and its step bound are :mod:`.kernels`.
+``P_Omega`` clips to ``[lb, ub]``; at an equilibrium ``y = -l1``, ``z = l2``, ``z_box = -(P v
++ q + A^T y + G^T z)``. The steps ``xi <- xi + r f(xi)`` of ratio ``r = h / eps`` (``h`` [s]),
+Euler or semi-implicit (``v`` first), are in :mod:`.kernels`.
 """
 
 from __future__ import annotations
@@ -28,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as spa
 
-from ..exceptions import ParamError, ProblemFormatError
+from ..exceptions import ProblemFormatError
 from .kernels import IntegrationResult, kernel, make_params, result
 
 if TYPE_CHECKING:
@@ -37,11 +29,7 @@ if TYPE_CHECKING:
 
 @dataclass
 class DenseQP:
-    """A QP as dense float64 arrays, absent parts replaced by neutral ones.
-
-    ``A v = b`` and ``G v <= h`` may have no rows (``me``, ``mi`` = 0); ``lb``,
-    ``ub`` are ``-inf`` / ``+inf`` where absent (``has_box``: the problem had one).
-    """
+    """A QP as dense float64 arrays: no rows, infinite bounds where absent (``has_box``)."""
 
     P: np.ndarray
     q: np.ndarray
@@ -55,14 +43,12 @@ class DenseQP:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        """``(n, me, mi)``: variables, equalities, inequalities."""
         return self.q.shape[0], self.b.shape[0], self.h.shape[0]
 
 
 @cache
 def empty_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(zeros((0, n)), zeros(0))``: no constraint rows (writable like a problem's rows: numba
-    compiles a read-only array type apart)."""
+    """No constraint rows (writable: numba compiles a read-only array type apart)."""
     return np.zeros((0, n)), np.zeros(0)
 
 
@@ -87,25 +73,16 @@ def _rows(M, v, m_name: str, v_name: str, n: int) -> tuple[np.ndarray, np.ndarra
     return M, v
 
 
-_F64 = np.dtype(np.float64)
-
-
 def _f64(a, name: str, ndim: int) -> np.ndarray:
-    """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a row or a column
-    vector taken as the other)."""
-    if type(a) is np.ndarray and a.dtype == _F64 and a.flags.c_contiguous:
-        if a.ndim == ndim:
-            return a
-    else:
-        a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
-    if a.ndim != ndim:
-        if ndim == 2 and a.ndim == 1:
-            a = a.reshape(1, -1)
-        elif ndim == 1 and a.ndim == 2 and 1 in a.shape:
-            a = a.ravel()
-        else:
-            raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
-    return a
+    """``a`` as a C-contiguous float64 array of ``ndim`` dimensions (a vector as a row)."""
+    a = np.ascontiguousarray(a.toarray() if spa.issparse(a) else a, dtype=np.float64)
+    if a.ndim == ndim:
+        return a
+    if ndim == 2 and a.ndim == 1:
+        return a.reshape(1, -1)
+    if ndim == 1 and a.ndim == 2 and 1 in a.shape:
+        return a.ravel()
+    raise ProblemFormatError(f"'{name}' has {a.ndim} dimensions, expected {ndim}", key=name)
 
 
 def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
@@ -126,18 +103,17 @@ def dense_qp(problem: qpsolvers.Problem) -> DenseQP:
 
 
 class NetworkState:
-    """State of the network, stored as one vector ``xi = [v; l1; l2]``.
+    """State of the network, one vector ``xi = [v; l1; l2]`` of which ``v`` (the output, the
+    paper's joint velocities [rad/s]), ``l1`` (``y = -l1``) and ``l2`` (``z = l2``) are views."""
 
-    ``v``: the output (the paper's joint-velocity command [rad/s]); ``l1``: equality
-    dual state (qpsolvers ``y = -l1``); ``l2``: inequality dual state, >= 0
-    (qpsolvers ``z = l2``); all three views of ``xi``.
-    """
-
-    __slots__ = ("xi", "n", "me", "mi")
+    __slots__ = ("xi", "n", "me", "mi", "shape", "l1", "l2")
 
     def __init__(self, xi: np.ndarray, n: int, me: int, mi: int):
         self.xi = xi
         self.n, self.me, self.mi = n, me, mi
+        self.shape = (n, me, mi)
+        self.l1 = xi[n : n + me]
+        self.l2 = xi[n + me :]
 
     @classmethod
     def cold(cls, n: int, me: int, mi: int, v0: np.ndarray | None = None) -> NetworkState:
@@ -166,18 +142,6 @@ class NetworkState:
     def v(self, value: np.ndarray) -> None:
         self.xi[: self.n] = value
 
-    @property
-    def l1(self) -> np.ndarray:
-        return self.xi[self.n : self.n + self.me]
-
-    @property
-    def l2(self) -> np.ndarray:
-        return self.xi[self.n + self.me :]
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        return self.n, self.me, self.mi
-
     def copy(self) -> NetworkState:
         return NetworkState(self.xi.copy(), self.n, self.me, self.mi)
 
@@ -198,16 +162,8 @@ def integrate(
     p_range: tuple[float, float] | None = None,
     **settings,
 ) -> IntegrationResult:
-    """Integrate the network on ``qp`` from ``state`` (updated in place).
-
-    ``settings``: those of :func:`make_params` (``r_total``: the duration over ``eps``);
-    ``p_range`` defaults to the eigenvalues of ``P``. ``steps == NO_STABLE_STEP`` when ``P``
-    is not positive definite and no step count was forced.
-    """
-    if state.shape != qp.shape:
-        raise ParamError(
-            f"state shape {state.shape} does not match problem {qp.shape}", key="state"
-        )
+    """Integrate the network on ``qp`` from ``state`` (updated in place); ``settings``: those
+    of :func:`make_params`; ``p_range`` defaults to the eigenvalues of ``P``."""
     prm = make_params(p_range=p_range or p_eigen_range(qp.P), **settings)
     kernel(use_numba)(qp.P, qp.q, qp.A, qp.b, qp.G, qp.h, qp.lb, qp.ub, state.xi, prm, np.zeros(0))
     return result(prm)
