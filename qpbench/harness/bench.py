@@ -1,12 +1,5 @@
-"""The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row each.
-
-:class:`BenchConfig` says what to run; :class:`Plan` checks it against the problem set and
-an existing output before anything is written; :func:`run_bench` solves each problem with every
-backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
-(:class:`~.isolation.IsolatedRunner`), in an order drawn per problem (:func:`backend_order`),
-and appends the problem's rows before the next starts; :class:`BenchSummary` is what it did.
-Modes, resuming and the order: docs/architecture.md, "The bench".
-"""
+"""The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row
+each (:func:`run_bench`); modes, resuming and the order: docs/architecture.md, "The bench"."""
 
 from __future__ import annotations
 
@@ -44,16 +37,11 @@ MODES = ("sequential", "independent")
 
 @dataclass
 class BenchConfig:
-    """What to run, checked when made.
-
-    ``profile``: a name or :class:`~qpbench.profiles.Profile`; ``repeat``: timed solves per
-    (problem, backend), the row has their min and median; ``mode``: :data:`MODES`;
-    ``time_limit``: per solve [s] (``None``: the profile's); ``isolate``: :data:`ISOLATE`
-    (:func:`~.isolation.wants_worker`); ``warmup``: discarded solves per backend first (the first
-    problem of each structure); ``settings``: solver settings of every backend,
-    ``backend_settings`` per backend name; ``seed``: of :func:`backend_order`;
-    ``memory_budget``: bytes a solve may need (``None``: :mod:`qpbench.memory`'s default).
-    """
+    """What to run, checked when made: ``profile``: a name or :class:`~qpbench.profiles.Profile`;
+    ``repeat``: timed solves per (problem, backend); ``mode``: :data:`MODES`; ``time_limit``: per
+    solve [s] (``None``: the profile's); ``isolate``: :data:`ISOLATE`; ``warmup``: discarded
+    solves first; ``settings``: of every backend, ``backend_settings`` per backend name;
+    ``seed``: of :func:`backend_order`; ``memory_budget``: bytes a solve may need."""
 
     backends: list[str]
     profile: str | Profile = "default"
@@ -80,7 +68,7 @@ class BenchConfig:
         seed = self.seed
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ParamError(f"seed must be an integer >= 0, got {seed!r}", key="seed")
-        parse_list(list(self.backends), "backends")  # none twice, not empty, as everywhere
+        parse_list(list(self.backends), "backends")
 
 
 def record_period(problem_set: ProblemSet) -> float | None:
@@ -95,7 +83,7 @@ def record_period(problem_set: ProblemSet) -> float | None:
 
 def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) -> dict:
     """Settings for backend ``name``: the run's, its own, and for an online backend (``rnn``)
-    ``dt`` = the time between two records (:func:`record_period`), which it integrates per call."""
+    ``dt`` = :func:`record_period`."""
     settings = {**config.settings, **config.backend_settings.get(name, {})}
     if backend_class(name).online and "dt" not in settings:
         period = record_period(problem_set)
@@ -105,11 +93,8 @@ def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) ->
 
 
 def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
-    """Indices of ``records`` grouped into sequences.
-
-    Sequential: one per scenario (first-appearance order), sorted by tick (stable); a record
-    without a scenario is a sequence of its own. Independent: one per record, in file order.
-    """
+    """Indices of ``records`` grouped into sequences: sequential, one per scenario sorted by tick
+    (a record without a scenario is one of its own); independent, one per record."""
     if mode == "independent":
         return [[i] for i in range(len(records))]
     groups: dict[object, list[int]] = {}
@@ -153,9 +138,7 @@ def _check_records(problem_set) -> list:
 
 class Plan:
     """A checked run: every check that can fail on user input, made before ``out`` is created
-    or changed. ``profile``: with the run's time limit; ``instances``: in-process backends;
-    ``skips``, ``notes``: :func:`skipped_solves`; ``resuming``: ``out`` is continued
-    (``existing``: its rows); ``learned``: backends seen to crash in this process (``marker``)."""
+    or changed; ``learned``: backends seen to crash in this process (``marker``)."""
 
     def __init__(
         self,
@@ -169,7 +152,7 @@ class Plan:
         from ..atomic import check_output
         from ..backends import get_backend
         from ..formats import content_sha256
-        from ..memory import resolve_budget
+        from ..memory import default_budget
 
         check_output(out, force=force, resume=resume, make_parent=make_parent)
         profile = get_profile(config.profile)
@@ -185,8 +168,7 @@ class Plan:
             name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
         }
         self.versions = {name: type(b).version() for name, b in self.instances.items()}
-        budget = config.memory_budget
-        self.budget = resolve_budget(None) if budget is None else budget
+        self.budget = default_budget() if config.memory_budget is None else config.memory_budget
         self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
         self.sha = content_sha256(problem_set)
         self.resuming = resume and out.exists() and not force
@@ -199,8 +181,7 @@ class Plan:
             self._learn_from_crash(config.isolate)
 
     def _learn_from_crash(self, isolate: str) -> None:
-        """A backend that died in this process while solving (in-flight marker of the
-        interrupted run) goes to a worker from now on (under ``--isolate auto``)."""
+        """A backend that died in this process while solving goes to a worker from now on."""
         self.learned, inflight, crash = self.marker.read()
         done_keys = {row_key(r) for r in self.existing.rows}
         if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
@@ -231,8 +212,8 @@ class Plan:
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
-    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made (nonconvex,
-    :func:`qpbench.memory.skip_reason`) and ``record index -> warning`` (slightly indefinite)."""
+    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made and
+    ``record index -> warning`` (slightly indefinite)."""
     from ..formats.convexity import assess_convexity
     from ..memory import skip_reason
 
@@ -256,7 +237,7 @@ def references_for(
 ) -> list:
     """One reference per record: ``references`` as given, or computed by it (a function of a
     problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
-    backend solves within the memory budget (the others' status is ``unknown``)."""
+    backend solves within the memory budget."""
     from ..memory import sparse_solver_bytes
     from ..reference import ReferenceSolution, reference_solutions
 
@@ -284,8 +265,7 @@ def references_for(
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
     """The order in which ``backends`` solve ``problem``: a permutation of the sorted names by
-    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``, so it depends on
-    the seed, the name and the set of backends only (a resumed run repeats it)."""
+    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``."""
     digest = hashlib.sha256(str(problem).encode("utf-8")).digest()
     words = [int.from_bytes(digest[i : i + 8], "little") for i in range(0, 32, 8)]
     names = sorted(backends)
@@ -306,23 +286,16 @@ def _structure(problem) -> tuple[bool, ...]:
 
 
 def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
-    """The first problem of the run, then the first of each other structure (:func:`_structure`):
-    a compiled kernel specialises on the parts present, and the warm-up pays for that."""
+    """The first problem of the run not ``skipped``, then the first of each other structure."""
     out, seen = [], set()
     for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
-        if i in skipped:  # a problem the backend does not solve is no warm-up either
+        if i in skipped:
             continue
         key = _structure(records[i].problem)
         if key not in seen:
             seen.add(key)
             out.append(records[i].problem)
     return out
-
-
-def _n_box(problem) -> int:
-    """Finite bounds of a problem."""
-    bounds = [b for b in (problem.lb, problem.ub) if b is not None]
-    return sum(int(np.isfinite(np.asarray(b, dtype=float)).sum()) for b in bounds)
 
 
 class _BenchRun:
@@ -457,6 +430,7 @@ class _BenchRun:
     def _row(self, i: int, backend: str, outcome: Outcome, position: int) -> dict:
         """The CSV row of ``backend``'s ``outcome`` on record ``i``, scored against its reference."""
         from ..formats import problem_sizes
+        from ..formats.records import box_bounds
         from ..metrics import evaluate, metric_columns
 
         record, profile = self.plan.records[i], self.plan.profile
@@ -497,7 +471,7 @@ class _BenchRun:
             "n": n,
             "m_eq": m_eq,
             "m_ineq": m_ineq,
-            "n_box": _n_box(record.problem),
+            "n_box": box_bounds(record.problem),
             "problem_set_sha256": self.plan.sha or "",
             "backend_version": self.plan.versions.get(backend),
         }
@@ -536,7 +510,7 @@ class _BenchRun:
 @dataclass
 class BackendStats:
     """One backend's rows (a line of the closing table): ``times_s``: ``wall_time_min_s`` [s];
-    ``failures``: :func:`is_failure` by status; ``isolated``: rows solved in a worker."""
+    ``failures``: failed solves by status; ``isolated``: rows solved in a worker."""
 
     rows: int = 0
     successes: int = 0
@@ -560,17 +534,18 @@ class BackendStats:
         v = _float(row.get("constraint_violation"))
         if v is not None and not math.isnan(v):
             self.violations.append(v)
-        status = str(row.get("status"))
-        if is_failure(status, row.get("reference_status") or None):
-            self.failures[status] = self.failures.get(status, 0) + 1
+        # a failed solve: a harness failure status, or not optimal where the reference is
+        status, reference = str(row.get("status")), row.get("reference_status")
+        if status in FAILURE_STATUSES or (reference == "optimal" and status != "optimal"):
+            if status != "skipped":
+                self.failures[status] = self.failures.get(status, 0) + 1
 
 
 @dataclass
 class BenchSummary:
-    """What a bench run did: each backend's :class:`BackendStats` over the rows of this run's
-    keys (resumed and new); ``elapsed_s`` [s] of this invocation; ``timed_s``: sum of the new
-    rows' ``wall_time_min_s`` [s]; ``overhead_median_s``: median over the new rows of
-    ``wall_time_min_s - solver_time_s`` [s]; ``isolated``: backends run in a worker."""
+    """What a bench run did: each backend's :class:`BackendStats` over this run's keys;
+    ``elapsed_s`` [s]; ``timed_s``: sum of the new rows' ``wall_time_min_s`` [s];
+    ``overhead_median_s``: median of ``wall_time_min_s - solver_time_s`` [s] over the new rows."""
 
     new_rows: int = 0
     backends: dict = field(default_factory=dict)
@@ -587,7 +562,7 @@ class BenchSummary:
 
     @property
     def failures(self) -> int:
-        """Rows counted as failed solves (:func:`is_failure`)."""
+        """Rows counted as failed solves."""
         return sum(s.n_failures for s in self.backends.values())
 
     def line(self) -> str:
@@ -629,8 +604,10 @@ class BenchSummary:
                     name + (" *" if st.isolated else ""),
                     str(st.rows),
                     f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
-                    f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
-                    f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
+                    *(
+                        f"{np.percentile(times, q) * 1e6:.1f}" if times.size else "-"
+                        for q in (50, 99)
+                    ),
                     f"{max(st.violations):.3g}" if st.violations else "-",
                     fails if not st.n_failures else f"{st.n_failures} ({fails})",
                 ]
@@ -646,22 +623,12 @@ class BenchSummary:
 
 
 def _truth(value) -> bool:
-    """A boolean cell: ``True`` / ``"True"`` (a resumed row) is true."""
     if isinstance(value, str):
         return value.strip().lower() in ("true", "1")
     return bool(value)
 
 
-def is_failure(status: str, reference_status: str | None) -> bool:
-    """A failed solve: a harness failure status, or not ``optimal`` where the reference is;
-    a ``skipped`` row (a solve not made, the reason in ``error``) is none."""
-    if status == "skipped":
-        return False
-    return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
-
-
 def _float(value) -> float | None:
-    """A number cell (a new row's value or a resumed row's string) as a float, else ``None``."""
     try:
         return float(value)
     except (TypeError, ValueError):
@@ -701,13 +668,10 @@ def run_bench(
     progress: bool | str = False,
     make_parent: bool = True,
 ) -> BenchSummary:
-    """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``.
-
-    ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
-    per record, or a function of the set returning them (:func:`references_for`).
-    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`). ``make_parent``: create
-    ``out``'s folder (the command line refuses a missing one instead).
-    """
+    """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``. ``force``: start ``out``
+    again; ``resume``: run only the keys it lacks; ``references``: :func:`references_for`;
+    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`); ``make_parent``: create ``out``'s
+    folder."""
     started = time.perf_counter()
     out = Path(out)
     plan = Plan(problem_set, config, out, force, resume, make_parent)

@@ -1,14 +1,6 @@
-"""Closed-loop runs: one (scenario, backend) run made into a row, and the table of many.
-
-:func:`run_row` is the one closed-loop run of every command (``closed-loop``, ``run``, ``sweep``):
-a discarded warm-up of :data:`WARMUP_TICKS` ticks, the timed run
-(:func:`qpbench.sim.loop.simulate`) and its row; its :class:`LoopTask` is plain picklable data.
-:func:`run_closed_loop` makes every pair into ``OUT/closed_loop.csv`` (rewritten atomically after
-each run) and ``OUT/logs/<scenario>__<backend>.parquet``, an isolated run in a worker process of
-its own with a deadline (:func:`run_deadline`). A row is the run's summary
-(:mod:`qpbench.sim.summary`) under :data:`TABLE_NAMES`, lists and dicts as JSON text:
-:data:`COLUMNS` first, then ``isolated``, ``run_budget_s`` [s] and the other figures sorted by
-name; its statuses: docs/architecture.md, "Closed-loop runs".
+"""Closed-loop runs: :func:`run_row`, the one (scenario, backend) run of every command, made into
+a row (the run's summary under :data:`TABLE_NAMES`), and :func:`run_closed_loop`, the table of
+many (``OUT/closed_loop.csv``, ``OUT/logs/``); statuses: docs/architecture.md, "Closed-loop runs".
 """
 
 from __future__ import annotations
@@ -91,14 +83,11 @@ TABLE_NAMES = {"duration": "duration_s"}
 
 @dataclass(frozen=True)
 class LoopTask:
-    """One closed-loop run, as plain picklable data.
-
-    ``scenario``: a name or TOML path (with ``scenario_text``, the path naming that text).
-    ``duration``, ``deadline`` (per tick), ``run_budget`` (wall time of the timed run): [s] or
-    ``None``. ``overrides``: ``(dotted key, value)`` pairs (``--set``). ``out``: the folder whose
-    ``logs/`` and ``figure_logs/`` get the run's logs (``None``: none written). ``plugins``: files
-    to load first. ``bands``: ``(force [N], tracking [m])``: add the time-to-converge figures.
-    """
+    """One closed-loop run, as plain picklable data: ``scenario``: a name or TOML path (with
+    ``scenario_text``, the path naming that text); ``duration``, ``deadline`` (per tick),
+    ``run_budget`` (wall time of the timed run): [s] or ``None``; ``overrides``: ``--set`` pairs;
+    ``out``: the folder of the run's logs (``None``: none written); ``plugins``: files to load
+    first; ``bands``: ``(force [N], tracking [m])`` of the time-to-converge figures."""
 
     scenario: str
     backend: str
@@ -114,7 +103,8 @@ class LoopTask:
 
 
 def run_row(task: LoopTask) -> dict:
-    """The row of one run (module docstring); a run that raises is an ``error`` row."""
+    """The row of one run: a warm-up of :data:`WARMUP_TICKS` ticks, the timed run, its figures;
+    a run that raises is an ``error`` row."""
     try:
         from ..backends import load_plugins
 
@@ -125,7 +115,6 @@ def run_row(task: LoopTask) -> dict:
 
 
 def _run(task: LoopTask) -> dict:
-    """Warm-up, timed run, row; its logs written when ``task.out`` is set."""
     from ..jit import warmup
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario, parse_scenario
@@ -135,7 +124,7 @@ def _run(task: LoopTask) -> dict:
         scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
     else:
         scenario = parse_scenario(task.scenario_text, path=task.scenario)
-    warmup([task.backend])  # loads what the parent compiled (qpbench.jit), before the clock
+    warmup([task.backend])
     terms = dict(formulation=task.formulation, deadline=task.deadline)
     simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
     result = simulate(
@@ -181,7 +170,7 @@ def log_name(scenario: str, backend: str) -> str:
 
 def failure_fields(status: str, message: str) -> dict:
     """Fields of a row without a result: ``status``, why (``error``) and its verdict (none for
-    ``skipped`` or ``invalid_scenario``; else ``incomplete``, nothing timed, nothing overridden)."""
+    ``skipped`` or ``invalid_scenario``)."""
     message = " ".join(str(message).split())
     if status in ("skipped", "invalid_scenario"):
         return dict(status=status, error=message, verdict="", verdict_reasons="")
@@ -200,8 +189,7 @@ def failure_fields(status: str, message: str) -> dict:
 
 
 def failure_row(task: LoopTask, status: str, message: str, warn: bool = False) -> dict:
-    """The table row of a run without a result (:func:`failure_fields`), no figures; ``warn``:
-    the message logged as a warning."""
+    """The table row of a run without a result (:func:`failure_fields`); ``warn``: log it."""
     if warn:
         log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
     row = {c: math.nan for c in COLUMNS}
@@ -235,9 +223,8 @@ def run_deadline(
 
 @dataclass
 class ClosedLoopOutcome:
-    """What :func:`run_closed_loop` did: the table, its failed runs (``errors``), the runs made now
-    (``ran``) and kept (``skipped``), and the rows whose verdict is in ``BAD_VERDICTS`` or whose
-    run failed (``not_ok``)."""
+    """What :func:`run_closed_loop` did: the table, its failed runs, the runs made now and kept,
+    and the rows whose verdict is bad or whose run failed (``not_ok``)."""
 
     table: pd.DataFrame
     csv_path: Path
@@ -266,14 +253,13 @@ def run_closed_loop(
     budgets: dict[str, float] | None = None,
     overrides: dict | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop into ``out`` (module docstring).
+    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker.
 
     ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
-    ``resume`` keeps the ``ok`` rows made under the same terms (formulation, duration, budget,
-    ``overrides``) and the rows of pairs not asked; ``force`` removes table and logs; ``skip``:
-    backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's deadline [s];
-    ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's in ``budgets``);
-    ``on_row`` is called with each row once written. Arguments are checked before anything runs.
+    ``resume`` keeps the ``ok`` rows made under the same terms and the rows of pairs not asked;
+    ``skip``: backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's
+    deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's
+    in ``budgets``); ``on_row`` is called with each row once written.
     """
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget

@@ -1,11 +1,6 @@
-"""Guarded solves in this process: every way a solve can go wrong becomes a status.
-
-:class:`LocalRunner` turns an exception escaping the backend into ``error``, a non-finite or
-missing ``x`` into ``invalid`` and a solve that returned after its time limit into
-``time_limit`` (:func:`qpbench.statuses.classify`). A solve is never interrupted here (an
-asynchronous exception can land in foreign code); one that must be stopped needs a worker
-process (:mod:`qpbench.harness.isolation`), which runs this same class.
-"""
+"""Guarded solves in this process: every way a solve can go wrong becomes a status
+(:func:`qpbench.statuses.classify`); a solve is never interrupted here (a worker process,
+:mod:`qpbench.harness.isolation`, runs this same class)."""
 
 from __future__ import annotations
 
@@ -27,7 +22,7 @@ class Outcome:
     """What one guarded (possibly repeated) solve produced: its status, replica 0's solution,
     ``wall_times_s`` of each timed repeat [s]; ``repeat_exact``: every repeat gave the kept
     answer bit for bit (else why in ``repeat_note``); ``state_reset``: the solve did not start
-    from the state the previous one left; ``isolated``: it ran in a worker process."""
+    from the previous one's state; ``isolated``: it ran in a worker process."""
 
     status: str
     solution: object | None = None
@@ -42,7 +37,7 @@ class Outcome:
 class LocalRunner:
     """One backend's guarded, timed solves in this process: ``backend`` is replica 0;
     ``time_limit`` [s] is checked when a solve returns; ``sequential``: state carried between
-    solves (else reset before each); ``repeat``: timed solves per problem (replicas made now)."""
+    solves; ``repeat``: timed solves per problem."""
 
     isolated = False
 
@@ -74,7 +69,6 @@ class LocalRunner:
         return Outcome(status, solution, [wall], error)
 
     def reset(self) -> None:
-        """Forget every replica's state (a new sequence starts)."""
         self.replicas.reset()
 
     def warmup(self, problem: qpsolvers.Problem) -> str:
@@ -86,8 +80,7 @@ class LocalRunner:
         return status
 
     def replay(self, problem: qpsolvers.Problem) -> str:
-        """An unrecorded solve that only moves the state forward (resume); the other replicas
-        follow at their next solve (:meth:`Replicas.ready`)."""
+        """An unrecorded solve that only moves the state forward (resume)."""
         outcome = self._guarded(problem)
         self.replicas.solved(0, problem)
         return outcome.status
@@ -96,7 +89,7 @@ class LocalRunner:
         self, problem: qpsolvers.Problem, repeat: int | None = None, reset_before: bool = False
     ) -> Outcome:
         """Solve ``problem`` once per replica (``repeat``, default the runner's), each from the
-        same state, each timed; ``reset_before``: reset first (after a failure)."""
+        same state; ``reset_before``: reset first (after a failure)."""
         if reset_before or not self.sequential:
             self.reset()
         count = self.repeat if repeat is None else max(1, int(repeat))

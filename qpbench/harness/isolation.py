@@ -1,12 +1,6 @@
-"""Solves in a worker process, for backends that may hang in native code or crash.
-
-:class:`IsolatedRunner` has the interface of :class:`~qpbench.harness.guard.LocalRunner` and
-runs one in a :class:`~qpbench.runner.process.Worker`, which times the solves itself (pickling
-and the pipe stay outside the wall times). A request past its deadline
-(:func:`~qpbench.runner.process.deadline`) kills the worker (``time_limit``); a worker that dies
-makes the solve ``crashed``. Either way a new worker starts at the next request, without the
-backend's state (the next row says ``state_reset``).
-"""
+"""Solves in a worker process, for backends that may hang in native code or crash: a
+:class:`~qpbench.harness.guard.LocalRunner` in a :class:`~qpbench.runner.process.Worker`, which
+is replaced, without the backend's state, after a death or a missed deadline."""
 
 from __future__ import annotations
 
@@ -24,7 +18,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.harness")
 
-#: Choices of ``isolate`` (:func:`wants_worker`).
 ISOLATE = ("auto", "always", "never")
 #: Time allowed for the discarded warm-up solve [s] (at least twice the time limit).
 WARMUP_TIMEOUT_S = 30.0
@@ -42,7 +35,7 @@ _FIELDS = (
 )
 _PLAIN = (int, float, str, bool, type(None), np.ndarray, np.generic)
 
-#: In a worker process: the guarded backend the requests go to (:func:`_build`).
+#: In a worker process: the guarded backend the requests go to.
 _RUNNER: LocalRunner | None = None
 
 
@@ -61,7 +54,7 @@ def wants_worker(isolate: str, backend: str, learned=()) -> bool:
 
 
 def _strip(outcome: Outcome) -> Outcome:
-    """Make an outcome picklable: a plain :class:`BackendSolution` without the problem."""
+    """The outcome with a plain, picklable :class:`BackendSolution` without the problem."""
     sol = outcome.solution
     if sol is not None:
         from ..backends.base import BackendSolution
@@ -77,7 +70,7 @@ def _strip(outcome: Outcome) -> Outcome:
 
 
 def _build(spec: dict) -> None:
-    """In the worker: load the kernels and plugins, build the backend and its :class:`LocalRunner`."""
+    """In the worker: load kernels and plugins, build the backend and its :class:`LocalRunner`."""
     global _RUNNER
     from ..backends import get_backend, load_plugins
     from ..jit import warmup
@@ -97,11 +90,9 @@ def _request(request: tuple):
 
 
 class IsolatedRunner:
-    """A backend in a worker process, which first loads this process's plugin files.
-
-    ``profile``, ``settings``: as for :func:`qpbench.backends.get_backend`; ``time_limit`` [s],
-    ``sequential``, ``repeat``: as for :class:`LocalRunner`.
-    """
+    """A backend in a worker process: ``profile``, ``settings``: as for
+    :func:`qpbench.backends.get_backend`; ``time_limit`` [s], ``sequential``, ``repeat``: as for
+    :class:`LocalRunner`."""
 
     isolated = True
 

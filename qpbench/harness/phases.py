@@ -1,5 +1,4 @@
-"""A long job told phase by phase: one line when a phase starts and ends (with its wall time),
-and on a terminal a progress bar with its ETA; the wall times go into the job's ``run.json``."""
+"""A long job told phase by phase: a line when a phase starts and ends, a bar on a terminal."""
 
 from __future__ import annotations
 
@@ -12,7 +11,7 @@ from dataclasses import dataclass, field
 
 @dataclass
 class Phase:
-    """One phase in progress: :meth:`update` counts work done (draws the bar on a terminal)."""
+    """One phase in progress: :meth:`update` counts work done."""
 
     name: str
     bar: object | None = None
@@ -42,8 +41,8 @@ class Phases:
 
     @contextmanager
     def phase(self, name: str, total: int | None = None, unit: str = "step", bar: bool = True):
-        """Run a phase: log its start, yield a :class:`Phase`, log its end and keep its time;
-        ``total``: the work units it counts (the bar's length); ``bar=False``: its code draws one."""
+        """Run a phase, yielding a :class:`Phase`; ``total``: the work units it counts (the bar's
+        length); ``bar=False``: its code draws one."""
         self.log.info("%s: started", name)
         progress = None
         if self.bars and bar:

@@ -1,13 +1,5 @@
-"""The main job (``qpbench run``): problem sets, bench, closed loop and report into one folder.
-
-:func:`run_all` with a :class:`RunConfig`, each step a phase (:class:`~.phases.Phases`): compile
-the chosen backends' kernels; regenerate a missing problem set of the paper's four scenarios;
-solve the references; bench every ``bench_every``-th problem of each set (``OUT/bench/``); run
-every scenario with every backend in the closed loop (``OUT/closed_loop.csv``), each within a
-wall-time budget decided from its bench time (:func:`closed_loop_budgets`); write the report.
-The run works in ``OUT/.partial/`` and then replaces the previous run's :data:`OUTPUTS`, each by
-a rename (docs/architecture.md, "The run pipeline").
-"""
+"""The main job (``qpbench run``, :func:`run_all`): problem sets, bench, closed loop and report
+into one folder (docs/architecture.md, "The run pipeline")."""
 
 from __future__ import annotations
 
@@ -62,9 +54,9 @@ def default_jobs() -> int:
 @dataclass
 class RunConfig:
     """What ``qpbench run`` does: ``problems``: folder of the sets ``<problems>/<scenario>/``;
-    ``duration``: closed-loop time per run [s] (``None``: the scenario's; the bench then takes the
-    problems with ``t < duration``); ``run_budget``: most wall time of a closed-loop run [s];
-    ``memory_budget``: bytes a bench solve may need; ``on_row``: called with each closed-loop row."""
+    ``duration``: closed-loop time per run [s] (``None``: the scenario's); ``run_budget``: most
+    wall time of a closed-loop run [s]; ``memory_budget``: bytes a bench solve may need;
+    ``on_row``: called with each closed-loop row."""
 
     out: Path
     problems: Path
@@ -86,18 +78,15 @@ class RunConfig:
             self.duration = positive_seconds(self.duration, "--duration")
         if self.run_budget is not None:
             self.run_budget = positive_seconds(self.run_budget, "--run-budget")
-        for key, value in (
-            ("--bench-every", self.bench_every),
-            ("--repeat", self.repeat),
-            ("--jobs", self.jobs),
-        ):
-            positive_count(value, key)
+        positive_count(self.bench_every, "--bench-every")
+        positive_count(self.repeat, "--repeat")
+        positive_count(self.jobs, "--jobs")
 
 
 @dataclass
 class RunOutcome:
     """What :func:`run_all` did: failed solves, failed runs and runs that failed their verdict,
-    the report, the time it took [s], and the bench's failed solves alone (``failed_solves``)."""
+    the report, the time it took [s], and the bench's failed solves alone."""
 
     failures: int
     report: Path
@@ -106,8 +95,7 @@ class RunOutcome:
 
 
 def _check_out(out: Path, force: bool) -> None:
-    """Refuse to replace :data:`OUTPUTS` that a previous ``qpbench run`` did not write
-    (no ``out/run.json``) unless ``force``."""
+    """Refuse to replace :data:`OUTPUTS` that ``qpbench run`` did not write, unless ``force``."""
     from ..atomic import check_folder
     from ..exceptions import OutputExistsError
 
@@ -123,7 +111,6 @@ def _check_out(out: Path, force: bool) -> None:
 
 
 def _dump_backend() -> str:
-    """The first available of :data:`DUMP_BACKENDS`."""
     from ..backends import backend_names
     from ..exceptions import BackendNotFound
 
@@ -138,8 +125,7 @@ def _dump_backend() -> str:
 def bench_subset(
     problem_set: ProblemSet, duration: float | None, every: int = 1
 ) -> tuple[ProblemSet, list]:
-    """Every ``every``-th problem with ``t < duration``, and their references (the set's
-    generator stride multiplied, so an online backend integrates the time between two)."""
+    """Every ``every``-th problem with ``t < duration``, and their references."""
     from ..reference import reference_solutions
     from ..selection import select_set
 
@@ -150,8 +136,7 @@ def bench_subset(
 
 
 def _compress_bench(bench_dir: Path) -> None:
-    """Gzip the bench CSVs of a completed run (``qpbench report`` reads them as they are); an
-    interrupted one keeps them plain and appendable for ``--resume``."""
+    """Gzip the bench CSVs of a completed run (an interrupted one keeps them appendable)."""
     import gzip
 
     for csv_path in sorted(bench_dir.glob("*.csv")):
@@ -163,8 +148,8 @@ def _compress_bench(bench_dir: Path) -> None:
 
 
 def run_all(config: RunConfig) -> RunOutcome:
-    """Problem sets, bench, closed loop and report (module docstring); outputs replaced at the
-    end; ``run.json`` keeps the phases' wall times (``phase_wall_time_s``) and the run's."""
+    """Problem sets, bench, closed loop and report, each a phase, in ``OUT/.partial/``; then the
+    previous run's :data:`OUTPUTS` are replaced, each by a rename."""
     from ..formats import load_problems
     from ..jit import warmup_logged
     from ..sim.loop import simulate
@@ -220,8 +205,8 @@ def run_all(config: RunConfig) -> RunOutcome:
 def _bench(
     config: RunConfig, subsets: dict, bench_dir: Path, phases
 ) -> tuple[int, dict[str, float]]:
-    """Bench every backend on each scenario's problems (one phase per set): the failed solves,
-    and each benched backend's median over all sets of ``wall_time_min_s`` [s]."""
+    """Bench every backend on each scenario's problems: the failed solves, and each backend's
+    median over all sets of ``wall_time_min_s`` [s]."""
     import statistics
 
     from .bench import BenchConfig, run_bench
@@ -252,14 +237,10 @@ def _bench(
 
 
 def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict[str, float]:
-    """Each backend's closed-loop wall-time budget [s], from its per-tick time in this run's bench.
-
-    A bench median ``t`` predicts a run of ``ticks * t`` (the longest chosen scenario's ticks):
-    the budget is :data:`BUDGET_MARGIN` times that, within :data:`BUDGET_FLOOR_S` and
-    ``run_budget``, so that a backend that keeps up finishes. One whose prediction exceeds
-    ``run_budget`` cannot finish and gets :data:`CUT_BUDGET_S`; one without a bench time the
-    ``run_budget``; ``run_budget`` ``None``: ``{}``.
-    """
+    """Each backend's closed-loop wall-time budget [s]: a bench median ``t`` predicts a run of
+    ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
+    :data:`BUDGET_FLOOR_S` and ``run_budget``; :data:`CUT_BUDGET_S` where the prediction exceeds
+    ``run_budget``; ``run_budget`` without a bench time."""
     if config.run_budget is None:
         return {}
     from ..sim.scenario import load_scenario
@@ -320,7 +301,7 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
 
 
 def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dict) -> dict:
-    """``run.json``: what was asked, each backend's closed-loop budget, which runs were cut or not ok."""
+    """``run.json``: what was asked, the budgets, which runs were cut or not ok."""
     stopped = table[table["status"] == "budget"]
     return {
         "command": "qpbench run",
@@ -329,7 +310,6 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dic
         "backends": config.backends,
         "duration_s": config.duration,
         "run_budget_s": config.run_budget,
-        # each backend's budget, decided from its per-tick time in this run's bench
         "closed_loop_budget_s": budgets,
         "bench_every": config.bench_every,
         "closed_loop_stopped_by_budget": {

@@ -1,7 +1,5 @@
 """Imported by the worker processes' forkserver only: loads the kernels the parent prepared
-(:data:`qpbench.runner.process.PRELOAD_KERNELS_ENV`) once for every worker forked from it; a
-failure only costs speed (a worker then loads them itself), so it does not stop the forkserver.
-"""
+(:data:`qpbench.runner.process.PRELOAD_KERNELS_ENV`); a failure only costs speed."""
 
 from __future__ import annotations
 

@@ -1,10 +1,5 @@
-"""The results table: typed rows appended and ``fsync``-ed as they are produced, resumable.
-
-One row per key (a bench's ``(problem, backend, profile)``; other studies pass their own
-columns), one physical line each; each batch is one ``write`` on an ``O_APPEND`` descriptor,
-``fsync``-ed before the next, so a kill leaves at most one half-written last line, which
-:func:`read_results` drops (and, with ``repair``, truncates) before a run resumes.
-"""
+"""The results table: rows appended and ``fsync``-ed as they are produced, one line each, so a
+kill leaves at most one half-written last line, which :func:`read_results` drops."""
 
 from __future__ import annotations
 
@@ -59,7 +54,7 @@ TAIL_COLUMNS = (
 
 
 def columns() -> tuple[str, ...]:
-    """Columns of a bench CSV: lead, the per-tick metrics (:func:`~qpbench.metrics.metric_columns`), tail."""
+    """Columns of a bench CSV: lead, the per-tick metrics, tail."""
     return LEAD_COLUMNS + metric_columns() + TAIL_COLUMNS
 
 
@@ -74,7 +69,7 @@ TIMING_COLUMNS = ("wall_time_min_s", "wall_time_median_s", "solver_time_s", "iso
 
 
 def row_key(row: dict) -> tuple[str, str, str]:
-    """``(problem, backend, profile)`` of a row (values as strings)."""
+    """The key of a row (values as strings)."""
     return tuple(str(row[c]) for c in KEY_COLUMNS)
 
 
@@ -91,7 +86,7 @@ def cell(value) -> str:
 
 
 def format_rows(rows: list[dict], columns: tuple[str, ...] | None = None) -> bytes:
-    """CSV bytes of ``rows`` (no header), one line each, in ``columns`` order (default: the bench's)."""
+    """CSV bytes of ``rows`` (no header) in ``columns`` order (default: the bench's)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     names = bench_columns() if columns is None else columns
@@ -107,7 +102,7 @@ def header_bytes(columns: tuple[str, ...] | None = None) -> bytes:
 
 @dataclass
 class ExistingResults:
-    """What a resumed run finds: complete rows (dicts of strings, file order), partial lines dropped."""
+    """What a resumed run finds: complete rows (dicts of strings), partial lines dropped."""
 
     rows: list[dict]
     dropped: int = 0
@@ -119,12 +114,9 @@ def read_results(
     columns: tuple[str, ...] | None = None,
     kind: str = "bench",
 ) -> ExistingResults:
-    """Read a table written by :class:`ResultsWriter` (default: a bench CSV).
-
-    A last line without its newline or a trailing line with the wrong number of fields is
-    dropped with a warning; ``repair=True`` also truncates the file to its last complete line.
-    :class:`InputError` if the header is not ``columns`` or a malformed line is followed by good ones.
-    """
+    """Read a table written by :class:`ResultsWriter` (default: a bench CSV): a last line without
+    its newline or trailing lines with the wrong number of fields are dropped (``repair``: cut
+    from the file too); :class:`InputError` for another header or a malformed line inside."""
     path = Path(path)
     names = bench_columns() if columns is None else tuple(columns)
     data = path.read_bytes()
@@ -211,10 +203,9 @@ class ResultsWriter:
 
 
 class InflightMarker:
-    """A side file naming the solve in progress, and what killed the run (docs/architecture.md,
-    "The bench"): line 1, the comma-separated backends to isolate; line 2, the key
-    ``problem<TAB>backend<TAB>profile``; then the :mod:`faulthandler` traceback, if any. ``out``:
-    the output whose marker it is (``.<out>.inflight`` beside it)."""
+    """A side file ``.<out>.inflight`` naming the solve in progress and what killed the run: line
+    1, the backends to isolate; line 2, the key, tab-separated; then the :mod:`faulthandler`
+    traceback, if any."""
 
     def __init__(self, out: str | Path):
         self.path = Path(out).with_name(f".{Path(out).name}.inflight")
@@ -224,7 +215,7 @@ class InflightMarker:
         self._faulthandler_was = None
 
     def read(self) -> tuple[list[str], tuple[str, ...] | None, str]:
-        """``(backends to isolate, last in-flight key or None, fatal-error text)`` of a previous run."""
+        """``(backends to isolate, last in-flight key or None, fatal-error text)``."""
         if not self.path.exists():
             return [], None, ""
         lines = self.path.read_text(errors="replace").split("\n")

@@ -1,12 +1,6 @@
-"""The one clock around a solve, and how ``--repeat`` times a solve again from the same state.
-
-The timed region (:func:`timed_call`) is the backend call and the reading of its answer
-(:data:`ANSWER_FIELDS`, so that a backend deferring its duals pays for them), gc off.
-``--repeat R`` keeps R instances of a backend (:class:`Replicas`) fed the same problems and
-resets, since its state mostly lives in native objects that cannot be restored: replica 0's
-answer is the row's, replicas 1..R-1 time the same work from the same state
-(``repeat_exact``, ``repeat_note``).
-"""
+"""The one clock around a solve (:func:`timed_call`), and how ``--repeat R`` times a solve again
+from the same state: R instances of a backend fed the same problems (:class:`Replicas`), since
+its state mostly lives in native objects that cannot be restored."""
 
 from __future__ import annotations
 
@@ -27,7 +21,7 @@ ANSWER_FIELDS = ("x", "y", "z", "z_box")
 
 def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSolution, int]:
     """``(solution, wall time [ns])`` of ``backend.solve(problem)`` and the reading of its
-    :data:`ANSWER_FIELDS`, gc off."""
+    :data:`ANSWER_FIELDS` (a backend deferring its duals pays for them), gc off."""
     enabled = gc.isenabled()
     gc.disable()
     try:
@@ -53,7 +47,6 @@ class Replicas:
         self._solved = [0]  # how many problems of ``history`` each member has solved
 
     def reset(self) -> None:
-        """Reset every replica (a failing ``reset`` shows up at the next solve)."""
         for backend in self.members:
             try:
                 backend.reset()
@@ -69,14 +62,13 @@ class Replicas:
         self._solved[r] += 1
 
     def drop(self, r: int) -> None:
-        """Forget replica ``r`` and later ones (state suspect); new ones are made when needed."""
+        """Forget replica ``r`` and later ones (state suspect)."""
         del self.members[r:]
         del self._solved[r:]
 
     def ready(self, r: int) -> Backend:
         """Replica ``r >= 1`` in the state replica 0 had before its last solve: made if missing,
-        then brought forward by solving, untimed, the history it has not solved (all but the last);
-        raises what making it or a catch-up solve raised (it is dropped)."""
+        then brought forward by solving the history it has not solved (all but the last)."""
         self.make(r + 1)
         backend = self.members[r]
         try:
@@ -89,7 +81,6 @@ class Replicas:
         return backend
 
     def make(self, count: int) -> None:
-        """Make replicas up to ``count`` (new ones start from the reset state)."""
         while len(self.members) < count:
             self.members.append(self.members[0].fresh())
             self._solved.append(0)

@@ -1,10 +1,7 @@
-"""Where work runs: this process, local worker processes, or a Dask cluster.
+"""Where work runs: this process, local worker processes (:mod:`.process`), or a Dask cluster.
 
-:mod:`.process` is the one module that starts worker processes. The sweep's executors run
-independent tasks ``fn(arg)`` (``fn`` module-level, ``arg`` plain picklable data) and yield a
-:class:`Done` per task as it finishes, the same values wherever they ran. A task whose worker
-dies is retried once (:data:`MAX_ATTEMPTS`), then lost. A remote Dask cluster should be reached
-over ``tls://`` (:func:`load_security`): its workers run whatever code their scheduler sends.
+The sweep's executors run tasks ``fn(arg)`` (``fn`` module-level, ``arg`` picklable) and yield a
+:class:`Done` per task as it finishes; a task whose worker dies is retried once, then lost.
 """
 
 from __future__ import annotations
@@ -47,8 +44,7 @@ class SerialExecutor:
 
 
 class ProcessExecutor:
-    """``jobs`` long-lived local worker processes (:func:`~.process.run_tasks`); with one job
-    the tasks run one after the other, undisturbed by each other, and a crash loses only its task."""
+    """``jobs`` long-lived local worker processes (:func:`~.process.run_tasks`)."""
 
     name = "processes"
 
@@ -62,18 +58,14 @@ class ProcessExecutor:
             yield done
 
     def close(self) -> None:
-        """Nothing to release: :meth:`run` stops its workers when it ends."""
+        pass
 
 
 def make_executor(
     name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None
 ) -> SerialExecutor | ProcessExecutor | DaskExecutor:
-    """The executor of ``--executor local|dask --jobs N [--scheduler ADDRESS --security FILE]``.
-
-    Raises:
-        ParamError: an unknown executor, ``jobs`` below 1, a scheduler or security file
-            without ``dask``, a ``tls://`` address without a security file or the reverse.
-    """
+    """The executor of ``--executor local|dask --jobs N [--scheduler ADDRESS --security FILE]``;
+    :class:`ParamError` for options that do not go together."""
     if name not in EXECUTORS:
         raise ParamError(
             f"unknown executor '{name}' (choose from {', '.join(EXECUTORS)})", key="--executor"

@@ -1,9 +1,6 @@
-"""Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1.
-
-Tasks are submitted at once and collected as they complete; a task whose worker was lost
-(``KilledWorker``) is submitted once more, then reported lost (the local scheduler allows no
-failure of its own). A task runs in a thread beside the worker's event loop, sharing its GIL,
-so the workers are quieted (:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster).
+"""Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1. A task
+runs in a thread beside the worker's event loop, sharing its GIL, so the workers are quieted
+(:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster).
 """
 
 from __future__ import annotations
@@ -35,14 +32,8 @@ QUIET_SLOW = {"tick": 1.0}
 
 def load_security(path: str | Path) -> Security:
     """A ``distributed.security.Security`` (encryption required) from a TOML or YAML file
-    naming PEM files relative to its folder::
-
-        ca_file = "ca.pem"       # the certificate authority that signed every certificate
-        cert_file = "node.pem"   # this machine's certificate (client, local scheduler, workers)
-        key_file = "node-key.pem"
-
-    :class:`InputError` for an unreadable file, an unknown or missing key, a missing PEM file.
-    """
+    naming PEM files relative to its folder: ``ca_file`` (the certificate authority),
+    ``cert_file`` (this machine's certificate), ``key_file``."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -63,17 +54,17 @@ def load_security(path: str | Path) -> Security:
             raise InputError(
                 "unknown key (expected ca_file, cert_file, key_file)", path=path, key=key
             )
-    files = {}
+    files = []
     for key in ("ca_file", "cert_file", "key_file"):
         if not isinstance(raw.get(key), str):
             raise InputError("missing key (the path of a PEM file)", path=path, key=key)
         file = (path.parent / raw[key]).resolve()
         if not file.is_file():
             raise InputError(f"no such file: {file}", path=path, key=key)
-        files[key] = str(file)
+        files.append(str(file))
     from distributed.security import Security
 
-    ca, cert, key = files["ca_file"], files["cert_file"], files["key_file"]
+    ca, cert, key = files
     return Security(
         tls_ca_file=ca,
         tls_client_cert=cert,
@@ -88,8 +79,8 @@ def load_security(path: str | Path) -> Security:
 
 class DaskExecutor:
     """Tasks on the cluster at ``scheduler``, or (``None``) on a ``LocalCluster`` of ``jobs``
-    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS. On an
-    existing cluster :class:`~.dask_worker.QuietWorker` is registered until :meth:`close`."""
+    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS. A task
+    whose worker was lost is submitted once more, then reported lost."""
 
     name = "dask"
 
@@ -124,21 +115,18 @@ class DaskExecutor:
                     f"cannot reach the Dask scheduler: {type(exc).__name__}: {exc}",
                     key="--scheduler",
                 ) from None
-            self._quiet_workers()
+            from .dask_worker import PLUGIN_NAME, QuietWorker
+
+            try:
+                self.client.register_plugin(QuietWorker(QUIET_STOP, QUIET_SLOW), name=PLUGIN_NAME)
+                self._plugin = True
+            except Exception as exc:  # noqa: BLE001 - a cluster refusing plugins still runs tasks
+                log.warning(
+                    "could not quiet the Dask workers' profiler (%s: %s): tasks run slower",
+                    type(exc).__name__,
+                    exc,
+                )
         self.address = self.client.scheduler.address
-
-    def _quiet_workers(self) -> None:
-        from .dask_worker import PLUGIN_NAME, QuietWorker
-
-        try:
-            self.client.register_plugin(QuietWorker(QUIET_STOP, QUIET_SLOW), name=PLUGIN_NAME)
-            self._plugin = True
-        except Exception as exc:  # noqa: BLE001 - a cluster that refuses plugins still runs the tasks
-            log.warning(
-                "could not quiet the Dask workers' profiler (%s: %s): tasks run slower",
-                type(exc).__name__,
-                exc,
-            )
 
     @property
     def concurrency(self) -> int:

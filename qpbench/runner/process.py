@@ -1,12 +1,8 @@
 """Worker processes: the one place that starts, feeds, times out and reaps them.
 
 A worker answers ``fn(arg)`` requests (``fn`` module-level, ``arg`` picklable) one at a time over
-a pipe: :class:`Worker` is one worker whose module globals keep state between requests;
-:func:`run_tasks` is the pool, with retries. A request ends ``ok``, ``error`` (it raised; the
-worker lives on), ``time_limit`` (past its deadline: SIGKILL, which needs no cooperation from a
-solver hung in native code) or ``crashed`` (:func:`death_message`). Workers are forked from a
-forkserver preloaded with qpbench and the kernels this process prepared
-(:mod:`qpbench.harness.preload`), so a worker never compiles.
+a pipe (:class:`Worker`; :func:`run_tasks` is the pool); a request ends ``ok``, ``error`` (it
+raised), ``time_limit`` (past its deadline: SIGKILL) or ``crashed`` (:func:`death_message`).
 """
 
 from __future__ import annotations
@@ -55,7 +51,6 @@ PRELOAD = (
 PRELOAD_KERNELS_ENV = "QPBENCH_PRELOAD_KERNELS"
 
 _CTX = None
-#: What :func:`preload_kernels` named last.
 _KERNELS: tuple[str, ...] = ()
 
 
@@ -66,8 +61,8 @@ def preload_kernels(names) -> None:
 
 
 def context(fresh: bool = False) -> BaseContext:
-    """The start method's context, its forkserver started and preloaded now (:func:`preload_kernels`);
-    ``fresh``: ``spawn``, never a fork of a process that may hold threads and locks."""
+    """The start method's context, its forkserver started and preloaded now; ``fresh``: ``spawn``,
+    never a fork of a process that may hold threads and locks."""
     global _CTX
     if fresh:
         return multiprocessing.get_context("spawn")
@@ -79,7 +74,7 @@ def context(fresh: bool = False) -> BaseContext:
         if method == "forkserver":
             os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
             ctx.set_forkserver_preload(list(PRELOAD))
-            # wait for the preload now (a no-op child): no deadline covers it
+            # wait for the preload now (a child doing nothing): no deadline covers it
             proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
             proc.start()
             proc.join(START_TIMEOUT_S)
@@ -88,7 +83,7 @@ def context(fresh: bool = False) -> BaseContext:
 
 
 def _noop() -> None:
-    """A child that does nothing."""
+    pass
 
 
 def deadline(time_limit: float, solves: int = 1) -> float:
@@ -108,7 +103,7 @@ def death_message(exitcode: int | None) -> str:
 
 
 def requests(conn: Connection) -> Iterator:
-    """Each request a worker process receives on ``conn``, until ``None`` or the other end closes."""
+    """Each request received on ``conn``, until ``None`` or the other end closes."""
     try:
         yield from iter(conn.recv, None)
     except EOFError:
@@ -145,7 +140,7 @@ class WorkerDied(Exception):
 
 class Worker:
     """One worker process (a daemon) and its pipe; ``imports``: modules it imports before it says
-    ready (outside any deadline)."""
+    ready."""
 
     def __init__(
         self, ctx: BaseContext | None = None, name: str = "qpbench-worker", imports: tuple = ()
@@ -177,8 +172,7 @@ class Worker:
         self.conn.send((fn, arg))
 
     def poll(self) -> tuple[str, object] | None:
-        """``(status, payload)`` once the request is over (``ok``, ``error``, ``crashed``,
-        ``time_limit``; after the last two the worker is gone), else ``None``."""
+        """``(status, payload)`` once the request is over, else ``None``."""
         try:
             if self.conn.poll():
                 kind, payload = self.conn.recv()
@@ -245,9 +239,8 @@ def run_located(fn: Callable, arg) -> tuple:
 
 @dataclass
 class Done:
-    """A finished task: ``value`` (``fn(arg)``) or ``lost`` (why not: the last attempt's error,
-    death or deadline, ``status`` saying which); where its last attempt ran; ``concurrent``: the
-    tasks that could run at once on that host."""
+    """A finished task: ``value`` (``fn(arg)``) or ``lost`` (why not, ``status`` saying which);
+    where its last attempt ran; ``concurrent``: the tasks that could run at once on that host."""
 
     key: object
     value: object
@@ -260,8 +253,8 @@ class Done:
 
 
 def retry_note(key, why: str, attempt: int, attempts: int = MAX_ATTEMPTS) -> str | None:
-    """After attempt ``attempt`` of a task lost ``why``: ``None`` (logged: it runs again) while
-    attempts are left, else why it is lost, with the attempts made."""
+    """After attempt ``attempt`` of a task lost ``why``: ``None`` (it runs again) while attempts
+    are left, else why it is lost."""
     if attempt < attempts:
         log.warning("%s: %s; running it again", key, why)
         return None
@@ -278,11 +271,8 @@ def run_tasks(
     fresh: bool = False,
     name: str = "qpbench-worker",
 ) -> Iterator[Done]:
-    """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs`` workers.
-
-    ``attempts``: runs of a task whose worker died before it is lost (:func:`retry_note`);
-    ``fresh``: a new worker for every task.
-    """
+    """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs``
+    workers; ``attempts``: runs of a task whose worker died; ``fresh``: a new worker per task."""
     if not tasks:
         return
     ctx = ctx if ctx is not None else context()
