@@ -19,8 +19,7 @@ from ..exceptions import InputError, ParamError, positive_count, positive_second
 from ..profiles import Profile, get_profile
 from ..selection import parse_list
 from ..statuses import FAILURE_STATUSES
-from .guard import LocalRunner, Outcome
-from .isolation import ISOLATE, IsolatedRunner, wants_worker
+from .guard import ISOLATE, IsolatedRunner, LocalRunner, Outcome, wants_worker
 from .results import ExistingResults, InflightMarker, ResultsWriter, read_results, row_key
 
 if TYPE_CHECKING:
@@ -136,79 +135,6 @@ def _check_records(problem_set) -> list:
     return records
 
 
-class Plan:
-    """A checked run: every check that can fail on user input, made before ``out`` is created
-    or changed; ``learned``: backends seen to crash in this process (``marker``)."""
-
-    def __init__(
-        self,
-        problem_set: ProblemSet,
-        config: BenchConfig,
-        out: Path,
-        force: bool,
-        resume: bool,
-        make_parent: bool = True,
-    ):
-        from ..atomic import check_output
-        from ..backends import get_backend
-        from ..formats import content_sha256
-        from ..memory import default_budget
-
-        check_output(out, force=force, resume=resume, make_parent=make_parent)
-        profile = get_profile(config.profile)
-        self.profile = profile.with_time_limit(
-            config.time_limit if config.time_limit is not None else float(profile.time_limit)
-        )
-        self.records = records = _check_records(problem_set)
-        self.seqs = sequences(records, config.mode)
-        self.settings = {
-            name: backend_settings(name, config, problem_set) for name in config.backends
-        }
-        self.instances = {
-            name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
-        }
-        self.versions = {name: type(b).version() for name, b in self.instances.items()}
-        self.budget = default_budget() if config.memory_budget is None else config.memory_budget
-        self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
-        self.sha = content_sha256(problem_set)
-        self.resuming = resume and out.exists() and not force
-        self.existing = ExistingResults([])
-        self.marker = InflightMarker(out)
-        self.learned: list[str] = []
-        if self.resuming:
-            self.existing = read_results(out, repair=False)
-            _check_existing(self.existing, out, config.mode, self.sha, int(config.seed))
-            self._learn_from_crash(config.isolate)
-
-    def _learn_from_crash(self, isolate: str) -> None:
-        """A backend that died in this process while solving goes to a worker from now on."""
-        self.learned, inflight, crash = self.marker.read()
-        done_keys = {row_key(r) for r in self.existing.rows}
-        if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
-            return
-        suspect = inflight[1]
-        if suspect in self.instances and suspect not in self.learned:
-            self.learned.append(suspect)
-            log.warning(
-                "the previous run died while %s was solving %s in this process (%s); %s",
-                suspect,
-                inflight[0],
-                crash.splitlines()[0],
-                "it runs in a worker process from now on"
-                if isolate == "auto"
-                else "use --isolate auto or always to isolate it",
-            )
-
-    def open_output(self, out: Path, force: bool) -> dict:
-        """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
-        if self.resuming:
-            self.existing = read_results(out, repair=True)
-        elif force and out.exists():
-            out.unlink()
-            self.marker.path.unlink(missing_ok=True)
-        return {row_key(r): r for r in self.existing.rows}
-
-
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
@@ -230,37 +156,6 @@ def skipped_solves(
             if why:
                 skips[(i, name)] = why
     return skips, notes
-
-
-def references_for(
-    problem_set: ProblemSet, plan: Plan, references: list | Callable[[ProblemSet], list] | None
-) -> list:
-    """One reference per record: ``references`` as given, or computed by it (a function of a
-    problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
-    backend solves within the memory budget."""
-    from ..memory import sparse_solver_bytes
-    from ..reference import ReferenceSolution, reference_solutions
-
-    if references is None or callable(references):
-        compute = references or reference_solutions
-        wanted = [
-            i
-            for i, r in enumerate(plan.records)
-            if any((i, name) not in plan.skips for name in plan.settings)
-            and sparse_solver_bytes(r.problem) <= plan.budget
-        ]
-        subset = replace(problem_set, records=[plan.records[i] for i in wanted])
-        computed = dict(zip(wanted, compute(subset))) if wanted else {}
-        references = [
-            computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
-            for i, r in enumerate(plan.records)
-        ]
-    if len(references) != len(plan.records):
-        raise InputError(
-            f"{len(references)} reference solutions for {len(plan.records)} problems",
-            path=problem_set.path,
-        )
-    return references
 
 
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
@@ -286,9 +181,9 @@ def _structure(problem) -> tuple[bool, ...]:
 
 
 def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
-    """The first problem of the run not ``skipped``, then the first of each other structure."""
+    """The first problem of each structure, in run order, not ``skipped``."""
     out, seen = [], set()
-    for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
+    for i in (i for seq in seqs for i in seq):
         if i in skipped:
             continue
         key = _structure(records[i].problem)
@@ -299,42 +194,137 @@ def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
 
 
 class _BenchRun:
-    """The solving part of :func:`run_bench`: runners, warm-up, sequences, rows."""
+    """One run of :func:`run_bench`: made, it has made every check that can fail on user input,
+    before ``out`` is created or changed; ``learned``: backends seen to crash in this process."""
 
-    def __init__(self, plan: Plan, config: BenchConfig, references: list, done: dict, out: Path):
-        self.plan, self.config, self.references, self.done = plan, config, references, done
+    def __init__(
+        self,
+        problem_set: ProblemSet,
+        config: BenchConfig,
+        out: Path,
+        force: bool,
+        resume: bool,
+        make_parent: bool = True,
+    ):
+        from ..atomic import check_output
+        from ..backends import get_backend
+        from ..formats import content_sha256
+        from ..memory import default_budget
+
+        check_output(out, force=force, resume=resume, make_parent=make_parent)
+        self.config, self.out = config, out
+        profile = get_profile(config.profile)
+        self.profile = profile.with_time_limit(
+            config.time_limit if config.time_limit is not None else float(profile.time_limit)
+        )
+        self.records = records = _check_records(problem_set)
+        self.seqs = sequences(records, config.mode)
+        self.settings = {
+            name: backend_settings(name, config, problem_set) for name in config.backends
+        }
+        self.instances = {
+            name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
+        }
+        self.versions = {name: type(b).version() for name, b in self.instances.items()}
+        self.budget = default_budget() if config.memory_budget is None else config.memory_budget
+        self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
+        self.sha = content_sha256(problem_set)
+        self.resuming = resume and out.exists() and not force
+        self.existing = ExistingResults([])
+        self.marker = InflightMarker(out)
+        self.learned: list[str] = []
+        if self.resuming:
+            self.existing = read_results(out, repair=False)
+            _check_existing(self.existing, out, config.mode, self.sha, int(config.seed))
+            self._learn_from_crash()
+
+    def _learn_from_crash(self) -> None:
+        """A backend that died in this process while solving goes to a worker from now on."""
+        self.learned, inflight, crash = self.marker.read()
+        done_keys = {row_key(r) for r in self.existing.rows}
+        if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
+            return
+        suspect = inflight[1]
+        if suspect in self.instances and suspect not in self.learned:
+            self.learned.append(suspect)
+            then = "it runs in a worker process from now on"
+            if self.config.isolate != "auto":
+                then = "use --isolate auto or always to isolate it"
+            msg = "the previous run died while %s was solving %s in this process (%s); %s"
+            log.warning(msg, suspect, inflight[0], crash.splitlines()[0], then)
+
+    def start(self, problem_set: ProblemSet, references, force: bool) -> None:
+        """References, warm-up, then ``out`` created or repaired (the run's first write), runners."""
+        from ..jit import warmup_logged
+
+        config, out = self.config, self.out
+        references = self._references_for(problem_set, references)
+        log.info("%d problems; backends: %s", len(problem_set), ", ".join(config.backends))
+        warmup_logged(log, config.backends, loop=False)  # no compile inside a timed solve
+        if self.resuming:
+            self.existing = read_results(out, repair=True)
+        elif force and out.exists():
+            out.unlink()
+            self.marker.path.unlink(missing_ok=True)
+        self.references, self.done = references, {row_key(r): r for r in self.existing.rows}
         self.sequential = config.mode == "sequential"
-        self.pname = plan.profile.name
+        self.pname = self.profile.name
         self.runners = {name: self._runner(name) for name in config.backends}
         self.summary = BenchSummary(
             isolated=[n for n in config.backends if self.runners[n].isolated], seed=int(config.seed)
         )
         left = {
-            name: [(r.name, name, self.pname) not in done for r in plan.records]
+            name: [(r.name, name, self.pname) not in self.done for r in self.records]
             for name in config.backends
         }
         # per backend and sequence: keys still to run (to know when replay is needed)
-        self.todo = {name: [any(left[name][i] for i in seq) for seq in plan.seqs] for name in left}
+        self.todo = {name: [any(left[name][i] for i in seq) for seq in self.seqs] for name in left}
         self.total_todo = sum(sum(v) for v in left.values())
-        self.writer = ResultsWriter(out, new=not (plan.resuming and out.exists()))
+        self.writer = ResultsWriter(out, new=not (self.resuming and out.exists()))
         self.overheads: list[float] = []
         self.bar = None
 
-    def _runner(self, name: str, isolate: bool = False):
-        plan, config = self.plan, self.config
-        limit = plan.profile.time_limit
-        if isolate or wants_worker(config.isolate, name, plan.learned):
-            settings = plan.settings[name]
-            return IsolatedRunner(
-                name, plan.profile, settings, limit, self.sequential, config.repeat
+    def _references_for(
+        self, problem_set: ProblemSet, references: list | Callable[[ProblemSet], list] | None
+    ) -> list:
+        """One reference per record: ``references`` as given, or computed by it (a function of a
+        problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
+        backend solves within the memory budget."""
+        from ..memory import sparse_solver_bytes
+        from ..reference import ReferenceSolution, reference_solutions
+
+        if references is None or callable(references):
+            compute = references or reference_solutions
+            wanted = [
+                i
+                for i, r in enumerate(self.records)
+                if any((i, name) not in self.skips for name in self.settings)
+                and sparse_solver_bytes(r.problem) <= self.budget
+            ]
+            subset = replace(problem_set, records=[self.records[i] for i in wanted])
+            computed = dict(zip(wanted, compute(subset))) if wanted else {}
+            references = [
+                computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
+                for i, r in enumerate(self.records)
+            ]
+        if len(references) != len(self.records):
+            raise InputError(
+                f"{len(references)} reference solutions for {len(self.records)} problems",
+                path=problem_set.path,
             )
-        return LocalRunner(plan.instances[name], limit, self.sequential, config.repeat)
+        return references
+
+    def _runner(self, name: str, isolate: bool = False):
+        limit, repeat = self.profile.time_limit, self.config.repeat
+        if isolate or wants_worker(self.config.isolate, name, self.learned):
+            settings = self.settings[name]
+            return IsolatedRunner(name, self.profile, settings, limit, self.sequential, repeat)
+        return LocalRunner(self.instances[name], limit, self.sequential, repeat)
 
     def run(self, progress: bool | str) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
-        self.plan.marker.open(
-            self.plan.learned, catch_faults=any(not r.isolated for r in self.runners.values())
-        )
+        catch_faults = any(not r.isolated for r in self.runners.values())
+        self.marker.open(self.learned, catch_faults=catch_faults)
         if progress == "log" and self.total_todo:
             self.bar = LogBar(self.total_todo, self.writer.path.name)
         elif progress and self.total_todo:
@@ -344,12 +334,12 @@ class _BenchRun:
         try:
             if self.config.warmup:
                 self._warmup()
-            for s, seq in enumerate(self.plan.seqs):
+            for s, seq in enumerate(self.seqs):
                 self._sequence(s, seq)
-            self.plan.marker.remove()
+            self.marker.remove()
         finally:
             self.writer.close()
-            self.plan.marker.close()
+            self.marker.close()
             if self.bar is not None:
                 self.bar.close()
             for runner in self.runners.values():
@@ -358,9 +348,9 @@ class _BenchRun:
     def _warmup(self) -> None:
         for name, runner in self.runners.items():
             if any(self.todo[name]):
-                skipped = {i for i, b in self.plan.skips if b == name}
-                self.plan.marker.mark(("warmup", name, self.pname))
-                for problem in _warmup_problems(self.plan.records, self.plan.seqs, skipped):
+                skipped = {i for i, b in self.skips if b == name}
+                self.marker.mark(("warmup", name, self.pname))
+                for problem in _warmup_problems(self.records, self.seqs, skipped):
                     runner.warmup(problem)
 
     def _sequence(self, s: int, seq: list[int]) -> None:
@@ -373,14 +363,14 @@ class _BenchRun:
             for name in active:
                 self.runners[name].reset()
         for i in seq:
-            record = self.plan.records[i]
+            record = self.records[i]
             solved = []
             order = backend_order(record.name, self.config.backends, self.config.seed)
             for position, name in enumerate(order):
                 if not self.todo[name][s]:
                     continue
                 key = (record.name, name, self.pname)
-                skip = self.plan.skips.get((i, name))
+                skip = self.skips.get((i, name))
                 if key in self.done:
                     if self.sequential and skip is None:
                         self._replay(name, record, self.done[key]["status"], needs_reset)
@@ -399,7 +389,7 @@ class _BenchRun:
         if needs_reset[name]:
             runner.reset()
             needs_reset[name] = False
-        self.plan.marker.mark((f"replay {record.name}", name, self.pname))
+        self.marker.mark((f"replay {record.name}", name, self.pname))
         if runner.replay(record.problem) in FAILURE_STATUSES:
             log.warning("%s: replay of %s failed; state reset", name, record.name)
             needs_reset[name] = True
@@ -407,22 +397,19 @@ class _BenchRun:
     def _solve(self, name: str, record, needs_reset: dict):
         """One timed (repeated) solve; a backend that overran in this process moves to a worker
         (a solve in this process is never interrupted; a worker is killed at its deadline)."""
-        self.plan.marker.mark((record.name, name, self.pname))
+        self.marker.mark((record.name, name, self.pname))
         runner = self.runners[name]
         outcome = runner.solve(
             record.problem, repeat=self.config.repeat, reset_before=needs_reset[name]
         )
         needs_reset[name] = self.sequential and outcome.status in FAILURE_STATUSES
         if outcome.status == "time_limit" and not runner.isolated and self.config.isolate == "auto":
-            log.warning(
-                "%s overran its time limit on %s in this process; it runs in a worker process from now on",
-                name,
-                record.name,
-            )
+            msg = "%s overran its time limit on %s in this process; it runs in a worker process from now on"
+            log.warning(msg, name, record.name)
             runner.close()
             self.runners[name] = self._runner(name, isolate=True)
-            self.plan.learned.append(name)
-            self.plan.marker.isolate = list(self.plan.learned)
+            self.learned.append(name)
+            self.marker.isolate = list(self.learned)
             self.summary.isolated.append(name)
             needs_reset[name] = self.sequential
         return outcome
@@ -433,22 +420,19 @@ class _BenchRun:
         from ..formats.records import box_bounds
         from ..metrics import evaluate, metric_columns
 
-        record, profile = self.plan.records[i], self.plan.profile
+        record, profile = self.records[i], self.profile
         kept, status = outcome.solution, outcome.status
         if kept is not None:
             kept.found = status == "optimal"
         sol = None if status == "invalid" else kept
         metrics = evaluate(record, sol, self.references[i], profile.tolerance)
         times = outcome.wall_times_s
-        n, m_eq, m_ineq = problem_sizes(record.problem)
         error = outcome.error if status != "optimal" or outcome.error else None
-        if i in self.plan.notes and status != "skipped":
-            error = "; ".join(filter(None, [self.plan.notes[i], error]))
+        if i in self.notes and status != "skipped":
+            error = "; ".join(filter(None, [self.notes[i], error]))
         return {
             "problem": record.name,
-            "scenario": record.scenario,
-            "tick": record.tick,
-            "t": record.t,
+            **{k: getattr(record, k) for k in ("scenario", "tick", "t")},
             "backend": backend,
             "profile": profile.name,
             "mode": self.config.mode,
@@ -461,19 +445,15 @@ class _BenchRun:
             "solver_time_s": _float(getattr(sol, "solver_time_s", None)),
             "iterations": getattr(kept, "iterations", None),
             "error": error,
-            "state_reset": outcome.state_reset,
-            "isolated": outcome.isolated,
+            **{k: getattr(outcome, k) for k in ("state_reset", "isolated", "repeat_exact")},
             "position": position,
             "order_seed": int(self.config.seed),
             "repeat": len(times),
-            "repeat_exact": outcome.repeat_exact,
             "repeat_note": outcome.repeat_note or None,
-            "n": n,
-            "m_eq": m_eq,
-            "m_ineq": m_ineq,
+            **dict(zip(("n", "m_eq", "m_ineq"), problem_sizes(record.problem))),
             "n_box": box_bounds(record.problem),
-            "problem_set_sha256": self.plan.sha or "",
-            "backend_version": self.plan.versions.get(backend),
+            "problem_set_sha256": self.sha or "",
+            "backend_version": self.versions.get(backend),
         }
 
     def _write_rows(self, i: int, solved: list) -> None:
@@ -495,7 +475,7 @@ class _BenchRun:
     def finish(self, started: float) -> BenchSummary:
         """The summary over every row of this run's keys (resumed and new)."""
         summary, pname = self.summary, self.pname
-        wanted = {(r.name, b, pname) for r in self.plan.records for b in self.config.backends}
+        wanted = {(r.name, b, pname) for r in self.records for b in self.config.backends}
         summary.backends = {name: BackendStats() for name in self.config.backends}
         for key, row in self.done.items():
             if key in wanted:
@@ -669,18 +649,11 @@ def run_bench(
     make_parent: bool = True,
 ) -> BenchSummary:
     """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``. ``force``: start ``out``
-    again; ``resume``: run only the keys it lacks; ``references``: :func:`references_for`;
-    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`); ``make_parent``: create ``out``'s
-    folder."""
+    again; ``resume``: run only the keys it lacks; ``references``: one per record, or a function
+    of the set returning them; ``progress``: a bar on stderr (``"log"``: :class:`LogBar`);
+    ``make_parent``: create ``out``'s folder."""
     started = time.perf_counter()
-    out = Path(out)
-    plan = Plan(problem_set, config, out, force, resume, make_parent)
-    from ..jit import warmup_logged
-
-    references = references_for(problem_set, plan, references)
-    log.info("%d problems; backends: %s", len(problem_set), ", ".join(config.backends))
-    warmup_logged(log, config.backends, loop=False)  # no compile inside a timed solve
-    done = plan.open_output(out, force)  # from here on, the output is created or changed
-    bench_run = _BenchRun(plan, config, references, done, out)
+    bench_run = _BenchRun(problem_set, config, Path(out), force, resume, make_parent)
+    bench_run.start(problem_set, references, force)
     bench_run.run(progress)
     return bench_run.finish(started)

@@ -11,7 +11,7 @@ import math
 import re
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +25,7 @@ from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
 from ..statuses import describe_exception
-from .isolation import ISOLATE, wants_worker
+from .guard import ISOLATE, wants_worker
 
 log = logging.getLogger("qpbench.harness")
 
@@ -103,55 +103,46 @@ class LoopTask:
 
 
 def run_row(task: LoopTask) -> dict:
-    """The row of one run: a warm-up of :data:`WARMUP_TICKS` ticks, the timed run, its figures;
-    a run that raises is an ``error`` row."""
-    try:
-        from ..backends import load_plugins
-
-        load_plugins(list(task.plugins))
-        return _run(task)
-    except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
-        return failure_row(task, "error", describe_exception(exc), warn=True)
-
-
-def _run(task: LoopTask) -> dict:
+    """The row of one run: a warm-up of :data:`WARMUP_TICKS` ticks, the timed run, its figures,
+    its logs written when ``task.out`` is set; a run that raises is an ``error`` row."""
+    from ..backends import load_plugins
     from ..jit import warmup
+    from ..sim.figure_log import figure_log_path, write_figure_log
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario, parse_scenario
     from ..sim.summary import convergence_figures
 
-    if task.scenario_text is None:
-        scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
-    else:
-        scenario = parse_scenario(task.scenario_text, path=task.scenario)
-    warmup([task.backend])
-    terms = dict(formulation=task.formulation, deadline=task.deadline)
-    simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
-    result = simulate(
-        scenario, task.backend, duration=task.duration, wall_budget_s=task.run_budget, **terms
-    )
-    summary = dict(result.summary)
-    if task.bands is not None:
-        summary.update(convergence_figures(result.log, *task.bands))
-    row = {
-        "scenario": task.scenario,
-        "backend": task.backend,
-        "status": "budget" if summary.get("stopped_early") else "ok",
-        "error": "",
-        "log_file": "",
-    }
-    for key, value in summary.items():
-        if key not in ("scenario", "backend"):
-            row[TABLE_NAMES.get(key, key)] = cell(value)
-    if task.out is not None:
-        from ..sim.figure_log import figure_log_path, write_figure_log
-
-        name = log_name(task.scenario, task.backend)
-        with atomic_path(Path(task.out) / LOG_DIR / name) as tmp:
-            result.log.to_parquet(tmp, index=False)
-        write_figure_log(result.log, figure_log_path(Path(task.out) / LOG_DIR / name))
-        row["log_file"] = f"{LOG_DIR}/{name}"
-    return row
+    try:
+        load_plugins(list(task.plugins))
+        if task.scenario_text is None:
+            scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
+        else:
+            scenario = parse_scenario(task.scenario_text, path=task.scenario)
+        warmup([task.backend])
+        terms = dict(formulation=task.formulation, deadline=task.deadline)
+        simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
+        result = simulate(
+            scenario, task.backend, duration=task.duration, wall_budget_s=task.run_budget, **terms
+        )
+        summary = dict(result.summary)
+        if task.bands is not None:
+            summary.update(convergence_figures(result.log, *task.bands))
+        status = "budget" if summary.get("stopped_early") else "ok"
+        row = dict(
+            scenario=task.scenario, backend=task.backend, status=status, error="", log_file=""
+        )
+        for key, value in summary.items():
+            if key not in ("scenario", "backend"):
+                row[TABLE_NAMES.get(key, key)] = cell(value)
+        if task.out is not None:
+            name = log_name(task.scenario, task.backend)
+            with atomic_path(Path(task.out) / LOG_DIR / name) as tmp:
+                result.log.to_parquet(tmp, index=False)
+            write_figure_log(result.log, figure_log_path(Path(task.out) / LOG_DIR / name))
+            row["log_file"] = f"{LOG_DIR}/{name}"
+        return row
+    except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
+        return failure_row(task, "error", describe_exception(exc), warn=True)
 
 
 def cell(value: object) -> object:
@@ -286,12 +277,11 @@ def run_closed_loop(
         if on_row is not None:
             on_row(row)
 
-    terms = LoopTask("", "", formulation, duration, deadline, overrides=tuple(overrides.items()))
-    terms = replace(terms, out=str(out), plugins=tuple(plugin_files()))  # workers load them too
+    pairs, plugins = tuple(overrides.items()), tuple(plugin_files())  # workers load them too
     items = [
         (
             (s, b),
-            replace(terms, scenario=s, backend=b, run_budget=budget(b)),
+            LoopTask(s, b, formulation, duration, deadline, budget(b), pairs, str(out), plugins),
             run_deadline(s, duration, run_time_limit) if wants_worker(isolate, b) else None,
         )
         for s, b in todo
@@ -315,6 +305,8 @@ def run_closed_loop(
 def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
     """Each run in a worker process of its own, ``jobs`` at a time: a run that dies or overruns its
     deadline is a ``crashed`` or ``time_limit`` row and takes no other run's row with it."""
+    from ..sim.figure_log import FIGURE_LOG_DIR
+
     tasks = {key: (task, deadline_s) for key, task, deadline_s in items}
     for done in run_tasks(run_row, items, jobs, fresh=True, name="qpbench-closed-loop"):
         if done.status is None:
@@ -325,18 +317,11 @@ def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
             message = f"no result after {deadline_s:.3g} s (run time limit); worker killed"
         else:
             message = f"{done.lost} during the closed-loop run"
-        _drop_partial_logs(task)
+        name = log_name(task.scenario, task.backend)
+        for folder in (LOG_DIR, FIGURE_LOG_DIR):  # the temporary logs the worker may have left
+            for tmp in (Path(task.out) / folder).glob(f".{name}.*.tmp"):
+                tmp.unlink(missing_ok=True)
         emit(done.key, failure_row(task, done.status, message, warn=True))
-
-
-def _drop_partial_logs(task: LoopTask) -> None:
-    """Remove the temporary logs a dead worker may have left (never a complete one)."""
-    from ..sim.figure_log import FIGURE_LOG_DIR
-
-    name = log_name(task.scenario, task.backend)
-    for folder in (LOG_DIR, FIGURE_LOG_DIR):
-        for tmp in (Path(task.out) / folder).glob(f".{name}.*.tmp"):
-            tmp.unlink(missing_ok=True)
 
 
 def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dict) -> None:
@@ -423,16 +408,13 @@ def _write_table(rows: list[dict], path: Path) -> None:
 
 def log_row(logger: logging.Logger, row: dict) -> None:
     """One line per run: INFO when its verdict is ``ok`` (or skipped), else WARNING with why."""
-    verdict = row.get("verdict")
-    verdict = verdict if isinstance(verdict, str) else ""
-    reasons = row.get("verdict_reasons")
-    reasons = reasons if isinstance(reasons, str) else ""
+    keys = ("verdict", "verdict_reasons", "error")
+    verdict, reasons, error = (row[k] if isinstance(row.get(k), str) else "" for k in keys)
     where = f"{row['scenario']} / {row['backend']}"
     if verdict and verdict != "ok":
         logger.warning("%s: %s (%s)", where, verdict, reasons or row.get("status"))
         return
     status = str(row.get("status"))
-    error = row.get("error") if isinstance(row.get("error"), str) else ""
     detail = "; ".join(
         x for x in (status if status != "ok" and verdict else "", error, reasons) if x
     )

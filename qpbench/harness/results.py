@@ -123,11 +123,8 @@ def read_results(
     dropped = 0
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
-        log.warning(
-            "%s: dropping a half-written last line (%d bytes) left by an interrupted run",
-            path,
-            len(data) - cut,
-        )
+        msg = "%s: dropping a half-written last line (%d bytes) left by an interrupted run"
+        log.warning(msg, path, len(data) - cut)
         data = data[:cut]
         dropped += 1
         if repair:
@@ -154,9 +151,8 @@ def read_results(
             "malformed line in the middle of the file; use --force to start again", path=path
         )
     for fields in body[n:]:
-        log.warning(
-            "%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(names)
-        )
+        msg = "%s: dropping a malformed line (%d fields, expected %d)"
+        log.warning(msg, path, len(fields), len(names))
     if repair and n < len(body):
         os.truncate(path, sum(len(ln) + 1 for ln in lines[: n + 1]))
     rows = [dict(zip(names, fields)) for fields in body[:n]]
@@ -209,7 +205,6 @@ class InflightMarker:
 
     def __init__(self, out: str | Path):
         self.path = Path(out).with_name(f".{Path(out).name}.inflight")
-        self.isolate: list[str] = []
         self._fd = None
         self._fault_fd = None
         self._faulthandler_was = None
@@ -235,8 +230,6 @@ class InflightMarker:
             faulthandler.enable(file=self._fault_fd, all_threads=False)
 
     def mark(self, key: tuple[str, ...] | None) -> None:
-        if self._fd is None:
-            return
         data = (",".join(self.isolate) + "\n" + ("\t".join(key) if key else "") + "\n").encode()
         os.pwrite(self._fd, data, 0)
         os.ftruncate(self._fd, len(data))

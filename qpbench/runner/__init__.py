@@ -83,10 +83,7 @@ def make_executor(
     if scheduler is not None and not tls:
         if security_file is not None:
             raise ParamError("--security needs a tls:// scheduler address", key="--scheduler")
-        log.warning(
-            "Dask scheduler %s without TLS: whoever can reach it can run code on every worker "
-            "(use tls:// and --security)",
-            scheduler,
-        )
+        why = "whoever can reach it can run code on every worker (use tls:// and --security)"
+        log.warning("Dask scheduler %s without TLS: %s", scheduler, why)
     security = load_security(security_file) if security_file is not None else None
     return DaskExecutor(scheduler, security, jobs)

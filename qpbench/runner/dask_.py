@@ -28,6 +28,8 @@ WORKER_CONFIG = {
 #: The plugin's equivalent of :data:`WORKER_CONFIG` on a running worker.
 QUIET_STOP = ("profile", "profile-cycle")
 QUIET_SLOW = {"tick": 1.0}
+#: The roles of a cluster that present a certificate.
+ROLES = ("client", "scheduler", "worker")
 
 
 def load_security(path: str | Path) -> Security:
@@ -64,17 +66,11 @@ def load_security(path: str | Path) -> Security:
         files.append(str(file))
     from distributed.security import Security
 
-    ca, cert, key = files
-    return Security(
-        tls_ca_file=ca,
-        tls_client_cert=cert,
-        tls_client_key=key,
-        tls_scheduler_cert=cert,
-        tls_scheduler_key=key,
-        tls_worker_cert=cert,
-        tls_worker_key=key,
-        require_encryption=True,
-    )
+    ca, cert, key = files  # this machine's certificate for every role
+    pems = {
+        f"tls_{role}_{kind}": pem for role in ROLES for kind, pem in (("cert", cert), ("key", key))
+    }
+    return Security(tls_ca_file=ca, require_encryption=True, **pems)
 
 
 class DaskExecutor:
@@ -111,21 +107,16 @@ class DaskExecutor:
             try:
                 self.client = Client(scheduler, security=security, timeout="30s")
             except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                raise InputError(
-                    f"cannot reach the Dask scheduler: {type(exc).__name__}: {exc}",
-                    key="--scheduler",
-                ) from None
+                why = f"cannot reach the Dask scheduler: {describe_exception(exc)}"
+                raise InputError(why, key="--scheduler") from None
             from .dask_worker import PLUGIN_NAME, QuietWorker
 
             try:
                 self.client.register_plugin(QuietWorker(QUIET_STOP, QUIET_SLOW), name=PLUGIN_NAME)
                 self._plugin = True
             except Exception as exc:  # noqa: BLE001 - a cluster refusing plugins still runs tasks
-                log.warning(
-                    "could not quiet the Dask workers' profiler (%s: %s): tasks run slower",
-                    type(exc).__name__,
-                    exc,
-                )
+                msg = "could not quiet the Dask workers' profiler (%s): tasks run slower"
+                log.warning(msg, describe_exception(exc))
         self.address = self.client.scheduler.address
 
     @property
@@ -173,9 +164,7 @@ class DaskExecutor:
             try:
                 self.client.unregister_worker_plugin(PLUGIN_NAME)
             except Exception as exc:  # noqa: BLE001 - closing goes on: the plugin stays registered
-                log.warning(
-                    "could not remove the Dask worker plugin: %s: %s", type(exc).__name__, exc
-                )
+                log.warning("could not remove the Dask worker plugin: %s", describe_exception(exc))
             self._plugin = False
         self.client.close()
         if self.cluster is not None:

@@ -40,7 +40,7 @@ MAX_ATTEMPTS = 2
 #: Modules the forkserver imports once, for every worker forked from it.
 PRELOAD = (
     "qpbench.runner.process",
-    "qpbench.harness.isolation",
+    "qpbench.harness.guard",
     "qpbench.backends",
     "numpy",
     "scipy.sparse",
@@ -309,17 +309,9 @@ def run_tasks(
                     if payload is None:
                         queue.appendleft((key, arg, timeout, tried))
                         continue
-                ok = status == "ok"
-                yield Done(
-                    key,
-                    payload if ok else None,
-                    None if ok else payload,
-                    tried,
-                    host,
-                    f"pid{w.proc.pid}",
-                    slots,
-                    None if ok else status,
-                )
+                value, lost = (payload, None) if status == "ok" else (None, payload)
+                worker = f"pid{w.proc.pid}"
+                yield Done(key, value, lost, tried, host, worker, slots, status if lost else None)
     finally:
         for w in workers:
             if w.task is not None:
