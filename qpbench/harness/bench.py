@@ -550,10 +550,8 @@ class BenchSummary:
 
         def counted(label: str, counts: dict) -> str:
             counts = {b: n for b, n in counts.items() if n}
-            text = f"{sum(counts.values())} {label}"
-            return text + (
-                " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
-            )
+            each = ", ".join(f"{b} {n}" for b, n in counts.items())
+            return f"{sum(counts.values())} {label}" + (f" ({each})" if counts else "")
 
         failed = counted("failed solves", {b: s.n_failures for b, s in self.backends.items()})
         unsuccessful = {b: s.rows - s.successes for b, s in self.backends.items()}

@@ -244,14 +244,12 @@ def run_closed_loop(
     budgets: dict[str, float] | None = None,
     overrides: dict | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker.
-
+    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker:
     ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
     ``resume`` keeps the ``ok`` rows made under the same terms and the rows of pairs not asked;
     ``skip``: backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's
     deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's
-    in ``budgets``); ``on_row`` is called with each row once written.
-    """
+    in ``budgets``); ``on_row`` is called with each row once written."""
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)

@@ -1,8 +1,6 @@
-"""Guarded solves: every way a solve can go wrong becomes a status
-(:func:`qpbench.statuses.classify`). :class:`LocalRunner` solves in this process, never
-interrupting a solve; :class:`IsolatedRunner`, for backends that may hang in native code or
-crash, runs one in a :class:`~qpbench.runner.process.Worker`, replaced, without the backend's
-state, after a death or a missed deadline."""
+"""Guarded solves, every way a solve can go wrong a status: :class:`LocalRunner` in this process;
+:class:`IsolatedRunner`, for backends that may hang or crash, one in a worker process, replaced
+(without the backend's state) after a death or a missed deadline."""
 
 from __future__ import annotations
 

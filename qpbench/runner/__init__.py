@@ -1,8 +1,5 @@
-"""Where work runs: this process, local worker processes (:mod:`.process`), or a Dask cluster.
-
-The sweep's executors run tasks ``fn(arg)`` (``fn`` module-level, ``arg`` picklable) and yield a
-:class:`Done` per task as it finishes; a task whose worker dies is retried once, then lost.
-"""
+"""Where work runs: this process, local worker processes (:mod:`.process`), or a Dask cluster;
+the sweep's executors yield a :class:`Done` per task ``fn(arg)`` as it finishes."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1. A task
 runs in a thread beside the worker's event loop, sharing its GIL, so the workers are quieted
-(:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster).
-"""
+(:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster)."""
 
 from __future__ import annotations
 
@@ -85,10 +84,8 @@ class DaskExecutor:
             import dask
             from distributed import Client, LocalCluster
         except ImportError:
-            raise ParamError(
-                "--executor dask needs dask and distributed: pip install 'qpbench[dask]'",
-                key="--executor",
-            ) from None
+            why = "--executor dask needs dask and distributed: pip install 'qpbench[dask]'"
+            raise ParamError(why, key="--executor") from None
         self.cluster = None
         self._plugin = False
         if scheduler is None:
@@ -96,7 +93,6 @@ class DaskExecutor:
                 self.cluster = LocalCluster(
                     n_workers=jobs,
                     threads_per_worker=1,
-                    processes=True,
                     host="127.0.0.1",
                     dashboard_address=None,
                     security=security,
@@ -137,9 +133,8 @@ class DaskExecutor:
         pending = {}
 
         def submit(i: int, key, arg, attempt: int):
-            fut = self.client.submit(
-                run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempt}"
-            )
+            name = f"qpbench-task-{i}-{attempt}"
+            fut = self.client.submit(run_located, fn, arg, pure=False, key=name)
             pending[fut] = (i, key, arg, attempt)
             return fut
 

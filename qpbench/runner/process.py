@@ -1,9 +1,6 @@
-"""Worker processes: the one place that starts, feeds, times out and reaps them.
-
-A worker answers ``fn(arg)`` requests (``fn`` module-level, ``arg`` picklable) one at a time over
-a pipe (:class:`Worker`; :func:`run_tasks` is the pool); a request ends ``ok``, ``error`` (it
-raised), ``time_limit`` (past its deadline: SIGKILL) or ``crashed`` (:func:`death_message`).
-"""
+"""Worker processes, the one place that starts, feeds, times out and reaps them: a worker answers
+``fn(arg)`` requests one at a time (:class:`Worker`; :func:`run_tasks` is the pool); a request
+ends ``ok``, ``error`` (it raised), ``time_limit`` (SIGKILL at its deadline) or ``crashed``."""
 
 from __future__ import annotations
 
