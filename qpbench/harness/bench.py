@@ -122,19 +122,6 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
         raise InputError(why + "use --force to start again", path=path, key=key)
 
 
-def _check_records(problem_set) -> list:
-    records = list(problem_set.records)
-    if not records:
-        raise InputError("problem set is empty", path=getattr(problem_set, "path", None))
-    names = [r.name for r in records]
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise InputError(
-            f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path
-        )
-    return records
-
-
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
@@ -217,7 +204,14 @@ class _BenchRun:
         self.profile = profile.with_time_limit(
             config.time_limit if config.time_limit is not None else float(profile.time_limit)
         )
-        self.records = records = _check_records(problem_set)
+        self.records = records = list(problem_set.records)
+        if not records:
+            raise InputError("problem set is empty", path=getattr(problem_set, "path", None))
+        names = [r.name for r in records]
+        if len(set(names)) != len(names):
+            dup = next(n for n in names if names.count(n) > 1)
+            why = f"problem name '{dup}' appears twice; rows are keyed by name"
+            raise InputError(why, path=problem_set.path)
         self.seqs = sequences(records, config.mode)
         self.settings = {
             name: backend_settings(name, config, problem_set) for name in config.backends

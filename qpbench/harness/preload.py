@@ -3,12 +3,11 @@
 
 from __future__ import annotations
 
-try:
-    import os
+import os
+from contextlib import suppress
 
+with suppress(Exception):  # see the module docstring
     from ..jit import prepare
     from ..runner.process import PRELOAD_KERNELS_ENV
 
     prepare([k for k in os.environ.get(PRELOAD_KERNELS_ENV, "").split(",") if k])
-except Exception:  # noqa: BLE001 - see the module docstring
-    pass

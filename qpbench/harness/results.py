@@ -8,6 +8,7 @@ import io
 import logging
 import math
 import os
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -131,8 +132,7 @@ def read_results(
             os.truncate(path, cut)
     if not data:
         if repair:  # killed before the header was complete: start the file again
-            with ResultsWriter(path, new=True, columns=names):
-                pass
+            ResultsWriter(path, new=True, columns=names).close()
         return ExistingResults([], dropped)
     lines = data.split(b"\n")[:-1]
     header, *body = (next(csv.reader([ln.decode("utf-8", errors="replace")])) for ln in lines)
@@ -241,10 +241,8 @@ class InflightMarker:
 
             faulthandler.disable()
             if self._faulthandler_was:
-                try:
+                with suppress(Exception):  # no usable stderr
                     faulthandler.enable(file=sys.__stderr__)
-                except Exception:  # noqa: BLE001 - no usable stderr
-                    pass
             os.close(self._fault_fd)
             self._fault_fd = None
         if self._fd is not None:

@@ -15,6 +15,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
+from contextlib import suppress
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import TYPE_CHECKING
@@ -64,11 +65,9 @@ def context(fresh: bool = False) -> BaseContext:
     if fresh:
         return multiprocessing.get_context("spawn")
     if _CTX is None:
-        method = (
-            "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        )
-        ctx = multiprocessing.get_context(method)
-        if method == "forkserver":
+        forkserver = "forkserver" in multiprocessing.get_all_start_methods()
+        ctx = multiprocessing.get_context("forkserver" if forkserver else "spawn")
+        if forkserver:
             os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
             ctx.set_forkserver_preload(list(PRELOAD))
             # wait for the preload now (a child doing nothing): no deadline covers it
@@ -101,10 +100,8 @@ def death_message(exitcode: int | None) -> str:
 
 def requests(conn: Connection) -> Iterator:
     """Each request received on ``conn``, until ``None`` or the other end closes."""
-    try:
+    with suppress(EOFError):
         yield from iter(conn.recv, None)
-    except EOFError:
-        return
 
 
 def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
@@ -144,9 +141,8 @@ class Worker:
     ):
         ctx = ctx if ctx is not None else context()
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(
-            target=_serve, args=(child, dict(os.environ), tuple(imports)), daemon=True, name=name
-        )
+        args = (child, dict(os.environ), tuple(imports))
+        self.proc = ctx.Process(target=_serve, args=args, daemon=True, name=name)
         self.proc.start()
         child.close()
         self.ready = False
@@ -170,12 +166,10 @@ class Worker:
 
     def poll(self) -> tuple[str, object] | None:
         """``(status, payload)`` once the request is over, else ``None``."""
-        try:
+        with suppress(EOFError, OSError):
             if self.conn.poll():
                 kind, payload = self.conn.recv()
                 return {"exc": "error"}.get(kind, kind), payload
-        except (EOFError, OSError):
-            pass
         if not self.proc.is_alive():
             self.proc.join(2)
             message = death_message(self.proc.exitcode)
@@ -215,11 +209,9 @@ class Worker:
     def stop(self) -> None:
         """Ask the worker to end (it finishes nothing more), then :meth:`kill` what is left."""
         if self.alive and self.proc.is_alive():
-            try:
+            with suppress(OSError, ValueError):
                 self.conn.send(None)
                 self.proc.join(2)
-            except (OSError, ValueError):
-                pass
         self.kill()
 
 
@@ -227,10 +219,8 @@ def run_located(fn: Callable, arg) -> tuple:
     """``fn(arg)`` with the host and worker that ran it (on a Dask worker: its address)."""
     worker = f"pid{os.getpid()}"
     if "distributed" in sys.modules:
-        try:
+        with suppress(ValueError):  # not in a Dask worker
             worker = sys.modules["distributed"].get_worker().address
-        except ValueError:
-            pass
     return fn(arg), socket.gethostname(), worker
 
 
