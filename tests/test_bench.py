@@ -14,7 +14,8 @@ import pytest
 from qpbench.cli import main
 from qpbench.formats import write_problem_set
 from qpbench.harness.bench import sequences
-from qpbench.harness.results import TIMING_COLUMNS, columns
+from qpbench.harness.results import TIMING_COLUMNS
+from qpbench.harness.results import bench_columns as columns
 from qpbench.profiles import PROFILES
 
 PLUGIN = str(Path(fb.__file__).resolve())

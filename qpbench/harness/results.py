@@ -54,13 +54,10 @@ TAIL_COLUMNS = (
 )
 
 
-def columns() -> tuple[str, ...]:
+def bench_columns() -> tuple[str, ...]:
     """Columns of a bench CSV: lead, the per-tick metrics, tail."""
     return LEAD_COLUMNS + metric_columns() + TAIL_COLUMNS
 
-
-#: :func:`columns` under a name that a ``columns`` parameter does not hide.
-bench_columns = columns
 
 #: Columns that identify a bench result: a resumed run skips rows with a known key.
 KEY_COLUMNS = ("problem", "backend", "profile")
@@ -86,19 +83,18 @@ def cell(value) -> str:
     return text
 
 
-def format_rows(rows: list[dict], columns: tuple[str, ...] | None = None) -> bytes:
-    """CSV bytes of ``rows`` (no header) in ``columns`` order (default: the bench's)."""
+def format_rows(rows: list[dict], columns: tuple[str, ...]) -> bytes:
+    """CSV bytes of ``rows`` (no header) in ``columns`` order."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    names = bench_columns() if columns is None else columns
     for row in rows:
-        writer.writerow([cell(row.get(c)) for c in names])
+        writer.writerow([cell(row.get(c)) for c in columns])
     return buf.getvalue().encode("utf-8")
 
 
-def header_bytes(columns: tuple[str, ...] | None = None) -> bytes:
-    """The header line of a table of ``columns`` (default: the bench's)."""
-    return (",".join(bench_columns() if columns is None else columns) + "\n").encode("utf-8")
+def header_bytes(columns: tuple[str, ...]) -> bytes:
+    """The header line of a table of ``columns``."""
+    return (",".join(columns) + "\n").encode("utf-8")
 
 
 @dataclass

@@ -27,8 +27,6 @@ WORKER_CONFIG = {
 #: The plugin's equivalent of :data:`WORKER_CONFIG` on a running worker.
 QUIET_STOP = ("profile", "profile-cycle")
 QUIET_SLOW = {"tick": 1.0}
-#: The roles of a cluster that present a certificate.
-ROLES = ("client", "scheduler", "worker")
 
 
 def load_security(path: str | Path) -> Security:
@@ -66,9 +64,8 @@ def load_security(path: str | Path) -> Security:
     from distributed.security import Security
 
     ca, cert, key = files  # this machine's certificate for every role
-    pems = {
-        f"tls_{role}_{kind}": pem for role in ROLES for kind, pem in (("cert", cert), ("key", key))
-    }
+    pems = {f"tls_{role}_cert": cert for role in ("client", "scheduler", "worker")}
+    pems |= {f"tls_{role}_key": key for role in ("client", "scheduler", "worker")}
     return Security(tls_ca_file=ca, require_encryption=True, **pems)
 
 
