@@ -189,8 +189,9 @@ def needs_solver(record: ProblemRecord) -> bool:
 
 
 def _unconstrained(record: ProblemRecord) -> ReferenceSolution:
-    problem = solver_problem(record.problem, dense=True)  # no constraint at all: small
+    problem = solver_problem(record.problem)
     P, q = problem.P, problem.q
+    P = P.toarray() if hasattr(P, "toarray") else P  # no constraint at all: small
     x, *_ = np.linalg.lstsq(P, -q, rcond=None)
     if float(np.max(np.abs(P @ x + q))) > 1e-9 * max(1.0, float(np.max(np.abs(q)))):
         note = "no constraints and P x = -q has no solution: unbounded"

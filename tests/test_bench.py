@@ -14,7 +14,8 @@ import pytest
 from qpbench.cli import main
 from qpbench.formats import write_problem_set
 from qpbench.harness.bench import sequences
-from qpbench.harness.results import TIMING_COLUMNS, columns
+from qpbench.harness.results import TIMING_COLUMNS
+from qpbench.harness.results import bench_columns as columns
 from qpbench.profiles import PROFILES
 
 PLUGIN = str(Path(fb.__file__).resolve())
@@ -514,7 +515,7 @@ def test_closing_summary_counts_failures_and_unsuccessful_solves_by_backend(
 
 def test_deferred_parts_of_the_answer_are_inside_the_timed_region(two_scenarios, tmp_path):
     from qpbench.formats import load_problems
-    from qpbench.harness.timing import timed_call
+    from qpbench.harness.guard import timed_call
 
     problem = load_problems(two_scenarios).records[0].problem
     sol, ns = timed_call(get_backend_instance("faulty:lazy-duals"), problem)

@@ -369,7 +369,7 @@ def test_guard_parameters(tmp_path):
     assert cl.run_deadline("wall", 0.1) == cl.RUN_TIME_LIMIT_MIN_S
     assert cl.run_deadline("wall", 100.0) == 100.0 * cl.RUN_TIME_LIMIT_PER_SIM_S
     assert cl.run_deadline("wall", None, 7.0) == 7.0
-    from qpbench.harness.isolation import wants_worker
+    from qpbench.harness.guard import wants_worker
 
     risky = [wants_worker("auto", b) for b in ("faulty:hang", "daqp", "nosuch")]
     assert risky == [True, False, False]

@@ -7,7 +7,7 @@ crosses the infeasible start of the run (the first ticks: the key points
 start inside the safety distance) into feasible ticks, then jumps to the
 ticks where the wall's rows become active; in sequential mode it is one
 sequence, state carried across the jump. Repeats 2..R are solved by replicas
-of the backend fed the same problems (:mod:`qpbench.harness.timing`); the
+of the backend fed the same problems (:mod:`qpbench.harness.guard`); the
 statuses, iteration counts and ``x`` (bit for bit) kept with ``repeat=3``
 must be those of ``repeat=1``, and every row must say that its timed
 repeats did the kept solve's work (``repeat_exact``).

@@ -18,8 +18,7 @@ import numpy as np
 import pytest
 
 from qpbench.backends import get_backend, load_plugins, plugin_files
-from qpbench.harness.guard import LocalRunner, classify
-from qpbench.harness.isolation import IsolatedRunner
+from qpbench.harness.guard import IsolatedRunner, LocalRunner, classify
 from qpbench.harness.results import TIMING_COLUMNS
 
 PLUGIN = str(Path(fb.__file__).resolve())
@@ -189,7 +188,7 @@ def test_worker_times_inside_and_carries_state(records, plugin_loaded):
 _KERNELS_IN_WORKER = """
 import faulty_backends as fb
 from qpbench import jit
-from qpbench.harness.isolation import IsolatedRunner
+from qpbench.harness.guard import IsolatedRunner
 from qpbench.rnn import network as nw
 
 jit.warmup()

@@ -197,7 +197,7 @@ def test_a_metric_added_here_is_a_column_of_qpbench_bench(tmp_path, monkeypatch)
 
     from qpbench import metrics
     from qpbench.cli import main
-    from qpbench.harness.results import columns
+    from qpbench.harness.results import bench_columns as columns
 
     monkeypatch.setattr(metrics, "PER_TICK_METRICS", dict(metrics.PER_TICK_METRICS))
 

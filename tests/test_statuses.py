@@ -18,8 +18,7 @@ import pytest
 from qpbench import metrics, statuses
 from qpbench.backends import STATUSES, get_backend
 from qpbench.cli import main
-from qpbench.harness.guard import LocalRunner
-from qpbench.harness.isolation import IsolatedRunner
+from qpbench.harness.guard import IsolatedRunner, LocalRunner
 from qpbench.runner.process import death_message
 from qpbench.sim.loop import simulate
 

@@ -75,7 +75,7 @@ def test_phases_off_a_terminal_one_line_at_start_and_end(caplog):
 
     import pytest
 
-    from qpbench.harness.phases import Phases
+    from qpbench.harness.pipeline import Phases
 
     logger = logging.getLogger("qpbench.test_phases")
     phases = Phases(logger, bars=None)  # stderr is no terminal under pytest: no bars

@@ -174,7 +174,7 @@ class Backend:
 
     def fresh(self) -> Backend:
         """A new instance with this one's profile and settings, sharing no state with it
-        (``--repeat`` times several, :mod:`qpbench.harness.timing`)."""
+        (``--repeat`` times several, :mod:`qpbench.harness.guard`)."""
         return type(self)(profile=self.profile, **self.settings)
 
     def __repr__(self) -> str:

@@ -19,14 +19,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..formats import load_problems
+    from ..formats.records import box_bounds
     from ..selection import select_records
 
     ps = load_problems(args.path)
     table = []
     for r in select_records(ps.records, args.pattern, args.every, args.limit):
         n, m_eq, m_ineq = r.sizes
-        p = r.problem
-        n_box = sum(int((x is not None) and (abs(x) < float("inf")).sum()) for x in (p.lb, p.ub))
+        n_box = box_bounds(r.problem)
         table.append(
             dict(name=r.name, n=n, m_eq=m_eq, m_ineq=m_ineq, n_box=n_box, scenario=r.scenario)
             | dict(tick=r.tick, t=r.t, formulation=r.formulation)

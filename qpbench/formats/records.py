@@ -102,6 +102,12 @@ def problem_sizes(problem: qpsolvers.Problem) -> tuple[int, int, int]:
     return n, m_eq, m_ineq
 
 
+def box_bounds(problem: qpsolvers.Problem) -> int:
+    """Finite bounds (``lb`` and ``ub`` entries) of a problem."""
+    bounds = [b for b in (problem.lb, problem.ub) if b is not None]
+    return sum(int(np.isfinite(np.asarray(b, dtype=float)).sum()) for b in bounds)
+
+
 def solver_problem(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     """``problem`` with float64 arrays, sparse matrices as CSC (what a sparse API is given)."""
     parts = (getattr(problem, k) for k in ARRAY_KEYS)

@@ -1,12 +1,5 @@
-"""The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row each.
-
-:class:`BenchConfig` says what to run; :class:`Plan` checks it against the problem set and
-an existing output before anything is written; :func:`run_bench` solves each problem with every
-backend, in this process (:class:`~.guard.LocalRunner`) or in a worker
-(:class:`~.isolation.IsolatedRunner`), in an order drawn per problem (:func:`backend_order`),
-and appends the problem's rows before the next starts; :class:`BenchSummary` is what it did.
-Modes, resuming and the order: docs/architecture.md, "The bench".
-"""
+"""The per-tick benchmark (``qpbench bench``): every backend on every problem of a set, one row
+each (:func:`run_bench`); modes, resuming and the order: docs/architecture.md, "The bench"."""
 
 from __future__ import annotations
 
@@ -26,8 +19,7 @@ from ..exceptions import InputError, ParamError, positive_count, positive_second
 from ..profiles import Profile, get_profile
 from ..selection import parse_list
 from ..statuses import FAILURE_STATUSES
-from .guard import LocalRunner, Outcome
-from .isolation import ISOLATE, IsolatedRunner, wants_worker
+from .guard import ISOLATE, IsolatedRunner, LocalRunner, Outcome, wants_worker
 from .results import ExistingResults, InflightMarker, ResultsWriter, read_results, row_key
 
 if TYPE_CHECKING:
@@ -44,16 +36,11 @@ MODES = ("sequential", "independent")
 
 @dataclass
 class BenchConfig:
-    """What to run, checked when made.
-
-    ``profile``: a name or :class:`~qpbench.profiles.Profile`; ``repeat``: timed solves per
-    (problem, backend), the row has their min and median; ``mode``: :data:`MODES`;
-    ``time_limit``: per solve [s] (``None``: the profile's); ``isolate``: :data:`ISOLATE`
-    (:func:`~.isolation.wants_worker`); ``warmup``: discarded solves per backend first (the first
-    problem of each structure); ``settings``: solver settings of every backend,
-    ``backend_settings`` per backend name; ``seed``: of :func:`backend_order`;
-    ``memory_budget``: bytes a solve may need (``None``: :mod:`qpbench.memory`'s default).
-    """
+    """What to run, checked when made: ``profile``: a name or :class:`~qpbench.profiles.Profile`;
+    ``repeat``: timed solves per (problem, backend); ``mode``: :data:`MODES`; ``time_limit``: per
+    solve [s] (``None``: the profile's); ``isolate``: :data:`ISOLATE`; ``warmup``: discarded
+    solves first; ``settings``: of every backend, ``backend_settings`` per backend name;
+    ``seed``: of :func:`backend_order`; ``memory_budget``: bytes a solve may need."""
 
     backends: list[str]
     profile: str | Profile = "default"
@@ -80,7 +67,7 @@ class BenchConfig:
         seed = self.seed
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ParamError(f"seed must be an integer >= 0, got {seed!r}", key="seed")
-        parse_list(list(self.backends), "backends")  # none twice, not empty, as everywhere
+        parse_list(list(self.backends), "backends")
 
 
 def record_period(problem_set: ProblemSet) -> float | None:
@@ -95,7 +82,7 @@ def record_period(problem_set: ProblemSet) -> float | None:
 
 def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) -> dict:
     """Settings for backend ``name``: the run's, its own, and for an online backend (``rnn``)
-    ``dt`` = the time between two records (:func:`record_period`), which it integrates per call."""
+    ``dt`` = :func:`record_period`."""
     settings = {**config.settings, **config.backend_settings.get(name, {})}
     if backend_class(name).online and "dt" not in settings:
         period = record_period(problem_set)
@@ -105,11 +92,8 @@ def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) ->
 
 
 def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
-    """Indices of ``records`` grouped into sequences.
-
-    Sequential: one per scenario (first-appearance order), sorted by tick (stable); a record
-    without a scenario is a sequence of its own. Independent: one per record, in file order.
-    """
+    """Indices of ``records`` grouped into sequences: sequential, one per scenario sorted by tick
+    (a record without a scenario is one of its own); independent, one per record."""
     if mode == "independent":
         return [[i] for i in range(len(records))]
     groups: dict[object, list[int]] = {}
@@ -138,101 +122,11 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
         raise InputError(why + "use --force to start again", path=path, key=key)
 
 
-def _check_records(problem_set) -> list:
-    records = list(problem_set.records)
-    if not records:
-        raise InputError("problem set is empty", path=getattr(problem_set, "path", None))
-    names = [r.name for r in records]
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise InputError(
-            f"problem name '{dup}' appears twice; rows are keyed by name", path=problem_set.path
-        )
-    return records
-
-
-class Plan:
-    """A checked run: every check that can fail on user input, made before ``out`` is created
-    or changed. ``profile``: with the run's time limit; ``instances``: in-process backends;
-    ``skips``, ``notes``: :func:`skipped_solves`; ``resuming``: ``out`` is continued
-    (``existing``: its rows); ``learned``: backends seen to crash in this process (``marker``)."""
-
-    def __init__(
-        self,
-        problem_set: ProblemSet,
-        config: BenchConfig,
-        out: Path,
-        force: bool,
-        resume: bool,
-        make_parent: bool = True,
-    ):
-        from ..atomic import check_output
-        from ..backends import get_backend
-        from ..formats import content_sha256
-        from ..memory import resolve_budget
-
-        check_output(out, force=force, resume=resume, make_parent=make_parent)
-        profile = get_profile(config.profile)
-        self.profile = profile.with_time_limit(
-            config.time_limit if config.time_limit is not None else float(profile.time_limit)
-        )
-        self.records = records = _check_records(problem_set)
-        self.seqs = sequences(records, config.mode)
-        self.settings = {
-            name: backend_settings(name, config, problem_set) for name in config.backends
-        }
-        self.instances = {
-            name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
-        }
-        self.versions = {name: type(b).version() for name, b in self.instances.items()}
-        budget = config.memory_budget
-        self.budget = resolve_budget(None) if budget is None else budget
-        self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
-        self.sha = content_sha256(problem_set)
-        self.resuming = resume and out.exists() and not force
-        self.existing = ExistingResults([])
-        self.marker = InflightMarker(out)
-        self.learned: list[str] = []
-        if self.resuming:
-            self.existing = read_results(out, repair=False)
-            _check_existing(self.existing, out, config.mode, self.sha, int(config.seed))
-            self._learn_from_crash(config.isolate)
-
-    def _learn_from_crash(self, isolate: str) -> None:
-        """A backend that died in this process while solving (in-flight marker of the
-        interrupted run) goes to a worker from now on (under ``--isolate auto``)."""
-        self.learned, inflight, crash = self.marker.read()
-        done_keys = {row_key(r) for r in self.existing.rows}
-        if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
-            return
-        suspect = inflight[1]
-        if suspect in self.instances and suspect not in self.learned:
-            self.learned.append(suspect)
-            log.warning(
-                "the previous run died while %s was solving %s in this process (%s); %s",
-                suspect,
-                inflight[0],
-                crash.splitlines()[0],
-                "it runs in a worker process from now on"
-                if isolate == "auto"
-                else "use --isolate auto or always to isolate it",
-            )
-
-    def open_output(self, out: Path, force: bool) -> dict:
-        """Create or repair ``out`` (the first write of the run); the rows already done, by key."""
-        if self.resuming:
-            self.existing = read_results(out, repair=True)
-        elif force and out.exists():
-            out.unlink()
-            self.marker.path.unlink(missing_ok=True)
-        return {row_key(r): r for r in self.existing.rows}
-
-
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
-    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made (nonconvex,
-    :func:`qpbench.memory.skip_reason`) and ``record index -> warning`` (slightly indefinite)."""
+    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made and
+    ``record index -> warning`` (slightly indefinite)."""
     from ..formats.convexity import assess_convexity
     from ..memory import skip_reason
 
@@ -251,41 +145,9 @@ def skipped_solves(
     return skips, notes
 
 
-def references_for(
-    problem_set: ProblemSet, plan: Plan, references: list | Callable[[ProblemSet], list] | None
-) -> list:
-    """One reference per record: ``references`` as given, or computed by it (a function of a
-    problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
-    backend solves within the memory budget (the others' status is ``unknown``)."""
-    from ..memory import sparse_solver_bytes
-    from ..reference import ReferenceSolution, reference_solutions
-
-    if references is None or callable(references):
-        compute = references or reference_solutions
-        wanted = [
-            i
-            for i, r in enumerate(plan.records)
-            if any((i, name) not in plan.skips for name in plan.settings)
-            and sparse_solver_bytes(r.problem) <= plan.budget
-        ]
-        subset = replace(problem_set, records=[plan.records[i] for i in wanted])
-        computed = dict(zip(wanted, compute(subset))) if wanted else {}
-        references = [
-            computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
-            for i, r in enumerate(plan.records)
-        ]
-    if len(references) != len(plan.records):
-        raise InputError(
-            f"{len(references)} reference solutions for {len(plan.records)} problems",
-            path=problem_set.path,
-        )
-    return references
-
-
 def backend_order(problem: str, backends: Iterable[str], seed: int = DEFAULT_SEED) -> list[str]:
     """The order in which ``backends`` solve ``problem``: a permutation of the sorted names by
-    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``, so it depends on
-    the seed, the name and the set of backends only (a resumed run repeats it)."""
+    ``numpy.random.default_rng([seed, *SHA-256(problem name) as 4 words])``."""
     digest = hashlib.sha256(str(problem).encode("utf-8")).digest()
     words = [int.from_bytes(digest[i : i + 8], "little") for i in range(0, 32, 8)]
     names = sorted(backends)
@@ -306,11 +168,10 @@ def _structure(problem) -> tuple[bool, ...]:
 
 
 def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
-    """The first problem of the run, then the first of each other structure (:func:`_structure`):
-    a compiled kernel specialises on the parts present, and the warm-up pays for that."""
+    """The first problem of each structure, in run order, not ``skipped``."""
     out, seen = [], set()
-    for i in [seqs[0][0]] + [i for seq in seqs for i in seq]:
-        if i in skipped:  # a problem the backend does not solve is no warm-up either
+    for i in (i for seq in seqs for i in seq):
+        if i in skipped:
             continue
         key = _structure(records[i].problem)
         if key not in seen:
@@ -319,49 +180,145 @@ def _warmup_problems(records, seqs, skipped=frozenset()) -> list:
     return out
 
 
-def _n_box(problem) -> int:
-    """Finite bounds of a problem."""
-    bounds = [b for b in (problem.lb, problem.ub) if b is not None]
-    return sum(int(np.isfinite(np.asarray(b, dtype=float)).sum()) for b in bounds)
-
-
 class _BenchRun:
-    """The solving part of :func:`run_bench`: runners, warm-up, sequences, rows."""
+    """One run of :func:`run_bench`: made, it has made every check that can fail on user input,
+    before ``out`` is created or changed; ``learned``: backends seen to crash in this process."""
 
-    def __init__(self, plan: Plan, config: BenchConfig, references: list, done: dict, out: Path):
-        self.plan, self.config, self.references, self.done = plan, config, references, done
+    def __init__(
+        self,
+        problem_set: ProblemSet,
+        config: BenchConfig,
+        out: Path,
+        force: bool,
+        resume: bool,
+        make_parent: bool = True,
+    ):
+        from ..atomic import check_output
+        from ..backends import get_backend
+        from ..formats import content_sha256
+        from ..memory import default_budget
+
+        check_output(out, force=force, resume=resume, make_parent=make_parent)
+        self.config, self.out = config, out
+        profile = get_profile(config.profile)
+        self.profile = profile.with_time_limit(
+            config.time_limit if config.time_limit is not None else float(profile.time_limit)
+        )
+        self.records = records = list(problem_set.records)
+        if not records:
+            raise InputError("problem set is empty", path=getattr(problem_set, "path", None))
+        names = [r.name for r in records]
+        if len(set(names)) != len(names):
+            dup = next(n for n in names if names.count(n) > 1)
+            why = f"problem name '{dup}' appears twice; rows are keyed by name"
+            raise InputError(why, path=problem_set.path)
+        self.seqs = sequences(records, config.mode)
+        self.settings = {
+            name: backend_settings(name, config, problem_set) for name in config.backends
+        }
+        self.instances = {
+            name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
+        }
+        self.versions = {name: type(b).version() for name, b in self.instances.items()}
+        self.budget = default_budget() if config.memory_budget is None else config.memory_budget
+        self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
+        self.sha = content_sha256(problem_set)
+        self.resuming = resume and out.exists() and not force
+        self.existing = ExistingResults([])
+        self.marker = InflightMarker(out)
+        self.learned: list[str] = []
+        if self.resuming:
+            self.existing = read_results(out, repair=False)
+            _check_existing(self.existing, out, config.mode, self.sha, int(config.seed))
+            self._learn_from_crash()
+
+    def _learn_from_crash(self) -> None:
+        """A backend that died in this process while solving goes to a worker from now on."""
+        self.learned, inflight, crash = self.marker.read()
+        done_keys = {row_key(r) for r in self.existing.rows}
+        if not (inflight and crash and inflight not in done_keys and len(inflight) == 3):
+            return
+        suspect = inflight[1]
+        if suspect in self.instances and suspect not in self.learned:
+            self.learned.append(suspect)
+            then = "it runs in a worker process from now on"
+            if self.config.isolate != "auto":
+                then = "use --isolate auto or always to isolate it"
+            msg = "the previous run died while %s was solving %s in this process (%s); %s"
+            log.warning(msg, suspect, inflight[0], crash.splitlines()[0], then)
+
+    def start(self, problem_set: ProblemSet, references, force: bool) -> None:
+        """References, warm-up, then ``out`` created or repaired (the run's first write), runners."""
+        from ..jit import warmup_logged
+
+        config, out = self.config, self.out
+        references = self._references_for(problem_set, references)
+        log.info("%d problems; backends: %s", len(problem_set), ", ".join(config.backends))
+        warmup_logged(log, config.backends, loop=False)  # no compile inside a timed solve
+        if self.resuming:
+            self.existing = read_results(out, repair=True)
+        elif force and out.exists():
+            out.unlink()
+            self.marker.path.unlink(missing_ok=True)
+        self.references, self.done = references, {row_key(r): r for r in self.existing.rows}
         self.sequential = config.mode == "sequential"
-        self.pname = plan.profile.name
+        self.pname = self.profile.name
         self.runners = {name: self._runner(name) for name in config.backends}
         self.summary = BenchSummary(
             isolated=[n for n in config.backends if self.runners[n].isolated], seed=int(config.seed)
         )
         left = {
-            name: [(r.name, name, self.pname) not in done for r in plan.records]
+            name: [(r.name, name, self.pname) not in self.done for r in self.records]
             for name in config.backends
         }
         # per backend and sequence: keys still to run (to know when replay is needed)
-        self.todo = {name: [any(left[name][i] for i in seq) for seq in plan.seqs] for name in left}
+        self.todo = {name: [any(left[name][i] for i in seq) for seq in self.seqs] for name in left}
         self.total_todo = sum(sum(v) for v in left.values())
-        self.writer = ResultsWriter(out, new=not (plan.resuming and out.exists()))
+        self.writer = ResultsWriter(out, new=not (self.resuming and out.exists()))
         self.overheads: list[float] = []
         self.bar = None
 
-    def _runner(self, name: str, isolate: bool = False):
-        plan, config = self.plan, self.config
-        limit = plan.profile.time_limit
-        if isolate or wants_worker(config.isolate, name, plan.learned):
-            settings = plan.settings[name]
-            return IsolatedRunner(
-                name, plan.profile, settings, limit, self.sequential, config.repeat
+    def _references_for(
+        self, problem_set: ProblemSet, references: list | Callable[[ProblemSet], list] | None
+    ) -> list:
+        """One reference per record: ``references`` as given, or computed by it (a function of a
+        problem set; ``None``: :func:`qpbench.reference.reference_solutions`) for the records some
+        backend solves within the memory budget."""
+        from ..memory import sparse_solver_bytes
+        from ..reference import ReferenceSolution, reference_solutions
+
+        if references is None or callable(references):
+            compute = references or reference_solutions
+            wanted = [
+                i
+                for i, r in enumerate(self.records)
+                if any((i, name) not in self.skips for name in self.settings)
+                and sparse_solver_bytes(r.problem) <= self.budget
+            ]
+            subset = replace(problem_set, records=[self.records[i] for i in wanted])
+            computed = dict(zip(wanted, compute(subset))) if wanted else {}
+            references = [
+                computed[i] if i in computed else ReferenceSolution("unknown", name=r.name)
+                for i, r in enumerate(self.records)
+            ]
+        if len(references) != len(self.records):
+            raise InputError(
+                f"{len(references)} reference solutions for {len(self.records)} problems",
+                path=problem_set.path,
             )
-        return LocalRunner(plan.instances[name], limit, self.sequential, config.repeat)
+        return references
+
+    def _runner(self, name: str, isolate: bool = False):
+        limit, repeat = self.profile.time_limit, self.config.repeat
+        if isolate or wants_worker(self.config.isolate, name, self.learned):
+            settings = self.settings[name]
+            return IsolatedRunner(name, self.profile, settings, limit, self.sequential, repeat)
+        return LocalRunner(self.instances[name], limit, self.sequential, repeat)
 
     def run(self, progress: bool | str) -> None:
         """Warm up, then every sequence; the output and the workers are closed whatever happens."""
-        self.plan.marker.open(
-            self.plan.learned, catch_faults=any(not r.isolated for r in self.runners.values())
-        )
+        catch_faults = any(not r.isolated for r in self.runners.values())
+        self.marker.open(self.learned, catch_faults=catch_faults)
         if progress == "log" and self.total_todo:
             self.bar = LogBar(self.total_todo, self.writer.path.name)
         elif progress and self.total_todo:
@@ -371,12 +328,12 @@ class _BenchRun:
         try:
             if self.config.warmup:
                 self._warmup()
-            for s, seq in enumerate(self.plan.seqs):
+            for s, seq in enumerate(self.seqs):
                 self._sequence(s, seq)
-            self.plan.marker.remove()
+            self.marker.remove()
         finally:
             self.writer.close()
-            self.plan.marker.close()
+            self.marker.close()
             if self.bar is not None:
                 self.bar.close()
             for runner in self.runners.values():
@@ -385,9 +342,9 @@ class _BenchRun:
     def _warmup(self) -> None:
         for name, runner in self.runners.items():
             if any(self.todo[name]):
-                skipped = {i for i, b in self.plan.skips if b == name}
-                self.plan.marker.mark(("warmup", name, self.pname))
-                for problem in _warmup_problems(self.plan.records, self.plan.seqs, skipped):
+                skipped = {i for i, b in self.skips if b == name}
+                self.marker.mark(("warmup", name, self.pname))
+                for problem in _warmup_problems(self.records, self.seqs, skipped):
                     runner.warmup(problem)
 
     def _sequence(self, s: int, seq: list[int]) -> None:
@@ -400,14 +357,14 @@ class _BenchRun:
             for name in active:
                 self.runners[name].reset()
         for i in seq:
-            record = self.plan.records[i]
+            record = self.records[i]
             solved = []
             order = backend_order(record.name, self.config.backends, self.config.seed)
             for position, name in enumerate(order):
                 if not self.todo[name][s]:
                     continue
                 key = (record.name, name, self.pname)
-                skip = self.plan.skips.get((i, name))
+                skip = self.skips.get((i, name))
                 if key in self.done:
                     if self.sequential and skip is None:
                         self._replay(name, record, self.done[key]["status"], needs_reset)
@@ -426,7 +383,7 @@ class _BenchRun:
         if needs_reset[name]:
             runner.reset()
             needs_reset[name] = False
-        self.plan.marker.mark((f"replay {record.name}", name, self.pname))
+        self.marker.mark((f"replay {record.name}", name, self.pname))
         if runner.replay(record.problem) in FAILURE_STATUSES:
             log.warning("%s: replay of %s failed; state reset", name, record.name)
             needs_reset[name] = True
@@ -434,22 +391,19 @@ class _BenchRun:
     def _solve(self, name: str, record, needs_reset: dict):
         """One timed (repeated) solve; a backend that overran in this process moves to a worker
         (a solve in this process is never interrupted; a worker is killed at its deadline)."""
-        self.plan.marker.mark((record.name, name, self.pname))
+        self.marker.mark((record.name, name, self.pname))
         runner = self.runners[name]
         outcome = runner.solve(
             record.problem, repeat=self.config.repeat, reset_before=needs_reset[name]
         )
         needs_reset[name] = self.sequential and outcome.status in FAILURE_STATUSES
         if outcome.status == "time_limit" and not runner.isolated and self.config.isolate == "auto":
-            log.warning(
-                "%s overran its time limit on %s in this process; it runs in a worker process from now on",
-                name,
-                record.name,
-            )
+            msg = "%s overran its time limit on %s in this process; it runs in a worker process from now on"
+            log.warning(msg, name, record.name)
             runner.close()
             self.runners[name] = self._runner(name, isolate=True)
-            self.plan.learned.append(name)
-            self.plan.marker.isolate = list(self.plan.learned)
+            self.learned.append(name)
+            self.marker.isolate = list(self.learned)
             self.summary.isolated.append(name)
             needs_reset[name] = self.sequential
         return outcome
@@ -457,24 +411,22 @@ class _BenchRun:
     def _row(self, i: int, backend: str, outcome: Outcome, position: int) -> dict:
         """The CSV row of ``backend``'s ``outcome`` on record ``i``, scored against its reference."""
         from ..formats import problem_sizes
+        from ..formats.records import box_bounds
         from ..metrics import evaluate, metric_columns
 
-        record, profile = self.plan.records[i], self.plan.profile
+        record, profile = self.records[i], self.profile
         kept, status = outcome.solution, outcome.status
         if kept is not None:
             kept.found = status == "optimal"
         sol = None if status == "invalid" else kept
         metrics = evaluate(record, sol, self.references[i], profile.tolerance)
         times = outcome.wall_times_s
-        n, m_eq, m_ineq = problem_sizes(record.problem)
         error = outcome.error if status != "optimal" or outcome.error else None
-        if i in self.plan.notes and status != "skipped":
-            error = "; ".join(filter(None, [self.plan.notes[i], error]))
+        if i in self.notes and status != "skipped":
+            error = "; ".join(filter(None, [self.notes[i], error]))
         return {
             "problem": record.name,
-            "scenario": record.scenario,
-            "tick": record.tick,
-            "t": record.t,
+            **{k: getattr(record, k) for k in ("scenario", "tick", "t")},
             "backend": backend,
             "profile": profile.name,
             "mode": self.config.mode,
@@ -487,19 +439,15 @@ class _BenchRun:
             "solver_time_s": _float(getattr(sol, "solver_time_s", None)),
             "iterations": getattr(kept, "iterations", None),
             "error": error,
-            "state_reset": outcome.state_reset,
-            "isolated": outcome.isolated,
+            **{k: getattr(outcome, k) for k in ("state_reset", "isolated", "repeat_exact")},
             "position": position,
             "order_seed": int(self.config.seed),
             "repeat": len(times),
-            "repeat_exact": outcome.repeat_exact,
             "repeat_note": outcome.repeat_note or None,
-            "n": n,
-            "m_eq": m_eq,
-            "m_ineq": m_ineq,
-            "n_box": _n_box(record.problem),
-            "problem_set_sha256": self.plan.sha or "",
-            "backend_version": self.plan.versions.get(backend),
+            **dict(zip(("n", "m_eq", "m_ineq"), problem_sizes(record.problem))),
+            "n_box": box_bounds(record.problem),
+            "problem_set_sha256": self.sha or "",
+            "backend_version": self.versions.get(backend),
         }
 
     def _write_rows(self, i: int, solved: list) -> None:
@@ -521,7 +469,7 @@ class _BenchRun:
     def finish(self, started: float) -> BenchSummary:
         """The summary over every row of this run's keys (resumed and new)."""
         summary, pname = self.summary, self.pname
-        wanted = {(r.name, b, pname) for r in self.plan.records for b in self.config.backends}
+        wanted = {(r.name, b, pname) for r in self.records for b in self.config.backends}
         summary.backends = {name: BackendStats() for name in self.config.backends}
         for key, row in self.done.items():
             if key in wanted:
@@ -536,7 +484,7 @@ class _BenchRun:
 @dataclass
 class BackendStats:
     """One backend's rows (a line of the closing table): ``times_s``: ``wall_time_min_s`` [s];
-    ``failures``: :func:`is_failure` by status; ``isolated``: rows solved in a worker."""
+    ``failures``: failed solves by status; ``isolated``: rows solved in a worker."""
 
     rows: int = 0
     successes: int = 0
@@ -560,17 +508,18 @@ class BackendStats:
         v = _float(row.get("constraint_violation"))
         if v is not None and not math.isnan(v):
             self.violations.append(v)
-        status = str(row.get("status"))
-        if is_failure(status, row.get("reference_status") or None):
-            self.failures[status] = self.failures.get(status, 0) + 1
+        # a failed solve: a harness failure status, or not optimal where the reference is
+        status, reference = str(row.get("status")), row.get("reference_status")
+        if status in FAILURE_STATUSES or (reference == "optimal" and status != "optimal"):
+            if status != "skipped":
+                self.failures[status] = self.failures.get(status, 0) + 1
 
 
 @dataclass
 class BenchSummary:
-    """What a bench run did: each backend's :class:`BackendStats` over the rows of this run's
-    keys (resumed and new); ``elapsed_s`` [s] of this invocation; ``timed_s``: sum of the new
-    rows' ``wall_time_min_s`` [s]; ``overhead_median_s``: median over the new rows of
-    ``wall_time_min_s - solver_time_s`` [s]; ``isolated``: backends run in a worker."""
+    """What a bench run did: each backend's :class:`BackendStats` over this run's keys;
+    ``elapsed_s`` [s]; ``timed_s``: sum of the new rows' ``wall_time_min_s`` [s];
+    ``overhead_median_s``: median of ``wall_time_min_s - solver_time_s`` [s] over the new rows."""
 
     new_rows: int = 0
     backends: dict = field(default_factory=dict)
@@ -587,7 +536,7 @@ class BenchSummary:
 
     @property
     def failures(self) -> int:
-        """Rows counted as failed solves (:func:`is_failure`)."""
+        """Rows counted as failed solves."""
         return sum(s.n_failures for s in self.backends.values())
 
     def line(self) -> str:
@@ -595,10 +544,8 @@ class BenchSummary:
 
         def counted(label: str, counts: dict) -> str:
             counts = {b: n for b, n in counts.items() if n}
-            text = f"{sum(counts.values())} {label}"
-            return text + (
-                " (" + ", ".join(f"{b} {n}" for b, n in counts.items()) + ")" if counts else ""
-            )
+            each = ", ".join(f"{b} {n}" for b, n in counts.items())
+            return f"{sum(counts.values())} {label}" + (f" ({each})" if counts else "")
 
         failed = counted("failed solves", {b: s.n_failures for b, s in self.backends.items()})
         unsuccessful = {b: s.rows - s.successes for b, s in self.backends.items()}
@@ -629,8 +576,10 @@ class BenchSummary:
                     name + (" *" if st.isolated else ""),
                     str(st.rows),
                     f"{100.0 * st.successes / st.rows:.1f}" if st.rows else "-",
-                    f"{np.percentile(times, 50) * 1e6:.1f}" if times.size else "-",
-                    f"{np.percentile(times, 99) * 1e6:.1f}" if times.size else "-",
+                    *(
+                        f"{np.percentile(times, q) * 1e6:.1f}" if times.size else "-"
+                        for q in (50, 99)
+                    ),
                     f"{max(st.violations):.3g}" if st.violations else "-",
                     fails if not st.n_failures else f"{st.n_failures} ({fails})",
                 ]
@@ -646,22 +595,12 @@ class BenchSummary:
 
 
 def _truth(value) -> bool:
-    """A boolean cell: ``True`` / ``"True"`` (a resumed row) is true."""
     if isinstance(value, str):
         return value.strip().lower() in ("true", "1")
     return bool(value)
 
 
-def is_failure(status: str, reference_status: str | None) -> bool:
-    """A failed solve: a harness failure status, or not ``optimal`` where the reference is;
-    a ``skipped`` row (a solve not made, the reason in ``error``) is none."""
-    if status == "skipped":
-        return False
-    return status in FAILURE_STATUSES or (reference_status == "optimal" and status != "optimal")
-
-
 def _float(value) -> float | None:
-    """A number cell (a new row's value or a resumed row's string) as a float, else ``None``."""
     try:
         return float(value)
     except (TypeError, ValueError):
@@ -701,22 +640,12 @@ def run_bench(
     progress: bool | str = False,
     make_parent: bool = True,
 ) -> BenchSummary:
-    """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``.
-
-    ``force``: start ``out`` again; ``resume``: run only the keys it lacks. ``references``: one
-    per record, or a function of the set returning them (:func:`references_for`).
-    ``progress``: a bar on stderr (``"log"``: :class:`LogBar`). ``make_parent``: create
-    ``out``'s folder (the command line refuses a missing one instead).
-    """
+    """Benchmark ``config.backends`` on ``problem_set``; rows to ``out``. ``force``: start ``out``
+    again; ``resume``: run only the keys it lacks; ``references``: one per record, or a function
+    of the set returning them; ``progress``: a bar on stderr (``"log"``: :class:`LogBar`);
+    ``make_parent``: create ``out``'s folder."""
     started = time.perf_counter()
-    out = Path(out)
-    plan = Plan(problem_set, config, out, force, resume, make_parent)
-    from ..jit import warmup_logged
-
-    references = references_for(problem_set, plan, references)
-    log.info("%d problems; backends: %s", len(problem_set), ", ".join(config.backends))
-    warmup_logged(log, config.backends, loop=False)  # no compile inside a timed solve
-    done = plan.open_output(out, force)  # from here on, the output is created or changed
-    bench_run = _BenchRun(plan, config, references, done, out)
+    bench_run = _BenchRun(problem_set, config, Path(out), force, resume, make_parent)
+    bench_run.start(problem_set, references, force)
     bench_run.run(progress)
     return bench_run.finish(started)

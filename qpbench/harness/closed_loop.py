@@ -1,14 +1,6 @@
-"""Closed-loop runs: one (scenario, backend) run made into a row, and the table of many.
-
-:func:`run_row` is the one closed-loop run of every command (``closed-loop``, ``run``, ``sweep``):
-a discarded warm-up of :data:`WARMUP_TICKS` ticks, the timed run
-(:func:`qpbench.sim.loop.simulate`) and its row; its :class:`LoopTask` is plain picklable data.
-:func:`run_closed_loop` makes every pair into ``OUT/closed_loop.csv`` (rewritten atomically after
-each run) and ``OUT/logs/<scenario>__<backend>.parquet``, an isolated run in a worker process of
-its own with a deadline (:func:`run_deadline`). A row is the run's summary
-(:mod:`qpbench.sim.summary`) under :data:`TABLE_NAMES`, lists and dicts as JSON text:
-:data:`COLUMNS` first, then ``isolated``, ``run_budget_s`` [s] and the other figures sorted by
-name; its statuses: docs/architecture.md, "Closed-loop runs".
+"""Closed-loop runs: :func:`run_row`, the one (scenario, backend) run of every command, made into
+a row (the run's summary under :data:`TABLE_NAMES`), and :func:`run_closed_loop`, the table of
+many (``OUT/closed_loop.csv``, ``OUT/logs/``); statuses: docs/architecture.md, "Closed-loop runs".
 """
 
 from __future__ import annotations
@@ -19,7 +11,7 @@ import math
 import re
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +25,7 @@ from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.verdict import BAD_VERDICTS, failed_run
 from ..statuses import describe_exception
-from .isolation import ISOLATE, wants_worker
+from .guard import ISOLATE, wants_worker
 
 log = logging.getLogger("qpbench.harness")
 
@@ -91,14 +83,11 @@ TABLE_NAMES = {"duration": "duration_s"}
 
 @dataclass(frozen=True)
 class LoopTask:
-    """One closed-loop run, as plain picklable data.
-
-    ``scenario``: a name or TOML path (with ``scenario_text``, the path naming that text).
-    ``duration``, ``deadline`` (per tick), ``run_budget`` (wall time of the timed run): [s] or
-    ``None``. ``overrides``: ``(dotted key, value)`` pairs (``--set``). ``out``: the folder whose
-    ``logs/`` and ``figure_logs/`` get the run's logs (``None``: none written). ``plugins``: files
-    to load first. ``bands``: ``(force [N], tracking [m])``: add the time-to-converge figures.
-    """
+    """One closed-loop run, as plain picklable data: ``scenario``: a name or TOML path (with
+    ``scenario_text``, the path naming that text); ``duration``, ``deadline`` (per tick),
+    ``run_budget`` (wall time of the timed run): [s] or ``None``; ``overrides``: ``--set`` pairs;
+    ``out``: the folder of the run's logs (``None``: none written); ``plugins``: files to load
+    first; ``bands``: ``(force [N], tracking [m])`` of the time-to-converge figures."""
 
     scenario: str
     backend: str
@@ -114,55 +103,46 @@ class LoopTask:
 
 
 def run_row(task: LoopTask) -> dict:
-    """The row of one run (module docstring); a run that raises is an ``error`` row."""
-    try:
-        from ..backends import load_plugins
-
-        load_plugins(list(task.plugins))
-        return _run(task)
-    except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
-        return failure_row(task, "error", describe_exception(exc), warn=True)
-
-
-def _run(task: LoopTask) -> dict:
-    """Warm-up, timed run, row; its logs written when ``task.out`` is set."""
+    """The row of one run: a warm-up of :data:`WARMUP_TICKS` ticks, the timed run, its figures,
+    its logs written when ``task.out`` is set; a run that raises is an ``error`` row."""
+    from ..backends import load_plugins
     from ..jit import warmup
+    from ..sim.figure_log import figure_log_path, write_figure_log
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario, parse_scenario
     from ..sim.summary import convergence_figures
 
-    if task.scenario_text is None:
-        scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
-    else:
-        scenario = parse_scenario(task.scenario_text, path=task.scenario)
-    warmup([task.backend])  # loads what the parent compiled (qpbench.jit), before the clock
-    terms = dict(formulation=task.formulation, deadline=task.deadline)
-    simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
-    result = simulate(
-        scenario, task.backend, duration=task.duration, wall_budget_s=task.run_budget, **terms
-    )
-    summary = dict(result.summary)
-    if task.bands is not None:
-        summary.update(convergence_figures(result.log, *task.bands))
-    row = {
-        "scenario": task.scenario,
-        "backend": task.backend,
-        "status": "budget" if summary.get("stopped_early") else "ok",
-        "error": "",
-        "log_file": "",
-    }
-    for key, value in summary.items():
-        if key not in ("scenario", "backend"):
-            row[TABLE_NAMES.get(key, key)] = cell(value)
-    if task.out is not None:
-        from ..sim.figure_log import figure_log_path, write_figure_log
-
-        name = log_name(task.scenario, task.backend)
-        with atomic_path(Path(task.out) / LOG_DIR / name) as tmp:
-            result.log.to_parquet(tmp, index=False)
-        write_figure_log(result.log, figure_log_path(Path(task.out) / LOG_DIR / name))
-        row["log_file"] = f"{LOG_DIR}/{name}"
-    return row
+    try:
+        load_plugins(list(task.plugins))
+        if task.scenario_text is None:
+            scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
+        else:
+            scenario = parse_scenario(task.scenario_text, path=task.scenario)
+        warmup([task.backend])
+        terms = dict(formulation=task.formulation, deadline=task.deadline)
+        simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
+        result = simulate(
+            scenario, task.backend, duration=task.duration, wall_budget_s=task.run_budget, **terms
+        )
+        summary = dict(result.summary)
+        if task.bands is not None:
+            summary.update(convergence_figures(result.log, *task.bands))
+        status = "budget" if summary.get("stopped_early") else "ok"
+        row = dict(
+            scenario=task.scenario, backend=task.backend, status=status, error="", log_file=""
+        )
+        for key, value in summary.items():
+            if key not in ("scenario", "backend"):
+                row[TABLE_NAMES.get(key, key)] = cell(value)
+        if task.out is not None:
+            name = log_name(task.scenario, task.backend)
+            with atomic_path(Path(task.out) / LOG_DIR / name) as tmp:
+                result.log.to_parquet(tmp, index=False)
+            write_figure_log(result.log, figure_log_path(Path(task.out) / LOG_DIR / name))
+            row["log_file"] = f"{LOG_DIR}/{name}"
+        return row
+    except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
+        return failure_row(task, "error", describe_exception(exc), warn=True)
 
 
 def cell(value: object) -> object:
@@ -181,7 +161,7 @@ def log_name(scenario: str, backend: str) -> str:
 
 def failure_fields(status: str, message: str) -> dict:
     """Fields of a row without a result: ``status``, why (``error``) and its verdict (none for
-    ``skipped`` or ``invalid_scenario``; else ``incomplete``, nothing timed, nothing overridden)."""
+    ``skipped`` or ``invalid_scenario``)."""
     message = " ".join(str(message).split())
     if status in ("skipped", "invalid_scenario"):
         return dict(status=status, error=message, verdict="", verdict_reasons="")
@@ -200,8 +180,7 @@ def failure_fields(status: str, message: str) -> dict:
 
 
 def failure_row(task: LoopTask, status: str, message: str, warn: bool = False) -> dict:
-    """The table row of a run without a result (:func:`failure_fields`), no figures; ``warn``:
-    the message logged as a warning."""
+    """The table row of a run without a result (:func:`failure_fields`); ``warn``: log it."""
     if warn:
         log.warning("closed loop %s with %s: %s", task.scenario, task.backend, message)
     row = {c: math.nan for c in COLUMNS}
@@ -235,9 +214,8 @@ def run_deadline(
 
 @dataclass
 class ClosedLoopOutcome:
-    """What :func:`run_closed_loop` did: the table, its failed runs (``errors``), the runs made now
-    (``ran``) and kept (``skipped``), and the rows whose verdict is in ``BAD_VERDICTS`` or whose
-    run failed (``not_ok``)."""
+    """What :func:`run_closed_loop` did: the table, its failed runs, the runs made now and kept,
+    and the rows whose verdict is bad or whose run failed (``not_ok``)."""
 
     table: pd.DataFrame
     csv_path: Path
@@ -266,15 +244,12 @@ def run_closed_loop(
     budgets: dict[str, float] | None = None,
     overrides: dict | None = None,
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop into ``out`` (module docstring).
-
+    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker:
     ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
-    ``resume`` keeps the ``ok`` rows made under the same terms (formulation, duration, budget,
-    ``overrides``) and the rows of pairs not asked; ``force`` removes table and logs; ``skip``:
-    backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's deadline [s];
-    ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's in ``budgets``);
-    ``on_row`` is called with each row once written. Arguments are checked before anything runs.
-    """
+    ``resume`` keeps the ``ok`` rows made under the same terms and the rows of pairs not asked;
+    ``skip``: backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's
+    deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's
+    in ``budgets``); ``on_row`` is called with each row once written."""
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
@@ -300,12 +275,11 @@ def run_closed_loop(
         if on_row is not None:
             on_row(row)
 
-    terms = LoopTask("", "", formulation, duration, deadline, overrides=tuple(overrides.items()))
-    terms = replace(terms, out=str(out), plugins=tuple(plugin_files()))  # workers load them too
+    pairs, plugins = tuple(overrides.items()), tuple(plugin_files())  # workers load them too
     items = [
         (
             (s, b),
-            replace(terms, scenario=s, backend=b, run_budget=budget(b)),
+            LoopTask(s, b, formulation, duration, deadline, budget(b), pairs, str(out), plugins),
             run_deadline(s, duration, run_time_limit) if wants_worker(isolate, b) else None,
         )
         for s, b in todo
@@ -329,6 +303,8 @@ def run_closed_loop(
 def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
     """Each run in a worker process of its own, ``jobs`` at a time: a run that dies or overruns its
     deadline is a ``crashed`` or ``time_limit`` row and takes no other run's row with it."""
+    from ..sim.figure_log import FIGURE_LOG_DIR
+
     tasks = {key: (task, deadline_s) for key, task, deadline_s in items}
     for done in run_tasks(run_row, items, jobs, fresh=True, name="qpbench-closed-loop"):
         if done.status is None:
@@ -339,18 +315,11 @@ def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
             message = f"no result after {deadline_s:.3g} s (run time limit); worker killed"
         else:
             message = f"{done.lost} during the closed-loop run"
-        _drop_partial_logs(task)
+        name = log_name(task.scenario, task.backend)
+        for folder in (LOG_DIR, FIGURE_LOG_DIR):  # the temporary logs the worker may have left
+            for tmp in (Path(task.out) / folder).glob(f".{name}.*.tmp"):
+                tmp.unlink(missing_ok=True)
         emit(done.key, failure_row(task, done.status, message, warn=True))
-
-
-def _drop_partial_logs(task: LoopTask) -> None:
-    """Remove the temporary logs a dead worker may have left (never a complete one)."""
-    from ..sim.figure_log import FIGURE_LOG_DIR
-
-    name = log_name(task.scenario, task.backend)
-    for folder in (LOG_DIR, FIGURE_LOG_DIR):
-        for tmp in (Path(task.out) / folder).glob(f".{name}.*.tmp"):
-            tmp.unlink(missing_ok=True)
 
 
 def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dict) -> None:
@@ -437,16 +406,13 @@ def _write_table(rows: list[dict], path: Path) -> None:
 
 def log_row(logger: logging.Logger, row: dict) -> None:
     """One line per run: INFO when its verdict is ``ok`` (or skipped), else WARNING with why."""
-    verdict = row.get("verdict")
-    verdict = verdict if isinstance(verdict, str) else ""
-    reasons = row.get("verdict_reasons")
-    reasons = reasons if isinstance(reasons, str) else ""
+    keys = ("verdict", "verdict_reasons", "error")
+    verdict, reasons, error = (row[k] if isinstance(row.get(k), str) else "" for k in keys)
     where = f"{row['scenario']} / {row['backend']}"
     if verdict and verdict != "ok":
         logger.warning("%s: %s (%s)", where, verdict, reasons or row.get("status"))
         return
     status = str(row.get("status"))
-    error = row.get("error") if isinstance(row.get("error"), str) else ""
     detail = "; ".join(
         x for x in (status if status != "ok" and verdict else "", error, reasons) if x
     )

@@ -1,13 +1,5 @@
-"""The main job (``qpbench run``): problem sets, bench, closed loop and report into one folder.
-
-:func:`run_all` with a :class:`RunConfig`, each step a phase (:class:`~.phases.Phases`): compile
-the chosen backends' kernels; regenerate a missing problem set of the paper's four scenarios;
-solve the references; bench every ``bench_every``-th problem of each set (``OUT/bench/``); run
-every scenario with every backend in the closed loop (``OUT/closed_loop.csv``), each within a
-wall-time budget decided from its bench time (:func:`closed_loop_budgets`); write the report.
-The run works in ``OUT/.partial/`` and then replaces the previous run's :data:`OUTPUTS`, each by
-a rename (docs/architecture.md, "The run pipeline").
-"""
+"""The main job (``qpbench run``, :func:`run_all`): problem sets, bench, closed loop and report
+into one folder (docs/architecture.md, "The run pipeline"), told phase by phase (:class:`Phases`)."""
 
 from __future__ import annotations
 
@@ -16,8 +8,10 @@ import logging
 import math
 import os
 import shutil
+import sys
 import time
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -54,6 +48,57 @@ REPEAT = 3
 DUMP_BACKENDS = ("qpsolvers:daqp", "clarabel", "proxqp", "qpsolvers:quadprog", "osqp")
 
 
+@dataclass
+class Phase:
+    """One phase in progress: :meth:`update` counts work done."""
+
+    name: str
+    bar: object | None = None
+
+    def update(self, n: int = 1) -> None:
+        if self.bar is not None:
+            self.bar.update(n)
+
+    def describe(self, text: str) -> None:
+        """Show what is being done now beside the bar."""
+        if self.bar is not None:
+            self.bar.set_postfix_str(text, refresh=False)
+
+
+@dataclass
+class Phases:
+    """The phases of a job, each timed and told; ``bars``: ``None`` when stderr is a terminal,
+    ``False`` never; ``times_s``: wall time of each finished phase [s], in the order run."""
+
+    log: logging.Logger
+    bars: bool | None = None
+    times_s: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.bars is None:
+            self.bars = sys.stderr.isatty()
+
+    @contextmanager
+    def phase(self, name: str, total: int | None = None, unit: str = "step", bar: bool = True):
+        """Run a phase, yielding a :class:`Phase`; ``total``: the work units it counts (the bar's
+        length); ``bar=False``: its code draws one."""
+        self.log.info("%s: started", name)
+        progress = None
+        if self.bars and bar:
+            from tqdm import tqdm
+
+            progress = tqdm(total=total, unit=unit, desc=name, leave=False, file=sys.stderr)
+        start = time.perf_counter()
+        try:
+            yield Phase(name, progress)
+        finally:
+            if progress is not None:
+                progress.close()
+        seconds = time.perf_counter() - start
+        self.times_s[name] = round(self.times_s.get(name, 0.0) + seconds, 1)
+        self.log.info("%s: done in %.1f s", name, seconds)
+
+
 def default_jobs() -> int:
     """Closed-loop runs at once by default: :data:`LOOP_JOBS`, at most one per core."""
     return max(1, min(LOOP_JOBS, os.cpu_count() or 1))
@@ -62,9 +107,9 @@ def default_jobs() -> int:
 @dataclass
 class RunConfig:
     """What ``qpbench run`` does: ``problems``: folder of the sets ``<problems>/<scenario>/``;
-    ``duration``: closed-loop time per run [s] (``None``: the scenario's; the bench then takes the
-    problems with ``t < duration``); ``run_budget``: most wall time of a closed-loop run [s];
-    ``memory_budget``: bytes a bench solve may need; ``on_row``: called with each closed-loop row."""
+    ``duration``: closed-loop time per run [s] (``None``: the scenario's); ``run_budget``: most
+    wall time of a closed-loop run [s]; ``memory_budget``: bytes a bench solve may need;
+    ``on_row``: called with each closed-loop row."""
 
     out: Path
     problems: Path
@@ -86,18 +131,15 @@ class RunConfig:
             self.duration = positive_seconds(self.duration, "--duration")
         if self.run_budget is not None:
             self.run_budget = positive_seconds(self.run_budget, "--run-budget")
-        for key, value in (
-            ("--bench-every", self.bench_every),
-            ("--repeat", self.repeat),
-            ("--jobs", self.jobs),
-        ):
-            positive_count(value, key)
+        positive_count(self.bench_every, "--bench-every")
+        positive_count(self.repeat, "--repeat")
+        positive_count(self.jobs, "--jobs")
 
 
 @dataclass
 class RunOutcome:
     """What :func:`run_all` did: failed solves, failed runs and runs that failed their verdict,
-    the report, the time it took [s], and the bench's failed solves alone (``failed_solves``)."""
+    the report, the time it took [s], and the bench's failed solves alone."""
 
     failures: int
     report: Path
@@ -106,8 +148,7 @@ class RunOutcome:
 
 
 def _check_out(out: Path, force: bool) -> None:
-    """Refuse to replace :data:`OUTPUTS` that a previous ``qpbench run`` did not write
-    (no ``out/run.json``) unless ``force``."""
+    """Refuse to replace :data:`OUTPUTS` that ``qpbench run`` did not write, unless ``force``."""
     from ..atomic import check_folder
     from ..exceptions import OutputExistsError
 
@@ -123,7 +164,6 @@ def _check_out(out: Path, force: bool) -> None:
 
 
 def _dump_backend() -> str:
-    """The first available of :data:`DUMP_BACKENDS`."""
     from ..backends import backend_names
     from ..exceptions import BackendNotFound
 
@@ -138,8 +178,7 @@ def _dump_backend() -> str:
 def bench_subset(
     problem_set: ProblemSet, duration: float | None, every: int = 1
 ) -> tuple[ProblemSet, list]:
-    """Every ``every``-th problem with ``t < duration``, and their references (the set's
-    generator stride multiplied, so an online backend integrates the time between two)."""
+    """Every ``every``-th problem with ``t < duration``, and their references."""
     from ..reference import reference_solutions
     from ..selection import select_set
 
@@ -150,8 +189,7 @@ def bench_subset(
 
 
 def _compress_bench(bench_dir: Path) -> None:
-    """Gzip the bench CSVs of a completed run (``qpbench report`` reads them as they are); an
-    interrupted one keeps them plain and appendable for ``--resume``."""
+    """Gzip the bench CSVs of a completed run (an interrupted one keeps them appendable)."""
     import gzip
 
     for csv_path in sorted(bench_dir.glob("*.csv")):
@@ -163,13 +201,12 @@ def _compress_bench(bench_dir: Path) -> None:
 
 
 def run_all(config: RunConfig) -> RunOutcome:
-    """Problem sets, bench, closed loop and report (module docstring); outputs replaced at the
-    end; ``run.json`` keeps the phases' wall times (``phase_wall_time_s``) and the run's."""
+    """Problem sets, bench, closed loop and report, each a phase, in ``OUT/.partial/``; then the
+    previous run's :data:`OUTPUTS` are replaced, each by a rename."""
     from ..formats import load_problems
     from ..jit import warmup_logged
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario, paper_scenarios
-    from .phases import Phases
 
     started = time.perf_counter()
     out, problems = Path(config.out), Path(config.problems)
@@ -220,8 +257,8 @@ def run_all(config: RunConfig) -> RunOutcome:
 def _bench(
     config: RunConfig, subsets: dict, bench_dir: Path, phases
 ) -> tuple[int, dict[str, float]]:
-    """Bench every backend on each scenario's problems (one phase per set): the failed solves,
-    and each benched backend's median over all sets of ``wall_time_min_s`` [s]."""
+    """Bench every backend on each scenario's problems: the failed solves, and each backend's
+    median over all sets of ``wall_time_min_s`` [s]."""
     import statistics
 
     from .bench import BenchConfig, run_bench
@@ -252,14 +289,10 @@ def _bench(
 
 
 def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict[str, float]:
-    """Each backend's closed-loop wall-time budget [s], from its per-tick time in this run's bench.
-
-    A bench median ``t`` predicts a run of ``ticks * t`` (the longest chosen scenario's ticks):
-    the budget is :data:`BUDGET_MARGIN` times that, within :data:`BUDGET_FLOOR_S` and
-    ``run_budget``, so that a backend that keeps up finishes. One whose prediction exceeds
-    ``run_budget`` cannot finish and gets :data:`CUT_BUDGET_S`; one without a bench time the
-    ``run_budget``; ``run_budget`` ``None``: ``{}``.
-    """
+    """Each backend's closed-loop wall-time budget [s]: a bench median ``t`` predicts a run of
+    ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
+    :data:`BUDGET_FLOOR_S` and ``run_budget``; :data:`CUT_BUDGET_S` where the prediction exceeds
+    ``run_budget``; ``run_budget`` without a bench time."""
     if config.run_budget is None:
         return {}
     from ..sim.scenario import load_scenario
@@ -308,7 +341,6 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             config.backends,
             staging,
             duration=config.duration,
-            formulation="paper",
             force=not config.resume,
             resume=config.resume,
             jobs=config.jobs,
@@ -320,7 +352,7 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
 
 
 def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dict) -> dict:
-    """``run.json``: what was asked, each backend's closed-loop budget, which runs were cut or not ok."""
+    """``run.json``: what was asked, the budgets, which runs were cut or not ok."""
     stopped = table[table["status"] == "budget"]
     return {
         "command": "qpbench run",
@@ -329,7 +361,6 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dic
         "backends": config.backends,
         "duration_s": config.duration,
         "run_budget_s": config.run_budget,
-        # each backend's budget, decided from its per-tick time in this run's bench
         "closed_loop_budget_s": budgets,
         "bench_every": config.bench_every,
         "closed_loop_stopped_by_budget": {

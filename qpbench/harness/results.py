@@ -1,10 +1,5 @@
-"""The results table: typed rows appended and ``fsync``-ed as they are produced, resumable.
-
-One row per key (a bench's ``(problem, backend, profile)``; other studies pass their own
-columns), one physical line each; each batch is one ``write`` on an ``O_APPEND`` descriptor,
-``fsync``-ed before the next, so a kill leaves at most one half-written last line, which
-:func:`read_results` drops (and, with ``repair``, truncates) before a run resumes.
-"""
+"""The results table: rows appended and ``fsync``-ed as they are produced, one line each, so a
+kill leaves at most one half-written last line, which :func:`read_results` drops."""
 
 from __future__ import annotations
 
@@ -13,6 +8,7 @@ import io
 import logging
 import math
 import os
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,13 +54,10 @@ TAIL_COLUMNS = (
 )
 
 
-def columns() -> tuple[str, ...]:
-    """Columns of a bench CSV: lead, the per-tick metrics (:func:`~qpbench.metrics.metric_columns`), tail."""
+def bench_columns() -> tuple[str, ...]:
+    """Columns of a bench CSV: lead, the per-tick metrics, tail."""
     return LEAD_COLUMNS + metric_columns() + TAIL_COLUMNS
 
-
-#: :func:`columns` under a name that a ``columns`` parameter does not hide.
-bench_columns = columns
 
 #: Columns that identify a bench result: a resumed run skips rows with a known key.
 KEY_COLUMNS = ("problem", "backend", "profile")
@@ -74,7 +67,7 @@ TIMING_COLUMNS = ("wall_time_min_s", "wall_time_median_s", "solver_time_s", "iso
 
 
 def row_key(row: dict) -> tuple[str, str, str]:
-    """``(problem, backend, profile)`` of a row (values as strings)."""
+    """The key of a row (values as strings)."""
     return tuple(str(row[c]) for c in KEY_COLUMNS)
 
 
@@ -90,24 +83,23 @@ def cell(value) -> str:
     return text
 
 
-def format_rows(rows: list[dict], columns: tuple[str, ...] | None = None) -> bytes:
-    """CSV bytes of ``rows`` (no header), one line each, in ``columns`` order (default: the bench's)."""
+def format_rows(rows: list[dict], columns: tuple[str, ...]) -> bytes:
+    """CSV bytes of ``rows`` (no header) in ``columns`` order."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    names = bench_columns() if columns is None else columns
     for row in rows:
-        writer.writerow([cell(row.get(c)) for c in names])
+        writer.writerow([cell(row.get(c)) for c in columns])
     return buf.getvalue().encode("utf-8")
 
 
-def header_bytes(columns: tuple[str, ...] | None = None) -> bytes:
-    """The header line of a table of ``columns`` (default: the bench's)."""
-    return (",".join(bench_columns() if columns is None else columns) + "\n").encode("utf-8")
+def header_bytes(columns: tuple[str, ...]) -> bytes:
+    """The header line of a table of ``columns``."""
+    return (",".join(columns) + "\n").encode("utf-8")
 
 
 @dataclass
 class ExistingResults:
-    """What a resumed run finds: complete rows (dicts of strings, file order), partial lines dropped."""
+    """What a resumed run finds: complete rows (dicts of strings), partial lines dropped."""
 
     rows: list[dict]
     dropped: int = 0
@@ -119,31 +111,24 @@ def read_results(
     columns: tuple[str, ...] | None = None,
     kind: str = "bench",
 ) -> ExistingResults:
-    """Read a table written by :class:`ResultsWriter` (default: a bench CSV).
-
-    A last line without its newline or a trailing line with the wrong number of fields is
-    dropped with a warning; ``repair=True`` also truncates the file to its last complete line.
-    :class:`InputError` if the header is not ``columns`` or a malformed line is followed by good ones.
-    """
+    """Read a table written by :class:`ResultsWriter` (default: a bench CSV): a last line without
+    its newline or trailing lines with the wrong number of fields are dropped (``repair``: cut
+    from the file too); :class:`InputError` for another header or a malformed line inside."""
     path = Path(path)
     names = bench_columns() if columns is None else tuple(columns)
     data = path.read_bytes()
     dropped = 0
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
-        log.warning(
-            "%s: dropping a half-written last line (%d bytes) left by an interrupted run",
-            path,
-            len(data) - cut,
-        )
+        msg = "%s: dropping a half-written last line (%d bytes) left by an interrupted run"
+        log.warning(msg, path, len(data) - cut)
         data = data[:cut]
         dropped += 1
         if repair:
             os.truncate(path, cut)
     if not data:
         if repair:  # killed before the header was complete: start the file again
-            with ResultsWriter(path, new=True, columns=names):
-                pass
+            ResultsWriter(path, new=True, columns=names).close()
         return ExistingResults([], dropped)
     lines = data.split(b"\n")[:-1]
     header, *body = (next(csv.reader([ln.decode("utf-8", errors="replace")])) for ln in lines)
@@ -162,9 +147,8 @@ def read_results(
             "malformed line in the middle of the file; use --force to start again", path=path
         )
     for fields in body[n:]:
-        log.warning(
-            "%s: dropping a malformed line (%d fields, expected %d)", path, len(fields), len(names)
-        )
+        msg = "%s: dropping a malformed line (%d fields, expected %d)"
+        log.warning(msg, path, len(fields), len(names))
     if repair and n < len(body):
         os.truncate(path, sum(len(ln) + 1 for ln in lines[: n + 1]))
     rows = [dict(zip(names, fields)) for fields in body[:n]]
@@ -211,20 +195,18 @@ class ResultsWriter:
 
 
 class InflightMarker:
-    """A side file naming the solve in progress, and what killed the run (docs/architecture.md,
-    "The bench"): line 1, the comma-separated backends to isolate; line 2, the key
-    ``problem<TAB>backend<TAB>profile``; then the :mod:`faulthandler` traceback, if any. ``out``:
-    the output whose marker it is (``.<out>.inflight`` beside it)."""
+    """A side file ``.<out>.inflight`` naming the solve in progress and what killed the run: line
+    1, the backends to isolate; line 2, the key, tab-separated; then the :mod:`faulthandler`
+    traceback, if any."""
 
     def __init__(self, out: str | Path):
         self.path = Path(out).with_name(f".{Path(out).name}.inflight")
-        self.isolate: list[str] = []
         self._fd = None
         self._fault_fd = None
         self._faulthandler_was = None
 
     def read(self) -> tuple[list[str], tuple[str, ...] | None, str]:
-        """``(backends to isolate, last in-flight key or None, fatal-error text)`` of a previous run."""
+        """``(backends to isolate, last in-flight key or None, fatal-error text)``."""
         if not self.path.exists():
             return [], None, ""
         lines = self.path.read_text(errors="replace").split("\n")
@@ -244,8 +226,6 @@ class InflightMarker:
             faulthandler.enable(file=self._fault_fd, all_threads=False)
 
     def mark(self, key: tuple[str, ...] | None) -> None:
-        if self._fd is None:
-            return
         data = (",".join(self.isolate) + "\n" + ("\t".join(key) if key else "") + "\n").encode()
         os.pwrite(self._fd, data, 0)
         os.ftruncate(self._fd, len(data))
@@ -257,10 +237,8 @@ class InflightMarker:
 
             faulthandler.disable()
             if self._faulthandler_was:
-                try:
+                with suppress(Exception):  # no usable stderr
                     faulthandler.enable(file=sys.__stderr__)
-                except Exception:  # noqa: BLE001 - no usable stderr
-                    pass
             os.close(self._fault_fd)
             self._fault_fd = None
         if self._fd is not None:

@@ -1,11 +1,5 @@
-"""Where work runs: this process, local worker processes, or a Dask cluster.
-
-:mod:`.process` is the one module that starts worker processes. The sweep's executors run
-independent tasks ``fn(arg)`` (``fn`` module-level, ``arg`` plain picklable data) and yield a
-:class:`Done` per task as it finishes, the same values wherever they ran. A task whose worker
-dies is retried once (:data:`MAX_ATTEMPTS`), then lost. A remote Dask cluster should be reached
-over ``tls://`` (:func:`load_security`): its workers run whatever code their scheduler sends.
-"""
+"""Where work runs: this process, local worker processes (:mod:`.process`), or a Dask cluster;
+the sweep's executors yield a :class:`Done` per task ``fn(arg)`` as it finishes."""
 
 from __future__ import annotations
 
@@ -47,8 +41,7 @@ class SerialExecutor:
 
 
 class ProcessExecutor:
-    """``jobs`` long-lived local worker processes (:func:`~.process.run_tasks`); with one job
-    the tasks run one after the other, undisturbed by each other, and a crash loses only its task."""
+    """``jobs`` long-lived local worker processes (:func:`~.process.run_tasks`)."""
 
     name = "processes"
 
@@ -62,18 +55,14 @@ class ProcessExecutor:
             yield done
 
     def close(self) -> None:
-        """Nothing to release: :meth:`run` stops its workers when it ends."""
+        pass
 
 
 def make_executor(
     name: str, jobs: int, scheduler: str | None = None, security_file: str | None = None
 ) -> SerialExecutor | ProcessExecutor | DaskExecutor:
-    """The executor of ``--executor local|dask --jobs N [--scheduler ADDRESS --security FILE]``.
-
-    Raises:
-        ParamError: an unknown executor, ``jobs`` below 1, a scheduler or security file
-            without ``dask``, a ``tls://`` address without a security file or the reverse.
-    """
+    """The executor of ``--executor local|dask --jobs N [--scheduler ADDRESS --security FILE]``;
+    :class:`ParamError` for options that do not go together."""
     if name not in EXECUTORS:
         raise ParamError(
             f"unknown executor '{name}' (choose from {', '.join(EXECUTORS)})", key="--executor"
@@ -91,10 +80,7 @@ def make_executor(
     if scheduler is not None and not tls:
         if security_file is not None:
             raise ParamError("--security needs a tls:// scheduler address", key="--scheduler")
-        log.warning(
-            "Dask scheduler %s without TLS: whoever can reach it can run code on every worker "
-            "(use tls:// and --security)",
-            scheduler,
-        )
+        why = "whoever can reach it can run code on every worker (use tls:// and --security)"
+        log.warning("Dask scheduler %s without TLS: %s", scheduler, why)
     security = load_security(security_file) if security_file is not None else None
     return DaskExecutor(scheduler, security, jobs)

@@ -1,10 +1,6 @@
-"""Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1.
-
-Tasks are submitted at once and collected as they complete; a task whose worker was lost
-(``KilledWorker``) is submitted once more, then reported lost (the local scheduler allows no
-failure of its own). A task runs in a thread beside the worker's event loop, sharing its GIL,
-so the workers are quieted (:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster).
-"""
+"""Tasks on a Dask ``distributed`` cluster: an existing one, or a local one on 127.0.0.1. A task
+runs in a thread beside the worker's event loop, sharing its GIL, so the workers are quieted
+(:data:`WORKER_CONFIG`, or :mod:`.dask_worker` on an existing cluster)."""
 
 from __future__ import annotations
 
@@ -35,14 +31,8 @@ QUIET_SLOW = {"tick": 1.0}
 
 def load_security(path: str | Path) -> Security:
     """A ``distributed.security.Security`` (encryption required) from a TOML or YAML file
-    naming PEM files relative to its folder::
-
-        ca_file = "ca.pem"       # the certificate authority that signed every certificate
-        cert_file = "node.pem"   # this machine's certificate (client, local scheduler, workers)
-        key_file = "node-key.pem"
-
-    :class:`InputError` for an unreadable file, an unknown or missing key, a missing PEM file.
-    """
+    naming PEM files relative to its folder: ``ca_file`` (the certificate authority),
+    ``cert_file`` (this machine's certificate), ``key_file``."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -63,33 +53,26 @@ def load_security(path: str | Path) -> Security:
             raise InputError(
                 "unknown key (expected ca_file, cert_file, key_file)", path=path, key=key
             )
-    files = {}
+    files = []
     for key in ("ca_file", "cert_file", "key_file"):
         if not isinstance(raw.get(key), str):
             raise InputError("missing key (the path of a PEM file)", path=path, key=key)
         file = (path.parent / raw[key]).resolve()
         if not file.is_file():
             raise InputError(f"no such file: {file}", path=path, key=key)
-        files[key] = str(file)
+        files.append(str(file))
     from distributed.security import Security
 
-    ca, cert, key = files["ca_file"], files["cert_file"], files["key_file"]
-    return Security(
-        tls_ca_file=ca,
-        tls_client_cert=cert,
-        tls_client_key=key,
-        tls_scheduler_cert=cert,
-        tls_scheduler_key=key,
-        tls_worker_cert=cert,
-        tls_worker_key=key,
-        require_encryption=True,
-    )
+    ca, cert, key = files  # this machine's certificate for every role
+    pems = {f"tls_{role}_cert": cert for role in ("client", "scheduler", "worker")}
+    pems |= {f"tls_{role}_key": key for role in ("client", "scheduler", "worker")}
+    return Security(tls_ca_file=ca, require_encryption=True, **pems)
 
 
 class DaskExecutor:
     """Tasks on the cluster at ``scheduler``, or (``None``) on a ``LocalCluster`` of ``jobs``
-    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS. On an
-    existing cluster :class:`~.dask_worker.QuietWorker` is registered until :meth:`close`."""
+    single-threaded worker processes; ``security``: :func:`load_security`'s, for TLS. A task
+    whose worker was lost is submitted once more, then reported lost."""
 
     name = "dask"
 
@@ -98,10 +81,8 @@ class DaskExecutor:
             import dask
             from distributed import Client, LocalCluster
         except ImportError:
-            raise ParamError(
-                "--executor dask needs dask and distributed: pip install 'qpbench[dask]'",
-                key="--executor",
-            ) from None
+            why = "--executor dask needs dask and distributed: pip install 'qpbench[dask]'"
+            raise ParamError(why, key="--executor") from None
         self.cluster = None
         self._plugin = False
         if scheduler is None:
@@ -109,7 +90,6 @@ class DaskExecutor:
                 self.cluster = LocalCluster(
                     n_workers=jobs,
                     threads_per_worker=1,
-                    processes=True,
                     host="127.0.0.1",
                     dashboard_address=None,
                     security=security,
@@ -120,25 +100,17 @@ class DaskExecutor:
             try:
                 self.client = Client(scheduler, security=security, timeout="30s")
             except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                raise InputError(
-                    f"cannot reach the Dask scheduler: {type(exc).__name__}: {exc}",
-                    key="--scheduler",
-                ) from None
-            self._quiet_workers()
+                why = f"cannot reach the Dask scheduler: {describe_exception(exc)}"
+                raise InputError(why, key="--scheduler") from None
+            from .dask_worker import PLUGIN_NAME, QuietWorker
+
+            try:
+                self.client.register_plugin(QuietWorker(QUIET_STOP, QUIET_SLOW), name=PLUGIN_NAME)
+                self._plugin = True
+            except Exception as exc:  # noqa: BLE001 - a cluster refusing plugins still runs tasks
+                msg = "could not quiet the Dask workers' profiler (%s): tasks run slower"
+                log.warning(msg, describe_exception(exc))
         self.address = self.client.scheduler.address
-
-    def _quiet_workers(self) -> None:
-        from .dask_worker import PLUGIN_NAME, QuietWorker
-
-        try:
-            self.client.register_plugin(QuietWorker(QUIET_STOP, QUIET_SLOW), name=PLUGIN_NAME)
-            self._plugin = True
-        except Exception as exc:  # noqa: BLE001 - a cluster that refuses plugins still runs the tasks
-            log.warning(
-                "could not quiet the Dask workers' profiler (%s: %s): tasks run slower",
-                type(exc).__name__,
-                exc,
-            )
 
     @property
     def concurrency(self) -> int:
@@ -158,9 +130,8 @@ class DaskExecutor:
         pending = {}
 
         def submit(i: int, key, arg, attempt: int):
-            fut = self.client.submit(
-                run_located, fn, arg, pure=False, key=f"qpbench-task-{i}-{attempt}"
-            )
+            name = f"qpbench-task-{i}-{attempt}"
+            fut = self.client.submit(run_located, fn, arg, pure=False, key=name)
             pending[fut] = (i, key, arg, attempt)
             return fut
 
@@ -185,9 +156,7 @@ class DaskExecutor:
             try:
                 self.client.unregister_worker_plugin(PLUGIN_NAME)
             except Exception as exc:  # noqa: BLE001 - closing goes on: the plugin stays registered
-                log.warning(
-                    "could not remove the Dask worker plugin: %s: %s", type(exc).__name__, exc
-                )
+                log.warning("could not remove the Dask worker plugin: %s", describe_exception(exc))
             self._plugin = False
         self.client.close()
         if self.cluster is not None:

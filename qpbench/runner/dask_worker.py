@@ -1,7 +1,5 @@
-"""A Dask worker plugin that keeps a worker's event loop timers (the statistical profiler
-``profile``, the health check ``tick``) from taking the GIL from the task's thread. It imports
-``distributed``: import it only where Dask is installed.
-"""
+"""A Dask worker plugin that keeps a worker's event loop timers from taking the GIL from the
+task's thread (imports ``distributed``)."""
 
 from __future__ import annotations
 
@@ -13,8 +11,7 @@ PLUGIN_NAME = "qpbench-quiet-worker"
 
 class QuietWorker(WorkerPlugin):
     """Stop the worker's periodic callbacks ``stop`` and run ``slow`` (``{name: period [s]}``)
-    less often, while registered. A stopped callback leaves ``Worker.periodic_callbacks`` (so a
-    worker that joins later does not start it) and comes back, running, at teardown."""
+    less often, while registered (a stopped one leaves ``Worker.periodic_callbacks``)."""
 
     name = PLUGIN_NAME
 
@@ -47,7 +44,6 @@ class QuietWorker(WorkerPlugin):
 
 
 def _retime(pc, ms: float) -> None:
-    """Give tornado periodic callback ``pc`` a period of ``ms`` [ms] (restarting it if it ran)."""
     running = pc.is_running()
     if running:
         pc.stop()

@@ -1,13 +1,6 @@
-"""Worker processes: the one place that starts, feeds, times out and reaps them.
-
-A worker answers ``fn(arg)`` requests (``fn`` module-level, ``arg`` picklable) one at a time over
-a pipe: :class:`Worker` is one worker whose module globals keep state between requests;
-:func:`run_tasks` is the pool, with retries. A request ends ``ok``, ``error`` (it raised; the
-worker lives on), ``time_limit`` (past its deadline: SIGKILL, which needs no cooperation from a
-solver hung in native code) or ``crashed`` (:func:`death_message`). Workers are forked from a
-forkserver preloaded with qpbench and the kernels this process prepared
-(:mod:`qpbench.harness.preload`), so a worker never compiles.
-"""
+"""Worker processes, the one place that starts, feeds, times out and reaps them: a worker answers
+``fn(arg)`` requests one at a time (:class:`Worker`; :func:`run_tasks` is the pool); a request
+ends ``ok``, ``error`` (it raised), ``time_limit`` (SIGKILL at its deadline) or ``crashed``."""
 
 from __future__ import annotations
 
@@ -22,6 +15,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
+from contextlib import suppress
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import TYPE_CHECKING
@@ -44,7 +38,7 @@ MAX_ATTEMPTS = 2
 #: Modules the forkserver imports once, for every worker forked from it.
 PRELOAD = (
     "qpbench.runner.process",
-    "qpbench.harness.isolation",
+    "qpbench.harness.guard",
     "qpbench.backends",
     "numpy",
     "scipy.sparse",
@@ -55,7 +49,6 @@ PRELOAD = (
 PRELOAD_KERNELS_ENV = "QPBENCH_PRELOAD_KERNELS"
 
 _CTX = None
-#: What :func:`preload_kernels` named last.
 _KERNELS: tuple[str, ...] = ()
 
 
@@ -66,20 +59,18 @@ def preload_kernels(names) -> None:
 
 
 def context(fresh: bool = False) -> BaseContext:
-    """The start method's context, its forkserver started and preloaded now (:func:`preload_kernels`);
-    ``fresh``: ``spawn``, never a fork of a process that may hold threads and locks."""
+    """The start method's context, its forkserver started and preloaded now; ``fresh``: ``spawn``,
+    never a fork of a process that may hold threads and locks."""
     global _CTX
     if fresh:
         return multiprocessing.get_context("spawn")
     if _CTX is None:
-        method = (
-            "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        )
-        ctx = multiprocessing.get_context(method)
-        if method == "forkserver":
+        forkserver = "forkserver" in multiprocessing.get_all_start_methods()
+        ctx = multiprocessing.get_context("forkserver" if forkserver else "spawn")
+        if forkserver:
             os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
             ctx.set_forkserver_preload(list(PRELOAD))
-            # wait for the preload now (a no-op child): no deadline covers it
+            # wait for the preload now (a child doing nothing): no deadline covers it
             proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
             proc.start()
             proc.join(START_TIMEOUT_S)
@@ -88,7 +79,7 @@ def context(fresh: bool = False) -> BaseContext:
 
 
 def _noop() -> None:
-    """A child that does nothing."""
+    pass
 
 
 def deadline(time_limit: float, solves: int = 1) -> float:
@@ -108,11 +99,9 @@ def death_message(exitcode: int | None) -> str:
 
 
 def requests(conn: Connection) -> Iterator:
-    """Each request a worker process receives on ``conn``, until ``None`` or the other end closes."""
-    try:
+    """Each request received on ``conn``, until ``None`` or the other end closes."""
+    with suppress(EOFError):
         yield from iter(conn.recv, None)
-    except EOFError:
-        return
 
 
 def _serve(conn, environ: dict, imports: tuple[str, ...]) -> None:
@@ -145,16 +134,15 @@ class WorkerDied(Exception):
 
 class Worker:
     """One worker process (a daemon) and its pipe; ``imports``: modules it imports before it says
-    ready (outside any deadline)."""
+    ready."""
 
     def __init__(
         self, ctx: BaseContext | None = None, name: str = "qpbench-worker", imports: tuple = ()
     ):
         ctx = ctx if ctx is not None else context()
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(
-            target=_serve, args=(child, dict(os.environ), tuple(imports)), daemon=True, name=name
-        )
+        args = (child, dict(os.environ), tuple(imports))
+        self.proc = ctx.Process(target=_serve, args=args, daemon=True, name=name)
         self.proc.start()
         child.close()
         self.ready = False
@@ -177,14 +165,11 @@ class Worker:
         self.conn.send((fn, arg))
 
     def poll(self) -> tuple[str, object] | None:
-        """``(status, payload)`` once the request is over (``ok``, ``error``, ``crashed``,
-        ``time_limit``; after the last two the worker is gone), else ``None``."""
-        try:
+        """``(status, payload)`` once the request is over, else ``None``."""
+        with suppress(EOFError, OSError):
             if self.conn.poll():
                 kind, payload = self.conn.recv()
                 return {"exc": "error"}.get(kind, kind), payload
-        except (EOFError, OSError):
-            pass
         if not self.proc.is_alive():
             self.proc.join(2)
             message = death_message(self.proc.exitcode)
@@ -224,11 +209,9 @@ class Worker:
     def stop(self) -> None:
         """Ask the worker to end (it finishes nothing more), then :meth:`kill` what is left."""
         if self.alive and self.proc.is_alive():
-            try:
+            with suppress(OSError, ValueError):
                 self.conn.send(None)
                 self.proc.join(2)
-            except (OSError, ValueError):
-                pass
         self.kill()
 
 
@@ -236,18 +219,15 @@ def run_located(fn: Callable, arg) -> tuple:
     """``fn(arg)`` with the host and worker that ran it (on a Dask worker: its address)."""
     worker = f"pid{os.getpid()}"
     if "distributed" in sys.modules:
-        try:
+        with suppress(ValueError):  # not in a Dask worker
             worker = sys.modules["distributed"].get_worker().address
-        except ValueError:
-            pass
     return fn(arg), socket.gethostname(), worker
 
 
 @dataclass
 class Done:
-    """A finished task: ``value`` (``fn(arg)``) or ``lost`` (why not: the last attempt's error,
-    death or deadline, ``status`` saying which); where its last attempt ran; ``concurrent``: the
-    tasks that could run at once on that host."""
+    """A finished task: ``value`` (``fn(arg)``) or ``lost`` (why not, ``status`` saying which);
+    where its last attempt ran; ``concurrent``: the tasks that could run at once on that host."""
 
     key: object
     value: object
@@ -260,8 +240,8 @@ class Done:
 
 
 def retry_note(key, why: str, attempt: int, attempts: int = MAX_ATTEMPTS) -> str | None:
-    """After attempt ``attempt`` of a task lost ``why``: ``None`` (logged: it runs again) while
-    attempts are left, else why it is lost, with the attempts made."""
+    """After attempt ``attempt`` of a task lost ``why``: ``None`` (it runs again) while attempts
+    are left, else why it is lost."""
     if attempt < attempts:
         log.warning("%s: %s; running it again", key, why)
         return None
@@ -278,11 +258,8 @@ def run_tasks(
     fresh: bool = False,
     name: str = "qpbench-worker",
 ) -> Iterator[Done]:
-    """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs`` workers.
-
-    ``attempts``: runs of a task whose worker died before it is lost (:func:`retry_note`);
-    ``fresh``: a new worker for every task.
-    """
+    """A :class:`Done` per task ``(key, arg, timeout [s] or None)``, as they end, on up to ``jobs``
+    workers; ``attempts``: runs of a task whose worker died; ``fresh``: a new worker per task."""
     if not tasks:
         return
     ctx = ctx if ctx is not None else context()
@@ -319,17 +296,9 @@ def run_tasks(
                     if payload is None:
                         queue.appendleft((key, arg, timeout, tried))
                         continue
-                ok = status == "ok"
-                yield Done(
-                    key,
-                    payload if ok else None,
-                    None if ok else payload,
-                    tried,
-                    host,
-                    f"pid{w.proc.pid}",
-                    slots,
-                    None if ok else status,
-                )
+                value, lost = (payload, None) if status == "ok" else (None, payload)
+                worker = f"pid{w.proc.pid}"
+                yield Done(key, value, lost, tried, host, worker, slots, status if lost else None)
     finally:
         for w in workers:
             if w.task is not None:
