@@ -17,8 +17,6 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["AdaptiveImpedance"]
-
 
 class AdaptiveImpedance:
     """Online estimate of ``Kp`` [N/m], ``Kd`` [N s/m] from ``kp0``, ``kd0`` (paper: 4000, 80),

@@ -10,8 +10,6 @@ import numpy as np
 
 from ..packed import HEADER as PACKED_HEADER
 
-__all__ = ["compiled_build_kernel", "packed_layout", "parameter_vector"]
-
 # Layout of the kernel's parameter vector.
 _T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = (
     range(16)

@@ -33,8 +33,6 @@ from ..statuses import FORMULATIONS
 from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
-__all__ = ["Controller", "TickArrays", "TickQP", "check_formulation"]
-
 
 class TickArrays(NamedTuple):
     """One tick's arrays: cost and obstacle rows ``P, q, G, h``, task row ``J v = b0`` (eq. 11),

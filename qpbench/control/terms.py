@@ -11,14 +11,6 @@ import numpy as np
 from ..exceptions import InputError
 from ..robot.environment import Obstacle
 
-__all__ = [
-    "CosinePath",
-    "EscapeVelocityLimits",
-    "ImpedanceTask",
-    "ObstacleAvoidance",
-    "PolylinePath",
-]
-
 
 class CosinePath:
     """``x_d(t) = centre + amplitude * cos(omega t + phase)`` per axis (paper sections 4.2-4.5):

@@ -14,8 +14,6 @@ import numpy as np
 from .environment import ContactSurface, LineObstacle, Obstacle
 from .kinematics import PlanarArm
 
-__all__ = ["BodyClearance", "body_clearance", "contact_obstacles", "link_label"]
-
 #: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
 SAME_LINE_TOL = 1e-9
 

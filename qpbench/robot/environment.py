@@ -22,16 +22,6 @@ import numpy as np
 
 from ..exceptions import InputError
 
-__all__ = [
-    "ContactSurface",
-    "DiskObstacle",
-    "LineObstacle",
-    "Obstacle",
-    "PointCloudObstacle",
-    "SegmentObstacle",
-    "OBSTACLE_KINDS",
-]
-
 #: Floats per obstacle point in the compiled kernel's table: ``[kind, p0x, p0y, p1x, p1y, radius,
 #: vx, vy]``.
 PRIMITIVE_WIDTH = 8

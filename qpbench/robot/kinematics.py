@@ -19,8 +19,6 @@ import numpy as np
 
 from ..exceptions import InputError
 
-__all__ = ["KEY_POINT_KINDS", "KeyPoints", "PlanarArm", "closest_key_points", "default_key_points"]
-
 #: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
 KEY_POINT_KINDS = ("paper", "closest")
 

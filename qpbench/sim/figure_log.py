@@ -18,8 +18,6 @@ import pandas as pd
 from ..statuses import CERTIFIED_INFEASIBLE, FAILURE_STATUSES
 from . import log as tick_log
 
-__all__ = ["BUCKETS", "FIGURE_LOG_DIR", "figure_log", "figure_log_path", "write_figure_log"]
-
 #: Folder of the figure logs in a closed-loop output folder (beside ``logs/``).
 FIGURE_LOG_DIR = "figure_logs"
 #: Spans of ticks a run is cut into (a figure is about 1,000 pixels wide).

@@ -40,8 +40,6 @@ from .scenario import Scenario, load_scenario
 from .summary import jsonable, summarize
 from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
 
-__all__ = ["SimResult", "resolve_backend", "simulate"]
-
 log = logging.getLogger(__name__)
 #: One line per solve, shown by ``qpbench -vv`` (the CLI sets its level).
 solve_log = logging.getLogger("qpbench.solves")

@@ -17,8 +17,6 @@ from ..exceptions import ScenarioError
 if TYPE_CHECKING:
     from importlib.resources.abc import Traversable
 
-__all__ = ["paper_scenarios", "run_scenarios", "scenario_names", "scenario_path", "shipped_dir"]
-
 
 def shipped_dir() -> Traversable:
     """The package folder of the shipped scenario files."""

@@ -25,8 +25,6 @@ from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 if TYPE_CHECKING:
     from pathlib import Path
 
-__all__ = ["DEFAULTS", "OPTIONAL_TABLES", "check_simulation", "filled", "validate"]
-
 # Types: num, int, bool, str, vec (numbers), vec2 (two numbers), points ([[x, y], ...]), a tuple
 # (one of its strings); ">0" or ">=0" after a type bounds a number or every entry of a vector.
 _SCHEMA: dict[str, dict] = {

@@ -21,19 +21,6 @@ if TYPE_CHECKING:
 
     from ..control.terms import EscapeVelocityLimits
 
-__all__ = [
-    "BAD_VERDICTS",
-    "DEFAULT_SAFETY_MARGIN",
-    "VERDICTS",
-    "VIOLATION_TOL",
-    "Verdict",
-    "VerdictSettings",
-    "failed_run",
-    "judge",
-    "judge_realtime",
-    "key_point_rule",
-]
-
 #: Verdicts, from the worst: the verdict of a run is the first whose rule holds.
 VERDICTS = ("failed", "unsafe", "limits", "incomplete", "diverged", "ok")
 #: Every verdict but ``ok``.
