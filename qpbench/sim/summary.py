@@ -63,12 +63,6 @@ def jsonable(overrides: dict) -> dict:
     return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in overrides.items()}
 
 
-def verdict_overrides(overrides: dict) -> dict:
-    """The ``[verdict]`` thresholds among scenario overrides, by key (``settle_time``)."""
-    prefix = "verdict."
-    return {k[len(prefix) :]: v for k, v in jsonable(overrides).items() if k.startswith(prefix)}
-
-
 def _none(x):
     x = float(x)
     return None if not math.isfinite(x) else x
@@ -97,11 +91,13 @@ def summarize(
     """Figures of a run and its verdict (module docstring); ``run_info`` from the loop's own."""
     t = frame[log.T].to_numpy()
     dt, settings = scenario.dt, scenario.verdict
-    ticks = len(frame)
+    ticks, overrides = len(frame), jsonable(scenario.overrides)
     out = {
         "scenario": scenario.name,
-        "scenario_overrides": jsonable(scenario.overrides),
-        "verdict_overrides": verdict_overrides(scenario.overrides),
+        "scenario_overrides": overrides,
+        "verdict_overrides": {  # the [verdict] thresholds set over the file's, by key
+            k.removeprefix("verdict."): v for k, v in overrides.items() if k.startswith("verdict.")
+        },
         "backend": backend,
         "formulation": formulation,
         "dt": dt,
@@ -109,7 +105,7 @@ def summarize(
         "ticks": ticks,
         "simulated_s": ticks * dt,
     }
-    out.update(_status_figures(frame, t, dt))
+    out.update(_status_figures(frame, t))
     errors, judged = _error_figures(frame, t, settings.settle_time)
     out.update(errors)
     dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
@@ -182,11 +178,11 @@ def _realtime_figures(
     solver, solver_why = judge_realtime(own_p99, own_over, own.size, dt, settings, "solver")
     return {
         "deadline_misses": misses,
-        "over_dt_share": misses / calls.size if calls.size else None,
+        "over_dt_share": misses / calls.size,
         "solver_time_p99_s": own_p99,
         "solver_over_dt_share": own_over / own.size if own.size else None,
         "realtime": "yes" if realtime == "yes" else "no",
-        "realtime_reason": why if calls.size else "no tick simulated",
+        "realtime_reason": why,
         "realtime_solver": solver,
         "realtime_solver_reason": solver_why,
     }
@@ -200,7 +196,7 @@ def _amax(x: np.ndarray) -> float | None:
     return _none(np.max(np.abs(x))) if x.size else None
 
 
-def _status_figures(frame: pd.DataFrame, t: np.ndarray, dt: float) -> dict:
+def _status_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
     """Counts by tick status (:mod:`qpbench.statuses`), fallbacks, and when the QP was infeasible."""
     status = frame[log.STATUS]
     infeasible = status.isin(INFEASIBLE_OR_UNCLASSIFIED).to_numpy()
@@ -231,7 +227,7 @@ def _error_figures(frame: pd.DataFrame, t: np.ndarray, settle_time: float) -> tu
         "tracking_max_after_2s": _amax(te),
         "force_error_rms_after_2s": _rms(fe),
         "force_error_max_after_2s": _amax(fe),
-        "force_final": _none(frame[log.FORCE].iloc[-1]) if len(frame) else None,
+        "force_final": _none(frame[log.FORCE].iloc[-1]),
     }
     settled = t >= settle_time - 1e-12
     worst = {}
@@ -329,19 +325,18 @@ def _limit_figures(frame: pd.DataFrame, t: np.ndarray, limits) -> tuple[dict, di
 def _effort_figures(frame: pd.DataFrame, n: int, dt: float, after: np.ndarray) -> dict:
     """Joint motion and effort, the task residual, ``Kp_hat, Kd_hat`` and the solve times [s]
     of a run."""
-    ticks = len(frame)
     theta = frame[log.theta_columns(n)].to_numpy()
     v = frame[log.velocity_columns(n)].to_numpy()
     v_sq = frame[log.V_SQ].to_numpy()
     solve_time = frame[log.SOLVE_TIME]
     return {
-        "max_abs_theta": _none(np.max(np.abs(theta))) if ticks else None,
-        "max_abs_v": _none(np.max(np.abs(v))) if ticks else None,
-        "v_sq_max": _none(v_sq.max()) if ticks else None,
+        "max_abs_theta": _none(np.max(np.abs(theta))),
+        "max_abs_v": _none(np.max(np.abs(v))),
+        "v_sq_max": _none(v_sq.max()),
         "v2_integral": float(np.sum(v_sq) * dt),
         "task_residual_max_after_2s": _amax(frame[log.TASK_RESIDUAL].to_numpy()[after]),
-        "kp_hat_final": _none(frame[log.KP_HAT].iloc[-1]) if ticks else None,
-        "kd_hat_final": _none(frame[log.KD_HAT].iloc[-1]) if ticks else None,
+        "kp_hat_final": _none(frame[log.KP_HAT].iloc[-1]),
+        "kd_hat_final": _none(frame[log.KD_HAT].iloc[-1]),
         "solve_time_median_s": _none(solve_time.median()),
         "solve_time_p99_s": _none(solve_time.quantile(0.99)),
         "solve_time_max_s": _none(solve_time.max()),

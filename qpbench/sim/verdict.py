@@ -44,21 +44,17 @@ class VerdictSettings:
     def __post_init__(self):
         from ..exceptions import InputError
 
-        def bad(key, rule, unit=""):  # NaN fails every rule below
+        for key, holds, rule in (  # NaN fails every rule
+            ("settle_time", lambda x: x >= 0, ">= 0 [s]"),
+            ("max_tracking_error", lambda x: x > 0, "> 0 [m]"),
+            ("max_force_error", lambda x: x > 0, "> 0 [N]"),
+            ("safety_margin", lambda x: x >= 0, ">= 0 [m]"),
+            ("max_p99_fraction_of_dt", lambda x: 0 < x <= 1, "> 0 and <= 1 (a fraction of dt)"),
+            ("max_over_dt_share", lambda x: 0 <= x < 1, ">= 0 and < 1 (a share of the ticks)"),
+        ):
             value = getattr(self, key)
-            raise InputError(f"must be {rule}{unit}, got {value!r}", key=f"verdict.{key}")
-
-        if not self.settle_time >= 0:
-            bad("settle_time", ">= 0", " [s]")
-        for key, unit in (("max_tracking_error", " [m]"), ("max_force_error", " [N]")):
-            if not getattr(self, key) > 0:
-                bad(key, "> 0", unit)
-        if not self.safety_margin >= 0:
-            bad("safety_margin", ">= 0", " [m]")
-        if not 0 < self.max_p99_fraction_of_dt <= 1:
-            bad("max_p99_fraction_of_dt", "> 0 and <= 1 (a fraction of dt)")
-        if not 0 <= self.max_over_dt_share < 1:
-            bad("max_over_dt_share", ">= 0 and < 1 (a share of the ticks)")
+            if not holds(value):
+                raise InputError(f"must be {rule}, got {value!r}", key=f"verdict.{key}")
 
 
 @dataclass(frozen=True)
@@ -70,10 +66,6 @@ class Verdict:
     reasons: tuple[str, ...] = ()
     key_point_rule: str = "-"
     key_point_rule_reason: str = ""
-
-    @property
-    def ok(self) -> bool:
-        return self.verdict == "ok"
 
     @property
     def text(self) -> str:
@@ -192,19 +184,17 @@ def judge(summary: dict, settings: VerdictSettings) -> Verdict:
 def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[str], list[str]]:
     """``(reasons, notes)``: where a run stopped early stopped, and whether tracking and force
     went unjudged (part of that reason; a note for a run that reached its duration)."""
-    simulated = float(summary.get("simulated_s") or 0.0)
+    simulated = summary["simulated_s"]
     unjudged = (
         f"tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
         if simulated <= settings.settle_time
         else ""
     )
-    if not summary.get("stopped_early"):
+    if not summary["stopped_early"]:
         return [], [unjudged] if unjudged else []
-    budget = summary.get("wall_budget_s")
+    budget = summary["wall_budget_s"]
     why = f" (wall-time budget {_g(float(budget))} s)" if budget is not None else ""
-    where = (
-        f"stopped at {simulated:.2f} s of {_g(float(summary.get('duration') or math.nan))} s{why}"
-    )
+    where = f"stopped at {simulated:.2f} s of {_g(summary['duration'])} s{why}"
     return [f"{where}: {unjudged or 'judged on what was simulated'}"], []
 
 
