@@ -95,7 +95,6 @@ class Controller:
         self.limits = limits
         self.obstacles = list(obstacles)
         self.avoidance = [ObstacleAvoidance(o, k, d_safe) for o in self.obstacles]
-        self.k = float(k)
         self.d_safe = float(d_safe)
         self.rho = float(rho)
         self.kp = float(kp)
@@ -235,8 +234,8 @@ class Controller:
         xd = self._path(t)
         b0 = self.task.impedance_reference(ee, t, kp, kd)
         lb, ub = self.limits.escape_velocity_bounds(theta)
-        if soft:
-            P, q = self.task.cost(J, b0, self.rho)
+        if soft:  # 1/2 v^T v + rho/2 |J v - b0|^2
+            P, q = np.eye(n) + self.rho * J.T @ J, -self.rho * J.T @ b0
         else:
             P, q = np.eye(n), np.zeros(n)
         a, radius = len(self.key_points), self.key_points.radius

@@ -81,13 +81,6 @@ class ImpedanceTask:
         xdot_d = np.array([vdx, vdy])
         return xdot_d - (kp / kd) * (np.asarray(x) - x_d) + (self.desired_force / kd) * self.normal
 
-    @staticmethod
-    def cost(J: np.ndarray, b0: np.ndarray, rho: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(P, q)`` of ``1/2 v^T v + rho/2 |J v - b0|^2`` (``soft`` formulation):
-        ``I + rho J^T J``, ``-rho J^T b0``."""
-        n = J.shape[1]
-        return np.eye(n) + rho * J.T @ J, -rho * J.T @ b0
-
 
 class EscapeVelocityLimits:
     """Joint limits as velocity bounds (paper eq. 11c, escape-velocity form)::

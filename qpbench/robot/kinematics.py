@@ -79,11 +79,6 @@ class PlanarArm:
         J[:, 1, :] = rel[:, :, 0] * mask
         return x, J
 
-    def jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """End-effector Jacobian ``J = dx/dtheta`` (eq. 2) in [m/rad], shape (2, n)."""
-        _, J = self.points_jacobians(theta, [self.n - 1], [1.0])
-        return J[0]
-
 
 @dataclass(frozen=True)
 class KeyPoints:
