@@ -95,6 +95,7 @@ class Controller:
         self.limits = limits
         self.obstacles = list(obstacles)
         self.avoidance = [ObstacleAvoidance(o, k, d_safe) for o in self.obstacles]
+        self.k = float(k)
         self.d_safe = float(d_safe)
         self.rho = float(rho)
         self.kp = float(kp)
