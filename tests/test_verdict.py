@@ -220,7 +220,9 @@ def _log(n=3000, dt=1e-3, **over):
 
 
 #: What :func:`summarize` reads of a scenario and a controller: 2 joints, one wall, key point A1.
-SCENARIO = SimpleNamespace(name="hand", overrides={}, dt=1e-3, duration=3.0, verdict=SETTINGS)
+SCENARIO = SimpleNamespace(
+    name="hand", overrides={}, verdict_overrides={}, dt=1e-3, duration=3.0, verdict=SETTINGS
+)
 CONTROLLER = SimpleNamespace(
     n=2,
     limits=LIMITS,

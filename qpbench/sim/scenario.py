@@ -84,6 +84,12 @@ class Scenario:
         return VerdictSettings(**self.data["verdict"])
 
     @property
+    def verdict_overrides(self) -> dict:
+        """The ``[verdict]`` thresholds set over the file's, by key (``settle_time``)."""
+        prefix = "verdict."
+        return {k[len(prefix) :]: v for k, v in self.overrides.items() if k.startswith(prefix)}
+
+    @property
     def normal(self) -> np.ndarray:
         """The contact surface's unit normal."""
         normal = self.data["contact"]["normal"]
@@ -186,21 +192,14 @@ def parse_scenario(
         if isinstance(exc, ScenarioError):
             raise
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
-    _warn_verdict_overrides(overrides or {}, file)
-    return scenario
-
-
-def _warn_verdict_overrides(overrides: dict, file) -> None:
-    """A WARNING naming the ``[verdict]`` thresholds set over the file's (the summary records
-    them: ``verdict_overrides``)."""
-    changed = {k: v for k, v in overrides.items() if str(k).startswith("verdict.")}
-    if changed:
+    if changed := scenario.verdict_overrides:
         log.warning(
             "%s: verdict thresholds changed on the command line: %s (the verdict is not judged "
             "on the scenario's own thresholds)",
             file,
-            ", ".join(f"{k}={v!r}" for k, v in changed.items()),
+            ", ".join(f"verdict.{k}={v!r}" for k, v in changed.items()),
         )
+    return scenario
 
 
 #: ``table.key`` or ``table[index].key``: a key of ``--set`` and of a sweep's parameters.

@@ -91,13 +91,11 @@ def summarize(
     """Figures of a run and its verdict (module docstring); ``run_info`` from the loop's own."""
     t = frame[log.T].to_numpy()
     dt, settings = scenario.dt, scenario.verdict
-    ticks, overrides = len(frame), jsonable(scenario.overrides)
+    ticks = len(frame)
     out = {
         "scenario": scenario.name,
-        "scenario_overrides": overrides,
-        "verdict_overrides": {  # the [verdict] thresholds set over the file's, by key
-            k.removeprefix("verdict."): v for k, v in overrides.items() if k.startswith("verdict.")
-        },
+        "scenario_overrides": jsonable(scenario.overrides),
+        "verdict_overrides": scenario.verdict_overrides,
         "backend": backend,
         "formulation": formulation,
         "dt": dt,
