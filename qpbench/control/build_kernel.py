@@ -43,26 +43,12 @@ def parameter_vector(
     return par
 
 
-def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[int, ...]]]]:
-    """Size of a tick's buffer and ``{name: (offset, shape)}`` of its arrays, in the order
-    :func:`_build_kernel_py` lays them out."""
-    shapes = {
-        "P": (n, n),
-        "q": (n,),
-        "G": (n_rows, n),
-        "h": (n_rows,),
-        "J": (2, n),
-        "b": (2,),
-        "lb": (n,),
-        "ub": (n,),
-        "ee": (2,),
-        "dist": (n_rows,),
-    }
-    layout, off = {}, PACKED_HEADER
-    for name, shape in shapes.items():
-        layout[name] = (off, shape)
-        off += int(np.prod(shape))
-    return off, layout
+def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
+    """Size of a tick's buffer and the slices of its P, q, G, h, J, b, lb, ub, ee and dist, in
+    the order :func:`_build_kernel_py` lays them out."""
+    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows)
+    ends = PACKED_HEADER + np.cumsum(sizes)
+    return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes, ends))
 
 
 # Over 80 lines, kept whole on purpose: numba compiles it as one function; split, each helper

@@ -132,10 +132,7 @@ class Controller:
             self._par,
         )
         self._path = task.path
-        self._packed_size, layout = packed_layout(self.n, self.n_rows)
-        self._packed_slices = tuple(
-            slice(off, off + int(np.prod(shape))) for off, shape in layout.values()
-        )
+        self._packed_size, self._packed_slices = packed_layout(self.n, self.n_rows)
 
     # -- fast path -------------------------------------------------------------
     def build_arrays(
