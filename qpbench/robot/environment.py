@@ -10,8 +10,7 @@ Obstacles give, for each key point ``A``, one or more obstacle points ``B`` (the
 a shape, or each point of a cloud), the distance ``dist`` [m] (signed for a ``line``: a wall is a
 half-plane) and the unit vector ``u`` from ``B`` to ``A``; they may translate with a constant
 ``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance of link
-segments to a shape (negative inside). A shape without a ``KERNEL_KIND`` makes the controller
-use its numpy path.
+segments to a shape (negative inside).
 """
 
 from __future__ import annotations
@@ -87,8 +86,8 @@ class Obstacle:
     ``velocity`` [m/s], ``n_points`` obstacle points ``B_j`` per key point."""
 
     KIND: str = ""
-    #: Code of the shape in the controller's compiled kernel (None: numpy path only).
-    KERNEL_KIND: int | None = None
+    #: Code of the shape in the controller's compiled kernel.
+    KERNEL_KIND: int
     n_points: int = 1
 
     def __init__(self, name: str, velocity=(0.0, 0.0)):
