@@ -79,6 +79,12 @@ def _intervals(mask: np.ndarray, t: np.ndarray) -> list[list[float]]:
     return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
 
 
+def _first(mask: np.ndarray, t: np.ndarray) -> tuple[int, float | None]:
+    """How many ticks ``mask`` holds on, and the first of them [s] (``None``: none)."""
+    rows = np.flatnonzero(mask)
+    return rows.size, (float(t[rows[0]]) if rows.size else None)
+
+
 def summarize(
     frame: pd.DataFrame,
     scenario: Scenario,
@@ -244,32 +250,28 @@ def _obstacle_figures(
     active (within :data:`ACTIVE_MARGIN` of ``d_safe``; ``{}`` without obstacles); for the
     key-point rule, the ticks with a key point below ``d_safe - margin`` [m] (a NaN distance
     counts) and the first of them [s] (``None`` without obstacles)."""
-    closest = {
-        "min_obstacle_distance": None,
-        "min_obstacle_distance_key_point": None,
-        "min_obstacle_distance_obstacle": None,
-        "min_obstacle_distance_t": None,
-        "d_safe": d_safe,
-    }
     if not dcols:
-        return closest, {}, {"key_point_below_ticks": None}
+        none = dict.fromkeys(
+            f"min_obstacle_distance{s}" for s in ("", "_key_point", "_obstacle", "_t")
+        )
+        return {**none, "d_safe": d_safe}, {}, {"key_point_below_ticks": None}
     D = frame[[log.distance_column(a, o) for a, o in dcols]].to_numpy()
     k, c = divmod(int(np.argmin(D)), D.shape[1])
-    closest.update(
-        min_obstacle_distance=_none(D[k, c]),
-        min_obstacle_distance_key_point=dcols[c][0],
-        min_obstacle_distance_obstacle=dcols[c][1],
-        min_obstacle_distance_t=_none(t[k]),
-    )
+    closest = {
+        "min_obstacle_distance": _none(D[k, c]),
+        "min_obstacle_distance_key_point": dcols[c][0],
+        "min_obstacle_distance_obstacle": dcols[c][1],
+        "min_obstacle_distance_t": _none(t[k]),
+        "d_safe": d_safe,
+    }
     near = D <= d_safe + ACTIVE_MARGIN
     active = {
         f"{a}/{o}": _intervals(near[:, c], t)[:MAX_INTERVALS]
         for c, (a, o) in enumerate(dcols)
         if near[:, c].any()
     }
-    below = np.flatnonzero(~(D >= d_safe - margin).all(axis=1))
-    first = float(t[below[0]]) if below.size else None
-    rule = {"key_point_below_ticks": below.size, "key_point_below_first_t": first}
+    below, first = _first(~(D >= d_safe - margin).all(axis=1), t)
+    rule = {"key_point_below_ticks": below, "key_point_below_first_t": first}
     return closest, {"obstacle_active_intervals": active}, rule
 
 
@@ -278,26 +280,20 @@ def _body_figures(frame: pd.DataFrame, t: np.ndarray, kinds: dict[str, str]) -> 
     clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles.
     For the verdict, that obstacle's kind (``kinds`` by name), the ticks with the body inside
     an obstacle and the first of them [s]."""
-    out = {
-        "min_body_distance": None,
-        "min_body_distance_link": None,
-        "min_body_distance_obstacle": None,
-        "min_body_distance_t": None,
-    }
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     if not np.isfinite(d).any():
-        return out, {"body_inside_ticks": 0}
+        none = dict.fromkeys(f"min_body_distance{s}" for s in ("", "_link", "_obstacle", "_t"))
+        return none, {"body_inside_ticks": 0}
     k = int(np.nanargmin(d))
     name = str(frame[log.D_BODY_OBSTACLE].iloc[k])
-    out.update(
-        min_body_distance=_none(d[k]),
-        min_body_distance_link=int(frame[log.D_BODY_LINK].iloc[k]),
-        min_body_distance_obstacle=name,
-        min_body_distance_t=_none(t[k]),
-    )
-    inside = np.flatnonzero(d < 0.0)
-    first = float(t[inside[0]]) if inside.size else None
-    judged = {"body_inside_ticks": inside.size, "body_inside_first_t": first}
+    out = {
+        "min_body_distance": _none(d[k]),
+        "min_body_distance_link": int(frame[log.D_BODY_LINK].iloc[k]),
+        "min_body_distance_obstacle": name,
+        "min_body_distance_t": _none(t[k]),
+    }
+    inside, first = _first(d < 0.0, t)
+    judged = {"body_inside_ticks": inside, "body_inside_first_t": first}
     return out, {**judged, "min_body_distance_kind": kinds[name]}
 
 
