@@ -52,7 +52,7 @@ def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
 
 
 # Over 80 lines, kept whole on purpose: numba compiles it as one function; split, each helper
-# would have to be compiled too. tests/test_controller.py compares it with the numpy terms.
+# would have to be compiled too. Its numpy twin: tests/controller_numpy.py.
 def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  # pragma: no cover
     """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist of one tick into ``buf`` (layout of
     :func:`packed_layout`) and write its header."""

@@ -9,11 +9,10 @@ obstacles are at least ``d_safe`` away)::
 
     minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
 
-``G`` holds one row per (key point, obstacle point) pair, key point major, so the row count is
-fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind ``closest`` take
-each link's point closest to each obstacle point, the end effector's link exempt against the
-contact surface; they are built by the numpy terms (:mod:`qpbench.control.terms`), every other
-kind by the compiled build (:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
+``G`` holds one row per (key point, obstacle point) pair, key point major (a fixed count; no
+obstacle: ``G = h = None``); key points of kind ``closest`` are built by the numpy terms
+(:mod:`qpbench.control.terms`), the paper's by the compiled build
+(:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
 """
 
 from __future__ import annotations

@@ -6,11 +6,10 @@ read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
 
     F = max(0, Kp_env delta + Kd_env deltadot)   if delta > 0, else 0     [N]
 
-Obstacles give, for each key point ``A``, one or more obstacle points ``B`` (the closest point of
-a shape, or each point of a cloud), the distance ``dist`` [m] (signed for a ``line``: a wall is a
-half-plane) and the unit vector ``u`` from ``B`` to ``A``; they may translate with a constant
-``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance of link
-segments to a shape (negative inside).
+Obstacles (:class:`Obstacle`) give, for key points or link segments, one or more obstacle points
+(the closest point of a shape, or each point of a cloud) and the signed distance [m] (negative
+inside; a ``line`` is a wall, a half-plane); they may translate with a constant ``velocity``
+[m/s].
 """
 
 from __future__ import annotations

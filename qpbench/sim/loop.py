@@ -373,20 +373,18 @@ class _Run:
         summary = summarize(
             frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info=run_info
         )
-        recs = []
-        if self.keep_every is not None:
-            from ..formats import ProblemRecord
+        from ..formats import ProblemRecord
 
-            name = f"{scenario.name}_{self.formulation}"
-            recs = [
-                ProblemRecord(
-                    problem=p,
-                    name=f"{name}_{k:06d}",
-                    scenario=scenario.name,
-                    tick=k,
-                    t=t,
-                    formulation=self.formulation,
-                )
-                for k, t, p in self.records
-            ]
+        name = f"{scenario.name}_{self.formulation}"
+        recs = [
+            ProblemRecord(
+                problem=p,
+                name=f"{name}_{k:06d}",
+                scenario=scenario.name,
+                tick=k,
+                t=t,
+                formulation=self.formulation,
+            )
+            for k, t, p in self.records  # none unless keep_every
+        ]
         return SimResult(frame, summary, recs)
