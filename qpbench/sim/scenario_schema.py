@@ -306,18 +306,9 @@ def check_simulation(data: dict, file: str | Path) -> None:
         )
 
 
-#: Order of the tables in a filled-in scenario file (:func:`filled`).
-_ORDER = (
-    "scenario",
-    "robot",
-    "key_points",
-    "path",
-    "contact",
-    "controller",
-    "adaptive",
-    "simulation",
-    "verdict",
-)
+#: Order of the tables in a filled-in scenario file (:func:`filled`): the schema's, ``[path]``
+#: after ``[key_points]``, ``[verdict]`` last.
+_ORDER = (*list(_SCHEMA)[:3], "path", *list(_SCHEMA)[3:], "verdict")
 
 
 def filled(data: dict, rnn: dict) -> dict:
