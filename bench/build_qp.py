@@ -11,12 +11,17 @@ kernel is compiled. Also prints the numpy reference path for comparison.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from controller_numpy import numpy_arrays  # noqa: E402 - the numpy twin, a test oracle
 
 
 def median_us(fn, states, repeat):
@@ -66,7 +71,13 @@ def main() -> None:
             states,
             args.repeat,
         )
-        ref = median_us(lambda th, t, kp, kd: ctrl.build_reference(th, t, kp, kd), states[:500], 1)
+        ref = median_us(
+            lambda th, t, kp, kd: ctrl.make_problem(
+                numpy_arrays(ctrl, th, t, kp, kd, False), False
+            ),
+            states[:500],
+            1,
+        )
         print(f"{name:<14} {ctrl.n_rows:>4} {build:>10.2f} {arrays:>16.2f} {ref:>16.2f}")
     print("target: build <= 15 us median per tick")
 

@@ -7,6 +7,7 @@ import cvxpy as cp
 import numpy as np
 import pytest
 import qpsolvers
+from controller_numpy import numpy_arrays
 
 from qpbench.control.adaptive import AdaptiveImpedance
 from qpbench.control.controller import Controller
@@ -179,13 +180,14 @@ def test_compiled_build_equals_numpy_terms(formulation, n):
         theta = rng.uniform(-3, 3, n)
         t = rng.uniform(0, 10)
         a = ctrl.build(theta, t, 4500.0, 70.0, formulation)
-        b = ctrl.build_reference(theta, t, 4500.0, 70.0, formulation)
+        b = numpy_arrays(ctrl, theta, t, 4500.0, 70.0, formulation == "soft")
+        twin = ctrl.make_problem(b, formulation == "soft")
         for f in ("P", "q", "G", "h", "A", "b", "lb", "ub"):
-            x, y = getattr(a.problem, f), getattr(b.problem, f)
+            x, y = getattr(a.problem, f), getattr(twin, f)
             assert (x is None) == (y is None)
             if x is not None:
                 np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-9, err_msg=f)
-        np.testing.assert_allclose(a.distances, b.distances, atol=1e-14)
+        np.testing.assert_allclose(a.distances, b.dist.reshape(a.distances.shape), atol=1e-14)
         np.testing.assert_allclose(a.ee, b.ee, atol=1e-15)
         assert isinstance(a.problem.P, np.ndarray) and a.problem.P.shape == (n, n)
         assert a.problem.G.shape == (ctrl.n_rows, n)  # fixed row count

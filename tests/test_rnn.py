@@ -516,7 +516,7 @@ def test_rnn_tuned_is_the_network_with_the_working_setting_in_the_loop():
 
     sc = load_scenario("wall")
     assert sc.rnn["eps"] == 0.02  # the shipped scenario carries the paper's value
-    tuned = resolve_backend("rnn-tuned", sc, dt=sc.dt)
+    tuned = resolve_backend("rnn-tuned", sc)
     assert (tuned.eps, tuned.substeps, tuned.method, tuned.l1_clip, tuned.dt) == (
         1e-4,
         20,
@@ -524,7 +524,7 @@ def test_rnn_tuned_is_the_network_with_the_working_setting_in_the_loop():
         10.0,
         sc.dt,
     )
-    assert resolve_backend("rnn", sc, dt=sc.dt).eps == 0.02
+    assert resolve_backend("rnn", sc).eps == 0.02
     a = simulate(sc, "rnn-tuned", duration=0.3).log
     b = simulate(replace(sc, rnn=dict(WORKING_SETTINGS)), "rnn", duration=0.3).log
     cols = [f"v_{i}" for i in range(4)]

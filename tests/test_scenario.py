@@ -42,7 +42,7 @@ def test_the_paper_scenarios_come_from_the_files_in_section_order(tmp_path, monk
             "in_paper = true", "in_paper = false"
         )
     )
-    import qpbench.sim.scenario_files as files
+    import qpbench.sim.scenario as files
 
     monkeypatch.setattr(files, "shipped_dir", lambda: tmp_path)
     assert paper_scenarios() == [*PAPER, "corner"]

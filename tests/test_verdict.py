@@ -19,7 +19,8 @@ from qpbench.exceptions import ParamError, ScenarioError
 from qpbench.sim.log import TIME_COLUMNS
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario, scenario_names
-from qpbench.sim.verdict import VerdictSettings, failed_run, judge, judge_realtime
+from qpbench.sim.summary import summarize
+from qpbench.sim.verdict import VerdictSettings, failed_run, judge_realtime
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
@@ -197,27 +198,53 @@ def _log(n=3000, dt=1e-3, **over):
         "v_0": np.zeros(n),
         "v_1": np.zeros(n),
         "tracking_error": np.zeros(n),
+        "force": np.zeros(n),
         "force_error": np.zeros(n),
         "d_A1_wall": np.full(n, 0.02),
         "d_body_min": np.full(n, 0.02),
         "d_body_link": np.full(n, 2),
         "d_body_obstacle": np.full(n, "wall"),
+        "v_sq": np.zeros(n),
+        "task_residual": np.zeros(n),
+        "status": np.full(n, "optimal"),
+        "fallback": np.zeros(n, dtype=bool),
+        "zero_velocity": np.zeros(n, dtype=bool),
+        "solve_time_s": np.full(n, 1e-5),
+        "solver_time_s": np.full(n, np.nan),
+        "kp_hat": np.ones(n),
+        "kd_hat": np.ones(n),
     }
     for k, f in over.items():
         cols[k] = f(t)
     return pd.DataFrame(cols)
 
 
-def _judge(frame, **summary):
-    summary.setdefault("simulated_s", len(frame) * 1e-3)  # as the summary has it
-    return judge(
-        frame,
-        SETTINGS,
-        d_safe=0.01,
-        limits=LIMITS,
-        obstacle_columns=[("A1", "wall")],
-        summary=summary,
-        obstacle_kinds={"wall": "line"},
+#: What :func:`summarize` reads of a scenario and a controller: 2 joints, one wall, key point A1.
+SCENARIO = SimpleNamespace(
+    name="hand", overrides={}, verdict_overrides={}, dt=1e-3, duration=3.0, verdict=SETTINGS
+)
+CONTROLLER = SimpleNamespace(
+    n=2,
+    limits=LIMITS,
+    d_safe=0.01,
+    obstacles=[SimpleNamespace(name="wall", KIND="line")],
+    obstacle_columns=lambda: [("A1", "wall", slice(0, 1))],
+    key_points=SimpleNamespace(kind="paper"),
+)
+
+
+def _judge(frame, **run_info):
+    """The verdict of a hand-made log: its summary's (``run_info`` over the summary's figures),
+    the reasons split where the summary joins them."""
+    s = summarize(frame, SCENARIO, CONTROLLER, "b", "paper", 1.0, run_info)
+    reasons = tuple(s["verdict_reasons"].split("; ")) if s["verdict_reasons"] else ()
+    return SimpleNamespace(
+        verdict=s["verdict"],
+        reasons=reasons,
+        text=s["verdict_reasons"],
+        ok=s["verdict"] == "ok",
+        key_point_rule=s["key_point_rule"],
+        key_point_rule_reason=s["key_point_rule_reason"],
     )
 
 

@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     from ..harness.pipeline import RunConfig, run_all
     from ..memory import resolve_budget
     from ..selection import select_backends, select_scenarios
-    from ..sim.scenario_files import run_scenarios
+    from ..sim.scenario import run_scenarios
 
     for key, value in (QUICK if args.quick else FULL).items():
         if getattr(args, key) is None:

@@ -6,8 +6,7 @@ The controller estimates the environment's ``W = [Kp_hat; Kd_hat]`` from the mea
 
 ``K_in = diag(gain_kp, gain_kd)``; ``eta`` is projected on the pressing direction ``n`` so
 ``W`` stays two scalars. Explicit Euler at the control period; the estimates are kept at or
-above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``). In steady contact ``n . xdot`` is about
-zero, so only ``Kp_hat`` moves.
+above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``).
 """
 
 from __future__ import annotations
@@ -16,8 +15,6 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     import numpy as np
-
-__all__ = ["AdaptiveImpedance"]
 
 
 class AdaptiveImpedance:

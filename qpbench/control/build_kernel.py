@@ -10,25 +10,19 @@ import numpy as np
 
 from ..packed import HEADER as PACKED_HEADER
 
-__all__ = ["compiled_build_kernel", "packed_layout", "parameter_vector"]
-
 # Layout of the kernel's parameter vector.
 _T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = (
     range(16)
 )
 _NPAR = 16
 
-_build_kernel_jit = None
-
 
 @cache
 def compiled_build_kernel():
-    """The packed build kernel, compiled (or loaded from numba's cache) on the first call."""
-    global _build_kernel_jit
+    """The build kernel, compiled (or loaded from numba's cache) on the first call."""
     import numba
 
-    _build_kernel_jit = numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
-    return numba.njit(cache=True, fastmath=False, nogil=True)(_build_packed_py)
+    return numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
 
 
 def parameter_vector(
@@ -49,32 +43,19 @@ def parameter_vector(
     return par
 
 
-def packed_layout(n: int, n_rows: int) -> tuple[int, dict[str, tuple[int, tuple[int, ...]]]]:
-    """Size of a tick's buffer and ``{name: (offset, shape)}`` of its arrays, in the order
-    :func:`_build_packed_py` lays them out."""
-    shapes = {
-        "P": (n, n),
-        "q": (n,),
-        "G": (n_rows, n),
-        "h": (n_rows,),
-        "J": (2, n),
-        "b": (2,),
-        "lb": (n,),
-        "ub": (n,),
-        "ee": (2,),
-        "dist": (n_rows,),
-    }
-    layout, off = {}, PACKED_HEADER
-    for name, shape in shapes.items():
-        layout[name] = (off, shape)
-        off += int(np.prod(shape))
-    return off, layout
+def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
+    """Size of a tick's buffer and the slices of its P, q, G, h, J, b, lb, ub, ee and dist, in
+    the order :func:`_build_kernel_py` lays them out."""
+    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows)
+    ends = PACKED_HEADER + np.cumsum(sizes)
+    return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes, ends))
 
 
-def _build_packed_py(
-    theta, lengths, kp_link, kp_frac, prims, lim, par, buf
-):  # pragma: no cover - compiled
-    """Write the tick into ``buf`` (layout of :func:`packed_layout`) and its header."""
+# Over 80 lines, kept whole on purpose: numba compiles it as one function; split, each helper
+# would have to be compiled too. Its numpy twin: tests/controller_numpy.py.
+def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  # pragma: no cover
+    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist of one tick into ``buf`` (layout of
+    :func:`packed_layout`) and write its header."""
     n = theta.shape[0]
     nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
     oP = PACKED_HEADER
@@ -99,35 +80,16 @@ def _build_packed_py(
     buf[8] = oh if nr > 0 else -1
     buf[9] = olb
     buf[10] = oub
-    _build_kernel_jit(
-        theta,
-        lengths,
-        kp_link,
-        kp_frac,
-        prims,
-        lim,
-        par,
-        buf[oP:oq].reshape((n, n)),
-        buf[oq:oG],
-        buf[oG:oh].reshape((nr, n)),
-        buf[oh:oJ],
-        buf[oJ:ob].reshape((2, n)),
-        buf[ob:olb],
-        buf[olb:oub],
-        buf[oub:oee],
-        buf[oee:od],
-        buf[od : od + nr],
-    )
-
-
-# Over 80 lines, kept whole on purpose: numba compiles it as one function (``_build_kernel_jit``);
-# split, each helper would have to be compiled too and rebound in this module's globals before
-# the first compile. tests/test_controller.py compares this one function with the numpy terms.
-def _build_kernel_py(
-    theta, lengths, kp_link, kp_frac, prims, lim, par, P, q, G, h, J, b, lb, ub, ee, dist
-):  # pragma: no cover - compiled
-    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist for one tick."""
-    n = theta.shape[0]
+    P = buf[oP:oq].reshape((n, n))
+    q = buf[oq:oG]
+    G = buf[oG:oh].reshape((nr, n))
+    h = buf[oh:oJ]
+    J = buf[oJ:ob].reshape((2, n))
+    b = buf[ob:olb]
+    lb = buf[olb:oub]
+    ub = buf[oub:oee]
+    ee = buf[oee:od]
+    dist = buf[od : od + nr]
     px = np.empty(n + 1)
     py = np.empty(n + 1)
     cs = np.empty(n)
@@ -164,7 +126,7 @@ def _build_kernel_py(
         vmax = lim[3, k]
         ub[k] = up if up < vmax else vmax
     # objective
-    if par[_SOFT] != 0.0:
+    if soft:
         rho = par[_RHO]
         for r in range(n):
             for c in range(n):

@@ -9,17 +9,15 @@ obstacles are at least ``d_safe`` away)::
 
     minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
 
-``G`` holds one row per (key point, obstacle point) pair, key point major, so the row count is
-fixed for a scenario; no obstacle means ``G = h = None``. Key points of kind ``closest`` take
-each link's point closest to each obstacle point, the end effector's link exempt against the
-contact surface; they are built by the numpy terms (:mod:`qpbench.control.terms`), every other
-kind by the compiled build (:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
+``G`` holds one row per (key point, obstacle point) pair, key point major (a fixed count; no
+obstacle: ``G = h = None``); key points of kind ``closest`` are built by the numpy terms
+(:mod:`qpbench.control.terms`), the paper's by the compiled build
+(:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partialmethod
 from typing import NamedTuple
 
 import numpy as np
@@ -33,14 +31,12 @@ from ..statuses import FORMULATIONS
 from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
 from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
 
-__all__ = ["Controller", "TickArrays", "TickQP", "check_formulation"]
-
 
 class TickArrays(NamedTuple):
     """One tick's arrays: cost and obstacle rows ``P, q, G, h``, task row ``J v = b0`` (eq. 11),
     escape-velocity bounds ``lb, ub`` [rad/s], end effector ``ee`` [m], key-point distances
     ``dist`` [m] (flat, key point major), ``xd = (x_d, xdot_d)`` [m, m/s], the packed ``buffer``
-    the others view (``None`` on the numpy reference path)."""
+    the others view (``None`` for key points of kind ``closest``)."""
 
     P: np.ndarray
     q: np.ndarray
@@ -117,7 +113,6 @@ class Controller:
         ]
         #: Inequality rows per tick (fixed).
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
-        self._compiled = not self.closest and all(o.KERNEL_KIND is not None for o in self.obstacles)
         prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, PRIMITIVE_WIDTH))]
         lim = np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max])
         self._par = parameter_vector(
@@ -134,10 +129,7 @@ class Controller:
             self._par,
         )
         self._path = task.path
-        self._packed_size, layout = packed_layout(self.n, self.n_rows)
-        self._packed_slices = tuple(
-            slice(off, off + int(np.prod(shape))) for off, shape in layout.values()
-        )
+        self._packed_size, self._packed_slices = packed_layout(self.n, self.n_rows)
 
     # -- fast path -------------------------------------------------------------
     def build_arrays(
@@ -150,8 +142,8 @@ class Controller:
     ) -> TickArrays:
         """The tick's :class:`TickArrays`, freshly allocated (the loop's hot path: ``theta``
         must be a contiguous float64 array; :meth:`build` converts)."""
-        if not self._compiled:
-            return self._arrays_from_terms(theta, t, kp, kd, soft)
+        if self.closest:
+            return self._closest_arrays(theta, t, kp, kd, soft)
         n = self.n
         nr = self.n_rows
         xd = self._path(t)
@@ -198,22 +190,16 @@ class Controller:
         kp: float | None = None,
         kd: float | None = None,
         formulation: str = "paper",
-        reference: bool = False,
     ) -> TickQP:
         """The tick's QP at joint angles ``theta`` [rad], time ``t`` [s], ``kp, kd`` (default: the
-        controller's); ``reference``: assembled from the numpy terms (slower; for checks)."""
+        controller's)."""
         soft = check_formulation(formulation)
         theta = np.ascontiguousarray(theta, dtype=np.float64)
         if theta.shape != (self.n,):
             raise ParamError(f"theta must have shape ({self.n},), got {theta.shape}", key="theta")
-        if reference:
-            arrays = self._arrays_from_terms(theta, float(t), kp, kd, soft)
-        else:
-            arrays = self.build_arrays(theta, float(t), kp, kd, soft)
+        arrays = self.build_arrays(theta, float(t), kp, kd, soft)
         problem = self.make_problem(arrays, soft)
         return TickQP(problem, arrays.J, arrays.b0, arrays.ee, self._distance_grid(arrays.dist))
-
-    build_reference = partialmethod(build, reference=True)
 
     def _distance_grid(self, dist: np.ndarray) -> np.ndarray:
         """The flat distances as (key point, obstacle point), ``inf`` for a pair without rows."""
@@ -226,8 +212,8 @@ class Controller:
             grid[i, starts[j] : starts[j + 1]] = dist[s]
         return grid
 
-    # -- numpy reference path ---------------------------------------------------
-    def _arrays_from_terms(self, theta, t, kp, kd, soft):
+    # -- key points of kind closest: the numpy terms ----------------------------
+    def _closest_arrays(self, theta, t, kp, kd, soft):
         theta = np.asarray(theta, dtype=float)
         kp = self.kp if kp is None else kp
         kd = self.kd if kd is None else kd
@@ -237,21 +223,17 @@ class Controller:
         xd = self._path(t)
         b0 = self.task.impedance_reference(ee, t, kp, kd)
         lb, ub = self.limits.escape_velocity_bounds(theta)
-        if soft:
-            P, q = self.task.cost(J, b0, self.rho)
+        if soft:  # 1/2 v^T v + rho/2 |J v - b0|^2
+            P, q = np.eye(n) + self.rho * J.T @ J, -self.rho * J.T @ b0
         else:
             P, q = np.eye(n), np.zeros(n)
         a, radius = len(self.key_points), self.key_points.radius
         if not self.pairs:
             G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
             return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
-        if self.closest:  # one key point per link: its point closest to each obstacle point
-            joints = self.arm.joint_positions(theta)
-            per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
-        else:
-            links, fracs = self.key_points.links, self.key_points.fracs
-            key_xy, key_J = self.arm.points_jacobians(theta, links, fracs)
-            per = [term.rows(key_xy, key_J, t, radius) for term in self.avoidance]
+        # one key point per link: its point closest to each obstacle point
+        joints = self.arm.joint_positions(theta)
+        per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
         # each term's rows are key point major; the QP's rows follow the pairs
         G = np.concatenate([per[j][0].reshape(a, -1, n)[i] for i, j in self.pairs])
         h = np.concatenate([per[j][1].reshape(a, -1)[i] for i, j in self.pairs])

@@ -11,14 +11,6 @@ import numpy as np
 from ..exceptions import InputError
 from ..robot.environment import Obstacle
 
-__all__ = [
-    "CosinePath",
-    "EscapeVelocityLimits",
-    "ImpedanceTask",
-    "ObstacleAvoidance",
-    "PolylinePath",
-]
-
 
 class CosinePath:
     """``x_d(t) = centre + amplitude * cos(omega t + phase)`` per axis (paper sections 4.2-4.5):
@@ -89,13 +81,6 @@ class ImpedanceTask:
         xdot_d = np.array([vdx, vdy])
         return xdot_d - (kp / kd) * (np.asarray(x) - x_d) + (self.desired_force / kd) * self.normal
 
-    @staticmethod
-    def cost(J: np.ndarray, b0: np.ndarray, rho: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(P, q)`` of ``1/2 v^T v + rho/2 |J v - b0|^2`` (``soft`` formulation):
-        ``I + rho J^T J``, ``-rho J^T b0``."""
-        n = J.shape[1]
-        return np.eye(n) + rho * J.T @ J, -rho * J.T @ b0
-
 
 class EscapeVelocityLimits:
     """Joint limits as velocity bounds (paper eq. 11c, escape-velocity form)::
@@ -129,25 +114,14 @@ class ObstacleAvoidance:
         d/dt dist = u . (J_Ai v - Bdot_j) >= -k (dist - d_safe)
         =>  G row = -u^T J_Ai,   h = k (dist - d_safe) - u . Bdot_j
 
-    Damper gain ``k`` [1/s], ``d_safe`` [m]; one row per pair, key point major.
+    Damper gain ``k`` [1/s], ``d_safe`` [m]; one row per pair, key point major (the paper's key
+    points: :mod:`qpbench.control.build_kernel`).
     """
 
     def __init__(self, obstacle: Obstacle, k: float, d_safe: float):
         self.obstacle = obstacle
         self.k = float(k)
         self.d_safe = float(d_safe)
-
-    def rows(
-        self, key_xy: np.ndarray, key_J: np.ndarray, t: float, radius: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``G`` (a*m, n), ``h`` (a*m,), ``dist`` (a, m) [m] (``radius`` subtracted) for key
-        points ``key_xy`` (a, 2) [m] with Jacobians ``key_J`` (a, 2, n)."""
-        _, dist, u = self.obstacle.closest(key_xy, t)
-        dist = dist - radius
-        a, m = dist.shape
-        G = -np.einsum("amk,akn->amn", u, key_J).reshape(a * m, -1)
-        h = (self.k * (dist - self.d_safe) - u @ self.obstacle.velocity).reshape(a * m)
-        return G, h, dist
 
     def closest_rows(
         self, joints: np.ndarray, t: float, radius: float = 0.0

@@ -9,12 +9,12 @@ into it by design; the closest-point key points use the same exemption.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .environment import ContactSurface, LineObstacle, Obstacle
 from .kinematics import PlanarArm
-
-__all__ = ["BodyClearance", "body_clearance", "contact_obstacles", "link_label"]
 
 #: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
 SAME_LINE_TOL = 1e-9
@@ -37,25 +37,15 @@ def link_label(link: int, n: int) -> str:
     return f"link {link} (end effector)" if link == n else f"link {link}"
 
 
-class BodyClearance:
+class BodyClearance(NamedTuple):
     """Clearance ``d`` (T, n, o) [m] of every link to every obstacle per tick (``+inf`` where
     exempt); per tick its smallest ``d_min`` [m] (NaN without obstacles), that one's 1-based
     ``link`` (0 without) and ``obstacle`` index (-1 without)."""
 
-    def __init__(self, d: np.ndarray):
-        self.d = d
-        T, n, o = d.shape
-        if o == 0 or T == 0:
-            self.d_min = np.full(T, np.nan)
-            self.link = np.zeros(T, dtype=np.int64)
-            self.obstacle = np.full(T, -1, dtype=np.int64)
-            return
-        flat = d.reshape(T, n * o)
-        filled = np.where(np.isnan(flat), -np.inf, flat)
-        arg = np.argmin(filled, axis=1)
-        self.d_min = flat[np.arange(T), arg]
-        self.link = arg // o + 1
-        self.obstacle = arg % o
+    d: np.ndarray
+    d_min: np.ndarray
+    link: np.ndarray
+    obstacle: np.ndarray
 
 
 def body_clearance(
@@ -73,7 +63,8 @@ def body_clearance(
     t = np.broadcast_to(np.asarray(t, dtype=float), (T,))
     d = np.empty((T, n, len(obstacles)))
     if not obstacles or T == 0:
-        return BodyClearance(d)
+        none = np.zeros(T, dtype=np.int64)
+        return BodyClearance(d, np.full(T, np.nan), none, none - 1)
     p = arm.joint_positions(theta)
     P0 = p[:, :-1].reshape(-1, 2)
     P1 = p[:, 1:].reshape(-1, 2)
@@ -83,4 +74,7 @@ def body_clearance(
         d[:, :, j] = dist.min(axis=1).reshape(T, n) - radius
         if exempt is not None and exempt[j]:
             d[:, n - 1, j] = np.inf
-    return BodyClearance(d)
+    flat = d.reshape(T, -1)
+    arg = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
+    m = len(obstacles)
+    return BodyClearance(d, flat[np.arange(T), arg], arg // m + 1, arg % m)

@@ -6,12 +6,10 @@ read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
 
     F = max(0, Kp_env delta + Kd_env deltadot)   if delta > 0, else 0     [N]
 
-Obstacles give, for each key point ``A``, one or more obstacle points ``B`` (the closest point of
-a shape, or each point of a cloud), the distance ``dist`` [m] (signed for a ``line``: a wall is a
-half-plane) and the unit vector ``u`` from ``B`` to ``A``; they may translate with a constant
-``velocity`` [m/s]. :meth:`Obstacle.closest_on_segments` gives the exact signed distance of link
-segments to a shape (negative inside). A shape without a ``KERNEL_KIND`` makes the controller
-use its numpy path.
+Obstacles (:class:`Obstacle`) give, for key points or link segments, one or more obstacle points
+(the closest point of a shape, or each point of a cloud) and the signed distance [m] (negative
+inside; a ``line`` is a wall, a half-plane); they may translate with a constant ``velocity``
+[m/s].
 """
 
 from __future__ import annotations
@@ -21,16 +19,6 @@ import math
 import numpy as np
 
 from ..exceptions import InputError
-
-__all__ = [
-    "ContactSurface",
-    "DiskObstacle",
-    "LineObstacle",
-    "Obstacle",
-    "PointCloudObstacle",
-    "SegmentObstacle",
-    "OBSTACLE_KINDS",
-]
 
 #: Floats per obstacle point in the compiled kernel's table: ``[kind, p0x, p0y, p1x, p1y, radius,
 #: vx, vy]``.
@@ -97,8 +85,8 @@ class Obstacle:
     ``velocity`` [m/s], ``n_points`` obstacle points ``B_j`` per key point."""
 
     KIND: str = ""
-    #: Code of the shape in the controller's compiled kernel (None: numpy path only).
-    KERNEL_KIND: int | None = None
+    #: Code of the shape in the controller's compiled kernel.
+    KERNEL_KIND: int
     n_points: int = 1
 
     def __init__(self, name: str, velocity=(0.0, 0.0)):

@@ -19,8 +19,6 @@ import numpy as np
 
 from ..exceptions import InputError
 
-__all__ = ["KEY_POINT_KINDS", "KeyPoints", "PlanarArm", "closest_key_points", "default_key_points"]
-
 #: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
 KEY_POINT_KINDS = ("paper", "closest")
 
@@ -80,11 +78,6 @@ class PlanarArm:
         J[:, 0, :] = -rel[:, :, 1] * mask
         J[:, 1, :] = rel[:, :, 0] * mask
         return x, J
-
-    def jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """End-effector Jacobian ``J = dx/dtheta`` (eq. 2) in [m/rad], shape (2, n)."""
-        _, J = self.points_jacobians(theta, [self.n - 1], [1.0])
-        return J[0]
 
 
 @dataclass(frozen=True)

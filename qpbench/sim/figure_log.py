@@ -18,8 +18,6 @@ import pandas as pd
 from ..statuses import CERTIFIED_INFEASIBLE, FAILURE_STATUSES
 from . import log as tick_log
 
-__all__ = ["BUCKETS", "FIGURE_LOG_DIR", "figure_log", "figure_log_path", "write_figure_log"]
-
 #: Folder of the figure logs in a closed-loop output folder (beside ``logs/``).
 FIGURE_LOG_DIR = "figure_logs"
 #: Spans of ticks a run is cut into (a figure is about 1,000 pixels wide).
@@ -28,23 +26,6 @@ BUCKETS = 300
 #: Mantissa bits kept of each drawn value (a relative step of 2**-12).
 MANTISSA_BITS = 12
 
-#: Columns kept besides the per-joint and per-distance ones.
-_KEPT = (
-    tick_log.T,
-    tick_log.EE_X,
-    tick_log.EE_Y,
-    tick_log.XD_X,
-    tick_log.XD_Y,
-    tick_log.TRACKING_ERROR,
-    tick_log.FORCE_ERROR,
-    tick_log.D_MIN,
-    tick_log.V_SQ,
-    tick_log.SOLVE_TIME,
-    tick_log.KP_HAT,
-    tick_log.STATUS,
-    tick_log.FALLBACK,
-    tick_log.ZERO_VELOCITY,
-)
 #: Quantities whose smallest and largest value in each span are kept (absolute value for signed errors).
 _EXTREMES = (
     (tick_log.TRACKING_ERROR, True),
@@ -53,6 +34,20 @@ _EXTREMES = (
     (tick_log.SOLVE_TIME, False),
     (tick_log.V_SQ, False),
 )
+#: Columns kept besides the per-joint and per-distance ones: those and these.
+_KEPT = (
+    *(column for column, _ in _EXTREMES),
+    tick_log.T,
+    tick_log.EE_X,
+    tick_log.EE_Y,
+    tick_log.XD_X,
+    tick_log.XD_Y,
+    tick_log.KP_HAT,
+    tick_log.STATUS,
+    tick_log.FALLBACK,
+    tick_log.ZERO_VELOCITY,
+)
+
 #: Statuses of a tick kept whatever its span.
 _NOT_SOLVED = frozenset(CERTIFIED_INFEASIBLE) | {"not_solved"} | FAILURE_STATUSES
 

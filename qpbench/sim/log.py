@@ -59,11 +59,6 @@ Z_MAX = "z_max"
 KP_HAT, KD_HAT = "kp_hat", "kd_hat"
 D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE = "d_body_min", "d_body_link", "d_body_obstacle"
 
-#: Prefixes of the per-joint columns ``theta_i`` [rad] and ``v_i`` [rad/s].
-THETA_PREFIX, V_PREFIX = "theta", "v"
-#: Prefix of the per (key point, obstacle) distance columns ``d_<A>_<obstacle>`` [m].
-DISTANCE_PREFIX = "d"
-
 #: Columns after the distances, in the order the tick kernel writes them
 #: (``status`` is inserted before ``fallback`` when the log becomes a frame).
 _TAIL = (
@@ -85,22 +80,22 @@ _MIDDLE = (EE_X, EE_Y, XD_X, XD_Y, TRACKING_ERROR, FORCE, FORCE_ERROR)
 
 def theta_columns(n: int) -> list[str]:
     """``theta_0 .. theta_{n-1}``: joint angles [rad]."""
-    return [f"{THETA_PREFIX}_{i}" for i in range(n)]
+    return [f"theta_{i}" for i in range(n)]
 
 
 def velocity_columns(n: int) -> list[str]:
     """``v_0 .. v_{n-1}``: commanded joint velocities [rad/s]."""
-    return [f"{V_PREFIX}_{i}" for i in range(n)]
+    return [f"v_{i}" for i in range(n)]
 
 
 def distance_column(key_point: str, obstacle: str) -> str:
     """``d_<key point>_<obstacle>``: the key point's distance to the obstacle [m]."""
-    return f"{DISTANCE_PREFIX}_{key_point}_{obstacle}"
+    return f"d_{key_point}_{obstacle}"
 
 
 def joint_count(frame: pd.DataFrame) -> int:
     """Joints of the arm a tick log is of (its ``v_i`` columns)."""
-    return sum(1 for c in frame.columns if re.fullmatch(rf"{V_PREFIX}_\d+", str(c)))
+    return sum(1 for c in frame.columns if re.fullmatch(r"v_\d+", str(c)))
 
 
 def distance_columns(frame: pd.DataFrame) -> list[str]:
@@ -108,8 +103,7 @@ def distance_columns(frame: pd.DataFrame) -> list[str]:
     return [
         c
         for c in frame.columns
-        if str(c).startswith(f"{DISTANCE_PREFIX}_")
-        and c not in (D_MIN, D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE)
+        if str(c).startswith("d_") and c not in (D_MIN, D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE)
     ]
 
 

@@ -40,8 +40,6 @@ from .scenario import Scenario, load_scenario
 from .summary import jsonable, summarize
 from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
 
-__all__ = ["SimResult", "resolve_backend", "simulate"]
-
 log = logging.getLogger(__name__)
 #: One line per solve, shown by ``qpbench -vv`` (the CLI sets its level).
 solve_log = logging.getLogger("qpbench.solves")
@@ -54,7 +52,7 @@ _Raised = namedtuple(
 
 
 def resolve_backend(
-    backend: str | Backend, scenario: Scenario, dt: float, profile: str = "default"
+    backend: str | Backend, scenario: Scenario, profile: str = "default"
 ) -> Backend:
     """A backend instance for ``scenario``: by name, or the given instance checked.
 
@@ -62,6 +60,7 @@ def resolve_backend(
     backends) gets that table's settings; an online backend also the control period ``dt``
     [s], which an instance's own ``dt`` must match.
     """
+    dt = scenario.dt
     if isinstance(backend, str):
         cls = backend_class(backend)
         settings = {}
@@ -80,18 +79,6 @@ def resolve_backend(
             f"the backend integrates dt = {own_dt} s per call but the loop's dt is {dt} s", key="dt"
         )
     return backend
-
-
-def _check_arguments(formulation: str, every, deadline, wall_budget_s) -> None:
-    """Check :func:`qpbench.sim.loop.simulate`'s arguments (:class:`ParamError` naming the key)."""
-    check_formulation(formulation)
-    if every is not None:
-        positive_count(every, "every")
-    for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):
-        if isinstance(value, str):  # float() would read it, but the API takes numbers
-            raise ParamError(f"expected a positive number of seconds, got {value!r}", key=key)
-        if value is not None:
-            positive_seconds(value, key)
 
 
 def _reset(backend: Backend) -> None:
@@ -135,11 +122,18 @@ def simulate(
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    _check_arguments(formulation, every, deadline, wall_budget_s)
+    check_formulation(formulation)
+    if every is not None:
+        positive_count(every, "every")
+    for key, value in (("deadline", deadline), ("wall_budget_s", wall_budget_s)):
+        if isinstance(value, str):  # float() would read it, but the API takes numbers
+            raise ParamError(f"expected a positive number of seconds, got {value!r}", key=key)
+        if value is not None:
+            positive_seconds(value, key)
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     keep_every = every if every is not None else (1 if dump is not None else None)
-    be = resolve_backend(backend, scenario, scenario.dt, profile)
+    be = resolve_backend(backend, scenario, profile)
     run = _Run(scenario, be, formulation, keep_every, deadline)
     run.warm()
     run.loop(progress, wall_budget_s)
@@ -379,20 +373,18 @@ class _Run:
         summary = summarize(
             frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info=run_info
         )
-        recs = []
-        if self.keep_every is not None:
-            from ..formats import ProblemRecord
+        from ..formats import ProblemRecord
 
-            name = f"{scenario.name}_{self.formulation}"
-            recs = [
-                ProblemRecord(
-                    problem=p,
-                    name=f"{name}_{k:06d}",
-                    scenario=scenario.name,
-                    tick=k,
-                    t=t,
-                    formulation=self.formulation,
-                )
-                for k, t, p in self.records
-            ]
+        name = f"{scenario.name}_{self.formulation}"
+        recs = [
+            ProblemRecord(
+                problem=p,
+                name=f"{name}_{k:06d}",
+                scenario=scenario.name,
+                tick=k,
+                t=t,
+                formulation=self.formulation,
+            )
+            for k, t, p in self.records  # none unless keep_every
+        ]
         return SimResult(frame, summary, recs)

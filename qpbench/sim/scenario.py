@@ -1,9 +1,11 @@
 """Scenarios: one TOML file holds every parameter of a simulation (paper section 4).
 
-:func:`load_scenario` reads a shipped scenario by name (:mod:`.scenario_files`) or a file by
-path and checks it against the schema (:mod:`.scenario_schema`). Values can be set over a
-file's without copying it (``overrides={"rnn.eps": 1e-3}``, ``qpbench simulate --set
-rnn.eps=0.001``; :func:`apply_overrides`), checked like the file's own.
+:func:`load_scenario` reads a shipped scenario (``qpbench/data/scenarios/<name>.toml``; one with
+``[scenario] in_paper = true`` is one of the paper's, whose per-tick QPs ``qpbench run``
+benchmarks too) by name or a file by path and checks it against the schema
+(:mod:`.scenario_schema`). Values can be set over a file's without copying it
+(``overrides={"rnn.eps": 1e-3}``, ``qpbench simulate --set rnn.eps=0.001``;
+:func:`apply_overrides`), checked like the file's own.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import logging
 import re
 import tomllib
 from dataclasses import dataclass, field, replace
+from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,26 +25,17 @@ from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
-from .scenario_files import paper_scenarios, scenario_names, scenario_path
 from .scenario_schema import OPTIONAL_TABLES, check_simulation, validate
 from .verdict import VerdictSettings
 
 if TYPE_CHECKING:
+    from importlib.resources.abc import Traversable
+
     from ..control.adaptive import AdaptiveImpedance
     from ..control.controller import Controller
     from ..control.terms import CosinePath, PolylinePath
 
 log = logging.getLogger(__name__)
-
-__all__ = [
-    "Scenario",
-    "apply_overrides",
-    "load_scenario",
-    "paper_scenarios",
-    "parse_scenario",
-    "scenario_names",
-    "scenario_path",
-]
 
 
 @dataclass
@@ -88,6 +82,12 @@ class Scenario:
     def verdict(self) -> VerdictSettings:
         """Thresholds of a run's verdict (``[verdict]``; :mod:`qpbench.sim.verdict`)."""
         return VerdictSettings(**self.data["verdict"])
+
+    @property
+    def verdict_overrides(self) -> dict:
+        """The ``[verdict]`` thresholds set over the file's, by key (``settle_time``)."""
+        prefix = "verdict."
+        return {k[len(prefix) :]: v for k, v in self.overrides.items() if k.startswith(prefix)}
 
     @property
     def normal(self) -> np.ndarray:
@@ -192,21 +192,14 @@ def parse_scenario(
         if isinstance(exc, ScenarioError):
             raise
         raise ScenarioError(exc.message, path=file, key=exc.key) from None
-    _warn_verdict_overrides(overrides or {}, file)
-    return scenario
-
-
-def _warn_verdict_overrides(overrides: dict, file) -> None:
-    """A WARNING naming the ``[verdict]`` thresholds set over the file's (the summary records
-    them: ``verdict_overrides``)."""
-    changed = {k: v for k, v in overrides.items() if str(k).startswith("verdict.")}
-    if changed:
+    if changed := scenario.verdict_overrides:
         log.warning(
             "%s: verdict thresholds changed on the command line: %s (the verdict is not judged "
             "on the scenario's own thresholds)",
             file,
-            ", ".join(f"{k}={v!r}" for k, v in changed.items()),
+            ", ".join(f"verdict.{k}={v!r}" for k, v in changed.items()),
         )
+    return scenario
 
 
 #: ``table.key`` or ``table[index].key``: a key of ``--set`` and of a sweep's parameters.
@@ -270,3 +263,62 @@ def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Sc
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"cannot read: {exc}", path=path) from None
     return parse_scenario(text, path, overrides)
+
+
+def shipped_dir() -> Traversable:
+    """The package folder of the shipped scenario files."""
+    return resources.files("qpbench") / "data" / "scenarios"
+
+
+def _scenario_table(name: str) -> dict:
+    """The ``[scenario]`` table of shipped scenario ``name``, as written."""
+    return tomllib.loads((shipped_dir() / f"{name}.toml").read_text(encoding="utf-8"))["scenario"]
+
+
+def _section_key(section) -> tuple[int, ...]:
+    """``"4.10"`` -> ``(4, 10)``: paper sections in the paper's order."""
+    return tuple(int(n) for n in re.findall(r"\d+", str(section)))
+
+
+def paper_scenarios() -> list[str]:
+    """The shipped scenarios of the paper (``in_paper = true``), in the order of their sections."""
+    tables = {name: _scenario_table(name) for name in _shipped_names()}
+    paper = [name for name, t in tables.items() if t.get("in_paper") is True]
+    return sorted(
+        paper, key=lambda name: (_section_key(tables[name].get("paper_section", "")), name)
+    )
+
+
+def _shipped_names() -> list[str]:
+    return sorted(p.name[:-5] for p in shipped_dir().iterdir() if p.name.endswith(".toml"))
+
+
+def scenario_names() -> list[str]:
+    """Names of the shipped scenarios: the paper's in its order, then the others sorted."""
+    paper = paper_scenarios()
+    return paper + [name for name in _shipped_names() if name not in paper]
+
+
+def run_scenarios() -> list[str]:
+    """The shipped scenarios ``qpbench run`` runs by default (``[scenario] in_run``, default
+    true), in the order of :func:`scenario_names`."""
+    return [name for name in scenario_names() if _scenario_table(name).get("in_run", True)]
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """The file a scenario name or path refers to (a name without a suffix or slash is
+    looked up among the shipped scenarios first)."""
+    text = str(name_or_path)
+    if "/" not in text and not text.endswith(".toml"):
+        candidate = shipped_dir() / f"{text}.toml"
+        if candidate.is_file():
+            return Path(str(candidate))
+        if not Path(text).is_file():
+            raise ScenarioError(
+                f"no shipped scenario of that name and no such file (shipped: {', '.join(scenario_names())})",
+                path=text,
+            )
+    path = Path(text)
+    if not path.is_file():
+        raise ScenarioError("no such scenario file", path=path)
+    return path

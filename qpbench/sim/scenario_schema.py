@@ -4,10 +4,7 @@ A missing, unknown or mistyped key raises :class:`~qpbench.exceptions.ScenarioEr
 file and the key; a range is checked here only for a value no object of the scenario holds
 (the arm, the key points, the contact surface, the obstacles and
 :class:`qpbench.sim.verdict.VerdictSettings` check their own). ``[adaptive]``, ``[rnn]`` and
-``[verdict]`` may be left out (:data:`DEFAULTS`). ``[rnn]`` holds ``eps`` [s] and any further
-settings of the ``rnn`` backends. ``[verdict]``: ``settle_time`` defaults to at most half the
-duration and, set on the command line, must be < ``simulation.duration``; ``0 <=
-safety_margin < d_safe`` (0 when ``d_safe`` is 0), by default at most half of ``d_safe``.
+``[verdict]`` may be left out (:data:`DEFAULTS`; ``[verdict]``: docs/verdicts.md).
 """
 
 from __future__ import annotations
@@ -24,8 +21,6 @@ from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 if TYPE_CHECKING:
     from pathlib import Path
-
-__all__ = ["DEFAULTS", "OPTIONAL_TABLES", "check_simulation", "filled", "validate"]
 
 # Types: num, int, bool, str, vec (numbers), vec2 (two numbers), points ([[x, y], ...]), a tuple
 # (one of its strings); ">0" or ">=0" after a type bounds a number or every entry of a vector.
@@ -100,7 +95,7 @@ _VERDICT_SCHEMA = dict.fromkeys(asdict(_VERDICT_DEFAULTS), "num")
 #: Tables a file may leave out (all their keys have defaults).
 OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 _TOP = (*_SCHEMA, "path", "obstacles", "rnn", "verdict")
-#: Defaults of the keys that may be left out, per table (``[verdict]``: see the module docstring).
+#: Defaults of the keys that may be left out, per table.
 DEFAULTS: dict[str, dict] = {
     "scenario": {"in_paper": False, "in_run": True},
     "key_points": {"kind": "paper"},
@@ -311,18 +306,9 @@ def check_simulation(data: dict, file: str | Path) -> None:
         )
 
 
-#: Order of the tables in a filled-in scenario file (:func:`filled`).
-_ORDER = (
-    "scenario",
-    "robot",
-    "key_points",
-    "path",
-    "contact",
-    "controller",
-    "adaptive",
-    "simulation",
-    "verdict",
-)
+#: Order of the tables in a filled-in scenario file (:func:`filled`): the schema's, ``[path]``
+#: after ``[key_points]``, ``[verdict]`` last.
+_ORDER = (*list(_SCHEMA)[:3], "path", *list(_SCHEMA)[3:], "verdict")
 
 
 def filled(data: dict, rnn: dict) -> dict:

@@ -11,12 +11,13 @@ figure does not exist); a row of ``closed_loop.csv`` or ``sweep.csv`` is that di
   ``stopped_early``.
 - ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
   ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations beyond
-  :data:`~qpbench.sim.verdict.VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
+  :data:`VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
 - ``min_obstacle_distance`` [m] of the key points; ``min_body_distance`` [m] of the link
   capsules (< 0 inside, :mod:`qpbench.robot.body`); ``obstacle_active_intervals``: per
   (key point, obstacle), when within :data:`ACTIVE_MARGIN` of ``d_safe``.
 - ``verdict``, ``verdict_reasons``, ``key_point_rule`` and ``realtime``, ``realtime_solver``:
-  :mod:`qpbench.sim.verdict` on these figures.
+  :mod:`qpbench.sim.verdict` on these figures and on the worst cases it names (computed here,
+  not in the row).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from ..control.controller import Controller
 from ..statuses import INFEASIBLE_OR_UNCLASSIFIED
 from . import log
 from .scenario import Scenario
-from .verdict import VIOLATION_TOL, judge, judge_realtime
+from .verdict import VerdictSettings, judge, judge_realtime
 
 #: Time from which the ``*_after_2s`` figures are taken [s].
 SETTLE_TIME = 2.0
@@ -40,6 +41,9 @@ ACTIVE_MARGIN = 1e-4
 
 #: One tick's solve longer than this misses a 1 kHz loop's deadline [s].
 KHZ_DEADLINE_S = 1e-3
+
+#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks.
+VIOLATION_TOL = 1e-6
 
 #: At most this many intervals per list in a summary.
 MAX_INTERVALS = 20
@@ -59,12 +63,6 @@ def jsonable(overrides: dict) -> dict:
     return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in overrides.items()}
 
 
-def verdict_overrides(overrides: dict) -> dict:
-    """The ``[verdict]`` thresholds among scenario overrides, by key (``settle_time``)."""
-    prefix = "verdict."
-    return {k[len(prefix) :]: v for k, v in jsonable(overrides).items() if k.startswith(prefix)}
-
-
 def _none(x):
     x = float(x)
     return None if not math.isfinite(x) else x
@@ -81,6 +79,12 @@ def _intervals(mask: np.ndarray, t: np.ndarray) -> list[list[float]]:
     return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
 
 
+def _first(mask: np.ndarray, t: np.ndarray) -> tuple[int, float | None]:
+    """How many ticks ``mask`` holds on, and the first of them [s] (``None``: none)."""
+    rows = np.flatnonzero(mask)
+    return rows.size, (float(t[rows[0]]) if rows.size else None)
+
+
 def summarize(
     frame: pd.DataFrame,
     scenario: Scenario,
@@ -92,12 +96,12 @@ def summarize(
 ) -> dict:
     """Figures of a run and its verdict (module docstring); ``run_info`` from the loop's own."""
     t = frame[log.T].to_numpy()
-    dt = scenario.dt
+    dt, settings = scenario.dt, scenario.verdict
     ticks = len(frame)
     out = {
         "scenario": scenario.name,
         "scenario_overrides": jsonable(scenario.overrides),
-        "verdict_overrides": verdict_overrides(scenario.overrides),
+        "verdict_overrides": scenario.verdict_overrides,
         "backend": backend,
         "formulation": formulation,
         "dt": dt,
@@ -105,14 +109,22 @@ def summarize(
         "ticks": ticks,
         "simulated_s": ticks * dt,
     }
-    out.update(_status_figures(frame, t, dt))
-    out.update(_error_figures(frame, t))
+    out.update(_status_figures(frame, t))
+    errors, judged = _error_figures(frame, t, settings.settle_time)
+    out.update(errors)
     dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
-    closest, active = _obstacle_figures(frame, t, dt, dcols, controller.d_safe)
+    margin = settings.safety_margin
+    closest, active, below = _obstacle_figures(frame, t, dcols, controller.d_safe, margin)
     out.update(closest)
-    out.update(_body_figures(frame, t))
+    judged.update(below)
+    body, inside = _body_figures(frame, t, {o.name: o.KIND for o in controller.obstacles})
+    out.update(body)
+    judged.update(inside, joints=controller.n)
     out["key_points_kind"] = controller.key_points.kind
-    out.update(_effort_figures(frame, controller, dt, t >= SETTLE_TIME - 1e-12))
+    limits, worst = _limit_figures(frame, t, controller.limits)
+    out.update(limits)
+    judged.update(worst)
+    out.update(_effort_figures(frame, controller.n, dt, t >= SETTLE_TIME - 1e-12))
     out.update(
         {
             "wall_time_s": float(wall_time_s),
@@ -123,20 +135,12 @@ def summarize(
     )
     out.update(active)
     out.update(run_info or {})
-    verdict = judge(
-        frame,
-        scenario.verdict,
-        d_safe=controller.d_safe,
-        limits=controller.limits,
-        obstacle_columns=dcols,
-        summary=out,
-        obstacle_kinds={o.name: o.KIND for o in controller.obstacles},
-    )
+    verdict = judge({**out, **judged}, settings)
     out["verdict"] = verdict.verdict
     out["verdict_reasons"] = verdict.text
     out["key_point_rule"] = verdict.key_point_rule
     out["key_point_rule_reason"] = verdict.key_point_rule_reason
-    out.update(_realtime_figures(frame, dt, scenario, out["solve_time_p99_s"]))
+    out.update(_realtime_figures(frame, dt, settings, out["solve_time_p99_s"]))
     return out
 
 
@@ -165,11 +169,10 @@ def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: f
 
 
 def _realtime_figures(
-    frame: pd.DataFrame, dt: float, scenario: Scenario, p99: float | None
+    frame: pd.DataFrame, dt: float, settings: VerdictSettings, p99: float | None
 ) -> dict:
     """Real time at ``dt`` [s] from the measured call times (p99 ``p99`` [s]) and from the
     solver's own times; ``deadline_misses``: the calls longer than ``dt``."""
-    settings = scenario.verdict
     calls = frame[log.SOLVE_TIME].to_numpy(dtype=float)
     own = frame[log.SOLVER_TIME].to_numpy(dtype=float)
     own = own[np.isfinite(own)]
@@ -179,11 +182,11 @@ def _realtime_figures(
     solver, solver_why = judge_realtime(own_p99, own_over, own.size, dt, settings, "solver")
     return {
         "deadline_misses": misses,
-        "over_dt_share": misses / calls.size if calls.size else None,
+        "over_dt_share": misses / calls.size,
         "solver_time_p99_s": own_p99,
         "solver_over_dt_share": own_over / own.size if own.size else None,
         "realtime": "yes" if realtime == "yes" else "no",
-        "realtime_reason": why if calls.size else "no tick simulated",
+        "realtime_reason": why,
         "realtime_solver": solver,
         "realtime_solver_reason": solver_why,
     }
@@ -197,7 +200,7 @@ def _amax(x: np.ndarray) -> float | None:
     return _none(np.max(np.abs(x))) if x.size else None
 
 
-def _status_figures(frame: pd.DataFrame, t: np.ndarray, dt: float) -> dict:
+def _status_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
     """Counts by tick status (:mod:`qpbench.statuses`), fallbacks, and when the QP was infeasible."""
     status = frame[log.STATUS]
     infeasible = status.isin(INFEASIBLE_OR_UNCLASSIFIED).to_numpy()
@@ -216,98 +219,118 @@ def _status_figures(frame: pd.DataFrame, t: np.ndarray, dt: float) -> dict:
     }
 
 
-def _error_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
-    """Tracking [m] and force [N] errors after :data:`SETTLE_TIME`, the last force [N]."""
+def _error_figures(frame: pd.DataFrame, t: np.ndarray, settle_time: float) -> tuple[dict, dict]:
+    """Tracking [m] and force [N] errors after :data:`SETTLE_TIME`, the last force [N]; for the
+    verdict, each error's largest ``(|error|, t)`` after ``settle_time`` [s] (NaN as ``inf``;
+    ``None``: no tick after it)."""
     after = t >= SETTLE_TIME - 1e-12
     te = frame[log.TRACKING_ERROR].to_numpy()[after]
     fe = frame[log.FORCE_ERROR].to_numpy()[after]
-    return {
+    out = {
         "tracking_rms_after_2s": _rms(te),
         "tracking_max_after_2s": _amax(te),
         "force_error_rms_after_2s": _rms(fe),
         "force_error_max_after_2s": _amax(fe),
-        "force_final": _none(frame[log.FORCE].iloc[-1]) if len(frame) else None,
+        "force_final": _none(frame[log.FORCE].iloc[-1]),
     }
+    settled = t >= settle_time - 1e-12
+    worst = {}
+    for column in (log.TRACKING_ERROR, log.FORCE_ERROR):
+        e = np.abs(frame[column].to_numpy(dtype=float)[settled])
+        e = np.where(np.isnan(e), np.inf, e)
+        k = int(np.argmax(e)) if e.size else -1
+        worst[f"{column}_worst"] = (float(e[k]), float(t[settled][k])) if e.size else None
+    return out, worst
 
 
 def _obstacle_figures(
-    frame: pd.DataFrame, t: np.ndarray, dt: float, dcols: list[tuple[str, str]], d_safe: float
-) -> tuple[dict, dict]:
-    """The closest approach of a key point to an obstacle [m], and when each pair's row was
-    about active (within :data:`ACTIVE_MARGIN` of ``d_safe``; ``{}`` without obstacles)."""
-    closest = {
-        "min_obstacle_distance": None,
-        "min_obstacle_distance_key_point": None,
-        "min_obstacle_distance_obstacle": None,
-        "min_obstacle_distance_t": None,
-        "d_safe": d_safe,
-    }
+    frame: pd.DataFrame, t: np.ndarray, dcols: list[tuple[str, str]], d_safe: float, margin: float
+) -> tuple[dict, dict, dict]:
+    """The closest approach of a key point to an obstacle [m]; when each pair's row was about
+    active (within :data:`ACTIVE_MARGIN` of ``d_safe``; ``{}`` without obstacles); for the
+    key-point rule, the ticks with a key point below ``d_safe - margin`` [m] (a NaN distance
+    counts) and the first of them [s] (``None`` without obstacles)."""
     if not dcols:
-        return closest, {}
+        none = dict.fromkeys(
+            f"min_obstacle_distance{s}" for s in ("", "_key_point", "_obstacle", "_t")
+        )
+        return {**none, "d_safe": d_safe}, {}, {"key_point_below_ticks": None}
     D = frame[[log.distance_column(a, o) for a, o in dcols]].to_numpy()
     k, c = divmod(int(np.argmin(D)), D.shape[1])
-    closest.update(
-        min_obstacle_distance=_none(D[k, c]),
-        min_obstacle_distance_key_point=dcols[c][0],
-        min_obstacle_distance_obstacle=dcols[c][1],
-        min_obstacle_distance_t=_none(t[k]),
-    )
+    closest = {
+        "min_obstacle_distance": _none(D[k, c]),
+        "min_obstacle_distance_key_point": dcols[c][0],
+        "min_obstacle_distance_obstacle": dcols[c][1],
+        "min_obstacle_distance_t": _none(t[k]),
+        "d_safe": d_safe,
+    }
     near = D <= d_safe + ACTIVE_MARGIN
     active = {
         f"{a}/{o}": _intervals(near[:, c], t)[:MAX_INTERVALS]
         for c, (a, o) in enumerate(dcols)
         if near[:, c].any()
     }
-    return closest, {"obstacle_active_intervals": active}
+    below, first = _first(~(D >= d_safe - margin).all(axis=1), t)
+    rule = {"key_point_below_ticks": below, "key_point_below_first_t": first}
+    return closest, {"obstacle_active_intervals": active}, rule
 
 
-def _body_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
+def _body_figures(frame: pd.DataFrame, t: np.ndarray, kinds: dict[str, str]) -> tuple[dict, dict]:
     """The body's closest approach to an obstacle (``d_body_*`` columns of the log): the
-    clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles."""
-    out = {
-        "min_body_distance": None,
-        "min_body_distance_link": None,
-        "min_body_distance_obstacle": None,
-        "min_body_distance_t": None,
-    }
+    clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles.
+    For the verdict, that obstacle's kind (``kinds`` by name), the ticks with the body inside
+    an obstacle and the first of them [s]."""
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     if not np.isfinite(d).any():
-        return out
+        none = dict.fromkeys(f"min_body_distance{s}" for s in ("", "_link", "_obstacle", "_t"))
+        return none, {"body_inside_ticks": 0}
     k = int(np.nanargmin(d))
-    out.update(
-        min_body_distance=_none(d[k]),
-        min_body_distance_link=int(frame[log.D_BODY_LINK].iloc[k]),
-        min_body_distance_obstacle=str(frame[log.D_BODY_OBSTACLE].iloc[k]),
-        min_body_distance_t=_none(t[k]),
-    )
-    return out
+    name = str(frame[log.D_BODY_OBSTACLE].iloc[k])
+    out = {
+        "min_body_distance": _none(d[k]),
+        "min_body_distance_link": int(frame[log.D_BODY_LINK].iloc[k]),
+        "min_body_distance_obstacle": name,
+        "min_body_distance_t": _none(t[k]),
+    }
+    inside, first = _first(d < 0.0, t)
+    judged = {"body_inside_ticks": inside, "body_inside_first_t": first}
+    return out, {**judged, "min_body_distance_kind": kinds[name]}
 
 
-def _effort_figures(
-    frame: pd.DataFrame, controller: Controller, dt: float, after: np.ndarray
-) -> dict:
-    """Joint-limit violations, joint motion and effort, the task residual, ``Kp_hat, Kd_hat``
-    and the solve times [s] of a run."""
-    n, lim, tol = controller.n, controller.limits, VIOLATION_TOL
-    ticks = len(frame)
+def _limit_figures(frame: pd.DataFrame, t: np.ndarray, limits) -> tuple[dict, dict]:
+    """Ticks with a joint angle [rad] or velocity [rad/s] beyond its limit by more than
+    :data:`VIOLATION_TOL` (a NaN counts); for the verdict, the worst of each as ``(joint,
+    value, the limit it is beyond, t [s])``."""
+    n = len(limits.theta_min)
+    counts, worst = {}, {}
+    for name, columns, lo, hi in (
+        ("joint_limit", log.theta_columns(n), limits.theta_min, limits.theta_max),
+        ("joint_velocity_limit", log.velocity_columns(n), limits.v_min, limits.v_max),
+    ):
+        X = frame[columns].to_numpy(dtype=float)
+        excess = np.where(np.isnan(X), np.inf, np.maximum(lo - X, X - hi))  # > 0 beyond
+        counts[f"{name}_violations"] = int((excess > VIOLATION_TOL).any(axis=1).sum())
+        k, i = divmod(int(np.argmax(excess)), n)
+        x = X[k, i]
+        worst[f"{name}_worst"] = (i, float(x), float(lo[i] if x < lo[i] else hi[i]), float(t[k]))
+    return counts, worst
+
+
+def _effort_figures(frame: pd.DataFrame, n: int, dt: float, after: np.ndarray) -> dict:
+    """Joint motion and effort, the task residual, ``Kp_hat, Kd_hat`` and the solve times [s]
+    of a run."""
     theta = frame[log.theta_columns(n)].to_numpy()
     v = frame[log.velocity_columns(n)].to_numpy()
     v_sq = frame[log.V_SQ].to_numpy()
     solve_time = frame[log.SOLVE_TIME]
     return {
-        "joint_limit_violations": int(
-            ((theta < lim.theta_min - tol) | (theta > lim.theta_max + tol)).any(axis=1).sum()
-        ),
-        "joint_velocity_limit_violations": int(
-            ((v < lim.v_min - tol) | (v > lim.v_max + tol)).any(axis=1).sum()
-        ),
-        "max_abs_theta": _none(np.max(np.abs(theta))) if ticks else None,
-        "max_abs_v": _none(np.max(np.abs(v))) if ticks else None,
-        "v_sq_max": _none(v_sq.max()) if ticks else None,
+        "max_abs_theta": _none(np.max(np.abs(theta))),
+        "max_abs_v": _none(np.max(np.abs(v))),
+        "v_sq_max": _none(v_sq.max()),
         "v2_integral": float(np.sum(v_sq) * dt),
         "task_residual_max_after_2s": _amax(frame[log.TASK_RESIDUAL].to_numpy()[after]),
-        "kp_hat_final": _none(frame[log.KP_HAT].iloc[-1]) if ticks else None,
-        "kd_hat_final": _none(frame[log.KD_HAT].iloc[-1]) if ticks else None,
+        "kp_hat_final": _none(frame[log.KP_HAT].iloc[-1]),
+        "kd_hat_final": _none(frame[log.KD_HAT].iloc[-1]),
         "solve_time_median_s": _none(solve_time.median()),
         "solve_time_p99_s": _none(solve_time.quantile(0.99)),
         "solve_time_max_s": _none(solve_time.max()),

@@ -17,8 +17,6 @@ if TYPE_CHECKING:
 
     from ..robot.environment import ContactSurface
 
-__all__ = ["APPLIED", "FALLBACK", "ZERO", "get_post_kernel", "post_constants", "warm_post_kernel"]
-
 
 @cache
 def get_post_kernel() -> Callable:

@@ -9,38 +9,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
-import numpy as np
 
 from ..robot.body import link_label
 from . import log
-
-if TYPE_CHECKING:
-    import pandas as pd
-
-    from ..control.terms import EscapeVelocityLimits
-
-__all__ = [
-    "BAD_VERDICTS",
-    "DEFAULT_SAFETY_MARGIN",
-    "VERDICTS",
-    "VIOLATION_TOL",
-    "Verdict",
-    "VerdictSettings",
-    "failed_run",
-    "judge",
-    "judge_realtime",
-    "key_point_rule",
-]
 
 #: Verdicts, from the worst: the verdict of a run is the first whose rule holds.
 VERDICTS = ("failed", "unsafe", "limits", "incomplete", "diverged", "ok")
 #: Every verdict but ``ok``.
 BAD_VERDICTS = VERDICTS[:-1]
-
-#: Tolerance of the joint-angle [rad] and joint-velocity [rad/s] limit checks.
-VIOLATION_TOL = 1e-6
 
 #: Default of ``[verdict] safety_margin`` [m] (``d_safe / 2`` when that is smaller).
 DEFAULT_SAFETY_MARGIN = 5e-4
@@ -68,21 +44,17 @@ class VerdictSettings:
     def __post_init__(self):
         from ..exceptions import InputError
 
-        def bad(key, rule, unit=""):  # NaN fails every rule below
+        for key, holds, rule in (  # NaN fails every rule
+            ("settle_time", lambda x: x >= 0, ">= 0 [s]"),
+            ("max_tracking_error", lambda x: x > 0, "> 0 [m]"),
+            ("max_force_error", lambda x: x > 0, "> 0 [N]"),
+            ("safety_margin", lambda x: x >= 0, ">= 0 [m]"),
+            ("max_p99_fraction_of_dt", lambda x: 0 < x <= 1, "> 0 and <= 1 (a fraction of dt)"),
+            ("max_over_dt_share", lambda x: 0 <= x < 1, ">= 0 and < 1 (a share of the ticks)"),
+        ):
             value = getattr(self, key)
-            raise InputError(f"must be {rule}{unit}, got {value!r}", key=f"verdict.{key}")
-
-        if not self.settle_time >= 0:
-            bad("settle_time", ">= 0", " [s]")
-        for key, unit in (("max_tracking_error", " [m]"), ("max_force_error", " [N]")):
-            if not getattr(self, key) > 0:
-                bad(key, "> 0", unit)
-        if not self.safety_margin >= 0:
-            bad("safety_margin", ">= 0", " [m]")
-        if not 0 < self.max_p99_fraction_of_dt <= 1:
-            bad("max_p99_fraction_of_dt", "> 0 and <= 1 (a fraction of dt)")
-        if not 0 <= self.max_over_dt_share < 1:
-            bad("max_over_dt_share", ">= 0 and < 1 (a share of the ticks)")
+            if not holds(value):
+                raise InputError(f"must be {rule}, got {value!r}", key=f"verdict.{key}")
 
 
 @dataclass(frozen=True)
@@ -94,10 +66,6 @@ class Verdict:
     reasons: tuple[str, ...] = ()
     key_point_rule: str = "-"
     key_point_rule_reason: str = ""
-
-    @property
-    def ok(self) -> bool:
-        return self.verdict == "ok"
 
     @property
     def text(self) -> str:
@@ -129,144 +97,104 @@ def _failed_reasons(summary: dict) -> list[str]:
     return [_n(n, noun) + rest for key, noun, rest in kinds if (n := int(get(key) or 0))]
 
 
-def _unsafe_reasons(frame, n: int, obstacle_kinds: dict[str, str] | None) -> list[str]:
+def _unsafe_reasons(s: dict) -> list[str]:
     """The body rule: a link's capsule inside an obstacle (``d_body_min < 0``) at some tick."""
-    d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
-    inside = d < 0.0
-    if not inside.any():
+    if not s["body_inside_ticks"]:
         return []
-    t = frame[log.T].to_numpy(dtype=float)
-    k = int(np.argmin(np.where(inside, d, np.inf)))
-    link = int(frame[log.D_BODY_LINK].iloc[k])
-    name = str(frame[log.D_BODY_OBSTACLE].iloc[k])
-    kind = (obstacle_kinds or {}).get(name, "obstacle")
-    rows = np.flatnonzero(inside)
+    where = link_label(s["min_body_distance_link"], s["joints"])
+    name, kind = s["min_body_distance_obstacle"], s["min_body_distance_kind"]
     return [
-        f"{link_label(link, n)} {-d[k] * 1e3:.1f} mm inside {kind} '{name}' at {t[k]:.2f} s "
-        f"(the body inside an obstacle on {_n(rows.size, 'tick')} from {t[rows[0]]:.3f} s)"
+        f"{where} {-s['min_body_distance'] * 1e3:.1f} mm inside {kind} '{name}' at "
+        f"{s['min_body_distance_t']:.2f} s (the body inside an obstacle on "
+        f"{_n(s['body_inside_ticks'], 'tick')} from {s['body_inside_first_t']:.3f} s)"
     ]
 
 
-def key_point_rule(
-    frame, d_safe: float, margin: float, columns: list[tuple[str, str]]
-) -> tuple[str, str]:
+def key_point_rule(s: dict, margin: float) -> tuple[str, str]:
     """The paper's guarantee, every key point kept ``d_safe - margin`` [m] from every obstacle:
     ``("held", "")``, ``("broken", reason)`` or ``("-", "")`` without obstacles."""
-    if not columns:
-        return "-", ""
-    if not len(frame):
-        return "held", ""
-    D = frame[[log.distance_column(a, o) for a, o in columns]].to_numpy(dtype=float)
-    t = frame[log.T].to_numpy(dtype=float)
-    limit = d_safe - margin
-    below = ~(D >= limit)  # a NaN distance counts as below
-    if not below.any():
-        return "held", ""
-    rows = np.flatnonzero(below.any(axis=1))
-    filled = np.where(np.isnan(D), -np.inf, D)
-    k, c = divmod(int(np.argmin(filled)), D.shape[1])
-    a, o = columns[c]
-    value = D[k, c]
-    shown = f"{value * 1e3:.1f} mm" if math.isfinite(value) else "not finite"
-    first = f", below from {t[rows[0]]:.3f} s" if rows[0] != k else ""
+    ticks = s["key_point_below_ticks"]
+    if not ticks:
+        return ("-" if ticks is None else "held"), ""
+    value, t, first = (
+        s["min_obstacle_distance"],
+        s["min_obstacle_distance_t"],
+        s["key_point_below_first_t"],
+    )
+    limit = s["d_safe"] - margin
+    shown = f"{value * 1e3:.1f} mm" if value is not None else "not finite"
+    since = f", below from {first:.3f} s" if first != t else ""
+    pair = f"{s['min_obstacle_distance_key_point']}/{s['min_obstacle_distance_obstacle']}"
     return "broken", (
         f"d_min {shown} < d_safe - {margin * 1e3:g} mm = {limit * 1e3:.1f} mm "
-        f"({a}/{o} at {t[k]:.3f} s{first}; {rows.size} ticks)"
+        f"({pair} at {t:.3f} s{since}; {ticks} ticks)"
     )
 
 
-def _limit_reasons(frame, limits, n: int) -> list[str]:
-    if not len(frame):
-        return []
-    t = frame[log.T].to_numpy(dtype=float)
+def _limit_reasons(s: dict) -> list[str]:
     out = []
-    for sym, columns, lo, hi, unit, what in (
-        ("theta", log.theta_columns(n), limits.theta_min, limits.theta_max, "rad", "angle"),
-        ("v", log.velocity_columns(n), limits.v_min, limits.v_max, "rad/s", "speed"),
+    for name, sym, unit, what in (
+        ("joint_limit", "theta", "rad", "angle"),
+        ("joint_velocity_limit", "v", "rad/s", "speed"),
     ):
-        X = frame[columns].to_numpy(dtype=float)
-        excess = np.maximum(lo - X, X - hi)  # > 0 beyond a limit
-        excess = np.where(np.isnan(X), np.inf, excess)
-        bad = (excess > VIOLATION_TOL).any(axis=1)
-        if not bad.any():
-            continue
-        k, i = divmod(int(np.argmax(excess)), n)
-        x = X[k, i]
-        bound = f"< {_g(lo[i])}" if x < lo[i] else f"> {_g(hi[i])}"
-        out.append(
-            f"joint {what} limit broken on {_n(int(bad.sum()), 'tick')} "
-            f"(worst {sym}_{i} = {_g(x)} {unit} {bound} {unit} at {t[k]:.3f} s)"
-        )
+        if count := s[f"{name}_violations"]:
+            i, x, limit, t = s[f"{name}_worst"]
+            bound = f"{'<' if x < limit else '>'} {_g(limit)}"
+            out.append(
+                f"joint {what} limit broken on {_n(count, 'tick')} "
+                f"(worst {sym}_{i} = {_g(x)} {unit} {bound} {unit} at {t:.3f} s)"
+            )
     return out
 
 
-def _diverged_reasons(frame, settings: VerdictSettings) -> list[str]:
-    t = frame[log.T].to_numpy(dtype=float)
-    after = t >= settings.settle_time - 1e-12
-    if not after.any():
-        return []
+def _diverged_reasons(s: dict, settings: VerdictSettings) -> list[str]:
     out = []
     for column, limit, unit, scale, what in (
         (log.TRACKING_ERROR, settings.max_tracking_error, "mm", 1e3, "tracking error"),
         (log.FORCE_ERROR, settings.max_force_error, "N", 1.0, "force error"),
     ):
-        e = np.abs(frame[column].to_numpy(dtype=float)[after])
-        e = np.where(np.isnan(e), np.inf, e)
-        if not (e > limit).any():
+        worst = s[f"{column}_worst"]
+        if worst is None or not worst[0] > limit:
             continue
-        k = int(np.argmax(e))
-        shown = f"{e[k] * scale:.3g} {unit}" if math.isfinite(e[k]) else "not finite"
+        e, t = worst
+        shown = f"{e * scale:.3g} {unit}" if math.isfinite(e) else "not finite"
         out.append(
             f"{what} {shown} > {limit * scale:g} {unit} after {settings.settle_time:g} s "
-            f"(at {t[after][k]:.3f} s)"
+            f"(at {t:.3f} s)"
         )
     return out
 
 
-def judge(
-    frame: pd.DataFrame,
-    settings: VerdictSettings,
-    *,
-    d_safe: float,
-    limits: EscapeVelocityLimits,
-    obstacle_columns: list[tuple[str, str]],
-    summary: dict,
-    obstacle_kinds: dict[str, str] | None = None,
-) -> Verdict:
-    """The verdict of one simulated run: ``frame`` the tick log, ``d_safe`` [m], ``limits`` the
-    joint limits [rad, rad/s], ``obstacle_columns`` the ``(key point, obstacle)`` of each
-    distance column, ``summary`` the run's figures (:mod:`qpbench.sim.summary`; missing counts
-    are 0), ``obstacle_kinds`` each obstacle's kind by name."""
-    n = len(limits.theta_min)
+def judge(summary: dict, settings: VerdictSettings) -> Verdict:
+    """The verdict of one simulated run on the figures of :func:`qpbench.sim.summary.summarize`
+    (missing counts of failures are 0) and the scenario's thresholds."""
     found = {
         "failed": _failed_reasons(summary),
-        "unsafe": _unsafe_reasons(frame, n, obstacle_kinds),
-        "limits": _limit_reasons(frame, limits, n),
-        "diverged": _diverged_reasons(frame, settings) if len(frame) else [],
+        "unsafe": _unsafe_reasons(summary),
+        "limits": _limit_reasons(summary),
+        "diverged": _diverged_reasons(summary, settings),
     }
     found["incomplete"], notes = _incomplete_reasons(summary, settings)
     reasons = [r for v in BAD_VERDICTS for r in found[v]]
     worst = next((v for v in BAD_VERDICTS if found[v]), "ok")
-    rule, why = key_point_rule(frame, d_safe, settings.safety_margin, obstacle_columns)
+    rule, why = key_point_rule(summary, settings.safety_margin)
     return Verdict(worst, tuple(reasons + notes), rule, why)
 
 
 def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[str], list[str]]:
     """``(reasons, notes)``: where a run stopped early stopped, and whether tracking and force
     went unjudged (part of that reason; a note for a run that reached its duration)."""
-    simulated = float(summary.get("simulated_s") or 0.0)
+    simulated = summary["simulated_s"]
     unjudged = (
         f"tracking and force not judged (settle time {settings.settle_time:g} s not reached)"
         if simulated <= settings.settle_time
         else ""
     )
-    if not summary.get("stopped_early"):
+    if not summary["stopped_early"]:
         return [], [unjudged] if unjudged else []
-    budget = summary.get("wall_budget_s")
+    budget = summary["wall_budget_s"]
     why = f" (wall-time budget {_g(float(budget))} s)" if budget is not None else ""
-    where = (
-        f"stopped at {simulated:.2f} s of {_g(float(summary.get('duration') or math.nan))} s{why}"
-    )
+    where = f"stopped at {simulated:.2f} s of {_g(summary['duration'])} s{why}"
     return [f"{where}: {unjudged or 'judged on what was simulated'}"], []
 
 
