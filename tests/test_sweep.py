@@ -355,6 +355,7 @@ def test_report_has_the_sweep_section(serial, tmp_path):
     assert main(["report", str(serial), "--out", str(report)]) == 0
     text = (report / "report.md").read_text()
     assert "### Sweep tiny" in text and "McNemar" in text and "| daqp | osqp | 8 |" in text
+    assert "| sweep.csv | sweep | 16 |" in text  # listed with the result files
     assert (report / "plots" / "sweep_ecdf_out_tiny.png").stat().st_size > 10_000
 
 

@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 
 from ..exceptions import InputError
-from ..report.inputs import CSV_ERRORS, expand_paths
+from ..formats import sha256_file
+from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths
 from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
 
@@ -76,11 +77,12 @@ def is_sweep_csv(path: Path) -> bool:
         return fh.readline().rstrip("\n") == ",".join(COLUMNS)
 
 
-def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
+def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[ResultFile]]:
     """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
     files = expand_paths(paths)
     sweeps = [p for p in files if p.suffix == ".csv" and is_sweep_csv(p)]
-    return [p for p in files if p not in sweeps], sweeps
+    tables = [ResultFile(p, "sweep", sha256_file(p), len(pd.read_csv(p))) for p in sweeps]
+    return [p for p in files if p not in sweeps], tables
 
 
 def _read(path: Path) -> pd.DataFrame:
@@ -237,15 +239,15 @@ def _manifest_lines(folder: Path) -> list[str]:
     ]
 
 
-def sweep_section(paths: list[Path], out: Path, plots: bool = True) -> list[str]:
-    """Markdown lines of the sweep section for the sweep tables ``paths`` (plots into ``out/plots``)."""
+def sweep_section(tables: list[ResultFile], out: Path, plots: bool = True) -> list[str]:
+    """Markdown lines of the sweep section for the sweep tables (plots into ``out/plots``)."""
     lines = [
         "## Sweeps\n",
         "Randomised instances of a scenario, each in closed loop with each backend "
         "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n",
     ]
-    for path in paths:
-        lines += _one_sweep(path, out, plots)
+    for table in tables:
+        lines += _one_sweep(table.path, out, plots)
     return lines
 
 
