@@ -113,7 +113,6 @@ def fits(frame: pd.DataFrame) -> dict:
     return {
         (backend, axis): fit_power_law(g[AXES[axis][0]], g["time_median_s"])
         for (backend, axis), g in measured.groupby(["backend", "axis"])
-        if axis in AXES
     }
 
 
@@ -163,13 +162,13 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
     return lines
 
 
-def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
+def deadline_table(frame: pd.DataFrame) -> list[dict]:
     """Per backend and axis: the first size whose build + solve exceeds :data:`TICK_S`, at p99
     and at the median, and the largest such tick [s]."""
     out = []
     m = frame[frame["status"] == "measured"]
     for (backend, axis), g in m.groupby(["backend", "axis"]):
-        xcol = AXES.get(axis, ("n",))[0]
+        xcol = AXES[axis][0]
         g = g.sort_values(xcol)
         row = {"backend": backend, "axis": axis}
         for stat in ("p99", "median"):
@@ -178,7 +177,7 @@ def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
             row[stat] = _size_label(frame, None if at is None else g[g[xcol] == at]["size"].iloc[0])
             row[f"largest {stat}"] = tick.max()
         out.append(row)
-    return pd.DataFrame(out)
+    return out
 
 
 def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
@@ -202,9 +201,23 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
         for ax, (axis, (xcol, label)) in zip(axes[row], AXES.items()):
             a = m[m["axis"] == axis]
             for b, lit in style.highlighted(backends, group):
-                _scaling_series(
-                    ax, a[a["backend"] == b].sort_values(xcol), xcol, b, lit, fitted.get((b, axis))
+                g, fit = a[a["backend"] == b].sort_values(xcol), fitted.get((b, axis))
+                if g.empty:
+                    continue
+                colour, z = (style.look(b).colour, 3) if lit else (style.GREY, 1)
+                marker = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
+                tag = f"{b} ({fit.text()})" if fit is not None else b
+                ax.plot(
+                    g[xcol],
+                    g["time_median_s"] * 1e6,
+                    marker,
+                    color=colour,
+                    zorder=z,
+                    label=tag if lit else None,
                 )
+                if fit is not None and not math.isnan(fit.slope):  # the fitted power law, dashed
+                    xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
+                    ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=z)
             ax.axhline(TICK_S * 1e6, color="k", lw=0.8, ls=":")
             ax.set_xscale("log")
             ax.set_yscale("log")
@@ -222,28 +235,6 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
                 ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
             ax.grid(True, which="both", alpha=0.3)
     return style.save(fig, path)
-
-
-def _scaling_series(ax, g: pd.DataFrame, xcol: str, b: str, lit: bool, fit) -> None:
-    """One backend's medians (square: dense, circle: sparse) and its fitted power law (dashed)."""
-    from ..report import style
-
-    if g.empty:
-        return
-    colour = style.look(b).colour if lit else style.GREY
-    marker = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
-    tag = f"{b} ({fit.text()})" if fit is not None else b
-    ax.plot(
-        g[xcol],
-        g["time_median_s"] * 1e6,
-        marker,
-        color=colour,
-        label=tag if lit else None,
-        zorder=3 if lit else 1,
-    )
-    if fit is not None and not math.isnan(fit.slope):
-        xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
-        ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=3 if lit else 1)
 
 
 def _text(key: str) -> Column:
@@ -333,7 +324,7 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
         "and median build + median solve (a typical tick fits); largest tick over the axis in brackets [us].",
         "",
     ]
-    lines += table(DEADLINE_COLUMNS, deadline_table(frame).to_dict("records"))
+    lines += table(DEADLINE_COLUMNS, deadline_table(frame))
     lines += ["## Every size and backend", ""]
     lines += table(ROW_COLUMNS, frame.to_dict("records"))
     return "\n".join(lines)
@@ -345,15 +336,13 @@ def write_scaling_report(
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``.
 
     Raises:
-        InputError: ``folder`` holds no scaling.csv or no row.
+        InputError: ``folder``'s scaling.csv holds no row.
         OutputExistsError: ``out/scaling.md`` exists and not ``force``.
     """
     from ..exceptions import InputError
     from ..report.write import publish
     from .runner import SUMMARY_NAME
 
-    if not is_scaling_dir(folder):
-        raise InputError("not a scaling folder (no scaling.csv)", path=folder)
     frame = pd.read_csv(Path(folder) / SUMMARY_NAME)
     if frame.empty:
         raise InputError("no rows", path=Path(folder) / SUMMARY_NAME)

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..harness.results import ResultsWriter
+from ..harness.results import ResultsWriter, read_results
 from .sizes import Size, generate, qp_shape, scenario_toml
 
 if TYPE_CHECKING:
@@ -63,24 +63,15 @@ SUMMARY_NAME = "scaling.csv"
 
 #: How the built-in solvers take their matrices: ``dense`` (a dense factorisation or dense
 #: active set: cost grows with n x rows whatever the zeros) or ``sparse``; a route
-#: ``qpsolvers:NAME`` or a variant ``NAME-...`` as ``NAME``. A backend class may say so itself
-#: with a ``matrix_format`` attribute.
+#: ``qpsolvers:NAME`` or a variant ``NAME-...`` as ``NAME``.
 _DENSE = ("daqp", "qpoases", "piqp", "proxqp", "pinv", "rnn", "quadprog", "cvxopt")
 _SPARSE = ("qpalm", "osqp", "clarabel", "cvxpy", "scs", "highs", "ecos", "gurobi")
 
 
 def matrix_format(name: str) -> str:
-    """``dense``, ``sparse`` or ``unknown`` (a plugin's backend that does not say)."""
-    from ..backends import backend_class
-    from ..exceptions import QpbenchError
-
-    try:
-        declared = getattr(backend_class(name), "matrix_format", None)
-    except QpbenchError:
-        declared = None
+    """``dense``, ``sparse`` or ``unknown`` (a backend of neither list)."""
     solver = name.removeprefix("qpsolvers:").split("-")[0]
-    known = "dense" if solver in _DENSE else "sparse" if solver in _SPARSE else "unknown"
-    return declared or known
+    return "dense" if solver in _DENSE else "sparse" if solver in _SPARSE else "unknown"
 
 
 @dataclass
@@ -123,13 +114,6 @@ class ScalingConfig:
             raise ParamError(
                 f"{self.duration} s at 1 kHz keeps no tick with --every {self.every}", key="--every"
             )
-
-
-def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
-    """Rows of a ``scaling.csv`` (strings; :func:`qpbench.harness.results.read_results`)."""
-    from ..harness.results import read_results
-
-    return read_results(path, repair=repair, columns=COLUMNS, kind="scaling").rows
 
 
 def build_times(
@@ -266,7 +250,6 @@ def _bench_size(size: Size, config: ScalingConfig, out: Path, run: list, base: d
 
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
-    from ..harness.results import read_results
     from ..reference import reference_solutions
 
     problem_set = load_problems(out / "sets" / size.name)
@@ -299,7 +282,8 @@ def run_scaling(
     summary_path = out / SUMMARY_NAME
     done: dict[str, list[dict]] = {}
     slow: dict = {}
-    for r in read_summary(summary_path, repair=True) if resume and summary_path.exists() else []:
+    kept = resume and summary_path.exists()
+    for r in read_results(summary_path, True, COLUMNS, "scaling").rows if kept else []:
         done.setdefault(r["size"], []).append(r)
         _note_slow(slow, r, config.slow_limit)
     failed = 0

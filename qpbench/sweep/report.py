@@ -81,7 +81,7 @@ def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[ResultF
     """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
     files = expand_paths(paths)
     sweeps = [p for p in files if p.suffix == ".csv" and is_sweep_csv(p)]
-    tables = [ResultFile(p, "sweep", sha256_file(p), len(pd.read_csv(p))) for p in sweeps]
+    tables = [ResultFile(p, "sweep", sha256_file(p), len(_read(p))) for p in sweeps]
     return [p for p in files if p not in sweeps], tables
 
 
@@ -192,12 +192,8 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                 v = np.sort(ok.loc[ok["backend"] == backend, col].dropna().to_numpy() * scale)
                 if not len(v):
                     continue
-                kw = (
-                    style.look(backend).line(np.arange(len(v) + 1), lw=1.3, label=backend, zorder=3)
-                    if lit
-                    else dict(color=style.GREY, lw=0.8, zorder=1)
-                )
                 y = np.r_[0.0, np.arange(1, len(v) + 1) / len(v)]
+                kw = style.series(backend, lit, np.arange(len(v) + 1), 1.3, 0.8)
                 ax.step(np.r_[v[0], v] - shift, y, where="post", **kw)
             if margin:
                 _margin_axis(ax, d_safe, float(ok[col].min()) * scale - d_safe)
@@ -254,7 +250,7 @@ def sweep_section(tables: list[ResultFile], out: Path, plots: bool = True) -> li
 def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
     """One sweep table's lines: rates, paired comparisons, distributions, ECDFs, worst runs."""
     df = _read(path)
-    name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
+    name = str(df["sweep"].iloc[0])
     lines = [f"### Sweep {name}\n", *_manifest_lines(path.parent)]
     lines.append(md_table(RATE_HEADER, rate_rows(df)))
     lines += titled(
@@ -269,7 +265,7 @@ def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
     )
     lines.append(md_table(QUANTILE_HEADER, _quantile_rows(df)))
     concurrent = df["concurrent_solves"].max()
-    if pd.notna(concurrent) and concurrent > 1:
+    if concurrent > 1:
         lines.append(
             f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
             "host: they are disturbed; take timings with `--jobs 1`.\n"

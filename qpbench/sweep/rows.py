@@ -17,7 +17,7 @@ import json
 import math
 from typing import TYPE_CHECKING
 
-from ..harness.closed_loop import TABLE_NAMES, failure_fields
+from ..harness.closed_loop import TABLE_NAMES
 
 if TYPE_CHECKING:
     from .sample import Instance
@@ -133,18 +133,9 @@ def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
 
 def sweep_row(head: dict, row: dict) -> dict:
     """The sweep's row (``head``: :func:`head_row`) of a closed-loop row
-    (:func:`qpbench.harness.closed_loop.run_row`)."""
-    out = dict(head)
-    for key in COLUMNS:
-        if key in row and key not in _HEAD[:7]:
-            value = row[key]
-            out[key] = None if isinstance(value, float) and math.isnan(value) else value
-    return out
-
-
-def failed_row(head: dict, status: str, message: str) -> dict:
-    """The row of a run without a result (:func:`qpbench.harness.closed_loop.failure_fields`)."""
-    return {**head, **failure_fields(status, message)}
+    (:func:`qpbench.harness.closed_loop.run_row` or
+    :func:`~qpbench.harness.closed_loop.failure_fields`)."""
+    return head | {key: row[key] for key in COLUMNS if key in row and key not in _HEAD[:7]}
 
 
 def same_outside_timing(a: dict, b: dict) -> list[str]:

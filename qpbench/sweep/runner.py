@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
-from ..harness.closed_loop import LoopTask, run_row
+from ..harness.closed_loop import LoopTask, failure_fields, run_row
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
-from .rows import COLUMNS, CSV_NAME, INSTANCE_DIR, KEY_COLUMNS, failed_row, head_row, sweep_row
+from .rows import COLUMNS, CSV_NAME, INSTANCE_DIR, KEY_COLUMNS, head_row, sweep_row
 from .sample import sample_instances
 from .spec import SweepSpec
 
@@ -160,7 +160,7 @@ def run_sweep(
                     continue
                 head = head_row(spec, inst, backend)
                 if inst.invalid is not None:
-                    emit(failed_row(head, "invalid_scenario", inst.invalid))
+                    emit(sweep_row(head, failure_fields("invalid_scenario", inst.invalid)))
                     continue
                 heads[(inst.name, backend)] = head
                 task = LoopTask(
@@ -173,10 +173,8 @@ def run_sweep(
                 items.append(((inst.name, backend), task))
         for done in executor.run(run_row, items):
             head = heads[done.key]
-            if done.lost is None:
-                row = sweep_row(head, done.value)
-            else:
-                row = failed_row(head, "crashed", done.lost)
+            fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
+            row = sweep_row(head, fields)
             row.update(
                 executor=executor.name,
                 host=done.host,

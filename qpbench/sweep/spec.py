@@ -121,14 +121,12 @@ def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
     if kind == "choice":
         return Distribution(key, kind, _choice(spec, base, bad), base)
     is_int = isinstance(base, int) and not isinstance(base, bool)
-    if kind == "integers" or is_int:
-        if not (kind == "integers" and is_int):
-            why = (
-                "an integer key takes integers or choice"
-                if is_int
-                else "integers is for integer keys"
-            )
-            raise bad(why, "dist")
+    if (kind == "integers") != is_int:
+        why = (
+            "an integer key takes integers or choice" if is_int else "integers is for integer keys"
+        )
+        raise bad(why, "dist")
+    if is_int:
         lo, hi = spec.get("low"), spec.get("high")
         if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
             raise bad(f"need integers low <= high, got {lo!r}, {hi!r}")
@@ -155,13 +153,8 @@ def _numeric(value, shape, bad, field, what):
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        arr = None
-    if (
-        arr is None
-        or arr.dtype == object
-        or not np.all(np.isfinite(arr))
-        or isinstance(value, bool)
-    ):
+        arr = np.array(np.nan)
+    if isinstance(value, bool) or not np.all(np.isfinite(arr)):
         raise bad(f"{what}: expected finite numbers, got {value!r}", field)
     if shape is not None and arr.ndim and arr.shape != tuple(shape):
         raise bad(
