@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from pathlib import Path
 
@@ -12,9 +13,10 @@ import pytest
 
 from qpbench.cli import main
 from qpbench.exceptions import InputError
+from qpbench.harness.results import cell
 from qpbench.sim.scenario import scenario_names, scenario_path
 from qpbench.sim.summary import time_to_converge
-from qpbench.sweep.rows import COLUMNS, TIMING_COLUMNS, same_outside_timing
+from qpbench.sweep.rows import COLUMNS, TIMING_COLUMNS
 from qpbench.sweep.runner import read_sweep_rows
 from qpbench.sweep.sample import sample_instances
 from qpbench.sweep.spec import load_sweep, parse_sweep
@@ -56,6 +58,30 @@ def _tiny_sweep(folder: Path, out: Path, *options: str) -> int:
     return main(
         ["sweep", str(write_sweep(folder)), "--backends", "daqp,osqp", "--out", str(out), *options]
     )
+
+
+def _parse(value):
+    """A cell as it reads back: text of a number -> the number (``""`` -> None)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return None
+    if isinstance(value, str):
+        if value == "":
+            return None
+        for kind in (int, float):
+            try:
+                return kind(value)
+            except ValueError:
+                pass
+    return value
+
+
+def same_outside_timing(a: dict, b: dict) -> list[str]:
+    """Columns where rows ``a`` and ``b`` differ, timing columns aside (floats compared exactly, as text)."""
+    return [
+        c
+        for c in COLUMNS
+        if c not in TIMING_COLUMNS and cell(_parse(a.get(c))) != cell(_parse(b.get(c)))
+    ]
 
 
 def assert_same_rows(a: list[dict], b: list[dict]) -> None:

@@ -14,7 +14,6 @@ raised), ``crashed`` (its worker was lost twice; ``attempts``: runs started) or
 from __future__ import annotations
 
 import json
-import math
 from typing import TYPE_CHECKING
 
 from ..harness.closed_loop import TABLE_NAMES
@@ -136,29 +135,3 @@ def sweep_row(head: dict, row: dict) -> dict:
     (:func:`qpbench.harness.closed_loop.run_row` or
     :func:`~qpbench.harness.closed_loop.failure_fields`)."""
     return head | {key: row[key] for key in COLUMNS if key in row and key not in _HEAD[:7]}
-
-
-def same_outside_timing(a: dict, b: dict) -> list[str]:
-    """Columns where rows ``a`` and ``b`` differ, timing columns aside (floats compared exactly, as text)."""
-    from ..harness.results import cell
-
-    return [
-        c
-        for c in COLUMNS
-        if c not in TIMING_COLUMNS and cell(_parse(a.get(c))) != cell(_parse(b.get(c)))
-    ]
-
-
-def _parse(value):
-    """A cell as it reads back: text of a number -> the number (``""`` -> None)."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return None
-    if isinstance(value, str):
-        if value == "":
-            return None
-        for kind in (int, float):
-            try:
-                return kind(value)
-            except ValueError:
-                pass
-    return value
