@@ -40,8 +40,7 @@ from pathlib import Path
 
 from qpbench.jit import warmup
 from qpbench.runner import DaskExecutor, ProcessExecutor, SerialExecutor
-from qpbench.sweep.rows import COLUMNS, TIMING_COLUMNS
-from qpbench.sweep.runner import read_sweep_rows, run_sweep
+from qpbench.sweep.runner import COLUMNS, TIMING_COLUMNS, read_sweep_rows, run_sweep
 from qpbench.sweep.spec import load_sweep
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,11 +13,14 @@ from qpbench.harness.results import read_results
 from qpbench.robot.kinematics import PlanarArm
 from qpbench.scaling.report import crossing, extrapolated_crossing, first_above, fit_power_law
 from qpbench.scaling.runner import COLUMNS
-from qpbench.scaling.scene import REACH, THETA_LIMIT, generate_arm, min_key_point_distance
 from qpbench.scaling.sizes import (
     DEFAULT_SIZES,
+    REACH,
+    THETA_LIMIT,
     Size,
     generate,
+    generate_arm,
+    min_key_point_distance,
     parse_sizes,
     qp_shape,
     scenario_toml,

@@ -16,10 +16,8 @@ from qpbench.exceptions import InputError
 from qpbench.harness.results import cell
 from qpbench.sim.scenario import scenario_names, scenario_path
 from qpbench.sim.summary import time_to_converge
-from qpbench.sweep.rows import COLUMNS, TIMING_COLUMNS
-from qpbench.sweep.runner import read_sweep_rows
-from qpbench.sweep.sample import sample_instances
-from qpbench.sweep.spec import load_sweep, parse_sweep
+from qpbench.sweep.runner import COLUMNS, TIMING_COLUMNS, read_sweep_rows
+from qpbench.sweep.spec import load_sweep, parse_sweep, sample_instances
 from qpbench.sweep.toml_text import dumps
 
 PLUGIN = str(Path(__file__).with_name("sweep_backends.py"))
@@ -260,7 +258,7 @@ def test_local_dask_cluster_gives_the_serial_rows(serial, tmp_path):
 
 
 def test_simulate_reruns_a_saved_instance(serial, tmp_path):
-    from qpbench.sweep.rows import SUMMARY_COLUMNS
+    from qpbench.sweep.runner import SUMMARY_COLUMNS
 
     row = next(r for r in rows_of(serial) if r["instance"] == "i00003" and r["backend"] == "daqp")
     summary, log = tmp_path / "s.json", tmp_path / "log.parquet"
@@ -416,7 +414,7 @@ def test_same_draws_one_value_for_every_component(tmp_path):
 
 def test_a_start_inside_d_safe_is_invalid_unless_allowed(tmp_path):
     from qpbench.sim.scenario import load_scenario
-    from qpbench.sweep.sample import start_clearance
+    from qpbench.sweep.spec import start_clearance
 
     assert start_clearance(load_scenario("wall"))[1:] == ("A1", "wall")
     assert start_clearance(load_scenario("wall"))[0] == pytest.approx(

@@ -71,7 +71,7 @@ def mcnemar_exact(b: int, c: int) -> float:
 
 def is_sweep_csv(path: Path) -> bool:
     """``path`` starts with the sweep table's header."""
-    from .rows import COLUMNS
+    from .runner import COLUMNS
 
     with open(path, encoding="utf-8", errors="replace") as fh:
         return fh.readline().rstrip("\n") == ",".join(COLUMNS)
