@@ -17,7 +17,7 @@ from qpbench.harness.results import cell
 from qpbench.sim.scenario import scenario_names, scenario_path
 from qpbench.sim.summary import time_to_converge
 from qpbench.sweep.runner import COLUMNS, TIMING_COLUMNS, read_sweep_rows
-from qpbench.sweep.spec import load_sweep, parse_sweep, sample_instances
+from qpbench.sweep.spec import load_sweep, sample_instances
 from qpbench.sweep.toml_text import dumps
 
 PLUGIN = str(Path(__file__).with_name("sweep_backends.py"))
@@ -197,7 +197,7 @@ def test_bad_head_keys(tmp_path):
         (SWEEP.replace("duration = 0.25", "duration = -1.0"), "sweep.duration"),
     ):
         with pytest.raises(InputError) as err:
-            parse_sweep(text, tmp_path / "s.toml")
+            load_sweep(tmp_path / "s.toml", text=text)
         assert err.value.key == key
 
 
@@ -404,11 +404,11 @@ def test_same_draws_one_value_for_every_component(tmp_path):
         ax, ay = inst.values["path.amplitude"]
         assert ax == ay and 0.05 <= ax <= 0.12
     with pytest.raises(InputError, match="same = true takes numbers"):
-        parse_sweep(
-            head
+        load_sweep(
+            tmp_path / "s.toml",
+            text=head
             + '[parameters]\n"path.centre" = { dist = "uniform", low = [0.3, 0.4], high = [0.5, 0.6], '
             "same = true }\n",
-            tmp_path / "s.toml",
         )
 
 

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from ..report.markdown_table import US, Column, table
+from .runner import SUMMARY_NAME
 
 #: The control period a tick must fit in [s].
 TICK_S = 1e-3
@@ -31,12 +32,11 @@ AXES = {
 
 @dataclass(frozen=True)
 class PowerFit:
-    """``T = 10**intercept * s**slope``, from ``points`` sizes; ``slope_se`` its standard error."""
+    """``T = 10**intercept * s**slope``; ``slope_se`` the slope's standard error."""
 
     slope: float
     slope_se: float
     intercept: float
-    points: int
 
     def predict(self, s: float | np.ndarray) -> np.ndarray:
         """Fitted time at size(s) ``s`` (same units as the data)."""
@@ -58,7 +58,7 @@ def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
     keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
     x, y = np.log10(s[keep]), np.log10(t[keep])
     if x.size < 2 or np.ptp(x) == 0:
-        return PowerFit(math.nan, math.nan, math.nan, int(x.size))
+        return PowerFit(math.nan, math.nan, math.nan)
     xm = x.mean()
     sxx = float(((x - xm) ** 2).sum())
     slope = float(((x - xm) * (y - y.mean())).sum() / sxx)
@@ -68,7 +68,7 @@ def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
         se = math.sqrt(rss / (x.size - 2) / sxx)
     else:
         se = math.nan
-    return PowerFit(slope, se, intercept, int(x.size))
+    return PowerFit(slope, se, intercept)
 
 
 def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | None:
@@ -102,8 +102,6 @@ def extrapolated_crossing(fit_a: PowerFit, fit_b: PowerFit) -> float | None:
 
 def is_scaling_dir(path: str | Path) -> bool:
     """Whether ``path`` is a folder written by ``qpbench scaling`` (it holds ``scaling.csv``)."""
-    from .runner import SUMMARY_NAME
-
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
 
 
@@ -341,7 +339,6 @@ def write_scaling_report(
     """
     from ..exceptions import InputError
     from ..report.write import publish
-    from .runner import SUMMARY_NAME
 
     frame = pd.read_csv(Path(folder) / SUMMARY_NAME)
     if frame.empty:

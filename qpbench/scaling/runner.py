@@ -96,20 +96,16 @@ class ScalingConfig:
 
     def __post_init__(self) -> None:
         """Every value checked when made (one-line errors naming the option)."""
-        from ..exceptions import ParamError, positive_seconds
+        from ..exceptions import ParamError, positive_count, positive_seconds
         from ..profiles import get_profile
 
         get_profile(self.profile)
         positive_seconds(self.duration, "--duration")
         positive_seconds(self.slow_limit, "--slow-limit")
-        for key, value, low in (
-            ("--every", self.every, 1),
-            ("--repeat", self.repeat, 1),
-            ("--seed", self.seed, 0),
-            ("--dense-limit", self.dense_limit, 1),
-        ):
-            if value < low:
-                raise ParamError(f"out of range: {value}", key=key)
+        for key in ("every", "repeat", "dense_limit"):
+            positive_count(getattr(self, key), "--" + key.replace("_", "-"))
+        if self.seed < 0:
+            raise ParamError(f"out of range: {self.seed}", key="--seed")
         if self.duration / 0.001 < self.every:
             raise ParamError(
                 f"{self.duration} s at 1 kHz keeps no tick with --every {self.every}", key="--every"
@@ -130,20 +126,6 @@ def build_times(
             best = min(best, time.perf_counter_ns() - t0)
         out[i] = best * 1e-9
     return out
-
-
-def _size_columns(size: Size, config: ScalingConfig) -> dict:
-    shape = qp_shape(size)
-    return {
-        **asdict(size),
-        **shape,
-        "size": size.name,
-        "key_points": size.key_points,
-        "rows": shape["m_eq"] + shape["m_ineq"],
-        "driver": config.driver,
-        "repeat": config.repeat,
-        "seed": config.seed,
-    }
 
 
 def _backend_row(base: dict, name: str, rows: list[dict]) -> dict:
@@ -222,8 +204,19 @@ def run_size(
         time.perf_counter() - started,
     )
     built = build_times(scenario.make_controller(), states, config.build_repeat)
-    base = _size_columns(size, config)
-    base.update(build_median_s=float(np.median(built)), build_p99_s=float(np.percentile(built, 99)))
+    shape = qp_shape(size)
+    base = {
+        **asdict(size),
+        **shape,
+        "size": size.name,
+        "key_points": size.key_points,
+        "rows": shape["m_eq"] + shape["m_ineq"],
+        "driver": config.driver,
+        "repeat": config.repeat,
+        "seed": config.seed,
+        "build_median_s": float(np.median(built)),
+        "build_p99_s": float(np.percentile(built, 99)),
+    }
     reasons = {name: _skip_reason(name, size, slow, config) for name in config.backends}
     run = [name for name, why in reasons.items() if why is None]
     rows, failed = _bench_size(size, config, out, run, base, progress) if run else ([], 0)

@@ -60,17 +60,9 @@ class GeneratedArm:
     theta0: np.ndarray
     target: np.ndarray
 
-    def key_point_positions(self, theta: np.ndarray | None = None) -> np.ndarray:
-        """Key-point positions in [m], shape (a, 2), at ``theta`` (default ``theta0``)."""
-        theta = self.theta0 if theta is None else theta
-        return self.arm.points(theta, self.key_points.links, self.key_points.fracs)
-
-
-def link_lengths(n: int, seed: int = 0, reach: float = REACH) -> np.ndarray:
-    """Link lengths in [m] summing to ``reach``, ``l_i`` proportional to uniform [0.5, 1.5] draws."""
-    rng = np.random.default_rng([int(seed), int(n), 7919])
-    w = rng.uniform(0.5, 1.5, size=int(n))
-    return reach * w / w.sum()
+    def key_point_positions(self) -> np.ndarray:
+        """Key-point positions in [m] at ``theta0``, shape (a, 2)."""
+        return self.arm.points(self.theta0, self.key_points.links, self.key_points.fracs)
 
 
 def _reach_at(lengths: np.ndarray, c: float) -> float:
@@ -87,9 +79,7 @@ def bent_arm_angles(lengths: np.ndarray, target: np.ndarray) -> np.ndarray:
         ParamError: ``target`` is out of reach (farther than the arm's length
             or nearer than the tightest arc with ``|c| <= 2 pi / n``).
     """
-    lengths = np.asarray(lengths, dtype=float)
     n = lengths.size
-    target = np.asarray(target, dtype=float)
     dist = float(np.hypot(*target))
     lo, hi = 0.0, 2.0 * math.pi / n * 0.95
     if not _reach_at(lengths, hi) < dist < _reach_at(lengths, lo):
@@ -115,7 +105,8 @@ def generate_arm(
 ) -> GeneratedArm:
     """The arm of ``links`` links with ``points_per_link`` key points per link besides the joints
     J2..Jn, lengths drawn from ``seed``, its end effector at ``target`` [m] (module docstring)."""
-    lengths = link_lengths(links, seed)
+    w = np.random.default_rng([int(seed), int(links), 7919]).uniform(0.5, 1.5, size=int(links))
+    lengths = REACH * w / w.sum()
     arm = PlanarArm(lengths)
     theta0 = bent_arm_angles(lengths, target)
     if np.any(np.abs(theta0) > THETA_LIMIT):
@@ -127,16 +118,20 @@ def generate_arm(
     return GeneratedArm(arm, key_points, theta0, arm.end_effector(theta0))
 
 
-#: Radius of the disk the cloud's points fill, in [m].
+#: Radius of the disk the cloud's points fill [m].
 CLOUD_RADIUS = 0.03
+#: The cloud's clearance beyond ``d_safe`` at the start [m] and its speed towards the arm [m/s].
+CLEARANCE = 0.015
+SPEED = 0.1
 
 
-def cloud_points(m: int, seed: int = 0, radius: float = CLOUD_RADIUS) -> np.ndarray:
-    """``m`` points uniform over a disk of ``radius`` [m] centred at 0, shape (m, 2); one point: the centre."""
+def cloud_points(m: int, seed: int = 0) -> np.ndarray:
+    """``m`` points uniform over a disk of :data:`CLOUD_RADIUS` [m] centred at 0, shape (m, 2);
+    one point: the centre."""
     if m == 1:
         return np.zeros((1, 2))
     rng = np.random.default_rng([int(seed), int(m), 104729])
-    r = radius * np.sqrt(rng.uniform(0.0, 1.0, m))
+    r = CLOUD_RADIUS * np.sqrt(rng.uniform(0.0, 1.0, m))
     a = rng.uniform(0.0, 2.0 * math.pi, m)
     return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
 
@@ -172,28 +167,21 @@ def _clear_offset(
     return offset
 
 
-def place_cloud(
-    gen: GeneratedArm,
-    points: int,
-    d_safe: float,
-    seed: int = 0,
-    clearance: float = 0.015,
-    speed: float = 0.1,
-) -> PointCloudObstacle:
+def place_cloud(gen: GeneratedArm, points: int, d_safe: float, seed: int = 0) -> PointCloudObstacle:
     """A cloud of ``points`` points (drawn from ``seed``) beside ``gen`` at ``theta0``, every key
-    point ``d_safe + clearance`` [m] from it: stepped outwards by 1 mm along the middle key point's
-    outer (or inner) normal until the arm clears it, the side needing the smaller step; it moves
-    towards the arm at ``speed`` [m/s]."""
+    point ``d_safe`` [m] + :data:`CLEARANCE` from it: stepped outwards by 1 mm along the middle key
+    point's outer (or inner) normal until the arm clears it, the side needing the smaller step; it
+    moves towards the arm at :data:`SPEED`."""
     xy = gen.key_point_positions()
     i = len(gen.key_points) // 2
     u = _outer_normal(gen, i)
     pts = cloud_points(points, seed)
-    want = d_safe + clearance
+    want = d_safe + CLEARANCE
     offset, side = min(
         (_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0))
     )
     u = u if side == 0 else -u
-    return PointCloudObstacle("cloud", xy[i] + offset * u + pts, velocity=-speed * u)
+    return PointCloudObstacle("cloud", xy[i] + offset * u + pts, velocity=-SPEED * u)
 
 
 @functools.cache
@@ -238,11 +226,7 @@ class Size:
 
 def qp_shape(size: Size) -> dict:
     """``{"n", "m_eq", "m_ineq"}`` of the size's tick QP (module docstring)."""
-    return {
-        "n": size.links,
-        "m_eq": 2,
-        "m_ineq": size.key_points * size.cloud_points,
-    }
+    return {"n": size.links, "m_eq": 2, "m_ineq": size.key_points * size.cloud_points}
 
 
 #: The default grid (module docstring), smallest first.

@@ -191,17 +191,13 @@ def _resumable(out: Path, spec: SweepSpec) -> dict:
         raise InputError(
             f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path
         ) from None
-    for key, value, what in (
-        ("sweep_sha256", spec.sha256, f"made from another sweep file ({old.get('sweep_file')})"),
-        (
-            "duration",
-            spec.duration,
-            f"made with duration {old.get('duration')}, not {spec.duration}",
-        ),
-    ):
-        if old.get(key) != value:
-            raise InputError(f"cannot resume: {what}; use --force", path=path, key=key)
-    return old
+    if old.get("sweep_sha256") != spec.sha256:
+        key, what = "sweep_sha256", f"made from another sweep file ({old.get('sweep_file')})"
+    elif old.get("duration") != spec.duration:
+        key, what = "duration", f"made with duration {old.get('duration')}, not {spec.duration}"
+    else:
+        return old
+    raise InputError(f"cannot resume: {what}; use --force", path=path, key=key)
 
 
 def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
@@ -261,7 +257,7 @@ def run_sweep(
     csv_path = out / CSV_NAME
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
-    ran = failed = 0
+    failed = 0
     items, heads = [], {}
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
@@ -299,7 +295,6 @@ def run_sweep(
                 concurrent_solves=done.concurrent,
                 attempts=done.attempts,
             )
-            ran += 1
             failed += row["status"] in ("error", "crashed")
             emit(row)
     order = [(inst.name, b) for inst in instances for b in backends]
@@ -308,4 +303,4 @@ def run_sweep(
     ]
     with atomic_path(csv_path) as tmp:
         tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
-    return SweepOutcome(final, csv_path, ran, len(kept), failed)
+    return SweepOutcome(final, csv_path, len(items), len(kept), failed)

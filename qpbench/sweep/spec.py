@@ -251,9 +251,13 @@ class SweepSpec:
 
 
 def load_sweep(
-    path: str | Path, samples: int | None = None, duration: float | None = None
+    path: str | Path,
+    samples: int | None = None,
+    duration: float | None = None,
+    text: str | None = None,
 ) -> SweepSpec:
-    """Read and check a sweep file (``samples``, ``duration`` override the file's).
+    """Read and check a sweep file (``samples``, ``duration`` override the file's; ``text``: the
+    file's text, ``path`` then only names it in errors and anchors a relative ``base``).
 
     Raises:
         InputError: unreadable file, unknown or missing key, impossible
@@ -261,17 +265,9 @@ def load_sweep(
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8") if text is None else text
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read the sweep file: {exc}", path=path) from None
-    return parse_sweep(text, path, samples=samples, duration=duration)
-
-
-def parse_sweep(
-    text: str, path: str | Path, samples: int | None = None, duration: float | None = None
-) -> SweepSpec:
-    """Parse sweep-file ``text`` (``path`` names it in errors and anchors a relative ``base``)."""
-    path = Path(path)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
