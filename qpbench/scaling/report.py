@@ -1,12 +1,8 @@
-"""The scaling study's report: ``scaling.md`` and ``scaling.png`` from ``scaling.csv``.
-
-Median solve time per tick against variables (the ``arm`` axis) and against constraint rows
-(the ``cloud`` axis), log-log, with fitted power laws; where the fastest sparse backend overtakes
-the fastest dense one; where build + solve stops fitting a 1 ms tick.
-
-A backend's median solve time ``T`` against a size ``s`` (variables or rows) is fitted as
-``T = C s^k``: least squares of ``log10 T`` on ``log10 s`` over one grid axis, the slope's
-standard error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (NaN for N = 2 sizes).
+"""The scaling study's report, ``scaling.md`` and ``scaling.png`` from ``scaling.csv``: median
+solve time per tick against variables (``arm`` axis) and constraint rows (``cloud`` axis),
+log-log, fitted as ``T = C s^k`` (least squares of ``log10 T`` on ``log10 s``, the slope's standard
+error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))``, NaN for N = 2 sizes); where the fastest
+sparse backend overtakes the fastest dense one; where build + solve stops fitting a 1 ms tick.
 """
 
 from __future__ import annotations
@@ -147,11 +143,11 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
         text = f"- {axis} axis: sparse overtakes dense at {_size_label(frame, name)}"
         if name is None:
             bd, bs = _fastest_at_largest(dense, xcol), _fastest_at_largest(sparse, xcol)
-            fd, fs = fitted.get((bd, axis)), fitted.get((bs, axis))
-            meet = extrapolated_crossing(fd, fs) if fd and fs else None
+            fd, fs = fitted[(bd, axis)], fitted[(bs, axis)]
+            meet = extrapolated_crossing(fd, fs)
             if meet is not None and meet > sizes.max():
                 text += f"; the fitted lines of {bd} and {bs} meet near {xcol} = {meet:,.0f} (extrapolated)"
-            elif fd and fs:
+            else:
                 text += (
                     f" (fastest dense {bd}, slope {fd.text()}; fastest sparse {bs}, slope {fs.text()}: "
                     "their fitted lines do not meet beyond the grid)"

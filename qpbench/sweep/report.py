@@ -195,8 +195,13 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                 y = np.r_[0.0, np.arange(1, len(v) + 1) / len(v)]
                 kw = style.series(backend, lit, np.arange(len(v) + 1), 1.3, 0.8)
                 ax.step(np.r_[v[0], v] - shift, y, where="post", **kw)
-            if margin:
-                _margin_axis(ax, d_safe, float(ok[col].min()) * scale - d_safe)
+            if margin:  # zoomed to -1..+2 mm, further left when a run went deeper
+                ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
+                ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
+                lowest = float(ok[col].min()) * scale - d_safe
+                left = min(-1.0, 1.1 * lowest) if np.isfinite(lowest) else -1.0
+                ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
+                ax.set_xlim(left, ZOOM_MM)
             elif col != "min_obstacle_distance" and ax.has_data() and (ok[col] > 0).any():
                 ax.set_xscale("log")
             ax.set_ylim(0.0, 1.02)
@@ -209,17 +214,6 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         style.legend_beside(axes[row, -1], handles, labels)
     fig.suptitle(title)
     style.save(fig, path)
-
-
-def _margin_axis(ax, d_safe: float, lowest: float) -> None:
-    """The d_min panel as the margin to ``d_safe`` [mm], zoomed to -1..+2 mm (further left to
-    ``lowest`` when a run went deeper): the unsafe line at -0.5 mm readable; runs further than
-    2 mm away leave on the right."""
-    ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
-    ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
-    left = min(-1.0, 1.1 * lowest) if np.isfinite(lowest) else -1.0
-    ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
-    ax.set_xlim(left, ZOOM_MM)
 
 
 def _manifest_lines(folder: Path) -> list[str]:

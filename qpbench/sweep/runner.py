@@ -39,9 +39,6 @@ INSTANCE_DIR = "instances"
 #: Statuses a resumed sweep keeps.
 KEPT_STATUSES = ("ok", "invalid_scenario")
 
-#: A row's key.
-KEY_COLUMNS = ("instance", "backend")
-
 
 # Column groups, each name once; the tables below are made of them.
 _HEAD = (
@@ -162,10 +159,11 @@ class SweepOutcome:
 
 
 def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
+    """``sweep.json``; ``samples``, ``backends``: of every run into the folder (a resumed run
+    merges them)."""
     from .. import __version__
 
     return {
-        # samples, backends: of every run into the folder (a resumed run merges them)
         "sweep": spec.name,
         "sweep_file": str(spec.path),
         "sweep_sha256": spec.sha256,
@@ -203,7 +201,7 @@ def _resumable(out: Path, spec: SweepSpec) -> dict:
 def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
     """The rows of ``sweep.csv`` as strings, the last row of each key kept (a half-written line dropped)."""
     rows = read_results(csv_path, repair=repair, columns=COLUMNS, kind="sweep").rows
-    last = {tuple(r[c] for c in KEY_COLUMNS): r for r in rows}
+    last = {(r["instance"], r["backend"]): r for r in rows}
     return list(last.values())
 
 

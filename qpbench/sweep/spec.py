@@ -280,7 +280,13 @@ def load_sweep(
         head["samples"] = _integer(samples, 1, path, "--samples")
     if duration is not None:
         head["duration"] = duration
-    base_path, base_raw = _base(head["base"], path)
+    name = head["base"]  # shipped, or a path relative to the sweep file's folder
+    relative = ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
+    try:
+        base = load_scenario(path.parent / name if relative else name)
+    except ScenarioError as exc:
+        raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
+    base_path, base_raw = base.path, tomllib.loads(base.source)
     extra = raw.get("obstacles", [])
     if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
         raise InputError("expected [[obstacles]] tables", path=path, key="obstacles")
@@ -288,7 +294,14 @@ def load_sweep(
     if head["duration"] is not None:
         positive_seconds(head["duration"], "sweep.duration", path)
         base_raw.setdefault("simulation", {})["duration"] = float(head["duration"])
-    scenario = _check_base(base_raw, path)
+    try:  # the base scenario with the sweep's obstacles and duration
+        scenario = parse_scenario(dumps(base_raw), path=path)
+    except ScenarioError as exc:
+        raise InputError(
+            f"base scenario with this sweep's obstacles and duration: {exc.message}",
+            path=path,
+            key=exc.key,
+        ) from None
     params = raw.get("parameters", {})
     if not isinstance(params, dict) or not params:
         raise InputError(
@@ -329,28 +342,6 @@ def _sweep_table(head, path) -> dict:
     if not isinstance(head.get("safe_start", True), bool):
         raise InputError("expected true or false", path=path, key="sweep.safe_start")
     return {"duration": None, "safe_start": True} | head
-
-
-def _base(name: str, path: Path) -> tuple[Path, dict]:
-    """The base scenario's file and tables (``name``: shipped, or a path relative to ``path``'s)."""
-    relative = ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
-    try:
-        base = load_scenario(path.parent / name if relative else name)
-    except ScenarioError as exc:
-        raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
-    return base.path, tomllib.loads(base.source)
-
-
-def _check_base(base_raw: dict, path: Path):
-    """The base scenario with the sweep's obstacles and duration, validated."""
-    try:
-        return parse_scenario(dumps(base_raw), path=path)
-    except ScenarioError as exc:
-        raise InputError(
-            f"base scenario with this sweep's obstacles and duration: {exc.message}",
-            path=path,
-            key=exc.key,
-        ) from None
 
 
 def _flatten(params: dict, path, prefix: str = ""):
@@ -427,11 +418,6 @@ class Instance:
     invalid: str | None = None
 
 
-def instance_name(index: int, samples: int) -> str:
-    """``i00003``: zero-padded to at least 5 digits (to the widest index of ``samples``)."""
-    return f"i{index:0{max(5, len(str(samples - 1)))}d}"
-
-
 def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
     """The scenario file of instance ``name``: a header saying where it comes from, then every table."""
     raw = apply_overrides(spec.base_raw, values)
@@ -493,8 +479,9 @@ def sample_instances(spec: SweepSpec) -> list[Instance]:
     """Every instance of ``spec`` (deterministic in ``spec.seed``), each checked by the scenario loader
     and, with ``[sweep] safe_start`` (default), for a start outside ``d_safe`` of every obstacle."""
     out = []
+    digits = max(5, len(str(spec.samples - 1)))  # i00003: as wide as the widest index
     for index in range(spec.samples):
-        name = instance_name(index, spec.samples)
+        name = f"i{index:0{digits}d}"
         values = {d.key: d.draw(spec.rng(index, d.key)) for d in spec.parameters}
         text = instance_text(spec, name, index, values)
         out.append(Instance(index, name, values, text, _why_invalid(text, name, spec.safe_start)))
