@@ -28,13 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
-from ..sim.scenario import (
-    OVERRIDE_KEY,
-    Scenario,
-    apply_overrides,
-    load_scenario,
-    parse_scenario,
-)
+from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
 from .toml_text import dumps, value_text
 
 #: Other names a reader may give a scenario key (the table is found in the base scenario).
