@@ -101,15 +101,6 @@ def is_scaling_dir(path: str | Path) -> bool:
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
 
 
-def fits(frame: pd.DataFrame) -> dict:
-    """``{(backend, axis): PowerFit}`` of median solve time on each axis."""
-    measured = frame[frame["status"] == "measured"]
-    return {
-        (backend, axis): fit_power_law(g[AXES[axis][0]], g["time_median_s"])
-        for (backend, axis), g in measured.groupby(["backend", "axis"])
-    }
-
-
 def _size_label(frame: pd.DataFrame, name) -> str:
     if name is None:
         return "none in the measured range"
@@ -339,10 +330,14 @@ def write_scaling_report(
     frame = pd.read_csv(Path(folder) / SUMMARY_NAME)
     if frame.empty:
         raise InputError("no rows", path=Path(folder) / SUMMARY_NAME)
-    fitted = fits(frame)
+    measured = frame[frame["status"] == "measured"]
+    fitted = {  # (backend, axis) -> PowerFit of its median solve times
+        (backend, axis): fit_power_law(g[AXES[axis][0]], g["time_median_s"])
+        for (backend, axis), g in measured.groupby(["backend", "axis"])
+    }
 
     def figures(out: Path) -> str | None:
-        if not (plots and (frame["status"] == "measured").any()):
+        if not plots or measured.empty:
             return None
         plot(frame, fitted, out / "scaling.png")
         return "scaling.png"

@@ -158,28 +158,6 @@ class SweepOutcome:
     failed: int
 
 
-def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
-    """``sweep.json``; ``samples``, ``backends``: of every run into the folder (a resumed run
-    merges them)."""
-    from .. import __version__
-
-    return {
-        "sweep": spec.name,
-        "sweep_file": str(spec.path),
-        "sweep_sha256": spec.sha256,
-        "sweep_text": spec.text,
-        "seed": spec.seed,
-        "samples": spec.samples,
-        "duration": spec.duration,
-        "base": spec.base,
-        "base_file": str(spec.base_path),
-        "backends": backends,
-        "qpbench_version": __version__,
-        "force_band_n": spec.force_band,
-        "tracking_band_m": spec.tracking_band,
-    }
-
-
 def _resumable(out: Path, spec: SweepSpec) -> dict:
     """The manifest of the sweep in ``out``, if made from the same sweep file and duration."""
     path = out / MANIFEST_NAME
@@ -206,11 +184,29 @@ def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
 
 
 def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
-    """Check ``out``, write the instances and the manifest; the instances and the kept rows."""
+    """Check ``out``, write the instances and the manifest (``sweep.json``); the instances and the
+    kept rows."""
     csv_path = out / CSV_NAME
     check_folder(out)
     check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
-    manifest, kept = _manifest(spec, backends), {}
+    from .. import __version__
+
+    manifest = {  # samples, backends: of every run into the folder (a resumed run merges them)
+        "sweep": spec.name,
+        "sweep_file": str(spec.path),
+        "sweep_sha256": spec.sha256,
+        "sweep_text": spec.text,
+        "seed": spec.seed,
+        "samples": spec.samples,
+        "duration": spec.duration,
+        "base": spec.base,
+        "base_file": str(spec.base_path),
+        "backends": backends,
+        "qpbench_version": __version__,
+        "force_band_n": spec.force_band,
+        "tracking_band_m": spec.tracking_band,
+    }
+    kept = {}
     if resume and csv_path.exists():  # the table holds the earlier runs' rows too
         old = _resumable(out, spec)
         manifest["backends"] = list(dict.fromkeys(old.get("backends", []) + backends))
