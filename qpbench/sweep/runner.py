@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
-from ..harness.closed_loop import TABLE_NAMES, LoopTask, failure_fields, run_row
+from ..harness.closed_loop import LoopTask, failure_fields, run_row
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
 from .spec import Instance, SweepSpec, sample_instances
 
@@ -40,9 +40,9 @@ INSTANCE_DIR = "instances"
 KEPT_STATUSES = ("ok", "invalid_scenario")
 
 
-# Column groups, each name once; the tables below are made of them.
-_HEAD = (
-    "instance",
+#: Columns of ``sweep.csv``, in order.
+COLUMNS = (
+    "instance",  # the run: its instance, backend and outcome (:func:`head_row`)
     "backend",
     "instance_file",
     "sample",
@@ -54,9 +54,7 @@ _HEAD = (
     "attempts",
     "verdict",
     "verdict_reasons",
-)
-_RUN = (  # from the summary
-    "duration",
+    "duration_s",  # the closed-loop summary's figures from here, but the convergence columns
     "simulated_s",
     "dt",
     "ticks",
@@ -64,10 +62,11 @@ _RUN = (  # from the summary
     "tracking_max_after_2s",
     "force_error_rms_after_2s",
     "force_error_max_after_2s",
-)
-_CONVERGENCE = ("t_converge_force_s", "t_converge_tracking_s", "force_band_n", "tracking_band_m")
-_SAFETY = (  # from the summary
-    "min_obstacle_distance",
+    "t_converge_force_s",  # the convergence figures and their bands
+    "t_converge_tracking_s",
+    "force_band_n",
+    "tracking_band_m",
+    "min_obstacle_distance",  # the summary's again
     "min_obstacle_distance_key_point",
     "min_obstacle_distance_obstacle",
     "min_obstacle_distance_t",
@@ -82,14 +81,11 @@ _SAFETY = (  # from the summary
     "error_ticks",
     "invalid_ticks",
     "first_error",
-)
-_SOLVE_TIMES = (  # from the summary
     "solve_time_median_s",
     "solve_time_p99_s",
     "solve_time_max_s",
     "deadline_misses",
-)
-_REALTIME = (  # from the summary (timing)
+    "ticks_over_1ms",
     "realtime",
     "realtime_reason",
     "realtime_solver",
@@ -97,29 +93,20 @@ _REALTIME = (  # from the summary (timing)
     "over_dt_share",
     "solver_time_p99_s",
     "solver_over_dt_share",
+    "wall_time_s",
+    "real_time_factor",
+    "verdict_overrides",
+    "executor",  # where it ran
+    "host",
+    "worker",
+    "concurrent_solves",
 )
-_WALL = ("wall_time_s", "real_time_factor")  # from the summary
-_PLACE = ("executor", "host", "worker", "concurrent_solves")
-
-#: Figures copied from the closed loop's row (column: ``TABLE_NAMES`` or the key).
-SUMMARY_COLUMNS = _RUN + _SAFETY + _SOLVE_TIMES + _REALTIME + _WALL
-
-#: Columns of ``sweep.csv``, in order.
-COLUMNS = (
-    _HEAD
-    + tuple(TABLE_NAMES.get(key, key) for key in _RUN)
-    + _CONVERGENCE
-    + _SAFETY
-    + _SOLVE_TIMES
-    + ("ticks_over_1ms",)
-    + _REALTIME
-    + _WALL
-    + ("verdict_overrides",)
-    + _PLACE
-)
-
 #: Columns that depend on timing or on where the run was made (ignored when comparing two sweeps).
-TIMING_COLUMNS = ("attempts",) + _SOLVE_TIMES + ("ticks_over_1ms",) + _REALTIME + _WALL + _PLACE
+TIMING_COLUMNS = (
+    ("attempts",)
+    + COLUMNS[COLUMNS.index("solve_time_median_s") : COLUMNS.index("verdict_overrides")]
+    + COLUMNS[COLUMNS.index("executor") :]
+)
 
 
 def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
@@ -144,7 +131,7 @@ def sweep_row(head: dict, row: dict) -> dict:
     """The sweep's row (``head``: :func:`head_row`) of a closed-loop row
     (:func:`qpbench.harness.closed_loop.run_row` or
     :func:`~qpbench.harness.closed_loop.failure_fields`)."""
-    return head | {key: row[key] for key in COLUMNS if key in row and key not in _HEAD[:7]}
+    return head | {key: row[key] for key in COLUMNS if key in row and key not in COLUMNS[:7]}
 
 
 @dataclass
