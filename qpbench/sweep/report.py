@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.stats import binomtest
 
 from ..exceptions import InputError
 from ..formats import sha256_file
@@ -19,8 +20,6 @@ from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths
 from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
 
-#: z of a two-sided 95 % interval.
-Z95 = 1.959963984540054
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
 RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
 #: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
@@ -49,24 +48,17 @@ QUANTILE_HEADER = [
 WORST_HEADER = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
 
 
-def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
-    """Wilson score interval of a proportion ``k / n`` (``(nan, nan)`` when ``n = 0``)."""
+def wilson(k: int, n: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion ``k / n`` (``(nan, nan)`` when ``n = 0``)."""
     if n == 0:
         return math.nan, math.nan
-    p = k / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    ci = binomtest(k, n).proportion_ci(0.95, method="wilson")
+    return max(0.0, float(ci.low)), min(1.0, float(ci.high))
 
 
 def mcnemar_exact(b: int, c: int) -> float:
     """Two-sided exact McNemar p-value of ``b`` and ``c`` discordant pairs (1 when there are none)."""
-    if b + c == 0:
-        return 1.0
-    from scipy.stats import binomtest
-
-    return float(binomtest(b, b + c, 0.5).pvalue)
+    return float(binomtest(b, b + c, 0.5).pvalue) if b + c else 1.0
 
 
 def is_sweep_csv(path: Path) -> bool:
