@@ -138,11 +138,9 @@ def cloud_points(m: int, seed: int = 0) -> np.ndarray:
 
 def min_key_point_distance(key_xy: np.ndarray, points: np.ndarray) -> float:
     """Smallest distance in [m] between key points (a, 2) and cloud points (m, 2)."""
-    best = math.inf
-    for chunk in np.array_split(points, max(1, points.shape[0] // 256)):
-        d = np.sqrt(((key_xy[:, None, :] - chunk[None, :, :]) ** 2).sum(axis=2))
-        best = min(best, float(d.min()))
-    return best
+    from scipy.spatial.distance import cdist
+
+    return float(cdist(key_xy, points).min())
 
 
 def _outer_normal(gen: GeneratedArm, i: int) -> np.ndarray:
