@@ -360,12 +360,11 @@ def _base_value(key: str, base_raw: dict, path):
     match = OVERRIDE_KEY.fullmatch(key)
     if match is None:
         name = ALIASES.get(key.casefold(), key.casefold())
-        tables = [t for t, v in base_raw.items() if isinstance(v, dict) and name in v]
-        hint = f"{tables[0]}.{name}" if tables else None
+        for table, value in base_raw.items():
+            if isinstance(value, dict) and name in value:
+                raise bad(f"unknown parameter key; the key is {table}.{name}")
         raise bad(
-            f"unknown parameter key; the key is {hint}"
-            if hint
-            else "unknown parameter key (expected a scenario key TABLE.KEY or obstacles[i].KEY, "
+            "unknown parameter key (expected a scenario key TABLE.KEY or obstacles[i].KEY, "
             "e.g. controller.desired_force)"
         )
     table, index, name = match.groups()
