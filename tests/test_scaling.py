@@ -9,14 +9,18 @@ import numpy as np
 import pytest
 
 from qpbench.cli import main
+from qpbench.harness.results import read_results
 from qpbench.robot.kinematics import PlanarArm
 from qpbench.scaling.report import crossing, extrapolated_crossing, first_above, fit_power_law
-from qpbench.scaling.runner import COLUMNS, read_summary
-from qpbench.scaling.scene import REACH, THETA_LIMIT, generate_arm, min_key_point_distance
+from qpbench.scaling.runner import COLUMNS
 from qpbench.scaling.sizes import (
     DEFAULT_SIZES,
+    REACH,
+    THETA_LIMIT,
     Size,
     generate,
+    generate_arm,
+    min_key_point_distance,
     parse_sizes,
     qp_shape,
     scenario_toml,
@@ -212,7 +216,7 @@ def test_command_end_to_end_on_the_two_smallest_sizes(tmp_path, capsys):
     assert (out / "scaling.csv").read_bytes() == before
     with open(out / "scaling.csv", "ab") as fh:
         fh.write(b"n4-p1-m100,cloud,4")
-    assert len(read_summary(out / "scaling.csv", repair=True)) == 4
+    assert len(read_results(out / "scaling.csv", repair=True, columns=COLUMNS).rows) == 4
     assert (out / "scaling.csv").read_bytes() == before
 
     # qpbench report renders the same folder

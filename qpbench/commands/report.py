@@ -45,7 +45,6 @@ def run(args: argparse.Namespace) -> int:
     if others:
         rest, sweeps = split_sweep_paths(others)
         sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
-        write_report(
-            rest, args.out, force=args.force, plots=plots, prefer=args.prefer, sections=sections
-        )
+        kw = {"prefer": args.prefer, "sections": sections, "files": sweeps}
+        write_report(rest, args.out, force=args.force, plots=plots, **kw)
     return 0

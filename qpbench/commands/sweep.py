@@ -79,8 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from ..jit import warmup_logged
     from ..runner import make_executor
     from ..selection import select_backends
-    from ..sweep.rows import CSV_NAME
-    from ..sweep.runner import run_sweep
+    from ..sweep.runner import CSV_NAME, run_sweep
     from ..sweep.spec import load_sweep
 
     plugins = plugin_files()  # loaded by the CLI (--plugin, QPBENCH_PLUGINS); every worker too

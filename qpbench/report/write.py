@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .inputs import read_results
+from .inputs import ResultFile, read_results
 from .markdown import render
 
 if TYPE_CHECKING:
@@ -79,11 +79,13 @@ def write_report(
     plots: bool = True,
     prefer: str | None = None,
     sections: Callable[[Path, bool], list[str]] | None = None,
+    files: list[ResultFile] = (),
 ) -> Path:
     """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
 
     ``sections(out, plots)``: markdown lines appended after the tables (the sweep section);
-    with it, ``paths`` may be empty. ``prefer``: see :func:`qpbench.report.inputs.read_results`.
+    with it, ``paths`` may be empty; ``files``: the tables of ``sections``, listed with the
+    result files. ``prefer``: see :func:`qpbench.report.inputs.read_results`.
 
     Raises:
         InputError: a path is missing or not a result CSV, a duplicate key or mixed repeat
@@ -94,6 +96,7 @@ def write_report(
     def render_all(out: Path) -> str:
         started = time.perf_counter()
         results = read_results(paths, prefer=prefer)
+        results.files += files
         log.info(
             "report: %d bench rows and %d closed-loop runs read in %.1f s",
             len(results.bench),

@@ -1,3 +1,3 @@
 """The scaling study (``qpbench scaling``): generated arms of many links facing point clouds
-(:mod:`.scene`, :mod:`.sizes`), their ticks benched (:mod:`.runner`), power laws fitted
-and reported (:mod:`.report`)."""
+(:mod:`.sizes`), their ticks benched (:mod:`.runner`), power laws fitted and reported
+(:mod:`.report`)."""

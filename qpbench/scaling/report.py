@@ -1,12 +1,8 @@
-"""The scaling study's report: ``scaling.md`` and ``scaling.png`` from ``scaling.csv``.
-
-Median solve time per tick against variables (the ``arm`` axis) and against constraint rows
-(the ``cloud`` axis), log-log, with fitted power laws; where the fastest sparse backend overtakes
-the fastest dense one; where build + solve stops fitting a 1 ms tick.
-
-A backend's median solve time ``T`` against a size ``s`` (variables or rows) is fitted as
-``T = C s^k``: least squares of ``log10 T`` on ``log10 s`` over one grid axis, the slope's
-standard error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))`` (NaN for N = 2 sizes).
+"""The scaling study's report, ``scaling.md`` and ``scaling.png`` from ``scaling.csv``: median
+solve time per tick against variables (``arm`` axis) and constraint rows (``cloud`` axis),
+log-log, fitted as ``T = C s^k`` (least squares of ``log10 T`` on ``log10 s``, the slope's standard
+error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))``, NaN for N = 2 sizes); where the fastest
+sparse backend overtakes the fastest dense one; where build + solve stops fitting a 1 ms tick.
 """
 
 from __future__ import annotations
@@ -19,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from ..report.markdown_table import US, Column, table
+from .runner import SUMMARY_NAME
 
 #: The control period a tick must fit in [s].
 TICK_S = 1e-3
@@ -31,12 +28,11 @@ AXES = {
 
 @dataclass(frozen=True)
 class PowerFit:
-    """``T = 10**intercept * s**slope``, from ``points`` sizes; ``slope_se`` its standard error."""
+    """``T = 10**intercept * s**slope``; ``slope_se`` the slope's standard error."""
 
     slope: float
     slope_se: float
     intercept: float
-    points: int
 
     def predict(self, s: float | np.ndarray) -> np.ndarray:
         """Fitted time at size(s) ``s`` (same units as the data)."""
@@ -58,7 +54,7 @@ def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
     keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
     x, y = np.log10(s[keep]), np.log10(t[keep])
     if x.size < 2 or np.ptp(x) == 0:
-        return PowerFit(math.nan, math.nan, math.nan, int(x.size))
+        return PowerFit(math.nan, math.nan, math.nan)
     xm = x.mean()
     sxx = float(((x - xm) ** 2).sum())
     slope = float(((x - xm) * (y - y.mean())).sum() / sxx)
@@ -68,7 +64,7 @@ def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
         se = math.sqrt(rss / (x.size - 2) / sxx)
     else:
         se = math.nan
-    return PowerFit(slope, se, intercept, int(x.size))
+    return PowerFit(slope, se, intercept)
 
 
 def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | None:
@@ -102,19 +98,7 @@ def extrapolated_crossing(fit_a: PowerFit, fit_b: PowerFit) -> float | None:
 
 def is_scaling_dir(path: str | Path) -> bool:
     """Whether ``path`` is a folder written by ``qpbench scaling`` (it holds ``scaling.csv``)."""
-    from .runner import SUMMARY_NAME
-
     return Path(path).is_dir() and (Path(path) / SUMMARY_NAME).is_file()
-
-
-def fits(frame: pd.DataFrame) -> dict:
-    """``{(backend, axis): PowerFit}`` of median solve time on each axis."""
-    measured = frame[frame["status"] == "measured"]
-    return {
-        (backend, axis): fit_power_law(g[AXES[axis][0]], g["time_median_s"])
-        for (backend, axis), g in measured.groupby(["backend", "axis"])
-        if axis in AXES
-    }
 
 
 def _size_label(frame: pd.DataFrame, name) -> str:
@@ -150,11 +134,11 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
         text = f"- {axis} axis: sparse overtakes dense at {_size_label(frame, name)}"
         if name is None:
             bd, bs = _fastest_at_largest(dense, xcol), _fastest_at_largest(sparse, xcol)
-            fd, fs = fitted.get((bd, axis)), fitted.get((bs, axis))
-            meet = extrapolated_crossing(fd, fs) if fd and fs else None
+            fd, fs = fitted[(bd, axis)], fitted[(bs, axis)]
+            meet = extrapolated_crossing(fd, fs)
             if meet is not None and meet > sizes.max():
                 text += f"; the fitted lines of {bd} and {bs} meet near {xcol} = {meet:,.0f} (extrapolated)"
-            elif fd and fs:
+            else:
                 text += (
                     f" (fastest dense {bd}, slope {fd.text()}; fastest sparse {bs}, slope {fs.text()}: "
                     "their fitted lines do not meet beyond the grid)"
@@ -163,22 +147,22 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
     return lines
 
 
-def deadline_table(frame: pd.DataFrame) -> pd.DataFrame:
+def deadline_table(frame: pd.DataFrame) -> list[dict]:
     """Per backend and axis: the first size whose build + solve exceeds :data:`TICK_S`, at p99
-    and at the median, and the largest such tick [s]."""
+    and at the median, and the largest such tick [us] in brackets."""
     out = []
     m = frame[frame["status"] == "measured"]
     for (backend, axis), g in m.groupby(["backend", "axis"]):
-        xcol = AXES.get(axis, ("n",))[0]
+        xcol = AXES[axis][0]
         g = g.sort_values(xcol)
         row = {"backend": backend, "axis": axis}
         for stat in ("p99", "median"):
             tick = g[f"build_{stat}_s"].fillna(0) + g[f"time_{stat}_s"]
             at = first_above(g[xcol].values, tick.values, TICK_S)
-            row[stat] = _size_label(frame, None if at is None else g[g[xcol] == at]["size"].iloc[0])
-            row[f"largest {stat}"] = tick.max()
+            label = _size_label(frame, None if at is None else g[g[xcol] == at]["size"].iloc[0])
+            row[f"{stat} tick over 1 ms from"] = f"{label} (largest {tick.max() * US:,.0f})"
         out.append(row)
-    return pd.DataFrame(out)
+    return out
 
 
 def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
@@ -202,9 +186,23 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
         for ax, (axis, (xcol, label)) in zip(axes[row], AXES.items()):
             a = m[m["axis"] == axis]
             for b, lit in style.highlighted(backends, group):
-                _scaling_series(
-                    ax, a[a["backend"] == b].sort_values(xcol), xcol, b, lit, fitted.get((b, axis))
+                g, fit = a[a["backend"] == b].sort_values(xcol), fitted.get((b, axis))
+                if g.empty:
+                    continue
+                colour, z = (style.look(b).colour, 3) if lit else (style.GREY, 1)
+                marker = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
+                tag = f"{b} ({fit.text()})" if fit is not None else b
+                ax.plot(
+                    g[xcol],
+                    g["time_median_s"] * 1e6,
+                    marker,
+                    color=colour,
+                    zorder=z,
+                    label=tag if lit else None,
                 )
+                if fit is not None and not math.isnan(fit.slope):  # the fitted power law, dashed
+                    xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
+                    ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=z)
             ax.axhline(TICK_S * 1e6, color="k", lw=0.8, ls=":")
             ax.set_xscale("log")
             ax.set_yscale("log")
@@ -224,39 +222,8 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
     return style.save(fig, path)
 
 
-def _scaling_series(ax, g: pd.DataFrame, xcol: str, b: str, lit: bool, fit) -> None:
-    """One backend's medians (square: dense, circle: sparse) and its fitted power law (dashed)."""
-    from ..report import style
-
-    if g.empty:
-        return
-    colour = style.look(b).colour if lit else style.GREY
-    marker = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
-    tag = f"{b} ({fit.text()})" if fit is not None else b
-    ax.plot(
-        g[xcol],
-        g["time_median_s"] * 1e6,
-        marker,
-        color=colour,
-        label=tag if lit else None,
-        zorder=3 if lit else 1,
-    )
-    if fit is not None and not math.isnan(fit.slope):
-        xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
-        ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=3 if lit else 1)
-
-
 def _text(key: str) -> Column:
     return Column(key, key, text=True)
-
-
-def _over(stat: str) -> Column:
-    """The first size whose ``stat`` tick is over 1 ms, and the largest such tick [us]."""
-    return Column(
-        f"{stat} tick over 1 ms from",
-        cell=lambda r: f"{r[stat]} (largest {r[f'largest {stat}'] * US:,.0f})",
-        text=True,
-    )
 
 
 #: The tables of ``scaling.md``, as typed columns of the rows they show.
@@ -276,7 +243,10 @@ SLOPE_COLUMNS = (
     Column("slope vs variables (arm axis)", "arm"),
     Column("slope vs rows (cloud axis)", "cloud"),
 )
-DEADLINE_COLUMNS = (_text("backend"), _text("axis"), _over("p99"), _over("median"))
+DEADLINE_COLUMNS = tuple(
+    _text(key)
+    for key in ("backend", "axis", "p99 tick over 1 ms from", "median tick over 1 ms from")
+)
 ROW_COLUMNS = (
     _text("size"),
     _text("backend"),
@@ -333,7 +303,7 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
         "and median build + median solve (a typical tick fits); largest tick over the axis in brackets [us].",
         "",
     ]
-    lines += table(DEADLINE_COLUMNS, deadline_table(frame).to_dict("records"))
+    lines += table(DEADLINE_COLUMNS, deadline_table(frame))
     lines += ["## Every size and backend", ""]
     lines += table(ROW_COLUMNS, frame.to_dict("records"))
     return "\n".join(lines)
@@ -345,22 +315,23 @@ def write_scaling_report(
     """Write ``scaling.md`` (and ``scaling.png``) for the study in ``folder`` into ``out``.
 
     Raises:
-        InputError: ``folder`` holds no scaling.csv or no row.
+        InputError: ``folder``'s scaling.csv holds no row.
         OutputExistsError: ``out/scaling.md`` exists and not ``force``.
     """
     from ..exceptions import InputError
     from ..report.write import publish
-    from .runner import SUMMARY_NAME
 
-    if not is_scaling_dir(folder):
-        raise InputError("not a scaling folder (no scaling.csv)", path=folder)
     frame = pd.read_csv(Path(folder) / SUMMARY_NAME)
     if frame.empty:
         raise InputError("no rows", path=Path(folder) / SUMMARY_NAME)
-    fitted = fits(frame)
+    measured = frame[frame["status"] == "measured"]
+    fitted = {  # (backend, axis) -> PowerFit of its median solve times
+        (backend, axis): fit_power_law(g[AXES[axis][0]], g["time_median_s"])
+        for (backend, axis), g in measured.groupby(["backend", "axis"])
+    }
 
     def figures(out: Path) -> str | None:
-        if not (plots and (frame["status"] == "measured").any()):
+        if not plots or measured.empty:
             return None
         plot(frame, fitted, out / "scaling.png")
         return "scaling.png"

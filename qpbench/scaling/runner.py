@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..harness.results import ResultsWriter
+from ..harness.results import ResultsWriter, read_results
 from .sizes import Size, generate, qp_shape, scenario_toml
 
 if TYPE_CHECKING:
@@ -63,24 +63,15 @@ SUMMARY_NAME = "scaling.csv"
 
 #: How the built-in solvers take their matrices: ``dense`` (a dense factorisation or dense
 #: active set: cost grows with n x rows whatever the zeros) or ``sparse``; a route
-#: ``qpsolvers:NAME`` or a variant ``NAME-...`` as ``NAME``. A backend class may say so itself
-#: with a ``matrix_format`` attribute.
+#: ``qpsolvers:NAME`` or a variant ``NAME-...`` as ``NAME``.
 _DENSE = ("daqp", "qpoases", "piqp", "proxqp", "pinv", "rnn", "quadprog", "cvxopt")
 _SPARSE = ("qpalm", "osqp", "clarabel", "cvxpy", "scs", "highs", "ecos", "gurobi")
 
 
 def matrix_format(name: str) -> str:
-    """``dense``, ``sparse`` or ``unknown`` (a plugin's backend that does not say)."""
-    from ..backends import backend_class
-    from ..exceptions import QpbenchError
-
-    try:
-        declared = getattr(backend_class(name), "matrix_format", None)
-    except QpbenchError:
-        declared = None
+    """``dense``, ``sparse`` or ``unknown`` (a backend of neither list)."""
     solver = name.removeprefix("qpsolvers:").split("-")[0]
-    known = "dense" if solver in _DENSE else "sparse" if solver in _SPARSE else "unknown"
-    return declared or known
+    return "dense" if solver in _DENSE else "sparse" if solver in _SPARSE else "unknown"
 
 
 @dataclass
@@ -105,31 +96,20 @@ class ScalingConfig:
 
     def __post_init__(self) -> None:
         """Every value checked when made (one-line errors naming the option)."""
-        from ..exceptions import ParamError, positive_seconds
+        from ..exceptions import ParamError, positive_count, positive_seconds
         from ..profiles import get_profile
 
         get_profile(self.profile)
         positive_seconds(self.duration, "--duration")
         positive_seconds(self.slow_limit, "--slow-limit")
-        for key, value, low in (
-            ("--every", self.every, 1),
-            ("--repeat", self.repeat, 1),
-            ("--seed", self.seed, 0),
-            ("--dense-limit", self.dense_limit, 1),
-        ):
-            if value < low:
-                raise ParamError(f"out of range: {value}", key=key)
+        for key in ("every", "repeat", "dense_limit"):
+            positive_count(getattr(self, key), "--" + key.replace("_", "-"))
+        if self.seed < 0:
+            raise ParamError(f"out of range: {self.seed}", key="--seed")
         if self.duration / 0.001 < self.every:
             raise ParamError(
                 f"{self.duration} s at 1 kHz keeps no tick with --every {self.every}", key="--every"
             )
-
-
-def read_summary(path: str | Path, repair: bool = False) -> list[dict]:
-    """Rows of a ``scaling.csv`` (strings; :func:`qpbench.harness.results.read_results`)."""
-    from ..harness.results import read_results
-
-    return read_results(path, repair=repair, columns=COLUMNS, kind="scaling").rows
 
 
 def build_times(
@@ -146,20 +126,6 @@ def build_times(
             best = min(best, time.perf_counter_ns() - t0)
         out[i] = best * 1e-9
     return out
-
-
-def _size_columns(size: Size, config: ScalingConfig) -> dict:
-    shape = qp_shape(size)
-    return {
-        **asdict(size),
-        **shape,
-        "size": size.name,
-        "key_points": size.key_points,
-        "rows": shape["m_eq"] + shape["m_ineq"],
-        "driver": config.driver,
-        "repeat": config.repeat,
-        "seed": config.seed,
-    }
 
 
 def _backend_row(base: dict, name: str, rows: list[dict]) -> dict:
@@ -238,8 +204,19 @@ def run_size(
         time.perf_counter() - started,
     )
     built = build_times(scenario.make_controller(), states, config.build_repeat)
-    base = _size_columns(size, config)
-    base.update(build_median_s=float(np.median(built)), build_p99_s=float(np.percentile(built, 99)))
+    shape = qp_shape(size)
+    base = {
+        **asdict(size),
+        **shape,
+        "size": size.name,
+        "key_points": size.key_points,
+        "rows": shape["m_eq"] + shape["m_ineq"],
+        "driver": config.driver,
+        "repeat": config.repeat,
+        "seed": config.seed,
+        "build_median_s": float(np.median(built)),
+        "build_p99_s": float(np.percentile(built, 99)),
+    }
     reasons = {name: _skip_reason(name, size, slow, config) for name in config.backends}
     run = [name for name, why in reasons.items() if why is None]
     rows, failed = _bench_size(size, config, out, run, base, progress) if run else ([], 0)
@@ -266,7 +243,6 @@ def _bench_size(size: Size, config: ScalingConfig, out: Path, run: list, base: d
 
     from ..formats import load_problems
     from ..harness.bench import BenchConfig, run_bench
-    from ..harness.results import read_results
     from ..reference import reference_solutions
 
     problem_set = load_problems(out / "sets" / size.name)
@@ -299,7 +275,8 @@ def run_scaling(
     summary_path = out / SUMMARY_NAME
     done: dict[str, list[dict]] = {}
     slow: dict = {}
-    for r in read_summary(summary_path, repair=True) if resume and summary_path.exists() else []:
+    kept = resume and summary_path.exists()
+    for r in read_results(summary_path, True, COLUMNS, "scaling").rows if kept else []:
         done.setdefault(r["size"], []).append(r)
         _note_slow(slow, r, config.slow_limit)
     failed = 0

@@ -1,4 +1,4 @@
-"""The sizes of the scaling study and the scenario each one is.
+"""The sizes of the scaling study and the scene and scenario each one is.
 
 A size is an arm (``n`` links, ``p`` key points per link) facing one point
 cloud of ``m`` points. Its tick's QP (paper eq. 11, ``paper`` formulation) has
@@ -11,6 +11,20 @@ cloud of ``m`` points. Its tick's QP (paper eq. 11, ``paper`` formulation) has
 The default grid has two axes, each dimension read with the other held: ``cloud`` (the paper's
 4-link layout, ``p = 1``, facing 1 to 1,000 points) and ``arm`` (4 to 64 links, ``p = 2``, facing
 16 points). :func:`scenario_toml` writes a size as an ordinary scenario file.
+
+The scene: a generated arm in contact and a point cloud approaching it. Link lengths sum to
+:data:`REACH` (the paper arm's 1.0 m): ``l_i = REACH w_i / sum(w)``, ``w_i`` uniform in
+[0.5, 1.5]. Key points: the paper's rule generalised (``p`` per link and the joints J2..Jn,
+``a = n p + n - 1``; ``p = 1``, ``n = 4``: A1..A7). The start puts the end effector at rest in
+contact (paper eq. 4: ``x_d(0) + (Fd / Kp) n``), so the first QPs are feasible: a bent arc of
+equal relative angles ``c`` (bisection on the reach, ``|c| <= 2 pi / n`` keeps the joints within
++-3 rad for n >= 4), turned onto the target by the first joint.
+
+As in the paper (section 2.2, obstacles as key points ``B_j``; eqs. 8-10) every (key point, cloud
+point) pair is one velocity-damper row, every tick: ``a m`` rows, a fixed count, as a persistent
+solver needs. The cloud fills a disk of :data:`CLOUD_RADIUS` on the outer side of the arm at its
+middle key point, ``d_safe + clearance`` away, and approaches it: its rows start inactive and
+become active within the first tenths of a second, so the dumped ticks hold both.
 """
 
 from __future__ import annotations
@@ -21,16 +35,151 @@ import math
 import re
 import tomllib
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..exceptions import ParamError
+from ..robot.environment import PointCloudObstacle
+from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
 from ..sweep.toml_text import dumps
-from .scene import THETA_LIMIT, VELOCITY_LIMIT, GeneratedArm, generate_arm, place_cloud
 
-if TYPE_CHECKING:
-    from ..robot.environment import PointCloudObstacle
+#: Sum of the link lengths of every generated arm in [m] (the paper arm's reach).
+REACH = 1.0
+#: Joint-angle limits in [rad] (the paper's, for every joint).
+THETA_LIMIT = 3.0
+#: Joint-velocity limits in [rad/s] (the paper's, for every joint).
+VELOCITY_LIMIT = 1.0
+
+
+@dataclass
+class GeneratedArm:
+    """An arm (lengths [m]), its key points, a start ``theta0`` [rad] in contact at ``target`` [m]."""
+
+    arm: PlanarArm
+    key_points: KeyPoints
+    theta0: np.ndarray
+    target: np.ndarray
+
+    def key_point_positions(self) -> np.ndarray:
+        """Key-point positions in [m] at ``theta0``, shape (a, 2)."""
+        return self.arm.points(self.theta0, self.key_points.links, self.key_points.fracs)
+
+
+def _reach_at(lengths: np.ndarray, c: float) -> float:
+    arm = PlanarArm(lengths)
+    theta = np.full(lengths.size, c)
+    theta[0] = 0.0
+    return float(np.hypot(*arm.end_effector(theta)))
+
+
+def bent_arm_angles(lengths: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Joint angles [rad] of the bent arc reaching ``target`` [m] exactly (module docstring).
+
+    Raises:
+        ParamError: ``target`` is out of reach (farther than the arm's length
+            or nearer than the tightest arc with ``|c| <= 2 pi / n``).
+    """
+    n = lengths.size
+    dist = float(np.hypot(*target))
+    lo, hi = 0.0, 2.0 * math.pi / n * 0.95
+    if not _reach_at(lengths, hi) < dist < _reach_at(lengths, lo):
+        raise ParamError(
+            f"target {target.tolist()} m is out of reach of a bent {n}-link arm", key="target"
+        )
+    for _ in range(100):  # the reach falls monotonically as the arc bends on [0, 2 pi / n)
+        mid = 0.5 * (lo + hi)
+        if _reach_at(lengths, mid) > dist:
+            lo = mid
+        else:
+            hi = mid
+    theta = np.full(n, 0.5 * (lo + hi))
+    theta[0] = 0.0
+    ee = PlanarArm(lengths).end_effector(theta)
+    theta[0] = math.atan2(target[1], target[0]) - math.atan2(ee[1], ee[0])
+    theta[0] = math.remainder(theta[0], 2.0 * math.pi)
+    return theta
+
+
+def generate_arm(
+    links: int, points_per_link: int, target: np.ndarray, seed: int = 0
+) -> GeneratedArm:
+    """The arm of ``links`` links with ``points_per_link`` key points per link besides the joints
+    J2..Jn, lengths drawn from ``seed``, its end effector at ``target`` [m] (module docstring)."""
+    w = np.random.default_rng([int(seed), int(links), 7919]).uniform(0.5, 1.5, size=int(links))
+    lengths = REACH * w / w.sum()
+    arm = PlanarArm(lengths)
+    theta0 = bent_arm_angles(lengths, target)
+    if np.any(np.abs(theta0) > THETA_LIMIT):
+        raise ParamError(
+            f"start angles {theta0.tolist()} leave the joint limits +-{THETA_LIMIT} rad",
+            key="theta0",
+        )
+    key_points = default_key_points(links, points_per_link, include_joints=True)
+    return GeneratedArm(arm, key_points, theta0, arm.end_effector(theta0))
+
+
+#: Radius of the disk the cloud's points fill [m].
+CLOUD_RADIUS = 0.03
+#: The cloud's clearance beyond ``d_safe`` at the start [m] and its speed towards the arm [m/s].
+CLEARANCE = 0.015
+SPEED = 0.1
+
+
+def cloud_points(m: int, seed: int = 0) -> np.ndarray:
+    """``m`` points uniform over a disk of :data:`CLOUD_RADIUS` [m] centred at 0, shape (m, 2);
+    one point: the centre."""
+    if m == 1:
+        return np.zeros((1, 2))
+    rng = np.random.default_rng([int(seed), int(m), 104729])
+    r = CLOUD_RADIUS * np.sqrt(rng.uniform(0.0, 1.0, m))
+    a = rng.uniform(0.0, 2.0 * math.pi, m)
+    return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+def min_key_point_distance(key_xy: np.ndarray, points: np.ndarray) -> float:
+    """Smallest distance in [m] between key points (a, 2) and cloud points (m, 2)."""
+    from scipy.spatial.distance import cdist
+
+    return float(cdist(key_xy, points).min())
+
+
+def _outer_normal(gen: GeneratedArm, i: int) -> np.ndarray:
+    """Unit normal at key point ``i`` pointing away from the chord base -> end effector."""
+    xy = gen.key_point_positions()
+    link = int(gen.key_points.links[i])
+    phi = float(np.cumsum(gen.theta0)[link])
+    normal = np.array([-math.sin(phi), math.cos(phi)])
+    chord = gen.target / np.linalg.norm(gen.target)
+    side = xy[i] - (xy[i] @ chord) * chord  # the key point's offset from the chord
+    return normal if normal @ side >= 0 else -normal
+
+
+def _clear_offset(
+    xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.ndarray, want: float
+) -> float:
+    """Smallest offset along ``u`` (1 mm steps from the one that puts the cloud's point nearest
+    the arm ``want`` away from ``anchor``) at which the arm clears the cloud by ``want``."""
+    offset = want + float(np.max(-(pts @ u)))
+    while min_key_point_distance(xy, anchor + offset * u + pts) < want:
+        offset += 0.001
+    return offset
+
+
+def place_cloud(gen: GeneratedArm, points: int, d_safe: float, seed: int = 0) -> PointCloudObstacle:
+    """A cloud of ``points`` points (drawn from ``seed``) beside ``gen`` at ``theta0``, every key
+    point ``d_safe`` [m] + :data:`CLEARANCE` from it: stepped outwards by 1 mm along the middle key
+    point's outer (or inner) normal until the arm clears it, the side needing the smaller step; it
+    moves towards the arm at :data:`SPEED`."""
+    xy = gen.key_point_positions()
+    i = len(gen.key_points) // 2
+    u = _outer_normal(gen, i)
+    pts = cloud_points(points, seed)
+    want = d_safe + CLEARANCE
+    offset, side = min(
+        (_clear_offset(xy, xy[i], s * u, pts, want), k) for k, s in enumerate((1.0, -1.0))
+    )
+    u = u if side == 0 else -u
+    return PointCloudObstacle("cloud", xy[i] + offset * u + pts, velocity=-SPEED * u)
 
 
 @functools.cache
@@ -75,11 +224,7 @@ class Size:
 
 def qp_shape(size: Size) -> dict:
     """``{"n", "m_eq", "m_ineq"}`` of the size's tick QP (module docstring)."""
-    return {
-        "n": size.links,
-        "m_eq": 2,
-        "m_ineq": size.key_points * size.cloud_points,
-    }
+    return {"n": size.links, "m_eq": 2, "m_ineq": size.key_points * size.cloud_points}
 
 
 #: The default grid (module docstring), smallest first.

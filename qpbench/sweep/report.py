@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.stats import binomtest
 
 from ..exceptions import InputError
-from ..report.inputs import CSV_ERRORS, expand_paths
+from ..formats import sha256_file
+from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths
 from ..report.markdown_table import md_table, slug, titled
 from ..sim.verdict import VERDICTS
 
-#: z of a two-sided 95 % interval.
-Z95 = 1.959963984540054
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
 RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
 #: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
@@ -48,39 +48,33 @@ QUANTILE_HEADER = [
 WORST_HEADER = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
 
 
-def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
-    """Wilson score interval of a proportion ``k / n`` (``(nan, nan)`` when ``n = 0``)."""
+def wilson(k: int, n: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion ``k / n`` (``(nan, nan)`` when ``n = 0``)."""
     if n == 0:
         return math.nan, math.nan
-    p = k / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    ci = binomtest(k, n).proportion_ci(0.95, method="wilson")
+    return max(0.0, float(ci.low)), min(1.0, float(ci.high))
 
 
 def mcnemar_exact(b: int, c: int) -> float:
     """Two-sided exact McNemar p-value of ``b`` and ``c`` discordant pairs (1 when there are none)."""
-    if b + c == 0:
-        return 1.0
-    from scipy.stats import binomtest
-
-    return float(binomtest(b, b + c, 0.5).pvalue)
+    return float(binomtest(b, b + c, 0.5).pvalue) if b + c else 1.0
 
 
 def is_sweep_csv(path: Path) -> bool:
     """``path`` starts with the sweep table's header."""
-    from .rows import COLUMNS
+    from .runner import COLUMNS
 
     with open(path, encoding="utf-8", errors="replace") as fh:
         return fh.readline().rstrip("\n") == ",".join(COLUMNS)
 
 
-def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[Path]]:
+def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[ResultFile]]:
     """The report's inputs as (other result CSVs, sweep tables); folders are searched."""
     files = expand_paths(paths)
     sweeps = [p for p in files if p.suffix == ".csv" and is_sweep_csv(p)]
-    return [p for p in files if p not in sweeps], sweeps
+    tables = [ResultFile(p, "sweep", sha256_file(p), len(_read(p))) for p in sweeps]
+    return [p for p in files if p not in sweeps], tables
 
 
 def _read(path: Path) -> pd.DataFrame:
@@ -190,15 +184,16 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                 v = np.sort(ok.loc[ok["backend"] == backend, col].dropna().to_numpy() * scale)
                 if not len(v):
                     continue
-                kw = (
-                    style.look(backend).line(np.arange(len(v) + 1), lw=1.3, label=backend, zorder=3)
-                    if lit
-                    else dict(color=style.GREY, lw=0.8, zorder=1)
-                )
                 y = np.r_[0.0, np.arange(1, len(v) + 1) / len(v)]
+                kw = style.series(backend, lit, np.arange(len(v) + 1), 1.3, 0.8)
                 ax.step(np.r_[v[0], v] - shift, y, where="post", **kw)
-            if margin:
-                _margin_axis(ax, d_safe, float(ok[col].min()) * scale - d_safe)
+            if margin:  # zoomed to -1..+2 mm, further left when a run went deeper
+                ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
+                ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
+                lowest = float(ok[col].min()) * scale - d_safe
+                left = min(-1.0, 1.1 * lowest) if np.isfinite(lowest) else -1.0
+                ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
+                ax.set_xlim(left, ZOOM_MM)
             elif col != "min_obstacle_distance" and ax.has_data() and (ok[col] > 0).any():
                 ax.set_xscale("log")
             ax.set_ylim(0.0, 1.02)
@@ -211,17 +206,6 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
         style.legend_beside(axes[row, -1], handles, labels)
     fig.suptitle(title)
     style.save(fig, path)
-
-
-def _margin_axis(ax, d_safe: float, lowest: float) -> None:
-    """The d_min panel as the margin to ``d_safe`` [mm], zoomed to -1..+2 mm (further left to
-    ``lowest`` when a run went deeper): the unsafe line at -0.5 mm readable; runs further than
-    2 mm away leave on the right."""
-    ax.axvline(0.0, color="k", lw=0.8, ls="--", label=f"d_safe {d_safe:g} mm")
-    ax.axvline(-0.5, color="red", lw=0.9, ls=":", label="d_safe - 0.5 mm")
-    left = min(-1.0, 1.1 * lowest) if np.isfinite(lowest) else -1.0
-    ax.axvspan(left, -0.5, color="red", alpha=0.06, lw=0)
-    ax.set_xlim(left, ZOOM_MM)
 
 
 def _manifest_lines(folder: Path) -> list[str]:
@@ -237,22 +221,22 @@ def _manifest_lines(folder: Path) -> list[str]:
     ]
 
 
-def sweep_section(paths: list[Path], out: Path, plots: bool = True) -> list[str]:
-    """Markdown lines of the sweep section for the sweep tables ``paths`` (plots into ``out/plots``)."""
+def sweep_section(tables: list[ResultFile], out: Path, plots: bool = True) -> list[str]:
+    """Markdown lines of the sweep section for the sweep tables (plots into ``out/plots``)."""
     lines = [
         "## Sweeps\n",
         "Randomised instances of a scenario, each in closed loop with each backend "
         "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n",
     ]
-    for path in paths:
-        lines += _one_sweep(path, out, plots)
+    for table in tables:
+        lines += _one_sweep(table.path, out, plots)
     return lines
 
 
 def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
     """One sweep table's lines: rates, paired comparisons, distributions, ECDFs, worst runs."""
     df = _read(path)
-    name = str(df["sweep"].dropna().iloc[0]) if df["sweep"].notna().any() else path.parent.name
+    name = str(df["sweep"].iloc[0])
     lines = [f"### Sweep {name}\n", *_manifest_lines(path.parent)]
     lines.append(md_table(RATE_HEADER, rate_rows(df)))
     lines += titled(
@@ -267,7 +251,7 @@ def _one_sweep(path: Path, out: Path, plots: bool) -> list[str]:
     )
     lines.append(md_table(QUANTILE_HEADER, _quantile_rows(df)))
     concurrent = df["concurrent_solves"].max()
-    if pd.notna(concurrent) and concurrent > 1:
+    if concurrent > 1:
         lines.append(
             f"Timing columns were taken with up to {int(concurrent)} closed loops solving at once on a "
             "host: they are disturbed; take timings with `--jobs 1`.\n"

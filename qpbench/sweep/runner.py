@@ -1,14 +1,22 @@
 """A sweep's run into ``DIR``: ``sweep.json`` (the manifest: the sweep file's text and SHA-256,
-seed, samples, duration, base, backends, qpbench's version), ``instances/<name>.toml`` and
-``sweep.csv`` (:mod:`.rows`). Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs the
-rest again; it refuses a folder of another sweep file or duration (instance ``i`` is the same
+seed, samples, duration, base, backends, qpbench's version), ``instances/<name>.toml`` and the
+table ``sweep.csv``: one row per (instance, backend), appended as runs end, rewritten at the end
+with the last row of each key. Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs
+the rest again; it refuses a folder of another sweep file or duration (instance ``i`` is the same
 whatever the sample count).
+
+A run's figures are its closed-loop summary's (:mod:`qpbench.sim.summary`; ``duration_s`` is
+``duration``) with the time-to-converge figures ``t_converge_force_s`` and
+``t_converge_tracking_s`` (empty: not converged) of the bands ``force_band_n`` [N] and
+``tracking_band_m`` [m]. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it
+raised), ``crashed`` (its worker was lost twice; ``attempts``: runs started) or
+``invalid_scenario`` (the loader refused the instance; no verdict). ``executor``, ``host``,
+``worker``, ``concurrent_solves``: where it ran.
 """
 
 from __future__ import annotations
 
 import json
-import logging
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -17,20 +25,113 @@ from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
 from ..exceptions import InputError
-from ..harness.closed_loop import LoopTask, run_row
+from ..harness.closed_loop import LoopTask, failure_fields, run_row
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
-from .rows import COLUMNS, CSV_NAME, INSTANCE_DIR, KEY_COLUMNS, failed_row, head_row, sweep_row
-from .sample import sample_instances
-from .spec import SweepSpec
+from .spec import Instance, SweepSpec, sample_instances
 
 if TYPE_CHECKING:
     from ..runner import DaskExecutor, ProcessExecutor, SerialExecutor
 
-log = logging.getLogger("qpbench.sweep")
-
+#: Names of the table, the manifest and the instances' folder inside the sweep's folder.
+CSV_NAME = "sweep.csv"
 MANIFEST_NAME = "sweep.json"
+INSTANCE_DIR = "instances"
 #: Statuses a resumed sweep keeps.
 KEPT_STATUSES = ("ok", "invalid_scenario")
+
+
+#: Columns of ``sweep.csv``, in order.
+COLUMNS = (
+    "instance",  # the run: its instance, backend and outcome (:func:`head_row`)
+    "backend",
+    "instance_file",
+    "sample",
+    "sweep",
+    "base_scenario",
+    "parameters",
+    "status",
+    "error",
+    "attempts",
+    "verdict",
+    "verdict_reasons",
+    "duration_s",  # the closed-loop summary's figures from here, but the convergence columns
+    "simulated_s",
+    "dt",
+    "ticks",
+    "tracking_rms_after_2s",
+    "tracking_max_after_2s",
+    "force_error_rms_after_2s",
+    "force_error_max_after_2s",
+    "t_converge_force_s",  # the convergence figures and their bands
+    "t_converge_tracking_s",
+    "force_band_n",
+    "tracking_band_m",
+    "min_obstacle_distance",  # the summary's again
+    "min_obstacle_distance_key_point",
+    "min_obstacle_distance_obstacle",
+    "min_obstacle_distance_t",
+    "d_safe",
+    "joint_limit_violations",
+    "joint_velocity_limit_violations",
+    "max_abs_v",
+    "infeasible_ticks",
+    "non_optimal_ticks",
+    "fallback_ticks",
+    "zero_velocity_ticks",
+    "error_ticks",
+    "invalid_ticks",
+    "first_error",
+    "solve_time_median_s",
+    "solve_time_p99_s",
+    "solve_time_max_s",
+    "deadline_misses",
+    "ticks_over_1ms",
+    "realtime",
+    "realtime_reason",
+    "realtime_solver",
+    "realtime_solver_reason",
+    "over_dt_share",
+    "solver_time_p99_s",
+    "solver_over_dt_share",
+    "wall_time_s",
+    "real_time_factor",
+    "verdict_overrides",
+    "executor",  # where it ran
+    "host",
+    "worker",
+    "concurrent_solves",
+)
+#: Columns that depend on timing or on where the run was made (ignored when comparing two sweeps).
+TIMING_COLUMNS = (
+    ("attempts",)
+    + COLUMNS[COLUMNS.index("solve_time_median_s") : COLUMNS.index("verdict_overrides")]
+    + COLUMNS[COLUMNS.index("executor") :]
+)
+
+
+def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
+    """The row of ``backend``'s run of instance ``inst`` of sweep ``spec``, without its figures."""
+    row = dict.fromkeys(COLUMNS)
+    row.update(
+        instance=inst.name,
+        backend=backend,
+        instance_file=f"{INSTANCE_DIR}/{inst.name}.toml",
+        sample=inst.index,
+        sweep=spec.name,
+        base_scenario=spec.base,
+        parameters=json.dumps(inst.values, separators=(",", ":")),
+        duration_s=spec.duration,
+        force_band_n=spec.force_band,
+        tracking_band_m=spec.tracking_band,
+    )
+    return row
+
+
+def sweep_row(head: dict, row: dict) -> dict:
+    """The sweep's row (``head``: :func:`head_row`) of a closed-loop row
+    (:func:`qpbench.harness.closed_loop.run_row` or
+    :func:`~qpbench.harness.closed_loop.failure_fields`)."""
+    return head | {key: row[key] for key in COLUMNS if key in row and key not in COLUMNS[:7]}
 
 
 @dataclass
@@ -44,11 +145,40 @@ class SweepOutcome:
     failed: int
 
 
-def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
+def _resumable(out: Path, spec: SweepSpec) -> dict:
+    """The manifest of the sweep in ``out``, if made from the same sweep file and duration."""
+    path = out / MANIFEST_NAME
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(
+            f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path
+        ) from None
+    if old.get("sweep_sha256") != spec.sha256:
+        key, what = "sweep_sha256", f"made from another sweep file ({old.get('sweep_file')})"
+    elif old.get("duration") != spec.duration:
+        key, what = "duration", f"made with duration {old.get('duration')}, not {spec.duration}"
+    else:
+        return old
+    raise InputError(f"cannot resume: {what}; use --force", path=path, key=key)
+
+
+def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
+    """The rows of ``sweep.csv`` as strings, the last row of each key kept (a half-written line dropped)."""
+    rows = read_results(csv_path, repair=repair, columns=COLUMNS, kind="sweep").rows
+    last = {(r["instance"], r["backend"]): r for r in rows}
+    return list(last.values())
+
+
+def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
+    """Check ``out``, write the instances and the manifest (``sweep.json``); the instances and the
+    kept rows."""
+    csv_path = out / CSV_NAME
+    check_folder(out)
+    check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
     from .. import __version__
 
-    return {
-        # samples, backends: of every run into the folder (a resumed run merges them)
+    manifest = {  # samples, backends: of every run into the folder (a resumed run merges them)
         "sweep": spec.name,
         "sweep_file": str(spec.path),
         "sweep_sha256": spec.sha256,
@@ -63,43 +193,7 @@ def _manifest(spec: SweepSpec, backends: list[str]) -> dict:
         "force_band_n": spec.force_band,
         "tracking_band_m": spec.tracking_band,
     }
-
-
-def _resumable(out: Path, spec: SweepSpec) -> dict:
-    """The manifest of the sweep in ``out``, if made from the same sweep file and duration."""
-    path = out / MANIFEST_NAME
-    try:
-        old = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(
-            f"cannot resume: unreadable manifest ({exc}); use --force to start again", path=path
-        ) from None
-    for key, value, what in (
-        ("sweep_sha256", spec.sha256, f"made from another sweep file ({old.get('sweep_file')})"),
-        (
-            "duration",
-            spec.duration,
-            f"made with duration {old.get('duration')}, not {spec.duration}",
-        ),
-    ):
-        if old.get(key) != value:
-            raise InputError(f"cannot resume: {what}; use --force", path=path, key=key)
-    return old
-
-
-def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
-    """The rows of ``sweep.csv`` as strings, the last row of each key kept (a half-written line dropped)."""
-    rows = read_results(csv_path, repair=repair, columns=COLUMNS, kind="sweep").rows
-    last = {tuple(r[c] for c in KEY_COLUMNS): r for r in rows}
-    return list(last.values())
-
-
-def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
-    """Check ``out``, write the instances and the manifest; the instances and the kept rows."""
-    csv_path = out / CSV_NAME
-    check_folder(out)
-    check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
-    manifest, kept = _manifest(spec, backends), {}
+    kept = {}
     if resume and csv_path.exists():  # the table holds the earlier runs' rows too
         old = _resumable(out, spec)
         manifest["backends"] = list(dict.fromkeys(old.get("backends", []) + backends))
@@ -144,7 +238,7 @@ def run_sweep(
     csv_path = out / CSV_NAME
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
-    ran = failed = 0
+    failed = 0
     items, heads = [], {}
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
@@ -160,7 +254,7 @@ def run_sweep(
                     continue
                 head = head_row(spec, inst, backend)
                 if inst.invalid is not None:
-                    emit(failed_row(head, "invalid_scenario", inst.invalid))
+                    emit(sweep_row(head, failure_fields("invalid_scenario", inst.invalid)))
                     continue
                 heads[(inst.name, backend)] = head
                 task = LoopTask(
@@ -173,10 +267,8 @@ def run_sweep(
                 items.append(((inst.name, backend), task))
         for done in executor.run(run_row, items):
             head = heads[done.key]
-            if done.lost is None:
-                row = sweep_row(head, done.value)
-            else:
-                row = failed_row(head, "crashed", done.lost)
+            fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
+            row = sweep_row(head, fields)
             row.update(
                 executor=executor.name,
                 host=done.host,
@@ -184,7 +276,6 @@ def run_sweep(
                 concurrent_solves=done.concurrent,
                 attempts=done.attempts,
             )
-            ran += 1
             failed += row["status"] in ("error", "crashed")
             emit(row)
     order = [(inst.name, b) for inst in instances for b in backends]
@@ -193,4 +284,4 @@ def run_sweep(
     ]
     with atomic_path(csv_path) as tmp:
         tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
-    return SweepOutcome(final, csv_path, ran, len(kept), failed)
+    return SweepOutcome(final, csv_path, len(items), len(kept), failed)

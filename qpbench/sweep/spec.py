@@ -1,8 +1,16 @@
-"""Sweep files (format: ``docs/sweeps.md``): a base scenario and, per scenario key, a
-distribution to draw that key's value from for every instance; instance ``i`` draws key ``k`` from
-``default_rng([seed, i, crc32(k)])``, the same whatever the sample count and the other keys.
-``[convergence]`` holds the bands of the time-to-converge figures, ``force_band`` [N] and
-``tracking_band`` [m] (default: a tenth of the base's ``[verdict]`` maximum errors).
+"""Sweep files (format: ``docs/sweeps.md``) and their instances.
+
+A sweep file names a base scenario and, per scenario key, a distribution to draw that key's value
+from for every instance; instance ``i`` draws key ``k`` from ``default_rng([seed, i, crc32(k)])``,
+the same whatever the sample count and the other keys. ``[convergence]`` holds the bands of the
+time-to-converge figures, ``force_band`` [N] and ``tracking_band`` [m] (default: a tenth of the
+base's ``[verdict]`` maximum errors).
+
+An instance is the base scenario with every swept key drawn, as a full scenario file, saved as
+``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario`` re-runs one alone. An
+instance the loader refuses keeps its one-line reason (:attr:`Instance.invalid`), as does one
+starting with a key point inside ``d_safe`` (unless ``[sweep] safe_start = false``): every backend
+would be ``unsafe`` at ``t = 0``, which says nothing about the backends.
 """
 
 from __future__ import annotations
@@ -20,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
-from ..sim.scenario import OVERRIDE_KEY
+from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
+from .toml_text import dumps, value_text
 
 #: Other names a reader may give a scenario key (the table is found in the base scenario).
 ALIASES = {"fd": "desired_force", "noise": "force_noise_std", "speed": "omega", "center": "centre"}
@@ -121,14 +130,12 @@ def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
     if kind == "choice":
         return Distribution(key, kind, _choice(spec, base, bad), base)
     is_int = isinstance(base, int) and not isinstance(base, bool)
-    if kind == "integers" or is_int:
-        if not (kind == "integers" and is_int):
-            why = (
-                "an integer key takes integers or choice"
-                if is_int
-                else "integers is for integer keys"
-            )
-            raise bad(why, "dist")
+    if (kind == "integers") != is_int:
+        why = (
+            "an integer key takes integers or choice" if is_int else "integers is for integer keys"
+        )
+        raise bad(why, "dist")
+    if is_int:
         lo, hi = spec.get("low"), spec.get("high")
         if not (isinstance(lo, int) and isinstance(hi, int) and lo <= hi):
             raise bad(f"need integers low <= high, got {lo!r}, {hi!r}")
@@ -155,13 +162,8 @@ def _numeric(value, shape, bad, field, what):
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        arr = None
-    if (
-        arr is None
-        or arr.dtype == object
-        or not np.all(np.isfinite(arr))
-        or isinstance(value, bool)
-    ):
+        arr = np.array(np.nan)
+    if isinstance(value, bool) or not np.all(np.isfinite(arr)):
         raise bad(f"{what}: expected finite numbers, got {value!r}", field)
     if shape is not None and arr.ndim and arr.shape != tuple(shape):
         raise bad(
@@ -243,9 +245,13 @@ class SweepSpec:
 
 
 def load_sweep(
-    path: str | Path, samples: int | None = None, duration: float | None = None
+    path: str | Path,
+    samples: int | None = None,
+    duration: float | None = None,
+    text: str | None = None,
 ) -> SweepSpec:
-    """Read and check a sweep file (``samples``, ``duration`` override the file's).
+    """Read and check a sweep file (``samples``, ``duration`` override the file's; ``text``: the
+    file's text, ``path`` then only names it in errors and anchors a relative ``base``).
 
     Raises:
         InputError: unreadable file, unknown or missing key, impossible
@@ -253,17 +259,9 @@ def load_sweep(
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8") if text is None else text
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read the sweep file: {exc}", path=path) from None
-    return parse_sweep(text, path, samples=samples, duration=duration)
-
-
-def parse_sweep(
-    text: str, path: str | Path, samples: int | None = None, duration: float | None = None
-) -> SweepSpec:
-    """Parse sweep-file ``text`` (``path`` names it in errors and anchors a relative ``base``)."""
-    path = Path(path)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -276,39 +274,40 @@ def parse_sweep(
         head["samples"] = _integer(samples, 1, path, "--samples")
     if duration is not None:
         head["duration"] = duration
-    base_path, base_raw = _base(head["base"], path)
+    name = head["base"]  # shipped, or a path relative to the sweep file's folder
+    relative = ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
+    try:
+        base = load_scenario(path.parent / name if relative else name)
+    except ScenarioError as exc:
+        raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
+    base_path, base_raw = base.path, tomllib.loads(base.source)
     extra = raw.get("obstacles", [])
     if not isinstance(extra, list) or not all(isinstance(o, dict) for o in extra):
         raise InputError("expected [[obstacles]] tables", path=path, key="obstacles")
     base_raw["obstacles"] = list(base_raw.get("obstacles", [])) + copy.deepcopy(extra)
-    if head.get("duration") is not None:
+    if head["duration"] is not None:
         positive_seconds(head["duration"], "sweep.duration", path)
         base_raw.setdefault("simulation", {})["duration"] = float(head["duration"])
-    scenario = _check_base(base_raw, path)
+    try:  # the base scenario with the sweep's obstacles and duration
+        scenario = parse_scenario(dumps(base_raw), path=path)
+    except ScenarioError as exc:
+        raise InputError(
+            f"base scenario with this sweep's obstacles and duration: {exc.message}",
+            path=path,
+            key=exc.key,
+        ) from None
     params = raw.get("parameters", {})
     if not isinstance(params, dict) or not params:
         raise InputError(
             "expected a [parameters] table with at least one key", path=path, key="parameters"
         )
-    distributions = [
+    dists = [
         checked_distribution(key, spec, _base_value(key, base_raw, path), path)
         for key, spec in _flatten(params, path)
     ]
-    force_band, tracking_band = _bands(raw.get("convergence", {}), scenario.verdict, path)
+    bands = _bands(raw.get("convergence", {}), scenario.verdict, path)
     return SweepSpec(
-        path=path,
-        text=text,
-        name=head["name"],
-        seed=head["seed"],
-        samples=head["samples"],
-        duration=head.get("duration"),
-        base=head["base"],
-        base_path=base_path,
-        base_raw=base_raw,
-        parameters=distributions,
-        force_band=force_band,
-        tracking_band=tracking_band,
-        safe_start=head.get("safe_start", True),
+        path, text, base_path=base_path, base_raw=base_raw, parameters=dists, **bands, **head
     )
 
 
@@ -336,34 +335,7 @@ def _sweep_table(head, path) -> dict:
     _integer(head["samples"], 1, path, "sweep.samples")
     if not isinstance(head.get("safe_start", True), bool):
         raise InputError("expected true or false", path=path, key="sweep.safe_start")
-    return dict(head)
-
-
-def _base(name: str, path: Path) -> tuple[Path, dict]:
-    """The base scenario's file and tables (``name``: shipped, or a path relative to ``path``'s)."""
-    from ..sim.scenario import load_scenario
-
-    relative = ("/" in name or name.endswith(".toml")) and not Path(name).is_absolute()
-    try:
-        base = load_scenario(path.parent / name if relative else name)
-    except ScenarioError as exc:
-        raise InputError(f"base scenario: {exc}", path=path, key="sweep.base") from None
-    return base.path, tomllib.loads(base.source)
-
-
-def _check_base(base_raw: dict, path: Path):
-    """The base scenario with the sweep's obstacles and duration, validated."""
-    from ..sim.scenario import parse_scenario
-    from .toml_text import dumps
-
-    try:
-        return parse_scenario(dumps(base_raw), path=path)
-    except ScenarioError as exc:
-        raise InputError(
-            f"base scenario with this sweep's obstacles and duration: {exc.message}",
-            path=path,
-            key=exc.key,
-        ) from None
+    return {"duration": None, "safe_start": True} | head
 
 
 def _flatten(params: dict, path, prefix: str = ""):
@@ -388,12 +360,11 @@ def _base_value(key: str, base_raw: dict, path):
     match = OVERRIDE_KEY.fullmatch(key)
     if match is None:
         name = ALIASES.get(key.casefold(), key.casefold())
-        tables = [t for t, v in base_raw.items() if isinstance(v, dict) and name in v]
-        hint = f"{tables[0]}.{name}" if tables else None
+        for table, value in base_raw.items():
+            if isinstance(value, dict) and name in value:
+                raise bad(f"unknown parameter key; the key is {table}.{name}")
         raise bad(
-            f"unknown parameter key; the key is {hint}"
-            if hint
-            else "unknown parameter key (expected a scenario key TABLE.KEY or obstacles[i].KEY, "
+            "unknown parameter key (expected a scenario key TABLE.KEY or obstacles[i].KEY, "
             "e.g. controller.desired_force)"
         )
     table, index, name = match.groups()
@@ -414,7 +385,7 @@ def _base_value(key: str, base_raw: dict, path):
     return target[name]
 
 
-def _bands(conv, verdict, path) -> tuple[float, float]:
+def _bands(conv, verdict, path) -> dict:
     if not isinstance(conv, dict):
         raise InputError("expected a table", path=path, key="convergence")
     check_known_keys(conv, ("force_band", "tracking_band"), path, "convergence")
@@ -425,4 +396,86 @@ def _bands(conv, verdict, path) -> tuple[float, float]:
             raise InputError(
                 f"must be a positive number, got {value!r}", path=path, key=f"convergence.{key}"
             )
-    return float(force), float(tracking)
+    return {"force_band": float(force), "tracking_band": float(tracking)}
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One sampled scenario: ``values`` swept key -> drawn value, ``text`` its scenario file,
+    ``invalid`` why the loader (or ``safe_start``) refused it, else ``None``."""
+
+    index: int
+    name: str
+    values: dict
+    text: str
+    invalid: str | None = None
+
+
+def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
+    """The scenario file of instance ``name``: a header saying where it comes from, then every table."""
+    raw = apply_overrides(spec.base_raw, values)
+    about = raw["scenario"]
+    about["name"] = f"{spec.name}-{name}"
+    about["description"] = (
+        f"Instance {index} of sweep {spec.name!r}, around: {about['description']}"
+    )
+    header = [
+        f"Instance {name} (sample {index}) of sweep {spec.name!r} ({spec.path.name}, sha256 {spec.sha256[:16]}, "
+        f"seed {spec.seed}).",
+        f"Base scenario: {spec.base} ({spec.base_path.name}); units as in it. Drawn for this instance:",
+    ]
+    header += [f"  {key} = {value_text(value)}" for key, value in values.items()]
+    if spec.duration is not None:
+        header.append(
+            f"  simulation.duration = {value_text(float(spec.duration))} (the sweep's duration)"
+        )
+    header.append(
+        f"Re-run alone: qpbench simulate --scenario {name}.toml --backend BACKEND (from its folder)"
+    )
+    return dumps(raw, header="\n".join(header))
+
+
+def start_clearance(scenario: Scenario) -> tuple[float, str, str]:
+    """Smallest distance [m] of a key point to an obstacle at t = 0, and which key point and obstacle.
+
+    ``(inf, "", "")`` without obstacles. Distances from the link's surface
+    (the key points' ``link_radius`` subtracted), as the controller measures them.
+    """
+    arm, kp = scenario.make_arm(), scenario.make_key_points()
+    points = arm.points(scenario.theta0, kp.links, kp.fracs)
+    best = (np.inf, "", "")
+    for obstacle in scenario.make_obstacles():
+        dist = obstacle.closest(points, 0.0)[1].min(axis=1) - kp.radius
+        i = int(np.argmin(dist))
+        if dist[i] < best[0]:
+            best = (float(dist[i]), kp.names[i], obstacle.name)
+    return best
+
+
+def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
+    try:
+        scenario = parse_scenario(text, path=f"{name}.toml")
+    except ScenarioError as exc:
+        return str(exc)
+    if safe_start:
+        d, point, obstacle = start_clearance(scenario)
+        d_safe = scenario.data["controller"]["d_safe"]
+        if d < d_safe:
+            return (
+                f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
+                f"inside d_safe = {d_safe * 1e3:g} mm (every backend would be unsafe at t = 0)"
+            )
+    return None
+
+
+def sample_instances(spec: SweepSpec) -> list[Instance]:
+    """Every instance of ``spec`` (deterministic in ``spec.seed``), each checked by the scenario loader
+    and, with ``[sweep] safe_start`` (default), for a start outside ``d_safe`` of every obstacle."""
+    out = []
+    digits = max(5, len(str(spec.samples - 1)))  # i00003: as wide as the widest index
+    for index in range(spec.samples):
+        name = f"i{index:0{digits}d}"
+        values = {d.key: d.draw(spec.rng(index, d.key)) for d in spec.parameters}
+        text = instance_text(spec, name, index, values)
+        out.append(Instance(index, name, values, text, _why_invalid(text, name, spec.safe_start)))
+    return out
