@@ -257,6 +257,46 @@ class StackedCsc:
         return P, spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, n))
 
 
+def finite_mask(problem: qpsolvers.Problem, n: int) -> tuple[bool, np.ndarray]:
+    """``(with_box, kept)``: whether the problem has bounds, and which rows of ``G``, ``lb`` and
+    ``ub`` (in this order, ``n`` each of the bounds) have a finite bound."""
+    lb, ub = problem.lb, problem.ub
+    with_box = lb is not None or ub is not None
+    parts = [np.empty(0) if problem.G is None else problem.h]
+    if with_box:
+        parts += [
+            np.full(n, -np.inf) if lb is None else lb,
+            np.full(n, np.inf) if ub is None else ub,
+        ]
+    else:
+        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
+    return with_box, np.isfinite(np.concatenate(parts))
+
+
+class FiniteRows:
+    """The rows of ``G`` and the bounds with a finite right-hand side (the others are left out,
+    as Clarabel's presolve does): :attr:`g_idx`, :attr:`lb_idx`, :attr:`ub_idx`, and :attr:`kept`, their
+    mask (:func:`finite_mask`) as bytes."""
+
+    def __init__(self, problem: qpsolvers.Problem, n: int):
+        self.n = n
+        m = self.m_all = 0 if problem.G is None else problem.G.shape[0]
+        self.with_box, kept = finite_mask(problem, n)
+        masks = kept[:m], kept[m : m + n], kept[m + n :]
+        self.all_kept = all(mask.all() for mask in masks)
+        self.g_idx, self.lb_idx, self.ub_idx = map(np.flatnonzero, masks)
+        self.kept = kept.tobytes()
+
+    def scatter(self, w_g, w_lb, w_ub) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, z_box)`` from the multipliers of the kept rows of ``G``, ``lb`` and ``ub``."""
+        z = np.zeros(self.m_all)
+        z[self.g_idx] = w_g
+        z_box = np.zeros(self.n if self.with_box else 0)
+        z_box[self.lb_idx] -= w_lb
+        z_box[self.ub_idx] += w_ub
+        return z, z_box
+
+
 def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
     """``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept; ``A``, ``G`` 2-D)."""
     P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)

@@ -76,6 +76,44 @@ def new_solution(
 _new = object.__new__
 
 
+class _Duals:
+    """``y``, ``z`` and ``z_box`` of a :class:`ViewSolution`, made on the first read of any.
+
+    A non-data descriptor: the first read puts all three views into the instance, where
+    later reads (and assigned values) are found without calling this.
+    """
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, sol, owner=None):
+        if sol is None:
+            return self
+        d = sol.__dict__
+        out = d.get("_out")  # None: no solution
+        _, sy, sz, sb = d["_slices"] if out is not None else _NO_SLICES
+        if "y" not in d:
+            d["y"] = None if sy is None else out[sy]
+        if "z" not in d:
+            d["z"] = None if sz is None else out[sz]
+        if "z_box" not in d:
+            d["z_box"] = None if sb is None else out[sb]
+        return d[self.name]
+
+
+_NO_SLICES = (None, None, None, None)
+
+
+class ViewSolution(BackendSolution):
+    """A solution whose ``x`` is a view of one output vector ``_out`` and whose ``y``, ``z``,
+    ``z_box`` are views made on the first read of any (a closed loop reads only ``x``):
+    ``_slices`` says where ``x``, ``y``, ``z``, ``z_box`` lie in ``_out`` (``None``: absent)."""
+
+    y = _Duals()
+    z = _Duals()
+    z_box = _Duals()
+
+
 def error_solution(problem: qpsolvers.Problem, exc: BaseException) -> BackendSolution:
     """Status ``error`` naming ``exc`` (a failure the solver raised on this problem)."""
     return BackendSolution(problem, status="error", error=describe_exception(exc))

@@ -1,26 +1,12 @@
 """Backends ``daqp`` (a persistent ``daqp.Model``) and ``daqp-stateless`` (``daqp.solve``):
-DAQP, a dual active-set solver, through its own Python API.
+DAQP, a dual active-set solver.
 
-DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with simple bounds
-native::
-
-    H = P,  f = q,  A = [A_eq; G],
-    bupper = [ub; b; h],  blower = [lb; b; -inf],  sense = [0 (n); 5 (me); 0 (mi)]
-
-(sense 5: an active, immutable equality; no box block without ``lb``/``ub``), stacked into
-buffers kept per shape. Its multipliers ``lam`` have qpsolvers' signs: ``z_box = lam[:n]``,
-``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an optimal solve carries ``x`` and duals.
-``warm_start`` is ignored.
-
-``daqp``: one ``daqp.Model`` per shape (shapes checked first: DAQP ignores an update of another
-shape), ``setup`` on its first tick, then ``update`` + ``solve`` from the previous working set;
-``H`` and ``f`` go to ``update`` only when they changed, so DAQP keeps its factorisation. A
-refused ``setup``/``update`` or a solve that is not optimal drops the model.
-``solver_time_s``: DAQP's ``setup_time + solve_time``.
-
-Settings (:func:`~qpbench.backends._common.solver_options`): ``primal_tol = dual_tol =
-eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s]; others are DAQP's own (the keys of
-``daqp.Model().settings``). ``ValueError``/``TypeError`` become status ``error``.
+DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with ``A = [A_eq; G]``,
+``bupper = [ub; b; h]``, ``blower = [lb; b; -inf]``, sense 5 (an immutable equality) on the
+``b`` rows, no box rows without bounds; ``lam`` has qpsolvers' signs. ``daqp`` sets a model up
+per shape, then updates it (``H``, ``f`` only when changed) and solves from the previous
+working set; a refused set-up or a status other than optimal drops it. ``warm_start`` is
+ignored.
 """
 
 from __future__ import annotations

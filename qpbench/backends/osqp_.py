@@ -1,13 +1,9 @@
 """Backend ``osqp``: OSQP (ADMM) through its own Python API.
 
-OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
-``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds); its multiplier
-``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
-
-The solver is set up once and ``update``-d while shape and pattern hold, warm-starting from its
-previous iterate or from ``warm_start``. Settings as ``qpsolvers:osqp``
-(:func:`~qpbench.backends._common.solver_options`), others to ``OSQP.setup``.
-``OSQPException`` and ``ValueError`` become status ``error``.
+OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]`` (the identity
+rows only with bounds), ``l = [-inf; b; lb]``, ``u = [h; b; ub]``. The solver is set up once
+and ``update``-d while shape and pattern hold, warm-starting from its previous iterate or from
+``warm_start``.
 """
 
 from __future__ import annotations

@@ -1,14 +1,10 @@
 """Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs.
 
-``piqp.DenseSolver`` solves ``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,
-x_l <= x <= x_u`` with ``h_l = -inf``; its multipliers are non-negative per side: ``z = z_u -
-z_l``, ``z_box = z_bu - z_bl``. A problem :func:`~qpbench.backends._common.dense_route` sends to
-the sparse API goes to ``piqp.SparseSolver`` (``P``'s upper triangle).
-
-The solver is ``setup`` once per shape (per structure when sparse), then ``update``-d; a status
-other than optimal drops it. ``warm_start`` is ignored (PIQP starts from its own point).
-Settings as ``qpsolvers:piqp`` (no time limit); others set on the solver's settings.
-``ValueError``, ``TypeError`` and ``RuntimeError`` become status ``error``.
+``piqp.DenseSolver`` with ``h_l = -inf``, ``z = z_u - z_l``, ``z_box = z_bu - z_bl``; a problem
+:func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
+``piqp.SparseSolver`` (``P``'s upper triangle). The solver is ``setup`` once per shape (per
+structure when sparse), then ``update``-d; a status other than optimal drops it.
+``warm_start`` is ignored.
 """
 
 from __future__ import annotations

@@ -1,20 +1,13 @@
 """Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's dense and sparse APIs.
 
-``proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)`` with ``H = P, g = q, C = G,
-l = -inf, u = h`` and the bounds as ProxQP's box (``z_box``: the last ``n`` entries of its
-``z``); a problem :func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
-``proxqp.sparse.QP`` with the bounds stacked under ``G``. Multipliers have qpsolvers' signs.
-
-The ``QP`` object is ``init``-ed once per shape (per structure when sparse), then ``update``-d.
-Its first solve starts from ``EQUALITY_CONSTRAINED_INITIAL_GUESS`` (as ``qpsolvers:proxqp``),
-the next ones from ``WARM_START_WITH_PREVIOUS_RESULT``; ``warm_start`` goes to
-``QP.solve(x, None, None)``; ``update_preconditioner=True`` recomputes the preconditioner at
-``update``. An infeasibility verdict after a warm start, or on the sparse route, is checked by
-one cold solve on a fresh object (``extras["cold_retry"]``, iterations and times added up;
-``retry_cold=False``: not); after a verdict the object is dropped.
-
-Settings: :func:`~qpbench.backends._common.solver_options` (no time limit), set on
-``QP.settings``. ``ValueError`` and ``RuntimeError`` become status ``error``.
+``proxqp.dense.QP`` with ``C = G``, ``l = -inf``, ``u = h`` and the bounds as ProxQP's box
+(``z_box``: the last ``n`` entries of its ``z``); a problem
+:func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
+``proxqp.sparse.QP`` with the bounds stacked under ``G``. The ``QP`` object is ``init``-ed
+once per shape (per structure when sparse), then ``update``-d, solved first from the
+equality-constrained guess and then from the previous result; ``warm_start`` goes to
+``QP.solve``. An infeasibility verdict after a warm start, or on the sparse route, is checked
+by one cold solve on a fresh object (``extras["cold_retry"]``; ``retry_cold=False``: not).
 """
 
 from __future__ import annotations

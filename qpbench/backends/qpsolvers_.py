@@ -1,21 +1,11 @@
 """Backends ``qpsolvers:<name>``: every solver qpsolvers can drive, through its wrapper.
 
-One stateless class per solver, generated at import and registered as ``qpsolvers:<name>``,
-for the solvers of :data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and
-:data:`OPTIONAL_SOLVERS` (a missing one shows as unavailable). A call is what
-:func:`qpsolvers.solve_problem` does (``check_constraints``, then qpsolvers' function for the
-solver, :func:`solver_function`); ``warm_start`` is passed as ``initvals``. Sparse-only solvers
-get CSC matrices, dense-only ones dense matrices.
-
-Settings: :func:`~qpbench.backends._common.native_settings`, then the other settings
-verbatim; under a ``qpbenchmark:<settings>`` profile qpbenchmark's arguments for the solver
-plus the backend's settings. The wrapper's warnings are ignored
-(:func:`silence_wrapper_warnings`).
-
-Statuses: ``found`` -> ``optimal``; otherwise read from the solver's report in
-``Solution.extras`` where qpsolvers keeps one (:data:`STATUS_READERS`, raw value in
-``extras["raw_status"]``), else ``not_solved``. :class:`qpsolvers.QPError` and ``ValueError``
-become status ``error``.
+One stateless class per solver, generated at import, for the solvers of
+:data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and :data:`OPTIONAL_SOLVERS` (a
+missing one shows as unavailable). A call is what :func:`qpsolvers.solve_problem` does;
+``warm_start`` is passed as ``initvals``. Statuses: ``found`` -> ``optimal``, otherwise read
+from the solver's report where qpsolvers keeps one (:data:`STATUS_READERS`), else
+``not_solved``.
 """
 
 from __future__ import annotations

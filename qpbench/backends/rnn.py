@@ -20,7 +20,7 @@ from ..packed import PackedProblem
 from ..rnn import kernels as nk
 from ..rnn import network as nw
 from . import register
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, ViewSolution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -234,38 +234,9 @@ class NetworkBackend(Backend):
         )
 
 
-class _Duals:
-    """``y``, ``z`` and ``z_box`` of a :class:`TickSolution`, made on the first read of any.
-
-    A non-data descriptor: the first read puts all three views into the instance, where
-    later reads find them without calling this.
-    """
-
-    def __set_name__(self, owner, name: str):
-        self.name = name
-
-    def __get__(self, sol, owner=None):
-        if sol is None:
-            return self
-        d = sol.__dict__
-        out = d["_out"]
-        _, sy, sz, sb = d["_slices"]
-        if "y" not in d:
-            d["y"] = None if sy is None else out[sy]
-        if "z" not in d:
-            d["z"] = None if sz is None else out[sz]
-        if "z_box" not in d:
-            d["z_box"] = out[sb]
-        return d[self.name]
-
-
-class TickSolution(BackendSolution):
-    """The online network's answer to one tick: ``x`` is a view of the kernel's fresh output
-    ``[x; y; z; z_box]``, ``y``, ``z``, ``z_box`` views made on the first read of any."""
-
-    y = _Duals()
-    z = _Duals()
-    z_box = _Duals()
+class TickSolution(ViewSolution):
+    """The online network's answer to one tick: ``_out`` is the kernel's fresh output
+    ``[x; y; z; z_box]``."""
 
 
 @register
