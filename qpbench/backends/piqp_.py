@@ -23,9 +23,18 @@ from ._common import (
 )
 from .base import BackendSolution, PersistentBackend, new_solution
 
-_STATUS_MAP: dict = {}
 _MODULE: list = []
 _SOLVED: list = []  # piqp.PIQP_SOLVED.value (an int compares faster than the enum, which hashes slower still)
+
+#: PIQP's status name -> our status (also read by ``qpsolvers:piqp``).
+PIQP_STATUSES = {
+    "PIQP_SOLVED": "optimal",
+    "PIQP_PRIMAL_INFEASIBLE": "primal_infeasible",
+    "PIQP_DUAL_INFEASIBLE": "dual_infeasible",
+    "PIQP_MAX_ITER_REACHED": "max_iter",
+    "PIQP_NUMERICS": "error",
+    "PIQP_INVALID_SETTINGS": "error",
+}
 
 
 def _piqp():
@@ -34,25 +43,7 @@ def _piqp():
 
         _MODULE.append(piqp)
         _SOLVED.append(piqp.PIQP_SOLVED.value)
-        piqp_statuses()
     return _MODULE[0]
-
-
-def piqp_statuses() -> dict:
-    """PIQP's status -> our status, built once (also read by ``qpsolvers:piqp``)."""
-    if not _STATUS_MAP:
-        S = _piqp()
-        _STATUS_MAP.update(
-            {
-                S.PIQP_SOLVED: "optimal",
-                S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
-                S.PIQP_MAX_ITER_REACHED: "max_iter",
-                S.PIQP_NUMERICS: "error",
-                S.PIQP_INVALID_SETTINGS: "error",
-            }
-        )
-    return _STATUS_MAP
 
 
 @register
@@ -157,8 +148,8 @@ class PiqpBackend(PersistentBackend):
             sol.z = EMPTY if G is None else z_u - z_l
             sol.z_box = EMPTY if lb is None and ub is None else z_bu - z_bl
         else:
-            status = _STATUS_MAP.get(raw_status, "not_solved")
-            raw = str(raw_status).split(".")[-1]
+            raw = raw_status.name
+            status = PIQP_STATUSES.get(raw, "not_solved")
             sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
             self.reset()
             if status == "error":

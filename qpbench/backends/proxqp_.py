@@ -29,9 +29,16 @@ from ._common import (
 )
 from .base import PersistentBackend, new_solution
 
-_STATUS_MAP: dict = {}
 _MODULE: list = []
 _SOLVED: list = []  # QPSolverOutput.PROXQP_SOLVED: compared by identity (the enum hashes in Python)
+
+#: ProxQP's ``QPSolverOutput`` name -> our status (also read by ``qpsolvers:proxqp``).
+PROXQP_STATUSES = {
+    "PROXQP_SOLVED": "optimal",
+    "PROXQP_PRIMAL_INFEASIBLE": "primal_infeasible",
+    "PROXQP_DUAL_INFEASIBLE": "dual_infeasible",
+    "PROXQP_MAX_ITER_REACHED": "max_iter",
+}
 
 
 def _proxqp():
@@ -40,28 +47,13 @@ def _proxqp():
         import proxsuite
 
         _MODULE.append(proxsuite.proxqp)
+        _SOLVED.append(proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED)
     return _MODULE[0]
-
-
-def proxqp_statuses() -> dict:
-    """``QPSolverOutput`` -> our status, built once (also read by ``qpsolvers:proxqp``)."""
-    if not _STATUS_MAP:
-        O = _proxqp().QPSolverOutput
-        _SOLVED.append(O.PROXQP_SOLVED)
-        _STATUS_MAP.update(
-            {
-                O.PROXQP_SOLVED: "optimal",
-                O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
-                O.PROXQP_MAX_ITER_REACHED: "max_iter",
-            }
-        )
-    return _STATUS_MAP
 
 
 def _status(value) -> tuple[str, str]:
     """Our status and ProxQP's name of a ``QPSolverOutput``."""
-    return proxqp_statuses().get(value, "not_solved"), str(value).split(".")[-1]
+    return PROXQP_STATUSES.get(value.name, "not_solved"), value.name
 
 
 @register
@@ -177,7 +169,7 @@ class ProxqpBackend(PersistentBackend):
             qp.solve()
         info = self._info
         raw_status = info.status
-        if _SOLVED and raw_status is _SOLVED[0]:
+        if raw_status is _SOLVED[0]:
             status, raw = "optimal", "PROXQP_SOLVED"
         else:
             status, raw = _status(raw_status)

@@ -22,8 +22,8 @@ from ._common import generic_settings, native_settings
 from .base import Backend, BackendSolution, error_solution, new_solution
 from .clarabel_ import CLARABEL_STATUSES
 from .osqp_ import osqp_statuses
-from .piqp_ import piqp_statuses
-from .proxqp_ import proxqp_statuses
+from .piqp_ import PIQP_STATUSES
+from .proxqp_ import PROXQP_STATUSES
 
 #: Each solver qpsolvers can drive: (algorithm family, Python distribution for the version column).
 SOLVERS: dict[str, tuple[str, str | None]] = {
@@ -79,7 +79,12 @@ def _info(read):
     return lambda e: None if e.get("info") is None else read(e["info"])
 
 
-_INFO_STATUS = _info(lambda info: info.status)
+_INFO_NAME = _info(lambda info: info.status.name)
+
+
+def _info_text(value, extras) -> str:
+    return str(extras["info"].status)
+
 
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
@@ -92,8 +97,8 @@ STATUS_READERS = {
         osqp_statuses,
         lambda v, e: str(e["info"].status),
     ),
-    "proxqp": _table_reader(_INFO_STATUS, proxqp_statuses),
-    "piqp": _table_reader(_INFO_STATUS, piqp_statuses),
+    "proxqp": _table_reader(_INFO_NAME, PROXQP_STATUSES, _info_text),
+    "piqp": _table_reader(_INFO_NAME, PIQP_STATUSES, _info_text),
     # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
     "scs": _table_reader(
         lambda e: e.get("status_val"),
