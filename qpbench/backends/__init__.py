@@ -1,10 +1,9 @@
 """Registry of solver backends, keyed by name.
 
 Built-in backends live one module each in this package (modules starting with ``_`` are
-helpers), each importing its solver lazily: a missing package makes the backend unavailable,
-not an import error. Plugins (entry points of group :data:`ENTRY_POINT_GROUP`, files named by
-``qpbench --plugin FILE`` or :data:`ENV_VAR`) load once per process after the built-in ones
-and may replace one of the same name; worker processes load :func:`plugin_files`.
+helpers), each importing its solver lazily. Plugins (entry points of group
+:data:`ENTRY_POINT_GROUP`, files named by ``qpbench --plugin FILE`` or :data:`ENV_VAR`) load
+once per process after the built-in ones and may replace one of the same name.
 """
 
 from __future__ import annotations
@@ -163,13 +162,9 @@ def backend_info() -> list[BackendInfo]:
     return infos
 
 
-def backend_names(available_only: bool = True) -> list[str]:
-    """Registered backend names, sorted; only the available ones by default."""
-    return [
-        name
-        for name, cls in sorted(_registry().items())
-        if not available_only or cls.unavailable_reason() is None
-    ]
+def backend_names() -> list[str]:
+    """The names of the available backends, sorted."""
+    return [name for name, cls in sorted(_registry().items()) if cls.unavailable_reason() is None]
 
 
 def resolve_name(name: str) -> str:

@@ -123,14 +123,14 @@ def load() -> ctypes.CDLL:
         compile_shim(prefix, path)
     lib = ctypes.CDLL(str(path))
     vp, ip = ctypes.c_void_p, ctypes.c_int
-    lib.qpb_new.argtypes, lib.qpb_new.restype = [ip, ip, vp, vp, ip], vp
-    lib.qpb_set_option.argtypes, lib.qpb_set_option.restype = (
-        [vp, ctypes.c_char_p, ctypes.c_double],
-        ip,
-    )
-    lib.qpb_free.argtypes, lib.qpb_free.restype = [vp], None
-    lib.qpb_message.argtypes, lib.qpb_message.restype = [ip], ctypes.c_char_p
-    lib.qpb_solve.argtypes, lib.qpb_solve.restype = [vp], ip
+    for function, argtypes, restype in (
+        (lib.qpb_new, [ip, ip, vp, vp, ip], vp),
+        (lib.qpb_set_option, [vp, ctypes.c_char_p, ctypes.c_double], ip),
+        (lib.qpb_free, [vp], None),
+        (lib.qpb_message, [ip], ctypes.c_char_p),
+        (lib.qpb_solve, [vp], ip),
+    ):
+        function.argtypes, function.restype = argtypes, restype
     LOADED.append(lib)
     return lib
 

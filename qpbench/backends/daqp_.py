@@ -62,12 +62,9 @@ class _Buffers:
         self.sense = np.zeros(m, dtype=np.intc)
         self.sense[nb : nb + me] = 5  # equality rows
         self.A_eq, self.A_in = self.A[:me], self.A[me:]
-        self.bu_box, self.bu_eq, self.bu_in = (
-            self.bu[:nb],
-            self.bu[nb : nb + me],
-            self.bu[nb + me :],
-        )
-        self.bl_box, self.bl_eq = self.bl[:nb], self.bl[nb : nb + me]
+        self.bu_box, self.bl_box = self.bu[:nb], self.bl[:nb]
+        self.bu_eq, self.bl_eq = self.bu[nb : nb + me], self.bl[nb : nb + me]
+        self.bu_in = self.bu[nb + me :]
 
     def fill(self, A, b, G, h, lb, ub) -> None:
         """Write a problem's rows and bounds (equalities as ``bl = bu``)."""

@@ -66,13 +66,10 @@ class PiqpBackend(PersistentBackend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._settings_dict = self._make_settings()
-
-    def _make_settings(self) -> dict:
         options = solver_options(self, "piqp")
         allowed = sorted(a for a in dir(_piqp().DenseSolver().settings) if not a.startswith("_"))
         refuse_unknown("piqp", options, allowed, "PIQP's own")
-        return {"verbose": False, "compute_timings": True, **options}
+        self._settings_dict = {"verbose": False, "compute_timings": True, **options}
 
     def reset(self) -> None:
         self._solver = self._shapes = self._info = None

@@ -89,9 +89,7 @@ class QpoasesBackend(Backend):
     def unavailable_reason(cls) -> str | None:
         if shim.qpoases_prefix() is None:
             return "cmeel-qpoases is not installed (pip install cmeel-qpoases)"
-        if not cls.needs_compile():
-            return None
-        if shim.compiler() is None:
+        if cls.needs_compile() and shim.compiler() is None:
             return "no C++ compiler ($CXX, g++ or c++) to build the qpOASES shim"
         return None
 
@@ -112,8 +110,14 @@ class QpoasesBackend(Backend):
             None if ub is None else ub.size,
         )
         ws = self._ws
-        if ws is None or sizes != ws.sizes:
-            ws = self._workspace(P, q, A, b, G, h, lb, ub)
+        if ws is None or sizes != ws.sizes:  # the workspace of this shape (checked here)
+            me, mi = check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+            key = (q.shape[0], me, mi, lb is not None or ub is not None)
+            if ws is None or ws.key != key:
+                self._ws = None
+                ws = self._ws = Workspace(
+                    key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
+                )
             ws.sizes = sizes
         n, me, mi, box = ws.key
         try:
@@ -146,26 +150,10 @@ class QpoasesBackend(Backend):
             sol.x = out[parts[0]]
             sol._obj = obj
         elif st == -1:
-            sol.error = self._message(raw)
+            message = self._lib.qpb_message(raw)
+            text = message.decode(errors="replace") if message else ""
+            sol.error = f"qpOASES return value {raw}: {text}"
         return sol
-
-    def _message(self, raw: int) -> str:
-        """The error text of qpOASES' return value ``raw``."""
-        message = self._lib.qpb_message(raw)
-        return f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
-
-    def _workspace(self, P, q, A, b, G, h, lb, ub) -> Workspace:
-        """The workspace of this problem's shape (checked here), the current one when the shape holds."""
-        n = q.shape[0]
-        me, mi = check_shapes(self.name, n, P, A, b, G, h, lb, ub)
-        key = (n, me, mi, lb is not None or ub is not None)
-        ws = self._ws
-        if ws is None or ws.key != key:
-            self._ws = None
-            ws = self._ws = Workspace(
-                key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
-            )
-        return ws
 
 
 _INF = np.inf

@@ -21,7 +21,7 @@ from . import register
 from ._common import generic_settings, native_settings
 from .base import Backend, BackendSolution, error_solution, new_solution
 from .clarabel_ import CLARABEL_STATUSES
-from .osqp_ import osqp_statuses
+from .osqp_ import OSQP_STATUSES, status_name
 from .piqp_ import PIQP_STATUSES
 from .proxqp_ import PROXQP_STATUSES
 
@@ -61,15 +61,13 @@ def _plain(value, extras) -> str:
 
 def _table_reader(read, table, text=_plain) -> object:
     """A status reader: ``read(extras)`` is the solver's status (None: no report), ``table``
-    (a dict, or a function returning one) maps it to ours, ``text(value, extras)`` is the raw
-    status kept."""
+    maps it to ours, ``text(value, extras)`` is the raw status kept."""
 
     def reader(extras) -> tuple[str, str | None]:
         value = read(extras)
         if value is None:
             return "not_solved", None
-        mapping = table() if callable(table) else table
-        return mapping.get(value, "not_solved"), text(value, extras)
+        return table.get(value, "not_solved"), text(value, extras)
 
     return reader
 
@@ -92,11 +90,7 @@ STATUS_READERS = {
         lambda e: None if e.get("status") is None else str(e["status"]).split(".")[-1],
         CLARABEL_STATUSES,
     ),
-    "osqp": _table_reader(
-        _info(lambda info: int(info.status_val)),
-        osqp_statuses,
-        lambda v, e: str(e["info"].status),
-    ),
+    "osqp": _table_reader(_info(lambda i: status_name(i.status_val)), OSQP_STATUSES, _info_text),
     "proxqp": _table_reader(_INFO_NAME, PROXQP_STATUSES, _info_text),
     "piqp": _table_reader(_INFO_NAME, PIQP_STATUSES, _info_text),
     # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
