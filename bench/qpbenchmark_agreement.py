@@ -113,7 +113,7 @@ def common_solvers(qpb) -> list[str]:
     """Solvers qpsolvers finds, qpbenchmark has settings for and qpbench can drive."""
     ours = {
         name.split(":", 1)[1]
-        for name in backend_names(available_only=True)
+        for name in backend_names()
         if name.startswith("qpsolvers:")
     }
     return sorted(

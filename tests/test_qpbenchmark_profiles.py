@@ -43,7 +43,7 @@ def _test_set(qpb, runtime=None):
 
 def _routes():
     return sorted(
-        n.split(":", 1)[1] for n in backend_names(available_only=True) if n.startswith("qpsolvers:")
+        n.split(":", 1)[1] for n in backend_names() if n.startswith("qpsolvers:")
     )
 
 

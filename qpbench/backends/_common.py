@@ -18,8 +18,6 @@ from ..exceptions import ParamError, ProblemFormatError
 from ..memory import DENSE_MAX_ENTRIES
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     import qpsolvers
 
     from .base import Backend
@@ -132,25 +130,33 @@ def native_settings(
     return settings
 
 
-def solver_options(
-    backend: Backend, solver: str, translate: Callable[[dict], dict] | None = None
-) -> dict:
+def solver_options(backend: Backend, solver: str, names: dict | None = None) -> dict:
     """The options an own-API backend gives ``solver``, as the ``qpsolvers:<solver>`` route.
 
     The generic settings (the profile's, overridden by the user's) in the solver's names
-    (``translate``, by default :func:`native_settings`), then the user's other settings. Under
-    a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then the
-    generic settings the user gave (``translate``-d, by default those the solver has under
+    (``names``: native name -> ``(generic key, conversion)``, a conversion returning ``None``
+    setting nothing; by default :func:`native_settings`), then the user's other settings.
+    Under a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then
+    the generic settings the user gave (in ``names``, by default those the solver has under
     the same name), then the other ones; nothing of qpbench's own profiles.
     """
     generic, native = generic_settings(backend)
     given = backend.profile.solver_options
     if given is None:
-        own = translate(generic) if translate else native_settings(solver, **generic)
+        own = _translate(generic, names) if names else native_settings(solver, **generic)
         return {**own, **native}
     user = {k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}
-    user = translate(user) if translate else {k: user[k] for k in user if k in _NATIVE[solver]}
+    user = _translate(user, names) if names else {k: user[k] for k in user if k in _NATIVE[solver]}
     return {**given.get(solver, {}), **user, **native}
+
+
+def _translate(generic: dict, names: dict) -> dict:
+    out = {}
+    for name, (key, convert) in names.items():
+        value = convert(generic[key]) if key in generic else None
+        if value is not None:
+            out[name] = value
+    return out
 
 
 def refuse_unknown(backend: str, native: dict, allowed, own: str) -> None:

@@ -116,18 +116,14 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     return (True, n, meq, m, with_box, kept.tobytes(), ())
 
 
-def _native_names(generic: dict) -> dict:
-    """Clarabel's settings for the generic ones given (any of ``eps_abs, eps_rel, max_iter, time_limit``)."""
-    out: dict = {}
-    if "eps_abs" in generic:
-        out["tol_feas"] = out["tol_gap_abs"] = float(generic["eps_abs"])
-    if "eps_rel" in generic:
-        out["tol_gap_rel"] = float(generic["eps_rel"])
-    if "max_iter" in generic:
-        out["max_iter"] = int(min(generic["max_iter"], 2**32 - 1))
-    if "time_limit" in generic:
-        out["time_limit"] = float(generic["time_limit"])
-    return out
+#: Clarabel's settings for the generic ones: name -> (generic key, conversion).
+_OWN_NAMES = {
+    "tol_feas": ("eps_abs", float),
+    "tol_gap_abs": ("eps_abs", float),
+    "tol_gap_rel": ("eps_rel", float),
+    "max_iter": ("max_iter", lambda k: int(min(k, 2**32 - 1))),  # Clarabel's u32
+    "time_limit": ("time_limit", float),
+}
 
 
 @register
@@ -158,7 +154,7 @@ class ClarabelBackend(PersistentBackend):
         s.verbose = False
         s.presolve_enable = False  # update() needs these two
         s.input_sparse_dropzeros = False
-        options = solver_options(self, "clarabel", _native_names)
+        options = solver_options(self, "clarabel", _OWN_NAMES)
         for key, value in options.items():
             setattr(s, key, value)
         return s

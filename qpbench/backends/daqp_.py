@@ -80,17 +80,13 @@ class _Buffers:
             self.bl_box[:] = -np.inf if lb is None else lb
 
 
-def _native_names(generic: dict) -> dict:
-    """DAQP's settings for the generic ones given (any of :data:`GENERIC_KEYS`)."""
-    out: dict = {}
-    if "eps_abs" in generic:
-        out["primal_tol"] = out["dual_tol"] = float(generic["eps_abs"])
-    if "max_iter" in generic:
-        out["iter_limit"] = int(min(generic["max_iter"], 2**31 - 1))
-    limit = generic.get("time_limit")
-    if limit is not None and np.isfinite(limit):
-        out["time_limit"] = float(limit)
-    return out
+#: DAQP's settings for the generic ones: name -> (generic key, conversion).
+_OWN_NAMES = {
+    "primal_tol": ("eps_abs", float),
+    "dual_tol": ("eps_abs", float),
+    "iter_limit": ("max_iter", lambda k: int(min(k, 2**31 - 1))),
+    "time_limit": ("time_limit", lambda t: float(t) if t is not None and np.isfinite(t) else None),
+}
 
 
 def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> BackendSolution:
@@ -138,7 +134,7 @@ class DaqpBackend(PersistentBackend):
 
     def options(self) -> dict:
         """The keyword settings given to DAQP (profile first, then the user's)."""
-        options = solver_options(self, "daqp", _native_names)
+        options = solver_options(self, "daqp", _OWN_NAMES)
         allowed = sorted((_DAQP[0] if _DAQP else _daqp()).Model().settings)
         refuse_unknown("daqp", options, allowed, "DAQP's own")
         return options
