@@ -111,11 +111,7 @@ def run_ours(
 
 def common_solvers(qpb) -> list[str]:
     """Solvers qpsolvers finds, qpbenchmark has settings for and qpbench can drive."""
-    ours = {
-        name.split(":", 1)[1]
-        for name in backend_names()
-        if name.startswith("qpsolvers:")
-    }
+    ours = {name.split(":", 1)[1] for name in backend_names() if name.startswith("qpsolvers:")}
     return sorted(
         s
         for s in qpsolvers.available_solvers

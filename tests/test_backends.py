@@ -15,7 +15,6 @@ import qpsolvers
 from conftest import sparse_copy
 from known import random_kkt_problem, robot_like_problem
 
-from qpbench import backends
 from qpbench.backends import (
     BackendSolution,
     backend_class,

@@ -42,9 +42,7 @@ def _test_set(qpb, runtime=None):
 
 
 def _routes():
-    return sorted(
-        n.split(":", 1)[1] for n in backend_names() if n.startswith("qpsolvers:")
-    )
+    return sorted(n.split(":", 1)[1] for n in backend_names() if n.startswith("qpsolvers:"))
 
 
 @pytest.mark.parametrize("runtime", [None, 1000.0])
