@@ -240,7 +240,7 @@ def main(argv=None) -> int:
             profile = get_profile(f"qpbenchmark:{settings_name}").with_time_limit(tol.runtime)
             for solver in solvers:
                 kwargs = dict(test_set.solver_settings[settings_name][solver])
-                options = get_backend(f"qpsolvers:{solver}", profile)._options()
+                options = get_backend(f"qpsolvers:{solver}", profile).solver_options
                 same_call = options == kwargs
                 theirs = run_qpbenchmark(
                     qpb, test_set, solver, settings_name, tmp / f"qpb-{settings_name}-{solver}.csv"
@@ -288,7 +288,7 @@ def main(argv=None) -> int:
             }
             rows = []
             for solver in solvers:
-                options = get_backend(f"qpsolvers:{solver}", profile)._options()
+                options = get_backend(f"qpsolvers:{solver}", profile).solver_options
                 extra = sorted(set(options) - set(s[solver]))
                 differs = sorted(k for k, v in s[solver].items() if options.get(k) != v)
                 run = "same" if set(extra) <= LIMIT_KEYS and not differs else "other"

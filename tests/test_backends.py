@@ -640,7 +640,7 @@ def test_qpsolvers_routes_call_what_solve_problem_calls(monkeypatch):
     for solver in ("daqp", "quadprog", "osqp"):
         backend = get_backend(f"qpsolvers:{solver}")
         ours = backend.solve(problem)
-        ref = qpsolvers.solve_problem(problem, solver, **backend._options())
+        ref = qpsolvers.solve_problem(problem, solver, **backend.solver_options)
         for field in ("x", "y", "z", "z_box"):
             np.testing.assert_array_equal(getattr(ours, field), getattr(ref, field))
     P, q, G, h, A, b, lb, ub = problem.unpack()

@@ -65,7 +65,7 @@ def test_profiles_pass_qpbenchmarks_arguments_verbatim(qpb, runtime):
         for solver in _routes():
             if not implemented(solver):
                 continue
-            options = get_backend(f"qpsolvers:{solver}", profile)._options()
+            options = get_backend(f"qpsolvers:{solver}", profile).solver_options
             assert options == test_set.solver_settings[settings][solver], (settings, solver)
 
 

@@ -8,6 +8,7 @@ once per process after the built-in ones and may replace one of the same name.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import os
@@ -31,7 +32,6 @@ ENTRY_POINT_GROUP = "qpbench.backends"
 ENV_VAR = "QPBENCH_PLUGINS"
 
 _REGISTRY: dict[str, type[Backend]] = {}
-_builtins_loaded = False
 _plugins_checked = False
 #: Plugin files loaded in this process: resolved path -> module name.
 _FILES: dict[Path, str] = {}
@@ -52,12 +52,10 @@ def builtin_modules() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
 
 
+@functools.cache
 def _load_builtins() -> None:
-    global _builtins_loaded
-    if not _builtins_loaded:
-        _builtins_loaded = True
-        for module in builtin_modules():
-            importlib.import_module(f"{__name__}.{module}")
+    for module in builtin_modules():
+        importlib.import_module(f"{__name__}.{module}")
 
 
 def load_plugins(files: Iterable[str | Path] = ()) -> None:

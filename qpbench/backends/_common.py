@@ -211,7 +211,7 @@ class StackedCsc:
 
     def __init__(self, P, blocks: list, eyes: list[tuple[float, np.ndarray]], n: int):
         self.n, self.eyes = n, eyes
-        self.k = k = sum(M.shape[0] for M in blocks)
+        k = sum(M.shape[0] for M in blocks)
         self.rows = k + sum(idx.size for _, idx in eyes)
         self.dense = all_dense(P, *blocks)
         self.structure = ()
@@ -281,8 +281,8 @@ def finite_mask(problem: qpsolvers.Problem, n: int) -> tuple[bool, np.ndarray]:
 
 class FiniteRows:
     """The rows of ``G`` and the bounds with a finite right-hand side (the others are left out,
-    as Clarabel's presolve does): :attr:`g_idx`, :attr:`lb_idx`, :attr:`ub_idx`, and :attr:`kept`, their
-    mask (:func:`finite_mask`) as bytes."""
+    as Clarabel's presolve does): ``g_idx``, ``lb_idx``, ``ub_idx``, and ``kept``, their mask
+    (:func:`finite_mask`) as bytes."""
 
     def __init__(self, problem: qpsolvers.Problem, n: int):
         self.n = n

@@ -36,13 +36,12 @@ class BackendSolution(qpsolvers.Solution):
     solver_time_s: float | None = None
     backend: str = ""
     error: str | None = None
+    _obj = None  # what the obj property stores (not a field)
 
-    def __getattr__(self, name: str):  # the defaults of an instance made by new_solution
+    def __getattr__(self, name: str):  # the default extras of an instance made by new_solution
         if name == "extras":
             extras = self.extras = {}
             return extras
-        if name == "_obj":
-            return None
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 

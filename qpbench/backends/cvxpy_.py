@@ -54,8 +54,8 @@ class _Model:
         objective = cp.Minimize(0.5 * cp.sum_squares(self.L.T @ x) + self.q @ x)
         self.problem = cp.Problem(objective, constraints)
 
-    def set_values(self, problem, rows: FiniteRows, P: np.ndarray, lb, ub) -> None:
-        self.L.value = cost_factor(P)
+    def set_values(self, problem, rows: FiniteRows, lb, ub) -> None:
+        self.L.value = cost_factor(as_dense(problem.P))
         self.q.value = np.asarray(problem.q, dtype=float)
         if self.eq is not None:
             self.A.value = as_dense(problem.A)
@@ -109,16 +109,14 @@ class CvxpyBackend(Backend):
         import cvxpy as cp
 
         sol = BackendSolution(problem)
-        q = np.asarray(problem.q)
-        n = q.shape[0]
-        P = as_dense(problem.P)
+        n = np.shape(problem.q)[0]
         meq = 0 if problem.A is None else problem.A.shape[0]
         rows = FiniteRows(problem, n)
         key = (n, meq, rows.kept)
         model = self._models.get(key)
         if model is None:
             model = self._models[key] = _Model(cp, n, meq, rows)
-        model.set_values(problem, rows, P, *dense_bounds(problem, n))
+        model.set_values(problem, rows, *dense_bounds(problem, n))
         if warm_start is not None:
             model.x.value = np.asarray(warm_start, dtype=float)
         if self._options is None:  # cp.installed_solvers() takes milliseconds

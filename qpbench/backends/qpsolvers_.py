@@ -259,12 +259,13 @@ class QpsolversBackend(Backend):
         silence_wrapper_warnings(solver)
         generic, native = generic_settings(self)
         given = self.profile.solver_options
+        #: The solver's options, as passed to qpsolvers (do not modify).
         if given is not None:
-            self._solver_options = {**given.get(solver, {}), **self.settings}
+            self.solver_options = {**given.get(solver, {}), **self.settings}
         else:
-            self._solver_options = {**native_settings(solver, **generic), **native}
+            self.solver_options = {**native_settings(solver, **generic), **native}
         # solve_problem passes verbose (default False) to the wrapper
-        self._call_options = {"verbose": False, **self._solver_options}
+        self._call_options = {"verbose": False, **self.solver_options}
         self._function = solver_function(solver)
 
     @classmethod
@@ -299,10 +300,6 @@ class QpsolversBackend(Backend):
             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
         } - {"problem", "initvals"}
         return backend_class(direct).setting_names() | named | frozenset(extra)
-
-    def _options(self) -> dict:
-        """The solver's options, as passed to qpsolvers (do not modify)."""
-        return self._solver_options
 
     def _solve(self, problem, warm_start):
         solved = problem
