@@ -111,14 +111,13 @@ class PiqpBackend(PersistentBackend):
     def _solve_sparse(self, problem):
         """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
         P, q, A, b, G, h, lb, ub = sparse_parts(problem, upper=True)
-        check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-        shapes = (
+        shapes = (  # every shape: the kept solver's were checked at its set-up
             "sparse",
             q.shape,
             None if b is None else b.shape,
             None if h is None else h.shape,
-            lb is None,
-            ub is None,
+            None if lb is None else lb.shape,
+            None if ub is None else ub.shape,
             structure_key(P, A, G),
         )
         return self._run(problem, _piqp().SparseSolver, shapes, P, q, A, b, G, h, lb, ub)

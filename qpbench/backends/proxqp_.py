@@ -154,7 +154,6 @@ class ProxqpBackend(PersistentBackend):
     def _run(self, problem, key, data, n, n_in, with_box, warm_start):
         """Update (same ``key``) or build the ``QP`` object with ``data``, solve, read the result
         (``n_in`` rows of ``G`` lead ProxQP's ``z``; with ``with_box`` the next ``n`` are ``z_box``)."""
-        n_eq = key[1]
         warm = self._qp is not None and key == self._key
         if warm:
             qp = self._qp
@@ -204,11 +203,6 @@ class ProxqpBackend(PersistentBackend):
         if status == "primal_infeasible" or status == "dual_infeasible":
             self.reset()  # no warm start from an infeasibility exit
             return sol
-        return self._read_solution(qp, sol, info, n, n_eq, n_in, with_box)
-
-    def _read_solution(self, qp, sol, info, n: int, n_eq: int, n_in: int, with_box: bool):
-        """Copy x, y, z (and z_box: the ``n`` rows after ``n_in``) out of ProxQP's results into ``sol``."""
-        status = sol.status
         views = self._views
         if views is None:  # update and solve write into the buffers these views show
             res = qp.results
@@ -217,7 +211,7 @@ class ProxqpBackend(PersistentBackend):
         x = x_view.copy()
         if all_finite(x):
             sol.x = x
-            sol.y = y_view.copy() if n_eq else EMPTY
+            sol.y = y_view.copy() if key[1] else EMPTY
             z = z_view.copy()  # [z; z_box] with a box
             sol.z, sol.z_box = (z[part_z], z[part_box]) if with_box else (z, EMPTY)
         if status == "optimal":
