@@ -203,10 +203,8 @@ def all_dense(*matrices: object) -> bool:
 class StackedCsc:
     """CSC patterns of ``P``'s upper triangle and of ``C = [D; s_1 I[idx_1]; s_2 I[idx_2] ...]``:
     the rows of the matrices ``blocks`` (``D``) over one signed identity block per ``(s, idx)``
-    of ``eyes`` (rows ``idx`` of ``s I``).
-
-    Dense matrices are stored with every entry, so the pattern does not change with their
-    values; the others with theirs (:attr:`structure` then compares two).
+    of ``eyes`` (rows ``idx`` of ``s I``). Dense matrices are stored with every entry; the
+    others with theirs (:attr:`structure` then compares two).
     """
 
     def __init__(self, P, blocks: list, eyes: list[tuple[float, np.ndarray]], n: int):
@@ -323,10 +321,8 @@ def _vectors(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
     """``P, q, A, b, G, h, lb, ub`` as they are when they are what a controller builds (float64
     arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts); shapes are
-    not compared here (:func:`check_shapes`).
-
-    The dense backends' per-tick path: one chain of tests, dtypes by identity first (numpy's
-    float64 descriptor is a singleton except in unpickled arrays, which take the ``==``).
+    not compared here (:func:`check_shapes`). Dtypes by identity first (numpy's float64
+    descriptor is a singleton except in unpickled arrays, which take the ``==``).
     """
     P, q, A, b = problem.P, problem.q, problem.A, problem.b
     G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub

@@ -238,6 +238,9 @@ class PersistentBackend(Backend):
         super().__init__(profile, **settings)
         self.reset()
 
+    def reset(self) -> None:
+        self._solver = self._layout = None  # the kept solver object and its data layout
+
     def _solve(self, problem, warm_start):
         try:
             return self._attempt(problem, warm_start)

@@ -145,10 +145,6 @@ class ClarabelBackend(PersistentBackend):
 
         return frozenset(own_settings(clarabel.DefaultSettings()) | set(GENERIC_KEYS))
 
-    def reset(self) -> None:
-        self._solver = None
-        self._layout: ConeLayout | None = None
-
     def _settings(self, clarabel):
         s = clarabel.DefaultSettings()
         s.verbose = False

@@ -127,10 +127,6 @@ class OsqpBackend(PersistentBackend):
     package = "osqp"
     module = "osqp"
 
-    def reset(self) -> None:
-        self._solver = None
-        self._layout: StackedLayout | None = None
-
     @classmethod
     def setting_names(cls) -> frozenset[str]:
         """The generic settings, OSQP's own (its ``OSQPSettings`` fields) and the names its

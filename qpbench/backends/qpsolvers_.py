@@ -143,15 +143,13 @@ def _iter_quadprog(extras: dict) -> int:
     return int(it.item(0) if type(it) is _ndarray else np.ravel(it)[0])
 
 
-#: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps
-#: (raising one of :data:`_ITERATION_ERRORS` when ``extras`` lacks it).
+#: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps.
 ITERATION_READERS = {
     **dict.fromkeys(("osqp", "proxqp", "piqp", "qpalm"), lambda e: int(e["info"].iter)),
     **dict.fromkeys(("scs", "ecos"), lambda e: int(e["iter"])),
     "quadprog": _iter_quadprog,
     "cvxopt": lambda e: int(e["iterations"]),
 }
-_ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
 
 def iterations(solver: str, extras: dict) -> int | None:
@@ -161,7 +159,7 @@ def iterations(solver: str, extras: dict) -> int | None:
         return None
     try:
         return reader(extras)
-    except _ITERATION_ERRORS:
+    except (KeyError, AttributeError, TypeError, IndexError):
         return None
 
 
@@ -203,12 +201,9 @@ _QPError = qpsolvers.QPError
 
 
 def solver_function(solver: str):
-    """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it.
-
-    The entry of the table ``solve_problem`` dispatches through (read from its globals: the
-    table's module moved between qpsolvers 4.4 and 4.13), saving ``solve_problem``'s frame;
-    without that table, ``solve_problem`` itself.
-    """
+    """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it:
+    the entry of the table ``solve_problem`` dispatches through (read from its globals),
+    without that table ``solve_problem`` itself."""
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     function = table.get(solver) if isinstance(table, dict) else None
     if function is not None:
@@ -239,13 +234,13 @@ class QpsolversBackend(Backend):
     solver: str = ""
 
     #: Solvers whose qpsolvers wrapper hands every keyword it does not take itself to the
-    #: solver's own settings, as the direct backend named here does: (that backend, keywords
-    #: the wrapper takes without listing them in its signature).
-    SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
-        "clarabel": ("clarabel", ()),  # setattr on DefaultSettings (an unknown name raises)
-        "daqp": ("daqp", ()),  # keywords of daqp.solve
-        "osqp": ("osqp", ("raise_error",)),  # OSQP.setup; raise_error goes to OSQP.solve
-        "piqp": ("piqp", ()),  # setattr on the settings (an unknown name is silently dropped)
+    #: solver's own settings, as the direct backend of the same name does: the keywords the
+    #: wrapper takes without listing them in its signature.
+    SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, ...]]] = {
+        "clarabel": (),  # setattr on DefaultSettings (an unknown name raises)
+        "daqp": (),  # keywords of daqp.solve
+        "osqp": ("raise_error",),  # OSQP.setup; raise_error goes to OSQP.solve
+        "piqp": (),  # setattr on the settings (an unknown name is silently dropped)
     }
 
     def __init__(self, profile="default", **settings):
@@ -288,10 +283,9 @@ class QpsolversBackend(Backend):
 
         from . import backend_class
 
-        same = cls.SAME_SETTINGS_AS.get(cls.solver)
-        if same is None:
+        extra = cls.SAME_SETTINGS_AS.get(cls.solver)
+        if extra is None:
             return None
-        direct, extra = same
         module = importlib.import_module(f"qpsolvers.solvers.{cls.solver}_")
         function = getattr(module, f"{cls.solver}_solve_problem")
         named = {
@@ -299,7 +293,7 @@ class QpsolversBackend(Backend):
             for name, p in inspect.signature(function).parameters.items()
             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
         } - {"problem", "initvals"}
-        return backend_class(direct).setting_names() | named | frozenset(extra)
+        return backend_class(cls.solver).setting_names() | named | frozenset(extra)
 
     def _solve(self, problem, warm_start):
         solved = problem
@@ -363,13 +357,14 @@ class QpsolversBackend(Backend):
 
 
 def _make_class(solver: str) -> type[QpsolversBackend]:
+    family, package = SOLVERS.get(solver, ("unknown", None))
     cls = type(
         f"Qpsolvers_{solver}",
         (QpsolversBackend,),
         {
             "name": f"qpsolvers:{solver}",
-            "family": SOLVERS.get(solver, ("unknown", None))[0],
-            "package": SOLVERS.get(solver, ("unknown", None))[1],
+            "family": family,
+            "package": package,
             "solver": solver,
             "certifies_infeasibility": True
             if solver in CERTIFYING_SOLVERS
