@@ -1,9 +1,6 @@
-"""What the backend modules share: settings, and a problem's arrays in the forms solvers take.
-
-Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one when a
-matrix is scipy.sparse or when made dense it would exceed
-:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`), and keep a sparse
-solver per :func:`structure_key`.
+"""What the backend modules share: settings, and a problem's arrays in the forms solvers take
+(a problem goes to a sparse API when :func:`wants_sparse`, a sparse solver kept per
+:func:`structure_key`).
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""The qpOASES shim of the ``qpoases`` backend: its C++ source, its build and load, its buffers.
-
-The shim wraps ``qpOASES::SQProblem`` in a few ``extern "C"`` functions, compiled by the
-system's C++ compiler against the ``cmeel-qpoases`` wheel on first use (once per machine and
-version, into ``qpbench.cache.shim_dir("qpoases")``) and loaded once per process. A
-:class:`Workspace` holds the buffers one ``SQProblem`` reads and writes.
+"""The qpOASES shim of the ``qpoases`` backend: ``qpOASES::SQProblem`` in a few ``extern "C"``
+functions (``data/qpoases_shim.cpp``), compiled against the ``cmeel-qpoases`` wheel on first
+use and loaded once per process, and the :class:`Workspace` of buffers it reads and writes.
 """
 
 from __future__ import annotations

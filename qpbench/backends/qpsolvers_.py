@@ -19,7 +19,7 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings, native_settings
-from .base import Backend, BackendSolution, error_solution, new_solution
+from .base import Backend, error_solution, new_solution
 from .clarabel_ import CLARABEL_STATUSES
 from .osqp_ import OSQP_STATUSES, status_name
 from .piqp_ import PIQP_STATUSES
@@ -336,13 +336,9 @@ class QpsolversBackend(Backend):
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time
         sol.iterations = iterations(self.solver, sol.extras)
-        if not result.found:
-            self._not_found(sol)
-        return sol
-
-    def _not_found(self, sol: BackendSolution) -> None:
-        """The status of a solve qpsolvers says found nothing, from the solver's own report;
-        no ``x`` unless finite."""
+        if result.found:
+            return sol
+        # found nothing: the status from the solver's own report, no x unless finite
         status, raw = "not_solved", None
         if self._reader is not None:
             extras = sol.extras
@@ -354,6 +350,7 @@ class QpsolversBackend(Backend):
         sol.status = status
         if sol.x is not None and not np.all(np.isfinite(sol.x)):
             sol.x = None
+        return sol
 
 
 def _make_class(solver: str) -> type[QpsolversBackend]:
