@@ -5,9 +5,6 @@ qpsolvers' sign convention::
 
     P x + q + A^T y + G^T z + z_box = 0,   z >= 0,
     z_box < 0 where the lower bound is active, > 0 where the upper bound is.
-
-A backend may keep state between calls (a persistent solver, a warm start from the previous
-tick); :meth:`Backend.reset` forgets it.
 """
 
 from __future__ import annotations

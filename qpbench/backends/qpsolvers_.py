@@ -55,11 +55,7 @@ SOLVERS: dict[str, tuple[str, str | None]] = {
 }
 
 
-def _plain(value, extras) -> str:
-    return str(value)
-
-
-def _table_reader(read, table, text=_plain) -> object:
+def _table_reader(read, table, text=lambda value, extras: str(value)) -> object:
     """A status reader: ``read(extras)`` is the solver's status (None: no report), ``table``
     maps it to ours, ``text(value, extras)`` is the raw status kept."""
 
