@@ -437,7 +437,7 @@ def direct_for(name: str, profile: str):
         return f"cvxpy Problem.solve ({solver})", factory
     if name.startswith("qpsolvers:"):
         solver = name.split(":", 1)[1]
-        settings = backend._options()
+        settings = backend.solver_options
         table = {
             "daqp": ("daqp.solve", direct_daqp),
             "quadprog": ("quadprog.solve_qp", direct_quadprog),

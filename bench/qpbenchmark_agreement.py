@@ -111,11 +111,7 @@ def run_ours(
 
 def common_solvers(qpb) -> list[str]:
     """Solvers qpsolvers finds, qpbenchmark has settings for and qpbench can drive."""
-    ours = {
-        name.split(":", 1)[1]
-        for name in backend_names(available_only=True)
-        if name.startswith("qpsolvers:")
-    }
+    ours = {name.split(":", 1)[1] for name in backend_names() if name.startswith("qpsolvers:")}
     return sorted(
         s
         for s in qpsolvers.available_solvers
@@ -244,7 +240,7 @@ def main(argv=None) -> int:
             profile = get_profile(f"qpbenchmark:{settings_name}").with_time_limit(tol.runtime)
             for solver in solvers:
                 kwargs = dict(test_set.solver_settings[settings_name][solver])
-                options = get_backend(f"qpsolvers:{solver}", profile)._options()
+                options = get_backend(f"qpsolvers:{solver}", profile).solver_options
                 same_call = options == kwargs
                 theirs = run_qpbenchmark(
                     qpb, test_set, solver, settings_name, tmp / f"qpb-{settings_name}-{solver}.csv"
@@ -292,7 +288,7 @@ def main(argv=None) -> int:
             }
             rows = []
             for solver in solvers:
-                options = get_backend(f"qpsolvers:{solver}", profile)._options()
+                options = get_backend(f"qpsolvers:{solver}", profile).solver_options
                 extra = sorted(set(options) - set(s[solver]))
                 differs = sorted(k for k, v in s[solver].items() if options.get(k) != v)
                 run = "same" if set(extra) <= LIMIT_KEYS and not differs else "other"

@@ -110,7 +110,7 @@ def select_backends(value: str | list[str] | None, option: str = "--backends") -
 
     names = parse_list(value or "all", option)
     if names == ["all"]:
-        return list(backend_names(available_only=True))
+        return list(backend_names())
     resolved = [resolve_name(name) for name in names]  # a typo gets a suggestion
     for i, name in enumerate(resolved):
         if name in resolved[:i]:

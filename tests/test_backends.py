@@ -15,7 +15,6 @@ import qpsolvers
 from conftest import sparse_copy
 from known import random_kkt_problem, robot_like_problem
 
-from qpbench import backends
 from qpbench.backends import (
     BackendSolution,
     backend_class,
@@ -457,7 +456,7 @@ def test_qpsolvers_availability_follows_qpsolvers(monkeypatch):
 
 
 def test_one_qpsolvers_backend_per_available_solver():
-    names = set(backends.backend_names(available_only=False))
+    names = {i.name for i in backend_info()}  # every registered backend
     for solver in qpsolvers.available_solvers:
         assert f"qpsolvers:{solver}" in names
     for name in ("osqp", "proxqp", "clarabel", "pinv", "cvxpy"):
@@ -641,7 +640,7 @@ def test_qpsolvers_routes_call_what_solve_problem_calls(monkeypatch):
     for solver in ("daqp", "quadprog", "osqp"):
         backend = get_backend(f"qpsolvers:{solver}")
         ours = backend.solve(problem)
-        ref = qpsolvers.solve_problem(problem, solver, **backend._options())
+        ref = qpsolvers.solve_problem(problem, solver, **backend.solver_options)
         for field in ("x", "y", "z", "z_box"):
             np.testing.assert_array_equal(getattr(ours, field), getattr(ref, field))
     P, q, G, h, A, b, lb, ub = problem.unpack()

@@ -75,7 +75,7 @@ def test_own_backend_gets_the_routes_arguments_and_nothing_else(solver, settings
     if not _available(solver):
         pytest.skip(f"{solver} not installed")
     profile = get_profile(f"qpbenchmark:{settings}")
-    route = get_backend(f"qpsolvers:{solver}", profile)._options()
+    route = get_backend(f"qpsolvers:{solver}", profile).solver_options
     own = _own_options(solver, profile)
     for key, value in route.items():
         assert own[key] == value, (solver, settings, key)

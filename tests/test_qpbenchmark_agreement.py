@@ -251,7 +251,7 @@ def test_same_solver_calls_same_metrics(
         for solver in usable:
             kwargs = dict(test_set.solver_settings[settings_name][solver])
             settings = {**solver_default_limits(solver), **kwargs}
-            options = get_backend(f"qpsolvers:{solver}", profile, **settings)._options()
+            options = get_backend(f"qpsolvers:{solver}", profile, **settings).solver_options
             assert options == settings, (settings_name, solver, options, settings)
             out = tmp_path / f"ours-{settings_name}-{solver}.csv"
             config = BenchConfig(
@@ -359,7 +359,7 @@ def test_cli_profile_against_qpbenchmark_settings(
     same_run, other_run = [], []
     for solver in solvers:
         kwargs = test_set.solver_settings[profile.name][solver]
-        options = get_backend(f"qpsolvers:{solver}", profile)._options()
+        options = get_backend(f"qpsolvers:{solver}", profile).solver_options
         differs = {k: (v, options.get(k)) for k, v in kwargs.items() if options.get(k) != v}
         assert not differs, f"{solver}: qpbenchmark's option (theirs, ours) {differs}"
         extra = set(options) - set(kwargs)

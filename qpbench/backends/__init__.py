@@ -1,14 +1,14 @@
 """Registry of solver backends, keyed by name.
 
 Built-in backends live one module each in this package (modules starting with ``_`` are
-helpers), each importing its solver lazily: a missing package makes the backend unavailable,
-not an import error. Plugins (entry points of group :data:`ENTRY_POINT_GROUP`, files named by
-``qpbench --plugin FILE`` or :data:`ENV_VAR`) load once per process after the built-in ones
-and may replace one of the same name; worker processes load :func:`plugin_files`.
+helpers), each importing its solver lazily. Plugins (entry points of group
+:data:`ENTRY_POINT_GROUP`, files named by ``qpbench --plugin FILE`` or :data:`ENV_VAR`) load
+once per process after the built-in ones and may replace one of the same name.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import os
@@ -32,7 +32,6 @@ ENTRY_POINT_GROUP = "qpbench.backends"
 ENV_VAR = "QPBENCH_PLUGINS"
 
 _REGISTRY: dict[str, type[Backend]] = {}
-_builtins_loaded = False
 _plugins_checked = False
 #: Plugin files loaded in this process: resolved path -> module name.
 _FILES: dict[Path, str] = {}
@@ -53,12 +52,10 @@ def builtin_modules() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
 
 
+@functools.cache
 def _load_builtins() -> None:
-    global _builtins_loaded
-    if not _builtins_loaded:
-        _builtins_loaded = True
-        for module in builtin_modules():
-            importlib.import_module(f"{__name__}.{module}")
+    for module in builtin_modules():
+        importlib.import_module(f"{__name__}.{module}")
 
 
 def load_plugins(files: Iterable[str | Path] = ()) -> None:
@@ -163,13 +160,9 @@ def backend_info() -> list[BackendInfo]:
     return infos
 
 
-def backend_names(available_only: bool = True) -> list[str]:
-    """Registered backend names, sorted; only the available ones by default."""
-    return [
-        name
-        for name, cls in sorted(_registry().items())
-        if not available_only or cls.unavailable_reason() is None
-    ]
+def backend_names() -> list[str]:
+    """The names of the available backends, sorted."""
+    return [name for name, cls in sorted(_registry().items()) if cls.unavailable_reason() is None]
 
 
 def resolve_name(name: str) -> str:

@@ -1,9 +1,6 @@
-"""What the backend modules share: settings, and a problem's arrays in the forms solvers take.
-
-Backends with a dense and a sparse API (ProxQP, PIQP) send a problem to the sparse one when a
-matrix is scipy.sparse or when made dense it would exceed
-:data:`qpbench.memory.DENSE_MAX_ENTRIES` entries (:func:`wants_sparse`), and keep a sparse
-solver per :func:`structure_key`.
+"""What the backend modules share: settings, and a problem's arrays in the forms solvers take
+(a problem goes to a sparse API when :func:`wants_sparse`, a sparse solver kept per
+:func:`structure_key`).
 """
 
 from __future__ import annotations
@@ -18,8 +15,6 @@ from ..exceptions import ParamError, ProblemFormatError
 from ..memory import DENSE_MAX_ENTRIES
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     import qpsolvers
 
     from .base import Backend
@@ -132,25 +127,33 @@ def native_settings(
     return settings
 
 
-def solver_options(
-    backend: Backend, solver: str, translate: Callable[[dict], dict] | None = None
-) -> dict:
+def solver_options(backend: Backend, solver: str, names: dict | None = None) -> dict:
     """The options an own-API backend gives ``solver``, as the ``qpsolvers:<solver>`` route.
 
     The generic settings (the profile's, overridden by the user's) in the solver's names
-    (``translate``, by default :func:`native_settings`), then the user's other settings. Under
-    a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then the
-    generic settings the user gave (``translate``-d, by default those the solver has under
+    (``names``: native name -> ``(generic key, conversion)``, a conversion returning ``None``
+    setting nothing; by default :func:`native_settings`), then the user's other settings.
+    Under a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then
+    the generic settings the user gave (in ``names``, by default those the solver has under
     the same name), then the other ones; nothing of qpbench's own profiles.
     """
     generic, native = generic_settings(backend)
     given = backend.profile.solver_options
     if given is None:
-        own = translate(generic) if translate else native_settings(solver, **generic)
+        own = _translate(generic, names) if names else native_settings(solver, **generic)
         return {**own, **native}
     user = {k: v for k, v in backend.settings.items() if k in GENERIC_KEYS}
-    user = translate(user) if translate else {k: user[k] for k in user if k in _NATIVE[solver]}
+    user = _translate(user, names) if names else {k: user[k] for k in user if k in _NATIVE[solver]}
     return {**given.get(solver, {}), **user, **native}
+
+
+def _translate(generic: dict, names: dict) -> dict:
+    out = {}
+    for name, (key, convert) in names.items():
+        value = convert(generic[key]) if key in generic else None
+        if value is not None:
+            out[name] = value
+    return out
 
 
 def refuse_unknown(backend: str, native: dict, allowed, own: str) -> None:
@@ -197,15 +200,13 @@ def all_dense(*matrices: object) -> bool:
 class StackedCsc:
     """CSC patterns of ``P``'s upper triangle and of ``C = [D; s_1 I[idx_1]; s_2 I[idx_2] ...]``:
     the rows of the matrices ``blocks`` (``D``) over one signed identity block per ``(s, idx)``
-    of ``eyes`` (rows ``idx`` of ``s I``).
-
-    Dense matrices are stored with every entry, so the pattern does not change with their
-    values; the others with theirs (:attr:`structure` then compares two).
+    of ``eyes`` (rows ``idx`` of ``s I``). Dense matrices are stored with every entry; the
+    others with theirs (:attr:`structure` then compares two).
     """
 
     def __init__(self, P, blocks: list, eyes: list[tuple[float, np.ndarray]], n: int):
         self.n, self.eyes = n, eyes
-        self.k = k = sum(M.shape[0] for M in blocks)
+        k = sum(M.shape[0] for M in blocks)
         self.rows = k + sum(idx.size for _, idx in eyes)
         self.dense = all_dense(P, *blocks)
         self.structure = ()
@@ -257,6 +258,46 @@ class StackedCsc:
         return P, spa.csc_matrix((C_data, self.C_indices, self.C_indptr), shape=(self.rows, n))
 
 
+def finite_mask(problem: qpsolvers.Problem, n: int) -> tuple[bool, np.ndarray]:
+    """``(with_box, kept)``: whether the problem has bounds, and which rows of ``G``, ``lb`` and
+    ``ub`` (in this order, ``n`` each of the bounds) have a finite bound."""
+    lb, ub = problem.lb, problem.ub
+    with_box = lb is not None or ub is not None
+    parts = [np.empty(0) if problem.G is None else problem.h]
+    if with_box:
+        parts += [
+            np.full(n, -np.inf) if lb is None else lb,
+            np.full(n, np.inf) if ub is None else ub,
+        ]
+    else:
+        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
+    return with_box, np.isfinite(np.concatenate(parts))
+
+
+class FiniteRows:
+    """The rows of ``G`` and the bounds with a finite right-hand side (the others are left out,
+    as Clarabel's presolve does): ``g_idx``, ``lb_idx``, ``ub_idx``, and ``kept``, their mask
+    (:func:`finite_mask`) as bytes."""
+
+    def __init__(self, problem: qpsolvers.Problem, n: int):
+        self.n = n
+        m = self.m_all = 0 if problem.G is None else problem.G.shape[0]
+        self.with_box, kept = finite_mask(problem, n)
+        masks = kept[:m], kept[m : m + n], kept[m + n :]
+        self.all_kept = all(mask.all() for mask in masks)
+        self.g_idx, self.lb_idx, self.ub_idx = map(np.flatnonzero, masks)
+        self.kept = kept.tobytes()
+
+    def scatter(self, w_g, w_lb, w_ub) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, z_box)`` from the multipliers of the kept rows of ``G``, ``lb`` and ``ub``."""
+        z = np.zeros(self.m_all)
+        z[self.g_idx] = w_g
+        z_box = np.zeros(self.n if self.with_box else 0)
+        z_box[self.lb_idx] -= w_lb
+        z_box[self.ub_idx] += w_ub
+        return z, z_box
+
+
 def dense_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
     """``P, q, A, b, G, h, lb, ub`` as dense float64 arrays (``None`` kept; ``A``, ``G`` 2-D)."""
     P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
@@ -277,10 +318,8 @@ def _vectors(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
     """``P, q, A, b, G, h, lb, ub`` as they are when they are what a controller builds (float64
     arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts); shapes are
-    not compared here (:func:`check_shapes`).
-
-    The dense backends' per-tick path: one chain of tests, dtypes by identity first (numpy's
-    float64 descriptor is a singleton except in unpickled arrays, which take the ``==``).
+    not compared here (:func:`check_shapes`). Dtypes by identity first (numpy's float64
+    descriptor is a singleton except in unpickled arrays, which take the ``==``).
     """
     P, q, A, b = problem.P, problem.q, problem.A, problem.b
     G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
@@ -337,34 +376,20 @@ def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]
         ProblemFormatError: an array whose shape does not fit ``n`` and the rows of ``A``
             and ``G`` (naming the backend, the array and both shapes).
     """
-    if P.shape != (n, n):
-        _refuse(backend, "P", P.shape, (n, n))
-    me = _rows(backend, A, b, n, ("A", "b", "me"))
-    mi = _rows(backend, G, h, n, ("G", "h", "mi"))
-    for key, v in (("lb", lb), ("ub", ub)):
-        if v is not None and v.shape != (n,):
-            _refuse(backend, key, v.shape, (n,))
+    me, mi = (0 if M is None else M.shape[0] for M in (A, G))
+    checks = [("P", P, (n, n), (n, n))]  # (name, array, its shape, the shape shown)
+    for matrix, M, vector, v, count, m in (("A", A, "b", b, "me", me), ("G", G, "h", h, "mi", mi)):
+        if M is not None:
+            checks += [(matrix, M, (m, n), (count, n)), (vector, v, (m,), (m,))]
+    checks += [(key, v, (n,), (n,)) for key, v in (("lb", lb), ("ub", ub)) if v is not None]
+    for key, v, shape, shown in checks:
+        if v is None or v.shape != shape:
+            raise ProblemFormatError(
+                f"backend '{backend}': {key} has shape {() if v is None else tuple(v.shape)}, "
+                f"expected {shown} (from q and the rows of A and G)",
+                key=key,
+            )
     return me, mi
-
-
-def _refuse(backend: str, key: str, shape, expected) -> None:
-    raise ProblemFormatError(
-        f"backend '{backend}': {key} has shape {tuple(shape)}, expected {tuple(expected)} "
-        "(from q and the rows of A and G)",
-        key=key,
-    )
-
-
-def _rows(backend: str, M, v, n: int, names: tuple[str, str, str]) -> int:
-    if M is None:
-        return 0
-    matrix, vector, count = names
-    if M.ndim != 2 or M.shape[1] != n:
-        _refuse(backend, matrix, M.shape, (count, n))
-    m = M.shape[0]
-    if v is None or v.shape != (m,):
-        _refuse(backend, vector, () if v is None else v.shape, (m,))
-    return m
 
 
 def wants_sparse(problem: qpsolvers.Problem) -> bool:

@@ -5,9 +5,6 @@ qpsolvers' sign convention::
 
     P x + q + A^T y + G^T z + z_box = 0,   z >= 0,
     z_box < 0 where the lower bound is active, > 0 where the upper bound is.
-
-A backend may keep state between calls (a persistent solver, a warm start from the previous
-tick); :meth:`Backend.reset` forgets it.
 """
 
 from __future__ import annotations
@@ -36,13 +33,12 @@ class BackendSolution(qpsolvers.Solution):
     solver_time_s: float | None = None
     backend: str = ""
     error: str | None = None
+    _obj = None  # what the obj property stores (not a field)
 
-    def __getattr__(self, name: str):  # the defaults of an instance made by new_solution
+    def __getattr__(self, name: str):  # the default extras of an instance made by new_solution
         if name == "extras":
             extras = self.extras = {}
             return extras
-        if name == "_obj":
-            return None
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 
@@ -74,6 +70,44 @@ def new_solution(
 
 
 _new = object.__new__
+
+
+class _Duals:
+    """``y``, ``z`` and ``z_box`` of a :class:`ViewSolution`, made on the first read of any.
+
+    A non-data descriptor: the first read puts all three views into the instance, where
+    later reads (and assigned values) are found without calling this.
+    """
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, sol, owner=None):
+        if sol is None:
+            return self
+        d = sol.__dict__
+        out = d.get("_out")  # None: no solution
+        _, sy, sz, sb = d["_slices"] if out is not None else _NO_SLICES
+        if "y" not in d:
+            d["y"] = None if sy is None else out[sy]
+        if "z" not in d:
+            d["z"] = None if sz is None else out[sz]
+        if "z_box" not in d:
+            d["z_box"] = None if sb is None else out[sb]
+        return d[self.name]
+
+
+_NO_SLICES = (None, None, None, None)
+
+
+class ViewSolution(BackendSolution):
+    """A solution whose ``x`` is a view of one output vector ``_out`` and whose ``y``, ``z``,
+    ``z_box`` are views made on the first read of any (a closed loop reads only ``x``):
+    ``_slices`` says where ``x``, ``y``, ``z``, ``z_box`` lie in ``_out`` (``None``: absent)."""
+
+    y = _Duals()
+    z = _Duals()
+    z_box = _Duals()
 
 
 def error_solution(problem: qpsolvers.Problem, exc: BaseException) -> BackendSolution:
@@ -200,6 +234,9 @@ class PersistentBackend(Backend):
     def __init__(self, profile: str | Profile = "default", **settings):
         super().__init__(profile, **settings)
         self.reset()
+
+    def reset(self) -> None:
+        self._solver = self._layout = None  # the kept solver object and its data layout
 
     def _solve(self, problem, warm_start):
         try:

@@ -2,13 +2,8 @@
 
 Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with ``C = [A; G; -I; I]``,
 ``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``, the rows with an infinite bound left out
-(part of the pattern); its ``w`` gives ``y = w_A``, ``z = w_G`` (zero on rows left out) and
-``z_box = w_ub - w_lb``. A ``DefaultSolver`` is built once and ``update``-d while shape and
+(part of the pattern). A ``DefaultSolver`` is built once and ``update``-d while shape and
 pattern hold; ``solver_time_s`` only for a freshly built one. ``warm_start`` is ignored.
-
-Settings: ``tol_feas = tol_gap_abs = eps_abs``, ``tol_gap_rel = eps_rel``, ``max_iter``,
-``time_limit`` [s], others (:func:`~qpbench.backends._common.solver_options`) set on
-``DefaultSettings``. ``ValueError``, ``TypeError`` and Rust panics become status ``error``.
 """
 
 from __future__ import annotations
@@ -22,10 +17,12 @@ from . import register
 from ._common import (
     EMPTY,
     GENERIC_KEYS,
+    FiniteRows,
     StackedCsc,
     all_dense,
     all_finite,
     dense_bounds,
+    finite_mask,
     own_settings,
     solver_options,
 )
@@ -37,29 +34,24 @@ if TYPE_CHECKING:
     import qpsolvers
 
 
-class ConeLayout(StackedCsc):
+class ConeLayout(FiniteRows, StackedCsc):
     """The pattern of ``P`` and ``C = [A; G_kept; -I_kept; I_kept]`` of one problem."""
 
     def __init__(self, problem):
-        self.n = n = problem.q.shape[0]
-        self.meq, self.m_all = (0 if M is None else M.shape[0] for M in (problem.A, problem.G))
-        self.with_box, kept = _kept(problem, n)
-        m = self.m_all
-        g_keep, lb_keep, ub_keep = kept[:m], kept[m : m + n], kept[m + n :]
-        self.all_kept = bool(g_keep.all() and ub_keep.all() and lb_keep.all())
-        self._g_idx, self._lb_idx, self._ub_idx = map(np.flatnonzero, (g_keep, lb_keep, ub_keep))
-        self.m = self._g_idx.size
-        eyes = [(-1.0, self._lb_idx), (1.0, self._ub_idx)] if self.with_box else []
-        super().__init__(problem.P, self.blocks(problem), eyes, n)
-        kept = kept.tobytes()
-        self.key = (self.dense, n, self.meq, m, self.with_box, kept, self.structure)
+        n = problem.q.shape[0]
+        FiniteRows.__init__(self, problem, n)
+        self.meq = 0 if problem.A is None else problem.A.shape[0]
+        self.m = self.g_idx.size
+        eyes = [(-1.0, self.lb_idx), (1.0, self.ub_idx)] if self.with_box else []
+        StackedCsc.__init__(self, problem.P, self.blocks(problem), eyes, n)
+        self.key = (self.dense, n, self.meq, self.m_all, self.with_box, self.kept, self.structure)
 
     def blocks(self, problem) -> list:
         """``[A; G_kept]``, the rows of ``C`` above the identity blocks."""
         blocks = [] if problem.A is None else [problem.A]
         G = problem.G
         if G is not None and self.m < self.m_all:
-            G = (G if type(G) is np.ndarray else spa.csr_matrix(G))[self._g_idx]
+            G = (G if type(G) is np.ndarray else spa.csr_matrix(G))[self.g_idx]
         return blocks if G is None else blocks + [G]
 
     def rhs(self, problem: qpsolvers.Problem) -> np.ndarray:
@@ -69,9 +61,9 @@ class ConeLayout(StackedCsc):
             return np.concatenate([v for v in (problem.b, problem.h) if v is not None] + [-lb, ub])
         parts = [] if problem.A is None else [np.asarray(problem.b, dtype=float)]
         if problem.G is not None:
-            parts.append(np.asarray(problem.h, dtype=float)[self._g_idx])
+            parts.append(np.asarray(problem.h, dtype=float)[self.g_idx])
         if self.with_box:
-            parts += [-lb[self._lb_idx], ub[self._ub_idx]]
+            parts += [-lb[self.lb_idx], ub[self.ub_idx]]
         return np.concatenate(parts) if parts else EMPTY
 
     def cones(self, clarabel: ModuleType) -> list:
@@ -82,33 +74,12 @@ class ConeLayout(StackedCsc):
 
     def split_duals(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(y, z, z_box)`` of Clarabel's multiplier ``w``."""
-        meq, n_lb = self.meq, self._lb_idx.size
+        meq, n_lb = self.meq, self.lb_idx.size
         k = meq + self.m
         if self.all_kept:
             z_box = w[k + n_lb :] - w[k : k + n_lb] if self.with_box else EMPTY
             return w[:meq], w[meq:k], z_box
-        z = np.zeros(self.m_all)
-        z[self._g_idx] = w[meq:k]
-        z_box = np.zeros(self.n if self.with_box else 0)
-        z_box[self._lb_idx] -= w[k : k + n_lb]
-        z_box[self._ub_idx] += w[k + n_lb :]
-        return w[:meq], z, z_box
-
-
-def _kept(problem, n: int) -> tuple[bool, np.ndarray]:
-    """``(with_box, kept)``: whether the problem has bounds, and which rows of ``G``, ``lb`` and
-    ``ub`` (in this order, ``n`` each of the bounds) have a finite bound."""
-    lb, ub = problem.lb, problem.ub
-    with_box = lb is not None or ub is not None
-    parts = [np.empty(0) if problem.G is None else problem.h]
-    if with_box:
-        parts += [
-            np.full(n, -np.inf) if lb is None else lb,
-            np.full(n, np.inf) if ub is None else ub,
-        ]
-    else:
-        parts.append(np.full(2 * n, np.nan))  # no box: nothing kept
-    return with_box, np.isfinite(np.concatenate(parts))
+        return (w[:meq], *self.scatter(w[meq:k], w[k : k + n_lb], w[k + n_lb :]))
 
 
 #: Clarabel status name -> our status (also used by ``qpsolvers:clarabel``).
@@ -140,23 +111,19 @@ def quick_key(problem: qpsolvers.Problem) -> tuple | None:
     if not all_dense(P, G, A):
         return None
     n = problem.q.shape[0]
-    with_box, kept = _kept(problem, n)
+    with_box, kept = finite_mask(problem, n)
     m, meq = 0 if G is None else G.shape[0], 0 if A is None else A.shape[0]
     return (True, n, meq, m, with_box, kept.tobytes(), ())
 
 
-def _native_names(generic: dict) -> dict:
-    """Clarabel's settings for the generic ones given (any of ``eps_abs, eps_rel, max_iter, time_limit``)."""
-    out: dict = {}
-    if "eps_abs" in generic:
-        out["tol_feas"] = out["tol_gap_abs"] = float(generic["eps_abs"])
-    if "eps_rel" in generic:
-        out["tol_gap_rel"] = float(generic["eps_rel"])
-    if "max_iter" in generic:
-        out["max_iter"] = int(min(generic["max_iter"], 2**32 - 1))
-    if "time_limit" in generic:
-        out["time_limit"] = float(generic["time_limit"])
-    return out
+#: Clarabel's settings for the generic ones: name -> (generic key, conversion).
+_OWN_NAMES = {
+    "tol_feas": ("eps_abs", float),
+    "tol_gap_abs": ("eps_abs", float),
+    "tol_gap_rel": ("eps_rel", float),
+    "max_iter": ("max_iter", lambda k: int(min(k, 2**32 - 1))),  # Clarabel's u32
+    "time_limit": ("time_limit", float),
+}
 
 
 @register
@@ -178,16 +145,12 @@ class ClarabelBackend(PersistentBackend):
 
         return frozenset(own_settings(clarabel.DefaultSettings()) | set(GENERIC_KEYS))
 
-    def reset(self) -> None:
-        self._solver = None
-        self._layout: ConeLayout | None = None
-
     def _settings(self, clarabel):
         s = clarabel.DefaultSettings()
         s.verbose = False
         s.presolve_enable = False  # update() needs these two
         s.input_sparse_dropzeros = False
-        options = solver_options(self, "clarabel", _native_names)
+        options = solver_options(self, "clarabel", _OWN_NAMES)
         for key, value in options.items():
             setattr(s, key, value)
         return s

@@ -1,21 +1,12 @@
 """Backend ``cvxpy``: the modelling-layer route, a parametrised cvxpy model re-solved with new values.
 
-Model, built once per shape (then only parameter values change)::
+Model, built once per shape, the rows and bounds with an infinite right-hand side left out::
 
     minimize    1/2 ||L' x||^2 + q' x          P = L L'
     subject to  A x == b,  G_f x <= h_f,  x[i_l] >= lb_f,  x[i_u] <= ub_f
 
-(``quad_form(x, P)`` with a parameter ``P`` is not DPP: :func:`cost_factor`), the rows and
-bounds with an infinite right-hand side left out (part of the cache key). Solver: cvxpy's
-default QP solver, OSQP (Clarabel when OSQP is missing), with the profile's tolerances in its
-own names (:func:`~qpbench.backends._common.native_settings`), ``warm_start=True``; an
-explicit ``warm_start`` sets ``x.value``. Other settings go to ``Problem.solve``.
-
-Duals: ``y`` of ``A x == b``, ``z`` of ``G x <= h`` (zero on rows left out), ``z_box = nu -
-mu`` from those of ``x >= lb`` and ``x <= ub``. Statuses: ``infeasible`` ->
-primal_infeasible, ``unbounded`` -> dual_infeasible, ``user_limit`` -> max_iter,
-``..._inaccurate`` -> not_solved except after ``max_iter`` iterations (max_iter).
-``cvxpy.error.SolverError`` becomes status ``error``.
+(``quad_form(x, P)`` with a parameter ``P`` is not DPP). Solver: OSQP (Clarabel when OSQP is
+missing) with :func:`~qpbench.backends._common.native_settings`, ``warm_start=True``.
 """
 
 from __future__ import annotations
@@ -25,7 +16,7 @@ import warnings
 import numpy as np
 
 from . import register
-from ._common import as_dense, dense_bounds, generic_settings, native_settings
+from ._common import FiniteRows, as_dense, dense_bounds, generic_settings, native_settings
 from .base import Backend, BackendSolution, error_solution
 
 
@@ -39,23 +30,19 @@ def cost_factor(P: np.ndarray) -> np.ndarray:
 
 
 class _Model:
-    """The parametrised cvxpy problem of one shape."""
+    """The parametrised cvxpy problem of one shape and one set of finite rows."""
 
-    def __init__(
-        self, cp, n: int, meq: int, g_keep: np.ndarray, lb_idx: np.ndarray, ub_idx: np.ndarray
-    ):
+    def __init__(self, cp, n: int, meq: int, rows: FiniteRows):
         self.x = x = cp.Variable(n)
         self.L = cp.Parameter((n, n))
         self.q = cp.Parameter(n)
-        self.g_keep, self.lb_idx, self.ub_idx = g_keep, lb_idx, ub_idx
-        self.m_all = g_keep.shape[0]
         self.eq = self.ineq = self.lower = self.upper = None
         if meq:
             self.A, self.b = cp.Parameter((meq, n)), cp.Parameter(meq)
             self.eq = self.A @ x == self.b
-        m = int(g_keep.sum())
-        if m:
-            self.G, self.h = cp.Parameter((m, n)), cp.Parameter(m)
+        g_idx, lb_idx, ub_idx = rows.g_idx, rows.lb_idx, rows.ub_idx
+        if g_idx.size:
+            self.G, self.h = cp.Parameter((g_idx.size, n)), cp.Parameter(g_idx.size)
             self.ineq = self.G @ x <= self.h
         if lb_idx.size:
             self.lb = cp.Parameter(lb_idx.size)
@@ -67,21 +54,21 @@ class _Model:
         objective = cp.Minimize(0.5 * cp.sum_squares(self.L.T @ x) + self.q @ x)
         self.problem = cp.Problem(objective, constraints)
 
-    def set_values(self, problem, P: np.ndarray, lb, ub) -> None:
-        self.L.value = cost_factor(P)
+    def set_values(self, problem, rows: FiniteRows, lb, ub) -> None:
+        self.L.value = cost_factor(as_dense(problem.P))
         self.q.value = np.asarray(problem.q, dtype=float)
         if self.eq is not None:
             self.A.value = as_dense(problem.A)
             self.b.value = np.asarray(problem.b, dtype=float)
         if self.ineq is not None:
-            self.G.value = as_dense(problem.G)[self.g_keep]
-            self.h.value = np.asarray(problem.h, dtype=float)[self.g_keep]
+            self.G.value = as_dense(problem.G)[rows.g_idx]
+            self.h.value = np.asarray(problem.h, dtype=float)[rows.g_idx]
         if self.lower is not None:
-            self.lb.value = lb[self.lb_idx]
+            self.lb.value = lb[rows.lb_idx]
         if self.upper is not None:
-            self.ub.value = ub[self.ub_idx]
+            self.ub.value = ub[rows.ub_idx]
 
-    def duals(self, n: int, with_box: bool):
+    def duals(self, rows: FiniteRows):
         def value(c):
             return (
                 np.zeros(0)
@@ -89,12 +76,7 @@ class _Model:
                 else np.atleast_1d(np.asarray(c.dual_value, float))
             )
 
-        z = np.zeros(self.m_all)
-        z[self.g_keep] = value(self.ineq)
-        z_box = np.zeros(n if with_box else 0)
-        z_box[self.lb_idx] -= value(self.lower)
-        z_box[self.ub_idx] += value(self.upper)
-        return value(self.eq), z, z_box
+        return (value(self.eq), *rows.scatter(*map(value, (self.ineq, self.lower, self.upper))))
 
 
 @register
@@ -127,20 +109,14 @@ class CvxpyBackend(Backend):
         import cvxpy as cp
 
         sol = BackendSolution(problem)
-        q = np.asarray(problem.q)
-        n = q.shape[0]
-        P = as_dense(problem.P)
+        n = np.shape(problem.q)[0]
         meq = 0 if problem.A is None else problem.A.shape[0]
-        g_keep = np.isfinite(problem.h) if problem.G is not None else np.zeros(0, bool)
-        lb, ub = dense_bounds(problem, n)
-        with_box = lb is not None
-        lb_idx = np.flatnonzero(np.isfinite(lb)) if with_box else np.zeros(0, np.int64)
-        ub_idx = np.flatnonzero(np.isfinite(ub)) if with_box else np.zeros(0, np.int64)
-        key = (n, meq, g_keep.tobytes(), lb_idx.tobytes(), ub_idx.tobytes())
+        rows = FiniteRows(problem, n)
+        key = (n, meq, rows.kept)
         model = self._models.get(key)
         if model is None:
-            model = self._models[key] = _Model(cp, n, meq, g_keep, lb_idx, ub_idx)
-        model.set_values(problem, P, lb, ub)
+            model = self._models[key] = _Model(cp, n, meq, rows)
+        model.set_values(problem, rows, *dense_bounds(problem, n))
         if warm_start is not None:
             model.x.value = np.asarray(warm_start, dtype=float)
         if self._options is None:  # cp.installed_solvers() takes milliseconds
@@ -174,5 +150,5 @@ class CvxpyBackend(Backend):
             return sol
         if model.x.value is not None and np.all(np.isfinite(model.x.value)):
             sol.x = np.array(model.x.value, dtype=float)
-            sol.y, sol.z, sol.z_box = model.duals(n, with_box)
+            sol.y, sol.z, sol.z_box = model.duals(rows)
         return sol

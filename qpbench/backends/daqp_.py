@@ -1,26 +1,12 @@
 """Backends ``daqp`` (a persistent ``daqp.Model``) and ``daqp-stateless`` (``daqp.solve``):
-DAQP, a dual active-set solver, through its own Python API.
+DAQP, a dual active-set solver.
 
-DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with simple bounds
-native::
-
-    H = P,  f = q,  A = [A_eq; G],
-    bupper = [ub; b; h],  blower = [lb; b; -inf],  sense = [0 (n); 5 (me); 0 (mi)]
-
-(sense 5: an active, immutable equality; no box block without ``lb``/``ub``), stacked into
-buffers kept per shape. Its multipliers ``lam`` have qpsolvers' signs: ``z_box = lam[:n]``,
-``y = lam[n:n+me]``, ``z = lam[n+me:]``. Only an optimal solve carries ``x`` and duals.
-``warm_start`` is ignored.
-
-``daqp``: one ``daqp.Model`` per shape (shapes checked first: DAQP ignores an update of another
-shape), ``setup`` on its first tick, then ``update`` + ``solve`` from the previous working set;
-``H`` and ``f`` go to ``update`` only when they changed, so DAQP keeps its factorisation. A
-refused ``setup``/``update`` or a solve that is not optimal drops the model.
-``solver_time_s``: DAQP's ``setup_time + solve_time``.
-
-Settings (:func:`~qpbench.backends._common.solver_options`): ``primal_tol = dual_tol =
-eps_abs``, ``iter_limit = max_iter``, ``time_limit`` [s]; others are DAQP's own (the keys of
-``daqp.Model().settings``). ``ValueError``/``TypeError`` become status ``error``.
+DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with ``A = [A_eq; G]``,
+``bupper = [ub; b; h]``, ``blower = [lb; b; -inf]``, sense 5 (an immutable equality) on the
+``b`` rows, no box rows without bounds; ``lam`` has qpsolvers' signs. ``daqp`` sets a model up
+per shape, then updates it (``H``, ``f`` only when changed) and solves from the previous
+working set; a refused set-up or a status other than optimal drops it. ``warm_start`` is
+ignored.
 """
 
 from __future__ import annotations
@@ -76,12 +62,9 @@ class _Buffers:
         self.sense = np.zeros(m, dtype=np.intc)
         self.sense[nb : nb + me] = 5  # equality rows
         self.A_eq, self.A_in = self.A[:me], self.A[me:]
-        self.bu_box, self.bu_eq, self.bu_in = (
-            self.bu[:nb],
-            self.bu[nb : nb + me],
-            self.bu[nb + me :],
-        )
-        self.bl_box, self.bl_eq = self.bl[:nb], self.bl[nb : nb + me]
+        self.bu_box, self.bl_box = self.bu[:nb], self.bl[:nb]
+        self.bu_eq, self.bl_eq = self.bu[nb : nb + me], self.bl[nb : nb + me]
+        self.bu_in = self.bu[nb + me :]
 
     def fill(self, A, b, G, h, lb, ub) -> None:
         """Write a problem's rows and bounds (equalities as ``bl = bu``)."""
@@ -97,17 +80,13 @@ class _Buffers:
             self.bl_box[:] = -np.inf if lb is None else lb
 
 
-def _native_names(generic: dict) -> dict:
-    """DAQP's settings for the generic ones given (any of :data:`GENERIC_KEYS`)."""
-    out: dict = {}
-    if "eps_abs" in generic:
-        out["primal_tol"] = out["dual_tol"] = float(generic["eps_abs"])
-    if "max_iter" in generic:
-        out["iter_limit"] = int(min(generic["max_iter"], 2**31 - 1))
-    limit = generic.get("time_limit")
-    if limit is not None and np.isfinite(limit):
-        out["time_limit"] = float(limit)
-    return out
+#: DAQP's settings for the generic ones: name -> (generic key, conversion).
+_OWN_NAMES = {
+    "primal_tol": ("eps_abs", float),
+    "dual_tol": ("eps_abs", float),
+    "iter_limit": ("max_iter", lambda k: int(min(k, 2**31 - 1))),
+    "time_limit": ("time_limit", lambda t: float(t) if t is not None and np.isfinite(t) else None),
+}
 
 
 def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> BackendSolution:
@@ -155,7 +134,7 @@ class DaqpBackend(PersistentBackend):
 
     def options(self) -> dict:
         """The keyword settings given to DAQP (profile first, then the user's)."""
-        options = solver_options(self, "daqp", _native_names)
+        options = solver_options(self, "daqp", _OWN_NAMES)
         allowed = sorted((_DAQP[0] if _DAQP else _daqp()).Model().settings)
         refuse_unknown("daqp", options, allowed, "DAQP's own")
         return options

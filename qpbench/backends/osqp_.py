@@ -1,13 +1,9 @@
 """Backend ``osqp``: OSQP (ADMM) through its own Python API.
 
-OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]``,
-``l = [-inf; b; lb]``, ``u = [h; b; ub]`` (the identity rows only with bounds); its multiplier
-``w`` has qpsolvers' signs: ``z = w[:m]``, ``y = w[m:m+meq]``, ``z_box = w[m+meq:]``.
-
-The solver is set up once and ``update``-d while shape and pattern hold, warm-starting from its
-previous iterate or from ``warm_start``. Settings as ``qpsolvers:osqp``
-(:func:`~qpbench.backends._common.solver_options`), others to ``OSQP.setup``.
-``OSQPException`` and ``ValueError`` become status ``error``.
+OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]`` (the identity
+rows only with bounds), ``l = [-inf; b; lb]``, ``u = [h; b; ub]``. The solver is set up once
+and ``update``-d while shape and pattern hold, warm-starting from its previous iterate or from
+``warm_start``.
 """
 
 from __future__ import annotations
@@ -17,8 +13,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import register
-
-# the same helpers as clarabel_'s: both solve the stacked CSC layout of _common
 from ._common import (
     EMPTY,
     GENERIC_KEYS,
@@ -96,26 +90,20 @@ def _stack(*vectors) -> np.ndarray:
     return np.concatenate(vectors) if vectors else EMPTY
 
 
-_STATUS_MAP: dict = {}
+#: OSQP's status name -> our status (also read by ``qpsolvers:osqp``).
+OSQP_STATUSES = {
+    "OSQP_SOLVED": "optimal",
+    "OSQP_PRIMAL_INFEASIBLE": "primal_infeasible",
+    "OSQP_DUAL_INFEASIBLE": "dual_infeasible",
+    "OSQP_MAX_ITER_REACHED": "max_iter",
+    "OSQP_TIME_LIMIT_REACHED": "time_limit",
+    "OSQP_NON_CVX": "error",
+}
 
 
-def osqp_statuses() -> dict:
-    """OSQP's ``status_val`` (int) -> our status, built once (also read by ``qpsolvers:osqp``)."""
-    if not _STATUS_MAP:
-        import osqp
-
-        S = osqp.SolverStatus
-        _STATUS_MAP.update(
-            {
-                int(S.OSQP_SOLVED): "optimal",
-                int(S.OSQP_PRIMAL_INFEASIBLE): "primal_infeasible",
-                int(S.OSQP_DUAL_INFEASIBLE): "dual_infeasible",
-                int(S.OSQP_MAX_ITER_REACHED): "max_iter",
-                int(S.OSQP_TIME_LIMIT_REACHED): "time_limit",
-                int(S.OSQP_NON_CVX): "error",
-            }
-        )
-    return _STATUS_MAP
+def status_name(status_val: int) -> str:
+    """OSQP's name of a ``status_val``."""
+    return (_OSQP[0] if _OSQP else _import_osqp()).SolverStatus(status_val).name
 
 
 def _has_box(problem) -> bool:
@@ -138,10 +126,6 @@ class OsqpBackend(PersistentBackend):
     family = "ADMM"
     package = "osqp"
     module = "osqp"
-
-    def reset(self) -> None:
-        self._solver = None
-        self._layout: StackedLayout | None = None
 
     @classmethod
     def setting_names(cls) -> frozenset[str]:
@@ -190,7 +174,7 @@ class OsqpBackend(PersistentBackend):
             sol.y, sol.z, sol.z_box = layout.split_duals(res.y)
             sol._obj = info.obj_val
             return sol
-        status = _STATUS_MAP.get(status_val, "not_solved")
+        status = OSQP_STATUSES.get(osqp.SolverStatus(status_val).name, "not_solved")
         sol.status = status
         if status == "error":
             sol.error = f"OSQP: {info.status}"
@@ -240,11 +224,10 @@ _ndarray = np.ndarray
 
 
 def _import_osqp():
-    """Import osqp once: the status table and :data:`_SOLVED`."""
+    """Import osqp once, and read :data:`_SOLVED`."""
     global _SOLVED
     import osqp
 
-    osqp_statuses()
     _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
     _OSQP.append(osqp)
     return osqp

@@ -56,9 +56,7 @@ class PinvBackend(Backend):
         sol.x = x
         sol.y = y
         sol.z = np.zeros(0 if problem.G is None else problem.G.shape[0])
-        sol.z_box = (
-            np.zeros(n) if (problem.lb is not None or problem.ub is not None) else np.zeros(0)
-        )
+        sol.z_box = np.zeros(n if problem.lb is not None or problem.ub is not None else 0)
         sol.status = "optimal"
         sol.iterations = 0
         return sol

@@ -1,14 +1,10 @@
 """Backend ``piqp``: PIQP (proximal interior point) through its own dense and sparse APIs.
 
-``piqp.DenseSolver`` solves ``min 1/2 x'Px + c'x  s.t.  A x = b,  h_l <= G x <= h_u,
-x_l <= x <= x_u`` with ``h_l = -inf``; its multipliers are non-negative per side: ``z = z_u -
-z_l``, ``z_box = z_bu - z_bl``. A problem :func:`~qpbench.backends._common.dense_route` sends to
-the sparse API goes to ``piqp.SparseSolver`` (``P``'s upper triangle).
-
-The solver is ``setup`` once per shape (per structure when sparse), then ``update``-d; a status
-other than optimal drops it. ``warm_start`` is ignored (PIQP starts from its own point).
-Settings as ``qpsolvers:piqp`` (no time limit); others set on the solver's settings.
-``ValueError``, ``TypeError`` and ``RuntimeError`` become status ``error``.
+``piqp.DenseSolver`` with ``h_l = -inf``, ``z = z_u - z_l``, ``z_box = z_bu - z_bl``; a problem
+:func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
+``piqp.SparseSolver`` (``P``'s upper triangle). The solver is ``setup`` once per shape (per
+structure when sparse), then ``update``-d; a status other than optimal drops it.
+``warm_start`` is ignored.
 """
 
 from __future__ import annotations
@@ -27,9 +23,18 @@ from ._common import (
 )
 from .base import BackendSolution, PersistentBackend, new_solution
 
-_STATUS_MAP: dict = {}
 _MODULE: list = []
 _SOLVED: list = []  # piqp.PIQP_SOLVED.value (an int compares faster than the enum, which hashes slower still)
+
+#: PIQP's status name -> our status (also read by ``qpsolvers:piqp``).
+PIQP_STATUSES = {
+    "PIQP_SOLVED": "optimal",
+    "PIQP_PRIMAL_INFEASIBLE": "primal_infeasible",
+    "PIQP_DUAL_INFEASIBLE": "dual_infeasible",
+    "PIQP_MAX_ITER_REACHED": "max_iter",
+    "PIQP_NUMERICS": "error",
+    "PIQP_INVALID_SETTINGS": "error",
+}
 
 
 def _piqp():
@@ -38,25 +43,7 @@ def _piqp():
 
         _MODULE.append(piqp)
         _SOLVED.append(piqp.PIQP_SOLVED.value)
-        piqp_statuses()
     return _MODULE[0]
-
-
-def piqp_statuses() -> dict:
-    """PIQP's status -> our status, built once (also read by ``qpsolvers:piqp``)."""
-    if not _STATUS_MAP:
-        S = _piqp()
-        _STATUS_MAP.update(
-            {
-                S.PIQP_SOLVED: "optimal",
-                S.PIQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                S.PIQP_DUAL_INFEASIBLE: "dual_infeasible",
-                S.PIQP_MAX_ITER_REACHED: "max_iter",
-                S.PIQP_NUMERICS: "error",
-                S.PIQP_INVALID_SETTINGS: "error",
-            }
-        )
-    return _STATUS_MAP
 
 
 @register
@@ -79,13 +66,10 @@ class PiqpBackend(PersistentBackend):
 
     def __init__(self, profile="default", **settings):
         super().__init__(profile, **settings)
-        self._settings_dict = self._make_settings()
-
-    def _make_settings(self) -> dict:
         options = solver_options(self, "piqp")
         allowed = sorted(a for a in dir(_piqp().DenseSolver().settings) if not a.startswith("_"))
         refuse_unknown("piqp", options, allowed, "PIQP's own")
-        return {"verbose": False, "compute_timings": True, **options}
+        self._settings_dict = {"verbose": False, "compute_timings": True, **options}
 
     def reset(self) -> None:
         self._solver = self._shapes = self._info = None
@@ -127,14 +111,13 @@ class PiqpBackend(PersistentBackend):
     def _solve_sparse(self, problem):
         """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
         P, q, A, b, G, h, lb, ub = sparse_parts(problem, upper=True)
-        check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-        shapes = (
+        shapes = (  # every shape: the kept solver's were checked at its set-up
             "sparse",
             q.shape,
             None if b is None else b.shape,
             None if h is None else h.shape,
-            lb is None,
-            ub is None,
+            None if lb is None else lb.shape,
+            None if ub is None else ub.shape,
             structure_key(P, A, G),
         )
         return self._run(problem, _piqp().SparseSolver, shapes, P, q, A, b, G, h, lb, ub)
@@ -161,8 +144,8 @@ class PiqpBackend(PersistentBackend):
             sol.z = EMPTY if G is None else z_u - z_l
             sol.z_box = EMPTY if lb is None and ub is None else z_bu - z_bl
         else:
-            status = _STATUS_MAP.get(raw_status, "not_solved")
-            raw = str(raw_status).split(".")[-1]
+            raw = raw_status.name
+            status = PIQP_STATUSES.get(raw, "not_solved")
             sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
             self.reset()
             if status == "error":

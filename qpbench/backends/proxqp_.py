@@ -1,20 +1,13 @@
 """Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's dense and sparse APIs.
 
-``proxqp.dense.QP(n, n_eq, n_in, box_constraints=True)`` with ``H = P, g = q, C = G,
-l = -inf, u = h`` and the bounds as ProxQP's box (``z_box``: the last ``n`` entries of its
-``z``); a problem :func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
-``proxqp.sparse.QP`` with the bounds stacked under ``G``. Multipliers have qpsolvers' signs.
-
-The ``QP`` object is ``init``-ed once per shape (per structure when sparse), then ``update``-d.
-Its first solve starts from ``EQUALITY_CONSTRAINED_INITIAL_GUESS`` (as ``qpsolvers:proxqp``),
-the next ones from ``WARM_START_WITH_PREVIOUS_RESULT``; ``warm_start`` goes to
-``QP.solve(x, None, None)``; ``update_preconditioner=True`` recomputes the preconditioner at
-``update``. An infeasibility verdict after a warm start, or on the sparse route, is checked by
-one cold solve on a fresh object (``extras["cold_retry"]``, iterations and times added up;
-``retry_cold=False``: not); after a verdict the object is dropped.
-
-Settings: :func:`~qpbench.backends._common.solver_options` (no time limit), set on
-``QP.settings``. ``ValueError`` and ``RuntimeError`` become status ``error``.
+``proxqp.dense.QP`` with ``C = G``, ``l = -inf``, ``u = h`` and the bounds as ProxQP's box
+(``z_box``: the last ``n`` entries of its ``z``); a problem
+:func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
+``proxqp.sparse.QP`` with the bounds stacked under ``G``. The ``QP`` object is ``init``-ed
+once per shape (per structure when sparse), then ``update``-d, solved first from the
+equality-constrained guess and then from the previous result; ``warm_start`` goes to
+``QP.solve``. An infeasibility verdict after a warm start, or on the sparse route, is checked
+by one cold solve on a fresh object (``extras["cold_retry"]``; ``retry_cold=False``: not).
 """
 
 from __future__ import annotations
@@ -36,9 +29,16 @@ from ._common import (
 )
 from .base import PersistentBackend, new_solution
 
-_STATUS_MAP: dict = {}
 _MODULE: list = []
 _SOLVED: list = []  # QPSolverOutput.PROXQP_SOLVED: compared by identity (the enum hashes in Python)
+
+#: ProxQP's ``QPSolverOutput`` name -> our status (also read by ``qpsolvers:proxqp``).
+PROXQP_STATUSES = {
+    "PROXQP_SOLVED": "optimal",
+    "PROXQP_PRIMAL_INFEASIBLE": "primal_infeasible",
+    "PROXQP_DUAL_INFEASIBLE": "dual_infeasible",
+    "PROXQP_MAX_ITER_REACHED": "max_iter",
+}
 
 
 def _proxqp():
@@ -47,28 +47,13 @@ def _proxqp():
         import proxsuite
 
         _MODULE.append(proxsuite.proxqp)
+        _SOLVED.append(proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED)
     return _MODULE[0]
-
-
-def proxqp_statuses() -> dict:
-    """``QPSolverOutput`` -> our status, built once (also read by ``qpsolvers:proxqp``)."""
-    if not _STATUS_MAP:
-        O = _proxqp().QPSolverOutput
-        _SOLVED.append(O.PROXQP_SOLVED)
-        _STATUS_MAP.update(
-            {
-                O.PROXQP_SOLVED: "optimal",
-                O.PROXQP_PRIMAL_INFEASIBLE: "primal_infeasible",
-                O.PROXQP_DUAL_INFEASIBLE: "dual_infeasible",
-                O.PROXQP_MAX_ITER_REACHED: "max_iter",
-            }
-        )
-    return _STATUS_MAP
 
 
 def _status(value) -> tuple[str, str]:
     """Our status and ProxQP's name of a ``QPSolverOutput``."""
-    return proxqp_statuses().get(value, "not_solved"), str(value).split(".")[-1]
+    return PROXQP_STATUSES.get(value.name, "not_solved"), value.name
 
 
 @register
@@ -169,7 +154,6 @@ class ProxqpBackend(PersistentBackend):
     def _run(self, problem, key, data, n, n_in, with_box, warm_start):
         """Update (same ``key``) or build the ``QP`` object with ``data``, solve, read the result
         (``n_in`` rows of ``G`` lead ProxQP's ``z``; with ``with_box`` the next ``n`` are ``z_box``)."""
-        n_eq = key[1]
         warm = self._qp is not None and key == self._key
         if warm:
             qp = self._qp
@@ -184,7 +168,7 @@ class ProxqpBackend(PersistentBackend):
             qp.solve()
         info = self._info
         raw_status = info.status
-        if _SOLVED and raw_status is _SOLVED[0]:
+        if raw_status is _SOLVED[0]:
             status, raw = "optimal", "PROXQP_SOLVED"
         else:
             status, raw = _status(raw_status)
@@ -219,11 +203,6 @@ class ProxqpBackend(PersistentBackend):
         if status == "primal_infeasible" or status == "dual_infeasible":
             self.reset()  # no warm start from an infeasibility exit
             return sol
-        return self._read_solution(qp, sol, info, n, n_eq, n_in, with_box)
-
-    def _read_solution(self, qp, sol, info, n: int, n_eq: int, n_in: int, with_box: bool):
-        """Copy x, y, z (and z_box: the ``n`` rows after ``n_in``) out of ProxQP's results into ``sol``."""
-        status = sol.status
         views = self._views
         if views is None:  # update and solve write into the buffers these views show
             res = qp.results
@@ -232,7 +211,7 @@ class ProxqpBackend(PersistentBackend):
         x = x_view.copy()
         if all_finite(x):
             sol.x = x
-            sol.y = y_view.copy() if n_eq else EMPTY
+            sol.y = y_view.copy() if key[1] else EMPTY
             z = z_view.copy()  # [z; z_box] with a box
             sol.z, sol.z_box = (z[part_z], z[part_box]) if with_box else (z, EMPTY)
         if status == "optimal":

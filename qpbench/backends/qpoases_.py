@@ -1,25 +1,13 @@
 """Backend ``qpoases``: qpOASES (online active set) with hotstart, through a compiled shim.
 
-qpOASES comes from the ``cmeel-qpoases`` wheel; the C shim around ``qpOASES::SQProblem``
-(:mod:`._qpoases_shim`) is compiled on first use: :meth:`QpoasesBackend.prepare` (the
-constructor calls it) before timing anything.
-
-``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with ``H = P``, ``g = q``,
-``A = [A_eq; G]``, ``lbA = [b; -inf]``, ``ubA = [b; h]`` (infinite bounds as ``INFTY = 1e20``);
-the shim negates qpOASES' multipliers into qpsolvers' sign. The arrays are copied into the
-one buffer the shim reads (shapes checked in full when the sizes change). The first tick of a
-shape calls ``init()``, the next ones ``hotstart()``; a status other than optimal makes the
-next tick call ``init()``. ``warm_start`` is ignored.
-
-Settings: ``max_iter`` -> ``nWSR``, ``time_limit`` [s] -> qpOASES' CPU-time limit (``eps_abs``,
-``eps_rel`` unused: an active-set method ends on the exact solution of its working set);
-``preset`` (:data:`PRESETS`) and the options :data:`OPTION_NAMES`.
-
-``solver_time_s``: the time of ``init()``/``hotstart()``, measured in the shim with
-``CLOCK_MONOTONIC`` (``extras["qpoases_cputime_s"]``: qpOASES' own, from ``gettimeofday``).
-Statuses: ``RET_MAX_NWSR_REACHED`` -> max_iter, or time_limit with fewer than ``nWSR``
-recalculations; infeasible / unbounded -> primal_infeasible / dual_infeasible; other failures
--> error with qpOASES' message. Only an optimal solve carries ``x`` and duals.
+``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with ``A = [A_eq; G]``,
+``lbA = [b; -inf]``, ``ubA = [b; h]``, written into the buffer the shim
+(:mod:`._qpoases_shim`, compiled on first use) reads. The first tick of a shape calls
+``init()``, the next ones ``hotstart()``; a status other than optimal makes the next tick call
+``init()``. ``warm_start`` is ignored. Settings: ``max_iter`` -> ``nWSR``, ``time_limit`` [s]
+-> qpOASES' CPU-time limit, ``preset`` (:data:`PRESETS`) and :data:`OPTION_NAMES`.
+``solver_time_s``: the shim's ``CLOCK_MONOTONIC`` time of the call (qpOASES' own in
+``extras["qpoases_cputime_s"]``).
 """
 
 from __future__ import annotations
@@ -40,7 +28,7 @@ from ._common import (
     refuse_unknown,
 )
 from ._qpoases_shim import OPTION_NAMES, PRESETS, Workspace
-from .base import Backend, BackendSolution, new_solution
+from .base import Backend, ViewSolution, new_solution
 
 #: Shim status -> our status.
 _STATUSES = {
@@ -51,37 +39,6 @@ _STATUSES = {
     -3: "dual_infeasible",
     -1: "error",
 }
-
-
-def _multipliers(part: int, name: str, doc: str) -> property:
-    """Field ``name`` of :class:`QpoasesSolution`: ``_xy[_parts[part]]`` on first read (None
-    without ``_xy``: no solution), kept; an assigned value replaces it."""
-    key = "_" + name
-
-    def get(self):
-        d = self.__dict__
-        value = d.get(key, _UNSET)
-        if value is _UNSET:
-            xy = d.get("_xy")
-            value = d[key] = None if xy is None else xy[d["_parts"][part]]
-        return value
-
-    def set_(self, value) -> None:
-        self.__dict__[key] = value
-
-    return property(get, set_, doc=doc)
-
-
-_UNSET = object()
-
-
-class QpoasesSolution(BackendSolution):
-    """A qpOASES tick's solution: ``x`` and the multipliers are views of one copy of the shim's
-    output, the multipliers made on first read (a closed loop reads only ``x``)."""
-
-    z_box = _multipliers(1, "z_box", "Multipliers of the bounds ``lb <= x <= ub``.")
-    y = _multipliers(2, "y", "Multipliers of the equalities ``A x = b``.")
-    z = _multipliers(3, "z", "Multipliers of the inequalities ``G x <= h``.")
 
 
 @register
@@ -132,9 +89,7 @@ class QpoasesBackend(Backend):
     def unavailable_reason(cls) -> str | None:
         if shim.qpoases_prefix() is None:
             return "cmeel-qpoases is not installed (pip install cmeel-qpoases)"
-        if not cls.needs_compile():
-            return None
-        if shim.compiler() is None:
+        if cls.needs_compile() and shim.compiler() is None:
             return "no C++ compiler ($CXX, g++ or c++) to build the qpOASES shim"
         return None
 
@@ -155,8 +110,14 @@ class QpoasesBackend(Backend):
             None if ub is None else ub.size,
         )
         ws = self._ws
-        if ws is None or sizes != ws.sizes:
-            ws = self._workspace(P, q, A, b, G, h, lb, ub)
+        if ws is None or sizes != ws.sizes:  # the workspace of this shape (checked here)
+            me, mi = check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+            key = (q.shape[0], me, mi, lb is not None or ub is not None)
+            if ws is None or ws.key != key:
+                self._ws = None
+                ws = self._ws = Workspace(
+                    key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
+                )
             ws.sizes = sizes
         n, me, mi, box = ws.key
         try:
@@ -180,35 +141,19 @@ class QpoasesBackend(Backend):
         obj, _, solve_time, cputime = ws.s.tolist()
         _, _, iterations, raw, _ = ws.iv.tolist()
         extras = {"raw_status": raw, "qpoases_cputime_s": cputime}
-        sol = new_solution(problem, _STATUSES[st], extras, QpoasesSolution)
+        sol = new_solution(problem, _STATUSES[st], extras, ViewSolution)
         sol.iterations = iterations
         sol.solver_time_s = solve_time
         if st == 0:  # x and the multipliers: one copy, x a view of it
-            xy = sol._xy = ws.xy.copy()
-            parts = sol._parts = ws.parts
-            sol.x = xy[parts[0]]
+            out = sol._out = ws.xy.copy()
+            parts = sol._slices = ws.parts
+            sol.x = out[parts[0]]
             sol._obj = obj
         elif st == -1:
-            sol.error = self._message(raw)
+            message = self._lib.qpb_message(raw)
+            text = message.decode(errors="replace") if message else ""
+            sol.error = f"qpOASES return value {raw}: {text}"
         return sol
-
-    def _message(self, raw: int) -> str:
-        """The error text of qpOASES' return value ``raw``."""
-        message = self._lib.qpb_message(raw)
-        return f"qpOASES return value {raw}: {message.decode(errors='replace') if message else ''}"
-
-    def _workspace(self, P, q, A, b, G, h, lb, ub) -> Workspace:
-        """The workspace of this problem's shape (checked here), the current one when the shape holds."""
-        n = q.shape[0]
-        me, mi = check_shapes(self.name, n, P, A, b, G, h, lb, ub)
-        key = (n, me, mi, lb is not None or ub is not None)
-        ws = self._ws
-        if ws is None or ws.key != key:
-            self._ws = None
-            ws = self._ws = Workspace(
-                key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
-            )
-        return ws
 
 
 _INF = np.inf

@@ -1,21 +1,11 @@
 """Backends ``qpsolvers:<name>``: every solver qpsolvers can drive, through its wrapper.
 
-One stateless class per solver, generated at import and registered as ``qpsolvers:<name>``,
-for the solvers of :data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and
-:data:`OPTIONAL_SOLVERS` (a missing one shows as unavailable). A call is what
-:func:`qpsolvers.solve_problem` does (``check_constraints``, then qpsolvers' function for the
-solver, :func:`solver_function`); ``warm_start`` is passed as ``initvals``. Sparse-only solvers
-get CSC matrices, dense-only ones dense matrices.
-
-Settings: :func:`~qpbench.backends._common.native_settings`, then the other settings
-verbatim; under a ``qpbenchmark:<settings>`` profile qpbenchmark's arguments for the solver
-plus the backend's settings. The wrapper's warnings are ignored
-(:func:`silence_wrapper_warnings`).
-
-Statuses: ``found`` -> ``optimal``; otherwise read from the solver's report in
-``Solution.extras`` where qpsolvers keeps one (:data:`STATUS_READERS`, raw value in
-``extras["raw_status"]``), else ``not_solved``. :class:`qpsolvers.QPError` and ``ValueError``
-become status ``error``.
+One stateless class per solver, generated at import, for the solvers of
+:data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and :data:`OPTIONAL_SOLVERS` (a
+missing one shows as unavailable). A call is what :func:`qpsolvers.solve_problem` does;
+``warm_start`` is passed as ``initvals``. Statuses: ``found`` -> ``optimal``, otherwise read
+from the solver's report where qpsolvers keeps one (:data:`STATUS_READERS`), else
+``not_solved``.
 """
 
 from __future__ import annotations
@@ -29,11 +19,11 @@ import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings, native_settings
-from .base import Backend, BackendSolution, error_solution, new_solution
+from .base import Backend, error_solution, new_solution
 from .clarabel_ import CLARABEL_STATUSES
-from .osqp_ import osqp_statuses
-from .piqp_ import piqp_statuses
-from .proxqp_ import proxqp_statuses
+from .osqp_ import OSQP_STATUSES, status_name
+from .piqp_ import PIQP_STATUSES
+from .proxqp_ import PROXQP_STATUSES
 
 #: Each solver qpsolvers can drive: (algorithm family, Python distribution for the version column).
 SOLVERS: dict[str, tuple[str, str | None]] = {
@@ -65,21 +55,15 @@ SOLVERS: dict[str, tuple[str, str | None]] = {
 }
 
 
-def _plain(value, extras) -> str:
-    return str(value)
-
-
-def _table_reader(read, table, text=_plain) -> object:
+def _table_reader(read, table, text=lambda value, extras: str(value)) -> object:
     """A status reader: ``read(extras)`` is the solver's status (None: no report), ``table``
-    (a dict, or a function returning one) maps it to ours, ``text(value, extras)`` is the raw
-    status kept."""
+    maps it to ours, ``text(value, extras)`` is the raw status kept."""
 
     def reader(extras) -> tuple[str, str | None]:
         value = read(extras)
         if value is None:
             return "not_solved", None
-        mapping = table() if callable(table) else table
-        return mapping.get(value, "not_solved"), text(value, extras)
+        return table.get(value, "not_solved"), text(value, extras)
 
     return reader
 
@@ -89,7 +73,12 @@ def _info(read):
     return lambda e: None if e.get("info") is None else read(e["info"])
 
 
-_INFO_STATUS = _info(lambda info: info.status)
+_INFO_NAME = _info(lambda info: info.status.name)
+
+
+def _info_text(value, extras) -> str:
+    return str(extras["info"].status)
+
 
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
@@ -97,13 +86,9 @@ STATUS_READERS = {
         lambda e: None if e.get("status") is None else str(e["status"]).split(".")[-1],
         CLARABEL_STATUSES,
     ),
-    "osqp": _table_reader(
-        _info(lambda info: int(info.status_val)),
-        osqp_statuses,
-        lambda v, e: str(e["info"].status),
-    ),
-    "proxqp": _table_reader(_INFO_STATUS, proxqp_statuses),
-    "piqp": _table_reader(_INFO_STATUS, piqp_statuses),
+    "osqp": _table_reader(_info(lambda i: status_name(i.status_val)), OSQP_STATUSES, _info_text),
+    "proxqp": _table_reader(_INFO_NAME, PROXQP_STATUSES, _info_text),
+    "piqp": _table_reader(_INFO_NAME, PIQP_STATUSES, _info_text),
     # SCS 3: 1 solved, -1 unbounded, -2 infeasible, -6/-7 the inaccurate ones.
     "scs": _table_reader(
         lambda e: e.get("status_val"),
@@ -154,15 +139,13 @@ def _iter_quadprog(extras: dict) -> int:
     return int(it.item(0) if type(it) is _ndarray else np.ravel(it)[0])
 
 
-#: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps
-#: (raising one of :data:`_ITERATION_ERRORS` when ``extras`` lacks it).
+#: Solver -> ``reader(extras) -> iterations`` for the solvers whose count qpsolvers keeps.
 ITERATION_READERS = {
     **dict.fromkeys(("osqp", "proxqp", "piqp", "qpalm"), lambda e: int(e["info"].iter)),
     **dict.fromkeys(("scs", "ecos"), lambda e: int(e["iter"])),
     "quadprog": _iter_quadprog,
     "cvxopt": lambda e: int(e["iterations"]),
 }
-_ITERATION_ERRORS = (KeyError, AttributeError, TypeError, IndexError)
 
 
 def iterations(solver: str, extras: dict) -> int | None:
@@ -172,7 +155,7 @@ def iterations(solver: str, extras: dict) -> int | None:
         return None
     try:
         return reader(extras)
-    except _ITERATION_ERRORS:
+    except (KeyError, AttributeError, TypeError, IndexError):
         return None
 
 
@@ -214,12 +197,9 @@ _QPError = qpsolvers.QPError
 
 
 def solver_function(solver: str):
-    """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it.
-
-    The entry of the table ``solve_problem`` dispatches through (read from its globals: the
-    table's module moved between qpsolvers 4.4 and 4.13), saving ``solve_problem``'s frame;
-    without that table, ``solve_problem`` itself.
-    """
+    """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it:
+    the entry of the table ``solve_problem`` dispatches through (read from its globals),
+    without that table ``solve_problem`` itself."""
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     function = table.get(solver) if isinstance(table, dict) else None
     if function is not None:
@@ -250,13 +230,13 @@ class QpsolversBackend(Backend):
     solver: str = ""
 
     #: Solvers whose qpsolvers wrapper hands every keyword it does not take itself to the
-    #: solver's own settings, as the direct backend named here does: (that backend, keywords
-    #: the wrapper takes without listing them in its signature).
-    SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
-        "clarabel": ("clarabel", ()),  # setattr on DefaultSettings (an unknown name raises)
-        "daqp": ("daqp", ()),  # keywords of daqp.solve
-        "osqp": ("osqp", ("raise_error",)),  # OSQP.setup; raise_error goes to OSQP.solve
-        "piqp": ("piqp", ()),  # setattr on the settings (an unknown name is silently dropped)
+    #: solver's own settings, as the direct backend of the same name does: the keywords the
+    #: wrapper takes without listing them in its signature.
+    SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, ...]]] = {
+        "clarabel": (),  # setattr on DefaultSettings (an unknown name raises)
+        "daqp": (),  # keywords of daqp.solve
+        "osqp": ("raise_error",),  # OSQP.setup; raise_error goes to OSQP.solve
+        "piqp": (),  # setattr on the settings (an unknown name is silently dropped)
     }
 
     def __init__(self, profile="default", **settings):
@@ -270,12 +250,13 @@ class QpsolversBackend(Backend):
         silence_wrapper_warnings(solver)
         generic, native = generic_settings(self)
         given = self.profile.solver_options
+        #: The solver's options, as passed to qpsolvers (do not modify).
         if given is not None:
-            self._solver_options = {**given.get(solver, {}), **self.settings}
+            self.solver_options = {**given.get(solver, {}), **self.settings}
         else:
-            self._solver_options = {**native_settings(solver, **generic), **native}
+            self.solver_options = {**native_settings(solver, **generic), **native}
         # solve_problem passes verbose (default False) to the wrapper
-        self._call_options = {"verbose": False, **self._solver_options}
+        self._call_options = {"verbose": False, **self.solver_options}
         self._function = solver_function(solver)
 
     @classmethod
@@ -298,10 +279,9 @@ class QpsolversBackend(Backend):
 
         from . import backend_class
 
-        same = cls.SAME_SETTINGS_AS.get(cls.solver)
-        if same is None:
+        extra = cls.SAME_SETTINGS_AS.get(cls.solver)
+        if extra is None:
             return None
-        direct, extra = same
         module = importlib.import_module(f"qpsolvers.solvers.{cls.solver}_")
         function = getattr(module, f"{cls.solver}_solve_problem")
         named = {
@@ -309,11 +289,7 @@ class QpsolversBackend(Backend):
             for name, p in inspect.signature(function).parameters.items()
             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
         } - {"problem", "initvals"}
-        return backend_class(direct).setting_names() | named | frozenset(extra)
-
-    def _options(self) -> dict:
-        """The solver's options, as passed to qpsolvers (do not modify)."""
-        return self._solver_options
+        return backend_class(cls.solver).setting_names() | named | frozenset(extra)
 
     def _solve(self, problem, warm_start):
         solved = problem
@@ -356,13 +332,9 @@ class QpsolversBackend(Backend):
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time
         sol.iterations = iterations(self.solver, sol.extras)
-        if not result.found:
-            self._not_found(sol)
-        return sol
-
-    def _not_found(self, sol: BackendSolution) -> None:
-        """The status of a solve qpsolvers says found nothing, from the solver's own report;
-        no ``x`` unless finite."""
+        if result.found:
+            return sol
+        # found nothing: the status from the solver's own report, no x unless finite
         status, raw = "not_solved", None
         if self._reader is not None:
             extras = sol.extras
@@ -374,16 +346,18 @@ class QpsolversBackend(Backend):
         sol.status = status
         if sol.x is not None and not np.all(np.isfinite(sol.x)):
             sol.x = None
+        return sol
 
 
 def _make_class(solver: str) -> type[QpsolversBackend]:
+    family, package = SOLVERS.get(solver, ("unknown", None))
     cls = type(
         f"Qpsolvers_{solver}",
         (QpsolversBackend,),
         {
             "name": f"qpsolvers:{solver}",
-            "family": SOLVERS.get(solver, ("unknown", None))[0],
-            "package": SOLVERS.get(solver, ("unknown", None))[1],
+            "family": family,
+            "package": package,
             "solver": solver,
             "certifies_infeasibility": True
             if solver in CERTIFYING_SOLVERS

@@ -1,11 +1,8 @@
 """Backends ``rnn``, ``rnn-tuned`` and ``rnn-converged``: the paper's recurrent neural network
 (eq. 15, :mod:`qpbench.rnn.network`).
 
-Settings: :data:`SETTING_NAMES` (keyword arguments of :func:`qpbench.backends.get_backend`; a
-scenario's ``[rnn]`` table). A step above ``safety`` times the stability bound of the call's
-QP is shortened to it (more steps) and ``error`` says so (``last.clamped``). When the
-problem's shape changes between calls, the state's parts whose size changed restart at zero
-(all of it when ``n`` changes).
+Settings: :data:`SETTING_NAMES` (a scenario's ``[rnn]`` table). A step above ``safety`` times
+the stability bound of the call's QP is shortened to it and ``error`` says so.
 """
 
 from __future__ import annotations
@@ -20,7 +17,7 @@ from ..packed import PackedProblem
 from ..rnn import kernels as nk
 from ..rnn import network as nw
 from . import register
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, ViewSolution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -43,9 +40,8 @@ _DEFAULTS = {
 SETTING_NAMES = tuple(_DEFAULTS)
 
 #: A setting that works in the closed loop of every shipped scenario (the paper's
-#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms (a step of
-#: 50 us, r = 0.5) and ``l1`` clipped to +-10 (anti-windup during the infeasible start).
-#: The frontier of settings: results/rnn/README.md, ``python bench/rnn_frontier.py``.
+#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms, ``l1``
+#: clipped to +-10 (anti-windup during the infeasible start).
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 
@@ -234,38 +230,9 @@ class NetworkBackend(Backend):
         )
 
 
-class _Duals:
-    """``y``, ``z`` and ``z_box`` of a :class:`TickSolution`, made on the first read of any.
-
-    A non-data descriptor: the first read puts all three views into the instance, where
-    later reads find them without calling this.
-    """
-
-    def __set_name__(self, owner, name: str):
-        self.name = name
-
-    def __get__(self, sol, owner=None):
-        if sol is None:
-            return self
-        d = sol.__dict__
-        out = d["_out"]
-        _, sy, sz, sb = d["_slices"]
-        if "y" not in d:
-            d["y"] = None if sy is None else out[sy]
-        if "z" not in d:
-            d["z"] = None if sz is None else out[sz]
-        if "z_box" not in d:
-            d["z_box"] = out[sb]
-        return d[self.name]
-
-
-class TickSolution(BackendSolution):
-    """The online network's answer to one tick: ``x`` is a view of the kernel's fresh output
-    ``[x; y; z; z_box]``, ``y``, ``z``, ``z_box`` views made on the first read of any."""
-
-    y = _Duals()
-    z = _Duals()
-    z_box = _Duals()
+class TickSolution(ViewSolution):
+    """The online network's answer to one tick: ``_out`` is the kernel's fresh output
+    ``[x; y; z; z_box]``."""
 
 
 @register
@@ -273,13 +240,10 @@ class RNNOnline(NetworkBackend):
     """The network integrated for ``dt`` per call (the paper's use); it never reports
     infeasibility, and a closed loop applies its ``x`` whatever the status.
 
-    Per-tick path: once a first call has set up the state, :meth:`solve` hands a
-    :class:`~qpbench.packed.PackedProblem` as its one buffer to
-    :func:`~qpbench.rnn.kernels.packed_kernel`, any other problem as its eight arrays to the
-    strict :func:`~qpbench.rnn.kernels.online_kernel` (numba's dispatcher being the type
-    check); the answer is a :class:`TickSolution`. What the kernels refuse (absent parts,
-    sparse matrices, another dtype or layout, a shape change) goes to the general path
-    (:meth:`_solve`). All paths give the same numbers bit for bit.
+    Per-tick path (:meth:`solve`, once a first call has set up the state): a
+    :class:`~qpbench.packed.PackedProblem` to :func:`~qpbench.rnn.kernels.packed_kernel`, any
+    other problem to :func:`~qpbench.rnn.kernels.online_kernel`; what they refuse goes to the
+    general path (:meth:`_solve`), with the same numbers bit for bit.
     """
 
     name = "rnn"

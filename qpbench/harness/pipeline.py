@@ -167,7 +167,7 @@ def _dump_backend() -> str:
     from ..backends import backend_names
     from ..exceptions import BackendNotFound
 
-    available = set(backend_names(available_only=True))
+    available = set(backend_names())
     for name in DUMP_BACKENDS:
         if name in available:
             return name
