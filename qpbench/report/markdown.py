@@ -90,7 +90,8 @@ VIOLATION_COLUMNS = (
 
 def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
     """Backend -> name shown in tables showing times, and the footnote lines for isolated rows."""
-    isolated = tables.isolated_rows(rows)
+    counts = rows.groupby("backend", sort=True)["isolated"].sum()
+    isolated = {str(b): int(n) for b, n in counts.items() if n}
     totals = rows.groupby("backend", sort=True).size()
     labels = {
         str(b): f"{b} {ISOLATED_MARK}" if str(b) in isolated else str(b) for b in totals.index
@@ -159,7 +160,8 @@ def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
 
 
 def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str]) -> list[str]:
-    """One profile's tables: success and shifted geometric means, violations, then per scenario."""
+    """One profile's tables: success and shifted geometric means, violations, then per scenario
+    its runtimes, the solver's own time against the whole call, and its per-tick figure."""
     out = [
         f"### Profile {label}\n",
         f"Tolerances: primal {tol.primal:g}, dual {tol.dual:g}, gap {tol.gap:g}, "
@@ -168,15 +170,13 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
     summary = tables.backend_summary(rows, tol)
     names, isolated_notes = _labels(rows)
     never = [str(b) for b, r in summary.iterrows() if int(r["found"]) == 0]
-    never_note = (
-        [
+    notes = list(isolated_notes)
+    if never:
+        notes.append(
             f"A `-` in a residual or gap column: {', '.join(never)} never found a solution (0 rows "
             "with status optimal), so there is no residual or gap to average; counted with the "
             "not-found value, floored at the tolerance, they would score as the best.\n"
-        ]
-        if never
-        else []
-    )
+        )
     accuracy = [m for m in tables.SHGEOM_METRICS if m != "runtime"]  # residuals and gaps, in order
     records = _records(summary, names)
     out.append("Success rate and shifted geometric means as ratios to the best (1 is the best):\n")
@@ -189,8 +189,7 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
         ],
         records,
     )
-    out.extend(isolated_notes + never_note)
-    out.append("Shifted geometric means, absolute values:\n")
+    out += [*notes, "Shifted geometric means, absolute values:\n"]
     out += table(
         [
             _BACKEND,
@@ -201,8 +200,7 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
         ],
         records,
     )
-    out.extend(isolated_notes + never_note)
-    out.extend(_violation_part(rows, never))
+    out += notes + _violation_part(rows, never)
     key = f"perf_profile_{slug(label)}"
     if key in plot_files:
         out.append(
@@ -211,39 +209,25 @@ def _profile_part(label: str, tol, rows: pd.DataFrame, plot_files: dict[str, str
         )
         out.append(f"![performance profile, {label}]({plot_files[key]})\n")
     for scenario, frame in tables.scenario_summary(rows, tol).items():
-        out.extend(_scenario_part(scenario, frame, label, rows, names, isolated_notes, plot_files))
-    return out
-
-
-def _scenario_part(
-    scenario: str,
-    frame: pd.DataFrame,
-    label: str,
-    rows: pd.DataFrame,
-    names: dict[str, str],
-    isolated_notes: list[str],
-    plot_files: dict[str, str],
-) -> list[str]:
-    """One scenario's runtime table of one profile, the solver's own time against the whole
-    call, and its per-tick figure."""
-    out = [
-        f"#### Scenario {scenario} ({label})\n",
-        "Per backend, runtime over every problem of the scenario:\n",
-        *table(SCENARIO_COLUMNS, _records(frame, names)),
-    ]
-    if any(names[b] != b for b in frame.index):
-        out.extend(isolated_notes)
-    times = tables.solver_time_summary(rows[rows["scenario"] == scenario])
-    if not times.empty:
-        out.append(
-            "What the solver reports for its own work (`solver_time_s`: what a controller calling "
-            "its C or C++ library pays) against the timed call, and their difference per tick (what "
-            "the Python layers add); backends that report no time of their own are not listed:\n"
-        )
-        out += table(SOLVER_TIME_COLUMNS, _records(times, names))
-    key = f"per_tick_{slug(label)}_{slug(scenario)}"
-    if key in plot_files:
-        out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
+        out += [
+            f"#### Scenario {scenario} ({label})\n",
+            "Per backend, runtime over every problem of the scenario:\n",
+            *table(SCENARIO_COLUMNS, _records(frame, names)),
+        ]
+        if any(names[b] != b for b in frame.index):
+            out.extend(isolated_notes)
+        times = tables.solver_time_summary(rows[rows["scenario"] == scenario])
+        if not times.empty:
+            out.append(
+                "What the solver reports for its own work (`solver_time_s`: what a controller "
+                "calling its C or C++ library pays) against the timed call, and their difference "
+                "per tick (what the Python layers add); backends that report no time of their own "
+                "are not listed:\n"
+            )
+            out += table(SOLVER_TIME_COLUMNS, _records(times, names))
+        key = f"per_tick_{slug(label)}_{slug(scenario)}"
+        if key in plot_files:
+            out.append(f"![time and gap against t, {scenario}]({plot_files[key]})\n")
     return out
 
 

@@ -1,9 +1,6 @@
-"""PNG figures of a report; :func:`write_plots` returns them by key (used by :mod:`.markdown`).
-
-Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<group>_<scenario>``
-(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>``
-(:mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities), ``closed_loop_d_...`` (closest
-key point against ``d_safe``), ``snapshot_<role>_...`` (:mod:`.snapshots`)."""
+"""PNG figures of a report by key: ``perf_profile_<group>``, ``per_tick_<group>_<scenario>``,
+``closed_loop[_v|_d]_<scenario>_<formulation>`` (:mod:`.loop_figure`, joint velocities, closest
+key point), ``snapshot_<role>_...`` (:mod:`.snapshots`)."""
 
 from __future__ import annotations
 
@@ -98,26 +95,16 @@ def velocity_plot(logs: dict, title: str, path: Path) -> bool:
     names = [b for _, group in style.groups(logs, max_series=len(logs)) for b in group if joints[b]]
     if not names:
         return False
-    plt = style.pyplot()
     ncol = min(5, len(names))
     nrow = -(-len(names) // ncol)
-    fig, axes = plt.subplots(
-        nrow,
-        ncol,
-        figsize=(3.0 * ncol + 0.6, 1.55 * nrow + 1.0),
-        sharex=True,
-        squeeze=False,
-        layout="constrained",
-    )
+    fig, axes = style.subplots(nrow, ncol, 3.0 * ncol + 0.6, 1.55 * nrow + 1.0, sharex=True)
     for ax in axes.flat[len(names) :]:
         ax.set_visible(False)
     for ax, backend in zip(axes.flat, names):
         d, cols = logs[backend], joints[backend]
-        joint_colours = plt.cm.viridis(np.linspace(0.0, 0.85, len(cols)))
-        for c, colour in zip(cols, joint_colours):
-            ax.plot(
-                d[tick_log.T].to_numpy(float), d[c].to_numpy(float), lw=0.8, color=colour, label=c
-            )
+        t = d[tick_log.T].to_numpy(float)
+        for c, colour in zip(cols, style.pyplot().cm.viridis(np.linspace(0.0, 0.85, len(cols)))):
+            ax.plot(t, d[c].to_numpy(float), lw=0.8, color=colour, label=c)
         ax.set_title(backend, fontsize=9, color=style.look(backend).colour, loc="left")
         ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)
@@ -180,9 +167,7 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
             [close["distance"] * 1e3],
             **look.line(lw=0, ms=7, zorder=4, markevery=None),
         )
-    ax.plot(
-        [], [], **look.line(lw=1.0, label=label, markevery=None)
-    )  # legend entry: line and marker
+    ax.plot([], [], **look.line(lw=1.0, label=label, markevery=None))  # legend: line and marker
     if "d_body_min" in d.columns:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 

@@ -1,18 +1,9 @@
-"""The statistics a report shows, from the rows :mod:`.inputs` read; aggregates as qpbenchmark's.
-
-- success rate: percentage of rows whose ``success`` is true (:mod:`qpbench.metrics`);
-- shifted geometric mean with qpbenchmark's shift ``sh = 10`` for every metric
-  (:func:`qpbenchmark.shgeom.shgeom`). A row without a found solution counts with the
-  *not-found value*: the profile's time limit for runtime, its tolerance for residuals and
-  gaps; a missing value (NaN) counts as not found, an infinite residual (no duals) stays
-  infinite. A backend that reports the infeasibility the reference found answered right and
-  its runtime counts as measured. Residuals and gaps are floored at their tolerance;
-- ratios to the best: each backend's mean over the smallest. A backend that never found a
-  solution would score best on residuals and gaps (the floor); it gets NaN there instead.
-
-Runtime is ``wall_time_min_s`` [s]: the harness's timing of the backend call and the reading
-of its answer, the minimum over the ``repeat`` timed solves.
-"""
+"""The statistics a report shows, aggregated as qpbenchmark does: success rate [%]; shifted
+geometric means (``sh = 10``) where a row without a found solution (or a NaN) counts as the
+*not-found value* (the profile's time limit for runtime, its tolerance for residuals and gaps,
+which are floored at it), a right report of infeasibility as measured runtime; ratios to the
+best (NaN on residuals and gaps for a backend that never found a solution). Runtime:
+``wall_time_min_s`` [s], the minimum over the timed repeats."""
 
 from __future__ import annotations
 
@@ -33,7 +24,6 @@ if TYPE_CHECKING:
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
 SHIFT = 10.0
 
-
 #: The runtime column of bench rows [s].
 RUNTIME = "wall_time_min_s"
 #: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?): the
@@ -50,6 +40,15 @@ SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
 
 def _percentile(values: np.ndarray, q: float) -> float:
     return float(np.percentile(values, q)) if values.size else math.nan
+
+
+def _max(values: np.ndarray) -> float:
+    return float(values.max()) if values.size else math.nan
+
+
+def _optimal(rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows whose reference solution is optimal."""
+    return rows[rows["reference_status"].astype(str) == "optimal"]
 
 
 def _ratio_to_best(values: pd.Series) -> pd.Series | float:
@@ -69,22 +68,15 @@ def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.nda
     column, tol_attr, floored = SHGEOM_METRICS[metric]
     not_found = float(getattr(tolerance, tol_attr))
     values = numbers(df, column)
-    if metric != "runtime":
-        values = np.abs(values)
     answered = df["found"].to_numpy(dtype=bool)
-    if metric == "runtime":
-        answered = answered | correct_infeasibility(df)
+    if metric == "runtime":  # or the backend reported the infeasibility the reference found
+        ref = df["reference_status"].astype(str).to_numpy()
+        right = (df["status"].astype(str).to_numpy() == ref) & np.isin(ref, CERTIFIED_INFEASIBLE)
+        answered = answered | right
+    else:
+        values = np.abs(values)
     values = np.where(answered & ~np.isnan(values), values, not_found)
-    if floored:
-        values = np.maximum(values, not_found)
-    return values
-
-
-def correct_infeasibility(df: pd.DataFrame) -> np.ndarray:
-    """Rows where the backend reported the infeasibility the reference found (a right answer)."""
-    status = df["status"].astype(str).to_numpy()
-    ref = df["reference_status"].astype(str).to_numpy()
-    return (status == ref) & np.isin(ref, CERTIFIED_INFEASIBLE)
+    return np.maximum(values, not_found) if floored else values
 
 
 def shgeom_of(values: np.ndarray) -> float:
@@ -110,12 +102,6 @@ def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataF
         yield group_label(profile, mode), tolerance, rows
 
 
-def isolated_rows(rows: pd.DataFrame) -> dict[str, int]:
-    """Per backend, rows solved in a worker process (only backends with some)."""
-    counts = rows.groupby("backend", sort=True)["isolated"].sum()
-    return {str(b): int(n) for b, n in counts.items() if n}
-
-
 def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
     """Per backend: success rate [%] and the shifted geometric mean (``<metric>``, runtime [s])
     and its ratio to the best (``<metric>_ratio``) of each metric of :data:`SHGEOM_METRICS`.
@@ -126,7 +112,7 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
     """
 
     def record(g: pd.DataFrame) -> dict:
-        found = int(g["found"].astype(bool).sum())
+        found = int(g["found"].sum())
         rec = {
             "problems": len(g),
             "success_rate": 100.0 * g["success"].astype(float).mean(),
@@ -137,8 +123,7 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
         for metric, (_, _, floored) in SHGEOM_METRICS.items():
             values = metric_values(g, metric, tolerance)
             rec[metric] = math.nan if floored and not found else shgeom_of(values)
-        feasible = g[g["reference_status"].astype(str) == "optimal"]
-        rec["runtime_feasible"] = shgeom_of(metric_values(feasible, "runtime", tolerance))
+        rec["runtime_feasible"] = shgeom_of(metric_values(_optimal(g), "runtime", tolerance))
         diff = numbers(g, RUNTIME) - numbers(g, "solver_time_s")
         diff = diff[np.isfinite(diff)]
         rec["overhead_median_s"] = float(np.median(diff)) if len(diff) >= 0.5 * len(g) else math.nan
@@ -157,21 +142,16 @@ def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
     """
 
     def record(g: pd.DataFrame) -> dict:
-        v = numbers(g, "constraint_violation")
-        v = v[~np.isnan(v)]
-        feasible = numbers(
-            g[g["reference_status"].astype(str) == "optimal"], "constraint_violation"
-        )
-        vf = feasible[~np.isnan(feasible)]
-        return {
-            "problems": len(g),
-            "found": int(g["found"].astype(bool).sum()),
-            "with_x": len(v),
-            "max": float(v.max()) if v.size else math.nan,
-            "p99": _percentile(v, 99),
-            "feasible_max": float(vf.max()) if vf.size else math.nan,
-            "feasible_p99": _percentile(vf, 99),
-        }
+        rec = {"problems": len(g), "found": int(g["found"].sum())}
+        for prefix, rows in (("", g), ("feasible_", _optimal(g))):
+            v = numbers(rows, "constraint_violation")
+            v = v[~np.isnan(v)]
+            rec |= {
+                f"{prefix}with_x": len(v),
+                f"{prefix}max": _max(v),
+                f"{prefix}p99": _percentile(v, 99),
+            }
+        return rec
 
     return _per_backend(rows, record)
 
@@ -214,8 +194,8 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
             "runtime_shgeom": shgeom_of(metric_values(b, "runtime", tolerance)),
             "runtime_p50_s": _percentile(t, 50),
             "runtime_p99_s": _percentile(t, 99),
-            "runtime_max_s": float(t.max()) if len(t) else math.nan,
-            "optimality_gap_max": float(gap.max()) if len(gap) else math.nan,
+            "runtime_max_s": _max(t),
+            "optimality_gap_max": _max(gap),
         }
 
     tables = {}
