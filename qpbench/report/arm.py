@@ -1,10 +1,6 @@
-"""Pictures of the arm in its workspace, as the paper's figures show it first.
-
-:func:`draw_snapshot` draws a closed-loop run: the arm at several instants (pale to solid), its
-key points, the obstacles, the contact surface, the desired and actual end-effector paths, the
-closest approach ringed; below, the closest key point's distance against ``d_safe``.
-:mod:`.animation` draws the same scene frame by frame. The backend's look is the one colour
-naming a backend; red means closer than ``d_safe``. Lengths in [m], equal axes."""
+"""Pictures of the arm in its workspace (:func:`draw_snapshot`; :mod:`.animation` draws the
+same scene frame by frame): the arm at several instants, its key points, the obstacles, the
+surface, the end-effector paths in the backend's look, red closer than ``d_safe``; lengths [m]."""
 
 from __future__ import annotations
 
@@ -98,10 +94,8 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
             near = np.array([ob.a, ob.b])
         elif kind == "DiskObstacle":
             near = ob.center + ob.radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
-        elif kind == "PointCloudObstacle":
+        else:  # a point cloud
             near = np.asarray(ob.points, dtype=float)
-        else:
-            continue
         parts.append(near[np.linalg.norm(near, axis=1) <= 2.0 * reach])
     pts = np.concatenate([p.reshape(-1, 2) for p in parts])
     pts = pts[np.isfinite(pts).all(axis=1)]
@@ -144,15 +138,8 @@ def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> 
             draw_line(ax, ob.point + shift, ob.normal, xlim, ylim, **line)
         elif kind == "SegmentObstacle":
             a, b = ob.a + shift, ob.b + shift
-            ax.plot(
-                [a[0], b[0]],
-                [a[1], b[1]],
-                color=OBSTACLE,
-                lw=3,
-                alpha=alpha,
-                solid_capstyle="round",
-                label=label,
-            )
+            line = dict(color=OBSTACLE, lw=3, alpha=alpha, solid_capstyle="round", label=label)
+            ax.plot([a[0], b[0]], [a[1], b[1]], **line)
         elif kind == "DiskObstacle":
             c = ob.center + shift
             ax.add_patch(Circle(c, ob.radius, color=OBSTACLE, alpha=0.35 * alpha, label=label))
@@ -181,55 +168,28 @@ def frame_parts(scenario):
     )
 
 
+#: Keyword arguments of an earlier pose's links and key points, and of the last pose's.
+POSE = (dict(lw=1.6, ms=2.5), dict(lw=2.6, ms=4, label="arm (pale: earlier poses)"))
+DOTS = (dict(s=10, lw=0.6), dict(s=26, lw=1.0, label="key points (last pose named)"))
+
+
 def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
-    """The arm and its key points at ticks ``idx``, paler the earlier; the last one's named."""
-    for j, k in enumerate(idx):
-        shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
-        p = arm.joint_positions(theta[k])
-        last = j == len(idx) - 1
-        ax.plot(
-            p[:, 0],
-            p[:, 1],
-            "-o",
-            color=ARM,
-            alpha=shade,
-            lw=2.6 if last else 1.6,
-            ms=4 if last else 2.5,
-            label="arm (pale: earlier poses)" if last else None,
-            zorder=3,
-        )
-        kp = arm.points(theta[k], keys.links, keys.fracs)
-        ax.scatter(
-            kp[:, 0],
-            kp[:, 1],
-            s=26 if last else 10,
-            facecolors="white",
-            edgecolors=KEY,
-            linewidths=1.0 if last else 0.6,
-            alpha=shade,
-            zorder=4,
-            label="key points (last pose named)" if last else None,
-        )
-        if last:
-            _name_key_points(ax, keys.names, kp)
-
-
-def _name_key_points(ax, names, points) -> None:
-    """Each key point's name beside it, on a white halo (links behind it do not hide it)."""
+    """The arm and its key points at ticks ``idx``, paler the earlier; the last one's named (on
+    a white halo: links behind them do not hide them)."""
     from matplotlib import patheffects
 
+    for j, k in enumerate(idx):
+        shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
+        last = j == len(idx) - 1
+        p = arm.joint_positions(theta[k])
+        ax.plot(p[:, 0], p[:, 1], "-o", color=ARM, alpha=shade, zorder=3, **POSE[last])
+        kp = arm.points(theta[k], keys.links, keys.fracs)
+        dots = dict(facecolors="white", edgecolors=KEY, alpha=shade, zorder=4)
+        ax.scatter(kp[:, 0], kp[:, 1], **dots, **DOTS[last])
     halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
-    for name, q in zip(names, points):
-        ax.annotate(
-            name,
-            q,
-            textcoords="offset points",
-            xytext=(5, 4),
-            fontsize=7.5,
-            color=KEY,
-            path_effects=halo,
-            zorder=7,
-        )
+    name = dict(textcoords="offset points", xytext=(5, 4), fontsize=7.5, color=KEY, zorder=7)
+    for text, q in zip(keys.names, kp):
+        ax.annotate(text, q, path_effects=halo, **name)
 
 
 def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
@@ -237,16 +197,9 @@ def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
     the arm's base."""
     desired = dict(color="0.35", lw=1.3, label="desired end-effector path", zorder=2)
     ax.plot(log["xd_x"], log["xd_y"], ":", **desired)
-    look = backend_look(backend)
-    ax.plot(
-        log["ee_x"],
-        log["ee_y"],
-        **look.line(  # no markers along it (they would read as key points); the legend shows it
-            lw=1.6,
-            label=f"{backend}: actual end-effector path" if backend else "actual end-effector path",
-            zorder=5,
-        ),
-    )
+    label = f"{backend}: actual end-effector path" if backend else "actual end-effector path"
+    # no markers along it (they would read as key points); the legend shows one
+    ax.plot(log["ee_x"], log["ee_y"], **backend_look(backend).line(lw=1.6, label=label, zorder=5))
     ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
 
 
@@ -259,17 +212,12 @@ def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys,
     q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
     d_safe = scenario.data["controller"]["d_safe"]
     bad = close["distance"] < d_safe - DEFAULT_SAFETY_MARGIN
-    ax.scatter(
-        [q[0]],
-        [q[1]],
-        s=170,
-        facecolors="none",
-        edgecolors="red" if bad else "black",
-        lw=1.8,
-        zorder=6,
-        label=f"closest approach: {close['key_point']} {close['distance'] * 1e3:.1f} mm "
-        f"from {close['obstacle']}\nat t = {close['t']:.2f} s (d_safe {d_safe * 1e3:g} mm)",
+    label = (
+        f"closest approach: {close['key_point']} {close['distance'] * 1e3:.1f} mm "
+        f"from {close['obstacle']}\nat t = {close['t']:.2f} s (d_safe {d_safe * 1e3:g} mm)"
     )
+    ring = dict(s=170, facecolors="none", edgecolors="red" if bad else "black", lw=1.8)
+    ax.scatter([q[0]], [q[1]], zorder=6, label=label, **ring)
 
 
 def draw_snapshot(
@@ -282,10 +230,8 @@ def draw_snapshot(
     backend: str | None = None,
 ) -> Path:
     """Draw the tick log of a run of ``scenario`` at ``instants`` poses evenly spaced in time
-    (module docstring) into ``path`` (its suffix picks PNG, SVG or PDF); return it.
-
-    ``backend``: the run's backend, whose look its path and distance line take (``None``: grey).
-    """
+    into ``path`` (PNG, SVG or PDF by its suffix); return it. ``backend``: the run's, whose look
+    its path and distance line take (``None``: grey)."""
     from .loop_figure import has_distance
 
     arm, keys, surface, obstacles = frame_parts(scenario)
@@ -296,14 +242,9 @@ def draw_snapshot(
 
     # the workspace's height follows its view's proportions (equal axes), within limits
     high = float(np.clip(WORKSPACE_IN * np.ptp(ylim) / np.ptp(xlim), 2.4, 1.3 * WORKSPACE_IN))
-    fig, axes = style.pyplot().subplots(
-        2 if has_d else 1,
-        1,
-        figsize=(WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0)),
-        height_ratios=[high, DISTANCE_IN] if has_d else None,
-        squeeze=False,
-        layout="constrained",
-    )
+    size = (WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0))
+    ratios = [high, DISTANCE_IN] if has_d else None
+    fig, axes = style.subplots(2 if has_d else 1, 1, *size, height_ratios=ratios)
     ax = axes[0, 0]
     surface_line = dict(color=SURFACE, lw=2.5, label="contact surface")
     draw_line(ax, surface.point, -surface.normal, xlim, ylim, **surface_line)
@@ -344,9 +285,8 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
             ax.plot(t, body, color=look.colour, ls=(0, (2, 2)), lw=0.9, label=label, zorder=2)
     k = int(np.nanargmin(d))
     bad = d[k] < (d_safe - DEFAULT_SAFETY_MARGIN) * 1e3
-    ax.scatter(
-        [t[k]], [d[k]], s=110, facecolors="none", edgecolors="red" if bad else "black", lw=1.6
-    )
+    ring = dict(s=110, facecolors="none", edgecolors="red" if bad else "black", lw=1.6)
+    ax.scatter([t[k]], [d[k]], **ring)
     distance_axis(ax, d_safe, float(np.nanmin(d)))
     ax.set_xlabel("t [s]")
     ax.set_ylabel("distance to an\nobstacle [mm]", fontsize=9)
