@@ -21,13 +21,6 @@ if TYPE_CHECKING:
     from ..sim.scenario import Scenario
 
 
-def _frame_ticks(t: np.ndarray, dt: float, fps: float, speed: float) -> list[int]:
-    """Ticks shown as frames: every ``speed / (fps * dt)``-th, ``dt`` [s] from ``t`` when it can."""
-    dt = float(t[1] - t[0]) if len(t) > 1 else dt
-    step = max(1, int(round(speed / (fps * dt))))
-    return list(range(0, len(t), step))
-
-
 def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim) -> bool:
     """Axes, surface, desired path and (if none moves) the obstacles; True when none moves."""
     scene.workspace_axes(ax, xlim, ylim)
@@ -79,7 +72,8 @@ def animate(
     arm, keys, surface, obstacles = scene.frame_parts(scenario)
     theta = scene.thetas(log, arm.n)
     t = log["t"].to_numpy(float)
-    frames = _frame_ticks(t, scenario.dt, fps, speed)
+    dt = float(t[1] - t[0]) if len(t) > 1 else scenario.dt  # every speed / (fps dt)-th tick
+    frames = list(range(0, len(t), max(1, int(round(speed / (fps * dt))))))
     xlim, ylim = scene.view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
     dcols = distance_columns(log)
@@ -136,31 +130,24 @@ def check_animation(path: Path, fps: float, speed: float) -> None:
 
 def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
     """Write ``anim`` to ``path`` atomically (temporary file, then rename) and close ``fig``."""
-    import matplotlib.pyplot as plt
     from matplotlib import animation
+    from tqdm import tqdm
+
+    from ..atomic import record, rename
 
     suffix = path.suffix.lower()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n_frames, unit="frame", desc=f"animate {path.name}", leave=False)
-    callback = None if bar is None else (lambda i, n: bar.update(1))  # matplotlib's (frame, total)
-
     writer = (
         animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
     )
+    desc = f"animate {path.name}"
+    bar = tqdm(total=n_frames, unit="frame", desc=desc, leave=False, disable=not progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp{suffix}")
-    try:
-        anim.save(tmp, writer=writer, progress_callback=callback)
-        from ..atomic import record, rename
-
+    try:  # matplotlib's progress callback gets (frame, total)
+        anim.save(tmp, writer=writer, progress_callback=lambda i, n: bar.update(1))
         rename(tmp, path)
         record(path)  # listed with the command's other outputs
     finally:
-        if bar is not None:
-            bar.close()
-        plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
+        bar.close()
+        style.pyplot().close(fig)
+        tmp.unlink(missing_ok=True)
