@@ -115,8 +115,8 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
 
 def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     """Read bench and closed-loop CSVs (folders are searched). Rows get ``source`` (their file);
-    bench rows :func:`scenario_key` as ``scenario``; closed-loop rows ``log_path`` (``log_file``
-    in the CSV's folder, ``None`` without a log).
+    bench rows :func:`scenario_key` as ``scenario``; closed-loop rows ``log_path``
+    (:func:`log_path`).
 
     Raises:
         InputError: unreadable CSV, one of neither kind, a duplicate key or mixed repeat counts
@@ -138,9 +138,7 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
         elif set(CLOSED_LOOP_COLUMNS) <= cols:
             for column in set(STRUCTURED_FIGURES) & cols:  # a table of failed runs has none
                 df[column] = df[column].map(_from_json)
-            df["log_path"] = [
-                str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
-            ]
+            df["log_path"] = [log_path(path.parent, f) for f in df["log_file"]]
             loops.append(df)
             kind = "closed-loop"
         else:
@@ -163,6 +161,17 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
         files=files,
         notes=notes,
     )
+
+
+def log_path(folder: Path, log_file: object) -> str | None:
+    """A run's tick log (``log_file`` in ``folder``, the CSV's), else its figure log
+    (:mod:`qpbench.sim.figure_log`), else ``None``."""
+    from ..sim.figure_log import figure_log_path
+
+    if not isinstance(log_file, str) or not log_file:
+        return None
+    found = [p for p in (folder / log_file, figure_log_path(folder / log_file)) if p.exists()]
+    return str(found[0]) if found else None
 
 
 def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:

@@ -1,12 +1,6 @@
-"""``report.md``: every number recomputed from the result CSVs it is given.
-
-The recommendation and how to read the rest (:mod:`.recommend`); the result files, machine and
-package versions; per (profile, mode) of the bench rows: success and shifted geometric means,
-constraint violation, the performance profile, then per scenario; the closed loop
-(:mod:`.markdown_closed_loop`). Each table follows a one-line caption ending in ``:``, so a
-reader (or a test) finds a table by its heading and caption. Times in [us], distances in [mm],
-forces in [N]; a backend with rows solved in a worker process is marked with a dagger.
-"""
+"""``report.md``: the recommendation (:mod:`.recommend`), the result files, machine and package
+versions, per (profile, mode) of the bench rows its tables, the closed loop
+(:mod:`.markdown_closed_loop`). Each table follows a one-line caption ending in ``:``."""
 
 from __future__ import annotations
 
@@ -70,10 +64,9 @@ SOLVER_TIME_COLUMNS = (
     Column("rows", "rows"),
     *(
         Column(f"{what} {q} (us)", f"{key}_{q}", US)
-        for what, key in (("call", "call"), ("solver", "solver"))
+        for what, key in (("call", "call"), ("solver", "solver"), ("call - solver", "around"))
         for q in ("p50", "p99")
     ),
-    *(Column(f"call - solver {q} (us)", f"around_{q}", US) for q in ("p50", "p99")),
 )
 #: Constraint violation per backend.
 VIOLATION_COLUMNS = (
@@ -256,13 +249,10 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     return out
 
 
-def render(
-    results: Results, plot_files: dict[str, str] | None = None, date: str | None = None
-) -> str:
+def render(results: Results, plot_files: dict[str, str]) -> str:
     """The text of ``report.md``; ``plot_files``: figure key -> path relative to the report (keys
-    of :mod:`.plots`, a missing one not shown); ``date``: default now, UTC."""
-    plot_files = plot_files or {}
-    date = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    of :mod:`.plots`, a missing one not shown)."""
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "# qpbench report\n",
         *opening(results.closed_loop, has_bench=not results.bench.empty),
@@ -283,10 +273,9 @@ def render(
     ]
     if not results.bench.empty:
         lines.extend(_bench_section(results, plot_files))
-        profiles_used = sorted(set(results.bench["profile"].astype(str)))
-        lines.append("## Profiles\n")
-        lines.append("Settings asked of every backend and success tolerances:\n")
-        lines += table(PROFILE_COLUMNS, [p for n, p in PROFILES.items() if n in profiles_used])
+        used = set(results.bench["profile"].astype(str))
+        lines += ["## Profiles\n", "Settings asked of every backend and success tolerances:\n"]
+        lines += table(PROFILE_COLUMNS, [p for n, p in PROFILES.items() if n in used])
     if not results.closed_loop.empty:
         lines.extend(closed_loop_section(results, plot_files))
     return "\n".join(lines)

@@ -23,21 +23,8 @@ ROLES = {"exact": "fastest exact backend", "network": "network"}
 NETWORKS = ("rnn-tuned", "rnn")
 
 
-def log_file(path: str | Path) -> str | None:
-    """A run's tick log; else its figure log (:mod:`qpbench.sim.figure_log`); else ``None``."""
-    from ..sim.figure_log import figure_log_path
-
-    if not isinstance(path, str) or not path:
-        return None
-    if Path(path).exists():
-        return path
-    compact = figure_log_path(path)
-    return str(compact) if compact.exists() else None
-
-
-def read_log(path: str | Path) -> pd.DataFrame | None:
-    """The frame of :func:`log_file` (``None``: no log, or a damaged one, with a warning)."""
-    path = log_file(path)
+def read_log(path: str | None) -> pd.DataFrame | None:
+    """The run's log (``log_path``) as a frame (``None``: no log, or a damaged one, warned)."""
     if path is None:
         return None
     try:
@@ -58,7 +45,7 @@ def _family(backend: str) -> str:
 
 def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     """Of one scenario's runs (one formulation), the row of each role that has one."""
-    runs = runs[np.array([log_file(p) is not None for p in runs["log_path"]], dtype=bool)]
+    runs = runs[runs["log_path"].notna().to_numpy()]
     chosen: dict[str, pd.Series] = {}
     whole = numbers(runs, "simulated_s") >= numbers(runs, "duration_s") - 1e-9
     families = [_family(str(b)) for b in runs["backend"]]

@@ -21,9 +21,9 @@ log = logging.getLogger("qpbench.report")
 
 
 @contextlib.contextmanager
-def figure_progress(folder: Path, every_s: float = 5.0):
+def figure_progress(folder: Path):
     """While the figures are drawn: a bar of the figures written into ``folder`` on a terminal,
-    else a log line every ``every_s`` seconds (and one at the end)."""
+    else a log line every 5 s (and one at the end)."""
     started = time.time()
     stop = threading.Event()
     bar = None
@@ -36,7 +36,7 @@ def figure_progress(folder: Path, every_s: float = 5.0):
         return sum(1 for p in folder.glob("*.png") if p.stat().st_mtime >= started - 1)
 
     def beat() -> None:
-        while not stop.wait(0.5 if bar is not None else every_s):
+        while not stop.wait(0.5 if bar is not None else 5.0):
             done = count()
             if bar is not None:
                 bar.update(done - bar.n)
@@ -80,16 +80,9 @@ def write_report(
     prefer: str | None = None,
     sections: Callable[[Path, bool], list[str]] | None = None,
 ) -> Path:
-    """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
-
-    ``sections(out, plots)``: markdown lines appended after the tables (the sweep section);
-    with it, ``paths`` may be empty. ``prefer``: see :func:`qpbench.report.inputs.read_results`.
-
-    Raises:
-        InputError: a path is missing or not a result CSV, a duplicate key or mixed repeat
-            counts without ``prefer``.
-        OutputExistsError: ``out/report.md`` exists and ``force`` is false.
-    """
+    """Read the result CSVs (:func:`.inputs.read_results`), write ``out/report.md`` and
+    ``out/plots/*.png`` (:func:`publish`). ``sections(out, plots)``: markdown lines appended
+    after the tables (the sweep section); with it, ``paths`` may be empty."""
 
     def render_all(out: Path) -> str:
         started = time.perf_counter()
