@@ -5,7 +5,10 @@ versions, per (profile, mode) of the bench rows its tables, the closed loop
 from __future__ import annotations
 
 import datetime
+import os
+import platform
 from operator import attrgetter
+from pathlib import Path
 
 import pandas as pd
 
@@ -13,10 +16,60 @@ from ..formats import package_versions
 from ..profiles import PROFILES
 from . import tables
 from .inputs import Results
-from .machine import PACKAGES, machine_info
 from .markdown_closed_loop import closed_loop_section
 from .markdown_table import US, Column, fmt, md_table, slug, table
 from .recommend import opening
+
+#: Distributions whose versions every report lists.
+PACKAGES = (
+    "qpbench",
+    "numpy",
+    "scipy",
+    "pandas",
+    "numba",
+    "qpsolvers",
+    "qpbenchmark",
+    "osqp",
+    "proxsuite",
+    "clarabel",
+    "cvxpy",
+    "daqp",
+    "quadprog",
+    "piqp",
+    "cmeel-qpoases",
+    "highspy",
+    "scs",
+    "qpalm",
+    "ecos",
+    "cvxopt",
+    "gurobipy",
+    "matplotlib",
+)
+
+
+def cpu_name() -> str:
+    """Model name of the CPU (``/proc/cpuinfo``'s ``model name``), or the platform's guess."""
+    cpuinfo = Path("/proc/cpuinfo")
+    try:
+        for line in cpuinfo.read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def machine_info() -> dict[str, str]:
+    """CPU, core counts, OS and Python of the current machine, as display strings."""
+    from ..runner import default_jobs
+
+    return {
+        "CPU": cpu_name(),
+        "Cores (usable / logical)": f"{default_jobs()} / {os.cpu_count()}",
+        "OS": platform.platform(),
+        "Python": f"{platform.python_implementation()} {platform.python_version()}",
+    }
+
 
 #: Mark of a backend with rows solved in a worker process.
 ISOLATED_MARK = "\u2020"

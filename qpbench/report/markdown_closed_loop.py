@@ -143,8 +143,8 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
 
 
 def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -> list[str]:
-    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.snapshots`), when drawn."""
-    from .snapshots import ROLES
+    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.plots`), when drawn."""
+    from .plots import ROLES
 
     keys = {role: f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}" for role in ROLES}
     shown = [role for role, key in keys.items() if key in plot_files]

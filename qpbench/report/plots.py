@@ -1,6 +1,8 @@
 """PNG figures of a report by key: ``perf_profile_<group>``, ``per_tick_<group>_<scenario>``,
 ``closed_loop[_v|_d]_<scenario>_<formulation>`` (:mod:`.loop_figure`, joint velocities, closest
-key point), ``snapshot_<role>_...`` (:mod:`.snapshots`)."""
+key point), ``snapshot_<role>_<scenario>_<formulation>`` (:func:`.arm.draw_snapshot`): the arm
+under the *fastest exact backend* (a QP solver whose run ended ``ok`` and whole, with the
+smallest median solve time) and the *network* (``rnn-tuned``, else ``rnn``, else another)."""
 
 from __future__ import annotations
 
@@ -16,7 +18,6 @@ from . import style, tables
 from .arm import closest_approach
 from .inputs import Results, numbers
 from .markdown_table import slug
-from .snapshots import read_log, write_snapshots
 
 log = logging.getLogger("qpbench.report")
 
@@ -213,7 +214,7 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
             draw(f"closed_loop_v_{name}", lambda p: velocity_plot(logs, title, p))
             title = f"Closest key point to an obstacle, {where}"
             draw(f"closed_loop_d_{name}", lambda p: distance_plot(logs, title, p, d_safe))
-        written.update(write_snapshots(g, scenario, formulation, folder))
+        _snapshots(g, scenario, formulation, draw)
     keep = {p.resolve() for p in written.values()}
     removed = [
         p
@@ -226,6 +227,80 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
         log.info("%s: removed %d figures no longer in the report", folder, len(removed))
     relative = Path(relative_to).resolve()
     return {k: p.resolve().relative_to(relative).as_posix() for k, p in written.items()}
+
+
+#: The two pictures of a scenario, left to right: role -> column header in the report.
+ROLES = {"exact": "fastest exact backend", "network": "network"}
+#: Network backends in order of preference.
+NETWORKS = ("rnn-tuned", "rnn")
+
+
+def read_log(path: str | None) -> pd.DataFrame | None:
+    """The run's log (``log_path``) as a frame (``None``: no log, or a damaged one, warned)."""
+    if path is None:
+        return None
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - a damaged log only loses its curve
+        log.warning("%s: cannot read tick log (%s)", path, exc)
+        return None
+
+
+def _family(backend: str) -> str:
+    from ..backends import backend_class
+
+    try:
+        return str(backend_class(backend).family)
+    except Exception:  # noqa: BLE001 - an unknown (plugin) backend: judged by its name
+        return "recurrent neural network" if backend.startswith("rnn") else ""
+
+
+def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
+    """Of one scenario's runs (one formulation), the row of each role that has one."""
+    runs = runs[runs["log_path"].notna().to_numpy()]
+    chosen: dict[str, pd.Series] = {}
+    whole = numbers(runs, "simulated_s") >= numbers(runs, "duration_s") - 1e-9
+    families = [_family(str(b)) for b in runs["backend"]]
+    network = np.array(["neural network" in f for f in families], dtype=bool)
+    exact = ~network & ~np.array([f.startswith("pseudo-inverse") for f in families], dtype=bool)
+    exact = runs[exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole]
+    if not exact.empty:
+        p50 = numbers(exact, "solve_time_median_s")
+        chosen["exact"] = exact.iloc[int(np.argmin(np.where(np.isnan(p50), np.inf, p50)))]
+    networks = runs[network]
+    if not networks.empty:
+        rank = [
+            NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)
+            for b in networks["backend"].astype(str)
+        ]
+        chosen["network"] = networks.iloc[int(np.argmin(rank))]
+    return chosen
+
+
+def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str, draw) -> None:
+    """Draw the snapshots of one scenario's runs with ``draw(key, figure)``."""
+    from ..sim.log import theta_columns
+    from ..sim.scenario import load_scenario
+    from .arm import draw_snapshot
+
+    chosen = snapshot_runs(runs)
+    if not chosen:
+        return
+    try:
+        scene = load_scenario(scenario)
+    except Exception as exc:  # noqa: BLE001 - a scenario not found here only loses its pictures
+        log.warning("%s: no arm snapshot (%s)", scenario, exc)
+        return
+    for role, row in chosen.items():
+        frame = read_log(row["log_path"])
+        if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
+            continue  # no log, or one without the joint angles: no picture of the arm
+        backend = str(row["backend"])
+        title = f"{scenario}: {backend} ({ROLES[role]})"
+        draw(
+            f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}",
+            lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend),
+        )
 
 
 #: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).
