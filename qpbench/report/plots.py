@@ -15,7 +15,7 @@ import pandas as pd
 
 from ..sim import log as tick_log
 from . import style, tables
-from .arm import closest_approach
+from .arm import ROLES, closest_approach
 from .inputs import Results, numbers
 from .markdown_table import slug
 
@@ -229,8 +229,6 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
     return {k: p.resolve().relative_to(relative).as_posix() for k, p in written.items()}
 
 
-#: The two pictures of a scenario, left to right: role -> column header in the report.
-ROLES = {"exact": "fastest exact backend", "network": "network"}
 #: Network backends in order of preference.
 NETWORKS = ("rnn-tuned", "rnn")
 

@@ -26,9 +26,7 @@ SHIFT = 10.0
 
 #: The runtime column of bench rows [s].
 RUNTIME = "wall_time_min_s"
-#: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?): the
-#: columns of the report's summary tables; a floored mean means nothing without a found
-#: solution (NaN for a backend with none).
+#: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?).
 SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
     "runtime": (RUNTIME, "runtime", False),
     "primal_residual": ("primal_residual", "primal", True),
@@ -103,22 +101,17 @@ def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataF
 
 
 def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
-    """Per backend: success rate [%] and the shifted geometric mean (``<metric>``, runtime [s])
-    and its ratio to the best (``<metric>_ratio``) of each metric of :data:`SHGEOM_METRICS`.
-
-    ``runtime_feasible``: the runtime mean over the problems whose reference is optimal only;
-    ``overhead_median_s``: median of wall time minus solver-reported time, NaN when fewer than
-    half of the rows report a solver time (a median of a few would not describe the backend).
-    """
+    """Per backend: success rate [%], each metric's shifted geometric mean (``<metric>``,
+    runtime [s]; ``runtime_feasible`` over the problems whose reference is optimal) and its ratio
+    to the best (``<metric>_ratio``); ``overhead_median_s``: median of wall time minus solver
+    time [s], NaN when fewer than half of the rows report a solver time."""
 
     def record(g: pd.DataFrame) -> dict:
         found = int(g["found"].sum())
         rec = {
             "problems": len(g),
             "success_rate": 100.0 * g["success"].astype(float).mean(),
-            "found_rate": 100.0 * g["found"].astype(float).mean(),
             "found": found,
-            "isolated": int(g["isolated"].sum()),
         }
         for metric, (_, _, floored) in SHGEOM_METRICS.items():
             values = metric_values(g, metric, tolerance)
@@ -136,10 +129,8 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
 
 
 def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per backend: constraint violation of its answers (absolute, problem units): ``max`` and
-    ``p99`` over the rows with an ``x`` (``with_x``), and ``feasible_max``, ``feasible_p99`` over
-    those whose reference is optimal (on an infeasible problem every answer violates something).
-    """
+    """Per backend: constraint violation of its answers (problem units), ``max`` and ``p99``
+    over the ``with_x`` rows with an x, ``feasible_*`` over those whose reference is optimal."""
 
     def record(g: pd.DataFrame) -> dict:
         rec = {"problems": len(g), "found": int(g["found"].sum())}
@@ -157,11 +148,9 @@ def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per backend, over the rows where both are known: the timed call (``call_*``) against
-    the time the solver reports for itself (``solver_*``: what a controller calling its C or
-    C++ library pays) and their difference per row (``around_*``) [s]. A backend reporting no
-    time of its own has no row.
-    """
+    """Per backend reporting a time of its own, over the rows where both are known: p50 and p99
+    of the timed call (``call_*``), of the solver's time (``solver_*``) and of their difference
+    (``around_*``) [s]."""
 
     def record(g: pd.DataFrame) -> dict | None:
         call, solver = numbers(g, RUNTIME), numbers(g, "solver_time_s")
@@ -178,10 +167,8 @@ def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.DataFrame]:
-    """Per scenario, per backend: problems, success [%], runtime shifted geometric mean as a
-    ratio to the scenario's best, runtime percentiles over every row, found or not (the time a
-    controller waits) [s], and the largest |optimality gap| of a found solution.
-    """
+    """Per scenario, per backend: problems, success [%], runtime shifted geometric mean and its
+    ratio to the best, runtime percentiles over every row [s], largest |optimality gap| found."""
 
     def record(b: pd.DataFrame) -> dict:
         t = numbers(b, RUNTIME)
@@ -198,22 +185,17 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
             "optimality_gap_max": _max(gap),
         }
 
-    tables = {}
-    for scenario, g in rows.groupby("scenario", sort=True):
-        table = _per_backend(g, record)
+    tables = {s: _per_backend(g, record) for s, g in rows.groupby("scenario", sort=True)}
+    for table in tables.values():
         table["runtime_ratio"] = _ratio_to_best(table["runtime_shgeom"])
-        tables[scenario] = table
     return tables
 
 
 def performance_profile(
     rows: pd.DataFrame, taus: np.ndarray | None = None
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Dolan-More performance profile of runtime: ``(taus, {backend: rho(taus)})``.
-
-    ``r[p, s] = t[p, s] / min_s t[p, s]`` over the successful solves (a failure: ``inf``);
-    ``rho_s(tau) = |{p : r[p, s] <= tau}| / |P|``.
-    """
+    """Dolan-More performance profile of runtime: ``(taus, {backend: rho(taus)})``, ``rho_s(tau)
+    = |{p : r[p, s] <= tau}| / |P|``, ``r[p, s] = t[p, s] / min_s t[p, s]`` (a failure: inf)."""
     rows = rows.assign(
         _key=rows["problem"].astype(str) + "\x00" + rows["scenario"].map(scenario_key)
     )
