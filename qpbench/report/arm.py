@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..sim import log as tick_log
 from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import style
 
@@ -37,19 +38,10 @@ def backend_look(backend: str | None) -> style.Look:
     return PATH if backend is None else style.look(backend)
 
 
-def thetas(log, n: int) -> np.ndarray:
-    """The joint angles [rad] of every tick of ``log``, one row per tick."""
-    from ..sim.log import theta_columns
-
-    return log[theta_columns(n)].to_numpy(dtype=float)
-
-
 def closest_approach(log: pd.DataFrame) -> dict | None:
     """Where and when a key point came closest to an obstacle: ``{"t", "k" (tick index),
     "key_point", "obstacle", "distance" [m]}``; ``None`` without obstacles."""
-    from ..sim.log import distance_columns
-
-    cols = distance_columns(log)
+    cols = tick_log.distance_columns(log)
     if not cols:
         return None
     D = log[cols].to_numpy(dtype=float)
@@ -82,7 +74,7 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
     base, both end-effector paths, the nearest point of each line and of the surface to the
     base, the disks, segments and clouds within twice the arm's reach; with a margin."""
     reach = float(np.sum(arm.lengths))
-    theta = thetas(log, arm.n)
+    theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     every = max(1, len(theta) // 400)
     parts = [np.zeros((1, 2))]
     parts += [arm.joint_positions(q) for q in theta[::every] if np.isfinite(q).all()]
@@ -162,16 +154,6 @@ def workspace_axes(ax, xlim, ylim) -> None:
     ax.grid(alpha=0.25)
 
 
-def frame_parts(scenario):
-    """The scene's arm, key points, surface and obstacles."""
-    return (
-        scenario.make_arm(),
-        scenario.make_key_points(),
-        scenario.make_surface(),
-        scenario.make_obstacles(),
-    )
-
-
 #: Keyword arguments of an earlier pose's links and key points, and of the last pose's.
 POSE = (dict(lw=1.6, ms=2.5), dict(lw=2.6, ms=4, label="arm (pale: earlier poses)"))
 DOTS = (dict(s=10, lw=0.6), dict(s=26, lw=1.0, label="key points (last pose named)"))
@@ -238,8 +220,9 @@ def draw_snapshot(
     its path and distance line take (``None``: grey)."""
     from .loop_figure import has_distance
 
-    arm, keys, surface, obstacles = frame_parts(scenario)
-    theta = thetas(log, arm.n)
+    arm, keys = scenario.make_arm(), scenario.make_key_points()
+    surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
+    theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     t = log["t"].to_numpy(float)
     xlim, ylim = view(scenario, log, arm)
     has_d = has_distance(log)
@@ -274,7 +257,6 @@ def draw_snapshot(
 def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -> None:
     """The closest key point's distance [mm] against t in the run's look (the body's dashed),
     its closest approach ringed, on the report's distance axis (:mod:`.loop_figure`)."""
-    from ..sim import log as tick_log
     from .loop_figure import distance_axis
 
     look = backend_look(backend)
@@ -340,19 +322,18 @@ def animate(
     """
     from matplotlib import animation
 
-    from ..sim.log import distance_columns
-
     path = Path(path)
     check_animation(path, fps, speed)
 
-    arm, keys, surface, obstacles = frame_parts(scenario)
-    theta = thetas(log, arm.n)
+    arm, keys = scenario.make_arm(), scenario.make_key_points()
+    surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
+    theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     t = log["t"].to_numpy(float)
     dt = float(t[1] - t[0]) if len(t) > 1 else scenario.dt  # every speed / (fps dt)-th tick
     frames = list(range(0, len(t), max(1, int(round(speed / (fps * dt))))))
     xlim, ylim = view(scenario, log, arm)
     d_safe = scenario.data["controller"]["d_safe"]
-    dcols = distance_columns(log)
+    dcols = tick_log.distance_columns(log)
 
     # equal axes: the frame's height follows the view's proportions
     high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))

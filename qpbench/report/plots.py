@@ -154,20 +154,13 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         ax.plot(t, dist, color=style.GREY, lw=0.7, zorder=1)
         return
     look = style.look(backend)
-    close = closest_approach(d)
-    label = (
-        backend
-        if close is None
-        else f"{backend}: {close['distance'] * 1e3:.1f} mm, {close['key_point']} / "
-        f"{close['obstacle']}, {close['t']:.2f} s"
-    )
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
+    label, close = backend, closest_approach(d)
     if close is not None:
-        ax.plot(
-            [close["t"]],
-            [close["distance"] * 1e3],
-            **look.line(lw=0, ms=7, zorder=4, markevery=None),
-        )
+        where = f"{close['key_point']} / {close['obstacle']}, {close['t']:.2f} s"
+        label = f"{backend}: {close['distance'] * 1e3:.1f} mm, {where}"
+        marker = look.line(lw=0, ms=7, zorder=4, markevery=None)
+        ax.plot([close["t"]], [close["distance"] * 1e3], **marker)
     ax.plot([], [], **look.line(lw=1.0, label=label, markevery=None))  # legend: line and marker
     if "d_body_min" in d.columns:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)

@@ -24,24 +24,23 @@ log = logging.getLogger("qpbench.report")
 def figure_progress(folder: Path):
     """While the figures are drawn: a bar of the figures written into ``folder`` on a terminal,
     else a log line every 5 s (and one at the end)."""
+    from tqdm import tqdm
+
     started = time.time()
     stop = threading.Event()
-    bar = None
-    if sys.stderr.isatty() and log.isEnabledFor(logging.INFO):
-        from tqdm import tqdm
-
-        bar = tqdm(unit="figure", desc="report figures", leave=False)
+    off = not (sys.stderr.isatty() and log.isEnabledFor(logging.INFO))
+    bar = tqdm(unit="figure", desc="report figures", leave=False, disable=off)
 
     def count() -> int:
         return sum(1 for p in folder.glob("*.png") if p.stat().st_mtime >= started - 1)
 
     def beat() -> None:
-        while not stop.wait(0.5 if bar is not None else 5.0):
+        while not stop.wait(5.0 if off else 0.5):
             done = count()
-            if bar is not None:
-                bar.update(done - bar.n)
-            else:
+            if off:
                 log.info("report: %d figures in %.0f s", done, time.time() - started)
+            else:
+                bar.update(done - bar.n)
 
     thread = threading.Thread(target=beat, name="report-progress", daemon=True)
     thread.start()
@@ -50,8 +49,7 @@ def figure_progress(folder: Path):
     finally:
         stop.set()
         thread.join()
-        if bar is not None:
-            bar.close()
+        bar.close()
         log.info("report: %d figures in %.1f s", count(), time.time() - started)
 
 
