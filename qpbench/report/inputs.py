@@ -181,13 +181,10 @@ def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
     if not dup.any():
         return bench
     if prefer is None:
-        first = int(np.flatnonzero(dup.to_numpy())[0])
-        key = keys.iloc[first]
+        key = keys.iloc[int(np.flatnonzero(dup.to_numpy())[0])]
         same = (keys == key).all(axis=1).to_numpy()
-        sources = list(dict.fromkeys(bench.loc[same, "source"]))
+        sources = [*dict.fromkeys(bench.loc[same, "source"])] * 2  # twice: a row twice in a file
         text = ", ".join(f"{c}={key[c]}" for c in DUPLICATE_KEY)
-        if len(sources) == 1:
-            sources = sources * 2
         raise InputError(
             f"{sources[0]} and {sources[1]} both hold the row ({text}); "
             "pass --prefer first or --prefer last to keep one file's rows",

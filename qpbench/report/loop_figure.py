@@ -22,6 +22,15 @@ if TYPE_CHECKING:
 COLUMN_IN, PANEL_IN = 4.6, 1.75
 #: The per-tick time budget drawn on the solve-time panel [s].
 BUDGET_S = 1e-3
+#: The panels, top to bottom, and their y labels.
+PANELS = {
+    "tracking": "|tracking error|\n[mm]",
+    "force": "|force error|\n|F - Fd| [N]",
+    "distance": "closest key point\nto an obstacle [mm]",
+    "time": "solve time\nper tick [µs]",
+    "speed": "joint speed\n|v|² [rad²/s²]",
+    "kp": "estimated\nKp_hat [N/m]",
+}
 
 
 def has_distance(log: pd.DataFrame) -> bool:
@@ -77,12 +86,8 @@ def closed_loop_figure(
         raise ValueError("no tick log to draw")
     has_d = any(has_distance(d) for d in logs.values())
     adaptive = any(np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0 for d in logs.values())
-    panels = (
-        ["tracking", "force"]
-        + (["distance"] if has_d else [])
-        + ["time", "speed"]
-        + (["kp"] if adaptive else [])
-    )
+    shown = {"distance": has_d, "kp": adaptive}
+    panels = [name for name in PANELS if shown.get(name, True)]
     fig, grid, groups = style.panels(
         logs, len(panels), COLUMN_IN, PANEL_IN, pad=(1.0, 1.4), sharex=True, sharey="row"
     )
@@ -127,14 +132,6 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
 
 def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first: bool) -> None:
     """Scales, labels (first column only), the safety lines and the time budget of a column."""
-    labels = {
-        "tracking": "|tracking error|\n[mm]",
-        "force": "|force error|\n|F - Fd| [N]",
-        "distance": "closest key point\nto an obstacle [mm]",
-        "time": "solve time\nper tick [µs]",
-        "speed": "joint speed\n|v|² [rad²/s²]",
-        "kp": "estimated\nKp_hat [N/m]",
-    }
     for name in ("tracking", "force", "time", "speed"):
         axes[name].set_yscale("log")
     if has_d:
@@ -146,7 +143,7 @@ def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first
     for name, ax in axes.items():
         ax.grid(True, alpha=0.3, which="major")
         if first:
-            ax.set_ylabel(labels[name], fontsize=9)
+            ax.set_ylabel(PANELS[name], fontsize=9)
 
 
 def _legend(axes: dict, group: list, title: str, references: bool) -> None:

@@ -170,16 +170,15 @@ def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
         "(residuals, gaps), and residuals and gaps are floored at their tolerance, as in "
         "qpbenchmark; a backend that reports the infeasibility the reference found (the "
         "paper formulation's first ticks) answered right and its runtime counts as measured. "
-        "Runtime is the harness's wall time of the "
-        "backend call and the reading of its answer (x and duals), the minimum over "
-        "the row's timed repeats (`repeat` column). With "
-        "sh = 10 s the runtime shm of microsecond solves is close to their arithmetic mean "
-        "and a single failure dominates it: read it with the success rate and the per-scenario "
-        "percentiles. Each problem is "
-        "solved by the backends in an order drawn for it from a recorded seed (`position`, `order_seed` "
-        "columns), so the cold caches the harness leaves between problems do not fall on one backend. "
-        "*runtime (feasible)* is the same mean over the problems whose reference "
-        "solution is optimal only: on the paper formulation's infeasible ticks the right answer "
+        "Runtime is the harness's wall time of the backend call and the reading of its answer "
+        "(x and duals), the minimum over the row's timed repeats (`repeat` column). With sh = "
+        "10 s the runtime shm of microsecond solves is close to their arithmetic mean and a single "
+        "failure dominates it: read it with the success rate and the per-scenario percentiles. "
+        "Each problem is solved by the backends in an order drawn for it from a recorded seed "
+        "(`position`, `order_seed` columns), so the cold caches the harness leaves between "
+        "problems do not fall on one backend. *runtime (feasible)* is the same mean over the "
+        "problems whose reference solution is optimal only: on the paper formulation's "
+        "infeasible ticks the right answer "
         'is "infeasible", and a backend that cannot say so (qpsolvers\' interface reports '
         "not_solved) is charged the time limit for it in the plain column.\n",
         *(f"Note: {note}.\n" for note in results.notes),
@@ -192,12 +191,9 @@ def _bench_section(results: Results, plot_files: dict[str, str]) -> list[str]:
 
 def _reference_agreement_part(bench: pd.DataFrame) -> list[str]:
     """How far the two reference solvers' objectives are apart, per problem."""
-    per_problem = (
-        bench.assign(_a=pd.to_numeric(bench["reference_agreement"], errors="coerce"))
-        .groupby(["scenario", "problem"], sort=False)["_a"]
-        .max()
-        .dropna()
-    )
+    agreement = pd.to_numeric(bench["reference_agreement"], errors="coerce")
+    per_problem = agreement.groupby([bench["scenario"], bench["problem"]], sort=False).max()
+    per_problem = per_problem.dropna()
     if not len(per_problem):
         return []
     return [

@@ -1,9 +1,6 @@
-"""The answer, stated: which backends to trust in the loop, from a closed-loop table.
-
-A backend is *recommended* for a scenario when every run of it there has verdict ``ok``
-(:mod:`qpbench.sim.verdict`) and was real time, overall when it is in every scenario; ranked by
-p99 call time (``solve_time_p99_s``, the largest over its runs), the solver's own p99 beside.
-Every other backend is listed with its reasons, each naming the scenario."""
+"""Which backends to trust in the loop: *recommended* for a scenario when every run of it there
+has verdict ``ok`` and was real time, overall when in every scenario; ranked by p99 call time
+(the largest over its runs); every other backend listed with its reasons."""
 
 from __future__ import annotations
 

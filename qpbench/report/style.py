@@ -239,7 +239,7 @@ def pyplot():
     return plt
 
 
-def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
+def save(fig, path: str | Path, dpi: float = 110) -> Path:
     """Write ``fig`` to ``path`` atomically (format from the suffix) and close it; a PNG taller
     than :data:`MAX_HEIGHT_PX` again at the resolution that fits. A constrained layout with
     equal axes is written in its tight box (its legend was placed before the aspect shrank them)."""
@@ -252,25 +252,19 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     fmt = path.suffix.lstrip(".").lower() or "png"
     laid_out = isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine)
     free_aspect = all(ax.get_aspect() == "auto" for ax in fig.axes)
-    kw.setdefault("bbox_inches", None if laid_out and free_aspect else "tight")
+    bbox = None if laid_out and free_aspect else "tight"
     try:
         with atomic_path(path) as tmp:  # never a half-written figure under the final name
-            fig.savefig(tmp, format=fmt, dpi=dpi, **kw)
+            fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches=bbox)
             height = 0
             if fmt == "png":
                 with Image.open(tmp) as img:
                     height = img.size[1]
             if height > MAX_HEIGHT_PX:
                 fitted = dpi * (MAX_HEIGHT_PX - 1) / height
-                log.warning(
-                    "%s: figure %d px tall at %g dpi, over %d px; written at %.0f dpi",
-                    path,
-                    height,
-                    dpi,
-                    MAX_HEIGHT_PX,
-                    fitted,
-                )
-                fig.savefig(tmp, format=fmt, dpi=fitted, **kw)
+                msg = "%s: figure %d px tall at %g dpi, over %d px; written at %.0f dpi"
+                log.warning(msg, path, height, dpi, MAX_HEIGHT_PX, fitted)
+                fig.savefig(tmp, format=fmt, dpi=fitted, bbox_inches=bbox)
     finally:
         pyplot().close(fig)
     return path
