@@ -245,9 +245,8 @@ def draw_snapshot(
     _mark_closest_approach(ax, log, scenario, arm, keys, theta)
 
     workspace_axes(ax, xlim, ylim)
-    ax.set_title(
-        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if len(t) > 1 else 0):.1f} s"
-    )
+    span = t[-1] + (t[1] - t[0] if len(t) > 1 else 0)
+    ax.set_title(title or f"{scenario.name}: the arm over {span:.1f} s")
     if has_d:
         _distance_panel(axes[1, 0], log, backend, scenario.data["controller"]["d_safe"])
     style.legend_beside(ax, *style.entries(axes[:, 0]))
@@ -372,17 +371,13 @@ def check_animation(path: Path, fps: float, speed: float) -> None:
     """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
     from ..exceptions import ParamError
 
-    suffix = path.suffix.lower()
+    suffix, key = path.suffix.lower(), "animate"
     if suffix not in (".gif", ".mp4"):
-        raise ParamError(
-            f"an animation is a .gif or an .mp4 file, got '{path.name}'", key="animate"
-        )
+        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key=key)
     if suffix == ".mp4" and shutil.which("ffmpeg") is None:
-        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key="animate")
+        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key=key)
     if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
-        raise ParamError(
-            f"fps and speed must be positive, got fps={fps}, speed={speed}", key="animate"
-        )
+        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key=key)
 
 
 def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
@@ -393,9 +388,7 @@ def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: 
     from ..atomic import record, rename
 
     suffix = path.suffix.lower()
-    writer = (
-        animation.PillowWriter(fps=fps) if suffix == ".gif" else animation.FFMpegWriter(fps=fps)
-    )
+    writer = (animation.PillowWriter if suffix == ".gif" else animation.FFMpegWriter)(fps=fps)
     desc = f"animate {path.name}"
     bar = tqdm(total=n_frames, unit="frame", desc=desc, leave=False, disable=not progress)
     path.parent.mkdir(parents=True, exist_ok=True)

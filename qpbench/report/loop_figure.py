@@ -107,12 +107,9 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
     t = d[tick_log.T].to_numpy(float)
     style_kw = style.series(backend, lit, t, lw=1.0, grey_lw=0.7)
     c = style_kw["color"]
-    axes["tracking"].plot(
-        t, np.maximum(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
-    )
-    axes["force"].plot(
-        t, np.maximum(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw
-    )
+    errors = np.abs(d[[tick_log.TRACKING_ERROR, tick_log.FORCE_ERROR]].to_numpy(float))
+    axes["tracking"].plot(t, np.maximum(errors[:, 0] * 1e3, 1e-7), **style_kw)
+    axes["force"].plot(t, np.maximum(errors[:, 1], 1e-7), **style_kw)
     if has_d:
         axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style_kw)
     dots = dict(ms=1.6, alpha=0.7, zorder=3) if lit else dict(ms=1.0, alpha=0.5, zorder=1)

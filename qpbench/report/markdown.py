@@ -356,6 +356,8 @@ CLOSED_LOOP_TABLE = (
 )
 
 
+#: The closed-loop figures of a scenario: key prefix and alt text.
+LOOP_FIGURES = (("", "closed loop"), ("v_", "joint velocities"), ("d_", "key-point distances"))
 #: The runs that failed their verdict.
 FAILED_TABLE = (
     Column("scenario", "scenario", text=True),
@@ -415,17 +417,11 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
             f"### Scenario {scenario} ({shown})\n",
             f"Closed-loop metrics per backend (runs of {fmt(duration)} s):\n",
         ]
-        out += table(
-            (Column("backend", "backend", text=True), *CLOSED_LOOP_TABLE), g.to_dict("records")
-        )
+        out += table((_BACKEND, *CLOSED_LOOP_TABLE), g.to_dict("records"))
         errors = g[~g["status"].isin(("ok", "budget"))].to_dict("records")
         out += [f"- {r['backend']}: {fmt(r['error'])}\n" for r in errors]
-        for kind, alt in (
-            ("", "closed loop"),
-            ("v_", "joint velocities"),
-            ("d_", "key-point distances"),
-        ):
-            key = f"closed_loop_{kind}{slug(scenario)}_{slug(formulation)}"
+        for prefix, alt in LOOP_FIGURES:
+            key = f"closed_loop_{prefix}{slug(scenario)}_{slug(formulation)}"
             if key in plot_files:
                 out.append(f"![{alt}, {scenario}]({plot_files[key]})\n")
         out.extend(_snapshot_row(scenario, formulation, plot_files))

@@ -114,9 +114,8 @@ def velocity_plot(logs: dict, title: str, path: Path) -> bool:
     for ax in axes[-1, :]:
         ax.set_xlabel("t (s)", fontsize=8)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(
-        handles, labels, loc="outside upper right", ncol=len(labels), fontsize=8, frameon=False
-    )
+    where = dict(loc="outside upper right", ncol=len(labels), fontsize=8, frameon=False)
+    fig.legend(handles, labels, **where)
     fig.suptitle(title, ha="left", x=0.02)
     style.save(fig, path)
     return True

@@ -196,9 +196,8 @@ def performance_profile(
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Dolan-More performance profile of runtime: ``(taus, {backend: rho(taus)})``, ``rho_s(tau)
     = |{p : r[p, s] <= tau}| / |P|``, ``r[p, s] = t[p, s] / min_s t[p, s]`` (a failure: inf)."""
-    rows = rows.assign(
-        _key=rows["problem"].astype(str) + "\x00" + rows["scenario"].map(scenario_key)
-    )
+    key = rows["problem"].astype(str) + "\x00" + rows["scenario"].map(scenario_key)
+    rows = rows.assign(_key=key)
     t = rows.pivot_table(index="_key", columns="backend", values=RUNTIME, aggfunc="first")
     ok = rows.pivot_table(index="_key", columns="backend", values="success", aggfunc="first")
     ok = ok.reindex_like(t).fillna(False).astype(bool)

@@ -85,12 +85,8 @@ def write_report(
     def render_all(out: Path) -> str:
         started = time.perf_counter()
         results = read_results(paths, prefer=prefer)
-        log.info(
-            "report: %d bench rows and %d closed-loop runs read in %.1f s",
-            len(results.bench),
-            len(results.closed_loop),
-            time.perf_counter() - started,
-        )
+        read = (len(results.bench), len(results.closed_loop), time.perf_counter() - started)
+        log.info("report: %d bench rows and %d closed-loop runs read in %.1f s", *read)
         plot_files: dict[str, str] = {}
         if plots:
             from .plots import write_plots
