@@ -7,8 +7,7 @@ from conftest import simulate_args
 from PIL import Image
 
 from qpbench.exceptions import ParamError
-from qpbench.report.animation import animate
-from qpbench.report.arm import closest_approach, draw_snapshot
+from qpbench.report.arm import animate, closest_approach, draw_snapshot
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario
 

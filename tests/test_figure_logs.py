@@ -161,7 +161,7 @@ def test_report_shows_the_arm_for_the_fastest_exact_backend_and_the_network_side
 
 def test_snapshot_roles(loop_dir):
     from qpbench.report.inputs import read_results
-    from qpbench.report.snapshots import snapshot_runs
+    from qpbench.report.plots import snapshot_runs
 
     runs = read_results([loop_dir / "closed_loop.csv"]).closed_loop
     chosen = snapshot_runs(runs)

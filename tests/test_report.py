@@ -385,7 +385,7 @@ def test_scenario_tables_recomputed(report_dir):
 
 
 def test_closed_loop_tables_equal_csv(report_dir):
-    from qpbench.report.markdown_closed_loop import CLOSED_LOOP_TABLE
+    from qpbench.report.markdown import CLOSED_LOOP_TABLE
 
     _, out, _, cl = report_dir
     md = (out / "report.md").read_text()
@@ -434,7 +434,7 @@ def test_runs_that_failed_their_verdict_are_listed(report_dir, tmp_path):
     assert [r[4] for r in tabs[0]["rows"][:-1]] == list(bad["verdict_reasons"])[:-1]
     assert "| incomplete | run raised: RuntimeError: boom \\| bad |" in md  # a "|" escaped
     # a table of runs that are all ok says so
-    from qpbench.report.markdown_closed_loop import failed_verdicts
+    from qpbench.report.markdown import failed_verdicts
 
     assert failed_verdicts(cl[cl["verdict"] == "ok"]) == ["Every run's verdict is ok.\n"]
 

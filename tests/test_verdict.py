@@ -602,7 +602,7 @@ def test_a_verdict_override_is_warned_and_recorded(tmp_path, capsys):
 
 
 def test_the_report_marks_a_verdict_judged_on_overridden_thresholds():
-    from qpbench.report.markdown_closed_loop import FOOTNOTE, OVERRIDDEN, failed_verdicts
+    from qpbench.report.markdown import FOOTNOTE, OVERRIDDEN, failed_verdicts
 
     df = pd.DataFrame(
         [

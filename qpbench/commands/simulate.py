@@ -91,7 +91,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
     (:func:`qpbench.sim.loop.simulate` checks its own arguments)."""
     from ..atomic import check_output
     from ..exceptions import ParamError, positive_seconds
-    from ..report.animation import check_animation
+    from ..report.arm import check_animation
 
     for key, suffixes in SUFFIXES.items():
         value = getattr(args, key)
@@ -136,7 +136,7 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
 
         draw_snapshot(scenario, result.log, args.snapshot, **kw)
     if args.animate is not None:
-        from ..report.animation import animate
+        from ..report.arm import animate
 
         speed, fps = args.speed, args.fps
         animate(scenario, result.log, args.animate, fps=fps, speed=speed, progress=progress, **kw)

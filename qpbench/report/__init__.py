@@ -4,8 +4,4 @@ renderer of every report (this one, the sweep's and the scaling study's)."""
 
 from __future__ import annotations
 
-from .inputs import Results, read_results
-from .markdown import render
-from .write import write_report
-
-__all__ = ["Results", "read_results", "render", "write_report"]
+from .write import write_report as write_report

@@ -1,18 +1,17 @@
-"""Pictures of the arm in its workspace, as the paper's figures show it first.
-
-:func:`draw_snapshot` draws a closed-loop run: the arm at several instants (pale to solid), its
-key points, the obstacles, the contact surface, the desired and actual end-effector paths, the
-closest approach ringed; below, the closest key point's distance against ``d_safe``.
-:mod:`.animation` draws the same scene frame by frame. The backend's look is the one colour
-naming a backend; red means closer than ``d_safe``. Lengths in [m], equal axes."""
+"""Pictures of the arm in its workspace: a still (:func:`draw_snapshot`) and an animation
+(:func:`animate`, GIF or MP4) of a run: the arm, its key points, the obstacles, the surface, the
+end-effector paths in the backend's look, red closer than ``d_safe``; lengths [m]."""
 
 from __future__ import annotations
 
+import math
+import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..sim import log as tick_log
 from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import style
 
@@ -27,6 +26,8 @@ if TYPE_CHECKING:
 ARM, KEY, OBSTACLE, SURFACE = "#343a40", "#212529", "#868e96", "#2b8a3e"
 #: Look of the actual end-effector path when no backend is named.
 PATH = style.Look("#495057", "o", "-")
+#: The report's two pictures of the arm per scenario, left to right: role -> column header.
+ROLES = {"exact": "fastest exact backend", "network": "network"}
 #: Width of the workspace (its height follows the view's proportions) and height of the
 #: distance panel below it [in].
 WORKSPACE_IN, DISTANCE_IN = 5.0, 1.6
@@ -37,19 +38,10 @@ def backend_look(backend: str | None) -> style.Look:
     return PATH if backend is None else style.look(backend)
 
 
-def thetas(log, n: int) -> np.ndarray:
-    """The joint angles [rad] of every tick of ``log``, one row per tick."""
-    from ..sim.log import theta_columns
-
-    return log[theta_columns(n)].to_numpy(dtype=float)
-
-
 def closest_approach(log: pd.DataFrame) -> dict | None:
     """Where and when a key point came closest to an obstacle: ``{"t", "k" (tick index),
     "key_point", "obstacle", "distance" [m]}``; ``None`` without obstacles."""
-    from ..sim.log import distance_columns
-
-    cols = distance_columns(log)
+    cols = tick_log.distance_columns(log)
     if not cols:
         return None
     D = log[cols].to_numpy(dtype=float)
@@ -82,7 +74,7 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
     base, both end-effector paths, the nearest point of each line and of the surface to the
     base, the disks, segments and clouds within twice the arm's reach; with a margin."""
     reach = float(np.sum(arm.lengths))
-    theta = thetas(log, arm.n)
+    theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     every = max(1, len(theta) // 400)
     parts = [np.zeros((1, 2))]
     parts += [arm.joint_positions(q) for q in theta[::every] if np.isfinite(q).all()]
@@ -98,10 +90,8 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
             near = np.array([ob.a, ob.b])
         elif kind == "DiskObstacle":
             near = ob.center + ob.radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
-        elif kind == "PointCloudObstacle":
+        else:  # a point cloud
             near = np.asarray(ob.points, dtype=float)
-        else:
-            continue
         parts.append(near[np.linalg.norm(near, axis=1) <= 2.0 * reach])
     pts = np.concatenate([p.reshape(-1, 2) for p in parts])
     pts = pts[np.isfinite(pts).all(axis=1)]
@@ -144,15 +134,8 @@ def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> 
             draw_line(ax, ob.point + shift, ob.normal, xlim, ylim, **line)
         elif kind == "SegmentObstacle":
             a, b = ob.a + shift, ob.b + shift
-            ax.plot(
-                [a[0], b[0]],
-                [a[1], b[1]],
-                color=OBSTACLE,
-                lw=3,
-                alpha=alpha,
-                solid_capstyle="round",
-                label=label,
-            )
+            line = dict(color=OBSTACLE, lw=3, alpha=alpha, solid_capstyle="round", label=label)
+            ax.plot([a[0], b[0]], [a[1], b[1]], **line)
         elif kind == "DiskObstacle":
             c = ob.center + shift
             ax.add_patch(Circle(c, ob.radius, color=OBSTACLE, alpha=0.35 * alpha, label=label))
@@ -171,65 +154,28 @@ def workspace_axes(ax, xlim, ylim) -> None:
     ax.grid(alpha=0.25)
 
 
-def frame_parts(scenario):
-    """The scene's arm, key points, surface and obstacles."""
-    return (
-        scenario.make_arm(),
-        scenario.make_key_points(),
-        scenario.make_surface(),
-        scenario.make_obstacles(),
-    )
+#: Keyword arguments of an earlier pose's links and key points, and of the last pose's.
+POSE = (dict(lw=1.6, ms=2.5), dict(lw=2.6, ms=4, label="arm (pale: earlier poses)"))
+DOTS = (dict(s=10, lw=0.6), dict(s=26, lw=1.0, label="key points (last pose named)"))
 
 
 def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
-    """The arm and its key points at ticks ``idx``, paler the earlier; the last one's named."""
-    for j, k in enumerate(idx):
-        shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
-        p = arm.joint_positions(theta[k])
-        last = j == len(idx) - 1
-        ax.plot(
-            p[:, 0],
-            p[:, 1],
-            "-o",
-            color=ARM,
-            alpha=shade,
-            lw=2.6 if last else 1.6,
-            ms=4 if last else 2.5,
-            label="arm (pale: earlier poses)" if last else None,
-            zorder=3,
-        )
-        kp = arm.points(theta[k], keys.links, keys.fracs)
-        ax.scatter(
-            kp[:, 0],
-            kp[:, 1],
-            s=26 if last else 10,
-            facecolors="white",
-            edgecolors=KEY,
-            linewidths=1.0 if last else 0.6,
-            alpha=shade,
-            zorder=4,
-            label="key points (last pose named)" if last else None,
-        )
-        if last:
-            _name_key_points(ax, keys.names, kp)
-
-
-def _name_key_points(ax, names, points) -> None:
-    """Each key point's name beside it, on a white halo (links behind it do not hide it)."""
+    """The arm and its key points at ticks ``idx``, paler the earlier; the last one's named (on
+    a white halo: links behind them do not hide them)."""
     from matplotlib import patheffects
 
+    for j, k in enumerate(idx):
+        shade = 0.18 + 0.82 * (j / max(len(idx) - 1, 1))
+        last = j == len(idx) - 1
+        p = arm.joint_positions(theta[k])
+        ax.plot(p[:, 0], p[:, 1], "-o", color=ARM, alpha=shade, zorder=3, **POSE[last])
+        kp = arm.points(theta[k], keys.links, keys.fracs)
+        dots = dict(facecolors="white", edgecolors=KEY, alpha=shade, zorder=4)
+        ax.scatter(kp[:, 0], kp[:, 1], **dots, **DOTS[last])
     halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
-    for name, q in zip(names, points):
-        ax.annotate(
-            name,
-            q,
-            textcoords="offset points",
-            xytext=(5, 4),
-            fontsize=7.5,
-            color=KEY,
-            path_effects=halo,
-            zorder=7,
-        )
+    name = dict(textcoords="offset points", xytext=(5, 4), fontsize=7.5, color=KEY, zorder=7)
+    for text, q in zip(keys.names, kp):
+        ax.annotate(text, q, path_effects=halo, **name)
 
 
 def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
@@ -237,16 +183,9 @@ def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
     the arm's base."""
     desired = dict(color="0.35", lw=1.3, label="desired end-effector path", zorder=2)
     ax.plot(log["xd_x"], log["xd_y"], ":", **desired)
-    look = backend_look(backend)
-    ax.plot(
-        log["ee_x"],
-        log["ee_y"],
-        **look.line(  # no markers along it (they would read as key points); the legend shows it
-            lw=1.6,
-            label=f"{backend}: actual end-effector path" if backend else "actual end-effector path",
-            zorder=5,
-        ),
-    )
+    label = f"{backend}: actual end-effector path" if backend else "actual end-effector path"
+    # no markers along it (they would read as key points); the legend shows one
+    ax.plot(log["ee_x"], log["ee_y"], **backend_look(backend).line(lw=1.6, label=label, zorder=5))
     ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
 
 
@@ -259,17 +198,12 @@ def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys,
     q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
     d_safe = scenario.data["controller"]["d_safe"]
     bad = close["distance"] < d_safe - DEFAULT_SAFETY_MARGIN
-    ax.scatter(
-        [q[0]],
-        [q[1]],
-        s=170,
-        facecolors="none",
-        edgecolors="red" if bad else "black",
-        lw=1.8,
-        zorder=6,
-        label=f"closest approach: {close['key_point']} {close['distance'] * 1e3:.1f} mm "
-        f"from {close['obstacle']}\nat t = {close['t']:.2f} s (d_safe {d_safe * 1e3:g} mm)",
+    label = (
+        f"closest approach: {close['key_point']} {close['distance'] * 1e3:.1f} mm "
+        f"from {close['obstacle']}\nat t = {close['t']:.2f} s (d_safe {d_safe * 1e3:g} mm)"
     )
+    ring = dict(s=170, facecolors="none", edgecolors="red" if bad else "black", lw=1.8)
+    ax.scatter([q[0]], [q[1]], zorder=6, label=label, **ring)
 
 
 def draw_snapshot(
@@ -282,28 +216,22 @@ def draw_snapshot(
     backend: str | None = None,
 ) -> Path:
     """Draw the tick log of a run of ``scenario`` at ``instants`` poses evenly spaced in time
-    (module docstring) into ``path`` (its suffix picks PNG, SVG or PDF); return it.
-
-    ``backend``: the run's backend, whose look its path and distance line take (``None``: grey).
-    """
+    into ``path`` (PNG, SVG or PDF by its suffix); return it. ``backend``: the run's, whose look
+    its path and distance line take (``None``: grey)."""
     from .loop_figure import has_distance
 
-    arm, keys, surface, obstacles = frame_parts(scenario)
-    theta = thetas(log, arm.n)
+    arm, keys = scenario.make_arm(), scenario.make_key_points()
+    surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
+    theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     t = log["t"].to_numpy(float)
     xlim, ylim = view(scenario, log, arm)
     has_d = has_distance(log)
 
     # the workspace's height follows its view's proportions (equal axes), within limits
     high = float(np.clip(WORKSPACE_IN * np.ptp(ylim) / np.ptp(xlim), 2.4, 1.3 * WORKSPACE_IN))
-    fig, axes = style.pyplot().subplots(
-        2 if has_d else 1,
-        1,
-        figsize=(WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0)),
-        height_ratios=[high, DISTANCE_IN] if has_d else None,
-        squeeze=False,
-        layout="constrained",
-    )
+    size = (WORKSPACE_IN + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0))
+    ratios = [high, DISTANCE_IN] if has_d else None
+    fig, axes = style.subplots(2 if has_d else 1, 1, *size, height_ratios=ratios)
     ax = axes[0, 0]
     surface_line = dict(color=SURFACE, lw=2.5, label="contact surface")
     draw_line(ax, surface.point, -surface.normal, xlim, ylim, **surface_line)
@@ -317,9 +245,8 @@ def draw_snapshot(
     _mark_closest_approach(ax, log, scenario, arm, keys, theta)
 
     workspace_axes(ax, xlim, ylim)
-    ax.set_title(
-        title or f"{scenario.name}: the arm over {t[-1] + (t[1] - t[0] if len(t) > 1 else 0):.1f} s"
-    )
+    span = t[-1] + (t[1] - t[0] if len(t) > 1 else 0)
+    ax.set_title(title or f"{scenario.name}: the arm over {span:.1f} s")
     if has_d:
         _distance_panel(axes[1, 0], log, backend, scenario.data["controller"]["d_safe"])
     style.legend_beside(ax, *style.entries(axes[:, 0]))
@@ -329,7 +256,6 @@ def draw_snapshot(
 def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -> None:
     """The closest key point's distance [mm] against t in the run's look (the body's dashed),
     its closest approach ringed, on the report's distance axis (:mod:`.loop_figure`)."""
-    from ..sim import log as tick_log
     from .loop_figure import distance_axis
 
     look = backend_look(backend)
@@ -344,10 +270,134 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
             ax.plot(t, body, color=look.colour, ls=(0, (2, 2)), lw=0.9, label=label, zorder=2)
     k = int(np.nanargmin(d))
     bad = d[k] < (d_safe - DEFAULT_SAFETY_MARGIN) * 1e3
-    ax.scatter(
-        [t[k]], [d[k]], s=110, facecolors="none", edgecolors="red" if bad else "black", lw=1.6
-    )
+    ring = dict(s=110, facecolors="none", edgecolors="red" if bad else "black", lw=1.6)
+    ax.scatter([t[k]], [d[k]], **ring)
     distance_axis(ax, d_safe, float(np.nanmin(d)))
     ax.set_xlabel("t [s]")
     ax.set_ylabel("distance to an\nobstacle [mm]", fontsize=9)
     ax.grid(True, which="major", alpha=0.3)
+
+
+def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim) -> bool:
+    """Axes, surface, desired path and (if none moves) the obstacles; True when none moves."""
+    workspace_axes(ax, xlim, ylim)
+    draw_line(ax, surface.point, -surface.normal, xlim, ylim, color=SURFACE, lw=2.5)
+    ax.plot(log["xd_x"], log["xd_y"], "--", color="0.6", lw=1.0)
+    static = not any(np.any(ob.velocity) for ob in obstacles)
+    if static:
+        draw_obstacles(ax, obstacles, 0.0, xlim, ylim)
+    return static
+
+
+def _animation_artists(ax, backend: str | None = None) -> tuple:
+    """The artists each frame updates: links, key points, end-effector trace (in ``backend``'s
+    look), and the time stamp (the axes' title: outside the workspace, never over the arm)."""
+    (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
+    keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
+    look = backend_look(backend)
+    (trace,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
+    label = ax.set_title("", fontsize=8, family="monospace", loc="left")
+    return link_line, keys_plot, trace, label
+
+
+def animate(
+    scenario: Scenario,
+    log: pd.DataFrame,
+    path: str | Path,
+    *,
+    fps: int = 20,
+    speed: float = 1.0,
+    progress: bool = False,
+    title: str | None = None,
+    backend: str | None = None,
+) -> Path:
+    """Render the tick log of a run of ``scenario`` frame by frame to ``path`` (``.gif``, or
+    ``.mp4`` with ffmpeg), the time stamp red while a key point is closer than ``d_safe``; return
+    it. ``speed``: simulated seconds per second of animation; ``backend``: whose look the
+    end-effector trace takes (``None``: dark grey).
+
+    Raises:
+        ParamError: an unknown suffix, ``.mp4`` without ffmpeg, or a non-positive ``fps``/``speed``.
+    """
+    from matplotlib import animation
+
+    path = Path(path)
+    check_animation(path, fps, speed)
+
+    arm, keys = scenario.make_arm(), scenario.make_key_points()
+    surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
+    theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
+    t = log["t"].to_numpy(float)
+    dt = float(t[1] - t[0]) if len(t) > 1 else scenario.dt  # every speed / (fps dt)-th tick
+    frames = list(range(0, len(t), max(1, int(round(speed / (fps * dt))))))
+    xlim, ylim = view(scenario, log, arm)
+    d_safe = scenario.data["controller"]["d_safe"]
+    dcols = tick_log.distance_columns(log)
+
+    # equal axes: the frame's height follows the view's proportions
+    high = float(np.clip(5.4 * np.ptp(ylim) / np.ptp(xlim) + 0.9, 2.6, 6.0))
+    fig, ax = style.pyplot().subplots(figsize=(6, high), dpi=70, layout="constrained")
+    static = _animation_background(ax, surface, log, obstacles, xlim, ylim)
+    link_line, keys_plot, trace, label = _animation_artists(ax, backend)
+    moving_artists: list = []
+    head = title or scenario.name
+
+    def draw(k):
+        for art in moving_artists:
+            art.remove()
+        moving_artists.clear()
+        if not static:
+            before = set(ax.lines) | set(ax.collections) | set(ax.patches)
+            draw_obstacles(ax, obstacles, float(t[k]), xlim, ylim)
+            moving_artists.extend((set(ax.lines) | set(ax.collections) | set(ax.patches)) - before)
+        p = arm.joint_positions(theta[k])
+        link_line.set_data(p[:, 0], p[:, 1])
+        keys_plot.set_offsets(arm.points(theta[k], keys.links, keys.fracs))
+        trace.set_data(log["ee_x"].to_numpy()[: k + 1], log["ee_y"].to_numpy()[: k + 1])
+        dmin = np.nanmin(log[dcols].to_numpy()[k]) if dcols else float("nan")
+        near = dcols and dmin < d_safe - DEFAULT_SAFETY_MARGIN
+        label.set_text(
+            f"{head}  t = {t[k]:5.2f} s" + (f"   d_min = {dmin * 1e3:6.1f} mm" if dcols else "")
+        )
+        label.set_color("red" if near else "black")
+        return [link_line, keys_plot, trace, label, *moving_artists]
+
+    anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    _save_animation(anim, fig, path, fps, len(frames), progress)
+    return path
+
+
+def check_animation(path: Path, fps: float, speed: float) -> None:
+    """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
+    from ..exceptions import ParamError
+
+    suffix, key = path.suffix.lower(), "animate"
+    if suffix not in (".gif", ".mp4"):
+        raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key=key)
+    if suffix == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ParamError("writing .mp4 needs ffmpeg on the PATH; use a .gif", key=key)
+    if not (fps > 0 and speed > 0 and math.isfinite(fps) and math.isfinite(speed)):
+        raise ParamError(f"fps and speed must be positive, got fps={fps}, speed={speed}", key=key)
+
+
+def _save_animation(anim, fig, path: Path, fps: float, n_frames: int, progress: bool) -> None:
+    """Write ``anim`` to ``path`` atomically (temporary file, then rename) and close ``fig``."""
+    from matplotlib import animation
+    from tqdm import tqdm
+
+    from ..atomic import record, rename
+
+    suffix = path.suffix.lower()
+    writer = (animation.PillowWriter if suffix == ".gif" else animation.FFMpegWriter)(fps=fps)
+    desc = f"animate {path.name}"
+    bar = tqdm(total=n_frames, unit="frame", desc=desc, leave=False, disable=not progress)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{suffix}")
+    try:  # matplotlib's progress callback gets (frame, total)
+        anim.save(tmp, writer=writer, progress_callback=lambda i, n: bar.update(1))
+        rename(tmp, path)
+        record(path)  # listed with the command's other outputs
+    finally:
+        bar.close()
+        style.pyplot().close(fig)
+        tmp.unlink(missing_ok=True)

@@ -1,10 +1,6 @@
-"""Reading result CSVs for a report: bench or closed-loop (by their columns), duplicates, repeats.
-
-A result key ``(problem, scenario, backend, profile, mode)`` in two files is an error unless
-``prefer`` (``first`` or ``last`` file) says which to keep; so is a backend whose rows in one
-``(profile, mode)`` come from files timed with different ``repeat`` counts (a minimum of 3
-solves is not comparable to a single shot); with ``prefer`` they are kept, with a note.
-"""
+"""Reading result CSVs for a report: bench or closed-loop (by their columns). A result key in
+two files, or a backend's rows in one ``(profile, mode)`` from files timed with different
+``repeat`` counts, is an error unless ``prefer`` (``first`` or ``last`` file) says which to keep."""
 
 from __future__ import annotations
 
@@ -49,10 +45,10 @@ CLOSED_LOOP_COLUMNS = ("scenario", "backend", "status", "log_file")
 
 @dataclass
 class ResultFile:
-    """One CSV given to the report."""
+    """One CSV given to the report; ``kind``: ``bench`` or ``closed-loop``."""
 
     path: Path
-    kind: str  # "bench" | "closed-loop"
+    kind: str
     sha256: str
     rows: int
 
@@ -96,11 +92,8 @@ def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
 
 
 def expand_paths(paths: list[str | Path]) -> list[Path]:
-    """CSV files named, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted).
-
-    Raises:
-        InputError: a path does not exist, or a folder holds no CSV.
-    """
+    """CSV files named, and every ``*.csv`` / ``*.csv.gz`` in a named folder (sorted);
+    :class:`InputError` for a missing path or a folder without one."""
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
@@ -121,15 +114,13 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
 
 
 def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
-    """Read bench and closed-loop CSVs (folders are searched); ``prefer``: module docstring.
-
-    Rows get ``source`` (their file); bench rows their :func:`scenario_key` as ``scenario`` and
-    ``""`` for a missing ``mode``; closed-loop rows ``log_path``, their ``log_file`` resolved
-    against the CSV's folder (``None`` when the run left no log).
+    """Read bench and closed-loop CSVs (folders are searched). Rows get ``source`` (their file);
+    bench rows :func:`scenario_key` as ``scenario``; closed-loop rows ``log_path``
+    (:func:`log_path`).
 
     Raises:
-        InputError: unreadable CSV, one that is neither kind (naming the file),
-            a duplicate key or mixed repeat counts without ``prefer``.
+        InputError: unreadable CSV, one of neither kind, a duplicate key or mixed repeat counts
+            without ``prefer``.
     """
     bench, loops, files = [], [], []
     for path in expand_paths(paths):
@@ -147,27 +138,23 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
         elif set(CLOSED_LOOP_COLUMNS) <= cols:
             for column in set(STRUCTURED_FIGURES) & cols:  # a table of failed runs has none
                 df[column] = df[column].map(_from_json)
-            df["log_path"] = [
-                str(path.parent / f) if isinstance(f, str) and f else None for f in df["log_file"]
-            ]
+            df["log_path"] = [log_path(path.parent, f) for f in df["log_file"]]
             loops.append(df)
             kind = "closed-loop"
         else:
-            missing = sorted(set(BENCH_COLUMNS) - cols)
+            missing = ", ".join(sorted(set(BENCH_COLUMNS) - cols))
             raise InputError(
-                "neither a bench CSV (missing columns "
-                + ", ".join(missing)
-                + ") nor a closed-loop CSV (needs scenario, backend, status, log_file)",
+                f"neither a bench CSV (missing columns {missing}) nor a closed-loop CSV "
+                "(needs scenario, backend, status, log_file)",
                 path=path,
             )
         files.append(ResultFile(path, kind, sha256_file(path), len(df)))
-    notes: list[str] = []
-    bench_df = pd.concat(bench, ignore_index=True) if bench else pd.DataFrame()
+    bench_df, notes = pd.DataFrame(), []
     if bench:
-        bench_df = drop_duplicates(bench_df, prefer)
+        bench_df = drop_duplicates(pd.concat(bench, ignore_index=True), prefer)
         bench_df["scenario"] = bench_df["scenario"].map(scenario_key)
         bench_df["mode"] = bench_df["mode"].fillna("")
-        notes.extend(check_repeats(bench_df, prefer))
+        notes = check_repeats(bench_df, prefer)
     return Results(
         bench=bench_df,
         closed_loop=pd.concat(loops, ignore_index=True) if loops else pd.DataFrame(),
@@ -176,29 +163,28 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     )
 
 
-def _key_frame(df: pd.DataFrame) -> pd.DataFrame:
-    """The :data:`DUPLICATE_KEY` columns as text (empty cells: ``-``)."""
-    return pd.DataFrame({c: df[c].map(scenario_key) for c in DUPLICATE_KEY}, index=df.index)
+def log_path(folder: Path, log_file: object) -> str | None:
+    """A run's tick log (``log_file`` in ``folder``, the CSV's), else its figure log
+    (:mod:`qpbench.sim.figure_log`), else ``None``."""
+    from ..sim.figure_log import figure_log_path
+
+    if not isinstance(log_file, str) or not log_file:
+        return None
+    found = [p for p in (folder / log_file, figure_log_path(folder / log_file)) if p.exists()]
+    return str(found[0]) if found else None
 
 
 def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
-    """Bench rows with each result key once (module docstring).
-
-    Raises:
-        InputError: a key in two files and ``prefer`` is ``None``.
-    """
-    keys = _key_frame(bench)
+    """Bench rows with each result key once; :class:`InputError` without ``prefer``."""
+    keys = pd.DataFrame({c: bench[c].map(scenario_key) for c in DUPLICATE_KEY}, index=bench.index)
     dup = keys.duplicated(keep=False)
     if not dup.any():
         return bench
     if prefer is None:
-        first = int(np.flatnonzero(dup.to_numpy())[0])
-        key = keys.iloc[first]
+        key = keys.iloc[int(np.flatnonzero(dup.to_numpy())[0])]
         same = (keys == key).all(axis=1).to_numpy()
-        sources = list(dict.fromkeys(bench.loc[same, "source"]))
+        sources = [*dict.fromkeys(bench.loc[same, "source"])] * 2  # twice: a row twice in a file
         text = ", ".join(f"{c}={key[c]}" for c in DUPLICATE_KEY)
-        if len(sources) == 1:
-            sources = sources * 2
         raise InputError(
             f"{sources[0]} and {sources[1]} both hold the row ({text}); "
             "pass --prefer first or --prefer last to keep one file's rows",
@@ -209,12 +195,8 @@ def drop_duplicates(bench: pd.DataFrame, prefer: str | None) -> pd.DataFrame:
 
 
 def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
-    """Notes on backends timed with different ``repeat`` counts in one table (a file's count for
-    a backend: the largest ``repeat`` of its rows, failed solves are not repeated).
-
-    Raises:
-        InputError: a mix and ``prefer`` is ``None``.
-    """
+    """Notes on backends timed with different ``repeat`` counts in one table (a file's count:
+    the largest ``repeat`` of its rows); :class:`InputError` on a mix without ``prefer``."""
     notes = []
     df = bench.assign(_repeat=pd.to_numeric(bench["repeat"], errors="coerce"))
     for (profile, mode), table in df.groupby(["profile", "mode"], sort=True):

@@ -1,12 +1,7 @@
-"""The closed-loop figure: one or several backends' runs of one scenario, side by side.
-
-Panels, top to bottom: |tracking error| [mm] and |F - Fd| [N] (log scales: a 1e-4 mm steady
-state and a 100 mm transient both readable); the closest key point to an obstacle [mm] against
-``d_safe`` (:func:`distance_axis`; scenarios with obstacles); solve time per tick [µs] against
-the 1 ms budget; ``|v|^2`` [rad²/s²]; ``Kp_hat`` [N/m] (adaptive scenarios). One column per group
-of backends (:func:`qpbench.report.style.groups`); ticks where a backend's own answer was not
-applied (fallback or zero velocity) shaded in its colour along the top of the first panel.
-"""
+"""The closed-loop figure of one scenario's runs: |tracking error| [mm], |F - Fd| [N], the
+closest key point [mm] against ``d_safe`` (with obstacles), solve time [µs] against the budget,
+``|v|^2`` [rad²/s²], ``Kp_hat`` [N/m] (adaptive); a column per group of backends; ticks without
+the backend's own answer (fallback, zero velocity) shaded along the top."""
 
 from __future__ import annotations
 
@@ -27,6 +22,15 @@ if TYPE_CHECKING:
 COLUMN_IN, PANEL_IN = 4.6, 1.75
 #: The per-tick time budget drawn on the solve-time panel [s].
 BUDGET_S = 1e-3
+#: The panels, top to bottom, and their y labels.
+PANELS = {
+    "tracking": "|tracking error|\n[mm]",
+    "force": "|force error|\n|F - Fd| [N]",
+    "distance": "closest key point\nto an obstacle [mm]",
+    "time": "solve time\nper tick [µs]",
+    "speed": "joint speed\n|v|² [rad²/s²]",
+    "kp": "estimated\nKp_hat [N/m]",
+}
 
 
 def has_distance(log: pd.DataFrame) -> bool:
@@ -81,16 +85,9 @@ def closed_loop_figure(
     if not logs:
         raise ValueError("no tick log to draw")
     has_d = any(has_distance(d) for d in logs.values())
-    adaptive = any(
-        tick_log.KP_HAT in d.columns and np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0
-        for d in logs.values()
-    )
-    panels = (
-        ["tracking", "force"]
-        + (["distance"] if has_d else [])
-        + ["time", "speed"]
-        + (["kp"] if adaptive else [])
-    )
+    adaptive = any(np.nanstd(d[tick_log.KP_HAT].to_numpy(float)) > 0 for d in logs.values())
+    shown = {"distance": has_d, "kp": adaptive}
+    panels = [name for name in PANELS if shown.get(name, True)]
     fig, grid, groups = style.panels(
         logs, len(panels), COLUMN_IN, PANEL_IN, pad=(1.0, 1.4), sharex=True, sharey="row"
     )
@@ -110,72 +107,40 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
     t = d[tick_log.T].to_numpy(float)
     style_kw = style.series(backend, lit, t, lw=1.0, grey_lw=0.7)
     c = style_kw["color"]
-    axes["tracking"].plot(
-        t, np.maximum(np.abs(d[tick_log.TRACKING_ERROR].to_numpy(float)) * 1e3, 1e-7), **style_kw
-    )
-    axes["force"].plot(
-        t, np.maximum(np.abs(d[tick_log.FORCE_ERROR].to_numpy(float)), 1e-7), **style_kw
-    )
-    if has_d and tick_log.D_MIN in d.columns:
+    errors = np.abs(d[[tick_log.TRACKING_ERROR, tick_log.FORCE_ERROR]].to_numpy(float))
+    axes["tracking"].plot(t, np.maximum(errors[:, 0] * 1e3, 1e-7), **style_kw)
+    axes["force"].plot(t, np.maximum(errors[:, 1], 1e-7), **style_kw)
+    if has_d:
         axes["distance"].plot(t, d[tick_log.D_MIN].to_numpy(float) * 1e3, **style_kw)
-    axes["time"].plot(
-        t,
-        d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6,
-        color=c,
-        lw=0.0,
-        marker=".",
-        ms=1.6 if lit else 1.0,
-        alpha=0.7 if lit else 0.5,
-        rasterized=True,
-        zorder=3 if lit else 1,
-    )
+    dots = dict(ms=1.6, alpha=0.7, zorder=3) if lit else dict(ms=1.0, alpha=0.5, zorder=1)
+    solve_time = d[tick_log.SOLVE_TIME].to_numpy(float) * 1e6
+    axes["time"].plot(t, solve_time, color=c, lw=0.0, marker=".", rasterized=True, **dots)
     axes["speed"].plot(t, np.maximum(d[tick_log.V_SQ].to_numpy(float), 1e-9), **style_kw)
-    if adaptive and tick_log.KP_HAT in d.columns:
+    if adaptive:
         axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style_kw)
     if not lit:
         return
     # ticks without the backend's own answer: a band along the top of the first panel
-    not_own = np.zeros(len(d), dtype=bool)
-    for col in (tick_log.FALLBACK, tick_log.ZERO_VELOCITY):
-        if col in d.columns:
-            not_own |= d[col].to_numpy(bool)
+    not_own = d[[tick_log.FALLBACK, tick_log.ZERO_VELOCITY]].to_numpy(bool).any(axis=1)
+    step = t[1] - t[0] if len(t) > 1 else 0.0
     for a, b in _intervals(not_own):
-        axes["tracking"].axvspan(
-            t[a],
-            t[b] + (t[1] - t[0] if len(t) > 1 else 0.0),
-            ymin=0.94,
-            ymax=1.0,
-            color=c,
-            alpha=0.5,
-            lw=0,
-        )
+        axes["tracking"].axvspan(t[a], t[b] + step, ymin=0.94, ymax=1.0, color=c, alpha=0.5, lw=0)
 
 
 def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first: bool) -> None:
     """Scales, labels (first column only), the safety lines and the time budget of a column."""
-    labels = {
-        "tracking": "|tracking error|\n[mm]",
-        "force": "|force error|\n|F - Fd| [N]",
-        "distance": "closest key point\nto an obstacle [mm]",
-        "time": "solve time\nper tick [µs]",
-        "speed": "joint speed\n|v|² [rad²/s²]",
-        "kp": "estimated\nKp_hat [N/m]",
-    }
     for name in ("tracking", "force", "time", "speed"):
         axes[name].set_yscale("log")
     if has_d:
-        lowest = min(
-            (float(np.nanmin(d[tick_log.D_MIN])) for d in logs.values() if has_distance(d)),
-            default=None,
-        )
-        distance_axis(axes["distance"], d_safe, None if lowest is None else lowest * 1e3)
+        lowest = min(float(np.nanmin(d[tick_log.D_MIN])) for d in logs.values() if has_distance(d))
+        distance_axis(axes["distance"], d_safe, lowest * 1e3)
     axes["time"].axhline(
         BUDGET_S * 1e6, color="red", ls="--", lw=0.9, label=f"{BUDGET_S * 1e3:g} ms budget"
     )
     for name, ax in axes.items():
         ax.grid(True, alpha=0.3, which="major")
         if first:
-            ax.set_ylabel(labels[name], fontsize=9)
+            ax.set_ylabel(PANELS[name], fontsize=9)
 
 
 def _legend(axes: dict, group: list, title: str, references: bool) -> None:

@@ -1,8 +1,5 @@
-"""The one renderer of report tables: how a value prints, typed columns, a Markdown table.
-
-Floats print with :data:`DIGITS` significant digits; times are shown in [us] (:data:`US`) and
-distances in [mm] (:data:`MM`).
-"""
+"""The one renderer of report tables: how a value prints (:func:`fmt`), typed columns
+(:class:`Column`), a Markdown table (:func:`md_table`)."""
 
 from __future__ import annotations
 
@@ -51,10 +48,7 @@ def fmt(value: object) -> str:
 
 def md_table(header: list[str], rows: list[list], pad: bool = False, left=1) -> str:
     """A Markdown table; ``left``: the first ``left`` columns (or the columns of these indices)
-    are left-aligned (text), the others right-aligned.
-
-    ``pad``: every column padded to its widest cell, so the table also reads aligned as plain text.
-    """
+    are left-aligned, the others right-aligned; ``pad``: every column padded to its widest cell."""
     lefts = set(range(left)) if isinstance(left, int) else set(left)
     cells = [[fmt(c) for c in r] for r in rows]
     widths = [max(3, len(h)) for h in header]

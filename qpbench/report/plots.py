@@ -1,9 +1,8 @@
-"""PNG figures of a report; :func:`write_plots` returns them by key (used by :mod:`.markdown`).
-
-Keys: ``perf_profile_<group>`` (Dolan-More profile of runtime), ``per_tick_<group>_<scenario>``
-(solve time and optimality gap against t), ``closed_loop_<scenario>_<formulation>``
-(:mod:`.loop_figure`), ``closed_loop_v_...`` (joint velocities), ``closed_loop_d_...`` (closest
-key point against ``d_safe``), ``snapshot_<role>_...`` (:mod:`.snapshots`)."""
+"""PNG figures of a report by key: ``perf_profile_<group>``, ``per_tick_<group>_<scenario>``,
+``closed_loop[_v|_d]_<scenario>_<formulation>`` (:mod:`.loop_figure`, joint velocities, closest
+key point), ``snapshot_<role>_<scenario>_<formulation>`` (:func:`.arm.draw_snapshot`): the arm
+under the *fastest exact backend* (a QP solver whose run ended ``ok`` and whole, with the
+smallest median solve time) and the *network* (``rnn-tuned``, else ``rnn``, else another)."""
 
 from __future__ import annotations
 
@@ -16,10 +15,9 @@ import pandas as pd
 
 from ..sim import log as tick_log
 from . import style, tables
-from .arm import closest_approach
+from .arm import ROLES, closest_approach
 from .inputs import Results, numbers
 from .markdown_table import slug
-from .snapshots import read_log, write_snapshots
 
 log = logging.getLogger("qpbench.report")
 
@@ -98,26 +96,16 @@ def velocity_plot(logs: dict, title: str, path: Path) -> bool:
     names = [b for _, group in style.groups(logs, max_series=len(logs)) for b in group if joints[b]]
     if not names:
         return False
-    plt = style.pyplot()
     ncol = min(5, len(names))
     nrow = -(-len(names) // ncol)
-    fig, axes = plt.subplots(
-        nrow,
-        ncol,
-        figsize=(3.0 * ncol + 0.6, 1.55 * nrow + 1.0),
-        sharex=True,
-        squeeze=False,
-        layout="constrained",
-    )
+    fig, axes = style.subplots(nrow, ncol, 3.0 * ncol + 0.6, 1.55 * nrow + 1.0, sharex=True)
     for ax in axes.flat[len(names) :]:
         ax.set_visible(False)
     for ax, backend in zip(axes.flat, names):
         d, cols = logs[backend], joints[backend]
-        joint_colours = plt.cm.viridis(np.linspace(0.0, 0.85, len(cols)))
-        for c, colour in zip(cols, joint_colours):
-            ax.plot(
-                d[tick_log.T].to_numpy(float), d[c].to_numpy(float), lw=0.8, color=colour, label=c
-            )
+        t = d[tick_log.T].to_numpy(float)
+        for c, colour in zip(cols, style.pyplot().cm.viridis(np.linspace(0.0, 0.85, len(cols)))):
+            ax.plot(t, d[c].to_numpy(float), lw=0.8, color=colour, label=c)
         ax.set_title(backend, fontsize=9, color=style.look(backend).colour, loc="left")
         ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)
@@ -126,9 +114,8 @@ def velocity_plot(logs: dict, title: str, path: Path) -> bool:
     for ax in axes[-1, :]:
         ax.set_xlabel("t (s)", fontsize=8)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(
-        handles, labels, loc="outside upper right", ncol=len(labels), fontsize=8, frameon=False
-    )
+    where = dict(loc="outside upper right", ncol=len(labels), fontsize=8, frameon=False)
+    fig.legend(handles, labels, **where)
     fig.suptitle(title, ha="left", x=0.02)
     style.save(fig, path)
     return True
@@ -166,23 +153,14 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         ax.plot(t, dist, color=style.GREY, lw=0.7, zorder=1)
         return
     look = style.look(backend)
-    close = closest_approach(d)
-    label = (
-        backend
-        if close is None
-        else f"{backend}: {close['distance'] * 1e3:.1f} mm, {close['key_point']} / "
-        f"{close['obstacle']}, {close['t']:.2f} s"
-    )
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
+    label, close = backend, closest_approach(d)
     if close is not None:
-        ax.plot(
-            [close["t"]],
-            [close["distance"] * 1e3],
-            **look.line(lw=0, ms=7, zorder=4, markevery=None),
-        )
-    ax.plot(
-        [], [], **look.line(lw=1.0, label=label, markevery=None)
-    )  # legend entry: line and marker
+        where = f"{close['key_point']} / {close['obstacle']}, {close['t']:.2f} s"
+        label = f"{backend}: {close['distance'] * 1e3:.1f} mm, {where}"
+        marker = look.line(lw=0, ms=7, zorder=4, markevery=None)
+        ax.plot([close["t"]], [close["distance"] * 1e3], **marker)
+    ax.plot([], [], **look.line(lw=1.0, label=label, markevery=None))  # legend: line and marker
     if "d_body_min" in d.columns:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 
@@ -228,7 +206,7 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
             draw(f"closed_loop_v_{name}", lambda p: velocity_plot(logs, title, p))
             title = f"Closest key point to an obstacle, {where}"
             draw(f"closed_loop_d_{name}", lambda p: distance_plot(logs, title, p, d_safe))
-        written.update(write_snapshots(g, scenario, formulation, folder))
+        _snapshots(g, scenario, formulation, draw)
     keep = {p.resolve() for p in written.values()}
     removed = [
         p
@@ -241,6 +219,78 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
         log.info("%s: removed %d figures no longer in the report", folder, len(removed))
     relative = Path(relative_to).resolve()
     return {k: p.resolve().relative_to(relative).as_posix() for k, p in written.items()}
+
+
+#: Network backends in order of preference.
+NETWORKS = ("rnn-tuned", "rnn")
+
+
+def read_log(path: str | None) -> pd.DataFrame | None:
+    """The run's log (``log_path``) as a frame (``None``: no log, or a damaged one, warned)."""
+    if path is None:
+        return None
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - a damaged log only loses its curve
+        log.warning("%s: cannot read tick log (%s)", path, exc)
+        return None
+
+
+def _family(backend: str) -> str:
+    from ..backends import backend_class
+
+    try:
+        return str(backend_class(backend).family)
+    except Exception:  # noqa: BLE001 - an unknown (plugin) backend: judged by its name
+        return "recurrent neural network" if backend.startswith("rnn") else ""
+
+
+def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
+    """Of one scenario's runs (one formulation), the row of each role that has one."""
+    runs = runs[runs["log_path"].notna().to_numpy()]
+    chosen: dict[str, pd.Series] = {}
+    whole = numbers(runs, "simulated_s") >= numbers(runs, "duration_s") - 1e-9
+    families = [_family(str(b)) for b in runs["backend"]]
+    network = np.array(["neural network" in f for f in families], dtype=bool)
+    exact = ~network & ~np.array([f.startswith("pseudo-inverse") for f in families], dtype=bool)
+    exact = runs[exact & (runs["verdict"].astype(str) == "ok").to_numpy(bool) & whole]
+    if not exact.empty:
+        p50 = numbers(exact, "solve_time_median_s")
+        chosen["exact"] = exact.iloc[int(np.argmin(np.where(np.isnan(p50), np.inf, p50)))]
+    networks = runs[network]
+    if not networks.empty:
+        rank = [
+            NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)
+            for b in networks["backend"].astype(str)
+        ]
+        chosen["network"] = networks.iloc[int(np.argmin(rank))]
+    return chosen
+
+
+def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str, draw) -> None:
+    """Draw the snapshots of one scenario's runs with ``draw(key, figure)``."""
+    from ..sim.log import theta_columns
+    from ..sim.scenario import load_scenario
+    from .arm import draw_snapshot
+
+    chosen = snapshot_runs(runs)
+    if not chosen:
+        return
+    try:
+        scene = load_scenario(scenario)
+    except Exception as exc:  # noqa: BLE001 - a scenario not found here only loses its pictures
+        log.warning("%s: no arm snapshot (%s)", scenario, exc)
+        return
+    for role, row in chosen.items():
+        frame = read_log(row["log_path"])
+        if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
+            continue  # no log, or one without the joint angles: no picture of the arm
+        backend = str(row["backend"])
+        title = f"{scenario}: {backend} ({ROLES[role]})"
+        draw(
+            f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}",
+            lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend),
+        )
 
 
 #: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).

@@ -1,9 +1,6 @@
-"""The answer, stated: which backends to trust in the loop, from a closed-loop table.
-
-A backend is *recommended* for a scenario when every run of it there has verdict ``ok``
-(:mod:`qpbench.sim.verdict`) and was real time, overall when it is in every scenario; ranked by
-p99 call time (``solve_time_p99_s``, the largest over its runs), the solver's own p99 beside.
-Every other backend is listed with its reasons, each naming the scenario."""
+"""Which backends to trust in the loop: *recommended* for a scenario when every run of it there
+has verdict ``ok`` and was real time, overall when in every scenario; ranked by p99 call time
+(the largest over its runs); every other backend listed with its reasons."""
 
 from __future__ import annotations
 
@@ -59,7 +56,6 @@ class Scope:
 
     @property
     def backends(self) -> list[str]:
-        """The recommended backends' names, fastest first."""
         return [p.backend for p in self.recommended]
 
 
@@ -169,6 +165,11 @@ def recommend(table: pd.DataFrame) -> Recommendation:
     return Recommendation(Scope(f"all scenarios ({names})", picks, rejected), scenarios, len(runs))
 
 
+def _why(reasons: tuple[str, ...]) -> str:
+    more = len(reasons) - MAX_REASONS
+    return "; ".join(reasons[:MAX_REASONS]) + (f" (and {more} more)" if more > 0 else "")
+
+
 def _us(seconds: float) -> str:
     return "-" if math.isnan(seconds) else f"{seconds * US:.4g}"
 
@@ -188,18 +189,12 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
             f"(p99 call time, the largest over their runs; the solver's own p99 beside, "
             f"- when it reports none):{gap}"
         )
-        lines.append(
-            md_table(
-                ["rank", "backend", "call p99 (us)", "solver p99 (us)"],
-                [
-                    [str(i), p.backend, _us(p.call_p99_s), _us(p.solver_p99_s)]
-                    for i, p in enumerate(overall.recommended, 1)
-                ],
-                pad=True,
-                left=2,
-            ).rstrip("\n")
-            + gap
-        )
+        header = ["rank", "backend", "call p99 (us)", "solver p99 (us)"]
+        rows = [
+            [str(i), p.backend, _us(p.call_p99_s), _us(p.solver_p99_s)]
+            for i, p in enumerate(overall.recommended, 1)
+        ]
+        lines.append(md_table(header, rows, pad=True, left=2).rstrip("\n") + gap)
     else:
         lines.append(f"No backend was ok and real time in every run of {overall.name}.{gap}")
     if len(answer.scenarios) > 1:
@@ -213,12 +208,7 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
         lines[-1] += gap
     if overall.not_recommended:
         lines.append(f"Not recommended:{gap}")
-        rows = []
-        for backend, reasons in overall.not_recommended.items():
-            why = "; ".join(reasons[:MAX_REASONS])
-            if len(reasons) > MAX_REASONS:
-                why += f" (and {len(reasons) - MAX_REASONS} more)"
-            rows.append([backend, why])
+        rows = [[b, _why(reasons)] for b, reasons in overall.not_recommended.items()]
         lines.append(md_table(["backend", "why"], rows, pad=True, left=2).rstrip("\n") + gap)
     return "\n".join(lines).rstrip("\n") + "\n"
 
@@ -234,9 +224,7 @@ def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
             "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "
             "the loop (`qpbench closed-loop` or `qpbench run`).\n"
         )
-    out.append("## How to read this\n")
-    out.append("\n".join(f"- {line}" for line in HOW_TO_READ) + "\n")
-    return out
+    return [*out, "## How to read this\n", "\n".join(f"- {line}" for line in HOW_TO_READ) + "\n"]
 
 
 def shortfalls(runs: pd.DataFrame | None = None, failed_solves: int = 0) -> list[str]:

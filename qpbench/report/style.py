@@ -1,10 +1,6 @@
-"""One look per backend, the same in every figure, and the one place figures are saved.
-
-A backend's look (:func:`look`) is fixed for the backends this package knows (:data:`LOOKS`),
-else picked from :data:`SPARE` by a stable hash of its name. At most :data:`MAX_SERIES` backends
-are highlighted in a panel: :func:`groups` splits them, one column of panels each
-(:func:`panels`), the others grey behind (:func:`highlighted`, :func:`series`).
-"""
+"""One look per backend (:func:`look`), the same in every figure; panels of at most
+:data:`MAX_SERIES` highlighted backends (:func:`groups`, :func:`panels`), the others grey behind;
+the one place figures are saved (:func:`save`)."""
 
 from __future__ import annotations
 
@@ -38,13 +34,9 @@ class Look:
     linestyle: str
 
     def line(self, x=None, **extra) -> dict:
-        """Keyword arguments of ``Axes.plot`` (``extra`` added or overriding).
-
-        ``x``: the line's x values; the markers go at the points nearest to :data:`MARKS` evenly
-        spaced x values (a decimated log's ticks are bunched), shifted by a share that differs
-        by marker, so coinciding lines each show their markers. Without ``x``: no marker on
-        the line (its legend entry still shows it).
-        """
+        """Keyword arguments of ``Axes.plot`` (``extra`` added or overriding); markers at
+        :func:`marks` of ``x``, shifted by marker (coinciding lines each show theirs); without
+        ``x`` none on the line (its legend entry still shows one)."""
         kw = {"color": self.colour, "ls": self.linestyle, "marker": self.marker, "ms": 4.5}
         phase = (MARKERS.index(self.marker) + 0.5) / len(MARKERS) if self.marker in MARKERS else 0.5
         kw["markevery"] = [] if x is None else marks(x, phase)
@@ -185,12 +177,8 @@ def groups(backends: Iterable[str], max_series: int = MAX_SERIES) -> list[tuple[
 def highlighted(everyone: Iterable[str], group: Iterable[str]) -> Iterator[tuple[str, bool]]:
     """``(backend, highlighted)`` for every backend: the grey rest first (drawn below), then ``group``."""
     group = list(group)
-    chosen = set(group)
-    for b in everyone:
-        if b not in chosen:
-            yield b, False
-    for b in group:
-        yield b, True
+    yield from ((b, False) for b in everyone if b not in group)
+    yield from ((b, True) for b in group)
 
 
 def series(backend: str, lit: bool, x, lw: float, grey_lw: float) -> dict:
@@ -201,19 +189,19 @@ def series(backend: str, lit: bool, x, lw: float, grey_lw: float) -> dict:
     return dict(color=GREY, lw=grey_lw, zorder=1)
 
 
+def subplots(rows: int, cols: int, width: float, height: float, **kw):
+    """``(fig, axes)``: a ``rows`` by ``cols`` grid (always 2-d), ``width`` by ``height`` [in],
+    constrained layout."""
+    kw |= dict(squeeze=False, layout="constrained")
+    return pyplot().subplots(rows, cols, figsize=(width, height), **kw)
+
+
 def panels(backends, rows: int, width: float, height: float, pad=(0.8, 1.6), **kw):
     """``(fig, axes, groups)``: ``rows`` rows of panels, a column per group of backends
     (:func:`groups`), each ``width`` by ``height`` [in] plus ``pad`` (width, height) [in]."""
-    groups_ = groups(backends)
-    fig, axes = pyplot().subplots(
-        rows,
-        len(groups_),
-        figsize=(width * len(groups_) + pad[0], height * rows + pad[1]),
-        squeeze=False,
-        layout="constrained",
-        **kw,
-    )
-    return fig, axes, groups_
+    cols = groups(backends)
+    size = (width * len(cols) + pad[0], height * rows + pad[1])
+    return (*subplots(rows, len(cols), *size, **kw), cols)
 
 
 def entries(axes, skip=()) -> tuple[list, list]:
@@ -251,13 +239,10 @@ def pyplot():
     return plt
 
 
-def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
-    """Write ``fig`` to ``path`` atomically (format from the suffix) and close it.
-
-    A PNG taller than :data:`MAX_HEIGHT_PX` is written again at the resolution that fits, with
-    a warning. A constrained layout without fixed-aspect axes is written as it is; any other in
-    its tight box (the layout places a legend beside equal axes before the aspect shrinks them).
-    """
+def save(fig, path: str | Path, dpi: float = 110) -> Path:
+    """Write ``fig`` to ``path`` atomically (format from the suffix) and close it; a PNG taller
+    than :data:`MAX_HEIGHT_PX` again at the resolution that fits. A constrained layout with
+    equal axes is written in its tight box (its legend was placed before the aspect shrank them)."""
     from matplotlib.layout_engine import ConstrainedLayoutEngine
     from PIL import Image
 
@@ -267,25 +252,19 @@ def save(fig, path: str | Path, dpi: float = 110, **kw) -> Path:
     fmt = path.suffix.lstrip(".").lower() or "png"
     laid_out = isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine)
     free_aspect = all(ax.get_aspect() == "auto" for ax in fig.axes)
-    kw.setdefault("bbox_inches", None if laid_out and free_aspect else "tight")
+    bbox = None if laid_out and free_aspect else "tight"
     try:
         with atomic_path(path) as tmp:  # never a half-written figure under the final name
-            fig.savefig(tmp, format=fmt, dpi=dpi, **kw)
+            fig.savefig(tmp, format=fmt, dpi=dpi, bbox_inches=bbox)
             height = 0
             if fmt == "png":
                 with Image.open(tmp) as img:
                     height = img.size[1]
             if height > MAX_HEIGHT_PX:
                 fitted = dpi * (MAX_HEIGHT_PX - 1) / height
-                log.warning(
-                    "%s: figure %d px tall at %g dpi, over %d px; written at %.0f dpi",
-                    path,
-                    height,
-                    dpi,
-                    MAX_HEIGHT_PX,
-                    fitted,
-                )
-                fig.savefig(tmp, format=fmt, dpi=fitted, **kw)
+                msg = "%s: figure %d px tall at %g dpi, over %d px; written at %.0f dpi"
+                log.warning(msg, path, height, dpi, MAX_HEIGHT_PX, fitted)
+                fig.savefig(tmp, format=fmt, dpi=fitted, bbox_inches=bbox)
     finally:
         pyplot().close(fig)
     return path

@@ -1,18 +1,9 @@
-"""The statistics a report shows, from the rows :mod:`.inputs` read; aggregates as qpbenchmark's.
-
-- success rate: percentage of rows whose ``success`` is true (:mod:`qpbench.metrics`);
-- shifted geometric mean with qpbenchmark's shift ``sh = 10`` for every metric
-  (:func:`qpbenchmark.shgeom.shgeom`). A row without a found solution counts with the
-  *not-found value*: the profile's time limit for runtime, its tolerance for residuals and
-  gaps; a missing value (NaN) counts as not found, an infinite residual (no duals) stays
-  infinite. A backend that reports the infeasibility the reference found answered right and
-  its runtime counts as measured. Residuals and gaps are floored at their tolerance;
-- ratios to the best: each backend's mean over the smallest. A backend that never found a
-  solution would score best on residuals and gaps (the floor); it gets NaN there instead.
-
-Runtime is ``wall_time_min_s`` [s]: the harness's timing of the backend call and the reading
-of its answer, the minimum over the ``repeat`` timed solves.
-"""
+"""The statistics a report shows, aggregated as qpbenchmark does: success rate [%]; shifted
+geometric means (``sh = 10``) where a row without a found solution (or a NaN) counts as the
+*not-found value* (the profile's time limit for runtime, its tolerance for residuals and gaps,
+which are floored at it), a right report of infeasibility as measured runtime; ratios to the
+best (NaN on residuals and gaps for a backend that never found a solution). Runtime:
+``wall_time_min_s`` [s], the minimum over the timed repeats."""
 
 from __future__ import annotations
 
@@ -33,12 +24,9 @@ if TYPE_CHECKING:
 #: Shift of the shifted geometric means (qpbenchmark uses 10 for every metric).
 SHIFT = 10.0
 
-
 #: The runtime column of bench rows [s].
 RUNTIME = "wall_time_min_s"
-#: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?): the
-#: columns of the report's summary tables; a floored mean means nothing without a found
-#: solution (NaN for a backend with none).
+#: Metric -> (bench column, Tolerance attribute giving the not-found value, floored?).
 SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
     "runtime": (RUNTIME, "runtime", False),
     "primal_residual": ("primal_residual", "primal", True),
@@ -50,6 +38,15 @@ SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
 
 def _percentile(values: np.ndarray, q: float) -> float:
     return float(np.percentile(values, q)) if values.size else math.nan
+
+
+def _max(values: np.ndarray) -> float:
+    return float(values.max()) if values.size else math.nan
+
+
+def _optimal(rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows whose reference solution is optimal."""
+    return rows[rows["reference_status"].astype(str) == "optimal"]
 
 
 def _ratio_to_best(values: pd.Series) -> pd.Series | float:
@@ -69,22 +66,15 @@ def metric_values(df: pd.DataFrame, metric: str, tolerance: Tolerance) -> np.nda
     column, tol_attr, floored = SHGEOM_METRICS[metric]
     not_found = float(getattr(tolerance, tol_attr))
     values = numbers(df, column)
-    if metric != "runtime":
-        values = np.abs(values)
     answered = df["found"].to_numpy(dtype=bool)
-    if metric == "runtime":
-        answered = answered | correct_infeasibility(df)
+    if metric == "runtime":  # or the backend reported the infeasibility the reference found
+        ref = df["reference_status"].astype(str).to_numpy()
+        right = (df["status"].astype(str).to_numpy() == ref) & np.isin(ref, CERTIFIED_INFEASIBLE)
+        answered = answered | right
+    else:
+        values = np.abs(values)
     values = np.where(answered & ~np.isnan(values), values, not_found)
-    if floored:
-        values = np.maximum(values, not_found)
-    return values
-
-
-def correct_infeasibility(df: pd.DataFrame) -> np.ndarray:
-    """Rows where the backend reported the infeasibility the reference found (a right answer)."""
-    status = df["status"].astype(str).to_numpy()
-    ref = df["reference_status"].astype(str).to_numpy()
-    return (status == ref) & np.isin(ref, CERTIFIED_INFEASIBLE)
+    return np.maximum(values, not_found) if floored else values
 
 
 def shgeom_of(values: np.ndarray) -> float:
@@ -110,35 +100,23 @@ def bench_groups(bench: pd.DataFrame) -> Iterator[tuple[str, Tolerance, pd.DataF
         yield group_label(profile, mode), tolerance, rows
 
 
-def isolated_rows(rows: pd.DataFrame) -> dict[str, int]:
-    """Per backend, rows solved in a worker process (only backends with some)."""
-    counts = rows.groupby("backend", sort=True)["isolated"].sum()
-    return {str(b): int(n) for b, n in counts.items() if n}
-
-
 def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
-    """Per backend: success rate [%] and the shifted geometric mean (``<metric>``, runtime [s])
-    and its ratio to the best (``<metric>_ratio``) of each metric of :data:`SHGEOM_METRICS`.
-
-    ``runtime_feasible``: the runtime mean over the problems whose reference is optimal only;
-    ``overhead_median_s``: median of wall time minus solver-reported time, NaN when fewer than
-    half of the rows report a solver time (a median of a few would not describe the backend).
-    """
+    """Per backend: success rate [%], each metric's shifted geometric mean (``<metric>``,
+    runtime [s]; ``runtime_feasible`` over the problems whose reference is optimal) and its ratio
+    to the best (``<metric>_ratio``); ``overhead_median_s``: median of wall time minus solver
+    time [s], NaN when fewer than half of the rows report a solver time."""
 
     def record(g: pd.DataFrame) -> dict:
-        found = int(g["found"].astype(bool).sum())
+        found = int(g["found"].sum())
         rec = {
             "problems": len(g),
             "success_rate": 100.0 * g["success"].astype(float).mean(),
-            "found_rate": 100.0 * g["found"].astype(float).mean(),
             "found": found,
-            "isolated": int(g["isolated"].sum()),
         }
         for metric, (_, _, floored) in SHGEOM_METRICS.items():
             values = metric_values(g, metric, tolerance)
             rec[metric] = math.nan if floored and not found else shgeom_of(values)
-        feasible = g[g["reference_status"].astype(str) == "optimal"]
-        rec["runtime_feasible"] = shgeom_of(metric_values(feasible, "runtime", tolerance))
+        rec["runtime_feasible"] = shgeom_of(metric_values(_optimal(g), "runtime", tolerance))
         diff = numbers(g, RUNTIME) - numbers(g, "solver_time_s")
         diff = diff[np.isfinite(diff)]
         rec["overhead_median_s"] = float(np.median(diff)) if len(diff) >= 0.5 * len(g) else math.nan
@@ -151,37 +129,28 @@ def backend_summary(rows: pd.DataFrame, tolerance: Tolerance) -> pd.DataFrame:
 
 
 def violation_summary(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per backend: constraint violation of its answers (absolute, problem units): ``max`` and
-    ``p99`` over the rows with an ``x`` (``with_x``), and ``feasible_max``, ``feasible_p99`` over
-    those whose reference is optimal (on an infeasible problem every answer violates something).
-    """
+    """Per backend: constraint violation of its answers (problem units), ``max`` and ``p99``
+    over the ``with_x`` rows with an x, ``feasible_*`` over those whose reference is optimal."""
 
     def record(g: pd.DataFrame) -> dict:
-        v = numbers(g, "constraint_violation")
-        v = v[~np.isnan(v)]
-        feasible = numbers(
-            g[g["reference_status"].astype(str) == "optimal"], "constraint_violation"
-        )
-        vf = feasible[~np.isnan(feasible)]
-        return {
-            "problems": len(g),
-            "found": int(g["found"].astype(bool).sum()),
-            "with_x": len(v),
-            "max": float(v.max()) if v.size else math.nan,
-            "p99": _percentile(v, 99),
-            "feasible_max": float(vf.max()) if vf.size else math.nan,
-            "feasible_p99": _percentile(vf, 99),
-        }
+        rec = {"problems": len(g), "found": int(g["found"].sum())}
+        for prefix, rows in (("", g), ("feasible_", _optimal(g))):
+            v = numbers(rows, "constraint_violation")
+            v = v[~np.isnan(v)]
+            rec |= {
+                f"{prefix}with_x": len(v),
+                f"{prefix}max": _max(v),
+                f"{prefix}p99": _percentile(v, 99),
+            }
+        return rec
 
     return _per_backend(rows, record)
 
 
 def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per backend, over the rows where both are known: the timed call (``call_*``) against
-    the time the solver reports for itself (``solver_*``: what a controller calling its C or
-    C++ library pays) and their difference per row (``around_*``) [s]. A backend reporting no
-    time of its own has no row.
-    """
+    """Per backend reporting a time of its own, over the rows where both are known: p50 and p99
+    of the timed call (``call_*``), of the solver's time (``solver_*``) and of their difference
+    (``around_*``) [s]."""
 
     def record(g: pd.DataFrame) -> dict | None:
         call, solver = numbers(g, RUNTIME), numbers(g, "solver_time_s")
@@ -198,10 +167,8 @@ def solver_time_summary(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.DataFrame]:
-    """Per scenario, per backend: problems, success [%], runtime shifted geometric mean as a
-    ratio to the scenario's best, runtime percentiles over every row, found or not (the time a
-    controller waits) [s], and the largest |optimality gap| of a found solution.
-    """
+    """Per scenario, per backend: problems, success [%], runtime shifted geometric mean and its
+    ratio to the best, runtime percentiles over every row [s], largest |optimality gap| found."""
 
     def record(b: pd.DataFrame) -> dict:
         t = numbers(b, RUNTIME)
@@ -214,29 +181,23 @@ def scenario_summary(rows: pd.DataFrame, tolerance: Tolerance) -> dict[str, pd.D
             "runtime_shgeom": shgeom_of(metric_values(b, "runtime", tolerance)),
             "runtime_p50_s": _percentile(t, 50),
             "runtime_p99_s": _percentile(t, 99),
-            "runtime_max_s": float(t.max()) if len(t) else math.nan,
-            "optimality_gap_max": float(gap.max()) if len(gap) else math.nan,
+            "runtime_max_s": _max(t),
+            "optimality_gap_max": _max(gap),
         }
 
-    tables = {}
-    for scenario, g in rows.groupby("scenario", sort=True):
-        table = _per_backend(g, record)
+    tables = {s: _per_backend(g, record) for s, g in rows.groupby("scenario", sort=True)}
+    for table in tables.values():
         table["runtime_ratio"] = _ratio_to_best(table["runtime_shgeom"])
-        tables[scenario] = table
     return tables
 
 
 def performance_profile(
     rows: pd.DataFrame, taus: np.ndarray | None = None
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Dolan-More performance profile of runtime: ``(taus, {backend: rho(taus)})``.
-
-    ``r[p, s] = t[p, s] / min_s t[p, s]`` over the successful solves (a failure: ``inf``);
-    ``rho_s(tau) = |{p : r[p, s] <= tau}| / |P|``.
-    """
-    rows = rows.assign(
-        _key=rows["problem"].astype(str) + "\x00" + rows["scenario"].map(scenario_key)
-    )
+    """Dolan-More performance profile of runtime: ``(taus, {backend: rho(taus)})``, ``rho_s(tau)
+    = |{p : r[p, s] <= tau}| / |P|``, ``r[p, s] = t[p, s] / min_s t[p, s]`` (a failure: inf)."""
+    key = rows["problem"].astype(str) + "\x00" + rows["scenario"].map(scenario_key)
+    rows = rows.assign(_key=key)
     t = rows.pivot_table(index="_key", columns="backend", values=RUNTIME, aggfunc="first")
     ok = rows.pivot_table(index="_key", columns="backend", values="success", aggfunc="first")
     ok = ok.reindex_like(t).fillna(False).astype(bool)

@@ -21,27 +21,26 @@ log = logging.getLogger("qpbench.report")
 
 
 @contextlib.contextmanager
-def figure_progress(folder: Path, every_s: float = 5.0):
+def figure_progress(folder: Path):
     """While the figures are drawn: a bar of the figures written into ``folder`` on a terminal,
-    else a log line every ``every_s`` seconds (and one at the end)."""
+    else a log line every 5 s (and one at the end)."""
+    from tqdm import tqdm
+
     started = time.time()
     stop = threading.Event()
-    bar = None
-    if sys.stderr.isatty() and log.isEnabledFor(logging.INFO):
-        from tqdm import tqdm
-
-        bar = tqdm(unit="figure", desc="report figures", leave=False)
+    off = not (sys.stderr.isatty() and log.isEnabledFor(logging.INFO))
+    bar = tqdm(unit="figure", desc="report figures", leave=False, disable=off)
 
     def count() -> int:
         return sum(1 for p in folder.glob("*.png") if p.stat().st_mtime >= started - 1)
 
     def beat() -> None:
-        while not stop.wait(0.5 if bar is not None else every_s):
+        while not stop.wait(5.0 if off else 0.5):
             done = count()
-            if bar is not None:
-                bar.update(done - bar.n)
-            else:
+            if off:
                 log.info("report: %d figures in %.0f s", done, time.time() - started)
+            else:
+                bar.update(done - bar.n)
 
     thread = threading.Thread(target=beat, name="report-progress", daemon=True)
     thread.start()
@@ -50,8 +49,7 @@ def figure_progress(folder: Path, every_s: float = 5.0):
     finally:
         stop.set()
         thread.join()
-        if bar is not None:
-            bar.close()
+        bar.close()
         log.info("report: %d figures in %.1f s", count(), time.time() - started)
 
 
@@ -81,28 +79,17 @@ def write_report(
     sections: Callable[[Path, bool], list[str]] | None = None,
     files: list[ResultFile] = (),
 ) -> Path:
-    """Read the result CSVs, write ``out/report.md`` and ``out/plots/*.png``.
-
-    ``sections(out, plots)``: markdown lines appended after the tables (the sweep section);
-    with it, ``paths`` may be empty; ``files``: the tables of ``sections``, listed with the
-    result files. ``prefer``: see :func:`qpbench.report.inputs.read_results`.
-
-    Raises:
-        InputError: a path is missing or not a result CSV, a duplicate key or mixed repeat
-            counts without ``prefer``.
-        OutputExistsError: ``out/report.md`` exists and ``force`` is false.
-    """
+    """Read the result CSVs (:func:`.inputs.read_results`), write ``out/report.md`` and
+    ``out/plots/*.png`` (:func:`publish`). ``sections(out, plots)``: markdown lines appended
+    after the tables (the sweep section); with it, ``paths`` may be empty; ``files``: the
+    tables of ``sections``, listed with the result files."""
 
     def render_all(out: Path) -> str:
         started = time.perf_counter()
         results = read_results(paths, prefer=prefer)
         results.files += files
-        log.info(
-            "report: %d bench rows and %d closed-loop runs read in %.1f s",
-            len(results.bench),
-            len(results.closed_loop),
-            time.perf_counter() - started,
-        )
+        read = (len(results.bench), len(results.closed_loop), time.perf_counter() - started)
+        log.info("report: %d bench rows and %d closed-loop runs read in %.1f s", *read)
         plot_files: dict[str, str] = {}
         if plots:
             from .plots import write_plots
