@@ -84,14 +84,6 @@ def _problems():
     return out
 
 
-def _warm_post(problems) -> None:
-    from .sim.tick_kernel import warm_post_kernel
-
-    # one per scenario (the formulation does not change types)
-    for sc, ctrl, theta, arrays, _ in problems[::2]:
-        warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
-
-
 def _warm_network(problems) -> None:
     import qpsolvers
 
@@ -165,10 +157,13 @@ def prepare(wanted: Iterable[str]) -> WarmupReport:
     if kernels:
         from numba.core import event
 
+        from .sim.tick_kernel import warm_post_kernel
+
         with event.install_recorder("numba:compile") as recorder:
             problems = _problems()  # also warms the controller's build kernel
-            if "post" in kernels:
-                _warm_post(problems)
+            # the closed loop's step: one per scenario (the formulation does not change types)
+            for sc, ctrl, theta, arrays, _ in problems[::2] if "post" in kernels else ():
+                warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
             if "network" in kernels:
                 _warm_network(problems)
         compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .options import add, add_force_resume, pick, strict_exit
+from .options import add, add_force_resume, log, pick, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -19,8 +18,6 @@ EXAMPLE = (
     "qpbench bench problems/maros_meszaros --backends qpsolvers:osqp --profile qpbenchmark:high_accuracy "
     "--reference none --out mm.csv"
 )
-
-log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -131,12 +128,11 @@ def run(args: argparse.Namespace) -> int:
     )
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
-    progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,
         config,
         args.out,
-        progress=progress,
+        progress=not args.quiet and sys.stderr.isatty(),
         references=references,
         make_parent=False,
         **pick(args, "force resume"),

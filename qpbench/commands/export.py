@@ -4,16 +4,13 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import tempfile
 from pathlib import Path
 
-from .options import add
+from .options import add, log
 
 HELP = "write problems as qpsolvers .npz files or a Parquet problem set (subset with --problems/--every/--limit)"
 EXAMPLE = "qpbench export problems/wall --format npz --problems 'wall_paper_001*' --limit 10 --out wall-npz"
-
-log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

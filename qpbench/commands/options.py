@@ -4,12 +4,15 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..memory import DEFAULT_FRACTION
 from ..statuses import FORMULATIONS
+
+log = logging.getLogger("qpbench")
 
 #: Flag -> ``add_argument`` keywords of the options several commands take.
 SHARED: dict[str, dict] = {
