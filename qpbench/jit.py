@@ -33,8 +33,8 @@ _SCENARIOS = ("wall", "free")
 @dataclass(frozen=True)
 class WarmupReport:
     """What :func:`warmup` did: ``compiled`` kernel specialisations (0: all loaded, or in
-    memory) in ``seconds`` [s]; ``cache``: numba's folder (``""`` without numba); ``kernels``:
-    the groups prepared, or (``in_memory``) ready before the call."""
+    memory) in ``seconds`` [s]; ``cache``: numba's folder; ``kernels``: the groups prepared,
+    or (``in_memory``) ready before the call."""
 
     compiled: int
     seconds: float
@@ -48,8 +48,6 @@ class WarmupReport:
         shims = self.shims_compiled
         if self.in_memory:
             return "kernels already loaded in this process"
-        if not self.kernels and self.cache == "":
-            return "numba is not installed: nothing to compile"
         if not self.kernels:
             if shims:
                 return f"native shim: compiled {shims} in {self.seconds:.1f} s"
@@ -140,19 +138,16 @@ def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupRe
 def prepare(wanted: Iterable[str]) -> WarmupReport:
     """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
     from .backends import backend_class
-    from .rnn.kernels import numba_available
     from .runner.process import preload_kernels
 
     wanted = tuple(wanted)
-    numba = numba_available()
-    # numba's folder: NUMBA_CACHE_DIR, else beside the sources
-    cache = (os.environ.get("NUMBA_CACHE_DIR") or f"{PACKAGE_DIR}/**/__pycache__") if numba else ""
+    cache = os.environ.get("NUMBA_CACHE_DIR") or f"{PACKAGE_DIR}/**/__pycache__"
     todo = [k for k in wanted if k not in _DONE]
     if not todo:  # nothing these backends need (said once in the log), or all prepared before
-        ready = tuple(k for k in wanted if k in KERNELS) if numba else ()
+        ready = tuple(k for k in wanted if k in KERNELS)
         return WarmupReport(0, 0.0, cache, ready, in_memory=bool(wanted))
     start = time.perf_counter()
-    kernels = tuple(k for k in todo if k in KERNELS) if numba else ()
+    kernels = tuple(k for k in todo if k in KERNELS)
     compiled = 0
     if kernels:
         from numba.core import event
