@@ -49,16 +49,11 @@ def select_set(
 def parse_list(value: str | list[str], option: str) -> list[str]:
     """Split a comma-separated option value (empty items dropped, order kept); refuse an empty
     list or an item given twice."""
-    items = value if isinstance(value, list) else value.split(",")
+    items = [i.strip() for i in (value if isinstance(value, list) else value.split(","))]
     out: list[str] = []
-    for item in items:
-        item = item.strip()
-        if not item:
-            continue
+    for item in filter(None, items):
         if item in out:
-            raise ParamError(
-                f"'{item}' listed twice in {','.join(i.strip() for i in items)}", key=option
-            )
+            raise ParamError(f"'{item}' listed twice in {','.join(items)}", key=option)
         out.append(item)
     if not out:
         raise ParamError("empty list", key=option)
@@ -113,16 +108,13 @@ def parse_overrides(items: list[str] | None) -> dict:
 
     out = {}
     for item in items or ():
-        key, sep, text = item.partition("=")
-        key = key.strip()
+        key, sep, text = (part.strip() for part in item.partition("="))
         if not sep or not key:
             raise ParamError(f"expected KEY=VALUE, got {item!r}", key="--set")
-        text = text.strip()
         try:
-            value = tomllib.loads(f"value = {text}")["value"]
+            out[key] = tomllib.loads(f"value = {text}")["value"]
         except tomllib.TOMLDecodeError:
-            value = text
-        out[key] = value
+            out[key] = text
     return out
 
 
@@ -133,9 +125,9 @@ def backend_settings(items: list[str] | None, backends: list[str]) -> dict[str, 
     from .backends import backend_class
 
     out: dict[str, dict] = {}
+    folded = {b.casefold(): b for b in backends}  # backend names match without regard to case
     for key, value in parse_overrides(items).items():
         backend, _, setting = key.rpartition(".")
-        folded = {b.casefold(): b for b in backends}  # backend names match without regard to case
         backend = folded.get(backend.casefold(), backend)
         if backend not in backends or not setting:
             raise ParamError(

@@ -42,7 +42,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--scenarios",
-        default=None,
         help="comma-separated scenarios, or 'all' shipped ones (default: the shipped ones with "
         "[scenario] in_run = true: the paper's four and adaptive_fast; the bench uses the "
         "paper's four among them)",
