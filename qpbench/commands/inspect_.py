@@ -89,14 +89,13 @@ def _print_table(ps, info: dict) -> None:
             lines.append(("t [s]", f"{info['t'][0]:g}-{info['t'][1]:g}"))
         lines += [("note", line) for line in info["notes"]]
     if ps.manifest is not None:
-        gen = ps.manifest.get("generator") or {}
+        gen = info["generator"] or {}
         lines.append(("generator", ", ".join(f"{k}={v}" for k, v in gen.items()) or "-"))
         state = "matches" if ps.hash_ok else "DOES NOT MATCH (file changed after it was written)"
         lines.append(("sha256", f"{ps.sha256} ({state} manifest)"))
-        if ps.manifest.get("count") != len(ps):
-            lines.append(
-                ("count", f"manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
-            )
+        count = info["manifest_count"]
+        if count != len(ps):
+            lines.append(("count", f"manifest says {count}, file holds {len(ps)}"))
     else:
         lines.append(("manifest", "none (hash not checked)"))
     for label, value in lines:
