@@ -1,14 +1,10 @@
-"""Every compiled kernel of qpbench, compiled (or loaded from numba's on-disk cache) before any clock.
-
-Every command that times something, and the harness before each closed-loop run, calls
-:func:`warmup` with the backends it runs; it prepares only what those backends and the
-closed loop use. Worker processes load the kernels from the cache when they start.
+"""Every compiled kernel of qpbench, compiled (or loaded from numba's on-disk cache) before any
+clock, only for the backends a command runs.
 
 Kernel groups (:data:`KERNELS`), each warmed on the QPs of :data:`_SCENARIOS`' controllers:
 ``controller`` (:mod:`qpbench.control.build_kernel`), ``post`` (the closed loop's step,
 :mod:`qpbench.sim.tick_kernel`) and ``network`` (:mod:`qpbench.rnn.kernels`); :data:`SHIM`,
-the ``qpoases`` backend's native shim. A problem of another shape compiles its own
-integrator in the bench's discarded warm-up solve.
+the ``qpoases`` backend's native shim.
 """
 
 from __future__ import annotations
@@ -20,8 +16,6 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from .cache import PACKAGE_DIR
-
-log = logging.getLogger("qpbench")
 
 #: Kernel groups :func:`warmup` prepares, in order.
 KERNELS = ("controller", "post", "network")
@@ -38,12 +32,9 @@ _SCENARIOS = ("wall", "free")
 
 @dataclass(frozen=True)
 class WarmupReport:
-    """What :func:`warmup` did.
-
-    ``compiled``: kernel specialisations compiled (0: all loaded, or in memory);
-    ``seconds`` [s]; ``cache``: numba's folder (``""`` without numba); ``kernels``:
-    the groups prepared, or (``in_memory``) ready before the call.
-    """
+    """What :func:`warmup` did: ``compiled`` kernel specialisations (0: all loaded, or in
+    memory) in ``seconds`` [s]; ``cache``: numba's folder; ``kernels``: the groups prepared,
+    or (``in_memory``) ready before the call."""
 
     compiled: int
     seconds: float
@@ -57,8 +48,6 @@ class WarmupReport:
         shims = self.shims_compiled
         if self.in_memory:
             return "kernels already loaded in this process"
-        if not self.kernels and self.cache == "":
-            return "numba is not installed: nothing to compile"
         if not self.kernels:
             if shims:
                 return f"native shim: compiled {shims} in {self.seconds:.1f} s"
@@ -78,11 +67,6 @@ class WarmupReport:
 _DONE: set[str] = set()
 
 
-def cache_location() -> str:
-    """Where numba keeps qpbench's compiled kernels (``NUMBA_CACHE_DIR`` or beside the sources)."""
-    return os.environ.get("NUMBA_CACHE_DIR") or f"{PACKAGE_DIR}/**/__pycache__"
-
-
 def _problems():
     """The tick QPs of :data:`_SCENARIOS`, both formulations; also warms the build kernel."""
     from .sim.scenario import load_scenario
@@ -96,14 +80,6 @@ def _problems():
             arrays = ctrl.build_arrays(theta, 0.0, ctrl.kp, ctrl.kd, soft)
             out.append((sc, ctrl, theta, arrays, ctrl.make_problem(arrays, soft)))
     return out
-
-
-def _warm_post(problems) -> None:
-    from .sim.tick_kernel import warm_post_kernel
-
-    # one per scenario (the formulation does not change types)
-    for sc, ctrl, theta, arrays, _ in problems[::2]:
-        warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
 
 
 def _warm_network(problems) -> None:
@@ -123,22 +99,6 @@ def _warm_network(problems) -> None:
     online.solve(problem)
     plain = qpsolvers.Problem(*(None if a is None else a.copy() for a in problem.unpack()))
     online.solve(plain)
-
-
-def _warm_shims() -> int:
-    """Compile (first time) and load the qpoases backend's native shim; 1 if it was compiled."""
-    from .backends import backend_class
-    from .exceptions import BackendNotFound
-
-    try:
-        qpoases = backend_class("qpoases")
-    except BackendNotFound:  # a backend that is not registered has nothing to prepare
-        return 0
-    if qpoases.unavailable_reason() is not None:
-        return 0
-    compiled = qpoases.needs_compile()
-    qpoases.prepare()
-    return int(compiled)
 
 
 def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str, ...]:
@@ -170,54 +130,52 @@ def prepared() -> tuple[str, ...]:
 
 
 def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:
-    """Compile, or load from numba's on-disk cache, what ``backends`` use (:func:`kernels_for`).
-
-    ``loop``: the command runs closed loops (or makes problem sets). What this
-    process prepared already is not prepared again (``in_memory``).
-    """
+    """Compile, or load from numba's on-disk cache, what ``backends`` use (:func:`kernels_for`;
+    ``loop``: closed loops too), unless this process prepared it already (``in_memory``)."""
     return prepare(kernels_for(backends, loop))
 
 
 def prepare(wanted: Iterable[str]) -> WarmupReport:
     """:func:`warmup` of named kernel groups and shims (names of :func:`kernels_for`)."""
-    from .rnn.kernels import numba_available
+    from .backends import backend_class
     from .runner.process import preload_kernels
 
     wanted = tuple(wanted)
-    numba = numba_available()
-    cache = cache_location() if numba else ""
+    cache = os.environ.get("NUMBA_CACHE_DIR") or f"{PACKAGE_DIR}/**/__pycache__"
     todo = [k for k in wanted if k not in _DONE]
     if not todo:  # nothing these backends need (said once in the log), or all prepared before
-        ready = tuple(k for k in wanted if k in KERNELS) if numba else ()
+        ready = tuple(k for k in wanted if k in KERNELS)
         return WarmupReport(0, 0.0, cache, ready, in_memory=bool(wanted))
     start = time.perf_counter()
-    kernels = tuple(k for k in todo if k in KERNELS) if numba else ()
+    kernels = tuple(k for k in todo if k in KERNELS)
     compiled = 0
     if kernels:
         from numba.core import event
 
+        from .sim.tick_kernel import warm_post_kernel
+
         with event.install_recorder("numba:compile") as recorder:
             problems = _problems()  # also warms the controller's build kernel
-            if "post" in kernels:
-                _warm_post(problems)
+            # the closed loop's step: one per scenario (the formulation does not change types)
+            for sc, ctrl, theta, arrays, _ in problems[::2] if "post" in kernels else ():
+                warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
             if "network" in kernels:
                 _warm_network(problems)
         compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)
         kernels = tuple(k for k in KERNELS if k in kernels or k == "controller")
         todo.append("controller")
-    shims = _warm_shims() if SHIM in todo else 0
+    shims = 0
+    qpoases = backend_class("qpoases")
+    if SHIM in todo and qpoases.unavailable_reason() is None:
+        shims = int(qpoases.needs_compile())  # the native shim: compiled the first time, loaded
+        qpoases.prepare()
     _DONE.update(todo)
     preload_kernels(prepared())  # what the worker processes' forkserver loads
     return WarmupReport(compiled, time.perf_counter() - start, cache, kernels, shims_compiled=shims)
 
 
-def warmup_logged(
-    logger: logging.Logger | None = None,
-    backends: Iterable[str] | None = None,
-    loop: bool = True,
-) -> WarmupReport:
-    """:func:`warmup`, then one INFO line saying what it did and how long it took."""
+def warmup_logged(logger: logging.Logger, backends: Iterable[str], loop: bool = True) -> None:
+    """:func:`warmup`, then one INFO line on ``logger`` saying what it did and how long it took."""
     report = warmup(backends, loop)
     if not report.in_memory:
-        (logger or log).info("%s", report.line())
-    return report
+        logger.info("%s", report.line())

@@ -1,10 +1,6 @@
-"""What a command works on, parsed and checked before any work starts.
-
-Problem subsets (``--problems PATTERN``: comma-separated shell-style patterns on the name;
-``--every K`` of those; ``--limit N`` of what is left; file order), backend and scenario lists
-(``all`` or comma-separated names, none twice) and ``--set`` overrides, checked against the
-backend's own settings where it can tell.
-"""
+"""What a command works on, parsed and checked before any work starts: problem subsets,
+backend and scenario lists (``all`` or comma-separated names, none twice) and ``--set``
+overrides."""
 
 from __future__ import annotations
 
@@ -17,85 +13,59 @@ if TYPE_CHECKING:
     from .formats import ProblemSet
 
 
-def select_records(
-    records: list, pattern: str | None = None, every: int | None = None, limit: int | None = None
-) -> list:
-    """The records (anything with a ``name``) kept by ``pattern`` (case-sensitive), then every
-    ``every``-th, then the first ``limit``.
-
-    Raises:
-        ParamError: ``every`` or ``limit`` below 1, or a pattern that matches nothing.
-    """
-    for key, value in (("every", every), ("limit", limit)):
-        if value is not None:
-            positive_count(value, key)
-    kept = list(records)
-    if pattern:
-        pats = [p.strip() for p in pattern.split(",") if p.strip()]
-        kept = [r for r in kept if any(fnmatch.fnmatchcase(r.name, p) for p in pats)]
-        if not kept:
-            sample = ", ".join(r.name for r in list(records)[:3])
-            raise ParamError(
-                f"'{pattern}' matches no problem (names look like: {sample})", key="problems"
-            )
-    if every is not None:
-        kept = kept[::every]
-    if limit is not None:
-        kept = kept[:limit]
-    return kept
-
-
 def select_set(
     problem_set: ProblemSet,
     pattern: str | None = None,
     every: int | None = None,
     limit: int | None = None,
 ) -> ProblemSet:
-    """A copy of ``problem_set`` holding the records :func:`select_records` keeps.
-
-    The manifest's generator stride (ticks per record) is multiplied by ``every``, so that an
-    online backend integrates the time between two kept records; the set's SHA-256 is kept.
-    """
+    """A copy of ``problem_set`` holding the records (in file order) kept by ``pattern``
+    (comma-separated shell-style patterns, case-sensitive; one that matches nothing is an
+    error), then every ``every``-th, then the first ``limit``; its SHA-256 kept and its
+    generator stride (ticks per record, what an online backend integrates) times ``every``."""
     from dataclasses import replace
 
-    if pattern is None and every is None and limit is None:
-        return problem_set
-    records = select_records(problem_set.records, pattern, every, limit)
+    for key, value in (("every", every), ("limit", limit)):
+        if value is not None:
+            positive_count(value, key)
+    records = problem_set.records
+    if pattern:
+        pats = [p.strip() for p in pattern.split(",") if p.strip()]
+        records = [r for r in records if any(fnmatch.fnmatchcase(r.name, p) for p in pats)]
+        if not records:
+            sample = ", ".join(r.name for r in problem_set.records[:3])
+            raise ParamError(
+                f"'{pattern}' matches no problem (names look like: {sample})", key="problems"
+            )
     manifest = problem_set.manifest
     generator = (manifest or {}).get("generator") or {}
     if every is not None and generator.get("every") is not None:
         generator = dict(generator, every=int(generator["every"]) * every)
         manifest = dict(manifest, generator=generator)
-    return replace(problem_set, records=records, manifest=manifest)
+    # a None stride or limit keeps them all
+    return replace(problem_set, records=list(records)[::every][:limit], manifest=manifest)
 
 
-def parse_list(value: str | list[str] | None, option: str) -> list[str]:
+def parse_list(value: str | list[str], option: str) -> list[str]:
     """Split a comma-separated option value (empty items dropped, order kept); refuse an empty
     list or an item given twice."""
-    if value is None:
-        return []
-    items = value if isinstance(value, list) else value.split(",")
+    items = [i.strip() for i in (value if isinstance(value, list) else value.split(","))]
     out: list[str] = []
-    for item in items:
-        item = item.strip()
-        if not item:
-            continue
+    for item in filter(None, items):
         if item in out:
-            raise ParamError(
-                f"'{item}' listed twice in {','.join(i.strip() for i in items)}", key=option
-            )
+            raise ParamError(f"'{item}' listed twice in {','.join(items)}", key=option)
         out.append(item)
     if not out:
         raise ParamError("empty list", key=option)
     return out
 
 
-def select_scenarios(value: str | list[str] | None, option: str = "--scenarios") -> list[str]:
+def select_scenarios(value: str | None) -> list[str]:
     """``all`` (or nothing): every shipped scenario (the paper's four first); else the names or
     paths given, each loaded here so that a typo or a broken file is one line naming it."""
     from .sim.scenario import load_scenario, scenario_names
 
-    names = parse_list(value or "all", option)
+    names = parse_list(value or "all", "--scenarios")
     if names == ["all"]:
         return scenario_names()  # the paper's (``in_paper = true``) first, in its order
     for name in names:
@@ -130,7 +100,7 @@ def select_backend(name: str, option: str = "--backend") -> str:
     return select_backends(names, option)[0]
 
 
-def parse_overrides(items: list[str] | None, option: str = "--set") -> dict:
+def parse_overrides(items: list[str] | None) -> dict:
     """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``: each value read as TOML, else
     as a string (``euler``); a later setting of a key wins. The keys are checked by their users
     (:func:`qpbench.sim.scenario.apply_overrides`, :func:`backend_settings`)."""
@@ -138,37 +108,32 @@ def parse_overrides(items: list[str] | None, option: str = "--set") -> dict:
 
     out = {}
     for item in items or ():
-        key, sep, text = item.partition("=")
-        key = key.strip()
+        key, sep, text = (part.strip() for part in item.partition("="))
         if not sep or not key:
-            raise ParamError(f"expected KEY=VALUE, got {item!r}", key=option)
-        text = text.strip()
+            raise ParamError(f"expected KEY=VALUE, got {item!r}", key="--set")
         try:
-            value = tomllib.loads(f"value = {text}")["value"]
+            out[key] = tomllib.loads(f"value = {text}")["value"]
         except tomllib.TOMLDecodeError:
-            value = text
-        out[key] = value
+            out[key] = text
     return out
 
 
-def backend_settings(
-    items: list[str] | None, backends: list[str], option: str = "--set"
-) -> dict[str, dict]:
+def backend_settings(items: list[str] | None, backends: list[str]) -> dict[str, dict]:
     """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked against
     :meth:`~qpbench.backends.base.Backend.setting_names` where the backend can tell (``osqp.rhoo``:
     "did you mean 'rho'")."""
     from .backends import backend_class
 
     out: dict[str, dict] = {}
-    for key, value in parse_overrides(items, option).items():
+    folded = {b.casefold(): b for b in backends}  # backend names match without regard to case
+    for key, value in parse_overrides(items).items():
         backend, _, setting = key.rpartition(".")
-        folded = {b.casefold(): b for b in backends}  # backend names match without regard to case
         backend = folded.get(backend.casefold(), backend)
         if backend not in backends or not setting:
             raise ParamError(
                 f"'{key}' names no backend of this run (expected BACKEND.KEY with BACKEND in "
                 "--backends)",
-                key=option,
+                key="--set",
             )
         allowed = backend_class(backend).setting_names()
         if allowed is not None and setting not in allowed:
@@ -176,7 +141,7 @@ def backend_settings(
             raise ParamError(
                 f"'{setting}' is not a setting of backend '{backend}'; "
                 f"{did_you_mean(setting, sorted(allowed))}{listed}",
-                key=f"{option} {key}",
+                key=f"--set {key}",
             )
         out.setdefault(backend, {})[setting] = value
     return out

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .options import add, add_force_resume, pick, strict_exit
+from .options import add, add_force_resume, log, pick, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -19,8 +18,6 @@ EXAMPLE = (
     "qpbench bench problems/maros_meszaros --backends qpsolvers:osqp --profile qpbenchmark:high_accuracy "
     "--reference none --out mm.csv"
 )
-
-log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -131,12 +128,11 @@ def run(args: argparse.Namespace) -> int:
     )
     references = _reference_source(args, config)
     problem_set = select_set(load_problems(args.path), args.pattern, args.every, args.limit)
-    progress = not args.quiet and sys.stderr.isatty()
     summary = run_bench(
         problem_set,
         config,
         args.out,
-        progress=progress,
+        progress=not args.quiet and sys.stderr.isatty(),
         references=references,
         make_parent=False,
         **pick(args, "force resume"),
@@ -148,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _reference_source(args: argparse.Namespace, config) -> object:
-    """``run_bench``'s ``references``: a function of the set, called once the input is checked.
+    """``run_bench``'s ``references``: a function of the set
+    (:func:`qpbench.reference.bench_references`), called once the input is checked.
 
     ``--reference none`` also makes the success rule qpbenchmark's (nothing to judge against).
     """
@@ -160,7 +157,7 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     from ..exceptions import ParamError, positive_count, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
-    from ..reference import SOURCES, cache_folder, from_objectives, reference_solutions
+    from ..reference import METHODS, SOURCES, bench_references, cache_folder
     from ..runner.process import context
 
     source = args.reference
@@ -171,25 +168,24 @@ def _reference_source(args: argparse.Namespace, config) -> object:
         limit = positive_seconds(args.reference_time_limit, "reference-time-limit")
     if source == "none":
         config.profile = replace(profile, tolerance=replace(profile.tolerance, rule="qpbenchmark"))
-        return _said("references: none (not cached)", lambda ps: [None] * len(ps.records))
-    if source not in SOURCES:
+    elif source not in SOURCES:
         if not Path(source).is_file():
             raise ParamError(
                 f"'{source}' is neither {', '.join(SOURCES)} nor a file", key="reference"
             )
-        objectives = read_objectives(source)  # a bad file fails here, before anything is written
-        return _said(
-            f"references: {source} (not cached)", lambda ps: from_objectives(ps, objectives, source)
-        )
+        read_objectives(source)  # a bad file fails here, before anything is written
     progress = None if args.quiet else tqdm if sys.stderr.isatty() else "log"
 
-    def solved(problem_set):
+    def references(problem_set):
+        if source not in METHODS:
+            log.info("%s", f"references: {source} (not cached)")
+            return bench_references(problem_set, source)
         folder = cache_folder(problem_set, args.cache_dir)
         where = "references: not cached (set built in memory)"
         log.info("%s", f"reference cache: {folder}" if folder else where)
-        return reference_solutions(
+        return bench_references(
             problem_set,
-            method=source,
+            source,
             time_limit=limit,
             jobs=args.jobs,
             progress=progress,
@@ -197,14 +193,4 @@ def _reference_source(args: argparse.Namespace, config) -> object:
             cache_dir=args.cache_dir,
         )
 
-    return solved
-
-
-def _said(line: str, references):
-    """``references``, saying ``line`` when called (once the run's input is checked)."""
-
-    def called(problem_set):
-        log.info("%s", line)
-        return references(problem_set)
-
-    return called
+    return references

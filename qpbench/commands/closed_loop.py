@@ -4,18 +4,15 @@
 from __future__ import annotations
 
 import argparse
-import logging
 from typing import TYPE_CHECKING
 
-from .options import add, add_force_resume, aligned, pick, run_bar, strict_exit
+from .options import add, add_force_resume, aligned, log, pick, run_bar, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd
 
 HELP = "run scenarios in closed loop with each backend solving every tick; one table row per (scenario, backend)"
 EXAMPLE = "qpbench closed-loop --scenarios wall,narrow --backends qpsolvers:daqp,rnn,pinv --out results/closed-loop"
-
-log = logging.getLogger("qpbench.closed_loop")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -4,16 +4,13 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import tempfile
 from pathlib import Path
 
-from .options import add
+from .options import add, log
 
 HELP = "write problems as qpsolvers .npz files or a Parquet problem set (subset with --problems/--every/--limit)"
 EXAMPLE = "qpbench export problems/wall --format npz --problems 'wall_paper_001*' --limit 10 --out wall-npz"
-
-log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,20 +20,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(parser, "path", "--problems", "--every", "--limit")
 
 
-def _safe_name(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_.+" else "_" for c in name)
-
-
 def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output, promote
     from ..exceptions import InputError
     from ..formats import load_problems, save_npz, write_problem_set
-    from ..selection import select_records
+    from ..selection import select_set
 
     out = Path(args.out)
     check_output(out, force=args.force, kind="dir")
-    ps = load_problems(args.path)
-    records = select_records(ps.records, args.pattern, args.every, args.limit)
+    records = select_set(load_problems(args.path), args.pattern, args.every, args.limit).records
     # written beside ``out`` and renamed into place: the folder appears complete or not at all
     with tempfile.TemporaryDirectory(
         prefix=f".{out.name}.", dir=out.parent, ignore_cleanup_errors=True
@@ -47,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
             generator = {"name": "qpbench export", "source": str(args.path)}
             write_problem_set(folder, records, generator=generator)
         for rec in records if args.format == "npz" else ():
-            file = folder / f"{_safe_name(rec.name)}.npz"
+            safe = "".join(c if c.isalnum() or c in "-_.+" else "_" for c in rec.name)
+            file = folder / f"{safe}.npz"
             if file.exists():
                 raise InputError(
                     f"two problems map to the same file name '{file.name}'", key=rec.name

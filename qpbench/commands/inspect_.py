@@ -45,7 +45,6 @@ def _notes(ps, budget: int) -> list[str]:
 
 def describe(ps: ProblemSet, budget: int) -> dict:
     """What the table shows, as a JSON-able dict (ranges as ``[min, max]``)."""
-
     from ..memory import nnz
 
     def span(values):
@@ -54,15 +53,13 @@ def describe(ps: ProblemSet, budget: int) -> dict:
     def count(values):
         return dict(Counter("-" if v is None else v for v in values))
 
-    ts = [r.t for r in ps.records if r.t is not None]
-    sizes = [r.sizes for r in ps.records]
     return {
         "path": str(ps.path),
         "kind": ps.kind,
         "problems": len(ps),
-        "n": span([s[0] for s in sizes]),
-        "m_eq": span([s[1] for s in sizes]),
-        "m_ineq": span([s[2] for s in sizes]),
+        **{
+            k: span([r.sizes[i] for r in ps.records]) for i, k in enumerate(("n", "m_eq", "m_ineq"))
+        },
         "nnz": span([sum(map(nnz, (r.problem.P, r.problem.G, r.problem.A))) for r in ps.records]),
         "sparse": sum(hasattr(r.problem.P, "nnz") for r in ps.records),
         "convexity": count(r.convexity and r.convexity.verdict for r in ps.records),
@@ -72,7 +69,7 @@ def describe(ps: ProblemSet, budget: int) -> dict:
         ),
         "formulation": count(r.formulation for r in ps.records),
         "scenario": count(r.scenario for r in ps.records),
-        "t": span(ts),
+        "t": span([r.t for r in ps.records if r.t is not None]),
         "generator": (ps.manifest or {}).get("generator"),
         "sha256": ps.sha256,
         "hash_ok": ps.hash_ok,
@@ -92,14 +89,13 @@ def _print_table(ps, info: dict) -> None:
             lines.append(("t [s]", f"{info['t'][0]:g}-{info['t'][1]:g}"))
         lines += [("note", line) for line in info["notes"]]
     if ps.manifest is not None:
-        gen = ps.manifest.get("generator") or {}
+        gen = info["generator"] or {}
         lines.append(("generator", ", ".join(f"{k}={v}" for k, v in gen.items()) or "-"))
         state = "matches" if ps.hash_ok else "DOES NOT MATCH (file changed after it was written)"
         lines.append(("sha256", f"{ps.sha256} ({state} manifest)"))
-        if ps.manifest.get("count") != len(ps):
-            lines.append(
-                ("count", f"manifest says {ps.manifest.get('count')}, file holds {len(ps)}")
-            )
+        count = info["manifest_count"]
+        if count != len(ps):
+            lines.append(("count", f"manifest says {count}, file holds {len(ps)}"))
     else:
         lines.append(("manifest", "none (hash not checked)"))
     for label, value in lines:

@@ -20,21 +20,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..formats import load_problems
     from ..formats.records import box_bounds
-    from ..selection import select_records
+    from ..selection import select_set
 
-    ps = load_problems(args.path)
     table = []
-    for r in select_records(ps.records, args.pattern, args.every, args.limit):
+    lines = [("name", "n", "m_eq", "m_ineq", "bounds", "scenario", "tick", "t [s]")]
+    for r in select_set(load_problems(args.path), args.pattern, args.every, args.limit):
         n, m_eq, m_ineq = r.sizes
         n_box = box_bounds(r.problem)
         table.append(
             dict(name=r.name, n=n, m_eq=m_eq, m_ineq=m_ineq, n_box=n_box, scenario=r.scenario)
             | dict(tick=r.tick, t=r.t, formulation=r.formulation)
         )
-    lines = [("name", "n", "m_eq", "m_ineq", "bounds", "scenario", "tick", "t [s]")]
-    for r in table:
-        sizes = [str(r[k]) for k in ("n", "m_eq", "m_ineq", "n_box")]
-        tick = "" if r["tick"] is None else str(r["tick"])
-        t = "" if r["t"] is None else f"{r['t']:.3f}"
-        lines.append((r["name"], *sizes, r["scenario"] or "-", tick, t))
+        tick = "" if r.tick is None else str(r.tick)
+        t = "" if r.t is None else f"{r.t:.3f}"
+        lines.append((r.name, *map(str, (n, m_eq, m_ineq, n_box)), r.scenario or "-", tick, t))
     return print_listing(args, table, lines, align="lrrrrl")

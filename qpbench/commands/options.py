@@ -1,16 +1,18 @@
-"""Options several commands take, one definition each (a command may give its own help text),
-the exit code of the commands that benchmark many backends (:func:`strict_exit`) and their
-plain-text tables (:func:`aligned`)."""
+"""Options several commands take, one definition each, and what commands share: the exit code
+(:func:`strict_exit`), progress bars and plain-text tables (:func:`aligned`)."""
 
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..memory import DEFAULT_FRACTION
 from ..statuses import FORMULATIONS
+
+log = logging.getLogger("qpbench")
 
 #: Flag -> ``add_argument`` keywords of the options several commands take.
 SHARED: dict[str, dict] = {
@@ -78,22 +80,18 @@ SHARED: dict[str, dict] = {
 
 
 def add(parser: argparse.ArgumentParser, *flags: str, **kw) -> None:
-    """Add the shared options ``flags``; ``kw`` (a command's own help, ``required``...) over
-    their keywords."""
+    """Add the shared options ``flags``, ``kw`` (a command's own help...) over their keywords."""
     for flag in flags:
         parser.add_argument(flag, **{**SHARED[flag], **kw})
 
 
 def pick(args: argparse.Namespace, names: str) -> dict:
-    """The options ``names`` (space-separated destinations) as keyword arguments of the call
-    that takes them under the same names."""
+    """The options ``names`` (space-separated destinations) as keyword arguments."""
     return {name: getattr(args, name) for name in names.split()}
 
 
 def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -> None:
-    """``--force`` or ``--resume`` (not both), with the command's help texts: what to do with an
-    output that is already there (:func:`qpbench.atomic.check_output`); and ``--strict``
-    (:func:`strict_exit`), which every command that can resume takes."""
+    """``--force`` or ``--resume`` (not both), with the command's help texts, and ``--strict``."""
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--force", action="store_true", help=force)
     group.add_argument("--resume", action="store_true", help=resume)
@@ -102,7 +100,7 @@ def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -
 
 def check_tables(folder, names, args: argparse.Namespace, key: str = "out") -> None:
     """Output folder ``folder`` may exist (its parent must), its files ``names`` only with
-    ``--force`` or ``--resume`` (:func:`qpbench.atomic.check_output`)."""
+    ``--force`` or ``--resume``."""
     from ..atomic import check_folder, check_output
 
     check_folder(folder, key=key)
@@ -113,10 +111,9 @@ def check_tables(folder, names, args: argparse.Namespace, key: str = "out") -> N
 def strict_exit(
     args: argparse.Namespace, *, runs=None, failed_solves: int = 0, recommend: bool = False
 ) -> int:
-    """0 once the outputs are written; with ``--strict``, 1 when
-    :func:`qpbench.report.recommend.shortfalls` finds something in ``runs`` (closed-loop or
-    sweep rows) or ``failed_solves``, with one line on stderr saying what. ``recommend``: then
-    print the recommendation from ``runs`` (closed-loop rows) as the last lines."""
+    """0 once the outputs are written; with ``--strict``, 1 when ``runs`` (closed-loop or sweep
+    rows) or ``failed_solves`` fall short, said in one line on stderr. ``recommend``: then print
+    the recommendation from ``runs`` as the last lines."""
     from ..report import recommend as rec
 
     found = rec.shortfalls(runs, failed_solves) if getattr(args, "strict", False) else None
@@ -129,8 +126,8 @@ def strict_exit(
 
 @contextmanager
 def run_bar(args: argparse.Namespace, total: int, desc: str, on_row, leave: bool = True):
-    """A progress bar of ``total`` runs (none with ``-q``); yields the ``on_row`` to give the
-    runner: one step of the bar, then ``on_row(row)``."""
+    """A progress bar of ``total`` runs (none with ``-q``); yields the runner's ``on_row``: one
+    step of the bar, then ``on_row(row)``."""
     from tqdm import tqdm
 
     bar = tqdm(total=total, unit="run", desc=desc, leave=leave, disable=args.quiet or None)
@@ -158,8 +155,7 @@ def aligned(rows: list, align: str = "l", free_last: bool = False) -> str:
 
 
 def print_listing(args: argparse.Namespace, items: list[dict], rows: list, **kw) -> int:
-    """``items`` as one JSON object per line with ``--json``, else the table of ``rows``
-    (:func:`aligned` with ``kw``); the exit code 0."""
+    """``items`` as one JSON object per line with ``--json``, else :func:`aligned` ``rows``; 0."""
     import json
 
     for line in [json.dumps(item) for item in items] if args.json else [aligned(rows, **kw)]:

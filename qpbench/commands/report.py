@@ -24,7 +24,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--prefer",
         choices=("first", "last"),
-        default=None,
         help="a (problem, scenario, backend, profile, mode) row in several bench CSVs is an error, and so "
         "is a backend timed with different --repeat counts in one table; first/last: keep the row of the "
         "first/last file given, and report mixed repeat counts with a note",

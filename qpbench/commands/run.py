@@ -4,11 +4,10 @@ closed loop and report into results/, the recommendation printed last."""
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
 from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
-from .options import add, add_force_resume, pick, strict_exit
+from .options import add, add_force_resume, log, pick, strict_exit
 
 HELP = (
     "the main job: make missing problem sets, bench every backend, closed loop every scenario, "
@@ -23,8 +22,6 @@ QUICK = dict(
 )
 #: The defaults without ``--quick``.
 FULL = dict(out="results", backends="all", bench_every=BENCH_EVERY, repeat=REPEAT)
-
-log = logging.getLogger("qpbench.run")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -45,7 +42,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--scenarios",
-        default=None,
         help="comma-separated scenarios, or 'all' shipped ones (default: the shipped ones with "
         "[scenario] in_run = true: the paper's four and adaptive_fast; the bench uses the "
         "paper's four among them)",

@@ -3,20 +3,17 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import shutil
 import sys
 from pathlib import Path
 
-from .options import add, add_force_resume, check_tables, pick, strict_exit
+from .options import add, add_force_resume, check_tables, log, pick, strict_exit
 
 HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
 EXAMPLE = (
     "qpbench scaling --backends daqp,qpoases,piqp,osqp,clarabel --out scaling/ ; "
     "qpbench report scaling/ --out scaling-report/"
 )
-
-log = logging.getLogger("qpbench")
 
 #: What a --force removes from --out (nothing else in the folder is touched).
 OWNED = ("scaling.csv", "scaling.md", "scaling.png", "bench", "sets", "scenarios")

@@ -32,20 +32,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _listing(name: str) -> dict:
-    from ..sim.scenario import load_scenario
-
-    sc = load_scenario(name)
-    return {
-        "name": sc.name,
-        "paper_section": sc.data["scenario"]["paper_section"],
-        "in_paper": sc.in_paper,
-        "duration_s": sc.duration,
-        "obstacles": [o["name"] for o in sc.data["obstacles"]],
-        "description": sc.description,
-    }
-
-
 def _show(name: str, as_json: bool, fill: bool) -> None:
     """Print scenario ``name`` (shipped name or file) as its TOML file (a file that loads), or
     ``fill``: with every default filled in; ``as_json``: its tables as JSON."""
@@ -72,7 +58,7 @@ def _show(name: str, as_json: bool, fill: bool) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..exceptions import ParamError
-    from ..sim.scenario import scenario_names
+    from ..sim.scenario import load_scenario, scenario_names
 
     stray = (
         args.action if args.action not in ("list", "show") else args.action == "list" and args.name
@@ -88,10 +74,15 @@ def run(args: argparse.Namespace) -> int:
             raise ParamError("which scenario? (qpbench scenarios show NAME)", key="NAME")
         _show(args.name, args.json, args.filled)
         return 0
-    listing = [_listing(name) for name in scenario_names()]
+    listing = []
     rows = [("name", "paper", "duration", "obstacles", "description")]
-    for i in listing:
-        duration = f"{i['duration_s']:g} s"
-        obstacles = ", ".join(i["obstacles"]) or "none"
-        rows.append((i["name"], i["paper_section"], duration, obstacles, i["description"]))
+    for sc in map(load_scenario, scenario_names()):
+        section = sc.data["scenario"]["paper_section"]
+        obstacles = [o["name"] for o in sc.data["obstacles"]]
+        listing.append(
+            dict(name=sc.name, paper_section=section, in_paper=sc.in_paper, duration_s=sc.duration)
+            | dict(obstacles=obstacles, description=sc.description)
+        )
+        duration = f"{sc.duration:g} s"
+        rows.append((sc.name, section, duration, ", ".join(obstacles) or "none", sc.description))
     return print_listing(args, listing, rows, align="llll", free_last=True)

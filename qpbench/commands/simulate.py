@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import sys
 from pathlib import Path
 
-from .options import add, check_tables, pick
+from .options import add, check_tables, log, pick
 
 HELP = "simulate a scenario in closed loop with one backend solving every tick's QP"
 EXAMPLE = (
@@ -20,8 +19,6 @@ EXAMPLE = (
     "qpbench simulate --scenario wall --backend rnn --set rnn.eps=0.001 --set rnn.substeps=5; "
     "qpbench simulate --scenario narrow --backend daqp --snapshot narrow.png --animate narrow.gif"
 )
-
-log = logging.getLogger("qpbench")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -82,10 +79,6 @@ def run(args: argparse.Namespace) -> int:
     return log_verdict(result.summary)
 
 
-#: The file suffixes of the outputs whose format the suffix picks (--animate: check_animation).
-SUFFIXES = {"log": (".csv", ".parquet"), "snapshot": (".png", ".svg", ".pdf")}
-
-
 def _check_arguments(args: argparse.Namespace) -> None:
     """The options only the command has checked, and no output in the way, before anything runs
     (:func:`qpbench.sim.loop.simulate` checks its own arguments)."""
@@ -93,7 +86,8 @@ def _check_arguments(args: argparse.Namespace) -> None:
     from ..exceptions import ParamError, positive_seconds
     from ..report.arm import check_animation
 
-    for key, suffixes in SUFFIXES.items():
+    # the outputs whose format the suffix picks (--animate: check_animation)
+    for key, suffixes in (("log", (".csv", ".parquet")), ("snapshot", (".png", ".svg", ".pdf"))):
         value = getattr(args, key)
         if value is not None and Path(value).suffix.lower() not in suffixes:
             raise ParamError(f"must end in {' or '.join(suffixes)}, got {value}", key=f"--{key}")

@@ -4,9 +4,8 @@ with each backend, run by an executor of :mod:`qpbench.runner`."""
 from __future__ import annotations
 
 import argparse
-import logging
 
-from .options import add, add_force_resume, aligned, check_tables, run_bar, strict_exit
+from .options import add, add_force_resume, aligned, check_tables, log, run_bar, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
@@ -14,8 +13,6 @@ EXAMPLE = (
     "qpbench sweep problems/sweeps/narrow.toml --backends daqp --samples 20 --out narrow-sweep "
     "--executor dask --jobs 2"
 )
-
-log = logging.getLogger("qpbench.sweep")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
