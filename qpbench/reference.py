@@ -117,9 +117,10 @@ def _status(solver: str, solution) -> str:
             return "optimal" if _worst_residual(solution) <= ALMOST_TOL else "unknown"
         status = CLARABEL_STATUSES.get(name.removeprefix("Almost"))  # Almost...Infeasible as well
     else:
-        from .backends.piqp_ import piqp_statuses
+        from .backends.piqp_ import PIQP_STATUSES
 
-        status = piqp_statuses().get(getattr(solution.extras.get("info"), "status", None))
+        raw = getattr(solution.extras.get("info"), "status", None)  # a piqp status enum
+        status = PIQP_STATUSES.get(getattr(raw, "name", None))
     return status if status in ("optimal", "time_limit", *CERTIFIED_INFEASIBLE) else "unknown"
 
 
@@ -270,6 +271,18 @@ def assemble(
     ref.time_limit_s = time_limit
     ref.timed_out = any(c.timed_out for c in candidates)
     return ref
+
+
+def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
+    """One reference per record from ``source``: a method (``options`` go to
+    :func:`reference_solutions`), ``none`` (``None`` entries) or a file of objectives."""
+    if source == "none":
+        return [None] * len(problem_set.records)
+    if source in METHODS:
+        return reference_solutions(problem_set, method=source, **options)
+    from .published import read_objectives
+
+    return from_objectives(problem_set, read_objectives(source), source)
 
 
 def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Path = "file") -> list:

@@ -196,7 +196,7 @@ class _BenchRun:
         from ..atomic import check_output
         from ..backends import get_backend
         from ..formats import content_sha256
-        from ..memory import default_budget
+        from ..memory import resolve_budget
 
         check_output(out, force=force, resume=resume, make_parent=make_parent)
         self.config, self.out = config, out
@@ -220,7 +220,7 @@ class _BenchRun:
             name: get_backend(name, self.profile, **self.settings[name]) for name in config.backends
         }
         self.versions = {name: type(b).version() for name, b in self.instances.items()}
-        self.budget = default_budget() if config.memory_budget is None else config.memory_budget
+        self.budget = resolve_budget(None) if config.memory_budget is None else config.memory_budget
         self.skips, self.notes = skipped_solves(records, config.backends, self.budget)
         self.sha = content_sha256(problem_set)
         self.resuming = resume and out.exists() and not force
