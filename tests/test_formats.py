@@ -133,6 +133,31 @@ def test_npz_sparse_round_trip_bit_exact(random_qp, tmp_path):
     assert_bit_exact(big, load_npz(path))
 
 
+def test_csc_index_out_of_range_is_a_format_error_not_a_crash(tmp_path):
+    # scipy's constructor checks only the lengths; a solver given such a matrix reads out of
+    # bounds, so a corrupted file must fail on reading, naming the file
+    rec = _sparse_record(40, "bad")
+    path = save_npz(rec, tmp_path / "bad.npz")
+    with np.load(path, allow_pickle=True) as data:
+        members = {k: data[k] for k in data.files}
+    members["P_csc_indices"] = members["P_csc_indices"] + 1000
+    np.savez(path, **members)
+    with pytest.raises(ProblemFormatError, match="bad.npz"):
+        load_npz(path)
+    folder = tmp_path / "set"
+    write_problem_set(folder, [rec], {"name": "test"})
+    parquet = folder / "problems.parquet"
+    table = pq.read_table(parquet)
+    column = table.column_names.index("P_csc_indices")
+    shifted = [[i + 1000 for i in row] for row in table.column("P_csc_indices").to_pylist()]
+    table = table.set_column(
+        column, table.schema.field(column), pa.array(shifted, table.schema.field(column).type)
+    )
+    pq.write_table(table, parquet)
+    with pytest.raises(ProblemFormatError, match="P"):
+        read_problem_set(folder, verify_hash=False)
+
+
 def test_npz_written_by_qpsolvers_is_read(random_qp, tmp_path):
     p = random_qp()
     p.save(str(tmp_path / "tick_0001.npz"))

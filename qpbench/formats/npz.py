@@ -22,6 +22,7 @@ from .records import (
     NPZ_META_KEY,
     ProblemRecord,
     check_record,
+    checked_csc,
     dense_copy,
     reading,
     solver_problem,
@@ -63,7 +64,7 @@ def _read_members(data, compact: bool) -> qpsolvers.Problem:
     for k in ARRAY_KEYS:
         if f"{k}_csc_data" in data.files:
             d, i, p, shape = (data[f"{k}_csc_{part}"] for part in (*CSC_TYPES, "shape"))
-            parts.append(spa.csc_matrix((d, i, p), shape=tuple(int(v) for v in shape)))
+            parts.append(checked_csc(d, i, p, tuple(int(v) for v in shape)))
         elif compact and k not in data.files:
             parts.append(None)
         else:

@@ -26,6 +26,7 @@ from .records import (
     ProblemRecord,
     ProblemSet,
     check_record,
+    checked_csc,
     dense_copy,
     reading,
     sorted_csc,
@@ -162,7 +163,7 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
                 f"{len(data)} values, expected n = {n} columns",
             )
         try:
-            return spa.csc_matrix((data, indices.astype(np.int32), indptr), shape=(rows, n))
+            return checked_csc(data, indices.astype(np.int32), indptr, (rows, n))
         except ValueError as exc:
             fail(k, f"CSC columns are inconsistent ({exc})")
     v = arrays[k][i]

@@ -134,6 +134,14 @@ def dense_copy(problem: qpsolvers.Problem) -> dict[str, np.ndarray | None]:
     return out
 
 
+def checked_csc(data, indices, indptr, shape: tuple[int, int]) -> spa.csc_matrix:
+    """The CSC matrix of stored arrays, every index checked (scipy's constructor checks only
+    the lengths, and an index out of range crashes a solver); ValueError if one is not."""
+    M = spa.csc_matrix((data, indices, indptr), shape=shape)
+    M.check_format(full_check=True)
+    return M
+
+
 def sorted_csc(M) -> spa.csc_matrix:
     """``M`` as float64 CSC with sorted indices."""
     M = spa.csc_matrix(M, dtype=np.float64)
