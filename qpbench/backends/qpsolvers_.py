@@ -15,7 +15,6 @@ from typing import ClassVar
 
 import numpy as np
 import qpsolvers
-import scipy.sparse as spa
 
 from . import register
 from ._common import generic_settings, native_settings
@@ -178,9 +177,11 @@ NO_CERTIFICATE = {
 
 def silence_wrapper_warnings(solver: str) -> None:
     """Ignore, from now on in this process, the warnings of qpsolvers' wrapper module of
-    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it) and those the
-    solver's package raises on qpsolvers' normal calls."""
+    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it), of its
+    conversions (dense matrices made sparse for a sparse-only solver, as ``solve_problem``
+    does) and those the solver's package raises on qpsolvers' normal calls."""
     warnings.filterwarnings("ignore", module=rf"qpsolvers\.solvers\.{solver}_\Z")
+    warnings.filterwarnings("ignore", module=r"qpsolvers\.conversions\.")
     if solver == "osqp":  # osqp 1.x: qpsolvers calls solve() without raise_error
         warnings.filterwarnings(
             "ignore", "The default value of raise_error will change", PendingDeprecationWarning
@@ -243,7 +244,6 @@ class QpsolversBackend(Backend):
         super().__init__(profile, **settings)
         solver = self.solver
         sparse, dense = qpsolvers.sparse_solvers, qpsolvers.dense_solvers
-        self._sparse_only = solver in sparse and solver not in dense
         self._dense_only = solver in dense and solver not in sparse
         self._reader = STATUS_READERS.get(solver)
         self._float64_wrapper = solver in FLOAT64_WRAPPERS
@@ -292,13 +292,8 @@ class QpsolversBackend(Backend):
         return backend_class(cls.solver).setting_names() | named | frozenset(extra)
 
     def _solve(self, problem, warm_start):
-        solved = problem
-        if self._sparse_only:
-            if not problem.has_sparse:
-                P, q, G, h, A, b, lb, ub = problem.unpack()
-                G, A = (None if M is None else spa.csc_matrix(M) for M in (G, A))
-                solved = qpsolvers.Problem(spa.csc_matrix(P), q, G, h, A, b, lb, ub)
-        elif self._dense_only:
+        solved = problem  # a sparse-only wrapper makes dense matrices sparse itself
+        if self._dense_only:
             P, G, A = problem.P, problem.G, problem.A
             if (  # type tests first: Problem.has_sparse costs more
                 not (
