@@ -127,9 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _configure_logging(args)
-    shown = {k: v for k, v in sorted(vars(args).items()) if k[0] != "_" and k != "command"}
-    settings = ", ".join(f"{k}={v!r}" for k, v in shown.items())
-    log.debug("qpbench %s %s: %s", __version__, args.command, settings)
+    shown = (f"{k}={v!r}" for k, v in sorted(vars(args).items()) if k[0] != "_" and k != "command")
+    log.debug("qpbench %s %s: %s", __version__, args.command, ", ".join(shown))
     from tqdm.contrib.logging import logging_redirect_tqdm
 
     from .atomic import listing, recording
@@ -154,8 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except BrokenPipeError:
         # stdout's reader closed early (``qpbench list ... | head``): stop quietly, as Unix tools do
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except KeyboardInterrupt:
         print(f"qpbench {args.command}: interrupted", file=sys.stderr)
