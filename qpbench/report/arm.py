@@ -371,7 +371,8 @@ def check_animation(path: Path, fps: float, speed: float) -> None:
     """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
     from ..exceptions import ParamError
 
-    suffix, key = path.suffix.lower(), "animate"
+    suffix = path.suffix.lower()
+    key = "animate"
     if suffix not in (".gif", ".mp4"):
         raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key=key)
     if suffix == ".mp4" and shutil.which("ffmpeg") is None:

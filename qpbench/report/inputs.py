@@ -97,12 +97,8 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
-            found = sorted(
-                q
-                for pattern in ("*.csv", "*.csv.gz")
-                for q in p.rglob(pattern)
-                if not q.name.startswith(".")
-            )
+            found = [q for q in p.rglob("*.csv*") if q.name.endswith((".csv", ".csv.gz"))]
+            found = sorted(q for q in found if not q.name.startswith("."))
             if not found:
                 raise InputError("folder holds no result CSV", path=p)
             out.extend(found)
@@ -149,7 +145,8 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
                 path=path,
             )
         files.append(ResultFile(path, kind, sha256_file(path), len(df)))
-    bench_df, notes = pd.DataFrame(), []
+    bench_df = pd.DataFrame()
+    notes = []
     if bench:
         bench_df = drop_duplicates(pd.concat(bench, ignore_index=True), prefer)
         bench_df["scenario"] = bench_df["scenario"].map(scenario_key)

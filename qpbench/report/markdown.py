@@ -424,23 +424,12 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
             key = f"closed_loop_{prefix}{slug(scenario)}_{slug(formulation)}"
             if key in plot_files:
                 out.append(f"![{alt}, {scenario}]({plot_files[key]})\n")
-        out.extend(_snapshot_row(scenario, formulation, plot_files))
+        keys = {r: f"snapshot_{r}_{slug(scenario)}_{slug(formulation)}" for r in ROLES}
+        drawn = [r for r, key in keys.items() if key in plot_files]
+        if drawn:  # the arm's pictures side by side
+            pictures = [f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in drawn]
+            out += [f"The arm, {scenario}:\n", md_table([ROLES[r] for r in drawn], [pictures])]
     return out
-
-
-def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -> list[str]:
-    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.plots`), when drawn."""
-    keys = {role: f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}" for role in ROLES}
-    shown = [role for role, key in keys.items() if key in plot_files]
-    if not shown:
-        return []
-    return [
-        f"The arm, {scenario}:\n",
-        md_table(
-            [ROLES[r] for r in shown],
-            [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]],
-        ),
-    ]
 
 
 def render(results: Results, plot_files: dict[str, str]) -> str:

@@ -81,7 +81,7 @@ def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     d_safe = None
     for _, r in runs.iterrows():
         df = read_log(r["log_path"])
-        if df is not None and tick_log.T in df.columns and len(df):
+        if df is not None and len(df):
             logs[str(r["backend"])] = df
             value = r.get("d_safe")
             if value is not None and np.isfinite(float(value)):
@@ -154,7 +154,8 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         return
     look = style.look(backend)
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
-    label, close = backend, closest_approach(d)
+    label = backend
+    close = closest_approach(d)
     if close is not None:
         where = f"{close['key_point']} / {close['obstacle']}, {close['t']:.2f} s"
         label = f"{backend}: {close['distance'] * 1e3:.1f} mm, {where}"
