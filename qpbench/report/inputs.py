@@ -76,17 +76,14 @@ def _from_json(text):
 def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
     if series.dtype == bool:
         return series
-    # an empty cell (a row whose solve crashed) counts as false
-    mapping = dict.fromkeys(("true", "1", "1.0"), True) | dict.fromkeys(
-        ("false", "0", "0.0", "nan", "", "none"), False
-    )
+    falses = ("false", "0", "0.0", "nan", "", "none")  # "": a row whose solve crashed
+    mapping = dict.fromkeys(("true", "1", "1.0"), True) | dict.fromkeys(falses, False)
     text = series.astype(str).str.strip().str.lower()
     bad = ~text.isin(list(mapping))
     if bad.any():
+        row = int(np.flatnonzero(bad)[0]) + 2
         raise InputError(
-            f"non-boolean value {series[bad].iloc[0]!r} in row {int(np.flatnonzero(bad)[0]) + 2}",
-            path=path,
-            key=key,
+            f"non-boolean value {series[bad].iloc[0]!r} in row {row}", path=path, key=key
         )
     return text.map(mapping).astype(bool)
 
@@ -211,9 +208,8 @@ def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
         counts = ", ".join(f"{Path(f).name}: {int(r)}" for f, r in per_file.items())
         text = f"{backend} ({group_label(profile, mode)}) mixes rows timed with different --repeat ({counts})"
         if prefer is None:
-            raise InputError(
-                f"{text}; pass --prefer first|last to report them together anyway", key="repeat"
-            )
+            hint = "pass --prefer first|last to report them together anyway"
+            raise InputError(f"{text}; {hint}", key="repeat")
         notes.append(text + ": single-shot and repeated times are in one table")
     return notes
 

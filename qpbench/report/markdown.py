@@ -140,11 +140,9 @@ VIOLATION_COLUMNS = (
 def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
     """Backend -> name shown in tables showing times, and the footnote lines for isolated rows."""
     counts = rows.groupby("backend", sort=True)["isolated"].sum()
-    isolated = {str(b): int(n) for b, n in counts.items() if n}
+    isolated = {b: int(n) for b, n in counts.items() if n}
     totals = rows.groupby("backend", sort=True).size()
-    labels = {
-        str(b): f"{b} {ISOLATED_MARK}" if str(b) in isolated else str(b) for b in totals.index
-    }
+    labels = {b: f"{b} {ISOLATED_MARK}" if b in isolated else b for b in totals.index}
     notes = []
     if isolated:
         parts = ", ".join(f"{b} {n} of {int(totals[b])} rows" for b, n in isolated.items())

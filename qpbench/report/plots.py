@@ -260,11 +260,8 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
         chosen["exact"] = exact.iloc[int(np.argmin(np.where(np.isnan(p50), np.inf, p50)))]
     networks = runs[network]
     if not networks.empty:
-        rank = [
-            NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)
-            for b in networks["backend"].astype(str)
-        ]
-        chosen["network"] = networks.iloc[int(np.argmin(rank))]
+        rank = networks["backend"].astype(str).map({b: i for i, b in enumerate(NETWORKS)})
+        chosen["network"] = networks.iloc[int(np.argmin(rank.fillna(len(NETWORKS))))]
     return chosen
 
 
