@@ -52,9 +52,8 @@ PACKAGES = (
 
 def cpu_name() -> str:
     """Model name of the CPU (``/proc/cpuinfo``'s ``model name``), or the platform's guess."""
-    cpuinfo = Path("/proc/cpuinfo")
     try:
-        for line in cpuinfo.read_text().splitlines():
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.lower().startswith("model name"):
                 return line.split(":", 1)[1].strip()
     except OSError:
@@ -285,10 +284,9 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     ]
     for b in never:
         r = frame.loc[b]
+        no_x = f"{b} never found a solution and returned no x: it has no accuracy figure.\n"
         if int(r["with_x"]) == 0:
-            out.append(
-                f"{b} never found a solution and returned no x: it has no accuracy figure.\n"
-            )
+            out.append(no_x)
             continue
         out.append(
             f"{b} never found a solution (0 of {int(r['problems'])} rows): its constraint violation is the "

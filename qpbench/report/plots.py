@@ -283,12 +283,10 @@ def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str, draw) -> Non
         frame = read_log(row["log_path"])
         if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
             continue  # no log, or one without the joint angles: no picture of the arm
+        key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         backend = str(row["backend"])
         title = f"{scenario}: {backend} ({ROLES[role]})"
-        draw(
-            f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}",
-            lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend),
-        )
+        draw(key, lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend))
 
 
 #: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).
