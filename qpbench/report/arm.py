@@ -78,8 +78,7 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
     every = max(1, len(theta) // 400)
     parts = [np.zeros((1, 2))]
     parts += [arm.joint_positions(q) for q in theta[::every] if np.isfinite(q).all()]
-    for x, y in (("ee_x", "ee_y"), ("xd_x", "xd_y")):
-        parts.append(log[[x, y]].to_numpy(float))
+    parts += [log[["ee_x", "ee_y"]].to_numpy(float), log[["xd_x", "xd_y"]].to_numpy(float)]
     surface = scenario.make_surface()
     parts.append(_foot(surface.point, surface.normal)[None, :])
     for ob in scenario.make_obstacles():
@@ -179,8 +178,7 @@ def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
 
 
 def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
-    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look), and
-    the arm's base."""
+    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look), the base."""
     desired = dict(color="0.35", lw=1.3, label="desired end-effector path", zorder=2)
     ax.plot(log["xd_x"], log["xd_y"], ":", **desired)
     label = f"{backend}: actual end-effector path" if backend else "actual end-effector path"
@@ -290,8 +288,7 @@ def _animation_background(ax, surface, log: pd.DataFrame, obstacles, xlim, ylim)
 
 
 def _animation_artists(ax, backend: str | None = None) -> tuple:
-    """The artists each frame updates: links, key points, end-effector trace (in ``backend``'s
-    look), and the time stamp (the axes' title: outside the workspace, never over the arm)."""
+    """The artists each frame updates: links, key points, end-effector trace, time stamp (title)."""
     (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
     keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
     look = backend_look(backend)
@@ -371,7 +368,8 @@ def check_animation(path: Path, fps: float, speed: float) -> None:
     """Reject an animation :func:`animate` cannot write (a :class:`ParamError` naming the value)."""
     from ..exceptions import ParamError
 
-    suffix, key = path.suffix.lower(), "animate"
+    suffix = path.suffix.lower()
+    key = "animate"
     if suffix not in (".gif", ".mp4"):
         raise ParamError(f"an animation is a .gif or an .mp4 file, got '{path.name}'", key=key)
     if suffix == ".mp4" and shutil.which("ffmpeg") is None:

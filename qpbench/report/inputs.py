@@ -76,17 +76,14 @@ def _from_json(text):
 def _as_bool(series: pd.Series, path: Path, key: str) -> pd.Series:
     if series.dtype == bool:
         return series
-    # an empty cell (a row whose solve crashed) counts as false
-    mapping = dict.fromkeys(("true", "1", "1.0"), True) | dict.fromkeys(
-        ("false", "0", "0.0", "nan", "", "none"), False
-    )
+    falses = ("false", "0", "0.0", "nan", "", "none")  # "": a row whose solve crashed
+    mapping = dict.fromkeys(("true", "1", "1.0"), True) | dict.fromkeys(falses, False)
     text = series.astype(str).str.strip().str.lower()
     bad = ~text.isin(list(mapping))
     if bad.any():
+        row = int(np.flatnonzero(bad)[0]) + 2
         raise InputError(
-            f"non-boolean value {series[bad].iloc[0]!r} in row {int(np.flatnonzero(bad)[0]) + 2}",
-            path=path,
-            key=key,
+            f"non-boolean value {series[bad].iloc[0]!r} in row {row}", path=path, key=key
         )
     return text.map(mapping).astype(bool)
 
@@ -97,12 +94,8 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
-            found = sorted(
-                q
-                for pattern in ("*.csv", "*.csv.gz")
-                for q in p.rglob(pattern)
-                if not q.name.startswith(".")
-            )
+            found = [q for q in p.rglob("*.csv*") if q.name.endswith((".csv", ".csv.gz"))]
+            found = sorted(q for q in found if not q.name.startswith("."))
             if not found:
                 raise InputError("folder holds no result CSV", path=p)
             out.extend(found)
@@ -149,7 +142,8 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
                 path=path,
             )
         files.append(ResultFile(path, kind, sha256_file(path), len(df)))
-    bench_df, notes = pd.DataFrame(), []
+    bench_df = pd.DataFrame()
+    notes = []
     if bench:
         bench_df = drop_duplicates(pd.concat(bench, ignore_index=True), prefer)
         bench_df["scenario"] = bench_df["scenario"].map(scenario_key)
@@ -214,9 +208,8 @@ def check_repeats(bench: pd.DataFrame, prefer: str | None) -> list[str]:
         counts = ", ".join(f"{Path(f).name}: {int(r)}" for f, r in per_file.items())
         text = f"{backend} ({group_label(profile, mode)}) mixes rows timed with different --repeat ({counts})"
         if prefer is None:
-            raise InputError(
-                f"{text}; pass --prefer first|last to report them together anyway", key="repeat"
-            )
+            hint = "pass --prefer first|last to report them together anyway"
+            raise InputError(f"{text}; {hint}", key="repeat")
         notes.append(text + ": single-shot and repeated times are in one table")
     return notes
 

@@ -144,8 +144,7 @@ def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first
 
 
 def _legend(axes: dict, group: list, title: str, references: bool) -> None:
-    """The column's legend above it: its backends, then (``references``) the reference lines
-    and what the band on top means."""
+    """The column's legend above it: its backends, then (``references``) the reference lines."""
     top = axes["tracking"]
     handles, labels = top.get_legend_handles_labels()
     if references:

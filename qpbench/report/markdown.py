@@ -52,9 +52,8 @@ PACKAGES = (
 
 def cpu_name() -> str:
     """Model name of the CPU (``/proc/cpuinfo``'s ``model name``), or the platform's guess."""
-    cpuinfo = Path("/proc/cpuinfo")
     try:
-        for line in cpuinfo.read_text().splitlines():
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.lower().startswith("model name"):
                 return line.split(":", 1)[1].strip()
     except OSError:
@@ -140,11 +139,9 @@ VIOLATION_COLUMNS = (
 def _labels(rows: pd.DataFrame) -> tuple[dict[str, str], list[str]]:
     """Backend -> name shown in tables showing times, and the footnote lines for isolated rows."""
     counts = rows.groupby("backend", sort=True)["isolated"].sum()
-    isolated = {str(b): int(n) for b, n in counts.items() if n}
+    isolated = {b: int(n) for b, n in counts.items() if n}
     totals = rows.groupby("backend", sort=True).size()
-    labels = {
-        str(b): f"{b} {ISOLATED_MARK}" if str(b) in isolated else str(b) for b in totals.index
-    }
+    labels = {b: f"{b} {ISOLATED_MARK}" if b in isolated else b for b in totals.index}
     notes = []
     if isolated:
         parts = ", ".join(f"{b} {n} of {int(totals[b])} rows" for b, n in isolated.items())
@@ -287,10 +284,9 @@ def _violation_part(rows: pd.DataFrame, never: list[str]) -> list[str]:
     ]
     for b in never:
         r = frame.loc[b]
+        no_x = f"{b} never found a solution and returned no x: it has no accuracy figure.\n"
         if int(r["with_x"]) == 0:
-            out.append(
-                f"{b} never found a solution and returned no x: it has no accuracy figure.\n"
-            )
+            out.append(no_x)
             continue
         out.append(
             f"{b} never found a solution (0 of {int(r['problems'])} rows): its constraint violation is the "
@@ -424,23 +420,12 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
             key = f"closed_loop_{prefix}{slug(scenario)}_{slug(formulation)}"
             if key in plot_files:
                 out.append(f"![{alt}, {scenario}]({plot_files[key]})\n")
-        out.extend(_snapshot_row(scenario, formulation, plot_files))
+        keys = {r: f"snapshot_{r}_{slug(scenario)}_{slug(formulation)}" for r in ROLES}
+        drawn = [r for r, key in keys.items() if key in plot_files]
+        if drawn:  # the arm's pictures side by side
+            pictures = [f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in drawn]
+            out += [f"The arm, {scenario}:\n", md_table([ROLES[r] for r in drawn], [pictures])]
     return out
-
-
-def _snapshot_row(scenario: str, formulation: str, plot_files: dict[str, str]) -> list[str]:
-    """The arm's snapshots of a scenario side by side (:mod:`qpbench.report.plots`), when drawn."""
-    keys = {role: f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}" for role in ROLES}
-    shown = [role for role, key in keys.items() if key in plot_files]
-    if not shown:
-        return []
-    return [
-        f"The arm, {scenario}:\n",
-        md_table(
-            [ROLES[r] for r in shown],
-            [[f"![{ROLES[r]}, {scenario}]({plot_files[keys[r]]})" for r in shown]],
-        ),
-    ]
 
 
 def render(results: Results, plot_files: dict[str, str]) -> str:

@@ -81,7 +81,7 @@ def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     d_safe = None
     for _, r in runs.iterrows():
         df = read_log(r["log_path"])
-        if df is not None and tick_log.T in df.columns and len(df):
+        if df is not None and len(df):
             logs[str(r["backend"])] = df
             value = r.get("d_safe")
             if value is not None and np.isfinite(float(value)):
@@ -154,7 +154,8 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         return
     look = style.look(backend)
     ax.plot(t, dist, color=look.colour, ls=look.linestyle, lw=1.0, zorder=3)
-    label, close = backend, closest_approach(d)
+    label = backend
+    close = closest_approach(d)
     if close is not None:
         where = f"{close['key_point']} / {close['obstacle']}, {close['t']:.2f} s"
         label = f"{backend}: {close['distance'] * 1e3:.1f} mm, {where}"
@@ -259,11 +260,8 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
         chosen["exact"] = exact.iloc[int(np.argmin(np.where(np.isnan(p50), np.inf, p50)))]
     networks = runs[network]
     if not networks.empty:
-        rank = [
-            NETWORKS.index(b) if b in NETWORKS else len(NETWORKS)
-            for b in networks["backend"].astype(str)
-        ]
-        chosen["network"] = networks.iloc[int(np.argmin(rank))]
+        rank = networks["backend"].astype(str).map({b: i for i, b in enumerate(NETWORKS)})
+        chosen["network"] = networks.iloc[int(np.argmin(rank.fillna(len(NETWORKS))))]
     return chosen
 
 
@@ -285,12 +283,10 @@ def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str, draw) -> Non
         frame = read_log(row["log_path"])
         if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
             continue  # no log, or one without the joint angles: no picture of the arm
+        key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         backend = str(row["backend"])
         title = f"{scenario}: {backend} ({ROLES[role]})"
-        draw(
-            f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}",
-            lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend),
-        )
+        draw(key, lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend))
 
 
 #: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).

@@ -214,8 +214,7 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
 
 
 def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
-    """The opening of ``report.md``: the recommendation (or a line saying there is none), then
-    "How to read this"."""
+    """The opening of ``report.md``: the recommendation (or why there is none), How to read this."""
     out = []
     if not closed_loop.empty:
         out.append(render(recommend(closed_loop), markdown=True))

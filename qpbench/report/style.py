@@ -38,7 +38,7 @@ class Look:
         :func:`marks` of ``x``, shifted by marker (coinciding lines each show theirs); without
         ``x`` none on the line (its legend entry still shows one)."""
         kw = {"color": self.colour, "ls": self.linestyle, "marker": self.marker, "ms": 4.5}
-        phase = (MARKERS.index(self.marker) + 0.5) / len(MARKERS) if self.marker in MARKERS else 0.5
+        phase = (MARKERS.index(self.marker) + 0.5) / len(MARKERS)
         kw["markevery"] = [] if x is None else marks(x, phase)
         kw["markerfacecolor"] = "white" if self.linestyle != "-" else self.colour
         return kw | extra
@@ -169,8 +169,7 @@ def groups(backends: Iterable[str], max_series: int = MAX_SERIES) -> list[tuple[
         members = [b for b in names if _kind(b) == kind]
         parts = -(-len(members) // max_series)
         for p in range(parts):
-            chunk = members[p::parts] if parts > 1 else members
-            out.append((f"{title} ({p + 1}/{parts})" if parts > 1 else title, chunk))
+            out.append((f"{title} ({p + 1}/{parts})" if parts > 1 else title, members[p::parts]))
     return out
 
 

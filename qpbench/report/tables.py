@@ -45,7 +45,6 @@ def _max(values: np.ndarray) -> float:
 
 
 def _optimal(rows: pd.DataFrame) -> pd.DataFrame:
-    """The rows whose reference solution is optimal."""
     return rows[rows["reference_status"].astype(str) == "optimal"]
 
 
