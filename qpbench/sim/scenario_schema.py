@@ -270,11 +270,8 @@ def _check_across_keys(data: dict, file) -> None:
             path=file,
             key="robot.theta0",
         )
-    if (
-        np.any(r["velocity_min"] > 0)
-        or np.any(r["velocity_max"] < 0)
-        or np.any(r["velocity_min"] >= r["velocity_max"])
-    ):
+    vmin, vmax = r["velocity_min"], r["velocity_max"]
+    if not (np.all(vmin <= 0) and np.all(vmax >= 0) and np.all(vmin < vmax)):
         raise ScenarioError(
             "need velocity_min <= 0 <= velocity_max and velocity_min < velocity_max [rad/s]",
             path=file,
