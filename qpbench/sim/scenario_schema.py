@@ -105,7 +105,8 @@ DEFAULTS: dict[str, dict] = {
 }
 
 
-def _number(v) -> bool:
+def finite_number(v) -> bool:
+    """True for an int or float (not a bool) that is finite."""
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
@@ -121,7 +122,7 @@ def _typed(value, kind, file, key: str):
         return value
     kind, _, bound = kind.partition(">")
     if kind == "num":
-        if not _number(value):
+        if not finite_number(value):
             bad("a finite number")
         out = float(value)
     elif kind == "int":
@@ -133,7 +134,7 @@ def _typed(value, kind, file, key: str):
             bad("true or false" if kind == "bool" else "a string")
         return value
     elif kind in ("vec", "vec2"):
-        if not isinstance(value, list) or not value or not all(_number(v) for v in value):
+        if not isinstance(value, list) or not value or not all(finite_number(v) for v in value):
             bad("a list of finite numbers")
         if kind == "vec2" and len(value) != 2:
             bad("a list of two numbers")
@@ -142,7 +143,9 @@ def _typed(value, kind, file, key: str):
         if not (
             isinstance(value, list)
             and value
-            and all(isinstance(p, list) and len(p) == 2 and all(map(_number, p)) for p in value)
+            and all(
+                isinstance(p, list) and len(p) == 2 and all(map(finite_number, p)) for p in value
+            )
         ):
             bad("a list of [x, y] pairs")
         return np.array(value, dtype=float)

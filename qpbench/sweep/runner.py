@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -240,6 +240,10 @@ def run_sweep(
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     failed = 0
     items, heads = [], {}
+    # the tasks' common terms; each carries its instance's text
+    terms = LoopTask(
+        "", "", plugins=tuple(plugins or ()), bands=(spec.force_band, spec.tracking_band)
+    )
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
         def emit(row):
@@ -257,13 +261,8 @@ def run_sweep(
                     emit(sweep_row(head, failure_fields("invalid_scenario", inst.invalid)))
                     continue
                 heads[(inst.name, backend)] = head
-                task = LoopTask(
-                    head["instance_file"],
-                    backend,
-                    plugins=tuple(plugins or ()),
-                    scenario_text=inst.text,  # the instance travels with its task
-                    bands=(spec.force_band, spec.tracking_band),
-                )
+                file = head["instance_file"]
+                task = replace(terms, scenario=file, backend=backend, scenario_text=inst.text)
                 items.append(((inst.name, backend), task))
         for done in executor.run(run_row, items):
             head = heads[done.key]

@@ -18,7 +18,6 @@ from __future__ import annotations
 import copy
 import difflib
 import hashlib
-import math
 import re
 import tomllib
 import zlib
@@ -29,6 +28,7 @@ import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
 from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
+from ..sim.scenario_schema import finite_number
 from .toml_text import dumps, value_text
 
 #: Other names a reader may give a scenario key (the table is found in the base scenario).
@@ -49,11 +49,6 @@ DISTRIBUTIONS = {
 
 #: Draws of a truncated normal tried before giving up on a component.
 _MAX_REDRAWS = 1000
-
-
-def finite_number(v) -> bool:
-    """True for an int or float (not a bool) that is finite."""
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 @dataclass(frozen=True)
