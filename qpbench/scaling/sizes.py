@@ -23,7 +23,7 @@ equal relative angles ``c`` (bisection on the reach, ``|c| <= 2 pi / n`` keeps t
 As in the paper (section 2.2, obstacles as key points ``B_j``; eqs. 8-10) every (key point, cloud
 point) pair is one velocity-damper row, every tick: ``a m`` rows, a fixed count, as a persistent
 solver needs. The cloud fills a disk of :data:`CLOUD_RADIUS` on the outer side of the arm at its
-middle key point, ``d_safe + clearance`` away, and approaches it: its rows start inactive and
+middle key point, ``d_safe`` + :data:`CLEARANCE` away, and approaches it: its rows start inactive and
 become active within the first tenths of a second, so the dumped ticks hold both.
 """
 
