@@ -70,9 +70,8 @@ def _instants(t: np.ndarray, count: int) -> np.ndarray:
 
 
 def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Axis limits [m] around what the run shows: the arm's joints (400 ticks at most), the
-    base, both end-effector paths, the nearest point of each line and of the surface to the
-    base, the disks, segments and clouds within twice the arm's reach; with a margin."""
+    """Axis limits [m] around the arm's joints (400 ticks at most), the base, both end-effector
+    paths, the lines' and the surface's nearest points and the shapes within twice the reach."""
     reach = float(np.sum(arm.lengths))
     theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     every = max(1, len(theta) // 400)
@@ -178,7 +177,7 @@ def _draw_poses(ax, arm, keys, theta: np.ndarray, idx: np.ndarray) -> None:
 
 
 def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None) -> None:
-    """The desired and actual end-effector paths [m] (the actual in ``backend``'s look), the base."""
+    """The desired and actual end-effector paths [m] (the actual in the run's look), the base."""
     desired = dict(color="0.35", lw=1.3, label="desired end-effector path", zorder=2)
     ax.plot(log["xd_x"], log["xd_y"], ":", **desired)
     label = f"{backend}: actual end-effector path" if backend else "actual end-effector path"

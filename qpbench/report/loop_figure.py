@@ -80,8 +80,7 @@ def closed_loop_figure(
     logs: dict, path: str | Path, *, title: str, d_safe: float | None = None
 ) -> Path:
     """Draw the closed-loop figure of ``logs`` (backend -> tick log) to ``path``; return it.
-    ``d_safe`` [m] (``None``: no safety lines); the ``Kp_hat`` panel when a log's ``kp_hat`` varies.
-    """
+    ``d_safe`` [m] (``None``: no safety lines); the ``Kp_hat`` panel when a log's one varies."""
     if not logs:
         raise ValueError("no tick log to draw")
     has_d = any(has_distance(d) for d in logs.values())

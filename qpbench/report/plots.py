@@ -122,9 +122,8 @@ def velocity_plot(logs: dict, title: str, path: Path) -> bool:
 
 
 def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> bool:
-    """Each backend's ``d_min`` [mm] against t (its ``d_body_min`` dashed), one panel per group of
-    backends, on the distance axis of :mod:`.loop_figure`; each closest approach marked and
-    named in the legend."""
+    """Each backend's ``d_min`` [mm] against t (``d_body_min`` dashed) on the distance axis of
+    :mod:`.loop_figure`, a panel per group of backends; each closest approach marked and named."""
     from .loop_figure import distance_axis, has_distance
 
     logs = {b: d for b, d in logs.items() if has_distance(d)}
@@ -167,9 +166,8 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
 
 
 def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
-    """Write every figure of a report into ``folder``; return key -> path relative to
-    ``relative_to``. The figures of a previous report there (named as :data:`FIGURE_PATTERN`)
-    that this one does not link are removed."""
+    """Write every figure of a report into ``folder`` (and remove a previous report's there that
+    it does not link, :data:`FIGURE_PATTERN`); return key -> path relative to ``relative_to``."""
     from .loop_figure import closed_loop_figure
 
     folder = Path(folder)
