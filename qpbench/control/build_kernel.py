@@ -33,13 +33,8 @@ def parameter_vector(
     radius [m]. The controller sets the time, ``x_d``, ``xdot_d``, ``Kp``, ``Kd`` and the
     formulation flag (indices 0-4, 8, 9, 14) before each call."""
     par = np.zeros(_NPAR)
-    par[_NX], par[_NY] = normal
-    par[_FD] = desired_force
-    par[_K] = k
-    par[_DSAFE] = d_safe
-    par[_ALPHA] = alpha
-    par[_RHO] = rho
-    par[_RADIUS] = radius
+    constants = (*normal, desired_force, k, d_safe, alpha, rho, radius)
+    par[[_NX, _NY, _FD, _K, _DSAFE, _ALPHA, _RHO, _RADIUS]] = constants
     return par
 
 

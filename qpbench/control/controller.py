@@ -29,7 +29,7 @@ from ..robot.environment import PRIMITIVE_WIDTH, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm
 from ..statuses import FORMULATIONS
 from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
-from .terms import EscapeVelocityLimits, ImpedanceTask, ObstacleAvoidance
+from .terms import EscapeVelocityLimits, ImpedanceTask, closest_rows
 
 
 class TickArrays(NamedTuple):
@@ -92,7 +92,6 @@ class Controller:
         self.task = task
         self.limits = limits
         self.obstacles = list(obstacles)
-        self.avoidance = [ObstacleAvoidance(o, k, d_safe) for o in self.obstacles]
         self.k = float(k)
         self.d_safe = float(d_safe)
         self.rho = float(rho)
@@ -233,7 +232,7 @@ class Controller:
             return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
         # one key point per link: its point closest to each obstacle point
         joints = self.arm.joint_positions(theta)
-        per = [term.closest_rows(joints, t, radius) for term in self.avoidance]
+        per = [closest_rows(o, self.k, self.d_safe, joints, t, radius) for o in self.obstacles]
         # each term's rows are key point major; the QP's rows follow the pairs
         G = np.concatenate([per[j][0].reshape(a, -1, n)[i] for i, j in self.pairs])
         h = np.concatenate([per[j][1].reshape(a, -1)[i] for i, j in self.pairs])

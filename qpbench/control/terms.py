@@ -106,38 +106,28 @@ class EscapeVelocityLimits:
         return lb, ub
 
 
-class ObstacleAvoidance:
-    """Velocity-damper rows keeping key points ``d_safe`` away from one obstacle (eqs. 8-10).
+def closest_rows(
+    obstacle: Obstacle, k: float, d_safe: float, joints: np.ndarray, t: float, radius: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Velocity-damper rows (eqs. 8-10) keeping each link's point closest to each point of
+    ``obstacle`` (key points of kind ``closest``) ``d_safe`` [m] away at ``t`` [s].
 
     For key point ``A_i`` and obstacle point ``B_j`` with ``u = (A_i - B_j)/|A_i - B_j|``::
 
         d/dt dist = u . (J_Ai v - Bdot_j) >= -k (dist - d_safe)
         =>  G row = -u^T J_Ai,   h = k (dist - d_safe) - u . Bdot_j
 
-    Damper gain ``k`` [1/s], ``d_safe`` [m]; one row per pair, key point major (the paper's key
-    points: :mod:`qpbench.control.build_kernel`).
+    Damper gain ``k`` [1/s]; ``joints``: base, joints and end effector (n+1, 2) [m]; ``radius``
+    [m]. Returns ``G`` (n*m, n), ``h`` (n*m,) and ``dist`` (n, m) [m] to the link's capsule,
+    link major (the paper's key points: :mod:`qpbench.control.build_kernel`).
     """
-
-    def __init__(self, obstacle: Obstacle, k: float, d_safe: float):
-        self.obstacle = obstacle
-        self.k = float(k)
-        self.d_safe = float(d_safe)
-
-    def closest_rows(
-        self, joints: np.ndarray, t: float, radius: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rows at each link's point closest to each obstacle point (key points ``closest``).
-
-        ``joints``: base, joints and end effector (n+1, 2) [m]; ``radius`` [m]. Returns ``G``
-        (n*m, n), ``h`` (n*m,) and ``dist`` (n, m) [m] to the link's capsule, link major.
-        """
-        n = joints.shape[0] - 1
-        A, _, dist, u = self.obstacle.closest_on_segments(joints[:-1], joints[1:], t)
-        dist = dist - radius
-        m = dist.shape[1]
-        rel = A[:, :, None, :] - joints[None, None, :-1, :]  # (n links, m, n joints, 2)
-        mask = (np.arange(n)[None, :] <= np.arange(n)[:, None]).astype(float)[:, None, :]
-        J = np.stack([-rel[..., 1] * mask, rel[..., 0] * mask], axis=2)  # (n, m, 2, n)
-        G = -np.einsum("lmk,lmkn->lmn", u, J).reshape(n * m, n)
-        h = (self.k * (dist - self.d_safe) - u @ self.obstacle.velocity).reshape(n * m)
-        return G, h, dist
+    n = joints.shape[0] - 1
+    A, _, dist, u = obstacle.closest_on_segments(joints[:-1], joints[1:], t)
+    dist = dist - radius
+    m = dist.shape[1]
+    rel = A[:, :, None, :] - joints[None, None, :-1, :]  # (n links, m, n joints, 2)
+    mask = (np.arange(n)[None, :] <= np.arange(n)[:, None]).astype(float)[:, None, :]
+    J = np.stack([-rel[..., 1] * mask, rel[..., 0] * mask], axis=2)  # (n, m, 2, n)
+    G = -np.einsum("lmk,lmkn->lmn", u, J).reshape(n * m, n)
+    h = (k * (dist - d_safe) - u @ obstacle.velocity).reshape(n * m)
+    return G, h, dist
