@@ -627,6 +627,9 @@ def test_the_report_marks_a_verdict_judged_on_overridden_thresholds():
     text = "".join(failed_verdicts(df))
     assert f"diverged{OVERRIDDEN}" in text and "| incomplete |" in text
     assert f"incomplete{OVERRIDDEN}" not in text and OVERRIDDEN in FOOTNOTE
+    # rows held in memory carry the summary's dict, not its JSON text
+    df["verdict_overrides"] = [{"settle_time": 5.0}, {}]
+    assert "".join(failed_verdicts(df)) == text
 
 
 # ---------------------------------------------------------------- a scenario with every default

@@ -176,14 +176,9 @@ class Backend:
     @classmethod
     def version(cls) -> str | None:
         """Version of the package behind the backend, if known."""
-        if cls.package is None:
-            return None
-        from importlib.metadata import PackageNotFoundError, version
+        from ..formats import package_versions
 
-        try:
-            return version(cls.package)
-        except PackageNotFoundError:
-            return None
+        return None if cls.package is None else package_versions((cls.package,))[cls.package]
 
     def solve(
         self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None

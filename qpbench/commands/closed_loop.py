@@ -6,7 +6,8 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from .options import add, add_force_resume, aligned, log, pick, run_bar, strict_exit
+from ..report.markdown_table import aligned
+from .options import add, add_force_resume, log, pick, run_bar, strict_exit
 
 if TYPE_CHECKING:
     import pandas as pd

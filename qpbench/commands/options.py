@@ -137,26 +137,12 @@ def run_bar(args: argparse.Namespace, total: int, desc: str, on_row, leave: bool
         bar.close()
 
 
-def aligned(rows: list, align: str = "l", free_last: bool = False) -> str:
-    """Rows of text cells as columns, column ``i`` left-aligned if ``align[i]`` is ``l``, else
-    (or past ``align``) right-aligned; ``free_last``: the last column (free text) not padded."""
-    n = len(rows[0]) - free_last
-    widths = [max(len(r[c]) for r in rows) for c in range(n)]
-    return "\n".join(
-        "  ".join(
-            [
-                c.ljust(w) if align[i : i + 1] == "l" else c.rjust(w)
-                for i, (c, w) in enumerate(zip(r, widths))
-            ]
-            + list(r[n:])
-        ).rstrip()
-        for r in rows
-    )
-
-
 def print_listing(args: argparse.Namespace, items: list[dict], rows: list, **kw) -> int:
-    """``items`` as one JSON object per line with ``--json``, else :func:`aligned` ``rows``; 0."""
+    """``items`` as one JSON object per line with ``--json``, else
+    :func:`qpbench.report.markdown_table.aligned` ``rows``; 0."""
     import json
+
+    from ..report.markdown_table import aligned
 
     for line in [json.dumps(item) for item in items] if args.json else [aligned(rows, **kw)]:
         print(line)

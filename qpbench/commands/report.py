@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..report import write_report
+    from ..report.write import write_report
     from ..scaling.report import is_scaling_dir, write_scaling_report
     from ..sweep.report import split_sweep_paths, sweep_section
 

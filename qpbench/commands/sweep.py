@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from .options import add, add_force_resume, aligned, check_tables, log, run_bar, strict_exit
+from ..report.markdown_table import aligned
+from .options import add, add_force_resume, check_tables, log, run_bar, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (

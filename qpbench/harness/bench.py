@@ -566,6 +566,8 @@ class BenchSummary:
     def table(self) -> str:
         """Per backend: rows, success %, time p50/p99 [us], max constraint violation (problem
         units), failures by status; ``*`` marks a backend solved in a worker process."""
+        from ..report.markdown_table import aligned
+
         lines = [["backend", "rows", "success %", "time p50 (us)", "time p99 (us)"]]
         lines[0] += ["max violation", "failures"]
         for name, st in self.backends.items():
@@ -584,14 +586,10 @@ class BenchSummary:
                     fails if not st.n_failures else f"{st.n_failures} ({fails})",
                 ]
             )
-        widths = [max(len(r[j]) for r in lines) for j in range(len(lines[0]) - 1)]
-        out = [
-            "  ".join([r[0].ljust(widths[0]), *map(str.rjust, r[1:-1], widths[1:]), r[-1]]).rstrip()
-            for r in lines
-        ]
+        out = aligned(lines, free_last=True)
         if any(st.isolated for st in self.backends.values()):
-            out.append("* some or all rows solved in a worker process (times taken inside it)")
-        return "\n".join(out)
+            out += "\n* some or all rows solved in a worker process (times taken inside it)"
+        return out
 
 
 def _truth(value) -> bool:

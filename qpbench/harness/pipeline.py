@@ -241,7 +241,7 @@ def run_all(config: RunConfig) -> RunOutcome:
     table, not_ok = _closed_loop(config, staging, phases, budgets)
     failures += not_ok  # failed runs and runs that failed their verdict
     with phases.phase("report"):
-        from ..report import write_report
+        from ..report.write import write_report
 
         write_report([staging / "bench", staging / "closed_loop.csv"], staging, force=True)
         _compress_bench(staging / "bench")

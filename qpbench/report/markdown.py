@@ -306,8 +306,11 @@ FOOTNOTE = (
 
 
 def _overridden(row) -> bool:
-    """The row's verdict was judged on thresholds set over the scenario file's."""
+    """The row's verdict was judged on thresholds set over the scenario file's (a summary's
+    dict, or its JSON text in a CSV)."""
     value = row["verdict_overrides"]
+    if isinstance(value, dict):
+        return bool(value)
     return isinstance(value, str) and value.strip() not in ("", "{}")
 
 

@@ -106,3 +106,20 @@ def table(columns: Iterable[Column], records: Iterable) -> list[str]:
     rows = [[c.value(r) for c in columns] for r in records]
     left = [i for i, c in enumerate(columns) if c.text]
     return [md_table([c.header for c in columns], rows, left=left)]
+
+
+def aligned(rows: list, align: str = "l", free_last: bool = False) -> str:
+    """Rows of text cells as columns, column ``i`` left-aligned if ``align[i]`` is ``l``, else
+    (or past ``align``) right-aligned; ``free_last``: the last column (free text) not padded."""
+    n = len(rows[0]) - free_last
+    widths = [max(len(r[c]) for r in rows) for c in range(n)]
+    return "\n".join(
+        "  ".join(
+            [
+                c.ljust(w) if align[i : i + 1] == "l" else c.rjust(w)
+                for i, (c, w) in enumerate(zip(r, widths))
+            ]
+            + list(r[n:])
+        ).rstrip()
+        for r in rows
+    )

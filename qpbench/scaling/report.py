@@ -175,13 +175,7 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
     m = frame[frame["status"] == "measured"]
     backends = sorted(m["backend"].unique())
     groups = style.groups(backends) or [("", [])]
-    fig, axes = style.pyplot().subplots(
-        len(groups),
-        len(AXES),
-        figsize=(14, 4.6 * len(groups) + 0.6),
-        squeeze=False,
-        layout="constrained",
-    )
+    fig, axes = style.subplots(len(groups), len(AXES), 14, 4.6 * len(groups) + 0.6)
     for row, (_, group) in enumerate(groups):
         for ax, (axis, (xcol, label)) in zip(axes[row], AXES.items()):
             a = m[m["axis"] == axis]

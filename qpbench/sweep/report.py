@@ -168,13 +168,8 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
     ok = df[df["status"] == "ok"]
     everyone = sorted(ok["backend"].unique())
     groups = style.groups(everyone) or [("", [])]
-    fig, axes = style.pyplot().subplots(
-        len(groups),
-        len(ECDF_PANELS),
-        figsize=(3.6 * len(ECDF_PANELS) + 2.0, 3.0 * len(groups) + 0.8),
-        squeeze=False,
-        layout="constrained",
-    )
+    size = (3.6 * len(ECDF_PANELS) + 2.0, 3.0 * len(groups) + 0.8)
+    fig, axes = style.subplots(len(groups), len(ECDF_PANELS), *size)
     d_safe = float(ok["d_safe"].dropna().iloc[0]) * 1e3 if ok["d_safe"].notna().any() else None
     for row, (group_title, group) in enumerate(groups):
         for ax, (col, label, scale, _) in zip(axes[row], ECDF_PANELS):
