@@ -408,6 +408,7 @@ def direct_for(name: str, profile: str):
     if name == "cvxpy":
         import cvxpy as cp
 
+        from qpbench.backends._common import FiniteRows
         from qpbench.backends.cvxpy_ import _Model
 
         solver, options = backend._solver_options(cp)
@@ -417,18 +418,12 @@ def direct_for(name: str, profile: str):
 
             def solve(p):
                 P, q, G, h, A, b, lb, ub = _parts(p)
-                key = (q.shape[0], A.shape[0], G.shape[0])
+                rows = FiniteRows(p, q.shape[0])
+                key = (q.shape[0], A.shape[0], rows.kept)
                 if key not in models:
-                    models[key] = _Model(
-                        cp,
-                        q.shape[0],
-                        A.shape[0],
-                        np.ones(G.shape[0], bool),
-                        np.arange(q.shape[0]),
-                        np.arange(q.shape[0]),
-                    )
+                    models[key] = _Model(cp, q.shape[0], A.shape[0], rows)
                 model = models[key]
-                model.set_values(p, P, lb, ub)
+                model.set_values(p, rows, lb, ub)
                 model.problem.solve(solver=solver, warm_start=True, **options)
                 return model.x.value
 

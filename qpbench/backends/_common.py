@@ -376,20 +376,34 @@ def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]
         ProblemFormatError: an array whose shape does not fit ``n`` and the rows of ``A``
             and ``G`` (naming the backend, the array and both shapes).
     """
-    me, mi = (0 if M is None else M.shape[0] for M in (A, G))
-    checks = [("P", P, (n, n), (n, n))]  # (name, array, its shape, the shape shown)
-    for matrix, M, vector, v, count, m in (("A", A, "b", b, "me", me), ("G", G, "h", h, "mi", mi)):
-        if M is not None:
-            checks += [(matrix, M, (m, n), (count, n)), (vector, v, (m,), (m,))]
-    checks += [(key, v, (n,), (n,)) for key, v in (("lb", lb), ("ub", ub)) if v is not None]
-    for key, v, shape, shown in checks:
-        if v is None or v.shape != shape:
-            raise ProblemFormatError(
-                f"backend '{backend}': {key} has shape {() if v is None else tuple(v.shape)}, "
-                f"expected {shown} (from q and the rows of A and G)",
-                key=key,
-            )
+    if P.shape != (n, n):
+        _refuse(backend, "P", P.shape, (n, n))
+    me = _rows(backend, A, b, n, ("A", "b", "me"))
+    mi = _rows(backend, G, h, n, ("G", "h", "mi"))
+    for key, v in (("lb", lb), ("ub", ub)):
+        if v is not None and v.shape != (n,):
+            _refuse(backend, key, v.shape, (n,))
     return me, mi
+
+
+def _refuse(backend: str, key: str, shape, expected) -> None:
+    raise ProblemFormatError(
+        f"backend '{backend}': {key} has shape {tuple(shape)}, expected {tuple(expected)} "
+        "(from q and the rows of A and G)",
+        key=key,
+    )
+
+
+def _rows(backend: str, M, v, n: int, names: tuple[str, str, str]) -> int:
+    if M is None:
+        return 0
+    matrix, vector, count = names
+    if M.ndim != 2 or M.shape[1] != n:
+        _refuse(backend, matrix, M.shape, (count, n))
+    m = M.shape[0]
+    if v is None or v.shape != (m,):
+        _refuse(backend, vector, () if v is None else v.shape, (m,))
+    return m
 
 
 def wants_sparse(problem: qpsolvers.Problem) -> bool:
