@@ -1,0 +1,1 @@
+"""The closed loop's engines and the one model of a run they share."""
