@@ -3,8 +3,9 @@ clock, only for the backends a command runs.
 
 Kernel groups (:data:`KERNELS`), each warmed on the QPs of :data:`_SCENARIOS`' controllers:
 ``controller`` (:mod:`qpbench.control.build_kernel`), ``post`` (the closed loop's step,
-:mod:`qpbench.sim.tick_kernel`) and ``network`` (:mod:`qpbench.rnn.kernels`); :data:`SHIM`,
-the ``qpoases`` backend's native shim.
+:mod:`qpbench.sim.tick_kernel`, and the adaptive law) and ``network`` (:mod:`qpbench.rnn.kernels`);
+``pinv`` (the pseudo-inverse's SVD); ``engine:<backend>``, the compiled engine of a backend that has one
+(:mod:`qpbench.engine.compiled`); :data:`SHIM`, the ``qpoases`` backend's native shim.
 """
 
 from __future__ import annotations
@@ -18,12 +19,14 @@ from dataclasses import dataclass
 from .cache import PACKAGE_DIR
 
 #: Kernel groups :func:`warmup` prepares, in order.
-KERNELS = ("controller", "post", "network")
+KERNELS = ("controller", "post", "network", "pinv")
 #: The groups every closed loop runs (the controller's tick build, the plant step).
 LOOP_KERNELS = ("controller", "post")
 
 #: The name :func:`kernels_for` gives the qpoases backend's native shim.
 SHIM = "qpoases-shim"
+#: Prefix of the group of a backend's compiled engine (``engine:daqp``).
+ENGINE = "engine:"
 #: Everything :func:`warmup` can prepare, in order.
 _ALL = (*KERNELS, SHIM)
 #: Shipped scenarios whose controllers give the QP shapes warmed: obstacle rows, none.
@@ -101,6 +104,24 @@ def _warm_network(problems) -> None:
     online.solve(plain)
 
 
+def compiled_solvers() -> tuple[str, ...]:
+    """The backends with a compiled engine (:data:`qpbench.engine.compiled.SOLVERS`)."""
+    from .engine.compiled import SOLVERS
+
+    return tuple(SOLVERS)
+
+
+def _warm_loop(engines: Iterable[str]) -> None:
+    """A few ticks of a closed loop on the Python engine (the step, the adaptive law), then on the
+    compiled engine of each backend of ``engines``, in scenarios with and without obstacles."""
+    from .sim.loop import simulate
+
+    for name in ("adaptive", "free"):
+        simulate(name, "pinv", duration=0.003, engine="python", warmup_ticks=0)
+        for backend in engines:
+            simulate(name, backend, duration=0.003, engine="compiled", warmup_ticks=0)
+
+
 def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str, ...]:
     """What :func:`warmup` prepares for ``backends`` (``None``: everything), in :data:`KERNELS` order.
 
@@ -121,12 +142,16 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
         wanted.update(cls.kernels)
         if cls.name == "qpoases":
             wanted.add(SHIM)
-    return tuple(k for k in _ALL if k in wanted)
+        if loop and cls.name in compiled_solvers():
+            wanted.add(ENGINE + cls.name)
+    engines = sorted(k for k in wanted if k.startswith(ENGINE))
+    return tuple(k for k in _ALL if k in wanted) + tuple(engines)
 
 
 def prepared() -> tuple[str, ...]:
     """The kernel groups (and shims) prepared in this process so far, in :data:`KERNELS` order."""
-    return tuple(k for k in _ALL if k in _DONE)
+    engines = sorted(k for k in _DONE if k.startswith(ENGINE))
+    return tuple(k for k in _ALL if k in _DONE) + tuple(engines)
 
 
 def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:
@@ -149,18 +174,21 @@ def prepare(wanted: Iterable[str]) -> WarmupReport:
     start = time.perf_counter()
     kernels = tuple(k for k in todo if k in KERNELS)
     compiled = 0
-    if kernels:
+    if kernels or any(k.startswith(ENGINE) for k in todo):
         from numba.core import event
-
-        from .sim.tick_kernel import warm_post_kernel
 
         with event.install_recorder("numba:compile") as recorder:
             problems = _problems()  # also warms the controller's build kernel
-            # the closed loop's step: one per scenario (the formulation does not change types)
-            for sc, ctrl, theta, arrays, _ in problems[::2] if "post" in kernels else ():
-                warm_post_kernel(ctrl, sc.make_surface(), sc.dt, theta, arrays)
+            engines = [k[len(ENGINE) :] for k in todo if k.startswith(ENGINE)]
+            if "post" in kernels or engines:  # the loop's step and law, each engine asked for
+                _warm_loop(engines)
             if "network" in kernels:
                 _warm_network(problems)
+            if "pinv" in kernels:  # the pseudo-inverse's kernel, with and without equalities
+                from .backends import get_backend
+
+                for *_, problem in problems[:2]:
+                    get_backend("pinv").solve(problem)
         compiled = sum(1 for _, ev in recorder.buffer if ev.is_start)
         kernels = tuple(k for k in KERNELS if k in kernels or k == "controller")
         todo.append("controller")

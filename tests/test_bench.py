@@ -514,8 +514,8 @@ def test_closing_summary_counts_failures_and_unsuccessful_solves_by_backend(
 
 
 def test_deferred_parts_of_the_answer_are_inside_the_timed_region(two_scenarios, tmp_path):
+    from qpbench.backends.base import timed_call
     from qpbench.formats import load_problems
-    from qpbench.harness.guard import timed_call
 
     problem = load_problems(two_scenarios).records[0].problem
     sol, ns = timed_call(get_backend_instance("faulty:lazy-duals"), problem)

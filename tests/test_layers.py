@@ -4,11 +4,11 @@ Every ``import`` statement of the package counts, at module level or inside
 a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
-    exceptions statuses profiles published memory atomic cache packed native_output
+    exceptions statuses profiles published memory atomic cache packed native_output native
     runner
     robot rnn backends metrics formats reference
     control
-    sim
+    sim engine
     selection report jit
     harness scaling sweep
     commands cli
@@ -46,6 +46,7 @@ LAYERS = [
         "cache",
         "packed",
         "native_output",
+        "native",
         "qpbench",
     },
     {"runner"},
@@ -58,7 +59,7 @@ LAYERS = [
         "reference",
     },
     {"control"},
-    {"sim"},
+    {"sim", "engine"},
     {"selection", "report", "jit"},
     {"harness", "scaling", "sweep"},
     {"commands", "cli"},

@@ -4,7 +4,7 @@ import time
 
 import numpy as np
 
-from qpbench.engine.native import clock
+from qpbench.native import clock
 
 
 def test_clock_is_the_monotonic_clock_and_never_goes_back():

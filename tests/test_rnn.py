@@ -533,8 +533,8 @@ def test_rnn_tuned_is_the_network_with_the_working_setting_in_the_loop():
 
 def test_online_answer_is_built_inside_the_bench_timed_region(rng):
     """The per-tick answer defers its duals; the bench's timed call builds them."""
+    from qpbench.backends.base import timed_call
     from qpbench.backends.rnn import TickSolution
-    from qpbench.harness.guard import timed_call
 
     problem, *_ = robot_like_problem(rng)
     backend = get_backend("rnn", **WORKING_SETTINGS)

@@ -9,13 +9,15 @@ from test_environment import contact_force
 
 def test_post_kernel_force_matches_contact_surface():
     """The tick kernel's inline force law agrees with the numpy oracle."""
+    from qpbench.engine.model import run_model
     from qpbench.sim.scenario import load_scenario
-    from qpbench.sim.tick_kernel import APPLIED, get_post_kernel, post_constants
+    from qpbench.sim.tick_kernel import APPLIED, get_post_kernel, log_columns
 
     scenario = load_scenario("wall")
     ctrl, surface = scenario.make_controller(), scenario.make_surface()
     assert surface.noise_std == 0.0
-    cols, cidx, ci, cf = post_constants(ctrl, surface, scenario.dt)
+    model = run_model(scenario, ctrl, soft=False)
+    names, cols = log_columns(ctrl)
     rng = np.random.default_rng(3)
     post = get_post_kernel()
     theta = scenario.theta0.astype(float)
@@ -24,28 +26,13 @@ def test_post_kernel_force_matches_contact_surface():
         ee = arrays.ee + rng.normal(0.0, 0.02, 2)
         previous = ee - rng.normal(0.0, 2e-4, 2)
         sensed = np.array([previous[0], previous[1], 0.0, 0.0])
-        data = np.zeros((2, len(cols)))
+        data = np.zeros((2, len(names)))
+        geometry = (ee, sensed, arrays.J, arrays.b0, arrays.dist, arrays.xd)
+        none = np.zeros(0)
         force = post(
-            theta.copy(),
-            np.zeros(ctrl.n),
-            ee,
-            sensed,
-            arrays.J,
-            arrays.b0,
-            arrays.dist,
-            arrays.xd,
-            np.zeros(0),
-            np.zeros(0),
-            data,
-            1,
-            ci,
-            cf,
-            0.0,
-            APPLIED,
-            ctrl.kp,
-            ctrl.kd,
-            0.0,
-        )
+            model, cols, theta.copy(), np.zeros(ctrl.n), *geometry, none, none, data, 1, 0.0,
+            APPLIED, ctrl.kp, ctrl.kd,
+        )  # fmt: skip
         expected = contact_force(surface, ee, (ee - previous) / scenario.dt)
         assert force == pytest.approx(expected, rel=1e-12, abs=1e-12)
-        assert data[1, cidx["force"]] == force
+        assert data[1, names.index("force")] == force

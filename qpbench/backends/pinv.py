@@ -9,8 +9,11 @@ the stationarity condition), ``z`` and ``z_box`` zero.
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
+from ..native import compile_with
 from . import register
 from ._common import as_dense
 from .base import Backend, BackendSolution, error_solution
@@ -27,6 +30,7 @@ class PinvBackend(Backend):
     )
     family = "pseudo-inverse (JMPI, ignores inequalities and bounds)"
     package = "numpy"
+    kernels = ("pinv",)
 
     @classmethod
     def setting_names(cls) -> frozenset[str]:
@@ -35,22 +39,17 @@ class PinvBackend(Backend):
 
     def _solve(self, problem, warm_start):
         sol = BackendSolution(problem)
-        P = as_dense(problem.P)
-        q = np.asarray(problem.q, dtype=float)
+        P = np.ascontiguousarray(as_dense(problem.P), dtype=np.float64)
+        q = np.ascontiguousarray(problem.q, dtype=np.float64)
         n = q.shape[0]
+        if problem.A is not None and problem.A.shape[0] > 0:
+            A = np.ascontiguousarray(as_dense(problem.A), dtype=np.float64)
+            b = np.ascontiguousarray(problem.b, dtype=np.float64)
+        else:
+            A, b = np.zeros((0, n)), np.zeros(0)
+        x, y = np.empty(n), np.empty(b.shape[0])
         try:
-            if problem.A is not None and problem.A.shape[0] > 0:
-                # One thin SVD A = U S V' gives both pseudo-inverse solutions:
-                # x = V S^+ U' b and y = -U S^+ V' (P x + q).
-                A = as_dense(problem.A)
-                U, s, Vt = np.linalg.svd(A, full_matrices=False)
-                keep = s > max(A.shape) * np.finfo(float).eps * (s[0] if s.size else 0.0)
-                s_inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
-                x = Vt.T @ (s_inv * (U.T @ np.asarray(problem.b, dtype=float)))
-                y = -U @ (s_inv * (Vt @ (P @ x + q)))
-            else:
-                x = np.linalg.lstsq(P, -q, rcond=None)[0]
-                y = np.zeros(0)
+            pinv_kernel()(P, q, A, b, x, y)
         except np.linalg.LinAlgError as exc:
             return error_solution(problem, exc)
         sol.x = x
@@ -60,3 +59,29 @@ class PinvBackend(Backend):
         sol.status = "optimal"
         sol.iterations = 0
         return sol
+
+
+@cache
+def pinv_kernel():
+    """:func:`pinv_py`, compiled (or loaded from numba's cache) on first use: the one
+    implementation the backend and the compiled engine call."""
+    return compile_with(pinv_py, name="pinv")
+
+
+def pinv_py(P, q, A, b, x, y):  # pragma: no cover - compiled
+    """JMPI into ``x`` (n,) and ``y`` (me,): with equalities (``me > 0``) one thin SVD
+    ``A = U S V'`` gives ``x = V S^+ U' b`` and ``y = -U S^+ V' (P x + q)``; without,
+    ``x = -P^+ q`` by least squares. Singular values below ``max(A.shape) eps s_max`` count as 0."""
+    n, me = P.shape[0], A.shape[0]
+    eps = np.finfo(np.float64).eps
+    if me == 0:
+        x[:] = np.linalg.lstsq(P, -q, rcond=n * eps)[0]
+        return
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    cut = max(me, n) * eps * s[0]
+    s_inv = np.zeros(s.shape[0])
+    for i in range(s.shape[0]):
+        if s[i] > cut:
+            s_inv[i] = 1.0 / s[i]
+    x[:] = Vt.T @ (s_inv * (U.T @ b))
+    y[:] = -(U @ (s_inv * (Vt @ (P @ x + q))))

@@ -11,6 +11,7 @@ above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``).
 
 from __future__ import annotations
 
+from functools import cache
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -57,13 +58,51 @@ class AdaptiveImpedance:
         force: float,
     ) -> tuple[float, float]:
         """One Euler step over ``dt`` [s] from positions [m], velocities [m/s] and the measured
-        force [N]; returns the new ``(Kp_hat, Kd_hat)``."""
-        nx, ny = self.nx, self.ny
-        eta_p = nx * (x[0] - x_d[0]) + ny * (x[1] - x_d[1])
-        eta_d = nx * (xdot[0] - xdot_d[0]) + ny * (xdot[1] - xdot_d[1])
-        ef = self.desired_force - force
-        kp = self.kp - dt * self.gain_kp * eta_p * ef
-        kd = self.kd - dt * self.gain_kd * eta_d * ef
-        self.kp = kp if kp > self.kp_min else self.kp_min
-        self.kd = kd if kd > self.kd_min else self.kd_min
+        force [N]; returns the new ``(Kp_hat, Kd_hat)`` (the compiled law :func:`adapt_py`)."""
+        import numpy as np
+
+        sensed = np.array([x[0], x[1], xdot[0], xdot[1]], dtype=float)
+        xd = np.array([x_d[0], x_d[1], xdot_d[0], xdot_d[1]], dtype=float)
+        gains = np.array([self.kp, self.kd])
+        compiled_law()(self.law(), float(dt), sensed, xd, float(force), gains)
+        self.kp, self.kd = float(gains[0]), float(gains[1])
         return self.kp, self.kd
+
+    def law(self):
+        """The law's constants as :func:`adapt_py` reads them: ``K_in`` (2), ``n`` (2), ``Fd``,
+        ``kp_min``, ``kd_min``."""
+        import numpy as np
+
+        return np.array(
+            [
+                self.gain_kp,
+                self.gain_kd,
+                self.nx,
+                self.ny,
+                self.desired_force,
+                self.kp_min,
+                self.kd_min,
+            ]
+        )
+
+
+@cache
+def compiled_law():
+    """:func:`adapt_py`, compiled (or loaded from numba's cache) on the first call."""
+    from ..native import compile_with
+
+    return compile_with(adapt_py, name="adapt")
+
+
+def adapt_py(law, dt, sensed, xd, force, gains):  # pragma: no cover - compiled
+    """One Euler step of the law over ``dt`` [s]: ``gains = [Kp_hat, Kd_hat]`` updated in place
+    from the sensed ``[x, xdot]`` and desired ``[x_d, xdot_d]`` (4,) [m, m/s] and the measured
+    ``force`` [N]; ``law`` of :meth:`AdaptiveImpedance.law`."""
+    nx, ny = law[2], law[3]
+    eta_p = nx * (sensed[0] - xd[0]) + ny * (sensed[1] - xd[1])
+    eta_d = nx * (sensed[2] - xd[2]) + ny * (sensed[3] - xd[3])
+    ef = law[4] - force
+    kp = gains[0] - dt * law[0] * eta_p * ef
+    kd = gains[1] - dt * law[1] * eta_d * ef
+    gains[0] = kp if kp > law[5] else law[5]
+    gains[1] = kd if kd > law[6] else law[6]

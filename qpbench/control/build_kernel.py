@@ -1,58 +1,175 @@
-"""The controller's compiled per-tick build (numba): kinematics, impedance reference (eq. 4),
-escape-velocity bounds (eq. 11c) and obstacle rows (eqs. 8-10) of one tick's QP, written into one
-packed buffer (:func:`packed_layout`, after the :mod:`qpbench.packed` header)."""
+"""The controller's compiled per-tick build (numba): desired path, kinematics, impedance reference
+(eq. 4), escape-velocity bounds (eq. 11c) and obstacle rows (eqs. 8-10) of one tick's QP, written
+into one packed buffer (:func:`packed_layout`, after the :mod:`qpbench.packed` header).
+
+Everything the build reads is named in one :class:`ControllerModel`; kinematics
+(:func:`_chain_points`) and obstacle distances (:func:`_distance`) are functions of it, so the
+build itself does not depend on how the arm or an obstacle is described.
+"""
 
 from __future__ import annotations
 
 from functools import cache
+from typing import NamedTuple
 
 import numpy as np
 
 from ..packed import HEADER as PACKED_HEADER
+from ..robot.environment import DISK, KIND, LINE, P0X, P0Y, P1X, P1Y, RADIUS, SEGMENT, VX, VY
 
-# Layout of the kernel's parameter vector.
-_T, _XDX, _XDY, _VDX, _VDY, _NX, _NY, _FD, _KP, _KD, _K, _DSAFE, _ALPHA, _RHO, _SOFT, _RADIUS = (
-    range(16)
-)
-_NPAR = 16
+#: ``ControllerModel.path_kind``: ``x_d(t)`` per axis a cosine, or a polyline.
+COSINE, POLYLINE = 0, 1
+
+
+class ControllerModel(NamedTuple):
+    """The constants of the paper's controller as the compiled kernels read them.
+
+    Arm: planar serial chain of link ``lengths`` (n,) [m]. Key points: link index ``key_link``
+    (a,) and fraction ``key_frac`` (a,) of the link's length, each a disk of ``key_radius``
+    [m]. ``obstacles``: the obstacle table (m, :data:`~qpbench.robot.environment.OBSTACLE_COLUMNS`),
+    one row per obstacle point at t = 0. Limits ``theta_min, theta_max`` [rad], ``v_min, v_max``
+    [rad/s] (n,), escape gain ``alpha`` [1/s]. Task: pressing ``normal`` (2,), ``desired_force``
+    [N]; damper gain ``k`` [1/s], ``d_safe`` [m]; ``rho`` [s^2/m^2] the task weight of the
+    ``soft`` formulation. Path ``x_d(t)``: ``path_kind`` :data:`COSINE` with ``path_cosine`` =
+    centre (2), amplitude (2) [m], omega (2) [rad/s], phase (2) [rad]; or :data:`POLYLINE`
+    through ``path_points`` (p, 2) [m] at ``path_times`` (p,) [s].
+    """
+
+    lengths: np.ndarray
+    key_link: np.ndarray
+    key_frac: np.ndarray
+    key_radius: float
+    obstacles: np.ndarray
+    theta_min: np.ndarray
+    theta_max: np.ndarray
+    v_min: np.ndarray
+    v_max: np.ndarray
+    alpha: float
+    normal: np.ndarray
+    desired_force: float
+    k: float
+    d_safe: float
+    rho: float
+    path_kind: int
+    path_cosine: np.ndarray
+    path_times: np.ndarray
+    path_points: np.ndarray
+
+
+@cache
+def compiled_path():
+    """``desired_state(kind, cosine, times, points, t, out)``: ``out = [x_d (2), xdot_d (2)]``
+    [m, m/s] at ``t`` [s] of a path given as :class:`ControllerModel`'s ``path_*`` fields."""
+    from ..native import compile_with
+
+    return compile_with(_desired_state_py, name="desired_state")
 
 
 @cache
 def compiled_build_kernel():
-    """The build kernel, compiled (or loaded from numba's cache) on the first call."""
-    import numba
+    """The build kernel ``build(model, theta, t, kp, kd, soft, buf)``, compiled (or loaded from
+    numba's cache) on the first call."""
+    from ..native import compile_with
 
-    return numba.njit(cache=True, fastmath=False, nogil=True)(_build_kernel_py)
-
-
-def parameter_vector(
-    normal, desired_force: float, k: float, d_safe: float, alpha: float, rho: float, radius: float
-) -> np.ndarray:
-    """The kernel's parameter vector with a controller's constants: pressing direction, ``Fd``
-    [N], damper gain ``k`` [1/s], ``d_safe`` [m], escape gain ``alpha`` [1/s], ``rho``, key-point
-    radius [m]. The controller sets the time, ``x_d``, ``xdot_d``, ``Kp``, ``Kd`` and the
-    formulation flag (indices 0-4, 8, 9, 14) before each call."""
-    par = np.zeros(_NPAR)
-    constants = (*normal, desired_force, k, d_safe, alpha, rho, radius)
-    par[[_NX, _NY, _FD, _K, _DSAFE, _ALPHA, _RHO, _RADIUS]] = constants
-    return par
+    helpers = {
+        "_desired_state_py": compiled_path(),
+        "_chain_points": compile_with(_chain_points, name="chain_points"),
+        "_distance": compile_with(_distance, name="obstacle_distance"),
+    }
+    return compile_with(_build_kernel_py, helpers, name="build_tick")
 
 
 def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
-    """Size of a tick's buffer and the slices of its P, q, G, h, J, b, lb, ub, ee and dist, in
-    the order :func:`_build_kernel_py` lays them out."""
-    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows)
+    """Size of a tick's buffer and the slices of its P, q, G, h, J, b, lb, ub, ee, dist and
+    ``x_d = (x_d, xdot_d)``, in the order :func:`_build_kernel_py` lays them out."""
+    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows, 4)
     ends = PACKED_HEADER + np.cumsum(sizes)
     return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes, ends))
 
 
-# Over 80 lines, kept whole on purpose: numba compiles it as one function; split, each helper
-# would have to be compiled too. Its numpy twin: tests/controller_numpy.py.
-def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  # pragma: no cover
-    """Fill P, q, G, h, J, b (= b0), lb, ub, ee and dist of one tick into ``buf`` (layout of
-    :func:`packed_layout`) and write its header."""
+def _desired_state_py(kind, c, times, pts, t, out):  # pragma: no cover - compiled
+    """``x_d(t)``, ``xdot_d(t)`` of a path (:class:`ControllerModel`'s ``path_*``) into ``out``
+    (4,); a polyline holds its first point before its first time and its last point after its
+    last."""
+    if kind == COSINE:
+        for i in range(2):
+            s = c[4 + i] * t + c[6 + i]
+            out[i] = c[i] + c[2 + i] * np.cos(s)
+            out[2 + i] = -c[2 + i] * c[4 + i] * np.sin(s)
+        return
+    last = times.shape[0] - 1
+    if t <= times[0] or t >= times[last]:
+        j = 0 if t <= times[0] else last
+        out[0], out[1], out[2], out[3] = pts[j, 0], pts[j, 1], 0.0, 0.0
+        return
+    i = np.searchsorted(times, t, side="right") - 1
+    span = times[i + 1] - times[i]
+    s = (t - times[i]) / span
+    for a in range(2):
+        step = pts[i + 1, a] - pts[i, a]
+        out[a] = pts[i, a] + s * step
+        out[2 + a] = step / span
+
+
+def _chain_points(cm, theta, px, py, cs, sn):  # pragma: no cover - compiled
+    """Planar forward kinematics (eq. 1): joint positions ``px, py`` (n+1,) [m] and each link's
+    direction ``cs, sn`` (n,)."""
     n = theta.shape[0]
-    nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 4) // (n + 2)
+    px[0] = 0.0
+    py[0] = 0.0
+    phi = 0.0
+    for i in range(n):
+        phi += theta[i]
+        cs[i] = np.cos(phi)
+        sn[i] = np.sin(phi)
+        px[i + 1] = px[i] + cm.lengths[i] * cs[i]
+        py[i + 1] = py[i] + cm.lengths[i] * sn[i]
+
+
+def _distance(row, ax, ay, t, u):  # pragma: no cover - compiled
+    """Signed distance [m] of point ``(ax, ay)`` to obstacle point ``row`` of the table at ``t``
+    [s] (its radius included), and in ``u`` (2,) the unit direction from the obstacle to the
+    point (the normal of a line; zero at distance 0)."""
+    kind = int(row[KIND])
+    bx = row[P0X] + row[VX] * t
+    by = row[P0Y] + row[VY] * t
+    if kind == LINE:  # signed distance, u = normal
+        u[0] = row[P1X]
+        u[1] = row[P1Y]
+        return (ax - bx) * u[0] + (ay - by) * u[1]
+    if kind == SEGMENT:
+        abx = row[P1X] - row[P0X]
+        aby = row[P1Y] - row[P0Y]
+        s = ((ax - bx) * abx + (ay - by) * aby) / (abx * abx + aby * aby)
+        if s < 0.0:
+            s = 0.0
+        elif s > 1.0:
+            s = 1.0
+        bx += s * abx
+        by += s * aby
+    dx = ax - bx
+    dy = ay - by
+    d = np.sqrt(dx * dx + dy * dy)
+    if d > 0.0:
+        u[0] = dx / d
+        u[1] = dy / d
+    else:
+        u[0] = 0.0
+        u[1] = 0.0
+    if kind == DISK:
+        d -= row[RADIUS]
+    return d
+
+
+# Over 80 lines, kept whole on purpose: numba compiles it as one function. Its numpy twin:
+# tests/controller_numpy.py.
+def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - compiled
+    """Fill P, q, G, h, J, b (= b0), lb, ub, ee, dist and x_d of one tick at joint angles
+    ``theta`` [rad], time ``t`` [s], interaction coefficients ``kp`` [N/m], ``kd`` [N s/m] into
+    ``buf`` (layout of :func:`packed_layout`; ``soft``: the soft formulation) and write its
+    header."""
+    n = theta.shape[0]
+    nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 8) // (n + 2)
     oP = PACKED_HEADER
     oq = oP + n * n
     oG = oq + n
@@ -63,7 +180,7 @@ def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
     oub = olb + n
     oee = oub + n
     od = oee + 2
-    soft = par[_SOFT] != 0.0
+    oxd = od + nr
     buf[0] = n
     buf[1] = 0 if soft else 2
     buf[2] = nr
@@ -84,20 +201,14 @@ def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
     lb = buf[olb:oub]
     ub = buf[oub:oee]
     ee = buf[oee:od]
-    dist = buf[od : od + nr]
+    dist = buf[od:oxd]
+    xd = buf[oxd : oxd + 4]
+    _desired_state_py(cm.path_kind, cm.path_cosine, cm.path_times, cm.path_points, t, xd)
     px = np.empty(n + 1)
     py = np.empty(n + 1)
     cs = np.empty(n)
     sn = np.empty(n)
-    px[0] = 0.0
-    py[0] = 0.0
-    phi = 0.0
-    for i in range(n):
-        phi += theta[i]
-        cs[i] = np.cos(phi)
-        sn[i] = np.sin(phi)
-        px[i + 1] = px[i] + lengths[i] * cs[i]
-        py[i + 1] = py[i] + lengths[i] * sn[i]
+    _chain_points(cm, theta, px, py, cs, sn)
     ex = px[n]
     ey = py[n]
     ee[0] = ex
@@ -106,23 +217,22 @@ def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
         J[0, k] = -(ey - py[k])
         J[1, k] = ex - px[k]
     # impedance reference, eq. 4
-    kd = par[_KD]
-    kpkd = par[_KP] / kd
-    fkd = par[_FD] / kd
-    b[0] = par[_VDX] - kpkd * (ex - par[_XDX]) + fkd * par[_NX]
-    b[1] = par[_VDY] - kpkd * (ey - par[_XDY]) + fkd * par[_NY]
+    kpkd = kp / kd
+    fkd = cm.desired_force / kd
+    b[0] = xd[2] - kpkd * (ex - xd[0]) + fkd * cm.normal[0]
+    b[1] = xd[3] - kpkd * (ey - xd[1]) + fkd * cm.normal[1]
     # escape-velocity bounds, eq. 11c
-    alpha = par[_ALPHA]
+    alpha = cm.alpha
     for k in range(n):
-        lo = alpha * (lim[0, k] - theta[k])
-        vmin = lim[2, k]
+        lo = alpha * (cm.theta_min[k] - theta[k])
+        vmin = cm.v_min[k]
         lb[k] = lo if lo > vmin else vmin
-        up = alpha * (lim[1, k] - theta[k])
-        vmax = lim[3, k]
+        up = alpha * (cm.theta_max[k] - theta[k])
+        vmax = cm.v_max[k]
         ub[k] = up if up < vmax else vmax
     # objective
     if soft:
-        rho = par[_RHO]
+        rho = cm.rho
         for r in range(n):
             for c in range(n):
                 P[r, c] = rho * (J[0, r] * J[0, c] + J[1, r] * J[1, c])
@@ -135,54 +245,22 @@ def _build_kernel_py(theta, lengths, kp_link, kp_frac, prims, lim, par, buf):  #
             P[r, r] = 1.0
             q[r] = 0.0
     # obstacle rows, eqs. 8-10 with the velocity-damper signs
-    nb = prims.shape[0]
-    t = par[_T]
-    kgain = par[_K]
-    dsafe = par[_DSAFE]
-    radius = par[_RADIUS]
-    for i in range(kp_link.shape[0]):
-        L = kp_link[i]
-        f = kp_frac[i] * lengths[L]
+    obstacles = cm.obstacles
+    nb = obstacles.shape[0]
+    u = np.empty(2)
+    for i in range(cm.key_link.shape[0]):
+        L = cm.key_link[i]
+        f = cm.key_frac[i] * cm.lengths[L]
         ax = px[L] + f * cs[L]
         ay = py[L] + f * sn[L]
         for j in range(nb):
-            kind = int(prims[j, 0])
-            vx = prims[j, 6]
-            vy = prims[j, 7]
-            bx = prims[j, 1] + vx * t
-            by = prims[j, 2] + vy * t
-            if kind == 0:  # line, signed distance, u = normal
-                ux = prims[j, 3]
-                uy = prims[j, 4]
-                d = (ax - bx) * ux + (ay - by) * uy
-            else:
-                if kind == 1:  # segment
-                    abx = prims[j, 3] - prims[j, 1]
-                    aby = prims[j, 4] - prims[j, 2]
-                    s = ((ax - bx) * abx + (ay - by) * aby) / (abx * abx + aby * aby)
-                    if s < 0.0:
-                        s = 0.0
-                    elif s > 1.0:
-                        s = 1.0
-                    bx += s * abx
-                    by += s * aby
-                dx = ax - bx
-                dy = ay - by
-                d = np.sqrt(dx * dx + dy * dy)
-                if d > 0.0:
-                    ux = dx / d
-                    uy = dy / d
-                else:
-                    ux = 0.0
-                    uy = 0.0
-                if kind == 2:  # disk
-                    d -= prims[j, 5]
-            d -= radius
+            row = obstacles[j]
+            d = _distance(row, ax, ay, t, u) - cm.key_radius
             r = i * nb + j
             for k in range(n):
                 if k <= L:
-                    G[r, k] = -(ux * (py[k] - ay) + uy * (ax - px[k]))
+                    G[r, k] = -(u[0] * (py[k] - ay) + u[1] * (ax - px[k]))
                 else:
                     G[r, k] = 0.0
-            h[r] = kgain * (d - dsafe) - (ux * vx + uy * vy)
+            h[r] = cm.k * (d - cm.d_safe) - (u[0] * row[VX] + u[1] * row[VY])
             dist[r] = d

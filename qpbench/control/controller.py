@@ -24,11 +24,12 @@ import numpy as np
 import qpsolvers
 
 from ..exceptions import ParamError
+from ..native import entry_point
 from ..packed import PackedProblem
-from ..robot.environment import PRIMITIVE_WIDTH, Obstacle
+from ..robot.environment import OBSTACLE_COLUMNS, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm
 from ..statuses import FORMULATIONS
-from .build_kernel import compiled_build_kernel, packed_layout, parameter_vector
+from .build_kernel import ControllerModel, compiled_build_kernel, packed_layout
 from .terms import EscapeVelocityLimits, ImpedanceTask, closest_rows
 
 
@@ -112,23 +113,36 @@ class Controller:
         ]
         #: Inequality rows per tick (fixed).
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
-        prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, PRIMITIVE_WIDTH))]
-        lim = np.vstack([limits.theta_min, limits.theta_max, limits.v_min, limits.v_max])
-        self._par = parameter_vector(
-            task.normal, task.desired_force, k, d_safe, limits.alpha, rho, key_points.radius
+        prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, len(OBSTACLE_COLUMNS)))]
+        path_kind, path_cosine, path_times, path_points = task.path.fields
+
+        def f64(a):
+            return np.ascontiguousarray(a, dtype=np.float64)
+
+        #: Everything the compiled build reads (:class:`ControllerModel`).
+        self.model = ControllerModel(
+            lengths=f64(arm.lengths),
+            key_link=np.ascontiguousarray(key_points.links, dtype=np.int64),
+            key_frac=f64(key_points.fracs),
+            key_radius=float(key_points.radius),
+            obstacles=f64(np.vstack(prims)),
+            theta_min=f64(limits.theta_min),
+            theta_max=f64(limits.theta_max),
+            v_min=f64(limits.v_min),
+            v_max=f64(limits.v_max),
+            alpha=float(limits.alpha),
+            normal=f64(task.normal),
+            desired_force=float(task.desired_force),
+            k=self.k,
+            d_safe=self.d_safe,
+            rho=self.rho,
+            path_kind=int(path_kind),
+            path_cosine=f64(path_cosine),
+            path_times=f64(path_times),
+            path_points=f64(path_points),
         )
-        #: The build kernel's arguments after ``theta``: lengths, key points, obstacles, limits
-        #: and the parameter vector (set per tick by :meth:`build_arrays`).
-        self._kernel_args = (
-            np.ascontiguousarray(arm.lengths, dtype=float),
-            np.ascontiguousarray(key_points.links, dtype=np.int64),
-            np.ascontiguousarray(key_points.fracs, dtype=float),
-            np.ascontiguousarray(np.vstack(prims), dtype=float),
-            np.ascontiguousarray(lim, dtype=float),
-            self._par,
-        )
-        self._path = task.path
         self._packed_size, self._packed_slices = packed_layout(self.n, self.n_rows)
+        self._build = None  # the compiled build for the model's types (on first use)
 
     # -- fast path -------------------------------------------------------------
     def build_arrays(
@@ -145,16 +159,14 @@ class Controller:
             return self._closest_arrays(theta, t, kp, kd, soft)
         n = self.n
         nr = self.n_rows
-        xd = self._path(t)
-        par = self._par
-        par[0] = t
-        par[1], par[2], par[3], par[4] = xd
-        par[8] = self.kp if kp is None else kp
-        par[9] = self.kd if kd is None else kd
-        par[14] = 1.0 if soft else 0.0
+        kp = float(self.kp if kp is None else kp)
+        kd = float(self.kd if kd is None else kd)
         buf = np.empty(self._packed_size)
-        compiled_build_kernel()(theta, *self._kernel_args, buf)
-        sP, sq, sG, sh, sJ, sb, slb, sub, see, sd = self._packed_slices
+        args = (self.model, theta, float(t), kp, kd, bool(soft), buf)
+        if self._build is None:
+            self._build = entry_point(compiled_build_kernel(), *args)
+        self._build(*args)
+        sP, sq, sG, sh, sJ, sb, slb, sub, see, sd, sxd = self._packed_slices
         return TickArrays(
             buf[sP].reshape(n, n),
             buf[sq],
@@ -166,7 +178,7 @@ class Controller:
             buf[sub],
             buf[see],
             buf[sd],
-            xd,
+            buf[sxd],
             buf,
         )
 
@@ -219,7 +231,7 @@ class Controller:
         n = self.n
         ee_arr, J = self.arm.points_jacobians(theta, [n - 1], [1.0])
         ee, J = ee_arr[0], J[0]
-        xd = self._path(t)
+        xd = np.asarray(self.task.path(t))
         b0 = self.task.impedance_reference(ee, t, kp, kd)
         lb, ub = self.limits.escape_velocity_bounds(theta)
         if soft:  # 1/2 v^T v + rho/2 |J v - b0|^2

@@ -4,12 +4,11 @@ velocity-damper rows (eqs. 8-10); :mod:`qpbench.control.build_kernel` computes t
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..exceptions import InputError
 from ..robot.environment import Obstacle
+from .build_kernel import COSINE, POLYLINE, compiled_path
 
 
 class CosinePath:
@@ -17,21 +16,18 @@ class CosinePath:
     ``centre``, ``amplitude`` [m], ``omega`` [rad/s], ``phase`` [rad], each of shape (2,)."""
 
     def __init__(self, centre, amplitude, omega, phase=(0.0, 0.0)):
-        self._c = tuple(float(v) for v in np.concatenate([centre, amplitude, omega, phase]))
+        cosine = np.concatenate([centre, amplitude, omega, phase]).astype(float)
+        self.fields = (COSINE, cosine, np.zeros(2), np.zeros((2, 2)))
 
     def __call__(self, t: float) -> tuple[float, float, float, float]:
-        """``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)`` at time t [s], in [m] and [m/s]."""
-        cx, cy, ax, ay, wx, wy, px, py = self._c
-        sx, sy = wx * t + px, wy * t + py
-        return (
-            cx + ax * math.cos(sx),
-            cy + ay * math.cos(sy),
-            -ax * wx * math.sin(sx),
-            -ay * wy * math.sin(sy),
-        )
+        """``(x_d_x, x_d_y, xdot_d_x, xdot_d_y)`` at time t [s], in [m] and [m/s] (the compiled
+        kernel's: :func:`~qpbench.control.build_kernel.compiled_path`)."""
+        out = np.empty(4)
+        compiled_path()(*self.fields, float(t), out)
+        return tuple(out.tolist())
 
 
-class PolylinePath:
+class PolylinePath(CosinePath):
     """A piecewise-linear ``x_d(t)`` through ``points`` (m, 2) [m] at increasing ``times`` (m,)
     [s], m >= 2; it holds the last point after the end."""
 
@@ -46,18 +42,7 @@ class PolylinePath:
             raise InputError(
                 f"polyline points must be {self.times.size} [x, y] pairs", key="path.points"
             )
-
-    def __call__(self, t: float) -> tuple[float, float, float, float]:
-        times, pts = self.times, self.points
-        if t <= times[0]:
-            return float(pts[0, 0]), float(pts[0, 1]), 0.0, 0.0
-        if t >= times[-1]:
-            return float(pts[-1, 0]), float(pts[-1, 1]), 0.0, 0.0
-        i = int(np.searchsorted(times, t, side="right")) - 1
-        s = (t - times[i]) / (times[i + 1] - times[i])
-        d = (pts[i + 1] - pts[i]) / (times[i + 1] - times[i])
-        x = pts[i] + s * (pts[i + 1] - pts[i])
-        return float(x[0]), float(x[1]), float(d[0]), float(d[1])
+        self.fields = (POLYLINE, np.zeros(8), self.times, self.points)
 
 
 class ImpedanceTask:

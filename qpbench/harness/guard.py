@@ -7,15 +7,14 @@ state) after a death or a missed deadline."""
 
 from __future__ import annotations
 
-import gc
 import logging
-import time
 from contextlib import suppress
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..backends.base import ANSWER_FIELDS, timed_call
 from ..runner.process import START_TIMEOUT_S, Worker, WorkerDied, deadline
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 
@@ -26,28 +25,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("qpbench.harness")
 
+
 #: Fields of a solution read inside the timed region.
-ANSWER_FIELDS = ("x", "y", "z", "z_box")
-
-
-def timed_call(backend: Backend, problem: qpsolvers.Problem) -> tuple[BackendSolution, int]:
-    """``(solution, wall time [ns])`` of ``backend.solve(problem)`` and the reading of its
-    :data:`ANSWER_FIELDS` (a backend deferring its duals pays for them), gc off."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        t0 = time.perf_counter_ns()
-        solution = backend.solve(problem)
-        if solution is not None:  # materialises the fields a backend defers
-            for name in ANSWER_FIELDS:
-                getattr(solution, name, None)
-        t1 = time.perf_counter_ns()
-    finally:
-        if enabled:
-            gc.enable()
-    return solution, t1 - t0
-
-
 class Replicas:
     """The instances of one backend that ``--repeat`` times; ``members[0]`` is the kept one;
     ``history``: the problems replica 0 solved since its last reset, in order."""

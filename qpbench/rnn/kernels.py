@@ -594,11 +594,16 @@ def online_kernel() -> Callable:
 
 
 @cache
-def packed_kernel() -> Callable:
-    """:func:`_online_tick_packed_loops` ``f(buffer, xi, prm, sol) -> code``: the compiled
-    function's entry point, for 1-D C-contiguous float64 arrays (no type matching)."""
+def packed_kernel_dispatcher() -> Callable:
+    """:func:`_online_tick_packed_loops` ``f(buffer, xi, prm, sol) -> code`` compiled for 1-D
+    C-contiguous float64 arrays (callable from compiled code)."""
     import numba
 
     kernel(True)
-    disp = numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
+    return numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
+
+
+def packed_kernel() -> Callable:
+    """:func:`packed_kernel_dispatcher`'s compiled function's entry point (no type matching)."""
+    disp = packed_kernel_dispatcher()
     return disp.overloads[disp.signatures[0]].entry_point

@@ -20,9 +20,12 @@ import numpy as np
 
 from ..exceptions import InputError
 
-#: Floats per obstacle point in the compiled kernel's table: ``[kind, p0x, p0y, p1x, p1y, radius,
-#: vx, vy]``.
-PRIMITIVE_WIDTH = 8
+#: Columns of the obstacle table the compiled kernels read, one row per obstacle point at t = 0
+#: (:meth:`Obstacle.primitives`), and their indices.
+OBSTACLE_COLUMNS = ("kind", "p0x", "p0y", "p1x", "p1y", "radius", "vx", "vy")
+KIND, P0X, P0Y, P1X, P1Y, RADIUS, VX, VY = range(len(OBSTACLE_COLUMNS))
+#: The ``kind`` codes of the table: one per obstacle class (its ``KERNEL_KIND``).
+LINE, SEGMENT, DISK, POINT = range(4)
 
 
 def _vec2(value, key: str) -> np.ndarray:
@@ -102,7 +105,7 @@ class Obstacle:
         return B, dist, u
 
     def primitives(self) -> np.ndarray:
-        """Rows ``[kind, p0x, p0y, p1x, p1y, radius, vx, vy]`` (m, 8) of the compiled kernel, at t = 0."""
+        """Rows of the obstacle table (m, :data:`OBSTACLE_COLUMNS`) of the compiled kernels, at t = 0."""
         raise NotImplementedError
 
     def closest_on_segments(
@@ -132,7 +135,7 @@ class LineObstacle(Obstacle):
     side (normalised here), the half-plane ``normal . (x - point) < 0`` is forbidden."""
 
     KIND = "line"
-    KERNEL_KIND = 0
+    KERNEL_KIND = LINE
 
     def __init__(self, name: str, point, normal, velocity=(0.0, 0.0)):
         super().__init__(name, velocity)
@@ -160,7 +163,7 @@ class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
 
     KIND = "segment"
-    KERNEL_KIND = 1
+    KERNEL_KIND = SEGMENT
 
     def __init__(self, name: str, a, b, velocity=(0.0, 0.0)):
         super().__init__(name, velocity)
@@ -200,7 +203,7 @@ class DiskObstacle(Obstacle):
     """A disk of centre ``center`` and radius ``radius`` in [m]."""
 
     KIND = "disk"
-    KERNEL_KIND = 2
+    KERNEL_KIND = DISK
 
     def __init__(self, name: str, center, radius: float, velocity=(0.0, 0.0)):
         super().__init__(name, velocity)
@@ -224,7 +227,7 @@ class PointCloudObstacle(Obstacle):
     """A set of points ``B_1..B_m`` in [m] (paper section 2.2: obstacles as key points)."""
 
     KIND = "points"
-    KERNEL_KIND = 3
+    KERNEL_KIND = POINT
 
     def __init__(self, name: str, points, velocity=(0.0, 0.0)):
         super().__init__(name, velocity)
@@ -251,10 +254,10 @@ class PointCloudObstacle(Obstacle):
 
     def primitives(self) -> np.ndarray:
         m = self.n_points
-        rows = np.zeros((m, PRIMITIVE_WIDTH))
-        rows[:, 0] = self.KERNEL_KIND
-        rows[:, 1:3] = self.points
-        rows[:, 6:8] = self.velocity
+        rows = np.zeros((m, len(OBSTACLE_COLUMNS)))
+        rows[:, KIND] = self.KERNEL_KIND
+        rows[:, P0X : P0Y + 1] = self.points
+        rows[:, VX : VY + 1] = self.velocity
         return rows
 
 

@@ -21,8 +21,14 @@ status              the backend's status on the tick's QP
                     (:data:`qpbench.statuses.TICK_STATUSES`)
 fallback            the soft fallback's answer was applied
 zero_velocity       zero velocity was commanded (fallback failed too)
-solve_time_s        wall time of the tick's solve call(s) [s]
-solver_time_s       the solver's own reported time for them [s] (NaN: none)
+build_time_s        time to build the tick's QP [s]
+solve_time_s        time of the tick's solve [s]: the call with the tick's QP until its
+                    answer (x, duals, status) is in the caller's memory
+fallback_build_time_s, fallback_solve_time_s
+                    the soft fallback's build and solve [s] (NaN: none ran)
+tick_time_s         the whole tick [s]: build, solve, fallback, sensing, plant, log row
+solver_time_s       the solver's own reported time for the solve and the fallback's [s]
+                    (NaN: none); all times on one clock (docs/methodology.md)
 y_0, y_1            equality duals of the applied solution (paper formulation)
 z_max               largest inequality (obstacle row) dual
 kp_hat, kd_hat      interaction coefficients the tick's QP used
@@ -52,8 +58,19 @@ FALLBACK = "fallback"
 ZERO_VELOCITY = "zero_velocity"
 SOLVE_TIME = "solve_time_s"
 SOLVER_TIME = "solver_time_s"
+BUILD_TIME = "build_time_s"
+FALLBACK_BUILD_TIME = "fallback_build_time_s"
+FALLBACK_SOLVE_TIME = "fallback_solve_time_s"
+TICK_TIME = "tick_time_s"
 #: Columns that depend on the machine's timing, not on the trajectory.
-TIME_COLUMNS = (SOLVE_TIME, SOLVER_TIME)
+TIME_COLUMNS = (
+    SOLVE_TIME,
+    SOLVER_TIME,
+    BUILD_TIME,
+    FALLBACK_BUILD_TIME,
+    FALLBACK_SOLVE_TIME,
+    TICK_TIME,
+)
 Y_0, Y_1 = "y_0", "y_1"
 Z_MAX = "z_max"
 KP_HAT, KD_HAT = "kp_hat", "kd_hat"
@@ -73,7 +90,12 @@ _TAIL = (
     Z_MAX,
     KP_HAT,
     KD_HAT,
-    SOLVER_TIME,  # written by the loop, not by the tick kernel
+    # written by the engines, not by the tick kernel
+    SOLVER_TIME,
+    BUILD_TIME,
+    FALLBACK_BUILD_TIME,
+    FALLBACK_SOLVE_TIME,
+    TICK_TIME,
 )
 _MIDDLE = (EE_X, EE_Y, XD_X, XD_Y, TRACKING_ERROR, FORCE, FORCE_ERROR)
 
@@ -120,23 +142,25 @@ def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
     )
 
 
-def to_frame(data: np.ndarray, columns: list[str], statuses: list[str]) -> pd.DataFrame:
-    """The first ``len(statuses)`` rows of ``data`` as a frame, ``status`` a categorical of
-    :data:`~qpbench.statuses.TICK_STATUSES` (another status counts as ``error``)."""
-    done = len(statuses)
-    codes = {s: i for i, s in enumerate(TICK_STATUSES)}
-    status_codes = np.fromiter(
-        (codes.get(s, codes["error"]) for s in statuses), dtype=np.int8, count=done
-    )
+def to_frame(data: np.ndarray, columns: list[str], status_codes: np.ndarray) -> pd.DataFrame:
+    """The first ``len(status_codes)`` rows of ``data`` as a frame, ``status`` a categorical of
+    :data:`~qpbench.statuses.TICK_STATUSES` from its codes (indices into it)."""
+    done = len(status_codes)
     frame = pd.DataFrame(data[:done], columns=columns)
     for flag in (FALLBACK, ZERO_VELOCITY):
         frame[flag] = frame[flag].astype(bool)
     frame.insert(
         columns.index(FALLBACK),
         STATUS,
-        pd.Categorical.from_codes(status_codes, categories=list(TICK_STATUSES)),
+        pd.Categorical.from_codes(
+            np.asarray(status_codes, dtype=np.int8), categories=list(TICK_STATUSES)
+        ),
     )
     return frame
+
+
+#: A tick status's code in a log (:func:`to_frame`); another status counts as ``error``.
+STATUS_CODES = {s: i for i, s in enumerate(TICK_STATUSES)}
 
 
 def add_body_columns(frame: pd.DataFrame, body, obstacle_names: list[str]) -> None:

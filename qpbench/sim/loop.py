@@ -15,13 +15,20 @@ One tick at ``t_k = k dt``:
 5. plant: ``theta_{k+1} = theta_k + dt v_k`` (steps 1 and 5 and the log row:
    :mod:`qpbench.sim.tick_kernel`).
 
+Two engines run these ticks on the same model of the run (:mod:`qpbench.engine.model`) and the
+same compiled build, step and adaptive law, so they give the same trajectory: ``compiled``
+(:mod:`qpbench.engine.compiled`: the whole run in one compiled function, the solver called
+through its C API, for the backends that have one) and ``python`` (every backend, called from
+this module's loop). Both time each tick on one clock (``CLOCK_MONOTONIC``; what each time
+includes: :mod:`qpbench.sim.log`, docs/methodology.md).
+
 The body's clearance (``d_body_*``) is computed after the loop for every tick at once.
 """
 
 from __future__ import annotations
 
+import gc
 import logging
-import math
 import time
 from collections import namedtuple
 from dataclasses import dataclass, field
@@ -31,14 +38,24 @@ import numpy as np
 import pandas as pd
 
 from ..backends import Backend, backend_class, get_backend
+from ..backends.base import timed_call
+from ..control.adaptive import compiled_law
 from ..control.controller import check_formulation
+from ..engine.model import run_model
 from ..exceptions import ParamError, positive_count, positive_seconds
+from ..native import entry_point
 from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
 from . import log as tick_log
+from .log import STATUS_CODES
 from .scenario import Scenario, load_scenario
 from .summary import jsonable, summarize
-from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, post_constants, warm_post_kernel
+from .tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel, log_columns
+
+#: The engines a closed loop runs on (``compiled``: where the backend has a compiled solve).
+ENGINES = ("compiled", "python")
+#: Ticks of the discarded warm-up run before every timed run (one-off costs out of the clock).
+WARMUP_TICKS = 3
 
 log = logging.getLogger(__name__)
 #: One line per solve, shown by ``qpbench -vv`` (the CLI sets its level).
@@ -110,6 +127,8 @@ def simulate(
     profile: str = "default",
     deadline: float | None = None,
     wall_budget_s: float | None = None,
+    engine: str = "compiled",
+    warmup_ticks: int = WARMUP_TICKS,
 ) -> SimResult:
     """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
 
@@ -118,8 +137,15 @@ def simulate(
     override the scenario's. ``every`` keeps every K-th tick's QP (default 1 with ``dump``, a
     folder the kept QPs are written to as a problem set). ``deadline`` [s]: a later answer is
     dropped (``time_limit``). ``wall_budget_s`` [s]: checked between ticks; once spent the run
-    stops with the ticks done (``stopped_early``).
+    stops with the ticks done (``stopped_early``). ``engine``: ``compiled`` where the backend
+    has a compiled solve (else, and with ``python``, the Python loop; the summary's ``engine``
+    says which ran). ``warmup_ticks``: a discarded run of that many ticks first, with a backend
+    of its own (with an instance: the same, reset after), so one-off costs stay off the clock.
     """
+    if engine not in ENGINES:
+        raise ParamError(
+            f"unknown engine '{engine}' (choose from {', '.join(ENGINES)})", key="engine"
+        )
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     check_formulation(formulation)
@@ -133,10 +159,14 @@ def simulate(
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     keep_every = every if every is not None else (1 if dump is not None else None)
+    if warmup_ticks:
+        warm = resolve_backend(backend, scenario, profile)
+        short = scenario.with_overrides(duration=warmup_ticks * scenario.dt)
+        _Run(short, warm, formulation, None, deadline, engine).run(False, None)
     be = resolve_backend(backend, scenario, profile)
-    run = _Run(scenario, be, formulation, keep_every, deadline)
-    run.warm()
-    run.loop(progress, wall_budget_s)
+    be.reset()
+    run = _Run(scenario, be, formulation, keep_every, deadline, engine)
+    run.run(progress, wall_budget_s)
     result = run.result(wall_budget_s)
     if dump is not None:
         _write_dump(dump, result.records, scenario, be.name, formulation, keep_every)
@@ -167,7 +197,10 @@ def _write_dump(folder, records, scenario: Scenario, backend_name, formulation, 
 
 
 class _Run:
-    """One closed-loop run: set up, warm the kernels, loop over the ticks, tabulate."""
+    """One closed-loop run: the model of the run, the log, the loop on one engine, the result."""
+
+    #: Ticks per call of the engine between progress updates.
+    CHUNK = 500
 
     def __init__(
         self,
@@ -176,181 +209,204 @@ class _Run:
         formulation: str,
         keep_every: int | None,
         deadline: float | None,
+        engine: str,
     ):
+        from ..engine import compiled
+
         self.scenario, self.be = scenario, backend
         self.formulation, self.keep_every = formulation, keep_every
         self.deadline = deadline
-        # a late answer is dropped only past a deadline
-        self.limit = math.inf if deadline is None else float(deadline)
-        self.dt = dt = scenario.dt
-        self.ticks = int(round(scenario.duration / dt))
+        self.soft = formulation == "soft"
         self.online = bool(getattr(backend, "online", False))
-        backend.reset()
         self.ctrl = ctrl = scenario.make_controller()
-        self.surface = scenario.make_surface()
-        self.adaptive = scenario.make_adaptive()
-        self.soft_primary = formulation == "soft"
-        self.cols, self.cidx, self.ci, self.cf = post_constants(ctrl, self.surface, dt)
-        self.post = get_post_kernel()
-        self.data = np.full((self.ticks, len(self.cols)), np.nan)
-        self.theta = scenario.theta0.astype(float)
-        self.sensed = np.zeros(4)  # end-effector position [m] and velocity [m/s] of the tick
-        # zero velocity (never written; writable so numba sees one array type)
-        self.zeros = np.zeros(ctrl.n)
-        self.none = np.zeros(0)
+        self.model = model = run_model(scenario, ctrl, self.soft, self.online, deadline)
+        self.ticks = model.ticks
+        self.names, self.cols = log_columns(ctrl)
+        self.data = np.full((self.ticks, len(self.names)), np.nan)
+        self.codes = np.zeros(self.ticks, dtype=np.int8)
+        self.state = compiled.loop_state(model, ctrl.n_rows)
         self.records: list = []
-        self.statuses: list[str] = []
-        self.n_dropped = self.n_raised = self.n_fallback_errors = 0
+        self.n_raised = 0
         self.first_error = self.first_error_t = None
+        why = "python engine asked for" if engine == "python" else None
+        if why is None and keep_every is not None:
+            why = "the tick QPs are kept (every, dump)"
+        if why is None:
+            why = compiled.unsupported_reason(backend, formulation, ctrl.closest)
+        self.engine, self.engine_note = ("python", why) if why else ("compiled", None)
+        self.wall = 0.0
+        self._post_kernel = None
 
-    def warm(self) -> None:
-        """Compile (or load) the loop's own kernels before the clock starts; the backend's are
-        the caller's (:func:`qpbench.jit.warmup`)."""
-        ctrl = self.ctrl
-        arrays = ctrl.build_arrays(self.theta, 0.0, ctrl.kp, ctrl.kd, self.soft_primary)
-        warm_post_kernel(ctrl, self.surface, self.dt, self.theta, arrays)
-
-    def loop(self, progress: bool, wall_budget_s: float | None) -> None:
-        """The ticks (module docstring, steps 1-5), until ``duration`` or the wall-time budget."""
-        ctrl, be, dt, ticks, limit = self.ctrl, self.be, self.dt, self.ticks, self.limit
-        data, sensed, adaptive = self.data, self.sensed, self.adaptive
-        theta, records, statuses = self.theta, self.records, self.statuses
-        c_force = self.cidx[tick_log.FORCE]
-        online, soft_primary, keep_every = self.online, self.soft_primary, self.keep_every
-        build, make_problem = ctrl.build_arrays, ctrl.make_problem
-        solve, perf, surface = be.solve, time.perf_counter, self.surface
-        noisy, fd, f64 = surface.noise_std > 0.0, ctrl.task.desired_force, np.dtype(np.float64)
-        kp, kd, v, c_own = ctrl.kp, ctrl.kd, np.zeros(ctrl.n), self.cidx[tick_log.SOLVER_TIME]
-        run_name = f"{self.scenario.name} {be.name}"
-        verbose = solve_log.isEnabledFor(logging.DEBUG)  # checked once: the tick loop stays lean
+    def run(self, progress: bool, wall_budget_s: float | None) -> None:
+        """The ticks, in chunks between progress updates, until ``duration`` or the budget."""
+        ticks = self.ticks
         bar = None
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=ticks, unit="tick", desc=run_name, mininterval=0.5)
-        start = perf()
-        stop_at = None if wall_budget_s is None else start + float(wall_budget_s)
-        for k in range(ticks):
-            if stop_at is not None and k and perf() >= stop_at:
-                break  # budget spent: the log keeps the ticks done
+            name = f"{self.scenario.name} {self.be.name}"
+            bar = tqdm(total=ticks, unit="tick", desc=name, mininterval=0.5)
+        chunk = self._compiled() if self.engine == "compiled" else self._python
+        enabled = gc.isenabled()
+        gc.disable()  # one clock, no collector's pauses inside it (the compiled engine has none)
+        try:
+            start = time.perf_counter()
+            stop_at = 0.0 if wall_budget_s is None else start + float(wall_budget_s)
+            k = 0
+            while k < ticks:
+                end = min(k + self.CHUNK, ticks)
+                done = chunk(k, end, stop_at)
+                if bar is not None:
+                    bar.update(done - k)
+                k = done
+                if done < end:
+                    break  # budget spent: the log keeps the ticks done
+            self.wall = time.perf_counter() - start
+        finally:
+            if enabled:
+                gc.enable()
+            if bar is not None:
+                bar.close()
+        self.done = k
+
+    def _compiled(self):
+        """The compiled engine's chunk function, with the backend's state (freed at the end)."""
+        from ..engine.compiled import SOLVERS, engine_for
+
+        fns = SOLVERS[self.be.name].functions()
+        engine = engine_for(self.be.name)
+        st = fns.make_state(self.be, self.model, self.ctrl.n_rows)
+        self._close = (fns.close_state, st)
+        self._error_text = fns.error_text
+        args = (self.model, self.cols, st, self.state, self.data, self.codes)
+
+        def chunk(k0: int, k1: int, stop_at: float) -> int:
+            return engine(*args, k0, k1, stop_at)
+
+        return chunk
+
+    def _python(self, k0: int, k1: int, stop_at: float) -> int:
+        """Ticks ``k0 .. k1-1`` on the Python engine (:mod:`qpbench.engine.compiled` does the
+        same in compiled code); returns the next tick (earlier when ``stop_at`` passed)."""
+        model, cols, be, ls = self.model, self.cols, self.be, self.state
+        data, codes, records = self.data, self.codes, self.records
+        theta, gains, noise = ls.theta, ls.gains, model.noise
+        build, make_problem = self.ctrl.build_arrays, self.ctrl.make_problem
+        law, adaptive, soft, keep = compiled_law(), model.adaptive, self.soft, self.keep_every
+        perf, dt, limit = time.perf_counter, model.dt, model.deadline
+        online, fd, error = self.online, model.controller.desired_force, STATUS_CODES["error"]
+        for k in range(k0, k1):
+            tick0 = perf()
+            if stop_at and k and tick0 >= stop_at:
+                return k
             t = k * dt
-            arrays = build(theta, t, kp, kd, soft_primary)
-            problem = make_problem(arrays, soft_primary)
-            if keep_every is not None and k % keep_every == 0:
+            kp, kd = float(gains[0]), float(gains[1])
+            arrays = build(theta, t, kp, kd, soft)
+            problem = make_problem(arrays, soft)
+            if keep is not None and k % keep == 0:
                 records.append((k, t, problem))
-            t0 = perf()
+            t1 = perf()
             try:
-                sol = solve(problem, v)
+                sol, ns = timed_call(be, problem, ls.v)
+                solve_s = ns * 1e-9
             except Exception as exc:  # noqa: BLE001 - a backend's exception is the tick's status
+                solve_s = perf() - t1
                 sol = _Raised(describe_exception(exc))
-            solve_s = perf() - t0
-            status, x = sol.status, sol.x
-            data[k, c_own] = getattr(sol, "solver_time_s", None)  # its own time [s]; None: NaN
-            force = -1.0
-            # the fast path: an answer classify() would call optimal (finite x, in time), or an online one
+            row = data[k]
+            row[cols.build_time], row[cols.solve_time] = t1 - tick0, solve_s
+            row[cols.solver_time] = getattr(sol, "solver_time_s", None)  # its own [s]; None: NaN
+            status, x, force = sol.status, sol.x, -1.0
+            # an answer classify() would call optimal (finite x, in time), or an online one
             if x is not None and (online or status == "optimal") and solve_s <= limit:
-                if type(x) is not np.ndarray or x.dtype != f64:
+                if type(x) is not np.ndarray or x.dtype != np.float64:
                     x = np.asarray(x, dtype=np.float64)
                 # -1.0 when x is not finite: nothing logged, the plant not moved
-                force = self._post(k, t, arrays, x, sol.y, sol.z, APPLIED, kp, kd, solve_s)
+                force = self._post(k, t, arrays, x, sol.y, sol.z, APPLIED, kp, kd)
                 if force >= 0.0:
-                    v = x
+                    ls.v[:] = x
             if force < 0.0:
-                status, v, force = self._without_answer(k, t, sol, solve_s, t0, arrays, kp, kd, v)
-            statuses.append(status)
-            if verbose:
-                solve_log.debug(
-                    "%s tick %d (t = %.3f s): %s in %.1f µs", run_name, k, t, status, solve_s * 1e6
-                )
-            if noisy:
-                force += surface.noise()
-                data[k, c_force], data[k, c_force + 1] = force, force - fd  # force, force_error
-            if adaptive is not None:
-                xd = arrays.xd
-                kp, kd = adaptive.update(dt, sensed, xd, sensed[2:], xd[2:], force)
-            if bar is not None and (k + 1) % 500 == 0:
-                bar.update(500)
-        self.wall = perf() - start
-        if bar is not None:  # to the ticks simulated
-            bar.update(bar.total - bar.n)
-            bar.close()
+                status, force = self._without_answer(k, t, sol, solve_s, arrays, kp, kd)
+            codes[k] = STATUS_CODES.get(status, error)
+            force += noise[k]
+            row[cols.force], row[cols.force + 1] = force, force - fd
+            if adaptive:
+                law(model.law, dt, ls.sensed, arrays.xd, force, gains)
+            row[cols.tick_time] = perf() - tick0
+        return k1
 
-    def _without_answer(self, k, t, sol, solve_s, t0, arrays, kp, kd, v):
+    def _without_answer(self, k, t, sol, solve_s, arrays, kp, kd):
         """A tick whose own answer is not applied: classify it (:func:`~qpbench.statuses.classify`),
         then apply the soft formulation's answer (same backend), else zero velocity.
 
-        Returns the tick's status, the velocity applied [rad/s] and the noise-free force [N].
+        Returns the tick's status and the noise-free force [N]; leaves the applied velocity
+        [rad/s] in the loop's state.
         """
-        be, limit, none, zeros = self.be, self.limit, self.none, self.zeros
+        be, limit, ls, cols = self.be, self.model.deadline, self.state, self.cols
         if type(sol) is _Raised:
             status, error = "error", sol.error
             self.n_raised += 1
         else:
             status, error = classify(sol, solve_s, limit)
             if status == "time_limit" and solve_s > limit:
-                self.n_dropped += 1  # arrived after the deadline: dropped
+                ls.counts[0] += 1  # arrived after the deadline: dropped
         if status == "error" and error and self.first_error is None:
             self.first_error, self.first_error_t = str(error), t
         if status in FAILURE_STATUSES and status != "time_limit":
             _reset(be)  # its state can no longer be trusted
-        mode, x, z = ZERO, zeros, none
-        if not self.online and not self.soft_primary:
-            ctrl = self.ctrl
-            t1 = time.perf_counter()
+        mode, x, z = ZERO, ls.zeros, None
+        if not self.online and not self.soft:
+            ctrl, row, perf = self.ctrl, self.data[k], time.perf_counter
+            t1 = perf()
+            problem = ctrl.make_problem(ctrl.build_arrays(ls.theta, t, kp, kd, True), True)
+            t2 = perf()
             try:
-                fb = be.solve(
-                    ctrl.make_problem(ctrl.build_arrays(self.theta, t, kp, kd, True), True), v
-                )
-                fb_status = classify(fb, time.perf_counter() - t1, limit)[0]
+                fb, ns = timed_call(be, problem, ls.v)
+                fb_s = ns * 1e-9
+                fb_status = classify(fb, fb_s, limit)[0]
             except Exception as exc:  # noqa: BLE001 - a failed fallback: zero velocity
+                fb_s = perf() - t2
                 fb, fb_status = _Raised(describe_exception(exc)), "error"
-                self.n_fallback_errors += 1
+                ls.counts[1] += 1
                 if self.first_error is None:
                     self.first_error, self.first_error_t = f"fallback: {fb.error}", t
                 _reset(be)
+            row[cols.fallback_build_time], row[cols.fallback_solve_time] = t2 - t1, fb_s
             if (own := getattr(fb, "solver_time_s", None)) is not None:
-                c = self.cidx[tick_log.SOLVER_TIME]  # the fallback's own time adds to the tick's
-                self.data[k, c] = np.nansum([self.data[k, c], own])
+                c = cols.solver_time  # the fallback's own time adds to the tick's
+                row[c] = np.nansum([row[c], own])
             if fb_status == "optimal":
                 mode, x = FALLBACK, np.asarray(fb.x, dtype=np.float64)
-                z = none if fb.z is None else fb.z
-        force = self._post(k, t, arrays, x, None, z, mode, kp, kd, time.perf_counter() - t0)
+                z = fb.z
+        force = self._post(k, t, arrays, x, None, z, mode, kp, kd)
         if force < 0.0:  # the fallback's answer was not finite either
-            mode, x = ZERO, zeros
-            force = self._post(k, t, arrays, x, None, None, mode, kp, kd, time.perf_counter() - t0)
-        return status, (x if mode == FALLBACK else zeros.copy()), force
+            mode, x = ZERO, ls.zeros
+            force = self._post(k, t, arrays, x, None, None, mode, kp, kd)
+        ls.v[:] = x if mode == FALLBACK else 0.0
+        return status, force
 
-    def _post(self, k, t, arrays, x, y, z, mode, kp, kd, solve_s) -> float:
+    def _post(self, k, t, arrays, x, y, z, mode, kp, kd) -> float:
         """The tick kernel (:mod:`qpbench.sim.tick_kernel`) on tick ``k`` with velocity ``x``
-        [rad/s], duals ``y, z`` (``None``: none) and the tick's solve time ``solve_s`` [s]."""
-        a, none = arrays, self.none
-        return self.post(
-            self.theta,
-            x,
-            a.ee,
-            self.sensed,
-            a.J,
-            a.b0,
-            a.dist,
-            a.xd,
-            none if y is None else y,
-            none if z is None else z,
-            self.data,
-            k,
-            self.ci,
-            self.cf,
-            t,
-            mode,
-            kp,
-            kd,
-            solve_s,
-        )  # arguments spelled out: no tuples built on the per-tick path
+        [rad/s] and duals ``y, z`` (``None``: none)."""
+        a, none, ls, f64 = arrays, self.state.zeros[:0], self.state, np.float64
+        y = none if y is None else np.ascontiguousarray(y, dtype=f64)
+        z = none if z is None else np.ascontiguousarray(z, dtype=f64)
+        x = np.ascontiguousarray(x, dtype=f64)
+        geometry = (a.ee, ls.sensed, a.J, a.b0, a.dist, a.xd)
+        args = (self.model, self.cols, ls.theta, x, *geometry, y, z, self.data, k, t, mode, kp, kd)
+        if self._post_kernel is None:  # one type signature a run: no type dispatch per tick
+            self._post_kernel = entry_point(get_post_kernel(), *args)
+        return self._post_kernel(*args)
 
     def result(self, wall_budget_s: float | None) -> SimResult:
-        """The tick log, the summary and the kept records of the ticks simulated."""
-        scenario, deadline, ctrl = self.scenario, self.deadline, self.ctrl
-        done = len(self.statuses)
-        frame = tick_log.to_frame(self.data, self.cols, self.statuses)
+        """The tick log, the summary and the kept records of the ticks simulated (the compiled
+        engine's state freed first)."""
+        close = getattr(self, "_close", None)
+        if close is not None:
+            close[0](close[1])
+            self._close = None
+        scenario, deadline, ctrl, ls = self.scenario, self.deadline, self.ctrl, self.state
+        done = self.done
+        frame = tick_log.to_frame(self.data, self.names, self.codes[:done])
         body = body_clearance(
             ctrl.arm,
             frame[tick_log.theta_columns(ctrl.n)].to_numpy(),
@@ -360,15 +416,21 @@ class _Run:
             ctrl.exempt,
         )
         tick_log.add_body_columns(frame, body, [o.name for o in ctrl.obstacles])
+        if self.engine == "compiled" and ls.counts[2] >= 0:  # the engine's first error tick
+            k = int(ls.counts[2])
+            self.first_error = self._error_text(self.be.name, ls.counts[3])
+            self.first_error_t = k * self.model.dt
         run_info = dict(
             deadline_s=deadline if deadline is None else float(deadline),
-            deadline_dropped=None if deadline is None else self.n_dropped,
+            deadline_dropped=None if deadline is None else int(ls.counts[0]),
             raised_ticks=self.n_raised,
-            fallback_errors=self.n_fallback_errors,
+            fallback_errors=int(ls.counts[1]),
             first_error=self.first_error,
             first_error_t=self.first_error_t,
             wall_budget_s=wall_budget_s,
             stopped_early=done < self.ticks,
+            engine=self.engine,
+            engine_note=self.engine_note,
         )
         summary = summarize(
             frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info=run_info
