@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="output folder: closed_loop.csv and logs/<scenario>__<backend>.parquet",
     )
     add(parser, "--duration", help="simulated time per run in [s] (default: each scenario's)")
-    add(parser, "--formulation", "--set", "--deadline")
+    add(parser, "--formulation", "--set", "--deadline", "--engine")
     add(
         parser,
         "--jobs",
@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     with run_bar(args, total, "closed loop", lambda row: log_row(log, row), leave=False) as on_row:
         settings = pick(
             args,
-            "duration formulation force resume jobs isolate run_time_limit deadline run_budget",
+            "duration formulation force resume jobs isolate run_time_limit deadline run_budget "
+            "engine",
         )
         outcome = run_closed_loop(
             scenarios, backends, args.out, on_row=on_row, overrides=overrides, **settings

@@ -41,6 +41,13 @@ SHARED: dict[str, dict] = {
         "the machine's speed (default: none, every answer is applied; deadline_misses counts "
         "ticks slower than dt)",
     },
+    "--engine": {
+        "default": "compiled",
+        "choices": ("compiled", "python"),
+        "help": "compiled: each run in one compiled function, the solver called as a C controller "
+        "calls it, for the backends that have a compiled solve (the others, and python: the "
+        "Python loop; the row's engine column says which ran) (default: compiled)",
+    },
     "--isolate": {"default": "auto", "choices": ("auto", "always", "never")},
     "--jobs": {"type": int, "metavar": "N"},
     "--run-budget": {"type": float, "metavar": "S"},

@@ -86,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"closed-loop runs at once, each in a worker process of its own (default: "
         f"{LOOP_JOBS}, at most one per core; the bench's timed solves stay one at a time)",
     )
-    add(parser, "--memory-budget")
+    add(parser, "--memory-budget", "--engine")
     add_force_resume(
         parser,
         force="replace bench/, logs/, plots/, closed_loop.csv or report.md in --out even "
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         scenarios=[],
         backends=[],
         memory_budget=resolve_budget(args.memory_budget),
-        **pick(args, "duration bench_every repeat jobs force resume"),
+        **pick(args, "duration bench_every repeat jobs force resume engine"),
         on_row=lambda row: (
             log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None
         ),

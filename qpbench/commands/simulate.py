@@ -34,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="backend name (see `qpbench backends`), e.g. qpsolvers:daqp, clarabel, rnn",
     )
-    add(parser, "--formulation", "--duration", "--set", "--profile", "--deadline")
+    add(parser, "--formulation", "--duration", "--set", "--profile", "--deadline", "--engine")
     parser.add_argument(
         "--dt", type=float, metavar="S", help="control period in [s] (default: the scenario's)"
     )
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log, [backend])
-    settings = pick(args, "formulation duration dt every dump profile deadline")
+    settings = pick(args, "formulation duration dt every dump profile deadline engine")
     result = simulate(scenario, backend, progress=progress, **settings)
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)

@@ -25,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sweep file: base scenario, distributions, seed, samples",
     )
     add(parser, "--backends", required=True)
+    add(parser, "--engine")
     add(
         parser,
         "--out",
@@ -106,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
                 pool.name,
             )
         kw = {"force": args.force, "resume": args.resume, "plugins": plugins, "on_row": on_row}
+        kw["engine"] = args.engine
         outcome = run_sweep(spec, backends, args.out, pool, **kw)
     if not args.quiet:
         print(summary_table(outcome.rows, backends))

@@ -31,8 +31,6 @@ log = logging.getLogger("qpbench.harness")
 
 CSV_NAME = "closed_loop.csv"
 LOG_DIR = "logs"
-#: Ticks of the discarded warm-up run before each timed run (one-off costs out of the clock).
-WARMUP_TICKS = 3
 #: Statuses of a run that produced no result.
 FAILED_RUN_STATUSES = ("error", "crashed", "time_limit")
 #: Least deadline of an isolated run [s].
@@ -45,6 +43,7 @@ COLUMNS = (
     "scenario",
     "backend",
     "formulation",
+    "engine",
     "duration_s",
     "simulated_s",
     "status",
@@ -70,6 +69,9 @@ COLUMNS = (
     "solve_time_median_s",
     "solve_time_p99_s",
     "solve_time_max_s",
+    "fallback_solve_time_p99_s",
+    "tick_time_median_s",
+    "tick_time_p99_s",
     "over_dt_share",
     "solver_time_p99_s",
     "real_time_factor",
@@ -100,11 +102,12 @@ class LoopTask:
     plugins: tuple = ()
     scenario_text: str | None = None
     bands: tuple | None = None
+    engine: str = "compiled"
 
 
 def run_row(task: LoopTask) -> dict:
-    """The row of one run: a warm-up of :data:`WARMUP_TICKS` ticks, the timed run, its figures,
-    its logs written when ``task.out`` is set; a run that raises is an ``error`` row."""
+    """The row of one run (:func:`qpbench.sim.loop.simulate`, its warm-up included), its
+    figures, its logs written when ``task.out`` is set; a run that raises is an ``error`` row."""
     from ..backends import load_plugins
     from ..jit import warmup
     from ..sim.figure_log import figure_log_path, write_figure_log
@@ -119,10 +122,14 @@ def run_row(task: LoopTask) -> dict:
         else:
             scenario = parse_scenario(task.scenario_text, path=task.scenario)
         warmup([task.backend])
-        terms = dict(formulation=task.formulation, deadline=task.deadline)
-        simulate(scenario, task.backend, duration=WARMUP_TICKS * scenario.dt, **terms)
         result = simulate(
-            scenario, task.backend, duration=task.duration, wall_budget_s=task.run_budget, **terms
+            scenario,
+            task.backend,
+            formulation=task.formulation,
+            deadline=task.deadline,
+            duration=task.duration,
+            wall_budget_s=task.run_budget,
+            engine=task.engine,
         )
         summary = dict(result.summary)
         if task.bands is not None:
@@ -243,13 +250,15 @@ def run_closed_loop(
     run_budget: float | None = None,
     budgets: dict[str, float] | None = None,
     overrides: dict | None = None,
+    engine: str = "compiled",
 ) -> ClosedLoopOutcome:
     """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker:
     ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
     ``resume`` keeps the ``ok`` rows made under the same terms and the rows of pairs not asked;
     ``skip``: backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's
     deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's
-    in ``budgets``); ``on_row`` is called with each row once written."""
+    in ``budgets``); ``engine``: :data:`qpbench.sim.loop.ENGINES`; ``on_row`` is called with
+    each row once written."""
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
@@ -279,7 +288,18 @@ def run_closed_loop(
     items = [
         (
             (s, b),
-            LoopTask(s, b, formulation, duration, deadline, budget(b), pairs, str(out), plugins),
+            LoopTask(
+                s,
+                b,
+                formulation,
+                duration,
+                deadline,
+                budget(b),
+                pairs,
+                str(out),
+                plugins,
+                engine=engine,
+            ),
             run_deadline(s, duration, run_time_limit) if wants_worker(isolate, b) else None,
         )
         for s, b in todo

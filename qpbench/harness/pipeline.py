@@ -118,6 +118,7 @@ class RunConfig:
     duration: float | None = None
     bench_every: int = BENCH_EVERY
     run_budget: float | None = RUN_BUDGET_S
+    engine: str = "compiled"
     repeat: int = REPEAT
     jobs: int = 1
     memory_budget: int | None = None
@@ -347,6 +348,7 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             on_row=on_row,
             run_budget=config.run_budget,
             budgets=budgets or None,
+            engine=config.engine,
         )
     return outcome.table, outcome.not_ok
 

@@ -8,7 +8,9 @@ figure does not exist); a row of ``closed_loop.csv`` or ``sweep.csv`` is that di
   ``non_optimal_ticks``: any status but ``optimal``; the guarded failures by status.
 - From the loop (``run_info``): ``deadline_s`` [s], ``deadline_dropped``, ``raised_ticks``,
   ``fallback_errors``, ``first_error``, ``first_error_t`` [s], ``wall_budget_s`` [s],
-  ``stopped_early``.
+  ``stopped_early``, ``engine`` (``compiled`` or ``python``) and ``engine_note`` (why the
+  Python engine ran).
+- ``<clock>_median_s``, ``_p99_s``, ``_max_s`` of the tick log's clocks (:data:`CLOCKS`).
 - ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
   ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations beyond
   :data:`VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
@@ -125,6 +127,7 @@ def summarize(
     out.update(limits)
     judged.update(worst)
     out.update(_effort_figures(frame, controller.n, dt, t >= SETTLE_TIME - 1e-12))
+    out.update(_time_figures(frame))
     out.update(
         {
             "wall_time_s": float(wall_time_s),
@@ -322,7 +325,6 @@ def _effort_figures(frame: pd.DataFrame, n: int, dt: float, after: np.ndarray) -
     theta = frame[log.theta_columns(n)].to_numpy()
     v = frame[log.velocity_columns(n)].to_numpy()
     v_sq = frame[log.V_SQ].to_numpy()
-    solve_time = frame[log.SOLVE_TIME]
     return {
         "max_abs_theta": _none(np.max(np.abs(theta))),
         "max_abs_v": _none(np.max(np.abs(v))),
@@ -331,7 +333,28 @@ def _effort_figures(frame: pd.DataFrame, n: int, dt: float, after: np.ndarray) -
         "task_residual_max_after_2s": _amax(frame[log.TASK_RESIDUAL].to_numpy()[after]),
         "kp_hat_final": _none(frame[log.KP_HAT].iloc[-1]),
         "kd_hat_final": _none(frame[log.KD_HAT].iloc[-1]),
-        "solve_time_median_s": _none(solve_time.median()),
-        "solve_time_p99_s": _none(solve_time.quantile(0.99)),
-        "solve_time_max_s": _none(solve_time.max()),
     }
+
+
+#: The tick log's clocks and their figures' prefixes (docs/methodology.md says what each holds).
+CLOCKS = {
+    "build_time": log.BUILD_TIME,
+    "solve_time": log.SOLVE_TIME,
+    "fallback_solve_time": log.FALLBACK_SOLVE_TIME,
+    "tick_time": log.TICK_TIME,
+}
+
+
+def _time_figures(frame: pd.DataFrame) -> dict:
+    """Median, p99 and max [s] of each clock over the ticks it timed (``fallback_solve_time``:
+    the ticks whose fallback ran; ``None`` when none did)."""
+    out = {}
+    for name, column in CLOCKS.items():
+        times = frame[column].dropna() if column in frame else pd.Series(dtype=float)
+        for stat, value in (
+            ("median", times.median()),
+            ("p99", times.quantile(0.99)),
+            ("max", times.max()),
+        ):
+            out[f"{name}_{stat}_s"] = _none(value) if times.size else None
+    return out

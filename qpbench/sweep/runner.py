@@ -222,6 +222,7 @@ def run_sweep(
     resume: bool = False,
     plugins: list[str] | None = None,
     on_row: Callable[[dict], None] | None = None,
+    engine: str = "compiled",
 ) -> SweepOutcome:
     """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``.
 
@@ -242,7 +243,11 @@ def run_sweep(
     items, heads = [], {}
     # the tasks' common terms; each carries its instance's text
     terms = LoopTask(
-        "", "", plugins=tuple(plugins or ()), bands=(spec.force_band, spec.tracking_band)
+        "",
+        "",
+        plugins=tuple(plugins or ()),
+        bands=(spec.force_band, spec.tracking_band),
+        engine=engine,
     )
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
