@@ -4,7 +4,7 @@ Every ``import`` statement of the package counts, at module level or inside
 a function. Layers, bottom to top (a package may import only from its own
 layer or below):
 
-    exceptions statuses profiles published memory atomic cache packed native_output
+    exceptions statuses profiles published memory atomic cache packed native_output engine
     runner
     robot rnn backends metrics formats reference
     control
@@ -46,6 +46,7 @@ LAYERS = [
         "cache",
         "packed",
         "native_output",
+        "engine",
         "qpbench",
     },
     {"runner"},
