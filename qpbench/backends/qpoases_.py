@@ -236,6 +236,7 @@ def close_state(st: State) -> None:
 
 
 def _free_handles(free, table: np.ndarray) -> None:
+    """``free`` each solver of ``table`` still held, marking it freed (0)."""
     for row in table:
         handle, row[_HANDLE] = int(row[_HANDLE]), 0
         if handle:
@@ -263,7 +264,8 @@ def _solve_py(st, buf, warm, sol, info):  # pragma: no cover - compiled
     """Solve the packed problem ``buf`` as :meth:`QpoasesBackend.solve` would: ``[x; y; z]``
     (qpsolvers' signs; NaN when not optimal) into ``sol``, the shim's time [s], ``nWSR`` done,
     the return value and qpOASES' CPU time [s] into ``info``; returns the status's index in
-    :data:`~qpbench.statuses.TICK_STATUSES`. ``warm`` is ignored (as ``warm_start``)."""
+    :data:`~qpbench.statuses.TICK_STATUSES`. ``warm`` is ignored (as ``warm_start``). A shape
+    :func:`make_state` was not given, or a closed state, raises ``ValueError``."""
     n, me, mi = int(buf[0]), int(buf[1]), int(buf[2])
     m = me + mi
     oP, oq, oA, ob = int(buf[3]), int(buf[4]), int(buf[5]), int(buf[6])
