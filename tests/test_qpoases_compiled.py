@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 import subprocess
 import sys
@@ -145,6 +146,17 @@ def test_close_when_a_run_raises_half_way(loop_qps):
     close_state(st)
     with pytest.raises(ValueError, match="closed state"):
         step(st, paper[171].buffer, warm, sol, info, False)
+
+
+def test_a_state_dropped_unclosed_frees_its_solvers():
+    """The solvers go with the state's buffers (a caller that forgot close_state leaks none),
+    marked freed in its table."""
+    st = make_state(4, 2, 7)
+    table = st.table
+    assert (table[:, 4] != 0).all()
+    del st
+    gc.collect()
+    assert (table[:, 4] == 0).all()
 
 
 _CACHE_SCRIPT = textwrap.dedent(
