@@ -124,6 +124,7 @@ def load() -> ctypes.CDLL:
         (lib.qpb_new, [ip, ip, vp, vp, ip], vp),
         (lib.qpb_set_option, [vp, ctypes.c_char_p, ctypes.c_double], ip),
         (lib.qpb_free, [vp], None),
+        (lib.qpb_renew, [vp], None),
         (lib.qpb_message, [ip], ctypes.c_char_p),
         (lib.qpb_solve, [vp], ip),
     ):
@@ -132,8 +133,17 @@ def load() -> ctypes.CDLL:
     return lib
 
 
+def layout(n: int, m: int) -> np.ndarray:
+    """Offsets in the buffer ``d`` of a problem of ``n`` variables and ``m`` constraint rows
+    (:data:`SHIM_SOURCE`'s layout): where ``H, g, A, lb, ub, lbA, ubA, [x, -y]`` and the four
+    scalars start, then ``d``'s length."""
+    return np.cumsum([0, n * n, n, m * n, n, n, m, m, 2 * n + m, 4])
+
+
 class Workspace:
-    """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object)."""
+    """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object,
+    unless :meth:`detach` handed it over); ``d`` and ``iv``, when given, are the caller's
+    (zeros of the lengths :func:`layout` and the shim say, C-contiguous)."""
 
     def __init__(
         self,
@@ -143,14 +153,16 @@ class Workspace:
         options: dict[str, float],
         nwsr: int,
         time_limit: float,
+        d: np.ndarray | None = None,
+        iv: np.ndarray | None = None,
     ) -> None:
         n, me, mi, box = self.key = key
         m = me + mi
-        d = self.d = np.zeros(n * n + n + m * n + 2 * n + 2 * m + n + n + m + 4)
-        self.iv = np.zeros(5, dtype=np.intc)
+        ends = self.ends = layout(n, m)
+        d = self.d = np.zeros(ends[-1]) if d is None else d
+        self.iv = np.zeros(5, dtype=np.intc) if iv is None else iv
         # Views of d in the order of SHIM_SOURCE's layout.
-        ends = np.cumsum([0, n * n, n, m * n, n, n, m, m, 2 * n + m])
-        H, self.g, A, self.lb, self.ub, lbA, ubA, self.xy = (
+        H, self.g, A, self.lb, self.ub, lbA, ubA, self.xy, self.s = (
             d[a:b] for a, b in zip(ends[:-1], ends[1:])
         )
         self.H = H.reshape(n, n)
@@ -169,7 +181,6 @@ class Workspace:
             slice(n, 2 * n if box else n),
         )
         self.sizes = None  # sizes of the arrays last written (their shapes checked then)
-        self.s = d[ends[-1] :]
         self.s[1] = time_limit
         self.iv[0] = nwsr
         self._free = lib.qpb_free
@@ -179,6 +190,12 @@ class Workspace:
         self.handle = handle
         for name, value in options.items():
             lib.qpb_set_option(handle, name.encode(), float(value))
+
+    def detach(self) -> int:
+        """The ``SQProblem``'s address, now the caller's to free (``qpb_free``) before ``d`` and
+        ``iv`` go."""
+        handle, self.handle = self.handle, None
+        return handle
 
     def __del__(self) -> None:
         handle = getattr(self, "handle", None)

@@ -8,15 +8,22 @@
 -> qpOASES' CPU-time limit, ``preset`` (:data:`PRESETS`) and :data:`OPTION_NAMES`.
 ``solver_time_s``: the shim's ``CLOCK_MONOTONIC`` time of the call (qpOASES' own in
 ``extras["qpoases_cputime_s"]``).
+
+The same solver for compiled closed loops: :func:`make_state`, :func:`compiled` (``solve``,
+``reset`` on a packed problem, the shim called by symbol name) and :func:`close_state`.
 """
 
 from __future__ import annotations
 
 import ctypes
+import weakref
+from functools import cache
+from typing import NamedTuple
 
 import numpy as np
 
 from ..exceptions import ParamError
+from ..statuses import TICK_STATUSES
 from . import _qpoases_shim as shim
 from . import register
 from ._common import (
@@ -157,3 +164,168 @@ class QpoasesBackend(Backend):
 
 
 _INF = np.inf
+
+
+# -- the compiled route: the same solver, called from compiled code ----------------------------
+# The solve below mirrors QpoasesBackend on a packed problem (qpbench.packed) for a compiled
+# closed loop: one workspace per shape the loop meets (the ``paper`` and the ``soft`` QP), each
+# made afresh (qpb_renew) whenever the backend would make a new Workspace: on a change of shape
+# and after reset().
+
+
+class State(NamedTuple):
+    """What the compiled :func:`compiled` ``solve`` keeps between calls (made by
+    :func:`make_state`, freed by :func:`close_state`).
+
+    ``table`` (int64, one row a shape): ``n, me, mi, box``, the ``SQProblem``'s address (0:
+    freed), then the offsets in ``data`` of the shim's ``H, g, A, lb, ub, lbA, ubA, [x, -y]``
+    and its four scalars; ``data`` (float64): the shapes' ``d`` buffers end to end; ``iv``
+    (C int, one row a shape): the shim's ``iv``; ``current`` (int64 (1,)): the row last solved,
+    -1 when the next call makes its solver afresh.
+    """
+
+    table: np.ndarray
+    data: np.ndarray
+    iv: np.ndarray
+    current: np.ndarray
+
+
+#: Columns of :attr:`State.table`.
+_N, _ME, _MI, _BOX, _HANDLE, _H, _G, _A, _LB, _UB, _LBA, _UBA, _XY, _S = range(14)
+#: Shim status + 3 -> index in :data:`~qpbench.statuses.TICK_STATUSES`.
+_STATUS_INDEX = tuple(TICK_STATUSES.index(_STATUSES[code]) for code in range(-3, 3))
+
+
+def make_state(n: int, me_max: int, mi_max: int, profile="default", **settings) -> State:
+    """The compiled solve's state for QPs of ``n`` variables and ``mi_max`` inequality rows,
+    with ``me_max`` equality rows (``paper``) or none (``soft``), both with bounds; ``profile``
+    and ``settings`` as :class:`QpoasesBackend` takes them (checked the same way)."""
+    backend = QpoasesBackend(profile, **settings)
+    shapes = sorted({(n, me_max, mi_max, True), (n, 0, mi_max, True)}, reverse=True)
+    ends = [shim.layout(k[0], k[1] + k[2]) for k in shapes]
+    starts = np.cumsum([0] + [e[-1] for e in ends])
+    table = np.zeros((len(shapes), _S + 1), dtype=np.int64)
+    st = State(
+        table,
+        np.zeros(starts[-1]),
+        np.zeros((len(shapes), 5), dtype=np.intc),
+        -np.ones(1, dtype=np.int64),
+    )
+    free = backend._lib.qpb_free
+    weakref.finalize(st.data, _free_handles, free, table)  # handles freed with the buffers
+    for k, (key, e, start) in enumerate(zip(shapes, ends, starts)):
+        ws = Workspace(
+            key,
+            backend._lib,
+            backend._preset,
+            backend._native,
+            backend._nwsr,
+            backend._time_limit,
+            d=st.data[start : start + e[-1]],
+            iv=st.iv[k],
+        )
+        table[k, :_HANDLE] = key
+        table[k, _HANDLE] = ws.detach()
+        table[k, _H:] = start + e[:-1]
+    return st
+
+
+def close_state(st: State) -> None:
+    """Free the solvers of ``st`` (safe to call twice; a solve on ``st`` after this raises)."""
+    _free_handles(shim.load().qpb_free, st.table)
+
+
+def _free_handles(free, table: np.ndarray) -> None:
+    """``free`` each solver of ``table`` still held, marking it freed (0)."""
+    for row in table:
+        handle, row[_HANDLE] = int(row[_HANDLE]), 0
+        if handle:
+            free(handle)
+
+
+@cache
+def compiled():
+    """``(solve, reset)`` of the solver protocol of compiled closed loops, compiled (or loaded
+    from numba's cache) on the first call; the shim is built first if needed."""
+    import numba
+    from numba import types
+
+    from ..native import external, load_permanently
+
+    shim.load()
+    load_permanently(str(shim.shim_path(shim.qpoases_prefix())))
+    globals()["_qpb_solve"] = external("qpb_solve", types.intc(types.intp))
+    globals()["_qpb_renew"] = external("qpb_renew", types.void(types.intp))
+    jit = numba.njit(cache=True, nogil=True)
+    return jit(_solve_py), jit(_reset_py)
+
+
+def _solve_py(st, buf, warm, sol, info):  # pragma: no cover - compiled
+    """Solve the packed problem ``buf`` as :meth:`QpoasesBackend.solve` would: ``[x; y; z]``
+    (qpsolvers' signs; NaN when not optimal) into ``sol``, the shim's time [s], ``nWSR`` done,
+    the return value and qpOASES' CPU time [s] into ``info``; returns the status's index in
+    :data:`~qpbench.statuses.TICK_STATUSES`. ``warm`` is ignored (as ``warm_start``). A shape
+    :func:`make_state` was not given, or a closed state, raises ``ValueError``."""
+    n, me, mi = int(buf[0]), int(buf[1]), int(buf[2])
+    m = me + mi
+    oP, oq, oA, ob = int(buf[3]), int(buf[4]), int(buf[5]), int(buf[6])
+    oG, oh, olb, oub = int(buf[7]), int(buf[8]), int(buf[9]), int(buf[10])
+    box = 1 if olb >= 0 or oub >= 0 else 0
+    table = st.table
+    k = -1
+    for r in range(table.shape[0]):
+        if table[r, _N] == n and table[r, _ME] == me and table[r, _MI] == mi:
+            k = r if table[r, _BOX] == box else k
+    if k < 0:
+        raise ValueError("qpoases: a QP of a shape make_state was not given")
+    row = table[k]
+    handle = row[_HANDLE]
+    if handle == 0:
+        raise ValueError("qpoases: solve on a closed state")
+    if st.current[0] != k:  # another shape than the last call's, or after reset: a new solver
+        _qpb_renew(handle)  # noqa: F821 - bound by compiled()
+        st.current[0] = k
+    # the backend's fills: H, g; A = [A_eq; G], lbA = [b; -inf] (set once), ubA = [b; h]
+    d, H, A, lbA, ubA = st.data, row[_H], row[_A], row[_LBA], row[_UBA]
+    d[H : H + n * n] = buf[oP : oP + n * n]
+    d[row[_G] : row[_G] + n] = buf[oq : oq + n]
+    if me:
+        d[A : A + me * n] = buf[oA : oA + me * n]
+        d[lbA : lbA + me] = buf[ob : ob + me]
+        d[ubA : ubA + me] = buf[ob : ob + me]
+    if mi:
+        d[A + me * n : A + m * n] = buf[oG : oG + mi * n]
+        d[ubA + me : ubA + m] = buf[oh : oh + mi]
+    for j in range(n):  # a missing bound: +-inf, as the backend's
+        d[row[_LB] + j] = buf[olb + j] if olb >= 0 else -np.inf
+        d[row[_UB] + j] = buf[oub + j] if oub >= 0 else np.inf
+    code = _qpb_solve(handle)  # noqa: F821 - bound by compiled()
+    s, iv = row[_S], st.iv[k]
+    info[0], info[1], info[2], info[3] = d[s + 2], iv[2], iv[3], d[s + 3]
+    if code == 0:
+        xy = row[_XY]
+        for j in range(n):
+            sol[j] = d[xy + j]
+        for j in range(m):  # y, then z: after x and the bounds' multipliers
+            sol[n + j] = d[xy + 2 * n + j]
+    else:
+        for j in range(n + m):
+            sol[j] = np.nan
+    return _STATUS_INDEX[code + 3]
+
+
+def _reset_py(st):  # pragma: no cover - compiled
+    """:meth:`QpoasesBackend.reset`: the next call makes its solver afresh."""
+    st.current[0] = -1
+
+
+def compiled_unavailable_reason() -> str | None:
+    """Why the compiled route cannot run here (``None``: it can): the backend's own reason."""
+    return QpoasesBackend.unavailable_reason()
+
+
+def raw_message(raw: int) -> str:
+    """qpOASES' message for return value ``raw``, as the backend's ``error`` says it."""
+    message = shim.load().qpb_message(raw)
+    text = message.decode(errors="replace") if message else ""
+    return f"qpOASES return value {raw}: {text}"

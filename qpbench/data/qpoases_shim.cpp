@@ -21,6 +21,14 @@ int set_option(Options& o, const char* name, double v) {
 @SETTERS@
     return -1;
 }
+/* qpOASES' destructor makes its global messages visible again: hidden here once more, as every
+   solver of the shim has them (printLevel PL_NONE). */
+void hide_messages() {
+    MessageHandling* m = getGlobalMessageHandler();
+    m->setErrorVisibilityStatus(VS_HIDDEN);
+    m->setWarningVisibilityStatus(VS_HIDDEN);
+    m->setInfoVisibilityStatus(VS_HIDDEN);
+}
 }
 
 extern "C" {
@@ -44,7 +52,16 @@ int qpb_set_option(void* p, const char* name, double v) {
     return 0;
 }
 int qpb_known_option(const char* name) { Options o; return set_option(o, name, 0.0) == 0; }
-void qpb_free(void* p) { delete static_cast<Handle*>(p); }
+void qpb_free(void* p) { delete static_cast<Handle*>(p); hide_messages(); }
+/* The SQProblem made afresh with the handle's options, as qpb_new left it: the next
+   qpb_solve calls init() on a solver with no history. */
+void qpb_renew(void* p) {
+    Handle* h = static_cast<Handle*>(p);
+    h->initialised = false;
+    h->qp.~SQProblem();
+    new (&h->qp) SQProblem(h->nV, h->nC);
+    h->qp.setOptions(h->options);
+}
 const char* qpb_message(int rv) {
     return MessageHandling::getErrorCodeMessage((returnValue) rv);
 }

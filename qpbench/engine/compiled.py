@@ -103,6 +103,7 @@ SOLVERS: dict[str, CompiledSolver] = {
     "pinv": CompiledSolver(".solvers"),
     "rnn": CompiledSolver(".solvers", ("paper",)),
     "rnn-tuned": CompiledSolver(".solvers"),
+    "qpoases": CompiledSolver(".native_solvers"),
 }
 
 
