@@ -97,7 +97,14 @@ def main() -> None:
             for _ in range(args.repeat):
                 for engine in ENGINES:
                     runs[engine].append(one_run(scenario, backend, args.duration, engine))
-            med = {e: {k: statistics.median(r[k] for r in runs[e]) for k in runs[e][0] if k != "verdict"} for e in ENGINES}  # noqa: E501
+            med = {
+                e: {
+                    k: statistics.median(r[k] for r in runs[e])
+                    for k in runs[e][0]
+                    if k != "verdict"
+                }
+                for e in ENGINES
+            }  # noqa: E501
             for engine in ENGINES:
                 m = med[engine]
                 print(
@@ -107,7 +114,9 @@ def main() -> None:
                 )
             ratio_tick = med["python"]["tick"] / med["compiled"]["tick"]
             ratio_run = med["python"]["run"] / med["compiled"]["run"]
-            print(f"{'':9} {backend:10} python/compiled: tick {ratio_tick:.1f}x, run {ratio_run:.1f}x")
+            print(
+                f"{'':9} {backend:10} python/compiled: tick {ratio_tick:.1f}x, run {ratio_run:.1f}x"
+            )
     for backend in args.sweep_backends.split(",") if args.sweep else ():
         times = {e: [] for e in ENGINES}
         for _ in range(max(1, args.repeat // 2)):

@@ -140,7 +140,8 @@ def simulate(
     stops with the ticks done (``stopped_early``). ``engine``: ``compiled`` where the backend
     has a compiled solve (else, and with ``python``, the Python loop; the summary's ``engine``
     says which ran). ``warmup_ticks``: a discarded run of that many ticks first, with a backend
-    of its own (with an instance: the same, reset after), so one-off costs stay off the clock.
+    of its own, so one-off costs stay off the clock (a backend given by name only: an
+    instance's state is the caller's).
     """
     if engine not in ENGINES:
         raise ParamError(
@@ -159,7 +160,7 @@ def simulate(
     if dt is not None or duration is not None:
         scenario = scenario.with_overrides(dt=dt, duration=duration)
     keep_every = every if every is not None else (1 if dump is not None else None)
-    if warmup_ticks:
+    if warmup_ticks and isinstance(backend, str):  # an instance's own state is the caller's
         warm = resolve_backend(backend, scenario, profile)
         short = scenario.with_overrides(duration=warmup_ticks * scenario.dt)
         _Run(short, warm, formulation, None, deadline, engine).run(False, None)
