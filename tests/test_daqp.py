@@ -92,7 +92,7 @@ def test_exit_flags_become_statuses(monkeypatch, flag, status):
     else:
         assert sol.x is None and sol.y is None and sol.z is None
     assert (sol.error is not None) == (status == "error")
-    assert sol.extras["raw_status"] == daqp_.EXITFLAGS.get(flag, daqp_._UNKNOWN)[1]
+    assert sol.extras["raw_status"] == daqp_.EXITFLAGS.get(flag, daqp_.UNKNOWN_EXITFLAG)[1]
 
 
 def test_same_answer_as_qpsolvers_route_on_robot_ticks():

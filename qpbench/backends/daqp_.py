@@ -36,7 +36,8 @@ EXITFLAGS = {
     -6: ("error", "OVERDETERMINED_INITIAL"),
     -7: ("time_limit", "TIMELIMIT"),
 }
-_UNKNOWN = ("error", "unknown exit flag")
+#: The status of an exit flag not in :data:`EXITFLAGS`.
+UNKNOWN_EXITFLAG = ("error", "unknown exit flag")
 
 _DAQP: list = []
 
@@ -93,7 +94,7 @@ def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> B
     """A solution from DAQP's exit ``flag``: with ``info`` (a solve's) its iterations and
     time, and when optimal ``x``, the objective and the duals split from ``lam``; without
     (a refused ``setup``/``update``) the status alone."""
-    status, raw = EXITFLAGS.get(flag, _UNKNOWN)
+    status, raw = EXITFLAGS.get(flag, UNKNOWN_EXITFLAG)
     sol = new_solution(problem, status, {"raw_status": raw})
     if info is None:
         if status == "error":
