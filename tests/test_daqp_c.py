@@ -288,7 +288,8 @@ def test_set_ups_updates_failures_and_drops_leak_nothing():
     loop: the C heap in use is the same after as before (DAQP's arrays all freed)."""
     good = [_box_qp([1.0, -2.0, 0.5]), _box_qp([0.2, 0.1, -0.3])]
     bad = _box_qp([1.0, -2.0, 0.5], lb=1.0, ub=-1.0)
-    cycle = [good[0], good[1], bad, good[0], None, good[1], good[0]] * 100
+    # update, failed update, set-up, reset, refused set-up, set-up, update
+    cycle = [good[0], good[1], bad, good[0], None, bad, good[1], good[0]] * 75
     ops = np.array([RESET if p is None else SOLVE for p in cycle], dtype=np.int64)
     bufs = np.array([np.zeros(good[0].buffer.size) if p is None else p.buffer for p in cycle])
     st = daqp_c.make_state(3, 1, 2, get_backend("daqp").options())
