@@ -92,7 +92,7 @@ def test_exit_flags_become_statuses(monkeypatch, flag, status):
     else:
         assert sol.x is None and sol.y is None and sol.z is None
     assert (sol.error is not None) == (status == "error")
-    assert sol.extras["raw_status"] == daqp_.EXITFLAGS.get(flag, daqp_._UNKNOWN)[1]
+    assert sol.extras["raw_status"] == daqp_.EXITFLAGS.get(flag, daqp_.UNKNOWN_EXITFLAG)[1]
 
 
 def test_same_answer_as_qpsolvers_route_on_robot_ticks():
@@ -139,3 +139,17 @@ def test_buffers_are_per_shape_and_do_not_leak_between_calls():
     assert len(backend._buffers) == 3  # the first and third problems share a shape, hence a buffer
     backend.reset()
     assert backend._buffers == {}
+
+
+def test_persistent_model_updates_a_problem_with_bounds_only():
+    """Box-only QPs of one shape (the soft formulation without obstacles): the model is updated
+    without constraint rows, and each answer is the clipped unconstrained minimum."""
+    backend = get_backend("daqp", "high_accuracy")
+    lb, ub = -np.ones(4), np.ones(4)
+    for q in ([3.0, -1.0, 0.5, -4.0], [1.0, 2.0, -3.0, 0.0], [0.2, -0.2, 5.0, -5.0]):
+        q = np.array(q)
+        problem = qpsolvers.Problem(2.0 * np.eye(4), q, None, None, None, None, lb, ub)
+        sol = backend.solve(problem)
+        assert sol.status == "optimal"
+        np.testing.assert_allclose(sol.x, np.clip(-q / 2.0, lb, ub), atol=1e-12)
+    assert backend._model is not None  # set up once, then updated

@@ -41,7 +41,7 @@ def engines_agree(scenario: str, backend: str, duration: float, **terms) -> dict
 
 
 @pytest.mark.parametrize("scenario", run_scenarios())
-@pytest.mark.parametrize("backend", ["pinv", "rnn-tuned"])
+@pytest.mark.parametrize("backend", ["daqp", "daqp-stateless", "qpoases", "pinv", "rnn-tuned"])
 def test_engines_give_the_same_run(scenario, backend):
     engines_agree(scenario, backend, duration=2.0)
 

@@ -4,9 +4,9 @@ DAQP, a dual active-set solver.
 DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with ``A = [A_eq; G]``,
 ``bupper = [ub; b; h]``, ``blower = [lb; b; -inf]``, sense 5 (an immutable equality) on the
 ``b`` rows, no box rows without bounds; ``lam`` has qpsolvers' signs. ``daqp`` sets a model up
-per shape, then updates it (``H``, ``f`` only when changed) and solves from the previous
-working set; a refused set-up or a status other than optimal drops it. ``warm_start`` is
-ignored.
+per shape, then updates it (``H``, ``f`` only when changed; ``A`` and the bounds when they
+have entries) and solves from the previous working set; a refused set-up or update or a
+status other than optimal drops it. ``warm_start`` is ignored.
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ EXITFLAGS = {
     -6: ("error", "OVERDETERMINED_INITIAL"),
     -7: ("time_limit", "TIMELIMIT"),
 }
-_UNKNOWN = ("error", "unknown exit flag")
+#: The status of an exit flag not in :data:`EXITFLAGS`.
+UNKNOWN_EXITFLAG = ("error", "unknown exit flag")
 
 _DAQP: list = []
 
@@ -93,7 +94,7 @@ def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> B
     """A solution from DAQP's exit ``flag``: with ``info`` (a solve's) its iterations and
     time, and when optimal ``x``, the objective and the duals split from ``lam``; without
     (a refused ``setup``/``update``) the status alone."""
-    status, raw = EXITFLAGS.get(flag, _UNKNOWN)
+    status, raw = EXITFLAGS.get(flag, UNKNOWN_EXITFLAG)
     sol = new_solution(problem, status, {"raw_status": raw})
     if info is None:
         if status == "error":
@@ -191,7 +192,10 @@ class DaqpModelBackend(DaqpBackend):
                 H = self._H = P.copy()
             if q.tobytes() != self._f.tobytes():
                 f = self._f = q.copy()
-            flag = model.update(H, f, buf.A, buf.bu, buf.bl)
+            # only arrays with entries: DAQP's update indexes the first one (IndexError)
+            A = buf.A if buf.A.shape[0] else None
+            bu, bl = (buf.bu, buf.bl) if buf.bu.shape[0] else (None, None)
+            flag = model.update(H, f, A, bu, bl)
         if flag < 0:
             self._model = None
             return read_result(problem, flag)

@@ -319,11 +319,6 @@ def _reset_py(st):  # pragma: no cover - compiled
     st.current[0] = -1
 
 
-def compiled_unavailable_reason() -> str | None:
-    """Why the compiled route cannot run here (``None``: it can): the backend's own reason."""
-    return QpoasesBackend.unavailable_reason()
-
-
 def raw_message(raw: int) -> str:
     """qpOASES' message for return value ``raw``, as the backend's ``error`` says it."""
     message = shim.load().qpb_message(raw)

@@ -104,6 +104,8 @@ SOLVERS: dict[str, CompiledSolver] = {
     "rnn": CompiledSolver(".solvers", ("paper",)),
     "rnn-tuned": CompiledSolver(".solvers"),
     "qpoases": CompiledSolver(".native_solvers"),
+    "daqp": CompiledSolver(".native_solvers"),
+    "daqp-stateless": CompiledSolver(".native_solvers"),
 }
 
 
