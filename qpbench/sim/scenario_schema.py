@@ -117,7 +117,7 @@ def _typed(value, kind, file, key: str):
         raise ScenarioError(f"expected {what}, got {value!r}", path=file, key=key)
 
     if isinstance(kind, tuple):
-        if value not in kind:
+        if not isinstance(value, str) or value not in kind:
             bad(f"one of {', '.join(kind)}")
         return value
     kind, _, bound = kind.partition(">")
@@ -166,12 +166,10 @@ def _table(raw, schema: dict, file, prefix: str) -> dict:
 
 
 def _by_kind(raw, schemas: dict, file, prefix: str) -> dict:
-    """A table whose ``kind`` picks its schema (``[path]``, an obstacle)."""
-    kind = raw.get("kind") if isinstance(raw, dict) else None
-    if isinstance(raw, dict) and kind not in schemas:
-        raise ScenarioError(
-            f"expected one of {', '.join(schemas)}, got {kind!r}", path=file, key=f"{prefix}.kind"
-        )
+    """A table whose ``kind`` (one of ``schemas``) picks its schema (``[path]``, an obstacle)."""
+    kind = None
+    if isinstance(raw, dict):
+        kind = _typed(raw.get("kind"), tuple(schemas), file, f"{prefix}.kind")
     return _table(raw, schemas.get(kind, {}), file, prefix)
 
 
