@@ -18,6 +18,11 @@ Faulty (names ``faulty:<kind>``):
 - ``segfault-once``: segfaults on the problem named in ``QPBENCH_TEST_SEGV``
   only, solves the others (not marked risky: the harness must learn it).
 
+A worker that dies while it starts: while the file named by :data:`DIE_AT_IMPORT_ENV`
+exists, the next process to import this module removes it and SIGKILLs itself (a
+worker pool's workers import the module of their task, :func:`double`, before they
+say they are ready).
+
 Stateful (they solve the QP exactly with qpsolvers' ``clarabel`` and report
 their state in ``iterations``), names ``stateful:<kind>``:
 
@@ -61,6 +66,28 @@ def exact_solution(problem) -> BackendSolution:
     out.x, out.y, out.z, out.z_box = sol.x, sol.y, sol.z, sol.z_box
     out.status = "optimal" if sol.found else "primal_infeasible"
     return out
+
+
+#: Environment variable naming the flag file of a death at import.
+DIE_AT_IMPORT_ENV = "QPBENCH_TEST_DIE_AT_IMPORT"
+
+
+def _die_at_import_once() -> None:
+    flag = os.environ.get(DIE_AT_IMPORT_ENV)
+    if flag:
+        try:
+            os.unlink(flag)  # one process takes the flag, however many start at once
+        except FileNotFoundError:
+            return
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+_die_at_import_once()
+
+
+def double(x):
+    """A task of the worker pool's tests: ``2 * x``."""
+    return 2 * x
 
 
 class _Faulty(Backend):

@@ -1,16 +1,20 @@
 """Executors: the Dask workers' settings (local cluster, worker plugin on an existing one), a lost
-Dask worker's run retried once then recorded as crashed, and the worker processes' request loop."""
+Dask worker's run retried once then recorded as crashed, the worker processes' request loop, and a
+worker of the local pool that dies before its task reaches it."""
 
 from __future__ import annotations
 
 import multiprocessing
+import os
+import signal
 import threading
 
+import faulty_backends
 import pytest
 from test_sweep import PLUGIN, rows_of, write_sweep
 
 from qpbench.cli import main
-from qpbench.runner.process import requests
+from qpbench.runner.process import Worker, WorkerDied, requests, run_tasks
 
 pytest.importorskip("distributed")
 
@@ -134,3 +138,43 @@ def test_requests_end_at_none_or_a_closed_pipe(end):
         parent.close()
     worker.join(10)
     assert not worker.is_alive()
+
+
+@pytest.mark.parametrize(("jobs", "attempts"), [(1, 1), (2, 1), (2, 2)])
+def test_a_worker_that_dies_while_starting_loses_its_task_only(
+    tmp_path, monkeypatch, jobs, attempts
+):
+    """A worker SIGKILLed while it starts is handled as one that dies mid-task: its task is a
+    ``crashed`` result saying why (or runs again on a new worker, with attempts left), a new
+    worker takes the next task, and every other task is answered."""
+    flag = tmp_path / "die"
+    flag.touch()
+    monkeypatch.setenv(faulty_backends.DIE_AT_IMPORT_ENV, str(flag))
+    tasks = [(k, k, 60.0) for k in range(4)]
+    done = list(run_tasks(faulty_backends.double, tasks, jobs, attempts=attempts))
+    assert not flag.exists()  # a worker died on it
+    assert sorted(d.key for d in done) == [0, 1, 2, 3]
+    lost = [d for d in done if d.lost is not None]
+    if attempts == 1:
+        assert len(lost) == 1 and lost[0].status == "crashed" and lost[0].value is None
+        assert lost[0].lost == "worker process killed by SIGKILL during start"
+    else:
+        assert not lost and sorted(d.attempts for d in done) == [1, 1, 1, 2]
+    assert all(d.value == 2 * d.key and d.status is None for d in done if d not in lost)
+
+
+def test_a_worker_dead_before_its_request_is_worker_died():
+    """A request sent to a worker that is gone is :class:`WorkerDied` (``crashed``, the signal),
+    not the pipe's error, and the worker is reaped."""
+    w = Worker(imports=("faulty_backends",))
+    try:
+        assert w.call(faulty_backends.double, 2, 60.0, "a task") == 4
+        os.kill(w.proc.pid, signal.SIGKILL)
+        w.proc.join(10)
+        with pytest.raises(WorkerDied) as died:
+            w.send(faulty_backends.double, 3, 60.0)
+        assert died.value.status == "crashed"
+        assert died.value.message == "worker process killed by SIGKILL before its request"
+        assert not w.alive
+    finally:
+        w.kill()

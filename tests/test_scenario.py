@@ -117,6 +117,10 @@ def edited(tmp_path, old, new, name="wall"):
         (r"^theta0 = \[1.57, ", "theta0 = [", "robot.theta0"),  # 3 values for 4 links
         (r"^\[controller\]", "[controler]", "controler"),  # misspelt table
         (r"^kind = \"line\"", 'kind = "wal"', "obstacles[0].kind"),
+        # a kind that is not a string (a list cannot be looked up among the kinds)
+        (r"^kind = \"line\"", 'kind = ["line"]', "obstacles[0].kind"),
+        (r"^kind = \"cosine\"", 'kind = ["cosine"]', "path.kind"),
+        (r"^link_radius = ", 'kind = ["paper"]\nlink_radius = ', "key_points.kind"),
         (r"^velocity = \[0.0, 0.0\]", "velocity = [0.0]", "obstacles[0].velocity"),
         (r"^normal = \[1.0, 0.0\]", "normal = [0.0, 0.0]", "obstacles.wall.normal"),
         (r"^eps = 0.02", "eps = -1.0", "rnn.eps"),
@@ -132,6 +136,25 @@ def test_bad_files_name_the_file_and_key(tmp_path, old, new, key):
     assert str(f) in msg
     assert f"key '{key}'" in msg, msg
     assert err.value.key == key
+
+
+@pytest.mark.parametrize(
+    "setting,key",
+    [
+        ('obstacles[0].kind=["line"]', "obstacles[0].kind"),
+        ('path.kind=["cosine"]', "path.kind"),
+        ('key_points.kind=["paper"]', "key_points.kind"),
+    ],
+)
+def test_a_list_for_a_kind_is_one_line_exit_2(tmp_path, capsys, setting, key):
+    from qpbench.cli import main
+
+    f = edited(tmp_path, r"^name = \"wall\"", 'name = "wall"')  # the shipped file, as a path
+    args = ["simulate", "--scenario", str(f), "--backend", "pinv", "--duration", "0.01"]
+    assert main([*args, "--set", setting]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(f) in err[0] and f"key '{key}'" in err[0], err
+    assert "expected one of" in err[0]
 
 
 def test_unknown_name_and_bad_toml(tmp_path):

@@ -149,6 +149,11 @@ def test_distributions_have_their_moments(tmp_path):
             "unknown distribution",
         ),
         (
+            '"robot.theta0" = { dist = ["normal"], std = 0.1 }',
+            "parameters.robot.theta0.dist",
+            "unknown distribution",
+        ),
+        (
             '"robot.theta0" = { dist = "uniform", low = [0.0, 0.0], high = 1.0 }',
             "parameters.robot.theta0.low",
             "shape",

@@ -138,6 +138,57 @@ def test_a_settle_time_set_past_the_duration_is_refused_a_shorter_run_is_not():
     assert sc.verdict.settle_time == 2.0 and sc.duration == 1.0
 
 
+def test_a_settle_time_set_on_the_command_line_is_checked_against_the_duration_run():
+    """The duration run is the one after every override (``--set``, then ``--duration``, or
+    :meth:`Scenario.with_overrides`), not the file's nor the ``--set`` one before it."""
+    settle = {"verdict.settle_time": 100.0, "simulation.duration": 200.0}
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("wall", overrides=settle, duration=5.0)
+    assert err.value.key == "verdict.settle_time" and "simulation.duration = 5 s" in str(err.value)
+    # past the file's 20 s, inside the run's 30 s: allowed
+    sc = load_scenario("wall", overrides={"verdict.settle_time": 25.0}, duration=30.0)
+    assert (sc.verdict.settle_time, sc.duration) == (25.0, 30.0)
+    with pytest.raises(ScenarioError) as err:
+        sc.with_overrides(duration=25.0)
+    assert err.value.key == "verdict.settle_time"
+    # a settle time of the file's own, not set on the command line: a shorter run says so
+    assert load_scenario("wall", duration=1.0).verdict.settle_time == 2.0
+
+
+@pytest.mark.parametrize("command", ["simulate", "closed-loop"])
+def test_a_diverging_run_cannot_pass_on_a_settle_time_beyond_its_duration(
+    tmp_path, capsys, command
+):
+    """The paper's network diverges in free (docs/results.md): with a settle time set past the
+    duration run it would not be judged, so the command refuses it before running."""
+    out = tmp_path / "out"
+    where = ["--scenario", "free", "--backend", "rnn", "--summary", str(out)]
+    if command == "closed-loop":
+        where = ["--scenarios", "free", "--backends", "rnn", "--out", str(out)]
+    settle = ["--set", "simulation.duration=200", "--set", "verdict.settle_time=100"]
+    assert main([command, *where, *settle, "--duration", "3"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"qpbench {command}: error"), lines
+    assert "key 'verdict.settle_time'" in lines[0] and "simulation.duration = 3 s" in lines[0]
+    assert not out.exists()
+    if command == "simulate":  # judged on the file's settle time, the same run is not ok
+        assert main([command, *where, "--duration", "3"]) == 1
+        assert json.loads(out.read_text())["verdict"] == "diverged"
+
+
+def test_closed_loop_judges_a_settle_time_set_on_the_command_line(tmp_path):
+    """A settle time inside the duration run is allowed and the row is judged on it (the
+    discarded warm-up, shorter than any settle time, is not judged): at 0.1 s wall's infeasible
+    start (to about 0.13 s) still holds the arm off the path, so the run is diverged."""
+    out = tmp_path / "loop"
+    argv = ["closed-loop", "--scenarios", "wall", "--backends", "daqp", "--out", str(out)]
+    assert main([*argv, "--duration", "0.2", "--set", "verdict.settle_time=0.1"]) == 0
+    row = pd.read_csv(out / "closed_loop.csv").iloc[0]
+    assert (row["status"], row["verdict"], row["duration_s"]) == ("ok", "diverged", 0.2)
+    assert json.loads(row["verdict_overrides"]) == {"settle_time": 0.1}
+    assert "after 0.1 s" in row["verdict_reasons"]
+
+
 def _without(text: str, table: str) -> str:
     head, rest = text.split(f"[{table}]\n")
     nxt = rest.find("\n[")

@@ -72,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
     scenarios = select_scenarios(args.scenarios)
     overrides = parse_overrides(args.overrides)
     for name in scenarios if overrides else ():
-        load_scenario(name, overrides=overrides)  # a bad key or value: one line naming it, exit 2
+        # a bad key or value (a settle time against the duration run): one line naming it, exit 2
+        load_scenario(name, overrides=overrides, duration=args.duration)
     backends = select_backends(args.backends)
     warmup_logged(log, backends)  # compiled here once: the worker processes load them
     total = len(scenarios) * len(backends)

@@ -69,10 +69,11 @@ def run(args: argparse.Namespace) -> int:
 
     _check_arguments(args)
     backend = select_backend(args.backend)
-    scenario = load_scenario(args.scenario, overrides=parse_overrides(args.overrides))
+    overrides = parse_overrides(args.overrides)
+    scenario = load_scenario(args.scenario, overrides, dt=args.dt, duration=args.duration)
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log, [backend])
-    settings = pick(args, "formulation duration dt every dump profile deadline engine")
+    settings = pick(args, "formulation every dump profile deadline engine")
     result = simulate(scenario, backend, progress=progress, **settings)
     _write_outputs(args, scenario, result, progress)
     _log_summary(result.summary)

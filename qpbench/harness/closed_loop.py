@@ -118,7 +118,8 @@ def run_row(task: LoopTask) -> dict:
     try:
         load_plugins(list(task.plugins))
         if task.scenario_text is None:
-            scenario = load_scenario(task.scenario, overrides=dict(task.overrides) or None)
+            overrides = dict(task.overrides) or None
+            scenario = load_scenario(task.scenario, overrides, duration=task.duration)
         else:
             scenario = parse_scenario(task.scenario_text, path=task.scenario)
         warmup([task.backend])
@@ -127,7 +128,6 @@ def run_row(task: LoopTask) -> dict:
             task.backend,
             formulation=task.formulation,
             deadline=task.deadline,
-            duration=task.duration,
             wall_budget_s=task.run_budget,
             engine=task.engine,
         )

@@ -153,16 +153,24 @@ class Worker:
 
     def send(self, fn: Callable, arg, timeout: float | None) -> None:
         """Start request ``fn(arg)``, answered within ``timeout`` [s] (``None``: no limit);
-        :class:`WorkerDied` if the worker did not start."""
+        :class:`WorkerDied` (the worker killed) if the worker did not start or died before the
+        request reached it."""
         if not self.ready:
             self.deadline, self.timeout = time.monotonic() + START_TIMEOUT_S, START_TIMEOUT_S
             status, payload = self._wait()
             if status != "ready":
+                self.kill()
                 raise WorkerDied(status, f"{payload} during start")
             self.ready = True
         self.timeout = timeout
         self.deadline = math.inf if timeout is None else time.monotonic() + timeout
-        self.conn.send((fn, arg))
+        try:
+            self.conn.send((fn, arg))
+        except OSError:  # the pipe is closed: the worker is gone
+            self.proc.join(2)
+            message = death_message(self.proc.exitcode)
+            self.kill()
+            raise WorkerDied("crashed", f"{message} before its request") from None
 
     def poll(self) -> tuple[str, object] | None:
         """``(status, payload)`` once the request is over, else ``None``."""
@@ -270,23 +278,26 @@ def run_tasks(
     workers = [Worker(ctx, f"{name}-{i}", imports) for i in range(slots)]
     try:
         while queue or any(w.task for w in workers):
+            ended = []  # (worker, (status, payload)) of the tasks over
             for i, w in enumerate(workers):
                 if w.task is None and queue:
                     if not w.alive:
                         workers[i] = w = Worker(ctx, f"{name}-{i}", imports)
                     key, arg, timeout, tried = queue.popleft()
                     w.task = (key, arg, timeout, tried + 1)
-                    w.send(fn, arg, timeout)
-            busy = [w for w in workers if w.task]
-            left = min(w.deadline for w in busy) - time.monotonic()
-            wait(
-                [w.conn for w in busy] + [w.proc.sentinel for w in busy],
-                None if math.isinf(left) else max(left, 0.0),
-            )
-            for w in busy:
-                answer = w.poll()
-                if answer is None:
-                    continue
+                    try:
+                        w.send(fn, arg, timeout)
+                    except WorkerDied as died:  # while starting or being sent it: as mid-task
+                        ended.append((w, (died.status, died.message)))
+            busy = [w for w in workers if w.task and w.alive]
+            if busy and not ended:
+                left = min(w.deadline for w in busy) - time.monotonic()
+                wait(
+                    [w.conn for w in busy] + [w.proc.sentinel for w in busy],
+                    None if math.isinf(left) else max(left, 0.0),
+                )
+            ended += [(w, answer) for w in busy if (answer := w.poll()) is not None]
+            for w, answer in ended:
                 (key, arg, timeout, tried), w.task = w.task, None
                 status, payload = answer
                 if fresh:

@@ -31,7 +31,7 @@ import gc
 import logging
 import time
 from collections import namedtuple
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -162,7 +162,8 @@ def simulate(
     keep_every = every if every is not None else (1 if dump is not None else None)
     if warmup_ticks and isinstance(backend, str):  # an instance's own state is the caller's
         warm = resolve_backend(backend, scenario, profile)
-        short = scenario.with_overrides(duration=warmup_ticks * scenario.dt)
+        # the discarded warm-up is not judged: the thresholds set over the file's are not its
+        short = replace(scenario, overrides={}).with_overrides(duration=warmup_ticks * scenario.dt)
         _Run(short, warm, formulation, None, deadline, engine).run(False, None)
     be = resolve_backend(backend, scenario, profile)
     be.reset()

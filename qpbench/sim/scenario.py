@@ -96,13 +96,14 @@ class Scenario:
         return normal / np.linalg.norm(normal)
 
     def with_overrides(self, dt: float | None = None, duration: float | None = None) -> Scenario:
-        """A copy with another control period or duration (validated like the file's values)."""
+        """A copy with another control period or duration (validated like the file's values,
+        with the values set over the file's)."""
         data = copy.deepcopy(self.data)
         if dt is not None:
             data["simulation"]["dt"] = float(dt)
         if duration is not None:
             data["simulation"]["duration"] = float(duration)
-        check_simulation(data, self.path or "<override>")
+        check_simulation(data, self.path or "<override>", tuple(self.overrides))
         return replace(self, data=data)
 
     def make_arm(self) -> PlanarArm:
@@ -163,17 +164,25 @@ class Scenario:
 
 
 def parse_scenario(
-    text: str, path: str | Path | None = None, overrides: dict | None = None
+    text: str,
+    path: str | Path | None = None,
+    overrides: dict | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
 ) -> Scenario:
     """Parse and validate a scenario from TOML text (``path`` only names it in errors);
-    ``overrides`` (:func:`apply_overrides`) are set before the validation."""
+    ``overrides`` (:func:`apply_overrides`), then ``dt`` and ``duration`` [s] (a command's
+    ``--dt``, ``--duration``), are set before the validation, which checks the scenario as it
+    runs (a settle time set in ``overrides`` against the duration run)."""
     file = path if path is not None else "<scenario>"
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"not valid TOML: {exc}", path=file) from None
-    if overrides:
-        raw = apply_overrides(raw, overrides, file)
+    times = {"simulation.dt": dt, "simulation.duration": duration}
+    times = {key: value for key, value in times.items() if value is not None}
+    if overrides or times:
+        raw = apply_overrides(raw, {**(overrides or {}), **times}, file)
     data, rnn = validate(raw, file, tuple(overrides or ()))
     scenario = Scenario(
         name=data["scenario"]["name"],
@@ -254,15 +263,21 @@ def apply_overrides(raw: dict, overrides: dict, file: str | Path = "<scenario>")
     return raw
 
 
-def load_scenario(name_or_path: str | Path, overrides: dict | None = None) -> Scenario:
+def load_scenario(
+    name_or_path: str | Path,
+    overrides: dict | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+) -> Scenario:
     """Load a scenario by shipped name (``wall``) or by path, with ``overrides``
-    (:func:`apply_overrides`); a :class:`ScenarioError` names the file and the key."""
+    (:func:`apply_overrides`) and another ``dt`` or ``duration`` [s] (:func:`parse_scenario`);
+    a :class:`ScenarioError` names the file and the key."""
     path = scenario_path(name_or_path)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"cannot read: {exc}", path=path) from None
-    return parse_scenario(text, path, overrides)
+    return parse_scenario(text, path, overrides, dt, duration)
 
 
 def shipped_dir() -> Traversable:

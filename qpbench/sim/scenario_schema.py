@@ -117,7 +117,7 @@ def _typed(value, kind, file, key: str):
         raise ScenarioError(f"expected {what}, got {value!r}", path=file, key=key)
 
     if isinstance(kind, tuple):
-        if value not in kind:
+        if not isinstance(value, str) or value not in kind:
             bad(f"one of {', '.join(kind)}")
         return value
     kind, _, bound = kind.partition(">")
@@ -166,12 +166,10 @@ def _table(raw, schema: dict, file, prefix: str) -> dict:
 
 
 def _by_kind(raw, schemas: dict, file, prefix: str) -> dict:
-    """A table whose ``kind`` picks its schema (``[path]``, an obstacle)."""
-    kind = raw.get("kind") if isinstance(raw, dict) else None
-    if isinstance(raw, dict) and kind not in schemas:
-        raise ScenarioError(
-            f"expected one of {', '.join(schemas)}, got {kind!r}", path=file, key=f"{prefix}.kind"
-        )
+    """A table whose ``kind`` (one of ``schemas``) picks its schema (``[path]``, an obstacle)."""
+    kind = None
+    if isinstance(raw, dict):
+        kind = _typed(raw.get("kind"), tuple(schemas), file, f"{prefix}.kind")
     return _table(raw, schemas.get(kind, {}), file, prefix)
 
 
@@ -198,8 +196,8 @@ def validate(raw: dict, file: str | Path, set_keys=()) -> tuple[dict, dict]:
     rnn = {**DEFAULTS["rnn"], **raw["rnn"]}  # eps checked, the rest passed to the backend
     _typed(rnn["eps"], "num>0", file, "rnn.eps")
     _check_across_keys(data, file)
-    check_simulation(data, file)
-    data["verdict"] = _verdict_table(raw["verdict"], data, file, set_keys)
+    data["verdict"] = _verdict_table(raw["verdict"], data, file)
+    check_simulation(data, file, set_keys)
     return data, rnn
 
 
@@ -223,7 +221,7 @@ def _obstacles(obstacles, file) -> list[dict]:
     return out
 
 
-def _verdict_table(raw, data: dict, file, set_keys=()) -> dict:
+def _verdict_table(raw, data: dict, file) -> dict:
     """The ``[verdict]`` table, with defaults that fit the task, checked against it (the ranges:
     :class:`~qpbench.sim.verdict.VerdictSettings`)."""
     d_safe, duration = data["controller"]["d_safe"], data["simulation"]["duration"]
@@ -234,13 +232,6 @@ def _verdict_table(raw, data: dict, file, set_keys=()) -> dict:
             **raw,
         }
     out = _table(raw, _VERDICT_SCHEMA, file, "verdict")
-    if "verdict.settle_time" in set_keys and not out["settle_time"] < duration:
-        raise ScenarioError(
-            f"must be < simulation.duration = {duration:g} s (tracking and force are judged "
-            f"after it), got {out['settle_time']:g} s",
-            path=file,
-            key="verdict.settle_time",
-        )
     margin = out["safety_margin"]
     if not (margin < d_safe or margin == d_safe == 0):
         raise ScenarioError(
@@ -282,8 +273,14 @@ def _check_across_keys(data: dict, file) -> None:
         )
 
 
-def check_simulation(data: dict, file: str | Path) -> None:
-    """``dt`` and ``duration`` > 0 [s], at least one tick, and ``alpha * dt < 1``."""
+def check_simulation(data: dict, file: str | Path, set_keys=()) -> None:
+    """``dt`` and ``duration`` > 0 [s], at least one tick, ``alpha * dt < 1``, and a settle time
+    set on the command line (``verdict.settle_time`` in ``set_keys``) < ``duration`` [s].
+
+    Called on every change of ``dt`` or ``duration`` (the file's, ``--set``, ``--duration``, a
+    sweep's), so a settle time set on the command line is checked against the duration run: a
+    run shorter than it would not judge tracking and force that it was set to judge.
+    """
     s = data["simulation"]
     for key in ("dt", "duration"):
         if not s[key] > 0:
@@ -303,6 +300,14 @@ def check_simulation(data: dict, file: str | Path) -> None:
             "to keep the joints inside their limits",
             path=file,
             key="controller.alpha",
+        )
+    settle = data["verdict"]["settle_time"]
+    if "verdict.settle_time" in set_keys and not settle < s["duration"]:
+        raise ScenarioError(
+            f"must be < simulation.duration = {s['duration']:g} s, the duration run (tracking "
+            f"and force are judged after it), got {settle:g} s",
+            path=file,
+            key="verdict.settle_time",
         )
 
 

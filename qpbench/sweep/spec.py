@@ -116,7 +116,7 @@ def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
         )
 
     kind = spec.get("dist")
-    if kind not in DISTRIBUTIONS:
+    if not isinstance(kind, str) or kind not in DISTRIBUTIONS:
         raise bad(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", "dist")
     for f in spec:
         if f != "dist" and f not in DISTRIBUTIONS[kind]:
