@@ -179,23 +179,8 @@ def body_crossings(
     )  # fmt: skip
     while piece.k.size:
         piece = piece.take(piece.a < found.s[piece.k])
-        width = piece.b - piece.a
-        V = speed[piece.k, piece.i, piece.j]
-        bound = (piece.da + piece.db - V * width) / 2.0
-        sweep = ~(bound > SWEEP_TOL)
-        for jj in np.unique(piece.j[sweep]):
-            sel = np.flatnonzero(sweep & (piece.j == jj))
-            ob = obstacles[jj]
-            back = ob.velocity * width[sel, None]  # the obstacle's frame: it is held as at a
-            swept = ob.swept_distance_bound(
-                piece.P0a[sel],
-                piece.P1a[sel],
-                piece.P0b[sel] - back,
-                piece.P1b[sel] - back,
-                t[piece.k[sel]] + piece.a[sel],
-            )
-            delta = accel[piece.k[sel], piece.i[sel]] * width[sel] ** 2 / 8.0
-            bound[sel] = np.maximum(bound[sel], swept - radius - delta)
+        width, V = piece.b - piece.a, speed[piece.k, piece.i, piece.j]
+        bound = _bound(piece, V, accel, obstacles, t, radius)
         piece = piece.take(~(bound > SWEEP_TOL) & (V * width > 0.0))
         width, V = piece.b - piece.a, speed[piece.k, piece.i, piece.j]
         key = (piece.k * n + piece.i) * o + piece.j
@@ -225,6 +210,27 @@ class _Pieces(NamedTuple):
     def take(self, rows) -> _Pieces:
         return _Pieces(*(x[rows] for x in self))
 
+    def in_frame(self, rows, obstacle: Obstacle, t: np.ndarray) -> tuple:
+        """The ``rows``' link ends at ``a`` and ``b`` in the obstacle's frame (it held as at
+        ``a``), and the time [s] of ``a`` (from the intervals' start times ``t``)."""
+        back = obstacle.velocity * (self.b[rows] - self.a[rows])[:, None]
+        at = t[self.k[rows]] + self.a[rows]
+        return self.P0a[rows], self.P1a[rows], self.P0b[rows] - back, self.P1b[rows] - back, at
+
+
+def _bound(piece: _Pieces, V, accel, obstacles, t, radius) -> np.ndarray:
+    """A lower bound [m] of each piece's clearance: the larger of the speed bound (``V`` [m/s])
+    and the sweep bound (``accel`` (K, n) [m/s^2]), as the module docstring says."""
+    width = piece.b - piece.a
+    bound = (piece.da + piece.db - V * width) / 2.0
+    sweep = ~(bound > SWEEP_TOL)
+    for jj in np.unique(piece.j[sweep]):
+        sel = np.flatnonzero(sweep & (piece.j == jj))
+        swept = obstacles[jj].swept_distance_bound(*piece.in_frame(sel, obstacles[jj], t))
+        delta = accel[piece.k[sel], piece.i[sel]] * width[sel] ** 2 / 8.0
+        bound[sel] = np.maximum(bound[sel], swept - radius - delta)
+    return bound
+
 
 class _Found:
     """Per interval, the first time found inside [s from its start], its link and obstacle."""
@@ -252,16 +258,7 @@ def _judge_last(piece: _Pieces, obstacles, t, found: _Found) -> None:
     them is a crossing, at the piece's middle."""
     for jj in np.unique(piece.j):
         sel = np.flatnonzero(piece.j == jj)
-        ob = obstacles[jj]
-        back = ob.velocity * (piece.b[sel] - piece.a[sel])[:, None]
-        hit = ob.passed_through(
-            piece.P0a[sel],
-            piece.P1a[sel],
-            piece.P0b[sel] - back,
-            piece.P1b[sel] - back,
-            t[piece.k[sel]] + piece.a[sel],
-        )
-        sel = sel[hit]
+        sel = sel[obstacles[jj].passed_through(*piece.in_frame(sel, obstacles[jj], t))]
         mid = (piece.a[sel] + piece.b[sel]) / 2.0
         found.add(piece.k[sel], mid, piece.i[sel], piece.j[sel])
 
