@@ -1,5 +1,6 @@
 """The whole body: exact capsule clearances against brute force, the contact-surface exemption,
-the closest-point obstacle rows, and the verdict on the body in closed loop."""
+the closest-point obstacle rows, the body between ticks against dense sub-steps of the same
+motion, and the verdict on the body in closed loop."""
 
 from __future__ import annotations
 
