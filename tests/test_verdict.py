@@ -16,6 +16,8 @@ from slow_backends import SlowExact
 
 from qpbench.cli import main
 from qpbench.exceptions import ParamError, ScenarioError
+from qpbench.robot.environment import LineObstacle
+from qpbench.robot.kinematics import PlanarArm
 from qpbench.sim.log import TIME_COLUMNS
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario, scenario_names
@@ -270,7 +272,8 @@ def _log(n=3000, dt=1e-3, **over):
     return pd.DataFrame(cols)
 
 
-#: What :func:`summarize` reads of a scenario and a controller: 2 joints, one wall, key point A1.
+#: What :func:`summarize` reads of a scenario and a controller: 2 joints, one wall, key point A1
+#: (the logs' arm lies still along x, 0.05 m from the wall; the body columns are made by hand).
 SCENARIO = SimpleNamespace(
     name="hand", overrides={}, verdict_overrides={}, dt=1e-3, duration=3.0, verdict=SETTINGS
 )
@@ -278,9 +281,11 @@ CONTROLLER = SimpleNamespace(
     n=2,
     limits=LIMITS,
     d_safe=0.01,
-    obstacles=[SimpleNamespace(name="wall", KIND="line")],
+    arm=PlanarArm([0.3, 0.4]),
+    obstacles=[LineObstacle("wall", [-0.05, 0.0], [1.0, 0.0])],
+    exempt=[False],
     obstacle_columns=lambda: [("A1", "wall", slice(0, 1))],
-    key_points=SimpleNamespace(kind="paper"),
+    key_points=SimpleNamespace(kind="paper", radius=0.0),
 )
 
 

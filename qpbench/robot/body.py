@@ -5,10 +5,25 @@ link_radius``); its clearance to an obstacle is the exact signed distance of the
 shape minus ``r`` [m] (``< 0``: inside, by that depth). A static ``line`` obstacle that is the
 contact surface (:func:`contact_obstacles`) is exempt for the end effector's link, which presses
 into it by design; the closest-point key points use the same exemption.
+
+Between two samples (:func:`body_crossings`) the joint angles move linearly and the obstacles
+translate; the interval is cut in halves until each piece is proven clear by a lower bound of
+its clearance, found inside at a cut, or shorter than the motion :data:`SWEEP_TOL` resolves
+(then judged by :meth:`~qpbench.robot.environment.Obstacle.passed_through`). Two bounds, the
+larger kept, for link ``i`` over a piece of ``w`` [s]:
+
+- the speed bound: no point of the link moves faster than ``V = sum_{j<=i} l_j |w_j|`` [m/s]
+  (``w_j`` the absolute angular speed of link ``j``) plus the obstacle's speed, so the clearance
+  is ``V``-Lipschitz and at least ``(d_a + d_b - V w) / 2``;
+- the sweep bound: every point of the link stays within ``delta = A w^2 / 8`` of the segment
+  between the linearly moving ends (``A = sum_{j<=i} l_j w_j^2`` [m/s^2] bounds its
+  acceleration), so the clearance is at least the obstacle's
+  :meth:`~qpbench.robot.environment.Obstacle.swept_distance_bound` minus ``delta``.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -18,6 +33,15 @@ from .kinematics import PlanarArm
 
 #: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
 SAME_LINE_TOL = 1e-9
+
+#: The body rule between samples is decided to this distance [m]: a piece of an interval is
+#: proven clear when its clearance is at least this (a margin over rounding), and not cut again
+#: when the link moves at most this far against the obstacle in it.
+SWEEP_TOL = 1e-12
+
+#: Most pieces one interval is cut into for one link and obstacle; a pair touching an obstacle
+#: along a stretch of time (clearance 0 to within :data:`SWEEP_TOL`) is judged on its pieces then.
+MAX_PIECES = 256
 
 
 def contact_obstacles(obstacles: list[Obstacle], surface: ContactSurface) -> list[bool]:
@@ -61,11 +85,21 @@ def body_clearance(
     theta = np.atleast_2d(np.asarray(theta, dtype=float))
     T, n = theta.shape
     t = np.broadcast_to(np.asarray(t, dtype=float), (T,))
-    d = np.empty((T, n, len(obstacles)))
     if not obstacles or T == 0:
         none = np.zeros(T, dtype=np.int64)
-        return BodyClearance(d, np.full(T, np.nan), none, none - 1)
-    p = arm.joint_positions(theta)
+        return BodyClearance(np.empty((T, n, 0)), np.full(T, np.nan), none, none - 1)
+    d = _clearances(arm.joint_positions(theta), t, obstacles, radius, exempt)
+    flat = d.reshape(T, -1)
+    arg = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
+    m = len(obstacles)
+    return BodyClearance(d, flat[np.arange(T), arg], arg // m + 1, arg % m)
+
+
+def _clearances(p: np.ndarray, t: np.ndarray, obstacles, radius: float, exempt) -> np.ndarray:
+    """Clearance (T, n, o) [m] of the links between joint positions ``p`` (T, n+1, 2) [m] at
+    times ``t`` (T,) [s] (:func:`body_clearance`)."""
+    T, n = p.shape[0], p.shape[1] - 1
+    d = np.empty((T, n, len(obstacles)))
     P0 = p[:, :-1].reshape(-1, 2)
     P1 = p[:, 1:].reshape(-1, 2)
     ts = np.repeat(t, n)
@@ -74,7 +108,180 @@ def body_clearance(
         d[:, :, j] = dist.min(axis=1).reshape(T, n) - radius
         if exempt is not None and exempt[j]:
             d[:, n - 1, j] = np.inf
-    flat = d.reshape(T, -1)
-    arg = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
-    m = len(obstacles)
-    return BodyClearance(d, flat[np.arange(T), arg], arg // m + 1, arg % m)
+    return d
+
+
+class BodyCrossings(NamedTuple):
+    """Intervals between samples in which a link went inside an obstacle it was clear of at both
+    samples: per such interval, its index ``tick`` (from sample ``tick``), the first time ``t``
+    [s] the link was found inside (to :data:`SWEEP_TOL` of motion), the 1-based ``link`` and the
+    ``obstacle`` index (the earliest found, when several)."""
+
+    tick: np.ndarray
+    t: np.ndarray
+    link: np.ndarray
+    obstacle: np.ndarray
+
+
+def body_crossings(
+    arm: PlanarArm,
+    theta: np.ndarray,
+    t: np.ndarray,
+    dt: float,
+    obstacles: list[Obstacle],
+    radius: float = 0.0,
+    exempt: list[bool] | None = None,
+    theta_end: np.ndarray | None = None,
+    d_min: np.ndarray | None = None,
+) -> BodyCrossings:
+    """The body rule between the samples ``theta`` (T, n) [rad] at ``t`` (T,) [s]: joint angles
+    linear from one sample to the next, ``dt`` [s] apart, and on to ``theta_end`` (n,) [rad]
+    (the last command's motion, ``theta_{T-1} + dt v_{T-1}``) when given; obstacles translating
+    with their velocity; capsules of ``radius`` [m], ``exempt`` as :func:`body_clearance`.
+    ``d_min`` (T,) [m]: the samples' :attr:`BodyClearance.d_min` when known (the tick log's
+    ``d_body_min``); the intervals it proves clear for every link are not looked at again."""
+    theta = np.atleast_2d(np.asarray(theta, dtype=float))
+    t = np.asarray(t, dtype=float).reshape(-1)
+    known = np.full(len(theta), -np.inf) if d_min is None else np.asarray(d_min, dtype=float)
+    if theta_end is not None and len(theta):
+        theta = np.vstack([theta, np.asarray(theta_end, dtype=float)])
+        t = np.append(t, t[-1] + dt)
+        known = np.append(known, -np.inf)
+    n, o = theta.shape[1], len(obstacles)
+    found = _Found(max(len(theta) - 1, 0))
+    if len(theta) < 2 or not obstacles:
+        return found.crossings(t)
+    w = np.cumsum(np.diff(theta, axis=0) / dt, axis=1)  # absolute angular speed of each link
+    own = np.array([math.hypot(*ob.velocity) for ob in obstacles])
+    speed = np.cumsum(arm.lengths * np.abs(w), axis=1)[:, :, None] + own  # (K, n, o) [m/s]
+    accel = np.cumsum(arm.lengths * w**2, axis=1)  # (K, n) [m/s^2]
+    with np.errstate(invalid="ignore"):
+        skip = (known[:-1] + known[1:] - speed.max(axis=(1, 2)) * dt) / 2.0 > SWEEP_TOL
+    look = np.flatnonzero(~skip)  # the intervals to look at
+    rows = np.unique(np.concatenate([look, look + 1]))
+    at = np.zeros(len(theta), dtype=np.int64)
+    at[rows] = np.arange(rows.size)
+    p = arm.joint_positions(theta[rows])
+    d = _clearances(p, t[rows], obstacles, radius, exempt)
+    da, db, pa, pb = d[at[look]], d[at[look + 1]], p[at[look]], p[at[look + 1]]
+    vs = speed[look]
+    with np.errstate(invalid="ignore"):
+        clear = (da >= 0.0) & (db >= 0.0) & np.isfinite(da + db + vs)
+        proven = ((da + db - vs * dt) / 2.0 > SWEEP_TOL) | (vs == 0.0)
+    if theta_end is not None:  # the last motion ends inside: no later sample says so
+        i, j = np.nonzero((da[-1] >= 0.0) & (db[-1] < 0.0))
+        found.add(np.full(i.size, len(theta) - 2), np.full(i.size, dt), i, j)
+    q, i, j = np.nonzero(clear & ~proven)
+    zero = np.zeros(q.size)
+    piece = _Pieces(
+        look[q], i, j, zero, zero + dt, da[q, i, j], db[q, i, j], pa[q, i], pa[q, i + 1],
+        pb[q, i], pb[q, i + 1],
+    )  # fmt: skip
+    while piece.k.size:
+        piece = piece.take(piece.a < found.s[piece.k])
+        width, V = piece.b - piece.a, speed[piece.k, piece.i, piece.j]
+        bound = _bound(piece, V, accel, obstacles, t, radius)
+        piece = piece.take(~(bound > SWEEP_TOL) & (V * width > 0.0))
+        width, V = piece.b - piece.a, speed[piece.k, piece.i, piece.j]
+        key = (piece.k * n + piece.i) * o + piece.j
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+        last = (V * width <= SWEEP_TOL) | (width <= dt * 2.0**-52) | (counts[inverse] > MAX_PIECES)
+        _judge_last(piece.take(last), obstacles, t, found)
+        piece = _split(piece.take(~last), arm, theta, t, dt, obstacles, radius, found)
+    return found.crossings(t)
+
+
+class _Pieces(NamedTuple):
+    """Pieces ``[a, b]`` [s from the interval's start] of intervals ``k``, for link ``i``
+    (0-based) and obstacle ``j``: the clearances ``da, db`` [m] and the link's ends [m] there."""
+
+    k: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    da: np.ndarray
+    db: np.ndarray
+    P0a: np.ndarray
+    P1a: np.ndarray
+    P0b: np.ndarray
+    P1b: np.ndarray
+
+    def take(self, rows) -> _Pieces:
+        return _Pieces(*(x[rows] for x in self))
+
+    def in_frame(self, rows, obstacle: Obstacle, t: np.ndarray) -> tuple:
+        """The ``rows``' link ends at ``a`` and ``b`` in the obstacle's frame (it held as at
+        ``a``), and the time [s] of ``a`` (from the intervals' start times ``t``)."""
+        back = obstacle.velocity * (self.b[rows] - self.a[rows])[:, None]
+        at = t[self.k[rows]] + self.a[rows]
+        return self.P0a[rows], self.P1a[rows], self.P0b[rows] - back, self.P1b[rows] - back, at
+
+
+def _bound(piece: _Pieces, V, accel, obstacles, t, radius) -> np.ndarray:
+    """A lower bound [m] of each piece's clearance: the larger of the speed bound (``V`` [m/s])
+    and the sweep bound (``accel`` (K, n) [m/s^2]), as the module docstring says."""
+    width = piece.b - piece.a
+    bound = (piece.da + piece.db - V * width) / 2.0
+    sweep = ~(bound > SWEEP_TOL)
+    for jj in np.unique(piece.j[sweep]):
+        sel = np.flatnonzero(sweep & (piece.j == jj))
+        swept = obstacles[jj].swept_distance_bound(*piece.in_frame(sel, obstacles[jj], t))
+        delta = accel[piece.k[sel], piece.i[sel]] * width[sel] ** 2 / 8.0
+        bound[sel] = np.maximum(bound[sel], swept - radius - delta)
+    return bound
+
+
+class _Found:
+    """Per interval, the first time found inside [s from its start], its link and obstacle."""
+
+    def __init__(self, intervals: int):
+        self.s = np.full(intervals, np.inf)
+        self.i = np.zeros(intervals, dtype=np.int64)
+        self.j = np.zeros(intervals, dtype=np.int64)
+
+    def add(self, k, s, i, j) -> None:
+        earlier = s < self.s[k]
+        k, s, i, j = k[earlier], s[earlier], i[earlier], j[earlier]
+        order = np.lexsort((s, k))
+        _, first = np.unique(k[order], return_index=True)
+        rows = order[first]
+        self.s[k[rows]], self.i[k[rows]], self.j[k[rows]] = s[rows], i[rows], j[rows]
+
+    def crossings(self, t: np.ndarray) -> BodyCrossings:
+        k = np.flatnonzero(np.isfinite(self.s))
+        return BodyCrossings(k, t[k] + self.s[k], self.i[k] + 1, self.j[k])
+
+
+def _judge_last(piece: _Pieces, obstacles, t, found: _Found) -> None:
+    """Pieces not cut again: a point through the link (or the link's end through a bar) inside
+    them is a crossing, at the piece's middle."""
+    for jj in np.unique(piece.j):
+        sel = np.flatnonzero(piece.j == jj)
+        sel = sel[obstacles[jj].passed_through(*piece.in_frame(sel, obstacles[jj], t))]
+        mid = (piece.a[sel] + piece.b[sel]) / 2.0
+        found.add(piece.k[sel], mid, piece.i[sel], piece.j[sel])
+
+
+def _split(piece: _Pieces, arm, theta, t, dt, obstacles, radius, found: _Found) -> _Pieces:
+    """Cut each piece in halves; a link inside its obstacle at the cut is found there, and only
+    the first half, where it went in, is kept."""
+    if not piece.k.size:
+        return piece
+    m = (piece.a + piece.b) / 2.0
+    k, i = piece.k, piece.i
+    at = theta[k] + (m / dt)[:, None] * (theta[k + 1] - theta[k])
+    p = arm.joint_positions(at)
+    rows = np.arange(k.size)
+    P0m, P1m = p[rows, i], p[rows, i + 1]
+    dm = np.empty(k.size)
+    for jj in np.unique(piece.j):
+        sel = np.flatnonzero(piece.j == jj)
+        _, _, dist, _ = obstacles[jj].closest_on_segments(P0m[sel], P1m[sel], t[k[sel]] + m[sel])
+        dm[sel] = dist.min(axis=1) - radius
+    inside = dm < 0.0
+    found.add(k[inside], m[inside], i[inside], piece.j[inside])
+    first = _Pieces(k, i, piece.j, piece.a, m, piece.da, dm, piece.P0a, piece.P1a, P0m, P1m)
+    second = _Pieces(k, i, piece.j, m, piece.b, dm, piece.db, P0m, P1m, piece.P0b, piece.P1b)
+    second = second.take(~inside)
+    return _Pieces(*(np.concatenate([x, y]) for x, y in zip(first, second)))

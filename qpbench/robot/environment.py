@@ -9,7 +9,10 @@ read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
 Obstacles (:class:`Obstacle`) give, for key points or link segments, one or more obstacle points
 (the closest point of a shape, or each point of a cloud) and the signed distance [m] (negative
 inside; a ``line`` is a wall, a half-plane); they may translate with a constant ``velocity``
-[m/s].
+[m/s]. Between two samples, for the body rule (:func:`qpbench.robot.body.body_crossings`), each
+kind bounds its distance to a segment swept with linearly moving ends from below
+(:meth:`Obstacle.swept_distance_bound`) and says whether a point passed through the segment or
+the segment through a point (:meth:`Obstacle.passed_through`).
 """
 
 from __future__ import annotations
@@ -117,6 +120,20 @@ class Obstacle:
         inside, by that depth) and ``u`` (s, m, 2), the way moving ``A`` increases ``dist``."""
         raise NotImplementedError
 
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t) -> np.ndarray:
+        """A lower bound [m] of the signed distance (as :meth:`closest_on_segments`, smallest over
+        the obstacle's points) to every segment ``P0(l) -> P1(l)``, ``P(l) = (1 - l) Pa + l Pb``
+        for ``l`` in [0, 1] (ends (s, 2) [m]), the obstacle held as at ``t`` [s]: the sweep of a
+        link in the obstacle's frame. Exact where the kind says so; a value ``<= 0`` says the
+        sweep may reach the obstacle (a bar's says no more: not how deep)."""
+        raise NotImplementedError
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t) -> np.ndarray:
+        """Per sweep (as :meth:`swept_distance_bound`), ``True`` where a point of the obstacle
+        went from one side of the segment to the other within it, or an end of the segment
+        through the obstacle's outline (the crossings a shape without inside makes)."""
+        raise NotImplementedError
+
     def _at(self, start: np.ndarray, t, s: int) -> np.ndarray:
         """``start + velocity * t`` for each of ``s`` segments, shape (s, 2)."""
         t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
@@ -158,6 +175,16 @@ class LineObstacle(Obstacle):
         u = np.broadcast_to(self.normal, A.shape).copy()
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
 
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
+        """Exact: the signed distance of a point is linear along the sweep, so its least is at
+        one of the four ends (a half-plane cannot be passed through)."""
+        p = self._at(self.point, t, np.shape(P0a)[0])
+        ends = np.stack([P0a, P1a, P0b, P1b], axis=1) - p[:, None, :]
+        return np.einsum("sei,i->se", ends, self.normal).min(axis=1)
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t):
+        return np.zeros(np.shape(P0a)[0], dtype=bool)
+
 
 class SegmentObstacle(Obstacle):
     """A segment from ``a`` to ``b`` (a thin bar)."""
@@ -198,6 +225,36 @@ class SegmentObstacle(Obstacle):
         dist = np.where(crossing, -dist, dist)
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
 
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
+        """The closest pair of two segments has an end of one on the other: the link's ends run
+        along the chords ``P0a -> P0b`` and ``P1a -> P1b``, the bar's ends are points swept over
+        (:func:`_swept_point_bound`). Positive, no crossing begins in the sweep (one begins with
+        an end on the other), nor is there one at its ends (their signed distances are in the
+        bound); ``<= 0`` otherwise."""
+        a = self._at(self.a, t, len(P0a))
+        b = a + (self.b - self.a)
+        return np.minimum.reduce(
+            [
+                _segment_distance(P0a, P0b, a, b),
+                _segment_distance(P1a, P1b, a, b),
+                _swept_point_bound(a, P0a, P1a, P0b, P1b),
+                _swept_point_bound(b, P0a, P1a, P0b, P1b),
+                self.closest_on_segments(P0a, P1a, t)[2][:, 0],
+                self.closest_on_segments(P0b, P1b, t)[2][:, 0],
+            ]
+        )
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t):
+        """An end of the bar through the link, or an end of the link through the bar."""
+        a = self._at(self.a, t, len(P0a))
+        b = a + (self.b - self.a)
+        return (
+            _passes_through(a, a, P0a, P1a, P0b, P1b)
+            | _passes_through(b, b, P0a, P1a, P0b, P1b)
+            | _passes_through(P0a, P0b, a, b, a, b)
+            | _passes_through(P1a, P1b, a, b, a, b)
+        )
+
 
 class DiskObstacle(Obstacle):
     """A disk of centre ``center`` and radius ``radius`` in [m]."""
@@ -221,6 +278,14 @@ class DiskObstacle(Obstacle):
         u = _normal_where_zero(u, P0, P1)
         B = c + self.radius * u
         return A[:, None, :], B[:, None, :], dist[:, None], u[:, None, :]
+
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
+        c = self._at(self.center, t, len(P0a))
+        return _swept_point_bound(c, P0a, P1a, P0b, P1b) - self.radius
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t):
+        c = self._at(self.center, t, len(P0a))
+        return _passes_through(c, c, P0a, P1a, P0b, P1b)
 
 
 class PointCloudObstacle(Obstacle):
@@ -252,6 +317,22 @@ class PointCloudObstacle(Obstacle):
         u = _normal_where_zero(u, Q0, Q1)
         return A.reshape(s, m, 2), C, dist.reshape(s, m), u.reshape(s, m, 2)
 
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
+        C, ends = self._each_point(t, P0a, P1a, P0b, P1b)
+        return _swept_point_bound(C, *ends).reshape(-1, self.n_points).min(axis=1)
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t):
+        C, ends = self._each_point(t, P0a, P1a, P0b, P1b)
+        return _passes_through(C, C, *ends).reshape(-1, self.n_points).any(axis=1)
+
+    def _each_point(self, t, *ends):
+        """The cloud's points at ``t`` [s] (s * m, 2) and each of the ``ends`` (s, 2) repeated
+        for each point, (s * m, 2)."""
+        s, m = len(ends[0]), self.n_points
+        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
+        C = (self.points[None, :, :] + t[:, None, None] * self.velocity).reshape(-1, 2)
+        return C, [np.repeat(np.asarray(E, dtype=float), m, axis=0) for E in ends]
+
     def primitives(self) -> np.ndarray:
         m = self.n_points
         rows = np.zeros((m, len(OBSTACLE_COLUMNS)))
@@ -279,6 +360,81 @@ def _segments_cross(P0, P1, Q0, Q1) -> np.ndarray:
     s1, s2 = _cross(e, Q0 - P0), _cross(e, Q1 - P0)
     s3, s4 = _cross(f, P0 - Q0), _cross(f, P1 - Q0)
     return (s1 * s2 < 0) & (s3 * s4 < 0)
+
+
+def _point_segment_distance(X, P0, P1) -> np.ndarray:
+    """Distance [m] of each point ``X`` to its segment ``P0 -> P1`` (all (s, 2))."""
+    return np.linalg.norm(X - _foot(X, P0, P1), axis=1)
+
+
+def _segment_distance(P0, P1, Q0, Q1) -> np.ndarray:
+    """Distance [m] between segments ``P0 -> P1`` and ``Q0 -> Q1`` (0 where they cross)."""
+    ends = np.minimum.reduce(
+        [
+            _point_segment_distance(P0, Q0, Q1),
+            _point_segment_distance(P1, Q0, Q1),
+            _point_segment_distance(Q0, P0, P1),
+            _point_segment_distance(Q1, P0, P1),
+        ]
+    )
+    return np.where(_segments_cross(P0, P1, Q0, Q1), 0.0, ends)
+
+
+def _swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
+    """A lower bound [m] of the distance of points ``C`` to the segments ``P0(l) -> P1(l)``,
+    ``P(l) = (1 - l) Pa + l Pb``, ``l`` in [0, 1] (all (s, 2)); 0 where one passes over ``C``.
+
+    The closest point of segment ``l`` is an end (on a chord ``P0a -> P0b`` or ``P1a -> P1b``)
+    or its foot, at distance ``|g(l)| / |e(l)|``: ``e(l) = P1(l) - P0(l)``, ``g(l) = e(l) x (C -
+    P0(l))`` a quadratic in ``l`` (its least magnitude on [0, 1] from its ends and its vertex)
+    and ``|e(l)|`` convex (at most its larger end). For a rigid link that moves little between
+    ``a`` and ``b`` the bound is within the square of that motion of the exact least distance.
+    """
+    Q, D0 = C - P0a, P0b - P0a
+    E = P1a - P0a
+    DE = (P1b - P0b) - E
+    c0 = _cross(E, Q)
+    c1 = _cross(DE, Q) - _cross(E, D0)
+    c2 = -_cross(DE, D0)
+    g1 = c0 + c1 + c2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lv = np.where(c2 != 0.0, -c1 / (2.0 * c2), -1.0)
+    vertex = (lv > 0.0) & (lv < 1.0)
+    gv = c0 + lv * (c1 + lv * c2)
+    root = (c0 * g1 <= 0.0) | (vertex & (gv * c0 <= 0.0))
+    least = np.minimum(np.abs(c0), np.abs(g1))
+    least = np.where(vertex, np.minimum(least, np.abs(gv)), least)
+    e_max = np.maximum(np.linalg.norm(E, axis=1), np.linalg.norm(E + DE, axis=1))
+    interior = np.where(root, 0.0, least / np.where(e_max > 0, e_max, 1.0))
+    return np.minimum.reduce(
+        [
+            interior,
+            _point_segment_distance(C, P0a, P0b),
+            _point_segment_distance(C, P1a, P1b),
+        ]
+    )
+
+
+#: Slack [m] of "within the segment" in :func:`_passes_through` (rounding at a segment's end).
+PASS_TOL = 1e-12
+
+
+def _passes_through(Xa, Xb, P0a, P1a, P0b, P1b) -> np.ndarray:
+    """Point ``X`` moving from ``Xa`` to ``Xb`` while its segment moves from ``P0a -> P1a`` to
+    ``P0b -> P1b`` (all (s, 2)): ``True`` where the side of ``X`` changes sign (or is 0 at one
+    end: on the segment there) and ``X`` projects within the segment at both ends (to
+    :data:`PASS_TOL`): over a motion short against the distances involved, it went through the
+    segment."""
+    ea, eb = P1a - P0a, P1b - P0b
+    ha, hb = _cross(ea, Xa - P0a), _cross(eb, Xb - P0b)
+
+    def within(X, P0, e):
+        length = np.linalg.norm(e, axis=1)
+        along = np.einsum("si,si->s", X - P0, e) / np.where(length > 0, length, 1.0)
+        return (along >= -PASS_TOL) & (along <= length + PASS_TOL)
+
+    sides = (ha * hb <= 0.0) & ((ha != 0.0) | (hb != 0.0))
+    return sides & within(Xa, P0a, ea) & within(Xb, P0b, eb)
 
 
 def _normal_where_zero(u: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> np.ndarray:

@@ -15,8 +15,11 @@ figure does not exist); a row of ``closed_loop.csv`` or ``sweep.csv`` is that di
   ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations beyond
   :data:`VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
 - ``min_obstacle_distance`` [m] of the key points; ``min_body_distance`` [m] of the link
-  capsules (< 0 inside, :mod:`qpbench.robot.body`); ``obstacle_active_intervals``: per
-  (key point, obstacle), when within :data:`ACTIVE_MARGIN` of ``d_safe``.
+  capsules (< 0 inside, :mod:`qpbench.robot.body`); ``body_crossings``: intervals between ticks
+  in which a link went inside an obstacle it was clear of at both ticks, the first at
+  ``body_crossing_t`` [s] (``body_crossing_link``, ``body_crossing_obstacle``);
+  ``obstacle_active_intervals``: per (key point, obstacle), when within :data:`ACTIVE_MARGIN` of
+  ``d_safe``.
 - ``verdict``, ``verdict_reasons``, ``key_point_rule`` and ``realtime``, ``realtime_solver``:
   :mod:`qpbench.sim.verdict` on these figures and on the worst cases it names (computed here,
   not in the row).
@@ -30,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..control.controller import Controller
+from ..robot.body import body_crossings
 from ..statuses import INFEASIBLE_OR_UNCLASSIFIED
 from . import log
 from .scenario import Scenario
@@ -119,7 +123,7 @@ def summarize(
     closest, active, below = _obstacle_figures(frame, t, dcols, controller.d_safe, margin)
     out.update(closest)
     judged.update(below)
-    body, inside = _body_figures(frame, t, {o.name: o.KIND for o in controller.obstacles})
+    body, inside = _body_figures(frame, t, controller, dt)
     out.update(body)
     judged.update(inside, joints=controller.n)
     out["key_points_kind"] = controller.key_points.kind
@@ -278,15 +282,22 @@ def _obstacle_figures(
     return closest, {"obstacle_active_intervals": active}, rule
 
 
-def _body_figures(frame: pd.DataFrame, t: np.ndarray, kinds: dict[str, str]) -> tuple[dict, dict]:
+def _body_figures(
+    frame: pd.DataFrame, t: np.ndarray, controller: Controller, dt: float
+) -> tuple[dict, dict]:
     """The body's closest approach to an obstacle (``d_body_*`` columns of the log): the
     clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles.
-    For the verdict, that obstacle's kind (``kinds`` by name), the ticks with the body inside
-    an obstacle and the first of them [s]."""
+    The intervals between ticks (``dt`` [s], the last command's included) in which a link went
+    inside an obstacle it was clear of at both ticks (:func:`~qpbench.robot.body.body_crossings`
+    on the logged angles): how many, and the first one's time [s], link and obstacle.
+    For the verdict, the obstacles' kinds, the ticks with the body inside an obstacle and the
+    first of them [s]."""
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
+    crossed = _crossing_figures(frame, t, controller, dt)
     if not np.isfinite(d).any():
         none = dict.fromkeys(f"min_body_distance{s}" for s in ("", "_link", "_obstacle", "_t"))
-        return none, {"body_inside_ticks": 0}
+        return {**none, **crossed}, {"body_inside_ticks": 0}
+    kinds = {o.name: o.KIND for o in controller.obstacles}
     k = int(np.nanargmin(d))
     name = str(frame[log.D_BODY_OBSTACLE].iloc[k])
     out = {
@@ -294,10 +305,44 @@ def _body_figures(frame: pd.DataFrame, t: np.ndarray, kinds: dict[str, str]) -> 
         "min_body_distance_link": int(frame[log.D_BODY_LINK].iloc[k]),
         "min_body_distance_obstacle": name,
         "min_body_distance_t": _none(t[k]),
+        **crossed,
     }
     inside, first = _first(d < 0.0, t)
     judged = {"body_inside_ticks": inside, "body_inside_first_t": first}
-    return out, {**judged, "min_body_distance_kind": kinds[name]}
+    judged["min_body_distance_kind"] = kinds[name]
+    judged["body_crossing_kind"] = kinds.get(crossed["body_crossing_obstacle"])
+    return out, judged
+
+
+def _crossing_figures(
+    frame: pd.DataFrame, t: np.ndarray, controller: Controller, dt: float
+) -> dict:
+    """``body_crossings`` (intervals) and the first one's ``body_crossing_t`` [s],
+    ``body_crossing_link`` (1-based) and ``body_crossing_obstacle`` (``None`` without one)."""
+    n = controller.n
+    theta = frame[log.theta_columns(n)].to_numpy(dtype=float)
+    v = frame[log.velocity_columns(n)].to_numpy(dtype=float)
+    found = body_crossings(
+        controller.arm,
+        theta,
+        t,
+        dt,
+        controller.obstacles,
+        controller.key_points.radius,
+        controller.exempt,
+        theta_end=theta[-1] + dt * v[-1] if len(theta) else None,
+        d_min=frame[log.D_BODY_MIN].to_numpy(dtype=float),
+    )
+    if not found.tick.size:
+        none = dict.fromkeys(f"body_crossing_{s}" for s in ("t", "link", "obstacle"))
+        return {"body_crossings": 0, **none}
+    first = int(np.argmin(found.t))
+    return {
+        "body_crossings": int(found.tick.size),
+        "body_crossing_t": float(found.t[first]),
+        "body_crossing_link": int(found.link[first]),
+        "body_crossing_obstacle": controller.obstacles[found.obstacle[first]].name,
+    }
 
 
 def _limit_figures(frame: pd.DataFrame, t: np.ndarray, limits) -> tuple[dict, dict]:

@@ -98,16 +98,25 @@ def _failed_reasons(summary: dict) -> list[str]:
 
 
 def _unsafe_reasons(s: dict) -> list[str]:
-    """The body rule: a link's capsule inside an obstacle (``d_body_min < 0``) at some tick."""
-    if not s["body_inside_ticks"]:
-        return []
-    where = link_label(s["min_body_distance_link"], s["joints"])
-    name, kind = s["min_body_distance_obstacle"], s["min_body_distance_kind"]
-    return [
-        f"{where} {-s['min_body_distance'] * 1e3:.1f} mm inside {kind} '{name}' at "
-        f"{s['min_body_distance_t']:.2f} s (the body inside an obstacle on "
-        f"{_n(s['body_inside_ticks'], 'tick')} from {s['body_inside_first_t']:.3f} s)"
-    ]
+    """The body rule: a link's capsule inside an obstacle (``d_body_min < 0``) at some tick, or
+    between two ticks at which it was clear of it (``body_crossings``)."""
+    out = []
+    if s["body_inside_ticks"]:
+        where = link_label(s["min_body_distance_link"], s["joints"])
+        name, kind = s["min_body_distance_obstacle"], s["min_body_distance_kind"]
+        out.append(
+            f"{where} {-s['min_body_distance'] * 1e3:.1f} mm inside {kind} '{name}' at "
+            f"{s['min_body_distance_t']:.2f} s (the body inside an obstacle on "
+            f"{_n(s['body_inside_ticks'], 'tick')} from {s['body_inside_first_t']:.3f} s)"
+        )
+    if s.get("body_crossings"):
+        where = link_label(s["body_crossing_link"], s["joints"])
+        name, kind = s["body_crossing_obstacle"], s["body_crossing_kind"]
+        out.append(
+            f"{where} inside {kind} '{name}' at {s['body_crossing_t']:.4f} s, between two ticks "
+            f"clear of it ({_n(s['body_crossings'], 'such interval')})"
+        )
+    return out
 
 
 def key_point_rule(s: dict, margin: float) -> tuple[str, str]:
