@@ -69,6 +69,8 @@ COLUMNS = (
     "v2_integral",
     "solve_time_median_s",
     "solve_time_p99_s",
+    "solve_time_p99_lo_s",
+    "solve_time_p99_hi_s",
     "solve_time_max_s",
     "over_dt_share",
     "solver_time_p99_s",
