@@ -163,6 +163,8 @@ SUMMARY_TIME_KEYS = frozenset(
         "real_time_factor",
         "solve_time_median_s",
         "solve_time_p99_s",
+        "solve_time_p99_lo_s",
+        "solve_time_p99_hi_s",
         "solve_time_max_s",
         "deadline_misses",
         "over_dt_share",

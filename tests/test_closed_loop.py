@@ -253,6 +253,8 @@ PLUGIN = str(Path(fb.__file__).resolve())
 TIMED = (
     "solve_time_median_s",
     "solve_time_p99_s",
+    "solve_time_p99_lo_s",
+    "solve_time_p99_hi_s",
     "solve_time_max_s",
     "real_time_factor",
     "wall_time_s",

@@ -55,6 +55,8 @@ SLICE = {
         "wall",
         "--backends",
         "qpsolvers:daqp,pinv",
+        "--sweep-budget",
+        "2",
     ],
     "scaling": ["--sizes", "n4-p1-m1", "--duration", "0.05", "--repeat", "1"],
     "sweep": ["--samples", "2", "--duration", "0.05"],

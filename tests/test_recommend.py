@@ -63,11 +63,14 @@ def test_ranked_by_p99_call_time_with_the_solvers_own_beside():
     text = rec.render(answer)
     assert text.splitlines()[0] == "Recommendation"
     (table_md,) = parse_tables(rec.render(answer, markdown=True))
-    assert table_md["header"] == ["rank", "backend", "call p99 (us)", "solver p99 (us)"]
+    assert table_md["header"] == [
+        "rank", "backend", "call p99 (us)", "95 % interval (us)", "solver p99 (us)",
+        "perturbed ok", "ok bound",
+    ]  # fmt: skip
     assert table_md["rows"] == [
-        ["1", "mid", "90", "30"],
-        ["2", "fast", "120", "-"],
-        ["3", "slow", "300", "100"],
+        ["1", "mid", "90", "-", "30", "-", "-"],
+        ["2", "fast", "120", "-", "-", "-", "-"],
+        ["3", "slow", "300", "-", "100", "-", "-"],
     ]
 
 
@@ -301,3 +304,154 @@ def test_the_report_opens_with_the_answer(closed_loop_csv, tmp_path):
             "p99 1.8 ms > 1 ms",
         ],
     ]
+
+
+def timed(scenario, backend, p99, lo, hi, **extra):
+    """A run whose p99 call time [s] has the interval ``[lo, hi]``."""
+    return run(scenario, backend, p99=p99, solve_time_p99_lo_s=lo, solve_time_p99_hi_s=hi, **extra)
+
+
+def test_overlapping_intervals_share_a_rank():
+    table = pd.DataFrame(
+        [
+            timed("wall", "a", 10e-6, 8e-6, 12e-6),
+            timed("wall", "b", 11e-6, 9e-6, 14e-6),  # overlaps a
+            timed("wall", "c", 30e-6, 28e-6, 33e-6),  # apart
+            timed("wall", "d", 40e-6, 34e-6, 45e-6),  # overlaps e only
+            timed("wall", "e", 44e-6, 42e-6, 60e-6),  # overlaps d and f: d, e, f chain
+            timed("wall", "f", 58e-6, 55e-6, 70e-6),
+            timed("wall", "g", 90e-6, 90e-6, 95e-6),
+        ]
+    )
+    picks = rec.recommend(table).overall.recommended
+    assert [(p.backend, p.rank_text) for p in picks] == [
+        ("a", "1="), ("b", "1="), ("c", "3"), ("d", "4="), ("e", "4="), ("f", "4="), ("g", "7"),
+    ]  # fmt: skip
+    (md,) = parse_tables(rec.render(rec.recommend(table), markdown=True))
+    assert [r[0] for r in md["rows"]] == ["1=", "1=", "3", "4=", "4=", "4=", "7"]
+    assert md["rows"][1][3] == "9-14"
+
+
+def test_a_backend_interval_is_that_of_its_largest_p99():
+    """The largest of several p99s, each in its interval, lies in [largest low, largest high]."""
+    table = pd.DataFrame(
+        [
+            timed("wall", "a", 10e-6, 5e-6, 30e-6),
+            timed("narrow", "a", 20e-6, 18e-6, 22e-6),
+            timed("wall", "b", 25e-6, 24e-6, 26e-6),
+            timed("narrow", "b", 23e-6, 23e-6, 25e-6),
+        ]
+    )
+    a, b = rec.recommend(table).overall.recommended
+    assert (a.call_p99_s, a.call_p99_lo_s, a.call_p99_hi_s) == (20e-6, 18e-6, 30e-6)
+    assert (b.call_p99_s, b.call_p99_lo_s, b.call_p99_hi_s) == (25e-6, 24e-6, 26e-6)
+    assert a.rank == b.rank == 1 and a.tied and b.tied
+
+
+def wilson_closed_form(k, n, z=1.959963984540054):
+    """The Wilson score interval's lower end, from its formula."""
+    p = k / n
+    centre = p + z * z / (2 * n)
+    spread = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return (centre - spread) / (1 + z * z / n)
+
+
+@pytest.mark.parametrize("k, n", [(19, 20), (73, 73), (140, 142), (0, 5), (497, 500)])
+def test_the_wilson_bound_is_the_formula(k, n):
+    from qpbench.report.tables import wilson
+
+    assert wilson(k, n)[0] == pytest.approx(wilson_closed_form(k, n), abs=1e-12)
+
+
+def test_least_runs_is_the_first_count_whose_bound_reaches():
+    assert [rec.least_runs(0.95, f) for f in (0, 1, 2)] == [73, 110, 142]
+    assert rec.least_runs(0.99) == 381
+    for bound, f in ((0.95, 0), (0.95, 2), (0.99, 0), (0.9, 1)):
+        n = rec.least_runs(bound, f)
+        assert wilson_closed_form(n - f, n) >= bound > wilson_closed_form(n - 1 - f, n - 1)
+    with pytest.raises(Exception, match="between 0 and 1"):
+        rec.check_bound(1.0)
+
+
+def sweep_rows(scenario, backend, ok, not_ok=0, verdict="diverged"):
+    """Perturbed runs of ``backend`` around ``scenario``: ``ok`` ok, ``not_ok`` with ``verdict``."""
+    rows = []
+    for i in range(ok + not_ok):
+        bad = i >= ok
+        rows.append(
+            {
+                "instance": f"i{i:05d}",
+                "backend": backend,
+                "instance_file": f"instances/i{i:05d}.toml",
+                "sample": i,
+                "base_scenario": scenario,
+                "status": "ok",
+                "error": math.nan,
+                "verdict": verdict if bad else "ok",
+                "verdict_reasons": "force error 9 N > 2 N after 2 s" if bad else math.nan,
+                "min_obstacle_distance": 0.0102 - (0.0001 if i == 3 else 0.0),
+                "d_safe": 0.01,
+                "tracking_max_after_2s": 1e-7,
+                "folder": f"out/perturbed/{scenario}",
+                "seed": 7,
+            }
+        )
+    return rows
+
+
+def test_nineteen_of_twenty_ok_perturbed_runs_are_not_enough_at_095():
+    table = pd.DataFrame([run("wall", "a", p99=20e-6), run("wall", "b", p99=30e-6)])
+    sweeps = pd.DataFrame(sweep_rows("wall", "a", 19, 1) + sweep_rows("wall", "b", 80))
+    answer = rec.recommend(table, sweeps, 0.95)
+    assert answer.swept == ("wall",)
+    assert answer.overall.backends == ["b"]  # 80 of 80: bound 0.954
+    (short,) = answer.overall.short
+    e = short.weakest
+    assert (short.backend, e.runs, e.ok) == ("a", 20, 19)
+    assert e.bound == pytest.approx(wilson_closed_form(19, 20)) and e.bound < 0.95
+    # the worst perturbed run: the not-ok one, with the command that re-runs it
+    assert e.worst["instance"] == "i00019" and e.worst["verdict"] == "diverged"
+    text = rec.render(answer)
+    assert "Not enough evidence" in text
+    assert (
+        "qpbench simulate --scenario out/perturbed/wall/instances/i00019.toml --backend a" in text
+    )
+    assert "wall i00003 (seed 7, sample 3)" in text  # b's worst: the closest to d_safe
+    # with as many runs as the threshold asks and still below it: not recommended, and why
+    sweeps = pd.DataFrame(sweep_rows("wall", "a", 130, 12) + sweep_rows("wall", "b", 80))
+    answer = rec.recommend(table, sweeps, 0.95)
+    assert answer.overall.not_recommended["a"] == (
+        f"perturbed wall: 130 of 142 ok, bound {wilson_closed_form(130, 142):.3f} < 0.95",
+    )
+    # a stricter threshold: 80 all ok are too few for 0.99
+    assert rec.recommend(table, sweeps, 0.99).overall.backends == []
+
+
+def test_a_swept_scenario_without_runs_of_a_backend_gives_no_evidence():
+    table = pd.DataFrame([run("wall", "a"), run("narrow", "a")])
+    sweeps = pd.DataFrame(sweep_rows("wall", "a", 80))
+    sweeps.attrs["swept"] = ["wall", "narrow"]
+    answer = rec.recommend(table, sweeps)
+    assert answer.overall.backends == [] and [p.backend for p in answer.overall.short] == ["a"]
+    sentence = rec.no_answer(answer)
+    assert sentence.startswith("No recommendation: a passed every run") and "\n" not in sentence
+    assert "a in narrow: 0 of 0 ok" in sentence and "--sweep-budget" in sentence
+    # without perturbed runs the answer rests on the nominal runs and says so
+    assert rec.recommend(table).overall.backends == ["a"]
+    assert "no perturbed runs" in rec.render(rec.recommend(table))
+
+
+def test_no_answer_is_one_sentence_saying_why():
+    late = pd.DataFrame(
+        [
+            run("wall", "a", realtime="no", realtime_reason="3 of 1000 ticks over dt"),
+            run("wall", "b", verdict="unsafe"),
+        ]
+    )
+    sentence = rec.no_answer(rec.recommend(late))
+    assert sentence.startswith("No recommendation from this machine: a had verdict ok")
+    assert "(a in wall: 3 of 1000 ticks over dt)" in sentence and sentence.count(". ") == 0
+    unsafe = pd.DataFrame([run("wall", "b", verdict="unsafe")])
+    assert rec.no_answer(rec.recommend(unsafe)) == (
+        "No backend was ok and real time in every run of all scenarios (wall)."
+    )

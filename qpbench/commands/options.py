@@ -77,6 +77,14 @@ SHARED: dict[str, dict] = {
     },
     "--every": {"type": int, "metavar": "K", "help": "keep every K-th problem"},
     "--limit": {"type": int, "metavar": "N", "help": "keep the first N problems"},
+    "--min-ok-bound": {
+        "type": float,
+        "default": 0.95,
+        "metavar": "P",
+        "help": "recommend a backend only when, in every scenario with perturbed runs, the "
+        "Wilson lower bound (95 %% interval) of its share of ok runs is at least P (default: "
+        "0.95: at least 73 perturbed runs a scenario, all ok; 0.99: 381)",
+    },
     "--memory-budget": {
         "metavar": "SIZE",
         "help": "bytes a step may allocate, e.g. 2GB, 512MB, 1.5GiB (default: "
@@ -116,18 +124,25 @@ def check_tables(folder, names, args: argparse.Namespace, key: str = "out") -> N
 
 
 def strict_exit(
-    args: argparse.Namespace, *, runs=None, failed_solves: int = 0, recommend: bool = False
+    args: argparse.Namespace,
+    *,
+    runs=None,
+    failed_solves: int = 0,
+    recommend: bool = False,
+    sweeps=None,
 ) -> int:
     """0 once the outputs are written; with ``--strict``, 1 when ``runs`` (closed-loop or sweep
     rows) or ``failed_solves`` fall short, said in one line on stderr. ``recommend``: then print
-    the recommendation from ``runs`` as the last lines."""
+    the recommendation from ``runs`` (and the perturbed runs ``sweeps``, judged on
+    ``args.min_ok_bound``) as the last lines."""
     from ..report import recommend as rec
 
     found = rec.shortfalls(runs, failed_solves) if getattr(args, "strict", False) else None
     if found:
         print(f"qpbench {args.command}: --strict: {'; '.join(found)}", file=sys.stderr)
     if recommend and not args.quiet:
-        print(rec.render(rec.recommend(runs)), end="")
+        bound = getattr(args, "min_ok_bound", rec.MIN_OK_BOUND)
+        print(rec.render(rec.recommend(runs, sweeps, bound)), end="")
     return 1 if found else 0
 
 

@@ -21,6 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add(parser, "--out", help="folder of report.md and plots/")
     add(parser, "--force", help="replace an existing report.md")
     parser.add_argument("--no-plots", action="store_true", help="write report.md only")
+    add(parser, "--min-ok-bound")
     parser.add_argument(
         "--prefer",
         choices=("first", "last"),
@@ -31,10 +32,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..report.recommend import check_bound
     from ..report.write import write_report
     from ..scaling.report import is_scaling_dir, write_scaling_report
     from ..sweep.report import split_sweep_paths, sweep_section
 
+    check_bound(args.min_ok_bound)
     plots = not args.no_plots
     # folders written by ``qpbench scaling``, tables by ``qpbench sweep``: their own sections
     scaling = [r for r in args.results if is_scaling_dir(r)]
@@ -45,5 +48,6 @@ def run(args: argparse.Namespace) -> int:
         rest, sweeps = split_sweep_paths(others)
         sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
         kw = {"prefer": args.prefer, "sections": sections, "files": sweeps}
+        kw["min_ok_bound"] = args.min_ok_bound
         write_report(rest, args.out, force=args.force, plots=plots, **kw)
     return 0

@@ -6,7 +6,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..harness.pipeline import BENCH_EVERY, LOOP_JOBS, REPEAT, RUN_BUDGET_S, default_jobs
+from ..harness.pipeline import (
+    BENCH_EVERY,
+    LOOP_JOBS,
+    REPEAT,
+    RUN_BUDGET_S,
+    SWEEP_BUDGET_S,
+    default_jobs,
+)
 from .options import add, add_force_resume, log, pick, strict_exit
 
 HELP = (
@@ -15,13 +22,26 @@ HELP = (
 )
 EXAMPLE = "qpbench run    (quick: qpbench run --quick)"
 
+#: Wall time of a quick run's perturbed runs [s].
+QUICK_SWEEP_BUDGET_S = 30.0
 #: What ``--quick`` sets, unless given: a short run of every scenario with a few fast backends
 #: that need no compiled kernel of their own, into ``./quick`` (``results/`` is left alone).
 QUICK = dict(
-    out="quick", backends="daqp,osqp,clarabel,pinv", duration=1.0, bench_every=10, repeat=1
+    out="quick",
+    backends="daqp,osqp,clarabel,pinv",
+    duration=1.0,
+    bench_every=10,
+    repeat=1,
+    sweep_budget=QUICK_SWEEP_BUDGET_S,
 )
 #: The defaults without ``--quick``.
-FULL = dict(out="results", backends="all", bench_every=BENCH_EVERY, repeat=REPEAT)
+FULL = dict(
+    out="results",
+    backends="all",
+    bench_every=BENCH_EVERY,
+    repeat=REPEAT,
+    sweep_budget=SWEEP_BUDGET_S,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,6 +94,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(simulated_s). 0: no budget (slow backends then take minutes per scenario)",
     )
     parser.add_argument(
+        "--sweep-budget",
+        type=float,
+        metavar="S",
+        help=f"wall time of the perturbed runs in [s] (default: {SWEEP_BUDGET_S:g}, "
+        f"{QUICK_SWEEP_BUDGET_S:g} with --quick): each backend ok and real time in every run gets "
+        "the instances of <problems>/sweeps/<scenario>.toml the budget buys, cheapest first "
+        "(docs/sweeps.md)",
+    )
+    add(parser, "--min-ok-bound")
+    parser.add_argument(
         "--repeat",
         type=int,
         metavar="R",
@@ -99,8 +129,9 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from ..harness.closed_loop import CSV_NAME, log_row
-    from ..harness.pipeline import RunConfig, run_all
+    from ..harness.pipeline import PERTURBED, RunConfig, run_all
     from ..memory import resolve_budget
+    from ..report.recommend import read_sweeps
     from ..selection import select_backends, select_scenarios
     from ..sim.scenario import run_scenarios
 
@@ -115,7 +146,9 @@ def run(args: argparse.Namespace) -> int:
         scenarios=[],
         backends=[],
         memory_budget=resolve_budget(args.memory_budget),
-        **pick(args, "duration bench_every repeat jobs force resume engine"),
+        **pick(
+            args, "duration bench_every repeat jobs force resume sweep_budget min_ok_bound engine"
+        ),
         on_row=lambda row: (
             log_row(log, row) if row.get("verdict") not in ("ok", "", None) else None
         ),
@@ -125,5 +158,7 @@ def run(args: argparse.Namespace) -> int:
     outcome = run_all(config)
     log.info("qpbench run: %s in %.0f s; report %s", args.out, outcome.wall_time_s, outcome.report)
     table = pd.read_csv(Path(args.out) / CSV_NAME)
+    sweeps = read_sweeps(sorted((Path(args.out) / PERTURBED).glob("*/sweep.csv")))
     # the exit code, then the recommendation as the last lines printed
-    return strict_exit(args, runs=table, failed_solves=outcome.failed_solves, recommend=True)
+    kw = dict(runs=table, failed_solves=outcome.failed_solves, recommend=True, sweeps=sweeps)
+    return strict_exit(args, **kw)

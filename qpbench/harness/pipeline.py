@@ -11,13 +11,14 @@ import shutil
 import sys
 import time
 from collections.abc import Callable
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..atomic import promote, record, write_text
 from ..exceptions import positive_count, positive_seconds
+from ..report.recommend import MIN_OK_BOUND, check_bound
 
 if TYPE_CHECKING:
     from ..formats import ProblemSet
@@ -25,7 +26,22 @@ if TYPE_CHECKING:
 log = logging.getLogger("qpbench.run")
 
 #: Outputs of a run inside ``--out`` (replaced as a whole at the end of a run).
-OUTPUTS = ("bench", "logs", "figure_logs", "plots", "closed_loop.csv", "report.md", "run.json")
+OUTPUTS = (
+    "bench",
+    "logs",
+    "figure_logs",
+    "perturbed",
+    "plots",
+    "closed_loop.csv",
+    "report.md",
+    "run.json",
+)
+#: Folder of the perturbed runs inside ``--out``: ``perturbed/<scenario>/``, a sweep's folder each.
+PERTURBED = "perturbed"
+#: Wall time of the perturbed runs of ``run`` [s] (``--sweep-budget``).
+SWEEP_BUDGET_S = 60.0
+#: Instances sampled at a time while looking for the valid ones a sweep needs.
+SAMPLE_CHUNK = 16
 #: Staging folder of a run in progress, inside ``--out``.
 STAGING = ".partial"
 #: Every k-th tick goes into a problem set.
@@ -109,7 +125,9 @@ class RunConfig:
     """What ``qpbench run`` does: ``problems``: folder of the sets ``<problems>/<scenario>/``;
     ``duration``: closed-loop time per run [s] (``None``: the scenario's); ``run_budget``: most
     wall time of a closed-loop run [s]; ``memory_budget``: bytes a bench solve may need;
-    ``on_row``: called with each closed-loop row."""
+    ``on_row``: called with each closed-loop row; ``sweep_budget``: wall time of the perturbed
+    runs [s] (:func:`sweep_plan`); ``min_ok_bound``: the least Wilson lower bound of a
+    recommended backend's share of ok perturbed runs."""
 
     out: Path
     problems: Path
@@ -126,8 +144,12 @@ class RunConfig:
     resume: bool = False
     progress: bool = True
     on_row: Callable[[dict], None] | None = field(default=None, repr=False)
+    sweep_budget: float = SWEEP_BUDGET_S
+    min_ok_bound: float = MIN_OK_BOUND
 
     def __post_init__(self) -> None:
+        self.sweep_budget = positive_seconds(self.sweep_budget, "--sweep-budget")
+        self.min_ok_bound = check_bound(self.min_ok_bound)
         if self.duration is not None:
             self.duration = positive_seconds(self.duration, "--duration")
         if self.run_budget is not None:
@@ -241,13 +263,27 @@ def run_all(config: RunConfig) -> RunOutcome:
     budgets = closed_loop_budgets(config, per_tick_s)
     table, not_ok = _closed_loop(config, staging, phases, budgets)
     failures += not_ok  # failed runs and runs that failed their verdict
+    perturbed = _perturbed(config, staging / PERTURBED, phases, table)
     with phases.phase("report"):
         from ..report.write import write_report
+        from ..sweep.report import split_sweep_paths, sweep_section
 
-        write_report([staging / "bench", staging / "closed_loop.csv"], staging, force=True)
+        swept = (staging / PERTURBED).is_dir()
+        _, sweeps = split_sweep_paths([staging / PERTURBED]) if swept else ([], [])
+        write_report(
+            [staging / "bench", staging / "closed_loop.csv"],
+            staging,
+            force=True,
+            sections=(lambda out, plots: sweep_section(sweeps, out, plots=False))
+            if sweeps
+            else None,
+            files=sweeps,
+            min_ok_bound=config.min_ok_bound,
+        )
         _compress_bench(staging / "bench")
     elapsed = time.perf_counter() - started
     manifest = _manifest(config, bench_scenarios, table, budgets)
+    manifest["perturbed"] = perturbed
     manifest["phase_wall_time_s"] = dict(phases.times_s)
     manifest["wall_time_s"] = round(elapsed, 1)
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
@@ -351,6 +387,159 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             engine=config.engine,
         )
     return outcome.table, outcome.not_ok
+
+
+def sweep_plan(costs_s: dict[str, float], worker_s: float, target: int) -> dict[str, int]:
+    """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` or as many
+    as the worker time left buys (``worker_s`` [s] over all workers; ``costs_s``: a backend's
+    measured cost of one instance in every swept scenario [s]), so a budget too small for every
+    backend gives the cheapest their full count and the rest fewer or none."""
+    plan, left = {}, max(0.0, worker_s)
+    for backend in sorted(costs_s, key=lambda b: (costs_s[b], b)):
+        cost = costs_s[backend]
+        n = target if cost <= 0 else min(target, int(left // cost))
+        plan[backend] = n
+        left -= n * cost
+    return plan
+
+
+@dataclass
+class Draws:
+    """A sweep's instances drawn so far, :data:`SAMPLE_CHUNK` at a time, and the time it took [s]."""
+
+    spec: object
+    drawn: list = field(default_factory=list)
+    seconds: float = 0.0
+
+    def first(self, valid: int) -> list:
+        """The first instances, as few as hold ``valid`` valid ones (drawing more if needed)."""
+        from ..sweep.spec import sample_instances
+
+        while sum(i.invalid is None for i in self.drawn) < valid:
+            t0 = time.perf_counter()
+            stop = len(self.drawn) + SAMPLE_CHUNK
+            self.drawn += sample_instances(replace(self.spec, samples=stop), len(self.drawn))
+            self.seconds += time.perf_counter() - t0
+        rows = [k for k, i in enumerate(self.drawn) if i.invalid is None]
+        return self.drawn[: rows[valid - 1] + 1] if valid else []
+
+    def cost_per_valid(self) -> float:
+        """Time [s] to draw one valid instance, as measured so far."""
+        valid = sum(i.invalid is None for i in self.drawn)
+        return self.seconds / valid if valid else 0.0
+
+
+def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
+    """The perturbed runs of the backends ok and real time in every nominal run (the
+    candidates): for each scenario of the run with a sweep file ``<problems>/sweeps/<name>.toml``,
+    its instances (as short as ``--duration`` when that is shorter), each candidate's count from
+    :func:`sweep_plan` on costs measured here, in ``folder/<scenario>/`` (a sweep's folder); what
+    was planned and spent, for ``run.json``."""
+    from ..backends import plugin_files
+    from ..report.recommend import TOLERATED_NOT_OK, least_runs, recommend
+    from ..runner import make_executor
+    from ..sweep.spec import load_sweep
+
+    started = time.perf_counter()
+    candidates = list(recommend(table).overall.passed)
+    paths = {s: Path(config.problems) / "sweeps" / f"{s}.toml" for s in config.scenarios}
+    specs = {s: load_sweep(p) for s, p in paths.items() if p.is_file()}
+    if config.duration is not None:  # a quick run's instances are as short as its runs
+        specs = {
+            s: load_sweep(paths[s], duration=_length(sp, config.duration))
+            for s, sp in specs.items()
+        }
+    target = least_runs(config.min_ok_bound, TOLERATED_NOT_OK)
+    about = {"scenarios": list(specs), "candidates": candidates, "budget_s": config.sweep_budget}
+    about.update(min_ok_bound=config.min_ok_bound, target_per_scenario=target)
+    if not specs or not candidates:
+        return about
+    with phases.phase("perturbed runs"):
+        draws = {s: Draws(spec) for s, spec in specs.items()}
+        costs, overhead_s = _instance_costs(draws, candidates, table)
+        # the instances are drawn here, the runs made by the workers: the drawing of the
+        # target's instances is reserved first
+        sampling_s = target * sum(d.cost_per_valid() for d in draws.values())
+        spent = time.perf_counter() - started
+        plan = sweep_plan(costs, (config.sweep_budget - spent - sampling_s) * config.jobs, target)
+        about.update(
+            instance_cost_s={b: round(c, 4) for b, c in costs.items()},
+            run_overhead_s=round(overhead_s, 4),
+            instances_per_scenario=plan,
+            predicted_s=round(
+                spent + sampling_s + sum(plan[b] * costs[b] for b in plan) / config.jobs, 1
+            ),
+        )
+        folder.mkdir(parents=True, exist_ok=True)
+        with closing(make_executor("local", config.jobs)) as pool:
+            for s, d in draws.items():
+                _sweep_scenario(s, d, plan, folder / s, pool, plugin_files(), config.resume)
+    about["wall_time_s"] = round(time.perf_counter() - started, 1)
+    log.info(
+        "perturbed runs: instances a scenario %s (target %d) in %.1f s (budget %g s)",
+        ", ".join(f"{b} {n}" for b, n in plan.items()),
+        target,
+        about["wall_time_s"],
+        config.sweep_budget,
+    )
+    return about
+
+
+def _length(spec, most: float | None = None) -> float:
+    """An instance's simulated time [s]: the sweep's duration, else its base scenario's; at most
+    ``most``."""
+    length = float(spec.duration or spec.base_raw["simulation"]["duration"])
+    return length if most is None else min(length, most)
+
+
+def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
+    """Each candidate's cost of one instance in every swept scenario [s]: its loop's wall time per
+    simulated second in the nominal run of the scenario times the instance's length, plus the
+    cost of a run around its loop (parsing, warm-up, figures), measured here on a one-tick run of
+    a first valid instance; and that overhead [s]."""
+    from .closed_loop import LoopTask, run_row
+
+    firsts = {s: d.first(1)[-1] for s, d in draws.items()}
+    s, spec = next((s, d.spec) for s, d in draws.items())
+    task = LoopTask(
+        f"{firsts[s].name}.toml",
+        candidates[0],
+        duration=float(spec.base_raw["simulation"]["dt"]),
+        scenario_text=firsts[s].text,
+        bands=(spec.force_band, spec.tracking_band),
+    )
+    t0 = time.perf_counter()
+    run_row(task)
+    overhead = time.perf_counter() - t0
+    runs = table.set_index(["scenario", "backend"])
+    costs = {}
+    for b in candidates:
+        per_s = {
+            s: runs.loc[(s, b), "wall_time_s"] / runs.loc[(s, b), "simulated_s"] for s in draws
+        }
+        costs[b] = sum(float(per_s[s]) * _length(d.spec) + overhead for s, d in draws.items())
+    return costs, overhead
+
+
+def _sweep_scenario(
+    scenario: str, draws: Draws, plan: dict, folder: Path, pool, plugins, resume
+) -> None:
+    """One scenario's perturbed runs into ``folder``: each backend on the first ``plan[b]`` valid
+    instances, the backends with the same count in one sweep (the later adding to its table)."""
+    from ..sweep.runner import run_sweep
+
+    counts = sorted({n for n in plan.values() if n > 0}, reverse=True)
+    if not counts:  # no backend could afford one: the sweep's folder says it was due
+        spec = replace(draws.spec, samples=max(1, len(draws.drawn)))
+        run_sweep(spec, [], folder, pool, force=True, instances=[])
+    for k, n in enumerate(counts):
+        backends = [b for b, m in plan.items() if m == n]
+        instances = draws.first(n)
+        spec = replace(draws.spec, samples=len(draws.drawn))
+        again = resume or k > 0
+        log.info("perturbed runs %s: %s, %d instances each", scenario, ", ".join(backends), n)
+        kw = dict(force=not again, resume=again, plugins=plugins, instances=instances)
+        run_sweep(spec, backends, folder, pool, **kw)
 
 
 def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dict) -> dict:

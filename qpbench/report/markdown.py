@@ -21,7 +21,7 @@ from . import tables
 from .arm import ROLES
 from .inputs import Results
 from .markdown_table import MM, US, Column, fmt, md_table, slug, table
-from .recommend import opening
+from .recommend import MIN_OK_BOUND, opening
 
 #: Distributions whose versions every report lists.
 PACKAGES = (
@@ -431,13 +431,19 @@ def closed_loop_section(results: Results, plot_files: dict[str, str]) -> list[st
     return out
 
 
-def render(results: Results, plot_files: dict[str, str]) -> str:
+def render(
+    results: Results,
+    plot_files: dict[str, str],
+    sweeps: pd.DataFrame | None = None,
+    min_ok_bound: float = MIN_OK_BOUND,
+) -> str:
     """The text of ``report.md``; ``plot_files``: figure key -> path relative to the report (keys
-    of :mod:`.plots`, a missing one not shown)."""
+    of :mod:`.plots`, a missing one not shown); ``sweeps``, ``min_ok_bound``: the perturbed runs
+    the recommendation reads (:func:`.recommend.recommend`)."""
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "# qpbench report\n",
-        *opening(results.closed_loop, has_bench=not results.bench.empty),
+        *opening(results.closed_loop, not results.bench.empty, sweeps, min_ok_bound),
         "Per-tick QPs of the compliant redundant manipulator of Zhou, Xu & Li (2019), "
         "benchmarked per tick and in the closed loop. Every number below is recomputed "
         "from the result files listed here.\n",

@@ -1,15 +1,30 @@
-"""Which backends to trust in the loop: *recommended* for a scenario when every run of it there
-has verdict ``ok`` and was real time, overall when in every scenario; ranked by p99 call time
-(the largest over its runs); every other backend listed with its reasons."""
+"""Which backends to trust in the loop: a *candidate* for a scenario when every run of it there
+has verdict ``ok`` and was real time, overall when in every scenario; *recommended* overall when
+also, in every scenario with perturbed runs (a sweep of it), the Wilson lower bound of its share
+of ``ok`` runs is at least ``min_ok_bound`` (:func:`recommend`); ranked by the p99 per-tick time a C controller would pay (the
+largest over its runs) with its confidence interval, overlapping intervals sharing a rank
+(:func:`ranked`); every other backend listed with its reasons (docs/verdicts.md, "Which backends
+are recommended")."""
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import pandas as pd
 
-from .markdown_table import US, md_table
+from .markdown_table import MM, US, fmt, md_table
+from .tables import wilson, worst_first
+
+#: Least Wilson lower bound (95 % interval) of a backend's share of ``ok`` perturbed runs in
+#: every swept scenario (``--min-ok-bound``).
+MIN_OK_BOUND = 0.95
+#: Perturbed runs a scenario a backend is given: the least number whose bound reaches the
+#: threshold with this many of them not ``ok`` (:func:`least_runs`; the controller itself fails a
+#: few perturbed instances whatever the solver).
+TOLERATED_NOT_OK = 2
 
 #: Reasons shown per backend in the overall list; the rest are counted ("and 3 more").
 MAX_REASONS = 2
@@ -24,35 +39,75 @@ HOW_TO_READ = (
     "*Real time* is judged at each scenario's control period dt from the measured call times "
     "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
     "calling its C or C++ library would pay.",
-    "A backend is recommended where every run of it was `ok` and real time, ranked by its p99 "
-    "call time; the closed-loop section below gives every run's figures.",
+    "A backend is recommended where every run of it was `ok` and real time and, in every "
+    "scenario with perturbed instances, the lower bound of its share of `ok` perturbed runs "
+    "reaches the threshold; ranked by the p99 per-tick time a C controller would pay (the solve timed in compiled code, else the solver's own) with a 95 % interval, backends whose "
+    "intervals overlap sharing a rank (`2=`); the closed-loop section below gives every run's "
+    "figures.",
     "The per-tick benchmark solves each QP exported from the loop with every backend and judges "
     "success against reference solutions; times are the minimum of the timed repeats.",
     "Units: times in us, distances and tracking errors in mm, forces in N; `-` is a value that "
     "does not exist (a backend that reports no time of its own, a run without a solution).",
 )
 
+#: Columns of a run's p99 ranking-time interval [s] (:func:`qpbench.sim.summary.block_bootstrap_quantile`).
+INTERVAL = ("rank_time_p99_lo_s", "rank_time_p99_hi_s")
+
 #: Row statuses of a run that produced no result (as in :mod:`qpbench.harness.closed_loop`).
 _NO_RESULT = ("error", "crashed", "time_limit")
 
 
 @dataclass(frozen=True)
+class Evidence:
+    """A backend's perturbed runs of one scenario: ``runs`` of valid instances, ``ok`` of them
+    with verdict ``ok``, ``bound`` the Wilson lower bound of the share (NaN without runs), and
+    its worst run (a row of the sweep table with ``folder``; ``None`` without runs)."""
+
+    scenario: str
+    runs: int
+    ok: int
+    bound: float
+    worst: dict | None = None
+
+
+@dataclass(frozen=True)
 class Pick:
-    """A recommended backend: its p99 call time and the solver's own p99 [s] (NaN: not reported)."""
+    """A backend that passed every run: its p99 ranking time (:func:`qpbench.sim.summary.rank_times`), that p99's interval [s] (NaN: none)
+    and the solver's own p99 [s] (NaN: not reported); ``rank`` (1 = fastest; backends whose
+    intervals overlap share one, ``tied``); ``evidence``: per swept scenario."""
 
     backend: str
     call_p99_s: float
     solver_p99_s: float
+    call_p99_lo_s: float = math.nan
+    call_p99_hi_s: float = math.nan
+    rank: int = 0
+    tied: bool = False
+    evidence: tuple[Evidence, ...] = ()
+
+    @property
+    def rank_text(self) -> str:
+        return f"{self.rank}=" if self.tied else str(self.rank)
+
+    @property
+    def weakest(self) -> Evidence | None:
+        """The swept scenario with the lowest bound (no runs first)."""
+        key = lambda e: -1.0 if math.isnan(e.bound) else e.bound  # noqa: E731
+        return min(self.evidence, key=key, default=None)
 
 
 @dataclass(frozen=True)
 class Scope:
-    """The answer for one scenario, or for all of them: the backends ok and real time in every
-    run, fastest first, and every other one -> its reasons."""
+    """The answer for one scenario, or for all of them: the backends recommended, fastest first;
+    those ok and real time in every run whose perturbed runs are too few (``short``); every other
+    one -> its reasons; ``passed``: the backends ok and real time in every run, before the
+    perturbed runs were looked at."""
 
     name: str
     recommended: tuple[Pick, ...] = ()
     not_recommended: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    short: tuple[Pick, ...] = ()
+    passed: tuple[str, ...] = ()
 
     @property
     def backends(self) -> list[str]:
@@ -61,11 +116,14 @@ class Scope:
 
 @dataclass(frozen=True)
 class Recommendation:
-    """:func:`recommend`'s answer: overall, then per scenario in the table's order."""
+    """:func:`recommend`'s answer: overall, then per scenario in the table's order; the perturbed
+    runs' threshold and whether there were any (``swept``: the scenarios with a sweep)."""
 
     overall: Scope
     scenarios: tuple[Scope, ...]
     runs: int
+    min_ok_bound: float = MIN_OK_BOUND
+    swept: tuple[str, ...] = ()
 
 
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
@@ -76,6 +134,10 @@ def read_runs(table: pd.DataFrame) -> pd.DataFrame:
         "realtime": "unknown",
         "realtime_reason": "",
         "solver_time_p99_s": math.nan,
+        "rank_time_p99_s": math.nan,
+        "rank_time_p99_lo_s": math.nan,
+        "rank_time_p99_hi_s": math.nan,
+        "rank_time_source": "",
         "verdict_reasons": "",
         "error": "",
         "simulated_s": math.nan,
@@ -97,6 +159,10 @@ def _first(reasons: object) -> str:
         if depth == 0 and text.startswith("; ", i):
             return text[:i]
     return text
+
+
+def _numbers(runs: pd.DataFrame, column: str) -> pd.Series:
+    return pd.to_numeric(runs[column], errors="coerce")
 
 
 def _reasons(row: dict, place: str) -> list[str]:
@@ -127,26 +193,151 @@ def _reasons(row: dict, place: str) -> list[str]:
 
 
 def _scope(name: str, runs: pd.DataFrame, place) -> Scope:
-    """One scope's answer from its runs; ``place(row)`` names a run's scenario in a reason."""
+    """One scope's answer from its runs; ``place(row)`` names a run's scenario in a reason. A
+    backend's p99 is the largest of its runs', its interval ``[largest low, largest high]``: the
+    largest of several values each in its own interval lies in that one."""
     picks, rejected = [], {}
     for backend, mine in runs.groupby(runs["backend"].astype(str), sort=False):
         reasons = [r for row in mine.to_dict("records") for r in _reasons(row, place(row))]
         if reasons:
             rejected[backend] = tuple(dict.fromkeys(reasons))
             continue
-        call = pd.to_numeric(mine["solve_time_p99_s"], errors="coerce").max()
-        solver = pd.to_numeric(mine["solver_time_p99_s"], errors="coerce").max()
-        picks.append(Pick(backend, float(call), float(solver)))
-    picks.sort(key=lambda p: (math.isnan(p.call_p99_s), p.call_p99_s, p.backend))
-    return Scope(name, tuple(picks), rejected)
+        call, solver = (_numbers(mine, c).max() for c in ("rank_time_p99_s", "solver_time_p99_s"))
+        lo, hi = (_numbers(mine, c).max(skipna=False) for c in INTERVAL)
+        picks.append(Pick(backend, float(call), float(solver), float(lo), float(hi)))
+    return Scope(name, ranked(picks), rejected, passed=tuple(p.backend for p in picks))
 
 
-def recommend(table: pd.DataFrame) -> Recommendation:
+def ranked(picks: list[Pick]) -> tuple[Pick, ...]:
+    """``picks`` fastest first (p99 ranking time, then name), each with its rank: backends whose
+    intervals overlap, directly or through others, share the rank of the first of them (``2=``);
+    a pick without an interval has its p99 as one. The groups are runs of neighbours in this
+    order (an interval holds its p99, so a group's intervals cover the p99s between them)."""
+    order = sorted(picks, key=lambda p: (math.isnan(p.call_p99_s), p.call_p99_s, p.backend))
+
+    def span(p: Pick) -> tuple[float, float]:
+        lo, hi = p.call_p99_lo_s, p.call_p99_hi_s
+        return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else (p.call_p99_s,) * 2
+
+    groups: list[list[Pick]] = []
+    for p in order:
+        lo, hi = span(p)
+        # joins the group before when it overlaps it (the group's intervals chain together);
+        # a later pick may join both: merge them
+        touching = [g for g in groups if any(lo <= span(q)[1] and span(q)[0] <= hi for q in g)]
+        for g in touching[1:]:
+            touching[0].extend(g)
+            groups.remove(g)
+        if touching:
+            touching[0].append(p)
+        else:
+            groups.append([p])
+    out, rank = [], 1
+    for g in groups:
+        g.sort(key=order.index)
+        out += [replace(p, rank=rank, tied=len(g) > 1) for p in g]
+        rank += len(g)
+    return tuple(out)
+
+
+def check_bound(value, key: str = "--min-ok-bound") -> float:
+    """``value`` as a least share bound if a number in (0, 1), else a :class:`ParamError` naming
+    ``key``."""
+    from ..exceptions import ParamError
+
+    try:
+        bound = float(value)
+    except (TypeError, ValueError):
+        bound = math.nan
+    if isinstance(value, bool) or not 0.0 < bound < 1.0:
+        raise ParamError(f"must be a number between 0 and 1 (exclusive), got {value!r}", key=key)
+    return bound
+
+
+def least_runs(bound: float, not_ok: int = 0, level: float = 0.95) -> int:
+    """The least number of runs whose share of ``ok`` has a Wilson lower bound (``level``
+    interval) of at least ``bound`` when ``not_ok`` of them are not ``ok`` (73 at 0.95 with none,
+    142 with two)."""
+    bound = check_bound(bound)
+    lo, hi = not_ok + 1, not_ok + 2
+    while wilson(hi - not_ok, hi, level)[0] < bound:  # the bound grows with the runs
+        lo, hi = hi, 2 * hi
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if wilson(mid - not_ok, mid, level)[0] >= bound else (mid + 1, hi)
+    return lo
+
+
+def read_sweeps(paths: list, relative_to: Path | None = None) -> pd.DataFrame:
+    """Sweep tables (``sweep.csv``) as one frame, the last row of each (instance, backend) of
+    each, with ``folder`` (the table's folder, relative to ``relative_to`` when inside it) and
+    ``seed`` (the sweep's, from its ``sweep.json``; NaN without one). ``attrs["swept"]``: the
+    base scenarios of the tables, those without a row too (a sweep no backend could afford)."""
+    frames, bases = [], []
+    for path in map(Path, paths):
+        df = pd.read_csv(path).drop_duplicates(["instance", "backend"], keep="last")
+        folder = path.parent
+        if relative_to is not None and folder.resolve().is_relative_to(Path(relative_to).resolve()):
+            folder = folder.resolve().relative_to(Path(relative_to).resolve())
+        try:
+            manifest = json.loads((path.parent / "sweep.json").read_text())
+        except (OSError, ValueError):
+            manifest = {}
+        bases += [str(manifest["base"])] if "base" in manifest else []
+        bases += [str(b) for b in df["base_scenario"].dropna().unique()]
+        frames.append(df.assign(folder=str(folder), seed=manifest.get("seed", math.nan)))
+    out = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    out.attrs["swept"] = list(dict.fromkeys(bases))
+    return out
+
+
+def _evidence(sweeps: pd.DataFrame, backend: str, scenarios: list[str], bound: float):
+    """Per swept scenario, ``backend``'s perturbed runs (:class:`Evidence`)."""
+    out = []
+    for s in scenarios:
+        if sweeps.empty:
+            out.append(Evidence(s, 0, 0, math.nan))
+            continue
+        mine = sweeps[(sweeps["base_scenario"] == s) & (sweeps["backend"] == backend)]
+        valid = worst_first(mine.assign(verdict=mine["verdict"].fillna("").astype(str)))
+        n, k = len(valid), int((valid["verdict"] == "ok").sum())
+        worst = valid.iloc[0].to_dict() if n else None
+        out.append(Evidence(s, n, k, wilson(k, n)[0] if n else math.nan, worst))
+    return tuple(out)
+
+
+def _judge_evidence(overall: Scope, sweeps, scenarios: list[str], bound: float) -> Scope:
+    """``overall`` with its picks judged on their perturbed runs in ``scenarios``: recommended
+    when every bound reaches ``bound``; too few runs (``short``) when below it with fewer runs
+    than :func:`least_runs` gives for :data:`TOLERATED_NOT_OK`; else not recommended."""
+    target = least_runs(bound, TOLERATED_NOT_OK)
+    keep, short, rejected = [], [], dict(overall.not_recommended)
+    for pick in overall.recommended:
+        pick = replace(pick, evidence=_evidence(sweeps, pick.backend, scenarios, bound))
+        below = [e for e in pick.evidence if not e.bound >= bound]
+        if not below:
+            keep.append(pick)
+        elif all(e.runs >= target for e in below):
+            rejected[pick.backend] = tuple(
+                f"perturbed {e.scenario}: {e.ok} of {e.runs} ok, bound {e.bound:.3f} < {bound:g}"
+                for e in below
+            )
+        else:
+            short.append(pick)
+    return replace(overall, recommended=ranked(keep), not_recommended=rejected, short=tuple(short))
+
+
+def recommend(
+    table: pd.DataFrame, sweeps: pd.DataFrame | None = None, min_ok_bound: float = MIN_OK_BOUND
+) -> Recommendation:
     """Per scenario and overall: the backends ok and real time in every run of ``table`` (one
-    row per run, any number per scenario and backend), fastest first, and why not the others."""
+    row per run, any number per scenario and backend), fastest first, and why not the others;
+    overall, with ``sweeps`` (:func:`read_sweeps`), a backend is recommended only when in every
+    scenario of ``table`` with perturbed runs (a sweep whose base is that scenario) the Wilson
+    lower bound of its share of ``ok`` runs is at least ``min_ok_bound``."""
     runs = read_runs(table)
     if runs.empty:
-        return Recommendation(Scope("all scenarios"), (), 0)
+        return Recommendation(Scope("all scenarios"), (), 0, min_ok_bound)
     runs["scenario"] = runs["scenario"].astype(str)
     several = runs["formulation"].nunique(dropna=True) > 1
 
@@ -162,7 +353,15 @@ def recommend(table: pd.DataFrame) -> Recommendation:
             rejected[pick.backend] = (f"not run in {', '.join(missing)}",)
     picks = tuple(p for p in every.recommended if p.backend not in rejected)
     names = ", ".join(s.name for s in scenarios)
-    return Recommendation(Scope(f"all scenarios ({names})", picks, rejected), scenarios, len(runs))
+    passed = tuple(p.backend for p in picks)
+    overall = Scope(f"all scenarios ({names})", picks, rejected, passed=passed)
+    swept = []
+    if sweeps is not None:
+        bases = sweeps.attrs.get("swept") or sweeps.get("base_scenario", pd.Series()).astype(str)
+        swept = [s.name for s in scenarios if s.name in set(bases)]
+    if swept:
+        overall = _judge_evidence(overall, sweeps, swept, min_ok_bound)
+    return Recommendation(overall, scenarios, len(runs), min_ok_bound, tuple(swept))
 
 
 def _why(reasons: tuple[str, ...]) -> str:
@@ -171,7 +370,98 @@ def _why(reasons: tuple[str, ...]) -> str:
 
 
 def _us(seconds: float) -> str:
-    return "-" if math.isnan(seconds) else f"{seconds * US:.4g}"
+    """[s] as [us]: four significant digits, whole microseconds from 10 ms on."""
+    if math.isnan(seconds):
+        return "-"
+    us = seconds * US
+    return f"{us:.4g}" if us < 1e4 else f"{us:.0f}"
+
+
+def _interval(p: Pick) -> str:
+    lo, hi = p.call_p99_lo_s, p.call_p99_hi_s
+    return "-" if math.isnan(lo) or math.isnan(hi) else f"{_us(lo)}-{_us(hi)}"
+
+
+def _rate(p: Pick) -> list[str]:
+    """The perturbed-run cells of a pick: ok of runs over every swept scenario, and the lowest
+    bound with its scenario."""
+    if not p.evidence:
+        return ["-", "-"]
+    ok, runs = sum(e.ok for e in p.evidence), sum(e.runs for e in p.evidence)
+    e = p.weakest
+    bound = "-" if math.isnan(e.bound) else f"{e.bound:.3f}"
+    return [f"{ok}/{runs}", f"{bound} ({e.scenario})"]
+
+
+def rerun_command(run: dict, backend: str) -> str:
+    """The command that runs one perturbed instance (a sweep row with ``folder``) alone."""
+    path = Path(str(run["folder"])) / str(run["instance_file"])
+    return f"qpbench simulate --scenario {path} --backend {backend}"
+
+
+def _worst_rows(picks: list[Pick]) -> list[list]:
+    """Per pick, its worst perturbed run: scenario, instance (sample and sweep seed), verdict,
+    the closest key point to an obstacle [mm], why, the command that re-runs it."""
+    rows = []
+    for p in picks:
+        runs = [e.worst | {"scenario": e.scenario} for e in p.evidence if e.worst is not None]
+        if not runs:
+            continue
+        frame = worst_first(pd.DataFrame(runs))
+        w = frame.iloc[0].to_dict()
+        seed = "" if pd.isna(w.get("seed")) else f"seed {int(w['seed'])}, "
+        why = _first(w.get("verdict_reasons")) or _text(w.get("error")) or "-"
+        rows.append(
+            [
+                p.backend,
+                f"{w['scenario']} {w['instance']} ({seed}sample {int(w['sample'])})",
+                _text(w["verdict"]) or "-",
+                fmt(float(pd.to_numeric(w["min_obstacle_distance"], errors="coerce")) * MM),
+                why,
+                f"`{rerun_command(w, p.backend)}`",
+            ]
+        )
+    return rows
+
+
+def _table(lines: list[str], header: list[str], rows: list[list], gap: str, left=2) -> None:
+    lines.append(md_table(header, rows, pad=True, left=left).rstrip("\n") + gap)
+
+
+def no_answer(answer: Recommendation) -> str:
+    """One sentence: why nothing is recommended (empty when something is)."""
+    overall, bound = answer.overall, answer.min_ok_bound
+    if overall.recommended:
+        return ""
+    if overall.short:
+        p = overall.short[0]
+        e = p.weakest
+        names = ", ".join(q.backend for q in overall.short)
+        return (
+            f"No recommendation: {names} passed every run of {overall.name} but had too few "
+            f"perturbed runs for a bound of {bound:g} ({p.backend} in {e.scenario}: {e.ok} of "
+            f"{e.runs} ok, bound {0.0 if math.isnan(e.bound) else e.bound:.3f}; at least "
+            f"{least_runs(bound)} all ok are needed): a larger --sweep-budget gives more."
+        )
+    late = [
+        b
+        for b, reasons in overall.not_recommended.items()
+        if all(r.startswith("not real time") for r in reasons)
+    ]
+    if late:
+        return (
+            f"No recommendation from this machine: {', '.join(late)} had verdict ok in every run "
+            f"of {overall.name} but missed real time ({late[0]} "
+            f"{overall.not_recommended[late[0]][0].removeprefix('not real time ')}); "
+            "short runs on a busy machine are judged on its load as much as on the solver: "
+            "run again on an idle machine, or with longer runs."
+        )
+    if overall.passed:
+        return (
+            f"No backend held a bound of {bound:g} on its share of ok perturbed runs in every "
+            f"swept scenario of {overall.name}."
+        )
+    return f"No backend was ok and real time in every run of {overall.name}."
 
 
 def render(answer: Recommendation, markdown: bool = False) -> str:
@@ -181,27 +471,61 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
     if not answer.runs:
         return f"{head}\nNo closed-loop run: nothing to recommend.\n"
     gap = "\n" if markdown else ""
-    overall = answer.overall
+    overall, bound = answer.overall, answer.min_ok_bound
     lines = [head]
+    swept = ", ".join(answer.swept)
     if overall.recommended:
         lines.append(
-            f"Backends ok and real time in every run of {overall.name}, fastest first "
-            f"(p99 call time, the largest over their runs; the solver's own p99 beside, "
-            f"- when it reports none):{gap}"
+            f"Backends ok and real time in every run of {overall.name}"
+            + (
+                f" and whose share of ok perturbed runs has a lower bound of at least {bound:g} "
+                f"in every swept scenario ({swept})"
+                if swept
+                else " (no perturbed runs: on the nominal runs alone)"
+            )
+            + ", fastest first by what a C or C++ controller would pay per tick (p99 over the "
+            "ticks, the largest over their runs, with its 95 % interval): the solve timed in "
+            "compiled code where the backend runs on the compiled engine, else the solver's own "
+            "time; overlapping intervals share a rank, `2=`; the solver's own p99 beside, - when "
+            f"it reports none; perturbed runs: ok of all, the lowest bound):{gap}"
         )
-        header = ["rank", "backend", "call p99 (us)", "solver p99 (us)"]
+        header = ["rank", "backend", "controller p99 (us)", "95 % interval (us)", "solver p99 (us)"]
+        header += ["perturbed ok", "ok bound"]
         rows = [
-            [str(i), p.backend, _us(p.call_p99_s), _us(p.solver_p99_s)]
-            for i, p in enumerate(overall.recommended, 1)
+            [p.rank_text, p.backend, _us(p.call_p99_s), _interval(p), _us(p.solver_p99_s)]
+            + _rate(p)
+            for p in overall.recommended
         ]
-        lines.append(md_table(header, rows, pad=True, left=2).rstrip("\n") + gap)
+        _table(lines, header, rows, gap)
     else:
-        lines.append(f"No backend was ok and real time in every run of {overall.name}.{gap}")
+        lines.append(no_answer(answer) + gap)
+    if overall.short:
+        lines.append(
+            f"Not enough evidence (ok and real time in every run, too few perturbed runs for a "
+            f"bound of {bound:g}; never recommended):{gap}"
+        )
+        header = [
+            "backend",
+            "controller p99 (us)",
+            "95 % interval (us)",
+            "perturbed ok",
+            "ok bound",
+        ]
+        rows = [[p.backend, _us(p.call_p99_s), _interval(p), *_rate(p)] for p in overall.short]
+        _table(lines, header, rows, gap, left=1)
+    worst = _worst_rows([*overall.recommended, *overall.short])
+    if worst:
+        where = " (paths from this report's folder)" if markdown else ""
+        lines.append(f"Worst perturbed run of each{where}:{gap}")
+        header = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
+        _table(lines, header, worst, gap, left=(0, 1, 2, 4, 5))
     if len(answer.scenarios) > 1:
         lines.append(f"Per scenario, ok and real time in every run, fastest first:{gap}")
         for scope in answer.scenarios:
             picks = ", ".join(
-                f"{p.backend} {_us(p.call_p99_s)} us (solver {_us(p.solver_p99_s)})"
+                f"{p.backend} {_us(p.call_p99_s)} us"
+                + (f" [{_interval(p)}]" if _interval(p) != "-" else "")
+                + f" (solver {_us(p.solver_p99_s)})"
                 for p in scope.recommended
             )
             lines.append(f"- {scope.name}: {picks or 'none'}")
@@ -209,15 +533,21 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
     if overall.not_recommended:
         lines.append(f"Not recommended:{gap}")
         rows = [[b, _why(reasons)] for b, reasons in overall.not_recommended.items()]
-        lines.append(md_table(["backend", "why"], rows, pad=True, left=2).rstrip("\n") + gap)
+        _table(lines, ["backend", "why"], rows, gap)
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
-def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
-    """The opening of ``report.md``: the recommendation (or why there is none), How to read this."""
+def opening(
+    closed_loop: pd.DataFrame,
+    has_bench: bool = False,
+    sweeps: pd.DataFrame | None = None,
+    min_ok_bound: float = MIN_OK_BOUND,
+) -> list[str]:
+    """The opening of ``report.md``: the recommendation (or why there is none; ``sweeps`` and
+    ``min_ok_bound`` as :func:`recommend` takes them), How to read this."""
     out = []
     if not closed_loop.empty:
-        out.append(render(recommend(closed_loop), markdown=True))
+        out.append(render(recommend(closed_loop, sweeps, min_ok_bound), markdown=True))
     elif has_bench:
         out.append(
             "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "

@@ -36,6 +36,30 @@ SHGEOM_METRICS: dict[str, tuple[str, str, bool]] = {
 }
 
 
+def wilson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval at ``level`` of a proportion ``k / n`` (``(nan, nan)`` when
+    ``n = 0``)."""
+    if n == 0:
+        return math.nan, math.nan
+    from scipy.stats import binomtest
+
+    ci = binomtest(k, n).proportion_ci(level, method="wilson")
+    return max(0.0, float(ci.low)), min(1.0, float(ci.high))
+
+
+def worst_first(runs: pd.DataFrame) -> pd.DataFrame:
+    """The runs of valid instances of a sweep table (status not ``invalid_scenario``), worst
+    first: worst verdict, then the smallest margin of a key point to ``d_safe``, then the largest
+    tracking error."""
+    from ..sim.verdict import VERDICTS
+
+    valid = runs[runs["status"] != "invalid_scenario"]
+    severity = valid["verdict"].map({v: i for i, v in enumerate(VERDICTS)}).fillna(0)
+    margin = (valid["min_obstacle_distance"] - valid["d_safe"]).fillna(np.inf)
+    tracking = -valid["tracking_max_after_2s"].fillna(0)
+    return valid.iloc[np.lexsort((tracking.to_numpy(), margin.to_numpy(), severity.to_numpy()))]
+
+
 def _percentile(values: np.ndarray, q: float) -> float:
     return float(np.percentile(values, q)) if values.size else math.nan
 

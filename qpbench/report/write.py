@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from .inputs import ResultFile, read_results
 from .markdown import render
+from .recommend import MIN_OK_BOUND, read_sweeps
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -78,11 +79,14 @@ def write_report(
     prefer: str | None = None,
     sections: Callable[[Path, bool], list[str]] | None = None,
     files: list[ResultFile] = (),
+    min_ok_bound: float = MIN_OK_BOUND,
 ) -> Path:
     """Read the result CSVs (:func:`.inputs.read_results`), write ``out/report.md`` and
     ``out/plots/*.png`` (:func:`publish`). ``sections(out, plots)``: markdown lines appended
     after the tables (the sweep section); with it, ``paths`` may be empty; ``files``: the
-    tables of ``sections``, listed with the result files."""
+    tables of ``sections``, listed with the result files; the sweep tables among them are the
+    recommendation's perturbed runs, judged on ``min_ok_bound``
+    (:func:`.recommend.recommend`)."""
 
     def render_all(out: Path) -> str:
         started = time.perf_counter()
@@ -96,7 +100,9 @@ def write_report(
 
             with figure_progress(out / "plots"):
                 plot_files = write_plots(results, out / "plots", relative_to=out)
-        text = render(results, plot_files)
+        swept = [f.path for f in results.files if f.kind == "sweep"]
+        sweeps = read_sweeps(swept, relative_to=out) if swept else None
+        text = render(results, plot_files, sweeps, min_ok_bound)
         if sections is not None:
             text += "\n" + "\n".join(sections(out, plots))
         return text

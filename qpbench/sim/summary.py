@@ -54,6 +54,14 @@ VIOLATION_TOL = 1e-6
 #: At most this many intervals per list in a summary.
 MAX_INTERVALS = 20
 
+#: The p99 call time's confidence interval (:func:`block_bootstrap_quantile`): its level, the
+#: length of a block of consecutive ticks [s], the resamples and their seed (docs/methodology.md,
+#: "How sure a p99 is").
+P99_LEVEL = 0.95
+BOOTSTRAP_BLOCK_S = 0.05
+BOOTSTRAP_RESAMPLES = 1000
+BOOTSTRAP_SEED = 0
+
 #: Figures of a summary that are lists or dicts (JSON text in a CSV cell).
 STRUCTURED_FIGURES = (
     "infeasible_intervals",
@@ -142,6 +150,7 @@ def summarize(
     )
     out.update(active)
     out.update(run_info or {})
+    out.update(_rank_figures(frame, dt, out.get("engine", "python")))
     verdict = judge({**out, **judged}, settings)
     out["verdict"] = verdict.verdict
     out["verdict_reasons"] = verdict.text
@@ -403,3 +412,94 @@ def _time_figures(frame: pd.DataFrame) -> dict:
         ):
             out[f"{name}_{stat}_s"] = _none(value) if times.size else None
     return out
+
+
+#: Where a run's ranking time comes from (:func:`rank_times`).
+RANK_SOURCES = ("compiled", "solver", "python")
+
+
+def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
+    """The per-tick time [s] a C or C++ controller would pay for the solver, and its source:
+    ``compiled``, the solve and the fallback's solve timed in compiled code (the compiled
+    engine); ``solver``, the solver's own report (the Python engine, when every tick has one);
+    ``python``, the solve and the fallback's solve through Python (the solver reports none on
+    some ticks: never judged on a subset)."""
+    solve = frame[log.SOLVE_TIME] + frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
+    if engine == "compiled":
+        return solve, "compiled"
+    own = frame[log.SOLVER_TIME]
+    if len(own) and own.notna().all():
+        return own, "solver"
+    return solve, "python"
+
+
+def _rank_figures(frame: pd.DataFrame, dt: float, engine: str) -> dict:
+    """``rank_time_source`` and the p99 [s] of :func:`rank_times` with its interval."""
+    times, source = rank_times(frame, engine)
+    lo, hi = _p99_interval(times, dt) if len(times) else (None, None)
+    return {
+        "rank_time_source": source,
+        "rank_time_p99_s": _none(times.quantile(0.99)) if len(times) else None,
+        "rank_time_p99_lo_s": lo,
+        "rank_time_p99_hi_s": hi,
+    }
+
+
+def _p99_interval(times: pd.Series, dt: float) -> tuple[float | None, float | None]:
+    """The interval of the p99 of a run's per-tick times [s] (:func:`block_bootstrap_quantile`
+    with blocks of :data:`BOOTSTRAP_BLOCK_S` at the control period ``dt`` [s])."""
+    block = max(1, round(BOOTSTRAP_BLOCK_S / dt))
+    lo, hi = block_bootstrap_quantile(times.to_numpy(dtype=float), 0.99, block)
+    return _none(lo), _none(hi)
+
+
+def block_bootstrap_quantile(
+    x: np.ndarray,
+    q: float,
+    block: int,
+    level: float = P99_LEVEL,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float]:
+    """Percentile interval at ``level`` of the ``q``-quantile of the series ``x`` by the circular
+    block bootstrap: each resample joins ``round(n / block)`` blocks of ``block`` consecutive
+    values (wrapping around the end) started at uniform random ticks, so the serial correlation
+    within a block is kept; its quantile is the order statistic of rank ``ceil(q m)`` of its
+    ``m`` values. Non-finite values are left out; ``(nan, nan)`` without any. Seeded: the same
+    series gives the same interval.
+
+    Only the values at or above the resample's quantile decide it, so the resamples are counted
+    on the largest values of ``x`` alone (a resample with too few of them is computed whole).
+    """
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    n = x.size
+    if n == 0:
+        return math.nan, math.nan
+    block = int(min(max(1, block), n))
+    k = max(1, round(n / block))
+    m = k * block
+    top_rank = m - math.ceil(round(q * m, 9)) + 1  # the quantile's rank from the largest, 1-based
+    rng = np.random.default_rng(seed)
+    starts = np.sort(rng.integers(0, n, size=(resamples, k)), axis=1)  # sorted: a faster search
+    # the ticks of the largest values, enough for about three times the resample's need
+    tail = min(n, math.ceil(3 * top_rank * n / m) + block)
+    ticks = np.argsort(x, kind="stable")[::-1][:tail]
+    # copies of tick j in a resample: blocks started in (j - block, j], around the circle
+    before = (ticks - block) % n
+    points, where = np.unique(np.r_[ticks, before], return_inverse=True)
+    slot = np.searchsorted(points, starts) + (np.arange(resamples) * (points.size + 1))[:, None]
+    per_slot = np.bincount(slot.ravel(), minlength=resamples * (points.size + 1))
+    started = np.cumsum(per_slot.reshape(resamples, -1), axis=1, dtype=np.int32)  # at <= points[i]
+    upto, below = started[:, where[:tail]], started[:, where[tail:]]
+    copies = upto - below + k * (ticks < block)[None, :]
+    reached = np.cumsum(copies, axis=1) >= top_rank
+    stats = np.empty(resamples)
+    found = reached.any(axis=1)
+    stats[found] = x[ticks[np.argmax(reached[found], axis=1)]]
+    for b in np.flatnonzero(~found):  # too few large values drawn: the whole resample
+        picks = (starts[b][:, None] + np.arange(block)[None, :]).ravel() % n
+        stats[b] = np.sort(x[picks])[m - top_rank]
+    alpha = (1.0 - level) / 2
+    lo, hi = np.quantile(stats, [alpha, 1.0 - alpha])
+    return float(lo), float(hi)

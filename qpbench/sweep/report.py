@@ -1,5 +1,5 @@
 """The report's sweep section (``docs/sweeps.md``), every number recomputed from ``sweep.csv``:
-per backend each bad verdict's rate with its 95 % Wilson score interval (:func:`wilson`), every
+per backend each bad verdict's rate with its 95 % Wilson score interval (``report.tables.wilson``), every
 pair of backends with McNemar's exact test (:func:`mcnemar_exact`), ECDFs and quantiles of the
 per-run figures, the worst runs with the command that re-runs each.
 """
@@ -7,7 +7,6 @@ per-run figures, the worst runs with the command that re-runs each.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,7 @@ from ..exceptions import InputError
 from ..formats import sha256_file
 from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths
 from ..report.markdown_table import md_table, slug, titled
-from ..sim.verdict import VERDICTS
+from ..report.tables import wilson, worst_first
 
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
 RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
@@ -46,14 +45,6 @@ QUANTILE_HEADER = [
     *("t conv. force s", "not conv.", "t conv. track s", "not conv.", "runs with ticks > 1 ms"),
 ]
 WORST_HEADER = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
-
-
-def wilson(k: int, n: int) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion ``k / n`` (``(nan, nan)`` when ``n = 0``)."""
-    if n == 0:
-        return math.nan, math.nan
-    ci = binomtest(k, n).proportion_ci(0.95, method="wilson")
-    return max(0.0, float(ci.low)), min(1.0, float(ci.high))
 
 
 def mcnemar_exact(b: int, c: int) -> float:
@@ -142,13 +133,9 @@ def _quantile_rows(df: pd.DataFrame) -> list[list]:
 
 def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
     """Per backend the ``k`` worst runs: worst verdict first, then the smallest margin to ``d_safe``."""
-    valid = df[df["status"] != "invalid_scenario"].copy()
-    valid["severity"] = valid["verdict"].map({v: i for i, v in enumerate(VERDICTS)}).fillna(0)
-    valid["margin"] = (valid["min_obstacle_distance"] - valid["d_safe"]).fillna(np.inf)
-    valid["tracking"] = -valid["tracking_max_after_2s"].fillna(0)
     out = []
-    for backend, g in valid.groupby("backend", sort=True):
-        for r in g.sort_values(["severity", "margin", "tracking"]).head(k).to_dict("records"):
+    for backend, g in worst_first(df).groupby("backend", sort=True):
+        for r in g.head(k).to_dict("records"):
             if r["verdict"] == "ok":
                 continue
             path = Path(r["folder"]) / str(r["instance_file"])

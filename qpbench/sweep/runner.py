@@ -170,9 +170,9 @@ def read_sweep_rows(csv_path: str | Path, repair: bool = False) -> list[dict]:
     return list(last.values())
 
 
-def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool):
-    """Check ``out``, write the instances and the manifest (``sweep.json``); the instances and the
-    kept rows."""
+def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resume: bool, drawn):
+    """Check ``out``, write the instances (``drawn``, else all of ``spec``'s) and the manifest
+    (``sweep.json``); the instances and the kept rows."""
     csv_path = out / CSV_NAME
     check_folder(out)
     check_output(csv_path, force=force, resume=resume, make_parent=True)  # out is made below
@@ -203,7 +203,7 @@ def _prepare(out: Path, spec: SweepSpec, backends: list[str], force: bool, resum
     elif force:
         csv_path.unlink(missing_ok=True)
         shutil.rmtree(out / INSTANCE_DIR, ignore_errors=True)
-    instances = sample_instances(spec)
+    instances = sample_instances(spec) if drawn is None else list(drawn)
     for inst in instances:
         path = out / INSTANCE_DIR / f"{inst.name}.toml"
         if not path.exists() or path.read_text(encoding="utf-8") != inst.text:
@@ -223,8 +223,10 @@ def run_sweep(
     plugins: list[str] | None = None,
     on_row: Callable[[dict], None] | None = None,
     engine: str = "compiled",
+    instances: list[Instance] | None = None,
 ) -> SweepOutcome:
-    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``.
+    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``;
+    ``instances``: those of :func:`~.spec.sample_instances` to run (default: every one of ``spec``).
 
     Each run is :func:`qpbench.harness.closed_loop.run_row`; its row is appended to ``sweep.csv``
     as it ends (then ``on_row``). At the end the table is rewritten atomically in instance and
@@ -235,7 +237,7 @@ def run_sweep(
         InputError: resuming a folder of another sweep file or duration.
     """
     out = Path(out)
-    instances, kept = _prepare(out, spec, backends, force, resume)
+    instances, kept = _prepare(out, spec, backends, force, resume, instances)
     csv_path = out / CSV_NAME
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0

@@ -463,12 +463,13 @@ def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
     return None
 
 
-def sample_instances(spec: SweepSpec) -> list[Instance]:
-    """Every instance of ``spec`` (deterministic in ``spec.seed``), each checked by the scenario loader
-    and, with ``[sweep] safe_start`` (default), for a start outside ``d_safe`` of every obstacle."""
+def sample_instances(spec: SweepSpec, start: int = 0) -> list[Instance]:
+    """The instances ``start`` to ``spec.samples - 1`` of ``spec`` (deterministic in ``spec.seed``),
+    each checked by the scenario loader and, with ``[sweep] safe_start`` (default), for a start
+    outside ``d_safe`` of every obstacle."""
     out = []
     digits = max(5, len(str(spec.samples - 1)))  # i00003: as wide as the widest index
-    for index in range(spec.samples):
+    for index in range(start, spec.samples):
         name = f"i{index:0{digits}d}"
         values = {d.key: d.draw(spec.rng(index, d.key)) for d in spec.parameters}
         text = instance_text(spec, name, index, values)

@@ -1,0 +1,65 @@
+"""The main job's perturbed runs (qpbench.harness.pipeline): the budget rule that decides each
+candidate's instances, and two quick runs in a row giving the same answer."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from qpbench.cli import main
+from qpbench.harness.pipeline import PERTURBED, sweep_plan
+from qpbench.report import recommend as rec
+
+PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
+
+
+def test_the_cheapest_get_their_instances_first():
+    costs = {"a": 1.0, "b": 2.0, "c": 3.0}
+    # 100 of a (100 s) and 100 of b (200 s) fill 300 s; c gets none
+    assert sweep_plan(costs, 300.0, 100) == {"a": 100, "b": 100, "c": 0}
+    # what is left after the cheaper ones is spent on the next one: 50 s buy 16 of c
+    assert sweep_plan(costs, 350.0, 100) == {"a": 100, "b": 100, "c": 16}
+    assert sweep_plan(costs, 1e6, 100) == {"a": 100, "b": 100, "c": 100}
+    assert sweep_plan(costs, 50.0, 100) == {"a": 50, "b": 0, "c": 0}
+    assert sweep_plan(costs, -5.0, 100) == {"a": 0, "b": 0, "c": 0}
+    # equal costs: by name, so the same costs give the same plan
+    assert sweep_plan({"y": 1.0, "x": 1.0}, 150.0, 100) == {"x": 100, "y": 50}
+
+
+def strictly_before(answer: rec.Recommendation) -> set[tuple[str, str]]:
+    """Pairs (a, b) of recommended backends with a ranked before b and not tied with it."""
+    picks = answer.overall.recommended
+    return {(a.backend, b.backend) for a in picks for b in picks if a.rank < b.rank}
+
+
+@pytest.mark.slow
+def test_two_quick_runs_give_the_same_answer(tmp_path, monkeypatch):
+    """``run --quick`` on two scenarios and two backends (the same code path as the whole quick
+    run, which takes a minute or more), twice: the same recommended backends, in the same order
+    up to declared ties, and the same verdicts of the perturbed runs both made."""
+    monkeypatch.chdir(tmp_path)
+    answers, perturbed = [], []
+    for out in ("q1", "q2"):
+        args = ["-q", "run", "--quick", "--scenarios", "wall,narrow", "--backends", "daqp,pinv"]
+        args += ["--problems", str(PROBLEMS), "--sweep-budget", "10", "--out", out]
+        assert main(args) == 0
+        sweeps = rec.read_sweeps(sorted((tmp_path / out / PERTURBED).glob("*/sweep.csv")))
+        loop = pd.read_csv(tmp_path / out / "closed_loop.csv")
+        answers.append(rec.recommend(loop, sweeps))
+        manifest = json.loads((tmp_path / out / "run.json").read_text())
+        assert manifest["perturbed"]["scenarios"] == ["wall", "narrow"]
+        assert manifest["perturbed"]["min_ok_bound"] == rec.MIN_OK_BOUND
+        assert "pinv" not in manifest["perturbed"]["candidates"]  # breaks the joint limits
+        if len(sweeps):
+            perturbed.append(sweeps.set_index(["base_scenario", "instance", "backend"])["verdict"])
+        md = (tmp_path / out / "report.md").read_text()
+        assert md.startswith("# qpbench report\n\n## Recommendation\n")
+    first, second = answers
+    assert set(first.overall.backends) == set(second.overall.backends)
+    assert not strictly_before(first) & {(b, a) for a, b in strictly_before(second)}
+    if len(perturbed) == 2:  # a run's verdicts do not depend on the machine
+        both = perturbed[0].index.intersection(perturbed[1].index)
+        assert (perturbed[0][both] == perturbed[1][both]).all()
