@@ -1,10 +1,10 @@
 """Which backends to trust in the loop: a *candidate* for a scenario when every run of it there
 has verdict ``ok`` and was real time, overall when in every scenario; *recommended* overall when
 also, in every scenario with perturbed runs (a sweep of it), the Wilson lower bound of its share
-of ``ok`` runs is at least ``min_ok_bound`` (:func:`recommend`); ranked by the p99 per-tick time a C controller would pay (the
-largest over its runs) with its confidence interval, overlapping intervals sharing a rank
-(:func:`ranked`); every other backend listed with its reasons (docs/verdicts.md, "Which backends
-are recommended")."""
+of ``ok`` runs is at least ``min_ok_bound`` (:func:`recommend`); ranked by the p99 per-tick
+time a C controller would pay (the largest over its runs) with its confidence interval,
+overlapping intervals sharing a rank (:func:`ranked`); every other backend listed with its
+reasons (docs/verdicts.md, "Which backends are recommended")."""
 
 from __future__ import annotations
 
@@ -41,7 +41,8 @@ HOW_TO_READ = (
     "calling its C or C++ library would pay.",
     "A backend is recommended where every run of it was `ok` and real time and, in every "
     "scenario with perturbed instances, the lower bound of its share of `ok` perturbed runs "
-    "reaches the threshold; ranked by the p99 per-tick time a C controller would pay (the solve timed in compiled code, else the solver's own) with a 95 % interval, backends whose "
+    "reaches the threshold; ranked by the p99 per-tick time a C controller would pay (the solve "
+    "timed in compiled code, else the solver's own) with a 95 % interval, backends whose "
     "intervals overlap sharing a rank (`2=`); the closed-loop section below gives every run's "
     "figures.",
     "The per-tick benchmark solves each QP exported from the loop with every backend and judges "
@@ -72,8 +73,9 @@ class Evidence:
 
 @dataclass(frozen=True)
 class Pick:
-    """A backend that passed every run: its p99 ranking time (:func:`qpbench.sim.summary.rank_times`), that p99's interval [s] (NaN: none)
-    and the solver's own p99 [s] (NaN: not reported); ``rank`` (1 = fastest; backends whose
+    """A backend that passed every run: its p99 ranking time
+    (:func:`qpbench.sim.summary.rank_times`), that p99's interval [s] (NaN: none) and the
+    solver's own p99 [s] (NaN: not reported); ``rank`` (1 = fastest; backends whose
     intervals overlap share one, ``tied``); ``evidence``: per swept scenario."""
 
     backend: str
