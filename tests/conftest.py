@@ -156,6 +156,8 @@ def write_band_set(folder: Path, n: int = 100_000) -> Path:
     return folder
 
 
+from qpbench.sim.summary import CLOCKS  # noqa: E402
+
 #: Summary keys of a closed-loop run that measure time; every other one must not depend on it.
 SUMMARY_TIME_KEYS = frozenset(
     {
@@ -174,7 +176,11 @@ SUMMARY_TIME_KEYS = frozenset(
         "realtime_reason",
         "realtime_solver",
         "realtime_solver_reason",
+        "rank_time_p99_s",
+        "rank_time_p99_lo_s",
+        "rank_time_p99_hi_s",
     }
+    | {f"{clock}_{stat}_s" for clock in CLOCKS for stat in ("median", "p99", "max")}
 )
 
 

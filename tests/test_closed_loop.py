@@ -250,23 +250,7 @@ from qpbench.backends import load_plugins  # noqa: E402
 PLUGIN = str(Path(fb.__file__).resolve())
 
 #: Columns that hold timings (differ between two runs of the same thing).
-TIMED = (
-    "solve_time_median_s",
-    "solve_time_p99_s",
-    "solve_time_p99_lo_s",
-    "solve_time_p99_hi_s",
-    "solve_time_max_s",
-    "real_time_factor",
-    "wall_time_s",
-    "deadline_misses",
-    "over_dt_share",
-    "solver_time_p99_s",
-    "solver_over_dt_share",
-    "realtime",
-    "realtime_reason",
-    "realtime_solver",
-    "realtime_solver_reason",
-)
+TIMED = tuple(SUMMARY_TIME_KEYS)
 
 
 def _untimed(row: pd.Series) -> pd.Series:

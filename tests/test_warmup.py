@@ -88,6 +88,12 @@ def test_first_run_on_a_fresh_cache_equals_the_next(fresh):
     )  # no compile inside the loop (a compile takes tens of seconds)
 
 
+def jit_kernels() -> tuple[str, ...]:
+    from qpbench.jit import KERNELS
+
+    return KERNELS
+
+
 @pytest.mark.slow
 def test_warmup_command_loads_what_the_cache_holds(fresh):
     cache, work, _, files = fresh
@@ -95,7 +101,7 @@ def test_warmup_command_loads_what_the_cache_holds(fresh):
         proc = _qpbench(["warmup", "--json"], cache, work)
         report = json.loads(proc.stdout)
         assert report["compiled"] == 0 and report["cache"] == str(cache)
-        assert report["kernels"] == ["controller", "post", "network"]
+        assert report["kernels"] == list(jit_kernels())
     assert _cache_files(cache) == files[0]
     proc = _qpbench(["warmup"], cache, work)
     assert (
@@ -119,9 +125,11 @@ def test_warmup_selects_the_kernels_of_the_backends_run():
     from qpbench.jit import KERNELS, LOOP_KERNELS, SHIM, kernels_for
 
     assert kernels_for(["daqp", "osqp", "qpsolvers:daqp"], loop=False) == ()
-    assert kernels_for(["daqp"]) == LOOP_KERNELS  # a closed loop builds the controller's QPs
+    # a closed loop builds the controller's QPs, and runs daqp's compiled engine
+    assert kernels_for(["daqp"]) == (*LOOP_KERNELS, "engine:daqp")
+    assert kernels_for(["osqp"]) == LOOP_KERNELS  # no compiled solve: the Python engine
     assert kernels_for(["rnn-tuned"], loop=False) == ("network",)
-    assert kernels_for(["daqp", "rnn"]) == KERNELS
+    assert kernels_for(["pinv", "rnn"]) == (*KERNELS, "engine:pinv", "engine:rnn")
     assert kernels_for(["qpoases"], loop=False) == (SHIM,)
     assert kernels_for(["no-such-backend"], loop=False) == ()
     assert kernels_for(None) == (*KERNELS, SHIM)  # qpbench warmup: everything

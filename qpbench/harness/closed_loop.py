@@ -11,7 +11,7 @@ import math
 import re
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -289,21 +289,11 @@ def run_closed_loop(
             on_row(row)
 
     pairs, plugins = tuple(overrides.items()), tuple(plugin_files())  # workers load them too
+    common = LoopTask("", "", formulation, duration, deadline, None, pairs, str(out), plugins)
     items = [
         (
             (s, b),
-            LoopTask(
-                s,
-                b,
-                formulation,
-                duration,
-                deadline,
-                budget(b),
-                pairs,
-                str(out),
-                plugins,
-                engine=engine,
-            ),
+            replace(common, scenario=s, backend=b, run_budget=budget(b), engine=engine),
             run_deadline(s, duration, run_time_limit) if wants_worker(isolate, b) else None,
         )
         for s, b in todo

@@ -418,6 +418,13 @@ class _Run:
             ctrl.exempt,
         )
         tick_log.add_body_columns(frame, body, [o.name for o in ctrl.obstacles])
+        if solve_log.isEnabledFor(logging.DEBUG):  # -vv: one line per solve, from the log
+            name = f"{scenario.name} {self.be.name}"
+            ticks = zip(frame[tick_log.T], frame[tick_log.STATUS], frame[tick_log.SOLVE_TIME])
+            for k, (t, status, solve_s) in enumerate(ticks):
+                solve_log.debug(
+                    "%s tick %d (t = %.3f s): %s in %.1f µs", name, k, t, status, solve_s * 1e6
+                )
         if self.engine == "compiled" and ls.counts[2] >= 0:  # the engine's first error tick
             k = int(ls.counts[2])
             self.first_error = self._error_text(self.be.name, ls.counts[3])
