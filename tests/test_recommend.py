@@ -33,7 +33,7 @@ def run(scenario, backend, verdict="ok", realtime="yes", p99=50e-6, solver=20e-6
         "realtime": realtime,
         "realtime_reason": math.nan,
         "realtime_solver": "yes",
-        "solve_time_p99_s": p99,
+        "rank_time_p99_s": p99,
         "solver_time_p99_s": solver,
         "min_body_distance": 0.02,
         "key_point_rule": "held",
@@ -64,7 +64,7 @@ def test_ranked_by_p99_call_time_with_the_solvers_own_beside():
     assert text.splitlines()[0] == "Recommendation"
     (table_md,) = parse_tables(rec.render(answer, markdown=True))
     assert table_md["header"] == [
-        "rank", "backend", "call p99 (us)", "95 % interval (us)", "solver p99 (us)",
+        "rank", "backend", "controller p99 (us)", "95 % interval (us)", "solver p99 (us)",
         "perturbed ok", "ok bound",
     ]  # fmt: skip
     assert table_md["rows"] == [
@@ -308,7 +308,7 @@ def test_the_report_opens_with_the_answer(closed_loop_csv, tmp_path):
 
 def timed(scenario, backend, p99, lo, hi, **extra):
     """A run whose p99 call time [s] has the interval ``[lo, hi]``."""
-    return run(scenario, backend, p99=p99, solve_time_p99_lo_s=lo, solve_time_p99_hi_s=hi, **extra)
+    return run(scenario, backend, p99=p99, rank_time_p99_lo_s=lo, rank_time_p99_hi_s=hi, **extra)
 
 
 def test_overlapping_intervals_share_a_rank():

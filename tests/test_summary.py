@@ -96,8 +96,9 @@ def test_a_run_summary_bounds_its_p99():
     scenario = load_scenario("wall")
     result = simulate(scenario, "pinv", duration=0.4)
     s = result.summary
-    assert s["solve_time_p99_lo_s"] <= s["solve_time_p99_s"] <= s["solve_time_p99_hi_s"]
-    times = result.log["solve_time_s"].to_numpy()
+    assert s["rank_time_source"] == "compiled"  # pinv runs on the compiled engine
+    assert s["rank_time_p99_lo_s"] <= s["rank_time_p99_s"] <= s["rank_time_p99_hi_s"]
+    times = (result.log["solve_time_s"] + result.log["fallback_solve_time_s"].fillna(0)).to_numpy()
     block = round(BOOTSTRAP_BLOCK_S / scenario.dt)
     lo, hi = block_bootstrap_quantile(times, 0.99, block)
-    assert (s["solve_time_p99_lo_s"], s["solve_time_p99_hi_s"]) == (lo, hi)
+    assert (s["rank_time_p99_lo_s"], s["rank_time_p99_hi_s"]) == (lo, hi)
