@@ -22,8 +22,9 @@ HOW_TO_READ = (
     "run stopped before its end: budget, crash, error), `diverged` (tracking or force error "
     "beyond its threshold), else `ok`; the reasons are in the closed-loop tables.",
     "*Real time* is judged at each scenario's control period dt from the measured call times "
-    "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
-    "calling its C or C++ library would pay.",
+    "(their p99 and the share of ticks over dt, beyond what this machine's own loop missed "
+    "without a solver; the infeasible ticks by their median); the solver's own time is what a "
+    "controller calling its C or C++ library would pay.",
     "A backend is recommended where every run of it was `ok` and real time, ranked by its p99 "
     "call time; the closed-loop section below gives every run's figures.",
     "The per-tick benchmark solves each QP exported from the loop with every backend and judges "
@@ -66,6 +67,7 @@ class Recommendation:
     overall: Scope
     scenarios: tuple[Scope, ...]
     runs: int
+    noise_floor: tuple[str, ...] = ()
 
 
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
@@ -81,6 +83,31 @@ def read_runs(table: pd.DataFrame) -> pd.DataFrame:
         "simulated_s": math.nan,
     }
     return table.assign(**{c: v for c, v in missing.items() if c not in table.columns})
+
+
+def noise_floor_runs(table: pd.DataFrame) -> pd.Series:
+    """Which rows are the noise floor's runs (``noise_floor`` true; none in a table without the
+    column): measured beside the candidates, never one of them."""
+    if "noise_floor" not in table.columns:
+        return pd.Series(False, index=table.index)
+    return table["noise_floor"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
+
+
+def floor_lines(table: pd.DataFrame) -> tuple[str, ...]:
+    """One line per noise floor run of ``table``: the machine's own loop, tick to tick."""
+    out = []
+    for row in table[noise_floor_runs(table)].to_dict("records"):
+        p99 = float(pd.to_numeric(row.get("time_p99_without_infeasible_s"), errors="coerce"))
+        over = pd.to_numeric(row.get("deadline_misses"), errors="coerce")
+        ticks = pd.to_numeric(row.get("timed_ticks"), errors="coerce")
+        if math.isnan(p99) or math.isnan(over) or math.isnan(ticks):
+            out.append(f"{row['scenario']}: {_text(row.get('error')) or 'no result'}")
+            continue
+        out.append(
+            f"{row['scenario']}: p99 tick {_us(p99)} us, {int(over)} of {int(ticks)} ticks over "
+            f"dt, real time {_text(row.get('realtime'))}"
+        )
+    return tuple(out)
 
 
 def _text(value: object) -> str:
@@ -121,6 +148,8 @@ def _reasons(row: dict, place: str) -> list[str]:
     if realtime == "no":
         why = _text(row.get("realtime_reason"))  # both criteria: p99 and ticks over dt
         out.append(f"not real time in {place}" + (f": {why}" if why else ""))
+    elif realtime == "unknown" and _text(row.get("realtime_reason")):
+        out.append(f"real time unknown in {place}: {_first(row.get('realtime_reason'))}")
     elif realtime != "yes" and verdict == "ok":
         out.append(f"real time not judged in {place}")
     return out
@@ -144,9 +173,10 @@ def _scope(name: str, runs: pd.DataFrame, place) -> Scope:
 def recommend(table: pd.DataFrame) -> Recommendation:
     """Per scenario and overall: the backends ok and real time in every run of ``table`` (one
     row per run, any number per scenario and backend), fastest first, and why not the others."""
-    runs = read_runs(table)
+    floor = floor_lines(table)
+    runs = read_runs(table[~noise_floor_runs(table)])
     if runs.empty:
-        return Recommendation(Scope("all scenarios"), (), 0)
+        return Recommendation(Scope("all scenarios"), (), 0, floor)
     runs["scenario"] = runs["scenario"].astype(str)
     several = runs["formulation"].nunique(dropna=True) > 1
 
@@ -162,7 +192,8 @@ def recommend(table: pd.DataFrame) -> Recommendation:
             rejected[pick.backend] = (f"not run in {', '.join(missing)}",)
     picks = tuple(p for p in every.recommended if p.backend not in rejected)
     names = ", ".join(s.name for s in scenarios)
-    return Recommendation(Scope(f"all scenarios ({names})", picks, rejected), scenarios, len(runs))
+    overall = Scope(f"all scenarios ({names})", picks, rejected)
+    return Recommendation(overall, scenarios, len(runs), floor)
 
 
 def _why(reasons: tuple[str, ...]) -> str:
@@ -210,14 +241,25 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
         lines.append(f"Not recommended:{gap}")
         rows = [[b, _why(reasons)] for b, reasons in overall.not_recommended.items()]
         lines.append(md_table(["backend", "why"], rows, pad=True, left=2).rstrip("\n") + gap)
+    if answer.noise_floor:
+        lines.append(
+            f"This machine's noise floor (the loop with the `noop` backend, no solver, in the "
+            f"same run set; real time is judged against it):{gap}"
+        )
+        lines.extend(f"- {line}" for line in answer.noise_floor)
+        lines[-1] += gap
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
-def opening(closed_loop: pd.DataFrame, has_bench: bool = False) -> list[str]:
-    """The opening of ``report.md``: the recommendation (or why there is none), How to read this."""
+def opening(
+    closed_loop: pd.DataFrame, has_bench: bool = False, noise_floor: pd.DataFrame | None = None
+) -> list[str]:
+    """The opening of ``report.md``: the recommendation (or why there is none) with the noise
+    floor's runs (``noise_floor``), How to read this."""
     out = []
     if not closed_loop.empty:
-        out.append(render(recommend(closed_loop), markdown=True))
+        runs = closed_loop if noise_floor is None else pd.concat([closed_loop, noise_floor])
+        out.append(render(recommend(runs), markdown=True))
     elif has_bench:
         out.append(
             "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "
@@ -233,7 +275,7 @@ def shortfalls(runs: pd.DataFrame | None = None, failed_solves: int = 0) -> list
     if failed_solves:
         out.append(f"{failed_solves} failed solves")
     if runs is not None and len(runs):
-        runs = read_runs(runs)
+        runs = read_runs(runs[~noise_floor_runs(runs)])
         verdict = runs["verdict"].map(_text)
         bad = verdict[verdict != "ok"].replace("", "no verdict")
         if len(bad):
