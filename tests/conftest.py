@@ -172,6 +172,14 @@ SUMMARY_TIME_KEYS = frozenset(
         "realtime_reason",
         "realtime_solver",
         "realtime_solver_reason",
+        "time_p99_without_infeasible_s",
+        "time_median_infeasible_s",
+        "certify_time_median_s",
+        "certify_time_max_s",
+        "noise_floor_over_dt_share",
+        "noise_floor_tick_p99_s",
+        *(f"over_dt_{kind}" for kind in ("optimal", "infeasible", "fallback", "other")),
+        *(f"time_p99_{kind}_s" for kind in ("optimal", "infeasible", "fallback", "other")),
     }
 )
 

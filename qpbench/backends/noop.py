@@ -5,8 +5,9 @@ everything a tick does but solve, so its ticks over ``dt`` are the machine's own
 (docs/verdicts.md, "The noise floor"). It notes when each call starts: the time between two
 calls is one whole tick of the loop (:meth:`tick_periods`), what the floor is judged on.
 Every closed-loop run set runs it once per scenario beside the candidates; ``all`` leaves it
-out, the per-tick bench refuses it and the recommendation never ranks it. Duals: zero (``x = 0`` solves no QP but the trivial one, so
-residuals mean nothing here). No time of its own (``solver_time_s`` is ``None``).
+out, the per-tick bench refuses it and the recommendation never ranks it. Duals: zero
+(``x = 0`` solves no QP but the trivial one, so residuals mean nothing here). No time of its
+own (``solver_time_s`` is ``None``).
 """
 
 from __future__ import annotations

@@ -316,6 +316,15 @@ def run_closed_loop(
     return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, len(order) - ran, not_ok)
 
 
+#: The fields :func:`judge_against_floor` sets.
+FLOOR_JUDGED = (
+    "realtime",
+    "realtime_reason",
+    "noise_floor_over_dt_share",
+    "noise_floor_tick_p99_s",
+)
+
+
 def judge_against_floor(row: dict, floor: dict | None) -> None:
     """Judge ``row``'s real time again, in place, against its scenario's noise floor (the row of
     the ``noop`` run of the same run set, ``None``: none; docs/verdicts.md, "The noise floor"):
