@@ -77,14 +77,14 @@ def sweep_time(backend: str, samples: int, engine: str) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", default="wall,narrow")
-    parser.add_argument("--backends", default=",".join(b for b in SOLVERS if b != "null"))
+    parser.add_argument("--backends", default=",".join(b for b in SOLVERS if b != "noop"))
     parser.add_argument("--duration", type=float, default=20.0)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--sweep", type=int, default=200, metavar="N")
     parser.add_argument("--sweep-backends", default="daqp")
     args = parser.parse_args()
     backends = args.backends.split(",")
-    warmup([*backends, "null"])
+    warmup([*backends, "noop"])
     print(f"load average before: {os.getloadavg()}")
     header = (
         f"{'scenario':9} {'backend':10} {'engine':8} {'tick us':>8} {'solve us':>9} "
@@ -92,7 +92,7 @@ def main() -> None:
     )
     for scenario in args.scenarios.split(","):
         print(f"\n{header}")
-        for backend in [*backends, "null"]:
+        for backend in [*backends, "noop"]:
             runs = {e: [] for e in ENGINES}
             for _ in range(args.repeat):
                 for engine in ENGINES:

@@ -73,19 +73,28 @@ def select_scenarios(value: str | None) -> list[str]:
     return names
 
 
-def select_backends(value: str | list[str] | None, option: str = "--backends") -> list[str]:
-    """``all`` (or nothing): every available backend; else the names given, in their registered
-    spelling, each available here (:class:`BackendNotFound` with close names otherwise)."""
-    from .backends import backend_names, get_backend, resolve_name
+def select_backends(
+    value: str | list[str] | None, option: str = "--backends", floor: bool = True
+) -> list[str]:
+    """``all`` (or nothing): every available backend but the noise floor (``noop``); else the
+    names given, in their registered spelling, each available here (:class:`BackendNotFound`
+    with close names otherwise); ``floor=False`` refuses the noise floor by name too."""
+    from .backends import backend_class, backend_names, get_backend, resolve_name
 
     names = parse_list(value or "all", option)
     if names == ["all"]:
-        return list(backend_names())
+        return [name for name in backend_names() if not backend_class(name).noise_floor]
     resolved = [resolve_name(name) for name in names]  # a typo gets a suggestion
     for i, name in enumerate(resolved):
         if name in resolved[:i]:
             raise ParamError(
                 f"'{names[i]}' listed twice in {','.join(names)} (both are '{name}')", key=option
+            )
+        if not floor and backend_class(name).noise_floor:
+            raise ParamError(
+                f"'{name}' is the closed loop's noise floor (x = 0, no solve), not a solver: "
+                "it has no answer to score, and every closed-loop run set runs it already",
+                key=option,
             )
     for name in resolved:
         get_backend(name)  # raises BackendNotFound with the reason

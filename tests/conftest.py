@@ -179,6 +179,14 @@ SUMMARY_TIME_KEYS = frozenset(
         "rank_time_p99_s",
         "rank_time_p99_lo_s",
         "rank_time_p99_hi_s",
+        "time_p99_without_infeasible_s",
+        "time_median_infeasible_s",
+        "certify_time_median_s",
+        "certify_time_max_s",
+        "noise_floor_over_dt_share",
+        "noise_floor_tick_p99_s",
+        *(f"over_dt_{kind}" for kind in ("optimal", "infeasible", "fallback", "other")),
+        *(f"time_p99_{kind}_s" for kind in ("optimal", "infeasible", "fallback", "other")),
     }
     | {f"{clock}_{stat}_s" for clock in CLOCKS for stat in ("median", "p99", "max")}
 )

@@ -25,7 +25,8 @@ from qpbench.backends import (
 from qpbench.backends.base import objective
 from qpbench.exceptions import BackendNotFound
 
-EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged"}  # tested in test_rnn.py
+#: Tested elsewhere: the networks in test_rnn.py, the noise floor (x = 0) in test_closed_loop.py.
+EXCLUDED = {"rnn", "rnn-tuned", "rnn-converged", "noop"}
 #: The package's backends (not those other tests register to inject faults).
 INFOS = [
     info

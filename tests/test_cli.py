@@ -141,6 +141,8 @@ def test_closed_loop_then_report(tmp_path):
     )
     assert code == 0  # written; pinv breaks the speed limits (and goes through narrow's lower line)
     table = pd.read_csv(out / "closed_loop.csv")
+    assert list(table["backend"]).count("noop") == 2  # each scenario's noise floor
+    table = table[table["backend"] != "noop"]
     assert len(table) == 4 and (table["status"] == "ok").all()
     assert list(table["verdict"]) == ["ok", "limits", "ok", "unsafe"]
     assert main(["-q", "report", str(out / "closed_loop.csv"), "--out", str(out)]) == 0
@@ -207,13 +209,14 @@ def test_run_end_to_end(tmp_path, monkeypatch, capsys):
         bench["repeat"] == 3
     ).all()  # run times every problem 3 times; the report uses the minimum
     assert set(bench["position"]) == {0, 1} and (bench["order_seed"] == 0).all()
-    loop = pd.read_csv(out / "closed_loop.csv")
+    full = pd.read_csv(out / "closed_loop.csv")  # with the noise floor's run
+    loop = full[full["backend"] != "noop"]
     assert (
         sorted(loop["backend"]) == ["pinv", "qpsolvers:daqp"] and (loop["duration_s"] == 0.3).all()
     )
     md = (out / "report.md").read_text()
     assert "## Per-tick benchmark" in md and "## Closed loop" in md
-    assert md.startswith("# qpbench report\n\n" + render(recommend(loop), markdown=True))
+    assert md.startswith("# qpbench report\n\n" + render(recommend(full), markdown=True))
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["backends"] == ["qpsolvers:daqp", "pinv"]
     assert (
@@ -282,6 +285,7 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     args = [*run_args("wall,free", f"daqp,{slow}", "r"), "--jobs", "1"]
     assert main(args) == 0
     loop = pd.read_csv(tmp_path / "r" / "closed_loop.csv")
+    loop = loop[loop["backend"] != "noop"]  # the noise floor's runs
     assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(
         (s, b) for s in ("wall", "free") for b in ("daqp", slow)
     )

@@ -22,6 +22,13 @@ from qpbench.sim.log import TIME_COLUMNS
 
 SCENARIOS = ["wall", "narrow"]
 BACKENDS = ["qpsolvers:daqp", "pinv"]
+#: The noise floor's backend, run first in each scenario of every run set.
+FLOOR = "noop"
+
+
+def _candidates(table: pd.DataFrame) -> pd.DataFrame:
+    """The rows of a closed-loop table but the noise floor's."""
+    return table[table["backend"] != FLOOR].reset_index(drop=True)
 
 
 def _cli_args(scenarios: str, backends: str, duration: str, out, *options: str) -> list[str]:
@@ -52,10 +59,10 @@ def test_table_has_one_row_per_pair(table_dir):
     table = pd.read_csv(out / cl.CSV_NAME)
     assert list(table.columns[: len(cl.COLUMNS)]) == list(cl.COLUMNS)
     assert [(r.scenario, r.backend) for r in table.itertuples()] == [
-        (s, b) for s in SCENARIOS for b in BACKENDS
+        (s, b) for s in SCENARIOS for b in [FLOOR, *BACKENDS]
     ]
     assert (table["status"] == "ok").all(), table["error"].tolist()
-    assert outcome.errors == 0 and outcome.ran == 4 and outcome.skipped == 0
+    assert outcome.errors == 0 and outcome.ran == 6 and outcome.skipped == 0
     # simulator summary keys come along
     for key in (
         "zero_velocity_ticks",
@@ -166,46 +173,49 @@ def test_failing_run_becomes_an_error_row(tmp_path):
     bad = tmp_path / "typo.toml"
     bad.write_text("[scenario]\nname = 'typo'\n")
     outcome = cl.run_closed_loop(["wall", str(bad)], ["pinv"], tmp_path / "o", duration=0.05)
-    table = outcome.table
+    table = _candidates(outcome.table)
     assert list(table["status"]) == ["ok", "error"]
     assert "ScenarioError" in table["error"].iloc[1] and "typo.toml" in table["error"].iloc[1]
-    assert outcome.errors == 1
+    assert outcome.errors == 2  # the noise floor's run of the bad scenario too
 
 
 def test_resume_force_and_refusal(tmp_path):
     out = tmp_path / "o"
     first = cl.run_closed_loop(["wall"], ["pinv", "qpsolvers:daqp"], out, duration=0.05)
-    assert first.ran == 2
+    assert first.ran == 3  # with the noise floor
     with pytest.raises(OutputExistsError):
         cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05)
     before = pd.read_csv(out / cl.CSV_NAME)
     again = cl.run_closed_loop(
         ["wall", "free"], ["pinv", "qpsolvers:daqp"], out, duration=0.05, resume=True
     )
-    assert again.ran == 2 and again.skipped == 2  # only the new scenario runs
+    assert again.ran == 3 and again.skipped == 3  # only the new scenario runs
     kept = again.table[again.table["scenario"] == "wall"].reset_index(drop=True)
     pd.testing.assert_series_equal(kept["solve_time_median_s"], before["solve_time_median_s"])
     # another duration is another run: resume does not keep it
     longer = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.08, resume=True)
-    assert longer.ran == 1
+    assert longer.ran == 2
     # the pairs not asked for this time stay in the table
     assert sorted(zip(longer.table["scenario"], longer.table["backend"])) == sorted(
-        (s, b) for s in ("wall", "free") for b in ("pinv", "qpsolvers:daqp")
+        (s, b) for s in ("wall", "free") for b in (FLOOR, "pinv", "qpsolvers:daqp")
     )
     assert longer.table.iloc[0]["duration_s"] == 0.08
     forced = cl.run_closed_loop(["wall"], ["pinv"], out, duration=0.05, force=True)
-    assert forced.ran == 1 and len(forced.table) == 1
-    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == ["wall__pinv.parquet"]
+    assert forced.ran == 2 and len(forced.table) == 2
+    assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == [
+        "wall__noop.parquet",
+        "wall__pinv.parquet",
+    ]
 
 
 def test_skipped_backends_get_a_row(tmp_path):
     outcome = cl.run_closed_loop(
         ["wall"], ["pinv", "cvxpy"], tmp_path, duration=0.05, skip={"cvxpy": "too slow here"}
     )
-    table = outcome.table
+    table = _candidates(outcome.table)
     assert list(table["status"]) == ["ok", "skipped"]
     assert table["error"].iloc[1] == "too slow here"
-    assert outcome.errors == 0 and outcome.ran == 1
+    assert outcome.errors == 0 and outcome.ran == 2
 
 
 def test_bad_parameters(tmp_path):
@@ -250,6 +260,7 @@ from qpbench.backends import load_plugins  # noqa: E402
 PLUGIN = str(Path(fb.__file__).resolve())
 
 #: Columns that hold timings (differ between two runs of the same thing).
+#: The row's columns that depend on the machine's timing.
 TIMED = tuple(SUMMARY_TIME_KEYS)
 
 
@@ -270,7 +281,7 @@ def _same_daqp_run(out_a, row_a, out_b, row_b):
 def daqp_alone(tmp_path_factory):
     out = tmp_path_factory.mktemp("alone")
     assert main(["-q", *_cli_args("wall", "daqp", "0.1", out)]) == 0
-    return out, pd.read_csv(out / cl.CSV_NAME).iloc[0]
+    return out, _candidates(pd.read_csv(out / cl.CSV_NAME)).iloc[0]
 
 
 def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alone):
@@ -290,7 +301,7 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
         ),
     ]
     assert main(args) == 1  # failed runs, and --strict
-    table = pd.read_csv(out / cl.CSV_NAME)
+    table = _candidates(pd.read_csv(out / cl.CSV_NAME))
     assert list(table["backend"]) == ["faulty:segfault", "faulty:hang", "daqp"]
     crashed, hung, daqp = (table.iloc[i] for i in range(3))
     assert crashed["status"] == "crashed" and "SIGSEGV" in crashed["error"]
@@ -304,7 +315,8 @@ def test_segfault_and_hang_are_rows_and_the_others_are_intact(tmp_path, daqp_alo
     assert daqp["status"] == "ok"
     _same_daqp_run(out, daqp, *daqp_alone)
     assert sorted(p.name for p in (out / cl.LOG_DIR).iterdir()) == [
-        "wall__daqp.parquet"
+        "wall__daqp.parquet",
+        "wall__noop.parquet",
     ]  # no partial logs
     # resume keeps the ok row and retries only the failed ones
     seen = []
@@ -332,7 +344,10 @@ def test_parallel_runs_survive_a_crash(tmp_path, daqp_alone):
     assert table["isolated"].all() and outcome.errors == 1
     alone_out, alone_row = daqp_alone
     _same_daqp_run(
-        out, outcome.table.iloc[1].drop("isolated"), alone_out, alone_row.drop("isolated")
+        out,
+        _candidates(outcome.table).iloc[1].drop("isolated"),
+        alone_out,
+        alone_row.drop("isolated"),
     )
     # the per-tick guards' counts reach the table (the test plugin loaded in the worker)
     raised = table.loc["faulty-ticks:raise"]
@@ -421,7 +436,7 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     ]
     # stopped early: its verdict is incomplete, a verdict that is not ok (exit 1 with --strict)
     assert main([*args, "--out", str(out), "--run-budget", "0.4", "--strict"]) == 1
-    row = pd.read_csv(out / cl.CSV_NAME).iloc[0]
+    row = _candidates(pd.read_csv(out / cl.CSV_NAME)).iloc[0]
     assert row["status"] == "budget" and row["verdict"] == "incomplete"
     assert row["run_budget_s"] == 0.4 and row["realtime"] == "no"  # about 4 ms a tick
     assert 0 < row["simulated_s"] < row["duration_s"] == 1.0
@@ -437,7 +452,7 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
     # the uncut run: its first ticks are the budgeted run's log
     whole_out = tmp_path / "whole"
     assert main([*args, "--out", str(whole_out)]) == 0  # not real time: no change of the exit code
-    whole = pd.read_csv(whole_out / cl.CSV_NAME).iloc[0]
+    whole = _candidates(pd.read_csv(whole_out / cl.CSV_NAME)).iloc[0]
     assert whole["status"] == "ok" and whole["simulated_s"] == 1.0 and whole["ticks"] == 1000
     whole_log = pd.read_parquet(whole_out / whole["log_file"])
     pd.testing.assert_frame_equal(
@@ -459,3 +474,65 @@ def test_budget_stops_a_run_and_the_row_says_so(tmp_path, monkeypatch, capsys):
 def test_bad_budget(tmp_path):
     with pytest.raises(ParamError, match="run-budget"):
         cl.run_closed_loop(["wall"], ["daqp"], tmp_path, run_budget=-1.0)
+
+
+# ---------------------------------------------------------------- the machine's noise floor
+
+
+def test_the_noop_backend_answers_zero_and_times_the_loop_tick_to_tick():
+    from qpbench.backends import NOISE_FLOOR, get_backend
+    from qpbench.sim.loop import simulate
+
+    be = get_backend(NOISE_FLOOR)
+    run = simulate("wall", be, duration=0.03)
+    assert (run.log["status"] == "optimal").all() and not run.log["fallback"].any()
+    assert np.all(run.log[[f"v_{i}" for i in range(4)]].to_numpy() == 0.0)
+    periods = be.tick_periods()
+    assert periods.size == 30 and np.isnan(periods[0])
+    # a whole tick is longer than the call inside it
+    assert np.all(periods[1:] > run.log["solve_time_s"].to_numpy()[:-1])
+    assert run.summary["realtime_solver"] == "unknown"  # no time of its own
+
+
+def test_the_noise_floor_is_no_candidate(tmp_path, capsys):
+    from qpbench.backends import NOISE_FLOOR
+
+    assert NOISE_FLOOR not in selection.select_backends("all")
+    assert selection.select_backends(NOISE_FLOOR) == [NOISE_FLOOR]  # by name, in the loop
+    with pytest.raises(ParamError, match="noise floor"):
+        selection.select_backends(f"daqp,{NOISE_FLOOR}", floor=False)
+    argv = ["bench", "problems/wall", "--backends", NOISE_FLOOR, "--out", str(tmp_path / "b.csv")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "noise floor" in err[0] and "--backends" in err[0]
+
+
+def test_a_run_set_measures_the_noise_floor_and_judges_real_time_against_it(tmp_path):
+    from qpbench.backends import NOISE_FLOOR
+    from qpbench.report import recommend as rec
+    from qpbench.sim.verdict import floor_fields, judge_realtime_run
+
+    # 2.5 s: past the settle time, so the noop run's own verdict (x = 0: diverged) exists
+    out = cl.run_closed_loop(["wall"], ["qpsolvers:daqp"], tmp_path / "cl", duration=2.5)
+    table = out.table
+    assert list(table["backend"]) == [NOISE_FLOOR, "qpsolvers:daqp"]  # the floor first
+    floor, daqp = (r for r in table.to_dict("records"))
+    assert floor["noise_floor"] is True and daqp["noise_floor"] is False
+    assert floor["verdict"] == "diverged" and daqp["verdict"] == "ok"
+    # the floor is judged tick to tick: every tick but the first, all of them optimal
+    assert floor["timed_ticks"] == floor["ticks"] - 1 == floor["ticks_optimal"] == 2499
+    log = pd.read_parquet(tmp_path / "cl" / floor["log_file"])
+    assert floor["time_p99_without_infeasible_s"] > np.quantile(log["solve_time_s"], 0.99)
+    # the candidate judged by the rule on its figures and the floor's, the floor beside
+    assert daqp["noise_floor_over_dt_share"] == floor["over_dt_share"]
+    assert daqp["noise_floor_tick_p99_s"] == floor["time_p99_without_infeasible_s"]
+    expected = judge_realtime_run(daqp, "call", floor_fields(floor))
+    assert (daqp["realtime"], daqp["realtime_reason"]) == expected
+    # the floor's verdict counts for nothing: not a run that is not ok, never recommended
+    assert out.not_ok == 0
+    answer = rec.recommend(table)
+    assert answer.runs == 1 and NOISE_FLOOR not in answer.overall.not_recommended
+    assert NOISE_FLOOR not in answer.overall.backends
+    assert len(answer.noise_floor) == 1 and answer.noise_floor[0].startswith("wall: p99 tick ")
+    assert "noise floor" in rec.render(answer)
+    assert not any("not ok" in s for s in rec.shortfalls(table))

@@ -71,7 +71,8 @@ def test_closed_loop(tmp_path, capsys):
     assert closed_loop(out, "daqp,pinv") == 0
     captured = capsys.readouterr()
     table = pd.read_csv(out / "closed_loop.csv")
-    assert list(table["verdict"]) == ["ok", "limits"]
+    assert list(table["backend"]) == ["noop", "daqp", "pinv"]  # the noise floor first
+    assert list(table["verdict"])[1:] == ["ok", "limits"]
     assert "--strict" not in captured.err
     # the recommendation is the last thing printed, after the table of runs
     answer = render(recommend(table))
@@ -100,6 +101,7 @@ def test_sweep(tmp_path, capsys):
 
     assert run("a") == 0
     rows = pd.read_csv(tmp_path / "a" / "sweep.csv")
+    rows = rows[~rows["noise_floor"]]  # the noop run: the machine's noise floor
     assert sorted(rows["verdict"]) == ["limits", "ok"]
     assert "--strict" not in capsys.readouterr().err
     assert run("b", "--strict") == 1

@@ -48,7 +48,8 @@ def write_sweep(folder: Path, text: str = SWEEP, name: str = "tiny.toml") -> Pat
 
 
 def rows_of(folder: Path) -> list[dict]:
-    return read_sweep_rows(folder / "sweep.csv")
+    """The sweep's rows but the noise floor's (the ``noop`` run of each instance)."""
+    return [r for r in read_sweep_rows(folder / "sweep.csv") if r["backend"] != "noop"]
 
 
 def _tiny_sweep(folder: Path, out: Path, *options: str) -> int:
@@ -234,7 +235,11 @@ def test_serial_rows(serial):
     assert len({r["worker"] for r in rows}) == 1  # one worker, one run after the other
     assert len(list((serial / "instances").glob("*.toml"))) == 8
     manifest = json.loads((serial / "sweep.json").read_text())
-    assert manifest["samples"] == 8 and manifest["backends"] == ["daqp", "osqp"]
+    assert manifest["samples"] == 8 and manifest["backends"] == ["noop", "daqp", "osqp"]
+    # each instance's noise floor, first, marked; the others judged against it
+    floors = [r for r in read_sweep_rows(serial / "sweep.csv") if r["backend"] == "noop"]
+    assert len(floors) == 8 and all(r["noise_floor"] == "True" for r in floors)
+    assert all(r["noise_floor"] == "False" and r["noise_floor_over_dt_share"] for r in rows)
     # exact QPs agree on the trajectory: same closest approach per instance
     by = {(r["instance"], r["backend"]): float(r["min_obstacle_distance"]) for r in rows}
     for r in rows:
@@ -285,7 +290,7 @@ def test_simulate_reruns_a_saved_instance(serial, tmp_path):
     convergence = ("force_band_n", "tracking_band_m", "ticks_over_1ms")
     copied = COLUMNS[COLUMNS.index("duration_s") : COLUMNS.index("verdict_overrides")]
     copied = [c for c in copied if c not in convergence and not c.startswith("t_converge")]
-    assert len(copied) == 36
+    assert len(copied) == 45
     again = {c: s.get("duration" if c == "duration_s" else c) for c in copied}
     again.update(verdict=s["verdict"], verdict_reasons=s["verdict_reasons"])
     frame = pd.read_parquet(log)

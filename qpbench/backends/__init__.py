@@ -30,6 +30,8 @@ from .base import BackendSolution as BackendSolution
 ENTRY_POINT_GROUP = "qpbench.backends"
 #: Environment variable naming plugin files (separated by :data:`os.pathsep`).
 ENV_VAR = "QPBENCH_PLUGINS"
+#: The backend every closed-loop run set runs once per scenario as the machine's noise floor.
+NOISE_FLOOR = "noop"
 
 _REGISTRY: dict[str, type[Backend]] = {}
 _plugins_checked = False

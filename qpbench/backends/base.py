@@ -139,6 +139,9 @@ class Backend:
             :data:`qpbench.memory.DENSE_MAX_ENTRIES` only.
         kernels: The numba kernel groups (:data:`qpbench.jit.KERNELS`) the backend runs,
             compiled or loaded before anything is timed.
+        noise_floor: Not a solver but the loop without one (``null``): measured beside the
+            candidates in every closed-loop run set, never ranked, left out of ``all`` and
+            refused by the per-tick bench.
     """
 
     name: ClassVar[str] = ""
@@ -152,6 +155,7 @@ class Backend:
     infeasibility_note: ClassVar[str] = ""
     sparse: ClassVar[bool] = False
     kernels: ClassVar[tuple[str, ...]] = ()
+    noise_floor: ClassVar[bool] = False
 
     def __init__(self, profile: str | Profile = "default", **settings):
         self.profile = get_profile(profile)

@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 
     # Nothing is written or logged before the input is known to be good: run_bench checks
     # --out, then logs, warms up and calls for the references.
-    backends = select_backends(args.backends)
+    backends = select_backends(args.backends, floor=False)
     config = BenchConfig(
         backend_settings=backend_settings(args.sets, backends),
         backends=backends,

@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
         ),
     )
     config.scenarios = select_scenarios(args.scenarios or ",".join(run_scenarios()))
-    config.backends = select_backends(args.backends)
+    config.backends = select_backends(args.backends, floor=False)
     outcome = run_all(config)
     log.info("qpbench run: %s in %.0f s; report %s", args.out, outcome.wall_time_s, outcome.report)
     table = pd.read_csv(Path(args.out) / CSV_NAME)

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     from ..selection import select_backend, select_backends
 
     config = ScalingConfig(  # every input checked before anything is written
-        backends=select_backends(args.backends),
+        backends=select_backends(args.backends, floor=False),
         sizes=parse_sizes(args.sizes),
         driver=select_backend(args.driver, "--driver"),
         **pick(args, "duration every repeat seed profile dense_limit slow_limit keep_sets"),

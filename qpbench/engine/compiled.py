@@ -99,7 +99,7 @@ class CompiledSolver:
 
 #: Backends with a compiled solve, by name.
 SOLVERS: dict[str, CompiledSolver] = {
-    "null": CompiledSolver(".solvers"),
+    "noop": CompiledSolver(".solvers"),
     "pinv": CompiledSolver(".solvers"),
     "rnn": CompiledSolver(".solvers", ("paper",)),
     "rnn-tuned": CompiledSolver(".solvers"),

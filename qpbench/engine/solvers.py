@@ -1,4 +1,4 @@
-"""Compiled solves of the backends whose solver is qpbench's own code: ``null`` (the machine's
+"""Compiled solves of the backends whose solver is qpbench's own code: ``noop`` (the machine's
 own loop), ``pinv`` (the paper's pseudo-inverse baseline) and the paper's network online
 (``rnn``, ``rnn-tuned``). The protocol: :class:`qpbench.engine.compiled.CompiledSolver`; each
 mirrors its Python backend call for call (same answer, status and state)."""
@@ -35,7 +35,7 @@ class NetworkState(NamedTuple):
 def make_state(backend, model, n_rows: int):
     """The solve's state for ``backend`` on ``model``'s QPs (``n_rows`` obstacle rows)."""
     n = model.theta0.shape[0]
-    if backend.name == "null" or backend.name == "pinv":
+    if backend.name == "noop" or backend.name == "pinv":
         return (np.zeros(1),)
     me = 0 if model.soft else 2
     prm = backend._prm.copy()
@@ -63,8 +63,8 @@ def error_text(name: str, raw: float) -> str:
 @cache
 def compiled_solve(name: str):
     """The compiled ``solve`` of backend ``name``."""
-    if name == "null":
-        return compile_with(_null_solve, name="null_solve")
+    if name == "noop":
+        return compile_with(_null_solve, name="noop_solve")
     if name == "pinv":
         return compile_with(_pinv_solve, {"_pinv": pinv_kernel()}, name="pinv_solve")
     packed = nk.packed_kernel_dispatcher()

@@ -18,12 +18,14 @@ import numpy as np
 import pandas as pd
 
 from ..atomic import atomic_path, check_folder, check_output, record
-from ..backends import plugin_files
+from ..backends import NOISE_FLOOR, plugin_files
 from ..control.controller import check_formulation
 from ..exceptions import ParamError, positive_count, positive_seconds
+from ..report.recommend import noise_floor_runs
 from ..runner.process import run_tasks
 from ..selection import parse_list
-from ..sim.verdict import BAD_VERDICTS, failed_run
+from ..sim.log import TICK_TIME
+from ..sim.verdict import BAD_VERDICTS, failed_run, floor_fields, judge_realtime_run
 from ..statuses import describe_exception
 from .guard import ISOLATE, wants_worker
 
@@ -42,6 +44,7 @@ RUN_TIME_LIMIT_PER_SIM_S = 50.0
 COLUMNS = (
     "scenario",
     "backend",
+    "noise_floor",
     "formulation",
     "engine",
     "duration_s",
@@ -77,6 +80,8 @@ COLUMNS = (
     "tick_time_median_s",
     "tick_time_p99_s",
     "over_dt_share",
+    "noise_floor_over_dt_share",
+    "noise_floor_tick_p99_s",
     "solver_time_p99_s",
     "real_time_factor",
     "verdict_overrides",
@@ -111,13 +116,15 @@ class LoopTask:
 
 def run_row(task: LoopTask) -> dict:
     """The row of one run (:func:`qpbench.sim.loop.simulate`, its warm-up included), its
-    figures, its logs written when ``task.out`` is set; a run that raises is an ``error`` row."""
-    from ..backends import load_plugins
+    figures, its logs written when ``task.out`` is set; a run that raises is an ``error`` row.
+    The noise floor's run (a backend whose class says ``noise_floor``) is judged on its whole
+    ticks (``tick_time_s``)."""
+    from ..backends import backend_class, load_plugins
     from ..jit import warmup
     from ..sim.figure_log import figure_log_path, write_figure_log
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario, parse_scenario
-    from ..sim.summary import convergence_figures
+    from ..sim.summary import convergence_figures, noise_floor_figures
 
     try:
         load_plugins(list(task.plugins))
@@ -135,7 +142,11 @@ def run_row(task: LoopTask) -> dict:
             wall_budget_s=task.run_budget,
             engine=task.engine,
         )
-        summary = dict(result.summary)
+        floor = backend_class(task.backend).noise_floor
+        summary = dict(result.summary, noise_floor=floor)
+        if floor:
+            ticks = result.log[TICK_TIME].to_numpy()
+            summary.update(noise_floor_figures(result.log, ticks, scenario))
         if task.bands is not None:
             summary.update(convergence_figures(result.log, *task.bands))
         status = "budget" if summary.get("stopped_early") else "ok"
@@ -198,6 +209,7 @@ def failure_row(task: LoopTask, status: str, message: str, warn: bool = False) -
     row.update(
         scenario=task.scenario,
         backend=task.backend,
+        noise_floor=task.backend == NOISE_FLOOR,
         formulation=task.formulation,
         duration_s=float(task.duration) if task.duration is not None else math.nan,
         log_file="",
@@ -269,8 +281,10 @@ def run_closed_loop(
     out = Path(out)
     csv_path = out / CSV_NAME
     previous = _prepare_output(out, force, resume)
-    order = [(s, b) for s in scenarios for b in backends]
-    budget = {b: (budgets or {}).get(b, run_budget) for b in backends}.get
+    # each scenario's noise floor first, run like the others (docs/verdicts.md, "The noise floor")
+    floored = [NOISE_FLOOR, *(b for b in backends if b != NOISE_FLOOR)]
+    order = [(s, b) for s in scenarios for b in floored]
+    budget = {b: (budgets or {}).get(b, run_budget) for b in floored}.get
     overrides = dict(overrides or {})
     rows, others = _kept_rows(order, previous, formulation, duration, budget, skip or {}, overrides)
     todo = [k for k in order if k not in rows]
@@ -306,12 +320,46 @@ def run_closed_loop(
                 emit(key, run_row(task))
             else:
                 _run_in_workers([(key, task, limit)], 1, emit)
+    for s in scenarios:
+        for b in floored:
+            if (s, b) in rows:
+                judge_against_floor(rows[(s, b)], rows.get((s, NOISE_FLOOR)))
     _write_table([rows[k] for k in order if k in rows] + others, csv_path)
     table = pd.read_csv(csv_path)  # the outcome, counted from the table as written
     failed = table["status"].isin(FAILED_RUN_STATUSES)
-    not_ok = int((table["verdict"].isin(BAD_VERDICTS) | failed).sum()) if len(table) else 0
+    candidate = ~noise_floor_runs(table)  # the floor's verdict judges nothing (x = 0)
+    not_ok = int(((table["verdict"].isin(BAD_VERDICTS) | failed) & candidate).sum())
     ran = len(todo)
     return ClosedLoopOutcome(table, csv_path, int(failed.sum()), ran, len(order) - ran, not_ok)
+
+
+#: The fields :func:`judge_against_floor` sets.
+FLOOR_JUDGED = (
+    "realtime",
+    "realtime_reason",
+    "noise_floor_over_dt_share",
+    "noise_floor_tick_p99_s",
+)
+
+
+def judge_against_floor(row: dict, floor: dict | None) -> None:
+    """Judge ``row``'s real time again, in place, against its scenario's noise floor (the row of
+    the ``noop`` run of the same run set, ``None``: none; docs/verdicts.md, "The noise floor"):
+    ``realtime``, ``realtime_reason`` and the floor's figures beside them. A row without
+    real-time figures (a run without a result, a table written before them) and the floor's
+    own row are left as they are."""
+    if row.get("backend") == NOISE_FLOOR or floor is None or not (_judged(row) and _judged(floor)):
+        return
+    row["realtime"], row["realtime_reason"] = judge_realtime_run(row, "call", floor_fields(floor))
+    row["noise_floor_over_dt_share"] = floor["over_dt_share"]
+    row["noise_floor_tick_p99_s"] = floor["time_p99_without_infeasible_s"]
+
+
+def _judged(row: dict) -> bool:
+    """``row`` holds the real-time figures of a run with a result."""
+    value = row.get("ticks_infeasible")
+    judged = value is not None and not (isinstance(value, float) and math.isnan(value))
+    return judged and row.get("status") in ("ok", "budget")
 
 
 def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
@@ -423,6 +471,10 @@ def log_row(logger: logging.Logger, row: dict) -> None:
     keys = ("verdict", "verdict_reasons", "error")
     verdict, reasons, error = (row[k] if isinstance(row.get(k), str) else "" for k in keys)
     where = f"{row['scenario']} / {row['backend']}"
+    if row.get("noise_floor") is True:  # x = 0: no verdict to tell, the machine's own loop
+        why = row.get("realtime_reason") or row.get("error") or row.get("status")
+        logger.info("%s: noise floor, real time %s (%s)", where, row.get("realtime"), why)
+        return
     if verdict and verdict != "ok":
         logger.warning("%s: %s (%s)", where, verdict, reasons or row.get("status"))
         return

@@ -354,10 +354,12 @@ def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict
 
 def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, float]):
     """Every scenario with every backend in the loop; the table and its runs that are not ok."""
+    from ..backends import NOISE_FLOOR
     from .closed_loop import run_closed_loop
 
-    runs = len(config.scenarios) * len(config.backends)
-    left = {s: len(config.backends) for s in config.scenarios}
+    per_scenario = len({*config.backends, NOISE_FLOOR})  # the noise floor's run with the others
+    runs = len(config.scenarios) * per_scenario
+    left = {s: per_scenario for s in config.scenarios}
     with phases.phase("closed loop", total=runs, unit="run") as phase:
         started = time.perf_counter()
 
@@ -368,7 +370,7 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             left[s] = left.get(s, 1) - 1
             if left[s] == 0:  # a scenario's last run: one line per scenario
                 spent = time.perf_counter() - started
-                n = len(config.backends)
+                n = per_scenario
                 log.info("closed loop %s: %d runs done (%.1f s into the closed loop)", s, n, spent)
             if config.on_row is not None:
                 config.on_row(row)
@@ -544,6 +546,8 @@ def _sweep_scenario(
 
 def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dict) -> dict:
     """``run.json``: what was asked, the budgets, which runs were cut or not ok."""
+    from ..report.recommend import noise_floor_runs
+
     stopped = table[table["status"] == "budget"]
     return {
         "command": "qpbench run",
@@ -560,7 +564,7 @@ def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dic
         },
         "closed_loop_not_ok": {
             f"{r.scenario}/{r.backend}": str(r.verdict)
-            for r in table.itertuples()
+            for r in table[~noise_floor_runs(table)].itertuples()
             if str(r.verdict) not in ("ok", "nan", "")
         },
         "bench_repeat": config.repeat,

@@ -15,6 +15,7 @@ import pandas as pd
 from ..exceptions import InputError
 from ..formats import sha256_file
 from ..sim.summary import STRUCTURED_FIGURES
+from .recommend import noise_floor_runs
 
 #: Columns that identify a bench result across CSVs.
 DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
@@ -61,6 +62,8 @@ class Results:
     closed_loop: pd.DataFrame
     files: list[ResultFile] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: The noise floor's closed-loop rows (``noop``), kept out of ``closed_loop``.
+    noise_floor: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 def _from_json(text):
@@ -149,11 +152,14 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
         bench_df["scenario"] = bench_df["scenario"].map(scenario_key)
         bench_df["mode"] = bench_df["mode"].fillna("")
         notes = check_repeats(bench_df, prefer)
+    loop_df = pd.concat(loops, ignore_index=True) if loops else pd.DataFrame()
+    floor = noise_floor_runs(loop_df)
     return Results(
         bench=bench_df,
-        closed_loop=pd.concat(loops, ignore_index=True) if loops else pd.DataFrame(),
+        closed_loop=loop_df[~floor].reset_index(drop=True),
         files=files,
         notes=notes,
+        noise_floor=loop_df[floor].reset_index(drop=True),
     )
 
 

@@ -37,8 +37,9 @@ HOW_TO_READ = (
     "run stopped before its end: budget, crash, error), `diverged` (tracking or force error "
     "beyond its threshold), else `ok`; the reasons are in the closed-loop tables.",
     "*Real time* is judged at each scenario's control period dt from the measured call times "
-    "(their p99 and the share of ticks over dt); the solver's own time is what a controller "
-    "calling its C or C++ library would pay.",
+    "(their p99 and the share of ticks over dt, beyond what this machine's own loop missed "
+    "without a solver; the infeasible ticks by their median); the solver's own time is what a "
+    "controller calling its C or C++ library would pay.",
     "A backend is recommended where every run of it was `ok` and real time and, in every "
     "scenario with perturbed instances, the lower bound of its share of `ok` perturbed runs "
     "reaches the threshold; ranked by the p99 per-tick time a C controller would pay (the solve "
@@ -126,6 +127,7 @@ class Recommendation:
     runs: int
     min_ok_bound: float = MIN_OK_BOUND
     swept: tuple[str, ...] = ()
+    noise_floor: tuple[str, ...] = ()
 
 
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
@@ -145,6 +147,31 @@ def read_runs(table: pd.DataFrame) -> pd.DataFrame:
         "simulated_s": math.nan,
     }
     return table.assign(**{c: v for c, v in missing.items() if c not in table.columns})
+
+
+def noise_floor_runs(table: pd.DataFrame) -> pd.Series:
+    """Which rows are the noise floor's runs (``noise_floor`` true; none in a table without the
+    column): measured beside the candidates, never one of them."""
+    if "noise_floor" not in table.columns:
+        return pd.Series(False, index=table.index)
+    return table["noise_floor"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
+
+
+def floor_lines(table: pd.DataFrame) -> tuple[str, ...]:
+    """One line per noise floor run of ``table``: the machine's own loop, tick to tick."""
+    out = []
+    for row in table[noise_floor_runs(table)].to_dict("records"):
+        p99 = float(pd.to_numeric(row.get("time_p99_without_infeasible_s"), errors="coerce"))
+        over = pd.to_numeric(row.get("deadline_misses"), errors="coerce")
+        ticks = pd.to_numeric(row.get("timed_ticks"), errors="coerce")
+        if math.isnan(p99) or math.isnan(over) or math.isnan(ticks):
+            out.append(f"{row['scenario']}: {_text(row.get('error')) or 'no result'}")
+            continue
+        out.append(
+            f"{row['scenario']}: p99 tick {_us(p99)} us, {int(over)} of {int(ticks)} ticks over "
+            f"dt, real time {_text(row.get('realtime'))}"
+        )
+    return tuple(out)
 
 
 def _text(value: object) -> str:
@@ -189,6 +216,8 @@ def _reasons(row: dict, place: str) -> list[str]:
     if realtime == "no":
         why = _text(row.get("realtime_reason"))  # both criteria: p99 and ticks over dt
         out.append(f"not real time in {place}" + (f": {why}" if why else ""))
+    elif realtime == "unknown" and _text(row.get("realtime_reason")):
+        out.append(f"real time unknown in {place}: {_first(row.get('realtime_reason'))}")
     elif realtime != "yes" and verdict == "ok":
         out.append(f"real time not judged in {place}")
     return out
@@ -337,9 +366,10 @@ def recommend(
     overall, with ``sweeps`` (:func:`read_sweeps`), a backend is recommended only when in every
     scenario of ``table`` with perturbed runs (a sweep whose base is that scenario) the Wilson
     lower bound of its share of ``ok`` runs is at least ``min_ok_bound``."""
-    runs = read_runs(table)
+    floor = floor_lines(table)
+    runs = read_runs(table[~noise_floor_runs(table)])
     if runs.empty:
-        return Recommendation(Scope("all scenarios"), (), 0, min_ok_bound)
+        return Recommendation(Scope("all scenarios"), (), 0, min_ok_bound, noise_floor=floor)
     runs["scenario"] = runs["scenario"].astype(str)
     several = runs["formulation"].nunique(dropna=True) > 1
 
@@ -363,7 +393,7 @@ def recommend(
         swept = [s.name for s in scenarios if s.name in set(bases)]
     if swept:
         overall = _judge_evidence(overall, sweeps, swept, min_ok_bound)
-    return Recommendation(overall, scenarios, len(runs), min_ok_bound, tuple(swept))
+    return Recommendation(overall, scenarios, len(runs), min_ok_bound, tuple(swept), floor)
 
 
 def _why(reasons: tuple[str, ...]) -> str:
@@ -536,6 +566,13 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
         lines.append(f"Not recommended:{gap}")
         rows = [[b, _why(reasons)] for b, reasons in overall.not_recommended.items()]
         _table(lines, ["backend", "why"], rows, gap)
+    if answer.noise_floor:
+        lines.append(
+            f"This machine's noise floor (the loop with the `noop` backend, no solver, in the "
+            f"same run set; real time is judged against it):{gap}"
+        )
+        lines.extend(f"- {line}" for line in answer.noise_floor)
+        lines[-1] += gap
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
@@ -544,12 +581,15 @@ def opening(
     has_bench: bool = False,
     sweeps: pd.DataFrame | None = None,
     min_ok_bound: float = MIN_OK_BOUND,
+    noise_floor: pd.DataFrame | None = None,
 ) -> list[str]:
     """The opening of ``report.md``: the recommendation (or why there is none; ``sweeps`` and
-    ``min_ok_bound`` as :func:`recommend` takes them), How to read this."""
+    ``min_ok_bound`` as :func:`recommend` takes them) with the noise floor's runs
+    (``noise_floor``), How to read this."""
     out = []
     if not closed_loop.empty:
-        out.append(render(recommend(closed_loop, sweeps, min_ok_bound), markdown=True))
+        runs = closed_loop if noise_floor is None else pd.concat([closed_loop, noise_floor])
+        out.append(render(recommend(runs, sweeps, min_ok_bound), markdown=True))
     elif has_bench:
         out.append(
             "## Recommendation\n\nNo closed-loop results here: a recommendation needs runs in "
@@ -565,7 +605,7 @@ def shortfalls(runs: pd.DataFrame | None = None, failed_solves: int = 0) -> list
     if failed_solves:
         out.append(f"{failed_solves} failed solves")
     if runs is not None and len(runs):
-        runs = read_runs(runs)
+        runs = read_runs(runs[~noise_floor_runs(runs)])
         verdict = runs["verdict"].map(_text)
         bad = verdict[verdict != "ok"].replace("", "no verdict")
         if len(bad):

@@ -37,7 +37,7 @@ from ..robot.body import body_crossings
 from ..statuses import INFEASIBLE_OR_UNCLASSIFIED
 from . import log
 from .scenario import Scenario
-from .verdict import VerdictSettings, judge, judge_realtime
+from .verdict import VerdictSettings, judge, judge_realtime_run
 
 #: Time from which the ``*_after_2s`` figures are taken [s].
 SETTLE_TIME = 2.0
@@ -156,7 +156,7 @@ def summarize(
     out["verdict_reasons"] = verdict.text
     out["key_point_rule"] = verdict.key_point_rule
     out["key_point_rule_reason"] = verdict.key_point_rule_reason
-    out.update(_realtime_figures(frame, dt, settings, out["solve_time_p99_s"]))
+    out.update(realtime_figures(frame, dt, settings))
     return out
 
 
@@ -176,7 +176,7 @@ def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: f
     whose solve missed a 1 kHz loop's deadline (a sweep's figures)."""
     t = frame[log.T].to_numpy(dtype=float)
     force, tracking = frame[log.FORCE_ERROR], frame[log.TRACKING_ERROR]
-    solve = frame[log.SOLVE_TIME].to_numpy(dtype=float)
+    solve = judged_tick_times(frame)
     return {
         "t_converge_force_s": time_to_converge(t, force.to_numpy(), force_band),
         "t_converge_tracking_s": time_to_converge(t, tracking.to_numpy(), tracking_band),
@@ -184,28 +184,129 @@ def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: f
     }
 
 
-def _realtime_figures(
-    frame: pd.DataFrame, dt: float, settings: VerdictSettings, p99: float | None
-) -> dict:
-    """Real time at ``dt`` [s] from the measured call times (p99 ``p99`` [s]) and from the
-    solver's own times; ``deadline_misses``: the calls longer than ``dt``."""
-    calls = frame[log.SOLVE_TIME].to_numpy(dtype=float)
-    own = frame[log.SOLVER_TIME].to_numpy(dtype=float)
-    own = own[np.isfinite(own)]
-    misses, own_over = int(np.count_nonzero(calls > dt)), int(np.count_nonzero(own > dt))
-    own_p99 = _none(np.quantile(own, 0.99)) if own.size else None
-    realtime, why = judge_realtime(p99, misses, calls.size, dt, settings, "call")
-    solver, solver_why = judge_realtime(own_p99, own_over, own.size, dt, settings, "solver")
+#: Kinds of tick the real-time figures are split by (docs/verdicts.md, "Real time"):
+#: ``optimal``; ``infeasible`` (declared infeasible or ``not_solved``:
+#: :data:`~qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`); ``fallback`` (another status, the
+#: tick's own answer not applied: the soft fallback ran, or zero velocity); ``other`` (another
+#: status whose answer was applied: an online backend's).
+TICK_KINDS = ("optimal", "infeasible", "fallback", "other")
+
+
+def judged_tick_times(frame: pd.DataFrame) -> np.ndarray:
+    """The per-tick time [s] real time is judged on, one per tick: the solver's work on the one
+    clock, the tick's solve and the soft fallback's (``solve_time_s`` plus
+    ``fallback_solve_time_s`` of the tick log)."""
+    fallback = frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
+    return (frame[log.SOLVE_TIME] + fallback).to_numpy(dtype=float)
+
+
+def primary_solve_times(frame: pd.DataFrame) -> np.ndarray:
+    """The per-tick time [s] of the backend's answer to the tick's own QP, the time to certify
+    infeasibility on an infeasible tick (``solve_time_s``, the fallback's left out)."""
+    return frame[log.SOLVE_TIME].to_numpy(dtype=float)
+
+
+def tick_kinds(frame: pd.DataFrame) -> dict[str, np.ndarray]:
+    """A mask per kind of :data:`TICK_KINDS`; each tick is of exactly one."""
+    status = frame[log.STATUS].astype(str).to_numpy()
+    infeasible = np.isin(status, INFEASIBLE_OR_UNCLASSIFIED)
+    optimal = status == "optimal"
+    rest = ~(infeasible | optimal)
+    dropped = (frame[log.FALLBACK] | frame[log.ZERO_VELOCITY]).to_numpy(dtype=bool)
+    fallback = rest & dropped
     return {
-        "deadline_misses": misses,
-        "over_dt_share": misses / calls.size,
-        "solver_time_p99_s": own_p99,
-        "solver_over_dt_share": own_over / own.size if own.size else None,
-        "realtime": "yes" if realtime == "yes" else "no",
-        "realtime_reason": why,
-        "realtime_solver": solver,
-        "realtime_solver_reason": solver_why,
+        "optimal": optimal,
+        "infeasible": infeasible,
+        "fallback": fallback,
+        "other": rest & ~fallback,
     }
+
+
+def tick_time_figures(
+    times: np.ndarray, kinds: dict[str, np.ndarray], certify: np.ndarray, dt: float
+) -> dict:
+    """Per-tick times [s] by kind (``kinds``: :func:`tick_kinds`): ``timed_ticks``; per kind
+    ``ticks_<kind>``,
+    ``over_dt_<kind>`` (longer than ``dt`` [s]) and ``time_p99_<kind>_s``;
+    ``time_p99_without_infeasible_s``, ``time_median_infeasible_s``; the time to certify
+    infeasibility, ``certify_time_median_s`` and ``certify_time_max_s``, of ``certify`` (the
+    times [s] of the ticks whose status is ``primal_infeasible``); ``None`` where no tick is
+    of the kind."""
+    out = {"timed_ticks": int(times.size)}
+    for kind, mask in kinds.items():
+        t = times[mask]
+        out[f"ticks_{kind}"] = int(t.size)
+        out[f"over_dt_{kind}"] = int(np.count_nonzero(t > dt))
+        out[f"time_p99_{kind}_s"] = _quantile(t, 0.99)
+    out["time_p99_without_infeasible_s"] = _quantile(times[~kinds["infeasible"]], 0.99)
+    out["time_median_infeasible_s"] = _quantile(times[kinds["infeasible"]], 0.5)
+    out["certify_time_median_s"] = _quantile(certify, 0.5)
+    out["certify_time_max_s"] = _none(certify.max()) if certify.size else None
+    return out
+
+
+def _quantile(x: np.ndarray, q: float) -> float | None:
+    return _none(np.quantile(x, q)) if x.size else None
+
+
+def realtime_figures(
+    frame: pd.DataFrame,
+    dt: float,
+    settings: VerdictSettings,
+    times: np.ndarray | None = None,
+    what: str = "call",
+) -> dict:
+    """Real time at ``dt`` [s] (docs/verdicts.md, "Real time"): the figures of ``times`` [s] per
+    tick (default :func:`judged_tick_times`) by kind (:func:`tick_time_figures`), the thresholds
+    they are judged on, ``deadline_misses`` (ticks over ``dt``) and ``over_dt_share``, and the
+    judgement of the solver's own times (``realtime_solver``: ``unknown`` unless every tick
+    has one); ``what`` names the times in the reasons."""
+    calls = judged_tick_times(frame) if times is None else np.asarray(times, dtype=float)
+    kinds = tick_kinds(frame)
+    primal = (frame[log.STATUS].astype(str) == "primal_infeasible").to_numpy()
+    t = frame[log.T].to_numpy()
+    infeasible = kinds["infeasible"]
+    span = {
+        "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
+        "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
+    }
+    base = {
+        "dt": dt,
+        "max_p99_fraction_of_dt": settings.max_p99_fraction_of_dt,
+        "max_over_dt_share": settings.max_over_dt_share,
+        **span,
+    }
+    certify = primary_solve_times(frame)[primal]
+    out = {**base, **tick_time_figures(calls, kinds, certify, dt)}
+    misses = sum(out[f"over_dt_{k}"] for k in TICK_KINDS)
+    out["deadline_misses"] = misses
+    out["over_dt_share"] = misses / calls.size if calls.size else None
+    out["realtime"], out["realtime_reason"] = judge_realtime_run(out, what)
+    own = frame[log.SOLVER_TIME].to_numpy(dtype=float)
+    whole = np.isfinite(own)
+    out["solver_time_ticks"] = int(whole.sum())
+    out["solver_time_p99_s"] = out["solver_over_dt_share"] = None
+    if not whole.any():
+        out["realtime_solver"], out["realtime_solver_reason"] = "unknown", "no solver time reported"
+    elif not whole.all():
+        out["realtime_solver"] = "unknown"
+        out["realtime_solver_reason"] = (
+            f"reports its own time on {int(whole.sum())} of {own.size} ticks only: not judged on "
+            "that subset"
+        )
+    else:
+        mine = {**base, **tick_time_figures(own, kinds, own[primal], dt)}
+        out["solver_time_p99_s"] = _quantile(own, 0.99)
+        out["solver_over_dt_share"] = int(np.count_nonzero(own > dt)) / own.size
+        out["realtime_solver"], out["realtime_solver_reason"] = judge_realtime_run(mine, "solver")
+    return out
+
+
+def noise_floor_figures(frame: pd.DataFrame, ticks: np.ndarray, scenario: Scenario) -> dict:
+    """The real-time figures of the noise floor's run (the loop with the ``noop`` backend,
+    docs/verdicts.md) judged on ``ticks`` [s], each whole tick of the loop (``tick_time_s``):
+    ``realtime`` says whether this machine holds the loop's rate without any solver."""
+    return realtime_figures(frame, scenario.dt, scenario.verdict, times=ticks, what="tick")
 
 
 def _rms(x: np.ndarray) -> float | None:

@@ -17,6 +17,7 @@ from ..exceptions import InputError
 from ..formats import sha256_file
 from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths
 from ..report.markdown_table import md_table, slug, titled
+from ..report.recommend import noise_floor_runs
 from ..report.tables import wilson, worst_first
 
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
@@ -74,6 +75,7 @@ def _read(path: Path) -> pd.DataFrame:
     except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
     df = df.drop_duplicates(["instance", "backend"], keep="last")
+    df = df[~noise_floor_runs(df)]  # the machine's, not a candidate's
     df["verdict"] = df["verdict"].fillna("").astype(str)
     df["folder"] = str(path.parent)
     return df

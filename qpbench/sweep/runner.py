@@ -11,7 +11,9 @@ A run's figures are its closed-loop summary's (:mod:`qpbench.sim.summary`; ``dur
 ``tracking_band_m`` [m]. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it
 raised), ``crashed`` (its worker was lost twice; ``attempts``: runs started) or
 ``invalid_scenario`` (the loader refused the instance; no verdict). ``executor``, ``host``,
-``worker``, ``concurrent_solves``: where it ran.
+``worker``, ``concurrent_solves``: where it ran. Each instance is run with the ``noop`` backend
+too (``noise_floor``: the machine's noise floor, docs/verdicts.md); the other runs of the
+instance made in the same sweep are judged real time against it.
 """
 
 from __future__ import annotations
@@ -24,8 +26,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..atomic import atomic_path, check_folder, check_output, write_text
+from ..backends import NOISE_FLOOR
 from ..exceptions import InputError
-from ..harness.closed_loop import LoopTask, failure_fields, run_row
+from ..harness.closed_loop import (
+    FLOOR_JUDGED,
+    LoopTask,
+    failure_fields,
+    judge_against_floor,
+    run_row,
+)
 from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
 from .spec import Instance, SweepSpec, sample_instances
 
@@ -51,6 +60,7 @@ COLUMNS = (
     "parameters",
     "status",
     "error",
+    "noise_floor",  # the noop run of the instance: the machine's noise floor, not a candidate
     "attempts",
     "verdict",
     "verdict_reasons",
@@ -91,6 +101,15 @@ COLUMNS = (
     "realtime_solver",
     "realtime_solver_reason",
     "over_dt_share",
+    "over_dt_optimal",
+    "over_dt_infeasible",
+    "over_dt_fallback",
+    "over_dt_other",
+    "time_p99_without_infeasible_s",
+    "certify_time_median_s",
+    "certify_time_max_s",
+    "noise_floor_over_dt_share",
+    "noise_floor_tick_p99_s",
     "solver_time_p99_s",
     "solver_over_dt_share",
     "wall_time_s",
@@ -237,12 +256,14 @@ def run_sweep(
         InputError: resuming a folder of another sweep file or duration.
     """
     out = Path(out)
+    # each instance's noise floor first, run like the others (docs/verdicts.md)
+    backends = [NOISE_FLOOR, *(b for b in backends if b != NOISE_FLOOR)]
     instances, kept = _prepare(out, spec, backends, force, resume, instances)
     csv_path = out / CSV_NAME
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     failed = 0
-    items, heads = [], {}
+    items, heads, figures = [], {}, {}
     # the tasks' common terms; each carries its instance's text
     terms = LoopTask(
         "",
@@ -274,6 +295,7 @@ def run_sweep(
         for done in executor.run(run_row, items):
             head = heads[done.key]
             fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
+            figures[done.key] = fields
             row = sweep_row(head, fields)
             row.update(
                 executor=executor.name,
@@ -284,6 +306,9 @@ def run_sweep(
             )
             failed += row["status"] in ("error", "crashed")
             emit(row)
+    for (name, backend), fields in figures.items():  # real time against the instance's floor
+        judge_against_floor(fields, figures.get((name, NOISE_FLOOR)))
+        rows[(name, backend)] |= {k: fields[k] for k in FLOOR_JUDGED if k in fields}
     order = [(inst.name, b) for inst in instances for b in backends]
     final = [rows[k] for k in order if k in rows] + [
         r for k, r in rows.items() if k not in set(order)
