@@ -51,9 +51,7 @@ def main() -> None:
     args = parser.parse_args()
     blocks = [int(b) for b in args.blocks.split(",")]
     rows = []
-    for scenario, backend in itertools.product(
-        args.scenarios.split(","), args.backends.split(",")
-    ):
+    for scenario, backend in itertools.product(args.scenarios.split(","), args.backends.split(",")):
         times = runs(scenario, backend, args.repeats)
         p99 = np.array([np.quantile(t, 0.99) for t in times])
         mid = float(np.median(p99))

@@ -479,19 +479,18 @@ def test_bad_budget(tmp_path):
 # ---------------------------------------------------------------- the machine's noise floor
 
 
-def test_the_noop_backend_answers_zero_and_times_the_loop_tick_to_tick():
-    from qpbench.backends import NOISE_FLOOR, get_backend
+def test_the_noop_backend_answers_zero_and_times_the_loop_tick_by_tick():
+    from qpbench.backends import NOISE_FLOOR
     from qpbench.sim.loop import simulate
 
-    be = get_backend(NOISE_FLOOR)
-    run = simulate("wall", be, duration=0.03)
-    assert (run.log["status"] == "optimal").all() and not run.log["fallback"].any()
-    assert np.all(run.log[[f"v_{i}" for i in range(4)]].to_numpy() == 0.0)
-    periods = be.tick_periods()
-    assert periods.size == 30 and np.isnan(periods[0])
-    # a whole tick is longer than the call inside it
-    assert np.all(periods[1:] > run.log["solve_time_s"].to_numpy()[:-1])
-    assert run.summary["realtime_solver"] == "unknown"  # no time of its own
+    for engine in ("python", "compiled"):
+        run = simulate("wall", NOISE_FLOOR, duration=0.03, engine=engine)
+        assert run.summary["engine"] == engine
+        assert (run.log["status"] == "optimal").all() and not run.log["fallback"].any()
+        assert np.all(run.log[[f"v_{i}" for i in range(4)]].to_numpy() == 0.0)
+        # a whole tick is longer than the call inside it
+        assert np.all(run.log["tick_time_s"] > run.log["solve_time_s"])
+        assert run.summary["realtime_solver"] == "unknown"  # no time of its own
 
 
 def test_the_noise_floor_is_no_candidate(tmp_path, capsys):
