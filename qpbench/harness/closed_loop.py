@@ -21,7 +21,7 @@ from ..atomic import atomic_path, check_folder, check_output, record
 from ..backends import NOISE_FLOOR, plugin_files
 from ..control.controller import check_formulation
 from ..exceptions import ParamError, positive_count, positive_seconds
-from ..report.recommend import noise_floor_runs
+from ..report.inputs import noise_floor_runs
 from ..runner.process import run_tasks
 from ..selection import parse_list
 from ..sim.log import TICK_TIME

@@ -546,7 +546,7 @@ def _sweep_scenario(
 
 def _manifest(config: RunConfig, bench_scenarios: list[str], table, budgets: dict) -> dict:
     """``run.json``: what was asked, the budgets, which runs were cut or not ok."""
-    from ..report.recommend import noise_floor_runs
+    from ..report.inputs import noise_floor_runs
 
     stopped = table[table["status"] == "budget"]
     return {

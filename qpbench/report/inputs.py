@@ -15,7 +15,6 @@ import pandas as pd
 from ..exceptions import InputError
 from ..formats import sha256_file
 from ..sim.summary import STRUCTURED_FIGURES
-from .recommend import noise_floor_runs
 
 #: Columns that identify a bench result across CSVs.
 DUPLICATE_KEY = ("problem", "scenario", "backend", "profile", "mode")
@@ -236,3 +235,11 @@ def scenario_key(value: object) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)) or value == "":
         return "-"
     return str(value)
+
+
+def noise_floor_runs(table: pd.DataFrame) -> pd.Series:
+    """Which rows are the noise floor's runs (``noise_floor`` true; none in a table without the
+    column): measured beside the candidates, never one of them."""
+    if "noise_floor" not in table.columns:
+        return pd.Series(False, index=table.index)
+    return table["noise_floor"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from .inputs import noise_floor_runs
 from .markdown_table import MM, US, fmt, md_table
 from .tables import wilson, worst_first
 
@@ -147,14 +148,6 @@ def read_runs(table: pd.DataFrame) -> pd.DataFrame:
         "simulated_s": math.nan,
     }
     return table.assign(**{c: v for c, v in missing.items() if c not in table.columns})
-
-
-def noise_floor_runs(table: pd.DataFrame) -> pd.Series:
-    """Which rows are the noise floor's runs (``noise_floor`` true; none in a table without the
-    column): measured beside the candidates, never one of them."""
-    if "noise_floor" not in table.columns:
-        return pd.Series(False, index=table.index)
-    return table["noise_floor"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
 
 
 def floor_lines(table: pd.DataFrame) -> tuple[str, ...]:

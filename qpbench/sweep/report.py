@@ -15,9 +15,8 @@ from scipy.stats import binomtest
 
 from ..exceptions import InputError
 from ..formats import sha256_file
-from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths
+from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths, noise_floor_runs
 from ..report.markdown_table import md_table, slug, titled
-from ..report.recommend import noise_floor_runs
 from ..report.tables import wilson, worst_first
 
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
