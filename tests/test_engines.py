@@ -70,3 +70,29 @@ def test_every_compiled_solve_has_a_python_backend():
 
     for name in SOLVERS:
         assert backend_class(name).name == name
+
+
+def test_the_fallback_solves_on_its_own_instance_on_both_engines(monkeypatch):
+    """The soft fallback has a solver instance of its own (a controller keeps one solver per QP
+    it solves): the tick's instance sees only paper QPs, the fallback's only soft ones, so a
+    persistent solver is never rebuilt for a change of shape; the compiled engine likewise."""
+    from qpbench import backends
+    from qpbench.backends.daqp_ import DaqpModelBackend
+
+    monkeypatch.setattr(backends, "_REGISTRY", dict(backends._registry()))  # restored after
+
+    shapes: dict[int, set] = {}
+
+    @backends.register
+    class ShapeCounting(DaqpModelBackend):
+        name = "test-shape-counting"
+
+        def _attempt(self, problem, warm_start):
+            shapes.setdefault(id(self), set()).add(problem.A is None)
+            return super()._attempt(problem, warm_start)
+
+    result = simulate("free", "test-shape-counting", duration=0.2, warmup_ticks=0)
+    assert result.summary["fallback_ticks"] > 50
+    assert sorted(len(seen) for seen in shapes.values()) == [1, 1]
+    # and the compiled engine, with a state per instance, gives the same run
+    engines_agree("free", "daqp", duration=0.2)

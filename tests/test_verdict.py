@@ -675,7 +675,7 @@ def test_each_miss_with_its_kind_and_the_time_to_certify_infeasibility():
     )
     assert why.endswith(
         "over dt on 118 of 20000 ticks: 115 infeasible (of 115 infeasible ticks, 0.000-0.114 s; "
-        "3.2 ms median call to certify infeasibility and solve the soft fallback, at most 5.3 ms), "
+        "3.2 ms median solve to certify infeasibility, at most 5.3 ms), "
         "2 optimal (p99 call 120 µs), 1 fallback (p99 call 1.1 ms, own answer not applied: the "
         "soft fallback ran)"
     )

@@ -174,8 +174,9 @@ def _finite(x):  # pragma: no cover - compiled
 
 # Over 80 lines, kept whole on purpose: numba compiles it as one function, with the backend's
 # solve and reset, the clock, the build, the step and the adaptive law bound by engine_for().
-def _run_py(model, cols, st, ls, data, codes, k0, k1, stop_at):  # pragma: no cover - compiled
-    """Run ticks ``k0 .. k1-1`` of ``model`` (state ``ls``, the backend's ``st``), writing rows
+def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: no cover - compiled
+    """Run ticks ``k0 .. k1-1`` of ``model`` (state ``ls``, the backend's ``st`` and its
+    fallback instance's ``fst``), writing rows
     of ``data`` and status codes; returns the next tick (earlier than ``k1`` when the clock
     passed ``stop_at`` [s] between ticks; ``stop_at <= 0``: no budget)."""
     cm = model.controller
@@ -227,7 +228,7 @@ def _run_py(model, cols, st, ls, data, codes, k0, k1, stop_at):  # pragma: no co
                 t3 = now(ts)
                 build(cm, theta, t, kp, kd, True, ls.fbuf)
                 t4 = now(ts)
-                fcode = solve(st, ls.fbuf, ls.v, ls.fsol, ls.finfo)
+                fcode = solve(fst, ls.fbuf, ls.v, ls.fsol, ls.finfo)
                 t5 = now(ts)
                 row[cols.fallback_build_time] = t4 - t3
                 row[cols.fallback_solve_time] = t5 - t4

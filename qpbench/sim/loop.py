@@ -7,10 +7,11 @@ One tick at ``t_k = k dt``:
 2. build the tick's QP (eq. 11, the chosen formulation) with the current ``Kp_hat, Kd_hat``;
 3. solve it, warm-started from the previous command. A tick without a usable answer (no
    solution, a non-finite ``x``, an exception: ``error``, an answer later than ``deadline``:
-   ``time_limit``) solves the ``soft`` formulation with the same backend (fallback), else
-   commands zero velocity; an online backend (the RNN) is its own controller: its ``x`` is
-   applied whatever its status. After a failure the backend is reset. A solve is never
-   interrupted;
+   ``time_limit``) solves the ``soft`` formulation (fallback) with a second instance of the
+   backend, as a controller keeps one solver per QP it solves (the same instance when the
+   caller gives one), else commands zero velocity; an online backend (the RNN) is its own
+   controller: its ``x`` is applied whatever its status. After a failure the instance that
+   failed is reset. A solve is never interrupted;
 4. adaptive scenarios: one Euler step of the law of section 4.4 from ``F_k``;
 5. plant: ``theta_{k+1} = theta_k + dt v_k`` (steps 1 and 5 and the log row:
    :mod:`qpbench.sim.tick_kernel`).
@@ -164,10 +165,12 @@ def simulate(
         warm = resolve_backend(backend, scenario, profile)
         # the discarded warm-up is not judged: the thresholds set over the file's are not its
         short = replace(scenario, overrides={}).with_overrides(duration=warmup_ticks * scenario.dt)
-        _Run(short, warm, formulation, None, deadline, engine).run(False, None)
+        spare = resolve_backend(backend, scenario, profile)
+        _Run(short, warm, formulation, None, deadline, engine, spare).run(False, None)
     be = resolve_backend(backend, scenario, profile)
     be.reset()
-    run = _Run(scenario, be, formulation, keep_every, deadline, engine)
+    fallback = resolve_backend(backend, scenario, profile) if isinstance(backend, str) else be
+    run = _Run(scenario, be, formulation, keep_every, deadline, engine, fallback)
     run.run(progress, wall_budget_s)
     result = run.result(wall_budget_s)
     if dump is not None:
@@ -212,10 +215,12 @@ class _Run:
         keep_every: int | None,
         deadline: float | None,
         engine: str,
+        fallback: Backend | None = None,
     ):
         from ..engine import compiled
 
         self.scenario, self.be = scenario, backend
+        self.fb_be = backend if fallback is None else fallback
         self.formulation, self.keep_every = formulation, keep_every
         self.deadline = deadline
         self.soft = formulation == "soft"
@@ -248,10 +253,10 @@ class _Run:
 
             name = f"{self.scenario.name} {self.be.name}"
             bar = tqdm(total=ticks, unit="tick", desc=name, mininterval=0.5)
-        chunk = self._compiled() if self.engine == "compiled" else self._python
         enabled = gc.isenabled()
         gc.disable()  # one clock, no collector's pauses inside it (the compiled engine has none)
         try:
+            chunk = self._compiled() if self.engine == "compiled" else self._python
             start = time.perf_counter()
             stop_at = 0.0 if wall_budget_s is None else start + float(wall_budget_s)
             k = 0
@@ -265,6 +270,9 @@ class _Run:
                     break  # budget spent: the log keeps the ticks done
             self.wall = time.perf_counter() - start
         finally:
+            for close, st in getattr(self, "_close", ()):  # the compiled solves' memory, once
+                close(st)
+            self._close = []
             if enabled:
                 gc.enable()
             if bar is not None:
@@ -278,9 +286,16 @@ class _Run:
         fns = SOLVERS[self.be.name].functions()
         engine = engine_for(self.be.name)
         st = fns.make_state(self.be, self.model, self.ctrl.n_rows)
-        self._close = (fns.close_state, st)
+        self._close = [(fns.close_state, st)]
+        fst = (
+            st
+            if self.fb_be is self.be
+            else fns.make_state(self.fb_be, self.model, self.ctrl.n_rows)
+        )
+        if fst is not st:
+            self._close.append((fns.close_state, fst))
         self._error_text = fns.error_text
-        args = (self.model, self.cols, st, self.state, self.data, self.codes)
+        args = (self.model, self.cols, st, fst, self.state, self.data, self.codes)
 
         def chunk(k0: int, k1: int, stop_at: float) -> int:
             return engine(*args, k0, k1, stop_at)
@@ -362,7 +377,7 @@ class _Run:
             problem = ctrl.make_problem(ctrl.build_arrays(ls.theta, t, kp, kd, True), True)
             t2 = perf()
             try:
-                fb, ns = timed_call(be, problem, ls.v)
+                fb, ns = timed_call(self.fb_be, problem, ls.v)
                 fb_s = ns * 1e-9
                 fb_status = classify(fb, fb_s, limit)[0]
             except Exception as exc:  # noqa: BLE001 - a failed fallback: zero velocity
@@ -371,7 +386,7 @@ class _Run:
                 ls.counts[1] += 1
                 if self.first_error is None:
                     self.first_error, self.first_error_t = f"fallback: {fb.error}", t
-                _reset(be)
+                _reset(self.fb_be)
             row[cols.fallback_build_time], row[cols.fallback_solve_time] = t2 - t1, fb_s
             if (own := getattr(fb, "solver_time_s", None)) is not None:
                 c = cols.solver_time  # the fallback's own time adds to the tick's
@@ -402,10 +417,6 @@ class _Run:
     def result(self, wall_budget_s: float | None) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated (the compiled
         engine's state freed first)."""
-        close = getattr(self, "_close", None)
-        if close is not None:
-            close[0](close[1])
-            self._close = None
         scenario, deadline, ctrl, ls = self.scenario, self.deadline, self.ctrl, self.state
         done = self.done
         frame = tick_log.to_frame(self.data, self.names, self.codes[:done])

@@ -311,8 +311,8 @@ def _over_dt_cause(f: Mapping, what: str) -> list[str]:
         text = f"{n} infeasible (of {f['ticks_infeasible']} infeasible ticks{span}"
         if f.get("certify_time_median_s") is not None:
             text += (
-                f"; {_us(f['certify_time_median_s'])} median {what} to certify infeasibility "
-                f"and solve the soft fallback, at most {_us(f['certify_time_max_s'])}"
+                f"; {_us(f['certify_time_median_s'])} median solve to certify infeasibility, "
+                f"at most {_us(f['certify_time_max_s'])}"
             )
         parts.append(text + ")")
     for kind, note in (
