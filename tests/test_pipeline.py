@@ -54,7 +54,9 @@ def test_two_quick_runs_give_the_same_answer(tmp_path, monkeypatch):
         assert manifest["perturbed"]["min_ok_bound"] == rec.MIN_OK_BOUND
         assert "pinv" not in manifest["perturbed"]["candidates"]  # breaks the joint limits
         if len(sweeps):
-            perturbed.append(sweeps.set_index(["base_scenario", "instance", "backend"])["verdict"])
+            # an instance that could not run (its drawn scenario invalid) has no verdict: ""
+            verdicts = sweeps.set_index(["base_scenario", "instance", "backend"])["verdict"]
+            perturbed.append(verdicts.fillna(""))
         md = (tmp_path / out / "report.md").read_text()
         assert md.startswith("# qpbench report\n\n## Recommendation\n")
     first, second = answers
@@ -62,4 +64,7 @@ def test_two_quick_runs_give_the_same_answer(tmp_path, monkeypatch):
     assert not strictly_before(first) & {(b, a) for a, b in strictly_before(second)}
     if len(perturbed) == 2:  # a run's verdicts do not depend on the machine
         both = perturbed[0].index.intersection(perturbed[1].index)
-        assert (perturbed[0][both] == perturbed[1][both]).all()
+        differ = perturbed[0][both] != perturbed[1][both]
+        assert not differ.any(), pd.concat(
+            [perturbed[0][both][differ], perturbed[1][both][differ]], axis=1
+        )

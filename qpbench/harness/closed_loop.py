@@ -312,18 +312,9 @@ def run_closed_loop(
         )
         for s, b in todo
     ]
-    if jobs > 1:  # every run in a worker: a crash is that run's row, not the pool's end
-        _run_in_workers(items, jobs, emit)
-    else:
-        for key, task, limit in items:
-            if limit is None:
-                emit(key, run_row(task))
-            else:
-                _run_in_workers([(key, task, limit)], 1, emit)
-    for s in scenarios:
-        for b in floored:
-            if (s, b) in rows:
-                judge_against_floor(rows[(s, b)], rows.get((s, NOISE_FLOOR)))
+    _run_items(items, jobs, emit)
+    for (s, _), row in rows.items():
+        judge_against_floor(row, rows.get((s, NOISE_FLOOR)))
     _write_table([rows[k] for k in order if k in rows] + others, csv_path)
     table = pd.read_csv(csv_path)  # the outcome, counted from the table as written
     failed = table["status"].isin(FAILED_RUN_STATUSES)
@@ -360,6 +351,20 @@ def _judged(row: dict) -> bool:
     value = row.get("ticks_infeasible")
     judged = value is not None and not (isinstance(value, float) and math.isnan(value))
     return judged and row.get("status") in ("ok", "budget")
+
+
+def _run_items(items: list[tuple], jobs: int, emit: Callable) -> None:
+    """Each ``(key, task, deadline)``'s row to ``emit``: here, or in a worker where it has a
+    deadline (isolated) or ``jobs > 1`` (then every run in a worker: a crash is that run's
+    row, not the pool's end)."""
+    if jobs > 1:
+        _run_in_workers(items, jobs, emit)
+        return
+    for key, task, limit in items:
+        if limit is None:
+            emit(key, run_row(task))
+        else:
+            _run_in_workers([(key, task, limit)], 1, emit)
 
 
 def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:

@@ -196,8 +196,15 @@ def judged_tick_times(frame: pd.DataFrame) -> np.ndarray:
     """The per-tick time [s] real time is judged on, one per tick: the solver's work on the one
     clock, the tick's solve and the soft fallback's (``solve_time_s`` plus
     ``fallback_solve_time_s`` of the tick log)."""
-    fallback = frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
-    return (frame[log.SOLVE_TIME] + fallback).to_numpy(dtype=float)
+    return _with_fallback(frame).to_numpy(dtype=float)
+
+
+def _with_fallback(frame: pd.DataFrame) -> pd.Series:
+    """``solve_time_s`` plus ``fallback_solve_time_s`` (0 where none ran, or in a log without
+    the column)."""
+    if log.FALLBACK_SOLVE_TIME not in frame:
+        return frame[log.SOLVE_TIME]
+    return frame[log.SOLVE_TIME] + frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
 
 
 def primary_solve_times(frame: pd.DataFrame) -> np.ndarray:
@@ -525,7 +532,7 @@ def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
     engine); ``solver``, the solver's own report (the Python engine, when every tick has one);
     ``python``, the solve and the fallback's solve through Python (the solver reports none on
     some ticks: never judged on a subset)."""
-    solve = frame[log.SOLVE_TIME] + frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
+    solve = _with_fallback(frame)
     if engine == "compiled":
         return solve, "compiled"
     own = frame[log.SOLVER_TIME]

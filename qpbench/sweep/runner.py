@@ -255,8 +255,7 @@ def run_sweep(
         OutputExistsError: ``out/sweep.csv`` exists without ``force`` or ``resume``.
         InputError: resuming a folder of another sweep file or duration.
     """
-    out = Path(out)
-    # each instance's noise floor first, run like the others (docs/verdicts.md)
+    out = Path(out)  # each instance's noise floor first, run like the others (docs/verdicts.md)
     backends = [NOISE_FLOOR, *(b for b in backends if b != NOISE_FLOOR)]
     instances, kept = _prepare(out, spec, backends, force, resume, instances)
     csv_path = out / CSV_NAME
@@ -265,13 +264,8 @@ def run_sweep(
     failed = 0
     items, heads, figures = [], {}, {}
     # the tasks' common terms; each carries its instance's text
-    terms = LoopTask(
-        "",
-        "",
-        plugins=tuple(plugins or ()),
-        bands=(spec.force_band, spec.tracking_band),
-        engine=engine,
-    )
+    bands = (spec.force_band, spec.tracking_band)
+    terms = LoopTask("", "", plugins=tuple(plugins or ()), bands=bands, engine=engine)
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
         def emit(row):
@@ -310,9 +304,7 @@ def run_sweep(
         judge_against_floor(fields, figures.get((name, NOISE_FLOOR)))
         rows[(name, backend)] |= {k: fields[k] for k in FLOOR_JUDGED if k in fields}
     order = [(inst.name, b) for inst in instances for b in backends]
-    final = [rows[k] for k in order if k in rows] + [
-        r for k, r in rows.items() if k not in set(order)
-    ]
+    final = [rows[k] for k in order if k in rows] + [r for k, r in rows.items() if k not in order]
     with atomic_path(csv_path) as tmp:
         tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
     return SweepOutcome(final, csv_path, len(items), len(kept), failed)
