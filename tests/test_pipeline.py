@@ -44,7 +44,7 @@ def test_two_quick_runs_give_the_same_answer(tmp_path, monkeypatch):
     answers, perturbed = [], []
     for out in ("q1", "q2"):
         args = ["-q", "run", "--quick", "--scenarios", "wall,narrow", "--backends", "daqp,pinv"]
-        args += ["--problems", str(PROBLEMS), "--sweep-budget", "10", "--out", out]
+        args += ["--problems", str(PROBLEMS), "--sweep-budget", "60", "--out", out]
         assert main(args) == 0
         sweeps = rec.read_sweeps(sorted((tmp_path / out / PERTURBED).glob("*/sweep.csv")))
         loop = pd.read_csv(tmp_path / out / "closed_loop.csv")

@@ -86,7 +86,13 @@ class DaskExecutor:
         self.cluster = None
         self._plugin = False
         if scheduler is None:
-            with dask.config.set({**WORKER_CONFIG, "distributed.scheduler.allowed-failures": 0}):
+            # one task on a worker at a time (saturation 1.0): a worker that dies takes only the
+            # task it was running with it, never one merely queued there
+            local = {
+                "distributed.scheduler.allowed-failures": 0,
+                "distributed.scheduler.worker-saturation": 1.0,
+            }
+            with dask.config.set({**WORKER_CONFIG, **local}):
                 self.cluster = LocalCluster(
                     n_workers=jobs,
                     threads_per_worker=1,
