@@ -112,6 +112,7 @@ class LoopTask:
     scenario_text: str | None = None
     bands: tuple | None = None
     engine: str = "compiled"
+    p99_interval: bool = True
 
 
 def run_row(task: LoopTask) -> dict:
@@ -141,6 +142,7 @@ def run_row(task: LoopTask) -> dict:
             deadline=task.deadline,
             wall_budget_s=task.run_budget,
             engine=task.engine,
+            p99_interval=task.p99_interval,
         )
         floor = backend_class(task.backend).noise_floor
         summary = dict(result.summary, noise_floor=floor)

@@ -130,6 +130,7 @@ def simulate(
     wall_budget_s: float | None = None,
     engine: str = "compiled",
     warmup_ticks: int = WARMUP_TICKS,
+    p99_interval: bool = True,
 ) -> SimResult:
     """Run the closed loop of ``scenario`` with ``backend`` solving every tick.
 
@@ -142,7 +143,8 @@ def simulate(
     has a compiled solve (else, and with ``python``, the Python loop; the summary's ``engine``
     says which ran). ``warmup_ticks``: a discarded run of that many ticks first, with a backend
     of its own, so one-off costs stay off the clock (a backend given by name only: an
-    instance's state is the caller's).
+    instance's state is the caller's). ``p99_interval``: the summary bounds the p99 of the
+    ranking time (a bootstrap, tens of milliseconds; a sweep's instances go without).
     """
     if engine not in ENGINES:
         raise ParamError(
@@ -172,7 +174,7 @@ def simulate(
     fallback = resolve_backend(backend, scenario, profile) if isinstance(backend, str) else be
     run = _Run(scenario, be, formulation, keep_every, deadline, engine, fallback)
     run.run(progress, wall_budget_s)
-    result = run.result(wall_budget_s)
+    result = run.result(wall_budget_s, p99_interval)
     if dump is not None:
         _write_dump(dump, result.records, scenario, be.name, formulation, keep_every)
     return result
@@ -414,7 +416,7 @@ class _Run:
             self._post_kernel = entry_point(get_post_kernel(), *args)
         return self._post_kernel(*args)
 
-    def result(self, wall_budget_s: float | None) -> SimResult:
+    def result(self, wall_budget_s: float | None, p99_interval: bool = True) -> SimResult:
         """The tick log, the summary and the kept records of the ticks simulated (the compiled
         engine's state freed first)."""
         scenario, deadline, ctrl, ls = self.scenario, self.deadline, self.ctrl, self.state
@@ -453,7 +455,14 @@ class _Run:
             engine_note=self.engine_note,
         )
         summary = summarize(
-            frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info=run_info
+            frame,
+            scenario,
+            ctrl,
+            self.be.name,
+            self.formulation,
+            self.wall,
+            run_info=run_info,
+            p99_interval=p99_interval,
         )
         from ..formats import ProblemRecord
 

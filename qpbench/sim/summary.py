@@ -107,6 +107,7 @@ def summarize(
     formulation: str,
     wall_time_s: float,
     run_info: dict | None = None,
+    p99_interval: bool = True,
 ) -> dict:
     """Figures of a run and its verdict (module docstring); ``run_info`` from the loop's own."""
     t = frame[log.T].to_numpy()
@@ -150,7 +151,7 @@ def summarize(
     )
     out.update(active)
     out.update(run_info or {})
-    out.update(_rank_figures(frame, dt, out.get("engine", "python")))
+    out.update(_rank_figures(frame, dt, out.get("engine", "python"), p99_interval))
     verdict = judge({**out, **judged}, settings)
     out["verdict"] = verdict.verdict
     out["verdict_reasons"] = verdict.text
@@ -541,10 +542,11 @@ def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
     return solve, "python"
 
 
-def _rank_figures(frame: pd.DataFrame, dt: float, engine: str) -> dict:
-    """``rank_time_source`` and the p99 [s] of :func:`rank_times` with its interval."""
+def _rank_figures(frame: pd.DataFrame, dt: float, engine: str, interval: bool) -> dict:
+    """``rank_time_source`` and the p99 [s] of :func:`rank_times` with its interval (``None``
+    without ``interval``: a sweep's instance, whose time ranks nothing)."""
     times, source = rank_times(frame, engine)
-    lo, hi = _p99_interval(times, dt) if len(times) else (None, None)
+    lo, hi = _p99_interval(times, dt) if len(times) and interval else (None, None)
     return {
         "rank_time_source": source,
         "rank_time_p99_s": _none(times.quantile(0.99)) if len(times) else None,
