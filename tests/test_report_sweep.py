@@ -40,3 +40,18 @@ def test_rates_and_pairs_count_per_instance():
     [pair] = paired_rows(df)
     assert pair[:7] == ["a", "b", 4, 1, 2, 0, 1]
     assert pair[7] == pytest.approx(mcnemar_exact(2, 0))
+
+
+def test_a_sweep_table_without_rows_reads_as_no_runs(tmp_path):
+    """A perturbed run whose budget ran no instance leaves a header-only table: no runs, no crash
+    (an empty mask of the noise floor's rows once selected columns instead of rows)."""
+    from qpbench.sweep.report import split_sweep_paths, sweep_section
+    from qpbench.sweep.runner import COLUMNS
+
+    folder = tmp_path / "perturbed" / "wall"
+    folder.mkdir(parents=True)
+    (folder / "sweep.csv").write_text(",".join(COLUMNS) + "\n")
+    _, tables = split_sweep_paths([tmp_path / "perturbed"])
+    assert len(tables) == 1 and tables[0].rows == 0
+    lines = sweep_section(tables, tmp_path, plots=False)
+    assert lines[-1] == "`wall`: no run in this table.\n"

@@ -242,4 +242,5 @@ def noise_floor_runs(table: pd.DataFrame) -> pd.Series:
     column): measured beside the candidates, never one of them."""
     if "noise_floor" not in table.columns:
         return pd.Series(False, index=table.index)
-    return table["noise_floor"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
+    floor = table["noise_floor"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
+    return floor.astype(bool)  # bool even when empty: a mask, never a list of column names

@@ -212,7 +212,10 @@ def sweep_section(tables: list[ResultFile], out: Path, plots: bool = True) -> li
         "(`qpbench sweep`). Rates among the runs of valid instances, 95 % Wilson intervals in brackets.\n",
     ]
     for table in tables:
-        lines += _one_sweep(table.path, out, plots)
+        if table.rows:
+            lines += _one_sweep(table.path, out, plots)
+        else:  # a budget that ran no instance: the table is a header
+            lines.append(f"`{table.path.parent.name}`: no run in this table.\n")
     return lines
 
 
