@@ -23,6 +23,7 @@ import numpy as np
 
 from ..control.build_kernel import packed_layout
 from ..native import clock, compile_with
+from ..packed import HEADER as PACKED_HEADER
 from ..sim.tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel
 
 if TYPE_CHECKING:
@@ -152,7 +153,7 @@ def _adapt():
 
 def _views(buf, n, nr):  # pragma: no cover - compiled (inlined by numba as plain arithmetic)
     """J, b0, ee, dist and x_d in a packed tick buffer (:func:`packed_layout`)."""
-    oJ = 11 + n * n + n + nr * n + nr
+    oJ = PACKED_HEADER + n * n + n + nr * n + nr
     ob = oJ + 2 * n
     oee = ob + 2 + 2 * n
     od = oee + 2
@@ -181,7 +182,7 @@ def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: 
     passed ``stop_at`` [s] between ticks; ``stop_at <= 0``: no budget)."""
     cm = model.controller
     n = model.theta0.shape[0]
-    nr = (ls.buf.shape[0] - 11 - n * n - 5 * n - 8) // (n + 2)
+    nr = (ls.buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 8) // (n + 2)  # as the build's
     dt = model.dt
     theta, sensed, gains, ts = ls.theta, ls.sensed, ls.gains, ls.ts
     J, b0, ee, dist, xd = _views(ls.buf, n, nr)
