@@ -149,7 +149,7 @@ def test_snapshot_follows_the_report_style(wall_run, tmp_path, monkeypatch, back
     assert legends_over_data(fig) == []
     workspace, distance = fig.axes
     assert distance.get_yscale() == "symlog"
-    d_safe_mm = scenario.data["controller"]["d_safe"] * 1e3
+    d_safe_mm = scenario.spec.controller.d_safe * 1e3
     lo, hi = distance.get_ylim()
     assert lo < d_safe_mm - 0.5 < d_safe_mm < hi
     # d_safe takes a readable share of the panel's height (not squashed against 0)

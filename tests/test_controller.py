@@ -3,6 +3,8 @@ escape-velocity bounds, the compiled kernel against the numpy terms, the adaptiv
 
 from __future__ import annotations
 
+import tomllib
+
 import cvxpy as cp
 import numpy as np
 import pytest
@@ -48,6 +50,19 @@ def fd_jac(lengths, theta, link, frac, h=1e-7):
             (fk(lengths, theta + e, link, frac) - fk(lengths, theta - e, link, frac)) / (2 * h)
         )
     return np.array(cols).T
+
+
+def file_tables(sc):
+    """The scenario file's tables as written (TOML read here, lists as arrays), not the model's."""
+
+    def arrays(v):
+        if isinstance(v, dict):
+            return {k: arrays(x) for k, x in v.items()}
+        if isinstance(v, list) and v and isinstance(v[0], dict):
+            return [arrays(x) for x in v]
+        return np.array(v, dtype=float) if isinstance(v, list) else v
+
+    return arrays(tomllib.loads(sc.source))
 
 
 def independent_qp(data, theta, t, kp, kd, formulation):
@@ -123,7 +138,7 @@ def test_independent_cvxpy_model_has_the_same_optimum(runs, name, formulation):
         theta = row[[f"theta_{i}" for i in range(n)]].to_numpy(float)
         t, kp, kd = float(row["t"]), float(row["kp_hat"]), float(row["kd_hat"])
         problem = ctrl.build(theta, t, kp, kd, formulation).problem
-        ref, const = independent_qp(sc.data, theta, t, kp, kd, formulation)
+        ref, const = independent_qp(file_tables(sc), theta, t, kp, kd, formulation)
         ref.solve(solver=cp.CLARABEL)
         sol = qpsolvers.solve_problem(
             problem, solver="clarabel", tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10

@@ -383,13 +383,13 @@ def test_overrides_round_trip_through_loader_cli_summary_and_dump(tmp_path):
     plain = load_scenario("wall")
     sc = load_scenario("wall", overrides=overrides)
     assert sc.rnn == {"eps": 0.001, "substeps": 5, "l1_clip": 10.0}
-    assert sc.data["controller"]["k"] == 20.0 and isinstance(sc.data["controller"]["k"], float)
-    np.testing.assert_array_equal(sc.data["obstacles"][0]["velocity"], [0.0, 0.01])
+    assert sc.spec.controller.k == 20.0 and isinstance(sc.spec.controller.k, float)
+    np.testing.assert_array_equal(sc.spec.obstacles[0].velocity, [0.0, 0.01])
     assert sc.overrides == overrides and plain.overrides == {} and sc.source == plain.source
     # everything not overridden is the file's
     for table in ("robot", "contact", "path", "simulation"):
-        for key, value in plain.data[table].items():
-            np.testing.assert_array_equal(sc.data[table][key], value)
+        for key, value in getattr(plain.spec, table):
+            np.testing.assert_array_equal(getattr(sc.spec, table).__dict__[key], value)
     # the CLI runs exactly that scenario, and says so in the summary and the dump's manifest
     args = [
         *simulate_args("wall", "rnn", "0.1", *_outputs(tmp_path)),

@@ -97,7 +97,7 @@ def test_start_state_is_feasible(size):
 def test_tick_qp_shapes_follow_the_formula_and_v0_is_feasible(size):
     gen, cloud = generate(size)
     scenario = parse_scenario(scenario_toml(size, gen, cloud, 0.1), f"{size.name}.toml")
-    problem = scenario.make_controller().build(scenario.data["robot"]["theta0"], 0.0).problem
+    problem = scenario.make_controller().build(scenario.spec.robot.theta0, 0.0).problem
     shape = qp_shape(size)
     assert problem.P.shape == (shape["n"], shape["n"])
     assert problem.A.shape == (shape["m_eq"], shape["n"])

@@ -67,16 +67,16 @@ def test_shipped_scenarios_load_with_the_paper_values():
         assert sc.name == name
         assert sc.rnn["eps"] == 0.02
         assert sc.dt == 0.001 and sc.duration == 20.0
-        np.testing.assert_allclose(sc.data["robot"]["link_lengths"], [0.3, 0.4, 0.15, 0.15])
-        c = sc.data["controller"]
-        assert (c["alpha"], c["k"], c["d_safe"], c["desired_force"]) == (8.0, 10.0, 0.01, 20.0)
-        assert (sc.data["contact"]["stiffness"], sc.data["contact"]["damping"]) == (5000.0, 50.0)
-    assert load_scenario("wall").data["obstacles"][0]["point"][0] == -0.05
-    assert [o["name"] for o in load_scenario("narrow").data["obstacles"]] == ["upper", "lower"]
+        np.testing.assert_allclose(sc.spec.robot.link_lengths, [0.3, 0.4, 0.15, 0.15])
+        c = sc.spec.controller
+        assert (c.alpha, c.k, c.d_safe, c.desired_force) == (8.0, 10.0, 0.01, 20.0)
+        assert (sc.spec.contact.stiffness, sc.spec.contact.damping) == (5000.0, 50.0)
+    assert load_scenario("wall").spec.obstacles[0].point[0] == -0.05
+    assert [o.name for o in load_scenario("narrow").spec.obstacles] == ["upper", "lower"]
     ad, fast = load_scenario("adaptive"), load_scenario("adaptive_fast")
-    assert (ad.data["controller"]["kp"], ad.data["controller"]["kd"]) == (4000.0, 80.0)
-    np.testing.assert_array_equal(ad.data["adaptive"]["gain"], [500.0, 20.0])
-    assert fast.data["adaptive"]["gain"][0] > ad.data["adaptive"]["gain"][0]
+    assert (ad.spec.controller.kp, ad.spec.controller.kd) == (4000.0, 80.0)
+    np.testing.assert_array_equal(ad.spec.adaptive.gain, [500.0, 20.0])
+    assert fast.spec.adaptive.gain[0] > ad.spec.adaptive.gain[0]
     assert load_scenario("free").make_adaptive() is None and ad.make_adaptive() is not None
 
 
@@ -236,7 +236,7 @@ def test_scenarios_show_prints_a_file_to_start_from(tmp_path, capsys):
     mine.write_text(
         text.replace('name = "wall"', 'name = "mine"').replace("d_safe = 0.01 ", "d_safe = 0.02 ")
     )
-    assert load_scenario(mine).data["controller"]["d_safe"] == 0.02
+    assert load_scenario(mine).spec.controller.d_safe == 0.02
     assert main(["scenarios", "show", "narrow", "--json"]) == 0
     tables = json.loads(capsys.readouterr().out)
     assert tables["scenario"]["name"] == "narrow" and [o["name"] for o in tables["obstacles"]] == [

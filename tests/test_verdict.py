@@ -208,9 +208,9 @@ def test_a_file_without_verdict_rnn_adaptive_runs_on_the_defaults(tmp_path):
     bare, shipped = load_scenario(f), load_scenario("wall")
     assert bare.verdict == shipped.verdict == VerdictSettings()
     assert bare.rnn == shipped.rnn == {"eps": 0.02}
-    assert not bare.data["adaptive"]["enabled"]
-    np.testing.assert_array_equal(bare.data["adaptive"]["gain"], shipped.data["adaptive"]["gain"])
-    assert bare.data["adaptive"]["kp_min"] == shipped.data["adaptive"]["kp_min"]
+    assert not bare.spec.adaptive.enabled
+    np.testing.assert_array_equal(bare.spec.adaptive.gain, shipped.spec.adaptive.gain)
+    assert bare.spec.adaptive.kp_min == shipped.spec.adaptive.kp_min
     # a threshold set over a table the file leaves out: the table's defaults, then the key
     assert (
         load_scenario(f, overrides={"verdict.max_force_error": 3.0}).verdict.max_force_error == 3.0
@@ -849,9 +849,9 @@ def test_show_filled_prints_a_file_that_loads_back_to_the_same_scenario(tmp_path
     back.write_text(printed)
     a, b = load_scenario(source), load_scenario(back)
     assert (a.name, a.rnn, a.verdict) == (b.name, b.rnn, b.verdict)
-    assert a.data.keys() == b.data.keys()
-    for table in a.data:
-        assert repr(a.data[table]) == repr(b.data[table]), table  # arrays and types alike
+    assert list(a.spec.model_fields) == list(b.spec.model_fields)
+    for table in a.spec.model_fields:  # arrays and types alike
+        assert repr(getattr(a.spec, table)) == repr(getattr(b.spec, table)), table
     # and again: the filled file filled is the same text
     assert main(["scenarios", "show", str(back), "--filled"]) == 0
     assert capsys.readouterr().out.split("\n", 2)[2] == printed.split("\n", 2)[2]

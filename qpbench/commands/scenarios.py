@@ -49,7 +49,7 @@ def _show(name: str, as_json: bool, fill: bool) -> None:
             "Keys, units and defaults: qpbench.sim.scenario_schema; why these thresholds: "
             "docs/verdicts.md."
         )
-        text = dumps(filled(sc.data, sc.rnn), header=header)
+        text = dumps(filled(sc.spec), header=header)
     if as_json:
         print(json.dumps(tomllib.loads(text), indent=2))
     else:
@@ -77,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
     listing = []
     rows = [("name", "paper", "duration", "obstacles", "description")]
     for sc in map(load_scenario, scenario_names()):
-        section = sc.data["scenario"]["paper_section"]
-        obstacles = [o["name"] for o in sc.data["obstacles"]]
+        section = sc.spec.scenario.paper_section
+        obstacles = [o.name for o in sc.spec.obstacles]
         listing.append(
             dict(name=sc.name, paper_section=section, in_paper=sc.in_paper, duration_s=sc.duration)
             | dict(obstacles=obstacles, description=sc.description)

@@ -193,7 +193,7 @@ def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys,
         return
     a = list(keys.names).index(close["key_point"])
     q = arm.points(theta[close["k"]], keys.links[a : a + 1], keys.fracs[a : a + 1])[0]
-    d_safe = scenario.data["controller"]["d_safe"]
+    d_safe = scenario.spec.controller.d_safe
     bad = close["distance"] < d_safe - DEFAULT_SAFETY_MARGIN
     label = (
         f"closest approach: {close['key_point']} {close['distance'] * 1e3:.1f} mm "
@@ -245,7 +245,7 @@ def draw_snapshot(
     span = t[-1] + (t[1] - t[0] if len(t) > 1 else 0)
     ax.set_title(title or f"{scenario.name}: the arm over {span:.1f} s")
     if has_d:
-        _distance_panel(axes[1, 0], log, backend, scenario.data["controller"]["d_safe"])
+        _distance_panel(axes[1, 0], log, backend, scenario.spec.controller.d_safe)
     style.legend_beside(ax, *style.entries(axes[:, 0]))
     return style.save(fig, path, dpi=110)
 
@@ -327,7 +327,7 @@ def animate(
     dt = float(t[1] - t[0]) if len(t) > 1 else scenario.dt  # every speed / (fps dt)-th tick
     frames = list(range(0, len(t), max(1, int(round(speed / (fps * dt))))))
     xlim, ylim = view(scenario, log, arm)
-    d_safe = scenario.data["controller"]["d_safe"]
+    d_safe = scenario.spec.controller.d_safe
     dcols = tick_log.distance_columns(log)
 
     # equal axes: the frame's height follows the view's proportions

@@ -25,7 +25,13 @@ from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
 from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
-from .scenario_schema import OPTIONAL_TABLES, check_simulation, validate
+from .scenario_schema import (
+    OPTIONAL_TABLES,
+    ScenarioSpec,
+    check_simulation,
+    validate,
+    with_simulation,
+)
 from .verdict import VerdictSettings
 
 if TYPE_CHECKING:
@@ -43,45 +49,45 @@ class Scenario:
     """Everything a simulation needs, read from one TOML file.
 
     ``path`` is None when parsed from text; ``source`` is the file's text (stored in dumped
-    problem sets' manifests); ``data`` the validated tables (numbers as floats, vectors as
-    arrays); ``rnn`` the ``rnn`` backends' settings; ``overrides`` the values set over the
-    file's, by dotted key.
+    problem sets' manifests); ``spec`` the validated file (:class:`ScenarioSpec`: tables as
+    attributes, vectors as arrays); ``rnn`` the ``rnn`` backends' settings; ``overrides`` the
+    values set over the file's, by dotted key.
     """
 
     name: str
     path: Path | None
     source: str
-    data: dict
+    spec: ScenarioSpec
     rnn: dict = field(default_factory=dict)
     overrides: dict = field(default_factory=dict)
 
     @property
     def description(self) -> str:
-        return self.data["scenario"]["description"]
+        return self.spec.scenario.description
 
     @property
     def in_paper(self) -> bool:
         """One of the paper's scenarios (``[scenario] in_paper``)."""
-        return self.data["scenario"]["in_paper"]
+        return self.spec.scenario.in_paper
 
     @property
     def dt(self) -> float:
         """Control period [s]."""
-        return self.data["simulation"]["dt"]
+        return self.spec.simulation.dt
 
     @property
     def duration(self) -> float:
         """Simulated time [s]."""
-        return self.data["simulation"]["duration"]
+        return self.spec.simulation.duration
 
     @property
     def theta0(self) -> np.ndarray:
-        return self.data["robot"]["theta0"].copy()
+        return self.spec.robot.theta0.copy()
 
     @property
     def verdict(self) -> VerdictSettings:
         """Thresholds of a run's verdict (``[verdict]``; :mod:`qpbench.sim.verdict`)."""
-        return VerdictSettings(**self.data["verdict"])
+        return self.spec.verdict_settings
 
     @property
     def verdict_overrides(self) -> dict:
@@ -92,45 +98,46 @@ class Scenario:
     @property
     def normal(self) -> np.ndarray:
         """The contact surface's unit normal."""
-        normal = self.data["contact"]["normal"]
+        normal = self.spec.contact.normal
         return normal / np.linalg.norm(normal)
 
     def with_overrides(self, dt: float | None = None, duration: float | None = None) -> Scenario:
         """A copy with another control period or duration (validated like the file's values,
         with the values set over the file's)."""
-        data = copy.deepcopy(self.data)
-        if dt is not None:
-            data["simulation"]["dt"] = float(dt)
-        if duration is not None:
-            data["simulation"]["duration"] = float(duration)
-        check_simulation(data, self.path or "<override>", tuple(self.overrides))
-        return replace(self, data=data)
+        values = {"dt": dt, "duration": duration}
+        spec = with_simulation(self.spec, **{k: v for k, v in values.items() if v is not None})
+        check_simulation(spec, self.path or "<override>", tuple(self.overrides))
+        return replace(self, spec=spec)
 
     def make_arm(self) -> PlanarArm:
-        return PlanarArm(self.data["robot"]["link_lengths"])
+        return PlanarArm(self.spec.robot.link_lengths)
 
     def make_key_points(self) -> KeyPoints:
-        kp, n = self.data["key_points"], len(self.data["robot"]["link_lengths"])
-        if kp["kind"] == "closest":
-            return closest_key_points(n, kp["link_radius"])
-        return default_key_points(n, kp["points_per_link"], kp["include_joints"], kp["link_radius"])
+        kp, n = self.spec.key_points, len(self.spec.robot.link_lengths)
+        if kp.kind == "closest":
+            return closest_key_points(n, kp.link_radius)
+        return default_key_points(n, kp.points_per_link, kp.include_joints, kp.link_radius)
 
     def make_path(self) -> CosinePath | PolylinePath:
         from ..control.terms import CosinePath, PolylinePath
 
-        p = self.data["path"]
-        if p["kind"] == "cosine":
-            return CosinePath(p["centre"], p["amplitude"], p["omega"], p["phase"])
-        return PolylinePath(p["times"], p["points"])
+        p = self.spec.path
+        if p.kind == "cosine":
+            return CosinePath(p.centre, p.amplitude, p.omega, p.phase)
+        return PolylinePath(p.times, p.points)
 
     def make_surface(self) -> ContactSurface:
-        keys = ("point", "normal", "stiffness", "damping", "force_noise_std", "noise_seed")
-        return ContactSurface(*(self.data["contact"][k] for k in keys))
+        c = self.spec.contact
+        return ContactSurface(
+            c.point, c.normal, c.stiffness, c.damping, c.force_noise_std, c.noise_seed
+        )
 
     def make_obstacles(self) -> list[Obstacle]:
         return [
-            OBSTACLE_KINDS[o["kind"]](**{k: v for k, v in o.items() if k != "kind"})
-            for o in self.data["obstacles"]
+            OBSTACLE_KINDS[o.kind](
+                **{k: getattr(o, k) for k in type(o).model_fields if k != "kind"}
+            )
+            for o in self.spec.obstacles
         ]
 
     def make_controller(self) -> Controller:
@@ -138,13 +145,13 @@ class Scenario:
         from ..control.controller import Controller
         from ..control.terms import EscapeVelocityLimits, ImpedanceTask
 
-        r, c = self.data["robot"], self.data["controller"]
-        task = ImpedanceTask(self.make_path(), self.normal, c["desired_force"])
+        r, c = self.spec.robot, self.spec.controller
+        task = ImpedanceTask(self.make_path(), self.normal, c.desired_force)
         limits = EscapeVelocityLimits(
-            r["theta_min"], r["theta_max"], r["velocity_min"], r["velocity_max"], c["alpha"]
+            r.theta_min, r.theta_max, r.velocity_min, r.velocity_max, c.alpha
         )
         obstacles = self.make_obstacles()
-        gains = {key: c[key] for key in ("k", "d_safe", "rho", "kp", "kd")}
+        gains = {key: getattr(c, key) for key in ("k", "d_safe", "rho", "kp", "kd")}
         exempt = contact_obstacles(obstacles, self.make_surface())
         return Controller(
             self.make_arm(), self.make_key_points(), task, limits, obstacles, **gains, exempt=exempt
@@ -154,12 +161,12 @@ class Scenario:
         """The adaptive estimator (section 4.4), or None when ``[adaptive] enabled = false``."""
         from ..control.adaptive import AdaptiveImpedance
 
-        a = self.data["adaptive"]
-        if not a["enabled"]:
+        a = self.spec.adaptive
+        if not a.enabled:
             return None
-        c = self.data["controller"]
+        c = self.spec.controller
         return AdaptiveImpedance(
-            c["kp"], c["kd"], a["gain"], self.normal, c["desired_force"], a["kp_min"], a["kd_min"]
+            c.kp, c.kd, a.gain, self.normal, c.desired_force, a.kp_min, a.kd_min
         )
 
 
@@ -183,13 +190,13 @@ def parse_scenario(
     times = {key: value for key, value in times.items() if value is not None}
     if overrides or times:
         raw = apply_overrides(raw, {**(overrides or {}), **times}, file)
-    data, rnn = validate(raw, file, tuple(overrides or ()))
+    spec = validate(raw, file, tuple(overrides or ()))
     scenario = Scenario(
-        name=data["scenario"]["name"],
+        name=spec.scenario.name,
         path=None if path is None else Path(path),
         source=text,
-        data=data,
-        rnn=rnn,
+        spec=spec,
+        rnn=spec.rnn_settings,
         overrides=dict(overrides or {}),
     )
     # build every object once so constructor checks surface here, naming the file

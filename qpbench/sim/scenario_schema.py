@@ -1,108 +1,38 @@
-"""The scenario file's schema: every table and key with its type and unit (paper section 4).
+"""The scenario file as one typed model (pydantic): every table and key with its type and unit
+(paper section 4).
 
-A missing, unknown or mistyped key raises :class:`~qpbench.exceptions.ScenarioError` naming the
-file and the key; a range is checked here only for a value no object of the scenario holds
-(the arm, the key points, the contact surface, the obstacles and
-:class:`qpbench.sim.verdict.VerdictSettings` check their own). ``[adaptive]``, ``[rnn]`` and
-``[verdict]`` may be left out (:data:`DEFAULTS`; ``[verdict]``: docs/verdicts.md).
+:func:`validate` turns the parsed TOML tables into a :class:`ScenarioSpec`; a missing, unknown
+or mistyped key, or a value out of its bounds, raises one
+:class:`~qpbench.exceptions.ScenarioError` naming the file and the key. Rules across keys (one
+value per joint, ``theta_min < theta0 < theta_max``, ``alpha dt < 1``, the verdict's margin
+below ``d_safe``) are checked here too; the objects built from the model (the arm, the contact
+surface, the obstacles, :class:`~qpbench.sim.verdict.VerdictSettings`) check the rest.
+``[adaptive]``, ``[rnn]`` and ``[verdict]`` may be left out (docs/verdicts.md for the latter).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
-from typing import TYPE_CHECKING
+from dataclasses import fields
+from pathlib import Path
+from typing import Annotated, Literal, Union
 
 import numpy as np
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Discriminator,
+    Field,
+    PlainSerializer,
+    StrictBool,
+    StrictStr,
+    Tag,
+    ValidationError,
+)
 
-from ..exceptions import ScenarioError, check_known_keys
-from ..robot.kinematics import KEY_POINT_KINDS
+from ..exceptions import ScenarioError
 from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
-
-if TYPE_CHECKING:
-    from pathlib import Path
-
-# Types: num, int, bool, str, vec (numbers), vec2 (two numbers), points ([[x, y], ...]), a tuple
-# (one of its strings); ">0" or ">=0" after a type bounds a number or every entry of a vector.
-_SCHEMA: dict[str, dict] = {
-    # in_paper: one of the paper's scenarios, whose ticks ``qpbench run`` also benchmarks;
-    # in_run: ``qpbench run`` runs it when no ``--scenarios`` are given
-    "scenario": {
-        "name": "str",
-        "description": "str",
-        "paper_section": "str",
-        "in_paper": "bool",
-        "in_run": "bool",
-    },
-    "robot": {
-        "link_lengths": "vec",  # [m]
-        "theta0": "vec",  # [rad]
-        "theta_min": "vec",  # [rad]
-        "theta_max": "vec",  # [rad]
-        "velocity_min": "vec",  # [rad/s]
-        "velocity_max": "vec",  # [rad/s]
-    },
-    # kind "paper": the paper's fixed key points; "closest": a row at each link's point closest
-    # to each obstacle, beyond the paper (:class:`qpbench.robot.kinematics.KeyPoints`)
-    "key_points": {
-        "points_per_link": "int",
-        "include_joints": "bool",
-        "link_radius": "num>=0",  # [m]
-        "kind": KEY_POINT_KINDS,
-    },
-    "contact": {
-        "point": "vec2",  # [m]
-        "normal": "vec2",
-        "stiffness": "num",  # [N/m]
-        "damping": "num",  # [N s/m]
-        "force_noise_std": "num",  # [N]
-        "noise_seed": "int",
-    },
-    "controller": {
-        "desired_force": "num>=0",  # [N]
-        "kp": "num>0",  # [N/m]
-        "kd": "num>0",  # [N s/m]
-        "alpha": "num>0",  # [1/s]
-        "k": "num>0",  # [1/s]
-        "d_safe": "num>=0",  # [m]
-        "rho": "num>0",
-    },
-    # gain: [kp part, kd part]; kp_min [N/m], kd_min [N s/m]
-    "adaptive": {"enabled": "bool", "gain": "vec2>=0", "kp_min": "num>0", "kd_min": "num>0"},
-    "simulation": {"dt": "num", "duration": "num"},  # [s] (check_simulation)
-}
-#: ``[path]`` by kind: centre, amplitude [m], omega [rad/s], phase [rad]; times [s], points [m].
-_PATH_SCHEMA = {
-    "cosine": {
-        "kind": "str",
-        "centre": "vec2",
-        "amplitude": "vec2",
-        "omega": "vec2",
-        "phase": "vec2",
-    },
-    "polyline": {"kind": "str", "times": "vec", "points": "points"},
-}
-#: ``[[obstacles]]`` by kind; points [m], velocity [m/s]; a line's normal points to the free side.
-_OBSTACLE_SCHEMA = {
-    "line": {"kind": "str", "name": "str", "point": "vec2", "normal": "vec2", "velocity": "vec2"},
-    "segment": {"kind": "str", "name": "str", "a": "vec2", "b": "vec2", "velocity": "vec2"},
-    "disk": {"kind": "str", "name": "str", "center": "vec2", "radius": "num", "velocity": "vec2"},
-    "points": {"kind": "str", "name": "str", "points": "points", "velocity": "vec2"},
-}
-#: ``[verdict]``: the fields of :class:`qpbench.sim.verdict.VerdictSettings`, which checks them.
-_VERDICT_DEFAULTS = VerdictSettings()
-_VERDICT_SCHEMA = dict.fromkeys(asdict(_VERDICT_DEFAULTS), "num")
-#: Tables a file may leave out (all their keys have defaults).
-OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
-_TOP = (*_SCHEMA, "path", "obstacles", "rnn", "verdict")
-#: Defaults of the keys that may be left out, per table.
-DEFAULTS: dict[str, dict] = {
-    "scenario": {"in_paper": False, "in_run": True},
-    "key_points": {"kind": "paper"},
-    "adaptive": {"enabled": False, "gain": [500.0, 20.0], "kp_min": 100.0, "kd_min": 1.0},
-    "rnn": {"eps": 0.02},
-    "verdict": asdict(_VERDICT_DEFAULTS),
-}
 
 
 def finite_number(v) -> bool:
@@ -110,128 +40,339 @@ def finite_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def _typed(value, kind, file, key: str):
-    """``value`` converted to ``kind`` (a schema type), else a :class:`ScenarioError` naming ``key``."""
+def _number(v):
+    if not finite_number(v):
+        raise ValueError(f"expected a finite number, got {v!r}")
+    return float(v)
 
-    def bad(what):
-        raise ScenarioError(f"expected {what}, got {value!r}", path=file, key=key)
 
-    if isinstance(kind, tuple):
-        if not isinstance(value, str) or value not in kind:
-            bad(f"one of {', '.join(kind)}")
-        return value
-    kind, _, bound = kind.partition(">")
-    if kind == "num":
-        if not finite_number(value):
-            bad("a finite number")
-        out = float(value)
-    elif kind == "int":
-        if not isinstance(value, int) or isinstance(value, bool):
-            bad("an integer")
-        out = int(value)
-    elif kind in ("bool", "str"):
-        if not isinstance(value, bool if kind == "bool" else str):
-            bad("true or false" if kind == "bool" else "a string")
-        return value
-    elif kind in ("vec", "vec2"):
-        if not isinstance(value, list) or not value or not all(finite_number(v) for v in value):
-            bad("a list of finite numbers")
-        if kind == "vec2" and len(value) != 2:
-            bad("a list of two numbers")
-        out = np.array(value, dtype=float)
-    else:  # points
-        if not (
-            isinstance(value, list)
-            and value
-            and all(
-                isinstance(p, list) and len(p) == 2 and all(map(finite_number, p)) for p in value
-            )
-        ):
-            bad("a list of [x, y] pairs")
-        return np.array(value, dtype=float)
-    if bound and not np.all(out > 0 if bound == "0" else out >= 0):
-        raise ScenarioError(f"must be >{bound[:-1]} 0, got {value}", path=file, key=key)
+def _integer(v):
+    if not isinstance(v, int) or isinstance(v, bool):
+        raise ValueError(f"expected an integer, got {v!r}")
+    return v
+
+
+def _vector(size: int | None = None, lower: float | None = None):
+    def check(v):
+        ok = isinstance(v, list) and v and all(finite_number(x) for x in v)
+        if not ok or (size is not None and len(v) != size):
+            what = "a list of finite numbers" if size is None else f"a list of {size} numbers"
+            raise ValueError(f"expected {what}, got {v!r}")
+        if lower is not None and min(v) < lower:
+            raise ValueError(f"every entry must be >= {lower:g}, got {v}")
+        return np.array(v, dtype=float)
+
+    return check
+
+
+def _points(v):
+    ok = isinstance(v, list) and v
+    ok = ok and all(isinstance(p, list) and len(p) == 2 and all(map(finite_number, p)) for p in v)
+    if not ok:
+        raise ValueError(f"expected a list of [x, y] pairs, got {v!r}")
+    return np.array(v, dtype=float)
+
+
+_AS_LIST = PlainSerializer(lambda a: a.tolist())
+Num = Annotated[float, BeforeValidator(_number)]
+Int = Annotated[int, BeforeValidator(_integer)]
+Vec = Annotated[np.ndarray, BeforeValidator(_vector()), _AS_LIST]
+Vec2 = Annotated[np.ndarray, BeforeValidator(_vector(2)), _AS_LIST]
+Points = Annotated[np.ndarray, BeforeValidator(_points), _AS_LIST]
+
+
+class Table(BaseModel):
+    """A table of the file: unknown keys refused, values frozen once validated."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
+
+
+def _by_kind(*models: type[Table]):
+    """A union of tables picked by their ``kind`` (``[path]``, an obstacle)."""
+
+    def kind_of(v):
+        kind = v.get("kind") if isinstance(v, dict) else getattr(v, "kind", None)
+        return kind if isinstance(kind, str) else None
+
+    members = [Annotated[m, Tag(m.model_fields["kind"].default)] for m in models]
+    return Annotated[Union[tuple(members)], Discriminator(kind_of)]  # noqa: UP007
+
+
+class ScenarioTable(Table):
+    """``[scenario]``. ``in_paper``: one of the paper's scenarios, whose ticks ``qpbench run``
+    also benchmarks; ``in_run``: ``qpbench run`` runs it when no ``--scenarios`` are given."""
+
+    name: StrictStr
+    description: StrictStr
+    paper_section: StrictStr
+    in_paper: StrictBool = False
+    in_run: StrictBool = True
+
+
+class RobotTable(Table):
+    """``[robot]``: a planar chain of ``link_lengths`` [m]; start ``theta0``, limits
+    ``theta_min``, ``theta_max`` [rad], ``velocity_min``, ``velocity_max`` [rad/s], one per joint."""
+
+    link_lengths: Vec
+    theta0: Vec
+    theta_min: Vec
+    theta_max: Vec
+    velocity_min: Vec
+    velocity_max: Vec
+
+
+class KeyPointsTable(Table):
+    """``[key_points]``: kind ``paper``, the paper's fixed key points; ``closest``, a row at each
+    link's point closest to each obstacle (:class:`qpbench.robot.kinematics.KeyPoints`);
+    ``link_radius`` [m]."""
+
+    points_per_link: Int
+    include_joints: StrictBool
+    link_radius: Annotated[Num, Field(ge=0)]
+    kind: Literal["paper", "closest"] = "paper"
+
+
+class CosinePathTable(Table):
+    """``x_d(t) = centre + amplitude cos(omega t + phase)`` per axis: [m], [m], [rad/s], [rad]."""
+
+    kind: Literal["cosine"] = "cosine"
+    centre: Vec2
+    amplitude: Vec2
+    omega: Vec2
+    phase: Vec2
+
+
+class PolylinePathTable(Table):
+    """``x_d(t)`` through ``points`` [m] at ``times`` [s]."""
+
+    kind: Literal["polyline"] = "polyline"
+    times: Vec
+    points: Points
+
+
+class ContactTable(Table):
+    """``[contact]``: a surface ``point`` [m] and pressing ``normal``, ``stiffness`` [N/m],
+    ``damping`` [N s/m], force-sensor noise ``force_noise_std`` [N] drawn from ``noise_seed``."""
+
+    point: Vec2
+    normal: Vec2
+    stiffness: Num
+    damping: Num
+    force_noise_std: Num
+    noise_seed: Int
+
+
+class ControllerTable(Table):
+    """``[controller]``: ``desired_force`` [N], ``kp`` [N/m], ``kd`` [N s/m], ``alpha`` [1/s],
+    ``k`` [1/s], ``d_safe`` [m], ``rho`` [s^2/m^2]."""
+
+    desired_force: Annotated[Num, Field(ge=0)]
+    kp: Annotated[Num, Field(gt=0)]
+    kd: Annotated[Num, Field(gt=0)]
+    alpha: Annotated[Num, Field(gt=0)]
+    k: Annotated[Num, Field(gt=0)]
+    d_safe: Annotated[Num, Field(ge=0)]
+    rho: Annotated[Num, Field(gt=0)]
+
+
+class AdaptiveTable(Table):
+    """``[adaptive]``: ``gain`` = [kp part, kd part], ``kp_min`` [N/m], ``kd_min`` [N s/m]."""
+
+    enabled: StrictBool = False
+    gain: Annotated[np.ndarray, BeforeValidator(_vector(2, lower=0.0)), _AS_LIST] = Field(
+        default_factory=lambda: np.array([500.0, 20.0])
+    )
+    kp_min: Annotated[Num, Field(gt=0)] = 100.0
+    kd_min: Annotated[Num, Field(gt=0)] = 1.0
+
+
+class SimulationTable(Table):
+    """``[simulation]``: control period ``dt`` and ``duration`` [s] (:func:`check_simulation`)."""
+
+    dt: Num
+    duration: Num
+
+
+class RnnTable(Table):
+    """``[rnn]``: ``eps`` > 0; the other keys are the ``rnn`` backends' settings, checked there."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+    eps: Annotated[Num, Field(gt=0)] = 0.02
+
+
+class LineTable(Table):
+    """A wall through ``point`` [m] with ``normal`` towards the free side."""
+
+    kind: Literal["line"] = "line"
+    name: StrictStr
+    point: Vec2
+    normal: Vec2
+    velocity: Vec2
+
+
+class SegmentTable(Table):
+    """A segment from ``a`` to ``b`` [m]."""
+
+    kind: Literal["segment"] = "segment"
+    name: StrictStr
+    a: Vec2
+    b: Vec2
+    velocity: Vec2
+
+
+class DiskTable(Table):
+    """A disk of ``center`` [m] and ``radius`` [m]."""
+
+    kind: Literal["disk"] = "disk"
+    name: StrictStr
+    center: Vec2
+    radius: Num
+    velocity: Vec2
+
+
+class PointsTable(Table):
+    """A cloud of ``points`` [m]."""
+
+    kind: Literal["points"] = "points"
+    name: StrictStr
+    points: Points
+    velocity: Vec2
+
+
+PathTable = _by_kind(CosinePathTable, PolylinePathTable)
+ObstacleTable = _by_kind(LineTable, SegmentTable, DiskTable, PointsTable)
+
+
+class ScenarioSpec(Table):
+    """One scenario file, validated; ``verdict`` holds the keys given in ``[verdict]`` (their
+    defaults depend on the task: :func:`validate` fills them)."""
+
+    scenario: ScenarioTable
+    robot: RobotTable
+    key_points: KeyPointsTable
+    path: PathTable
+    contact: ContactTable
+    controller: ControllerTable
+    adaptive: AdaptiveTable = Field(default_factory=AdaptiveTable)
+    simulation: SimulationTable
+    obstacles: list[ObstacleTable]
+    rnn: RnnTable = Field(default_factory=RnnTable)
+    verdict: dict = Field(default_factory=dict)
+
+    @property
+    def rnn_settings(self) -> dict:
+        """The ``[rnn]`` table as a plain dict, defaults filled in."""
+        return self.rnn.model_dump()
+
+    @property
+    def verdict_settings(self) -> VerdictSettings:
+        return VerdictSettings(**self.verdict)
+
+
+def _key(loc: tuple) -> str:
+    """``("obstacles", 0, "line", "radius")`` -> ``obstacles[0].radius`` (a union's tag dropped)."""
+    out = ""
+    for i, part in enumerate(loc):
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif i > 0 and (loc[i - 1] == "path" or isinstance(loc[i - 1], int)) and i + 1 < len(loc):
+            continue  # the tag pydantic puts in the location of a union's member
+        else:
+            out += f".{part}" if out else str(part)
     return out
 
 
-def _table(raw, schema: dict, file, prefix: str) -> dict:
-    if not isinstance(raw, dict):
-        raise ScenarioError("expected a table", path=file, key=prefix)
-    raw = {**DEFAULTS.get(prefix, {}), **raw}
-    check_known_keys(raw, schema, file, prefix, ScenarioError)
-    for key in schema:
-        if key not in raw:
-            raise ScenarioError("missing key", path=file, key=f"{prefix}.{key}")
-    return {key: _typed(raw[key], kind, file, f"{prefix}.{key}") for key, kind in schema.items()}
+def _expected(loc: tuple) -> list[str]:
+    """The keys the table at ``loc`` (the location of an unknown key) may hold."""
+    model = ScenarioSpec
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue
+        if part in _TAGGED:
+            model = _TAGGED[part]
+            continue
+        annotation = model.model_fields[part].annotation
+        model = annotation if isinstance(annotation, type) else model
+    return list(model.model_fields)
 
 
-def _by_kind(raw, schemas: dict, file, prefix: str) -> dict:
-    """A table whose ``kind`` (one of ``schemas``) picks its schema (``[path]``, an obstacle)."""
-    kind = None
-    if isinstance(raw, dict):
-        kind = _typed(raw.get("kind"), tuple(schemas), file, f"{prefix}.kind")
-    return _table(raw, schemas.get(kind, {}), file, prefix)
+_TAGGED = {
+    m.model_fields["kind"].default: m
+    for m in (CosinePathTable, PolylinePathTable, LineTable, SegmentTable, DiskTable, PointsTable)
+}
+_KINDS = {
+    "path": ("cosine", "polyline"),
+    "obstacles": ("line", "segment", "disk", "points"),
+}
 
 
-def validate(raw: dict, file: str | Path, set_keys=()) -> tuple[dict, dict]:
-    """The parsed TOML tables ``raw`` checked against the schema: ``(data, rnn)``, the tables
-    (numbers as floats, vectors as arrays) and the ``[rnn]`` settings as a plain dict.
+def _error(exc: ValidationError, file) -> ScenarioError:
+    """The first of pydantic's errors (an unknown key before the rest) as one line."""
+    errors = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")
+    e = errors[0]
+    loc, kind = e["loc"], e["type"]
+    key = _key(loc)
+    if kind == "extra_forbidden":
+        where = "table" if len(loc) == 1 else "key"
+        msg = f"unknown {where} (expected one of: {', '.join(_expected(loc))})"
+    elif kind == "missing":
+        msg = "missing table" if len(loc) == 1 else "missing key"
+    elif kind in ("union_tag_invalid", "union_tag_not_found", "literal_error"):
+        choices = _KINDS.get(str(loc[0]), ())
+        if kind == "literal_error":
+            choices = e["ctx"]["expected"].replace("'", "").replace(" or ", ", ").split(", ")
+        key = key if kind == "literal_error" else f"{key}.kind"
+        value = e["input"].get("kind") if isinstance(e["input"], dict) else e["input"]
+        msg = f"expected one of: {', '.join(choices)}, got {value!r}"
+    elif kind == "model_type" or kind == "model_attributes_type":
+        msg = "expected a table"
+    elif kind == "list_type":
+        msg = "expected a list of tables"
+    else:
+        msg = e["msg"].removeprefix("Value error, ")
+        if kind in ("greater_than", "greater_than_equal"):
+            op, bound = (">", e["ctx"]["gt"]) if kind == "greater_than" else (">=", e["ctx"]["ge"])
+            msg = f"must be {op} {bound}, got {e['input']}"
+        elif kind in ("bool_type", "string_type"):
+            what = "true or false" if kind == "bool_type" else "a string"
+            msg = f"expected {what}, got {e['input']!r}"
+    return ScenarioError(msg, path=file, key=key)
+
+
+def validate(raw: dict, file: str | Path, set_keys=()) -> ScenarioSpec:
+    """The parsed TOML tables ``raw`` as a :class:`ScenarioSpec`, every rule checked.
 
     ``set_keys``: the dotted keys set over the file's on the command line.
     """
-    for key in raw:
-        if key not in _TOP:
-            raise ScenarioError(
-                f"unknown table (expected one of: {', '.join(sorted(_TOP))})", path=file, key=key
-            )
-    raw = {**{t: {} for t in OPTIONAL_TABLES}, **raw}
-    for key in sorted(_TOP):
-        if key not in raw:
-            raise ScenarioError("missing table", path=file, key=key)
-    data = {name: _table(raw[name], schema, file, name) for name, schema in _SCHEMA.items()}
-    data["path"] = _by_kind(raw["path"], _PATH_SCHEMA, file, "path")
-    data["obstacles"] = _obstacles(raw["obstacles"], file)
-    if not isinstance(raw["rnn"], dict):
-        raise ScenarioError("expected a table", path=file, key="rnn")
-    rnn = {**DEFAULTS["rnn"], **raw["rnn"]}  # eps checked, the rest passed to the backend
-    _typed(rnn["eps"], "num>0", file, "rnn.eps")
-    _check_across_keys(data, file)
-    data["verdict"] = _verdict_table(raw["verdict"], data, file)
-    check_simulation(data, file, set_keys)
-    return data, rnn
+    try:
+        spec = ScenarioSpec.model_validate(raw)
+    except ValidationError as exc:
+        raise _error(exc, file) from None
+    _check_across_keys(spec, file)
+    spec = spec.model_copy(update={"verdict": _verdict_table(raw.get("verdict", {}), spec, file)})
+    check_simulation(spec, file, set_keys)
+    return spec
 
 
-def _obstacles(obstacles, file) -> list[dict]:
-    if not isinstance(obstacles, list):
-        raise ScenarioError(
-            "expected a list of obstacle tables ([[obstacles]] or obstacles = [])",
-            path=file,
-            key="obstacles",
-        )
-    out = []
-    for i, o in enumerate(obstacles):
-        entry = _by_kind(o, _OBSTACLE_SCHEMA, file, f"obstacles[{i}]")
-        if not entry["name"] or entry["name"] in [e["name"] for e in out]:
-            raise ScenarioError(
-                f"obstacle names must be non-empty and unique, got {entry['name']!r}",
-                path=file,
-                key=f"obstacles[{i}].name",
-            )
-        out.append(entry)
-    return out
+_VERDICT_KEYS = tuple(f.name for f in fields(VerdictSettings))
 
 
-def _verdict_table(raw, data: dict, file) -> dict:
+def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
     """The ``[verdict]`` table, with defaults that fit the task, checked against it (the ranges:
     :class:`~qpbench.sim.verdict.VerdictSettings`)."""
-    d_safe, duration = data["controller"]["d_safe"], data["simulation"]["duration"]
-    if isinstance(raw, dict):  # defaults that fit the task
-        raw = {
-            "settle_time": min(_VERDICT_DEFAULTS.settle_time, duration / 2),
-            "safety_margin": min(DEFAULT_SAFETY_MARGIN, d_safe / 2),
-            **raw,
-        }
-    out = _table(raw, _VERDICT_SCHEMA, file, "verdict")
+    d_safe, duration = spec.controller.d_safe, spec.simulation.duration
+    defaults = VerdictSettings()
+    out = {k: getattr(defaults, k) for k in _VERDICT_KEYS}
+    out["settle_time"] = min(defaults.settle_time, duration / 2)
+    out["safety_margin"] = min(DEFAULT_SAFETY_MARGIN, d_safe / 2)
+    for key, value in raw.items():
+        if key not in _VERDICT_KEYS:
+            msg = f"unknown key (expected one of: {', '.join(_VERDICT_KEYS)})"
+            raise ScenarioError(msg, path=file, key=f"verdict.{key}")
+        try:
+            out[key] = _number(value)
+        except ValueError as exc:
+            raise ScenarioError(str(exc), path=file, key=f"verdict.{key}") from None
     margin = out["safety_margin"]
     if not (margin < d_safe or margin == d_safe == 0):
         raise ScenarioError(
@@ -242,38 +383,47 @@ def _verdict_table(raw, data: dict, file) -> dict:
     return out
 
 
-def _check_across_keys(data: dict, file) -> None:
+def _check_across_keys(spec: ScenarioSpec, file) -> None:
     """One value per link, ``theta_min < theta0 < theta_max``,
-    ``velocity_min <= 0 <= velocity_max``."""
-    r = data["robot"]
-    n = r["link_lengths"].size
+    ``velocity_min <= 0 <= velocity_max``; obstacle names unique."""
+    r = spec.robot
+    n = r.link_lengths.size
     for key in ("theta0", "theta_min", "theta_max", "velocity_min", "velocity_max"):
-        if r[key].size != n:
+        if getattr(r, key).size != n:
             raise ScenarioError(
-                f"expected {n} values (one per link), got {r[key].size}",
+                f"expected {n} values (one per link), got {getattr(r, key).size}",
                 path=file,
                 key=f"robot.{key}",
             )
-    if np.any(r["theta_min"] >= r["theta_max"]):
+    if np.any(r.theta_min >= r.theta_max):
         raise ScenarioError("every theta_min must be < theta_max", path=file, key="robot.theta_min")
-    outside = np.flatnonzero((r["theta0"] < r["theta_min"]) | (r["theta0"] > r["theta_max"]))
+    outside = np.flatnonzero((r.theta0 < r.theta_min) | (r.theta0 > r.theta_max))
     if outside.size:
         i = int(outside[0])
         raise ScenarioError(
-            f"theta0[{i}] = {r['theta0'][i]} rad is outside [{r['theta_min'][i]}, {r['theta_max'][i]}]",
+            f"theta0[{i}] = {r.theta0[i]} rad is outside [{r.theta_min[i]}, {r.theta_max[i]}]",
             path=file,
             key="robot.theta0",
         )
-    vmin, vmax = r["velocity_min"], r["velocity_max"]
+    vmin, vmax = r.velocity_min, r.velocity_max
     if not (np.all(vmin <= 0) and np.all(vmax >= 0) and np.all(vmin < vmax)):
         raise ScenarioError(
             "need velocity_min <= 0 <= velocity_max and velocity_min < velocity_max [rad/s]",
             path=file,
             key="robot.velocity_min",
         )
+    names: list[str] = []
+    for i, o in enumerate(spec.obstacles):
+        if not o.name or o.name in names:
+            raise ScenarioError(
+                f"obstacle names must be non-empty and unique, got {o.name!r}",
+                path=file,
+                key=f"obstacles[{i}].name",
+            )
+        names.append(o.name)
 
 
-def check_simulation(data: dict, file: str | Path, set_keys=()) -> None:
+def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
     """``dt`` and ``duration`` > 0 [s], at least one tick, ``alpha * dt < 1``, and a settle time
     set on the command line (``verdict.settle_time`` in ``set_keys``) < ``duration`` [s].
 
@@ -281,49 +431,61 @@ def check_simulation(data: dict, file: str | Path, set_keys=()) -> None:
     sweep's), so a settle time set on the command line is checked against the duration run: a
     run shorter than it would not judge tracking and force that it was set to judge.
     """
-    s = data["simulation"]
+    s = spec.simulation
     for key in ("dt", "duration"):
-        if not s[key] > 0:
+        if not getattr(s, key) > 0:
             raise ScenarioError(
-                f"must be > 0 [s], got {s[key]}", path=file, key=f"simulation.{key}"
+                f"must be > 0 [s], got {getattr(s, key)}", path=file, key=f"simulation.{key}"
             )
-    if s["duration"] < s["dt"]:
+    if s.duration < s.dt:
         raise ScenarioError(
-            f"shorter than one control period dt = {s['dt']} s",
-            path=file,
-            key="simulation.duration",
+            f"shorter than one control period dt = {s.dt} s", path=file, key="simulation.duration"
         )
-    alpha = data["controller"]["alpha"]
-    if alpha * s["dt"] >= 1.0:
+    alpha = spec.controller.alpha
+    if alpha * s.dt >= 1.0:
         raise ScenarioError(
-            f"alpha * dt = {alpha * s['dt']:g} must be < 1 for the escape-velocity bounds "
+            f"alpha * dt = {alpha * s.dt:g} must be < 1 for the escape-velocity bounds "
             "to keep the joints inside their limits",
             path=file,
             key="controller.alpha",
         )
-    settle = data["verdict"]["settle_time"]
-    if "verdict.settle_time" in set_keys and not settle < s["duration"]:
+    settle = spec.verdict.get("settle_time", 0.0)
+    if "verdict.settle_time" in set_keys and not settle < s.duration:
         raise ScenarioError(
-            f"must be < simulation.duration = {s['duration']:g} s, the duration run (tracking "
+            f"must be < simulation.duration = {s.duration:g} s, the duration run (tracking "
             f"and force are judged after it), got {settle:g} s",
             path=file,
             key="verdict.settle_time",
         )
 
 
-#: Order of the tables in a filled-in scenario file (:func:`filled`): the schema's, ``[path]``
-#: after ``[key_points]``, ``[verdict]`` last.
-_ORDER = (*list(_SCHEMA)[:3], "path", *list(_SCHEMA)[3:], "verdict")
+def with_simulation(spec: ScenarioSpec, **values) -> ScenarioSpec:
+    """``spec`` with ``[simulation]`` values (``dt``, ``duration`` [s]) replaced."""
+    simulation = spec.simulation.model_copy(update={k: float(v) for k, v in values.items()})
+    return spec.model_copy(update={"simulation": simulation})
 
 
-def filled(data: dict, rnn: dict) -> dict:
-    """The validated tables (:func:`validate`) as TOML-ready tables, every default filled in
-    (vectors as lists)."""
+#: Order of the tables in a filled-in scenario file (:func:`filled`).
+_ORDER = (
+    "scenario",
+    "robot",
+    "key_points",
+    "path",
+    "contact",
+    "controller",
+    "adaptive",
+    "simulation",
+    "verdict",
+)
 
-    def plain(table: dict) -> dict:
-        return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in table.items()}
+#: Tables a file may leave out (all their keys have defaults).
+OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 
-    out = {"obstacles": [plain(o) for o in data["obstacles"]]}
-    out.update((table, plain(data[table])) for table in _ORDER)
-    out["rnn"] = plain(rnn)
+
+def filled(spec: ScenarioSpec) -> dict:
+    """The scenario as TOML-ready tables, every default filled in (vectors as lists)."""
+    plain = spec.model_dump(mode="json")
+    out = {"obstacles": plain["obstacles"]}
+    out.update((table, plain[table]) for table in _ORDER)
+    out["rnn"] = plain["rnn"]
     return out

@@ -454,7 +454,7 @@ def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
         return str(exc)
     if safe_start:
         d, point, obstacle = start_clearance(scenario)
-        d_safe = scenario.data["controller"]["d_safe"]
+        d_safe = scenario.spec.controller.d_safe
         if d < d_safe:
             return (
                 f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
