@@ -76,43 +76,58 @@ def chain_data(model: ChainModel) -> ChainData:
     return ChainData(np.zeros((n + 1, 3, 3)), np.zeros((n + 1, 3)), np.zeros((n, 3)))
 
 
+def _f64(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def make_model(
-    rotation, translation, axis, tool_rotation, tool_translation, dim=3, q_min=None, q_max=None,
-    v_max=None, radius=0.0, what: str = "robot",
-) -> ChainModel:  # fmt: skip
-    """A checked :class:`ChainModel` in the dtypes the compiled functions take; limits default
-    to none (infinite), ``radius`` [m] is one per link or one for all; ``what`` names the
-    source in errors."""
-    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    rotation, translation, axis = f64(rotation), f64(translation), f64(axis)
+    rotation,
+    translation,
+    axis,
+    tool_rotation,
+    tool_translation,
+    dim: int = 3,
+    what: str = "robot",
+    q_min=None,
+    q_max=None,
+    v_max=None,
+    radius=0.0,
+) -> ChainModel:
+    """A checked :class:`ChainModel` in the dtypes the compiled functions take (fields as
+    there); limits default to none (infinite), ``radius`` [m] is one per link or one for all;
+    ``what`` is the key errors name."""
+    rotation, translation, axis = _f64(rotation), _f64(translation), _f64(axis)
     n = axis.shape[0] if axis.ndim == 2 else 0
     if n < 1 or rotation.shape != (n, 3, 3) or translation.shape != (n, 3) or axis.shape[1] != 3:
-        raise InputError(f"a chain needs n >= 1 joints with (n,3,3) rotations, (n,3) offsets "
-                         f"and axes, got axes of shape {axis.shape}", key=what)  # fmt: skip
+        raise InputError(
+            f"a chain needs n >= 1 joints: rotations (n, 3, 3), offsets and axes (n, 3), got "
+            f"{rotation.shape}, {translation.shape}, {axis.shape}",
+            key=what,
+        )
     norms = np.linalg.norm(axis, axis=1)
     if not np.all(np.abs(norms - 1.0) < 1e-9):
         raise InputError(f"joint axes must be unit vectors, got norms {norms.tolist()}", key=what)
     if dim not in (2, 3):
         raise InputError(f"dim must be 2 or 3, got {dim}", key=what)
-
-    def per_joint(v, default, name):
-        v = f64(np.broadcast_to(default if v is None else v, (n,)))
-        if np.isnan(v).any():
-            raise InputError(f"{name} must be numbers, got {v.tolist()}", key=f"{what}.{name}")
-        return v
-
-    q_min, q_max = per_joint(q_min, -np.inf, "q_min"), per_joint(q_max, np.inf, "q_max")
-    v_max, radius = per_joint(v_max, np.inf, "v_max"), per_joint(radius, 0.0, "radius")
-    if np.any(q_min >= q_max) or np.any(v_max <= 0) or np.any(radius < 0):
+    lim = {}
+    for name, v, default in (("q_min", q_min, -np.inf), ("q_max", q_max, np.inf),
+                             ("v_max", v_max, np.inf), ("radius", radius, 0.0)):  # fmt: skip
+        v = np.asarray(default if v is None else v, dtype=float)
+        if v.ndim > 1 or v.size not in (1, n) or np.isnan(v).any():
+            raise InputError(f"needs 1 or {n} numbers, got {v.tolist()}", key=f"{what}.{name}")
+        lim[name] = _f64(np.broadcast_to(v, (n,)))
+    if (
+        np.any(lim["q_min"] >= lim["q_max"])
+        or np.any(lim["v_max"] <= 0)
+        or np.any(lim["radius"] < 0)
+    ):
         raise InputError(
-            f"need q_min < q_max, v_max > 0 and radius >= 0, got q_min {q_min.tolist()}, "
-            f"q_max {q_max.tolist()}, v_max {v_max.tolist()}, radius {radius.tolist()}",
+            "need q_min < q_max, v_max > 0 and radius >= 0, got "
+            + ", ".join(f"{k} {v.tolist()}" for k, v in lim.items()),
             key=what,
         )
-    return ChainModel(
-        int(dim), rotation, translation, axis, f64(tool_rotation), f64(tool_translation),
-        q_min, q_max, v_max, radius,
-    )  # fmt: skip
+    tool = (_f64(tool_rotation), _f64(tool_translation))
+    return ChainModel(int(dim), rotation, translation, axis, *tool, **lim)
 
 
 def planar_chain(lengths, **fields) -> ChainModel:
@@ -132,7 +147,7 @@ def planar_chain(lengths, **fields) -> ChainModel:
     axis = np.tile([0.0, 0.0, 1.0], (n, 1))
     rotation = np.tile(np.eye(3), (n, 1, 1))
     tool = np.array([lengths[-1], 0.0, 0.0])
-    return make_model(rotation, translation, axis, np.eye(3), tool, dim=2, what="robot", **fields)
+    return make_model(rotation, translation, axis, np.eye(3), tool, 2, "robot", **fields)
 
 
 def _rodrigues(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
