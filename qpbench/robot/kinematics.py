@@ -85,15 +85,23 @@ class KeyPoints:
 
 
 def default_key_points(
-    n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0
+    n: int,
+    points_per_link: int = 1,
+    include_joints: bool = True,
+    radius: float = 0.0,
+    lengths=None,
 ) -> KeyPoints:
     """Key points of an n-link chain, link by link: ``points_per_link`` evenly spaced points on
     each link (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn;
-    ``radius`` [m]. One point per link, n = 4: the paper's A1..A7 (no end effector)."""
+    ``radius`` [m]. With link ``lengths`` [m] (a spatial chain's, whose joints can share an
+    origin), a link of zero length has none (its points are the previous link's end). One point
+    per link, n = 4: the paper's A1..A7 (no end effector)."""
     if points_per_link < 0:
         raise InputError(f"must be >= 0, got {points_per_link}", key="key_points.points_per_link")
     links, fracs = [], []
     for i in range(n):
+        if lengths is not None and lengths[i] < 1e-12:
+            continue
         for j in range(1, points_per_link + 1):
             links.append(i)
             fracs.append(j / (points_per_link + 1))

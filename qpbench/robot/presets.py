@@ -130,7 +130,9 @@ def chain_from_urdf(path, ee_frame: str, **fields) -> ChainModel:
         elif kind == "JointModelRevoluteUnaligned":
             axes.append(jm.extract().axis)
         else:
-            what = "continuous (no limits)" if kind.startswith("JointModelRUB") else kind
+            named = (("Unbounded", "continuous (no limits)"), ("RUB", "continuous (no limits)"),
+                     ("JointModelP", "prismatic"), ("FreeFlyer", "floating"))  # fmt: skip
+            what = next((w for key, w in named if key in kind), kind)
             msg = f"joint {model.names[j]!r} is {what}: a chain takes revolute joints with limits"
             raise InputError(msg, path=path, key="robot.ee_frame")
         lo.append(model.lowerPositionLimit[jm.idx_q])
