@@ -115,7 +115,7 @@ def test_compiled_equals_numpy(name):
         np.testing.assert_allclose(J, J_np, atol=1e-14)
         x1, J1 = np.zeros(3), np.full((model.dim, model.n), np.nan)
         cc.link_point(data, links[0], fracs[0], x1)
-        cc.point_jacobian(model, data, links[0], x1, J1)
+        cc.point_jacobian(data, links[0], x1, J1)
         np.testing.assert_array_equal(x1, X[0])
         np.testing.assert_array_equal(J1, J[0])
 

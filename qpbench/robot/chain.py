@@ -214,8 +214,15 @@ def _forward_kinematics_py(model, q, data):  # pragma: no cover - compiled
                     R[k, i, j] = a0 * rot[0, j] + a1 * rot[1, j] + a2 * rot[2, j]
         if tail:
             return
-        x, y, z = model.axis[k, 0], model.axis[k, 1], model.axis[k, 2]
         c, s = np.cos(q[k]), np.sin(q[k])
+        x, y, z = model.axis[k, 0], model.axis[k, 1], model.axis[k, 2]
+        if x == 0.0 and y == 0.0 and z == 1.0:  # about z: R_k = A_k Rz(q)
+            for i in range(3):
+                a0, a1 = R[k, i, 0], R[k, i, 1]
+                w[k, i] = R[k, i, 2]
+                R[k, i, 0] = c * a0 + s * a1
+                R[k, i, 1] = c * a1 - s * a0
+            continue
         v = 1.0 - c  # Rot(axis, q) by Rodrigues' formula
         r00, r01, r02 = c + v * x * x, v * x * y - s * z, v * x * z + s * y
         r10, r11, r12 = v * x * y + s * z, c + v * y * y, v * y * z - s * x
@@ -236,29 +243,49 @@ def _link_point_py(data, link, frac, x):  # pragma: no cover - compiled
         x[i] = p[link, i] + frac * (p[link + 1, i] - p[link, i])
 
 
-def _point_jacobian_py(model, data, link, x, J):  # pragma: no cover - compiled
+def _point_jacobian_py(data, link, x, J):  # pragma: no cover - compiled
     """``J`` (dim, n) [m/rad]: the Jacobian of the world point ``x`` (3,) rigidly attached to
-    link ``link``, after :func:`forward_kinematics`."""
+    link ``link``, after :func:`forward_kinematics` (``dim``: ``J``'s rows, the model's)."""
     p, w = data.position, data.axis
+    spatial = J.shape[0] == 3
     for k in range(w.shape[0]):
         if k > link:
-            for r in range(model.dim):
-                J[r, k] = 0.0
+            J[0, k] = 0.0
+            J[1, k] = 0.0
+            if spatial:
+                J[2, k] = 0.0
             continue
         dx, dy, dz = x[0] - p[k, 0], x[1] - p[k, 1], x[2] - p[k, 2]
         J[0, k] = w[k, 1] * dz - w[k, 2] * dy
         J[1, k] = w[k, 2] * dx - w[k, 0] * dz
-        if model.dim == 3:
+        if spatial:
             J[2, k] = w[k, 0] * dy - w[k, 1] * dx
 
 
 def _points_jacobians_py(model, q, data, links, fracs, X, J):  # pragma: no cover - compiled
     """Forward kinematics at ``q`` (n,) [rad] into ``data``, then the points ``(links[j],
-    fracs[j])`` into ``X`` (a, 3) [m] and their Jacobians into ``J`` (a, dim, n) [m/rad]."""
+    fracs[j])`` into ``X`` (a, 3) [m] and their Jacobians into ``J`` (a, dim, n) [m/rad]:
+    :func:`link_point` and :func:`point_jacobian` of each, in one loop (a call per point would
+    cost more than its arithmetic)."""
     _forward_kinematics_py(model, q, data)
+    p, w = data.position, data.axis
+    spatial = J.shape[1] == 3
     for j in range(links.shape[0]):
-        _link_point_py(data, links[j], fracs[j], X[j])
-        _point_jacobian_py(model, data, links[j], X[j], J[j])
+        L, f = links[j], fracs[j]
+        for i in range(3):
+            X[j, i] = p[L, i] + f * (p[L + 1, i] - p[L, i])
+        for k in range(w.shape[0]):
+            if k > L:
+                J[j, 0, k] = 0.0
+                J[j, 1, k] = 0.0
+                if spatial:
+                    J[j, 2, k] = 0.0
+                continue
+            dx, dy, dz = X[j, 0] - p[k, 0], X[j, 1] - p[k, 1], X[j, 2] - p[k, 2]
+            J[j, 0, k] = w[k, 1] * dz - w[k, 2] * dy
+            J[j, 1, k] = w[k, 2] * dx - w[k, 0] * dz
+            if spatial:
+                J[j, 2, k] = w[k, 0] * dy - w[k, 1] * dx
 
 
 class CompiledChain(NamedTuple):
@@ -266,7 +293,7 @@ class CompiledChain(NamedTuple):
 
     forward_kinematics: object  # (model, q, data)
     link_point: object  # (data, link, frac, x)
-    point_jacobian: object  # (model, data, link, x, J)
+    point_jacobian: object  # (data, link, x, J)
     points_jacobians: object  # (model, q, data, links, fracs, X, J)
 
 
@@ -278,6 +305,7 @@ def compiled_chain() -> CompiledChain:
     fk = compile_with(_forward_kinematics_py, name="chain_forward_kinematics")
     point = compile_with(_link_point_py, name="chain_link_point")
     jac = compile_with(_point_jacobian_py, name="chain_point_jacobian")
-    bound = {"_forward_kinematics_py": fk, "_link_point_py": point, "_point_jacobian_py": jac}
-    both = compile_with(_points_jacobians_py, bound, name="chain_points_jacobians")
+    both = compile_with(
+        _points_jacobians_py, {"_forward_kinematics_py": fk}, name="chain_points_jacobians"
+    )
     return CompiledChain(fk, point, jac, both)
