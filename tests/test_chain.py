@@ -12,17 +12,31 @@ from qpbench.robot.chain import (
     chain_data,
     compiled_chain,
     forward_kinematics_np,
+    make_model,
     planar_chain,
     points_jacobians_np,
 )
 from qpbench.robot.kinematics import Arm, PlanarArm, default_key_points
 from qpbench.robot.presets import chain_from_urdf, iiwa14, make_chain, panda
 
+
+def skewed_chain(n=5, seed=4):
+    """A spatial chain of random placements and random (unaligned) unit axes."""
+    rng = np.random.default_rng(seed)
+    rot = np.linalg.qr(rng.normal(size=(n + 1, 3, 3)))[0]
+    rot *= np.sign(np.linalg.det(rot))[:, None, None]  # proper rotations
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    t = rng.uniform(-0.3, 0.3, (n + 1, 3))
+    return make_model(rot[:-1], t[:-1], axis, rot[-1], t[-1], 3, q_min=-2.0, q_max=2.0)
+
+
 CHAINS = {
     "planar4": lambda: planar_chain([0.3, 0.4, 0.15, 0.15]),
     "planar7": lambda: planar_chain(np.linspace(0.1, 0.3, 7)),
     "panda": panda,
     "iiwa14": iiwa14,
+    "skewed": skewed_chain,
 }
 
 
