@@ -68,7 +68,10 @@ def test_joint_positions_geometry():
     theta = rng.uniform(-3, 3, 4)
     p = arm.joint_positions(theta)
     np.testing.assert_allclose(np.linalg.norm(np.diff(p, axis=0), axis=1), arm.lengths)
-    np.testing.assert_allclose(arm.absolute_angles(theta), np.cumsum(theta))
+    d = np.diff(p, axis=0)  # link i points along phi[i] = sum(theta[:i+1])
+    np.testing.assert_allclose(
+        np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - np.cumsum(theta)))), 0, atol=1e-12
+    )
 
 
 def test_paper_key_points():

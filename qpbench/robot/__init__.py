@@ -1,1 +1,2 @@
-"""The paper's planar redundant arm (kinematics, key points) and its environment (contact, obstacles)."""
+"""The arm as a serial chain (planar, the presets, a URDF), its key points, and its environment
+(contact, obstacles)."""

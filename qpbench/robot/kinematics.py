@@ -1,14 +1,11 @@
-"""Planar serial chain: forward kinematics, Jacobians and key points (paper sections 2.1, 2.2).
+"""The arm's kinematics as numpy functions of joint angles, and the points kept away from
+obstacles (paper sections 2.1, 2.2).
 
-``theta[k]`` is the relative angle of joint k [rad]; link i's absolute angle is
-``phi[i] = sum(theta[:i+1])``. Joint positions (eq. 1)::
-
-    p[0] = 0,   p[i+1] = p[i] + l[i] [cos phi[i], sin phi[i]]
-
-The end effector is ``p[n]``. A point ``x`` on link i has the Jacobian (eqs. 2, 7b) whose column
-k <= i is ``[-(x - p[k])_y, (x - p[k])_x]`` and whose columns k > i are zero. A point on a link
-is ``(link, frac)``: ``x = p[link] + frac * l[link] [cos phi, sin phi]`` (``frac = 1``: the next
-joint). Vectorised numpy; :mod:`qpbench.control.build_kernel` repeats the maths compiled.
+:class:`Arm` is a serial chain (:mod:`qpbench.robot.chain`, which also holds its compiled
+twin); :class:`PlanarArm` the paper's planar arm of link lengths (eq. 1: ``p[0] = 0``,
+``p[i+1] = p[i] + l[i] [cos phi[i], sin phi[i]]``, ``phi[i] = sum(theta[:i+1])``). A point on
+a link is ``(link, frac)``: ``frac`` 0 at joint ``link``, 1 at the next joint (the end effector
+for the last link); its Jacobian (eqs. 2, 7b) has zero columns after ``link``.
 """
 
 from __future__ import annotations
@@ -18,66 +15,53 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exceptions import InputError
+from .chain import ChainModel, forward_kinematics_np, planar_chain, points_jacobians_np
 
 #: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
 KEY_POINT_KINDS = ("paper", "closest")
 
 
-class PlanarArm:
-    """A planar serial chain of revolute joints with link ``lengths`` (n,) [m], n >= 2."""
+class Arm:
+    """A serial chain of n revolute joints (:class:`~qpbench.robot.chain.ChainModel`) with
+    positions and Jacobians of ``dim`` rows (2: planar, 3: spatial)."""
 
-    def __init__(self, lengths):
-        lengths = np.asarray(lengths, dtype=float)
-        ok = (
-            lengths.ndim == 1 and lengths.size >= 2 and np.all(np.isfinite(lengths) & (lengths > 0))
-        )
-        if not ok:
-            raise InputError(
-                f"a planar arm needs at least 2 finite link lengths > 0 [m], got {lengths.tolist()}",
-                key="robot.link_lengths",
-            )
-        self.lengths = lengths
-        self.n = lengths.size
-
-    def absolute_angles(self, theta: np.ndarray) -> np.ndarray:
-        """``phi[i] = sum(theta[:i+1])`` in [rad], shape (..., n)."""
-        return np.cumsum(np.asarray(theta, dtype=float), axis=-1)
+    def __init__(self, model: ChainModel):
+        self.model = model
+        self.n = model.n
+        self.dim = model.dim
+        #: Link lengths [m] (n,): joint to joint, the last to the end effector.
+        self.lengths = model.lengths
 
     def joint_positions(self, theta: np.ndarray) -> np.ndarray:
-        """Positions of the base, the joints and the end effector [m], shape (..., n+1, 2), at
-        joint angles ``theta`` of shape (..., n) [rad]."""
-        phi = self.absolute_angles(theta)
-        seg = self.lengths[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-        p = np.zeros((*phi.shape[:-1], self.n + 1, 2))
-        np.cumsum(seg, axis=-2, out=p[..., 1:, :])
-        return p
+        """Positions of the joints and the end effector [m], shape (..., n+1, dim), at joint
+        angles ``theta`` of shape (..., n) [rad] (row 0: joint 0, fixed to the base)."""
+        return forward_kinematics_np(self.model, theta).position[..., : self.dim]
 
     def end_effector(self, theta: np.ndarray) -> np.ndarray:
-        """End-effector position ``x = f(theta)`` (eq. 1) in [m], shape (2,)."""
-        return self.joint_positions(theta)[-1]
+        """End-effector position ``x = f(theta)`` (eq. 1) in [m], shape (..., dim)."""
+        return self.joint_positions(theta)[..., -1, :]
 
     def points(self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray) -> np.ndarray:
-        """Positions of points ``(links[j], fracs[j])`` in [m], shape (a, 2)."""
+        """Positions of points ``(links[j], fracs[j])`` in [m], shape (a, dim)."""
         links = np.asarray(links, dtype=int)
         fracs = np.asarray(fracs, dtype=float)
-        phi = self.absolute_angles(theta)
         p = self.joint_positions(theta)
-        d = np.stack([np.cos(phi[links]), np.sin(phi[links])], axis=1)
-        return p[links] + (fracs * self.lengths[links])[:, None] * d
+        return p[links] + fracs[:, None] * (p[links + 1] - p[links])
 
     def points_jacobians(
         self, theta: np.ndarray, links: np.ndarray, fracs: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (a, 2) in [m] and Jacobians (a, 2, n) in [m/rad] of points on links (eq. 7b)."""
-        links = np.asarray(links, dtype=int)
-        x = self.points(theta, links, fracs)
-        p = self.joint_positions(theta)[:-1]  # joint k's position, (n, 2)
-        rel = x[:, None, :] - p[None, :, :]  # (a, n, 2)
-        mask = (np.arange(self.n)[None, :] <= links[:, None]).astype(float)  # (a, n)
-        J = np.empty((x.shape[0], 2, self.n))
-        J[:, 0, :] = -rel[:, :, 1] * mask
-        J[:, 1, :] = rel[:, :, 0] * mask
-        return x, J
+        """Positions (a, dim) in [m] and Jacobians (a, dim, n) in [m/rad] of points on links
+        (eq. 7b)."""
+        x, J = points_jacobians_np(self.model, theta, links, fracs)
+        return x[:, : self.dim], J
+
+
+class PlanarArm(Arm):
+    """The planar arm of link ``lengths`` (n,) [m], n >= 2 (:func:`~qpbench.robot.chain.planar_chain`)."""
+
+    def __init__(self, lengths):
+        super().__init__(planar_chain(lengths))
 
 
 @dataclass(frozen=True)
@@ -101,15 +85,23 @@ class KeyPoints:
 
 
 def default_key_points(
-    n: int, points_per_link: int = 1, include_joints: bool = True, radius: float = 0.0
+    n: int,
+    points_per_link: int = 1,
+    include_joints: bool = True,
+    radius: float = 0.0,
+    lengths=None,
 ) -> KeyPoints:
     """Key points of an n-link chain, link by link: ``points_per_link`` evenly spaced points on
     each link (fractions ``j / (m + 1)``) and, with ``include_joints``, the joints J2..Jn;
-    ``radius`` [m]. One point per link, n = 4: the paper's A1..A7 (no end effector)."""
+    ``radius`` [m]. With link ``lengths`` [m] (a spatial chain's, whose joints can share an
+    origin), a link of zero length has none (its points are the previous link's end). One point
+    per link, n = 4: the paper's A1..A7 (no end effector)."""
     if points_per_link < 0:
         raise InputError(f"must be >= 0, got {points_per_link}", key="key_points.points_per_link")
     links, fracs = [], []
     for i in range(n):
+        if lengths is not None and lengths[i] < 1e-12:
+            continue
         for j in range(1, points_per_link + 1):
             links.append(i)
             fracs.append(j / (points_per_link + 1))
