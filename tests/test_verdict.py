@@ -17,7 +17,7 @@ from slow_backends import SlowExact
 
 from qpbench.cli import main
 from qpbench.exceptions import ParamError, ScenarioError
-from qpbench.robot.environment import LineObstacle
+from qpbench.robot.obstacles.line import LineObstacle
 from qpbench.robot.kinematics import PlanarArm
 from qpbench.sim.log import TIME_COLUMNS
 from qpbench.sim.loop import simulate

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exceptions import ParamError
-from ..robot.environment import PointCloudObstacle
+from ..robot.obstacles.points import PointCloudObstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
 from ..sweep.toml_text import dumps
 

@@ -23,7 +23,9 @@ import numpy as np
 
 from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
-from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
+from ..robot.obstacles import make as make_obstacle
+from ..robot.environment import ContactSurface
+from ..robot.obstacles import Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
 from .scenario_schema import OPTIONAL_TABLES, check_simulation, validate
 from .verdict import VerdictSettings
@@ -128,10 +130,7 @@ class Scenario:
         return ContactSurface(*(self.data["contact"][k] for k in keys))
 
     def make_obstacles(self) -> list[Obstacle]:
-        return [
-            OBSTACLE_KINDS[o["kind"]](**{k: v for k, v in o.items() if k != "kind"})
-            for o in self.data["obstacles"]
-        ]
+        return [make_obstacle(o) for o in self.data["obstacles"]]
 
     def make_controller(self) -> Controller:
         """The scenario's :class:`~qpbench.control.controller.Controller`."""

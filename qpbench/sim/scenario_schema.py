@@ -3,7 +3,8 @@
 A missing, unknown or mistyped key raises :class:`~qpbench.exceptions.ScenarioError` naming the
 file and the key; a range is checked here only for a value no object of the scenario holds
 (the arm, the key points, the contact surface, the obstacles and
-:class:`qpbench.sim.verdict.VerdictSettings` check their own). ``[adaptive]``, ``[rnn]`` and
+:class:`qpbench.sim.verdict.VerdictSettings` check their own). An obstacle's entry is its kind's
+schema (:mod:`qpbench.robot.obstacles`). ``[adaptive]``, ``[rnn]`` and
 ``[verdict]`` may be left out (:data:`DEFAULTS`; ``[verdict]``: docs/verdicts.md).
 """
 
@@ -17,6 +18,8 @@ import numpy as np
 
 from ..exceptions import ScenarioError, check_known_keys
 from ..robot.kinematics import KEY_POINT_KINDS
+from ..robot.obstacles import kinds as obstacle_kinds
+from ..robot.obstacles import schema_adapter, validated
 from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 if TYPE_CHECKING:
@@ -81,13 +84,6 @@ _PATH_SCHEMA = {
         "phase": "vec2",
     },
     "polyline": {"kind": "str", "times": "vec", "points": "points"},
-}
-#: ``[[obstacles]]`` by kind; points [m], velocity [m/s]; a line's normal points to the free side.
-_OBSTACLE_SCHEMA = {
-    "line": {"kind": "str", "name": "str", "point": "vec2", "normal": "vec2", "velocity": "vec2"},
-    "segment": {"kind": "str", "name": "str", "a": "vec2", "b": "vec2", "velocity": "vec2"},
-    "disk": {"kind": "str", "name": "str", "center": "vec2", "radius": "num", "velocity": "vec2"},
-    "points": {"kind": "str", "name": "str", "points": "points", "velocity": "vec2"},
 }
 #: ``[verdict]``: the fields of :class:`qpbench.sim.verdict.VerdictSettings`, which checks them.
 _VERDICT_DEFAULTS = VerdictSettings()
@@ -210,12 +206,20 @@ def _obstacles(obstacles, file) -> list[dict]:
         )
     out = []
     for i, o in enumerate(obstacles):
-        entry = _by_kind(o, _OBSTACLE_SCHEMA, file, f"obstacles[{i}]")
-        if not entry["name"] or entry["name"] in [e["name"] for e in out]:
+        prefix = f"obstacles[{i}]"
+        if not isinstance(o, dict):
+            raise ScenarioError("expected a table", path=file, key=prefix)
+        _typed(o.get("kind"), tuple(obstacle_kinds()), file, f"{prefix}.kind")
+        model = validated(schema_adapter(), o, prefix, file, ScenarioError, tagged=True)
+        entry = {
+            k: np.array(v, dtype=float) if isinstance(v, (tuple, list)) else v
+            for k, v in model.model_dump().items()
+        }
+        if entry["name"] in [e["name"] for e in out]:
             raise ScenarioError(
-                f"obstacle names must be non-empty and unique, got {entry['name']!r}",
+                f"obstacle names must be unique, got {entry['name']!r}",
                 path=file,
-                key=f"obstacles[{i}].name",
+                key=f"{prefix}.name",
             )
         out.append(entry)
     return out

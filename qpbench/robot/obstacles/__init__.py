@@ -1,0 +1,60 @@
+"""Obstacles: one module per kind, registered here as backends are (paper sections 2.2, 4).
+
+Each kind module holds its scenario schema (a pydantic model), its class (a subclass of
+:class:`Obstacle`: its rows of the obstacle table, its drawing, its between-ticks tests for the
+body rule) and registers it with :func:`register`; the kinds share the compiled 3-D geometry
+(:func:`compiled_segment_distance`: the signed distance of a table row to a segment with its
+gradient direction). Planar kinds (``line``, ``segment``, ``disk``, ``points``) take 2-D inputs
+and lie in ``z = 0``; spatial kinds (``plane``, ``sphere``, ``capsule``, ``box``) take 3-D ones.
+Modules starting with ``_`` are the package's helpers.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import pkgutil
+from typing import Annotated, Union
+
+from ._base import Obstacle as Obstacle
+from ._base import validated as validated
+from ._draw import OBSTACLE_COLOR as OBSTACLE_COLOR
+from ._draw import draw_line as draw_line
+from ._geometry import compiled_closest as compiled_closest
+from ._geometry import compiled_segment_distance as compiled_segment_distance
+from ._table import BOX, CAPSULE, DISK, LINE, PLANE, POINT, SEGMENT, SPHERE  # noqa: F401
+from ._table import HX, HY, HZ, P0Z, P1Z, QW, QX, QY, QZ, VZ  # noqa: F401
+from ._table import KIND, OBSTACLE_COLUMNS, P0X, P0Y, P1X, P1Y, RADIUS, VX, VY  # noqa: F401
+from ._table import table_rows as table_rows
+
+_REGISTRY: dict[str, type[Obstacle]] = {}
+
+
+def register(cls: type[Obstacle]) -> type[Obstacle]:
+    """Class decorator: add the obstacle kind ``cls`` under ``cls.KIND``."""
+    _REGISTRY[cls.KIND] = cls
+    return cls
+
+
+@functools.cache
+def kinds() -> dict[str, type[Obstacle]]:
+    """Kind name (as written in scenario files) -> class, every module of the package loaded."""
+    for m in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if not m.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{m.name}")
+    return dict(sorted(_REGISTRY.items()))
+
+
+@functools.cache
+def schema_adapter():
+    """A pydantic ``TypeAdapter`` of any kind's schema, discriminated by ``kind``."""
+    from pydantic import Field, TypeAdapter
+
+    schemas = tuple(cls.Schema for cls in kinds().values())
+    return TypeAdapter(Annotated[Union[schemas], Field(discriminator="kind")])  # noqa: UP007
+
+
+def make(entry: dict) -> Obstacle:
+    """The obstacle of a validated scenario entry (``kind`` and its schema's fields)."""
+    cls = kinds()[entry["kind"]]
+    return cls(**{k: v for k, v in entry.items() if k != "kind"})
