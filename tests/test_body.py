@@ -9,11 +9,11 @@ import pytest
 
 from qpbench.robot.body import body_clearance, body_crossings, contact_obstacles, link_label
 from qpbench.robot.environment import ContactSurface
+from qpbench.robot.kinematics import PlanarArm
 from qpbench.robot.obstacles.disk import DiskObstacle
 from qpbench.robot.obstacles.line import LineObstacle
 from qpbench.robot.obstacles.points import PointCloudObstacle
 from qpbench.robot.obstacles.segment import SegmentObstacle
-from qpbench.robot.kinematics import PlanarArm
 
 SAMPLES = 4001
 

@@ -17,13 +17,40 @@ import numpy as np
 from ..exceptions import InputError
 
 # The obstacle table's columns and kind codes, and the obstacles' base class, where the
-# controller reads them (:mod:`qpbench.robot.obstacles` is their home).
-from .obstacles import DISK, KIND, LINE, OBSTACLE_COLUMNS, P0X, P0Y, P1X, P1Y, POINT  # noqa: E402
-from .obstacles import RADIUS, SEGMENT, VX, VY, Obstacle  # noqa: E402
+# controller reads them (their home: :mod:`qpbench.robot.obstacles`).
+from .obstacles import (
+    DISK,
+    KIND,
+    LINE,
+    OBSTACLE_COLUMNS,
+    P0X,
+    P0Y,
+    P1X,
+    P1Y,
+    POINT,
+    RADIUS,
+    SEGMENT,
+    VX,
+    VY,
+    Obstacle,
+)
 
 __all__ = [
-    *("OBSTACLE_COLUMNS", "KIND", "P0X", "P0Y", "P1X", "P1Y", "RADIUS", "VX", "VY"),
-    *("LINE", "SEGMENT", "DISK", "POINT", "Obstacle", "ContactSurface"),
+    "OBSTACLE_COLUMNS",
+    "KIND",
+    "P0X",
+    "P0Y",
+    "P1X",
+    "P1Y",
+    "RADIUS",
+    "VX",
+    "VY",
+    "LINE",
+    "SEGMENT",
+    "DISK",
+    "POINT",
+    "Obstacle",
+    "ContactSurface",
 ]
 
 

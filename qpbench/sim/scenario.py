@@ -23,10 +23,10 @@ import numpy as np
 
 from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
-from ..robot.obstacles import make as make_obstacle
 from ..robot.environment import ContactSurface
-from ..robot.obstacles import Obstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
+from ..robot.obstacles import Obstacle
+from ..robot.obstacles import make as make_obstacle
 from .scenario_schema import OPTIONAL_TABLES, check_simulation, validate
 from .verdict import VerdictSettings
 

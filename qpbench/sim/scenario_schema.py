@@ -209,12 +209,20 @@ def _obstacles(obstacles, file) -> list[dict]:
         prefix = f"obstacles[{i}]"
         if not isinstance(o, dict):
             raise ScenarioError("expected a table", path=file, key=prefix)
-        _typed(o.get("kind"), tuple(obstacle_kinds()), file, f"{prefix}.kind")
-        model = validated(schema_adapter(), o, prefix, file, ScenarioError, tagged=True)
+        kind = _typed(o.get("kind"), tuple(obstacle_kinds()), file, f"{prefix}.kind")
+        fields = list(obstacle_kinds()[kind].Schema.model_fields)
+        model = validated(schema_adapter(), o, prefix, file, ScenarioError, fields)
         entry = {
             k: np.array(v, dtype=float) if isinstance(v, (tuple, list)) else v
             for k, v in model.model_dump().items()
         }
+        if obstacle_kinds()[kind].DIM != 2:  # the arm and its controller are planar
+            planar = [k for k, cls in obstacle_kinds().items() if cls.DIM == 2]
+            raise ScenarioError(
+                f"a spatial kind; a planar scenario takes one of: {', '.join(planar)}",
+                path=file,
+                key=f"{prefix}.kind",
+            )
         if entry["name"] in [e["name"] for e in out]:
             raise ScenarioError(
                 f"obstacle names must be unique, got {entry['name']!r}",

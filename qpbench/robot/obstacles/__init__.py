@@ -16,17 +16,80 @@ import importlib
 import pkgutil
 from typing import Annotated, Union
 
-from ._base import Obstacle as Obstacle
-from ._base import validated as validated
-from ._draw import OBSTACLE_COLOR as OBSTACLE_COLOR
-from ._draw import draw_line as draw_line
-from ._geometry import compiled_closest as compiled_closest
-from ._geometry import compiled_segment_distance as compiled_segment_distance
-from ._table import BOX, CAPSULE, DISK, LINE, PLANE, POINT, SEGMENT, SPHERE  # noqa: F401
-from ._table import HX, HY, HZ, P0Z, P1Z, QW, QX, QY, QZ, VZ  # noqa: F401
-from ._table import KIND, OBSTACLE_COLUMNS, P0X, P0Y, P1X, P1Y, RADIUS, VX, VY  # noqa: F401
-from ._table import table_rows as table_rows
+from ._base import Obstacle, validated
+from ._draw import OBSTACLE_COLOR, draw_line
+from ._geometry import compiled_closest, compiled_segment_distance
+from ._table import (
+    BOX,
+    CAPSULE,
+    DISK,
+    HX,
+    HY,
+    HZ,
+    KIND,
+    LINE,
+    OBSTACLE_COLUMNS,
+    P0X,
+    P0Y,
+    P0Z,
+    P1X,
+    P1Y,
+    P1Z,
+    PLANE,
+    POINT,
+    QW,
+    QX,
+    QY,
+    QZ,
+    RADIUS,
+    SEGMENT,
+    SPHERE,
+    VX,
+    VY,
+    VZ,
+    table_rows,
+)
 
+__all__ = [
+    "OBSTACLE_COLUMNS",
+    "KIND",
+    "P0X",
+    "P0Y",
+    "P1X",
+    "P1Y",
+    "RADIUS",
+    "VX",
+    "VY",
+    "P0Z",
+    "P1Z",
+    "VZ",
+    "HX",
+    "HY",
+    "HZ",
+    "QW",
+    "QX",
+    "QY",
+    "QZ",
+    "LINE",
+    "SEGMENT",
+    "DISK",
+    "POINT",
+    "PLANE",
+    "SPHERE",
+    "CAPSULE",
+    "BOX",
+    "table_rows",
+    "Obstacle",
+    "validated",
+    "OBSTACLE_COLOR",
+    "draw_line",
+    "compiled_closest",
+    "compiled_segment_distance",
+    "register",
+    "kinds",
+    "schema_adapter",
+    "make",
+]
 _REGISTRY: dict[str, type[Obstacle]] = {}
 
 

@@ -13,10 +13,10 @@ import numpy as np
 
 from ._table import (
     BOX,
+    CAPSULE,
     HX,
     HY,
     HZ,
-    CAPSULE,
     KIND,
     LINE,
     P0X,
@@ -66,10 +66,14 @@ def compiled_segment_distance():
     from ...native import compile_with
 
     closest = compile_with(_closest_params, name="closest_params")
-    box = compile_with(_box, {"_excess": compile_with(_excess, name="box_excess")}, name="box")
+    box_helpers = {"_excess": compile_with(_excess, name="box_excess")}
+    box_helpers["_box_depth"] = compile_with(_box_depth, name="box_depth")
+    box = compile_with(_box, box_helpers, name="box")
     helpers = {"_closest_params": closest, "_box": box}
     helpers["_planar_segments"] = compile_with(
-        _planar_segments, {"_crosses": compile_with(_crosses, name="crosses")}, name="planar_segments"
+        _planar_segments,
+        {"_crosses": compile_with(_crosses, name="crosses")},
+        name="planar_segments",
     )
     return compile_with(_segment_distance, helpers, name="segment_distance")
 
@@ -144,7 +148,6 @@ def _closest_params(rx, ry, rz, ex, ey, ez, fx, fy, fz):  # pragma: no cover - c
     return s, w
 
 
-
 def _crosses(p0x, p0y, p1x, p1y, q0x, q0y, q1x, q1y):  # pragma: no cover - compiled
     """Planar segments ``p`` and ``q`` cross strictly (each splits the other's ends)."""
     ex, ey, fx, fy = p1x - p0x, p1y - p0y, q1x - q0x, q1y - q0y
@@ -197,8 +200,16 @@ def _box(rx, ry, rz, ex, ey, ez, h, q):  # pragma: no cover - compiled
     r10, r11, r12 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
     r20, r21, r22 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
     # the segment in the box's frame (R^T r, R^T e)
-    p = (r00 * rx + r10 * ry + r20 * rz, r01 * rx + r11 * ry + r21 * rz, r02 * rx + r12 * ry + r22 * rz)
-    e = (r00 * ex + r10 * ey + r20 * ez, r01 * ex + r11 * ey + r21 * ez, r02 * ex + r12 * ey + r22 * ez)
+    p = (
+        r00 * rx + r10 * ry + r20 * rz,
+        r01 * rx + r11 * ry + r21 * rz,
+        r02 * rx + r12 * ry + r22 * rz,
+    )
+    e = (
+        r00 * ex + r10 * ey + r20 * ez,
+        r01 * ex + r11 * ey + r21 * ez,
+        r02 * ex + r12 * ey + r22 * ez,
+    )
     best, s_best = np.inf, 0.0
     # candidates: the ends, the 6 breakpoints, and each piece's minimiser; a piece is fixed by
     # each axis' side (below, within, above: 27 sign patterns, those of no piece only add values
@@ -230,32 +241,11 @@ def _box(rx, ry, rz, ex, ey, ez, h, q):  # pragma: no cover - compiled
             best, s_best = f, s
     if best > 0.0:
         d = np.sqrt(best)
-        g = (_excess(p[0] + s_best * e[0], h[0]), _excess(p[1] + s_best * e[1], h[1]), 0.0)
-        g = (g[0] / d, g[1] / d, _excess(p[2] + s_best * e[2], h[2]) / d)
+        gx = _excess(p[0] + s_best * e[0], h[0]) / d
+        gy = _excess(p[1] + s_best * e[1], h[1]) / d
+        g = (gx, gy, _excess(p[2] + s_best * e[2], h[2]) / d)
     else:
-        # inside: the depth min_i (h_i - |x_i(s)|) is concave and piecewise linear in s; its
-        # largest is at an end, where an x_i is 0, or where two of its lines meet
-        depth, s_best = -np.inf, 0.0
-        for k in range(17):
-            if k < 2:
-                s = float(k)
-            elif k < 5:
-                if e[k - 2] == 0.0:
-                    continue
-                s = -p[k - 2] / e[k - 2]
-            else:
-                i, j = (k - 5) // 4 % 3, ((k - 5) // 4 + 1) % 3
-                si, sj = 1.0 if (k - 5) % 2 else -1.0, 1.0 if (k - 5) // 2 % 2 else -1.0
-                den = sj * e[j] - si * e[i]
-                if den == 0.0:
-                    continue
-                s = (h[j] - h[i] - sj * p[j] + si * p[i]) / den
-            s = min(max(s, 0.0), 1.0)
-            g_s = np.inf
-            for i in range(3):
-                g_s = min(g_s, h[i] - abs(p[i] + s * e[i]))
-            if g_s > depth:
-                depth, s_best = g_s, s
+        depth, s_best = _box_depth(p, e, h)
         d = -depth
         face, least = 0, np.inf
         for i in range(3):
@@ -268,6 +258,35 @@ def _box(rx, ry, rz, ex, ey, ez, h, q):  # pragma: no cover - compiled
     uy = r10 * g[0] + r11 * g[1] + r12 * g[2]
     uz = r20 * g[0] + r21 * g[1] + r22 * g[2]
     return d, s_best, ux, uy, uz
+
+
+def _box_depth(p, e, h):  # pragma: no cover - compiled
+    """The largest depth ``min_i (h_i - |x_i(s)|)`` [m] of the points ``x(s) = p + s e`` in the
+    box's frame (half extents ``h``), and its ``s``."""
+    # the depth min_i (h_i - |x_i(s)|) is concave and piecewise linear in s; its
+    # largest is at an end, where an x_i is 0, or where two of its lines meet
+    depth, s_best = -np.inf, 0.0
+    for k in range(17):
+        if k < 2:
+            s = float(k)
+        elif k < 5:
+            if e[k - 2] == 0.0:
+                continue
+            s = -p[k - 2] / e[k - 2]
+        else:
+            i, j = (k - 5) // 4 % 3, ((k - 5) // 4 + 1) % 3
+            si, sj = 1.0 if (k - 5) % 2 else -1.0, 1.0 if (k - 5) // 2 % 2 else -1.0
+            den = sj * e[j] - si * e[i]
+            if den == 0.0:
+                continue
+            s = (h[j] - h[i] - sj * p[j] + si * p[i]) / den
+        s = min(max(s, 0.0), 1.0)
+        g_s = np.inf
+        for i in range(3):
+            g_s = min(g_s, h[i] - abs(p[i] + s * e[i]))
+        if g_s > depth:
+            depth, s_best = g_s, s
+    return depth, s_best
 
 
 @cache

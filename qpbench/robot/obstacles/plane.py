@@ -63,4 +63,5 @@ class PlaneObstacle(Obstacle):
         normal = project(self.normal, plane)
         if not np.any(normal):
             return np.empty((0, 2))
-        return (float(fit(self.normal, 3) @ fit(self.point, 3)) / float(normal @ normal)) * normal[None]
+        offset = float(fit(self.normal, 3) @ fit(self.point, 3)) / float(normal @ normal)
+        return offset * normal[None]
