@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 import numpy as np
 
 from . import register
-from ._base import Obstacle, Positive, Quat, SpatialSchema, Vec3, fit, unit, vector
+from ._base import Obstacle, Positive, Quat, SpatialSchema, Vec3, unit, vector
 from ._draw import draw_outline, look, project
 from ._table import BOX, table_rows
 
@@ -66,4 +66,4 @@ class BoxObstacle(Obstacle):
         draw_outline(ax, project(self.corners(t), plane), 0.0, **look(self.name, faint, color))
 
     def view_points(self, plane=("x", "y")):
-        return project(fit(self.corners(), 3), plane)
+        return project(self.corners(), plane)
