@@ -1,6 +1,6 @@
-"""What every obstacle kind shares: the schema's field types and its one-line errors, the class
-:class:`Obstacle` (closest points by the compiled geometry, a generic between-ticks bound) and
-the projection of a 3-D scene onto a view plane."""
+"""What every obstacle kind shares: the schema's field types and its one-line errors, and the
+class :class:`Obstacle` (closest points by the compiled geometry, a generic between-ticks
+bound)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,10 @@ from ._geometry import compiled_closest
 
 
 def _number(value):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ValueError(f"expected a finite number, got {value!r}")
-    if not math.isfinite(value):
+    number = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(
+        value, bool
+    )
+    if not (number and math.isfinite(value)):
         raise ValueError(f"expected a finite number, got {value!r}")
     return float(value)
 
