@@ -8,14 +8,12 @@ import numpy as np
 import pytest
 
 from qpbench.robot.body import body_clearance, body_crossings, contact_obstacles, link_label
-from qpbench.robot.environment import (
-    ContactSurface,
-    DiskObstacle,
-    LineObstacle,
-    PointCloudObstacle,
-    SegmentObstacle,
-)
+from qpbench.robot.environment import ContactSurface
 from qpbench.robot.kinematics import PlanarArm
+from qpbench.robot.obstacles.disk import DiskObstacle
+from qpbench.robot.obstacles.line import LineObstacle
+from qpbench.robot.obstacles.points import PointCloudObstacle
+from qpbench.robot.obstacles.segment import SegmentObstacle
 
 SAMPLES = 4001
 

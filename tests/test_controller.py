@@ -16,13 +16,11 @@ from qpbench.control.controller import Controller
 from qpbench.control.terms import CosinePath, EscapeVelocityLimits, ImpedanceTask, PolylinePath
 from qpbench.exceptions import ParamError
 from qpbench.packed import PackedProblem
-from qpbench.robot.environment import (
-    DiskObstacle,
-    LineObstacle,
-    PointCloudObstacle,
-    SegmentObstacle,
-)
 from qpbench.robot.kinematics import PlanarArm, default_key_points
+from qpbench.robot.obstacles.disk import DiskObstacle
+from qpbench.robot.obstacles.line import LineObstacle
+from qpbench.robot.obstacles.points import PointCloudObstacle
+from qpbench.robot.obstacles.segment import SegmentObstacle
 from qpbench.sim.scenario import load_scenario
 
 SCENARIOS = ("free", "wall", "adaptive", "narrow")

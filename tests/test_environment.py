@@ -6,13 +6,11 @@ import numpy as np
 import pytest
 
 from qpbench.exceptions import InputError
-from qpbench.robot.environment import (
-    ContactSurface,
-    DiskObstacle,
-    LineObstacle,
-    PointCloudObstacle,
-    SegmentObstacle,
-)
+from qpbench.robot.environment import ContactSurface
+from qpbench.robot.obstacles.disk import DiskObstacle
+from qpbench.robot.obstacles.line import LineObstacle
+from qpbench.robot.obstacles.points import PointCloudObstacle
+from qpbench.robot.obstacles.segment import SegmentObstacle
 
 
 def penetration(surface, x) -> float:

@@ -17,8 +17,8 @@ from slow_backends import SlowExact
 
 from qpbench.cli import main
 from qpbench.exceptions import ParamError, ScenarioError
-from qpbench.robot.environment import LineObstacle
 from qpbench.robot.kinematics import PlanarArm
+from qpbench.robot.obstacles.line import LineObstacle
 from qpbench.sim.log import TIME_COLUMNS
 from qpbench.sim.loop import simulate
 from qpbench.sim.scenario import load_scenario, scenario_names

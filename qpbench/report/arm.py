@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..robot.obstacles import OBSTACLE_COLOR, draw_line
 from ..sim import log as tick_log
 from ..sim.verdict import DEFAULT_SAFETY_MARGIN
 from . import style
@@ -23,7 +24,7 @@ if TYPE_CHECKING:
 
 #: Colour of the arm (links and joints), of the key points' edges, of obstacles and of the
 #: surface: neutral, so that the backend's look is the only colour that names a backend.
-ARM, KEY, OBSTACLE, SURFACE = "#343a40", "#212529", "#868e96", "#2b8a3e"
+ARM, KEY, OBSTACLE, SURFACE = "#343a40", "#212529", OBSTACLE_COLOR, "#2b8a3e"
 #: Look of the actual end-effector path when no backend is named.
 PATH = style.Look("#495057", "o", "-")
 #: The report's two pictures of the arm per scenario, left to right: role -> column header.
@@ -81,15 +82,7 @@ def view(scenario, log, arm) -> tuple[tuple[float, float], tuple[float, float]]:
     surface = scenario.make_surface()
     parts.append(_foot(surface.point, surface.normal)[None, :])
     for ob in scenario.make_obstacles():
-        kind = type(ob).__name__
-        if kind == "LineObstacle":
-            near = _foot(ob.point, ob.normal)[None, :]
-        elif kind == "SegmentObstacle":
-            near = np.array([ob.a, ob.b])
-        elif kind == "DiskObstacle":
-            near = ob.center + ob.radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
-        else:  # a point cloud
-            near = np.asarray(ob.points, dtype=float)
+        near = ob.view_points()
         parts.append(near[np.linalg.norm(near, axis=1) <= 2.0 * reach])
     pts = np.concatenate([p.reshape(-1, 2) for p in parts])
     pts = pts[np.isfinite(pts).all(axis=1)]
@@ -105,41 +98,11 @@ def _foot(point, normal) -> np.ndarray:
     return normal * float(normal @ point)
 
 
-def draw_line(ax, point, normal, xlim, ylim, **line) -> None:
-    """The line through ``point`` perpendicular to ``normal``, its solid side lightly filled."""
-    tangent = np.array([-normal[1], normal[0]])
-    span = 4.0 * max(xlim[1] - xlim[0], ylim[1] - ylim[0])
-    a, b = point - span * tangent, point + span * tangent
-    ax.plot([a[0], b[0]], [a[1], b[1]], **line)
-    # the solid side (opposite the normal), lightly filled
-    depth = 0.04 * span
-    poly = np.array([a, b, b - depth * normal, a - depth * normal])
-    ax.fill(poly[:, 0], poly[:, 1], color=line.get("color", OBSTACLE), alpha=0.12, lw=0)
-
-
 def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False) -> None:
-    from matplotlib.patches import Circle
-
-    alpha = 0.25 if faint else 1.0
+    """Each obstacle as at ``t`` [s], drawn by its kind (a static line is not drawn again
+    ``faint``)."""
     for ob in obstacles:
-        shift = ob.velocity * t
-        kind = type(ob).__name__
-        label = None if faint else ob.name
-        if kind == "LineObstacle":
-            if faint and not np.any(ob.velocity):
-                continue
-            line = dict(color=OBSTACLE, lw=2, alpha=alpha, label=label)
-            draw_line(ax, ob.point + shift, ob.normal, xlim, ylim, **line)
-        elif kind == "SegmentObstacle":
-            a, b = ob.a + shift, ob.b + shift
-            line = dict(color=OBSTACLE, lw=3, alpha=alpha, solid_capstyle="round", label=label)
-            ax.plot([a[0], b[0]], [a[1], b[1]], **line)
-        elif kind == "DiskObstacle":
-            c = ob.center + shift
-            ax.add_patch(Circle(c, ob.radius, color=OBSTACLE, alpha=0.35 * alpha, label=label))
-        elif kind == "PointCloudObstacle":
-            pts = ob.points + shift
-            ax.scatter(pts[:, 0], pts[:, 1], s=6, color=OBSTACLE, alpha=alpha, label=label)
+        ob.draw(ax, t, limits=(xlim, ylim), faint=faint, color=OBSTACLE)
 
 
 def workspace_axes(ax, xlim, ylim) -> None:

@@ -9,7 +9,7 @@ into it by design; the closest-point key points use the same exemption.
 Between two samples (:func:`body_crossings`) the joint angles move linearly and the obstacles
 translate; the interval is cut in halves until each piece is proven clear by a lower bound of
 its clearance, found inside at a cut, or shorter than the motion :data:`SWEEP_TOL` resolves
-(then judged by :meth:`~qpbench.robot.environment.Obstacle.passed_through`). Two bounds, the
+(then judged by :meth:`~qpbench.robot.obstacles.Obstacle.passed_through`). Two bounds, the
 larger kept, for link ``i`` over a piece of ``w`` [s]:
 
 - the speed bound: no point of the link moves faster than ``V = sum_{j<=i} l_j |w_j|`` [m/s]
@@ -18,7 +18,7 @@ larger kept, for link ``i`` over a piece of ``w`` [s]:
 - the sweep bound: every point of the link stays within ``delta = A w^2 / 8`` of the segment
   between the linearly moving ends (``A = sum_{j<=i} l_j w_j^2`` [m/s^2] bounds its
   acceleration), so the clearance is at least the obstacle's
-  :meth:`~qpbench.robot.environment.Obstacle.swept_distance_bound` minus ``delta``.
+  :meth:`~qpbench.robot.obstacles.Obstacle.swept_distance_bound` minus ``delta``.
 """
 
 from __future__ import annotations
@@ -28,8 +28,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .environment import ContactSurface, LineObstacle, Obstacle
+from .environment import ContactSurface
 from .kinematics import PlanarArm
+from .obstacles import Obstacle
+from .obstacles.line import LineObstacle
 
 #: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
 SAME_LINE_TOL = 1e-9
@@ -88,7 +90,7 @@ def body_clearance(
     if not obstacles or T == 0:
         none = np.zeros(T, dtype=np.int64)
         return BodyClearance(np.empty((T, n, 0)), np.full(T, np.nan), none, none - 1)
-    d = _clearances(arm.joint_positions(theta), t, obstacles, radius, exempt)
+    d = _clearances(_lift(arm.joint_positions(theta)), t, obstacles, radius, exempt)
     flat = d.reshape(T, -1)
     arg = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
     m = len(obstacles)
@@ -96,12 +98,12 @@ def body_clearance(
 
 
 def _clearances(p: np.ndarray, t: np.ndarray, obstacles, radius: float, exempt) -> np.ndarray:
-    """Clearance (T, n, o) [m] of the links between joint positions ``p`` (T, n+1, 2) [m] at
+    """Clearance (T, n, o) [m] of the links between joint positions ``p`` (T, n+1, 3) [m] at
     times ``t`` (T,) [s] (:func:`body_clearance`)."""
     T, n = p.shape[0], p.shape[1] - 1
     d = np.empty((T, n, len(obstacles)))
-    P0 = p[:, :-1].reshape(-1, 2)
-    P1 = p[:, 1:].reshape(-1, 2)
+    P0 = p[:, :-1].reshape(-1, 3)
+    P1 = p[:, 1:].reshape(-1, 3)
     ts = np.repeat(t, n)
     for j, o in enumerate(obstacles):
         _, _, dist, _ = o.closest_on_segments(P0, P1, ts)
@@ -151,17 +153,16 @@ def body_crossings(
     found = _Found(max(len(theta) - 1, 0))
     if len(theta) < 2 or not obstacles:
         return found.crossings(t)
-    w = np.cumsum(np.diff(theta, axis=0) / dt, axis=1)  # absolute angular speed of each link
+    link_speed, accel = _motion_bounds(arm, np.diff(theta, axis=0) / dt)
     own = np.array([math.hypot(*ob.velocity) for ob in obstacles])
-    speed = np.cumsum(arm.lengths * np.abs(w), axis=1)[:, :, None] + own  # (K, n, o) [m/s]
-    accel = np.cumsum(arm.lengths * w**2, axis=1)  # (K, n) [m/s^2]
+    speed = link_speed[:, :, None] + own  # (K, n, o) [m/s]
     with np.errstate(invalid="ignore"):
         skip = (known[:-1] + known[1:] - speed.max(axis=(1, 2)) * dt) / 2.0 > SWEEP_TOL
     look = np.flatnonzero(~skip)  # the intervals to look at
     rows = np.unique(np.concatenate([look, look + 1]))
     at = np.zeros(len(theta), dtype=np.int64)
     at[rows] = np.arange(rows.size)
-    p = arm.joint_positions(theta[rows])
+    p = _lift(arm.joint_positions(theta[rows]))
     d = _clearances(p, t[rows], obstacles, radius, exempt)
     da, db, pa, pb = d[at[look]], d[at[look + 1]], p[at[look]], p[at[look + 1]]
     vs = speed[look]
@@ -191,6 +192,32 @@ def body_crossings(
     return found.crossings(t)
 
 
+def _lift(p: np.ndarray) -> np.ndarray:
+    """Joint positions (..., d) [m] in 3-D (a planar arm's in z = 0)."""
+    if p.shape[-1] == 3:
+        return p
+    return np.concatenate([p, np.zeros((*p.shape[:-1], 3 - p.shape[-1]))], axis=-1)
+
+
+def _motion_bounds(arm, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of every point's speed ``V`` [m/s] and acceleration ``A`` [m/s^2] on each link
+    (K, n) while the joint velocities ``v`` (K, n) [rad/s] hold. A planar chain: ``V_i =
+    sum_{j<=i} l_j |w_j|``, ``A_i = sum_{j<=i} l_j w_j^2`` (``w_j`` link ``j``'s absolute
+    angular speed). Any other chain of revolute joints (each turning all that follows it about
+    an axis through it): joint ``j`` moves a point of link ``i`` at most ``|v_j| R_ji`` with
+    ``R_ji = sum_{j<=k<=i} l_k``, so ``V_i = sum_{j<=i} |v_j| R_ji`` and ``A_i <= (sum_{j<=i}
+    |v_j|) V_i`` (each second derivative of a point is at most the reach of the later joint)."""
+    lengths = np.asarray(arm.lengths, dtype=float)
+    if isinstance(arm, PlanarArm):
+        w = np.cumsum(v, axis=1)  # absolute angular speed of each link
+        return np.cumsum(lengths * np.abs(w), axis=1), np.cumsum(lengths * w**2, axis=1)
+    # R[j, i] = sum_{j<=k<=i} l_k for j <= i, else 0
+    upper = np.triu(np.ones((len(lengths), len(lengths))))
+    R = np.cumsum(upper * lengths[None, :], axis=1) * upper
+    V = np.abs(v) @ R
+    return V, np.cumsum(np.abs(v), axis=1) * V
+
+
 class _Pieces(NamedTuple):
     """Pieces ``[a, b]`` [s from the interval's start] of intervals ``k``, for link ``i``
     (0-based) and obstacle ``j``: the clearances ``da, db`` [m] and the link's ends [m] there."""
@@ -213,7 +240,7 @@ class _Pieces(NamedTuple):
     def in_frame(self, rows, obstacle: Obstacle, t: np.ndarray) -> tuple:
         """The ``rows``' link ends at ``a`` and ``b`` in the obstacle's frame (it held as at
         ``a``), and the time [s] of ``a`` (from the intervals' start times ``t``)."""
-        back = obstacle.velocity * (self.b[rows] - self.a[rows])[:, None]
+        back = obstacle.velocity3 * (self.b[rows] - self.a[rows])[:, None]
         at = t[self.k[rows]] + self.a[rows]
         return self.P0a[rows], self.P1a[rows], self.P0b[rows] - back, self.P1b[rows] - back, at
 
@@ -271,7 +298,7 @@ def _split(piece: _Pieces, arm, theta, t, dt, obstacles, radius, found: _Found) 
     m = (piece.a + piece.b) / 2.0
     k, i = piece.k, piece.i
     at = theta[k] + (m / dt)[:, None] * (theta[k + 1] - theta[k])
-    p = arm.joint_positions(at)
+    p = _lift(arm.joint_positions(at))
     rows = np.arange(k.size)
     P0m, P1m = p[rows, i], p[rows, i + 1]
     dm = np.empty(k.size)

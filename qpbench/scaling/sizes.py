@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exceptions import ParamError
-from ..robot.environment import PointCloudObstacle
 from ..robot.kinematics import KeyPoints, PlanarArm, default_key_points
+from ..robot.obstacles.points import PointCloudObstacle
 from ..sweep.toml_text import dumps
 
 #: Sum of the link lengths of every generated arm in [m] (the paper arm's reach).

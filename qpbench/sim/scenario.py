@@ -23,8 +23,10 @@ import numpy as np
 
 from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
-from ..robot.environment import OBSTACLE_KINDS, ContactSurface, Obstacle
+from ..robot.environment import ContactSurface
 from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
+from ..robot.obstacles import Obstacle
+from ..robot.obstacles import make as make_obstacle
 from .scenario_schema import (
     OPTIONAL_TABLES,
     ScenarioSpec,
@@ -133,12 +135,7 @@ class Scenario:
         )
 
     def make_obstacles(self) -> list[Obstacle]:
-        return [
-            OBSTACLE_KINDS[o.kind](
-                **{k: getattr(o, k) for k in type(o).model_fields if k != "kind"}
-            )
-            for o in self.spec.obstacles
-        ]
+        return [make_obstacle(o.model_dump()) for o in self.spec.obstacles]
 
     def make_controller(self) -> Controller:
         """The scenario's :class:`~qpbench.control.controller.Controller`."""

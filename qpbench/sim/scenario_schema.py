@@ -32,6 +32,7 @@ from pydantic import (
 )
 
 from ..exceptions import ScenarioError
+from ..robot.obstacles import kinds as obstacle_kinds
 from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 
@@ -87,14 +88,19 @@ class Table(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
 
 
-def _by_kind(*models: type[Table]):
+def _tag(model: type[BaseModel]) -> str:
+    """The ``kind`` a table model stands for (its ``Literal`` field)."""
+    return model.model_fields["kind"].annotation.__args__[0]
+
+
+def _by_kind(*models: type[BaseModel]):
     """A union of tables picked by their ``kind`` (``[path]``, an obstacle)."""
 
     def kind_of(v):
         kind = v.get("kind") if isinstance(v, dict) else getattr(v, "kind", None)
         return kind if isinstance(kind, str) else None
 
-    members = [Annotated[m, Tag(m.model_fields["kind"].default)] for m in models]
+    members = [Annotated[m, Tag(_tag(m))] for m in models]
     return Annotated[Union[tuple(members)], Discriminator(kind_of)]  # noqa: UP007
 
 
@@ -200,47 +206,9 @@ class RnnTable(Table):
     eps: Annotated[Num, Field(gt=0)] = 0.02
 
 
-class LineTable(Table):
-    """A wall through ``point`` [m] with ``normal`` towards the free side."""
-
-    kind: Literal["line"] = "line"
-    name: StrictStr
-    point: Vec2
-    normal: Vec2
-    velocity: Vec2
-
-
-class SegmentTable(Table):
-    """A segment from ``a`` to ``b`` [m]."""
-
-    kind: Literal["segment"] = "segment"
-    name: StrictStr
-    a: Vec2
-    b: Vec2
-    velocity: Vec2
-
-
-class DiskTable(Table):
-    """A disk of ``center`` [m] and ``radius`` [m]."""
-
-    kind: Literal["disk"] = "disk"
-    name: StrictStr
-    center: Vec2
-    radius: Num
-    velocity: Vec2
-
-
-class PointsTable(Table):
-    """A cloud of ``points`` [m]."""
-
-    kind: Literal["points"] = "points"
-    name: StrictStr
-    points: Points
-    velocity: Vec2
-
-
 PathTable = _by_kind(CosinePathTable, PolylinePathTable)
-ObstacleTable = _by_kind(LineTable, SegmentTable, DiskTable, PointsTable)
+#: An obstacle: its kind's schema (:mod:`qpbench.robot.obstacles`), picked by ``kind``.
+ObstacleTable = _by_kind(*(cls.Schema for cls in obstacle_kinds().values()))
 
 
 class ScenarioSpec(Table):
@@ -296,14 +264,9 @@ def _expected(loc: tuple) -> list[str]:
     return list(model.model_fields)
 
 
-_TAGGED = {
-    m.model_fields["kind"].default: m
-    for m in (CosinePathTable, PolylinePathTable, LineTable, SegmentTable, DiskTable, PointsTable)
-}
-_KINDS = {
-    "path": ("cosine", "polyline"),
-    "obstacles": ("line", "segment", "disk", "points"),
-}
+_TAGGED = {"cosine": CosinePathTable, "polyline": PolylinePathTable}
+_TAGGED.update((kind, cls.Schema) for kind, cls in obstacle_kinds().items())
+_KINDS = {"path": ("cosine", "polyline"), "obstacles": tuple(obstacle_kinds())}
 
 
 def _error(exc: ValidationError, file) -> ScenarioError:
@@ -413,7 +376,14 @@ def _check_across_keys(spec: ScenarioSpec, file) -> None:
             key="robot.velocity_min",
         )
     names: list[str] = []
+    planar = [kind for kind, cls in obstacle_kinds().items() if cls.DIM == 2]
     for i, o in enumerate(spec.obstacles):
+        if o.kind not in planar:  # the arm and its controller are planar
+            raise ScenarioError(
+                f"a spatial kind; a planar scenario takes one of: {', '.join(planar)}",
+                path=file,
+                key=f"obstacles[{i}].kind",
+            )
         if not o.name or o.name in names:
             raise ScenarioError(
                 f"obstacle names must be non-empty and unique, got {o.name!r}",

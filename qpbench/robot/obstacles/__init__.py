@@ -1,0 +1,123 @@
+"""Obstacles: one module per kind, registered here as backends are (paper sections 2.2, 4).
+
+Each kind module holds its scenario schema (a pydantic model), its class (a subclass of
+:class:`Obstacle`: its rows of the obstacle table, its drawing, its between-ticks tests for the
+body rule) and registers it with :func:`register`; the kinds share the compiled 3-D geometry
+(:func:`compiled_segment_distance`: the signed distance of a table row to a segment with its
+gradient direction). Planar kinds (``line``, ``segment``, ``disk``, ``points``) take 2-D inputs
+and lie in ``z = 0``; spatial kinds (``plane``, ``sphere``, ``capsule``, ``box``) take 3-D ones.
+Modules starting with ``_`` are the package's helpers.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import pkgutil
+from typing import Annotated, Union
+
+from ._base import Obstacle, validated
+from ._draw import OBSTACLE_COLOR, draw_line
+from ._geometry import compiled_closest, compiled_segment_distance
+from ._table import (
+    BOX,
+    CAPSULE,
+    DISK,
+    HX,
+    HY,
+    HZ,
+    KIND,
+    LINE,
+    OBSTACLE_COLUMNS,
+    P0X,
+    P0Y,
+    P0Z,
+    P1X,
+    P1Y,
+    P1Z,
+    PLANE,
+    POINT,
+    QW,
+    QX,
+    QY,
+    QZ,
+    RADIUS,
+    SEGMENT,
+    SPHERE,
+    VX,
+    VY,
+    VZ,
+    table_rows,
+)
+
+__all__ = [
+    "OBSTACLE_COLUMNS",
+    "KIND",
+    "P0X",
+    "P0Y",
+    "P1X",
+    "P1Y",
+    "RADIUS",
+    "VX",
+    "VY",
+    "P0Z",
+    "P1Z",
+    "VZ",
+    "HX",
+    "HY",
+    "HZ",
+    "QW",
+    "QX",
+    "QY",
+    "QZ",
+    "LINE",
+    "SEGMENT",
+    "DISK",
+    "POINT",
+    "PLANE",
+    "SPHERE",
+    "CAPSULE",
+    "BOX",
+    "table_rows",
+    "Obstacle",
+    "validated",
+    "OBSTACLE_COLOR",
+    "draw_line",
+    "compiled_closest",
+    "compiled_segment_distance",
+    "register",
+    "kinds",
+    "schema_adapter",
+    "make",
+]
+_REGISTRY: dict[str, type[Obstacle]] = {}
+
+
+def register(cls: type[Obstacle]) -> type[Obstacle]:
+    """Class decorator: add the obstacle kind ``cls`` under ``cls.KIND``."""
+    _REGISTRY[cls.KIND] = cls
+    return cls
+
+
+@functools.cache
+def kinds() -> dict[str, type[Obstacle]]:
+    """Kind name (as written in scenario files) -> class, every module of the package loaded."""
+    for m in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if not m.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{m.name}")
+    return dict(sorted(_REGISTRY.items()))
+
+
+@functools.cache
+def schema_adapter():
+    """A pydantic ``TypeAdapter`` of any kind's schema, discriminated by ``kind``."""
+    from pydantic import Field, TypeAdapter
+
+    schemas = tuple(cls.Schema for cls in kinds().values())
+    return TypeAdapter(Annotated[Union[schemas], Field(discriminator="kind")])  # noqa: UP007
+
+
+def make(entry: dict) -> Obstacle:
+    """The obstacle of a validated scenario entry (``kind`` and its schema's fields)."""
+    cls = kinds()[entry["kind"]]
+    return cls(**{k: v for k, v in entry.items() if k != "kind"})

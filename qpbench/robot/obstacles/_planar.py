@@ -1,0 +1,101 @@
+"""Planar geometry of the between-ticks tests (numpy): a point against a swept segment, a
+point through a moving segment, segments against segments; all arrays (s, 2) [m]."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def foot(X: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> np.ndarray:
+    """The point of each segment ``P0 -> P1`` closest to ``X`` (all (s, 2)) [m]."""
+    e = P1 - P0
+    ee = np.einsum("si,si->s", e, e)
+    f = np.einsum("si,si->s", X - P0, e) / np.where(ee > 0, ee, 1.0)
+    return P0 + np.clip(f, 0.0, 1.0)[:, None] * e
+
+
+def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+
+def segments_cross(P0, P1, Q0, Q1) -> np.ndarray:
+    """Segments ``P0 -> P1`` and ``Q0 -> Q1`` cross strictly (each splits the other's ends)."""
+    e, f = P1 - P0, Q1 - Q0
+    s1, s2 = cross(e, Q0 - P0), cross(e, Q1 - P0)
+    s3, s4 = cross(f, P0 - Q0), cross(f, P1 - Q0)
+    return (s1 * s2 < 0) & (s3 * s4 < 0)
+
+
+def point_segment_distance(X, P0, P1) -> np.ndarray:
+    """Distance [m] of each point ``X`` to its segment ``P0 -> P1`` (all (s, 2))."""
+    return np.linalg.norm(X - foot(X, P0, P1), axis=1)
+
+
+def segment_distance(P0, P1, Q0, Q1) -> np.ndarray:
+    """Distance [m] between segments ``P0 -> P1`` and ``Q0 -> Q1`` (0 where they cross)."""
+    ends = np.minimum.reduce(
+        [
+            point_segment_distance(P0, Q0, Q1),
+            point_segment_distance(P1, Q0, Q1),
+            point_segment_distance(Q0, P0, P1),
+            point_segment_distance(Q1, P0, P1),
+        ]
+    )
+    return np.where(segments_cross(P0, P1, Q0, Q1), 0.0, ends)
+
+
+def swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
+    """A lower bound [m] of the distance of points ``C`` to the segments ``P0(l) -> P1(l)``,
+    ``P(l) = (1 - l) Pa + l Pb``, ``l`` in [0, 1] (all (s, 2)); 0 where one passes over ``C``.
+
+    The closest point of segment ``l`` is an end (on a chord ``P0a -> P0b`` or ``P1a -> P1b``)
+    or its foot, at distance ``|g(l)| / |e(l)|``: ``e(l) = P1(l) - P0(l)``, ``g(l) = e(l) x (C -
+    P0(l))`` a quadratic in ``l`` (its least magnitude on [0, 1] from its ends and its vertex)
+    and ``|e(l)|`` convex (at most its larger end). For a rigid link that moves little between
+    ``a`` and ``b`` the bound is within the square of that motion of the exact least distance.
+    """
+    Q, D0 = C - P0a, P0b - P0a
+    E = P1a - P0a
+    DE = (P1b - P0b) - E
+    c0 = cross(E, Q)
+    c1 = cross(DE, Q) - cross(E, D0)
+    c2 = -cross(DE, D0)
+    g1 = c0 + c1 + c2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lv = np.where(c2 != 0.0, -c1 / (2.0 * c2), -1.0)
+    vertex = (lv > 0.0) & (lv < 1.0)
+    gv = c0 + lv * (c1 + lv * c2)
+    root = (c0 * g1 <= 0.0) | (vertex & (gv * c0 <= 0.0))
+    least = np.minimum(np.abs(c0), np.abs(g1))
+    least = np.where(vertex, np.minimum(least, np.abs(gv)), least)
+    e_max = np.maximum(np.linalg.norm(E, axis=1), np.linalg.norm(E + DE, axis=1))
+    interior = np.where(root, 0.0, least / np.where(e_max > 0, e_max, 1.0))
+    return np.minimum.reduce(
+        [
+            interior,
+            point_segment_distance(C, P0a, P0b),
+            point_segment_distance(C, P1a, P1b),
+        ]
+    )
+
+
+#: Slack [m] of "within the segment" in :func:`passes_through` (rounding at a segment's end).
+PASS_TOL = 1e-12
+
+
+def passes_through(Xa, Xb, P0a, P1a, P0b, P1b) -> np.ndarray:
+    """Point ``X`` moving from ``Xa`` to ``Xb`` while its segment moves from ``P0a -> P1a`` to
+    ``P0b -> P1b`` (all (s, 2)): ``True`` where the side of ``X`` changes sign (or is 0 at one
+    end: on the segment there) and ``X`` projects within the segment at both ends (to
+    :data:`PASS_TOL`): over a motion short against the distances involved, it went through the
+    segment."""
+    ea, eb = P1a - P0a, P1b - P0b
+    ha, hb = cross(ea, Xa - P0a), cross(eb, Xb - P0b)
+
+    def within(X, P0, e):
+        length = np.linalg.norm(e, axis=1)
+        along = np.einsum("si,si->s", X - P0, e) / np.where(length > 0, length, 1.0)
+        return (along >= -PASS_TOL) & (along <= length + PASS_TOL)
+
+    sides = (ha * hb <= 0.0) & ((ha != 0.0) | (hb != 0.0))
+    return sides & within(Xa, P0a, ea) & within(Xb, P0b, eb)

@@ -1,0 +1,76 @@
+"""``segment``: a thin bar of the plane (a ``capsule`` of radius 0 in z = 0)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from . import register
+from ._base import PlanarSchema, Vec2, planar_inputs
+from ._planar import passes_through, segment_distance, swept_point_bound
+from ._table import SEGMENT
+from .capsule import CapsuleObstacle
+
+
+class SegmentSchema(PlanarSchema):
+    """Ends ``a``, ``b`` [m] at t = 0."""
+
+    kind: Literal["segment"]
+    a: Vec2
+    b: Vec2
+
+
+@register
+class SegmentObstacle(CapsuleObstacle):
+    """A segment from ``a`` to ``b`` (a thin bar). Crossing a segment in the plane, its distance
+    is minus the least distance of one segment's end to the other (the shortest way out along
+    the crossing; 0 when an end touches), and ``u`` points the way the link must move to come
+    free."""
+
+    KIND = "segment"
+    KERNEL_KIND = SEGMENT
+    Schema = SegmentSchema
+    DIM = 2
+
+    def __init__(self, name: str, a, b, velocity=(0.0, 0.0)):
+        super().__init__(name, a, b, velocity=velocity)
+
+    def _ends(self, t, s: int):
+        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
+        a = self.a + t[:, None] * self.velocity
+        return a, a + (self.b - self.a)
+
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
+        """In the plane: the closest pair of two segments has an end of one on the other: the
+        link's ends run along the chords ``P0a -> P0b`` and ``P1a -> P1b``, the bar's ends are
+        points swept over. Positive, no crossing begins in the sweep (one begins with an end on
+        the other), nor is there one at its ends (their signed distances are in the bound)."""
+        if not planar_inputs(P0a, P1a, P0b, P1b):
+            return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
+        P0a, P1a, P0b, P1b = (np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b))
+        a, b = self._ends(t, len(P0a))
+        return np.minimum.reduce(
+            [
+                segment_distance(P0a, P0b, a, b),
+                segment_distance(P1a, P1b, a, b),
+                swept_point_bound(a, P0a, P1a, P0b, P1b),
+                swept_point_bound(b, P0a, P1a, P0b, P1b),
+                self.closest_on_segments(P0a, P1a, t)[2][:, 0],
+                self.closest_on_segments(P0b, P1b, t)[2][:, 0],
+            ]
+        )
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t):
+        """In the plane: an end of the bar through the link, or an end of the link through the
+        bar."""
+        if not planar_inputs(P0a, P1a, P0b, P1b):
+            return super().passed_through(P0a, P1a, P0b, P1b, t)
+        P0a, P1a, P0b, P1b = (np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b))
+        a, b = self._ends(t, len(P0a))
+        return (
+            passes_through(a, a, P0a, P1a, P0b, P1b)
+            | passes_through(b, b, P0a, P1a, P0b, P1b)
+            | passes_through(P0a, P0b, a, b, a, b)
+            | passes_through(P1a, P1b, a, b, a, b)
+        )
