@@ -368,7 +368,7 @@ def _scenario_with(tmp_path, obstacle: str):
         (
             '{kind = "sphere", name = "s", center = [0.9, 0.9, 0.0], radius = 0.1}',
             "kind",
-            "planar scenario",
+            "planar arm takes the planar kinds",
         ),
         (
             '{kind = "box", name = "s", center = [0.9, 0.9, 0.0], half_extents = [0.1, -0.1, 0.1]}',
@@ -449,6 +449,7 @@ class SpatialChain:
     def __init__(self, lengths):
         self.lengths = np.asarray(lengths, dtype=float)
         self.n = len(self.lengths)
+        self.dim = 3
 
     def joint_positions(self, theta):
         theta = np.atleast_2d(theta)

@@ -34,10 +34,15 @@ SHIPPED = ROOT / "qpbench" / "data" / "scenarios"
 
 def test_every_shipped_scenario_has_thresholds():
     for name in scenario_names():
-        v = load_scenario(name).verdict
-        assert v.settle_time == 2.0 and v.max_tracking_error == 0.001 and v.safety_margin == 0.0005
+        sc = load_scenario(name)
+        v, d_safe = sc.verdict, sc.spec.controller.d_safe
+        assert v.settle_time == 2.0 and v.max_tracking_error == 0.001
+        assert v.safety_margin == pytest.approx(0.05 * d_safe)  # 5% of d_safe
         assert v.max_p99_fraction_of_dt == 0.5 and v.max_over_dt_share == 0.001
-        assert v == VerdictSettings(max_force_error=v.max_force_error)  # the defaults, written out
+        # the defaults, written out (the margin: the default's 5% of d_safe)
+        assert v == VerdictSettings(
+            max_force_error=v.max_force_error, safety_margin=v.safety_margin
+        )
         # the paper's adaptation gain leaves a 5 N force bias for tens of seconds: twice that is allowed
         assert v.max_force_error == (10.0 if name == "adaptive" else 2.0)
 

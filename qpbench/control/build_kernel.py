@@ -2,9 +2,10 @@
 (eq. 4), escape-velocity bounds (eq. 11c) and obstacle rows (eqs. 8-10) of one tick's QP, written
 into one packed buffer (:func:`packed_layout`, after the :mod:`qpbench.packed` header).
 
-Everything the build reads is named in one :class:`ControllerModel`; kinematics
-(:func:`_chain_points`) and obstacle distances (:func:`_distance`) are functions of it, so the
-build itself does not depend on how the arm or an obstacle is described.
+One build for a planar (``dim`` 2) or a spatial (``dim`` 3) arm: everything it reads is named in
+one :class:`ControllerModel`; the kinematics are the chain's (:mod:`qpbench.robot.chain`) and
+the distances the obstacle registry's (:func:`~qpbench.robot.obstacles.compiled_segment_distance`),
+so the build does not depend on how the arm or an obstacle is described.
 """
 
 from __future__ import annotations
@@ -15,30 +16,39 @@ from typing import NamedTuple
 import numpy as np
 
 from ..packed import HEADER as PACKED_HEADER
-from ..robot.environment import DISK, KIND, LINE, P0X, P0Y, P1X, P1Y, RADIUS, SEGMENT, VX, VY
+from ..robot.chain import ChainData, ChainModel
+from ..robot.obstacles import VX, VY, VZ
 
 #: ``ControllerModel.path_kind``: ``x_d(t)`` per axis a cosine, or a polyline.
 COSINE, POLYLINE = 0, 1
 
 
 class ControllerModel(NamedTuple):
-    """The constants of the paper's controller as the compiled kernels read them.
+    """The constants of the paper's controller as the compiled kernels read them, and the
+    workspace of its build (held once per run, written every tick).
 
-    Arm: planar serial chain of link ``lengths`` (n,) [m]. Key points: link index ``key_link``
-    (a,) and fraction ``key_frac`` (a,) of the link's length, each a disk of ``key_radius``
-    [m]. ``obstacles``: the obstacle table (m, :data:`~qpbench.robot.environment.OBSTACLE_COLUMNS`),
-    one row per obstacle point at t = 0. Limits ``theta_min, theta_max`` [rad], ``v_min, v_max``
-    [rad/s] (n,), escape gain ``alpha`` [1/s]. Task: pressing ``normal`` (2,), ``desired_force``
-    [N]; damper gain ``k`` [1/s], ``d_safe`` [m]; ``rho`` [s^2/m^2] the task weight of the
-    ``soft`` formulation. Path ``x_d(t)``: ``path_kind`` :data:`COSINE` with ``path_cosine`` =
-    centre (2), amplitude (2) [m], omega (2) [rad/s], phase (2) [rad]; or :data:`POLYLINE`
-    through ``path_points`` (p, 2) [m] at ``path_times`` (p,) [s].
+    Arm: the ``chain`` (:class:`~qpbench.robot.chain.ChainModel`, ``dim`` 2 or 3) and its
+    kinematics' workspace ``data``. Guarded elements (a,): link ``key_link``, from fraction
+    ``key_f0`` to ``key_f1`` of it (a key point of the paper: ``f0 = f1``; a whole link, kind
+    ``closest``: 0 to 1), a capsule of ``key_radius`` [m]. Obstacle row r (nr,) keeps element
+    ``row_key[r]`` from primitive ``row_prim[r]`` of the obstacle table ``obstacles`` (m,
+    :data:`~qpbench.robot.obstacles.OBSTACLE_COLUMNS`, at t = 0). Limits ``theta_min,
+    theta_max`` [rad], ``v_min, v_max`` [rad/s] (n,), escape gain ``alpha`` [1/s]. Task:
+    pressing ``normal`` (dim,), ``desired_force`` [N]; damper gain ``k`` [1/s], ``d_safe`` [m];
+    ``rho`` [s^2/m^2] the task weight of the ``soft`` formulation. Path ``x_d(t)``:
+    ``path_kind`` :data:`COSINE` with ``path_cosine`` = centre, amplitude [m], omega [rad/s],
+    phase [rad] (dim each); or :data:`POLYLINE` through ``path_points`` (p, dim) [m] at
+    ``path_times`` (p,) [s]. ``scratch`` (9,): the build's 3-vectors.
     """
 
-    lengths: np.ndarray
+    chain: ChainModel
+    data: ChainData
     key_link: np.ndarray
-    key_frac: np.ndarray
+    key_f0: np.ndarray
+    key_f1: np.ndarray
     key_radius: float
+    row_key: np.ndarray
+    row_prim: np.ndarray
     obstacles: np.ndarray
     theta_min: np.ndarray
     theta_max: np.ndarray
@@ -54,12 +64,14 @@ class ControllerModel(NamedTuple):
     path_cosine: np.ndarray
     path_times: np.ndarray
     path_points: np.ndarray
+    scratch: np.ndarray
 
 
 @cache
 def compiled_path():
-    """``desired_state(kind, cosine, times, points, t, out)``: ``out = [x_d (2), xdot_d (2)]``
-    [m, m/s] at ``t`` [s] of a path given as :class:`ControllerModel`'s ``path_*`` fields."""
+    """``desired_state(kind, cosine, times, points, t, out)``: ``out = [x_d (dim), xdot_d
+    (dim)]`` [m, m/s] at ``t`` [s] of a path given as :class:`ControllerModel`'s ``path_*``
+    fields (``dim``: half of ``out``'s length)."""
     from ..native import compile_with
 
     return compile_with(_desired_state_py, name="desired_state")
@@ -70,95 +82,51 @@ def compiled_build_kernel():
     """The build kernel ``build(model, theta, t, kp, kd, soft, buf)``, compiled (or loaded from
     numba's cache) on the first call."""
     from ..native import compile_with
+    from ..robot.chain import compiled_chain
+    from ..robot.obstacles import compiled_segment_distance
 
     helpers = {
         "_desired_state_py": compiled_path(),
-        "_chain_points": compile_with(_chain_points, name="chain_points"),
-        "_distance": compile_with(_distance, name="obstacle_distance"),
+        "_forward_kinematics": compiled_chain().forward_kinematics,
+        "_segment_distance": compiled_segment_distance(),
     }
     return compile_with(_build_kernel_py, helpers, name="build_tick")
 
 
-def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
+def packed_layout(n: int, n_rows: int, dim: int = 2) -> tuple[int, tuple[slice, ...]]:
     """Size of a tick's buffer and the slices of its P, q, G, h, J, b, lb, ub, ee, dist and
-    ``x_d = (x_d, xdot_d)``, in the order :func:`_build_kernel_py` lays them out."""
-    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows, 4)
+    ``x_d = (x_d, xdot_d)``, in the order :func:`_build_kernel_py` lays them out (``dim``: the
+    task's rows)."""
+    sizes = (n * n, n, n_rows * n, n_rows, dim * n, dim, n, n, dim, n_rows, 2 * dim)
     ends = PACKED_HEADER + np.cumsum(sizes)
     return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes, ends))
 
 
 def _desired_state_py(kind, c, times, pts, t, out):  # pragma: no cover - compiled
     """``x_d(t)``, ``xdot_d(t)`` of a path (:class:`ControllerModel`'s ``path_*``) into ``out``
-    (4,); a polyline holds its first point before its first time and its last point after its
-    last."""
+    (2 dim,); a polyline holds its first point before its first time and its last point after
+    its last."""
+    dim = out.shape[0] // 2
     if kind == COSINE:
-        for i in range(2):
-            s = c[4 + i] * t + c[6 + i]
-            out[i] = c[i] + c[2 + i] * np.cos(s)
-            out[2 + i] = -c[2 + i] * c[4 + i] * np.sin(s)
+        for i in range(dim):
+            s = c[2 * dim + i] * t + c[3 * dim + i]
+            out[i] = c[i] + c[dim + i] * np.cos(s)
+            out[dim + i] = -c[dim + i] * c[2 * dim + i] * np.sin(s)
         return
     last = times.shape[0] - 1
     if t <= times[0] or t >= times[last]:
         j = 0 if t <= times[0] else last
-        out[0], out[1], out[2], out[3] = pts[j, 0], pts[j, 1], 0.0, 0.0
+        for a in range(dim):
+            out[a] = pts[j, a]
+            out[dim + a] = 0.0
         return
     i = np.searchsorted(times, t, side="right") - 1
     span = times[i + 1] - times[i]
     s = (t - times[i]) / span
-    for a in range(2):
+    for a in range(dim):
         step = pts[i + 1, a] - pts[i, a]
         out[a] = pts[i, a] + s * step
-        out[2 + a] = step / span
-
-
-def _chain_points(cm, theta, px, py, cs, sn):  # pragma: no cover - compiled
-    """Planar forward kinematics (eq. 1): joint positions ``px, py`` (n+1,) [m] and each link's
-    direction ``cs, sn`` (n,)."""
-    n = theta.shape[0]
-    px[0] = 0.0
-    py[0] = 0.0
-    phi = 0.0
-    for i in range(n):
-        phi += theta[i]
-        cs[i] = np.cos(phi)
-        sn[i] = np.sin(phi)
-        px[i + 1] = px[i] + cm.lengths[i] * cs[i]
-        py[i + 1] = py[i] + cm.lengths[i] * sn[i]
-
-
-def _distance(row, ax, ay, t, u):  # pragma: no cover - compiled
-    """Signed distance [m] of point ``(ax, ay)`` to obstacle point ``row`` of the table at ``t``
-    [s] (its radius included), and in ``u`` (2,) the unit direction from the obstacle to the
-    point (the normal of a line; zero at distance 0)."""
-    kind = int(row[KIND])
-    bx = row[P0X] + row[VX] * t
-    by = row[P0Y] + row[VY] * t
-    if kind == LINE:  # signed distance, u = normal
-        u[0] = row[P1X]
-        u[1] = row[P1Y]
-        return (ax - bx) * u[0] + (ay - by) * u[1]
-    if kind == SEGMENT:
-        abx = row[P1X] - row[P0X]
-        aby = row[P1Y] - row[P0Y]
-        s = ((ax - bx) * abx + (ay - by) * aby) / (abx * abx + aby * aby)
-        if s < 0.0:
-            s = 0.0
-        elif s > 1.0:
-            s = 1.0
-        bx += s * abx
-        by += s * aby
-    dx = ax - bx
-    dy = ay - by
-    d = np.sqrt(dx * dx + dy * dy)
-    if d > 0.0:
-        u[0] = dx / d
-        u[1] = dy / d
-    else:
-        u[0] = 0.0
-        u[1] = 0.0
-    if kind == DISK:
-        d -= row[RADIUS]
-    return d
+        out[dim + a] = step / span
 
 
 # Over 80 lines, kept whole on purpose: numba compiles it as one function. Its numpy twin:
@@ -169,20 +137,21 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     ``buf`` (layout of :func:`packed_layout`; ``soft``: the soft formulation) and write its
     header."""
     n = theta.shape[0]
-    nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 8) // (n + 2)
+    dim = cm.normal.shape[0]
+    nr = cm.row_key.shape[0]
     oP = PACKED_HEADER
     oq = oP + n * n
     oG = oq + n
     oh = oG + nr * n
     oJ = oh + nr
-    ob = oJ + 2 * n
-    olb = ob + 2
+    ob = oJ + dim * n
+    olb = ob + dim
     oub = olb + n
     oee = oub + n
-    od = oee + 2
+    od = oee + dim
     oxd = od + nr
     buf[0] = n
-    buf[1] = 0 if soft else 2
+    buf[1] = 0 if soft else dim
     buf[2] = nr
     buf[3] = oP
     buf[4] = oq
@@ -196,31 +165,31 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     q = buf[oq:oG]
     G = buf[oG:oh].reshape((nr, n))
     h = buf[oh:oJ]
-    J = buf[oJ:ob].reshape((2, n))
+    J = buf[oJ:ob].reshape((dim, n))
     b = buf[ob:olb]
     lb = buf[olb:oub]
     ub = buf[oub:oee]
     ee = buf[oee:od]
     dist = buf[od:oxd]
-    xd = buf[oxd : oxd + 4]
+    xd = buf[oxd : oxd + 2 * dim]
     _desired_state_py(cm.path_kind, cm.path_cosine, cm.path_times, cm.path_points, t, xd)
-    px = np.empty(n + 1)
-    py = np.empty(n + 1)
-    cs = np.empty(n)
-    sn = np.empty(n)
-    _chain_points(cm, theta, px, py, cs, sn)
-    ex = px[n]
-    ey = py[n]
-    ee[0] = ex
-    ee[1] = ey
+    _forward_kinematics(cm.chain, theta, cm.data)  # noqa: F821 - bound
+    p = cm.data.position
+    w = cm.data.axis
+    # end effector and its Jacobian: columns w_k x (x - p_k) (eq. 2)
+    for i in range(dim):
+        ee[i] = p[n, i]
     for k in range(n):
-        J[0, k] = -(ey - py[k])
-        J[1, k] = ex - px[k]
+        dx, dy, dz = p[n, 0] - p[k, 0], p[n, 1] - p[k, 1], p[n, 2] - p[k, 2]
+        J[0, k] = w[k, 1] * dz - w[k, 2] * dy
+        J[1, k] = w[k, 2] * dx - w[k, 0] * dz
+        if dim == 3:
+            J[2, k] = w[k, 0] * dy - w[k, 1] * dx
     # impedance reference, eq. 4
     kpkd = kp / kd
     fkd = cm.desired_force / kd
-    b[0] = xd[2] - kpkd * (ex - xd[0]) + fkd * cm.normal[0]
-    b[1] = xd[3] - kpkd * (ey - xd[1]) + fkd * cm.normal[1]
+    for i in range(dim):
+        b[i] = xd[dim + i] - kpkd * (ee[i] - xd[i]) + fkd * cm.normal[i]
     # escape-velocity bounds, eq. 11c
     alpha = cm.alpha
     for k in range(n):
@@ -235,32 +204,47 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
         rho = cm.rho
         for r in range(n):
             for c in range(n):
-                P[r, c] = rho * (J[0, r] * J[0, c] + J[1, r] * J[1, c])
+                acc = 0.0
+                for i in range(dim):
+                    acc += J[i, r] * J[i, c]
+                P[r, c] = rho * acc
             P[r, r] += 1.0
-            q[r] = -rho * (J[0, r] * b[0] + J[1, r] * b[1])
+            acc = 0.0
+            for i in range(dim):
+                acc += J[i, r] * b[i]
+            q[r] = -rho * acc
     else:
         for r in range(n):
             for c in range(n):
                 P[r, c] = 0.0
             P[r, r] = 1.0
             q[r] = 0.0
-    # obstacle rows, eqs. 8-10 with the velocity-damper signs
-    obstacles = cm.obstacles
-    nb = obstacles.shape[0]
-    u = np.empty(2)
-    for i in range(cm.key_link.shape[0]):
+    # obstacle rows, eqs. 8-10 with the velocity-damper signs: element [a, e] of a link, its
+    # point x = a + s (e - a) closest to the primitive, u the distance's gradient at x
+    a = cm.scratch[0:3]
+    e = cm.scratch[3:6]
+    u = cm.scratch[6:9]
+    for r in range(nr):
+        i = cm.row_key[r]
         L = cm.key_link[i]
-        f = cm.key_frac[i] * cm.lengths[L]
-        ax = px[L] + f * cs[L]
-        ay = py[L] + f * sn[L]
-        for j in range(nb):
-            row = obstacles[j]
-            d = _distance(row, ax, ay, t, u) - cm.key_radius
-            r = i * nb + j
-            for k in range(n):
-                if k <= L:
-                    G[r, k] = -(u[0] * (py[k] - ay) + u[1] * (ax - px[k]))
-                else:
-                    G[r, k] = 0.0
-            h[r] = cm.k * (d - cm.d_safe) - (u[0] * row[VX] + u[1] * row[VY])
-            dist[r] = d
+        f0, f1 = cm.key_f0[i], cm.key_f1[i]
+        for c in range(3):
+            step = p[L + 1, c] - p[L, c]
+            a[c] = p[L, c] + f0 * step
+            e[c] = p[L, c] + f1 * step
+        row = cm.obstacles[cm.row_prim[r]]
+        d, s = _segment_distance(row, a, e, t, u)  # noqa: F821 - bound
+        d -= cm.key_radius
+        x0, x1, x2 = a[0] + s * (e[0] - a[0]), a[1] + s * (e[1] - a[1]), a[2] + s * (e[2] - a[2])
+        for k in range(n):  # G = -u^T J_x, J_x's columns w_k x (x - p_k) up to link L
+            if k <= L:
+                dx, dy, dz = x0 - p[k, 0], x1 - p[k, 1], x2 - p[k, 2]
+                G[r, k] = -(
+                    u[0] * (w[k, 1] * dz - w[k, 2] * dy)
+                    + u[1] * (w[k, 2] * dx - w[k, 0] * dz)
+                    + u[2] * (w[k, 0] * dy - w[k, 1] * dx)
+                )
+            else:
+                G[r, k] = 0.0
+        h[r] = cm.k * (d - cm.d_safe) - (u[0] * row[VX] + u[1] * row[VY] + u[2] * row[VZ])
+        dist[r] = d

@@ -9,10 +9,11 @@ obstacles are at least ``d_safe`` away)::
 
     minimize 1/2 v^T (I + rho J^T J) v - rho b0^T J v   s.t.  G v <= h,  lb <= v <= ub
 
-``G`` holds one row per (key point, obstacle point) pair, key point major (a fixed count; no
-obstacle: ``G = h = None``); key points of kind ``closest`` are built by the numpy terms
-(:mod:`qpbench.control.terms`), the paper's by the compiled build
-(:mod:`qpbench.control.build_kernel`) into one fresh buffer per tick.
+``J`` has ``dim`` rows (2: a planar arm; 3: a spatial one, whose orientation is left free).
+``G`` holds one row per (key point, obstacle primitive) pair, key point major (a fixed count; no
+obstacle: ``G = h = None``); a key point is a point of a link (the paper's) or, of kind
+``closest``, the whole link (its point closest to the primitive, found every tick). The compiled
+build (:mod:`qpbench.control.build_kernel`) writes them into one fresh buffer per tick.
 """
 
 from __future__ import annotations
@@ -26,18 +27,19 @@ import qpsolvers
 from ..exceptions import ParamError
 from ..native import entry_point
 from ..packed import PackedProblem
+from ..robot.chain import chain_data
 from ..robot.environment import OBSTACLE_COLUMNS, Obstacle
-from ..robot.kinematics import KeyPoints, PlanarArm
+from ..robot.kinematics import Arm, KeyPoints
 from ..statuses import FORMULATIONS
 from .build_kernel import ControllerModel, compiled_build_kernel, packed_layout
-from .terms import EscapeVelocityLimits, ImpedanceTask, closest_rows
+from .terms import EscapeVelocityLimits, ImpedanceTask
 
 
 class TickArrays(NamedTuple):
     """One tick's arrays: cost and obstacle rows ``P, q, G, h``, task row ``J v = b0`` (eq. 11),
     escape-velocity bounds ``lb, ub`` [rad/s], end effector ``ee`` [m], key-point distances
     ``dist`` [m] (flat, key point major), ``xd = (x_d, xdot_d)`` [m, m/s], the packed ``buffer``
-    the others view (``None`` for key points of kind ``closest``)."""
+    the others view."""
 
     P: np.ndarray
     q: np.ndarray
@@ -76,7 +78,7 @@ class Controller:
 
     def __init__(
         self,
-        arm: PlanarArm,
+        arm: Arm,
         key_points: KeyPoints,
         task: ImpedanceTask,
         limits: EscapeVelocityLimits,
@@ -99,6 +101,7 @@ class Controller:
         self.kp = float(kp)
         self.kd = float(kd)
         self.n = arm.n
+        self.dim = arm.dim
         self.points_per_obstacle = [o.n_points for o in self.obstacles]
         self.n_obstacle_points = int(sum(self.points_per_obstacle))
         self.closest = key_points.kind == "closest"
@@ -114,17 +117,26 @@ class Controller:
         #: Inequality rows per tick (fixed).
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
         prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, len(OBSTACLE_COLUMNS)))]
+        starts = np.cumsum([0, *self.points_per_obstacle])
+        rows = [(i, p) for i, j in self.pairs for p in range(starts[j], starts[j + 1])]
+        rows = np.array(rows, dtype=np.int64).reshape(-1, 2)
         path_kind, path_cosine, path_times, path_points = task.path.fields
+        whole = np.ones(len(key_points)) if self.closest else key_points.fracs
+        f0 = np.zeros(len(key_points)) if self.closest else key_points.fracs
 
         def f64(a):
             return np.ascontiguousarray(a, dtype=np.float64)
 
         #: Everything the compiled build reads (:class:`ControllerModel`).
         self.model = ControllerModel(
-            lengths=f64(arm.lengths),
+            chain=arm.model,
+            data=chain_data(arm.model),
             key_link=np.ascontiguousarray(key_points.links, dtype=np.int64),
-            key_frac=f64(key_points.fracs),
+            key_f0=f64(f0),
+            key_f1=f64(whole),
             key_radius=float(key_points.radius),
+            row_key=np.ascontiguousarray(rows[:, 0]),
+            row_prim=np.ascontiguousarray(rows[:, 1]),
             obstacles=f64(np.vstack(prims)),
             theta_min=f64(limits.theta_min),
             theta_max=f64(limits.theta_max),
@@ -140,8 +152,9 @@ class Controller:
             path_cosine=f64(path_cosine),
             path_times=f64(path_times),
             path_points=f64(path_points),
+            scratch=np.zeros(9),
         )
-        self._packed_size, self._packed_slices = packed_layout(self.n, self.n_rows)
+        self._packed_size, self._packed_slices = packed_layout(self.n, self.n_rows, self.dim)
         self._build = None  # the compiled build for the model's types (on first use)
 
     # -- fast path -------------------------------------------------------------
@@ -155,8 +168,6 @@ class Controller:
     ) -> TickArrays:
         """The tick's :class:`TickArrays`, freshly allocated (the loop's hot path: ``theta``
         must be a contiguous float64 array; :meth:`build` converts)."""
-        if self.closest:
-            return self._closest_arrays(theta, t, kp, kd, soft)
         n = self.n
         nr = self.n_rows
         kp = float(self.kp if kp is None else kp)
@@ -172,7 +183,7 @@ class Controller:
             buf[sq],
             buf[sG].reshape(nr, n),
             buf[sh],
-            buf[sJ].reshape(2, n),
+            buf[sJ].reshape(self.dim, n),
             buf[sb],
             buf[slb],
             buf[sub],
@@ -222,34 +233,6 @@ class Controller:
         for (i, j), (_, _, s) in zip(self.pairs, self.obstacle_columns()):
             grid[i, starts[j] : starts[j + 1]] = dist[s]
         return grid
-
-    # -- key points of kind closest: the numpy terms ----------------------------
-    def _closest_arrays(self, theta, t, kp, kd, soft):
-        theta = np.asarray(theta, dtype=float)
-        kp = self.kp if kp is None else kp
-        kd = self.kd if kd is None else kd
-        n = self.n
-        ee_arr, J = self.arm.points_jacobians(theta, [n - 1], [1.0])
-        ee, J = ee_arr[0], J[0]
-        xd = np.asarray(self.task.path(t))
-        b0 = self.task.impedance_reference(ee, t, kp, kd)
-        lb, ub = self.limits.escape_velocity_bounds(theta)
-        if soft:  # 1/2 v^T v + rho/2 |J v - b0|^2
-            P, q = np.eye(n) + self.rho * J.T @ J, -self.rho * J.T @ b0
-        else:
-            P, q = np.eye(n), np.zeros(n)
-        a, radius = len(self.key_points), self.key_points.radius
-        if not self.pairs:
-            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
-            return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
-        # one key point per link: its point closest to each obstacle point
-        joints = self.arm.joint_positions(theta)
-        per = [closest_rows(o, self.k, self.d_safe, joints, t, radius) for o in self.obstacles]
-        # each term's rows are key point major; the QP's rows follow the pairs
-        G = np.concatenate([per[j][0].reshape(a, -1, n)[i] for i, j in self.pairs])
-        h = np.concatenate([per[j][1].reshape(a, -1)[i] for i, j in self.pairs])
-        dist = np.concatenate([per[j][2][i] for i, j in self.pairs])
-        return TickArrays(P, q, G, h, J, b0, lb, ub, ee.copy(), dist, xd)
 
     def obstacle_columns(self) -> list[tuple[str, str, slice]]:
         """``(key point name, obstacle name, slice of the flat distance array)`` for each log

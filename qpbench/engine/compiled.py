@@ -64,17 +64,17 @@ class LoopState(NamedTuple):
 
 def loop_state(model: RunModel, n_rows: int) -> LoopState:
     """Fresh :class:`LoopState` for ``model``'s arm with ``n_rows`` obstacle rows."""
-    n = model.theta0.shape[0]
-    size, _ = packed_layout(n, n_rows)
+    n, dim = model.theta0.shape[0], model.controller.normal.shape[0]
+    size, _ = packed_layout(n, n_rows, dim)
     return LoopState(
         theta=model.theta0.copy(),
         v=np.zeros(n),
-        sensed=np.zeros(4),
+        sensed=np.zeros(2 * dim),
         gains=np.array([model.kp0, model.kd0]),
         buf=np.zeros(size),
         fbuf=np.zeros(size),
-        sol=np.zeros(n + 2 + n_rows),
-        fsol=np.zeros(n + 2 + n_rows),
+        sol=np.zeros(n + dim + n_rows),
+        fsol=np.zeros(n + dim + n_rows),
         info=np.zeros(4),
         finfo=np.zeros(4),
         zeros=np.zeros(n),
@@ -110,15 +110,13 @@ SOLVERS: dict[str, CompiledSolver] = {
 }
 
 
-def unsupported_reason(backend: Backend, formulation: str, closest: bool) -> str | None:
+def unsupported_reason(backend: Backend, formulation: str) -> str | None:
     """Why ``backend`` runs on the Python engine here (``None``: it runs compiled)."""
     spec = SOLVERS.get(backend.name)
     if spec is None:
         return "no compiled solve"
     if formulation not in spec.formulations:
         return f"no compiled solve of the {formulation} formulation"
-    if closest:
-        return "key points of kind 'closest' are built in Python"
     return spec.functions().unavailable_reason(backend)
 
 
@@ -151,18 +149,18 @@ def _adapt():
     return compiled_law()
 
 
-def _views(buf, n, nr):  # pragma: no cover - compiled (inlined by numba as plain arithmetic)
+def _views(buf, n, nr, dim):  # pragma: no cover - compiled (inlined as plain arithmetic)
     """J, b0, ee, dist and x_d in a packed tick buffer (:func:`packed_layout`)."""
     oJ = PACKED_HEADER + n * n + n + nr * n + nr
-    ob = oJ + 2 * n
-    oee = ob + 2 + 2 * n
-    od = oee + 2
+    ob = oJ + dim * n
+    oee = ob + dim + 2 * n
+    od = oee + dim
     return (
-        buf[oJ:ob].reshape((2, n)),
-        buf[ob : ob + 2],
+        buf[oJ:ob].reshape((dim, n)),
+        buf[ob : ob + dim],
         buf[oee:od],
         buf[od : od + nr],
-        buf[od + nr : od + nr + 4],
+        buf[od + nr : od + nr + 2 * dim],
     )
 
 
@@ -182,10 +180,10 @@ def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: 
     passed ``stop_at`` [s] between ticks; ``stop_at <= 0``: no budget)."""
     cm = model.controller
     n = model.theta0.shape[0]
-    nr = (ls.buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 8) // (n + 2)  # as the build's
+    nr = cm.row_key.shape[0]
     dt = model.dt
     theta, sensed, gains, ts = ls.theta, ls.sensed, ls.gains, ls.ts
-    J, b0, ee, dist, xd = _views(ls.buf, n, nr)
+    J, b0, ee, dist, xd = _views(ls.buf, n, nr, cm.normal.shape[0])
     empty = ls.zeros[:0]
     geometry = (ee, sensed, J, b0, dist, xd)
     for k in range(k0, k1):

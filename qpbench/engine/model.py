@@ -25,7 +25,8 @@ class RunModel(NamedTuple):
     ``online``: the backend's answer is applied whatever its status (the network);
     ``deadline`` [s]: a later answer is dropped (``inf``: none). Contact surface (the
     environment's spring-damper): penetration ``normal . x - surface_offset`` [m],
-    ``stiffness`` [N/m], ``damping`` [N s/m]; ``tangent`` (2,) of the tracking error.
+    ``stiffness`` [N/m], ``damping`` [N s/m]; ``tangent`` (dim,) of a planar arm's tracking
+    error (zero on a spatial arm, whose error is the one in the contact plane).
     ``adaptive``: the law of section 4.4 runs with constants ``law``
     (:meth:`~qpbench.control.adaptive.AdaptiveImpedance.law`); ``kp0, kd0``: the first tick's
     coefficients. ``noise`` (ticks,) [N]: the force sensor's noise of every tick."""
@@ -75,7 +76,7 @@ def run_model(
         surface_offset=float(normal @ surface.point),
         stiffness=float(surface.stiffness),
         damping=float(surface.damping),
-        tangent=np.array([-normal[1], normal[0]]),
+        tangent=np.array([-normal[1], normal[0]]) if normal.size == 2 else np.zeros(3),
         adaptive=adaptive is not None,
         law=np.zeros(7) if adaptive is None else adaptive.law(),
         kp0=float(controller.kp),

@@ -31,11 +31,11 @@ def compiled_reset(name: str):
 
 def make_state(backend, model, n_rows: int):
     """The solve's state for ``backend`` (its profile and settings) on ``model``'s QPs: the
-    paper QP (2 equality rows) and the soft fallback's (none), ``n_rows`` obstacle rows."""
-    n = model.theta0.shape[0]
+    paper QP (dim equality rows) and the soft fallback's (none), ``n_rows`` obstacle rows."""
+    n, dim = model.theta0.shape[0], model.controller.normal.shape[0]
     if backend.name == "qpoases":
-        return _qpoases().make_state(n, 2, n_rows, backend.profile, **backend.settings)
-    return _daqp().make_state(n, 2, n_rows, backend.options())
+        return _qpoases().make_state(n, dim, n_rows, backend.profile, **backend.settings)
+    return _daqp().make_state(n, dim, n_rows, backend.options())
 
 
 def close_state(st) -> None:

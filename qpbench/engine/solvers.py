@@ -37,7 +37,7 @@ def make_state(backend, model, n_rows: int):
     n = model.theta0.shape[0]
     if backend.name == "noop" or backend.name == "pinv":
         return (np.zeros(1),)
-    me = 0 if model.soft else 2
+    me = 0 if model.soft else model.controller.normal.shape[0]
     prm = backend._prm.copy()
     prm[nk.STATE_ME] = me
     size = n + me + n_rows

@@ -166,6 +166,18 @@ def _mark_closest_approach(ax, log: pd.DataFrame, scenario: Scenario, arm, keys,
     ax.scatter([q[0]], [q[1]], zorder=6, label=label, **ring)
 
 
+def check_drawable(scenario: Scenario, key: str) -> None:
+    """A :class:`~qpbench.exceptions.ParamError` naming ``key`` when ``scenario``'s arm is not
+    planar: the pictures here are of the plane."""
+    from ..exceptions import ParamError
+
+    if scenario.make_arm().dim != 2:
+        raise ParamError(
+            f"draws a planar arm; {scenario.name}'s robot is spatial ({scenario.spec.robot.kind})",
+            key=key,
+        )
+
+
 def draw_snapshot(
     scenario: Scenario,
     log: pd.DataFrame,
@@ -180,6 +192,7 @@ def draw_snapshot(
     its path and distance line take (``None``: grey)."""
     from .loop_figure import has_distance
 
+    check_drawable(scenario, "scenario")
     arm, keys = scenario.make_arm(), scenario.make_key_points()
     surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
     theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
@@ -283,6 +296,7 @@ def animate(
     path = Path(path)
     check_animation(path, fps, speed)
 
+    check_drawable(scenario, "scenario")
     arm, keys = scenario.make_arm(), scenario.make_key_points()
     surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
     theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)

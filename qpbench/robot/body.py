@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .environment import ContactSurface
-from .kinematics import PlanarArm
+from .kinematics import Arm
 from .obstacles import Obstacle
 from .obstacles.line import LineObstacle
 
@@ -75,7 +75,7 @@ class BodyClearance(NamedTuple):
 
 
 def body_clearance(
-    arm: PlanarArm,
+    arm: Arm,
     theta: np.ndarray,
     t: np.ndarray,
     obstacles: list[Obstacle],
@@ -126,7 +126,7 @@ class BodyCrossings(NamedTuple):
 
 
 def body_crossings(
-    arm: PlanarArm,
+    arm: Arm,
     theta: np.ndarray,
     t: np.ndarray,
     dt: float,
@@ -208,7 +208,7 @@ def _motion_bounds(arm, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``R_ji = sum_{j<=k<=i} l_k``, so ``V_i = sum_{j<=i} |v_j| R_ji`` and ``A_i <= (sum_{j<=i}
     |v_j|) V_i`` (each second derivative of a point is at most the reach of the later joint)."""
     lengths = np.asarray(arm.lengths, dtype=float)
-    if isinstance(arm, PlanarArm):
+    if arm.dim == 2:  # a planar chain (:func:`~qpbench.robot.chain.planar_chain`)
         w = np.cumsum(v, axis=1)  # absolute angular speed of each link
         return np.cumsum(lengths * np.abs(w), axis=1), np.cumsum(lengths * w**2, axis=1)
     # R[j, i] = sum_{j<=k<=i} l_k for j <= i, else 0

@@ -1,9 +1,10 @@
 """The robot's surroundings: the contact surface (paper sections 2.1, 4); the obstacles live in
 :mod:`qpbench.robot.obstacles`, one module per kind.
 
-Contact surface: a line through ``point`` with unit normal ``normal`` (the pressing direction);
-penetration ``delta = n . (x - point)``; a spring-damper force while penetrating (paper eq. 3
-read as the environment's law; computed by :mod:`qpbench.sim.tick_kernel`)::
+Contact surface: a line (planar arm) or a plane (spatial arm) through ``point`` with unit
+normal ``normal`` (the pressing direction); penetration ``delta = n . (x - point)``; a
+spring-damper force while penetrating (paper eq. 3 read as the environment's law; computed by
+:mod:`qpbench.sim.tick_kernel`)::
 
     F = max(0, Kp_env delta + Kd_env deltadot)   if delta > 0, else 0     [N]
 """
@@ -54,10 +55,10 @@ __all__ = [
 ]
 
 
-def _vec2(value, key: str) -> np.ndarray:
+def _vector(value, key: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
-    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
-        raise InputError(f"expected two finite numbers, got {value!r}", key=key)
+    if arr.shape not in ((2,), (3,)) or not np.all(np.isfinite(arr)):
+        raise InputError(f"expected two or three finite numbers, got {value!r}", key=key)
     return arr
 
 
@@ -69,17 +70,17 @@ def _not_negative(value, key: str, unit: str, strict: bool = False) -> float:
 
 
 def _unit(value, key: str) -> np.ndarray:
-    arr = _vec2(value, key)
-    norm = math.hypot(arr[0], arr[1])
+    arr = _vector(value, key)
+    norm = math.hypot(*arr)
     if norm < 1e-12:
         raise InputError(f"a direction must not be zero, got {value!r}", key=key)
     return arr / norm
 
 
 class ContactSurface:
-    """A line the end effector presses on (paper section 2.1, Figure 1): ``point`` [m], pressing
-    ``normal`` (normalised here), ``stiffness`` ``Kp_env`` [N/m], ``damping`` ``Kd_env``
-    [N s/m], force-sensor noise ``noise_std`` [N] drawn from ``seed``."""
+    """A line or plane the end effector presses on (paper section 2.1, Figure 1): ``point`` [m],
+    pressing ``normal`` (normalised here; both of the arm's dim, 2 or 3), ``stiffness``
+    ``Kp_env`` [N/m], ``damping`` ``Kd_env`` [N s/m], force-sensor noise ``noise_std`` [N] drawn from ``seed``."""
 
     def __init__(
         self,
@@ -90,7 +91,7 @@ class ContactSurface:
         noise_std: float = 0.0,
         seed: int | None = 0,
     ):
-        self.point = _vec2(point, "contact.point")
+        self.point = _vector(point, "contact.point")
         self.normal = _unit(normal, "contact.normal")
         self.stiffness = _not_negative(stiffness, "contact.stiffness", "[N/m]", strict=True)
         self.damping = _not_negative(damping, "contact.damping", "[N s/m]")

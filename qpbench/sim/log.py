@@ -3,9 +3,10 @@
 =================== ===========================================================
 t                   time [s]
 theta_i, v_i        joint angles [rad] and commanded velocities [rad/s]
-ee_x, ee_y          end-effector position [m]
-xd_x, xd_y          desired position x_d(t) [m]
-tracking_error      tangential error t . (x - x_d) [m], t the surface tangent
+ee_x, ee_y, [ee_z]  end-effector position [m] (ee_z: a spatial arm's)
+xd_x, xd_y, [xd_z]  desired position x_d(t) [m]
+tracking_error      planar arm: tangential error t . (x - x_d) [m], t the surface
+                    tangent; spatial arm: |x - x_d| within the contact plane [m]
 force               measured contact force [N]; force_error = force - Fd [N]
 d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
                     point cloud's points; link radius subtracted)
@@ -29,7 +30,7 @@ fallback_build_time_s, fallback_solve_time_s
 tick_time_s         the whole tick [s]: build, solve, fallback, sensing, plant, log row
 solver_time_s       the solver's own reported time for the solve and the fallback's [s]
                     (NaN: none); all times on one clock (docs/methodology.md)
-y_0, y_1            equality duals of the applied solution (paper formulation)
+y_0, y_1, [y_2]     equality duals of the applied solution (paper formulation)
 z_max               largest inequality (obstacle row) dual
 kp_hat, kd_hat      interaction coefficients the tick's QP used
 =================== ===========================================================
@@ -45,8 +46,8 @@ import pandas as pd
 from ..statuses import TICK_STATUSES
 
 T = "t"
-EE_X, EE_Y = "ee_x", "ee_y"
-XD_X, XD_Y = "xd_x", "xd_y"
+EE_X, EE_Y, EE_Z = "ee_x", "ee_y", "ee_z"
+XD_X, XD_Y, XD_Z = "xd_x", "xd_y", "xd_z"
 TRACKING_ERROR = "tracking_error"
 FORCE = "force"
 FORCE_ERROR = "force_error"
@@ -71,7 +72,7 @@ TIME_COLUMNS = (
     FALLBACK_SOLVE_TIME,
     TICK_TIME,
 )
-Y_0, Y_1 = "y_0", "y_1"
+Y_0, Y_1, Y_2 = "y_0", "y_1", "y_2"
 Z_MAX = "z_max"
 KP_HAT, KD_HAT = "kp_hat", "kd_hat"
 D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE = "d_body_min", "d_body_link", "d_body_obstacle"
@@ -129,16 +130,21 @@ def distance_columns(frame: pd.DataFrame) -> list[str]:
     ]
 
 
-def float_columns(n: int, obstacle_columns: list[tuple[str, str]]) -> list[str]:
+def float_columns(n: int, obstacle_columns: list[tuple[str, str]], dim: int = 2) -> list[str]:
     """The float block the tick kernel fills, in order (every column but ``status``), for ``n``
-    joints and the ``(key point, obstacle)`` of each distance column."""
+    joints, the ``(key point, obstacle)`` of each distance column and a task of ``dim`` axes
+    (3: ``ee_z``, ``xd_z``, ``y_2`` too)."""
+    middle, tail = list(_MIDDLE), list(_TAIL)
+    if dim == 3:
+        middle[:4] = [EE_X, EE_Y, EE_Z, XD_X, XD_Y, XD_Z]
+        tail.insert(tail.index(Y_1) + 1, Y_2)
     return (
         [T]
         + theta_columns(n)
         + velocity_columns(n)
-        + list(_MIDDLE)
+        + middle
         + [distance_column(a, o) for a, o in obstacle_columns]
-        + list(_TAIL)
+        + tail
     )
 
 

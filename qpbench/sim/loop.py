@@ -241,7 +241,7 @@ class _Run:
         if why is None and keep_every is not None:
             why = "the tick QPs are kept (every, dump)"
         if why is None:
-            why = compiled.unsupported_reason(backend, formulation, ctrl.closest)
+            why = compiled.unsupported_reason(backend, formulation)
         self.engine, self.engine_note = ("python", why) if why else ("compiled", None)
         self.wall = 0.0
         self._post_kernel = None

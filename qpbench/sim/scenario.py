@@ -24,13 +24,14 @@ import numpy as np
 from ..exceptions import InputError, ScenarioError, did_you_mean
 from ..robot.body import contact_obstacles
 from ..robot.environment import ContactSurface
-from ..robot.kinematics import KeyPoints, PlanarArm, closest_key_points, default_key_points
+from ..robot.kinematics import Arm, KeyPoints, closest_key_points, default_key_points
 from ..robot.obstacles import Obstacle
 from ..robot.obstacles import make as make_obstacle
 from .scenario_schema import (
     OPTIONAL_TABLES,
     ScenarioSpec,
     check_simulation,
+    robot_chain,
     validate,
     with_simulation,
 )
@@ -111,14 +112,17 @@ class Scenario:
         check_simulation(spec, self.path or "<override>", tuple(self.overrides))
         return replace(self, spec=spec)
 
-    def make_arm(self) -> PlanarArm:
-        return PlanarArm(self.spec.robot.link_lengths)
+    def make_arm(self) -> Arm:
+        """The robot (``[robot]``: its kind's chain, with the limits the file gives)."""
+        return Arm(robot_chain(self.spec.robot))
 
     def make_key_points(self) -> KeyPoints:
-        kp, n = self.spec.key_points, len(self.spec.robot.link_lengths)
+        kp, arm = self.spec.key_points, self.make_arm()
         if kp.kind == "closest":
-            return closest_key_points(n, kp.link_radius)
-        return default_key_points(n, kp.points_per_link, kp.include_joints, kp.link_radius)
+            return closest_key_points(arm.n, kp.link_radius)
+        return default_key_points(
+            arm.n, kp.points_per_link, kp.include_joints, kp.link_radius, lengths=arm.lengths
+        )
 
     def make_path(self) -> CosinePath | PolylinePath:
         from ..control.terms import CosinePath, PolylinePath
@@ -142,16 +146,16 @@ class Scenario:
         from ..control.controller import Controller
         from ..control.terms import EscapeVelocityLimits, ImpedanceTask
 
-        r, c = self.spec.robot, self.spec.controller
+        r, c, arm = self.spec.robot, self.spec.controller, self.make_arm()
         task = ImpedanceTask(self.make_path(), self.normal, c.desired_force)
-        limits = EscapeVelocityLimits(
-            r.theta_min, r.theta_max, r.velocity_min, r.velocity_max, c.alpha
-        )
+        chain = arm.model
+        v_min = -chain.v_max if r.velocity_min is None else r.velocity_min
+        limits = EscapeVelocityLimits(chain.q_min, chain.q_max, v_min, chain.v_max, c.alpha)
         obstacles = self.make_obstacles()
         gains = {key: getattr(c, key) for key in ("k", "d_safe", "rho", "kp", "kd")}
         exempt = contact_obstacles(obstacles, self.make_surface())
         return Controller(
-            self.make_arm(), self.make_key_points(), task, limits, obstacles, **gains, exempt=exempt
+            arm, self.make_key_points(), task, limits, obstacles, **gains, exempt=exempt
         )
 
     def make_adaptive(self) -> AdaptiveImpedance | None:

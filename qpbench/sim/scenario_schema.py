@@ -31,8 +31,10 @@ from pydantic import (
     ValidationError,
 )
 
-from ..exceptions import ScenarioError
+from ..exceptions import InputError, ScenarioError
+from ..robot.chain import ChainModel
 from ..robot.obstacles import kinds as obstacle_kinds
+from ..robot.presets import make_chain
 from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 
@@ -67,10 +69,12 @@ def _vector(size: int | None = None, lower: float | None = None):
 
 
 def _points(v):
-    ok = isinstance(v, list) and v
-    ok = ok and all(isinstance(p, list) and len(p) == 2 and all(map(finite_number, p)) for p in v)
+    ok = isinstance(v, list) and v and isinstance(v[0], list) and len(v[0]) in (2, 3)
+    ok = ok and all(
+        isinstance(p, list) and len(p) == len(v[0]) and all(map(finite_number, p)) for p in v
+    )
     if not ok:
-        raise ValueError(f"expected a list of [x, y] pairs, got {v!r}")
+        raise ValueError(f"expected a list of [x, y] or [x, y, z] points, got {v!r}")
     return np.array(v, dtype=float)
 
 
@@ -78,7 +82,6 @@ _AS_LIST = PlainSerializer(lambda a: a.tolist())
 Num = Annotated[float, BeforeValidator(_number)]
 Int = Annotated[int, BeforeValidator(_integer)]
 Vec = Annotated[np.ndarray, BeforeValidator(_vector()), _AS_LIST]
-Vec2 = Annotated[np.ndarray, BeforeValidator(_vector(2)), _AS_LIST]
 Points = Annotated[np.ndarray, BeforeValidator(_points), _AS_LIST]
 
 
@@ -93,11 +96,12 @@ def _tag(model: type[BaseModel]) -> str:
     return model.model_fields["kind"].annotation.__args__[0]
 
 
-def _by_kind(*models: type[BaseModel]):
-    """A union of tables picked by their ``kind`` (``[path]``, an obstacle)."""
+def _by_kind(*models: type[BaseModel], default: str | None = None):
+    """A union of tables picked by their ``kind`` (``[robot]``, ``[path]``, an obstacle); a
+    table without one is of kind ``default``."""
 
     def kind_of(v):
-        kind = v.get("kind") if isinstance(v, dict) else getattr(v, "kind", None)
+        kind = v.get("kind", default) if isinstance(v, dict) else getattr(v, "kind", None)
         return kind if isinstance(kind, str) else None
 
     members = [Annotated[m, Tag(_tag(m))] for m in models]
@@ -115,16 +119,49 @@ class ScenarioTable(Table):
     in_run: StrictBool = True
 
 
-class RobotTable(Table):
-    """``[robot]``: a planar chain of ``link_lengths`` [m]; start ``theta0``, limits
-    ``theta_min``, ``theta_max`` [rad], ``velocity_min``, ``velocity_max`` [rad/s], one per joint."""
+class PlanarRobotTable(Table):
+    """``[robot]`` of kind ``planar`` (the default): a planar chain of ``link_lengths`` [m];
+    start ``theta0``, limits ``theta_min``, ``theta_max`` [rad], ``velocity_min``,
+    ``velocity_max`` [rad/s], one per joint."""
 
+    kind: Literal["planar"] = "planar"
     link_lengths: Vec
     theta0: Vec
     theta_min: Vec
     theta_max: Vec
     velocity_min: Vec
     velocity_max: Vec
+
+
+class PandaRobotTable(Table):
+    """``[robot]`` of kind ``panda`` (``iiwa14``: the same keys): the preset's chain
+    (:mod:`qpbench.robot.presets`) from ``theta0`` [rad]; its limits unless given here
+    (``velocity_min`` defaults to ``-velocity_max``)."""
+
+    kind: Literal["panda"]
+    theta0: Vec
+    theta_min: Vec | None = None
+    theta_max: Vec | None = None
+    velocity_min: Vec | None = None
+    velocity_max: Vec | None = None
+
+
+class Iiwa14RobotTable(PandaRobotTable):
+    kind: Literal["iiwa14"]
+
+
+class UrdfRobotTable(PandaRobotTable):
+    """``[robot]`` of kind ``urdf``: the chain from the root of URDF ``file`` to ``ee_frame``
+    (read by pinocchio), keys as :class:`PandaRobotTable`'s."""
+
+    kind: Literal["urdf"]
+    file: StrictStr
+    ee_frame: StrictStr
+
+
+RobotTable = _by_kind(
+    PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, UrdfRobotTable, default="planar"
+)
 
 
 class KeyPointsTable(Table):
@@ -139,17 +176,18 @@ class KeyPointsTable(Table):
 
 
 class CosinePathTable(Table):
-    """``x_d(t) = centre + amplitude cos(omega t + phase)`` per axis: [m], [m], [rad/s], [rad]."""
+    """``x_d(t) = centre + amplitude cos(omega t + phase)`` per axis (the robot's dim):
+    [m], [m], [rad/s], [rad]."""
 
     kind: Literal["cosine"] = "cosine"
-    centre: Vec2
-    amplitude: Vec2
-    omega: Vec2
-    phase: Vec2
+    centre: Vec
+    amplitude: Vec
+    omega: Vec
+    phase: Vec
 
 
 class PolylinePathTable(Table):
-    """``x_d(t)`` through ``points`` [m] at ``times`` [s]."""
+    """``x_d(t)`` through ``points`` [m] (of the robot's dim) at ``times`` [s]."""
 
     kind: Literal["polyline"] = "polyline"
     times: Vec
@@ -157,11 +195,11 @@ class PolylinePathTable(Table):
 
 
 class ContactTable(Table):
-    """``[contact]``: a surface ``point`` [m] and pressing ``normal``, ``stiffness`` [N/m],
+    """``[contact]``: a surface ``point`` [m] and pressing ``normal`` (the robot's dim), ``stiffness`` [N/m],
     ``damping`` [N s/m], force-sensor noise ``force_noise_std`` [N] drawn from ``noise_seed``."""
 
-    point: Vec2
-    normal: Vec2
+    point: Vec
+    normal: Vec
     stiffness: Num
     damping: Num
     force_noise_std: Num
@@ -243,7 +281,7 @@ def _key(loc: tuple) -> str:
     for i, part in enumerate(loc):
         if isinstance(part, int):
             out += f"[{part}]"
-        elif i > 0 and (loc[i - 1] == "path" or isinstance(loc[i - 1], int)) and i + 1 < len(loc):
+        elif i > 0 and (loc[i - 1] in _UNIONS or isinstance(loc[i - 1], int)) and i + 1 < len(loc):
             continue  # the tag pydantic puts in the location of a union's member
         else:
             out += f".{part}" if out else str(part)
@@ -264,9 +302,16 @@ def _expected(loc: tuple) -> list[str]:
     return list(model.model_fields)
 
 
+_ROBOTS = (PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, UrdfRobotTable)
 _TAGGED = {"cosine": CosinePathTable, "polyline": PolylinePathTable}
+_TAGGED.update((_tag(m), m) for m in _ROBOTS)
 _TAGGED.update((kind, cls.Schema) for kind, cls in obstacle_kinds().items())
-_KINDS = {"path": ("cosine", "polyline"), "obstacles": tuple(obstacle_kinds())}
+_KINDS = {
+    "path": ("cosine", "polyline"),
+    "robot": tuple(map(_tag, _ROBOTS)),
+    "obstacles": tuple(obstacle_kinds()),
+}
+_UNIONS = ("path", "robot")
 
 
 def _error(exc: ValidationError, file) -> ScenarioError:
@@ -346,49 +391,83 @@ def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
     return out
 
 
+def robot_chain(robot) -> ChainModel:
+    """The chain of a ``[robot]`` table (:func:`~qpbench.robot.presets.make_chain`), with the
+    limits the table gives (a preset's own otherwise)."""
+    own = {"planar": ("link_lengths",), "urdf": ("file", "ee_frame")}.get(robot.kind, ())
+    fields = {key: getattr(robot, key) for key in own}
+    for key, name in (("q_min", "theta_min"), ("q_max", "theta_max"), ("v_max", "velocity_max")):
+        if getattr(robot, name) is not None:
+            fields[key] = getattr(robot, name)
+    return make_chain(robot.kind, **fields)
+
+
 def _check_across_keys(spec: ScenarioSpec, file) -> None:
-    """One value per link, ``theta_min < theta0 < theta_max``,
-    ``velocity_min <= 0 <= velocity_max``; obstacle names unique."""
+    """One value per joint, ``theta_min < theta0 < theta_max``,
+    ``velocity_min <= 0 <= velocity_max``; vectors of the robot's dim; obstacle kinds of its
+    dim; obstacle names unique."""
     r = spec.robot
-    n = r.link_lengths.size
+
+    def fail(msg, key):
+        raise ScenarioError(msg, path=file, key=key)
+
+    if r.kind == "planar":
+        n = r.link_lengths.size
+    else:
+        try:
+            n = robot_chain(r.model_copy(update={"theta_min": None, "theta_max": None,
+                                                 "velocity_max": None})).n  # fmt: skip
+        except InputError as exc:
+            raise ScenarioError(exc.message, path=exc.path or file, key=exc.key) from None
     for key in ("theta0", "theta_min", "theta_max", "velocity_min", "velocity_max"):
-        if getattr(r, key).size != n:
-            raise ScenarioError(
-                f"expected {n} values (one per link), got {getattr(r, key).size}",
-                path=file,
-                key=f"robot.{key}",
-            )
-    if np.any(r.theta_min >= r.theta_max):
-        raise ScenarioError("every theta_min must be < theta_max", path=file, key="robot.theta_min")
-    outside = np.flatnonzero((r.theta0 < r.theta_min) | (r.theta0 > r.theta_max))
+        value = getattr(r, key)
+        if value is not None and value.size != n:
+            fail(f"expected {n} values (one per joint), got {value.size}", f"robot.{key}")
+    try:
+        chain = robot_chain(r)
+    except InputError as exc:
+        raise ScenarioError(exc.message, path=exc.path or file, key=exc.key) from None
+    outside = np.flatnonzero((r.theta0 < chain.q_min) | (r.theta0 > chain.q_max))
     if outside.size:
         i = int(outside[0])
-        raise ScenarioError(
-            f"theta0[{i}] = {r.theta0[i]} rad is outside [{r.theta_min[i]}, {r.theta_max[i]}]",
-            path=file,
-            key="robot.theta0",
+        fail(
+            f"theta0[{i}] = {r.theta0[i]} rad is outside [{chain.q_min[i]}, {chain.q_max[i]}]",
+            "robot.theta0",
         )
-    vmin, vmax = r.velocity_min, r.velocity_max
-    if not (np.all(vmin <= 0) and np.all(vmax >= 0) and np.all(vmin < vmax)):
-        raise ScenarioError(
+    vmin = -chain.v_max if r.velocity_min is None else r.velocity_min
+    if not (np.all(vmin <= 0) and np.all(vmin < chain.v_max)):
+        fail(
             "need velocity_min <= 0 <= velocity_max and velocity_min < velocity_max [rad/s]",
-            path=file,
-            key="robot.velocity_min",
+            "robot.velocity_min",
         )
+    dim = chain.dim
+    vectors = [("contact.point", spec.contact.point), ("contact.normal", spec.contact.normal)]
+    if spec.path.kind == "cosine":
+        vectors += [
+            (f"path.{k}", getattr(spec.path, k))
+            for k in CosinePathTable.model_fields
+            if k != "kind"
+        ]
+    else:
+        vectors.append(("path.points", spec.path.points[0]))
+    for key, value in vectors:
+        if value.size != dim:
+            fail(f"expected {dim} numbers (the robot's dim), got {value.size}", key)
+    if dim == 3 and spec.adaptive.enabled:
+        fail("the adaptive law runs on a planar arm only", "adaptive.enabled")
     names: list[str] = []
-    planar = [kind for kind, cls in obstacle_kinds().items() if cls.DIM == 2]
+    kinds = [kind for kind, cls in obstacle_kinds().items() if cls.DIM == dim]
     for i, o in enumerate(spec.obstacles):
-        if o.kind not in planar:  # the arm and its controller are planar
-            raise ScenarioError(
-                f"a spatial kind; a planar scenario takes one of: {', '.join(planar)}",
-                path=file,
-                key=f"obstacles[{i}].kind",
+        if o.kind not in kinds:
+            arm = "planar" if dim == 2 else "spatial"
+            fail(
+                f"a {arm} arm takes the {arm} kinds only: {', '.join(kinds)}",
+                f"obstacles[{i}].kind",
             )
         if not o.name or o.name in names:
-            raise ScenarioError(
+            fail(
                 f"obstacle names must be non-empty and unique, got {o.name!r}",
-                path=file,
-                key=f"obstacles[{i}].name",
+                f"obstacles[{i}].name",
             )
         names.append(o.name)
 
@@ -454,7 +533,7 @@ OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 
 def filled(spec: ScenarioSpec) -> dict:
     """The scenario as TOML-ready tables, every default filled in (vectors as lists)."""
-    plain = spec.model_dump(mode="json")
+    plain = spec.model_dump(mode="json", exclude_none=True)  # a preset's own limits: unset
     out = {"obstacles": plain["obstacles"]}
     out.update((table, plain[table]) for table in _ORDER)
     out["rnn"] = plain["rnn"]

@@ -24,10 +24,10 @@ APPLIED, FALLBACK, ZERO = 0, 1, 2
 
 class LogColumns(NamedTuple):
     """Indices of the tick log's float columns (:func:`qpbench.sim.log.float_columns`) the
-    kernels write: the first of ``theta_i``, ``v_i``; ``ee`` the first of ``ee_x, ee_y, xd_x,
-    xd_y, tracking_error``; ``force`` (then ``force_error``); ``d`` the first distance column,
-    whose points lie in ``dist_start[c]:dist_stop[c]`` of the flat distances (then ``d_min``,
-    ``v_sq``, ``task_residual``); ``y`` the first of ``y_0, y_1``."""
+    kernels write: the first of ``theta_i``, ``v_i``; ``ee`` the first of ``ee_x, ee_y, [ee_z],
+    xd_x, xd_y, [xd_z], tracking_error``; ``force`` (then ``force_error``); ``d`` the first
+    distance column, whose points lie in ``dist_start[c]:dist_stop[c]`` of the flat distances
+    (then ``d_min``, ``v_sq``, ``task_residual``); ``y`` the first of ``y_0, y_1, [y_2]``."""
 
     t: int
     theta: int
@@ -54,7 +54,7 @@ class LogColumns(NamedTuple):
 def log_columns(controller: Controller) -> tuple[list[str], LogColumns]:
     """The tick log's float columns for ``controller`` and their :class:`LogColumns`."""
     obstacle_cols = controller.obstacle_columns()
-    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in obstacle_cols])
+    cols = log.float_columns(controller.n, [(a, o) for a, o, _ in obstacle_cols], controller.dim)
     at = {c: i for i, c in enumerate(cols)}.__getitem__
     layout = LogColumns(
         t=at(log.T),
@@ -96,9 +96,12 @@ def _post_py(
     :class:`~qpbench.engine.model.RunModel`, ``cols``: :class:`LogColumns`).
 
     Returns the noise-free contact force [N] (-1.0, nothing written, when ``v`` is not finite);
-    leaves the end-effector position [m] and velocity [m/s] in ``sensed``.
+    leaves the end-effector position [m] and velocity [m/s] in ``sensed`` (2 dim,). The
+    tracking error is the signed tangential error ``t . (x - x_d)`` on a planar arm and the
+    length of the error's component in the contact plane on a spatial one [m].
     """
     n = theta.shape[0]
+    dim = ee.shape[0]
     for i in range(n):
         if not math.isfinite(v[i]):
             return -1.0
@@ -107,9 +110,8 @@ def _post_py(
     row[cols.t] = t
     row[cols.fallback] = 1.0 if mode == FALLBACK else 0.0
     row[cols.zero] = 1.0 if mode == ZERO else 0.0
-    if y.shape[0] == 2:
-        row[cols.y] = y[0]
-        row[cols.y + 1] = y[1]
+    for i in range(y.shape[0]):
+        row[cols.y + i] = y[i]
     if z.shape[0] > 0:
         zmax = z[0]
         for i in range(1, z.shape[0]):
@@ -118,18 +120,19 @@ def _post_py(
         row[cols.z_max] = zmax
     row[cols.kp] = kp
     row[cols.kd] = kd
-    # sense: velocity by finite difference, spring-damper force
-    xd0 = xd1 = 0.0
-    if k > 0:
-        xd0 = (ee[0] - sensed[0]) / dt
-        xd1 = (ee[1] - sensed[1]) / dt
-    sensed[0], sensed[1], sensed[2], sensed[3] = ee[0], ee[1], xd0, xd1
-    # the contact force law (noise-free)
-    nx, ny = model.controller.normal[0], model.controller.normal[1]
-    delta = nx * ee[0] + ny * ee[1] - model.surface_offset
+    # sense: velocity by finite difference, spring-damper force along the normal
+    normal = model.controller.normal
+    delta = 0.0
+    ndot = 0.0
+    for i in range(dim):
+        xdot = (ee[i] - sensed[i]) / dt if k > 0 else 0.0
+        sensed[i], sensed[dim + i] = ee[i], xdot
+        delta += normal[i] * ee[i]
+        ndot += normal[i] * xdot
+    delta -= model.surface_offset
     force = 0.0
     if delta > 0.0:
-        force = model.stiffness * delta + model.damping * (nx * xd0 + ny * xd1)
+        force = model.stiffness * delta + model.damping * ndot
         if force < 0.0:
             force = 0.0
     row[cols.force] = force
@@ -141,16 +144,23 @@ def _post_py(
         vsq += v[i] * v[i]
         theta[i] += dt * v[i]
     c_ee = cols.ee
-    row[c_ee] = ee[0]
-    row[c_ee + 1] = ee[1]
-    row[c_ee + 2] = xd[0]
-    row[c_ee + 3] = xd[1]
-    tangent = model.tangent
-    row[c_ee + 4] = tangent[0] * (ee[0] - xd[0]) + tangent[1] * (ee[1] - xd[1])
-    r0, r1 = b0[0], b0[1]
-    for j in range(n):
-        r0 -= J[0, j] * v[j]
-        r1 -= J[1, j] * v[j]
+    along = 0.0  # tangential error (dim 2), the error along the normal (dim 3)
+    res = 0.0
+    for i in range(dim):
+        row[c_ee + i] = ee[i]
+        row[c_ee + dim + i] = xd[i]
+        along += (model.tangent[i] if dim == 2 else normal[i]) * (ee[i] - xd[i])
+        r = b0[i]
+        for j in range(n):
+            r -= J[i, j] * v[j]
+        res += r * r
+    if dim == 3:
+        plane = 0.0
+        for i in range(3):
+            e = ee[i] - xd[i] - along * normal[i]
+            plane += e * e
+        along = math.sqrt(plane)
+    row[c_ee + 2 * dim] = along
     ncol = cols.dist_start.shape[0]
     dmin = np.inf
     for c in range(ncol):
@@ -163,5 +173,5 @@ def _post_py(
             dmin = m
     row[cols.d + ncol] = dmin if ncol > 0 else np.nan
     row[cols.d + ncol + 1] = vsq
-    row[cols.d + ncol + 2] = math.sqrt(r0 * r0 + r1 * r1)
+    row[cols.d + ncol + 2] = math.sqrt(res)
     return force
