@@ -46,6 +46,13 @@ def test_engines_give_the_same_run(scenario, backend):
     engines_agree(scenario, backend, duration=2.0)
 
 
+@pytest.mark.parametrize("backend", ["daqp", "qpoases", "pinv"])
+def test_engines_give_the_same_spatial_run(backend):
+    """The Panda of ``panda_table``: 3 task rows, closest-point rows against a ball."""
+    summary = engines_agree("panda_table", backend, duration=3.0)
+    assert summary["ticks"] == 3000
+
+
 def test_engines_agree_with_the_paper_network_and_the_soft_formulation():
     engines_agree("narrow", "rnn", duration=1.0)
     engines_agree("wall", "rnn-tuned", duration=1.0, formulation="soft")

@@ -1,7 +1,7 @@
 """The paper's controller on a spatial arm (the shipped ``panda_table``): one tick's QP against an
 independent cvxpy model (the scenario file's numbers, Franka's Denavit-Hartenberg table and
-finite-difference Jacobians), the closed loop with an exact solver, both engines, the scenario's
-checks across keys and the command line."""
+finite-difference Jacobians), the closed loop with an exact solver, the scenario's
+checks across keys and the command line (both engines: tests/test_engines.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import qpsolvers
 from test_controller import file_tables
-from test_engines import engines_agree
 
 from qpbench.cli import main
 from qpbench.exceptions import ScenarioError
@@ -140,10 +139,6 @@ def test_panda_table_holds_d_safe_the_limits_the_force_and_the_path(run):
     radius = np.hypot(log["ee_x"].to_numpy()[after] - 0.5, log["ee_y"].to_numpy()[after])
     np.testing.assert_allclose(radius, 0.1, atol=1e-5)
     assert s["verdict"] == "ok" and s["key_point_rule"] == "held"
-
-
-def test_both_engines_give_the_same_spatial_run():
-    engines_agree("panda_table", "daqp", duration=4.0)
 
 
 def _edited(tmp_path, old, new):

@@ -121,7 +121,7 @@ class Controller:
         rows = [(i, p) for i, j in self.pairs for p in range(starts[j], starts[j + 1])]
         rows = np.array(rows, dtype=np.int64).reshape(-1, 2)
         path_kind, path_cosine, path_times, path_points = task.path.fields
-        whole = np.ones(len(key_points)) if self.closest else key_points.fracs
+        f1 = np.ones(len(key_points)) if self.closest else key_points.fracs
         f0 = np.zeros(len(key_points)) if self.closest else key_points.fracs
 
         def f64(a):
@@ -133,7 +133,7 @@ class Controller:
             data=chain_data(arm.model),
             key_link=np.ascontiguousarray(key_points.links, dtype=np.int64),
             key_f0=f64(f0),
-            key_f1=f64(whole),
+            key_f1=f64(f1),
             key_radius=float(key_points.radius),
             row_key=np.ascontiguousarray(rows[:, 0]),
             row_prim=np.ascontiguousarray(rows[:, 1]),

@@ -93,13 +93,11 @@ def _post_py(
     model, cols, theta, v, ee, sensed, J, b0, dist, xd, y, z, data, k, t, mode, kp, kd
 ):  # pragma: no cover - compiled
     """Log tick ``k`` into ``data[k]`` and advance the plant ``theta += dt v`` (``model``: the
-    :class:`~qpbench.engine.model.RunModel`, ``cols``: :class:`LogColumns`).
-
-    Returns the noise-free contact force [N] (-1.0, nothing written, when ``v`` is not finite);
-    leaves the end-effector position [m] and velocity [m/s] in ``sensed`` (2 dim,). The
-    tracking error is the signed tangential error ``t . (x - x_d)`` on a planar arm and the
-    length of the error's component in the contact plane on a spatial one [m].
-    """
+    :class:`~qpbench.engine.model.RunModel`, ``cols``: :class:`LogColumns`); returns the
+    noise-free contact force [N] (-1.0, nothing written, when ``v`` is not finite) and leaves
+    the end-effector position [m] and velocity [m/s] in ``sensed`` (2 dim,). The tracking
+    error [m]: ``t . (x - x_d)`` on a planar arm, ``|x - x_d|`` in the contact plane on a
+    spatial one."""
     n = theta.shape[0]
     dim = ee.shape[0]
     for i in range(n):
@@ -113,17 +111,12 @@ def _post_py(
     for i in range(y.shape[0]):
         row[cols.y + i] = y[i]
     if z.shape[0] > 0:
-        zmax = z[0]
-        for i in range(1, z.shape[0]):
-            if z[i] > zmax:
-                zmax = z[i]
-        row[cols.z_max] = zmax
+        row[cols.z_max] = np.max(z)
     row[cols.kp] = kp
     row[cols.kd] = kd
     # sense: velocity by finite difference, spring-damper force along the normal
     normal = model.controller.normal
-    delta = 0.0
-    ndot = 0.0
+    delta = ndot = 0.0
     for i in range(dim):
         xdot = (ee[i] - sensed[i]) / dt if k > 0 else 0.0
         sensed[i], sensed[dim + i] = ee[i], xdot
@@ -144,8 +137,7 @@ def _post_py(
         vsq += v[i] * v[i]
         theta[i] += dt * v[i]
     c_ee = cols.ee
-    along = 0.0  # tangential error (dim 2), the error along the normal (dim 3)
-    res = 0.0
+    along = res = 0.0  # along: the tangential error (dim 2), the error along the normal (dim 3)
     for i in range(dim):
         row[c_ee + i] = ee[i]
         row[c_ee + dim + i] = xd[i]
