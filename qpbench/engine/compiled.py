@@ -6,8 +6,8 @@ and log row (:mod:`qpbench.sim.tick_kernel`), the sensor noise drawn before the 
 adaptive law. The engine body (:func:`_run_py`) is compiled once per compiled ``solve``, with
 it and its ``reset`` bound (:func:`qpbench.native.compile_with`), so a C API call is a direct
 call; backends whose solve is one function choosing by its state (``noop``, ``pinv`` and the
-network; ``daqp`` and ``daqp-stateless``) share one engine, compiled once. The tick allocates
-nothing: its scratch is in the state and the tick buffer. A backend joins by a
+network; ``daqp`` and ``daqp-stateless``) share one engine, compiled once. The build and the
+step allocate nothing per tick (scratch in the state and the tick buffer). A backend joins by a
 :class:`CompiledSolver` in :data:`SOLVERS`.
 
 Times are read from ``CLOCK_MONOTONIC`` in compiled code (:func:`qpbench.native.clock`): the
