@@ -62,15 +62,7 @@ def compiled_path():
     [m, m/s] at ``t`` [s] of a path given as :class:`ControllerModel`'s ``path_*`` fields."""
     from ..native import compile_with
 
-    return compile_with(_desired_state_py, name="desired_state")
-
-
-@cache
-def compiled_rows_of():
-    """:func:`rows_of`, compiled to be inlined."""
-    from ..native import compile_with
-
-    return compile_with(rows_of, name="rows_of", inline="always")
+    return compile_with(_desired_state_py, name="desired_state", inline="always")
 
 
 @cache
@@ -81,12 +73,9 @@ def compiled_build_kernel():
 
     # inlined into the build (numba's IR): no call, no reference counts per tick
     helpers = {
-        "_desired_state_py": compile_with(
-            _desired_state_py, name="desired_state_inline", inline="always"
-        ),
+        "_desired_state_py": compiled_path(),
         "_chain_points": compile_with(_chain_points, name="chain_points", inline="always"),
         "_distance": compile_with(_distance, name="obstacle_distance", inline="always"),
-        "rows_of": compiled_rows_of(),
     }
     return compile_with(_build_kernel_py, helpers, name="build_tick")
 
@@ -99,11 +88,6 @@ def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
     sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows, 4, 4 * n + 4)
     ends = PACKED_HEADER + np.cumsum(sizes)
     return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes[:-1], ends))
-
-
-def rows_of(buf, n):  # pragma: no cover - compiled (inlined)
-    """The obstacle rows of a tick buffer of ``n`` joints (the sizes of :func:`packed_layout`)."""
-    return (buf.shape[0] - PACKED_HEADER - n * n - 9 * n - 12) // (n + 2)
 
 
 def _desired_state_py(kind, c, times, pts, t, out):  # pragma: no cover - compiled
@@ -188,7 +172,7 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     ``buf`` (layout of :func:`packed_layout`; ``soft``: the soft formulation) and write its
     header."""
     n = theta.shape[0]
-    nr = rows_of(buf, n)
+    nr = (buf.shape[0] - PACKED_HEADER - n * n - 9 * n - 12) // (n + 2)  # packed_layout's sizes
     oP = PACKED_HEADER
     oq = oP + n * n
     oG = oq + n

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from ..control.build_kernel import compiled_rows_of, packed_layout
+from ..control.build_kernel import packed_layout
 from ..native import clock, compile_with
 from ..packed import HEADER as PACKED_HEADER
 from ..sim.tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
 OPTIMAL, TIME_LIMIT, ERROR, INVALID = 0, 4, 5, 7
 
 # The functions :func:`_run_py` calls, bound in each compiled copy by :func:`engine_for`.
-solve = reset = now = build = post = adapt = rows_of = None
+solve = reset = now = build = post = adapt = None
 
 
 class LoopState(NamedTuple):
@@ -143,7 +143,6 @@ def _engine(solve, reset) -> Callable:
         "adapt": _adapt(),
         "_views": compile_with(_views, name="tick_views", inline="always"),
         "_finite": compile_with(_finite, name="all_finite", inline="always"),
-        "rows_of": compiled_rows_of(),
     }
     return compile_with(_run_py, bindings, name=f"engine_{solve.py_func.__name__.strip('_')}")
 
@@ -191,7 +190,7 @@ def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: 
     passed ``stop_at`` [s] between ticks; ``stop_at <= 0``: no budget)."""
     cm = model.controller
     n = model.theta0.shape[0]
-    nr = rows_of(ls.buf, n)
+    nr = ls.sol.shape[0] - n - 2  # obstacle rows: sol = [x; y (2); z]
     dt, deadline, noise, law = model.dt, model.deadline, model.noise, model.law
     online, soft, adaptive, fd = model.online, model.soft, model.adaptive, cm.desired_force
     theta, sensed, gains, ts, v, counts = ls.theta, ls.sensed, ls.gains, ls.ts, ls.v, ls.counts
