@@ -181,8 +181,8 @@ def _finite(x):  # pragma: no cover - compiled
     return True
 
 
-# Over 80 lines, kept whole on purpose: numba compiles it as one function, with the backend's
-# solve and reset, the clock, the build, the step and the adaptive law bound by engine_for().
+# Numba compiles it as one function, with the solve and reset, the clock, the build, the step
+# and the adaptive law bound by engine_for().
 def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: no cover - compiled
     """Run ticks ``k0 .. k1-1`` of ``model`` (state ``ls``, the backend's ``st`` and its
     fallback instance's ``fst``), writing rows
