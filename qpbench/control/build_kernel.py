@@ -62,7 +62,7 @@ def compiled_path():
     [m, m/s] at ``t`` [s] of a path given as :class:`ControllerModel`'s ``path_*`` fields."""
     from ..native import compile_with
 
-    return compile_with(_desired_state_py, name="desired_state")
+    return compile_with(_desired_state_py, name="desired_state", inline="always")
 
 
 @cache
@@ -71,20 +71,23 @@ def compiled_build_kernel():
     numba's cache) on the first call."""
     from ..native import compile_with
 
+    # inlined into the build (numba's IR): no call, no reference counts per tick
     helpers = {
         "_desired_state_py": compiled_path(),
-        "_chain_points": compile_with(_chain_points, name="chain_points"),
-        "_distance": compile_with(_distance, name="obstacle_distance"),
+        "_chain_points": compile_with(_chain_points, name="chain_points", inline="always"),
+        "_distance": compile_with(_distance, name="obstacle_distance", inline="always"),
     }
     return compile_with(_build_kernel_py, helpers, name="build_tick")
 
 
 def packed_layout(n: int, n_rows: int) -> tuple[int, tuple[slice, ...]]:
     """Size of a tick's buffer and the slices of its P, q, G, h, J, b, lb, ub, ee, dist and
-    ``x_d = (x_d, xdot_d)``, in the order :func:`_build_kernel_py` lays them out."""
-    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows, 4)
+    ``x_d = (x_d, xdot_d)``, in the order :func:`_build_kernel_py` lays them out; the buffer
+    ends with the build's scratch, so a tick allocates nothing."""
+    # scratch: joint positions px, py (n+1), link directions cs, sn (n), a direction u (2)
+    sizes = (n * n, n, n_rows * n, n_rows, 2 * n, 2, n, n, 2, n_rows, 4, 4 * n + 4)
     ends = PACKED_HEADER + np.cumsum(sizes)
-    return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes, ends))
+    return int(ends[-1]), tuple(slice(int(e - s), int(e)) for s, e in zip(sizes[:-1], ends))
 
 
 def _desired_state_py(kind, c, times, pts, t, out):  # pragma: no cover - compiled
@@ -169,7 +172,7 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     ``buf`` (layout of :func:`packed_layout`; ``soft``: the soft formulation) and write its
     header."""
     n = theta.shape[0]
-    nr = (buf.shape[0] - PACKED_HEADER - n * n - 5 * n - 8) // (n + 2)
+    nr = (buf.shape[0] - PACKED_HEADER - n * n - 9 * n - 12) // (n + 2)  # packed_layout's sizes
     oP = PACKED_HEADER
     oq = oP + n * n
     oG = oq + n
@@ -203,11 +206,10 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     ee = buf[oee:od]
     dist = buf[od:oxd]
     xd = buf[oxd : oxd + 4]
+    o = oxd + 4
+    px, py = buf[o : o + n + 1], buf[o + n + 1 : o + 2 * n + 2]
+    cs, sn, u = buf[o + 2 * n + 2 : o + 3 * n + 2], buf[o + 3 * n + 2 : o + 4 * n + 2], buf[-2:]
     _desired_state_py(cm.path_kind, cm.path_cosine, cm.path_times, cm.path_points, t, xd)
-    px = np.empty(n + 1)
-    py = np.empty(n + 1)
-    cs = np.empty(n)
-    sn = np.empty(n)
     _chain_points(cm, theta, px, py, cs, sn)
     ex = px[n]
     ey = py[n]
@@ -247,7 +249,6 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     # obstacle rows, eqs. 8-10 with the velocity-damper signs
     obstacles = cm.obstacles
     nb = obstacles.shape[0]
-    u = np.empty(2)
     for i in range(cm.key_link.shape[0]):
         L = cm.key_link[i]
         f = cm.key_frac[i] * cm.lengths[L]
