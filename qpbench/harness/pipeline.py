@@ -51,7 +51,7 @@ EVERY = 10
 BENCH_EVERY = 10
 #: The most wall time a closed-loop run may take [s] (``--run-budget``).
 RUN_BUDGET_S = 10.0
-#: A backend's closed-loop budget is this many times the run its bench median predicts.
+#: A backend's closed-loop budget is this many times the run its bench mean predicts.
 BUDGET_MARGIN = 3.0
 #: The least closed-loop budget of a backend that keeps up [s] (the loop's own work per tick).
 BUDGET_FLOOR_S = 2.0
@@ -328,7 +328,8 @@ def _bench(
     config: RunConfig, subsets: dict, bench_dir: Path, phases
 ) -> tuple[int, dict[str, float]]:
     """Bench every backend on each scenario's problems: the failed solves, and each backend's
-    median over all sets of ``wall_time_min_s`` [s]."""
+    mean over all sets of ``wall_time_min_s`` [s] (what a run's solves take per tick: a median
+    misses a tail of slow solves that makes most of a run's time)."""
     import statistics
 
     from .bench import BenchConfig, run_bench
@@ -355,11 +356,11 @@ def _bench(
         failures += summary.failures
         for name, stats in summary.backends.items():
             times.setdefault(name, []).extend(stats.times_s)
-    return failures, {b: statistics.median(t) for b, t in times.items() if t}
+    return failures, {b: statistics.fmean(t) for b, t in times.items() if t}
 
 
 def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict[str, float]:
-    """Each backend's closed-loop wall-time budget [s]: a bench median ``t`` predicts a run of
+    """Each backend's closed-loop wall-time budget [s]: a bench mean ``t`` predicts a run of
     ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
     :data:`BUDGET_FLOOR_S` and ``run_budget``; :data:`CUT_BUDGET_S` where the prediction exceeds
     ``run_budget``; ``run_budget`` without a bench time."""
