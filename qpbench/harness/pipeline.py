@@ -426,16 +426,16 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
 
 
 def sweep_plan(costs_s: dict[str, float], worker_s: float, target: int) -> dict[str, int]:
-    """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` or as many
-    as the worker time left buys (``worker_s`` [s] over all workers; ``costs_s``: a backend's
-    measured cost of one instance in every swept scenario [s]), so a budget too small for every
-    backend gives the cheapest their full count and the rest fewer or none."""
+    """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` while the
+    worker time left buys them (``worker_s`` [s] over all workers; ``costs_s``: a backend's
+    measured cost of one instance in every swept scenario [s]), else none: fewer than
+    ``target`` cannot recommend it (its bound stays short of the threshold, "not enough
+    evidence" either way), so they would only lengthen the run."""
     plan, left = {}, max(0.0, worker_s)
     for backend in sorted(costs_s, key=lambda b: (costs_s[b], b)):
-        cost = costs_s[backend]
-        n = target if cost <= 0 else min(target, int(left // cost))
-        plan[backend] = n
-        left -= n * cost
+        cost = max(0.0, costs_s[backend]) * target
+        plan[backend] = target if cost <= left else 0
+        left -= cost if plan[backend] else 0.0
     return plan
 
 
