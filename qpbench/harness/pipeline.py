@@ -465,6 +465,25 @@ class Draws:
         return self.seconds / valid if valid else 0.0
 
 
+def _draw_ahead(draws: dict[str, Draws], valid: int) -> dict[str, threading.Event]:
+    """Draw each scenario's first ``valid`` valid instances in a thread, in order, while the
+    workers run the scenarios before it; an event per scenario, set once its instances are
+    drawn (all set if a draw fails: the scenario's sweep then draws again, and says why)."""
+    ready = {s: threading.Event() for s in draws}
+
+    def draw() -> None:
+        try:
+            for s, d in draws.items():
+                d.first(valid)
+                ready[s].set()
+        finally:
+            for event in ready.values():
+                event.set()
+
+    threading.Thread(target=draw, name="qpbench-draw", daemon=True).start()
+    return ready
+
+
 def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
     """The perturbed runs of the backends ok and real time in every nominal run (the
     candidates): for each scenario of the run with a sweep file ``<problems>/sweeps/<name>.toml``,
@@ -493,9 +512,9 @@ def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
     with phases.phase("perturbed runs"):
         draws = {s: Draws(spec) for s, spec in specs.items()}
         costs, overhead_s = _instance_costs(draws, candidates, table)
-        # the instances are drawn here, the runs made by the workers: the drawing of the
-        # target's instances is reserved first
-        sampling_s = target * sum(d.cost_per_valid() for d in draws.values())
+        # the instances are drawn here, the runs made by the workers: the drawing of the first
+        # scenario's target is reserved first (the others are drawn while the workers run)
+        sampling_s = target * next(iter(draws.values())).cost_per_valid()
         spent = time.perf_counter() - started
         plan = sweep_plan(costs, (config.sweep_budget - spent - sampling_s) * config.jobs, target)
         about.update(
@@ -507,8 +526,10 @@ def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
             ),
         )
         folder.mkdir(parents=True, exist_ok=True)
+        ready = _draw_ahead(draws, max(plan.values(), default=0))
         with closing(make_executor("local", config.jobs)) as pool:
             for s, d in draws.items():
+                ready[s].wait()
                 _sweep_scenario(s, d, plan, folder / s, pool, plugin_files(), config.resume)
     about["wall_time_s"] = round(time.perf_counter() - started, 1)
     log.info(
