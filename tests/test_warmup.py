@@ -1,9 +1,9 @@
 """Kernels compiled before the clock, once: a fresh machine's first run is the same run as the next.
 
 The fresh-cache check runs two simulations in an empty numba cache folder of its own
-(``NUMBA_CACHE_DIR``), with the backend whose run compiles least (``pinv``: the controller,
-the plant step, the pseudo-inverse and its compiled engine): the first compiles, the second
-must only load. The ``warmup`` command is checked on the session's cache, which holds every
+(``NUMBA_CACHE_DIR``), with a backend whose run compiles little (``daqp``: the loop's kernels
+and one compiled engine, whose solve calls DAQP's C library by name): the first compiles,
+the second must only load. The ``warmup`` command is checked on the session's cache, which holds every
 kernel once it has run.
 """
 
@@ -50,7 +50,7 @@ def fresh(tmp_path_factory):
         "--scenario",
         "wall",
         "--backend",
-        "pinv",
+        "daqp",
         "--set",
         "simulation.duration=0.1",
     ]
