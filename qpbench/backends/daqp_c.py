@@ -195,8 +195,9 @@ class Kernels(NamedTuple):
     reset: object
 
 
+@cache
 def installed_version() -> str | None:
-    """The installed daqp distribution's version, or ``None``."""
+    """The installed daqp distribution's version, or ``None`` (read once per process)."""
     try:
         return importlib.metadata.version("daqp")
     except importlib.metadata.PackageNotFoundError:
