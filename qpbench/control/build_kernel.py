@@ -209,6 +209,8 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     o = oxd + 4
     px, py = buf[o : o + n + 1], buf[o + n + 1 : o + 2 * n + 2]
     cs, sn, u = buf[o + 2 * n + 2 : o + 3 * n + 2], buf[o + 3 * n + 2 : o + 4 * n + 2], buf[-2:]
+    u[0] = 0.0  # the whole buffer is the tick's, scratch included: no stale memory in it
+    u[1] = 0.0
     _desired_state_py(cm.path_kind, cm.path_cosine, cm.path_times, cm.path_points, t, xd)
     _chain_points(cm, theta, px, py, cs, sn)
     ex = px[n]
