@@ -5,19 +5,21 @@ What a new machine and a shared CI runner see:
 
 1. ``git clone`` of this repository (its committed ``HEAD``) into a temporary
    folder, with ``../shared`` linked beside it when it exists here (CI's layout);
-2. ``.ci/run`` there with ``NUMBA_CACHE_DIR`` pointing at a new empty folder
-   (nothing compiled yet): it creates a fresh virtual environment, installs the
+2. ``.ci/run`` there without ``NUMBA_CACHE_DIR``, as CI runs it: a fresh clone has
+   no kernel compiled, so the suite compiles them into a folder of its session
+   (tests/conftest.py); it creates a fresh virtual environment, installs the
    project as README says and runs the test suite;
-3. ``.ci/run`` again, in a second fresh clone with a second empty cache, while
-   ``--burners`` (default 2) other processes each keep a core busy
-   (``python3 -c "while 1: pass"``).
+3. ``.ci/run`` again, in a second fresh clone, while ``--burners`` (default 2)
+   other processes each keep a core busy (``python3 -c "while 1: pass"``).
 
-It prints one line per run (exit status, duration, pytest's last line) and exits
-non-zero when a run fails. It takes two full CI runs (about 5-10 minutes on 2 cores).
+It prints one line per run (exit status, duration, the load average of the
+minute before it ended, pytest's last line) and exits non-zero when a run
+fails. ``--durations N`` has pytest list the N slowest tests in each run's log
+(kept with ``--keep``). It takes two full CI runs.
 
 Usage::
 
-    python bench/ci_under_load.py [--burners 2] [--only idle|load] [--keep]
+    python bench/ci_under_load.py [--burners 2] [--only idle|load] [--durations N] [--keep]
 """
 
 from __future__ import annotations
@@ -35,13 +37,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def fresh_clone(workdir: Path, name: str) -> Path:
+def fresh_clone(workdir: Path, name: str, shared: Path) -> Path:
     """Clone this repository's HEAD into ``workdir/<name>/main`` with ``shared`` beside it."""
     base = workdir / name
     base.mkdir()
-    dest = base / ROOT.name
+    dest = base / "main"
     subprocess.run(["git", "clone", "--quiet", str(ROOT), str(dest)], check=True)
-    shared = ROOT.parent / "shared"
     if shared.exists():
         (base / "shared").symlink_to(shared)
     return dest
@@ -52,10 +53,13 @@ def last_line(text: str) -> str:
     return lines[-1] if lines else ""
 
 
-def ci_run(clone: Path, cache: Path, log: Path) -> tuple[int, float, str]:
-    """``.ci/run`` in ``clone`` with an empty numba cache; (status, seconds, last output line)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), CI="true")
-    env.pop("VIRTUAL_ENV", None)
+def ci_run(clone: Path, log: Path, durations: int) -> tuple[int, float, str]:
+    """``.ci/run`` in ``clone`` as CI runs it; (status, seconds, last output line)."""
+    env = dict(os.environ, CI="true")
+    for name in ("VIRTUAL_ENV", "NUMBA_CACHE_DIR", "PYTHONPATH", "PYTEST_ADDOPTS"):
+        env.pop(name, None)
+    if durations:
+        env["PYTEST_ADDOPTS"] = f"--durations={durations}"
     start = time.perf_counter()
     with open(log, "wb") as fh:
         proc = subprocess.run(
@@ -82,6 +86,15 @@ def main(argv: list[str] | None = None) -> int:
         "--burners", type=int, default=2, help="CPU-bound processes beside the loaded run"
     )
     parser.add_argument("--only", choices=("idle", "load"), help="run only one of the two")
+    parser.add_argument(
+        "--durations", type=int, default=0, help="pytest's N slowest tests in the log"
+    )
+    parser.add_argument(
+        "--shared",
+        type=Path,
+        default=ROOT.parent / "shared",
+        help="the folder linked as ../shared beside each clone (default: the one beside this one)",
+    )
     parser.add_argument("--keep", action="store_true", help="keep the temporary clones and logs")
     args = parser.parse_args(argv)
 
@@ -92,17 +105,18 @@ def main(argv: list[str] | None = None) -> int:
         if args.only:
             runs = [r for r in runs if r[0] == args.only]
         for name, burners in runs:
-            clone = fresh_clone(workdir, name)
-            cache = workdir / f"{name}-numba-cache"
-            cache.mkdir()
+            clone = fresh_clone(workdir, name, args.shared)
             procs = start_burners(burners)
             try:
-                status, elapsed, tail = ci_run(clone, cache, workdir / f"{name}.log")
+                status, elapsed, tail = ci_run(clone, workdir / f"{name}.log", args.durations)
+                load = os.getloadavg()[0]
             finally:
                 stop_burners(procs)
             failures += status != 0
             print(
-                f"{name:>4} ({burners} busy processes beside it): exit {status} in {elapsed:.0f} s; {tail}"
+                f"{name:>4} ({burners} busy processes beside it): exit {status} in {elapsed:.0f} s"
+                f" (load average {load:.1f}); {tail}",
+                flush=True,
             )
             if status != 0:
                 print(f"     log: {workdir / f'{name}.log'}")

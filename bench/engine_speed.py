@@ -19,8 +19,14 @@ and judged, as ``qpbench sweep`` runs them), alternating engines.
 
 The load average is printed with the figures: the machine may be shared.
 
+``--compile`` measures instead what a fresh clone pays to compile the engines (numba's cache
+empty): a few ticks of ``wall`` on the Python engine with every backend (their own kernels, the
+build and the step), then, per backend in turn, its first run on the compiled engine [s]; a
+backend whose engine another one already compiled pays only its own state.
+
     python bench/engine_speed.py [--scenarios wall,narrow] [--backends daqp,qpoases,...]
         [--duration 20] [--repeat 5] [--sweep 200] [--sweep-backends daqp]
+    NUMBA_CACHE_DIR=$(mktemp -d) python bench/engine_speed.py --compile [--backends ...]
 """
 
 from __future__ import annotations
@@ -74,6 +80,31 @@ def sweep_time(backend: str, samples: int, engine: str) -> float:
         return time.perf_counter() - start
 
 
+def compile_times(backends: list[str]) -> None:
+    """Print each backend's first compiled run [s of CPU, and wall], after the Python engine's
+    kernels (CPU time: the machine may be shared)."""
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    if not cache or any(Path(cache).iterdir()):
+        raise SystemExit("--compile: set NUMBA_CACHE_DIR to an empty folder (mktemp -d)")
+    print(f"load average before: {os.getloadavg()}")
+    cpu, wall = time.process_time(), time.perf_counter()
+    for backend in backends:
+        simulate("wall", backend, duration=0.003, engine="python", warmup_ticks=0)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    print(f"{'python engine':15} {cpu:6.1f} s CPU {wall:6.1f} s wall (every backend)")
+    total = 0.0
+    for backend in backends:
+        cpu, wall = time.process_time(), time.perf_counter()
+        result = simulate("wall", backend, duration=0.003, engine="compiled", warmup_ticks=0)
+        if result.summary["engine"] != "compiled":
+            raise SystemExit(f"{backend} ran on the python engine: {result.summary['engine_note']}")
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+        total += cpu
+        print(f"{backend:15} {cpu:6.1f} s CPU {wall:6.1f} s wall (compiled engine)")
+    print(f"{'compiled, all':15} {total:6.1f} s CPU")
+    print(f"load average after: {os.getloadavg()}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", default="wall,narrow")
@@ -82,8 +113,11 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--sweep", type=int, default=200, metavar="N")
     parser.add_argument("--sweep-backends", default="daqp")
+    parser.add_argument("--compile", action="store_true", help="cold compile times instead")
     args = parser.parse_args()
     backends = args.backends.split(",")
+    if args.compile:
+        return compile_times(["noop", *backends])
     warmup([*backends, "noop"])
     print(f"load average before: {os.getloadavg()}")
     header = (

@@ -9,8 +9,8 @@ from pathlib import Path
 
 from qpbench.cache import PACKAGE_DIR  # imports nothing compiled: safe before the cache is set
 
-#: Test files run before every other one (see :func:`pytest_collection_modifyitems`).
-FIRST = ("test_warmup.py",)
+#: The checkout these tests run from: subprocesses import its package too (see below).
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _fresh_install() -> bool:
@@ -19,15 +19,20 @@ def _fresh_install() -> bool:
 
 
 # On a fresh install (CI's clean clone) the suite's kernels go to one empty folder of the
-# session, which tests/test_warmup.py fills first from an empty cache (the first-run check it
-# exists for) and every later test and subprocess loads: the kernels are compiled once per
-# session, not once for that check and again for the rest. Set before numba is imported (it
-# reads NUMBA_CACHE_DIR once). A checkout whose kernels are already compiled keeps its cache,
-# and test_warmup.py compiles into a folder of its own.
+# session, shared by the xdist workers and every subprocess (they inherit the environment) and
+# removed at the end, rather than beside the sources. Set before numba is imported (it reads
+# NUMBA_CACHE_DIR once). A checkout whose kernels are already compiled keeps its cache.
+# Subprocesses (``python -m qpbench.cli`` in a temporary folder, the installed ``qpbench``
+# script) import the checkout's package, as the tests do, not a copy installed elsewhere: the
+# code under test, and its kernels compiled once (numba caches a kernel per source file).
 SHARED_FRESH_CACHE = None
 if _fresh_install():
     SHARED_FRESH_CACHE = tempfile.mkdtemp(prefix="qpbench-test-kernels-")
     os.environ["NUMBA_CACHE_DIR"] = SHARED_FRESH_CACHE
+if os.environ.get("PYTHONPATH", "").split(os.pathsep)[0] != str(ROOT):
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])
+    )
 
 import numpy as np  # noqa: E402  (after NUMBA_CACHE_DIR is set)
 import pytest  # noqa: E402
@@ -35,11 +40,6 @@ import qpsolvers  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
 from qpbench.formats import ProblemRecord  # noqa: E402
-
-
-def pytest_collection_modifyitems(config, items):
-    """The files of :data:`FIRST` run first (their fresh-cache check must see an empty cache)."""
-    items.sort(key=lambda item: item.path.name not in FIRST)
 
 
 def pytest_unconfigure(config):
@@ -88,7 +88,7 @@ def _logging_restored():
 
 
 #: The Maros-Meszaros subset the repository ships.
-MAROS_MESZAROS_DIR = Path(__file__).resolve().parents[1] / "problems" / "maros_meszaros"
+MAROS_MESZAROS_DIR = ROOT / "problems" / "maros_meszaros"
 
 
 def random_problem(rng, n=4, n_ineq=3, n_eq=2, bounds=True, lb=True, ub=True) -> qpsolvers.Problem:

@@ -223,7 +223,7 @@ def test_run_end_to_end(tmp_path, monkeypatch, capsys):
         manifest["closed_loop_not_ok"] == {"wall/pinv": "limits"}
         and manifest["run_budget_s"] == RUN_BUDGET_S
     )
-    # each backend's closed-loop budget, decided from its bench median, is the one its row ran under
+    # each backend's closed-loop budget, decided from its bench mean, is the one its row ran under
     assert set(manifest["closed_loop_budget_s"]) == {"qpsolvers:daqp", "pinv"}
     assert dict(zip(loop["backend"], loop["run_budget_s"])) == manifest["closed_loop_budget_s"]
     # the wall time of every phase, in the order run
@@ -364,7 +364,7 @@ def test_run_bench_subset_solves_references_of_the_kept_records_only(tmp_path, m
 
 
 def test_closed_loop_budgets_follow_the_bench():
-    """Each backend's budget from its bench median: room to finish for one that keeps up, the floor
+    """Each backend's budget from its bench mean: room to finish for one that keeps up, the floor
     for one that cannot finish within --run-budget, --run-budget for one without a bench time."""
     from qpbench.harness.pipeline import (
         BUDGET_FLOOR_S,

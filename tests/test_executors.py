@@ -178,3 +178,38 @@ def test_a_worker_dead_before_its_request_is_worker_died():
         assert not w.alive
     finally:
         w.kill()
+
+
+def _server_of(pid: int) -> int:
+    """The parent process of ``pid`` (``/proc``): the forkserver a worker was forked from."""
+    with open(f"/proc/{pid}/stat") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[1])
+
+
+@pytest.mark.skipif(
+    "forkserver" not in multiprocessing.get_all_start_methods() or not os.path.isdir("/proc"),
+    reason="needs the forkserver and /proc",
+)
+def test_a_forkserver_with_fewer_kernels_is_replaced_once_none_of_its_workers_lives(monkeypatch):
+    """Kernels named after the forkserver started: while one of its workers lives the next worker
+    comes from the same server (a live worker would seem dead if its server ended); once none
+    lives, from a new one that loads them."""
+    from qpbench.runner import process
+
+    monkeypatch.setattr(process, "_KERNELS", process._KERNELS)  # restored afterwards
+    first = Worker(name="qpbench-test-first")
+    try:
+        server = _server_of(first.proc.pid)
+        process.preload_kernels((*process._KERNELS, "a-kernel-the-server-lacks"))
+        second = Worker(name="qpbench-test-second")
+        assert _server_of(second.proc.pid) == server
+        assert first.call(faulty_backends.double, 2, 60.0, "a task") == 4  # first still answers
+        second.stop()
+    finally:
+        first.stop()
+    third = Worker(name="qpbench-test-third")
+    try:
+        assert _server_of(third.proc.pid) != server
+        assert third.call(faulty_backends.double, 3, 60.0, "a task") == 6
+    finally:
+        third.stop()

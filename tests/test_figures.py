@@ -100,6 +100,17 @@ def test_every_figure_is_drawn_and_under_the_height_limit(narrow):
     assert not [m for m in narrow["warnings"] if "px" in m], narrow["warnings"]
 
 
+def test_figures_drawn_in_worker_processes_are_those_drawn_here(narrow, tmp_path):
+    """Two at a time in worker processes: the same figures, byte for byte, as one at a time here."""
+    results = read_results([RESULTS / "bench" / "narrow.csv.gz", RESULTS / "closed_loop.csv"])
+    cl = results.closed_loop
+    results = Results(results.bench, cl[cl["scenario"].astype(str) == "narrow"].copy())
+    files = write_plots(results, tmp_path / "plots", tmp_path, jobs=2)
+    assert files == narrow["files"]
+    for rel in files.values():
+        assert (tmp_path / rel).read_bytes() == (narrow["out"] / rel).read_bytes(), rel
+
+
 def test_a_backend_has_one_colour_in_every_figure_and_no_two_share_one(narrow):
     colours: dict[str, set[str]] = {}
     for fig in narrow["lines"]:

@@ -258,10 +258,6 @@ SIZE_EXCEPTIONS = {
     "qpbench/control/build_kernel.py:_build_kernel_py": (
         "numba kernel: the controller's tick build, compiled as one function"
     ),
-    "qpbench/engine/compiled.py:_run_py": (
-        "numba kernel: the compiled engine's tick loop, compiled as one function per backend and "
-        "pinned to the Python engine's loop by tests/test_engines.py"
-    ),
 }
 
 

@@ -20,13 +20,17 @@ def test_the_cheapest_get_their_instances_first():
     costs = {"a": 1.0, "b": 2.0, "c": 3.0}
     # 100 of a (100 s) and 100 of b (200 s) fill 300 s; c gets none
     assert sweep_plan(costs, 300.0, 100) == {"a": 100, "b": 100, "c": 0}
-    # what is left after the cheaper ones is spent on the next one: 50 s buy 16 of c
-    assert sweep_plan(costs, 350.0, 100) == {"a": 100, "b": 100, "c": 16}
+    # what is left after the cheaper ones buys 16 of c, fewer than can recommend it: none
+    assert sweep_plan(costs, 350.0, 100) == {"a": 100, "b": 100, "c": 0}
+    assert sweep_plan(costs, 600.0, 100) == {"a": 100, "b": 100, "c": 100}
     assert sweep_plan(costs, 1e6, 100) == {"a": 100, "b": 100, "c": 100}
-    assert sweep_plan(costs, 50.0, 100) == {"a": 50, "b": 0, "c": 0}
+    assert sweep_plan(costs, 50.0, 100) == {"a": 0, "b": 0, "c": 0}
     assert sweep_plan(costs, -5.0, 100) == {"a": 0, "b": 0, "c": 0}
     # equal costs: by name, so the same costs give the same plan
-    assert sweep_plan({"y": 1.0, "x": 1.0}, 150.0, 100) == {"x": 100, "y": 50}
+    assert sweep_plan({"y": 1.0, "x": 1.0}, 150.0, 100) == {"x": 100, "y": 0}
+    # every planned count reaches the target, and the plan's cost stays within the time
+    plan = sweep_plan(costs, 450.0, 100)
+    assert set(plan.values()) <= {0, 100} and sum(plan[b] * costs[b] for b in plan) <= 450.0
 
 
 def strictly_before(answer: rec.Recommendation) -> set[tuple[str, str]]:

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import gc
-import os
 import subprocess
 import sys
 import textwrap
@@ -180,18 +179,16 @@ _CACHE_SCRIPT = textwrap.dedent(
 )
 
 
-def test_second_process_loads_the_compiled_solve_from_the_cache(tmp_path):
-    """The solve calls the shim by symbol name, so numba caches it: the second process compiles
-    nothing (the first also builds the shim into the empty cache folder)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+def test_second_process_loads_the_compiled_solve_from_the_cache():
+    """The solve calls the shim by symbol name, so numba caches it: in the session's kernel
+    cache (the first process compiles what is not there yet; a cold cache is
+    tests/test_warmup.py's), the second process compiles nothing."""
     runs = []
     for _ in range(2):
-        done = subprocess.run(
-            [sys.executable, "-c", _CACHE_SCRIPT], capture_output=True, text=True, env=env
-        )
+        done = subprocess.run([sys.executable, "-c", _CACHE_SCRIPT], capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
         runs.append(done.stdout.split())
-    assert runs[0] == ["0", "0", "1", "0", "1"]  # optimal; compiled
+    assert runs[0][0] == "0"  # optimal
     assert runs[1] == ["0", "1", "0", "1", "0"]  # optimal; loaded
 
 

@@ -141,8 +141,8 @@ LAYOUT_SIZE = 34
 _MASKS = (1, 2, 4, 8, 16, 5)
 
 # Entries of State.meta: whether a workspace is set up, its shape key (n, me, mi, box), the
-# capacity the state was made for.
-HAS_MODEL, KEY_N, KEY_ME, KEY_MI, KEY_BOX, N_MAX, ME_MAX, MI_MAX = range(8)
+# capacity the state was made for, whether it is ``daqp-stateless``'s.
+HAS_MODEL, KEY_N, KEY_ME, KEY_MI, KEY_BOX, N_MAX, ME_MAX, MI_MAX, STATELESS = range(9)
 
 #: The status index of ``optimal``.
 OPTIMAL = TICK_STATUSES.index("optimal")
@@ -185,16 +185,19 @@ class State(NamedTuple):
 
 
 class Kernels(NamedTuple):
-    """The compiled solves ``solve(st, buf, warm, sol, info) -> status`` of ``daqp`` (``model``)
-    and ``daqp-stateless`` (``stateless``), and ``reset(st)``, both backends' reset."""
+    """The compiled solves ``solve(st, buf, warm, sol, info) -> status`` of ``daqp`` (``model``),
+    ``daqp-stateless`` (``stateless``) and either, as its state was made (``either``: one
+    engine for both), and ``reset(st)``, both backends' reset."""
 
     model: object
     stateless: object
+    either: object
     reset: object
 
 
+@cache
 def installed_version() -> str | None:
-    """The installed daqp distribution's version, or ``None``."""
+    """The installed daqp distribution's version, or ``None`` (read once per process)."""
     try:
         return importlib.metadata.version("daqp")
     except importlib.metadata.PackageNotFoundError:
@@ -278,9 +281,10 @@ def _words(data: bytes) -> np.ndarray:
     return out
 
 
-def make_state(n: int, me_max: int, mi_max: int, options: dict) -> State:
+def make_state(n: int, me_max: int, mi_max: int, options: dict, stateless: bool = False) -> State:
     """A state for problems of ``n`` variables (at most), at most ``me_max`` equality and
-    ``mi_max`` inequality rows, with DAQP's settings ``options`` (:meth:`DaqpBackend.options`).
+    ``mi_max`` inequality rows, with DAQP's settings ``options`` (:meth:`DaqpBackend.options`);
+    ``stateless``: the ``either`` solve calls ``daqp-stateless``'s.
 
     Raises:
         RuntimeError: the installed daqp is not one this route knows (:func:`unavailable_reason`).
@@ -297,8 +301,8 @@ def make_state(n: int, me_max: int, mi_max: int, options: dict) -> State:
     statuses = np.full(2 * FLAG_SPAN + 2, TICK_STATUSES.index(UNKNOWN_EXITFLAG[0]), dtype=np.int64)
     for flag, (status, _) in EXITFLAGS.items():
         statuses[flag + FLAG_SPAN] = TICK_STATUSES.index(status)
-    meta = np.zeros(8, dtype=np.int64)
-    meta[N_MAX], meta[ME_MAX], meta[MI_MAX] = n, me_max, mi_max
+    meta = np.zeros(9, dtype=np.int64)
+    meta[N_MAX], meta[ME_MAX], meta[MI_MAX], meta[STATELESS] = n, me_max, mi_max, stateless
     settings0 = settings_struct(structs, options)
     qp, result, work = (_words(bytes(int(layout[k]))) for k in (SIZE_P, SIZE_R, SIZE_W))
     rows, m = me_max + mi_max, n + me_max + mi_max
@@ -358,9 +362,11 @@ def kernels() -> Kernels:
     names["_c_free_workspace"] = external("free_daqp_workspace", types.void(p))
     names["_c_free_ldp"] = external("free_daqp_ldp", types.void(p))
     jit = numba.njit(cache=True, nogil=True)
+    inline = numba.njit(cache=True, nogil=True, inline="always")  # no call, no refcounts
     for name in [k for k in names if k.endswith("_jit")]:
-        names[name] = jit(names[name])
-    return Kernels(jit(_solve_model), jit(_solve_stateless), names["_drop_jit"])
+        names[name] = inline(names[name])
+    model, stateless = jit(_solve_model), jit(_solve_stateless)
+    return Kernels(model, stateless, jit(_solve_either), names["_drop_jit"])
 
 
 def compiled(backend: str):
@@ -410,14 +416,26 @@ def _stack(st, buf, n, me, mi, nb):
 
 
 def _copy_changed(buf, off, dst, size):
-    """Copy ``buf[off : off + size]`` into ``dst``; whether any bit differed."""
-    src, old = buf.view(np.int64), dst.view(np.int64)
+    """Copy ``buf[off : off + size]`` into ``dst``; whether any differed bitwise (a zero's sign
+    too; NaNs compare the same; no ``view``: its error path compiles numba's strings)."""
     changed = False
     for k in range(size):
-        if src[off + k] != old[k]:
+        a, b = buf[off + k], dst[k]
+        if a == b:
+            differ = math.copysign(1.0, a) != math.copysign(1.0, b)
+        else:
+            differ = not (a != a and b != b)
+        if differ:
             changed = True
-            old[k] = src[off + k]
+            dst[k] = a
     return changed
+
+
+def _fresh_settings(st):
+    """The profile's settings into the struct DAQP reads (word by word: an array assignment
+    compiles numba's shape-error strings)."""
+    for k in range(st.settings0.shape[0]):
+        st.settings[k] = st.settings0[k]
 
 
 def _point_problem(st, n, m, nb, rows):
@@ -482,7 +500,7 @@ def _set_up(st, buf, n, m, nb, rows):
     """``setup_daqp`` on a zeroed workspace with the profile's settings (a new ``daqp.Model``);
     its exit flag (< 0: refused, DAQP has freed what it allocated)."""
     lay, work = st.layout, st.work
-    st.settings[:] = st.settings0
+    _fresh_settings_jit(st)
     work[:] = 0
     work[lay[W_SETTINGS] >> 3] = st.settings.ctypes.data
     _copy_changed_jit(buf, int(buf[OFF_P]), st.H, n * n)
@@ -560,7 +578,7 @@ def _solve_stateless(st, buf, warm, sol, info):
     _stack_jit(st, buf, n, me, mi, nb)
     _copy_changed_jit(buf, int(buf[OFF_P]), st.H, n * n)
     _copy_changed_jit(buf, int(buf[OFF_Q]), st.f, n)
-    st.settings[:] = st.settings0
+    _fresh_settings_jit(st)
     _point_problem_jit(st, n, m, nb, rows)
     _clear_result_jit(st, m)
     _c_quadprog(st.result.ctypes.data, st.qp.ctypes.data, st.settings.ctypes.data)
@@ -572,13 +590,23 @@ def _solve_stateless(st, buf, warm, sol, info):
     return _outcome_jit(st, flag, n, me, mi, nb, sol)
 
 
+def _solve_either(st, buf, warm, sol, info):
+    """The solve of ``daqp-stateless`` or ``daqp``, as ``st`` was made."""
+    if st.meta[STATELESS]:
+        return _solve_stateless_jit(st, buf, warm, sol, info)
+    return _solve_model_jit(st, buf, warm, sol, info)
+
+
 # Rebound to compiled versions by kernels() (numba resolves them from these globals).
 _shape_jit = _shape
 _stack_jit = _stack
 _copy_changed_jit = _copy_changed
 _point_problem_jit = _point_problem
+_fresh_settings_jit = _fresh_settings
 _clear_result_jit = _clear_result
 _outcome_jit = _outcome
 _drop_jit = _drop
 _set_up_jit = _set_up
 _update_jit = _update
+_solve_model_jit = _solve_model
+_solve_stateless_jit = _solve_stateless

@@ -99,8 +99,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help=f"wall time of the perturbed runs in [s] (default: {SWEEP_BUDGET_S:g}, "
         f"{QUICK_SWEEP_BUDGET_S:g} with --quick): each backend ok and real time in every run gets "
-        "the instances of <problems>/sweeps/<scenario>.toml the budget buys, cheapest first "
-        "(docs/sweeps.md)",
+        "the instances of <problems>/sweeps/<scenario>.toml its recommendation needs while the "
+        "budget buys them, cheapest first, else none (docs/sweeps.md)",
     )
     add(parser, "--min-ok-bound")
     parser.add_argument(

@@ -74,7 +74,7 @@ def compiled_path():
     fields (``dim``: half of ``out``'s length)."""
     from ..native import compile_with
 
-    return compile_with(_desired_state_py, name="desired_state")
+    return compile_with(_desired_state_py, name="desired_state", inline="always")
 
 
 @cache
@@ -85,6 +85,8 @@ def compiled_build_kernel():
     from ..robot.chain import compiled_chain
     from ..robot.obstacles import compiled_segment_distance
 
+    # the path inlined into the build (numba's IR); the kinematics and distances are calls
+    # (inlined, no gain measured: bench/README.md)
     helpers = {
         "_desired_state_py": compiled_path(),
         "_forward_kinematics": compiled_chain().forward_kinematics,

@@ -3,9 +3,12 @@
 Each tick, as :mod:`qpbench.sim.loop` describes it and with the same compiled pieces: the build
 (:mod:`qpbench.control.build_kernel`), the backend's compiled solve, the soft fallback, the step
 and log row (:mod:`qpbench.sim.tick_kernel`), the sensor noise drawn before the run, the
-adaptive law. The engine body (:func:`_run_py`) is compiled once per backend with that backend's
-``solve`` and ``reset`` bound (:func:`qpbench.native.compile_with`), so a C API call is a direct
-call. A backend joins by a :class:`CompiledSolver` in :data:`SOLVERS`.
+adaptive law. The engine body (:func:`_run_py`) is compiled once per compiled ``solve``, with
+it and its ``reset`` bound (:func:`qpbench.native.compile_with`), so a C API call is a direct
+call; backends whose solve is one function choosing by its state (``noop``, ``pinv`` and the
+network; ``daqp`` and ``daqp-stateless``) share one engine, compiled once. The build and the
+step allocate nothing per tick (scratch in the state and the controller model). A backend joins by a
+:class:`CompiledSolver` in :data:`SOLVERS`.
 
 Times are read from ``CLOCK_MONOTONIC`` in compiled code (:func:`qpbench.native.clock`): the
 build, the solve (the call with the tick's QP until x, duals and status are in the engine's
@@ -120,21 +123,26 @@ def unsupported_reason(backend: Backend, formulation: str) -> str | None:
     return spec.functions().unavailable_reason(backend)
 
 
-@cache
 def engine_for(name: str) -> Callable:
-    """The engine compiled (or loaded from numba's cache) with backend ``name``'s solve."""
+    """The engine compiled (or loaded from numba's cache) with backend ``name``'s solve (one
+    engine per compiled solve: backends sharing a solve share it)."""
     fns = SOLVERS[name].functions()
+    return _engine(fns.compiled_solve(name), fns.compiled_reset(name))
+
+
+@cache
+def _engine(solve, reset) -> Callable:
     bindings = {
-        "solve": fns.compiled_solve(name),
-        "reset": fns.compiled_reset(name),
+        "solve": solve,
+        "reset": reset,
         "now": clock(),
         "build": _build(),
         "post": get_post_kernel(),
         "adapt": _adapt(),
-        "_views": compile_with(_views, name="tick_views"),
-        "_finite": compile_with(_finite, name="all_finite"),
+        "_views": compile_with(_views, name="tick_views", inline="always"),
+        "_finite": compile_with(_finite, name="all_finite", inline="always"),
     }
-    return compile_with(_run_py, bindings, name=f"engine_{name.replace('-', '_')}")
+    return compile_with(_run_py, bindings, name=f"engine_{solve.py_func.__name__.strip('_')}")
 
 
 def _build():
@@ -171,8 +179,8 @@ def _finite(x):  # pragma: no cover - compiled
     return True
 
 
-# Over 80 lines, kept whole on purpose: numba compiles it as one function, with the backend's
-# solve and reset, the clock, the build, the step and the adaptive law bound by engine_for().
+# Numba compiles it as one function, with the solve and reset, the clock, the build, the step
+# and the adaptive law bound by engine_for().
 def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: no cover - compiled
     """Run ticks ``k0 .. k1-1`` of ``model`` (state ``ls``, the backend's ``st`` and its
     fallback instance's ``fst``), writing rows
@@ -181,80 +189,75 @@ def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: 
     cm = model.controller
     n = model.theta0.shape[0]
     nr = cm.row_key.shape[0]
-    dt = model.dt
-    theta, sensed, gains, ts = ls.theta, ls.sensed, ls.gains, ls.ts
-    J, b0, ee, dist, xd = _views(ls.buf, n, nr, cm.normal.shape[0])
-    empty = ls.zeros[:0]
-    geometry = (ee, sensed, J, b0, dist, xd)
+    dt, deadline, noise, law = model.dt, model.deadline, model.noise, model.law
+    online, soft, adaptive, fd = model.online, model.soft, model.adaptive, cm.desired_force
+    theta, sensed, gains, ts, v, counts = ls.theta, ls.sensed, ls.gains, ls.ts, ls.v, ls.counts
+    buf, fbuf, sol, fsol, info, finfo = ls.buf, ls.fbuf, ls.sol, ls.fsol, ls.info, ls.finfo
+    zeros = ls.zeros
+    J, b0, ee, dist, xd = _views(buf, n, nr, cm.normal.shape[0])
+    empty = zeros[:0]
+    x, fx, fz = sol[:n], fsol[:n], fsol[n : n + nr]
+    tick0 = now(ts)  # then each tick's end is the next one's start: one clock read fewer
     for k in range(k0, k1):
-        tick0 = now(ts)
         if stop_at > 0.0 and k > 0 and tick0 >= stop_at:
             return k
         t = k * dt
         kp, kd = gains[0], gains[1]
-        build(cm, theta, t, kp, kd, model.soft, ls.buf)
+        build(cm, theta, t, kp, kd, soft, buf)
         t1 = now(ts)
-        me = int(ls.buf[1])
-        code = solve(st, ls.buf, ls.v, ls.sol, ls.info)
+        code = solve(st, buf, v, sol, info)
         t2 = now(ts)
         row = data[k]
         row[cols.build_time] = t1 - tick0
         row[cols.solve_time] = t2 - t1
-        row[cols.solver_time] = ls.info[0]
-        x = ls.sol[:n]
-        force = -1.0
+        row[cols.solver_time] = info[0]
+        mode = APPLIED
         # an answer: optimal, or any but an error of an online backend (applied as it is)
-        answered = code == OPTIMAL or (model.online and code != ERROR)
-        if answered and t2 - t1 <= model.deadline and _finite(x):
-            y = ls.sol[n : n + me]
-            z = ls.sol[n + me : n + me + nr]
-            force = post(model, cols, theta, x, *geometry, y, z, data, k, t, APPLIED, kp, kd)
-            for i in range(n):
-                ls.v[i] = x[i]
-        if force < 0.0:
+        answered = code == OPTIMAL or (online and code != ERROR)
+        if not (answered and t2 - t1 <= deadline and _finite(x)):
             if answered and not _finite(x):
                 code = INVALID
-            elif t2 - t1 > model.deadline:
+            elif t2 - t1 > deadline:
                 code = TIME_LIMIT
-                ls.counts[0] += 1
-            if code == ERROR and ls.counts[2] < 0:
-                ls.counts[2] = k
-                ls.counts[3] = ls.info[2]
+                counts[0] += 1
+            if code == ERROR and counts[2] < 0:
+                counts[2] = k
+                counts[3] = info[2]
             if code == ERROR or code == INVALID:
                 reset(st)  # its state can no longer be trusted
             mode = ZERO
-            if not model.online and not model.soft:
+            if not online and not soft:
                 t3 = now(ts)
-                build(cm, theta, t, kp, kd, True, ls.fbuf)
+                build(cm, theta, t, kp, kd, not soft, fbuf)  # True, not a literal: one build
                 t4 = now(ts)
-                fcode = solve(fst, ls.fbuf, ls.v, ls.fsol, ls.finfo)
+                fcode = solve(fst, fbuf, v, fsol, finfo)
                 t5 = now(ts)
                 row[cols.fallback_build_time] = t4 - t3
                 row[cols.fallback_solve_time] = t5 - t4
-                if np.isfinite(ls.finfo[0]):  # the fallback's own time adds to the tick's
+                if np.isfinite(finfo[0]):  # the fallback's own time adds to the tick's
                     own = row[cols.solver_time]
-                    row[cols.solver_time] = ls.finfo[0] + (own if np.isfinite(own) else 0.0)
-                if fcode == OPTIMAL and t5 - t4 <= model.deadline and _finite(ls.fsol[:n]):
+                    row[cols.solver_time] = finfo[0] + (own if np.isfinite(own) else 0.0)
+                if fcode == OPTIMAL and t5 - t4 <= deadline and _finite(fx):
                     mode = FALLBACK
-            if mode == FALLBACK:
-                fx = ls.fsol[:n]
-                fz = ls.fsol[n : n + nr]
-                force = post(
-                    model, cols, theta, fx, *geometry, empty, fz, data, k, t, FALLBACK, kp, kd
-                )
-                for i in range(n):
-                    ls.v[i] = fx[i]
-            else:
-                force = post(
-                    model, cols, theta, ls.zeros, *geometry, empty, empty, data, k, t, ZERO, kp, kd
-                )
-                for i in range(n):
-                    ls.v[i] = 0.0
+        if mode == APPLIED:
+            me = int(buf[1])
+            vel, y, z = x, sol[n : n + me], sol[n + me : n + me + nr]
+        elif mode == FALLBACK:
+            vel, y, z = fx, empty, fz
+        else:
+            vel, y, z = zeros, empty, empty
+        force = post(
+            model, cols, theta, vel, ee, sensed, J, b0, dist, xd, y, z, data, k, t, mode, kp, kd
+        )
+        for i in range(n):
+            v[i] = vel[i]
         codes[k] = code
-        force += model.noise[k]
+        force += noise[k]
         row[cols.force] = force
-        row[cols.force + 1] = force - cm.desired_force
-        if model.adaptive:
-            adapt(model.law, dt, sensed, xd, force, gains)
-        row[cols.tick_time] = now(ts) - tick0
+        row[cols.force + 1] = force - fd
+        if adaptive:
+            adapt(law, dt, sensed, xd, force, gains)
+        end = now(ts)
+        row[cols.tick_time] = end - tick0
+        tick0 = end
     return k1

@@ -1,6 +1,7 @@
 """Compiled solves of the backends whose solver is a native library, called as a C controller
 calls it: ``qpoases`` (the shim's entry points, hotstart; :mod:`qpbench.backends.qpoases_`) and
-``daqp``/``daqp-stateless`` (DAQP's C API, :mod:`qpbench.backends.daqp_c`). The protocol:
+``daqp``/``daqp-stateless`` (DAQP's C API, :mod:`qpbench.backends.daqp_c`; one solve for both,
+as the state was made). The protocol:
 :class:`qpbench.engine.compiled.CompiledSolver`; each mirrors its Python backend call for call.
 """
 
@@ -21,7 +22,7 @@ def _daqp():
 
 def compiled_solve(name: str):
     """The compiled ``solve`` of backend ``name``."""
-    return (_qpoases().compiled() if name == "qpoases" else _daqp().compiled(name))[0]
+    return _qpoases().compiled()[0] if name == "qpoases" else _daqp().kernels().either
 
 
 def compiled_reset(name: str):
@@ -35,7 +36,8 @@ def make_state(backend, model, n_rows: int):
     n, dim = model.theta0.shape[0], model.controller.normal.shape[0]
     if backend.name == "qpoases":
         return _qpoases().make_state(n, dim, n_rows, backend.profile, **backend.settings)
-    return _daqp().make_state(n, dim, n_rows, backend.options())
+    stateless = backend.name == "daqp-stateless"
+    return _daqp().make_state(n, dim, n_rows, backend.options(), stateless)
 
 
 def close_state(st) -> None:

@@ -1,7 +1,8 @@
 """Compiled solves of the backends whose solver is qpbench's own code: ``noop`` (the machine's
 own loop), ``pinv`` (the paper's pseudo-inverse baseline) and the paper's network online
 (``rnn``, ``rnn-tuned``). The protocol: :class:`qpbench.engine.compiled.CompiledSolver`; each
-mirrors its Python backend call for call (same answer, status and state)."""
+mirrors its Python backend call for call (same answer, status and state). One compiled solve
+serves the four (the state says which), so one engine is compiled for them."""
 
 from __future__ import annotations
 
@@ -16,16 +17,21 @@ from ..rnn import kernels as nk
 
 #: Status codes (``TICK_STATUSES``).
 _OPTIMAL, _MAX_ITER, _ERROR = 0, 3, 5
+#: ``OwnState.kind``: which solve a state is for (one engine for all four backends).
+NOOP, PINV, NETWORK = 0, 1, 2
 
 # Compiled functions the solves call, bound by compiled_solve().
-_pinv = _packed = None
+_pinv = _packed = _null_solve_in = _pinv_solve_in = _network_solve_in = None
 
 
-class NetworkState(NamedTuple):
-    """The online network's state ``xi = [v; l1; l2]``, its parameter block ``prm``
+class OwnState(NamedTuple):
+    """A solve's state: ``kind`` (:data:`NOOP`, :data:`PINV`, :data:`NETWORK`); the online
+    network's state ``xi = [v; l1; l2]``, its parameter block ``prm``
     (:mod:`qpbench.rnn.kernels`), the kernel's output ``out`` and ``cold[0]``: the next call
-    starts from ``v = warm`` and zero multipliers (after a reset or a divergence)."""
+    starts from ``v = warm`` and zero multipliers (after a reset or a divergence); empty for
+    the others."""
 
+    kind: int
     xi: np.ndarray
     prm: np.ndarray
     out: np.ndarray
@@ -36,12 +42,14 @@ def make_state(backend, model, n_rows: int):
     """The solve's state for ``backend`` on ``model``'s QPs (``n_rows`` obstacle rows)."""
     n = model.theta0.shape[0]
     if backend.name == "noop" or backend.name == "pinv":
-        return (np.zeros(1),)
+        kind, none = (NOOP if backend.name == "noop" else PINV), np.zeros(0)
+        return OwnState(kind, none, none, none, np.ones(1))
     me = 0 if model.soft else model.controller.normal.shape[0]
     prm = backend._prm.copy()
     prm[nk.STATE_ME] = me
     size = n + me + n_rows
-    return NetworkState(np.zeros(size), prm, np.empty(3 * n + 2 * (me + n_rows)), np.ones(1))
+    out = np.empty(3 * n + 2 * (me + n_rows))
+    return OwnState(NETWORK, np.zeros(size), prm, out, np.ones(1))
 
 
 def close_state(st) -> None:
@@ -61,26 +69,36 @@ def error_text(name: str, raw: float) -> str:
 
 
 @cache
-def compiled_solve(name: str):
-    """The compiled ``solve`` of backend ``name``."""
-    if name == "noop":
-        return compile_with(_null_solve, name="noop_solve")
-    if name == "pinv":
-        return compile_with(_pinv_solve, {"_pinv": pinv_kernel()}, name="pinv_solve")
-    packed = nk.packed_kernel_dispatcher()
-    return compile_with(_network_solve, {"_packed": packed}, name="network_solve")
+def compiled_solve(name: str = ""):
+    """The compiled ``solve`` of every backend here (by its state's ``kind``): one engine."""
+    inline = {"inline": "always"}
+    bound = {
+        "_pinv": pinv_kernel(),
+        "_packed": nk.packed_kernel_dispatcher(),
+        "_null_solve_in": compile_with(_null_solve, name="noop_solve", **inline),
+    }
+    bound["_pinv_solve_in"] = compile_with(_pinv_solve, bound, name="pinv_solve", **inline)
+    bound["_network_solve_in"] = compile_with(_network_solve, bound, name="network_solve", **inline)
+    return compile_with(_own_solve, bound, name="own_solve")
+
+
+def compiled_reset(name: str = ""):
+    """The compiled ``reset`` of every backend here."""
+    return _compiled_reset()
 
 
 @cache
-def compiled_reset(name: str):
-    """The compiled ``reset`` of backend ``name``."""
-    if name.startswith("rnn"):
-        return compile_with(_network_reset, name="network_reset")
-    return compile_with(_no_reset, name="no_reset")
+def _compiled_reset():
+    return compile_with(_network_reset, name="network_reset")
 
 
-def _no_reset(st):  # pragma: no cover - compiled
-    return None
+def _own_solve(st, buf, warm, sol, info):  # pragma: no cover - compiled
+    """The solve of ``st.kind``."""
+    if st.kind == NOOP:
+        return _null_solve_in(st, buf, warm, sol, info)
+    if st.kind == PINV:
+        return _pinv_solve_in(st, buf, warm, sol, info)
+    return _network_solve_in(st, buf, warm, sol, info)
 
 
 def _null_solve(st, buf, warm, sol, info):  # pragma: no cover - compiled
@@ -111,6 +129,7 @@ def _pinv_solve(st, buf, warm, sol, info):  # pragma: no cover - compiled
 
 
 def _network_reset(st):  # pragma: no cover - compiled
+    """The next network call starts cold (nothing to reset for the others)."""
     st.cold[0] = 1.0
 
 

@@ -9,6 +9,7 @@ import math
 import os
 import shutil
 import sys
+import threading
 import time
 from collections.abc import Callable
 from contextlib import closing, contextmanager
@@ -50,7 +51,7 @@ EVERY = 10
 BENCH_EVERY = 10
 #: The most wall time a closed-loop run may take [s] (``--run-budget``).
 RUN_BUDGET_S = 10.0
-#: A backend's closed-loop budget is this many times the run its bench median predicts.
+#: A backend's closed-loop budget is this many times the run its bench mean predicts.
 BUDGET_MARGIN = 3.0
 #: The least closed-loop budget of a backend that keeps up [s] (the loop's own work per tick).
 BUDGET_FLOOR_S = 2.0
@@ -245,7 +246,9 @@ def run_all(config: RunConfig) -> RunOutcome:
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
     dump = [_dump_backend()] if missing else []
     with phases.phase("compile"):  # only the backends this run runs, before anything is timed
-        warmup_logged(log, [*config.backends, *dump])
+        # here what the bench times; the closed loop's kernels in a worker, behind the bench
+        warmup_logged(log, [*config.backends, *dump], loop=bool(missing))
+        behind = _compile_behind(config.backends)  # None: nothing left (all compiled here)
     for s in missing:
         with phases.phase(f"problem set {s}"):
             log.info("simulating %s with %s to dump every %dth tick", s, dump[0], EVERY)
@@ -259,6 +262,10 @@ def run_all(config: RunConfig) -> RunOutcome:
             )
             phase.update()
     failures, per_tick_s = _bench(config, subsets, staging / "bench", phases)
+    if behind is not None:
+        with phases.phase("compile, closed loop"):  # what is left of it, then loaded here
+            behind.join()
+            warmup_logged(log, config.backends)
     failed_solves = failures
     budgets = closed_loop_budgets(config, per_tick_s)
     table, not_ok = _closed_loop(config, staging, phases, budgets)
@@ -279,6 +286,7 @@ def run_all(config: RunConfig) -> RunOutcome:
             else None,
             files=sweeps,
             min_ok_bound=config.min_ok_bound,
+            jobs=config.jobs,  # the figures on as many cores as the runs
         )
         _compress_bench(staging / "bench")
     elapsed = time.perf_counter() - started
@@ -291,11 +299,37 @@ def run_all(config: RunConfig) -> RunOutcome:
     return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
 
 
+def _compile_behind(backends: list[str]) -> threading.Thread | None:
+    """Compile the closed loop's kernels for ``backends`` (:func:`qpbench.jit.kernels_for`) not
+    prepared here into numba's on-disk cache, in a worker process, while this process benches;
+    the thread that waits for it (a failure only leaves the compile to the closed loop), or
+    ``None`` when none is left."""
+    from ..jit import kernels_for, prepare, prepared
+
+    todo = [k for k in kernels_for(backends) if k not in prepared()]
+    if not todo:
+        return None
+
+    def wait() -> None:
+        from ..runner.process import context, run_tasks
+
+        started = time.perf_counter()
+        tasks = [("compile", todo, None)]
+        for done in run_tasks(prepare, tasks, 1, ctx=context(fresh=True), name="qpbench-compile"):
+            said = done.value.line() if done.lost is None else done.lost
+            log.info("closed loop's %s (in a worker, %.1f s)", said, time.perf_counter() - started)
+
+    thread = threading.Thread(target=wait, name="qpbench-compile", daemon=True)
+    thread.start()
+    return thread
+
+
 def _bench(
     config: RunConfig, subsets: dict, bench_dir: Path, phases
 ) -> tuple[int, dict[str, float]]:
     """Bench every backend on each scenario's problems: the failed solves, and each backend's
-    median over all sets of ``wall_time_min_s`` [s]."""
+    mean over all sets of ``wall_time_min_s`` [s] (what a run's solves take per tick: a median
+    misses a tail of slow solves that makes most of a run's time)."""
     import statistics
 
     from .bench import BenchConfig, run_bench
@@ -322,11 +356,11 @@ def _bench(
         failures += summary.failures
         for name, stats in summary.backends.items():
             times.setdefault(name, []).extend(stats.times_s)
-    return failures, {b: statistics.median(t) for b, t in times.items() if t}
+    return failures, {b: statistics.fmean(t) for b, t in times.items() if t}
 
 
 def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict[str, float]:
-    """Each backend's closed-loop wall-time budget [s]: a bench median ``t`` predicts a run of
+    """Each backend's closed-loop wall-time budget [s]: a bench mean ``t`` predicts a run of
     ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
     :data:`BUDGET_FLOOR_S` and ``run_budget``; :data:`CUT_BUDGET_S` where the prediction exceeds
     ``run_budget``; ``run_budget`` without a bench time."""
@@ -392,16 +426,16 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
 
 
 def sweep_plan(costs_s: dict[str, float], worker_s: float, target: int) -> dict[str, int]:
-    """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` or as many
-    as the worker time left buys (``worker_s`` [s] over all workers; ``costs_s``: a backend's
-    measured cost of one instance in every swept scenario [s]), so a budget too small for every
-    backend gives the cheapest their full count and the rest fewer or none."""
+    """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` while the
+    worker time left buys them (``worker_s`` [s] over all workers; ``costs_s``: a backend's
+    measured cost of one instance in every swept scenario [s]), else none: fewer than
+    ``target`` cannot recommend it (its bound stays short of the threshold, "not enough
+    evidence" either way), so they would only lengthen the run."""
     plan, left = {}, max(0.0, worker_s)
     for backend in sorted(costs_s, key=lambda b: (costs_s[b], b)):
-        cost = costs_s[backend]
-        n = target if cost <= 0 else min(target, int(left // cost))
-        plan[backend] = n
-        left -= n * cost
+        cost = max(0.0, costs_s[backend]) * target
+        plan[backend] = target if cost <= left else 0
+        left -= cost if plan[backend] else 0.0
     return plan
 
 
@@ -429,6 +463,25 @@ class Draws:
         """Time [s] to draw one valid instance, as measured so far."""
         valid = sum(i.invalid is None for i in self.drawn)
         return self.seconds / valid if valid else 0.0
+
+
+def _draw_ahead(draws: dict[str, Draws], valid: int) -> dict[str, threading.Event]:
+    """Draw each scenario's first ``valid`` valid instances in a thread, in order, while the
+    workers run the scenarios before it; an event per scenario, set once its instances are
+    drawn (all set if a draw fails: the scenario's sweep then draws again, and says why)."""
+    ready = {s: threading.Event() for s in draws}
+
+    def draw() -> None:
+        try:
+            for s, d in draws.items():
+                d.first(valid)
+                ready[s].set()
+        finally:
+            for event in ready.values():
+                event.set()
+
+    threading.Thread(target=draw, name="qpbench-draw", daemon=True).start()
+    return ready
 
 
 def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
@@ -459,9 +512,9 @@ def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
     with phases.phase("perturbed runs"):
         draws = {s: Draws(spec) for s, spec in specs.items()}
         costs, overhead_s = _instance_costs(draws, candidates, table)
-        # the instances are drawn here, the runs made by the workers: the drawing of the
-        # target's instances is reserved first
-        sampling_s = target * sum(d.cost_per_valid() for d in draws.values())
+        # the instances are drawn here, the runs made by the workers: the drawing of the first
+        # scenario's target is reserved first (the others are drawn while the workers run)
+        sampling_s = target * next(iter(draws.values())).cost_per_valid()
         spent = time.perf_counter() - started
         plan = sweep_plan(costs, (config.sweep_budget - spent - sampling_s) * config.jobs, target)
         about.update(
@@ -473,8 +526,10 @@ def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
             ),
         )
         folder.mkdir(parents=True, exist_ok=True)
+        ready = _draw_ahead(draws, max(plan.values(), default=0))
         with closing(make_executor("local", config.jobs)) as pool:
             for s, d in draws.items():
+                ready[s].wait()
                 _sweep_scenario(s, d, plan, folder / s, pool, plugin_files(), config.resume)
     about["wall_time_s"] = round(time.perf_counter() - started, 1)
     log.info(

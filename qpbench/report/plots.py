@@ -165,25 +165,24 @@ def _distance_series(ax, backend: str, d: pd.DataFrame, lit: bool) -> None:
         ax.plot(t, d["d_body_min"].to_numpy(float) * 1e3, color=look.colour, ls=(0, (2, 2)), lw=0.8)
 
 
-def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -> dict[str, str]:
+def write_plots(
+    results: Results, folder: str | Path, relative_to: str | Path, jobs: int = 1
+) -> dict[str, str]:
     """Write every figure of a report into ``folder`` (and remove a previous report's there that
-    it does not link, :data:`FIGURE_PATTERN`); return key -> path relative to ``relative_to``."""
+    it does not link, :data:`FIGURE_PATTERN`), ``jobs`` figures at a time (more than one: each
+    in a worker process); return key -> path relative to ``relative_to``."""
+    from functools import partial
+
     from .loop_figure import closed_loop_figure
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    written: dict[str, Path] = {}
-
-    def draw(key: str, figure) -> None:
-        """``figure(path)`` draws the figure ``key`` (``False``: nothing to draw)."""
-        if figure(folder / f"{key}.png") is not False:
-            written[key] = folder / f"{key}.png"
-
+    planned: dict[str, object] = {}  # key -> figure(path), False when there is nothing to draw
     for label, _tol, rows in tables.bench_groups(results.bench):
-        draw(f"perf_profile_{slug(label)}", lambda p: performance_profile_plot(rows, label, p))
+        planned[f"perf_profile_{slug(label)}"] = partial(performance_profile_plot, rows, label)
         for scenario, g in rows.groupby("scenario", sort=True):
-            title = f"{scenario} ({label})"
-            draw(f"per_tick_{slug(label)}_{slug(scenario)}", lambda p: per_tick_plot(g, title, p))
+            key = f"per_tick_{slug(label)}_{slug(scenario)}"
+            planned[key] = partial(per_tick_plot, g, f"{scenario} ({label})")
     df = results.closed_loop
     groups = (
         []
@@ -197,15 +196,16 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
         name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
         if logs:
             title = f"Closed loop, {where}"
-            draw(
-                f"closed_loop_{name}",
-                lambda p: closed_loop_figure(logs, p, title=title, d_safe=d_safe),
+            planned[f"closed_loop_{name}"] = partial(
+                closed_loop_figure, logs, title=title, d_safe=d_safe
             )
             title = f"Joint velocities, {where}"
-            draw(f"closed_loop_v_{name}", lambda p: velocity_plot(logs, title, p))
+            planned[f"closed_loop_v_{name}"] = partial(velocity_plot, logs, title)
             title = f"Closest key point to an obstacle, {where}"
-            draw(f"closed_loop_d_{name}", lambda p: distance_plot(logs, title, p, d_safe))
-        _snapshots(g, scenario, formulation, draw)
+            planned[f"closed_loop_d_{name}"] = partial(distance_plot, logs, title, d_safe=d_safe)
+        planned.update(_snapshots(g, scenario, formulation))
+    drawn = _draw_all(planned, folder, jobs)
+    written = {key: folder / f"{key}.png" for key in planned if drawn.get(key)}
     keep = {p.resolve() for p in written.values()}
     removed = [
         p
@@ -218,6 +218,30 @@ def write_plots(results: Results, folder: str | Path, relative_to: str | Path) -
         log.info("%s: removed %d figures no longer in the report", folder, len(removed))
     relative = Path(relative_to).resolve()
     return {k: p.resolve().relative_to(relative).as_posix() for k, p in written.items()}
+
+
+def draw_figure(job: tuple) -> bool:
+    """``figure(path)`` of a job ``(figure, path)``: whether it drew one (``False``: nothing to
+    draw)."""
+    figure, path = job
+    return figure(path) is not False
+
+
+def _draw_all(planned: dict, folder: Path, jobs: int) -> dict[str, bool]:
+    """Draw each planned figure into ``folder/<key>.png``: here, or ``jobs`` at a time in worker
+    processes (:func:`qpbench.runner.process.run_tasks`; a figure whose worker failed is left
+    out, warned)."""
+    tasks = [(key, (figure, folder / f"{key}.png"), None) for key, figure in planned.items()]
+    if jobs <= 1 or len(tasks) <= 1:
+        return {key: draw_figure(job) for key, job, _ in tasks}
+    from ..runner.process import run_tasks
+
+    drawn = {}
+    for done in run_tasks(draw_figure, tasks, jobs, name="qpbench-figure"):
+        if done.lost is not None:
+            log.warning("figure %s not drawn: %s", done.key, done.lost)
+        drawn[done.key] = done.lost is None and bool(done.value)
+    return drawn
 
 
 #: Network backends in order of preference.
@@ -263,20 +287,23 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
     return chosen
 
 
-def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str, draw) -> None:
-    """Draw the snapshots of one scenario's runs with ``draw(key, figure)``."""
+def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str) -> dict:
+    """The snapshots of one scenario's runs: key -> figure(path)."""
+    from functools import partial
+
     from ..sim.log import theta_columns
     from ..sim.scenario import load_scenario
     from .arm import draw_snapshot
 
     chosen = snapshot_runs(runs)
     if not chosen:
-        return
+        return {}
     try:
         scene = load_scenario(scenario)
     except Exception as exc:  # noqa: BLE001 - a scenario not found here only loses its pictures
         log.warning("%s: no arm snapshot (%s)", scenario, exc)
-        return
+        return {}
+    figures = {}
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
         if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
@@ -284,7 +311,8 @@ def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str, draw) -> Non
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         backend = str(row["backend"])
         title = f"{scenario}: {backend} ({ROLES[role]})"
-        draw(key, lambda p: draw_snapshot(scene, frame, p, title=title, backend=backend))
+        figures[key] = partial(draw_snapshot, scene, frame, title=title, backend=backend)
+    return figures
 
 
 #: Names of the figures :func:`write_plots` writes (and so may remove when it no longer links them).

@@ -80,13 +80,15 @@ def write_report(
     sections: Callable[[Path, bool], list[str]] | None = None,
     files: list[ResultFile] = (),
     min_ok_bound: float = MIN_OK_BOUND,
+    jobs: int = 1,
 ) -> Path:
     """Read the result CSVs (:func:`.inputs.read_results`), write ``out/report.md`` and
     ``out/plots/*.png`` (:func:`publish`). ``sections(out, plots)``: markdown lines appended
     after the tables (the sweep section); with it, ``paths`` may be empty; ``files``: the
     tables of ``sections``, listed with the result files; the sweep tables among them are the
     recommendation's perturbed runs, judged on ``min_ok_bound``
-    (:func:`.recommend.recommend`)."""
+    (:func:`.recommend.recommend`); ``jobs``: figures drawn at a time, each in a worker process
+    when more than one."""
 
     def render_all(out: Path) -> str:
         started = time.perf_counter()
@@ -99,7 +101,7 @@ def write_report(
             from .plots import write_plots
 
             with figure_progress(out / "plots"):
-                plot_files = write_plots(results, out / "plots", relative_to=out)
+                plot_files = write_plots(results, out / "plots", relative_to=out, jobs=jobs)
         swept = [f.path for f in results.files if f.kind == "sweep"]
         sweeps = read_sweeps(swept, relative_to=out) if swept else None
         text = render(results, plot_files, sweeps, min_ok_bound)

@@ -13,6 +13,7 @@ import signal
 import socket
 import sys
 import time
+import weakref
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import suppress
@@ -43,6 +44,7 @@ PRELOAD = (
     "numpy",
     "scipy.sparse",
     "qpbench.harness.preload",
+    "qpbench.harness.closed_loop",  # every closed-loop run's worker (pandas, the loop)
 )
 
 #: Environment variable naming the kernels the forkserver's preload loads (comma-separated).
@@ -50,6 +52,9 @@ PRELOAD_KERNELS_ENV = "QPBENCH_PRELOAD_KERNELS"
 
 _CTX = None
 _KERNELS: tuple[str, ...] = ()
+#: The kernels the running forkserver loaded, and the workers forked from it (alive or not).
+_PRELOADED: tuple[str, ...] = ()
+_FORKED: weakref.WeakSet = weakref.WeakSet()
 
 
 def preload_kernels(names) -> None:
@@ -60,14 +65,26 @@ def preload_kernels(names) -> None:
 
 def context(fresh: bool = False) -> BaseContext:
     """The start method's context, its forkserver started and preloaded now; ``fresh``: ``spawn``,
-    never a fork of a process that may hold threads and locks."""
-    global _CTX
+    never a fork of a process that may hold threads and locks. A forkserver that loaded fewer
+    kernels than are named now is replaced once no worker forked from it lives (each worker
+    would load the others itself; a live worker would seem dead when its server ends)."""
+    global _CTX, _PRELOADED
     if fresh:
         return multiprocessing.get_context("spawn")
+    stale = _CTX is not None and _CTX.get_start_method() == "forkserver"
+    stale = stale and not set(_KERNELS) <= set(_PRELOADED)
+    if stale and not any(w.proc.is_alive() for w in _FORKED):
+        from multiprocessing import forkserver
+
+        stop = getattr(forkserver._forkserver, "_stop", None)  # CPython's, since 3.8
+        if stop is not None:
+            stop()  # the next worker starts a new server
+            _CTX = None
     if _CTX is None:
         forkserver = "forkserver" in multiprocessing.get_all_start_methods()
         ctx = multiprocessing.get_context("forkserver" if forkserver else "spawn")
         if forkserver:
+            _PRELOADED = _KERNELS
             os.environ[PRELOAD_KERNELS_ENV] = ",".join(_KERNELS)
             ctx.set_forkserver_preload(list(PRELOAD))
             # wait for the preload now (a child doing nothing): no deadline covers it
@@ -145,6 +162,8 @@ class Worker:
         self.proc = ctx.Process(target=_serve, args=args, daemon=True, name=name)
         self.proc.start()
         child.close()
+        if ctx.get_start_method() == "forkserver":
+            _FORKED.add(self)
         self.ready = False
         self.alive = True
         self.task = None  # the pool's (key, arg, timeout, attempts)
