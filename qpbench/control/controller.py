@@ -28,8 +28,8 @@ from ..exceptions import ParamError
 from ..native import entry_point
 from ..packed import PackedProblem
 from ..robot.chain import chain_data
-from ..robot.environment import OBSTACLE_COLUMNS, Obstacle
 from ..robot.kinematics import Arm, KeyPoints
+from ..robot.obstacles import OBSTACLE_COLUMNS, Obstacle
 from ..statuses import FORMULATIONS
 from .build_kernel import ControllerModel, compiled_build_kernel, packed_layout
 from .terms import EscapeVelocityLimits, ImpedanceTask

@@ -17,43 +17,6 @@ import numpy as np
 
 from ..exceptions import InputError
 
-# The obstacle table's columns and kind codes, and the obstacles' base class, where the
-# controller reads them (their home: :mod:`qpbench.robot.obstacles`).
-from .obstacles import (
-    DISK,
-    KIND,
-    LINE,
-    OBSTACLE_COLUMNS,
-    P0X,
-    P0Y,
-    P1X,
-    P1Y,
-    POINT,
-    RADIUS,
-    SEGMENT,
-    VX,
-    VY,
-    Obstacle,
-)
-
-__all__ = [
-    "OBSTACLE_COLUMNS",
-    "KIND",
-    "P0X",
-    "P0Y",
-    "P1X",
-    "P1Y",
-    "RADIUS",
-    "VX",
-    "VY",
-    "LINE",
-    "SEGMENT",
-    "DISK",
-    "POINT",
-    "Obstacle",
-    "ContactSurface",
-]
-
 
 def _vector(value, key: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
