@@ -206,6 +206,19 @@ def simulate_args(scenario: str, backend: str, duration: str, *options: str) -> 
     ]
 
 
+def panda_adaptive(duration: float):
+    """``panda_table`` with the adaptive law on, its gains, start estimates and clamps those of
+    ``adaptive_fast`` (``Kp_hat`` from 4000 N/m against the table's 5000 N/m)."""
+    from qpbench.sim.scenario import load_scenario
+
+    fast = load_scenario("adaptive_fast").spec
+    a, c = fast.adaptive, fast.controller
+    overrides = {"adaptive.enabled": True, "adaptive.gain": a.gain.tolist()}
+    overrides |= {"adaptive.kp_min": a.kp_min, "adaptive.kd_min": a.kd_min}
+    overrides |= {"controller.kp": c.kp, "controller.kd": c.kd}
+    return load_scenario("panda_table", overrides=overrides, duration=duration)
+
+
 def sparse_copy(problem: qpsolvers.Problem) -> qpsolvers.Problem:
     """The same QP with ``P``, ``G`` and ``A`` as ``scipy.sparse`` CSC matrices (``None`` kept)."""
     import scipy.sparse as spa

@@ -348,3 +348,23 @@ def test_adaptive_law_moves_kp_hat_towards_the_truth():
     assert fast.kp == pytest.approx(5000.0, rel=0.01)
     fast.reset()
     assert fast.kp == 4000.0
+
+
+def test_adaptive_law_is_the_same_along_the_normal_of_a_spatial_arm():
+    """In 3-D the law reads only the components along ``n``: a planar contact embedded in z = 0,
+    any tangential offset and velocity added, gives the planar estimates step for step."""
+    rng = np.random.default_rng(3)
+    n2 = np.array([1.0, -1.0]) / np.sqrt(2.0)
+    n3 = np.array([n2[0], n2[1], 0.0])
+    planar = AdaptiveImpedance(4000.0, 80.0, (5e4, 20.0), n2, 20.0, 100.0, 1.0)
+    spatial = AdaptiveImpedance(4000.0, 80.0, (5e4, 20.0), n3, 20.0, 100.0, 1.0)
+    assert spatial.law().size == planar.law().size + 1
+    for _ in range(200):
+        x, xd, v, vd = rng.normal(size=(4, 2)) * 1e-3
+        force = 20.0 + rng.normal()
+        free = np.array([-n2[1], n2[0], 1.0]) * rng.normal(size=3)[:, None]  # tangential
+        lift = lambda p: np.append(p, 0.0)  # noqa: E731
+        want = planar.update(1e-3, x, xd, v, vd, force)
+        got = spatial.update(1e-3, lift(x) + free[0], lift(xd), lift(v) + free[1], lift(vd), force)
+        assert got == pytest.approx(want, rel=1e-12)
+    assert planar.kp != 4000.0 and planar.kd != 80.0

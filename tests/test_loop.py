@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import qpsolvers
-from conftest import SUMMARY_TIME_KEYS, simulate_args
+from conftest import SUMMARY_TIME_KEYS, panda_adaptive, simulate_args
 from test_environment import contact_force
 
 from qpbench.backends import backend_names
@@ -93,6 +93,30 @@ def test_adaptive_fast_converges(short_runs):
     s = short_runs["adaptive_fast"].summary
     assert s["kp_hat_final"] == pytest.approx(5000.0, rel=0.01)
     assert s["force_error_max_after_2s"] < 0.5
+    assert s["tracking_max_after_2s"] < 1e-3
+
+
+def test_adaptive_law_converges_on_the_spatial_arm():
+    """The same scalar law along the table's normal on the Panda: ``Kp_hat`` reaches the table's
+    stiffness as in ``adaptive_fast``, the force follows the spring's ``Kp_env Fd / Kp_hat``
+    and its error settles; ``Kd_hat`` (the normal velocity is about zero in steady contact)
+    only drifts towards the table's damping."""
+    sc = panda_adaptive(duration=4.0)
+    surface = sc.make_surface()
+    res = simulate(sc, qp_backend())
+    s, log = res.summary, res.log
+    assert s["verdict"] == "ok" and s["fallback_ticks"] == s["zero_velocity_ticks"] == 0
+    assert log["kp_hat"].iloc[0] == 4000.0 and log["kd_hat"].iloc[0] == 80.0
+    assert s["kp_hat_final"] == pytest.approx(surface.stiffness, rel=0.01)
+    t, kp, kd, force = (log[c].to_numpy() for c in ("t", "kp_hat", "kd_hat", "force"))
+    assert surface.damping < kd[-1] < kd[0]
+    settled = t >= 0.1  # after the first contact's transient: Kp_hat rises, the error falls
+    error = np.abs(force[settled] - 20.0)
+    assert np.all(np.diff(kp[settled]) >= 0.0) and np.all(np.diff(error) <= 1e-9)
+    assert error[-1] < 0.2 and error[t[settled] >= 2.0][0] < 1.0
+    after = t >= 2.0
+    spring = surface.stiffness * 20.0 / kp[after]  # steady contact at the estimate's equilibrium
+    np.testing.assert_allclose(force[after], spring, atol=0.02)
     assert s["tracking_max_after_2s"] < 1e-3
 
 

@@ -4,9 +4,10 @@ The controller estimates the environment's ``W = [Kp_hat; Kd_hat]`` from the mea
 
     Wdot = -K_in eta (Fd - F),     eta = [n . (x - x_d); n . (xdot - xdot_d)]
 
-``K_in = diag(gain_kp, gain_kd)``; ``eta`` is projected on the pressing direction ``n`` so
-``W`` stays two scalars. Explicit Euler at the control period; the estimates are kept at or
-above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``).
+``K_in = diag(gain_kp, gain_kd)``; ``eta`` is projected on the pressing direction ``n`` (the
+impedance acts along it, the task tracks in the other directions), so ``W`` stays two scalars
+on a planar or a spatial arm. Explicit Euler at the control period; the estimates are kept at
+or above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ if TYPE_CHECKING:
 
 class AdaptiveImpedance:
     """Online estimate of ``Kp`` [N/m], ``Kd`` [N s/m] from ``kp0``, ``kd0`` (paper: 4000, 80),
-    ``gain = K_in`` diagonal (paper: (500, 20)), unit ``normal`` and ``Fd`` [N]."""
+    ``gain = K_in`` diagonal (paper: (500, 20)), unit ``normal`` (the arm's dim) and ``Fd`` [N]."""
 
     def __init__(
         self,
@@ -36,8 +37,7 @@ class AdaptiveImpedance:
         self.kd0 = float(kd0)
         self.gain_kp = float(gain[0])
         self.gain_kd = float(gain[1])
-        self.nx = float(normal[0])
-        self.ny = float(normal[1])
+        self.normal = [float(c) for c in normal]
         self.desired_force = float(desired_force)
         self.kp_min = float(kp_min)
         self.kd_min = float(kd_min)
@@ -57,33 +57,25 @@ class AdaptiveImpedance:
         xdot_d: np.ndarray,
         force: float,
     ) -> tuple[float, float]:
-        """One Euler step over ``dt`` [s] from positions [m], velocities [m/s] and the measured
-        force [N]; returns the new ``(Kp_hat, Kd_hat)`` (the compiled law :func:`adapt_py`)."""
+        """One Euler step over ``dt`` [s] from positions [m], velocities [m/s] (the arm's dim) and
+        the measured force [N]; returns the new ``(Kp_hat, Kd_hat)`` (the compiled law
+        :func:`adapt_py`)."""
         import numpy as np
 
-        sensed = np.array([x[0], x[1], xdot[0], xdot[1]], dtype=float)
-        xd = np.array([x_d[0], x_d[1], xdot_d[0], xdot_d[1]], dtype=float)
+        sensed = np.concatenate([x, xdot]).astype(float)
+        xd = np.concatenate([x_d, xdot_d]).astype(float)
         gains = np.array([self.kp, self.kd])
         compiled_law()(self.law(), float(dt), sensed, xd, float(force), gains)
         self.kp, self.kd = float(gains[0]), float(gains[1])
         return self.kp, self.kd
 
     def law(self):
-        """The law's constants as :func:`adapt_py` reads them: ``K_in`` (2), ``n`` (2), ``Fd``,
-        ``kp_min``, ``kd_min``."""
+        """The law's constants as :func:`adapt_py` reads them: ``K_in`` (2), ``Fd``, ``kp_min``,
+        ``kd_min``, then ``n`` (the arm's dim)."""
         import numpy as np
 
-        return np.array(
-            [
-                self.gain_kp,
-                self.gain_kd,
-                self.nx,
-                self.ny,
-                self.desired_force,
-                self.kp_min,
-                self.kd_min,
-            ]
-        )
+        head = [self.gain_kp, self.gain_kd, self.desired_force, self.kp_min, self.kd_min]
+        return np.array(head + self.normal)
 
 
 @cache
@@ -96,13 +88,15 @@ def compiled_law():
 
 def adapt_py(law, dt, sensed, xd, force, gains):  # pragma: no cover - compiled
     """One Euler step of the law over ``dt`` [s]: ``gains = [Kp_hat, Kd_hat]`` updated in place
-    from the sensed ``[x, xdot]`` and desired ``[x_d, xdot_d]`` (4,) [m, m/s] and the measured
-    ``force`` [N]; ``law`` of :meth:`AdaptiveImpedance.law`."""
-    nx, ny = law[2], law[3]
-    eta_p = nx * (sensed[0] - xd[0]) + ny * (sensed[1] - xd[1])
-    eta_d = nx * (sensed[2] - xd[2]) + ny * (sensed[3] - xd[3])
-    ef = law[4] - force
+    from the sensed ``[x, xdot]`` and desired ``[x_d, xdot_d]`` (2 dim,) [m, m/s] and the
+    measured ``force`` [N]; ``law`` of :meth:`AdaptiveImpedance.law`."""
+    dim = law.shape[0] - 5
+    eta_p = eta_d = 0.0
+    for i in range(dim):
+        eta_p += law[5 + i] * (sensed[i] - xd[i])
+        eta_d += law[5 + i] * (sensed[dim + i] - xd[dim + i])
+    ef = law[2] - force
     kp = gains[0] - dt * law[0] * eta_p * ef
     kd = gains[1] - dt * law[1] * eta_d * ef
-    gains[0] = kp if kp > law[5] else law[5]
-    gains[1] = kd if kd > law[6] else law[6]
+    gains[0] = kp if kp > law[3] else law[3]
+    gains[1] = kd if kd > law[4] else law[4]

@@ -78,7 +78,7 @@ def run_model(
         damping=float(surface.damping),
         tangent=np.array([-normal[1], normal[0]]) if normal.size == 2 else np.zeros(3),
         adaptive=adaptive is not None,
-        law=np.zeros(7) if adaptive is None else adaptive.law(),
+        law=np.zeros(5 + normal.size) if adaptive is None else adaptive.law(),
         kp0=float(controller.kp),
         kd0=float(controller.kd),
         noise=noise,

@@ -453,8 +453,6 @@ def _check_across_keys(spec: ScenarioSpec, file) -> None:
     for key, value in vectors:
         if value.size != dim:
             fail(f"expected {dim} numbers (the robot's dim), got {value.size}", key)
-    if dim == 3 and spec.adaptive.enabled:
-        fail("the adaptive law runs on a planar arm only", "adaptive.enabled")
     names: list[str] = []
     kinds = [kind for kind, cls in obstacle_kinds().items() if cls.DIM == dim]
     for i, o in enumerate(spec.obstacles):
