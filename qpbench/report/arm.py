@@ -115,15 +115,15 @@ def view(scenario, log, arm, plane=("x", "y")) -> tuple[tuple[float, float], tup
     return (lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad)
 
 
-def limits(scenario, log, arm, planes) -> dict[str, tuple[float, float]]:
-    """Axis name -> limits [m]: each of the ``planes``' :func:`view`, an axis two views share
-    spanning both (the views line up along it)."""
-    out: dict = {}
+def limits(scenario, log, arm) -> tuple[tuple, dict[str, tuple[float, float]], float]:
+    """The :func:`views`, axis name -> limits [m] (each view's :func:`view`, an axis two views
+    share spanning both: the views line up along it) and the largest height / width of a view."""
+    planes, out = views(scenario), {}
     for plane in planes:
         for axis, (lo, hi) in zip(plane, view(scenario, log, arm, plane)):
             was = out.get(axis, (lo, hi))
             out[axis] = (min(lo, was[0]), max(hi, was[1]))
-    return out
+    return planes, out, max(np.ptp(out[v]) / np.ptp(out[h]) for h, v in planes)
 
 
 def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False, plane=("x", "y")):
@@ -252,12 +252,10 @@ def draw_snapshot(
     surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
     theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     t = log["t"].to_numpy(float)
-    planes = views(scenario)
-    lims = limits(scenario, log, arm, planes)
+    planes, lims, ratio = limits(scenario, log, arm)
     has_d = has_distance(log)
 
     # the workspace's height follows its views' proportions (equal axes), within limits
-    ratio = max(np.ptp(lims[v]) / np.ptp(lims[h]) for h, v in planes)
     high = float(np.clip(WORKSPACE_IN * ratio, 2.4, 1.3 * WORKSPACE_IN))
     size = (WORKSPACE_IN * len(planes) + 3.2, high + 0.8 + (DISTANCE_IN + 0.6 if has_d else 0.0))
     fig = style.pyplot().figure(figsize=size, layout="constrained")
@@ -368,13 +366,11 @@ def animate(
     ee = _log_points(log, "ee")
     dt = float(t[1] - t[0]) if len(t) > 1 else scenario.dt  # every speed / (fps dt)-th tick
     frames = list(range(0, len(t), max(1, int(round(speed / (fps * dt))))))
-    planes = views(scenario)
-    lims = limits(scenario, log, arm, planes)
+    planes, lims, ratio = limits(scenario, log, arm)
     d_safe = scenario.spec.controller.d_safe
     dcols = tick_log.distance_columns(log)
 
     # equal axes: the frame's height follows the views' proportions
-    ratio = max(np.ptp(lims[v]) / np.ptp(lims[h]) for h, v in planes)
     high = float(np.clip(5.4 * ratio + 0.9, 2.6, 6.0))
     size = (6 * len(planes), high)
     fig, grid = style.pyplot().subplots(1, len(planes), figsize=size, dpi=70, layout="constrained")
