@@ -71,12 +71,6 @@ def run(args: argparse.Namespace) -> int:
     backend = select_backend(args.backend)
     overrides = parse_overrides(args.overrides)
     scenario = load_scenario(args.scenario, overrides, dt=args.dt, duration=args.duration)
-    if scenario.make_arm().dim == 3:
-        from ..report.arm import check_drawable
-
-        for key in ("snapshot", "animate"):
-            if getattr(args, key) is not None:
-                check_drawable(scenario, f"--{key}")
     progress = sys.stderr.isatty() and not args.quiet
     warmup_logged(log, [backend])
     settings = pick(args, "formulation every dump profile deadline engine")

@@ -17,7 +17,7 @@ import pkgutil
 from typing import Annotated, Union
 
 from ._base import Obstacle, validated
-from ._draw import OBSTACLE_COLOR, draw_line
+from ._draw import OBSTACLE_COLOR, draw_trace, outline, project, trace
 from ._geometry import compiled_closest, compiled_segment_distance
 from ._table import (
     BOX,
@@ -82,7 +82,10 @@ __all__ = [
     "Obstacle",
     "validated",
     "OBSTACLE_COLOR",
-    "draw_line",
+    "outline",
+    "draw_trace",
+    "project",
+    "trace",
     "compiled_closest",
     "compiled_segment_distance",
     "register",

@@ -11,11 +11,32 @@ _AXES = {"x": 0, "y": 1, "z": 2}
 
 
 def project(points, plane=("x", "y")) -> np.ndarray:
-    """Points (..., d) [m] (d = 2: in z = 0) on the view ``plane`` (..., 2)."""
+    """Points (..., d) [m] (d = 2: in z = 0) on the view ``plane`` (..., 2): their coordinates
+    along its axes, in order (``("x", "y", "z")``: the points in 3-D)."""
     points = np.asarray(points, dtype=float)
     full = np.zeros((*points.shape[:-1], 3))
     full[..., : points.shape[-1]] = points
-    return full[..., [_AXES[plane[0]], _AXES[plane[1]]]]
+    return full[..., [_AXES[a] for a in plane]]
+
+
+def trace(point, normal, plane=("x", "y")):
+    """The line a plane through ``point`` [m] with ``normal`` (2-D: a line of z = 0) leaves on
+    the view ``plane``: a point of it [m] and its unit normal there (each (2,)); ``None`` when
+    the plane is seen face on. Exact when seen edge on (the normal in the view plane, as a
+    line's always is); else the plane's section through the origin of the third axis."""
+    n = project(normal, plane)
+    if np.linalg.norm(n) < 1e-12:
+        return None
+    offset = float(project(normal, "xyz") @ project(point, "xyz")) / float(n @ n)
+    return offset * n, n / np.linalg.norm(n)
+
+
+def draw_trace(ax, point, normal, plane, limits, **line) -> None:
+    """The plane through ``point`` [m] with ``normal`` (towards its free side) on the view
+    ``plane`` (:func:`trace`, drawn by :func:`draw_line` across ``limits`` (xlim, ylim) [m])."""
+    seen = trace(point, normal, plane)
+    if seen is not None:
+        draw_line(ax, *seen, *limits, **line)
 
 
 def look(name: str, faint: bool, color=None) -> dict:
@@ -37,19 +58,23 @@ def draw_line(ax, point, normal, xlim, ylim, **line) -> None:
     ax.fill(poly[:, 0], poly[:, 1], color=line.get("color", OBSTACLE_COLOR), alpha=0.12, lw=0)
 
 
-def draw_outline(ax, points, radius: float, **style) -> None:
-    """The convex hull of ``points`` (k, 2) [m] swollen by ``radius`` [m], filled (a disk, a
-    capsule's or a box's shadow)."""
-    from matplotlib.patches import Polygon
-
+def outline(points, radius: float) -> np.ndarray:
+    """The convex hull (k, 2) [m], counter-clockwise, of ``points`` (k, 2) [m] swollen by
+    ``radius`` [m] (a disk's, a capsule's or a box's shadow)."""
+    points = np.asarray(points, dtype=float)
+    if radius == 0.0:
+        return _hull(points)
     angles = np.linspace(0.0, 2.0 * np.pi, 48, endpoint=False)
     ring = np.stack([np.cos(angles), np.sin(angles)], axis=1) * radius
-    cloud = (np.asarray(points, dtype=float)[:, None, :] + ring[None]).reshape(-1, 2)
-    if radius == 0.0:
-        cloud = np.asarray(points, dtype=float)
-    hull = _hull(cloud)
+    return _hull((points[:, None, :] + ring[None]).reshape(-1, 2))
+
+
+def draw_outline(ax, points, radius: float, **style):
+    """:func:`outline` filled; the patch."""
+    from matplotlib.patches import Polygon
+
     style = {**style, "alpha": 0.35 * style.get("alpha", 1.0)}
-    ax.add_patch(Polygon(hull, closed=True, lw=0, **style))
+    return ax.add_patch(Polygon(outline(points, radius), closed=True, lw=0, **style))
 
 
 def _hull(points: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 
 from . import register
 from ._base import Obstacle, SpatialSchema, Vec3, fit, unit
-from ._draw import draw_line, look, project
+from ._draw import draw_trace, look, trace
 from ._table import PLANE, table_rows
 
 
@@ -47,21 +47,13 @@ class PlaneObstacle(Obstacle):
         return np.einsum("sei,i->se", ends, fit(self.normal, d)).min(axis=1)
 
     def draw(self, ax, t=0.0, plane=("x", "y"), limits=None, faint=False, color=None):
-        """The plane's trace on the view plane (through the origin of the third axis), its solid
-        side lightly filled; a static one is not drawn again ``faint``."""
-        normal = project(self.normal, plane)
-        if (faint and not np.any(self.velocity)) or not np.any(normal):
+        """The plane's trace on the view plane (:func:`~._draw.trace`), its solid side lightly
+        filled; a static one is not drawn again ``faint``."""
+        if faint and not np.any(self.velocity):
             return
-        # the trace: points x of the view plane with n . (x - p) = 0
-        p = fit(self.point, 3) + t * self.velocity3
-        n3 = fit(self.normal, 3)
-        offset = float(n3 @ p) / float(normal @ normal)
-        style = look(self.name, faint, color)
-        draw_line(ax, offset * normal, normal / np.linalg.norm(normal), *limits, lw=2, **style)
+        point = fit(self.point, 3) + t * self.velocity3
+        draw_trace(ax, point, self.normal, plane, limits, lw=2, **look(self.name, faint, color))
 
     def view_points(self, plane=("x", "y")):
-        normal = project(self.normal, plane)
-        if not np.any(normal):
-            return np.empty((0, 2))
-        offset = float(fit(self.normal, 3) @ fit(self.point, 3)) / float(normal @ normal)
-        return offset * normal[None]
+        seen = trace(self.point, self.normal, plane)
+        return np.empty((0, 2)) if seen is None else seen[0][None]
