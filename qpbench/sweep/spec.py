@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
+from ..robot.body import body_clearance, contact_obstacles, link_label
 from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
 from ..sim.scenario_schema import finite_number
 from .toml_text import dumps, value_text
@@ -431,20 +432,17 @@ def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
 
 
 def start_clearance(scenario: Scenario) -> tuple[float, str, str]:
-    """Smallest distance [m] of a key point to an obstacle at t = 0, and which key point and obstacle.
-
-    ``(inf, "", "")`` without obstacles. Distances from the link's surface
-    (the key points' ``link_radius`` subtracted), as the controller measures them.
-    """
-    arm, kp = scenario.make_arm(), scenario.make_key_points()
-    points = arm.points(scenario.theta0, kp.links, kp.fracs)
-    best = (np.inf, "", "")
-    for obstacle in scenario.make_obstacles():
-        dist = obstacle.closest(points, 0.0)[1].min(axis=1) - kp.radius
-        i = int(np.argmin(dist))
-        if dist[i] < best[0]:
-            best = (float(dist[i]), kp.names[i], obstacle.name)
-    return best
+    """Smallest clearance [m] of a link's capsule to an obstacle at t = 0, and which link and
+    obstacle: :func:`~qpbench.robot.body.body_clearance`, as the verdict measures the body, for
+    any chain (planar or spatial). ``(inf, "", "")`` without obstacles."""
+    arm, obstacles = scenario.make_arm(), scenario.make_obstacles()
+    if not obstacles:
+        return np.inf, "", ""
+    exempt = contact_obstacles(obstacles, scenario.make_surface())
+    radius = scenario.spec.key_points.link_radius
+    body = body_clearance(arm, scenario.theta0, 0.0, obstacles, radius, exempt)
+    link, obstacle = int(body.link[0]), obstacles[int(body.obstacle[0])].name
+    return float(body.d_min[0]), link_label(link, arm.n), obstacle
 
 
 def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
@@ -457,8 +455,8 @@ def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
         d_safe = scenario.spec.controller.d_safe
         if d < d_safe:
             return (
-                f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
-                f"inside d_safe = {d_safe * 1e3:g} mm (every backend would be unsafe at t = 0)"
+                f"{name}.toml: starts with {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
+                f"inside d_safe = {d_safe * 1e3:g} mm (every backend would start unsafe)"
             )
     return None
 
