@@ -29,7 +29,7 @@ import numpy as np
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
 from ..robot.body import body_clearance, contact_obstacles, link_label
 from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
-from ..sim.scenario_schema import finite_number
+from ..sim.scenario_schema import filled, finite_number
 from .toml_text import dumps, value_text
 
 #: Other names a reader may give a scenario key (the table is found in the base scenario).
@@ -298,7 +298,9 @@ def load_sweep(
             "expected a [parameters] table with at least one key", path=path, key="parameters"
         )
     dists = [
-        checked_distribution(key, spec, _base_value(key, base_raw, path), path)
+        checked_distribution(
+            key, spec, _base_value(key, base_raw, filled(scenario.spec), path), path
+        )
         for key, spec in _flatten(params, path)
     ]
     bands = _bands(raw.get("convergence", {}), scenario.verdict, path)
@@ -349,7 +351,10 @@ def _flatten(params: dict, path, prefix: str = ""):
             )
 
 
-def _base_value(key: str, base_raw: dict, path):
+def _base_value(key: str, base_raw: dict, defaults: dict, path):
+    """The base's value of ``key``: the file's, else its default (``defaults``: the validated
+    base, every default filled in; an obstacle's ``velocity``)."""
+
     def bad(message: str) -> InputError:
         return InputError(message, path=path, key=f"parameters.{key}")
 
@@ -368,11 +373,13 @@ def _base_value(key: str, base_raw: dict, path):
         obstacles = base_raw.get("obstacles", []) if table == "obstacles" else []
         if table != "obstacles" or int(index) >= len(obstacles):
             raise bad(f"no such obstacle (base and sweep have {len(obstacles)})")
-        target = obstacles[int(index)]
+        target, default = obstacles[int(index)], defaults["obstacles"][int(index)]
     else:
-        target = base_raw.get(table)
+        target, default = base_raw.get(table), defaults.get(table, {})
         if table == "obstacles" or not isinstance(target, dict):
             raise bad(f"unknown parameter key: the base scenario has no table [{table}]")
+    if name not in target and name in default:
+        return default[name]
     if name not in target:
         close = difflib.get_close_matches(name, list(target), n=1)
         where = table if index is None else f"{table}[{index}]"
