@@ -13,13 +13,20 @@ from qpbench.cli import main
 from qpbench.robot.body import body_clearance
 from qpbench.robot.chain import forward_kinematics_np
 from qpbench.robot.presets import chain_from_urdf
-from qpbench.scaling.sizes import CLEARANCE, DEFAULT_SIZES, Size, parse_sizes, qp_shape
+from qpbench.scaling.sizes import (
+    CLEARANCE,
+    DEFAULT_SIZES,
+    Size,
+    parse_sizes,
+    qp_shape,
+    start_target,
+)
 from qpbench.scaling.spatial import (
     REACH,
     chain_of,
     generated_chain,
     scenario_files,
-    start_target,
+    task,
     urdf_text,
 )
 from qpbench.sim.scenario import parse_scenario
@@ -79,7 +86,7 @@ def test_spatial_size_starts_in_contact_with_valid_qps(name, tmp_path):
     assert np.allclose(chain.rotation, chain_of(size).rotation, atol=1e-12)
     assert np.all((theta0 > chain.q_min) & (theta0 < chain.q_max))
     ee = forward_kinematics_np(chain, theta0).position[-1]
-    assert np.allclose(ee, start_target(), atol=1e-9)  # 4 mm into the table, paper eq. 4
+    assert np.allclose(ee, start_target(task()), atol=1e-9)  # 4 mm into the table, paper eq. 4
     obstacles, radius = scenario.make_obstacles(), scenario.spec.key_points.link_radius
     body = body_clearance(scenario.make_arm(), theta0, 0.0, obstacles, radius)
     d_safe = scenario.spec.controller.d_safe

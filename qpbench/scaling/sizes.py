@@ -183,12 +183,18 @@ def place_cloud(gen: GeneratedArm, points: int, d_safe: float, seed: int = 0) ->
 
 
 @functools.cache
+def base_tables(name: str) -> dict:
+    """Shipped scenario ``name``'s tables as its file holds them (every size's task)."""
+    from ..sim.scenario import scenario_path
+
+    return tomllib.loads(scenario_path(name).read_text(encoding="utf-8"))
+
+
+@functools.cache
 def task() -> dict:
     """The scenario tables every size shares: the ``wall`` scenario's but its ``[scenario]``,
     ``[robot]`` and obstacles, the path started mid-stroke (phase -pi/2) so the arm moves at once."""
-    from ..sim.scenario import scenario_path
-
-    raw = tomllib.loads(scenario_path("wall").read_text(encoding="utf-8"))
+    raw = copy.deepcopy(base_tables("wall"))
     del raw["scenario"], raw["robot"], raw["obstacles"]
     raw["path"]["phase"] = [-math.pi / 2, -math.pi / 2]
     return raw
@@ -294,11 +300,13 @@ def parse_sizes(text: str | None) -> list[Size]:
     return out
 
 
-def start_target() -> np.ndarray:
-    """Where the end effector rests in contact at t = 0 in [m]: ``x_d(0) + (Fd / Kp) n``."""
-    path, contact, control = task()["path"], task()["contact"], task()["controller"]
+def start_target(tables: dict | None = None) -> np.ndarray:
+    """Where the end effector rests in contact at t = 0 in [m]: ``x_d(0) + (Fd / Kp) n``, in the
+    task ``tables`` (default: :func:`task`)."""
+    tables = tables or task()
+    path, contact, control = tables["path"], tables["contact"], tables["controller"]
     x_d = np.array(path["centre"]) + np.array(path["amplitude"]) * np.cos(path["phase"])
-    normal = np.array(contact["normal"]) / np.hypot(*contact["normal"])
+    normal = np.array(contact["normal"]) / np.linalg.norm(contact["normal"])
     return x_d + control["desired_force"] / control["kp"] * normal
 
 

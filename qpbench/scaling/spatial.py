@@ -27,7 +27,6 @@ from __future__ import annotations
 import copy
 import functools
 import math
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +38,7 @@ from ..robot.kinematics import Arm
 from ..robot.obstacles.sphere import SphereObstacle
 from ..robot.presets import make_chain, make_model, modified_dh
 from ..sweep.toml_text import dumps
-from .sizes import CLEARANCE, CLOUD_RADIUS, SPEED, Size
+from .sizes import CLEARANCE, CLOUD_RADIUS, SPEED, Size, base_tables, start_target
 
 #: A generated chain: joint 1's height [m], the sum of the later joints' offsets [m], the flange
 #: past the last joint [m] (the Panda's 0.333 and 0.107; its reach is about 0.86 m).
@@ -94,21 +93,10 @@ def urdf_text(chain: ChainModel) -> str:
 @functools.cache
 def task() -> dict:
     """The scenario tables every spatial size shares: ``panda_table``'s but its ``[scenario]``,
-    ``[robot]`` and obstacles (its start ``theta0`` is the Panda's guess, ``"guess"``)."""
-    from ..sim.scenario import scenario_path
-
-    raw = tomllib.loads(scenario_path("panda_table").read_text(encoding="utf-8"))
-    raw["guess"] = raw["robot"]["theta0"]
+    ``[robot]`` and obstacles."""
+    raw = copy.deepcopy(base_tables("panda_table"))
     del raw["scenario"], raw["robot"], raw["obstacles"]
     return raw
-
-
-def start_target() -> np.ndarray:
-    """Where the end effector rests in contact at t = 0 in [m]: ``x_d(0) + (Fd / Kp) n``."""
-    path, contact, control = task()["path"], task()["contact"], task()["controller"]
-    x_d = np.array(path["centre"]) + np.array(path["amplitude"]) * np.cos(path["phase"])
-    normal = np.array(contact["normal"]) / np.linalg.norm(contact["normal"])
-    return x_d + control["desired_force"] / control["kp"] * normal
 
 
 def start_angles(chain: ChainModel, target: np.ndarray, guess: np.ndarray) -> np.ndarray:
@@ -137,7 +125,7 @@ def start_angles(chain: ChainModel, target: np.ndarray, guess: np.ndarray) -> np
 def _guess(size: Size) -> np.ndarray:
     """A bent start: the Panda's from ``panda_table``; the others' every other joint bent."""
     if size.robot == "panda":
-        return np.array(task()["guess"], dtype=float)
+        return np.array(base_tables("panda_table")["robot"]["theta0"], dtype=float)
     bend = 0.6 if size.robot == "iiwa14" else 0.35
     return np.array([bend if k % 2 else 0.0 for k in range(size.links)])
 
@@ -178,8 +166,7 @@ def scenario_files(size: Size, seed: int, duration: float, urdf: Path) -> tuple[
     ``urdf``, which the scenario names); ``duration`` [s]."""
     chain = chain_of(size)
     raw = copy.deepcopy(task())
-    guess = raw.pop("guess")
-    theta0 = start_angles(chain, start_target(), guess if size.robot == "panda" else _guess(size))
+    theta0 = start_angles(chain, start_target(raw), _guess(size))
     d_safe, radius = raw["controller"]["d_safe"], raw["key_points"]["link_radius"]
     balls = place_balls(chain, theta0, size.cloud_points, radius, d_safe, seed)
     n, m = size.links, size.cloud_points
