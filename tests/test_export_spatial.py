@@ -89,3 +89,4 @@ def test_closed_loop_on_panda_table(tmp_path):
     row = rows["daqp"]
     assert row["scenario"] == "panda_table" and row["status"] == "ok"
     assert row["verdict"] == "ok" and float(row["min_body_distance"]) > 0.0
+    assert row["realtime"] in ("yes", "no") and row["realtime_reason"]  # judged, as planar

@@ -59,7 +59,7 @@ def test_sweep_runs_on_panda_table_with_daqp(tmp_path):
     assert main([*args, "--out", str(out), "--jobs", "1"]) == 0
     rows = [r for r in read_sweep_rows(out / "sweep.csv") if r["backend"] == "daqp"]
     assert len(rows) == 2 and all(r["status"] == "ok" for r in rows)
-    assert all(r["verdict"] == "ok" for r in rows)
+    assert all(r["verdict"] == "ok" and r["realtime"] in ("yes", "no") for r in rows)
     assert all(float(r["min_obstacle_distance"]) > 0.03 - 0.0015 for r in rows)
     rerun = load_scenario(out / "instances" / "i00000.toml")
     assert rerun.make_arm().n == 7 and rerun.duration == 0.2
