@@ -9,8 +9,8 @@ base's ``[verdict]`` maximum errors).
 An instance is the base scenario with every swept key drawn, as a full scenario file, saved as
 ``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario`` re-runs one alone. An
 instance the loader refuses keeps its one-line reason (:attr:`Instance.invalid`), as does one
-starting with a key point inside ``d_safe`` (unless ``[sweep] safe_start = false``): every backend
-would be ``unsafe`` at ``t = 0``, which says nothing about the backends.
+whose body starts inside ``d_safe`` of an obstacle (:func:`start_clearance`; unless ``[sweep]
+safe_start = false``): every backend would start unsafe, which says nothing about the backends.
 """
 
 from __future__ import annotations
