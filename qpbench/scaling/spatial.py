@@ -41,7 +41,7 @@ from ..sweep.toml_text import dumps
 from .sizes import CLEARANCE, CLOUD_RADIUS, SPEED, Size, base_tables, start_target
 
 #: A generated chain: joint 1's height [m], the sum of the later joints' offsets [m], the flange
-#: past the last joint [m] (the Panda's 0.333 and 0.107; its reach is about 0.86 m).
+#: past the last joint [m] (the Panda's 0.333 and 0.107; its offsets sum to 1.39 m).
 BASE_HEIGHT, REACH, TOOL_LENGTH = 0.333, 1.0, 0.107
 #: A generated chain's joint limits [rad] (170 deg, the iiwa's) and velocity limits [rad/s].
 JOINT_LIMIT, VELOCITY_LIMIT = math.radians(170.0), 2.175
