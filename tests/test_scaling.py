@@ -93,7 +93,9 @@ def test_start_state_is_feasible(size):
     assert np.hypot(*cloud.velocity) == pytest.approx(0.1)
 
 
-@pytest.mark.parametrize("size", DEFAULT_SIZES, ids=lambda s: s.name)
+@pytest.mark.parametrize(
+    "size", [s for s in DEFAULT_SIZES if not s.spatial], ids=lambda s: s.name
+)  # the spatial ones: tests/test_scaling_spatial.py
 def test_tick_qp_shapes_follow_the_formula_and_v0_is_feasible(size):
     gen, cloud = generate(size)
     scenario = parse_scenario(scenario_toml(size, gen, cloud, 0.1), f"{size.name}.toml")

@@ -430,10 +430,10 @@ def test_a_start_inside_d_safe_is_invalid_unless_allowed(tmp_path):
     from qpbench.sim.scenario import load_scenario
     from qpbench.sweep.spec import start_clearance
 
-    assert start_clearance(load_scenario("wall"))[1:] == ("A1", "wall")
+    assert start_clearance(load_scenario("wall"))[1:] == ("link 1", "wall")
     assert start_clearance(load_scenario("wall"))[0] == pytest.approx(
         0.05, abs=1e-3
-    )  # A1, A2 at x = 0
+    )  # link 1 from the base at x = 0
     head = SWEEP.split("[parameters]")[0].replace("samples = 8", "samples = 2")
     line = '[parameters]\n"obstacles[0].point" = { dist = "uniform", low = [-0.005, 0.0], high = [-0.001, 0.0] }\n'
     inst = sample_instances(load_sweep(write_sweep(tmp_path, head + line)))

@@ -33,8 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--sizes",
         default="default",
         metavar="LIST",
-        help="'default' (9 sizes: n4-p1-m1,m10,m100,m1000 and n4..n64-p2-m16) or comma-separated "
-        "nN-pP-mM names: N links, P key points per link, a cloud of M points",
+        help="'default' (13 sizes: n4-p1-m1,m10,m100,m1000, n4..n64-p2-m16, and spatial: "
+        "panda-m4, iiwa14-m4, chain14-m4, chain28-m4) or comma-separated names: nN-pP-mM (a "
+        "planar arm of N links, P key points per link, a cloud of M points), panda-mM, iiwa14-mM "
+        "or chainN-mM (a generated spatial chain of N joints; pinocchio) facing M balls",
     )
 
     def option(flag, text, spec="", **kw):

@@ -1,6 +1,6 @@
 """The scaling study's report, ``scaling.md`` and ``scaling.png`` from ``scaling.csv``: median
-solve time per tick against variables (``arm`` axis) and constraint rows (``cloud`` axis),
-log-log, fitted as ``T = C s^k`` (least squares of ``log10 T`` on ``log10 s``, the slope's standard
+solve time per tick against variables (``arm`` and ``spatial`` axes) and constraint rows
+(``cloud`` axis), log-log, fitted as ``T = C s^k`` (least squares of ``log10 T`` on ``log10 s``, the slope's standard
 error ``sqrt(RSS / (N - 2) / sum((x - mean x)^2))``, NaN for N = 2 sizes); where the fastest
 sparse backend overtakes the fastest dense one; where build + solve stops fitting a 1 ms tick.
 """
@@ -23,6 +23,10 @@ TICK_S = 1e-3
 AXES = {
     "arm": ("n", "variables n (arm axis: 4-64 links, 16 cloud points)"),
     "cloud": ("rows", "constraint rows (cloud axis: 4 links, 1-1,000 cloud points)"),
+    "spatial": (
+        "n",
+        "variables n (spatial axis: Panda, iiwa 14, chains of 14 and 28 joints, 4 balls)",
+    ),
 }
 
 
@@ -166,7 +170,7 @@ def deadline_table(frame: pd.DataFrame) -> list[dict]:
 
 
 def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
-    """Two log-log panels (module docstring) as a PNG at ``path``: squares dense, circles sparse,
+    """A log-log panel per axis (module docstring) as a PNG at ``path``: squares dense, circles sparse,
     one row of panels per group of backends (:func:`qpbench.report.style.groups`)."""
     import matplotlib.ticker
 
@@ -236,6 +240,7 @@ SLOPE_COLUMNS = (
     _text("format"),
     Column("slope vs variables (arm axis)", "arm"),
     Column("slope vs rows (cloud axis)", "cloud"),
+    Column("slope vs variables (spatial axis)", "spatial"),
 )
 DEADLINE_COLUMNS = tuple(
     _text(key)
@@ -265,8 +270,8 @@ def markdown(frame: pd.DataFrame, fitted: dict, image: str | None) -> str:
         "",
         f"Closed loop solved by `{first['driver']}`, ticks dumped and solved by each backend "
         f"(min of {first['repeat']} timed solves per tick, seed {first['seed']}); medians and p99 over each "
-        "size's ticks. Rows are constraint rows (2 task equalities + one row per key point and cloud point); "
-        "the 2n bounds are not counted.",
+        "size's ticks. Rows are constraint rows (2 task equalities, 3 on a spatial arm, + one row per key point "
+        "and cloud point, per link and ball on a spatial arm); the 2n bounds are not counted.",
         "",
     ]
     if image:

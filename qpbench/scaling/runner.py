@@ -22,6 +22,7 @@ import numpy as np
 
 from ..harness.results import ResultsWriter, read_results
 from .sizes import Size, generate, qp_shape, scenario_toml
+from .spatial import scenario_files
 
 if TYPE_CHECKING:
     from ..control.controller import Controller
@@ -32,6 +33,7 @@ log = logging.getLogger("qpbench.scaling")
 COLUMNS = (
     "size",
     "axis",
+    "robot",
     "links",
     "points_per_link",
     "key_points",
@@ -172,10 +174,14 @@ def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
     from ..sim.loop import simulate
     from ..sim.scenario import parse_scenario
 
-    gen, cloud = generate(size, config.seed)
     path = out / "scenarios" / f"{size.name}.toml"
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = scenario_toml(size, gen, cloud, config.duration)
+    if size.spatial:
+        text, urdf = scenario_files(size, config.seed, config.duration, path.with_suffix(".urdf"))
+        if urdf is not None:
+            write_text(path.with_suffix(".urdf"), urdf)
+    else:
+        text = scenario_toml(size, *generate(size, config.seed), config.duration)
     write_text(path, text)
     scenario = parse_scenario(text, path)
     (out / "sets").mkdir(exist_ok=True)
@@ -290,12 +296,13 @@ def run_scaling(
         started = time.perf_counter()
         shape = qp_shape(size)
         log.info(
-            "%s: %d variables, %d rows (%d key points x %d cloud points + 2)",
+            "%s: %d variables, %d rows (%d key points x %d cloud points + %d)",
             size.name,
             shape["n"],
             shape["m_eq"] + shape["m_ineq"],
             size.key_points,
             size.cloud_points,
+            shape["m_eq"],
         )
         rows, size_failed = run_size(size, config, out, slow, progress)
         new = not summary_path.exists() or summary_path.stat().st_size == 0

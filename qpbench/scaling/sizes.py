@@ -183,27 +183,39 @@ def place_cloud(gen: GeneratedArm, points: int, d_safe: float, seed: int = 0) ->
 
 
 @functools.cache
+def base_tables(name: str) -> dict:
+    """Shipped scenario ``name``'s tables as its file holds them (every size's task)."""
+    from ..sim.scenario import scenario_path
+
+    return tomllib.loads(scenario_path(name).read_text(encoding="utf-8"))
+
+
+@functools.cache
 def task() -> dict:
     """The scenario tables every size shares: the ``wall`` scenario's but its ``[scenario]``,
     ``[robot]`` and obstacles, the path started mid-stroke (phase -pi/2) so the arm moves at once."""
-    from ..sim.scenario import scenario_path
-
-    raw = tomllib.loads(scenario_path("wall").read_text(encoding="utf-8"))
+    raw = copy.deepcopy(base_tables("wall"))
     del raw["scenario"], raw["robot"], raw["obstacles"]
     raw["path"]["phase"] = [-math.pi / 2, -math.pi / 2]
     return raw
 
 
+#: Robots of the ``spatial`` axis: the two presets and generated chains (:mod:`.spatial`).
+SPATIAL_ROBOTS = ("panda", "iiwa14", "chain")
+
+
 @dataclass(frozen=True)
 class Size:
     """``links`` n >= 2 links, ``points_per_link`` p >= 1 key points per link besides the joints,
-    a cloud of ``cloud_points`` points (1 to 100,000); ``axis``: its grid axis (``cloud`` or
-    ``arm``), for the fits."""
+    a cloud of ``cloud_points`` points (1 to 100,000); ``axis``: its grid axis (``cloud``,
+    ``arm`` or ``spatial``), for the fits; ``robot``: ``planar`` (a generated planar arm) or one
+    of :data:`SPATIAL_ROBOTS` (n joints, ``cloud_points`` balls, :mod:`.spatial`)."""
 
     links: int
     points_per_link: int
     cloud_points: int
     axis: str = "arm"
+    robot: str = "planar"
 
     def __post_init__(self):
         if self.links < 2 or self.points_per_link < 1 or not 1 <= self.cloud_points <= 100000:
@@ -211,43 +223,76 @@ class Size:
                 f"'{self.name}': need N >= 2 links, P >= 1 points per link, 1 <= M <= 100000",
                 key="--sizes",
             )
+        if self.robot in ("panda", "iiwa14") and self.links != 7:
+            raise ParamError(f"'{self.name}': the {self.robot} has 7 joints", key="--sizes")
+
+    @property
+    def spatial(self) -> bool:
+        return self.robot != "planar"
 
     @property
     def name(self) -> str:
+        if self.robot == "chain":
+            return f"chain{self.links}-m{self.cloud_points}"
+        if self.spatial:
+            return f"{self.robot}-m{self.cloud_points}"
         return f"n{self.links}-p{self.points_per_link}-m{self.cloud_points}"
 
     @property
     def key_points(self) -> int:
-        """``a = n p + (n - 1)``: p points per link and the joints J2..Jn."""
+        """``a = n p + (n - 1)``: p points per link and the joints J2..Jn; spatial: one guarded
+        element per link (its point closest to each ball)."""
+        if self.spatial:
+            return self.links
         return self.links * self.points_per_link + self.links - 1
 
 
 def qp_shape(size: Size) -> dict:
     """``{"n", "m_eq", "m_ineq"}`` of the size's tick QP (module docstring)."""
-    return {"n": size.links, "m_eq": 2, "m_ineq": size.key_points * size.cloud_points}
+    m_eq = 3 if size.spatial else 2
+    return {"n": size.links, "m_eq": m_eq, "m_ineq": size.key_points * size.cloud_points}
 
 
 #: The default grid (module docstring), smallest first.
 DEFAULT_SIZES = tuple(
     [Size(4, 1, m, "cloud") for m in (1, 10, 100, 1000)]
     + [Size(n, 2, 16, "arm") for n in (4, 8, 16, 32, 64)]
+    + [Size(7, 1, 4, "spatial", robot) for robot in ("panda", "iiwa14")]
+    + [Size(n, 1, 4, "spatial", "chain") for n in (14, 28)]
 )
+
+_SPATIAL_NAME = re.compile(r"(panda|iiwa14|chain(\d+))-m(\d+)")
+
+
+def _named(part: str) -> Size | None:
+    """The size a name not of the default grid stands for (None: not a size name)."""
+    if match := re.fullmatch(r"n(\d+)-p(\d+)-m(\d+)", part):
+        return Size(*map(int, match.groups()))
+    if match := _SPATIAL_NAME.fullmatch(part):
+        robot, links, m = match.groups()
+        if robot.startswith("chain"):
+            return Size(int(links), 1, int(m), "spatial", "chain")
+        return Size(7, 1, int(m), "spatial", robot)
+    return None
 
 
 def parse_sizes(text: str | None) -> list[Size]:
-    """Sizes named in ``text``: ``default``/None, or comma-separated ``nN-pP-mM`` names (a name not
-    of the default grid is on the ``arm`` axis); :class:`ParamError` for another name."""
+    """Sizes named in ``text``: ``default``/None, or comma-separated names, ``nN-pP-mM`` (planar;
+    a name not of the default grid is on the ``arm`` axis), ``panda-mM``, ``iiwa14-mM`` or
+    ``chainN-mM`` (spatial); :class:`ParamError` for another name."""
     if text is None or text.strip() in ("", "default"):
         return list(DEFAULT_SIZES)
     known = {s.name: s for s in DEFAULT_SIZES}
     out = []
     for part in filter(None, (p.strip() for p in text.split(","))):
-        match = re.fullmatch(r"n(\d+)-p(\d+)-m(\d+)", part)
-        if part not in known and match is None:
+        size = known.get(part) or _named(part)
+        if size is None:
             raise ParamError(
-                f"'{part}' is not a size name nN-pP-mM (e.g. n16-p2-m16)", key="--sizes"
+                f"'{part}' is not a size name nN-pP-mM, panda-mM, iiwa14-mM or chainN-mM "
+                "(e.g. n16-p2-m16, chain14-m4)",
+                key="--sizes",
             )
-        out.append(known.get(part) or Size(*map(int, match.groups())))
+        out.append(size)
     if not out:
         raise ParamError("no size given", key="--sizes")
     if len({s.name for s in out}) != len(out):
@@ -255,11 +300,13 @@ def parse_sizes(text: str | None) -> list[Size]:
     return out
 
 
-def start_target() -> np.ndarray:
-    """Where the end effector rests in contact at t = 0 in [m]: ``x_d(0) + (Fd / Kp) n``."""
-    path, contact, control = task()["path"], task()["contact"], task()["controller"]
+def start_target(tables: dict | None = None) -> np.ndarray:
+    """Where the end effector rests in contact at t = 0 in [m]: ``x_d(0) + (Fd / Kp) n``, in the
+    task ``tables`` (default: :func:`task`)."""
+    tables = tables or task()
+    path, contact, control = tables["path"], tables["contact"], tables["controller"]
     x_d = np.array(path["centre"]) + np.array(path["amplitude"]) * np.cos(path["phase"])
-    normal = np.array(contact["normal"]) / np.hypot(*contact["normal"])
+    normal = np.array(contact["normal"]) / np.linalg.norm(contact["normal"])
     return x_d + control["desired_force"] / control["kp"] * normal
 
 

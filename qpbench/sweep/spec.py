@@ -9,8 +9,8 @@ base's ``[verdict]`` maximum errors).
 An instance is the base scenario with every swept key drawn, as a full scenario file, saved as
 ``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario`` re-runs one alone. An
 instance the loader refuses keeps its one-line reason (:attr:`Instance.invalid`), as does one
-starting with a key point inside ``d_safe`` (unless ``[sweep] safe_start = false``): every backend
-would be ``unsafe`` at ``t = 0``, which says nothing about the backends.
+whose body starts inside ``d_safe`` of an obstacle (:func:`start_clearance`; unless ``[sweep]
+safe_start = false``): every backend would start unsafe, which says nothing about the backends.
 """
 
 from __future__ import annotations
@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
+from ..robot.body import body_clearance, contact_obstacles, link_label
 from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
-from ..sim.scenario_schema import finite_number
+from ..sim.scenario_schema import filled, finite_number
 from .toml_text import dumps, value_text
 
 #: Other names a reader may give a scenario key (the table is found in the base scenario).
@@ -297,7 +298,9 @@ def load_sweep(
             "expected a [parameters] table with at least one key", path=path, key="parameters"
         )
     dists = [
-        checked_distribution(key, spec, _base_value(key, base_raw, path), path)
+        checked_distribution(
+            key, spec, _base_value(key, base_raw, filled(scenario.spec), path), path
+        )
         for key, spec in _flatten(params, path)
     ]
     bands = _bands(raw.get("convergence", {}), scenario.verdict, path)
@@ -348,7 +351,10 @@ def _flatten(params: dict, path, prefix: str = ""):
             )
 
 
-def _base_value(key: str, base_raw: dict, path):
+def _base_value(key: str, base_raw: dict, defaults: dict, path):
+    """The base's value of ``key``: the file's, else its default (``defaults``: the validated
+    base, every default filled in; an obstacle's ``velocity``)."""
+
     def bad(message: str) -> InputError:
         return InputError(message, path=path, key=f"parameters.{key}")
 
@@ -367,11 +373,13 @@ def _base_value(key: str, base_raw: dict, path):
         obstacles = base_raw.get("obstacles", []) if table == "obstacles" else []
         if table != "obstacles" or int(index) >= len(obstacles):
             raise bad(f"no such obstacle (base and sweep have {len(obstacles)})")
-        target = obstacles[int(index)]
+        target, default = obstacles[int(index)], defaults["obstacles"][int(index)]
     else:
-        target = base_raw.get(table)
+        target, default = base_raw.get(table), defaults.get(table, {})
         if table == "obstacles" or not isinstance(target, dict):
             raise bad(f"unknown parameter key: the base scenario has no table [{table}]")
+    if name not in target and name in default:
+        return default[name]
     if name not in target:
         close = difflib.get_close_matches(name, list(target), n=1)
         where = table if index is None else f"{table}[{index}]"
@@ -431,20 +439,17 @@ def instance_text(spec: SweepSpec, name: str, index: int, values: dict) -> str:
 
 
 def start_clearance(scenario: Scenario) -> tuple[float, str, str]:
-    """Smallest distance [m] of a key point to an obstacle at t = 0, and which key point and obstacle.
-
-    ``(inf, "", "")`` without obstacles. Distances from the link's surface
-    (the key points' ``link_radius`` subtracted), as the controller measures them.
-    """
-    arm, kp = scenario.make_arm(), scenario.make_key_points()
-    points = arm.points(scenario.theta0, kp.links, kp.fracs)
-    best = (np.inf, "", "")
-    for obstacle in scenario.make_obstacles():
-        dist = obstacle.closest(points, 0.0)[1].min(axis=1) - kp.radius
-        i = int(np.argmin(dist))
-        if dist[i] < best[0]:
-            best = (float(dist[i]), kp.names[i], obstacle.name)
-    return best
+    """Smallest clearance [m] of a link's capsule to an obstacle at t = 0, and which link and
+    obstacle: :func:`~qpbench.robot.body.body_clearance`, as the verdict measures the body, for
+    any chain (planar or spatial). ``(inf, "", "")`` without obstacles."""
+    arm, obstacles = scenario.make_arm(), scenario.make_obstacles()
+    if not obstacles:
+        return np.inf, "", ""
+    exempt = contact_obstacles(obstacles, scenario.make_surface())
+    radius = scenario.spec.key_points.link_radius
+    body = body_clearance(arm, scenario.theta0, 0.0, obstacles, radius, exempt)
+    link, obstacle = int(body.link[0]), obstacles[int(body.obstacle[0])].name
+    return float(body.d_min[0]), link_label(link, arm.n), obstacle
 
 
 def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
@@ -457,8 +462,8 @@ def _why_invalid(text: str, name: str, safe_start: bool) -> str | None:
         d_safe = scenario.spec.controller.d_safe
         if d < d_safe:
             return (
-                f"{name}.toml: starts with key point {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
-                f"inside d_safe = {d_safe * 1e3:g} mm (every backend would be unsafe at t = 0)"
+                f"{name}.toml: starts with {point} {d * 1e3:.2f} mm from obstacle {obstacle}, "
+                f"inside d_safe = {d_safe * 1e3:g} mm (every backend would start unsafe)"
             )
     return None
 

@@ -1,0 +1,194 @@
+"""The spatial sizes of the scaling study (:class:`~.sizes.Size` with a spatial ``robot``): the
+Panda, the iiwa 14 and generated chains of n joints, in the ``panda_table`` scenario's task
+(pressing on a table while tracing a circle; 3 task rows), facing ``m`` balls that approach them.
+Their tick QP has n variables, 3 equality rows and ``n m`` inequality rows (one per link and
+ball: the link's point closest to the ball, ``[key_points] kind = "closest"``).
+
+A generated chain ``chainN`` is the presets' joint pattern without their offsets, in Craig's
+modified Denavit-Hartenberg rows: joint 1 :data:`BASE_HEIGHT` above the base, every later joint
+:data:`REACH` ``/ (n - 1)`` past the previous one along its own axis, the axes alternately
+turned by ``+-pi/2`` about x (each joint's axis perpendicular to the previous one's, as in the
+Panda and the iiwa), the flange :data:`TOOL_LENGTH` past the last joint; limits
+``+-``:data:`JOINT_LIMIT` and the Panda's :data:`VELOCITY_LIMIT`. The reach stays the presets'
+while n grows, so a size changes the QP's variables and rows, not the task. A scenario file names
+its chain by a URDF (``[robot] kind = "urdf"``; pinocchio reads it), written beside it.
+
+The start: the end effector at rest in contact, ``x_d(0) + (Fd / Kp) n`` (paper eq. 4), reached by
+damped least squares from a bent guess (the Panda's: ``panda_table``'s start), pulled towards
+the guess in the null space of the position Jacobian and kept :data:`LIMIT_MARGIN` inside the
+limits. The balls (radius :data:`BALL_RADIUS`) fill a ball of :data:`~.sizes.CLOUD_RADIUS` beside
+the middle joint, away from the chord base -> end effector, stepped outwards by 1 mm until the
+body's clearance (:func:`~qpbench.robot.body.body_clearance`, the verdict's) is ``d_safe`` +
+:data:`~.sizes.CLEARANCE`; they move towards the arm at :data:`~.sizes.SPEED`.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..exceptions import ParamError
+from ..robot.body import body_clearance
+from ..robot.chain import ChainModel, points_jacobians_np
+from ..robot.kinematics import Arm
+from ..robot.obstacles.sphere import SphereObstacle
+from ..robot.presets import make_chain, make_model, modified_dh
+from ..sweep.toml_text import dumps
+from .sizes import CLEARANCE, CLOUD_RADIUS, SPEED, Size, base_tables, start_target
+
+#: A generated chain: joint 1's height [m], the sum of the later joints' offsets [m], the flange
+#: past the last joint [m] (the Panda's 0.333 and 0.107; its offsets sum to 1.39 m).
+BASE_HEIGHT, REACH, TOOL_LENGTH = 0.333, 1.0, 0.107
+#: A generated chain's joint limits [rad] (170 deg, the iiwa's) and velocity limits [rad/s].
+JOINT_LIMIT, VELOCITY_LIMIT = math.radians(170.0), 2.175
+#: The start's distance from the joint limits [rad].
+LIMIT_MARGIN = 0.05
+#: The balls' radius [m].
+BALL_RADIUS = 0.02
+
+
+def generated_chain(n: int) -> ChainModel:
+    """The generated chain of ``n`` joints (module docstring)."""
+    alpha = [0.0] + [math.pi / 2 if k % 2 == 0 else -math.pi / 2 for k in range(1, n)] + [0.0]
+    d = [BASE_HEIGHT] + [REACH / (n - 1)] * (n - 1) + [TOOL_LENGTH]
+    rot, trans = modified_dh([0.0] * (n + 1), d, alpha)
+    axis = np.tile([0.0, 0.0, 1.0], (n, 1))
+    limits = dict(q_min=-JOINT_LIMIT, q_max=JOINT_LIMIT, v_max=VELOCITY_LIMIT)
+    return make_model(rot[:-1], trans[:-1], axis, rot[-1], trans[-1], 3, "robot", **limits)
+
+
+def chain_of(size: Size) -> ChainModel:
+    """The size's chain: a preset's, or :func:`generated_chain`."""
+    return generated_chain(size.links) if size.robot == "chain" else make_chain(size.robot)
+
+
+def urdf_text(chain: ChainModel) -> str:
+    """A URDF of ``chain`` (joints ``joint1..n``, the end effector frame ``tool``), whose
+    rotations are turns about x (:func:`generated_chain`'s)."""
+
+    def joint(name, kind, parent, child, xyz, roll, limits=""):
+        return (
+            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="{" ".join(map(repr, map(float, xyz)))}" rpy="{roll!r} 0 0"/>'
+            f'<axis xyz="0 0 1"/>{limits}</joint>'
+        )
+
+    rolls = [float(math.atan2(r[2, 1], r[1, 1])) for r in [*chain.rotation, chain.tool_rotation]]
+    body = [f'<link name="link{k}"/>' for k in range(chain.n + 1)] + ['<link name="tool"/>']
+    for k in range(chain.n):
+        lo, hi, v = (float(x[k]) for x in (chain.q_min, chain.q_max, chain.v_max))
+        limit = f'<limit lower="{lo!r}" upper="{hi!r}" effort="100" velocity="{v!r}"/>'
+        args = (f"link{k}", f"link{k + 1}", chain.translation[k], rolls[k], limit)
+        body.append(joint(f"joint{k + 1}", "revolute", *args))
+    body.append(
+        joint("flange", "fixed", f"link{chain.n}", "tool", chain.tool_translation, rolls[-1])
+    )
+    return f'<?xml version="1.0"?>\n<robot name="chain{chain.n}">{"".join(body)}</robot>\n'
+
+
+@functools.cache
+def task() -> dict:
+    """The scenario tables every spatial size shares: ``panda_table``'s but its ``[scenario]``,
+    ``[robot]`` and obstacles."""
+    raw = copy.deepcopy(base_tables("panda_table"))
+    del raw["scenario"], raw["robot"], raw["obstacles"]
+    return raw
+
+
+def start_angles(chain: ChainModel, target: np.ndarray, guess: np.ndarray) -> np.ndarray:
+    """Joint angles [rad] putting the end effector at ``target`` [m] (module docstring).
+
+    Raises:
+        ParamError: no such angles found within the limits.
+    """
+    q, n = np.array(guess, dtype=float), chain.n
+    lo, hi = chain.q_min + LIMIT_MARGIN, chain.q_max - LIMIT_MARGIN
+    for _ in range(1000):
+        x, J = points_jacobians_np(chain, q, [n - 1], [1.0])
+        e, J = target - x[0], J[0]
+        if np.linalg.norm(e) < 1e-12:
+            return q
+        step = J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), e)
+        null = np.eye(n) - np.linalg.pinv(J) @ J
+        q = np.clip(q + step + 0.1 * null @ (guess - q), lo, hi)
+    raise ParamError(
+        f"no start within the joint limits puts a {n}-joint chain's end effector at "
+        f"{target.tolist()} m",
+        key="theta0",
+    )
+
+
+def _guess(size: Size) -> np.ndarray:
+    """A bent start: the Panda's from ``panda_table``; the others' every other joint bent."""
+    if size.robot == "panda":
+        return np.array(base_tables("panda_table")["robot"]["theta0"], dtype=float)
+    bend = 0.6 if size.robot == "iiwa14" else 0.35
+    return np.array([bend if k % 2 else 0.0 for k in range(size.links)])
+
+
+def place_balls(
+    chain: ChainModel, theta0: np.ndarray, m: int, link_radius: float, d_safe: float, seed: int
+) -> list[SphereObstacle]:
+    """``m`` balls beside the chain at ``theta0`` [rad], their body clearance ``d_safe`` [m] +
+    :data:`~.sizes.CLEARANCE` (module docstring), drawn from ``seed``."""
+    rng = np.random.default_rng([int(seed), int(m), chain.n, 15485863])
+    p = Arm(chain).joint_positions(theta0[None])[0]
+    mid = p[len(p) // 2]
+    chord = (p[-1] - p[0]) / np.linalg.norm(p[-1] - p[0])
+    u = (mid - p[0]) - ((mid - p[0]) @ chord) * chord
+    u = u / np.linalg.norm(u) if np.linalg.norm(u) > 1e-9 else np.array([0.0, 1.0, 0.0])
+    spread = CLOUD_RADIUS - BALL_RADIUS
+    offsets = rng.normal(size=(m, 3))
+    offsets *= (spread * rng.uniform(0.0, 1.0, (m, 1)) ** (1 / 3)) / np.linalg.norm(
+        offsets, axis=1, keepdims=True
+    )
+    if m == 1:
+        offsets[:] = 0.0
+    want, step = d_safe + CLEARANCE, 0.0
+
+    def balls(step):
+        return [
+            SphereObstacle(f"ball{i}", mid + step * u + o, BALL_RADIUS, velocity=-SPEED * u)
+            for i, o in enumerate(offsets)
+        ]
+
+    while np.nanmin(body_clearance(Arm(chain), theta0, 0.0, balls(step), link_radius).d) < want:
+        step += 0.001
+    return balls(step)
+
+
+def scenario_files(size: Size, seed: int, duration: float, urdf: Path) -> tuple[str, str | None]:
+    """The size's scenario file's text and, for a generated chain, its URDF's (to be written at
+    ``urdf``, which the scenario names); ``duration`` [s]."""
+    chain = chain_of(size)
+    raw = copy.deepcopy(task())
+    theta0 = start_angles(chain, start_target(raw), _guess(size))
+    d_safe, radius = raw["controller"]["d_safe"], raw["key_points"]["link_radius"]
+    balls = place_balls(chain, theta0, size.cloud_points, radius, d_safe, seed)
+    n, m = size.links, size.cloud_points
+    raw["scenario"] = {
+        "name": size.name,
+        "description": f"Scaling study: a {n}-joint {size.robot} chain, {m} balls "
+        f"({n * m} obstacle rows).",
+        "paper_section": "scaling (beyond the paper)",
+    }
+    robot = {"kind": size.robot}
+    if size.robot == "chain":
+        robot = {"kind": "urdf", "file": str(Path(urdf).resolve()), "ee_frame": "tool"}
+    raw["robot"] = {**robot, "theta0": theta0}
+    raw["simulation"]["duration"] = float(duration)
+    raw["obstacles"] = [
+        {"kind": "sphere", "name": b.name, "center": b.center, "radius": b.radius,
+         "velocity": b.velocity}
+        for b in balls
+    ]  # fmt: skip
+    header = (
+        f"Scaling study size {size.name}: a {n}-joint chain ({size.robot}) in panda_table's task "
+        f"facing {m} balls that approach it.\nWritten by qpbench scaling; units as in the scenario "
+        "schema."
+    )
+    return dumps(raw, header=header), urdf_text(chain) if size.robot == "chain" else None
