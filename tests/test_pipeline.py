@@ -96,3 +96,15 @@ def test_a_python_engine_backend_the_perturbed_runs_cannot_afford_is_cut():
     assert closed_loop_budgets(config, per_tick, {}) == closed_loop_budgets(
         replace(config, sweep_budget=120.0), per_tick, specs
     )
+
+
+def test_the_bench_takes_the_paper_and_the_spatial_scenarios():
+    """The bench's sets: the paper's and the spatial arm's among those run (adaptive_fast, a
+    variant of adaptive, is left to the closed loop), else every one asked."""
+    from qpbench.harness.closed_loop import arm_family
+    from qpbench.harness.pipeline import bench_sets
+    from qpbench.sim.scenario import load_scenario
+
+    assert bench_sets(["free", "adaptive_fast", "panda_table"]) == ["free", "panda_table"]
+    assert bench_sets(["adaptive_fast"]) == ["adaptive_fast"]
+    assert [arm_family(load_scenario(s)) for s in ("wall", "panda_table")] == ["planar", "spatial"]

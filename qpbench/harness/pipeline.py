@@ -231,15 +231,11 @@ def run_all(config: RunConfig) -> RunOutcome:
     from ..formats import load_problems
     from ..jit import warmup_logged
     from ..sim.loop import simulate
-    from ..sim.scenario import load_scenario, paper_scenarios
-    from .closed_loop import arm_family
+    from ..sim.scenario import load_scenario
 
     started = time.perf_counter()
     out, problems = Path(config.out), Path(config.problems)
-    paper = paper_scenarios()  # the bench's: the paper's and the spatial ones among those asked
-    bench_scenarios = [
-        s for s in config.scenarios if s in paper or arm_family(load_scenario(s)) == "spatial"
-    ] or list(config.scenarios)
+    bench_scenarios = bench_sets(config.scenarios)
     _check_out(out, config.force)
     staging = out / STAGING
     if staging.exists() and not config.resume:
@@ -302,6 +298,17 @@ def run_all(config: RunConfig) -> RunOutcome:
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
     promote(staging, out, OUTPUTS)
     return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
+
+
+def bench_sets(scenarios: list[str]) -> list[str]:
+    """The scenarios among ``scenarios`` whose problem sets the bench solves: the paper's and the
+    spatial ones, else all of them."""
+    from ..sim.scenario import load_scenario, paper_scenarios
+    from .closed_loop import arm_family
+
+    paper = paper_scenarios()
+    spatial = [s for s in scenarios if arm_family(load_scenario(s)) == "spatial"]
+    return [s for s in scenarios if s in paper or s in spatial] or list(scenarios)
 
 
 def _compile_behind(backends: list[str]) -> threading.Thread | None:
