@@ -93,6 +93,9 @@ def test_a_python_engine_backend_the_perturbed_runs_cannot_afford_is_cut():
     per_tick = {"daqp": 1e-4, "osqp": 1e-4}  # 85 s > 60 s
     budgets = closed_loop_budgets(config, per_tick, specs)
     assert budgets["osqp"] == CUT_BUDGET_S and budgets["daqp"] > CUT_BUDGET_S
+    # a compiled-engine backend whose Python call cannot keep up still gets its whole run
+    slow = closed_loop_budgets(config, {"daqp": 1e-3, "osqp": 1e-3}, specs)
+    assert slow == {"daqp": config.run_budget, "osqp": CUT_BUDGET_S}
     assert closed_loop_budgets(config, per_tick, {}) == closed_loop_budgets(
         replace(config, sweep_budget=120.0), per_tick, specs
     )

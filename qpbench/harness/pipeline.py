@@ -377,11 +377,12 @@ def closed_loop_budgets(
     """Each backend's closed-loop wall-time budget [s]: a bench mean ``t`` predicts a run of
     ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
     :data:`BUDGET_FLOOR_S` and ``run_budget``; ``run_budget`` without a bench time;
-    :data:`CUT_BUDGET_S` where the prediction exceeds ``run_budget``, or where the backend runs
-    on the Python engine and its perturbed runs in the sweeps ``specs`` (:func:`sweep_specs`)
-    would take more than ``--sweep-budget`` times ``--jobs`` at ``t`` a tick, a lower bound of
-    their cost (the engine's own work comes on top): the perturbed runs cannot afford it
-    (:func:`sweep_plan`), so no full run of it could make it recommended."""
+    :data:`CUT_BUDGET_S` for a backend on the Python engine (the bench times the call that engine
+    makes, not a compiled solve) when the prediction exceeds ``run_budget``, or when its
+    perturbed runs in the sweeps ``specs`` (:func:`sweep_specs`) would take more than
+    ``--sweep-budget`` times ``--jobs`` at ``t`` a tick, a lower bound of their cost (the
+    engine's own work comes on top): the perturbed runs cannot afford it (:func:`sweep_plan`),
+    so no full run of it could make it recommended."""
     if config.run_budget is None:
         return {}
     from ..jit import compiled_solvers
@@ -402,12 +403,10 @@ def closed_loop_budgets(
     budgets = {}
     for backend in config.backends:
         t = per_tick_s.get(backend, math.nan)
-        unaffordable = (
-            backend not in compiled and swept_ticks * t > config.sweep_budget * config.jobs
-        )
+        late = ticks * t > run_budget or swept_ticks * t > config.sweep_budget * config.jobs
         if not math.isfinite(t):
             budgets[backend] = run_budget
-        elif ticks * t > run_budget or unaffordable:
+        elif late and backend not in compiled:
             budgets[backend] = cut
         else:
             budgets[backend] = round(min(run_budget, max(floor, BUDGET_MARGIN * ticks * t)), 3)

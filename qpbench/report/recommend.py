@@ -608,8 +608,9 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
     if answer.families:
         lines.append(
             "Per arm family, each answered alone on its own scenarios and their perturbed runs "
-            "as above (the rank, the controller p99 in us; a backend recommended in every family "
-            f"is recommended above, ranked on its slowest family):{gap}"
+            "as above, on its nominal runs alone where none of its scenarios is swept (the rank, "
+            "the controller p99 in us; a backend recommended in every family is recommended "
+            f"above, ranked on its slowest family):{gap}"
         )
         rows = _family_rows(answer.families)
         header = ["backend", *(_family_title(f) for f in answer.families)]
