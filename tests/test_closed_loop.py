@@ -73,6 +73,7 @@ def test_table_has_one_row_per_pair(table_dir):
         assert key in table.columns
     assert (table["duration_s"] == 0.5).all()
     assert (table["ticks"] == 500).all()
+    assert (table["family"] == "planar").all() and (table["joints"] == 4).all()  # the arm
 
 
 def test_figures_equal_the_tick_logs(table_dir):

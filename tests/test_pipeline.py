@@ -4,6 +4,7 @@ candidate's instances, and two quick runs in a row giving the same answer."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -72,3 +73,41 @@ def test_two_quick_runs_give_the_same_answer(tmp_path, monkeypatch):
         assert not differ.any(), pd.concat(
             [perturbed[0][both][differ], perturbed[1][both][differ]], axis=1
         )
+
+
+def test_a_python_engine_backend_the_perturbed_runs_cannot_afford_is_cut():
+    """With a sweep of wall (6 s instances at 1 kHz), the least runs' solves at the bench mean are a lower
+    bound of the perturbed runs' cost: above --sweep-budget times --jobs a backend on the Python
+    engine is cut (it could not be recommended); a compiled-engine one is not (its bench time is
+    the Python call, not the compiled solve); a larger sweep budget affords both."""
+    from qpbench.harness.pipeline import CUT_BUDGET_S, RunConfig, closed_loop_budgets, sweep_specs
+
+    config = RunConfig(out=Path("x"), problems=PROBLEMS, scenarios=["wall"],
+                       backends=["daqp", "osqp"], sweep_budget=60.0)  # fmt: skip
+    specs = sweep_specs(config)
+    assert list(specs) == ["wall"]
+    target = rec.least_runs(config.min_ok_bound, rec.TOLERATED_NOT_OK)
+    per_tick = {"daqp": 5e-5, "osqp": 5e-5}  # 142 x 6,000 ticks x 50 us = 43 s: within 60 s
+    assert target * 6_000 * 5e-5 < 60.0
+    assert CUT_BUDGET_S not in closed_loop_budgets(config, per_tick, specs).values()
+    per_tick = {"daqp": 1e-4, "osqp": 1e-4}  # 85 s > 60 s
+    budgets = closed_loop_budgets(config, per_tick, specs)
+    assert budgets["osqp"] == CUT_BUDGET_S and budgets["daqp"] > CUT_BUDGET_S
+    # a compiled-engine backend whose Python call cannot keep up still gets its whole run
+    slow = closed_loop_budgets(config, {"daqp": 1e-3, "osqp": 1e-3}, specs)
+    assert slow == {"daqp": config.run_budget, "osqp": CUT_BUDGET_S}
+    assert closed_loop_budgets(config, per_tick, {}) == closed_loop_budgets(
+        replace(config, sweep_budget=120.0), per_tick, specs
+    )
+
+
+def test_the_bench_takes_the_paper_and_the_spatial_scenarios():
+    """The bench's sets: the paper's and the spatial arm's among those run (adaptive_fast, a
+    variant of adaptive, is left to the closed loop), else every one asked."""
+    from qpbench.harness.closed_loop import arm_family
+    from qpbench.harness.pipeline import bench_sets
+    from qpbench.sim.scenario import load_scenario
+
+    assert bench_sets(["free", "adaptive_fast", "panda_table"]) == ["free", "panda_table"]
+    assert bench_sets(["adaptive_fast"]) == ["adaptive_fast"]
+    assert [arm_family(load_scenario(s)) for s in ("wall", "panda_table")] == ["planar", "spatial"]

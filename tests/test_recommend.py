@@ -455,3 +455,39 @@ def test_no_answer_is_one_sentence_saying_why():
     assert rec.no_answer(rec.recommend(unsafe)) == (
         "No backend was ok and real time in every run of all scenarios (wall)."
     )
+
+
+def test_each_arm_family_is_answered_alone_and_overall_is_what_both_recommend():
+    """Planar and spatial runs: each family ranked on its own scenarios and perturbed runs; a
+    backend ok in one family only is recommended there and not overall; the ranking can turn
+    round between families; a table without the family column has no families."""
+    planar, spatial = dict(family="planar", joints=4), dict(family="spatial", joints=7)
+    table = pd.DataFrame(
+        [
+            run("wall", "a", p99=10e-6, **planar),
+            run("wall", "b", p99=30e-6, **planar),
+            run("wall", "c", p99=40e-6, **planar),
+            run("panda_table", "a", p99=90e-6, **spatial),
+            run("panda_table", "b", p99=50e-6, **spatial),
+            run(
+                "panda_table", "c", verdict="unsafe", verdict_reasons="body 2 mm inside", **spatial
+            ),
+        ]
+    )
+    sweeps = pd.DataFrame(
+        sweep_rows("wall", "a", 80) + sweep_rows("wall", "b", 80) + sweep_rows("wall", "c", 80)
+    )
+    answer = rec.recommend(table, sweeps, 0.95)
+    fam = {f.name: f for f in answer.families}
+    assert list(fam) == ["planar (n = 4) (wall)", "spatial (n = 7) (panda_table)"]
+    assert fam["planar (n = 4) (wall)"].backends == ["a", "b", "c"]
+    assert fam["spatial (n = 7) (panda_table)"].backends == ["b", "a"]  # turned round
+    assert answer.overall.backends == ["b", "a"]  # on its slowest family: b 50 us, a 90 us
+    assert "c" in answer.overall.not_recommended
+    text = rec.render(answer, markdown=True)
+    (table_md,) = [t for t in parse_tables(text) if "planar (n = 4)" in t["header"]]
+    assert table_md["header"] == ["backend", "planar (n = 4)", "spatial (n = 7)"]
+    rows = {r[0]: r[1:] for r in table_md["rows"]}
+    assert rows["a"] == ["1: 10", "2: 90"] and rows["b"] == ["2: 30", "1: 50"]
+    assert rows["c"][0] == "3: 40" and rows["c"][1].startswith("unsafe in panda_table")
+    assert rec.recommend(table.drop(columns=["family", "joints"]), sweeps).families == ()

@@ -63,8 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scenarios",
         help="comma-separated scenarios, or 'all' shipped ones (default: the shipped ones with "
-        "[scenario] in_run = true: the paper's four and adaptive_fast; the bench uses the "
-        "paper's four among them)",
+        "[scenario] in_run = true: the paper's four, adaptive_fast and the spatial ones; the "
+        "bench uses the paper's and the spatial ones among them)",
     )
     add(
         parser,
@@ -81,8 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--bench-every",
         type=int,
         metavar="K",
-        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 200 of each set's "
-        "2,000, every 100th control tick; 1: all of them, about 10x longer)",
+        help=f"bench every K-th problem of each set (default: {BENCH_EVERY}: 50 of each set's "
+        "2,000, every 400th control tick; 1: all of them, about 40x longer)",
     )
     add(
         parser,

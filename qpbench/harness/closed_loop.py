@@ -44,6 +44,8 @@ RUN_TIME_LIMIT_PER_SIM_S = 50.0
 COLUMNS = (
     "scenario",
     "backend",
+    "family",
+    "joints",
     "noise_floor",
     "formulation",
     "engine",
@@ -152,9 +154,8 @@ def run_row(task: LoopTask) -> dict:
         if task.bands is not None:
             summary.update(convergence_figures(result.log, *task.bands))
         status = "budget" if summary.get("stopped_early") else "ok"
-        row = dict(
-            scenario=task.scenario, backend=task.backend, status=status, error="", log_file=""
-        )
+        row = dict(scenario=task.scenario, backend=task.backend, status=status, error="")
+        row.update(family=arm_family(scenario), joints=len(scenario.theta0), log_file="")
         for key, value in summary.items():
             if key not in ("scenario", "backend"):
                 row[TABLE_NAMES.get(key, key)] = cell(value)
@@ -167,6 +168,12 @@ def run_row(task: LoopTask) -> dict:
         return row
     except Exception as exc:  # noqa: BLE001 - one failing run must not stop the others
         return failure_row(task, "error", describe_exception(exc), warn=True)
+
+
+def arm_family(scenario) -> str:
+    """``"planar"`` or ``"spatial"``: the family of a scenario's arm (its task space's dim, 2 or
+    3), by which the report ranks the backends apart."""
+    return "planar" if len(scenario.normal) == 2 else "spatial"
 
 
 def cell(value: object) -> object:

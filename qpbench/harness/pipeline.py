@@ -47,16 +47,17 @@ SAMPLE_CHUNK = 16
 STAGING = ".partial"
 #: Every k-th tick goes into a problem set.
 EVERY = 10
-#: The bench of ``run`` takes every k-th problem of each set (every 100th control tick).
-BENCH_EVERY = 10
+#: The bench of ``run`` takes every k-th problem of each set (every 400th control tick).
+BENCH_EVERY = 40
 #: The most wall time a closed-loop run may take [s] (``--run-budget``).
 RUN_BUDGET_S = 10.0
 #: A backend's closed-loop budget is this many times the run its bench mean predicts.
 BUDGET_MARGIN = 3.0
 #: The least closed-loop budget of a backend that keeps up [s] (the loop's own work per tick).
 BUDGET_FLOOR_S = 2.0
-#: The budget of a backend whose solves alone would take longer than ``run_budget`` [s].
-CUT_BUDGET_S = 1.0
+#: The budget of a backend that cannot be recommended by this run [s]: its solves alone would
+#: take longer than ``run_budget``, or the perturbed runs could not afford it.
+CUT_BUDGET_S = 0.5
 #: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process, at most one per core.
 LOOP_JOBS = 2
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
@@ -230,12 +231,11 @@ def run_all(config: RunConfig) -> RunOutcome:
     from ..formats import load_problems
     from ..jit import warmup_logged
     from ..sim.loop import simulate
-    from ..sim.scenario import load_scenario, paper_scenarios
+    from ..sim.scenario import load_scenario
 
     started = time.perf_counter()
     out, problems = Path(config.out), Path(config.problems)
-    paper = paper_scenarios()  # the bench's: the paper's four among those asked, else all asked
-    bench_scenarios = [s for s in config.scenarios if s in paper] or list(config.scenarios)
+    bench_scenarios = bench_sets(config.scenarios)
     _check_out(out, config.force)
     staging = out / STAGING
     if staging.exists() and not config.resume:
@@ -267,10 +267,11 @@ def run_all(config: RunConfig) -> RunOutcome:
             behind.join()
             warmup_logged(log, config.backends)
     failed_solves = failures
-    budgets = closed_loop_budgets(config, per_tick_s)
+    specs = sweep_specs(config)
+    budgets = closed_loop_budgets(config, per_tick_s, specs)
     table, not_ok = _closed_loop(config, staging, phases, budgets)
     failures += not_ok  # failed runs and runs that failed their verdict
-    perturbed = _perturbed(config, staging / PERTURBED, phases, table)
+    perturbed = _perturbed(config, staging / PERTURBED, phases, table, specs)
     with phases.phase("report"):
         from ..report.write import write_report
         from ..sweep.report import split_sweep_paths, sweep_section
@@ -297,6 +298,17 @@ def run_all(config: RunConfig) -> RunOutcome:
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
     promote(staging, out, OUTPUTS)
     return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
+
+
+def bench_sets(scenarios: list[str]) -> list[str]:
+    """The scenarios among ``scenarios`` whose problem sets the bench solves: the paper's and the
+    spatial ones, else all of them."""
+    from ..sim.scenario import load_scenario, paper_scenarios
+    from .closed_loop import arm_family
+
+    paper = paper_scenarios()
+    spatial = [s for s in scenarios if arm_family(load_scenario(s)) == "spatial"]
+    return [s for s in scenarios if s in paper or s in spatial] or list(scenarios)
 
 
 def _compile_behind(backends: list[str]) -> threading.Thread | None:
@@ -359,30 +371,45 @@ def _bench(
     return failures, {b: statistics.fmean(t) for b, t in times.items() if t}
 
 
-def closed_loop_budgets(config: RunConfig, per_tick_s: dict[str, float]) -> dict[str, float]:
+def closed_loop_budgets(
+    config: RunConfig, per_tick_s: dict[str, float], specs: dict | None = None
+) -> dict[str, float]:
     """Each backend's closed-loop wall-time budget [s]: a bench mean ``t`` predicts a run of
     ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
-    :data:`BUDGET_FLOOR_S` and ``run_budget``; :data:`CUT_BUDGET_S` where the prediction exceeds
-    ``run_budget``; ``run_budget`` without a bench time."""
+    :data:`BUDGET_FLOOR_S` and ``run_budget``; ``run_budget`` without a bench time;
+    :data:`CUT_BUDGET_S` for a backend on the Python engine (the bench times the call that engine
+    makes, not a compiled solve) when the prediction exceeds ``run_budget``, or when its
+    perturbed runs in the sweeps ``specs`` (:func:`sweep_specs`) would take more than
+    ``--sweep-budget`` times ``--jobs`` at ``t`` a tick, a lower bound of their cost (the
+    engine's own work comes on top): the perturbed runs cannot afford it (:func:`sweep_plan`),
+    so no full run of it could make it recommended."""
     if config.run_budget is None:
         return {}
+    from ..jit import compiled_solvers
+    from ..report.recommend import TOLERATED_NOT_OK, least_runs
     from ..sim.scenario import load_scenario
 
     scenarios = [load_scenario(name) for name in config.scenarios]
     ticks = max(
         (math.ceil((config.duration or sc.duration) / sc.dt) for sc in scenarios), default=0
     )
+    swept_ticks = least_runs(config.min_ok_bound, TOLERATED_NOT_OK) * sum(
+        _length(sp) / float(sp.base_raw["simulation"]["dt"]) for sp in (specs or {}).values()
+    )
+    compiled = compiled_solvers() if config.engine == "compiled" else ()
     run_budget = config.run_budget
     floor = min(BUDGET_FLOOR_S, run_budget)
+    cut = min(CUT_BUDGET_S, run_budget)
     budgets = {}
     for backend in config.backends:
-        predicted = ticks * per_tick_s.get(backend, math.nan)
-        if not math.isfinite(predicted):
+        t = per_tick_s.get(backend, math.nan)
+        late = ticks * t > run_budget or swept_ticks * t > config.sweep_budget * config.jobs
+        if not math.isfinite(t):
             budgets[backend] = run_budget
-        elif predicted > run_budget:
-            budgets[backend] = min(CUT_BUDGET_S, run_budget)
+        elif late and backend not in compiled:
+            budgets[backend] = cut
         else:
-            budgets[backend] = round(min(run_budget, max(floor, BUDGET_MARGIN * predicted)), 3)
+            budgets[backend] = round(min(run_budget, max(floor, BUDGET_MARGIN * ticks * t)), 3)
     return budgets
 
 
@@ -484,26 +511,31 @@ def _draw_ahead(draws: dict[str, Draws], valid: int) -> dict[str, threading.Even
     return ready
 
 
-def _perturbed(config: RunConfig, folder: Path, phases, table) -> dict:
+def sweep_specs(config: RunConfig) -> dict:
+    """Each scenario's sweep of the run, ``<problems>/sweeps/<name>.toml`` where that file
+    exists (its instances as short as ``--duration`` when that is shorter)."""
+    from ..sweep.spec import load_sweep
+
+    paths = {s: Path(config.problems) / "sweeps" / f"{s}.toml" for s in config.scenarios}
+    specs = {s: load_sweep(p) for s, p in paths.items() if p.is_file()}
+    if config.duration is None:
+        return specs
+    return {
+        s: load_sweep(paths[s], duration=_length(sp, config.duration)) for s, sp in specs.items()
+    }
+
+
+def _perturbed(config: RunConfig, folder: Path, phases, table, specs: dict) -> dict:
     """The perturbed runs of the backends ok and real time in every nominal run (the
-    candidates): for each scenario of the run with a sweep file ``<problems>/sweeps/<name>.toml``,
-    its instances (as short as ``--duration`` when that is shorter), each candidate's count from
-    :func:`sweep_plan` on costs measured here, in ``folder/<scenario>/`` (a sweep's folder); what
-    was planned and spent, for ``run.json``."""
+    candidates): for each sweep of ``specs`` (:func:`sweep_specs`), its instances, each
+    candidate's count from :func:`sweep_plan` on costs measured here, in ``folder/<scenario>/``
+    (a sweep's folder); what was planned and spent, for ``run.json``."""
     from ..backends import plugin_files
     from ..report.recommend import TOLERATED_NOT_OK, least_runs, recommend
     from ..runner import make_executor
-    from ..sweep.spec import load_sweep
 
     started = time.perf_counter()
     candidates = list(recommend(table).overall.passed)
-    paths = {s: Path(config.problems) / "sweeps" / f"{s}.toml" for s in config.scenarios}
-    specs = {s: load_sweep(p) for s, p in paths.items() if p.is_file()}
-    if config.duration is not None:  # a quick run's instances are as short as its runs
-        specs = {
-            s: load_sweep(paths[s], duration=_length(sp, config.duration))
-            for s, sp in specs.items()
-        }
     target = least_runs(config.min_ok_bound, TOLERATED_NOT_OK)
     about = {"scenarios": list(specs), "candidates": candidates, "budget_s": config.sweep_budget}
     about.update(min_ok_bound=config.min_ok_bound, target_per_scenario=target)

@@ -121,7 +121,8 @@ class Scope:
 @dataclass(frozen=True)
 class Recommendation:
     """:func:`recommend`'s answer: overall, then per scenario in the table's order; the perturbed
-    runs' threshold and whether there were any (``swept``: the scenarios with a sweep)."""
+    runs' threshold and whether there were any (``swept``: the scenarios with a sweep); with
+    more than one arm family, each family's own answer (``families``)."""
 
     overall: Scope
     scenarios: tuple[Scope, ...]
@@ -129,6 +130,7 @@ class Recommendation:
     min_ok_bound: float = MIN_OK_BOUND
     swept: tuple[str, ...] = ()
     noise_floor: tuple[str, ...] = ()
+    families: tuple[Scope, ...] = ()
 
 
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
@@ -358,7 +360,9 @@ def recommend(
     row per run, any number per scenario and backend), fastest first, and why not the others;
     overall, with ``sweeps`` (:func:`read_sweeps`), a backend is recommended only when in every
     scenario of ``table`` with perturbed runs (a sweep whose base is that scenario) the Wilson
-    lower bound of its share of ``ok`` runs is at least ``min_ok_bound``."""
+    lower bound of its share of ``ok`` runs is at least ``min_ok_bound``. With runs of more than
+    one arm family (column ``family``: planar, spatial), each family is also answered alone, the
+    same way on its own scenarios (``families``); overall is then what both recommend."""
     floor = floor_lines(table)
     runs = read_runs(table[~noise_floor_runs(table)])
     if runs.empty:
@@ -370,23 +374,54 @@ def recommend(
         return f"{row['scenario']} ({row['formulation']})" if several else row["scenario"]
 
     scenarios = tuple(_scope(s, g, place) for s, g in runs.groupby("scenario", sort=False))
-    every = _scope("all scenarios", runs, place)
+    bases = set()
+    if sweeps is not None:
+        bases = set(
+            sweeps.attrs.get("swept") or sweeps.get("base_scenario", pd.Series()).astype(str)
+        )
+    swept = tuple(s.name for s in scenarios if s.name in bases)
+    judge = (sweeps, swept, min_ok_bound, place)
+    overall = _across("all scenarios", runs, scenarios, *judge)
+    families = _families(runs)
+    if len(families) > 1:
+        families = tuple(
+            _across(name, runs[runs["scenario"].isin(names)], scenarios, *judge)
+            for name, names in families.items()
+        )
+    else:
+        families = ()
+    return Recommendation(overall, scenarios, len(runs), min_ok_bound, swept, floor, families)
+
+
+def _families(runs: pd.DataFrame) -> dict[str, list[str]]:
+    """The scenarios of each arm family of ``runs``, named with the arm's joints (``planar (n =
+    4)``); none from a table without the column ``family``."""
+    if "family" not in runs.columns:
+        return {}
+    out: dict[str, list[str]] = {}
+    for (family, joints), g in runs.dropna(subset=["family"]).groupby(
+        ["family", "joints"], sort=False
+    ):
+        out.setdefault(f"{family} (n = {int(joints)})", []).extend(g["scenario"].unique())
+    return out
+
+
+def _across(name, runs, scopes, sweeps, swept, bound, place) -> Scope:
+    """The answer over the scenarios of ``runs`` (their ``scopes`` among ``scopes``): ok and real
+    time in every run and run in every one of them, then judged on the perturbed runs of those
+    of them in ``swept``."""
+    mine = list(dict.fromkeys(runs["scenario"]))
+    every = _scope(name, runs, place)
     rejected = dict(every.not_recommended)
     for pick in every.recommended:
-        missing = [s.name for s in scenarios if pick.backend not in s.backends]
+        missing = [s.name for s in scopes if s.name in mine and pick.backend not in s.backends]
         if missing:  # ok wherever it ran, but not run everywhere
             rejected[pick.backend] = (f"not run in {', '.join(missing)}",)
     picks = tuple(p for p in every.recommended if p.backend not in rejected)
-    names = ", ".join(s.name for s in scenarios)
     passed = tuple(p.backend for p in picks)
-    overall = Scope(f"all scenarios ({names})", picks, rejected, passed=passed)
-    swept = []
-    if sweeps is not None:
-        bases = sweeps.attrs.get("swept") or sweeps.get("base_scenario", pd.Series()).astype(str)
-        swept = [s.name for s in scenarios if s.name in set(bases)]
-    if swept:
-        overall = _judge_evidence(overall, sweeps, swept, min_ok_bound)
-    return Recommendation(overall, scenarios, len(runs), min_ok_bound, tuple(swept), floor)
+    overall = Scope(f"{name} ({', '.join(mine)})", picks, rejected, passed=passed)
+    judged = [s for s in swept if s in mine]
+    return _judge_evidence(overall, sweeps, judged, bound) if judged else overall
 
 
 def _why(reasons: tuple[str, ...]) -> str:
@@ -489,6 +524,32 @@ def no_answer(answer: Recommendation) -> str:
     return f"No backend was ok and real time in every run of {overall.name}."
 
 
+def _family_title(scope: Scope) -> str:
+    """``planar (n = 4)`` of the scope ``planar (n = 4) (free, wall)``."""
+    return scope.name.rsplit(" (", 1)[0]
+
+
+def _family_rows(families: tuple[Scope, ...]) -> list[list[str]]:
+    """One row per backend recommended or short of evidence in some family, in the order of the
+    first family's ranking: per family its rank and p99, ``too few perturbed runs``, or the
+    first reason it is not recommended there."""
+    cells: dict[str, list[str]] = {}
+    for k, f in enumerate(families):
+        for p in f.recommended:
+            cells.setdefault(p.backend, ["-"] * len(families))[k] = (
+                f"{p.rank_text}: {_us(p.call_p99_s)}"
+            )
+        for p in f.short:
+            cells.setdefault(p.backend, ["-"] * len(families))[k] = (
+                f"too few perturbed runs: {_us(p.call_p99_s)}"
+            )
+    for b, row in cells.items():
+        for k, f in enumerate(families):
+            if b in f.not_recommended:
+                row[k] = _first(f.not_recommended[b][0])
+    return [[b, *row] for b, row in cells.items()]
+
+
 def render(answer: Recommendation, markdown: bool = False) -> str:
     """The answer as text: Markdown (``report.md``) or plain (a terminal), the same lines;
     the tables are padded Markdown tables, aligned on a terminal too."""
@@ -544,6 +605,16 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
         lines.append(f"Worst perturbed run of each{where}:{gap}")
         header = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
         _table(lines, header, worst, gap, left=(0, 1, 2, 4, 5))
+    if answer.families:
+        lines.append(
+            "Per arm family, each answered alone on its own scenarios and their perturbed runs "
+            "as above, on its nominal runs alone where none of its scenarios is swept (the rank, "
+            "the controller p99 in us; a backend recommended in every family is recommended "
+            f"above, ranked on its slowest family):{gap}"
+        )
+        rows = _family_rows(answer.families)
+        header = ["backend", *(_family_title(f) for f in answer.families)]
+        _table(lines, header, rows, gap, left=len(header))
     if len(answer.scenarios) > 1:
         lines.append(f"Per scenario, ok and real time in every run, fastest first:{gap}")
         for scope in answer.scenarios:
