@@ -12,7 +12,7 @@ import qpsolvers
 from qpbench.cli import main
 from qpbench.robot.body import body_clearance
 from qpbench.robot.chain import forward_kinematics_np
-from qpbench.robot.presets import chain_from_urdf
+from qpbench.robot.presets import make_chain, modified_dh
 from qpbench.scaling.sizes import (
     CLEARANCE,
     DEFAULT_SIZES,
@@ -24,10 +24,10 @@ from qpbench.scaling.sizes import (
 from qpbench.scaling.spatial import (
     REACH,
     chain_of,
+    dh_rows,
     generated_chain,
-    scenario_files,
+    scenario_file,
     task,
-    urdf_text,
 )
 from qpbench.sim.scenario import parse_scenario
 
@@ -58,29 +58,29 @@ def test_generated_chain_alternates_its_axes_and_keeps_the_reach(n):
     assert np.all(chain.q_max > 0) and np.allclose(chain.q_min, -chain.q_max)
 
 
-def test_generated_chain_urdf_reads_back_as_the_chain(tmp_path):
-    pytest.importorskip("pinocchio")
-    chain = generated_chain(14)
-    path = tmp_path / "chain.urdf"
-    path.write_text(urdf_text(chain))
-    back = chain_from_urdf(path, "tool")
-    q = np.random.default_rng(3).uniform(-1, 1, 14)
-    a, b = forward_kinematics_np(chain, q), forward_kinematics_np(back, q)
-    assert np.allclose(a.position, b.position, atol=1e-12)
-    assert np.allclose(a.rotation, b.rotation, atol=1e-12)
-    for key in ("q_min", "q_max", "v_max"):
-        assert np.array_equal(getattr(chain, key), getattr(back, key))
+def test_dh_rows_of_the_panda_make_the_preset():
+    """``kind = "dh"`` is the presets' own construction: the Panda's published rows give it."""
+    from qpbench.robot.presets import PANDA_DH, PANDA_LIMITS
+
+    rows = dict(zip(("a", "d", "alpha"), PANDA_DH, strict=True))
+    chain, preset = make_chain("dh", **rows, **PANDA_LIMITS), make_chain("panda")
+    q = np.random.default_rng(3).uniform(-1, 1, 7)
+    a, b = forward_kinematics_np(chain, q), forward_kinematics_np(preset, q)
+    assert np.array_equal(a.position, b.position) and np.array_equal(a.rotation, b.rotation)
+    assert np.array_equal(modified_dh(*PANDA_DH)[0], modified_dh(*rows.values())[0])
+
+
+def test_dh_rows_of_unequal_lengths_are_refused():
+    rows = dh_rows(4)
+    rows["alpha"] = rows["alpha"][:-1]
+    with pytest.raises(Exception, match="n \\+ 1 values each"):
+        make_chain("dh", **rows)
 
 
 @pytest.mark.parametrize("name", SPATIAL)
 def test_spatial_size_starts_in_contact_with_valid_qps(name, tmp_path):
     [size] = parse_sizes(name)
-    if size.robot == "chain":
-        pytest.importorskip("pinocchio")
-    urdf = tmp_path / f"{name}.urdf"
-    text, urdf_body = scenario_files(size, 0, 0.1, urdf)
-    if urdf_body is not None:
-        urdf.write_text(urdf_body)
+    text = scenario_file(size, 0, 0.1)
     scenario = parse_scenario(text, tmp_path / f"{name}.toml")
     chain, theta0 = scenario.make_arm().model, scenario.theta0
     assert np.allclose(chain.rotation, chain_of(size).rotation, atol=1e-12)

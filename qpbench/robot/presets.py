@@ -14,7 +14,7 @@ from ..exceptions import InputError, check_known_keys, did_you_mean
 from .chain import ChainModel, make_model, planar_chain
 
 #: ``robot.kind``: the robots :func:`make_chain` makes.
-CHAIN_KINDS = ("planar", "panda", "iiwa14", "urdf")
+CHAIN_KINDS = ("planar", "panda", "iiwa14", "dh", "urdf")
 
 
 def _rot_x(alpha: float) -> np.ndarray:
@@ -148,11 +148,17 @@ def chain_from_urdf(path, ee_frame: str, **fields) -> ChainModel:
         raise InputError(e.message, path=path, key=e.key) from None
 
 
+#: The keys of ``[robot]`` that make a kind's chain (the limits aside).
+OWN_KEYS = {"planar": ("link_lengths",), "dh": ("a", "d", "alpha"), "urdf": ("file", "ee_frame")}
+
+
 def make_chain(kind: str, **fields) -> ChainModel:
     """The chain of ``robot.kind`` ``kind``: ``planar`` (``link_lengths`` [m]), ``panda``,
-    ``iiwa14``, ``urdf`` (``file``, ``ee_frame``); other ``fields``: limits ``q_min``,
-    ``q_max`` [rad], ``v_max`` [rad/s] and ``radius`` [m] (:func:`~qpbench.robot.chain.make_model`)."""
-    own = {"planar": ("link_lengths",), "urdf": ("file", "ee_frame")}.get(kind, ())
+    ``iiwa14``, ``dh`` (Craig's modified Denavit-Hartenberg rows ``a`` [m], ``d`` [m],
+    ``alpha`` [rad] of the n joints and the flange, every joint about its z axis), ``urdf``
+    (``file``, ``ee_frame``); other ``fields``: limits ``q_min``, ``q_max`` [rad], ``v_max``
+    [rad/s] and ``radius`` [m] (:func:`~qpbench.robot.chain.make_model`)."""
+    own = OWN_KEYS.get(kind, ())
     check_known_keys(fields, (*own, "q_min", "q_max", "v_max", "radius"), None, "robot")
     if kind == "planar":
         if "link_lengths" not in fields:
@@ -165,6 +171,13 @@ def make_chain(kind: str, **fields) -> ChainModel:
                     "robot.kind = 'urdf' needs a file and an ee_frame", key=f"robot.{key}"
                 )
         return chain_from_urdf(fields.pop("file"), fields.pop("ee_frame"), **fields)
+    if kind == "dh":
+        rows = [np.asarray(fields.pop(k, ()), dtype=float).ravel() for k in ("a", "d", "alpha")]
+        if len({r.size for r in rows}) != 1 or rows[0].size < 2:
+            sizes = ", ".join(str(r.size) for r in rows)
+            msg = f"a, d and alpha need n + 1 values each (n joints, the flange), got {sizes}"
+            raise InputError(msg, key="robot.alpha")
+        return _from_placements(*modified_dh(*rows), "robot", **fields)
     if kind in ("panda", "iiwa14"):
         return panda(**fields) if kind == "panda" else iiwa14(**fields)
     raise InputError(

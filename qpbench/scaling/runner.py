@@ -22,7 +22,7 @@ import numpy as np
 
 from ..harness.results import ResultsWriter, read_results
 from .sizes import Size, generate, qp_shape, scenario_toml
-from .spatial import scenario_files
+from .spatial import scenario_file
 
 if TYPE_CHECKING:
     from ..control.controller import Controller
@@ -177,9 +177,7 @@ def _dump_ticks(size: Size, config: ScalingConfig, out: Path):
     path = out / "scenarios" / f"{size.name}.toml"
     path.parent.mkdir(parents=True, exist_ok=True)
     if size.spatial:
-        text, urdf = scenario_files(size, config.seed, config.duration, path.with_suffix(".urdf"))
-        if urdf is not None:
-            write_text(path.with_suffix(".urdf"), urdf)
+        text = scenario_file(size, config.seed, config.duration)
     else:
         text = scenario_toml(size, *generate(size, config.seed), config.duration)
     write_text(path, text)

@@ -11,7 +11,7 @@ turned by ``+-pi/2`` about x (each joint's axis perpendicular to the previous on
 Panda and the iiwa), the flange :data:`TOOL_LENGTH` past the last joint; limits
 ``+-``:data:`JOINT_LIMIT` and the Panda's :data:`VELOCITY_LIMIT`. The reach stays the presets'
 while n grows, so a size changes the QP's variables and rows, not the task. A scenario file names
-its chain by a URDF (``[robot] kind = "urdf"``; pinocchio reads it), written beside it.
+its chain by these rows (``[robot] kind = "dh"``).
 
 The start: the end effector at rest in contact, ``x_d(0) + (Fd / Kp) n`` (paper eq. 4), reached by
 damped least squares from a bent guess (the Panda's: ``panda_table``'s start), pulled towards
@@ -27,7 +27,6 @@ from __future__ import annotations
 import copy
 import functools
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -36,7 +35,7 @@ from ..robot.body import body_clearance
 from ..robot.chain import ChainModel, points_jacobians_np
 from ..robot.kinematics import Arm
 from ..robot.obstacles.sphere import SphereObstacle
-from ..robot.presets import make_chain, make_model, modified_dh
+from ..robot.presets import make_chain
 from ..sweep.toml_text import dumps
 from .sizes import CLEARANCE, CLOUD_RADIUS, SPEED, Size, base_tables, start_target
 
@@ -51,43 +50,23 @@ LIMIT_MARGIN = 0.05
 BALL_RADIUS = 0.02
 
 
-def generated_chain(n: int) -> ChainModel:
-    """The generated chain of ``n`` joints (module docstring)."""
+def dh_rows(n: int) -> dict:
+    """The generated chain of ``n`` joints as ``[robot] kind = "dh"`` rows and limits (module
+    docstring)."""
     alpha = [0.0] + [math.pi / 2 if k % 2 == 0 else -math.pi / 2 for k in range(1, n)] + [0.0]
     d = [BASE_HEIGHT] + [REACH / (n - 1)] * (n - 1) + [TOOL_LENGTH]
-    rot, trans = modified_dh([0.0] * (n + 1), d, alpha)
-    axis = np.tile([0.0, 0.0, 1.0], (n, 1))
-    limits = dict(q_min=-JOINT_LIMIT, q_max=JOINT_LIMIT, v_max=VELOCITY_LIMIT)
-    return make_model(rot[:-1], trans[:-1], axis, rot[-1], trans[-1], 3, "robot", **limits)
+    return dict(a=[0.0] * (n + 1), d=d, alpha=alpha, q_min=[-JOINT_LIMIT] * n,
+                q_max=[JOINT_LIMIT] * n, v_max=[VELOCITY_LIMIT] * n)  # fmt: skip
+
+
+def generated_chain(n: int) -> ChainModel:
+    """The generated chain of ``n`` joints (module docstring)."""
+    return make_chain("dh", **dh_rows(n))
 
 
 def chain_of(size: Size) -> ChainModel:
     """The size's chain: a preset's, or :func:`generated_chain`."""
     return generated_chain(size.links) if size.robot == "chain" else make_chain(size.robot)
-
-
-def urdf_text(chain: ChainModel) -> str:
-    """A URDF of ``chain`` (joints ``joint1..n``, the end effector frame ``tool``), whose
-    rotations are turns about x (:func:`generated_chain`'s)."""
-
-    def joint(name, kind, parent, child, xyz, roll, limits=""):
-        return (
-            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-            f'<origin xyz="{" ".join(map(repr, map(float, xyz)))}" rpy="{roll!r} 0 0"/>'
-            f'<axis xyz="0 0 1"/>{limits}</joint>'
-        )
-
-    rolls = [float(math.atan2(r[2, 1], r[1, 1])) for r in [*chain.rotation, chain.tool_rotation]]
-    body = [f'<link name="link{k}"/>' for k in range(chain.n + 1)] + ['<link name="tool"/>']
-    for k in range(chain.n):
-        lo, hi, v = (float(x[k]) for x in (chain.q_min, chain.q_max, chain.v_max))
-        limit = f'<limit lower="{lo!r}" upper="{hi!r}" effort="100" velocity="{v!r}"/>'
-        args = (f"link{k}", f"link{k + 1}", chain.translation[k], rolls[k], limit)
-        body.append(joint(f"joint{k + 1}", "revolute", *args))
-    body.append(
-        joint("flange", "fixed", f"link{chain.n}", "tool", chain.tool_translation, rolls[-1])
-    )
-    return f'<?xml version="1.0"?>\n<robot name="chain{chain.n}">{"".join(body)}</robot>\n'
 
 
 @functools.cache
@@ -161,9 +140,8 @@ def place_balls(
     return balls(step)
 
 
-def scenario_files(size: Size, seed: int, duration: float, urdf: Path) -> tuple[str, str | None]:
-    """The size's scenario file's text and, for a generated chain, its URDF's (to be written at
-    ``urdf``, which the scenario names); ``duration`` [s]."""
+def scenario_file(size: Size, seed: int, duration: float) -> str:
+    """The size's scenario file's text; ``duration`` [s]."""
     chain = chain_of(size)
     raw = copy.deepcopy(task())
     theta0 = start_angles(chain, start_target(raw), _guess(size))
@@ -178,7 +156,10 @@ def scenario_files(size: Size, seed: int, duration: float, urdf: Path) -> tuple[
     }
     robot = {"kind": size.robot}
     if size.robot == "chain":
-        robot = {"kind": "urdf", "file": str(Path(urdf).resolve()), "ee_frame": "tool"}
+        rows = dh_rows(n)
+        limits = dict(theta_min="q_min", theta_max="q_max", velocity_max="v_max")
+        robot = {"kind": "dh", **{k: rows[k] for k in ("a", "d", "alpha")}}
+        robot.update({key: rows[name] for key, name in limits.items()})
     raw["robot"] = {**robot, "theta0": theta0}
     raw["simulation"]["duration"] = float(duration)
     raw["obstacles"] = [
@@ -191,4 +172,4 @@ def scenario_files(size: Size, seed: int, duration: float, urdf: Path) -> tuple[
         f"facing {m} balls that approach it.\nWritten by qpbench scaling; units as in the scenario "
         "schema."
     )
-    return dumps(raw, header=header), urdf_text(chain) if size.robot == "chain" else None
+    return dumps(raw, header=header)

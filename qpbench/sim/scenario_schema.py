@@ -34,7 +34,7 @@ from pydantic import (
 from ..exceptions import InputError, ScenarioError
 from ..robot.chain import ChainModel
 from ..robot.obstacles import kinds as obstacle_kinds
-from ..robot.presets import make_chain
+from ..robot.presets import OWN_KEYS, make_chain
 from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 
 
@@ -159,8 +159,28 @@ class UrdfRobotTable(PandaRobotTable):
     ee_frame: StrictStr
 
 
+class DhRobotTable(PandaRobotTable):
+    """``[robot]`` of kind ``dh``: a chain of n revolute joints from Craig's modified
+    Denavit-Hartenberg rows ``a`` [m], ``d`` [m], ``alpha`` [rad], n + 1 each (the joints, then
+    the flange), from ``theta0`` [rad]; its limits ``theta_min``, ``theta_max``,
+    ``velocity_max`` are required."""
+
+    kind: Literal["dh"]
+    a: Vec
+    d: Vec
+    alpha: Vec
+    theta_min: Vec
+    theta_max: Vec
+    velocity_max: Vec
+
+
 RobotTable = _by_kind(
-    PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, UrdfRobotTable, default="planar"
+    PlanarRobotTable,
+    PandaRobotTable,
+    Iiwa14RobotTable,
+    DhRobotTable,
+    UrdfRobotTable,
+    default="planar",
 )
 
 
@@ -394,7 +414,7 @@ def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
 def robot_chain(robot) -> ChainModel:
     """The chain of a ``[robot]`` table (:func:`~qpbench.robot.presets.make_chain`), with the
     limits the table gives (a preset's own otherwise)."""
-    own = {"planar": ("link_lengths",), "urdf": ("file", "ee_frame")}.get(robot.kind, ())
+    own = OWN_KEYS.get(robot.kind, ())
     fields = {key: getattr(robot, key) for key in own}
     for key, name in (("q_min", "theta_min"), ("q_max", "theta_max"), ("v_max", "velocity_max")):
         if getattr(robot, name) is not None:
