@@ -550,15 +550,9 @@ def _family_rows(families: tuple[Scope, ...]) -> list[list[str]]:
     return [[b, *row] for b, row in cells.items()]
 
 
-def render(answer: Recommendation, markdown: bool = False) -> str:
-    """The answer as text: Markdown (``report.md``) or plain (a terminal), the same lines;
-    the tables are padded Markdown tables, aligned on a terminal too."""
-    head = "## Recommendation\n" if markdown else "Recommendation"
-    if not answer.runs:
-        return f"{head}\nNo closed-loop run: nothing to recommend.\n"
-    gap = "\n" if markdown else ""
+def _ranked_lines(answer: Recommendation, lines: list[str], gap: str) -> None:
+    """The recommended backends' table (or why there are none) and the short of evidence."""
     overall, bound = answer.overall, answer.min_ok_bound
-    lines = [head]
     swept = ", ".join(answer.swept)
     if overall.recommended:
         lines.append(
@@ -590,31 +584,15 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
             f"Not enough evidence (ok and real time in every run, too few perturbed runs for a "
             f"bound of {bound:g}; never recommended):{gap}"
         )
-        header = [
-            "backend",
-            "controller p99 (us)",
-            "95 % interval (us)",
-            "perturbed ok",
-            "ok bound",
-        ]
+        header = ["backend", "controller p99 (us)", "95 % interval (us)", "perturbed ok"]
+        header.append("ok bound")
         rows = [[p.backend, _us(p.call_p99_s), _interval(p), *_rate(p)] for p in overall.short]
         _table(lines, header, rows, gap, left=1)
-    worst = _worst_rows([*overall.recommended, *overall.short])
-    if worst:
-        where = " (paths from this report's folder)" if markdown else ""
-        lines.append(f"Worst perturbed run of each{where}:{gap}")
-        header = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
-        _table(lines, header, worst, gap, left=(0, 1, 2, 4, 5))
-    if answer.families:
-        lines.append(
-            "Per arm family, each answered alone on its own scenarios and their perturbed runs "
-            "as above, on its nominal runs alone where none of its scenarios is swept (the rank, "
-            "the controller p99 in us; a backend recommended in every family is recommended "
-            f"above, ranked on its slowest family):{gap}"
-        )
-        rows = _family_rows(answer.families)
-        header = ["backend", *(_family_title(f) for f in answer.families)]
-        _table(lines, header, rows, gap, left=len(header))
+
+
+def _scenario_lines(answer: Recommendation, lines: list[str], gap: str) -> None:
+    """Each scenario's own answer, the backends not recommended and why, the noise floor."""
+    overall = answer.overall
     if len(answer.scenarios) > 1:
         lines.append(f"Per scenario, ok and real time in every run, fastest first:{gap}")
         for scope in answer.scenarios:
@@ -637,6 +615,35 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
         )
         lines.extend(f"- {line}" for line in answer.noise_floor)
         lines[-1] += gap
+
+
+def render(answer: Recommendation, markdown: bool = False) -> str:
+    """The answer as text: Markdown (``report.md``) or plain (a terminal), the same lines;
+    the tables are padded Markdown tables, aligned on a terminal too."""
+    head = "## Recommendation\n" if markdown else "Recommendation"
+    if not answer.runs:
+        return f"{head}\nNo closed-loop run: nothing to recommend.\n"
+    gap = "\n" if markdown else ""
+    lines = [head]
+    _ranked_lines(answer, lines, gap)
+    overall = answer.overall
+    worst = _worst_rows([*overall.recommended, *overall.short])
+    if worst:
+        where = " (paths from this report's folder)" if markdown else ""
+        lines.append(f"Worst perturbed run of each{where}:{gap}")
+        header = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
+        _table(lines, header, worst, gap, left=(0, 1, 2, 4, 5))
+    if answer.families:
+        lines.append(
+            "Per arm family, each answered alone on its own scenarios and their perturbed runs "
+            "as above, on its nominal runs alone where none of its scenarios is swept (the rank, "
+            "the controller p99 in us; a backend recommended in every family is recommended "
+            f"above, ranked on its slowest family):{gap}"
+        )
+        rows = _family_rows(answer.families)
+        header = ["backend", *(_family_title(f) for f in answer.families)]
+        _table(lines, header, rows, gap, left=len(header))
+    _scenario_lines(answer, lines, gap)
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
