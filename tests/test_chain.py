@@ -31,22 +31,7 @@ def skewed_chain(n=5, seed=4):
     return make_model(rot[:-1], t[:-1], axis, rot[-1], t[-1], 3, q_min=-2.0, q_max=2.0)
 
 
-def axes_chain():
-    """Joints about their frames' x, y, z and -z axes, placed with and without rotations (the
-    compiled kinematics' short paths and Rodrigues' formula in one chain)."""
-    skewed = skewed_chain(4, seed=9)
-    rot = np.tile(np.eye(3), (5, 1, 1))
-    rot[[1, 4]] = skewed.rotation[[1, 2]]
-    axis = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]
-    t = np.random.default_rng(9).uniform(-0.3, 0.3, (5, 3))
-    model = make_model(rot[:-1], t[:-1], axis, rot[-1], t[-1], 3)
-    assert model.identity.tolist() == [True, False, True, True, False]
-    assert model.turn.tolist() == [0, 1, 2, -1]
-    return model
-
-
 CHAINS = {
-    "axes": axes_chain,
     "planar4": lambda: planar_chain([0.3, 0.4, 0.15, 0.15]),
     "planar7": lambda: planar_chain(np.linspace(0.1, 0.3, 7)),
     "panda": panda,

@@ -34,10 +34,7 @@ class ChainModel(NamedTuple):
     ``translation`` (n, 3) [m]: joint k's frame in joint k-1's (the base's for k = 0); ``axis``
     (n, 3): joint k's unit axis in its own frame; ``tool_rotation`` (3, 3), ``tool_translation``
     (3,) [m]: the end effector in joint n-1's frame; ``q_min``, ``q_max`` (n,) [rad], ``v_max``
-    (n,) [rad/s]: joint limits; ``radius`` (n,) [m]: link i's capsule radius. Derived by
-    :func:`make_model` for the compiled kinematics: ``identity`` (n+1,) whether ``rotation[k]``
-    (k = n: ``tool_rotation``) is the identity (its product skipped), ``turn`` (n,) the frame
-    axis 0, 1, 2 (x, y, z) that ``axis[k]`` is, or -1 (Rodrigues' formula).
+    (n,) [rad/s]: joint limits; ``radius`` (n,) [m]: link i's capsule radius.
     """
 
     dim: int
@@ -50,8 +47,6 @@ class ChainModel(NamedTuple):
     q_max: np.ndarray
     v_max: np.ndarray
     radius: np.ndarray
-    identity: np.ndarray
-    turn: np.ndarray
 
     @property
     def n(self) -> int:
@@ -132,13 +127,7 @@ def make_model(
             key=what,
         )
     tool = (_f64(tool_rotation), _f64(tool_translation))
-    identity = np.array([np.array_equal(r, np.eye(3)) for r in (*rotation, tool[0])])
-    turn = np.array(
-        [next((i for i in range(3) if np.array_equal(a, np.eye(3)[i])), -1) for a in axis]
-    )
-    return ChainModel(
-        int(dim), rotation, translation, axis, *tool, **lim, identity=identity, turn=turn
-    )
+    return ChainModel(int(dim), rotation, translation, axis, *tool, **lim)
 
 
 def planar_chain(lengths, **fields) -> ChainModel:
@@ -209,44 +198,30 @@ def _forward_kinematics_py(model, q, data):  # pragma: no cover - compiled
     """``data`` (:class:`ChainData`) at joint angles ``q`` (n,) [rad]."""
     R, p, w = data.rotation, data.position, data.axis
     n = q.shape[0]
-    for k in range(n + 1):  # R_k = R_{k-1} rot, p_k = p_{k-1} + R_{k-1} t (no views: each costs)
+    for k in range(n + 1):
         tail = k == n
-        if tail:
-            tool = model.tool_translation
-            t0, t1, t2 = tool[0], tool[1], tool[2]
-        else:
-            off = model.translation
-            t0, t1, t2 = off[k, 0], off[k, 1], off[k, 2]
-        for i in range(3):
-            if k == 0:  # never the tail (n >= 1)
-                p[0, i] = t0 if i == 0 else (t1 if i == 1 else t2)
+        rot = model.tool_rotation if tail else model.rotation[k]
+        t = model.tool_translation if tail else model.translation[k]
+        for i in range(3):  # R_k = R_{k-1} rot, p_k = p_{k-1} + R_{k-1} t
+            if k == 0:
+                p[0, i] = t[i]
                 for j in range(3):
-                    R[0, i, j] = model.rotation[0, i, j]
-                continue
-            a0, a1, a2 = R[k - 1, i, 0], R[k - 1, i, 1], R[k - 1, i, 2]
-            p[k, i] = p[k - 1, i] + a0 * t0 + a1 * t1 + a2 * t2
-            if model.identity[k]:
-                R[k, i, 0], R[k, i, 1], R[k, i, 2] = a0, a1, a2
-            elif tail:
-                tr = model.tool_rotation
-                for j in range(3):
-                    R[k, i, j] = a0 * tr[0, j] + a1 * tr[1, j] + a2 * tr[2, j]
+                    R[0, i, j] = rot[i, j]
             else:
-                fr = model.rotation
+                a0, a1, a2 = R[k - 1, i, 0], R[k - 1, i, 1], R[k - 1, i, 2]
+                p[k, i] = p[k - 1, i] + a0 * t[0] + a1 * t[1] + a2 * t[2]
                 for j in range(3):
-                    R[k, i, j] = a0 * fr[k, 0, j] + a1 * fr[k, 1, j] + a2 * fr[k, 2, j]
+                    R[k, i, j] = a0 * rot[0, j] + a1 * rot[1, j] + a2 * rot[2, j]
         if tail:
             return
         c, s = np.cos(q[k]), np.sin(q[k])
         x, y, z = model.axis[k, 0], model.axis[k, 1], model.axis[k, 2]
-        m = model.turn[k]
-        if m >= 0:  # about the frame's axis m: columns m + 1, m + 2 turn, column m stays
-            m1, m2 = (m + 1) % 3, (m + 2) % 3
+        if x == 0.0 and y == 0.0 and z == 1.0:  # about z: R_k = A_k Rz(q)
             for i in range(3):
-                a1, a2 = R[k, i, m1], R[k, i, m2]
-                w[k, i] = R[k, i, m]
-                R[k, i, m1] = c * a1 + s * a2
-                R[k, i, m2] = c * a2 - s * a1
+                a0, a1 = R[k, i, 0], R[k, i, 1]
+                w[k, i] = R[k, i, 2]
+                R[k, i, 0] = c * a0 + s * a1
+                R[k, i, 1] = c * a1 - s * a0
             continue
         v = 1.0 - c  # Rot(axis, q) by Rodrigues' formula
         r00, r01, r02 = c + v * x * x, v * x * y - s * z, v * x * z + s * y
