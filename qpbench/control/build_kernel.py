@@ -80,7 +80,10 @@ def compiled_path():
 @cache
 def compiled_build_kernel():
     """The build kernel ``build(model, theta, t, kp, kd, soft, buf)``, compiled (or loaded from
-    numba's cache) on the first call."""
+    numba's cache) on the first call; inlined into a compiled caller (numba's IR), so a loop
+    calling it reads the model's fields once, not as a call's arguments every tick (a call
+    passes the model flattened, a few words per array: about 240 words, copied to the stack
+    each call; bench/README.md)."""
     from ..native import compile_with
     from ..robot.chain import compiled_chain
     from ..robot.obstacles import compiled_segment_distance
@@ -92,7 +95,7 @@ def compiled_build_kernel():
         "_forward_kinematics": compiled_chain().forward_kinematics,
         "_segment_distance": compiled_segment_distance(),
     }
-    return compile_with(_build_kernel_py, helpers, name="build_tick")
+    return compile_with(_build_kernel_py, helpers, name="build_tick", inline="always")
 
 
 def packed_layout(n: int, n_rows: int, dim: int = 2) -> tuple[int, tuple[slice, ...]]:
