@@ -80,7 +80,10 @@ def compiled_path():
 @cache
 def compiled_build_kernel():
     """The build kernel ``build(model, theta, t, kp, kd, soft, buf)``, compiled (or loaded from
-    numba's cache) on the first call."""
+    numba's cache) on the first call; inlined into a compiled caller (numba's IR), so a loop
+    calling it reads the model's fields once, not as a call's arguments every tick (a call
+    passes the model flattened, a few words per array: about 240 words, copied to the stack
+    each call; bench/README.md)."""
     from ..native import compile_with
     from ..robot.chain import compiled_chain
     from ..robot.obstacles import compiled_segment_distance
@@ -92,7 +95,7 @@ def compiled_build_kernel():
         "_forward_kinematics": compiled_chain().forward_kinematics,
         "_segment_distance": compiled_segment_distance(),
     }
-    return compile_with(_build_kernel_py, helpers, name="build_tick")
+    return compile_with(_build_kernel_py, helpers, name="build_tick", inline="always")
 
 
 def packed_layout(n: int, n_rows: int, dim: int = 2) -> tuple[int, tuple[slice, ...]]:
@@ -132,7 +135,8 @@ def _desired_state_py(kind, c, times, pts, t, out):  # pragma: no cover - compil
 
 
 # Over 80 lines, kept whole on purpose: numba compiles it as one function. Its numpy twin:
-# tests/controller_numpy.py.
+# tests/controller_numpy.py. It indexes the buffer by offset rather than through views (a view
+# costs a reference count's increment and decrement, a reshape a call).
 def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - compiled
     """Fill P, q, G, h, J, b (= b0), lb, ub, ee, dist and x_d of one tick at joint angles
     ``theta`` [rad], time ``t`` [s], interaction coefficients ``kp`` [N/m], ``kd`` [N s/m] into
@@ -163,90 +167,84 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
     buf[8] = oh if nr > 0 else -1
     buf[9] = olb
     buf[10] = oub
-    P = buf[oP:oq].reshape((n, n))
-    q = buf[oq:oG]
-    G = buf[oG:oh].reshape((nr, n))
-    h = buf[oh:oJ]
-    J = buf[oJ:ob].reshape((dim, n))
-    b = buf[ob:olb]
-    lb = buf[olb:oub]
-    ub = buf[oub:oee]
-    ee = buf[oee:od]
-    dist = buf[od:oxd]
-    xd = buf[oxd : oxd + 2 * dim]
-    _desired_state_py(cm.path_kind, cm.path_cosine, cm.path_times, cm.path_points, t, xd)
+    _desired_state_py(
+        cm.path_kind, cm.path_cosine, cm.path_times, cm.path_points, t, buf[oxd : oxd + 2 * dim]
+    )
     _forward_kinematics(cm.chain, theta, cm.data)  # noqa: F821 - bound
     p = cm.data.position
     w = cm.data.axis
-    # end effector and its Jacobian: columns w_k x (x - p_k) (eq. 2)
-    for i in range(dim):
-        ee[i] = p[n, i]
-    for k in range(n):
-        dx, dy, dz = p[n, 0] - p[k, 0], p[n, 1] - p[k, 1], p[n, 2] - p[k, 2]
-        J[0, k] = w[k, 1] * dz - w[k, 2] * dy
-        J[1, k] = w[k, 2] * dx - w[k, 0] * dz
-        if dim == 3:
-            J[2, k] = w[k, 0] * dy - w[k, 1] * dx
-    # impedance reference, eq. 4
+    # end effector and its Jacobian: columns w_k x (x - p_k) (eq. 2); impedance reference, eq. 4
     kpkd = kp / kd
     fkd = cm.desired_force / kd
     for i in range(dim):
-        b[i] = xd[dim + i] - kpkd * (ee[i] - xd[i]) + fkd * cm.normal[i]
+        buf[oee + i] = p[n, i]
+        buf[ob + i] = buf[oxd + dim + i] - kpkd * (p[n, i] - buf[oxd + i]) + fkd * cm.normal[i]
+    for k in range(n):
+        dx, dy, dz = p[n, 0] - p[k, 0], p[n, 1] - p[k, 1], p[n, 2] - p[k, 2]
+        buf[oJ + k] = w[k, 1] * dz - w[k, 2] * dy
+        buf[oJ + n + k] = w[k, 2] * dx - w[k, 0] * dz
+        if dim == 3:
+            buf[oJ + 2 * n + k] = w[k, 0] * dy - w[k, 1] * dx
     # escape-velocity bounds, eq. 11c
     alpha = cm.alpha
     for k in range(n):
         lo = alpha * (cm.theta_min[k] - theta[k])
         vmin = cm.v_min[k]
-        lb[k] = lo if lo > vmin else vmin
+        buf[olb + k] = lo if lo > vmin else vmin
         up = alpha * (cm.theta_max[k] - theta[k])
         vmax = cm.v_max[k]
-        ub[k] = up if up < vmax else vmax
+        buf[oub + k] = up if up < vmax else vmax
     # objective
-    if soft:
-        rho = cm.rho
-        for r in range(n):
-            for c in range(n):
-                acc = 0.0
+    rho = cm.rho
+    for r in range(n):
+        acc = 0.0
+        for c in range(n):
+            pc = 0.0
+            if soft:
                 for i in range(dim):
-                    acc += J[i, r] * J[i, c]
-                P[r, c] = rho * acc
-            P[r, r] += 1.0
-            acc = 0.0
+                    pc += buf[oJ + i * n + r] * buf[oJ + i * n + c]
+                pc *= rho
+            buf[oP + r * n + c] = pc
+        buf[oP + r * n + r] += 1.0
+        if soft:
             for i in range(dim):
-                acc += J[i, r] * b[i]
-            q[r] = -rho * acc
-    else:
-        for r in range(n):
-            for c in range(n):
-                P[r, c] = 0.0
-            P[r, r] = 1.0
-            q[r] = 0.0
+                acc += buf[oJ + i * n + r] * buf[ob + i]
+            acc *= -rho
+        buf[oq + r] = acc
     # obstacle rows, eqs. 8-10 with the velocity-damper signs: element [a, e] of a link, its
-    # point x = a + s (e - a) closest to the primitive, u the distance's gradient at x
+    # point x = a + s (e - a) closest to the primitive, u the distance's gradient at x; the
+    # rows of one primitive together (its row of the table read once)
     a = cm.scratch[0:3]
     e = cm.scratch[3:6]
     u = cm.scratch[6:9]
-    for r in range(nr):
-        i = cm.row_key[r]
-        L = cm.key_link[i]
-        f0, f1 = cm.key_f0[i], cm.key_f1[i]
-        for c in range(3):
-            step = p[L + 1, c] - p[L, c]
-            a[c] = p[L, c] + f0 * step
-            e[c] = p[L, c] + f1 * step
-        row = cm.obstacles[cm.row_prim[r]]
-        d, s = _segment_distance(row, a, e, t, u)  # noqa: F821 - bound
-        d -= cm.key_radius
-        x0, x1, x2 = a[0] + s * (e[0] - a[0]), a[1] + s * (e[1] - a[1]), a[2] + s * (e[2] - a[2])
-        for k in range(n):  # G = -u^T J_x, J_x's columns w_k x (x - p_k) up to link L
-            if k <= L:
-                dx, dy, dz = x0 - p[k, 0], x1 - p[k, 1], x2 - p[k, 2]
-                G[r, k] = -(
-                    u[0] * (w[k, 1] * dz - w[k, 2] * dy)
-                    + u[1] * (w[k, 2] * dx - w[k, 0] * dz)
-                    + u[2] * (w[k, 0] * dy - w[k, 1] * dx)
-                )
-            else:
-                G[r, k] = 0.0
-        h[r] = cm.k * (d - cm.d_safe) - (u[0] * row[VX] + u[1] * row[VY] + u[2] * row[VZ])
-        dist[r] = d
+    for m in range(cm.obstacles.shape[0]):
+        row = cm.obstacles[m]
+        for r in range(nr):
+            if cm.row_prim[r] != m:
+                continue
+            i = cm.row_key[r]
+            L = cm.key_link[i]
+            f0, f1 = cm.key_f0[i], cm.key_f1[i]
+            for c in range(3):
+                step = p[L + 1, c] - p[L, c]
+                a[c] = p[L, c] + f0 * step
+                e[c] = p[L, c] + f1 * step
+            d, s = _segment_distance(row, a, e, t, u)  # noqa: F821 - bound
+            d -= cm.key_radius
+            x0 = a[0] + s * (e[0] - a[0])
+            x1 = a[1] + s * (e[1] - a[1])
+            x2 = a[2] + s * (e[2] - a[2])
+            g = oG + r * n
+            for k in range(n):  # G = -u^T J_x, J_x's columns w_k x (x - p_k) up to link L
+                if k <= L:
+                    dx, dy, dz = x0 - p[k, 0], x1 - p[k, 1], x2 - p[k, 2]
+                    buf[g + k] = -(
+                        u[0] * (w[k, 1] * dz - w[k, 2] * dy)
+                        + u[1] * (w[k, 2] * dx - w[k, 0] * dz)
+                        + u[2] * (w[k, 0] * dy - w[k, 1] * dx)
+                    )
+                else:
+                    buf[g + k] = 0.0
+            toward = u[0] * row[VX] + u[1] * row[VY] + u[2] * row[VZ]  # the primitive's speed
+            buf[oh + r] = cm.k * (d - cm.d_safe) - toward
+            buf[od + r] = d

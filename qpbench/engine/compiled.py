@@ -7,8 +7,9 @@ adaptive law. The engine body (:func:`_run_py`) is compiled once per compiled ``
 it and its ``reset`` bound (:func:`qpbench.native.compile_with`), so a C API call is a direct
 call; backends whose solve is one function choosing by its state (``noop``, ``pinv`` and the
 network; ``daqp`` and ``daqp-stateless``) share one engine, compiled once. The build and the
-step allocate nothing per tick (scratch in the state and the controller model). A backend joins by a
-:class:`CompiledSolver` in :data:`SOLVERS`.
+step are inlined into the body (numba's IR): called, each would be passed the model, flattened
+to a few words per array, every tick. They allocate nothing per tick (scratch in the state and
+the controller model). A backend joins by a :class:`CompiledSolver` in :data:`SOLVERS`.
 
 Times are read from ``CLOCK_MONOTONIC`` in compiled code (:func:`qpbench.native.clock`): the
 build, the solve (the call with the tick's QP until x, duals and status are in the engine's
