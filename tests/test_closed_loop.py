@@ -536,3 +536,19 @@ def test_a_run_set_measures_the_noise_floor_and_judges_real_time_against_it(tmp_
     assert len(answer.noise_floor) == 1 and answer.noise_floor[0].startswith("wall: p99 tick ")
     assert "noise floor" in rec.render(answer)
     assert not any("not ok" in s for s in rec.shortfalls(table))
+
+
+def test_a_run_of_scenario_text_lasts_the_task_duration():
+    """A task's ``duration`` holds for a scenario given as text (a sweep's instance) as for one
+    given by name: the same ticks, the same trajectory."""
+    from qpbench.backends import NOISE_FLOOR
+    from qpbench.sim.scenario import load_scenario
+
+    text = load_scenario("wall").source
+    by_name = cl.run_row(cl.LoopTask("wall", NOISE_FLOOR, duration=0.003))
+    by_text = cl.run_row(cl.LoopTask("w.toml", NOISE_FLOOR, duration=0.003, scenario_text=text))
+    assert by_name["status"] == by_text["status"] == "ok"
+    assert by_name["ticks"] == by_text["ticks"] == 3
+    assert by_name["min_obstacle_distance"] == by_text["min_obstacle_distance"]
+    whole = cl.run_row(cl.LoopTask("w.toml", NOISE_FLOOR, scenario_text=text, duration=None))
+    assert whole["ticks"] == round(load_scenario("wall").duration / load_scenario("wall").dt)

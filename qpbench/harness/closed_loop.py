@@ -135,7 +135,7 @@ def run_row(task: LoopTask) -> dict:
             overrides = dict(task.overrides) or None
             scenario = load_scenario(task.scenario, overrides, duration=task.duration)
         else:
-            scenario = parse_scenario(task.scenario_text, path=task.scenario)
+            scenario = parse_scenario(task.scenario_text, task.scenario, duration=task.duration)
         warmup([task.backend])
         result = simulate(
             scenario,

@@ -41,6 +41,8 @@ OUTPUTS = (
 PERTURBED = "perturbed"
 #: Wall time of the perturbed runs of ``run`` [s] (``--sweep-budget``).
 SWEEP_BUDGET_S = 60.0
+#: One-tick runs whose median CPU time is the cost of a perturbed run around its loop.
+OVERHEAD_RUNS = 3
 #: Instances sampled at a time while looking for the valid ones a sweep needs.
 SAMPLE_CHUNK = 16
 #: Staging folder of a run in progress, inside ``--out``.
@@ -452,13 +454,16 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
     return outcome.table, outcome.not_ok
 
 
-def sweep_plan(costs_s: dict[str, float], worker_s: float, target: int) -> dict[str, int]:
+def sweep_plan(
+    costs_s: dict[str, float], worker_s: float, target: int, floor_s: float = 0.0
+) -> dict[str, int]:
     """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` while the
     worker time left buys them (``worker_s`` [s] over all workers; ``costs_s``: a backend's
-    measured cost of one instance in every swept scenario [s]), else none: fewer than
+    cost of one instance in every swept scenario [s]; ``floor_s``: the same of the instance's
+    noise-floor run, paid once, with the first backend funded), else none: fewer than
     ``target`` cannot recommend it (its bound stays short of the threshold, "not enough
     evidence" either way), so they would only lengthen the run."""
-    plan, left = {}, max(0.0, worker_s)
+    plan, left = {}, max(0.0, worker_s) - max(0.0, floor_s) * target
     for backend in sorted(costs_s, key=lambda b: (costs_s[b], b)):
         cost = max(0.0, costs_s[backend]) * target
         plan[backend] = target if cost <= left else 0
@@ -543,19 +548,22 @@ def _perturbed(config: RunConfig, folder: Path, phases, table, specs: dict) -> d
         return about
     with phases.phase("perturbed runs"):
         draws = {s: Draws(spec) for s, spec in specs.items()}
-        costs, overhead_s = _instance_costs(draws, candidates, table)
+        costs, floor_s, overhead_s = _instance_costs(draws, candidates, table)
         # the instances are drawn here, the runs made by the workers: the drawing of the first
         # scenario's target is reserved first (the others are drawn while the workers run)
         sampling_s = target * next(iter(draws.values())).cost_per_valid()
         spent = time.perf_counter() - started
-        plan = sweep_plan(costs, (config.sweep_budget - spent - sampling_s) * config.jobs, target)
+        worker_s = (config.sweep_budget - spent - sampling_s) * config.jobs
+        plan = sweep_plan(costs, worker_s, target, floor_s)
+        funded = sum(plan[b] * costs[b] for b in plan) + (
+            floor_s * target if any(plan.values()) else 0
+        )
         about.update(
             instance_cost_s={b: round(c, 4) for b, c in costs.items()},
-            run_overhead_s=round(overhead_s, 4),
+            noise_floor_cost_s=round(floor_s, 4),
+            run_overhead_s={b: round(c, 4) for b, c in overhead_s.items()},
             instances_per_scenario=plan,
-            predicted_s=round(
-                spent + sampling_s + sum(plan[b] * costs[b] for b in plan) / config.jobs, 1
-            ),
+            predicted_s=round(spent + sampling_s + funded / config.jobs, 1),
         )
         folder.mkdir(parents=True, exist_ok=True)
         ready = _draw_ahead(draws, max(plan.values(), default=0))
@@ -582,32 +590,50 @@ def _length(spec, most: float | None = None) -> float:
 
 
 def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
-    """Each candidate's cost of one instance in every swept scenario [s]: its loop's wall time per
-    simulated second in the nominal run of the scenario times the instance's length, plus the
-    cost of a run around its loop (parsing, warm-up, figures), measured here on a one-tick run of
-    a first valid instance; and that overhead [s]."""
+    """Each candidate's cost of one instance in every swept scenario [s], and the noise floor's
+    (:data:`~qpbench.backends.NOISE_FLOOR`, run on every instance): its loop's time per simulated
+    second in the nominal run of the scenario (its wall time, or its ticks at their p99 when
+    less: the machine's load lengthens a few ticks, not the p99; none without a result) times
+    the instance's length, plus the cost of a run around its loop (parsing, warm-up, figures):
+    the median CPU time of :data:`OVERHEAD_RUNS` one-tick runs of a first valid instance here,
+    as the sweep runs it, after one untimed (the CPU time, unlike the wall time, hardly moves
+    with the machine's load); and those overheads [s] by backend."""
+    import statistics
+
+    from ..backends import NOISE_FLOOR
     from .closed_loop import LoopTask, run_row
 
-    firsts = {s: d.first(1)[-1] for s, d in draws.items()}
-    s, spec = next((s, d.spec) for s, d in draws.items())
+    first = next(iter(draws.values()))
+    inst, spec = first.first(1)[-1], first.spec
     task = LoopTask(
-        f"{firsts[s].name}.toml",
-        candidates[0],
+        f"{inst.name}.toml",
+        "",
         duration=float(spec.base_raw["simulation"]["dt"]),
-        scenario_text=firsts[s].text,
+        scenario_text=inst.text,
         bands=(spec.force_band, spec.tracking_band),
+        p99_interval=False,
     )
-    t0 = time.perf_counter()
-    run_row(task)
-    overhead = time.perf_counter() - t0
+    overhead = {}
+    for b in (candidates[0], NOISE_FLOOR):
+        times = []
+        for _ in range(OVERHEAD_RUNS + 1):
+            t0 = time.process_time()
+            run_row(replace(task, backend=b))
+            times.append(time.process_time() - t0)
+        overhead[b] = statistics.median(times[1:])
     runs = table.set_index(["scenario", "backend"])
-    costs = {}
-    for b in candidates:
-        per_s = {
-            s: runs.loc[(s, b), "wall_time_s"] / runs.loc[(s, b), "simulated_s"] for s in draws
-        }
-        costs[b] = sum(float(per_s[s]) * _length(d.spec) + overhead for s, d in draws.items())
-    return costs, overhead
+
+    def cost(b: str, around_s: float) -> float:
+        total = around_s * len(draws)
+        for s, d in draws.items():
+            run = runs.loc[(s, b)]
+            loop_s = min(run["wall_time_s"], run["tick_time_p99_s"] * run["ticks"])
+            per_s = float(loop_s) / float(run["simulated_s"])
+            total += per_s * _length(d.spec) if math.isfinite(per_s) else 0.0
+        return total
+
+    costs = {b: cost(b, overhead[candidates[0]]) for b in candidates}
+    return costs, cost(NOISE_FLOOR, overhead[NOISE_FLOOR]), overhead
 
 
 def _sweep_scenario(
