@@ -54,6 +54,7 @@ def test_the_body_keeps_d_safe_the_limits_the_force_and_the_path(runs, name):
     bad = log["t"].to_numpy()[log["status"].to_numpy() != "optimal"]
     assert bad.size == s["infeasible_ticks"] and (bad < 0.01).all()
     obstacles, share = SCENARIOS[name]
+    assert "d_L7_board" not in log  # the board pressed on: no row of the end effector's link
     near = np.zeros(len(log), dtype=bool)
     for obstacle in obstacles:
         d, _ = distances(log, obstacle)
