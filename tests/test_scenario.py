@@ -25,9 +25,18 @@ PAPER = ("free", "wall", "adaptive", "narrow")
 
 def test_the_paper_scenarios_come_from_the_files_in_section_order(tmp_path, monkeypatch):
     assert paper_scenarios() == list(PAPER)
-    OTHERS = ["adaptive_fast", "disk_on_path", "moving_disk", "panda_table"]
+    OTHERS = [
+        "adaptive_fast",
+        "disk_on_path",
+        "iiwa_wall",
+        "moving_disk",
+        "panda_shelf",
+        "panda_table",
+    ]
     assert scenario_names() == [*PAPER, *OTHERS]
-    assert [load_scenario(n).in_paper for n in scenario_names()] == [True] * 4 + [False] * 4
+    assert [load_scenario(n).in_paper for n in scenario_names()] == [True] * 4 + [False] * len(
+        OTHERS
+    )
     # a new file is a new scenario: in_paper and its section decide where it goes
     for f in SHIPPED.glob("*.toml"):
         (tmp_path / f.name).write_bytes(f.read_bytes())

@@ -31,7 +31,7 @@ import numpy as np
 from .environment import ContactSurface
 from .kinematics import Arm
 from .obstacles import Obstacle
-from .obstacles.line import LineObstacle
+from .obstacles.plane import PlaneObstacle
 
 #: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
 SAME_LINE_TOL = 1e-9
@@ -47,10 +47,10 @@ MAX_PIECES = 256
 
 
 def contact_obstacles(obstacles: list[Obstacle], surface: ContactSurface) -> list[bool]:
-    """For each obstacle: it is the contact surface (a static ``line`` through its point, free
-    side against the pressing direction)."""
+    """For each obstacle: it is the contact surface (a static ``plane`` or ``line`` through its
+    point, free side against the pressing direction)."""
     return [
-        isinstance(o, LineObstacle)
+        isinstance(o, PlaneObstacle)
         and not np.any(o.velocity)
         and float(o.normal @ surface.normal) <= -1.0 + SAME_LINE_TOL
         and abs(float(o.normal @ (surface.point - o.point))) <= SAME_LINE_TOL
