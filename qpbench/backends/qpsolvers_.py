@@ -1,11 +1,8 @@
 """Backends ``qpsolvers:<name>``: every solver qpsolvers can drive, through its wrapper.
 
-One stateless class per solver, generated at import, for the solvers of
-:data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and :data:`OPTIONAL_SOLVERS` (a
-missing one shows as unavailable). A call is what :func:`qpsolvers.solve_problem` does;
-``warm_start`` is passed as ``initvals``. Statuses: ``found`` -> ``optimal``, otherwise read
-from the solver's report where qpsolvers keeps one (:data:`STATUS_READERS`), else
-``not_solved``.
+One stateless class per solver qpsolvers has or qpbench expects, generated at import; a call is
+what :func:`qpsolvers.solve_problem` does (``warm_start`` as ``initvals``). Statuses: ``found``
+-> ``optimal``, else the solver's report (:data:`STATUS_READERS`), else ``not_solved``.
 """
 
 from __future__ import annotations
@@ -176,10 +173,8 @@ NO_CERTIFICATE = {
 
 
 def silence_wrapper_warnings(solver: str) -> None:
-    """Ignore, from now on in this process, the warnings of qpsolvers' wrapper module of
-    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it), of its
-    conversions (dense matrices made sparse for a sparse-only solver, as ``solve_problem``
-    does) and those the solver's package raises on qpsolvers' normal calls."""
+    """Ignore, from now on in this process, the warnings of qpsolvers' wrapper of ``solver``
+    and of its conversions (the status says what they would)."""
     warnings.filterwarnings("ignore", module=rf"qpsolvers\.solvers\.{solver}_\Z")
     warnings.filterwarnings("ignore", module=r"qpsolvers\.conversions\.")
     if solver == "osqp":  # osqp 1.x: qpsolvers calls solve() without raise_error
@@ -198,9 +193,7 @@ _QPError = qpsolvers.QPError
 
 
 def solver_function(solver: str):
-    """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it:
-    the entry of the table ``solve_problem`` dispatches through (read from its globals),
-    without that table ``solve_problem`` itself."""
+    """qpsolvers' function for ``solver``: the entry of ``solve_problem``'s dispatch table."""
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     function = table.get(solver) if isinstance(table, dict) else None
     if function is not None:
