@@ -282,29 +282,11 @@ def make_state(n: int, me_max: int, mi_max: int, options: dict, stateless: bool 
     settings0 = settings_struct(structs, options)
     qp, result, work = (_words(bytes(int(layout[k]))) for k in (SIZE_P, SIZE_R, SIZE_W))
     rows, m = me_max + mi_max, n + me_max + mi_max
-    return State(
-        layout,
-        statuses,
-        meta,
-        qp,
-        qp.view(np.int32),
-        settings0.copy(),
-        settings0,
-        result,
-        result.view(np.int32),
-        result.view(np.float64),
-        work,
-        work.view(np.int32),
-        np.zeros(n * n),
-        np.zeros(n),
-        np.zeros(rows * n),
-        np.zeros(m),
-        np.zeros(m),
-        np.zeros(m, dtype=np.int32),
-        np.zeros(n),
-        np.zeros(m),
-        np.zeros(1),
-    )
+    structs = qp, qp.view(np.int32), settings0.copy(), settings0, result, result.view(np.int32)
+    structs += result.view(np.float64), work, work.view(np.int32)
+    H, f, A, bu, bl, x, lam, clock = map(np.zeros, (n * n, n, rows * n, m, m, n, m, 1))
+    sense = np.zeros(m, dtype=np.int32)
+    return State(layout, statuses, meta, *structs, H, f, A, bu, bl, sense, x, lam, clock)
 
 
 def close_state(st: State) -> None:
