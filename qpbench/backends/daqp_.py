@@ -102,11 +102,8 @@ def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> B
     sol.solver_time_s = info["setup_time"] + info["solve_time"]
     if status == "optimal":
         lam, nb, me = info["lam"], buf.nb, buf.me
-        sol.x = x
-        sol.obj = fval
-        sol.z_box = lam[:nb]
-        sol.y = lam[nb : nb + me]
-        sol.z = lam[nb + me :]
+        sol.x, sol.obj = x, fval
+        sol.z_box, sol.y, sol.z = lam[:nb], lam[nb : nb + me], lam[nb + me :]
     elif status == "error":
         sol.error = f"DAQP exit flag {flag} ({raw})"
     return sol

@@ -312,10 +312,7 @@ class QpsolversBackend(Backend):
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
         if not self._float64_wrapper:  # clarabel's duals are lists
             x, y, z, z_box = map(_float_array, (x, y, z, z_box))
-        sol.x = x
-        sol.y = y
-        sol.z = z
-        sol.z_box = z_box
+        sol.x, sol.y, sol.z, sol.z_box = x, y, z, z_box
         sol._obj = result.obj
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time
