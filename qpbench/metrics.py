@@ -74,8 +74,7 @@ class Tick:
     values: dict = field(default_factory=dict)
 
 
-#: The per-tick metrics in column order: ``{columns: function}``; a function of one column
-#: returns its value, one of several a dict of them.
+#: The per-tick metrics in column order: ``{columns: function}`` (several columns: a dict).
 PER_TICK_METRICS: dict[tuple[str, ...], Callable[[Tick], object]] = {}
 
 

@@ -16,8 +16,7 @@ STATUSES = (
     "not_solved",
 )
 
-#: Statuses only the harness gives: ``invalid`` (a non-finite answer, or ``optimal``
-#: without one) and ``crashed`` (the worker process holding the backend died).
+#: Statuses only the harness gives: ``invalid`` (no finite answer) and ``crashed`` (worker died).
 GUARD_STATUSES = ("invalid", "crashed")
 
 #: Categories of a closed-loop tick log's ``status`` column (no worker process there).

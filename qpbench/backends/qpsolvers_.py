@@ -211,8 +211,7 @@ def _float_array(v):
     return np.asarray(v, dtype=float)
 
 
-#: Solvers whose qpsolvers wrapper hands ``x``, ``y``, ``z`` and ``z_box`` back as float64
-#: arrays (or None): taken as given; any other solver's results are converted.
+#: Solvers whose qpsolvers wrapper hands its answer back as float64 arrays (others converted).
 FLOAT64_WRAPPERS = frozenset(
     "cvxopt daqp ecos gurobi highs osqp piqp proxqp qpalm quadprog scs".split()
 )
@@ -223,9 +222,8 @@ class QpsolversBackend(Backend):
 
     solver: str = ""
 
-    #: Solvers whose qpsolvers wrapper hands every keyword it does not take itself to the
-    #: solver's own settings, as the direct backend of the same name does: the keywords the
-    #: wrapper takes without listing them in its signature.
+    #: Solvers whose wrapper hands unknown keywords to the solver's settings, as the direct
+    #: backend does: the keywords the wrapper takes without listing them in its signature.
     SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, ...]]] = {
         "clarabel": (),  # setattr on DefaultSettings (an unknown name raises)
         "daqp": (),  # keywords of daqp.solve

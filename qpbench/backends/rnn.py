@@ -39,9 +39,8 @@ _DEFAULTS = {
 #: Names of the settings the rnn backends accept (a scenario's ``[rnn]`` table).
 SETTING_NAMES = tuple(_DEFAULTS)
 
-#: A setting that works in the closed loop of every shipped scenario (the paper's
-#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms, ``l1``
-#: clipped to +-10 (anti-windup during the infeasible start).
+#: A setting that works in the closed loop of every shipped scenario (the paper's ``eps``
+#: does not): 20 semi-implicit steps per 1 ms, ``l1`` clipped (anti-windup).
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 

@@ -41,8 +41,7 @@ SYMMETRY_RTOL = 1e-9
 
 #: The matrices of a problem (the parts that may be scipy.sparse).
 MATRIX_KEYS = ("P", "G", "A")
-#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types,
-#: the arrays of its :func:`sorted_csc`.
+#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types.
 CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 
