@@ -111,10 +111,9 @@ def check_output(
     make_parent: bool = False,
     key: str = "out",
 ) -> None:
-    """Check an output before anything is written: it is a ``kind`` (``file`` or ``dir``) or
-    nothing yet (else :class:`ParamError`), its parent folder exists unless ``make_parent``
-    (an internal staging folder; else :class:`ParamError`), and it exists only with ``force``
-    or ``resume`` (``None``: the command has no ``--resume``; else :class:`OutputExistsError`)."""
+    """Check an output before anything is written: a ``kind`` (``file``, ``dir``) or nothing, its
+    parent present unless ``make_parent`` (else :class:`ParamError`), existing only with
+    ``force`` or ``resume`` (``None``: no ``--resume``; else :class:`OutputExistsError`)."""
     path = Path(path)
     if kind == "file" and path.is_dir():
         raise ParamError(f"{path}: is a folder; expected a file name", key=key)
@@ -132,9 +131,8 @@ def check_output(
 
 
 def promote(staging: Path, out: Path, names) -> None:
-    """Replace the outputs ``names`` in ``out`` by those in ``staging``, one rename each (a
-    folder's previous version moved aside, then removed), and remove ``staging``: a
-    reader sees the previous outputs or the new ones."""
+    """Replace the outputs ``names`` in ``out`` by those in ``staging``, one rename each, and
+    remove ``staging``: a reader sees the previous outputs or the new ones."""
     for name in names:
         src = staging / name
         dst = out / name

@@ -28,9 +28,8 @@ def user_cache_dir() -> Path:
 
 
 def cache_root() -> Path:
-    """The folder compiled artefacts go to: ``$NUMBA_CACHE_DIR`` when set; else the package
-    folder's ``__cache__`` when writable (numba's own: ``__pycache__`` beside the sources,
-    :func:`configure_numba_cache`); else :func:`user_cache_dir`."""
+    """The folder compiled artefacts go to: ``$NUMBA_CACHE_DIR``; else the package folder's
+    ``__cache__`` when writable; else :func:`user_cache_dir`."""
     env, local = os.environ.get("NUMBA_CACHE_DIR"), PACKAGE_DIR / "__cache__"
     return Path(env) if env else local if writable(local) else user_cache_dir()
 

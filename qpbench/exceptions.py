@@ -43,8 +43,7 @@ class ParamError(InputError):
 
 
 def did_you_mean(name: str, choices) -> str:
-    """``"did you mean 'a' or 'b'? "``: the (up to three) ``choices`` closest to ``name``,
-    ignoring case, or ``""``."""
+    """``"did you mean 'a' or 'b'? "``: up to three ``choices`` close to ``name``, or ``""``."""
     folded = {str(c).casefold(): c for c in choices}
     close = difflib.get_close_matches(str(name).casefold(), list(folded), n=3, cutoff=0.6)
     return f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""
@@ -78,8 +77,7 @@ class OutputExistsError(QpbenchError):
 
 
 def positive_seconds(value, key: str, path: str | Path | None = None) -> float:
-    """``value`` as a duration [s] if a finite number > 0, else a :class:`ParamError` naming
-    ``key``: the one check of every time argument."""
+    """``value`` as a duration [s] if a finite number > 0, else a :class:`ParamError`."""
     try:
         seconds = float(value)
     except (TypeError, ValueError):
@@ -90,8 +88,7 @@ def positive_seconds(value, key: str, path: str | Path | None = None) -> float:
 
 
 def positive_count(value, key: str, path: str | Path | None = None) -> int:
-    """``value`` if an integer >= 1, else a :class:`ParamError` naming ``key``: the one check of
-    every count argument (jobs, repeats, strides, limits)."""
+    """``value`` if an integer >= 1, else a :class:`ParamError` naming ``key``."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
         raise ParamError(f"must be an integer >= 1, got {value!r}", path=path, key=key)
     return int(value)

@@ -1,11 +1,6 @@
-"""Every compiled kernel of qpbench, compiled (or loaded from numba's on-disk cache) before any
-clock, only for the backends a command runs.
-
-Kernel groups (:data:`KERNELS`), each warmed on the QPs of :data:`_SCENARIOS`' controllers:
-``controller`` (:mod:`qpbench.control.build_kernel`), ``post`` (the closed loop's step,
-:mod:`qpbench.sim.tick_kernel`, and the adaptive law) and ``network`` (:mod:`qpbench.rnn.kernels`);
-``pinv`` (the pseudo-inverse's SVD); ``engine:<backend>``, the compiled engine of a backend that has one
-(:mod:`qpbench.engine.compiled`); :data:`SHIM`, the ``qpoases`` backend's native shim.
+"""Every compiled kernel of qpbench, compiled (or loaded from numba's cache) before any clock,
+only for the backends a command runs: the groups :data:`KERNELS`, ``engine:<backend>``
+(:mod:`qpbench.engine.compiled`) and :data:`SHIM`, warmed on :data:`_SCENARIOS`' QPs.
 """
 
 from __future__ import annotations
@@ -35,9 +30,8 @@ _SCENARIOS = ("wall", "free")
 
 @dataclass(frozen=True)
 class WarmupReport:
-    """What :func:`warmup` did: ``compiled`` kernel specialisations (0: all loaded, or in
-    memory) in ``seconds`` [s]; ``cache``: numba's folder; ``kernels``: the groups prepared,
-    or (``in_memory``) ready before the call."""
+    """What :func:`warmup` did: ``compiled`` specialisations in ``seconds`` [s], numba's
+    ``cache`` folder, the ``kernels`` prepared (``in_memory``: ready before the call)."""
 
     compiled: int
     seconds: float
@@ -112,8 +106,7 @@ def compiled_solvers() -> tuple[str, ...]:
 
 
 def _warm_loop(engines: Iterable[str]) -> None:
-    """A few ticks of a closed loop on the Python engine (the step, the adaptive law), then on the
-    compiled engine of each backend of ``engines``, in scenarios with and without obstacles."""
+    """A few ticks of a closed loop on the Python engine, then on each compiled one of ``engines``."""
     from .sim.loop import simulate
 
     for name in ("adaptive", "free"):
@@ -123,11 +116,8 @@ def _warm_loop(engines: Iterable[str]) -> None:
 
 
 def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str, ...]:
-    """What :func:`warmup` prepares for ``backends`` (``None``: everything), in :data:`KERNELS` order.
-
-    :data:`LOOP_KERNELS` when ``loop`` (the run builds the controller's QPs), the groups
-    the backends' classes name in ``kernels``, then :data:`SHIM` for ``qpoases``.
-    """
+    """What :func:`warmup` prepares for ``backends`` (``None``: everything), in order:
+    :data:`LOOP_KERNELS` when ``loop``, the backends' ``kernels``, :data:`SHIM`, engines."""
     from .backends import backend_class
     from .exceptions import BackendNotFound
 
@@ -155,8 +145,7 @@ def prepared() -> tuple[str, ...]:
 
 
 def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:
-    """Compile, or load from numba's on-disk cache, what ``backends`` use (:func:`kernels_for`;
-    ``loop``: closed loops too), unless this process prepared it already (``in_memory``)."""
+    """Compile or load what ``backends`` use (:func:`kernels_for`) unless already prepared."""
     return prepare(kernels_for(backends, loop))
 
 

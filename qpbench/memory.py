@@ -1,7 +1,5 @@
-"""A memory budget (``--memory-budget``) and estimates of what a solve needs: a solve whose
-estimate exceeds it is a ``skipped`` row, never an out-of-memory kill. Estimates (float64
-values, 4-byte indices) are orders of magnitude, not predictions.
-"""
+"""A memory budget (``--memory-budget``) and estimates (orders of magnitude) of what a solve
+needs: a solve whose estimate exceeds it is a ``skipped`` row, never an out-of-memory kill."""
 
 from __future__ import annotations
 

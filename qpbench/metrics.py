@@ -44,12 +44,9 @@ def _excess(M, v, x: np.ndarray) -> np.ndarray | None:
 
 
 def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> dict:
-    """How far ``x`` is from satisfying ``problem``'s constraints (absolute, problem units).
-
+    """How far ``x`` is from satisfying ``problem``'s constraints (absolute, problem units):
     ``violation_ineq = max(0, max(G x - h))``, ``violation_eq = max|A x - b|``,
-    ``violation_box = max(0, max(lb - x), max(x - ub))``, ``constraint_violation``: the largest;
-    a part the problem lacks is 0; all NaN when ``x`` is ``None``.
-    """
+    ``violation_box = max(0, max(lb - x), max(x - ub))``, ``constraint_violation`` the largest."""
     if x is None:
         return dict.fromkeys(VIOLATION_KEYS, math.nan)
     x = np.asarray(x, dtype=np.float64).reshape(-1)
@@ -67,8 +64,7 @@ def constraint_violation(problem: qpsolvers.Problem, x: np.ndarray | None) -> di
 
 @dataclass
 class Tick:
-    """What a per-tick metric reads: the record, the solution and its ``x``, the reference and its
-    status (each ``None`` when missing), and ``values``, the metrics before this one, by column."""
+    """What a per-tick metric reads (``None`` when missing); ``values``: the metrics before it."""
 
     record: object
     solution: object
@@ -78,16 +74,15 @@ class Tick:
     values: dict = field(default_factory=dict)
 
 
-#: The per-tick metrics in column order: ``{columns: function}``; a function of one column
-#: returns its value, one of several a dict of them.
+#: The per-tick metrics in column order: ``{columns: function}`` (several columns: a dict).
 PER_TICK_METRICS: dict[tuple[str, ...], Callable[[Tick], object]] = {}
 
 
 def per_tick_metric(
     fn: Callable | None = None, *, columns: tuple[str, ...] | None = None
 ) -> Callable:
-    """Register ``fn(tick) -> value`` as a per-tick metric named after its column, or returning
-    ``{"a": ..., "b": ...}`` for ``columns=("a", "b")``; a registered name is replaced in place."""
+    """Register ``fn(tick) -> value`` as a per-tick metric named after its column (or a dict of
+    ``columns``); a registered name is replaced in place."""
 
     def add(f: Callable) -> Callable:
         cols = tuple(columns) if columns else (f.__name__,)
@@ -114,8 +109,7 @@ def _objective(tick: Tick) -> float:
     columns=("reference_objective", "reference_status", "reference_agreement", "reference_note")
 )
 def _reference(tick: Tick) -> dict:
-    """The reference's objective (NaN unless optimal), status, agreement and note: each
-    solver's answer, which was kept and why, or why there is no reference."""
+    """The reference's objective (NaN unless optimal), status, agreement and note."""
     ref, status = tick.reference, tick.reference_status
     return {
         "reference_objective": float(ref.objective) if status == "optimal" else math.nan,
@@ -158,12 +152,11 @@ def evaluate(
     reference: object | None,
     tolerance: Tolerance,
 ) -> dict:
-    """Score ``solution`` (``None``: the backend returned nothing) of ``record`` against
-    ``reference`` under ``tolerance``: ``status``, ``found``, every per-tick metric, in order,
-    ``optimality_gap_signed`` and ``success``: against a ``primal_infeasible`` or
-    ``dual_infeasible`` reference, the backend reporting that status; otherwise ``found``, each
-    residual within the tolerance and, against an ``optimal`` reference, ``optimality_gap <=
-    tolerance.gap`` (``rule == "qpbenchmark"``: :func:`qpbench.published.qpbenchmark_success`)."""
+    """Score ``solution`` (``None``: nothing returned) of ``record`` against ``reference`` under
+    ``tolerance``: ``status``, ``found``, every per-tick metric, ``optimality_gap_signed`` and
+    ``success``: the reference's infeasibility status if it has one; else ``found``, residuals
+    within the tolerance and ``optimality_gap <= tolerance.gap`` against an optimal reference
+    (``rule == "qpbenchmark"``: :func:`qpbench.published.qpbenchmark_success`)."""
     x = getattr(solution, "x", None)
     tick = Tick(record, solution, x, reference, getattr(reference, "status", None))
     for columns, fn in PER_TICK_METRICS.items():

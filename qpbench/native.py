@@ -1,12 +1,7 @@
-"""Compiled kernels and the native code they call: copies of one body compiled with other
-functions bound (:func:`compile_with`), shared libraries loaded into the process's symbol table,
-their functions declared for numba, and the one monotonic clock every tick is timed by.
-
-A function declared here (:func:`external`) is resolved by name when a kernel is compiled or
-loaded from numba's cache, so kernels that call it cache like any other (a ctypes function
-pointer would be baked into the code and make numba refuse to cache it). Pointers cross as
-``intp`` addresses (``arr.ctypes.data`` in compiled code): on the 64-bit targets numba supports,
-a pointer and a 64-bit integer are passed the same way.
+"""Compiled kernels and the native code they call: one body compiled with other functions
+bound (:func:`compile_with`), shared libraries' functions declared for numba by name (so the
+kernels calling them cache; a ctypes pointer would not), pointers as ``intp`` addresses, and
+the one monotonic clock every tick is timed by.
 """
 
 from __future__ import annotations
@@ -27,8 +22,7 @@ def load_permanently(path: str) -> None:
 
 
 def external(name: str, signature):
-    """The C function ``name`` of a library loaded by :func:`load_permanently`, callable from
-    compiled code with numba ``signature``."""
+    """The C function ``name`` of a loaded library, for compiled code, of numba ``signature``."""
     from numba import types
 
     return types.ExternalFunction(name, signature)
@@ -36,8 +30,7 @@ def external(name: str, signature):
 
 @cache
 def clock():
-    """The compiled clock ``monotonic(ts) -> seconds``: ``clock_gettime(CLOCK_MONOTONIC)`` into
-    the caller's ``ts`` (int64[2], no allocation per call)."""
+    """The compiled clock ``monotonic(ts) -> seconds`` (``ts``: the caller's int64[2])."""
     import numba
     from numba import types
 
@@ -54,13 +47,8 @@ def _monotonic_py(ts):  # pragma: no cover - compiled
 
 
 def compile_with(fn, bindings: dict | None = None, name: str | None = None, **options):
-    """``numba.njit(cache=True, nogil=True)`` of a copy of ``fn`` whose globals also hold
-    ``bindings`` (compiled functions it calls by name), named ``name`` (default: ``fn``'s).
-
-    One body compiled with other functions bound (an engine per backend's solve), each copy
-    cached under its own name; numba's cache stays valid because the bindings are compiled
-    functions resolved when the copy is compiled.
-    """
+    """``numba.njit(cache=True, nogil=True)`` of a copy of ``fn`` named ``name``, its globals
+    also holding ``bindings`` (compiled functions it calls by name), cached under its name."""
     import types
 
     import numba
@@ -74,10 +62,8 @@ def compile_with(fn, bindings: dict | None = None, name: str | None = None, **op
 
 
 def entry_point(dispatcher, *args):
-    """The compiled function of ``dispatcher`` for the types of ``args`` (compiled, or loaded
-    from the cache, now), callable without numba's type dispatch: for a caller that calls it
-    per tick with arguments of these same types (a named model costs several microseconds to
-    type per call)."""
+    """The compiled function of ``dispatcher`` for the types of ``args``, callable without
+    numba's type dispatch (a per-tick caller with arguments of these types)."""
     sig = tuple(dispatcher.typeof_pyval(a) for a in args)
     dispatcher.compile(sig)
     return dispatcher.overloads[sig].entry_point

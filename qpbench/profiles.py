@@ -18,10 +18,8 @@ QPBENCHMARK_PREFIX = "qpbenchmark:"
 
 @dataclass(frozen=True)
 class Tolerance:
-    """Thresholds of a success: max primal residual, dual residual and absolute duality gap
-    (inf-norms), the time limit ``runtime`` [s] (as qpbenchmark's) and the ``rule``:
-    ``qpbench`` (thresholds included, the reference's optimality gap and infeasibility
-    verdicts) or ``qpbenchmark`` (its strict rule, no reference)."""
+    """Thresholds of a success: max primal and dual residual, absolute duality gap (inf-norms),
+    time limit ``runtime`` [s]; ``rule``: ``qpbench`` or ``qpbenchmark`` (:func:`metrics.evaluate`)."""
 
     primal: float
     dual: float
@@ -46,8 +44,7 @@ class Profile:
     solver_options: dict | None = field(default=None, hash=False)
 
     def with_time_limit(self, time_limit: float) -> Profile:
-        """The same profile with another per-solve time limit [s] (a qpbenchmark profile's
-        solver arguments change with it, as its ``set_time_limit`` makes them)."""
+        """The same profile with another per-solve time limit [s] (and solver arguments)."""
         if self.name.startswith(QPBENCHMARK_PREFIX):
             rebuilt = qpbenchmark_profile(self.name.removeprefix(QPBENCHMARK_PREFIX), time_limit)
             return replace(rebuilt, reference_time_limit=self.reference_time_limit)

@@ -45,9 +45,8 @@ def import_qpbenchmark() -> ModuleType:
 
 @functools.lru_cache(maxsize=None)
 def qpbenchmark_settings(runtime: float | None = None) -> tuple[dict, dict]:
-    """``(kwargs, tolerances)`` of a ``qpbenchmark.TestSet`` per settings name: the keyword
-    arguments its runner passes per solver (shared: do not modify) and its ``Tolerance``, under
-    a time limit ``runtime`` [s] (``None``: its default)."""
+    """``(kwargs, tolerances)`` of a ``qpbenchmark.TestSet`` per settings name (its runner's
+    arguments per solver, shared: do not modify), under a time limit ``runtime`` [s]."""
     qpb = import_qpbenchmark()
 
     class _Settings(qpb.TestSet):
@@ -109,9 +108,8 @@ def read_published_results(path: str | Path) -> pd.DataFrame:
 
 
 def read_objectives(path: str | Path) -> dict[str, float]:
-    """Known optimal objectives ``1/2 x'Px + q'x + r`` (as Maros and Meszaros publish them)
-    of a CSV with a header ``problem,objective`` (other columns ignored, blank lines
-    skipped); an :class:`InputError` names a bad line."""
+    """Known optimal objectives ``1/2 x'Px + q'x + r`` of a CSV with a header
+    ``problem,objective``; an :class:`InputError` names a bad line."""
     path = Path(path)
     try:
         rows = list(csv.reader(path.read_text(encoding="utf-8").splitlines()))

@@ -68,11 +68,9 @@ _VEC_KEYS = ("x", "y", "z", "z_box")
 
 @dataclass
 class ReferenceSolution:
-    """High-accuracy solution of one problem: ``status`` ``optimal``, ``primal_infeasible``,
-    ``dual_infeasible`` or ``unknown``; ``x, y, z, z_box`` (qpsolvers' signs, float64) only when
-    optimal; ``objective``/``kkt`` the kept answer's, ``check_*`` the other solver's;
-    ``agreement`` their relative objective difference (NaN unless both optimal);
-    ``time_limit_s`` [s] the limit of each solve (``inf``: none)."""
+    """High-accuracy solution of one problem: ``status`` (optimal, infeasible or ``unknown``),
+    ``x, y, z, z_box`` when optimal; the kept answer's ``objective``/``kkt``, the other's
+    ``check_*``, their relative objective difference ``agreement``; ``time_limit_s`` [s]."""
 
     status: str
     x: np.ndarray | None = None
@@ -107,8 +105,7 @@ def _worst_residual(solution) -> float:
 
 
 def _status(solver: str, solution) -> str:
-    """The reference status of a qpsolvers solution of ``solver`` by the backends' status maps
-    (``AlmostSolved``: optimal when its ``kkt <= ALMOST_TOL``); ``unknown`` for no verdict."""
+    """The reference status of ``solver``'s qpsolvers solution (``unknown``: no verdict)."""
     if solver == "clarabel":
         from .backends.clarabel_ import CLARABEL_STATUSES
 
@@ -126,8 +123,7 @@ def _status(solver: str, solution) -> str:
 
 @dataclass
 class Candidate:
-    """One reference solver's answer; ``wall_s`` [s]; ``kkt`` computed from ``solution`` when
-    not given (``inf`` without one)."""
+    """One reference solver's answer; ``wall_s`` [s]; ``kkt`` from ``solution`` by default."""
 
     solver: str
     status: str
@@ -151,8 +147,7 @@ class Candidate:
 
 
 def solve_candidate(record: ProblemRecord, solver: str, time_limit: float = math.inf) -> Candidate:
-    """One reference solver's answer (its vectors only); never raises for solver trouble. An
-    answer later than ``time_limit`` [s] is discarded (``unknown``, ``timed_out``)."""
+    """One reference solver's answer (vectors only; later than ``time_limit`` [s]: none)."""
     settings = dict(SOLVER_SETTINGS[solver])
     limited = math.isfinite(time_limit)
     if limited and solver == "clarabel":
@@ -219,8 +214,7 @@ def reference_solution(record: ProblemRecord, method: str = "auto") -> Reference
 
 
 def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, str, str]:
-    """``(kept, other, status, why)`` of two answers: an optimal one is kept over an ``unknown``
-    one, or over an infeasibility claim when its ``kkt <= ALMOST_TOL`` (it refutes it)."""
+    """``(kept, other, status, why)`` of two answers (docs/methodology.md)."""
     if first.status == second.status == "optimal":
         keep, other = (first, second) if first.kkt <= second.kkt else (second, first)
         return keep, other, "optimal", f"kept {keep.solver}: smaller KKT residuals"
@@ -240,9 +234,8 @@ def settle(first: Candidate, second: Candidate) -> tuple[Candidate, Candidate, s
 def assemble(
     name: str | None, candidates: list[Candidate], time_limit: float = math.inf
 ) -> ReferenceSolution:
-    """The reference made of one solver's answer or of two (:func:`settle`), each solve limited
-    to ``time_limit`` [s]; two agree when their statuses match and, when optimal, their
-    ``agreement`` ``|f1 - f2| / max(1, |f1|, |f2|)`` is at most ``AGREE_RTOL``."""
+    """The reference of one answer or two (:func:`settle`); two agree when their statuses match
+    and, when optimal, ``|f1 - f2| / max(1, |f1|, |f2|) <= AGREE_RTOL``."""
     fields: dict = {}
     if len(candidates) == 1:
         (keep,) = candidates
@@ -274,8 +267,7 @@ def assemble(
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
-    """One reference per record from ``source``: a method (``options`` go to
-    :func:`reference_solutions`), ``none`` (``None`` entries) or a file of objectives."""
+    """One reference per record from ``source``: a method, ``none`` or a file of objectives."""
     if source == "none":
         return [None] * len(problem_set.records)
     if source in METHODS:
@@ -301,8 +293,8 @@ def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Pat
 def _compute(
     records: list, method: str, time_limit: float, jobs: int, on_done, context=None
 ) -> dict:
-    """``{name: ReferenceSolution}`` of ``records``: in this process without a time limit
-    (``inf``) and with one job, else each solve a task of a worker."""
+    """``{name: ReferenceSolution}``: in this process without a time limit and with one job,
+    else each solve a worker's task."""
     solvers = METHODS[method]
     limited = math.isfinite(time_limit)
     timeout = deadline(time_limit) if limited else None
@@ -369,9 +361,8 @@ def reference_solutions(
     cache_dir: str | Path | None = None,
 ) -> list[ReferenceSolution]:
     """References of every problem of a set, in order, read from or added to the cache.
-    ``progress``: ``None``, a tqdm-like callable (called with ``total=``) or ``"log"``;
-    ``time_limit`` [s] per solve; ``jobs`` workers at once, started by ``context`` (default
-    ``spawn``: never a fork of this process, which may hold threads and locks)."""
+    ``progress``: ``None``, a tqdm-like callable or ``"log"``; ``time_limit`` [s] per solve;
+    ``jobs`` workers started by ``context`` (default: ``spawn``)."""
     path = cache_path(problem_set, method, cache_dir) if cache else None
     sha = content_sha256(problem_set)
     limit = math.inf if time_limit is None else float(time_limit)
@@ -395,9 +386,8 @@ def reference_solutions(
 
 
 def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -> Path | None:
-    """Where references of ``problem_set`` are cached (``None``: built in memory): ``cache_dir``
-    when given; else the set's folder (a single file's folder) when it is writable and ours
-    (``manifest.json`` or a ``reference-*.parquet`` there); else ``user_cache_dir()/references``."""
+    """Where references of ``problem_set`` are cached: ``cache_dir``; else the set's folder when
+    writable and ours; else ``user_cache_dir()/references`` (``None``: built in memory)."""
     if problem_set.path is None:
         return None
     if cache_dir is not None:
@@ -411,8 +401,7 @@ def cache_folder(problem_set: ProblemSet, cache_dir: str | Path | None = None) -
 def cache_path(
     problem_set: ProblemSet, method: str = "auto", cache_dir: str | Path | None = None
 ) -> Path | None:
-    """The cache file of ``problem_set``'s references by ``method`` (``None``: not cached),
-    keyed by :func:`qpbench.formats.content_sha256` and :data:`REFERENCE_VERSION`."""
+    """The cache file of ``problem_set``'s references by ``method`` (``None``: not cached)."""
     sha = content_sha256(problem_set)
     folder = cache_folder(problem_set, cache_dir)
     if sha is None or folder is None:

@@ -19,10 +19,9 @@ def select_set(
     every: int | None = None,
     limit: int | None = None,
 ) -> ProblemSet:
-    """A copy of ``problem_set`` holding the records (in file order) kept by ``pattern``
-    (comma-separated shell-style patterns, case-sensitive; one that matches nothing is an
-    error), then every ``every``-th, then the first ``limit``; its SHA-256 kept and its
-    generator stride (ticks per record, what an online backend integrates) times ``every``."""
+    """A copy of ``problem_set`` holding the records kept by ``pattern`` (comma-separated
+    shell-style patterns; none matching is an error), then every ``every``-th, then the first
+    ``limit``; its generator stride (ticks per record) times ``every``."""
     from dataclasses import replace
 
     for key, value in (("every", every), ("limit", limit)):
@@ -61,8 +60,8 @@ def parse_list(value: str | list[str], option: str) -> list[str]:
 
 
 def select_scenarios(value: str | None) -> list[str]:
-    """``all`` (or nothing): every shipped scenario (the paper's four first); else the names or
-    paths given, each loaded here so that a typo or a broken file is one line naming it."""
+    """``all`` (or nothing): every shipped scenario; else the names or paths given, each loaded
+    here (a typo or a broken file is one line naming it)."""
     from .sim.scenario import load_scenario, scenario_names
 
     names = parse_list(value or "all", "--scenarios")
@@ -76,9 +75,8 @@ def select_scenarios(value: str | None) -> list[str]:
 def select_backends(
     value: str | list[str] | None, option: str = "--backends", floor: bool = True
 ) -> list[str]:
-    """``all`` (or nothing): every available backend but the noise floor (``noop``); else the
-    names given, in their registered spelling, each available here (:class:`BackendNotFound`
-    with close names otherwise); ``floor=False`` refuses the noise floor by name too."""
+    """``all`` (or nothing): every available backend but the noise floor; else the names given,
+    registered spelling, each available; ``floor=False`` refuses the noise floor by name."""
     from .backends import backend_class, backend_names, get_backend, resolve_name
 
     names = parse_list(value or "all", option)
@@ -111,8 +109,7 @@ def select_backend(name: str, option: str = "--backend") -> str:
 
 def parse_overrides(items: list[str] | None) -> dict:
     """``["rnn.eps=0.001", ...]`` -> ``{"rnn.eps": 0.001, ...}``: each value read as TOML, else
-    as a string (``euler``); a later setting of a key wins. The keys are checked by their users
-    (:func:`qpbench.sim.scenario.apply_overrides`, :func:`backend_settings`)."""
+    as a string; a later setting of a key wins (the keys are checked by their users)."""
     import tomllib
 
     out = {}
@@ -129,8 +126,7 @@ def parse_overrides(items: list[str] | None) -> dict:
 
 def backend_settings(items: list[str] | None, backends: list[str]) -> dict[str, dict]:
     """``--set BACKEND.KEY=VALUE`` items -> ``{backend: {key: value}}``, each key checked against
-    :meth:`~qpbench.backends.base.Backend.setting_names` where the backend can tell (``osqp.rhoo``:
-    "did you mean 'rho'")."""
+    :meth:`~qpbench.backends.base.Backend.setting_names` where the backend can tell."""
     from .backends import backend_class
 
     out: dict[str, dict] = {}

@@ -1,7 +1,5 @@
-"""The one vocabulary of solve outcomes, and how a returned answer is classified (the
-per-tick guard and the closed loop both use :func:`classify`, so the same answer gets the
-same status in a bench row and a tick log).
-"""
+"""The one vocabulary of solve outcomes, and :func:`classify`, which the per-tick guard and the
+closed loop both use."""
 
 from __future__ import annotations
 
@@ -18,8 +16,7 @@ STATUSES = (
     "not_solved",
 )
 
-#: Statuses only the harness gives: ``invalid`` (a non-finite answer, or ``optimal``
-#: without one) and ``crashed`` (the worker process holding the backend died).
+#: Statuses only the harness gives: ``invalid`` (no finite answer) and ``crashed`` (worker died).
 GUARD_STATUSES = ("invalid", "crashed")
 
 #: Categories of a closed-loop tick log's ``status`` column (no worker process there).
@@ -28,9 +25,7 @@ TICK_STATUSES = STATUSES + ("invalid",)
 #: The backend proved the QP has no solution.
 CERTIFIED_INFEASIBLE = ("primal_infeasible", "dual_infeasible")
 
-#: A certificate of infeasibility, or ``not_solved``: a failure the backend cannot classify
-#: (qpsolvers' route to DAQP, quadprog or HiGHS keeps only ``found=False``), on the
-#: controller's QPs the infeasible start.
+#: A certificate of infeasibility, or ``not_solved`` (a failure the backend cannot classify).
 INFEASIBLE_OR_UNCLASSIFIED = CERTIFIED_INFEASIBLE + ("not_solved",)
 
 #: A failure whatever the reference says; the backend is reset after one.
@@ -48,8 +43,8 @@ def describe_exception(exc: BaseException) -> str:
 
 def classify(solution: object, wall_s: float, time_limit: float) -> tuple[str, str | None]:
     """Status and error text of an answer returned in ``wall_s`` [s]: ``invalid`` for a
-    non-finite ``x`` or ``optimal`` without one, else ``time_limit`` past ``time_limit``
-    [s], else the backend's status (from ``found`` for a plain :class:`qpsolvers.Solution`)."""
+    non-finite ``x`` or ``optimal`` without one, ``time_limit`` past ``time_limit`` [s], else
+    the backend's status."""
     status = getattr(solution, "status", None) or (
         "optimal" if getattr(solution, "found", False) else "not_solved"
     )

@@ -1,10 +1,5 @@
-"""Registry of solver backends, keyed by name.
-
-Built-in backends live one module each in this package (modules starting with ``_`` are
-helpers), each importing its solver lazily. Plugins (entry points of group
-:data:`ENTRY_POINT_GROUP`, files named by ``qpbench --plugin FILE`` or :data:`ENV_VAR`) load
-once per process after the built-in ones and may replace one of the same name.
-"""
+"""Registry of solver backends, keyed by name: one module each in this package (``_*``:
+helpers), then plugins (docs/architecture.md, "Adding things"), which may replace one."""
 
 from __future__ import annotations
 
@@ -171,8 +166,7 @@ def resolve_name(name: str) -> str:
     """The registered spelling of backend ``name``, matched without regard to case.
 
     Raises:
-        BackendNotFound: no such backend; the message offers the closest names and lists
-            the available ones.
+        BackendNotFound: no such backend (offering the closest names).
     """
     registry = _registry()
     if name in registry:

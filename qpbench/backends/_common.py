@@ -1,7 +1,4 @@
-"""What the backend modules share: settings, and a problem's arrays in the forms solvers take
-(a problem goes to a sparse API when :func:`wants_sparse`, a sparse solver kept per
-:func:`structure_key`).
-"""
+"""What the backend modules share: settings, and a problem's arrays in the forms solvers take."""
 
 from __future__ import annotations
 
@@ -28,8 +25,8 @@ GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
 
 
 def generic_settings(backend: Backend) -> tuple[dict, dict]:
-    """``(generic, native)``: :data:`GENERIC_KEYS` from the profile overridden by the user's
-    settings of the same name, and the user's other settings (passed to the solver verbatim)."""
+    """``(generic, native)``: :data:`GENERIC_KEYS` (the profile's, overridden by the user's),
+    and the user's other settings."""
     generic = {key: getattr(backend.profile, key) for key in GENERIC_KEYS}
     native = {}
     for key, value in backend.settings.items():
@@ -37,10 +34,9 @@ def generic_settings(backend: Backend) -> tuple[dict, dict]:
     return generic, native
 
 
-#: Each solver's option names for the generic settings, as qpbenchmark's ``SolverSettings``
-#: sets them plus iteration limits: native name -> the generic key whose value it takes, or a
-#: function of the generic values (``e``: eps_abs, ``r``: eps_rel, ``k``: max_iter, ``t``:
-#: time_limit) where the value is derived.
+#: Each solver's names for the generic settings, as qpbenchmark's ``SolverSettings`` plus
+#: iteration limits: native name -> generic key, or a function of ``(eps_abs, eps_rel,
+#: max_iter, time_limit)``.
 _NATIVE: dict[str, dict[str, object]] = {
     "clarabel": {
         "tol_feas": "eps_abs",
@@ -95,8 +91,7 @@ _NATIVE["proxqp"] = _NATIVE["piqp"]
 _NATIVE["kvxopt"] = _NATIVE["cvxopt"]
 _NATIVE["qpalm"] = _NATIVE["osqp"]
 
-#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile): OSQP's polishing (a
-#: solve of the KKT system of the guessed active set), PIQP's and ProxQP's duality-gap test.
+#: Options added at ``eps_abs <= 1e-7`` (the ``high_accuracy`` profile).
 _HIGH_ACCURACY = {
     "osqp": {"polishing": True},
     "piqp": {"check_duality_gap": True},
@@ -107,8 +102,8 @@ _HIGH_ACCURACY = {
 def native_settings(
     solver: str, eps_abs: float, eps_rel: float, max_iter: int, time_limit: float
 ) -> dict:
-    """Solver options (qpsolvers keyword arguments) for the generic settings (``time_limit``
-    in [s]); ``{}`` for a solver without a translation (quadprog has no tolerance setting)."""
+    """qpsolvers keyword arguments for the generic settings (``time_limit`` [s]); ``{}`` for a
+    solver without a translation."""
     names = _NATIVE.get(solver)
     if names is None:
         return {}
@@ -128,15 +123,11 @@ def native_settings(
 
 
 def solver_options(backend: Backend, solver: str, names: dict | None = None) -> dict:
-    """The options an own-API backend gives ``solver``, as the ``qpsolvers:<solver>`` route.
-
-    The generic settings (the profile's, overridden by the user's) in the solver's names
-    (``names``: native name -> ``(generic key, conversion)``, a conversion returning ``None``
-    setting nothing; by default :func:`native_settings`), then the user's other settings.
-    Under a ``qpbenchmark:<settings>`` profile: qpbenchmark's arguments for the solver, then
-    the generic settings the user gave (in ``names``, by default those the solver has under
-    the same name), then the other ones; nothing of qpbench's own profiles.
-    """
+    """The options an own-API backend gives ``solver``, as the ``qpsolvers:<solver>`` route:
+    the generic settings in the solver's names (``names``: native name -> ``(generic key,
+    conversion)``, ``None`` setting nothing; default :func:`native_settings`), then the user's
+    others. Under a ``qpbenchmark:<settings>`` profile, qpbenchmark's arguments instead of
+    the profile's generic settings."""
     generic, native = generic_settings(backend)
     given = backend.profile.solver_options
     if given is None:
@@ -157,8 +148,7 @@ def _translate(generic: dict, names: dict) -> dict:
 
 
 def refuse_unknown(backend: str, native: dict, allowed, own: str) -> None:
-    """Raise :class:`~qpbench.exceptions.ParamError` naming the first key of ``native`` not in
-    ``allowed`` (``own``: how the message names the solver's settings)."""
+    """Raise :class:`~qpbench.exceptions.ParamError` on the first key of ``native`` not allowed."""
     for key in native:
         if key not in allowed:
             raise ParamError(
@@ -198,11 +188,9 @@ def all_dense(*matrices: object) -> bool:
 
 
 class StackedCsc:
-    """CSC patterns of ``P``'s upper triangle and of ``C = [D; s_1 I[idx_1]; s_2 I[idx_2] ...]``:
-    the rows of the matrices ``blocks`` (``D``) over one signed identity block per ``(s, idx)``
-    of ``eyes`` (rows ``idx`` of ``s I``). Dense matrices are stored with every entry; the
-    others with theirs (:attr:`structure` then compares two).
-    """
+    """CSC patterns of ``P``'s upper triangle and of ``C = [D; s_1 I[idx_1]; ...]``: the
+    ``blocks`` (``D``) over rows ``idx`` of ``s I`` per ``(s, idx)`` of ``eyes``. Dense
+    matrices are stored with every entry (docs/architecture.md, "Backends")."""
 
     def __init__(self, P, blocks: list, eyes: list[tuple[float, np.ndarray]], n: int):
         self.n, self.eyes = n, eyes
@@ -259,8 +247,7 @@ class StackedCsc:
 
 
 def finite_mask(problem: qpsolvers.Problem, n: int) -> tuple[bool, np.ndarray]:
-    """``(with_box, kept)``: whether the problem has bounds, and which rows of ``G``, ``lb`` and
-    ``ub`` (in this order, ``n`` each of the bounds) have a finite bound."""
+    """``(with_box, kept)``: whether there are bounds, and which rows of ``[G; lb; ub]`` are finite."""
     lb, ub = problem.lb, problem.ub
     with_box = lb is not None or ub is not None
     parts = [np.empty(0) if problem.G is None else problem.h]
@@ -275,9 +262,8 @@ def finite_mask(problem: qpsolvers.Problem, n: int) -> tuple[bool, np.ndarray]:
 
 
 class FiniteRows:
-    """The rows of ``G`` and the bounds with a finite right-hand side (the others are left out,
-    as Clarabel's presolve does): ``g_idx``, ``lb_idx``, ``ub_idx``, and ``kept``, their mask
-    (:func:`finite_mask`) as bytes."""
+    """The rows of ``G`` and the bounds with a finite right-hand side (as Clarabel's presolve):
+    ``g_idx``, ``lb_idx``, ``ub_idx``, and ``kept``, their mask as bytes."""
 
     def __init__(self, problem: qpsolvers.Problem, n: int):
         self.n = n
@@ -316,11 +302,8 @@ def _vectors(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
 
 
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
-    """``P, q, A, b, G, h, lb, ub`` as they are when they are what a controller builds (float64
-    arrays, ``q`` 1-D, ``A`` and ``G`` 2-D), else ``None`` (the backend converts); shapes are
-    not compared here (:func:`check_shapes`). Dtypes by identity first (numpy's float64
-    descriptor is a singleton except in unpickled arrays, which take the ``==``).
-    """
+    """``P, q, A, b, G, h, lb, ub`` as they are when a controller built them (float64 arrays,
+    ``q`` 1-D, ``A``, ``G`` 2-D), else ``None``; shapes unchecked. Dtypes by identity first."""
     P, q, A, b = problem.P, problem.q, problem.A, problem.b
     G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
     if not (
@@ -369,12 +352,10 @@ _isfinite = math.isfinite
 
 
 def check_shapes(backend: str, n: int, P, A, b, G, h, lb, ub) -> tuple[int, int]:
-    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape (a solver
-    keeping a workspace of one shape must not be handed arrays of another).
+    """``(me, mi)``, the rows of ``A`` and ``G``, after checking every array's shape.
 
     Raises:
-        ProblemFormatError: an array whose shape does not fit ``n`` and the rows of ``A``
-            and ``G`` (naming the backend, the array and both shapes).
+        ProblemFormatError: an array whose shape does not fit (naming it and both shapes).
     """
     if P.shape != (n, n):
         _refuse(backend, "P", P.shape, (n, n))
@@ -417,8 +398,7 @@ def wants_sparse(problem: qpsolvers.Problem) -> bool:
 
 
 def dense_route(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
-    """The dense parts of a problem for a backend with a dense and a sparse API, or ``None``
-    when it goes to the sparse one."""
+    """The dense parts of a problem, or ``None`` when it goes to a sparse API."""
     parts = dense_f64_parts(problem)
     if parts is not None and parts[1].shape[0] <= _SMALL_N:
         return parts
@@ -443,8 +423,7 @@ def _csc(M, n: int) -> spa.csc_matrix | None:
 
 
 def sparse_parts(problem: qpsolvers.Problem, upper: bool = False) -> tuple:
-    """``P, q, A, b, G, h, lb, ub`` with the matrices as CSC float64 (``None`` kept);
-    ``upper``: only the upper triangle of ``P`` (what PIQP's sparse API reads)."""
+    """``P, q, A, b, G, h, lb, ub`` with CSC float64 matrices; ``upper``: ``P``'s upper triangle."""
     q, b, h, lb, ub = _vectors(problem)
     n = q.shape[0]
     P = _csc(problem.P, n)

@@ -43,11 +43,9 @@ def _option_setters() -> str:
     )
 
 
-#: The shim's C++ source. Data layout of the buffer ``d`` (float64), all
-#: row-major: ``H (n*n), g (n), A (m*n), lb (n), ub (n), lbA (m), ubA (m),
-#: x (n), -y (n+m: qpOASES' multipliers with qpsolvers' sign), obj,
-#: time limit [s], solve time [s], qpOASES cputime [s]``;
-#: of ``iv`` (int): ``nWSR limit, -, nWSR done, return value, status``.
+#: The shim's C++ source. Buffer ``d`` (float64, row-major): ``H (n*n), g, A (m*n), lb, ub,
+#: lbA, ubA, x, -y (n+m), obj, time limit, solve time, qpOASES cputime [s]``; ``iv`` (int):
+#: ``nWSR limit, -, nWSR done, return value, status``.
 SHIM_SOURCE = (
     (Path(__file__).parents[1] / "data" / "qpoases_shim.cpp")
     .read_text()
@@ -134,16 +132,14 @@ def load() -> ctypes.CDLL:
 
 
 def layout(n: int, m: int) -> np.ndarray:
-    """Offsets in the buffer ``d`` of a problem of ``n`` variables and ``m`` constraint rows
-    (:data:`SHIM_SOURCE`'s layout): where ``H, g, A, lb, ub, lbA, ubA, [x, -y]`` and the four
-    scalars start, then ``d``'s length."""
+    """Where ``H, g, A, lb, ub, lbA, ubA, [x, -y]`` and the four scalars start in ``d`` for
+    ``n`` variables and ``m`` rows, then ``d``'s length."""
     return np.cumsum([0, n * n, n, m * n, n, n, m, m, 2 * n + m, 4])
 
 
 class Workspace:
-    """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object,
-    unless :meth:`detach` handed it over); ``d`` and ``iv``, when given, are the caller's
-    (zeros of the lengths :func:`layout` and the shim say, C-contiguous)."""
+    """Buffers of one shape and the ``SQProblem`` that reads them (freed with this object unless
+    :meth:`detach`-ed); ``d`` and ``iv`` may be the caller's (zeros, C-contiguous)."""
 
     def __init__(
         self,

@@ -23,12 +23,8 @@ from ..statuses import describe_exception
 
 @dataclass
 class BackendSolution(qpsolvers.Solution):
-    """A :class:`qpsolvers.Solution` plus what a benchmark needs to know.
-
-    ``status`` is one of :data:`qpbench.statuses.STATUSES`; ``solver_time_s`` [s] is the time
-    the solver reports itself; ``error`` holds the exception when ``status == "error"``.
-    ``obj`` is the solver's objective, or ``1/2 x'Px + q'x`` computed from ``x`` on first read.
-    """
+    """A :class:`qpsolvers.Solution` plus ``status`` (:data:`qpbench.statuses.STATUSES`), the
+    solver's own ``solver_time_s`` [s] and ``error``; ``obj`` is computed from ``x`` if unset."""
 
     status: str = "not_solved"
     iterations: int | None = None
@@ -62,8 +58,7 @@ BackendSolution.obj = property(_get_obj, _set_obj, doc="Primal objective at ``x`
 def new_solution(
     problem: qpsolvers.Problem, status: str, extras: dict, cls: type = BackendSolution
 ) -> BackendSolution:
-    """A :class:`BackendSolution` (or subclass ``cls``), every other field at its default:
-    the per-tick constructor of the fast backends, without the dataclass ``__init__``."""
+    """A :class:`BackendSolution` (or ``cls``) without the dataclass ``__init__``."""
     sol = _new(cls)
     sol.problem = problem
     sol.status = status
@@ -75,11 +70,8 @@ _new = object.__new__
 
 
 class _Duals:
-    """``y``, ``z`` and ``z_box`` of a :class:`ViewSolution`, made on the first read of any.
-
-    A non-data descriptor: the first read puts all three views into the instance, where
-    later reads (and assigned values) are found without calling this.
-    """
+    """``y``, ``z`` and ``z_box`` of a :class:`ViewSolution`, put into the instance on the
+    first read of any (a non-data descriptor: later reads do not call it)."""
 
     def __set_name__(self, owner, name: str):
         self.name = name
@@ -103,9 +95,8 @@ _NO_SLICES = (None, None, None, None)
 
 
 class ViewSolution(BackendSolution):
-    """A solution whose ``x`` is a view of one output vector ``_out`` and whose ``y``, ``z``,
-    ``z_box`` are views made on the first read of any (a closed loop reads only ``x``):
-    ``_slices`` says where ``x``, ``y``, ``z``, ``z_box`` lie in ``_out`` (``None``: absent)."""
+    """A solution whose ``x``, ``y``, ``z``, ``z_box`` are views of ``_out`` at ``_slices``
+    (``None``: absent), the duals made on first read (a closed loop reads only ``x``)."""
 
     y = _Duals()
     z = _Duals()
@@ -118,30 +109,20 @@ def error_solution(problem: qpsolvers.Problem, exc: BaseException) -> BackendSol
 
 
 class Backend:
-    """Base class of every backend: set the class attributes and implement :meth:`_solve`.
+    """Base class of every backend: set the class attributes and implement :meth:`_solve`
+    (docs/architecture.md, "Adding things").
 
     Attributes:
         name: Registry key, e.g. ``"osqp"`` or ``"qpsolvers:daqp"``.
-        package: Python distribution whose version is reported (or ``None``).
-        module: Python module the backend needs (unavailable when it does not import).
-        online: True for a backend that is its own controller state (the ``rnn`` network):
-            a closed loop applies its ``x`` whatever the status, with no fallback, and
-            passes the time between records as ``dt``.
-        risky: Run in a worker process with a deadline under ``--isolate auto`` (it was
-            seen to hang in native code).
-        scenario_table: Scenario table whose values a closed loop passes as settings
-            (``"rnn"``), or ``None``.
-        certifies_infeasibility: Whether the backend tells a primal-infeasible QP from an
-            unbounded one by a certificate (``None``: not declared); when it cannot,
-            :attr:`infeasibility_note` says why.
-        sparse: Hands scipy.sparse matrices to its solver as they are; the others make them
-            dense, so the bench gives them problems up to
+        package: Python distribution whose version is reported; ``module``: the module needed.
+        online: Its own controller state (``rnn``): its ``x`` applied whatever the status.
+        risky: Run in a worker with a deadline under ``--isolate auto``.
+        scenario_table: Scenario table passed as settings by a closed loop (``"rnn"``).
+        certifies_infeasibility: Tells primal from dual infeasibility (``None``: undeclared).
+        sparse: Takes scipy.sparse matrices; the others get problems up to
             :data:`qpbench.memory.DENSE_MAX_ENTRIES` only.
-        kernels: The numba kernel groups (:data:`qpbench.jit.KERNELS`) the backend runs,
-            compiled or loaded before anything is timed.
-        noise_floor: Not a solver but the loop without one (``null``): measured beside the
-            candidates in every closed-loop run set, never ranked, left out of ``all`` and
-            refused by the per-tick bench.
+        kernels: The numba kernel groups (:data:`qpbench.jit.KERNELS`) it runs.
+        noise_floor: The loop without a solver: never ranked, not in ``all``, no bench.
     """
 
     name: ClassVar[str] = ""
@@ -163,14 +144,12 @@ class Backend:
 
     @classmethod
     def setting_names(cls) -> frozenset[str] | None:
-        """The settings the backend accepts (``--set`` keys are checked against them), or
-        ``None`` when it cannot tell (every key is passed on)."""
+        """The settings ``--set`` may give, or ``None``: any key is passed on."""
         return None
 
     @classmethod
     def unavailable_reason(cls) -> str | None:
-        """``None`` when the backend can run here, else why not (by default: whether
-        :attr:`module` imports; imported here, never at module import)."""
+        """``None`` when the backend can run here, else why not (default: :attr:`module` imports)."""
         if cls.module is None:
             return None
         try:
@@ -189,11 +168,8 @@ class Backend:
     def solve(
         self, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None
     ) -> BackendSolution:
-        """Solve ``problem`` (``warm_start``: an optional primal guess of shape (n,)).
-
-        ``found`` is True only for status ``optimal``. Solver failures are statuses, not
-        exceptions; an exception escaping here is a bug (the harness records it as ``error``).
-        """
+        """Solve ``problem`` (``warm_start``: a primal guess, shape (n,)); ``found`` iff
+        ``optimal``. Solver failures are statuses; an exception escaping here is a bug."""
         sol = self._solve(problem, warm_start)
         sol.backend = self.name
         sol.found = sol.status == "optimal"
@@ -208,8 +184,7 @@ class Backend:
         """Forget every state kept between calls (persistent solver, warm start)."""
 
     def fresh(self) -> Backend:
-        """A new instance with this one's profile and settings, sharing no state with it
-        (``--repeat`` times several, :mod:`qpbench.harness.guard`)."""
+        """A new instance with this one's profile and settings, sharing no state."""
         return type(self)(profile=self.profile, **self.settings)
 
     def __repr__(self) -> str:
@@ -222,10 +197,8 @@ def objective(problem: qpsolvers.Problem, x: np.ndarray) -> float:
 
 
 class PersistentBackend(Backend):
-    """A backend keeping its solver between calls: the constructor calls :meth:`reset` (which
-    builds the state), and a failure of the solver raised by :meth:`_attempt` (an instance of
-    :attr:`errors`, or of a class named in :attr:`error_names`) is status ``error`` and drops
-    the state."""
+    """A backend keeping its solver between calls (:meth:`reset` builds the state): a failure
+    :meth:`_attempt` raises (:attr:`errors`, :attr:`error_names`) is ``error`` and drops it."""
 
     certifies_infeasibility = True
     errors: ClassVar[tuple[type[BaseException], ...]] = (ValueError,)
@@ -261,10 +234,8 @@ ANSWER_FIELDS = ("x", "y", "z", "z_box")
 def timed_call(
     backend: Backend, problem: qpsolvers.Problem, warm_start: np.ndarray | None = None
 ) -> tuple[BackendSolution, int]:
-    """``(solution, time [ns])`` of ``backend.solve(problem, warm_start)``: the one definition
-    of a solve's time from Python. Inside the clock (``CLOCK_MONOTONIC``, the compiled engine's
-    too): the call and the reading of the answer's :data:`ANSWER_FIELDS` (a backend deferring
-    its duals pays for them); the garbage collector is off while it runs."""
+    """``(solution, time [ns])`` of ``backend.solve(problem, warm_start)``, the one definition
+    of a solve's time from Python: the call and the read of :data:`ANSWER_FIELDS`, gc off."""
     enabled = gc.isenabled()
     gc.disable()
     try:

@@ -1,9 +1,8 @@
 """Backend ``clarabel``: Clarabel (interior point) through its own Python API.
 
-Clarabel solves ``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K`` with ``C = [A; G; -I; I]``,
-``d = [b; h; -lb; ub]``, ``K = {0}^meq x R+^(rest)``, the rows with an infinite bound left out
-(part of the pattern). A ``DefaultSolver`` is built once and ``update``-d while shape and
-pattern hold; ``solver_time_s`` only for a freshly built one. ``warm_start`` is ignored.
+``min 1/2 x'Px + q'x  s.t.  C x + s = d,  s in K``, ``C = [A; G; -I; I]``, ``d = [b; h; -lb;
+ub]``, ``K = {0}^meq x R+^(rest)``, rows with an infinite bound left out. A ``DefaultSolver``
+is built once and ``update``-d while the pattern holds (docs/architecture.md, "Clarabel").
 """
 
 from __future__ import annotations

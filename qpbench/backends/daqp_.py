@@ -3,10 +3,9 @@ DAQP, a dual active-set solver.
 
 DAQP solves ``min 1/2 x'Hx + f'x  s.t.  blower <= [x; A x] <= bupper`` with ``A = [A_eq; G]``,
 ``bupper = [ub; b; h]``, ``blower = [lb; b; -inf]``, sense 5 (an immutable equality) on the
-``b`` rows, no box rows without bounds; ``lam`` has qpsolvers' signs. ``daqp`` sets a model up
-per shape, then updates it (``H``, ``f`` only when changed; ``A`` and the bounds when they
-have entries) and solves from the previous working set; a refused set-up or update or a
-status other than optimal drops it. ``warm_start`` is ignored.
+``b`` rows. ``daqp`` sets a model up per shape, then updates it (``H``, ``f`` only when changed)
+and solves from the previous working set; a refused set-up or update or a status other than
+optimal drops it. ``warm_start`` is ignored.
 """
 
 from __future__ import annotations
@@ -91,9 +90,8 @@ _OWN_NAMES = {
 
 
 def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> BackendSolution:
-    """A solution from DAQP's exit ``flag``: with ``info`` (a solve's) its iterations and
-    time, and when optimal ``x``, the objective and the duals split from ``lam``; without
-    (a refused ``setup``/``update``) the status alone."""
+    """A solution from DAQP's exit ``flag``, with a solve's ``info`` its iterations, time and
+    (when optimal) answer; without (a refused ``setup``/``update``) the status alone."""
     status, raw = EXITFLAGS.get(flag, UNKNOWN_EXITFLAG)
     sol = new_solution(problem, status, {"raw_status": raw})
     if info is None:
@@ -104,11 +102,8 @@ def read_result(problem, flag: int, x=None, fval=None, info=None, buf=None) -> B
     sol.solver_time_s = info["setup_time"] + info["solve_time"]
     if status == "optimal":
         lam, nb, me = info["lam"], buf.nb, buf.me
-        sol.x = x
-        sol.obj = fval
-        sol.z_box = lam[:nb]
-        sol.y = lam[nb : nb + me]
-        sol.z = lam[nb + me :]
+        sol.x, sol.obj = x, fval
+        sol.z_box, sol.y, sol.z = lam[:nb], lam[nb : nb + me], lam[nb + me :]
     elif status == "error":
         sol.error = f"DAQP exit flag {flag} ({raw})"
     return sol

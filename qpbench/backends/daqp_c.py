@@ -1,26 +1,11 @@
-"""The backends ``daqp`` and ``daqp-stateless`` as compiled code calling DAQP's C API, as a C
-controller calls it: the solves a compiled closed loop makes each tick (:func:`kernels`).
+"""The backends ``daqp`` and ``daqp-stateless`` as compiled code calling DAQP's C API (exported
+by the ``daqp`` extension): the solves a compiled closed loop makes each tick (:func:`kernels`).
 
-They mirror :mod:`qpbench.backends.daqp_` call for call: the same stacking ``[box; equality;
-inequality]`` of the rows, bounds and sense flags, the same settings (:func:`make_state`
-takes :meth:`DaqpBackend.options`), the same exit-flag table (:data:`daqp_.EXITFLAGS`), the
-duals split from ``lam`` alike. ``daqp`` sets a workspace up per shape (``setup_daqp``), then
-per tick ``daqp_update_ldp`` (``H``, ``f`` only when changed, as ``daqp.Model.update``
-does) and ``daqp_solve``; a refused set-up or update or a status other than optimal drops it.
-``daqp-stateless`` calls ``daqp_quadprog`` (set-up, solve and free in one call), which is
-what ``daqp.solve`` calls.
-
-The C functions come from the ``daqp`` Python extension itself, which exports them. The
-structs ``DAQPProblem``, ``DAQPSettings``, ``DAQPResult`` and the ``DAQPWorkspace`` record
-live in numpy memory of the caller's :class:`State`; their field offsets are data of the state
-(:data:`LAYOUTS`, one entry per daqp version whose headers were read), not constants of the
-compiled code. DAQP allocates the workspace's arrays; :func:`close_state` frees them.
-
-Three things of DAQP's API the kernels handle: ``free_daqp_workspace`` frees the settings the
-workspace points to (the kernels detach theirs, numpy memory, before freeing);
-``free_daqp_ldp`` frees the constraint states a ``daqp.Model``-like update points the
-problem's ``sense`` at (the kernels point it back at their own array); a failed
-``daqp_update_ldp`` leaves a reset workspace (dropped, set up afresh on the next call).
+They mirror :mod:`qpbench.backends.daqp_` call for call (stacking, settings, exit flags, duals).
+The C structs live in numpy memory of a :class:`State`, their field offsets data of the state
+(:data:`LAYOUTS`, per daqp version). The kernels detach their settings before
+``free_daqp_workspace`` frees them, point ``sense`` back at their own array after
+``free_daqp_ldp``, and drop the workspace a failed ``daqp_update_ldp`` resets.
 """
 
 from __future__ import annotations
@@ -105,7 +90,7 @@ class _Workspace011(ctypes.Structure):
 
 
 class Structs(NamedTuple):
-    """The C structs of one daqp version, as ctypes structures (offsets and sizes by ctypes)."""
+    """The C structs of one daqp version, as ctypes structures."""
 
     problem: type[ctypes.Structure]
     settings: type[ctypes.Structure]
@@ -153,13 +138,9 @@ FLAG_SPAN = 16
 
 
 class State(NamedTuple):
-    """What the kernels keep between calls: numpy memory only (ints and addresses as int64).
-
-    ``qp``, ``settings``, ``result``, ``work`` hold the C structs (``*32``, ``resultf``: views
-    of the same memory as int32 and float64); ``settings0`` the settings each set-up starts
-    from; ``H``, ``f``, ``A``, ``bu``, ``bl``, ``sense`` the problem the structs point at;
-    ``x``, ``lam`` DAQP's output; ``clock`` the set-up time DAQP writes [s].
-    """
+    """What the kernels keep between calls, numpy memory only: the C structs (``*32``,
+    ``resultf``: int32 and float64 views), ``settings0`` (each set-up's start), the problem
+    arrays, DAQP's ``x`` and ``lam``, ``clock`` (set-up time [s])."""
 
     layout: np.ndarray
     statuses: np.ndarray
@@ -185,9 +166,8 @@ class State(NamedTuple):
 
 
 class Kernels(NamedTuple):
-    """The compiled solves ``solve(st, buf, warm, sol, info) -> status`` of ``daqp`` (``model``),
-    ``daqp-stateless`` (``stateless``) and either, as its state was made (``either``: one
-    engine for both), and ``reset(st)``, both backends' reset."""
+    """The compiled solves ``solve(st, buf, warm, sol, info) -> status`` of ``daqp``,
+    ``daqp-stateless`` and ``either`` (as the state was made), and ``reset(st)``."""
 
     model: object
     stateless: object
@@ -197,7 +177,7 @@ class Kernels(NamedTuple):
 
 @cache
 def installed_version() -> str | None:
-    """The installed daqp distribution's version, or ``None`` (read once per process)."""
+    """The installed daqp distribution's version, or ``None``."""
     try:
         return importlib.metadata.version("daqp")
     except importlib.metadata.PackageNotFoundError:
@@ -211,8 +191,7 @@ def library_path() -> str | None:
 
 
 def unavailable_reason(version: str | None = None) -> str | None:
-    """``None`` when the compiled route can run ``version`` (default: the installed daqp),
-    else why not, one line (the backend then runs on the Python engine)."""
+    """``None`` when the compiled route can run ``version`` (default: installed), else why not."""
     version = installed_version() if version is None else version
     if version is None or library_path() is None:
         return "daqp is not installed: no compiled DAQP route"
@@ -252,12 +231,10 @@ def layout_of(structs: Structs) -> np.ndarray:
 
 
 def settings_struct(structs: Structs, options: dict) -> np.ndarray:
-    """``DAQPSettings`` as int64 words: DAQP's defaults (``daqp_default_settings``) with
-    ``options`` (DAQP's own names, as :meth:`DaqpBackend.options` gives them) written over.
+    """``DAQPSettings`` as int64 words: DAQP's defaults with ``options`` (DAQP's names) over them.
 
     Raises:
-        ParamError: an option DAQP's settings do not have, or an integer one that is not an
-            integer of C's ``int`` range (naming it).
+        ParamError: an unknown option, or an integer one outside C's ``int``.
     """
     settings = structs.settings()
     _library().daqp_default_settings(ctypes.byref(settings))
@@ -282,13 +259,12 @@ def _words(data: bytes) -> np.ndarray:
 
 
 def make_state(n: int, me_max: int, mi_max: int, options: dict, stateless: bool = False) -> State:
-    """A state for problems of ``n`` variables (at most), at most ``me_max`` equality and
-    ``mi_max`` inequality rows, with DAQP's settings ``options`` (:meth:`DaqpBackend.options`);
-    ``stateless``: the ``either`` solve calls ``daqp-stateless``'s.
+    """A state for at most ``n`` variables, ``me_max`` equality and ``mi_max`` inequality rows,
+    DAQP's settings ``options``; ``stateless``: ``either`` runs ``daqp-stateless``.
 
     Raises:
-        RuntimeError: the installed daqp is not one this route knows (:func:`unavailable_reason`).
-        ParamError: a bad option (:func:`settings_struct`) or size.
+        RuntimeError: the installed daqp is not one this route knows.
+        ParamError: a bad option or size.
     """
     reason = unavailable_reason()
     if reason is not None:
@@ -306,29 +282,11 @@ def make_state(n: int, me_max: int, mi_max: int, options: dict, stateless: bool 
     settings0 = settings_struct(structs, options)
     qp, result, work = (_words(bytes(int(layout[k]))) for k in (SIZE_P, SIZE_R, SIZE_W))
     rows, m = me_max + mi_max, n + me_max + mi_max
-    return State(
-        layout,
-        statuses,
-        meta,
-        qp,
-        qp.view(np.int32),
-        settings0.copy(),
-        settings0,
-        result,
-        result.view(np.int32),
-        result.view(np.float64),
-        work,
-        work.view(np.int32),
-        np.zeros(n * n),
-        np.zeros(n),
-        np.zeros(rows * n),
-        np.zeros(m),
-        np.zeros(m),
-        np.zeros(m, dtype=np.int32),
-        np.zeros(n),
-        np.zeros(m),
-        np.zeros(1),
-    )
+    structs = qp, qp.view(np.int32), settings0.copy(), settings0, result, result.view(np.int32)
+    structs += result.view(np.float64), work, work.view(np.int32)
+    H, f, A, bu, bl, x, lam, clock = map(np.zeros, (n * n, n, rows * n, m, m, n, m, 1))
+    sense = np.zeros(m, dtype=np.int32)
+    return State(layout, statuses, meta, *structs, H, f, A, bu, bl, sense, x, lam, clock)
 
 
 def close_state(st: State) -> None:
@@ -416,8 +374,7 @@ def _stack(st, buf, n, me, mi, nb):
 
 
 def _copy_changed(buf, off, dst, size):
-    """Copy ``buf[off : off + size]`` into ``dst``; whether any differed bitwise (a zero's sign
-    too; NaNs compare the same; no ``view``: its error path compiles numba's strings)."""
+    """Copy ``buf[off : off + size]`` into ``dst``; whether any differed bitwise (NaNs equal)."""
     changed = False
     for k in range(size):
         a, b = buf[off + k], dst[k]
@@ -432,15 +389,13 @@ def _copy_changed(buf, off, dst, size):
 
 
 def _fresh_settings(st):
-    """The profile's settings into the struct DAQP reads (word by word: an array assignment
-    compiles numba's shape-error strings)."""
+    """The profile's settings into the struct DAQP reads (word by word: no numba error path)."""
     for k in range(st.settings0.shape[0]):
         st.settings[k] = st.settings0[k]
 
 
 def _point_problem(st, n, m, nb, rows):
-    """Fill ``DAQPProblem`` with the state's arrays, as ``daqp.Model.setup`` and ``daqp.solve``
-    do (``A`` NULL without rows; bounds and sense NULL without constraints; no hierarchy)."""
+    """Fill ``DAQPProblem`` with the state's arrays, as ``daqp.Model.setup`` does."""
     lay, qp, qp32 = st.layout, st.qp, st.qp32
     qp32[lay[P_N] >> 2] = n
     qp32[lay[P_M] >> 2] = m
@@ -465,8 +420,7 @@ def _clear_result(st, m):
 
 
 def _outcome(st, flag, n, me, mi, nb, sol):
-    """The status of exit ``flag``; when optimal ``[x; y; z]`` into ``sol`` (duals split from
-    ``lam``), else NaN there."""
+    """The status of exit ``flag``; ``[x; y; z]`` into ``sol`` when optimal, else NaN."""
     statuses = st.statuses
     span = (statuses.shape[0] - 2) // 2
     status = statuses[flag + span] if -span <= flag <= span else statuses[-1]
@@ -483,8 +437,7 @@ def _outcome(st, flag, n, me, mi, nb, sol):
 
 
 def _drop(st):
-    """Free DAQP's arrays of a set-up workspace (not the state's settings: detached first) and
-    point the problem's ``sense`` back at the state's own array; nothing when none is set up."""
+    """Free DAQP's arrays of a set-up workspace (settings detached first); ``sense`` back home."""
     lay, meta = st.layout, st.meta
     if meta[HAS_MODEL]:
         work = st.work
@@ -497,8 +450,7 @@ def _drop(st):
 
 
 def _set_up(st, buf, n, m, nb, rows):
-    """``setup_daqp`` on a zeroed workspace with the profile's settings (a new ``daqp.Model``);
-    its exit flag (< 0: refused, DAQP has freed what it allocated)."""
+    """``setup_daqp`` on a zeroed workspace with the profile's settings; its exit flag."""
     lay, work = st.layout, st.work
     _fresh_settings_jit(st)
     work[:] = 0
@@ -517,8 +469,7 @@ def _set_up(st, buf, n, m, nb, rows):
 
 
 def _update(st, buf, n, m, rows):
-    """``daqp_update_ldp`` as ``daqp.Model.update(H, f, A, bu, bl)`` does it with ``H``, ``f``
-    given only when changed and ``A``, the bounds only when they have entries."""
+    """``daqp_update_ldp`` as ``daqp.Model.update``: ``H``, ``f`` only when changed."""
     lay = st.layout
     mask = 0
     if _copy_changed_jit(buf, int(buf[OFF_P]), st.H, n * n):
@@ -571,8 +522,7 @@ def _solve_model(st, buf, warm, sol, info):
 
 
 def _solve_stateless(st, buf, warm, sol, info):
-    """One call of backend ``daqp-stateless``: ``daqp_quadprog`` with fresh settings, as
-    ``daqp.solve`` (``warm`` ignored, as there); the status index."""
+    """One call of backend ``daqp-stateless`` (``daqp_quadprog``, as ``daqp.solve``)."""
     n, me, mi, nb = _shape_jit(st, buf)
     rows, m = me + mi, nb + me + mi
     _stack_jit(st, buf, n, me, mi, nb)

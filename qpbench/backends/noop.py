@@ -1,13 +1,8 @@
 """Backend ``noop``, the null backend: the machine's noise floor, not a solver.
 
-It answers every QP with ``x = 0``, status ``optimal``, at once: a closed loop run with it does
-everything a tick does but solve, so its ticks over ``dt`` are the machine's own
-(docs/verdicts.md, "The noise floor"), judged on its whole ticks (``tick_time_s``). The
-compiled engine runs it too (:mod:`qpbench.engine.solvers`).
-Every closed-loop run set runs it once per scenario beside the candidates; ``all`` leaves it
-out, the per-tick bench refuses it and the recommendation never ranks it. Duals: zero
-(``x = 0`` solves no QP but the trivial one, so residuals mean nothing here). No time of its
-own (``solver_time_s`` is ``None``).
+It answers every QP with ``x = 0``, status ``optimal``, zero duals, no time of its own: a
+closed loop run with it does everything a tick does but solve (docs/verdicts.md, "The noise
+floor"). Every closed-loop run set runs it; ``all`` and the per-tick bench leave it out.
 """
 
 from __future__ import annotations

@@ -1,9 +1,7 @@
 """Backend ``osqp``: OSQP (ADMM) through its own Python API.
 
-OSQP solves ``min 1/2 x'Px + q'x  s.t.  l <= C x <= u`` with ``C = [G; A; I]`` (the identity
-rows only with bounds), ``l = [-inf; b; lb]``, ``u = [h; b; ub]``. The solver is set up once
-and ``update``-d while shape and pattern hold, warm-starting from its previous iterate or from
-``warm_start``.
+``min 1/2 x'Px + q'x  s.t.  l <= C x <= u``, ``C = [G; A; I]`` (``I`` only with bounds), ``l =
+[-inf; b; lb]``, ``u = [h; b; ub]``; set up once, ``update``-d while shape and pattern hold.
 """
 
 from __future__ import annotations
@@ -129,8 +127,7 @@ class OsqpBackend(PersistentBackend):
 
     @classmethod
     def setting_names(cls) -> frozenset[str]:
-        """The generic settings, OSQP's own (its ``OSQPSettings`` fields) and the names its
-        ``update_settings`` translates (``polish``, ``warm_start``, ``solver_type``, ``cg_preconditioner``)."""
+        """The generic settings, OSQP's ``OSQPSettings`` fields and the names it translates."""
         import osqp
 
         solver = osqp.OSQP()
@@ -189,8 +186,7 @@ class OsqpBackend(PersistentBackend):
         return sol
 
     def _update_or_setup(self, osqp, problem) -> StackedLayout:
-        """Update the kept solver with ``problem`` when its shape and pattern fit, else set
-        up a new one (the general route: sparse input, absent blocks, a new shape); the layout."""
+        """Update the kept solver when shape and pattern fit, else set up a new one; the layout."""
         with_box = _has_box(problem)
         layout = self._layout
         reuse = False

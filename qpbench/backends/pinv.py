@@ -52,8 +52,7 @@ class PinvBackend(Backend):
             pinv_kernel()(P, q, A, b, x, y)
         except np.linalg.LinAlgError as exc:
             return error_solution(problem, exc)
-        sol.x = x
-        sol.y = y
+        sol.x, sol.y = x, y
         sol.z = np.zeros(0 if problem.G is None else problem.G.shape[0])
         sol.z_box = np.zeros(n if problem.lb is not None or problem.ub is not None else 0)
         sol.status = "optimal"
@@ -63,15 +62,13 @@ class PinvBackend(Backend):
 
 @cache
 def pinv_kernel():
-    """:func:`pinv_py`, compiled (or loaded from numba's cache) on first use: the one
-    implementation the backend and the compiled engine call."""
+    """:func:`pinv_py` compiled: the one implementation the backend and the compiled engine call."""
     return compile_with(pinv_py, name="pinv")
 
 
 def pinv_py(P, q, A, b, x, y):  # pragma: no cover - compiled
-    """JMPI into ``x`` (n,) and ``y`` (me,): with equalities (``me > 0``) one thin SVD
-    ``A = U S V'`` gives ``x = V S^+ U' b`` and ``y = -U S^+ V' (P x + q)``; without,
-    ``x = -P^+ q`` by least squares. Singular values below ``max(A.shape) eps s_max`` count as 0."""
+    """JMPI into ``x`` (n,) and ``y`` (me,): ``A = U S V'``, ``x = V S^+ U' b``, ``y = -U S^+ V'
+    (P x + q)``; without equalities ``x = -P^+ q``. ``S^+`` drops ``s < max(A.shape) eps s_max``."""
     n, me = P.shape[0], A.shape[0]
     eps = np.finfo(np.float64).eps
     if me == 0:

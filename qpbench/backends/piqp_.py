@@ -123,9 +123,8 @@ class PiqpBackend(PersistentBackend):
         return self._run(problem, _piqp().SparseSolver, shapes, P, q, A, b, G, h, lb, ub)
 
     def _run(self, problem, cls, shapes, P, q, A, b, G, h, lb, ub) -> BackendSolution:
-        """Update the kept solver when it was set up for ``shapes``, else set up a new ``cls``
-        (``None``: ``DenseSolver``) after checking the shapes; solve; the solution in
-        qpsolvers' convention."""
+        """Update the kept solver set up for ``shapes``, else set up a new ``cls`` (``None``:
+        ``DenseSolver``) after checking the shapes; solve."""
         solver = self._solver
         if solver is not None and shapes == self._shapes:
             solver.update(P, q, A, b, G, None, h, lb, ub)

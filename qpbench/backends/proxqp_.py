@@ -1,13 +1,10 @@
 """Backend ``proxqp``: ProxQP (proximal augmented Lagrangian) through proxsuite's dense and sparse APIs.
 
-``proxqp.dense.QP`` with ``C = G``, ``l = -inf``, ``u = h`` and the bounds as ProxQP's box
-(``z_box``: the last ``n`` entries of its ``z``); a problem
-:func:`~qpbench.backends._common.dense_route` sends to the sparse API goes to
-``proxqp.sparse.QP`` with the bounds stacked under ``G``. The ``QP`` object is ``init``-ed
-once per shape (per structure when sparse), then ``update``-d, solved first from the
-equality-constrained guess and then from the previous result; ``warm_start`` goes to
-``QP.solve``. An infeasibility verdict after a warm start, or on the sparse route, is checked
-by one cold solve on a fresh object (``extras["cold_retry"]``; ``retry_cold=False``: not).
+``proxqp.dense.QP`` with ``C = G``, ``l = -inf``, ``u = h`` and the bounds as ProxQP's box; the
+sparse route (:func:`~qpbench.backends._common.dense_route`) stacks the bounds under ``G``. The
+``QP`` object is ``init``-ed once per shape (or structure), then ``update``-d and warm-started;
+an infeasibility verdict after a warm start, or on the sparse route, is checked by one cold
+solve (``extras["cold_retry"]``; ``retry_cold=False``: not; docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -95,8 +92,7 @@ class ProxqpBackend(PersistentBackend):
         return update_preconditioner
 
     def _build(self, proxqp, key, data):
-        """A new ``QP`` object initialised with ``data``, kept: ``proxqp.dense.QP`` for a ``key``
-        ``(n, n_eq, n_in, with_box)``, ``proxqp.sparse.QP`` for ``(n, n_eq, n_in, False, structure)``."""
+        """A new ``QP`` object (sparse for a ``key`` with a structure) initialised with ``data``."""
         self._qp = self._info = self._views = None
         n, n_eq, n_in, with_box = key[:4]
         if len(key) > 4:
@@ -153,7 +149,7 @@ class ProxqpBackend(PersistentBackend):
 
     def _run(self, problem, key, data, n, n_in, with_box, warm_start):
         """Update (same ``key``) or build the ``QP`` object with ``data``, solve, read the result
-        (``n_in`` rows of ``G`` lead ProxQP's ``z``; with ``with_box`` the next ``n`` are ``z_box``)."""
+        (``z``: ``n_in`` rows of ``G``, then ``n`` of ``z_box``)."""
         warm = self._qp is not None and key == self._key
         if warm:
             qp = self._qp

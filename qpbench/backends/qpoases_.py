@@ -1,16 +1,12 @@
 """Backend ``qpoases``: qpOASES (online active set) with hotstart, through a compiled shim.
 
 ``min 1/2 x'Hx + g'x  s.t.  lb <= x <= ub,  lbA <= A x <= ubA`` with ``A = [A_eq; G]``,
-``lbA = [b; -inf]``, ``ubA = [b; h]``, written into the buffer the shim
-(:mod:`._qpoases_shim`, compiled on first use) reads. The first tick of a shape calls
-``init()``, the next ones ``hotstart()``; a status other than optimal makes the next tick call
-``init()``. ``warm_start`` is ignored. Settings: ``max_iter`` -> ``nWSR``, ``time_limit`` [s]
--> qpOASES' CPU-time limit, ``preset`` (:data:`PRESETS`) and :data:`OPTION_NAMES`.
-``solver_time_s``: the shim's ``CLOCK_MONOTONIC`` time of the call (qpOASES' own in
-``extras["qpoases_cputime_s"]``).
-
-The same solver for compiled closed loops: :func:`make_state`, :func:`compiled` (``solve``,
-``reset`` on a packed problem, the shim called by symbol name) and :func:`close_state`.
+``lbA = [b; -inf]``, ``ubA = [b; h]``, written into the shim's buffer (:mod:`._qpoases_shim`).
+``init()`` on the first tick of a shape and after a status other than optimal, else
+``hotstart()``; ``warm_start`` is ignored. Settings: ``max_iter`` -> ``nWSR``, ``time_limit``
+[s], ``preset`` (:data:`PRESETS`), :data:`OPTION_NAMES`. ``solver_time_s``: the shim's
+``CLOCK_MONOTONIC`` time (qpOASES' own in ``extras["qpoases_cputime_s"]``). The same solver
+for compiled closed loops: :func:`make_state`, :func:`compiled`, :func:`close_state`.
 """
 
 from __future__ import annotations
@@ -157,32 +153,22 @@ class QpoasesBackend(Backend):
             sol.x = out[parts[0]]
             sol._obj = obj
         elif st == -1:
-            message = self._lib.qpb_message(raw)
-            text = message.decode(errors="replace") if message else ""
-            sol.error = f"qpOASES return value {raw}: {text}"
+            sol.error = raw_message(raw)
         return sol
 
 
 _INF = np.inf
 
 
-# -- the compiled route: the same solver, called from compiled code ----------------------------
-# The solve below mirrors QpoasesBackend on a packed problem (qpbench.packed) for a compiled
-# closed loop: one workspace per shape the loop meets (the ``paper`` and the ``soft`` QP), each
-# made afresh (qpb_renew) whenever the backend would make a new Workspace: on a change of shape
-# and after reset().
+# -- the compiled route: QpoasesBackend on a packed problem, one workspace per shape, made
+# afresh (qpb_renew) on a change of shape and after reset(), as the backend would.
 
 
 class State(NamedTuple):
-    """What the compiled :func:`compiled` ``solve`` keeps between calls (made by
-    :func:`make_state`, freed by :func:`close_state`).
-
-    ``table`` (int64, one row a shape): ``n, me, mi, box``, the ``SQProblem``'s address (0:
-    freed), then the offsets in ``data`` of the shim's ``H, g, A, lb, ub, lbA, ubA, [x, -y]``
-    and its four scalars; ``data`` (float64): the shapes' ``d`` buffers end to end; ``iv``
-    (C int, one row a shape): the shim's ``iv``; ``current`` (int64 (1,)): the row last solved,
-    -1 when the next call makes its solver afresh.
-    """
+    """What the compiled ``solve`` keeps between calls: ``table`` (a row per shape: ``n, me,
+    mi, box``, the ``SQProblem``'s address (0: freed), the offsets in ``data`` of the shim's
+    buffers), ``data`` (the shapes' ``d`` end to end), ``iv`` (the shim's, a row per shape),
+    ``current`` (the row last solved; -1: make the solver afresh)."""
 
     table: np.ndarray
     data: np.ndarray
@@ -197,9 +183,8 @@ _STATUS_INDEX = tuple(TICK_STATUSES.index(_STATUSES[code]) for code in range(-3,
 
 
 def make_state(n: int, me_max: int, mi_max: int, profile="default", **settings) -> State:
-    """The compiled solve's state for QPs of ``n`` variables and ``mi_max`` inequality rows,
-    with ``me_max`` equality rows (``paper``) or none (``soft``), both with bounds; ``profile``
-    and ``settings`` as :class:`QpoasesBackend` takes them (checked the same way)."""
+    """The compiled solve's state for QPs of ``n`` variables, ``mi_max`` inequality rows and
+    ``me_max`` or no equality rows, with bounds; ``profile``, ``settings`` as the backend's."""
     backend = QpoasesBackend(profile, **settings)
     shapes = sorted({(n, me_max, mi_max, True), (n, 0, mi_max, True)}, reverse=True)
     ends = [shim.layout(k[0], k[1] + k[2]) for k in shapes]
@@ -245,8 +230,7 @@ def _free_handles(free, table: np.ndarray) -> None:
 
 @cache
 def compiled():
-    """``(solve, reset)`` of the solver protocol of compiled closed loops, compiled (or loaded
-    from numba's cache) on the first call; the shim is built first if needed."""
+    """``(solve, reset)`` of the solver protocol of compiled closed loops (compiled on first call)."""
     import numba
     from numba import types
 
@@ -261,11 +245,9 @@ def compiled():
 
 
 def _solve_py(st, buf, warm, sol, info):  # pragma: no cover - compiled
-    """Solve the packed problem ``buf`` as :meth:`QpoasesBackend.solve` would: ``[x; y; z]``
-    (qpsolvers' signs; NaN when not optimal) into ``sol``, the shim's time [s], ``nWSR`` done,
-    the return value and qpOASES' CPU time [s] into ``info``; returns the status's index in
-    :data:`~qpbench.statuses.TICK_STATUSES`. ``warm`` is ignored (as ``warm_start``). A shape
-    :func:`make_state` was not given, or a closed state, raises ``ValueError``."""
+    """Solve the packed problem ``buf`` as :meth:`QpoasesBackend.solve`: ``[x; y; z]`` (NaN
+    unless optimal) into ``sol``, the shim's time [s], ``nWSR`` done, the return value and
+    qpOASES' CPU time [s] into ``info``; the status index. An unknown shape raises."""
     n, me, mi = int(buf[0]), int(buf[1]), int(buf[2])
     m = me + mi
     oP, oq, oA, ob = int(buf[3]), int(buf[4]), int(buf[5]), int(buf[6])

@@ -1,11 +1,8 @@
 """Backends ``qpsolvers:<name>``: every solver qpsolvers can drive, through its wrapper.
 
-One stateless class per solver, generated at import, for the solvers of
-:data:`qpsolvers.available_solvers`, :data:`EXPECTED_SOLVERS` and :data:`OPTIONAL_SOLVERS` (a
-missing one shows as unavailable). A call is what :func:`qpsolvers.solve_problem` does;
-``warm_start`` is passed as ``initvals``. Statuses: ``found`` -> ``optimal``, otherwise read
-from the solver's report where qpsolvers keeps one (:data:`STATUS_READERS`), else
-``not_solved``.
+One stateless class per solver qpsolvers has or qpbench expects, generated at import; a call is
+what :func:`qpsolvers.solve_problem` does (``warm_start`` as ``initvals``). Statuses: ``found``
+-> ``optimal``, else the solver's report (:data:`STATUS_READERS`), else ``not_solved``.
 """
 
 from __future__ import annotations
@@ -176,10 +173,8 @@ NO_CERTIFICATE = {
 
 
 def silence_wrapper_warnings(solver: str) -> None:
-    """Ignore, from now on in this process, the warnings of qpsolvers' wrapper module of
-    ``solver`` (on a failed solve, an ignored ``initvals``: the status says it), of its
-    conversions (dense matrices made sparse for a sparse-only solver, as ``solve_problem``
-    does) and those the solver's package raises on qpsolvers' normal calls."""
+    """Ignore, from now on in this process, the warnings of qpsolvers' wrapper of ``solver``
+    and of its conversions (the status says what they would)."""
     warnings.filterwarnings("ignore", module=rf"qpsolvers\.solvers\.{solver}_\Z")
     warnings.filterwarnings("ignore", module=r"qpsolvers\.conversions\.")
     if solver == "osqp":  # osqp 1.x: qpsolvers calls solve() without raise_error
@@ -198,9 +193,7 @@ _QPError = qpsolvers.QPError
 
 
 def solver_function(solver: str):
-    """qpsolvers' function for ``solver``, called as :func:`qpsolvers.solve_problem` calls it:
-    the entry of the table ``solve_problem`` dispatches through (read from its globals),
-    without that table ``solve_problem`` itself."""
+    """qpsolvers' function for ``solver``: the entry of ``solve_problem``'s dispatch table."""
     table = getattr(_solve_problem, "__globals__", {}).get("solve_function")
     function = table.get(solver) if isinstance(table, dict) else None
     if function is not None:
@@ -218,8 +211,7 @@ def _float_array(v):
     return np.asarray(v, dtype=float)
 
 
-#: Solvers whose qpsolvers wrapper hands ``x``, ``y``, ``z`` and ``z_box`` back as float64
-#: arrays (or None): taken as given; any other solver's results are converted.
+#: Solvers whose qpsolvers wrapper hands its answer back as float64 arrays (others converted).
 FLOAT64_WRAPPERS = frozenset(
     "cvxopt daqp ecos gurobi highs osqp piqp proxqp qpalm quadprog scs".split()
 )
@@ -230,9 +222,8 @@ class QpsolversBackend(Backend):
 
     solver: str = ""
 
-    #: Solvers whose qpsolvers wrapper hands every keyword it does not take itself to the
-    #: solver's own settings, as the direct backend of the same name does: the keywords the
-    #: wrapper takes without listing them in its signature.
+    #: Solvers whose wrapper hands unknown keywords to the solver's settings, as the direct
+    #: backend does: the keywords the wrapper takes without listing them in its signature.
     SAME_SETTINGS_AS: ClassVar[dict[str, tuple[str, ...]]] = {
         "clarabel": (),  # setattr on DefaultSettings (an unknown name raises)
         "daqp": (),  # keywords of daqp.solve
@@ -319,10 +310,7 @@ class QpsolversBackend(Backend):
         x, y, z, z_box = result.x, result.y, result.z, result.z_box
         if not self._float64_wrapper:  # clarabel's duals are lists
             x, y, z, z_box = map(_float_array, (x, y, z, z_box))
-        sol.x = x
-        sol.y = y
-        sol.z = z
-        sol.z_box = z_box
+        sol.x, sol.y, sol.z, sol.z_box = x, y, z, z_box
         sol._obj = result.obj
         sol.build_time = result.build_time
         sol.solver_time_s = result.solve_time

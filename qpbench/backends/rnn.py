@@ -39,15 +39,13 @@ _DEFAULTS = {
 #: Names of the settings the rnn backends accept (a scenario's ``[rnn]`` table).
 SETTING_NAMES = tuple(_DEFAULTS)
 
-#: A setting that works in the closed loop of every shipped scenario (the paper's
-#: ``eps = 0.02`` does not): ``eps = 0.1 ms``, 20 semi-implicit steps per 1 ms, ``l1``
-#: clipped to +-10 (anti-windup during the infeasible start).
+#: A setting that works in the closed loop of every shipped scenario (the paper's ``eps``
+#: does not): 20 semi-implicit steps per 1 ms, ``l1`` clipped (anti-windup).
 WORKING_SETTINGS = {"eps": 1e-4, "substeps": 20, "method": "semi-implicit", "l1_clip": 10.0}
 
 
 def _positive(key: str, value: object, integer: bool = False, upper: float = math.inf):
-    """``value`` if it is a finite number in ``(0, upper]`` (an integer with ``integer``), or
-    ``None`` for a setting whose default is ``None``."""
+    """``value`` if a finite number in ``(0, upper]`` (``integer``: an integer); ``None`` kept."""
     if value is None and _DEFAULTS[key] is None:
         return None
     try:
@@ -63,10 +61,7 @@ def _positive(key: str, value: object, integer: bool = False, upper: float = mat
 
 
 class NetworkBackend(Backend):
-    """Shared settings, state handling and solution building.
-
-    An ``online`` backend integrates ``dt`` per call; the others integrate to ``tol``.
-    """
+    """Shared settings, state and solutions: ``online`` integrates ``dt`` a call, else to ``tol``."""
 
     family: ClassVar[str] = "recurrent neural network"
     package: ClassVar[str | None] = "qpbench"
@@ -121,8 +116,7 @@ class NetworkBackend(Backend):
             l1_clip=self.l1_clip,
             step_ratio=self.tick / (self.substeps * self.eps) if self.substeps else 0.0,
         )
-        # "optimal": the residuals meet the profile's success thresholds (and the stop
-        # tolerance, when it is tighter)
+        # "optimal": the residuals within the profile's success thresholds (or a looser tol)
         self._prm[nk.OK_PRIMAL] = max(self.tol, self.profile.tolerance.primal)
         self._prm[nk.OK_DUAL] = max(self.tol, self.profile.tolerance.dual)
         self.state = None
@@ -175,8 +169,7 @@ class NetworkBackend(Backend):
         )
 
     def _solve(self, problem, warm_start) -> BackendSolution:
-        """The general path: convert ``problem`` (arrays as they are to the compiled kernel,
-        which checks the shapes), set up the state, integrate."""
+        """The general path: convert ``problem`` (or not: the kernel checks), integrate."""
         p = problem
         if self.use_numba and type(p.P) is _ndarray and {type(p.A), type(p.G)} <= _DENSE:
             n = p.q.shape[0]
@@ -231,20 +224,14 @@ class NetworkBackend(Backend):
 
 
 class TickSolution(ViewSolution):
-    """The online network's answer to one tick: ``_out`` is the kernel's fresh output
-    ``[x; y; z; z_box]``."""
+    """The online network's answer to one tick: ``_out`` is the kernel's ``[x; y; z; z_box]``."""
 
 
 @register
 class RNNOnline(NetworkBackend):
-    """The network integrated for ``dt`` per call (the paper's use); it never reports
-    infeasibility, and a closed loop applies its ``x`` whatever the status.
-
-    Per-tick path (:meth:`solve`, once a first call has set up the state): a
-    :class:`~qpbench.packed.PackedProblem` to :func:`~qpbench.rnn.kernels.packed_kernel`, any
-    other problem to :func:`~qpbench.rnn.kernels.online_kernel`; what they refuse goes to the
-    general path (:meth:`_solve`), with the same numbers bit for bit.
-    """
+    """The network integrated for ``dt`` per call (the paper's use). Per-tick path once a call
+    has set up the state: :func:`~qpbench.rnn.kernels.packed_kernel` or
+    :func:`~qpbench.rnn.kernels.online_kernel`; what they refuse goes to :meth:`_solve`."""
 
     name = "rnn"
     online = True
@@ -326,9 +313,8 @@ _Packed = PackedProblem
 
 @register
 class RNNConverged(NetworkBackend):
-    """The network integrated until its KKT residuals are within ``tol``, or ``max_iter``
-    steps (status ``max_iter``), from the state the previous call left (cold after
-    :meth:`reset`); ``iterations`` counts integration steps."""
+    """The network integrated from the previous call's state until its KKT residuals are
+    within ``tol``, or ``max_iter`` steps (status ``max_iter``)."""
 
     name = "rnn-converged"
     default_method = "semi-implicit"
@@ -342,8 +328,7 @@ class RNNConverged(NetworkBackend):
 
 @register
 class RNNTuned(RNNOnline):
-    """The online network with :data:`WORKING_SETTINGS`, not the paper's ``eps``; it ignores a
-    scenario's ``[rnn]`` table (the paper's values); settings given explicitly still override."""
+    """The online network with :data:`WORKING_SETTINGS`, ignoring a scenario's ``[rnn]`` table."""
 
     name = "rnn-tuned"
     scenario_table = None

@@ -114,8 +114,7 @@ def add_force_resume(parser: argparse.ArgumentParser, force: str, resume: str) -
 
 
 def check_tables(folder, names, args: argparse.Namespace, key: str = "out") -> None:
-    """Output folder ``folder`` may exist (its parent must), its files ``names`` only with
-    ``--force`` or ``--resume``."""
+    """Output folder ``folder`` may exist, its files ``names`` only with ``--force``/``--resume``."""
     from ..atomic import check_folder, check_output
 
     check_folder(folder, key=key)
@@ -131,10 +130,8 @@ def strict_exit(
     recommend: bool = False,
     sweeps=None,
 ) -> int:
-    """0 once the outputs are written; with ``--strict``, 1 when ``runs`` (closed-loop or sweep
-    rows) or ``failed_solves`` fall short, said in one line on stderr. ``recommend``: then print
-    the recommendation from ``runs`` (and the perturbed runs ``sweeps``, judged on
-    ``args.min_ok_bound``) as the last lines."""
+    """0 once the outputs are written; with ``--strict``, 1 when ``runs`` or ``failed_solves``
+    fall short (one line on stderr). ``recommend``: then print the recommendation."""
     from ..report import recommend as rec
 
     found = rec.shortfalls(runs, failed_solves) if getattr(args, "strict", False) else None
@@ -148,8 +145,7 @@ def strict_exit(
 
 @contextmanager
 def run_bar(args: argparse.Namespace, total: int, desc: str, on_row, leave: bool = True):
-    """A progress bar of ``total`` runs (none with ``-q``); yields the runner's ``on_row``: one
-    step of the bar, then ``on_row(row)``."""
+    """A progress bar of ``total`` runs (none with ``-q``) around the runner's ``on_row``."""
     from tqdm import tqdm
 
     bar = tqdm(total=total, unit="run", desc=desc, leave=leave, disable=args.quiet or None)
@@ -160,8 +156,7 @@ def run_bar(args: argparse.Namespace, total: int, desc: str, on_row, leave: bool
 
 
 def print_listing(args: argparse.Namespace, items: list[dict], rows: list, **kw) -> int:
-    """``items`` as one JSON object per line with ``--json``, else
-    :func:`qpbench.report.markdown_table.aligned` ``rows``; 0."""
+    """``items`` as JSON lines with ``--json``, else ``rows`` aligned; 0."""
     import json
 
     from ..report.markdown_table import aligned

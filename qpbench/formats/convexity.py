@@ -1,9 +1,7 @@
-"""Is ``P`` positive semidefinite? By ``ratio = lambda_min(P) / lambda_max(P)``, never
-making a large matrix dense: ``convex``, ``rounding`` (a published problem's rounded data:
-solved, with a warning) or ``nonconvex`` (skipped). Up to ``DENSE_EIG_MAX_N`` variables
-``eigvalsh``; else Gershgorin discs; else ``lambda_max`` by power iteration and the inertia
-of ``P + delta I`` (Sylvester's law, sparse ``L D L'``) at the two thresholds, then the ratio
-to 2 % by bisection on the shift.
+"""Is ``P`` positive semidefinite? By ``ratio = lambda_min(P) / lambda_max(P)``: ``convex``,
+``rounding`` (solved, with a warning) or ``nonconvex`` (skipped). Up to ``DENSE_EIG_MAX_N``
+variables ``eigvalsh``; else Gershgorin discs, else the inertia of ``P + delta I`` (sparse
+``L D L'``) at the two thresholds, then the ratio to 2 % by bisection on the shift.
 """
 
 from __future__ import annotations
@@ -75,8 +73,7 @@ def assess_convexity(P: np.ndarray | spa.spmatrix | spa.sparray) -> Convexity:
 
 
 def _bisect_ratio(P, hi: float, low: float, high: float, rtol: float = 0.02) -> float | None:
-    """``lambda_min / hi`` known to lie in ``[-high, -low]``, by bisection (in log scale) on
-    the inertia of ``P + t hi I`` to relative ``rtol``; ``None`` if an inertia is undecided."""
+    """``lambda_min / hi`` in ``[-high, -low]`` by bisection on the inertia of ``P + t hi I``."""
     while high / low > 1 + rtol:
         mid = math.sqrt(low * high)
         count = negative_eigenvalues(P, mid * hi)
@@ -103,8 +100,7 @@ def _top_eigenvalue(P, d: np.ndarray, steps: int = 30) -> float:
 
 
 def negative_eigenvalues(P: spa.spmatrix | spa.sparray, shift: float) -> int | None:
-    """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift`` (inertia of ``P +
-    shift I`` from a diagonal-pivot sparse LU); ``None`` if it pivoted off the diagonal."""
+    """How many eigenvalues of a symmetric sparse ``P`` lie below ``-shift`` (``None``: unknown)."""
     from scipy.sparse.linalg import splu
 
     M = (P + shift * spa.identity(P.shape[0], format="csc")).tocsc()

@@ -47,9 +47,8 @@ def list_column(values: list[np.ndarray | None], kind: str = "float64"):
 def write_problem_set(
     folder: str | Path, records: list[ProblemRecord], generator: dict, extra: dict | None = None
 ) -> Path:
-    """Write ``records`` to ``folder/problems.parquet`` (arrays, metadata, CSC columns of each
-    matrix sparse in some record) and ``manifest.json`` (with ``generator``, what made the
-    set, and ``extra``), atomically, Parquet first."""
+    """Write ``records`` to ``folder/problems.parquet`` and ``manifest.json`` (with
+    ``generator``, what made the set, and ``extra``), atomically, Parquet first."""
     import pyarrow as pa
 
     folder = Path(folder)

@@ -41,16 +41,14 @@ SYMMETRY_RTOL = 1e-9
 
 #: The matrices of a problem (the parts that may be scipy.sparse).
 MATRIX_KEYS = ("P", "G", "A")
-#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types,
-#: the arrays of its :func:`sorted_csc`.
+#: How a sparse matrix ``M`` is stored: members or columns ``M_csc_<part>`` of these types.
 CSC_TYPES = {"data": "float64", "indices": "int32", "indptr": "int64"}
 
 
 @dataclass
 class ProblemRecord:
     """One QP and where it comes from: ``name`` unique in its set; ``t`` the tick's time [s];
-    ``formulation`` ``paper`` (hard task equality, eq. 11) or ``soft``; ``offset`` the
-    objective's constant (Maros-Meszaros ``r``); ``convexity`` set by :func:`check_record`."""
+    ``formulation`` ``paper`` (eq. 11) or ``soft``; ``offset`` the objective's constant."""
 
     problem: qpsolvers.Problem
     name: str
@@ -122,8 +120,7 @@ def _float64(v):
 
 
 def dense_copy(problem: qpsolvers.Problem) -> dict[str, np.ndarray | None]:
-    """Each array as qpsolvers and qpbenchmark read it: dense float64, ``None`` when absent or
-    sparse in a problem of more than ``DENSE_COPY_MAX`` entries made dense."""
+    """Each array dense float64 (``None``: absent, or sparse above ``DENSE_COPY_MAX`` entries)."""
     small = dense_entries(problem) <= DENSE_COPY_MAX
     out = {}
     for k in ARRAY_KEYS:
@@ -135,8 +132,7 @@ def dense_copy(problem: qpsolvers.Problem) -> dict[str, np.ndarray | None]:
 
 
 def checked_csc(data, indices, indptr, shape: tuple[int, int]) -> spa.csc_matrix:
-    """The CSC matrix of stored arrays, every index checked (scipy's constructor checks only
-    the lengths, and an index out of range crashes a solver); ValueError if one is not."""
+    """The CSC matrix of stored arrays, every index checked (ValueError if one is not)."""
     M = spa.csc_matrix((data, indices, indptr), shape=shape)
     M.check_format(full_check=True)
     return M
@@ -151,8 +147,7 @@ def sorted_csc(M) -> spa.csc_matrix:
 
 @contextmanager
 def reading(path: Path, what: str, errors: tuple[type[Exception], ...] = (Exception,)):
-    """Reading ``path``: a missing file is "no such file", one of ``errors`` "unreadable
-    ``what``", both a :class:`ProblemFormatError` naming the file."""
+    """Reading ``path``: a missing file or one of ``errors`` is a :class:`ProblemFormatError`."""
     try:
         yield
     except FileNotFoundError:
@@ -170,12 +165,9 @@ def _values(M) -> np.ndarray:
 
 
 def check_record(record: ProblemRecord, path: str | Path | None = None) -> None:
-    """Check shapes and values (sparse matrices through their stored values, never dense):
-    ``P`` ``n x n`` and symmetric (``max |P - P'| <= SYMMETRY_RTOL max |P|``); ``G, h``
-    and ``A, b`` in pairs; ``P q G h A b`` finite (several solvers reject ``h = inf``);
-    ``lb`` may be ``-inf``, ``ub`` ``+inf``; the name and offset. A
-    :class:`ProblemFormatError` names the field. Sets :attr:`ProblemRecord.convexity`.
-    """
+    """Check shapes and values (sparse matrices never made dense): ``P`` ``n x n`` and symmetric
+    (to ``SYMMETRY_RTOL``), ``G, h`` and ``A, b`` in pairs, all finite but ``lb = -inf``, ``ub =
+    +inf``; a :class:`ProblemFormatError` names the field. Sets ``record.convexity``."""
     from .convexity import assess_convexity
 
     problem, name, offset = record.problem, record.name, record.offset

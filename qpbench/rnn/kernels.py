@@ -1,8 +1,5 @@
-"""The network's kernels: its parameter block ``prm``, its step bound and its integrator as loops.
-
-numba resolves the ``*_jit`` names a kernel calls from this module's globals: :func:`kernel`
-rebinds them to compiled versions before the first compile (without numba Python runs them).
-"""
+"""The network's kernels: its parameter block ``prm``, its step bound and its integrator as
+loops (the ``*_jit`` names: docs/architecture.md, "The network")."""
 
 from __future__ import annotations
 
@@ -31,18 +28,16 @@ SQUARINGS = 5
 PMIN, PMAX, SEMI, R_TOTAL, SUBSTEPS, SAFETY, MAX_STEPS, TOL, L1_CLIP = range(9)
 #: Outputs.
 PRIMAL, DUAL, COMPL, OBJ, RATIO, RATIO_MAX, SIG2 = range(9, 16)
-#: Inputs of the per-tick kernel: the residual bounds of status ``optimal``, the state's
-#: equality count (-1: not checked); output: the last call's step count (NaN: none yet).
+#: Per-tick inputs (the residual bounds of ``optimal``, the state's equality count, -1: not
+#: checked); output: the last call's step count (NaN: none yet).
 OK_PRIMAL, OK_DUAL, STATE_ME, STEPS = range(16, 20)
-#: Inputs: the ratio ``r = h / eps`` of a fixed step (0: none), whether to clamp a forced
-#: step to the bound; output: the step count the setting asked for (0: the bound chose).
+#: Inputs: a fixed step's ratio (0: none), whether to clamp it; output: the steps it asked for.
 R_STEP, CLAMP, NOMINAL = range(20, 23)
 #: Output: what a fixed-duration call did against its setting (``NOTE_*``).
 NOTE = 23
 PRM_SIZE = 24
 
-#: ``prm[NOTE]``: nothing to say; the step was clamped to the bound; no step is proven stable
-#: (``P`` not positive definite); the steps the bound needs exceed ``MAX_STEPS``.
+#: ``prm[NOTE]``: nothing; step clamped; no step proven stable; steps capped at ``MAX_STEPS``.
 NOTE_NONE, NOTE_CLAMPED, NOTE_UNPROVEN, NOTE_CAPPED = 0, 1, 2, 3
 
 #: Kernel return codes besides a step count.
@@ -66,10 +61,9 @@ def make_params(
     clamp: bool = True,
 ) -> np.ndarray:
     """The parameter block ``prm``. Fixed duration ``r_total = duration / eps > 0``: steps of
-    ratio at most ``step_ratio``, else ``substeps`` steps, else the fewest with ``r <= safety *
-    ratio_max`` (with ``clamp`` a forced step above it is shortened). Else steps of ``r = safety
-    * ratio_max`` until the residuals are ``<= tol`` (negative: never), or ``max_steps``.
-    ``p_range``: ``(lambda_min, lambda_max)`` of ``P``; ``l1_clip``: a bound on ``|l1|``."""
+    ratio ``<= step_ratio``, else ``substeps``, else the fewest with ``r <= safety * ratio_max``
+    (``clamp``: a forced step above it shortened); else ``r = safety * ratio_max`` until the
+    residuals are ``<= tol`` or ``max_steps``. ``p_range``: ``P``'s eigenvalue range."""
     if method not in METHODS:
         raise ParamError(
             f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
@@ -88,10 +82,9 @@ def make_params(
 
 @dataclass
 class IntegrationResult:
-    """What one integration did: ``steps`` (or ``NO_STABLE_STEP``); residuals (inf-norms): primal
+    """What one integration did: ``steps`` (or ``NO_STABLE_STEP``); inf-norm residuals, primal
     ``max(|A v - b|, [G v - h]^+, [lb - v]^+, [v - ub]^+)``, dual ``|v - P_Omega(v - g)|`` (15a),
-    complementarity ``|l2 - max(l2 + G v - h, 0)|``; ``ratio`` ``r = h / eps``, its bound
-    ``ratio_max`` from ``sigma2_bound`` (NaN: not computed); ``nominal_steps`` (0: the bound's)."""
+    complementarity ``|l2 - max(l2 + G v - h, 0)|``; ``ratio`` ``r = h / eps`` and its bound."""
 
     steps: int
     primal_residual: float
@@ -180,8 +173,7 @@ def _frobenius2(A, G):
 
 
 def nominal_steps(r_total, r_step, substeps):
-    """Steps a fixed-duration call takes before any clamp (0: the bound decides): the fewest
-    of ratio at most ``r_step`` (rounding adds none), else ``substeps``."""
+    """Steps of a fixed-duration call before any clamp (0: the bound decides)."""
     if r_total <= 0.0:
         return 0
     if r_step > 0.0:
@@ -248,8 +240,7 @@ def _matvec(M, xi, y):
 
 
 def _grad_products(P, q, A, G, xi, g, Av, Gv, products):
-    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``
-    (each row of ``A`` and ``G`` read once for both)."""
+    """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``."""
     n = P.shape[0]
     me = A.shape[0]
     mi = G.shape[0]
@@ -302,8 +293,7 @@ def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
 
 
 def _residuals(b, h, lb, ub, xi, g, Av, Gv):
-    """``(primal, dual, complementarity)`` residuals of the state (:class:`IntegrationResult`),
-    maxima that propagate NaN (a diverged state must not look converged)."""
+    """``(primal, dual, complementarity)`` residuals of the state, propagating NaN."""
     n = lb.shape[0]
     me = b.shape[0]
     mi = h.shape[0]
@@ -461,9 +451,7 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
 
 
 def _online_tick_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):  # pragma: no cover - compiled
-    """:func:`_integrate_loops` and its verdict ``4 * steps + 2 * note + ok`` (``ok``: the
-    residuals within ``prm[OK_*]``; ``note``: :func:`step_note` has something to say), or
-    :data:`SHAPE_MISMATCH`, :data:`NO_STABLE_STEP`, :data:`DIVERGED`."""
+    """:func:`_integrate_loops` and its verdict ``4 * steps + 2 * note + ok``, or a code < 0."""
     if prm[STATE_ME] >= 0.0 and b.shape[0] != prm[STATE_ME]:
         return SHAPE_MISMATCH
     steps = _integrate_jit(P, q, A, b, G, h, lb, ub, xi, prm, sol)
@@ -482,8 +470,7 @@ def _part_fits(off, size, length):  # pragma: no cover - compiled
 
 
 def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
-    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer
-    (:data:`SHAPE_MISMATCH`: a part outside it or absent ``lb``, ``ub``, sizes not the state's)."""
+    """:func:`_online_tick_loops` on views of a :class:`qpbench.packed.PackedProblem`'s buffer."""
     length = buf.shape[0]
     if length < HEADER:
         return SHAPE_MISMATCH
@@ -520,8 +507,7 @@ def _online_tick_packed_loops(buf, xi, prm, sol):  # pragma: no cover - compiled
     )
 
 
-# The names the kernels call: plain functions until kernel() compiles them, inlined into their
-# callers except those of _CALLS (called once a solve).
+# The names the kernels call, compiled by kernel(), inlined except those of _CALLS.
 _sigma2_bound_jit = sigma2_bound
 _ratio_max_jit = ratio_max
 _gershgorin_jit = _gershgorin
@@ -559,9 +545,8 @@ def _interpreted() -> Callable:
 
 
 def kernel(use_numba: bool = True) -> Callable:
-    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (or a code < 0),
-    compiled or run by Python: ``xi = [v; l1; l2]`` updated in place; ``sol`` (length ``2n +
-    me + mi``, or 0) receives ``[x; y; z; z_box]``."""
+    """The integrator ``f(P, q, A, b, G, h, lb, ub, xi, prm, sol) -> steps`` (or a code < 0):
+    ``xi = [v; l1; l2]`` updated in place, ``[x; y; z; z_box]`` into ``sol`` (or length 0)."""
     global _COMPILED
     if not use_numba:
         return _interpreted()
@@ -584,8 +569,7 @@ def _signature(*ndims):
 
 @cache
 def online_kernel() -> Callable:
-    """:func:`_online_tick_loops` (``sol`` of length ``3 n + 2 (me + mi)``) compiled for
-    C-contiguous writable float64 arrays only (numba's dispatcher raises ``TypeError``)."""
+    """:func:`_online_tick_loops` compiled for C-contiguous writable float64 arrays only."""
     import numba
 
     kernel(True)  # binds the integrator the tick calls
@@ -595,8 +579,7 @@ def online_kernel() -> Callable:
 
 @cache
 def packed_kernel_dispatcher() -> Callable:
-    """:func:`_online_tick_packed_loops` ``f(buffer, xi, prm, sol) -> code`` compiled for 1-D
-    C-contiguous float64 arrays (callable from compiled code)."""
+    """:func:`_online_tick_packed_loops` compiled for 1-D C-contiguous float64 arrays."""
     import numba
 
     kernel(True)
