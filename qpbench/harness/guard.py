@@ -26,7 +26,6 @@ if TYPE_CHECKING:
 log = logging.getLogger("qpbench.harness")
 
 
-#: Fields of a solution read inside the timed region.
 class Replicas:
     """The instances of one backend that ``--repeat`` times; ``members[0]`` is the kept one;
     ``history``: the problems replica 0 solved since its last reset, in order."""
