@@ -1,29 +1,6 @@
-"""The figures of a closed-loop run and its verdict: computed here and nowhere else.
-
-:func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able dict (``None`` where a
-figure does not exist); a row of ``closed_loop.csv`` or ``sweep.csv`` is that dict.
-
-- ``infeasible_ticks``: ticks declared infeasible or ``not_solved``
-  (:data:`~qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`), with when [s];
-  ``non_optimal_ticks``: any status but ``optimal``; the guarded failures by status.
-- From the loop (``run_info``): ``deadline_s`` [s], ``deadline_dropped``, ``raised_ticks``,
-  ``fallback_errors``, ``first_error``, ``first_error_t`` [s], ``wall_budget_s`` [s],
-  ``stopped_early``, ``engine`` (``compiled`` or ``python``) and ``engine_note`` (why the
-  Python engine ran).
-- ``<clock>_median_s``, ``_p99_s``, ``_max_s`` of the tick log's clocks (:data:`CLOCKS`).
-- ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
-  ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations beyond
-  :data:`VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
-- ``min_obstacle_distance`` [m] of the key points; ``min_body_distance`` [m] of the link
-  capsules (< 0 inside, :mod:`qpbench.robot.body`); ``body_crossings``: intervals between ticks
-  in which a link went inside an obstacle it was clear of at both ticks, the first at
-  ``body_crossing_t`` [s] (``body_crossing_link``, ``body_crossing_obstacle``);
-  ``obstacle_active_intervals``: per (key point, obstacle), when within :data:`ACTIVE_MARGIN` of
-  ``d_safe``.
-- ``verdict``, ``verdict_reasons``, ``key_point_rule`` and ``realtime``, ``realtime_solver``:
-  :mod:`qpbench.sim.verdict` on these figures and on the worst cases it names (computed here,
-  not in the row).
-"""
+"""The figures of a closed-loop run and its verdict, computed here and nowhere else:
+:func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able dict (``None``
+where a figure does not exist); what each holds: docs/methodology.md, "A run's figures"."""
 
 from __future__ import annotations
 
@@ -37,7 +14,7 @@ from ..robot.body import body_crossings
 from ..statuses import INFEASIBLE_OR_UNCLASSIFIED
 from . import log
 from .scenario import Scenario
-from .verdict import VerdictSettings, judge, judge_realtime_run
+from .verdict import TICK_KINDS, VerdictSettings, judge, judge_realtime_run
 
 #: Time from which the ``*_after_2s`` figures are taken [s].
 SETTLE_TIME = 2.0
@@ -183,14 +160,6 @@ def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: f
     }
 
 
-#: Kinds of tick the real-time figures are split by (docs/verdicts.md, "Real time"):
-#: ``optimal``; ``infeasible`` (declared infeasible or ``not_solved``:
-#: :data:`~qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`); ``fallback`` (another status, the
-#: tick's own answer not applied: the soft fallback ran, or zero velocity); ``other`` (another
-#: status whose answer was applied: an online backend's).
-TICK_KINDS = ("optimal", "infeasible", "fallback", "other")
-
-
 def judged_tick_times(frame: pd.DataFrame) -> np.ndarray:
     """The per-tick time [s] real time is judged on (:func:`_with_fallback`)."""
     return _with_fallback(frame).to_numpy(dtype=float)
@@ -204,7 +173,7 @@ def _with_fallback(frame: pd.DataFrame) -> pd.Series:
 
 
 def tick_kinds(frame: pd.DataFrame) -> dict[str, np.ndarray]:
-    """A mask per kind of :data:`TICK_KINDS`; each tick is of exactly one."""
+    """A mask per kind of :data:`~qpbench.sim.verdict.TICK_KINDS`; each tick is of exactly one."""
     status = frame[log.STATUS].astype(str).to_numpy()
     infeasible = np.isin(status, INFEASIBLE_OR_UNCLASSIFIED)
     optimal = status == "optimal"
@@ -258,17 +227,13 @@ def realtime_figures(
     calls = judged_tick_times(frame) if times is None else np.asarray(times, dtype=float)
     kinds = tick_kinds(frame)
     primal = (frame[log.STATUS].astype(str) == "primal_infeasible").to_numpy()
-    t = frame[log.T].to_numpy()
-    infeasible = kinds["infeasible"]
-    span = {
-        "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
-        "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
-    }
+    t = frame[log.T].to_numpy()[kinds["infeasible"]]
     base = {
         "dt": dt,
         "max_p99_fraction_of_dt": settings.max_p99_fraction_of_dt,
         "max_over_dt_share": settings.max_over_dt_share,
-        **span,
+        "first_infeasible_t": _none(t[0]) if t.size else None,
+        "last_infeasible_t": _none(t[-1]) if t.size else None,
     }
     certify = frame[log.SOLVE_TIME].to_numpy(dtype=float)[primal]  # the tick's own solve
     out = {**base, **tick_time_figures(calls, kinds, certify, dt)}

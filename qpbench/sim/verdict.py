@@ -199,6 +199,8 @@ def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[
     return [f"{where}: {unjudged or 'judged on what was simulated'}"], []
 
 
+#: Kinds of tick the real-time figures are split by (docs/verdicts.md, "Ticks by kind").
+TICK_KINDS = ("optimal", "infeasible", "fallback", "other")
 #: Kinds of tick whose times the p99 and share rules judge: every tick not declared infeasible.
 _JUDGED_KINDS = ("optimal", "fallback", "other")
 
@@ -244,13 +246,8 @@ def judge_realtime_run(f: Mapping, what: str, floor: Mapping | None = None) -> t
     if infeasible:
         median = f["time_median_infeasible_s"]
         ok = median <= limit
-        checks.append(
-            (
-                _held(ok, p99_held),
-                f"the {infeasible} infeasible ticks: median {what} {_us(median)} {_le(ok)} "
-                f"{frac:.0%} of dt {_us(dt)}",
-            )
-        )
+        text = f"the {infeasible} infeasible ticks: median {what} {_us(median)} {_le(ok)} "
+        checks.append((_held(ok, p99_held), text + f"{frac:.0%} of dt {_us(dt)}"))
     outcomes = {o for o, _ in checks}
     verdict = "no" if "no" in outcomes else "unknown" if "unknown" in outcomes else "yes"
     texts = [t for o, t in checks if o != "yes"] + [t for o, t in checks if o == "yes"]
@@ -285,7 +282,7 @@ def _counted(key: str, value):
 
 def _over_dt_cause(f: Mapping, what: str) -> list[str]:
     """The ticks over ``dt`` by kind, in words (empty without any)."""
-    total = sum(f[f"over_dt_{k}"] for k in ("optimal", "infeasible", "fallback", "other"))
+    total = sum(f[f"over_dt_{k}"] for k in TICK_KINDS)
     if not total:
         return []
     parts = []
