@@ -81,8 +81,7 @@ def record_period(problem_set: ProblemSet) -> float | None:
 
 
 def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) -> dict:
-    """Settings for backend ``name``: the run's, its own, and for an online backend (``rnn``)
-    ``dt`` = :func:`record_period`."""
+    """Settings for backend ``name``: the run's, its own, and an online backend's ``dt``."""
     settings = {**config.settings, **config.backend_settings.get(name, {})}
     if backend_class(name).online and "dt" not in settings:
         period = record_period(problem_set)
@@ -92,8 +91,7 @@ def backend_settings(name: str, config: BenchConfig, problem_set: ProblemSet) ->
 
 
 def sequences(records: list[ProblemRecord], mode: str) -> list[list[int]]:
-    """Indices of ``records`` grouped into sequences: sequential, one per scenario sorted by tick
-    (a record without a scenario is one of its own); independent, one per record."""
+    """Indices of ``records`` in sequences: one per scenario sorted by tick, or per record."""
     if mode == "independent":
         return [[i] for i in range(len(records))]
     groups: dict[object, list[int]] = {}
@@ -125,8 +123,7 @@ def _check_existing(existing: ExistingResults, path: Path, mode: str, sha, seed:
 def skipped_solves(
     records: list[ProblemRecord], backends: list[str], budget: int
 ) -> tuple[dict, dict]:
-    """``(skips, notes)``: ``(record index, backend) -> why`` of the solves not made and
-    ``record index -> warning`` (slightly indefinite)."""
+    """``(skips, notes)``: why ``(record index, backend)`` is not solved; a record's warning."""
     from ..formats.convexity import assess_convexity
     from ..memory import skip_reason
 
@@ -248,7 +245,7 @@ class _BenchRun:
             log.warning(msg, suspect, inflight[0], crash.splitlines()[0], then)
 
     def start(self, problem_set: ProblemSet, references, force: bool) -> None:
-        """References, warm-up, then ``out`` created or repaired (the run's first write), runners."""
+        """References, warm-up, then ``out`` created or repaired (the run's first write)."""
         from ..jit import warmup_logged
 
         config, out = self.config, self.out
@@ -409,7 +406,7 @@ class _BenchRun:
         return outcome
 
     def _row(self, i: int, backend: str, outcome: Outcome, position: int) -> dict:
-        """The CSV row of ``backend``'s ``outcome`` on record ``i``, scored against its reference."""
+        """The CSV row of ``backend``'s ``outcome`` on record ``i``."""
         from ..formats import problem_sizes
         from ..formats.records import box_bounds
         from ..metrics import evaluate, metric_columns
@@ -451,7 +448,7 @@ class _BenchRun:
         }
 
     def _write_rows(self, i: int, solved: list) -> None:
-        """Rows (metrics against the reference) once every backend has solved problem ``i``."""
+        """Rows once every backend has solved problem ``i``."""
         backends = self.config.backends
         solved = sorted(solved, key=lambda item: backends.index(item[1]))
         batch = [self._row(i, name, outcome, position) for position, name, outcome in solved]
@@ -606,8 +603,7 @@ def _float(value) -> float | None:
 
 
 class LogBar:
-    """Off a terminal, the bench's progress bar as log lines: at most one per ``every_s``
-    seconds, with the solves done, the time so far and the time left at this pace."""
+    """Off a terminal, the bench's progress bar as log lines, at most one per ``every_s`` [s]."""
 
     def __init__(self, total: int, name: str, every_s: float = 10.0):
         self.total, self.name, self.every_s, self.n = total, name, every_s, 0

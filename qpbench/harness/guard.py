@@ -1,9 +1,6 @@
-"""Guarded, timed solves. :func:`timed_call` is the one clock around a solve; ``--repeat R`` times
-a solve again from the same state on R instances of a backend fed the same problems
-(:class:`Replicas`: its state mostly lives in native objects that cannot be restored). Every way
-a solve can go wrong is a status: :class:`LocalRunner` in this process; :class:`IsolatedRunner`,
-for backends that may hang or crash, one in a worker process, replaced (without the backend's
-state) after a death or a missed deadline."""
+"""Guarded, timed solves (:func:`timed_call`, the one clock; ``--repeat``: :class:`Replicas`).
+Every way a solve can go wrong is a status: :class:`LocalRunner` in this process,
+:class:`IsolatedRunner` in a worker process, replaced after a death or a missed deadline."""
 
 from __future__ import annotations
 
@@ -26,7 +23,6 @@ if TYPE_CHECKING:
 log = logging.getLogger("qpbench.harness")
 
 
-#: Fields of a solution read inside the timed region.
 class Replicas:
     """The instances of one backend that ``--repeat`` times; ``members[0]`` is the kept one;
     ``history``: the problems replica 0 solved since its last reset, in order."""
@@ -279,9 +275,8 @@ def _request(request: tuple):
 
 
 class IsolatedRunner:
-    """A backend in a worker process: ``profile``, ``settings``: as for
-    :func:`qpbench.backends.get_backend`; ``time_limit`` [s], ``sequential``, ``repeat``: as for
-    :class:`LocalRunner`."""
+    """A backend in a worker process (arguments: :func:`qpbench.backends.get_backend`'s and
+    :class:`LocalRunner`'s)."""
 
     isolated = True
 

@@ -111,12 +111,8 @@ def expand_paths(paths: list[str | Path]) -> list[Path]:
 def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
     """Read bench and closed-loop CSVs (folders are searched). Rows get ``source`` (their file);
     bench rows :func:`scenario_key` as ``scenario``; closed-loop rows ``log_path``
-    (:func:`log_path`).
-
-    Raises:
-        InputError: unreadable CSV, one of neither kind, a duplicate key or mixed repeat counts
-            without ``prefer``.
-    """
+    (:func:`log_path`). :class:`InputError`: unreadable CSV, one of neither kind, a duplicate
+    key or mixed repeat counts without ``prefer``."""
     bench, loops, files = [], [], []
     for path in expand_paths(paths):
         try:
@@ -144,8 +140,7 @@ def read_results(paths: list[str | Path], prefer: str | None = None) -> Results:
                 path=path,
             )
         files.append(ResultFile(path, kind, sha256_file(path), len(df)))
-    bench_df = pd.DataFrame()
-    notes = []
+    bench_df, notes = pd.DataFrame(), []
     if bench:
         bench_df = drop_duplicates(pd.concat(bench, ignore_index=True), prefer)
         bench_df["scenario"] = bench_df["scenario"].map(scenario_key)

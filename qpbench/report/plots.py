@@ -77,8 +77,7 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
 
 def _logs(runs: pd.DataFrame) -> tuple[dict, float | None]:
     """The tick (or figure) logs of ``runs`` by backend, and their ``d_safe`` [m]."""
-    logs = {}
-    d_safe = None
+    logs, d_safe = {}, None
     for _, r in runs.iterrows():
         df = read_log(r["log_path"])
         if df is not None and len(df):

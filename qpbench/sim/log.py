@@ -1,40 +1,5 @@
-"""The closed loop's tick log: its columns, by name, in one place.
-
-=================== ===========================================================
-t                   time [s]
-theta_i, v_i        joint angles [rad] and commanded velocities [rad/s]
-ee_x, ee_y, [ee_z]  end-effector position [m] (ee_z: a spatial arm's)
-xd_x, xd_y, [xd_z]  desired position x_d(t) [m]
-tracking_error      planar arm: tangential error t . (x - x_d) [m], t the surface
-                    tangent; spatial arm: |x - x_d| within the contact plane [m]
-force               measured contact force [N]; force_error = force - Fd [N]
-d_<A>_<obstacle>    distance of key point A to the obstacle [m] (min over a
-                    point cloud's points; link radius subtracted)
-d_min               smallest of those [m]
-d_body_min          the body's clearance [m]: smallest signed distance of a link's
-                    capsule to an obstacle (< 0: inside; :mod:`qpbench.robot.body`;
-                    NaN without obstacles)
-d_body_link         its link, 1-based (0 without obstacles)
-d_body_obstacle     its obstacle's name ("" without obstacles)
-v_sq                ``|v|^2`` [rad^2/s^2]
-task_residual       ``|J v - b0|`` [m/s]
-status              the backend's status on the tick's QP
-                    (:data:`qpbench.statuses.TICK_STATUSES`)
-fallback            the soft fallback's answer was applied
-zero_velocity       zero velocity was commanded (fallback failed too)
-build_time_s        time to build the tick's QP [s]
-solve_time_s        time of the tick's solve [s]: the call with the tick's QP until its
-                    answer (x, duals, status) is in the caller's memory
-fallback_build_time_s, fallback_solve_time_s
-                    the soft fallback's build and solve [s] (NaN: none ran)
-tick_time_s         the whole tick [s]: build, solve, fallback, sensing, plant, log row
-solver_time_s       the solver's own reported time for the solve and the fallback's [s]
-                    (NaN: none); all times on one clock (docs/methodology.md)
-y_0, y_1, [y_2]     equality duals of the applied solution (paper formulation)
-z_max               largest inequality (obstacle row) dual
-kp_hat, kd_hat      interaction coefficients the tick's QP used
-=================== ===========================================================
-"""
+"""The closed loop's tick log: its columns, by name, in one place (what each holds:
+docs/methodology.md, "The tick log")."""
 
 from __future__ import annotations
 
@@ -123,11 +88,8 @@ def joint_count(frame: pd.DataFrame) -> int:
 
 def distance_columns(frame: pd.DataFrame) -> list[str]:
     """The ``d_<A>_<obstacle>`` columns of a tick log, in its order."""
-    return [
-        c
-        for c in frame.columns
-        if str(c).startswith("d_") and c not in (D_MIN, D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE)
-    ]
+    body = (D_MIN, D_BODY_MIN, D_BODY_LINK, D_BODY_OBSTACLE)
+    return [c for c in frame.columns if str(c).startswith("d_") and c not in body]
 
 
 def float_columns(n: int, obstacle_columns: list[tuple[str, str]], dim: int = 2) -> list[str]:
@@ -138,14 +100,8 @@ def float_columns(n: int, obstacle_columns: list[tuple[str, str]], dim: int = 2)
     if dim == 3:
         middle[:4] = [EE_X, EE_Y, EE_Z, XD_X, XD_Y, XD_Z]
         tail.insert(tail.index(Y_1) + 1, Y_2)
-    return (
-        [T]
-        + theta_columns(n)
-        + velocity_columns(n)
-        + middle
-        + [distance_column(a, o) for a, o in obstacle_columns]
-        + tail
-    )
+    distances = [distance_column(a, o) for a, o in obstacle_columns]
+    return [T, *theta_columns(n), *velocity_columns(n), *middle, *distances, *tail]
 
 
 def to_frame(data: np.ndarray, columns: list[str], status_codes: np.ndarray) -> pd.DataFrame:
@@ -155,13 +111,9 @@ def to_frame(data: np.ndarray, columns: list[str], status_codes: np.ndarray) -> 
     frame = pd.DataFrame(data[:done], columns=columns)
     for flag in (FALLBACK, ZERO_VELOCITY):
         frame[flag] = frame[flag].astype(bool)
-    frame.insert(
-        columns.index(FALLBACK),
-        STATUS,
-        pd.Categorical.from_codes(
-            np.asarray(status_codes, dtype=np.int8), categories=list(TICK_STATUSES)
-        ),
-    )
+    codes = np.asarray(status_codes, dtype=np.int8)
+    status = pd.Categorical.from_codes(codes, categories=list(TICK_STATUSES))
+    frame.insert(columns.index(FALLBACK), STATUS, status)
     return frame
 
 
@@ -175,8 +127,5 @@ def add_body_columns(frame: pd.DataFrame, body, obstacle_names: list[str]) -> No
     names = np.array(list(obstacle_names) + [""], dtype=object)
     frame.insert(at, D_BODY_MIN, body.d_min)
     frame.insert(at + 1, D_BODY_LINK, body.link.astype(np.int64))
-    frame.insert(
-        at + 2,
-        D_BODY_OBSTACLE,
-        pd.Categorical(names[body.obstacle], categories=list(dict.fromkeys(names))),
-    )
+    obstacle = pd.Categorical(names[body.obstacle], categories=list(dict.fromkeys(names)))
+    frame.insert(at + 2, D_BODY_OBSTACLE, obstacle)

@@ -1,29 +1,6 @@
-"""The figures of a closed-loop run and its verdict: computed here and nowhere else.
-
-:func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able dict (``None`` where a
-figure does not exist); a row of ``closed_loop.csv`` or ``sweep.csv`` is that dict.
-
-- ``infeasible_ticks``: ticks declared infeasible or ``not_solved``
-  (:data:`~qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`), with when [s];
-  ``non_optimal_ticks``: any status but ``optimal``; the guarded failures by status.
-- From the loop (``run_info``): ``deadline_s`` [s], ``deadline_dropped``, ``raised_ticks``,
-  ``fallback_errors``, ``first_error``, ``first_error_t`` [s], ``wall_budget_s`` [s],
-  ``stopped_early``, ``engine`` (``compiled`` or ``python``) and ``engine_note`` (why the
-  Python engine ran).
-- ``<clock>_median_s``, ``_p99_s``, ``_max_s`` of the tick log's clocks (:data:`CLOCKS`).
-- ``*_after_2s``: tracking [m] and force [N] errors over ``t >=`` :data:`SETTLE_TIME`;
-  ``v2_integral``: ``sum_k |v_k|^2 dt`` [rad^2/s]; limit violations beyond
-  :data:`VIOLATION_TOL`; ``real_time_factor = simulated_s / wall_time_s``.
-- ``min_obstacle_distance`` [m] of the key points; ``min_body_distance`` [m] of the link
-  capsules (< 0 inside, :mod:`qpbench.robot.body`); ``body_crossings``: intervals between ticks
-  in which a link went inside an obstacle it was clear of at both ticks, the first at
-  ``body_crossing_t`` [s] (``body_crossing_link``, ``body_crossing_obstacle``);
-  ``obstacle_active_intervals``: per (key point, obstacle), when within :data:`ACTIVE_MARGIN` of
-  ``d_safe``.
-- ``verdict``, ``verdict_reasons``, ``key_point_rule`` and ``realtime``, ``realtime_solver``:
-  :mod:`qpbench.sim.verdict` on these figures and on the worst cases it names (computed here,
-  not in the row).
-"""
+"""The figures of a closed-loop run and its verdict, computed here and nowhere else:
+:func:`summarize` turns a tick log (:mod:`qpbench.sim.log`) into a JSON-able dict (``None``
+where a figure does not exist); what each holds: docs/methodology.md, "A run's figures"."""
 
 from __future__ import annotations
 
@@ -37,7 +14,7 @@ from ..robot.body import body_crossings
 from ..statuses import INFEASIBLE_OR_UNCLASSIFIED
 from . import log
 from .scenario import Scenario
-from .verdict import VerdictSettings, judge, judge_realtime_run
+from .verdict import TICK_KINDS, VerdictSettings, judge, judge_realtime_run
 
 #: Time from which the ``*_after_2s`` figures are taken [s].
 SETTLE_TIME = 2.0
@@ -127,9 +104,7 @@ def summarize(
     out.update(_status_figures(frame, t))
     errors, judged = _error_figures(frame, t, settings.settle_time)
     out.update(errors)
-    dcols = [(a, o) for a, o, _ in controller.obstacle_columns()]
-    margin = settings.safety_margin
-    closest, active, below = _obstacle_figures(frame, t, dcols, controller.d_safe, margin)
+    closest, active, below = _obstacle_figures(frame, t, controller, settings.safety_margin)
     out.update(closest)
     judged.update(below)
     body, inside = _body_figures(frame, t, controller, dt)
@@ -185,37 +160,20 @@ def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: f
     }
 
 
-#: Kinds of tick the real-time figures are split by (docs/verdicts.md, "Real time"):
-#: ``optimal``; ``infeasible`` (declared infeasible or ``not_solved``:
-#: :data:`~qpbench.statuses.INFEASIBLE_OR_UNCLASSIFIED`); ``fallback`` (another status, the
-#: tick's own answer not applied: the soft fallback ran, or zero velocity); ``other`` (another
-#: status whose answer was applied: an online backend's).
-TICK_KINDS = ("optimal", "infeasible", "fallback", "other")
-
-
 def judged_tick_times(frame: pd.DataFrame) -> np.ndarray:
-    """The per-tick time [s] real time is judged on, one per tick: the solver's work on the one
-    clock, the tick's solve and the soft fallback's (``solve_time_s`` plus
-    ``fallback_solve_time_s`` of the tick log)."""
+    """The per-tick time [s] real time is judged on (:func:`_with_fallback`)."""
     return _with_fallback(frame).to_numpy(dtype=float)
 
 
 def _with_fallback(frame: pd.DataFrame) -> pd.Series:
-    """``solve_time_s`` plus ``fallback_solve_time_s`` (0 where none ran, or in a log without
-    the column)."""
+    """``solve_time_s`` plus ``fallback_solve_time_s`` [s] (0 where none ran or no column)."""
     if log.FALLBACK_SOLVE_TIME not in frame:
         return frame[log.SOLVE_TIME]
     return frame[log.SOLVE_TIME] + frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
 
 
-def primary_solve_times(frame: pd.DataFrame) -> np.ndarray:
-    """The per-tick time [s] of the backend's answer to the tick's own QP, the time to certify
-    infeasibility on an infeasible tick (``solve_time_s``, the fallback's left out)."""
-    return frame[log.SOLVE_TIME].to_numpy(dtype=float)
-
-
 def tick_kinds(frame: pd.DataFrame) -> dict[str, np.ndarray]:
-    """A mask per kind of :data:`TICK_KINDS`; each tick is of exactly one."""
+    """A mask per kind of :data:`~qpbench.sim.verdict.TICK_KINDS`; each tick is of exactly one."""
     status = frame[log.STATUS].astype(str).to_numpy()
     infeasible = np.isin(status, INFEASIBLE_OR_UNCLASSIFIED)
     optimal = status == "optimal"
@@ -233,13 +191,10 @@ def tick_kinds(frame: pd.DataFrame) -> dict[str, np.ndarray]:
 def tick_time_figures(
     times: np.ndarray, kinds: dict[str, np.ndarray], certify: np.ndarray, dt: float
 ) -> dict:
-    """Per-tick times [s] by kind (``kinds``: :func:`tick_kinds`): ``timed_ticks``; per kind
-    ``ticks_<kind>``,
-    ``over_dt_<kind>`` (longer than ``dt`` [s]) and ``time_p99_<kind>_s``;
-    ``time_p99_without_infeasible_s``, ``time_median_infeasible_s``; the time to certify
-    infeasibility, ``certify_time_median_s`` and ``certify_time_max_s``, of ``certify`` (the
-    times [s] of the ticks whose status is ``primal_infeasible``); ``None`` where no tick is
-    of the kind."""
+    """Per-tick times [s] by kind (:func:`tick_kinds`): ``timed_ticks``; per kind ``ticks_<kind>``,
+    ``over_dt_<kind>`` (longer than ``dt`` [s]), ``time_p99_<kind>_s``; without and of the
+    infeasible ticks; ``certify_time_median_s``, ``_max_s`` of ``certify`` (the times [s] of the
+    ``primal_infeasible`` ticks); ``None`` where no tick is of the kind."""
     out = {"timed_ticks": int(times.size)}
     for kind, mask in kinds.items():
         t = times[mask]
@@ -272,19 +227,15 @@ def realtime_figures(
     calls = judged_tick_times(frame) if times is None else np.asarray(times, dtype=float)
     kinds = tick_kinds(frame)
     primal = (frame[log.STATUS].astype(str) == "primal_infeasible").to_numpy()
-    t = frame[log.T].to_numpy()
-    infeasible = kinds["infeasible"]
-    span = {
-        "first_infeasible_t": _none(t[infeasible][0]) if infeasible.any() else None,
-        "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
-    }
+    t = frame[log.T].to_numpy()[kinds["infeasible"]]
     base = {
         "dt": dt,
         "max_p99_fraction_of_dt": settings.max_p99_fraction_of_dt,
         "max_over_dt_share": settings.max_over_dt_share,
-        **span,
+        "first_infeasible_t": _none(t[0]) if t.size else None,
+        "last_infeasible_t": _none(t[-1]) if t.size else None,
     }
-    certify = primary_solve_times(frame)[primal]
+    certify = frame[log.SOLVE_TIME].to_numpy(dtype=float)[primal]  # the tick's own solve
     out = {**base, **tick_time_figures(calls, kinds, certify, dt)}
     misses = sum(out[f"over_dt_{k}"] for k in TICK_KINDS)
     out["deadline_misses"] = misses
@@ -338,9 +289,7 @@ def _status_figures(frame: pd.DataFrame, t: np.ndarray) -> dict:
         "last_infeasible_t": _none(t[infeasible][-1]) if infeasible.any() else None,
         "infeasible_intervals": _intervals(infeasible, t),
         "status_counts": {str(k): int(v) for k, v in status.value_counts().items() if v},
-        "error_ticks": int((status == "error").sum()),
-        "time_limit_ticks": int((status == "time_limit").sum()),
-        "invalid_ticks": int((status == "invalid").sum()),
+        **{f"{s}_ticks": int((status == s).sum()) for s in ("error", "time_limit", "invalid")},
     }
 
 
@@ -369,12 +318,13 @@ def _error_figures(frame: pd.DataFrame, t: np.ndarray, settle_time: float) -> tu
 
 
 def _obstacle_figures(
-    frame: pd.DataFrame, t: np.ndarray, dcols: list[tuple[str, str]], d_safe: float, margin: float
+    frame: pd.DataFrame, t: np.ndarray, controller: Controller, margin: float
 ) -> tuple[dict, dict, dict]:
     """The closest approach of a key point to an obstacle [m]; when each pair's row was about
     active (within :data:`ACTIVE_MARGIN` of ``d_safe``; ``{}`` without obstacles); for the
     key-point rule, the ticks with a key point below ``d_safe - margin`` [m] (a NaN distance
     counts) and the first of them [s] (``None`` without obstacles)."""
+    dcols, d_safe = [(a, o) for a, o, _ in controller.obstacle_columns()], controller.d_safe
     if not dcols:
         none = dict.fromkeys(
             f"min_obstacle_distance{s}" for s in ("", "_key_point", "_obstacle", "_t")
@@ -440,16 +390,11 @@ def _crossing_figures(
     n = controller.n
     theta = frame[log.theta_columns(n)].to_numpy(dtype=float)
     v = frame[log.velocity_columns(n)].to_numpy(dtype=float)
+    end = theta[-1] + dt * v[-1] if len(theta) else None  # after the last command
+    d, obstacles = frame[log.D_BODY_MIN].to_numpy(float), controller.obstacles
+    radius = controller.key_points.radius
     found = body_crossings(
-        controller.arm,
-        theta,
-        t,
-        dt,
-        controller.obstacles,
-        controller.key_points.radius,
-        controller.exempt,
-        theta_end=theta[-1] + dt * v[-1] if len(theta) else None,
-        d_min=frame[log.D_BODY_MIN].to_numpy(dtype=float),
+        controller.arm, theta, t, dt, obstacles, radius, controller.exempt, theta_end=end, d_min=d
     )
     if not found.tick.size:
         none = dict.fromkeys(f"body_crossing_{s}" for s in ("t", "link", "obstacle"))
@@ -514,17 +459,10 @@ def _time_figures(frame: pd.DataFrame) -> dict:
     out = {}
     for name, column in CLOCKS.items():
         times = frame[column].dropna() if column in frame else pd.Series(dtype=float)
-        for stat, value in (
-            ("median", times.median()),
-            ("p99", times.quantile(0.99)),
-            ("max", times.max()),
-        ):
+        values = (times.median(), times.quantile(0.99), times.max())
+        for stat, value in zip(("median", "p99", "max"), values):
             out[f"{name}_{stat}_s"] = _none(value) if times.size else None
     return out
-
-
-#: Where a run's ranking time comes from (:func:`rank_times`).
-RANK_SOURCES = ("compiled", "solver", "python")
 
 
 def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
@@ -546,21 +484,16 @@ def _rank_figures(frame: pd.DataFrame, dt: float, engine: str, interval: bool) -
     """``rank_time_source`` and the p99 [s] of :func:`rank_times` with its interval (``None``
     without ``interval``: a sweep's instance, whose time ranks nothing)."""
     times, source = rank_times(frame, engine)
-    lo, hi = _p99_interval(times, dt) if len(times) and interval else (None, None)
+    lo = hi = None
+    if len(times) and interval:  # blocks of BOOTSTRAP_BLOCK_S at the control period dt [s]
+        block = max(1, round(BOOTSTRAP_BLOCK_S / dt))
+        lo, hi = map(_none, block_bootstrap_quantile(times.to_numpy(dtype=float), 0.99, block))
     return {
         "rank_time_source": source,
         "rank_time_p99_s": _none(times.quantile(0.99)) if len(times) else None,
         "rank_time_p99_lo_s": lo,
         "rank_time_p99_hi_s": hi,
     }
-
-
-def _p99_interval(times: pd.Series, dt: float) -> tuple[float | None, float | None]:
-    """The interval of the p99 of a run's per-tick times [s] (:func:`block_bootstrap_quantile`
-    with blocks of :data:`BOOTSTRAP_BLOCK_S` at the control period ``dt`` [s])."""
-    block = max(1, round(BOOTSTRAP_BLOCK_S / dt))
-    lo, hi = block_bootstrap_quantile(times.to_numpy(dtype=float), 0.99, block)
-    return _none(lo), _none(hi)
 
 
 def block_bootstrap_quantile(
@@ -572,15 +505,10 @@ def block_bootstrap_quantile(
     seed: int = BOOTSTRAP_SEED,
 ) -> tuple[float, float]:
     """Percentile interval at ``level`` of the ``q``-quantile of the series ``x`` by the circular
-    block bootstrap: each resample joins ``round(n / block)`` blocks of ``block`` consecutive
-    values (wrapping around the end) started at uniform random ticks, so the serial correlation
-    within a block is kept; its quantile is the order statistic of rank ``ceil(q m)`` of its
-    ``m`` values. Non-finite values are left out; ``(nan, nan)`` without any. Seeded: the same
-    series gives the same interval.
-
-    Only the values at or above the resample's quantile decide it, so the resamples are counted
-    on the largest values of ``x`` alone (a resample with too few of them is computed whole).
-    """
+    block bootstrap (docs/methodology.md, "How sure a p99 is"): ``round(n / block)`` blocks of
+    ``block`` values per resample, its quantile the order statistic of rank ``ceil(q m)``;
+    non-finite values left out (``(nan, nan)`` without any); seeded. Only the values at or above
+    a resample's quantile decide it, so resamples are counted on the largest values of ``x``."""
     x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
     n = x.size

@@ -25,15 +25,9 @@ DEFAULT_SAFETY_MARGIN = 5e-4
 
 @dataclass(frozen=True)
 class VerdictSettings:
-    """Thresholds of the verdict and of real time (the scenario's ``[verdict]`` table), checked
-    here (``verdict.<key>``).
-
-    ``settle_time`` [s]: start of the judged span of tracking and force errors;
-    ``max_tracking_error`` [m], ``max_force_error`` [N]: largest errors after it;
-    ``safety_margin`` [m]: the key-point rule's margin below ``d_safe``; real time: the p99 of
-    the tick times at most ``max_p99_fraction_of_dt`` of ``dt`` and at most
-    ``max_over_dt_share`` of the ticks longer than ``dt``.
-    """
+    """Thresholds of the verdict and of real time (the scenario's ``[verdict]`` table, checked
+    here): ``settle_time`` [s], from which ``max_tracking_error`` [m] and ``max_force_error`` [N]
+    are judged; ``safety_margin`` [m] below ``d_safe``; real time: docs/verdicts.md."""
 
     settle_time: float = 2.0
     max_tracking_error: float = 1e-3
@@ -126,11 +120,8 @@ def key_point_rule(s: dict, margin: float) -> tuple[str, str]:
     ticks = s["key_point_below_ticks"]
     if not ticks:
         return ("-" if ticks is None else "held"), ""
-    value, t, first = (
-        s["min_obstacle_distance"],
-        s["min_obstacle_distance_t"],
-        s["key_point_below_first_t"],
-    )
+    value, t = s["min_obstacle_distance"], s["min_obstacle_distance_t"]
+    first = s["key_point_below_first_t"]
     limit = s["d_safe"] - margin
     shown = f"{value * 1e3:.1f} mm" if value is not None else "not finite"
     since = f", below from {first:.3f} s" if first != t else ""
@@ -208,24 +199,19 @@ def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[
     return [f"{where}: {unjudged or 'judged on what was simulated'}"], []
 
 
+#: Kinds of tick the real-time figures are split by (docs/verdicts.md, "Ticks by kind").
+TICK_KINDS = ("optimal", "infeasible", "fallback", "other")
 #: Kinds of tick whose times the p99 and share rules judge: every tick not declared infeasible.
 _JUDGED_KINDS = ("optimal", "fallback", "other")
 
 
 def judge_realtime_run(f: Mapping, what: str, floor: Mapping | None = None) -> tuple[str, str]:
-    """Whether a run's per-tick times keep its loop (docs/verdicts.md, "Real time"):
-    ``(yes|no|unknown, why)`` from the figures of :func:`qpbench.sim.summary.tick_time_figures`
-    (with ``dt`` [s] and the two thresholds) of one clock, ``what`` naming it.
-
-    Three criteria: the ticks not declared infeasible, their p99 at most
-    ``max_p99_fraction_of_dt`` of ``dt`` and at most ``max_over_dt_share`` of them over ``dt``
-    (beyond the share the machine's own loop missed; the count rounded up, so a run of fewer
-    than 1,000 ticks may miss one at 0.1 %); the infeasible ticks, their median at
-    most ``max_p99_fraction_of_dt`` of ``dt``. ``floor``: the noise floor's figures
-    (:func:`floor_fields`); a criterion the floor itself fails (the share, or the p99 for the
-    other two) is ``unknown`` where the run fails it too. ``no`` when a criterion is, else
-    ``unknown`` when one is. The reason: the criteria not met first, then the others, then the
-    ticks over ``dt`` by kind. ``f`` may be a row read back from a table (NaN for ``None``)."""
+    """Whether a run's per-tick times keep its loop, ``(yes|no|unknown, why)``, by the three
+    criteria of docs/verdicts.md, "Real time", on the figures of
+    :func:`qpbench.sim.summary.tick_time_figures` (with ``dt`` [s] and the two thresholds) of one
+    clock, ``what`` naming it; ``f`` may be a row read back from a table (NaN for ``None``).
+    ``floor``: the noise floor's figures (:func:`floor_fields`); a criterion the floor itself
+    fails (the share, or the p99 for the other two) is ``unknown`` where the run fails it too."""
     f = {k: _counted(k, v) for k, v in f.items()}
     dt, frac, share = f["dt"], f["max_p99_fraction_of_dt"], f["max_over_dt_share"]
     ticks, infeasible = f["timed_ticks"], f["ticks_infeasible"]
@@ -260,13 +246,8 @@ def judge_realtime_run(f: Mapping, what: str, floor: Mapping | None = None) -> t
     if infeasible:
         median = f["time_median_infeasible_s"]
         ok = median <= limit
-        checks.append(
-            (
-                _held(ok, p99_held),
-                f"the {infeasible} infeasible ticks: median {what} {_us(median)} {_le(ok)} "
-                f"{frac:.0%} of dt {_us(dt)}",
-            )
-        )
+        text = f"the {infeasible} infeasible ticks: median {what} {_us(median)} {_le(ok)} "
+        checks.append((_held(ok, p99_held), text + f"{frac:.0%} of dt {_us(dt)}"))
     outcomes = {o for o, _ in checks}
     verdict = "no" if "no" in outcomes else "unknown" if "unknown" in outcomes else "yes"
     texts = [t for o, t in checks if o != "yes"] + [t for o, t in checks if o == "yes"]
@@ -301,7 +282,7 @@ def _counted(key: str, value):
 
 def _over_dt_cause(f: Mapping, what: str) -> list[str]:
     """The ticks over ``dt`` by kind, in words (empty without any)."""
-    total = sum(f[f"over_dt_{k}"] for k in ("optimal", "infeasible", "fallback", "other"))
+    total = sum(f[f"over_dt_{k}"] for k in TICK_KINDS)
     if not total:
         return []
     parts = []
