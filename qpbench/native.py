@@ -53,12 +53,41 @@ def compile_with(fn, bindings: dict | None = None, name: str | None = None, **op
 
     import numba
 
-    name = name or fn.__name__
-    copy = types.FunctionType(fn.__code__, {**fn.__globals__, **(bindings or {})}, name)
+    scope = {**fn.__globals__, **(bindings or {})}
+    name = f"{name or fn.__name__}_{_sources_digest(fn.__code__.co_filename, scope)}"
+    copy = types.FunctionType(fn.__code__, scope, name)
     copy.__qualname__ = name
     copy.__module__ = fn.__module__
     copy.__doc__ = fn.__doc__
     return numba.njit(cache=True, nogil=True, **options)(copy)
+
+
+@cache
+def _file_digest(path: str) -> str:
+    import hashlib
+
+    with open(path, "rb") as f:
+        return hashlib.sha1(f.read()).hexdigest()
+
+
+def _sources_digest(path: str, scope: dict) -> str:
+    """A digest of ``path`` and of the source file of every compiled function reachable from
+    ``scope``: numba's cache checks the calling function's own file only, yet a caller's cached
+    code holds its callees' code (inlined or linked), so a callee edited in another file would
+    leave a stale caller. Naming the copy by this digest gives the edited program a new entry."""
+    import hashlib
+
+    files, seen, todo = {path}, set(), list(scope.values())
+    while todo:
+        value = todo.pop()
+        py_func = getattr(value, "py_func", None)
+        if py_func is None or id(value) in seen:
+            continue
+        seen.add(id(value))
+        files.add(py_func.__code__.co_filename)
+        todo.extend(py_func.__globals__.values())
+    text = "".join(_file_digest(f) for f in sorted(files))
+    return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 
 def entry_point(dispatcher, *args):
