@@ -62,7 +62,6 @@ def compile_with(fn, bindings: dict | None = None, name: str | None = None, **op
     return numba.njit(cache=True, nogil=True, **options)(copy)
 
 
-@cache
 def _file_digest(path: str) -> str:
     import hashlib
 
