@@ -213,3 +213,24 @@ def test_a_forkserver_with_fewer_kernels_is_replaced_once_none_of_its_workers_li
         assert third.call(faulty_backends.double, 3, 60.0, "a task") == 6
     finally:
         third.stop()
+
+
+def test_workers_import_the_qpbench_this_process_runs_not_a_folder_of_that_name_here(
+    tmp_path, monkeypatch
+):
+    """A clone with qpbench installed beside it: the current folder holds ``qpbench/``; the
+    forkserver's workers must run the installed package (and its compiled kernels' cache),
+    as this process does."""
+    import qpbench
+    from qpbench.runner import process
+
+    (tmp_path / "qpbench").mkdir()
+    (tmp_path / "qpbench" / "__init__.py").write_text("")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(process, "_KERNELS", process._KERNELS)  # restored afterwards
+    process.preload_kernels((*process._KERNELS, "a-kernel-for-a-new-server"))  # a new server
+    worker = Worker(name="qpbench-test-path")
+    try:
+        assert worker.call(faulty_backends.qpbench_file, None, 60.0, "a task") == qpbench.__file__
+    finally:
+        worker.stop()

@@ -16,7 +16,7 @@ import time
 import weakref
 from collections import deque
 from collections.abc import Callable, Iterator
-from contextlib import suppress
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import TYPE_CHECKING
@@ -89,7 +89,8 @@ def context(fresh: bool = False) -> BaseContext:
             ctx.set_forkserver_preload(list(PRELOAD))
             # wait for the preload now (a child doing nothing): no deadline covers it
             proc = ctx.Process(target=_noop, name="qpbench-forkserver-ready")
-            proc.start()
+            with _safe_path():
+                proc.start()
             proc.join(START_TIMEOUT_S)
         _CTX = ctx
     return _CTX
@@ -97,6 +98,23 @@ def context(fresh: bool = False) -> BaseContext:
 
 def _noop() -> None:
     pass
+
+
+@contextmanager
+def _safe_path():
+    """The forkserver started with ``PYTHONSAFEPATH`` set: CPython 3.11's server imports its
+    preload with the current folder first on its path (it runs ``python -c``), so in a clone
+    with qpbench installed beside it the workers ran the clone's ``qpbench/`` while this process
+    ran the installed one, and every compiled kernel was compiled and cached twice."""
+    before = os.environ.get("PYTHONSAFEPATH")
+    os.environ["PYTHONSAFEPATH"] = "1"
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["PYTHONSAFEPATH"]
+        else:
+            os.environ["PYTHONSAFEPATH"] = before
 
 
 def deadline(time_limit: float, solves: int = 1) -> float:
