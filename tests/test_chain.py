@@ -300,3 +300,16 @@ def test_panda_preset_equals_the_shipped_urdf():
         np.testing.assert_allclose(
             forward_kinematics_np(model, q).position[:-1], joints_pin, atol=1e-10
         )
+
+
+@pytest.mark.parametrize("scenario", ["wall", "panda_table", "iiwa_wall"])
+def test_a_logs_positions_compiled_equal_numpys_forward_kinematics(scenario):
+    """The body's clearance reads a run's joint positions compiled, row after row; numpy's
+    batched forward kinematics is the reference."""
+    from qpbench.robot.chain import forward_kinematics_np, positions_many
+    from qpbench.sim.scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    model = sc.make_controller().arm.model
+    Q = sc.theta0 + 0.5 * np.random.default_rng(3).standard_normal((500, len(sc.theta0)))
+    assert np.abs(positions_many(model, Q) - forward_kinematics_np(model, Q).position).max() < 1e-14

@@ -594,25 +594,33 @@ def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
     (:data:`~qpbench.backends.NOISE_FLOOR`, run on every instance): its loop's time per simulated
     second in the nominal run of the scenario (its wall time, or its ticks at their p99 when
     less: the machine's load lengthens a few ticks, not the p99; none without a result) times
-    the instance's length, plus the cost of a run around its loop (parsing, warm-up, figures):
-    the median CPU time of :data:`OVERHEAD_RUNS` one-tick runs of a first valid instance here,
-    as the sweep runs it, after one untimed (the CPU time, unlike the wall time, hardly moves
-    with the machine's load); and those overheads [s] by backend."""
+    the instance's length, plus the cost of a run around its loop (parsing, warm-up, the
+    summary and the body's clearance over its ticks): the median CPU time of
+    :data:`OVERHEAD_RUNS` runs of a first valid instance here, as the sweep runs it, after one
+    untimed, less its loop (the CPU time, unlike the wall time, hardly moves with the machine's
+    load); and those overheads [s] by backend."""
     import statistics
 
     from ..backends import NOISE_FLOOR
     from .closed_loop import LoopTask, run_row
 
-    first = next(iter(draws.values()))
+    name, first = next(iter(draws.items()))
     inst, spec = first.first(1)[-1], first.spec
     task = LoopTask(
         f"{inst.name}.toml",
         "",
-        duration=float(spec.base_raw["simulation"]["dt"]),
         scenario_text=inst.text,
         bands=(spec.force_band, spec.tracking_band),
         p99_interval=False,
     )
+    runs = table.set_index(["scenario", "backend"])
+
+    def loop_s(s: str, b: str) -> float:
+        """The loop's share of an instance of scenario ``s``'s sweep [s]."""
+        run = runs.loc[(s, b)]
+        per_s = min(run["wall_time_s"], run["tick_time_p99_s"] * run["ticks"]) / run["simulated_s"]
+        return float(per_s) * _length(draws[s].spec) if math.isfinite(per_s) else 0.0
+
     overhead = {}
     for b in (candidates[0], NOISE_FLOOR):
         times = []
@@ -620,17 +628,10 @@ def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
             t0 = time.process_time()
             run_row(replace(task, backend=b))
             times.append(time.process_time() - t0)
-        overhead[b] = statistics.median(times[1:])
-    runs = table.set_index(["scenario", "backend"])
+        overhead[b] = max(0.0, statistics.median(times[1:]) - loop_s(name, b))
 
     def cost(b: str, around_s: float) -> float:
-        total = around_s * len(draws)
-        for s, d in draws.items():
-            run = runs.loc[(s, b)]
-            loop_s = min(run["wall_time_s"], run["tick_time_p99_s"] * run["ticks"])
-            per_s = float(loop_s) / float(run["simulated_s"])
-            total += per_s * _length(d.spec) if math.isfinite(per_s) else 0.0
-        return total
+        return around_s * len(draws) + sum(loop_s(s, b) for s in draws)
 
     costs = {b: cost(b, overhead[candidates[0]]) for b in candidates}
     return costs, cost(NOISE_FLOOR, overhead[NOISE_FLOOR]), overhead

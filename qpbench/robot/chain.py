@@ -295,6 +295,7 @@ class CompiledChain(NamedTuple):
     link_point: object  # (data, link, frac, x)
     point_jacobian: object  # (data, link, x, J)
     points_jacobians: object  # (model, q, data, links, fracs, X, J)
+    positions: object  # (model, Q, data, P)
 
 
 @cache
@@ -308,4 +309,22 @@ def compiled_chain() -> CompiledChain:
     both = compile_with(
         _points_jacobians_py, {"_forward_kinematics_py": fk}, name="chain_points_jacobians"
     )
-    return CompiledChain(fk, point, jac, both)
+    many = compile_with(_positions_py, {"_forward_kinematics_py": fk}, name="chain_positions")
+    return CompiledChain(fk, point, jac, both, many)
+
+
+def _positions_py(model, Q, data, P):  # pragma: no cover - compiled
+    """``P`` (T, n+1, 3) [m]: the joint and end-effector positions at each row of ``Q`` (T, n)
+    [rad] (a run's whole log at once, for the body's clearance)."""
+    for i in range(Q.shape[0]):
+        _forward_kinematics_py(model, Q[i], data)
+        P[i] = data.position
+
+
+def positions_many(model: ChainModel, Q: np.ndarray) -> np.ndarray:
+    """Joint and end-effector positions (T, n+1, 3) [m] at joint angles ``Q`` (T, n) [rad],
+    compiled (:func:`forward_kinematics_np` does the same in numpy)."""
+    Q = np.ascontiguousarray(Q, dtype=float)
+    P = np.empty((Q.shape[0], model.n + 1, 3))
+    compiled_chain().positions(model, Q, chain_data(model), P)
+    return P

@@ -15,7 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exceptions import InputError
-from .chain import ChainModel, forward_kinematics_np, planar_chain, points_jacobians_np
+from .chain import (
+    ChainModel,
+    forward_kinematics_np,
+    planar_chain,
+    points_jacobians_np,
+    positions_many,
+)
 
 #: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
 KEY_POINT_KINDS = ("paper", "closest")
@@ -35,6 +41,9 @@ class Arm:
     def joint_positions(self, theta: np.ndarray) -> np.ndarray:
         """Positions of the joints and the end effector [m], shape (..., n+1, dim), at joint
         angles ``theta`` of shape (..., n) [rad] (row 0: joint 0, fixed to the base)."""
+        theta = np.asarray(theta, dtype=float)
+        if theta.ndim == 2:  # a run's log: compiled, one configuration after another
+            return positions_many(self.model, theta)[..., : self.dim]
         return forward_kinematics_np(self.model, theta).position[..., : self.dim]
 
     def end_effector(self, theta: np.ndarray) -> np.ndarray:
