@@ -41,8 +41,6 @@ OUTPUTS = (
 PERTURBED = "perturbed"
 #: Wall time of the perturbed runs of ``run`` [s] (``--sweep-budget``).
 SWEEP_BUDGET_S = 60.0
-#: One-tick runs whose median CPU time is the cost of a perturbed run around its loop.
-OVERHEAD_RUNS = 3
 #: Instances sampled at a time while looking for the valid ones a sweep needs.
 SAMPLE_CHUNK = 16
 #: Staging folder of a run in progress, inside ``--out``.
@@ -548,20 +546,17 @@ def _perturbed(config: RunConfig, folder: Path, phases, table, specs: dict) -> d
         return about
     with phases.phase("perturbed runs"):
         draws = {s: Draws(spec) for s, spec in specs.items()}
-        costs, floor_s, overhead_s = _instance_costs(draws, candidates, table)
+        costs, around_s = _instance_costs(draws, candidates, table)
         # the instances are drawn here, the runs made by the workers: the drawing of the first
         # scenario's target is reserved first (the others are drawn while the workers run)
         sampling_s = target * next(iter(draws.values())).cost_per_valid()
         spent = time.perf_counter() - started
         worker_s = (config.sweep_budget - spent - sampling_s) * config.jobs
-        plan = sweep_plan(costs, worker_s, target, floor_s)
-        funded = sum(plan[b] * costs[b] for b in plan) + (
-            floor_s * target if any(plan.values()) else 0
-        )
+        plan = sweep_plan(costs, worker_s, target)
+        funded = sum(plan[b] * costs[b] for b in plan)
         about.update(
             instance_cost_s={b: round(c, 4) for b, c in costs.items()},
-            noise_floor_cost_s=round(floor_s, 4),
-            run_overhead_s={b: round(c, 4) for b, c in overhead_s.items()},
+            run_overhead_s={s: round(c, 4) for s, c in around_s.items()},
             instances_per_scenario=plan,
             predicted_s=round(spent + sampling_s + funded / config.jobs, 1),
         )
@@ -590,29 +585,18 @@ def _length(spec, most: float | None = None) -> float:
 
 
 def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
-    """Each candidate's cost of one instance in every swept scenario [s], and the noise floor's
-    (:data:`~qpbench.backends.NOISE_FLOOR`, run on every instance): its loop's time per simulated
-    second in the nominal run of the scenario (its wall time, or its ticks at their p99 when
-    less: the machine's load lengthens a few ticks, not the p99; none without a result) times
-    the instance's length, plus the cost of a run around its loop (parsing, warm-up, the
-    summary and the body's clearance over its ticks): the median CPU time of
-    :data:`OVERHEAD_RUNS` runs of a first valid instance here, as the sweep runs it, after one
-    untimed, less its loop (the CPU time, unlike the wall time, hardly moves with the machine's
-    load); and those overheads [s] by backend."""
-    import statistics
-
-    from ..backends import NOISE_FLOOR
+    """Each candidate's cost of one instance in every swept scenario [s]: its loop's time per
+    simulated second in the nominal run of the scenario (its wall time, or its ticks at their
+    p99 when less: the machine's load lengthens a few ticks, not the p99; none without a
+    result) times the instance's length, plus the cost of a run around its loop (parsing,
+    warm-up, the summary and the body's clearance over its ticks, which grow with the ticks
+    and the obstacles): the CPU time of a whole run of each sweep's first valid instance here,
+    as the sweep runs it, after one untimed, less its loop (the CPU time, unlike the wall time,
+    hardly moves with the machine's load); and that cost around the loop [s] by scenario. The
+    noise floor's runs are not charged: a sweep runs an instance's floor only where a run
+    missed real time (:func:`qpbench.sweep.runner.run_sweep`)."""
     from .closed_loop import LoopTask, run_row
 
-    name, first = next(iter(draws.items()))
-    inst, spec = first.first(1)[-1], first.spec
-    task = LoopTask(
-        f"{inst.name}.toml",
-        "",
-        scenario_text=inst.text,
-        bands=(spec.force_band, spec.tracking_band),
-        p99_interval=False,
-    )
     runs = table.set_index(["scenario", "backend"])
 
     def loop_s(s: str, b: str) -> float:
@@ -621,20 +605,21 @@ def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
         per_s = min(run["wall_time_s"], run["tick_time_p99_s"] * run["ticks"]) / run["simulated_s"]
         return float(per_s) * _length(draws[s].spec) if math.isfinite(per_s) else 0.0
 
-    overhead = {}
-    for b in (candidates[0], NOISE_FLOOR):
-        times = []
-        for _ in range(OVERHEAD_RUNS + 1):
-            t0 = time.process_time()
-            run_row(replace(task, backend=b))
-            times.append(time.process_time() - t0)
-        overhead[b] = max(0.0, statistics.median(times[1:]) - loop_s(name, b))
+    def task(d: Draws) -> LoopTask:
+        inst, spec = d.first(1)[-1], d.spec
+        bands = (spec.force_band, spec.tracking_band)
+        text = inst.text
+        return LoopTask(f"{inst.name}.toml", candidates[0], scenario_text=text, bands=bands)
 
-    def cost(b: str, around_s: float) -> float:
-        return around_s * len(draws) + sum(loop_s(s, b) for s in draws)
-
-    costs = {b: cost(b, overhead[candidates[0]]) for b in candidates}
-    return costs, cost(NOISE_FLOOR, overhead[NOISE_FLOOR]), overhead
+    tasks = {s: replace(task(d), p99_interval=False) for s, d in draws.items()}
+    run_row(next(iter(tasks.values())))  # untimed: the first run's imports and kernels
+    around = {}
+    for s, t in tasks.items():
+        t0 = time.process_time()
+        run_row(t)
+        around[s] = max(0.0, time.process_time() - t0 - loop_s(s, candidates[0]))
+    costs = {b: sum(around[s] + loop_s(s, b) for s in draws) for b in candidates}
+    return costs, around
 
 
 def _sweep_scenario(
