@@ -116,3 +116,28 @@ def test_the_bench_takes_the_paper_and_the_spatial_scenarios():
     assert bench_sets(["free", "adaptive_fast", "panda_table"]) == ["free", "panda_table"]
     assert bench_sets(["adaptive_fast"]) == ["adaptive_fast"]
     assert [arm_family(load_scenario(s)) for s in ("wall", "panda_table")] == ["planar", "spatial"]
+
+
+def test_the_closed_loops_engines_are_compiled_here_from_the_last_back_while_the_worker_lives(
+    monkeypatch,
+):
+    """The run's compile worker takes its groups in order; this process, done benching, takes
+    the engines from the last one back until the worker ends (never a non-engine group)."""
+    from qpbench import jit
+    from qpbench.harness.pipeline import _meet_halfway
+
+    class Behind:
+        todo = ("controller", "post", "engine:a", "engine:b", "engine:c")
+        alive = [True, True, False]
+
+        def is_alive(self):
+            return self.alive.pop(0)
+
+    calls = []
+    monkeypatch.setattr(jit, "prepare", lambda groups: calls.append(list(groups)))
+    _meet_halfway(Behind())
+    assert calls == [["engine:c"], ["engine:b"]]
+    Behind.alive = [True] * 5
+    calls.clear()
+    _meet_halfway(Behind())
+    assert calls == [["engine:c"], ["engine:b"], ["engine:a"]]

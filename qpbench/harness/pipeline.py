@@ -57,7 +57,7 @@ BUDGET_MARGIN = 3.0
 BUDGET_FLOOR_S = 2.0
 #: The budget of a backend that cannot be recommended by this run [s]: its solves alone would
 #: take longer than ``run_budget``, or the perturbed runs could not afford it.
-CUT_BUDGET_S = 0.5
+CUT_BUDGET_S = 0.25
 #: Closed-loop runs at once in ``run`` (``--jobs``), each in a worker process, at most one per core.
 LOOP_JOBS = 2
 #: Timed solves per bench problem (the report shows the minimum: warm caches).
@@ -264,6 +264,7 @@ def run_all(config: RunConfig) -> RunOutcome:
     failures, per_tick_s = _bench(config, subsets, staging / "bench", phases)
     if behind is not None:
         with phases.phase("compile, closed loop"):  # what is left of it, then loaded here
+            _meet_halfway(behind)
             behind.join()
             warmup_logged(log, config.backends)
     failed_solves = failures
@@ -332,8 +333,22 @@ def _compile_behind(backends: list[str]) -> threading.Thread | None:
             log.info("closed loop's %s (in a worker, %.1f s)", said, time.perf_counter() - started)
 
     thread = threading.Thread(target=wait, name="qpbench-compile", daemon=True)
+    thread.todo = tuple(todo)
     thread.start()
     return thread
+
+
+def _meet_halfway(behind: threading.Thread) -> None:
+    """While the worker of :func:`_compile_behind` still compiles (its groups in order), compile
+    its engines here from the last one back, one at a time: the two meet in the middle (at
+    most the group both were at is compiled twice), and this core, idle while it waited, does
+    its share. What the worker cached first is loaded here from the cache."""
+    from ..jit import ENGINE, prepare
+
+    for group in reversed(behind.todo):
+        if not behind.is_alive() or not group.startswith(ENGINE):
+            return
+        prepare([group])
 
 
 def _bench(
