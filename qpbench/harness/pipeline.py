@@ -229,7 +229,7 @@ def run_all(config: RunConfig) -> RunOutcome:
     """Problem sets, bench, closed loop and report, each a phase, in ``OUT/.partial/``; then the
     previous run's :data:`OUTPUTS` are replaced, each by a rename."""
     from ..formats import load_problems
-    from ..jit import warmup_logged
+    from ..jit import kernels_for, warmup_logged
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario
 
@@ -246,9 +246,11 @@ def run_all(config: RunConfig) -> RunOutcome:
     missing = [s for s in bench_scenarios if not (problems / s / "problems.parquet").exists()]
     dump = [_dump_backend()] if missing else []
     with phases.phase("compile"):  # only the backends this run runs, before anything is timed
-        # here what the bench times; the closed loop's kernels in a worker, behind the bench
-        warmup_logged(log, [*config.backends, *dump], loop=bool(missing))
-        behind = _compile_behind(config.backends)  # None: nothing left (all compiled here)
+        # here what the bench times; the closed loop's kernels in a worker, beside it and then
+        # behind the bench (None: nothing left for it)
+        here = (*config.backends, *dump), bool(missing)
+        behind = _compile_behind(config.backends, kernels_for(*here))
+        warmup_logged(log, *here)
     for s in missing:
         with phases.phase(f"problem set {s}"):
             log.info("simulating %s with %s to dump every %dth tick", s, dump[0], EVERY)
@@ -312,14 +314,15 @@ def bench_sets(scenarios: list[str]) -> list[str]:
     return [s for s in scenarios if s in paper or s in spatial] or list(scenarios)
 
 
-def _compile_behind(backends: list[str]) -> threading.Thread | None:
+def _compile_behind(backends: list[str], here: tuple[str, ...] = ()) -> threading.Thread | None:
     """Compile the closed loop's kernels for ``backends`` (:func:`qpbench.jit.kernels_for`) not
-    prepared here into numba's on-disk cache, in a worker process, while this process benches;
-    the thread that waits for it (a failure only leaves the compile to the closed loop), or
-    ``None`` when none is left."""
+    prepared (or being prepared, ``here``) in this process into numba's on-disk cache, in a
+    worker process, while this process compiles what the bench times and benches: the thread
+    that waits for it (a failure only leaves the compile to the closed loop), or ``None`` when
+    none is left."""
     from ..jit import kernels_for, prepare, prepared
 
-    todo = [k for k in kernels_for(backends) if k not in prepared()]
+    todo = [k for k in kernels_for(backends) if k not in prepared() and k not in here]
     if not todo:
         return None
 
