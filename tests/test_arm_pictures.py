@@ -80,7 +80,15 @@ def test_every_shipped_picture_has_its_command_beside_it():
     network = re.search(r"`(qpbench simulate --scenario S --backend rnn-tuned [^`]*)`", readme)
     assert network, "README no longer documents how the network's pictures are made"
     made = set()
-    for scenario in ("free", "wall", "adaptive", "narrow", "panda_table"):
+    for scenario in (
+        "free",
+        "wall",
+        "adaptive",
+        "narrow",
+        "panda_table",
+        "panda_shelf",
+        "iiwa_wall",
+    ):
         for command in (documented_command(scenario), network.group(1)):
             command = command.replace(" S ", f" {scenario} ").replace("/S", f"/{scenario}")
             made |= {w.replace("results/arm/", "") for w in command.split() if "." in w}

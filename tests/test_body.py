@@ -715,7 +715,7 @@ def test_shipped_runs_with_daqp_keep_their_verdicts():
     from qpbench.sim.scenario import load_scenario
 
     shipped = _shipped_daqp_verdicts()
-    assert len(shipped) == 5
+    assert len(shipped) == 8
     for name, verdict in shipped.items():
         s = simulate(load_scenario(name), "daqp").summary
         assert (s["verdict"], s["body_crossings"]) == (verdict, 0), (name, s["verdict_reasons"])

@@ -287,24 +287,7 @@ def run_sweep(
                 file = head["instance_file"]
                 task = replace(terms, scenario=file, backend=backend, scenario_text=inst.text)
                 items.append(((inst.name, backend), task))
-        floors = {key: task for key, task in items if key[1] == NOISE_FLOOR}
-        for batch in ([i for i in items if i[0] not in floors], floors):
-            if isinstance(batch, dict):  # the floors the runs' real time needs, now they are in
-                batch = [(k, t) for k, t in batch.items() if _floor_needed(k[0], figures, rows)]
-            for done in executor.run(run_row, batch):
-                head = heads[done.key]
-                fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
-                figures[done.key] = fields
-                row = sweep_row(head, fields)
-                row.update(
-                    executor=executor.name,
-                    host=done.host,
-                    worker=done.worker,
-                    concurrent_solves=done.concurrent,
-                    attempts=done.attempts,
-                )
-                failed += row["status"] in ("error", "crashed")
-                emit(row)
+        failed += _run_items(executor, items, heads, figures, rows, emit)
     for (name, backend), fields in figures.items():  # real time against the instance's floor
         judge_against_floor(fields, figures.get((name, NOISE_FLOOR)))
         rows[(name, backend)] |= {k: fields[k] for k in FLOOR_JUDGED if k in fields}
@@ -313,6 +296,31 @@ def run_sweep(
     with atomic_path(csv_path) as tmp:
         tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
     return SweepOutcome(final, csv_path, len(items), len(kept), failed)
+
+
+def _run_items(executor, items: list, heads: dict, figures: dict, rows: dict, emit) -> int:
+    """Run ``items`` (``(key, task)``) on ``executor``, the noise floors last and only those the
+    other runs need (:func:`_floor_needed`): each run's figures into ``figures``, its row to
+    ``emit``; the count of runs that failed to run."""
+    failed = 0
+    floors = {key: task for key, task in items if key[1] == NOISE_FLOOR}
+    for batch in ([i for i in items if i[0] not in floors], floors):
+        if isinstance(batch, dict):  # the floors the runs' real time needs, now they are in
+            batch = [(k, t) for k, t in batch.items() if _floor_needed(k[0], figures, rows)]
+        for done in executor.run(run_row, batch):
+            fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
+            figures[done.key] = fields
+            row = sweep_row(heads[done.key], fields)
+            row.update(
+                executor=executor.name,
+                host=done.host,
+                worker=done.worker,
+                concurrent_solves=done.concurrent,
+                attempts=done.attempts,
+            )
+            failed += row["status"] in ("error", "crashed")
+            emit(row)
+    return failed
 
 
 def _floor_needed(instance: str, figures: dict, rows: dict) -> bool:
