@@ -185,8 +185,8 @@ def test_converged_on_robot_ticks_warm_from_previous_tick():
 def test_converged_on_shipped_problem_sets():
     """Every sampled tick of every shipped set is converged to DAQP's answer or reported
     ``max_iter``, never a wrong answer reported found; the paper's four sets have no
-    ``max_iter``, the spatial ones at most one in 50 (panda_shelf's tick 2310, two obstacle
-    rows active with duals of 50-60, is one: docs/robots.md)."""
+    ``max_iter``, the spatial ones at most one in 50 (a tick of panda_shelf is one:
+    docs/robots.md)."""
     from pathlib import Path
 
     from qpbench.formats import read_problem_set

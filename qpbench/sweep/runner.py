@@ -300,13 +300,14 @@ def run_sweep(
 
 def _run_items(executor, items: list, heads: dict, figures: dict, rows: dict, emit) -> int:
     """Run ``items`` (``(key, task)``) on ``executor``, the noise floors last and only those the
-    other runs need (:func:`_floor_needed`): each run's figures into ``figures``, its row to
-    ``emit``; the count of runs that failed to run."""
+    other runs need (:func:`_floors_needed`, from ``rows``, which ``emit`` fills): each run's
+    figures into ``figures``, its row to ``emit``; the count of runs that failed to run."""
     failed = 0
     floors = {key: task for key, task in items if key[1] == NOISE_FLOOR}
     for batch in ([i for i in items if i[0] not in floors], floors):
         if isinstance(batch, dict):  # the floors the runs' real time needs, now they are in
-            batch = [(k, t) for k, t in batch.items() if _floor_needed(k[0], figures, rows)]
+            needed = _floors_needed(rows, {name for name, _ in batch})
+            batch = [(k, t) for k, t in batch.items() if k[0] in needed]
         for done in executor.run(run_row, batch):
             fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
             figures[done.key] = fields
@@ -323,12 +324,13 @@ def _run_items(executor, items: list, heads: dict, figures: dict, rows: dict, em
     return failed
 
 
-def _floor_needed(instance: str, figures: dict, rows: dict) -> bool:
-    """Whether ``instance``'s noise floor must run: one of its runs (run now, or kept) is not
-    real time, or none is there to say (a sweep of the floor alone). A criterion a run meets
-    is met whatever the floor (the floor only excuses misses: docs/verdicts.md), so an instance
-    whose runs all hold the rate is judged without it, at half the cost."""
-    theirs = [f for (name, b), f in figures.items() if name == instance and b != NOISE_FLOOR]
-    theirs += [r for (name, b), r in rows.items() if name == instance and b != NOISE_FLOOR]
-    judged = [f.get("realtime") for f in theirs if f.get("realtime") not in (None, "")]
-    return not judged or any(str(v) != "yes" for v in judged)
+def _floors_needed(rows: dict, names: set[str]) -> set[str]:
+    """The instances among ``names`` whose noise floor must run: one of their runs (run now, or
+    kept) in ``rows`` is not real time, or none of them says (a sweep of the floor alone). A criterion a
+    run meets is met whatever the floor (the floor only excuses misses: docs/verdicts.md), so
+    an instance whose runs all hold the rate is judged without it, at half the cost."""
+    said: dict[str, set[str]] = {}
+    for (name, backend), row in rows.items():
+        if backend != NOISE_FLOOR and row.get("realtime") not in (None, ""):
+            said.setdefault(name, set()).add(str(row["realtime"]))
+    return {name for name in names if said.get(name) != {"yes"}}
