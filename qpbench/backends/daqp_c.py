@@ -319,7 +319,7 @@ def kernels() -> Kernels:
     names["_c_quadprog"] = external("daqp_quadprog", types.void(p, p, p))
     names["_c_free_workspace"] = external("free_daqp_workspace", types.void(p))
     names["_c_free_ldp"] = external("free_daqp_ldp", types.void(p))
-    jit = numba.njit(cache=True, nogil=True)
+    jit = numba.njit(cache=True, nogil=True, _nrt=False)
     inline = numba.njit(cache=True, nogil=True, inline="always")  # no call, no refcounts
     for name in [k for k in names if k.endswith("_jit")]:
         names[name] = inline(names[name])

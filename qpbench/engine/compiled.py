@@ -14,6 +14,13 @@ the controller model). A backend joins by a :class:`CompiledSolver` in :data:`SO
 Times are read from ``CLOCK_MONOTONIC`` in compiled code (:func:`qpbench.native.clock`): the
 build, the solve (the call with the tick's QP until x, duals and status are in the engine's
 memory), the fallback's build and solve, and the whole tick.
+
+The engine, DAQP's compiled solves, the chain's kinematics and the obstacle distances are
+compiled without numba's runtime (``_nrt=False``): they allocate nothing, and with the runtime
+every array a function binds, or the model it is passed (inlined, each of its arrays), costs an
+atomic increment and decrement of a reference count each tick (bench/README.md, "Reference
+counts"). A function that allocates (``np.max`` of an array, a slice assigned to a slice) does
+not compile there: it fails at compile time, never at run time.
 """
 
 from __future__ import annotations
@@ -143,7 +150,8 @@ def _engine(solve, reset) -> Callable:
         "_views": compile_with(_views, name="tick_views", inline="always"),
         "_finite": compile_with(_finite, name="all_finite", inline="always"),
     }
-    return compile_with(_run_py, bindings, name=f"engine_{solve.py_func.__name__.strip('_')}")
+    name = f"engine_{solve.py_func.__name__.strip('_')}"
+    return compile_with(_run_py, bindings, name=name, _nrt=False)
 
 
 def _build():

@@ -197,25 +197,30 @@ def points_jacobians_np(model: ChainModel, q, links, fracs) -> tuple[np.ndarray,
 def _forward_kinematics_py(model, q, data):  # pragma: no cover - compiled
     """``data`` (:class:`ChainData`) at joint angles ``q`` (n,) [rad]."""
     R, p, w = data.rotation, data.position, data.axis
+    rot, tr, ax = model.rotation, model.translation, model.axis
+    trot, ttr = model.tool_rotation, model.tool_translation
     n = q.shape[0]
-    for k in range(n + 1):
+    for k in range(n + 1):  # rows indexed in place (a view costs two reference counts)
         tail = k == n
-        rot = model.tool_rotation if tail else model.rotation[k]
-        t = model.tool_translation if tail else model.translation[k]
         for i in range(3):  # R_k = R_{k-1} rot, p_k = p_{k-1} + R_{k-1} t
             if k == 0:
-                p[0, i] = t[i]
+                p[0, i] = tr[0, i]
                 for j in range(3):
-                    R[0, i, j] = rot[i, j]
+                    R[0, i, j] = rot[0, i, j]
+                continue
+            a0, a1, a2 = R[k - 1, i, 0], R[k - 1, i, 1], R[k - 1, i, 2]
+            if tail:
+                p[k, i] = p[k - 1, i] + a0 * ttr[0] + a1 * ttr[1] + a2 * ttr[2]
+                for j in range(3):
+                    R[k, i, j] = a0 * trot[0, j] + a1 * trot[1, j] + a2 * trot[2, j]
             else:
-                a0, a1, a2 = R[k - 1, i, 0], R[k - 1, i, 1], R[k - 1, i, 2]
-                p[k, i] = p[k - 1, i] + a0 * t[0] + a1 * t[1] + a2 * t[2]
+                p[k, i] = p[k - 1, i] + a0 * tr[k, 0] + a1 * tr[k, 1] + a2 * tr[k, 2]
                 for j in range(3):
-                    R[k, i, j] = a0 * rot[0, j] + a1 * rot[1, j] + a2 * rot[2, j]
+                    R[k, i, j] = a0 * rot[k, 0, j] + a1 * rot[k, 1, j] + a2 * rot[k, 2, j]
         if tail:
             return
         c, s = np.cos(q[k]), np.sin(q[k])
-        x, y, z = model.axis[k, 0], model.axis[k, 1], model.axis[k, 2]
+        x, y, z = ax[k, 0], ax[k, 1], ax[k, 2]
         if x == 0.0 and y == 0.0 and z == 1.0:  # about z: R_k = A_k Rz(q)
             for i in range(3):
                 a0, a1 = R[k, i, 0], R[k, i, 1]
@@ -303,7 +308,7 @@ def compiled_chain() -> CompiledChain:
     """The compiled kinematics, compiled (or loaded from numba's cache) on first use."""
     from ..native import compile_with
 
-    fk = compile_with(_forward_kinematics_py, name="chain_forward_kinematics")
+    fk = compile_with(_forward_kinematics_py, name="chain_forward_kinematics", _nrt=False)
     point = compile_with(_link_point_py, name="chain_link_point")
     jac = compile_with(_point_jacobian_py, name="chain_point_jacobian")
     both = compile_with(

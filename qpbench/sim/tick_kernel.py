@@ -112,10 +112,10 @@ def _post_py(
     row[cols.zero] = 1.0 if mode == ZERO else 0.0
     for i in range(y.shape[0]):
         row[cols.y + i] = y[i]
-    if z.shape[0] > 0:
-        row[cols.z_max] = np.max(z)
-    row[cols.kp] = kp
-    row[cols.kd] = kd
+    for i in range(z.shape[0]):  # their max, NaN if any (np.max needs numba's runtime)
+        if i == 0 or z[i] > row[cols.z_max] or z[i] != z[i]:
+            row[cols.z_max] = z[i]
+    row[cols.kp], row[cols.kd] = kp, kd
     # sense: velocity by finite difference, spring-damper force along the normal
     normal = model.controller.normal
     delta = ndot = 0.0

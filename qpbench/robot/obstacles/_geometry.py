@@ -75,7 +75,7 @@ def compiled_segment_distance():
         {"_crosses": compile_with(_crosses, name="crosses")},
         name="planar_segments",
     )
-    return compile_with(_segment_distance, helpers, name="segment_distance")
+    return compile_with(_segment_distance, helpers, name="segment_distance", _nrt=False)
 
 
 def _segment_distance(row, a, b, t, u):  # pragma: no cover - compiled
