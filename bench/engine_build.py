@@ -4,8 +4,9 @@ Runs each scenario's full duration with DAQP on the compiled engine ``--repeat``
 prints, per scenario, the median over the runs of the run's median ``build_time_s`` and
 ``tick_time_s`` [us] and of its real-time factor (simulated over wall time); then the build
 kernel alone (``kernel [ns]``): the compiled build called in a compiled loop over the joint
-angles of the last run's ticks, the least over 30 passes of the thread's CPU time per build
-(less moved by other work on the machine than the run's wall-clock medians).
+angles of the last run's ticks, compiled as the engine is (without numba's runtime), the least
+over 30 passes of the thread's CPU time per build (less moved by other work on the machine than
+the run's wall-clock medians).
 
     PYTHONPATH=$PWD python bench/engine_build.py [--repeat 3] [wall narrow panda_table]
 """
@@ -31,7 +32,7 @@ def build_loop():
 
     build = compiled_build_kernel()
 
-    @numba.njit
+    @numba.njit(_nrt=False)  # as the engine: no reference counts
     def loop(model, thetas, kp, kd, soft, buf):
         for k in range(thetas.shape[0]):
             build(model, thetas[k], k * 1e-3, kp, kd, soft, buf)
