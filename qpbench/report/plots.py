@@ -182,15 +182,9 @@ def write_plots(
         for scenario, g in rows.groupby("scenario", sort=True):
             key = f"per_tick_{slug(label)}_{slug(scenario)}"
             planned[key] = partial(per_tick_plot, g, f"{scenario} ({label})")
-    df = results.closed_loop
-    groups = (
-        []
-        if df.empty
-        else df.groupby(
-            [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
-        )
-    )
-    for (scenario, formulation), g in groups:
+    df = results.closed_loop  # without columns when there is no closed-loop run
+    by = [] if df.empty else [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)]
+    for (scenario, formulation), g in df.groupby(by, sort=False) if by else []:
         logs, d_safe = _logs(g)
         name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
         if logs:
