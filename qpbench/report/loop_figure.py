@@ -150,7 +150,7 @@ def _legend(axes: dict, group: list, title: str, references: bool) -> None:
         lines = style.entries([axes[n] for n in ("distance", "time") if n in axes], skip=group)
         handles, labels = handles + lines[0], labels + lines[1]
         title = (title + "\n" if title else "") + "band on top: fallback or zero velocity"
-    style.legend_above(top, handles, labels, ncol=2, title=title or None, title_fontsize=8)
+    style.legend_above(top, handles, labels, title=title)
 
 
 def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:

@@ -34,7 +34,7 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("tau (runtime / best runtime)")
         ax.grid(True, which="both", alpha=0.3)
-        style.legend_above(ax, title=title or None, title_fontsize=8)
+        style.legend_above(ax, title=title)
     axes[0, 0].set_ylabel("fraction of problems solved")
     fig.suptitle(f"Performance profile of runtime ({label}); grey: the other backends")
     style.save(fig, path)
@@ -67,7 +67,7 @@ def per_tick_plot(rows: pd.DataFrame, title: str, path: Path) -> bool:
                 ax.text(0.5, 0.5, "no solution found", transform=ax.transAxes, ha="center")
             ax.grid(True, which="both", alpha=0.3)
         axes[1, col].set_xlabel("t (s)")
-        style.legend_above(axes[0, col], title=group_title or None, title_fontsize=8)
+        style.legend_above(axes[0, col], title=group_title)
     axes[0, 0].set_ylabel("solve time (us)")
     axes[1, 0].set_ylabel("|optimality gap|")
     fig.suptitle(f"{title}; grey: the other backends")
@@ -136,7 +136,7 @@ def distance_plot(logs: dict, title: str, path: Path, d_safe: float | None) -> b
         distance_axis(ax, d_safe, lowest * 1e3)
         ax.set_xlabel("t [s]")
         ax.grid(True, which="major", alpha=0.3)
-        style.legend_above(ax, ncol=1, title=group_title or None, title_fontsize=8)
+        style.legend_above(ax, ncol=1, title=group_title)
     axes[0, 0].set_ylabel("closest key point to an obstacle [mm]\n(linear below d_safe, log above)")
     fig.suptitle(f"{title}; grey: the other backends")
     style.save(fig, path)
@@ -182,15 +182,9 @@ def write_plots(
         for scenario, g in rows.groupby("scenario", sort=True):
             key = f"per_tick_{slug(label)}_{slug(scenario)}"
             planned[key] = partial(per_tick_plot, g, f"{scenario} ({label})")
-    df = results.closed_loop
-    groups = (
-        []
-        if df.empty
-        else df.groupby(
-            [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)], sort=False
-        )
-    )
-    for (scenario, formulation), g in groups:
+    df = results.closed_loop  # without columns when there is no closed-loop run
+    by = [] if df.empty else [df["scenario"].astype(str), df["formulation"].fillna("-").astype(str)]
+    for (scenario, formulation), g in df.groupby(by, sort=False) if by else []:
         logs, d_safe = _logs(g)
         name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
         if logs:

@@ -317,7 +317,7 @@ def read_sweeps(paths: list, relative_to: Path | None = None) -> pd.DataFrame:
     return out
 
 
-def _evidence(sweeps: pd.DataFrame, backend: str, scenarios: list[str], bound: float):
+def _evidence(sweeps: pd.DataFrame, backend: str, scenarios: list[str]):
     """Per swept scenario, ``backend``'s perturbed runs (:class:`Evidence`)."""
     out = []
     for s in scenarios:
@@ -339,7 +339,7 @@ def _judge_evidence(overall: Scope, sweeps, scenarios: list[str], bound: float) 
     target = least_runs(bound, TOLERATED_NOT_OK)
     keep, short, rejected = [], [], dict(overall.not_recommended)
     for pick in overall.recommended:
-        pick = replace(pick, evidence=_evidence(sweeps, pick.backend, scenarios, bound))
+        pick = replace(pick, evidence=_evidence(sweeps, pick.backend, scenarios))
         below = [e for e in pick.evidence if not e.bound >= bound]
         if not below:
             keep.append(pick)
@@ -382,20 +382,16 @@ def recommend(
     swept = tuple(s.name for s in scenarios if s.name in bases)
     judge = (sweeps, swept, min_ok_bound, place)
     overall = _across("all scenarios", runs, scenarios, *judge)
-    families = _families(runs)
-    if len(families) > 1:
-        families = tuple(
-            _across(name, runs[runs["scenario"].isin(names)], scenarios, *judge)
-            for name, names in families.items()
-        )
-    else:
-        families = ()
+    families = tuple(
+        _across(name, runs[runs["scenario"].isin(names)], scenarios, *judge)
+        for name, names in _families(runs).items()
+    )
     return Recommendation(overall, scenarios, len(runs), min_ok_bound, swept, floor, families)
 
 
 def _families(runs: pd.DataFrame) -> dict[str, list[str]]:
     """The scenarios of each arm family of ``runs``, named with the arm's joints (``planar (n =
-    4)``); none from a table without the column ``family``."""
+    4)``); none from runs of one family, or a table without the column ``family``."""
     if "family" not in runs.columns:
         return {}
     out: dict[str, list[str]] = {}
@@ -403,7 +399,7 @@ def _families(runs: pd.DataFrame) -> dict[str, list[str]]:
         ["family", "joints"], sort=False
     ):
         out.setdefault(f"{family} (n = {int(joints)})", []).extend(g["scenario"].unique())
-    return out
+    return out if len(out) > 1 else {}
 
 
 def _across(name, runs, scopes, sweeps, swept, bound, place) -> Scope:
@@ -524,25 +520,15 @@ def no_answer(answer: Recommendation) -> str:
     return f"No backend was ok and real time in every run of {overall.name}."
 
 
-def _family_title(scope: Scope) -> str:
-    """``planar (n = 4)`` of the scope ``planar (n = 4) (free, wall)``."""
-    return scope.name.rsplit(" (", 1)[0]
-
-
 def _family_rows(families: tuple[Scope, ...]) -> list[list[str]]:
     """One row per backend recommended or short of evidence in some family, in the order of the
     first family's ranking: per family its rank and p99, ``too few perturbed runs``, or the
     first reason it is not recommended there."""
     cells: dict[str, list[str]] = {}
     for k, f in enumerate(families):
-        for p in f.recommended:
-            cells.setdefault(p.backend, ["-"] * len(families))[k] = (
-                f"{p.rank_text}: {_us(p.call_p99_s)}"
-            )
-        for p in f.short:
-            cells.setdefault(p.backend, ["-"] * len(families))[k] = (
-                f"too few perturbed runs: {_us(p.call_p99_s)}"
-            )
+        shown = [(p, p.rank_text) for p in f.recommended]
+        for p, what in shown + [(p, "too few perturbed runs") for p in f.short]:
+            cells.setdefault(p.backend, ["-"] * len(families))[k] = f"{what}: {_us(p.call_p99_s)}"
     for b, row in cells.items():
         for k, f in enumerate(families):
             if b in f.not_recommended:
@@ -641,7 +627,8 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
             f"above, ranked on its slowest family):{gap}"
         )
         rows = _family_rows(answer.families)
-        header = ["backend", *(_family_title(f) for f in answer.families)]
+        # a family's scope "planar (n = 4) (free, wall)" titles its column "planar (n = 4)"
+        header = ["backend", *(f.name.rsplit(" (", 1)[0] for f in answer.families)]
         _table(lines, header, rows, gap, left=len(header))
     _scenario_lines(answer, lines, gap)
     return "\n".join(lines).rstrip("\n") + "\n"

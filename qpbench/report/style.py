@@ -212,9 +212,11 @@ def entries(axes, skip=()) -> tuple[list, list]:
     return [h for h, _ in pairs], [t for _, t in pairs]
 
 
-def legend_above(ax, handles=None, labels=None, ncol: int = 2, **kw):
-    """A legend above ``ax``, outside the data (``handles``/``labels``: the axes' own by default)."""
+def legend_above(ax, handles=None, labels=None, ncol: int = 2, title: str = "", **kw):
+    """A legend above ``ax``, outside the data (``handles``/``labels``: the axes' own by default),
+    under a small ``title`` (none when empty)."""
     where = dict(loc="lower left", bbox_to_anchor=(0.0, 1.02, 1.0, 0.2), mode="expand", ncol=ncol)
+    where |= dict(title=title or None, title_fontsize=8)
     return legend_beside(ax, handles, labels, **({"fontsize": 7.5} | where | kw))
 
 

@@ -190,14 +190,8 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
                 colour, z = (style.look(b).colour, 3) if lit else (style.GREY, 1)
                 marker = "o" if g["matrix_format"].iloc[0] == "sparse" else "s"
                 tag = f"{b} ({fit.text()})" if fit is not None else b
-                ax.plot(
-                    g[xcol],
-                    g["time_median_s"] * 1e6,
-                    marker,
-                    color=colour,
-                    zorder=z,
-                    label=tag if lit else None,
-                )
+                times = g["time_median_s"] * 1e6
+                ax.plot(g[xcol], times, marker, color=colour, zorder=z, label=tag if lit else None)
                 if fit is not None and not math.isnan(fit.slope):  # the fitted power law, dashed
                     xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
                     ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=z)
@@ -214,8 +208,7 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
                 f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)",
                 fontsize=9,
             )
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
+            style.legend_beside(ax, fontsize=7)
             ax.grid(True, which="both", alpha=0.3)
     return style.save(fig, path)
 

@@ -293,15 +293,9 @@ def run_scaling(
             continue
         started = time.perf_counter()
         shape = qp_shape(size)
-        log.info(
-            "%s: %d variables, %d rows (%d key points x %d cloud points + %d)",
-            size.name,
-            shape["n"],
-            shape["m_eq"] + shape["m_ineq"],
-            size.key_points,
-            size.cloud_points,
-            shape["m_eq"],
-        )
+        constraint_rows = shape["m_eq"] + shape["m_ineq"]
+        what = f"{size.key_points} key points x {size.cloud_points} cloud points + {shape['m_eq']}"
+        log.info("%s: %d variables, %d rows (%s)", size.name, shape["n"], constraint_rows, what)
         rows, size_failed = run_size(size, config, out, slow, progress)
         new = not summary_path.exists() or summary_path.stat().st_size == 0
         with ResultsWriter(summary_path, new=new, columns=COLUMNS) as writer:

@@ -1,24 +1,25 @@
 """The sizes of the scaling study and the scene and scenario each one is.
 
-A size is an arm (``n`` links, ``p`` key points per link) facing one point
-cloud of ``m`` points. Its tick's QP (paper eq. 11, ``paper`` formulation) has
+A planar size is an arm (``n`` links, ``p`` key points per link) facing one point cloud of ``m``
+points. Its tick's QP (paper eq. 11, ``paper`` formulation) has
 
     variables       n
     equality rows   2                     (the task J v = b0)
     inequality rows a m,  a = n p + n - 1 (one per key point and cloud point)
     bounds          n lower, n upper      (escape-velocity joint limits)
 
-The default grid has two axes, each dimension read with the other held: ``cloud`` (the paper's
-4-link layout, ``p = 1``, facing 1 to 1,000 points) and ``arm`` (4 to 64 links, ``p = 2``, facing
-16 points). :func:`scenario_toml` writes a size as an ordinary scenario file.
+The default grid's axes, each dimension read with the others held: ``cloud`` (the paper's
+4-link layout, ``p = 1``, facing 1 to 1,000 points), ``arm`` (4 to 64 links, ``p = 2``, facing
+16 points) and ``spatial`` (:mod:`.spatial`). :func:`scenario_toml` writes a size as an
+ordinary scenario file.
 
 The scene: a generated arm in contact and a point cloud approaching it. Link lengths sum to
-:data:`REACH` (the paper arm's 1.0 m): ``l_i = REACH w_i / sum(w)``, ``w_i`` uniform in
-[0.5, 1.5]. Key points: the paper's rule generalised (``p`` per link and the joints J2..Jn,
-``a = n p + n - 1``; ``p = 1``, ``n = 4``: A1..A7). The start puts the end effector at rest in
-contact (paper eq. 4: ``x_d(0) + (Fd / Kp) n``), so the first QPs are feasible: a bent arc of
-equal relative angles ``c`` (bisection on the reach, ``|c| <= 2 pi / n`` keeps the joints within
-+-3 rad for n >= 4), turned onto the target by the first joint.
+:data:`REACH`: ``l_i = REACH w_i / sum(w)``, ``w_i`` uniform in [0.5, 1.5]. Key points: the
+paper's rule generalised (``p`` per link and the joints J2..Jn; ``p = 1``, ``n = 4``: A1..A7).
+The start puts the end effector at rest in contact (paper eq. 4: ``x_d(0) + (Fd / Kp) n``), so
+the first QPs are feasible: a bent arc of equal relative angles ``c`` (bisection on the reach,
+``|c| <= 2 pi / n`` keeps the joints within +-3 rad for n >= 4), turned onto the target by the
+first joint.
 
 As in the paper (section 2.2, obstacles as key points ``B_j``; eqs. 8-10) every (key point, cloud
 point) pair is one velocity-damper row, every tick: ``a m`` rows, a fixed count, as a persistent
@@ -190,12 +191,18 @@ def base_tables(name: str) -> dict:
     return tomllib.loads(scenario_path(name).read_text(encoding="utf-8"))
 
 
+def task_of(name: str) -> dict:
+    """Shipped scenario ``name``'s tables but its ``[scenario]``, ``[robot]`` and obstacles."""
+    raw = copy.deepcopy(base_tables(name))
+    del raw["scenario"], raw["robot"], raw["obstacles"]
+    return raw
+
+
 @functools.cache
 def task() -> dict:
-    """The scenario tables every size shares: the ``wall`` scenario's but its ``[scenario]``,
-    ``[robot]`` and obstacles, the path started mid-stroke (phase -pi/2) so the arm moves at once."""
-    raw = copy.deepcopy(base_tables("wall"))
-    del raw["scenario"], raw["robot"], raw["obstacles"]
+    """The scenario tables every planar size shares: the ``wall`` scenario's task, the path
+    started mid-stroke (phase -pi/2) so the arm moves at once."""
+    raw = task_of("wall")
     raw["path"]["phase"] = [-math.pi / 2, -math.pi / 2]
     return raw
 
@@ -316,17 +323,29 @@ def generate(size: Size, seed: int = 0) -> tuple[GeneratedArm, PointCloudObstacl
     return gen, place_cloud(gen, size.cloud_points, task()["controller"]["d_safe"], seed)
 
 
-def scenario_toml(size: Size, gen: GeneratedArm, cloud: PointCloudObstacle, duration: float) -> str:
-    """The size as a scenario file's text (:mod:`qpbench.sim.scenario` layout), ``duration`` [s]."""
-    n, a, m = size.links, size.key_points, size.cloud_points
-    raw = copy.deepcopy(task())
+def size_file(
+    size: Size, tables: dict, robot: dict, obstacles: list, duration: float, what: str, header: str
+) -> str:
+    """The text of the size's scenario file (:mod:`qpbench.sim.scenario` layout): the task
+    ``tables`` with the size's ``[scenario]`` (``what``: its description), ``[robot]`` (``robot``)
+    and ``obstacles``, runs of ``duration`` [s]; ``header``: the size in words, its first lines."""
+    raw = copy.deepcopy(tables)
     raw["scenario"] = {
         "name": size.name,
-        "description": f"Scaling study: {n} links, {a} key points, a cloud of {m} points "
-        f"({a * m} obstacle rows).",
+        "description": f"Scaling study: {what}.",
         "paper_section": "scaling (beyond the paper)",
     }
-    raw["robot"] = {
+    raw["robot"] = robot
+    raw["simulation"]["duration"] = float(duration)
+    raw["obstacles"] = obstacles
+    written = "Written by qpbench scaling; units as in the scenario schema."
+    return dumps(raw, header=f"Scaling study size {size.name}: {header}.\n{written}")
+
+
+def scenario_toml(size: Size, gen: GeneratedArm, cloud: PointCloudObstacle, duration: float) -> str:
+    """The planar size's scenario file's text (:func:`size_file`)."""
+    n, a, m = size.links, size.key_points, size.cloud_points
+    robot = {
         "link_lengths": gen.arm.lengths,
         "theta0": gen.theta0,
         "theta_min": [-THETA_LIMIT] * n,
@@ -334,13 +353,16 @@ def scenario_toml(size: Size, gen: GeneratedArm, cloud: PointCloudObstacle, dura
         "velocity_min": [-VELOCITY_LIMIT] * n,
         "velocity_max": [VELOCITY_LIMIT] * n,
     }
-    raw["key_points"]["points_per_link"] = size.points_per_link
-    raw["simulation"]["duration"] = float(duration)
+    tables = copy.deepcopy(task())
+    tables["key_points"]["points_per_link"] = size.points_per_link
     points = {"kind": "points", "name": "cloud", "velocity": cloud.velocity, "points": cloud.points}
-    raw["obstacles"] = [points]
-    header = (
-        f"Scaling study size {size.name}: a generated {n}-link arm ({size.points_per_link} key "
-        f"points per link and the joints: {a} key points)\nfacing a cloud of {m} points that "
-        "approaches it. Written by qpbench scaling; units as in the scenario schema."
+    return size_file(
+        size,
+        tables,
+        robot,
+        [points],
+        duration,
+        f"{n} links, {a} key points, a cloud of {m} points ({a * m} obstacle rows)",
+        f"a generated {n}-link arm ({size.points_per_link} key points per link and the joints: "
+        f"{a} key points)\nfacing a cloud of {m} points that approaches it",
     )
-    return dumps(raw, header=header)

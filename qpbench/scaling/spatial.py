@@ -1,30 +1,11 @@
 """The spatial sizes of the scaling study (:class:`~.sizes.Size` with a spatial ``robot``): the
-Panda, the iiwa 14 and generated chains of n joints, in the ``panda_table`` scenario's task
-(pressing on a table while tracing a circle; 3 task rows), facing ``m`` balls that approach them.
+Panda, the iiwa 14 and generated chains of n joints (modified Denavit-Hartenberg rows, ``[robot]
+kind = "dh"``) in the ``panda_table`` scenario's task, facing ``m`` balls that approach them.
 Their tick QP has n variables, 3 equality rows and ``n m`` inequality rows (one per link and
-ball: the link's point closest to the ball, ``[key_points] kind = "closest"``).
-
-A generated chain ``chainN`` is the presets' joint pattern without their offsets, in Craig's
-modified Denavit-Hartenberg rows: joint 1 :data:`BASE_HEIGHT` above the base, every later joint
-:data:`REACH` ``/ (n - 1)`` past the previous one along its own axis, the axes alternately
-turned by ``+-pi/2`` about x (each joint's axis perpendicular to the previous one's, as in the
-Panda and the iiwa), the flange :data:`TOOL_LENGTH` past the last joint; limits
-``+-``:data:`JOINT_LIMIT` and the Panda's :data:`VELOCITY_LIMIT`. The reach stays the presets'
-while n grows, so a size changes the QP's variables and rows, not the task. A scenario file names
-its chain by these rows (``[robot] kind = "dh"``).
-
-The start: the end effector at rest in contact, ``x_d(0) + (Fd / Kp) n`` (paper eq. 4), reached by
-damped least squares from a bent guess (the Panda's: ``panda_table``'s start), pulled towards
-the guess in the null space of the position Jacobian and kept :data:`LIMIT_MARGIN` inside the
-limits. The balls (radius :data:`BALL_RADIUS`) fill a ball of :data:`~.sizes.CLOUD_RADIUS` beside
-the middle joint, away from the chord base -> end effector, stepped outwards by 1 mm until the
-body's clearance (:func:`~qpbench.robot.body.body_clearance`, the verdict's) is ``d_safe`` +
-:data:`~.sizes.CLEARANCE`; they move towards the arm at :data:`~.sizes.SPEED`.
-"""
+ball). The chain, the start and the balls: docs/scaling.md, "The spatial sizes"."""
 
 from __future__ import annotations
 
-import copy
 import functools
 import math
 
@@ -36,8 +17,16 @@ from ..robot.chain import ChainModel, points_jacobians_np
 from ..robot.kinematics import Arm
 from ..robot.obstacles.sphere import SphereObstacle
 from ..robot.presets import make_chain
-from ..sweep.toml_text import dumps
-from .sizes import CLEARANCE, CLOUD_RADIUS, SPEED, Size, base_tables, start_target
+from .sizes import (
+    CLEARANCE,
+    CLOUD_RADIUS,
+    SPEED,
+    Size,
+    base_tables,
+    size_file,
+    start_target,
+    task_of,
+)
 
 #: A generated chain: joint 1's height [m], the sum of the later joints' offsets [m], the flange
 #: past the last joint [m] (the Panda's 0.333 and 0.107; its offsets sum to 1.39 m).
@@ -51,8 +40,7 @@ BALL_RADIUS = 0.02
 
 
 def dh_rows(n: int) -> dict:
-    """The generated chain of ``n`` joints as ``[robot] kind = "dh"`` rows and limits (module
-    docstring)."""
+    """The generated chain of ``n`` joints as ``[robot] kind = "dh"`` rows and limits."""
     alpha = [0.0] + [math.pi / 2 if k % 2 == 0 else -math.pi / 2 for k in range(1, n)] + [0.0]
     d = [BASE_HEIGHT] + [REACH / (n - 1)] * (n - 1) + [TOOL_LENGTH]
     return dict(a=[0.0] * (n + 1), d=d, alpha=alpha, q_min=[-JOINT_LIMIT] * n,
@@ -60,7 +48,7 @@ def dh_rows(n: int) -> dict:
 
 
 def generated_chain(n: int) -> ChainModel:
-    """The generated chain of ``n`` joints (module docstring)."""
+    """The generated chain of ``n`` joints (docs/scaling.md)."""
     return make_chain("dh", **dh_rows(n))
 
 
@@ -71,15 +59,12 @@ def chain_of(size: Size) -> ChainModel:
 
 @functools.cache
 def task() -> dict:
-    """The scenario tables every spatial size shares: ``panda_table``'s but its ``[scenario]``,
-    ``[robot]`` and obstacles."""
-    raw = copy.deepcopy(base_tables("panda_table"))
-    del raw["scenario"], raw["robot"], raw["obstacles"]
-    return raw
+    """The scenario tables every spatial size shares: the ``panda_table`` scenario's task."""
+    return task_of("panda_table")
 
 
 def start_angles(chain: ChainModel, target: np.ndarray, guess: np.ndarray) -> np.ndarray:
-    """Joint angles [rad] putting the end effector at ``target`` [m] (module docstring).
+    """Joint angles [rad] putting the end effector at ``target`` [m] (docs/scaling.md).
 
     Raises:
         ParamError: no such angles found within the limits.
@@ -113,7 +98,7 @@ def place_balls(
     chain: ChainModel, theta0: np.ndarray, m: int, link_radius: float, d_safe: float, seed: int
 ) -> list[SphereObstacle]:
     """``m`` balls beside the chain at ``theta0`` [rad], their body clearance ``d_safe`` [m] +
-    :data:`~.sizes.CLEARANCE` (module docstring), drawn from ``seed``."""
+    :data:`~.sizes.CLEARANCE` (docs/scaling.md), drawn from ``seed``."""
     rng = np.random.default_rng([int(seed), int(m), chain.n, 15485863])
     p = Arm(chain).joint_positions(theta0[None])[0]
     mid = p[len(p) // 2]
@@ -141,35 +126,29 @@ def place_balls(
 
 
 def scenario_file(size: Size, seed: int, duration: float) -> str:
-    """The size's scenario file's text; ``duration`` [s]."""
-    chain = chain_of(size)
-    raw = copy.deepcopy(task())
+    """The spatial size's scenario file's text (:func:`~.sizes.size_file`); ``duration`` [s]."""
+    chain, raw = chain_of(size), task()
     theta0 = start_angles(chain, start_target(raw), _guess(size))
     d_safe, radius = raw["controller"]["d_safe"], raw["key_points"]["link_radius"]
     balls = place_balls(chain, theta0, size.cloud_points, radius, d_safe, seed)
     n, m = size.links, size.cloud_points
-    raw["scenario"] = {
-        "name": size.name,
-        "description": f"Scaling study: a {n}-joint {size.robot} chain, {m} balls "
-        f"({n * m} obstacle rows).",
-        "paper_section": "scaling (beyond the paper)",
-    }
     robot = {"kind": size.robot}
     if size.robot == "chain":
         rows = dh_rows(n)
         limits = dict(theta_min="q_min", theta_max="q_max", velocity_max="v_max")
         robot = {"kind": "dh", **{k: rows[k] for k in ("a", "d", "alpha")}}
         robot.update({key: rows[name] for key, name in limits.items()})
-    raw["robot"] = {**robot, "theta0": theta0}
-    raw["simulation"]["duration"] = float(duration)
-    raw["obstacles"] = [
+    obstacles = [
         {"kind": "sphere", "name": b.name, "center": b.center, "radius": b.radius,
          "velocity": b.velocity}
         for b in balls
     ]  # fmt: skip
-    header = (
-        f"Scaling study size {size.name}: a {n}-joint chain ({size.robot}) in panda_table's task "
-        f"facing {m} balls that approach it.\nWritten by qpbench scaling; units as in the scenario "
-        "schema."
+    return size_file(
+        size,
+        raw,
+        {**robot, "theta0": theta0},
+        obstacles,
+        duration,
+        f"a {n}-joint {size.robot} chain, {m} balls ({n * m} obstacle rows)",
+        f"a {n}-joint chain ({size.robot}) in panda_table's task facing {m} balls that approach it",
     )
-    return dumps(raw, header=header)
