@@ -20,7 +20,7 @@ import pandas as pd
 from ..atomic import atomic_path, check_folder, check_output, record
 from ..backends import NOISE_FLOOR, plugin_files
 from ..control.controller import check_formulation
-from ..exceptions import ParamError, positive_count, positive_seconds
+from ..exceptions import check_choice, positive_count, positive_seconds
 from ..report.inputs import noise_floor_runs
 from ..runner.process import run_tasks
 from ..selection import parse_list
@@ -407,10 +407,7 @@ def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dic
         if value is not None:
             positive_seconds(value, key)
     positive_count(jobs, "--jobs")
-    if isolate not in ISOLATE:
-        raise ParamError(
-            f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate"
-        )
+    check_choice(isolate, ISOLATE, "isolation", "--isolate")
 
 
 def _prepare_output(out: Path, force: bool, resume: bool) -> list[dict]:

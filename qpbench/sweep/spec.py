@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
+from ..exceptions import InputError, ScenarioError, check_choice, check_known_keys, positive_seconds
 from ..robot.body import body_clearance, contact_obstacles, link_label
 from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
 from ..sim.scenario_schema import filled, finite_number
@@ -116,9 +116,8 @@ def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
             message, path=path, key=".".join(filter(None, ("parameters", key, field)))
         )
 
-    kind = spec.get("dist")
-    if not isinstance(kind, str) or kind not in DISTRIBUTIONS:
-        raise bad(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", "dist")
+    kind = str(spec.get("dist"))
+    check_choice(kind, DISTRIBUTIONS, "distribution", f"parameters.{key}.dist", InputError, path)
     for f in spec:
         if f != "dist" and f not in DISTRIBUTIONS[kind]:
             expected = ", ".join(DISTRIBUTIONS[kind])
