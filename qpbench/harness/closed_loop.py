@@ -118,10 +118,9 @@ class LoopTask:
 
 
 def run_row(task: LoopTask) -> dict:
-    """The row of one run (:func:`qpbench.sim.loop.simulate`, its warm-up included), its
-    figures, its logs written when ``task.out`` is set; a run that raises is an ``error`` row.
-    The noise floor's run (a backend whose class says ``noise_floor``) is judged on its whole
-    ticks (``tick_time_s``)."""
+    """The row of one run (:func:`qpbench.sim.loop.simulate`, its warm-up included), its logs
+    written when ``task.out`` is set; a run that raises is an ``error`` row. The noise floor's
+    run is judged on its whole ticks (``tick_time_s``)."""
     from ..backends import backend_class, load_plugins
     from ..jit import warmup
     from ..sim.figure_log import figure_log_path, write_figure_log
@@ -277,13 +276,11 @@ def run_closed_loop(
     overrides: dict | None = None,
     engine: str = "compiled",
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker:
-    ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
-    ``resume`` keeps the ``ok`` rows made under the same terms and the rows of pairs not asked;
-    ``skip``: backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's
-    deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's
-    in ``budgets``); ``engine``: :data:`qpbench.sim.loop.ENGINES`; ``on_row`` is called with
-    each row once written."""
+    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker
+    (the options of ``qpbench closed-loop``): ``resume`` keeps the ``ok`` rows made under the
+    same terms and the rows of pairs not asked; ``skip``: backend -> reason of a ``skipped``
+    row; ``run_budget`` [s]: a backend's in ``budgets``; ``on_row`` is called with each row
+    once written."""
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
@@ -343,11 +340,9 @@ FLOOR_JUDGED = (
 
 
 def judge_against_floor(row: dict, floor: dict | None) -> None:
-    """Judge ``row``'s real time again, in place, against its scenario's noise floor (the row of
-    the ``noop`` run of the same run set, ``None``: none; docs/verdicts.md, "The noise floor"):
-    ``realtime``, ``realtime_reason`` and the floor's figures beside them. A row without
-    real-time figures (a run without a result, a table written before them) and the floor's
-    own row are left as they are."""
+    """Judge ``row``'s real time again, in place, against its scenario's noise floor row
+    (``None``: none; docs/verdicts.md, "The noise floor"): :data:`FLOOR_JUDGED`. A row without
+    real-time figures and the floor's own row are left as they are."""
     if row.get("backend") == NOISE_FLOOR or floor is None or not (_judged(row) and _judged(floor)):
         return
     row["realtime"], row["realtime_reason"] = judge_realtime_run(row, "call", floor_fields(floor))

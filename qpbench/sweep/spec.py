@@ -1,16 +1,7 @@
-"""Sweep files (format: ``docs/sweeps.md``) and their instances.
-
-A sweep file names a base scenario and, per scenario key, a distribution to draw that key's value
-from for every instance; instance ``i`` draws key ``k`` from ``default_rng([seed, i, crc32(k)])``,
-the same whatever the sample count and the other keys. ``[convergence]`` holds the bands of the
-time-to-converge figures, ``force_band`` [N] and ``tracking_band`` [m] (default: a tenth of the
-base's ``[verdict]`` maximum errors).
-
-An instance is the base scenario with every swept key drawn, as a full scenario file, saved as
-``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario`` re-runs one alone. An
-instance the loader refuses keeps its one-line reason (:attr:`Instance.invalid`), as does one
-whose body starts inside ``d_safe`` of an obstacle (:func:`start_clearance`; unless ``[sweep]
-safe_start = false``): every backend would start unsafe, which says nothing about the backends.
+"""Sweep files (format and sampling: ``docs/sweeps.md``) and their instances, each the base
+scenario with every swept key drawn, as a full scenario file. ``[convergence]`` holds the bands
+of the time-to-converge figures, ``force_band`` [N] and ``tracking_band`` [m] (default: a tenth
+of the base's ``[verdict]`` maximum errors).
 """
 
 from __future__ import annotations
@@ -246,12 +237,8 @@ def load_sweep(
     text: str | None = None,
 ) -> SweepSpec:
     """Read and check a sweep file (``samples``, ``duration`` override the file's; ``text``: the
-    file's text, ``path`` then only names it in errors and anchors a relative ``base``).
-
-    Raises:
-        InputError: unreadable file, unknown or missing key, impossible
-            distribution, unknown base scenario (one line naming the file and key).
-    """
+    file's text, ``path`` then only names it in errors and anchors a relative ``base``); an
+    :class:`InputError` names the file and the key."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8") if text is None else text
