@@ -442,22 +442,21 @@ def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
 
 def _same_run(row: dict, formulation, duration, run_budget, overrides: dict) -> bool:
     """``row`` (read back) is a finished run of this formulation, duration, budget and overrides."""
-    text = row.get("scenario_overrides")
+    text, status = row.get("scenario_overrides"), row.get("status")
     try:
         stored = (
             json.loads(text) if isinstance(text, str) and text else {} if pd.isna(text) else None
         )
-        if str(row.get("formulation")) != formulation or stored != json.loads(
-            json.dumps(overrides)
-        ):
-            return False
-        if row.get("status") == "budget":  # the same run only under the same budget
-            if run_budget is None or not math.isclose(float(row["run_budget_s"]), run_budget):
-                return False
-        elif row.get("status") != "ok":
-            return False
-        return duration is None or math.isclose(
-            float(row.get("duration_s")), float(duration), rel_tol=1e-9, abs_tol=1e-12
+        finished = status == "ok" or (  # a stopped run is the same only under the same budget
+            status == "budget"
+            and run_budget is not None
+            and math.isclose(float(row["run_budget_s"]), run_budget)
+        )
+        return (
+            finished
+            and str(row.get("formulation")) == formulation
+            and stored == json.loads(json.dumps(overrides))
+            and (duration is None or math.isclose(float(row.get("duration_s")), float(duration)))
         )
     except (TypeError, ValueError):
         return False

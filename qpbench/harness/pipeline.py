@@ -459,14 +459,11 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
     return outcome.table, outcome.not_ok
 
 
-def sweep_plan(
-    costs_s: dict[str, float], worker_s: float, target: int, floor_s: float = 0.0
-) -> dict[str, int]:
+def sweep_plan(costs_s: dict[str, float], worker_s: float, target: int) -> dict[str, int]:
     """Perturbed instances a scenario per backend (docs/sweeps.md, step 3): cheapest first, each
     gets ``target`` while the worker time left buys them, else none. ``worker_s`` [s] over all
-    workers; ``costs_s``: a backend's cost of one instance in every swept scenario [s];
-    ``floor_s``: the same of the instance's noise-floor run, paid once with the first funded."""
-    plan, left = {}, max(0.0, worker_s) - max(0.0, floor_s) * target
+    workers; ``costs_s``: a backend's cost of one instance in every swept scenario [s]."""
+    plan, left = {}, max(0.0, worker_s)
     for backend in sorted(costs_s, key=lambda b: (costs_s[b], b)):
         cost = max(0.0, costs_s[backend]) * target
         plan[backend] = target if cost <= left else 0
