@@ -49,6 +49,16 @@ def did_you_mean(name: str, choices) -> str:
     return f"did you mean {' or '.join(repr(folded[c]) for c in close)}? " if close else ""
 
 
+def check_choice(
+    value, choices, what: str, key: str, error: type[InputError] = ParamError, path=None
+):
+    """``value`` if among ``choices``, else ``error`` "unknown WHAT 'VALUE' (choose from ...)"."""
+    if value not in choices:
+        message = f"unknown {what} '{value}' (choose from {', '.join(choices)})"
+        raise error(message, path=path, key=key)
+    return value
+
+
 def check_known_keys(
     table: dict, known, path: str | Path | None, prefix: str, error: type[InputError] = InputError
 ) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass, field, replace
 
-from .exceptions import ParamError
+from .exceptions import check_choice
 from .published import SETTINGS_NAMES, qpbenchmark_settings
 
 #: Prefix of the profiles that apply qpbenchmark's own settings.
@@ -97,10 +97,7 @@ def get_profile(name: str | Profile) -> Profile:
     """The profile called ``name`` (a :class:`Profile` passes through)."""
     if isinstance(name, Profile):
         return name
-    if name not in profile_names():
-        raise ParamError(
-            f"unknown profile '{name}' (choose from {', '.join(profile_names())})", key="profile"
-        )
+    check_choice(name, profile_names(), "profile", "profile")
     if name.startswith(QPBENCHMARK_PREFIX):
         return qpbenchmark_profile(name.removeprefix(QPBENCHMARK_PREFIX))
     return PROFILES[name]

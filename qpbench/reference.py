@@ -1,8 +1,7 @@
-"""Reference solutions of a problem set: computed by :data:`METHODS` (``auto``: Clarabel and
-PIQP at 1e-10, an answer kept by its KKT residuals, :func:`settle`), cached (:func:`cache_path`)
-or read from known objectives (docs/methodology.md). ``kkt`` is the worst of qpsolvers' primal
-residual, dual residual and duality gap at an answer (``inf`` without one); every reference
-carries a ``note``: each solver's answer, which was kept and why.
+"""Reference solutions of a problem set (docs/methodology.md): computed by :data:`METHODS`,
+cached (:func:`cache_path`) or read from known objectives. ``kkt`` is the worst of qpsolvers'
+primal residual, dual residual and duality gap at an answer (``inf`` without one); a
+reference's ``note`` says each solver's answer, which was kept and why.
 """
 
 from __future__ import annotations
@@ -267,19 +266,15 @@ def assemble(
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
-    """One reference per record from ``source``: a method, ``none`` or a file of objectives."""
+    """One reference per record from ``source``: a method, ``none`` or a file of known optimal
+    objectives."""
     if source == "none":
         return [None] * len(problem_set.records)
     if source in METHODS:
         return reference_solutions(problem_set, method=source, **options)
     from .published import read_objectives
 
-    return from_objectives(problem_set, read_objectives(source), source)
-
-
-def from_objectives(problem_set: ProblemSet, objectives: dict, source: str | Path = "file") -> list:
-    """References from known optimal objectives (``{problem name: objective}``)."""
-    refs = []
+    objectives, refs = read_objectives(source), []
     for record in problem_set.records:
         f = float(objectives.get(record.name, math.nan))
         ref = ReferenceSolution("optimal", objective=f, solver="file", name=record.name)

@@ -32,10 +32,6 @@ def test_the_cheapest_get_their_instances_first():
     # every planned count reaches the target, and the plan's cost stays within the time
     plan = sweep_plan(costs, 450.0, 100)
     assert set(plan.values()) <= {0, 100} and sum(plan[b] * costs[b] for b in plan) <= 450.0
-    # the instances' noise-floor runs are paid once, before the first backend funded
-    assert sweep_plan(costs, 350.0, 100, floor_s=0.5) == {"a": 100, "b": 100, "c": 0}
-    assert sweep_plan(costs, 349.0, 100, floor_s=0.5) == {"a": 100, "b": 0, "c": 0}
-    assert sweep_plan(costs, 149.0, 100, floor_s=0.5) == {"a": 0, "b": 0, "c": 0}
 
 
 def strictly_before(answer: rec.Recommendation) -> set[tuple[str, str]]:

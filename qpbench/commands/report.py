@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .options import add
+from .options import add, pick
 
 HELP = "write report.md and PNG plots from bench, closed-loop and sweep result CSVs (every number recomputed)"
 EXAMPLE = "qpbench report results/bench results/closed_loop.csv --out results --force"
@@ -47,7 +47,6 @@ def run(args: argparse.Namespace) -> int:
     if others:
         rest, sweeps = split_sweep_paths(others)
         sections = (lambda out, plots: sweep_section(sweeps, out, plots)) if sweeps else None
-        kw = {"prefer": args.prefer, "sections": sections, "files": sweeps}
-        kw["min_ok_bound"] = args.min_ok_bound
-        write_report(rest, args.out, force=args.force, plots=plots, **kw)
+        kw = pick(args, "prefer force min_ok_bound")
+        write_report(rest, args.out, plots=plots, sections=sections, files=sweeps, **kw)
     return 0

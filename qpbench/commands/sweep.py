@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..report.markdown_table import aligned
-from .options import add, add_force_resume, check_tables, log, run_bar, strict_exit
+from .options import add, add_force_resume, check_tables, log, pick, run_bar, strict_exit
 
 HELP = "sample perturbed instances of a scenario and run each in closed loop with each backend (one row per pair)"
 EXAMPLE = (
@@ -106,9 +106,8 @@ def run(args: argparse.Namespace) -> int:
                 pool.concurrency,
                 pool.name,
             )
-        kw = {"force": args.force, "resume": args.resume, "plugins": plugins, "on_row": on_row}
-        kw["engine"] = args.engine
-        outcome = run_sweep(spec, backends, args.out, pool, **kw)
+        kw = pick(args, "force resume engine")
+        outcome = run_sweep(spec, backends, args.out, pool, plugins=plugins, on_row=on_row, **kw)
     if not args.quiet:
         print(summary_table(outcome.rows, backends))
     log.info(

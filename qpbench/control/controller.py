@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 import qpsolvers
 
-from ..exceptions import ParamError
+from ..exceptions import ParamError, check_choice
 from ..native import entry_point
 from ..packed import PackedProblem
 from ..robot.chain import chain_data
@@ -248,9 +248,4 @@ class Controller:
 def check_formulation(formulation: str, key: str = "formulation") -> bool:
     """Whether ``formulation`` (one of :data:`FORMULATIONS`) is ``soft``; else :class:`ParamError`
     naming ``key``."""
-    if formulation not in FORMULATIONS:
-        raise ParamError(
-            f"unknown formulation '{formulation}' (choose from {', '.join(FORMULATIONS)})",
-            key=key,
-        )
-    return formulation == "soft"
+    return check_choice(formulation, FORMULATIONS, "formulation", key) == "soft"

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..backends import backend_class
-from ..exceptions import InputError, ParamError, positive_count, positive_seconds
+from ..exceptions import InputError, ParamError, check_choice, positive_count, positive_seconds
 from ..profiles import Profile, get_profile
 from ..selection import parse_list
 from ..statuses import FAILURE_STATUSES
@@ -55,12 +55,8 @@ class BenchConfig:
     memory_budget: int | None = None
 
     def __post_init__(self) -> None:
-        for key, what, choices in (("mode", "mode", MODES), ("isolate", "isolation", ISOLATE)):
-            value = getattr(self, key)
-            if value not in choices:
-                raise ParamError(
-                    f"unknown {what} '{value}' (choose from {', '.join(choices)})", key=key
-                )
+        check_choice(self.mode, MODES, "mode", "mode")
+        check_choice(self.isolate, ISOLATE, "isolation", "isolate")
         positive_count(self.repeat, "repeat")
         if self.time_limit is not None:
             self.time_limit = positive_seconds(self.time_limit, "time-limit")

@@ -20,7 +20,7 @@ import pandas as pd
 from ..atomic import atomic_path, check_folder, check_output, record
 from ..backends import NOISE_FLOOR, plugin_files
 from ..control.controller import check_formulation
-from ..exceptions import ParamError, positive_count, positive_seconds
+from ..exceptions import check_choice, positive_count, positive_seconds
 from ..report.inputs import noise_floor_runs
 from ..runner.process import run_tasks
 from ..selection import parse_list
@@ -118,10 +118,9 @@ class LoopTask:
 
 
 def run_row(task: LoopTask) -> dict:
-    """The row of one run (:func:`qpbench.sim.loop.simulate`, its warm-up included), its
-    figures, its logs written when ``task.out`` is set; a run that raises is an ``error`` row.
-    The noise floor's run (a backend whose class says ``noise_floor``) is judged on its whole
-    ticks (``tick_time_s``)."""
+    """The row of one run (:func:`qpbench.sim.loop.simulate`, its warm-up included), its logs
+    written when ``task.out`` is set; a run that raises is an ``error`` row. The noise floor's
+    run is judged on its whole ticks (``tick_time_s``)."""
     from ..backends import backend_class, load_plugins
     from ..jit import warmup
     from ..sim.figure_log import figure_log_path, write_figure_log
@@ -277,13 +276,11 @@ def run_closed_loop(
     overrides: dict | None = None,
     engine: str = "compiled",
 ) -> ClosedLoopOutcome:
-    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker:
-    ``duration`` [s] (``None``: each scenario's); ``formulation``: ``paper`` (eq. 11) or ``soft``;
-    ``resume`` keeps the ``ok`` rows made under the same terms and the rows of pairs not asked;
-    ``skip``: backend -> reason of a ``skipped`` row; ``run_time_limit``: an isolated run's
-    deadline [s]; ``deadline``: per tick [s]; ``run_budget``: a run's wall time [s] (a backend's
-    in ``budgets``); ``engine``: :data:`qpbench.sim.loop.ENGINES`; ``on_row`` is called with
-    each row once written."""
+    """Run every (scenario, backend) pair in the loop into ``out``, an isolated one in a worker
+    (the options of ``qpbench closed-loop``): ``resume`` keeps the ``ok`` rows made under the
+    same terms and the rows of pairs not asked; ``skip``: backend -> reason of a ``skipped``
+    row; ``run_budget`` [s]: a backend's in ``budgets``; ``on_row`` is called with each row
+    once written."""
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
     times["--run-budget"] = run_budget
     _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
@@ -343,11 +340,9 @@ FLOOR_JUDGED = (
 
 
 def judge_against_floor(row: dict, floor: dict | None) -> None:
-    """Judge ``row``'s real time again, in place, against its scenario's noise floor (the row of
-    the ``noop`` run of the same run set, ``None``: none; docs/verdicts.md, "The noise floor"):
-    ``realtime``, ``realtime_reason`` and the floor's figures beside them. A row without
-    real-time figures (a run without a result, a table written before them) and the floor's
-    own row are left as they are."""
+    """Judge ``row``'s real time again, in place, against its scenario's noise floor row
+    (``None``: none; docs/verdicts.md, "The noise floor"): :data:`FLOOR_JUDGED`. A row without
+    real-time figures and the floor's own row are left as they are."""
     if row.get("backend") == NOISE_FLOOR or floor is None or not (_judged(row) and _judged(floor)):
         return
     row["realtime"], row["realtime_reason"] = judge_realtime_run(row, "call", floor_fields(floor))
@@ -407,10 +402,7 @@ def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dic
         if value is not None:
             positive_seconds(value, key)
     positive_count(jobs, "--jobs")
-    if isolate not in ISOLATE:
-        raise ParamError(
-            f"unknown isolation '{isolate}' (choose from {', '.join(ISOLATE)})", key="--isolate"
-        )
+    check_choice(isolate, ISOLATE, "isolation", "--isolate")
 
 
 def _prepare_output(out: Path, force: bool, resume: bool) -> list[dict]:
@@ -450,22 +442,21 @@ def _kept_rows(order, previous, formulation, duration, budget, skip, overrides):
 
 def _same_run(row: dict, formulation, duration, run_budget, overrides: dict) -> bool:
     """``row`` (read back) is a finished run of this formulation, duration, budget and overrides."""
-    text = row.get("scenario_overrides")
+    text, status = row.get("scenario_overrides"), row.get("status")
     try:
         stored = (
             json.loads(text) if isinstance(text, str) and text else {} if pd.isna(text) else None
         )
-        if str(row.get("formulation")) != formulation or stored != json.loads(
-            json.dumps(overrides)
-        ):
-            return False
-        if row.get("status") == "budget":  # the same run only under the same budget
-            if run_budget is None or not math.isclose(float(row["run_budget_s"]), run_budget):
-                return False
-        elif row.get("status") != "ok":
-            return False
-        return duration is None or math.isclose(
-            float(row.get("duration_s")), float(duration), rel_tol=1e-9, abs_tol=1e-12
+        finished = status == "ok" or (  # a stopped run is the same only under the same budget
+            status == "budget"
+            and run_budget is not None
+            and math.isclose(float(row["run_budget_s"]), run_budget)
+        )
+        return (
+            finished
+            and str(row.get("formulation")) == formulation
+            and stored == json.loads(json.dumps(overrides))
+            and (duration is None or math.isclose(float(row.get("duration_s")), float(duration)))
         )
     except (TypeError, ValueError):
         return False

@@ -124,12 +124,9 @@ def default_jobs() -> int:
 
 @dataclass
 class RunConfig:
-    """What ``qpbench run`` does: ``problems``: folder of the sets ``<problems>/<scenario>/``;
-    ``duration``: closed-loop time per run [s] (``None``: the scenario's); ``run_budget``: most
-    wall time of a closed-loop run [s]; ``memory_budget``: bytes a bench solve may need;
-    ``on_row``: called with each closed-loop row; ``sweep_budget``: wall time of the perturbed
-    runs [s] (:func:`sweep_plan`); ``min_ok_bound``: the least Wilson lower bound of a
-    recommended backend's share of ok perturbed runs."""
+    """What ``qpbench run`` does (its options): ``problems``: folder of the sets
+    ``<problems>/<scenario>/``; ``duration``, ``run_budget``, ``sweep_budget`` [s];
+    ``memory_budget`` [bytes]; ``on_row``: called with each closed-loop row."""
 
     out: Path
     problems: Path
@@ -192,12 +189,11 @@ def _dump_backend() -> str:
     from ..backends import backend_names
     from ..exceptions import BackendNotFound
 
-    available = set(backend_names())
-    for name in DUMP_BACKENDS:
-        if name in available:
-            return name
-    tried = ", ".join(DUMP_BACKENDS)
-    raise BackendNotFound(f"no QP backend to generate problem sets with (tried {tried})")
+    name = next((name for name in DUMP_BACKENDS if name in backend_names()), None)
+    if name is None:
+        tried = ", ".join(DUMP_BACKENDS)
+        raise BackendNotFound(f"no QP backend to generate problem sets with (tried {tried})")
+    return name
 
 
 def bench_subset(
@@ -295,8 +291,7 @@ def run_all(config: RunConfig) -> RunOutcome:
         _compress_bench(staging / "bench")
     elapsed = time.perf_counter() - started
     manifest = _manifest(config, bench_scenarios, table, budgets)
-    manifest["perturbed"] = perturbed
-    manifest["phase_wall_time_s"] = dict(phases.times_s)
+    manifest.update(perturbed=perturbed, phase_wall_time_s=dict(phases.times_s))
     manifest["wall_time_s"] = round(elapsed, 1)
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
     promote(staging, out, OUTPUTS)
@@ -315,11 +310,10 @@ def bench_sets(scenarios: list[str]) -> list[str]:
 
 
 def _compile_behind(backends: list[str], here: tuple[str, ...] = ()) -> threading.Thread | None:
-    """Compile the closed loop's kernels for ``backends`` (:func:`qpbench.jit.kernels_for`) not
-    prepared (or being prepared, ``here``) in this process into numba's on-disk cache, in a
-    worker process, while this process compiles what the bench times and benches: the thread
-    that waits for it (a failure only leaves the compile to the closed loop), or ``None`` when
-    none is left."""
+    """Compile the closed loop's kernels for ``backends`` not prepared (or being prepared,
+    ``here``) in this process into numba's on-disk cache, in a worker process, while this
+    process benches: the thread that waits for it (a failure only leaves the compile to the
+    closed loop), or ``None`` when none is left."""
     from ..jit import kernels_for, prepare, prepared
 
     todo = [k for k in kernels_for(backends) if k not in prepared() and k not in here]
@@ -343,9 +337,8 @@ def _compile_behind(backends: list[str], here: tuple[str, ...] = ()) -> threadin
 
 def _meet_halfway(behind: threading.Thread) -> None:
     """While the worker of :func:`_compile_behind` still compiles (its groups in order), compile
-    its engines here from the last one back, one at a time: the two meet in the middle (at
-    most the group both were at is compiled twice), and this core, idle while it waited, does
-    its share. What the worker cached first is loaded here from the cache."""
+    its engines here from the last one back: the two meet in the middle (at most one group is
+    compiled twice)."""
     from ..jit import ENGINE, prepare
 
     for group in reversed(behind.todo):
@@ -358,8 +351,7 @@ def _bench(
     config: RunConfig, subsets: dict, bench_dir: Path, phases
 ) -> tuple[int, dict[str, float]]:
     """Bench every backend on each scenario's problems: the failed solves, and each backend's
-    mean over all sets of ``wall_time_min_s`` [s] (what a run's solves take per tick: a median
-    misses a tail of slow solves that makes most of a run's time)."""
+    mean over all sets of ``wall_time_min_s`` [s] (a mean, as a run's time is a sum)."""
     import statistics
 
     from .bench import BenchConfig, run_bench
@@ -392,15 +384,12 @@ def _bench(
 def closed_loop_budgets(
     config: RunConfig, per_tick_s: dict[str, float], specs: dict | None = None
 ) -> dict[str, float]:
-    """Each backend's closed-loop wall-time budget [s]: a bench mean ``t`` predicts a run of
-    ``ticks * t`` (the longest scenario's); the budget is :data:`BUDGET_MARGIN` times that, within
-    :data:`BUDGET_FLOOR_S` and ``run_budget``; ``run_budget`` without a bench time;
-    :data:`CUT_BUDGET_S` for a backend on the Python engine (the bench times the call that engine
-    makes, not a compiled solve) when the prediction exceeds ``run_budget``, or when its
-    perturbed runs in the sweeps ``specs`` (:func:`sweep_specs`) would take more than
-    ``--sweep-budget`` times ``--jobs`` at ``t`` a tick, a lower bound of their cost (the
-    engine's own work comes on top): the perturbed runs cannot afford it (:func:`sweep_plan`),
-    so no full run of it could make it recommended."""
+    """Each backend's closed-loop wall-time budget [s] (docs/methodology.md, "Closed loop"): a
+    bench mean ``t`` predicts a run of ``ticks * t`` (the longest scenario's); the budget is
+    :data:`BUDGET_MARGIN` times that, within :data:`BUDGET_FLOOR_S` and ``run_budget``
+    (``run_budget`` without a bench time); :data:`CUT_BUDGET_S` for a backend on the Python
+    engine whose prediction, or whose perturbed runs in the sweeps ``specs`` at ``t`` a tick,
+    the run cannot afford."""
     if config.run_budget is None:
         return {}
     from ..jit import compiled_solvers
@@ -449,8 +438,8 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
             left[s] = left.get(s, 1) - 1
             if left[s] == 0:  # a scenario's last run: one line per scenario
                 spent = time.perf_counter() - started
-                n = per_scenario
-                log.info("closed loop %s: %d runs done (%.1f s into the closed loop)", s, n, spent)
+                msg = "closed loop %s: %d runs done (%.1f s into the closed loop)"
+                log.info(msg, s, per_scenario, spent)
             if config.on_row is not None:
                 config.on_row(row)
 
@@ -470,16 +459,11 @@ def _closed_loop(config: RunConfig, staging: Path, phases, budgets: dict[str, fl
     return outcome.table, outcome.not_ok
 
 
-def sweep_plan(
-    costs_s: dict[str, float], worker_s: float, target: int, floor_s: float = 0.0
-) -> dict[str, int]:
-    """Perturbed instances a scenario per backend: cheapest first, each gets ``target`` while the
-    worker time left buys them (``worker_s`` [s] over all workers; ``costs_s``: a backend's
-    cost of one instance in every swept scenario [s]; ``floor_s``: the same of the instance's
-    noise-floor run, paid once, with the first backend funded), else none: fewer than
-    ``target`` cannot recommend it (its bound stays short of the threshold, "not enough
-    evidence" either way), so they would only lengthen the run."""
-    plan, left = {}, max(0.0, worker_s) - max(0.0, floor_s) * target
+def sweep_plan(costs_s: dict[str, float], worker_s: float, target: int) -> dict[str, int]:
+    """Perturbed instances a scenario per backend (docs/sweeps.md, step 3): cheapest first, each
+    gets ``target`` while the worker time left buys them, else none. ``worker_s`` [s] over all
+    workers; ``costs_s``: a backend's cost of one instance in every swept scenario [s]."""
+    plan, left = {}, max(0.0, worker_s)
     for backend in sorted(costs_s, key=lambda b: (costs_s[b], b)):
         cost = max(0.0, costs_s[backend]) * target
         plan[backend] = target if cost <= left else 0
@@ -548,9 +532,8 @@ def sweep_specs(config: RunConfig) -> dict:
 
 def _perturbed(config: RunConfig, folder: Path, phases, table, specs: dict) -> dict:
     """The perturbed runs of the backends ok and real time in every nominal run (the
-    candidates): for each sweep of ``specs`` (:func:`sweep_specs`), its instances, each
-    candidate's count from :func:`sweep_plan` on costs measured here, in ``folder/<scenario>/``
-    (a sweep's folder); what was planned and spent, for ``run.json``."""
+    candidates), each sweep of ``specs`` in ``folder/<scenario>/``, as many instances as
+    :func:`sweep_plan` funds; what was planned and spent, for ``run.json``."""
     from ..backends import plugin_files
     from ..report.recommend import TOLERATED_NOT_OK, least_runs, recommend
     from ..runner import make_executor
@@ -603,16 +586,10 @@ def _length(spec, most: float | None = None) -> float:
 
 
 def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
-    """Each candidate's cost of one instance in every swept scenario [s]: its loop's time per
-    simulated second in the nominal run of the scenario (its wall time, or its ticks at their
-    p99 when less: the machine's load lengthens a few ticks, not the p99; none without a
-    result) times the instance's length, plus the cost of a run around its loop (parsing,
-    warm-up, the summary and the body's clearance over its ticks, which grow with the ticks
-    and the obstacles): the CPU time of a whole run of each sweep's first valid instance here,
-    as the sweep runs it, after one untimed, less its loop (the CPU time, unlike the wall time,
-    hardly moves with the machine's load); and that cost around the loop [s] by scenario. The
-    noise floor's runs are not charged: a sweep runs an instance's floor only where a run
-    missed real time (:func:`qpbench.sweep.runner.run_sweep`)."""
+    """Each candidate's cost of one instance in every swept scenario [s], and the cost of a run
+    around its loop [s] by scenario, as docs/sweeps.md (step 2) measures them: the loop's time
+    per simulated second in the nominal run times the instance's length, plus the CPU time of a
+    whole run of each sweep's first valid instance less its loop."""
     from .closed_loop import LoopTask, run_row
 
     runs = table.set_index(["scenario", "backend"])

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..exceptions import ParamError
+from ..exceptions import check_choice
 from ..packed import HEADER
 
 if TYPE_CHECKING:
@@ -64,10 +64,7 @@ def make_params(
     ratio ``<= step_ratio``, else ``substeps``, else the fewest with ``r <= safety * ratio_max``
     (``clamp``: a forced step above it shortened); else ``r = safety * ratio_max`` until the
     residuals are ``<= tol`` or ``max_steps``. ``p_range``: ``P``'s eigenvalue range."""
-    if method not in METHODS:
-        raise ParamError(
-            f"unknown method '{method}' (choose from {', '.join(METHODS)})", key="method"
-        )
+    check_choice(method, METHODS, "method", "method")
     prm = np.zeros(PRM_SIZE)  # NOTE_NONE
     prm[PMIN], prm[PMAX] = p_range
     prm[[R_TOTAL, SUBSTEPS, SAFETY]] = r_total, substeps, safety

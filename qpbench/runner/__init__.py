@@ -7,7 +7,7 @@ import logging
 import os
 from collections.abc import Callable, Iterator
 
-from ..exceptions import ParamError, positive_count
+from ..exceptions import ParamError, check_choice, positive_count
 from .dask_ import DaskExecutor, load_security
 from .process import MAX_ATTEMPTS, Done, run_located, run_tasks
 
@@ -63,10 +63,7 @@ def make_executor(
 ) -> SerialExecutor | ProcessExecutor | DaskExecutor:
     """The executor of ``--executor local|dask --jobs N [--scheduler ADDRESS --security FILE]``;
     :class:`ParamError` for options that do not go together."""
-    if name not in EXECUTORS:
-        raise ParamError(
-            f"unknown executor '{name}' (choose from {', '.join(EXECUTORS)})", key="--executor"
-        )
+    check_choice(name, EXECUTORS, "executor", "--executor")
     positive_count(jobs, "--jobs")
     if name == "local":
         if scheduler is not None or security_file is not None:

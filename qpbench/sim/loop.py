@@ -43,7 +43,7 @@ from ..backends.base import timed_call
 from ..control.adaptive import compiled_law
 from ..control.controller import check_formulation
 from ..engine.model import run_model
-from ..exceptions import ParamError, positive_count, positive_seconds
+from ..exceptions import ParamError, check_choice, positive_count, positive_seconds
 from ..native import entry_point
 from ..robot.body import body_clearance
 from ..statuses import FAILURE_STATUSES, classify, describe_exception
@@ -146,10 +146,7 @@ def simulate(
     instance's state is the caller's). ``p99_interval``: the summary bounds the p99 of the
     ranking time (a bootstrap, tens of milliseconds; a sweep's instances go without).
     """
-    if engine not in ENGINES:
-        raise ParamError(
-            f"unknown engine '{engine}' (choose from {', '.join(ENGINES)})", key="engine"
-        )
+    check_choice(engine, ENGINES, "engine", "engine")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     check_formulation(formulation)

@@ -1,19 +1,10 @@
-"""A sweep's run into ``DIR``: ``sweep.json`` (the manifest: the sweep file's text and SHA-256,
-seed, samples, duration, base, backends, qpbench's version), ``instances/<name>.toml`` and the
-table ``sweep.csv``: one row per (instance, backend), appended as runs end, rewritten at the end
-with the last row of each key. Resuming keeps the ``ok`` and ``invalid_scenario`` rows and runs
-the rest again; it refuses a folder of another sweep file or duration (instance ``i`` is the same
-whatever the sample count).
-
-A run's figures are its closed-loop summary's (:mod:`qpbench.sim.summary`; ``duration_s`` is
-``duration``) with the time-to-converge figures ``t_converge_force_s`` and
-``t_converge_tracking_s`` (empty: not converged) of the bands ``force_band_n`` [N] and
-``tracking_band_m`` [m]. ``status``: ``ok`` (a result, whatever its verdict), ``error`` (it
-raised), ``crashed`` (its worker was lost twice; ``attempts``: runs started) or
-``invalid_scenario`` (the loader refused the instance; no verdict). ``executor``, ``host``,
-``worker``, ``concurrent_solves``: where it ran. Each instance is run with the ``noop`` backend
-too (``noise_floor``: the machine's noise floor, docs/verdicts.md); the other runs of the
-instance made in the same sweep are judged real time against it.
+"""A sweep's run into ``DIR`` (docs/sweeps.md): ``sweep.json`` (the manifest),
+``instances/<name>.toml`` and the table ``sweep.csv``, one row per (instance, backend) appended
+as runs end and rewritten at the end with the last row of each key. A row's figures are its
+closed-loop summary's (:mod:`qpbench.sim.summary`) with the time-to-converge figures (empty:
+not converged). ``status``: ``ok`` (a result, whatever its verdict), ``error``, ``crashed`` (its
+worker was lost twice) or ``invalid_scenario`` (no verdict). Each instance is run with the
+noise floor too, against which its other runs are judged real time (docs/verdicts.md).
 """
 
 from __future__ import annotations
@@ -244,29 +235,22 @@ def run_sweep(
     engine: str = "compiled",
     instances: list[Instance] | None = None,
 ) -> SweepOutcome:
-    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into ``out``;
-    ``instances``: those of :func:`~.spec.sample_instances` to run (default: every one of ``spec``).
-
-    Each run is :func:`qpbench.harness.closed_loop.run_row`; its row is appended to ``sweep.csv``
-    as it ends (then ``on_row``). At the end the table is rewritten atomically in instance and
-    backend order, one row per key.
-
-    Raises:
-        OutputExistsError: ``out/sweep.csv`` exists without ``force`` or ``resume``.
-        InputError: resuming a folder of another sweep file or duration.
-    """
+    """Run every (instance, backend) of ``spec`` on ``executor`` (:mod:`qpbench.runner`) into
+    ``out``, each row to ``on_row`` once appended; ``instances``: those of
+    :func:`~.spec.sample_instances` to run (default: every one of ``spec``). An
+    :class:`OutputExistsError` without ``force`` or ``resume`` when ``out/sweep.csv`` exists,
+    an :class:`InputError` when resuming a folder of another sweep file or duration."""
     out = Path(out)  # each instance's noise floor, run like the others (docs/verdicts.md)
     backends = [NOISE_FLOOR, *(b for b in backends if b != NOISE_FLOOR)]
     instances, kept = _prepare(out, spec, backends, force, resume, instances)
     csv_path = out / CSV_NAME
     rows = dict(kept)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
-    failed = 0
     items, heads, figures = [], {}, {}
-    # the tasks' common terms; each carries its instance's text
+    # the tasks' common terms (an instance's time ranks nothing); each carries its instance's text
     bands = (spec.force_band, spec.tracking_band)
-    terms = LoopTask("", "", plugins=tuple(plugins or ()), bands=bands, engine=engine)
-    terms = replace(terms, p99_interval=False)  # an instance's time ranks nothing
+    plugins = tuple(plugins or ())
+    terms = LoopTask("", "", plugins=plugins, bands=bands, engine=engine, p99_interval=False)
     with ResultsWriter(csv_path, new=new, columns=COLUMNS) as writer:
 
         def emit(row):
@@ -287,7 +271,7 @@ def run_sweep(
                 file = head["instance_file"]
                 task = replace(terms, scenario=file, backend=backend, scenario_text=inst.text)
                 items.append(((inst.name, backend), task))
-        failed += _run_items(executor, items, heads, figures, rows, emit)
+        failed = _run_items(executor, items, heads, figures, rows, emit)
     for (name, backend), fields in figures.items():  # real time against the instance's floor
         judge_against_floor(fields, figures.get((name, NOISE_FLOOR)))
         rows[(name, backend)] |= {k: fields[k] for k in FLOOR_JUDGED if k in fields}
@@ -326,9 +310,8 @@ def _run_items(executor, items: list, heads: dict, figures: dict, rows: dict, em
 
 def _floors_needed(rows: dict, names: set[str]) -> set[str]:
     """The instances among ``names`` whose noise floor must run: one of their runs (run now, or
-    kept) in ``rows`` is not real time, or none of them says (a sweep of the floor alone). A criterion a
-    run meets is met whatever the floor (the floor only excuses misses: docs/verdicts.md), so
-    an instance whose runs all hold the rate is judged without it, at half the cost."""
+    kept) in ``rows`` is not real time, or none of them says (the floor only excuses misses:
+    docs/verdicts.md)."""
     said: dict[str, set[str]] = {}
     for (name, backend), row in rows.items():
         if backend != NOISE_FLOOR and row.get("realtime") not in (None, ""):

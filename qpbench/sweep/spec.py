@@ -1,16 +1,7 @@
-"""Sweep files (format: ``docs/sweeps.md``) and their instances.
-
-A sweep file names a base scenario and, per scenario key, a distribution to draw that key's value
-from for every instance; instance ``i`` draws key ``k`` from ``default_rng([seed, i, crc32(k)])``,
-the same whatever the sample count and the other keys. ``[convergence]`` holds the bands of the
-time-to-converge figures, ``force_band`` [N] and ``tracking_band`` [m] (default: a tenth of the
-base's ``[verdict]`` maximum errors).
-
-An instance is the base scenario with every swept key drawn, as a full scenario file, saved as
-``DIR/instances/<name>.toml`` so that ``qpbench simulate --scenario`` re-runs one alone. An
-instance the loader refuses keeps its one-line reason (:attr:`Instance.invalid`), as does one
-whose body starts inside ``d_safe`` of an obstacle (:func:`start_clearance`; unless ``[sweep]
-safe_start = false``): every backend would start unsafe, which says nothing about the backends.
+"""Sweep files (format and sampling: ``docs/sweeps.md``) and their instances, each the base
+scenario with every swept key drawn, as a full scenario file. ``[convergence]`` holds the bands
+of the time-to-converge figures, ``force_band`` [N] and ``tracking_band`` [m] (default: a tenth
+of the base's ``[verdict]`` maximum errors).
 """
 
 from __future__ import annotations
@@ -26,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exceptions import InputError, ScenarioError, check_known_keys, positive_seconds
+from ..exceptions import InputError, ScenarioError, check_choice, check_known_keys, positive_seconds
 from ..robot.body import body_clearance, contact_obstacles, link_label
 from ..sim.scenario import OVERRIDE_KEY, Scenario, apply_overrides, load_scenario, parse_scenario
 from ..sim.scenario_schema import filled, finite_number
@@ -116,9 +107,8 @@ def checked_distribution(key: str, spec: dict, base, path) -> Distribution:
             message, path=path, key=".".join(filter(None, ("parameters", key, field)))
         )
 
-    kind = spec.get("dist")
-    if not isinstance(kind, str) or kind not in DISTRIBUTIONS:
-        raise bad(f"unknown distribution {kind!r} (choose from {', '.join(DISTRIBUTIONS)})", "dist")
+    kind = str(spec.get("dist"))
+    check_choice(kind, DISTRIBUTIONS, "distribution", f"parameters.{key}.dist", InputError, path)
     for f in spec:
         if f != "dist" and f not in DISTRIBUTIONS[kind]:
             expected = ", ".join(DISTRIBUTIONS[kind])
@@ -247,12 +237,8 @@ def load_sweep(
     text: str | None = None,
 ) -> SweepSpec:
     """Read and check a sweep file (``samples``, ``duration`` override the file's; ``text``: the
-    file's text, ``path`` then only names it in errors and anchors a relative ``base``).
-
-    Raises:
-        InputError: unreadable file, unknown or missing key, impossible
-            distribution, unknown base scenario (one line naming the file and key).
-    """
+    file's text, ``path`` then only names it in errors and anchors a relative ``base``); an
+    :class:`InputError` names the file and the key."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8") if text is None else text
