@@ -23,9 +23,6 @@ from .chain import (
     positions_many,
 )
 
-#: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
-KEY_POINT_KINDS = ("paper", "closest")
-
 
 class Arm:
     """A serial chain of n revolute joints (:class:`~qpbench.robot.chain.ChainModel`) with
