@@ -16,12 +16,9 @@ One tick at ``t_k = k dt``:
 5. plant: ``theta_{k+1} = theta_k + dt v_k`` (steps 1 and 5 and the log row:
    :mod:`qpbench.sim.tick_kernel`).
 
-Two engines run these ticks on the same model of the run (:mod:`qpbench.engine.model`) and the
-same compiled build, step and adaptive law, so they give the same trajectory: ``compiled``
-(:mod:`qpbench.engine.compiled`: the whole run in one compiled function, the solver called
-through its C API, for the backends that have one) and ``python`` (every backend, called from
-this module's loop). Both time each tick on one clock (``CLOCK_MONOTONIC``; what each time
-includes: :mod:`qpbench.sim.log`, docs/methodology.md).
+Two engines run these ticks on the same model of the run and give the same trajectory:
+``compiled`` (:mod:`qpbench.engine.compiled`) and ``python`` (this module's loop); their
+clocks: docs/methodology.md, "Closed-loop engines and their clocks".
 
 The body's clearance (``d_body_*``) is computed after the loop for every tick at once.
 """

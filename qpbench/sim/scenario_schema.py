@@ -285,15 +285,6 @@ class ScenarioSpec(Table):
     rnn: RnnTable = Field(default_factory=RnnTable)
     verdict: dict = Field(default_factory=dict)
 
-    @property
-    def rnn_settings(self) -> dict:
-        """The ``[rnn]`` table as a plain dict, defaults filled in."""
-        return self.rnn.model_dump()
-
-    @property
-    def verdict_settings(self) -> VerdictSettings:
-        return VerdictSettings(**self.verdict)
-
 
 def _key(loc: tuple) -> str:
     """``("obstacles", 0, "line", "radius")`` -> ``obstacles[0].radius`` (a union's tag dropped)."""
@@ -492,12 +483,8 @@ def _check_across_keys(spec: ScenarioSpec, file) -> None:
 
 def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
     """``dt`` and ``duration`` > 0 [s], at least one tick, ``alpha * dt < 1``, and a settle time
-    set on the command line (``verdict.settle_time`` in ``set_keys``) < ``duration`` [s].
-
-    Called on every change of ``dt`` or ``duration`` (the file's, ``--set``, ``--duration``, a
-    sweep's), so a settle time set on the command line is checked against the duration run: a
-    run shorter than it would not judge tracking and force that it was set to judge.
-    """
+    set on the command line (``verdict.settle_time`` in ``set_keys``) < ``duration`` [s]: called
+    on every change of ``dt`` or ``duration``, so it is checked against the duration run."""
     s = spec.simulation
     for key in ("dt", "duration"):
         if not getattr(s, key) > 0:
@@ -524,12 +511,6 @@ def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
             path=file,
             key="verdict.settle_time",
         )
-
-
-def with_simulation(spec: ScenarioSpec, **values) -> ScenarioSpec:
-    """``spec`` with ``[simulation]`` values (``dt``, ``duration`` [s]) replaced."""
-    simulation = spec.simulation.model_copy(update={k: float(v) for k, v in values.items()})
-    return spec.model_copy(update={"simulation": simulation})
 
 
 #: Order of the tables in a filled-in scenario file (:func:`filled`).

@@ -354,12 +354,9 @@ def _body_figures(
     frame: pd.DataFrame, t: np.ndarray, controller: Controller, dt: float
 ) -> tuple[dict, dict]:
     """The body's closest approach to an obstacle (``d_body_*`` columns of the log): the
-    clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles.
-    The intervals between ticks (``dt`` [s], the last command's included) in which a link went
-    inside an obstacle it was clear of at both ticks (:func:`~qpbench.robot.body.body_crossings`
-    on the logged angles): how many, and the first one's time [s], link and obstacle.
-    For the verdict, the obstacles' kinds, the ticks with the body inside an obstacle and the
-    first of them [s]."""
+    clearance [m], its link (1-based), its obstacle and when [s] (``None`` without obstacles),
+    and :func:`_crossing_figures`. For the verdict, the obstacles' kinds, the ticks with the
+    body inside an obstacle and the first of them [s]."""
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     crossed = _crossing_figures(frame, t, controller, dt)
     if not np.isfinite(d).any():

@@ -183,12 +183,8 @@ class Obstacle:
         """A lower bound [m] of the signed distance (as :meth:`closest_on_segments`, smallest
         over the obstacle's points) to every segment ``P0(l) -> P1(l)``, ``P(l) = (1 - l) Pa +
         l Pb`` for ``l`` in [0, 1] (ends (s, d) [m]), the obstacle held as at ``t`` [s]: the
-        sweep of a link in the obstacle's frame; a value ``<= 0`` says it may reach it.
-
-        Here for any kind whose signed distance is 1-Lipschitz (a convex shape's): a point of
-        the sweep is within ``l M`` of the first segment and ``(1 - l) M`` of the last (``M``
-        the ends' larger move), so the bound is the least over ``l`` of the larger of ``d_a -
-        l M`` and ``d_b - (1 - l) M``."""
+        sweep of a link in the obstacle's frame; a value ``<= 0`` says it may reach it. Here the
+        Lipschitz bound of a convex shape's signed distance (docs/body.md)."""
         d_a = self.closest_on_segments(P0a, P1a, t)[2].min(axis=1)
         d_b = self.closest_on_segments(P0b, P1b, t)[2].min(axis=1)
         M = np.maximum(np.linalg.norm(P0b - P0a, axis=1), np.linalg.norm(P1b - P1a, axis=1))
@@ -217,6 +213,8 @@ class Obstacle:
         raise NotImplementedError
 
 
-def planar_inputs(*ends) -> bool:
-    """The segments' ends (each (s, d) [m]) all lie in z = 0."""
-    return all(np.shape(E)[1] == 2 or not np.any(np.asarray(E)[:, 2]) for E in ends)
+def planar_ends(*ends) -> list[np.ndarray] | None:
+    """The segments' ends (each (s, d) [m]) as (s, 2) arrays when all lie in z = 0, else None."""
+    if not all(np.shape(E)[1] == 2 or not np.any(np.asarray(E)[:, 2]) for E in ends):
+        return None
+    return [np.asarray(E, dtype=float)[:, :2] for E in ends]

@@ -47,13 +47,8 @@ def segment_distance(P0, P1, Q0, Q1) -> np.ndarray:
 def swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
     """A lower bound [m] of the distance of points ``C`` to the segments ``P0(l) -> P1(l)``,
     ``P(l) = (1 - l) Pa + l Pb``, ``l`` in [0, 1] (all (s, 2)); 0 where one passes over ``C``.
-
-    The closest point of segment ``l`` is an end (on a chord ``P0a -> P0b`` or ``P1a -> P1b``)
-    or its foot, at distance ``|g(l)| / |e(l)|``: ``e(l) = P1(l) - P0(l)``, ``g(l) = e(l) x (C -
-    P0(l))`` a quadratic in ``l`` (its least magnitude on [0, 1] from its ends and its vertex)
-    and ``|e(l)|`` convex (at most its larger end). For a rigid link that moves little between
-    ``a`` and ``b`` the bound is within the square of that motion of the exact least distance.
-    """
+    The closest point of segment ``l`` is an end (on a chord) or its foot, at ``|g(l)| /
+    |e(l)|`` with ``g(l) = e(l) x (C - P0(l))`` quadratic in ``l`` (docs/body.md)."""
     Q, D0 = C - P0a, P0b - P0a
     E = P1a - P0a
     DE = (P1b - P0b) - E

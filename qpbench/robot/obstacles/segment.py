@@ -7,7 +7,7 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import PlanarSchema, Vec2, planar_inputs
+from ._base import PlanarSchema, Vec2, planar_ends
 from ._planar import passes_through, segment_distance, swept_point_bound
 from ._table import SEGMENT
 from .capsule import CapsuleObstacle
@@ -46,9 +46,10 @@ class SegmentObstacle(CapsuleObstacle):
         link's ends run along the chords ``P0a -> P0b`` and ``P1a -> P1b``, the bar's ends are
         points swept over. Positive, no crossing begins in the sweep (one begins with an end on
         the other), nor is there one at its ends (their signed distances are in the bound)."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
-        P0a, P1a, P0b, P1b = (np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b))
+        P0a, P1a, P0b, P1b = ends
         a, b = self._ends(t, len(P0a))
         return np.minimum.reduce(
             [
@@ -64,9 +65,10 @@ class SegmentObstacle(CapsuleObstacle):
     def passed_through(self, P0a, P1a, P0b, P1b, t):
         """In the plane: an end of the bar through the link, or an end of the link through the
         bar."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().passed_through(P0a, P1a, P0b, P1b, t)
-        P0a, P1a, P0b, P1b = (np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b))
+        P0a, P1a, P0b, P1b = ends
         a, b = self._ends(t, len(P0a))
         return (
             passes_through(a, a, P0a, P1a, P0b, P1b)
