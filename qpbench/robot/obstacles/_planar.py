@@ -1,5 +1,5 @@
 """Planar geometry of the between-ticks tests (numpy): a point against a swept segment, a
-point through a moving segment, segments against segments; all arrays (s, 2) [m]."""
+point through a moving segment; all arrays (s, 2) [m]."""
 
 from __future__ import annotations
 
@@ -18,30 +18,9 @@ def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
 
 
-def segments_cross(P0, P1, Q0, Q1) -> np.ndarray:
-    """Segments ``P0 -> P1`` and ``Q0 -> Q1`` cross strictly (each splits the other's ends)."""
-    e, f = P1 - P0, Q1 - Q0
-    s1, s2 = cross(e, Q0 - P0), cross(e, Q1 - P0)
-    s3, s4 = cross(f, P0 - Q0), cross(f, P1 - Q0)
-    return (s1 * s2 < 0) & (s3 * s4 < 0)
-
-
 def point_segment_distance(X, P0, P1) -> np.ndarray:
     """Distance [m] of each point ``X`` to its segment ``P0 -> P1`` (all (s, 2))."""
     return np.linalg.norm(X - foot(X, P0, P1), axis=1)
-
-
-def segment_distance(P0, P1, Q0, Q1) -> np.ndarray:
-    """Distance [m] between segments ``P0 -> P1`` and ``Q0 -> Q1`` (0 where they cross)."""
-    ends = np.minimum.reduce(
-        [
-            point_segment_distance(P0, Q0, Q1),
-            point_segment_distance(P1, Q0, Q1),
-            point_segment_distance(Q0, P0, P1),
-            point_segment_distance(Q1, P0, P1),
-        ]
-    )
-    return np.where(segments_cross(P0, P1, Q0, Q1), 0.0, ends)
 
 
 def swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
