@@ -174,14 +174,8 @@ class DhRobotTable(PandaRobotTable):
     velocity_max: Vec
 
 
-RobotTable = _by_kind(
-    PlanarRobotTable,
-    PandaRobotTable,
-    Iiwa14RobotTable,
-    DhRobotTable,
-    UrdfRobotTable,
-    default="planar",
-)
+_ROBOTS = (PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, DhRobotTable, UrdfRobotTable)
+RobotTable = _by_kind(*_ROBOTS, default="planar")
 
 
 class KeyPointsTable(Table):
@@ -264,7 +258,8 @@ class RnnTable(Table):
     eps: Annotated[Num, Field(gt=0)] = 0.02
 
 
-PathTable = _by_kind(CosinePathTable, PolylinePathTable)
+_PATHS = (CosinePathTable, PolylinePathTable)
+PathTable = _by_kind(*_PATHS)
 #: An obstacle: its kind's schema (:mod:`qpbench.robot.obstacles`), picked by ``kind``.
 ObstacleTable = _by_kind(*(cls.Schema for cls in obstacle_kinds().values()))
 
@@ -313,12 +308,11 @@ def _expected(loc: tuple) -> list[str]:
     return list(model.model_fields)
 
 
-_ROBOTS = (PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, UrdfRobotTable)
-_TAGGED = {"cosine": CosinePathTable, "polyline": PolylinePathTable}
-_TAGGED.update((_tag(m), m) for m in _ROBOTS)
+#: The tables picked by ``kind``, by kind, and the kinds each union takes.
+_TAGGED = {_tag(m): m for m in (*_ROBOTS, *_PATHS)}
 _TAGGED.update((kind, cls.Schema) for kind, cls in obstacle_kinds().items())
 _KINDS = {
-    "path": ("cosine", "polyline"),
+    "path": tuple(map(_tag, _PATHS)),
     "robot": tuple(map(_tag, _ROBOTS)),
     "obstacles": tuple(obstacle_kinds()),
 }
