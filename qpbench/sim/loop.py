@@ -214,12 +214,11 @@ class _Run:
         keep_every: int | None,
         deadline: float | None,
         engine: str,
-        fallback: Backend | None = None,
+        fallback: Backend,
     ):
         from ..engine import compiled
 
-        self.scenario, self.be = scenario, backend
-        self.fb_be = backend if fallback is None else fallback
+        self.scenario, self.be, self.fb_be = scenario, backend, fallback
         self.formulation, self.keep_every = formulation, keep_every
         self.deadline = deadline
         self.soft = formulation == "soft"
@@ -452,14 +451,7 @@ class _Run:
             engine_note=self.engine_note,
         )
         summary = summarize(
-            frame,
-            scenario,
-            ctrl,
-            self.be.name,
-            self.formulation,
-            self.wall,
-            run_info=run_info,
-            p99_interval=p99_interval,
+            frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info, p99_interval
         )
         from ..formats import ProblemRecord
 
