@@ -463,11 +463,8 @@ def _time_figures(frame: pd.DataFrame) -> dict:
 
 
 def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
-    """The per-tick time [s] a C or C++ controller would pay for the solver, and its source:
-    ``compiled``, the solve and the fallback's solve timed in compiled code (the compiled
-    engine); ``solver``, the solver's own report (the Python engine, when every tick has one);
-    ``python``, the solve and the fallback's solve through Python (the solver reports none on
-    some ticks: never judged on a subset)."""
+    """The per-tick time [s] a C or C++ controller would pay for the solver, and its source
+    (``compiled``, ``solver`` or ``python``: docs/methodology.md, "How sure a p99 is")."""
     solve = _with_fallback(frame)
     if engine == "compiled":
         return solve, "compiled"
@@ -502,10 +499,9 @@ def block_bootstrap_quantile(
     seed: int = BOOTSTRAP_SEED,
 ) -> tuple[float, float]:
     """Percentile interval at ``level`` of the ``q``-quantile of the series ``x`` by the circular
-    block bootstrap (docs/methodology.md, "How sure a p99 is"): ``round(n / block)`` blocks of
-    ``block`` values per resample, its quantile the order statistic of rank ``ceil(q m)``;
-    non-finite values left out (``(nan, nan)`` without any); seeded. Only the values at or above
-    a resample's quantile decide it, so resamples are counted on the largest values of ``x``."""
+    block bootstrap (docs/methodology.md, "How sure a p99 is"); non-finite values left out
+    (``(nan, nan)`` without any). Only the values at or above a resample's quantile decide it,
+    so resamples are counted on the largest values of ``x``."""
     x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
     n = x.size

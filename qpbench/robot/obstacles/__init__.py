@@ -14,7 +14,6 @@ from __future__ import annotations
 import functools
 import importlib
 import pkgutil
-from typing import Annotated, Union
 
 from ._base import Obstacle
 from ._draw import OBSTACLE_COLOR, draw_trace, outline, project, trace
@@ -78,15 +77,6 @@ def kinds() -> dict[str, type[Obstacle]]:
         if not m.name.startswith("_"):
             importlib.import_module(f"{__name__}.{m.name}")
     return dict(sorted(_REGISTRY.items()))
-
-
-@functools.cache
-def schema_adapter():
-    """A pydantic ``TypeAdapter`` of any kind's schema, discriminated by ``kind``."""
-    from pydantic import Field, TypeAdapter
-
-    schemas = tuple(cls.Schema for cls in kinds().values())
-    return TypeAdapter(Annotated[Union[schemas], Field(discriminator="kind")])  # noqa: UP007
 
 
 def make(entry: dict) -> Obstacle:

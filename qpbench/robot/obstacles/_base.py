@@ -94,29 +94,23 @@ def unit(vector, key: str) -> np.ndarray:
     return arr / norm
 
 
-def validated(schema, data: dict, prefix: str, path=None, error=InputError, fields=None):
-    """``data`` validated by pydantic ``schema``: a model, or a ``TypeAdapter`` of a union
-    discriminated by ``kind`` (whose errors start with the kind) with the ``fields`` of
-    ``data``'s kind; its first error raised as one line ``error`` naming ``path`` and
-    ``prefix.<key>``."""
+def validated(schema: type[Schema], data: dict, prefix: str) -> Schema:
+    """``data`` validated by pydantic model ``schema``; its first error raised as one line
+    :class:`InputError` naming ``prefix.<key>``."""
     try:
-        if isinstance(schema, type):
-            return schema.model_validate(data)
-        return schema.validate_python(data)
+        return schema.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        tagged = not isinstance(schema, type)
-        loc = [p for p in err["loc"] if isinstance(p, str)][1 if tagged else 0 :]
+        loc = [p for p in err["loc"] if isinstance(p, str)]
         if err["type"] == "missing":
             message = "missing key"
         elif err["type"] == "extra_forbidden":
-            known = list(schema.model_fields) if fields is None else fields
-            message = f"unknown key (expected one of: {', '.join(known)})"
+            message = f"unknown key (expected one of: {', '.join(schema.model_fields)})"
         elif err["type"] == "value_error":
             message = err["msg"].removeprefix("Value error, ")
         else:
             message = f"{err['msg'][0].lower()}{err['msg'][1:]}, got {err['input']!r}"
-        raise error(message, path=path, key=".".join([prefix, *loc[:1]])) from None
+        raise InputError(message, key=".".join([prefix, *loc[:1]])) from None
 
 
 class Obstacle:
