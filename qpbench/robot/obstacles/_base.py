@@ -127,7 +127,10 @@ class Obstacle:
     DIM: ClassVar[int] = 3
 
     def __init__(self, **fields):
-        """The fields of :attr:`Schema` (checked by it; errors name ``obstacles.<name>.<key>``)."""
+        """The fields of :attr:`Schema` (checked by it; errors name ``obstacles.<name>.<key>``);
+        ``velocity`` None: at rest, in the kind's dimension."""
+        if fields.get("velocity", 0) is None:
+            del fields["velocity"]
         name = str(fields.get("name", ""))
         self.fields = validated(self.Schema, {"kind": self.KIND, **fields}, f"obstacles.{name}")
         self.name = name

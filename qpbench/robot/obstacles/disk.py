@@ -30,9 +30,6 @@ class DiskObstacle(SphereObstacle):
     Schema = DiskSchema
     DIM = 2
 
-    def __init__(self, name: str, center, radius: float, velocity=(0.0, 0.0)):
-        super().__init__(name, center, radius, velocity)
-
     def _centre(self, t, s: int) -> np.ndarray:
         t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
         return self.center + t[:, None] * self.velocity
