@@ -141,7 +141,7 @@ def simulate(
     says which ran). ``warmup_ticks``: a discarded run of that many ticks first, with a backend
     of its own, so one-off costs stay off the clock (a backend given by name only: an
     instance's state is the caller's). ``p99_interval``: the summary bounds the p99 of the
-    ranking time (a bootstrap, tens of milliseconds; a sweep's instances go without).
+    ranking time (a bootstrap; a sweep's instances go without).
     """
     if engine not in ENGINES:
         raise ParamError(
