@@ -425,8 +425,8 @@ def _limit_figures(frame: pd.DataFrame, t: np.ndarray, limits) -> tuple[dict, di
 
 
 def _effort_figures(frame: pd.DataFrame, n: int, dt: float, after: np.ndarray) -> dict:
-    """Joint motion and effort, the task residual, ``Kp_hat, Kd_hat`` and the solve times [s]
-    of a run."""
+    """Joint motion and effort, the task residual after :data:`SETTLE_TIME` and the last
+    ``Kp_hat, Kd_hat``."""
     theta = frame[log.theta_columns(n)].to_numpy()
     v = frame[log.velocity_columns(n)].to_numpy()
     v_sq = frame[log.V_SQ].to_numpy()
