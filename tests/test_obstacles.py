@@ -387,8 +387,11 @@ def test_schema_errors_are_one_line_naming_file_and_key(tmp_path, obstacle, key,
 
 
 def test_schemas_are_discriminated_by_kind_and_fill_defaults(tmp_path):
-    adapter = obstacles.schema_adapter()
-    box = adapter.validate_python(
+    from pydantic import TypeAdapter
+
+    from qpbench.sim.scenario_schema import ObstacleTable
+
+    box = TypeAdapter(ObstacleTable).validate_python(
         {"kind": "box", "name": "b", "center": [0, 0, 1], "half_extents": [1, 2, 3]}
     )
     assert type(box).__name__ == "BoxSchema" and box.quaternion == (1.0, 0.0, 0.0, 0.0)

@@ -149,6 +149,19 @@ def test_bad_files_name_the_file_and_key(tmp_path, old, new, key):
     assert err.value.key == key
 
 
+def test_a_dh_robot_names_its_unknown_key_and_every_robot_kind(tmp_path):
+    """An unknown key of a ``dh`` robot and an unknown robot kind are one-line errors listing
+    the dh table's keys and every kind, dh included."""
+    rows = "a = [0.0, 0.0, 0.0, 0.0]\nd = [0.333, 0.5, 0.5, 0.107]\nalpha = [0.0, 1.57, -1.57, 0.0]"
+    f = edited(tmp_path, r'^kind = "iiwa14"', f'kind = "dh"\n{rows}\nbogus = 1', "iiwa_wall")
+    with pytest.raises(ScenarioError, match="unknown key .*alpha") as err:
+        load_scenario(f)
+    assert err.value.key == "robot.bogus"
+    f = edited(tmp_path, r'^kind = "iiwa14"', 'kind = "dhx"', "iiwa_wall")
+    with pytest.raises(ScenarioError, match="planar, panda, iiwa14, dh, urdf"):
+        load_scenario(f)
+
+
 @pytest.mark.parametrize(
     "setting,key",
     [

@@ -82,8 +82,7 @@ def compiled_build_kernel():
     """The build kernel ``build(model, theta, t, kp, kd, soft, buf)``, compiled (or loaded from
     numba's cache) on the first call; inlined into a compiled caller (numba's IR), so a loop
     calling it reads the model's fields once, not as a call's arguments every tick (a call
-    passes the model flattened, a few words per array: about 240 words, copied to the stack
-    each call; bench/README.md)."""
+    copies the flattened model, a few words per array, to the stack: bench/README.md)."""
     from ..native import compile_with
     from ..robot.chain import compiled_chain
     from ..robot.obstacles import compiled_segment_distance

@@ -169,7 +169,6 @@ class Controller:
         """The tick's :class:`TickArrays`, freshly allocated (the loop's hot path: ``theta``
         must be a contiguous float64 array; :meth:`build` converts)."""
         n = self.n
-        nr = self.n_rows
         kp = float(self.kp if kp is None else kp)
         kd = float(self.kd if kd is None else kd)
         buf = np.empty(self._packed_size)
@@ -177,21 +176,9 @@ class Controller:
         if self._build is None:
             self._build = entry_point(compiled_build_kernel(), *args)
         self._build(*args)
-        sP, sq, sG, sh, sJ, sb, slb, sub, see, sd, sxd = self._packed_slices
-        return TickArrays(
-            buf[sP].reshape(n, n),
-            buf[sq],
-            buf[sG].reshape(nr, n),
-            buf[sh],
-            buf[sJ].reshape(self.dim, n),
-            buf[sb],
-            buf[slb],
-            buf[sub],
-            buf[see],
-            buf[sd],
-            buf[sxd],
-            buf,
-        )
+        P, q, G, h, J, *rest = (buf[s] for s in self._packed_slices)
+        P, G, J = P.reshape(n, n), G.reshape(self.n_rows, n), J.reshape(self.dim, n)
+        return TickArrays(P, q, G, h, J, *rest, buf)
 
     def make_problem(self, arrays: TickArrays, soft: bool) -> qpsolvers.Problem:
         """A :class:`qpsolvers.Problem` of :meth:`build_arrays`' output (a

@@ -15,7 +15,6 @@ from .convexity import assess_convexity as assess_convexity
 from .maros_meszaros import load_maros_meszaros
 from .npz import load_npz
 from .npz import save_npz as save_npz
-from .parquet import list_column as list_column
 from .parquet import package_versions as package_versions
 from .parquet import read_parquet, read_problem_set, sha256_file
 from .parquet import table_to_bytes as table_to_bytes

@@ -1,24 +1,6 @@
-"""The whole body: exact clearance of the arm's link capsules to the obstacles.
-
-Link i is the segment ``p[i] -> p[i+1]`` swollen by the link radius ``r`` (``[key_points]
-link_radius``); its clearance to an obstacle is the exact signed distance of the segment to the
-shape minus ``r`` [m] (``< 0``: inside, by that depth). A static ``line`` obstacle that is the
-contact surface (:func:`contact_obstacles`) is exempt for the end effector's link, which presses
-into it by design; the closest-point key points use the same exemption.
-
-Between two samples (:func:`body_crossings`) the joint angles move linearly and the obstacles
-translate; the interval is cut in halves until each piece is proven clear by a lower bound of
-its clearance, found inside at a cut, or shorter than the motion :data:`SWEEP_TOL` resolves
-(then judged by :meth:`~qpbench.robot.obstacles.Obstacle.passed_through`). Two bounds, the
-larger kept, for link ``i`` over a piece of ``w`` [s]:
-
-- the speed bound: no point of the link moves faster than ``V = sum_{j<=i} l_j |w_j|`` [m/s]
-  (``w_j`` the absolute angular speed of link ``j``) plus the obstacle's speed, so the clearance
-  is ``V``-Lipschitz and at least ``(d_a + d_b - V w) / 2``;
-- the sweep bound: every point of the link stays within ``delta = A w^2 / 8`` of the segment
-  between the linearly moving ends (``A = sum_{j<=i} l_j w_j^2`` [m/s^2] bounds its
-  acceleration), so the clearance is at least the obstacle's
-  :meth:`~qpbench.robot.obstacles.Obstacle.swept_distance_bound` minus ``delta``.
+"""The whole body: exact clearance of the arm's link capsules to the obstacles, at the ticks
+(:func:`body_clearance`) and between them (:func:`body_crossings`); the rule, the exemption of
+the contact surface and the bounds that decide an interval: docs/body.md.
 """
 
 from __future__ import annotations
@@ -136,12 +118,10 @@ def body_crossings(
     theta_end: np.ndarray | None = None,
     d_min: np.ndarray | None = None,
 ) -> BodyCrossings:
-    """The body rule between the samples ``theta`` (T, n) [rad] at ``t`` (T,) [s]: joint angles
-    linear from one sample to the next, ``dt`` [s] apart, and on to ``theta_end`` (n,) [rad]
-    (the last command's motion, ``theta_{T-1} + dt v_{T-1}``) when given; obstacles translating
-    with their velocity; capsules of ``radius`` [m], ``exempt`` as :func:`body_clearance`.
-    ``d_min`` (T,) [m]: the samples' :attr:`BodyClearance.d_min` when known (the tick log's
-    ``d_body_min``); the intervals it proves clear for every link are not looked at again."""
+    """The body rule between the samples ``theta`` (T, n) [rad] at ``t`` (T,) [s], ``dt`` [s]
+    apart, and on to ``theta_end`` (n,) [rad] (the last command's motion) when given; ``radius``,
+    ``exempt`` as :func:`body_clearance`. ``d_min`` (T,) [m]: the samples' known
+    :attr:`BodyClearance.d_min`; the intervals it proves clear are not looked at again."""
     theta = np.atleast_2d(np.asarray(theta, dtype=float))
     t = np.asarray(t, dtype=float).reshape(-1)
     known = np.full(len(theta), -np.inf) if d_min is None else np.asarray(d_min, dtype=float)
@@ -201,12 +181,8 @@ def _lift(p: np.ndarray) -> np.ndarray:
 
 def _motion_bounds(arm, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of every point's speed ``V`` [m/s] and acceleration ``A`` [m/s^2] on each link
-    (K, n) while the joint velocities ``v`` (K, n) [rad/s] hold. A planar chain: ``V_i =
-    sum_{j<=i} l_j |w_j|``, ``A_i = sum_{j<=i} l_j w_j^2`` (``w_j`` link ``j``'s absolute
-    angular speed). Any other chain of revolute joints (each turning all that follows it about
-    an axis through it): joint ``j`` moves a point of link ``i`` at most ``|v_j| R_ji`` with
-    ``R_ji = sum_{j<=k<=i} l_k``, so ``V_i = sum_{j<=i} |v_j| R_ji`` and ``A_i <= (sum_{j<=i}
-    |v_j|) V_i`` (each second derivative of a point is at most the reach of the later joint)."""
+    (K, n) while the joint velocities ``v`` (K, n) [rad/s] hold (docs/body.md: the planar arm's,
+    and any other chain's of revolute joints)."""
     lengths = np.asarray(arm.lengths, dtype=float)
     if arm.dim == 2:  # a planar chain (:func:`~qpbench.robot.chain.planar_chain`)
         w = np.cumsum(v, axis=1)  # absolute angular speed of each link

@@ -87,7 +87,6 @@ def make_model(
     tool_rotation,
     tool_translation,
     dim: int = 3,
-    what: str = "robot",
     q_min=None,
     q_max=None,
     v_max=None,
@@ -95,26 +94,28 @@ def make_model(
 ) -> ChainModel:
     """A checked :class:`ChainModel` in the dtypes the compiled functions take (fields as
     there); limits default to none (infinite), ``radius`` [m] is one per link or one for all;
-    ``what`` is the key errors name."""
+    errors name the key ``robot``."""
     rotation, translation, axis = _f64(rotation), _f64(translation), _f64(axis)
     n = axis.shape[0] if axis.ndim == 2 else 0
     if n < 1 or rotation.shape != (n, 3, 3) or translation.shape != (n, 3) or axis.shape[1] != 3:
         raise InputError(
             f"a chain needs n >= 1 joints: rotations (n, 3, 3), offsets and axes (n, 3), got "
             f"{rotation.shape}, {translation.shape}, {axis.shape}",
-            key=what,
+            key="robot",
         )
     norms = np.linalg.norm(axis, axis=1)
     if not np.all(np.abs(norms - 1.0) < 1e-9):
-        raise InputError(f"joint axes must be unit vectors, got norms {norms.tolist()}", key=what)
+        raise InputError(
+            f"joint axes must be unit vectors, got norms {norms.tolist()}", key="robot"
+        )
     if dim not in (2, 3):
-        raise InputError(f"dim must be 2 or 3, got {dim}", key=what)
+        raise InputError(f"dim must be 2 or 3, got {dim}", key="robot")
     lim = {}
     for name, v, default in (("q_min", q_min, -np.inf), ("q_max", q_max, np.inf),
                              ("v_max", v_max, np.inf), ("radius", radius, 0.0)):  # fmt: skip
         v = np.asarray(default if v is None else v, dtype=float)
         if v.ndim > 1 or v.size not in (1, n) or np.isnan(v).any():
-            raise InputError(f"needs 1 or {n} numbers, got {v.tolist()}", key=f"{what}.{name}")
+            raise InputError(f"needs 1 or {n} numbers, got {v.tolist()}", key=f"robot.{name}")
         lim[name] = _f64(np.broadcast_to(v, (n,)))
     if (
         np.any(lim["q_min"] >= lim["q_max"])
@@ -124,7 +125,7 @@ def make_model(
         raise InputError(
             "need q_min < q_max, v_max > 0 and radius >= 0, got "
             + ", ".join(f"{k} {v.tolist()}" for k, v in lim.items()),
-            key=what,
+            key="robot",
         )
     tool = (_f64(tool_rotation), _f64(tool_translation))
     return ChainModel(int(dim), rotation, translation, axis, *tool, **lim)
@@ -147,7 +148,7 @@ def planar_chain(lengths, **fields) -> ChainModel:
     axis = np.tile([0.0, 0.0, 1.0], (n, 1))
     rotation = np.tile(np.eye(3), (n, 1, 1))
     tool = np.array([lengths[-1], 0.0, 0.0])
-    return make_model(rotation, translation, axis, np.eye(3), tool, 2, "robot", **fields)
+    return make_model(rotation, translation, axis, np.eye(3), tool, 2, **fields)
 
 
 def _rodrigues(axis: np.ndarray, q: np.ndarray) -> np.ndarray:

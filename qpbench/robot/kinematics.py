@@ -1,11 +1,7 @@
 """The arm's kinematics as numpy functions of joint angles, and the points kept away from
-obstacles (paper sections 2.1, 2.2).
-
-:class:`Arm` is a serial chain (:mod:`qpbench.robot.chain`, which also holds its compiled
-twin); :class:`PlanarArm` the paper's planar arm of link lengths (eq. 1: ``p[0] = 0``,
-``p[i+1] = p[i] + l[i] [cos phi[i], sin phi[i]]``, ``phi[i] = sum(theta[:i+1])``). A point on
-a link is ``(link, frac)``: ``frac`` 0 at joint ``link``, 1 at the next joint (the end effector
-for the last link); its Jacobian (eqs. 2, 7b) has zero columns after ``link``.
+obstacles (paper sections 2.1, 2.2): :class:`Arm` is a serial chain (:mod:`qpbench.robot.chain`:
+its equations, points ``(link, frac)`` on links and their Jacobians, eqs. 1, 2, 7b);
+:class:`PlanarArm` the paper's planar arm of link lengths, a chain of that kind.
 """
 
 from __future__ import annotations
@@ -22,9 +18,6 @@ from .chain import (
     points_jacobians_np,
     positions_many,
 )
-
-#: The kinds of key points (``[key_points] kind``; :class:`KeyPoints`).
-KEY_POINT_KINDS = ("paper", "closest")
 
 
 class Arm:

@@ -71,17 +71,17 @@ IIWA14_LIMITS_DEG = dict(
 )
 
 
-def _from_placements(rot, trans, what: str, **fields) -> ChainModel:
+def _from_placements(rot, trans, **fields) -> ChainModel:
     """A spatial chain of z-axis joints from m = n + 1 placements (the last: the tool)."""
     axis = np.tile([0.0, 0.0, 1.0], (len(rot) - 1, 1))
-    return make_model(rot[:-1], trans[:-1], axis, rot[-1], trans[-1], 3, what, **fields)
+    return make_model(rot[:-1], trans[:-1], axis, rot[-1], trans[-1], 3, **fields)
 
 
 def panda(**fields) -> ChainModel:
     """The Franka Emika Panda (7 joints, flange 0.107 m past joint 7); ``fields`` override
     the limits or set the links' ``radius`` [m] (:func:`~qpbench.robot.chain.make_model`)."""
     rot, trans = modified_dh(*PANDA_DH)
-    return _from_placements(rot, trans, "robot", **{**PANDA_LIMITS, **fields})
+    return _from_placements(rot, trans, **{**PANDA_LIMITS, **fields})
 
 
 def iiwa14(**fields) -> ChainModel:
@@ -90,7 +90,7 @@ def iiwa14(**fields) -> ChainModel:
     rot = np.array([rpy_matrix(*r) for r in IIWA14_RPY])
     q_max, v_max = (np.radians(IIWA14_LIMITS_DEG[k]) for k in ("q_max", "v_max"))
     limits = dict(q_min=-q_max, q_max=q_max, v_max=v_max)
-    return _from_placements(rot, np.array(IIWA14_XYZ), "robot", **{**limits, **fields})
+    return _from_placements(rot, np.array(IIWA14_XYZ), **{**limits, **fields})
 
 
 def chain_from_urdf(path, ee_frame: str, **fields) -> ChainModel:
@@ -143,7 +143,7 @@ def chain_from_urdf(path, ee_frame: str, **fields) -> ChainModel:
     tables = [m.rotation for m in place], [m.translation for m in place], axes
     tool = frame.placement.rotation, frame.placement.translation
     try:
-        return make_model(*tables, *tool, 3, "robot", **{**limits, **fields})
+        return make_model(*tables, *tool, 3, **{**limits, **fields})
     except InputError as e:  # name the file
         raise InputError(e.message, path=path, key=e.key) from None
 
@@ -177,7 +177,7 @@ def make_chain(kind: str, **fields) -> ChainModel:
             sizes = ", ".join(str(r.size) for r in rows)
             msg = f"a, d and alpha need n + 1 values each (n joints, the flange), got {sizes}"
             raise InputError(msg, key="robot.alpha")
-        return _from_placements(*modified_dh(*rows), "robot", **fields)
+        return _from_placements(*modified_dh(*rows), **fields)
     if kind in ("panda", "iiwa14"):
         return panda(**fields) if kind == "panda" else iiwa14(**fields)
     raise InputError(

@@ -125,7 +125,7 @@ def write_figure_log(frame: pd.DataFrame, path: str | Path) -> Path:
     table = pa.Table.from_pandas(figure_log(frame), preserve_index=False)
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     with atomic_path(path) as tmp:
-        # byte-stream split puts the (mostly zero) low bytes of the floats together: half the size
+        # byte-stream split puts the (mostly zero) low bytes of the floats together, where they compress
         pq.write_table(
             table,
             tmp,

@@ -56,12 +56,7 @@ _TAIL = (
     Z_MAX,
     KP_HAT,
     KD_HAT,
-    # written by the engines, not by the tick kernel
-    SOLVER_TIME,
-    BUILD_TIME,
-    FALLBACK_BUILD_TIME,
-    FALLBACK_SOLVE_TIME,
-    TICK_TIME,
+    *TIME_COLUMNS[1:],  # written by the engines, not by the tick kernel
 )
 _MIDDLE = (EE_X, EE_Y, XD_X, XD_Y, TRACKING_ERROR, FORCE, FORCE_ERROR)
 

@@ -16,12 +16,9 @@ One tick at ``t_k = k dt``:
 5. plant: ``theta_{k+1} = theta_k + dt v_k`` (steps 1 and 5 and the log row:
    :mod:`qpbench.sim.tick_kernel`).
 
-Two engines run these ticks on the same model of the run (:mod:`qpbench.engine.model`) and the
-same compiled build, step and adaptive law, so they give the same trajectory: ``compiled``
-(:mod:`qpbench.engine.compiled`: the whole run in one compiled function, the solver called
-through its C API, for the backends that have one) and ``python`` (every backend, called from
-this module's loop). Both time each tick on one clock (``CLOCK_MONOTONIC``; what each time
-includes: :mod:`qpbench.sim.log`, docs/methodology.md).
+Two engines run these ticks on the same model of the run and give the same trajectory:
+``compiled`` (:mod:`qpbench.engine.compiled`) and ``python`` (this module's loop); their
+clocks: docs/methodology.md, "Closed-loop engines and their clocks".
 
 The body's clearance (``d_body_*``) is computed after the loop for every tick at once.
 """
@@ -144,7 +141,7 @@ def simulate(
     says which ran). ``warmup_ticks``: a discarded run of that many ticks first, with a backend
     of its own, so one-off costs stay off the clock (a backend given by name only: an
     instance's state is the caller's). ``p99_interval``: the summary bounds the p99 of the
-    ranking time (a bootstrap, tens of milliseconds; a sweep's instances go without).
+    ranking time (a bootstrap; a sweep's instances go without).
     """
     check_choice(engine, ENGINES, "engine", "engine")
     if not isinstance(scenario, Scenario):
@@ -214,12 +211,11 @@ class _Run:
         keep_every: int | None,
         deadline: float | None,
         engine: str,
-        fallback: Backend | None = None,
+        fallback: Backend,
     ):
         from ..engine import compiled
 
-        self.scenario, self.be = scenario, backend
-        self.fb_be = backend if fallback is None else fallback
+        self.scenario, self.be, self.fb_be = scenario, backend, fallback
         self.formulation, self.keep_every = formulation, keep_every
         self.deadline = deadline
         self.soft = formulation == "soft"
@@ -452,14 +448,7 @@ class _Run:
             engine_note=self.engine_note,
         )
         summary = summarize(
-            frame,
-            scenario,
-            ctrl,
-            self.be.name,
-            self.formulation,
-            self.wall,
-            run_info=run_info,
-            p99_interval=p99_interval,
+            frame, scenario, ctrl, self.be.name, self.formulation, self.wall, run_info, p99_interval
         )
         from ..formats import ProblemRecord
 

@@ -33,7 +33,6 @@ from .scenario_schema import (
     check_simulation,
     robot_chain,
     validate,
-    with_simulation,
 )
 from .verdict import VerdictSettings
 
@@ -90,7 +89,7 @@ class Scenario:
     @property
     def verdict(self) -> VerdictSettings:
         """Thresholds of a run's verdict (``[verdict]``; :mod:`qpbench.sim.verdict`)."""
-        return self.spec.verdict_settings
+        return VerdictSettings(**self.spec.verdict)
 
     @property
     def verdict_overrides(self) -> dict:
@@ -108,7 +107,10 @@ class Scenario:
         """A copy with another control period or duration (validated like the file's values,
         with the values set over the file's)."""
         values = {"dt": dt, "duration": duration}
-        spec = with_simulation(self.spec, **{k: v for k, v in values.items() if v is not None})
+        times = {k: float(v) for k, v in values.items() if v is not None}
+        spec = self.spec.model_copy(
+            update={"simulation": self.spec.simulation.model_copy(update=times)}
+        )
         check_simulation(spec, self.path or "<override>", tuple(self.overrides))
         return replace(self, spec=spec)
 
@@ -197,7 +199,7 @@ def parse_scenario(
         path=None if path is None else Path(path),
         source=text,
         spec=spec,
-        rnn=spec.rnn_settings,
+        rnn=spec.rnn.model_dump(),
         overrides=dict(overrides or {}),
     )
     # build every object once so constructor checks surface here, naming the file

@@ -174,14 +174,8 @@ class DhRobotTable(PandaRobotTable):
     velocity_max: Vec
 
 
-RobotTable = _by_kind(
-    PlanarRobotTable,
-    PandaRobotTable,
-    Iiwa14RobotTable,
-    DhRobotTable,
-    UrdfRobotTable,
-    default="planar",
-)
+_ROBOTS = (PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, DhRobotTable, UrdfRobotTable)
+RobotTable = _by_kind(*_ROBOTS, default="planar")
 
 
 class KeyPointsTable(Table):
@@ -264,7 +258,8 @@ class RnnTable(Table):
     eps: Annotated[Num, Field(gt=0)] = 0.02
 
 
-PathTable = _by_kind(CosinePathTable, PolylinePathTable)
+_PATHS = (CosinePathTable, PolylinePathTable)
+PathTable = _by_kind(*_PATHS)
 #: An obstacle: its kind's schema (:mod:`qpbench.robot.obstacles`), picked by ``kind``.
 ObstacleTable = _by_kind(*(cls.Schema for cls in obstacle_kinds().values()))
 
@@ -284,15 +279,6 @@ class ScenarioSpec(Table):
     obstacles: list[ObstacleTable]
     rnn: RnnTable = Field(default_factory=RnnTable)
     verdict: dict = Field(default_factory=dict)
-
-    @property
-    def rnn_settings(self) -> dict:
-        """The ``[rnn]`` table as a plain dict, defaults filled in."""
-        return self.rnn.model_dump()
-
-    @property
-    def verdict_settings(self) -> VerdictSettings:
-        return VerdictSettings(**self.verdict)
 
 
 def _key(loc: tuple) -> str:
@@ -322,12 +308,11 @@ def _expected(loc: tuple) -> list[str]:
     return list(model.model_fields)
 
 
-_ROBOTS = (PlanarRobotTable, PandaRobotTable, Iiwa14RobotTable, UrdfRobotTable)
-_TAGGED = {"cosine": CosinePathTable, "polyline": PolylinePathTable}
-_TAGGED.update((_tag(m), m) for m in _ROBOTS)
+#: The tables picked by ``kind``, by kind, and the kinds each union takes.
+_TAGGED = {_tag(m): m for m in (*_ROBOTS, *_PATHS)}
 _TAGGED.update((kind, cls.Schema) for kind, cls in obstacle_kinds().items())
 _KINDS = {
-    "path": ("cosine", "polyline"),
+    "path": tuple(map(_tag, _PATHS)),
     "robot": tuple(map(_tag, _ROBOTS)),
     "obstacles": tuple(obstacle_kinds()),
 }
@@ -492,12 +477,8 @@ def _check_across_keys(spec: ScenarioSpec, file) -> None:
 
 def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
     """``dt`` and ``duration`` > 0 [s], at least one tick, ``alpha * dt < 1``, and a settle time
-    set on the command line (``verdict.settle_time`` in ``set_keys``) < ``duration`` [s].
-
-    Called on every change of ``dt`` or ``duration`` (the file's, ``--set``, ``--duration``, a
-    sweep's), so a settle time set on the command line is checked against the duration run: a
-    run shorter than it would not judge tracking and force that it was set to judge.
-    """
+    set on the command line (``verdict.settle_time`` in ``set_keys``) < ``duration`` [s]: called
+    on every change of ``dt`` or ``duration``, so it is checked against the duration run."""
     s = spec.simulation
     for key in ("dt", "duration"):
         if not getattr(s, key) > 0:
@@ -524,12 +505,6 @@ def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
             path=file,
             key="verdict.settle_time",
         )
-
-
-def with_simulation(spec: ScenarioSpec, **values) -> ScenarioSpec:
-    """``spec`` with ``[simulation]`` values (``dt``, ``duration`` [s]) replaced."""
-    simulation = spec.simulation.model_copy(update={k: float(v) for k, v in values.items()})
-    return spec.model_copy(update={"simulation": simulation})
 
 
 #: Order of the tables in a filled-in scenario file (:func:`filled`).

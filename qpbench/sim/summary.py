@@ -354,12 +354,9 @@ def _body_figures(
     frame: pd.DataFrame, t: np.ndarray, controller: Controller, dt: float
 ) -> tuple[dict, dict]:
     """The body's closest approach to an obstacle (``d_body_*`` columns of the log): the
-    clearance [m], its link (1-based), its obstacle and when [s]; ``None`` without obstacles.
-    The intervals between ticks (``dt`` [s], the last command's included) in which a link went
-    inside an obstacle it was clear of at both ticks (:func:`~qpbench.robot.body.body_crossings`
-    on the logged angles): how many, and the first one's time [s], link and obstacle.
-    For the verdict, the obstacles' kinds, the ticks with the body inside an obstacle and the
-    first of them [s]."""
+    clearance [m], its link (1-based), its obstacle and when [s] (``None`` without obstacles),
+    and :func:`_crossing_figures`. For the verdict, the obstacles' kinds, the ticks with the
+    body inside an obstacle and the first of them [s]."""
     d = frame[log.D_BODY_MIN].to_numpy(dtype=float)
     crossed = _crossing_figures(frame, t, controller, dt)
     if not np.isfinite(d).any():
@@ -428,8 +425,8 @@ def _limit_figures(frame: pd.DataFrame, t: np.ndarray, limits) -> tuple[dict, di
 
 
 def _effort_figures(frame: pd.DataFrame, n: int, dt: float, after: np.ndarray) -> dict:
-    """Joint motion and effort, the task residual, ``Kp_hat, Kd_hat`` and the solve times [s]
-    of a run."""
+    """Joint motion and effort, the task residual after :data:`SETTLE_TIME` and the last
+    ``Kp_hat, Kd_hat``."""
     theta = frame[log.theta_columns(n)].to_numpy()
     v = frame[log.velocity_columns(n)].to_numpy()
     v_sq = frame[log.V_SQ].to_numpy()
@@ -466,11 +463,8 @@ def _time_figures(frame: pd.DataFrame) -> dict:
 
 
 def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
-    """The per-tick time [s] a C or C++ controller would pay for the solver, and its source:
-    ``compiled``, the solve and the fallback's solve timed in compiled code (the compiled
-    engine); ``solver``, the solver's own report (the Python engine, when every tick has one);
-    ``python``, the solve and the fallback's solve through Python (the solver reports none on
-    some ticks: never judged on a subset)."""
+    """The per-tick time [s] a C or C++ controller would pay for the solver, and its source
+    (``compiled``, ``solver`` or ``python``: docs/methodology.md, "How sure a p99 is")."""
     solve = _with_fallback(frame)
     if engine == "compiled":
         return solve, "compiled"
@@ -505,10 +499,9 @@ def block_bootstrap_quantile(
     seed: int = BOOTSTRAP_SEED,
 ) -> tuple[float, float]:
     """Percentile interval at ``level`` of the ``q``-quantile of the series ``x`` by the circular
-    block bootstrap (docs/methodology.md, "How sure a p99 is"): ``round(n / block)`` blocks of
-    ``block`` values per resample, its quantile the order statistic of rank ``ceil(q m)``;
-    non-finite values left out (``(nan, nan)`` without any); seeded. Only the values at or above
-    a resample's quantile decide it, so resamples are counted on the largest values of ``x``."""
+    block bootstrap (docs/methodology.md, "How sure a p99 is"); non-finite values left out
+    (``(nan, nan)`` without any). Only the values at or above a resample's quantile decide it,
+    so resamples are counted on the largest values of ``x``."""
     x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
     n = x.size

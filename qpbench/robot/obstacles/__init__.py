@@ -14,14 +14,12 @@ from __future__ import annotations
 import functools
 import importlib
 import pkgutil
-from typing import Annotated, Union
 
-from ._base import Obstacle, validated
+from ._base import Obstacle
 from ._draw import OBSTACLE_COLOR, draw_trace, outline, project, trace
-from ._geometry import compiled_closest, compiled_segment_distance
+from ._geometry import compiled_segment_distance
 from ._table import (
     BOX,
-    CAPSULE,
     DISK,
     HX,
     HY,
@@ -29,69 +27,39 @@ from ._table import (
     KIND,
     LINE,
     OBSTACLE_COLUMNS,
-    P0X,
-    P0Y,
-    P0Z,
-    P1X,
-    P1Y,
-    P1Z,
-    PLANE,
     POINT,
     QW,
-    QX,
-    QY,
     QZ,
-    RADIUS,
     SEGMENT,
-    SPHERE,
     VX,
     VY,
     VZ,
-    table_rows,
 )
 
+#: Re-exported for the controller, the drawings and the tests of the table's layout.
 __all__ = [
-    "OBSTACLE_COLUMNS",
-    "KIND",
-    "P0X",
-    "P0Y",
-    "P1X",
-    "P1Y",
-    "RADIUS",
-    "VX",
-    "VY",
-    "P0Z",
-    "P1Z",
-    "VZ",
+    "BOX",
+    "DISK",
     "HX",
     "HY",
     "HZ",
-    "QW",
-    "QX",
-    "QY",
-    "QZ",
+    "KIND",
     "LINE",
-    "SEGMENT",
-    "DISK",
+    "OBSTACLE_COLUMNS",
     "POINT",
-    "PLANE",
-    "SPHERE",
-    "CAPSULE",
-    "BOX",
-    "table_rows",
-    "Obstacle",
-    "validated",
+    "QW",
+    "QZ",
+    "SEGMENT",
+    "VX",
+    "VY",
+    "VZ",
     "OBSTACLE_COLOR",
-    "outline",
+    "Obstacle",
+    "compiled_segment_distance",
     "draw_trace",
+    "outline",
     "project",
     "trace",
-    "compiled_closest",
-    "compiled_segment_distance",
-    "register",
-    "kinds",
-    "schema_adapter",
-    "make",
 ]
 _REGISTRY: dict[str, type[Obstacle]] = {}
 
@@ -109,15 +77,6 @@ def kinds() -> dict[str, type[Obstacle]]:
         if not m.name.startswith("_"):
             importlib.import_module(f"{__name__}.{m.name}")
     return dict(sorted(_REGISTRY.items()))
-
-
-@functools.cache
-def schema_adapter():
-    """A pydantic ``TypeAdapter`` of any kind's schema, discriminated by ``kind``."""
-    from pydantic import Field, TypeAdapter
-
-    schemas = tuple(cls.Schema for cls in kinds().values())
-    return TypeAdapter(Annotated[Union[schemas], Field(discriminator="kind")])  # noqa: UP007
 
 
 def make(entry: dict) -> Obstacle:

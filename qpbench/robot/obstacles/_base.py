@@ -94,29 +94,23 @@ def unit(vector, key: str) -> np.ndarray:
     return arr / norm
 
 
-def validated(schema, data: dict, prefix: str, path=None, error=InputError, fields=None):
-    """``data`` validated by pydantic ``schema``: a model, or a ``TypeAdapter`` of a union
-    discriminated by ``kind`` (whose errors start with the kind) with the ``fields`` of
-    ``data``'s kind; its first error raised as one line ``error`` naming ``path`` and
-    ``prefix.<key>``."""
+def validated(schema: type[Schema], data: dict, prefix: str) -> Schema:
+    """``data`` validated by pydantic model ``schema``; its first error raised as one line
+    :class:`InputError` naming ``prefix.<key>``."""
     try:
-        if isinstance(schema, type):
-            return schema.model_validate(data)
-        return schema.validate_python(data)
+        return schema.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        tagged = not isinstance(schema, type)
-        loc = [p for p in err["loc"] if isinstance(p, str)][1 if tagged else 0 :]
+        loc = [p for p in err["loc"] if isinstance(p, str)]
         if err["type"] == "missing":
             message = "missing key"
         elif err["type"] == "extra_forbidden":
-            known = list(schema.model_fields) if fields is None else fields
-            message = f"unknown key (expected one of: {', '.join(known)})"
+            message = f"unknown key (expected one of: {', '.join(schema.model_fields)})"
         elif err["type"] == "value_error":
             message = err["msg"].removeprefix("Value error, ")
         else:
             message = f"{err['msg'][0].lower()}{err['msg'][1:]}, got {err['input']!r}"
-        raise error(message, path=path, key=".".join([prefix, *loc[:1]])) from None
+        raise InputError(message, key=".".join([prefix, *loc[:1]])) from None
 
 
 class Obstacle:
@@ -133,7 +127,10 @@ class Obstacle:
     DIM: ClassVar[int] = 3
 
     def __init__(self, **fields):
-        """The fields of :attr:`Schema` (checked by it; errors name ``obstacles.<name>.<key>``)."""
+        """The fields of :attr:`Schema` (checked by it; errors name ``obstacles.<name>.<key>``);
+        ``velocity`` None: at rest, in the kind's dimension."""
+        if fields.get("velocity", 0) is None:
+            del fields["velocity"]
         name = str(fields.get("name", ""))
         self.fields = validated(self.Schema, {"kind": self.KIND, **fields}, f"obstacles.{name}")
         self.name = name
@@ -183,12 +180,8 @@ class Obstacle:
         """A lower bound [m] of the signed distance (as :meth:`closest_on_segments`, smallest
         over the obstacle's points) to every segment ``P0(l) -> P1(l)``, ``P(l) = (1 - l) Pa +
         l Pb`` for ``l`` in [0, 1] (ends (s, d) [m]), the obstacle held as at ``t`` [s]: the
-        sweep of a link in the obstacle's frame; a value ``<= 0`` says it may reach it.
-
-        Here for any kind whose signed distance is 1-Lipschitz (a convex shape's): a point of
-        the sweep is within ``l M`` of the first segment and ``(1 - l) M`` of the last (``M``
-        the ends' larger move), so the bound is the least over ``l`` of the larger of ``d_a -
-        l M`` and ``d_b - (1 - l) M``."""
+        sweep of a link in the obstacle's frame; a value ``<= 0`` says it may reach it. Here the
+        Lipschitz bound of a convex shape's signed distance (docs/body.md)."""
         d_a = self.closest_on_segments(P0a, P1a, t)[2].min(axis=1)
         d_b = self.closest_on_segments(P0b, P1b, t)[2].min(axis=1)
         M = np.maximum(np.linalg.norm(P0b - P0a, axis=1), np.linalg.norm(P1b - P1a, axis=1))
@@ -217,6 +210,8 @@ class Obstacle:
         raise NotImplementedError
 
 
-def planar_inputs(*ends) -> bool:
-    """The segments' ends (each (s, d) [m]) all lie in z = 0."""
-    return all(np.shape(E)[1] == 2 or not np.any(np.asarray(E)[:, 2]) for E in ends)
+def planar_ends(*ends) -> list[np.ndarray] | None:
+    """The segments' ends (each (s, d) [m]) as (s, 2) arrays when all lie in z = 0, else None."""
+    if not all(np.shape(E)[1] == 2 or not np.any(np.asarray(E)[:, 2]) for E in ends):
+        return None
+    return [np.asarray(E, dtype=float)[:, :2] for E in ends]

@@ -33,29 +33,26 @@ def trace(point, normal, plane=("x", "y")):
 
 def draw_trace(ax, point, normal, plane, limits, **line) -> None:
     """The plane through ``point`` [m] with ``normal`` (towards its free side) on the view
-    ``plane`` (:func:`trace`, drawn by :func:`draw_line` across ``limits`` (xlim, ylim) [m])."""
+    ``plane`` (:func:`trace`): its line across ``limits`` (xlim, ylim) [m], its solid side (away
+    from the normal) lightly filled."""
     seen = trace(point, normal, plane)
-    if seen is not None:
-        draw_line(ax, *seen, *limits, **line)
+    if seen is None:
+        return
+    point, normal = seen
+    (x0, x1), (y0, y1) = limits
+    tangent = np.array([-normal[1], normal[0]])
+    span = 4.0 * max(x1 - x0, y1 - y0)
+    a, b = point - span * tangent, point + span * tangent
+    ax.plot([a[0], b[0]], [a[1], b[1]], **line)
+    depth = 0.04 * span
+    poly = np.array([a, b, b - depth * normal, a - depth * normal])
+    ax.fill(poly[:, 0], poly[:, 1], color=line.get("color", OBSTACLE_COLOR), alpha=0.12, lw=0)
 
 
 def look(name: str, faint: bool, color=None) -> dict:
     """Colour, opacity and label of an obstacle (an earlier time's: paler, no label)."""
     alpha = 0.25 if faint else 1.0
     return dict(color=color or OBSTACLE_COLOR, alpha=alpha, label=None if faint else name)
-
-
-def draw_line(ax, point, normal, xlim, ylim, **line) -> None:
-    """The line through ``point`` perpendicular to ``normal`` (both 2-D), its solid side (away
-    from the normal) lightly filled, across the view's limits."""
-    normal = np.asarray(normal, dtype=float)
-    tangent = np.array([-normal[1], normal[0]])
-    span = 4.0 * max(xlim[1] - xlim[0], ylim[1] - ylim[0])
-    a, b = point - span * tangent, point + span * tangent
-    ax.plot([a[0], b[0]], [a[1], b[1]], **line)
-    depth = 0.04 * span
-    poly = np.array([a, b, b - depth * normal, a - depth * normal])
-    ax.fill(poly[:, 0], poly[:, 1], color=line.get("color", OBSTACLE_COLOR), alpha=0.12, lw=0)
 
 
 def outline(points, radius: float) -> np.ndarray:

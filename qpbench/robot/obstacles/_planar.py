@@ -1,5 +1,5 @@
 """Planar geometry of the between-ticks tests (numpy): a point against a swept segment, a
-point through a moving segment, segments against segments; all arrays (s, 2) [m]."""
+point through a moving segment; all arrays (s, 2) [m]."""
 
 from __future__ import annotations
 
@@ -18,42 +18,16 @@ def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
 
 
-def segments_cross(P0, P1, Q0, Q1) -> np.ndarray:
-    """Segments ``P0 -> P1`` and ``Q0 -> Q1`` cross strictly (each splits the other's ends)."""
-    e, f = P1 - P0, Q1 - Q0
-    s1, s2 = cross(e, Q0 - P0), cross(e, Q1 - P0)
-    s3, s4 = cross(f, P0 - Q0), cross(f, P1 - Q0)
-    return (s1 * s2 < 0) & (s3 * s4 < 0)
-
-
 def point_segment_distance(X, P0, P1) -> np.ndarray:
     """Distance [m] of each point ``X`` to its segment ``P0 -> P1`` (all (s, 2))."""
     return np.linalg.norm(X - foot(X, P0, P1), axis=1)
 
 
-def segment_distance(P0, P1, Q0, Q1) -> np.ndarray:
-    """Distance [m] between segments ``P0 -> P1`` and ``Q0 -> Q1`` (0 where they cross)."""
-    ends = np.minimum.reduce(
-        [
-            point_segment_distance(P0, Q0, Q1),
-            point_segment_distance(P1, Q0, Q1),
-            point_segment_distance(Q0, P0, P1),
-            point_segment_distance(Q1, P0, P1),
-        ]
-    )
-    return np.where(segments_cross(P0, P1, Q0, Q1), 0.0, ends)
-
-
 def swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
     """A lower bound [m] of the distance of points ``C`` to the segments ``P0(l) -> P1(l)``,
     ``P(l) = (1 - l) Pa + l Pb``, ``l`` in [0, 1] (all (s, 2)); 0 where one passes over ``C``.
-
-    The closest point of segment ``l`` is an end (on a chord ``P0a -> P0b`` or ``P1a -> P1b``)
-    or its foot, at distance ``|g(l)| / |e(l)|``: ``e(l) = P1(l) - P0(l)``, ``g(l) = e(l) x (C -
-    P0(l))`` a quadratic in ``l`` (its least magnitude on [0, 1] from its ends and its vertex)
-    and ``|e(l)|`` convex (at most its larger end). For a rigid link that moves little between
-    ``a`` and ``b`` the bound is within the square of that motion of the exact least distance.
-    """
+    The closest point of segment ``l`` is an end (on a chord) or its foot, at ``|g(l)| /
+    |e(l)|`` with ``g(l) = e(l) x (C - P0(l))`` quadratic in ``l`` (docs/body.md)."""
     Q, D0 = C - P0a, P0b - P0a
     E = P1a - P0a
     DE = (P1b - P0b) - E

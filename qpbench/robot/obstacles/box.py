@@ -47,14 +47,9 @@ class BoxObstacle(Obstacle):
 
     def rotation(self) -> np.ndarray:
         """The rotation matrix (3, 3) of :attr:`quaternion` (box frame to world)."""
-        w, x, y, z = self.quaternion
-        return np.array(
-            [
-                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-            ]
-        )
+        from scipy.spatial.transform import Rotation
+
+        return Rotation.from_quat(np.roll(self.quaternion, -1)).as_matrix()  # scalar last
 
     def corners(self, t: float = 0.0) -> np.ndarray:
         """The 8 corners (8, 3) [m] at ``t`` [s]."""

@@ -53,7 +53,7 @@ class CapsuleObstacle(Obstacle):
         within both (to :data:`PASS_TOL`), at both ends of the sweep."""
         a = fit(self.a, 3)[None, :] + np.reshape(t, (-1, 1)) * self.velocity3
         f = fit(self.b - self.a, 3)
-        P0a, P1a, P0b, P1b = (_lift(E) for E in (P0a, P1a, P0b, P1b))
+        P0a, P1a, P0b, P1b = (project(E, "xyz") for E in (P0a, P1a, P0b, P1b))
 
         def side_and_within(P0, P1):
             e = P1 - P0
@@ -86,8 +86,3 @@ class CapsuleObstacle(Obstacle):
         ends = project(np.array([self.a, self.b]), plane)
         ring = self.radius * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
         return (ends[:, None, :] + ring[None]).reshape(-1, 2)
-
-
-def _lift(E) -> np.ndarray:
-    E = np.asarray(E, dtype=float)
-    return E if E.shape[1] == 3 else np.hstack([E, np.zeros((len(E), 1))])

@@ -7,7 +7,7 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import PlanarSchema, Positive, Vec2, planar_inputs
+from ._base import PlanarSchema, Positive, Vec2, planar_ends
 from ._planar import passes_through, swept_point_bound
 from ._table import DISK
 from .sphere import SphereObstacle
@@ -30,24 +30,21 @@ class DiskObstacle(SphereObstacle):
     Schema = DiskSchema
     DIM = 2
 
-    def __init__(self, name: str, center, radius: float, velocity=(0.0, 0.0)):
-        super().__init__(name, center, radius, velocity)
-
     def _centre(self, t, s: int) -> np.ndarray:
         t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
         return self.center + t[:, None] * self.velocity
 
     def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
         """In the plane: the centre against the swept segment minus the radius."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
-        ends = [np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b)]
         return swept_point_bound(self._centre(t, len(P0a)), *ends) - self.radius
 
     def passed_through(self, P0a, P1a, P0b, P1b, t):
         """In the plane: the centre through the segment."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().passed_through(P0a, P1a, P0b, P1b, t)
         c = self._centre(t, len(P0a))
-        ends = [np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b)]
         return passes_through(c, c, *ends)

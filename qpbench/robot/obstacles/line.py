@@ -27,6 +27,3 @@ class LineObstacle(PlaneObstacle):
     KERNEL_KIND = LINE
     Schema = LineSchema
     DIM = 2
-
-    def __init__(self, name: str, point, normal, velocity=(0.0, 0.0)):
-        super().__init__(name, point, normal, velocity)

@@ -29,7 +29,7 @@ class PlaneObstacle(Obstacle):
     KERNEL_KIND = PLANE
     Schema = PlaneSchema
 
-    def __init__(self, name: str, point, normal, velocity=(0.0, 0.0, 0.0)):
+    def __init__(self, name: str, point, normal, velocity=None):
         super().__init__(name=name, point=point, normal=normal, velocity=velocity)
         self.point = np.array(self.fields.point, dtype=float)
         self.normal = unit(self.fields.normal, self._key("normal"))

@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import Obstacle, PlanarSchema, Points2, planar_inputs
+from ._base import Obstacle, PlanarSchema, Points2, planar_ends
 from ._draw import look, project
 from ._planar import passes_through, swept_point_bound
 from ._table import POINT, table_rows
@@ -39,17 +39,19 @@ class PointCloudObstacle(Obstacle):
 
     def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
         """In the plane: each point against the swept segment."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
-        C, ends = self._each_point(t, P0a, P1a, P0b, P1b)
+        C, ends = self._each_point(t, *ends)
         return swept_point_bound(C, *ends).reshape(-1, len(self.points)).min(axis=1)
 
     def passed_through(self, P0a, P1a, P0b, P1b, t):
         """In the plane: a point that changes sides of the segment within it (3-D: a point
         through a segment is not a crossing of any extent, ``False``)."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().passed_through(P0a, P1a, P0b, P1b, t)
-        C, ends = self._each_point(t, P0a, P1a, P0b, P1b)
+        C, ends = self._each_point(t, *ends)
         return passes_through(C, C, *ends).reshape(-1, len(self.points)).any(axis=1)
 
     def _each_point(self, t, *ends):
@@ -58,7 +60,7 @@ class PointCloudObstacle(Obstacle):
         s, m = len(ends[0]), len(self.points)
         t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
         C = (self.points[None, :, :] + t[:, None, None] * self.velocity).reshape(-1, 2)
-        return C, [np.repeat(np.asarray(E, dtype=float)[:, :2], m, axis=0) for E in ends]
+        return C, [np.repeat(E, m, axis=0) for E in ends]
 
     def draw(self, ax, t=0.0, plane=("x", "y"), limits=None, faint=False, color=None):
         """Each point as a dot."""

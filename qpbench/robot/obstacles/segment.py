@@ -7,8 +7,8 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import PlanarSchema, Vec2, planar_inputs
-from ._planar import passes_through, segment_distance, swept_point_bound
+from ._base import PlanarSchema, Vec2, planar_ends
+from ._planar import passes_through, swept_point_bound
 from ._table import SEGMENT
 from .capsule import CapsuleObstacle
 
@@ -44,29 +44,30 @@ class SegmentObstacle(CapsuleObstacle):
     def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
         """In the plane: the closest pair of two segments has an end of one on the other: the
         link's ends run along the chords ``P0a -> P0b`` and ``P1a -> P1b``, the bar's ends are
-        points swept over. Positive, no crossing begins in the sweep (one begins with an end on
-        the other), nor is there one at its ends (their signed distances are in the bound)."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        points swept over (a chord's signed distance to the bar is <= 0 where an end crosses it).
+        Positive, no crossing begins in the sweep (one begins with an end on the other), nor is
+        there one at its ends (their signed distances are in the bound)."""
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
-        P0a, P1a, P0b, P1b = (np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b))
+        P0a, P1a, P0b, P1b = ends
         a, b = self._ends(t, len(P0a))
+        segments = ((P0a, P0b), (P1a, P1b), (P0a, P1a), (P0b, P1b))  # the chords, the link
         return np.minimum.reduce(
             [
-                segment_distance(P0a, P0b, a, b),
-                segment_distance(P1a, P1b, a, b),
                 swept_point_bound(a, P0a, P1a, P0b, P1b),
                 swept_point_bound(b, P0a, P1a, P0b, P1b),
-                self.closest_on_segments(P0a, P1a, t)[2][:, 0],
-                self.closest_on_segments(P0b, P1b, t)[2][:, 0],
+                *(self.closest_on_segments(P, Q, t)[2][:, 0] for P, Q in segments),
             ]
         )
 
     def passed_through(self, P0a, P1a, P0b, P1b, t):
         """In the plane: an end of the bar through the link, or an end of the link through the
         bar."""
-        if not planar_inputs(P0a, P1a, P0b, P1b):
+        ends = planar_ends(P0a, P1a, P0b, P1b)
+        if ends is None:
             return super().passed_through(P0a, P1a, P0b, P1b, t)
-        P0a, P1a, P0b, P1b = (np.asarray(E, dtype=float)[:, :2] for E in (P0a, P1a, P0b, P1b))
+        P0a, P1a, P0b, P1b = ends
         a, b = self._ends(t, len(P0a))
         return (
             passes_through(a, a, P0a, P1a, P0b, P1b)

@@ -28,7 +28,7 @@ class SphereObstacle(Obstacle):
     KERNEL_KIND = SPHERE
     Schema = SphereSchema
 
-    def __init__(self, name: str, center, radius: float, velocity=(0.0, 0.0, 0.0)):
+    def __init__(self, name: str, center, radius: float, velocity=None):
         super().__init__(name=name, center=center, radius=radius, velocity=velocity)
         self.center = np.array(self.fields.center, dtype=float)
         self.radius = float(self.fields.radius)
