@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
-from ..memory import DENSE_MAX_ENTRIES
+from ..memory import DENSE_MAX_ENTRIES, dense_entries
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -379,12 +379,9 @@ def _rows(backend: str, M, v, n: int, names: tuple[str, str, str]) -> int:
 
 def wants_sparse(problem: qpsolvers.Problem) -> bool:
     """True when the problem goes to a sparse API: a scipy.sparse matrix, or too large made dense."""
-    P, A, G = problem.P, problem.A, problem.G
-    if spa.issparse(P) or spa.issparse(A) or spa.issparse(G):
+    if spa.issparse(problem.P) or spa.issparse(problem.A) or spa.issparse(problem.G):
         return True
-    n = np.shape(problem.q)[0]
-    m = sum(0 if M is None else np.atleast_2d(M).shape[0] for M in (A, G))
-    return n * (n + m) > DENSE_MAX_ENTRIES
+    return dense_entries(problem) > DENSE_MAX_ENTRIES
 
 
 def dense_route(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
