@@ -134,14 +134,18 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
             wanted.add(SHIM)
         if loop and cls.name in compiled_solvers():
             wanted.add(ENGINE + cls.name)
-    engines = sorted(k for k in wanted if k.startswith(ENGINE))
-    return tuple(k for k in _ALL if k in wanted) + tuple(engines)
+    return _in_order(wanted)
 
 
 def prepared() -> tuple[str, ...]:
     """The kernel groups (and shims) prepared in this process so far, in :data:`KERNELS` order."""
-    engines = sorted(k for k in _DONE if k.startswith(ENGINE))
-    return tuple(k for k in _ALL if k in _DONE) + tuple(engines)
+    return _in_order(_DONE)
+
+
+def _in_order(names: set[str]) -> tuple[str, ...]:
+    """``names`` in :data:`_ALL`'s order, then the engines by name."""
+    engines = sorted(k for k in names if k.startswith(ENGINE))
+    return tuple(k for k in _ALL if k in names) + tuple(engines)
 
 
 def warmup(backends: Iterable[str] | None = None, loop: bool = True) -> WarmupReport:

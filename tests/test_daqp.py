@@ -81,7 +81,7 @@ def test_exit_flags_become_statuses(monkeypatch, flag, status):
             xx, fval, _, info = real.solve(*args, **kwargs)
             return xx, fval, flag, info
 
-    monkeypatch.setattr(daqp_, "_DAQP", [Fake])
+    monkeypatch.setattr(daqp_, "_daqp", lambda: Fake)
     sol = get_backend("daqp-stateless", "high_accuracy").solve(problem)
     assert sol.status == status and sol.found == (status == "optimal")
     assert calls[0]["iter_limit"] == 1_000_000

@@ -144,8 +144,8 @@ def test_daqp_model_updates_only_what_changed(monkeypatch, wall_ticks):
     class Module:
         Model = Recording
 
+    backend = get_backend("daqp", "high_accuracy")  # reads DAQP's setting names: no model kept
     monkeypatch.setattr(daqp_model, "_daqp", lambda: Module)
-    backend = get_backend("daqp", "high_accuracy")
 
     def check(problem):
         ref = qpsolvers.solve_problem(problem, solver="daqp")

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as spa
 
 from ..exceptions import ParamError, ProblemFormatError
-from ..memory import DENSE_MAX_ENTRIES
+from ..memory import DENSE_MAX_ENTRIES, dense_entries
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -303,44 +303,34 @@ def _vectors(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...]:
 
 def dense_f64_parts(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:
     """``P, q, A, b, G, h, lb, ub`` as they are when a controller built them (float64 arrays,
-    ``q`` 1-D, ``A``, ``G`` 2-D), else ``None``; shapes unchecked. Dtypes by identity first."""
+    ``q`` 1-D, ``A``, ``G`` 2-D), else ``None``; shapes unchecked."""
     P, q, A, b = problem.P, problem.q, problem.A, problem.b
     G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
     if not (
-        type(P) is _ndarray
-        and (P.dtype is _f64 or P.dtype == _f64)
-        and type(q) is _ndarray
-        and (q.dtype is _f64 or q.dtype == _f64)
+        _is_f64(P)
+        and _is_f64(q)
         and q.ndim == 1
-        and (
-            A is None
-            or (
-                type(A) is _ndarray
-                and (A.dtype is _f64 or A.dtype == _f64)
-                and A.ndim == 2
-                and type(b) is _ndarray
-                and (b.dtype is _f64 or b.dtype == _f64)
-            )
-        )
-        and (
-            G is None
-            or (
-                type(G) is _ndarray
-                and (G.dtype is _f64 or G.dtype == _f64)
-                and G.ndim == 2
-                and type(h) is _ndarray
-                and (h.dtype is _f64 or h.dtype == _f64)
-            )
-        )
-        and (lb is None or (type(lb) is _ndarray and (lb.dtype is _f64 or lb.dtype == _f64)))
-        and (ub is None or (type(ub) is _ndarray and (ub.dtype is _f64 or ub.dtype == _f64)))
+        and (A is None or (_is_f64(A) and A.ndim == 2 and _is_f64(b)))
+        and (G is None or (_is_f64(G) and G.ndim == 2 and _is_f64(h)))
+        and (lb is None or _is_f64(lb))
+        and (ub is None or _is_f64(ub))
     ):
         return None
     return P, q, A, b, G, h, lb, ub
 
 
+def _is_f64(v) -> bool:
+    """Whether ``v`` is a float64 numpy array (dtype by identity first)."""
+    return type(v) is _ndarray and (v.dtype is _f64 or v.dtype == _f64)
+
+
 _ndarray = np.ndarray
 _f64 = np.dtype(np.float64)
+
+
+def shapes(*arrays) -> tuple:
+    """The shape of each array (``None`` kept): equal tuples, arrays of the same shapes."""
+    return tuple(None if v is None else v.shape for v in arrays)
 
 
 def all_finite(x: np.ndarray) -> bool:
@@ -389,12 +379,9 @@ def _rows(backend: str, M, v, n: int, names: tuple[str, str, str]) -> int:
 
 def wants_sparse(problem: qpsolvers.Problem) -> bool:
     """True when the problem goes to a sparse API: a scipy.sparse matrix, or too large made dense."""
-    P, A, G = problem.P, problem.A, problem.G
-    if spa.issparse(P) or spa.issparse(A) or spa.issparse(G):
+    if spa.issparse(problem.P) or spa.issparse(problem.A) or spa.issparse(problem.G):
         return True
-    n = np.shape(problem.q)[0]
-    m = sum(0 if M is None else np.atleast_2d(M).shape[0] for M in (A, G))
-    return n * (n + m) > DENSE_MAX_ENTRIES
+    return dense_entries(problem) > DENSE_MAX_ENTRIES
 
 
 def dense_route(problem: qpsolvers.Problem) -> tuple[np.ndarray | None, ...] | None:

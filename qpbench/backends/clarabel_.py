@@ -90,18 +90,11 @@ CLARABEL_STATUSES = {
     "MaxTime": "time_limit",
     "NumericalError": "error",
 }
-_NAMES: dict = {}
 
 
-def _status_name(status) -> str:
-    """Name of a ``clarabel.SolverStatus`` (cached: its ``str`` is slow)."""
-    try:
-        return _NAMES[status]
-    except KeyError:
-        name = _NAMES[status] = str(status).split(".")[-1]
-        return name
-    except TypeError:  # unhashable
-        return str(status).split(".")[-1]
+def status_name(status) -> str:
+    """Name of a ``clarabel.SolverStatus`` (``Solved``; older versions' ``str`` is qualified)."""
+    return str(status).split(".")[-1]
 
 
 def quick_key(problem: qpsolvers.Problem) -> tuple | None:
@@ -187,7 +180,7 @@ class ClarabelBackend(PersistentBackend):
             else:
                 self._layout = None
         res = (self._solver or solver).solve()
-        name = _status_name(res.status)
+        name = status_name(res.status)
         status = CLARABEL_STATUSES.get(name, "not_solved")
         sol.status = status
         sol.extras = {"raw_status": name}

@@ -10,6 +10,8 @@ optimal drops it. ``warm_start`` is ignored.
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
 from . import register
@@ -38,15 +40,12 @@ EXITFLAGS = {
 #: The status of an exit flag not in :data:`EXITFLAGS`.
 UNKNOWN_EXITFLAG = ("error", "unknown exit flag")
 
-_DAQP: list = []
 
-
+@cache
 def _daqp():
-    if not _DAQP:
-        import daqp
+    import daqp
 
-        _DAQP.append(daqp)
-    return _DAQP[0]
+    return daqp
 
 
 class _Buffers:
@@ -131,7 +130,7 @@ class DaqpBackend(PersistentBackend):
     def options(self) -> dict:
         """The keyword settings given to DAQP (profile first, then the user's)."""
         options = solver_options(self, "daqp", _OWN_NAMES)
-        allowed = sorted((_DAQP[0] if _DAQP else _daqp()).Model().settings)
+        allowed = sorted(_daqp().Model().settings)
         refuse_unknown("daqp", options, allowed, "DAQP's own")
         return options
 
@@ -149,10 +148,9 @@ class DaqpBackend(PersistentBackend):
         return key, buf
 
     def _attempt(self, problem, warm_start):
-        daqp = _DAQP[0] if _DAQP else _daqp()
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
         _, buf = self._stack(P, q, A, b, G, h, lb, ub)
-        x, fval, flag, info = daqp.solve(P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options)
+        x, fval, flag, info = _daqp().solve(P, q, buf.A, buf.bu, buf.bl, buf.sense, **self._options)
         return read_result(problem, flag, x, fval, info, buf)
 
 

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from functools import cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -101,7 +102,7 @@ OSQP_STATUSES = {
 
 def status_name(status_val: int) -> str:
     """OSQP's name of a ``status_val``."""
-    return (_OSQP[0] if _OSQP else _import_osqp()).SolverStatus(status_val).name
+    return _osqp().SolverStatus(status_val).name
 
 
 def _has_box(problem) -> bool:
@@ -140,7 +141,6 @@ class OsqpBackend(PersistentBackend):
         return {"verbose": False, **solver_options(self, "osqp")}
 
     def _attempt(self, problem, warm_start):
-        osqp = _OSQP[0] if _OSQP else _import_osqp()
         P, G, A, lb, ub = problem.P, problem.G, problem.A, problem.lb, problem.ub
         layout = self._layout
         if (
@@ -156,23 +156,15 @@ class OsqpBackend(PersistentBackend):
             l, u, Px, Ax = layout.tick_data(P, G, problem.h, A, problem.b, lb, ub)
             self._solver.update(q=problem.q, l=l, u=u, Px=Px, Ax=Ax)
         else:
-            layout = self._update_or_setup(osqp, problem)
+            layout = self._update_or_setup(problem)
         if warm_start is not None:
             self._solver.warm_start(x=np.asarray(warm_start, dtype=float))
         res = self._solver.solve(raise_error=False)
         info = res.info
-        status_val = info.status_val
-        sol = new_solution(problem, "not_solved", {"raw_status": info.status, "info": info})
+        status = OSQP_STATUSES.get(status_name(info.status_val), "not_solved")
+        sol = new_solution(problem, status, {"raw_status": info.status, "info": info})
         sol.iterations = info.iter
         sol.solver_time_s = info.run_time
-        if status_val == _SOLVED:  # OSQP 1.x hands back fresh arrays: no copy
-            sol.status = "optimal"
-            sol.x = res.x
-            sol.y, sol.z, sol.z_box = layout.split_duals(res.y)
-            sol._obj = info.obj_val
-            return sol
-        status = OSQP_STATUSES.get(osqp.SolverStatus(status_val).name, "not_solved")
-        sol.status = status
         if status == "error":
             sol.error = f"OSQP: {info.status}"
         if status in ("primal_infeasible", "dual_infeasible"):
@@ -180,12 +172,14 @@ class OsqpBackend(PersistentBackend):
             sol.extras["dual_inf_cert"] = np.array(res.dual_inf_cert)
             return sol
         x = res.x
-        if x is not None and all_finite(x):
-            sol.x = np.array(x)
-            sol.y, sol.z, sol.z_box = layout.split_duals(np.array(res.y))
+        if x is not None and all_finite(x):  # OSQP 1.x hands back fresh arrays: no copy
+            sol.x = x
+            sol.y, sol.z, sol.z_box = layout.split_duals(res.y)
+        if status == "optimal":
+            sol._obj = info.obj_val
         return sol
 
-    def _update_or_setup(self, osqp, problem) -> StackedLayout:
+    def _update_or_setup(self, problem) -> StackedLayout:
         """Update the kept solver when shape and pattern fit, else set up a new one; the layout."""
         with_box = _has_box(problem)
         layout = self._layout
@@ -208,22 +202,17 @@ class OsqpBackend(PersistentBackend):
         layout = StackedLayout(problem, with_box)
         P, C = layout.matrices(problem.P, _blocks(problem))
         l, u = layout.vectors(problem)
-        solver = osqp.OSQP()
+        solver = _osqp().OSQP()
         solver.setup(P=P, q=np.asarray(problem.q, dtype=float), A=C, l=l, u=u, **self._settings())
         self._solver, self._layout = solver, layout
         return layout
 
 
-_OSQP: list = []
-_SOLVED = None  # OSQP_SOLVED's status_val, read at the first import of osqp
 _ndarray = np.ndarray
 
 
-def _import_osqp():
-    """Import osqp once, and read :data:`_SOLVED`."""
-    global _SOLVED
+@cache
+def _osqp():
     import osqp
 
-    _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
-    _OSQP.append(osqp)
     return osqp

@@ -9,6 +9,8 @@ structure when sparse), then ``update``-d; a status other than optimal drops it.
 
 from __future__ import annotations
 
+from functools import cache
+
 from . import register
 from ._common import (
     EMPTY,
@@ -17,14 +19,12 @@ from ._common import (
     dense_route,
     own_settings,
     refuse_unknown,
+    shapes,
     solver_options,
     sparse_parts,
     structure_key,
 )
 from .base import BackendSolution, PersistentBackend, new_solution
-
-_MODULE: list = []
-_SOLVED: list = []  # piqp.PIQP_SOLVED.value (an int compares faster than the enum, which hashes slower still)
 
 #: PIQP's status name -> our status (also read by ``qpsolvers:piqp``).
 PIQP_STATUSES = {
@@ -37,13 +37,11 @@ PIQP_STATUSES = {
 }
 
 
+@cache
 def _piqp():
-    if not _MODULE:
-        import piqp
+    import piqp
 
-        _MODULE.append(piqp)
-        _SOLVED.append(piqp.PIQP_SOLVED.value)
-    return _MODULE[0]
+    return piqp
 
 
 @register
@@ -72,10 +70,10 @@ class PiqpBackend(PersistentBackend):
         self._settings_dict = {"verbose": False, "compute_timings": True, **options}
 
     def reset(self) -> None:
-        self._solver = self._shapes = self._info = None
+        self._solver = self._key = self._info = None
         self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
 
-    def _setup(self, cls, shapes, data):
+    def _setup(self, cls, key, data):
         """A new ``cls`` solver (``DenseSolver`` or ``SparseSolver``) set up with ``data``; kept."""
         self.reset()
         solver = cls()
@@ -83,7 +81,7 @@ class PiqpBackend(PersistentBackend):
         for name, value in self._settings_dict.items():
             setattr(s, name, value)
         solver.setup(*data)
-        self._solver, self._shapes = solver, shapes
+        self._solver, self._key = solver, key
         res = solver.result
         self._info = res.info
         # update() and solve() overwrite the vectors these views show (each read builds one)
@@ -96,59 +94,38 @@ class PiqpBackend(PersistentBackend):
             return self._solve_sparse(problem)
         P, q, A, b, G, h, lb, ub = parts
         # PIQP keeps its old data on an update of another shape: updated only on the same shapes
-        shapes = (
-            P.shape,
-            q.shape,
-            None if A is None else A.shape,
-            None if b is None else b.shape,
-            None if G is None else G.shape,
-            None if h is None else h.shape,
-            None if lb is None else lb.shape,
-            None if ub is None else ub.shape,
-        )
-        return self._run(problem, None, shapes, P, q, A, b, G, h, lb, ub)
+        return self._run(problem, None, shapes(P, q, A, b, G, h, lb, ub), P, q, A, b, G, h, lb, ub)
 
     def _solve_sparse(self, problem):
         """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
         P, q, A, b, G, h, lb, ub = sparse_parts(problem, upper=True)
-        shapes = (  # every shape: the kept solver's were checked at its set-up
-            "sparse",
-            q.shape,
-            None if b is None else b.shape,
-            None if h is None else h.shape,
-            None if lb is None else lb.shape,
-            None if ub is None else ub.shape,
-            structure_key(P, A, G),
-        )
-        return self._run(problem, _piqp().SparseSolver, shapes, P, q, A, b, G, h, lb, ub)
+        # every shape: the kept solver's were checked at its set-up
+        key = ("sparse", shapes(q, b, h, lb, ub), structure_key(P, A, G))
+        return self._run(problem, _piqp().SparseSolver, key, P, q, A, b, G, h, lb, ub)
 
-    def _run(self, problem, cls, shapes, P, q, A, b, G, h, lb, ub) -> BackendSolution:
-        """Update the kept solver set up for ``shapes``, else set up a new ``cls`` (``None``:
+    def _run(self, problem, cls, key, P, q, A, b, G, h, lb, ub) -> BackendSolution:
+        """Update the kept solver set up for ``key``, else set up a new ``cls`` (``None``:
         ``DenseSolver``) after checking the shapes; solve."""
         solver = self._solver
-        if solver is not None and shapes == self._shapes:
+        if solver is not None and key == self._key:
             solver.update(P, q, A, b, G, None, h, lb, ub)
         else:
             check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-            solver = self._setup(
-                cls or _piqp().DenseSolver, shapes, (P, q, A, b, G, None, h, lb, ub)
-            )
-        raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
+            solver = self._setup(cls or _piqp().DenseSolver, key, (P, q, A, b, G, None, h, lb, ub))
+        raw = solver.solve().name  # what ``result.info.status`` holds, without reading it
+        status = PIQP_STATUSES.get(raw, "not_solved")
+        sol = new_solution(problem, status, {"raw_status": raw})
         info = self._info
-        if raw_status.value == _SOLVED[0]:  # the objective is computed from x when read
-            sol = new_solution(problem, "optimal", {"raw_status": "PIQP_SOLVED"})
+        sol.iterations = info.iter
+        sol.solver_time_s = info.run_time
+        if status == "optimal":  # the objective is computed from x when read
             x, y, z_l, z_u, z_bl, z_bu = self._views
             sol.x = x.copy()
             sol.y = EMPTY if A is None else y.copy()
             sol.z = EMPTY if G is None else z_u - z_l
             sol.z_box = EMPTY if lb is None and ub is None else z_bu - z_bl
-        else:
-            raw = raw_status.name
-            status = PIQP_STATUSES.get(raw, "not_solved")
-            sol = BackendSolution(problem, status=status, extras={"raw_status": raw})
-            self.reset()
-            if status == "error":
-                sol.error = f"PIQP: {raw}"
-        sol.iterations = info.iter
-        sol.solver_time_s = info.run_time
+            return sol
+        self.reset()
+        if status == "error":
+            sol.error = f"PIQP: {raw}"
         return sol

@@ -9,6 +9,8 @@ solve (``extras["cold_retry"]``; ``retry_cold=False``: not; docs/architecture.md
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import scipy.sparse as spa
 
@@ -26,9 +28,6 @@ from ._common import (
 )
 from .base import PersistentBackend, new_solution
 
-_MODULE: list = []
-_SOLVED: list = []  # QPSolverOutput.PROXQP_SOLVED: compared by identity (the enum hashes in Python)
-
 #: ProxQP's ``QPSolverOutput`` name -> our status (also read by ``qpsolvers:proxqp``).
 PROXQP_STATUSES = {
     "PROXQP_SOLVED": "optimal",
@@ -38,14 +37,12 @@ PROXQP_STATUSES = {
 }
 
 
+@cache
 def _proxqp():
     """``proxsuite.proxqp`` (cached: proxsuite's module ``__getattr__`` is Python code)."""
-    if not _MODULE:
-        import proxsuite
+    import proxsuite
 
-        _MODULE.append(proxsuite.proxqp)
-        _SOLVED.append(proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED)
-    return _MODULE[0]
+    return proxsuite.proxqp
 
 
 def _status(value) -> tuple[str, str]:
@@ -155,7 +152,7 @@ class ProxqpBackend(PersistentBackend):
             qp = self._qp
             qp.update(*data, update_preconditioner=self._update_preconditioner)
         else:
-            qp = self._build(_MODULE[0] if _MODULE else _proxqp(), key, data)
+            qp = self._build(_proxqp(), key, data)
         if warm_start is not None:
             # results.x becomes a copy of the guess: the kept views are read again
             qp.solve(np.asarray(warm_start, dtype=float), None, None)
@@ -163,11 +160,7 @@ class ProxqpBackend(PersistentBackend):
         else:
             qp.solve()
         info = self._info
-        raw_status = info.status
-        if raw_status is _SOLVED[0]:
-            status, raw = "optimal", "PROXQP_SOLVED"
-        else:
-            status, raw = _status(raw_status)
+        status, raw = _status(info.status)
         retried = False
         sparse = len(key) > 4
         if sparse:  # the kept views' split of z depends on n_in, which the key does not pin

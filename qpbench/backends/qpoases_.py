@@ -29,9 +29,10 @@ from ._common import (
     dense_parts,
     generic_settings,
     refuse_unknown,
+    shapes,
 )
 from ._qpoases_shim import OPTION_NAMES, PRESETS, Workspace
-from .base import Backend, ViewSolution, new_solution
+from .base import Backend, new_solution
 
 #: Shim status -> our status.
 _STATUSES = {
@@ -101,19 +102,9 @@ class QpoasesBackend(Backend):
 
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
-        # A copy into a buffer of another size raises: check_shapes then names the array.
-        sizes = (
-            P.size,
-            q.size,
-            None if A is None else A.size,
-            None if b is None else b.size,
-            None if G is None else G.size,
-            None if h is None else h.size,
-            None if lb is None else lb.size,
-            None if ub is None else ub.size,
-        )
+        arrays = shapes(P, q, A, b, G, h, lb, ub)
         ws = self._ws
-        if ws is None or sizes != ws.sizes:  # the workspace of this shape (checked here)
+        if ws is None or arrays != ws.shapes:  # the workspace of this shape (checked here)
             me, mi = check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
             key = (q.shape[0], me, mi, lb is not None or ub is not None)
             if ws is None or ws.key != key:
@@ -121,36 +112,30 @@ class QpoasesBackend(Backend):
                 ws = self._ws = Workspace(
                     key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
                 )
-            ws.sizes = sizes
+            ws.shapes = arrays
         n, me, mi, box = ws.key
-        try:
-            ws.H[:] = P
-            ws.g[:] = q
-            if me:
-                ws.A_eq[:] = A
-                ws.lbA_eq[:] = b
-                ws.ubA_eq[:] = b
-            if mi:
-                ws.A_in[:] = G
-                ws.ubA_in[:] = h
-            if box:
-                ws.lb[:] = -_INF if lb is None else lb
-                ws.ub[:] = _INF if ub is None else ub
-        except ValueError:
-            ws.sizes = None
-            check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-            raise
+        ws.H[:] = P
+        ws.g[:] = q
+        if me:
+            ws.A_eq[:] = A
+            ws.lbA_eq[:] = b
+            ws.ubA_eq[:] = b
+        if mi:
+            ws.A_in[:] = G
+            ws.ubA_in[:] = h
+        if box:
+            ws.lb[:] = -_INF if lb is None else lb
+            ws.ub[:] = _INF if ub is None else ub
         st = self._lib.qpb_solve(ws.handle)
         obj, _, solve_time, cputime = ws.s.tolist()
         _, _, iterations, raw, _ = ws.iv.tolist()
         extras = {"raw_status": raw, "qpoases_cputime_s": cputime}
-        sol = new_solution(problem, _STATUSES[st], extras, ViewSolution)
+        sol = new_solution(problem, _STATUSES[st], extras)
         sol.iterations = iterations
         sol.solver_time_s = solve_time
-        if st == 0:  # x and the multipliers: one copy, x a view of it
-            out = sol._out = ws.xy.copy()
-            parts = sol._slices = ws.parts
-            sol.x = out[parts[0]]
+        if st == 0:  # x and the multipliers: one copy, each a view of it
+            out = ws.xy.copy()
+            sol.x, sol.y, sol.z, sol.z_box = (out[part] for part in ws.parts)
             sol._obj = obj
         elif st == -1:
             sol.error = raw_message(raw)

@@ -17,6 +17,7 @@ from . import register
 from ._common import generic_settings, native_settings
 from .base import Backend, error_solution, new_solution
 from .clarabel_ import CLARABEL_STATUSES
+from .clarabel_ import status_name as clarabel_status_name
 from .osqp_ import OSQP_STATUSES, status_name
 from .piqp_ import PIQP_STATUSES
 from .proxqp_ import PROXQP_STATUSES
@@ -79,7 +80,7 @@ def _info_text(value, extras) -> str:
 #: Solver -> ``reader(extras) -> (status, raw status)``.
 STATUS_READERS = {
     "clarabel": _table_reader(
-        lambda e: None if e.get("status") is None else str(e["status"]).split(".")[-1],
+        lambda e: None if e.get("status") is None else clarabel_status_name(e["status"]),
         CLARABEL_STATUSES,
     ),
     "osqp": _table_reader(_info(lambda i: status_name(i.status_val)), OSQP_STATUSES, _info_text),
