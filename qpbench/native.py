@@ -37,7 +37,7 @@ def clock():
     load_permanently(ctypes.util.find_library("c"))
     _clock_gettime = external("clock_gettime", types.intc(types.intc, types.intp))
     globals()["_clock_gettime"] = _clock_gettime
-    return numba.njit(cache=True, nogil=True)(_monotonic_py)
+    return numba.njit(cache=True, nogil=True, _nrt=False)(_monotonic_py)
 
 
 def _monotonic_py(ts):  # pragma: no cover - compiled
@@ -48,7 +48,11 @@ def _monotonic_py(ts):  # pragma: no cover - compiled
 
 def compile_with(fn, bindings: dict | None = None, name: str | None = None, **options):
     """``numba.njit(cache=True, nogil=True)`` of a copy of ``fn`` named ``name``, its globals
-    also holding ``bindings`` (compiled functions it calls by name), cached under its name."""
+    also holding ``bindings`` (compiled functions it calls by name), cached under its name.
+
+    It runs with numba's runtime (reference counts, allocation) unless ``options`` say
+    ``_nrt=False``: numba compiles a function that does not say, first called from one compiled
+    without the runtime (the engine), without it too, and one that allocates then fails."""
     import types
 
     import numba
@@ -59,6 +63,7 @@ def compile_with(fn, bindings: dict | None = None, name: str | None = None, **op
     copy.__qualname__ = name
     copy.__module__ = fn.__module__
     copy.__doc__ = fn.__doc__
+    options.setdefault("_nrt", True)  # said, not inherited from a caller compiled without it
     return numba.njit(cache=True, nogil=True, **options)(copy)
 
 

@@ -225,7 +225,7 @@ def compiled():
     load_permanently(str(shim.shim_path(shim.qpoases_prefix())))
     globals()["_qpb_solve"] = external("qpb_solve", types.intc(types.intp))
     globals()["_qpb_renew"] = external("qpb_renew", types.void(types.intp))
-    jit = numba.njit(cache=True, nogil=True)
+    jit = numba.njit(cache=True, nogil=True, _nrt=True)  # the runtime said (native.compile_with)
     return jit(_solve_py), jit(_reset_py)
 
 

@@ -553,7 +553,7 @@ def kernel(use_numba: bool = True) -> Callable:
         names = globals()
         for name in [k for k in names if k.endswith("_jit")]:
             inline = "never" if name in _CALLS else "always"
-            names[name] = numba.njit(cache=True, inline=inline)(names[name])
+            names[name] = numba.njit(cache=True, inline=inline, _nrt=True)(names[name])
         _COMPILED = names["_integrate_jit"]
     return _COMPILED
 
@@ -571,7 +571,7 @@ def online_kernel() -> Callable:
 
     kernel(True)  # binds the integrator the tick calls
     sig = _signature(2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
-    return numba.njit(sig, cache=True)(_online_tick_loops)
+    return numba.njit(sig, cache=True, _nrt=True)(_online_tick_loops)
 
 
 @cache
@@ -580,7 +580,7 @@ def packed_kernel_dispatcher() -> Callable:
     import numba
 
     kernel(True)
-    return numba.njit(_signature(1, 1, 1, 1), cache=True)(_online_tick_packed_loops)
+    return numba.njit(_signature(1, 1, 1, 1), cache=True, _nrt=True)(_online_tick_packed_loops)
 
 
 def packed_kernel() -> Callable:
