@@ -179,9 +179,11 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
     m = frame[frame["status"] == "measured"]
     backends = sorted(m["backend"].unique())
     groups = style.groups(backends) or [("", [])]
-    fig, axes = style.subplots(len(groups), len(AXES), 14, 4.6 * len(groups) + 0.6)
+    # a panel per axis the study ran (a study of planar sizes only has no spatial panel)
+    shown = {k: v for k, v in AXES.items() if (m["axis"] == k).any()} or AXES
+    fig, axes = style.subplots(len(groups), len(shown), 7 * len(shown), 4.6 * len(groups) + 0.6)
     for row, (_, group) in enumerate(groups):
-        for ax, (axis, (xcol, label)) in zip(axes[row], AXES.items()):
+        for ax, (axis, (xcol, label)) in zip(axes[row], shown.items()):
             a = m[m["axis"] == axis]
             for b, lit in style.highlighted(backends, group):
                 g, fit = a[a["backend"] == b].sort_values(xcol), fitted.get((b, axis))
