@@ -31,13 +31,12 @@ def external(name: str, signature):
 @cache
 def clock():
     """The compiled clock ``monotonic(ts) -> seconds`` (``ts``: the caller's int64[2])."""
-    import numba
     from numba import types
 
     load_permanently(ctypes.util.find_library("c"))
     _clock_gettime = external("clock_gettime", types.intc(types.intc, types.intp))
     globals()["_clock_gettime"] = _clock_gettime
-    return numba.njit(cache=True, nogil=True, _nrt=False)(_monotonic_py)
+    return njit(_nrt=False)(_monotonic_py)
 
 
 def _monotonic_py(ts):  # pragma: no cover - compiled
@@ -46,16 +45,20 @@ def _monotonic_py(ts):  # pragma: no cover - compiled
     return ts[0] + 1e-9 * ts[1]
 
 
-def compile_with(fn, bindings: dict | None = None, name: str | None = None, **options):
-    """``numba.njit(cache=True, nogil=True)`` of a copy of ``fn`` named ``name``, its globals
-    also holding ``bindings`` (compiled functions it calls by name), cached under its name.
-
-    It runs with numba's runtime (reference counts, allocation) unless ``options`` say
-    ``_nrt=False``: numba compiles a function that does not say, first called from one compiled
-    without the runtime (the engine), without it too, and one that allocates then fails."""
-    import types
-
+def njit(*signature, **options):
+    """``numba.njit`` with the package's options unless ``options`` say otherwise: cached, the GIL
+    released, and numba's runtime (reference counts, allocation) on. The runtime is always said:
+    numba compiles a function that does not say with its first caller's setting, so one that
+    allocates, first called from a function compiled without it (the engine), would fail."""
     import numba
+
+    return numba.njit(*signature, **{"cache": True, "nogil": True, "_nrt": True, **options})
+
+
+def compile_with(fn, bindings: dict | None = None, name: str | None = None, **options):
+    """:func:`njit` (``options`` passed on) of a copy of ``fn`` named ``name``, its globals also
+    holding ``bindings`` (compiled functions it calls by name), cached under its name."""
+    import types
 
     scope = {**fn.__globals__, **(bindings or {})}
     name = f"{name or fn.__name__}_{_sources_digest(fn.__code__.co_filename, scope)}"
@@ -63,8 +66,7 @@ def compile_with(fn, bindings: dict | None = None, name: str | None = None, **op
     copy.__qualname__ = name
     copy.__module__ = fn.__module__
     copy.__doc__ = fn.__doc__
-    options.setdefault("_nrt", True)  # said, not inherited from a caller compiled without it
-    return numba.njit(cache=True, nogil=True, **options)(copy)
+    return njit(**options)(copy)
 
 
 def _file_digest(path: str) -> str:

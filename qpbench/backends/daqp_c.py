@@ -302,10 +302,9 @@ _c_setup = _c_update = _c_solve = _c_quadprog = _c_free_workspace = _c_free_ldp 
 @cache
 def kernels() -> Kernels:
     """The compiled kernels (compiled, or loaded from numba's cache, on first call)."""
-    import numba
     from numba import types
 
-    from ..native import external, load_permanently
+    from ..native import external, load_permanently, njit
 
     reason = unavailable_reason()
     if reason is not None:
@@ -319,8 +318,8 @@ def kernels() -> Kernels:
     names["_c_quadprog"] = external("daqp_quadprog", types.void(p, p, p))
     names["_c_free_workspace"] = external("free_daqp_workspace", types.void(p))
     names["_c_free_ldp"] = external("free_daqp_ldp", types.void(p))
-    jit = numba.njit(cache=True, nogil=True, _nrt=False)
-    inline = numba.njit(cache=True, nogil=True, inline="always")  # no call, no refcounts
+    jit = njit(_nrt=False)
+    inline = njit(inline="always")  # no call, no refcounts
     for name in [k for k in names if k.endswith("_jit")]:
         names[name] = inline(names[name])
     model, stateless = jit(_solve_model), jit(_solve_stateless)

@@ -216,16 +216,15 @@ def _free_handles(free, table: np.ndarray) -> None:
 @cache
 def compiled():
     """``(solve, reset)`` of the solver protocol of compiled closed loops (compiled on first call)."""
-    import numba
     from numba import types
 
-    from ..native import external, load_permanently
+    from ..native import external, load_permanently, njit
 
     shim.load()
     load_permanently(str(shim.shim_path(shim.qpoases_prefix())))
     globals()["_qpb_solve"] = external("qpb_solve", types.intc(types.intp))
     globals()["_qpb_renew"] = external("qpb_renew", types.void(types.intp))
-    jit = numba.njit(cache=True, nogil=True, _nrt=True)  # the runtime said (native.compile_with)
+    jit = njit()
     return jit(_solve_py), jit(_reset_py)
 
 

@@ -18,8 +18,8 @@ memory), the fallback's build and solve, and the whole tick.
 The engine, DAQP's compiled solves, the chain's kinematics and the obstacle distances are
 compiled without numba's runtime (``_nrt=False``): they allocate nothing, and with the runtime
 every array a function binds, or the model it is passed (inlined, each of its arrays), costs an
-atomic increment and decrement of a reference count each tick (bench/README.md, "Reference
-counts"). A function that allocates (``np.max`` of an array, a slice assigned to a slice) does
+atomic increment and decrement of a reference count each tick (bench/README.md, "The engine
+today: no reference counts"). A function that allocates (``np.max`` of an array, a slice assigned to a slice) does
 not compile there: it fails at compile time, never at run time.
 """
 

@@ -548,12 +548,12 @@ def kernel(use_numba: bool = True) -> Callable:
     if not use_numba:
         return _interpreted()
     if _COMPILED is None:
-        import numba
+        from ..native import njit
 
         names = globals()
         for name in [k for k in names if k.endswith("_jit")]:
             inline = "never" if name in _CALLS else "always"
-            names[name] = numba.njit(cache=True, inline=inline, _nrt=True)(names[name])
+            names[name] = njit(inline=inline, nogil=False)(names[name])
         _COMPILED = names["_integrate_jit"]
     return _COMPILED
 
@@ -567,20 +567,20 @@ def _signature(*ndims):
 @cache
 def online_kernel() -> Callable:
     """:func:`_online_tick_loops` compiled for C-contiguous writable float64 arrays only."""
-    import numba
+    from ..native import njit
 
     kernel(True)  # binds the integrator the tick calls
     sig = _signature(2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
-    return numba.njit(sig, cache=True, _nrt=True)(_online_tick_loops)
+    return njit(sig, nogil=False)(_online_tick_loops)
 
 
 @cache
 def packed_kernel_dispatcher() -> Callable:
     """:func:`_online_tick_packed_loops` compiled for 1-D C-contiguous float64 arrays."""
-    import numba
+    from ..native import njit
 
     kernel(True)
-    return numba.njit(_signature(1, 1, 1, 1), cache=True, _nrt=True)(_online_tick_packed_loops)
+    return njit(_signature(1, 1, 1, 1), nogil=False)(_online_tick_packed_loops)
 
 
 def packed_kernel() -> Callable:
