@@ -194,9 +194,7 @@ class _BenchRun:
         check_output(out, force=force, resume=resume, make_parent=make_parent)
         self.config, self.out = config, out
         profile = get_profile(config.profile)
-        self.profile = profile.with_time_limit(
-            config.time_limit if config.time_limit is not None else float(profile.time_limit)
-        )
+        self.profile = profile.with_time_limit(float(config.time_limit or profile.time_limit))
         self.records = records = list(problem_set.records)
         if not records:
             raise InputError("problem set is empty", path=getattr(problem_set, "path", None))

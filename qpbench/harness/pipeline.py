@@ -259,17 +259,15 @@ def run_all(config: RunConfig) -> RunOutcome:
                 load_problems(problems / s), config.duration, config.bench_every
             )
             phase.update()
-    failures, per_tick_s = _bench(config, subsets, staging / "bench", phases)
+    failed_solves, per_tick_s = _bench(config, subsets, staging / "bench", phases)
     if behind is not None:
         with phases.phase("compile, closed loop"):  # what is left of it, then loaded here
             _meet_halfway(behind)
             behind.join()
             warmup_logged(log, config.backends)
-    failed_solves = failures
     specs = sweep_specs(config)
     budgets = closed_loop_budgets(config, per_tick_s, specs)
     table, not_ok = _closed_loop(config, staging, phases, budgets)
-    failures += not_ok  # failed runs and runs that failed their verdict
     perturbed = _perturbed(config, staging / PERTURBED, phases, table, specs)
     with phases.phase("report"):
         from ..report.write import write_report
@@ -295,7 +293,7 @@ def run_all(config: RunConfig) -> RunOutcome:
     manifest["wall_time_s"] = round(elapsed, 1)
     write_text(staging / "run.json", json.dumps(manifest, indent=2) + "\n")
     promote(staging, out, OUTPUTS)
-    return RunOutcome(failures, out / "report.md", elapsed, failed_solves)
+    return RunOutcome(failed_solves + not_ok, out / "report.md", elapsed, failed_solves)
 
 
 def bench_sets(scenarios: list[str]) -> list[str]:
@@ -587,9 +585,7 @@ def _length(spec, most: float | None = None) -> float:
 
 def _instance_costs(draws: dict[str, Draws], candidates: list[str], table):
     """Each candidate's cost of one instance in every swept scenario [s], and the cost of a run
-    around its loop [s] by scenario, as docs/sweeps.md (step 2) measures them: the loop's time
-    per simulated second in the nominal run times the instance's length, plus the CPU time of a
-    whole run of each sweep's first valid instance less its loop."""
+    around its loop [s] by scenario, as docs/sweeps.md (step 2) measures them."""
     from .closed_loop import LoopTask, run_row
 
     runs = table.set_index(["scenario", "backend"])
