@@ -136,19 +136,9 @@ class Recommendation:
 def read_runs(table: pd.DataFrame) -> pd.DataFrame:
     """The closed-loop (or sweep) table with the columns the answer reads; a table written
     before verdicts and real time were judged reads as no verdict, real time ``unknown``."""
-    missing = {
-        "verdict": "",
-        "realtime": "unknown",
-        "realtime_reason": "",
-        "solver_time_p99_s": math.nan,
-        "rank_time_p99_s": math.nan,
-        "rank_time_p99_lo_s": math.nan,
-        "rank_time_p99_hi_s": math.nan,
-        "rank_time_source": "",
-        "verdict_reasons": "",
-        "error": "",
-        "simulated_s": math.nan,
-    }
+    text = ("verdict", "realtime_reason", "rank_time_source", "verdict_reasons", "error")
+    numbers = ("solver_time_p99_s", "rank_time_p99_s", *INTERVAL, "simulated_s")
+    missing = dict.fromkeys(text, "") | dict.fromkeys(numbers, math.nan) | {"realtime": "unknown"}
     return table.assign(**{c: v for c, v in missing.items() if c not in table.columns})
 
 
@@ -170,9 +160,8 @@ def floor_lines(table: pd.DataFrame) -> tuple[str, ...]:
 
 
 def _text(value: object) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    return str(value).strip()
+    missing = value is None or (isinstance(value, float) and math.isnan(value))
+    return "" if missing else str(value).strip()
 
 
 def _first(reasons: object) -> str:
@@ -427,10 +416,8 @@ def _why(reasons: tuple[str, ...]) -> str:
 
 def _us(seconds: float) -> str:
     """[s] as [us]: four significant digits, whole microseconds from 10 ms on."""
-    if math.isnan(seconds):
-        return "-"
     us = seconds * US
-    return f"{us:.4g}" if us < 1e4 else f"{us:.0f}"
+    return "-" if math.isnan(seconds) else f"{us:.4g}" if us < 1e4 else f"{us:.0f}"
 
 
 def _interval(p: Pick) -> str:
@@ -463,20 +450,13 @@ def _worst_rows(picks: list[Pick]) -> list[list]:
         runs = [e.worst | {"scenario": e.scenario} for e in p.evidence if e.worst is not None]
         if not runs:
             continue
-        frame = worst_first(pd.DataFrame(runs))
-        w = frame.iloc[0].to_dict()
+        w = worst_first(pd.DataFrame(runs)).iloc[0].to_dict()
         seed = "" if pd.isna(w.get("seed")) else f"seed {int(w['seed'])}, "
+        where = f"{w['scenario']} {w['instance']} ({seed}sample {int(w['sample'])})"
+        d_min = fmt(float(pd.to_numeric(w["min_obstacle_distance"], errors="coerce")) * MM)
         why = _first(w.get("verdict_reasons")) or _text(w.get("error")) or "-"
-        rows.append(
-            [
-                p.backend,
-                f"{w['scenario']} {w['instance']} ({seed}sample {int(w['sample'])})",
-                _text(w["verdict"]) or "-",
-                fmt(float(pd.to_numeric(w["min_obstacle_distance"], errors="coerce")) * MM),
-                why,
-                f"`{rerun_command(w, p.backend)}`",
-            ]
-        )
+        verdict, rerun = _text(w["verdict"]) or "-", f"`{rerun_command(w, p.backend)}`"
+        rows.append([p.backend, where, verdict, d_min, why, rerun])
     return rows
 
 
@@ -499,16 +479,13 @@ def no_answer(answer: Recommendation) -> str:
             f"{e.runs} ok, bound {0.0 if math.isnan(e.bound) else e.bound:.3f}; at least "
             f"{least_runs(bound)} all ok are needed): a larger --sweep-budget gives more."
         )
-    late = [
-        b
-        for b, reasons in overall.not_recommended.items()
-        if all(r.startswith("not real time") for r in reasons)
-    ]
+    rejected = overall.not_recommended
+    late = [b for b, why in rejected.items() if all(r.startswith("not real time") for r in why)]
     if late:
         return (
             f"No recommendation from this machine: {', '.join(late)} had verdict ok in every run "
             f"of {overall.name} but missed real time ({late[0]} "
-            f"{overall.not_recommended[late[0]][0].removeprefix('not real time ')}); "
+            f"{rejected[late[0]][0].removeprefix('not real time ')}); "
             "short runs on a busy machine are judged on its load as much as on the solver: "
             "run again on an idle machine, or with longer runs."
         )
