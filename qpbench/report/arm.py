@@ -135,11 +135,7 @@ def draw_obstacles(ax, obstacles, t: float, xlim, ylim, faint: bool = False, pla
 
 def workspace_axes(ax, xlim, ylim, plane=("x", "y")) -> None:
     """Equal-aspect axes in metres over the view ``plane``, with a light grid."""
-    ax.set_xlim(*xlim)
-    ax.set_ylim(*ylim)
-    ax.set_aspect("equal")
-    ax.set_xlabel(f"{plane[0]} [m]")
-    ax.set_ylabel(f"{plane[1]} [m]")
+    ax.set(xlim=xlim, ylim=ylim, aspect="equal", xlabel=f"{plane[0]} [m]", ylabel=f"{plane[1]} [m]")
     ax.grid(alpha=0.25)
 
 
@@ -204,25 +200,22 @@ def _draw_paths(ax, log: pd.DataFrame, backend: str | None = None, plane=("x", "
     ax.scatter([0.0], [0.0], marker="s", s=40, color="black", zorder=5, label="base")
 
 
-def _closest_point(scenario: Scenario, arm, keys, theta, close: dict) -> np.ndarray:
-    """The key point of ``close`` (:func:`closest_approach`) at its tick [m] (a ``closest`` key
-    point: its link's point nearest the obstacle)."""
-    a = list(keys.names).index(close["key_point"])
-    links, fracs = keys.links[a : a + 1], keys.fracs[a : a + 1]
-    obstacle = [ob for ob in scenario.make_obstacles() if ob.name == close["obstacle"]]
-    if keys.kind != "closest" or not obstacle:
-        return arm.points(theta[close["k"]], links, fracs)[0]
-    p = arm.joint_positions(theta[close["k"]])
-    A, _, dist, _ = obstacle[0].closest_on_segments(p[links], p[links + 1], close["t"])
-    return A[0, int(np.argmin(dist[0]))]
-
-
 def _mark_closest_approach(ax, log, scenario: Scenario, arm, keys, theta, plane=("x", "y")):
-    """Ring the key point at its closest approach to an obstacle, red when closer than d_safe."""
+    """Ring the key point at its closest approach to an obstacle (:func:`closest_approach`; a
+    ``closest`` key point: its link's point nearest the obstacle), red when closer than d_safe."""
     close = closest_approach(log)
     if close is None or close["key_point"] not in keys.names:
         return
-    q = project(_closest_point(scenario, arm, keys, theta, close), plane)
+    a, k = list(keys.names).index(close["key_point"]), close["k"]
+    links, fracs = keys.links[a : a + 1], keys.fracs[a : a + 1]
+    obstacle = [ob for ob in scenario.make_obstacles() if ob.name == close["obstacle"]]
+    if keys.kind != "closest" or not obstacle:
+        point = arm.points(theta[k], links, fracs)[0]
+    else:
+        p = arm.joint_positions(theta[k])
+        A, _, dist, _ = obstacle[0].closest_on_segments(p[links], p[links + 1], close["t"])
+        point = A[0, int(np.argmin(dist[0]))]
+    q = project(point, plane)
     d_safe = scenario.spec.controller.d_safe
     bad = close["distance"] < d_safe - DEFAULT_SAFETY_MARGIN
     label = (
@@ -315,26 +308,6 @@ def _distance_panel(ax, log: pd.DataFrame, backend: str | None, d_safe: float) -
     ax.grid(True, which="major", alpha=0.3)
 
 
-def _animation_background(ax, surface, log, obstacles, plane, lims, static: bool) -> None:
-    """Axes, surface, desired path and (if none moves) the obstacles, on the view ``plane``."""
-    xlim, ylim = lims[plane[0]], lims[plane[1]]
-    workspace_axes(ax, xlim, ylim, plane)
-    draw_trace(ax, surface.point, -surface.normal, plane, (xlim, ylim), color=SURFACE, lw=2.5)
-    xd = project(_log_points(log, "xd"), plane)
-    ax.plot(xd[:, 0], xd[:, 1], "--", color="0.6", lw=1.0)
-    if static:
-        draw_obstacles(ax, obstacles, 0.0, xlim, ylim, plane=plane)
-
-
-def _animation_artists(ax, backend: str | None = None) -> tuple:
-    """The artists each frame updates in a view: links, key points, end-effector trace."""
-    (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
-    keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
-    look = backend_look(backend)
-    (trace_line,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
-    return link_line, keys_plot, trace_line
-
-
 def animate(
     scenario: Scenario,
     log: pd.DataFrame,
@@ -372,18 +345,31 @@ def animate(
 
     # equal axes: the frame's height follows the views' proportions
     high = float(np.clip(5.4 * ratio + 0.9, 2.6, 6.0))
-    size = (6 * len(planes), high)
-    fig, grid = style.pyplot().subplots(1, len(planes), figsize=size, dpi=70, layout="constrained")
-    axes = list(np.atleast_1d(grid))
+    fig, grid = style.subplots(1, len(planes), 6 * len(planes), high, dpi=70)
+    axes = list(grid[0])
     static = not any(np.any(ob.velocity) for ob in obstacles)
-    for ax, plane in zip(axes, planes):
-        _animation_background(ax, surface, log, obstacles, plane, lims, static)
+    look = backend_look(backend)
+    updated = []  # per view, the artists each frame updates: links, key points, trace
+    for ax, plane in zip(axes, planes):  # axes, surface, desired path, obstacles if none moves
+        xlim, ylim = lims[plane[0]], lims[plane[1]]
+        workspace_axes(ax, xlim, ylim, plane)
+        draw_trace(ax, surface.point, -surface.normal, plane, (xlim, ylim), color=SURFACE, lw=2.5)
+        xd = project(_log_points(log, "xd"), plane)
+        ax.plot(xd[:, 0], xd[:, 1], "--", color="0.6", lw=1.0)
+        if static:
+            draw_obstacles(ax, obstacles, 0.0, xlim, ylim, plane=plane)
         if len(planes) > 1:
             ax.set_title(caption(plane), fontsize=8, loc="right")
-    updated = [_animation_artists(ax, backend) for ax in axes]
+        (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
+        keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
+        (trace_line,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
+        updated.append((link_line, keys_plot, trace_line))
     label = axes[0].set_title("", fontsize=8, family="monospace", loc="left")
     moving_artists: list = []
     head = title or scenario.name
+
+    def shown(ax) -> set:
+        return set(ax.lines) | set(ax.collections) | set(ax.patches)
 
     def draw(k):
         for art in moving_artists:
@@ -393,11 +379,9 @@ def animate(
             p = project(arm.joint_positions(theta[k]), plane)
             moving_artists.extend(_capsules(ax, p, keys.radius))
             if not static:
-                before = set(ax.lines) | set(ax.collections) | set(ax.patches)
+                before = shown(ax)
                 draw_obstacles(ax, obstacles, float(t[k]), *(lims[a] for a in plane), plane=plane)
-                moving_artists.extend(
-                    (set(ax.lines) | set(ax.collections) | set(ax.patches)) - before
-                )
+                moving_artists.extend(shown(ax) - before)
             link_line.set_data(p[:, 0], p[:, 1])
             keys_plot.set_offsets(project(arm.points(theta[k], keys.links, keys.fracs), plane))
             e = project(ee[: k + 1], plane)
