@@ -38,21 +38,20 @@ def has_distance(log: pd.DataFrame) -> bool:
     return tick_log.D_MIN in log.columns and np.isfinite(log[tick_log.D_MIN].to_numpy(float)).any()
 
 
-def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
-    if not mask.any():
-        return []
-    idx = np.flatnonzero(mask)
-    breaks = np.flatnonzero(np.diff(idx) > 1)
-    return list(zip(np.r_[idx[0], idx[breaks + 1]], np.r_[idx[breaks], idx[-1]]))
-
-
 def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> None:
     """A distance axis in [mm]: linear up to ``d_safe`` [m] (else 10 mm), logarithmic beyond,
     with the ``d_safe`` line and the ``d_safe - 0.5 mm`` line a run must not cross (the region
     below shaded); ``lowest_mm``: the smallest distance drawn, which the axis reaches."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter
+
     lin = d_safe * 1e3 if d_safe is not None and d_safe > 0 else 10.0
     ax.set_yscale("symlog", linthresh=lin, linscale=1.0)
-    _distance_ticks(ax, lin)
+    # ticks in plain [mm]: 0, +-lin (d_safe) and 1-2-5 steps beyond (symlog's: powers of ten)
+    steps = [m * 10.0**e for e in range(-3, 6) for m in (1, 2, 5)]
+    beyond = [v for v in steps if v >= 1.8 * lin]
+    ticks = sorted({0.0, lin, -lin, *beyond, *(-v for v in beyond)})
+    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
     if d_safe is None:
         return
     bad = (d_safe - DEFAULT_SAFETY_MARGIN) * 1e3
@@ -62,18 +61,6 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     bottom = lo - 0.3 * max(abs(lo), lin) if lo < 0 else -0.3 * lin
     ax.axhspan(bottom, bad, color="red", alpha=0.06, lw=0)
     ax.set_ylim(bottom=bottom)
-
-
-def _distance_ticks(ax, lin: float) -> None:
-    """Ticks of a distance axis in plain [mm]: 0, ``+-lin`` (``d_safe``) and 1-2-5 steps beyond
-    (the symlog axis's own are powers of ten)."""
-    from matplotlib.ticker import FixedLocator, FuncFormatter
-
-    steps = [m * 10.0**e for e in range(-3, 6) for m in (1, 2, 5)]
-    beyond = [v for v in steps if v >= 1.8 * lin]
-    ticks = sorted({0.0, lin, -lin, *beyond, *(-v for v in beyond)})
-    ax.yaxis.set_major_locator(FixedLocator(ticks))
-    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
 
 
 def closed_loop_figure(
@@ -90,19 +77,40 @@ def closed_loop_figure(
     fig, grid, groups = style.panels(
         logs, len(panels), COLUMN_IN, PANEL_IN, pad=(1.0, 1.4), sharex=True, sharey="row"
     )
+    if has_d:
+        lowest = min(float(np.nanmin(d[tick_log.D_MIN])) for d in logs.values() if has_distance(d))
+    budget = f"{BUDGET_S * 1e3:g} ms budget"
     for col, (group_title, group) in enumerate(groups):
-        axes = {name: ax for name, ax in zip(panels, grid[:, col])}
+        axes = dict(zip(panels, grid[:, col]))
         for backend, lit in style.highlighted(logs, group):
             _plot_log(axes, logs[backend], backend, lit, has_d, adaptive)
-        _label_axes(axes, logs, has_d, d_safe, first=col == 0)
+        # scales, labels (first column only), the safety lines and the time budget
+        for name in ("tracking", "force", "time", "speed"):
+            axes[name].set_yscale("log")
+        if has_d:
+            distance_axis(axes["distance"], d_safe, lowest * 1e3)
+        axes["time"].axhline(BUDGET_S * 1e6, color="red", ls="--", lw=0.9, label=budget)
+        for name, ax in axes.items():
+            ax.grid(True, alpha=0.3, which="major")
+            if col == 0:
+                ax.set_ylabel(PANELS[name], fontsize=9)
         axes[panels[-1]].set_xlabel("t [s]")
-        _legend(axes, group, group_title, references=col == 0)
+        # the column's legend above it: its backends, then (first column) the reference lines
+        handles, labels = axes["tracking"].get_legend_handles_labels()
+        if col == 0:
+            lines = style.entries([axes[n] for n in ("distance", "time") if n in axes], skip=group)
+            handles, labels = handles + lines[0], labels + lines[1]
+            band = "band on top: fallback or zero velocity"
+            group_title = (group_title + "\n" if group_title else "") + band
+        style.legend_above(axes["tracking"], handles, labels, title=group_title)
     fig.suptitle(title + "; grey: the other backends" if len(groups) > 1 else title)
     return style.save(fig, path, dpi=100)
 
 
 def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: bool) -> None:
     """One backend's tick log on every panel of a column: in its look when ``lit``, else grey."""
+    from scipy import ndimage
+
     t = d[tick_log.T].to_numpy(float)
     style_kw = style.series(backend, lit, t, lw=1.0, grey_lw=0.7)
     c = style_kw["color"]
@@ -119,38 +127,12 @@ def _plot_log(axes: dict, d, backend: str, lit: bool, has_d: bool, adaptive: boo
         axes["kp"].plot(t, d[tick_log.KP_HAT].to_numpy(float), **style_kw)
     if not lit:
         return
-    # ticks without the backend's own answer: a band along the top of the first panel
+    # ticks without the backend's own answer: a band along the top of the first panel per run
     not_own = d[[tick_log.FALLBACK, tick_log.ZERO_VELOCITY]].to_numpy(bool).any(axis=1)
     step = t[1] - t[0] if len(t) > 1 else 0.0
-    for a, b in _intervals(not_own):
+    for (run,) in ndimage.find_objects(ndimage.label(not_own)[0]):
+        a, b = run.start, run.stop - 1
         axes["tracking"].axvspan(t[a], t[b] + step, ymin=0.94, ymax=1.0, color=c, alpha=0.5, lw=0)
-
-
-def _label_axes(axes: dict, logs: dict, has_d: bool, d_safe: float | None, first: bool) -> None:
-    """Scales, labels (first column only), the safety lines and the time budget of a column."""
-    for name in ("tracking", "force", "time", "speed"):
-        axes[name].set_yscale("log")
-    if has_d:
-        lowest = min(float(np.nanmin(d[tick_log.D_MIN])) for d in logs.values() if has_distance(d))
-        distance_axis(axes["distance"], d_safe, lowest * 1e3)
-    axes["time"].axhline(
-        BUDGET_S * 1e6, color="red", ls="--", lw=0.9, label=f"{BUDGET_S * 1e3:g} ms budget"
-    )
-    for name, ax in axes.items():
-        ax.grid(True, alpha=0.3, which="major")
-        if first:
-            ax.set_ylabel(PANELS[name], fontsize=9)
-
-
-def _legend(axes: dict, group: list, title: str, references: bool) -> None:
-    """The column's legend above it: its backends, then (``references``) the reference lines."""
-    top = axes["tracking"]
-    handles, labels = top.get_legend_handles_labels()
-    if references:
-        lines = style.entries([axes[n] for n in ("distance", "time") if n in axes], skip=group)
-        handles, labels = handles + lines[0], labels + lines[1]
-        title = (title + "\n" if title else "") + "band on top: fallback or zero velocity"
-    style.legend_above(top, handles, labels, title=title)
 
 
 def run_figure(frame: pd.DataFrame, summary: dict, path: str | Path) -> Path:
