@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import re
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +31,7 @@ def performance_profile_plot(rows: pd.DataFrame, label: str, path: Path) -> None
         for backend, lit in style.highlighted(profiles, group):
             kw = style.series(backend, lit, np.log(taus), lw=1.5, grey_lw=0.8)
             ax.step(taus, profiles[backend], where="post", **kw)
-        ax.set_xscale("log")
-        ax.set_ylim(-0.02, 1.02)
-        ax.set_xlabel("tau (runtime / best runtime)")
+        ax.set(xscale="log", ylim=(-0.02, 1.02), xlabel="tau (runtime / best runtime)")
         ax.grid(True, which="both", alpha=0.3)
         style.legend_above(ax, title=title)
     axes[0, 0].set_ylabel("fraction of problems solved")
@@ -170,8 +169,6 @@ def write_plots(
     """Write every figure of a report into ``folder`` (and remove a previous report's there that
     it does not link, :data:`FIGURE_PATTERN`), ``jobs`` figures at a time (more than one: each
     in a worker process); return key -> path relative to ``relative_to``."""
-    from functools import partial
-
     from .loop_figure import closed_loop_figure
 
     folder = Path(folder)
@@ -188,10 +185,8 @@ def write_plots(
         logs, d_safe = _logs(g)
         name, where = f"{slug(scenario)}_{slug(formulation)}", f"{scenario} ({formulation})"
         if logs:
-            title = f"Closed loop, {where}"
-            planned[f"closed_loop_{name}"] = partial(
-                closed_loop_figure, logs, title=title, d_safe=d_safe
-            )
+            loop = partial(closed_loop_figure, logs, title=f"Closed loop, {where}", d_safe=d_safe)
+            planned[f"closed_loop_{name}"] = loop
             title = f"Joint velocities, {where}"
             planned[f"closed_loop_v_{name}"] = partial(velocity_plot, logs, title)
             title = f"Closest key point to an obstacle, {where}"
@@ -282,9 +277,6 @@ def snapshot_runs(runs: pd.DataFrame) -> dict[str, pd.Series]:
 
 def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str) -> dict:
     """The snapshots of one scenario's runs: key -> figure(path)."""
-    from functools import partial
-
-    from ..sim.log import theta_columns
     from ..sim.scenario import load_scenario
     from .arm import draw_snapshot
 
@@ -299,7 +291,9 @@ def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str) -> dict:
     figures = {}
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
-        if frame is None or not set(theta_columns(scene.make_arm().n)) <= set(frame.columns):
+        if frame is None or not set(tick_log.theta_columns(scene.make_arm().n)) <= set(
+            frame.columns
+        ):
             continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         backend = str(row["backend"])
