@@ -25,6 +25,7 @@ from pydantic import (
     Discriminator,
     Field,
     PlainSerializer,
+    Strict,
     StrictBool,
     StrictStr,
     Tag,
@@ -41,18 +42,6 @@ from .verdict import DEFAULT_SAFETY_MARGIN, VerdictSettings
 def finite_number(v) -> bool:
     """True for an int or float (not a bool) that is finite."""
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _number(v):
-    if not finite_number(v):
-        raise ValueError(f"expected a finite number, got {v!r}")
-    return float(v)
-
-
-def _integer(v):
-    if not isinstance(v, int) or isinstance(v, bool):
-        raise ValueError(f"expected an integer, got {v!r}")
-    return v
 
 
 def _vector(size: int | None = None, lower: float | None = None):
@@ -79,8 +68,8 @@ def _points(v):
 
 
 _AS_LIST = PlainSerializer(lambda a: a.tolist())
-Num = Annotated[float, BeforeValidator(_number)]
-Int = Annotated[int, BeforeValidator(_integer)]
+Num = Annotated[float, Strict(), Field(allow_inf_nan=False)]  # an int too, never a bool
+Int = Annotated[int, Strict()]
 Vec = Annotated[np.ndarray, BeforeValidator(_vector()), _AS_LIST]
 Points = Annotated[np.ndarray, BeforeValidator(_points), _AS_LIST]
 
@@ -319,6 +308,16 @@ _KINDS = {
 _UNIONS = ("path", "robot")
 
 
+#: What a value of the wrong type should have been, by pydantic's error type.
+_EXPECTED = {
+    "bool_type": "true or false",
+    "string_type": "a string",
+    "int_type": "an integer",
+    "float_type": "a finite number",
+    "finite_number": "a finite number",
+}
+
+
 def _error(exc: ValidationError, file) -> ScenarioError:
     """The first of pydantic's errors (an unknown key before the rest) as one line."""
     errors = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")
@@ -345,10 +344,9 @@ def _error(exc: ValidationError, file) -> ScenarioError:
         msg = e["msg"].removeprefix("Value error, ")
         if kind in ("greater_than", "greater_than_equal"):
             op, bound = (">", e["ctx"]["gt"]) if kind == "greater_than" else (">=", e["ctx"]["ge"])
-            msg = f"must be {op} {bound}, got {e['input']}"
-        elif kind in ("bool_type", "string_type"):
-            what = "true or false" if kind == "bool_type" else "a string"
-            msg = f"expected {what}, got {e['input']!r}"
+            msg = f"must be {op} {bound:g}, got {e['input']}"
+        elif kind in _EXPECTED:
+            msg = f"expected {_EXPECTED[kind]}, got {e['input']!r}"
     return ScenarioError(msg, path=file, key=key)
 
 
@@ -382,10 +380,10 @@ def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
         if key not in _VERDICT_KEYS:
             msg = f"unknown key (expected one of: {', '.join(_VERDICT_KEYS)})"
             raise ScenarioError(msg, path=file, key=f"verdict.{key}")
-        try:
-            out[key] = _number(value)
-        except ValueError as exc:
-            raise ScenarioError(str(exc), path=file, key=f"verdict.{key}") from None
+        if not finite_number(value):
+            msg = f"expected a finite number, got {value!r}"
+            raise ScenarioError(msg, path=file, key=f"verdict.{key}")
+        out[key] = float(value)
     margin = out["safety_margin"]
     if not (margin < d_safe or margin == d_safe == 0):
         raise ScenarioError(
@@ -509,15 +507,7 @@ def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
 
 #: Order of the tables in a filled-in scenario file (:func:`filled`).
 _ORDER = (
-    "scenario",
-    "robot",
-    "key_points",
-    "path",
-    "contact",
-    "controller",
-    "adaptive",
-    "simulation",
-    "verdict",
+    "obstacles scenario robot key_points path contact controller adaptive simulation verdict rnn"
 )
 
 #: Tables a file may leave out (all their keys have defaults).
@@ -527,7 +517,4 @@ OPTIONAL_TABLES = ("adaptive", "rnn", "verdict")
 def filled(spec: ScenarioSpec) -> dict:
     """The scenario as TOML-ready tables, every default filled in (vectors as lists)."""
     plain = spec.model_dump(mode="json", exclude_none=True)  # a preset's own limits: unset
-    out = {"obstacles": plain["obstacles"]}
-    out.update((table, plain[table]) for table in _ORDER)
-    out["rnn"] = plain["rnn"]
-    return out
+    return {table: plain[table] for table in _ORDER.split()}
