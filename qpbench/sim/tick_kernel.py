@@ -22,59 +22,48 @@ if TYPE_CHECKING:
 APPLIED, FALLBACK, ZERO = 0, 1, 2
 
 
-class LogColumns(NamedTuple):
-    """Indices of the tick log's float columns (:func:`qpbench.sim.log.float_columns`) the
-    kernels write: the first of ``theta_i``, ``v_i``; ``ee`` the first of ``ee_x, ee_y, [ee_z],
-    xd_x, xd_y, [xd_z], tracking_error``; ``force`` (then ``force_error``); ``d`` the first
-    distance column, whose points lie in ``dist_start[c]:dist_stop[c]`` of the flat distances
-    (then ``d_min``, ``v_sq``, ``task_residual``); ``y`` the first of ``y_0, y_1, [y_2]``."""
+#: The :class:`LogColumns` fields that index one column of the log, and that column.
+_COLUMN_OF = {
+    "t": log.T,
+    "theta": log.theta_columns(1)[0],
+    "v": log.velocity_columns(1)[0],
+    "ee": log.EE_X,
+    "force": log.FORCE,
+    "d": log.D_MIN,
+    "fallback": log.FALLBACK,
+    "zero": log.ZERO_VELOCITY,
+    "y": log.Y_0,
+    "z_max": log.Z_MAX,
+    "kp": log.KP_HAT,
+    "kd": log.KD_HAT,
+    "solve_time": log.SOLVE_TIME,
+    "solver_time": log.SOLVER_TIME,
+    "build_time": log.BUILD_TIME,
+    "fallback_build_time": log.FALLBACK_BUILD_TIME,
+    "fallback_solve_time": log.FALLBACK_SOLVE_TIME,
+    "tick_time": log.TICK_TIME,
+}
 
-    t: int
-    theta: int
-    v: int
-    ee: int
-    force: int
-    d: int
-    fallback: int
-    zero: int
-    y: int
-    z_max: int
-    kp: int
-    kd: int
-    solve_time: int
-    solver_time: int
-    build_time: int
-    fallback_build_time: int
-    fallback_solve_time: int
-    tick_time: int
-    dist_start: np.ndarray
-    dist_stop: np.ndarray
+#: Indices of the tick log's float columns (:func:`qpbench.sim.log.float_columns`) the kernels
+#: write: the first of ``theta_i``, ``v_i``; ``ee`` the first of ``ee_x, ee_y, [ee_z], xd_x,
+#: xd_y, [xd_z], tracking_error``; ``force`` (then ``force_error``); ``d`` the first distance
+#: column, whose points lie in ``dist_start[c]:dist_stop[c]`` of the flat distances (then
+#: ``d_min``, ``v_sq``, ``task_residual``); ``y`` the first of ``y_0, y_1, [y_2]``.
+LogColumns = NamedTuple(
+    "LogColumns",
+    [(name, int) for name in _COLUMN_OF] + [("dist_start", np.ndarray), ("dist_stop", np.ndarray)],
+)
 
 
 def log_columns(controller: Controller) -> tuple[list[str], LogColumns]:
     """The tick log's float columns for ``controller`` and their :class:`LogColumns`."""
     obstacle_cols = controller.obstacle_columns()
     cols = log.float_columns(controller.n, [(a, o) for a, o, _ in obstacle_cols], controller.dim)
-    at = {c: i for i, c in enumerate(cols)}.__getitem__
+    at = {c: i for i, c in enumerate(cols)}
+    index = {name: at[column] for name, column in _COLUMN_OF.items()}
+    index["d"] -= len(obstacle_cols)  # the first distance column, before d_min
     layout = LogColumns(
-        t=at(log.T),
-        theta=at(log.theta_columns(1)[0]),
-        v=at(log.velocity_columns(1)[0]),
-        ee=at(log.EE_X),
-        force=at(log.FORCE),
-        d=at(log.D_MIN) - len(obstacle_cols),
-        fallback=at(log.FALLBACK),
-        zero=at(log.ZERO_VELOCITY),
-        y=at(log.Y_0),
-        z_max=at(log.Z_MAX),
-        kp=at(log.KP_HAT),
-        kd=at(log.KD_HAT),
-        solve_time=at(log.SOLVE_TIME),
-        solver_time=at(log.SOLVER_TIME),
-        build_time=at(log.BUILD_TIME),
-        fallback_build_time=at(log.FALLBACK_BUILD_TIME),
-        fallback_solve_time=at(log.FALLBACK_SOLVE_TIME),
-        tick_time=at(log.TICK_TIME),
+        **index,
         dist_start=np.array([s.start for _, _, s in obstacle_cols], dtype=np.int64),
         dist_stop=np.array([s.stop for _, _, s in obstacle_cols], dtype=np.int64),
     )
