@@ -11,16 +11,13 @@ step are inlined into the body (numba's IR): called, each would be passed the mo
 to a few words per array, every tick. They allocate nothing per tick (scratch in the state and
 the controller model). A backend joins by a :class:`CompiledSolver` in :data:`SOLVERS`.
 
-Times are read from ``CLOCK_MONOTONIC`` in compiled code (:func:`qpbench.native.clock`): the
-build, the solve (the call with the tick's QP until x, duals and status are in the engine's
-memory), the fallback's build and solve, and the whole tick.
+Times are read from ``CLOCK_MONOTONIC`` in compiled code (:func:`qpbench.native.clock`); what
+each clock spans: docs/methodology.md, "Closed-loop engines and their clocks".
 
 The engine, DAQP's compiled solves, the chain's kinematics and the obstacle distances are
-compiled without numba's runtime (``_nrt=False``): they allocate nothing, and with the runtime
-every array a function binds, or the model it is passed (inlined, each of its arrays), costs an
-atomic increment and decrement of a reference count each tick (bench/README.md, "The engine
-today: no reference counts"). A function that allocates (``np.max`` of an array, a slice assigned to a slice) does
-not compile there: it fails at compile time, never at run time.
+compiled without numba's runtime (``_nrt=False``): they allocate nothing, so no array costs a
+reference count each tick (bench/README.md, "The engine today: no reference counts"); a
+function that allocates fails there at compile time, never at run time.
 """
 
 from __future__ import annotations
@@ -32,7 +29,8 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from ..control.build_kernel import packed_layout
+from ..control.adaptive import compiled_law
+from ..control.build_kernel import compiled_build_kernel, packed_layout
 from ..native import clock, compile_with
 from ..packed import HEADER as PACKED_HEADER
 from ..sim.tick_kernel import APPLIED, FALLBACK, ZERO, get_post_kernel
@@ -144,26 +142,14 @@ def _engine(solve, reset) -> Callable:
         "solve": solve,
         "reset": reset,
         "now": clock(),
-        "build": _build(),
+        "build": compiled_build_kernel(),
         "post": get_post_kernel(),
-        "adapt": _adapt(),
+        "adapt": compiled_law(),
         "_views": compile_with(_views, name="tick_views", inline="always"),
         "_finite": compile_with(_finite, name="all_finite", inline="always"),
     }
     name = f"engine_{solve.py_func.__name__.strip('_')}"
     return compile_with(_run_py, bindings, name=name, _nrt=False)
-
-
-def _build():
-    from ..control.build_kernel import compiled_build_kernel
-
-    return compiled_build_kernel()
-
-
-def _adapt():
-    from ..control.adaptive import compiled_law
-
-    return compiled_law()
 
 
 def _views(buf, n, nr, dim):  # pragma: no cover - compiled (inlined as plain arithmetic)
@@ -192,9 +178,9 @@ def _finite(x):  # pragma: no cover - compiled
 # and the adaptive law bound by engine_for().
 def _run_py(model, cols, st, fst, ls, data, codes, k0, k1, stop_at):  # pragma: no cover - compiled
     """Run ticks ``k0 .. k1-1`` of ``model`` (state ``ls``, the backend's ``st`` and its
-    fallback instance's ``fst``), writing rows
-    of ``data`` and status codes; returns the next tick (earlier than ``k1`` when the clock
-    passed ``stop_at`` [s] between ticks; ``stop_at <= 0``: no budget)."""
+    fallback instance's ``fst``), writing rows of ``data`` and status codes; returns the next
+    tick (earlier than ``k1`` when the clock passed ``stop_at`` [s] between ticks; ``stop_at <=
+    0``: no budget)."""
     cm = model.controller
     n = model.theta0.shape[0]
     nr = cm.row_key.shape[0]

@@ -30,6 +30,7 @@ import logging
 import time
 from collections import namedtuple
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -279,23 +280,14 @@ class _Run:
         from ..engine.compiled import SOLVERS, engine_for
 
         fns = SOLVERS[self.be.name].functions()
-        engine = engine_for(self.be.name)
-        st = fns.make_state(self.be, self.model, self.ctrl.n_rows)
+        st = fst = fns.make_state(self.be, self.model, self.ctrl.n_rows)
         self._close = [(fns.close_state, st)]
-        fst = (
-            st
-            if self.fb_be is self.be
-            else fns.make_state(self.fb_be, self.model, self.ctrl.n_rows)
-        )
-        if fst is not st:
+        if self.fb_be is not self.be:
+            fst = fns.make_state(self.fb_be, self.model, self.ctrl.n_rows)
             self._close.append((fns.close_state, fst))
         self._error_text = fns.error_text
         args = (self.model, self.cols, st, fst, self.state, self.data, self.codes)
-
-        def chunk(k0: int, k1: int, stop_at: float) -> int:
-            return engine(*args, k0, k1, stop_at)
-
-        return chunk
+        return partial(engine_for(self.be.name), *args)  # then (k0, k1, stop_at)
 
     def _python(self, k0: int, k1: int, stop_at: float) -> int:
         """Ticks ``k0 .. k1-1`` on the Python engine (:mod:`qpbench.engine.compiled` does the
