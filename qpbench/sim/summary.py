@@ -297,23 +297,17 @@ def _error_figures(frame: pd.DataFrame, t: np.ndarray, settle_time: float) -> tu
     """Tracking [m] and force [N] errors after :data:`SETTLE_TIME`, the last force [N]; for the
     verdict, each error's largest ``(|error|, t)`` after ``settle_time`` [s] (NaN as ``inf``;
     ``None``: no tick after it)."""
-    after = t >= SETTLE_TIME - 1e-12
-    te = frame[log.TRACKING_ERROR].to_numpy()[after]
-    fe = frame[log.FORCE_ERROR].to_numpy()[after]
-    out = {
-        "tracking_rms_after_2s": _rms(te),
-        "tracking_max_after_2s": _amax(te),
-        "force_error_rms_after_2s": _rms(fe),
-        "force_error_max_after_2s": _amax(fe),
-        "force_final": _none(frame[log.FORCE].iloc[-1]),
-    }
-    settled = t >= settle_time - 1e-12
-    worst = {}
-    for column in (log.TRACKING_ERROR, log.FORCE_ERROR):
-        e = np.abs(frame[column].to_numpy(dtype=float)[settled])
+    after, settled = t >= SETTLE_TIME - 1e-12, t >= settle_time - 1e-12
+    out, worst = {}, {}
+    for name, column in (("tracking", log.TRACKING_ERROR), ("force_error", log.FORCE_ERROR)):
+        error = frame[column].to_numpy(dtype=float)
+        out[f"{name}_rms_after_2s"] = _rms(error[after])
+        out[f"{name}_max_after_2s"] = _amax(error[after])
+        e = np.abs(error[settled])
         e = np.where(np.isnan(e), np.inf, e)
         k = int(np.argmax(e)) if e.size else -1
         worst[f"{column}_worst"] = (float(e[k]), float(t[settled][k])) if e.size else None
+    out["force_final"] = _none(frame[log.FORCE].iloc[-1])
     return out, worst
 
 
