@@ -13,7 +13,7 @@ surface, the obstacles, :class:`~qpbench.sim.verdict.VerdictSettings`) check the
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from dataclasses import asdict
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
@@ -320,8 +320,7 @@ _EXPECTED = {
 
 def _error(exc: ValidationError, file) -> ScenarioError:
     """The first of pydantic's errors (an unknown key before the rest) as one line."""
-    errors = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")
-    e = errors[0]
+    e = min(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")  # the first of them
     loc, kind = e["loc"], e["type"]
     key = _key(loc)
     if kind == "extra_forbidden":
@@ -365,20 +364,17 @@ def validate(raw: dict, file: str | Path, set_keys=()) -> ScenarioSpec:
     return spec
 
 
-_VERDICT_KEYS = tuple(f.name for f in fields(VerdictSettings))
-
-
 def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
     """The ``[verdict]`` table, with defaults that fit the task, checked against it (the ranges:
     :class:`~qpbench.sim.verdict.VerdictSettings`)."""
     d_safe, duration = spec.controller.d_safe, spec.simulation.duration
     defaults = VerdictSettings()
-    out = {k: getattr(defaults, k) for k in _VERDICT_KEYS}
+    out = asdict(defaults)
     out["settle_time"] = min(defaults.settle_time, duration / 2)
     out["safety_margin"] = min(DEFAULT_SAFETY_MARGIN, d_safe / 2)
     for key, value in raw.items():
-        if key not in _VERDICT_KEYS:
-            msg = f"unknown key (expected one of: {', '.join(_VERDICT_KEYS)})"
+        if key not in out:
+            msg = f"unknown key (expected one of: {', '.join(out)})"
             raise ScenarioError(msg, path=file, key=f"verdict.{key}")
         if not finite_number(value):
             msg = f"expected a finite number, got {value!r}"
@@ -405,6 +401,14 @@ def robot_chain(robot) -> ChainModel:
     return make_chain(robot.kind, **fields)
 
 
+def _chain(robot, file) -> ChainModel:
+    """:func:`robot_chain`, its error naming ``file`` (unless it names a file of its own)."""
+    try:
+        return robot_chain(robot)
+    except InputError as exc:
+        raise ScenarioError(exc.message, path=exc.path or file, key=exc.key) from None
+
+
 def _check_across_keys(spec: ScenarioSpec, file) -> None:
     """One value per joint, ``theta_min < theta0 < theta_max``,
     ``velocity_min <= 0 <= velocity_max``; vectors of the robot's dim; obstacle kinds of its
@@ -414,22 +418,13 @@ def _check_across_keys(spec: ScenarioSpec, file) -> None:
     def fail(msg, key):
         raise ScenarioError(msg, path=file, key=key)
 
-    if r.kind == "planar":
-        n = r.link_lengths.size
-    else:
-        try:
-            n = robot_chain(r.model_copy(update={"theta_min": None, "theta_max": None,
-                                                 "velocity_max": None})).n  # fmt: skip
-        except InputError as exc:
-            raise ScenarioError(exc.message, path=exc.path or file, key=exc.key) from None
+    unlimited = r.model_copy(update={"theta_min": None, "theta_max": None, "velocity_max": None})
+    n = r.link_lengths.size if r.kind == "planar" else _chain(unlimited, file).n
     for key in ("theta0", "theta_min", "theta_max", "velocity_min", "velocity_max"):
         value = getattr(r, key)
         if value is not None and value.size != n:
             fail(f"expected {n} values (one per joint), got {value.size}", f"robot.{key}")
-    try:
-        chain = robot_chain(r)
-    except InputError as exc:
-        raise ScenarioError(exc.message, path=exc.path or file, key=exc.key) from None
+    chain = _chain(r, file)
     outside = np.flatnonzero((r.theta0 < chain.q_min) | (r.theta0 > chain.q_max))
     if outside.size:
         i = int(outside[0])
@@ -446,11 +441,7 @@ def _check_across_keys(spec: ScenarioSpec, file) -> None:
     dim = chain.dim
     vectors = [("contact.point", spec.contact.point), ("contact.normal", spec.contact.normal)]
     if spec.path.kind == "cosine":
-        vectors += [
-            (f"path.{k}", getattr(spec.path, k))
-            for k in CosinePathTable.model_fields
-            if k != "kind"
-        ]
+        vectors += [(f"path.{k}", value) for k, value in spec.path if k != "kind"]
     else:
         vectors.append(("path.points", spec.path.points[0]))
     for key, value in vectors:
