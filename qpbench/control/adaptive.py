@@ -33,14 +33,10 @@ class AdaptiveImpedance:
         kp_min: float,
         kd_min: float,
     ):
-        self.kp0 = float(kp0)
-        self.kd0 = float(kd0)
-        self.gain_kp = float(gain[0])
-        self.gain_kd = float(gain[1])
+        self.kp0, self.kd0, self.kp_min, self.kd_min = map(float, (kp0, kd0, kp_min, kd_min))
+        self.gain_kp, self.gain_kd = float(gain[0]), float(gain[1])
         self.normal = [float(c) for c in normal]
         self.desired_force = float(desired_force)
-        self.kp_min = float(kp_min)
-        self.kd_min = float(kd_min)
         self.reset()
 
     def reset(self) -> None:

@@ -19,6 +19,7 @@ build (:mod:`qpbench.control.build_kernel`) writes them into one fresh buffer pe
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -90,18 +91,10 @@ class Controller:
         kd: float,
         exempt: list[bool] | None = None,
     ):
-        self.arm = arm
-        self.key_points = key_points
-        self.task = task
-        self.limits = limits
+        self.arm, self.key_points, self.task, self.limits = arm, key_points, task, limits
         self.obstacles = list(obstacles)
-        self.k = float(k)
-        self.d_safe = float(d_safe)
-        self.rho = float(rho)
-        self.kp = float(kp)
-        self.kd = float(kd)
-        self.n = arm.n
-        self.dim = arm.dim
+        self.k, self.d_safe, self.rho, self.kp, self.kd = map(float, (k, d_safe, rho, kp, kd))
+        self.n, self.dim = arm.n, arm.dim
         self.points_per_obstacle = [o.n_points for o in self.obstacles]
         self.n_obstacle_points = int(sum(self.points_per_obstacle))
         self.closest = key_points.kind == "closest"
@@ -117,16 +110,14 @@ class Controller:
         #: Inequality rows per tick (fixed).
         self.n_rows = sum(self.points_per_obstacle[j] for _, j in self.pairs)
         prims = [o.primitives() for o in self.obstacles] or [np.zeros((0, len(OBSTACLE_COLUMNS)))]
-        starts = np.cumsum([0, *self.points_per_obstacle])
+        # each obstacle's first point among all obstacles' points
+        self._starts = starts = np.cumsum([0, *self.points_per_obstacle])
         rows = [(i, p) for i, j in self.pairs for p in range(starts[j], starts[j + 1])]
         rows = np.array(rows, dtype=np.int64).reshape(-1, 2)
         path_kind, path_cosine, path_times, path_points = task.path.fields
         f1 = np.ones(len(key_points)) if self.closest else key_points.fracs
         f0 = np.zeros(len(key_points)) if self.closest else key_points.fracs
-
-        def f64(a):
-            return np.ascontiguousarray(a, dtype=np.float64)
-
+        f64 = partial(np.ascontiguousarray, dtype=np.float64)
         #: Everything the compiled build reads (:class:`ControllerModel`).
         self.model = ControllerModel(
             chain=arm.model,
@@ -215,8 +206,7 @@ class Controller:
         a, m = len(self.key_points), self.n_obstacle_points
         if self.n_rows == a * m:
             return dist.reshape(a, m)
-        grid = np.full((a, m), np.inf)
-        starts = np.concatenate([[0], np.cumsum(self.points_per_obstacle)])
+        grid, starts = np.full((a, m), np.inf), self._starts
         for (i, j), (_, _, s) in zip(self.pairs, self.obstacle_columns()):
             grid[i, starts[j] : starts[j + 1]] = dist[s]
         return grid

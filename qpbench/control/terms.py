@@ -79,10 +79,8 @@ class EscapeVelocityLimits:
     """
 
     def __init__(self, theta_min, theta_max, v_min, v_max, alpha: float):
-        self.theta_min = np.asarray(theta_min, dtype=float)
-        self.theta_max = np.asarray(theta_max, dtype=float)
-        self.v_min = np.asarray(v_min, dtype=float)
-        self.v_max = np.asarray(v_max, dtype=float)
+        limits = (np.asarray(x, dtype=float) for x in (theta_min, theta_max, v_min, v_max))
+        self.theta_min, self.theta_max, self.v_min, self.v_max = limits
         self.alpha = float(alpha)
 
     def escape_velocity_bounds(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -82,13 +82,9 @@ def compiled_solve(name: str = ""):
     return compile_with(_own_solve, bound, name="own_solve")
 
 
+@cache
 def compiled_reset(name: str = ""):
     """The compiled ``reset`` of every backend here."""
-    return _compiled_reset()
-
-
-@cache
-def _compiled_reset():
     return compile_with(_network_reset, name="network_reset")
 
 

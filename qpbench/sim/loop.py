@@ -79,9 +79,7 @@ def resolve_backend(
     dt = scenario.dt
     if isinstance(backend, str):
         cls = backend_class(backend)
-        settings = {}
-        if cls.scenario_table:
-            settings.update(getattr(scenario, cls.scenario_table))
+        settings = dict(getattr(scenario, cls.scenario_table)) if cls.scenario_table else {}
         if cls.online:
             settings.setdefault("dt", dt)
         return get_backend(backend, profile=profile, **settings)

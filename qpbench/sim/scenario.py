@@ -106,8 +106,7 @@ class Scenario:
     def with_overrides(self, dt: float | None = None, duration: float | None = None) -> Scenario:
         """A copy with another control period or duration (validated like the file's values,
         with the values set over the file's)."""
-        values = {"dt": dt, "duration": duration}
-        times = {k: float(v) for k, v in values.items() if v is not None}
+        times = {k: float(v) for k, v in (("dt", dt), ("duration", duration)) if v is not None}
         spec = self.spec.model_copy(
             update={"simulation": self.spec.simulation.model_copy(update=times)}
         )
