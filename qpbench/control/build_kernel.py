@@ -80,9 +80,8 @@ def compiled_path():
 @cache
 def compiled_build_kernel():
     """The build kernel ``build(model, theta, t, kp, kd, soft, buf)``, compiled (or loaded from
-    numba's cache) on the first call; inlined into a compiled caller (numba's IR), so a loop
-    calling it reads the model's fields once, not as a call's arguments every tick (a call
-    copies the flattened model, a few words per array, to the stack: bench/README.md)."""
+    numba's cache) on the first call; inlined into a compiled caller (why:
+    :mod:`qpbench.engine.compiled`)."""
     from ..native import compile_with
     from ..robot.chain import compiled_chain
     from ..robot.obstacles import compiled_segment_distance

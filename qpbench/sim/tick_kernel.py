@@ -73,8 +73,7 @@ def log_columns(controller: Controller) -> tuple[list[str], LogColumns]:
 @cache
 def get_post_kernel() -> Callable:
     """The compiled :func:`_post_py` (compiled, or loaded from numba's cache, on first call);
-    inlined into a compiled caller, which then does not pass the run's model as a call's
-    arguments every tick (as :func:`~qpbench.control.build_kernel.compiled_build_kernel`)."""
+    inlined into a compiled caller (why: :mod:`qpbench.engine.compiled`)."""
     from ..native import compile_with
 
     return compile_with(_post_py, name="post_tick", inline="always")
