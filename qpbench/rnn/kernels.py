@@ -189,32 +189,24 @@ def clamped_steps(r_total, r_max, at_least, max_steps):
 def sigma2_bound(A, G):
     """Upper bound on ``lambda_max(A^T A + G^T G)``: ``tr(B^(2^k))^(1/2^k)``, ``k = SQUARINGS``."""
     n = A.shape[1]
-    B = np.zeros((n, n))
+    B, C = np.empty((n, n)), np.zeros((n, n))
     for k in range(A.shape[0]):
         for i in range(n):
             for j in range(n):
-                B[i, j] += A[k, i] * A[k, j]
+                C[i, j] += A[k, i] * A[k, j]
     for k in range(G.shape[0]):
         for i in range(n):
             for j in range(n):
-                B[i, j] += G[k, i] * G[k, j]
-    t = 0.0
-    for i in range(n):
-        t += B[i, i]
-    if not t > 0.0:
-        return 0.0
-    logc = math.log(t)
-    for i in range(n):
-        for j in range(n):
-            B[i, j] /= t
-    C = np.empty((n, n))
-    for _ in range(SQUARINGS):
-        for i in range(n):
-            for j in range(n):
-                s = 0.0
-                for k in range(n):
-                    s += B[i, k] * B[k, j]
-                C[i, j] = s
+                C[i, j] += G[k, i] * G[k, j]
+    logc = 0.0
+    for squaring in range(SQUARINGS + 1):  # C: the Gram matrix, then B^2; B: C / tr(C)
+        if squaring:
+            for i in range(n):
+                for j in range(n):
+                    s = 0.0
+                    for k in range(n):
+                        s += B[i, k] * B[k, j]
+                    C[i, j] = s
         t = 0.0
         for i in range(n):
             t += C[i, i]
@@ -239,31 +231,27 @@ def _matvec(M, xi, y):
 def _grad_products(P, q, A, G, xi, g, Av, Gv, products):
     """``g = P v + q - A^T l1 + G^T l2`` and, with ``products``, ``Av = A v``, ``Gv = G v``."""
     n = P.shape[0]
-    me = A.shape[0]
-    mi = G.shape[0]
     for j in range(n):
         s = q[j]
         for k in range(n):
             s += P[j, k] * xi[k]
         g[j] = s
-    for i in range(me):
-        c = xi[n + i]
+    _add_rows_jit(A, xi, n, -1.0, g, Av, products)
+    _add_rows_jit(G, xi, n + A.shape[0], 1.0, g, Gv, products)
+
+
+def _add_rows(M, xi, off, sign, g, Mv, products):
+    """``g += sign M^T xi[off:]`` (``-a c`` as ``a (-c)``: the same numbers) and, with
+    ``products``, ``Mv = M v``: one pass over each row."""
+    for i in range(M.shape[0]):
+        c = sign * xi[off + i]
         s = 0.0
-        for j in range(n):
-            a = A[i, j]
-            s += a * xi[j]
-            g[j] -= a * c
-        if products:
-            Av[i] = s
-    for i in range(mi):
-        c = xi[n + me + i]
-        s = 0.0
-        for j in range(n):
-            a = G[i, j]
+        for j in range(M.shape[1]):
+            a = M[i, j]
             s += a * xi[j]
             g[j] += a * c
         if products:
-            Gv[i] = s
+            Mv[i] = s
 
 
 def _step(P, q, A, b, G, h, lb, ub, xi, g, Av, Gv, r, semi, l1_clip):
@@ -327,20 +315,13 @@ def _integrate_loops(P, q, A, b, G, h, lb, ub, xi, prm, sol):
     me = b.shape[0]
     mi = h.shape[0]
     if (
-        P.shape[0] != n
-        or P.shape[1] != n
-        or A.shape[0] != me
-        or A.shape[1] != n
-        or G.shape[0] != mi
-        or G.shape[1] != n
+        P.shape != (n, n)
+        or A.shape != (me, n)
+        or G.shape != (mi, n)
         or lb.shape[0] != n
         or ub.shape[0] != n
         or xi.shape[0] != n + me + mi
-        or (
-            sol.shape[0] != 0
-            and sol.shape[0] != 2 * n + me + mi
-            and sol.shape[0] != 3 * n + 2 * (me + mi)
-        )
+        or sol.shape[0] not in (0, 2 * n + me + mi, 3 * n + 2 * (me + mi))
     ):
         return SHAPE_MISMATCH
     o1 = n
@@ -513,6 +494,7 @@ _nominal_steps_jit = nominal_steps
 _clamped_steps_jit = clamped_steps
 _matvec_jit = _matvec
 _grad_products_jit = _grad_products
+_add_rows_jit = _add_rows
 _step_jit = _step
 _residuals_jit = _residuals
 _integrate_jit = _integrate_loops
@@ -558,29 +540,28 @@ def kernel(use_numba: bool = True) -> Callable:
     return _COMPILED
 
 
-def _signature(*ndims):
+def _typed(fn, *ndims) -> Callable:
+    """``fn`` compiled for C-contiguous float64 arrays of ``ndims`` dimensions, returning an
+    int64 (the integrator it calls bound first)."""
     import numba
 
-    return numba.int64(*(numba.types.Array(numba.float64, d, "C") for d in ndims))
+    from ..native import njit
+
+    kernel(True)
+    arrays = (numba.types.Array(numba.float64, d, "C") for d in ndims)
+    return njit(numba.int64(*arrays), nogil=False)(fn)
 
 
 @cache
 def online_kernel() -> Callable:
     """:func:`_online_tick_loops` compiled for C-contiguous writable float64 arrays only."""
-    from ..native import njit
-
-    kernel(True)  # binds the integrator the tick calls
-    sig = _signature(2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
-    return njit(sig, nogil=False)(_online_tick_loops)
+    return _typed(_online_tick_loops, 2, 1, 2, 1, 2, 1, 1, 1, 1, 1, 1)
 
 
 @cache
 def packed_kernel_dispatcher() -> Callable:
     """:func:`_online_tick_packed_loops` compiled for 1-D C-contiguous float64 arrays."""
-    from ..native import njit
-
-    kernel(True)
-    return njit(_signature(1, 1, 1, 1), nogil=False)(_online_tick_packed_loops)
+    return _typed(_online_tick_packed_loops, 1, 1, 1, 1)
 
 
 def packed_kernel() -> Callable:
