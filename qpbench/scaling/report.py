@@ -198,14 +198,13 @@ def plot(frame: pd.DataFrame, fitted: dict, path: Path) -> Path:
                     xs = np.geomspace(g[xcol].min(), g[xcol].max(), 20)
                     ax.plot(xs, fit.predict(xs) * 1e6, "--", color=colour, lw=1, zorder=z)
             ax.axhline(TICK_S * 1e6, color="k", lw=0.8, ls=":")
-            ax.set_xscale("log")
-            ax.set_yscale("log")
+            ax.set(
+                xscale="log", yscale="log", xlabel=label, ylabel="median solve time per tick [us]"
+            )
             ticks = sorted(a[xcol].unique())
             if ticks:  # the measured sizes as plain numbers
                 ax.set_xticks(ticks, [f"{int(v):,}" for v in ticks])
                 ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-            ax.set_xlabel(label)
-            ax.set_ylabel("median solve time per tick [us]")
             ax.set_title(
                 f"{axis} axis (slope +- standard error; squares: dense, circles: sparse)",
                 fontsize=9,

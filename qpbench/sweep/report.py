@@ -179,9 +179,8 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                 ax.set_xlim(left, ZOOM_MM)
             elif col != "min_obstacle_distance" and ax.has_data() and (ok[col] > 0).any():
                 ax.set_xscale("log")
-            ax.set_ylim(0.0, 1.02)
+            ax.set(ylim=(0.0, 1.02), xlabel=MARGIN_LABEL if margin else label)
             ax.grid(alpha=0.3)
-            ax.set_xlabel(MARGIN_LABEL if margin else label)
         axes[row, 0].set_ylabel(
             f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
         )
