@@ -55,3 +55,26 @@ def test_a_sweep_table_without_rows_reads_as_no_runs(tmp_path):
     assert len(tables) == 1 and tables[0].rows == 0
     lines = sweep_section(tables, tmp_path, plots=False)
     assert lines[-1] == "`wall`: no run in this table.\n"
+
+
+def test_the_shipped_sweeps_render_as_shipped(tmp_path, monkeypatch):
+    """docs/sweeps.md's report command on the shipped tables, which were written before later
+    columns were added to ``sweep.csv``: read as a sweep (not refused as a foreign CSV), with the
+    same rates, pairs and worst runs as the shipped report."""
+    from pathlib import Path
+
+    from qpbench.cli import main
+
+    repo = Path(__file__).resolve().parent.parent
+    monkeypatch.chdir(repo)
+    out = tmp_path / "sweeps"
+    args = ["report", "results/sweeps/wall", "results/sweeps/narrow", "--out", str(out)]
+    assert main([*args, "--no-plots"]) == 0
+    shipped = (repo / "results" / "sweeps" / "report.md").read_text().splitlines()
+    rendered = (out / "report.md").read_text().splitlines()
+
+    def tables(lines):
+        return [x for x in lines if x.startswith("| ") and "| OS |" not in x]
+
+    assert len(tables(rendered)) > 40
+    assert tables(rendered) == tables(shipped)

@@ -19,6 +19,8 @@ from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths, noise_floor_ru
 from ..report.markdown_table import md_table, slug, titled
 from ..report.tables import wilson, worst_first
 
+#: Leading columns of ``sweep.csv`` that tell a sweep table from other result CSVs.
+IDENTIFYING = 6
 #: Verdicts whose rates are tabulated, in the table's order (every verdict but ``ok``).
 RATED = ("unsafe", "diverged", "limits", "incomplete", "failed")
 #: x label of the d_min panel when the sweep has a ``d_safe``: its values are d_min - d_safe.
@@ -53,11 +55,14 @@ def mcnemar_exact(b: int, c: int) -> float:
 
 
 def is_sweep_csv(path: Path) -> bool:
-    """``path`` starts with the sweep table's header."""
+    """``path`` starts with the sweep table's identifying columns (``instance`` to
+    ``base_scenario``): a table of this version or of an earlier one, which lacks columns
+    added since (read as empty by :func:`_read`)."""
     from .runner import COLUMNS
 
     with open(path, encoding="utf-8", errors="replace") as fh:
-        return fh.readline().rstrip("\n") == ",".join(COLUMNS)
+        head = fh.readline().rstrip("\n").split(",")
+    return head[:IDENTIFYING] == list(COLUMNS[:IDENTIFYING])
 
 
 def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[ResultFile]]:
@@ -73,6 +78,9 @@ def _read(path: Path) -> pd.DataFrame:
         df = pd.read_csv(path)
     except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
+    from .runner import COLUMNS
+
+    df = df.reindex(columns=[*df.columns, *(c for c in COLUMNS if c not in df.columns)])
     df = df.drop_duplicates(["instance", "backend"], keep="last")
     df = df[~noise_floor_runs(df)]  # the machine's, not a candidate's
     df["verdict"] = df["verdict"].fillna("").astype(str)
