@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
 import math
+from functools import cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,6 +21,9 @@ if TYPE_CHECKING:
 #: An empty, read-only vector: the multipliers of an absent block.
 EMPTY = np.zeros(0)
 EMPTY.flags.writeable = False
+
+#: A solver's module by name, imported on first use.
+solver_module = cache(importlib.import_module)
 
 #: Setting names every backend understands; the profile provides their values.
 GENERIC_KEYS = ("eps_abs", "eps_rel", "max_iter", "time_limit")
@@ -107,12 +112,7 @@ def native_settings(
     names = _NATIVE.get(solver)
     if names is None:
         return {}
-    generic = {
-        "eps_abs": eps_abs,
-        "eps_rel": eps_rel,
-        "max_iter": int(max_iter),
-        "time_limit": time_limit,
-    }
+    generic = dict(eps_abs=eps_abs, eps_rel=eps_rel, max_iter=int(max_iter), time_limit=time_limit)
     args = tuple(generic.values())
     settings = {
         name: generic[key] if type(key) is str else key(*args) for name, key in names.items()

@@ -10,7 +10,7 @@ optimal drops it. ``warm_start`` is ignored.
 
 from __future__ import annotations
 
-from functools import cache
+from functools import partial
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from ._common import (
     dense_f64_parts,
     dense_parts,
     refuse_unknown,
+    solver_module,
     solver_options,
 )
 from .base import BackendSolution, PersistentBackend, new_solution
@@ -41,11 +42,7 @@ EXITFLAGS = {
 UNKNOWN_EXITFLAG = ("error", "unknown exit flag")
 
 
-@cache
-def _daqp():
-    import daqp
-
-    return daqp
+_daqp = partial(solver_module, "daqp")
 
 
 class _Buffers:

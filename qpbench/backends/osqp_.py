@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from functools import cache
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,6 +19,7 @@ from ._common import (
     all_dense,
     all_finite,
     dense_bounds,
+    solver_module,
     solver_options,
 )
 from .base import PersistentBackend, new_solution
@@ -209,10 +210,4 @@ class OsqpBackend(PersistentBackend):
 
 
 _ndarray = np.ndarray
-
-
-@cache
-def _osqp():
-    import osqp
-
-    return osqp
+_osqp = partial(solver_module, "osqp")

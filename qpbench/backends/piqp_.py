@@ -9,7 +9,7 @@ structure when sparse), then ``update``-d; a status other than optimal drops it.
 
 from __future__ import annotations
 
-from functools import cache
+from functools import partial
 
 from . import register
 from ._common import (
@@ -20,6 +20,7 @@ from ._common import (
     own_settings,
     refuse_unknown,
     shapes,
+    solver_module,
     solver_options,
     sparse_parts,
     structure_key,
@@ -36,12 +37,7 @@ PIQP_STATUSES = {
     "PIQP_INVALID_SETTINGS": "error",
 }
 
-
-@cache
-def _piqp():
-    import piqp
-
-    return piqp
+_piqp = partial(solver_module, "piqp")
 
 
 @register
