@@ -100,6 +100,13 @@ class QpoasesBackend(Backend):
     def reset(self) -> None:
         self._ws = None
 
+    def workspace(self, key: tuple[int, int, int, bool], **buffers) -> Workspace:
+        """A :class:`Workspace` of shape ``key`` with this backend's options (``buffers``: its
+        ``d`` and ``iv``)."""
+        return Workspace(
+            key, self._lib, self._preset, self._native, self._nwsr, self._time_limit, **buffers
+        )
+
     def _solve(self, problem, warm_start):
         P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
         arrays = shapes(P, q, A, b, G, h, lb, ub)
@@ -109,9 +116,7 @@ class QpoasesBackend(Backend):
             key = (q.shape[0], me, mi, lb is not None or ub is not None)
             if ws is None or ws.key != key:
                 self._ws = None
-                ws = self._ws = Workspace(
-                    key, self._lib, self._preset, self._native, self._nwsr, self._time_limit
-                )
+                ws = self._ws = self.workspace(key)
             ws.shapes = arrays
         n, me, mi, box = ws.key
         ws.H[:] = P
@@ -184,16 +189,7 @@ def make_state(n: int, me_max: int, mi_max: int, profile="default", **settings) 
     free = backend._lib.qpb_free
     weakref.finalize(st.data, _free_handles, free, table)  # handles freed with the buffers
     for k, (key, e, start) in enumerate(zip(shapes, ends, starts)):
-        ws = Workspace(
-            key,
-            backend._lib,
-            backend._preset,
-            backend._native,
-            backend._nwsr,
-            backend._time_limit,
-            d=st.data[start : start + e[-1]],
-            iv=st.iv[k],
-        )
+        ws = backend.workspace(key, d=st.data[start : start + e[-1]], iv=st.iv[k])
         table[k, :_HANDLE] = key
         table[k, _HANDLE] = ws.detach()
         table[k, _H:] = start + e[:-1]
