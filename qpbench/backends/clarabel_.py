@@ -25,7 +25,7 @@ from ._common import (
     own_settings,
     solver_options,
 )
-from .base import BackendSolution, PersistentBackend
+from .base import PersistentBackend, new_solution
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -150,7 +150,6 @@ class ClarabelBackend(PersistentBackend):
     def _attempt(self, problem, warm_start):
         import clarabel
 
-        sol = BackendSolution(problem)
         layout = self._layout
         same = False
         if self._solver is not None and layout is not None:
@@ -182,8 +181,7 @@ class ClarabelBackend(PersistentBackend):
         res = (self._solver or solver).solve()
         name = status_name(res.status)
         status = CLARABEL_STATUSES.get(name, "not_solved")
-        sol.status = status
-        sol.extras = {"raw_status": name}
+        sol = new_solution(problem, status, {"raw_status": name})
         if status == "error":
             sol.error = f"Clarabel: {name}"
         sol.iterations = int(res.iterations)
