@@ -266,12 +266,16 @@ def assemble(
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
-    """One reference per record from ``source``: a method, ``none`` or a file of known optimal
-    objectives."""
+    """One reference per record from ``source``, said in the log: a method (``options``: those
+    of :func:`reference_solutions`), ``none`` or a file of known optimal objectives."""
+    if source in METHODS:
+        folder = cache_folder(problem_set, options.get("cache_dir"))
+        where = "references: not cached (set built in memory)"
+        log.info("%s", f"reference cache: {folder}" if folder else where)
+        return reference_solutions(problem_set, method=source, **options)
+    log.info("%s", f"references: {source} (not cached)")
     if source == "none":
         return [None] * len(problem_set.records)
-    if source in METHODS:
-        return reference_solutions(problem_set, method=source, **options)
     from .published import read_objectives
 
     objectives, refs = read_objectives(source), []

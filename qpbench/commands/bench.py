@@ -7,7 +7,7 @@ import sys
 
 from ..harness.bench import DEFAULT_SEED
 from ..profiles import profile_names
-from .options import add, add_force_resume, log, pick, strict_exit
+from .options import add, add_force_resume, pick, strict_exit
 
 HELP = (
     "benchmark backends on a problem set: one long-format CSV row per (problem, backend, profile)"
@@ -157,7 +157,7 @@ def _reference_source(args: argparse.Namespace, config) -> object:
     from ..exceptions import ParamError, positive_count, positive_seconds
     from ..profiles import get_profile
     from ..published import read_objectives
-    from ..reference import METHODS, SOURCES, bench_references, cache_folder
+    from ..reference import METHODS, SOURCES, bench_references
     from ..runner.process import context
 
     source = args.reference
@@ -175,22 +175,10 @@ def _reference_source(args: argparse.Namespace, config) -> object:
             )
         read_objectives(source)  # a bad file fails here, before anything is written
     progress = None if args.quiet else tqdm if sys.stderr.isatty() else "log"
+    kw = dict(time_limit=limit, jobs=args.jobs, progress=progress, cache_dir=args.cache_dir)
 
-    def references(problem_set):
-        if source not in METHODS:
-            log.info("%s", f"references: {source} (not cached)")
-            return bench_references(problem_set, source)
-        folder = cache_folder(problem_set, args.cache_dir)
-        where = "references: not cached (set built in memory)"
-        log.info("%s", f"reference cache: {folder}" if folder else where)
-        return bench_references(
-            problem_set,
-            source,
-            time_limit=limit,
-            jobs=args.jobs,
-            progress=progress,
-            context=context(),
-            cache_dir=args.cache_dir,
-        )
+    def references(problem_set):  # the worker processes' context: only a method's solves
+        ctx = context() if source in METHODS else None
+        return bench_references(problem_set, source, context=ctx, **kw)
 
     return references
