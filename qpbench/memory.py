@@ -72,10 +72,12 @@ def resolve_budget(text: str | None) -> int:
     return budget
 
 
-def _n_m(problem: qpsolvers.Problem) -> tuple[int, int]:
-    """Variables and rows (equalities and inequalities) of ``problem``."""
+def problem_sizes(problem: qpsolvers.Problem) -> tuple[int, int, int]:
+    """``(n, m_eq, m_ineq)`` of a problem (box bounds are not counted as rows)."""
     n = int(np.asarray(problem.q).shape[0])
-    return n, sum(0 if M is None else int(M.shape[0]) for M in (problem.A, problem.G))
+    m_eq = 0 if problem.A is None else int(problem.A.shape[0])
+    m_ineq = 0 if problem.G is None else int(problem.G.shape[0])
+    return n, m_eq, m_ineq
 
 
 def nnz(M) -> int:
@@ -87,15 +89,16 @@ def nnz(M) -> int:
 
 def sparse_solver_bytes(problem: qpsolvers.Problem) -> int:
     """What a sparse solver needs for ``problem`` (KKT matrix, its factor, vectors), in bytes."""
-    n, m = _n_m(problem)
+    n, m_eq, m_ineq = problem_sizes(problem)
+    m = m_eq + m_ineq
     kkt = nnz(problem.P) + nnz(problem.A) + nnz(problem.G) + n + m
     return 12 * kkt * (1 + FILL) + 8 * 50 * (n + m)
 
 
 def dense_entries(problem: qpsolvers.Problem) -> int:
     """``n (n + m_eq + m_ineq)``: entries of the problem's matrices made dense."""
-    n, m = _n_m(problem)
-    return n * (n + m)
+    n, m_eq, m_ineq = problem_sizes(problem)
+    return n * (n + m_eq + m_ineq)
 
 
 def skip_reason(problem: qpsolvers.Problem, sparse_backend: bool, budget: int) -> str | None:
@@ -107,8 +110,8 @@ def skip_reason(problem: qpsolvers.Problem, sparse_backend: bool, budget: int) -
                 f"dense-only backend: n (n + m) = {entries:.3g} entries > {DENSE_MAX_ENTRIES:.3g} "
                 f"({format_size(8 * entries)} dense)"
             )
-        n, m = _n_m(problem)  # the problem's dense copy, the solver's and its workspace:
-        need = 3 * 8 * (entries + 4 * (n + m))
+        n, m_eq, m_ineq = problem_sizes(problem)  # the problem's dense copy, the solver's
+        need = 3 * 8 * (entries + 4 * (n + m_eq + m_ineq))  # and its workspace
     else:
         need = sparse_solver_bytes(problem)
     if need > budget:

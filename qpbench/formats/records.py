@@ -12,7 +12,7 @@ import qpsolvers
 import scipy.sparse as spa
 
 from ..exceptions import ProblemFormatError
-from ..memory import dense_entries
+from ..memory import dense_entries, problem_sizes
 
 #: Array columns, in qpsolvers' argument order.
 ARRAY_KEYS = ("P", "q", "G", "h", "A", "b", "lb", "ub")
@@ -90,14 +90,6 @@ class ProblemSet:
 
     def __getitem__(self, i: int) -> ProblemRecord:
         return self.records[i]
-
-
-def problem_sizes(problem: qpsolvers.Problem) -> tuple[int, int, int]:
-    """``(n, m_eq, m_ineq)`` of a problem (box bounds are not counted as rows)."""
-    n = int(np.asarray(problem.q).shape[0])
-    m_eq = 0 if problem.A is None else int(problem.A.shape[0])
-    m_ineq = 0 if problem.G is None else int(problem.G.shape[0])
-    return n, m_eq, m_ineq
 
 
 def box_bounds(problem: qpsolvers.Problem) -> int:
