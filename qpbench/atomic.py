@@ -124,10 +124,8 @@ def check_output(
     if not parent.exists() and not make_parent:
         raise ParamError(f"{path}: parent folder {parent} does not exist; create it first", key=key)
     if path.exists() and not (force or resume):
-        hint = "pass --force to overwrite" + (
-            " or --resume to continue" if resume is not None else ""
-        )
-        raise OutputExistsError(f"{path}: exists; {hint}")
+        or_resume = "" if resume is None else " or --resume to continue"
+        raise OutputExistsError(f"{path}: exists; pass --force to overwrite{or_resume}")
 
 
 def promote(staging: Path, out: Path, names) -> None:

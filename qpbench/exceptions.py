@@ -65,11 +65,8 @@ def check_known_keys(
     """Raise ``error`` naming ``prefix.KEY`` for the first key of ``table`` not in ``known``."""
     for key in table:
         if key not in known:
-            raise error(
-                f"unknown key (expected one of: {', '.join(known)})",
-                path=path,
-                key=f"{prefix}.{key}",
-            )
+            message = f"unknown key (expected one of: {', '.join(known)})"
+            raise error(message, path=path, key=f"{prefix}.{key}")
 
 
 class BackendNotFound(QpbenchError):

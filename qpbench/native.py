@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import ctypes.util
 from functools import cache
+from pathlib import Path
 
 #: ``CLOCK_MONOTONIC`` of Linux' ``<time.h>``.
 CLOCK_MONOTONIC = 1
@@ -69,13 +70,6 @@ def compile_with(fn, bindings: dict | None = None, name: str | None = None, **op
     return njit(**options)(copy)
 
 
-def _file_digest(path: str) -> str:
-    import hashlib
-
-    with open(path, "rb") as f:
-        return hashlib.sha1(f.read()).hexdigest()
-
-
 def _sources_digest(path: str, scope: dict) -> str:
     """A digest of ``path`` and of the source file of every compiled function reachable from
     ``scope``: numba's cache checks the calling function's own file only, yet a caller's cached
@@ -92,7 +86,7 @@ def _sources_digest(path: str, scope: dict) -> str:
         seen.add(id(value))
         files.add(py_func.__code__.co_filename)
         todo.extend(py_func.__globals__.values())
-    text = "".join(_file_digest(f) for f in sorted(files))
+    text = "".join(hashlib.sha1(Path(f).read_bytes()).hexdigest() for f in sorted(files))
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 

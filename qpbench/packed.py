@@ -66,7 +66,7 @@ class PackedProblem(qpsolvers.Problem):
     @classmethod
     def from_views(cls, buf, P, q, G, h, A, b, lb, ub) -> PackedProblem:
         """A problem from views the caller made of ``buf`` after writing its header (no checks)."""
-        self = _new(cls)
+        self = object.__new__(cls)
         self.__dict__.update(buffer=buf, P=P, q=q, G=G, h=h, A=A, b=b, lb=lb, ub=ub)
         return self
 
@@ -88,9 +88,6 @@ class PackedProblem(qpsolvers.Problem):
     def __repr__(self) -> str:
         n, me, mi = self.shape
         return f"PackedProblem(n={n}, me={me}, mi={mi})"
-
-
-_new = object.__new__
 
 
 def pack(problem: qpsolvers.Problem) -> PackedProblem:

@@ -56,13 +56,12 @@ class Profile:
 
 
 PROFILES: dict[str, Profile] = {
-    "low_accuracy": Profile(
-        "low_accuracy", 1e-4, 0.0, 10_000, 1.0, Tolerance(1e-3, 1e-3, 1e-3, 1.0)
-    ),
-    "default": Profile("default", 1e-7, 0.0, 100_000, 10.0, Tolerance(1e-6, 1e-6, 1e-6, 10.0)),
-    "high_accuracy": Profile(
-        "high_accuracy", 1e-9, 0.0, 1_000_000, 10.0, Tolerance(1e-9, 1e-9, 1e-9, 10.0)
-    ),
+    p.name: p
+    for p in (
+        Profile("low_accuracy", 1e-4, 0.0, 10_000, 1.0, Tolerance(1e-3, 1e-3, 1e-3, 1.0)),
+        Profile("default", 1e-7, 0.0, 100_000, 10.0, Tolerance(1e-6, 1e-6, 1e-6, 10.0)),
+        Profile("high_accuracy", 1e-9, 0.0, 1_000_000, 10.0, Tolerance(1e-9, 1e-9, 1e-9, 10.0)),
+    )
 }
 
 

@@ -58,7 +58,6 @@ def load_maros_meszaros(path: str | Path) -> ProblemRecord:
     lo = np.where(lo <= -MM_INFINITY, -np.inf, lo)
     up = np.where(up >= MM_INFINITY, np.inf, up)
     problem = qpsolvers.Problem(P, q, *_constraints(A, lo, up, m, n))
-    problem.lb, problem.ub = _box(problem.lb), _box(problem.ub)
     record = ProblemRecord(problem=problem, name=name, offset=r)
     check_record(record, path=path)
     return record
@@ -93,7 +92,8 @@ def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: i
     identity = m >= n and (rows[m - n :] != spa.identity(n, format="csr")).nnz == 0
     if identity:
         C, lc, uc = rows[: m - n], lo[: m - n], up[: m - n]
-        lb, ub = lo[m - n :].copy(), up[m - n :].copy()
+        # a bound vector without any finite entry: none
+        lb, ub = (None if np.all(np.isinf(v)) else v.copy() for v in (lo[m - n :], up[m - n :]))
     else:  # no identity block: every row is a general constraint
         C, lc, uc = rows, lo, up
         lb = ub = None
@@ -107,8 +107,3 @@ def _constraints(A: spa.csc_matrix, lo: np.ndarray, up: np.ndarray, m: int, n: i
     else:
         G = h = None
     return G, h, Aeq, beq, lb, ub
-
-
-def _box(v):
-    """``None`` for a bound vector without any finite entry."""
-    return None if v is None or np.all(np.isinf(v)) else v

@@ -156,11 +156,8 @@ def _matrix(arrays: dict, csc: dict, k: str, i: int, n: int, fail):
         vector = None if k == "P" else arrays["h" if k == "G" else "b"][i]
         rows = n if k == "P" else (0 if vector is None else vector.size)
         if len(indptr) != n + 1 or len(indices) != len(data):
-            fail(
-                k,
-                f"CSC columns hold {len(indptr) - 1} columns and {len(indices)} indices for "
-                f"{len(data)} values, expected n = {n} columns",
-            )
+            held = f"{len(indptr) - 1} columns and {len(indices)} indices for {len(data)} values"
+            fail(k, f"CSC columns hold {held}, expected n = {n} columns")
         try:
             return checked_csc(data, indices.astype(np.int32), indptr, (rows, n))
         except ValueError as exc:
