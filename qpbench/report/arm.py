@@ -333,7 +333,7 @@ def animate(
     check_animation(path, fps, speed)
 
     arm, keys = scenario.make_arm(), scenario.make_key_points()
-    surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
+    obstacles = scenario.make_obstacles()
     theta = log[tick_log.theta_columns(arm.n)].to_numpy(float)
     t = log["t"].to_numpy(float)
     ee = _log_points(log, "ee")
@@ -349,21 +349,7 @@ def animate(
     axes = list(grid[0])
     static = not any(np.any(ob.velocity) for ob in obstacles)
     look = backend_look(backend)
-    updated = []  # per view, the artists each frame updates: links, key points, trace
-    for ax, plane in zip(axes, planes):  # axes, surface, desired path, obstacles if none moves
-        xlim, ylim = lims[plane[0]], lims[plane[1]]
-        workspace_axes(ax, xlim, ylim, plane)
-        draw_trace(ax, surface.point, -surface.normal, plane, (xlim, ylim), color=SURFACE, lw=2.5)
-        xd = project(_log_points(log, "xd"), plane)
-        ax.plot(xd[:, 0], xd[:, 1], "--", color="0.6", lw=1.0)
-        if static:
-            draw_obstacles(ax, obstacles, 0.0, xlim, ylim, plane=plane)
-        if len(planes) > 1:
-            ax.set_title(caption(plane), fontsize=8, loc="right")
-        (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
-        keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
-        (trace_line,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
-        updated.append((link_line, keys_plot, trace_line))
+    updated = _animation_views(axes, planes, lims, scenario, log, static, look)
     label = axes[0].set_title("", fontsize=8, family="monospace", loc="left")
     moving_artists: list = []
     head = title or scenario.name
@@ -397,6 +383,28 @@ def animate(
     anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
     _save_animation(anim, fig, path, fps, len(frames), progress)
     return path
+
+
+def _animation_views(axes, planes, lims, scenario: Scenario, log, static: bool, look) -> list:
+    """Draw each view's still parts (axes, surface, desired path, the obstacles if none moves)
+    and return, per view, the artists a frame updates: links, key points, trace."""
+    surface, obstacles = scenario.make_surface(), scenario.make_obstacles()
+    updated = []
+    for ax, plane in zip(axes, planes):
+        xlim, ylim = lims[plane[0]], lims[plane[1]]
+        workspace_axes(ax, xlim, ylim, plane)
+        draw_trace(ax, surface.point, -surface.normal, plane, (xlim, ylim), color=SURFACE, lw=2.5)
+        xd = project(_log_points(log, "xd"), plane)
+        ax.plot(xd[:, 0], xd[:, 1], "--", color="0.6", lw=1.0)
+        if static:
+            draw_obstacles(ax, obstacles, 0.0, xlim, ylim, plane=plane)
+        if len(planes) > 1:
+            ax.set_title(caption(plane), fontsize=8, loc="right")
+        (link_line,) = ax.plot([], [], "-o", color=ARM, lw=2.4, ms=4, zorder=3)
+        keys_plot = ax.scatter([], [], s=18, facecolors="white", edgecolors=KEY, lw=0.9, zorder=4)
+        (trace_line,) = ax.plot([], [], color=look.colour, ls=look.linestyle, lw=1.4, zorder=5)
+        updated.append((link_line, keys_plot, trace_line))
+    return updated
 
 
 def check_animation(path: Path, fps: float, speed: float) -> None:
