@@ -5,7 +5,10 @@ Target: at most 15 us per tick (the numpy prototype took 21-30 us). Times
 the ``qpsolvers.Problem``) on the states of a closed-loop run, after the
 kernel is compiled. Also prints the numpy reference path for comparison.
 
-    python bench/build_qp.py [--ticks 2000] [--repeat 5]
+    python bench/build_qp.py [--ticks 2000] [--repeat 5] [SCENARIO ...]
+
+SCENARIO: shipped names or scenario files (default the paper's four), e.g. the scaling
+study's sizes in ``results/scaling/scenarios/``.
 """
 
 from __future__ import annotations
@@ -45,12 +48,14 @@ def main() -> None:
     parser.add_argument(
         "--backend", default="qpsolvers:daqp", help="backend of the run that provides the states"
     )
+    parser.add_argument("scenarios", nargs="*", default=["free", "wall", "adaptive", "narrow"])
     args = parser.parse_args()
     print(
         f"{'scenario':<14} {'rows':>4} {'build [us]':>10} {'arrays only [us]':>16} {'numpy terms [us]':>16}"
     )
-    for name in ("free", "wall", "adaptive", "narrow"):
+    for name in args.scenarios:
         sc = load_scenario(name)
+        name = Path(name).stem
         res = simulate(sc, args.backend, duration=args.ticks * sc.dt)
         n = sc.make_arm().n
         log = res.log

@@ -210,39 +210,36 @@ def _build_kernel_py(cm, theta, t, kp, kd, soft, buf):  # pragma: no cover - com
             acc *= -rho
         buf[oq + r] = acc
     # obstacle rows, eqs. 8-10 with the velocity-damper signs: element [a, e] of a link, its
-    # point x = a + s (e - a) closest to the primitive, u the distance's gradient at x; the
-    # rows of one primitive together (its row of the table read once)
+    # point x = a + s (e - a) closest to the primitive, u the distance's gradient at x; each
+    # row reads its primitive's row of the table (a cloud's cost linear in its points)
     a = cm.scratch[0:3]
     e = cm.scratch[3:6]
     u = cm.scratch[6:9]
-    for m in range(cm.obstacles.shape[0]):
-        row = cm.obstacles[m]
-        for r in range(nr):
-            if cm.row_prim[r] != m:
-                continue
-            i = cm.row_key[r]
-            L = cm.key_link[i]
-            f0, f1 = cm.key_f0[i], cm.key_f1[i]
-            for c in range(3):
-                step = p[L + 1, c] - p[L, c]
-                a[c] = p[L, c] + f0 * step
-                e[c] = p[L, c] + f1 * step
-            d, s = _segment_distance(row, a, e, t, u)  # noqa: F821 - bound
-            d -= cm.key_radius
-            x0 = a[0] + s * (e[0] - a[0])
-            x1 = a[1] + s * (e[1] - a[1])
-            x2 = a[2] + s * (e[2] - a[2])
-            g = oG + r * n
-            for k in range(n):  # G = -u^T J_x, J_x's columns w_k x (x - p_k) up to link L
-                if k <= L:
-                    dx, dy, dz = x0 - p[k, 0], x1 - p[k, 1], x2 - p[k, 2]
-                    buf[g + k] = -(
-                        u[0] * (w[k, 1] * dz - w[k, 2] * dy)
-                        + u[1] * (w[k, 2] * dx - w[k, 0] * dz)
-                        + u[2] * (w[k, 0] * dy - w[k, 1] * dx)
-                    )
-                else:
-                    buf[g + k] = 0.0
-            toward = u[0] * row[VX] + u[1] * row[VY] + u[2] * row[VZ]  # the primitive's speed
-            buf[oh + r] = cm.k * (d - cm.d_safe) - toward
-            buf[od + r] = d
+    for r in range(nr):
+        row = cm.obstacles[cm.row_prim[r]]
+        i = cm.row_key[r]
+        L = cm.key_link[i]
+        f0, f1 = cm.key_f0[i], cm.key_f1[i]
+        for c in range(3):
+            step = p[L + 1, c] - p[L, c]
+            a[c] = p[L, c] + f0 * step
+            e[c] = p[L, c] + f1 * step
+        d, s = _segment_distance(row, a, e, t, u)  # noqa: F821 - bound
+        d -= cm.key_radius
+        x0 = a[0] + s * (e[0] - a[0])
+        x1 = a[1] + s * (e[1] - a[1])
+        x2 = a[2] + s * (e[2] - a[2])
+        g = oG + r * n
+        for k in range(n):  # G = -u^T J_x, J_x's columns w_k x (x - p_k) up to link L
+            if k <= L:
+                dx, dy, dz = x0 - p[k, 0], x1 - p[k, 1], x2 - p[k, 2]
+                buf[g + k] = -(
+                    u[0] * (w[k, 1] * dz - w[k, 2] * dy)
+                    + u[1] * (w[k, 2] * dx - w[k, 0] * dz)
+                    + u[2] * (w[k, 0] * dy - w[k, 1] * dx)
+                )
+            else:
+                buf[g + k] = 0.0
+        toward = u[0] * row[VX] + u[1] * row[VY] + u[2] * row[VZ]  # the primitive's speed
+        buf[oh + r] = cm.k * (d - cm.d_safe) - toward
+        buf[od + r] = d
