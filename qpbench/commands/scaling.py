@@ -9,7 +9,10 @@ from pathlib import Path
 
 from .options import add, add_force_resume, check_tables, log, pick, strict_exit
 
-HELP = "scaling study: generated arms of 4-64 links and point clouds of 1-1,000 points; solve time against QP size"
+HELP = (
+    "scaling study: generated planar arms of 4-64 links and point clouds of 1-1,000 points, "
+    "and spatial arms facing balls; solve time against QP size"
+)
 EXAMPLE = (
     "qpbench scaling --backends daqp,qpoases,piqp,osqp,clarabel --out scaling/ ; "
     "qpbench report scaling/ --out scaling-report/"
@@ -36,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="'default' (13 sizes: n4-p1-m1,m10,m100,m1000, n4..n64-p2-m16, and spatial: "
         "panda-m4, iiwa14-m4, chain14-m4, chain28-m4) or comma-separated names: nN-pP-mM (a "
         "planar arm of N links, P key points per link, a cloud of M points), panda-mM, iiwa14-mM "
-        "or chainN-mM (a generated spatial chain of N joints; pinocchio) facing M balls",
+        "or chainN-mM (a generated spatial chain of N joints, modified DH rows) facing M balls",
     )
 
     def option(flag, text, spec="", **kw):
