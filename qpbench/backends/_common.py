@@ -330,7 +330,7 @@ _f64 = np.dtype(np.float64)
 
 def shapes(*arrays) -> tuple:
     """The shape of each array (``None`` kept): equal tuples, arrays of the same shapes."""
-    return tuple(None if v is None else v.shape for v in arrays)
+    return tuple([None if v is None else v.shape for v in arrays])  # a list: no generator
 
 
 def all_finite(x: np.ndarray) -> bool:

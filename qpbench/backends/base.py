@@ -69,6 +69,40 @@ def new_solution(
 _new = object.__new__
 
 
+class _Duals:
+    """``y``, ``z`` and ``z_box`` of a :class:`ViewSolution`, put into the instance on the
+    first read of any (a non-data descriptor: later reads do not call it)."""
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, sol, owner=None):
+        if sol is None:
+            return self
+        d = sol.__dict__
+        out = d.get("_out")  # None: no solution
+        _, sy, sz, sb = d["_slices"] if out is not None else _NO_SLICES
+        if "y" not in d:
+            d["y"] = None if sy is None else out[sy]
+        if "z" not in d:
+            d["z"] = None if sz is None else out[sz]
+        if "z_box" not in d:
+            d["z_box"] = None if sb is None else out[sb]
+        return d[self.name]
+
+
+_NO_SLICES = (None, None, None, None)
+
+
+class ViewSolution(BackendSolution):
+    """A solution whose ``x``, ``y``, ``z``, ``z_box`` are views of ``_out`` at ``_slices``
+    (``None``: absent), the duals made on first read (a closed loop reads only ``x``)."""
+
+    y = _Duals()
+    z = _Duals()
+    z_box = _Duals()
+
+
 def error_solution(problem: qpsolvers.Problem, exc: BaseException) -> BackendSolution:
     """Status ``error`` naming ``exc`` (a failure the solver raised on this problem)."""
     return BackendSolution(problem, status="error", error=describe_exception(exc))

@@ -45,6 +45,12 @@ def _proxqp():
     return proxsuite.proxqp
 
 
+@cache
+def _solved():
+    """``QPSolverOutput.PROXQP_SOLVED``, compared by identity (the enum hashes in Python)."""
+    return _proxqp().QPSolverOutput.PROXQP_SOLVED
+
+
 def _status(value) -> tuple[str, str]:
     """Our status and ProxQP's name of a ``QPSolverOutput``."""
     return PROXQP_STATUSES.get(value.name, "not_solved"), value.name
@@ -160,7 +166,9 @@ class ProxqpBackend(PersistentBackend):
         else:
             qp.solve()
         info = self._info
-        status, raw = _status(info.status)
+        raw_status = info.status
+        solved = raw_status is _solved()
+        status, raw = ("optimal", "PROXQP_SOLVED") if solved else _status(raw_status)
         retried = False
         sparse = len(key) > 4
         if sparse:  # the kept views' split of z depends on n_in, which the key does not pin

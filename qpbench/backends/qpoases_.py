@@ -32,7 +32,7 @@ from ._common import (
     shapes,
 )
 from ._qpoases_shim import OPTION_NAMES, PRESETS, Workspace
-from .base import Backend, new_solution
+from .base import Backend, ViewSolution, new_solution
 
 #: Shim status -> our status.
 _STATUSES = {
@@ -135,12 +135,13 @@ class QpoasesBackend(Backend):
         obj, _, solve_time, cputime = ws.s.tolist()
         _, _, iterations, raw, _ = ws.iv.tolist()
         extras = {"raw_status": raw, "qpoases_cputime_s": cputime}
-        sol = new_solution(problem, _STATUSES[st], extras)
+        sol = new_solution(problem, _STATUSES[st], extras, ViewSolution)
         sol.iterations = iterations
         sol.solver_time_s = solve_time
-        if st == 0:  # x and the multipliers: one copy, each a view of it
-            out = ws.xy.copy()
-            sol.x, sol.y, sol.z, sol.z_box = (out[part] for part in ws.parts)
+        if st == 0:  # x and the multipliers: one copy, x a view of it (the duals on first read)
+            out = sol._out = ws.xy.copy()
+            parts = sol._slices = ws.parts
+            sol.x = out[parts[0]]
             sol._obj = obj
         elif st == -1:
             sol.error = raw_message(raw)

@@ -17,7 +17,7 @@ from ..packed import PackedProblem
 from ..rnn import kernels as nk
 from ..rnn import network as nw
 from . import register
-from .base import Backend, BackendSolution
+from .base import Backend, BackendSolution, ViewSolution
 
 if TYPE_CHECKING:
     import qpsolvers
@@ -223,8 +223,8 @@ class NetworkBackend(Backend):
         )
 
 
-class TickSolution(BackendSolution):
-    """The online network's answer to one tick: views of the kernel's ``[x; y; z; z_box]``."""
+class TickSolution(ViewSolution):
+    """The online network's answer to one tick: ``_out`` is the kernel's ``[x; y; z; z_box]``."""
 
 
 @register
@@ -289,7 +289,9 @@ class RNNOnline(NetworkBackend):
             return sol
         sol = _new(TickSolution)
         sol.problem = problem
-        sol.x, sol.y, sol.z, sol.z_box = (None if part is None else out[part] for part in slices)
+        sol.x = out[slices[0]]
+        sol._out = out
+        sol._slices = slices
         sol.iterations = code >> 2
         if code & 2:  # the step was clamped to the bound (or none is proven stable)
             sol.error = nk.step_note(prm)
