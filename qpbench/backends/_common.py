@@ -328,9 +328,19 @@ _ndarray = np.ndarray
 _f64 = np.dtype(np.float64)
 
 
-def shapes(*arrays) -> tuple:
-    """The shape of each array (``None`` kept): equal tuples, arrays of the same shapes."""
-    return tuple([None if v is None else v.shape for v in arrays])  # a list: no generator
+def shapes(P, q, A, b, G, h, lb, ub) -> tuple:
+    """The shape of each array (``None`` kept): equal tuples, arrays of the same shapes.
+    Written out: a loop over the arrays costs a tick twice as much."""
+    return (
+        P.shape,
+        q.shape,
+        None if A is None else A.shape,
+        None if b is None else b.shape,
+        None if G is None else G.shape,
+        None if h is None else h.shape,
+        None if lb is None else lb.shape,
+        None if ub is None else ub.shape,
+    )
 
 
 def all_finite(x: np.ndarray) -> bool:

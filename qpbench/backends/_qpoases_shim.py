@@ -176,7 +176,7 @@ class Workspace:
             slice(2 * n + me, None),
             slice(n, 2 * n if box else n),
         )
-        self.shapes = None  # shapes of the arrays last written (checked then)
+        self.sizes = None  # sizes of the arrays last written (checked then)
         self.s[1] = time_limit
         self.iv[0] = nwsr
         self._free = lib.qpb_free

@@ -102,7 +102,7 @@ class PiqpBackend(PersistentBackend):
         """The sparse route: ``piqp.SparseSolver`` kept per structure (upper triangle of ``P``)."""
         P, q, A, b, G, h, lb, ub = sparse_parts(problem, upper=True)
         # every shape: the kept solver's were checked at its set-up
-        key = ("sparse", shapes(q, b, h, lb, ub), structure_key(P, A, G))
+        key = ("sparse", shapes(P, q, A, b, G, h, lb, ub), structure_key(P, A, G))
         return self._run(problem, _piqp().SparseSolver, key, P, q, A, b, G, h, lb, ub)
 
     def _run(self, problem, cls, key, P, q, A, b, G, h, lb, ub) -> BackendSolution:

@@ -25,11 +25,9 @@ from . import register
 from ._common import (
     GENERIC_KEYS,
     check_shapes,
-    dense_f64_parts,
     dense_parts,
     generic_settings,
     refuse_unknown,
-    shapes,
 )
 from ._qpoases_shim import OPTION_NAMES, PRESETS, Workspace
 from .base import Backend, ViewSolution, new_solution
@@ -108,29 +106,57 @@ class QpoasesBackend(Backend):
         )
 
     def _solve(self, problem, warm_start):
-        P, q, A, b, G, h, lb, ub = dense_f64_parts(problem) or dense_parts(problem)
-        arrays = shapes(P, q, A, b, G, h, lb, ub)
+        P, q, A, b = problem.P, problem.q, problem.A, problem.b
+        G, h, lb, ub = problem.G, problem.h, problem.lb, problem.ub
+        # Types only (each copy below converts to float64), written out: a tick pays no call.
+        if not (
+            type(P) is _ndarray
+            and type(q) is _ndarray
+            and q.ndim == 1
+            and (A is None or (type(A) is _ndarray and type(b) is _ndarray))
+            and (G is None or (type(G) is _ndarray and type(h) is _ndarray))
+            and (lb is None or type(lb) is _ndarray)
+            and (ub is None or type(ub) is _ndarray)
+        ):
+            P, q, A, b, G, h, lb, ub = dense_parts(problem)
+        # The sizes decide: a copy into a buffer of another size raises, one of the same size
+        # cannot broadcast; check_shapes names the array when the sizes changed or a copy raised.
+        sizes = (
+            P.size,
+            q.size,
+            None if A is None else A.size,
+            None if b is None else b.size,
+            None if G is None else G.size,
+            None if h is None else h.size,
+            None if lb is None else lb.size,
+            None if ub is None else ub.size,
+        )
         ws = self._ws
-        if ws is None or arrays != ws.shapes:  # the workspace of this shape (checked here)
+        if ws is None or sizes != ws.sizes:  # the workspace of this shape (checked here)
             me, mi = check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
             key = (q.shape[0], me, mi, lb is not None or ub is not None)
             if ws is None or ws.key != key:
                 self._ws = None
                 ws = self._ws = self.workspace(key)
-            ws.shapes = arrays
+            ws.sizes = sizes
         n, me, mi, box = ws.key
-        ws.H[:] = P
-        ws.g[:] = q
-        if me:
-            ws.A_eq[:] = A
-            ws.lbA_eq[:] = b
-            ws.ubA_eq[:] = b
-        if mi:
-            ws.A_in[:] = G
-            ws.ubA_in[:] = h
-        if box:
-            ws.lb[:] = -_INF if lb is None else lb
-            ws.ub[:] = _INF if ub is None else ub
+        try:
+            ws.H[:] = P
+            ws.g[:] = q
+            if me:
+                ws.A_eq[:] = A
+                ws.lbA_eq[:] = b
+                ws.ubA_eq[:] = b
+            if mi:
+                ws.A_in[:] = G
+                ws.ubA_in[:] = h
+            if box:
+                ws.lb[:] = -_INF if lb is None else lb
+                ws.ub[:] = _INF if ub is None else ub
+        except ValueError:
+            ws.sizes = None
+            check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
+            raise
         st = self._lib.qpb_solve(ws.handle)
         obj, _, solve_time, cputime = ws.s.tolist()
         _, _, iterations, raw, _ = ws.iv.tolist()
@@ -149,6 +175,7 @@ class QpoasesBackend(Backend):
 
 
 _INF = np.inf
+_ndarray = np.ndarray
 
 
 # -- the compiled route: QpoasesBackend on a packed problem, one workspace per shape, made
