@@ -289,7 +289,10 @@ def test_run_never_leaves_a_backend_out_of_the_closed_loop(tmp_path, monkeypatch
     assert sorted(zip(loop["scenario"], loop["backend"])) == sorted(
         (s, b) for s in ("wall", "free") for b in ("daqp", slow)
     )
-    assert (loop["verdict"] == "ok").all() and loop["status"].isin(("ok", "budget")).all()
+    # the slow runs' budget is three times the bench's prediction: a machine loaded enough to
+    # stretch its sleeps further cuts them, and their rows say how far they got
+    cut = (loop["status"] == "budget") & (loop["verdict"] == "incomplete")
+    assert ((loop["verdict"] == "ok") & loop["status"].isin(("ok", "budget")) | cut).all()
     assert (loop["ticks"] > 0).all()
     fast = loop[loop["backend"] == "daqp"]
     assert (
