@@ -26,7 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--scenario",
         required=True,
         metavar="NAME|PATH",
-        help="shipped scenario name (free, wall, adaptive, adaptive_fast, narrow) or a .toml file",
+        help="a shipped scenario's name (`qpbench scenarios` lists them: wall, narrow, panda_table, "
+        "...) or a .toml file",
     )
     parser.add_argument(
         "--backend",
