@@ -121,6 +121,8 @@ class QpoasesBackend(Backend):
             P, q, A, b, G, h, lb, ub = dense_parts(problem)
         # The sizes decide: a copy into a buffer of another size raises, one of the same size
         # cannot broadcast; check_shapes names the array when the sizes changed or a copy raised.
+        # Written out like _common.shapes, not a call to it: a call per tick shows in
+        # bench/backend_overhead.py (alternating runs, bench/README).
         sizes = (
             P.size,
             q.size,
