@@ -155,6 +155,28 @@ def test_the_distance_axis_shows_d_safe(narrow):
     assert band / span > 0.005  # on a linear 0-300 mm axis it would be 0.5 / 450
 
 
+def test_the_distance_axis_labels_data_close_above_d_safe():
+    """A run between d_safe (30 mm) and the first 1-2-5 tick above it (100 mm) still gets a
+    labelled tick at its data; a run reaching 300 mm gets the 1-2-5 ticks only."""
+    import matplotlib.pyplot as plt
+
+    from qpbench.report.loop_figure import distance_axis
+
+    def labelled(data):
+        fig, ax = plt.subplots()
+        ax.plot([0, 1], data)
+        distance_axis(ax, 0.03, min(data))
+        fig.canvas.draw()
+        lo, hi = ax.get_ylim()
+        ticks = [v for v in ax.yaxis.get_major_locator()() if lo <= v <= hi]
+        plt.close(fig)
+        return ticks
+
+    close = labelled([43.0, 45.0])  # without the extra tick: 0 and 30 only
+    assert close[:2] == [0.0, 30.0] and len(close) == 3 and 40.0 <= close[2] <= 60.0
+    assert labelled([43.0, 300.0]) == [0.0, 30.0, 100.0, 200.0]
+
+
 def test_looks_are_distinct_and_fixed():
     colours = [look.colour.lower() for look in style.LOOKS.values()]
     assert len(set(colours)) == len(colours)

@@ -42,15 +42,11 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     """A distance axis in [mm]: linear up to ``d_safe`` [m] (else 10 mm), logarithmic beyond,
     with the ``d_safe`` line and the ``d_safe - 0.5 mm`` line a run must not cross (the region
     below shaded); ``lowest_mm``: the smallest distance drawn, which the axis reaches."""
-    from matplotlib.ticker import FixedLocator, FuncFormatter
+    from matplotlib.ticker import FuncFormatter
 
     lin = d_safe * 1e3 if d_safe is not None and d_safe > 0 else 10.0
     ax.set_yscale("symlog", linthresh=lin, linscale=1.0)
-    # ticks in plain [mm]: 0, +-lin (d_safe) and 1-2-5 steps beyond (symlog's: powers of ten)
-    steps = [m * 10.0**e for e in range(-3, 6) for m in (1, 2, 5)]
-    beyond = [v for v in steps if v >= 1.8 * lin]
-    ticks = sorted({0.0, lin, -lin, *beyond, *(-v for v in beyond)})
-    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_major_locator(_distance_ticks(lin))
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
     if d_safe is None:
         return
@@ -61,6 +57,29 @@ def distance_axis(ax, d_safe: float | None, lowest_mm: float | None = None) -> N
     bottom = lo - 0.3 * max(abs(lo), lin) if lo < 0 else -0.3 * lin
     ax.axhspan(bottom, bad, color="red", alpha=0.06, lw=0)
     ax.set_ylim(bottom=bottom)
+
+
+def _distance_ticks(lin: float):
+    """Ticks in plain [mm] (symlog's are powers of ten): 0, +-``lin`` (d_safe) and 1-2-5 steps
+    beyond; where none of those lies between ``lin`` and the top of the view (a run that stays
+    close above d_safe), the largest 1-1.5-2-3-4-5-6-8 step there, so the data have a label."""
+    from matplotlib.ticker import Locator
+
+    def steps(mantissas):
+        return [m * 10.0**e for e in range(-3, 6) for m in mantissas]
+
+    beyond = [v for v in steps((1, 2, 5)) if v >= 1.8 * lin]
+    ticks = sorted({0.0, lin, -lin, *beyond, *(-v for v in beyond)})
+
+    class Ticks(Locator):
+        def __call__(self):
+            top = max(self.axis.get_view_interval())
+            if any(lin < v <= top for v in ticks):
+                return ticks
+            near = [v for v in steps((1, 1.5, 2, 3, 4, 5, 6, 8)) if 1.2 * lin <= v <= top]
+            return sorted(ticks + near[-1:])
+
+    return Ticks()
 
 
 def closed_loop_figure(
