@@ -330,7 +330,7 @@ _f64 = np.dtype(np.float64)
 
 def shapes(P, q, A, b, G, h, lb, ub) -> tuple:
     """The shape of each array (``None`` kept): equal tuples, arrays of the same shapes.
-    Written out: a loop over the arrays costs a tick twice as much."""
+    Written out: a loop over the arrays shows in a tick (bench/backend_overhead.py)."""
     return (
         P.shape,
         q.shape,

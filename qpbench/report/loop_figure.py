@@ -70,14 +70,14 @@ def _distance_ticks(lin: float):
 
     beyond = [v for v in steps((1, 2, 5)) if v >= 1.8 * lin]
     ticks = sorted({0.0, lin, -lin, *beyond, *(-v for v in beyond)})
+    finer = [v for v in steps((1, 1.5, 2, 3, 4, 5, 6, 8)) if 1.2 * lin <= v < beyond[0]]
 
     class Ticks(Locator):
         def __call__(self):
             top = max(self.axis.get_view_interval())
-            if any(lin < v <= top for v in ticks):
+            if top >= beyond[0]:
                 return ticks
-            near = [v for v in steps((1, 1.5, 2, 3, 4, 5, 6, 8)) if 1.2 * lin <= v <= top]
-            return sorted(ticks + near[-1:])
+            return sorted(ticks + [v for v in finer if v <= top][-1:])
 
     return Ticks()
 
