@@ -137,32 +137,17 @@ OPTIMAL = TICK_STATUSES.index("optimal")
 FLAG_SPAN = 16
 
 
-class State(NamedTuple):
-    """What the kernels keep between calls, numpy memory only: the C structs (``*32``,
-    ``resultf``: int32 and float64 views), ``settings0`` (each set-up's start), the problem
-    arrays, DAQP's ``x`` and ``lam``, ``clock`` (set-up time [s])."""
-
-    layout: np.ndarray
-    statuses: np.ndarray
-    meta: np.ndarray
-    qp: np.ndarray
-    qp32: np.ndarray
-    settings: np.ndarray
-    settings0: np.ndarray
-    result: np.ndarray
-    result32: np.ndarray
-    resultf: np.ndarray
-    work: np.ndarray
-    work32: np.ndarray
-    H: np.ndarray
-    f: np.ndarray
-    A: np.ndarray
-    bu: np.ndarray
-    bl: np.ndarray
-    sense: np.ndarray
-    x: np.ndarray
-    lam: np.ndarray
-    clock: np.ndarray
+#: What the kernels keep between calls, numpy memory only: the C structs (``*32``, ``resultf``:
+#: int32 and float64 views), ``settings0`` (each set-up's start), the problem arrays, DAQP's
+#: ``x`` and ``lam``, ``clock`` (set-up time [s]).
+State = NamedTuple(
+    "State",
+    [
+        (name, np.ndarray)
+        for name in """layout statuses meta qp qp32 settings settings0 result result32 resultf work
+        work32 H f A bu bl sense x lam clock""".split()
+    ],
+)
 
 
 class Kernels(NamedTuple):
