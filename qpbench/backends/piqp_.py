@@ -75,21 +75,6 @@ class PiqpBackend(PersistentBackend):
         self._solver = self._key = self._info = None
         self._views = None  # (x, y, z_l, z_u, z_bl, z_bu): numpy views of the live result
 
-    def _setup(self, cls, key, data):
-        """A new ``cls`` solver (``DenseSolver`` or ``SparseSolver``) set up with ``data``; kept."""
-        self.reset()
-        solver = cls()
-        s = solver.settings
-        for name, value in self._settings_dict.items():
-            setattr(s, name, value)
-        solver.setup(*data)
-        self._solver, self._key = solver, key
-        res = solver.result
-        self._info = res.info
-        # update() and solve() overwrite the vectors these views show (each read builds one)
-        self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
-        return solver
-
     def _attempt(self, problem, warm_start):
         parts = dense_route(problem)
         if parts is None:
@@ -113,7 +98,16 @@ class PiqpBackend(PersistentBackend):
             solver.update(P, q, A, b, G, None, h, lb, ub)
         else:
             check_shapes(self.name, q.shape[0], P, A, b, G, h, lb, ub)
-            solver = self._setup(cls or _piqp().DenseSolver, key, (P, q, A, b, G, None, h, lb, ub))
+            self.reset()
+            solver = (cls or _piqp().DenseSolver)()
+            for name, value in self._settings_dict.items():
+                setattr(solver.settings, name, value)
+            solver.setup(P, q, A, b, G, None, h, lb, ub)
+            self._solver, self._key = solver, key
+            res = solver.result
+            self._info = res.info
+            # update() and solve() overwrite the vectors these views show (each read builds one)
+            self._views = (res.x, res.y, res.z_l, res.z_u, res.z_bl, res.z_bu)
         raw_status = solver.solve()  # what ``result.info.status`` holds, without reading it
         raw = "PIQP_SOLVED" if raw_status.value == _solved() else raw_status.name
         status = PIQP_STATUSES.get(raw, "not_solved")
