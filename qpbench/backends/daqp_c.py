@@ -307,8 +307,7 @@ def kernels() -> Kernels:
     inline = njit(inline="always")  # no call, no refcounts
     for name in [k for k in names if k.endswith("_jit")]:
         names[name] = inline(names[name])
-    model, stateless = jit(_solve_model), jit(_solve_stateless)
-    return Kernels(model, stateless, jit(_solve_either), names["_drop_jit"])
+    return Kernels(jit(_solve_model), jit(_solve_stateless), jit(_solve_either), names["_drop_jit"])
 
 
 def compiled(backend: str):

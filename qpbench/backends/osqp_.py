@@ -132,8 +132,7 @@ class OsqpBackend(PersistentBackend):
         """The generic settings, OSQP's ``OSQPSettings`` fields and the names it translates."""
         import osqp
 
-        solver = osqp.OSQP()
-        own = {k for k in type(solver.ext.OSQPSettings()).__dict__ if not k.startswith("_")}
+        own = {k for k in type(osqp.OSQP().ext.OSQPSettings()).__dict__ if not k.startswith("_")}
         return frozenset(
             own | {"polish", "warm_start", "solver_type", "cg_preconditioner"} | set(GENERIC_KEYS)
         )
