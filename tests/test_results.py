@@ -11,7 +11,7 @@ from qpbench.exceptions import InputError
 from qpbench.harness.results import (
     InflightMarker,
     ResultsWriter,
-    format_rows,
+    csv_bytes,
     read_results,
     row_key,
 )
@@ -80,7 +80,7 @@ def test_half_written_last_line_is_dropped_and_repaired(tmp_path, cut, caplog):
     with ResultsWriter(path, new=True) as writer:
         writer.write_rows([make_row(i) for i in range(3)])
     full = path.read_bytes()
-    last = format_rows([make_row(3)], columns())
+    last = csv_bytes([make_row(3)], columns())
     path.write_bytes(full + last[:cut])  # killed while writing row 3
     res = read_results(path, repair=False)
     assert len(res.rows) == 3 and res.dropped == 1

@@ -83,18 +83,14 @@ def cell(value) -> str:
     return text
 
 
-def format_rows(rows: list[dict], columns: tuple[str, ...]) -> bytes:
-    """CSV bytes of ``rows`` (no header) in ``columns`` order."""
+def csv_bytes(rows: list[dict], columns: tuple[str, ...], header: bool = False) -> bytes:
+    """CSV bytes of ``rows`` in ``columns`` order, after the header line if ``header``."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    for row in rows:
-        writer.writerow([cell(row.get(c)) for c in columns])
+    if header:
+        writer.writerow(columns)
+    writer.writerows([cell(row.get(c)) for c in columns] for row in rows)
     return buf.getvalue().encode("utf-8")
-
-
-def header_bytes(columns: tuple[str, ...]) -> bytes:
-    """The header line of a table of ``columns``."""
-    return (",".join(columns) + "\n").encode("utf-8")
 
 
 @dataclass
@@ -169,7 +165,7 @@ class ResultsWriter:
         self._fd = os.open(self.path, flags, 0o644)
         record(self.path)
         if new:
-            self._write(header_bytes(self.columns))
+            self._write(csv_bytes([], self.columns, header=True))
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
@@ -180,7 +176,7 @@ class ResultsWriter:
     def write_rows(self, rows: list[dict]) -> None:
         """Append ``rows`` and make them durable before returning."""
         if rows:
-            self._write(format_rows(rows, self.columns))
+            self._write(csv_bytes(rows, self.columns))
 
     def close(self) -> None:
         if self._fd is not None:

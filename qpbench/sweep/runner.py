@@ -26,7 +26,7 @@ from ..harness.closed_loop import (
     judge_against_floor,
     run_row,
 )
-from ..harness.results import ResultsWriter, format_rows, header_bytes, read_results
+from ..harness.results import ResultsWriter, csv_bytes, read_results
 from .spec import Instance, SweepSpec, sample_instances
 
 if TYPE_CHECKING:
@@ -278,7 +278,7 @@ def run_sweep(
     order = [(inst.name, b) for inst in instances for b in backends]
     final = [rows[k] for k in order if k in rows] + [r for k, r in rows.items() if k not in order]
     with atomic_path(csv_path) as tmp:
-        tmp.write_bytes(header_bytes(COLUMNS) + format_rows(final, COLUMNS))
+        tmp.write_bytes(csv_bytes(final, COLUMNS, header=True))
     return SweepOutcome(final, csv_path, len(items), len(kept), failed)
 
 
