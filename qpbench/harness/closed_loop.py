@@ -281,9 +281,16 @@ def run_closed_loop(
     same terms and the rows of pairs not asked; ``skip``: backend -> reason of a ``skipped``
     row; ``run_budget`` [s]: a backend's in ``budgets``; ``on_row`` is called with each row
     once written."""
+    # the arguments checked before anything is written or run (errors naming the option)
+    check_formulation(formulation, key="--formulation")
+    parse_list(list(scenarios), "--scenarios")  # a name given twice is refused, as everywhere
+    parse_list(list(backends), "--backends")
     times = {"--duration": duration, "--run-time-limit": run_time_limit, "--deadline": deadline}
-    times["--run-budget"] = run_budget
-    _check_arguments(scenarios, backends, formulation, jobs, isolate, times)
+    for key, value in {**times, "--run-budget": run_budget}.items():
+        if value is not None:
+            positive_seconds(value, key)
+    positive_count(jobs, "--jobs")
+    check_choice(isolate, ISOLATE, "isolation", "--isolate")
     out = Path(out)
     csv_path = out / CSV_NAME
     previous = _prepare_output(out, force, resume)
@@ -391,18 +398,6 @@ def _run_in_workers(items: list[tuple], jobs: int, emit: Callable) -> None:
             for tmp in (Path(task.out) / folder).glob(f".{name}.*.tmp"):
                 tmp.unlink(missing_ok=True)
         emit(done.key, failure_row(task, done.status, message, warn=True))
-
-
-def _check_arguments(scenarios, backends, formulation, jobs, isolate, times: dict) -> None:
-    """The arguments checked before anything is written or run (errors naming the option)."""
-    check_formulation(formulation, key="--formulation")
-    parse_list(list(scenarios), "--scenarios")  # a name given twice is refused, as everywhere
-    parse_list(list(backends), "--backends")
-    for key, value in times.items():
-        if value is not None:
-            positive_seconds(value, key)
-    positive_count(jobs, "--jobs")
-    check_choice(isolate, ISOLATE, "isolation", "--isolate")
 
 
 def _prepare_output(out: Path, force: bool, resume: bool) -> list[dict]:
