@@ -403,8 +403,6 @@ def closed_loop_budgets(
     )
     compiled = compiled_solvers() if config.engine == "compiled" else ()
     run_budget = config.run_budget
-    floor = min(BUDGET_FLOOR_S, run_budget)
-    cut = min(CUT_BUDGET_S, run_budget)
     budgets = {}
     for backend in config.backends:
         t = per_tick_s.get(backend, math.nan)
@@ -412,9 +410,10 @@ def closed_loop_budgets(
         if not math.isfinite(t):
             budgets[backend] = run_budget
         elif late and backend not in compiled:
-            budgets[backend] = cut
+            budgets[backend] = min(CUT_BUDGET_S, run_budget)
         else:
-            budgets[backend] = round(min(run_budget, max(floor, BUDGET_MARGIN * ticks * t)), 3)
+            margin_s = BUDGET_MARGIN * ticks * t
+            budgets[backend] = round(min(run_budget, max(BUDGET_FLOOR_S, margin_s)), 3)
     return budgets
 
 
