@@ -359,9 +359,7 @@ def judge_against_floor(row: dict, floor: dict | None) -> None:
 
 def _judged(row: dict) -> bool:
     """``row`` holds the real-time figures of a run with a result."""
-    value = row.get("ticks_infeasible")
-    judged = value is not None and not (isinstance(value, float) and math.isnan(value))
-    return judged and row.get("status") in ("ok", "budget")
+    return pd.notna(row.get("ticks_infeasible")) and row.get("status") in ("ok", "budget")
 
 
 def _run_items(items: list[tuple], jobs: int, emit: Callable) -> None:
