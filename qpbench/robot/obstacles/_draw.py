@@ -58,12 +58,15 @@ def look(name: str, faint: bool, color=None) -> dict:
 def outline(points, radius: float) -> np.ndarray:
     """The convex hull (k, 2) [m], counter-clockwise, of ``points`` (k, 2) [m] swollen by
     ``radius`` [m] (a disk's, a capsule's or a box's shadow)."""
+    from scipy.spatial import ConvexHull
+
     points = np.asarray(points, dtype=float)
-    if radius == 0.0:
-        return _hull(points)
-    angles = np.linspace(0.0, 2.0 * np.pi, 48, endpoint=False)
-    ring = np.stack([np.cos(angles), np.sin(angles)], axis=1) * radius
-    return _hull((points[:, None, :] + ring[None]).reshape(-1, 2))
+    if radius != 0.0:
+        angles = np.linspace(0.0, 2.0 * np.pi, 48, endpoint=False)
+        ring = np.stack([np.cos(angles), np.sin(angles)], axis=1) * radius
+        points = (points[:, None, :] + ring[None]).reshape(-1, 2)
+    hull = points[ConvexHull(points).vertices]
+    return np.roll(hull, -np.lexsort(hull.T[::-1])[0], axis=0)  # from the least (x, y)
 
 
 def draw_outline(ax, points, radius: float, **style):
@@ -72,24 +75,3 @@ def draw_outline(ax, points, radius: float, **style):
 
     style = {**style, "alpha": 0.35 * style.get("alpha", 1.0)}
     return ax.add_patch(Polygon(outline(points, radius), closed=True, lw=0, **style))
-
-
-def _hull(points: np.ndarray) -> np.ndarray:
-    """Convex hull of planar points (monotone chain), counter-clockwise."""
-    pts = sorted(set(map(tuple, np.round(points, 15))))
-    if len(pts) < 3:
-        return np.array(pts)
-
-    def half(seq):
-        out: list = []
-        for p in seq:
-            while len(out) >= 2 and _turn(out[-2], out[-1], p) <= 0:
-                out.pop()
-            out.append(p)
-        return out[:-1]
-
-    return np.array(half(pts) + half(pts[::-1]))
-
-
-def _turn(o, a, b) -> float:
-    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
