@@ -12,7 +12,7 @@ import numpy as np
 
 from .environment import ContactSurface
 from .kinematics import Arm
-from .obstacles import Obstacle
+from .obstacles import Obstacle, project
 from .obstacles.plane import PlaneObstacle
 
 #: Tolerance of "the same line" (an obstacle recognised as the contact surface) [m, rad].
@@ -72,7 +72,7 @@ def body_clearance(
     if not obstacles or T == 0:
         none = np.zeros(T, dtype=np.int64)
         return BodyClearance(np.empty((T, n, 0)), np.full(T, np.nan), none, none - 1)
-    d = _clearances(_lift(arm.joint_positions(theta)), t, obstacles, radius, exempt)
+    d = _clearances(project(arm.joint_positions(theta), "xyz"), t, obstacles, radius, exempt)
     flat = d.reshape(T, -1)
     arg = np.argmin(np.where(np.isnan(flat), -np.inf, flat), axis=1)
     m = len(obstacles)
@@ -142,7 +142,7 @@ def body_crossings(
     rows = np.unique(np.concatenate([look, look + 1]))
     at = np.zeros(len(theta), dtype=np.int64)
     at[rows] = np.arange(rows.size)
-    p = _lift(arm.joint_positions(theta[rows]))
+    p = project(arm.joint_positions(theta[rows]), "xyz")
     d = _clearances(p, t[rows], obstacles, radius, exempt)
     da, db, pa, pb = d[at[look]], d[at[look + 1]], p[at[look]], p[at[look + 1]]
     vs = speed[look]
@@ -170,13 +170,6 @@ def body_crossings(
         _judge_last(piece.take(last), obstacles, t, found)
         piece = _split(piece.take(~last), arm, theta, t, dt, obstacles, radius, found)
     return found.crossings(t)
-
-
-def _lift(p: np.ndarray) -> np.ndarray:
-    """Joint positions (..., d) [m] in 3-D (a planar arm's in z = 0)."""
-    if p.shape[-1] == 3:
-        return p
-    return np.concatenate([p, np.zeros((*p.shape[:-1], 3 - p.shape[-1]))], axis=-1)
 
 
 def _motion_bounds(arm, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -274,7 +267,7 @@ def _split(piece: _Pieces, arm, theta, t, dt, obstacles, radius, found: _Found) 
     m = (piece.a + piece.b) / 2.0
     k, i = piece.k, piece.i
     at = theta[k] + (m / dt)[:, None] * (theta[k + 1] - theta[k])
-    p = _lift(arm.joint_positions(at))
+    p = project(arm.joint_positions(at), "xyz")
     rows = np.arange(k.size)
     P0m, P1m = p[rows, i], p[rows, i + 1]
     dm = np.empty(k.size)

@@ -77,14 +77,6 @@ class SpatialSchema(Schema):
     velocity: Vec3 = (0.0, 0.0, 0.0)
 
 
-def fit(vector, d: int) -> np.ndarray:
-    """``vector`` with ``d`` entries: cut, or padded with zeros (a planar point in z = 0)."""
-    out = np.zeros(d)
-    k = min(d, len(vector))
-    out[:k] = np.asarray(vector, dtype=float)[:k]
-    return out
-
-
 def unit(vector, key: str) -> np.ndarray:
     """``vector`` normalised, else an :class:`InputError` naming ``key``."""
     arr = np.asarray(vector, dtype=float)

@@ -8,7 +8,7 @@ import numpy as np
 
 from ...exceptions import InputError
 from . import register
-from ._base import NotNegative, Obstacle, SpatialSchema, Vec3, fit
+from ._base import NotNegative, Obstacle, SpatialSchema, Vec3
 from ._draw import draw_outline, look, project
 from ._planar import PASS_TOL
 from ._table import CAPSULE, table_rows
@@ -51,8 +51,8 @@ class CapsuleObstacle(Obstacle):
         """The axis and the segment went through each other: the side of one's line against
         the other's, ``(e x f) . (a - P0)``, changes sign while the lines' closest points lie
         within both (to :data:`PASS_TOL`), at both ends of the sweep."""
-        a = fit(self.a, 3)[None, :] + np.reshape(t, (-1, 1)) * self.velocity3
-        f = fit(self.b - self.a, 3)
+        a = project(self.a, "xyz")[None, :] + np.reshape(t, (-1, 1)) * self.velocity3
+        f = project(self.b - self.a, "xyz")
         P0a, P1a, P0b, P1b = (project(E, "xyz") for E in (P0a, P1a, P0b, P1b))
 
         def side_and_within(P0, P1):
@@ -74,8 +74,7 @@ class CapsuleObstacle(Obstacle):
 
     def draw(self, ax, t=0.0, plane=("x", "y"), limits=None, faint=False, color=None):
         """Its shadow on the view plane (a bar of radius 0: a thick line)."""
-        shift = t * self.velocity3
-        ends = project(np.array([fit(self.a, 3) + shift, fit(self.b, 3) + shift]), plane)
+        ends = project(project([self.a, self.b], "xyz") + t * self.velocity3, plane)
         style = look(self.name, faint, color)
         if self.radius > 0.0:
             draw_outline(ax, ends, self.radius, **style)

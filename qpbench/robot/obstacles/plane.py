@@ -7,8 +7,8 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import Obstacle, SpatialSchema, Vec3, fit, unit
-from ._draw import draw_trace, look, trace
+from ._base import Obstacle, SpatialSchema, Vec3, unit
+from ._draw import draw_trace, look, project, trace
 from ._table import PLANE, table_rows
 
 
@@ -40,18 +40,18 @@ class PlaneObstacle(Obstacle):
     def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
         """Exact: the signed distance of a point is linear along the sweep, so its least is at
         one of the four ends (a half-space cannot be passed through)."""
-        d = np.shape(P0a)[1]
+        axes = "xyz"[: np.shape(P0a)[1]]  # the ends' (2: in z = 0)
         t = np.broadcast_to(np.asarray(t, dtype=float), (np.shape(P0a)[0],))
-        p = fit(self.point, d)[None, :] + t[:, None] * fit(self.velocity, d)
+        p = project(self.point, axes)[None, :] + t[:, None] * project(self.velocity, axes)
         ends = np.stack([P0a, P1a, P0b, P1b], axis=1) - p[:, None, :]
-        return np.einsum("sei,i->se", ends, fit(self.normal, d)).min(axis=1)
+        return np.einsum("sei,i->se", ends, project(self.normal, axes)).min(axis=1)
 
     def draw(self, ax, t=0.0, plane=("x", "y"), limits=None, faint=False, color=None):
         """The plane's trace on the view plane (:func:`~._draw.trace`), its solid side lightly
         filled; a static one is not drawn again ``faint``."""
         if faint and not np.any(self.velocity):
             return
-        point = fit(self.point, 3) + t * self.velocity3
+        point = project(self.point, "xyz") + t * self.velocity3
         draw_trace(ax, point, self.normal, plane, limits, lw=2, **look(self.name, faint, color))
 
     def view_points(self, plane=("x", "y")):

@@ -7,7 +7,7 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import Obstacle, Positive, SpatialSchema, Vec3, fit
+from ._base import Obstacle, Positive, SpatialSchema, Vec3
 from ._draw import draw_outline, look, project
 from ._table import SPHERE, table_rows
 
@@ -38,7 +38,7 @@ class SphereObstacle(Obstacle):
 
     def draw(self, ax, t=0.0, plane=("x", "y"), limits=None, faint=False, color=None):
         """Its shadow on the view plane, a disk."""
-        c = project(fit(self.center, 3) + t * self.velocity3, plane)
+        c = project(project(self.center, "xyz") + t * self.velocity3, plane)
         draw_outline(ax, c[None], self.radius, **look(self.name, faint, color))
 
     def view_points(self, plane=("x", "y")):
