@@ -202,7 +202,34 @@ class Obstacle:
         raise NotImplementedError
 
 
-def planar_ends(*ends) -> list[np.ndarray] | None:
+class PlanarObstacle(Obstacle):
+    """Base of the planar kinds (listed before the spatial kind each one is in z = 0): 2-D
+    inputs; between ticks, where every end of the sweep lies in z = 0, the tests in the plane
+    (:meth:`_swept_in_plane`, :meth:`_passed_in_plane` of ``t`` and the ends as (s, 2) arrays
+    [m]), else the spatial kind's."""
+
+    DIM = 2
+
+    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
+        ends = _in_plane(P0a, P1a, P0b, P1b)
+        if ends is None:
+            return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
+        return self._swept_in_plane(t, *ends)
+
+    def passed_through(self, P0a, P1a, P0b, P1b, t):
+        ends = _in_plane(P0a, P1a, P0b, P1b)
+        if ends is None:
+            return super().passed_through(P0a, P1a, P0b, P1b, t)
+        return self._passed_in_plane(t, *ends)
+
+    def _at(self, points, t, s: int) -> np.ndarray:
+        """``points`` (..., 2) [m] moved from t = 0 to ``t`` [s] (a number or one per segment of
+        ``s``): (s, ..., 2)."""
+        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
+        return points + t.reshape(-1, *[1] * np.ndim(points)) * self.velocity
+
+
+def _in_plane(*ends) -> list[np.ndarray] | None:
     """The segments' ends (each (s, d) [m]) as (s, 2) arrays when all lie in z = 0, else None."""
     if not all(np.shape(E)[1] == 2 or not np.any(np.asarray(E)[:, 2]) for E in ends):
         return None

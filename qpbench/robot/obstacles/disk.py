@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from typing import Literal
 
-import numpy as np
-
 from . import register
-from ._base import PlanarSchema, Positive, Vec2, planar_ends
+from ._base import PlanarObstacle, PlanarSchema, Positive, Vec2
 from ._planar import passes_through, swept_point_bound
 from ._table import DISK
 from .sphere import SphereObstacle
@@ -22,29 +20,18 @@ class DiskSchema(PlanarSchema):
 
 
 @register
-class DiskObstacle(SphereObstacle):
+class DiskObstacle(PlanarObstacle, SphereObstacle):
     """A disk of centre ``center`` and radius ``radius`` in [m]."""
 
     KIND = "disk"
     KERNEL_KIND = DISK
     Schema = DiskSchema
-    DIM = 2
 
-    def _centre(self, t, s: int) -> np.ndarray:
-        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
-        return self.center + t[:, None] * self.velocity
+    def _swept_in_plane(self, t, *ends):
+        """The centre against the swept segment minus the radius."""
+        return swept_point_bound(self._at(self.center, t, len(ends[0])), *ends) - self.radius
 
-    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
-        """In the plane: the centre against the swept segment minus the radius."""
-        ends = planar_ends(P0a, P1a, P0b, P1b)
-        if ends is None:
-            return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
-        return swept_point_bound(self._centre(t, len(P0a)), *ends) - self.radius
-
-    def passed_through(self, P0a, P1a, P0b, P1b, t):
-        """In the plane: the centre through the segment."""
-        ends = planar_ends(P0a, P1a, P0b, P1b)
-        if ends is None:
-            return super().passed_through(P0a, P1a, P0b, P1b, t)
-        c = self._centre(t, len(P0a))
+    def _passed_in_plane(self, t, *ends):
+        """The centre through the segment."""
+        c = self._at(self.center, t, len(ends[0]))
         return passes_through(c, c, *ends)

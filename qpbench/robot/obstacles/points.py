@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import Obstacle, PlanarSchema, Points2, planar_ends
+from ._base import PlanarObstacle, PlanarSchema, Points2
 from ._draw import look, project
 from ._planar import passes_through, swept_point_bound
 from ._table import POINT, table_rows
@@ -22,13 +22,12 @@ class PointsSchema(PlanarSchema):
 
 
 @register
-class PointCloudObstacle(Obstacle):
+class PointCloudObstacle(PlanarObstacle):
     """A set of points ``B_1..B_m`` in [m] (paper section 2.2: obstacles as key points)."""
 
     KIND = "points"
     KERNEL_KIND = POINT
     Schema = PointsSchema
-    DIM = 2
 
     def __init__(self, name: str, points, velocity=(0.0, 0.0)):
         super().__init__(name=name, points=points, velocity=velocity)
@@ -37,30 +36,22 @@ class PointCloudObstacle(Obstacle):
     def primitives(self) -> np.ndarray:
         return table_rows(self.KERNEL_KIND, len(self.points), p0=self.points, v=self.velocity)
 
-    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
-        """In the plane: each point against the swept segment."""
-        ends = planar_ends(P0a, P1a, P0b, P1b)
-        if ends is None:
-            return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
+    def _swept_in_plane(self, t, *ends):
+        """Each point against the swept segment."""
         C, ends = self._each_point(t, *ends)
         return swept_point_bound(C, *ends).reshape(-1, len(self.points)).min(axis=1)
 
-    def passed_through(self, P0a, P1a, P0b, P1b, t):
-        """In the plane: a point that changes sides of the segment within it (3-D: a point
-        through a segment is not a crossing of any extent, ``False``)."""
-        ends = planar_ends(P0a, P1a, P0b, P1b)
-        if ends is None:
-            return super().passed_through(P0a, P1a, P0b, P1b, t)
+    def _passed_in_plane(self, t, *ends):
+        """A point that changes sides of the segment within it (3-D: a point through a segment
+        is not a crossing of any extent, ``False``)."""
         C, ends = self._each_point(t, *ends)
         return passes_through(C, C, *ends).reshape(-1, len(self.points)).any(axis=1)
 
     def _each_point(self, t, *ends):
         """The cloud's points at ``t`` [s] (s * m, 2) and each of the ``ends`` (s, 2) repeated
         for each point, (s * m, 2)."""
-        s, m = len(ends[0]), len(self.points)
-        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
-        C = (self.points[None, :, :] + t[:, None, None] * self.velocity).reshape(-1, 2)
-        return C, [np.repeat(E, m, axis=0) for E in ends]
+        C = self._at(self.points, t, len(ends[0])).reshape(-1, 2)
+        return C, [np.repeat(E, len(self.points), axis=0) for E in ends]
 
     def draw(self, ax, t=0.0, plane=("x", "y"), limits=None, faint=False, color=None):
         """Each point as a dot."""

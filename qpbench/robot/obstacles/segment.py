@@ -7,7 +7,7 @@ from typing import Literal
 import numpy as np
 
 from . import register
-from ._base import PlanarSchema, Vec2, planar_ends
+from ._base import PlanarObstacle, PlanarSchema, Vec2
 from ._planar import passes_through, swept_point_bound
 from ._table import SEGMENT
 from .capsule import CapsuleObstacle
@@ -22,7 +22,7 @@ class SegmentSchema(PlanarSchema):
 
 
 @register
-class SegmentObstacle(CapsuleObstacle):
+class SegmentObstacle(PlanarObstacle, CapsuleObstacle):
     """A segment from ``a`` to ``b`` (a thin bar). Crossing a segment in the plane, its distance
     is minus the least distance of one segment's end to the other (the shortest way out along
     the crossing; 0 when an end touches), and ``u`` points the way the link must move to come
@@ -31,26 +31,20 @@ class SegmentObstacle(CapsuleObstacle):
     KIND = "segment"
     KERNEL_KIND = SEGMENT
     Schema = SegmentSchema
-    DIM = 2
 
     def __init__(self, name: str, a, b, velocity=(0.0, 0.0)):
         super().__init__(name, a, b, velocity=velocity)
 
     def _ends(self, t, s: int):
-        t = np.broadcast_to(np.asarray(t, dtype=float), (s,))
-        a = self.a + t[:, None] * self.velocity
+        a = self._at(self.a, t, s)
         return a, a + (self.b - self.a)
 
-    def swept_distance_bound(self, P0a, P1a, P0b, P1b, t):
-        """In the plane: the closest pair of two segments has an end of one on the other: the
-        link's ends run along the chords ``P0a -> P0b`` and ``P1a -> P1b``, the bar's ends are
-        points swept over (a chord's signed distance to the bar is <= 0 where an end crosses it).
-        Positive, no crossing begins in the sweep (one begins with an end on the other), nor is
-        there one at its ends (their signed distances are in the bound)."""
-        ends = planar_ends(P0a, P1a, P0b, P1b)
-        if ends is None:
-            return super().swept_distance_bound(P0a, P1a, P0b, P1b, t)
-        P0a, P1a, P0b, P1b = ends
+    def _swept_in_plane(self, t, P0a, P1a, P0b, P1b):
+        """The closest pair of two segments has an end of one on the other: the link's ends run
+        along the chords ``P0a -> P0b`` and ``P1a -> P1b``, the bar's ends are points swept over
+        (a chord's signed distance to the bar is <= 0 where an end crosses it). Positive, no
+        crossing begins in the sweep (one begins with an end on the other), nor is there one at
+        its ends (their signed distances are in the bound)."""
         a, b = self._ends(t, len(P0a))
         segments = ((P0a, P0b), (P1a, P1b), (P0a, P1a), (P0b, P1b))  # the chords, the link
         return np.minimum.reduce(
@@ -61,13 +55,8 @@ class SegmentObstacle(CapsuleObstacle):
             ]
         )
 
-    def passed_through(self, P0a, P1a, P0b, P1b, t):
-        """In the plane: an end of the bar through the link, or an end of the link through the
-        bar."""
-        ends = planar_ends(P0a, P1a, P0b, P1b)
-        if ends is None:
-            return super().passed_through(P0a, P1a, P0b, P1b, t)
-        P0a, P1a, P0b, P1b = ends
+    def _passed_in_plane(self, t, P0a, P1a, P0b, P1b):
+        """An end of the bar through the link, or an end of the link through the bar."""
         a, b = self._ends(t, len(P0a))
         return (
             passes_through(a, a, P0a, P1a, P0b, P1b)
