@@ -144,17 +144,6 @@ def min_key_point_distance(key_xy: np.ndarray, points: np.ndarray) -> float:
     return float(cdist(key_xy, points).min())
 
 
-def _outer_normal(gen: GeneratedArm, i: int) -> np.ndarray:
-    """Unit normal at key point ``i`` pointing away from the chord base -> end effector."""
-    xy = gen.key_point_positions()
-    link = int(gen.key_points.links[i])
-    phi = float(np.cumsum(gen.theta0)[link])
-    normal = np.array([-math.sin(phi), math.cos(phi)])
-    chord = gen.target / np.linalg.norm(gen.target)
-    side = xy[i] - (xy[i] @ chord) * chord  # the key point's offset from the chord
-    return normal if normal @ side >= 0 else -normal
-
-
 def _clear_offset(
     xy: np.ndarray, anchor: np.ndarray, u: np.ndarray, pts: np.ndarray, want: float
 ) -> float:
@@ -173,7 +162,11 @@ def place_cloud(gen: GeneratedArm, points: int, d_safe: float, seed: int = 0) ->
     moves towards the arm at :data:`SPEED`."""
     xy = gen.key_point_positions()
     i = len(gen.key_points) // 2
-    u = _outer_normal(gen, i)
+    phi = float(np.cumsum(gen.theta0)[int(gen.key_points.links[i])])
+    u = np.array([-math.sin(phi), math.cos(phi)])  # the normal of key point i's link
+    chord = gen.target / np.linalg.norm(gen.target)
+    off = xy[i] - (xy[i] @ chord) * chord  # the key point's offset from the chord
+    u = u if u @ off >= 0 else -u  # outer: away from the chord base -> end effector
     pts = cloud_points(points, seed)
     want = d_safe + CLEARANCE
     offset, side = min(
