@@ -121,8 +121,7 @@ TIMING_COLUMNS = (
 
 def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
     """The row of ``backend``'s run of instance ``inst`` of sweep ``spec``, without its figures."""
-    row = dict.fromkeys(COLUMNS)
-    row.update(
+    return dict.fromkeys(COLUMNS) | dict(
         instance=inst.name,
         backend=backend,
         instance_file=f"{INSTANCE_DIR}/{inst.name}.toml",
@@ -134,7 +133,6 @@ def head_row(spec: SweepSpec, inst: Instance, backend: str) -> dict:
         force_band_n=spec.force_band,
         tracking_band_m=spec.tracking_band,
     )
-    return row
 
 
 def sweep_row(head: dict, row: dict) -> dict:
@@ -295,8 +293,7 @@ def _run_items(executor, items: list, heads: dict, figures: dict, rows: dict, em
         for done in executor.run(run_row, batch):
             fields = done.value if done.lost is None else failure_fields("crashed", done.lost)
             figures[done.key] = fields
-            row = sweep_row(heads[done.key], fields)
-            row.update(
+            row = sweep_row(heads[done.key], fields) | dict(
                 executor=executor.name,
                 host=done.host,
                 worker=done.worker,
