@@ -18,11 +18,6 @@ def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
 
 
-def point_segment_distance(X, P0, P1) -> np.ndarray:
-    """Distance [m] of each point ``X`` to its segment ``P0 -> P1`` (all (s, 2))."""
-    return np.linalg.norm(X - foot(X, P0, P1), axis=1)
-
-
 def swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
     """A lower bound [m] of the distance of points ``C`` to the segments ``P0(l) -> P1(l)``,
     ``P(l) = (1 - l) Pa + l Pb``, ``l`` in [0, 1] (all (s, 2)); 0 where one passes over ``C``.
@@ -47,8 +42,8 @@ def swept_point_bound(C, P0a, P1a, P0b, P1b) -> np.ndarray:
     return np.minimum.reduce(
         [
             interior,
-            point_segment_distance(C, P0a, P0b),
-            point_segment_distance(C, P1a, P1b),
+            np.linalg.norm(C - foot(C, P0a, P0b), axis=1),  # to the chords the ends run along
+            np.linalg.norm(C - foot(C, P1a, P1b), axis=1),
         ]
     )
 
