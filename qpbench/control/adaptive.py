@@ -13,10 +13,8 @@ or above ``kp_min``, ``kd_min`` (``b0`` divides by ``Kd``).
 from __future__ import annotations
 
 from functools import cache
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    import numpy as np
+import numpy as np
 
 
 class AdaptiveImpedance:
@@ -41,8 +39,7 @@ class AdaptiveImpedance:
 
     def reset(self) -> None:
         """Back to the initial estimates."""
-        self.kp = self.kp0
-        self.kd = self.kd0
+        self.kp, self.kd = self.kp0, self.kd0
 
     def update(
         self,
@@ -56,8 +53,6 @@ class AdaptiveImpedance:
         """One Euler step over ``dt`` [s] from positions [m], velocities [m/s] (the arm's dim) and
         the measured force [N]; returns the new ``(Kp_hat, Kd_hat)`` (the compiled law
         :func:`adapt_py`)."""
-        import numpy as np
-
         sensed = np.concatenate([x, xdot]).astype(float)
         xd = np.concatenate([x_d, xdot_d]).astype(float)
         gains = np.array([self.kp, self.kd])
@@ -68,8 +63,6 @@ class AdaptiveImpedance:
     def law(self):
         """The law's constants as :func:`adapt_py` reads them: ``K_in`` (2), ``Fd``, ``kp_min``,
         ``kd_min``, then ``n`` (the arm's dim)."""
-        import numpy as np
-
         head = [self.gain_kp, self.gain_kd, self.desired_force, self.kp_min, self.kd_min]
         return np.array(head + self.normal)
 

@@ -89,7 +89,7 @@ class Scenario:
     @property
     def verdict(self) -> VerdictSettings:
         """Thresholds of a run's verdict (``[verdict]``; :mod:`qpbench.sim.verdict`)."""
-        return VerdictSettings(**self.spec.verdict)
+        return VerdictSettings(**self.spec.verdict.model_dump())
 
     @property
     def verdict_overrides(self) -> dict:

@@ -13,7 +13,7 @@ surface, the obstacles, :class:`~qpbench.sim.verdict.VerdictSettings`) check the
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
@@ -30,6 +30,7 @@ from pydantic import (
     StrictStr,
     Tag,
     ValidationError,
+    create_model,
 )
 
 from ..exceptions import InputError, ScenarioError
@@ -247,6 +248,12 @@ class RnnTable(Table):
     eps: Annotated[Num, Field(gt=0)] = 0.02
 
 
+#: ``[verdict]``: the keys given, of :class:`~qpbench.sim.verdict.VerdictSettings` (their
+#: defaults depend on the task: :func:`validate` fills them).
+VerdictTable = create_model(
+    "VerdictTable", __base__=Table, **{f.name: (Num | None, None) for f in fields(VerdictSettings)}
+)
+
 _PATHS = (CosinePathTable, PolylinePathTable)
 PathTable = _by_kind(*_PATHS)
 #: An obstacle: its kind's schema (:mod:`qpbench.robot.obstacles`), picked by ``kind``.
@@ -254,8 +261,7 @@ ObstacleTable = _by_kind(*(cls.Schema for cls in obstacle_kinds().values()))
 
 
 class ScenarioSpec(Table):
-    """One scenario file, validated; ``verdict`` holds the keys given in ``[verdict]`` (their
-    defaults depend on the task: :func:`validate` fills them)."""
+    """One scenario file, validated (``verdict`` filled in by :func:`validate`)."""
 
     scenario: ScenarioTable
     robot: RobotTable
@@ -267,7 +273,7 @@ class ScenarioSpec(Table):
     simulation: SimulationTable
     obstacles: list[ObstacleTable]
     rnn: RnnTable = Field(default_factory=RnnTable)
-    verdict: dict = Field(default_factory=dict)
+    verdict: VerdictTable = Field(default_factory=VerdictTable)
 
 
 def _key(loc: tuple) -> str:
@@ -359,12 +365,12 @@ def validate(raw: dict, file: str | Path, set_keys=()) -> ScenarioSpec:
     except ValidationError as exc:
         raise _error(exc, file) from None
     _check_across_keys(spec, file)
-    spec = spec.model_copy(update={"verdict": _verdict_table(raw.get("verdict", {}), spec, file)})
+    spec = spec.model_copy(update={"verdict": _verdict_table(spec, file)})
     check_simulation(spec, file, set_keys)
     return spec
 
 
-def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
+def _verdict_table(spec: ScenarioSpec, file) -> VerdictTable:
     """The ``[verdict]`` table, with defaults that fit the task, checked against it (the ranges:
     :class:`~qpbench.sim.verdict.VerdictSettings`)."""
     d_safe, duration = spec.controller.d_safe, spec.simulation.duration
@@ -372,14 +378,7 @@ def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
     out = asdict(defaults)
     out["settle_time"] = min(defaults.settle_time, duration / 2)
     out["safety_margin"] = min(DEFAULT_SAFETY_MARGIN, d_safe / 2)
-    for key, value in raw.items():
-        if key not in out:
-            msg = f"unknown key (expected one of: {', '.join(out)})"
-            raise ScenarioError(msg, path=file, key=f"verdict.{key}")
-        if not finite_number(value):
-            msg = f"expected a finite number, got {value!r}"
-            raise ScenarioError(msg, path=file, key=f"verdict.{key}")
-        out[key] = float(value)
+    out.update(spec.verdict.model_dump(exclude_none=True))
     margin = out["safety_margin"]
     if not (margin < d_safe or margin == d_safe == 0):
         raise ScenarioError(
@@ -387,7 +386,7 @@ def _verdict_table(raw, spec: ScenarioSpec, file) -> dict:
             path=file,
             key="verdict.safety_margin",
         )
-    return out
+    return spec.verdict.model_copy(update=out)
 
 
 def robot_chain(robot) -> ChainModel:
@@ -486,7 +485,7 @@ def check_simulation(spec: ScenarioSpec, file: str | Path, set_keys=()) -> None:
             path=file,
             key="controller.alpha",
         )
-    settle = spec.verdict.get("settle_time", 0.0)
+    settle = spec.verdict.settle_time
     if "verdict.settle_time" in set_keys and not settle < s.duration:
         raise ScenarioError(
             f"must be < simulation.duration = {s.duration:g} s, the duration run (tracking "
