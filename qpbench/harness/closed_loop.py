@@ -126,7 +126,7 @@ def run_row(task: LoopTask) -> dict:
     from ..sim.figure_log import figure_log_path, write_figure_log
     from ..sim.loop import simulate
     from ..sim.scenario import load_scenario, parse_scenario
-    from ..sim.summary import convergence_figures, noise_floor_figures
+    from ..sim.summary import convergence_figures, realtime_figures
 
     try:
         load_plugins(list(task.plugins))
@@ -149,7 +149,9 @@ def run_row(task: LoopTask) -> dict:
         summary = dict(result.summary, noise_floor=floor)
         if floor:
             ticks = result.log[TICK_TIME].to_numpy()
-            summary.update(noise_floor_figures(result.log, ticks, scenario))
+            summary.update(
+                realtime_figures(result.log, scenario.dt, scenario.verdict, ticks, "tick")
+            )
         if task.bands is not None:
             summary.update(convergence_figures(result.log, *task.bands))
         status = "budget" if summary.get("stopped_early") else "ok"

@@ -152,21 +152,16 @@ def convergence_figures(frame: pd.DataFrame, force_band: float, tracking_band: f
     whose solve missed a 1 kHz loop's deadline (a sweep's figures)."""
     t = frame[log.T].to_numpy(dtype=float)
     force, tracking = frame[log.FORCE_ERROR], frame[log.TRACKING_ERROR]
-    solve = judged_tick_times(frame)
     return {
         "t_converge_force_s": time_to_converge(t, force.to_numpy(), force_band),
         "t_converge_tracking_s": time_to_converge(t, tracking.to_numpy(), tracking_band),
-        "ticks_over_1ms": int(np.count_nonzero(solve > KHZ_DEADLINE_S)),
+        "ticks_over_1ms": int(np.count_nonzero(judged_tick_times(frame) > KHZ_DEADLINE_S)),
     }
 
 
-def judged_tick_times(frame: pd.DataFrame) -> np.ndarray:
-    """The per-tick time [s] real time is judged on (:func:`_with_fallback`)."""
-    return _with_fallback(frame).to_numpy(dtype=float)
-
-
-def _with_fallback(frame: pd.DataFrame) -> pd.Series:
-    """``solve_time_s`` plus ``fallback_solve_time_s`` [s] (0 where none ran or no column)."""
+def judged_tick_times(frame: pd.DataFrame) -> pd.Series:
+    """The per-tick time [s] real time is judged on: ``solve_time_s`` plus
+    ``fallback_solve_time_s`` (0 where none ran or no column)."""
     if log.FALLBACK_SOLVE_TIME not in frame:
         return frame[log.SOLVE_TIME]
     return frame[log.SOLVE_TIME] + frame[log.FALLBACK_SOLVE_TIME].fillna(0.0)
@@ -224,7 +219,7 @@ def realtime_figures(
     they are judged on, ``deadline_misses`` (ticks over ``dt``) and ``over_dt_share``, and the
     judgement of the solver's own times (``realtime_solver``: ``unknown`` unless every tick
     has one); ``what`` names the times in the reasons."""
-    calls = judged_tick_times(frame) if times is None else np.asarray(times, dtype=float)
+    calls = np.asarray(judged_tick_times(frame) if times is None else times, dtype=float)
     kinds = tick_kinds(frame)
     primal = (frame[log.STATUS].astype(str) == "primal_infeasible").to_numpy()
     t = frame[log.T].to_numpy()[kinds["infeasible"]]
@@ -259,13 +254,6 @@ def realtime_figures(
         out["solver_over_dt_share"] = int(np.count_nonzero(own > dt)) / own.size
         out["realtime_solver"], out["realtime_solver_reason"] = judge_realtime_run(mine, "solver")
     return out
-
-
-def noise_floor_figures(frame: pd.DataFrame, ticks: np.ndarray, scenario: Scenario) -> dict:
-    """The real-time figures of the noise floor's run (the loop with the ``noop`` backend,
-    docs/verdicts.md) judged on ``ticks`` [s], each whole tick of the loop (``tick_time_s``):
-    ``realtime`` says whether this machine holds the loop's rate without any solver."""
-    return realtime_figures(frame, scenario.dt, scenario.verdict, times=ticks, what="tick")
 
 
 def _rms(x: np.ndarray) -> float | None:
@@ -459,7 +447,7 @@ def _time_figures(frame: pd.DataFrame) -> dict:
 def rank_times(frame: pd.DataFrame, engine: str) -> tuple[pd.Series, str]:
     """The per-tick time [s] a C or C++ controller would pay for the solver, and its source
     (``compiled``, ``solver`` or ``python``: docs/methodology.md, "How sure a p99 is")."""
-    solve = _with_fallback(frame)
+    solve = judged_tick_times(frame)
     if engine == "compiled":
         return solve, "compiled"
     own = frame[log.SOLVER_TIME]
