@@ -31,10 +31,8 @@ class AdaptiveImpedance:
         kp_min: float,
         kd_min: float,
     ):
-        self.kp0, self.kd0, self.kp_min, self.kd_min = map(float, (kp0, kd0, kp_min, kd_min))
-        self.gain_kp, self.gain_kd = float(gain[0]), float(gain[1])
-        self.normal = [float(c) for c in normal]
-        self.desired_force = float(desired_force)
+        self.kp0, self.kd0 = float(kp0), float(kd0)
+        self._law = np.array([*gain, desired_force, kp_min, kd_min, *normal], dtype=float)
         self.reset()
 
     def reset(self) -> None:
@@ -63,8 +61,7 @@ class AdaptiveImpedance:
     def law(self):
         """The law's constants as :func:`adapt_py` reads them: ``K_in`` (2), ``Fd``, ``kp_min``,
         ``kd_min``, then ``n`` (the arm's dim)."""
-        head = [self.gain_kp, self.gain_kd, self.desired_force, self.kp_min, self.kd_min]
-        return np.array(head + self.normal)
+        return self._law.copy()
 
 
 @cache
