@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import binary_dilation
 
 from ..statuses import CERTIFIED_INFEASIBLE, FAILURE_STATUSES
 from . import log as tick_log
@@ -63,10 +64,7 @@ def _special(frame: pd.DataFrame) -> np.ndarray:
     """Ticks not solved, failed, or without the backend's own answer, and their neighbours."""
     flags = frame[[tick_log.FALLBACK, tick_log.ZERO_VELOCITY]].to_numpy(bool).any(axis=1)
     mask = frame[tick_log.STATUS].astype(str).isin(_NOT_SOLVED).to_numpy() | flags
-    near = mask.copy()
-    near[1:] |= mask[:-1]
-    near[:-1] |= mask[1:]
-    return near
+    return binary_dilation(mask)  # and each one's neighbours
 
 
 def _extremes(frame: pd.DataFrame) -> np.ndarray:

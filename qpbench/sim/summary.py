@@ -117,12 +117,10 @@ def summarize(
     out.update(_effort_figures(frame, controller.n, dt, t >= SETTLE_TIME - 1e-12))
     out.update(_time_figures(frame))
     out.update(
-        {
-            "wall_time_s": float(wall_time_s),
-            "real_time_factor": _none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
-            "wall_budget_s": None,
-            "stopped_early": False,
-        }
+        wall_time_s=float(wall_time_s),
+        real_time_factor=_none(ticks * dt / wall_time_s) if wall_time_s > 0 else None,
+        wall_budget_s=None,
+        stopped_early=False,
     )
     out.update(active)
     out.update(run_info or {})
