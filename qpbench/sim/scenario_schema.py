@@ -256,8 +256,9 @@ VerdictTable = create_model(
 
 _PATHS = (CosinePathTable, PolylinePathTable)
 PathTable = _by_kind(*_PATHS)
+_OBSTACLES = tuple(cls.Schema for cls in obstacle_kinds().values())
 #: An obstacle: its kind's schema (:mod:`qpbench.robot.obstacles`), picked by ``kind``.
-ObstacleTable = _by_kind(*(cls.Schema for cls in obstacle_kinds().values()))
+ObstacleTable = _by_kind(*_OBSTACLES)
 
 
 class ScenarioSpec(Table):
@@ -303,14 +304,9 @@ def _expected(loc: tuple) -> list[str]:
     return list(model.model_fields)
 
 
-#: The tables picked by ``kind``, by kind, and the kinds each union takes.
-_TAGGED = {_tag(m): m for m in (*_ROBOTS, *_PATHS)}
-_TAGGED.update((kind, cls.Schema) for kind, cls in obstacle_kinds().items())
-_KINDS = {
-    "path": tuple(map(_tag, _PATHS)),
-    "robot": tuple(map(_tag, _ROBOTS)),
-    "obstacles": tuple(obstacle_kinds()),
-}
+#: The tables picked by ``kind``, by the union that takes them, and by kind.
+_KINDS = {"path": _PATHS, "robot": _ROBOTS, "obstacles": _OBSTACLES}
+_TAGGED = {_tag(m): m for models in _KINDS.values() for m in models}
 _UNIONS = ("path", "robot")
 
 
@@ -335,7 +331,7 @@ def _error(exc: ValidationError, file) -> ScenarioError:
     elif kind == "missing":
         msg = "missing table" if len(loc) == 1 else "missing key"
     elif kind in ("union_tag_invalid", "union_tag_not_found", "literal_error"):
-        choices = _KINDS.get(str(loc[0]), ())
+        choices = map(_tag, _KINDS.get(str(loc[0]), ()))
         if kind == "literal_error":
             choices = e["ctx"]["expected"].replace("'", "").replace(" or ", ", ").split(", ")
         key = key if kind == "literal_error" else f"{key}.kind"
