@@ -96,7 +96,6 @@ class Controller:
         self.k, self.d_safe, self.rho, self.kp, self.kd = map(float, (k, d_safe, rho, kp, kd))
         self.n, self.dim = arm.n, arm.dim
         self.points_per_obstacle = [o.n_points for o in self.obstacles]
-        self.n_obstacle_points = int(sum(self.points_per_obstacle))
         self.closest = key_points.kind == "closest"
         self.exempt = list(exempt) if exempt is not None else [False] * len(self.obstacles)
         #: (key point, obstacle) pairs with rows, in row order; the end effector's link
@@ -203,7 +202,7 @@ class Controller:
 
     def _distance_grid(self, dist: np.ndarray) -> np.ndarray:
         """The flat distances as (key point, obstacle point), ``inf`` for a pair without rows."""
-        a, m = len(self.key_points), self.n_obstacle_points
+        a, m = len(self.key_points), int(self._starts[-1])
         if self.n_rows == a * m:
             return dist.reshape(a, m)
         grid, starts = np.full((a, m), np.inf), self._starts

@@ -64,8 +64,7 @@ class ImpedanceTask:
 
     def impedance_reference(self, x: np.ndarray, t: float, kp: float, kd: float) -> np.ndarray:
         """``b0`` (eq. 4) in [m/s] for end-effector position ``x`` [m] at time ``t`` [s]."""
-        state = np.array(self.path(t))
-        x_d, xdot_d = state[: state.size // 2], state[state.size // 2 :]
+        x_d, xdot_d = np.split(np.array(self.path(t)), 2)
         return xdot_d - (kp / kd) * (np.asarray(x) - x_d) + (self.desired_force / kd) * self.normal
 
 

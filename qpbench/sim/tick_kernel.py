@@ -62,12 +62,11 @@ def log_columns(controller: Controller) -> tuple[list[str], LogColumns]:
     at = {c: i for i, c in enumerate(cols)}
     index = {name: at[column] for name, column in _COLUMN_OF.items()}
     index["d"] -= len(obstacle_cols)  # the first distance column, before d_min
-    layout = LogColumns(
+    return cols, LogColumns(
         **index,
         dist_start=np.array([s.start for _, _, s in obstacle_cols], dtype=np.int64),
         dist_stop=np.array([s.stop for _, _, s in obstacle_cols], dtype=np.int64),
     )
-    return cols, layout
 
 
 @cache
