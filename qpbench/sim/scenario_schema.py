@@ -294,13 +294,9 @@ def _expected(loc: tuple) -> list[str]:
     """The keys the table at ``loc`` (the location of an unknown key) may hold."""
     model = ScenarioSpec
     for part in loc[:-1]:
-        if isinstance(part, int):
-            continue
-        if part in _TAGGED:
-            model = _TAGGED[part]
-            continue
-        annotation = model.model_fields[part].annotation
-        model = annotation if isinstance(annotation, type) else model
+        if isinstance(part, str):  # an index keeps the model, a union's tag picks its member
+            found = _TAGGED.get(part) or model.model_fields[part].annotation
+            model = found if isinstance(found, type) else model
     return list(model.model_fields)
 
 

@@ -61,13 +61,8 @@ def _none(x):
 
 def _intervals(mask: np.ndarray, t: np.ndarray) -> list[list[float]]:
     """Runs of consecutive True ticks as ``[first t, last t]`` pairs [s]."""
-    if not mask.any():
-        return []
-    idx = np.flatnonzero(mask)
-    breaks = np.flatnonzero(np.diff(idx) > 1)
-    starts = np.r_[idx[0], idx[breaks + 1]]
-    ends = np.r_[idx[breaks], idx[-1]]
-    return [[round(float(t[s]), 9), round(float(t[e]), 9)] for s, e in zip(starts, ends)]
+    edges = np.flatnonzero(np.diff(np.r_[False, mask, False]))  # each run's first, last + 1
+    return [[round(float(t[s]), 9), round(float(t[e - 1]), 9)] for s, e in edges.reshape(-1, 2)]
 
 
 def _first(mask: np.ndarray, t: np.ndarray) -> tuple[int, float | None]:
