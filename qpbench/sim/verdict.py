@@ -11,6 +11,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from ..exceptions import InputError
 from ..robot.body import link_label
 from . import log
 
@@ -37,8 +38,6 @@ class VerdictSettings:
     max_over_dt_share: float = 1e-3
 
     def __post_init__(self):
-        from ..exceptions import InputError
-
         for key, holds, rule in (  # NaN fails every rule
             ("settle_time", lambda x: x >= 0, ">= 0 [s]"),
             ("max_tracking_error", lambda x: x > 0, "> 0 [m]"),
@@ -178,8 +177,7 @@ def judge(summary: dict, settings: VerdictSettings) -> Verdict:
     found["incomplete"], notes = _incomplete_reasons(summary, settings)
     reasons = [r for v in BAD_VERDICTS for r in found[v]]
     worst = next((v for v in BAD_VERDICTS if found[v]), "ok")
-    rule, why = key_point_rule(summary, settings.safety_margin)
-    return Verdict(worst, tuple(reasons + notes), rule, why)
+    return Verdict(worst, tuple(reasons + notes), *key_point_rule(summary, settings.safety_margin))
 
 
 def _incomplete_reasons(summary: dict, settings: VerdictSettings) -> tuple[list[str], list[str]]:
