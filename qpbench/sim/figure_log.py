@@ -89,9 +89,8 @@ def _coarse(x: np.ndarray) -> np.ndarray:
     """float32 with the mantissa rounded to :data:`MANTISSA_BITS` bits (the low bits zero, so they compress)."""
     bits = np.ascontiguousarray(x, dtype=np.float32).view(np.uint32)
     drop = 23 - MANTISSA_BITS
-    finite = np.isfinite(x)
     rounded = ((bits + np.uint32(1 << (drop - 1))) & ~np.uint32((1 << drop) - 1)).view(np.float32)
-    return np.where(finite, rounded, x.astype(np.float32))
+    return np.where(np.isfinite(x), rounded, x.astype(np.float32))
 
 
 def figure_log(frame: pd.DataFrame) -> pd.DataFrame:

@@ -240,13 +240,10 @@ class _Run:
 
     def run(self, progress: bool, wall_budget_s: float | None) -> None:
         """The ticks, in chunks between progress updates, until ``duration`` or the budget."""
-        ticks = self.ticks
-        bar = None
-        if progress:
-            from tqdm import tqdm
+        from tqdm import tqdm
 
-            name = f"{self.scenario.name} {self.be.name}"
-            bar = tqdm(total=ticks, unit="tick", desc=name, mininterval=0.5)
+        ticks, name = self.ticks, f"{self.scenario.name} {self.be.name}"
+        bar = tqdm(total=ticks, unit="tick", desc=name, mininterval=0.5, disable=not progress)
         enabled = gc.isenabled()
         gc.disable()  # one clock, no collector's pauses inside it (the compiled engine has none)
         try:
@@ -257,8 +254,7 @@ class _Run:
             while k < ticks:
                 end = min(k + self.CHUNK, ticks)
                 done = chunk(k, end, stop_at)
-                if bar is not None:
-                    bar.update(done - k)
+                bar.update(done - k)
                 k = done
                 if done < end:
                     break  # budget spent: the log keeps the ticks done
@@ -269,8 +265,7 @@ class _Run:
             self._close = []
             if enabled:
                 gc.enable()
-            if bar is not None:
-                bar.close()
+            bar.close()
         self.done = k
 
     def _compiled(self):
