@@ -384,12 +384,11 @@ def _verdict_table(spec: ScenarioSpec, file) -> VerdictTable:
 def robot_chain(robot) -> ChainModel:
     """The chain of a ``[robot]`` table (:func:`~qpbench.robot.presets.make_chain`), with the
     limits the table gives (a preset's own otherwise)."""
-    own = OWN_KEYS.get(robot.kind, ())
-    fields = {key: getattr(robot, key) for key in own}
+    args = {key: getattr(robot, key) for key in OWN_KEYS.get(robot.kind, ())}
     for key, name in (("q_min", "theta_min"), ("q_max", "theta_max"), ("v_max", "velocity_max")):
         if getattr(robot, name) is not None:
-            fields[key] = getattr(robot, name)
-    return make_chain(robot.kind, **fields)
+            args[key] = getattr(robot, name)
+    return make_chain(robot.kind, **args)
 
 
 def _chain(robot, file) -> ChainModel:
