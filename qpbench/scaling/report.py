@@ -53,8 +53,7 @@ class PowerFit:
 def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
     """Least squares of ``log10 times`` on ``log10 sizes``, non-positive or non-finite pairs left
     out (NaN with fewer than two distinct sizes)."""
-    s = np.asarray(sizes, dtype=float)
-    t = np.asarray(times, dtype=float)
+    s, t = np.asarray(sizes, dtype=float), np.asarray(times, dtype=float)
     keep = np.isfinite(s) & np.isfinite(t) & (s > 0) & (t > 0)
     x, y = np.log10(s[keep]), np.log10(t[keep])
     if x.size < 2 or np.ptp(x) == 0:
@@ -63,11 +62,8 @@ def fit_power_law(sizes: np.ndarray, times: np.ndarray) -> PowerFit:
     sxx = float(((x - xm) ** 2).sum())
     slope = float(((x - xm) * (y - y.mean())).sum() / sxx)
     intercept = float(y.mean() - slope * xm)
-    if x.size > 2:
-        rss = float(((y - intercept - slope * x) ** 2).sum())
-        se = math.sqrt(rss / (x.size - 2) / sxx)
-    else:
-        se = math.nan
+    rss = float(((y - intercept - slope * x) ** 2).sum())
+    se = math.sqrt(rss / (x.size - 2) / sxx) if x.size > 2 else math.nan
     return PowerFit(slope, se, intercept)
 
 
@@ -75,21 +71,17 @@ def first_above(sizes: np.ndarray, values: np.ndarray, limit: float) -> float | 
     """The first size (in increasing order) from which every value exceeds ``limit``, else None."""
     order = np.argsort(np.asarray(sizes, dtype=float), kind="stable")
     s = np.asarray(sizes)[order]
-    v = np.asarray(values, dtype=float)[order]
-    for i in range(s.size):
-        if np.all(v[i:] > limit):
-            return s[i].item()
-    return None
+    below = np.flatnonzero(~(np.asarray(values, dtype=float)[order] > limit))
+    i = below[-1] + 1 if below.size else 0  # the first after the last value not above
+    return s[i].item() if i < s.size else None
 
 
 def crossing(sizes: np.ndarray, slower: np.ndarray, faster: np.ndarray) -> float | None:
     """The first size from which time ``faster`` stays strictly below ``slower`` (NaN: not
     measured, left out), else None."""
-    s = np.asarray(sizes, dtype=float)
-    a = np.asarray(slower, dtype=float)
-    b = np.asarray(faster, dtype=float)
+    a, b = np.asarray(slower, dtype=float), np.asarray(faster, dtype=float)
     keep = np.isfinite(a) & np.isfinite(b)
-    return first_above(s[keep], (a - b)[keep], 0.0)
+    return first_above(np.asarray(sizes, dtype=float)[keep], (a - b)[keep], 0.0)
 
 
 def extrapolated_crossing(fit_a: PowerFit, fit_b: PowerFit) -> float | None:
