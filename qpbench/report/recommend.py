@@ -436,10 +436,14 @@ def _rate(p: Pick) -> list[str]:
     return [f"{ok}/{runs}", f"{bound} ({e.scenario})"]
 
 
+#: Columns of the worst perturbed runs' table (the recommendation's and a sweep's).
+WORST_HEADER = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
+
+
 def rerun_command(run: dict, backend: str) -> str:
-    """The command that runs one perturbed instance (a sweep row with ``folder``) alone."""
+    """The command that runs one perturbed instance (a sweep row with ``folder``) alone, as code."""
     path = Path(str(run["folder"])) / str(run["instance_file"])
-    return f"qpbench simulate --scenario {path} --backend {backend}"
+    return f"`qpbench simulate --scenario {path} --backend {backend}`"
 
 
 def _worst_rows(picks: list[Pick]) -> list[list]:
@@ -455,8 +459,8 @@ def _worst_rows(picks: list[Pick]) -> list[list]:
         where = f"{w['scenario']} {w['instance']} ({seed}sample {int(w['sample'])})"
         d_min = fmt(float(pd.to_numeric(w["min_obstacle_distance"], errors="coerce")) * MM)
         why = _first(w.get("verdict_reasons")) or _text(w.get("error")) or "-"
-        verdict, rerun = _text(w["verdict"]) or "-", f"`{rerun_command(w, p.backend)}`"
-        rows.append([p.backend, where, verdict, d_min, why, rerun])
+        verdict = _text(w["verdict"]) or "-"
+        rows.append([p.backend, where, verdict, d_min, why, rerun_command(w, p.backend)])
     return rows
 
 
@@ -594,8 +598,7 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
     if worst:
         where = " (paths from this report's folder)" if markdown else ""
         lines.append(f"Worst perturbed run of each{where}:{gap}")
-        header = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
-        _table(lines, header, worst, gap, left=(0, 1, 2, 4, 5))
+        _table(lines, WORST_HEADER, worst, gap, left=(0, 1, 2, 4, 5))
     if answer.families:
         lines.append(
             "Per arm family, each answered alone on its own scenarios and their perturbed runs "

@@ -17,6 +17,7 @@ from ..exceptions import InputError
 from ..formats import sha256_file
 from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths, noise_floor_runs
 from ..report.markdown_table import md_table, slug, titled
+from ..report.recommend import WORST_HEADER, rerun_command
 from ..report.tables import wilson, worst_first
 
 #: Leading columns of ``sweep.csv`` that tell a sweep table from other result CSVs.
@@ -46,7 +47,6 @@ QUANTILE_HEADER = [
     *(h for *_, median in ECDF_PANELS for h in (median, "p90", "max")),
     *("t conv. force s", "not conv.", "t conv. track s", "not conv.", "runs with ticks > 1 ms"),
 ]
-WORST_HEADER = ["backend", "instance", "verdict", "d_min mm", "why", "re-run"]
 
 
 def mcnemar_exact(b: int, c: int) -> float:
@@ -147,10 +147,9 @@ def worst_rows(df: pd.DataFrame, k: int = WORST) -> list[list]:
         for r in g.head(k).to_dict("records"):
             if r["verdict"] == "ok":
                 continue
-            path = Path(r["folder"]) / str(r["instance_file"])
             why = r["verdict_reasons"] if isinstance(r["verdict_reasons"], str) else r["error"]
-            rerun = f"`qpbench simulate --scenario {path} --backend {backend}`"
             distance = r["min_obstacle_distance"] * 1e3
+            rerun = rerun_command(r, backend)
             out.append([backend, r["instance"], r["verdict"], distance, str(why)[:160], rerun])
     return out
 
@@ -189,9 +188,7 @@ def ecdf_plot(df: pd.DataFrame, path: Path, title: str) -> None:
                 ax.set_xscale("log")
             ax.set(ylim=(0.0, 1.02), xlabel=MARGIN_LABEL if margin else label)
             ax.grid(alpha=0.3)
-        axes[row, 0].set_ylabel(
-            f"{group_title}\nfraction of runs" if group_title else "fraction of runs"
-        )
+        axes[row, 0].set_ylabel((f"{group_title}\n" if group_title else "") + "fraction of runs")
         handles, labels = axes[row, 2].get_legend_handles_labels()  # d_min's: with d_safe
         style.legend_beside(axes[row, -1], handles, labels)
     fig.suptitle(title)
