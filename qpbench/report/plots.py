@@ -288,12 +288,10 @@ def _snapshots(runs: pd.DataFrame, scenario: str, formulation: str) -> dict:
     except Exception as exc:  # noqa: BLE001 - a scenario not found here only loses its pictures
         log.warning("%s: no arm snapshot (%s)", scenario, exc)
         return {}
-    figures = {}
+    figures, angles = {}, set(tick_log.theta_columns(scene.make_arm().n))
     for role, row in chosen.items():
         frame = read_log(row["log_path"])
-        if frame is None or not set(tick_log.theta_columns(scene.make_arm().n)) <= set(
-            frame.columns
-        ):
+        if frame is None or not angles <= set(frame.columns):
             continue  # no log, or one without the joint angles: no picture of the arm
         key = f"snapshot_{role}_{slug(scenario)}_{slug(formulation)}"
         backend = str(row["backend"])

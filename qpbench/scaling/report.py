@@ -88,8 +88,7 @@ def extrapolated_crossing(fit_a: PowerFit, fit_b: PowerFit) -> float | None:
     """Size where two fitted lines meet (``None`` when parallel or not fitted)."""
     if any(math.isnan(v) for v in (fit_a.slope, fit_b.slope)) or fit_a.slope == fit_b.slope:
         return None
-    x = (fit_b.intercept - fit_a.intercept) / (fit_a.slope - fit_b.slope)
-    return float(10.0**x)
+    return float(10.0 ** ((fit_b.intercept - fit_a.intercept) / (fit_a.slope - fit_b.slope)))
 
 
 def is_scaling_dir(path: str | Path) -> bool:
