@@ -6,6 +6,7 @@ per-run figures, the worst runs with the command that re-runs each.
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from ..exceptions import InputError
 from ..formats import sha256_file
 from ..report.inputs import CSV_ERRORS, ResultFile, expand_paths, noise_floor_runs
 from ..report.markdown_table import md_table, slug, titled
-from ..report.recommend import WORST_HEADER, rerun_command
+from ..report.recommend import WORST_HEADER, read_sweeps, rerun_command
 from ..report.tables import wilson, worst_first
 
 #: Leading columns of ``sweep.csv`` that tell a sweep table from other result CSVs.
@@ -75,16 +76,14 @@ def split_sweep_paths(paths: list[str | Path]) -> tuple[list[Path], list[ResultF
 
 def _read(path: Path) -> pd.DataFrame:
     try:
-        df = pd.read_csv(path)
+        df = read_sweeps([path])  # the last row of each (instance, backend), with ``folder``
     except CSV_ERRORS as exc:
         raise InputError(f"not a readable sweep CSV ({exc})", path=path) from None
     from .runner import COLUMNS
 
     df = df.reindex(columns=[*df.columns, *(c for c in COLUMNS if c not in df.columns)])
-    df = df.drop_duplicates(["instance", "backend"], keep="last")
     df = df[~noise_floor_runs(df)]  # the machine's, not a candidate's
     df["verdict"] = df["verdict"].fillna("").astype(str)
-    df["folder"] = str(path.parent)
     return df
 
 
@@ -111,17 +110,15 @@ def paired_rows(df: pd.DataFrame) -> list[list]:
     ok = valid.pivot_table(
         index="instance", columns="backend", values="verdict", aggfunc=lambda v: v.iloc[-1] == "ok"
     )
-    backends = sorted(ok.columns)
     out = []
-    for i, a in enumerate(backends):
-        for b in backends[i + 1 :]:
-            both = ok[[a, b]].dropna()
-            if both.empty:
-                continue
-            xa, xb = both[a].astype(bool).to_numpy(), both[b].astype(bool).to_numpy()
-            n10, n01 = int((xa & ~xb).sum()), int((~xa & xb).sum())
-            both_ok, neither = int((xa & xb).sum()), int((~xa & ~xb).sum())
-            out.append([a, b, len(both), both_ok, n10, n01, neither, mcnemar_exact(n10, n01)])
+    for a, b in itertools.combinations(sorted(ok.columns), 2):
+        both = ok[[a, b]].dropna()
+        if both.empty:
+            continue
+        xa, xb = both[a].astype(bool).to_numpy(), both[b].astype(bool).to_numpy()
+        n10, n01 = int((xa & ~xb).sum()), int((~xa & xb).sum())
+        both_ok, neither = int((xa & xb).sum()), int((~xa & ~xb).sum())
+        out.append([a, b, len(both), both_ok, n10, n01, neither, mcnemar_exact(n10, n01)])
     return out
 
 
