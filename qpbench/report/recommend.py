@@ -384,9 +384,8 @@ def _families(runs: pd.DataFrame) -> dict[str, list[str]]:
     if "family" not in runs.columns:
         return {}
     out: dict[str, list[str]] = {}
-    for (family, joints), g in runs.dropna(subset=["family"]).groupby(
-        ["family", "joints"], sort=False
-    ):
+    groups = runs.dropna(subset=["family"]).groupby(["family", "joints"], sort=False)
+    for (family, joints), g in groups:
         out.setdefault(f"{family} (n = {int(joints)})", []).extend(g["scenario"].unique())
     return out if len(out) > 1 else {}
 
