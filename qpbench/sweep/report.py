@@ -93,8 +93,7 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
     for backend, g in df.groupby("backend", sort=True):
         valid = g[g["status"] != "invalid_scenario"]
         n = len(valid)
-        invalid = int((g["status"] == "invalid_scenario").sum())
-        row = [backend, n, invalid, int((valid["verdict"] == "ok").sum())]
+        row = [backend, n, len(g) - n, int((valid["verdict"] == "ok").sum())]
         for verdict in RATED:
             k = int((valid["verdict"] == verdict).sum())
             lo, hi = wilson(k, n)
