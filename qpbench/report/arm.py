@@ -348,8 +348,7 @@ def animate(
     fig, grid = style.subplots(1, len(planes), 6 * len(planes), high, dpi=70)
     axes = list(grid[0])
     static = not any(np.any(ob.velocity) for ob in obstacles)
-    look = backend_look(backend)
-    updated = _animation_views(axes, planes, lims, scenario, log, static, look)
+    updated = _animation_views(axes, planes, lims, scenario, log, static, backend_look(backend))
     label = axes[0].set_title("", fontsize=8, family="monospace", loc="left")
     moving_artists: list = []
     head = title or scenario.name
