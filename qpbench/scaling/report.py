@@ -120,11 +120,10 @@ def crossover_lines(frame: pd.DataFrame, fitted: dict) -> list[str]:
         if dense.empty or sparse.empty:
             lines.append(f"- {axis} axis: no dense and sparse backend both measured")
             continue
-        best_d = dense.groupby("size")["time_median_s"].min()
-        best_s = sparse.groupby("size")["time_median_s"].min()
         sizes = a.drop_duplicates("size").set_index("size")[xcol].sort_values()
         names = list(sizes.index)
-        at = crossing(sizes.values, best_d.reindex(names).values, best_s.reindex(names).values)
+        best = [f.groupby("size")["time_median_s"].min().reindex(names) for f in (dense, sparse)]
+        at = crossing(sizes.values, best[0].values, best[1].values)
         name = None if at is None else names[list(sizes.values).index(at)]
         text = f"- {axis} axis: sparse overtakes dense at {_size_label(frame, name)}"
         if name is None:
