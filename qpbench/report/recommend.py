@@ -316,8 +316,7 @@ def _evidence(sweeps: pd.DataFrame, backend: str, scenarios: list[str]):
         mine = sweeps[(sweeps["base_scenario"] == s) & (sweeps["backend"] == backend)]
         valid = worst_first(mine.assign(verdict=mine["verdict"].fillna("").astype(str)))
         n, k = len(valid), int((valid["verdict"] == "ok").sum())
-        worst = valid.iloc[0].to_dict() if n else None
-        out.append(Evidence(s, n, k, wilson(k, n)[0] if n else math.nan, worst))
+        out.append(Evidence(s, n, k, wilson(k, n)[0], valid.iloc[0].to_dict() if n else None))
     return tuple(out)
 
 
