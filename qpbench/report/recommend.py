@@ -591,8 +591,7 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
     gap = "\n" if markdown else ""
     lines = [head]
     _ranked_lines(answer, lines, gap)
-    overall = answer.overall
-    worst = _worst_rows([*overall.recommended, *overall.short])
+    worst = _worst_rows([*answer.overall.recommended, *answer.overall.short])
     if worst:
         where = " (paths from this report's folder)" if markdown else ""
         lines.append(f"Worst perturbed run of each{where}:{gap}")
@@ -604,10 +603,9 @@ def render(answer: Recommendation, markdown: bool = False) -> str:
             "the controller p99 in us; a backend recommended in every family is recommended "
             f"above, ranked on its slowest family):{gap}"
         )
-        rows = _family_rows(answer.families)
         # a family's scope "planar (n = 4) (free, wall)" titles its column "planar (n = 4)"
         header = ["backend", *(f.name.rsplit(" (", 1)[0] for f in answer.families)]
-        _table(lines, header, rows, gap, left=len(header))
+        _table(lines, header, _family_rows(answer.families), gap, left=len(header))
     _scenario_lines(answer, lines, gap)
     return "\n".join(lines).rstrip("\n") + "\n"
 
