@@ -145,8 +145,7 @@ def deadline_table(frame: pd.DataFrame) -> list[dict]:
     """Per backend and axis: the first size whose build + solve exceeds :data:`TICK_S`, at p99
     and at the median, and the largest such tick [us] in brackets."""
     out = []
-    m = frame[frame["status"] == "measured"]
-    for (backend, axis), g in m.groupby(["backend", "axis"]):
+    for (backend, axis), g in frame[frame["status"] == "measured"].groupby(["backend", "axis"]):
         xcol = AXES[axis][0]
         g = g.sort_values(xcol)
         row = {"backend": backend, "axis": axis}

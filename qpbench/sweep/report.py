@@ -105,8 +105,7 @@ def rate_rows(df: pd.DataFrame) -> list[list]:
 
 def paired_rows(df: pd.DataFrame) -> list[list]:
     """Every pair of backends on the instances both ran: counts and McNemar's exact p-value."""
-    valid = df[df["status"] != "invalid_scenario"]
-    ok = valid.pivot_table(
+    ok = df[df["status"] != "invalid_scenario"].pivot_table(
         index="instance", columns="backend", values="verdict", aggfunc=lambda v: v.iloc[-1] == "ok"
     )
     out = []
