@@ -98,13 +98,6 @@ def _warm_network(problems) -> None:
     online.solve(plain)
 
 
-def compiled_solvers() -> tuple[str, ...]:
-    """The backends with a compiled engine (:data:`qpbench.engine.compiled.SOLVERS`)."""
-    from .engine.compiled import SOLVERS
-
-    return tuple(SOLVERS)
-
-
 def _warm_loop(engines: Iterable[str]) -> None:
     """A few ticks of a closed loop on the Python engine, then on each compiled one of ``engines``."""
     from .sim.loop import simulate
@@ -119,6 +112,7 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
     """What :func:`warmup` prepares for ``backends`` (``None``: everything), in order:
     :data:`LOOP_KERNELS` when ``loop``, the backends' ``kernels``, :data:`SHIM`, engines."""
     from .backends import backend_class
+    from .engine.compiled import SOLVERS
     from .exceptions import BackendNotFound
 
     if backends is None:
@@ -132,7 +126,7 @@ def kernels_for(backends: Iterable[str] | None, loop: bool = True) -> tuple[str,
         wanted.update(cls.kernels)
         if cls.name == "qpoases":
             wanted.add(SHIM)
-        if loop and cls.name in compiled_solvers():
+        if loop and cls.name in SOLVERS:
             wanted.add(ENGINE + cls.name)
     return _in_order(wanted)
 

@@ -390,7 +390,7 @@ def closed_loop_budgets(
     the run cannot afford."""
     if config.run_budget is None:
         return {}
-    from ..jit import compiled_solvers
+    from ..engine.compiled import SOLVERS
     from ..report.recommend import TOLERATED_NOT_OK, least_runs
     from ..sim.scenario import load_scenario
 
@@ -401,7 +401,7 @@ def closed_loop_budgets(
     swept_ticks = least_runs(config.min_ok_bound, TOLERATED_NOT_OK) * sum(
         _length(sp) / float(sp.base_raw["simulation"]["dt"]) for sp in (specs or {}).values()
     )
-    compiled = compiled_solvers() if config.engine == "compiled" else ()
+    compiled = SOLVERS if config.engine == "compiled" else ()
     run_budget = config.run_budget
     budgets = {}
     for backend in config.backends:
