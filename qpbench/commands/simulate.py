@@ -110,6 +110,8 @@ def _check_arguments(args: argparse.Namespace) -> None:
 def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -> None:
     """The tick log, the summary, the figure, the snapshot and the animation asked for."""
     from ..atomic import atomic_path, write_text
+    from ..report.arm import animate, draw_snapshot
+    from ..report.loop_figure import run_figure
 
     s = result.summary
     if args.log is not None:
@@ -123,17 +125,11 @@ def _write_outputs(args: argparse.Namespace, scenario, result, progress: bool) -
     elif args.summary is not None:
         write_text(args.summary, json.dumps(s, indent=2) + "\n")
     if args.plot is not None:
-        from ..report.loop_figure import run_figure
-
         run_figure(result.log, s, args.plot)
     kw = {"title": f"{scenario.name} / {s['backend']}", "backend": s["backend"]}
     if args.snapshot is not None:
-        from ..report.arm import draw_snapshot
-
         draw_snapshot(scenario, result.log, args.snapshot, **kw)
     if args.animate is not None:
-        from ..report.arm import animate
-
         speed, fps = args.speed, args.fps
         animate(scenario, result.log, args.animate, fps=fps, speed=speed, progress=progress, **kw)
 
