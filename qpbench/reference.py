@@ -257,12 +257,10 @@ def assemble(
         fields.update(agree=agree, agreement=agreement)
     if status == "optimal":
         fields.update({k: getattr(keep.solution, k) for k in _VEC_KEYS}, objective=keep.objective)
-    ref = ReferenceSolution(
+    fields.update(time_limit_s=time_limit, timed_out=any(c.timed_out for c in candidates))
+    return ReferenceSolution(
         status, solver=keep.solver, kkt=keep.kkt, name=name, note=note, **fields
     )
-    ref.time_limit_s = time_limit
-    ref.timed_out = any(c.timed_out for c in candidates)
-    return ref
 
 
 def bench_references(problem_set: ProblemSet, source: str = "auto", **options) -> list:
