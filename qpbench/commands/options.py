@@ -148,11 +148,8 @@ def run_bar(args: argparse.Namespace, total: int, desc: str, on_row, leave: bool
     """A progress bar of ``total`` runs (none with ``-q``) around the runner's ``on_row``."""
     from tqdm import tqdm
 
-    bar = tqdm(total=total, unit="run", desc=desc, leave=leave, disable=args.quiet or None)
-    try:
+    with tqdm(total=total, unit="run", desc=desc, leave=leave, disable=args.quiet or None) as bar:
         yield lambda row: (bar.update(1), on_row(row))
-    finally:
-        bar.close()
 
 
 def print_listing(args: argparse.Namespace, items: list[dict], rows: list, **kw) -> int:
