@@ -22,7 +22,6 @@ from .parquet import write_problem_set as write_problem_set
 from .records import ARRAY_KEYS as ARRAY_KEYS
 from .records import MANIFEST_NAME, PARQUET_NAME, ProblemSet
 from .records import ProblemRecord as ProblemRecord
-from .records import problem_sizes as problem_sizes
 from .records import solver_problem as solver_problem
 
 #: Reader of one file, by file type.

@@ -401,7 +401,6 @@ class _BenchRun:
 
     def _row(self, i: int, backend: str, outcome: Outcome, position: int) -> dict:
         """The CSV row of ``backend``'s ``outcome`` on record ``i``."""
-        from ..formats import problem_sizes
         from ..formats.records import box_bounds
         from ..metrics import evaluate, metric_columns
 
@@ -435,7 +434,7 @@ class _BenchRun:
             "order_seed": int(self.config.seed),
             "repeat": len(times),
             "repeat_note": outcome.repeat_note or None,
-            **dict(zip(("n", "m_eq", "m_ineq"), problem_sizes(record.problem))),
+            **dict(zip(("n", "m_eq", "m_ineq"), record.sizes)),
             "n_box": box_bounds(record.problem),
             "problem_set_sha256": self.sha or "",
             "backend_version": self.versions.get(backend),
