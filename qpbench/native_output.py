@@ -34,20 +34,18 @@ def silence_native_stdout(enabled: bool = True) -> Iterator[None]:
     _flush_c_stdio()
     saved = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
-    old_stdout = sys.stdout
     private = os.fdopen(
-        os.dup(saved), "w", buffering=1, encoding=old_stdout.encoding, errors=old_stdout.errors
+        os.dup(saved), "w", buffering=1, encoding=sys.stdout.encoding, errors=sys.stdout.errors
     )
     try:
         os.dup2(devnull, 1)
-        sys.stdout = private
-        yield
+        with contextlib.redirect_stdout(private):
+            yield
     finally:
         with contextlib.suppress(BrokenPipeError):  # the reader went away (``| head``)
             private.flush()
         _flush_c_stdio()
         os.dup2(saved, 1)
-        sys.stdout = old_stdout
         with contextlib.suppress(BrokenPipeError):
             private.close()
         os.close(saved)
