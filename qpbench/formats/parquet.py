@@ -59,20 +59,19 @@ def write_problem_set(
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise ProblemFormatError(f"problem name '{dup}' is not unique", path=path, key="name")
-    lst = pa.list_(pa.float64())
-    fields = [(k, lst) for k in ARRAY_KEYS] + [(k, getattr(pa, t)()) for k, t in META_TYPES.items()]
     dense = [dense_copy(r.problem) for r in records]
-    cols = [list_column([d[k] for d in dense]) for k in ARRAY_KEYS]
-    cols += [pa.array([getattr(r, k) for r in records], type=t) for k, t in fields[len(cols) :]]
+    cols = {k: list_column([d[k] for d in dense]) for k in ARRAY_KEYS}
+    for k, t in META_TYPES.items():
+        cols[k] = pa.array([getattr(r, k) for r in records], type=getattr(pa, t)())
     for k in MATRIX_KEYS:
         matrices = [getattr(r.problem, k) for r in records]
         if not any(spa.issparse(M) for M in matrices):
             continue
         parts = [sorted_csc(M) if spa.issparse(M) else None for M in matrices]
         for part, kind in CSC_TYPES.items():
-            fields.append((f"{k}_csc_{part}", pa.list_(getattr(pa, kind)())))
-            cols.append(list_column([None if p is None else getattr(p, part) for p in parts], kind))
-    table = pa.Table.from_arrays(cols, schema=pa.schema(fields))
+            values = [None if p is None else getattr(p, part) for p in parts]
+            cols[f"{k}_csc_{part}"] = list_column(values, kind)
+    table = pa.table(cols)
     data = table_to_bytes(table)
     manifest = {
         "format": "qpbench-problem-set",
