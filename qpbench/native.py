@@ -22,21 +22,14 @@ def load_permanently(path: str) -> None:
     llvmlite.binding.load_library_permanently(path)
 
 
-def external(name: str, signature):
-    """The C function ``name`` of a loaded library, for compiled code, of numba ``signature``."""
-    from numba import types
-
-    return types.ExternalFunction(name, signature)
-
-
 @cache
 def clock():
     """The compiled clock ``monotonic(ts) -> seconds`` (``ts``: the caller's int64[2])."""
     from numba import types
 
     load_permanently(ctypes.util.find_library("c"))
-    _clock_gettime = external("clock_gettime", types.intc(types.intc, types.intp))
-    globals()["_clock_gettime"] = _clock_gettime
+    signature = types.intc(types.intc, types.intp)
+    globals()["_clock_gettime"] = types.ExternalFunction("clock_gettime", signature)
     return njit(_nrt=False)(_monotonic_py)
 
 

@@ -289,7 +289,7 @@ def kernels() -> Kernels:
     """The compiled kernels (compiled, or loaded from numba's cache, on first call)."""
     from numba import types
 
-    from ..native import external, load_permanently, njit
+    from ..native import load_permanently, njit
 
     reason = unavailable_reason()
     if reason is not None:
@@ -297,12 +297,12 @@ def kernels() -> Kernels:
     load_permanently(library_path())
     p, i = types.intp, types.intc
     names = globals()
-    names["_c_setup"] = external("setup_daqp", i(p, p, p))
-    names["_c_update"] = external("daqp_update_ldp", i(i, p, p))
-    names["_c_solve"] = external("daqp_solve", types.void(p, p))
-    names["_c_quadprog"] = external("daqp_quadprog", types.void(p, p, p))
-    names["_c_free_workspace"] = external("free_daqp_workspace", types.void(p))
-    names["_c_free_ldp"] = external("free_daqp_ldp", types.void(p))
+    names["_c_setup"] = types.ExternalFunction("setup_daqp", i(p, p, p))
+    names["_c_update"] = types.ExternalFunction("daqp_update_ldp", i(i, p, p))
+    names["_c_solve"] = types.ExternalFunction("daqp_solve", types.void(p, p))
+    names["_c_quadprog"] = types.ExternalFunction("daqp_quadprog", types.void(p, p, p))
+    names["_c_free_workspace"] = types.ExternalFunction("free_daqp_workspace", types.void(p))
+    names["_c_free_ldp"] = types.ExternalFunction("free_daqp_ldp", types.void(p))
     jit = njit(_nrt=False)
     inline = njit(inline="always")  # no call, no refcounts
     for name in [k for k in names if k.endswith("_jit")]:

@@ -244,12 +244,12 @@ def compiled():
     """``(solve, reset)`` of the solver protocol of compiled closed loops (compiled on first call)."""
     from numba import types
 
-    from ..native import external, load_permanently, njit
+    from ..native import load_permanently, njit
 
     shim.load()
     load_permanently(str(shim.shim_path(shim.qpoases_prefix())))
-    globals()["_qpb_solve"] = external("qpb_solve", types.intc(types.intp))
-    globals()["_qpb_renew"] = external("qpb_renew", types.void(types.intp))
+    globals()["_qpb_solve"] = types.ExternalFunction("qpb_solve", types.intc(types.intp))
+    globals()["_qpb_renew"] = types.ExternalFunction("qpb_renew", types.void(types.intp))
     jit = njit()
     return jit(_solve_py), jit(_reset_py)
 
