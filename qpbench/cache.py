@@ -34,13 +34,6 @@ def cache_root() -> Path:
     return Path(env) if env else local if writable(local) else user_cache_dir()
 
 
-def shim_dir(name: str) -> Path:
-    """Folder for a compiled native shim ``name`` (e.g. ``"qpoases"``), created if missing."""
-    folder = cache_root() / name
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
-
-
 def configure_numba_cache() -> None:
     """Set ``NUMBA_CACHE_DIR`` (inherited by workers) to :func:`user_cache_dir` / ``numba`` when
     unset and the package folder is not writable (numba's default: beside the sources)."""

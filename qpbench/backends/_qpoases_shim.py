@@ -85,15 +85,14 @@ def shim_path(prefix: Path) -> Path:
 
 def compile_shim(prefix: Path, target: Path) -> None:
     """Compile the shim into ``target`` atomically (temporary file, then rename)."""
-    from ..cache import shim_dir
-
     cxx = compiler()
     if cxx is None:
         raise BackendError(
             "qpoases: no C++ compiler (set $CXX or install g++) to build the qpOASES shim"
         )
     include, lib = prefix / "include", prefix / "lib"
-    with tempfile.TemporaryDirectory(dir=shim_dir("qpoases")) as tmp:
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
         src, tmp_so = Path(tmp, "shim.cpp"), Path(tmp, "shim.so")
         src.write_text(SHIM_SOURCE)
         flags = ["-O2", "-shared", "-fPIC", "-std=c++11", "-lqpOASES", f"-Wl,-rpath,{lib}"]
