@@ -39,8 +39,7 @@ def select_set(
     manifest = problem_set.manifest
     generator = (manifest or {}).get("generator") or {}
     if every is not None and generator.get("every") is not None:
-        generator = dict(generator, every=int(generator["every"]) * every)
-        manifest = dict(manifest, generator=generator)
+        manifest = dict(manifest, generator=dict(generator, every=int(generator["every"]) * every))
     # a None stride or limit keeps them all
     return replace(problem_set, records=list(records)[::every][:limit], manifest=manifest)
 
